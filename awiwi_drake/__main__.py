@@ -1,0 +1,5 @@
+import sys
+
+from awiwi_drake.cli import main
+
+sys.exit(main())

@@ -1,0 +1,72 @@
+"""Scalar-type-generic math for the law functions.
+
+The constitutive laws of awiwi_drake are written once and evaluated with
+``float`` (numpy float arrays), ``AutoDiffXd`` and, where the law allows,
+``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).
+numpy ufuncs (``np.sin``, ``np.arctan``, ``np.tanh``, ``np.sqrt``, ``np.abs``)
+already dispatch element-wise on object arrays; ``max``/``min``/``where``
+do not, so they live here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pydrake.math as _pm
+
+__all__ = ["is_float", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like"]
+
+
+def is_float(x) -> bool:
+    """True when ``x`` is a float scalar or a non-object numpy array."""
+    if isinstance(x, np.ndarray):
+        return x.dtype != object
+    return isinstance(x, (float, int, np.floating, np.integer))
+
+
+def _binary(fn_float, fn_obj, a, b):
+    if is_float(a) and is_float(b):
+        return fn_float(a, b)
+    a_arr, b_arr = np.broadcast_arrays(np.asarray(a, dtype=object), np.asarray(b, dtype=object))
+    out = np.empty(a_arr.shape, dtype=object)
+    for idx in np.ndindex(a_arr.shape):
+        ai, bi = a_arr[idx], b_arr[idx]
+        # pydrake.math.max needs both arguments of the same scalar type.
+        if isinstance(ai, (int, float, np.floating)) and not isinstance(bi, (int, float, np.floating)):
+            ai = type(bi)(float(ai))
+        elif isinstance(bi, (int, float, np.floating)) and not isinstance(ai, (int, float, np.floating)):
+            bi = type(ai)(float(bi))
+        out[idx] = fn_obj(ai, bi)
+    return out[()] if out.shape == () else out
+
+
+def smax(a, b):
+    """Element-wise maximum for float, AutoDiffXd and Expression."""
+    return _binary(np.maximum, _pm.max, a, b)
+
+
+def smin(a, b):
+    """Element-wise minimum for float, AutoDiffXd and Expression."""
+    return _binary(np.minimum, _pm.min, a, b)
+
+
+def clip(x, low, high):
+    """Element-wise clip to [low, high] (differentiable almost everywhere)."""
+    return smin(smax(x, low), high)
+
+
+def positive_part(x):
+    """max(x, 0): the tension-only (slack) nonlinearity."""
+    return smax(x, 0.0)
+
+
+def asarray_like(values, like):
+    """numpy array of ``values`` with the dtype of ``like`` (object for AutoDiff/Expression)."""
+    return np.asarray(values, dtype=float if is_float(like) else object)
+
+
+def zeros_like(n: int, like):
+    """Length-``n`` zeros of the scalar type of ``like``."""
+    if is_float(like):
+        return np.zeros(n)
+    sample = np.ravel(np.asarray(like, dtype=object))[0]
+    return np.array([type(sample)(0.0) for _ in range(n)], dtype=object)

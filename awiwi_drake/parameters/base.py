@@ -1,0 +1,273 @@
+"""Parameter dataclasses with units, ranges and provenance.
+
+Every physical number in awiwi_drake is a field of a frozen dataclass derived
+from :class:`Parameters` and declared with :func:`param`.  The declaration
+carries the unit, the allowed range and the *source* of the default value
+(a thesis table/equation, or ``"chosen: <reason>"``).  Construction validates
+every field and raises a :class:`ValueError` naming the class and the field.
+
+Example
+-------
+>>> from dataclasses import dataclass
+>>> @dataclass(frozen=True)
+... class Pendulum(Parameters):
+...     mass: float = param(1.0, unit="kg", low=0.0, low_inclusive=False,
+...                         source="chosen: unit mass")
+>>> Pendulum(mass=-1.0)
+Traceback (most recent call last):
+...
+ValueError: Pendulum.mass = -1.0 is out of range: must be > 0.0 [kg]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, Mapping
+
+import numpy as np
+
+__all__ = ["Parameters", "param", "ParameterInfo", "provenance_table"]
+
+
+@dataclass(frozen=True)
+class ParameterInfo:
+    """Metadata of one parameter field (unit, range, source, description)."""
+
+    name: str
+    unit: str
+    source: str
+    low: float | None
+    high: float | None
+    low_inclusive: bool
+    high_inclusive: bool
+    doc: str
+
+    def range_text(self) -> str:
+        lo = "-inf" if self.low is None else repr(self.low)
+        hi = "+inf" if self.high is None else repr(self.high)
+        lb = "[" if (self.low is not None and self.low_inclusive) else "("
+        rb = "]" if (self.high is not None and self.high_inclusive) else ")"
+        return f"{lb}{lo}, {hi}{rb}"
+
+
+def param(
+    default: Any,
+    *,
+    unit: str,
+    source: str,
+    low: float | None = None,
+    high: float | None = None,
+    low_inclusive: bool = True,
+    high_inclusive: bool = True,
+    doc: str = "",
+    vector: bool = False,
+    finite: bool = True,
+):
+    """Declare a validated dataclass field.
+
+    Parameters
+    ----------
+    default : float, int, bool, tuple
+        Default value.  Sequences are stored as tuples (hashable, immutable).
+    unit : str
+        SI unit, e.g. ``"kg m^2"``; ``"-"`` for dimensionless.
+    source : str
+        Where the default comes from: ``"Table 12.1"``, ``"(3.8), Table 3.3"``
+        or ``"chosen: <reason>"``.
+    low, high : float, optional
+        Allowed range of the value (each element for sequences).
+    low_inclusive, high_inclusive : bool
+        Whether the bounds themselves are allowed.
+    doc : str
+        One-line description.
+    vector : bool
+        The field holds a sequence of numbers.
+    finite : bool
+        Reject NaN and infinity (default).
+    """
+    if not source:
+        raise ValueError("param(): every parameter needs a source")
+    meta = dict(unit=unit, source=source, low=low, high=high,
+                low_inclusive=low_inclusive, high_inclusive=high_inclusive,
+                doc=doc, vector=vector, finite=finite, is_param=True)
+    if vector or isinstance(default, (list, tuple, np.ndarray)):
+        meta["vector"] = True
+        value = tuple(float(v) for v in np.ravel(default))
+        return field(default=value, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def _check_scalar(cls_name: str, name: str, v: Any, m: Mapping[str, Any], where: str = "") -> None:
+    label = f"{cls_name}.{name}{where}"
+    if isinstance(v, bool):
+        return
+    if not isinstance(v, (int, float, np.floating, np.integer)):
+        raise ValueError(f"{label} = {v!r} is not a number [{m['unit']}]")
+    v = float(v)
+    if m["finite"] and not math.isfinite(v):
+        raise ValueError(f"{label} = {v!r} is not finite [{m['unit']}]")
+    lo, hi = m["low"], m["high"]
+    if lo is not None and (v < lo or (v == lo and not m["low_inclusive"])):
+        op = ">=" if m["low_inclusive"] else ">"
+        raise ValueError(f"{label} = {v!r} is out of range: must be {op} {lo} [{m['unit']}]")
+    if hi is not None and (v > hi or (v == hi and not m["high_inclusive"])):
+        op = "<=" if m["high_inclusive"] else "<"
+        raise ValueError(f"{label} = {v!r} is out of range: must be {op} {hi} [{m['unit']}]")
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """Base class: validated, immutable, self-documenting parameter sets.
+
+    Subclasses may override :meth:`_validate` for cross-field checks (call
+    ``super()._validate()`` first).  Nested :class:`Parameters` fields are
+    validated by their own constructors.
+    """
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            m = f.metadata
+            if not m.get("is_param"):
+                continue
+            v = getattr(self, f.name)
+            if m.get("vector"):
+                if isinstance(v, (list, np.ndarray)):
+                    v = tuple(float(x) for x in np.ravel(v))
+                    object.__setattr__(self, f.name, v)
+                if not isinstance(v, tuple):
+                    raise ValueError(
+                        f"{type(self).__name__}.{f.name} = {v!r} must be a sequence of numbers [{m['unit']}]")
+                for i, x in enumerate(v):
+                    _check_scalar(type(self).__name__, f.name, x, m, where=f"[{i}]")
+            else:
+                _check_scalar(type(self).__name__, f.name, v, m)
+        self._validate()
+
+    def _validate(self) -> None:  # pragma: no cover - hook
+        """Cross-field checks; raise ValueError naming the field(s)."""
+
+    # ------------------------------------------------------------------
+    @classmethod
+    def info(cls) -> dict[str, ParameterInfo]:
+        """Metadata of every declared parameter, by field name."""
+        out = {}
+        for f in fields(cls):
+            m = f.metadata
+            if m.get("is_param"):
+                out[f.name] = ParameterInfo(f.name, m["unit"], m["source"], m["low"], m["high"],
+                                            m["low_inclusive"], m["high_inclusive"], m["doc"])
+        return out
+
+    def replace(self, **changes: Any) -> "Parameters":
+        """A validated copy with some fields changed (unknown names raise)."""
+        names = {f.name for f in fields(self)}
+        unknown = sorted(set(changes) - names)
+        if unknown:
+            raise ValueError(
+                f"{type(self).__name__} has no parameter {unknown[0]!r}; known: {', '.join(sorted(names))}")
+        return dataclasses.replace(self, **changes)
+
+    def with_overrides(self, overrides: Mapping[str, str | float]) -> "Parameters":
+        """Apply ``NAME=VALUE`` overrides, searching nested parameter sets.
+
+        A name may be a field of this set or of a nested set (e.g. the
+        ``motor`` of a rig); dotted paths (``motor.inertia``) are accepted too.
+        String values are parsed as floats, or comma-separated float lists for
+        vector fields.  Unknown names and malformed values raise ValueError.
+        """
+        result = self
+        for key, raw in overrides.items():
+            result = result._override_one(key, raw)
+        return result
+
+    def _override_one(self, key: str, raw: Any) -> "Parameters":
+        path = self._find_path(key)
+        if path is None:
+            raise ValueError(f"unknown parameter {key!r} for {type(self).__name__}; "
+                             f"known: {', '.join(sorted(self.all_names()))}")
+        return self._set_path(path, raw)
+
+    def _set_path(self, path: list[str], raw: Any) -> "Parameters":
+        head = path[0]
+        if len(path) > 1:
+            child = getattr(self, head)
+            return dataclasses.replace(self, **{head: child._set_path(path[1:], raw)})
+        f = next(f for f in fields(self) if f.name == head)
+        value = _parse_value(type(self).__name__, head, raw, vector=bool(f.metadata.get("vector")),
+                             current=getattr(self, head))
+        return dataclasses.replace(self, **{head: value})
+
+    def _find_path(self, key: str) -> list[str] | None:
+        if "." in key:
+            head, rest = key.split(".", 1)
+            child = getattr(self, head, None) if head in {f.name for f in fields(self)} else None
+            if isinstance(child, Parameters):
+                sub = child._find_path(rest)
+                return None if sub is None else [head] + sub
+            return None
+        for f in fields(self):
+            if f.name == key and f.metadata.get("is_param"):
+                return [key]
+        for f in fields(self):
+            child = getattr(self, f.name)
+            if isinstance(child, Parameters):
+                sub = child._find_path(key)
+                if sub is not None:
+                    return [f.name] + sub
+        return None
+
+    def all_names(self, prefix: str = "") -> list[str]:
+        """Every settable parameter name (nested ones dotted)."""
+        names = []
+        for f in fields(self):
+            child = getattr(self, f.name)
+            if isinstance(child, Parameters):
+                names += child.all_names(prefix + f.name + ".")
+            elif f.metadata.get("is_param"):
+                names.append(prefix + f.name)
+        return names
+
+    def provenance(self, prefix: str = "") -> list[dict[str, Any]]:
+        """Rows ``{name, value, unit, range, source, doc}`` for this set and nested sets."""
+        rows = []
+        for f in fields(self):
+            child = getattr(self, f.name)
+            if isinstance(child, Parameters):
+                rows += child.provenance(prefix + f.name + ".")
+            elif f.metadata.get("is_param"):
+                info = type(self).info()[f.name]
+                rows.append(dict(name=prefix + f.name, value=child, unit=info.unit,
+                                 range=info.range_text(), source=info.source, doc=info.doc))
+        return rows
+
+
+def _parse_value(cls_name: str, name: str, raw: Any, *, vector: bool, current: Any) -> Any:
+    if not isinstance(raw, str):
+        return tuple(raw) if vector else raw
+    text = raw.strip()
+    try:
+        if vector:
+            return tuple(float(t) for t in text.split(",") if t.strip() != "")
+        if isinstance(current, bool):
+            low = text.lower()
+            if low in ("1", "true", "yes", "on"):
+                return True
+            if low in ("0", "false", "no", "off"):
+                return False
+            raise ValueError
+        if isinstance(current, int) and not isinstance(current, bool):
+            return int(text)
+        return float(text)
+    except ValueError:
+        kind = "a comma-separated list of numbers" if vector else type(current).__name__
+        raise ValueError(f"{cls_name}.{name}: cannot parse {raw!r} as {kind}") from None
+
+
+def provenance_table(params: Parameters) -> str:
+    """Markdown table of a parameter set: name, value, unit, range, source."""
+    lines = ["| parameter | value | unit | range | source |", "|---|---|---|---|---|"]
+    for r in params.provenance():
+        lines.append(f"| `{r['name']}` | {r['value']} | {r['unit']} | {r['range']} | {r['source']} |")
+    return "\n".join(lines)
