@@ -1,0 +1,185 @@
+"""The catalog of physically named candidate effects.
+
+Every candidate is a switch in :class:`~awiwi_drake.discrepancy.model.DiscrepancyModel_`
+(or, for ``delay``, a time shift of the replayed commands, i.e. a delay block in
+front of the motor input): parameters that are zero turn it off.  Each
+parameter has a unit, bounds and a screening perturbation; *amplitude*
+parameters enter (almost) linearly and are screened by regression, *shape*
+parameters are screened on a small grid and freed in the simulation fit.
+
+Catalog (names are part of the contract):
+
+=================== ======================================================================
+``motor_friction``   (3.8): ``tau = -(g2 atan(g1 w) + g3 w)`` on each motor
+``motor_ripple``     ``tau = sum_k a_k sin(n_k theta) + b_k cos(n_k theta)`` (orders per rev)
+``spring_hysteresis`` force offset ``h w``, Dahl state ``w' = (x' - |x'| w) / delta``
+``joint_friction``   link Coulomb ``-F_c tanh(q'/v_s)`` (stick-slip, regularised)
+``guide_friction``   tendon-path friction ``(C0 + mu f) tanh(v/v0)`` opposing the tendon motion
+``delay``            applied torque ``u(t - T)``
+=================== ======================================================================
+
+Nuisance candidates (calibration, not new physics): ``force_sensor`` (gain and
+offsets), ``nominal_motor`` (B, d), ``nominal_spring`` (stiffness scale),
+``nominal_link`` (m, d_q).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from awiwi_drake.parameters.discrepancy import CatalogBounds
+
+__all__ = ["ParamSpec", "Effect", "param_specs", "PARAM_NAMES", "PARAM_INDEX", "EFFECTS",
+           "effects_for_rig", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS"]
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One catalog parameter: value that turns it off, bounds, screening perturbation."""
+
+    name: str
+    unit: str
+    off: float
+    low: float
+    high: float
+    perturbation: float
+    doc: str
+
+
+def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
+    """Ordered parameter specs of the whole catalog (order = model parameter vector)."""
+    b = bounds or CatalogBounds()
+    rmax = b.ripple_amplitude_max
+    nrel = b.nominal_relative_max
+    specs = [
+        ParamSpec("motor_coulomb", "Nm", 0.0, 0.0, b.motor_coulomb_max, 0.02, "gamma2 of (3.8)"),
+        ParamSpec("motor_slope", "s/rad", 10.0, *b.motor_slope_range, 1.0, "gamma1 of (3.8) (Table 3.3 default)"),
+        ParamSpec("motor_viscous", "Nm s/rad", 0.0, 0.0, b.motor_viscous_max, 0.005, "gamma3 of (3.8)"),
+    ]
+    for m in (1, 2):
+        for k in (1, 2):
+            specs += [ParamSpec(f"ripple_sin{k}_m{m}", "Nm", 0.0, -rmax, rmax, 0.01,
+                                f"ripple sine coefficient, harmonic {k}, motor {m}"),
+                      ParamSpec(f"ripple_cos{k}_m{m}", "Nm", 0.0, -rmax, rmax, 0.01,
+                                f"ripple cosine coefficient, harmonic {k}, motor {m}")]
+    specs += [
+        ParamSpec("ripple_order_1", "1/rev", 1.0, 1.0, 200.0, 0.0, "order of ripple harmonic 1"),
+        ParamSpec("ripple_order_2", "1/rev", 2.0, 1.0, 200.0, 0.0, "order of ripple harmonic 2"),
+        ParamSpec("hysteresis_width", "N", 0.0, 0.0, b.hysteresis_width_max, 0.5, "hysteresis half-width h"),
+        ParamSpec("hysteresis_length", "m", 2e-4, *b.hysteresis_length_range, 0.0, "Dahl transition length"),
+        ParamSpec("joint_coulomb", "Nm", 0.0, 0.0, b.joint_coulomb_max, 0.002, "link Coulomb torque"),
+        ParamSpec("joint_velocity", "rad/s", 0.05, *b.joint_velocity_range, 0.0, "link friction velocity scale"),
+        ParamSpec("guide_c0", "N", 0.0, 0.0, b.guide_c0_max, 0.3, "C0 of (4.1) (at the rig's bending angle)"),
+        ParamSpec("guide_mu", "-", 0.0, 0.0, b.guide_mu_max, 0.01, "tension-proportional guide friction"),
+        ParamSpec("delay", "s", 0.0, 0.0, b.delay_max, 0.002, "pure input delay"),
+        ParamSpec("force_gain", "-", 0.0, -b.force_gain_max, b.force_gain_max, 0.01, "force sensor gain error"),
+        ParamSpec("force_offset_1", "N", 0.0, -b.force_offset_max, b.force_offset_max, 0.5, "force sensor 1 offset"),
+        ParamSpec("force_offset_2", "N", 0.0, -b.force_offset_max, b.force_offset_max, 0.5, "force sensor 2 offset"),
+        ParamSpec("motor_inertia_rel", "-", 0.0, -nrel, nrel, 0.05, "relative error of B"),
+        ParamSpec("motor_damping_add", "Nm s/rad", 0.0, -0.05, 0.2, 0.002, "added motor damping"),
+        ParamSpec("spring_scale_rel", "-", 0.0, -nrel, nrel, 0.02, "relative error of the spring force"),
+        ParamSpec("link_inertia_rel", "-", 0.0, -nrel, nrel, 0.05, "relative error of m"),
+        ParamSpec("link_damping_add", "Nm s/rad", 0.0, -0.05, 0.2, 2e-4, "added link damping"),
+    ]
+    return specs
+
+
+PARAM_NAMES = [s.name for s in param_specs()]
+PARAM_INDEX = {n: i for i, n in enumerate(PARAM_NAMES)}
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A candidate augmentation.
+
+    Attributes
+    ----------
+    name : str
+        Catalog name.
+    kind : str
+        ``"physical"`` or ``"nuisance"``.
+    amplitude : tuple[str]
+        Parameters that scale the effect (screened by regression).
+    shape : dict[str, tuple]
+        Shape parameters and the grid screened for each.
+    rigs : tuple[str]
+        Rigs on which the effect exists.
+    signature : str
+        Where it shows in the residual (for the report).
+    """
+
+    name: str
+    kind: str
+    amplitude: tuple
+    shape: dict
+    rigs: tuple
+    signature: str
+
+    def amplitude_for(self, rig: str) -> tuple:
+        """Amplitude parameters that exist on ``rig`` (drop motor-2/link/force-2 ones)."""
+        if rig == "joint":
+            return self.amplitude
+        return tuple(a for a in self.amplitude if not a.endswith("_m2") and a != "force_offset_2")
+
+
+EFFECTS = {
+    "motor_friction": Effect(
+        "motor_friction", "physical", ("motor_coulomb", "motor_viscous"),
+        {"motor_slope": (3.0, 10.0, 30.0, 100.0)}, ("tendon", "joint"),
+        "motor-torque residual odd in motor velocity, saturating (atan); peaks at reversals"),
+    "motor_ripple": Effect(
+        "motor_ripple", "physical",
+        ("ripple_sin1_m1", "ripple_cos1_m1", "ripple_sin2_m1", "ripple_cos2_m1",
+         "ripple_sin1_m2", "ripple_cos1_m2", "ripple_sin2_m2", "ripple_cos2_m2"),
+        {}, ("tendon", "joint"),
+        "residual periodic in motor angle: lines at integer cycles per revolution"),
+    "spring_hysteresis": Effect(
+        "spring_hysteresis", "physical", ("hysteresis_width",),
+        {"hysteresis_length": (5e-5, 2e-4, 8e-4)}, ("tendon", "joint"),
+        "force residual depends on the direction of elongation (loop in force vs elongation)"),
+    "joint_friction": Effect(
+        "joint_friction", "physical", ("joint_coulomb",),
+        {"joint_velocity": (0.01, 0.05, 0.2)}, ("joint",),
+        "force-difference residual odd in link velocity, stick near link reversals"),
+    "guide_friction": Effect(
+        "guide_friction", "physical", ("guide_c0", "guide_mu"), {}, ("tendon", "joint"),
+        "motor-torque residual odd in tendon velocity and growing with tension"),
+    "delay": Effect(
+        "delay", "physical", ("delay",), {}, ("tendon", "joint"),
+        "residual-input cross-correlation peaks at a positive lag; phase lag growing with frequency"),
+    "force_sensor": Effect(
+        "force_sensor", "nuisance", ("force_gain", "force_offset_1", "force_offset_2"), {},
+        ("tendon", "joint"), "force residual proportional to force or constant"),
+    "nominal_motor": Effect(
+        "nominal_motor", "nuisance", ("motor_inertia_rel", "motor_damping_add"), {},
+        ("tendon", "joint"), "motor-torque residual in phase with acceleration or velocity"),
+    "nominal_spring": Effect(
+        "nominal_spring", "nuisance", ("spring_scale_rel",), {}, ("tendon", "joint"),
+        "force residual proportional to the modelled force"),
+    "nominal_link": Effect(
+        "nominal_link", "nuisance", ("link_inertia_rel", "link_damping_add"), {}, ("joint",),
+        "link-mode frequency or damping wrong"),
+}
+
+PHYSICAL_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.kind == "physical")
+NUISANCE_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.kind == "nuisance")
+
+
+def effects_for_rig(rig: str, outputs: list[str]) -> list[Effect]:
+    """Candidates that can act and be seen on ``rig`` with the measured ``outputs``."""
+    has_force = any(o.startswith("tendon_force") for o in outputs)
+    out = []
+    for e in EFFECTS.values():
+        if rig not in e.rigs:
+            continue
+        if e.name == "force_sensor" and not has_force:
+            continue
+        out.append(e)
+    return out
+
+
+def default_vector() -> np.ndarray:
+    """The catalog parameter vector with every effect off."""
+    return np.array([s.off for s in param_specs()])

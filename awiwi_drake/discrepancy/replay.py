@@ -1,0 +1,295 @@
+"""Replay measured commands through the augmented model: multiple-shooting windows.
+
+The dataset is cut into windows of ``settings.window`` seconds.  Each window
+starts from the state estimated from the measurements (smoothed angles,
+Savitzky-Golay velocities, link angle measured or recovered from the forces)
+and is simulated open loop with the logged commands, so drift of the free
+joint chain cannot build up beyond one window.  The remaining sensitivity to
+the uncertain window-start state is removed by projecting every window's
+residual onto the orthogonal complement of its initial-state sensitivities
+(a linearised profile over the window initial states, i.e. multiple shooting
+with free shooting nodes).
+
+All windows and all perturbed parameter sets of one evaluation are copies of
+one :class:`~awiwi_drake.discrepancy.model.DiscrepancyModel_`, integrated by
+one Drake ``Simulator`` (fixed-step RK3, built once per batch size and reset).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from scipy.signal import savgol_filter
+
+from awiwi_drake.parameters.discrepancy import DiscrepancySettings
+
+from . import laws
+from .catalog import PARAM_INDEX, default_vector
+from .data import Dataset
+from .model import DiscrepancyModel_, NominalParameters
+
+__all__ = ["ReplayEngine", "noise_floor"]
+
+
+def noise_floor(y: np.ndarray) -> float:
+    """White-noise standard deviation of a sampled signal, from its 3rd differences.
+
+    For a smooth signal plus white noise of variance s^2, the third difference
+    has variance 20 s^2 while the signal contributes (w dt)^3 of its amplitude;
+    the median absolute deviation makes the estimate robust to steps.
+    """
+    d3 = np.diff(np.asarray(y, float), 3)
+    if d3.size == 0:
+        return 0.0
+    mad = np.median(np.abs(d3 - np.median(d3))) * 1.4826
+    return float(mad / np.sqrt(20.0))
+
+
+class ReplayEngine:
+    """Multiple-shooting replay of one dataset (see module docstring).
+
+    Parameters
+    ----------
+    dataset : Dataset
+    settings : DiscrepancySettings, optional
+    """
+
+    def __init__(self, dataset: Dataset, settings: DiscrepancySettings | None = None):
+        self.ds = dataset
+        self.settings = settings or DiscrepancySettings()
+        self.nom = NominalParameters.from_dataset(dataset.rig, dataset.parameters)
+        self.dt = dataset.dt
+        self.U = dataset.input_matrix  # (N, n)
+        N = len(dataset.time)
+        self.N = N
+        L = int(round(self.settings.window / self.dt))
+        if L < 3:
+            raise ValueError(f"settings.window = {self.settings.window} s is shorter than 3 samples "
+                             f"of {dataset.name} (dt = {self.dt} s)")
+        if N < L + 2:
+            raise ValueError(f"dataset {dataset.name}: {N} samples are fewer than one "
+                             f"{self.settings.window} s window")
+        self.L = L
+        self.starts = np.arange(0, N - L - 1, L)
+        blk = max(1, int(round(self.settings.block / self.settings.window)))
+        block_id = np.arange(len(self.starts)) // blk
+        self.test = (block_id % 2) == 1
+        if not self.test.any():  # short record: alternate windows
+            self.test = (np.arange(len(self.starts)) % 2) == 1
+        self.train = ~self.test
+        # measured signals, model measurement mapping, noise floor
+        model_names = self.nom.measurement_names()
+        self.out_names = dataset.output_names
+        self.out_index = np.array([model_names.index(o) for o in self.out_names])
+        self.Y = np.column_stack([dataset.outputs[o] for o in self.out_names])  # (N, ny)
+        sig = np.array([noise_floor(self.Y[:, j]) for j in range(self.Y.shape[1])])
+        spread = self.Y.std(axis=0)
+        self.sigma = np.maximum(sig, 1e-6 * np.maximum(spread, 1e-12))
+        self.spread = np.maximum(spread, 1e-12)
+        self._estimate_states()
+        self._sims = {}
+        self.simulations = 0
+        self.sim_time = 0.0
+
+    # ------------------------------------------------------------------ states
+    def _estimate_states(self):
+        ds, nom, dt = self.ds, self.nom, self.dt
+        win = max(5, int(round(self.settings.velocity_smoothing / dt)) | 1)
+        win = min(win, (self.N // 2) * 2 - 1)
+        n = nom.num_motors
+        sfx = ["_1", "_2"] if n == 2 else [""]
+        th = np.array([ds.outputs[f"motor_angle{s}"] for s in sfx])
+        ths = savgol_filter(th, win, 3, axis=1)
+        om = savgol_filter(th, win, 3, deriv=1, delta=dt, axis=1)
+        cols = [ths, om]
+        self.q_est = None
+        if nom.has_link:
+            q = self._link_angle_estimate(ths)
+            qs = savgol_filter(q, win, 3)
+            qd = savgol_filter(q, win, 3, deriv=1, delta=dt)
+            cols += [qs[None], qd[None]]
+            self.q_est = qs
+        self.xhat = np.vstack(cols)  # (ns - n, N)
+        x, xd = laws_kinematics(nom, self.xhat)
+        self.elong = np.array(x)  # (n, N)
+
+    def _link_angle_estimate(self, ths):
+        ds, nom = self.ds, self.nom
+        if "link_angle" in ds.outputs:
+            return np.asarray(ds.outputs["link_angle"], float)
+        r, rq = nom.motor_pulley_radius, nom.link_pulley_radius
+        est = []
+        xs = np.linspace(0.0, 0.05, 4001)
+        fs = laws.spring_force(xs, nom.spring_poly)
+        for i, s in enumerate(("_1", "_2")):
+            key = f"tendon_force{s}"
+            if key in ds.outputs:
+                x = np.interp(ds.outputs[key], fs, xs)
+                est.append((r * ths[0] - x) / rq if i == 0 else (x - r * ths[1]) / rq)
+        if est:
+            return np.mean(est, axis=0)
+        return r * (ths[0] - ths[1]) / (2 * rq)
+
+    def initial_states(self, starts: np.ndarray, hyst_length: np.ndarray) -> np.ndarray:
+        """Estimated window-start states (num_states, len(starts)); ``w`` from the Dahl
+        law run over the 200 samples before each start on the smoothed elongation."""
+        n = self.nom.num_motors
+        X0 = np.empty((self.nom.num_states, len(starts)))
+        X0[:-n] = self.xhat[:, starts]
+        w = np.zeros((n, len(starts)))
+        back = 200
+        for k in range(back, 0, -1):
+            i1 = np.clip(starts - k + 1, 0, None)
+            i0 = np.clip(starts - k, 0, None)
+            dx = self.elong[:, i1] - self.elong[:, i0]
+            s = np.sign(dx)
+            w = s + (w - s) * np.exp(-np.abs(dx) / hyst_length)
+        X0[-n:] = w
+        return X0
+
+    # ------------------------------------------------------------------ simulate
+    def _simulator(self, M: int):
+        if M not in self._sims:
+            sys = DiscrepancyModel_[float](self.nom, M)
+            sim = Simulator(sys)
+            ResetIntegratorFromFlags(sim, "runge_kutta3", self.dt / self.settings.step_divisor)
+            integ = sim.get_mutable_integrator()
+            integ.set_fixed_step_mode(True)
+            ctx = sim.get_mutable_context()
+            self._sims[M] = (sys, sim, ctx)
+        return self._sims[M]
+
+    def simulate(self, starts: np.ndarray, P: np.ndarray, X0: np.ndarray) -> np.ndarray:
+        """Simulate copies; returns the model measurements (M, L, num_measurements).
+
+        Parameters
+        ----------
+        starts : (M,) int, window start sample of each copy
+        P : (num_params, M) catalog parameters of each copy
+        X0 : (num_states, M) initial state of each copy
+        """
+        import time as _time
+        t0 = _time.perf_counter()
+        M = len(starts)
+        sys, sim, ctx = self._simulator(M)
+        n = self.nom.num_motors
+        ctx.SetTime(0.0)
+        ctx.SetContinuousState(np.asarray(X0, float).ravel())
+        ctx.get_mutable_numeric_parameter(0).SetFromVector(np.asarray(P, float).ravel())
+        delay = P[PARAM_INDEX["delay"]] / self.dt
+        nd = np.floor(delay).astype(int)
+        a = delay - nd
+        port = sys.get_input_port(0)
+        out = sys.get_output_port(0)
+        ny = self.nom.num_measurements
+        Ym = np.empty((M, self.L, ny))
+        sim.Initialize()
+        for k in range(self.L):
+            i0 = np.clip(starts + k - nd, 0, self.N - 1)
+            i1 = np.clip(starts + k - nd - 1, 0, self.N - 1)
+            u = (1 - a)[:, None] * self.U[i0] + a[:, None] * self.U[i1]  # (M, n)
+            port.FixValue(ctx, u.T.ravel())
+            sim.AdvanceTo((k + 1) * self.dt)
+            Ym[:, k, :] = out.Eval(ctx).reshape(ny, M).T
+        if not np.all(np.isfinite(Ym)):
+            bad = np.unique(np.nonzero(~np.isfinite(Ym))[0])
+            raise FloatingPointError(f"replay of {self.ds.name} diverged in {len(bad)} of {M} copies")
+        self.simulations += 1
+        self.sim_time += _time.perf_counter() - t0
+        return Ym
+
+    def residual(self, starts: np.ndarray, Ym: np.ndarray) -> np.ndarray:
+        """Normalised residual (measured - model)/sigma, shape (M, L * ny_measured)."""
+        idx = starts[:, None] + 1 + np.arange(self.L)[None, :]
+        meas = self.Y[idx]  # (M, L, ny)
+        pred = Ym[:, :, self.out_index]
+        return ((meas - pred) / self.sigma).reshape(len(starts), -1)
+
+    # ------------------------------------------------------------------ batches
+    def evaluate(self, Psets: np.ndarray, windows: np.ndarray, state_perturbations=None) -> np.ndarray:
+        """Residuals of several parameter sets on several windows in one simulation.
+
+        Parameters
+        ----------
+        Psets : (S, num_params) parameter vectors
+        windows : (W,) window indices
+        state_perturbations : (K, num_states), optional; adds K copies per
+            window of the *first* parameter set with perturbed initial states.
+
+        Returns
+        -------
+        (S + K, W, L * ny) normalised residuals.
+        """
+        Psets = np.atleast_2d(Psets)
+        S, W = len(Psets), len(windows)
+        starts_w = self.starts[windows]
+        K = 0 if state_perturbations is None else len(state_perturbations)
+        starts = np.tile(starts_w, S + K)
+        P = np.empty((Psets.shape[1], (S + K) * W))
+        for s in range(S):
+            P[:, s * W:(s + 1) * W] = Psets[s][:, None]
+        for k in range(K):
+            P[:, (S + k) * W:(S + k + 1) * W] = Psets[0][:, None]
+        hl = P[PARAM_INDEX["hysteresis_length"]]
+        X0 = np.empty((self.nom.num_states, (S + K) * W))
+        for val in np.unique(hl):
+            sel = hl == val
+            X0[:, sel] = self.initial_states(starts[sel], val)
+        for k in range(K):
+            X0[:, (S + k) * W:(S + k + 1) * W] += state_perturbations[k][:, None]
+        Ym = self.simulate(starts, P, X0)
+        return self.residual(starts, Ym).reshape(S + K, W, -1)
+
+    def state_steps(self) -> np.ndarray:
+        """Initial-state perturbations used for the projection (num_states x num_states)."""
+        nom = self.nom
+        n = nom.num_motors
+        th_scale = np.maximum(self.xhat[:n].std(axis=1), 1e-3) * 1e-2
+        om_scale = np.maximum(self.xhat[n:2 * n].std(axis=1), 1e-2) * 1e-2
+        steps = list(th_scale) + list(om_scale)
+        if nom.has_link:
+            steps += [max(self.xhat[2 * n].std(), 1e-3) * 1e-2, max(self.xhat[2 * n + 1].std(), 1e-2) * 1e-2]
+        steps += [0.05] * n
+        return np.diag(steps)
+
+    def projector(self, Pbase: np.ndarray, windows: np.ndarray):
+        """Base residual and per-window orthonormal bases of the initial-state sensitivities.
+
+        Returns
+        -------
+        r0 : (W, L*ny) base residual
+        Q : (W, L*ny, k) orthonormal bases (project with ``r - Q (Q^T r)``)
+        """
+        D = self.state_steps()
+        R = self.evaluate(Pbase[None], windows, state_perturbations=D)
+        r0 = R[0]
+        S = (r0[None] - R[1:]) / np.diag(D)[:, None, None]  # d(pred)/dx0 scaled: (ns, W, m)
+        S = np.transpose(S, (1, 2, 0))  # (W, m, ns)
+        bases = []
+        kmax = 0
+        for w in range(len(windows)):
+            u, s, _ = np.linalg.svd(S[w], full_matrices=False)
+            keep = s > 1e-8 * max(s[0], 1e-300)
+            bases.append(u[:, keep])
+            kmax = max(kmax, int(keep.sum()))
+        Q = np.zeros((len(windows), S.shape[1], kmax))
+        for w, b in enumerate(bases):
+            Q[w, :, :b.shape[1]] = b
+        return r0, Q
+
+
+def project(R: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """Remove the initial-state directions: ``R - Q Q^T R`` per window; R is (..., W, m)."""
+    coef = np.einsum("wmk,...wm->...wk", Q, R)
+    return R - np.einsum("wmk,...wk->...wm", Q, coef)
+
+
+def laws_kinematics(nom: NominalParameters, xhat: np.ndarray):
+    """Elongation and rate from the stacked estimate ``[theta, omega, (q, q')]``."""
+    from .model import rig_kinematics
+    n = nom.num_motors
+    theta, omega = xhat[:n], xhat[n:2 * n]
+    q = qd = None
+    if nom.has_link:
+        q, qd = xhat[2 * n], xhat[2 * n + 1]
+    return rig_kinematics(nom, theta, omega, q, qd)

@@ -1,0 +1,357 @@
+"""Hidden-effect truth datasets: the test bench of the discrepancy workflow.
+
+A truth plant (:class:`HiddenEffectPlant_`) runs in closed loop with a discrete
+PD motor controller at the logging rate, driven by lab excitations
+(multisine, chirp, steps, slow reversals).  Hidden effects are switched into
+the plant in forms that deliberately differ from the catalog forms where
+physics allows, so that identifying them is not circular:
+
+================== ================================================================
+``motor_friction``   Stribeck: ``-(Fc + (Fs - Fc) exp(-(w/vs)^2)) tanh(w/eps) - s2 w``
+``motor_ripple``     two harmonics at orders drawn from {1..6, 100} per rev, random phase
+``spring_hysteresis`` Bouc-Wen (n = 1, beta = 0.7, gamma = 0.3) offset on the spring force
+``joint_friction``   Stribeck at the link
+``guide_friction``   capstan ``f (exp(mu_a sgn v) - 1)`` plus constant (4.1) part
+``delay``            exact delay of the zero-order-hold command (interval split)
+================== ================================================================
+
+Sensor noise is white at a given SNR (relative to each signal's standard
+deviation); forces are quantised to 12 bit over the sensor range.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import positive_part
+from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+
+from . import laws
+from .catalog import EFFECTS
+from .data import Dataset
+from .model import NominalParameters, rig_kinematics
+
+__all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
+
+HIDDEN_EFFECTS = ("motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
+                  "guide_friction", "delay")
+NUISANCES = ("force_sensor", "nominal_motor")
+
+
+def default_nominal(rig: str) -> dict:
+    """Nominal dataset parameters (centre of the random draw), with their sources in
+    :func:`awiwi_drake.parameters.discrepancy` and the foundation defaults."""
+    from .defaults import nominal_defaults
+    return nominal_defaults(rig)
+
+
+def _truth_friction(v, fc, fs, vs, eps, s2):
+    return -((fc + (fs - fc) * np.exp(-(v / vs) ** 2)) * np.tanh(v / eps) + s2 * v)
+
+
+@TemplateSystem.define("HiddenEffectPlant_")
+def HiddenEffectPlant_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Truth rig with hidden effects; state ``[theta, omega, (q, q'), z]``, input
+        ``motor_torque`` (applied), outputs ``measurement`` ``[theta, f, (q)]`` and ``state``."""
+
+        def _construct(self, nominal: NominalParameters, truth: dict, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._nom = nominal
+            self._truth = dict(truth)
+            n = nominal.num_motors
+            self._ns = nominal.num_states
+            self.DeclareContinuousState(self._ns)
+            self.DeclareVectorInputPort("motor_torque", n)
+            self.DeclareVectorOutputPort("measurement", nominal.num_measurements, self._calc_y,
+                                         prerequisites_of_calc={self.all_state_ticket()})
+            self.DeclareVectorOutputPort("state", self._ns, self._calc_x,
+                                         prerequisites_of_calc={self.all_state_ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._nom, other._truth, converter=converter)
+
+        def _split(self, X):
+            nom, n = self._nom, self._nom.num_motors
+            theta, omega = X[:n], X[n:2 * n]
+            q = qd = None
+            if nom.has_link:
+                q, qd = X[2 * n], X[2 * n + 1]
+            return theta, omega, q, qd, X[-n:]
+
+        def _forces(self, X):
+            nom, tr = self._nom, self._truth
+            theta, omega, q, qd, z = self._split(X)
+            x, xd = rig_kinematics(nom, theta, omega, q, qd)
+            f = []
+            for i in range(nom.num_motors):
+                f0 = laws.spring_force(x[i], nom.spring_poly) * tr.get("spring_scale", 1.0)
+                if "spring_hysteresis" in tr:
+                    f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
+                f.append(f0)
+            return f, x, xd
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            X = context.get_continuous_state_vector().CopyToVector()
+            U = self.get_input_port(0).Eval(context)
+            nom, tr, n = self._nom, self._truth, self._nom.num_motors
+            theta, omega, q, qd, z = self._split(X)
+            f, x, xd = self._forces(X)
+            B = nom.motor_inertia * tr.get("inertia_scale", 1.0)
+            r = nom.motor_pulley_radius
+            acc, zd = [], []
+            for i in range(n):
+                tau = U[i] - nom.motor_damping * omega[i]
+                if "motor_friction" in tr:
+                    p = tr["motor_friction"]
+                    tau = tau + _truth_friction(omega[i], p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
+                if "motor_ripple" in tr:
+                    p = tr["motor_ripple"]
+                    tau = tau + laws.ripple(theta[i], [(o, a, b) for o, a, b in p["harmonics"][i]])
+                tension = f[i]
+                if "guide_friction" in tr:
+                    p = tr["guide_friction"]
+                    v = r * omega[i]
+                    sgn = np.tanh(v / p["v0"])
+                    tension = tension + positive_part(f[i]) * (np.exp(p["mu_angle"] * sgn) - 1.0) \
+                        + p["c0"] * sgn
+                tau = tau - r * tension
+                acc.append(tau / B)
+                if "spring_hysteresis" in tr:
+                    p = tr["spring_hysteresis"]
+                    v = xd[i]
+                    av = np.sqrt(v * v + 1e-12)
+                    zd.append((v - p["beta"] * av * z[i] - p["gamma"] * v * np.sqrt(z[i] * z[i] + 1e-12))
+                              / p["length"])
+                else:
+                    zd.append(0.0 * z[i])
+            out = [omega[i] for i in range(n)] + acc
+            if nom.has_link:
+                tq = nom.link_pulley_radius * (f[0] - f[1]) - nom.link_damping * qd
+                if "joint_friction" in tr:
+                    p = tr["joint_friction"]
+                    tq = tq + _truth_friction(qd, p["fc"], p["fs"], p["vs"], p["eps"], 0.0)
+                out += [qd, tq / nom.link_inertia]
+            out += zd
+            derivatives.get_mutable_vector().SetFromVector(np.array(out))
+
+        def _calc_y(self, context, output):
+            X = context.get_continuous_state_vector().CopyToVector()
+            f, _, _ = self._forces(X)
+            theta, omega, q, qd, z = self._split(X)
+            y = list(theta) + list(f) + ([q] if self._nom.has_link else [])
+            output.SetFromVector(np.array(y))
+
+        def _calc_x(self, context, output):
+            output.SetFromVector(context.get_continuous_state_vector().CopyToVector())
+
+    return Impl
+
+
+def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
+    """Random truth parameters for the hidden effects (and optional miscalibrations)."""
+    hidden = list(hidden)
+    for h in hidden:
+        if h not in HIDDEN_EFFECTS:
+            raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")
+        if rig not in EFFECTS[h].rigs:
+            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r}")
+    for h in nuisance:
+        if h not in NUISANCES:
+            raise ValueError(f"unknown nuisance {h!r} (known: {', '.join(NUISANCES)})")
+    n = 2 if rig == "joint" else 1
+    tr: dict = {}
+    u = rng.uniform
+    if "motor_friction" in hidden:
+        fc = u(0.06, 0.2)
+        tr["motor_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.8), vs=u(0.1, 0.5), eps=u(0.02, 0.05),
+                                    viscous=u(0.0, 0.02))
+    if "motor_ripple" in hidden:
+        orders = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False)
+        harm = []
+        for _ in range(n):
+            hm = []
+            for o in orders:
+                amp, ph = u(0.04, 0.12), u(0, 2 * np.pi)
+                hm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
+            harm.append(hm)
+        tr["motor_ripple"] = dict(harmonics=harm)
+    if "spring_hysteresis" in hidden:
+        tr["spring_hysteresis"] = dict(width=u(4.0, 10.0), length=u(1e-4, 4e-4), beta=0.7, gamma=0.3)
+    if "joint_friction" in hidden:
+        fc = u(0.01, 0.03)
+        tr["joint_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.6), vs=u(0.1, 0.4), eps=u(0.08, 0.15))
+    if "guide_friction" in hidden:
+        tr["guide_friction"] = dict(mu_angle=u(0.08, 0.2), c0=u(0.3, 1.5), v0=2e-4)
+    if "delay" in hidden:
+        tr["delay"] = float(u(0.002, 0.006))
+    if "force_sensor" in nuisance:
+        tr["force_gain"] = float(1.0 + u(0.05, 0.12) * rng.choice([-1, 1]))
+        tr["force_offset"] = float(u(1.0, 3.0) * rng.choice([-1, 1]))
+    if "nominal_motor" in nuisance:
+        tr["inertia_scale"] = float(1.0 + u(0.15, 0.3) * rng.choice([-1, 1]))
+    tr["hidden"] = hidden
+    tr["nuisance"] = list(nuisance)
+    return tr
+
+
+def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Normalised lab excitation in [-1, 1]: multisine, chirp, steps, slow reversals."""
+    T = t[-1] - t[0] + (t[1] - t[0])
+    s = (t - t[0]) / T
+    a = np.zeros_like(t)
+    # multisine 0.3-6 Hz, Schroeder phases
+    m = s < 0.3
+    freqs = np.linspace(0.3, 6.0, 12)
+    ph = -np.pi * np.arange(12) * (np.arange(12) + 1) / 12 + rng.uniform(0, 0.5)
+    ms = sum(np.sin(2 * np.pi * f * t + p) for f, p in zip(freqs, ph))
+    a[m] = ms[m] / np.max(np.abs(ms[m]))
+    # chirp 0.2 -> 6 Hz
+    m2 = (s >= 0.3) & (s < 0.55)
+    tc = t[m2] - t[m2][0] if m2.any() else t[m2]
+    if m2.any():
+        dur = tc[-1] + 1e-9
+        a[m2] = np.sin(2 * np.pi * (0.2 * tc + (6.0 - 0.2) * tc ** 2 / (2 * dur)))
+    # steps every 0.3 s
+    m3 = (s >= 0.55) & (s < 0.8)
+    if m3.any():
+        k = ((t[m3] - t[m3][0]) / 0.3).astype(int)
+        levels = rng.uniform(-1, 1, k.max() + 1)
+        a[m3] = levels[k]
+    # slow reversals (triangle 0.3 Hz)
+    m4 = s >= 0.8
+    if m4.any():
+        tt = t[m4] - t[m4][0]
+        a[m4] = 2 * np.abs(2 * ((0.3 * tt + 0.25) % 1.0) - 1) - 1
+    return a
+
+
+def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
+                       nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
+                       keep_clean: bool = True) -> Dataset:
+    """Simulate one closed-loop experiment on a truth rig with hidden effects.
+
+    Parameters
+    ----------
+    rig : "tendon" | "joint"
+    hidden : sequence of catalog names hidden in the truth plant
+    snr_db : float or None
+        Sensor SNR [dB] per output (None: noise-free, no quantisation).
+    seed : int
+        Random physical parameters, effect parameters, excitation and noise.
+    nuisance : sequence of "force_sensor" | "nominal_motor"
+        Miscalibrations: the JSON's nominal values or the sensor differ from the truth.
+
+    Returns
+    -------
+    Dataset whose ``meta["truth"]`` records the hidden effects and whose
+    ``meta["clean_outputs"]`` (in memory only, when ``keep_clean``) holds the
+    noise-free outputs.
+    """
+    if rig not in ("tendon", "joint"):
+        raise ValueError(f"unknown rig {rig!r} (known: tendon, joint)")
+    gen = gen or TruthGeneratorParams()
+    rng = np.random.default_rng(seed)
+    base = default_nominal(rig)
+    spread = gen.parameter_spread
+    params = {}
+    for k, v in base.items():
+        if k == "spring_poly":
+            sc = rng.uniform(1 - spread, 1 + spread)
+            params[k] = [float(c * sc) for c in v]
+        elif k in ("motor_pulley_radius", "link_pulley_radius"):
+            params[k] = float(v)
+        else:
+            params[k] = float(v * rng.uniform(1 - spread, 1 + spread))
+    nom = NominalParameters.from_dataset(rig, params)
+    truth = draw_truth(rig, hidden, rng, nuisance)
+    plant = HiddenEffectPlant_[float](nom, truth)
+    sim = Simulator(plant)
+    dt = 1.0 / gen.sample_rate
+    N = int(round(gen.duration / dt))
+    t = np.arange(N) * dt
+    ResetIntegratorFromFlags(sim, "runge_kutta3", dt)
+    sim.get_mutable_integrator().set_target_accuracy(1e-6)
+    ctx = sim.get_mutable_context()
+    n = nom.num_motors
+    r = nom.motor_pulley_radius
+    xs = np.linspace(0, 0.05, 20001)
+    x0 = float(np.interp(gen.pretension, laws.spring_force(xs, nom.spring_poly), xs))
+    th0 = x0 / r
+    a = _excitation(t, rng)
+    # first-order reference filter (10 ms): steps stay steps for the plant, without
+    # commanding torque impulses beyond the motor's range
+    alpha = dt / (0.01 + dt)
+    for k in range(1, N):
+        a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
+    if rig == "joint":
+        rq = nom.link_pulley_radius
+        qref = gen.link_excursion * a
+        cc = 0.2 * th0 * np.sin(2 * np.pi * 0.13 * t + rng.uniform(0, 2 * np.pi))
+        ref = np.stack([th0 + rq / r * qref + cc, th0 - rq / r * qref + cc], axis=1)
+        X0 = np.zeros(nom.num_states)
+        X0[:2] = th0
+    else:
+        ref = (th0 + 0.6 * th0 * a)[:, None]
+        X0 = np.zeros(nom.num_states)
+        X0[0] = th0
+    ff = r * gen.pretension
+    ctx.SetContinuousState(X0)
+    port = plant.get_input_port(0)
+    yport = plant.get_output_port(0)
+    xport = plant.get_output_port(1)
+    delay = float(truth.get("delay", 0.0))
+    nd = int(np.floor(delay / dt + 1e-12))
+    frac = delay / dt - nd
+    Ucmd = np.zeros((N, n))
+    Y = np.zeros((N, nom.num_measurements))
+    port.FixValue(ctx, np.full(n, ff))
+    sim.Initialize()
+    for k in range(N):
+        xk = xport.Eval(ctx)
+        Y[k] = yport.Eval(ctx)
+        th, om = xk[:n], xk[n:2 * n]
+        Ucmd[k] = ff + gen.kp * (ref[k] - th) - gen.kd * om
+        if k == N - 1:
+            break
+        u_new = Ucmd[max(k - nd, 0)]
+        if frac > 1e-9:
+            u_old = Ucmd[max(k - nd - 1, 0)]
+            port.FixValue(ctx, u_old)
+            sim.AdvanceTo(t[k] + frac * dt)
+        port.FixValue(ctx, u_new)
+        sim.AdvanceTo(t[k + 1])
+        if not np.all(np.isfinite(ctx.get_continuous_state_vector().CopyToVector())):
+            raise FloatingPointError(f"truth simulation diverged at t = {t[k + 1]:.4f} s")
+    names = nom.measurement_names()
+    clean = {nm: Y[:, j].copy() for j, nm in enumerate(names)}
+    meas = {}
+    for j, nm in enumerate(names):
+        y = Y[:, j].copy()
+        if nm.startswith("tendon_force") and "force_gain" in truth:
+            y = truth["force_gain"] * y + truth["force_offset"]
+        if snr_db is not None:
+            y = y + rng.normal(0.0, Y[:, j].std() * 10 ** (-snr_db / 20.0), N)
+            if nm.startswith("tendon_force"):
+                lsb = gen.force_range / 2 ** gen.force_bits
+                y = np.round(y / lsb) * lsb
+        meas[nm] = y
+    inputs = {nm: Ucmd[:, i] for i, nm in enumerate(
+        ["motor_torque_1", "motor_torque_2"] if n == 2 else ["motor_torque"])}
+    init = {}
+    sn = nom.state_names()
+    for i, nm in enumerate(sn[:-n]):
+        init[nm] = float(X0[i])
+    tag = "-".join(hidden) if hidden else "none"
+    name = name or f"{rig}_{tag}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
+    truth_json = {k: v for k, v in truth.items()}
+    meta = {"truth": truth_json, "generator": {"snr_db": snr_db, "seed": seed,
+                                               "sample_rate": gen.sample_rate, "duration": gen.duration}}
+    ds = Dataset(name, rig, t, inputs, meas, params, init, meta)
+    if keep_clean:
+        ds.meta["clean_outputs"] = clean
+    return ds
