@@ -1,0 +1,28 @@
+"""Model-discrepancy workflow (issue 6): find where simulation and data disagree,
+name the missing effect, add it to the model and show the gap shrink.
+
+Entry points: :func:`load_dataset`, :func:`diagnose` (returns a :class:`Diagnosis`),
+:func:`write_report`, :func:`make_truth_dataset` (hidden-effect test data).
+See ``docs`` of each module: ``catalog`` (named effects), ``model`` (the
+augmented Drake system), ``replay`` (multiple shooting), ``localise``
+(residual maps), ``workflow`` (screen, fit, decide), ``truth`` (generator).
+"""
+
+from .catalog import EFFECTS, NUISANCE_EFFECTS, PHYSICAL_EFFECTS
+from .data import RIGS, Dataset, load_dataset, save_dataset
+from .model import DiscrepancyModel_, NominalParameters
+from .replay import ReplayEngine
+from .truth import HIDDEN_EFFECTS, HiddenEffectPlant_, make_truth_dataset
+from .workflow import Diagnosis, diagnose, gap_metrics
+
+
+def write_report(dx, directory):
+    """Write the report folder (see :mod:`awiwi_drake.discrepancy.report`)."""
+    from .report import write_report as _w
+    return _w(dx, directory)
+
+
+__all__ = ["EFFECTS", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS", "RIGS", "Dataset", "load_dataset",
+           "save_dataset", "DiscrepancyModel_", "NominalParameters", "ReplayEngine", "HIDDEN_EFFECTS",
+           "HiddenEffectPlant_", "make_truth_dataset", "Diagnosis", "diagnose", "gap_metrics",
+           "write_report"]

@@ -127,7 +127,7 @@ class Effect:
 EFFECTS = {
     "motor_friction": Effect(
         "motor_friction", "physical", ("motor_coulomb", "motor_viscous"),
-        {"motor_slope": (3.0, 10.0, 30.0, 100.0)}, ("tendon", "joint"),
+        {"motor_slope": (3.0, 10.0, 30.0)}, ("tendon", "joint"),
         "motor-torque residual odd in motor velocity, saturating (atan); peaks at reversals"),
     "motor_ripple": Effect(
         "motor_ripple", "physical",

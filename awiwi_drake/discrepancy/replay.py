@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_coeffs, savgol_filter
 
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
@@ -28,7 +28,7 @@ from .catalog import PARAM_INDEX, default_vector
 from .data import Dataset
 from .model import DiscrepancyModel_, NominalParameters
 
-__all__ = ["ReplayEngine", "noise_floor"]
+__all__ = ["ReplayEngine", "Projection", "project", "noise_floor"]
 
 
 def noise_floor(y: np.ndarray) -> float:
@@ -96,6 +96,7 @@ class ReplayEngine:
         ds, nom, dt = self.ds, self.nom, self.dt
         win = max(5, int(round(self.settings.velocity_smoothing / dt)) | 1)
         win = min(win, (self.N // 2) * 2 - 1)
+        self._sg_window = win
         n = nom.num_motors
         sfx = ["_1", "_2"] if n == 2 else [""]
         th = np.array([ds.outputs[f"motor_angle{s}"] for s in sfx])
@@ -105,11 +106,14 @@ class ReplayEngine:
         self.q_est = None
         if nom.has_link:
             q = self._link_angle_estimate(ths)
+            self._q_raw = q
             qs = savgol_filter(q, win, 3)
             qd = savgol_filter(q, win, 3, deriv=1, delta=dt)
             cols += [qs[None], qd[None]]
             self.q_est = qs
         self.xhat = np.vstack(cols)  # (ns - n, N)
+        fk = [f"tendon_force{s}" for s in sfx]
+        self._force_smooth = [savgol_filter(ds.outputs[k], win, 3) if k in ds.outputs else None for k in fk]
         x, xd = laws_kinematics(nom, self.xhat)
         self.elong = np.array(x)  # (n, N)
 
@@ -130,20 +134,37 @@ class ReplayEngine:
             return np.mean(est, axis=0)
         return r * (ths[0] - ths[1]) / (2 * rq)
 
-    def initial_states(self, starts: np.ndarray, hyst_length: np.ndarray) -> np.ndarray:
-        """Estimated window-start states (num_states, len(starts)); ``w`` from the Dahl
-        law run over the 200 samples before each start on the smoothed elongation."""
+    def initial_states(self, starts: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """Estimated window-start states (num_states, len(starts)) for copies with
+        catalog parameters ``P`` (num_params, len(starts)).
+
+        Angles and velocities come from the smoothed measurements.  The hysteresis
+        state ``w`` is read from the measured force where it is measured
+        (``w = (f_meas - f(x)) / (h tanh f)``, clipped to [-1, 1]); otherwise the Dahl
+        law is run over the 200 samples before each start on the smoothed elongation."""
         n = self.nom.num_motors
         X0 = np.empty((self.nom.num_states, len(starts)))
         X0[:-n] = self.xhat[:, starts]
+        length = P[PARAM_INDEX["hysteresis_length"]]
+        width = P[PARAM_INDEX["hysteresis_width"]]
         w = np.zeros((n, len(starts)))
         back = 200
         for k in range(back, 0, -1):
             i1 = np.clip(starts - k + 1, 0, None)
             i0 = np.clip(starts - k, 0, None)
             dx = self.elong[:, i1] - self.elong[:, i0]
-            s = np.sign(dx)
-            w = s + (w - s) * np.exp(-np.abs(dx) / hyst_length)
+            sg = np.sign(dx)
+            w = sg + (w - sg) * np.exp(-np.abs(dx) / length)
+        for i in range(n):
+            if self._force_smooth[i] is None:
+                continue
+            f0 = laws.spring_force(self.elong[i, starts], self.nom.spring_poly)
+            f_true = (self._force_smooth[i][starts] - P[PARAM_INDEX[f"force_offset_{i + 1}"]]) \
+                / (1.0 + P[PARAM_INDEX["force_gain"]])
+            gate = width * np.tanh(f0)
+            ok = gate > 1e-9
+            est = (f_true - (1.0 + P[PARAM_INDEX["spring_scale_rel"]]) * f0) / np.where(ok, gate, 1.0)
+            w[i] = np.where(ok, np.clip(est, -1.0, 1.0), w[i])
         X0[-n:] = w
         return X0
 
@@ -230,11 +251,7 @@ class ReplayEngine:
             P[:, s * W:(s + 1) * W] = Psets[s][:, None]
         for k in range(K):
             P[:, (S + k) * W:(S + k + 1) * W] = Psets[0][:, None]
-        hl = P[PARAM_INDEX["hysteresis_length"]]
-        X0 = np.empty((self.nom.num_states, (S + K) * W))
-        for val in np.unique(hl):
-            sel = hl == val
-            X0[:, sel] = self.initial_states(starts[sel], val)
+        X0 = self.initial_states(starts, P)
         for k in range(K):
             X0[:, (S + k) * W:(S + k + 1) * W] += state_perturbations[k][:, None]
         Ym = self.simulate(starts, P, X0)
@@ -252,36 +269,97 @@ class ReplayEngine:
         steps += [0.05] * n
         return np.diag(steps)
 
+    def state_prior_std(self) -> np.ndarray:
+        """Standard deviation of the window-start state estimate (prior of the profile).
+
+        Angles: twice the noise floor times the Savitzky-Golay noise gain; velocities:
+        twice the derivative-filter noise gain plus 2 % of their RMS (smoothing bias at
+        fast transients); hysteresis state: 1 (unknown)."""
+        n = self.nom.num_motors
+        win = self._sg_window
+        g0 = float(np.sqrt(np.sum(savgol_coeffs(win, 3) ** 2)))
+        g1 = float(np.sqrt(np.sum(savgol_coeffs(win, 3, deriv=1, delta=self.dt) ** 2)))
+        sfx = ["_1", "_2"] if n == 2 else [""]
+        sig_th = np.array([self.sigma[self.out_names.index(f"motor_angle{s}")] for s in sfx])
+        om_rms = np.sqrt(np.mean(self.xhat[n:2 * n] ** 2, axis=1))
+        std = list(2 * g0 * sig_th) + list(2 * g1 * sig_th + 0.02 * om_rms)
+        if self.nom.has_link:
+            sq = noise_floor(self._q_raw)
+            qd_rms = float(np.sqrt(np.mean(self.xhat[2 * n + 1] ** 2)))
+            std += [max(2 * g0 * sq, 1e-9), 2 * g1 * sq + 0.02 * qd_rms]
+        std += [1.0] * n
+        return np.maximum(np.array(std), 1e-12)
+
+    def profiled(self, Psets: np.ndarray, windows: np.ndarray) -> list:
+        """Residuals and window-start profiles of several parameter sets (one simulation).
+
+        Returns a list of ``(r0, Projection)``, one per set: ``r0`` (W, L*ny) is the
+        residual from the estimated window starts, the projection profiles it over
+        the window initial states (sensitivities by finite differences at that set)."""
+        Psets = np.atleast_2d(Psets)
+        D = self.state_steps()
+        ns = D.shape[0]
+        Sn, W = len(Psets), len(windows)
+        starts = np.tile(self.starts[windows], Sn * (1 + ns))
+        P = np.repeat(np.repeat(Psets, 1 + ns, axis=0).T, W, axis=1)
+        X0 = self.initial_states(starts, P)
+        for s in range(Sn):
+            for k in range(ns):
+                b = (s * (1 + ns) + 1 + k) * W
+                X0[:, b:b + W] += D[k][:, None]
+        Ym = self.simulate(starts, P, X0)
+        R = self.residual(starts, Ym).reshape(Sn, 1 + ns, W, -1)
+        prior = self.state_prior_std()
+        out = []
+        for s in range(Sn):
+            r0 = R[s, 0]
+            S = (r0[None] - R[s, 1:]) / np.diag(D)[:, None, None]  # d(pred)/dx0: (ns, W, m)
+            out.append((r0, Projection(np.transpose(S, (1, 2, 0)) * prior[None, None, :])))
+        return out
+
     def projector(self, Pbase: np.ndarray, windows: np.ndarray):
-        """Base residual and per-window orthonormal bases of the initial-state sensitivities.
+        """Base residual and the window-start profile of one parameter set.
 
         Returns
         -------
         r0 : (W, L*ny) base residual
-        Q : (W, L*ny, k) orthonormal bases (project with ``r - Q (Q^T r)``)
+        proj : :class:`Projection` (apply with :func:`project`)
         """
-        D = self.state_steps()
-        R = self.evaluate(Pbase[None], windows, state_perturbations=D)
-        r0 = R[0]
-        S = (r0[None] - R[1:]) / np.diag(D)[:, None, None]  # d(pred)/dx0 scaled: (ns, W, m)
-        S = np.transpose(S, (1, 2, 0))  # (W, m, ns)
-        bases = []
-        kmax = 0
-        for w in range(len(windows)):
-            u, s, _ = np.linalg.svd(S[w], full_matrices=False)
-            keep = s > 1e-8 * max(s[0], 1e-300)
-            bases.append(u[:, keep])
-            kmax = max(kmax, int(keep.sum()))
-        Q = np.zeros((len(windows), S.shape[1], kmax))
-        for w, b in enumerate(bases):
-            Q[w, :, :b.shape[1]] = b
-        return r0, Q
+        return self.profiled(np.asarray(Pbase)[None], windows)[0]
 
 
-def project(R: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """Remove the initial-state directions: ``R - Q Q^T R`` per window; R is (..., W, m)."""
-    coef = np.einsum("wmk,...wm->...wk", Q, R)
-    return R - np.einsum("wmk,...wk->...wm", Q, coef)
+class Projection:
+    """Profile over the window initial states with a Gaussian prior (per window).
+
+    With ``S`` the prior-scaled initial-state sensitivities of a window, the
+    residual energy minimised over the initial-state correction ``d`` with prior
+    ``|d|^2`` is ``r^T (I + S S^T)^-1 r = |C r|^2``, ``C = I - U diag(1 - 1/sqrt(1 +
+    s^2)) U^T`` from the SVD ``S = U diag(s) V^T``.  :func:`project` applies ``C``,
+    so least squares on projected residuals is exact generalised least squares.
+    """
+
+    def __init__(self, S: np.ndarray):
+        W, m, ns = S.shape
+        U = np.zeros((W, m, ns))
+        d = np.zeros((W, ns))
+        dof = np.empty(W)
+        for w in range(W):
+            u, sv, _ = np.linalg.svd(S[w], full_matrices=False)
+            U[w, :, :len(sv)] = u
+            d[w, :len(sv)] = 1.0 - 1.0 / np.sqrt(1.0 + sv ** 2)
+            dof[w] = m - np.sum(sv ** 2 / (1.0 + sv ** 2))
+        self.U, self.d, self.dof = U, d, dof
+
+    def take(self, windows: np.ndarray) -> "Projection":
+        out = Projection.__new__(Projection)
+        out.U, out.d, out.dof = self.U[windows], self.d[windows], self.dof[windows]
+        return out
+
+
+def project(R: np.ndarray, proj: Projection) -> np.ndarray:
+    """Apply the window-start profile ``C`` to residuals ``R`` of shape (..., W, m)."""
+    coef = np.einsum("wmk,...wm->...wk", proj.U, R) * proj.d
+    return R - np.einsum("wmk,...wk->...wm", proj.U, coef)
 
 
 def laws_kinematics(nom: NominalParameters, xhat: np.ndarray):

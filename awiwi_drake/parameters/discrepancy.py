@@ -97,8 +97,10 @@ class CatalogBounds(Parameters):
         0.2, unit="Nm s/rad", low=0.0, source="Table 3.3: gamma3 = 0.0356; x5.6 margin",
         doc="upper bound of gamma3 in (3.8)")
     motor_slope_range: tuple = param(
-        (2.0, 200.0), unit="s/rad", low=0.0,
-        source="Table 3.3: gamma1 = 10 s/rad, +-1.3 decades", doc="range of gamma1")
+        (2.0, 60.0), unit="s/rad", low=0.0,
+        source="Table 3.3: gamma1 = 10 s/rad; upper end 60 keeps gamma1 gamma2 / B * h < 2.5 "
+               "(explicit RK3 stability at h = 0.25 ms, gamma2 <= 0.2 Nm, B = 2e-3)",
+        doc="range of gamma1")
     ripple_orders: tuple = param(
         (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 100.0), unit="cycles/rev", low=1.0,
         source="Ch. 3: output bearing (1 /rev and its harmonics) and motor bearing "

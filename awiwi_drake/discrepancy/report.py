@@ -1,0 +1,196 @@
+"""Plots and the report folder (Markdown + PNG + JSON) of a diagnosis.
+
+Plotting functions take results and return ``(fig, ax)``; :func:`write_report`
+computes the residual maps of the nominal and the augmented model, draws them
+and writes ``report.md``, ``summary.json`` and the PNGs.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import numpy as np
+
+from .catalog import default_vector
+from .localise import ResidualMaps, residual_maps
+from .workflow import Diagnosis
+
+__all__ = ["plot_overlay", "plot_residual_maps", "plot_candidates", "write_report", "json_summary"]
+
+
+def _plt():
+    import matplotlib
+    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        try:
+            matplotlib.use("Agg")
+        except Exception:  # pragma: no cover
+            pass
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def plot_overlay(dx: Diagnosis, *, windows: int = 4):
+    """Measured vs nominal vs augmented predictions on held-out windows (one row per signal)."""
+    plt = _plt()
+    eng = dx.engine
+    test = np.nonzero(eng.test)[0]
+    pick = test[np.linspace(0, len(test) - 1, min(windows, len(test))).astype(int)]
+    ny = len(eng.out_names)
+    fig, ax = plt.subplots(ny, 1, figsize=(9, 1.9 * ny), sharex=True, squeeze=False)
+    ax = ax[:, 0]
+    from .catalog import PARAM_INDEX  # noqa: F401
+    preds = {}
+    for label, p in (("nominal", default_vector()), ("augmented", dx.final_parameters)):
+        P = np.repeat(p[:, None], len(pick), axis=1)
+        X0 = eng.initial_states(eng.starts[pick], P)
+        preds[label] = eng.simulate(eng.starts[pick], P, X0)[:, :, eng.out_index]
+    for w_i, w in enumerate(pick):
+        idx = eng.starts[w] + 1 + np.arange(eng.L)
+        t = eng.ds.time[idx]
+        for j, name in enumerate(eng.out_names):
+            ax[j].plot(t, eng.Y[idx, j], color="0.6", lw=1, label="measured" if w_i == 0 else None)
+            ax[j].plot(t, preds["nominal"][w_i, :, j], color="C3", lw=1, label="nominal" if w_i == 0 else None)
+            ax[j].plot(t, preds["augmented"][w_i, :, j], color="C0", lw=1,
+                       label="augmented" if w_i == 0 else None)
+            ax[j].set_ylabel(name, fontsize=8)
+    ax[0].legend(fontsize=7, ncol=3)
+    ax[-1].set_xlabel("time [s] (held-out multiple-shooting windows)")
+    fig.suptitle(f"{dx.dataset}: replay from measured window starts", fontsize=9)
+    fig.tight_layout()
+    return fig, ax
+
+
+def plot_residual_maps(maps: ResidualMaps, title: str = ""):
+    """Six panels: spectrum/floor, coherence, cycles per rev, velocity bins, direction, lag."""
+    plt = _plt()
+    fig, ax = plt.subplots(2, 3, figsize=(12, 6.5))
+    ax = ax.ravel()
+    for n, p in maps.psd_ratio.items():
+        ax[0].semilogy(maps.freq, np.maximum(p, 1e-3), lw=0.8, label=n)
+    ax[0].axhline(1.0, color="k", ls="--", lw=0.8)
+    ax[0].set(xlabel="frequency [Hz]", ylabel="residual PSD / noise floor", title="spectrum")
+    ax[0].legend(fontsize=6)
+    for (n, u), c in maps.coherence.items():
+        ax[1].plot(maps.freq, c, lw=0.6, label=f"{n} | {u}")
+    ax[1].set(xlabel="frequency [Hz]", ylabel="coherence", title="residual-input coherence", ylim=(0, 1))
+    ax[1].legend(fontsize=5)
+    xo = np.arange(len(maps.cpr_orders))
+    wdt = 0.8 / max(len(maps.cpr_amplitude), 1)
+    for i, (n, a) in enumerate(maps.cpr_amplitude.items()):
+        ax[2].bar(xo + i * wdt, a, width=wdt, label=n)
+    ax[2].axhline(maps.cpr_noise, color="k", ls="--", lw=0.8)
+    ax[2].set_xticks(xo + 0.4, [f"{o:g}" for o in maps.cpr_orders])
+    ax[2].set(xlabel="cycles per motor revolution", ylabel="amplitude [noise units]",
+              title="residual vs motor angle")
+    for n, v in maps.velocity_profile.items():
+        ax[3].plot(maps.velocity_bins, v, "o-", ms=3, lw=0.8, label=n)
+    ax[3].axhline(0, color="k", lw=0.5)
+    ax[3].set(xlabel="motor velocity bin centre [rad/s]", ylabel="mean residual [noise units]",
+              title="by velocity")
+    names = list(maps.direction_asymmetry)
+    ax[4].bar(range(len(names)), [maps.direction_asymmetry[n] for n in names])
+    ax[4].set_xticks(range(len(names)), names, fontsize=7)
+    ax[4].set(ylabel="res(x'>0) - res(x'<0) [noise units]", title="by direction of elongation")
+    for n, c in maps.xcorr.items():
+        ax[5].plot(maps.lags * 1e3, c, lw=0.8, label=n)
+    ax[5].set(xlabel="lag [ms]", ylabel="corr(residual, du/dt)", title="residual-input lag")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig, ax
+
+
+def plot_candidates(dx: Diagnosis):
+    """Held-out gain (share of the energy above the noise floor) of the candidates per step."""
+    plt = _plt()
+    nstep = max(len(dx.history), 1)
+    fig, ax = plt.subplots(1, nstep, figsize=(5 * nstep, 3.2), squeeze=False)
+    ax = ax[0]
+    for i, h in enumerate(dx.history):
+        sc = h["screen"]
+        names = [c["effect"] for c in sc]
+        ax[i].barh(range(len(sc)), [100 * c["relative_gain"] for c in sc], color="0.7", label="screen")
+        fits = {c["effect"]: c for c in h["fits"]}
+        ax[i].barh([names.index(k) for k in fits], [100 * c["relative_gain"] for c in fits.values()],
+                   height=0.4, color="C0", label="simulation fit")
+        ax[i].set_yticks(range(len(sc)), names, fontsize=7)
+        ax[i].invert_yaxis()
+        ax[i].set(xlabel="held-out gain [% of excess over floor]",
+                  title=f"step {i + 1} (residual/floor {h['ratio']:.2f})")
+        ax[i].legend(fontsize=7)
+    fig.tight_layout()
+    return fig, ax
+
+
+def json_summary(dx: Diagnosis, maps_before: ResidualMaps | None = None) -> dict:
+    """The JSON summary (contract keys: named_effects, nrmse_before, nrmse_after, steps)."""
+    out = dx.to_json()
+    if maps_before is not None:
+        out["localisation"] = maps_before.summary
+    return out
+
+
+def write_report(dx: Diagnosis, directory) -> pathlib.Path:
+    """Write ``report.md``, ``summary.json`` and PNGs into ``directory``; returns the Markdown path."""
+    plt = _plt()
+    d = pathlib.Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    eng = dx.engine
+    maps0 = residual_maps(eng, default_vector())
+    maps1 = residual_maps(eng, dx.final_parameters)
+    figs = {
+        "overlay.png": plot_overlay(dx)[0],
+        "residual_maps_nominal.png": plot_residual_maps(maps0, "nominal model residual")[0],
+        "residual_maps_augmented.png": plot_residual_maps(maps1, "augmented model residual")[0],
+    }
+    if dx.history:
+        figs["candidates.png"] = plot_candidates(dx)[0]
+    for name, fig in figs.items():
+        fig.savefig(d / name, dpi=110)
+        plt.close(fig)
+    summary = json_summary(dx, maps0)
+    (d / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
+    L = [f"# Model-discrepancy diagnosis: {dx.dataset}", "",
+         f"Rig `{dx.rig}`; verdict: **{dx.verdict}**; "
+         f"named effects: {', '.join(f'`{e}`' for e in dx.named_effects) or 'none'}"
+         + (f"; calibration: {', '.join(dx.nuisance_corrections)}" if dx.nuisance_corrections else "")
+         + f". {dx.simulations} batched Drake simulations, {dx.seconds:.1f} s.", "",
+         "## Gap (held-out multiple-shooting windows)", "",
+         "| signal | noise floor | NRMSE before | NRMSE after | fit % before | fit % after |",
+         "|---|---|---|---|---|---|"]
+    for n in dx.nrmse_before_signals:
+        b, a = dx.nrmse_before_signals[n], dx.nrmse_after_signals[n]
+        L.append(f"| `{n}` | {dx.noise_floor[n]:.3g} | {b:.4f} | {a:.4f} | {100 * (1 - b):.1f} | {100 * (1 - a):.1f} |")
+    L += [f"| **mean** | | {dx.nrmse_before:.4f} | {dx.nrmse_after:.4f} | {dx.fit_percent_before:.1f} | "
+          f"{dx.fit_percent_after:.1f} |", "",
+          f"Residual energy / noise floor on held-out windows: {dx.floor_ratio_before:.3f} before, "
+          f"{dx.floor_ratio_after:.3f} after (1 = nothing left to explain).", "",
+          "![overlay](overlay.png)", "", "## Steps", ""]
+    if not dx.steps:
+        L.append("No candidate beat the noise floor: nothing is missing from the model.")
+    for i, s in enumerate(dx.steps, 1):
+        L.append(f"### {i}. `{s.effect}` ({s.kind}, {s.status}, confidence {s.confidence:.2f})")
+        L.append("")
+        L.append("| parameter | value | std. error |")
+        L.append("|---|---|---|")
+        for k, v in s.parameters.items():
+            L.append(f"| `{k}` | {v:.5g} | {s.uncertainties.get(k, float('nan')):.2g} |")
+        L.append("")
+        L.append(f"NRMSE after: {s.nrmse_after:.4f}." + (f" Alternatives: {s.alternatives}." if s.alternatives else ""))
+        L.append("")
+        L.append("| candidate | stage | held-out gain [% excess] | z | dBIC | parameters |")
+        L.append("|---|---|---|---|---|---|")
+        for c in s.candidates:
+            ps = ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
+            L.append(f"| {c.effect} | {c.stage} | {100 * c.relative_gain:.1f} | {c.z:.1f} | {c.delta_bic:.0f} | {ps} |")
+        L.append("")
+    L += ["## Residual maps", "", "Nominal model:", "", "![nominal](residual_maps_nominal.png)", "",
+          "Augmented model:", "", "![augmented](residual_maps_augmented.png)", ""]
+    if dx.history:
+        L += ["## Candidates", "", "![candidates](candidates.png)", ""]
+    L += ["## Localisation (nominal residual)", "", "```", json.dumps(maps0.summary, indent=1, default=float),
+          "```", "", "Standard errors assume white residuals (they understate the uncertainty when "
+          "the residual is coloured).", ""]
+    md = d / "report.md"
+    md.write_text("\n".join(L))
+    return md
