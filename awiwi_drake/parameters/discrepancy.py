@@ -61,10 +61,16 @@ class DiscrepancySettings(Parameters):
         source="chosen: simulation fits only the three best screened candidates (speed)",
         doc="candidates fitted by simulation per step")
     min_z: float = param(
-        4.0, unit="-", low=0.0, high=100.0,
-        source="chosen: held-out paired improvement must exceed 4 standard errors "
-               "(one-sided p ~ 3e-5; many candidates are tested)",
-        doc="significance threshold on held-out windows")
+        4.0, unit="-", low=0.0, high=1e6,
+        source="chosen: held-out gain must exceed 4 null standard deviations (2 |delta|) "
+               "of a prediction change unrelated to the residual (one-sided p ~ 3e-5; "
+               "many candidates are tested)",
+        doc="significance threshold on the held-out gain")
+    min_rank_z: float = param(
+        2.5, unit="-", low=-10.0, high=100.0,
+        source="chosen: Wilcoxon signed-rank z over held-out windows >= 2.5 (p ~ 0.006): "
+               "most windows improve, not just a few transient-rich ones",
+        doc="robustness threshold over windows")
     min_gain: float = param(
         0.03, unit="-", low=0.0, high=1.0,
         source="chosen: an accepted effect removes >= 3 % of the held-out residual energy "
