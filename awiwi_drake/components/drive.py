@@ -17,7 +17,8 @@ Two backends build the same physics with the same port names:
 The returned sub-diagram exports:
 
 * inputs ``motor_torque`` (m) [Nm], ``joint_angle`` (n) [rad], and with
-  hysteresis ``joint_velocity`` (n) [rad/s];
+  hysteresis ``joint_velocity`` (n) [rad/s] (no joint ports when n = 0, the
+  tendon rig whose far end is fixed);
 * outputs ``motor_angle``, ``motor_velocity`` (m), ``motor_state`` (2m),
   ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``elongation`` (m) [m],
   ``generalized_force`` (n) [Nm] (``-P^T f``), ``applied_torque`` (m) [Nm].
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pydrake.symbolic as sym
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer, Gain, Multiplexer, SymbolicVectorSystem
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Gain, Multiplexer, SymbolicVectorSystem
 
 from awiwi_drake.components.motor import MotorBank_, motor_acceleration, saturate_torque
 from awiwi_drake.components.routing import TendonRouting_
@@ -128,8 +129,16 @@ def _build_python(b, motor, spring, coupling, offsets, hyst, r_m, m, n):
         b.Connect(springs.GetOutputPort("tendon_force"), gain.get_input_port())
         b.Connect(gain.get_output_port(), motors.GetInputPort("load_torque"))
     b.ExportInput(motors.GetInputPort("motor_torque"), "motor_torque")
-    b.ExportInput(routing.GetInputPort("joint_angle"), "joint_angle")
-    if hyst.enabled:
+    if n > 0:
+        b.ExportInput(routing.GetInputPort("joint_angle"), "joint_angle")
+    else:  # far end fixed (tendon rig): no joints
+        empty = b.AddNamedSystem("no_joints", ConstantVectorSource(np.zeros(0)))
+        b.Connect(empty.get_output_port(), routing.GetInputPort("joint_angle"))
+    if hyst.enabled and n == 0:
+        b.Connect(empty.get_output_port(), routing.GetInputPort("joint_velocity"))
+        b.Connect(motors.GetOutputPort("motor_velocity"), routing.GetInputPort("motor_velocity"))
+        b.Connect(routing.GetOutputPort("elongation_rate"), springs.GetInputPort("elongation_rate"))
+    elif hyst.enabled:
         b.Connect(motors.GetOutputPort("motor_velocity"), routing.GetInputPort("motor_velocity"))
         b.Connect(routing.GetOutputPort("elongation_rate"), springs.GetInputPort("elongation_rate"))
         b.ExportInput(routing.GetInputPort("joint_velocity"), "joint_velocity")
@@ -139,7 +148,8 @@ def _build_python(b, motor, spring, coupling, offsets, hyst, r_m, m, n):
     b.ExportOutput(springs.GetOutputPort("tendon_force"), "tendon_force")
     b.ExportOutput(springs.GetOutputPort("tendon_stiffness"), "tendon_stiffness")
     b.ExportOutput(routing.GetOutputPort("elongation"), "elongation")
-    b.ExportOutput(routing.GetOutputPort("generalized_force"), "generalized_force")
+    if n > 0:
+        b.ExportOutput(routing.GetOutputPort("generalized_force"), "generalized_force")
     b.ExportOutput(motors.GetOutputPort("applied_torque"), "applied_torque")
 
 
@@ -178,18 +188,23 @@ def _build_symbolic(b, motor, spring, coupling, offsets, hyst, r_m, m, n):
                + list(np.asarray(saturate_torque(u, motor), dtype=object)))
     svs = b.AddNamedSystem("drive", SymbolicVectorSystem(state=state_v, input=input_v, dynamics=dynamics,
                                                          output=outputs))
+    in_names = ["motor_torque", "joint_angle"] + (["joint_velocity"] if hyst.enabled else [])
     in_sizes = [m, n] + ([n] if hyst.enabled else [])
-    mux = b.AddNamedSystem("inputs", Multiplexer(in_sizes))
-    b.Connect(mux.get_output_port(), svs.get_input_port())
-    b.ExportInput(mux.get_input_port(0), "motor_torque")
-    b.ExportInput(mux.get_input_port(1), "joint_angle")
-    if hyst.enabled:
-        b.ExportInput(mux.get_input_port(2), "joint_velocity")
-    demux = b.AddNamedSystem("outputs", Demultiplexer([m, m, m, m, m, n, m]))
+    in_ports = [(nm, sz) for nm, sz in zip(in_names, in_sizes) if sz > 0]  # no joints: tendon rig
+    if len(in_ports) == 1:
+        b.ExportInput(svs.get_input_port(), "motor_torque")
+    else:
+        mux = b.AddNamedSystem("inputs", Multiplexer([sz for _, sz in in_ports]))
+        b.Connect(mux.get_output_port(), svs.get_input_port())
+        for i, (nm, _) in enumerate(in_ports):
+            b.ExportInput(mux.get_input_port(i), nm)
+    out_names = ["motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "elongation",
+                 "generalized_force", "applied_torque"]
+    out_sizes = [m, m, m, m, m, n, m]
+    keep = [(nm, sz) for nm, sz in zip(out_names, out_sizes) if sz > 0]
+    demux = b.AddNamedSystem("outputs", Demultiplexer([sz for _, sz in keep]))
     b.Connect(svs.get_output_port(), demux.get_input_port())
-    names = ["motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "elongation",
-             "generalized_force", "applied_torque"]
-    for i, nm in enumerate(names):
+    for i, (nm, _) in enumerate(keep):
         b.ExportOutput(demux.get_output_port(i), nm)
     state_mux = b.AddNamedSystem("motor_state_mux", Multiplexer([m, m]))
     b.Connect(demux.get_output_port(0), state_mux.get_input_port(0))
