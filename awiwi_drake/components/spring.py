@@ -82,6 +82,12 @@ class PolynomialSpring:
         k = np.arange(2, n + 1)
         return where_positive(x, self._horner(xp, self.coefficients[1:] * k * (k - 1)))
 
+    def energy(self, x):
+        """Stored energy ``int_0^x f`` [J] (0 when slack)."""
+        xp = positive_part(x)
+        k = np.arange(1, len(self.coefficients) + 1)
+        return xp * xp * self._horner(xp, self.coefficients / (k + 1))
+
     def inverse_force(self, f):
         """Elongation [m] at which the spring carries force ``f`` [N] (float, vectorised)."""
         f = np.asarray(f, dtype=float)
@@ -118,6 +124,11 @@ class LinearSpring:
     def stiffness_derivative(self, x):
         return 0.0 * x
 
+    def energy(self, x):
+        """Stored energy [J]."""
+        xe = positive_part(x) if self.tension_only else x
+        return 0.5 * self.k * xe * xe
+
     def inverse_force(self, f):
         f = np.asarray(f, dtype=float)
         if (self.tension_only and np.any(f < 0)) or not np.all(np.isfinite(f)):
@@ -150,6 +161,12 @@ class AntagonisticPairSpring:
     def stiffness(self, d):
         r = self.r
         return r * r * (self.spring.stiffness(self.x0 + r * d) + self.spring.stiffness(self.x0 - r * d))
+
+    def energy(self, d):
+        """Stored energy relative to d = 0 [J] (needs the inner spring's ``energy``)."""
+        r = self.r
+        return (self.spring.energy(self.x0 + r * d) + self.spring.energy(self.x0 - r * d)
+                - 2 * self.spring.energy(self.x0))
 
     def stiffness_derivative(self, d):
         r = self.r
