@@ -56,6 +56,7 @@ motor angle change that cancels it is ``-offset / r_m``
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 from dataclasses import dataclass, field
@@ -111,6 +112,19 @@ def _value(x) -> float:
     if is_float(x):
         return float(x)
     return None
+
+
+def _is_symbolic(x) -> bool:
+    return not is_float(x) and not isinstance(x, AutoDiffXd)
+
+
+def _symbolic_errstate(*args):
+    """numpy reports spurious 'invalid value' FP flags after object loops over
+    symbolic Expressions (set inside Drake's symbolic constructors); silence
+    them for symbolic input only (float input keeps numpy's warnings)."""
+    if any(_is_symbolic(a) for a in args):
+        return np.errstate(invalid="ignore")
+    return contextlib.nullcontext()
 
 
 def _default(params):
@@ -191,6 +205,11 @@ def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool
         Palm points, palm frame ABC and circle parameters, in frame 0.
     """
     p = _default(params)
+    with _symbolic_errstate(q71, q73):
+        return _solve(q71, q73, p, check)
+
+
+def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     a, b, c = p.length, p.width, p.thickness
     L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
     gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
@@ -294,9 +313,10 @@ def wrist_tendon_lengths(q71, q73, params: WristParams | None = None) -> np.ndar
     """
     p = _default(params)
     pose = wrist_kinematics(q71, q73, p)
-    palm_in_0 = pose.origin + p.palm_offset_array @ pose.rotation.T
-    diff = p.forearm_offset_array - palm_in_0
-    return np.sqrt(np.sum(diff * diff, axis=1))
+    with _symbolic_errstate(q71, q73):
+        palm_in_0 = pose.origin + p.palm_offset_array @ pose.rotation.T
+        diff = p.forearm_offset_array - palm_in_0
+        return np.sqrt(np.sum(diff * diff, axis=1))
 
 
 @functools.lru_cache(maxsize=16)
