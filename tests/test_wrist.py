@@ -88,6 +88,17 @@ def test_neutral_wrist_is_the_box():
                                np.linalg.norm(palm - P.forearm_offset_array, axis=1), atol=1e-15)
 
 
+def test_table_6_2_is_consistent_with_the_reconstruction():
+    """Evidence for the box construction from Table 6.2 alone (see hand/wrist.py)."""
+    a, c = P.length, P.thickness
+    h0 = wrist_tendon_lengths(0.0, 0.0)
+    assert np.ptp(h0) < 0.5e-3                    # all 38 neutral paths nearly equal (46.6 mm)
+    # side view: every tendon passes through the flexion crossing point (a/2, c/2)
+    F, W = P.forearm_offset_array, P.palm_offset_array + [a, 0.0, c / 2]
+    np.testing.assert_allclose(0.5 * (F[:, [0, 2]] + W[:, [0, 2]]), np.tile([a / 2, c / 2], (38, 1)),
+                               atol=1e-15)
+
+
 @pytest.mark.parametrize("q", CONFIGS)
 def test_constraints_and_frame(q):
     pose = wrist_kinematics(*q)
@@ -217,6 +228,13 @@ def test_fig_6_10_tendon_displacements(study):
     # nonlinear in the angle (thesis: "the relationship ... is nonlinear")
     half = wrist_tendon_offsets(10 * DEG, 0.0)
     assert np.max(np.abs(peak - 2 * half)) > 1e-3
+
+
+def test_held_flexion_variant_keeps_constraints():
+    res = wrist_motion_study(hold_flexion=True, num_samples=41)
+    assert res.max_constraint_error < 1e-12
+    assert np.allclose(res.wrist_angle[res.phase == "abduction", 1], 30 * DEG)
+    assert res.abduction_r2 > 0.85 and res.abduction_slope < 0
 
 
 def test_motion_study_validation():

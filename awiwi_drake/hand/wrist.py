@@ -23,6 +23,25 @@ origin at a corner of the a x b x c wrist box):
   z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
   about the median axis y = b/2, as the thesis describes for Fig 6.10.
 
+Why this construction: it is the reading of Fig 6.2-6.7 in which (i) all
+four unprinted lengths follow from a, b, c alone, (ii) both views are
+inverted (crossed) parallelograms in the neutral wrist, (iii) A0 and B0C0 are
+apart in the top view (Fig 6.3) and the BC plane turns about B0C0 (Fig 6.4),
+(iv) |AB| = |AC| (6.5), and (v) the Table 6.2 points are consistent with it:
+with the palm frame centred on the palm face, all 38 neutral tendons have
+nearly the same length (46.6 +- 0.1 mm) and both layers pass through the
+flexion crossing point.  Two alternatives were tried and rejected: the BC
+plane along the wrist side (y = 0, A0A parallel to it) makes abduction a pure
+*translation* of the palm (all tendons move alike, contrary to Fig 6.10), and
+B0C0 on the median plane needs A0 on that axis (contrary to Fig 6.3).
+
+Consequence, reported in docs/REPRODUCTIONS.md: the BC plane is diagonal in
+the top view, so the flexion turns the palm about an axis tilted by
+atan(b/a) = 40 deg from y.  Flexion therefore moves the tendons less than
+abduction (peak ratio 0.49 for the thesis motion) but not negligibly, which
+the thesis's "minimal coupling" suggests; the printed figure gives no
+numbers per tendon to settle it.
+
 Angles
 ------
 ``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis
@@ -406,10 +425,11 @@ class WristMotionResult:
         Signed lateral distance of each tendon's forearm point from the wrist's
         median axis, ``y - b/2`` [m].
     flexion_peak, abduction_peak : float
-        Largest |displacement| in each phase [m].
+        Largest |displacement| in each phase [m] (abduction: relative to the
+        start of the abduction phase).
     abduction_slope : float
-        Least-squares slope of displacement vs ``median_distance`` at the
-        abduction peak [m/m].
+        Least-squares slope of the abduction-induced displacement at the
+        abduction peak vs ``median_distance`` [m/m].
     abduction_r2 : float
         Coefficient of determination of that linear fit.
     abduction_intercept : float
@@ -441,12 +461,31 @@ class WristMotionResult:
 
 
 def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
-                       duration: float = 4.0, num_samples: int = 201,
+                       duration: float = 4.0, num_samples: int = 201, hold_flexion: bool = False,
                        params: WristParams | None = None) -> WristMotionResult:
-    """Flexion to ``flexion`` and back, then abduction to ``abduction`` and back (Fig 6.9, 6.10).
+    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10).
 
-    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``,
-    the second half q71 likewise (s the phase time / phase duration).
+    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``
+    (out to ``flexion`` and back), the second half moves q71 likewise (s the
+    phase time / phase duration).  With ``hold_flexion=True`` q73 ramps to
+    ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.
+
+    The abduction statistics use the displacement caused by the abduction
+    alone: offsets at the abduction peak minus offsets at the start of the
+    abduction phase, fitted linearly against the signed distance of each
+    tendon's forearm point from the median axis (y - b/2).
+
+    Parameters
+    ----------
+    flexion, abduction : float
+        Peak q73 and q71 [rad] (thesis: 30 deg and 20 deg).
+    duration : float
+        Total time [s] (Fig 6.10: 4 s; Fig 6.9: 10 s).
+    num_samples : int
+        Time samples (>= 5).
+    hold_flexion : bool
+        Keep the flexion during the abduction phase.
+    params : WristParams, optional
 
     Returns
     -------
@@ -460,27 +499,30 @@ def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float 
     p = _default(params)
     t = np.linspace(0.0, duration, int(num_samples))
     half = 0.5 * duration
-    s = np.where(t < half, t / half, (t - half) / half)
-    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
     in_flex = t < half
-    q73 = np.where(in_flex, flexion * bump, 0.0)
+    s = np.where(in_flex, t / half, (t - half) / half)
+    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
+    if hold_flexion:
+        q73 = np.where(in_flex, flexion * 0.5 * (1.0 - np.cos(np.pi * s)), flexion)
+    else:
+        q73 = np.where(in_flex, flexion * bump, 0.0)
     q71 = np.where(in_flex, 0.0, abduction * bump)
     offsets = np.empty((t.size, p.num_tendons))
     errors = np.empty((t.size, 6))
-    for i in range(t.size):  # analysis loop (not a system calc)
+    for i in range(t.size):  # analysis loop over samples (not a system calc)
         offsets[i] = wrist_tendon_offsets(q71[i], q73[i], p)
         errors[i] = wrist_constraint_errors(wrist_kinematics(q71[i], q73[i], p), p)
     dist = p.forearm_offset_array[:, 1] - 0.5 * p.width
-    peak = np.argmax(np.abs(q71))
-    slope, intercept = np.polyfit(dist, offsets[peak], 1)
-    fit = slope * dist + intercept
-    ss_res = float(np.sum((offsets[peak] - fit) ** 2))
-    ss_tot = float(np.sum((offsets[peak] - offsets[peak].mean()) ** 2))
+    start = int(np.argmax(~in_flex))
+    abd = offsets[int(np.argmax(np.abs(q71)))] - offsets[start]
+    slope, intercept = np.polyfit(dist, abd, 1)
+    ss_res = float(np.sum((abd - (slope * dist + intercept)) ** 2))
+    ss_tot = float(np.sum((abd - abd.mean()) ** 2))
     return WristMotionResult(
         t=t, wrist_angle=np.column_stack([q71, q73]), offsets=offsets, constraint_errors=errors,
         phase=np.where(in_flex, "flexion", "abduction"), median_distance=dist,
         flexion_peak=float(np.max(np.abs(offsets[in_flex]))),
-        abduction_peak=float(np.max(np.abs(offsets[~in_flex]))),
+        abduction_peak=float(np.max(np.abs(offsets[~in_flex] - offsets[start]))),
         abduction_slope=float(slope), abduction_intercept=float(intercept),
         abduction_r2=1.0 - ss_res / ss_tot)
 
