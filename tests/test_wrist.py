@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.symbolic import Variable
+from pydrake.symbolic import Expression, Variable
 
 from awiwi_drake.hand.wrist import (
     TENDON_FINGERS,
+    WristCoupling,
     wrist_compensation,
     wrist_constraint_errors,
     wrist_jacobian,
@@ -161,6 +162,31 @@ def test_jacobian_matches_finite_differences(q):
     np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-9)
 
 
+def test_coupling_object_is_generic_and_consistent():
+    """P(q) is exact for every scalar type: AutoDiff of P = Hessian of h (symmetric, = FD of P)."""
+    cp = WristCoupling()
+    q = np.array([0.12, -0.3])
+    assert (cp.num_tendons, cp.num_joints) == (38, 2)
+    np.testing.assert_allclose(cp.h(q), wrist_tendon_lengths(*q), atol=0.0)
+    # P from the forward-mode tangents equals AutoDiffXd of h
+    h_ad = wrist_tendon_lengths(AutoDiffXd(q[0], [1.0, 0.0]), AutoDiffXd(q[1], [0.0, 1.0]))
+    np.testing.assert_allclose(cp.P(q), np.array([e.derivatives() for e in h_ad]), atol=1e-15)
+    P_ad = cp.P(np.array([AutoDiffXd(q[0], [1.0, 0.0]), AutoDiffXd(q[1], [0.0, 1.0])]))
+    H = np.array([[e.derivatives() for e in row] for row in P_ad])           # (38, 2, 2)
+    np.testing.assert_allclose(H[:, 0, 1], H[:, 1, 0], atol=1e-14)
+    e = 1e-6
+    for j in range(2):
+        dq = e * np.eye(2)[j]
+        np.testing.assert_allclose(H[:, :, j], (cp.P(q + dq) - cp.P(q - dq)) / (2 * e), rtol=1e-5, atol=1e-8)
+    x = [Variable("a"), Variable("b")]
+    P_sym = cp.P(np.array([Expression(v) for v in x]))
+    env = {x[0]: q[0], x[1]: q[1]}
+    np.testing.assert_allclose([P_sym[i, j].Evaluate(env) for i, j in ((0, 0), (37, 1))],
+                               cp.P(q)[[0, 37], [0, 1]], atol=1e-15)
+    with pytest.raises(ValueError, match="q must have 2 entries"):
+        cp.h(np.zeros(3))
+
+
 def test_scalar_types_agree():
     q = (0.2, 0.35)
     ref = wrist_tendon_offsets(*q)
@@ -182,6 +208,8 @@ def test_pure_abduction_is_planar_and_flexion_symmetric_in_the_box():
 def test_out_of_range_raises():
     with pytest.raises(ValueError, match=r"wrist_angle \[q71, q73\]"):
         wrist_tendon_offsets(0.0, -1.2)
+    with pytest.raises(ValueError, match="q71 = nan rad is not finite"):
+        wrist_tendon_offsets(float("nan"), 0.0)
     with pytest.raises(ValueError, match="params"):
         wrist_tendon_offsets(0.0, 0.0, params={"length": 0.05})
     with pytest.raises(ValueError, match="motor_pulley_radius"):

@@ -95,6 +95,8 @@ __all__ = [
     "wrist_tendon_lengths",
     "wrist_tendon_offsets",
     "wrist_jacobian",
+    "wrist_lengths_and_jacobian",
+    "WristCoupling",
     "wrist_compensation",
     "WristMotionResult",
     "wrist_motion_study",
@@ -124,8 +126,88 @@ def _norm(u):
     return np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
 
 
+class _Tangent:
+    """Forward-mode pair (value, d value / d [q71, q73]) over any scalar type T.
+
+    Used to differentiate the closed-form kinematics once, exactly, for
+    float, AutoDiffXd and Expression alike (AutoDiffXd cannot nest), so the
+    coupling matrix P(q) is itself generic in the scalar type.  numpy ufuncs
+    on object arrays call the methods ``sin``, ``cos``, ``sqrt``, ``arctan2``.
+    """
+
+    __slots__ = ("v", "d")
+
+    def __init__(self, v, d):
+        self.v = v
+        self.d = d
+
+    @staticmethod
+    def _lift(o):
+        return o if isinstance(o, _Tangent) else _Tangent(o, 0.0)
+
+    def __add__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = _Tangent._lift(o)
+        return _Tangent(self.v + o.v, self.d + o.d)
+
+    __radd__ = __add__
+
+    def __sub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = _Tangent._lift(o)
+        return _Tangent(self.v - o.v, self.d - o.d)
+
+    def __rsub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return _Tangent._lift(o) - self
+
+    def __neg__(self):
+        return _Tangent(-self.v, -self.d)
+
+    def __mul__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, _Tangent):
+            return _Tangent(self.v * o, self.d * o)
+        return _Tangent(self.v * o.v, self.d * o.v + self.v * o.d)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, _Tangent):
+            return _Tangent(self.v / o, self.d / o)
+        q = self.v / o.v
+        return _Tangent(q, (self.d - q * o.d) / o.v)
+
+    def __rtruediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return _Tangent._lift(o) / self
+
+    def sin(self):
+        return _Tangent(np.sin(self.v), np.cos(self.v) * self.d)
+
+    def cos(self):
+        return _Tangent(np.cos(self.v), -np.sin(self.v) * self.d)
+
+    def sqrt(self):
+        r = np.sqrt(self.v)
+        return _Tangent(r, self.d / (2.0 * r))
+
+    def arctan2(self, x):
+        x = _Tangent._lift(x)
+        return _Tangent(np.arctan2(self.v, x.v), (x.v * self.d - self.v * x.d) / (x.v * x.v + self.v * self.v))
+
+
 def _value(x) -> float:
     """Float value of a float or AutoDiffXd scalar (None for symbolic)."""
+    if isinstance(x, _Tangent):
+        return _value(x.v)
     if isinstance(x, AutoDiffXd):
         return x.value()
     if is_float(x):
@@ -134,6 +216,8 @@ def _value(x) -> float:
 
 
 def _is_symbolic(x) -> bool:
+    if isinstance(x, _Tangent):
+        return _is_symbolic(x.v)
     return not is_float(x) and not isinstance(x, AutoDiffXd)
 
 
@@ -229,6 +313,11 @@ def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool
 
 
 def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
+    if check:
+        for name, q in (("q71", q71), ("q73", q73)):
+            v = _value(q)
+            if v is not None and not math.isfinite(v):
+                raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
     a, b, c = p.length, p.width, p.thickness
     L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
     gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
@@ -363,19 +452,86 @@ def wrist_tendon_offsets(q71, q73, params: WristParams | None = None) -> np.ndar
     return wrist_tendon_lengths(q71, q73, p) - _neutral_lengths(p)
 
 
-def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
-    """Exact Jacobian ``d h_wrist / d [q71, q73]`` (num_tendons x 2) [m/rad], by AutoDiff.
+def wrist_lengths_and_jacobian(q71, q73, params: WristParams | None = None):
+    """Tendon lengths (6.9) and their exact Jacobian, generic in the scalar type.
+
+    The palm pose is differentiated in forward mode through the closed-form
+    kinematics; the tendon part uses ``dh_i/dq = -u_i . (dO/dq + dR/dq p_i)``
+    with ``u_i`` the unit vector from the palm point to the forearm point.
 
     Parameters
     ----------
-    q71, q73 : float
+    q71, q73 : float, AutoDiffXd or Expression
         Abduction and flexion [rad].
+    params : WristParams, optional
+
+    Returns
+    -------
+    h : ndarray (num_tendons,)
+        Lengths [m].
+    P : ndarray (num_tendons, 2)
+        ``dh/d[q71, q73]`` [m/rad] (the wrist block of the coupling matrix).
     """
-    q71 = float(q71)
-    q73 = float(q73)
-    h = wrist_tendon_lengths(AutoDiffXd(q71, np.array([1.0, 0.0])),
-                             AutoDiffXd(q73, np.array([0.0, 1.0])), params)
-    return np.array([e.derivatives() for e in h], dtype=float).reshape(-1, 2)
+    p = _default(params)
+    scalar = is_float(q71) and is_float(q73)
+    unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+    pose = wrist_kinematics(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), p)
+    dtype = float if scalar else object
+    O = np.array([e.v for e in pose.origin], dtype=dtype)
+    dO = np.array([e.d for e in pose.origin], dtype=dtype)                      # (3, 2)
+    R = np.array([[e.v for e in row] for row in pose.rotation], dtype=dtype)
+    dR = np.array([[e.d for e in row] for row in pose.rotation], dtype=dtype)  # (3, 3, 2)
+    with _symbolic_errstate(q71, q73):
+        Pp = p.palm_offset_array
+        diff = p.forearm_offset_array - (O + Pp @ R.T)
+        h = np.sqrt(np.sum(diff * diff, axis=1))
+        u = diff / h[:, None]
+        J = np.column_stack([-np.sum(u * (dO[:, j] + Pp @ dR[:, :, j].T), axis=1) for j in range(2)])
+    return h, J
+
+
+def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
+    """Exact Jacobian ``d h_wrist / d [q71, q73]`` (num_tendons x 2) [m/rad].
+
+    Row i, column j: change of tendon i's path through the wrist per radian of
+    q71 (j = 0) or q73 (j = 1); the wrist block of ``P(q) = dh/dq``.  Generic
+    in the scalar type (see :func:`wrist_lengths_and_jacobian`).
+    """
+    return wrist_lengths_and_jacobian(q71, q73, params)[1]
+
+
+class WristCoupling:
+    """The wrist as a routing coupling object: ``h(q)`` (38,) and ``P(q)`` (38 x 2).
+
+    ``q = [q71, q73]`` [rad]; ``h`` are the absolute tendon path lengths
+    through the wrist (6.9) and ``P = dh/dq``, both generic in the scalar type
+    so :class:`TendonRouting_` (``-P^T f`` on the wrist joints) converts to
+    AutoDiffXd.  Rows follow Table 6.2 (tendon 1..38).
+
+    Parameters
+    ----------
+    params : WristParams, optional
+    """
+
+    num_joints = 2
+
+    def __init__(self, params: WristParams | None = None):
+        self.params = _default(params)
+        self.num_tendons = self.params.num_tendons
+
+    def _split(self, q):
+        q = np.asarray(q) if not isinstance(q, np.ndarray) else q
+        if q.shape != (2,):
+            raise ValueError(f"wrist joint vector q must have 2 entries [q71, q73], got shape {q.shape}")
+        return q[0], q[1]
+
+    def h(self, q) -> np.ndarray:
+        """Tendon path lengths through the wrist [m]."""
+        return wrist_tendon_lengths(*self._split(q), self.params)
+
+    def P(self, q) -> np.ndarray:
+        """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
+        return wrist_jacobian(*self._split(q), self.params)
 
 
 def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:
