@@ -229,6 +229,8 @@ def test_fig_6_9_constraint_errors(study):
     """Fig 6.9: constraint errors at numerical precision (thesis < 6e-14 m)."""
     assert study.constraint_errors.shape == (study.t.size, 6)
     assert study.max_constraint_error < 1e-12
+    # the closed-form branch is followed continuously (no jump to the mirror solution)
+    assert np.max(np.abs(np.diff(study.offsets, axis=0))) < 1e-3
     assert np.max(np.abs(np.degrees(study.wrist_angle)), axis=0) == pytest.approx([20.0, 30.0])
 
 

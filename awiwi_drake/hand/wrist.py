@@ -52,6 +52,10 @@ singular linkage, so the neutral wrist has t_B0 = atan2(c, sqrt(a^2 + b^2))
 (28.9 deg).  We therefore measure ``q73`` from the neutral wrist:
 ``t_B = t_B0 - q73`` (thesis q73 = ours + 61.1 deg).  Both angles are crank
 angles: near neutral the palm turns about twice as far (crossed four-bars).
+At q71 = 0 the linkage assembles for q73 in about (-56 deg, +105 deg) (at
+q73 = 30 deg, q71 in about (-78 deg, +178 deg)); the thesis's motion
+(30 deg, 20 deg) is well inside.  Outside the reachable set the functions
+raise ``ValueError`` naming ``wrist_angle``.
 
 Method (thesis numbering)
 -------------------------
