@@ -185,6 +185,8 @@ def test_coupling_object_is_generic_and_consistent():
                                cp.P(q)[[0, 37], [0, 1]], atol=1e-15)
     with pytest.raises(ValueError, match="q must have 2 entries"):
         cp.h(np.zeros(3))
+    with pytest.raises(ValueError, match="tendon force f must have 38"):
+        cp.dPT_f_dq(q, np.ones(5))
 
 
 def test_scalar_types_agree():

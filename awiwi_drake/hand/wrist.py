@@ -537,6 +537,23 @@ class WristCoupling:
         """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
         return wrist_jacobian(*self._split(q), self.params)
 
+    def dPT_f_dq(self, q, f) -> np.ndarray:
+        """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
+
+        The geometric stiffness of the wrist joints due to the tendon forces
+        ``f`` (the joint stiffness map is ``P^T K_t P - dPT_f_dq``).  Exact:
+        forward-mode tangents nested over the scalar type.
+        """
+        q71, q73 = self._split(q)
+        f = np.asarray(f)
+        if f.shape != (self.num_tendons,):
+            raise ValueError(f"tendon force f must have {self.num_tendons} entries, got shape {f.shape}")
+        unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+        P = wrist_jacobian(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), self.params)
+        scalar = is_float(q71) and is_float(q73) and is_float(f)
+        dP = np.array([[e.d for e in row] for row in P], dtype=float if scalar else object)  # (m, 2, 2)
+        return np.tensordot(f, dP, axes=(0, 0))
+
 
 def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:
     """Motor angle change that cancels the wrist offset: ``-offset / r_m`` [rad].
