@@ -17,9 +17,12 @@ FINGER_COLORS = {"thumb": "tab:red", "index": "tab:blue", "middle": "tab:green",
                  "ring": "tab:orange", "fifth": "tab:purple"}
 
 
-def _axes(ax):
+def _start(result, ax):
+    """Validate the data and return (fig, ax), creating them when ax is None."""
     import matplotlib.pyplot as plt
 
+    if not isinstance(result, WristMotionResult):
+        raise ValueError(f"result must be a WristMotionResult, got {type(result).__name__}")
     if ax is None:
         fig, ax = plt.subplots(figsize=(7.0, 4.0))
     else:
@@ -37,15 +40,15 @@ def plot_wrist_displacements(result: WristMotionResult, ax=None):
     Parameters
     ----------
     result : WristMotionResult
+        From :func:`~awiwi_drake.hand.wrist.wrist_motion_study` (uses ``offsets``).
     ax : matplotlib Axes, optional
+        Axes to draw into (default: a new figure).
 
     Returns
     -------
-    (fig, ax)
+    (fig, ax) : the figure and the axes holding one line per tendon.
     """
-    if not isinstance(result, WristMotionResult):
-        raise ValueError(f"result must be a WristMotionResult, got {type(result).__name__}")
-    fig, ax = _axes(ax)
+    fig, ax = _start(result, ax)
     seen = set()
     for i, finger in enumerate(result.fingers):
         label = finger if finger not in seen else None
@@ -69,15 +72,8 @@ def plot_wrist_displacements(result: WristMotionResult, ax=None):
 
 
 def plot_wrist_constraint_errors(result: WristMotionResult, ax=None):
-    """Largest distance-constraint error vs time (Fig 6.9).
-
-    Returns
-    -------
-    (fig, ax)
-    """
-    if not isinstance(result, WristMotionResult):
-        raise ValueError(f"result must be a WristMotionResult, got {type(result).__name__}")
-    fig, ax = _axes(ax)
+    """Largest distance-constraint error vs time (Fig 6.9); ``ax`` optional, returns ``(fig, ax)``."""
+    fig, ax = _start(result, ax)
     ax.plot(result.t, np.max(np.abs(result.constraint_errors), axis=1), color="k")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("max constraint error [m]")
