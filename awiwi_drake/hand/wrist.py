@@ -38,9 +38,9 @@ B0C0 on the median plane needs A0 on that axis (contrary to Fig 6.3).
 Consequence, reported in docs/REPRODUCTIONS.md: the BC plane is diagonal in
 the top view, so the flexion turns the palm about an axis tilted by
 atan(b/a) = 40 deg from y.  Flexion therefore moves the tendons less than
-abduction (peak ratio 0.49 for the thesis motion) but not negligibly, which
-the thesis's "minimal coupling" suggests; the printed figure gives no
-numbers per tendon to settle it.
+abduction (peak ratio 0.49 for the thesis motion; 0.13 vs 0.29 mm per degree
+of palm rotation) but not negligibly, whereas the thesis calls the flexion
+coupling minimal; its figure prints no per-tendon numbers to settle this.
 
 Angles
 ------
