@@ -127,7 +127,7 @@ def test_calibration_polynomial_fits_the_mechanism_in_series_with_the_tendon(lev
     th, x_mech, f, _ = lever.sample_curve(max_force=p.max_force)
     x_total = x_mech + f / k_t                       # series: elongations add at equal force
     err = poly.force(x_total) - f
-    assert np.max(np.abs(err)) < 1.5                 # N, over 0-180 N (stated in SpringModelParams)
+    assert np.max(np.abs(err)) < 0.1                 # N, over 0-180 N (stated in SpringModelParams)
     # Series stiffness law: 1/k = 1/k_mech + 1/k_t.
     i = len(f) // 2
     k_series = series_stiffness(np.array([lever.stiffness(x_mech[i])]), k_t)[0]
