@@ -1,66 +1,88 @@
 """Catalog laws, vectorised over model copies and generic in the scalar type.
 
-Parameters arrive as arrays (one value per copy), so the foundation laws,
-which take parameter dataclasses, are called with a light namespace holding
-arrays.  Every function here works with float arrays (the fast path) and numpy
-object arrays of AutoDiffXd (the scalar-conversion tests).
+One truth: the catalog forms call the foundation laws
+(:func:`~awiwi_drake.components.motor.motor_friction_torque` (3.8),
+:func:`~awiwi_drake.components.motor.motor_ripple_torque`,
+:class:`~awiwi_drake.components.spring.PolynomialSpring`,
+:func:`~awiwi_drake.components.spring.hysteresis_rate`,
+:func:`~awiwi_drake.components.tendon.capstan_friction_force`).  Catalog
+parameters arrive as arrays (one value per model copy), so the laws, which
+read attributes of parameter dataclasses, receive a namespace holding arrays.
+Every function works with float arrays (fast path) and numpy object arrays of
+AutoDiffXd (scalar-conversion tests).
 """
 
 from __future__ import annotations
 
+import functools
+from types import SimpleNamespace
+
 import numpy as np
 
-from awiwi_drake._math import positive_part
+from awiwi_drake.components.motor import motor_friction_torque, motor_ripple_torque
+from awiwi_drake.components.spring import PolynomialSpring, hysteresis_rate
+from awiwi_drake.components.tendon import capstan_friction_force
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
-__all__ = ["spring_force", "spring_with_hysteresis", "motor_friction", "ripple", "guide_friction",
-           "joint_friction", "dahl_rate", "GUIDE_VELOCITY"]
+__all__ = ["spring_force", "spring_with_hysteresis", "hysteresis_force_rate", "motor_friction", "ripple",
+           "guide_friction", "joint_friction", "GUIDE_VELOCITY", "HYSTERESIS_VELOCITY"]
 
 GUIDE_VELOCITY = CatalogBounds().guide_velocity
+HYSTERESIS_VELOCITY = CatalogBounds().hysteresis_velocity
+
+
+@functools.lru_cache(maxsize=64)
+def _spring(coefficients: tuple) -> PolynomialSpring:
+    return PolynomialSpring(tuple(float(c) for c in coefficients))
 
 
 def spring_force(x, coefficients):
     """Polynomial spring ``f = sum_k c_k x^k`` for ``x > 0``, else 0 (issue 6 contract)."""
-    xp = positive_part(x)
-    f = 0.0 * xp
-    for c in reversed(coefficients):
-        f = (f + c) * xp
-    return f
+    return _spring(tuple(coefficients)).force(x)
 
 
-def spring_with_hysteresis(x, w, coefficients, scale_rel, width):
-    """Spring force with a stiffness-scale correction and a Dahl hysteresis offset ``h w``.
-
-    The offset is gated by tension (no force when slack)."""
+def spring_with_hysteresis(x, z, coefficients, scale_rel, gate_force=1.0):
+    """Spring-mechanism force: elastic force with a stiffness-scale correction plus the
+    hysteresis force ``z`` [N], gated by tension (no friction force when slack)."""
     f0 = spring_force(x, coefficients)
-    return (1.0 + scale_rel) * f0 + width * w * np.tanh(f0 / 1.0)
+    return (1.0 + scale_rel) * f0 + z * np.tanh(f0 / gate_force), f0
 
 
-def dahl_rate(xd, w, length, eps):
-    """Normalised Dahl state rate ``w' = (x' - |x'| w) / delta``; ``w`` in [-1, 1]."""
-    absv = np.sqrt(xd * xd + eps * eps)
-    return (xd - absv * w) / length
+def hysteresis_force_rate(z, x, xd, f_elastic, width, length):
+    """Dahl hysteresis of the foundation (:func:`hysteresis_rate`) with a constant loop
+    half-width ``width`` [N] reached within ``length`` [m] of travel: ``sigma = width / length``."""
+    p = SimpleNamespace(width_ratio=0.0, width_offset=width, rate=width / length,
+                        smoothing_velocity=HYSTERESIS_VELOCITY)
+    return hysteresis_rate(z, x, xd, f_elastic, p)
 
 
 def motor_friction(omega, coulomb, slope, viscous):
     """(3.8): torque acting on the motor ``-(g2 atan(g1 w) + g3 w)``."""
-    return -(coulomb * np.arctan(slope * omega) + viscous * omega)
+    p = SimpleNamespace(damping=0.0, friction=True, coulomb_torque=coulomb, friction_slope=slope,
+                        viscous_friction=viscous)
+    return motor_friction_torque(omega, p)
 
 
 def ripple(theta, harmonics):
-    """Torque periodic in the motor angle: ``sum a sin(n theta) + b cos(n theta)``."""
+    """Torque periodic in the motor angle: ``sum a sin(n theta) + b cos(n theta)``
+    (the foundation's ripple law per harmonic, sine and cosine phases)."""
     tau = 0.0 * theta
     for order, a, b in harmonics:
-        tau = tau + a * np.sin(order * theta) + b * np.cos(order * theta)
+        for amp, phase in ((a, 0.0), (b, 0.5 * np.pi)):
+            p = SimpleNamespace(ripple=True, gear_ratio=order, ripple_motor_amplitude=amp,
+                                ripple_motor_phase=phase, ripple_output_amplitude=0.0, ripple_output_phase=0.0)
+            tau = tau + motor_ripple_torque(theta, p)
     return tau
 
 
-def guide_friction(tendon_velocity, tension, c0, mu, v0):
+def guide_friction(tendon_velocity, tension, c0, mu_alpha, v0):
     """Path friction on the tendon [N], opposing ``tendon_velocity`` (motor side).
 
-    ``C0`` is (4.1) at the rig's total bending angle (speed independent);
-    ``mu f`` is the tension-proportional (capstan, linearised) part of Ch. 9."""
-    return (c0 + mu * positive_part(tension)) * np.tanh(tendon_velocity / v0)
+    ``c0``: the speed- and tension-independent magnitude of (4.1) at the rig's
+    bending angle; ``mu_alpha``: capstan exponent (tension-proportional part, ch. 9),
+    via :func:`capstan_friction_force` at unit angle."""
+    cap = capstan_friction_force(tension, 1.0, SimpleNamespace(mu=mu_alpha))
+    return (c0 + cap) * np.tanh(tendon_velocity / v0)
 
 
 def joint_friction(qd, coulomb, velocity):

@@ -8,8 +8,8 @@ every finite-difference perturbation of a fit as one copy, so a whole
 residual/Jacobian evaluation is one pass of one Drake ``Simulator``
 ("banks, not swarms": one Python call per step for all copies).
 
-State of copy ``j`` (``n`` motors): ``[theta_1..n, omega_1..n, (q, q'), w_1..n]``
-where ``w`` is the normalised Dahl hysteresis state of each spring; stored
+State of copy ``j`` (``n`` motors): ``[theta_1..n, omega_1..n, (q, q'), z_1..n]``
+where ``z`` [N] is the Dahl hysteresis force of each spring mechanism; stored
 variable-major (index ``s * copies + j``).  Input ``motor_torque``
 (``n * copies``, applied torque, already delayed).  Output ``measurement``:
 ``[theta_1..n, f_1..n, (q)]`` per copy, ``f`` the spring-mechanism force as the
@@ -35,7 +35,6 @@ from .catalog import PARAM_INDEX, PARAM_NAMES, default_vector
 
 __all__ = ["NominalParameters", "DiscrepancyModel_", "DiscrepancyModel"]
 
-_EPS_V = 1e-6  # m/s: smooth |x'| in the Dahl law (far below any measured tendon speed)
 
 
 @dataclass(frozen=True)
@@ -82,7 +81,7 @@ class NominalParameters:
         names = [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
         if self.has_link:
             names += ["link_angle", "link_velocity"]
-        return names + [f"hysteresis_state{s}" for s in sfx]
+        return names + [f"hysteresis_force{s}" for s in sfx]
 
     def measurement_names(self) -> list[str]:
         n = self.num_motors
@@ -123,18 +122,17 @@ def model_derivatives(nom: NominalParameters, X, U, P):
     q = qd = None
     if nom.has_link:
         q, qd = X[2 * n], X[2 * n + 1]
-    w = X[-n:]
+    z = X[-n:]
     x, xd = rig_kinematics(nom, theta, omega, q, qd)
     B = nom.motor_inertia * (1.0 + _p(P, "motor_inertia_rel"))
     d = nom.motor_damping + _p(P, "motor_damping_add")
     r = nom.motor_pulley_radius
-    out = []
-    forces = []
+    forces, elastic = [], []
     for i in range(n):
-        f = laws.spring_with_hysteresis(x[i], w[i], nom.spring_poly, _p(P, "spring_scale_rel"),
-                                        _p(P, "hysteresis_width"))
+        f, f0 = laws.spring_with_hysteresis(x[i], z[i], nom.spring_poly, _p(P, "spring_scale_rel"))
         forces.append(f)
-    acc, wdot = [], []
+        elastic.append(f0)
+    acc, zdot = [], []
     for i in range(n):
         m = i + 1
         tau = (U[i] - d * omega[i]
@@ -147,7 +145,8 @@ def model_derivatives(nom: NominalParameters, X, U, P):
                - r * (forces[i] + laws.guide_friction(r * omega[i], forces[i], _p(P, "guide_c0"),
                                                       _p(P, "guide_mu"), laws.GUIDE_VELOCITY)))
         acc.append(tau / B)
-        wdot.append(laws.dahl_rate(xd[i], w[i], _p(P, "hysteresis_length"), _EPS_V))
+        zdot.append(laws.hysteresis_force_rate(z[i], x[i], xd[i], elastic[i], _p(P, "hysteresis_width"),
+                                               _p(P, "hysteresis_length")))
     out = [omega[i] for i in range(n)] + acc
     if nom.has_link:
         mq = nom.link_inertia * (1.0 + _p(P, "link_inertia_rel"))
@@ -156,7 +155,7 @@ def model_derivatives(nom: NominalParameters, X, U, P):
         qdd = (rq * (forces[0] - forces[1]) - dq * qd
                + laws.joint_friction(qd, _p(P, "joint_coulomb"), _p(P, "joint_velocity"))) / mq
         out += [qd, qdd]
-    out += wdot
+    out += zdot
     return np.array(out)
 
 
@@ -167,12 +166,11 @@ def model_measurements(nom: NominalParameters, X, P):
     q = qd = None
     if nom.has_link:
         q, qd = X[2 * n], X[2 * n + 1]
-    w = X[-n:]
+    z = X[-n:]
     x, _ = rig_kinematics(nom, theta, omega, q, qd)
     out = [theta[i] for i in range(n)]
     for i in range(n):
-        f = laws.spring_with_hysteresis(x[i], w[i], nom.spring_poly, _p(P, "spring_scale_rel"),
-                                        _p(P, "hysteresis_width"))
+        f, _ = laws.spring_with_hysteresis(x[i], z[i], nom.spring_poly, _p(P, "spring_scale_rel"))
         out.append((1.0 + _p(P, "force_gain")) * f + _p(P, f"force_offset_{i + 1}"))
     if nom.has_link:
         out.append(q)

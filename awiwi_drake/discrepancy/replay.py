@@ -155,16 +155,17 @@ class ReplayEngine:
             dx = self.elong[:, i1] - self.elong[:, i0]
             sg = np.sign(dx)
             w = sg + (w - sg) * np.exp(-np.abs(dx) / length)
+        w = w * width
         for i in range(n):
             if self._force_smooth[i] is None:
                 continue
             f0 = laws.spring_force(self.elong[i, starts], self.nom.spring_poly)
             f_true = (self._force_smooth[i][starts] - P[PARAM_INDEX[f"force_offset_{i + 1}"]]) \
                 / (1.0 + P[PARAM_INDEX["force_gain"]])
-            gate = width * np.tanh(f0)
-            ok = gate > 1e-9
+            gate = np.tanh(f0)
+            ok = (gate > 1e-6) & (width > 0)
             est = (f_true - (1.0 + P[PARAM_INDEX["spring_scale_rel"]]) * f0) / np.where(ok, gate, 1.0)
-            w[i] = np.where(ok, np.clip(est, -1.0, 1.0), w[i])
+            w[i] = np.where(ok, np.clip(est, -width, width), w[i])
         X0[-n:] = w
         return X0
 
@@ -266,15 +267,15 @@ class ReplayEngine:
         steps = list(th_scale) + list(om_scale)
         if nom.has_link:
             steps += [max(self.xhat[2 * n].std(), 1e-3) * 1e-2, max(self.xhat[2 * n + 1].std(), 1e-2) * 1e-2]
-        steps += [0.05] * n
+        steps += [0.05] * n  # N of hysteresis force
         return np.diag(steps)
 
-    def state_prior_std(self) -> np.ndarray:
+    def state_prior_std(self, P: np.ndarray | None = None) -> np.ndarray:
         """Standard deviation of the window-start state estimate (prior of the profile).
 
         Angles: twice the noise floor times the Savitzky-Golay noise gain; velocities:
         twice the derivative-filter noise gain plus 2 % of their RMS (smoothing bias at
-        fast transients); hysteresis state: 1 (unknown)."""
+        fast transients); hysteresis force: the loop half-width of ``P`` (unknown sign)."""
         n = self.nom.num_motors
         win = self._sg_window
         g0 = float(np.sqrt(np.sum(savgol_coeffs(win, 3) ** 2)))
@@ -287,7 +288,8 @@ class ReplayEngine:
             sq = noise_floor(self._q_raw)
             qd_rms = float(np.sqrt(np.mean(self.xhat[2 * n + 1] ** 2)))
             std += [max(2 * g0 * sq, 1e-9), 2 * g1 * sq + 0.02 * qd_rms]
-        std += [1.0] * n
+        width = 0.0 if P is None else float(P[PARAM_INDEX["hysteresis_width"]])
+        std += [width] * n
         return np.maximum(np.array(std), 1e-12)
 
     def profiled(self, Psets: np.ndarray, windows: np.ndarray) -> list:
@@ -309,9 +311,9 @@ class ReplayEngine:
                 X0[:, b:b + W] += D[k][:, None]
         Ym = self.simulate(starts, P, X0)
         R = self.residual(starts, Ym).reshape(Sn, 1 + ns, W, -1)
-        prior = self.state_prior_std()
         out = []
         for s in range(Sn):
+            prior = self.state_prior_std(Psets[s])
             r0 = R[s, 0]
             S = (r0[None] - R[s, 1:]) / np.diag(D)[:, None, None]  # d(pred)/dx0: (ns, W, m)
             out.append((r0, Projection(np.transpose(S, (1, 2, 0)) * prior[None, None, :])))

@@ -122,6 +122,10 @@ class CatalogBounds(Parameters):
         (2e-5, 2e-3), unit="m", low=0.0,
         source="chosen: Dahl transition over 0.02-2 mm of elongation (spring travel "
                "is a few mm, Fig 4.8)", doc="range of the transition length")
+    hysteresis_velocity: float = param(
+        1e-5, unit="m/s", low=0.0, low_inclusive=False,
+        source="chosen: v_s of the Dahl law, 1 % of typical tendon speeds (sign of x')",
+        doc="smoothing velocity of the hysteresis direction")
     joint_coulomb_max: float = param(
         0.5, unit="Nm", low=0.0,
         source="chosen: a few times the link torque r_q * 20 N of a finger joint",
