@@ -217,7 +217,7 @@ def DiscrepancyModel_(T):
         def _arrays(self, context):
             M = self._copies
             X = context.get_continuous_state_vector().CopyToVector().reshape(self._ns, M)
-            P = context.get_numeric_parameter(0).get_value().reshape(self._np, M)
+            P = context.get_numeric_parameter(0).CopyToVector().reshape(self._np, M)
             return X, P
 
         def DoCalcTimeDerivatives(self, context, derivatives):

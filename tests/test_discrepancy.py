@@ -1,0 +1,285 @@
+"""Model-discrepancy workflow: data contract, model physics, profile statistics (fast)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
+
+from awiwi_drake.components.spring import PolynomialSpring
+from awiwi_drake.discrepancy import Dataset, load_dataset, save_dataset
+from awiwi_drake.discrepancy.catalog import PARAM_INDEX, PARAM_NAMES, default_vector
+from awiwi_drake.discrepancy.model import (DiscrepancyModel_, NominalParameters, model_derivatives,
+                                           model_measurements)
+from awiwi_drake.discrepancy.replay import Projection, noise_floor, project
+from awiwi_drake.discrepancy.truth import HiddenEffectPlant_, draw_truth
+
+JOINT = {"motor_inertia": 2e-3, "motor_damping": 1.2e-3, "motor_pulley_radius": 0.006,
+         "spring_poly": [1.2e4, 2.5e6], "link_inertia": 1e-4, "link_damping": 1.2e-3,
+         "link_pulley_radius": 0.008}
+
+
+def _tiny_dataset(rig="joint") -> Dataset:
+    t = np.arange(50) * 1e-3
+    if rig == "joint":
+        ins = {"motor_torque_1": 0.2 + 0 * t, "motor_torque_2": 0.2 + 0 * t}
+        outs = {"motor_angle_1": 0.3 + 0 * t, "motor_angle_2": 0.3 + 0 * t, "tendon_force_1": 30 + 0 * t,
+                "tendon_force_2": 30 + 0 * t, "link_angle": 0 * t}
+        init = {k: 0.0 for k in ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
+                                 "link_angle", "link_velocity")}
+        params = dict(JOINT)
+    else:
+        ins = {"motor_torque": 0.2 + 0 * t}
+        outs = {"motor_angle": 0.3 + 0 * t, "tendon_force": 30 + 0 * t}
+        init = {"motor_angle": 0.3, "motor_velocity": 0.0}
+        params = {k: JOINT[k] for k in ("motor_inertia", "motor_damping", "motor_pulley_radius", "spring_poly")}
+    return Dataset("tiny", rig, t, ins, outs, params, init)
+
+
+def test_dataset_roundtrip(tmp_path):
+    ds = _tiny_dataset()
+    path = save_dataset(ds, tmp_path)
+    back = load_dataset(path)
+    assert back.rig == "joint" and back.output_names == ds.output_names
+    np.testing.assert_allclose(back.time, ds.time)
+    np.testing.assert_allclose(back.inputs["motor_torque_2"], ds.inputs["motor_torque_2"])
+    assert back.parameters["spring_poly"] == JOINT["spring_poly"]
+
+
+def _corrupt(tmp_path, csv_edit=None, json_edit=None):
+    path = save_dataset(_tiny_dataset(), tmp_path)
+    if csv_edit:
+        lines = path.read_text().splitlines()
+        path.write_text("\n".join(csv_edit(lines)) + "\n")
+    if json_edit:
+        jp = path.with_suffix(".json")
+        meta = json.loads(jp.read_text())
+        json_edit(meta)
+        jp.write_text(json.dumps(meta))
+    return path
+
+
+def _set_cell(lines, row, col, value):
+    cells = lines[row].split(",")
+    cells[col] = value
+    lines[row] = ",".join(cells)
+    return lines
+
+
+@pytest.mark.parametrize("csv_edit,json_edit,message", [
+    (lambda L: [L[0].replace("link_angle", "link_angel")] + L[1:], None, "unknown column 'link_angel'"),
+    (lambda L: [",".join(L[0].split(",")[:-1])] + [",".join(r.split(",")[:-1]) for r in L[1:]], None,
+     "missing column 'link_angle'"),
+    (lambda L: _set_cell(L, 5, 0, "0.0035"), None, "row 6: time step"),
+    (lambda L: _set_cell(L, 6, 0, "0.0"), None, "row 7: time is not increasing"),
+    (lambda L: _set_cell(L, 8, 3, "nan"), None, "row 9, column 'motor_angle_1'"),
+    (None, lambda m: m["parameters"].pop("link_inertia"), "missing parameter 'link_inertia'"),
+    (None, lambda m: m.update(rig="finger"), "unknown rig 'finger'"),
+    (None, lambda m: m["parameters"].update(motor_inertia=-1.0), "'motor_inertia' = -1.0 must be > 0"),
+    (None, lambda m: m["initial_state"].pop("link_velocity"), "initial_state misses 'link_velocity'"),
+])
+def test_load_rejects_malformed_data_naming_the_place(tmp_path, csv_edit, json_edit, message):
+    path = _corrupt(tmp_path, csv_edit, json_edit)
+    with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load_dataset(path)
+
+
+def test_missing_file_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="nothere.json"):
+        (tmp_path / "nothere.csv").write_text("time\n0\n")
+        load_dataset(tmp_path / "nothere.csv")
+
+
+# ---------------------------------------------------------------- model physics
+def _random_state(nom, rng):
+    n = nom.num_motors
+    x = [rng.uniform(0.3, 0.5, n), rng.uniform(-2, 2, n)]
+    if nom.has_link:
+        x += [rng.uniform(-0.1, 0.1, 1), rng.uniform(-3, 3, 1)]
+    x += [rng.uniform(-1, 1, n)]
+    return np.concatenate(x)
+
+
+def test_nominal_model_matches_foundation_joint_rig():
+    """All catalog switches off, the discrepancy model is the foundation's joint rig (Fig 5.9)."""
+    from awiwi_drake.components.spring import tendon_spring
+    from awiwi_drake.parameters.components import MotorParams
+    from awiwi_drake.parameters.rigs import JointRigParams
+    from awiwi_drake.rigs import joint_rig
+
+    motor = MotorParams(friction=False, saturation=False, damping=1.2e-3)
+    rp = JointRigParams(motor=motor, link_inertia=1e-4, link_damping=1.2e-3)
+    rig = joint_rig(params=rp)
+    coeffs = tuple(tendon_spring(rp.spring).coefficients)
+    nom = NominalParameters("joint", motor.inertia, motor.damping, motor.pulley_radius, coeffs,
+                            rp.link_inertia, rp.link_damping, rp.link_pulley_radius)
+    rng = np.random.default_rng(0)
+    ctx = rig.diagram.CreateDefaultContext()
+    for _ in range(3):
+        X = _random_state(nom, rng)
+        X[-2:] = 0.0
+        u = rng.uniform(-0.5, 0.5, 2)
+        # foundation order [q, qd, th1, th2, w1, w2]
+        ctx.SetContinuousState(np.r_[X[4], X[5], X[0], X[1], X[2], X[3]])
+        rig.diagram.GetInputPort("motor_torque").FixValue(ctx, u)
+        rig.diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
+        ref = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+        ours = model_derivatives(nom, X[:, None], u[:, None], default_vector()[:, None])[:, 0]
+        np.testing.assert_allclose(ours[[4, 5, 0, 1, 2, 3]], ref, rtol=1e-9, atol=1e-9)
+        f_ref = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
+        y = model_measurements(nom, X[:, None], default_vector()[:, None])[:, 0]
+        np.testing.assert_allclose(y[2:4], f_ref, rtol=1e-12)
+
+
+def _energy(nom, X):
+    n = nom.num_motors
+    spring = PolynomialSpring(nom.spring_poly)
+    from awiwi_drake.discrepancy.model import rig_kinematics
+    th, om = X[:n], X[n:2 * n]
+    q = qd = None
+    if nom.has_link:
+        q, qd = X[2 * n], X[2 * n + 1]
+    x, _ = rig_kinematics(nom, th, om, q, qd)
+    e = 0.5 * nom.motor_inertia * np.sum(om ** 2) + sum(float(spring.energy(np.array([xi]))[0]) for xi in x)
+    if nom.has_link:
+        e += 0.5 * nom.link_inertia * qd ** 2
+    return e
+
+
+@pytest.mark.parametrize("effects", [{}, {"motor_coulomb": 0.2, "motor_viscous": 0.02},
+                                     {"joint_coulomb": 0.02}, {"guide_c0": 1.0, "guide_mu": 0.2}])
+def test_unforced_rig_is_passive(effects):
+    """dE/dt = -d sum w^2 - d_q q'^2 exactly without effects; friction effects only dissipate more."""
+    nom = NominalParameters.from_dataset("joint", JOINT)
+    p = default_vector()
+    for k, v in effects.items():
+        p[PARAM_INDEX[k]] = v
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        X = _random_state(nom, rng)
+        X[-2:] = 0.0
+        xdot = model_derivatives(nom, X[:, None], np.zeros((2, 1)), p[:, None])[:, 0]
+        h = 1e-6
+        grad = np.array([(_energy(nom, X + h * e) - _energy(nom, X - h * e)) / (2 * h) for e in np.eye(len(X))])
+        dEdt = grad @ xdot
+        natural = -nom.motor_damping * np.sum(X[2:4] ** 2) - nom.link_damping * X[5] ** 2
+        if not effects:
+            assert dEdt == pytest.approx(natural, rel=1e-4, abs=1e-8)
+        else:
+            assert dEdt < natural + 1e-9
+
+
+def test_hysteresis_force_loop_has_catalog_width():
+    """Dahl law of the catalog: the force saturates at +-h on loading/unloading (loop width 2h)."""
+    from awiwi_drake.discrepancy import laws
+    h, length = 8.0, 2e-4
+    for direction in (+1.0, -1.0):
+        z = 0.0
+        x = 3e-3
+        for _ in range(4000):  # travel 2 mm in 1 um steps (10 loop lengths)
+            xd = direction * 1e-3
+            z += laws.hysteresis_force_rate(z, x, xd, 30.0, h, length) * 1e-3
+            x += xd * 1e-3
+        assert z == pytest.approx(direction * h, rel=2e-3)
+
+
+def _autodiff_check(system, ctx_setup, nx):
+    ad = system.ToAutoDiffXd()
+    ctx = system.CreateDefaultContext()
+    X = ctx_setup(system, ctx)
+    f0 = system.EvalTimeDerivatives(ctx).CopyToVector()
+    actx = ad.CreateDefaultContext()
+    ctx_setup(ad, actx, autodiff=True)
+    actx.SetContinuousState(InitializeAutoDiff(X).ravel())
+    grad = ExtractGradient(ad.EvalTimeDerivatives(actx).CopyToVector())
+    fd = np.zeros((len(f0), nx))
+    for j in range(nx):
+        h = 1e-7 * max(1.0, abs(X[j]))
+        ctx.SetContinuousState(X + h * np.eye(nx)[j])
+        fp = system.EvalTimeDerivatives(ctx).CopyToVector()
+        ctx.SetContinuousState(X - h * np.eye(nx)[j])
+        fm = system.EvalTimeDerivatives(ctx).CopyToVector()
+        fd[:, j] = (fp - fm) / (2 * h)
+    np.testing.assert_allclose(grad, fd, rtol=2e-5, atol=1e-4 * np.abs(fd).max())
+
+
+def test_discrepancy_model_converts_to_autodiff_and_matches_finite_differences():
+    nom = NominalParameters.from_dataset("joint", JOINT)
+    sys = DiscrepancyModel_[float](nom, 2)
+    assert sys.ToAutoDiffXdMaybe() is not None
+    rng = np.random.default_rng(2)
+    X = np.concatenate([_random_state(nom, rng), _random_state(nom, rng)]).reshape(2, -1).T.ravel()
+    p = default_vector()
+    for k, v in {"motor_coulomb": 0.1, "ripple_sin1_m1": 0.05, "ripple_cos2_m2": 0.03, "hysteresis_width": 5.0,
+                 "joint_coulomb": 0.02, "guide_mu": 0.1, "guide_c0": 0.5}.items():
+        p[PARAM_INDEX[k]] = v
+    P = np.repeat(p[:, None], 2, axis=1).ravel()
+
+    def setup(system, ctx, autodiff=False):
+        T = AutoDiffXd if autodiff else float
+        ctx.get_mutable_numeric_parameter(0).SetFromVector(np.array([T(v) for v in P]) if autodiff else P)
+        u = np.array([0.3, -0.2, 0.1, 0.4])
+        system.get_input_port(0).FixValue(ctx, np.array([T(v) for v in u]) if autodiff else u)
+        if not autodiff:
+            ctx.SetContinuousState(X)
+        return X
+
+    _autodiff_check(sys, setup, len(X))
+
+
+def test_truth_plant_converts_to_autodiff_and_matches_finite_differences():
+    nom = NominalParameters.from_dataset("joint", JOINT)
+    truth = draw_truth("joint", ["motor_friction", "spring_hysteresis", "joint_friction", "guide_friction",
+                                 "motor_ripple"], np.random.default_rng(3))
+    sys = HiddenEffectPlant_[float](nom, truth)
+    rng = np.random.default_rng(4)
+    X = _random_state(nom, rng)
+    X[-2:] = [0.3, -0.4]
+
+    def setup(system, ctx, autodiff=False):
+        u = np.array([0.3, -0.2])
+        system.get_input_port(0).FixValue(ctx, np.array([AutoDiffXd(v) for v in u]) if autodiff else u)
+        if not autodiff:
+            ctx.SetContinuousState(X)
+        return X
+
+    _autodiff_check(sys, setup, len(X))
+
+
+# ---------------------------------------------------------------- statistics
+def test_noise_floor_estimator_recovers_white_noise_on_lab_signals():
+    rng = np.random.default_rng(5)
+    t = np.arange(20000) * 1e-3
+    clean = sum(np.sin(2 * np.pi * f * t + rng.uniform(0, 6)) for f in (0.3, 1.1, 3.7, 6.0))
+    clean[8000:] += np.repeat(rng.uniform(-1, 1, 40), 300)  # steps
+    for sigma in (0.003, 0.03, 0.3):
+        est = noise_floor(clean + rng.normal(0, sigma, t.size))
+        assert est == pytest.approx(sigma, rel=0.06)
+
+
+def test_window_start_profile_is_generalised_least_squares():
+    """|C r|^2 equals the energy minimised over the prior-weighted initial-state
+    correction, and white noise leaves dof = m - sum s^2/(1+s^2) on average."""
+    rng = np.random.default_rng(6)
+    W, m, ns = 3, 40, 4
+    S = rng.normal(size=(W, m, ns)) * np.array([0.1, 1.0, 10.0, 0.0])
+    proj = Projection(S)
+    r = rng.normal(size=(W, m))
+    for w in range(W):
+        A = S[w]
+        d = np.linalg.solve(A.T @ A + np.eye(ns), A.T @ r[w])
+        direct = np.sum((r[w] - A @ d) ** 2) + d @ d
+        assert np.sum(project(r, proj)[w] ** 2) == pytest.approx(direct, rel=1e-10)
+    noise = rng.normal(size=(4000, W, m))
+    mean_energy = (project(noise, proj) ** 2).sum(axis=2).mean(axis=0)
+    np.testing.assert_allclose(mean_energy, proj.dof, rtol=0.03)
+
+
+def test_catalog_names_are_the_contract():
+    from awiwi_drake.discrepancy import EFFECTS, PHYSICAL_EFFECTS
+    assert set(PHYSICAL_EFFECTS) == {"motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
+                                     "guide_friction", "delay"}
+    assert {"force_sensor", "nominal_motor", "nominal_spring"} <= set(EFFECTS)
+    assert len(PARAM_NAMES) == len(set(PARAM_NAMES))
