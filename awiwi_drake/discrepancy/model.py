@@ -94,6 +94,18 @@ def _p(P, name):
     return P[PARAM_INDEX[name]]
 
 
+def _activity(P):
+    """Per catalog parameter: nonzero in any copy (None off the float path: all active)."""
+    if P.dtype == object:
+        return None
+    return np.any(P != 0.0, axis=1)
+
+
+def _active(act, *names) -> bool:
+    """Whether any of ``names`` is switched on in some copy."""
+    return True if act is None else bool(any(act[PARAM_INDEX[n]] for n in names))
+
+
 def rig_kinematics(nom: NominalParameters, theta, omega, q=None, qd=None):
     """Spring elongations and their rates ``(x, xd)`` per motor (lists of arrays)."""
     r = nom.motor_pulley_radius
@@ -132,28 +144,42 @@ def model_derivatives(nom: NominalParameters, X, U, P):
         f, f0 = laws.spring_with_hysteresis(x[i], z[i], nom.spring_poly, _p(P, "spring_scale_rel"))
         forces.append(f)
         elastic.append(f0)
+    # switches: a catalog effect whose parameters are zero in every copy is skipped
+    # (float path only; AutoDiffXd/Expression always evaluate every term)
+    act = _activity(P)
+    fric_on = _active(act, "motor_coulomb", "motor_viscous")
+    guide_on = _active(act, "guide_c0", "guide_mu")
+    hyst_on = _active(act, "hysteresis_width")
     acc, zdot = [], []
     for i in range(n):
         m = i + 1
-        tau = (U[i] - d * omega[i]
-               + laws.motor_friction(omega[i], _p(P, "motor_coulomb"), _p(P, "motor_slope"),
-                                     _p(P, "motor_viscous"))
-               + laws.ripple(theta[i], [(_p(P, "ripple_order_1"), _p(P, f"ripple_sin1_m{m}"),
-                                         _p(P, f"ripple_cos1_m{m}")),
-                                        (_p(P, "ripple_order_2"), _p(P, f"ripple_sin2_m{m}"),
-                                         _p(P, f"ripple_cos2_m{m}"))])
-               - r * (forces[i] + laws.guide_friction(r * omega[i], forces[i], _p(P, "guide_c0"),
-                                                      _p(P, "guide_mu"), laws.GUIDE_VELOCITY)))
-        acc.append(tau / B)
-        zdot.append(laws.hysteresis_force_rate(z[i], x[i], xd[i], elastic[i], _p(P, "hysteresis_width"),
-                                               _p(P, "hysteresis_length")))
+        tau = U[i] - d * omega[i]
+        if fric_on:
+            tau = tau + laws.motor_friction(omega[i], _p(P, "motor_coulomb"), _p(P, "motor_slope"),
+                                            _p(P, "motor_viscous"))
+        harmonics = [(_p(P, f"ripple_order_{k}"), _p(P, f"ripple_sin{k}_m{m}"), _p(P, f"ripple_cos{k}_m{m}"))
+                     for k in (1, 2) if _active(act, f"ripple_sin{k}_m{m}", f"ripple_cos{k}_m{m}")]
+        if harmonics:
+            tau = tau + laws.ripple(theta[i], harmonics)
+        tension = forces[i]
+        if guide_on:
+            tension = tension + laws.guide_friction(r * omega[i], forces[i], _p(P, "guide_c0"),
+                                                    _p(P, "guide_mu"), laws.GUIDE_VELOCITY)
+        acc.append((tau - r * tension) / B)
+        if hyst_on:
+            zdot.append(laws.hysteresis_force_rate(z[i], x[i], xd[i], elastic[i], _p(P, "hysteresis_width"),
+                                                   _p(P, "hysteresis_length")))
+        else:
+            zdot.append(0.0 * z[i])
     out = [omega[i] for i in range(n)] + acc
     if nom.has_link:
         mq = nom.link_inertia * (1.0 + _p(P, "link_inertia_rel"))
         dq = nom.link_damping + _p(P, "link_damping_add")
         rq = nom.link_pulley_radius
-        qdd = (rq * (forces[0] - forces[1]) - dq * qd
-               + laws.joint_friction(qd, _p(P, "joint_coulomb"), _p(P, "joint_velocity"))) / mq
+        tq = rq * (forces[0] - forces[1]) - dq * qd
+        if _active(act, "joint_coulomb"):
+            tq = tq + laws.joint_friction(qd, _p(P, "joint_coulomb"), _p(P, "joint_velocity"))
+        qdd = tq / mq
         out += [qd, qdd]
     out += zdot
     return np.array(out)

@@ -474,7 +474,8 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
         say("screen: " + ", ".join(f"{s['effect'].name} {100 * s['rel']:.0f}%" for s in screened[:5]))
         screen_results = [CandidateResult(s["effect"].name, s["effect"].kind, "screen", s["params"], {},
                                           s["gain"], s["rel"], s["z"], s["dbic"]) for s in screened]
-        top = [s for s in screened if s["gain"] > 0][:settings.num_confirm]
+        best_gain = max([s["gain"] for s in screened] + [0.0])
+        top = [s for s in screened if s["gain"] > settings.confirm_fraction * best_gain][:settings.num_confirm]
         fitted = []
         for s in top:
             eff = s["effect"]
@@ -538,12 +539,27 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
             conf = 1.0
         conf = float(min(conf, norm.cdf(win.z - settings.min_rank_z + 2.0)))
         status = "ambiguous" if ambiguous else "confirmed"
+        if ambiguous and accepted and win.kind == "physical" and run.kind == "physical":
+            # a leftover that several effects explain equally (e.g. the form mismatch of an
+            # effect already added) names nothing: report it and stop
+            unresolved = [c.effect for c in fitted if c.gain >= settings.ambiguous_ratio * win.gain]
+            say(f"unresolved: {', '.join(unresolved)} explain the rest about equally: stop")
+            history[-1]["unresolved"] = unresolved
+            break
         accepted.append(EFFECTS[win.effect])
         if win.kind == "physical":
             n_phys += 1
         else:
             n_nuis += 1
-        st = _State(eng, win._p)
+        # polish the accepted parameters with the profile at the fitted point, so the
+        # next step's candidates are compared with an optimised base
+        names = _free_params(accepted, rig)
+        names = [n for n in names if not n.startswith("ripple_order")]
+        Wtr = np.arange(len(eng.starts))[eng.train]
+        p_pol = _fit(st, names, win._p, bounds, settings, eng.projector(win._p, Wtr)[1])[0]
+        st_new = _State(eng, p_pol)
+        st_old = _State(eng, win._p)
+        st = st_new if st_new.E_test <= st_old.E_test else st_old
         nr = _nrmse(eng, st.rp, st.W[eng.test])
         alts = [run.effect] if ambiguous else []
         steps.append(Step(win.effect, win.kind, status, conf, win.parameters, win.uncertainties,

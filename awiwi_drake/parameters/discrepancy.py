@@ -60,6 +60,11 @@ class DiscrepancySettings(Parameters):
         3, unit="-", low=1, high=12,
         source="chosen: simulation fits only the three best screened candidates (speed)",
         doc="candidates fitted by simulation per step")
+    confirm_fraction: float = param(
+        0.25, unit="-", low=0.0, high=1.0,
+        source="chosen: candidates screened below 25 % of the best screened gain are not "
+               "fitted by simulation (speed; the screen underestimates by < 2x in tests)",
+        doc="screen-gain fraction for simulation fits")
     min_z: float = param(
         4.0, unit="-", low=0.0, high=1e6,
         source="chosen: held-out gain must exceed 4 null standard deviations (2 |delta|) "

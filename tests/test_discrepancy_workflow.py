@@ -1,0 +1,72 @@
+"""End-to-end: the workflow names hidden effects, closes the gap, and finds nothing
+when nothing is hidden (short 4 s datasets; the full study is benchmarks/bench_discrepancy.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from awiwi_drake.discrepancy import diagnose, load_dataset, make_truth_dataset
+from awiwi_drake.discrepancy.workflow import gap_metrics
+from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+
+SHORT = TruthGeneratorParams(duration=4.0)
+
+
+@pytest.fixture(scope="module")
+def joint_friction_case():
+    ds = make_truth_dataset("joint", ["joint_friction"], snr_db=30, seed=11, gen=SHORT)
+    return ds, diagnose(ds)
+
+
+def test_hidden_joint_friction_is_named_and_gap_closes(joint_friction_case):
+    ds, dx = joint_friction_case
+    assert dx.named_effects == ["joint_friction"]
+    step = dx.steps[0]
+    assert step.status == "confirmed" and step.confidence > 0.9
+    # Stribeck truth (fc < F < fs near the catalog's velocity scale) vs catalog Coulomb
+    tr = ds.meta["truth"]["joint_friction"]
+    assert 0.7 * tr["fc"] < step.parameters["joint_coulomb"] < 1.3 * tr["fs"]
+    gap = gap_metrics(dx, ds)
+    assert gap["gap_closed"] > 0.8
+    assert dx.nrmse_after < 0.6 * dx.nrmse_before
+    assert dx.floor_ratio_after < 1.3
+
+
+def test_nothing_hidden_reports_no_effect():
+    ds = make_truth_dataset("joint", [], snr_db=30, seed=12, gen=SHORT)
+    dx = diagnose(ds)
+    assert dx.named_effects == [] and dx.verdict == "no effect"
+    assert dx.floor_ratio_before < 1.1  # the nominal replay is at the noise floor
+    assert dx.nrmse_after == dx.nrmse_before
+
+
+def test_hidden_delay_on_tendon_rig_is_named_with_its_value():
+    ds = make_truth_dataset("tendon", ["delay"], snr_db=30, seed=13, gen=SHORT)
+    dx = diagnose(ds)
+    assert dx.named_effects[:1] == ["delay"]
+    assert dx.steps[0].parameters["delay"] == pytest.approx(ds.meta["truth"]["delay"], rel=0.2)
+
+
+def test_cli_make_dataset_and_diagnose(tmp_path, capsys):
+    from awiwi_drake.cli import main
+
+    assert main(["make-dataset", "--rig", "tendon", "--hide", "motor_friction", "--snr", "30", "--seed", "14",
+                 "--duration", "3", "--name", "mf", "--out", str(tmp_path)]) == 0
+    ds = load_dataset(tmp_path / "mf.csv")
+    assert ds.meta["truth"]["hidden"] == ["motor_friction"]
+    out_json = tmp_path / "dx.json"
+    assert main(["diagnose", str(tmp_path / "mf.csv"), "--json", str(out_json),
+                 "--report", str(tmp_path / "rep")]) == 0
+    captured = capsys.readouterr()
+    assert "nominal model" in captured.err  # progress on the terminal
+    summary = json.loads(out_json.read_text())
+    assert summary["named_effects"] == ["motor_friction"]
+    assert summary["nrmse_after"] < summary["nrmse_before"]
+    step = summary["steps"][0]
+    assert step["effect"] == "motor_friction" and 0 < step["confidence"] <= 1
+    assert step["parameters"]["motor_coulomb"] > 0 and np.isfinite(step["nrmse_after"])
+    assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "residual_maps_nominal.png").exists()
+    assert main(["diagnose", str(tmp_path / "missing.csv")]) == 2
