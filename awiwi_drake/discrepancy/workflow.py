@@ -381,31 +381,40 @@ def _fit(st: _State, names: list, p_start: np.ndarray, bounds: CatalogBounds, se
     x0 = np.clip(p_start[idx], lo + 1e-6 * span, hi - 1e-6 * span)
     steps = 1e-3 * span
     Wtr = st.W[eng.train]
-    cache = {}
+    res_cache, jac_cache = {}, {}
 
-    def batch(x):
-        key = x.tobytes()
-        if key in cache:
-            return cache[key]
-        P = np.repeat(p_start[None], 1 + len(x), axis=0)
+    def vec(x):
+        P = np.repeat(p_start[None], 1, axis=0)
         P[:, idx] = x
-        h = np.where(x + steps <= hi, steps, -steps)
-        for j in range(len(x)):
-            P[1 + j, idx[j]] += h[j]
-        R = eng.evaluate(P, Wtr)
-        Rp = np.stack([project(R[s], Qtr) for s in range(len(P))])
-        r = Rp[0].ravel()
-        J = np.stack([(r - Rp[1 + j].ravel()) / h[j] for j in range(len(x))], axis=1)
-        cache.clear()
-        cache[key] = (r, J)
-        return r, J
+        return P
 
-    sol = least_squares(lambda x: batch(x)[0], x0, jac=lambda x: -batch(x)[1],
-                        bounds=(lo, hi), x_scale=np.maximum(span, 1e-12) * 0.01,
+    def fun(x):
+        key = x.tobytes()
+        if key not in res_cache:
+            res_cache.clear()
+            res_cache[key] = project(eng.evaluate(vec(x), Wtr)[0], Qtr).ravel()
+        return res_cache[key]
+
+    def jac(x):
+        """Forward differences of all parameters in one batched simulation; the
+        residual is a derivative of the model output (returns d r / d x)."""
+        key = x.tobytes()
+        if key not in jac_cache:
+            r = fun(x)
+            h = np.where(x + steps <= hi, steps, -steps)
+            P = np.repeat(vec(x), len(x), axis=0)
+            for j in range(len(x)):
+                P[j, idx[j]] += h[j]
+            R = eng.evaluate(P, Wtr)
+            jac_cache.clear()
+            jac_cache[key] = np.stack([(project(R[j], Qtr).ravel() - r) / h[j] for j in range(len(x))], axis=1)
+        return jac_cache[key]
+
+    sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=np.maximum(span, 1e-12) * 0.01,
                         max_nfev=settings.max_nfev, method="trf")
     p = p_start.copy()
     p[idx] = sol.x
-    r, J = batch(sol.x)
+    r, J = fun(sol.x), jac(sol.x)
     dof = max(r.size - len(names), 1)
     s2 = max(float(r @ r) / dof, 1.0)
     try:

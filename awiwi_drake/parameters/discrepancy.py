@@ -92,9 +92,9 @@ class DiscrepancySettings(Parameters):
                "and is not significantly worse: 'ambiguous'",
         doc="runner-up/winner gain ratio for 'ambiguous'")
     max_nfev: int = param(
-        25, unit="-", low=1, high=1000,
-        source="chosen: Gauss-Newton converges in < 10 iterations from the screening "
-               "estimate; 25 bounds the cost", doc="fit iterations")
+        15, unit="-", low=1, high=1000,
+        source="chosen: trust-region Gauss-Newton converges in < 10 iterations from the "
+               "screening/probe estimate; 15 bounds the cost", doc="fit iterations")
 
 
 @dataclass(frozen=True)
