@@ -527,7 +527,8 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
                 f"z {z:4.1f}/{zg:6.1f}, dBIC {dbic:9.1f} ({nfev} evals, {time.perf_counter() - t0:.1f} s)")
         fitted.sort(key=lambda c: -c.gain)
         significant = [c for c in fitted if c.z_gain >= settings.min_z and c.z >= settings.min_rank_z
-                       and c.relative_gain >= settings.min_gain and c.delta_bic < 0]
+                       and c.relative_gain >= settings.min_gain and c.delta_bic < 0
+                       and c.gain >= settings.min_floor_gain * st.floor_test]
         history.append({"ratio": st.ratio, "screen": [c.summary() for c in screen_results],
                         "fits": [c.summary() for c in fitted]})
         if not significant:

@@ -81,6 +81,12 @@ class DiscrepancySettings(Parameters):
         source="chosen: an accepted effect removes >= 3 % of the held-out residual energy "
                "above the noise floor",
         doc="minimum relative improvement")
+    min_floor_gain: float = param(
+        0.02, unit="-", low=0.0, high=1.0,
+        source="chosen: an accepted effect removes >= 2 % of the held-out noise-floor energy; "
+               "below that, form mismatches of effects already added and the noise-floor "
+               "estimate's bias (quantisation) dominate (benchmark, 20 dB)",
+        doc="minimum gain relative to the noise floor")
     floor_ratio: float = param(
         1.10, unit="-", low=1.0, high=10.0,
         source="chosen: a held-out residual within 10 % of the noise floor energy means "
