@@ -283,3 +283,24 @@ def test_catalog_names_are_the_contract():
                                      "guide_friction", "delay"}
     assert {"force_sensor", "nominal_motor", "nominal_spring"} <= set(EFFECTS)
     assert len(PARAM_NAMES) == len(set(PARAM_NAMES))
+
+
+def test_benchmark_scores_follow_their_definitions():
+    """top-1, false-positive and exact-set rates of benchmarks/bench_discrepancy.py."""
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).parent.parent / "benchmarks" / "bench_discrepancy.py"
+    spec = importlib.util.spec_from_file_location("bench_discrepancy", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    row = dict(rig="joint", snr_db=30, nuisance=[], nuisance_named=[], seconds=1.0, cpu_seconds=1.0)
+    rows = [dict(row, hidden=["delay"], named=["delay", "motor_friction"], gap_closed=0.9),
+            dict(row, hidden=["delay"], named=["motor_friction"], gap_closed=0.1),
+            dict(row, hidden=[], named=[], gap_closed=0.0),
+            dict(row, hidden=[], named=["delay"], gap_closed=0.0),
+            dict(row, hidden=["delay", "motor_ripple"], named=["motor_ripple", "delay"], gap_closed=0.95)]
+    s = bench.summarise(rows)
+    assert s["top1_by_snr"][30] == (0.5, 2)
+    assert s["false_positive"][30] == (0.5, 2)
+    assert s["exact_set"]["two_hidden"] == (1.0, 1)
+    assert s["gap_closed"]["median"] == pytest.approx(0.9)

@@ -106,6 +106,16 @@ def _active(act, *names) -> bool:
     return True if act is None else bool(any(act[PARAM_INDEX[n]] for n in names))
 
 
+def split_state(nom: NominalParameters, X):
+    """``(theta, omega, q, q', z)`` from a stacked state ``[theta, omega, (q, q'), z]``
+    (``q``, ``q'`` are None without a link)."""
+    n = nom.num_motors
+    q = qd = None
+    if nom.has_link:
+        q, qd = X[2 * n], X[2 * n + 1]
+    return X[:n], X[n:2 * n], q, qd, X[-n:]
+
+
 def rig_kinematics(nom: NominalParameters, theta, omega, q=None, qd=None):
     """Spring elongations and their rates ``(x, xd)`` per motor (lists of arrays)."""
     r = nom.motor_pulley_radius
@@ -130,11 +140,7 @@ def model_derivatives(nom: NominalParameters, X, U, P):
     array (num_states, copies), generic in the scalar type.
     """
     n = nom.num_motors
-    theta, omega = X[:n], X[n:2 * n]
-    q = qd = None
-    if nom.has_link:
-        q, qd = X[2 * n], X[2 * n + 1]
-    z = X[-n:]
+    theta, omega, q, qd, z = split_state(nom, X)
     x, xd = rig_kinematics(nom, theta, omega, q, qd)
     B = nom.motor_inertia * (1.0 + _p(P, "motor_inertia_rel"))
     d = nom.motor_damping + _p(P, "motor_damping_add")
@@ -188,11 +194,7 @@ def model_derivatives(nom: NominalParameters, X, U, P):
 def model_measurements(nom: NominalParameters, X, P):
     """Measured signals ``[theta..., f_meas..., (q)]`` of all copies (num_measurements, copies)."""
     n = nom.num_motors
-    theta, omega = X[:n], X[n:2 * n]
-    q = qd = None
-    if nom.has_link:
-        q, qd = X[2 * n], X[2 * n + 1]
-    z = X[-n:]
+    theta, omega, q, qd, z = split_state(nom, X)
     x, _ = rig_kinematics(nom, theta, omega, q, qd)
     out = [theta[i] for i in range(n)]
     for i in range(n):

@@ -366,10 +366,6 @@ def project(R: np.ndarray, proj: Projection) -> np.ndarray:
 
 def laws_kinematics(nom: NominalParameters, xhat: np.ndarray):
     """Elongation and rate from the stacked estimate ``[theta, omega, (q, q')]``."""
-    from .model import rig_kinematics
-    n = nom.num_motors
-    theta, omega = xhat[:n], xhat[n:2 * n]
-    q = qd = None
-    if nom.has_link:
-        q, qd = xhat[2 * n], xhat[2 * n + 1]
+    from .model import rig_kinematics, split_state
+    theta, omega, q, qd, _ = split_state(nom, np.vstack([xhat, np.zeros((nom.num_motors, xhat.shape[1]))]))
     return rig_kinematics(nom, theta, omega, q, qd)

@@ -32,7 +32,7 @@ from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 from . import laws
 from .catalog import EFFECTS
 from .data import Dataset
-from .model import NominalParameters, rig_kinematics
+from .model import NominalParameters, rig_kinematics, split_state
 
 __all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
 
@@ -76,12 +76,7 @@ def HiddenEffectPlant_(T):
             Impl._construct(self, other._nom, other._truth, converter=converter)
 
         def _split(self, X):
-            nom, n = self._nom, self._nom.num_motors
-            theta, omega = X[:n], X[n:2 * n]
-            q = qd = None
-            if nom.has_link:
-                q, qd = X[2 * n], X[2 * n + 1]
-            return theta, omega, q, qd, X[-n:]
+            return split_state(self._nom, X)
 
         def _forces(self, X):
             nom, tr = self._nom, self._truth

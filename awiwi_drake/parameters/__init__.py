@@ -9,3 +9,4 @@ from awiwi_drake.parameters.components import (
     SpringMechanismGeometry, TendonParams)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, SpringModelParams, TendonRigParams
 from awiwi_drake.parameters.wrist import WristParams
+from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings, TruthGeneratorParams
