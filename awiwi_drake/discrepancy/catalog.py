@@ -72,7 +72,7 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
         ParamSpec("joint_coulomb", "Nm", 0.0, 0.0, b.joint_coulomb_max, 0.002, "link Coulomb torque"),
         ParamSpec("joint_velocity", "rad/s", 0.05, *b.joint_velocity_range, 0.0, "link friction velocity scale"),
         ParamSpec("guide_c0", "N", 0.0, 0.0, b.guide_c0_max, 0.3, "C0 of (4.1) (at the rig's bending angle)"),
-        ParamSpec("guide_mu", "-", 0.0, 0.0, b.guide_mu_max, 0.01, "tension-proportional guide friction"),
+        ParamSpec("guide_mu", "-", 0.0, 0.0, b.guide_mu_max, 0.01, "capstan exponent mu*alpha (tension-proportional part)"),
         ParamSpec("delay", "s", 0.0, 0.0, b.delay_max, 0.002, "pure input delay"),
         ParamSpec("force_gain", "-", 0.0, -b.force_gain_max, b.force_gain_max, 0.01, "force sensor gain error"),
         ParamSpec("force_offset_1", "N", 0.0, -b.force_offset_max, b.force_offset_max, 0.5, "force sensor 1 offset"),

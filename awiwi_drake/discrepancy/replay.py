@@ -352,6 +352,13 @@ class Projection:
             dof[w] = m - np.sum(sv ** 2 / (1.0 + sv ** 2))
         self.U, self.d, self.dof = U, d, dof
 
+    def correction(self, R: np.ndarray) -> np.ndarray:
+        """Prediction change of the MAP window-start correction (linearised), in residual
+        units: ``S d* = U diag(s^2 / (1 + s^2)) U^T r``; R is (W, m)."""
+        g = 1.0 - (1.0 - self.d) ** 2
+        coef = np.einsum("wmk,wm->wk", self.U, R) * g
+        return np.einsum("wmk,wk->wm", self.U, coef)
+
     def take(self, windows: np.ndarray) -> "Projection":
         out = Projection.__new__(Projection)
         out.U, out.d, out.dof = self.U[windows], self.d[windows], self.dof[windows]

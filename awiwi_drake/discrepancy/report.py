@@ -37,26 +37,29 @@ def plot_overlay(dx: Diagnosis, *, windows: int = 4):
     test = np.nonzero(eng.test)[0]
     pick = test[np.linspace(0, len(test) - 1, min(windows, len(test))).astype(int)]
     ny = len(eng.out_names)
-    fig, ax = plt.subplots(ny, 1, figsize=(9, 1.9 * ny), sharex=True, squeeze=False)
-    ax = ax[:, 0]
-    from .catalog import PARAM_INDEX  # noqa: F401
+    fig, ax = plt.subplots(ny, len(pick), figsize=(2.6 * len(pick) + 1, 1.8 * ny), sharex="col",
+                           squeeze=False)
     preds = {}
     for label, p in (("nominal", default_vector()), ("augmented", dx.final_parameters)):
-        P = np.repeat(p[:, None], len(pick), axis=1)
-        X0 = eng.initial_states(eng.starts[pick], P)
-        preds[label] = eng.simulate(eng.starts[pick], P, X0)[:, :, eng.out_index]
+        # prediction from the profiled window start: measured - (residual - MAP correction)
+        r0, proj = eng.projector(p, pick)
+        shift = (r0 - proj.correction(r0)).reshape(len(pick), eng.L, ny) * eng.sigma
+        idx = eng.starts[pick][:, None] + 1 + np.arange(eng.L)[None, :]
+        preds[label] = eng.Y[idx] - shift
     for w_i, w in enumerate(pick):
         idx = eng.starts[w] + 1 + np.arange(eng.L)
         t = eng.ds.time[idx]
         for j, name in enumerate(eng.out_names):
-            ax[j].plot(t, eng.Y[idx, j], color="0.6", lw=1, label="measured" if w_i == 0 else None)
-            ax[j].plot(t, preds["nominal"][w_i, :, j], color="C3", lw=1, label="nominal" if w_i == 0 else None)
-            ax[j].plot(t, preds["augmented"][w_i, :, j], color="C0", lw=1,
-                       label="augmented" if w_i == 0 else None)
-            ax[j].set_ylabel(name, fontsize=8)
-    ax[0].legend(fontsize=7, ncol=3)
-    ax[-1].set_xlabel("time [s] (held-out multiple-shooting windows)")
-    fig.suptitle(f"{dx.dataset}: replay from measured window starts", fontsize=9)
+            a = ax[j, w_i]
+            a.plot(t, eng.Y[idx, j], color="0.6", lw=1, label="measured")
+            a.plot(t, preds["nominal"][w_i, :, j], color="C3", lw=1, label="nominal")
+            a.plot(t, preds["augmented"][w_i, :, j], color="C0", lw=1, label="augmented")
+            a.tick_params(labelsize=6)
+            if w_i == 0:
+                a.set_ylabel(name, fontsize=7)
+        ax[-1, w_i].set_xlabel("time [s]", fontsize=7)
+    ax[0, 0].legend(fontsize=6)
+    fig.suptitle(f"{dx.dataset}: held-out windows replayed from the profiled window starts", fontsize=9)
     fig.tight_layout()
     return fig, ax
 
