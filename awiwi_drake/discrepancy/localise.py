@@ -30,6 +30,10 @@ class ResidualMaps:
     cpr_noise: float
     velocity_bins: np.ndarray
     velocity_profile: dict  # signal -> mean residual per motor-velocity bin
+    position_bins: np.ndarray
+    position_profile: dict  # signal -> mean residual per motor-angle bin
+    force_bins: np.ndarray | None
+    force_profile: dict  # signal -> mean residual per tendon-force bin
     direction_asymmetry: dict  # force signal -> mean(res | x' > 0) - mean(res | x' < 0) (noise units)
     lags: np.ndarray
     xcorr: dict  # signal -> normalised cross-correlation with the first input's rate
@@ -73,13 +77,18 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
             amps.append(float(np.hypot(c[0], c[1])))
         cpr[n] = np.array(amps)
     cpr_noise = float(2.0 / np.sqrt(max(ok.sum(), 1)))
-    # operating regions: motor velocity bins
-    om = eng.xhat[nmot][ok]
-    edges = np.quantile(om, np.linspace(0, 1, 11))
-    centers = 0.5 * (edges[1:] + edges[:-1])
-    bins = np.clip(np.searchsorted(edges, om) - 1, 0, 9)
-    vprof = {n: np.array([np.mean(full[ok, j][bins == b]) if np.any(bins == b) else np.nan
-                          for b in range(10)]) for j, n in enumerate(eng.out_names)}
+    # operating regions: quantile bins of motor velocity, motor angle and tendon force
+    def profile(v):
+        edges = np.quantile(v, np.linspace(0, 1, 11))
+        bins = np.clip(np.searchsorted(edges, v) - 1, 0, 9)
+        prof = {n: np.array([np.mean(full[ok, j][bins == b]) if np.any(bins == b) else np.nan
+                             for b in range(10)]) for j, n in enumerate(eng.out_names)}
+        return 0.5 * (edges[1:] + edges[:-1]), prof
+
+    centers, vprof = profile(eng.xhat[nmot][ok])
+    pos_centers, pprof = profile(theta)
+    fkey = next((o for o in eng.out_names if o.startswith("tendon_force")), None)
+    force_centers, fprof = profile(eng.ds.outputs[fkey][ok]) if fkey else (None, {})
     # direction of elongation
     xd = np.array([eng.elong[i] for i in range(nmot)])
     xdd = np.gradient(xd, axis=1)[:, ok]
@@ -113,8 +122,11 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
         "top_cpr_amplitude": {n: float(np.max(cpr[n])) for n in eng.out_names},
         "cpr_noise_amplitude": cpr_noise,
         "velocity_sign_asymmetry": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in vprof.items()},
+        "position_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in pprof.items()},
+        "force_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in fprof.items()},
         "direction_asymmetry": asym,
         "xcorr_peak_lag_s": {n: float(lags[np.argmax(np.abs(c))] * eng.dt) for n, c in xc.items()},
     }
     return ResidualMaps(eng.ds.time, res, freq, psd_ratio, coh, orders, cpr, cpr_noise, centers, vprof,
+                        pos_centers, pprof, force_centers, fprof,
                         asym, lags * eng.dt, xc, summary)

@@ -65,9 +65,10 @@ def plot_overlay(dx: Diagnosis, *, windows: int = 4):
 
 
 def plot_residual_maps(maps: ResidualMaps, title: str = ""):
-    """Six panels: spectrum/floor, coherence, cycles per rev, velocity bins, direction, lag."""
+    """Eight panels: spectrum/floor, coherence, cycles per rev, lag; residual by velocity,
+    motor angle, tendon force and direction of elongation (operating regions)."""
     plt = _plt()
-    fig, ax = plt.subplots(2, 3, figsize=(12, 6.5))
+    fig, ax = plt.subplots(2, 4, figsize=(15, 6.5))
     ax = ax.ravel()
     for n, p in maps.psd_ratio.items():
         ax[0].semilogy(maps.freq, np.maximum(p, 1e-3), lw=0.8, label=n)
@@ -91,6 +92,14 @@ def plot_residual_maps(maps: ResidualMaps, title: str = ""):
     ax[3].axhline(0, color="k", lw=0.5)
     ax[3].set(xlabel="motor velocity bin centre [rad/s]", ylabel="mean residual [noise units]",
               title="by velocity")
+    for a, (bins, prof, label) in zip((ax[6], ax[7]), ((maps.position_bins, maps.position_profile,
+                                                         "motor angle bin centre [rad]"),
+                                                        (maps.force_bins, maps.force_profile,
+                                                         "tendon force bin centre [N]"))):
+        for n, v in prof.items():
+            a.plot(bins, v, "o-", ms=3, lw=0.8, label=n)
+        a.axhline(0, color="k", lw=0.5)
+        a.set(xlabel=label, ylabel="mean residual [noise units]", title="by " + label.split(" bin")[0])
     names = list(maps.direction_asymmetry)
     ax[4].bar(range(len(names)), [maps.direction_asymmetry[n] for n in names])
     ax[4].set_xticks(range(len(names)), names, fontsize=7)
