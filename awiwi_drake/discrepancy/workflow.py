@@ -253,7 +253,18 @@ def _screen(st: _State, effects: list, bounds: CatalogBounds, rig: str) -> list:
     for name, entries in results.items():
         eff = entries[0]["effect"]
         if name == "motor_ripple":
-            ranked = sorted(entries, key=lambda e: -e["train_gain"])[:2]
+            # sequential greedy: the best order, then the order that adds most to it
+            # (low orders alias each other over a limited angle range)
+            first = max(entries, key=lambda e: e["train_gain"])
+            b = st.rp[tr].ravel()
+
+            def joint_gain(e):
+                A = np.concatenate([first["g"], e["g"]], axis=-1)[tr].reshape(-1, 2 * first["g"].shape[-1])
+                coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+                return float(b @ b - np.sum((b - A @ coef) ** 2))
+
+            rest = [e for e in entries if e is not first]
+            ranked = [first] + ([max(rest, key=joint_gain)] if rest else [])
             g = np.concatenate([e["g"] for e in ranked], axis=-1)
             rp = st.rp
             cols = []
