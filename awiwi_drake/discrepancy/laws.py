@@ -76,13 +76,17 @@ def ripple(theta, harmonics):
 
 
 def guide_friction(tendon_velocity, tension, c0, mu_alpha, v0):
-    """Path friction on the tendon [N], opposing ``tendon_velocity`` (motor side).
+    """Path friction on the tendon [N] between motor and spring, opposing the tendon motion.
 
     ``c0``: the speed- and tension-independent magnitude of (4.1) at the rig's
-    bending angle; ``mu_alpha``: capstan exponent (tension-proportional part, ch. 9),
-    via :func:`capstan_friction_force` at unit angle."""
-    cap = capstan_friction_force(tension, 1.0, SimpleNamespace(mu=mu_alpha))
-    return (c0 + cap) * np.tanh(tendon_velocity / v0)
+    bending angle; ``mu_alpha``: capstan exponent (tension-proportional part, ch. 9).
+    Capstan: pulling the tendon in (``v > 0``) the motor-side tension is ``f e^(mu alpha)``,
+    releasing it ``f e^(-mu alpha)`` (the loss :func:`capstan_friction_force`); the two
+    branches are blended with ``s = tanh(v / v0)``."""
+    s = np.tanh(tendon_velocity / v0)
+    release = capstan_friction_force(tension, 1.0, SimpleNamespace(mu=mu_alpha))
+    pull = tension * (np.exp(mu_alpha) - 1.0)
+    return c0 * s + 0.5 * (1.0 + s) * pull - 0.5 * (1.0 - s) * release
 
 
 def joint_friction(qd, coulomb, velocity):
