@@ -1,0 +1,19 @@
+"""The Awiwi fingers and hand (thesis ch. 5; the wrist, ch. 6, is ``hand.wrist``).
+
+* :mod:`.kinematics`: Table 5.1 transforms, thumb base transform (5.19).
+* :mod:`.coupling`: tendon lengths ``h(q)``, coupling matrices ``P(q) = dh/dq``
+  ((5.5), (5.18), (5.22)), stiffness transformation (5.12), guide friction.
+* :mod:`.estimation`: link-position estimation, pseudo-inverse (5.15) and
+  Algorithm 1 (thumb base).
+* :mod:`.plant`: continuous MultibodyPlant builders for each finger and the hand.
+* :mod:`.diagrams`: ``finger_diagram`` / ``hand_diagram`` (motors, springs,
+  routing, plant), controller, wrist compensation.
+"""
+
+from .coupling import (FingerCoupling, LinearFingerCoupling, ThumbCoupling, HandCoupling,
+                       finger_coupling, hand_coupling, joint_stiffness, reduced_coupling_matrix)
+from .kinematics import finger_frames, finger_joint_names, thumb_base_transform, thumb_frames
+
+__all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
+           "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
+           "finger_frames", "finger_joint_names", "thumb_base_transform", "thumb_frames"]
