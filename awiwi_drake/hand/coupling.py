@@ -57,6 +57,16 @@ def _is_float_array(q) -> bool:
     return np.asarray(q).dtype != object
 
 
+def _quiet_fp(method):
+    """numpy reports stale floating-point flags (set inside pydrake.symbolic) as
+    'invalid value' warnings on object arrays; they carry no information here."""
+    def wrapper(*args, **kw):
+        with np.errstate(invalid="ignore"):
+            return method(*args, **kw)
+    wrapper.__name__, wrapper.__doc__ = method.__name__, method.__doc__
+    return wrapper
+
+
 class FingerCoupling:
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
@@ -195,12 +205,14 @@ class ThumbCoupling(FingerCoupling):
         Ry = _ry(np.cos(q11), np.sin(q11), like)
         return Rz, Ry
 
+    @_quiet_fp
     def base_vectors(self, q):
         """Tendon vectors ``d_i = T^12_10 p_i - p0_i`` (4 x 3) in frame 10."""
         q = self._check_q(q)
         Rz, Ry = self._base(q[0], q[1])
         return (Rz @ Ry @ self.bone_points.T).T - self.palm_points
 
+    @_quiet_fp
     def h(self, q):
         q = self._check_q(q)
         d = self.base_vectors(q)
@@ -215,6 +227,7 @@ class ThumbCoupling(FingerCoupling):
         dA1 = Rz @ Ry @ _KY @ b          # d/dq11
         return Rz, Ry, b, dA0, dA1
 
+    @_quiet_fp
     def P(self, q):
         q = self._check_q(q)
         d = self.base_vectors(q)
@@ -228,6 +241,7 @@ class ThumbCoupling(FingerCoupling):
         P[4:, 2:] = self._P_distal
         return P
 
+    @_quiet_fp
     def tension_hessian(self, q, f):
         """``sum_i f_i d^2 h_i/dq^2``; only the base block (q10, q11) is non-zero."""
         q = self._check_q(q)
