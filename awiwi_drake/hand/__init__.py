@@ -1,4 +1,4 @@
-"""The Awiwi fingers and hand (thesis ch. 5; the wrist, ch. 6, is ``hand.wrist``).
+"""The Awiwi hand: fingers (thesis ch. 5) and wrist (ch. 6, :mod:`.wrist`).
 
 * :mod:`.kinematics`: Table 5.1 transforms, thumb base transform (5.19).
 * :mod:`.coupling`: tendon lengths ``h(q)``, coupling matrices ``P(q) = dh/dq``
