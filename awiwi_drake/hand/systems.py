@@ -69,11 +69,13 @@ class JointSpaceControllerPorts:
     joint_angle_reference: object   # input port (n)
     motor_state: object             # input port (2m): [theta; omega]
     motor_torque: object            # output port (m), sampled at 1/period
+    motor_angle_offset: object = None  # input port (m) [rad] added to the motor references
 
 
 def add_joint_space_controller(builder, *, P_op: np.ndarray, motor_pulley_radius: float,
                                theta_op: np.ndarray, u_op: np.ndarray, q_op: np.ndarray,
                                kp: float, kd: float, period: float = CONTROL_PERIOD,
+                               motor_angle_offset: bool = False,
                                name: str = "joint_controller") -> JointSpaceControllerPorts:
     """Motor PD with a joint-space reference, linear around an operating point.
 
@@ -81,7 +83,9 @@ def add_joint_space_controller(builder, *, P_op: np.ndarray, motor_pulley_radius
     at its operating elongation when the joints sit at ``q_ref`` (exact for
     constant ``P``; first order for the thumb base).  Then
     ``u = u_op + kp (theta_ref - theta) - kd omega``, held by a
-    ``ZeroOrderHold`` of ``period`` (3 kHz).  All blocks are Drake C++
+    ``ZeroOrderHold`` of ``period`` (3 kHz).  With ``motor_angle_offset``
+    an extra input (m) [rad] is added to ``theta_ref`` (e.g. the wrist
+    feedforward ``-h_wrist / r_m``).  All blocks are Drake C++
     primitives (``Multiplexer``, stateless ``AffineSystem``, ``ZeroOrderHold``).
     """
     P_op = np.asarray(P_op, float)
@@ -94,16 +98,19 @@ def add_joint_space_controller(builder, *, P_op: np.ndarray, motor_pulley_radius
     if period <= 0:
         raise ValueError(f"{name}: period must be > 0, got {period}")
     rm = float(motor_pulley_radius)
-    mux = builder.AddNamedSystem(name + "_mux", Multiplexer([n, 2 * m]))
-    D = np.hstack([-kp * P_op / rm, -kp * np.eye(m), -kd * np.eye(m)])
+    sizes = [n, 2 * m] + ([m] if motor_angle_offset else [])
+    mux = builder.AddNamedSystem(name + "_mux", Multiplexer(sizes))
+    D = np.hstack([-kp * P_op / rm, -kp * np.eye(m), -kd * np.eye(m)]
+                  + ([kp * np.eye(m)] if motor_angle_offset else []))
     y0 = np.asarray(u_op, float) + kp * (np.asarray(theta_op, float) + P_op @ np.asarray(q_op, float) / rm)
     gain = builder.AddNamedSystem(name + "_law", AffineSystem(
-        A=np.zeros((0, 0)), B=np.zeros((0, n + 2 * m)), f0=np.zeros(0),
+        A=np.zeros((0, 0)), B=np.zeros((0, sum(sizes))), f0=np.zeros(0),
         C=np.zeros((m, 0)), D=D, y0=y0))
     hold = builder.AddNamedSystem(name + "_zoh", ZeroOrderHold(period, m))
     builder.Connect(mux.get_output_port(0), gain.get_input_port(0))
     builder.Connect(gain.get_output_port(0), hold.get_input_port())
     return JointSpaceControllerPorts(mux, gain, hold, mux.get_input_port(0), mux.get_input_port(1),
-                                     hold.get_output_port())
+                                     hold.get_output_port(),
+                                     mux.get_input_port(2) if motor_angle_offset else None)
 
 

@@ -30,14 +30,19 @@ equations ((5.22) thumb, (5.5) index/middle, (5.18) ring, see
 from __future__ import annotations
 
 
+import math
 from dataclasses import dataclass, field
 
 from .base import Parameters, param
+from .components import GuideFrictionParams, MotorParams
+from .rigs import SpringModelParams
 
 __all__ = [
     "FingerParams", "IndexFingerParams", "MiddleFingerParams", "RingFingerParams",
     "FifthFingerParams", "ThumbParams", "HandParams", "FINGERS", "TENDON_SLICES",
-    "finger_params",
+    "finger_params", "FingerDriveParams", "FingerRigParams", "IndexRigParams", "MiddleRigParams",
+    "RingRigParams", "FifthRigParams", "ThumbRigParams", "HandRigParams", "JointControllerParams",
+    "FINGER_RIG_PARAMS",
 ]
 
 _T51 = "Table 5.1"
@@ -93,8 +98,9 @@ class FingerParams(Parameters):
         source=("chosen: stiff coupling tendon, ~20x the tendon-induced PIP stiffness "
                 "(k_t r^2 ~ 1e4 N/m * (7e-3 m)^2 ~ 0.5 N m/rad), so q_DIP/q_PIP holds to ~1 %"))
     coupling_damping: float = param(
-        2e-4, unit="N m s/rad", low=0.0, high=1.0,
-        source="chosen: near-critical damping of the coupling mode (2 sqrt(k I) ~ 2e-4)")
+        5e-3, unit="N m s/rad", low=0.0, high=1.0,
+        source=("chosen: ~0.65 of the critical damping 2 sqrt(k_c I_distal) = 7.7e-3 of the "
+                "coupling mode (k_c = 20 N m/rad, I_distal = 7.35e-7 kg m^2)"))
     # Fifth finger hematometacarpal joint (section 5.5); unused when has_hmc is False.
     has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only")
     hmc_radius: float = param(0.008, unit="m", low=0.001, high=0.03, source=_RADIUS_SRC,
@@ -237,3 +243,92 @@ def finger_params(name: str):
 
 
 
+
+
+@dataclass(frozen=True)
+class FingerDriveParams(Parameters):
+    """Motors, springs, pretension and routing friction shared by finger and hand diagrams."""
+
+    motor: MotorParams = field(default_factory=MotorParams)
+    spring: SpringModelParams = field(default_factory=SpringModelParams)
+    pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
+                              source="Fig 15.26: f_pre = 20 N (as the joint rig)",
+                              doc="tendon force of every tendon at the default operating point")
+    guide_friction: bool = param(False, unit="-",
+                                 source="chosen: off by default (keeps the model smooth for Linearize)")
+    capstan_friction: bool = param(False, unit="-",
+                                   source=("chosen: False = speed-independent (4.1); True = tension-"
+                                           "proportional capstan law (ch. 9: 10-50 % of the force)"))
+    friction: GuideFrictionParams = field(default_factory=GuideFrictionParams)
+    palm_bending_angle: float = param(
+        math.pi / 2, unit="rad", low=0.0, high=4 * math.pi,
+        source="chosen: the tendons turn ~90 deg from the wrist into the finger (Fig 5.4)")
+    joint_wrap_angle: float = param(
+        math.pi / 2, unit="rad", low=0.0, high=2 * math.pi,
+        source="chosen: ~90 deg wrap on each joint pulley a tendon crosses (Fig 5.10), straight finger")
+    friction_smoothing_velocity: float = param(
+        1e-3, unit="m/s", low=0.0, low_inclusive=False,
+        source="chosen: tanh(v/v_s) replaces sign(v) below 1 mm/s tendon sliding speed")
+    gravity: bool = param(False, unit="-", source="section 5.2.2: ~0.002 N m, negligible")
+
+
+@dataclass(frozen=True)
+class FingerRigParams(FingerDriveParams):
+    """One finger with its motors and springs (``finger`` set by the subclasses)."""
+
+    finger: FingerParams = field(default_factory=IndexFingerParams)
+    finger_name = "index"
+
+
+@dataclass(frozen=True)
+class IndexRigParams(FingerRigParams):
+    finger: IndexFingerParams = field(default_factory=IndexFingerParams)
+    finger_name = "index"
+
+
+@dataclass(frozen=True)
+class MiddleRigParams(FingerRigParams):
+    finger: MiddleFingerParams = field(default_factory=MiddleFingerParams)
+    finger_name = "middle"
+
+
+@dataclass(frozen=True)
+class RingRigParams(FingerRigParams):
+    finger: RingFingerParams = field(default_factory=RingFingerParams)
+    finger_name = "ring"
+
+
+@dataclass(frozen=True)
+class FifthRigParams(FingerRigParams):
+    finger: FifthFingerParams = field(default_factory=FifthFingerParams)
+    finger_name = "fifth"
+
+
+@dataclass(frozen=True)
+class ThumbRigParams(FingerRigParams):
+    finger: ThumbParams = field(default_factory=ThumbParams)
+    finger_name = "thumb"
+
+
+FINGER_RIG_PARAMS = {"thumb": ThumbRigParams, "index": IndexRigParams, "middle": MiddleRigParams,
+                     "ring": RingRigParams, "fifth": FifthRigParams}
+
+
+@dataclass(frozen=True)
+class HandRigParams(FingerDriveParams):
+    """The whole hand: 5 fingers, 38 motors and springs."""
+
+    hand: HandParams = field(default_factory=HandParams)
+
+
+@dataclass(frozen=True)
+class JointControllerParams(Parameters):
+    """Motor-side PD with a joint-space reference (:func:`awiwi_drake.hand.systems.add_joint_space_controller`)."""
+
+    kp: float = param(20.0, unit="N m/rad", low=0.0,
+                      source=("chosen: motor loop at sqrt(kp/B) = 100 rad/s with B = 2e-3 kg m^2; the "
+                              "Coulomb friction 0.56 N m (Table 3.3) then leaves <= 0.03 rad motor error"))
+    kd: float = param(0.3, unit="N m s/rad", low=0.0,
+                      source="chosen: damping ratio ~0.75 of the motor loop (2 * 0.75 * 100 * 2e-3)")
+    period: float = param(1.0 / 3000.0, unit="s", low=0.0, low_inclusive=False,
+                          source="thesis: 3 kHz control rate")
