@@ -185,15 +185,15 @@ def _monotone_inverse(fun, dfun, target, x_hi, iters=60):
     x = 0.5 * (lo + hi)
     for _ in range(iters):
         fx = fun(x) - target
+        if np.all(np.abs(fx) <= 1e-13 * np.maximum(1.0, np.abs(target))):
+            break
         lo = np.where(fx < 0, x, lo)
-        hi = np.where(fx >= 0, x, hi)
+        hi = np.where(fx > 0, x, hi)
         k = dfun(x)
         step = np.where(k > 0, fx / np.where(k > 0, k, 1.0), 0.0)
         xn = x - step
-        bad = (xn <= lo) | (xn >= hi) | (k <= 0)
-        x = np.where(bad, 0.5 * (lo + hi), xn)
-        if np.all(np.abs(fx) < 1e-10 * np.maximum(1.0, np.abs(target))):
-            break
+        bad = (xn < lo) | (xn > hi) | (k <= 0)
+        x = np.where(fx == 0, x, np.where(bad, 0.5 * (lo + hi), xn))
     return x if x.size > 1 else x[0]
 
 

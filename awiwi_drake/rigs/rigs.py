@@ -33,6 +33,10 @@ __all__ = ["tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 DEFAULT_BACKEND = "python"
 
 
+def _limit(motor: MotorParams):
+    return motor.torque_limit if motor.saturation else None
+
+
 def _check_params(params, cls, rig):
     if params is None:
         return cls()
@@ -75,7 +79,8 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
                               dict(tendon_force=tendon_force, elongation=x,
                                    tendon_stiffness=float(spring.stiffness(np.array([x]))[0])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, dict(drive=drive))
+    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring,
+               dict(drive=drive, tension_only=True, torque_limit=_limit(p.motor)))
 
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
@@ -154,7 +159,8 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
                                    stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0])))
 
     return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law,
-               dict(drive=drive, spring_kind=spring))
+               dict(drive=drive, spring_kind=spring, tension_only=False,
+                    torque_limit=p.torque_limit if finite_limit else None))
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -199,4 +205,4 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                                    joint_stiffness=float(rq ** 2 * k.sum())))
 
     return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring,
-               dict(drive=drive, coupling=coupling))
+               dict(drive=drive, coupling=coupling, tension_only=True, torque_limit=_limit(p.motor)))
