@@ -293,8 +293,29 @@ class HandCoupling(FingerCoupling):
         self.tendon_names = [n for c in self.parts.values() for n in c.tendon_names]
         self.is_constant = all(c.is_constant for c in self.parts.values())
 
+    def _float_constant_part(self):
+        """Constant block matrix (all linear parts and offsets) for the float fast path."""
+        if not hasattr(self, "_P_const"):
+            P = np.zeros((self.num_tendons, self.num_joints))
+            for n, c in self.parts.items():
+                if c.is_constant:
+                    P[self.tendon_slices[n], self.joint_slices[n]] = c.P(np.zeros(c.num_joints))
+            if self.num_offsets:
+                P[:, self.num_finger_joints:] = np.eye(self.num_tendons)
+            self._P_const = P
+            self._nonlinear = [n for n, c in self.parts.items() if not c.is_constant]
+        return self._P_const
+
     def h(self, q):
         q = self._check_q(q)
+        if q.dtype != object:   # fast path (simulation): one matmul + the nonlinear parts
+            h = self._float_constant_part() @ q
+            for n in self._nonlinear:
+                h[self.tendon_slices[n]] = self.parts[n].h(q[self.joint_slices[n]])
+            if self.num_offsets:
+                for n in self._nonlinear:
+                    h[self.tendon_slices[n]] += q[self.num_finger_joints:][self.tendon_slices[n]]
+            return h
         h = np.concatenate([c.h(q[self.joint_slices[n]]) for n, c in self.parts.items()])
         if self.num_offsets:
             h = h + q[self.num_finger_joints:]
@@ -302,6 +323,11 @@ class HandCoupling(FingerCoupling):
 
     def P(self, q):
         q = self._check_q(q)
+        if q.dtype != object:
+            P = self._float_constant_part().copy()
+            for n in self._nonlinear:
+                P[self.tendon_slices[n], self.joint_slices[n]] = self.parts[n].P(q[self.joint_slices[n]])
+            return P
         blocks = {n: c.P(q[self.joint_slices[n]]) for n, c in self.parts.items()}
         like = float if all(b.dtype != object for b in blocks.values()) else object
         P = np.zeros((self.num_tendons, self.num_joints), dtype=like)

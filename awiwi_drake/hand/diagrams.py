@@ -242,7 +242,8 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = _state_names(joint_names, coupling.tendon_names, drive.hysteresis)
-    extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, drive_coupling=drive_coupling, models=models,
+    extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
+                 torque_limit=p.motor.torque_limit if p.motor.saturation else None, drive_coupling=drive_coupling, models=models,
                  joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
                  coupling_gain=G, spring_law=spring)
 

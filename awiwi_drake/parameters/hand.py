@@ -325,10 +325,11 @@ class HandRigParams(FingerDriveParams):
 class JointControllerParams(Parameters):
     """Motor-side PD with a joint-space reference (:func:`awiwi_drake.hand.systems.add_joint_space_controller`)."""
 
-    kp: float = param(20.0, unit="N m/rad", low=0.0,
-                      source=("chosen: motor loop at sqrt(kp/B) = 100 rad/s with B = 2e-3 kg m^2; the "
-                              "Coulomb friction 0.56 N m (Table 3.3) then leaves <= 0.03 rad motor error"))
-    kd: float = param(0.3, unit="N m s/rad", low=0.0,
-                      source="chosen: damping ratio ~0.75 of the motor loop (2 * 0.75 * 100 * 2e-3)")
+    kp: float = param(100.0, unit="N m/rad", low=0.0,
+                      source=("chosen: motor loop at sqrt(kp/B) = 224 rad/s with B = 2e-3 kg m^2 (well "
+                              "below the 3 kHz rate); the Coulomb friction 0.56 N m (Table 3.3) then leaves "
+                              "<= 5.6e-3 rad motor error, ~0.03 mm of tendon"))
+    kd: float = param(0.6, unit="N m s/rad", low=0.0,
+                      source="chosen: damping ratio ~0.67 of the motor loop (2 * 0.67 * 224 * 2e-3)")
     period: float = param(1.0 / 3000.0, unit="s", low=0.0, low_inclusive=False,
                           source="thesis: 3 kHz control rate")
