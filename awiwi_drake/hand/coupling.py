@@ -119,6 +119,7 @@ class LinearFingerCoupling(FingerCoupling):
         # plant joints = S @ independent DoF (identity for uncoupled fingers)
         self.dof_selection = np.eye(self.num_joints) if dof_selection is None else np.asarray(dof_selection)
 
+    @_quiet_fp
     def h(self, q):
         return self._P @ self._check_q(q)
 
@@ -306,6 +307,7 @@ class HandCoupling(FingerCoupling):
             self._nonlinear = [n for n, c in self.parts.items() if not c.is_constant]
         return self._P_const
 
+    @_quiet_fp
     def h(self, q):
         q = self._check_q(q)
         if q.dtype != object:   # fast path (simulation): one matmul + the nonlinear parts
@@ -321,6 +323,7 @@ class HandCoupling(FingerCoupling):
             h = h + q[self.num_finger_joints:]
         return h
 
+    @_quiet_fp
     def P(self, q):
         q = self._check_q(q)
         if q.dtype != object:
