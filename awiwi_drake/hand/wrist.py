@@ -23,6 +23,25 @@ origin at a corner of the a x b x c wrist box):
   z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
   about the median axis y = b/2, as the thesis describes for Fig 6.10.
 
+Why this construction: it is the reading of Fig 6.2-6.7 in which (i) all
+four unprinted lengths follow from a, b, c alone, (ii) both views are
+inverted (crossed) parallelograms in the neutral wrist, (iii) A0 and B0C0 are
+apart in the top view (Fig 6.3) and the BC plane turns about B0C0 (Fig 6.4),
+(iv) |AB| = |AC| (6.5), and (v) the Table 6.2 points are consistent with it:
+with the palm frame centred on the palm face, all 38 neutral tendons have
+nearly the same length (46.6 +- 0.1 mm) and both layers pass through the
+flexion crossing point.  Two alternatives were tried and rejected: the BC
+plane along the wrist side (y = 0, A0A parallel to it) makes abduction a pure
+*translation* of the palm (all tendons move alike, contrary to Fig 6.10), and
+B0C0 on the median plane needs A0 on that axis (contrary to Fig 6.3).
+
+Consequence, reported in docs/REPRODUCTIONS.md: the BC plane is diagonal in
+the top view, so the flexion turns the palm about an axis tilted by
+atan(b/a) = 40 deg from y.  Flexion therefore moves the tendons less than
+abduction (peak ratio 0.49 for the thesis motion; 0.13 vs 0.29 mm per degree
+of palm rotation) but not negligibly, whereas the thesis calls the flexion
+coupling minimal; its figure prints no per-tendon numbers to settle this.
+
 Angles
 ------
 ``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis
@@ -33,6 +52,10 @@ singular linkage, so the neutral wrist has t_B0 = atan2(c, sqrt(a^2 + b^2))
 (28.9 deg).  We therefore measure ``q73`` from the neutral wrist:
 ``t_B = t_B0 - q73`` (thesis q73 = ours + 61.1 deg).  Both angles are crank
 angles: near neutral the palm turns about twice as far (crossed four-bars).
+At q71 = 0 the linkage assembles for q73 in about (-56 deg, +105 deg) (at
+q73 = 30 deg, q71 in about (-78 deg, +178 deg)); the thesis's motion
+(30 deg, 20 deg) is well inside.  Outside the reachable set the functions
+raise ``ValueError`` naming ``wrist_angle``.
 
 Method (thesis numbering)
 -------------------------
@@ -56,6 +79,7 @@ motor angle change that cancels it is ``-offset / r_m``
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 from dataclasses import dataclass, field
@@ -75,6 +99,8 @@ __all__ = [
     "wrist_tendon_lengths",
     "wrist_tendon_offsets",
     "wrist_jacobian",
+    "wrist_lengths_and_jacobian",
+    "WristCoupling",
     "wrist_compensation",
     "WristMotionResult",
     "wrist_motion_study",
@@ -104,13 +130,108 @@ def _norm(u):
     return np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
 
 
+class _Tangent:
+    """Forward-mode pair (value, d value / d [q71, q73]) over any scalar type T.
+
+    Used to differentiate the closed-form kinematics once, exactly, for
+    float, AutoDiffXd and Expression alike (AutoDiffXd cannot nest), so the
+    coupling matrix P(q) is itself generic in the scalar type.  numpy ufuncs
+    on object arrays call the methods ``sin``, ``cos``, ``sqrt``, ``arctan2``.
+    """
+
+    __slots__ = ("v", "d")
+
+    def __init__(self, v, d):
+        self.v = v
+        self.d = d
+
+    @staticmethod
+    def _lift(o):
+        return o if isinstance(o, _Tangent) else _Tangent(o, 0.0)
+
+    def __add__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = _Tangent._lift(o)
+        return _Tangent(self.v + o.v, self.d + o.d)
+
+    __radd__ = __add__
+
+    def __sub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = _Tangent._lift(o)
+        return _Tangent(self.v - o.v, self.d - o.d)
+
+    def __rsub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return _Tangent._lift(o) - self
+
+    def __neg__(self):
+        return _Tangent(-self.v, -self.d)
+
+    def __mul__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, _Tangent):
+            return _Tangent(self.v * o, self.d * o)
+        return _Tangent(self.v * o.v, self.d * o.v + self.v * o.d)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, _Tangent):
+            return _Tangent(self.v / o, self.d / o)
+        q = self.v / o.v
+        return _Tangent(q, (self.d - q * o.d) / o.v)
+
+    def __rtruediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return _Tangent._lift(o) / self
+
+    def sin(self):
+        return _Tangent(np.sin(self.v), np.cos(self.v) * self.d)
+
+    def cos(self):
+        return _Tangent(np.cos(self.v), -np.sin(self.v) * self.d)
+
+    def sqrt(self):
+        r = np.sqrt(self.v)
+        return _Tangent(r, self.d / (2.0 * r))
+
+    def arctan2(self, x):
+        x = _Tangent._lift(x)
+        return _Tangent(np.arctan2(self.v, x.v), (x.v * self.d - self.v * x.d) / (x.v * x.v + self.v * self.v))
+
+
 def _value(x) -> float:
     """Float value of a float or AutoDiffXd scalar (None for symbolic)."""
+    if isinstance(x, _Tangent):
+        return _value(x.v)
     if isinstance(x, AutoDiffXd):
         return x.value()
     if is_float(x):
         return float(x)
     return None
+
+
+def _is_symbolic(x) -> bool:
+    if isinstance(x, _Tangent):
+        return _is_symbolic(x.v)
+    return not is_float(x) and not isinstance(x, AutoDiffXd)
+
+
+def _symbolic_errstate(*args):
+    """numpy reports spurious 'invalid value' FP flags after object loops over
+    symbolic Expressions (set inside Drake's symbolic constructors); silence
+    them for symbolic input only (float input keeps numpy's warnings)."""
+    if any(_is_symbolic(a) for a in args):
+        return np.errstate(invalid="ignore")
+    return contextlib.nullcontext()
 
 
 def _default(params):
@@ -191,6 +312,16 @@ def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool
         Palm points, palm frame ABC and circle parameters, in frame 0.
     """
     p = _default(params)
+    with _symbolic_errstate(q71, q73):
+        return _solve(q71, q73, p, check)
+
+
+def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
+    if check:
+        for name, q in (("q71", q71), ("q73", q73)):
+            v = _value(q)
+            if v is not None and not math.isfinite(v):
+                raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
     a, b, c = p.length, p.width, p.thickness
     L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
     gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
@@ -294,9 +425,10 @@ def wrist_tendon_lengths(q71, q73, params: WristParams | None = None) -> np.ndar
     """
     p = _default(params)
     pose = wrist_kinematics(q71, q73, p)
-    palm_in_0 = pose.origin + p.palm_offset_array @ pose.rotation.T
-    diff = p.forearm_offset_array - palm_in_0
-    return np.sqrt(np.sum(diff * diff, axis=1))
+    with _symbolic_errstate(q71, q73):
+        palm_in_0 = pose.origin + p.palm_offset_array @ pose.rotation.T
+        diff = p.forearm_offset_array - palm_in_0
+        return np.sqrt(np.sum(diff * diff, axis=1))
 
 
 @functools.lru_cache(maxsize=16)
@@ -324,19 +456,103 @@ def wrist_tendon_offsets(q71, q73, params: WristParams | None = None) -> np.ndar
     return wrist_tendon_lengths(q71, q73, p) - _neutral_lengths(p)
 
 
-def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
-    """Exact Jacobian ``d h_wrist / d [q71, q73]`` (num_tendons x 2) [m/rad], by AutoDiff.
+def wrist_lengths_and_jacobian(q71, q73, params: WristParams | None = None):
+    """Tendon lengths (6.9) and their exact Jacobian, generic in the scalar type.
+
+    The palm pose is differentiated in forward mode through the closed-form
+    kinematics; the tendon part uses ``dh_i/dq = -u_i . (dO/dq + dR/dq p_i)``
+    with ``u_i`` the unit vector from the palm point to the forearm point.
 
     Parameters
     ----------
-    q71, q73 : float
+    q71, q73 : float, AutoDiffXd or Expression
         Abduction and flexion [rad].
+    params : WristParams, optional
+
+    Returns
+    -------
+    h : ndarray (num_tendons,)
+        Lengths [m].
+    P : ndarray (num_tendons, 2)
+        ``dh/d[q71, q73]`` [m/rad] (the wrist block of the coupling matrix).
     """
-    q71 = float(q71)
-    q73 = float(q73)
-    h = wrist_tendon_lengths(AutoDiffXd(q71, np.array([1.0, 0.0])),
-                             AutoDiffXd(q73, np.array([0.0, 1.0])), params)
-    return np.array([e.derivatives() for e in h], dtype=float).reshape(-1, 2)
+    p = _default(params)
+    scalar = is_float(q71) and is_float(q73)
+    unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+    pose = wrist_kinematics(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), p)
+    dtype = float if scalar else object
+    O = np.array([e.v for e in pose.origin], dtype=dtype)
+    dO = np.array([e.d for e in pose.origin], dtype=dtype)                      # (3, 2)
+    R = np.array([[e.v for e in row] for row in pose.rotation], dtype=dtype)
+    dR = np.array([[e.d for e in row] for row in pose.rotation], dtype=dtype)  # (3, 3, 2)
+    with _symbolic_errstate(q71, q73):
+        Pp = p.palm_offset_array
+        diff = p.forearm_offset_array - (O + Pp @ R.T)
+        h = np.sqrt(np.sum(diff * diff, axis=1))
+        u = diff / h[:, None]
+        J = np.column_stack([-np.sum(u * (dO[:, j] + Pp @ dR[:, :, j].T), axis=1) for j in range(2)])
+    return h, J
+
+
+def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
+    """Exact Jacobian ``d h_wrist / d [q71, q73]`` (num_tendons x 2) [m/rad].
+
+    Row i, column j: change of tendon i's path through the wrist per radian of
+    q71 (j = 0) or q73 (j = 1); the wrist block of ``P(q) = dh/dq``.  Generic
+    in the scalar type (see :func:`wrist_lengths_and_jacobian`).
+    """
+    return wrist_lengths_and_jacobian(q71, q73, params)[1]
+
+
+class WristCoupling:
+    """The wrist as a routing coupling object: ``h(q)`` (38,) and ``P(q)`` (38 x 2).
+
+    ``q = [q71, q73]`` [rad]; ``h`` are the absolute tendon path lengths
+    through the wrist (6.9) and ``P = dh/dq``, both generic in the scalar type
+    so :class:`TendonRouting_` (``-P^T f`` on the wrist joints) converts to
+    AutoDiffXd.  Rows follow Table 6.2 (tendon 1..38).
+
+    Parameters
+    ----------
+    params : WristParams, optional
+    """
+
+    num_joints = 2
+
+    def __init__(self, params: WristParams | None = None):
+        self.params = _default(params)
+        self.num_tendons = self.params.num_tendons
+
+    def _split(self, q):
+        q = np.asarray(q) if not isinstance(q, np.ndarray) else q
+        if q.shape != (2,):
+            raise ValueError(f"wrist joint vector q must have 2 entries [q71, q73], got shape {q.shape}")
+        return q[0], q[1]
+
+    def h(self, q) -> np.ndarray:
+        """Tendon path lengths through the wrist [m]."""
+        return wrist_tendon_lengths(*self._split(q), self.params)
+
+    def P(self, q) -> np.ndarray:
+        """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
+        return wrist_jacobian(*self._split(q), self.params)
+
+    def dPT_f_dq(self, q, f) -> np.ndarray:
+        """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
+
+        The geometric stiffness of the wrist joints due to the tendon forces
+        ``f`` (the joint stiffness map is ``P^T K_t P - dPT_f_dq``).  Exact:
+        forward-mode tangents nested over the scalar type.
+        """
+        q71, q73 = self._split(q)
+        f = np.asarray(f)
+        if f.shape != (self.num_tendons,):
+            raise ValueError(f"tendon force f must have {self.num_tendons} entries, got shape {f.shape}")
+        unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+        P = wrist_jacobian(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), self.params)
+        scalar = is_float(q71) and is_float(q73) and is_float(f)
+        dP = np.array([[e.d for e in row] for row in P], dtype=float if scalar else object)  # (m, 2, 2)
+        return np.tensordot(f, dP, axes=(0, 0))
 
 
 def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:
@@ -386,10 +602,11 @@ class WristMotionResult:
         Signed lateral distance of each tendon's forearm point from the wrist's
         median axis, ``y - b/2`` [m].
     flexion_peak, abduction_peak : float
-        Largest |displacement| in each phase [m].
+        Largest |displacement| in each phase [m] (abduction: relative to the
+        start of the abduction phase).
     abduction_slope : float
-        Least-squares slope of displacement vs ``median_distance`` at the
-        abduction peak [m/m].
+        Least-squares slope of the abduction-induced displacement at the
+        abduction peak vs ``median_distance`` [m/m].
     abduction_r2 : float
         Coefficient of determination of that linear fit.
     abduction_intercept : float
@@ -421,12 +638,31 @@ class WristMotionResult:
 
 
 def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
-                       duration: float = 4.0, num_samples: int = 201,
+                       duration: float = 4.0, num_samples: int = 201, hold_flexion: bool = False,
                        params: WristParams | None = None) -> WristMotionResult:
-    """Flexion to ``flexion`` and back, then abduction to ``abduction`` and back (Fig 6.9, 6.10).
+    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10).
 
-    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``,
-    the second half q71 likewise (s the phase time / phase duration).
+    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``
+    (out to ``flexion`` and back), the second half moves q71 likewise (s the
+    phase time / phase duration).  With ``hold_flexion=True`` q73 ramps to
+    ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.
+
+    The abduction statistics use the displacement caused by the abduction
+    alone: offsets at the abduction peak minus offsets at the start of the
+    abduction phase, fitted linearly against the signed distance of each
+    tendon's forearm point from the median axis (y - b/2).
+
+    Parameters
+    ----------
+    flexion, abduction : float
+        Peak q73 and q71 [rad] (thesis: 30 deg and 20 deg).
+    duration : float
+        Total time [s] (Fig 6.10: 4 s; Fig 6.9: 10 s).
+    num_samples : int
+        Time samples (>= 5).
+    hold_flexion : bool
+        Keep the flexion during the abduction phase.
+    params : WristParams, optional
 
     Returns
     -------
@@ -440,27 +676,30 @@ def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float 
     p = _default(params)
     t = np.linspace(0.0, duration, int(num_samples))
     half = 0.5 * duration
-    s = np.where(t < half, t / half, (t - half) / half)
-    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
     in_flex = t < half
-    q73 = np.where(in_flex, flexion * bump, 0.0)
+    s = np.where(in_flex, t / half, (t - half) / half)
+    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
+    if hold_flexion:
+        q73 = np.where(in_flex, flexion * 0.5 * (1.0 - np.cos(np.pi * s)), flexion)
+    else:
+        q73 = np.where(in_flex, flexion * bump, 0.0)
     q71 = np.where(in_flex, 0.0, abduction * bump)
     offsets = np.empty((t.size, p.num_tendons))
     errors = np.empty((t.size, 6))
-    for i in range(t.size):  # analysis loop (not a system calc)
+    for i in range(t.size):  # analysis loop over samples (not a system calc)
         offsets[i] = wrist_tendon_offsets(q71[i], q73[i], p)
         errors[i] = wrist_constraint_errors(wrist_kinematics(q71[i], q73[i], p), p)
     dist = p.forearm_offset_array[:, 1] - 0.5 * p.width
-    peak = np.argmax(np.abs(q71))
-    slope, intercept = np.polyfit(dist, offsets[peak], 1)
-    fit = slope * dist + intercept
-    ss_res = float(np.sum((offsets[peak] - fit) ** 2))
-    ss_tot = float(np.sum((offsets[peak] - offsets[peak].mean()) ** 2))
+    start = int(np.argmax(~in_flex))
+    abd = offsets[int(np.argmax(np.abs(q71)))] - offsets[start]
+    slope, intercept = np.polyfit(dist, abd, 1)
+    ss_res = float(np.sum((abd - (slope * dist + intercept)) ** 2))
+    ss_tot = float(np.sum((abd - abd.mean()) ** 2))
     return WristMotionResult(
         t=t, wrist_angle=np.column_stack([q71, q73]), offsets=offsets, constraint_errors=errors,
         phase=np.where(in_flex, "flexion", "abduction"), median_distance=dist,
         flexion_peak=float(np.max(np.abs(offsets[in_flex]))),
-        abduction_peak=float(np.max(np.abs(offsets[~in_flex]))),
+        abduction_peak=float(np.max(np.abs(offsets[~in_flex] - offsets[start]))),
         abduction_slope=float(slope), abduction_intercept=float(intercept),
         abduction_r2=1.0 - ss_res / ss_tot)
 
