@@ -99,6 +99,11 @@ class FingerCoupling:
         """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
         return np.zeros((self.num_joints, self.num_joints))
 
+    def dPT_f_dq(self, q, f) -> np.ndarray:
+        """``d(P(q)^T f)/dq`` at fixed ``f``: the same matrix as :meth:`tension_hessian`
+        (name used by ``components.routing.ConstantCoupling``)."""
+        return self.tension_hessian(q, f)
+
     def generalized_force(self, q, f) -> np.ndarray:
         """``tau = -P(q)^T f`` (ARCHITECTURE sign convention)."""
         return -(self.P(q).T @ f)
