@@ -60,9 +60,11 @@ def _is_float_array(q) -> bool:
 def _quiet_fp(method):
     """numpy reports stale floating-point flags (set inside pydrake.symbolic) as
     'invalid value' warnings on object arrays; they carry no information here."""
-    def wrapper(*args, **kw):
+    def wrapper(self, q, *args, **kw):
+        if isinstance(q, np.ndarray) and q.dtype != object:
+            return method(self, q, *args, **kw)
         with np.errstate(invalid="ignore"):
-            return method(*args, **kw)
+            return method(self, q, *args, **kw)
     wrapper.__name__, wrapper.__doc__ = method.__name__, method.__doc__
     return wrapper
 
@@ -218,9 +220,20 @@ class ThumbCoupling(FingerCoupling):
         Rz, Ry = self._base(q[0], q[1])
         return (Rz @ Ry @ self.bone_points.T).T - self.palm_points
 
+    def _float_base(self, q):
+        """Float fast path: tendon vectors d (4 x 3), norms, and d/dq of the bone points (3 x 4 each)."""
+        c0, s0, c1, s1 = np.cos(q[0]), np.sin(q[0]), np.cos(q[1]), np.sin(q[1])
+        R = np.array([[c0 * c1, -s0, c0 * s1], [s0 * c1, c0, s0 * s1], [-s1, 0.0, c1]])   # Rz(q10) Ry(q11)
+        A = R @ self.bone_points.T
+        d = A.T - self.palm_points
+        return d, np.sqrt(np.einsum("ij,ij->i", d, d)), A, R
+
     @_quiet_fp
     def h(self, q):
         q = self._check_q(q)
+        if q.dtype != object:
+            _, norm, _, _ = self._float_base(q)
+            return np.concatenate([norm, self._P_distal @ q[2:]])
         d = self.base_vectors(q)
         base = np.sqrt(np.sum(d * d, axis=1))
         distal = self._P_distal @ q[2:]
@@ -236,6 +249,15 @@ class ThumbCoupling(FingerCoupling):
     @_quiet_fp
     def P(self, q):
         q = self._check_q(q)
+        if q.dtype != object:
+            d, norm, A, R = self._float_base(q)
+            dA0 = _KZ @ A                                   # Kz Rz = Rz Kz
+            dA1 = R @ (_KY @ self.bone_points.T)
+            P = np.zeros((8, 4))
+            P[:4, 0] = np.einsum("ij,ji->i", d, dA0) / norm
+            P[:4, 1] = np.einsum("ij,ji->i", d, dA1) / norm
+            P[4:, 2:] = self._P_distal
+            return P
         d = self.base_vectors(q)
         norm = np.sqrt(np.sum(d * d, axis=1))
         _, _, _, dA0, dA1 = self._base_jacobians(q)
