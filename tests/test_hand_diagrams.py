@@ -8,7 +8,7 @@ from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoD
 
 from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.hand.coupling import finger_coupling
-from awiwi_drake.hand.diagrams import (GuideFriction, closed_loop, finger_diagram, hand_diagram,
+from awiwi_drake.hand.diagrams import (GuideFriction, finger_diagram, hand_diagram,
                                        tendon_bending_angles)
 from awiwi_drake.hand.studies import coupling_hold_study, poles_vs_pretension, wrist_compensation_study
 from awiwi_drake.parameters.hand import FINGERS, IndexRigParams, TENDON_SLICES

@@ -7,7 +7,13 @@
   Algorithm 1 (thumb base).
 * :mod:`.plant`: continuous MultibodyPlant builders for each finger and the hand.
 * :mod:`.diagrams`: ``finger_diagram`` / ``hand_diagram`` (motors, springs,
-  routing, plant), controller, wrist compensation.
+  routing, plant; Rig-compatible), ``closed_loop`` (3 kHz joint-space PD, wrist
+  feedforward).
+* :mod:`.studies`: Fig 5.7, poles vs pretension, coupling hold, wrist compensation.
+* :mod:`.plots`, :mod:`.visualize` (Meshcat HTML recording).
+
+``finger_diagram``, ``hand_diagram`` and ``closed_loop`` are importable from
+here (loaded on first use, so ``import awiwi_drake.hand`` stays light).
 """
 
 from .coupling import (FingerCoupling, LinearFingerCoupling, ThumbCoupling, HandCoupling,
@@ -16,4 +22,14 @@ from .kinematics import finger_frames, finger_joint_names, thumb_base_transform,
 
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
            "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
-           "finger_frames", "finger_joint_names", "thumb_base_transform", "thumb_frames"]
+           "finger_frames", "finger_joint_names", "thumb_base_transform", "thumb_frames",
+           "finger_diagram", "hand_diagram", "closed_loop"]
+
+_LAZY = {"finger_diagram": "diagrams", "hand_diagram": "diagrams", "closed_loop": "diagrams"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -22,7 +22,7 @@ order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
 part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
 
 State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``
-(then hysteresis forces when enabled).
+(spring hysteresis is not supported here: ValueError).
 
 The wrist enters the routing like extra joints: the drive's coupling is the
 finger coupling plus ``m`` length-offset "joints" (identity columns of
@@ -36,8 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
-from pydrake.systems.primitives import (Adder, ConstantVectorSource, Demultiplexer, MatrixGain,
-                                        Multiplexer)
+from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from ..components.drive import build_tendon_drive
@@ -150,16 +149,17 @@ def GuideFriction_(T):
 GuideFriction = GuideFriction_[None]
 
 
-def _state_names(plant_joint_names, tendon_names, hysteresis):
+def _state_names(plant_joint_names, tendon_names):
     names = list(plant_joint_names) + [f"{j}_dot" for j in plant_joint_names]
     names += [f"theta_{t}" for t in tendon_names] + [f"omega_{t}" for t in tendon_names]
-    if hysteresis:
-        names += [f"hysteresis_{t}" for t in tendon_names]
     return tuple(names)
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
     """Shared builder of finger and hand diagrams."""
+    if p.spring.hysteresis.enabled:
+        raise ValueError(f"{name}: spring.hysteresis.enabled=True is not supported by the finger/hand "
+                         "diagrams (the drive does not export the hysteresis state); use the joint rig")
     b = DiagramBuilder()
     plant, models = plant_factory(b)
     n = plant.num_positions()
@@ -190,19 +190,11 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         b.Connect(sel.get_output_port(), jmux.get_input_port(1))
         b.Connect(jmux.get_output_port(), d.GetInputPort("joint_angle"))
         b.ExportOutput(sel.get_output_port(), "wrist_tendon_offset")
-        if drive.hysteresis:  # wrist offset rate not modelled in the hysteresis input (zero)
-            vmux = b.AddNamedSystem("joint_and_wrist_rate", Multiplexer([n, m]))
-            zero = b.AddNamedSystem("wrist_offset_rate", ConstantVectorSource(np.zeros(m)))
-            b.Connect(split.get_output_port(1), vmux.get_input_port(0))
-            b.Connect(zero.get_output_port(), vmux.get_input_port(1))
-            b.Connect(vmux.get_output_port(), d.GetInputPort("joint_velocity"))
         gf_split = b.AddNamedSystem("generalized_force_split", Demultiplexer([n, m]))
         b.Connect(d.GetOutputPort("generalized_force"), gf_split.get_input_port())
         tendon_tau = gf_split.get_output_port(0)
     else:
         b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
-        if drive.hysteresis:
-            b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
         tendon_tau = d.GetOutputPort("generalized_force")
     G = coupling_force_gain(plant, models)
     sources = [tendon_tau]
@@ -225,9 +217,6 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
     state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
     b.Connect(plant.get_state_output_port(), state.get_input_port(0))
-    if drive.hysteresis:
-        raise ValueError(f"{name}: spring hysteresis is not supported by the finger diagrams yet "
-                         "(set spring.hysteresis.enabled=False)")
     b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
     b.ExportOutput(state.get_output_port(), "state")
     b.ExportOutput(split.get_output_port(0), "joint_angle")
@@ -241,10 +230,10 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = _state_names(joint_names, coupling.tendon_names, drive.hysteresis)
+    state_names = _state_names(joint_names, coupling.tendon_names)
     extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
-                 torque_limit=p.motor.torque_limit if p.motor.saturation else None, drive_coupling=drive_coupling, models=models,
-                 joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
+                 torque_limit=p.motor.torque_limit if p.motor.saturation else None,
+                 drive_coupling=drive_coupling, models=models, joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
                  coupling_gain=G, spring_law=spring)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .coupling import FingerCoupling, LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
+from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
            "estimate_thumb", "EstimationStudy", "thumb_estimation_study", "noise_error_bound"]
