@@ -79,6 +79,14 @@ def test_wrist_feedforward_reduces_finger_drift_tenfold():
     d = s.max_drift()
     assert d["compensated"] < 0.2 * d["uncompensated"]
     assert s.min_tendon_force["compensated"] > s.min_tendon_force["uncompensated"]
+    assert not [e for e in s.events["compensated"] if e.kind == "tendon_slack"]
+
+
+def test_large_uncompensated_wrist_motion_slackens_tendons_and_is_reported():
+    s = wrist_compensation_study("index", amplitude=np.radians(15.0), frequency=0.5, t_final=0.45)
+    slack = [e for e in s.events["uncompensated"] if e.kind == "tendon_slack"]
+    assert slack and s.min_tendon_force["uncompensated"] == 0.0
+    assert s.min_tendon_force["compensated"] > 10.0
 
 
 def test_joint_control_reaches_the_reference_and_keeps_the_coupling():

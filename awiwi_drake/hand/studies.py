@@ -18,7 +18,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, Demultiplexer, MatrixGain, Sine
 
 from ..analysis.linear import linearize
-from ..analysis.simulate import simulate
+from ..analysis.simulate import rig_monitors, simulate
 from ..components.routing import TendonRouting_
 from ..components.spring import SpringBank_, tendon_spring
 from ..parameters.hand import FINGER_RIG_PARAMS, FingerRigParams, JointControllerParams
@@ -200,6 +200,7 @@ class WristCompensationStudy:
     drift_compensated: np.ndarray
     joint_names: list
     min_tendon_force: dict
+    events: dict            # "uncompensated"/"compensated" -> list of analysis.simulate.Event (slack, saturation)
 
     def max_drift(self) -> dict:
         """Largest |q - q_ref| [rad] over time and joints, per case."""
@@ -218,7 +219,7 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
     a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run).
     """
     from .diagrams import hand_diagram
-    drift, fmin = {}, {}
+    drift, fmin, events = {}, {}, {}
     t_grid = np.linspace(0.0, t_final, 201)
     for comp in (False, True):
         rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
@@ -241,10 +242,13 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         q_op = cl.operating_point.info["joint_angles"]
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
-        res = simulate(d, ctx, t_final, log=("joint_angle", "tendon_force"),
-                       max_step=cl.controller.hold.period(), accuracy=accuracy).resample(t_grid)
+        res = simulate(d, ctx, t_final, log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
+                       max_step=cl.controller.hold.period(), accuracy=accuracy)
+        events[comp] = list(res.events)
+        res = res.resample(t_grid)
         drift[comp] = res["joint_angle"] - q_op
         fmin[comp] = float(np.min(res["tendon_force"]))
     return WristCompensationStudy(t_grid, amplitude * np.sin(2 * np.pi * frequency * t_grid), drift[False],
                                   drift[True], list(rig.extra["joint_names"]),
-                                  {"uncompensated": fmin[False], "compensated": fmin[True]})
+                                  {"uncompensated": fmin[False], "compensated": fmin[True]},
+                                  {"uncompensated": events[False], "compensated": events[True]})
