@@ -19,6 +19,7 @@ __all__ = ["main", "CliError", "parse_sets"]
 # One module per command group (see each module's register()).
 _COMMAND_MODULES = [
     "awiwi_drake.cli.rigs",
+    "awiwi_drake.cli.compare",
 ]
 
 

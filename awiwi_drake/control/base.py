@@ -242,7 +242,8 @@ class ClosedLoop:
                 zoh.SetVectorState(zoh.GetMyMutableContextFromRoot(context), u)
             for d in self._delays:
                 dctx = d.GetMyMutableContextFromRoot(context)
-                dctx.SetDiscreteState(np.tile(u, self.delay_steps))
+                nbuf = dctx.get_discrete_state_vector().size() // u.size
+                dctx.SetDiscreteState(np.tile(u, nbuf))
 
 
 def _vector(value, size: int, name: str) -> np.ndarray:
@@ -365,7 +366,10 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     # command path: controller -> hold -> delay -> saturation -> rig
     cmd = ctrl.GetOutputPort(COMMAND_PORT)
     builder.ExportOutput(cmd, "motor_torque_command")
-    if rate_hz is not None:
+    # A DiscreteTimeDelay samples its input every period and outputs it `steps` periods later, so it is
+    # the sample-and-hold itself (a ZOH in front would add a period: simultaneous updates read the
+    # pre-update hold value).
+    if rate_hz is not None and not steps:
         zoh = builder.AddNamedSystem("command_hold", ZeroOrderHold(1.0 / rate_hz, n_u))
         builder.Connect(cmd, zoh.get_input_port(0))
         cmd = zoh.get_output_port(0)

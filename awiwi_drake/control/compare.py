@@ -34,7 +34,7 @@ from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
 __all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test",
-           "run_standard_tests", "compare", "step_metrics", "sine_metrics", "gain_diagram",
+           "run_standard_tests", "compare", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
            "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -160,47 +160,82 @@ def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
     return 1.0 / loop.rate_hz if loop.rate_hz else params.sample_period
 
 
-def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
-              disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
-              meta: dict | None = None) -> TestRun:
-    """Advance ``context`` (from time 0) to ``t_final`` sampling every ``dt``, holding the inputs."""
+def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
+                  inputs: Mapping[str, Callable[[float], Any]] | None = None,
+                  outputs: Sequence[str] = (), max_step: float = 2e-4,
+                  label: str = "closed loop") -> dict[str, np.ndarray]:
+    """Advance ``context`` from its time to ``+t_final`` sampling every ``dt``.
+
+    ``inputs`` maps exported input ports (references, ``external_torque``) to
+    functions of time (relative to the start), held constant between samples.
+    Returns ``{"t", "x", <input names>, <output names>}`` arrays (one row per sample).
+
+    Raises
+    ------
+    SimulationDivergedError
+        When the state or an output becomes non-finite.
+    ValueError
+        When an input or output name is not a port of the closed loop.
+    """
     d = loop.diagram
-    ref_ports = [d.GetInputPort(r) for r in loop.references]
-    dist_port = d.GetInputPort("external_torque") if "external_torque" in loop.disturbances else None
-    out_port = d.GetOutputPort(loop.tracked_outputs[0])
-    cmd_port = d.GetOutputPort("motor_torque_command")
+    inputs = dict(inputs or {})
+    in_ports = {}
+    for nm in inputs:
+        if not d.HasInputPort(nm):
+            raise ValueError(f"simulate_loop: no input port {nm!r} (inputs: "
+                             f"{', '.join(loop.references + loop.disturbances)})")
+        in_ports[nm] = d.GetInputPort(nm)
+    out_ports = {}
+    for nm in outputs:
+        if not d.HasOutputPort(nm):
+            raise ValueError(f"simulate_loop: no output port {nm!r}")
+        out_ports[nm] = d.GetOutputPort(nm)
     n = int(round(t_final / dt)) + 1
+    t_start = context.get_time()
     ts = np.arange(n) * dt
-    ys, us, rs, ws, xs = [], [], [], [], []
+    log: dict[str, list] = {k: [] for k in ["x", *inputs, *outputs]}
 
     def _apply(t):
-        r = reference(t)
-        for p in ref_ports:
-            p.FixValue(context, np.full(p.size(), r))
-        w = disturbance(t) if disturbance is not None else 0.0
-        if dist_port is not None:
-            dist_port.FixValue(context, np.full(dist_port.size(), w))
-        return r, w
+        vals = {}
+        for nm, fn in inputs.items():
+            v = np.atleast_1d(np.asarray(fn(t), float))
+            port = in_ports[nm]
+            in_ports[nm].FixValue(context, np.full(port.size(), v[0]) if v.size == 1 else v)
+            vals[nm] = v
+        return vals
 
-    context.SetTime(0.0)
-    r, w = _apply(0.0)
+    cur = _apply(0.0)
     sim = _make_simulator(loop, context, max_step)
     for i, t in enumerate(ts):
         if i > 0:
-            sim.AdvanceTo(t)
-        y = out_port.Eval(context)
-        u = cmd_port.Eval(context)
+            sim.AdvanceTo(t_start + t)
         x = context.get_continuous_state_vector().CopyToVector()
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
-            raise SimulationDivergedError(f"{controller}/{test}: state not finite at t = {t:.4g} s")
-        ys.append(float(y[0]))
-        us.append(np.array(u, dtype=float))
-        rs.append(r)
-        ws.append(w)
-        xs.append(x)
-        r, w = _apply(t + dt)
-    return TestRun(controller, test, ts, np.array(rs), np.array(ys), np.array(us), np.array(ws),
-                   np.array(xs), dict(meta or {}))
+        row = {nm: np.array(p.Eval(context), dtype=float) for nm, p in out_ports.items()}
+        if not np.all(np.isfinite(x)) or not all(np.all(np.isfinite(v)) for v in row.values()):
+            raise SimulationDivergedError(f"{label}: state or output not finite at t = {t:.4g} s")
+        log["x"].append(x)
+        for nm, v in row.items():
+            log[nm].append(v)
+        cur = _apply(t)  # inputs held on [t, t + dt); logged outputs are left limits at t
+        for nm in inputs:
+            log[nm].append(cur[nm])
+    out = {k: np.array(v) for k, v in log.items()}
+    out["t"] = ts
+    return out
+
+
+def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
+              disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
+              meta: dict | None = None) -> TestRun:
+    inputs = {r: reference for r in loop.references}
+    if "external_torque" in loop.disturbances:
+        inputs["external_torque"] = disturbance or (lambda t: 0.0)
+    y = loop.tracked_outputs[0]
+    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=(y, "motor_torque_command"),
+                        max_step=max_step, label=f"{controller}/{test}")
+    w = log["external_torque"][:, 0] if "external_torque" in log else np.zeros(len(log["t"]))
+    return TestRun(controller, test, log["t"], log[loop.references[0]][:, 0], log[y][:, 0],
+                   log["motor_torque_command"], w, log["x"], dict(meta or {}))
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: CompareTestParams | None = None,
