@@ -1,0 +1,252 @@
+"""Simulation with Drake's ``Simulator``, logging and health monitors.
+
+:func:`simulate` runs a diagram, records named output ports at every
+integrator step, and watches for
+
+* divergence - a non-finite or exploding state raises :class:`SimulationDivergedError`
+  naming the time and the state entry;
+* tendon slack - tendon force at or below ``slack_force`` (a tendon-driven hand's
+  model is invalid then, ch. 7);
+* actuator saturation - commanded torque beyond the motor's limit.
+
+Slack and saturation are recorded as :class:`Event` intervals in the
+:class:`SimulationResult` (and optionally raise).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from pydrake.systems.framework import Context, Diagram, EventStatus, OutputPort, System
+
+__all__ = ["SimulationDivergedError", "Event", "SimulationResult", "SlackMonitor", "SaturationMonitor",
+           "simulate", "rig_monitors"]
+
+
+class SimulationDivergedError(RuntimeError):
+    """The state became non-finite or exceeded the divergence bound."""
+
+
+@dataclass
+class Event:
+    """An interval during which a condition held for one channel."""
+
+    kind: str
+    channel: str
+    t_start: float
+    t_end: float
+    extreme: float
+
+    def __str__(self) -> str:
+        return f"{self.kind} on {self.channel} from {self.t_start:.4g} s to {self.t_end:.4g} s (extreme {self.extreme:.4g})"
+
+
+@dataclass
+class SimulationResult:
+    """Logged signals (one row per integrator step) and detected events.
+
+    Attributes
+    ----------
+    t : ndarray (T,)
+    signals : dict of name -> ndarray (T, k)
+    events : list of Event
+    final_context : Context
+    """
+
+    t: np.ndarray
+    signals: dict
+    events: list = field(default_factory=list)
+    final_context: Context | None = None
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self.signals:
+            raise KeyError(f"signal {name!r} was not logged; logged: {', '.join(self.signals)}")
+        return self.signals[name]
+
+    def events_of(self, kind: str) -> list:
+        return [e for e in self.events if e.kind == kind]
+
+    def resample(self, t: np.ndarray) -> "SimulationResult":
+        """Signals linearly interpolated at times ``t`` (for comparisons and plots)."""
+        out = {k: np.stack([np.interp(t, self.t, v[:, j]) for j in range(v.shape[1])], axis=1)
+               for k, v in self.signals.items()}
+        return SimulationResult(np.asarray(t), out, list(self.events), self.final_context)
+
+
+class _IntervalMonitor:
+    """Track per-channel intervals where ``condition(value)`` holds on one port."""
+
+    kind = "condition"
+
+    def __init__(self, system: System, port, labels: Sequence[str] | None = None, raise_on_event: bool = False):
+        self.system, self.port = system, port
+        self.labels = labels
+        self.raise_on_event = raise_on_event
+        self._open: dict[int, Event] = {}
+        self.events: list[Event] = []
+
+    def _condition(self, v: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _extreme(self, old: float, v: float) -> float:
+        return max(old, v)
+
+    def check(self, root: Context) -> str | None:
+        v = self.port.Eval(self.system.GetMyContextFromRoot(root))
+        t = root.get_time()
+        hit = self._condition(v)
+        for i in range(len(v)):
+            if hit[i]:
+                if i not in self._open:
+                    label = self.labels[i] if self.labels else f"{self.port.get_name()}[{i}]"
+                    self._open[i] = Event(self.kind, label, t, t, float(v[i]))
+                    if self.raise_on_event:
+                        return f"{self.kind} on {label} at t = {t:.6g} s (value {v[i]:.6g})"
+                ev = self._open[i]
+                ev.t_end, ev.extreme = t, self._extreme(ev.extreme, float(v[i]))
+            elif i in self._open:
+                self.events.append(self._open.pop(i))
+        return None
+
+    def finish(self) -> list[Event]:
+        self.events.extend(self._open.values())
+        self._open.clear()
+        return sorted(self.events, key=lambda e: e.t_start)
+
+
+class SlackMonitor(_IntervalMonitor):
+    """Tendon slack: the force on output ``port_name`` at or below ``slack_force`` [N]."""
+
+    kind = "tendon_slack"
+
+    def __init__(self, system, port_name="tendon_force", slack_force: float = 0.0, **kw):
+        super().__init__(system, system.GetOutputPort(port_name), **kw)
+        self.slack_force = slack_force
+
+    def _condition(self, v):
+        return v <= self.slack_force
+
+    def _extreme(self, old, v):
+        return min(old, v)
+
+
+class SaturationMonitor(_IntervalMonitor):
+    """Actuator saturation: ``|commanded torque| >= torque_limit`` on input ``port_name``."""
+
+    kind = "actuator_saturation"
+
+    def __init__(self, system, torque_limit: float, port_name="motor_torque", **kw):
+        super().__init__(system, system.GetInputPort(port_name), **kw)
+        self.torque_limit = torque_limit
+
+    def _condition(self, v):
+        return np.abs(v) >= self.torque_limit
+
+    def _extreme(self, old, v):
+        return old if abs(old) >= abs(v) else v
+
+
+def rig_monitors(rig, *, raise_on_slack: bool = False, raise_on_saturation: bool = False) -> list:
+    """Slack and saturation monitors for a rig (``rig.extra`` says ``tension_only`` and ``torque_limit``)."""
+    monitors = []
+    if rig.extra.get("tension_only", True):
+        monitors.append(SlackMonitor(rig.diagram, raise_on_event=raise_on_slack))
+    limit = rig.extra.get("torque_limit")
+    if limit is not None:
+        monitors.append(SaturationMonitor(rig.diagram, limit, raise_on_event=raise_on_saturation))
+    return monitors
+
+
+def _resolve_ports(diagram: Diagram, log) -> list[tuple[str, System, OutputPort]]:
+    out = []
+    if isinstance(log, Mapping):
+        items = list(log.items())
+    else:
+        items = [(name, name) for name in (log or [])]
+    for name, port in items:
+        if isinstance(port, str):
+            if not diagram.HasOutputPort(port):
+                names = [diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())]
+                raise ValueError(f"simulate: diagram {diagram.get_name()!r} has no output port {port!r}; "
+                                 f"ports: {', '.join(names)}")
+            out.append((name, diagram, diagram.GetOutputPort(port)))
+        else:
+            out.append((name, port.get_system(), port))
+    return out
+
+
+def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
+             log: Iterable[str] | Mapping[str, object] = ("state",),
+             monitors: Sequence = (), integrator: str = "runge_kutta3", max_step: float = 1e-3,
+             accuracy: float = 1e-5, divergence_bound: float = 1e6, t_start: float | None = None
+             ) -> SimulationResult:
+    """Simulate ``diagram`` from ``context`` to ``t_final`` [s] with Drake's ``Simulator``.
+
+    Parameters
+    ----------
+    diagram : Diagram
+    context : Context or None
+        Initial root context (inputs fixed as needed); None: default context.
+    t_final : float
+        End time [s].
+    log : names or mapping
+        Exported output port names of ``diagram`` (or ``{label: OutputPort}`` for
+        ports of subsystems) recorded at every step.
+    monitors : sequence
+        Objects with ``check(root_context) -> str | None`` and ``finish() -> list[Event]``
+        (see :func:`rig_monitors`).
+    integrator : str
+        Drake integrator name (``runge_kutta3`` error-controlled is the default:
+        it beats implicit integrators, which finite-difference through Python).
+    max_step, accuracy : float
+        Maximum step [s] and target accuracy of the integrator.
+    divergence_bound : float
+        Any state entry beyond this magnitude counts as divergence.
+    """
+    if not (np.isfinite(t_final) and t_final > 0):
+        raise ValueError(f"simulate: t_final = {t_final} must be finite and > 0 [s]")
+    ports = _resolve_ports(diagram, log)
+    sim = Simulator(diagram, context) if context is not None else Simulator(diagram)
+    ResetIntegratorFromFlags(sim, integrator, max_step)
+    integ = sim.get_mutable_integrator()
+    if integrator not in ("runge_kutta2", "explicit_euler", "semi_explicit_euler"):  # fixed-step ones
+        integ.set_target_accuracy(accuracy)
+    root = sim.get_mutable_context()
+    if t_start is not None:
+        root.SetTime(t_start)
+    times: list[float] = []
+    rows: dict[str, list] = {name: [] for name, _, _ in ports}
+    failure: list[str] = []
+
+    def monitor(ctx: Context):
+        x = ctx.get_continuous_state_vector().CopyToVector()
+        if not np.all(np.isfinite(x)) or (x.size and np.max(np.abs(x)) > divergence_bound):
+            bad = int(np.argmax(~np.isfinite(x) | (np.abs(x) > divergence_bound)))
+            failure.append(f"simulation diverged at t = {ctx.get_time():.6g} s: state[{bad}] = {x[bad]}")
+            return EventStatus.Failed(diagram, failure[-1])
+        times.append(ctx.get_time())
+        for name, system, port in ports:
+            rows[name].append(np.array(port.Eval(system.GetMyContextFromRoot(ctx)), dtype=float).ravel())
+        for m in monitors:
+            msg = m.check(ctx)
+            if msg:
+                failure.append(msg)
+                return EventStatus.Failed(diagram, msg)
+        return EventStatus.Succeeded()
+
+    sim.set_monitor(monitor)
+    try:
+        sim.Initialize()
+        sim.AdvanceTo(t_final)
+    except RuntimeError as exc:
+        if failure and failure[-1].startswith("simulation diverged"):
+            raise SimulationDivergedError(failure[-1]) from None
+        if failure:
+            raise RuntimeError(failure[-1]) from None
+        raise
+    events = [e for m in monitors for e in m.finish()]
+    signals = {k: np.array(v) for k, v in rows.items()}
+    return SimulationResult(np.array(times), signals, sorted(events, key=lambda e: e.t_start), sim.get_context())
