@@ -30,18 +30,15 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.analysis import ResetIntegratorFromFlags
 
+from awiwi_drake.analysis.simulate import SimulationDivergedError
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
 __all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test",
            "run_standard_tests", "compare", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
-           "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS"]
+           "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
-
-
-class SimulationDivergedError(RuntimeError):
-    """Raised when the closed-loop state becomes non-finite."""
 
 
 @dataclass
@@ -71,7 +68,7 @@ class Metrics:
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
     peak_input: float = math.nan         # max |motor_torque_command| [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
-    damping_ratio: float = math.nan      # from the overshoot of a step (NaN: no overshoot)
+    damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
     gain: float = math.nan               # |Y/R| at the sine frequency
     phase_deg: float = math.nan          # phase of Y/R at the sine frequency
@@ -270,8 +267,12 @@ def _damping_from_overshoot(os_frac: float) -> float:
 
 
 def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: float = 0.0,
-                 band: float = 0.02) -> dict[str, float]:
+                 band: float = 0.02, fit: bool = False) -> dict[str, float]:
     """Rise time (10-90 %), overshoot [% of the step], settling time (band), error, damping ratio.
+
+    The damping ratio comes from the overshoot (``-ln(OS) / sqrt(pi^2 + ln^2 OS)``,
+    NaN without overshoot) or, with ``fit=True``, from
+    :func:`fit_second_order_step` (robust to measurement noise).
 
     ``y`` is a step response with the step at ``t_step``; the final value is
     the reference ``r1`` (the steady-state error is reported separately).
@@ -291,7 +292,10 @@ def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: flo
     out["rise_time"] = float(tt[i90] - tt[i10]) if (i10 is not None and i90 is not None) else math.nan
     os_frac = max(0.0, float(np.max(e)) - 1.0)
     out["overshoot"] = 100.0 * os_frac
-    out["damping_ratio"] = _damping_from_overshoot(os_frac)
+    if fit:
+        out["damping_ratio"] = fit_second_order_step(t, y, r0, r1, t_step)["damping_ratio"]
+    else:
+        out["damping_ratio"] = _damping_from_overshoot(os_frac)
     outside = np.nonzero(np.abs(e - 1.0) > band)[0]
     if len(outside) == 0:
         out["settling_time"] = 0.0
@@ -379,7 +383,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     if loop.saturation is not None:
         m.saturated_fraction = float(np.mean(np.any(u > loop.saturation[None, :] * (1 + 1e-9), axis=1)))
     if test == "step":
-        for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay).items():
+        for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay,
+                                 band=p.settling_band, fit=True).items():
             setattr(m, k_, v)
     elif test == "sine":
         skip = run.t >= 1.0 / p.sine_frequency  # drop the first period (transient)
@@ -474,3 +479,42 @@ def plot_metric(table: MetricsTable, metric: str, test: str, *, ax=None):
     ax.set_ylabel(f"{metric} [{UNITS[metric]}]")
     ax.set_title(test)
     return fig, ax
+
+
+def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> dict[str, float]:
+    """Least-squares fit of a delayed 2nd-order step ``r0 -> r1`` to ``y``: ``omega_n``, ``damping_ratio``.
+
+    Robust to measurement noise (the overshoot-based estimate takes a noisy
+    maximum).  Fitted parameters: natural frequency, damping ratio (0.05-3),
+    final value and a dead time.
+    """
+    from scipy.optimize import least_squares
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    m = t >= t_step
+    tt, e = t[m] - t_step, (y[m] - r0) / (r1 - r0)
+
+    def model(p):
+        wn, z, fin, td = p
+        s = np.clip(tt - td, 0.0, None)
+        if z < 1.0:
+            wd = wn * math.sqrt(1 - z * z)
+            resp = 1 - np.exp(-z * wn * s) * (np.cos(wd * s) + z / math.sqrt(1 - z * z) * np.sin(wd * s))
+        elif z == 1.0:
+            resp = 1 - np.exp(-wn * s) * (1 + wn * s)
+        else:
+            a = wn * (z - math.sqrt(z * z - 1))
+            b = wn * (z + math.sqrt(z * z - 1))
+            resp = 1 - (b * np.exp(-a * s) - a * np.exp(-b * s)) / (b - a)
+        return fin * resp
+
+    i10 = int(np.argmax(e >= 0.5)) if np.any(e >= 0.5) else len(e) // 4
+    wn0 = 1.7 / max(tt[max(i10, 1)], 1e-4)  # t_50 ~ 1.7 / wn for xi ~ 0.7
+    best = None
+    for z0 in (0.4, 0.7, 1.2):
+        sol = least_squares(lambda p: model(p) - e, [wn0, z0, 1.0, 0.0],
+                            bounds=([1e-3, 0.05, 0.5, 0.0], [1e5, 3.0, 1.5, 0.5 * tt[-1]]))
+        if best is None or sol.cost < best.cost:
+            best = sol
+    wn, z, fin, td = best.x
+    return dict(natural_frequency=float(wn), damping_ratio=float(z), final=float(fin), dead_time=float(td))

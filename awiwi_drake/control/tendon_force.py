@@ -84,8 +84,9 @@ class ForceMap:
 def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
     """Tabulate the rig's ``tendon_force`` output over motor angles (motor at rest).
 
-    The rig must have the state ``[theta, omega]`` and output ``tendon_force``.
-    The slope is the centred difference of the tabulated force (second order).
+    The rig must have the state ``[theta, omega]`` and output ``tendon_force``;
+    the slope is ``r_m * tendon_stiffness`` when the rig outputs the stiffness,
+    else the centred difference of the tabulated force.
     """
     d = rig.diagram
     if not d.HasOutputPort("tendon_force"):
@@ -111,11 +112,18 @@ def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
         raise ValueError("force_map: could not bracket the tendon force between slack and f_max")
     th = np.linspace(lo, hi, 4 * num)
     fo = np.array([f(t) for t in th])
+    r_m = _motor(rig).pulley_radius
+    kport = d.GetOutputPort("tendon_stiffness") if d.HasOutputPort("tendon_stiffness") else None
+
+    def slope(t):  # d f / d theta = r_m k_t (exact, from the rig's stiffness output)
+        ctx.SetContinuousState([t, 0.0])
+        return r_m * float(kport.Eval(ctx)[0])
+
     taut = fo > 1e-6
     first = int(np.argmax(taut))
     top = int(np.argmax(fo >= f_max))
     th, fo = th[max(first - 1, 0): top + 1], fo[max(first - 1, 0): top + 1]
-    alpha = np.gradient(fo, th)
+    alpha = np.array([slope(t) for t in th]) if kport is not None else np.gradient(fo, th)
     keep = np.concatenate([[True], np.diff(fo) > 0])
     return ForceMap(th[keep], fo[keep], alpha[keep])
 
