@@ -38,6 +38,14 @@ class SimpleRig:
     def operating_point(self, **kw):
         return Op(np.zeros(4), np.zeros(1))
 
+    def context(self, op=None):
+        op = op or self.operating_point()
+        ctx = self.diagram.CreateDefaultContext()
+        ctx.SetContinuousState(op.state)
+        self.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
+        self.diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
+        return ctx
+
 
 def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible_joint"):
     A, B, E = flexible_joint_matrices(k=k, m=m)

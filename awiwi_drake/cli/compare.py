@@ -13,10 +13,11 @@ from pathlib import Path
 
 __all__ = ["register", "run", "RIG_FACTORIES"]
 
+# the fused C++ drive (backend="symbolic") is ~4x faster in closed loop than the python backend
 RIG_FACTORIES = {
-    "tendon-rig": ("awiwi_drake.rigs", "tendon_rig"),
-    "flexible-joint": ("awiwi_drake.rigs", "flexible_joint_rig"),
-    "joint-rig": ("awiwi_drake.rigs", "joint_rig"),
+    "tendon-rig": ("awiwi_drake.rigs", "tendon_rig", {"backend": "symbolic"}),
+    "flexible-joint": ("awiwi_drake.rigs", "flexible_joint_rig", {"backend": "symbolic"}),
+    "joint-rig": ("awiwi_drake.rigs", "joint_rig", {"backend": "symbolic"}),
 }
 
 
@@ -61,8 +62,14 @@ def run(args) -> int:
     for t in tests or []:
         if t not in TESTS:
             raise ValueError(f"--tests: unknown test {t!r}; known: {', '.join(TESTS)}")
-    module, fn = RIG_FACTORIES[args.rig]
-    make_rig = getattr(importlib.import_module(module), fn)
+    module, fn, kw = RIG_FACTORIES[args.rig]
+    rig_fn = getattr(importlib.import_module(module), fn)
+
+    if args.rate == 0:  # continuous loops need the python backend (no spurious feedthrough)
+        kw = dict(kw, backend="python")
+
+    def make_rig():
+        return rig_fn(**kw)
     short = args.short or short_mode()
     loops = {}
     params = None

@@ -26,6 +26,14 @@ def _tendon_sdre(rig):
     return tendon_sdre_controller(rig)
 
 
+def _impedance(mode):
+    def factory(rig):
+        from awiwi_drake.control.impedance import impedance_controller
+        return impedance_controller(rig, mode=mode)
+    factory.__name__ = f"_impedance_{mode.replace('-', '_')}"
+    return factory
+
+
 def _pole_placement(rig):
     from awiwi_drake.control.pole_placement import pole_placement_controller
     return pole_placement_controller(rig)
@@ -47,6 +55,12 @@ register_controller("tendon-scheduled", _tendon_scheduled, rigs=("tendon_rig",),
                     description="(10.2) with gains (10.11) scheduled on the reference force (10.12)")
 register_controller("tendon-sdre", _tendon_sdre, rigs=("tendon_rig",), loop_options=_SAMPLED,
                     description="SDRE tendon force control (14.7)-(14.9), Table 14.1, gains at 200 Hz")
+register_controller("pd", _impedance("pd"), rigs=_JOINTS, loop_options=_SAMPLED,
+                    description="PD on the motor angles towards the link reference (baseline)")
+register_controller("two-time-scale", _impedance("two-time-scale"), rigs=_JOINTS, loop_options=_SAMPLED,
+                    description="joint impedance (11.4) over a motor-position tendon loop (11.3)")
+register_controller("cascaded", _impedance("cascaded"), rigs=_JOINTS, loop_options=_SAMPLED,
+                    description="joint impedance (11.4) over a linearising force loop (11.16)")
 register_controller("pole-placement", _pole_placement, rigs=_JOINTS, loop_options=_SAMPLED,
                     description="state feedback placing a double oscillator (12.13), Table 12.1")
 register_controller("lqr", _lqr, rigs=_JOINTS, loop_options=_SAMPLED,

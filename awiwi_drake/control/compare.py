@@ -76,9 +76,11 @@ class Metrics:
     resonance_hz: float = math.nan       # frequency of the peak gain
     bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the limit
+    status: str = "ok"                   # "ok" or "diverged: <reason>" (then the metrics are NaN)
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-")
@@ -97,8 +99,8 @@ class MetricsTable:
         raise KeyError(f"no metrics for controller {controller!r} and test {test!r}")
 
     def column(self, name: str, test: str) -> dict[str, float]:
-        if name not in COLUMNS:
-            raise ValueError(f"unknown metric {name!r}; known: {', '.join(COLUMNS[2:])}")
+        if name not in NUMERIC:
+            raise ValueError(f"unknown metric {name!r}; known: {', '.join(NUMERIC)}")
         return {r.controller: getattr(r, name) for r in self.rows if r.test == test}
 
     def to_csv(self, path: str | Path) -> Path:
@@ -114,12 +116,13 @@ class MetricsTable:
         lines = []
         for test in dict.fromkeys(r.test for r in self.rows):
             rows = [r for r in self.rows if r.test == test]
-            cols = [c for c in COLUMNS[2:] if any(math.isfinite(getattr(r, c)) for r in rows)]
+            cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " |")
-            lines.append("|---" * (len(cols) + 1) + "|")
+            lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
+            lines.append("|---" * (len(cols) + 2) + "|")
             for r in rows:
-                lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols) + " |")
+                lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
+                             + f" | {r.status} |")
             lines.append("")
         return "\n".join(lines)
 
@@ -160,7 +163,7 @@ def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
 def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
                   inputs: Mapping[str, Callable[[float], Any]] | None = None,
                   outputs: Sequence[str] = (), max_step: float = 2e-4,
-                  label: str = "closed loop") -> dict[str, np.ndarray]:
+                  label: str = "closed loop", divergence_bound: float = 1e6) -> dict[str, np.ndarray]:
     """Advance ``context`` from its time to ``+t_final`` sampling every ``dt``.
 
     ``inputs`` maps exported input ports (references, ``external_torque``) to
@@ -210,6 +213,8 @@ def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
         row = {nm: np.array(p.Eval(context), dtype=float) for nm, p in out_ports.items()}
         if not np.all(np.isfinite(x)) or not all(np.all(np.isfinite(v)) for v in row.values()):
             raise SimulationDivergedError(f"{label}: state or output not finite at t = {t:.4g} s")
+        if np.max(np.abs(x)) > divergence_bound:
+            raise SimulationDivergedError(f"{label}: |state| > {divergence_bound:g} at t = {t:.4g} s")
         log["x"].append(x)
         for nm, v in row.items():
             log[nm].append(v)
@@ -318,16 +323,26 @@ def sine_metrics(t, r, y, freq_hz: float) -> dict[str, float]:
                 phase_deg=math.degrees(math.atan2(h.imag, h.real)))
 
 
-def gain_diagram(t, r, y, f_low: float, f_high: float) -> tuple[np.ndarray, np.ndarray]:
-    """Gain |Y/R| from a chirp (Welch cross spectra), restricted to [f_low, f_high]."""
-    from scipy.signal import csd, welch
+def gain_diagram(t, r, y, f_low: float, f_high: float, *, smooth: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Gain |Y/R| of a swept-sine (chirp) test, restricted to [f_low, f_high].
+
+    Ratio of the Fourier transforms of the whole (mean-removed) records, which
+    resolves ``1 / T``; a centred moving average over ``smooth`` bins of both
+    auto/cross spectra tames the ripple of the finite chirp.
+    """
     t, r, y = (np.asarray(a, float) for a in (t, r, y))
-    fs = 1.0 / float(np.median(np.diff(t)))
-    nper = min(len(t), int(2 ** math.floor(math.log2(max(16, len(t) // 4)))))
-    r0, y0 = r - np.mean(r), y - np.mean(y)
-    f, prr = welch(r0, fs=fs, nperseg=nper)
-    _, pry = csd(r0, y0, fs=fs, nperseg=nper)
-    m = (f >= f_low) & (f <= f_high) & (prr > 1e-12 * np.max(prr))
+    if len(t) < 16:
+        raise ValueError("gain_diagram: need at least 16 samples")
+    dt = float(np.median(np.diff(t)))
+    R = np.fft.rfft(r - np.mean(r))
+    Y = np.fft.rfft(y - np.mean(y))
+    f = np.fft.rfftfreq(len(t), dt)
+    prr, pry = np.abs(R) ** 2, np.conj(R) * Y
+    if smooth > 1:
+        ker = np.ones(smooth) / smooth
+        prr = np.convolve(prr, ker, mode="same")
+        pry = np.convolve(pry, ker, mode="same")
+    m = (f >= f_low) & (f <= f_high) & (prr > 1e-9 * np.max(prr))
     return f[m], np.abs(pry[m] / prr[m])
 
 
@@ -413,7 +428,11 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     settled = settle(loop, p.initial_reference, t_settle=p.settle_time, params=p)
     runs, rows = [], []
     for test in tests:
-        run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+        try:
+            run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+        except SimulationDivergedError as exc:
+            rows.append(Metrics(controller, test, status=f"diverged: {exc}"))
+            continue
         runs.append(run)
         rows.append(m)
     return runs, rows

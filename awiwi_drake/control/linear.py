@@ -65,8 +65,19 @@ def rig_context(rig: Any, op: Any = None, *, state: Sequence[float] | None = Non
 def linearize_rig(rig: Any, op: Any = None, *, outputs: Sequence[str] = ("state",),
                   state: Sequence[float] | None = None,
                   motor_torque: Sequence[float] | None = None) -> RigLinearization:
-    """First-order Taylor model of ``rig`` w.r.t. ``motor_torque`` at an operating point (Drake)."""
+    """Linear model of ``rig`` w.r.t. ``motor_torque`` at an operating point.
+
+    ``A, B`` come from the framework (:func:`awiwi_drake.analysis.linearize`,
+    Drake's ``Linearize``) at an operating point; with ``state`` /
+    ``motor_torque`` given (a non-equilibrium point, e.g. for SDRE) Drake's
+    ``FirstOrderTaylorApproximation`` is used.  The rows ``C[name]`` of the named
+    outputs come from ``FirstOrderTaylorApproximation`` at the same point.
+    """
+    from awiwi_drake.analysis import linearize
+
     d = rig.diagram
+    if op is None and hasattr(rig, "operating_point"):
+        op = rig.operating_point()
     ctx = rig_context(rig, op, state=state, motor_torque=motor_torque)
     in_idx = d.GetInputPort(COMMAND_PORT).get_index()
     C, y0 = {}, {}
@@ -76,9 +87,12 @@ def linearize_rig(rig: Any, op: Any = None, *, outputs: Sequence[str] = ("state"
             raise ValueError(f"linearize_rig: rig {getattr(rig, 'name', '?')!r} has no output port {name!r}")
         lin = FirstOrderTaylorApproximation(d, ctx, input_port_index=in_idx,
                                             output_port_index=d.GetOutputPort(name).get_index())
-        A, B, f0 = lin.A(), lin.B(), lin.f0()
-        C[name] = lin.C()
+        A, B, f0 = np.array(lin.A()), np.array(lin.B()), np.array(lin.f0())
+        C[name] = np.array(lin.C())
         y0[name] = np.asarray(lin.y0(), float)
+    if state is None and motor_torque is None and op is not None and hasattr(rig, "context"):
+        fw = linearize(rig, op)  # the framework's linearisation (checks that op is an equilibrium)
+        A, B = fw.A, fw.B
     x0 = ctx.get_continuous_state_vector().CopyToVector()
     u0 = d.GetInputPort(COMMAND_PORT).Eval(ctx)
     names = tuple(getattr(rig, "state_names", ()) or ())

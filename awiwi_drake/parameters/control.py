@@ -101,21 +101,24 @@ class SdreJointParams(Parameters):
 
 @dataclass(frozen=True)
 class ImpedanceParams(Parameters):
-    """Two-time-scale / cascaded impedance (11.3)-(11.4)."""
+    """Joint PD, two-time-scale and cascaded impedance (11.3)-(11.4), (11.16)."""
 
     joint_stiffness: float = param(0.3, unit="Nm/rad", low=0.0, low_inclusive=False,
                                    source="chosen: about half the mechanical stiffness 0.605 (Table 12.1); "
                                           "Fig 11.2 'low impedance stiffness'")
-    joint_damping: float = param(2e-4, unit="Nm s/rad", low=0.0,
+    joint_damping: float = param(5e-4, unit="Nm s/rad", low=0.0,
                                  source="chosen: low damping as in Fig 11.2 (oscillations visible)")
-    motor_stiffness: float = param(20.0, unit="Nm/rad", low=0.0, low_inclusive=False,
-                                   source="chosen: inner loop Kp of (11.3), ~5x faster than the link mode")
-    motor_damping: float = param(0.2, unit="Nm s/rad", low=0.0, low_inclusive=False,
-                                 source="chosen: inner loop Kd of (11.3), xi ~0.5 with B = 2e-3")
-    force_gain: float = param(0.5, unit="-", low=0.0, low_inclusive=False,
-                              source="chosen: cascaded (11.16) force-error gain, dimensionless on r f")
-    force_damping: float = param(0.02, unit="s", low=0.0, low_inclusive=False,
-                                 source="chosen: cascaded (11.16) force-rate gain")
+    motor_bandwidth: float = param(150.0, unit="rad/s", low=0.0, low_inclusive=False,
+                                   source="chosen: inner motor-position loop of (11.3), Kp = B w^2, faster "
+                                          "than the impedance but below the 3 kHz / 333 us delay limit")
+    motor_damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
+                                       source="chosen: inner loop Kd = 2 xi w B")
+    force_bandwidth: float = param(150.0, unit="rad/s", low=0.0, low_inclusive=False,
+                                   source="chosen: cascaded force-error dynamics (11.16), same speed as "
+                                          "the two-time-scale inner loop for a fair comparison")
+    force_damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
+                                       source="chosen: cascaded force-error damping (11.16)")
+    friction_compensation: bool = param(True, unit="-", source="(11.3): friction estimate b(theta, thetadot)")
 
 
 @dataclass(frozen=True)
