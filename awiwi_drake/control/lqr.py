@@ -85,4 +85,4 @@ def quadratic_cost(t: np.ndarray, x: np.ndarray, u: np.ndarray, Q: np.ndarray, R
     x = np.atleast_2d(np.asarray(x, float))
     u = np.asarray(u, float).reshape(len(t), -1)
     integrand = np.einsum("ti,ij,tj->t", x, Q, x) + np.einsum("ti,ij,tj->t", u, np.atleast_2d(R), u)
-    return float(np.trapz(integrand, t))
+    return float(np.trapezoid(integrand, t))

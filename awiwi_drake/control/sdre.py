@@ -150,7 +150,7 @@ def SdreController_(T):
 
         def _calc(self, context, output):
             vals = self._values(context)
-            K = context.get_discrete_state(self.gain_index).get_value().reshape(self.m, self.n)
+            K = context.get_discrete_state(self.gain_index).CopyToVector().reshape(self.m, self.n)
             x = self.model.state(vals)
             r = vals[self.model.reference + REFERENCE_SUFFIX][0]
             x_ref, u_ref = self.model.equilibrium(r)
