@@ -128,8 +128,10 @@ class RippleCompensationParams(Parameters):
     amplitude_scale: float = param(0.8, unit="-", low=0.0, high=1.0,
                                    source="chosen: ch. 3 asks for a conservative amplitude estimate "
                                           "(compensate 80 %)")
-    speed: float = param(2.0 * 3.141592653589793, unit="rad/s", low=0.0, low_inclusive=False,
-                         source="chosen: 1 rev/s like Fig 3.5 (1 rad/s and 0.5 rad/s tests)")
+    speed: float = param(1.0, unit="rad/s", low=0.0, low_inclusive=False,
+                         source="Fig 3.5: constant speeds 1 rad/s and 0.5 rad/s")
+    duration: float = param(1.0, unit="s", low=0.0, low_inclusive=False,
+                            source="chosen: ~16 periods of the motor-shaft ripple at 1 rad/s")
     position_gain: float = param(5.0, unit="Nm/rad", low=0.0, low_inclusive=False,
                                  source="chosen: simple PD of Fig 3.4 (moderate so the ripple shows)")
     velocity_gain: float = param(0.2, unit="Nm s/rad", low=0.0, low_inclusive=False,
@@ -141,9 +143,15 @@ class FrictionIdentificationParams(Parameters):
     """Piecewise-constant velocity identification (Fig 3.3)."""
 
     max_speed: float = param(15.0, unit="rad/s", low=0.0, low_inclusive=False, source="Fig 3.3b: +-15 rad/s")
-    num_speeds: int = param(12, unit="-", low=3, source="chosen: 12 plateaus per sign")
+    min_speed: float = param(0.2, unit="rad/s", low=0.0, low_inclusive=False,
+                             source="chosen: resolves the atan knee (gamma1 = 10 s/rad) with >= 1 ripple period per plateau")
+    num_speeds: int = param(10, unit="-", low=3, source="chosen: 10 log-spaced plateaus per sign")
     plateau_time: float = param(0.6, unit="s", low=0.0, low_inclusive=False,
-                                source="chosen: several output revolutions at the slow plateaus (Fig 3.3a)")
+                                source="chosen: >= 1 motor-shaft ripple period at the slowest plateau (Fig 3.3a)")
+    position_gain: float = param(50.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: stiff PD tracking of the ramp (lag < 0.02 rad)")
+    velocity_gain: float = param(1.0, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: PD damping, xi ~ 1.6 with B = 2e-3")
     settle_fraction: float = param(0.3, unit="-", low=0.0, high=0.9,
                                    source="chosen: discard the transient at the start of each plateau")
     torque_noise_std: float = param(0.01, unit="Nm", low=0.0,
