@@ -62,6 +62,8 @@ def run(args) -> int:
     for t in tests or []:
         if t not in TESTS:
             raise ValueError(f"--tests: unknown test {t!r}; known: {', '.join(TESTS)}")
+    if tests is not None and "disturbance" in tests and args.rig == "tendon-rig":
+        raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
     module, fn, kw = RIG_FACTORIES[args.rig]
     rig_fn = getattr(importlib.import_module(module), fn)
 
@@ -90,8 +92,6 @@ def run(args) -> int:
                 params = params.replace(step_duration=min(params.step_duration, 0.15),
                                         sweep_duration=min(params.sweep_duration, 1.0),
                                         settle_time=min(params.settle_time, 0.1), sine_periods=2.0)
-    if tests is not None and "disturbance" in tests and args.rig == "tendon-rig":
-        raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
     result = compare(loops, tests=tests, params=params)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

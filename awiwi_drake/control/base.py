@@ -179,7 +179,8 @@ class ClosedLoop:
     reference) and every rig input other than ``motor_torque`` (e.g.
     ``external_torque``); outputs: every rig output under its own name, the
     controller command ``motor_torque_command`` and the torque entering the rig
-    ``motor_torque`` (after hold, delay and saturation).
+    ``motor_torque`` (after hold, delay and saturation), and any other controller
+    output ``<name>`` as ``controller_<name>``.
     """
 
     diagram: Diagram
@@ -395,6 +396,9 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     for n in rig_out:
         if n != COMMAND_PORT:
             builder.ExportOutput(plant.GetOutputPort(n), n)
+    for n in ctrl_out:  # e.g. the SDRE gain, exported as controller_<name>
+        if n != COMMAND_PORT:
+            builder.ExportOutput(ctrl.GetOutputPort(n), f"controller_{n}")
     diagram = builder.Build()
     diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")
     handles.diagram = diagram
