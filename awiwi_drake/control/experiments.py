@@ -83,6 +83,7 @@ class TendonSteps:
     controller: str
     t: np.ndarray
     t_step: float
+    step: float = 5.0
     forces: dict = field(default_factory=dict)     # f0 -> force trace [N]
     commands: dict = field(default_factory=dict)   # f0 -> command trace [Nm]
     metrics: dict = field(default_factory=dict)    # f0 -> dict(overshoot, settling_time, damping_ratio, ...)
@@ -98,7 +99,7 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
     fmap = fmap or force_map(tendon_rig())
     factory = tendon_scheduled_controller if scheduled else tendon_pd_controller
     t_step = 0.02
-    res = TendonSteps("scheduled" if scheduled else "fixed", np.array([]), t_step)
+    res = TendonSteps("scheduled" if scheduled else "fixed", np.array([]), t_step, step)
     for f0 in initial_forces:
         rig, loop = _tendon_loop(factory, realistic=realistic, gains=gains or TendonForceGains(), fmap=fmap)
         op = rig.operating_point(tendon_force=f0)

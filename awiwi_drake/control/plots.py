@@ -32,7 +32,7 @@ def plot_tendon_steps(steps, *, ax=None):
     for f0, f in steps.forces.items():
         m = steps.metrics[f0]
         ax.plot(steps.t, f, label=f"{f0:g} N: xi = {m['damping_ratio']:.2f}, OS = {m['overshoot']:.0f} %")
-        ax.plot(steps.t, np.where(steps.t < steps.t_step, f0, f0 + (f[-1] - f0 > 0) * 5.0), "k--", lw=0.8)
+        ax.plot(steps.t, np.where(steps.t < steps.t_step, f0, f0 + steps.step), "k--", lw=0.8)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("tendon force [N]")
     ax.set_title(f"{steps.controller} gains")
