@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pathlib
+import re
 import shutil
 import subprocess
 import sys
@@ -10,7 +11,7 @@ from dataclasses import dataclass, field
 
 from pydrake.systems.framework import Diagram
 
-__all__ = ["ExportResult", "export_diagram", "graphviz_available"]
+__all__ = ["ExportResult", "export_diagram", "graphviz_available", "canonical_ids"]
 
 
 @dataclass
@@ -20,6 +21,34 @@ class ExportResult:
     dot: pathlib.Path
     images: list = field(default_factory=list)
     skipped: list = field(default_factory=list)
+
+
+_ID = re.compile(r"\b(_|s|clusters|cluster)(\d+)(?=in\b|out\b|diagram\b|subsystems\b|\b|:)")
+
+
+def canonical_ids(dot_text: str) -> str:
+    """Renumber Drake's system ids (which depend on creation order) as 1, 2, 3, ...
+
+    Makes exported graphs reproducible, so committed ``diagrams/*.dot`` can be
+    compared with freshly generated ones.
+    """
+    mapping: dict[str, str] = {}
+
+    def sub(m):
+        new = mapping.setdefault(m.group(2), str(len(mapping) + 1))
+        return m.group(1) + new
+
+    lines = _ID.sub(sub, dot_text).split("\n")
+    # Edges come out in id order, which also depends on creation order: sort each run of edges.
+    out, run = [], []
+    for line in lines + [""]:
+        if "->" in line:
+            run.append(line)
+            continue
+        out.extend(sorted(run))
+        run = []
+        out.append(line)
+    return "\n".join(out[:-1])
 
 
 def graphviz_available() -> bool:
@@ -51,7 +80,7 @@ def export_diagram(diagram: Diagram, out_dir, name: str, *, max_depth: int | Non
     text = (diagram.GetGraphvizString(max_depth=max_depth, options=options) if max_depth is not None
             else diagram.GetGraphvizString(options=options))
     dot_path = out / f"{name}.dot"
-    dot_path.write_text(text)
+    dot_path.write_text(canonical_ids(text))
     result = ExportResult(dot_path)
     if not graphviz_available():
         result.skipped = [f"{name}.{fmt}" for fmt in formats]

@@ -108,7 +108,10 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
     if backend == "python":
         _build_python(builder, motor, spring, coupling, offsets, hysteresis, r_m, m, n)
     else:
-        _build_symbolic(builder, motor, spring, coupling, offsets, hysteresis, r_m, m, n)
+        # numpy checks the FPU flags after object-array ufuncs; symbolic expressions leave
+        # spurious 'invalid value' flags behind, which are meaningless here.
+        with np.errstate(invalid="ignore"):
+            _build_symbolic(builder, motor, spring, coupling, offsets, hysteresis, r_m, m, n)
     diagram = builder.Build()
     diagram.set_name(name)
     return TendonDrive(diagram, m, n, backend, bool(hysteresis.enabled))

@@ -8,3 +8,4 @@ from awiwi_drake.parameters.components import (
     GuideFrictionParams, HysteresisParams, LinearSpringParams, MotorParams, PolynomialSpringParams,
     SpringMechanismGeometry, TendonParams)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, SpringModelParams, TendonRigParams
+from awiwi_drake.parameters.wrist import WristParams

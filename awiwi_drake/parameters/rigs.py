@@ -26,7 +26,7 @@ class SpringModelParams(Parameters):
     tendon: TendonParams = field(default_factory=TendonParams)
     include_tendon: bool = param(True, unit="-", source="ch. 4 'Calibration': measured on the mounted tendon")
     polynomial_degree: int = param(6, unit="-", low=1, high=12,
-                                   source="chosen: degree 6 fits the lever curve within 1 N over 0-175 N")
+                                   source="chosen: degree 6 fits the lever+tendon curve within 0.1 N over 0-180 N (tests)")
     max_force: float = param(180.0, unit="N", low=1.0,
                              source="Fig 4.8b: the calibrated range ends near 180 N")
     hysteresis: HysteresisParams = field(default_factory=HysteresisParams)

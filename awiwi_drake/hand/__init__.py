@@ -1,0 +1,1 @@
+"""The Awiwi hand: fingers (thesis ch. 5) and wrist (ch. 6)."""
