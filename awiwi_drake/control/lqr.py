@@ -1,7 +1,7 @@
 """Linear quadratic regulator on the linearised rig (ch. 13, Table 13.1).
 
 The gain comes from Drake's ``LinearQuadraticRegulator`` applied to the rig
-linearisation (:func:`awiwi_drake.control.linear.linearize_rig`); the
+diagram at its operating point (:func:`awiwi_drake.analysis.lqr`); the
 controller is a :class:`~awiwi_drake.control.linear.StateFeedbackLaw` that
 tracks ``link_angle_reference`` through the equilibrium family of the linear
 model.  Q is given on the flexible-joint state ``[q, qd, theta, thetad]``
@@ -70,7 +70,12 @@ def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = N
     n, m = lin.B.shape
     Q = expand_q(p.q_diag, n)
     R = r_val * np.eye(m)
-    K, S = lqr_gain(lin.A, lin.B, Q, R)
+    if hasattr(rig, "equilibrium"):  # the framework: LinearQuadraticRegulator(system, context, Q, R)
+        from awiwi_drake.analysis import lqr as framework_lqr
+        res = framework_lqr(rig, Q, R, op if op is not None else rig.operating_point())
+        K, S = np.asarray(res.K), np.asarray(res.S)
+    else:
+        K, S = lqr_gain(lin.A, lin.B, Q, R)
     return LqrDesign(K, S, Q, R, closed_loop_poles(lin.A, lin.B, K), lin)
 
 
