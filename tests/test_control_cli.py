@@ -37,3 +37,9 @@ def test_compare_errors_exit_2(tmp_path, capsys, args, needle):
     assert rc == 2
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
+
+
+def test_compare_list(capsys):
+    assert main(["compare", "--rig", "tendon-rig", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert [line.split()[0] for line in out.splitlines()] == ["tendon-pd", "tendon-scheduled", "tendon-sdre"]

@@ -80,3 +80,15 @@ def test_impedance_laws_convert_to_autodiff_and_reject_bad_gains():
         ImpedanceParams(motor_bandwidth=float("nan"))
     with pytest.raises(ValueError, match="mode"):
         ImpedanceLaw(transmission(rig), mode="singular")
+
+
+def test_fig_11_2_and_11_3_in_the_gain_diagram():
+    """Simulated chirp 5-50 Hz (two-time-scale, flexible joint): the resonance peak grows with the impedance
+    stiffness and shrinks with the mechanical stiffness (linearised loop: 1.0 -> 1.24; 1.75 -> 1.0)."""
+    from awiwi_drake.control.experiments import impedance_sweep
+
+    def peak(kp, k):
+        return impedance_sweep("two-time-scale", joint_stiffness=kp, rig="flexible_joint", stiffness=k,
+                               f_start=5.0, f_stop=50.0, duration=1.5)["peak_gain"]
+    assert peak(1.2, 0.605) > peak(0.3, 0.605) + 0.2
+    assert peak(1.2, 0.43) > peak(1.2, 1.15) + 0.5

@@ -25,9 +25,9 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("compare", help="compare controllers on a rig (step, sine, disturbance, sweep)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--rig", required=True, choices=sorted(RIG_FACTORIES), help="rig to control")
-    p.add_argument("--controllers", required=True,
-                   help="comma-separated registered names, e.g. pd,lqr (see --list)")
-    p.add_argument("--out", required=True, help="output directory")
+    p.add_argument("--controllers", help="comma-separated registered names, e.g. pd,lqr (see --list)")
+    p.add_argument("--out", help="output directory")
+    p.add_argument("--list", action="store_true", help="list the controllers that fit --rig and exit")
     p.add_argument("--tests", default=None, help="comma-separated subset of step,sine,disturbance,sweep")
     p.add_argument("--rate", type=float, default=None,
                    help="control rate [Hz] (default: the controller's, 3000); 0 = continuous")
@@ -55,6 +55,14 @@ def run(args) -> int:
     from awiwi_drake.control.registry import get_entry
     from awiwi_drake.parameters.control import compare_test_params
 
+    from awiwi_drake.control.registry import controller_names
+
+    if args.list:
+        for n in controller_names(args.rig):
+            print(f"{n:16s} {get_entry(n).description}")
+        return 0
+    if not args.controllers or not args.out:
+        raise ValueError("give --controllers and --out (or --list)")
     names = _parse_list(args.controllers, "controllers")
     for n in names:  # validate every name before any simulation
         get_entry(n, args.rig)

@@ -244,11 +244,16 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: Compa
            state=None, motor_torque=None):
     """A context of ``loop`` settled at the constant ``reference`` (time reset to 0).
 
-    The start is the rig's default operating point unless ``state`` is given.
+    The start is the rig's operating point for the tracked output at ``reference``
+    (``tendon_force=...``, ``link_angle=...``; else its default one) unless
+    ``state`` is given.
     """
     params = params or compare_test_params(loop.rig)
     if state is None and hasattr(loop.rig, "operating_point"):
-        op = loop.rig.operating_point()
+        try:  # start at the rig's equilibrium for the reference when the rig offers one
+            op = loop.rig.operating_point(**{loop.tracked_outputs[0]: reference})
+        except (TypeError, ValueError):
+            op = loop.rig.operating_point()
         state = np.asarray(op.state, dtype=float)
         motor_torque = op.motor_torque if motor_torque is None else motor_torque
     ctx = loop.create_context(state=state, motor_torque=motor_torque,
