@@ -182,3 +182,26 @@ def test_registry_errors_and_names():
         register_controller("lqr", lambda rig: None, rigs=("joint_rig",), description="dup")
     with pytest.raises(ValueError, match="unknown rig"):
         controller_names("hand")
+
+
+def test_continuous_loop_on_fused_backend_gives_clear_error():
+    from awiwi_drake.rigs import flexible_joint_rig
+    with pytest.raises(ValueError, match="algebraic loop.*backend='python'"):
+        closed_loop(flexible_joint_rig(backend="symbolic"), StaticLawController(_Pd()), rate_hz=None)
+
+
+def test_saturation_and_slack_are_reported():
+    """Joint rig (3 Nm amplifier limit, tension-only tendons, 20 N pretension)."""
+    from awiwi_drake.control.impedance import impedance_controller
+    from awiwi_drake.rigs import joint_rig
+    rig = joint_rig(backend="symbolic")
+    loop = closed_loop(rig, impedance_controller(rig, mode="pd"), rate_hz=3000.0)
+    _, m = run_test(loop, "step", params=compare_test_params(rig, step_size=1.0, step_duration=0.1, settle_time=0.0))
+    assert m.peak_input > rig.extra["torque_limit"] and 0.1 < m.saturated_fraction < 1.0
+    assert m.slack_fraction == 0.0  # antagonistic motors keep the pretension
+    # 0.5 Nm on the link needs 31 N of force difference: one tendon (20 N pretension) goes slack
+    loop = closed_loop(joint_rig(backend="symbolic"), impedance_controller(joint_rig(), mode="two-time-scale"),
+                       rate_hz=3000.0)
+    _, m = run_test(loop, "disturbance", params=compare_test_params(rig, disturbance_torque=0.5, step_duration=0.1,
+                                                                      settle_time=0.0))
+    assert m.slack_fraction > 0.1 and m.status == "ok"

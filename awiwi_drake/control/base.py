@@ -399,7 +399,16 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     for n in ctrl_out:  # e.g. the SDRE gain, exported as controller_<name>
         if n != COMMAND_PORT:
             builder.ExportOutput(ctrl.GetOutputPort(n), f"controller_{n}")
-    diagram = builder.Build()
+    try:
+        diagram = builder.Build()
+    except RuntimeError as exc:
+        if "algebraic loop" not in str(exc):
+            raise
+        raise ValueError(
+            f"closed_loop: continuous loop (rate_hz=None) of rig {getattr(rig, 'name', '?')!r} and controller "
+            f"{controller.get_name()!r} has an algebraic loop: the rig reports direct feedthrough from "
+            f"motor_torque to its outputs (the fused backend='symbolic' drive does); use backend='python' "
+            f"or a sampled controller (rate_hz)") from None
     diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")
     handles.diagram = diagram
     handles.disturbances = tuple(dist)

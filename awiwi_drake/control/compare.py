@@ -75,7 +75,8 @@ class Metrics:
     peak_gain: float = math.nan          # max |Y/R| over the sweep
     resonance_hz: float = math.nan       # frequency of the peak gain
     bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
-    saturated_fraction: float = math.nan  # fraction of samples with the command beyond the limit
+    saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
+    slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     status: str = "ok"                   # "ok" or "diverged: <reason>" (then the metrics are NaN)
 
 
@@ -83,7 +84,8 @@ COLUMNS = [f for f in Metrics.__dataclass_fields__]
 NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
-             peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-")
+             peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
+             slack_fraction="-")
 
 
 @dataclass
@@ -233,11 +235,18 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: C
     if "external_torque" in loop.disturbances:
         inputs["external_torque"] = disturbance or (lambda t: 0.0)
     y = loop.tracked_outputs[0]
-    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=(y, "motor_torque_command"),
+    outputs = [y, "motor_torque_command"]
+    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    if slack and y != "tendon_force":
+        outputs.append("tendon_force")
+    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=outputs,
                         max_step=max_step, label=f"{controller}/{test}")
     w = log["external_torque"][:, 0] if "external_torque" in log else np.zeros(len(log["t"]))
+    meta = dict(meta or {})
+    if slack:
+        meta["tendon_force"] = log["tendon_force"]
     return TestRun(controller, test, log["t"], log[loop.references[0]][:, 0], log[y][:, 0],
-                   log["motor_torque_command"], w, log["x"], dict(meta or {}))
+                   log["motor_torque_command"], w, log["x"], meta)
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: CompareTestParams | None = None,
@@ -400,8 +409,13 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     m = Metrics(controller, test)
     u = np.abs(run.command)
     m.peak_input = float(np.max(u))
-    if loop.saturation is not None:
-        m.saturated_fraction = float(np.mean(np.any(u > loop.saturation[None, :] * (1 + 1e-9), axis=1)))
+    limit = loop.saturation
+    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
+        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is not None:
+        m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
+    if "tendon_force" in run.meta:
+        m.slack_fraction = float(np.mean(np.any(run.meta["tendon_force"] <= 0.0, axis=1)))
     if test == "step":
         for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay,
                                  band=p.settling_band, fit=True).items():

@@ -46,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from awiwi_drake._math import smax
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain
 from awiwi_drake.control.registry import rig_kind
 from awiwi_drake.parameters.components import MotorParams
@@ -65,6 +66,7 @@ class Transmission:
     pretension: np.ndarray    # f_pre per tendon [N] (or [Nm])
     motor: MotorParams
     compensate_friction: bool
+    min_alpha: float = 0.0    # floor of r_m k_t in the laws: a slack tendon has k_t = 0
 
     @property
     def pseudo_inverse(self) -> np.ndarray:
@@ -80,10 +82,13 @@ def transmission(rig: Any) -> Transmission:
         # the rig's motor: no (3.8) friction, linear damping d_theta (12.8); nothing to compensate
         motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                             saturation=False)
-        return Transmission(np.array([1.0]), 1.0, np.array([0.0]), motor, False)
+        return Transmission(np.array([1.0]), 1.0, np.array([0.0]), motor, False, 0.05 * p.stiffness)
     if kind == "joint_rig":
         rq = p.link_pulley_radius
-        return Transmission(np.array([rq, -rq]), p.motor.pulley_radius, np.full(2, p.pretension), p.motor, True)
+        k_pre = float(np.ravel(rig.operating_point().info["tendon_stiffness"])[0])
+        # floor: 5 % of the stiffness at pretension (chosen: keeps the laws finite when a tendon goes slack)
+        return Transmission(np.array([rq, -rq]), p.motor.pulley_radius, np.full(2, p.pretension), p.motor, True,
+                            0.05 * p.motor.pulley_radius * k_pre)
     raise ValueError(f"impedance control needs a joint rig (flexible-joint or joint-rig), got {kind!r}")
 
 
@@ -123,7 +128,7 @@ class ImpedanceLaw(StaticLaw):
         B, r = tr.motor.inertia, tr.pulley_radius
         comp = -motor_friction_torque(w, tr.motor) if (tr.compensate_friction and self.params.friction_compensation) \
             else 0.0 * w
-        alpha = r * k
+        alpha = smax(r * k, tr.min_alpha)
         if self.mode == "two-time-scale":
             theta_err = (f_des - f) / alpha  # theta_des - theta
             return r * f + self.kp_m * theta_err - self.kd_m * w + comp
