@@ -50,12 +50,9 @@ def run(args) -> int:
     import importlib
 
     from awiwi_drake.config import short_mode
-    from awiwi_drake.control.base import closed_loop
-    from awiwi_drake.control.compare import TESTS, compare, plot_gain_diagram, plot_runs
-    from awiwi_drake.control.registry import get_entry
+    from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_runs
+    from awiwi_drake.control.registry import controller_names, get_entry
     from awiwi_drake.parameters.control import compare_test_params
-
-    from awiwi_drake.control.registry import controller_names
 
     if args.list:
         for n in controller_names(args.rig):
@@ -80,27 +77,21 @@ def run(args) -> int:
 
     def make_rig():
         return rig_fn(**kw)
+
     short = args.short or short_mode()
-    loops = {}
-    params = None
-    for n in names:
-        rig = make_rig()
-        entry = get_entry(n, rig)
-        opts = dict(entry.loop_options)
-        if args.rate is not None:
-            opts["rate_hz"] = None if args.rate == 0 else args.rate
-        if args.delay is not None:
-            opts["delay"] = args.delay
-        if args.saturation is not None:
-            opts["saturation"] = args.saturation
-        loops[n] = closed_loop(rig, entry.factory(rig), **opts)
-        if params is None:
-            params = compare_test_params(rig)
-            if short:
-                params = params.replace(step_duration=min(params.step_duration, 0.15),
-                                        sweep_duration=min(params.sweep_duration, 1.0),
-                                        settle_time=min(params.settle_time, 0.1), sine_periods=2.0)
-    result = compare(loops, tests=tests, params=params)
+    params = compare_test_params(args.rig)
+    if short:
+        params = params.replace(step_duration=min(params.step_duration, 0.15),
+                                sweep_duration=min(params.sweep_duration, 1.0),
+                                settle_time=min(params.settle_time, 0.1), sine_periods=2.0)
+    opts = {}
+    if args.rate is not None:
+        opts["rate_hz"] = None if args.rate == 0 else args.rate
+    if args.delay is not None:
+        opts["delay"] = args.delay
+    if args.saturation is not None:
+        opts["saturation"] = args.saturation
+    result = compare_controllers(make_rig, names, tests=tests, params=params, **opts)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     result.table.to_csv(out / "metrics.csv")

@@ -35,7 +35,7 @@ from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
 __all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test",
-           "run_standard_tests", "compare", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
+           "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
            "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -470,6 +470,29 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
         rows += m
         rig = getattr(loop.rig, "name", rig)
     return Comparison(runs, MetricsTable(rows), rig)
+
+
+def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
+                        params: CompareTestParams | None = None, **loop_options: Any) -> Comparison:
+    """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
+
+    ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
+    registry's defaults for :func:`awiwi_drake.control.base.closed_loop`.  Names are
+    validated (unknown / not fitting the rig: ValueError) before any simulation.
+    """
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.registry import get_entry
+    names = list(names)
+    if not names:
+        raise ValueError("compare_controllers: give at least one controller name")
+    probe = make_rig()
+    entries = [get_entry(n, probe) for n in names]
+    loops = {}
+    for n, entry in zip(names, entries):
+        rig = make_rig()
+        opts = {**entry.loop_options, **loop_options}
+        loops[n] = closed_loop(rig, entry.factory(rig), **opts)
+    return compare(loops, tests=tests, params=params or compare_test_params(probe))
 
 
 # ----------------------------------------------------------------------------

@@ -163,8 +163,9 @@ class TendonForceLaw(StaticLaw):
         self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=self.name)
         w, xi = g.natural_frequency, g.damping_ratio
         # table of gains over the force table: scheduled = interpolation in it
-        self._kp_tab = w ** 2 * self.inertia / np.maximum(fmap.alpha, 1e-9)
-        self._kd_tab = 2 * xi * w * self.inertia / np.maximum(fmap.alpha, 1e-9)
+        alpha = np.maximum(fmap.alpha, float(fmap.alpha_of_force(g.min_schedule_force)))
+        self._kp_tab = w ** 2 * self.inertia / alpha
+        self._kd_tab = 2 * xi * w * self.inertia / alpha
         self.kp_fixed, self.kd_fixed = identified_gains(float(fmap.alpha_of_force(g.design_force)),
                                                         self.inertia, w, xi)
 
