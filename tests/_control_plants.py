@@ -65,7 +65,7 @@ def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible_joint"):
 
 def autodiff_vs_fd(system, inputs: dict, output: str = "motor_torque", h: float = 1e-6, state=None):
     """(J_autodiff, J_fd) of ``output`` w.r.t. the concatenated ``inputs`` (float system + its AutoDiff copy)."""
-    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
 
     names = list(inputs)
     sizes = [np.size(inputs[n]) for n in names]

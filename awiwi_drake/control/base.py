@@ -28,10 +28,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem_, System
 from pydrake.systems.primitives import DiscreteTimeDelay, Saturation, ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
