@@ -291,7 +291,8 @@ def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: flo
 
     The damping ratio comes from the overshoot (``-ln(OS) / sqrt(pi^2 + ln^2 OS)``,
     NaN without overshoot) or, with ``fit=True``, from
-    :func:`fit_second_order_step` (robust to measurement noise).
+    :func:`fit_second_order_step` (robust to measurement noise; NaN when the fit
+    hits its bounds 0.05 / 3, i.e. the response is not second-order like).
 
     ``y`` is a step response with the step at ``t_step``; the final value is
     the reference ``r1`` (the steady-state error is reported separately).
@@ -312,7 +313,8 @@ def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: flo
     os_frac = max(0.0, float(np.max(e)) - 1.0)
     out["overshoot"] = 100.0 * os_frac
     if fit:
-        out["damping_ratio"] = fit_second_order_step(t, y, r0, r1, t_step)["damping_ratio"]
+        xi = fit_second_order_step(t, y, r0, r1, t_step)["damping_ratio"]
+        out["damping_ratio"] = xi if 0.05 < xi < 2.99 else math.nan  # at a bound: not a 2nd-order response
     else:
         out["damping_ratio"] = _damping_from_overshoot(os_frac)
     outside = np.nonzero(np.abs(e - 1.0) > band)[0]
