@@ -33,7 +33,13 @@ class SimulationDivergedError(RuntimeError):
 
 @dataclass
 class Event:
-    """An interval during which a condition held for one channel."""
+    """An interval during which a condition held for one channel.
+
+    Conditions are checked after every integrator step, so ``t_start`` and
+    ``t_end`` are the first and last step times at which it held (within one
+    step, at most ``max_step``, of the true crossing), and ``extreme`` is the
+    most extreme sampled value.
+    """
 
     kind: str
     channel: str
