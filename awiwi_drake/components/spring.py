@@ -25,7 +25,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 from pydrake.symbolic import Expression
 
-from awiwi_drake._math import asarray_like, is_float, positive_part, smin, where_positive
+from awiwi_drake._math import asarray_like, clip, is_float, positive_part, smin, where_positive
 from awiwi_drake.parameters.components import (
     HysteresisParams, LinearSpringParams, PolynomialSpringParams, SpringMechanismGeometry, TendonParams)
 
@@ -474,7 +474,10 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
     width ``2 (beta f + z0)`` around the elastic curve.
     """
     half_width = p.width_ratio * f_elastic + p.width_offset + 1e-3
-    return p.rate * xdot * (1.0 - np.tanh(xdot / p.smoothing_velocity) * z / half_width)
+    # tanh saturates to +-1 long before 40: clipping its argument only avoids overflow in
+    # the AutoDiff derivative (1 - tanh^2) at large rates.
+    direction = np.tanh(clip(xdot / p.smoothing_velocity, -40.0, 40.0))
+    return p.rate * xdot * (1.0 - direction * z / half_width)
 
 
 @TemplateSystem.define("SpringBank_")
