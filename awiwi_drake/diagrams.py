@@ -47,6 +47,8 @@ def export_all(out_dir="diagrams") -> list[str]:
     for stem, builder, depth in DIAGRAM_EXPORTS:
         res = export_diagram(builder(), out_dir, stem, max_depth=depth, quiet=True)
         lines.append(f"wrote {res.dot}" + "".join(f", {p.name}" for p in res.images))
+        if graphviz_available():
+            lines.extend(f"  not rendered: {why}" for why in res.skipped)
     if not graphviz_available():
         lines.append("note: Graphviz 'dot' not found: only .dot files were written "
                      "(install the Debian package 'graphviz' for .svg/.png)")
