@@ -155,3 +155,48 @@ def test_bad_operating_points_raise_named_errors():
         rig.operating_point(wrist_angle=[0.1, 0.0])
     with pytest.raises(ValueError, match="finger"):
         finger_diagram(finger="pinky")
+    with pytest.raises(ValueError, match="IndexRigParams"):
+        finger_diagram(finger="ring", params=IndexRigParams())
+
+
+def test_hand_simulates_under_joint_control():
+    """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
+    stay put (decoupled routing, palm fixed), no tendon goes slack."""
+    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.hand.diagrams import closed_loop
+    hand = hand_diagram(backend="python")
+    cl = closed_loop(hand)
+    q_ref = np.zeros(hand.num_joints)
+    i_mcp = hand.extra["joint_names"].index("q21")
+    q_ref[i_mcp] = 0.2
+    res = simulate(cl.diagram, cl.context(joint_reference=q_ref), 0.06, log=("joint_angle", "tendon_force"),
+                   monitors=rig_monitors(hand), max_step=1.0 / 3000, accuracy=1e-3)
+    q = res["joint_angle"][-1]
+    assert q[i_mcp] > 0.1
+    others = [i for i, n in enumerate(hand.extra["joint_names"]) if not n.startswith("q2")]
+    assert np.max(np.abs(q[others])) < 1e-9
+    assert not [e for e in res.events if e.kind == "tendon_slack"]
+
+
+def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+    from awiwi_drake.components.routing import TendonRouting_
+    sys = TendonRouting_[float](finger_coupling("thumb"), 0.005, np.full(8, 1e-3))
+    ad = sys.ToAutoDiffXd()
+    rng = np.random.default_rng(5)
+    theta, q, f = rng.uniform(-1, 1, 8), rng.uniform(-1, 1, 4), rng.uniform(5, 40, 8)
+    x = np.concatenate([theta, q, f])
+
+    def out(xx, system, ctx, port):
+        system.GetInputPort("motor_angle").FixValue(ctx, xx[:8])
+        system.GetInputPort("joint_angle").FixValue(ctx, xx[8:12])
+        system.GetInputPort("tendon_force").FixValue(ctx, xx[12:])
+        return system.GetOutputPort(port).Eval(ctx)
+
+    fctx, actx = sys.CreateDefaultContext(), ad.CreateDefaultContext()
+    for port in ("elongation", "generalized_force"):
+        J = ExtractGradient(out(InitializeAutoDiff(x).ravel(), ad, actx, port))
+        eps = 1e-6
+        J_fd = np.array([(out(x + eps * e, sys, fctx, port) - out(x - eps * e, sys, fctx, port)) / (2 * eps)
+                         for e in np.eye(x.size)]).T
+        np.testing.assert_allclose(J, J_fd, atol=1e-7)

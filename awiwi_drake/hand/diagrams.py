@@ -348,6 +348,9 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     p = params if params is not None else FINGER_RIG_PARAMS[finger]()
     if not isinstance(p, FingerRigParams):
         raise ValueError(f"finger_diagram: params must be FingerRigParams, got {type(p).__name__}")
+    if p.finger_name != finger:
+        raise ValueError(f"finger_diagram: params {type(p).__name__} are for the {p.finger_name} finger, not "
+                         f"{finger!r} (use FINGER_RIG_PARAMS[{finger!r}])")
     fp = p.finger
 
     def plant_factory(b):
