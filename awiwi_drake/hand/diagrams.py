@@ -360,9 +360,13 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
                   wrist, visual)
 
 
-def hand_diagram(*, params: HandRigParams | None = None, backend: str = DEFAULT_BACKEND, wrist: bool = True,
+def hand_diagram(*, params: HandRigParams | None = None, backend: str = "python", wrist: bool = True,
                  visual: bool = False) -> HandRig:
     """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
+
+    The default backend is ``"python"``: for 38 tendons the numpy banks are
+    faster than the fused symbolic drive (benchmarks/bench_hand.py: 0.44x vs
+    0.17x real time under 3 kHz control; Linearize 0.15 s vs 1.2 s).
 
     Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
     (Table 6.2 numbering, chosen: see ``parameters.hand``).  Same ports and
@@ -460,7 +464,7 @@ def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op
 
 
 def _export_hand():
-    return hand_diagram().diagram
+    return hand_diagram(backend="symbolic").diagram
 
 
 def _export_hand_python():

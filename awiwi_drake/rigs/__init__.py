@@ -42,11 +42,11 @@ def build_target(name: str, overrides: dict | None = None, **kwargs) -> Rig:
 
 # --- fingers and hand (thesis ch. 5-6), registered here with lazy imports -------------------------
 def _hand_target(finger: str | None):
-    def build(*, params=None, backend: str = "symbolic"):
+    def build(*, params=None, backend: str | None = None):
         from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
-        if finger is None:
-            return hand_diagram(params=params, backend=backend, wrist=True)
-        return finger_diagram(finger=finger, params=params, backend=backend)
+        if finger is None:  # python banks are faster than the fused drive for 38 tendons
+            return hand_diagram(params=params, backend=backend or "python", wrist=True)
+        return finger_diagram(finger=finger, params=params, backend=backend or "symbolic")
     build.__name__ = f"{finger or 'hand'}_target"
     return build
 
