@@ -76,7 +76,7 @@ def bench(target: str, backend: str, sim_time: float, repeat: int) -> dict:
         best = 0.0
         for _ in range(repeat):
             cl = closed_loop(_build(target, backend))
-            rtf, steps = _run(cl.diagram, cl.context(joint_reference=q_ref), sim_time, **kw)
+            rtf, steps = _run(cl.diagram, cl.context(joint_angle_reference=q_ref), sim_time, **kw)
             best = max(best, rtf)
         out[mode], out[mode.replace("rtf", "steps")] = best, steps
     return out

@@ -169,7 +169,7 @@ def test_hand_simulates_under_joint_control():
     q_ref = np.zeros(hand.num_joints)
     i_mcp = hand.extra["joint_names"].index("q21")
     q_ref[i_mcp] = 0.2
-    res = simulate(cl.diagram, cl.context(joint_reference=q_ref), 0.06, log=("joint_angle", "tendon_force"),
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.06, log=("joint_angle", "tendon_force"),
                    monitors=rig_monitors(hand), max_step=1.0 / 3000, accuracy=1e-3)
     q = res["joint_angle"][-1]
     assert q[i_mcp] > 0.1

@@ -392,7 +392,7 @@ class ClosedLoop:
     operating_point: OperatingPoint
     controller: object
 
-    def context(self, *, joint_reference=None, wrist_angle=None, external_torque=None):
+    def context(self, *, joint_angle_reference=None, wrist_angle=None, external_torque=None):
         """Context at the rig's operating point with the reference inputs fixed."""
         ctx = self.diagram.CreateDefaultContext()
         ctx.SetContinuousState(self.operating_point.state)
@@ -400,7 +400,10 @@ class ClosedLoop:
         self.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
             np.asarray(self.operating_point.motor_torque, float))
         n = self.rig.num_joints
-        q_ref = self.operating_point.info["joint_angles"] if joint_reference is None else joint_reference
+        q_ref = self.operating_point.info["joint_angles"] if joint_angle_reference is None else joint_angle_reference
+        if np.shape(q_ref) != (n,):
+            raise ValueError(f"{self.diagram.get_name()}: joint_angle_reference must have {n} entries "
+                             f"({', '.join(self.rig.extra['joint_names'])}), got shape {np.shape(q_ref)}")
         self.diagram.GetInputPort("joint_angle_reference").FixValue(ctx, np.asarray(q_ref, float))
         self.diagram.GetInputPort("external_torque").FixValue(
             ctx, np.zeros(n) if external_torque is None else np.asarray(external_torque, float))

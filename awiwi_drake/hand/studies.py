@@ -184,7 +184,7 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     q_ref = np.zeros(n)
     q_ref[n - 2] = pip_step
     q_ref[n - 1] = pip_step * fp.dip_pip_ratio
-    res = simulate(cl.diagram, cl.context(joint_reference=q_ref), t_final, log=("joint_angle",),
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), t_final, log=("joint_angle",),
                    max_step=cl.controller.hold.period(), accuracy=1e-4)
     q = res["joint_angle"]
     return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
