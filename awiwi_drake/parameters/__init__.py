@@ -12,3 +12,6 @@ from awiwi_drake.parameters.control import (
     CompareTestParams, ForceSensorParams, FrictionIdentificationParams, ImpedanceParams, LqrParams, PolePlacementParams,
     RippleCompensationParams, SdreJointParams, SdreTendonParams, TendonForceGains)
 from awiwi_drake.parameters.wrist import WristParams
+from awiwi_drake.parameters.hand import (
+    FifthFingerParams, FingerParams, FingerRigParams, HandParams, HandRigParams, IndexFingerParams,
+    JointControllerParams, MiddleFingerParams, RingFingerParams, ThumbParams)

@@ -15,7 +15,10 @@ single-joint studies (Tables 14.2, 15.1).  These are not the same quantity:
 the total finger mass is 0.02 kg (split over the links), and the *distal*
 link mass is chosen so that its inertia about the DIP axis (slender cylinder
 about its end, radius ``link_radius``) is about 7.2e-7 kg m^2, the value a
-single-joint rig at the finger tip sees.
+single-joint rig at the finger tip sees.  The resulting centre of mass lies
+~4 cm from the MCP, not 1 cm: with the Table 5.1 bone lengths (9 cm finger)
+the 0.01 m of section 5.2.2 cannot hold; it only served the thesis's gravity
+estimate (negligible either way: 0.02 kg x 9.81 x 0.04 m = 0.008 N m).
 
 Global tendon order
 -------------------
@@ -28,7 +31,6 @@ equations ((5.22) thumb, (5.5) index/middle, (5.18) ring, see
 """
 
 from __future__ import annotations
-
 
 import math
 from dataclasses import dataclass, field
