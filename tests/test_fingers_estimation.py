@@ -75,3 +75,22 @@ def test_estimation_rejects_bad_shapes():
         thumb_base_gradient_search(c, np.zeros(3))
     with pytest.raises(ValueError, match="dh"):
         estimate_linear(finger_coupling("index"), np.zeros(5))
+
+
+def test_estimator_system_converts_and_its_derivative_is_the_pseudo_inverse():
+    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+    from awiwi_drake.hand.estimation import LinkPositionEstimator
+    c = finger_coupling("thumb")
+    est = LinkPositionEstimator(c, 0.005, np.full(8, 1e-3), iterations=50)
+    ad = est.ToAutoDiffXd()
+    q = np.array([0.4, -0.3, 0.2, 0.1])
+    theta = np.linspace(-1, 1, 8)
+    x = 0.005 * theta + c.h(q) - c.h(np.zeros(4)) + 1e-3
+    ctx = ad.CreateDefaultContext()
+    ctx.SetDiscreteState(q + 0.01)                          # warm start near the truth
+    ad.GetInputPort("motor_angle").FixValue(ctx, theta)
+    ad.GetInputPort("elongation").FixValue(ctx, InitializeAutoDiff(x).ravel())
+    nxt = ad.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector().CopyToVector()
+    np.testing.assert_allclose(ExtractValue(nxt).ravel(), q, atol=1e-6)
+    # d q_hat / d elongation = P(q)^+ (least squares on the 8 tendon lengths)
+    np.testing.assert_allclose(ExtractGradient(nxt), np.linalg.pinv(c.P(q)), atol=1e-5)

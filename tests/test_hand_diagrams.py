@@ -200,3 +200,28 @@ def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
         J_fd = np.array([(out(x + eps * e, sys, fctx, port) - out(x - eps * e, sys, fctx, port)) / (2 * eps)
                          for e in np.eye(x.size)]).T
         np.testing.assert_allclose(J, J_fd, atol=1e-7)
+
+
+@pytest.mark.parametrize("finger", ["thumb", "ring"])
+def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
+    """No joint sensors: the 3 kHz estimator (motor angles + spring elongations) follows the plant."""
+    from awiwi_drake.analysis.simulate import simulate
+    from awiwi_drake.hand.diagrams import closed_loop
+    rig = finger_diagram(finger=finger)
+    cl = closed_loop(rig, estimator=True)
+    q_ref = np.asarray(OPS[finger + "_ref"] if finger + "_ref" in OPS else
+                       rig.extra["coupling"].dof_selection @ np.array(OPS[finger]), float)
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.1,
+                   log=("joint_angle", "joint_angle_estimate", "joint_velocity"), max_step=1.0 / 3000,
+                   accuracy=1e-3)
+    late = res.t > 0.05
+    err = np.abs(res["joint_angle_estimate"][late] - res["joint_angle"][late]).max(axis=0)
+    # bound: one sample of lag (|v| * period) + the search tolerance (thumb, 15 warm-started
+    # iterations: < 1e-4 rad) + for the ring PIP/DIP the coupling element's deflection e (the DIP is
+    # estimated as c q_PIP; the PIP absorbs r43 e / (r42 + c r43) of it; |e| < 5e-3 rad here)
+    lag = np.abs(res["joint_velocity"][late]).max(axis=0) / 3000
+    extra = np.full(rig.num_joints, 1e-4)
+    if finger == "ring":
+        extra[-2:] = 5e-3
+    assert np.all(err <= lag + extra), (err, lag)
+    assert np.linalg.norm(res["joint_angle"][-1] - q_ref) < 0.5 * np.linalg.norm(q_ref)   # it moved

@@ -391,6 +391,7 @@ class ClosedLoop:
     rig: HandRig
     operating_point: OperatingPoint
     controller: object
+    estimator: object = None
 
     def context(self, *, joint_angle_reference=None, wrist_angle=None, external_torque=None):
         """Context at the rig's operating point with the reference inputs fixed."""
@@ -399,6 +400,9 @@ class ClosedLoop:
         # start the 3 kHz hold at the holding torques (not at zero)
         self.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
             np.asarray(self.operating_point.motor_torque, float))
+        if self.estimator is not None:   # the estimator starts at the operating point (known pose)
+            self.estimator.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
+                np.asarray(self.operating_point.info["joint_angles"], float))
         n = self.rig.num_joints
         q_ref = self.operating_point.info["joint_angles"] if joint_angle_reference is None else joint_angle_reference
         if np.shape(q_ref) != (n,):
@@ -414,7 +418,7 @@ class ClosedLoop:
 
 
 def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op: OperatingPoint | None = None,
-                wrist_compensation: bool = False) -> ClosedLoop:
+                wrist_compensation: bool = False, estimator: bool = False) -> ClosedLoop:
     """``rig`` with the joint-space motor PD (:func:`add_joint_space_controller`) at 3 kHz.
 
     Exported inputs: ``joint_angle_reference`` (n), ``external_torque`` (n),
@@ -422,7 +426,9 @@ def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op
     with ``wrist_compensation``, the feedforward
     :class:`~awiwi_drake.hand.wrist.WristCompensation_` that shifts the motor
     references by ``-h_wrist / r_m``).  Outputs: the rig's, plus
-    ``motor_torque``.
+    ``motor_torque``, and with ``estimator`` ``joint_angle_estimate`` from a
+    :class:`~awiwi_drake.hand.estimation.LinkPositionEstimator_` at the
+    control rate (fed by the motor angles and the spring elongations only).
     """
     c = params or JointControllerParams()
     op = op or rig.operating_point()
@@ -461,9 +467,18 @@ def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op
         port = plant.get_output_port(i)
         b.ExportOutput(port, port.get_name())
     b.ExportOutput(ctrl.motor_torque, "motor_torque")
+    if estimator:
+        from .estimation import LinkPositionEstimator
+        est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
+            coupling, rig.params.motor.pulley_radius, rig.extra["offsets"], period=c.period))
+        b.Connect(plant.GetOutputPort("motor_angle"), est.GetInputPort("motor_angle"))
+        b.Connect(plant.GetOutputPort("elongation"), est.GetInputPort("elongation"))
+        if has_wrist:
+            b.Connect(plant.GetOutputPort("wrist_tendon_offset"), est.GetInputPort("wrist_offset"))
+        b.ExportOutput(est.get_output_port(0), "joint_angle_estimate")
     diagram = b.Build()
     diagram.set_name(f"{rig.name}_joint_control")
-    return ClosedLoop(diagram, rig, op, ctrl)
+    return ClosedLoop(diagram, rig, op, ctrl, est if estimator else None)
 
 
 def _export_hand():

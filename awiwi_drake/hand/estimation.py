@@ -189,3 +189,106 @@ def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int
                 err[(it, a, start)] = np.linalg.norm(out - grid, axis=1)
                 bnd[(it, a, start)] = a * sig_bound + 2.0 * steps
     return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd)
+
+
+# ---------------------------------------------------------------------------------------------
+# The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
+
+from pydrake.systems.framework import BasicVector_, LeafSystem_  # noqa: E402
+from pydrake.systems.scalar_conversion import TemplateSystem  # noqa: E402
+
+
+def _estimator_parts(coupling):
+    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
+    js = coupling.joint_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_joints)}
+    ts = coupling.tendon_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_tendons)}
+    return parts, js, ts
+
+
+@TemplateSystem.define("LinkPositionEstimator_")
+def LinkPositionEstimator_(T):
+    """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
+
+    Inputs ``motor_angle`` (m) [rad] and ``elongation`` (m) [m] (the spring
+    sensors); the length change at the finger base is
+    ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (+ wrist offsets, which
+    ``wrist_offset`` (m) removes when connected; leave it unconnected or 0
+    otherwise).  Every ``period`` the discrete state (the estimate, n plant
+    joints) is updated: constant-P fingers by the pseudo-inverse (5.15), the
+    thumb base by Algorithm 1 warm-started from the previous estimate (the
+    thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Output
+    ``joint_angle_estimate`` (n) = the state.
+
+    For AutoDiffXd/Expression the search runs on values and one Gauss-Newton
+    step ``q + P(q)^+ (dh - dh(q))`` in the scalar type carries the
+    derivatives (at convergence ``dq/d dh = P^+``, implicit-function theorem).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, coupling, motor_pulley_radius: float, offsets, period: float = 1.0 / 3000,
+                       iterations: int = 15, step0: float = 0.1, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            m, n = coupling.num_tendons, coupling.num_joints
+            offsets = np.asarray(offsets, dtype=float)
+            if offsets.shape != (m,):
+                raise ValueError(f"LinkPositionEstimator: offsets must have {m} entries, got {offsets.shape}")
+            if not period > 0:
+                raise ValueError(f"LinkPositionEstimator: period = {period} must be > 0 [s]")
+            self.coupling, self.r_m, self.offsets = coupling, float(motor_pulley_radius), offsets
+            self.period, self.iterations, self.step0 = float(period), int(iterations), float(step0)
+            self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
+            self._theta = self.DeclareVectorInputPort("motor_angle", m)
+            self._x = self.DeclareVectorInputPort("elongation", m)
+            self._w = self.DeclareVectorInputPort("wrist_offset", m)
+            self._state = self.DeclareDiscreteState(n)
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
+            self.DeclareStateOutputPort("joint_angle_estimate", self._state)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.coupling, other.r_m, other.offsets, other.period, other.iterations,
+                            other.step0, converter=converter)
+
+        def _update(self, context, discrete_state):
+            theta = self._theta.Eval(context)
+            dh = self._x.Eval(context) - self.r_m * theta - self.offsets
+            if self._w.HasValue(context):
+                dh = dh - self._w.Eval(context)
+            q_prev = context.get_discrete_state(0).CopyToVector()
+            q_val = np.array([_value(v) for v in q_prev])
+            dh_val = np.array([_value(v) for v in dh])
+            parts, js, ts = _estimator_parts(self.coupling)
+            q_new = np.zeros(len(q_val))
+            for name, c in parts.items():
+                if c.is_constant:
+                    q_new[js[name]] = estimate_linear(c, dh_val[ts[name]])
+                else:  # thumb: Algorithm 1 warm-started at the previous estimate
+                    q_new[js[name]] = estimate_thumb(c, dh_val[ts[name]], q_val[js[name]][:2],
+                                                     iterations=self.iterations, step0=self.step0)
+            if T is not float:  # one Gauss-Newton step in the scalar type carries the derivatives
+                r = dh - (self.coupling.h(q_new) - self._h0)
+                S = _selection_of(self.coupling)
+                PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
+                q_new = q_new + S @ (np.linalg.pinv(PS) @ r)
+            discrete_state.set_value(0, q_new)
+
+    return Impl
+
+
+LinkPositionEstimator = LinkPositionEstimator_[None]
+
+
+def _value(v) -> float:
+    return float(v) if isinstance(v, (float, int, np.floating)) else float(v.value()) \
+        if hasattr(v, "value") else float(v.Evaluate())
+
+
+def _selection_of(coupling) -> np.ndarray:
+    parts, js, _ = _estimator_parts(coupling)
+    n = coupling.num_joints
+    blocks = [(js[k], c.dof_selection) for k, c in parts.items()]
+    S = np.zeros((n, sum(b.shape[1] for _, b in blocks)))
+    col = 0
+    for sl, b in blocks:
+        S[sl, col:col + b.shape[1]] = b
+        col += b.shape[1]
+    return S
