@@ -23,11 +23,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
-           "estimate_thumb", "EstimationStudy", "thumb_estimation_study", "noise_error_bound"]
+           "estimate_thumb", "EstimationStudy", "thumb_estimation_study", "noise_error_bound",
+           "LinkPositionEstimator_", "LinkPositionEstimator"]
 
 
 def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
@@ -194,8 +197,6 @@ def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int
 # ---------------------------------------------------------------------------------------------
 # The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
 
-from pydrake.systems.framework import BasicVector_, LeafSystem_  # noqa: E402
-from pydrake.systems.scalar_conversion import TemplateSystem  # noqa: E402
 
 
 def _estimator_parts(coupling):
