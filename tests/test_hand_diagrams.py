@@ -225,3 +225,14 @@ def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
         extra[-2:] = 5e-3
     assert np.all(err <= lag + extra), (err, lag)
     assert np.linalg.norm(res["joint_angle"][-1] - q_ref) < 0.5 * np.linalg.norm(q_ref)   # it moved
+
+
+def test_gravity_option_keeps_the_operating_point_an_equilibrium():
+    p = IndexRigParams(gravity=True)
+    rig = finger_diagram(finger="index", params=p)
+    op = rig.operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
+    linearize(rig, op, equilibrium_tolerance=1e-6)
+    op0 = finger_diagram(finger="index").operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
+    # section 5.2.2: gravity ~ 0.002-0.008 N m, i.e. well under a newton of tendon force change
+    df = np.abs(op.info["tendon_force"] - op0.info["tendon_force"]).max()
+    assert 0.0 < df < 1.0

@@ -238,7 +238,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
-        return _equilibrium(name, p, coupling, spring, offsets, G, rows if wrist else None, pretension,
+        return _equilibrium(name, p, plant, coupling, spring, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle)
 
     return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, extra)
@@ -261,9 +261,9 @@ def _selection(coupling) -> np.ndarray:
     return S
 
 
-def _equilibrium(name, p, coupling, spring, offsets, G, wrist_rows, pretension, joint_angles,
+def _equilibrium(name, p, plant, coupling, spring, offsets, G, wrist_rows, pretension, joint_angles,
                  external_torque, wrist_angle):
-    """Static equilibrium: ``-P(q)^T f + tau_c(q) + tau_ext = 0`` with ``f`` closest to the pretension."""
+    """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
     n, m = coupling.num_joints, coupling.num_tendons
     f0 = p.pretension if pretension is None else float(pretension)
     if not f0 > 0:
@@ -284,9 +284,14 @@ def _equilibrium(name, p, coupling, spring, offsets, G, wrist_rows, pretension, 
     if tau_ext.shape != (n,):
         raise ValueError(f"{name}: external_torque must have {n} entries, got {tau_ext.size}")
     tau_c = np.zeros(n) if G is None else -G[:, :n] @ q
+    tau_g = np.zeros(n)
+    if p.gravity:
+        pctx = plant.CreateDefaultContext()
+        plant.SetPositions(pctx, q)
+        tau_g = plant.CalcGravityGeneralizedForces(pctx)
     P = np.asarray(coupling.P(q), dtype=float)
-    # P^T f = tau_ext + tau_c ; f = particular + f0 * projection of 1 onto ker(P^T)
-    rhs = tau_ext + tau_c
+    # P^T f = tau_ext + tau_c + tau_g ; f = particular + f0 * projection of 1 onto ker(P^T)
+    rhs = tau_ext + tau_c + tau_g
     f_part, *_ = np.linalg.lstsq(P.T, rhs, rcond=None)
     if np.linalg.norm(P.T @ f_part - rhs) > 1e-9 * max(1.0, np.linalg.norm(rhs)):
         raise ValueError(f"{name}: the tendons cannot balance external_torque/joint_angles here (the "
