@@ -16,9 +16,9 @@ def test_linearize_finger_targets_match_the_builder(name, capsys):
     from awiwi_drake.hand.diagrams import finger_diagram
     assert main(["linearize", name, "--json", "--set", "pretension=30"]) == 0
     data = json.loads(capsys.readouterr().out)
-    from awiwi_drake.parameters.hand import FINGER_RIG_PARAMS
+    from awiwi_drake.parameters.hand import FingerRigParams
     finger = name.split("-")[1]
-    rig = finger_diagram(finger=finger, params=FINGER_RIG_PARAMS[finger](pretension=30.0))
+    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger, pretension=30.0))
     lin = linearize(rig)
     np.testing.assert_allclose(np.array(data["A"]), lin.A, rtol=1e-9, atol=1e-9)
     assert data["state_names"] == list(rig.state_names)

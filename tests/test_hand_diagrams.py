@@ -11,7 +11,7 @@ from awiwi_drake.hand.coupling import finger_coupling
 from awiwi_drake.hand.diagrams import (GuideFriction, finger_diagram, hand_diagram,
                                        tendon_bending_angles)
 from awiwi_drake.hand.studies import coupling_hold_study, poles_vs_pretension, wrist_compensation_study
-from awiwi_drake.parameters.hand import FINGERS, IndexRigParams, TENDON_SLICES
+from awiwi_drake.parameters.hand import FINGERS, TENDON_SLICES, FingerRigParams
 
 OPS = {"index": [0.1, 0.4, 0.3, 0.2], "middle": [0.0, 0.2, 0.5, 0.1], "ring": [0.05, 0.3, 0.4],
        "fifth": [0.1, 0.0, 0.3, 0.5], "thumb": [0.4, -0.3, 0.2, 0.3]}
@@ -98,7 +98,7 @@ def test_joint_control_reaches_the_reference_and_keeps_the_coupling():
 
 
 def test_guide_friction_is_passive_and_converts_to_autodiff():
-    p = IndexRigParams(guide_friction=True)
+    p = FingerRigParams.for_finger("index", guide_friction=True)
     c = finger_coupling("index")
     alpha = tendon_bending_angles(c, p)
     assert alpha[0] == pytest.approx(p.palm_bending_angle + 2 * p.joint_wrap_angle)   # abd + MCP
@@ -133,7 +133,7 @@ def test_guide_friction_in_the_finger_diagram_dissipates_link_motion():
     from awiwi_drake.analysis.simulate import simulate
     rms = {}
     for on in (False, True):
-        rig = finger_diagram(finger="index", params=IndexRigParams(guide_friction=on))
+        rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index", guide_friction=on))
         op = rig.operating_point()
         ctx = rig.context(op)
         x = op.state.copy()
@@ -155,8 +155,10 @@ def test_bad_operating_points_raise_named_errors():
         rig.operating_point(wrist_angle=[0.1, 0.0])
     with pytest.raises(ValueError, match="finger"):
         finger_diagram(finger="pinky")
-    with pytest.raises(ValueError, match="IndexRigParams"):
-        finger_diagram(finger="ring", params=IndexRigParams())
+    with pytest.raises(ValueError, match="finger_name"):
+        finger_diagram(finger="ring", params=FingerRigParams.for_finger("index"))
+    with pytest.raises(ValueError, match="FingerRigParams.finger must be ThumbParams"):
+        FingerRigParams(finger_name="thumb")
 
 
 def test_hand_simulates_under_joint_control():
@@ -228,7 +230,7 @@ def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
 
 
 def test_gravity_option_keeps_the_operating_point_an_equilibrium():
-    p = IndexRigParams(gravity=True)
+    p = FingerRigParams.for_finger("index", gravity=True)
     rig = finger_diagram(finger="index", params=p)
     op = rig.operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
     linearize(rig, op, equilibrium_tolerance=1e-6)

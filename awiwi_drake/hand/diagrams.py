@@ -43,7 +43,7 @@ from ..components.drive import build_tendon_drive
 from ..components.motor import motor_ripple_torque
 from ..components.spring import tendon_spring
 from ..components.tendon import capstan_friction_force, guide_friction_force
-from ..parameters.hand import (FINGER_RIG_PARAMS, FINGERS, TENDON_SLICES, FingerRigParams,
+from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams, JointControllerParams)
 from ..rigs.base import OperatingPoint, Rig
 from .coupling import FingerCoupling, HandCoupling, finger_coupling
@@ -336,7 +336,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     ----------
     finger : {"thumb", "index", "middle", "ring", "fifth"}
     params : FingerRigParams, optional
-        Default ``FINGER_RIG_PARAMS[finger]()``.
+        Default ``FingerRigParams.for_finger(finger)``.
     backend : {"symbolic", "python"}
         The tendon drive's backend (``awiwi_drake.components.drive``).
     wrist : bool
@@ -350,12 +350,12 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
-    p = params if params is not None else FINGER_RIG_PARAMS[finger]()
+    p = params if params is not None else FingerRigParams.for_finger(finger)
     if not isinstance(p, FingerRigParams):
         raise ValueError(f"finger_diagram: params must be FingerRigParams, got {type(p).__name__}")
     if p.finger_name != finger:
-        raise ValueError(f"finger_diagram: params {type(p).__name__} are for the {p.finger_name} finger, not "
-                         f"{finger!r} (use FINGER_RIG_PARAMS[{finger!r}])")
+        raise ValueError(f"finger_diagram: params.finger_name is {p.finger_name!r}, not {finger!r} "
+                         f"(use FingerRigParams.for_finger({finger!r}))")
     fp = p.finger
 
     def plant_factory(b):

@@ -21,7 +21,7 @@ from ..analysis.linear import linearize
 from ..analysis.simulate import rig_monitors, simulate
 from ..components.routing import TendonRouting_
 from ..components.spring import SpringBank_, tendon_spring
-from ..parameters.hand import FINGER_RIG_PARAMS, FingerRigParams, JointControllerParams
+from ..parameters.hand import FingerRigParams, JointControllerParams
 from .coupling import finger_coupling
 from .diagrams import HandRig, closed_loop, finger_diagram
 from .plant import coupling_force_gain, make_finger_plant
@@ -41,7 +41,7 @@ def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = 
     Returns ``(diagram, plant)``; the diagram exports ``state`` (plant [q; v])
     and ``tendon_force``.
     """
-    p = params if params is not None else FINGER_RIG_PARAMS[finger]()
+    p = params if params is not None else FingerRigParams.for_finger(finger)
     b = DiagramBuilder()
     plant, model = make_finger_plant(finger, p.finger, builder=b, gravity=p.gravity)
     n = plant.num_positions()
@@ -110,7 +110,7 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
     Integrated with Drake's error-controlled ``runge_kutta5`` at ``accuracy``
     (the result agrees with ``runge_kutta3`` at 1e-6 to 1e-8 rad).
     """
-    p = params if params is not None else FINGER_RIG_PARAMS[finger]()
+    p = params if params is not None else FingerRigParams.for_finger(finger)
     out = {}
     names = None
     for flag in (True, False):

@@ -42,9 +42,7 @@ from .rigs import SpringModelParams
 __all__ = [
     "FingerParams", "IndexFingerParams", "MiddleFingerParams", "RingFingerParams",
     "FifthFingerParams", "ThumbParams", "HandParams", "FINGERS", "TENDON_SLICES",
-    "finger_params", "FingerDriveParams", "FingerRigParams", "IndexRigParams", "MiddleRigParams",
-    "RingRigParams", "FifthRigParams", "ThumbRigParams", "HandRigParams", "JointControllerParams",
-    "FINGER_RIG_PARAMS",
+    "finger_params", "FingerDriveParams", "FingerRigParams", "HandRigParams", "JointControllerParams",
 ]
 
 _T51 = "Table 5.1"
@@ -275,46 +273,36 @@ class FingerDriveParams(Parameters):
     gravity: bool = param(False, unit="-", source="section 5.2.2: ~0.002 N m, negligible")
 
 
+_FINGER_PARAM_TYPES = {"thumb": ThumbParams, "index": IndexFingerParams, "middle": MiddleFingerParams,
+                       "ring": RingFingerParams, "fifth": FifthFingerParams}
+
+
 @dataclass(frozen=True)
 class FingerRigParams(FingerDriveParams):
-    """One finger with its motors and springs (``finger`` set by the subclasses)."""
+    """One finger with its motors and springs.
 
-    finger: FingerParams = field(default_factory=IndexFingerParams)
-    finger_name = "index"
+    ``finger_name`` says which finger ``finger`` describes (checked); build the
+    default set of any finger with :meth:`for_finger`.
+    """
 
+    finger: FingerParams | ThumbParams = field(default_factory=IndexFingerParams)
+    finger_name: str = "index"
 
-@dataclass(frozen=True)
-class IndexRigParams(FingerRigParams):
-    finger: IndexFingerParams = field(default_factory=IndexFingerParams)
-    finger_name = "index"
+    @classmethod
+    def for_finger(cls, name: str, **overrides) -> "FingerRigParams":
+        """Defaults for finger ``name`` (one of FINGERS), with field ``overrides``."""
+        if name not in FINGERS:
+            raise ValueError(f"FingerRigParams.finger_name must be one of {FINGERS}, got {name!r}")
+        return cls(finger=_FINGER_PARAM_TYPES[name](), finger_name=name, **overrides)
 
-
-@dataclass(frozen=True)
-class MiddleRigParams(FingerRigParams):
-    finger: MiddleFingerParams = field(default_factory=MiddleFingerParams)
-    finger_name = "middle"
-
-
-@dataclass(frozen=True)
-class RingRigParams(FingerRigParams):
-    finger: RingFingerParams = field(default_factory=RingFingerParams)
-    finger_name = "ring"
-
-
-@dataclass(frozen=True)
-class FifthRigParams(FingerRigParams):
-    finger: FifthFingerParams = field(default_factory=FifthFingerParams)
-    finger_name = "fifth"
-
-
-@dataclass(frozen=True)
-class ThumbRigParams(FingerRigParams):
-    finger: ThumbParams = field(default_factory=ThumbParams)
-    finger_name = "thumb"
-
-
-FINGER_RIG_PARAMS = {"thumb": ThumbRigParams, "index": IndexRigParams, "middle": MiddleRigParams,
-                     "ring": RingRigParams, "fifth": FifthRigParams}
+    def _validate(self) -> None:
+        super()._validate()
+        if self.finger_name not in FINGERS:
+            raise ValueError(f"FingerRigParams.finger_name must be one of {FINGERS}, got {self.finger_name!r}")
+        expected = _FINGER_PARAM_TYPES[self.finger_name]
+        if not isinstance(self.finger, expected):
+            raise ValueError(f"FingerRigParams.finger must be {expected.__name__} for finger_name "
+                             f"{self.finger_name!r}, got {type(self.finger).__name__}")
 
 
 @dataclass(frozen=True)

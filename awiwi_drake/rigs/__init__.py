@@ -52,14 +52,15 @@ def _hand_target(finger: str | None):
 
 
 def _register_hand_targets() -> None:
-    from awiwi_drake.parameters.hand import FINGER_RIG_PARAMS, HandRigParams
+    import functools
+    from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
     dof = {"thumb": "4 DoF (tensegrity base (5.20)-(5.22), PIP, DIP), 8 tendons",
            "index": "4 DoF (Table 5.1, (5.5)), 8 tendons", "middle": "4 DoF (as the index), 8 tendons",
            "ring": "3 DoF (PIP/DIP coupled (5.16), 4 plant joints), 6 tendons",
            "fifth": "4 DoF (hematometacarpal + ring-like), 5 plant joints, 8 tendons"}
-    for f, cls in FINGER_RIG_PARAMS.items():
+    for f in FINGERS:
         TARGETS[f"finger-{f}"] = dict(
-            builder=_hand_target(f), params=cls,
+            builder=_hand_target(f), params=functools.partial(FingerRigParams.for_finger, f),
             description=f"{f} finger: {dof[f]}; state [q, q_dot, theta, omega]; operating point: "
                         "pretension=20 N, q=0")
     TARGETS["hand"] = dict(
