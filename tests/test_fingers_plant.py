@@ -108,3 +108,26 @@ def test_fig_5_7_coriolis_effect_vanishes_at_least_quadratically_with_the_deflec
     assert np.all(small.max_abs_difference < 1e-3)          # the thesis's bound holds at 0.025 rad
     assert np.max(np.abs(big.q_full[:, 0])) < 1e-3 * np.max(np.abs(big.q_full[:, 2])) * 20
     assert np.max(np.abs(big.q_full[:, 2])) == pytest.approx(0.05, rel=1e-6)   # released from rest
+
+
+def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating_elongation():
+    from awiwi_drake.hand.coupling import finger_coupling
+    from awiwi_drake.hand.systems import MotorAngleReference
+    c = finger_coupling("thumb")
+    theta_op, q_op, r_m = np.linspace(-0.2, 0.2, 8), np.zeros(4), 0.005
+    sys = MotorAngleReference(c, r_m, theta_op, q_op)
+    ctx = sys.CreateDefaultContext()
+    q = np.array([0.5, 0.35, 0.3, -0.2])
+
+    def out(qq):
+        sys.get_input_port(0).FixValue(ctx, qq)
+        return sys.get_output_port(0).Eval(ctx).copy()
+
+    theta = out(q)
+    # elongation r_m theta + h(q) - h(0) equals its operating value for every tendon
+    np.testing.assert_allclose(r_m * theta + c.h(q), r_m * theta_op + c.h(q_op), atol=1e-15)
+    ad = sys.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    ad.get_input_port(0).FixValue(actx, InitializeAutoDiff(q).ravel())
+    J = ExtractGradient(ad.get_output_port(0).Eval(actx))
+    np.testing.assert_allclose(J, -c.P(q) / r_m, atol=1e-12)

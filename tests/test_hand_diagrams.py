@@ -238,3 +238,17 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
     # section 5.2.2: gravity ~ 0.002-0.008 N m, i.e. well under a newton of tendon force change
     df = np.abs(op.info["tendon_force"] - op0.info["tendon_force"]).max()
     assert 0.0 < df < 1.0
+
+
+def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
+    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.hand.diagrams import closed_loop
+    rig = finger_diagram(finger="thumb")
+    cl = closed_loop(rig)
+    q_ref = np.array([0.5, 0.35, 0.0, 0.0])
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.3, log=("joint_angle",),
+                   monitors=rig_monitors(rig), max_step=1.0 / 3000, accuracy=1e-3)
+    # the springs are held at their 20 N elongation at q_ref; the residual comes from the tendon
+    # forces no longer balancing exactly there (P(q_ref)^T f_op != 0) and from motor friction
+    assert np.abs(res["joint_angle"][-1] - q_ref).max() < 0.05
+    assert not [e for e in res.events if e.kind == "tendon_slack"]

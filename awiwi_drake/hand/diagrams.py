@@ -439,7 +439,6 @@ def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op
     op = op or rig.operating_point()
     coupling = rig.extra["coupling"]
     q_op = op.info["joint_angles"]
-    P_op = np.asarray(coupling.P(q_op), float)
     m, n = rig.num_tendons, rig.num_joints
     has_wrist = rig.diagram.HasInputPort("wrist_angle")
     if wrist_compensation and not has_wrist:
@@ -447,7 +446,7 @@ def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op
     theta_op = op.state[2 * n: 2 * n + m]
     b = DiagramBuilder()
     plant = b.AddNamedSystem(rig.name, rig.diagram)
-    ctrl = add_joint_space_controller(b, P_op=P_op, motor_pulley_radius=rig.params.motor.pulley_radius,
+    ctrl = add_joint_space_controller(b, coupling=coupling, motor_pulley_radius=rig.params.motor.pulley_radius,
                                       theta_op=theta_op, u_op=np.asarray(op.motor_torque, float), q_op=q_op,
                                       kp=c.kp, kd=c.kd, period=c.period,
                                       motor_angle_offset=wrist_compensation)
