@@ -202,3 +202,17 @@ def test_overrides_reach_nested_parameters_and_reject_unknown_names():
     assert dataclasses.replace(p).motor.inertia == 3e-3
     with pytest.raises(ValueError, match="unknown parameter 'intertia'"):
         TendonRigParams().with_overrides({"intertia": "1"})
+
+
+def test_fixed_step_rk3_at_the_control_period_matches_error_control():
+    rig = joint_rig()
+    op = rig.operating_point(pretension=20.0)
+    finals = []
+    for fixed in (False, True):
+        ctx = rig.context(op)
+        rig.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque + [0.8, -0.8])
+        res = simulate(rig.diagram, ctx, 0.1, log=("state",), max_step=1 / 3000, accuracy=1e-7, fixed_step=fixed)
+        finals.append(res["state"][-1])
+        if fixed:
+            assert np.allclose(np.diff(res.t[1:]), 1 / 3000)   # really fixed steps
+    np.testing.assert_allclose(finals[1], finals[0], rtol=1e-3, atol=1e-5)

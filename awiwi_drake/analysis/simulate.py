@@ -240,8 +240,8 @@ def _resolve_ports(diagram: Diagram, log) -> list[tuple[str, System, OutputPort]
 def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
              log: Iterable[str] | Mapping[str, object] = ("state",),
              monitors: Sequence = (), integrator: str = "runge_kutta3", max_step: float = 1e-3,
-             accuracy: float = 1e-5, divergence_bound: float = 1e6, t_start: float | None = None
-             ) -> SimulationResult:
+             accuracy: float = 1e-5, divergence_bound: float = 1e6, t_start: float | None = None,
+             fixed_step: bool = False) -> SimulationResult:
     """Simulate ``diagram`` from ``context`` to ``t_final`` [s] with Drake's ``Simulator``.
 
     Parameters
@@ -264,6 +264,10 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
         Maximum step [s] and target accuracy of the integrator.
     divergence_bound : float
         Any state entry beyond this magnitude counts as divergence.
+    fixed_step : bool
+        Run the integrator at ``max_step`` without error control (e.g. RK3 at
+        the 3 kHz control period: several times faster under a sample-and-hold
+        controller; check the accuracy against an error-controlled run).
     """
     if not (np.isfinite(t_final) and t_final > 0):
         raise ValueError(f"simulate: t_final = {t_final} must be finite and > 0 [s]")
@@ -271,7 +275,9 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
     sim = Simulator(diagram, context) if context is not None else Simulator(diagram)
     ResetIntegratorFromFlags(sim, integrator, max_step)
     integ = sim.get_mutable_integrator()
-    if integrator not in ("runge_kutta2", "explicit_euler", "semi_explicit_euler"):  # fixed-step ones
+    if fixed_step:
+        integ.set_fixed_step_mode(True)
+    elif integrator not in ("runge_kutta2", "explicit_euler", "semi_explicit_euler"):  # fixed-step ones
         integ.set_target_accuracy(accuracy)
     root = sim.get_mutable_context()
     if t_start is not None:

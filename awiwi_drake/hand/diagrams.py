@@ -512,11 +512,5 @@ HAND_DIAGRAM_EXPORTS = [
 
 def export_hand_diagrams(out_dir="diagrams") -> list[str]:
     """Write the hand/finger diagram graphs (``hand_*.dot``, and .svg/.png with Graphviz)."""
-    from ..export import export_diagram, graphviz_available
-    lines = []
-    for stem, builder, depth in HAND_DIAGRAM_EXPORTS:
-        res = export_diagram(builder(), out_dir, stem, max_depth=depth, quiet=True)
-        lines.append(f"wrote {res.dot}" + "".join(f", {p.name}" for p in res.images))
-    if not graphviz_available():
-        lines.append("note: Graphviz 'dot' not found: only .dot files were written")
-    return lines
+    from ..diagrams import export_entries
+    return export_entries(HAND_DIAGRAM_EXPORTS, out_dir)
