@@ -25,7 +25,8 @@ from scipy.integrate import solve_ivp
 
 from awiwi_drake.components.motor import motor_acceleration
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
-from awiwi_drake.rigs.demo import DemoScenario, MotorPositionGains, joint_rig_position_loop, motor_references
+from awiwi_drake.rigs.demo import (
+    DemoScenario, MotorPositionGains, joint_rig_position_loop, motor_references, start_loop_at)
 
 RATE = 3000.0
 
@@ -57,9 +58,7 @@ def closed_loop_rtf_joint(backend, seconds, integrator="runge_kutta3"):
     scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
     diagram, _, _ = joint_rig_position_loop(rig, scen)
     ctx = diagram.CreateDefaultContext()
-    rig.set_operating_point(rig.diagram.GetMyMutableContextFromRoot(ctx),
-                            rig.operating_point(pretension=scen.f_start), fix_inputs=False)
-    diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
+    start_loop_at(diagram, ctx, rig, rig.operating_point(pretension=scen.f_start))
     return _advance(diagram, ctx, seconds, integrator)
 
 
@@ -83,7 +82,8 @@ def scipy_reference_rtf(seconds):
         acc = motor_acceleration(th, w, u, r * f, p.motor)
         return np.concatenate([[qd, (rq * (f[0] - f[1]) - dq * qd) / m], w, acc])
 
-    x = rig.operating_point(pretension=scen.f_start).state.copy()
+    op = rig.operating_point(pretension=scen.f_start)
+    x = op.state.copy()
     dt = 1.0 / RATE
     n = int(round(seconds * RATE))
     t0 = time.perf_counter()

@@ -133,8 +133,10 @@ def test_every_parameter_has_unit_source_and_valid_default():
         inst = cls()
         for name, info in cls.info().items():
             assert info.source and info.unit, f"{cls.__name__}.{name} lacks a unit or source"
-            assert info.source.startswith(("Table", "Tables", "(", "ch.", "Fig", "chosen", "Section", "MODEL_NOTES")) \
-                or "Table" in info.source or "Fig" in info.source, f"{cls.__name__}.{name}: source {info.source!r}"
+            src = info.source.lower()
+            cites = ("table", "fig", "(", "ch.", "chapter", "section", "algorithm", "eq", "thesis", "model_notes")
+            assert src.startswith(("chosen", "derived")) or any(c in src for c in cites), \
+                f"{cls.__name__}.{name}: source {info.source!r} neither cites the thesis nor says why it was chosen"
         assert provenance_table(inst).count("\n") >= 2
 
 
@@ -143,11 +145,55 @@ def test_every_parameter_has_unit_source_and_valid_default():
     (MotorParams, "inertia", -2e-3, "must be > 0.0"),
     (FlexibleJointParams, "stiffness", 0.0, "FlexibleJointParams.stiffness = 0.0 is out of range"),
     (JointRigParams, "link_pulley_radius", 0.2, "must be <= 0.05"),
-    (MotorParams, "friction", "yes", "is not a number"),
+    (MotorParams, "friction", "yes", "must be True or False"),
+    (MotorParams, "friction", 0.5, "must be True or False"),
+    (MotorParams, "inertia", False, "is not a number"),
+    (FlexibleJointParams, "spring_model", "cubic", "must be one of 'linear', 'nonlinear'"),
 ])
 def test_bad_parameters_raise_naming_the_field(cls, field, value, message):
     with pytest.raises(ValueError, match=message.replace("(", r"\(").replace(")", r"\)")):
         cls(**{field: value})
+
+
+def test_int_fields_take_whole_numbers_only():
+    from awiwi_drake.parameters import SpringModelParams
+    with pytest.raises(ValueError, match="SpringModelParams.polynomial_degree = 2.5 must be a whole number"):
+        SpringModelParams(polynomial_degree=2.5)
+    with pytest.raises(ValueError, match="cannot parse '5.5'"):
+        JointRigParams().with_overrides({"polynomial_degree": "5.5"})
+
+
+def test_infeasible_operating_points_and_unused_fields_are_rejected():
+    from awiwi_drake.rigs import build_target
+    with pytest.raises(ValueError, match="pretension = 700.0 N exceeds the calibrated range"):
+        build_target("joint-rig", {"pretension": "700"})
+    with pytest.raises(ValueError, match="beyond motor.torque_limit = 0.05 Nm"):
+        build_target("joint-rig", {"torque_limit": "0.05"}).operating_point()
+    with pytest.raises(ValueError, match="only apply to spring_model='nonlinear'"):
+        build_target("flexible-joint", {"pretension": "5"})
+    with pytest.raises(ValueError, match="beyond the lever's mechanical stop"):
+        build_target("tendon-rig", {"spring.max_force": "1000"})
+
+
+def test_spring_overrange_is_reported_and_the_curve_stays_monotonic_beyond_it():
+    rig = tendon_rig()
+    ctx = rig.context()
+    rig.diagram.GetInputPort("motor_torque").FixValue(ctx, [2.9])   # inside the 3 Nm limit: stalls near 600 N
+    res = simulate(rig.diagram, ctx, 0.3, log=("tendon_force", "tendon_stiffness"), monitors=rig_monitors(rig))
+    over = res.events_of("spring_overrange")
+    assert len(over) == 1 and over[0].extreme > rig.spring.max_force
+    assert np.all(res["tendon_stiffness"] > 0)            # the tangent continuation never turns over
+    assert not res.events_of("actuator_saturation")
+
+
+def test_pair_slack_of_the_nonlinear_flexible_joint_is_detected():
+    rig = flexible_joint_rig(spring="nonlinear")
+    x0, r = rig.extra["pair_slack"]
+    ctx = rig.context()
+    d = 1.5 * x0 / r                                      # deflection beyond the slack limit x0 / r
+    ctx.SetContinuousState([0.0, 0.0, d, 0.0])
+    res = simulate(rig.diagram, ctx, 1e-4, log=("state",), monitors=rig_monitors(rig))
+    assert [e.channel for e in res.events_of("tendon_slack")] == ["pair tendon 2"]
 
 
 def test_overrides_reach_nested_parameters_and_reject_unknown_names():
@@ -156,3 +202,17 @@ def test_overrides_reach_nested_parameters_and_reject_unknown_names():
     assert dataclasses.replace(p).motor.inertia == 3e-3
     with pytest.raises(ValueError, match="unknown parameter 'intertia'"):
         TendonRigParams().with_overrides({"intertia": "1"})
+
+
+def test_fixed_step_rk3_at_the_control_period_matches_error_control():
+    rig = joint_rig()
+    op = rig.operating_point(pretension=20.0)
+    finals = []
+    for fixed in (False, True):
+        ctx = rig.context(op)
+        rig.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque + [0.8, -0.8])
+        res = simulate(rig.diagram, ctx, 0.1, log=("state",), max_step=1 / 3000, accuracy=1e-7, fixed_step=fixed)
+        finals.append(res["state"][-1])
+        if fixed:
+            assert np.allclose(np.diff(res.t[1:]), 1 / 3000)   # really fixed steps
+    np.testing.assert_allclose(finals[1], finals[0], rtol=1e-3, atol=1e-5)

@@ -2,4 +2,4 @@
 
 from awiwi_drake.analysis.linear import LinearizationResult, LqrResult, linearize, lqr, lqr_closed_loop, poles_table
 from awiwi_drake.analysis.simulate import (
-    Event, SaturationMonitor, SimulationDivergedError, SimulationResult, SlackMonitor, rig_monitors, simulate)
+    Event, OverrangeMonitor, PairSlackMonitor, SaturationMonitor, SimulationDivergedError, SimulationResult, SlackMonitor, rig_monitors, simulate)

@@ -23,6 +23,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import Context, Diagram, EventStatus, OutputPort, System
 
 __all__ = ["SimulationDivergedError", "Event", "SimulationResult", "SlackMonitor", "SaturationMonitor",
+           "OverrangeMonitor", "PairSlackMonitor",
            "simulate", "rig_monitors"]
 
 
@@ -32,7 +33,13 @@ class SimulationDivergedError(RuntimeError):
 
 @dataclass
 class Event:
-    """An interval during which a condition held for one channel."""
+    """An interval during which a condition held for one channel.
+
+    Conditions are checked after every integrator step, so ``t_start`` and
+    ``t_end`` are the first and last step times at which it held (within one
+    step, at most ``max_step``, of the true crossing), and ``extreme`` is the
+    most extreme sampled value.
+    """
 
     kind: str
     channel: str
@@ -94,9 +101,14 @@ class _IntervalMonitor:
     def _extreme(self, old: float, v: float) -> float:
         return max(old, v)
 
+    def reset(self) -> None:
+        """Forget events (called by :func:`simulate` before each run)."""
+        self._open, self.events = {}, []
+
     def check(self, root: Context) -> str | None:
-        v = self.port.Eval(self.system.GetMyContextFromRoot(root))
-        t = root.get_time()
+        return self._check_values(root.get_time(), self.port.Eval(self.system.GetMyContextFromRoot(root)))
+
+    def _check_values(self, t: float, v) -> str | None:
         hit = self._condition(v)
         for i in range(len(v)):
             if hit[i]:
@@ -133,6 +145,19 @@ class SlackMonitor(_IntervalMonitor):
         return min(old, v)
 
 
+class OverrangeMonitor(_IntervalMonitor):
+    """Spring beyond its calibrated range: force on ``port_name`` above ``max_force`` [N]."""
+
+    kind = "spring_overrange"
+
+    def __init__(self, system, max_force: float, port_name="tendon_force", **kw):
+        super().__init__(system, system.GetOutputPort(port_name), **kw)
+        self.max_force = max_force
+
+    def _condition(self, v):
+        return v > self.max_force
+
+
 class SaturationMonitor(_IntervalMonitor):
     """Actuator saturation: ``|commanded torque| >= torque_limit`` on input ``port_name``."""
 
@@ -149,11 +174,45 @@ class SaturationMonitor(_IntervalMonitor):
         return old if abs(old) >= abs(v) else v
 
 
+class PairSlackMonitor(_IntervalMonitor):
+    """Slack in an antagonistic torsional spring ``phi(d)`` (flexible joint, nonlinear spring).
+
+    The pair's tendons have elongations ``x0 + r d`` and ``x0 - r d`` with
+    ``d = theta - q`` (state entries ``i_theta`` and ``i_q``); a tendon is slack when
+    its elongation is <= 0.
+    """
+
+    kind = "tendon_slack"
+
+    def __init__(self, system, x0: float, radius: float, i_q: int = 0, i_theta: int = 2, **kw):
+        super().__init__(system, system.GetOutputPort("state"), labels=["pair tendon 1", "pair tendon 2"], **kw)
+        self.x0, self.r, self.i_q, self.i_theta = x0, radius, i_q, i_theta
+
+    def check(self, root):
+        x = self.port.Eval(self.system.GetMyContextFromRoot(root))
+        d = x[self.i_theta] - x[self.i_q]
+        elong = np.array([self.x0 + self.r * d, self.x0 - self.r * d])
+        return self._check_values(root.get_time(), elong)
+
+    def _condition(self, v):
+        return v <= 0.0
+
+
 def rig_monitors(rig, *, raise_on_slack: bool = False, raise_on_saturation: bool = False) -> list:
-    """Slack and saturation monitors for a rig (``rig.extra`` says ``tension_only`` and ``torque_limit``)."""
+    """Slack, over-range and saturation monitors for a rig.
+
+    ``rig.extra`` says what applies: ``tension_only`` (slack on ``tendon_force``),
+    ``pair_slack`` (slack of the two hidden tendons of an antagonistic torsional
+    spring, from the ``state`` output), ``max_force`` (calibrated spring range)
+    and ``torque_limit``.
+    """
     monitors = []
     if rig.extra.get("tension_only", True):
         monitors.append(SlackMonitor(rig.diagram, raise_on_event=raise_on_slack))
+    if rig.extra.get("pair_slack") is not None:
+        monitors.append(PairSlackMonitor(rig.diagram, *rig.extra["pair_slack"], raise_on_event=raise_on_slack))
+    if rig.extra.get("max_force") is not None:
+        monitors.append(OverrangeMonitor(rig.diagram, rig.extra["max_force"]))
     limit = rig.extra.get("torque_limit")
     if limit is not None:
         monitors.append(SaturationMonitor(rig.diagram, limit, raise_on_event=raise_on_saturation))
@@ -181,8 +240,8 @@ def _resolve_ports(diagram: Diagram, log) -> list[tuple[str, System, OutputPort]
 def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
              log: Iterable[str] | Mapping[str, object] = ("state",),
              monitors: Sequence = (), integrator: str = "runge_kutta3", max_step: float = 1e-3,
-             accuracy: float = 1e-5, divergence_bound: float = 1e6, t_start: float | None = None
-             ) -> SimulationResult:
+             accuracy: float = 1e-5, divergence_bound: float = 1e6, t_start: float | None = None,
+             fixed_step: bool = False) -> SimulationResult:
     """Simulate ``diagram`` from ``context`` to ``t_final`` [s] with Drake's ``Simulator``.
 
     Parameters
@@ -205,6 +264,10 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
         Maximum step [s] and target accuracy of the integrator.
     divergence_bound : float
         Any state entry beyond this magnitude counts as divergence.
+    fixed_step : bool
+        Run the integrator at ``max_step`` without error control (e.g. RK3 at
+        the 3 kHz control period: several times faster under a sample-and-hold
+        controller; check the accuracy against an error-controlled run).
     """
     if not (np.isfinite(t_final) and t_final > 0):
         raise ValueError(f"simulate: t_final = {t_final} must be finite and > 0 [s]")
@@ -212,7 +275,9 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
     sim = Simulator(diagram, context) if context is not None else Simulator(diagram)
     ResetIntegratorFromFlags(sim, integrator, max_step)
     integ = sim.get_mutable_integrator()
-    if integrator not in ("runge_kutta2", "explicit_euler", "semi_explicit_euler"):  # fixed-step ones
+    if fixed_step:
+        integ.set_fixed_step_mode(True)
+    elif integrator not in ("runge_kutta2", "explicit_euler", "semi_explicit_euler"):  # fixed-step ones
         integ.set_target_accuracy(accuracy)
     root = sim.get_mutable_context()
     if t_start is not None:
@@ -237,6 +302,9 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
                 return EventStatus.Failed(diagram, msg)
         return EventStatus.Succeeded()
 
+    for m in monitors:
+        if hasattr(m, "reset"):
+            m.reset()
     sim.set_monitor(monitor)
     try:
         sim.Initialize()

@@ -541,7 +541,7 @@ class WristCoupling:
         """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
 
         The geometric stiffness of the wrist joints due to the tendon forces
-        ``f`` (the joint stiffness map is ``P^T K_t P - dPT_f_dq``).  Exact:
+        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + dPT_f_dq``).  Exact:
         forward-mode tangents nested over the scalar type.
         """
         q71, q73 = self._split(q)

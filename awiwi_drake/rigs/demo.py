@@ -21,7 +21,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from awiwi_drake.parameters.base import Parameters, param
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["DemoScenario", "MotorPositionGains", "motor_references", "joint_rig_position_loop"]
+__all__ = ["DemoScenario", "MotorPositionGains", "motor_references", "joint_rig_position_loop", "start_loop_at"]
 
 
 @dataclass(frozen=True)
@@ -70,7 +70,9 @@ def joint_rig_position_loop(rig: Rig, scenario: DemoScenario = DemoScenario(),
     if rig.name != "joint_rig":
         raise ValueError(f"joint_rig_position_loop: needs a joint_rig, got {rig.name}")
     s = scenario
-    t = np.linspace(0.0, s.t_final, 601)
+    grid = np.linspace(0.0, s.t_final, 601)
+    grid = grid[np.abs(grid - s.step_time) > 1e-6]
+    t = np.union1d(grid, [s.step_time - 1e-7, s.step_time])  # knots on both sides: a sharp step
     pre = np.interp(t, [0.0, s.ramp_time, s.t_final], [s.f_start, s.f_end, s.f_end])
     q_ref = np.where(t >= s.step_time, s.link_step, 0.0)
     theta_ref, ff = motor_references(rig, t, pre, q_ref)
@@ -100,3 +102,15 @@ def joint_rig_position_loop(rig: Rig, scenario: DemoScenario = DemoScenario(),
     diagram = b.Build()
     diagram.set_name("joint_rig_position_loop")
     return diagram, t, dict(pretension=pre, link_reference=q_ref, theta_reference=theta_ref)
+
+
+def start_loop_at(diagram, context, rig: Rig, op) -> None:
+    """Start a loop from :func:`joint_rig_position_loop` at operating point ``op``.
+
+    Sets the rig's state and the hold's initial command to ``op.motor_torque``,
+    so the loop starts in equilibrium instead of with a zero command.
+    """
+    rig.set_operating_point(rig.diagram.GetMyMutableContextFromRoot(context), op, fix_inputs=False)
+    hold = diagram.GetSubsystemByName("zoh_3kHz")
+    hold.GetMyMutableContextFromRoot(context).get_mutable_discrete_state(0).SetFromVector(op.motor_torque)
+    diagram.GetInputPort("external_torque").FixValue(context, [0.0])

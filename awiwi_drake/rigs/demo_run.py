@@ -8,7 +8,7 @@ import numpy as np
 
 from awiwi_drake.analysis import linearize, rig_monitors, simulate
 from awiwi_drake.config import short_mode
-from awiwi_drake.rigs.demo import DemoScenario, joint_rig_position_loop
+from awiwi_drake.rigs.demo import DemoScenario, joint_rig_position_loop, start_loop_at
 from awiwi_drake.rigs.rigs import joint_rig
 
 __all__ = ["run_demo", "pole_sweep_pretension"]
@@ -41,8 +41,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
     scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
     diagram, t_ref, refs = joint_rig_position_loop(rig, scenario)
     ctx = diagram.CreateDefaultContext()
-    rig.set_operating_point(rig.diagram.GetMyMutableContextFromRoot(ctx),
-                            rig.operating_point(pretension=scenario.f_start), fix_inputs=False)
+    start_loop_at(diagram, ctx, rig, rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final, log=("link_angle", "tendon_force", "motor_torque"),
                       monitors=rig_monitors(rig), max_step=1.0 / 3000)
     fig, _ = plot_signals(result, ["link_angle", "tendon_force", "motor_torque"],

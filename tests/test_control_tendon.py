@@ -1,0 +1,143 @@
+"""Tendon force control (ch. 10, 14.2.1): closed forms (10.3)-(10.4), (10.11), gain scheduling, SDRE."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from _control_plants import autodiff_vs_fd
+from awiwi_drake.analysis import lqr
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.compare import fit_second_order_step, simulate_loop
+from awiwi_drake.control.sensors import force_sensor
+from awiwi_drake.control.sdre import tendon_sdre_controller
+from awiwi_drake.control.tendon_force import (TendonForceLaw, force_map, steady_state_force_without_feedforward,
+                                              tendon_pd_controller, tendon_scheduled_controller)
+from awiwi_drake.parameters import MotorParams, TendonRigParams
+from awiwi_drake.parameters.control import ForceSensorParams, SdreTendonParams, TendonForceGains
+from awiwi_drake.rigs import tendon_rig
+
+DT = 1.0 / 3000.0
+
+
+@pytest.fixture(scope="module")
+def fmap():
+    return force_map(tendon_rig())
+
+
+def _step(controller_factory, fmap, f0, f1, *, t_final, ripple=False, noise=0.0, gains=None, delay=None):
+    rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=ripple)), backend="symbolic")
+    ctrl = controller_factory(rig, gains, fmap=fmap)
+    sensors = {"tendon_force": force_sensor(ForceSensorParams(noise_std=noise))} if noise else None
+    loop = closed_loop(rig, ctrl, rate_hz=3000.0, delay=delay, sensors=sensors)
+    op = rig.operating_point(tendon_force=f0)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
+                              references={"tendon_force_reference": f0})
+    t_step = 0.02
+    log = simulate_loop(loop, ctx, t_final, DT, inputs={"tendon_force_reference": lambda t: f0 if t < t_step else f1},
+                        outputs=("tendon_force", "motor_torque_command"))
+    return log, t_step, ctrl
+
+
+def test_force_map_and_identified_gains(fmap):
+    rig = tendon_rig()
+    r_m = rig.params.motor.pulley_radius
+    for f in (10.0, 30.0, 45.0):
+        op = rig.operating_point(tendon_force=f)
+        assert fmap.theta_of_force(f) == pytest.approx(op.state[0], abs=2e-4)
+        assert fmap.alpha_of_force(f) == pytest.approx(r_m * op.info["tendon_stiffness"], rel=2e-3)
+    g = TendonForceGains()
+    law = TendonForceLaw(fmap, rig.params.motor, g, scheduled=True)
+    B, w, xi = rig.params.motor.inertia, g.natural_frequency, g.damping_ratio
+    for f in (12.0, 33.0):
+        kp, kd = law.gains_at(f)
+        a = fmap.alpha_of_force(f)
+        assert kp == pytest.approx(w ** 2 * B / a, rel=2e-3) and kd == pytest.approx(2 * xi * w * B / a, rel=2e-3)
+    fixed = TendonForceLaw(fmap, rig.params.motor, g, scheduled=False)
+    assert fixed.gains_at(12.0) == fixed.gains_at(40.0)
+    np.testing.assert_allclose(fixed.gains_at(40.0), law.gains_at(g.design_force), rtol=1e-5)
+
+
+def test_steady_state_error_with_and_without_feedforward(fmap):
+    """(10.3): without the force feed-forward f_ss = f_des Kp / (Kp + r_m); (10.4): with it the error vanishes."""
+    no_ff = TendonForceGains(force_feedforward=False)
+    log, _, ctrl = _step(tendon_pd_controller, fmap, 20.0, 30.0, t_final=0.4, gains=no_ff)
+    kp = ctrl.law.kp_fixed
+    r_m = tendon_rig().params.motor.pulley_radius
+    expected = steady_state_force_without_feedforward(30.0, kp, r_m)
+    assert 30.0 - expected > 0.05  # a visible error ...
+    assert log["tendon_force"][-1, 0] == pytest.approx(expected, abs=2e-3)  # ... exactly as (10.3) says
+    log, _, _ = _step(tendon_pd_controller, fmap, 20.0, 30.0, t_final=0.4)
+    assert log["tendon_force"][-1, 0] == pytest.approx(30.0, abs=1e-3)
+
+
+def test_scheduled_gains_are_well_damped_everywhere_fixed_are_not(fmap):
+    """Fig 10.2-10.3 with friction, ripple, 12-bit quantisation, noise and 333 us delay in the loop.
+
+    The damping ratio is fitted to each simulated 5 N step (2nd-order model).
+    Scheduled gains: within 0.10 of the design value 0.7 at 10, 20, 30, 40 N.
+    Fixed gains (tuned at 30 N): under-damped at 10 N and spread at least twice as wide.
+    """
+    design = TendonForceGains().damping_ratio
+    xi = {"fixed": [], "scheduled": []}
+    for name, factory in (("fixed", tendon_pd_controller), ("scheduled", tendon_scheduled_controller)):
+        for f0 in (10.0, 20.0, 30.0, 40.0):
+            log, t_step, _ = _step(factory, fmap, f0, f0 + 5.0, t_final=0.15, ripple=True, noise=0.1, delay=333e-6)
+            fit = fit_second_order_step(log["t"], log["tendon_force"][:, 0], f0, f0 + 5.0, t_step)
+            xi[name].append(fit["damping_ratio"])
+    sched, fixed = np.array(xi["scheduled"]), np.array(xi["fixed"])
+    assert np.all(np.abs(sched - design) < 0.10), sched
+    assert fixed[0] < design - 0.12, fixed  # 10 N: visibly under-damped
+    assert np.ptp(fixed) > 2.0 * np.ptp(sched), (fixed, sched)
+
+
+def test_tendon_sdre_gain_equals_lqr_and_tracks_0_40_45(fmap):
+    rig = tendon_rig(backend="symbolic")
+    p = SdreTendonParams()
+    ctrl = tendon_sdre_controller(rig, p, design_force=30.0, fmap=fmap)
+    op = rig.operating_point(tendon_force=30.0)
+    ref = lqr(tendon_rig(), np.diag(p.q_diag), [[p.r]], op)  # the framework's LQR at the same point
+    np.testing.assert_allclose(ctrl.K0, ref.K, rtol=1e-6)
+    np.testing.assert_allclose(ctrl.gain_at(op.state, op.motor_torque), ref.K, rtol=1e-6)
+    # Fig 14.3: 0 -> 40 -> 45 N with SDRE and with the frozen gains: both reach the targets, barely differ
+    finals = []
+    for fixed in (False, True):
+        r = tendon_rig(backend="symbolic")
+        loop = closed_loop(r, tendon_sdre_controller(r, p, fixed=fixed, fmap=fmap), rate_hz=3000.0)
+        o = r.operating_point(tendon_force=0.0)
+        ctx = loop.create_context(state=o.state, motor_torque=o.motor_torque,
+                                  references={"tendon_force_reference": 0.0})
+        log = simulate_loop(loop, ctx, 0.6, DT, outputs=("tendon_force",),
+                            inputs={"tendon_force_reference": lambda t: 0.0 if t < 0.05 else (40.0 if t < 0.3 else 45.0)})
+        f = log["tendon_force"][:, 0]
+        assert f[int(0.29 / DT)] == pytest.approx(40.0, abs=0.2)
+        finals.append(f)
+        assert f[-1] == pytest.approx(45.0, abs=0.2)
+    assert np.max(np.abs(finals[0] - finals[1])) < 0.25 * 40.0  # "differences hardly visible"
+
+
+def test_tendon_controllers_convert_to_autodiff(fmap):
+    rig = tendon_rig()
+    inputs = {"tendon_force_reference": [25.0], "tendon_force": [22.0], "motor_velocity": [0.3]}
+    for factory in (tendon_pd_controller, tendon_scheduled_controller):
+        ctrl = factory(rig, fmap=fmap)
+        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs, h=1e-5)
+        np.testing.assert_allclose(J_ad, J_fd, rtol=1e-4, atol=1e-6)
+    sd = tendon_sdre_controller(rig, fmap=fmap)
+    J_ad, J_fd = autodiff_vs_fd(sd, {"tendon_force_reference": [25.0], "motor_angle": [0.5], "motor_velocity": [0.1]},
+                                h=1e-5)
+    np.testing.assert_allclose(J_ad, J_fd, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("field,value", [("natural_frequency", 0.0), ("damping_ratio", -0.5),
+                                         ("damping_ratio", float("nan")), ("design_force", float("inf"))])
+def test_tendon_gains_reject_bad_values(field, value):
+    with pytest.raises(ValueError, match=field):
+        TendonForceGains(**{field: value})
+
+
+def test_sdre_rejects_bad_weights():
+    with pytest.raises(ValueError, match="r"):
+        SdreTendonParams(r=0.0)
+    with pytest.raises(ValueError, match="update_rate"):
+        SdreTendonParams(update_rate=float("nan"))

@@ -1,0 +1,133 @@
+"""Finger MultibodyPlants: Table 5.1 kinematics, coupling element, Coriolis term system."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+
+from awiwi_drake.hand.kinematics import finger_frames, thumb_frames
+from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant, make_hand_plant
+from awiwi_drake.hand.systems import CoriolisCancellation
+from awiwi_drake.parameters.hand import FINGERS, HandParams, finger_params
+
+
+@pytest.mark.parametrize("finger", FINGERS)
+def test_plant_forward_kinematics_equals_table_5_1(finger):
+    plant, model = make_finger_plant(finger)
+    ctx = plant.CreateDefaultContext()
+    p = finger_params(finger)
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        q = rng.uniform(-1.2, 1.2, plant.num_positions())
+        plant.SetPositions(ctx, q)
+        X = plant.CalcRelativeTransform(ctx, plant.world_frame(), model.tip_body.body_frame())
+        ref = (thumb_frames(p, q) if finger == "thumb" else finger_frames(p, q))[-1]
+        np.testing.assert_allclose(X.multiply(model.tip_offset), ref[:3, 3], atol=1e-15)
+
+
+def test_distal_inertia_about_dip_is_the_thesis_link_inertia():
+    plant, model = make_finger_plant("index")
+    ctx = plant.CreateDefaultContext()
+    M = plant.CalcMassMatrix(ctx)
+    # 7.2e-7 kg m^2 (Tables 14.2, 15.1): the chosen distal mass reproduces it within 5 %
+    assert M[3, 3] == pytest.approx(7.2e-7, rel=0.05)
+    # about the MCP (q = 0, straight finger): closed form sum of cylinder inertias + parallel axis
+    # (the lateral offsets of M76/M98 lie along the flexion axis and do not count)
+    p = finger_params("index")
+    R, start, expected = p.link_radius, 0.0, 0.0
+    for m, L in ((p.proximal_mass, p.proximal_length), (p.middle_mass, p.middle_length),
+                 (p.distal_mass, p.distal_length)):
+        expected += m * (L ** 2 / 12 + R ** 2 / 4) + m * (start + L / 2) ** 2
+        start += L
+    assert M[1, 1] == pytest.approx(expected, rel=1e-12)
+
+
+def test_coupling_element_is_a_spring_on_dip_minus_ratio_pip():
+    hp = HandParams()
+    plant, models = make_hand_plant(hp)
+    G = coupling_force_gain(plant, models)
+    n = plant.num_positions()
+    K = G[:, :n]
+    np.testing.assert_allclose(K, K.T)
+    assert np.linalg.eigvalsh(K).min() > -1e-12
+    q = np.zeros(n)
+    ring = models["ring"]
+    ip, idp = ring.joints[2].position_start(), ring.joints[3].position_start()
+    q[ip] = 0.5
+    q[idp] = 0.5 * hp.ring.dip_pip_ratio           # on the coupling manifold (5.16): no force
+    np.testing.assert_allclose(K @ q, 0.0, atol=1e-15)
+    q[idp] += 0.01                                 # off it: restoring torque k_c * 0.01 on the DIP
+    assert (-(K @ q))[idp] == pytest.approx(-hp.ring.coupling_stiffness * 0.01)
+    assert np.count_nonzero(np.abs(K).sum(axis=0)) == 4   # ring PIP/DIP and fifth PIP/DIP only
+
+
+def test_coriolis_term_system_converts_and_satisfies_skew_symmetry():
+    plant, _ = make_finger_plant("index")
+    sys = CoriolisCancellation(plant)
+    ad = sys.ToAutoDiffXd()
+    rng = np.random.default_rng(2)
+    x = np.r_[rng.uniform(-1, 1, 4), rng.uniform(-3, 3, 4)]
+    ctx = ad.CreateDefaultContext()
+    ad.get_input_port(0).FixValue(ctx, InitializeAutoDiff(x).ravel())
+    y = ad.get_output_port(0).Eval(ctx)
+    fctx = sys.CreateDefaultContext()
+
+    def f(xx):
+        sys.get_input_port(0).FixValue(fctx, xx)
+        return sys.get_output_port(0).Eval(fctx).copy()
+
+    eps = 1e-6
+    J = np.array([(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(8)]).T
+    np.testing.assert_allclose(ExtractValue(y).ravel(), f(x), rtol=1e-12)
+    np.testing.assert_allclose(ExtractGradient(y), J, atol=1e-9)
+    # physics: v^T C(q,v) v = 1/2 v^T Mdot v, and C(q, a v) a v = a^2 C(q,v) v
+    pc = plant.CreateDefaultContext()
+    q, v = x[:4], x[4:]
+
+    def M(qq):
+        plant.SetPositions(pc, qq)
+        return plant.CalcMassMatrix(pc)
+
+    Mdot = (M(q + eps * v) - M(q - eps * v)) / (2 * eps)
+    assert v @ f(x) == pytest.approx(0.5 * v @ Mdot @ v, rel=1e-6)
+    np.testing.assert_allclose(f(np.r_[q, 2 * v]), 4 * f(x), rtol=1e-12)
+
+
+def test_fig_5_7_coriolis_effect_vanishes_at_least_quadratically_with_the_deflection():
+    """Fig 5.7: release a PIP deflection with motors fixed, with and without C(q, v) v.
+
+    Coriolis/centrifugal torques scale with v^2 and v with the deflection d, so
+    the trajectory difference must shrink at least 4x when d halves.  The
+    abduction joint barely moves in the full model (thesis: 'remaining at 0').
+    """
+    from awiwi_drake.hand.studies import coriolis_study
+    big = coriolis_study("index", deflection=0.05, t_final=0.02)
+    small = coriolis_study("index", deflection=0.025, t_final=0.02)
+    assert np.all(big.max_abs_difference >= 3.5 * small.max_abs_difference)
+    assert np.all(small.max_abs_difference < 1e-3)          # the thesis's bound holds at 0.025 rad
+    assert np.max(np.abs(big.q_full[:, 0])) < 1e-3 * np.max(np.abs(big.q_full[:, 2])) * 20
+    assert np.max(np.abs(big.q_full[:, 2])) == pytest.approx(0.05, rel=1e-6)   # released from rest
+
+
+def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating_elongation():
+    from awiwi_drake.hand.coupling import finger_coupling
+    from awiwi_drake.hand.systems import MotorAngleReference
+    c = finger_coupling("thumb")
+    theta_op, q_op, r_m = np.linspace(-0.2, 0.2, 8), np.zeros(4), 0.005
+    sys = MotorAngleReference(c, r_m, theta_op, q_op)
+    ctx = sys.CreateDefaultContext()
+    q = np.array([0.5, 0.35, 0.3, -0.2])
+
+    def out(qq):
+        sys.get_input_port(0).FixValue(ctx, qq)
+        return sys.get_output_port(0).Eval(ctx).copy()
+
+    theta = out(q)
+    # elongation r_m theta + h(q) - h(0) equals its operating value for every tendon
+    np.testing.assert_allclose(r_m * theta + c.h(q), r_m * theta_op + c.h(q_op), atol=1e-15)
+    ad = sys.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    ad.get_input_port(0).FixValue(actx, InitializeAutoDiff(q).ravel())
+    J = ExtractGradient(ad.get_output_port(0).Eval(actx))
+    np.testing.assert_allclose(J, -c.P(q) / r_m, atol=1e-12)
