@@ -94,12 +94,17 @@ class ReplayEngine:
     # ------------------------------------------------------------------ states
     def _estimate_states(self):
         ds, nom, dt = self.ds, self.nom, self.dt
-        win = max(5, int(round(self.settings.velocity_smoothing / dt)) | 1)
-        win = min(win, (self.N // 2) * 2 - 1)
-        self._sg_window = win
         n = nom.num_motors
         sfx = ["_1", "_2"] if n == 2 else [""]
         th = np.array([ds.outputs[f"motor_angle{s}"] for s in sfx])
+        # differentiation window grows with the relative angle noise (sqrt law: velocity
+        # noise ~ 1/T^1.5, smoothing bias ~ T^2), capped at half a shooting window
+        rel = max(noise_floor(row) / max(row.std(), 1e-12) for row in th)
+        T = self.settings.velocity_smoothing * max(1.0, np.sqrt(rel / 0.01))
+        T = min(T, 0.5 * self.settings.window)
+        win = max(5, int(round(T / dt)) | 1)
+        win = min(win, (self.N // 2) * 2 - 1)
+        self._sg_window = win
         ths = savgol_filter(th, win, 3, axis=1)
         om = savgol_filter(th, win, 3, deriv=1, delta=dt, axis=1)
         cols = [ths, om]
