@@ -137,7 +137,8 @@ def markdown(summ: dict, rows: list) -> str:
     for r in rows:
         L.append(f"| {r['rig']} | {', '.join(r['hidden']) or '-'}{' +' + ','.join(r['nuisance']) if r['nuisance'] else ''} "
                  f"| {r['snr_db']} | {', '.join(r['named']) or '-'} | {', '.join(r['nuisance_named']) or '-'} "
-                 f"| {r['gap_closed']:.2f} | {r['seconds']:.1f} | {r['cpu_seconds']:.1f} |")
+                 f"| {r['gap_closed']:.2f} | {r['seconds']:.1f} | {r['cpu_seconds']:.1f} |".replace(
+                     f"| {r['gap_closed']:.2f} |", "| - |" if not r["hidden"] else f"| {r['gap_closed']:.2f} |"))
     return "\n".join(L)
 
 
