@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pydrake.math as _pm
 
-__all__ = ["is_float", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like"]
+__all__ = ["is_float", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like", "where_positive"]
 
 
 def is_float(x) -> bool:
@@ -70,3 +70,26 @@ def zeros_like(n: int, like):
         return np.zeros(n)
     sample = np.ravel(np.asarray(like, dtype=object))[0]
     return np.array([type(sample)(0.0) for _ in range(n)], dtype=object)
+
+
+def where_positive(x, a):
+    """Element-wise ``a if x > 0 else 0`` for float, AutoDiffXd and Expression.
+
+    Used for quantities that vanish when a tendon is slack (e.g. stiffness).
+    The selection itself carries no derivative (it is piecewise constant).
+    """
+    if is_float(x) and is_float(a):
+        return np.where(np.asarray(x) > 0.0, a, 0.0)
+    import pydrake.symbolic as _sym
+    x_arr, a_arr = np.broadcast_arrays(np.asarray(x, dtype=object), np.asarray(a, dtype=object))
+    out = np.empty(x_arr.shape, dtype=object)
+    for idx in np.ndindex(x_arr.shape):
+        xi, ai = x_arr[idx], a_arr[idx]
+        if isinstance(xi, (_sym.Expression, _sym.Variable)) or isinstance(ai, (_sym.Expression, _sym.Variable)):
+            xe = xi if isinstance(xi, _sym.Expression) else _sym.Expression(xi)
+            ae = ai if isinstance(ai, _sym.Expression) else _sym.Expression(ai)
+            out[idx] = _sym.if_then_else(xe > 0.0, ae, _sym.Expression(0.0))
+        else:
+            xv = xi.value() if hasattr(xi, "value") else float(xi)
+            out[idx] = ai if xv > 0.0 else 0.0 * ai
+    return out[()] if out.shape == () else out

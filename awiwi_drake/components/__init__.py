@@ -1,0 +1,12 @@
+"""Physical components: laws (pure functions) and their LeafSystems (thesis ch. 3-5)."""
+
+from awiwi_drake.components.drive import BACKENDS, TendonDrive, build_tendon_drive
+from awiwi_drake.components.motor import (
+    MotorBank, MotorBank_, motor_acceleration, motor_friction_torque, motor_ripple_torque, reflected_inertia,
+    saturate_torque)
+from awiwi_drake.components.routing import ConstantCoupling, TendonRouting, TendonRouting_, antagonistic_coupling
+from awiwi_drake.components.spring import (
+    AntagonisticPairSpring, LeverSpringMechanism, LinearSpring, PolynomialSpring, SpringBank, SpringBank_,
+    hysteresis_rate, tendon_spring)
+from awiwi_drake.components.tendon import (
+    capstan_friction_force, guide_friction_force, series_stiffness, tendon_stiffness)

@@ -1,0 +1,127 @@
+"""Tendon routing: the map between motors, springs and joints (thesis (5.5)-(5.9)).
+
+Sign convention (docs/ARCHITECTURE.md): ``h(q)`` is the tendon path length
+between motor pulley and insertion, ``P(q) = dh/dq`` (m x n),
+spring elongation ``x = r_m theta + h(q) - h(0) + x0`` and generalised joint
+force ``tau = -P(q)^T f``.
+
+A *coupling* is any object with ``num_tendons``, ``num_joints``, ``h(q)`` and
+``P(q)`` written generically in the scalar type (float, AutoDiffXd,
+Expression); the finger couplings of :mod:`awiwi_drake.hand` follow it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import asarray_like
+
+__all__ = ["ConstantCoupling", "TendonRouting_", "TendonRouting", "antagonistic_coupling"]
+
+
+class ConstantCoupling:
+    """Coupling with a constant matrix: ``h(q) = P q`` (index/middle type fingers, (5.6))."""
+
+    def __init__(self, P, name: str = "constant"):
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        if P.ndim != 2 or not np.all(np.isfinite(P)):
+            raise ValueError(f"ConstantCoupling: P must be a finite 2-D matrix, got shape {np.shape(P)}")
+        self._P = P
+        self.name = name
+        self.num_tendons, self.num_joints = P.shape
+
+    def h(self, q):
+        return self._P @ q
+
+    def P(self, q=None):
+        return self._P
+
+    def dPT_f_dq(self, q, f):
+        """``d(P(q)^T f)/dq`` (n x n): zero for a constant coupling."""
+        return np.zeros((self.num_joints, self.num_joints))
+
+
+def antagonistic_coupling(link_pulley_radius: float) -> ConstantCoupling:
+    """The one-joint, two-tendon coupling of Fig 5.9: ``h = [-r_q q, +r_q q]``."""
+    if not link_pulley_radius > 0:
+        raise ValueError(f"antagonistic_coupling: link_pulley_radius = {link_pulley_radius} must be > 0 [m]")
+    return ConstantCoupling([[-link_pulley_radius], [link_pulley_radius]], name="antagonistic")
+
+
+def _check_coupling(coupling):
+    for attr in ("num_tendons", "num_joints", "h", "P"):
+        if not hasattr(coupling, attr):
+            raise ValueError(f"TendonRouting: coupling lacks {attr!r} (needs num_tendons, num_joints, h(q), P(q))")
+
+
+@TemplateSystem.define("TendonRouting_")
+def TendonRouting_(T):
+    """Maps motor and joint angles to spring elongations and tendon forces to joint torques.
+
+    Input ports
+    -----------
+    motor_angle : (m,) [rad]
+    joint_angle : (n,) [rad]
+    tendon_force : (m,) [N]
+    motor_velocity : (m,) [rad/s], joint_velocity : (n,) [rad/s]  (only with ``rates=True``)
+
+    Output ports
+    ------------
+    elongation : (m,) [m]       ``r_m theta + h(q) - h(0) + x0``
+    generalized_force : (n,) [Nm]  ``-P(q)^T f``
+    elongation_rate : (m,) [m/s]  ``r_m omega + P(q) qdot``  (only with ``rates=True``)
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, coupling=None, motor_pulley_radius: float = 0.005, offsets=None,
+                       rates: bool = False, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            _check_coupling(coupling)
+            if not motor_pulley_radius > 0:
+                raise ValueError(f"TendonRouting: motor_pulley_radius = {motor_pulley_radius} must be > 0 [m]")
+            m, n = coupling.num_tendons, coupling.num_joints
+            offsets = np.zeros(m) if offsets is None else np.asarray(offsets, dtype=float)
+            if offsets.shape != (m,) or not np.all(np.isfinite(offsets)):
+                raise ValueError(f"TendonRouting: offsets must be {m} finite numbers [m], got {offsets!r}")
+            self.coupling, self.r_m, self.offsets, self.rates = coupling, float(motor_pulley_radius), offsets, rates
+            self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
+            self._theta = self.DeclareVectorInputPort("motor_angle", m)
+            self._q = self.DeclareVectorInputPort("joint_angle", n)
+            self._f = self.DeclareVectorInputPort("tendon_force", m)
+            self.DeclareVectorOutputPort("elongation", m, self._calc_elongation,
+                                         prerequisites_of_calc={self._theta.ticket(), self._q.ticket()})
+            self.DeclareVectorOutputPort("generalized_force", n, self._calc_tau,
+                                         prerequisites_of_calc={self._q.ticket(), self._f.ticket()})
+            if rates:
+                self._omega = self.DeclareVectorInputPort("motor_velocity", m)
+                self._qd = self.DeclareVectorInputPort("joint_velocity", n)
+                self.DeclareVectorOutputPort(
+                    "elongation_rate", m, self._calc_rate,
+                    prerequisites_of_calc={self._q.ticket(), self._omega.ticket(), self._qd.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.coupling, other.r_m, other.offsets, other.rates, converter=converter)
+
+        def _calc_elongation(self, context, out):
+            theta = self._theta.Eval(context)
+            q = self._q.Eval(context)
+            x = self.r_m * theta + self.coupling.h(q) - self._h0 + self.offsets
+            out.SetFromVector(asarray_like(x, theta))
+
+        def _calc_tau(self, context, out):
+            q = self._q.Eval(context)
+            f = self._f.Eval(context)
+            out.SetFromVector(asarray_like(-(np.asarray(self.coupling.P(q)).T @ f), f))
+
+        def _calc_rate(self, context, out):
+            q = self._q.Eval(context)
+            omega = self._omega.Eval(context)
+            qd = self._qd.Eval(context)
+            out.SetFromVector(asarray_like(self.r_m * omega + np.asarray(self.coupling.P(q)) @ qd, omega))
+
+    return Impl
+
+
+TendonRouting = TendonRouting_[None]

@@ -1,0 +1,10 @@
+"""All parameter sets of awiwi_drake, with units, ranges and sources.
+
+Defaults are the Awiwi hand's; every value cites the thesis or says why it was chosen.
+"""
+
+from awiwi_drake.parameters.base import ParameterInfo, Parameters, param, provenance_table
+from awiwi_drake.parameters.components import (
+    GuideFrictionParams, HysteresisParams, LinearSpringParams, MotorParams, PolynomialSpringParams,
+    SpringMechanismGeometry, TendonParams)
+from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, SpringModelParams, TendonRigParams

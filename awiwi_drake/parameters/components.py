@@ -1,0 +1,247 @@
+"""Parameters of the physical components: motor (ch. 3), spring mechanism and tendon (ch. 4).
+
+Thesis values cite their table/equation; chosen values say why.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from awiwi_drake.parameters.base import Parameters, param
+
+__all__ = [
+    "MotorParams",
+    "PolynomialSpringParams",
+    "LinearSpringParams",
+    "SpringMechanismGeometry",
+    "HysteresisParams",
+    "TendonParams",
+    "GuideFrictionParams",
+]
+
+# Torque constant implied by Fig 3.3b: the friction law (3.8) with Table 3.3 gives
+# 1.41 Nm at 15 rad/s where the figure shows about 1.3 A.  Used only to turn the
+# ripple currents of Fig 3.4b into torques.
+_TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
+
+
+@dataclass(frozen=True)
+class MotorParams(Parameters):
+    """Geared PMSM + harmonic drive, seen at the output shaft (ch. 3).
+
+    Dynamics (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - r_m f``.
+
+    Attributes
+    ----------
+    inertia : float
+        B [kg m^2], total reflected inertia at the output shaft (3.1); domain (0, inf).
+    friction : bool
+        Include the velocity-dependent friction (3.8).
+    friction_slope : float
+        gamma1 [s/rad] of (3.8), Table 3.3; domain (0, inf).
+    coulomb_torque : float
+        gamma2 [Nm] of (3.8), Table 3.3; domain [0, inf).
+    viscous_friction : float
+        gamma3 [Nm s/rad] of (3.8), Table 3.3; domain [0, inf).
+    damping : float
+        Extra linear damping d_theta [Nm s/rad] (used by the flexible-joint model (12.8));
+        domain [0, inf).
+    ripple : bool
+        Include the position-dependent ripple torques (3.5).
+    ripple_motor_amplitude : float
+        Amplitude [Nm] of the motor-shaft bearing ripple (period 2 pi / gear_ratio at the output).
+    ripple_output_amplitude : float
+        Amplitude [Nm] of the output-bearing ripple (period 2 pi).
+    ripple_motor_phase, ripple_output_phase : float
+        Phases [rad] of the two ripple components.
+    gear_ratio : float
+        Input/output speed ratio of the harmonic drive (1/alpha_gear); domain [1, inf).
+    saturation : bool
+        Clip the commanded torque to +-torque_limit (reported by the simulation monitors).
+    torque_limit : float
+        Maximum output torque [Nm]; domain (0, inf).
+    pulley_radius : float
+        r_m [m], radius of the motor pulley winding the tendon; domain (0, 0.05].
+    """
+
+    inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False,
+                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))")
+    friction: bool = param(True, unit="-", source="chosen: the thesis's motor model includes (3.8)")
+    friction_slope: float = param(10.0, unit="s/rad", low=0.0, low_inclusive=False,
+                                  source="Table 3.3, gamma1")
+    coulomb_torque: float = param(0.5586, unit="Nm", low=0.0, source="Table 3.3, gamma2")
+    viscous_friction: float = param(0.0356, unit="Nm s/rad", low=0.0, source="Table 3.3, gamma3")
+    damping: float = param(0.0, unit="Nm s/rad", low=0.0,
+                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta")
+    ripple: bool = param(False, unit="-",
+                         source="chosen: off by default; switch on to study compensation (Fig 3.4-3.6)")
+    ripple_motor_amplitude: float = param(
+        round(0.05 * _TORQUE_PER_AMPERE, 4), unit="Nm", low=0.0,
+        source="chosen from Fig 3.4b: 0.1 A peak-to-peak x 1.08 Nm/A (torque constant implied by Fig 3.3b/Table 3.3)")
+    ripple_output_amplitude: float = param(
+        round(0.025 * _TORQUE_PER_AMPERE, 4), unit="Nm", low=0.0,
+        source="chosen from Fig 3.4b: 0.05 A peak-to-peak x 1.08 Nm/A (the slower, smaller component)")
+    ripple_motor_phase: float = param(0.0, unit="rad", source="chosen: arbitrary reference")
+    ripple_output_phase: float = param(0.0, unit="rad", source="chosen: arbitrary reference")
+    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100")
+    saturation: bool = param(True, unit="-", source="chosen: real amplifiers saturate")
+    torque_limit: float = param(3.0, unit="Nm", low=0.0, low_inclusive=False,
+                                source="chosen: 180 N x r_m (0.9 Nm) + Table 3.3 friction at 15 rad/s (1.41 Nm), with margin")
+    pulley_radius: float = param(0.005, unit="m", low=0.0, high=0.05, low_inclusive=False,
+                                 source="chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 torques")
+
+
+@dataclass(frozen=True)
+class PolynomialSpringParams(Parameters):
+    """Calibration-polynomial spring: ``f(x) = sum_k c_k x^k`` (k = 1..K) for x > 0, else 0.
+
+    The thesis's real-time form (ch. 4, "Calibration"). Must be increasing on
+    ``[0, max_elongation]`` (checked on a fine grid).
+
+    Attributes
+    ----------
+    coefficients : tuple of float
+        (c1, c2, ...) in SI (N/m, N/m^2, ...); c1 >= 0.
+    max_elongation : float
+        Upper end [m] of the calibrated range; domain (0, 0.1].
+    """
+
+    coefficients: tuple = param((2.0e4,), unit="N/m^k", vector=True,
+                                source="chosen: placeholder linear spring; rigs use the lever fit")
+    max_elongation: float = param(0.006, unit="m", low=0.0, high=0.1, low_inclusive=False,
+                                  source="chosen: the lever mechanism's range (~6 mm, Fig 4.7)")
+
+    def _validate(self) -> None:
+        if len(self.coefficients) == 0:
+            raise ValueError("PolynomialSpringParams.coefficients must hold at least c1")
+        if self.coefficients[0] < 0:
+            raise ValueError(f"PolynomialSpringParams.coefficients[0] = {self.coefficients[0]} must be >= 0 "
+                             "(a spring cannot push at zero elongation)")
+        x = np.linspace(0.0, self.max_elongation, 401)
+        dfdx = sum(k * c * x ** (k - 1) for k, c in enumerate(self.coefficients, start=1))
+        bad = np.nonzero(dfdx <= 0.0)[0]
+        if bad.size and not (bad.size == 1 and bad[0] == 0 and self.coefficients[0] == 0.0):
+            i = bad[1] if (bad[0] == 0 and self.coefficients[0] == 0.0 and bad.size > 1) else bad[0]
+            raise ValueError(
+                f"PolynomialSpringParams.coefficients: the spring curve is not increasing at x = {x[i]:.6g} m "
+                f"(df/dx = {dfdx[i]:.6g} N/m) within [0, max_elongation = {self.max_elongation} m]")
+
+
+@dataclass(frozen=True)
+class LinearSpringParams(Parameters):
+    """Linear torsional/translational spring (flexible joint (12.8), ch. 15 test rig).
+
+    Attributes
+    ----------
+    stiffness : float
+        k [N/m or Nm/rad]; domain (0, inf).
+    """
+
+    stiffness: float = param(0.605, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 12.1, k")
+
+
+@dataclass(frozen=True)
+class SpringMechanismGeometry(Parameters):
+    """Lever + linear spring ("tangent alpha") mechanism of Fig 4.6 / Table 4.1.
+
+    Planar geometry, all points in one frame [m]. The tendon runs from the
+    motor-side pulley M over the lever pulley P to the fixed pulley F; the
+    lever turns about the pivot C; a linear spring joins the lever point Q to
+    the anchor S. Pulleys are modelled by their centres (a documented
+    simplification: Table 4.1 lists radii but the thesis gives no numbers).
+    Tension pushes P towards the line MF; at ``lever_straight_angle`` the
+    tendon is straight and the stiffness is unbounded (the tangent-alpha
+    property: stiffness rises with force).
+
+    The thesis prints no numbers for Table 4.1: these were chosen so that the
+    force-angle curve matches Fig 4.8b (0 N at 0 deg, 175 N at 48 deg, convex,
+    dL of about 6 mm, Fig 4.7).
+    """
+
+    pulley_spacing: float = param(0.060, unit="m", low=0.0, low_inclusive=False,
+                                  source="chosen: |MF| = 60 mm, fits the forearm module")
+    lever_length: float = param(0.015, unit="m", low=0.0, low_inclusive=False,
+                                source="chosen: pivot to lever-pulley distance")
+    pivot_offset: float = param(-0.015, unit="m",
+                                source="chosen: pivot C on the line MF, 15 mm left of its midpoint")
+    lever_straight_angle: float = param(math.radians(70.0), unit="rad", low=0.0, high=math.pi / 2,
+                                        low_inclusive=False,
+                                        source="chosen: tendon straight at 70 deg, beyond the 50 deg range of Fig 4.8b")
+    spring_arm: float = param(0.012, unit="m", low=0.0, low_inclusive=False,
+                              source="chosen: pivot to spring attachment Q (opposite arm)")
+    spring_anchor: tuple = param((-0.025, -0.060), unit="m", vector=True,
+                                 source="chosen: anchor S below the lever, spring nearly perpendicular to its arm")
+    spring_constant: float = param(12462.0, unit="N/m", low=0.0, low_inclusive=False,
+                                   source="chosen: K tuned so that f(48 deg) = 175 N (Fig 4.8b)")
+    max_lever_angle: float = param(math.radians(55.0), unit="rad", low=0.0, high=math.pi / 2,
+                                   low_inclusive=False,
+                                   source="chosen: mechanical stop a little beyond the 50 deg of Fig 4.8b")
+
+    def _validate(self) -> None:
+        if len(self.spring_anchor) != 2:
+            raise ValueError("SpringMechanismGeometry.spring_anchor must be a 2-vector (x, y) [m]")
+        if self.max_lever_angle >= self.lever_straight_angle:
+            raise ValueError(
+                f"SpringMechanismGeometry.max_lever_angle = {self.max_lever_angle} must be below "
+                f"lever_straight_angle = {self.lever_straight_angle} (the curve is singular there)")
+
+
+@dataclass(frozen=True)
+class HysteresisParams(Parameters):
+    """Rate-independent hysteresis of the spring mechanism (Fig 4.8b, point A).
+
+    A Dahl-type friction force ``z`` in the lever adds to the elastic force:
+    ``dz/dt = sigma * xdot * (1 - tanh(xdot / v_s) * z / (beta f_el(x) + z0))``.
+    The loop half-width at force f is ``beta f + z0``: the full width at 70 N is
+    ``2 (70 beta + z0)``.
+    """
+
+    enabled: bool = param(False, unit="-", source="chosen: off by default (optional effect)")
+    width_ratio: float = param(0.1, unit="-", low=0.0,
+                               source="chosen: full width 2 x 0.1 x 70 N = 14 N at 70 N (Fig 4.8b: 10-20 N)")
+    width_offset: float = param(0.0, unit="N", low=0.0, source="chosen: loop closes at zero force")
+    rate: float = param(2.0e5, unit="N/m", low=0.0, low_inclusive=False,
+                        source="chosen: sigma; the loop saturates within ~0.1 mm of reversal")
+    smoothing_velocity: float = param(1e-4, unit="m/s", low=0.0, low_inclusive=False,
+                                      source="chosen: v_s, smooth sign(xdot) for integration")
+
+
+@dataclass(frozen=True)
+class TendonParams(Parameters):
+    """Dyneema tendon in series with the mechanism (ch. 4, section 5.1).
+
+    ``k_t = E S / l0``.
+    """
+
+    youngs_modulus: float = param(100e9, unit="Pa", low=0.0, low_inclusive=False,
+                                  source="chosen: typical Dyneema (UHMWPE) modulus (MODEL_NOTES ch. 4)")
+    diameter: float = param(1.0e-3, unit="m", low=0.0, low_inclusive=False,
+                            source="chosen: 1 mm braided tendon")
+    rest_length: float = param(0.4, unit="m", low=0.0, low_inclusive=False,
+                               source="chosen: forearm motor to finger joint, about 40 cm")
+    fill_factor: float = param(0.5, unit="-", low=0.0, high=1.0, low_inclusive=False,
+                               source="chosen: braid fill factor, effective load-bearing fraction of the section")
+
+    @property
+    def cross_section(self) -> float:
+        """Effective load-bearing cross-section S [m^2]."""
+        return self.fill_factor * math.pi * self.diameter ** 2 / 4.0
+
+
+@dataclass(frozen=True)
+class GuideFrictionParams(Parameters):
+    """Tendon guide friction: bending-angle law (4.1) and a capstan variant.
+
+    (4.1): ``F = C0 (1 - exp(-C1 alpha))`` (independent of tension and speed).
+    Capstan: ``F = f (1 - exp(-mu alpha))`` (proportional to tension; ch. 9 reports
+    routing friction of 10-50 % of the measured force).
+    """
+
+    c0: float = param(2.2, unit="N", low=0.0, source="chosen: Fig 4.10 saturates near 2 N at 200 deg (6.5 mm Dyneema)")
+    c1: float = param(0.7, unit="1/rad", low=0.0,
+                      source="chosen: with c0, 0.2 N at 8 deg and 2.0 N at 200 deg (Fig 4.10 range 0.2-2 N)")
+    mu: float = param(0.1, unit="-", low=0.0, high=1.0,
+                      source="Fig 4.11: sliding friction coefficients 0.05-0.2; 0.1 gives 30 % loss at 200 deg (ch. 9: 10-50 %)")

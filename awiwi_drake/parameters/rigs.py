@@ -1,0 +1,82 @@
+"""Parameters of the three test rigs (ch. 10/14.2.1, 12/15.2-15.4, 15.5/Fig 5.9)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from awiwi_drake.parameters.base import Parameters, param
+from awiwi_drake.parameters.components import (
+    HysteresisParams, MotorParams, SpringMechanismGeometry, TendonParams)
+
+__all__ = ["SpringModelParams", "TendonRigParams", "FlexibleJointParams", "JointRigParams"]
+
+
+@dataclass(frozen=True)
+class SpringModelParams(Parameters):
+    """How a rig's tendon spring is modelled.
+
+    The rigs use the thesis's real-time form: a calibration polynomial
+    (degree ``polynomial_degree``) fitted to the lever mechanism in series with
+    the tendon (ch. 4: the calibration is done on the mounted tendon, so the
+    tendon's elasticity is inside the polynomial).
+    """
+
+    geometry: SpringMechanismGeometry = field(default_factory=SpringMechanismGeometry)
+    tendon: TendonParams = field(default_factory=TendonParams)
+    include_tendon: bool = param(True, unit="-", source="ch. 4 'Calibration': measured on the mounted tendon")
+    polynomial_degree: int = param(6, unit="-", low=1, high=12,
+                                   source="chosen: degree 6 fits the lever curve within 1 N over 0-175 N")
+    max_force: float = param(180.0, unit="N", low=1.0,
+                             source="Fig 4.8b: the calibrated range ends near 180 N")
+    hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
+
+
+@dataclass(frozen=True)
+class TendonRigParams(Parameters):
+    """One motor winding one tendon through one spring mechanism; far end fixed (ch. 10, 14.2.1)."""
+
+    motor: MotorParams = field(default_factory=MotorParams)
+    spring: SpringModelParams = field(default_factory=SpringModelParams)
+
+
+@dataclass(frozen=True)
+class FlexibleJointParams(Parameters):
+    """Fourth-order flexible joint (12.8); defaults are Table 12.1.
+
+    ``m qdd = -d_q qd + tau_s + tau_ext``; ``b thdd = -d_th thd - tau_s + u`` with
+    ``tau_s = k (th - q)`` (linear) or, for ``spring="nonlinear"``, the torque of an
+    antagonistic pair of lever springs at pretension ``pretension`` on pulleys of
+    radius ``pulley_radius`` (ch. 15.4: ``tau = phi(th - q)``, radii folded into phi).
+    """
+
+    link_inertia: float = param(4e-7, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 12.1, m")
+    motor_inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 12.1, b")
+    stiffness: float = param(0.605, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 12.1, k")
+    link_damping: float = param(0.0012, unit="Nm s/rad", low=0.0, source="Table 12.1, d_q")
+    motor_damping: float = param(0.0012, unit="Nm s/rad", low=0.0, source="Table 12.1, d_theta")
+    torque_limit: float = param(math.inf, unit="Nm", low=0.0, low_inclusive=False, finite=False,
+                                source="chosen: unlimited, as in (12.8); set for saturation studies (ch. 15)")
+    pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
+                              source="chosen: nonlinear spring only; Fig 15.26 uses 20 N")
+    pulley_radius: float = param(0.008, unit="m", low=0.0, low_inclusive=False,
+                                 source="chosen: nonlinear spring only; finger pulleys are 5-10 mm")
+    spring: SpringModelParams = field(default_factory=SpringModelParams)
+
+
+@dataclass(frozen=True)
+class JointRigParams(Parameters):
+    """One link driven antagonistically by two motors through two lever springs (Fig 5.9, ch. 15.5).
+
+    ``x1 = r_m th1 - r_q q + x0``, ``x2 = r_m th2 + r_q q + x0``; ``m qdd = r_q (f1 - f2) - d_q qd + tau_ext``.
+    """
+
+    motor: MotorParams = field(default_factory=MotorParams)
+    spring: SpringModelParams = field(default_factory=SpringModelParams)
+    link_inertia: float = param(7.2e-7, unit="kg m^2", low=0.0, low_inclusive=False,
+                                source="Tables 14.2, 15.1, 16.1 (finger link)")
+    link_damping: float = param(1e-3, unit="Nm s/rad", low=0.0, source="Table 15.1, b_q")
+    link_pulley_radius: float = param(0.008, unit="m", low=0.0, high=0.05, low_inclusive=False,
+                                      source="chosen: r_q; MODEL_NOTES: joint pulleys 5-10 mm")
+    pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
+                              source="Fig 15.26: f_pre = 20 N (default operating point)")

@@ -1,0 +1,130 @@
+"""The ``Rig`` handle shared by all rigs (and by finger/hand diagrams)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import RevoluteJoint, SpatialInertia, UnitInertia
+from pydrake.systems.framework import Context, Diagram
+
+__all__ = ["OperatingPoint", "Rig", "add_revolute_link"]
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """An equilibrium of a rig: full state and the inputs that hold it.
+
+    Attributes
+    ----------
+    state : ndarray
+        Continuous state of the rig diagram, in ``Rig.state_names`` order.
+    motor_torque : ndarray
+        Commanded motor torques [Nm] that hold the equilibrium.
+    external_torque : ndarray or None
+        External link torques [Nm] (link rigs).
+    info : dict
+        What defined the point (e.g. ``pretension``, ``link_angle``) and derived
+        quantities (``tendon_force``, ...).
+    """
+
+    state: np.ndarray
+    motor_torque: np.ndarray
+    external_torque: np.ndarray | None = None
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class Rig:
+    """A plant diagram with named ports, its parameters and its operating points.
+
+    Attributes
+    ----------
+    name : str
+    diagram : Diagram
+        Exported inputs ``motor_torque`` (and ``external_torque`` for link rigs);
+        outputs ``state`` and named physical quantities.
+    params : Parameters
+    state_names : tuple of str
+        Names of the continuous state in diagram order.
+    backend : str
+        ``"python"`` or ``"symbolic"`` (see :mod:`awiwi_drake.components.drive`).
+    plant : MultibodyPlant or None
+    equilibrium : callable
+        ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
+    spring : object
+        The spring law used (``force``, ``stiffness``).
+    """
+
+    name: str
+    diagram: Diagram
+    params: Any
+    state_names: tuple
+    backend: str
+    equilibrium: Callable[..., OperatingPoint]
+    plant: MultibodyPlant | None = None
+    spring: Any = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def num_states(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def input_names(self) -> list[str]:
+        return [self.diagram.get_input_port(i).get_name() for i in range(self.diagram.num_input_ports())]
+
+    @property
+    def output_names(self) -> list[str]:
+        return [self.diagram.get_output_port(i).get_name() for i in range(self.diagram.num_output_ports())]
+
+    def operating_point(self, **kwargs) -> OperatingPoint:
+        """The equilibrium named by ``kwargs`` (see the rig's builder for the keys)."""
+        return self.equilibrium(**kwargs)
+
+    def context(self, op: OperatingPoint | None = None) -> Context:
+        """A context at ``op`` (default operating point if None) with all inputs fixed."""
+        op = self.operating_point() if op is None else op
+        ctx = self.diagram.CreateDefaultContext()
+        self.set_operating_point(ctx, op)
+        return ctx
+
+    def set_operating_point(self, context: Context, op: OperatingPoint, *, fix_inputs: bool = True) -> None:
+        """Write ``op`` into the rig's (sub)context; fix its inputs unless told not to."""
+        state = np.asarray(op.state, dtype=float)
+        if state.shape != (self.num_states,):
+            raise ValueError(f"{self.name}: operating point state has {state.size} entries, "
+                             f"expected {self.num_states} ({', '.join(self.state_names)})")
+        context.SetContinuousState(state)
+        if fix_inputs:
+            self.diagram.GetInputPort("motor_torque").FixValue(context, np.asarray(op.motor_torque, dtype=float))
+            if self.diagram.HasInputPort("external_torque"):
+                ext = op.external_torque if op.external_torque is not None else \
+                    np.zeros(self.diagram.GetInputPort("external_torque").size())
+                self.diagram.GetInputPort("external_torque").FixValue(context, np.asarray(ext, dtype=float))
+
+    def state_index(self, name: str) -> int:
+        """Index of a state by name (clear error for unknown names)."""
+        try:
+            return self.state_names.index(name)
+        except ValueError:
+            raise ValueError(f"{self.name}: unknown state {name!r}; states are {', '.join(self.state_names)}") from None
+
+
+def add_revolute_link(plant: MultibodyPlant, *, name: str, inertia: float, damping: float,
+                      mass: float = 0.02) -> RevoluteJoint:
+    """Add one link on a revolute joint about z to ``plant``.
+
+    The centre of mass is on the joint axis (gravity, along -z, gives no torque;
+    the thesis finds gravity negligible, ch. 5) and the rotational inertia about
+    the axis is ``inertia`` [kg m^2]. ``mass`` only matters for reaction forces.
+    """
+    if not inertia > 0 or not mass > 0 or damping < 0:
+        raise ValueError(f"add_revolute_link: need inertia > 0, mass > 0, damping >= 0 (got {inertia}, {mass}, {damping})")
+    I_unit = inertia / mass
+    body = plant.AddRigidBody(f"{name}_body", SpatialInertia(mass, np.zeros(3), UnitInertia(I_unit, I_unit, I_unit)))
+    joint = plant.AddJoint(RevoluteJoint(name, plant.world_frame(), body.body_frame(), [0.0, 0.0, 1.0], damping))
+    plant.AddJointActuator(f"{name}_tendons", joint)
+    return joint

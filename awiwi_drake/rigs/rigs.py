@@ -1,0 +1,202 @@
+"""The three test rigs of the thesis as Drake diagrams.
+
+* :func:`tendon_rig` - one motor winding one tendon through a spring mechanism,
+  far end fixed: the plant of ch. 10 (10.1) and 14.2.1. State ``[theta, omega]``.
+* :func:`flexible_joint_rig` - motor, spring, link: the 4th-order plant (12.8)
+  (and ch. 15.2-15.4). State ``[q, qdot, theta, thetadot]`` as in (12.10).
+* :func:`joint_rig` - one link driven antagonistically by two motors through two
+  nonlinear springs with pretension (Fig 5.9, ch. 15.5). The link is a
+  MultibodyPlant revolute joint (continuous time) receiving the tendon torque as
+  a generalised force, so the same pieces scale to the fingers.
+  State ``[q, qdot, theta1, theta2, omega1, omega2]``.
+
+Every block is named; ports are named after physical quantities.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Demultiplexer, Multiplexer
+
+from awiwi_drake.components.drive import build_tendon_drive
+from awiwi_drake.components.motor import motor_ripple_torque
+from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
+from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
+from awiwi_drake.parameters.components import HysteresisParams, MotorParams
+from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
+from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
+
+__all__ = ["tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
+
+DEFAULT_BACKEND = "python"
+
+
+def _check_params(params, cls, rig):
+    if params is None:
+        return cls()
+    if not isinstance(params, cls):
+        raise ValueError(f"{rig}: params must be {cls.__name__}, got {type(params).__name__}")
+    return params
+
+
+def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
+    """One motor, one spring mechanism, tendon fixed at the far end (ch. 10, 14.2.1).
+
+    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega],
+    ``motor_angle``, ``motor_velocity``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
+    ``applied_torque`` [Nm].
+
+    Operating point keys: ``tendon_force`` [N] (default 20 N).
+    """
+    p = _check_params(params, TendonRigParams, "tendon_rig")
+    spring = tendon_spring(p.spring)
+    drive = build_tendon_drive(motor=p.motor, spring=spring, coupling=ConstantCoupling(np.zeros((1, 0))),
+                               backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
+    b = DiagramBuilder()
+    d = b.AddSystem(drive.diagram)
+    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
+    b.ExportOutput(d.GetOutputPort("motor_state"), "state")
+    for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
+        b.ExportOutput(d.GetOutputPort(nm), nm)
+    diagram = b.Build()
+    diagram.set_name("tendon_rig")
+    names = ("theta", "omega") + (("hysteresis_force",) if drive.hysteresis else ())
+
+    def equilibrium(tendon_force: float = 20.0) -> OperatingPoint:
+        if not tendon_force >= 0:
+            raise ValueError(f"tendon_rig: tendon_force = {tendon_force} must be >= 0 [N]")
+        x = float(np.ravel(spring.inverse_force(np.array([tendon_force])))[0])
+        theta = x / p.motor.pulley_radius
+        u = p.motor.pulley_radius * tendon_force - float(motor_ripple_torque(np.array([theta]), p.motor)[0])
+        state = [theta, 0.0] + ([0.0] if drive.hysteresis else [])
+        return OperatingPoint(np.array(state), np.array([u]), None,
+                              dict(tendon_force=tendon_force, elongation=x,
+                                   tendon_stiffness=float(spring.stiffness(np.array([x]))[0])))
+
+    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, dict(drive=drive))
+
+
+def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
+              motor_pulley_radius=None, names_motor):
+    """Shared builder: MultibodyPlant link(s) + tendon drive, exported ports."""
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("link", MultibodyPlant(0.0))
+    add_revolute_link(plant, name="joint", inertia=inertia, damping=damping)
+    plant.Finalize()
+    drive = build_tendon_drive(motor=motor, spring=spring, coupling=coupling, backend=backend,
+                               hysteresis=hysteresis, motor_pulley_radius=motor_pulley_radius, name="tendon_drive")
+    d = b.AddSystem(drive.diagram)
+    split = b.AddNamedSystem("link_state_split", Demultiplexer([1, 1]))
+    b.Connect(plant.get_state_output_port(), split.get_input_port())
+    b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
+    if drive.hysteresis:
+        b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
+    b.Connect(d.GetOutputPort("generalized_force"), plant.get_actuation_input_port())
+    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
+    b.ExportInput(plant.get_applied_generalized_force_input_port(), "external_torque")
+    state = b.AddNamedSystem("state_mux", Multiplexer([2, 2 * coupling.num_tendons]))
+    b.Connect(plant.get_state_output_port(), state.get_input_port(0))
+    b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
+    b.ExportOutput(state.get_output_port(), "state")
+    b.ExportOutput(split.get_output_port(0), "link_angle")
+    b.ExportOutput(split.get_output_port(1), "link_velocity")
+    b.ExportOutput(d.GetOutputPort("generalized_force"), "joint_torque")
+    for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
+        b.ExportOutput(d.GetOutputPort(nm), nm)
+    diagram = b.Build()
+    diagram.set_name(name)
+    names = ("q", "qdot") + names_motor + tuple(f"hysteresis_force{i + 1}" for i in range(coupling.num_tendons)
+                                                  if drive.hysteresis)
+    return diagram, plant, drive, names
+
+
+def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str = "linear",
+                       backend: str = DEFAULT_BACKEND) -> Rig:
+    """Fourth-order flexible joint (12.8): motor, spring, link.
+
+    ``m qdd = -d_q qd + tau_s + tau_ext``, ``b thdd = -d_th thd - tau_s + u``, with
+    ``tau_s = k (theta - q)`` (``spring="linear"``, Table 12.1) or the antagonistic
+    lever-spring pair ``phi(theta - q)`` (``spring="nonlinear"``, ch. 15.4).
+    The motor has no (3.8) friction here: (12.8) uses the linear damping d_theta.
+
+    Ports: in ``motor_torque`` (1), ``external_torque`` (1) [Nm]; out ``state`` =
+    [q, qdot, theta, thetadot] (the order of (12.10)), ``link_angle``,
+    ``link_velocity``, ``motor_angle``, ``motor_velocity``, ``tendon_force`` (=
+    spring torque tau_s [Nm]), ``tendon_stiffness`` [Nm/rad], ``joint_torque``,
+    ``applied_torque``.
+
+    Operating point keys: ``link_angle`` [rad], ``external_torque`` [Nm].
+    """
+    p = _check_params(params, FlexibleJointParams, "flexible_joint_rig")
+    if spring == "linear":
+        law = LinearSpring(p.stiffness, tension_only=False)
+    elif spring == "nonlinear":
+        law = AntagonisticPairSpring(tendon_spring(p.spring), p.pretension, p.pulley_radius)
+    else:
+        raise ValueError(f"flexible_joint_rig: spring = {spring!r} must be 'linear' or 'nonlinear'")
+    finite_limit = bool(np.isfinite(p.torque_limit))
+    motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
+                        saturation=finite_limit, torque_limit=p.torque_limit if finite_limit else 1.0)
+    diagram, plant, drive, names = _link_rig(
+        name="flexible_joint_rig", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
+        inertia=p.link_inertia, damping=p.link_damping, backend=backend,
+        hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
+        motor_pulley_radius=1.0, names_motor=("theta", "thetadot"))
+
+    def equilibrium(link_angle: float = 0.0, external_torque: float = 0.0) -> OperatingPoint:
+        tau_s = -float(external_torque)
+        delta = float(np.ravel(law.inverse_force(np.array([tau_s])))[0]) if spring == "nonlinear" else tau_s / p.stiffness
+        state = np.array([link_angle, 0.0, link_angle + delta, 0.0] + ([0.0] if drive.hysteresis else []))
+        return OperatingPoint(state, np.array([tau_s]), np.array([float(external_torque)]),
+                              dict(link_angle=link_angle, external_torque=external_torque, spring_torque=tau_s,
+                                   stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0])))
+
+    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law,
+               dict(drive=drive, spring_kind=spring))
+
+
+def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
+    """One link, two antagonistic motors and nonlinear springs with pretension (Fig 5.9, ch. 15.5).
+
+    ``x1 = r_m th1 - r_q q``, ``x2 = r_m th2 + r_q q``, ``f_i = f(x_i)``,
+    ``m qdd = r_q (f1 - f2) - d_q qd + tau_ext``, motors per (3.5).
+
+    Ports: in ``motor_torque`` (2), ``external_torque`` (1) [Nm]; out ``state`` =
+    [q, qdot, theta1, theta2, omega1, omega2], ``link_angle``, ``link_velocity``,
+    ``motor_angle`` (2), ``motor_velocity`` (2), ``tendon_force`` (2) [N],
+    ``tendon_stiffness`` (2) [N/m], ``joint_torque`` [Nm], ``applied_torque`` (2).
+
+    Operating point keys: ``pretension`` [N] (default ``params.pretension``),
+    ``link_angle`` [rad], ``external_torque`` [Nm]. The joint stiffness there is
+    ``r_q^2 (k1 + k2)``.
+    """
+    p = _check_params(params, JointRigParams, "joint_rig")
+    spring = tendon_spring(p.spring)
+    coupling = antagonistic_coupling(p.link_pulley_radius)
+    diagram, plant, drive, names = _link_rig(
+        name="joint_rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
+        damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis,
+        names_motor=("theta1", "theta2", "omega1", "omega2"))
+    r, rq = p.motor.pulley_radius, p.link_pulley_radius
+
+    def equilibrium(pretension: float | None = None, link_angle: float = 0.0,
+                    external_torque: float = 0.0) -> OperatingPoint:
+        f0 = p.pretension if pretension is None else float(pretension)
+        f = np.array([f0 - external_torque / (2 * rq), f0 + external_torque / (2 * rq)])
+        if np.any(f <= 0):
+            raise ValueError(f"joint_rig: pretension {f0} N cannot hold external_torque {external_torque} Nm "
+                             f"without slack (tendon forces would be {f} N)")
+        x = np.asarray(spring.inverse_force(f), dtype=float)
+        theta = np.array([(x[0] + rq * link_angle) / r, (x[1] - rq * link_angle) / r])
+        u = r * f - motor_ripple_torque(theta, p.motor)
+        state = np.concatenate([[link_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
+        k = np.asarray(spring.stiffness(x), dtype=float)
+        return OperatingPoint(state, u, np.array([float(external_torque)]),
+                              dict(pretension=f0, link_angle=link_angle, external_torque=external_torque,
+                                   tendon_force=f, elongation=x, tendon_stiffness=k,
+                                   joint_stiffness=float(rq ** 2 * k.sum())))
+
+    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring,
+               dict(drive=drive, coupling=coupling))
