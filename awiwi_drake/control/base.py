@@ -1,0 +1,398 @@
+"""Controller API: named-port controllers and the closed-loop builder.
+
+Conventions (binding for every controller in :mod:`awiwi_drake.control`)
+-----------------------------------------------------------------------
+* A controller is a Drake system (a scalar-convertible ``TemplateSystem`` or a
+  C++ primitive / diagram of primitives) whose
+
+  - input ports named ``<signal>_reference`` carry the reference of the rig
+    output ``<signal>`` (e.g. ``tendon_force_reference`` tracks the rig output
+    ``tendon_force``; ``link_angle_reference`` tracks ``link_angle``);
+  - other input ports are *measurements* and carry exactly the name of a rig
+    output port (``state``, ``tendon_force``, ``motor_velocity``, ...);
+  - one output port ``motor_torque`` [Nm] is the command (size = rig input).
+
+* :func:`closed_loop` wires a rig and a controller by these names, optionally
+  sampled at ``rate_hz`` (zero-order hold on the command, 3 kHz in the hand),
+  with a round-trip ``delay`` (a :class:`DiscreteTimeDelay` of whole control
+  periods), a torque ``saturation`` and sensor models, and returns a
+  :class:`ClosedLoop` handle.
+
+Most controllers of the thesis are static laws ``u = law(inputs)``; they are
+built with :class:`StaticLawController_`, which evaluates a pure, scalar-generic
+law object (float and AutoDiffXd) so that every controller converts with
+``ToAutoDiffXd()`` and can be linearised together with the rig.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem_, System
+from pydrake.systems.primitives import DiscreteTimeDelay, Saturation, ZeroOrderHold
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+__all__ = [
+    "COMMAND_PORT",
+    "REFERENCE_SUFFIX",
+    "check_gain",
+    "check_gains",
+    "StaticLaw",
+    "StaticLawController_",
+    "StaticLawController",
+    "ClosedLoop",
+    "closed_loop",
+    "reference_ports",
+    "measurement_ports",
+]
+
+COMMAND_PORT = "motor_torque"
+REFERENCE_SUFFIX = "_reference"
+_ROUND_TRIP_TOLERANCE = 0.01  # delay must be a whole number of periods within 1 % of a period
+
+
+# ----------------------------------------------------------------------------
+# gain validation
+def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negative: bool = False,
+               owner: str = "controller") -> float:
+    """Validate one scalar gain; return it as float.
+
+    Raises
+    ------
+    ValueError
+        Naming ``owner.name`` when the gain is not a finite real number, is
+        non-positive (``allow_zero=False``) or negative.
+    """
+    label = f"{owner} gain {name!r}"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{label} = {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{label} = {v!r} is not finite")
+    if allow_negative:
+        return v
+    if v < 0.0 or (v == 0.0 and not allow_zero):
+        need = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{label} = {v!r} must be {need}")
+    return v
+
+
+def check_gains(name: str, values: Any, *, shape: tuple[int, ...] | None = None,
+                owner: str = "controller", positive: bool = False) -> np.ndarray:
+    """Validate a gain vector/matrix: finite (and positive when asked); return a float array."""
+    try:
+        arr = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner} gain {name!r} = {values!r} is not numeric") from None
+    if shape is not None and arr.shape != tuple(shape):
+        raise ValueError(f"{owner} gain {name!r} has shape {arr.shape}, expected {tuple(shape)}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{owner} gain {name!r} contains non-finite entries: {arr!r}")
+    if positive and not np.all(arr > 0.0):
+        raise ValueError(f"{owner} gain {name!r} must be > 0 element-wise, got {arr!r}")
+    return arr
+
+
+# ----------------------------------------------------------------------------
+# static-law controllers
+class StaticLaw:
+    """Base class of a pure controller law ``u = law(inputs)``.
+
+    Subclasses set ``inputs`` (ordered mapping port name -> size),
+    ``output_size`` and implement :meth:`__call__` taking a dict of numpy
+    arrays (float or object arrays of AutoDiffXd) and returning the command
+    array.  Laws must be written with numpy ufuncs and
+    :mod:`awiwi_drake._math` so that float and AutoDiffXd pass through.
+    """
+
+    name: str = "controller"
+    inputs: Mapping[str, int] = {}
+    output_size: int = 1
+
+    def __call__(self, u: Mapping[str, np.ndarray]) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+
+@TemplateSystem.define("StaticLawController_")
+def StaticLawController_(T):
+    """A feedthrough controller evaluating a :class:`StaticLaw` (float, AutoDiffXd)."""
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, law: StaticLaw, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(law, StaticLaw):
+                raise ValueError(f"StaticLawController: law must be a StaticLaw, got {type(law).__name__}")
+            self.law = law
+            self._ports = []
+            for pname, size in law.inputs.items():
+                self._ports.append((pname, self.DeclareVectorInputPort(pname, int(size))))
+            tickets = {p.ticket() for _, p in self._ports}
+            self.DeclareVectorOutputPort(COMMAND_PORT, int(law.output_size), self._calc,
+                                         prerequisites_of_calc=tickets)
+            self.set_name(law.name)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.law, converter=converter)
+
+        def _calc(self, context, output):
+            values = {name: port.Eval(context) for name, port in self._ports}
+            out = self.law(values)
+            output.SetFromVector(np.asarray(out).reshape(-1))
+
+    return Impl
+
+
+StaticLawController = StaticLawController_[None]
+
+
+# ----------------------------------------------------------------------------
+# port helpers
+def _input_names(system: System) -> list[str]:
+    return [system.get_input_port(i).get_name() for i in range(system.num_input_ports())]
+
+
+def _output_names(system: System) -> list[str]:
+    return [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]
+
+
+def reference_ports(controller: System) -> list[str]:
+    """Names of the controller's ``*_reference`` input ports."""
+    return [n for n in _input_names(controller) if n.endswith(REFERENCE_SUFFIX)]
+
+
+def measurement_ports(controller: System) -> list[str]:
+    """Names of the controller's measurement input ports (all non-reference inputs)."""
+    return [n for n in _input_names(controller) if not n.endswith(REFERENCE_SUFFIX)]
+
+
+# ----------------------------------------------------------------------------
+@dataclass
+class ClosedLoop:
+    """Handles of a closed loop built by :func:`closed_loop`.
+
+    Exported diagram ports: inputs ``<signal>_reference`` (one per controller
+    reference) and every rig input other than ``motor_torque`` (e.g.
+    ``external_torque``); outputs: every rig output under its own name, the
+    controller command ``motor_torque_command`` and the torque entering the rig
+    ``motor_torque`` (after hold, delay and saturation).
+    """
+
+    diagram: Diagram
+    rig: Any
+    controller: System
+    rate_hz: float | None
+    delay: float | None
+    delay_steps: int
+    saturation: np.ndarray | None
+    references: tuple[str, ...]
+    disturbances: tuple[str, ...]
+    tracked_outputs: tuple[str, ...]
+    _holds: list = field(default_factory=list, repr=False)
+    _delays: list = field(default_factory=list, repr=False)
+
+    @property
+    def num_inputs(self) -> int:
+        """Size of the command ``motor_torque``."""
+        return self.diagram.GetOutputPort(COMMAND_PORT).size()
+
+    def create_context(self, *, state: Sequence[float] | None = None,
+                       motor_torque: Sequence[float] | float | None = None,
+                       references: Mapping[str, Any] | None = None,
+                       disturbances: Mapping[str, Any] | None = None) -> Context:
+        """A context with the rig state set, references/disturbances fixed.
+
+        ``motor_torque`` initialises the sample-and-hold and delay buffers (so
+        the first control periods apply the operating-point torque instead of
+        zero).  Unspecified references/disturbances are fixed to zero.
+        """
+        ctx = self.diagram.CreateDefaultContext()
+        self.initialize(ctx, state=state, motor_torque=motor_torque)
+        references = dict(references or {})
+        disturbances = dict(disturbances or {})
+        for name in self.references:
+            port = self.diagram.GetInputPort(name)
+            port.FixValue(ctx, _vector(references.pop(name, 0.0), port.size(), name))
+        for name in self.disturbances:
+            port = self.diagram.GetInputPort(name)
+            port.FixValue(ctx, _vector(disturbances.pop(name, 0.0), port.size(), name))
+        unknown = sorted(set(references) | set(disturbances))
+        if unknown:
+            raise ValueError(f"closed loop has no input port {unknown[0]!r}; inputs: "
+                             f"{', '.join(self.references + self.disturbances)}")
+        return ctx
+
+    def initialize(self, context: Context, *, state=None, motor_torque=None) -> None:
+        """Set the rig state and the hold/delay buffers in a (root) context."""
+        if state is not None:
+            rig_sys = self.diagram.GetSubsystemByName("rig")
+            rig_ctx = rig_sys.GetMyMutableContextFromRoot(context)
+            x = np.asarray(state, dtype=float).reshape(-1)
+            n = rig_ctx.num_continuous_states()
+            if x.size != n:
+                raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} continuous states")
+            rig_ctx.SetContinuousState(x)
+        if motor_torque is not None:
+            u = _vector(motor_torque, self.num_inputs, "motor_torque")
+            for zoh in self._holds:
+                zoh.SetVectorState(zoh.GetMyMutableContextFromRoot(context), u)
+            for d in self._delays:
+                dctx = d.GetMyMutableContextFromRoot(context)
+                dctx.SetDiscreteState(np.tile(u, self.delay_steps))
+
+
+def _vector(value, size: int, name: str) -> np.ndarray:
+    v = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
+    if v.size == 1 and size > 1:
+        v = np.full(size, float(v[0]))
+    if v.size != size:
+        raise ValueError(f"{name}: expected {size} values, got {v.size}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name}: values must be finite, got {v}")
+    return v
+
+
+def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
+                delay: float | None = None, saturation: float | Sequence[float] | None = None,
+                sensors: Mapping[str, System] | None = None, name: str | None = None) -> ClosedLoop:
+    """Close the loop between a rig and a controller by port names.
+
+    Parameters
+    ----------
+    rig : Rig
+        Any object with a ``diagram`` exporting the input ``motor_torque`` and
+        the measurement outputs (the :class:`awiwi_drake.rigs.Rig` contract).
+    controller : System
+        Controller following the naming conventions of this module.
+    rate_hz : float or None
+        Control rate [Hz]: the command is sampled and held (zero-order hold)
+        every ``1/rate_hz`` s (3 kHz in the Awiwi hand).  ``None``: continuous
+        controller (needed for :func:`awiwi_drake.analysis.linearize`).
+    delay : float or None
+        Round-trip delay [s] (333e-6 s in the hand), realised by a
+        ``DiscreteTimeDelay`` of ``round(delay * rate_hz)`` periods; requires
+        ``rate_hz`` and must be a whole number of periods within 1 %.
+    saturation : float or sequence or None
+        Symmetric torque limit [Nm] applied to the command (Drake
+        ``Saturation``).  ``None``: the rig's own limit (if any) applies.
+    sensors : mapping, optional
+        ``{rig_output_name: system}``: a sensor model with one input and one
+        output inserted between that rig output and the controller input.
+    name : str, optional
+        Diagram name (default ``"<rig>_<controller>"``).
+
+    Returns
+    -------
+    ClosedLoop
+    """
+    rig_diagram = getattr(rig, "diagram", None)
+    if not isinstance(rig_diagram, System):
+        raise ValueError(f"closed_loop: rig must have a Drake system in .diagram, got {type(rig).__name__}")
+    if not isinstance(controller, System):
+        raise ValueError(f"closed_loop: controller must be a Drake System, got {type(controller).__name__}")
+    rig_in, rig_out = _input_names(rig_diagram), _output_names(rig_diagram)
+    ctrl_in, ctrl_out = _input_names(controller), _output_names(controller)
+    if COMMAND_PORT not in rig_in:
+        raise ValueError(f"closed_loop: rig {getattr(rig, 'name', '?')!r} has no input port {COMMAND_PORT!r}")
+    if COMMAND_PORT not in ctrl_out:
+        raise ValueError(f"closed_loop: controller {controller.get_name()!r} has no output port "
+                         f"{COMMAND_PORT!r} (outputs: {', '.join(ctrl_out) or 'none'})")
+    n_u = rig_diagram.GetInputPort(COMMAND_PORT).size()
+    if controller.GetOutputPort(COMMAND_PORT).size() != n_u:
+        raise ValueError(f"closed_loop: controller port {COMMAND_PORT!r} has size "
+                         f"{controller.GetOutputPort(COMMAND_PORT).size()}, rig input has size {n_u}")
+    refs = reference_ports(controller)
+    tracked = []
+    for r in refs:
+        sig = r[: -len(REFERENCE_SUFFIX)]
+        if sig not in rig_out:
+            raise ValueError(f"closed_loop: controller reference port {r!r} refers to {sig!r}, which the rig "
+                             f"{getattr(rig, 'name', '?')!r} does not output (outputs: {', '.join(rig_out)})")
+        tracked.append(sig)
+    for m in measurement_ports(controller):
+        if m not in rig_out:
+            raise ValueError(f"closed_loop: controller measurement port {m!r} is not an output of rig "
+                             f"{getattr(rig, 'name', '?')!r} (outputs: {', '.join(rig_out)})")
+        if controller.GetInputPort(m).size() != rig_diagram.GetOutputPort(m).size():
+            raise ValueError(f"closed_loop: port {m!r} has size {controller.GetInputPort(m).size()} on the "
+                             f"controller but {rig_diagram.GetOutputPort(m).size()} on the rig")
+    sensors = dict(sensors or {})
+    for s in sensors:
+        if s not in rig_out:
+            raise ValueError(f"closed_loop: sensor given for {s!r}, which is not a rig output")
+    if rate_hz is not None:
+        rate_hz = float(rate_hz)
+        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+            raise ValueError(f"closed_loop: rate_hz = {rate_hz!r} must be > 0 (or None for continuous)")
+    steps = 0
+    if delay is not None:
+        delay = float(delay)
+        if not math.isfinite(delay) or delay < 0.0:
+            raise ValueError(f"closed_loop: delay = {delay!r} must be >= 0 s")
+        if delay > 0.0:
+            if rate_hz is None:
+                raise ValueError("closed_loop: delay needs a sampled controller (give rate_hz)")
+            steps = int(round(delay * rate_hz))
+            if steps < 1 or abs(steps - delay * rate_hz) > _ROUND_TRIP_TOLERANCE:
+                raise ValueError(f"closed_loop: delay = {delay!r} s is not a whole number of control "
+                                 f"periods (1/{rate_hz:g} s) within 1 %")
+    sat = None
+    if saturation is not None:
+        sat = _vector(saturation, n_u, "saturation")
+        if np.any(sat <= 0.0):
+            raise ValueError(f"closed_loop: saturation = {sat} must be > 0 Nm")
+
+    builder = DiagramBuilder()
+    plant = builder.AddNamedSystem("rig", rig_diagram)
+    ctrl = builder.AddNamedSystem("controller", controller)
+    handles = ClosedLoop(diagram=None, rig=rig, controller=controller, rate_hz=rate_hz,
+                         delay=(steps / rate_hz if steps else None), delay_steps=steps, saturation=sat,
+                         references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked))
+    # measurements (optionally through sensor models)
+    for m in measurement_ports(controller):
+        src = plant.GetOutputPort(m)
+        if m in sensors:
+            sensor = builder.AddNamedSystem(f"sensor_{m}", sensors[m])
+            if sensor.num_input_ports() != 1 or sensor.num_output_ports() != 1:
+                raise ValueError(f"closed_loop: sensor for {m!r} must have exactly one input and one output")
+            builder.Connect(src, sensor.get_input_port(0))
+            src = sensor.get_output_port(0)
+        builder.Connect(src, ctrl.GetInputPort(m))
+    # command path: controller -> hold -> delay -> saturation -> rig
+    cmd = ctrl.GetOutputPort(COMMAND_PORT)
+    builder.ExportOutput(cmd, "motor_torque_command")
+    if rate_hz is not None:
+        zoh = builder.AddNamedSystem("command_hold", ZeroOrderHold(1.0 / rate_hz, n_u))
+        builder.Connect(cmd, zoh.get_input_port(0))
+        cmd = zoh.get_output_port(0)
+        handles._holds.append(zoh)
+    if steps:
+        dly = builder.AddNamedSystem("round_trip_delay", DiscreteTimeDelay(1.0 / rate_hz, steps, n_u))
+        builder.Connect(cmd, dly.get_input_port())
+        cmd = dly.get_output_port()
+        handles._delays.append(dly)
+    if sat is not None:
+        satsys = builder.AddNamedSystem("torque_saturation", Saturation(-sat, sat))
+        builder.Connect(cmd, satsys.get_input_port(0))
+        cmd = satsys.get_output_port(0)
+    builder.Connect(cmd, plant.GetInputPort(COMMAND_PORT))
+    builder.ExportOutput(cmd, COMMAND_PORT)
+    for r in refs:
+        builder.ExportInput(ctrl.GetInputPort(r), r)
+    dist = []
+    for n in rig_in:
+        if n != COMMAND_PORT:
+            builder.ExportInput(plant.GetInputPort(n), n)
+            dist.append(n)
+    for n in rig_out:
+        if n != COMMAND_PORT:
+            builder.ExportOutput(plant.GetOutputPort(n), n)
+    diagram = builder.Build()
+    diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")
+    handles.diagram = diagram
+    handles.disturbances = tuple(dist)
+    return handles

@@ -1,0 +1,1 @@
+"""Built-in controller registrations (imported lazily by :mod:`.registry`)."""

@@ -1,0 +1,117 @@
+"""Controller registry: ``name -> factory(rig) -> controller system``.
+
+Built-in controllers are registered by the modules listed in
+``PROVIDER_MODULES`` (imported lazily on first use, so that registering never
+imports Drake-heavy modules at package import).  Other parts of the package
+(and users) add controllers with :func:`register_controller`.
+
+Rig kinds are ``"tendon_rig"``, ``"flexible_joint"`` and ``"joint_rig"``;
+:func:`rig_kind` maps a rig object (or a CLI spelling such as
+``"flexible-joint"``) to its kind.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+__all__ = ["ControllerEntry", "register_controller", "make_controller", "controller_names",
+           "get_entry", "rig_kind", "RIG_KINDS", "PROVIDER_MODULES"]
+
+RIG_KINDS = ("tendon_rig", "flexible_joint", "joint_rig")
+_ALIASES = {
+    "tendon": "tendon_rig", "tendon_rig": "tendon_rig",
+    "flexible_joint": "flexible_joint", "flexible_joint_rig": "flexible_joint", "flexible": "flexible_joint",
+    "joint_rig": "joint_rig", "joint": "joint_rig", "antagonistic_joint": "joint_rig",
+}
+# Modules whose import registers controllers (append yours).
+PROVIDER_MODULES = ["awiwi_drake.control.catalog"]
+
+
+@dataclass(frozen=True)
+class ControllerEntry:
+    """One registered controller.
+
+    ``factory(rig)`` returns the controller system; ``loop_options`` are the
+    keyword defaults for :func:`awiwi_drake.control.base.closed_loop`
+    (e.g. ``{"rate_hz": 3000.0}``).
+    """
+
+    name: str
+    factory: Callable[[Any], Any]
+    rigs: tuple[str, ...]
+    description: str
+    loop_options: Mapping[str, Any] = field(default_factory=dict)
+
+
+_REGISTRY: dict[str, ControllerEntry] = {}
+_loaded = False
+
+
+def _ensure_loaded() -> None:
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    for mod in PROVIDER_MODULES:
+        importlib.import_module(mod)
+
+
+def rig_kind(rig: Any) -> str:
+    """The kind of a rig object or rig name (``tendon_rig``, ``flexible_joint``, ``joint_rig``)."""
+    name = rig if isinstance(rig, str) else getattr(rig, "name", None)
+    if not isinstance(name, str):
+        raise ValueError(f"cannot tell the rig kind of {rig!r}: it has no name")
+    key = name.strip().lower().replace("-", "_").replace(" ", "_")
+    if key in _ALIASES:
+        return _ALIASES[key]
+    for alias, kind in _ALIASES.items():  # e.g. "flexible_joint_linear"
+        if key.startswith(alias):
+            return kind
+    raise ValueError(f"unknown rig {name!r}; known rigs: tendon-rig, flexible-joint, joint-rig")
+
+
+def register_controller(name: str, factory: Callable[[Any], Any], *, rigs: tuple[str, ...] | list[str],
+                        description: str, loop_options: Mapping[str, Any] | None = None,
+                        replace: bool = False) -> ControllerEntry:
+    """Register a controller factory under ``name`` for the given rig kinds."""
+    if not name or name != name.strip():
+        raise ValueError(f"register_controller: bad controller name {name!r}")
+    kinds = tuple(rig_kind(r) for r in rigs)
+    if not kinds:
+        raise ValueError(f"register_controller: controller {name!r} needs at least one rig kind")
+    if name in _REGISTRY and not replace:
+        raise ValueError(f"register_controller: controller {name!r} is already registered")
+    entry = ControllerEntry(name, factory, kinds, description, dict(loop_options or {}))
+    _REGISTRY[name] = entry
+    return entry
+
+
+def controller_names(rig: Any | None = None) -> list[str]:
+    """Registered names (only those fitting ``rig`` when given)."""
+    _ensure_loaded()
+    if rig is None:
+        return sorted(_REGISTRY)
+    kind = rig_kind(rig)
+    return sorted(n for n, e in _REGISTRY.items() if kind in e.rigs)
+
+
+def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
+    """The entry of ``name``; ValueError when unknown or not fitting ``rig``."""
+    _ensure_loaded()
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown controller {name!r}; known: {', '.join(sorted(_REGISTRY))}")
+    entry = _REGISTRY[name]
+    if rig is not None:
+        kind = rig_kind(rig)
+        if kind not in entry.rigs:
+            fits = controller_names(rig)
+            raise ValueError(f"controller {name!r} does not fit rig {kind!r} (it is for "
+                             f"{', '.join(entry.rigs)}); controllers for {kind!r}: {', '.join(fits)}")
+    return entry
+
+
+def make_controller(name: str, rig: Any):
+    """Build controller ``name`` for ``rig`` (ValueError when unknown or unfit)."""
+    return get_entry(name, rig).factory(rig)

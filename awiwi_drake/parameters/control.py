@@ -1,0 +1,183 @@
+"""Controller parameters (ch. 3, 10-14) with units, ranges and sources."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from awiwi_drake.parameters.base import Parameters, param
+
+__all__ = ["TendonForceGains", "ForceSensorParams", "PolePlacementParams", "LqrParams", "SdreTendonParams",
+           "SdreJointParams", "ImpedanceParams", "RippleCompensationParams", "FrictionIdentificationParams",
+           "CompareTestParams", "compare_test_params", "LQR_R_VALUES"]
+
+#: Table 13.1: the three input costs of Fig 13.2-13.3.
+LQR_R_VALUES = (1e-4, 1e-2, 1.0)
+
+
+@dataclass(frozen=True)
+class TendonForceGains(Parameters):
+    """Tendon force PD (10.2) designed by identification (10.10)-(10.11).
+
+    ``Kp = w^2 B / alpha``, ``Kd = 2 xi w B / alpha`` with ``alpha = d f_t / d theta``
+    at the design force (fixed gains) or at the reference force (scheduled).
+    """
+
+    natural_frequency: float = param(150.0, unit="rad/s", low=0.0, low_inclusive=False,
+                                     source="chosen: settles a 5 N step in ~40 ms like Fig 10.3b at 3 kHz",
+                                     doc="target w of the motor-position error dynamics (10.10)")
+    damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
+                                 source="chosen: 4.6 % overshoot makes the damping measurable from a step "
+                                        "(Fig 10.3: 'well damped')",
+                                 doc="target xi (10.10)")
+    design_force: float = param(30.0, unit="N", low=0.0, low_inclusive=False,
+                                source="Fig 10.2 (fixed gains tuned for 30 N)",
+                                doc="working point of the fixed-gain design")
+    friction_compensation: bool = param(True, unit="-", source="(10.2): friction estimate fed forward")
+    force_feedforward: bool = param(True, unit="-", source="(10.2): tendon torque r_m f fed forward")
+    friction_scale: float = param(1.0, unit="-", low=0.0, high=1.0,
+                                  source="chosen: 1 = full model (3.8); < 1 conservative (ch. 3: "
+                                         "under- rather than over-compensate)")
+
+
+@dataclass(frozen=True)
+class ForceSensorParams(Parameters):
+    """Tendon force sensor: 12-bit Hall sensor with white noise (section 4, 10.4)."""
+
+    bits: int = param(12, unit="bit", low=1, high=24, source="ch. 4: 12-bit Hall sensor at 3 kHz")
+    full_scale: float = param(200.0, unit="N", low=0.0, low_inclusive=False,
+                              source="chosen: covers the ~180 N top of Fig 4.8b")
+    noise_std: float = param(0.1, unit="N", low=0.0,
+                             source="chosen: ~2 quantisation steps, noise of Fig 10.4 of a few 0.1 N")
+    sample_period: float = param(1.0 / 3000.0, unit="s", low=0.0, low_inclusive=False,
+                                 source="ch. 1: 3 kHz control rate")
+
+
+@dataclass(frozen=True)
+class PolePlacementParams(Parameters):
+    """Target double oscillator (12.13), Table 12.1."""
+
+    omega1: float = param(100.0, unit="rad/s", low=0.0, low_inclusive=False, source="Table 12.1")
+    omega2: float = param(30.0, unit="rad/s", low=0.0, low_inclusive=False, source="Table 12.1")
+    xi1: float = param(0.7, unit="-", low=0.0, low_inclusive=False, source="Table 12.1")
+    xi2: float = param(0.7, unit="-", low=0.0, low_inclusive=False, source="Table 12.1")
+    stiffness_low: float = param(0.43, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                 source="Fig 12.3-12.4: K = [0.43, 1.15]")
+    stiffness_high: float = param(1.15, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                  source="Fig 12.3-12.4: K = [0.43, 1.15]")
+    perturbed_stiffness: float = param(0.600, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                       source="section 12.3: k 0.605 -> 0.600")
+
+
+@dataclass(frozen=True)
+class LqrParams(Parameters):
+    """LQR of the flexible joint, Table 13.1: state [q, qd, theta, thetad]."""
+
+    q_diag: tuple = param((10.0, 0.01, 1.0, 0.01), unit="mixed", low=0.0, source="(13.9), Table 13.1")
+    r: float = param(0.01, unit="1/Nm^2", low=0.0, low_inclusive=False, source="(13.10), Table 13.1")
+
+
+@dataclass(frozen=True)
+class SdreTendonParams(Parameters):
+    """SDRE tendon force controller, Table 14.1: state [theta error, theta rate]."""
+
+    q_diag: tuple = param((1.0, 1e-4), unit="mixed", low=0.0, source="Table 14.1")
+    r: float = param(1e-6, unit="1/Nm^2", low=0.0, low_inclusive=False, source="Table 14.1")
+    update_rate: float = param(200.0, unit="Hz", low=0.0, low_inclusive=False,
+                               source="section 14.4: 'a rate of about 200 Hz is sufficient'")
+
+
+@dataclass(frozen=True)
+class SdreJointParams(Parameters):
+    """SDRE nonlinear flexible joint, Table 14.2: state [q, qd, theta, thetad]."""
+
+    q_diag: tuple = param((10.0, 0.01, 0.1, 0.01), unit="mixed", low=0.0, source="Table 14.2")
+    r: float = param(1e-4, unit="1/Nm^2", low=0.0, low_inclusive=False, source="Table 14.2")
+    link_inertia: float = param(7.2e-7, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 14.2")
+    update_rate: float = param(200.0, unit="Hz", low=0.0, low_inclusive=False,
+                               source="section 14.4: 'a rate of about 200 Hz is sufficient'")
+
+
+@dataclass(frozen=True)
+class ImpedanceParams(Parameters):
+    """Two-time-scale / cascaded impedance (11.3)-(11.4)."""
+
+    joint_stiffness: float = param(0.3, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                   source="chosen: about half the mechanical stiffness 0.605 (Table 12.1); "
+                                          "Fig 11.2 'low impedance stiffness'")
+    joint_damping: float = param(2e-4, unit="Nm s/rad", low=0.0,
+                                 source="chosen: low damping as in Fig 11.2 (oscillations visible)")
+    motor_stiffness: float = param(20.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                   source="chosen: inner loop Kp of (11.3), ~5x faster than the link mode")
+    motor_damping: float = param(0.2, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: inner loop Kd of (11.3), xi ~0.5 with B = 2e-3")
+    force_gain: float = param(0.5, unit="-", low=0.0, low_inclusive=False,
+                              source="chosen: cascaded (11.16) force-error gain, dimensionless on r f")
+    force_damping: float = param(0.02, unit="s", low=0.0, low_inclusive=False,
+                                 source="chosen: cascaded (11.16) force-rate gain")
+
+
+@dataclass(frozen=True)
+class RippleCompensationParams(Parameters):
+    """Ripple feedforward (section 3.2): known phase, conservative amplitude."""
+
+    amplitude_scale: float = param(0.8, unit="-", low=0.0, high=1.0,
+                                   source="chosen: ch. 3 asks for a conservative amplitude estimate "
+                                          "(compensate 80 %)")
+    speed: float = param(2.0 * 3.141592653589793, unit="rad/s", low=0.0, low_inclusive=False,
+                         source="chosen: 1 rev/s like Fig 3.5 (1 rad/s and 0.5 rad/s tests)")
+    position_gain: float = param(5.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: simple PD of Fig 3.4 (moderate so the ripple shows)")
+    velocity_gain: float = param(0.2, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: simple PD of Fig 3.4")
+
+
+@dataclass(frozen=True)
+class FrictionIdentificationParams(Parameters):
+    """Piecewise-constant velocity identification (Fig 3.3)."""
+
+    max_speed: float = param(15.0, unit="rad/s", low=0.0, low_inclusive=False, source="Fig 3.3b: +-15 rad/s")
+    num_speeds: int = param(12, unit="-", low=3, source="chosen: 12 plateaus per sign")
+    plateau_time: float = param(0.6, unit="s", low=0.0, low_inclusive=False,
+                                source="chosen: several output revolutions at the slow plateaus (Fig 3.3a)")
+    settle_fraction: float = param(0.3, unit="-", low=0.0, high=0.9,
+                                   source="chosen: discard the transient at the start of each plateau")
+    torque_noise_std: float = param(0.01, unit="Nm", low=0.0,
+                                    source="chosen: current-sensor noise ~1 % of the 1 Nm range")
+
+
+@dataclass(frozen=True)
+class CompareTestParams(Parameters):
+    """Standard closed-loop tests of :mod:`awiwi_drake.control.compare` (per rig)."""
+
+    initial_reference: float = param(0.0, unit="ref", source="chosen per rig", finite=True)
+    step_size: float = param(0.3, unit="ref", source="chosen per rig", finite=True)
+    step_delay: float = param(0.02, unit="s", low=0.0, source="chosen: short quiet lead-in")
+    step_duration: float = param(0.5, unit="s", low=0.0, low_inclusive=False, source="chosen per rig")
+    sine_amplitude: float = param(0.1, unit="ref", source="chosen per rig")
+    sine_frequency: float = param(2.0, unit="Hz", low=0.0, low_inclusive=False, source="chosen per rig")
+    sine_periods: float = param(3.0, unit="-", low=1.0, source="chosen: first period dropped as transient")
+    disturbance_torque: float = param(0.02, unit="Nm", source="chosen: ~0.03 rad deflection at 0.6 Nm/rad")
+    sweep_amplitude: float = param(0.05, unit="ref", source="chosen per rig")
+    sweep_start: float = param(1.0, unit="Hz", low=0.0, low_inclusive=False, source="Fig 11.4: 0-70 Hz")
+    sweep_stop: float = param(70.0, unit="Hz", low=0.0, low_inclusive=False, source="Fig 11.4: 0-70 Hz")
+    sweep_duration: float = param(4.0, unit="s", low=0.0, low_inclusive=False,
+                                  source="chosen: slow enough chirp for a quasi-steady gain")
+    settle_time: float = param(0.3, unit="s", low=0.0, source="chosen: transients of the start decay")
+    sample_period: float = param(2e-4, unit="s", low=0.0, low_inclusive=False,
+                                 source="chosen: logging/hold period for continuous loops")
+    max_step: float = param(2e-4, unit="s", low=0.0, low_inclusive=False,
+                            source="chosen: RK3 max step, resolves the ~100 Hz modes")
+
+
+def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
+    """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
+    from awiwi_drake.control.registry import rig_kind
+    kind = rig_kind(rig)
+    if kind == "tendon_rig":
+        base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
+                                 sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
+                                 sweep_duration=2.0, settle_time=0.2)
+    else:
+        base = CompareTestParams()
+    return base.replace(**overrides) if overrides else base
