@@ -57,6 +57,7 @@ from awiwi_drake.parameters.backstepping import (
 
 __all__ = [
     "REFERENCE_SIZE",
+    "REFERENCE_PORT",
     "JointModel",
     "position_backstepping",
     "position_feedback_coefficients",
@@ -67,8 +68,24 @@ __all__ = [
     "ImpedanceBackstepping",
 ]
 
-#: Size of the ``link_reference`` input: ``[r, r', r'', r''', r'''']`` (steps: derivatives zero).
+#: Entries of a full reference ``[r, r', r'', r''', r'''']``.
 REFERENCE_SIZE = 5
+#: Name of the reference input (ctrl1 convention: ``<rig output>_reference``).
+REFERENCE_PORT = "link_angle_reference"
+
+
+def _reference_port_size(reference_derivatives: int) -> int:
+    if reference_derivatives not in (0, REFERENCE_SIZE - 1):
+        raise ValueError(f"reference_derivatives = {reference_derivatives!r} must be 0 (steps: derivatives "
+                         f"taken as zero) or {REFERENCE_SIZE - 1} (r and its first four derivatives)")
+    return 1 + reference_derivatives
+
+
+def _full_reference(r):
+    """Pad a 1-entry reference with zero derivatives."""
+    if len(r) == REFERENCE_SIZE:
+        return r
+    return [r[0]] + [0.0 * r[0]] * (REFERENCE_SIZE - 1)
 
 
 @dataclass(frozen=True)
@@ -183,7 +200,7 @@ def position_backstepping(state, reference, plant: BacksteppingPlantParams, gain
     state : array (4,)
         ``[q, qd, theta, thetad]`` (12.10).
     reference : array (5,)
-        ``[r, r', r'', r''', r'''']`` of the link angle (steps: zeros beyond r).
+        The link-angle reference and its first four derivatives (steps: zeros beyond r).
     plant : BacksteppingPlantParams
         Controller model (m, b, K, b_q, b_theta). The thesis neglects the damping in the design;
         here it is kept, so that the design model is the plant (set it to 0 to follow the thesis).
@@ -291,27 +308,30 @@ def PositionBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Position backstepping controller of a linear flexible joint (15.11)-(15.50).
 
-        Input ports: ``state`` (4: ``[q, qd, theta, thetad]``), ``link_reference`` (5).
+        Input ports: ``state`` (4: ``[q, qd, theta, thetad]``), ``link_angle_reference``
+        (1, or 5 = reference and four derivatives with ``reference_derivatives=4``).
         Output ports: ``motor_torque`` (1) [Nm], ``lyapunov`` (1).
         """
 
-        def _construct(self, plant=None, gains=None, converter=None):
+        def _construct(self, plant=None, gains=None, reference_derivatives=0, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.plant = plant or BacksteppingPlantParams()
             self.gains = gains or PositionBacksteppingGains()
+            self.reference_derivatives = reference_derivatives
             self._coeffs = position_feedback_coefficients(self.gains)
             self.DeclareVectorInputPort("state", 4)
-            self.DeclareVectorInputPort("link_reference", REFERENCE_SIZE)
+            self.DeclareVectorInputPort(REFERENCE_PORT, _reference_port_size(reference_derivatives))
             tickets = {self.all_input_ports_ticket()}
             self.DeclareVectorOutputPort("motor_torque", 1, self._calc_u, prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("lyapunov", 1, self._calc_v, prerequisites_of_calc=tickets)
+            self.set_name("backstepping_position")
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.plant, other.gains, converter=converter)
+            Impl._construct(self, other.plant, other.gains, other.reference_derivatives, converter=converter)
 
         def _eval(self, context):
             x = self.get_input_port(0).Eval(context)
-            r = self.get_input_port(1).Eval(context)
+            r = _full_reference(self.get_input_port(1).Eval(context))
             return position_backstepping(x, r, self.plant, self.gains, self._coeffs)
 
         def _calc_u(self, context, output):
@@ -331,35 +351,41 @@ def ImpedanceBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Impedance backstepping controller of a joint driven by N motors (15.51)-(15.106).
 
-        Input ports: ``state`` (2 + 2N: ``[q, qd, theta_1..N, omega_1..N]``), ``link_reference`` (5),
-        ``external_torque_estimate`` (1, optional: 0 when not connected).
+        Input ports: ``state`` (2 + 2N: ``[q, qd, theta_1..N, omega_1..N]``), ``link_angle_reference``
+        (1, or 5 with ``reference_derivatives=4``) and, with ``external_torque_input=True``,
+        ``external_torque_estimate`` (1) [Nm] (the thesis's formal design; taken as 0 otherwise).
         Output ports: ``motor_torque`` (N) [Nm], ``lyapunov`` (1), ``joint_torque_desired`` (1) [Nm].
         """
 
-        def _construct(self, model: JointModel, gains=None, converter=None):
+        def _construct(self, model: JointModel, gains=None, reference_derivatives=0, external_torque_input=False,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(model, JointModel):
                 raise ValueError(f"ImpedanceBackstepping: model must be a JointModel, got {type(model).__name__}")
             self.model = model
             self.gains = gains or ImpedanceBacksteppingGains()
+            self.reference_derivatives = reference_derivatives
+            self.external_torque_input = bool(external_torque_input)
             n = model.num_motors
             self.DeclareVectorInputPort("state", model.state_size)
-            self.DeclareVectorInputPort("link_reference", REFERENCE_SIZE)
-            self.DeclareVectorInputPort("external_torque_estimate", 1)
+            self.DeclareVectorInputPort(REFERENCE_PORT, _reference_port_size(reference_derivatives))
+            if self.external_torque_input:
+                self.DeclareVectorInputPort("external_torque_estimate", 1)
             tickets = {self.all_input_ports_ticket()}
             self.DeclareVectorOutputPort("motor_torque", n, self._calc_u, prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("lyapunov", 1, self._calc_v, prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("joint_torque_desired", 1, self._calc_alpha,
                                          prerequisites_of_calc=tickets)
+            self.set_name("backstepping_impedance" if n == 1 else "backstepping_antagonistic")
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.model, other.gains, converter=converter)
+            Impl._construct(self, other.model, other.gains, other.reference_derivatives,
+                            other.external_torque_input, converter=converter)
 
         def _eval(self, context):
             x = self.get_input_port(0).Eval(context)
-            r = self.get_input_port(1).Eval(context)
-            port = self.get_input_port(2)
-            text = port.Eval(context)[0] if port.HasValue(context) else 0.0
+            r = _full_reference(self.get_input_port(1).Eval(context))
+            text = self.get_input_port(2).Eval(context)[0] if self.external_torque_input else 0.0
             return impedance_backstepping(x, r, self.model, self.gains, text)
 
         def _calc_u(self, context, output):
