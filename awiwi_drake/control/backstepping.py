@@ -49,6 +49,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import is_float, smax
+from awiwi_drake.control.friction_observer import observer_rate
 from awiwi_drake.parameters.backstepping import (
     BacksteppingPlantParams,
     ImpedanceBacksteppingGains,
@@ -57,6 +58,7 @@ from awiwi_drake.parameters.backstepping import (
 
 __all__ = [
     "REFERENCE_SIZE",
+    "EXTERNAL_TORQUE_SOURCES",
     "REFERENCE_PORT",
     "JointModel",
     "position_backstepping",
@@ -68,6 +70,8 @@ __all__ = [
     "ImpedanceBackstepping",
 ]
 
+#: Sources of the external torque used by the impedance design (see :class:`ImpedanceBackstepping_`).
+EXTERNAL_TORQUE_SOURCES = ("observer", "input", "none")
 #: Entries of a full reference ``[r, r', r'', r''', r'''']``.
 REFERENCE_SIZE = 5
 #: Name of the reference input (ctrl1 convention: ``<rig output>_reference``).
@@ -352,41 +356,81 @@ def ImpedanceBackstepping_(T):
         """Impedance backstepping controller of a joint driven by N motors (15.51)-(15.106).
 
         Input ports: ``state`` (2 + 2N: ``[q, qd, theta_1..N, omega_1..N]``), ``link_angle_reference``
-        (1, or 5 with ``reference_derivatives=4``) and, with ``external_torque_input=True``,
-        ``external_torque_estimate`` (1) [Nm] (the thesis's formal design; taken as 0 otherwise).
-        Output ports: ``motor_torque`` (N) [Nm], ``lyapunov`` (1), ``joint_torque_desired`` (1) [Nm].
+        (1, or 5 with ``reference_derivatives=4``) and, with ``external_torque="input"``,
+        ``external_torque_measured`` (1) [Nm].
+        Output ports: ``motor_torque`` (N) [Nm], ``lyapunov`` (1), ``joint_torque_desired`` (1) [Nm],
+        ``external_torque_estimate`` (1) [Nm].
+
+        The design (15.62) needs the external torque ``tau_ext``. ``external_torque`` chooses its source:
+        ``"observer"`` (default): the observer (9.2) on the link momentum, gain
+        ``gains.observer_gain`` (one continuous state ``w_hat``; its estimate stays 0 in undisturbed
+        nominal motion, so the Lyapunov function still decreases); ``"input"``: a measured value on the
+        port ``external_torque_measured``; ``"none"``: taken as 0 (the thesis's practice and the law
+        (15.70)/(16.3); a constant load then drives the loop far from the impedance behaviour).
         """
 
-        def _construct(self, model: JointModel, gains=None, reference_derivatives=0, external_torque_input=False,
+        def _construct(self, model: JointModel, gains=None, reference_derivatives=0, external_torque="observer",
                        converter=None):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(model, JointModel):
                 raise ValueError(f"ImpedanceBackstepping: model must be a JointModel, got {type(model).__name__}")
+            if external_torque not in EXTERNAL_TORQUE_SOURCES:
+                raise ValueError(f"ImpedanceBackstepping: external_torque = {external_torque!r} must be one of "
+                                 f"{EXTERNAL_TORQUE_SOURCES}")
             self.model = model
             self.gains = gains or ImpedanceBacksteppingGains()
             self.reference_derivatives = reference_derivatives
-            self.external_torque_input = bool(external_torque_input)
+            self.external_torque = external_torque
             n = model.num_motors
             self.DeclareVectorInputPort("state", model.state_size)
             self.DeclareVectorInputPort(REFERENCE_PORT, _reference_port_size(reference_derivatives))
-            if self.external_torque_input:
-                self.DeclareVectorInputPort("external_torque_estimate", 1)
+            if external_torque == "input":
+                self.DeclareVectorInputPort("external_torque_measured", 1)
             tickets = {self.all_input_ports_ticket()}
+            if external_torque == "observer":
+                self.DeclareContinuousState(1)
+                tickets.add(self.all_state_ticket())
             self.DeclareVectorOutputPort("motor_torque", n, self._calc_u, prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("lyapunov", 1, self._calc_v, prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("joint_torque_desired", 1, self._calc_alpha,
+                                         prerequisites_of_calc=tickets)
+            self.DeclareVectorOutputPort("external_torque_estimate", 1, self._calc_text,
                                          prerequisites_of_calc=tickets)
             self.set_name("backstepping_impedance" if n == 1 else "backstepping_antagonistic")
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.model, other.gains, other.reference_derivatives,
-                            other.external_torque_input, converter=converter)
+                            other.external_torque, converter=converter)
+
+        def _observer(self, context, x):
+            """(w_hat', tau_ext_hat) of the observer (9.2) on the link."""
+            m = self.model
+            w_hat = context.get_continuous_state_vector().GetAtIndex(0)
+            n = m.num_motors
+            P = np.array(m.coupling)
+            xe = m.motor_pulley_radius * np.asarray(x[2:2 + n]) + P * x[0] + np.array(m.elongation_offset)
+            known = np.sum(-P * m.spring.force(xe)) - m.link_damping * x[1]
+            return observer_rate(w_hat, x[1], known, m.link_inertia, self.gains.observer_gain)
+
+        def _text(self, context, x):
+            if self.external_torque == "observer":
+                return self._observer(context, x)[1]
+            if self.external_torque == "input":
+                return self.get_input_port(2).Eval(context)[0]
+            return 0.0 * x[0]
 
         def _eval(self, context):
             x = self.get_input_port(0).Eval(context)
             r = _full_reference(self.get_input_port(1).Eval(context))
-            text = self.get_input_port(2).Eval(context)[0] if self.external_torque_input else 0.0
-            return impedance_backstepping(x, r, self.model, self.gains, text)
+            return impedance_backstepping(x, r, self.model, self.gains, self._text(context, x))
+
+        def _calc_text(self, context, output):
+            output.SetAtIndex(0, self._text(context, self.get_input_port(0).Eval(context)))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            if self.external_torque == "observer":
+                x = self.get_input_port(0).Eval(context)
+                derivatives.get_mutable_vector().SetAtIndex(0, self._observer(context, x)[0])
 
         def _calc_u(self, context, output):
             output.SetFromVector(self._eval(context)[0])

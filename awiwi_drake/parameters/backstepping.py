@@ -80,8 +80,11 @@ class PositionStudy(Parameters):
                           source="Fig 15.13 (0, 0.1, 0.2, 0.5, 1 ms) plus the 333 us round trip of section 15.2.4")
     round_trip_delay: float = param(3.33e-4, unit="s", low=0.0,
                                     source="section 15.2.4: 333 us round trip, measure to actuation")
-    delay_steps: int = param(8, unit="-", low=1, source="chosen: each delay line is 8 samples of delay/8 "
-                             "(DiscreteTimeDelay needs a period; 8 keeps the staircase fine at 1/8 of the delay)")
+    delay_steps: int = param(2, unit="-", low=1, source="chosen: the controller is sampled at 2/delay and the "
+                             "command delayed 2 periods (DiscreteTimeDelay needs a period; finer costs ~1 s per "
+                             "simulated second per step at these rates)")
+    delay_duration: float = param(4.0, unit="s", low=0.0, low_inclusive=False,
+                                  source="chosen: the K1 = 5 response settles within 4 s; sampled runs are costly")
 
 
 @dataclass(frozen=True)
@@ -98,6 +101,9 @@ class ImpedanceBacksteppingGains(Parameters):
                       source="chosen: Table 15.1 K3 (section 15.3 prints none)")
     k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False,
                       source="chosen: Table 15.1 K4 (section 15.3 prints none)")
+    observer_gain: float = param(500.0, unit="1/s", low=0.0, low_inclusive=False,
+                                 source="chosen: bandwidth of the external-torque observer (9.2) that supplies the "
+                                        "tau_ext (15.62) formally needs; 5x K3")
 
 
 @dataclass(frozen=True)
@@ -140,8 +146,9 @@ class NonlinearImpedanceStudy(Parameters):
     damping: float = param(0.05, unit="Nm s/rad", low=0.0, low_inclusive=False, source="Fig 15.16, Kd,imp")
     k3: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K3")
     k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K4")
-    torque_limit: float = param(0.05, unit="Nm", low=0.0, low_inclusive=False,
-                                source="chosen: active during the step peak, idle at rest (Fig 15.21)")
+    torque_limit: float = param(2.0, unit="Nm", low=0.0, low_inclusive=False,
+                                source="chosen: above the 0.5 Nm holding torque, far below the unsaturated "
+                                       "step peak (Fig 15.21 saturates the step only)")
 
 
 @dataclass(frozen=True)
@@ -158,7 +165,7 @@ class AntagonisticBacksteppingGains(Parameters):
                            source="chosen: near-critical link damping for 0.5 Nm/rad on the joint rig")
     k3: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K3")
     k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K4")
-    pretension: float = param(15.0, unit="N", low=0.0, low_inclusive=False, source="Fig 15.25: f_pre = 15 N")
+    pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False, source="Fig 15.26: f_pre = 20 N")
 
 
 @dataclass(frozen=True)

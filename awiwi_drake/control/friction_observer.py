@@ -1,0 +1,115 @@
+"""Joint friction (disturbance) observer and compensation (thesis ch. 9), link-side friction law.
+
+Observer (9.2), written for a link of inertia ``J`` whose known driving torque
+``tau_a`` (the measured joint torque, minus modelled damping) is disturbed by an
+unknown torque ``d`` (friction, contact):
+
+    J w' = tau_a + d                      (link)
+    J w_hat' = tau_a + d_hat              (model copy)
+    d_hat = L J (w - w_hat)               (Luenberger correction, (9.2))
+
+so that ``d_hat' = L (d - d_hat)``: the estimate is ``d`` low-pass filtered at
+``L`` [rad/s] (the "filtered version of the real friction" of section 9.1).
+The thesis writes the friction torque with the opposite sign
+(``tau_fric = -d``); compensation adds ``-d_hat`` to the desired joint torque
+(``u = u_c + tau_fric_hat``).
+
+:func:`observer_rate` is the law (float, AutoDiffXd); :class:`DisturbanceObserver_`
+the TemplateSystem; the impedance backstepping controller embeds the same law
+to estimate the external torque that its design (15.62) formally requires.
+:func:`stick_slip_friction` is a smooth Stribeck law for the link-side
+friction of the test joint (:class:`LinkFriction_`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
+
+__all__ = ["observer_rate", "stick_slip_friction", "DisturbanceObserver_", "DisturbanceObserver",
+           "LinkFriction_", "LinkFriction"]
+
+
+def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
+    """``(w_hat', d_hat)`` of the observer (9.2) for velocity ``w`` and known torque ``tau_a``."""
+    d_hat = gain * inertia * (w - w_hat)
+    return (known_torque + d_hat) / inertia, d_hat
+
+
+def stick_slip_friction(v, p: LinkFrictionParams):
+    """Link friction torque [Nm] acting on the link at velocity ``v`` [rad/s] (smooth Stribeck law).
+
+    ``-(Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/v_eps) - d v``.
+    """
+    level = p.coulomb + (p.static - p.coulomb) * np.exp(-(v / p.stribeck_velocity) ** 2)
+    return -level * np.tanh(v / p.smoothing_velocity) - p.viscous * v
+
+
+@TemplateSystem.define("DisturbanceObserver_")
+def DisturbanceObserver_(T):
+    class Impl(LeafSystem_[T]):
+        """Observer (9.2). Inputs ``link_velocity`` (1) [rad/s], ``joint_torque`` (1) [Nm] (known
+        driving torque); output ``disturbance_estimate`` (1) [Nm] (``-tau_fric_hat``); state ``w_hat``.
+        """
+
+        def _construct(self, inertia: float, params: FrictionObserverParams | None = None, damping: float = 0.0,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not inertia > 0:
+                raise ValueError(f"DisturbanceObserver: inertia = {inertia} must be > 0 [kg m^2]")
+            self.inertia, self.params, self.damping = float(inertia), params or FrictionObserverParams(), float(damping)
+            self.DeclareContinuousState(1)
+            self.DeclareVectorInputPort("link_velocity", 1)
+            self.DeclareVectorInputPort("joint_torque", 1)
+            self.DeclareVectorOutputPort("disturbance_estimate", 1, self._calc,
+                                         prerequisites_of_calc={self.all_state_ticket(),
+                                                                self.get_input_port(0).ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.inertia, other.params, other.damping, converter=converter)
+
+        def _rate(self, context):
+            w_hat = context.get_continuous_state_vector().GetAtIndex(0)
+            w = self.get_input_port(0).Eval(context)[0]
+            tau = self.get_input_port(1).Eval(context)[0] - self.damping * w
+            return observer_rate(w_hat, w, tau, self.inertia, self.params.gain)
+
+        def _calc(self, context, output):
+            w_hat = context.get_continuous_state_vector().GetAtIndex(0)
+            w = self.get_input_port(0).Eval(context)[0]
+            output.SetAtIndex(0, self.params.gain * self.inertia * (w - w_hat))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            derivatives.get_mutable_vector().SetAtIndex(0, self._rate(context)[0])
+
+    return Impl
+
+
+DisturbanceObserver = DisturbanceObserver_[None]
+
+
+@TemplateSystem.define("LinkFriction_")
+def LinkFriction_(T):
+    class Impl(LeafSystem_[T]):
+        """Link-side stick-slip friction: input ``link_velocity`` (1), output ``friction_torque`` (1) [Nm]."""
+
+        def _construct(self, params: LinkFrictionParams | None = None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.params = params or LinkFrictionParams()
+            self.DeclareVectorInputPort("link_velocity", 1)
+            self.DeclareVectorOutputPort("friction_torque", 1, self._calc,
+                                         prerequisites_of_calc={self.get_input_port(0).ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.params, converter=converter)
+
+        def _calc(self, context, output):
+            output.SetAtIndex(0, stick_slip_friction(self.get_input_port(0).Eval(context)[0], self.params))
+
+    return Impl
+
+
+LinkFriction = LinkFriction_[None]
