@@ -239,7 +239,7 @@ def position_backstepping(state, reference, plant: BacksteppingPlantParams, gain
 # Impedance backstepping, N motors on one joint (15.51)-(15.106)
 # ---------------------------------------------------------------------------
 def impedance_backstepping(state, reference, model: JointModel, gains: ImpedanceBacksteppingGains,
-                           external_torque=0.0):
+                           external_torque=0.0, compensation=0.0):
     """Motor torques of the impedance backstepping controller and its Lyapunov value.
 
     Parameters
@@ -254,6 +254,9 @@ def impedance_backstepping(state, reference, model: JointModel, gains: Impedance
         Kp,imp, Kd,imp, K3, K4 > 0.
     external_torque : scalar
         Measured/estimated external joint torque (0 when unknown, as in the thesis's practice).
+    compensation : scalar
+        Torque added to the impedance torque (ch. 9: ``-d_hat`` cancels an estimated friction);
+        treated as constant in the derivatives, like the external torque.
 
     Returns
     -------
@@ -290,7 +293,7 @@ def impedance_backstepping(state, reference, model: JointModel, gains: Impedance
     r0, r1, r2, r3, r4 = (reference[i] for i in range(REFERENCE_SIZE))
     Kp, Kd, K3, K4 = gains.stiffness, gains.damping, gains.k3, gains.k4
     e, ed, edd, eddd = q - r0, qd - r1, qdd - r2, qddd - r3
-    alpha = -Kp * e - Kd * ed + m * r2 + bq * r1            # (15.54) + feedforward of the reference
+    alpha = -Kp * e - Kd * ed + m * r2 + bq * r1 + compensation   # (15.54) + reference feedforward
     alpha_d = -Kp * ed - Kd * edd + m * r3 + bq * r2
     alpha_dd = -Kp * edd - Kd * eddd + m * r4 + bq * r3
     w = np.array(model.torque_share)
@@ -364,13 +367,14 @@ def ImpedanceBackstepping_(T):
         The design (15.62) needs the external torque ``tau_ext``. ``external_torque`` chooses its source:
         ``"observer"`` (default): the observer (9.2) on the link momentum, gain
         ``gains.observer_gain`` (one continuous state ``w_hat``; its estimate stays 0 in undisturbed
-        nominal motion, so the Lyapunov function still decreases); ``"input"``: a measured value on the
+        nominal motion, so the Lyapunov function still decreases); ``compensate=True`` also cancels the
+        estimate in the impedance torque (the friction compensation of ch. 9); ``"input"``: a measured value on the
         port ``external_torque_measured``; ``"none"``: taken as 0 (the thesis's practice and the law
         (15.70)/(16.3); a constant load then drives the loop far from the impedance behaviour).
         """
 
         def _construct(self, model: JointModel, gains=None, reference_derivatives=0, external_torque="observer",
-                       converter=None):
+                       compensate=False, converter=None):
             LeafSystem_[T].__init__(self, converter)
             if not isinstance(model, JointModel):
                 raise ValueError(f"ImpedanceBackstepping: model must be a JointModel, got {type(model).__name__}")
@@ -381,6 +385,10 @@ def ImpedanceBackstepping_(T):
             self.gains = gains or ImpedanceBacksteppingGains()
             self.reference_derivatives = reference_derivatives
             self.external_torque = external_torque
+            self.compensate = bool(compensate)
+            if self.compensate and external_torque == "none":
+                raise ValueError("ImpedanceBackstepping: compensate=True needs an external torque source "
+                                 "('observer' or 'input')")
             n = model.num_motors
             self.DeclareVectorInputPort("state", model.state_size)
             self.DeclareVectorInputPort(REFERENCE_PORT, _reference_port_size(reference_derivatives))
@@ -400,7 +408,7 @@ def ImpedanceBackstepping_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.model, other.gains, other.reference_derivatives,
-                            other.external_torque, converter=converter)
+                            other.external_torque, other.compensate, converter=converter)
 
         def _observer(self, context, x):
             """(w_hat', tau_ext_hat) of the observer (9.2) on the link."""
@@ -422,7 +430,8 @@ def ImpedanceBackstepping_(T):
         def _eval(self, context):
             x = self.get_input_port(0).Eval(context)
             r = _full_reference(self.get_input_port(1).Eval(context))
-            return impedance_backstepping(x, r, self.model, self.gains, self._text(context, x))
+            d = self._text(context, x)
+            return impedance_backstepping(x, r, self.model, self.gains, d, -d if self.compensate else 0.0 * d)
 
         def _calc_text(self, context, output):
             output.SetAtIndex(0, self._text(context, self.get_input_port(0).Eval(context)))

@@ -157,7 +157,12 @@ def position_controller(rig, gains: PositionBacksteppingGains | None = None, **k
 
 
 def impedance_controller(rig, gains=None, *, spring=None, pretension=None, damping=True, **kw):
-    """:class:`ImpedanceBackstepping` for a flexible-joint rig (N = 1) or the joint rig (N = 2)."""
+    """:class:`ImpedanceBackstepping` for a flexible-joint rig (N = 1) or the joint rig (N = 2).
+
+    ``gains`` may be :class:`AntagonisticBacksteppingGains` (its pretension is used) or
+    :class:`ImpedanceBacksteppingGains`; ``kw`` go to the controller (``external_torque``,
+    ``reference_derivatives``, ``compensate``).
+    """
     if gains is None:
         gains = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else \
             ImpedanceBacksteppingGains()
@@ -165,6 +170,8 @@ def impedance_controller(rig, gains=None, *, spring=None, pretension=None, dampi
         pretension = gains.pretension if pretension is None else pretension
         gains = ImpedanceBacksteppingGains(stiffness=gains.stiffness, damping=gains.damping, k3=gains.k3,
                                            k4=gains.k4)
+    if pretension is None and isinstance(rig.params, JointRigParams):
+        pretension = rig.params.pretension
     model = joint_model(rig, spring=spring, pretension=pretension, damping=damping)
     return ImpedanceBackstepping(model, gains, **kw)
 

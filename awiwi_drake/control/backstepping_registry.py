@@ -1,0 +1,50 @@
+"""Registry entries for ctrl1's comparison tool: ``backstepping`` and ``optimal-backstepping``.
+
+* ``backstepping``: the impedance backstepping controller matching the rig
+  (flexible joint: (15.51)-(15.81) with the rig's own spring law, linear or
+  nonlinear; joint rig: the antagonistic controller (15.82)-(15.106)), with the
+  external-torque observer (9.2).
+* ``backstepping-position``: the position controller (15.11)-(15.50)
+  (linear flexible joint only).
+* ``optimal-backstepping``: the impedance controller whose gains
+  ``(Kp,imp, Kd,imp, K3, K4)`` are fitted (ch. 16, scipy least squares) to the
+  LQR of the rig with Table 16.1's weights in torque coordinates
+  (``R = 1e-3``: with Table 16.1's ``R = 0.1`` the LQR gain is below the
+  structural floor of the backstepping feedback, see REPRODUCTIONS.md).
+  Flexible joint only.
+
+Controllers are continuous (``rate_hz=None``): the backstepping design cancels
+the joint dynamics exactly and is run as in the thesis's simulations.
+"""
+
+from __future__ import annotations
+
+from awiwi_drake.control.registry import register_controller
+
+_LOOP = {"rate_hz": None}
+
+
+def _backstepping(rig):
+    from awiwi_drake.control.backstepping_studies import impedance_controller
+    return impedance_controller(rig)
+
+
+def _position(rig):
+    from awiwi_drake.control.backstepping_studies import position_controller
+    return position_controller(rig)
+
+
+def _optimal(rig):
+    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.optimal_gains import optimize_gains
+    from awiwi_drake.parameters.backstepping import OptimalGainsCase
+    fit = optimize_gains(rig, OptimalGainsCase(r_weight=1e-3))
+    return impedance_controller(rig, fit.gains)
+
+
+register_controller("backstepping", _backstepping, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
+                    description="impedance backstepping (ch. 15.3-15.5), rig's spring law, external-torque observer")
+register_controller("backstepping-position", _position, rigs=("flexible_joint",), loop_options=_LOOP,
+                    description="position backstepping of the linear flexible joint (15.11)-(15.50)")
+register_controller("optimal-backstepping", _optimal, rigs=("flexible_joint",), loop_options=_LOOP,
+                    description="impedance backstepping with gains fitted to the LQR (ch. 16)")
