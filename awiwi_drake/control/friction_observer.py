@@ -133,7 +133,9 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     from awiwi_drake.control.base import closed_loop
     from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains
     from awiwi_drake.rigs import joint_rig
-    rig = joint_rig()
+    from awiwi_drake.parameters.rigs import JointRigParams
+    fp = friction or LinkFrictionParams()
+    rig = joint_rig(params=JointRigParams().replace(link_inertia=fp.test_joint_inertia))
     g = gains or AntagonisticBacksteppingGains()
     obs = observer or FrictionObserverParams()
     from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains
@@ -142,7 +144,7 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     loop = closed_loop(rig, ctrl, rate_hz=None)
     b = DiagramBuilder()
     cl = b.AddNamedSystem("loop", loop.diagram)
-    fr = b.AddNamedSystem("link_friction", LinkFriction(friction))
+    fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
     b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
     b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
     b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")

@@ -71,6 +71,10 @@ class LinkFrictionParams(Parameters):
     static: float = param(0.015, unit="Nm", low=0.0, source="chosen: breakaway 1.5x Coulomb (stick-slip)")
     stribeck_velocity: float = param(0.05, unit="rad/s", low=0.0, low_inclusive=False,
                                      source="chosen: Stribeck drop over 0.05 rad/s")
-    smoothing_velocity: float = param(2e-3, unit="rad/s", low=0.0, low_inclusive=False,
-                                      source="chosen: tanh regularisation of sign(v) (integrable stick)")
+    smoothing_velocity: float = param(0.01, unit="rad/s", low=0.0, low_inclusive=False,
+                                      source="chosen: tanh regularisation of sign(v); slope Fc/v_eps = 1 Nm s/rad "
+                                             "keeps the explicit integrator's steps near 0.1 ms at test_joint_inertia")
+    test_joint_inertia: float = param(1e-4, unit="kg m^2", low=0.0, low_inclusive=False,
+                                      source="chosen: link + distal chain of a finger on the test fixture; the "
+                                             "7.2e-7 of Table 15.1 makes stick-slip too stiff to integrate explicitly")
     viscous: float = param(1e-4, unit="Nm s/rad", low=0.0, source="chosen: small viscous part")
