@@ -17,42 +17,33 @@ def _axes(ax, **kw):
     return fig, ax
 
 
-def plot_link_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
-    """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
+def _time_series(runs, signal, ylabel, *, ax, title, log=False, reference=False):
     fig, ax = _axes(ax)
+    plot = ax.semilogy if log else ax.plot
     for r in runs:
-        ax.plot(r.t, r.q, label=r.label)
+        plot(r.t, signal(r), label=r.label)
     if reference and len(runs) and np.all(np.isfinite(runs[0].reference)):
         ax.plot(runs[0].t, runs[0].reference, "k--", lw=0.8, label="reference")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("link angle [rad]")
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.legend(fontsize="small")
     return fig, ax
+
+
+def plot_link_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
+    """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
+    return _time_series(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
 
 
 def plot_command(runs, *, ax=None, title: str = ""):
     """Motor torque entering the plant (Fig 15.11)."""
-    fig, ax = _axes(ax)
-    for r in runs:
-        ax.plot(r.t, r.command[:, 0], label=r.label)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("motor torque [Nm]")
-    ax.set_title(title)
-    ax.legend(fontsize="small")
-    return fig, ax
+    return _time_series(runs, lambda r: r.command[:, 0], "motor torque [Nm]", ax=ax, title=title)
 
 
 def plot_lyapunov(runs, *, ax=None, title: str = "Lyapunov function"):
     """The controller's Lyapunov function along each run (log scale)."""
-    fig, ax = _axes(ax)
-    for r in runs:
-        ax.semilogy(r.t, np.maximum(r.lyapunov, 1e-300), label=r.label)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("V")
-    ax.set_title(title)
-    ax.legend(fontsize="small")
-    return fig, ax
+    return _time_series(runs, lambda r: np.maximum(r.lyapunov, 1e-300), "V", ax=ax, title=title, log=True)
 
 
 def plot_phase_portrait(runs, *, ax=None, title: str = ""):
