@@ -95,19 +95,27 @@ def test_coriolis_term_system_converts_and_satisfies_skew_symmetry():
 
 
 def test_fig_5_7_coriolis_effect_vanishes_at_least_quadratically_with_the_deflection():
-    """Fig 5.7: release a PIP deflection with motors fixed, with and without C(q, v) v.
+    """Fig 5.7: release an MCP flexion deflection (the thesis's "second joint", abduction
+    at 0) with motors fixed, with and without C(q, v) v.
 
-    Coriolis/centrifugal torques scale with v^2 and v with the deflection d, so
-    the trajectory difference must shrink at least 4x when d halves.  The
-    abduction joint barely moves in the full model (thesis: 'remaining at 0').
+    v scales with the deflection d and the Coriolis/centrifugal torques with v^2,
+    so the trajectory difference shrinks at least 4x when d halves.  Measured
+    (0.05 -> 0.025 rad, 0.02 s): 4.0x on the abduction (the lateral offsets of
+    M76/M98 make the finger non-planar: a v^2 torque already at q = 0) and 8.0x on
+    MCP/PIP/DIP (in a planar chain the terms are ~ sin(q) v^2 ~ d^3).  We assert
+    >= 3.9x and >= 7x.  The thesis's 1e-3 rad bound over 0.2 s holds at 0.025 rad.
     """
     from awiwi_drake.hand.studies import coriolis_study
     big = coriolis_study("index", deflection=0.05, t_final=0.02)
     small = coriolis_study("index", deflection=0.025, t_final=0.02)
-    assert np.all(big.max_abs_difference >= 3.5 * small.max_abs_difference)
-    assert np.all(small.max_abs_difference < 1e-3)          # the thesis's bound holds at 0.025 rad
-    assert np.max(np.abs(big.q_full[:, 0])) < 1e-3 * np.max(np.abs(big.q_full[:, 2])) * 20
-    assert np.max(np.abs(big.q_full[:, 2])) == pytest.approx(0.05, rel=1e-6)   # released from rest
+    ratio = big.max_abs_difference / small.max_abs_difference
+    assert ratio[0] >= 3.9 and np.all(ratio[1:] >= 7.0), ratio
+    np.testing.assert_allclose(big.q_full[0], [0.0, 0.05, 0.0, 0.0])           # the MCP is the deflected joint
+    assert np.max(np.abs(big.q_full[:, 1])) == pytest.approx(0.05, rel=1e-6)   # released from rest
+    # the abduction is "not influenced" (thesis): < 0.2 % of the MCP deflection
+    assert np.max(np.abs(big.q_full[:, 0])) < 2e-3 * 0.05
+    full = coriolis_study("index", deflection=0.025, t_final=0.2, num_samples=201)
+    assert np.all(full.max_abs_difference < 1e-3)      # the thesis's bound, its 0.2 s horizon
 
 
 def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating_elongation():
