@@ -139,3 +139,42 @@ def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating
     ad.get_input_port(0).FixValue(actx, InitializeAutoDiff(q).ravel())
     J = ExtractGradient(ad.get_output_port(0).Eval(actx))
     np.testing.assert_allclose(J, -c.P(q) / r_m, atol=1e-12)
+
+
+@pytest.mark.parametrize("finger", ["ring", "fifth"])
+def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
+    """A static torque on the DIP, motors held: the coupling error q_DIP - c q_PIP equals
+    c^T K_q^-1 e_DIP tau (K_q: the operating point's joint stiffness, tendons + coupling
+    element) = tau / (k_c (1 + c^2)), since the PIP/DIP tendon pair acts along (r2, r3),
+    orthogonal to the coupling direction.  Checked on the nonlinear diagram's equilibrium."""
+    from scipy.optimize import fsolve
+
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.hand.plant import coupling_compliance
+    from awiwi_drake.hand.studies import fixed_motor_diagram
+    from awiwi_drake.parameters.hand import FingerRigParams
+    p = FingerRigParams.for_finger(finger)
+    fp = p.finger
+    rig = finger_diagram(finger=finger, params=p, backend="python")
+    op = rig.operating_point(pretension=p.pretension)
+    c = rig.extra["models"].coupling_vector
+    comp = coupling_compliance(op.info["joint_stiffness"], c)
+    assert comp == pytest.approx(1.0 / (fp.coupling_stiffness * (1 + fp.dip_pip_ratio ** 2)), rel=1e-9)
+
+    diagram, plant = fixed_motor_diagram(finger, p)
+    n = plant.num_positions()
+    ctx = diagram.CreateDefaultContext()
+    tau = np.zeros(n)
+    tau[-1] = 0.02                       # N m on the DIP (1 N at the 2 cm distal phalanx)
+    diagram.GetInputPort("external_torque").FixValue(ctx, tau)
+
+    def vdot(q):
+        ctx.SetContinuousState(np.r_[q, np.zeros(n)])
+        return diagram.EvalTimeDerivatives(ctx).CopyToVector()[n:]
+
+    q_eq, info, ok, msg = fsolve(vdot, np.zeros(n), full_output=True, xtol=1e-13)
+    assert ok == 1, msg
+    err = c @ q_eq
+    # exact up to the solver: the coupling element is linear and the tendon pair cannot see c
+    assert err == pytest.approx(comp * tau[-1], rel=1e-4), (err, comp * tau[-1])
+    assert err > 0.0                      # the DIP gives way in the direction it is pushed

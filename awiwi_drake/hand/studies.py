@@ -39,8 +39,9 @@ def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = 
     With ``coriolis=False`` a :class:`CoriolisCancellation_` adds ``C(q, v) v``
     to the applied generalised force, removing the Coriolis/centrifugal terms
     from ``M vdot + C v = tau`` (the simplified model of Fig 5.7).
-    Returns ``(diagram, plant)``; the diagram exports ``state`` (plant [q; v])
-    and ``tendon_force``.
+    Returns ``(diagram, plant)``; the diagram exports the input
+    ``external_torque`` (n) [N m] (fix it before simulating) and the
+    outputs ``state`` (plant [q; v]) and ``tendon_force``.
     """
     p = params if params is not None else FingerRigParams.for_finger(finger)
     b = DiagramBuilder()
@@ -70,9 +71,10 @@ def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = 
         cc = b.AddNamedSystem("coriolis_cancellation", CoriolisCancellation(standalone))
         b.Connect(plant.get_state_output_port(), cc.get_input_port(0))
         sources.append(cc.get_output_port(0))
-    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources), n))
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
     for i, s in enumerate(sources):
         b.Connect(s, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
     b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
     b.ExportOutput(plant.get_state_output_port(), "state")
     b.ExportOutput(springs.GetOutputPort("tendon_force"), "tendon_force")
@@ -134,6 +136,7 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
         if not 0 <= j < n:
             raise ValueError(f"coriolis_study: joint index {j} out of range 0..{n - 1} ({', '.join(names)})")
         ctx = diagram.CreateDefaultContext()
+        diagram.GetInputPort("external_torque").FixValue(ctx, np.zeros(n))
         x0 = np.zeros(2 * n)
         x0[j] = deflection
         if p.finger.pip_dip_coupled if hasattr(p.finger, "pip_dip_coupled") else False:

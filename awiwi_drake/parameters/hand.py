@@ -94,14 +94,20 @@ class FingerParams(Parameters):
     # Ring/fifth PIP-DIP coupling (section 5.3); unused when pip_dip_coupled is False.
     pip_dip_coupled: bool = param(False, unit="-", source="section 5.3: ring and fifth only")
     coupling_stiffness: float = param(
-        2.0, unit="N m/rad", low=0.0, high=1e4, low_inclusive=False,
-        source=("chosen: a stiff coupling tendon (4x the tendon-induced PIP stiffness ~0.5 N m/rad) "
-                "whose mode, sqrt(k_c / I_eff) ~ 4000 rad/s with the DIP's effective inertia "
-                "I_eff ~ 1.2e-7 kg m^2, is no faster than the other finger link modes (~3100-3300 rad/s), "
-                "so explicit RK3 at the 3 kHz control period stays stable"))
+        4.0, unit="N m/rad", low=0.0, high=1e4, low_inclusive=False,
+        source=("chosen: a stiff coupling tendon, 3.1x the tendon-induced PIP stiffness of the ring at "
+                "20 N pretension (2 k_t r42^2 = 1.29 N m/rad, k_t = 13.2 kN/m).  Coupling tolerance as a "
+                "compliance: the DIP torque -> coupling error map c^T K_q^-1 e_DIP of the motors-held joint "
+                "stiffness K_q (5.12) + k_c c c^T is 1/(k_c (1 + (r43/r42)^2)) = 0.166 rad/N m, because the "
+                "PIP/DIP tendon pair acts along (r42, r43), orthogonal to c = (-r43/r42, 1) "
+                "(hand.plant.coupling_compliance).  Stiffer is limited by the coupling mode sqrt(k_c/I_eff): "
+                "5.8e3 rad/s (ring, I_eff = 1/(c^T M^-1 c) = 1.21e-7 kg m^2) and 6.4e3 rad/s (fifth, "
+                "9.9e-8 kg m^2) at damping ratios 0.70 / 0.77, where fixed-step RK3 at the 3 kHz control period "
+                "still contracts (|R(lambda h)| = 0.59 / 0.78); k_c = 6 would put the fifth at 7.8e3 rad/s, "
+                "|R| = 1.35 at damping ratio 0.7: unstable"))
     coupling_damping: float = param(
-        7e-4, unit="N m s/rad", low=0.0, high=1.0,
-        source="chosen: damping ratio ~0.7 of the coupling mode (2 * 0.7 * sqrt(k_c I_eff))")
+        9.7e-4, unit="N m s/rad", low=0.0, high=1.0,
+        source="chosen: damping ratio 0.7 of the ring's coupling mode (2 * 0.7 * sqrt(k_c I_eff), I_eff = 1.21e-7 kg m^2)")
     # Fifth finger hematometacarpal joint (section 5.5); unused when has_hmc is False.
     has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only")
     hmc_radius: float = param(0.008, unit="m", low=0.001, high=0.03, source=_RADIUS_SRC,
