@@ -170,3 +170,29 @@ def test_bad_inputs_name_the_quantity():
         ThumbParams(palm_points=(0.0,) * 9)
     with pytest.raises(ValueError, match="pip_radius"):
         RingFingerParams(pip_radius=-1.0)
+
+
+def test_finger_structure_flags_are_fixed_by_the_thesis():
+    """pip_dip_coupled / has_hmc are not free: a ring with 8 tendons or a coupled index would
+    silently change the hand's tendon count (38, Table 6.2) and the global tendon order."""
+    from awiwi_drake.parameters.hand import (FifthFingerParams, FingerParams, HandParams,
+                                             IndexFingerParams)
+    for make, field in ((lambda: RingFingerParams(pip_dip_coupled=False), "RingFingerParams.pip_dip_coupled"),
+                        (lambda: IndexFingerParams(pip_dip_coupled=True), "IndexFingerParams.pip_dip_coupled"),
+                        (lambda: IndexFingerParams(has_hmc=True), "IndexFingerParams.has_hmc"),
+                        (lambda: FifthFingerParams(has_hmc=False), "FifthFingerParams.has_hmc"),
+                        (lambda: HandParams(ring=IndexFingerParams()), "HandParams.ring"),
+                        (lambda: finger_coupling("ring", FingerParams()), "ring finger: FingerParams.pip_dip_coupled"),
+                        (lambda: finger_coupling("ring", IndexFingerParams()), "index finger")):
+        with pytest.raises(ValueError, match=field):
+            make()
+    # a generic FingerParams with the ring's structure is accepted and gives the ring's 6 tendons
+    assert finger_coupling("ring", FingerParams(pip_dip_coupled=True)).num_tendons == 6
+
+
+def test_global_tendon_order_mismatch_is_a_value_error(monkeypatch):
+    import awiwi_drake.hand.coupling as hc
+    swapped = dict(TENDON_SLICES, ring=slice(30, 36), fifth=slice(24, 32))
+    monkeypatch.setattr(hc, "TENDON_SLICES", swapped)
+    with pytest.raises(ValueError, match="ring finger's tendons occupy 25-30 of 38"):
+        hc.hand_coupling()

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from .base import Parameters, param
 from .components import GuideFrictionParams, MotorParams
@@ -42,7 +43,7 @@ from .rigs import SpringModelParams
 __all__ = [
     "FingerParams", "IndexFingerParams", "MiddleFingerParams", "RingFingerParams",
     "FifthFingerParams", "ThumbParams", "HandParams", "FINGERS", "TENDON_SLICES",
-    "finger_params", "FingerDriveParams", "FingerRigParams", "HandRigParams", "JointControllerParams",
+    "finger_params", "FINGER_STRUCTURE", "check_finger_structure", "FingerDriveParams", "FingerRigParams", "HandRigParams", "JointControllerParams",
 ]
 
 _T51 = "Table 5.1"
@@ -121,6 +122,14 @@ class FingerParams(Parameters):
 
     num_dof = property(lambda self: 4 - int(self.pip_dip_coupled) + int(self.has_hmc))
 
+    #: the finger whose structure (pip_dip_coupled, has_hmc) the thesis fixes (FINGER_STRUCTURE);
+    #: "generic" for this base class: any structure
+    FINGER: ClassVar[str] = "generic"
+
+    def _validate(self) -> None:
+        super()._validate()
+        check_finger_structure(self.FINGER, self)
+
     @property
     def dip_pip_ratio(self) -> float:
         """(5.16): ``q_DIP = (r_x3 / r_x2) q_PIP`` for a coupled finger."""
@@ -131,15 +140,21 @@ class FingerParams(Parameters):
 class IndexFingerParams(FingerParams):
     """Index finger: Table 5.1, (5.5)."""
 
+    FINGER: ClassVar[str] = "index"
+
 
 @dataclass(frozen=True)
 class MiddleFingerParams(FingerParams):
     """Middle finger: section 5.2 models it like the index (no separate table)."""
 
+    FINGER: ClassVar[str] = "middle"
+
 
 @dataclass(frozen=True)
 class RingFingerParams(FingerParams):
     """Ring finger: PIP/DIP coupled ((5.16), (5.18)), 3 DoF, 6 tendons."""
+
+    FINGER: ClassVar[str] = "ring"
 
     pip_dip_coupled: bool = param(True, unit="-", source="section 5.3, (5.16)")
     proximal_length: float = param(
@@ -150,6 +165,8 @@ class RingFingerParams(FingerParams):
 @dataclass(frozen=True)
 class FifthFingerParams(FingerParams):
     """Fifth finger: hematometacarpal joint + ring-like coupling, 4 DoF, 8 tendons."""
+
+    FINGER: ClassVar[str] = "fifth"
 
     pip_dip_coupled: bool = param(True, unit="-", source="section 5.3, (5.17)")
     has_hmc: bool = param(True, unit="-", source="section 5.5")
@@ -212,6 +229,30 @@ class ThumbParams(Parameters):
 
 FINGERS = ("thumb", "index", "middle", "ring", "fifth")
 
+# (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
+FINGER_STRUCTURE = {"index": (False, False), "middle": (False, False), "ring": (True, False),
+                    "fifth": (True, True)}
+_TENDONS = {"index": 8, "middle": 8, "ring": 6, "fifth": 8}
+
+
+def structure_text(finger: str) -> str:
+    """Human-readable structure of ``finger`` (for error messages)."""
+    if finger not in FINGER_STRUCTURE:
+        return "generic finger"
+    coupled, hmc = FINGER_STRUCTURE[finger]
+    dof = 4 - int(coupled) + int(hmc)
+    return (f"pip_dip_coupled={coupled}, has_hmc={hmc}: {dof} DoF, {_TENDONS[finger]} tendons")
+
+
+def check_finger_structure(finger: str, p) -> None:
+    """ValueError naming ``finger`` and the field when ``p``'s structure flags are not the thesis's."""
+    if finger not in FINGER_STRUCTURE:
+        return
+    for name, value in zip(("pip_dip_coupled", "has_hmc"), FINGER_STRUCTURE[finger]):
+        if getattr(p, name) != value:
+            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} "
+                             f"({structure_text(finger)}; sections 5.2-5.5), got {getattr(p, name)}")
+
 # Global tendon numbering (0-based slices of the 38 tendons, Table 6.2 order): chosen, see module doc.
 TENDON_SLICES = {"thumb": slice(0, 8), "index": slice(8, 16), "middle": slice(16, 24),
                  "ring": slice(24, 30), "fifth": slice(30, 38)}
@@ -235,6 +276,14 @@ class HandParams(Parameters):
                                source="chosen: human palm length ~90 mm (Fig 5.5 scale)")
     finger_spacing: float = param(0.02, unit="m", low=0.005, high=0.05,
                                   source="chosen: ~20 mm between finger bases (human hand)")
+
+    def _validate(self) -> None:
+        super()._validate()
+        for name, typ in _FINGER_PARAM_TYPES.items():
+            if not isinstance(getattr(self, name), typ):
+                raise ValueError(f"HandParams.{name} must be {typ.__name__}, got {type(getattr(self, name)).__name__}")
+            if name != "thumb":
+                check_finger_structure(name, getattr(self, name))
 
     def finger(self, name: str):
         """The parameter set of finger ``name`` (one of FINGERS)."""
