@@ -178,3 +178,42 @@ def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
     # exact up to the solver: the coupling element is linear and the tendon pair cannot see c
     assert err == pytest.approx(comp * tau[-1], rel=1e-4), (err, comp * tau[-1])
     assert err > 0.0                      # the DIP gives way in the direction it is pushed
+
+
+def test_fifth_hmc_moves_the_finger_towards_the_palm_centre():
+    """Section 5.5: the HMC gives 'a locking motion towards the palm center'.  The chosen axis is
+    perpendicular to the metacarpal (a rotation about the bone's own axis would spin it in place,
+    leaving the finger base where it is) and flexing it brings base and fingertip closer."""
+    from awiwi_drake.hand.plant import palm_centre
+    hp = HandParams()
+    plant, models = make_hand_plant(hp)
+    ctx = plant.CreateDefaultContext()
+    m = models["fifth"]
+    hmc, abd = m.joints[0], m.joints[1]
+    X_WB = plant.CalcRelativeTransform(ctx, plant.world_frame(), hmc.frame_on_parent())
+    axis_W = X_WB.rotation().multiply(hmc.revolute_axis())
+    bone_W = X_WB.rotation().multiply([1.0, 0.0, 0.0])            # the metacarpal runs along base x
+    assert abs(axis_W @ bone_W) < 1e-15
+
+    def points(q5h):
+        q = np.zeros(plant.num_positions())
+        q[hmc.position_start()] = q5h
+        plant.SetPositions(ctx, q)
+        base = plant.CalcPointsPositions(ctx, abd.frame_on_child(), np.zeros((3, 1)), plant.world_frame())
+        tip = plant.CalcPointsPositions(ctx, m.tip_body.body_frame(), m.tip_offset.reshape(3, 1),
+                                        plant.world_frame())
+        return base.ravel(), tip.ravel()
+
+    c = palm_centre(hp)
+    b0, t0 = points(0.0)
+    for q5h in (0.1, 0.3):
+        b, t = points(q5h)
+        # the base moves on a circle of radius hmc_offset (not in place), towards the palm centre
+        assert np.linalg.norm(b - b0) == pytest.approx(2 * hp.fifth.hmc_offset * np.sin(q5h / 2), rel=1e-12)
+        assert np.linalg.norm(b - c) < np.linalg.norm(b0 - c)
+        assert np.linalg.norm(t - c) < np.linalg.norm(t0 - c)
+        assert t[2] > t0[2] and t[1] > t0[1]      # palmar (+z) and radially, towards the thumb side (+y)
+    # first order: d|tip - c|/dq < 0 at the straight pose (a pure flexion axis would give 0 here)
+    eps = 1e-6
+    d = (np.linalg.norm(points(eps)[1] - c) - np.linalg.norm(points(-eps)[1] - c)) / (2 * eps)
+    assert d < -0.1 * hp.fifth.hmc_offset

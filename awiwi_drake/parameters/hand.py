@@ -115,12 +115,27 @@ class FingerParams(Parameters):
                               doc="moment arm of the two HMC tendons")
     hmc_offset: float = param(0.03, unit="m", low=0.0, high=0.1,
                               source=("chosen: the four-bar linkage (section 5.5, no dimensions) is "
-                                      "replaced by a revolute joint 3 cm proximal to the abduction axis"),
+                                      "replaced by a revolute joint 3 cm proximal to the abduction axis "
+                                      "(axis: hmc_axis_tilt)"),
                               doc="HMC axis to abduction axis")
+    hmc_axis_tilt: float = param(
+        math.radians(30.0), unit="rad", low=0.0, high=math.pi / 2,
+        source=("chosen: section 5.5 gives no four-bar dimensions, only the motion: 'a locking motion "
+                "towards the palm center'.  The four-bar is replaced by one revolute axis perpendicular to "
+                "the metacarpal (base x), tilted by this angle from the MCP flexion axis (-y) towards the "
+                "palm normal (+z): hmc_axis = (0, -cos a, sin a).  Flexing the HMC then moves the finger "
+                "palmar (cos a) and radially towards the palm centre (sin a); 30 deg, the obliquity of the "
+                "human fifth carpometacarpal axis, is our pick"),
+        doc="angle between the HMC axis and the MCP flexion axis, in the plane normal to the metacarpal")
     hmc_mass: float = param(0.005, unit="kg", low=0.0, high=0.1, low_inclusive=False,
                             source="chosen: the fifth metacarpal, a short bone of the palm")
 
     num_dof = property(lambda self: 4 - int(self.pip_dip_coupled) + int(self.has_hmc))
+
+    @property
+    def hmc_axis(self) -> tuple:
+        """Unit HMC axis in the finger base frame (x: along the metacarpal): ``(0, -cos a, sin a)``."""
+        return (0.0, -math.cos(self.hmc_axis_tilt), math.sin(self.hmc_axis_tilt))
 
     #: the finger whose structure (pip_dip_coupled, has_hmc) the thesis fixes (FINGER_STRUCTURE);
     #: "generic" for this base class: any structure
