@@ -22,6 +22,10 @@ Thesis equations and how we read them
   ``+-r42 q42`` (h44, h45), which the stated count of six tendons
   (``P4`` in R^{6x3}, Table 6.2) leaves no room for: we read it as the
   PIP-only part of the same path and do not add motors for it.
+  Alternative reading (reported in docs/REPRODUCTIONS.md): Fig 5.11 labels
+  the two motors theta44/theta45, i.e. the pair ``+-r42 q42`` is motor-driven
+  (reduced moment arm 7 mm instead of our 10.6 mm, 12 mm as printed) and
+  h46/h47 are passive coupling tendons (our coupling element).
   :func:`reduced_coupling_matrix` gives the 3-DoF matrix.
 * Fifth: no equations in the thesis.  Chosen: the ring routing plus an
   antagonistic pair on the hematometacarpal (HMC) joint,
