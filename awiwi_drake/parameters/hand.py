@@ -93,7 +93,7 @@ class FingerParams(Parameters):
         source=("chosen: light joint damping, of the order of the 0.1 % damping of the "
                 "Fig 5.7 study (damping ratio ~1e-3 to 1e-2 with the tendon stiffness)"))
     # Ring/fifth PIP-DIP coupling (section 5.3); unused when pip_dip_coupled is False.
-    pip_dip_coupled: bool = param(False, unit="-", source="section 5.3: ring and fifth only")
+    pip_dip_coupled: bool = param(False, unit="-", source="section 5.3: ring and fifth only (fixed per finger: FINGER_STRUCTURE, validated)")
     coupling_stiffness: float = param(
         4.0, unit="N m/rad", low=0.0, high=1e4, low_inclusive=False,
         source=("chosen: a stiff coupling tendon, 3.1x the tendon-induced PIP stiffness of the ring at "
@@ -110,7 +110,7 @@ class FingerParams(Parameters):
         9.7e-4, unit="N m s/rad", low=0.0, high=1.0,
         source="chosen: damping ratio 0.7 of the ring's coupling mode (2 * 0.7 * sqrt(k_c I_eff), I_eff = 1.21e-7 kg m^2)")
     # Fifth finger hematometacarpal joint (section 5.5); unused when has_hmc is False.
-    has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only")
+    has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only (fixed per finger: FINGER_STRUCTURE, validated)")
     hmc_radius: float = param(0.008, unit="m", low=0.001, high=0.03, source=_RADIUS_SRC,
                               doc="moment arm of the two HMC tendons")
     hmc_offset: float = param(0.03, unit="m", low=0.0, high=0.1,
