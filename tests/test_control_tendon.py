@@ -46,6 +46,11 @@ def test_force_map_and_identified_gains(fmap):
         op = rig.operating_point(tendon_force=f)
         assert fmap.theta_of_force(f) == pytest.approx(op.state[0], abs=2e-4)
         assert fmap.alpha_of_force(f) == pytest.approx(r_m * op.info["tendon_stiffness"], rel=2e-3)
+    # the slope table (r_m k_t from the rig's stiffness output) is the derivative of the tabulated force:
+    # centred differences of the force column agree to O(h^2) away from the ends
+    grad = np.gradient(fmap.force, fmap.theta)
+    np.testing.assert_allclose(fmap.alpha[5:-5], grad[5:-5], rtol=2e-3)
+    assert np.all(fmap.force > 0) and fmap.slack_angle < fmap.theta[0]  # taut rows only
     g = TendonForceGains()
     law = TendonForceLaw(fmap, rig.params.motor, g, scheduled=True)
     B, w, xi = rig.params.motor.inertia, g.natural_frequency, g.damping_ratio
@@ -89,6 +94,45 @@ def test_scheduled_gains_are_well_damped_everywhere_fixed_are_not(fmap):
     assert np.all(np.abs(sched - design) < 0.10), sched
     assert fixed[0] < design - 0.12, fixed  # 10 N: visibly under-damped
     assert np.ptp(fixed) > 2.0 * np.ptp(sched), (fixed, sched)
+
+
+def test_tendon_pd_near_slack_with_noisy_sensor_stays_bounded(fmap):
+    """References 0-1 N with a 0.1 N noisy sensor: readings go below 0 N, the derivative term must stay damping.
+
+    Before the fix the slope table was extrapolated below its slack row (alpha(-0.5 N) = -704 N/rad) and
+    5 -> 0.3 N ran away to theta = -9 rad.  Now alpha is taken at max(f, min_schedule_force).
+    """
+    g = TendonForceGains()
+    law = TendonForceLaw(fmap, tendon_rig().params.motor, g)
+    a_floor = fmap.alpha_of_force(g.min_schedule_force)
+    assert a_floor > 0 and fmap.alpha_of_force(-0.5, floor=g.min_schedule_force) == pytest.approx(a_floor)
+    assert fmap.alpha_of_force(-0.5) == pytest.approx(fmap.alpha[0])  # no extrapolation below the table
+    # derivative term alone (no friction feed-forward): d u / d motor_velocity = -Kd alpha(2 N) < 0 at any reading
+    ctrl = tendon_pd_controller(tendon_rig(), g.replace(friction_compensation=False), fmap=fmap)
+    for f in (-0.5, 0.0, 0.3, 1.9):
+        J_ad, _ = autodiff_vs_fd(ctrl, {"tendon_force_reference": [0.3], "tendon_force": [f], "motor_velocity": [0.0]})
+        assert J_ad[0, 2] == pytest.approx(-law.kd_fixed * a_floor, rel=1e-9)
+    limit = MotorParams().torque_limit
+    for factory in (tendon_pd_controller, tendon_scheduled_controller):
+        for f1 in (0.0, 0.3, 1.0):
+            log, _, _ = _step(factory, fmap, 5.0, f1, t_final=0.3, noise=0.1)
+            th, f = log["x"][:, 0], log["tendon_force"][:, 0]
+            assert np.min(th) > fmap.slack_angle - 0.15, (factory.__name__, f1, np.min(th))  # was -9 rad
+            # after the step transient the noisy readings near slack do not drive the motor to its limit
+            assert np.max(np.abs(log["motor_torque_command"][log["t"] > 0.1])) < 0.5 * limit
+            if f1 > 0:
+                assert np.mean(f[-300:]) == pytest.approx(f1, abs=0.1)
+
+
+def test_tendon_force_references_outside_the_table_are_rejected(fmap):
+    law = TendonForceLaw(fmap, tendon_rig().params.motor, TendonForceGains(), scheduled=True)
+    meas = {"tendon_force": np.array([1.0]), "motor_velocity": np.array([0.0])}
+    for bad in (-1.0, 1.5 * fmap.max_force, float("nan")):
+        with pytest.raises(ValueError, match="tendon_force_reference"):
+            law({"tendon_force_reference": np.array([bad]), **meas})
+    with pytest.raises(ValueError, match="design_force"):
+        TendonForceLaw(fmap, tendon_rig().params.motor, TendonForceGains(design_force=1e4))
+    assert fmap.theta_of_force(0.0) == pytest.approx(fmap.slack_angle)
 
 
 def test_tendon_sdre_gain_equals_lqr_and_tracks_0_40_45(fmap):

@@ -36,7 +36,8 @@ class TendonForceGains(Parameters):
                                 doc="working point of the fixed-gain design")
     min_schedule_force: float = param(2.0, unit="N", low=0.0, low_inclusive=False,
                                       source="chosen: below ~2 N the spring is nearly slack (alpha -> 0); the "
-                                             "scheduled gains are held at their 2 N values there")
+                                             "scheduled gains and the slope alpha of the derivative term "
+                                             "(noisy readings near/below 0 N) are held at their 2 N values there")
     friction_compensation: bool = param(True, unit="-", source="(10.2): friction estimate fed forward")
     force_feedforward: bool = param(True, unit="-", source="(10.2): tendon torque r_m f fed forward")
     friction_scale: float = param(1.0, unit="-", low=0.0, high=1.0,
