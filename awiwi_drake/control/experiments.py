@@ -122,7 +122,12 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
 def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float]] = ((0.05, 40.0), (0.5, 45.0)),
                            t_final: float = 1.0, params: SdreTendonParams | None = None,
                            fmap: ForceMap | None = None) -> dict:
-    """Fig 14.3: 0 -> 40 -> 45 N with SDRE gains (200 Hz) or gains frozen at 30 N."""
+    """Fig 14.3: 0 -> 40 -> 45 N with SDRE gains (200 Hz) or gains frozen at 30 N.
+
+    ``torque`` is the command; ``saturated`` flags samples beyond the rig's ``torque_limit`` (3 Nm): with the
+    Table 14.1 weights (position gain ~ sqrt(Q11 / R) = 1000 Nm/rad) both controllers saturate during most of
+    the 0 -> 40 N transient.
+    """
     fmap = fmap or force_map(tendon_rig())
     rig = tendon_rig(backend="symbolic")
     loop = closed_loop(rig, tendon_sdre_controller(rig, params, fixed=fixed, fmap=fmap), rate_hz=RATE)
@@ -130,8 +135,10 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
     log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force", "controller_gain", "motor_torque"),
                         inputs={"tendon_force_reference": _reference_schedule(schedule, 0.0)})
+    u = log["motor_torque"][:, 0]
+    limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
     return dict(t=log["t"], force=log["tendon_force"][:, 0], reference=log["tendon_force_reference"][:, 0],
-                gain=log["controller_gain"], torque=log["motor_torque"][:, 0])
+                gain=log["controller_gain"], torque=u, torque_limit=limit, saturated=np.abs(u) > limit)
 
 
 def lqr_trajectories(r_values: Sequence[float] = (1e-4, 1e-2, 1.0), *, x0=(0.3, 0.0, 0.3, 0.0),
