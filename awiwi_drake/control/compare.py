@@ -34,7 +34,7 @@ from awiwi_drake.analysis.simulate import SimulationDivergedError
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
-__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test",
+__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
            "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
            "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
@@ -77,11 +77,12 @@ class Metrics:
     bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
-    status: str = "ok"                   # "ok" or "diverged: <reason>" (then the metrics are NaN)
+    status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
+    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
-NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status")]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status", "flags")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
@@ -123,8 +124,9 @@ class MetricsTable:
             lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
             lines.append("|---" * (len(cols) + 2) + "|")
             for r in rows:
+                status = f"{r.status}: {r.flags}" if r.flags else r.status
                 lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
-                             + f" | {r.status} |")
+                             + f" | {status} |")
             lines.append("")
         return "\n".join(lines)
 
@@ -437,7 +439,30 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         run.meta.update(freq=f, gain=g)
         for k_, v in _sweep_metrics(f, g).items():
             setattr(m, k_, v)
+    flag_run(m, p)
     return run, m
+
+
+def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
+    """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
+
+    Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``slack`` (slack
+    fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band),
+    ``negative stiffness`` (disturbance test: the link moves *with* the load).
+    """
+    flags = []
+    if m.saturated_fraction > params.max_saturated_fraction:
+        flags.append(f"saturated {100 * m.saturated_fraction:.0f} %")
+    if m.slack_fraction > params.max_slack_fraction:
+        flags.append(f"slack {100 * m.slack_fraction:.0f} %")
+    if m.test == "step" and not math.isfinite(m.settling_time):
+        flags.append("not settled")
+    if m.test == "disturbance" and m.stiffness < 0:
+        flags.append("negative stiffness")
+    m.flags = "; ".join(flags)
+    if flags and m.status == "ok":
+        m.status = "flagged"
+    return m
 
 
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,

@@ -206,6 +206,13 @@ class CompareTestParams(Parameters):
     settle_time: float = param(0.3, unit="s", low=0.0, source="chosen: transients of the start decay")
     settling_band: float = param(0.02, unit="-", low=0.0, high=0.5, low_inclusive=False,
                                  source="chosen: 2 % of the step (5 % on the noisy tendon rig)")
+    max_saturated_fraction: float = param(0.05, unit="-", low=0.0, high=1.0,
+                                          source="chosen: a run whose command is beyond the torque limit for "
+                                                 "more than 5 % of the samples is not the designed linear loop "
+                                                 "(flagged)")
+    max_slack_fraction: float = param(0.0, unit="-", low=0.0, high=1.0,
+                                      source="chosen: any slack tendon means an antagonistic joint lost one side "
+                                             "of its actuation (flagged)")
     sample_period: float = param(2e-4, unit="s", low=0.0, low_inclusive=False,
                                  source="chosen: logging/hold period for continuous loops")
     max_step: float = param(2e-4, unit="s", low=0.0, low_inclusive=False,
