@@ -143,6 +143,25 @@ def test_step_metrics_on_second_order_closed_form():
     assert 0 < m["settling_time"] <= -math.log(0.02 * math.sqrt(1 - zeta ** 2)) / (zeta * wn)
 
 
+def test_damping_ratio_is_nan_when_the_fit_hits_a_bound():
+    """A first-order step (no 2nd-order behaviour) drives the fitted xi to its upper bound 3: reported NaN;
+    a true 2nd-order step with xi = 0.4 is recovered."""
+    t = np.linspace(0, 0.5, 2001)
+    m = step_metrics(t, 1.0 - np.exp(-t / 0.02), 0.0, 1.0, fit=True)
+    assert math.isnan(m["damping_ratio"])
+    zeta, wn = 0.4, 60.0
+    wd = wn * math.sqrt(1 - zeta ** 2)
+    y = 1 - np.exp(-zeta * wn * t) * (np.cos(wd * t) + zeta / math.sqrt(1 - zeta ** 2) * np.sin(wd * t))
+    assert step_metrics(t, y, 0.0, 1.0, fit=True)["damping_ratio"] == pytest.approx(zeta, rel=1e-3)
+
+
+def test_closed_loop_twice_on_one_rig_asks_for_a_fresh_rig():
+    rig = linear_flexible_joint_rig()
+    closed_loop(rig, StaticLawController(_Pd()))
+    with pytest.raises(ValueError, match="fresh rig"):
+        closed_loop(rig, StaticLawController(_Pd()))
+
+
 def test_sine_metrics_and_gain_diagram_on_known_filter():
     from scipy import signal
     t = np.arange(0, 4.0, 1e-3)

@@ -86,7 +86,7 @@ from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import ImpedanceParams
 
 __all__ = ["Transmission", "transmission", "ImpedanceLaw", "CascadedImpedanceController_",
-           "CascadedImpedanceController", "MotorPdLaw", "impedance_controller", "MODES"]
+           "CascadedImpedanceController", "LinkReferenceMotorPdLaw", "impedance_controller", "MODES"]
 
 MODES = ("pd", "two-time-scale", "cascaded")
 
@@ -254,7 +254,7 @@ def CascadedImpedanceController_(T):
 CascadedImpedanceController = CascadedImpedanceController_[None]
 
 
-class MotorPdLaw(StaticLaw):
+class LinkReferenceMotorPdLaw(StaticLaw):
     """``u = u_ref(r) + Kp_m (theta_ref(r) - theta) - Kd_m thetadot`` on the motor coordinates of ``state``."""
 
     def __init__(self, lin, motor_index, inertia: float, params: ImpedanceParams | None = None):
@@ -290,7 +290,7 @@ def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mod
         n = len(tr.coupling)
         ith = [names.index(nm) for nm in (("theta",) if n == 1 else ("theta1", "theta2"))]
         iw = [names.index(nm) for nm in (("thetadot",) if n == 1 else ("omega1", "omega2"))]
-        return StaticLawController(MotorPdLaw(lin, (ith, iw), tr.motor.inertia, params))
+        return StaticLawController(LinkReferenceMotorPdLaw(lin, (ith, iw), tr.motor.inertia, params))
     law = ImpedanceLaw(transmission(rig), params, mode=mode)
     if mode == "cascaded":
         return CascadedImpedanceController(law, law.params.observer_bandwidth)
