@@ -106,10 +106,22 @@ def test_lqr_cost_matches_riccati_and_grows_with_R():
 
 
 def test_lqr_gains_beside_thesis_13_11():
-    """(13.11) prints K = [-126.21, -0.11, 159.37, 1.52] for R = 0.01; ours from Table 12.1/13.1 (see REPRODUCTIONS)."""
-    K = design_lqr(flexible_joint_rig(), LqrParams(r=0.01)).K.ravel()
-    np.testing.assert_allclose(K, [-112.51, -0.030034, 145.68, 1.2569], rtol=2e-3)
-    assert np.sign(K).tolist() == [-1, -1, 1, 1]  # same signs and order of magnitude as the thesis
+    """(13.11) prints K = [-126.21, -0.11, 159.37, 1.52] for R = 0.01 (see REPRODUCTIONS).
+
+    Ours: the framework's LQR on the rig equals scipy's CARE solution for (12.8) written independently with
+    Table 12.1 values (no pinned literals); beside the thesis: same signs, the large gains within 25 %."""
+    p = LqrParams(r=0.01)
+    K = design_lqr(flexible_joint_rig(), p).K.ravel()
+    A, B, _ = flexible_joint_matrices()
+    Q, R = np.diag(p.q_diag), np.array([[p.r]])
+    K_scipy = np.linalg.solve(R, B.T @ solve_continuous_are(A, B, Q, R)).ravel()
+    np.testing.assert_allclose(K, K_scipy, rtol=1e-6)
+    thesis = np.array([-126.21, -0.11, 159.37, 1.52])
+    assert np.all(np.sign(K) == np.sign(thesis))
+    ratio = K / thesis
+    assert np.all((ratio[[0, 2, 3]] > 0.8) & (ratio[[0, 2, 3]] < 1.25)), ratio  # ours 0.89 / 0.91 / 0.83
+    assert 0.1 < ratio[1] < 1.0  # the qdot gain differs most (0.27): the printed gains do not follow from
+    #                              the printed parameters (MODEL_NOTES)
 
 
 def test_sdre_gain_equals_lqr_gain_at_the_linearisation_point():
