@@ -72,6 +72,12 @@ class PolePlacementParams(Parameters):
                                   source="Fig 12.3-12.4: K = [0.43, 1.15]")
     perturbed_stiffness: float = param(0.600, unit="Nm/rad", low=0.0, low_inclusive=False,
                                        source="section 12.3: k 0.605 -> 0.600")
+    link_damping_low: float = param(0.0012 * 0.43 / 0.605, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                                    source="chosen: Fig 12.3's caption repeats the K range [0.43, 1.15] for D_q "
+                                           "(nominal 0.0012, Table 12.1); we use the same relative range "
+                                           "x [0.71, 1.90] around 0.0012")
+    link_damping_high: float = param(0.0012 * 1.15 / 0.605, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                                     source="chosen: see link_damping_low")
 
 
 @dataclass(frozen=True)
