@@ -39,7 +39,7 @@ tendon ``i`` on a pulley of radius ``r_m``):
                                          + 2 xi_f w_f (fdot_des - fdot) + w_f^2 (f_des - f)),
 
     with ``alpha = r_m k``, ``fdot = k (r_m thetadot - c qdot)``, the model
-    estimates ``qdd_hat = (c.f - d_q qdot) / M``,
+    estimates ``qdd_hat = (c.f - d_q qdot + tau_hat) / M``,
     ``qddd_hat = (c.fdot - d_q qdd_hat) / M`` and the derivatives of
     ``f_des = f_pre + c^+ (Kp_imp (q_des - q) + Kd_imp (qdot_des - qdot))``::
 
@@ -75,11 +75,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
-from awiwi_drake._math import smax
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake._math import smax
 from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain
 from awiwi_drake.control.registry import rig_kind
 from awiwi_drake.parameters.components import MotorParams
