@@ -133,6 +133,9 @@ def test_tendon_force_references_outside_the_table_are_rejected(fmap):
     with pytest.raises(ValueError, match="design_force"):
         TendonForceLaw(fmap, tendon_rig().params.motor, TendonForceGains(design_force=1e4))
     assert fmap.theta_of_force(0.0) == pytest.approx(fmap.slack_angle)
+    sdre = tendon_sdre_controller(tendon_rig(), fmap=fmap)
+    with pytest.raises(ValueError, match="tendon_force_reference"):
+        sdre.model.equilibrium(-2.0)
 
 
 def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fmap):
