@@ -41,11 +41,15 @@ def _binary(fn_float, fn_obj, a, b):
 
 def smax(a, b):
     """Element-wise maximum for float, AutoDiffXd and Expression."""
+    if isinstance(a, np.ndarray) and a.dtype == float and isinstance(b, float):
+        return np.maximum(a, b)  # hot path
     return _binary(np.maximum, _pm.max, a, b)
 
 
 def smin(a, b):
     """Element-wise minimum for float, AutoDiffXd and Expression."""
+    if isinstance(a, np.ndarray) and a.dtype == float and isinstance(b, float):
+        return np.minimum(a, b)  # hot path
     return _binary(np.minimum, _pm.min, a, b)
 
 

@@ -4,8 +4,9 @@ Each command group lives in its own module in this package and exposes
 ``register(subparsers)``, which adds sub-commands whose ``func(args) -> int``
 does the work.  To add a group, create the module and list it in
 ``_COMMAND_MODULES``.  User errors (``ValueError``, ``FileNotFoundError``,
-``KeyError`` raised as ``CliError``) print one line on stderr and exit 2,
-without a traceback.
+``KeyError``, ``CliError``) print one line on stderr and exit 2; failures of
+the computation itself (``RuntimeError``, e.g. a diverged simulation) print
+one line and exit 1. No traceback either way.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ __all__ = ["main", "CliError", "parse_sets"]
 # One module per command group (see each module's register()).
 _COMMAND_MODULES = [
     "awiwi_drake.cli.rigs",
+    "awiwi_drake.cli.compare",
+    "awiwi_drake.cli.hand",
 ]
 
 
@@ -60,6 +63,10 @@ def main(argv: list[str] | None = None) -> int:
         msg = exc.args[0] if (isinstance(exc, KeyError) and exc.args) else str(exc)
         print(f"awiwi-drake {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:  # e.g. Drake refusing a non-equilibrium, a diverged simulation
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        print(f"awiwi-drake {args.command}: error: {first}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -42,7 +42,7 @@ from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 
 __all__ = ["build_tendon_drive", "TendonDrive", "BACKENDS", "DRIVE_OUTPUTS"]
 
-BACKENDS = ("symbolic", "python")
+BACKENDS = ("python", "symbolic")
 DRIVE_OUTPUTS = ("motor_angle", "motor_velocity", "motor_state", "tendon_force", "tendon_stiffness",
                  "elongation", "generalized_force", "applied_torque")
 
@@ -67,7 +67,7 @@ def _check_backend(backend: str) -> None:
         raise ValueError(f"backend = {backend!r} is unknown; use one of {', '.join(BACKENDS)}")
 
 
-def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, backend: str = "symbolic",
+def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, backend: str = "python",
                        hysteresis: HysteresisParams = HysteresisParams(),
                        motor_pulley_radius: float | None = None, name: str = "tendon_drive") -> TendonDrive:
     """Build the motors + springs + routing sub-diagram (see module docstring).
@@ -82,7 +82,8 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
         ``h(q)``, ``P(q)``, ``num_tendons``, ``num_joints`` (see :mod:`routing`).
     offsets : (m,) array, optional
         Elongation offsets x0 [m] (pretension with all angles zero).
-    backend : {"symbolic", "python"}
+    backend : {"python", "symbolic"}
+        Default "python", like the rigs (see the module docstring for the trade-off).
     hysteresis : HysteresisParams
         Spring hysteresis (adds m states and the ``joint_velocity`` input).
     motor_pulley_radius : float, optional
@@ -108,7 +109,10 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
     if backend == "python":
         _build_python(builder, motor, spring, coupling, offsets, hysteresis, r_m, m, n)
     else:
-        _build_symbolic(builder, motor, spring, coupling, offsets, hysteresis, r_m, m, n)
+        # numpy checks the FPU flags after object-array ufuncs; symbolic expressions leave
+        # spurious 'invalid value' flags behind, which are meaningless here.
+        with np.errstate(invalid="ignore"):
+            _build_symbolic(builder, motor, spring, coupling, offsets, hysteresis, r_m, m, n)
     diagram = builder.Build()
     diagram.set_name(name)
     return TendonDrive(diagram, m, n, backend, bool(hysteresis.enabled))

@@ -78,8 +78,12 @@ def saturate_torque(u, p: MotorParams):
 
 def motor_acceleration(theta, omega, u, load_torque, p: MotorParams):
     """Output-shaft acceleration of (3.5): ``(sat(u) + tau_fric + tau_ripple - load) / B``."""
-    return (saturate_torque(u, p) + motor_friction_torque(omega, p) + motor_ripple_torque(theta, p)
-            - load_torque) / p.inertia
+    tau = saturate_torque(u, p) - load_torque
+    if p.friction or p.damping:
+        tau = tau + motor_friction_torque(omega, p)
+    if p.ripple:
+        tau = tau + motor_ripple_torque(theta, p)
+    return tau / p.inertia
 
 
 @TemplateSystem.define("MotorBank_")

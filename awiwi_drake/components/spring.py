@@ -25,7 +25,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 from pydrake.symbolic import Expression
 
-from awiwi_drake._math import asarray_like, is_float, positive_part, where_positive
+from awiwi_drake._math import asarray_like, clip, is_float, positive_part, smin, where_positive
 from awiwi_drake.parameters.components import (
     HysteresisParams, LinearSpringParams, PolynomialSpringParams, SpringMechanismGeometry, TendonParams)
 
@@ -42,7 +42,13 @@ __all__ = [
 
 
 class PolynomialSpring:
-    """Calibration polynomial ``f(x) = sum_{k>=1} c_k x^k`` for ``x > 0``, else 0."""
+    """Calibration polynomial ``f(x) = sum_{k>=1} c_k x^k`` for ``0 < x <= x_max``.
+
+    Slack (``x <= 0``): ``f = 0``. Beyond the calibrated range ``x_max =
+    max_elongation`` the curve continues as its tangent (C1, increasing), so a
+    polynomial fit never turns over outside the data; the simulation monitors
+    report when a tendon leaves the calibrated range (``spring_overrange``).
+    """
 
     supports_symbolic = True
 
@@ -51,36 +57,56 @@ class PolynomialSpring:
             params = PolynomialSpringParams(coefficients=tuple(params))
         self.params = params
         self.coefficients = np.asarray(params.coefficients, dtype=float)
-        self.max_elongation = params.max_elongation
+        self.max_elongation = xm = params.max_elongation
+        self._powers = np.arange(1, len(self.coefficients) + 1)
+        self._k = self.coefficients * self._powers                     # f' coefficients (x^(k-1))
+        self.max_force = float(xm * self._horner(xm, self.coefficients))
+        self._k_end = float(self._horner(xm, self._k))
+        self._e_end = float(xm * xm * self._horner(xm, self.coefficients / (self._powers + 1)))
 
     def __repr__(self):
-        return f"PolynomialSpring(coefficients={tuple(self.params.coefficients)})"
+        return f"PolynomialSpring(coefficients={tuple(self.params.coefficients)}, max_elongation={self.max_elongation})"
 
-    def _horner(self, xp, coeffs):
+    @staticmethod
+    def _horner(xp, coeffs):
         acc = coeffs[-1] + 0.0 * xp
         for c in coeffs[-2::-1]:
             acc = acc * xp + c
         return acc
 
+    def _split(self, x):
+        """(x clipped to [0, x_max], elongation beyond x_max)."""
+        return smin(positive_part(x), self.max_elongation), positive_part(x - self.max_elongation)
+
     def force(self, x):
-        """Tendon force [N] at elongation ``x`` [m] (0 when slack)."""
-        xp = positive_part(x)
-        return xp * self._horner(xp, self.coefficients)
+        """Tendon force [N] at elongation ``x`` [m] (0 when slack, tangent beyond x_max)."""
+        if isinstance(x, np.ndarray) and x.dtype == float and x.ndim == 1:
+            # Hot path (float simulation): one power table and a dot product, ~4 us for any N.
+            xc = np.minimum(np.maximum(x, 0.0), self.max_elongation)
+            return (xc[:, None] ** self._powers) @ self.coefficients + self._k_end * np.maximum(x - self.max_elongation, 0.0)
+        xc, beyond = self._split(x)
+        return xc * self._horner(xc, self.coefficients) + self._k_end * beyond
 
     def stiffness(self, x):
-        """``df/dx`` [N/m] (0 when slack)."""
-        xp = positive_part(x)
-        k = np.arange(1, len(self.coefficients) + 1)
-        return where_positive(x, self._horner(xp, self.coefficients * k))
+        """``df/dx`` [N/m] (0 when slack, constant beyond x_max)."""
+        xc, _ = self._split(x)
+        return where_positive(x, self._horner(xc, self._k))
 
     def stiffness_derivative(self, x):
-        """``d^2f/dx^2`` [N/m^2] (0 when slack)."""
-        xp = positive_part(x)
+        """``d^2f/dx^2`` [N/m^2] (0 when slack and beyond x_max)."""
         n = len(self.coefficients)
+        xc, _ = self._split(x)
         if n < 2:
-            return 0.0 * xp
+            return 0.0 * xc
         k = np.arange(2, n + 1)
-        return where_positive(x, self._horner(xp, self.coefficients[1:] * k * (k - 1)))
+        return where_positive(x, where_positive(self.max_elongation - x,
+                                                self._horner(xc, self.coefficients[1:] * k * (k - 1))))
+
+    def energy(self, x):
+        """Stored energy ``int_0^x f`` [J] (0 when slack)."""
+        xc, e = self._split(x)
+        inside = xc * xc * self._horner(xc, self.coefficients / (self._powers + 1))
+        return inside + (self.max_force + 0.5 * self._k_end * e) * e
 
     def inverse_force(self, f):
         """Elongation [m] at which the spring carries force ``f`` [N] (float, vectorised)."""
@@ -118,6 +144,11 @@ class LinearSpring:
     def stiffness_derivative(self, x):
         return 0.0 * x
 
+    def energy(self, x):
+        """Stored energy [J]."""
+        xe = positive_part(x) if self.tension_only else x
+        return 0.5 * self.k * xe * xe
+
     def inverse_force(self, f):
         f = np.asarray(f, dtype=float)
         if (self.tension_only and np.any(f < 0)) or not np.all(np.isfinite(f)):
@@ -150,6 +181,12 @@ class AntagonisticPairSpring:
     def stiffness(self, d):
         r = self.r
         return r * r * (self.spring.stiffness(self.x0 + r * d) + self.spring.stiffness(self.x0 - r * d))
+
+    def energy(self, d):
+        """Stored energy relative to d = 0 [J] (needs the inner spring's ``energy``)."""
+        r = self.r
+        return (self.spring.energy(self.x0 + r * d) + self.spring.energy(self.x0 - r * d)
+                - 2 * self.spring.energy(self.x0))
 
     def stiffness_derivative(self, d):
         r = self.r
@@ -185,15 +222,15 @@ def _monotone_inverse(fun, dfun, target, x_hi, iters=60):
     x = 0.5 * (lo + hi)
     for _ in range(iters):
         fx = fun(x) - target
+        if np.all(np.abs(fx) <= 1e-13 * np.maximum(1.0, np.abs(target))):
+            break
         lo = np.where(fx < 0, x, lo)
-        hi = np.where(fx >= 0, x, hi)
+        hi = np.where(fx > 0, x, hi)
         k = dfun(x)
         step = np.where(k > 0, fx / np.where(k > 0, k, 1.0), 0.0)
         xn = x - step
-        bad = (xn <= lo) | (xn >= hi) | (k <= 0)
-        x = np.where(bad, 0.5 * (lo + hi), xn)
-        if np.all(np.abs(fx) < 1e-10 * np.maximum(1.0, np.abs(target))):
-            break
+        bad = (xn < lo) | (xn > hi) | (k <= 0)
+        x = np.where(fx == 0, x, np.where(bad, 0.5 * (lo + hi), xn))
     return x if x.size > 1 else x[0]
 
 
@@ -228,6 +265,19 @@ class LeverSpringMechanism:
         self._dL0 = float(self.tendon_length(0.0))
         self._s0 = float(self._spring_length(0.0))
         self.max_elongation = float(self.elongation_at_angle(g.max_lever_angle))
+        self._check_monotonic()
+
+    def _check_monotonic(self) -> None:
+        """The geometry must release tendon and load the spring monotonically up to the stop."""
+        th = np.linspace(0.0, self.geometry.max_lever_angle, 200)[1:]
+        x = self.elongation_at_angle(th)
+        if np.any(np.diff(np.concatenate([[0.0], x])) <= 0):
+            raise ValueError("SpringMechanismGeometry: the tendon length dL must shrink monotonically with the lever "
+                             "angle up to max_lever_angle (check pivot_offset, lever_length, lever_straight_angle)")
+        f = np.array([self._f_exact(float(t)) for t in th[::10]])
+        if np.any(f <= 0) or np.any(np.diff(f) <= 0):
+            raise ValueError("SpringMechanismGeometry: the tendon force must rise with the lever angle up to "
+                             "max_lever_angle (check spring_anchor, spring_arm, spring_constant)")
 
     # -- geometry, generic in the scalar type of th ------------------------------
     def _points(self, th):
@@ -323,10 +373,14 @@ class LeverSpringMechanism:
                                  "use .to_polynomial() (the calibration polynomial) for symbolic/C++ use")
             vals = np.array([v.value() for v in arr.ravel()])
             f, k = self._force_stiffness_float(vals)
+            if want == "stiffness":  # d(stiffness)/dx by a central difference of the exact stiffness
+                h = 1e-9
+                dk = (self._force_stiffness_float(vals + h)[1] - self._force_stiffness_float(np.maximum(vals - h, 0))[1]) \
+                    / (vals + h - np.maximum(vals - h, 0))
             res = np.empty(arr.size, dtype=object)
             for i, v in enumerate(arr.ravel()):
                 val = f[i] if want == "force" else k[i]
-                slope = k[i] if want == "force" else 0.0  # d(stiffness)/dx not propagated
+                slope = k[i] if want == "force" else dk[i]
                 res[i] = AutoDiffXd(val, slope * v.derivatives())
             return res.reshape(arr.shape) if arr.shape else res[0]
         xv = np.asarray(x, dtype=float)
@@ -351,8 +405,11 @@ class LeverSpringMechanism:
         if np.any(f < 0) or not np.all(np.isfinite(f)):
             raise ValueError(f"LeverSpringMechanism.inverse_force: force must be finite and >= 0 [N], got {f}")
         th_hi = self.geometry.lever_straight_angle * (1 - 1e-6)
-        th = _monotone_inverse(lambda t: self.force_at_angle(t), lambda t: np.ones_like(t), np.atleast_1d(f),
-                               x_hi=th_hi, iters=200)
+
+        def dfdth(t):
+            return np.array([self._force_and_slope_at_angle(float(ti))[1] for ti in np.atleast_1d(t)])
+
+        th = _monotone_inverse(lambda t: self.force_at_angle(t), dfdth, np.atleast_1d(f), x_hi=th_hi)
         x = self.elongation_at_angle(np.atleast_1d(th))
         return x if f.shape else float(np.ravel(x)[0])
 
@@ -394,8 +451,17 @@ def _fit_polynomial_cached(geometry, degree, max_force, tendon):
 
 
 def tendon_spring(spring_params) -> PolynomialSpring:
-    """The spring law a rig uses, from its :class:`SpringModelParams`."""
-    return LeverSpringMechanism(spring_params.geometry).to_polynomial(
+    """The spring law a rig uses, from its :class:`SpringModelParams`.
+
+    Raises ValueError when ``max_force`` is beyond what the lever carries at its
+    mechanical stop (``geometry.max_lever_angle``).
+    """
+    lever = LeverSpringMechanism(spring_params.geometry)
+    f_stop = float(lever.force_at_angle(spring_params.geometry.max_lever_angle))
+    if spring_params.max_force > f_stop:
+        raise ValueError(f"SpringModelParams.max_force = {spring_params.max_force} N is beyond the lever's "
+                         f"mechanical stop ({f_stop:.1f} N at geometry.max_lever_angle)")
+    return lever.to_polynomial(
         spring_params.polynomial_degree, max_force=spring_params.max_force,
         tendon=spring_params.tendon if spring_params.include_tendon else None)
 
@@ -408,7 +474,10 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
     width ``2 (beta f + z0)`` around the elastic curve.
     """
     half_width = p.width_ratio * f_elastic + p.width_offset + 1e-3
-    return p.rate * xdot * (1.0 - np.tanh(xdot / p.smoothing_velocity) * z / half_width)
+    # tanh saturates to +-1 long before 40: clipping its argument only avoids overflow in
+    # the AutoDiff derivative (1 - tanh^2) at large rates.
+    direction = np.tanh(clip(xdot / p.smoothing_velocity, -40.0, 40.0))
+    return p.rate * xdot * (1.0 - direction * z / half_width)
 
 
 @TemplateSystem.define("SpringBank_")

@@ -28,10 +28,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem_, System
 from pydrake.systems.primitives import DiscreteTimeDelay, Saturation, ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -179,7 +178,8 @@ class ClosedLoop:
     reference) and every rig input other than ``motor_torque`` (e.g.
     ``external_torque``); outputs: every rig output under its own name, the
     controller command ``motor_torque_command`` and the torque entering the rig
-    ``motor_torque`` (after hold, delay and saturation).
+    ``motor_torque`` (after hold, delay and saturation), and any other controller
+    output ``<name>`` as ``controller_<name>``.
     """
 
     diagram: Diagram
@@ -242,7 +242,8 @@ class ClosedLoop:
                 zoh.SetVectorState(zoh.GetMyMutableContextFromRoot(context), u)
             for d in self._delays:
                 dctx = d.GetMyMutableContextFromRoot(context)
-                dctx.SetDiscreteState(np.tile(u, self.delay_steps))
+                nbuf = dctx.get_discrete_state_vector().size() // u.size
+                dctx.SetDiscreteState(np.tile(u, nbuf))
 
 
 def _vector(value, size: int, name: str) -> np.ndarray:
@@ -365,7 +366,10 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     # command path: controller -> hold -> delay -> saturation -> rig
     cmd = ctrl.GetOutputPort(COMMAND_PORT)
     builder.ExportOutput(cmd, "motor_torque_command")
-    if rate_hz is not None:
+    # A DiscreteTimeDelay samples its input every period and outputs it `steps` periods later, so it is
+    # the sample-and-hold itself (a ZOH in front would add a period: simultaneous updates read the
+    # pre-update hold value).
+    if rate_hz is not None and not steps:
         zoh = builder.AddNamedSystem("command_hold", ZeroOrderHold(1.0 / rate_hz, n_u))
         builder.Connect(cmd, zoh.get_input_port(0))
         cmd = zoh.get_output_port(0)
@@ -391,7 +395,24 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     for n in rig_out:
         if n != COMMAND_PORT:
             builder.ExportOutput(plant.GetOutputPort(n), n)
-    diagram = builder.Build()
+    for n in ctrl_out:  # e.g. the SDRE gain, exported as controller_<name>
+        if n != COMMAND_PORT:
+            builder.ExportOutput(ctrl.GetOutputPort(n), f"controller_{n}")
+    try:
+        diagram = builder.Build()
+    except RuntimeError as exc:
+        if "already been built into" in str(exc):
+            raise ValueError(
+                f"closed_loop: rig {getattr(rig, 'name', '?')!r} or controller {controller.get_name()!r} is already "
+                f"part of another closed loop (a Drake system belongs to one diagram): build a fresh rig and "
+                f"controller for each closed_loop call (e.g. rig = tendon_rig(); ctrl = factory(rig))") from None
+        if "algebraic loop" not in str(exc):
+            raise
+        raise ValueError(
+            f"closed_loop: continuous loop (rate_hz=None) of rig {getattr(rig, 'name', '?')!r} and controller "
+            f"{controller.get_name()!r} has an algebraic loop: the rig reports direct feedthrough from "
+            f"motor_torque to its outputs (the fused backend='symbolic' drive does); use backend='python' "
+            f"or a sampled controller (rate_hz)") from None
     diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")
     handles.diagram = diagram
     handles.disturbances = tuple(dist)

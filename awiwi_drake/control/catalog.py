@@ -1,1 +1,46 @@
-"""Built-in controller registrations (imported lazily by :mod:`.registry`)."""
+"""Built-in controller registrations (imported lazily by :mod:`.registry`).
+
+Factories import their modules on call so that listing names stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+from awiwi_drake.control.registry import register_controller
+
+_JOINTS = ("flexible_joint", "joint_rig")
+_SAMPLED = {"rate_hz": 3000.0}
+
+
+def _lazy(module: str, function: str, **kwargs):
+    """``factory(rig)`` calling ``module.function(rig, **kwargs)`` (imported on first call)."""
+    def factory(rig):
+        return getattr(importlib.import_module(f"awiwi_drake.control.{module}"), function)(rig, **kwargs)
+    factory.__name__ = f"{function}_factory"
+    return factory
+
+
+_BUILTIN = [
+    ("tendon-pd", _lazy("tendon_force", "tendon_pd_controller"), ("tendon_rig",),
+     "(10.2) PD + force/friction feed-forward, gains (10.11) fixed at 30 N"),
+    ("tendon-scheduled", _lazy("tendon_force", "tendon_scheduled_controller"), ("tendon_rig",),
+     "(10.2) with gains (10.11) scheduled on the reference force (10.12)"),
+    ("tendon-sdre", _lazy("sdre", "tendon_sdre_controller"), ("tendon_rig",),
+     "SDRE tendon force control (14.7)-(14.9), Table 14.1, gains at 200 Hz"),
+    ("pd", _lazy("impedance", "impedance_controller", mode="pd"), _JOINTS,
+     "PD on the motor angles towards the link reference (baseline)"),
+    ("two-time-scale", _lazy("impedance", "impedance_controller", mode="two-time-scale"), _JOINTS,
+     "joint impedance (11.4) over a motor-position tendon loop (11.3)"),
+    ("cascaded", _lazy("impedance", "impedance_controller", mode="cascaded"), _JOINTS,
+     "joint impedance (11.4) over an exactly linearising force loop (11.16), load observer"),
+    ("pole-placement", _lazy("pole_placement", "pole_placement_controller"), _JOINTS,
+     "state feedback placing a double oscillator (12.13), Table 12.1"),
+    ("lqr", _lazy("lqr", "lqr_controller"), _JOINTS,
+     "LQR on the linearised rig, Table 13.1 (Q=diag(10,.01,1,.01), R=0.01)"),
+    ("sdre", _lazy("sdre", "joint_sdre_controller"), _JOINTS,
+     "SDRE state feedback (14.10)-(14.12), Table 14.2, gains at 200 Hz"),
+]
+
+for _name, _factory, _rigs, _doc in _BUILTIN:
+    register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)

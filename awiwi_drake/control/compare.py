@@ -3,7 +3,8 @@
 :func:`run_standard_tests` runs, on one :class:`~awiwi_drake.control.base.ClosedLoop`,
 
 * ``step``: reference step ``r0 -> r0 + step`` (rise time 10-90 %, overshoot,
-  2 % settling time, steady-state error, damping ratio from the overshoot);
+  settling time in ``settling_band`` (2 %; 5 % on the noisy tendon rig), steady-state
+  error, damping ratio of a fitted 2nd-order model);
 * ``sine``: sinusoidal tracking (RMS error, gain and phase at the frequency);
 * ``disturbance``: an ``external_torque`` step at constant reference
   (achieved stiffness ``dtau / dq``; link rigs only);
@@ -30,18 +31,15 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.analysis import ResetIntegratorFromFlags
 
+from awiwi_drake.analysis.simulate import SimulationDivergedError
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
-__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test",
-           "run_standard_tests", "compare", "step_metrics", "sine_metrics", "gain_diagram",
-           "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS"]
+__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
+           "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
+           "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
-
-
-class SimulationDivergedError(RuntimeError):
-    """Raised when the closed-loop state becomes non-finite."""
 
 
 @dataclass
@@ -67,24 +65,29 @@ class Metrics:
     test: str
     rise_time: float = math.nan          # s, 10-90 % of the step
     overshoot: float = math.nan          # % of the step size
-    settling_time: float = math.nan      # s, 2 % band of the step size
+    settling_time: float = math.nan      # s, band CompareTestParams.settling_band (2 %; 5 % on the tendon rig)
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
     peak_input: float = math.nan         # max |motor_torque_command| [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
-    damping_ratio: float = math.nan      # from the overshoot of a step (NaN: no overshoot)
+    damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
     gain: float = math.nan               # |Y/R| at the sine frequency
     phase_deg: float = math.nan          # phase of Y/R at the sine frequency
     peak_gain: float = math.nan          # max |Y/R| over the sweep
     resonance_hz: float = math.nan       # frequency of the peak gain
     bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
-    saturated_fraction: float = math.nan  # fraction of samples with the command beyond the limit
+    saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
+    slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
+    status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
+    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status", "flags")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
-             peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-")
+             peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
+             slack_fraction="-")
 
 
 @dataclass
@@ -100,8 +103,8 @@ class MetricsTable:
         raise KeyError(f"no metrics for controller {controller!r} and test {test!r}")
 
     def column(self, name: str, test: str) -> dict[str, float]:
-        if name not in COLUMNS:
-            raise ValueError(f"unknown metric {name!r}; known: {', '.join(COLUMNS[2:])}")
+        if name not in NUMERIC:
+            raise ValueError(f"unknown metric {name!r}; known: {', '.join(NUMERIC)}")
         return {r.controller: getattr(r, name) for r in self.rows if r.test == test}
 
     def to_csv(self, path: str | Path) -> Path:
@@ -117,12 +120,14 @@ class MetricsTable:
         lines = []
         for test in dict.fromkeys(r.test for r in self.rows):
             rows = [r for r in self.rows if r.test == test]
-            cols = [c for c in COLUMNS[2:] if any(math.isfinite(getattr(r, c)) for r in rows)]
+            cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " |")
-            lines.append("|---" * (len(cols) + 1) + "|")
+            lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
+            lines.append("|---" * (len(cols) + 2) + "|")
             for r in rows:
-                lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols) + " |")
+                status = f"{r.status}: {r.flags}" if r.flags else r.status
+                lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
+                             + f" | {status} |")
             lines.append("")
         return "\n".join(lines)
 
@@ -160,58 +165,107 @@ def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
     return 1.0 / loop.rate_hz if loop.rate_hz else params.sample_period
 
 
-def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
-              disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
-              meta: dict | None = None) -> TestRun:
-    """Advance ``context`` (from time 0) to ``t_final`` sampling every ``dt``, holding the inputs."""
+def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
+                  inputs: Mapping[str, Callable[[float], Any]] | None = None,
+                  outputs: Sequence[str] = (), max_step: float = 2e-4,
+                  label: str = "closed loop", divergence_bound: float = 1e6) -> dict[str, np.ndarray]:
+    """Advance ``context`` from its time to ``+t_final`` sampling every ``dt``.
+
+    ``inputs`` maps exported input ports (references, ``external_torque``) to
+    functions of time (relative to the start), held constant between samples.
+    Returns ``{"t", "x", <input names>, <output names>}`` arrays (one row per sample).
+
+    Raises
+    ------
+    SimulationDivergedError
+        When the state or an output becomes non-finite.
+    ValueError
+        When an input or output name is not a port of the closed loop.
+    """
     d = loop.diagram
-    ref_ports = [d.GetInputPort(r) for r in loop.references]
-    dist_port = d.GetInputPort("external_torque") if "external_torque" in loop.disturbances else None
-    out_port = d.GetOutputPort(loop.tracked_outputs[0])
-    cmd_port = d.GetOutputPort("motor_torque_command")
+    inputs = dict(inputs or {})
+    in_ports = {}
+    for nm in inputs:
+        if not d.HasInputPort(nm):
+            raise ValueError(f"simulate_loop: no input port {nm!r} (inputs: "
+                             f"{', '.join(loop.references + loop.disturbances)})")
+        in_ports[nm] = d.GetInputPort(nm)
+    out_ports = {}
+    for nm in outputs:
+        if not d.HasOutputPort(nm):
+            raise ValueError(f"simulate_loop: no output port {nm!r}")
+        out_ports[nm] = d.GetOutputPort(nm)
     n = int(round(t_final / dt)) + 1
+    t_start = context.get_time()
     ts = np.arange(n) * dt
-    ys, us, rs, ws, xs = [], [], [], [], []
+    log: dict[str, list] = {k: [] for k in ["x", *inputs, *outputs]}
 
     def _apply(t):
-        r = reference(t)
-        for p in ref_ports:
-            p.FixValue(context, np.full(p.size(), r))
-        w = disturbance(t) if disturbance is not None else 0.0
-        if dist_port is not None:
-            dist_port.FixValue(context, np.full(dist_port.size(), w))
-        return r, w
+        vals = {}
+        for nm, fn in inputs.items():
+            v = np.atleast_1d(np.asarray(fn(t), float))
+            port = in_ports[nm]
+            in_ports[nm].FixValue(context, np.full(port.size(), v[0]) if v.size == 1 else v)
+            vals[nm] = v
+        return vals
 
-    context.SetTime(0.0)
-    r, w = _apply(0.0)
+    cur = _apply(0.0)
     sim = _make_simulator(loop, context, max_step)
     for i, t in enumerate(ts):
         if i > 0:
-            sim.AdvanceTo(t)
-        y = out_port.Eval(context)
-        u = cmd_port.Eval(context)
+            sim.AdvanceTo(t_start + t)
         x = context.get_continuous_state_vector().CopyToVector()
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
-            raise SimulationDivergedError(f"{controller}/{test}: state not finite at t = {t:.4g} s")
-        ys.append(float(y[0]))
-        us.append(np.array(u, dtype=float))
-        rs.append(r)
-        ws.append(w)
-        xs.append(x)
-        r, w = _apply(t + dt)
-    return TestRun(controller, test, ts, np.array(rs), np.array(ys), np.array(us), np.array(ws),
-                   np.array(xs), dict(meta or {}))
+        row = {nm: np.array(p.Eval(context), dtype=float) for nm, p in out_ports.items()}
+        if not np.all(np.isfinite(x)) or not all(np.all(np.isfinite(v)) for v in row.values()):
+            raise SimulationDivergedError(f"{label}: state or output not finite at t = {t:.4g} s")
+        if np.max(np.abs(x)) > divergence_bound:
+            raise SimulationDivergedError(f"{label}: |state| > {divergence_bound:g} at t = {t:.4g} s")
+        log["x"].append(x)
+        for nm, v in row.items():
+            log[nm].append(v)
+        cur = _apply(t)  # inputs held on [t, t + dt); logged outputs are left limits at t
+        for nm in inputs:
+            log[nm].append(cur[nm])
+    out = {k: np.array(v) for k, v in log.items()}
+    out["t"] = ts
+    return out
+
+
+def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
+              disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
+              meta: dict | None = None) -> TestRun:
+    inputs = {r: reference for r in loop.references}
+    if "external_torque" in loop.disturbances:
+        inputs["external_torque"] = disturbance or (lambda t: 0.0)
+    y = loop.tracked_outputs[0]
+    outputs = [y, "motor_torque_command"]
+    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    if slack and y != "tendon_force":
+        outputs.append("tendon_force")
+    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=outputs,
+                        max_step=max_step, label=f"{controller}/{test}")
+    w = log["external_torque"][:, 0] if "external_torque" in log else np.zeros(len(log["t"]))
+    meta = dict(meta or {})
+    if slack:
+        meta["tendon_force"] = log["tendon_force"]
+    return TestRun(controller, test, log["t"], log[loop.references[0]][:, 0], log[y][:, 0],
+                   log["motor_torque_command"], w, log["x"], meta)
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: CompareTestParams | None = None,
            state=None, motor_torque=None):
     """A context of ``loop`` settled at the constant ``reference`` (time reset to 0).
 
-    The start is the rig's default operating point unless ``state`` is given.
+    The start is the rig's operating point for the tracked output at ``reference``
+    (``tendon_force=...``, ``link_angle=...``; else its default one) unless
+    ``state`` is given.
     """
     params = params or compare_test_params(loop.rig)
     if state is None and hasattr(loop.rig, "operating_point"):
-        op = loop.rig.operating_point()
+        try:  # start at the rig's equilibrium for the reference when the rig offers one
+            op = loop.rig.operating_point(**{loop.tracked_outputs[0]: reference})
+        except (TypeError, ValueError):
+            op = loop.rig.operating_point()
         state = np.asarray(op.state, dtype=float)
         motor_torque = op.motor_torque if motor_torque is None else motor_torque
     ctx = loop.create_context(state=state, motor_torque=motor_torque,
@@ -234,9 +288,18 @@ def _damping_from_overshoot(os_frac: float) -> float:
     return -lg / math.sqrt(math.pi ** 2 + lg ** 2)
 
 
+_XI_BOUNDS = (0.05, 3.0)  # damping-ratio bounds of fit_second_order_step
+_XI_MARGIN = 1e-3        # relative margin: a fitted value this close to a bound is "at the bound"
+
+
 def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: float = 0.0,
-                 band: float = 0.02) -> dict[str, float]:
+                 band: float = 0.02, fit: bool = False) -> dict[str, float]:
     """Rise time (10-90 %), overshoot [% of the step], settling time (band), error, damping ratio.
+
+    The damping ratio comes from the overshoot (``-ln(OS) / sqrt(pi^2 + ln^2 OS)``,
+    NaN without overshoot) or, with ``fit=True``, from
+    :func:`fit_second_order_step` (robust to measurement noise; NaN when the fit
+    hits its bounds 0.05 / 3, i.e. the response is not second-order like).
 
     ``y`` is a step response with the step at ``t_step``; the final value is
     the reference ``r1`` (the steady-state error is reported separately).
@@ -256,7 +319,13 @@ def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: flo
     out["rise_time"] = float(tt[i90] - tt[i10]) if (i10 is not None and i90 is not None) else math.nan
     os_frac = max(0.0, float(np.max(e)) - 1.0)
     out["overshoot"] = 100.0 * os_frac
-    out["damping_ratio"] = _damping_from_overshoot(os_frac)
+    if fit:
+        xi = fit_second_order_step(t, y, r0, r1, t_step)["damping_ratio"]
+        lo, hi = _XI_BOUNDS
+        # at (or within 0.1 % of) a bound of the fit: not a 2nd-order response -> NaN
+        out["damping_ratio"] = xi if lo * (1 + _XI_MARGIN) < xi < hi * (1 - _XI_MARGIN) else math.nan
+    else:
+        out["damping_ratio"] = _damping_from_overshoot(os_frac)
     outside = np.nonzero(np.abs(e - 1.0) > band)[0]
     if len(outside) == 0:
         out["settling_time"] = 0.0
@@ -279,16 +348,26 @@ def sine_metrics(t, r, y, freq_hz: float) -> dict[str, float]:
                 phase_deg=math.degrees(math.atan2(h.imag, h.real)))
 
 
-def gain_diagram(t, r, y, f_low: float, f_high: float) -> tuple[np.ndarray, np.ndarray]:
-    """Gain |Y/R| from a chirp (Welch cross spectra), restricted to [f_low, f_high]."""
-    from scipy.signal import csd, welch
+def gain_diagram(t, r, y, f_low: float, f_high: float, *, smooth: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Gain |Y/R| of a swept-sine (chirp) test, restricted to [f_low, f_high].
+
+    Ratio of the Fourier transforms of the whole (mean-removed) records, which
+    resolves ``1 / T``; a centred moving average over ``smooth`` bins of both
+    auto/cross spectra tames the ripple of the finite chirp.
+    """
     t, r, y = (np.asarray(a, float) for a in (t, r, y))
-    fs = 1.0 / float(np.median(np.diff(t)))
-    nper = min(len(t), int(2 ** math.floor(math.log2(max(16, len(t) // 4)))))
-    r0, y0 = r - np.mean(r), y - np.mean(y)
-    f, prr = welch(r0, fs=fs, nperseg=nper)
-    _, pry = csd(r0, y0, fs=fs, nperseg=nper)
-    m = (f >= f_low) & (f <= f_high) & (prr > 1e-12 * np.max(prr))
+    if len(t) < 16:
+        raise ValueError("gain_diagram: need at least 16 samples")
+    dt = float(np.median(np.diff(t)))
+    R = np.fft.rfft(r - np.mean(r))
+    Y = np.fft.rfft(y - np.mean(y))
+    f = np.fft.rfftfreq(len(t), dt)
+    prr, pry = np.abs(R) ** 2, np.conj(R) * Y
+    if smooth > 1:
+        ker = np.ones(smooth) / smooth
+        prr = np.convolve(prr, ker, mode="same")
+        pry = np.convolve(pry, ker, mode="same")
+    m = (f >= f_low) & (f <= f_high) & (prr > 1e-9 * np.max(prr))
     return f[m], np.abs(pry[m] / prr[m])
 
 
@@ -341,10 +420,16 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     m = Metrics(controller, test)
     u = np.abs(run.command)
     m.peak_input = float(np.max(u))
-    if loop.saturation is not None:
-        m.saturated_fraction = float(np.mean(np.any(u > loop.saturation[None, :] * (1 + 1e-9), axis=1)))
+    limit = loop.saturation
+    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
+        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is not None:
+        m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
+    if "tendon_force" in run.meta:
+        m.slack_fraction = float(np.mean(np.any(run.meta["tendon_force"] <= 0.0, axis=1)))
     if test == "step":
-        for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay).items():
+        for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay,
+                                 band=p.settling_band, fit=True).items():
             setattr(m, k_, v)
     elif test == "sine":
         skip = run.t >= 1.0 / p.sine_frequency  # drop the first period (transient)
@@ -361,7 +446,30 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         run.meta.update(freq=f, gain=g)
         for k_, v in _sweep_metrics(f, g).items():
             setattr(m, k_, v)
+    flag_run(m, p)
     return run, m
+
+
+def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
+    """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
+
+    Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``slack`` (slack
+    fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band),
+    ``negative stiffness`` (disturbance test: the link moves *with* the load).
+    """
+    flags = []
+    if m.saturated_fraction > params.max_saturated_fraction:
+        flags.append(f"saturated {100 * m.saturated_fraction:.0f} %")
+    if m.slack_fraction > params.max_slack_fraction:
+        flags.append(f"slack {100 * m.slack_fraction:.0f} %")
+    if m.test == "step" and not math.isfinite(m.settling_time):
+        flags.append("not settled")
+    if m.test == "disturbance" and m.stiffness < 0:
+        flags.append("negative stiffness")
+    m.flags = "; ".join(flags)
+    if flags and m.status == "ok":
+        m.status = "flagged"
+    return m
 
 
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
@@ -373,7 +481,11 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     settled = settle(loop, p.initial_reference, t_settle=p.settle_time, params=p)
     runs, rows = [], []
     for test in tests:
-        run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+        try:
+            run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+        except SimulationDivergedError as exc:
+            rows.append(Metrics(controller, test, status=f"diverged: {exc}"))
+            continue
         runs.append(run)
         rows.append(m)
     return runs, rows
@@ -392,6 +504,29 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
         rows += m
         rig = getattr(loop.rig, "name", rig)
     return Comparison(runs, MetricsTable(rows), rig)
+
+
+def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
+                        params: CompareTestParams | None = None, **loop_options: Any) -> Comparison:
+    """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
+
+    ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
+    registry's defaults for :func:`awiwi_drake.control.base.closed_loop`.  Names are
+    validated (unknown / not fitting the rig: ValueError) before any simulation.
+    """
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.registry import get_entry
+    names = list(names)
+    if not names:
+        raise ValueError("compare_controllers: give at least one controller name")
+    probe = make_rig()
+    entries = [get_entry(n, probe) for n in names]
+    loops = {}
+    for n, entry in zip(names, entries):
+        rig = make_rig()
+        opts = {**entry.loop_options, **loop_options}
+        loops[n] = closed_loop(rig, entry.factory(rig), **opts)
+    return compare(loops, tests=tests, params=params or compare_test_params(probe))
 
 
 # ----------------------------------------------------------------------------
@@ -439,3 +574,42 @@ def plot_metric(table: MetricsTable, metric: str, test: str, *, ax=None):
     ax.set_ylabel(f"{metric} [{UNITS[metric]}]")
     ax.set_title(test)
     return fig, ax
+
+
+def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> dict[str, float]:
+    """Least-squares fit of a delayed 2nd-order step ``r0 -> r1`` to ``y``: ``omega_n``, ``damping_ratio``.
+
+    Robust to measurement noise (the overshoot-based estimate takes a noisy
+    maximum).  Fitted parameters: natural frequency, damping ratio (0.05-3),
+    final value and a dead time.
+    """
+    from scipy.optimize import least_squares
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    m = t >= t_step
+    tt, e = t[m] - t_step, (y[m] - r0) / (r1 - r0)
+
+    def model(p):
+        wn, z, fin, td = p
+        s = np.clip(tt - td, 0.0, None)
+        if z < 1.0:
+            wd = wn * math.sqrt(1 - z * z)
+            resp = 1 - np.exp(-z * wn * s) * (np.cos(wd * s) + z / math.sqrt(1 - z * z) * np.sin(wd * s))
+        elif z == 1.0:
+            resp = 1 - np.exp(-wn * s) * (1 + wn * s)
+        else:
+            a = wn * (z - math.sqrt(z * z - 1))
+            b = wn * (z + math.sqrt(z * z - 1))
+            resp = 1 - (b * np.exp(-a * s) - a * np.exp(-b * s)) / (b - a)
+        return fin * resp
+
+    i10 = int(np.argmax(e >= 0.5)) if np.any(e >= 0.5) else len(e) // 4
+    wn0 = 1.7 / max(tt[max(i10, 1)], 1e-4)  # t_50 ~ 1.7 / wn for xi ~ 0.7
+    best = None
+    for z0 in (0.4, 0.7, 1.2):
+        sol = least_squares(lambda p: model(p) - e, [wn0, z0, 1.0, 0.0],
+                            bounds=([1e-3, _XI_BOUNDS[0], 0.5, 0.0], [1e5, _XI_BOUNDS[1], 1.5, 0.5 * tt[-1]]))
+        if best is None or sol.cost < best.cost:
+            best = sol
+    wn, z, fin, td = best.x
+    return dict(natural_frequency=float(wn), damping_ratio=float(z), final=float(fin), dead_time=float(td))

@@ -8,3 +8,10 @@ from awiwi_drake.parameters.components import (
     GuideFrictionParams, HysteresisParams, LinearSpringParams, MotorParams, PolynomialSpringParams,
     SpringMechanismGeometry, TendonParams)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, SpringModelParams, TendonRigParams
+from awiwi_drake.parameters.control import (
+    CompareTestParams, ForceSensorParams, FrictionIdentificationParams, ImpedanceParams, LqrParams, PolePlacementParams,
+    RippleCompensationParams, SdreJointParams, SdreTendonParams, TendonForceGains)
+from awiwi_drake.parameters.wrist import WristParams
+from awiwi_drake.parameters.hand import (
+    FifthFingerParams, FingerParams, FingerRigParams, HandParams, HandRigParams, IndexFingerParams,
+    JointControllerParams, MiddleFingerParams, RingFingerParams, ThumbParams)

@@ -64,6 +64,7 @@ def param(
     doc: str = "",
     vector: bool = False,
     finite: bool = True,
+    choices: tuple | None = None,
 ):
     """Declare a validated dataclass field.
 
@@ -86,12 +87,18 @@ def param(
         The field holds a sequence of numbers.
     finite : bool
         Reject NaN and infinity (default).
+    choices : tuple of str, optional
+        For a text field: the allowed values.
+
+    The field's annotation sets its type: a ``bool`` field takes only
+    True/False, an ``int`` field only whole numbers, a ``str`` field text (from
+    ``choices`` if given), any other field a real number (not a bool).
     """
     if not source:
         raise ValueError("param(): every parameter needs a source")
     meta = dict(unit=unit, source=source, low=low, high=high,
                 low_inclusive=low_inclusive, high_inclusive=high_inclusive,
-                doc=doc, vector=vector, finite=finite, is_param=True)
+                doc=doc, vector=vector, finite=finite, choices=choices, is_param=True)
     if vector or isinstance(default, (list, tuple, np.ndarray)):
         meta["vector"] = True
         value = tuple(float(v) for v in np.ravel(default))
@@ -99,12 +106,29 @@ def param(
     return field(default=default, metadata=meta)
 
 
-def _check_scalar(cls_name: str, name: str, v: Any, m: Mapping[str, Any], where: str = "") -> None:
+def _kind(f) -> str:
+    """'bool', 'int', 'str' or 'float' from a dataclass field's annotation."""
+    t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+    t = t.replace(" ", "")
+    return t if t in ("bool", "int", "str") else "float"
+
+
+def _check_scalar(cls_name: str, name: str, v: Any, m: Mapping[str, Any], where: str = "",
+                  kind: str = "float") -> None:
     label = f"{cls_name}.{name}{where}"
-    if isinstance(v, bool):
+    kind = "float" if m.get("vector") else kind
+    if kind == "str":
+        if not isinstance(v, str) or (m.get("choices") and v not in m["choices"]):
+            raise ValueError(f"{label} = {v!r} must be one of {', '.join(map(repr, m.get('choices') or ()))}")
         return
-    if not isinstance(v, (int, float, np.floating, np.integer)):
+    if kind == "bool":
+        if not isinstance(v, (bool, np.bool_)):
+            raise ValueError(f"{label} = {v!r} must be True or False")
+        return
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.floating, np.integer)):
         raise ValueError(f"{label} = {v!r} is not a number [{m['unit']}]")
+    if kind == "int" and float(v) != int(v):
+        raise ValueError(f"{label} = {v!r} must be a whole number")
     v = float(v)
     if m["finite"] and not math.isfinite(v):
         raise ValueError(f"{label} = {v!r} is not finite [{m['unit']}]")
@@ -142,7 +166,7 @@ class Parameters:
                 for i, x in enumerate(v):
                     _check_scalar(type(self).__name__, f.name, x, m, where=f"[{i}]")
             else:
-                _check_scalar(type(self).__name__, f.name, v, m)
+                _check_scalar(type(self).__name__, f.name, v, m, kind=_kind(f))
         self._validate()
 
     def _validate(self) -> None:  # pragma: no cover - hook
@@ -210,13 +234,17 @@ class Parameters:
         for f in fields(self):
             if f.name == key and f.metadata.get("is_param"):
                 return [key]
+        found = []
         for f in fields(self):
             child = getattr(self, f.name)
             if isinstance(child, Parameters):
                 sub = child._find_path(key)
                 if sub is not None:
-                    return [f.name] + sub
-        return None
+                    found.append([f.name] + sub)
+        if len(found) > 1:
+            raise ValueError(f"parameter name {key!r} is ambiguous in {type(self).__name__}: use one of "
+                             + ", ".join(".".join(p) for p in found))
+        return found[0] if found else None
 
     def all_names(self, prefix: str = "") -> list[str]:
         """Every settable parameter name (nested ones dotted)."""
@@ -247,6 +275,8 @@ def _parse_value(cls_name: str, name: str, raw: Any, *, vector: bool, current: A
     if not isinstance(raw, str):
         return tuple(raw) if vector else raw
     text = raw.strip()
+    if isinstance(current, str):
+        return text
     try:
         if vector:
             return tuple(float(t) for t in text.split(",") if t.strip() != "")
@@ -258,7 +288,10 @@ def _parse_value(cls_name: str, name: str, raw: Any, *, vector: bool, current: A
                 return False
             raise ValueError
         if isinstance(current, int) and not isinstance(current, bool):
-            return int(text)
+            value = float(text)
+            if value != int(value):
+                raise ValueError
+            return int(value)
         return float(text)
     except ValueError:
         kind = "a comma-separated list of numbers" if vector else type(current).__name__

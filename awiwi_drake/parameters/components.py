@@ -22,9 +22,9 @@ __all__ = [
     "GuideFrictionParams",
 ]
 
-# Torque constant implied by Fig 3.3b: the friction law (3.8) with Table 3.3 gives
-# 1.41 Nm at 15 rad/s where the figure shows about 1.3 A.  Used only to turn the
-# ripple currents of Fig 3.4b into torques.
+# Torque constant, roughly: the friction law (3.8) with Table 3.3 gives 1.41 Nm at
+# 15 rad/s where Fig 3.3b reads about 1.3 A, i.e. about 1.1 Nm/A (reading accuracy
+# of the figure: +-10 %). Used only to turn the ripple currents of Fig 3.4b into torques.
 _TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
 
 

@@ -26,7 +26,7 @@ class SpringModelParams(Parameters):
     tendon: TendonParams = field(default_factory=TendonParams)
     include_tendon: bool = param(True, unit="-", source="ch. 4 'Calibration': measured on the mounted tendon")
     polynomial_degree: int = param(6, unit="-", low=1, high=12,
-                                   source="chosen: degree 6 fits the lever curve within 1 N over 0-175 N")
+                                   source="chosen: degree 6 fits the lever+tendon curve within 0.1 N over 0-180 N (tests)")
     max_force: float = param(180.0, unit="N", low=1.0,
                              source="Fig 4.8b: the calibrated range ends near 180 N")
     hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
@@ -38,11 +38,22 @@ class TendonRigParams(Parameters):
 
     motor: MotorParams = field(default_factory=MotorParams)
     spring: SpringModelParams = field(default_factory=SpringModelParams)
+    operating_force: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
+                                   source="chosen: default operating point inside the 10-45 N steps of Fig 10.2")
+
+    def _validate(self) -> None:
+        if self.operating_force > self.spring.max_force:
+            raise ValueError(f"TendonRigParams.operating_force = {self.operating_force} N exceeds the calibrated "
+                             f"range spring.max_force = {self.spring.max_force} N")
 
 
 @dataclass(frozen=True)
 class FlexibleJointParams(Parameters):
     """Fourth-order flexible joint (12.8); defaults are Table 12.1.
+
+    ``spring_model="linear"`` uses ``stiffness`` only; ``pretension``,
+    ``pulley_radius`` and ``spring`` belong to ``spring_model="nonlinear"``
+    (the rig rejects them when changed for the linear model).
 
     ``m qdd = -d_q qd + tau_s + tau_ext``; ``b thdd = -d_th thd - tau_s + u`` with
     ``tau_s = k (th - q)`` (linear) or, for ``spring="nonlinear"``, the torque of an
@@ -50,6 +61,8 @@ class FlexibleJointParams(Parameters):
     radius ``pulley_radius`` (ch. 15.4: ``tau = phi(th - q)``, radii folded into phi).
     """
 
+    spring_model: str = param("linear", unit="-", choices=("linear", "nonlinear"),
+                              source="(12.8) is linear; ch. 15.4 studies the nonlinear spring")
     link_inertia: float = param(4e-7, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 12.1, m")
     motor_inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 12.1, b")
     stiffness: float = param(0.605, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 12.1, k")
@@ -62,6 +75,11 @@ class FlexibleJointParams(Parameters):
     pulley_radius: float = param(0.008, unit="m", low=0.0, low_inclusive=False,
                                  source="chosen: nonlinear spring only; finger pulleys are 5-10 mm")
     spring: SpringModelParams = field(default_factory=SpringModelParams)
+
+    def _validate(self) -> None:
+        if self.spring_model == "nonlinear" and self.pretension > self.spring.max_force:
+            raise ValueError(f"FlexibleJointParams.pretension = {self.pretension} N exceeds the calibrated range "
+                             f"spring.max_force = {self.spring.max_force} N")
 
 
 @dataclass(frozen=True)
@@ -80,3 +98,8 @@ class JointRigParams(Parameters):
                                       source="chosen: r_q; MODEL_NOTES: joint pulleys 5-10 mm")
     pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
                               source="Fig 15.26: f_pre = 20 N (default operating point)")
+
+    def _validate(self) -> None:
+        if self.pretension > self.spring.max_force:
+            raise ValueError(f"JointRigParams.pretension = {self.pretension} N exceeds the calibrated range "
+                             f"spring.max_force = {self.spring.max_force} N")

@@ -38,3 +38,35 @@ def build_target(name: str, overrides: dict | None = None, **kwargs) -> Rig:
     if overrides:
         params = params.with_overrides(overrides)
     return entry["builder"](params=params, **kwargs)
+
+
+# --- fingers and hand (thesis ch. 5-6), registered here with lazy imports -------------------------
+def _hand_target(finger: str | None):
+    def build(*, params=None, backend: str | None = None):
+        from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+        if finger is None:  # python banks are faster than the fused drive for 38 tendons
+            return hand_diagram(params=params, backend=backend or "python", wrist=True)
+        return finger_diagram(finger=finger, params=params, backend=backend or "symbolic")
+    build.__name__ = f"{finger or 'hand'}_target"
+    return build
+
+
+def _register_hand_targets() -> None:
+    import functools
+    from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
+    dof = {"thumb": "4 DoF (tensegrity base (5.20)-(5.22), PIP, DIP), 8 tendons",
+           "index": "4 DoF (Table 5.1, (5.5)), 8 tendons", "middle": "4 DoF (as the index), 8 tendons",
+           "ring": "3 DoF (PIP/DIP coupled (5.16), 4 plant joints), 6 tendons",
+           "fifth": "4 DoF (hematometacarpal + ring-like), 5 plant joints, 8 tendons"}
+    for f in FINGERS:
+        TARGETS[f"finger-{f}"] = dict(
+            builder=_hand_target(f), params=functools.partial(FingerRigParams.for_finger, f),
+            description=f"{f} finger: {dof[f]}; state [q, q_dot, theta, omega]; operating point: "
+                        "pretension=20 N, q=0")
+    TARGETS["hand"] = dict(
+        builder=_hand_target(None), params=HandRigParams,
+        description="whole hand: 21 plant joints (19 DoF), 38 motors and springs, wrist input held at 0; "
+                    "state [q (21), q_dot (21), theta (38), omega (38)]")
+
+
+_register_hand_targets()

@@ -33,6 +33,16 @@ __all__ = ["tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 DEFAULT_BACKEND = "python"
 
 
+def _limit(motor: MotorParams):
+    return motor.torque_limit if motor.saturation else None
+
+
+def _check_torque(rig: str, u: np.ndarray, motor: MotorParams, what: str) -> None:
+    if motor.saturation and np.any(np.abs(u) > motor.torque_limit):
+        raise ValueError(f"{rig}: holding {what} needs motor torque {np.round(u, 4).tolist()} Nm, beyond "
+                         f"motor.torque_limit = {motor.torque_limit} Nm")
+
+
 def _check_params(params, cls, rig):
     if params is None:
         return cls()
@@ -48,7 +58,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
     ``motor_angle``, ``motor_velocity``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
     ``applied_torque`` [Nm].
 
-    Operating point keys: ``tendon_force`` [N] (default 20 N).
+    Operating point keys: ``tendon_force`` [N] (default ``params.operating_force``).
     """
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
@@ -64,18 +74,22 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
     diagram.set_name("tendon_rig")
     names = ("theta", "omega") + (("hysteresis_force",) if drive.hysteresis else ())
 
-    def equilibrium(tendon_force: float = 20.0) -> OperatingPoint:
-        if not tendon_force >= 0:
-            raise ValueError(f"tendon_rig: tendon_force = {tendon_force} must be >= 0 [N]")
+    def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
+        tendon_force = p.operating_force if tendon_force is None else float(tendon_force)
+        if not 0 <= tendon_force <= spring.max_force:
+            raise ValueError(f"tendon_rig: tendon_force = {tendon_force} N must be in [0, {spring.max_force:.1f}] N "
+                             "(the calibrated spring range)")
         x = float(np.ravel(spring.inverse_force(np.array([tendon_force])))[0])
         theta = x / p.motor.pulley_radius
         u = p.motor.pulley_radius * tendon_force - float(motor_ripple_torque(np.array([theta]), p.motor)[0])
+        _check_torque("tendon_rig", np.array([u]), p.motor, f"tendon_force = {tendon_force} N")
         state = [theta, 0.0] + ([0.0] if drive.hysteresis else [])
         return OperatingPoint(np.array(state), np.array([u]), None,
                               dict(tendon_force=tendon_force, elongation=x,
                                    tendon_stiffness=float(spring.stiffness(np.array([x]))[0])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, dict(drive=drive))
+    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring,
+               dict(drive=drive, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force))
 
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
@@ -112,7 +126,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
     return diagram, plant, drive, names
 
 
-def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str = "linear",
+def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None,
                        backend: str = DEFAULT_BACKEND) -> Rig:
     """Fourth-order flexible joint (12.8): motor, spring, link.
 
@@ -130,7 +144,15 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     Operating point keys: ``link_angle`` [rad], ``external_torque`` [Nm].
     """
     p = _check_params(params, FlexibleJointParams, "flexible_joint_rig")
+    if spring is not None:  # keyword shortcut for params.spring_model
+        p = p.replace(spring_model=spring)
+    spring = p.spring_model
     if spring == "linear":
+        default = FlexibleJointParams()
+        unused = [n for n in ("pretension", "pulley_radius", "spring") if getattr(p, n) != getattr(default, n)]
+        if unused:
+            raise ValueError(f"flexible_joint_rig: {', '.join(unused)} only apply to spring_model='nonlinear' "
+                             "(the linear spring uses stiffness)")
         law = LinearSpring(p.stiffness, tension_only=False)
     elif spring == "nonlinear":
         law = AntagonisticPairSpring(tendon_spring(p.spring), p.pretension, p.pulley_radius)
@@ -149,12 +171,17 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
         tau_s = -float(external_torque)
         delta = float(np.ravel(law.inverse_force(np.array([tau_s])))[0]) if spring == "nonlinear" else tau_s / p.stiffness
         state = np.array([link_angle, 0.0, link_angle + delta, 0.0] + ([0.0] if drive.hysteresis else []))
+        if finite_limit and abs(tau_s) > p.torque_limit:
+            raise ValueError(f"flexible_joint_rig: external_torque = {external_torque} Nm needs a motor torque "
+                             f"beyond torque_limit = {p.torque_limit} Nm")
         return OperatingPoint(state, np.array([tau_s]), np.array([float(external_torque)]),
                               dict(link_angle=link_angle, external_torque=external_torque, spring_torque=tau_s,
                                    stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0])))
 
     return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law,
-               dict(drive=drive, spring_kind=spring))
+               dict(drive=drive, spring_kind=spring, tension_only=False,
+                    torque_limit=p.torque_limit if finite_limit else None,
+                    pair_slack=(law.x0, law.r) if spring == "nonlinear" else None))
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -185,12 +212,16 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                     external_torque: float = 0.0) -> OperatingPoint:
         f0 = p.pretension if pretension is None else float(pretension)
         f = np.array([f0 - external_torque / (2 * rq), f0 + external_torque / (2 * rq)])
+        if np.any(f > spring.max_force):
+            raise ValueError(f"joint_rig: pretension {f0} N with external_torque {external_torque} Nm needs tendon "
+                             f"forces {f} N beyond the calibrated range ({spring.max_force:.1f} N)")
         if np.any(f <= 0):
             raise ValueError(f"joint_rig: pretension {f0} N cannot hold external_torque {external_torque} Nm "
                              f"without slack (tendon forces would be {f} N)")
         x = np.asarray(spring.inverse_force(f), dtype=float)
         theta = np.array([(x[0] + rq * link_angle) / r, (x[1] - rq * link_angle) / r])
         u = r * f - motor_ripple_torque(theta, p.motor)
+        _check_torque("joint_rig", u, p.motor, f"pretension = {f0} N")
         state = np.concatenate([[link_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
         k = np.asarray(spring.stiffness(x), dtype=float)
         return OperatingPoint(state, u, np.array([float(external_torque)]),
@@ -199,4 +230,5 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                                    joint_stiffness=float(rq ** 2 * k.sum())))
 
     return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring,
-               dict(drive=drive, coupling=coupling))
+               dict(drive=drive, coupling=coupling, tension_only=True, torque_limit=_limit(p.motor),
+                    max_force=spring.max_force))

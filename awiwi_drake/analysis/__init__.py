@@ -1,0 +1,5 @@
+"""Analysis from the framework: linearisation, LQR, simulation (with monitors)."""
+
+from awiwi_drake.analysis.linear import LinearizationResult, LqrResult, linearize, lqr, lqr_closed_loop, poles_table
+from awiwi_drake.analysis.simulate import (
+    Event, OverrangeMonitor, PairSlackMonitor, SaturationMonitor, SimulationDivergedError, SimulationResult, SlackMonitor, rig_monitors, simulate)

@@ -1,0 +1,50 @@
+"""Hand commands: ``animate`` (Meshcat recording to HTML) and ``export-hand-diagrams``.
+
+``awiwi-drake linearize finger-index|finger-middle|finger-ring|finger-fifth|finger-thumb|hand``
+comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.rigs.TARGETS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["register"]
+
+_TARGETS = ("hand", "thumb", "index", "middle", "ring", "fifth")
+
+
+def register(sub) -> None:
+    fmt = argparse.RawDescriptionHelpFormatter
+    p = sub.add_parser(
+        "animate", formatter_class=fmt,
+        help="simulate a grasp of the hand (or one finger) and write a self-contained Meshcat HTML file",
+        epilog="The motion: open -> closed -> open joint references tracked by the 3 kHz joint-space\n"
+               "controller through the full tendon model (motors, lever springs, routing). Offline.")
+    p.add_argument("--out", default="hand.html", help="HTML file to write (default hand.html)")
+    p.add_argument("--target", choices=_TARGETS, default="hand")
+    p.add_argument("--duration", type=float, default=1.5, help="simulated seconds (default 1.5)")
+    p.add_argument("--backend", choices=["python", "symbolic"], default="python",
+                   help="tendon drive backend (python is faster for the whole hand)")
+    p.set_defaults(func=_animate)
+
+    p = sub.add_parser("export-hand-diagrams",
+                       help="write the hand/finger diagram graphs (diagrams/hand_*.dot, .svg/.png with Graphviz)")
+    p.add_argument("--out", default="diagrams", help="output folder (default diagrams/)")
+    p.set_defaults(func=_export)
+
+
+def _animate(args) -> int:
+    from awiwi_drake.hand.visualize import record_animation
+
+    res = record_animation(args.out, target=args.target, duration=args.duration, backend=args.backend)
+    print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
+          f"max joint tracking error {res.max_tracking_error:.3g} rad)")
+    return 0
+
+
+def _export(args) -> int:
+    from awiwi_drake.hand.diagrams import export_hand_diagrams
+
+    for line in export_hand_diagrams(args.out):
+        print(line)
+    return 0

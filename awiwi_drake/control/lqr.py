@@ -1,0 +1,93 @@
+"""Linear quadratic regulator on the linearised rig (ch. 13, Table 13.1).
+
+The gain comes from Drake's ``LinearQuadraticRegulator`` applied to the rig
+diagram at its operating point (:func:`awiwi_drake.analysis.lqr`); the
+controller is a :class:`~awiwi_drake.control.linear.StateFeedbackLaw` that
+tracks ``link_angle_reference`` through the equilibrium family of the linear
+model.  Q is given on the flexible-joint state ``[q, qd, theta, thetad]``
+((13.9)); for the antagonistic joint rig (two motors) the motor weights are
+repeated for both motors (:func:`expand_q`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+from pydrake.systems.controllers import LinearQuadraticRegulator
+
+from awiwi_drake.control.base import check_gain, check_gains
+from awiwi_drake.control.linear import RigLinearization, closed_loop_poles, linearize_rig, state_feedback_controller
+from awiwi_drake.parameters.control import LqrParams
+
+__all__ = ["LqrDesign", "expand_q", "lqr_gain", "design_lqr", "lqr_controller", "quadratic_cost"]
+
+
+@dataclass
+class LqrDesign:
+    """LQR gain ``K`` (u = -K dx), cost-to-go ``S`` and closed-loop poles."""
+
+    K: np.ndarray
+    S: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    closed_loop_poles: np.ndarray
+    linearization: RigLinearization
+
+
+def expand_q(q_diag: Sequence[float], n: int) -> np.ndarray:
+    """Q for an ``n``-state rig from the 4-state flexible-joint weights ``[q, qd, theta, thetad]``.
+
+    ``n = 4``: diag(q_diag).  ``n = 6`` (joint rig ``[q, qd, th1, th2, w1, w2]``):
+    diag(q, qd, theta, theta, thetad, thetad).
+    """
+    q = check_gains("Q diagonal", q_diag, owner="lqr")
+    if np.any(q < 0):
+        raise ValueError(f"lqr gain 'Q diagonal' must be >= 0, got {q}")
+    if len(q) == n:
+        return np.diag(q)
+    if len(q) == 4 and n == 6:
+        return np.diag([q[0], q[1], q[2], q[2], q[3], q[3]])
+    raise ValueError(f"lqr: Q diagonal has {len(q)} entries but the rig has {n} states")
+
+
+def lqr_gain(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
+    """``(K, S)`` from Drake's ``LinearQuadraticRegulator`` (u = -K x)."""
+    R = np.atleast_2d(np.asarray(R, float))
+    if not np.all(np.isfinite(R)) or np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
+        raise ValueError(f"lqr gain 'R' must be positive definite and finite, got {R!r}")
+    K, S = LinearQuadraticRegulator(np.asarray(A, float), np.asarray(B, float), np.asarray(Q, float), R)
+    return np.asarray(K), np.asarray(S)
+
+
+def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None,
+               lin: RigLinearization | None = None) -> LqrDesign:
+    """LQR design on the rig linearised at ``op`` (Table 13.1 by default; ``r`` overrides R)."""
+    p = params or LqrParams()
+    r_val = check_gain("R", p.r if r is None else r, owner="lqr")
+    lin = lin or linearize_rig(rig, op, outputs=("state", "link_angle"))
+    n, m = lin.B.shape
+    Q = expand_q(p.q_diag, n)
+    R = r_val * np.eye(m)
+    if hasattr(rig, "equilibrium"):  # the framework: LinearQuadraticRegulator(system, context, Q, R)
+        from awiwi_drake.analysis import lqr as framework_lqr
+        res = framework_lqr(rig, Q, R, op if op is not None else rig.operating_point())
+        K, S = np.asarray(res.K), np.asarray(res.S)
+    else:
+        K, S = lqr_gain(lin.A, lin.B, Q, R)
+    return LqrDesign(K, S, Q, R, closed_loop_poles(lin.A, lin.B, K), lin)
+
+
+def lqr_controller(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None):
+    """Registered factory ``lqr``: LQR state feedback tracking ``link_angle_reference``."""
+    d = design_lqr(rig, params, r=r, op=op)
+    return state_feedback_controller(d.linearization, d.K, reference="link_angle", name="lqr")
+
+
+def quadratic_cost(t: np.ndarray, x: np.ndarray, u: np.ndarray, Q: np.ndarray, R: np.ndarray) -> float:
+    """``int x'Qx + u'Ru dt`` by the trapezoidal rule (x, u deviations from the set point)."""
+    x = np.atleast_2d(np.asarray(x, float))
+    u = np.asarray(u, float).reshape(len(t), -1)
+    integrand = np.einsum("ti,ij,tj->t", x, Q, x) + np.einsum("ti,ij,tj->t", u, np.atleast_2d(R), u)
+    return float(np.trapezoid(integrand, t))

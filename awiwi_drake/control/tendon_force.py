@@ -1,0 +1,249 @@
+"""Tendon force control (ch. 10, (10.2)-(10.12)) on the tendon rig.
+
+Plant (10.1): ``B thdd = tau_fric(thd) + tau_ripple(th) + u - r_m f_t(th)`` (the
+tendon is fixed at its far end, so the force is a function of the motor angle).
+
+Controller (10.2)::
+
+    u = Kp (f_des - f) - Kd fdot_hat + [r_m f]_ff + [-tau_fric_hat(thd)]_ff
+
+with ``fdot_hat = alpha(f) thd`` (``alpha = d f_t / d theta``, the rig's force
+map) and gains by identification to a damped second-order error dynamics
+(10.10)-(10.11)::
+
+    Kp = w^2 B / alpha,   Kd = 2 xi w B / alpha.
+
+*Fixed gains* evaluate ``alpha`` at the design force (30 N, Fig 10.2);
+*scheduled gains* evaluate it at the reference force (10.12), by linear
+interpolation in a table (section 10.3: "a simple linear interpolation").
+The thesis writes ``Kp = w^2 B / beta`` and ``Kd = 2 xi w B / alpha`` with
+alpha, beta the derivatives of ``f_t`` and of ``fdot`` w.r.t. ``theta_dot``
+and ``theta``; for a force that depends on ``theta`` only both equal
+``d f_t / d theta``, which is what is used here.
+
+Near slack.  The force map is tabulated over the *taut* range only (the
+slack point ``f = 0``, where ``alpha = 0``, is not a row of the slope
+table), and the slope used in the derivative term is ``alpha(clip(f,
+f_floor, f_max))`` with ``f_floor = min_schedule_force`` (2 N): a noisy or
+negative force reading (the sensor noise reaches below 0 N near slack)
+therefore never extrapolates the slope below the table, which would make
+``alpha < 0`` and turn the ``-Kd fdot_hat`` damping into positive feedback.
+References outside ``[0, f_max]`` of the table raise ``ValueError``.
+
+Steady state (all derivatives zero, friction (3.8) vanishes at rest):
+without the force feed-forward ``Kp (f_des - f) = r_m f`` (10.3), i.e.
+``f = f_des Kp / (Kp + r_m)``; with it the error vanishes (10.4).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from awiwi_drake._math import clip, is_float
+from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain
+from awiwi_drake.parameters.control import TendonForceGains
+
+__all__ = ["ForceMap", "force_map", "interp", "TendonForceLaw", "tendon_pd_controller",
+           "tendon_scheduled_controller", "identified_gains", "steady_state_force_without_feedforward"]
+
+
+def interp(x, xp: np.ndarray, fp: np.ndarray):
+    """Piecewise-linear interpolation for float and AutoDiffXd (derivative = local slope).
+
+    Outside the table the end segments are extrapolated linearly; callers
+    clamp or validate their argument first (:class:`ForceMap` does).
+    """
+    xp = np.asarray(xp, float)
+    fp = np.asarray(fp, float)
+    if is_float(x):
+        xv = float(np.asarray(x).reshape(-1)[0]) if np.ndim(x) else float(x)
+    else:
+        xi = np.asarray(x, dtype=object).reshape(-1)[0]
+        xv = xi.value()
+        x = xi
+    i = int(np.clip(np.searchsorted(xp, xv) - 1, 0, len(xp) - 2))
+    slope = (fp[i + 1] - fp[i]) / (xp[i + 1] - xp[i])
+    return fp[i] + slope * (x - xp[i])
+
+
+def _value(x) -> float:
+    """Float value of a float / 1-element array / AutoDiffXd scalar."""
+    v = np.asarray(x, dtype=object).reshape(-1)[0] if np.ndim(x) else x
+    return float(v) if is_float(v) else float(v.value())
+
+
+@dataclass
+class ForceMap:
+    """Tabulated static tendon force ``f(theta)`` of a rig and its slope ``alpha(theta)``.
+
+    ``theta`` is increasing; only the taut, strictly increasing part is kept
+    (every row has ``force > 0``); ``slack_angle`` is the largest tabulated
+    motor angle at which the tendon is still slack (``f = 0``).
+    """
+
+    theta: np.ndarray
+    force: np.ndarray
+    alpha: np.ndarray
+    slack_angle: float
+
+    @property
+    def max_force(self) -> float:
+        return float(self.force[-1])
+
+    def check_force(self, f, name: str = "tendon_force_reference") -> float:
+        """Validate a force argument against the table ``[0, max_force]``; return its float value."""
+        v = _value(f)
+        if not (math.isfinite(v) and 0.0 <= v <= self.max_force):
+            raise ValueError(f"{name} = {v!r} N is outside the tendon force table [0, {self.max_force:.4g}] N "
+                             f"(force_map(f_max=...) tabulates up to f_max)")
+        return v
+
+    def force_at(self, theta):
+        return interp(theta, self.theta, self.force)
+
+    def theta_of_force(self, f):
+        """Motor angle holding the static force ``f`` in ``[0, max_force]`` (slack point at ``f = 0``)."""
+        self.check_force(f, "force")
+        return interp(f, np.concatenate([[0.0], self.force]), np.concatenate([[self.slack_angle], self.theta]))
+
+    def alpha_of_force(self, f, floor: float | None = None):
+        """``d f / d theta`` at force ``f`` [N/rad] (float or AutoDiffXd).
+
+        The force argument is clamped to the taut range ``[max(floor, force[0]),
+        max_force]`` (derivative 0 outside), never extrapolated: below the
+        table's first row (or below ``floor``) the slope at that row is used.
+        """
+        lo = float(self.force[0]) if floor is None else max(float(floor), float(self.force[0]))
+        return interp(clip(f, lo, self.max_force), self.force, self.alpha)
+
+
+def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
+    """Tabulate the rig's ``tendon_force`` output over motor angles (motor at rest).
+
+    The rig must have the state ``[theta, omega]`` and output ``tendon_force``;
+    the slope is ``r_m * tendon_stiffness`` when the rig outputs the stiffness,
+    else the centred difference of the tabulated force.
+    """
+    d = rig.diagram
+    if not d.HasOutputPort("tendon_force"):
+        raise ValueError(f"force_map: rig {getattr(rig, 'name', '?')!r} has no output 'tendon_force'")
+    ctx = d.CreateDefaultContext()
+    for i in range(d.num_input_ports()):
+        d.get_input_port(i).FixValue(ctx, np.zeros(d.get_input_port(i).size()))
+    port = d.GetOutputPort("tendon_force")
+    n = ctx.num_continuous_states()
+    if n != 2:
+        raise ValueError(f"force_map: expected a tendon rig with state [theta, omega], got {n} states")
+
+    def f(th):
+        ctx.SetContinuousState([th, 0.0])
+        return float(port.Eval(ctx)[0])
+
+    lo, hi = -0.01, 0.01
+    while f(lo) > 1e-9 and lo > -1e3:
+        lo *= 2.0
+    while f(hi) < f_max and hi < 1e3:
+        hi *= 2.0
+    if f(hi) < f_max or f(lo) > 1e-9:
+        raise ValueError("force_map: could not bracket the tendon force between slack and f_max")
+    th = np.linspace(lo, hi, 4 * num)
+    fo = np.array([f(t) for t in th])
+    r_m = _motor(rig).pulley_radius
+    kport = d.GetOutputPort("tendon_stiffness") if d.HasOutputPort("tendon_stiffness") else None
+
+    def slope(t):  # d f / d theta = r_m k_t (exact, from the rig's stiffness output)
+        ctx.SetContinuousState([t, 0.0])
+        return r_m * float(kport.Eval(ctx)[0])
+
+    taut = fo > 1e-6
+    first = int(np.argmax(taut))
+    top = int(np.argmax(fo >= f_max))
+    slack_angle = float(th[first - 1]) if first > 0 else float(th[0])
+    # the slack row (f = 0, alpha = 0) is not kept: interpolating the slope between it and the first taut
+    # row (and extrapolating below it) gives meaningless, even negative, slopes near slack
+    th, fo = th[first: top + 1], fo[first: top + 1]
+    alpha = np.array([slope(t) for t in th]) if kport is not None else np.gradient(fo, th)
+    keep = np.concatenate([[True], np.diff(fo) > 0])
+    return ForceMap(th[keep], fo[keep], alpha[keep], slack_angle)
+
+
+def identified_gains(alpha: float, inertia: float, omega: float, xi: float) -> tuple[float, float]:
+    """(10.11): ``Kp = w^2 B / alpha``, ``Kd = 2 xi w B / alpha`` (float)."""
+    check_gain("alpha", alpha, owner="tendon force design")
+    return omega ** 2 * inertia / alpha, 2.0 * xi * omega * inertia / alpha
+
+
+def steady_state_force_without_feedforward(f_des: float, kp: float, pulley_radius: float) -> float:
+    """(10.3) at rest with smooth friction (zero at zero speed): ``f = f_des Kp / (Kp + r_m)``."""
+    return f_des * kp / (kp + pulley_radius)
+
+
+def _motor(rig):
+    p = getattr(getattr(rig, "params", None), "motor", None)
+    if p is None:
+        raise ValueError(f"rig {getattr(rig, 'name', '?')!r} has no params.motor (MotorParams)")
+    return p
+
+
+class TendonForceLaw(StaticLaw):
+    """(10.2) with fixed (design force) or scheduled (reference force) gains."""
+
+    inputs = {"tendon_force_reference": 1, "tendon_force": 1, "motor_velocity": 1}
+    output_size = 1
+
+    def __init__(self, fmap: ForceMap, motor: Any, gains: TendonForceGains | None = None, *,
+                 scheduled: bool = False, name: str | None = None):
+        g = gains or TendonForceGains()
+        self.name = name or ("tendon_scheduled" if scheduled else "tendon_pd")
+        check_gain("natural_frequency", g.natural_frequency, owner=self.name)
+        check_gain("damping_ratio", g.damping_ratio, owner=self.name)
+        self.fmap, self.motor, self.gains, self.scheduled = fmap, motor, g, bool(scheduled)
+        self.inertia = check_gain("inertia", motor.inertia, owner=self.name)
+        self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=self.name)
+        w, xi = g.natural_frequency, g.damping_ratio
+        fmap.check_force(g.design_force, "design_force")
+        fmap.check_force(g.min_schedule_force, "min_schedule_force")
+        self.alpha_floor = float(fmap.alpha_of_force(g.min_schedule_force))
+        # table of gains over the force table: scheduled = interpolation in it (held at min_schedule_force below)
+        alpha = np.maximum(fmap.alpha, self.alpha_floor)
+        self._kp_tab = w ** 2 * self.inertia / alpha
+        self._kd_tab = 2 * xi * w * self.inertia / alpha
+        self.kp_fixed, self.kd_fixed = identified_gains(float(fmap.alpha_of_force(g.design_force)),
+                                                        self.inertia, w, xi)
+
+    def gains_at(self, f_ref):
+        """(Kp, Kd) used at reference force ``f_ref``."""
+        self.fmap.check_force(f_ref)
+        if not self.scheduled:
+            return self.kp_fixed, self.kd_fixed
+        fr = clip(f_ref, float(self.fmap.force[0]), self.fmap.max_force)
+        return interp(fr, self.fmap.force, self._kp_tab), interp(fr, self.fmap.force, self._kd_tab)
+
+    def __call__(self, u):
+        from awiwi_drake.components import motor_friction_torque
+        fd = u["tendon_force_reference"][0]
+        f = u["tendon_force"][0]
+        w = u["motor_velocity"][0]
+        kp, kd = self.gains_at(fd)
+        # slope at the measured force clamped to [min_schedule_force, f_max]: > 0 even for readings <= 0
+        fdot = self.fmap.alpha_of_force(f, floor=self.gains.min_schedule_force) * w
+        tau = kp * (fd - f) - kd * fdot
+        if self.gains.force_feedforward:
+            tau = tau + self.r_m * f
+        if self.gains.friction_compensation:
+            tau = tau - self.gains.friction_scale * motor_friction_torque(w, self.motor)
+        return np.array([tau])
+
+
+def tendon_pd_controller(rig: Any, gains: TendonForceGains | None = None, *, fmap: ForceMap | None = None):
+    """Registered factory ``tendon-pd``: (10.2) with gains fixed at the design force."""
+    return StaticLawController(TendonForceLaw(fmap or force_map(rig), _motor(rig), gains, scheduled=False))
+
+
+def tendon_scheduled_controller(rig: Any, gains: TendonForceGains | None = None, *, fmap: ForceMap | None = None):
+    """Registered factory ``tendon-scheduled``: (10.2) with gains (10.11) scheduled on the reference."""
+    return StaticLawController(TendonForceLaw(fmap or force_map(rig), _motor(rig), gains, scheduled=True))

@@ -1,0 +1,35 @@
+"""The Awiwi hand: fingers (thesis ch. 5) and wrist (ch. 6, :mod:`.wrist`).
+
+* :mod:`.kinematics`: Table 5.1 transforms, thumb base transform (5.19).
+* :mod:`.coupling`: tendon lengths ``h(q)``, coupling matrices ``P(q) = dh/dq``
+  ((5.5), (5.18), (5.22)), stiffness transformation (5.12), guide friction.
+* :mod:`.estimation`: link-position estimation, pseudo-inverse (5.15) and
+  Algorithm 1 (thumb base).
+* :mod:`.plant`: continuous MultibodyPlant builders for each finger and the hand.
+* :mod:`.diagrams`: ``finger_diagram`` / ``hand_diagram`` (motors, springs,
+  routing, plant; Rig-compatible), ``closed_loop`` (3 kHz joint-space PD, wrist
+  feedforward).
+* :mod:`.studies`: Fig 5.7, poles vs pretension, coupling hold, wrist compensation.
+* :mod:`.plots`, :mod:`.visualize` (Meshcat HTML recording).
+
+``finger_diagram``, ``hand_diagram`` and ``closed_loop`` are importable from
+here (loaded on first use, so ``import awiwi_drake.hand`` stays light).
+"""
+
+from .coupling import (FingerCoupling, LinearFingerCoupling, ThumbCoupling, HandCoupling,
+                       finger_coupling, hand_coupling, joint_stiffness, reduced_coupling_matrix)
+from .kinematics import finger_frames, finger_joint_names, thumb_base_transform, thumb_frames
+
+__all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
+           "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
+           "finger_frames", "finger_joint_names", "thumb_base_transform", "thumb_frames",
+           "finger_diagram", "hand_diagram", "closed_loop"]
+
+_LAZY = {"finger_diagram": "diagrams", "hand_diagram": "diagrams", "closed_loop": "diagrams"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+        return getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,429 @@
+"""Tendon routing of the fingers: lengths ``h(q)``, coupling ``P(q)``, stiffness map.
+
+Sign convention (docs/ARCHITECTURE.md): ``h_i(q)`` is the length of tendon
+path ``i``; ``P(q) = dh/dq`` (m x n); spring elongation
+``x = r_m theta + h(q) - h(0) + x0``; joint torque ``tau = -P(q)^T f``.
+
+Thesis equations and how we read them
+-------------------------------------
+* Index / middle, (5.5): the eight lengths are used as printed and ``P`` is
+  *derived* from them.  (5.9) prints rows 1-4 with other signs (row 1 of
+  (5.9) is ``[r20, -r21]``, while d/dq of (5.5) row 1 is ``[r20, r21]``);
+  with ``h`` as the single truth the rows of (5.9) are a permutation/sign
+  flip of ours and the spanned torques are the same.
+* Ring / fifth, (5.16)-(5.18): the plant keeps PIP and DIP as two joints
+  (the coupling is a stiff element, :mod:`.plant`), so the routing acts on
+  both.  The six ring tendons are the four base tendons (rows 1-4 of (5.5))
+  and one PIP/DIP pair that rolls over the PIP pulley ``r42`` and the DIP
+  pulley ``r43``: ``h = +-(r42 q42 + r43 q43)``.  With the coupling (5.16)
+  ``q43 = (r43/r42) q42`` the reduced 3-DoF row is ``+-(r42 + r43^2/r42) q42``;
+  (5.18) prints ``+-(r42 + r43) q42``, which is the same only for
+  ``r42 = r43`` (1:1 coupling).  (5.18) also lists a second pair
+  ``+-r42 q42`` (h44, h45), which the stated count of six tendons
+  (``P4`` in R^{6x3}, Table 6.2) leaves no room for: we read it as the
+  PIP-only part of the same path and do not add motors for it.
+  Alternative reading (reported in docs/REPRODUCTIONS.md): Fig 5.11 labels
+  the two motors theta44/theta45, i.e. the pair ``+-r42 q42`` is motor-driven
+  (reduced moment arm 7 mm instead of our 10.6 mm, 12 mm as printed) and
+  h46/h47 are passive coupling tendons (our coupling element).
+  :func:`reduced_coupling_matrix` gives the 3-DoF matrix.
+* Fifth: no equations in the thesis.  Chosen: the ring routing plus an
+  antagonistic pair on the hematometacarpal (HMC) joint,
+  ``h = +-r_h q_5h`` (rows 1-2), then the four base rows, then the PIP/DIP
+  pair: 8 tendons, 4 DoF (section 5.5 gives the counts).
+* Thumb, (5.20)-(5.22): the four base tendons run straight from the palm
+  points A0..D0 (frame 10) to the bone points A..D (frame 12):
+  ``h_i = |T^12_10(q10, q11) p_i - p0_i|``; the PIP/DIP rows are (5.22) as
+  printed (again (5.21) prints other signs; ``h`` wins).  ``P`` and the
+  tension Hessian ``sum_i f_i d^2 h_i/dq^2`` are analytic.
+
+Stiffness (5.12) under our convention: ``K_q = -d tau/dq =
+P^T K_t P + sum_i f_i d^2 h_i / dq^2`` (the ``dP^T/dq f`` term; zero for
+constant ``P``), see :func:`joint_stiffness`.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerParams, HandParams, ThumbParams,
+                               check_finger_structure, finger_params)
+from .kinematics import finger_joint_names
+
+__all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
+           "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
+           "coupling_selection", "index_coupling_matrix"]
+
+
+def _is_float_array(q) -> bool:
+    return np.asarray(q).dtype != object
+
+
+def _quiet_fp(method):
+    """numpy reports stale floating-point flags (set inside pydrake.symbolic) as
+    'invalid value' warnings on object arrays; they carry no information here."""
+    def wrapper(self, q, *args, **kw):
+        if isinstance(q, np.ndarray) and q.dtype != object:
+            return method(self, q, *args, **kw)
+        with np.errstate(invalid="ignore"):
+            return method(self, q, *args, **kw)
+    wrapper.__name__, wrapper.__doc__ = method.__name__, method.__doc__
+    return wrapper
+
+
+class FingerCoupling:
+    """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
+
+    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
+    ``joint_names``; ``is_constant`` when ``P`` does not depend on ``q``.
+    All methods accept float arrays and numpy object arrays of AutoDiffXd or
+    symbolic Expression.
+    """
+
+    num_tendons: int
+    num_joints: int
+    tendon_names: list[str]
+    joint_names: list[str]
+    is_constant: bool = True
+
+    def _check_q(self, q):
+        q = np.asarray(q) if _is_float_array(q) else np.asarray(q, dtype=object)
+        if q.shape != (self.num_joints,):
+            raise ValueError(f"{type(self).__name__}: q must have shape ({self.num_joints},) "
+                             f"(joints {', '.join(self.joint_names)}), got {q.shape}")
+        return q
+
+    def h(self, q) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def P(self, q) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def tension_hessian(self, q, f) -> np.ndarray:
+        """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
+        return np.zeros((self.num_joints, self.num_joints))
+
+    def dPT_f_dq(self, q, f) -> np.ndarray:
+        """``d(P(q)^T f)/dq`` at fixed ``f``: the same matrix as :meth:`tension_hessian`
+        (name used by ``components.routing.ConstantCoupling``)."""
+        return self.tension_hessian(q, f)
+
+    def generalized_force(self, q, f) -> np.ndarray:
+        """``tau = -P(q)^T f`` (ARCHITECTURE sign convention)."""
+        return -(self.P(q).T @ f)
+
+
+class LinearFingerCoupling(FingerCoupling):
+    """Constant coupling: ``h(q) = P q`` (index, middle, ring, fifth)."""
+
+    def __init__(self, P: np.ndarray, *, joint_names: Sequence[str], tendon_names: Sequence[str],
+                 dof_selection: np.ndarray | None = None):
+        P = np.asarray(P, dtype=float)
+        if P.shape != (len(tendon_names), len(joint_names)):
+            raise ValueError(f"P has shape {P.shape}, expected ({len(tendon_names)}, {len(joint_names)})")
+        self._P = P
+        self.num_tendons, self.num_joints = P.shape
+        self.joint_names = list(joint_names)
+        self.tendon_names = list(tendon_names)
+        # plant joints = S @ independent DoF (identity for uncoupled fingers)
+        self.dof_selection = np.eye(self.num_joints) if dof_selection is None else np.asarray(dof_selection)
+
+    @_quiet_fp
+    def h(self, q):
+        return self._P @ self._check_q(q)
+
+    def P(self, q=None):
+        if q is not None:
+            self._check_q(q)
+        return self._P.copy()
+
+
+def index_coupling_matrix(r0: float, r1: float, r2: float, r3: float) -> np.ndarray:
+    """``P = dh/dq`` of (5.5) (8 x 4; joints abd, MCP, PIP, DIP)."""
+    return np.array([
+        [r0, r1, 0, 0], [r0, -r1, 0, 0], [-r0, r1, 0, 0], [-r0, -r1, 0, 0],
+        [0, 0, r2, 0], [0, 0, -r2, 0], [0, 0, r2, -r3], [0, 0, -r2, r3]], dtype=float)
+
+
+def coupling_selection(p: FingerParams) -> np.ndarray:
+    """``S`` with ``q_plant = S q_dof``: DIP = (r_x3/r_x2) PIP (5.16) for coupled fingers."""
+    n = 4 + int(p.has_hmc)
+    if not p.pip_dip_coupled:
+        return np.eye(n)
+    S = np.zeros((n, n - 1))
+    S[: n - 1, : n - 1] = np.eye(n - 1)
+    S[n - 1, n - 2] = p.dip_pip_ratio
+    return S
+
+
+def reduced_coupling_matrix(coupling: LinearFingerCoupling) -> np.ndarray:
+    """Coupling matrix on the independent DoF, ``P S`` (ring: the 6 x 3 ``P4`` of section 5.3.3)."""
+    return coupling.P() @ coupling.dof_selection
+
+
+def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
+    r0, r1, r2, r3 = p.abduction_radius, p.mcp_radius, p.pip_radius, p.dip_radius
+    if not p.pip_dip_coupled:
+        P = index_coupling_matrix(r0, r1, r2, r3)
+    else:
+        base = index_coupling_matrix(r0, r1, r2, r3)[:4]
+        P = np.vstack([base, [[0, 0, r2, r3], [0, 0, -r2, -r3]]])
+    if p.has_hmc:
+        rh = p.hmc_radius
+        P = np.vstack([np.hstack([[[rh], [-rh]], np.zeros((2, 4))]), np.hstack([np.zeros((len(P), 1)), P])])
+    names = [f"{finger}_h{k + 1}" for k in range(P.shape[0])]
+    return LinearFingerCoupling(P, joint_names=finger_joint_names(finger), tendon_names=names,
+                                dof_selection=coupling_selection(p))
+
+
+def _rz(c, s, like):
+    R = np.zeros((3, 3), dtype=like)
+    R[0, 0], R[0, 1], R[1, 0], R[1, 1], R[2, 2] = c, -s, s, c, 1.0
+    return R
+
+
+def _ry(c, s, like):
+    R = np.zeros((3, 3), dtype=like)
+    R[0, 0], R[0, 2], R[2, 0], R[2, 2], R[1, 1] = c, s, -s, c, 1.0
+    return R
+
+
+_KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz
+_KY = np.array([[0.0, 0, 1], [0, 0, 0], [-1, 0, 0]])  # dRy/dq = Ry Ky
+
+
+class ThumbCoupling(FingerCoupling):
+    """Thumb (5.20)-(5.22): tensegrity base (nonlinear) + PIP/DIP (linear)."""
+
+    is_constant = False
+
+    def __init__(self, p: ThumbParams | None = None):
+        self.params = p = p or ThumbParams()
+        self.num_tendons, self.num_joints = 8, 4
+        self.joint_names = finger_joint_names("thumb")
+        self.tendon_names = [f"thumb_h{k + 1}" for k in range(8)]
+        self.palm_points = np.reshape(p.palm_points, (4, 3))
+        # bone points relative to the base rotation centre: (5.19) with T^12_10 = Rz Ry Trans(L)
+        self.bone_points = np.reshape(p.bone_points, (4, 3)) + np.array([p.metacarpal_length, 0, 0])
+        r12, r13 = p.pip_radius, p.dip_radius
+        self._P_distal = np.array([[r12, 0], [-r12, 0], [-r12, r13], [r12, -r13]], dtype=float)
+        self.dof_selection = np.eye(4)
+
+    def _base(self, q10, q11):
+        like = float if _is_float_array(np.array([q10, q11])) else object
+        Rz = _rz(np.cos(q10), np.sin(q10), like)
+        Ry = _ry(np.cos(q11), np.sin(q11), like)
+        return Rz, Ry
+
+    @_quiet_fp
+    def base_vectors(self, q):
+        """Tendon vectors ``d_i = T^12_10 p_i - p0_i`` (4 x 3) in frame 10."""
+        q = self._check_q(q)
+        Rz, Ry = self._base(q[0], q[1])
+        return (Rz @ Ry @ self.bone_points.T).T - self.palm_points
+
+    def _float_base(self, q):
+        """Float fast path: tendon vectors d (4 x 3), norms, and d/dq of the bone points (3 x 4 each)."""
+        c0, s0, c1, s1 = np.cos(q[0]), np.sin(q[0]), np.cos(q[1]), np.sin(q[1])
+        R = np.array([[c0 * c1, -s0, c0 * s1], [s0 * c1, c0, s0 * s1], [-s1, 0.0, c1]])   # Rz(q10) Ry(q11)
+        A = R @ self.bone_points.T
+        d = A.T - self.palm_points
+        return d, np.sqrt(np.einsum("ij,ij->i", d, d)), A, R
+
+    @_quiet_fp
+    def h(self, q):
+        q = self._check_q(q)
+        if q.dtype != object:
+            _, norm, _, _ = self._float_base(q)
+            return np.concatenate([norm, self._P_distal @ q[2:]])
+        d = self.base_vectors(q)
+        base = np.sqrt(np.sum(d * d, axis=1))
+        distal = self._P_distal @ q[2:]
+        return np.concatenate([base, distal])
+
+    def _base_jacobians(self, q):
+        Rz, Ry = self._base(q[0], q[1])
+        b = self.bone_points.T  # 3 x 4
+        dA0 = Rz @ _KZ @ Ry @ b          # d/dq10
+        dA1 = Rz @ Ry @ _KY @ b          # d/dq11
+        return Rz, Ry, b, dA0, dA1
+
+    @_quiet_fp
+    def P(self, q):
+        q = self._check_q(q)
+        if q.dtype != object:
+            d, norm, A, R = self._float_base(q)
+            dA0 = _KZ @ A                                   # Kz Rz = Rz Kz
+            dA1 = R @ (_KY @ self.bone_points.T)
+            P = np.zeros((8, 4))
+            P[:4, 0] = np.einsum("ij,ji->i", d, dA0) / norm
+            P[:4, 1] = np.einsum("ij,ji->i", d, dA1) / norm
+            P[4:, 2:] = self._P_distal
+            return P
+        d = self.base_vectors(q)
+        norm = np.sqrt(np.sum(d * d, axis=1))
+        _, _, _, dA0, dA1 = self._base_jacobians(q)
+        like = float if _is_float_array(q) else object
+        P = np.zeros((8, 4), dtype=like)
+        for i in range(4):
+            P[i, 0] = np.dot(d[i], dA0[:, i]) / norm[i]
+            P[i, 1] = np.dot(d[i], dA1[:, i]) / norm[i]
+        P[4:, 2:] = self._P_distal
+        return P
+
+    @_quiet_fp
+    def tension_hessian(self, q, f):
+        """``sum_i f_i d^2 h_i/dq^2``; only the base block (q10, q11) is non-zero."""
+        q = self._check_q(q)
+        d = self.base_vectors(q)
+        norm = np.sqrt(np.sum(d * d, axis=1))
+        Rz, Ry, b, dA0, dA1 = self._base_jacobians(q)
+        d00 = Rz @ _KZ @ _KZ @ Ry @ b
+        d01 = Rz @ _KZ @ Ry @ _KY @ b
+        d11 = Rz @ Ry @ _KY @ _KY @ b
+        like = float if (_is_float_array(q) and _is_float_array(f)) else object
+        H = np.zeros((4, 4), dtype=like)
+        for i in range(4):
+            u = d[i] / norm[i]
+            J = np.stack([dA0[:, i], dA1[:, i]], axis=1)         # 3 x 2
+            uJ = u @ J
+            Hi = (J.T @ J - np.outer(uJ, uJ)) / norm[i]
+            Hi = Hi + np.array([[u @ d00[:, i], u @ d01[:, i]], [u @ d01[:, i], u @ d11[:, i]]])
+            H[:2, :2] = H[:2, :2] + f[i] * Hi
+        return H
+
+
+class HandCoupling(FingerCoupling):
+    """Block-diagonal routing of several fingers, optionally with length-offset inputs.
+
+    Joints: the fingers' plant joints in ``fingers`` order, then
+    ``num_offsets`` extra "joints" that add one-to-one to the tendon lengths
+    (``h += d``; P gets an identity block).  The hand uses them for the 38
+    wrist tendon-length offsets (Table 6.2 order = our global tendon order),
+    so that a wrist motion enters the drive like any joint motion.  Their
+    generalised force ``-f`` is the tendon force itself.
+    """
+
+    def __init__(self, parts: dict[str, FingerCoupling], *, num_offsets: int = 0):
+        self.parts = dict(parts)
+        self.joint_slices, self.tendon_slices = {}, {}
+        j = t = 0
+        for name, c in self.parts.items():
+            self.joint_slices[name] = slice(j, j + c.num_joints)
+            self.tendon_slices[name] = slice(t, t + c.num_tendons)
+            j += c.num_joints
+            t += c.num_tendons
+        if num_offsets not in (0, t):
+            raise ValueError(f"num_offsets must be 0 or the number of tendons ({t}), got {num_offsets}")
+        self.num_finger_joints = j
+        self.num_offsets = num_offsets
+        self.num_tendons, self.num_joints = t, j + num_offsets
+        self.joint_names = [n for c in self.parts.values() for n in c.joint_names]
+        self.joint_names += [f"wrist_offset_{k + 1}" for k in range(num_offsets)]
+        self.tendon_names = [n for c in self.parts.values() for n in c.tendon_names]
+        self.is_constant = all(c.is_constant for c in self.parts.values())
+
+    def _float_constant_part(self):
+        """Constant block matrix (all linear parts and offsets) for the float fast path."""
+        if not hasattr(self, "_P_const"):
+            P = np.zeros((self.num_tendons, self.num_joints))
+            for n, c in self.parts.items():
+                if c.is_constant:
+                    P[self.tendon_slices[n], self.joint_slices[n]] = c.P(np.zeros(c.num_joints))
+            if self.num_offsets:
+                P[:, self.num_finger_joints:] = np.eye(self.num_tendons)
+            self._P_const = P
+            self._nonlinear = [n for n, c in self.parts.items() if not c.is_constant]
+        return self._P_const
+
+    @_quiet_fp
+    def h(self, q):
+        q = self._check_q(q)
+        if q.dtype != object:   # fast path (simulation): one matmul + the nonlinear parts
+            h = self._float_constant_part() @ q
+            for n in self._nonlinear:
+                h[self.tendon_slices[n]] = self.parts[n].h(q[self.joint_slices[n]])
+            if self.num_offsets:
+                for n in self._nonlinear:
+                    h[self.tendon_slices[n]] += q[self.num_finger_joints:][self.tendon_slices[n]]
+            return h
+        h = np.concatenate([c.h(q[self.joint_slices[n]]) for n, c in self.parts.items()])
+        if self.num_offsets:
+            h = h + q[self.num_finger_joints:]
+        return h
+
+    @_quiet_fp
+    def P(self, q):
+        q = self._check_q(q)
+        if q.dtype != object:
+            P = self._float_constant_part().copy()
+            for n in self._nonlinear:
+                P[self.tendon_slices[n], self.joint_slices[n]] = self.parts[n].P(q[self.joint_slices[n]])
+            return P
+        blocks = {n: c.P(q[self.joint_slices[n]]) for n, c in self.parts.items()}
+        like = float if all(b.dtype != object for b in blocks.values()) else object
+        P = np.zeros((self.num_tendons, self.num_joints), dtype=like)
+        for n, b in blocks.items():
+            P[self.tendon_slices[n], self.joint_slices[n]] = b
+        if self.num_offsets:
+            P[:, self.num_finger_joints:] = np.eye(self.num_tendons)
+        return P
+
+    def tension_hessian(self, q, f):
+        q = self._check_q(q)
+        like = float if (_is_float_array(q) and _is_float_array(f)) else object
+        H = np.zeros((self.num_joints, self.num_joints), dtype=like)
+        for n, c in self.parts.items():
+            js = self.joint_slices[n]
+            H[js, js] = c.tension_hessian(q[js], np.asarray(f)[self.tendon_slices[n]])
+        return H
+
+
+def finger_coupling(finger: str, params=None) -> FingerCoupling:
+    """Coupling object of one finger (``params`` default: the finger's defaults)."""
+    p = params if params is not None else finger_params(finger)
+    if finger == "thumb":
+        if not isinstance(p, ThumbParams):
+            raise ValueError(f"params for the thumb must be ThumbParams, got {type(p).__name__}")
+        return ThumbCoupling(p)
+    if finger not in FINGERS:
+        raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
+    if not isinstance(p, FingerParams):
+        raise ValueError(f"params for finger {finger!r} must be FingerParams, got {type(p).__name__}")
+    if p.FINGER not in ("generic", finger):
+        raise ValueError(f"params for finger {finger!r} are {type(p).__name__} (the {p.FINGER} finger)")
+    check_finger_structure(finger, p)      # a generic FingerParams must still have this finger's structure
+    return _linear_finger(finger, p)
+
+
+def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = False) -> HandCoupling:
+    """All five fingers, global tendon order thumb, index, middle, ring, fifth (Table 6.2 rows 1-38)."""
+    params = params or HandParams()
+    c = HandCoupling({f: finger_coupling(f, params.finger(f)) for f in FINGERS},
+                     num_offsets=38 if wrist_offsets else 0)
+    for f in FINGERS:  # the chosen global numbering (parameters.hand.TENDON_SLICES)
+        if c.tendon_slices[f] != TENDON_SLICES[f]:
+            got = c.tendon_slices[f]
+            raise ValueError(f"hand_coupling: the {f} finger's tendons occupy {got.start + 1}-{got.stop} of "
+                             f"{c.num_tendons}, but the global tendon order (parameters.hand.TENDON_SLICES, "
+                             f"Table 6.2 rows) puts them at {TENDON_SLICES[f].start + 1}-{TENDON_SLICES[f].stop}")
+    return c
+
+
+def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:
+    """Joint stiffness (5.12): ``K_q = -d tau/dq = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2``.
+
+    ``f`` are the tendon forces [N] (tension positive), ``k_t`` the tendon
+    (spring) stiffnesses [N/m].  With ``tau = -P^T f`` and ``f = f(x)``,
+    ``x = r_m theta + h(q) - h(0) + x0``, the motors held fixed.
+    """
+    f = np.asarray(f)
+    k_t = np.asarray(k_t)
+    if f.shape != (coupling.num_tendons,):
+        raise ValueError(f"f must have shape ({coupling.num_tendons},), got {f.shape}")
+    if k_t.shape != (coupling.num_tendons,):
+        raise ValueError(f"k_t must have shape ({coupling.num_tendons},), got {k_t.shape}")
+    P = coupling.P(q)
+    return P.T @ (k_t[:, None] * P) + coupling.tension_hessian(q, f)

@@ -1,0 +1,520 @@
+"""Finger and hand diagrams: motors + springs + routing (one tendon drive) + MultibodyPlant.
+
+``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig`
+(a :class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` /
+``analysis.simulate`` work on them.
+
+Diagram (names as in the exported graph)::
+
+    motor_torque ──> tendon_drive (MotorBank + SpringBank + TendonRouting, or one C++ SVS)
+                        ^ joint_angle            │ generalized_force (-P^T f)
+    <finger>_plant ─────┘  (q [, wrist offsets]) v
+        ^ applied_generalized_force <── generalized_force_sum <── coupling_element (-G [q; v])
+                                                              <── external_torque (input)
+                                                              <── guide_friction (optional)
+
+Exported inputs: ``motor_torque`` (m) [N m], ``external_torque`` (n) [N m],
+and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad].
+Exported outputs: ``state`` (the full continuous state, ``state_names``
+order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
+``motor_velocity`` / ``motor_state``, ``tendon_force`` [N],
+``tendon_stiffness`` [N/m], ``elongation`` [m], ``joint_torque`` (n, tendon
+part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
+
+State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``
+(spring hysteresis is not supported here: ValueError).
+
+The wrist enters the routing like extra joints: the drive's coupling is the
+finger coupling plus ``m`` length-offset "joints" (identity columns of
+``P``) fed by :class:`~awiwi_drake.hand.wrist.WristTendonOffsets_`
+(Table 6.2 order = our global tendon order, ``parameters.hand.TENDON_SLICES``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from ..components.drive import build_tendon_drive
+from ..components.motor import motor_ripple_torque
+from ..components.spring import tendon_spring
+from ..components.tendon import capstan_friction_force, guide_friction_force
+from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
+                               HandRigParams, JointControllerParams)
+from ..rigs.base import OperatingPoint, Rig
+from .coupling import FingerCoupling, HandCoupling, finger_coupling
+from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
+from .systems import add_joint_space_controller
+
+__all__ = ["HandRig", "finger_diagram", "hand_diagram", "HAND_DIAGRAM_EXPORTS", "export_hand_diagrams", "tendon_bending_angles", "GuideFriction_",
+           "GuideFriction", "closed_loop", "ClosedLoop", "DEFAULT_BACKEND"]
+
+DEFAULT_BACKEND = "symbolic"
+
+
+@dataclass
+class HandRig(Rig):
+    """A :class:`Rig` for fingers and the hand; fixes the ``wrist_angle`` input too.
+
+    Extra attributes live in ``extra``: ``coupling`` (the finger/hand
+    coupling without wrist offsets), ``drive_coupling`` (what the drive
+    uses), ``models`` (FingerModel handles), ``joint_names``,
+    ``tendon_names``, ``offsets`` (x0 [m]), ``coupling_gain`` (G).
+    """
+
+    def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
+        super().set_operating_point(context, op, fix_inputs=fix_inputs)
+        if fix_inputs and self.diagram.HasInputPort("wrist_angle"):
+            self.diagram.GetInputPort("wrist_angle").FixValue(
+                context, np.asarray(op.info.get("wrist_angle", np.zeros(2)), dtype=float))
+
+    @property
+    def num_joints(self) -> int:
+        return len(self.extra["joint_names"])
+
+    @property
+    def num_tendons(self) -> int:
+        return len(self.extra["tendon_names"])
+
+
+def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
+    """Total bending angle per tendon [rad] at the straight pose (input of (4.1)).
+
+    ``palm_bending_angle`` plus ``joint_wrap_angle`` for every joint pulley the
+    tendon crosses (non-zero entry of ``P(0)``); the thumb base tendons run
+    straight from the palm (no pulley), so they get the palm bend only.
+    """
+    P = np.asarray(coupling.P(np.zeros(coupling.num_joints)), dtype=float)
+    crossed = (np.abs(P) > 0).sum(axis=1)
+    if isinstance(coupling, HandCoupling):
+        parts = coupling.parts
+    else:
+        parts = {"finger": coupling}
+    for name, c in parts.items():
+        if not c.is_constant:  # thumb: base rows are straight tendons
+            ts = coupling.tendon_slices[name] if isinstance(coupling, HandCoupling) else slice(0, c.num_tendons)
+            crossed[ts.start:ts.start + 4] = 0
+    return p.palm_bending_angle + p.joint_wrap_angle * crossed
+
+
+@TemplateSystem.define("GuideFriction_")
+def GuideFriction_(T):
+    """Routing (guide) friction as a generalised force on the joints.
+
+    Inputs ``state`` = plant ``[q; v]`` (2n), ``tendon_force`` (m) [N].
+    Output ``generalized_force`` (n) = ``-P(q)^T f_fr`` with
+    ``f_fr = F tanh(P(q) v / v_s)``: the friction opposes the sliding of each
+    tendon through its guides (speed ``P v``, the path-length rate at the
+    finger), so its power ``-F . |P v|`` is never positive.  ``F`` is (4.1)
+    ``C0 (1 - exp(-C1 alpha))`` (speed and tension independent) or, with
+    ``capstan=True``, ``f (1 - exp(-mu alpha))``.
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, coupling, bending_angles, params, capstan: bool, smoothing_velocity: float,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.coupling, self.alpha, self.params = coupling, np.asarray(bending_angles, float), params
+            self.capstan, self.v_s = bool(capstan), float(smoothing_velocity)
+            n, m = coupling.num_joints, coupling.num_tendons
+            if self.alpha.shape != (m,):
+                raise ValueError(f"GuideFriction: bending_angles must have {m} entries, got {self.alpha.shape}")
+            self._n = n
+            self._x = self.DeclareVectorInputPort("state", 2 * n)
+            self._f = self.DeclareVectorInputPort("tendon_force", m)
+            self._F_const = guide_friction_force(self.alpha, params)
+            self.DeclareVectorOutputPort("generalized_force", n, self._calc,
+                                         prerequisites_of_calc={self._x.ticket(), self._f.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.coupling, other.alpha, other.params, other.capstan, other.v_s,
+                            converter=converter)
+
+        def _calc(self, context, out):
+            x = self._x.Eval(context)
+            q, v = x[: self._n], x[self._n:]
+            P = np.asarray(self.coupling.P(q))
+            F = capstan_friction_force(self._f.Eval(context), self.alpha, self.params) if self.capstan \
+                else self._F_const
+            f_fr = F * np.tanh((P @ v) / self.v_s)
+            out.SetFromVector(-(P.T @ f_fr))
+
+    return Impl
+
+
+GuideFriction = GuideFriction_[None]
+
+
+def _state_names(plant_joint_names, tendon_names):
+    names = list(plant_joint_names) + [f"{j}_dot" for j in plant_joint_names]
+    names += [f"theta_{t}" for t in tendon_names] + [f"omega_{t}" for t in tendon_names]
+    return tuple(names)
+
+
+def _build(name, p, plant_factory, parts, backend, wrist, visual):
+    """Shared builder of finger and hand diagrams."""
+    if p.spring.hysteresis.enabled:
+        raise ValueError(f"{name}: spring.hysteresis.enabled=True is not supported by the finger/hand "
+                         "diagrams (the drive does not export the hysteresis state); use the joint rig")
+    b = DiagramBuilder()
+    plant, models = plant_factory(b)
+    n = plant.num_positions()
+    coupling = HandCoupling(parts) if len(parts) > 1 else next(iter(parts.values()))
+    m = coupling.num_tendons
+    if coupling.num_joints != n:
+        raise ValueError(f"{name}: coupling has {coupling.num_joints} joints, plant {n}")
+    drive_coupling = HandCoupling(parts, num_offsets=m) if wrist else coupling
+    spring = tendon_spring(p.spring)
+    x_pre = float(np.ravel(spring.inverse_force(np.array([p.pretension])))[0])
+    offsets = np.full(m, x_pre)
+    drive = build_tendon_drive(motor=p.motor, spring=spring, coupling=drive_coupling, offsets=offsets,
+                               backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
+    d = b.AddSystem(drive.diagram)
+    split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
+    b.Connect(plant.get_state_output_port(), split.get_input_port())
+    rows = _wrist_rows(parts)
+    if rows.size != m:
+        counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
+        raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
+                         f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
+    if wrist:
+        from .wrist import WristTendonOffsets
+        w = b.AddNamedSystem("wrist_tendon_offsets", WristTendonOffsets())
+        select = np.zeros((m, 38))
+        select[np.arange(m), rows] = 1.0
+        sel = b.AddNamedSystem("wrist_offset_select", MatrixGain(select))
+        b.Connect(w.get_output_port(0), sel.get_input_port())
+        b.ExportInput(w.get_input_port(0), "wrist_angle")
+        jmux = b.AddNamedSystem("joint_and_wrist", Multiplexer([n, m]))
+        b.Connect(split.get_output_port(0), jmux.get_input_port(0))
+        b.Connect(sel.get_output_port(), jmux.get_input_port(1))
+        b.Connect(jmux.get_output_port(), d.GetInputPort("joint_angle"))
+        b.ExportOutput(sel.get_output_port(), "wrist_tendon_offset")
+        gf_split = b.AddNamedSystem("generalized_force_split", Demultiplexer([n, m]))
+        b.Connect(d.GetOutputPort("generalized_force"), gf_split.get_input_port())
+        tendon_tau = gf_split.get_output_port(0)
+    else:
+        b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
+        tendon_tau = d.GetOutputPort("generalized_force")
+    G = coupling_force_gain(plant, models)
+    sources = [tendon_tau]
+    if G is not None:
+        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
+        b.Connect(plant.get_state_output_port(), ce.get_input_port())
+        sources.append(ce.get_output_port())
+    if p.guide_friction:
+        gfr = b.AddNamedSystem("guide_friction", GuideFriction(
+            coupling, tendon_bending_angles(coupling, p), p.friction, p.capstan_friction,
+            p.friction_smoothing_velocity))
+        b.Connect(plant.get_state_output_port(), gfr.GetInputPort("state"))
+        b.Connect(d.GetOutputPort("tendon_force"), gfr.GetInputPort("tendon_force"))
+        sources.append(gfr.get_output_port())
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
+    for i, src in enumerate(sources):
+        b.Connect(src, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
+    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
+    state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
+    b.Connect(plant.get_state_output_port(), state.get_input_port(0))
+    b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
+    b.ExportOutput(state.get_output_port(), "state")
+    b.ExportOutput(split.get_output_port(0), "joint_angle")
+    b.ExportOutput(split.get_output_port(1), "joint_velocity")
+    b.ExportOutput(tendon_tau, "joint_torque")
+    for nm in ("motor_angle", "motor_velocity", "motor_state", "tendon_force", "tendon_stiffness",
+               "elongation", "applied_torque"):
+        b.ExportOutput(d.GetOutputPort(nm), nm)
+    if visual:
+        b.ExportOutput(b.GetSubsystemByName("scene_graph").get_query_output_port(), "query_object")
+    diagram = b.Build()
+    diagram.set_name(name)
+    joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
+    state_names = _state_names(joint_names, coupling.tendon_names)
+    extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
+                 torque_limit=p.motor.torque_limit if p.motor.saturation else None,
+                 drive_coupling=drive_coupling, models=models, joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
+                 coupling_gain=G, spring_law=spring)
+
+    def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
+                    wrist_angle=None) -> OperatingPoint:
+        return _equilibrium(name, p, plant, coupling, spring, offsets, G, rows if wrist else None, pretension,
+                            joint_angles, external_torque, wrist_angle)
+
+    return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, extra)
+
+
+def _wrist_rows(parts) -> np.ndarray:
+    """Rows of Table 6.2 (0-based) served by the tendons of ``parts``, in routing order."""
+    return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
+
+
+def _selection(coupling) -> np.ndarray:
+    """``S`` with ``q_plant = S q_dof`` over all parts."""
+    parts = coupling.parts if isinstance(coupling, HandCoupling) else {"f": coupling}
+    blocks = [c.dof_selection for c in parts.values()]
+    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
+    i = j = 0
+    for blk in blocks:
+        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
+        i, j = i + blk.shape[0], j + blk.shape[1]
+    return S
+
+
+def _equilibrium(name, p, plant, coupling, spring, offsets, G, wrist_rows, pretension, joint_angles,
+                 external_torque, wrist_angle):
+    """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
+    n, m = coupling.num_joints, coupling.num_tendons
+    f0 = p.pretension if pretension is None else float(pretension)
+    if not f0 > 0:
+        raise ValueError(f"{name}: pretension = {f0} must be > 0 [N]")
+    S = _selection(coupling)
+    if joint_angles is None:
+        q = np.zeros(n)
+    else:
+        qa = np.asarray(joint_angles, dtype=float).ravel()
+        if qa.shape == (S.shape[1],) and S.shape[1] != n:
+            q = S @ qa                       # independent DoF given: DIP follows (5.16)-(5.17)
+        elif qa.shape == (n,):
+            q = qa
+        else:
+            raise ValueError(f"{name}: joint_angles must have {n} (plant joints) or {S.shape[1]} (DoF) "
+                             f"entries, got {qa.size}")
+    tau_ext = np.zeros(n) if external_torque is None else np.asarray(external_torque, dtype=float).ravel()
+    if tau_ext.shape != (n,):
+        raise ValueError(f"{name}: external_torque must have {n} entries, got {tau_ext.size}")
+    tau_c = np.zeros(n) if G is None else -G[:, :n] @ q
+    tau_g = np.zeros(n)
+    if p.gravity:
+        pctx = plant.CreateDefaultContext()
+        plant.SetPositions(pctx, q)
+        tau_g = plant.CalcGravityGeneralizedForces(pctx)
+    P = np.asarray(coupling.P(q), dtype=float)
+    # P^T f = tau_ext + tau_c + tau_g ; f = particular + f0 * projection of 1 onto ker(P^T)
+    rhs = tau_ext + tau_c + tau_g
+    f_part, *_ = np.linalg.lstsq(P.T, rhs, rcond=None)
+    if np.linalg.norm(P.T @ f_part - rhs) > 1e-9 * max(1.0, np.linalg.norm(rhs)):
+        raise ValueError(f"{name}: the tendons cannot balance external_torque/joint_angles here (the "
+                         "coupled DIP must satisfy q_DIP = (r_x3/r_x2) q_PIP and carry no separate torque)")
+    ones = np.ones(m)
+    f_null = ones - P @ np.linalg.lstsq(P, ones, rcond=None)[0]
+    f = f_part + f0 * f_null / np.mean(f_null)
+    if np.any(f <= 0):
+        bad = [coupling.tendon_names[i] for i in np.flatnonzero(f <= 0)]
+        raise ValueError(f"{name}: pretension {f0} N leaves tendon(s) {', '.join(bad)} slack at this "
+                         f"operating point (forces {np.round(f, 3)} N)")
+    x = np.asarray(spring.inverse_force(f), dtype=float)
+    h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
+    w_off = np.zeros(m)
+    wa = np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, dtype=float).ravel()
+    if wa.shape != (2,):
+        raise ValueError(f"{name}: wrist_angle must be [q71, q73], got {wa}")
+    if wrist_rows is not None:
+        from .wrist import wrist_tendon_offsets
+        w_off = np.asarray(wrist_tendon_offsets(wa[0], wa[1]), dtype=float)[wrist_rows]
+    elif wrist_angle is not None:
+        raise ValueError(f"{name}: wrist_angle given but the diagram has no wrist (wrist=False)")
+    r_m = p.motor.pulley_radius
+    theta = (x - offsets - (np.asarray(coupling.h(q), dtype=float) - h0) - w_off) / r_m
+    u = r_m * f - np.asarray(motor_ripple_torque(theta, p.motor), dtype=float)
+    if p.motor.saturation and np.any(np.abs(u) > p.motor.torque_limit):
+        raise ValueError(f"{name}: holding torques up to {np.abs(u).max():.3g} N m exceed "
+                         f"motor.torque_limit = {p.motor.torque_limit} N m")
+    state = np.concatenate([q, np.zeros(n), theta, np.zeros(m)])
+    K_t = np.asarray(spring.stiffness(x), dtype=float)
+    from .coupling import joint_stiffness
+    Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
+    return OperatingPoint(state, u, tau_ext, dict(pretension=f0, joint_angles=q, tendon_force=f, elongation=x,
+                                                  tendon_stiffness=K_t, joint_stiffness=Kq, wrist_angle=wa))
+
+
+def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,
+                   backend: str = DEFAULT_BACKEND, wrist: bool = False, visual: bool = False) -> HandRig:
+    """One finger with its motors, springs and routing (see module docstring).
+
+    Parameters
+    ----------
+    finger : {"thumb", "index", "middle", "ring", "fifth"}
+    params : FingerRigParams, optional
+        Default ``FingerRigParams.for_finger(finger)``.
+    backend : {"symbolic", "python"}
+        The tendon drive's backend (``awiwi_drake.components.drive``).
+    wrist : bool
+        Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
+        finger's tendons enter the routing.
+    visual : bool
+        Register cylinder geometry with a SceneGraph (for Meshcat).
+
+    Operating point keys: ``pretension`` [N], ``joint_angles`` (plant joints or
+    independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
+    """
+    if finger not in FINGERS:
+        raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
+    p = params if params is not None else FingerRigParams.for_finger(finger)
+    if not isinstance(p, FingerRigParams):
+        raise ValueError(f"finger_diagram: params must be FingerRigParams, got {type(p).__name__}")
+    if p.finger_name != finger:
+        raise ValueError(f"finger_diagram: params.finger_name is {p.finger_name!r}, not {finger!r} "
+                         f"(use FingerRigParams.for_finger({finger!r}))")
+    fp = p.finger
+
+    def plant_factory(b):
+        return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity)
+
+    return _build(f"finger_{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
+                  wrist, visual)
+
+
+def hand_diagram(*, params: HandRigParams | None = None, backend: str = "python", wrist: bool = True,
+                 visual: bool = False) -> HandRig:
+    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
+
+    The default backend is ``"python"``: for 38 tendons the numpy banks are
+    faster than the fused symbolic drive (benchmarks/bench_hand.py: 0.44x vs
+    0.17x real time under 3 kHz control; Linearize 0.15 s vs 1.2 s).
+
+    Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
+    (Table 6.2 numbering, chosen: see ``parameters.hand``).  Same ports and
+    operating-point keys as :func:`finger_diagram`.
+    """
+    p = params if params is not None else HandRigParams()
+    if not isinstance(p, HandRigParams):
+        raise ValueError(f"hand_diagram: params must be HandRigParams, got {type(p).__name__}")
+
+    def plant_factory(b):
+        return make_hand_plant(p.hand, builder=b, visual=visual, gravity=p.gravity)
+
+    parts = {f: finger_coupling(f, p.hand.finger(f)) for f in FINGERS}
+    return _build("hand", p, plant_factory, parts, backend, wrist, visual)
+
+
+@dataclass
+class ClosedLoop:
+    """A rig with the 3 kHz joint-space controller (and optional wrist compensation)."""
+
+    diagram: object
+    rig: HandRig
+    operating_point: OperatingPoint
+    controller: object
+    estimator: object = None
+
+    def context(self, *, joint_angle_reference=None, wrist_angle=None, external_torque=None):
+        """Context at the rig's operating point with the reference inputs fixed."""
+        ctx = self.diagram.CreateDefaultContext()
+        ctx.SetContinuousState(self.operating_point.state)
+        # start the 3 kHz hold at the holding torques (not at zero)
+        self.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
+            np.asarray(self.operating_point.motor_torque, float))
+        if self.estimator is not None:   # the estimator starts at the operating point (known pose)
+            self.estimator.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
+                np.asarray(self.operating_point.info["joint_angles"], float))
+        n = self.rig.num_joints
+        q_ref = self.operating_point.info["joint_angles"] if joint_angle_reference is None else joint_angle_reference
+        if np.shape(q_ref) != (n,):
+            raise ValueError(f"{self.diagram.get_name()}: joint_angle_reference must have {n} entries "
+                             f"({', '.join(self.rig.extra['joint_names'])}), got shape {np.shape(q_ref)}")
+        self.diagram.GetInputPort("joint_angle_reference").FixValue(ctx, np.asarray(q_ref, float))
+        self.diagram.GetInputPort("external_torque").FixValue(
+            ctx, np.zeros(n) if external_torque is None else np.asarray(external_torque, float))
+        if self.diagram.HasInputPort("wrist_angle"):
+            self.diagram.GetInputPort("wrist_angle").FixValue(
+                ctx, np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, float))
+        return ctx
+
+
+def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op: OperatingPoint | None = None,
+                wrist_compensation: bool = False, estimator: bool = False) -> ClosedLoop:
+    """``rig`` with the joint-space motor PD (:func:`add_joint_space_controller`) at 3 kHz.
+
+    Exported inputs: ``joint_angle_reference`` (n), ``external_torque`` (n),
+    ``wrist_angle`` (2, when the rig has a wrist; it drives both the rig and,
+    with ``wrist_compensation``, the feedforward
+    :class:`~awiwi_drake.hand.wrist.WristCompensation_` that shifts the motor
+    references by ``-h_wrist / r_m``).  Outputs: the rig's, plus
+    ``motor_torque``, and with ``estimator`` ``joint_angle_estimate`` from a
+    :class:`~awiwi_drake.hand.estimation.LinkPositionEstimator_` at the
+    control rate (fed by the motor angles and the spring elongations only).
+    """
+    c = params or JointControllerParams()
+    op = op or rig.operating_point()
+    coupling = rig.extra["coupling"]
+    q_op = op.info["joint_angles"]
+    m, n = rig.num_tendons, rig.num_joints
+    has_wrist = rig.diagram.HasInputPort("wrist_angle")
+    if wrist_compensation and not has_wrist:
+        raise ValueError("closed_loop: wrist_compensation needs a rig built with wrist=True")
+    theta_op = op.state[2 * n: 2 * n + m]
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem(rig.name, rig.diagram)
+    ctrl = add_joint_space_controller(b, coupling=coupling, motor_pulley_radius=rig.params.motor.pulley_radius,
+                                      theta_op=theta_op, u_op=np.asarray(op.motor_torque, float), q_op=q_op,
+                                      kp=c.kp, kd=c.kd, period=c.period,
+                                      motor_angle_offset=wrist_compensation)
+    b.Connect(plant.GetOutputPort("motor_state"), ctrl.motor_state)
+    b.Connect(ctrl.motor_torque, plant.GetInputPort("motor_torque"))
+    b.ExportInput(ctrl.joint_angle_reference, "joint_angle_reference")
+    b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+    if has_wrist:
+        if wrist_compensation:
+            from .wrist import WristCompensation
+            comp = b.AddNamedSystem("wrist_compensation", WristCompensation(rig.params.motor.pulley_radius))
+            select = np.zeros((m, 38))
+            select[np.arange(m), rig.extra["wrist_rows"]] = 1.0
+            sel = b.AddNamedSystem("wrist_compensation_select", MatrixGain(select))
+            b.Connect(comp.get_output_port(0), sel.get_input_port())
+            b.Connect(sel.get_output_port(), ctrl.motor_angle_offset)
+            # one exported wrist_angle input feeding both the rig and the feedforward
+            b.ConnectInput(b.ExportInput(plant.GetInputPort("wrist_angle"), "wrist_angle"), comp.get_input_port(0))
+        else:
+            b.ExportInput(plant.GetInputPort("wrist_angle"), "wrist_angle")
+    for i in range(rig.diagram.num_output_ports()):
+        port = plant.get_output_port(i)
+        b.ExportOutput(port, port.get_name())
+    b.ExportOutput(ctrl.motor_torque, "motor_torque")
+    if estimator:
+        from .estimation import LinkPositionEstimator
+        est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
+            coupling, rig.params.motor.pulley_radius, rig.extra["offsets"], period=c.period))
+        b.Connect(plant.GetOutputPort("motor_angle"), est.GetInputPort("motor_angle"))
+        b.Connect(plant.GetOutputPort("elongation"), est.GetInputPort("elongation"))
+        if has_wrist:
+            b.Connect(plant.GetOutputPort("wrist_tendon_offset"), est.GetInputPort("wrist_offset"))
+        b.ExportOutput(est.get_output_port(0), "joint_angle_estimate")
+    diagram = b.Build()
+    diagram.set_name(f"{rig.name}_joint_control")
+    return ClosedLoop(diagram, rig, op, ctrl, est if estimator else None)
+
+
+def _export_hand():
+    return hand_diagram(backend="symbolic").diagram
+
+
+def _export_hand_python():
+    return hand_diagram(backend="python").diagram
+
+
+def _export_index_loop():
+    return closed_loop(finger_diagram(finger="index", wrist=True), wrist_compensation=True).diagram
+
+
+def _export_ring():
+    return finger_diagram(finger="ring", backend="python").diagram
+
+
+# (file_stem, builder, max_depth) in the format of awiwi_drake.diagrams.DIAGRAM_EXPORTS
+HAND_DIAGRAM_EXPORTS = [
+    ("hand_top", _export_hand, 1),
+    ("hand_deep", _export_hand_python, None),
+    ("hand_finger_index_control_wrist", _export_index_loop, 1),
+    ("hand_finger_ring_deep", _export_ring, None),
+]
+
+
+def export_hand_diagrams(out_dir="diagrams") -> list[str]:
+    """Write the hand/finger diagram graphs (``hand_*.dot``, and .svg/.png with Graphviz)."""
+    from ..diagrams import export_entries
+    return export_entries(HAND_DIAGRAM_EXPORTS, out_dir)

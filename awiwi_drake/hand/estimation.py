@@ -1,0 +1,354 @@
+"""Link-position estimation from tendon lengths (thesis (5.14)-(5.15), (5.24), Algorithm 1).
+
+The fingers have no joint sensors; the tendon length change at the finger
+base ``dh = h(q) - h(0)`` is measured (motor angle and spring sensor).
+
+* Constant coupling: least squares (5.14) is solved by the pseudo-inverse
+  (5.15), ``q = (P S)^+ dh`` on the independent DoF (``S`` maps them to the
+  plant joints; identity except for the ring/fifth PIP/DIP coupling).
+* Thumb base: ``P(q)`` depends on ``q``; Algorithm 1 is a fixed-step
+  gradient search with step halving on the cost ``C(q) = |dh_meas - dh(q)|^2``
+  over the base angles (q10, q11).  The step moves along the *normalised*
+  gradient (a fixed step in radians), is accepted when the cost decreases
+  and halved otherwise.  The PIP/DIP of the thumb use the pseudo-inverse.
+
+Deviations from the printed method (docs/REPRODUCTIONS.md, hand section):
+(5.15) prints ``P+ = P (P P^T)^-1`` with ``P in R^{n x m}``, which is not
+dimensionally consistent; for our tall ``P`` (m x n, full column rank) the
+pseudo-inverse is ``(P^T P)^-1 P^T`` (``numpy.linalg.pinv``).  (5.24) sums
+``i = 1..7`` while the thumb has eight tendons ``h10..h17``; the base search
+uses the four base tendons ``h10..h13`` (the only ones that depend on
+(q10, q11)).  Algorithm 1 parametrises the search over ``ker P``
+(``B <= ker P``, variable ``alpha``) and steps by the raw gradient
+``alpha - grad * step``; we search directly on (q10, q11) (the base block is
+4 x 2 with full column rank, so its kernel is trivial) and step along the
+normalised gradient (a step in radians, independent of the tendon-length
+scale).  Trial points are projected onto ``[-limit, limit]^2``; the result
+reports when that projection acted (``GradientSearchResult.projected``,
+``at_limit``), nothing is clipped silently.
+
+Error bound (used by the tests and docs/REPRODUCTIONS.md): at a converged
+least-squares solution a measurement error ``e`` moves the estimate by
+``dq ~ P^+ e`` to first order, so ``|dq| <= |e| / sigma_min(P)``; with
+``|e_i| <= a`` on each of the four base tendons, ``|e| <= 2 a``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
+
+__all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
+           "estimate_thumb", "EstimationStudy", "thumb_estimation_study", "noise_error_bound",
+           "LinkPositionEstimator_", "LinkPositionEstimator"]
+
+
+def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
+    """(5.15): plant joint angles from measured length changes ``dh = h(q) - h(0)``."""
+    dh = np.asarray(dh, dtype=float)
+    if dh.shape != (coupling.num_tendons,):
+        raise ValueError(f"dh must have shape ({coupling.num_tendons},), got {dh.shape}")
+    q_dof = np.linalg.pinv(reduced_coupling_matrix(coupling)) @ dh
+    return coupling.dof_selection @ q_dof
+
+
+@dataclass
+class GradientSearchResult:
+    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps.
+
+    ``projected`` counts the trial points that the projection onto
+    ``[-limit, limit]^2`` moved; ``at_limit`` is True when the returned
+    estimate lies on that bound (the true pose may lie beyond it: the
+    estimate is then the projection, not the least-squares solution).
+    """
+
+    q: np.ndarray
+    cost: float
+    step: float
+    accepted: int
+    iterations: int
+    projected: int = 0
+    at_limit: bool = False
+    limit: float = np.pi / 2
+
+
+def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0.0), *,
+                               iterations: int = 30, step0: float = 0.1,
+                               min_step: float = 1e-7,
+                               limit: float = np.pi / 2) -> GradientSearchResult:
+    """Algorithm 1: fixed-step gradient search with step halving on (q10, q11).
+
+    Parameters
+    ----------
+    coupling : ThumbCoupling
+    dh_base : array (4,)
+        Measured base tendon length changes ``h_i(q) - h_i(0)`` [m], i = 0..3.
+    q_start : (q10, q11)
+        Start (``(0, 0)``: cold start as in Fig 5.16-5.17; the previous
+        estimate: warm start, as the real-time code does).
+    iterations : int
+        Number of iterations (15, 30, 50 in Fig 5.17).
+    step0 : float
+        Initial step [rad] along the normalised gradient (chosen: 0.1 rad, so
+        that 15 iterations cannot reach the grid corners from the origin, as
+        the thesis observes).
+    min_step : float
+        The search stops halving below this step [rad].
+    limit : float
+        Trial points are projected onto ``[-limit, limit]^2`` (the
+        "projected gradient" of section 5.6).  Default pi/2: beyond it the
+        metacarpal would cross the plane of the palm points A0..D0, where each
+        configuration has a mirror image with the same four tendon lengths
+        (the palm points are coplanar), so the projection keeps the search on
+        the physical branch.
+    """
+    dh_base = np.asarray(dh_base, dtype=float)
+    if dh_base.shape != (4,):
+        raise ValueError(f"dh_base must have shape (4,), got {dh_base.shape}")
+    if iterations < 1:
+        raise ValueError(f"iterations must be >= 1, got {iterations}")
+    h0 = coupling.h(np.zeros(4))[:4]
+    q = np.array([q_start[0], q_start[1], 0.0, 0.0], dtype=float)
+
+    def cost_grad(qq):
+        r = coupling.h(qq)[:4] - h0 - dh_base
+        P = coupling.P(qq)[:4, :2]
+        return float(r @ r), 2.0 * P.T @ r
+
+    if not limit > 0:
+        raise ValueError(f"limit must be > 0 [rad], got {limit}")
+    c_best, grad = cost_grad(q)
+    step, accepted, projected = float(step0), 0, 0
+    for _ in range(iterations):
+        g_norm = np.linalg.norm(grad)
+        if g_norm == 0.0 or step < min_step:
+            break
+        trial = q.copy()
+        free = trial[:2] - step * grad / g_norm
+        trial[:2] = np.clip(free, -limit, limit)
+        projected += int(np.any(trial[:2] != free))
+        c, g = cost_grad(trial)
+        if c < c_best:
+            q, c_best, grad, accepted = trial, c, g, accepted + 1
+        else:
+            step *= 0.5
+    return GradientSearchResult(q=q[:2].copy(), cost=c_best, step=step, accepted=accepted,
+                                iterations=iterations, projected=projected,
+                                at_limit=bool(np.any(np.abs(q[:2]) >= limit)), limit=float(limit))
+
+
+def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_search: bool = False, **kw):
+    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP.
+
+    With ``return_search`` returns ``(q, GradientSearchResult)`` (e.g. to see
+    whether the base estimate sits on the projection bound).
+    """
+    dh = np.asarray(dh, dtype=float)
+    if dh.shape != (8,):
+        raise ValueError(f"dh must have shape (8,), got {dh.shape}")
+    search = thumb_base_gradient_search(coupling, dh[:4], q_start, **kw)
+    distal = np.linalg.pinv(coupling.P(np.zeros(4))[4:, 2:]) @ dh[4:]
+    q = np.concatenate([search.q, distal])
+    return (q, search) if return_search else q
+
+
+def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> float:
+    """First-order bound on the base estimate error [rad] for per-tendon noise ``|e_i| <= amplitude``.
+
+    ``|dq| <= |P^+| |e| <= 2 amplitude / sigma_min(P_base(q))``.
+    """
+    P = coupling.P(np.array([q_base[0], q_base[1], 0.0, 0.0]))[:4, :2]
+    return 2.0 * amplitude / np.linalg.svd(P, compute_uv=False)[-1]
+
+
+@dataclass
+class EstimationStudy:
+    """Fig 5.16-5.17 study: grid truth, estimates and errors per (iterations, noise, start)."""
+
+    grid: np.ndarray                # (N, 2) true (q10, q11)
+    estimates: dict                 # (iterations, noise [m], start) -> (N, 2)
+    errors: dict                    # same keys -> (N,) |q_hat - q| [rad]
+    bounds: dict                    # same keys -> (N,) first-order noise bound + final step
+    at_limit: dict = None           # same keys -> (N,) bool: the estimate sits on the +-pi/2 projection bound
+
+    def summary_rows(self) -> list[dict]:
+        """One row per case: iterations, noise [mm], start, mean/median/max error [rad]."""
+        rows = []
+        for key, e in self.errors.items():
+            it, a, start = key
+            rows.append(dict(iterations=it, noise_mm=1e3 * a, start=start, mean=float(np.mean(e)),
+                             median=float(np.median(e)), max=float(np.max(e)),
+                             frac_within_0p1=float(np.mean(e < 0.1)),
+                             at_limit=int(np.sum(self.at_limit[key])) if self.at_limit else 0))
+        return rows
+
+
+def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int = 13,
+                           limit: float = 1.5, iterations=(15, 30, 50), noise=(0.0, 5e-4, 1e-3),
+                           starts=("cold", "warm"), step0: float = 0.1, seed: int = 0) -> EstimationStudy:
+    """Reproduce Fig 5.16-5.17 on an ``n_grid`` x ``n_grid`` grid over ``[-limit, limit]^2``.
+
+    Noise: uniform in ``[-a, a]`` on each base tendon length ("amplitude").
+    Cold start: every estimate starts at (0, 0) (the thesis's evaluation).
+    Warm start: the grid is visited in a serpentine order and each estimate
+    starts from the previous estimate (the thesis's real-time use); the first
+    one starts at the true first grid point (an estimator initialised at a
+    known pose, e.g. after homing).
+    """
+    coupling = coupling or ThumbCoupling()
+    if n_grid < 2:
+        raise ValueError(f"n_grid must be >= 2, got {n_grid}")
+    axis = np.linspace(-limit, limit, n_grid)
+    grid = np.array([(a, b if i % 2 == 0 else -b) for i, a in enumerate(axis) for b in axis])
+    h0 = coupling.h(np.zeros(4))[:4]
+    dh_true = np.array([coupling.h(np.array([a, b, 0, 0]))[:4] - h0 for a, b in grid])
+    rng = np.random.default_rng(seed)
+    noise_unit = rng.uniform(-1.0, 1.0, size=dh_true.shape)
+    sig_bound = np.array([noise_error_bound(coupling, g, 1.0) for g in grid])
+    est, err, bnd, lim = {}, {}, {}, {}
+    for a in noise:
+        meas = dh_true + a * noise_unit
+        for it in iterations:
+            for start in starts:
+                if start not in ("cold", "warm"):
+                    raise ValueError(f"starts: expected 'cold' or 'warm', got {start!r}")
+                q_prev = grid[0].copy()
+                out = np.zeros_like(grid)
+                steps = np.zeros(len(grid))
+                hit = np.zeros(len(grid), dtype=bool)
+                for k, m in enumerate(meas):
+                    q0 = (0.0, 0.0) if start == "cold" else q_prev
+                    r = thumb_base_gradient_search(coupling, m, q0, iterations=it, step0=step0)
+                    out[k], steps[k], q_prev, hit[k] = r.q, r.step, r.q, r.at_limit
+                est[(it, a, start)] = out
+                lim[(it, a, start)] = hit
+                err[(it, a, start)] = np.linalg.norm(out - grid, axis=1)
+                bnd[(it, a, start)] = a * sig_bound + 2.0 * steps
+    return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd, at_limit=lim)
+
+
+# ---------------------------------------------------------------------------------------------
+# The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
+
+
+
+def _estimator_parts(coupling):
+    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
+    js = coupling.joint_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_joints)}
+    ts = coupling.tendon_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_tendons)}
+    return parts, js, ts
+
+
+@TemplateSystem.define("LinkPositionEstimator_", T_list=[float, AutoDiffXd])
+def LinkPositionEstimator_(T):
+    """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
+
+    Inputs ``motor_angle`` (m) [rad] and ``elongation`` (m) [m] (the spring
+    sensors); the length change at the finger base is
+    ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (+ wrist offsets, which
+    ``wrist_offset`` (m) removes when connected; leave it unconnected or 0
+    otherwise).  Every ``period`` the discrete state (the estimate, n plant
+    joints) is updated: constant-P fingers by the pseudo-inverse (5.15), the
+    thumb base by Algorithm 1 warm-started from the previous estimate (the
+    thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Output
+    ``joint_angle_estimate`` (n) = the state.
+
+    Scalar types: float and AutoDiffXd only.  For AutoDiffXd the search runs
+    on values and one Gauss-Newton step ``q + P(q)^+ (dh - dh(q))`` in the
+    scalar type carries the derivatives (at convergence ``dq/d dh = P^+``,
+    implicit-function theorem).  Not symbolic: Algorithm 1 branches on cost
+    values (accept / halve), which a symbolic Expression cannot evaluate, so
+    ``ToSymbolic()`` of a diagram holding this estimator fails (Drake names
+    the system).
+
+    Projection bound: when the thumb base estimate sits on the search's
+    ``+-pi/2`` bound (the pose may lie beyond it) the update still stores it,
+    counts it in ``limit_hits`` (a diagnostic attribute of the system,
+    summed over all contexts) and warns once per system (RuntimeWarning).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, coupling, motor_pulley_radius: float, offsets, period: float = 1.0 / 3000,
+                       iterations: int = 15, step0: float = 0.1, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            m, n = coupling.num_tendons, coupling.num_joints
+            offsets = np.asarray(offsets, dtype=float)
+            if offsets.shape != (m,):
+                raise ValueError(f"LinkPositionEstimator: offsets must have {m} entries, got {offsets.shape}")
+            if not period > 0:
+                raise ValueError(f"LinkPositionEstimator: period = {period} must be > 0 [s]")
+            self.coupling, self.r_m, self.offsets = coupling, float(motor_pulley_radius), offsets
+            self.period, self.iterations, self.step0 = float(period), int(iterations), float(step0)
+            self.limit_hits = 0
+            self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
+            self._theta = self.DeclareVectorInputPort("motor_angle", m)
+            self._x = self.DeclareVectorInputPort("elongation", m)
+            self._w = self.DeclareVectorInputPort("wrist_offset", m)
+            self._state = self.DeclareDiscreteState(n)
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
+            self.DeclareStateOutputPort("joint_angle_estimate", self._state)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.coupling, other.r_m, other.offsets, other.period, other.iterations,
+                            other.step0, converter=converter)
+
+        def _update(self, context, discrete_state):
+            theta = self._theta.Eval(context)
+            dh = self._x.Eval(context) - self.r_m * theta - self.offsets
+            if self._w.HasValue(context):
+                dh = dh - self._w.Eval(context)
+            q_prev = context.get_discrete_state(0).CopyToVector()
+            q_val = np.array([_value(v) for v in q_prev])
+            dh_val = np.array([_value(v) for v in dh])
+            parts, js, ts = _estimator_parts(self.coupling)
+            q_new = np.zeros(len(q_val))
+            for name, c in parts.items():
+                if c.is_constant:
+                    q_new[js[name]] = estimate_linear(c, dh_val[ts[name]])
+                else:  # thumb: Algorithm 1 warm-started at the previous estimate
+                    q_new[js[name]], search = estimate_thumb(c, dh_val[ts[name]], q_val[js[name]][:2],
+                                                             iterations=self.iterations, step0=self.step0,
+                                                             return_search=True)
+                    if search.at_limit:
+                        self.limit_hits += 1
+                        if self.limit_hits == 1:
+                            warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
+                                          f"{np.round(search.q, 4)} rad sits on the search bound "
+                                          f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
+                                          "further hits are counted in limit_hits", RuntimeWarning,
+                                          stacklevel=2)
+            if T is not float:  # one Gauss-Newton step in the scalar type carries the derivatives
+                r = dh - (self.coupling.h(q_new) - self._h0)
+                S = _selection_of(self.coupling)
+                PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
+                q_new = q_new + S @ (np.linalg.pinv(PS) @ r)
+            discrete_state.set_value(0, q_new)
+
+    return Impl
+
+
+LinkPositionEstimator = LinkPositionEstimator_[None]
+
+
+def _value(v) -> float:
+    return float(v) if isinstance(v, (float, int, np.floating)) else float(v.value()) \
+        if hasattr(v, "value") else float(v.Evaluate())
+
+
+def _selection_of(coupling) -> np.ndarray:
+    parts, js, _ = _estimator_parts(coupling)
+    n = coupling.num_joints
+    blocks = [(js[k], c.dof_selection) for k, c in parts.items()]
+    S = np.zeros((n, sum(b.shape[1] for _, b in blocks)))
+    col = 0
+    for sl, b in blocks:
+        S[sl, col:col + b.shape[1]] = b
+        col += b.shape[1]
+    return S

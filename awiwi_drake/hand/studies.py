@@ -1,0 +1,270 @@
+"""Numerical studies of chapter 5 and 6 on the finger/hand models (results are data).
+
+* :func:`coriolis_study` - Fig 5.7: release a 0.1 rad deflection of the second
+  joint (MCP flexion, abduction at 0) with the motors fixed, with and without
+  the Coriolis/centrifugal terms.
+* :func:`poles_vs_pretension` - poles of a finger/hand rig (``Linearize``) versus pretension.
+* :func:`coupling_hold_study` - the ring/fifth PIP/DIP coupling element holds
+  ``q_DIP = (r_x3/r_x2) q_PIP`` during a controlled PIP motion.
+* :func:`wrist_compensation_study` - finger joint drift during a wrist
+  abduction sweep, with and without the feedforward compensation (ch. 6).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import Adder, ConstantVectorSource, Demultiplexer, MatrixGain, Sine
+
+from ..analysis.linear import linearize
+from ..analysis.simulate import rig_monitors, simulate
+from ..components.routing import TendonRouting_
+from ..components.spring import SpringBank_, tendon_spring
+from ..parameters.hand import FingerRigParams, JointControllerParams
+from .coupling import finger_coupling
+from .diagrams import HandRig, closed_loop, finger_diagram
+from .plant import coupling_force_gain, make_finger_plant
+from .systems import CoriolisCancellation
+
+__all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
+           "CouplingHoldStudy", "coupling_hold_study", "WristCompensationStudy", "wrist_compensation_study"]
+
+
+def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = None, *,
+                        coriolis: bool = True):
+    """Finger plant + routing + springs with the motors held at their pretension angles.
+
+    With ``coriolis=False`` a :class:`CoriolisCancellation_` adds ``C(q, v) v``
+    to the applied generalised force, removing the Coriolis/centrifugal terms
+    from ``M vdot + C v = tau`` (the simplified model of Fig 5.7).
+    Returns ``(diagram, plant)``; the diagram exports the input
+    ``external_torque`` (n) [N m] (fix it before simulating) and the
+    outputs ``state`` (plant [q; v]) and ``tendon_force``.
+    """
+    p = params if params is not None else FingerRigParams.for_finger(finger)
+    b = DiagramBuilder()
+    plant, model = make_finger_plant(finger, p.finger, builder=b, gravity=p.gravity)
+    n = plant.num_positions()
+    coupling = finger_coupling(finger, p.finger)
+    m = coupling.num_tendons
+    spring = tendon_spring(p.spring)
+    x_pre = float(np.ravel(spring.inverse_force(np.array([p.pretension])))[0])
+    routing = b.AddNamedSystem("routing", TendonRouting_[float](coupling, p.motor.pulley_radius, np.full(m, x_pre)))
+    springs = b.AddNamedSystem("springs", SpringBank_[float](spring, m))
+    motors = b.AddNamedSystem("motors_fixed", ConstantVectorSource(np.zeros(m)))
+    split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
+    b.Connect(plant.get_state_output_port(), split.get_input_port())
+    b.Connect(motors.get_output_port(), routing.GetInputPort("motor_angle"))
+    b.Connect(split.get_output_port(0), routing.GetInputPort("joint_angle"))
+    b.Connect(routing.GetOutputPort("elongation"), springs.GetInputPort("elongation"))
+    b.Connect(springs.GetOutputPort("tendon_force"), routing.GetInputPort("tendon_force"))
+    sources = [routing.GetOutputPort("generalized_force")]
+    G = coupling_force_gain(plant, model)
+    if G is not None:
+        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
+        b.Connect(plant.get_state_output_port(), ce.get_input_port())
+        sources.append(ce.get_output_port())
+    if not coriolis:
+        standalone, _ = make_finger_plant(finger, p.finger, gravity=p.gravity)
+        cc = b.AddNamedSystem("coriolis_cancellation", CoriolisCancellation(standalone))
+        b.Connect(plant.get_state_output_port(), cc.get_input_port(0))
+        sources.append(cc.get_output_port(0))
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
+    for i, s in enumerate(sources):
+        b.Connect(s, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
+    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    b.ExportOutput(plant.get_state_output_port(), "state")
+    b.ExportOutput(springs.GetOutputPort("tendon_force"), "tendon_force")
+    diagram = b.Build()
+    diagram.set_name(f"{finger}_fixed_motors" + ("" if coriolis else "_no_coriolis"))
+    return diagram, plant
+
+
+@dataclass
+class CoriolisStudy:
+    """Fig 5.7: joint trajectories with/without Coriolis terms and their difference.
+
+    ``difference`` = ``q_full - q_simplified`` (T x n) [rad] on the common grid ``t``.
+    """
+
+    t: np.ndarray
+    q_full: np.ndarray
+    q_simplified: np.ndarray
+    joint_names: list
+
+    @property
+    def difference(self) -> np.ndarray:
+        return self.q_full - self.q_simplified
+
+    @property
+    def max_abs_difference(self) -> np.ndarray:
+        """Per joint [rad] (thesis: below 1e-3 rad over 0.2 s)."""
+        return np.max(np.abs(self.difference), axis=0)
+
+
+def mcp_flexion_joint(finger: str) -> int:
+    """Plant joint index of the finger's first flexion joint (the "second joint" of Fig 5.7).
+
+    index/middle/ring: 1 (``q_x1``, after the abduction ``q_x0``); fifth: 2
+    (after the HMC ``q_5h`` and ``q_50``); thumb: 0 (base flexion ``q10``).
+    """
+    return {"thumb": 0, "fifth": 2}.get(finger, 1)
+
+
+def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int | None = None,
+                   t_final: float = 0.2, params: FingerRigParams | None = None,
+                   accuracy: float = 1e-7, num_samples: int = 401) -> CoriolisStudy:
+    """Release a ``deflection`` [rad] of ``joint`` with the motors fixed (Fig 5.7).
+
+    Default ``joint``: the MCP flexion (:func:`mcp_flexion_joint`, 1 for the
+    index), as in the thesis: "initially deflected 0.1 rad in the second joint
+    (flexion)", the first joint (abduction) at 0.
+    Integrated with Drake's error-controlled ``runge_kutta5`` at ``accuracy``
+    (the result agrees with ``runge_kutta3`` at 1e-6 to 1e-8 rad).
+    """
+    p = params if params is not None else FingerRigParams.for_finger(finger)
+    out = {}
+    names = None
+    for flag in (True, False):
+        diagram, plant = fixed_motor_diagram(finger, p, coriolis=flag)
+        n = plant.num_positions()
+        names = [plant.get_joint(j).name() for j in plant.GetJointIndices()]
+        j = mcp_flexion_joint(finger) if joint is None else joint
+        if not 0 <= j < n:
+            raise ValueError(f"coriolis_study: joint index {j} out of range 0..{n - 1} ({', '.join(names)})")
+        ctx = diagram.CreateDefaultContext()
+        diagram.GetInputPort("external_torque").FixValue(ctx, np.zeros(n))
+        x0 = np.zeros(2 * n)
+        x0[j] = deflection
+        if p.finger.pip_dip_coupled if hasattr(p.finger, "pip_dip_coupled") else False:
+            if j == n - 2:  # coupled: deflect the DIP consistently (no coupling-element transient)
+                x0[n - 1] = deflection * p.finger.dip_pip_ratio
+        ctx.SetContinuousState(x0)
+        res = simulate(diagram, ctx, t_final, log=("state",), integrator="runge_kutta5", max_step=1e-3,
+                       accuracy=accuracy)
+        out[flag] = res.resample(np.linspace(0.0, t_final, num_samples))
+    t = out[True].t
+    return CoriolisStudy(t, out[True]["state"][:, : len(names)], out[False]["state"][:, : len(names)], names)
+
+
+@dataclass
+class PoleSweep:
+    """Poles (rows) of a rig's linearisation at each pretension [N]."""
+
+    pretension: np.ndarray
+    poles: np.ndarray        # (len(pretension), num_states) complex, sorted as in LinearizationResult
+
+    def max_frequency(self) -> np.ndarray:
+        """Largest |imag| [rad/s] per pretension (the stiffest link mode)."""
+        return np.max(np.abs(self.poles.imag), axis=1)
+
+
+def poles_vs_pretension(rig: HandRig, pretensions) -> PoleSweep:
+    """Linearise ``rig`` (Drake ``Linearize``) at ``q = 0`` for each pretension [N]."""
+    pre = np.asarray(pretensions, dtype=float)
+    poles = np.array([linearize(rig, rig.operating_point(pretension=f)).poles for f in pre])
+    return PoleSweep(pre, poles)
+
+
+@dataclass
+class CouplingHoldStudy:
+    """PIP step of a coupled finger under joint control: coupling error ``q_DIP - c q_PIP``."""
+
+    t: np.ndarray
+    q_pip: np.ndarray
+    q_dip: np.ndarray
+    ratio: float
+
+    @property
+    def coupling_error(self) -> np.ndarray:
+        return self.q_dip - self.ratio * self.q_pip
+
+    @property
+    def max_coupling_error(self) -> float:
+        return float(np.max(np.abs(self.coupling_error)))
+
+
+def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final: float = 0.3,
+                        backend: str = "symbolic", controller: JointControllerParams | None = None
+                        ) -> CouplingHoldStudy:
+    """Step the PIP reference of a coupled finger by ``pip_step`` [rad] and log PIP/DIP."""
+    rig = finger_diagram(finger=finger, backend=backend)
+    fp = rig.params.finger
+    if not getattr(fp, "pip_dip_coupled", False):
+        raise ValueError(f"coupling_hold_study: finger {finger!r} has no PIP/DIP coupling")
+    cl = closed_loop(rig, params=controller)
+    n = rig.num_joints
+    q_ref = np.zeros(n)
+    q_ref[n - 2] = pip_step
+    q_ref[n - 1] = pip_step * fp.dip_pip_ratio
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), t_final, log=("joint_angle",),
+                   max_step=cl.controller.hold.period(), accuracy=1e-4)
+    q = res["joint_angle"]
+    return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
+
+
+@dataclass
+class WristCompensationStudy:
+    """Finger joint drift during a wrist abduction sweep (rows: time; columns: joints)."""
+
+    t: np.ndarray
+    wrist_abduction: np.ndarray
+    drift_uncompensated: np.ndarray
+    drift_compensated: np.ndarray
+    joint_names: list
+    min_tendon_force: dict
+    events: dict            # "uncompensated"/"compensated" -> list of analysis.simulate.Event (slack, saturation)
+
+    def max_drift(self) -> dict:
+        """Largest |q - q_ref| [rad] over time and joints, per case."""
+        return {"uncompensated": float(np.max(np.abs(self.drift_uncompensated))),
+                "compensated": float(np.max(np.abs(self.drift_compensated)))}
+
+
+def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic", amplitude: float = np.radians(5.0), frequency: float = 2.0,
+                             t_final: float = 0.5, controller: JointControllerParams | None = None,
+                             accuracy: float = 1e-3) -> WristCompensationStudy:
+    """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
+
+    The joint references stay at the operating point; the drift is the joint
+    motion the wrist causes through the tendon path change (6.9).  Run once
+    without and once with the feedforward ``-h_wrist / r_m``.  ``target`` is
+    a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run).
+    """
+    from .diagrams import hand_diagram
+    drift, fmin, events = {}, {}, {}
+    t_grid = np.linspace(0.0, t_final, 201)
+    for comp in (False, True):
+        rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
+               else finger_diagram(finger=target, backend=backend, wrist=True))
+        cl = closed_loop(rig, params=controller, wrist_compensation=comp)
+        b = DiagramBuilder()
+        sys = b.AddSystem(cl.diagram)
+        sine = b.AddNamedSystem("wrist_sweep", Sine(np.array([amplitude, 0.0]),
+                                                    np.array([2 * np.pi * frequency, 0.0]), np.zeros(2)))
+        b.Connect(sine.get_output_port(0), sys.GetInputPort("wrist_angle"))
+        b.ExportInput(sys.GetInputPort("joint_angle_reference"), "joint_angle_reference")
+        b.ExportInput(sys.GetInputPort("external_torque"), "external_torque")
+        b.ExportOutput(sys.GetOutputPort("joint_angle"), "joint_angle")
+        b.ExportOutput(sys.GetOutputPort("tendon_force"), "tendon_force")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        ctx.SetContinuousState(cl.operating_point.state)
+        cl.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
+            np.asarray(cl.operating_point.motor_torque, float))
+        q_op = cl.operating_point.info["joint_angles"]
+        d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
+        d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
+        res = simulate(d, ctx, t_final, log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
+                       max_step=cl.controller.hold.period(), accuracy=accuracy)
+        events[comp] = list(res.events)
+        res = res.resample(t_grid)
+        drift[comp] = res["joint_angle"] - q_op
+        fmin[comp] = float(np.min(res["tendon_force"]))
+    return WristCompensationStudy(t_grid, amplitude * np.sin(2 * np.pi * frequency * t_grid), drift[False],
+                                  drift[True], list(rig.extra["joint_names"]),
+                                  {"uncompensated": fmin[False], "compensated": fmin[True]},
+                                  {"uncompensated": events[False], "compensated": events[True]})

@@ -1,0 +1,789 @@
+"""Wrist of the Awiwi hand (thesis ch. 6): kinematics, tendon lengths, systems.
+
+The wrist is a *double inverted parallelogram* (crossed four-bar linkages).
+The thesis (6.1)-(6.9) gives the method but not the link lengths; this module
+reconstructs them from Table 6.1 (a = length, b = width, c = thickness) with
+the following box construction, in the forearm frame 0 of Table 6.2 (x along
+the forearm towards the hand, y across the width, z across the thickness,
+origin at a corner of the a x b x c wrist box):
+
+* Forearm points: ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the
+  abduction axis, along z) and ``A0 = (0, b, c/2)`` on the other side.
+* Palm points in the neutral wrist: ``B = (a, b, c)``, ``C = (a, b, 0)``,
+  ``A = (a, 0, c/2)``.  So the links B0B and C0C are crossed space diagonals
+  of the box: R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm edge BC equals
+  the forearm edge B0C0: D_BC = c (side view: an inverted parallelogram, the
+  flexion linkage); A is equidistant from B and C (|AB| = |AC|, as (6.5)
+  requires) at R_AA0 = |AM| = b from the midpoint M of BC; the link A0A,
+  |AA0| = sqrt(a^2 + b^2), crosses the projection of B0..M in the top view:
+  ground M0A0 = coupler MA = b (top view: the second inverted parallelogram,
+  the abduction linkage).
+* Thus both crossing points lie on the wrist centre (a/2, b/2, c/2): the
+  two tendon layers of Table 6.2 cross there in the side view (forearm
+  z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
+  about the median axis y = b/2, as the thesis describes for Fig 6.10.
+
+Why this construction: it is the reading of Fig 6.2-6.7 in which (i) all
+four unprinted lengths follow from a, b, c alone, (ii) both views are
+inverted (crossed) parallelograms in the neutral wrist, (iii) A0 and B0C0 are
+apart in the top view (Fig 6.3) and the BC plane turns about B0C0 (Fig 6.4),
+(iv) |AB| = |AC| (6.5), and (v) the Table 6.2 points are consistent with it:
+with the palm frame centred on the palm face, all 38 neutral tendons have
+nearly the same length (46.6 +- 0.1 mm) and both layers pass through the
+flexion crossing point.  Two alternatives were tried and rejected: the BC
+plane along the wrist side (y = 0, A0A parallel to it) makes abduction a pure
+*translation* of the palm (all tendons move alike, contrary to Fig 6.10), and
+B0C0 on the median plane needs A0 on that axis (contrary to Fig 6.3).
+
+Consequence, reported in docs/REPRODUCTIONS.md: the BC plane is diagonal in
+the top view, so the flexion turns the palm about an axis tilted by
+atan(b/a) = 40 deg from y.  Flexion therefore moves the tendons less than
+abduction (peak ratio 0.49 for the thesis motion; 0.13 vs 0.29 mm per degree
+of palm rotation) but not negligibly, whereas the thesis calls the flexion
+coupling minimal; its figure prints no per-tendon numbers to settle this.
+
+Angles
+------
+``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis
+B0C0 (Fig 6.4).  ``q73`` (flexion) is the crank angle of that linkage.  The
+thesis writes t_B = pi/2 - q73 with q73 the potentiometer reading; with
+B0 at the origin and C0 at (0, D_BC) in the plane, t_B = pi/2 is the flat,
+singular linkage, so the neutral wrist has t_B0 = atan2(c, sqrt(a^2 + b^2))
+(28.9 deg).  We therefore measure ``q73`` from the neutral wrist:
+``t_B = t_B0 - q73`` (thesis q73 = ours + 61.1 deg).  Both angles are crank
+angles: near neutral the palm turns about twice as far (crossed four-bars).
+At q71 = 0 the linkage assembles for q73 in about (-56 deg, +105 deg) (at
+q73 = 30 deg, q71 in about (-78 deg, +178 deg)); the thesis's motion
+(30 deg, 20 deg) is well inside.  Outside the reachable set the functions
+raise ``ValueError`` naming ``wrist_angle``.
+
+Method (thesis numbering)
+-------------------------
+(6.1) B on its circle; (6.4) C in closed form (the non-trivial branch of
+(6.2)-(6.3); the branch t_C = t_B is the parallelogram and is discarded);
+(6.5)-(6.8) A on the circle of radius R_AA0 about M in the plane orthogonal
+to BC, solved in closed form for t_A (a single ``atan2``; the branch is the
+one through the neutral wrist); palm frame ABC: origin (A + M)/2 (centre of
+the palm face), y from A to M, z from C to B, x = y x z (equal to frame 0,
+translated, in the neutral wrist); (6.9) tendon lengths.
+
+Everything is closed form (no iteration), written once for ``float``,
+``AutoDiffXd`` and ``pydrake.symbolic.Expression``, so derivatives are exact.
+
+Sign convention (docs/ARCHITECTURE.md): the spring elongation is
+``x = r_m theta + h(q) - h(0) + x0``; the wrist adds ``h_wrist(q) -
+h_wrist(0)`` (:func:`wrist_tendon_offsets`) to the tendon path, and the
+motor angle change that cancels it is ``-offset / r_m``
+(:func:`wrist_compensation`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import is_float
+from awiwi_drake.parameters.wrist import WristParams
+
+__all__ = [
+    "WristPose",
+    "wrist_kinematics",
+    "wrist_constraint_errors",
+    "wrist_tendon_lengths",
+    "wrist_tendon_offsets",
+    "wrist_jacobian",
+    "wrist_lengths_and_jacobian",
+    "WristCoupling",
+    "wrist_compensation",
+    "WristMotionResult",
+    "wrist_motion_study",
+    "WristTendonOffsets_",
+    "WristTendonOffsets",
+    "WristCompensation_",
+    "WristCompensation",
+    "TENDON_FINGERS",
+]
+
+#: Finger served by each tendon row of Table 6.2 (thumb 1-8, index 9-16,
+#: middle 17-24, ring 25-30, fifth 31-38; see the hand module for the routing).
+TENDON_FINGERS = ("thumb",) * 8 + ("index",) * 8 + ("middle",) * 8 + ("ring",) * 6 + ("fifth",) * 8
+
+
+# ---------------------------------------------------------------------------
+# small scalar-generic vector helpers (3-vectors as numpy arrays, float or object)
+def _vec(x, y, z):
+    return np.array([x, y, z], dtype=object if not (is_float(x) and is_float(y) and is_float(z)) else float)
+
+
+def _cross(u, v):
+    return _vec(u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0])
+
+
+def _norm(u):
+    return np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+
+
+class _Tangent:
+    """Forward-mode pair (value, d value / d [q71, q73]) over any scalar type T.
+
+    Used to differentiate the closed-form kinematics once, exactly, for
+    float, AutoDiffXd and Expression alike (AutoDiffXd cannot nest), so the
+    coupling matrix P(q) is itself generic in the scalar type.  numpy ufuncs
+    on object arrays call the methods ``sin``, ``cos``, ``sqrt``, ``arctan2``.
+    """
+
+    __slots__ = ("v", "d")
+
+    def __init__(self, v, d):
+        self.v = v
+        self.d = d
+
+    @staticmethod
+    def _lift(o):
+        return o if isinstance(o, _Tangent) else _Tangent(o, 0.0)
+
+    def __add__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = _Tangent._lift(o)
+        return _Tangent(self.v + o.v, self.d + o.d)
+
+    __radd__ = __add__
+
+    def __sub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = _Tangent._lift(o)
+        return _Tangent(self.v - o.v, self.d - o.d)
+
+    def __rsub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return _Tangent._lift(o) - self
+
+    def __neg__(self):
+        return _Tangent(-self.v, -self.d)
+
+    def __mul__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, _Tangent):
+            return _Tangent(self.v * o, self.d * o)
+        return _Tangent(self.v * o.v, self.d * o.v + self.v * o.d)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, _Tangent):
+            return _Tangent(self.v / o, self.d / o)
+        q = self.v / o.v
+        return _Tangent(q, (self.d - q * o.d) / o.v)
+
+    def __rtruediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return _Tangent._lift(o) / self
+
+    def sin(self):
+        return _Tangent(np.sin(self.v), np.cos(self.v) * self.d)
+
+    def cos(self):
+        return _Tangent(np.cos(self.v), -np.sin(self.v) * self.d)
+
+    def sqrt(self):
+        r = np.sqrt(self.v)
+        return _Tangent(r, self.d / (2.0 * r))
+
+    def arctan2(self, x):
+        x = _Tangent._lift(x)
+        return _Tangent(np.arctan2(self.v, x.v), (x.v * self.d - self.v * x.d) / (x.v * x.v + self.v * self.v))
+
+
+def _value(x) -> float:
+    """Float value of a float or AutoDiffXd scalar (None for symbolic)."""
+    if isinstance(x, _Tangent):
+        return _value(x.v)
+    if isinstance(x, AutoDiffXd):
+        return x.value()
+    if is_float(x):
+        return float(x)
+    return None
+
+
+def _is_symbolic(x) -> bool:
+    if isinstance(x, _Tangent):
+        return _is_symbolic(x.v)
+    return not is_float(x) and not isinstance(x, AutoDiffXd)
+
+
+def _symbolic_errstate(*args):
+    """numpy reports spurious 'invalid value' FP flags after object loops over
+    symbolic Expressions (set inside Drake's symbolic constructors); silence
+    them for symbolic input only (float input keeps numpy's warnings)."""
+    if any(_is_symbolic(a) for a in args):
+        return np.errstate(invalid="ignore")
+    return contextlib.nullcontext()
+
+
+def _default(params):
+    if params is None:
+        return _default_params()
+    if not isinstance(params, WristParams):
+        raise ValueError(f"params must be a WristParams, got {type(params).__name__}")
+    return params
+
+
+@functools.lru_cache(maxsize=1)
+def _default_params() -> WristParams:
+    return WristParams()
+
+
+# ---------------------------------------------------------------------------
+@dataclass
+class WristPose:
+    """Points and palm frame of the wrist at one configuration (frame 0 coordinates).
+
+    Attributes
+    ----------
+    A, B, C : ndarray (3,)
+        Palm points [m].
+    A0, B0, C0 : ndarray (3,)
+        Forearm points [m] (constant).
+    M : ndarray (3,)
+        Midpoint of BC [m].
+    rotation : ndarray (3, 3)
+        Orientation of the palm frame ABC in frame 0 (columns x, y, z).
+    origin : ndarray (3,)
+        Origin of the palm frame ABC in frame 0 [m].
+    t_A, t_B, t_C : scalar
+        Circle parameters of (6.5) and (6.1) [rad].
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    A0: np.ndarray
+    B0: np.ndarray
+    C0: np.ndarray
+    M: np.ndarray
+    rotation: np.ndarray
+    origin: np.ndarray
+    t_A: object
+    t_B: object
+    t_C: object
+
+    def transform(self) -> np.ndarray:
+        """Homogeneous transform T^0_ABC (4 x 4) of the palm frame in the forearm frame."""
+        T = np.zeros((4, 4), dtype=self.rotation.dtype)
+        T[:3, :3] = self.rotation
+        T[:3, 3] = self.origin
+        T[3, 3] = 1.0
+        return T
+
+
+def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool = True) -> WristPose:
+    """Solve the double inverted parallelogram, thesis (6.1)-(6.8).
+
+    Parameters
+    ----------
+    q71 : float, AutoDiffXd or Expression
+        Abduction [rad]: rotation of the BC linkage plane about the axis B0C0.
+    q73 : float, AutoDiffXd or Expression
+        Flexion [rad], crank angle measured from the neutral wrist
+        (``t_B = t_B0 - q73``, see the module docstring for the thesis offset).
+    params : WristParams, optional
+        Geometry (default: Table 6.1, 6.2).
+    check : bool
+        For float/AutoDiff input, raise ``ValueError`` naming ``q71``/``q73``
+        when the linkage cannot be assembled (instead of returning NaN).
+
+    Returns
+    -------
+    WristPose
+        Palm points, palm frame ABC and circle parameters, in frame 0.
+    """
+    p = _default(params)
+    with _symbolic_errstate(q71, q73):
+        return _solve(q71, q73, p, check)
+
+
+def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
+    if check:
+        for name, q in (("q71", q71), ("q73", q73)):
+            v = _value(q)
+            if v is not None and not math.isfinite(v):
+                raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
+    a, b, c = p.length, p.width, p.thickness
+    L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
+    gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
+    tB0 = math.atan2(c, p.diagonal_length)  # neutral crank angle in the BC plane
+
+    # BC plane: spanned by e_u (horizontal, rotated by q71 about B0C0) and e_v = z.
+    g = gamma0 + q71
+    cg, sg = np.cos(g), np.sin(g)
+    e_u = _vec(cg, sg, 0.0)
+    e_v = _vec(0.0, 0.0, 1.0)
+    n = _vec(-sg, cg, 0.0)                  # plane normal: z axis of the frame BCM
+
+    # (6.1) and (6.4): B and C in the plane (B0 at the origin, C0 at (0, D_BC)).
+    tB = tB0 - q73
+    ctB, stB = np.cos(tB), np.sin(tB)
+    den = L * L + d * d - 2.0 * L * d * stB
+    if check:
+        _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
+    Bu, Bv = L * ctB, L * stB
+    Cu = L * (L * L - d * d) * ctB / den
+    Cv = (L * L - d * d) * (L * stB - d) / den
+    tC = np.arctan2(Cv - d, Cu)             # (6.3), measured about C0
+    B = Bu * e_u + Bv * e_v
+    C = Cu * e_u + Cv * e_v
+    M = 0.5 * (B + C)
+
+    # Frame BCM: x along MC, z the plane normal, y = z x x.
+    BC = C - B
+    x = BC / _norm(BC)
+    y = _cross(n, x)
+    A0 = np.array([0.0, b, 0.5 * c])
+    r = A0 - M
+    a0y, a0z = np.dot(r, y), np.dot(r, n)   # (6.6): A0 in BCM (x-coordinate: np.dot(r, x))
+    a0x = np.dot(r, x)
+    # (6.7): a0x^2 + (a0y - R cos tA)^2 + (a0z - R sin tA)^2 = dA^2
+    #   <=> a0y cos tA + a0z sin tA = k, solved with one atan2 (neutral branch).
+    k = (a0x * a0x + a0y * a0y + a0z * a0z + R * R - dA * dA) / (2.0 * R)
+    rho2 = a0y * a0y + a0z * a0z
+    disc = rho2 - k * k
+    if check:
+        _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
+    tA = np.arctan2(a0z, a0y) - np.arctan2(np.sqrt(disc), k)
+    # (6.5), (6.8): A in frame 0.
+    A = M + R * np.cos(tA) * y + R * np.sin(tA) * n
+
+    # Palm frame ABC.
+    AM = M - A
+    yp = AM / _norm(AM)
+    zp = -BC / _norm(BC)
+    xp = _cross(yp, zp)
+    rot = np.column_stack([xp, yp, zp])
+    origin = 0.5 * (A + M)
+    B0 = np.zeros(3)
+    C0 = np.array([0.0, 0.0, c])
+    return WristPose(A=A, B=B, C=C, A0=A0, B0=B0, C0=C0, M=M, rotation=rot, origin=origin,
+                     t_A=tA, t_B=tB, t_C=tC)
+
+
+def _check_positive(value, what: str, q71, q73) -> None:
+    v = _value(value)
+    if v is not None and not (v > 0.0):
+        raise ValueError(f"wrist_angle [q71, q73] = [{_value(q71)}, {_value(q73)}] rad is outside "
+                         f"the reachable range of the wrist: {what}")
+
+
+def wrist_constraint_errors(pose: WristPose, params: WristParams | None = None) -> np.ndarray:
+    """Errors of the six distance constraints of Fig 6.9 [m].
+
+    Returns ``[|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|]`` minus their design
+    values (``link_length``, ``crank_length`` twice, ``palm_edge_length``
+    twice, ``coupler_length``); also checks nothing else, so orthonormality of
+    the palm frame is tested separately.
+    """
+    p = _default(params)
+    P = pose
+    d = [_norm(P.A - P.A0) - p.link_length,
+         _norm(P.B - P.B0) - p.crank_length,
+         _norm(P.C - P.C0) - p.crank_length,
+         _norm(P.A - P.B) - p.palm_edge_length,
+         _norm(P.A - P.C) - p.palm_edge_length,
+         _norm(P.B - P.C) - p.coupler_length]
+    return np.array(d, dtype=object if any(not is_float(e) for e in d) else float)
+
+
+def wrist_tendon_lengths(q71, q73, params: WristParams | None = None) -> np.ndarray:
+    """Length of each tendon through the wrist, thesis (6.9).
+
+    ``h_i = || h0_forearm,i - T^0_ABC h^ABC_palm,i ||`` for the 38 rows of
+    Table 6.2, in table order (tendon 1..38).
+
+    Parameters
+    ----------
+    q71, q73 : float, AutoDiffXd or Expression
+        Abduction and flexion [rad] (see :func:`wrist_kinematics`).
+    params : WristParams, optional
+
+    Returns
+    -------
+    ndarray (num_tendons,)
+        Lengths [m] (object dtype for AutoDiffXd/Expression input).
+    """
+    p = _default(params)
+    pose = wrist_kinematics(q71, q73, p)
+    with _symbolic_errstate(q71, q73):
+        palm_in_0 = pose.origin + p.palm_offset_array @ pose.rotation.T
+        diff = p.forearm_offset_array - palm_in_0
+        return np.sqrt(np.sum(diff * diff, axis=1))
+
+
+@functools.lru_cache(maxsize=16)
+def _neutral_lengths(params: WristParams) -> np.ndarray:
+    out = wrist_tendon_lengths(0.0, 0.0, params)
+    out.setflags(write=False)
+    return out
+
+
+def wrist_tendon_offsets(q71, q73, params: WristParams | None = None) -> np.ndarray:
+    """Wrist-induced tendon path change ``h_wrist(q) - h_wrist(0)`` [m], Table 6.2 order.
+
+    Positive: the path through the wrist gets longer, which (ARCHITECTURE.md)
+    stretches the tendon's spring like winding its motor would.  Generic in the
+    scalar type (float, AutoDiffXd, Expression).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> off = wrist_tendon_offsets(np.radians(20.0), 0.0)   # 20 deg abduction
+    >>> off.shape
+    (38,)
+    """
+    p = _default(params)
+    return wrist_tendon_lengths(q71, q73, p) - _neutral_lengths(p)
+
+
+def wrist_lengths_and_jacobian(q71, q73, params: WristParams | None = None):
+    """Tendon lengths (6.9) and their exact Jacobian, generic in the scalar type.
+
+    The palm pose is differentiated in forward mode through the closed-form
+    kinematics; the tendon part uses ``dh_i/dq = -u_i . (dO/dq + dR/dq p_i)``
+    with ``u_i`` the unit vector from the palm point to the forearm point.
+
+    Parameters
+    ----------
+    q71, q73 : float, AutoDiffXd or Expression
+        Abduction and flexion [rad].
+    params : WristParams, optional
+
+    Returns
+    -------
+    h : ndarray (num_tendons,)
+        Lengths [m].
+    P : ndarray (num_tendons, 2)
+        ``dh/d[q71, q73]`` [m/rad] (the wrist block of the coupling matrix).
+    """
+    p = _default(params)
+    scalar = is_float(q71) and is_float(q73)
+    unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+    pose = wrist_kinematics(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), p)
+    dtype = float if scalar else object
+    O = np.array([e.v for e in pose.origin], dtype=dtype)
+    dO = np.array([e.d for e in pose.origin], dtype=dtype)                      # (3, 2)
+    R = np.array([[e.v for e in row] for row in pose.rotation], dtype=dtype)
+    dR = np.array([[e.d for e in row] for row in pose.rotation], dtype=dtype)  # (3, 3, 2)
+    with _symbolic_errstate(q71, q73):
+        Pp = p.palm_offset_array
+        diff = p.forearm_offset_array - (O + Pp @ R.T)
+        h = np.sqrt(np.sum(diff * diff, axis=1))
+        u = diff / h[:, None]
+        J = np.column_stack([-np.sum(u * (dO[:, j] + Pp @ dR[:, :, j].T), axis=1) for j in range(2)])
+    return h, J
+
+
+def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
+    """Exact Jacobian ``d h_wrist / d [q71, q73]`` (num_tendons x 2) [m/rad].
+
+    Row i, column j: change of tendon i's path through the wrist per radian of
+    q71 (j = 0) or q73 (j = 1); the wrist block of ``P(q) = dh/dq``.  Generic
+    in the scalar type (see :func:`wrist_lengths_and_jacobian`).
+    """
+    return wrist_lengths_and_jacobian(q71, q73, params)[1]
+
+
+class WristCoupling:
+    """The wrist as a routing coupling object: ``h(q)`` (38,) and ``P(q)`` (38 x 2).
+
+    ``q = [q71, q73]`` [rad]; ``h`` are the absolute tendon path lengths
+    through the wrist (6.9) and ``P = dh/dq``, both generic in the scalar type
+    so :class:`TendonRouting_` (``-P^T f`` on the wrist joints) converts to
+    AutoDiffXd.  Rows follow Table 6.2 (tendon 1..38).
+
+    Parameters
+    ----------
+    params : WristParams, optional
+    """
+
+    num_joints = 2
+
+    def __init__(self, params: WristParams | None = None):
+        self.params = _default(params)
+        self.num_tendons = self.params.num_tendons
+
+    def _split(self, q):
+        q = np.asarray(q) if not isinstance(q, np.ndarray) else q
+        if q.shape != (2,):
+            raise ValueError(f"wrist joint vector q must have 2 entries [q71, q73], got shape {q.shape}")
+        return q[0], q[1]
+
+    def h(self, q) -> np.ndarray:
+        """Tendon path lengths through the wrist [m]."""
+        return wrist_tendon_lengths(*self._split(q), self.params)
+
+    def P(self, q) -> np.ndarray:
+        """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
+        return wrist_jacobian(*self._split(q), self.params)
+
+    def dPT_f_dq(self, q, f) -> np.ndarray:
+        """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
+
+        The geometric stiffness of the wrist joints due to the tendon forces
+        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + dPT_f_dq``).  Exact:
+        forward-mode tangents nested over the scalar type.
+        """
+        q71, q73 = self._split(q)
+        f = np.asarray(f)
+        if f.shape != (self.num_tendons,):
+            raise ValueError(f"tendon force f must have {self.num_tendons} entries, got shape {f.shape}")
+        unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
+        P = wrist_jacobian(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), self.params)
+        scalar = is_float(q71) and is_float(q73) and is_float(f)
+        dP = np.array([[e.d for e in row] for row in P], dtype=float if scalar else object)  # (m, 2, 2)
+        return np.tensordot(f, dP, axes=(0, 0))
+
+
+def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:
+    """Motor angle change that cancels the wrist offset: ``-offset / r_m`` [rad].
+
+    Parameters
+    ----------
+    q71, q73 : scalar
+        Wrist angles [rad].
+    motor_pulley_radius : float or array (num_tendons,)
+        r_m [m], > 0.
+    """
+    r = _check_radius(motor_pulley_radius, _default(params).num_tendons)
+    return -wrist_tendon_offsets(q71, q73, params) / r
+
+
+def _check_radius(r, n: int) -> np.ndarray:
+    arr = np.asarray(r, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"motor_pulley_radius must be a scalar or have {n} entries, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
+        raise ValueError(f"motor_pulley_radius must be finite and > 0 [m], got {arr}")
+    return arr
+
+
+# ---------------------------------------------------------------------------
+@dataclass
+class WristMotionResult:
+    """Data of the thesis's wrist check (Fig 6.9, 6.10): flexion, then abduction.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        Time [s].
+    wrist_angle : ndarray (N, 2)
+        [q71, q73] [rad] along the motion.
+    offsets : ndarray (N, num_tendons)
+        Tendon displacement ``h_wrist(q) - h_wrist(0)`` [m] (Fig 6.10).
+    constraint_errors : ndarray (N, 6)
+        Distance constraint errors [m] (Fig 6.9), order of
+        :func:`wrist_constraint_errors`.
+    phase : ndarray (N,) of str
+        ``"flexion"`` or ``"abduction"``.
+    median_distance : ndarray (num_tendons,)
+        Signed lateral distance of each tendon's forearm point from the wrist's
+        median axis, ``y - b/2`` [m].
+    flexion_peak, abduction_peak : float
+        Largest |displacement| in each phase [m] (abduction: relative to the
+        start of the abduction phase).
+    abduction_slope : float
+        Least-squares slope of the abduction-induced displacement at the
+        abduction peak vs ``median_distance`` [m/m].
+    abduction_r2 : float
+        Coefficient of determination of that linear fit.
+    abduction_intercept : float
+        Intercept of that fit [m].
+    """
+
+    t: np.ndarray
+    wrist_angle: np.ndarray
+    offsets: np.ndarray
+    constraint_errors: np.ndarray
+    phase: np.ndarray
+    median_distance: np.ndarray
+    flexion_peak: float = 0.0
+    abduction_peak: float = 0.0
+    abduction_slope: float = 0.0
+    abduction_intercept: float = 0.0
+    abduction_r2: float = 0.0
+    fingers: tuple = field(default=TENDON_FINGERS)
+
+    @property
+    def max_constraint_error(self) -> float:
+        """max over time and constraints of |error| [m] (Fig 6.9)."""
+        return float(np.max(np.abs(self.constraint_errors)))
+
+    @property
+    def flexion_to_abduction_ratio(self) -> float:
+        """flexion_peak / abduction_peak (small: flexion barely moves the tendons)."""
+        return self.flexion_peak / self.abduction_peak
+
+
+def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
+                       duration: float = 4.0, num_samples: int = 201, hold_flexion: bool = False,
+                       params: WristParams | None = None) -> WristMotionResult:
+    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10).
+
+    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``
+    (out to ``flexion`` and back), the second half moves q71 likewise (s the
+    phase time / phase duration).  With ``hold_flexion=True`` q73 ramps to
+    ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.
+
+    The abduction statistics use the displacement caused by the abduction
+    alone: offsets at the abduction peak minus offsets at the start of the
+    abduction phase, fitted linearly against the signed distance of each
+    tendon's forearm point from the median axis (y - b/2).
+
+    Parameters
+    ----------
+    flexion, abduction : float
+        Peak q73 and q71 [rad] (thesis: 30 deg and 20 deg).
+    duration : float
+        Total time [s] (Fig 6.10: 4 s; Fig 6.9: 10 s).
+    num_samples : int
+        Time samples (>= 5).
+    hold_flexion : bool
+        Keep the flexion during the abduction phase.
+    params : WristParams, optional
+
+    Returns
+    -------
+    WristMotionResult
+        Displacements, constraint errors and the proportionality statistics.
+    """
+    if not (duration > 0.0):
+        raise ValueError(f"duration must be > 0 [s], got {duration}")
+    if int(num_samples) < 5:
+        raise ValueError(f"num_samples must be >= 5, got {num_samples}")
+    p = _default(params)
+    t = np.linspace(0.0, duration, int(num_samples))
+    half = 0.5 * duration
+    in_flex = t < half
+    s = np.where(in_flex, t / half, (t - half) / half)
+    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
+    if hold_flexion:
+        q73 = np.where(in_flex, flexion * 0.5 * (1.0 - np.cos(np.pi * s)), flexion)
+    else:
+        q73 = np.where(in_flex, flexion * bump, 0.0)
+    q71 = np.where(in_flex, 0.0, abduction * bump)
+    offsets = np.empty((t.size, p.num_tendons))
+    errors = np.empty((t.size, 6))
+    for i in range(t.size):  # analysis loop over samples (not a system calc)
+        offsets[i] = wrist_tendon_offsets(q71[i], q73[i], p)
+        errors[i] = wrist_constraint_errors(wrist_kinematics(q71[i], q73[i], p), p)
+    dist = p.forearm_offset_array[:, 1] - 0.5 * p.width
+    start = int(np.argmax(~in_flex))
+    abd = offsets[int(np.argmax(np.abs(q71)))] - offsets[start]
+    slope, intercept = np.polyfit(dist, abd, 1)
+    ss_res = float(np.sum((abd - (slope * dist + intercept)) ** 2))
+    ss_tot = float(np.sum((abd - abd.mean()) ** 2))
+    return WristMotionResult(
+        t=t, wrist_angle=np.column_stack([q71, q73]), offsets=offsets, constraint_errors=errors,
+        phase=np.where(in_flex, "flexion", "abduction"), median_distance=dist,
+        flexion_peak=float(np.max(np.abs(offsets[in_flex]))),
+        abduction_peak=float(np.max(np.abs(offsets[~in_flex] - offsets[start]))),
+        abduction_slope=float(slope), abduction_intercept=float(intercept),
+        abduction_r2=1.0 - ss_res / ss_tot)
+
+
+# ---------------------------------------------------------------------------
+@TemplateSystem.define("WristTendonOffsets_")
+def WristTendonOffsets_(T):
+    """Wrist tendon offsets as a system.
+
+    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output
+    ``wrist_tendon_offset`` (38) [m] = ``h_wrist(q) - h_wrist(0)``, Table 6.2
+    order (direct feedthrough).  Scalar types: float, AutoDiffXd, Expression.
+
+    Parameters
+    ----------
+    params : WristParams, optional
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, params: WristParams | None = None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._params = _default(params)
+            n = self._params.num_tendons
+            self._u = self.DeclareVectorInputPort("wrist_angle", 2)
+            self.DeclareVectorOutputPort("wrist_tendon_offset", n, self._calc,
+                                         prerequisites_of_calc={self._u.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._params, converter=converter)
+
+        @property
+        def params(self) -> WristParams:
+            return self._params
+
+        def _calc(self, context, output):
+            q = self._u.Eval(context)
+            output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
+
+    return Impl
+
+
+@TemplateSystem.define("WristCompensation_")
+def WristCompensation_(T):
+    """Feedforward that cancels the wrist-induced tendon elongation.
+
+    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output ``motor_angle_offset``
+    (38) [rad] = ``-(h_wrist(q) - h_wrist(0)) / r_m``: adding it to the motor
+    angle references keeps every elongation ``r_m theta + h(q) - h(0) + x0``
+    unchanged when the wrist moves (ARCHITECTURE.md sign convention).
+
+    Parameters
+    ----------
+    motor_pulley_radius : float or array (38,)
+        r_m [m] (``MotorParams.pulley_radius``), > 0.
+    params : WristParams, optional
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, motor_pulley_radius, params: WristParams | None = None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._params = _default(params)
+            n = self._params.num_tendons
+            self._r = _check_radius(motor_pulley_radius, n)
+            self._u = self.DeclareVectorInputPort("wrist_angle", 2)
+            self.DeclareVectorOutputPort("motor_angle_offset", n, self._calc,
+                                         prerequisites_of_calc={self._u.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._r.copy(), other._params, converter=converter)
+
+        @property
+        def params(self) -> WristParams:
+            return self._params
+
+        @property
+        def motor_pulley_radius(self) -> np.ndarray:
+            return self._r.copy()
+
+        def _calc(self, context, output):
+            q = self._u.Eval(context)
+            output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
+
+    return Impl
+
+
+WristTendonOffsets = WristTendonOffsets_[None]
+WristCompensation = WristCompensation_[None]

@@ -1,0 +1,110 @@
+"""Speed of the finger and hand models: real-time factor and Linearize time.
+
+Usage::
+
+    PYTHONPATH=. python benchmarks/bench_hand.py [--sim-time 0.2] [--repeat 3] [--json out.json]
+
+For one finger (index) and the whole hand (wrist input at 0), each backend:
+
+* open loop: motors held by their operating-point torques, error-controlled
+  RK3 (accuracy 1e-4, max step 1 ms);
+* closed loop: the 3 kHz joint-space PD (ZeroOrderHold) with a small step
+  reference, (a) error-controlled RK3 (accuracy 1e-4) and (b) fixed-step RK3
+  at the control period (one integrator step per controller sample);
+* time of ``analysis.linearize`` (Drake ``Linearize``).
+
+Real-time factor = simulated time / wall time (best of ``--repeat``).  The
+figures depend on the machine load; run on an idle core for comparable numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+
+from awiwi_drake.analysis.linear import linearize
+from awiwi_drake.hand.diagrams import closed_loop, finger_diagram, hand_diagram
+
+
+def _run(diagram, context, t_final, *, fixed_step=None, accuracy=1e-4, max_step=1e-3):
+    sim = Simulator(diagram, context)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", fixed_step or max_step)
+    integ = sim.get_mutable_integrator()
+    if fixed_step:
+        integ.set_fixed_step_mode(True)
+    else:
+        integ.set_target_accuracy(accuracy)
+    sim.Initialize()
+    t0 = time.perf_counter()
+    sim.AdvanceTo(t_final)
+    wall = time.perf_counter() - t0
+    x = context.get_continuous_state_vector().CopyToVector()
+    if not np.all(np.isfinite(x)):
+        raise RuntimeError("benchmark simulation diverged")
+    return t_final / wall, integ.get_num_steps_taken()
+
+
+def _build(target, backend):
+    return (hand_diagram(backend=backend, wrist=True) if target == "hand"
+            else finger_diagram(finger=target, backend=backend))
+
+
+def bench(target: str, backend: str, sim_time: float, repeat: int) -> dict:
+    out = dict(target=target, backend=backend)
+    t0 = time.perf_counter()
+    rig = _build(target, backend)
+    out["build_s"] = time.perf_counter() - t0
+    lin_times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        linearize(rig)
+        lin_times.append(time.perf_counter() - t0)
+    out["linearize_s"] = min(lin_times)
+    best = 0.0
+    for _ in range(repeat):
+        rtf, steps = _run(rig.diagram, rig.context(), sim_time)
+        best = max(best, rtf)
+    out["open_loop_rtf"], out["open_loop_steps"] = best, steps
+    n = rig.num_joints
+    q_ref = np.zeros(n)
+    q_ref[1 if target != "hand" else 5] = 0.2
+    for mode, kw in (("closed_loop_rtf", {}), ("closed_loop_fixed_step_rtf", {"fixed_step": 1.0 / 3000})):
+        best = 0.0
+        for _ in range(repeat):
+            cl = closed_loop(_build(target, backend))
+            rtf, steps = _run(cl.diagram, cl.context(joint_angle_reference=q_ref), sim_time, **kw)
+            best = max(best, rtf)
+        out[mode], out[mode.replace("rtf", "steps")] = best, steps
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sim-time", type=float, default=0.2, help="simulated seconds per run")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--targets", default="index,hand")
+    ap.add_argument("--backends", default="symbolic,python")
+    ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
+    args = ap.parse_args(argv)
+    rows = []
+    print(f"{'target':8s} {'backend':9s} {'build s':>8s} {'lin s':>7s} {'open RTF':>9s} "
+          f"{'ctrl RTF':>9s} {'ctrl fixed RTF':>15s}")
+    for target in args.targets.split(","):
+        for backend in args.backends.split(","):
+            r = bench(target, backend, args.sim_time, args.repeat)
+            rows.append(r)
+            print(f"{target:8s} {backend:9s} {r['build_s']:8.2f} {r['linearize_s']:7.3f} "
+                  f"{r['open_loop_rtf']:9.3f} {r['closed_loop_rtf']:9.3f} {r['closed_loop_fixed_step_rtf']:15.3f}",
+                  flush=True)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(rows, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,237 @@
+"""Physics of the component laws: motor (ch. 3), spring mechanism and tendon (ch. 4)."""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
+import pydrake.symbolic as sym
+
+from awiwi_drake.components import (
+    LeverSpringMechanism, LinearSpring, AntagonisticPairSpring, PolynomialSpring, capstan_friction_force,
+    guide_friction_force, hysteresis_rate, motor_friction_torque, motor_ripple_torque, reflected_inertia,
+    saturate_torque, series_stiffness, tendon_spring, tendon_stiffness)
+from awiwi_drake.parameters import (
+    GuideFrictionParams, HysteresisParams, MotorParams, PolynomialSpringParams, SpringMechanismGeometry,
+    SpringModelParams, TendonParams)
+
+
+# ---------------------------------------------------------------- motor (ch. 3)
+def test_reflected_inertia_closed_form():
+    # (3.1): B = B_motor alpha^-2 + B_gearbox with alpha = 1/100.
+    assert reflected_inertia(2e-7, 0.0, 100.0) == pytest.approx(2e-3)  # Table 16.1 writes 2e-7 * ratio^2
+    assert reflected_inertia(1e-7, 5e-4, 100.0) == pytest.approx(1.5e-3)
+    with pytest.raises(ValueError, match="gear_ratio"):
+        reflected_inertia(1e-7, 0.0, 0.0)
+
+
+def test_friction_matches_table_3_3_closed_form():
+    p = MotorParams()
+    for w in (-15.0, -1.0, 0.3, 15.0):
+        expected = -(0.5586 * math.atan(10 * w) + 0.0356 * w)
+        assert motor_friction_torque(np.array([w]), p)[0] == pytest.approx(expected, rel=1e-12)
+    # Fig 3.3b scale: about 1.4 Nm at 15 rad/s.
+    assert -motor_friction_torque(np.array([15.0]), p)[0] == pytest.approx(1.408, abs=0.01)
+
+
+def test_friction_is_dissipative_and_odd():
+    p = MotorParams(damping=0.01)
+    w = np.linspace(-20, 20, 401)
+    tau = motor_friction_torque(w, p)
+    assert np.all(w * tau <= 0.0)
+    np.testing.assert_allclose(tau, -motor_friction_torque(-w, p), atol=1e-14)
+    assert np.all(motor_friction_torque(w, MotorParams(friction=False)) == 0.0)
+
+
+def test_ripple_periods_and_switch():
+    p = MotorParams(ripple=True)
+    th = np.linspace(0, 2 * np.pi, 50)
+    # The motor-shaft component repeats every 2 pi / 100 at the output, the output bearing every 2 pi.
+    mot = MotorParams(ripple=True, ripple_output_amplitude=0.0)
+    np.testing.assert_allclose(motor_ripple_torque(th, mot), motor_ripple_torque(th + 2 * np.pi / 100, mot), atol=1e-12)
+    np.testing.assert_allclose(motor_ripple_torque(th, p), motor_ripple_torque(th + 2 * np.pi, p), atol=1e-12)
+    peak = np.max(np.abs(motor_ripple_torque(np.linspace(0, 2 * np.pi, 20001), p)))
+    assert peak == pytest.approx(p.ripple_motor_amplitude + p.ripple_output_amplitude, rel=1e-3)
+    assert np.all(motor_ripple_torque(th, MotorParams(ripple=False)) == 0.0)
+
+
+def test_saturation_clips_only_when_enabled():
+    u = np.array([-5.0, 0.5, 5.0])
+    np.testing.assert_allclose(saturate_torque(u, MotorParams(torque_limit=2.0)), [-2.0, 0.5, 2.0])
+    np.testing.assert_allclose(saturate_torque(u, MotorParams(saturation=False)), u)
+
+
+def test_laws_accept_autodiff_and_symbolic():
+    p = MotorParams(ripple=True)
+    w = InitializeAutoDiff(np.array([0.7])).ravel()
+    d_ad = motor_friction_torque(w, p)[0].derivatives()[0]
+    h = 1e-6
+    d_fd = (motor_friction_torque(np.array([0.7 + h]), p)[0] - motor_friction_torque(np.array([0.7 - h]), p)[0]) / (2 * h)
+    assert d_ad == pytest.approx(d_fd, rel=1e-6)
+    x = sym.Variable("w")
+    with np.errstate(invalid="ignore"):  # numpy inspects FPU flags after object-array ufuncs
+        expr = motor_friction_torque(np.array([sym.Expression(x)]), p)[0]
+    assert expr.Evaluate({x: 0.7}) == pytest.approx(motor_friction_torque(np.array([0.7]), p)[0])
+
+
+# ---------------------------------------------------------------- spring mechanism (ch. 4)
+@pytest.fixture(scope="module")
+def lever():
+    return LeverSpringMechanism()
+
+
+def test_lever_curve_matches_fig_4_8b(lever):
+    # Fig 4.8b: about 0 N at 0 deg rising to about 170-180 N near 45-50 deg.
+    assert lever.force_at_angle(0.0) == 0.0
+    assert lever.force_at_angle(math.radians(48)) == pytest.approx(175.0, abs=1.0)
+    f45, f50 = lever.force_at_angle(math.radians(45)), lever.force_at_angle(math.radians(50))
+    assert 130 < f45 < 175 < f50 < 220
+    th, x, f, k = lever.sample_curve(max_force=180.0)
+    assert np.all(np.diff(f) > 0) and np.all(np.diff(x) > 0)       # monotonic
+    assert np.all(np.diff(k[1:]) > 0)                               # convex: stiffness rises with force
+    assert 0.004 < x[-1] < 0.008                                    # dL of a few millimetres (Fig 4.7)
+
+
+def test_lever_force_is_virtual_work_of_the_spring(lever):
+    # Energy: int_0^x f dx' equals the energy stored in the linear spring at the same lever angle.
+    th = np.linspace(0.0, math.radians(48), 2001)
+    x = lever.elongation_at_angle(th)
+    f = lever.force_at_angle(th)
+    work = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(x))])
+    stored = lever.spring_energy_at_angle(th)
+    np.testing.assert_allclose(work, stored, atol=2e-4 * stored[-1])
+
+
+def test_lever_autodiff_equals_finite_difference(lever):
+    x0 = 0.003
+    ad = lever.force(AutoDiffXd(x0, np.array([1.0])))
+    h = 1e-8
+    fd = (lever.force(x0 + h) - lever.force(x0 - h)) / (2 * h)
+    assert ad.value() == pytest.approx(lever.force(x0), rel=1e-12)
+    assert ad.derivatives()[0] == pytest.approx(fd, rel=1e-5)
+    assert lever.stiffness(x0) == pytest.approx(fd, rel=1e-5)
+    assert lever.force(-1e-3) == 0.0 and lever.stiffness(-1e-3) == 0.0  # slack
+    assert lever.inverse_force(100.0) == pytest.approx(0.0050036, rel=1e-4)
+    assert lever.force(lever.inverse_force(100.0)) == pytest.approx(100.0, rel=1e-9)
+
+
+def test_lever_rejects_symbolic_with_clear_message(lever):
+    with pytest.raises(ValueError, match="to_polynomial"):
+        lever.force(np.array([sym.Expression(sym.Variable("x"))]))
+
+
+def test_calibration_polynomial_fits_the_mechanism_in_series_with_the_tendon(lever):
+    p = SpringModelParams()
+    poly = tendon_spring(p)
+    k_t = tendon_stiffness(p.tendon)
+    th, x_mech, f, _ = lever.sample_curve(max_force=p.max_force)
+    x_total = x_mech + f / k_t                       # series: elongations add at equal force
+    err = poly.force(x_total) - f
+    assert np.max(np.abs(err)) < 0.1                 # N, over 0-180 N (stated in SpringModelParams)
+    # Series stiffness law: 1/k = 1/k_mech + 1/k_t.
+    i = len(f) // 2
+    k_series = series_stiffness(np.array([lever.stiffness(x_mech[i])]), k_t)[0]
+    assert poly.stiffness(x_total[i]) == pytest.approx(k_series, rel=0.05)
+
+
+@pytest.mark.parametrize("spring", [PolynomialSpring((2000.0, 3e6)), LinearSpring(1e4)])
+def test_spring_stiffness_and_energy_are_derivative_and_integral_of_force(spring):
+    x = np.linspace(-1e-3, 5e-3, 61)
+    h = 1e-8
+    fd = (spring.force(x + h) - spring.force(x - h)) / (2 * h)
+    mask = np.abs(x) > 2 * h
+    np.testing.assert_allclose(spring.stiffness(x)[mask], fd[mask], rtol=1e-6, atol=1e-6)
+    e_fd = (spring.energy(x + h) - spring.energy(x - h)) / (2 * h)
+    np.testing.assert_allclose(e_fd[mask], spring.force(x)[mask], rtol=1e-6, atol=1e-6)
+    assert np.all(spring.force(x[x <= 0]) == 0.0)   # tension only
+    assert np.all(spring.stiffness(x[x <= 0]) == 0.0)
+    f = np.array([1.0, 10.0, 50.0])
+    np.testing.assert_allclose(spring.force(spring.inverse_force(f)), f, rtol=1e-10)
+
+
+def test_antagonistic_pair_is_odd_stiffening_with_pretension_stiffness():
+    base = PolynomialSpring((2000.0, 3e6))
+    pair = AntagonisticPairSpring(base, pretension=20.0, radius=0.008)
+    d = np.linspace(-0.3, 0.3, 61)
+    np.testing.assert_allclose(pair.force(d), -pair.force(-d), atol=1e-12)
+    assert pair.stiffness(np.array([0.0]))[0] == pytest.approx(2 * 0.008 ** 2 * base.stiffness(pair.x0), rel=1e-12)
+    stiffer = AntagonisticPairSpring(base, pretension=40.0, radius=0.008)
+    assert stiffer.stiffness(np.array([0.0]))[0] > pair.stiffness(np.array([0.0]))[0]
+
+
+def test_polynomial_spring_params_validation_names_the_field():
+    with pytest.raises(ValueError, match="not increasing"):
+        PolynomialSpringParams(coefficients=(1000.0, -1e7))
+    with pytest.raises(ValueError, match=r"coefficients\[1\].*not finite"):
+        PolynomialSpringParams(coefficients=(1000.0, float("nan")))
+    with pytest.raises(ValueError, match="coefficients"):
+        PolynomialSpringParams(coefficients=(-5.0,))
+    with pytest.raises(ValueError, match="max_lever_angle"):
+        SpringMechanismGeometry(max_lever_angle=1.3)
+
+
+def test_hysteresis_loop_width_and_dissipation():
+    # Quasi-static cycle 40 -> 100 -> 40 N of elongation, integrate dz/dt on the path.
+    poly = tendon_spring(SpringModelParams())
+    hp = HysteresisParams(enabled=True)
+    x_lo, x_hi = poly.inverse_force(40.0), poly.inverse_force(100.0)
+    xs = np.concatenate([np.linspace(x_lo, x_hi, 4000), np.linspace(x_hi, x_lo, 4000),
+                         np.linspace(x_lo, x_hi, 4000)])
+    dt = 1e-4
+    xdot = np.gradient(xs, dt)
+    z = 0.0
+    forces = []
+    for x, v in zip(xs, xdot):
+        z += dt * hysteresis_rate(z, x, v, poly.force(x), hp)
+        forces.append(poly.force(x) + z)
+    forces = np.array(forces)
+    up = forces[8000:]                    # second loading branch (after the first reversal)
+    down = forces[4000:8000][::-1]
+    i = np.argmin(np.abs(xs[8000:] - poly.inverse_force(70.0)))
+    width = up[i] - down[i]
+    assert 10.0 <= width <= 20.0          # Fig 4.8b point A: 10-20 N at ~70 N
+    work = np.trapezoid(up, xs[8000:]) - np.trapezoid(down, xs[8000:])
+    assert work > 0                        # the loop dissipates energy
+
+
+# ---------------------------------------------------------------- tendon and guide friction
+def test_tendon_elasticity_scales_and_stays_in_dyneema_range():
+    p = TendonParams()
+    k = tendon_stiffness(p)
+    # Stiffness halves when the tendon doubles in length and quadruples with twice the diameter.
+    assert tendon_stiffness(p.replace(rest_length=2 * p.rest_length)) == pytest.approx(k / 2)
+    assert tendon_stiffness(p.replace(diameter=2 * p.diameter)) == pytest.approx(4 * k)
+    # At the top of the calibrated range (180 N) the strain is well below Dyneema's ~3.5 % at break.
+    strain = 180.0 / k / p.rest_length
+    assert 1e-3 < strain < 0.01
+    # Series with the mechanism: softer than either; a slack mechanism transmits nothing.
+    ks = series_stiffness(np.array([0.0, 2e4, 1e6]), k)
+    assert ks[0] == 0.0 and ks[1] < 2e4 and ks[2] < k
+    assert series_stiffness(np.array([k]), k)[0] == pytest.approx(k / 2)
+
+
+def test_guide_friction_law_4_1_and_fig_4_10_range():
+    p = GuideFrictionParams()
+    a = np.radians([0.0, 8.0, 100.0, 200.0])
+    F = guide_friction_force(a, p)
+    # Limits of (4.1): zero without bending, initial slope C0*C1, saturation at C0 for large angles.
+    h = 1e-6
+    assert guide_friction_force(h, p) / h == pytest.approx(p.c0 * p.c1, rel=1e-5)
+    assert guide_friction_force(100.0, p) == pytest.approx(p.c0, rel=1e-12)
+    assert F[0] == 0.0 and 0.15 < F[1] < 0.3 and 1.7 < F[3] < 2.1     # Fig 4.10: ~0.2-2 N over 0-200 deg
+    assert np.all(np.diff(F) > 0)
+    with pytest.raises(ValueError, match="bending_angle"):
+        guide_friction_force(-1.0)
+
+
+def test_capstan_friction_is_proportional_to_tension():
+    a = math.radians(200)
+    f1, f2 = capstan_friction_force(10.0, a), capstan_friction_force(20.0, a)
+    assert f2 == pytest.approx(2 * f1)
+    # Wrapping two guides in series (angles a1 + a2) loses the same as one guide of the total angle
+    # (Euler-Eytelwein: tension ratios multiply).
+    a1, a2, T = 0.7, 2.1, 30.0
+    T_after_1 = T - capstan_friction_force(T, a1)
+    T_after_2 = T_after_1 - capstan_friction_force(T_after_1, a2)
+    assert T - T_after_2 == pytest.approx(capstan_friction_force(T, a1 + a2), rel=1e-12)
+    assert 0.1 <= f1 / 10.0 <= 0.5        # ch. 9: routing friction 10-50 % of the force

@@ -1,0 +1,49 @@
+"""``awiwi-drake compare``: files, rows, physics of one row, errors with exit status 2."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+
+from awiwi_drake.cli import main
+
+
+def test_compare_writes_metrics_and_plots(tmp_path):
+    out = tmp_path / "cmp"
+    rc = main(["compare", "--rig", "flexible-joint", "--controllers", "two-time-scale,lqr", "--out", str(out),
+               "--short", "--tests", "step,disturbance"])
+    assert rc == 0
+    rows = list(csv.DictReader((out / "metrics.csv").open()))
+    assert [(r["controller"], r["test"]) for r in rows] == [
+        ("two-time-scale", "step"), ("two-time-scale", "disturbance"), ("lqr", "step"), ("lqr", "disturbance")]
+    # the impedance controller holds its stiffness (0.3 Nm/rad, ImpedanceParams) under the torque step
+    stiff = float(next(r for r in rows if r["controller"] == "two-time-scale" and r["test"] == "disturbance")["stiffness"])
+    assert stiff == pytest.approx(0.3, rel=0.02)
+    assert all(r["status"] == "ok" for r in rows if r["controller"] == "two-time-scale")
+    for r in rows:  # status flags are consistent with the metrics in the CSV
+        assert r["status"] == ("flagged" if r["flags"] else "ok")
+        if r["test"] == "step":
+            assert ("not settled" in r["flags"]) == (r["settling_time"] == "nan")
+    assert "| two-time-scale |" in (out / "metrics.md").read_text()
+    assert (out / "step.png").stat().st_size > 1000 and (out / "disturbance.png").exists()
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--rig", "flexible-joint", "--controllers", "pd,nope"], "unknown controller 'nope'"),
+    (["--rig", "flexible-joint", "--controllers", "tendon-pd"], "does not fit rig 'flexible_joint'"),
+    (["--rig", "tendon-rig", "--controllers", "tendon-pd", "--tests", "disturbance"], "external torque"),
+    (["--rig", "joint-rig", "--controllers", "pd", "--tests", "ramp"], "unknown test 'ramp'"),
+    (["--rig", "joint-rig", "--controllers", "pd,pd"], "duplicate"),
+])
+def test_compare_errors_exit_2(tmp_path, capsys, args, needle):
+    rc = main(["compare", *args, "--out", str(tmp_path / "x"), "--short"])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1
+
+
+def test_compare_list(capsys):
+    assert main(["compare", "--rig", "tendon-rig", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert [line.split()[0] for line in out.splitlines()] == ["tendon-pd", "tendon-scheduled", "tendon-sdre"]

@@ -1,0 +1,269 @@
+"""Finger and hand diagrams: equilibria, Linearize vs the stiffness map, backends, wrist, control."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+
+from awiwi_drake.analysis.linear import linearize
+from awiwi_drake.hand.coupling import finger_coupling
+from awiwi_drake.hand.diagrams import (GuideFriction, finger_diagram, hand_diagram,
+                                       tendon_bending_angles)
+from awiwi_drake.hand.studies import coupling_hold_study, poles_vs_pretension, wrist_compensation_study
+from awiwi_drake.parameters.hand import FINGERS, TENDON_SLICES, FingerRigParams
+
+OPS = {"index": [0.1, 0.4, 0.3, 0.2], "middle": [0.0, 0.2, 0.5, 0.1], "ring": [0.05, 0.3, 0.4],
+       "fifth": [0.1, 0.0, 0.3, 0.5], "thumb": [0.4, -0.3, 0.2, 0.3]}
+
+
+def _mass_matrix(rig, q):
+    ctx = rig.plant.CreateDefaultContext()
+    rig.plant.SetPositions(ctx, q)
+    return rig.plant.CalcMassMatrix(ctx)
+
+
+@pytest.mark.parametrize("finger", FINGERS)
+def test_operating_point_is_an_equilibrium_and_linearization_gives_the_stiffness_map(finger):
+    rig = finger_diagram(finger=finger, backend="symbolic")
+    op = rig.operating_point(pretension=25.0, joint_angles=OPS[finger])
+    lin = linearize(rig, op, equilibrium_tolerance=1e-6)     # Drake checks xdot(op) ~ 0
+    n = rig.num_joints
+    q = op.info["joint_angles"]
+    # link rows: M qdd = -K_q dq + ...  =>  M A[v, q] = -K_q  with K_q of (5.12) (+ coupling element)
+    K_from_drake = -_mass_matrix(rig, q) @ lin.A[n:2 * n, :n]
+    np.testing.assert_allclose(K_from_drake, op.info["joint_stiffness"], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(op.info["tendon_force"].mean(), 25.0, rtol=1e-12)
+    assert np.all(op.info["tendon_force"] > 0)
+    # the python backend (separate TemplateSystems) gives the same linearisation
+    lin_py = linearize(finger_diagram(finger=finger, backend="python"), op)
+    np.testing.assert_allclose(lin_py.A, lin.A, rtol=1e-7, atol=1e-6 * np.abs(lin.A).max())
+    np.testing.assert_allclose(lin_py.B, lin.B, rtol=1e-7, atol=1e-12)
+
+
+def test_stiffest_link_mode_rises_with_pretension():
+    """The lever springs stiffen with force (Fig 4.8b), so co-contraction stiffens the finger."""
+    sweep = poles_vs_pretension(finger_diagram(finger="index"), [5.0, 20.0, 80.0])
+    w = sweep.max_frequency()
+    assert np.all(np.diff(w) > 0)
+    assert np.all(sweep.poles.real <= 1e-9)       # open loop: no unstable pole
+
+
+def test_hand_is_five_decoupled_fingers_in_the_global_tendon_order():
+    hand = hand_diagram(wrist=False)
+    assert (hand.num_joints, hand.num_tendons, hand.num_states) == (21, 38, 118)
+    assert hand.extra["tendon_names"][TENDON_SLICES["ring"]][0] == "ring_h1"
+    lin_h = linearize(hand, hand.operating_point())
+    index = finger_diagram(finger="index")
+    lin_i = linearize(index, index.operating_point())
+    hj = [hand.state_names.index(s) for s in index.state_names]
+    np.testing.assert_allclose(lin_h.A[np.ix_(hj, hj)], lin_i.A, rtol=1e-9, atol=1e-9)
+    others = np.setdiff1d(np.arange(hand.num_states), hj)
+    assert not np.any(lin_h.A[np.ix_(hj, others)])
+
+
+def test_wrist_offsets_enter_the_equilibrium():
+    rig = finger_diagram(finger="index", wrist=True)
+    op0 = rig.operating_point()
+    op = rig.operating_point(wrist_angle=[np.radians(10.0), np.radians(-5.0)])
+    linearize(rig, op, equilibrium_tolerance=1e-6)
+    from awiwi_drake.hand.wrist import wrist_tendon_offsets
+    off = wrist_tendon_offsets(np.radians(10.0), np.radians(-5.0))[TENDON_SLICES["index"]]
+    n = rig.num_joints
+    dtheta = op.state[2 * n:2 * n + 8] - op0.state[2 * n:2 * n + 8]
+    np.testing.assert_allclose(dtheta, -off / rig.params.motor.pulley_radius, rtol=1e-12, atol=1e-15)
+
+
+def test_wrist_feedforward_reduces_finger_drift_eightfold_down_to_the_friction_limit():
+    """5 deg wrist abduction sweep, index under the 3 kHz motor PD: the feedforward -h_wrist/r_m
+    removes the tendon path change (6.9); what remains is the friction-limited motor PD: each motor
+    may stop up to gamma2/kp (Coulomb torque over the PD gain) off its reference, i.e. r_m gamma2/kp
+    of tendon, which the routing maps to at most |P^+| (r_m gamma2/kp) 1 per joint
+    (abduction: 4.65e-3 rad).  Measured: drift 0.0415 -> 0.0045 rad (9.2x); abduction residual
+    4.52e-3 rad = 0.97 of its friction bound."""
+    s = wrist_compensation_study("index", amplitude=np.radians(5.0), frequency=0.5, t_final=0.4)
+    d = s.max_drift()
+    assert d["compensated"] < d["uncompensated"] / 8.0
+    rig_p = FingerRigParams.for_finger("index")
+    from awiwi_drake.parameters.hand import JointControllerParams
+    e = rig_p.motor.pulley_radius * rig_p.motor.coulomb_torque / JointControllerParams().kp
+    bound = np.abs(np.linalg.pinv(finger_coupling("index").P())) @ np.full(8, e)
+    assert np.all(np.abs(s.drift_compensated).max(axis=0) <= 1.05 * bound)
+    assert np.abs(s.drift_uncompensated).max(axis=0)[0] > 5 * bound[0]     # without it: far beyond friction
+    assert s.min_tendon_force["compensated"] > s.min_tendon_force["uncompensated"]
+    assert not [e for e in s.events["compensated"] if e.kind == "tendon_slack"]
+
+
+def test_large_uncompensated_wrist_motion_slackens_tendons_and_is_reported():
+    s = wrist_compensation_study("index", amplitude=np.radians(15.0), frequency=0.5, t_final=0.45)
+    slack = [e for e in s.events["uncompensated"] if e.kind == "tendon_slack"]
+    assert slack and s.min_tendon_force["uncompensated"] == 0.0
+    assert s.min_tendon_force["compensated"] > 10.0
+
+
+def test_joint_control_reaches_the_reference_and_keeps_the_coupling():
+    s = coupling_hold_study("ring", pip_step=0.5, t_final=0.25)
+    # bound: during the step the pair's force change (< 10 N) puts at most r43 * 10 N = 0.05 N m on
+    # the DIP; the coupling compliance 1/(k_c (1 + c^2)) = 0.166 rad/N m turns it into 8.3e-3 rad
+    # (measured 2.3e-3 rad)
+    fp = FingerRigParams.for_finger("ring").finger
+    bound = fp.dip_radius * 10.0 / (fp.coupling_stiffness * (1 + fp.dip_pip_ratio ** 2))
+    assert s.max_coupling_error < bound
+    assert s.q_pip[-1] == pytest.approx(0.5, abs=0.02)           # friction-limited PD, 3 kHz
+
+
+def test_guide_friction_is_passive_and_converts_to_autodiff():
+    p = FingerRigParams.for_finger("index", guide_friction=True)
+    c = finger_coupling("index")
+    alpha = tendon_bending_angles(c, p)
+    assert alpha[0] == pytest.approx(p.palm_bending_angle + 2 * p.joint_wrap_angle)   # abd + MCP
+    for capstan in (False, True):
+        sys = GuideFriction(c, alpha, p.friction, capstan, p.friction_smoothing_velocity)
+        ctx = sys.CreateDefaultContext()
+        rng = np.random.default_rng(4)
+        x = np.r_[rng.uniform(-0.5, 0.5, 4), rng.uniform(-2, 2, 4)]
+        f = rng.uniform(5, 40, 8)
+        sys.GetInputPort("tendon_force").FixValue(ctx, f)
+
+        def out(xx):
+            sys.GetInputPort("state").FixValue(ctx, xx)
+            return sys.get_output_port(0).Eval(ctx).copy()
+
+        tau = out(x)
+        assert x[4:] @ tau < 0                                   # dissipates
+        ad = sys.ToAutoDiffXd()
+        actx = ad.CreateDefaultContext()
+        ad.GetInputPort("state").FixValue(actx, InitializeAutoDiff(x).ravel())
+        ad.GetInputPort("tendon_force").FixValue(actx, f)
+        y = ad.get_output_port(0).Eval(actx)
+        eps = 1e-7
+        J = np.array([(out(x + eps * e) - out(x - eps * e)) / (2 * eps) for e in np.eye(8)]).T
+        np.testing.assert_allclose(ExtractValue(y).ravel(), tau, rtol=1e-12)
+        np.testing.assert_allclose(ExtractGradient(y), J, rtol=1e-5, atol=1e-7)
+
+
+def test_guide_friction_in_the_finger_diagram_dissipates_link_motion():
+    """Launch the PIP at 2 rad/s with the motors held: guide friction (4.1) removes the link's
+    kinetic energy far faster than the light joint damping alone."""
+    from awiwi_drake.analysis.simulate import simulate
+    rms = {}
+    for on in (False, True):
+        rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index", guide_friction=on))
+        op = rig.operating_point()
+        ctx = rig.context(op)
+        x = op.state.copy()
+        x[rig.num_joints + 2] = 2.0
+        ctx.SetContinuousState(x)
+        res = simulate(rig.diagram, ctx, 0.01, log=("joint_velocity",), max_step=1e-4, accuracy=1e-4)
+        late = res.t > 0.005
+        rms[on] = float(np.sqrt(np.mean(res["joint_velocity"][late] ** 2)))
+    assert rms[True] < 0.5 * rms[False]
+
+
+def test_bad_operating_points_raise_named_errors():
+    rig = finger_diagram(finger="ring")
+    with pytest.raises(ValueError, match="joint_angles"):
+        rig.operating_point(joint_angles=[0.0, 0.1])
+    with pytest.raises(ValueError, match="slack"):
+        rig.operating_point(pretension=1.0, external_torque=[0.0, 0.5, 0.0, 0.0])
+    with pytest.raises(ValueError, match="wrist"):
+        rig.operating_point(wrist_angle=[0.1, 0.0])
+    with pytest.raises(ValueError, match="finger"):
+        finger_diagram(finger="pinky")
+    with pytest.raises(ValueError, match="finger_name"):
+        finger_diagram(finger="ring", params=FingerRigParams.for_finger("index"))
+    with pytest.raises(ValueError, match="FingerRigParams.finger must be ThumbParams"):
+        FingerRigParams(finger_name="thumb")
+
+
+def test_hand_simulates_under_joint_control():
+    """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
+    stay put (decoupled routing, palm fixed), no tendon goes slack."""
+    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.hand.diagrams import closed_loop
+    hand = hand_diagram(backend="python")
+    cl = closed_loop(hand)
+    q_ref = np.zeros(hand.num_joints)
+    i_mcp = hand.extra["joint_names"].index("q21")
+    q_ref[i_mcp] = 0.2
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.06, log=("joint_angle", "tendon_force"),
+                   monitors=rig_monitors(hand), max_step=1.0 / 3000, accuracy=1e-3)
+    q = res["joint_angle"][-1]
+    assert q[i_mcp] > 0.1
+    others = [i for i, n in enumerate(hand.extra["joint_names"]) if not n.startswith("q2")]
+    assert np.max(np.abs(q[others])) < 1e-9
+    assert not [e for e in res.events if e.kind == "tendon_slack"]
+
+
+def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+    from awiwi_drake.components.routing import TendonRouting_
+    sys = TendonRouting_[float](finger_coupling("thumb"), 0.005, np.full(8, 1e-3))
+    ad = sys.ToAutoDiffXd()
+    rng = np.random.default_rng(5)
+    theta, q, f = rng.uniform(-1, 1, 8), rng.uniform(-1, 1, 4), rng.uniform(5, 40, 8)
+    x = np.concatenate([theta, q, f])
+
+    def out(xx, system, ctx, port):
+        system.GetInputPort("motor_angle").FixValue(ctx, xx[:8])
+        system.GetInputPort("joint_angle").FixValue(ctx, xx[8:12])
+        system.GetInputPort("tendon_force").FixValue(ctx, xx[12:])
+        return system.GetOutputPort(port).Eval(ctx)
+
+    fctx, actx = sys.CreateDefaultContext(), ad.CreateDefaultContext()
+    for port in ("elongation", "generalized_force"):
+        J = ExtractGradient(out(InitializeAutoDiff(x).ravel(), ad, actx, port))
+        eps = 1e-6
+        J_fd = np.array([(out(x + eps * e, sys, fctx, port) - out(x - eps * e, sys, fctx, port)) / (2 * eps)
+                         for e in np.eye(x.size)]).T
+        np.testing.assert_allclose(J, J_fd, atol=1e-7)
+
+
+@pytest.mark.parametrize("finger", ["thumb", "ring"])
+def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
+    """No joint sensors: the 3 kHz estimator (motor angles + spring elongations) follows the plant."""
+    from awiwi_drake.analysis.simulate import simulate
+    from awiwi_drake.hand.diagrams import closed_loop
+    rig = finger_diagram(finger=finger)
+    cl = closed_loop(rig, estimator=True)
+    q_ref = np.asarray(OPS[finger + "_ref"] if finger + "_ref" in OPS else
+                       rig.extra["coupling"].dof_selection @ np.array(OPS[finger]), float)
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.1,
+                   log=("joint_angle", "joint_angle_estimate", "joint_velocity"), max_step=1.0 / 3000,
+                   accuracy=1e-3)
+    late = res.t > 0.05
+    err = np.abs(res["joint_angle_estimate"][late] - res["joint_angle"][late]).max(axis=0)
+    # bound: one sample of lag (|v| * period) + the search tolerance (thumb, 15 warm-started
+    # iterations: < 1e-4 rad) + for the ring PIP/DIP the coupling element's deflection e (the DIP is
+    # estimated as c q_PIP; the PIP absorbs r43 e / (r42 + c r43) of it; |e| < 5e-3 rad here)
+    lag = np.abs(res["joint_velocity"][late]).max(axis=0) / 3000
+    extra = np.full(rig.num_joints, 1e-4)
+    if finger == "ring":
+        extra[-2:] = 5e-3
+    assert np.all(err <= lag + extra), (err, lag)
+    assert np.linalg.norm(res["joint_angle"][-1] - q_ref) < 0.5 * np.linalg.norm(q_ref)   # it moved
+
+
+def test_gravity_option_keeps_the_operating_point_an_equilibrium():
+    p = FingerRigParams.for_finger("index", gravity=True)
+    rig = finger_diagram(finger="index", params=p)
+    op = rig.operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
+    linearize(rig, op, equilibrium_tolerance=1e-6)
+    op0 = finger_diagram(finger="index").operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
+    # section 5.2.2: gravity ~ 0.002-0.008 N m, i.e. well under a newton of tendon force change
+    df = np.abs(op.info["tendon_force"] - op0.info["tendon_force"]).max()
+    assert 0.0 < df < 1.0
+
+
+def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
+    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.hand.diagrams import closed_loop
+    rig = finger_diagram(finger="thumb")
+    cl = closed_loop(rig)
+    q_ref = np.array([0.5, 0.35, 0.0, 0.0])
+    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.3, log=("joint_angle",),
+                   monitors=rig_monitors(rig), max_step=1.0 / 3000, accuracy=1e-3)
+    # the springs are held at their 20 N elongation at q_ref; the residual comes from the tendon
+    # forces no longer balancing exactly there (P(q_ref)^T f_op != 0) and from motor friction
+    assert np.abs(res["joint_angle"][-1] - q_ref).max() < 0.05
+    assert not [e for e in res.events if e.kind == "tendon_slack"]

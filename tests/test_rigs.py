@@ -1,0 +1,219 @@
+"""The rigs as physics: (12.10), LQR against an independent Riccati solution,
+closed-loop convergence, energy conservation and passivity, Linearize against
+finite differences, and stiffness versus pretension."""
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from awiwi_drake.analysis import linearize, lqr, lqr_closed_loop, simulate
+from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
+from awiwi_drake.rigs import build_target, flexible_joint_rig, joint_rig, tendon_rig
+
+BACKENDS = ("python", "symbolic")
+
+
+def expected_12_10(p: FlexibleJointParams):
+    m, b, k, dq, dth = p.link_inertia, p.motor_inertia, p.stiffness, p.link_damping, p.motor_damping
+    A = np.array([[0, 1, 0, 0],
+                  [-k / m, -dq / m, k / m, 0],
+                  [0, 0, 0, 1],
+                  [k / b, 0, -k / b, -dth / b]])
+    B = np.array([[0], [0], [0], [1 / b]])
+    return A, B
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_flexible_joint_linearisation_equals_12_10(backend):
+    p = FlexibleJointParams()  # Table 12.1
+    rig = flexible_joint_rig(params=p, backend=backend)
+    assert rig.state_names == ("q", "qdot", "theta", "thetadot")
+    res = linearize(rig)
+    A, B = expected_12_10(p)
+    np.testing.assert_allclose(res.A, A, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(res.B, B, rtol=1e-12)
+    # Also away from the nominal values and at a loaded operating point (linear spring: same A).
+    p2 = p.replace(link_inertia=7.2e-7, stiffness=1.15, link_damping=1e-3)
+    res2 = linearize(flexible_joint_rig(params=p2, backend=backend),
+                     flexible_joint_rig(params=p2).operating_point(link_angle=0.4, external_torque=0.05))
+    np.testing.assert_allclose(res2.A, expected_12_10(p2)[0], rtol=1e-12, atol=1e-9)
+
+
+def test_lqr_equals_independent_riccati_solution():
+    rig = flexible_joint_rig()
+    Q = np.diag([10, 0.01, 1, 0.01])  # Table 13.1
+    for r in (1e-4, 1e-2, 1.0):
+        R = np.array([[r]])
+        res = lqr(rig, Q, R)
+        A, B = expected_12_10(rig.params)
+        S = scipy.linalg.solve_continuous_are(A, B, Q, R)
+        K = np.linalg.solve(R, B.T @ S)
+        np.testing.assert_allclose(res.K, K, rtol=1e-6)
+        np.testing.assert_allclose(res.S, S, rtol=1e-6)
+        assert np.all(res.closed_loop_poles.real < 0)
+
+
+def test_lqr_closed_loop_converges_and_cost_matches_riccati():
+    rig = flexible_joint_rig()
+    Q, R = np.diag([10, 0.01, 1, 0.01]), np.array([[1e-2]])
+    op = rig.operating_point(link_angle=0.0)
+    diagram, _ = lqr_closed_loop(rig, Q, R, op)
+    ctx = diagram.CreateDefaultContext()
+    x0 = np.array([0.2, 0.0, 0.1, 0.0])
+    ctx.SetContinuousState(x0)
+    diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
+    res = simulate(diagram, ctx, 1.0, log=("state", "motor_torque"), max_step=1e-4, accuracy=1e-8)
+    assert np.max(np.abs(res["state"][-1])) < 1e-3 * np.max(np.abs(x0))
+    # The realised quadratic cost equals x0^T S x0 (Riccati value function).
+    x, u, t = res["state"], res["motor_torque"], res.t
+    stage = np.einsum("ij,jk,ik->i", x, Q, x) + R[0, 0] * u[:, 0] ** 2
+    cost = np.trapezoid(stage, t)
+    assert cost == pytest.approx(x0 @ lqr(rig, Q, R, op).S @ x0, rel=2e-2)
+
+
+def test_joint_rig_lqr_closed_loop_stiffness_against_an_external_push():
+    rig = joint_rig()
+    op = rig.operating_point(pretension=20.0)
+    Q, R = np.diag([1e3, 1e-4, 1e3, 1e3, 1e-4, 1e-4]), np.diag([1.0, 1.0])  # slowest pole -5.6 1/s
+    design = lqr(rig, Q, R, op)
+    diagram, _ = lqr_closed_loop(rig, Q, R, op)
+    ctx = diagram.CreateDefaultContext()
+    ctx.SetContinuousState(op.state)
+    push = 0.01  # Nm on the link
+    diagram.GetInputPort("external_torque").FixValue(ctx, [push])
+    res = simulate(diagram, ctx, 2.5, log=("state",), max_step=1e-3)
+    # Linear prediction of the steady state: 0 = (A - B K) dx + E push, E = d xdot / d tau_ext = e_qdot / m.
+    lin = design.linearization
+    E = np.zeros(rig.num_states)
+    E[1] = 1.0 / rig.params.link_inertia
+    dx = np.linalg.solve(lin.A - lin.B @ design.K, -E * push)
+    np.testing.assert_allclose(res["state"][-1] - op.state, dx, rtol=0.02, atol=1e-6)
+    assert dx[0] > 0  # the link yields in the direction of the push
+
+
+def _flexible_energy(p, x, u=0.0):
+    q, qd, th, thd = x
+    return 0.5 * p.link_inertia * qd ** 2 + 0.5 * p.motor_inertia * thd ** 2 + 0.5 * p.stiffness * (th - q) ** 2 - u * th
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_undamped_flexible_joint_conserves_energy(backend):
+    p = FlexibleJointParams(link_damping=0.0, motor_damping=0.0)
+    rig = flexible_joint_rig(params=p, backend=backend)
+    ctx = rig.context()
+    x0 = np.array([0.1, 0.0, -0.05, 2.0])
+    ctx.SetContinuousState(x0)
+    u = 0.01
+    rig.diagram.GetInputPort("motor_torque").FixValue(ctx, [u])
+    res = simulate(rig.diagram, ctx, 0.01, log=("state",), max_step=1e-4, accuracy=1e-7)
+    E = np.array([_flexible_energy(p, x, u) for x in res["state"]])
+    assert np.max(np.abs(E - E[0])) < 1e-5 * abs(E[0])
+
+
+def _joint_energy(rig, ctx_like_state, u):
+    p = rig.params
+    q, qd, th1, th2, w1, w2 = ctx_like_state
+    x1 = p.motor.pulley_radius * th1 - p.link_pulley_radius * q
+    x2 = p.motor.pulley_radius * th2 + p.link_pulley_radius * q
+    V = float(rig.spring.energy(np.array([x1]))[0] + rig.spring.energy(np.array([x2]))[0])
+    return (0.5 * p.link_inertia * qd ** 2 + 0.5 * p.motor.inertia * (w1 ** 2 + w2 ** 2) + V
+            - u[0] * th1 - u[1] * th2)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_frictionless_joint_rig_conserves_energy_and_friction_dissipates(backend):
+    motor = MotorParams(friction=False, damping=0.0, saturation=False)
+    p = JointRigParams(motor=motor, link_damping=0.0)
+    rig = joint_rig(params=p, backend=backend)
+    op = rig.operating_point(pretension=20.0)
+    x0 = op.state + np.array([0.05, 0.0, 0.0, 0.0, 3.0, -1.0])
+    ctx = rig.context(op)
+    ctx.SetContinuousState(x0)
+    res = simulate(rig.diagram, ctx, 0.01, log=("state",), max_step=1e-4, accuracy=1e-7)
+    E = np.array([_joint_energy(rig, x, op.motor_torque) for x in res["state"]])
+    assert np.max(np.abs(E - E[0])) < 1e-5 * np.max(np.abs(E))
+    # Link kinetic energy from MultibodyPlant equals 1/2 m qdot^2 (the model's own energy).
+    plant_ctx = rig.plant.GetMyContextFromRoot(res.final_context)
+    qd = res["state"][-1, 1]
+    assert rig.plant.CalcKineticEnergy(plant_ctx) == pytest.approx(0.5 * p.link_inertia * qd ** 2, rel=1e-9)
+    # With (3.8) friction and link damping the same start loses energy monotonically (passivity).
+    rig_f = joint_rig(params=JointRigParams(), backend=backend)
+    op_f = rig_f.operating_point(pretension=20.0)
+    ctx = rig_f.context(op_f)
+    ctx.SetContinuousState(op_f.state + np.array([0.05, 0.0, 0.0, 0.0, 3.0, -1.0]))
+    res = simulate(rig_f.diagram, ctx, 0.01, log=("state",), max_step=1e-4, accuracy=1e-7)
+    E = np.array([_joint_energy(rig_f, x, op_f.motor_torque) for x in res["state"]])
+    assert np.all(np.diff(E) <= 1e-9 * np.max(np.abs(E)))
+    assert E[-1] < E[0]
+
+
+def _fd_jacobian(rig, op, h=1e-7):
+    ctx = rig.context(op)
+    n = rig.num_states
+    A = np.zeros((n, n))
+    for j in range(n):
+        for s in (1, -1):
+            x = op.state.copy()
+            x[j] += s * h * max(1.0, abs(x[j]))
+            ctx.SetContinuousState(x)
+            A[:, j] += s * rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+        A[:, j] /= 2 * h * max(1.0, abs(op.state[j]))
+    return A
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_joint_rig_linearisation_agrees_with_finite_differences(backend):
+    rig = joint_rig(params=JointRigParams(motor=MotorParams(ripple=True)), backend=backend)
+    op = rig.operating_point(pretension=25.0, link_angle=0.3, external_torque=0.02)
+    res = linearize(rig, op)
+    A_fd = _fd_jacobian(rig, op)
+    np.testing.assert_allclose(res.A, A_fd, rtol=1e-5, atol=1e-5 * np.max(np.abs(A_fd)))
+
+
+def test_backends_linearise_identically():
+    for build in (tendon_rig, joint_rig):
+        a = linearize(build(backend="python"))
+        b = linearize(build(backend="symbolic"))
+        np.testing.assert_allclose(a.A, b.A, rtol=1e-10, atol=1e-8)
+        np.testing.assert_allclose(a.B, b.B, rtol=1e-12)
+
+
+def test_tendon_rig_linearisation_closed_form():
+    rig = tendon_rig()
+    op = rig.operating_point(tendon_force=30.0)
+    res = linearize(rig, op)
+    p = rig.params.motor
+    k = op.info["tendon_stiffness"]
+    friction_slope = p.coulomb_torque * p.friction_slope + p.viscous_friction  # d(3.8)/dw at w = 0
+    A = np.array([[0, 1], [-p.pulley_radius ** 2 * k / p.inertia, -friction_slope / p.inertia]])
+    np.testing.assert_allclose(res.A, A, rtol=1e-9)
+    assert rig.diagram.GetOutputPort("tendon_force").Eval(rig.context(op))[0] == pytest.approx(30.0, rel=1e-12)
+
+
+def test_joint_stiffness_from_linearisation_rises_with_pretension_as_the_spring_predicts():
+    rig = joint_rig()
+    m, rq = rig.params.link_inertia, rig.params.link_pulley_radius
+    stiffness = []
+    for f0 in (5.0, 10.0, 20.0, 40.0, 80.0):
+        op = rig.operating_point(pretension=f0)
+        A = linearize(rig, op).A
+        K_q = -m * A[1, 0]  # link row: m qdd = -K_q q + ...  (motors held)
+        k_spring = rig.spring.stiffness(rig.spring.inverse_force(np.array([f0, f0])))
+        assert K_q == pytest.approx(rq ** 2 * np.sum(k_spring), rel=1e-9)
+        stiffness.append(K_q)
+    assert np.all(np.diff(stiffness) > 0)
+
+
+def test_operating_point_errors_are_clear():
+    with pytest.raises(ValueError, match="slack"):
+        joint_rig().operating_point(pretension=1.0, external_torque=1.0)
+    with pytest.raises(ValueError, match="params must be JointRigParams"):
+        joint_rig(params=TendonRigParams())
+    with pytest.raises(ValueError, match="backend"):
+        joint_rig(backend="fortran")
+    with pytest.raises(ValueError, match="unknown rig"):
+        build_target("hand-of-god")
+    with pytest.raises(ValueError, match="unknown parameter 'link_mass'"):
+        build_target("joint-rig", {"link_mass": "1"})
+    with pytest.raises(ValueError, match=r"JointRigParams.link_inertia = -1.0 is out of range"):
+        build_target("joint-rig", {"link_inertia": "-1"})

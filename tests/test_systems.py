@@ -1,0 +1,161 @@
+"""Every LeafSystem of the foundation is scalar-convertible, and its AutoDiff
+derivatives equal finite differences of its float dynamics/outputs."""
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
+from pydrake.symbolic import Expression
+
+from awiwi_drake.components import (
+    ConstantCoupling, MotorBank_, SpringBank_, TendonRouting_, build_tendon_drive, tendon_spring)
+from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
+
+RNG = np.random.default_rng(0)
+
+
+def _fix_inputs(system, context, values):
+    for name, v in values.items():
+        system.GetInputPort(name).FixValue(context, v)
+
+
+def _evaluate(system, x, inputs):
+    """(xdot, {output: value}) of a float system at state x with inputs."""
+    ctx = system.CreateDefaultContext()
+    if x.size:
+        ctx.SetContinuousState(x)
+    _fix_inputs(system, ctx, inputs)
+    xdot = system.EvalTimeDerivatives(ctx).CopyToVector() if x.size else np.zeros(0)
+    outs = {system.get_output_port(i).get_name(): system.get_output_port(i).Eval(ctx).copy()
+            for i in range(system.num_output_ports())}
+    return xdot, outs
+
+
+def _check_autodiff_matches_fd(system, x, inputs, rtol=1e-5):
+    """Gradient of xdot and outputs w.r.t. (x, inputs) by AutoDiff vs central differences."""
+    ad = system.ToAutoDiffXd()
+    assert ad is not None
+    names = list(inputs)
+    flat = np.concatenate([x] + [np.asarray(inputs[n], dtype=float) for n in names])
+    sizes = [x.size] + [np.size(inputs[n]) for n in names]
+    z = InitializeAutoDiff(flat).ravel()
+    ctx = ad.CreateDefaultContext()
+    offs = np.cumsum([0] + sizes)
+    if x.size:
+        ctx.SetContinuousState(z[offs[0]:offs[1]])
+    for i, n in enumerate(names):
+        ad.GetInputPort(n).FixValue(ctx, z[offs[i + 1]:offs[i + 2]])
+    grads = {}
+    if x.size:
+        grads["xdot"] = ExtractGradient(ad.EvalTimeDerivatives(ctx).CopyToVector())
+    for i in range(ad.num_output_ports()):
+        port = ad.get_output_port(i)
+        grads[port.get_name()] = ExtractGradient(port.Eval(ctx))
+
+    def f(v):
+        xx = v[offs[0]:offs[1]]
+        inp = {n: v[offs[i + 1]:offs[i + 2]] for i, n in enumerate(names)}
+        xdot, outs = _evaluate(system, xx, inp)
+        return {"xdot": xdot, **outs}
+
+    h = 1e-7 * np.maximum(1.0, np.abs(flat))
+    cols = []
+    for j in range(flat.size):
+        e = np.zeros_like(flat)
+        e[j] = h[j]
+        fp, fm = f(flat + e), f(flat - e)
+        cols.append({k: (fp[k] - fm[k]) / (2 * h[j]) for k in fp})
+    for key, g in grads.items():
+        fd = np.stack([c[key] for c in cols], axis=1) if flat.size else np.zeros_like(g)
+        scale = max(1.0, np.max(np.abs(fd)))
+        np.testing.assert_allclose(g, fd, rtol=rtol, atol=rtol * scale, err_msg=f"gradient of {key}")
+
+
+def test_motor_bank_converts_and_autodiff_matches_fd():
+    p = MotorParams(ripple=True)
+    sys = MotorBank_[float](p, 3)
+    x = np.array([0.1, 0.5, -0.3, 1.0, -2.0, 0.01])
+    _check_autodiff_matches_fd(sys, x, {"motor_torque": np.array([0.3, -0.2, 0.1]),
+                                        "tendon_force": np.array([20.0, 35.0, 5.0])})
+    assert sys.ToSymbolic() is not None  # symbolic conversion too (atan, sin, min/max)
+
+
+def test_motor_bank_load_torque_variant_and_bad_arguments():
+    sys = MotorBank_[float](MotorParams(friction=False, saturation=False), 1, "load_torque")
+    xdot, _ = _evaluate(sys, np.array([0.0, 0.0]), {"motor_torque": [0.5], "load_torque": [0.1]})
+    assert xdot[1] == pytest.approx((0.5 - 0.1) / 2e-3)
+    with pytest.raises(ValueError, match="num_motors"):
+        MotorBank_[float](MotorParams(), 0)
+    with pytest.raises(ValueError, match="load_input"):
+        MotorBank_[float](MotorParams(), 1, "force")
+
+
+@pytest.mark.parametrize("hysteresis", [False, True])
+def test_spring_bank_converts_and_autodiff_matches_fd(hysteresis):
+    spring = tendon_spring(SpringModelParams())
+    sys = SpringBank_[float](spring, 2, HysteresisParams(enabled=hysteresis))
+    inputs = {"elongation": np.array([0.002, 0.004])}
+    x = np.zeros(0)
+    if hysteresis:
+        inputs["elongation_rate"] = np.array([0.01, -0.02])
+        x = np.array([1.0, -2.0])
+    _check_autodiff_matches_fd(sys, x, inputs, rtol=2e-5)
+    assert sys.ToSymbolic() is not None
+
+
+def test_lever_spring_bank_autodiff_matches_fd_and_refuses_symbolic():
+    from awiwi_drake.components import LeverSpringMechanism
+    sys = SpringBank_[float](LeverSpringMechanism(), 2)
+    # force and stiffness gradients (the stiffness slope is a difference of exact values: looser tolerance)
+    _check_autodiff_matches_fd(sys, np.zeros(0), {"elongation": np.array([0.002, 0.004])}, rtol=1e-3)
+    with pytest.raises(ValueError, match="cannot be evaluated symbolically"):
+        SpringBank_[Expression](LeverSpringMechanism(), 1)
+
+
+def test_routing_converts_and_autodiff_matches_fd():
+    coupling = ConstantCoupling([[-0.008, 0.0], [0.008, 0.0], [0.006, -0.005]])
+    sys = TendonRouting_[float](coupling, 0.005, np.array([0.001, 0.002, 0.0]), True)
+    inputs = {"motor_angle": np.array([0.3, -0.1, 0.2]), "joint_angle": np.array([0.2, -0.4]),
+              "tendon_force": np.array([10.0, 20.0, 5.0]), "motor_velocity": np.array([1.0, 2.0, 3.0]),
+              "joint_velocity": np.array([0.5, -0.5])}
+    _check_autodiff_matches_fd(sys, np.zeros(0), inputs)
+    _, outs = _evaluate(sys, np.zeros(0), inputs)
+    P = coupling.P()
+    np.testing.assert_allclose(outs["generalized_force"], -P.T @ inputs["tendon_force"])  # tau = -P^T f
+    np.testing.assert_allclose(outs["elongation"], 0.005 * inputs["motor_angle"] + P @ inputs["joint_angle"]
+                               + [0.001, 0.002, 0.0])
+
+
+def test_routing_virtual_work_is_consistent():
+    # Power balance: tendon forces do work f . xdot = f . (r_m omega) + f . (P qdot)
+    # and the joints receive tau . qdot = -f . (P qdot).
+    coupling = ConstantCoupling(RNG.normal(size=(4, 2)) * 0.01)
+    sys = TendonRouting_[float](coupling, 0.005, None, True)
+    f = RNG.uniform(5, 50, 4)
+    qd = RNG.normal(size=2)
+    _, outs = _evaluate(sys, np.zeros(0), {"motor_angle": np.zeros(4), "joint_angle": np.zeros(2),
+                                           "tendon_force": f, "motor_velocity": np.zeros(4),
+                                           "joint_velocity": qd})
+    assert outs["generalized_force"] @ qd == pytest.approx(-f @ outs["elongation_rate"], rel=1e-12)
+
+
+@pytest.mark.parametrize("hysteresis", [False, True])
+def test_both_drive_backends_give_identical_dynamics(hysteresis):
+    spring = tendon_spring(SpringModelParams())
+    coupling = ConstantCoupling([[-0.008], [0.008]])
+    results = []
+    for backend in ("python", "symbolic"):
+        drive = build_tendon_drive(motor=MotorParams(ripple=True), spring=spring, coupling=coupling,
+                                   offsets=[0.002, 0.003], backend=backend,
+                                   hysteresis=HysteresisParams(enabled=hysteresis))
+        x = RNG.uniform(-0.5, 0.5, drive.num_states) if not results else results[0][0]
+        inputs = {"motor_torque": np.array([0.4, -0.2]), "joint_angle": np.array([0.1])}
+        if hysteresis:
+            inputs["joint_velocity"] = np.array([0.3])
+        xdot, outs = _evaluate(drive.diagram, x, inputs)
+        results.append((x, xdot, outs))
+        assert drive.diagram.ToAutoDiffXd() is not None
+    (_, d0, o0), (_, d1, o1) = results
+    np.testing.assert_allclose(d0, d1, rtol=1e-12, atol=1e-9)
+    assert set(o0) == set(o1)
+    for k in o0:
+        np.testing.assert_allclose(o0[k], o1[k], rtol=1e-12, atol=1e-12, err_msg=k)
