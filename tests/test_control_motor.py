@@ -15,14 +15,17 @@ from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleC
 
 
 def test_friction_identification_recovers_table_3_3():
-    """Simulated Fig 3.3 protocol (ripple on, torque noise 0.01 Nm): (3.8) parameters within 10 / 3 / 8 %."""
+    """Simulated Fig 3.3 protocol (ripple on, torque noise 0.05 Nm, every plateau from rest at zero torque):
+    (3.8) parameters within 4 / 1.5 / 5 % (about 3x the largest error over seeds 0-4: 1.2 / 0.4 / 1.8 %)."""
     motor = MotorParams(ripple=True)  # Table 3.3: gamma1 = 10, gamma2 = 0.5586, gamma3 = 0.0356
-    data = friction_identification_data(motor, FrictionIdentificationParams(num_speeds=6, plateau_time=0.45), seed=3)
+    p = FrictionIdentificationParams(num_speeds=6, plateau_time=0.45)
+    assert p.torque_noise_std == 0.05
+    data = friction_identification_data(motor, p, seed=3)
     fit = fit_friction(data.speed, data.torque)
-    assert fit.gamma1 == pytest.approx(motor.friction_slope, rel=0.10)
-    assert fit.gamma2 == pytest.approx(motor.coulomb_torque, rel=0.03)
-    assert fit.gamma3 == pytest.approx(motor.viscous_friction, rel=0.08)
-    assert fit.rms_residual < 0.03  # Nm; the ripple residue of the plateau means
+    assert fit.gamma1 == pytest.approx(motor.friction_slope, rel=0.04)
+    assert fit.gamma2 == pytest.approx(motor.coulomb_torque, rel=0.015)
+    assert fit.gamma3 == pytest.approx(motor.viscous_friction, rel=0.05)
+    assert fit.rms_residual < 0.02  # Nm; the ripple residue of the plateau means (0.011 observed)
     # central symmetry (3.8): the fitted law is odd
     np.testing.assert_allclose(fit.torque(-data.speed), -fit.torque(data.speed))
 

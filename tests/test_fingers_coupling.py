@@ -97,7 +97,10 @@ def test_stiffness_map_is_symmetric_pd_and_equals_minus_dtau_dq(finger):
         np.testing.assert_allclose(K, K.T, atol=1e-12)
         np.testing.assert_allclose(K, -_fd_jacobian(tau, q0), rtol=1e-6, atol=1e-8)
         # positive definite on the independent DoF (ring/fifth: the DIP is held by the
-        # coupling element, not by tendons, so K itself is singular along q_DIP - c q_PIP)
+        # coupling element, not by tendons, so K itself is singular along q_DIP - c q_PIP).
+        # Constant P: K = S^T P^T K_t P S is PD for any k_t > 0 since P S has full column rank.
+        # Thumb: only under a condition on the forces (here 10-40 N, ratio <= 4), see
+        # test_thumb_stiffness_is_pd_over_the_workspace_for_balanced_forces_with_the_real_spring
         S = c.dof_selection
         assert np.linalg.eigvalsh(S.T @ K @ S).min() > 0
         if c.is_constant:
@@ -170,3 +173,64 @@ def test_bad_inputs_name_the_quantity():
         ThumbParams(palm_points=(0.0,) * 9)
     with pytest.raises(ValueError, match="pip_radius"):
         RingFingerParams(pip_radius=-1.0)
+
+
+def test_finger_structure_flags_are_fixed_by_the_thesis():
+    """pip_dip_coupled / has_hmc are not free: a ring with 8 tendons or a coupled index would
+    silently change the hand's tendon count (38, Table 6.2) and the global tendon order."""
+    from awiwi_drake.parameters.hand import (FifthFingerParams, FingerParams, HandParams,
+                                             IndexFingerParams)
+    for make, field in ((lambda: RingFingerParams(pip_dip_coupled=False), "RingFingerParams.pip_dip_coupled"),
+                        (lambda: IndexFingerParams(pip_dip_coupled=True), "IndexFingerParams.pip_dip_coupled"),
+                        (lambda: IndexFingerParams(has_hmc=True), "IndexFingerParams.has_hmc"),
+                        (lambda: FifthFingerParams(has_hmc=False), "FifthFingerParams.has_hmc"),
+                        (lambda: HandParams(ring=IndexFingerParams()), "HandParams.ring"),
+                        (lambda: finger_coupling("ring", FingerParams()), "ring finger: FingerParams.pip_dip_coupled"),
+                        (lambda: finger_coupling("ring", IndexFingerParams()), "index finger")):
+        with pytest.raises(ValueError, match=field):
+            make()
+    # a generic FingerParams with the ring's structure is accepted and gives the ring's 6 tendons
+    assert finger_coupling("ring", FingerParams(pip_dip_coupled=True)).num_tendons == 6
+
+
+def test_global_tendon_order_mismatch_is_a_value_error(monkeypatch):
+    import awiwi_drake.hand.coupling as hc
+    swapped = dict(TENDON_SLICES, ring=slice(30, 36), fifth=slice(24, 32))
+    monkeypatch.setattr(hc, "TENDON_SLICES", swapped)
+    with pytest.raises(ValueError, match="ring finger's tendons occupy 25-30 of 38"):
+        hc.hand_coupling()
+
+
+def test_thumb_stiffness_is_pd_over_the_workspace_for_balanced_forces_with_the_real_spring():
+    """Condition for K_q > 0 at the thumb base (the only place where the tension Hessian enters):
+    the calibrated spring law (k_t(f) of the lever mechanism + Dyneema, FingerRigParams defaults),
+    all four base tendons taut with forces in [f_min, 170 N] (the spring's range) and
+    f_max / f_min <= 20.  Then on the base workspace [-1.5, 1.5]^2 every combination of forces at
+    the extremes of that band gives lambda_min(K_base) >= 1.09 N m/rad.  The condition is real:
+    a 2 N / 170 N imbalance (ratio 85) makes K indefinite at (0.5, -1.5) (lambda_min = -0.51)."""
+    import itertools
+
+    from awiwi_drake.components.spring import tendon_spring
+    from awiwi_drake.parameters.hand import FingerRigParams
+    c = finger_coupling("thumb")
+    spring = tendon_spring(FingerRigParams.for_finger("thumb").spring)
+
+    def k_of(f):
+        f = np.asarray(f, dtype=float)
+        return np.asarray(spring.stiffness(np.asarray(spring.inverse_force(f), dtype=float)), dtype=float)
+
+    def lam_min(q_base, f_base):
+        f = np.r_[f_base, np.full(4, 20.0)]
+        return np.linalg.eigvalsh(joint_stiffness(c, np.r_[q_base, 0.0, 0.0], f, k_of(f))[:2, :2]).min()
+
+    ax = np.linspace(-1.5, 1.5, 7)
+    worst = np.inf
+    for f_lo in (1.0, 8.5):                           # ratio 20: bands 1-20 N and 8.5-170 N
+        for a, b in itertools.product(ax, ax):
+            for combo in itertools.product((f_lo, 20.0 * f_lo), repeat=4):
+                worst = min(worst, lam_min((a, b), combo))
+    assert worst >= 1.0, worst
+    # equal pretension over the whole spring range: PD, and stiffer with force (lever spring)
+    lam_eq = [min(lam_min((a, b), np.full(4, f0)) for a, b in itertools.product(ax, ax)) for f0 in (1, 20, 170)]
+    assert 0 < lam_eq[0] < lam_eq[1] < lam_eq[2]
+    assert lam_min((0.5, -1.5), (2.0, 170.0, 2.0, 2.0)) < 0.0

@@ -94,3 +94,42 @@ def test_estimator_system_converts_and_its_derivative_is_the_pseudo_inverse():
     np.testing.assert_allclose(ExtractValue(nxt).ravel(), q, atol=1e-6)
     # d q_hat / d elongation = P(q)^+ (least squares on the 8 tendon lengths)
     np.testing.assert_allclose(ExtractGradient(nxt), np.linalg.pinv(c.P(q)), atol=1e-5)
+
+
+def test_projection_onto_the_search_bound_is_reported_not_silent():
+    """A pose beyond the +-pi/2 search bound: the estimate is the projection, and says so."""
+    c = finger_coupling("thumb")
+    h0 = c.h(np.zeros(4))[:4]
+    inside = thumb_base_gradient_search(c, c.h(np.array([1.2, -0.4, 0, 0]))[:4] - h0, (1.1, -0.3), iterations=50)
+    assert not inside.at_limit and inside.projected == 0
+    beyond = np.array([1.8, 0.2, 0.0, 0.0])
+    r = thumb_base_gradient_search(c, c.h(beyond)[:4] - h0, (1.5, 0.2), iterations=50)
+    assert r.at_limit and r.projected > 0
+    assert r.q[0] == pytest.approx(np.pi / 2) and r.limit == pytest.approx(np.pi / 2)
+    # the study flags them per point and counts them per case: on a 3 x 3 grid the warm start jumps
+    # 3 rad between neighbours and 15 iterations end on the bound at three corners
+    study = thumb_estimation_study(c, n_grid=3, iterations=(15,), noise=(0.0,), starts=("warm",))
+    key = (15, 0.0, "warm")
+    on_bound = np.any(np.isclose(np.abs(study.estimates[key]), np.pi / 2), axis=1)
+    np.testing.assert_array_equal(study.at_limit[key], on_bound)
+    assert study.summary_rows()[0]["at_limit"] == 3
+    assert np.all(study.errors[key][study.at_limit[key]] > 0.1)
+    # the 3 kHz estimator warns once and counts
+    from awiwi_drake.hand.estimation import LinkPositionEstimator
+    est = LinkPositionEstimator(c, 0.005, np.zeros(8), iterations=50)
+    ctx = est.CreateDefaultContext()
+    ctx.SetDiscreteState(beyond - [0.3, 0, 0, 0])
+    est.GetInputPort("motor_angle").FixValue(ctx, np.zeros(8))
+    est.GetInputPort("elongation").FixValue(ctx, c.h(beyond) - c.h(np.zeros(4)))
+    with pytest.warns(RuntimeWarning, match="search bound"):
+        est.EvalUniquePeriodicDiscreteUpdate(ctx)
+    assert est.limit_hits == 1
+
+
+def test_estimator_is_not_symbolic_and_says_so():
+    """Algorithm 1 branches on cost values: float and AutoDiffXd only (T_list), a clear error otherwise."""
+    from awiwi_drake.hand.estimation import LinkPositionEstimator
+    est = LinkPositionEstimator(finger_coupling("thumb"), 0.005, np.zeros(8))
+    est.ToAutoDiffXd()
+    with pytest.raises(RuntimeError, match="LinkPositionEstimator_.*does not support scalar conversion.*Expression"):
+        est.ToSymbolic()

@@ -95,19 +95,27 @@ def test_coriolis_term_system_converts_and_satisfies_skew_symmetry():
 
 
 def test_fig_5_7_coriolis_effect_vanishes_at_least_quadratically_with_the_deflection():
-    """Fig 5.7: release a PIP deflection with motors fixed, with and without C(q, v) v.
+    """Fig 5.7: release an MCP flexion deflection (the thesis's "second joint", abduction
+    at 0) with motors fixed, with and without C(q, v) v.
 
-    Coriolis/centrifugal torques scale with v^2 and v with the deflection d, so
-    the trajectory difference must shrink at least 4x when d halves.  The
-    abduction joint barely moves in the full model (thesis: 'remaining at 0').
+    v scales with the deflection d and the Coriolis/centrifugal torques with v^2,
+    so the trajectory difference shrinks at least 4x when d halves.  Measured
+    (0.05 -> 0.025 rad, 0.02 s): 4.0x on the abduction (the lateral offsets of
+    M76/M98 make the finger non-planar: a v^2 torque already at q = 0) and 8.0x on
+    MCP/PIP/DIP (in a planar chain the terms are ~ sin(q) v^2 ~ d^3).  We assert
+    >= 3.9x and >= 7x.  The thesis's 1e-3 rad bound over 0.2 s holds at 0.025 rad.
     """
     from awiwi_drake.hand.studies import coriolis_study
     big = coriolis_study("index", deflection=0.05, t_final=0.02)
     small = coriolis_study("index", deflection=0.025, t_final=0.02)
-    assert np.all(big.max_abs_difference >= 3.5 * small.max_abs_difference)
-    assert np.all(small.max_abs_difference < 1e-3)          # the thesis's bound holds at 0.025 rad
-    assert np.max(np.abs(big.q_full[:, 0])) < 1e-3 * np.max(np.abs(big.q_full[:, 2])) * 20
-    assert np.max(np.abs(big.q_full[:, 2])) == pytest.approx(0.05, rel=1e-6)   # released from rest
+    ratio = big.max_abs_difference / small.max_abs_difference
+    assert ratio[0] >= 3.9 and np.all(ratio[1:] >= 7.0), ratio
+    np.testing.assert_allclose(big.q_full[0], [0.0, 0.05, 0.0, 0.0])           # the MCP is the deflected joint
+    assert np.max(np.abs(big.q_full[:, 1])) == pytest.approx(0.05, rel=1e-6)   # released from rest
+    # the abduction is "not influenced" (thesis): < 0.2 % of the MCP deflection
+    assert np.max(np.abs(big.q_full[:, 0])) < 2e-3 * 0.05
+    full = coriolis_study("index", deflection=0.025, t_final=0.2, num_samples=201)
+    assert np.all(full.max_abs_difference < 1e-3)      # the thesis's bound, its 0.2 s horizon
 
 
 def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating_elongation():
@@ -131,3 +139,81 @@ def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating
     ad.get_input_port(0).FixValue(actx, InitializeAutoDiff(q).ravel())
     J = ExtractGradient(ad.get_output_port(0).Eval(actx))
     np.testing.assert_allclose(J, -c.P(q) / r_m, atol=1e-12)
+
+
+@pytest.mark.parametrize("finger", ["ring", "fifth"])
+def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
+    """A static torque on the DIP, motors held: the coupling error q_DIP - c q_PIP equals
+    c^T K_q^-1 e_DIP tau (K_q: the operating point's joint stiffness, tendons + coupling
+    element) = tau / (k_c (1 + c^2)), since the PIP/DIP tendon pair acts along (r2, r3),
+    orthogonal to the coupling direction.  Checked on the nonlinear diagram's equilibrium."""
+    from scipy.optimize import fsolve
+
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.hand.plant import coupling_compliance
+    from awiwi_drake.hand.studies import fixed_motor_diagram
+    from awiwi_drake.parameters.hand import FingerRigParams
+    p = FingerRigParams.for_finger(finger)
+    fp = p.finger
+    rig = finger_diagram(finger=finger, params=p, backend="python")
+    op = rig.operating_point(pretension=p.pretension)
+    c = rig.extra["models"].coupling_vector
+    comp = coupling_compliance(op.info["joint_stiffness"], c)
+    assert comp == pytest.approx(1.0 / (fp.coupling_stiffness * (1 + fp.dip_pip_ratio ** 2)), rel=1e-9)
+
+    diagram, plant = fixed_motor_diagram(finger, p)
+    n = plant.num_positions()
+    ctx = diagram.CreateDefaultContext()
+    tau = np.zeros(n)
+    tau[-1] = 0.02                       # N m on the DIP (1 N at the 2 cm distal phalanx)
+    diagram.GetInputPort("external_torque").FixValue(ctx, tau)
+
+    def vdot(q):
+        ctx.SetContinuousState(np.r_[q, np.zeros(n)])
+        return diagram.EvalTimeDerivatives(ctx).CopyToVector()[n:]
+
+    q_eq, info, ok, msg = fsolve(vdot, np.zeros(n), full_output=True, xtol=1e-13)
+    assert ok == 1, msg
+    err = c @ q_eq
+    # exact up to the solver: the coupling element is linear and the tendon pair cannot see c
+    assert err == pytest.approx(comp * tau[-1], rel=1e-4), (err, comp * tau[-1])
+    assert err > 0.0                      # the DIP gives way in the direction it is pushed
+
+
+def test_fifth_hmc_moves_the_finger_towards_the_palm_centre():
+    """Section 5.5: the HMC gives 'a locking motion towards the palm center'.  The chosen axis is
+    perpendicular to the metacarpal (a rotation about the bone's own axis would spin it in place,
+    leaving the finger base where it is) and flexing it brings base and fingertip closer."""
+    from awiwi_drake.hand.plant import palm_centre
+    hp = HandParams()
+    plant, models = make_hand_plant(hp)
+    ctx = plant.CreateDefaultContext()
+    m = models["fifth"]
+    hmc, abd = m.joints[0], m.joints[1]
+    X_WB = plant.CalcRelativeTransform(ctx, plant.world_frame(), hmc.frame_on_parent())
+    axis_W = X_WB.rotation().multiply(hmc.revolute_axis())
+    bone_W = X_WB.rotation().multiply([1.0, 0.0, 0.0])            # the metacarpal runs along base x
+    assert abs(axis_W @ bone_W) < 1e-15
+
+    def points(q5h):
+        q = np.zeros(plant.num_positions())
+        q[hmc.position_start()] = q5h
+        plant.SetPositions(ctx, q)
+        base = plant.CalcPointsPositions(ctx, abd.frame_on_child(), np.zeros((3, 1)), plant.world_frame())
+        tip = plant.CalcPointsPositions(ctx, m.tip_body.body_frame(), m.tip_offset.reshape(3, 1),
+                                        plant.world_frame())
+        return base.ravel(), tip.ravel()
+
+    c = palm_centre(hp)
+    b0, t0 = points(0.0)
+    for q5h in (0.1, 0.3):
+        b, t = points(q5h)
+        # the base moves on a circle of radius hmc_offset (not in place), towards the palm centre
+        assert np.linalg.norm(b - b0) == pytest.approx(2 * hp.fifth.hmc_offset * np.sin(q5h / 2), rel=1e-12)
+        assert np.linalg.norm(b - c) < np.linalg.norm(b0 - c)
+        assert np.linalg.norm(t - c) < np.linalg.norm(t0 - c)
+        assert t[2] > t0[2] and t[1] > t0[1]      # palmar (+z) and radially, towards the thumb side (+y)
+    # first order: d|tip - c|/dq < 0 at the straight pose (a pure flexion axis would give 0 here)
+    eps = 1e-6
+    d = (np.linalg.norm(points(eps)[1] - c) - np.linalg.norm(points(-eps)[1] - c)) / (2 * eps)
+    assert d < -0.1 * hp.fifth.hmc_offset

@@ -37,6 +37,13 @@ def test_animate_writes_self_contained_html(tmp_path, capsys):
     assert main(["animate", "--out", str(out), "--target", "index", "--duration", "0.15"]) == 0
     text = out.read_text()
     assert "<html" in text.lower() and "meshcat" in text.lower() and len(text) > 10_000
+    # self-contained: no script or stylesheet fetched from the network, the meshcat code is inline
+    import re
+    assert not re.search(r"<script[^>]*\bsrc\s*=\s*[\"']?(https?:)?//", text, re.I)
+    assert not re.search(r"<link[^>]*\bhref\s*=\s*[\"']?(https?:)?//", text, re.I)
+    inline = re.findall(r"<script[^>]*>(.*?)</script>", text, re.S | re.I)
+    assert max(len(js) for js in inline) > 100_000          # the bundled meshcat viewer
+    assert text.count("viewer.handle_command_bytearray(") >= 10   # the scene and the recording, embedded as data
     assert main(["animate", "--out", str(tmp_path / "x.txt")]) == 2
     assert "html" in capsys.readouterr().err
 

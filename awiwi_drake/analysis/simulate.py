@@ -271,6 +271,9 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
     """
     if not (np.isfinite(t_final) and t_final > 0):
         raise ValueError(f"simulate: t_final = {t_final} must be finite and > 0 [s]")
+    if not isinstance(fixed_step, bool):
+        raise ValueError(f"simulate: fixed_step = {fixed_step!r} must be True or False "
+                         "(the step size is max_step)")
     ports = _resolve_ports(diagram, log)
     sim = Simulator(diagram, context) if context is not None else Simulator(diagram)
     ResetIntegratorFromFlags(sim, integrator, max_step)

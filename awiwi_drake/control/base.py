@@ -401,6 +401,11 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     try:
         diagram = builder.Build()
     except RuntimeError as exc:
+        if "already been built into" in str(exc):
+            raise ValueError(
+                f"closed_loop: rig {getattr(rig, 'name', '?')!r} or controller {controller.get_name()!r} is already "
+                f"part of another closed loop (a Drake system belongs to one diagram): build a fresh rig and "
+                f"controller for each closed_loop call (e.g. rig = tendon_rig(); ctrl = factory(rig))") from None
         if "algebraic loop" not in str(exc):
             raise
         raise ValueError(

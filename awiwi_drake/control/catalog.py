@@ -33,7 +33,7 @@ _BUILTIN = [
     ("two-time-scale", _lazy("impedance", "impedance_controller", mode="two-time-scale"), _JOINTS,
      "joint impedance (11.4) over a motor-position tendon loop (11.3)"),
     ("cascaded", _lazy("impedance", "impedance_controller", mode="cascaded"), _JOINTS,
-     "joint impedance (11.4) over a linearising force loop (11.16)"),
+     "joint impedance (11.4) over an exactly linearising force loop (11.16), load observer"),
     ("pole-placement", _lazy("pole_placement", "pole_placement_controller"), _JOINTS,
      "state feedback placing a double oscillator (12.13), Table 12.1"),
     ("lqr", _lazy("lqr", "lqr_controller"), _JOINTS,

@@ -3,7 +3,8 @@
 :func:`run_standard_tests` runs, on one :class:`~awiwi_drake.control.base.ClosedLoop`,
 
 * ``step``: reference step ``r0 -> r0 + step`` (rise time 10-90 %, overshoot,
-  2 % settling time, steady-state error, damping ratio from the overshoot);
+  settling time in ``settling_band`` (2 %; 5 % on the noisy tendon rig), steady-state
+  error, damping ratio of a fitted 2nd-order model);
 * ``sine``: sinusoidal tracking (RMS error, gain and phase at the frequency);
 * ``disturbance``: an ``external_torque`` step at constant reference
   (achieved stiffness ``dtau / dq``; link rigs only);
@@ -34,7 +35,7 @@ from awiwi_drake.analysis.simulate import SimulationDivergedError
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
-__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test",
+__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
            "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
            "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
@@ -64,7 +65,7 @@ class Metrics:
     test: str
     rise_time: float = math.nan          # s, 10-90 % of the step
     overshoot: float = math.nan          # % of the step size
-    settling_time: float = math.nan      # s, 2 % band of the step size
+    settling_time: float = math.nan      # s, band CompareTestParams.settling_band (2 %; 5 % on the tendon rig)
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
     peak_input: float = math.nan         # max |motor_torque_command| [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
@@ -77,11 +78,12 @@ class Metrics:
     bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
-    status: str = "ok"                   # "ok" or "diverged: <reason>" (then the metrics are NaN)
+    status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
+    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
-NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status")]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status", "flags")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
@@ -123,8 +125,9 @@ class MetricsTable:
             lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
             lines.append("|---" * (len(cols) + 2) + "|")
             for r in rows:
+                status = f"{r.status}: {r.flags}" if r.flags else r.status
                 lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
-                             + f" | {r.status} |")
+                             + f" | {status} |")
             lines.append("")
         return "\n".join(lines)
 
@@ -285,6 +288,10 @@ def _damping_from_overshoot(os_frac: float) -> float:
     return -lg / math.sqrt(math.pi ** 2 + lg ** 2)
 
 
+_XI_BOUNDS = (0.05, 3.0)  # damping-ratio bounds of fit_second_order_step
+_XI_MARGIN = 1e-3        # relative margin: a fitted value this close to a bound is "at the bound"
+
+
 def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: float = 0.0,
                  band: float = 0.02, fit: bool = False) -> dict[str, float]:
     """Rise time (10-90 %), overshoot [% of the step], settling time (band), error, damping ratio.
@@ -314,7 +321,9 @@ def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: flo
     out["overshoot"] = 100.0 * os_frac
     if fit:
         xi = fit_second_order_step(t, y, r0, r1, t_step)["damping_ratio"]
-        out["damping_ratio"] = xi if 0.05 < xi < 2.99 else math.nan  # at a bound: not a 2nd-order response
+        lo, hi = _XI_BOUNDS
+        # at (or within 0.1 % of) a bound of the fit: not a 2nd-order response -> NaN
+        out["damping_ratio"] = xi if lo * (1 + _XI_MARGIN) < xi < hi * (1 - _XI_MARGIN) else math.nan
     else:
         out["damping_ratio"] = _damping_from_overshoot(os_frac)
     outside = np.nonzero(np.abs(e - 1.0) > band)[0]
@@ -437,7 +446,30 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         run.meta.update(freq=f, gain=g)
         for k_, v in _sweep_metrics(f, g).items():
             setattr(m, k_, v)
+    flag_run(m, p)
     return run, m
+
+
+def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
+    """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
+
+    Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``slack`` (slack
+    fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band),
+    ``negative stiffness`` (disturbance test: the link moves *with* the load).
+    """
+    flags = []
+    if m.saturated_fraction > params.max_saturated_fraction:
+        flags.append(f"saturated {100 * m.saturated_fraction:.0f} %")
+    if m.slack_fraction > params.max_slack_fraction:
+        flags.append(f"slack {100 * m.slack_fraction:.0f} %")
+    if m.test == "step" and not math.isfinite(m.settling_time):
+        flags.append("not settled")
+    if m.test == "disturbance" and m.stiffness < 0:
+        flags.append("negative stiffness")
+    m.flags = "; ".join(flags)
+    if flags and m.status == "ok":
+        m.status = "flagged"
+    return m
 
 
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
@@ -576,7 +608,7 @@ def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> di
     best = None
     for z0 in (0.4, 0.7, 1.2):
         sol = least_squares(lambda p: model(p) - e, [wn0, z0, 1.0, 0.0],
-                            bounds=([1e-3, 0.05, 0.5, 0.0], [1e5, 3.0, 1.5, 0.5 * tt[-1]]))
+                            bounds=([1e-3, _XI_BOUNDS[0], 0.5, 0.0], [1e5, _XI_BOUNDS[1], 1.5, 0.5 * tt[-1]]))
         if best is None or sol.cost < best.cost:
             best = sol
     wn, z, fin, td = best.x

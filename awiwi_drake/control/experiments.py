@@ -22,12 +22,13 @@ from awiwi_drake.control.sensors import force_sensor
 from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_force_without_feedforward,
                                               tendon_pd_controller, tendon_scheduled_controller)
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
-from awiwi_drake.parameters.control import (ForceSensorParams, ImpedanceParams, LqrParams, SdreJointParams,
-                                            SdreTendonParams, TendonForceGains)
+from awiwi_drake.parameters.control import (ForceSensorParams, ImpedanceParams, ImpedanceSweepParams, LqrParams,
+                                            SdreJointParams, SdreTendonParams, TendonForceGains)
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
 
 __all__ = ["TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "tendon_sdre_experiment",
-           "lqr_trajectories", "joint_sdre_experiment", "impedance_step", "impedance_sweep"]
+           "lqr_trajectories", "joint_sdre_experiment", "impedance_step", "impedance_sweep",
+           "impedance_frequency_response"]
 
 RATE = 3000.0
 DT = 1.0 / RATE
@@ -121,7 +122,12 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
 def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float]] = ((0.05, 40.0), (0.5, 45.0)),
                            t_final: float = 1.0, params: SdreTendonParams | None = None,
                            fmap: ForceMap | None = None) -> dict:
-    """Fig 14.3: 0 -> 40 -> 45 N with SDRE gains (200 Hz) or gains frozen at 30 N."""
+    """Fig 14.3: 0 -> 40 -> 45 N with SDRE gains (200 Hz) or gains frozen at 30 N.
+
+    ``torque`` is the command; ``saturated`` flags samples beyond the rig's ``torque_limit`` (3 Nm): with the
+    Table 14.1 weights (position gain ~ sqrt(Q11 / R) = 1000 Nm/rad) both controllers saturate during most of
+    the 0 -> 40 N transient.
+    """
     fmap = fmap or force_map(tendon_rig())
     rig = tendon_rig(backend="symbolic")
     loop = closed_loop(rig, tendon_sdre_controller(rig, params, fixed=fixed, fmap=fmap), rate_hz=RATE)
@@ -129,8 +135,10 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
     log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force", "controller_gain", "motor_torque"),
                         inputs={"tendon_force_reference": _reference_schedule(schedule, 0.0)})
+    u = log["motor_torque"][:, 0]
+    limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
     return dict(t=log["t"], force=log["tendon_force"][:, 0], reference=log["tendon_force_reference"][:, 0],
-                gain=log["controller_gain"], torque=log["motor_torque"][:, 0])
+                gain=log["controller_gain"], torque=u, torque_limit=limit, saturated=np.abs(u) > limit)
 
 
 def lqr_trajectories(r_values: Sequence[float] = (1e-4, 1e-2, 1.0), *, x0=(0.3, 0.0, 0.3, 0.0),
@@ -193,11 +201,22 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
     return dict(t=log["t"], link_angle=log["link_angle"][:, 0], reference=log["link_angle_reference"][:, 0], **m)
 
 
-def impedance_sweep(mode: str = "cascaded", *, joint_stiffness: float = 0.3, rig: str = "joint_rig",
-                    stiffness: float | None = None, pretension: float | None = None, f_start: float = 2.0,
-                    f_stop: float = 20.0, duration: float = 3.0, amplitude: float = 0.02) -> dict:
-    """Fig 11.4: chirp of the link reference, gain diagram |q / q_des|(f)."""
+def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint_rig",
+                    stiffness: float | None = None, pretension: float | None = None, f_start: float | None = None,
+                    f_stop: float | None = None, duration: float | None = None,
+                    amplitude: float | None = None) -> dict:
+    """Fig 11.4: chirp of the link reference (3 kHz loop), gain diagram |q / q_des|(f).
+
+    Defaults (:class:`ImpedanceSweepParams`): the two-time-scale (singular perturbation) impedance of
+    Fig 11.4 on the antagonistic joint rig, Kp_imp = 4 Nm/rad, chirp 5-60 Hz over 3 s, 0.02 rad.
+    """
     from awiwi_drake.control.compare import gain_diagram
+    sp = ImpedanceSweepParams()
+    joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
+    f_start = sp.f_start if f_start is None else f_start
+    f_stop = sp.f_stop if f_stop is None else f_stop
+    duration = sp.duration if duration is None else duration
+    amplitude = sp.amplitude if amplitude is None else amplitude
     r = _joint(rig, stiffness=stiffness, pretension=pretension)
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=RATE)
@@ -210,3 +229,36 @@ def impedance_sweep(mode: str = "cascaded", *, joint_stiffness: float = 0.3, rig
     f, g = gain_diagram(log["t"], log["link_angle_reference"][:, 0], log["link_angle"][:, 0], f_start, f_stop)
     i = int(np.argmax(g))
     return dict(freq=f, gain=g, resonance_hz=float(f[i]), peak_gain=float(g[i]))
+
+
+def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffness: float | None = None,
+                                 rig: str = "joint_rig", stiffness: float | None = None,
+                                 pretension: float | None = None, freqs: Sequence[float] | None = None) -> dict:
+    """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize`` (python backend).
+
+    The exact small-signal counterpart of :func:`impedance_sweep` (no 3 kHz hold); also returns the
+    closed-loop eigenvalues.  Default frequencies: 0.5-70 Hz (Fig 11.4).
+    """
+    from pydrake.systems.primitives import Linearize
+    sp = ImpedanceSweepParams()
+    joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
+    freqs = np.linspace(0.5, 70.0, 700) if freqs is None else np.asarray(freqs, float)
+    if rig == "flexible_joint":
+        r = flexible_joint_rig(params=FlexibleJointParams() if stiffness is None else
+                               FlexibleJointParams(stiffness=stiffness), backend="python")
+    else:
+        r = joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
+                      backend="python")
+    loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
+                       rate_hz=None)
+    op = r.operating_point()
+    ctx = loop.create_context(state=op.state, references={"link_angle_reference": 0.0})
+    d = loop.diagram
+    lin = Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
+                    output_port_index=d.GetOutputPort("link_angle").get_index())
+    A, B, C, D = (np.asarray(m) for m in (lin.A(), lin.B(), lin.C(), lin.D()))
+    eye = np.eye(A.shape[0])
+    g = np.array([abs((C @ np.linalg.solve(2j * np.pi * f * eye - A, B) + D)[0, 0]) for f in freqs])
+    i = int(np.argmax(g))
+    return dict(freq=freqs, gain=g, resonance_hz=float(freqs[i]), peak_gain=float(g[i]),
+                eigenvalues=np.linalg.eigvals(A))

@@ -28,12 +28,42 @@ tendon ``i`` on a pulley of radius ``r_m``):
 
     with ``Kp_m = B w_m^2``, ``Kd_m = 2 xi_m w_m B``.
 ``cascaded`` (11.16)
-    linearising force controller so that the force error obeys
-    ``e_f'' + 2 xi_f w_f e_f' + w_f^2 e_f = 0`` (the cascaded form needs a law in
-    ``f``, not ``theta``, section 11.7)::
+    linearising force controller (the cascaded form needs a law in ``f``, not
+    ``theta``, section 11.7).  With the link model ``M qdd = c.f - d_q qdot``
+    (+ the unknown external torque) and the drive ``B thdd = u - r_m f + b(thetadot)``
+    the force obeys ``fdd = (k r_m / B)(u - r_m f + b) - k c qdd`` (the
+    ``k'(x) xdot^2`` term of a nonlinear spring is neglected: it vanishes at rest
+    and in the linearisation).  The law::
 
-        u = r_m f + b_hat + (B / alpha) (w_f^2 (f_des - f) + 2 xi_f w_f (fdot_des - fdot)),
-        fdot = k_t (r_m thetadot - c qdot),  fdot_des = -c^+ Kp_imp qdot
+        u = r_m f - b_hat + (B / alpha) (fdd_des + k c qdd_hat
+                                         + 2 xi_f w_f (fdot_des - fdot) + w_f^2 (f_des - f)),
+
+    with ``alpha = r_m k``, ``fdot = k (r_m thetadot - c qdot)``, the model
+    estimates ``qdd_hat = (c.f - d_q qdot + tau_hat) / M``,
+    ``qddd_hat = (c.fdot - d_q qdd_hat) / M`` and the derivatives of
+    ``f_des = f_pre + c^+ (Kp_imp (q_des - q) + Kd_imp (qdot_des - qdot))``::
+
+        fdot_des = c^+ (Kp_imp (qdot_des - qdot) + Kd_imp (qdd_des - qdd_hat)),
+        fdd_des  = c^+ (Kp_imp (qdd_des - qdd_hat) - Kd_imp qddd_hat),
+
+    makes the force error ``e_f = f_des - f`` of every tendon obey
+    ``e_f'' + 2 xi_f w_f e_f' + w_f^2 e_f = 0`` exactly (for the model) and the
+    link ``M qdd + (d_q + Kd_imp) qdot + Kp_imp (q - q_des) = -c.e_f``: a cascade
+    whose linearisation has the designed force pole pair (once per tendon) and
+    the link pair (tested with Drake's ``Linearize`` of the continuous loop).
+    ``qdd_hat`` includes an external-torque estimate ``tau_hat`` from a
+    momentum observer (De Luca's generalised-momentum residual, one continuous
+    state ``z``): ``zdot = c.f - d_q qdot + tau_hat``, ``tau_hat = K_O (M qdot - z)``,
+    so ``tau_hat' = K_O (tau_ext - tau_hat)``.  Without it a constant external
+    torque enters ``qdd_hat`` as ``tau_ext / M`` (M = 4e-7 kg m^2 on the flexible
+    joint) and biases the force loop so much that the static joint stiffness
+    becomes *negative* (-0.003 Nm/rad measured instead of Kp_imp = 0.45).  With it
+    the loop is a triangular cascade (observer error -> force errors -> link):
+    eigenvalues = force pair(s) + link pair + ``-K_O``, and at rest under a
+    load ``f = f_des`` (stiffness = Kp_imp).
+    The reference is a set point (``link_angle_reference`` only):
+    ``qdot_des = qdd_des = 0`` between its changes (:meth:`ImpedanceLaw.desired_force_rates`
+    takes them for trajectory use).
 
 Rigs: the flexible joint (``c = [1]``, ``r_m = 1``: the "tendon force" is the
 spring torque) and the antagonistic joint rig (``c = [r_q, -r_q]``).
@@ -45,14 +75,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import smax
-from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain
+from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain
 from awiwi_drake.control.registry import rig_kind
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import ImpedanceParams
 
-__all__ = ["Transmission", "transmission", "ImpedanceLaw", "MotorPdLaw", "impedance_controller", "MODES"]
+__all__ = ["Transmission", "transmission", "ImpedanceLaw", "CascadedImpedanceController_",
+           "CascadedImpedanceController", "LinkReferenceMotorPdLaw", "impedance_controller", "MODES"]
 
 MODES = ("pd", "two-time-scale", "cascaded")
 
@@ -67,6 +100,8 @@ class Transmission:
     motor: MotorParams
     compensate_friction: bool
     min_alpha: float = 0.0    # floor of r_m k_t in the laws: a slack tendon has k_t = 0
+    link_inertia: float = 0.0  # M [kg m^2] of the link model (cascaded law)
+    link_damping: float = 0.0  # d_q [Nm s/rad] of the link model (cascaded law)
 
     @property
     def pseudo_inverse(self) -> np.ndarray:
@@ -82,13 +117,14 @@ def transmission(rig: Any) -> Transmission:
         # the rig's motor: no (3.8) friction, linear damping d_theta (12.8); nothing to compensate
         motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                             saturation=False)
-        return Transmission(np.array([1.0]), 1.0, np.array([0.0]), motor, False, 0.05 * p.stiffness)
+        return Transmission(np.array([1.0]), 1.0, np.array([0.0]), motor, False, 0.05 * p.stiffness,
+                            p.link_inertia, p.link_damping)
     if kind == "joint_rig":
         rq = p.link_pulley_radius
         k_pre = float(np.ravel(rig.operating_point().info["tendon_stiffness"])[0])
         # floor: 5 % of the stiffness at pretension (chosen: keeps the laws finite when a tendon goes slack)
         return Transmission(np.array([rq, -rq]), p.motor.pulley_radius, np.full(2, p.pretension), p.motor, True,
-                            0.05 * p.motor.pulley_radius * k_pre)
+                            0.05 * p.motor.pulley_radius * k_pre, p.link_inertia, p.link_damping)
     raise ValueError(f"impedance control needs a joint rig (flexible-joint or joint-rig), got {kind!r}")
 
 
@@ -98,6 +134,9 @@ class ImpedanceLaw(StaticLaw):
     def __init__(self, tr: Transmission, params: ImpedanceParams | None = None, *, mode: str = "two-time-scale"):
         if mode not in MODES[1:]:
             raise ValueError(f"impedance mode {mode!r} unknown; use one of {', '.join(MODES[1:])}")
+        if mode == "cascaded":
+            check_gain("link_inertia", tr.link_inertia, owner="cascaded transmission")
+            check_gain("link_damping", tr.link_damping, owner="cascaded transmission", allow_zero=True)
         p = params or ImpedanceParams()
         self.name = mode.replace("-", "_")
         self.mode, self.tr, self.params = mode, tr, p
@@ -115,29 +154,106 @@ class ImpedanceLaw(StaticLaw):
                        "tendon_force": n, "tendon_stiffness": n}
         self.output_size = n
 
-    def desired_forces(self, q_des, q, qdot):
-        tau = self.kp_imp * (q_des - q) - self.kd_imp * qdot
+    def desired_forces(self, q_des, q, qdot, qdot_des=0.0):
+        """``f_des = f_pre + c^+ (Kp_imp (q_des - q) + Kd_imp (qdot_des - qdot))`` (11.4)."""
+        tau = self.kp_imp * (q_des - q) + self.kd_imp * (qdot_des - qdot)
         return self.tr.pretension + self.tr.pseudo_inverse * tau
 
+    def link_model(self, f, fdot, qdot, tau_hat=0.0):
+        """Model estimates ``(qdd_hat, qddd_hat)`` from ``M qdd = c.f - d_q qdot + tau_hat`` (``tau_hat`` const)."""
+        tr = self.tr
+        qdd = (tr.coupling @ f - tr.link_damping * qdot + tau_hat) / tr.link_inertia
+        qddd = (tr.coupling @ fdot - tr.link_damping * qdd) / tr.link_inertia
+        return qdd, qddd
+
+    def desired_force_rates(self, qdot, qdd, qddd, qdot_des=0.0, qdd_des=0.0):
+        """``(fdot_des, fdd_des)``: time derivatives of :meth:`desired_forces` (``qddd_des = 0``)."""
+        c_plus = self.tr.pseudo_inverse
+        fdot_des = c_plus * (self.kp_imp * (qdot_des - qdot) + self.kd_imp * (qdd_des - qdd))
+        fdd_des = c_plus * (self.kp_imp * (qdd_des - qdd) - self.kd_imp * qddd)
+        return fdot_des, fdd_des
+
     def __call__(self, u):
+        return self.command(u)
+
+    def command(self, u, tau_hat=0.0):
+        """Motor torques; ``tau_hat``: external link torque estimate (cascaded law only)."""
         from awiwi_drake.components import motor_friction_torque
         tr = self.tr
         q, qd = u["link_angle"][0], u["link_velocity"][0]
         w, f, k = u["motor_velocity"], u["tendon_force"], u["tendon_stiffness"]
         f_des = self.desired_forces(u["link_angle_reference"][0], q, qd)
         B, r = tr.motor.inertia, tr.pulley_radius
-        comp = -motor_friction_torque(w, tr.motor) if (tr.compensate_friction and self.params.friction_compensation) \
-            else 0.0 * w
         alpha = smax(r * k, tr.min_alpha)
         if self.mode == "two-time-scale":
+            comp = -motor_friction_torque(w, tr.motor) if (tr.compensate_friction and
+                                                           self.params.friction_compensation) else 0.0 * w
             theta_err = (f_des - f) / alpha  # theta_des - theta
             return r * f + self.kp_m * theta_err - self.kd_m * w + comp
+        # linearising force law: model-based, so the modelled motor damping/friction is always cancelled
+        comp = -motor_friction_torque(w, tr.motor) if self.params.friction_compensation else 0.0 * w
         fdot = k * (r * w - tr.coupling * qd)
-        fdot_des = tr.pseudo_inverse * (-self.kp_imp * qd)  # d/dt f_des without the acceleration term
-        return r * f + comp + (B / alpha) * (self.kf * (f_des - f) + self.kfd * (fdot_des - fdot))
+        qdd, qddd = self.link_model(f, fdot, qd, tau_hat)
+        fdot_des, fdd_des = self.desired_force_rates(qd, qdd, qddd)
+        return r * f + comp + (B / alpha) * (fdd_des + k * tr.coupling * qdd + self.kfd * (fdot_des - fdot)
+                                             + self.kf * (f_des - f))
 
 
-class MotorPdLaw(StaticLaw):
+@TemplateSystem.define("CascadedImpedanceController_")
+def CascadedImpedanceController_(T):
+    """The cascaded law (11.16) with a momentum observer of the external link torque (one continuous state).
+
+    Inputs: the law's ports; outputs ``motor_torque`` (feedthrough) and
+    ``external_torque_estimate`` [Nm].  State ``z`` [kg m^2 rad/s] starts at 0
+    (exact for a link at rest: ``tau_hat = K_O (M qdot - z)``).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, law: "ImpedanceLaw", observer_gain: float, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(law, ImpedanceLaw) or law.mode != "cascaded":
+                raise ValueError("CascadedImpedanceController: law must be a cascaded ImpedanceLaw")
+            self.law = law
+            self.observer_gain = check_gain("observer_bandwidth", observer_gain, owner=law.name)
+            self._ports = {nm: self.DeclareVectorInputPort(nm, int(sz)) for nm, sz in law.inputs.items()}
+            self.DeclareContinuousState(1)
+            tickets = {p.ticket() for p in self._ports.values()} | {self.all_state_ticket()}
+            self.DeclareVectorOutputPort(COMMAND_PORT, int(law.output_size), self._calc,
+                                         prerequisites_of_calc=tickets)
+            self.DeclareVectorOutputPort("external_torque_estimate", 1, self._calc_estimate,
+                                         prerequisites_of_calc={self._ports["link_velocity"].ticket(),
+                                                                self.all_state_ticket()})
+            self.set_name(law.name)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.law, other.observer_gain, converter=converter)
+
+        def _estimate(self, context):
+            z = context.get_continuous_state_vector().CopyToVector()[0]
+            qd = self._ports["link_velocity"].Eval(context)[0]
+            return self.observer_gain * (self.law.tr.link_inertia * qd - z)
+
+        def _calc(self, context, output):
+            values = {nm: p.Eval(context) for nm, p in self._ports.items()}
+            output.SetFromVector(np.asarray(self.law.command(values, self._estimate(context))).reshape(-1))
+
+        def _calc_estimate(self, context, output):
+            output.SetFromVector(np.array([self._estimate(context)]))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            tr = self.law.tr
+            f = self._ports["tendon_force"].Eval(context)
+            qd = self._ports["link_velocity"].Eval(context)[0]
+            zdot = tr.coupling @ f - tr.link_damping * qd + self._estimate(context)
+            derivatives.get_mutable_vector().SetFromVector(np.array([zdot]))
+
+    return Impl
+
+
+CascadedImpedanceController = CascadedImpedanceController_[None]
+
+
+class LinkReferenceMotorPdLaw(StaticLaw):
     """``u = u_ref(r) + Kp_m (theta_ref(r) - theta) - Kd_m thetadot`` on the motor coordinates of ``state``."""
 
     def __init__(self, lin, motor_index, inertia: float, params: ImpedanceParams | None = None):
@@ -173,5 +289,8 @@ def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mod
         n = len(tr.coupling)
         ith = [names.index(nm) for nm in (("theta",) if n == 1 else ("theta1", "theta2"))]
         iw = [names.index(nm) for nm in (("thetadot",) if n == 1 else ("omega1", "omega2"))]
-        return StaticLawController(MotorPdLaw(lin, (ith, iw), tr.motor.inertia, params))
-    return StaticLawController(ImpedanceLaw(transmission(rig), params, mode=mode))
+        return StaticLawController(LinkReferenceMotorPdLaw(lin, (ith, iw), tr.motor.inertia, params))
+    law = ImpedanceLaw(transmission(rig), params, mode=mode)
+    if mode == "cascaded":
+        return CascadedImpedanceController(law, law.params.observer_bandwidth)
+    return StaticLawController(law)

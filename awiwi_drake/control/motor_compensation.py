@@ -106,8 +106,12 @@ class MotorPdLaw(StaticLaw):
 
 def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,
                           theta0: float = 0.0, friction_scale: float = 0.0, ripple: RippleEstimate | None = None,
-                          rate_hz: float = 3000.0) -> dict[str, np.ndarray]:
+                          rate_hz: float = 3000.0, start_at_rest: bool = False) -> dict[str, np.ndarray]:
     """The motor following ``theta0 + speed t`` under a sampled PD (one row per control period).
+
+    ``start_at_rest``: the motor starts at rest with zero torque in the hold buffer (an experiment that
+    knows nothing about the friction it is about to identify); otherwise it starts at ``speed`` with the
+    (model) friction torque held, which removes the start transient (ripple study).
 
     Returns per control period ``k`` (``[t_k, t_k+1)``): ``t`` (midpoint),
     ``theta``/``omega`` (midpoint values), ``command`` (the torque applied during
@@ -117,8 +121,8 @@ def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, 
     rig = motor_rig(motor)
     law = MotorPdLaw(motor, kp, kd, friction_scale=friction_scale, ripple=ripple)
     loop = closed_loop(rig, StaticLawController(law), rate_hz=rate_hz)
-    u0 = float(-motor_friction_torque(np.array([speed]), motor)[0])
-    ctx = loop.create_context(state=[theta0, speed], motor_torque=u0,
+    u0 = 0.0 if start_at_rest else float(-motor_friction_torque(np.array([speed]), motor)[0])
+    ctx = loop.create_context(state=[theta0, 0.0 if start_at_rest else speed], motor_torque=u0,
                               references={"motor_angle_reference": theta0, "motor_velocity_reference": speed})
     dt = 1.0 / rate_hz
     log = simulate_loop(loop, ctx, duration, dt, outputs=("motor_angle", "motor_velocity", "motor_torque"),
@@ -159,7 +163,11 @@ class FrictionFit:
 
 def friction_identification_data(motor: MotorParams, params: FrictionIdentificationParams | None = None, *,
                                  seed: int = 0) -> FrictionData:
-    """Simulated Fig 3.3 protocol: forward and backward plateaus at log-spaced speeds, noisy torque readings."""
+    """Simulated Fig 3.3 protocol: forward and backward plateaus at log-spaced speeds, noisy torque readings.
+
+    Each plateau starts with the motor at rest and zero torque (nothing about the friction is assumed);
+    the start transient is discarded (``settle_fraction``).
+    """
     p = params or FrictionIdentificationParams()
     rng = np.random.default_rng(seed)
     speeds = np.geomspace(p.min_speed, p.max_speed, p.num_speeds)
@@ -169,7 +177,7 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
         travel = v * p.plateau_time
         for sign, th0 in ((1.0, 0.0), (-1.0, travel)):  # forward, then back over the same angles
             run = constant_velocity_run(motor, sign * v, p.plateau_time, kp=p.position_gain, kd=p.velocity_gain,
-                                        theta0=th0)
+                                        theta0=th0, start_at_rest=True)
             tau = run["command"] + rng.normal(0.0, p.torque_noise_std, size=run["command"].shape)
             t_steady = p.settle_fraction * p.plateau_time
             steady = run["t"] >= t_steady

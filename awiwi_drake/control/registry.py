@@ -26,7 +26,7 @@ _ALIASES = {
     "joint_rig": "joint_rig", "joint": "joint_rig", "antagonistic_joint": "joint_rig",
 }
 # Modules whose import registers controllers (append yours).
-PROVIDER_MODULES = ["awiwi_drake.control.catalog"]
+PROVIDER_MODULES = ["awiwi_drake.control.catalog", "awiwi_drake.control.backstepping_registry"]
 
 
 @dataclass(frozen=True)

@@ -73,6 +73,7 @@ class TendonSdreModel:
         return np.array([values["motor_angle"][0], values["motor_velocity"][0]])
 
     def equilibrium(self, r):
+        self.fmap.check_force(r, "tendon_force_reference")  # ValueError outside the force table [0, f_max]
         th = self.fmap.theta_of_force(r)
         zero = th * 0.0
         return np.array([th, zero]), np.array([self.r_m * r])

@@ -21,6 +21,15 @@ alpha, beta the derivatives of ``f_t`` and of ``fdot`` w.r.t. ``theta_dot``
 and ``theta``; for a force that depends on ``theta`` only both equal
 ``d f_t / d theta``, which is what is used here.
 
+Near slack.  The force map is tabulated over the *taut* range only (the
+slack point ``f = 0``, where ``alpha = 0``, is not a row of the slope
+table), and the slope used in the derivative term is ``alpha(clip(f,
+f_floor, f_max))`` with ``f_floor = min_schedule_force`` (2 N): a noisy or
+negative force reading (the sensor noise reaches below 0 N near slack)
+therefore never extrapolates the slope below the table, which would make
+``alpha < 0`` and turn the ``-Kd fdot_hat`` damping into positive feedback.
+References outside ``[0, f_max]`` of the table raise ``ValueError``.
+
 Steady state (all derivatives zero, friction (3.8) vanishes at rest):
 without the force feed-forward ``Kp (f_des - f) = r_m f`` (10.3), i.e.
 ``f = f_des Kp / (Kp + r_m)``; with it the error vanishes (10.4).
@@ -28,12 +37,13 @@ without the force feed-forward ``Kp (f_des - f) = r_m f`` (10.3), i.e.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from awiwi_drake._math import is_float
+from awiwi_drake._math import clip, is_float
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain
 from awiwi_drake.parameters.control import TendonForceGains
 
@@ -44,7 +54,8 @@ __all__ = ["ForceMap", "force_map", "interp", "TendonForceLaw", "tendon_pd_contr
 def interp(x, xp: np.ndarray, fp: np.ndarray):
     """Piecewise-linear interpolation for float and AutoDiffXd (derivative = local slope).
 
-    Outside the table the end segments are extrapolated linearly.
+    Outside the table the end segments are extrapolated linearly; callers
+    clamp or validate their argument first (:class:`ForceMap` does).
     """
     xp = np.asarray(xp, float)
     fp = np.asarray(fp, float)
@@ -59,26 +70,55 @@ def interp(x, xp: np.ndarray, fp: np.ndarray):
     return fp[i] + slope * (x - xp[i])
 
 
+def _value(x) -> float:
+    """Float value of a float / 1-element array / AutoDiffXd scalar."""
+    v = np.asarray(x, dtype=object).reshape(-1)[0] if np.ndim(x) else x
+    return float(v) if is_float(v) else float(v.value())
+
+
 @dataclass
 class ForceMap:
     """Tabulated static tendon force ``f(theta)`` of a rig and its slope ``alpha(theta)``.
 
-    ``theta`` is increasing; only the taut, strictly increasing part is kept.
+    ``theta`` is increasing; only the taut, strictly increasing part is kept
+    (every row has ``force > 0``); ``slack_angle`` is the largest tabulated
+    motor angle at which the tendon is still slack (``f = 0``).
     """
 
     theta: np.ndarray
     force: np.ndarray
     alpha: np.ndarray
+    slack_angle: float
+
+    @property
+    def max_force(self) -> float:
+        return float(self.force[-1])
+
+    def check_force(self, f, name: str = "tendon_force_reference") -> float:
+        """Validate a force argument against the table ``[0, max_force]``; return its float value."""
+        v = _value(f)
+        if not (math.isfinite(v) and 0.0 <= v <= self.max_force):
+            raise ValueError(f"{name} = {v!r} N is outside the tendon force table [0, {self.max_force:.4g}] N "
+                             f"(force_map(f_max=...) tabulates up to f_max)")
+        return v
 
     def force_at(self, theta):
         return interp(theta, self.theta, self.force)
 
     def theta_of_force(self, f):
-        return interp(f, self.force, self.theta)
+        """Motor angle holding the static force ``f`` in ``[0, max_force]`` (slack point at ``f = 0``)."""
+        self.check_force(f, "force")
+        return interp(f, np.concatenate([[0.0], self.force]), np.concatenate([[self.slack_angle], self.theta]))
 
-    def alpha_of_force(self, f):
-        """``d f / d theta`` at force ``f`` [N/rad] (float or AutoDiffXd)."""
-        return interp(f, self.force, self.alpha)
+    def alpha_of_force(self, f, floor: float | None = None):
+        """``d f / d theta`` at force ``f`` [N/rad] (float or AutoDiffXd).
+
+        The force argument is clamped to the taut range ``[max(floor, force[0]),
+        max_force]`` (derivative 0 outside), never extrapolated: below the
+        table's first row (or below ``floor``) the slope at that row is used.
+        """
+        lo = float(self.force[0]) if floor is None else max(float(floor), float(self.force[0]))
+        return interp(clip(f, lo, self.max_force), self.force, self.alpha)
 
 
 def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
@@ -122,10 +162,13 @@ def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
     taut = fo > 1e-6
     first = int(np.argmax(taut))
     top = int(np.argmax(fo >= f_max))
-    th, fo = th[max(first - 1, 0): top + 1], fo[max(first - 1, 0): top + 1]
+    slack_angle = float(th[first - 1]) if first > 0 else float(th[0])
+    # the slack row (f = 0, alpha = 0) is not kept: interpolating the slope between it and the first taut
+    # row (and extrapolating below it) gives meaningless, even negative, slopes near slack
+    th, fo = th[first: top + 1], fo[first: top + 1]
     alpha = np.array([slope(t) for t in th]) if kport is not None else np.gradient(fo, th)
     keep = np.concatenate([[True], np.diff(fo) > 0])
-    return ForceMap(th[keep], fo[keep], alpha[keep])
+    return ForceMap(th[keep], fo[keep], alpha[keep], slack_angle)
 
 
 def identified_gains(alpha: float, inertia: float, omega: float, xi: float) -> tuple[float, float]:
@@ -162,8 +205,11 @@ class TendonForceLaw(StaticLaw):
         self.inertia = check_gain("inertia", motor.inertia, owner=self.name)
         self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=self.name)
         w, xi = g.natural_frequency, g.damping_ratio
-        # table of gains over the force table: scheduled = interpolation in it
-        alpha = np.maximum(fmap.alpha, float(fmap.alpha_of_force(g.min_schedule_force)))
+        fmap.check_force(g.design_force, "design_force")
+        fmap.check_force(g.min_schedule_force, "min_schedule_force")
+        self.alpha_floor = float(fmap.alpha_of_force(g.min_schedule_force))
+        # table of gains over the force table: scheduled = interpolation in it (held at min_schedule_force below)
+        alpha = np.maximum(fmap.alpha, self.alpha_floor)
         self._kp_tab = w ** 2 * self.inertia / alpha
         self._kd_tab = 2 * xi * w * self.inertia / alpha
         self.kp_fixed, self.kd_fixed = identified_gains(float(fmap.alpha_of_force(g.design_force)),
@@ -171,9 +217,11 @@ class TendonForceLaw(StaticLaw):
 
     def gains_at(self, f_ref):
         """(Kp, Kd) used at reference force ``f_ref``."""
+        self.fmap.check_force(f_ref)
         if not self.scheduled:
             return self.kp_fixed, self.kd_fixed
-        return interp(f_ref, self.fmap.force, self._kp_tab), interp(f_ref, self.fmap.force, self._kd_tab)
+        fr = clip(f_ref, float(self.fmap.force[0]), self.fmap.max_force)
+        return interp(fr, self.fmap.force, self._kp_tab), interp(fr, self.fmap.force, self._kd_tab)
 
     def __call__(self, u):
         from awiwi_drake.components import motor_friction_torque
@@ -181,7 +229,8 @@ class TendonForceLaw(StaticLaw):
         f = u["tendon_force"][0]
         w = u["motor_velocity"][0]
         kp, kd = self.gains_at(fd)
-        fdot = self.fmap.alpha_of_force(f) * w
+        # slope at the measured force clamped to [min_schedule_force, f_max]: > 0 even for readings <= 0
+        fdot = self.fmap.alpha_of_force(f, floor=self.gains.min_schedule_force) * w
         tau = kp * (fd - f) - kd * fdot
         if self.gains.force_feedforward:
             tau = tau + self.r_m * f

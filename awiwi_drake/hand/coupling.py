@@ -22,6 +22,10 @@ Thesis equations and how we read them
   ``+-r42 q42`` (h44, h45), which the stated count of six tendons
   (``P4`` in R^{6x3}, Table 6.2) leaves no room for: we read it as the
   PIP-only part of the same path and do not add motors for it.
+  Alternative reading (reported in docs/REPRODUCTIONS.md): Fig 5.11 labels
+  the two motors theta44/theta45, i.e. the pair ``+-r42 q42`` is motor-driven
+  (reduced moment arm 7 mm instead of our 10.6 mm, 12 mm as printed) and
+  h46/h47 are passive coupling tendons (our coupling element).
   :func:`reduced_coupling_matrix` gives the 3-DoF matrix.
 * Fifth: no equations in the thesis.  Chosen: the ring routing plus an
   antagonistic pair on the hematometacarpal (HMC) joint,
@@ -45,7 +49,7 @@ from typing import Sequence
 import numpy as np
 
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerParams, HandParams, ThumbParams,
-                               finger_params)
+                               check_finger_structure, finger_params)
 from .kinematics import finger_joint_names
 
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
@@ -388,6 +392,9 @@ def finger_coupling(finger: str, params=None) -> FingerCoupling:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
     if not isinstance(p, FingerParams):
         raise ValueError(f"params for finger {finger!r} must be FingerParams, got {type(p).__name__}")
+    if p.FINGER not in ("generic", finger):
+        raise ValueError(f"params for finger {finger!r} are {type(p).__name__} (the {p.FINGER} finger)")
+    check_finger_structure(finger, p)      # a generic FingerParams must still have this finger's structure
     return _linear_finger(finger, p)
 
 
@@ -397,7 +404,11 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
     c = HandCoupling({f: finger_coupling(f, params.finger(f)) for f in FINGERS},
                      num_offsets=38 if wrist_offsets else 0)
     for f in FINGERS:  # the chosen global numbering (parameters.hand.TENDON_SLICES)
-        assert c.tendon_slices[f] == TENDON_SLICES[f], f
+        if c.tendon_slices[f] != TENDON_SLICES[f]:
+            got = c.tendon_slices[f]
+            raise ValueError(f"hand_coupling: the {f} finger's tendons occupy {got.start + 1}-{got.stop} of "
+                             f"{c.num_tendons}, but the global tendon order (parameters.hand.TENDON_SLICES, "
+                             f"Table 6.2 rows) puts them at {TENDON_SLICES[f].start + 1}-{TENDON_SLICES[f].stop}")
     return c
 
 

@@ -177,6 +177,10 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
     b.Connect(plant.get_state_output_port(), split.get_input_port())
     rows = _wrist_rows(parts)
+    if rows.size != m:
+        counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
+        raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
+                         f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
     if wrist:
         from .wrist import WristTendonOffsets
         w = b.AddNamedSystem("wrist_tendon_offsets", WristTendonOffsets())

@@ -12,6 +12,21 @@ base ``dh = h(q) - h(0)`` is measured (motor angle and spring sensor).
   gradient (a fixed step in radians), is accepted when the cost decreases
   and halved otherwise.  The PIP/DIP of the thumb use the pseudo-inverse.
 
+Deviations from the printed method (docs/REPRODUCTIONS.md, hand section):
+(5.15) prints ``P+ = P (P P^T)^-1`` with ``P in R^{n x m}``, which is not
+dimensionally consistent; for our tall ``P`` (m x n, full column rank) the
+pseudo-inverse is ``(P^T P)^-1 P^T`` (``numpy.linalg.pinv``).  (5.24) sums
+``i = 1..7`` while the thumb has eight tendons ``h10..h17``; the base search
+uses the four base tendons ``h10..h13`` (the only ones that depend on
+(q10, q11)).  Algorithm 1 parametrises the search over ``ker P``
+(``B <= ker P``, variable ``alpha``) and steps by the raw gradient
+``alpha - grad * step``; we search directly on (q10, q11) (the base block is
+4 x 2 with full column rank, so its kernel is trivial) and step along the
+normalised gradient (a step in radians, independent of the tendon-length
+scale).  Trial points are projected onto ``[-limit, limit]^2``; the result
+reports when that projection acted (``GradientSearchResult.projected``,
+``at_limit``), nothing is clipped silently.
+
 Error bound (used by the tests and docs/REPRODUCTIONS.md): at a converged
 least-squares solution a measurement error ``e`` moves the estimate by
 ``dq ~ P^+ e`` to first order, so ``|dq| <= |e| / sigma_min(P)``; with
@@ -20,9 +35,11 @@ least-squares solution a measurement error ``e`` moves the estimate by
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -44,13 +61,22 @@ def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
 
 @dataclass
 class GradientSearchResult:
-    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps."""
+    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps.
+
+    ``projected`` counts the trial points that the projection onto
+    ``[-limit, limit]^2`` moved; ``at_limit`` is True when the returned
+    estimate lies on that bound (the true pose may lie beyond it: the
+    estimate is then the projection, not the least-squares solution).
+    """
 
     q: np.ndarray
     cost: float
     step: float
     accepted: int
     iterations: int
+    projected: int = 0
+    at_limit: bool = False
+    limit: float = np.pi / 2
 
 
 def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0.0), *,
@@ -96,31 +122,41 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
         P = coupling.P(qq)[:4, :2]
         return float(r @ r), 2.0 * P.T @ r
 
+    if not limit > 0:
+        raise ValueError(f"limit must be > 0 [rad], got {limit}")
     c_best, grad = cost_grad(q)
-    step, accepted = float(step0), 0
+    step, accepted, projected = float(step0), 0, 0
     for _ in range(iterations):
         g_norm = np.linalg.norm(grad)
         if g_norm == 0.0 or step < min_step:
             break
         trial = q.copy()
-        trial[:2] = np.clip(trial[:2] - step * grad / g_norm, -limit, limit)
+        free = trial[:2] - step * grad / g_norm
+        trial[:2] = np.clip(free, -limit, limit)
+        projected += int(np.any(trial[:2] != free))
         c, g = cost_grad(trial)
         if c < c_best:
             q, c_best, grad, accepted = trial, c, g, accepted + 1
         else:
             step *= 0.5
     return GradientSearchResult(q=q[:2].copy(), cost=c_best, step=step, accepted=accepted,
-                                iterations=iterations)
+                                iterations=iterations, projected=projected,
+                                at_limit=bool(np.any(np.abs(q[:2]) >= limit)), limit=float(limit))
 
 
-def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), **kw) -> np.ndarray:
-    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP."""
+def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_search: bool = False, **kw):
+    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP.
+
+    With ``return_search`` returns ``(q, GradientSearchResult)`` (e.g. to see
+    whether the base estimate sits on the projection bound).
+    """
     dh = np.asarray(dh, dtype=float)
     if dh.shape != (8,):
         raise ValueError(f"dh must have shape (8,), got {dh.shape}")
-    base = thumb_base_gradient_search(coupling, dh[:4], q_start, **kw).q
+    search = thumb_base_gradient_search(coupling, dh[:4], q_start, **kw)
     distal = np.linalg.pinv(coupling.P(np.zeros(4))[4:, 2:]) @ dh[4:]
-    return np.concatenate([base, distal])
+    q = np.concatenate([search.q, distal])
+    return (q, search) if return_search else q
 
 
 def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> float:
@@ -140,6 +176,7 @@ class EstimationStudy:
     estimates: dict                 # (iterations, noise [m], start) -> (N, 2)
     errors: dict                    # same keys -> (N,) |q_hat - q| [rad]
     bounds: dict                    # same keys -> (N,) first-order noise bound + final step
+    at_limit: dict = None           # same keys -> (N,) bool: the estimate sits on the +-pi/2 projection bound
 
     def summary_rows(self) -> list[dict]:
         """One row per case: iterations, noise [mm], start, mean/median/max error [rad]."""
@@ -148,7 +185,8 @@ class EstimationStudy:
             it, a, start = key
             rows.append(dict(iterations=it, noise_mm=1e3 * a, start=start, mean=float(np.mean(e)),
                              median=float(np.median(e)), max=float(np.max(e)),
-                             frac_within_0p1=float(np.mean(e < 0.1))))
+                             frac_within_0p1=float(np.mean(e < 0.1)),
+                             at_limit=int(np.sum(self.at_limit[key])) if self.at_limit else 0))
         return rows
 
 
@@ -174,7 +212,7 @@ def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int
     rng = np.random.default_rng(seed)
     noise_unit = rng.uniform(-1.0, 1.0, size=dh_true.shape)
     sig_bound = np.array([noise_error_bound(coupling, g, 1.0) for g in grid])
-    est, err, bnd = {}, {}, {}
+    est, err, bnd, lim = {}, {}, {}, {}
     for a in noise:
         meas = dh_true + a * noise_unit
         for it in iterations:
@@ -184,14 +222,16 @@ def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int
                 q_prev = grid[0].copy()
                 out = np.zeros_like(grid)
                 steps = np.zeros(len(grid))
+                hit = np.zeros(len(grid), dtype=bool)
                 for k, m in enumerate(meas):
                     q0 = (0.0, 0.0) if start == "cold" else q_prev
                     r = thumb_base_gradient_search(coupling, m, q0, iterations=it, step0=step0)
-                    out[k], steps[k], q_prev = r.q, r.step, r.q
+                    out[k], steps[k], q_prev, hit[k] = r.q, r.step, r.q, r.at_limit
                 est[(it, a, start)] = out
+                lim[(it, a, start)] = hit
                 err[(it, a, start)] = np.linalg.norm(out - grid, axis=1)
                 bnd[(it, a, start)] = a * sig_bound + 2.0 * steps
-    return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd)
+    return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd, at_limit=lim)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -206,7 +246,7 @@ def _estimator_parts(coupling):
     return parts, js, ts
 
 
-@TemplateSystem.define("LinkPositionEstimator_")
+@TemplateSystem.define("LinkPositionEstimator_", T_list=[float, AutoDiffXd])
 def LinkPositionEstimator_(T):
     """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
 
@@ -220,9 +260,18 @@ def LinkPositionEstimator_(T):
     thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Output
     ``joint_angle_estimate`` (n) = the state.
 
-    For AutoDiffXd/Expression the search runs on values and one Gauss-Newton
-    step ``q + P(q)^+ (dh - dh(q))`` in the scalar type carries the
-    derivatives (at convergence ``dq/d dh = P^+``, implicit-function theorem).
+    Scalar types: float and AutoDiffXd only.  For AutoDiffXd the search runs
+    on values and one Gauss-Newton step ``q + P(q)^+ (dh - dh(q))`` in the
+    scalar type carries the derivatives (at convergence ``dq/d dh = P^+``,
+    implicit-function theorem).  Not symbolic: Algorithm 1 branches on cost
+    values (accept / halve), which a symbolic Expression cannot evaluate, so
+    ``ToSymbolic()`` of a diagram holding this estimator fails (Drake names
+    the system).
+
+    Projection bound: when the thumb base estimate sits on the search's
+    ``+-pi/2`` bound (the pose may lie beyond it) the update still stores it,
+    counts it in ``limit_hits`` (a diagnostic attribute of the system,
+    summed over all contexts) and warns once per system (RuntimeWarning).
     """
 
     class Impl(LeafSystem_[T]):
@@ -237,6 +286,7 @@ def LinkPositionEstimator_(T):
                 raise ValueError(f"LinkPositionEstimator: period = {period} must be > 0 [s]")
             self.coupling, self.r_m, self.offsets = coupling, float(motor_pulley_radius), offsets
             self.period, self.iterations, self.step0 = float(period), int(iterations), float(step0)
+            self.limit_hits = 0
             self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
             self._theta = self.DeclareVectorInputPort("motor_angle", m)
             self._x = self.DeclareVectorInputPort("elongation", m)
@@ -263,8 +313,17 @@ def LinkPositionEstimator_(T):
                 if c.is_constant:
                     q_new[js[name]] = estimate_linear(c, dh_val[ts[name]])
                 else:  # thumb: Algorithm 1 warm-started at the previous estimate
-                    q_new[js[name]] = estimate_thumb(c, dh_val[ts[name]], q_val[js[name]][:2],
-                                                     iterations=self.iterations, step0=self.step0)
+                    q_new[js[name]], search = estimate_thumb(c, dh_val[ts[name]], q_val[js[name]][:2],
+                                                             iterations=self.iterations, step0=self.step0,
+                                                             return_search=True)
+                    if search.at_limit:
+                        self.limit_hits += 1
+                        if self.limit_hits == 1:
+                            warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
+                                          f"{np.round(search.q, 4)} rad sits on the search bound "
+                                          f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
+                                          "further hits are counted in limit_hits", RuntimeWarning,
+                                          stacklevel=2)
             if T is not float:  # one Gauss-Newton step in the scalar type carries the derivatives
                 r = dh - (self.coupling.h(q_new) - self._h0)
                 S = _selection_of(self.coupling)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..parameters.hand import FingerParams, ThumbParams
 
-__all__ = ["rot_x", "rot_y", "rot_z", "translation", "M21", "finger_joint_names",
+__all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "translation", "M21", "finger_joint_names",
            "finger_frames", "thumb_frames", "thumb_base_transform", "fingertip_position"]
 
 _FINGER_DIGIT = {"thumb": 1, "index": 2, "middle": 3, "ring": 4, "fifth": 5}
@@ -51,6 +51,18 @@ def rot_x(q) -> np.ndarray:
     T = _eye_like(q)
     c, s = np.cos(q), np.sin(q)
     T[1, 1], T[1, 2], T[2, 1], T[2, 2] = c, -s, s, c
+    return T
+
+
+def rot_axis(axis, q) -> np.ndarray:
+    """Homogeneous rotation by ``q`` about the unit ``axis`` (Rodrigues' formula)."""
+    T = _eye_like(q)
+    k = np.asarray(axis, dtype=float)
+    if abs(np.linalg.norm(k) - 1.0) > 1e-12:
+        raise ValueError(f"rot_axis: axis must be a unit vector, got {k}")
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    R = np.eye(3) + np.sin(q) * K + (1.0 - np.cos(q)) * (K @ K)
+    T[:3, :3] = R
     return T
 
 
@@ -95,16 +107,18 @@ def finger_frames(p: FingerParams, q) -> list[np.ndarray]:
     """Frames of a finger in its base frame, (5.2): ``[T_abd, T_mcp, T_pip, T_dip, T_tip]``.
 
     ``q`` holds the plant joints (``finger_joint_names``); for the fifth
-    finger the HMC angle comes first and the HMC is a rotation about the base
-    x axis (the four-bar linkage of section 5.5 replaced by an equivalent
-    revolute joint: a chosen simplification).  Each frame is the joint frame
+    finger the HMC angle comes first and the HMC is a rotation about
+    ``p.hmc_axis``, perpendicular to the metacarpal (base x) and oblique
+    between the flexion axis and the palm normal (the four-bar linkage of
+    section 5.5 replaced by one revolute joint: a chosen simplification that
+    keeps its "locking motion towards the palm center").  Each frame is the joint frame
     *after* its rotation, so its z axis is the joint axis.
     """
     q = list(q)
     fixed = finger_fixed_transforms(p)
     T = np.eye(4)
     if p.has_hmc:
-        T = rot_x(q.pop(0)) @ fixed["hmc"]
+        T = rot_axis(p.hmc_axis, q.pop(0)) @ fixed["hmc"]
     if len(q) != 4:
         raise ValueError(f"q: expected {4 + int(p.has_hmc)} joint angles, got {len(q) + int(p.has_hmc)}")
     T_abd = T @ rot_z(q[0])                                   # M10

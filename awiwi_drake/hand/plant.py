@@ -29,7 +29,7 @@ from ..parameters.hand import FINGERS, FingerParams, HandParams, ThumbParams, fi
 from .kinematics import M21, finger_joint_names
 
 __all__ = ["FingerModel", "add_finger", "make_finger_plant", "make_hand_plant",
-           "coupling_force_gain", "finger_base_pose"]
+           "coupling_force_gain", "coupling_compliance", "finger_base_pose", "palm_centre"]
 
 _COLORS = {"thumb": (0.85, 0.55, 0.45, 1.0), "index": (0.55, 0.65, 0.85, 1.0),
            "middle": (0.55, 0.8, 0.6, 1.0), "ring": (0.85, 0.8, 0.5, 1.0),
@@ -130,7 +130,7 @@ def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, pa
     frame, X = parent_frame, X_PF
     if p.has_hmc:
         mc = link("metacarpal", p.hmc_mass, p.hmc_offset)
-        joint(0, frame, X, mc, [1, 0, 0])                                   # q5h about x (chosen)
+        joint(0, frame, X, mc, p.hmc_axis)                                  # q5h: oblique, normal to the metacarpal
         frame, X = mc.body_frame(), np.eye(4)
         X[0, 3] = p.hmc_offset
         k = 1
@@ -188,6 +188,12 @@ def finger_base_pose(finger: str, hp: HandParams) -> RigidTransform:
     return RigidTransform([x, y, 0.0])
 
 
+def palm_centre(hp: HandParams) -> np.ndarray:
+    """Centre of the palm's palmar surface [m] in the palm frame (the drawn palm box's centre,
+    on its surface): halfway along the palm, midway between the thumb side and the fifth finger."""
+    return np.array([hp.palm_length / 2, 0.25 * hp.finger_spacing, 0.0])
+
+
 def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: bool = False,
                     gravity: bool = False):
     """A finalised continuous plant with all five fingers on a fixed palm.
@@ -209,7 +215,7 @@ def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: b
     if visual and plant.geometry_source_is_registered():
         palm = plant.world_body()
         plant.RegisterVisualGeometry(
-            palm, RigidTransform([hp.palm_length / 2, 0.25 * hp.finger_spacing, -0.008]),
+            palm, RigidTransform(palm_centre(hp) - [0.0, 0.0, 0.008]),
             _Box(hp.palm_length, 4.5 * hp.finger_spacing, 0.016), "palm_visual", np.array([0.7, 0.7, 0.7, 1.0]))
     models = {f: add_finger(plant, f, hp.finger(f), X_PF=finger_base_pose(f, hp), visual=visual)
               for f in FINGERS}
@@ -246,3 +252,35 @@ def coupling_force_gain(plant: MultibodyPlant, models) -> np.ndarray | None:
         G[:, :n] += m.params.coupling_stiffness * np.outer(c, c)
         G[:, n:] += m.params.coupling_damping * np.outer(c, c)
     return G if any_coupled else None
+
+
+def coupling_compliance(joint_stiffness: np.ndarray, coupling_vector: np.ndarray,
+                        joint: int | None = None) -> float:
+    """Coupling error per unit torque on a joint [rad/(N m)]: ``c^T K_q^-1 e_joint``.
+
+    ``joint_stiffness`` is the full motors-held stiffness ``K_q`` (n x n, the
+    tendons' (5.12) plus the coupling element ``k_c c c^T``, e.g.
+    ``op.info["joint_stiffness"]`` of a finger rig), ``coupling_vector`` the
+    ``c`` of :attr:`FingerModel.coupling_vector` placed in the n plant joints
+    (``c . q = q_DIP - (r_x3/r_x2) q_PIP``).  ``joint`` defaults to the DIP
+    (the joint where ``c`` is 1).  A static torque ``tau`` on that joint
+    leaves the coupling error ``c . dq = compliance * tau`` (linearised).
+    For the ring/fifth routing the PIP/DIP tendon pair acts along
+    ``(r_x2, r_x3)``, orthogonal to ``c``, so the result is
+    ``1 / (k_c (1 + (r_x3/r_x2)^2))`` whatever the tendon stiffness.
+    """
+    K = np.asarray(joint_stiffness, dtype=float)
+    c = np.asarray(coupling_vector, dtype=float).ravel()
+    n = c.size
+    if K.shape != (n, n):
+        raise ValueError(f"coupling_compliance: joint_stiffness must be {n} x {n} like coupling_vector, got {K.shape}")
+    if joint is None:
+        hits = np.flatnonzero(c == 1.0)
+        if hits.size != 1:
+            raise ValueError("coupling_compliance: coupling_vector has no single DIP entry equal to 1; pass joint=")
+        joint = int(hits[0])
+    if not 0 <= joint < n:
+        raise ValueError(f"coupling_compliance: joint = {joint} out of range 0..{n - 1}")
+    e = np.zeros(n)
+    e[joint] = 1.0
+    return float(c @ np.linalg.solve(K, e))

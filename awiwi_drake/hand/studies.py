@@ -1,7 +1,8 @@
 """Numerical studies of chapter 5 and 6 on the finger/hand models (results are data).
 
-* :func:`coriolis_study` - Fig 5.7: release a 0.1 rad PIP deflection with the
-  motors fixed, with and without the Coriolis/centrifugal terms.
+* :func:`coriolis_study` - Fig 5.7: release a 0.1 rad deflection of the second
+  joint (MCP flexion, abduction at 0) with the motors fixed, with and without
+  the Coriolis/centrifugal terms.
 * :func:`poles_vs_pretension` - poles of a finger/hand rig (``Linearize``) versus pretension.
 * :func:`coupling_hold_study` - the ring/fifth PIP/DIP coupling element holds
   ``q_DIP = (r_x3/r_x2) q_PIP`` during a controlled PIP motion.
@@ -27,7 +28,7 @@ from .diagrams import HandRig, closed_loop, finger_diagram
 from .plant import coupling_force_gain, make_finger_plant
 from .systems import CoriolisCancellation
 
-__all__ = ["CoriolisStudy", "coriolis_study", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
+__all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
            "CouplingHoldStudy", "coupling_hold_study", "WristCompensationStudy", "wrist_compensation_study"]
 
 
@@ -38,8 +39,9 @@ def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = 
     With ``coriolis=False`` a :class:`CoriolisCancellation_` adds ``C(q, v) v``
     to the applied generalised force, removing the Coriolis/centrifugal terms
     from ``M vdot + C v = tau`` (the simplified model of Fig 5.7).
-    Returns ``(diagram, plant)``; the diagram exports ``state`` (plant [q; v])
-    and ``tendon_force``.
+    Returns ``(diagram, plant)``; the diagram exports the input
+    ``external_torque`` (n) [N m] (fix it before simulating) and the
+    outputs ``state`` (plant [q; v]) and ``tendon_force``.
     """
     p = params if params is not None else FingerRigParams.for_finger(finger)
     b = DiagramBuilder()
@@ -69,9 +71,10 @@ def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = 
         cc = b.AddNamedSystem("coriolis_cancellation", CoriolisCancellation(standalone))
         b.Connect(plant.get_state_output_port(), cc.get_input_port(0))
         sources.append(cc.get_output_port(0))
-    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources), n))
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
     for i, s in enumerate(sources):
         b.Connect(s, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
     b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
     b.ExportOutput(plant.get_state_output_port(), "state")
     b.ExportOutput(springs.GetOutputPort("tendon_force"), "tendon_force")
@@ -102,11 +105,23 @@ class CoriolisStudy:
         return np.max(np.abs(self.difference), axis=0)
 
 
+def mcp_flexion_joint(finger: str) -> int:
+    """Plant joint index of the finger's first flexion joint (the "second joint" of Fig 5.7).
+
+    index/middle/ring: 1 (``q_x1``, after the abduction ``q_x0``); fifth: 2
+    (after the HMC ``q_5h`` and ``q_50``); thumb: 0 (base flexion ``q10``).
+    """
+    return {"thumb": 0, "fifth": 2}.get(finger, 1)
+
+
 def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int | None = None,
                    t_final: float = 0.2, params: FingerRigParams | None = None,
                    accuracy: float = 1e-7, num_samples: int = 401) -> CoriolisStudy:
-    """Release a ``deflection`` [rad] of ``joint`` (default: the PIP) with the motors fixed (Fig 5.7).
+    """Release a ``deflection`` [rad] of ``joint`` with the motors fixed (Fig 5.7).
 
+    Default ``joint``: the MCP flexion (:func:`mcp_flexion_joint`, 1 for the
+    index), as in the thesis: "initially deflected 0.1 rad in the second joint
+    (flexion)", the first joint (abduction) at 0.
     Integrated with Drake's error-controlled ``runge_kutta5`` at ``accuracy``
     (the result agrees with ``runge_kutta3`` at 1e-6 to 1e-8 rad).
     """
@@ -117,10 +132,11 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
         diagram, plant = fixed_motor_diagram(finger, p, coriolis=flag)
         n = plant.num_positions()
         names = [plant.get_joint(j).name() for j in plant.GetJointIndices()]
-        j = (n - 2 if finger != "thumb" else 2) if joint is None else joint
+        j = mcp_flexion_joint(finger) if joint is None else joint
         if not 0 <= j < n:
             raise ValueError(f"coriolis_study: joint index {j} out of range 0..{n - 1} ({', '.join(names)})")
         ctx = diagram.CreateDefaultContext()
+        diagram.GetInputPort("external_torque").FixValue(ctx, np.zeros(n))
         x0 = np.zeros(2 * n)
         x0[j] = deflection
         if p.finger.pip_dip_coupled if hasattr(p.finger, "pip_dip_coupled") else False:

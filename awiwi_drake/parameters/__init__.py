@@ -15,4 +15,9 @@ from awiwi_drake.parameters.wrist import WristParams
 from awiwi_drake.parameters.hand import (
     FifthFingerParams, FingerParams, FingerRigParams, HandParams, HandRigParams, IndexFingerParams,
     JointControllerParams, MiddleFingerParams, RingFingerParams, ThumbParams)
+from awiwi_drake.parameters.backstepping import (
+    AntagonisticBacksteppingGains, BacksteppingPlantParams, ImpedanceBacksteppingGains, ImpedanceStudy,
+    NonlinearImpedanceStudy, OptimalGainsCase, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
+from awiwi_drake.parameters.hand_control import (
+    ForceDistributionParams, FrictionObserverParams, LinkFrictionParams, StiffnessCorrectionParams)
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings, TruthGeneratorParams

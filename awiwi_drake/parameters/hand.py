@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 from .base import Parameters, param
 from .components import GuideFrictionParams, MotorParams
@@ -42,7 +43,7 @@ from .rigs import SpringModelParams
 __all__ = [
     "FingerParams", "IndexFingerParams", "MiddleFingerParams", "RingFingerParams",
     "FifthFingerParams", "ThumbParams", "HandParams", "FINGERS", "TENDON_SLICES",
-    "finger_params", "FingerDriveParams", "FingerRigParams", "HandRigParams", "JointControllerParams",
+    "finger_params", "FINGER_STRUCTURE", "check_finger_structure", "FingerDriveParams", "FingerRigParams", "HandRigParams", "JointControllerParams",
 ]
 
 _T51 = "Table 5.1"
@@ -92,28 +93,57 @@ class FingerParams(Parameters):
         source=("chosen: light joint damping, of the order of the 0.1 % damping of the "
                 "Fig 5.7 study (damping ratio ~1e-3 to 1e-2 with the tendon stiffness)"))
     # Ring/fifth PIP-DIP coupling (section 5.3); unused when pip_dip_coupled is False.
-    pip_dip_coupled: bool = param(False, unit="-", source="section 5.3: ring and fifth only")
+    pip_dip_coupled: bool = param(False, unit="-", source="section 5.3: ring and fifth only (fixed per finger: FINGER_STRUCTURE, validated)")
     coupling_stiffness: float = param(
-        2.0, unit="N m/rad", low=0.0, high=1e4, low_inclusive=False,
-        source=("chosen: a stiff coupling tendon (4x the tendon-induced PIP stiffness ~0.5 N m/rad) "
-                "whose mode, sqrt(k_c / I_eff) ~ 4000 rad/s with the DIP's effective inertia "
-                "I_eff ~ 1.2e-7 kg m^2, is no faster than the other finger link modes (~3100-3300 rad/s), "
-                "so explicit RK3 at the 3 kHz control period stays stable"))
+        4.0, unit="N m/rad", low=0.0, high=1e4, low_inclusive=False,
+        source=("chosen: a stiff coupling tendon, 3.1x the tendon-induced PIP stiffness of the ring at "
+                "20 N pretension (2 k_t r42^2 = 1.29 N m/rad, k_t = 13.2 kN/m).  Coupling tolerance as a "
+                "compliance: the DIP torque -> coupling error map c^T K_q^-1 e_DIP of the motors-held joint "
+                "stiffness K_q (5.12) + k_c c c^T is 1/(k_c (1 + (r43/r42)^2)) = 0.166 rad/N m, because the "
+                "PIP/DIP tendon pair acts along (r42, r43), orthogonal to c = (-r43/r42, 1) "
+                "(hand.plant.coupling_compliance).  Stiffer is limited by the coupling mode sqrt(k_c/I_eff): "
+                "5.8e3 rad/s (ring, I_eff = 1/(c^T M^-1 c) = 1.21e-7 kg m^2) and 6.4e3 rad/s (fifth, "
+                "9.9e-8 kg m^2) at damping ratios 0.70 / 0.77, where fixed-step RK3 at the 3 kHz control period "
+                "still contracts (|R(lambda h)| = 0.59 / 0.78); k_c = 6 would put the fifth at 7.8e3 rad/s, "
+                "|R| = 1.35 at damping ratio 0.7: unstable"))
     coupling_damping: float = param(
-        7e-4, unit="N m s/rad", low=0.0, high=1.0,
-        source="chosen: damping ratio ~0.7 of the coupling mode (2 * 0.7 * sqrt(k_c I_eff))")
+        9.7e-4, unit="N m s/rad", low=0.0, high=1.0,
+        source="chosen: damping ratio 0.7 of the ring's coupling mode (2 * 0.7 * sqrt(k_c I_eff), I_eff = 1.21e-7 kg m^2)")
     # Fifth finger hematometacarpal joint (section 5.5); unused when has_hmc is False.
-    has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only")
+    has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only (fixed per finger: FINGER_STRUCTURE, validated)")
     hmc_radius: float = param(0.008, unit="m", low=0.001, high=0.03, source=_RADIUS_SRC,
                               doc="moment arm of the two HMC tendons")
     hmc_offset: float = param(0.03, unit="m", low=0.0, high=0.1,
                               source=("chosen: the four-bar linkage (section 5.5, no dimensions) is "
-                                      "replaced by a revolute joint 3 cm proximal to the abduction axis"),
+                                      "replaced by a revolute joint 3 cm proximal to the abduction axis "
+                                      "(axis: hmc_axis_tilt)"),
                               doc="HMC axis to abduction axis")
+    hmc_axis_tilt: float = param(
+        math.radians(30.0), unit="rad", low=0.0, high=math.pi / 2,
+        source=("chosen: section 5.5 gives no four-bar dimensions, only the motion: 'a locking motion "
+                "towards the palm center'.  The four-bar is replaced by one revolute axis perpendicular to "
+                "the metacarpal (base x), tilted by this angle from the MCP flexion axis (-y) towards the "
+                "palm normal (+z): hmc_axis = (0, -cos a, sin a).  Flexing the HMC then moves the finger "
+                "palmar (cos a) and radially towards the palm centre (sin a); 30 deg, the obliquity of the "
+                "human fifth carpometacarpal axis, is our pick"),
+        doc="angle between the HMC axis and the MCP flexion axis, in the plane normal to the metacarpal")
     hmc_mass: float = param(0.005, unit="kg", low=0.0, high=0.1, low_inclusive=False,
                             source="chosen: the fifth metacarpal, a short bone of the palm")
 
     num_dof = property(lambda self: 4 - int(self.pip_dip_coupled) + int(self.has_hmc))
+
+    @property
+    def hmc_axis(self) -> tuple:
+        """Unit HMC axis in the finger base frame (x: along the metacarpal): ``(0, -cos a, sin a)``."""
+        return (0.0, -math.cos(self.hmc_axis_tilt), math.sin(self.hmc_axis_tilt))
+
+    #: the finger whose structure (pip_dip_coupled, has_hmc) the thesis fixes (FINGER_STRUCTURE);
+    #: "generic" for this base class: any structure
+    FINGER: ClassVar[str] = "generic"
+
+    def _validate(self) -> None:
+        super()._validate()
+        check_finger_structure(self.FINGER, self)
 
     @property
     def dip_pip_ratio(self) -> float:
@@ -125,15 +155,21 @@ class FingerParams(Parameters):
 class IndexFingerParams(FingerParams):
     """Index finger: Table 5.1, (5.5)."""
 
+    FINGER: ClassVar[str] = "index"
+
 
 @dataclass(frozen=True)
 class MiddleFingerParams(FingerParams):
     """Middle finger: section 5.2 models it like the index (no separate table)."""
 
+    FINGER: ClassVar[str] = "middle"
+
 
 @dataclass(frozen=True)
 class RingFingerParams(FingerParams):
     """Ring finger: PIP/DIP coupled ((5.16), (5.18)), 3 DoF, 6 tendons."""
+
+    FINGER: ClassVar[str] = "ring"
 
     pip_dip_coupled: bool = param(True, unit="-", source="section 5.3, (5.16)")
     proximal_length: float = param(
@@ -144,6 +180,8 @@ class RingFingerParams(FingerParams):
 @dataclass(frozen=True)
 class FifthFingerParams(FingerParams):
     """Fifth finger: hematometacarpal joint + ring-like coupling, 4 DoF, 8 tendons."""
+
+    FINGER: ClassVar[str] = "fifth"
 
     pip_dip_coupled: bool = param(True, unit="-", source="section 5.3, (5.17)")
     has_hmc: bool = param(True, unit="-", source="section 5.5")
@@ -206,6 +244,30 @@ class ThumbParams(Parameters):
 
 FINGERS = ("thumb", "index", "middle", "ring", "fifth")
 
+# (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
+FINGER_STRUCTURE = {"index": (False, False), "middle": (False, False), "ring": (True, False),
+                    "fifth": (True, True)}
+_TENDONS = {"index": 8, "middle": 8, "ring": 6, "fifth": 8}
+
+
+def structure_text(finger: str) -> str:
+    """Human-readable structure of ``finger`` (for error messages)."""
+    if finger not in FINGER_STRUCTURE:
+        return "generic finger"
+    coupled, hmc = FINGER_STRUCTURE[finger]
+    dof = 4 - int(coupled) + int(hmc)
+    return (f"pip_dip_coupled={coupled}, has_hmc={hmc}: {dof} DoF, {_TENDONS[finger]} tendons")
+
+
+def check_finger_structure(finger: str, p) -> None:
+    """ValueError naming ``finger`` and the field when ``p``'s structure flags are not the thesis's."""
+    if finger not in FINGER_STRUCTURE:
+        return
+    for name, value in zip(("pip_dip_coupled", "has_hmc"), FINGER_STRUCTURE[finger]):
+        if getattr(p, name) != value:
+            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} "
+                             f"({structure_text(finger)}; sections 5.2-5.5), got {getattr(p, name)}")
+
 # Global tendon numbering (0-based slices of the 38 tendons, Table 6.2 order): chosen, see module doc.
 TENDON_SLICES = {"thumb": slice(0, 8), "index": slice(8, 16), "middle": slice(16, 24),
                  "ring": slice(24, 30), "fifth": slice(30, 38)}
@@ -229,6 +291,14 @@ class HandParams(Parameters):
                                source="chosen: human palm length ~90 mm (Fig 5.5 scale)")
     finger_spacing: float = param(0.02, unit="m", low=0.005, high=0.05,
                                   source="chosen: ~20 mm between finger bases (human hand)")
+
+    def _validate(self) -> None:
+        super()._validate()
+        for name, typ in _FINGER_PARAM_TYPES.items():
+            if not isinstance(getattr(self, name), typ):
+                raise ValueError(f"HandParams.{name} must be {typ.__name__}, got {type(getattr(self, name)).__name__}")
+            if name != "thumb":
+                check_finger_structure(name, getattr(self, name))
 
     def finger(self, name: str):
         """The parameter set of finger ``name`` (one of FINGERS)."""

@@ -1,0 +1,203 @@
+"""One runner for parameter sweeps and Monte-Carlo studies.
+
+Every sweep in awiwi_drake (gain studies of ch. 15, Algorithm 3 of ch. 16, ...)
+goes through :func:`run_sweep`: a function ``fn(**point)`` is evaluated at
+each point of a grid (or of a list of points) on any
+:class:`concurrent.futures.Executor`.
+
+* Default: a :class:`~concurrent.futures.ProcessPoolExecutor` created for the
+  call (``max_workers`` processes, shut down afterwards). ``fn`` and the point
+  values must then be picklable: a module-level function, not a lambda.
+* Threads: ``run_sweep(fn, grid, executor=ThreadPoolExecutor(2))`` (cheap
+  start-up; good when ``fn`` releases the GIL, e.g. Drake's C++ simulation).
+* In-process: ``executor="serial"`` (debugging, tiny sweeps).
+* Dask: ``client = dask.distributed.Client(...)``;
+  ``run_sweep(fn, grid, executor=client.get_executor())``. Any object with the
+  ``Executor.submit`` interface works; executors passed in are *not* shut down.
+
+Points are sent in chunks (``chunksize`` points per task) to amortise the
+per-task overhead (pickling, scheduling: ~1 ms per task for a process pool).
+A point that raises is recorded in :attr:`SweepResult.errors` (with
+``on_error="record"``) or re-raised with the point named (``"raise"``, default).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import itertools
+import os
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["SweepResult", "SweepPointError", "run_sweep", "grid_points", "monte_carlo_points"]
+
+
+class SweepPointError(RuntimeError):
+    """A sweep point raised; the message names the point and the original error."""
+
+
+@dataclass
+class SweepResult:
+    """Outcome of :func:`run_sweep`.
+
+    Attributes
+    ----------
+    points : list of dict
+        The evaluated points, in input order.
+    values : list
+        ``fn(**point)`` for each point (``None`` where the point failed).
+    errors : dict
+        ``index -> "ExceptionType: message"`` of the failed points (``on_error="record"``).
+    wall_time : float
+        Wall-clock time of the whole sweep [s].
+    executor : str
+        Name of the executor type used.
+    """
+
+    points: list
+    values: list
+    errors: dict = field(default_factory=dict)
+    wall_time: float = 0.0
+    executor: str = ""
+
+    def ok(self) -> list:
+        """Indices of the points that succeeded."""
+        return [i for i in range(len(self.points)) if i not in self.errors]
+
+    def column(self, name: str) -> np.ndarray:
+        """Values of one swept parameter as an array (in point order)."""
+        try:
+            return np.array([p[name] for p in self.points])
+        except KeyError:
+            raise ValueError(f"SweepResult: no swept parameter {name!r}; have {sorted(self.points[0])}") from None
+
+
+def grid_points(grid: Mapping[str, Sequence]) -> list[dict]:
+    """Cartesian product of ``{name: values}`` as a list of point dicts (last name varies fastest)."""
+    if not isinstance(grid, Mapping) or not grid:
+        raise ValueError("grid_points: grid must be a non-empty mapping name -> sequence of values")
+    names = list(grid)
+    for n in names:
+        vals = grid[n]
+        if isinstance(vals, (str, bytes)) or not hasattr(vals, "__len__") or len(vals) == 0:
+            raise ValueError(f"grid_points: grid[{n!r}] must be a non-empty sequence of values")
+    return [dict(zip(names, combo)) for combo in itertools.product(*(list(grid[n]) for n in names))]
+
+
+def monte_carlo_points(low: Mapping[str, float], high: Mapping[str, float], n: int, *,
+                       seed: int | None = None, log: bool = False) -> list[dict]:
+    """``n`` points drawn uniformly (or log-uniformly) in the box ``[low, high]``.
+
+    Parameters
+    ----------
+    low, high : mapping name -> float
+        Box corners (same names).
+    n : int
+        Number of samples (>= 1).
+    seed : int, optional
+        Seed of :func:`numpy.random.default_rng` (reproducible draws).
+    log : bool
+        Sample ``log(value)`` uniformly (needs ``low > 0``).
+    """
+    if set(low) != set(high):
+        raise ValueError(f"monte_carlo_points: low and high name different parameters: {sorted(low)} vs {sorted(high)}")
+    if int(n) < 1:
+        raise ValueError(f"monte_carlo_points: n = {n} must be >= 1")
+    rng = np.random.default_rng(seed)
+    cols = {}
+    for name in low:
+        lo, hi = float(low[name]), float(high[name])
+        if not lo < hi:
+            raise ValueError(f"monte_carlo_points: low[{name!r}] = {lo} must be below high[{name!r}] = {hi}")
+        if log:
+            if lo <= 0:
+                raise ValueError(f"monte_carlo_points: log sampling needs low[{name!r}] > 0, got {lo}")
+            cols[name] = np.exp(rng.uniform(np.log(lo), np.log(hi), int(n)))
+        else:
+            cols[name] = rng.uniform(lo, hi, int(n))
+    return [{name: float(cols[name][i]) for name in low} for i in range(int(n))]
+
+
+def _run_chunk(fn: Callable, points: list[dict], fixed: dict, record: bool) -> list[tuple[bool, Any]]:
+    out = []
+    for p in points:
+        try:
+            out.append((True, fn(**fixed, **p)))
+        except Exception as exc:  # noqa: BLE001 - reported per point
+            if not record:
+                raise SweepPointError(f"sweep point {p}: {type(exc).__name__}: {exc}\n"
+                                      f"{traceback.format_exc()}") from exc
+            out.append((False, f"{type(exc).__name__}: {exc}"))
+    return out
+
+
+def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[Mapping[str, Any]], *,
+              executor: cf.Executor | str | None = None, max_workers: int | None = None,
+              chunksize: int | None = None, fixed: Mapping[str, Any] | None = None,
+              on_error: str = "raise") -> SweepResult:
+    """Evaluate ``fn(**fixed, **point)`` at every point.
+
+    Parameters
+    ----------
+    fn : callable
+        Picklable (module-level) function for process pools.
+    points : mapping or iterable of mappings
+        ``{name: values}`` for a Cartesian grid (:func:`grid_points`) or an explicit list
+        of point dicts (e.g. :func:`monte_carlo_points`).
+    executor : concurrent.futures.Executor, "serial" or None
+        ``None``: a ProcessPoolExecutor for this call (shut down afterwards);
+        ``"serial"``: evaluate in this process; an Executor (thread pool, process pool,
+        ``dask.distributed.Client.get_executor()``) is used as is and left running.
+    max_workers : int, optional
+        Workers of the default process pool (default: ``min(2, os.cpu_count())``).
+    chunksize : int, optional
+        Points per submitted task (default: about 4 tasks per worker).
+    fixed : mapping, optional
+        Keyword arguments passed unchanged to every call.
+    on_error : {"raise", "record"}
+        Re-raise the first failing point (named), or record failures in ``SweepResult.errors``.
+    """
+    if on_error not in ("raise", "record"):
+        raise ValueError(f"run_sweep: on_error must be 'raise' or 'record', got {on_error!r}")
+    if not callable(fn):
+        raise ValueError(f"run_sweep: fn must be callable, got {fn!r}")
+    pts = grid_points(points) if isinstance(points, Mapping) else [dict(p) for p in points]
+    if not pts:
+        raise ValueError("run_sweep: no points to evaluate")
+    fixed = dict(fixed or {})
+    clash = sorted(set(fixed) & set().union(*pts))
+    if clash:
+        raise ValueError(f"run_sweep: parameter {clash[0]!r} is both swept and fixed")
+    record = on_error == "record"
+    t0 = time.perf_counter()
+
+    if isinstance(executor, str):
+        if executor != "serial":
+            raise ValueError(f"run_sweep: executor must be an Executor, 'serial' or None, got {executor!r}")
+        results = _run_chunk(fn, pts, fixed, record)
+        name = "serial"
+    else:
+        owned = executor is None
+        workers = max_workers or min(2, os.cpu_count() or 1)
+        ex = cf.ProcessPoolExecutor(max_workers=workers) if owned else executor
+        n_workers = workers if owned else max(1, getattr(ex, "_max_workers", 2) or 2)
+        size = int(chunksize) if chunksize else max(1, -(-len(pts) // (4 * n_workers)))
+        if size < 1:
+            raise ValueError(f"run_sweep: chunksize = {chunksize} must be >= 1")
+        chunks = [pts[i:i + size] for i in range(0, len(pts), size)]
+        try:
+            futures = [ex.submit(_run_chunk, fn, c, fixed, record) for c in chunks]
+            results = []
+            for f in futures:  # keeps input order
+                results.extend(f.result())
+        finally:
+            if owned:
+                ex.shutdown(wait=True, cancel_futures=True)
+        name = type(ex).__name__
+    values = [v if ok else None for ok, v in results]
+    errors = {i: v for i, (ok, v) in enumerate(results) if not ok}
+    return SweepResult(points=pts, values=values, errors=errors, wall_time=time.perf_counter() - t0, executor=name)

@@ -1,0 +1,63 @@
+"""Registry entries for ctrl1's comparison tool: ``backstepping`` and ``optimal-backstepping``.
+
+* ``backstepping``: the impedance backstepping controller matching the rig
+  (flexible joint: (15.51)-(15.81) with the rig's own spring law, linear or
+  nonlinear; joint rig: the antagonistic controller (15.82)-(15.106)), with the
+  external-torque observer (9.2).
+* ``backstepping-position``: the position controller (15.11)-(15.50)
+  (linear flexible joint only).
+* ``optimal-backstepping``: the impedance controller whose gains
+  ``(Kp,imp, Kd,imp, K3, K4)`` are fitted (ch. 16, scipy least squares) to the
+  LQR of the rig with Table 16.1's weights in torque coordinates
+  (``R = 1e-3``: with Table 16.1's ``R = 0.1`` the LQR gain is below the
+  structural floor of the backstepping feedback, see REPRODUCTIONS.md).
+  Flexible joint only.
+
+Loop option: sampled at 30 kHz, with Kd,imp limited to ``m f_s / 4`` (the
+impedance damping puts a link pole at ``-Kd,imp / m``: -1.25e5 1/s for the
+default gains on Table 12.1's 4e-7 kg m^2 link, unstable once sampled). The design cancels the joint dynamics exactly and
+is fragile to sampling: at the hand's 3 kHz the joint-rig step saturates and does
+not move (``awiwi-drake compare --rig joint-rig --rate 3000``), at 30 kHz it
+tracks (slower than the continuous loop). ``--rate 0`` runs it continuously on a
+rig without direct feedthrough (python backend; the CLI's symbolic rigs have one).
+"""
+
+from __future__ import annotations
+
+from awiwi_drake.control.registry import register_controller
+
+_LOOP = {"rate_hz": 30000.0}   # chosen: 10x the hand's 3 kHz, see the module docstring
+
+
+def _sampled_damping(rig, damping: float) -> float:
+    """Kd,imp limited so that the link pole -Kd,imp/m stays at |h lambda| <= 1/4 ... 1 of the sampled loop."""
+    return min(damping, rig.params.link_inertia * _LOOP["rate_hz"] / 4.0)
+
+
+def _backstepping(rig):
+    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
+    from awiwi_drake.parameters.rigs import JointRigParams
+    g = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else ImpedanceBacksteppingGains()
+    return impedance_controller(rig, g.replace(damping=_sampled_damping(rig, g.damping)))
+
+
+def _position(rig):
+    from awiwi_drake.control.backstepping_studies import position_controller
+    return position_controller(rig)
+
+
+def _optimal(rig):
+    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.optimal_gains import optimize_gains
+    from awiwi_drake.parameters.backstepping import OptimalGainsCase
+    fit = optimize_gains(rig, OptimalGainsCase(r_weight=1e-3))
+    return impedance_controller(rig, fit.gains)
+
+
+register_controller("backstepping", _backstepping, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
+                    description="impedance backstepping (ch. 15.3-15.5), rig's spring law, external-torque observer")
+register_controller("backstepping-position", _position, rigs=("flexible_joint",), loop_options=_LOOP,
+                    description="position backstepping of the linear flexible joint (15.11)-(15.50)")
+register_controller("optimal-backstepping", _optimal, rigs=("flexible_joint",), loop_options=_LOOP,
+                    description="impedance backstepping with gains fitted to the LQR (ch. 16)")

@@ -1,0 +1,529 @@
+"""Closed-loop studies of the backstepping controllers (thesis section 15.1-15.5).
+
+Builders tie the control laws of :mod:`.backstepping` to the foundation rigs
+(``flexible_joint_rig``, ``joint_rig``) and to ctrl1's :func:`closed_loop`;
+study functions run the simulations behind Fig 15.2-15.4, 15.7-15.13,
+15.16-15.21 and 15.23-15.27 and return data (:class:`BacksteppingRun`);
+:mod:`.backstepping_plots` draws them.
+
+All simulations use Drake's ``Simulator`` with error-controlled RK3. Inputs
+that change at given times (reference steps, disturbance steps) are applied
+as events: the simulation advances to the event time, the input is re-fixed,
+and the integration continues.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
+
+from awiwi_drake.components.motor import motor_friction_torque
+from awiwi_drake.components.spring import LinearSpring
+from awiwi_drake.control.backstepping import (
+    REFERENCE_PORT, REFERENCE_SIZE, ImpedanceBackstepping, JointModel, PositionBackstepping)
+from awiwi_drake.control.backstepping_example import ScalarBackstepping, ScalarExamplePlant
+from awiwi_drake.control.base import ClosedLoop, closed_loop
+from awiwi_drake.parameters.backstepping import (
+    AntagonisticBacksteppingGains, BacksteppingPlantParams, ImpedanceBacksteppingGains, ImpedanceStudy,
+    NonlinearImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
+from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig
+
+__all__ = [
+    "BacksteppingRun", "SimulationDivergedError", "table_15_1_params", "table_15_1_rig", "plant_params",
+    "joint_model", "position_controller", "impedance_controller", "simulate_events",
+    "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
+    "impedance_steady_state", "nonlinear_impedance_study", "antagonistic_step", "antagonistic_sine",
+    "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations", "with_external_torque_sensor",
+]
+
+
+class SimulationDivergedError(RuntimeError):
+    """The closed-loop state became non-finite."""
+
+
+@dataclass
+class BacksteppingRun:
+    """Sampled time series of one closed-loop simulation.
+
+    Attributes
+    ----------
+    label : str
+        What was varied (e.g. ``"K1 = 5"``).
+    t : ndarray (N,)
+        Sample times [s].
+    state : ndarray (N, n)
+        Rig state (``[q, qd, theta..., omega...]``).
+    command : ndarray (N, m)
+        Torque entering the rig [Nm] (after hold, delay, saturation).
+    lyapunov : ndarray (N,)
+        The controller's Lyapunov function.
+    reference : ndarray (N,)
+        Link-angle reference [rad].
+    disturbance : ndarray (N,)
+        External torque [Nm].
+    extra : dict
+        Further logged outputs (``tendon_force``, ``joint_torque``, ``tendon_stiffness``, ...).
+    """
+
+    label: str
+    t: np.ndarray
+    state: np.ndarray
+    command: np.ndarray
+    lyapunov: np.ndarray
+    reference: np.ndarray
+    disturbance: np.ndarray
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def q(self) -> np.ndarray:
+        """Link angle [rad]."""
+        return self.state[:, 0]
+
+
+# ---------------------------------------------------------------------------
+# rigs and models
+def table_15_1_params(**changes) -> FlexibleJointParams:
+    """FlexibleJointParams with the Table 15.1 values (m = 7.2e-7, b = 2e-4, b_th = 1e-2, b_q = 1e-3, K = 20)."""
+    t = BacksteppingPlantParams()
+    p = FlexibleJointParams(link_inertia=t.link_inertia, motor_inertia=t.motor_inertia, stiffness=t.stiffness,
+                            link_damping=t.link_damping, motor_damping=t.motor_damping)
+    return p.replace(**changes) if changes else p
+
+
+def table_15_1_rig(*, spring: str = "linear", **changes):
+    """``flexible_joint_rig`` with Table 15.1 parameters (``spring="nonlinear"``: lever-spring pair)."""
+    return flexible_joint_rig(params=table_15_1_params(**changes), spring=spring)
+
+
+def plant_params(rig) -> BacksteppingPlantParams:
+    """The design model of the position controller from a linear ``flexible_joint_rig``."""
+    p = rig.params
+    if not isinstance(p, FlexibleJointParams) or rig.extra.get("spring_kind") != "linear":
+        raise ValueError(f"plant_params: the position controller (15.11)-(15.50) needs a linear flexible_joint_rig, "
+                         f"got {rig.name} ({rig.extra.get('spring_kind', '?')})")
+    return BacksteppingPlantParams(link_inertia=p.link_inertia, motor_inertia=p.motor_inertia,
+                                   motor_damping=p.motor_damping, link_damping=p.link_damping, stiffness=p.stiffness)
+
+
+def joint_model(rig, *, spring=None, pretension: float | None = None, damping: bool = True) -> JointModel:
+    """The controller design model of a rig (single flexible joint or antagonistic joint rig).
+
+    Parameters
+    ----------
+    rig : Rig
+        ``flexible_joint_rig`` (N = 1, torsion spring ``tau = phi(theta - q)``) or ``joint_rig``
+        (N = 2, tendons ``x_i = r_m theta_i + P_i q``, P = [-r_q, r_q], equal torque share, pretension).
+    spring : spring law, optional
+        Design spring law (default: the rig's own law: the nominal design). Pass
+        ``LinearSpring(k, tension_only=False)`` for the "linear controller" of section 15.4.
+    pretension : float, optional
+        Tendon pretension [N] of the joint rig (default: the rig's).
+    damping : bool
+        Keep link/motor damping and motor friction in the design model (the nominal design;
+        the thesis neglects them: ``False``).
+    """
+    p = rig.params
+    law = rig.spring if spring is None else spring
+    if isinstance(p, FlexibleJointParams):
+        return JointModel(link_inertia=p.link_inertia, link_damping=p.link_damping if damping else 0.0,
+                          motor_inertia=(p.motor_inertia,), coupling=(-1.0,), motor_pulley_radius=1.0, spring=law,
+                          elongation_offset=(0.0,), motor_damping=p.motor_damping if damping else 0.0,
+                          name=rig.name)
+    if isinstance(p, JointRigParams):
+        rq = p.link_pulley_radius
+        f0 = p.pretension if pretension is None else float(pretension)
+        if not f0 > 0:
+            raise ValueError(f"joint_model: pretension = {f0} N must be > 0 (tendons must stay taut)")
+        friction = functools.partial(motor_friction_torque, p=p.motor) if damping else None
+        return JointModel(link_inertia=p.link_inertia, link_damping=p.link_damping if damping else 0.0,
+                          motor_inertia=(p.motor.inertia,) * 2, coupling=(-rq, rq),
+                          motor_pulley_radius=p.motor.pulley_radius, spring=law, elongation_offset=(0.0, 0.0),
+                          motor_friction=friction, torque_share=(0.5, 0.5), torque_offset=(rq * f0, -rq * f0),
+                          name=rig.name)
+    raise ValueError(f"joint_model: no backstepping design model for rig {rig.name!r}")
+
+
+def position_controller(rig, gains: PositionBacksteppingGains | None = None, **kw):
+    """:class:`PositionBackstepping` for a linear flexible-joint rig."""
+    return PositionBackstepping(plant_params(rig), gains or PositionBacksteppingGains(), **kw)
+
+
+def impedance_controller(rig, gains=None, *, spring=None, pretension=None, damping=True, **kw):
+    """:class:`ImpedanceBackstepping` for a flexible-joint rig (N = 1) or the joint rig (N = 2).
+
+    ``gains`` may be :class:`AntagonisticBacksteppingGains` (its pretension is used) or
+    :class:`ImpedanceBacksteppingGains`; ``kw`` go to the controller (``external_torque``,
+    ``reference_derivatives``, ``compensate``).
+    """
+    if gains is None:
+        gains = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else \
+            ImpedanceBacksteppingGains()
+    if isinstance(gains, AntagonisticBacksteppingGains):
+        pretension = gains.pretension if pretension is None else pretension
+        gains = ImpedanceBacksteppingGains(stiffness=gains.stiffness, damping=gains.damping, k3=gains.k3,
+                                           k4=gains.k4)
+    if pretension is None and isinstance(rig.params, JointRigParams):
+        pretension = rig.params.pretension
+    model = joint_model(rig, spring=spring, pretension=pretension, damping=damping)
+    return ImpedanceBackstepping(model, gains, **kw)
+
+
+# ---------------------------------------------------------------------------
+# simulation with input events
+def simulate_events(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None,
+                    inputs0: Mapping[str, object] | None = None,
+                    events: Sequence[tuple[float, Mapping[str, object]]] = (),
+                    input_functions: Mapping[str, Callable[[float], object]] | None = None,
+                    dt: float = 1e-3, max_step: float = 1e-3, accuracy: float = 1e-6, label: str = "",
+                    extra_outputs: Sequence[str] = ()) -> BacksteppingRun:
+    """Simulate a :class:`ClosedLoop` from ``state0`` with piecewise-constant inputs.
+
+    ``inputs0`` fixes the exported inputs at t = 0 (``link_angle_reference``,
+    ``external_torque``; missing ones are 0); ``events`` = ``[(t, {port: value})]``
+    re-fix them at given times; ``input_functions`` = ``{port: f(t)}`` are
+    re-fixed at every sample (sample-and-hold at ``dt``, e.g. a sine reference
+    with derivatives). Raises :class:`SimulationDivergedError` on a non-finite state.
+    """
+    if t_final <= 0 or dt <= 0:
+        raise ValueError(f"simulate_events: t_final = {t_final} and dt = {dt} must be > 0")
+    d = loop.diagram
+    ctx = loop.create_context(state=state0, motor_torque=motor_torque0,
+                              references={k: v for k, v in (inputs0 or {}).items() if k in loop.references},
+                              disturbances={k: v for k, v in (inputs0 or {}).items() if k in loop.disturbances})
+    ctrl = d.GetSubsystemByName("controller")
+    cctx = ctrl.GetMyContextFromRoot(ctx)
+    has_v = ctrl.HasOutputPort("lyapunov")
+    rig_sys = d.GetSubsystemByName("rig")
+    rctx = rig_sys.GetMyContextFromRoot(ctx)
+
+    def fix(values):
+        for name, v in values.items():
+            port = d.GetInputPort(name)
+            port.FixValue(ctx, np.broadcast_to(np.asarray(v, dtype=float), (port.size(),)).copy())
+
+    funcs = dict(input_functions or {})
+    fix({k: f(0.0) for k, f in funcs.items()})
+    sim = Simulator(d, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", max_step)
+    sim.get_mutable_integrator().set_target_accuracy(accuracy)
+    sim.Initialize()
+    n = int(round(t_final / dt)) + 1
+    ts = np.arange(n) * dt
+    pending = sorted(events, key=lambda e: e[0])
+    ref_port = d.GetInputPort(REFERENCE_PORT) if d.HasInputPort(REFERENCE_PORT) else None
+    ext_port = d.GetInputPort("external_torque") if d.HasInputPort("external_torque") else None
+    X, U, V, R, W = [], [], [], [], []
+    extra = {k: [] for k in extra_outputs}
+    for i, t in enumerate(ts):
+        while pending and pending[0][0] <= t + 1e-12:
+            te, vals = pending.pop(0)
+            if te > ctx.get_time():
+                sim.AdvanceTo(te)
+            fix(vals)
+        if t > ctx.get_time():
+            sim.AdvanceTo(t)
+        if funcs:
+            fix({k: f(t) for k, f in funcs.items()})
+        x = rctx.get_continuous_state_vector().CopyToVector()
+        if not np.all(np.isfinite(x)):
+            raise SimulationDivergedError(f"{label or d.get_name()}: state not finite at t = {t:.4g} s")
+        X.append(x)
+        U.append(np.array(d.GetOutputPort("motor_torque").Eval(ctx), dtype=float))
+        V.append(float(ctrl.GetOutputPort("lyapunov").Eval(cctx)[0]) if has_v else math.nan)
+        R.append(float(ref_port.Eval(ctx)[0]) if ref_port is not None else math.nan)
+        W.append(float(ext_port.Eval(ctx)[0]) if ext_port is not None else 0.0)
+        for k in extra_outputs:
+            extra[k].append(np.array(d.GetOutputPort(k).Eval(ctx), dtype=float))
+    return BacksteppingRun(label, ts, np.array(X), np.array(U), np.array(V), np.array(R), np.array(W),
+                           {k: np.array(v) for k, v in extra.items()})
+
+
+def is_monotone_nonincreasing(v, *, rtol: float = 1e-6, atol: float = 1e-12) -> bool:
+    """True when ``v`` never increases by more than ``rtol * max|v| + atol`` between samples."""
+    v = np.asarray(v, dtype=float)
+    return bool(np.all(np.diff(v) <= rtol * np.max(np.abs(v)) + atol))
+
+
+def count_oscillations(t, y, target, *, after: float = 0.0, band: float = 0.02) -> int:
+    """Number of crossings of ``target`` by ``y`` (outside a ``band`` of the step) after ``after`` s.
+
+    A monotone (non-oscillating) step response crosses its target at most once.
+    """
+    t, y = np.asarray(t), np.asarray(y)
+    e = (y - target)[t >= after]
+    scale = max(abs(target), 1e-12)
+    s = np.sign(np.where(np.abs(e) > band * scale, e, 0.0))
+    s = s[s != 0]
+    return int(np.sum(s[1:] != s[:-1]))
+
+
+# ---------------------------------------------------------------------------
+# 15.1: scalar example
+def example_phase_portrait(gains: ScalarExampleGains, initial_states, *, t_final: float = 60.0,
+                           variant: str = "textbook", dt: float = 0.05) -> list[BacksteppingRun]:
+    """Trajectories of (15.1) under (15.10) from each initial state (Fig 15.2-15.4)."""
+    runs = []
+    for x0 in initial_states:
+        b = DiagramBuilder()
+        plant = b.AddNamedSystem("rig", ScalarExamplePlant())
+        ctrl = b.AddNamedSystem("controller", ScalarBackstepping(gains, variant))
+        b.Connect(plant.get_output_port(0), ctrl.get_input_port(0))
+        b.Connect(ctrl.GetOutputPort("u"), plant.get_input_port(0))
+        b.ExportOutput(ctrl.GetOutputPort("u"), "motor_torque")
+        loop = ClosedLoop(diagram=b.Build(), rig=None, controller=ctrl, rate_hz=None, delay=None, delay_steps=0,
+                          saturation=None, references=(), disturbances=(), tracked_outputs=())
+        runs.append(simulate_events(loop, t_final=t_final, state0=x0, dt=dt, max_step=0.05,
+                                    label=f"x0 = ({x0[0]:g}, {x0[1]:g})"))
+    return runs
+
+
+# ---------------------------------------------------------------------------
+# 15.2: position control, linear flexible joint
+def _step_run(make_controller, *, step, t_final, label, dt=2e-3, saturation=None, delay=None, rate_hz=None,
+              max_step=2e-3, make_rig=None):
+    """A fresh rig (a Drake diagram joins one closed loop only) with ``make_controller(rig)``."""
+    rig = (make_rig or table_15_1_rig)()
+    loop = closed_loop(rig, make_controller(rig), rate_hz=rate_hz, delay=delay, saturation=saturation)
+    op = rig.operating_point()
+    # ClosedLoop.initialize sizes the delay buffer as steps * n, DiscreteTimeDelay holds (steps + 1) * n:
+    # leave the buffers at their default (zero = the rest torque of this rig) when delayed.
+    u0 = None if loop.delay_steps else op.motor_torque
+    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=u0,
+                           inputs0={REFERENCE_PORT: step}, dt=dt, max_step=max_step, label=label)
+
+
+def position_gain_study(which: str = "k1", study: PositionStudy | None = None, *, t_final: float | None = None,
+                        values: Sequence[float] | None = None) -> list[BacksteppingRun]:
+    """0.8 rad steps for K1 in {0.2, 1, 5, 50} (K2 = 1, Fig 15.7) or K2 in the same set (K1 = 5, Fig 15.8)."""
+    s = study or PositionStudy()
+    if which == "k1":
+        vals, make = values or s.k1_values, (lambda v: PositionBacksteppingGains(k1=v, k2=s.k1_fixed_k2))
+    elif which == "k2":
+        vals, make = values or s.k2_values, (lambda v: PositionBacksteppingGains(k1=s.k2_fixed_k1, k2=v))
+    else:
+        raise ValueError(f"position_gain_study: which = {which!r} must be 'k1' or 'k2'")
+    return [_step_run(lambda rig, v=v: position_controller(rig, make(v)), step=s.step,
+                      t_final=t_final or s.duration, label=f"{which.upper()} = {v:g}") for v in vals]
+
+
+def saturation_study(study: PositionStudy | None = None, *, t_final: float | None = None) -> list[BacksteppingRun]:
+    """0.8 rad step without and with |u| < 5e-4 Nm (K1 = K2 = 1, K3 = K4 = 100; Fig 15.10-15.11)."""
+    s = study or PositionStudy()
+    g = PositionBacksteppingGains(k1=s.saturation_k1, k2=s.saturation_k2)
+    return [_step_run(lambda rig: position_controller(rig, g), step=s.step, t_final=t_final or s.duration,
+                      label=lbl, saturation=sat)
+            for lbl, sat in (("no saturation", None), (f"|u| < {s.saturation:g} Nm", s.saturation))]
+
+
+def delay_study(study: PositionStudy | None = None, *, t_final: float | None = None,
+                delays: Sequence[float] | None = None) -> list[BacksteppingRun]:
+    """0.8 rad steps with round-trip delays (K1 = 5, K2 = 1; Fig 15.13).
+
+    A delay ``d > 0`` is realised by ctrl1's :func:`closed_loop`: the controller is sampled
+    every ``d / delay_steps`` s and its command delayed by ``delay_steps`` periods (for a
+    static state feedback, a delay on the command equals the same total delay split between
+    measurement and command, the thesis's Fig 15.12).
+    """
+    s = study or PositionStudy()
+    g = PositionBacksteppingGains()
+    runs = []
+    for d in (delays if delays is not None else s.delays):
+        if d > 0:
+            rate = s.delay_steps / d
+            runs.append(_step_run(lambda rig: position_controller(rig, g), step=s.step,
+                                  t_final=t_final or s.delay_duration, label=f"delay {1e3 * d:g} ms", delay=d, rate_hz=rate, max_step=min(2e-3, d)))
+        else:
+            runs.append(_step_run(lambda rig: position_controller(rig, g), step=s.step,
+                                  t_final=t_final or s.delay_duration, label="delay 0 ms"))
+    return runs
+
+
+# ---------------------------------------------------------------------------
+# 15.3: impedance control, linear flexible joint
+def _impedance_run(make_rig, make_controller, *, step, step_time, disturbance, disturbance_time, t_final, label,
+                   saturation=None, dt=2e-3, max_step=1e-3, extra_outputs=()):
+    rig = make_rig()
+    loop = closed_loop(rig, make_controller(rig), rate_hz=None, saturation=saturation)
+    op = rig.operating_point()
+    events = [(step_time, {REFERENCE_PORT: step}), (disturbance_time, {"external_torque": disturbance})]
+    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque, events=events,
+                           dt=dt, max_step=max_step, label=label, extra_outputs=extra_outputs)
+
+
+def impedance_study(which: str = "stiffness", study: ImpedanceStudy | None = None, *,
+                    t_final: float | None = None, values: Sequence[float] | None = None,
+                    gains: ImpedanceBacksteppingGains | None = None,
+                    external_torque: str = "input") -> list[BacksteppingRun]:
+    """45 deg step at 0.5 s, 0.2 Nm disturbance at 1.5 s (Fig 15.16: Kp,imp; Fig 15.17: Kd,imp).
+
+    ``external_torque="input"`` (default) measures the load with an ideal sensor
+    (:func:`with_external_torque_sensor`), as the design (15.62) formally requires;
+    ``"observer"`` estimates it with (9.2); ``"none"`` ignores it.
+    """
+    s = study or ImpedanceStudy()
+    g0 = gains or ImpedanceBacksteppingGains()
+    if which == "stiffness":
+        vals = values or s.stiffness_values
+        make = lambda v: g0.replace(stiffness=v, damping=s.stiffness_fixed_damping)  # noqa: E731
+        label = "Kp,imp = {:g} Nm/rad"
+    elif which == "damping":
+        vals = values or s.damping_values
+        make = lambda v: g0.replace(stiffness=s.damping_fixed_stiffness, damping=v)  # noqa: E731
+        label = "Kd,imp = {:g} Nm s/rad"
+    else:
+        raise ValueError(f"impedance_study: which = {which!r} must be 'stiffness' or 'damping'")
+    make_rig = (lambda: with_external_torque_sensor(table_15_1_rig())) if external_torque == "input" \
+        else table_15_1_rig
+    return [_impedance_run(make_rig, lambda rig, v=v: impedance_controller(rig, make(v),
+                                                                           external_torque=external_torque),
+                           step=s.step, step_time=s.step_time,
+                           disturbance=s.disturbance, disturbance_time=s.disturbance_time,
+                           t_final=t_final or s.duration, label=label.format(v)) for v in vals]
+
+
+def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: float, **kw) -> float:
+    """Steady-state deflection ``q_ss - r`` [rad] under a constant external torque, from the closed loop.
+
+    Drake's ``Linearize`` of the (linear) closed loop gives ``x' = A x + B w``; the
+    steady state is ``-A^-1 B w``. ``kw`` go to :func:`impedance_controller`.
+    """
+    from pydrake.systems.primitives import Linearize
+    loop = closed_loop(rig, impedance_controller(rig, gains, **kw), rate_hz=None)
+    ctx = loop.create_context(state=rig.operating_point().state)
+    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("link_angle").get_index(),
+                    equilibrium_check_tolerance=1e-6)
+    x_ss = -np.linalg.solve(lin.A(), lin.B() @ [disturbance])
+    return float((lin.C() @ x_ss)[0])
+
+
+# ---------------------------------------------------------------------------
+# 15.4: nonlinear spring
+def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, saturation: bool = False,
+                              t_final: float | None = None, external_torque: str = "input") -> list[BacksteppingRun]:
+    """Linear vs nonlinear backstepping impedance controller on the nonlinear-spring joint (Fig 15.19-15.21).
+
+    The "linear controller" designs with the spring's stiffness at zero deflection; the
+    "nonlinear controller" uses the real spring curve and its first two derivatives.
+    ``saturation=True`` limits the motor torque (Fig 15.21).
+    """
+    s = study or NonlinearImpedanceStudy()
+    base = functools.partial(table_15_1_rig, spring="nonlinear")
+    make_rig = (lambda: with_external_torque_sensor(base())) if external_torque == "input" else base
+    g = ImpedanceBacksteppingGains(stiffness=s.stiffness, damping=s.damping, k3=s.k3, k4=s.k4)
+    k0 = float(np.ravel(make_rig().spring.stiffness(np.array([0.0])))[0])
+    sat = s.torque_limit if saturation else None
+    runs = []
+    for label, law in (("nonlinear controller", None), ("linear controller", LinearSpring(k0, tension_only=False))):
+        runs.append(_impedance_run(make_rig, lambda rig, law=law: impedance_controller(rig, g, spring=law, external_torque=external_torque),
+                                   step=s.step, step_time=s.step_time,
+                                   disturbance=s.disturbance, disturbance_time=s.disturbance_time,
+                                   t_final=t_final or s.duration, label=label, saturation=sat,
+                                   extra_outputs=("tendon_stiffness",)))
+    return runs
+
+
+# ---------------------------------------------------------------------------
+# 15.5: antagonistic joint
+def _sine_reference(amplitude, freq, offset=0.0):
+    w = 2 * math.pi * freq
+
+    def f(t):
+        s, c = math.sin(w * t), math.cos(w * t)
+        return np.array([offset + amplitude * s, amplitude * w * c, -amplitude * w * w * s,
+                         -amplitude * w ** 3 * c, amplitude * w ** 4 * s])
+    return f
+
+
+def antagonistic_step(gains: AntagonisticBacksteppingGains | None = None, *, step: float = math.radians(30.0),
+                      t_final: float = 0.8, make_rig=None, dt: float = 1e-3) -> BacksteppingRun:
+    """Step of the antagonistic joint (Fig 15.24: 30 deg PIP step), joint rig defaults."""
+    rig = (make_rig or joint_rig)()
+    g = gains or AntagonisticBacksteppingGains()
+    op = rig.operating_point(pretension=g.pretension)
+    loop = closed_loop(rig, impedance_controller(rig, g), rate_hz=None)
+    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
+                           events=[(0.05, {REFERENCE_PORT: step})], dt=dt, max_step=1e-3,
+                           label="backstepping step", extra_outputs=("tendon_force", "joint_torque"))
+
+
+def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amplitude: float = math.radians(25.0),
+                      frequency: float = 1.0, offset: float = math.radians(30.0), t_final: float = 2.0, make_rig=None,
+                      feedforward: bool = True, dt: float = 1e-3) -> BacksteppingRun:
+    """Sine tracking of the antagonistic joint (Fig 15.25: 10-55 deg at about 1 Hz).
+
+    ``feedforward=True`` feeds the reference derivatives (``reference_derivatives=4``); otherwise
+    the controller sees the reference value only (regulation design).
+    """
+    rig = (make_rig or joint_rig)()
+    g = gains or AntagonisticBacksteppingGains()
+    ref = _sine_reference(amplitude, frequency, offset)
+    ctrl = impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0)
+    loop = closed_loop(rig, ctrl, rate_hz=None)
+    op = rig.operating_point(pretension=g.pretension, link_angle=offset)
+    fn = ref if feedforward else (lambda t: ref(t)[:1])
+    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
+                           input_functions={REFERENCE_PORT: fn}, dt=dt, max_step=dt, label="backstepping sine",
+                           extra_outputs=("tendon_force",))
+
+
+def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflection: float = 0.3,
+                                 gains: AntagonisticBacksteppingGains | None = None, load: float = 0.01) -> dict:
+    """Fig 15.27: joint torque from the tendon forces under an imposed deflection, per Kp,imp.
+
+    At steady state the tendon torque balances whatever holds the link, so imposing a
+    deflection ``delta`` with a fixture gives the torque ``K_eff delta`` where ``K_eff`` is the
+    static stiffness of the closed loop. ``K_eff`` is computed exactly from Drake's
+    linearisation of the joint rig + controller at the pretension operating point
+    (:func:`impedance_steady_state` with a small ``load`` [Nm]); the returned
+    ``torque = K_eff * deflection`` [Nm] is the quantity plotted in Fig 15.27.
+    (A simulated stiff fixture excites a link mode far above the torque loops' bandwidth:
+    the design's assumption of a constant external torque no longer holds.)
+    """
+    g0 = gains or AntagonisticBacksteppingGains()
+    k_eff = []
+    for kp in stiffness_values:
+        g = g0.replace(stiffness=float(kp))
+        rig = joint_rig(params=JointRigParams().replace(pretension=g.pretension))
+        dq = impedance_steady_state(rig, g, load)
+        k_eff.append(load / dq)
+    k_eff = np.array(k_eff)
+    return dict(stiffness=np.array(stiffness_values, dtype=float), effective_stiffness=k_eff,
+                torque=k_eff * deflection, deflection=deflection)
+
+
+def with_external_torque_sensor(rig):
+    """A copy of a link rig whose diagram also outputs the applied ``external_torque`` as
+    ``external_torque_measured`` (an ideal torque sensor: the thesis's formal design (15.62)).
+
+    The external torque input is routed through a pass-through so that the controller can
+    read it as a measurement (ctrl1's closed-loop convention: measurements are rig outputs).
+    """
+    import dataclasses
+    from pydrake.systems.primitives import PassThrough
+    if not rig.diagram.HasInputPort("external_torque"):
+        raise ValueError(f"with_external_torque_sensor: rig {rig.name!r} has no input 'external_torque'")
+    b = DiagramBuilder()
+    inner = b.AddNamedSystem("plant", rig.diagram)
+    tap = b.AddNamedSystem("external_torque_tap", PassThrough(inner.GetInputPort("external_torque").size()))
+    b.ExportInput(tap.get_input_port(), "external_torque")
+    b.Connect(tap.get_output_port(), inner.GetInputPort("external_torque"))
+    b.ExportOutput(tap.get_output_port(), "external_torque_measured")
+    for i in range(rig.diagram.num_input_ports()):
+        name = rig.diagram.get_input_port(i).get_name()
+        if name != "external_torque":
+            b.ExportInput(inner.GetInputPort(name), name)
+    for i in range(rig.diagram.num_output_ports()):
+        name = rig.diagram.get_output_port(i).get_name()
+        b.ExportOutput(inner.GetOutputPort(name), name)
+    diagram = b.Build()
+    diagram.set_name(rig.name)
+    return dataclasses.replace(rig, diagram=diagram)

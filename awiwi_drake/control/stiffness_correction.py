@@ -1,0 +1,236 @@
+"""Stiffness correction (thesis ch. 8).
+
+The stiffness felt at a joint is the series connection of the controller's
+impedance and the mechanical (tendon) stiffness (8.1):
+
+    K_eff^-1 = K_imp^-1 + K_mech^-1.
+
+The user sets ``K_eff,des``; the pretension is chosen for ``K_mech,des =
+eps K_eff,des`` (8.2, eps > 1); the controller gain is then recomputed online
+from the *current* mechanical stiffness so that ``K_eff`` stays at target while
+loads change ``K_mech`` (nonlinear springs). ``K_imp`` is kept positive
+definite (eigenvalues >= ``min_impedance``) and bounded (``max_impedance``,
+the singular case ``K_mech -> K_eff`` of section 8.3); when either limit acts,
+the target is not met and the law reports it (``limited``).
+
+:func:`impedance_for_effective_stiffness` is the matrix law (n x n);
+:class:`StiffnessCorrectedImpedance_` a controller for the antagonistic joint
+rig: motor-side impedance (the Awiwi hand has no link sensors: the controller
+acts on the motor positions, so its compliance is in series with the springs),
+motor PD with tendon-force feedforward, pretension set by (8.2), ``K_imp``
+updated online from the spring stiffness at the measured elongations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import clip, smax
+from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
+
+__all__ = ["impedance_for_effective_stiffness", "effective_stiffness", "pretension_elongation",
+           "StiffnessCorrectedImpedance_", "StiffnessCorrectedImpedance", "StiffnessRun", "stiffness_correction_run"]
+
+
+def effective_stiffness(K_imp, K_mech):
+    """(8.1): ``(K_imp^-1 + K_mech^-1)^-1`` for symmetric positive definite matrices (or scalars)."""
+    K_imp, K_mech = np.atleast_2d(K_imp).astype(float), np.atleast_2d(K_mech).astype(float)
+    return np.linalg.inv(np.linalg.inv(K_imp) + np.linalg.inv(K_mech))
+
+
+def impedance_for_effective_stiffness(K_eff_des, K_mech, params: StiffnessCorrectionParams | None = None):
+    """``K_imp`` from (8.1) for a desired ``K_eff`` and the current ``K_mech``, kept positive definite.
+
+    Returns ``(K_imp, limited)``: ``limited`` is True when an eigenvalue had to be raised to
+    ``min_impedance`` (K_mech <= K_eff in that direction: the target is unreachable with a
+    passive controller) or capped at ``max_impedance`` (K_mech close to K_eff).
+    """
+    p = params or StiffnessCorrectionParams()
+    Ke, Km = np.atleast_2d(K_eff_des).astype(float), np.atleast_2d(K_mech).astype(float)
+    if Ke.shape != Km.shape or Ke.shape[0] != Ke.shape[1]:
+        raise ValueError(f"impedance_for_effective_stiffness: K_eff_des {Ke.shape} and K_mech {Km.shape} "
+                         "must be square and of the same shape")
+    for name, M in (("K_eff_des", Ke), ("K_mech", Km)):
+        if not np.allclose(M, M.T, atol=1e-12) or np.min(np.linalg.eigvalsh(M)) <= 0:
+            raise ValueError(f"impedance_for_effective_stiffness: {name} must be symmetric positive definite")
+    C = np.linalg.inv(Ke) - np.linalg.inv(Km)          # K_imp^-1
+    C = 0.5 * (C + C.T)
+    w, V = np.linalg.eigh(C)
+    # compliance eigenvalues -> stiffness eigenvalues, limited to [min, max]
+    with np.errstate(divide="ignore"):
+        k = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0), np.inf)
+    limited = bool(np.any(k < p.min_impedance) or np.any(k > p.max_impedance))
+    k = np.clip(k, p.min_impedance, p.max_impedance)
+    return (V * k) @ V.T, limited
+
+
+def pretension_elongation(spring, joint_stiffness: float, link_pulley_radius: float) -> float:
+    """Common elongation x with ``2 r_q^2 k(x) = joint_stiffness`` (8.2: pretension for a K_mech target)."""
+    target = joint_stiffness / (2.0 * link_pulley_radius ** 2)
+    hi = float(getattr(spring, "max_elongation", 0.01))
+    hi = hi if np.isfinite(hi) else 0.01
+    k_lo, k_hi = float(spring.stiffness(np.array([1e-9]))[0]), float(spring.stiffness(np.array([hi]))[0])
+    if not k_lo <= target <= k_hi:
+        raise ValueError(f"pretension_elongation: K_mech = {joint_stiffness} Nm/rad needs a tendon stiffness of "
+                         f"{target:.4g} N/m, outside the spring's range [{k_lo:.4g}, {k_hi:.4g}] N/m")
+    lo = 1e-9
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if float(spring.stiffness(np.array([mid]))[0]) < target else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+@TemplateSystem.define("StiffnessCorrectedImpedance_")
+def StiffnessCorrectedImpedance_(T):
+    class Impl(LeafSystem_[T]):
+        """Motor-side joint impedance with online stiffness correction on the antagonistic joint rig.
+
+        Inputs: ``state`` (6, joint rig order), ``link_angle_reference`` (1) [rad],
+        ``effective_stiffness_reference`` (1) [Nm/rad]. ``online=False`` computes K_imp once from the
+        nominal K_mech = eps K_eff (no correction), for comparison.
+        Outputs: ``motor_torque`` (2) [Nm]; ``stiffness`` (3) = ``[K_imp, K_mech, K_eff (8.1)]`` [Nm/rad].
+
+        ``q_m = r_m (theta1 - theta2) / (2 r_q)`` is the motor-side joint angle, ``tau = r_q (f1 - f2)``
+        the joint torque of the tendons. The motors track ``q_m,des = q_ref - tau / K_imp`` (the
+        controller compliance) at the common elongation ``x_c`` of (8.2) with a PD and the
+        tendon-force feedforward ``r_m f_i``. At rest ``q - q_ref = tau_ext (1/K_imp + 1/K_mech)``.
+        """
+
+        def _construct(self, rig_params, spring, params=None, motor_gains=(50.0, 1.0), online=True,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.rig_params, self.spring, self.online = rig_params, spring, bool(online)
+            self.params = params or StiffnessCorrectionParams()
+            self.motor_gains = tuple(float(g) for g in motor_gains)
+            if min(self.motor_gains) <= 0:
+                raise ValueError(f"StiffnessCorrectedImpedance: motor_gains = {motor_gains} must be > 0")
+            self.DeclareVectorInputPort("state", 6)
+            self.DeclareVectorInputPort("link_angle_reference", 1)
+            self.DeclareVectorInputPort("effective_stiffness_reference", 1)
+            t = {self.all_input_ports_ticket()}
+            self.DeclareVectorOutputPort("motor_torque", 2, self._calc_u, prerequisites_of_calc=t)
+            self.DeclareVectorOutputPort("stiffness", 3, self._calc_k, prerequisites_of_calc=t)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.rig_params, other.spring, other.params, other.motor_gains,
+                            other.online, converter=converter)
+
+        def _law(self, context):
+            x = self.get_input_port(0).Eval(context)
+            q_ref = self.get_input_port(1).Eval(context)[0]
+            k_eff = self.get_input_port(2).Eval(context)[0]
+            p, sp = self.rig_params, self.spring
+            rm, rq = p.motor.pulley_radius, p.link_pulley_radius
+            q, th, om = x[0], x[2:4], x[4:6]
+            xe = np.array([rm * th[0] - rq * q, rm * th[1] + rq * q])
+            f = sp.force(xe)
+            k_mech = rq * rq * (sp.stiffness(xe[0:1])[0] + sp.stiffness(xe[1:2])[0])
+            # (8.1) solved for K_imp, kept in [min, max] (scalar joint); without online correction
+            # the nominal K_mech = eps K_eff of (8.2) is used
+            k_model = k_mech if self.online else self.params.epsilon * k_eff
+            compliance = 1.0 / k_eff - 1.0 / k_model
+            k_imp = clip(1.0 / smax(compliance, 1.0 / self.params.max_impedance),
+                         self.params.min_impedance, self.params.max_impedance)
+            tau = rq * (f[0] - f[1])
+            x_c = self._elongation(k_eff)
+            q_m_des = q_ref - tau / k_imp
+            th_ref = np.array([(x_c + rq * q_m_des) / rm, (x_c - rq * q_m_des) / rm])
+            kp, kd = self.motor_gains
+            u = rm * f + kp * (th_ref - th) - kd * om
+            return u, k_imp, k_mech
+
+        def _elongation(self, k_eff):
+            """(8.2) pretension for K_mech,des = eps K_eff (cached per target value)."""
+            key = float(k_eff.value() if hasattr(k_eff, "value") else k_eff)
+            cache = self.__dict__.setdefault("_xc", {})
+            if key not in cache:
+                cache[key] = pretension_elongation(self.spring, self.params.epsilon * key,
+                                                   self.rig_params.link_pulley_radius)
+            return cache[key]
+
+        def _calc_u(self, context, output):
+            output.SetFromVector(self._law(context)[0])
+
+        def _calc_k(self, context, output):
+            _, k_imp, k_mech = self._law(context)
+            output.SetFromVector(np.array([k_imp, k_mech, 1.0 / (1.0 / k_imp + 1.0 / k_mech)]))
+
+    return Impl
+
+
+StiffnessCorrectedImpedance = StiffnessCorrectedImpedance_[None]
+
+
+@dataclass
+class StiffnessRun:
+    """Time series of a stiffness-correction run: ``t``, link angle ``q``, external torque ``tau_ext``,
+    ``k_imp``, ``k_mech``, ``k_eff`` ((8.1) of the logged gains) and the target ``k_target``."""
+
+    t: np.ndarray
+    q: np.ndarray
+    tau_ext: np.ndarray
+    k_imp: np.ndarray
+    k_mech: np.ndarray
+    k_eff: np.ndarray
+    k_target: np.ndarray
+    corrected: bool
+
+
+def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segment: float = 0.15,
+                             corrected: bool = True, params: StiffnessCorrectionParams | None = None,
+                             dt: float = 1e-3) -> StiffnessRun:
+    """Fig 8.3: K_eff held at each target (1, then 0.7 Nm/rad) while load steps change K_mech.
+
+    Each target is held for ``len(loads)`` segments of ``segment`` s with the external torques
+    ``loads`` [Nm]. ``corrected=False`` uses K_imp from the nominal K_mech (no online correction).
+    """
+    from pydrake.systems.primitives import ConstantVectorSource
+    from awiwi_drake.rigs import joint_rig
+    p = params or StiffnessCorrectionParams()
+    targets = tuple(p.targets if targets is None else targets)
+    rig = joint_rig()
+    law = StiffnessCorrectedImpedance(rig.params, rig.spring, p, online=corrected)
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("rig", rig.diagram)
+    ctrl = b.AddNamedSystem("controller", law)
+    b.Connect(plant.GetOutputPort("state"), ctrl.GetInputPort("state"))
+    b.Connect(ctrl.GetOutputPort("motor_torque"), plant.GetInputPort("motor_torque"))
+    ref = b.AddNamedSystem("reference", ConstantVectorSource([0.0]))
+    b.Connect(ref.get_output_port(), ctrl.GetInputPort("link_angle_reference"))
+    b.ExportInput(ctrl.GetInputPort("effective_stiffness_reference"), "effective_stiffness_reference")
+    b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+    diagram = b.Build()
+    ctx = diagram.CreateDefaultContext()
+    rq = rig.params.link_pulley_radius
+    x_c = pretension_elongation(rig.spring, p.epsilon * targets[0], rq)
+    f0 = float(rig.spring.force(np.array([x_c]))[0])
+    op = rig.operating_point(pretension=f0)
+    plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
+    kport, eport = diagram.GetInputPort("effective_stiffness_reference"), diagram.GetInputPort("external_torque")
+    sim = Simulator(diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-3)
+    sim.get_mutable_integrator().set_target_accuracy(1e-6)
+    cctx = ctrl.GetMyContextFromRoot(ctx)
+    log = {k: [] for k in ("t", "q", "w", "ki", "km", "ke", "kt")}
+    t_now = 0.0
+    for target in targets:
+        kport.FixValue(ctx, [target])
+        for load in loads:
+            eport.FixValue(ctx, [load])
+            t_end = t_now + segment
+            while t_now < t_end - 1e-12:
+                t_now = min(t_end, t_now + dt)
+                sim.AdvanceTo(t_now)
+                s = ctrl.GetOutputPort("stiffness").Eval(cctx)
+                x = plant.GetOutputPort("state").Eval(plant.GetMyContextFromRoot(ctx))
+                if not np.all(np.isfinite(x)):
+                    raise RuntimeError(f"stiffness_correction_run: state not finite at t = {t_now:.4g} s")
+                for k, v in zip(("t", "q", "w", "ki", "km", "ke", "kt"), (t_now, x[0], load, s[0], s[1], s[2], target)):
+                    log[k].append(float(v))
+    a = {k: np.array(v) for k, v in log.items()}
+    return StiffnessRun(a["t"], a["q"], a["w"], a["ki"], a["km"], a["ke"], a["kt"], corrected)

@@ -1,0 +1,202 @@
+"""Parameters of the backstepping controllers (ch. 15) and the optimal gain selection (ch. 16).
+
+Thesis values cite their table/figure/equation; chosen values say why.
+Study lists (the gain sets of one figure) are vector fields so that a study is
+one parameter set.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from awiwi_drake.parameters.base import Parameters, param
+
+__all__ = [
+    "ScalarExampleGains",
+    "BacksteppingPlantParams",
+    "PositionBacksteppingGains",
+    "PositionStudy",
+    "ImpedanceBacksteppingGains",
+    "ImpedanceStudy",
+    "NonlinearImpedanceStudy",
+    "AntagonisticBacksteppingGains",
+    "OptimalGainsCase",
+]
+
+
+@dataclass(frozen=True)
+class ScalarExampleGains(Parameters):
+    """Gains of the scalar backstepping example (15.1)-(15.10).
+
+    Defaults: the gain set of Fig 15.3 (k1 = k2 = 1); Fig 15.2 uses (0.1, 5), Fig 15.4 (5, 0.1).
+    """
+
+    k1: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.3")
+    k2: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.3")
+
+
+@dataclass(frozen=True)
+class BacksteppingPlantParams(Parameters):
+    """Single flexible joint with a linear spring used in section 15.2/15.3 (Table 15.1).
+
+    ``m qdd = -b_q qd + K (theta - q) + tau_ext``, ``b thdd = -b_theta thd - K (theta - q) + u``.
+    """
+
+    link_inertia: float = param(7.2e-7, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 15.1, m")
+    motor_inertia: float = param(2e-4, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 15.1, b")
+    motor_damping: float = param(1e-2, unit="Nm s/rad", low=0.0, source="Table 15.1, b_theta")
+    link_damping: float = param(1e-3, unit="Nm s/rad", low=0.0, source="Table 15.1, b_q")
+    stiffness: float = param(20.0, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 15.1, K")
+
+
+@dataclass(frozen=True)
+class PositionBacksteppingGains(Parameters):
+    """Gains k1..k4 of the position controller (15.27), (15.31), (15.37), (15.43).
+
+    Defaults: the set of Fig 15.13 (K1 = 5, K2 = 1) with K3 = K4 = 100 (Table 15.1).
+    """
+
+    k1: float = param(5.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.13")
+    k2: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.13")
+    k3: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K3")
+    k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K4")
+
+
+@dataclass(frozen=True)
+class PositionStudy(Parameters):
+    """The simulation studies of section 15.2.4 (Fig 15.7, 15.8, 15.10, 15.11, 15.13)."""
+
+    step: float = param(0.8, unit="rad", source="Fig 15.7-15.13: commanded step of 0.8 rad")
+    duration: float = param(10.0, unit="s", low=0.0, low_inclusive=False, source="Fig 15.7-15.13 time axes")
+    k1_values: tuple = param((0.2, 1.0, 5.0, 50.0), unit="1/s", low=0.0, vector=True, source="Fig 15.7")
+    k1_fixed_k2: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.7 (K2 = 1)")
+    k2_values: tuple = param((0.2, 1.0, 5.0, 50.0), unit="1/s", low=0.0, vector=True, source="Fig 15.8")
+    k2_fixed_k1: float = param(5.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.8 (K1 = 5)")
+    saturation: float = param(5e-4, unit="Nm", low=0.0, low_inclusive=False, source="Fig 15.10: |u| < 0.0005")
+    saturation_k1: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.10 (K1 = 1)")
+    saturation_k2: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False, source="Fig 15.10 (K2 = 1)")
+    delays: tuple = param((0.0, 1e-4, 2e-4, 3.33e-4, 5e-4, 1e-3), unit="s", low=0.0, vector=True,
+                          source="Fig 15.13 (0, 0.1, 0.2, 0.5, 1 ms) plus the 333 us round trip of section 15.2.4")
+    round_trip_delay: float = param(3.33e-4, unit="s", low=0.0,
+                                    source="section 15.2.4: 333 us round trip, measure to actuation")
+    delay_steps: int = param(8, unit="-", low=1, source="chosen: the controller is sampled at 8/delay (24 kHz for "
+                             "333 us) and the command delayed 8 periods; with 2 periods (6 kHz) the exact-cancellation "
+                             "loop of the 839 Hz link mode goes unstable (the thesis delays a continuous loop)")
+    delay_duration: float = param(4.0, unit="s", low=0.0, low_inclusive=False,
+                                  source="chosen: the K1 = 5 response settles within 4 s; sampled runs are costly")
+
+
+@dataclass(frozen=True)
+class ImpedanceBacksteppingGains(Parameters):
+    """Gains of the impedance backstepping controller (15.54), (15.57), (15.63).
+
+    Defaults: Kp,imp = 0.1, Kd,imp = 0.05 (middle curves of Fig 15.16); K3 = K4 = 100 (Table 15.1,
+    the impedance section prints no K3, K4).
+    """
+
+    stiffness: float = param(0.1, unit="Nm/rad", low=0.0, low_inclusive=False, source="Fig 15.16, Kp,imp")
+    damping: float = param(0.05, unit="Nm s/rad", low=0.0, low_inclusive=False, source="Fig 15.16, Kd,imp")
+    k3: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False,
+                      source="chosen: Table 15.1 K3 (section 15.3 prints none)")
+    k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False,
+                      source="chosen: Table 15.1 K4 (section 15.3 prints none)")
+    observer_gain: float = param(500.0, unit="1/s", low=0.0, low_inclusive=False,
+                                 source="chosen: bandwidth of the external-torque observer (9.2) that supplies the "
+                                        "tau_ext (15.62) formally needs; 5x K3")
+
+
+@dataclass(frozen=True)
+class ImpedanceStudy(Parameters):
+    """Impedance simulations of section 15.3.3 (Fig 15.16, 15.17)."""
+
+    step: float = param(math.radians(45.0), unit="rad", source="Fig 15.16/15.17: 45 deg step")
+    step_time: float = param(0.5, unit="s", low=0.0, source="Fig 15.16/15.17: step at t = 0.5 s")
+    disturbance: float = param(0.2, unit="Nm", source="Fig 15.16 caption: 0.2 Nm (the text says 1 Nm)")
+    disturbance_time: float = param(1.5, unit="s", low=0.0, source="Fig 15.16/15.17: t = 1.5 s")
+    duration: float = param(3.0, unit="s", low=0.0, low_inclusive=False, source="Fig 15.16/15.17 time axis")
+    stiffness_values: tuple = param((0.02, 0.1, 0.5), unit="Nm/rad", low=0.0, vector=True, source="Fig 15.16")
+    stiffness_fixed_damping: float = param(0.05, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                                           source="Fig 15.16 (Kd,imp = 0.05)")
+    damping_values: tuple = param((0.01, 0.05, 0.1), unit="Nm s/rad", low=0.0, vector=True, source="Fig 15.17")
+    damping_fixed_stiffness: float = param(1.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                           source="Fig 15.17 (Kp,imp = 1)")
+    deflection_tolerance: float = param(0.05, unit="-", low=0.0,
+                                        source="chosen: 5 % on disturbance/Kp,imp (the closed form of the "
+                                               "uncompensated loop differs by less, see REPRODUCTIONS.md)")
+
+
+@dataclass(frozen=True)
+class NonlinearImpedanceStudy(Parameters):
+    """Nonlinear-spring impedance simulations of section 15.4.3 (Fig 15.19-15.21).
+
+    The thesis gives no numbers for this study; the time axis and events follow Fig 15.19
+    (step at 0.5 s, load at 1.5 s, 5 s long).
+    """
+
+    step: float = param(1.0, unit="rad", source="chosen: Fig 15.19 shows a step of about 1 rad")
+    step_time: float = param(0.5, unit="s", low=0.0, source="Fig 15.19/15.20: motion starts at t = 0.5 s")
+    disturbance: float = param(0.5, unit="Nm", source="chosen: a load that changes the joint stiffness "
+                               "visibly (Fig 15.20), within the spring range")
+    disturbance_time: float = param(1.5, unit="s", low=0.0, source="Fig 15.20: load at t = 1.5 s")
+    duration: float = param(3.0, unit="s", low=0.0, low_inclusive=False,
+                            source="chosen: 3 s shows the settling after the load (Fig 15.19 plots 5 s)")
+    stiffness: float = param(1.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                             source="chosen: Kp,imp of Fig 15.17")
+    damping: float = param(0.05, unit="Nm s/rad", low=0.0, low_inclusive=False, source="Fig 15.16, Kd,imp")
+    k3: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K3")
+    k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K4")
+    torque_limit: float = param(2.0, unit="Nm", low=0.0, low_inclusive=False,
+                                source="chosen: above the 0.5 Nm holding torque, far below the unsaturated "
+                                       "step peak (Fig 15.21 saturates the step only)")
+
+
+@dataclass(frozen=True)
+class AntagonisticBacksteppingGains(Parameters):
+    """Gains of the antagonistic backstepping impedance controller (15.82)-(15.106).
+
+    The desired joint torque is shared equally (15.88) and each tendon keeps the pretension
+    ``pretension`` [N] (Fig 15.24: 10 N, Fig 15.25: 15 N, Fig 15.26: 20 N).
+    """
+
+    stiffness: float = param(0.5, unit="Nm/rad", low=0.0, low_inclusive=False,
+                             source="chosen: inside the range of Fig 15.22 (0.5-5 Nm/rad)")
+    damping: float = param(0.01, unit="Nm s/rad", low=0.0, low_inclusive=False,
+                           source="chosen: near-critical link damping for 0.5 Nm/rad on the joint rig")
+    k3: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K3")
+    k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K4")
+    pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False, source="Fig 15.26: f_pre = 20 N")
+
+
+@dataclass(frozen=True)
+class OptimalGainsCase(Parameters):
+    """Optimal backstepping gain selection (ch. 16), Table 16.1.
+
+    State of Table 16.1: ``[q, qd, tau, taud]``; ``Q`` and ``R`` weight that state and the motor torque.
+    """
+
+    link_inertia: float = param(7.2e-7, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 16.1, M")
+    motor_inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False,
+                                 source="Table 16.1, Bm = 2e-7 ratio^2, ratio = 100")
+    stiffness: float = param(0.605, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 16.1, K")
+    q_weights: tuple = param((100.0, 0.01, 0.01, 0.01), unit="-", low=0.0, vector=True, source="Table 16.1, Q")
+    r_weight: float = param(0.1, unit="-", low=0.0, low_inclusive=False, source="Table 16.1, R")
+    printed_kdes: tuple = param((-7.7018, -3.8384, -3.8384, -0.0100), unit="mixed", vector=True,
+                                source="Table 16.1, Kdes (printed; compared, not used)")
+    samples: int = param(20000, unit="-", low=1, source="chosen: Algorithm 3 stabilises after ~1e4 samples here")
+    gain_low: tuple = param((1e-3, 1e-4, 1e-1, 1e-1), unit="mixed", low=0.0, low_inclusive=False, vector=True,
+                            source="chosen: lower corner of the log-uniform sampling box for "
+                                   "(Kp,imp, Kd,imp, K3, K4); Algorithm 3's rand(1,4) scaled")
+    gain_high: tuple = param((1e3, 1e2, 1e4, 1e4), unit="mixed", low=0.0, low_inclusive=False, vector=True,
+                             source="chosen: upper corner of the sampling box (covers ch. 15's gains)")
+    seed: int = param(16, unit="-", low=0, source="chosen: reproducible Monte-Carlo draws")
+
+    def _validate(self) -> None:
+        if len(self.q_weights) != 4:
+            raise ValueError(f"OptimalGainsCase.q_weights must have 4 entries, got {len(self.q_weights)}")
+        for name in ("gain_low", "gain_high"):
+            if len(getattr(self, name)) != 4:
+                raise ValueError(f"OptimalGainsCase.{name} must have 4 entries (Kp,imp, Kd,imp, K3, K4)")
+        for i, (lo, hi) in enumerate(zip(self.gain_low, self.gain_high)):
+            if not lo < hi:
+                raise ValueError(f"OptimalGainsCase.gain_low[{i}] = {lo} must be below gain_high[{i}] = {hi}")

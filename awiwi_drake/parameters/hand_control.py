@@ -1,0 +1,80 @@
+"""Parameters of the hand-level algorithms: force distribution (ch. 7), stiffness correction (ch. 8),
+joint friction observer (ch. 9).
+
+The thesis prints no numbers for these algorithms beyond Fig 8.3 (1 and 0.7 Nm/rad) and the
+epsilon range of (8.2); the remaining values are chosen and say why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from awiwi_drake.parameters.base import Parameters, param
+
+__all__ = ["ForceDistributionParams", "StiffnessCorrectionParams", "FrictionObserverParams", "LinkFrictionParams"]
+
+
+@dataclass(frozen=True)
+class ForceDistributionParams(Parameters):
+    """Algorithm 2 (ch. 7): bounds, weights gamma1..3 of (7.7), barrier width, search settings."""
+
+    f_min: float = param(5.0, unit="N", low=0.0,
+                         source="chosen: keeps tendons taut with margin (ch. 7: slack must be avoided)")
+    f_max: float = param(170.0, unit="N", low=0.0, low_inclusive=False,
+                         source="chosen: top of the spring curve of Fig 4.8b (~170-180 N)")
+    gamma_stiffness: float = param(1.0, unit="-", low=0.0, source="chosen: gamma1 of (7.7), relative stiffness error")
+    gamma_lower: float = param(10.0, unit="-", low=0.0, source="chosen: gamma2 of (7.7), 10x the stiffness term")
+    gamma_upper: float = param(10.0, unit="-", low=0.0, source="chosen: gamma3 of (7.7), 10x the stiffness term")
+    barrier_width: float = param(2.0, unit="N", low=0.0, low_inclusive=False,
+                                 source="chosen: the potentials act within 2 N of a bound")
+    iterations: int = param(60, unit="-", low=1, source="chosen: N of Algorithm 2; converged in tests")
+    initial_step: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
+                                source="chosen: s0 of Algorithm 2, about 1/8 of the force range")
+    min_step: float = param(1e-6, unit="N", low=0.0, source="chosen: stop when the halved step is negligible")
+    bound_tolerance: float = param(1e-9, unit="N", low=0.0, source="chosen: numerical tolerance of the bounds")
+
+    def _validate(self) -> None:
+        if not self.f_min < self.f_max:
+            raise ValueError(f"ForceDistributionParams.f_min = {self.f_min} must be below f_max = {self.f_max}")
+
+
+@dataclass(frozen=True)
+class StiffnessCorrectionParams(Parameters):
+    """Stiffness correction (ch. 8): K_mech = eps K_eff,des (8.2), K_imp from (8.1)."""
+
+    epsilon: float = param(1.5, unit="-", low=1.0, low_inclusive=False,
+                           source="section 8.4: 1.5 shows acceptable results ((8.2): 2-3 also good)")
+    min_impedance: float = param(1e-3, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: smallest eigenvalue kept for K_imp (positive definite, section 8.2)")
+    max_impedance: float = param(1e3, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                 source="chosen: cap of K_imp when K_mech -> K_eff (section 8.3 singular case)")
+    targets: tuple = param((1.0, 0.7), unit="Nm/rad", low=0.0, vector=True, source="Fig 8.3: K_eff held at 1 and 0.7")
+
+
+@dataclass(frozen=True)
+class FrictionObserverParams(Parameters):
+    """Joint friction observer (9.2)."""
+
+    gain: float = param(200.0, unit="1/s", low=0.0, low_inclusive=False,
+                        source="chosen: L of (9.2); observer bandwidth 200 rad/s, above the 1 Hz test motion")
+
+
+@dataclass(frozen=True)
+class LinkFrictionParams(Parameters):
+    """Link-side stick-slip friction of the observer test joint (ch. 9; values not in the thesis).
+
+    ``tau_f = -(Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/v_eps) - d v``.
+    """
+
+    coulomb: float = param(0.01, unit="Nm", low=0.0,
+                           source="chosen: 10-50 % routing friction (ch. 9) of a ~0.05 Nm joint torque")
+    static: float = param(0.015, unit="Nm", low=0.0, source="chosen: breakaway 1.5x Coulomb (stick-slip)")
+    stribeck_velocity: float = param(0.05, unit="rad/s", low=0.0, low_inclusive=False,
+                                     source="chosen: Stribeck drop over 0.05 rad/s")
+    smoothing_velocity: float = param(0.01, unit="rad/s", low=0.0, low_inclusive=False,
+                                      source="chosen: tanh regularisation of sign(v); slope Fc/v_eps = 1 Nm s/rad "
+                                             "keeps the explicit integrator's steps near 0.1 ms at test_joint_inertia")
+    test_joint_inertia: float = param(1e-4, unit="kg m^2", low=0.0, low_inclusive=False,
+                                      source="chosen: link + distal chain of a finger on the test fixture; the "
+                                             "7.2e-7 of Table 15.1 makes stick-slip too stiff to integrate explicitly")
+    viscous: float = param(1e-4, unit="Nm s/rad", low=0.0, source="chosen: small viscous part")

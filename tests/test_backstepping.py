@@ -1,0 +1,208 @@
+"""Backstepping (ch. 15): scalar conversion, Lyapunov decrease, closed forms, thesis studies (short)."""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import InitializeAutoDiff, ExtractGradient
+from pydrake.systems.primitives import Linearize
+
+from awiwi_drake.control.backstepping import (
+    ImpedanceBackstepping, PositionBackstepping, impedance_backstepping, position_backstepping)
+from awiwi_drake.control.backstepping_example import ScalarBackstepping, ScalarExamplePlant, example_control
+from awiwi_drake.control.backstepping_studies import (
+    antagonistic_step, antagonistic_stiffness_check, count_oscillations, delay_study, example_phase_portrait,
+    impedance_controller, impedance_steady_state, impedance_study, is_monotone_nonincreasing, joint_model,
+    position_controller, position_gain_study, saturation_study, table_15_1_rig)
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.parameters.backstepping import (
+    ImpedanceBacksteppingGains, ImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
+from awiwi_drake.rigs import joint_rig
+
+
+def _output_jacobian(system, port, inputs, wrt):
+    """d(output)/d(input ``wrt``) of a feedthrough system via ToAutoDiffXd, and by central differences."""
+    ad = system.ToAutoDiffXd()
+    ctx = ad.CreateDefaultContext()
+    for name, v in inputs.items():
+        val = InitializeAutoDiff(np.asarray(v, float)).ravel() if name == wrt else \
+            np.array([type(InitializeAutoDiff(np.zeros(1))[0, 0])(float(x)) for x in v])
+        ad.GetInputPort(name).FixValue(ctx, val)
+    J_ad = ExtractGradient(np.asarray(ad.GetOutputPort(port).Eval(ctx), dtype=object))
+    if J_ad.shape[1] == 0:
+        J_ad = np.zeros((J_ad.shape[0], len(inputs[wrt])))
+    fctx = system.CreateDefaultContext()
+    cols = []
+    for i in range(len(inputs[wrt])):
+        vals = []
+        for s in (+1, -1):
+            for name, v in inputs.items():
+                v = np.array(v, float)
+                if name == wrt:
+                    v[i] += s * 1e-6 * max(1.0, abs(v[i]))
+                system.GetInputPort(name).FixValue(fctx, v)
+            vals.append(np.array(system.GetOutputPort(port).Eval(fctx)))
+        cols.append((vals[0] - vals[1]) / (2e-6 * max(1.0, abs(inputs[wrt][i]))))
+    return J_ad, np.array(cols).T
+
+
+@pytest.mark.parametrize("case", ["position", "impedance_linear", "impedance_nonlinear", "antagonistic"])
+def test_controllers_convert_and_autodiff_matches_finite_differences(case):
+    rng = np.random.default_rng(5)
+    if case == "position":
+        rig = table_15_1_rig()
+        sys = position_controller(rig)
+        x = rng.normal(0, 0.05, 4)
+    elif case == "antagonistic":
+        rig = joint_rig()
+        sys = impedance_controller(rig, external_torque="none")
+        x = rig.operating_point().state + np.concatenate([rng.normal(0, 0.02, 4), rng.normal(0, 0.1, 2)])
+    else:
+        rig = table_15_1_rig(spring="linear" if case.endswith("linear") else "nonlinear")
+        sys = impedance_controller(rig, external_torque="none")
+        x = rng.normal(0, 0.05, 4)
+    assert sys.ToAutoDiffXd() is not None
+    J_ad, J_fd = _output_jacobian(sys, "motor_torque", {"state": x, "link_angle_reference": [0.3]}, "state")
+    np.testing.assert_allclose(J_ad, J_fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(J_ad)))
+
+
+def test_scalar_example_systems_convert():
+    plant, ctrl = ScalarExamplePlant(), ScalarBackstepping(ScalarExampleGains(k1=2.0, k2=3.0))
+    J_ad, J_fd = _output_jacobian(ctrl, "u", {"state": [0.4, -0.7]}, "state")
+    np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6)
+    ad = plant.ToAutoDiffXd()
+    ctx = ad.CreateDefaultContext()
+    ctx.SetContinuousState(InitializeAutoDiff(np.array([0.5, 0.2])).ravel())
+    ad.get_input_port(0).FixValue(ctx, [type(InitializeAutoDiff(np.zeros(1))[0, 0])(0.0)])
+    J = ExtractGradient(ad.EvalTimeDerivatives(ctx).CopyToVector())
+    x1 = 0.5
+    np.testing.assert_allclose(J, [[-3 * x1 ** 2 + 2 * x1, 1.0], [0.0, 0.0]], atol=1e-12)  # (15.1)
+
+
+def _closed_loop_vdot(rig, controller, x, ref, rel=1e-7):
+    """dV/dt along the closed loop at state x: central difference of V along Drake's derivatives."""
+    loop = closed_loop(rig, controller, rate_hz=None)
+    ctx = loop.create_context(state=x, references={"link_angle_reference": ref})
+    d = loop.diagram
+    ctrl = d.GetSubsystemByName("controller")
+    if ctrl.num_continuous_states():       # observer: start without a disturbance estimate (w_hat = qd)
+        ctrl.GetMyMutableContextFromRoot(ctx).SetContinuousState([x[1]])
+    xdot = d.EvalTimeDerivatives(ctx).CopyToVector()
+    full = ctx.get_continuous_state_vector().CopyToVector()
+    V = []
+    for s in (1, -1):
+        ctx.SetContinuousState(full + s * rel * xdot)
+        V.append(ctrl.GetOutputPort("lyapunov").Eval(ctrl.GetMyContextFromRoot(ctx))[0])
+    ctx.SetContinuousState(full)
+    return (V[0] - V[1]) / (2 * rel), ctrl.GetOutputPort("lyapunov").Eval(ctrl.GetMyContextFromRoot(ctx))[0]
+
+
+@pytest.mark.parametrize("case", ["position", "impedance_linear", "impedance_nonlinear", "antagonistic"])
+def test_lyapunov_decreases_along_the_nominal_closed_loop(case):
+    """V' <= 0 at random states of the rig + controller diagram (undisturbed, nominal model)."""
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        if case == "position":
+            rig = table_15_1_rig()
+            ctrl, x = position_controller(rig), rng.normal(0, 0.05, 4)
+        elif case == "antagonistic":
+            rig = joint_rig()
+            ctrl = impedance_controller(rig)
+            x = rig.operating_point().state + np.concatenate(
+                [rng.normal(0, 0.05, 2), rng.normal(0, 0.02, 2), rng.normal(0, 0.1, 2)])
+        else:
+            rig = table_15_1_rig(spring="linear" if case.endswith("linear") else "nonlinear")
+            ctrl = impedance_controller(rig)
+            x = rng.normal(0, 0.05, 4)
+        vdot, V = _closed_loop_vdot(rig, ctrl, x, rng.normal(0, 0.3))
+        assert V > 0
+        assert vdot < 1e-6 * abs(V), (case, vdot, V)
+
+
+def test_position_closed_loop_poles_are_the_designed_ones():
+    """Exact linearisation: Drake's Linearize of rig + controller has the poles of the z-dynamics (15.42)."""
+    g = PositionBacksteppingGains(k1=5.0, k2=1.0, k3=100.0, k4=100.0)
+    rig = table_15_1_rig()
+    loop = closed_loop(rig, position_controller(rig, g), rate_hz=None)
+    ctx = loop.create_context(state=np.zeros(4))
+    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("link_angle_reference").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("link_angle").get_index())
+    Az = np.array([[-g.k1, 1, 0, 0], [-1, -g.k2, 1, 0], [0, -1, -g.k3, 1], [0, 0, -1, -g.k4]])
+    got = np.sort_complex(np.linalg.eigvals(lin.A()))
+    want = np.sort_complex(np.linalg.eigvals(Az))
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    # the dominant pair: e'' + (K1 + K2) e' + (1 + K1 K2) e = 0 (symmetric in K1, K2)
+    dom = np.roots([1.0, g.k1 + g.k2, 1.0 + g.k1 * g.k2])
+    np.testing.assert_allclose(np.sort(got.real)[-2:], np.sort(dom.real), rtol=0.05)
+
+
+def test_scalar_example_converges_for_the_thesis_gain_sets():
+    """Fig 15.2-15.4: (k1, k2) = (0.1, 5), (1, 1), (5, 0.1) converge from a grid of initial states."""
+    starts = [(-1.0, -1.0), (1.5, 3.0), (-1.0, 3.0), (1.5, -1.0)]
+    for k1, k2 in ((0.1, 5.0), (1.0, 1.0), (5.0, 0.1)):
+        for variant in ("textbook", "printed"):
+            runs = example_phase_portrait(ScalarExampleGains(k1=k1, k2=k2), starts, t_final=60.0, dt=0.1,
+                                          variant=variant)
+            for r in runs:
+                assert np.linalg.norm(r.state[-1]) < 0.02 + 1.2 * math.exp(-k1 * 55.0), (k1, k2, variant, r.label)
+                if variant == "textbook":
+                    assert is_monotone_nonincreasing(r.lyapunov, rtol=1e-4)
+
+
+def test_position_steps_settle_with_decreasing_lyapunov():
+    s = PositionStudy()
+    for r in position_gain_study("k1", values=(1.0, 5.0), t_final=8.0):
+        assert abs(r.q[-1] - s.step) < 0.01 * s.step
+        assert is_monotone_nonincreasing(r.lyapunov, rtol=1e-4)
+
+
+def test_saturated_position_loop_stays_bounded_and_moves_towards_the_target():
+    """Fig 15.10/15.11: |u| < 5e-4 Nm; the saturated loop is slower but does not diverge."""
+    free, sat = saturation_study(t_final=4.0)
+    s = PositionStudy()
+    assert np.max(np.abs(sat.command)) <= s.saturation * (1 + 1e-9)
+    assert np.max(np.abs(free.command)) > 5 * s.saturation             # the saturation is active
+    assert np.all(np.diff(sat.q[sat.t > 0.5]) >= -1e-9)               # monotone approach, no oscillation
+    assert 0.05 < sat.q[-1] < s.step
+    # speed limited by the motor damping: |thetadot| <= u_max / b_theta (+ transient)
+    assert np.max(np.abs(sat.state[:, 3])) < 1.5 * s.saturation / 1e-2
+
+
+def test_333us_round_trip_delay_does_not_oscillate():
+    """Section 15.2.4: with the 333 us round trip the K1 = 5 response stays non-oscillating."""
+    run = delay_study(t_final=0.6, delays=(3.33e-4,))[0]
+    ref = delay_study(t_final=0.6, delays=(0.0,))[0]
+    assert np.all(np.diff(run.q) >= -1e-9)                      # monotone rise: no oscillation
+    assert np.all(np.abs(np.diff(run.command[:, 0])) < 1e-4)      # no command chatter
+    # ... but the sampled/delayed exact-cancellation loop is much slower (REPRODUCTIONS.md)
+    assert 0.0 < run.q[-1] < ref.q[-1]
+
+
+def test_impedance_steady_state_is_disturbance_over_stiffness():
+    """Fig 15.16: steady deflection = tau_ext / Kp,imp (closed loop linearised by Drake, observer on)."""
+    g = ImpedanceBacksteppingGains()
+    for kp in ImpedanceStudy().stiffness_values:
+        dq = impedance_steady_state(table_15_1_rig(), g.replace(stiffness=kp), 0.2)
+        assert dq == pytest.approx(0.2 / kp, rel=1e-6)
+
+
+def test_impedance_simulation_deflection_within_tolerance():
+    """Step then load on the Table 15.1 joint: measured deflection within 5 % of disturbance / Kp,imp."""
+    s = ImpedanceStudy().replace(step_time=0.05, disturbance_time=0.65, duration=2.0)
+    run = impedance_study("stiffness", s, values=(0.5,))[0]
+    pre = np.mean(run.q[(run.t > 0.6) & (run.t < 0.65)])
+    post = np.mean(run.q[run.t > 1.95])
+    assert pre == pytest.approx(s.step, rel=0.02)          # the 45 deg step has (nearly) settled
+    assert post - pre == pytest.approx(s.disturbance / 0.5, rel=s.deflection_tolerance)
+    assert is_monotone_nonincreasing(run.lyapunov[(run.t > 0.06) & (run.t < 0.65)], rtol=1e-4)
+
+
+def test_antagonistic_step_and_impedance_check():
+    run = antagonistic_step(t_final=0.8)
+    assert run.q[-1] == pytest.approx(math.radians(30.0), abs=1e-4)
+    assert np.all(run.extra["tendon_force"] > 0)                      # no slack with the pretension
+    assert is_monotone_nonincreasing(run.lyapunov[run.t > 0.051], rtol=1e-4)
+    # Fig 15.27: the tendon torque under an imposed deflection is proportional to Kp,imp
+    kp = np.array([0.01, 0.02, 0.05, 0.1])
+    d = antagonistic_stiffness_check(kp, deflection=0.3)
+    np.testing.assert_allclose(d["torque"], kp * 0.3, rtol=1e-6)

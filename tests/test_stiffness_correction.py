@@ -1,0 +1,61 @@
+"""Stiffness correction (ch. 8): (8.1) closed form, positive definiteness, online correction on the joint rig."""
+
+import numpy as np
+import pytest
+
+from awiwi_drake.control.stiffness_correction import (
+    StiffnessCorrectedImpedance, effective_stiffness, impedance_for_effective_stiffness, pretension_elongation,
+    stiffness_correction_run)
+from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
+from awiwi_drake.rigs import joint_rig
+
+
+def test_series_law_recovers_the_target_and_stays_positive_definite():
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(3, 3))
+    K_eff = A @ A.T + 0.5 * np.eye(3)
+    K_mech = 2.0 * K_eff                                 # (8.2) with eps = 2
+    K_imp, limited = impedance_for_effective_stiffness(K_eff, K_mech)
+    assert not limited
+    np.testing.assert_allclose(K_imp, K_imp.T, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(K_imp) > 0)
+    np.testing.assert_allclose(effective_stiffness(K_imp, K_mech), K_eff, rtol=1e-10)
+    np.testing.assert_allclose(K_imp, 2.0 * K_eff, rtol=1e-10)      # eps/(eps-1) K_eff for eps = 2
+    # K_mech below the target in one direction: K_imp stays positive definite, reported as limited
+    K_imp2, limited2 = impedance_for_effective_stiffness(np.eye(2), np.diag([3.0, 0.5]))
+    assert limited2 and np.all(np.linalg.eigvalsh(K_imp2) > 0)
+    with pytest.raises(ValueError, match="K_mech"):
+        impedance_for_effective_stiffness(np.eye(2), -np.eye(2))
+
+
+def test_pretension_sets_the_mechanical_stiffness():
+    rig = joint_rig()
+    rq = rig.params.link_pulley_radius
+    x = pretension_elongation(rig.spring, 1.5, rq)
+    assert 2 * rq ** 2 * float(rig.spring.stiffness(np.array([x]))[0]) == pytest.approx(1.5, rel=1e-6)
+    with pytest.raises(ValueError, match="outside the spring"):
+        pretension_elongation(rig.spring, 1e6, rq)
+
+
+def test_controller_converts_to_autodiff():
+    rig = joint_rig()
+    assert StiffnessCorrectedImpedance(rig.params, rig.spring).ToAutoDiffXd() is not None
+
+
+def test_effective_stiffness_held_while_loads_change_the_springs():
+    """Fig 8.3: K_eff measured from the static deflection stays at 1 Nm/rad (then 0.7) under a load that
+    changes K_mech; the online correction beats the gain computed from the nominal K_mech."""
+    p = StiffnessCorrectionParams()
+    kw = dict(loads=(0.0, 0.15), segment=0.25, targets=p.targets)
+    runs = {c: stiffness_correction_run(corrected=c, **kw) for c in (True, False)}
+    run = runs[True]
+    for target in p.targets:
+        seg = np.nonzero(run.k_target == target)[0]
+        unloaded_end = seg[run.tau_ext[seg] == 0.0][-1]
+        loaded = seg[run.tau_ext[seg] > 0]
+        end = loaded[-1]
+        assert abs(run.k_mech[end] - run.k_mech[unloaded_end]) > 0.002       # the load changed the springs
+        err = {c: abs(r.tau_ext[end] / r.q[end] / target - 1.0) for c, r in runs.items()}
+        assert err[True] < 0.02 and err[True] < err[False]
+        np.testing.assert_allclose(run.k_eff[loaded], target, rtol=1e-9)    # (8.1) of the logged gains
+        assert np.all(run.k_imp > 0)
