@@ -32,9 +32,14 @@ RATE = 3000.0
 
 
 def _advance(diagram, context, seconds: float, integrator: str = "runge_kutta3") -> float:
+    """RTF of one run; ``integrator`` may end in ``"-fixed"`` (fixed step at the control period)."""
+    fixed = integrator.endswith("-fixed")
+    integrator = integrator.replace("-fixed", "")
     sim = Simulator(diagram, context)
     ResetIntegratorFromFlags(sim, integrator, 1.0 / RATE)
-    if integrator == "runge_kutta3":
+    if fixed:
+        sim.get_mutable_integrator().set_fixed_step_mode(True)
+    elif integrator == "runge_kutta3":
         sim.get_mutable_integrator().set_target_accuracy(1e-4)
     sim.Initialize()
     t0 = time.perf_counter()
@@ -125,6 +130,11 @@ def main(argv=None):
     x_rk2 = _advance.last_state
     print(f"fixed RK2 vs RK3 (1e-4): final link angle differs by {abs(x_rk2[0] - x_rk3[0]):.2e} rad, "
           f"motor angles by {np.max(np.abs(x_rk2[2:4] - x_rk3[2:4])):.2e} rad")
+    for backend in ("python", "symbolic"):
+        cl[f"{backend}+rk3-fixed"] = record("joint_rig + 3 kHz PD, fixed RK3 @ 1/3 ms", backend,
+                                           lambda: closed_loop_rtf_joint(backend, args.seconds, "runge_kutta3-fixed"))
+    x_rk3f = _advance.last_state
+    print(f"fixed RK3 vs RK3 (1e-4): final link angle differs by {abs(x_rk3f[0] - x_rk3[0]):.2e} rad")
     ref = record("joint_rig + 3 kHz PD (numpy+solve_ivp)", "scipy", lambda: scipy_reference_rtf(args.seconds)[0])
     for backend, v in cl.items():
         print(f"ratio drake/{backend} : scipy reference = {v / ref:.2f}")
