@@ -203,6 +203,7 @@ def _autodiff_check(system, ctx_setup, nx):
         fm = system.EvalTimeDerivatives(ctx).CopyToVector()
         fd[:, j] = (fp - fm) / (2 * h)
     np.testing.assert_allclose(grad, fd, rtol=2e-5, atol=1e-4 * np.abs(fd).max())
+    return grad, fd
 
 
 def test_discrepancy_model_converts_to_autodiff_and_matches_finite_differences():
@@ -245,7 +246,9 @@ def test_truth_plant_converts_to_autodiff_and_matches_finite_differences():
             ctx.SetContinuousState(X)
         return X
 
-    _autodiff_check(sys, setup, len(X))
+    assert sys.ToAutoDiffXdMaybe() is not None
+    grad, fd = _autodiff_check(sys, setup, len(X))    # asserts gradient == finite differences
+    assert np.all(np.isfinite(grad)) and np.abs(fd).max() > 0
 
 
 # ---------------------------------------------------------------- statistics

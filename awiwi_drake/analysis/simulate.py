@@ -15,6 +15,7 @@ Slack and saturation are recorded as :class:`Event` intervals in the
 
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass, field
 from typing import Iterable, Mapping, Sequence
 
@@ -83,7 +84,7 @@ class SimulationResult:
         return SimulationResult(np.asarray(t), out, list(self.events), self.final_context)
 
 
-class _IntervalMonitor:
+class _IntervalMonitor(abc.ABC):
     """Track per-channel intervals where ``condition(value)`` holds on one port."""
 
     kind = "condition"
@@ -95,8 +96,9 @@ class _IntervalMonitor:
         self._open: dict[int, Event] = {}
         self.events: list[Event] = []
 
-    def _condition(self, v: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _condition(self, v: np.ndarray) -> np.ndarray:
+        """Boolean per channel: does the condition hold?"""
 
     def _extreme(self, old: float, v: float) -> float:
         return max(old, v)

@@ -26,6 +26,7 @@ law object (float and AutoDiffXd) so that every controller converts with
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
@@ -99,7 +100,7 @@ def check_gains(name: str, values: Any, *, shape: tuple[int, ...] | None = None,
 
 # ----------------------------------------------------------------------------
 # static-law controllers
-class StaticLaw:
+class StaticLaw(abc.ABC):
     """Base class of a pure controller law ``u = law(inputs)``.
 
     Subclasses set ``inputs`` (ordered mapping port name -> size),
@@ -113,8 +114,9 @@ class StaticLaw:
     inputs: Mapping[str, int] = {}
     output_size: int = 1
 
-    def __call__(self, u: Mapping[str, np.ndarray]) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def __call__(self, u: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The command for the given named inputs."""
 
 
 @TemplateSystem.define("StaticLawController_")

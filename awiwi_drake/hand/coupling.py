@@ -44,6 +44,7 @@ constant ``P``), see :func:`joint_stiffness`.
 
 from __future__ import annotations
 
+import abc
 from typing import Sequence
 
 import numpy as np
@@ -73,7 +74,7 @@ def _quiet_fp(method):
     return wrapper
 
 
-class FingerCoupling:
+class FingerCoupling(abc.ABC):
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
     Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
@@ -95,11 +96,13 @@ class FingerCoupling:
                              f"(joints {', '.join(self.joint_names)}), got {q.shape}")
         return q
 
-    def h(self, q) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def h(self, q) -> np.ndarray:
+        """Tendon path lengths h(q) (m,) [m]."""
 
-    def P(self, q) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def P(self, q) -> np.ndarray:
+        """Coupling matrix dh/dq (m x n) [m/rad]."""
 
     def tension_hessian(self, q, f) -> np.ndarray:
         """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
