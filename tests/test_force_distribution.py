@@ -10,7 +10,8 @@ from scipy.optimize import minimize
 
 from awiwi_drake.components.spring import tendon_spring
 from awiwi_drake.control.force_distribution import (
-    OptimalForceDistribution, TendonForceDistribution, coupling_nullspace, finger_force_distribution,
+    OptimalForceDistribution, TendonForceDistribution, TendonForceDistributionSystem, coupling_nullspace,
+    finger_force_distribution,
     hand_stiffness_map, joint_stiffness, stiffness_cost)
 from awiwi_drake.hand.coupling import finger_coupling, index_coupling_matrix
 from awiwi_drake.parameters.hand import FingerDriveParams, IndexFingerParams
@@ -187,3 +188,63 @@ def test_bad_input_names_the_argument():
         finger_force_distribution("index").solve(np.zeros(4), np.eye(4), warm_start=np.ones(3))
     with pytest.raises(ValueError, match="max_iterations"):
         OptimalForceDistribution(hand_stiffness_map(), max_iterations=0)
+
+
+def _ad_update(system, x, forces, n):
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+    ad = system.ToAutoDiffXd()
+    ctx = ad.CreateDefaultContext()
+    xa = InitializeAutoDiff(x).ravel()
+    ctx.SetDiscreteState(0, forces.astype(object) * 1.0)
+    ad.GetInputPort("joint_torque_reference").FixValue(ctx, xa[:n])
+    ad.GetInputPort("joint_stiffness_reference").FixValue(ctx, xa[n:])
+    return ExtractGradient(ad.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector())
+
+
+@pytest.mark.parametrize("tau, K_diag", [((0.1, 0.05, -0.03, 0.02), (8.0, 12.0, 6.0, 2.0)),
+                                         ((0.05, -0.02, 0.03, 0.01), (2.0, 3.0, 1.5, 0.6))])
+def test_system_autodiff_is_the_derivative_of_the_optimum(tau, K_diag):
+    """ToAutoDiffXd of the loop system: d(forces)/d(tau, K) from the implicit-function theorem equals
+    central differences of the fully converged float optimum (the second request has two tendons
+    on f_min: the active set is held)."""
+    system = TendonForceDistributionSystem(fingers=("index",), iterations_per_period=30)
+    s = finger_force_distribution("index", max_iterations=100, tolerance=1e-15)
+    x = np.concatenate([tau, K_diag])
+    res = s.solve(x[:4], np.diag(x[4:]))
+    J = _ad_update(system, x, res.forces, 4)
+    J_fd = np.zeros_like(J)
+    for j in range(8):
+        h = 1e-5 * max(1.0, abs(x[j]))
+        xp, xm = x.copy(), x.copy()
+        xp[j] += h
+        xm[j] -= h
+        J_fd[:, j] = (s.solve(xp[:4], np.diag(xp[4:]), warm_start=res.forces).forces
+                      - s.solve(xm[:4], np.diag(xm[4:]), warm_start=res.forces).forces) / (2 * h)
+    assert np.abs(J_fd).max() > 1.0
+    np.testing.assert_allclose(J, J_fd, atol=1e-2 * np.abs(J_fd).max())
+
+
+def test_system_update_is_the_warm_started_solver_and_reports_status():
+    system = TendonForceDistributionSystem(fingers=("index", "thumb"), iterations_per_period=2)
+    assert [system.get_input_port(i).get_name() for i in range(3)] == [
+        "joint_torque_reference", "joint_stiffness_reference", "joint_angle"]
+    ctx = system.CreateDefaultContext()
+    tau = np.array([0.05, -0.02, 0.03, 0.01, 0.02, 0.01, -0.01, 0.0])
+    K = np.array([2.0, 3.0, 1.5, 0.6, 3.0, 3.0, 2.0, 1.0])
+    q = np.array([0.3, -0.2, 0.1, 0.1])
+    system.GetInputPort("joint_torque_reference").FixValue(ctx, tau)
+    system.GetInputPort("joint_stiffness_reference").FixValue(ctx, K)
+    system.GetInputPort("joint_angle").FixValue(ctx, np.concatenate([np.zeros(4), q]))
+    f0 = ctx.get_discrete_state(0).CopyToVector()
+    upd = system.EvalUniquePeriodicDiscreteUpdate(ctx)
+    idx, th = finger_force_distribution("index"), finger_force_distribution("thumb")
+    np.testing.assert_allclose(upd.get_vector(0).CopyToVector()[:8],
+                               idx.solve(tau[:4], np.diag(K[:4]), warm_start=f0[:8], max_iterations=2).forces)
+    np.testing.assert_allclose(upd.get_vector(0).CopyToVector()[8:],
+                               th.solve(tau[4:], np.diag(K[4:]), q=q, warm_start=f0[8:], max_iterations=2).forces)
+    np.testing.assert_array_equal(upd.get_vector(1).CopyToVector(), [0.0, 0.0])
+    system.GetInputPort("joint_torque_reference").FixValue(ctx, np.concatenate([[5.0, 0, 0, 0], tau[4:]]))
+    np.testing.assert_array_equal(system.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(1).CopyToVector(),
+                                  [1.0, 0.0])                     # the infeasible index request is reported
+    with pytest.raises(ValueError, match="stiffness"):
+        TendonForceDistributionSystem(stiffness="sparse")

@@ -57,7 +57,10 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 from pydrake.solvers import ClarabelSolver, MathematicalProgram
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy.optimize import linprog
 
 from awiwi_drake.components.spring import tendon_spring
@@ -67,7 +70,8 @@ from awiwi_drake.parameters.hand_control import ForceDistributionParams
 
 __all__ = ["DistributionResult", "TendonStiffnessMap", "TendonForceDistribution", "OptimalForceDistribution",
            "coupling_nullspace", "joint_stiffness", "stiffness_cost", "hand_stiffness_map",
-           "finger_force_distribution"]
+           "finger_force_distribution", "optimum_sensitivity", "TendonForceDistribution_",
+           "TendonForceDistributionSystem"]
 
 
 def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
@@ -595,3 +599,176 @@ def finger_force_distribution(finger: str, *, method: str = "optimal", params: F
     if coupling.is_constant and coupling.dof_selection.shape[0] != coupling.dof_selection.shape[1]:
         coupling = reduced_coupling_matrix(coupling)
     return methods[method](hand_stiffness_map(drive), params, coupling, **solver_options)
+
+
+# ----------------------------------------------------------------------------
+# sensitivity of the optimum (implicit-function theorem) and the loop system
+def optimum_sensitivity(solver: OptimalForceDistribution, result: DistributionResult, tau_des, K_des, *,
+                        P=None, hessian=None, q=None, active_tolerance: float = 1e-5):
+    """Derivatives ``(df/dtau (m x n), df/dvec(K_des) (m x n^2))`` of a converged optimum of (7.6).
+
+    Implicit-function theorem on the first-order conditions with the active set held: the
+    torque equality and the active bounds fix ``f`` on a subspace, the reduced gradient
+    ``Z^T grad C`` stays zero on its complement.  The Hessian of the true cost is
+    ``2/N (G^T G - diag(d2k_t/df2_i p_i^T E p_i))`` (``G`` as in the solver, ``E = K_des - K_q``,
+    ``N = ||K_des||_F^2``); ``d grad C / d vec(K_des) = -2/N G^T`` at a stationary point.
+    Valid at a strict (non-degenerate) optimum; ``result`` must come from ``solver`` at these inputs.
+    """
+    P, _, _, rank, hessian = solver._coupling_at(P, hessian, q)
+    m, n = P.shape
+    tau_des, K_des = solver._check_request(tau_des, K_des, n)
+    p = solver.params
+    f = np.asarray(result.forces, dtype=float)
+    k, dk = solver.stiffness_map(f)
+    grid = getattr(solver.stiffness_map, "forces", None)
+    h = 1e-3 if grid is None else float(np.min(np.diff(grid)))
+    ddk = (solver.stiffness_map(f + h)[1] - solver.stiffness_map(f - h)[1]) / (2 * h)
+    outer = np.einsum("ij,ik->ijk", P, P)
+    G = (dk[:, None, None] * outer + (hessian if hessian is not None else 0.0)).reshape(m, n * n).T
+    E = K_des - joint_stiffness(P, k, f, hessian)
+    N = max(float(np.sum(K_des * K_des)), 1e-300)
+    Hc = 2.0 / N * (G.T @ G - np.diag(ddk * np.einsum("ij,jk,ik->i", P, E, P)))
+    U, s, Vt = np.linalg.svd(P, full_matrices=False)
+    active = np.nonzero((f - p.f_min <= active_tolerance) | (p.f_max - f <= active_tolerance))[0]
+    C = np.vstack([U[:, :rank].T, np.eye(m)[active]])
+    C_pinv = np.linalg.pinv(C)
+    _, sc, Vc = np.linalg.svd(C)
+    Z = Vc[int(np.sum(sc > 1e-10 * sc.max())):].T                  # null space of the fixed constraints
+    drhs_dtau = np.vstack([-(Vt[:rank].T / s[:rank]).T, np.zeros((len(active), n))])
+    df_p = C_pinv @ drhs_dtau                                      # m x n
+    if Z.shape[1] == 0:
+        return df_p, np.zeros((m, n * n))
+    ZHZ = Z.T @ Hc @ Z
+    dtau = df_p - Z @ np.linalg.solve(ZHZ, Z.T @ Hc @ df_p)
+    dK = Z @ np.linalg.solve(ZHZ, Z.T @ (2.0 / N * G.T))
+    return dtau, dK
+
+
+@TemplateSystem.define("TendonForceDistribution_", T_list=[float, AutoDiffXd])
+def TendonForceDistribution_(T):
+    """Tendon force distribution (ch. 7) for one or several fingers, sampled (the thesis's 3 kHz).
+
+    Inputs ``joint_torque_reference`` (n) [Nm] and ``joint_stiffness_reference`` [Nm/rad] on the
+    fingers' *independent* DoF (ring/fifth: DIP follows PIP, see :func:`finger_force_distribution`),
+    fingers in the order given; the stiffness is either per joint (``stiffness="diagonal"``, n
+    entries) or the row-major n_f x n_f block of each finger, concatenated (``"full"``).  With the
+    thumb, input ``joint_angle`` carries the *plant* joint angles of the fingers given (P(q) of the
+    thumb base).  Output ``tendon_force_reference`` (m) [N] = the discrete state, updated every
+    ``period`` by the finger solvers warm-started at the previous forces
+    (``iterations_per_period`` QPs for the optimal method), initialised at the mid-range forces.
+    Output ``distribution_status`` (number of fingers) is 0 (ok), 1 (infeasible request: the
+    forces produce the torque and violate the bounds, reported, never clipped) or 2 (bound
+    violation), sampled with the state.
+
+    Scalar types float and AutoDiffXd.  For AutoDiffXd the solver runs on values; with
+    ``method="optimal"`` the update adds ``J_tau dtau + J_K dK`` in the scalar type, the exact
+    derivatives of the optimum (:func:`optimum_sensitivity`; for the thumb's posture ``q``, which
+    moves P(q) in both the constraint and the cost, central differences of the converged optimum);
+    with ``"algorithm2"`` only the
+    torque-producing part ``-(P^T)^+ tau`` carries derivatives (its step-halving search is not a
+    smooth function of the inputs).  Not symbolic: the solvers branch on values.
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, fingers=("index",), method: str = "optimal", period: float = 1.0 / 3000.0,
+                       iterations_per_period: int = 3, stiffness: str = "diagonal",
+                       params: ForceDistributionParams | None = None, drive: FingerDriveParams | None = None,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            fingers = (fingers,) if isinstance(fingers, str) else tuple(fingers)
+            if not fingers or len(set(fingers)) != len(fingers):
+                raise ValueError(f"TendonForceDistribution: fingers must be distinct names from {FINGERS}, "
+                                 f"got {fingers}")
+            if stiffness not in ("diagonal", "full"):
+                raise ValueError(f"TendonForceDistribution: stiffness must be 'diagonal' or 'full', got {stiffness!r}")
+            if not period > 0:
+                raise ValueError(f"TendonForceDistribution: period = {period} must be > 0 [s]")
+            if int(iterations_per_period) < 1:
+                raise ValueError(f"TendonForceDistribution: iterations_per_period = {iterations_per_period} "
+                                 "must be >= 1")
+            self.fingers, self.method, self.period = fingers, method, float(period)
+            self.iterations_per_period, self.stiffness_kind = int(iterations_per_period), stiffness
+            self.params, self.drive = params, drive
+            self.solvers = [finger_force_distribution(f, method=method, params=params, drive=drive) for f in fingers]
+            self._parts = []                 # (solver, dof slice, tendon slice, K slice, plant-joint slice)
+            dof = ten = kk = pj = 0
+            for f, s in zip(fingers, self.solvers):
+                c = finger_coupling(f)
+                n_f = c.dof_selection.shape[1]
+                m_f = c.num_tendons
+                nk = n_f if stiffness == "diagonal" else n_f * n_f
+                self._parts.append((s, slice(dof, dof + n_f), slice(ten, ten + m_f), slice(kk, kk + nk),
+                                    slice(pj, pj + c.num_joints)))
+                dof, ten, kk, pj = dof + n_f, ten + m_f, kk + nk, pj + c.num_joints
+            self.num_dof, self.num_tendons = dof, ten
+            p = self.solvers[0].params
+            self._tau = self.DeclareVectorInputPort("joint_torque_reference", dof)
+            self._K = self.DeclareVectorInputPort("joint_stiffness_reference", kk)
+            self._q = (self.DeclareVectorInputPort("joint_angle", pj)
+                       if any(s._offline is None for s in self.solvers) else None)
+            self._state = self.DeclareDiscreteState(np.full(ten, 0.5 * (p.f_min + p.f_max)))
+            self._status = self.DeclareDiscreteState(np.zeros(len(fingers)))
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
+            self.DeclareStateOutputPort("tendon_force_reference", self._state)
+            self.DeclareStateOutputPort("distribution_status", self._status)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.fingers, other.method, other.period, other.iterations_per_period,
+                            other.stiffness_kind, other.params, other.drive, converter=converter)
+
+        @staticmethod
+        def _posture_jacobian(s, tau, K_des, q, res, h=1e-6):
+            """df*/dq (m x n_plant) of the converged optimum by central differences (warm-started)."""
+            cols = []
+            for e in np.eye(len(q)):
+                fp = s.solve(tau, K_des, q=q + h * e, warm_start=res.forces).forces
+                fm = s.solve(tau, K_des, q=q - h * e, warm_start=res.forces).forces
+                cols.append((fp - fm) / (2 * h))
+            return np.stack(cols, axis=1)
+
+        def _K_block(self, Kv, n_f):
+            return np.diag(Kv) if self.stiffness_kind == "diagonal" else Kv.reshape(n_f, n_f)
+
+        def _update(self, context, discrete_state):
+            tau_T = self._tau.Eval(context)
+            K_T = self._K.Eval(context)
+            f_prev = context.get_discrete_state(self._state).CopyToVector()
+            as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
+            tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
+            f_prev_v = as_float(f_prev).ravel()
+            q = None if self._q is None else as_float(self._q.Eval(context)).ravel()
+            f_new = np.empty(self.num_tendons, dtype=object if T is not float else float)
+            status = np.zeros(len(self.fingers))
+            codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
+            for k, (s, sd, st, sk, sq) in enumerate(self._parts):
+                n_f = sd.stop - sd.start
+                K_des = self._K_block(Kv[sk], n_f)
+                kw = {} if s._offline is not None else dict(q=q[sq])
+                if isinstance(s, OptimalForceDistribution):
+                    res = s.solve(tau[sd], K_des, warm_start=f_prev_v[st], max_iterations=self.iterations_per_period, **kw)
+                else:
+                    res = s.solve(tau[sd], K_des, **kw)
+                status[k] = codes[res.status]
+                if T is float:
+                    f_new[st] = res.forces
+                    continue
+                # AutoDiffXd: value of the solver plus the derivatives of the optimum
+                dtau = tau_T[sd] - tau[sd]
+                if isinstance(s, OptimalForceDistribution) and res.status == "ok":
+                    J_tau, J_K = optimum_sensitivity(s, res, tau[sd], K_des, **kw)
+                    dK = (self._K_block(K_T[sk], n_f) - K_des).ravel()
+                    f_new[st] = res.forces + J_tau @ dtau + J_K @ dK
+                    if "q" in kw:      # thumb: P(q) moves the optimum; central differences of the optimum
+                        q_T = self._q.Eval(context)[sq]
+                        f_new[st] = f_new[st] + self._posture_jacobian(s, tau[sd], K_des, kw["q"], res) @ (
+                            q_T - kw["q"])
+                else:
+                    P, pinv_PT, *_ = s._coupling_at(None, None, kw.get("q"))
+                    f_new[st] = res.forces - pinv_PT @ dtau
+            discrete_state.set_value(self._state, f_new)
+            discrete_state.set_value(self._status, status)
+
+    return Impl
+
+
+TendonForceDistributionSystem = TendonForceDistribution_[None]
