@@ -179,7 +179,7 @@ def test_bad_operating_points_raise_named_errors():
 def test_hand_simulates_under_joint_control():
     """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
     stay put (decoupled routing, palm fixed), no tendon goes slack."""
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.hand.diagrams import closed_loop
     hand = hand_diagram(backend="python")
     cl = closed_loop(hand)
@@ -256,7 +256,7 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
 
 
 def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.hand.diagrams import closed_loop
     rig = finger_diagram(finger="thumb")
     cl = closed_loop(rig)
