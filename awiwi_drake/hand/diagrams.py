@@ -42,7 +42,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from ..components.drive import build_tendon_drive
 from ..components.motor import motor_ripple_torque
 from ..components.spring import tendon_spring
-from ..components.tendon import capstan_friction_force, guide_friction_force
+from ..components.friction import guide_friction, guide_friction_force
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
@@ -121,11 +121,11 @@ def GuideFriction_(T):
 
     Inputs ``state`` = plant ``[q; v]`` (2n), ``tendon_force`` (m) [N].
     Output ``generalized_force`` (n) = ``-P(q)^T f_fr`` with
-    ``f_fr = F tanh(P(q) v / v_s)``: the friction opposes the sliding of each
-    tendon through its guides (speed ``P v``, the path-length rate at the
-    finger), so its power ``-F . |P v|`` is never positive.  ``F`` is (4.1)
+    ``f_fr`` the guide friction law :func:`~awiwi_drake.components.friction.guide_friction`
+    of each tendon sliding through its guides at ``P(q) v`` (the path-length rate at the
+    finger), so its power ``-f_fr . P v`` is never positive: the constant part is (4.1)
     ``C0 (1 - exp(-C1 alpha))`` (speed and tension independent) or, with
-    ``capstan=True``, ``f (1 - exp(-mu alpha))``.
+    ``capstan=True``, the capstan part ``f (exp(mu alpha s) - 1)`` (tension proportional).
     """
 
     class Impl(LeafSystem_[T]):
@@ -140,7 +140,9 @@ def GuideFriction_(T):
             self._n = n
             self._x = self.DeclareVectorInputPort("state", 2 * n)
             self._f = self.DeclareVectorInputPort("tendon_force", m)
-            self._F_const = guide_friction_force(self.alpha, params)
+            zero = np.zeros(m)
+            self._constant = zero if self.capstan else guide_friction_force(self.alpha, params)
+            self._exponent = params.mu * self.alpha if self.capstan else zero
             self.DeclareVectorOutputPort("generalized_force", n, self._calc,
                                          prerequisites_of_calc={self._x.ticket(), self._f.ticket()})
 
@@ -152,9 +154,7 @@ def GuideFriction_(T):
             x = self._x.Eval(context)
             q, v = x[: self._n], x[self._n:]
             P = np.asarray(self.coupling.P(q))
-            F = capstan_friction_force(self._f.Eval(context), self.alpha, self.params) if self.capstan \
-                else self._F_const
-            f_fr = F * np.tanh((P @ v) / self.v_s)
+            f_fr = guide_friction(P @ v, self._f.Eval(context), self._constant, self._exponent, self.v_s)
             out.SetFromVector(-(P.T @ f_fr))
 
     return Impl
