@@ -26,7 +26,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from ..analysis.simulate import simulate
 from ..parameters.display import AnimationParams
 from ..parameters.hand import FINGERS
-from .diagrams import closed_loop, finger_diagram, hand_diagram
+from .diagrams import finger_diagram, hand_diagram
 
 __all__ = ["GRASP_POSE", "grasp_pose", "AnimationResult", "record_animation", "quiet_meshcat", "DISPLAY_ROTATION",
            "frame_camera"]
@@ -140,8 +140,10 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
         raise ValueError(f"out = {str(out)!r}: the recording is written as HTML (use a .html file name)")
     rig = (hand_diagram(backend=backend, visual=True) if target == "hand"
            else finger_diagram(finger=target, backend=backend, visual=True))
-    cl = closed_loop(rig)
-    q0 = cl.operating_point.info["joint_angles"]
+    from ..control import closed_loop, make_controller
+    cl = closed_loop(rig, make_controller("joint-pd", rig))
+    op = rig.operating_point()
+    q0 = op.info["joint_angles"]
     q1 = grasp_pose(rig)
     b = DiagramBuilder()
     sys = b.AddSystem(cl.diagram)
@@ -161,9 +163,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     b.ExportOutput(ref.get_output_port(), "joint_angle_reference")
     d = b.Build()
     ctx = d.CreateDefaultContext()
-    ctx.SetContinuousState(cl.operating_point.state)
-    cl.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
-        np.asarray(cl.operating_point.motor_torque, float))
+    cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
     # the scene: display frame, forearm stub (hand only), camera on the moving links
     R = RotationMatrix(DISPLAY_ROTATION)
     meshcat.SetTransform("/drake", RigidTransform(R, np.zeros(3)))
