@@ -178,7 +178,7 @@ def test_bad_operating_points_raise_named_errors():
 def test_hand_simulates_under_joint_control():
     """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
     stay put (decoupled routing, palm fixed), no tendon goes slack."""
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
     hand = hand_diagram(backend="python")
     cl = closed_loop(hand, make_controller("joint-pd", hand))
@@ -257,7 +257,7 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
 
 
 def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
     rig = finger_diagram(finger="thumb")
     cl = closed_loop(rig, make_controller("joint-pd", rig))
