@@ -69,7 +69,9 @@ def test_steady_state_error_with_and_without_feedforward(fmap):
     log, _, ctrl = _step(tendon_pd_controller, fmap, 20.0, 30.0, t_final=0.4, gains=no_ff)
     kp = ctrl.law.kp_fixed
     r_m = tendon_rig().params.motor.pulley_radius
-    expected = steady_state_force_without_feedforward(30.0, kp, r_m)
+    # at rest the smooth friction vanishes and the motor balances the tendon: Kp (f_des - f) = r_m f
+    expected = 30.0 * kp / (kp + r_m)
+    assert steady_state_force_without_feedforward(30.0, kp, r_m) == pytest.approx(expected, rel=1e-15)
     assert 30.0 - expected > 0.05  # a visible error ...
     assert log["tendon_force"][-1, 0] == pytest.approx(expected, abs=2e-3)  # ... exactly as (10.3) says
     log, _, _ = _step(tendon_pd_controller, fmap, 20.0, 30.0, t_final=0.4)
