@@ -247,3 +247,32 @@ def test_state_feedback_rejects_bad_gains():
         design_lqr(flexible_joint_rig(), r=0.0)
     with pytest.raises(ValueError, match="Q diagonal"):
         design_lqr(flexible_joint_rig(), LqrParams(q_diag=(1.0, 2.0, 3.0)))
+
+
+def test_sdre_printed_14_10_factorisation_is_exact_and_designs_at_the_operating_point():
+    """(14.10) with the secant stiffness: A(x) x + B u equals the nonlinear flexible joint's time
+    derivatives (Drake) at arbitrary states; at rest it is the linearisation (SDRE = LQR there)."""
+    from awiwi_drake.control.sdre import PrintedJointFactorisation
+    rig = flexible_joint_rig(spring="nonlinear")
+    fac = PrintedJointFactorisation(rig)
+    ctx = rig.diagram.CreateDefaultContext()
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        x = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-2, 2), 0.0, rng.uniform(-2, 2)])
+        x[2] = x[0] + rng.uniform(-0.05, 0.05)
+        u = rng.uniform(-0.3, 0.3)
+        ctx.SetContinuousState(x)
+        rig.diagram.GetInputPort("motor_torque").FixValue(ctx, [u])
+        rig.diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
+        xdot = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+        A, B = fac(x, [u])
+        np.testing.assert_allclose(A @ x + B.ravel() * u, xdot, rtol=1e-9, atol=1e-9 * np.abs(xdot).max())
+    p = SdreJointParams(factorisation="printed")
+    ctrl = joint_sdre_controller(rig, p)
+    ref = joint_sdre_controller(rig, SdreJointParams())
+    np.testing.assert_allclose(ctrl.K0, ref.K0, rtol=1e-6)                # tangent = secant at delta = 0
+    x_load = rig.operating_point(external_torque=0.3).state
+    assert fac.stiffness(x_load) < float(np.ravel(rig.spring.stiffness(np.array([x_load[2] - x_load[0]])))[0])
+    with pytest.raises(ValueError, match="flexible_joint_rig"):
+        from awiwi_drake.rigs import joint_rig
+        joint_sdre_controller(joint_rig(), p)
