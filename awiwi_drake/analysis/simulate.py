@@ -286,7 +286,12 @@ def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
         integ.set_target_accuracy(accuracy)
     root = sim.get_mutable_context()
     if t_start is not None:
+        if not np.isfinite(t_start):
+            raise ValueError(f"simulate: t_start = {t_start} must be finite [s]")
         root.SetTime(t_start)
+    if not t_final > root.get_time():  # Drake would end the process (SystemExit) instead of raising
+        raise ValueError(f"simulate: t_final = {t_final} s must be after the start time "
+                         f"{root.get_time()} s (t_start or the context's time)")
     times: list[float] = []
     rows: dict[str, list] = {name: [] for name, _, _ in ports}
     failure: list[str] = []
