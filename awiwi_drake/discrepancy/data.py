@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths", "check_plausibility"]
+__all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths", "check_plausibility",
+           "CLI_RIG_NAMES"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,10 @@ RIGS = {
         ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
          "link_angle", "link_velocity"), 2, True),
 }
+
+
+# the command line's spelling of the dataset rigs (awiwi-drake make-dataset --rig joint-rig)
+CLI_RIG_NAMES = {"tendon-rig": "tendon", "joint-rig": "joint"}
 
 
 @dataclass
@@ -245,8 +250,11 @@ def load_dataset(path, *, checks=None) -> Dataset:
         if key not in meta:
             raise ValueError(f"{json_path}: missing key {key!r}")
     rig = meta["rig"]
-    if not isinstance(rig, str) or rig not in RIGS:
-        raise ValueError(f"{json_path}: 'rig' must be one of {', '.join(map(repr, RIGS))}, got {rig!r}")
+    if not isinstance(rig, str):
+        raise ValueError(f"{json_path}: 'rig' must be a name ({', '.join(RIGS)}), got {rig!r}")
+    rig = CLI_RIG_NAMES.get(rig, rig)
+    if rig not in RIGS:
+        raise ValueError(f"{json_path}: unknown rig {rig!r} (known: {', '.join(RIGS)}; or {', '.join(CLI_RIG_NAMES)})")
     spec = RIGS[rig]
     params = _check_parameters(rig, meta["parameters"], str(json_path), checks)
     inputs, outputs = _name_list(meta, "inputs", json_path), _name_list(meta, "outputs", json_path)
@@ -382,7 +390,12 @@ def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) ->
 
 
 def save_dataset(ds: Dataset, directory, name: str | None = None) -> pathlib.Path:
-    """Write ``NAME.csv`` + ``NAME.json`` into ``directory``; returns the CSV path."""
+    """Write ``NAME.csv`` + ``NAME.json`` into ``directory``; returns the CSV path.
+
+    A generated dataset's answer (``meta["truth"]``: the hidden effects and their
+    parameters) goes to a separate ``NAME.truth.json``, so that the data handed to
+    :func:`~awiwi_drake.discrepancy.diagnose` does not contain it.
+    """
     d = pathlib.Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     name = name or ds.name
@@ -393,6 +406,8 @@ def save_dataset(ds: Dataset, directory, name: str | None = None) -> pathlib.Pat
     np.savetxt(csv_path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
     meta = {"rig": ds.rig, "parameters": ds.parameters, "initial_state": ds.initial_state,
             "inputs": list(ds.spec.inputs), "outputs": ds.output_names}
-    meta.update({k: v for k, v in ds.meta.items() if not k.startswith("clean_")})
+    meta.update({k: v for k, v in ds.meta.items() if not k.startswith("clean_") and k != "truth"})
     (d / f"{name}.json").write_text(json.dumps(meta, indent=1, default=float))
+    if "truth" in ds.meta:
+        (d / f"{name}.truth.json").write_text(json.dumps(ds.meta["truth"], indent=1, default=float))
     return csv_path
