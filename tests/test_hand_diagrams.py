@@ -178,7 +178,7 @@ def test_bad_operating_points_raise_named_errors():
 def test_hand_simulates_under_joint_control():
     """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
     stay put (decoupled routing, palm fixed), no tendon goes slack."""
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
     hand = hand_diagram(backend="python")
     cl = closed_loop(hand, make_controller("joint-pd", hand))
@@ -246,18 +246,26 @@ def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
 
 
 def test_gravity_option_keeps_the_operating_point_an_equilibrium():
+    """With gravity on, the operating point's tendon forces change by exactly what holds the links up:
+    ``P(q)^T (f_g - f_0) = tau_g(q)``, the gravity generalised force from MultibodyPlant; its size is the
+    0.002-0.008 Nm of section 5.2.2."""
+    q = np.array([0.0, 0.5, 0.3, 0.2])
     p = FingerRigParams.for_finger("index", gravity=True)
     rig = finger_diagram(finger="index", params=p)
-    op = rig.operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
+    op = rig.operating_point(joint_angles=q)
     linearize(rig, op, equilibrium_tolerance=1e-6)
-    op0 = finger_diagram(finger="index").operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
-    # section 5.2.2: gravity ~ 0.002-0.008 N m, i.e. well under a newton of tendon force change
-    df = np.abs(op.info["tendon_force"] - op0.info["tendon_force"]).max()
-    assert 0.0 < df < 1.0
+    op0 = finger_diagram(finger="index").operating_point(joint_angles=q)
+    plant_ctx = rig.plant.CreateDefaultContext()
+    rig.plant.SetPositions(plant_ctx, q)
+    tau_g = rig.plant.CalcGravityGeneralizedForces(plant_ctx)
+    P = np.asarray(finger_coupling("index").P(q))
+    np.testing.assert_allclose(P.T @ (op.info["tendon_force"] - op0.info["tendon_force"]), tau_g,
+                               rtol=1e-9, atol=1e-12)
+    assert 0.002 <= np.max(np.abs(tau_g)) <= 0.008
 
 
 def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
     rig = finger_diagram(finger="thumb")
     cl = closed_loop(rig, make_controller("joint-pd", rig))

@@ -80,7 +80,7 @@ def test_joint_rig_lqr_closed_loop_stiffness_against_an_external_push():
     push = 0.01  # Nm on the link
     ctx = loop.create_context(op, references={"link_angle_reference": op.state[0]},
                               disturbances={"external_torque": [push]})
-    res = simulate(loop.diagram, ctx, 2.5, log=("state",), max_step=1e-3)
+    res = simulate(loop.diagram, ctx, 2.5, log=("state",), max_step=1e-3, accuracy=1e-8)
     # Linear prediction of the steady state: 0 = (A - B K) dx + E push, E = d xdot / d tau_ext = e_qdot / m.
     lin = design.linearization
     E = np.zeros(rig.num_states)
