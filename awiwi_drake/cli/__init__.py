@@ -131,8 +131,16 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (the option is named by argparse)."""
+
+    def error(self, message: str):  # noqa: D401 - argparse hook
+        print(f"{self.prog}: error: {message} (see '{self.prog} --help')", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="awiwi-drake",
         description="Model, simulate, linearise and control the DLR Awiwi hand (Drake).")
     parser.add_argument("--version", action="version", version=f"awiwi-drake {_version()}",
