@@ -23,23 +23,22 @@ RIG_FACTORIES = {
 }
 
 
-# chosen CLI limits: the thesis's loops run at 3 kHz with a 333 us round trip (ch. 10); a rate above 100 kHz
-# or a delay above 1 s is a unit mistake (and would make the sampled simulation run without end)
-MAX_RATE_HZ = 1e5
-MAX_DELAY_S = 1.0
-
-
 def _rate(text: str) -> float:
-    value = finite_float(text)
-    if value != 0 and not 1.0 <= value <= MAX_RATE_HZ:
-        raise argparse.ArgumentTypeError(f"{text!r} must be 0 (continuous) or in [1, {MAX_RATE_HZ:g}] Hz")
+    from awiwi_drake.parameters.cli import CliLimits
+
+    value, lim = finite_float(text), CliLimits()
+    if value != 0 and not lim.min_rate <= value <= lim.max_rate:
+        raise argparse.ArgumentTypeError(f"{text!r} must be 0 (continuous) or in [{lim.min_rate:g}, "
+                                         f"{lim.max_rate:g}] Hz (CliLimits)")
     return value
 
 
 def _delay(text: str) -> float:
-    value = finite_float(text)
-    if not 0.0 <= value <= MAX_DELAY_S:
-        raise argparse.ArgumentTypeError(f"{text!r} must be in [0, {MAX_DELAY_S:g}] s")
+    from awiwi_drake.parameters.cli import CliLimits
+
+    value, top = finite_float(text), CliLimits().max_delay
+    if not 0.0 <= value <= top:
+        raise argparse.ArgumentTypeError(f"{text!r} must be in [0, {top:g}] s (CliLimits)")
     return value
 
 

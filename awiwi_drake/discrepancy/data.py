@@ -190,28 +190,43 @@ def _name_list(meta: dict, key: str, where) -> list:
     return v
 
 
-def _parse_csv(csv_path: pathlib.Path, text: str, header: list, first_data_line: int) -> np.ndarray:
-    """The numeric table; a bad row is named.  Memory: the text plus one float64 array."""
-    import io
-    ncol = len(header)
+def _read_csv(csv_path: pathlib.Path) -> tuple[list, np.ndarray]:
+    """Header and numeric table of the CSV, streamed: memory is about one float64 array.
+
+    A bad row is named (a second, line-by-line pass runs only then).
+    """
+    if csv_path.is_dir():
+        raise ValueError(f"{csv_path}: is a directory, not a dataset file (a dataset is NAME.csv + NAME.json)")
     try:
-        data = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=first_data_line, dtype=float, ndmin=2)
-    except ValueError:
-        data = None
-    if data is not None and data.shape[1] == ncol:
-        return data
-    # slow path, only to name the offending row
-    for i, line in enumerate(text.splitlines()[first_data_line:], start=first_data_line + 1):
-        if not line.strip():
-            continue
-        cells = line.split(",")
-        if len(cells) != ncol:
-            raise ValueError(f"{csv_path}: row {i} has {len(cells)} cells, header has {ncol}")
-        for c, cell in zip(header, cells):
+        with open(csv_path, encoding="utf-8-sig", newline=None) as fh:
+            head_line = fh.readline().strip()
+            if not head_line:
+                raise ValueError(f"{csv_path}: empty file (or empty header line)")
+            header = [h.strip() for h in head_line.split(",")]
             try:
-                float(cell)
+                data = np.loadtxt(fh, delimiter=",", dtype=float, ndmin=2)
             except ValueError:
-                raise ValueError(f"{csv_path}: row {i}, column {c!r}: not a number: {cell.strip()!r}") from None
+                data = None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{csv_path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"{csv_path}: cannot read ({exc.strerror or exc})") from None
+    ncol = len(header)
+    if data is not None and (data.size == 0 or data.shape[1] == ncol):
+        return header, data.reshape(-1, ncol) if data.size else np.zeros((0, ncol))
+    with open(csv_path, encoding="utf-8-sig", newline=None) as fh:
+        fh.readline()
+        for i, line in enumerate(fh, start=2):
+            if not line.strip():
+                continue
+            cells = line.split(",")
+            if len(cells) != ncol:
+                raise ValueError(f"{csv_path}: row {i} has {len(cells)} cells, header has {ncol}")
+            for c, cell in zip(header, cells):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise ValueError(f"{csv_path}: row {i}, column {c!r}: not a number: {cell.strip()!r}") from None
     raise ValueError(f"{csv_path}: cannot read the table")  # pragma: no cover - loadtxt and the scan disagree
 
 
@@ -283,12 +298,7 @@ def load_dataset(path, *, checks=None) -> Dataset:
         raise ValueError(f"{json_path}: unknown initial_state key {unknown[0]!r}")
 
     # ---- CSV
-    text = _read_text(csv_path)
-    first_nl = text.find("\n")
-    head_line = (text if first_nl < 0 else text[:first_nl]).strip()
-    if not head_line:
-        raise ValueError(f"{csv_path}: empty file (or empty header line)")
-    header = [h.strip() for h in head_line.split(",")]
+    header, data = _read_csv(csv_path)
     if header[0] != "time":
         raise ValueError(f"{csv_path}: first column must be 'time', got {header[0]!r}")
     if len(set(header)) != len(header):
@@ -302,8 +312,6 @@ def load_dataset(path, *, checks=None) -> Dataset:
     for col in sorted(expected):
         if col not in header:
             raise ValueError(f"{csv_path}: missing column {col!r}")
-    data = _parse_csv(csv_path, text, header, 1)
-    del text
     bad_rows, bad_cols = np.nonzero(~np.isfinite(data))
     if bad_rows.size:
         i, j = int(bad_rows[0]), int(bad_cols[0])
@@ -369,12 +377,12 @@ def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) ->
     elong = 0.0
     for k in ds.output_names:
         if k.startswith("motor_angle"):
-            travel = rm * float(np.ptp(ds.outputs[k]))
+            travel = rm * float(np.max(np.abs(ds.outputs[k])))
             if travel > c.max_elongation:
-                raise ValueError(f"{where}: column {k!r} moves the tendon by r_m * (max - min) = {travel:.3g} m "
+                raise ValueError(f"{where}: column {k!r} moves the tendon by r_m * max|angle| = {travel:.3g} m "
                                  f"(> {c.max_elongation:g} m): motor angles must be in rad, or "
                                  f"motor_pulley_radius is wrong")
-            elong = max(elong, rm * float(np.max(np.abs(ds.outputs[k]))))
+            elong = max(elong, travel)
     if "link_angle" in ds.outputs:
         elong += p["link_pulley_radius"] * float(np.max(np.abs(ds.outputs["link_angle"])))
     forces = [k for k in ds.output_names if k.startswith("tendon_force")]

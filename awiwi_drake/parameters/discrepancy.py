@@ -264,7 +264,7 @@ class DatasetChecks(Parameters):
     max_elongation: float = param(
         0.05, unit="m", low=0.0, low_inclusive=False,
         source="chosen: 10x the ~5 mm travel of the lever spring mechanism (Fig 4.8b); motor angles in degrees "
-               "give r_m * 57 rad ~ 0.3 m", doc="largest plausible r_m (max - min) of a motor angle")
+               "give r_m * 57 rad ~ 0.3 m", doc="largest plausible r_m max|motor angle|")
     max_torque: float = param(
         1000.0, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: 300x the 3 Nm motor limit (Table 12.1)", doc="largest plausible |commanded torque|")
