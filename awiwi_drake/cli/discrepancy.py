@@ -50,18 +50,9 @@ def _diagnose(args) -> int:
 
 def _snr(text: str) -> float | None:
     """argparse type of --snr: a finite number of dB, or inf/none for noise-free data."""
-    import argparse
-    import math
+    from . import finite_float
 
-    if text.strip().lower() in ("inf", "none"):
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number of dB (or 'inf' for noise-free)") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number of dB (or 'inf' for noise-free)")
-    return value
+    return None if text.strip().lower() in ("inf", "none") else finite_float(text)
 
 
 def _seed(text: str) -> int:
