@@ -10,7 +10,7 @@ from awiwi_drake.analysis import linearize, lqr, lqr_closed_loop, simulate
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
 from awiwi_drake.rigs import build_target, flexible_joint_rig, joint_rig, tendon_rig
 
-BACKENDS = ("python", "symbolic")
+BACKENDS = ("compiled", "python", "symbolic")
 
 
 def expected_12_10(p: FlexibleJointParams):
@@ -81,7 +81,8 @@ def test_joint_rig_lqr_closed_loop_stiffness_against_an_external_push():
     ctx.SetContinuousState(op.state)
     push = 0.01  # Nm on the link
     diagram.GetInputPort("external_torque").FixValue(ctx, [push])
-    res = simulate(diagram, ctx, 2.5, log=("state",), max_step=1e-3)
+    # accuracy 1e-7: at the default accuracy the (3.8) Coulomb slope leaves ~1e-6 rad/s of integration noise
+    res = simulate(diagram, ctx, 2.5, log=("state",), max_step=1e-3, accuracy=1e-7)
     # Linear prediction of the steady state: 0 = (A - B K) dx + E push, E = d xdot / d tau_ext = e_qdot / m.
     lin = design.linearization
     E = np.zeros(rig.num_states)
@@ -132,10 +133,10 @@ def test_frictionless_joint_rig_conserves_energy_and_friction_dissipates(backend
     res = simulate(rig.diagram, ctx, 0.01, log=("state",), max_step=1e-4, accuracy=1e-7)
     E = np.array([_joint_energy(rig, x, op.motor_torque) for x in res["state"]])
     assert np.max(np.abs(E - E[0])) < 1e-5 * np.max(np.abs(E))
-    # Link kinetic energy from MultibodyPlant equals 1/2 m qdot^2 (the model's own energy).
-    plant_ctx = rig.plant.GetMyContextFromRoot(res.final_context)
-    qd = res["state"][-1, 1]
-    assert rig.plant.CalcKineticEnergy(plant_ctx) == pytest.approx(0.5 * p.link_inertia * qd ** 2, rel=1e-9)
+    if rig.plant is not None:  # link kinetic energy from MultibodyPlant equals 1/2 m qdot^2 (the model's own energy)
+        plant_ctx = rig.plant.GetMyContextFromRoot(res.final_context)
+        qd = res["state"][-1, 1]
+        assert rig.plant.CalcKineticEnergy(plant_ctx) == pytest.approx(0.5 * p.link_inertia * qd ** 2, rel=1e-9)
     # With (3.8) friction and link damping the same start loses energy monotonically (passivity).
     rig_f = joint_rig(params=JointRigParams(), backend=backend)
     op_f = rig_f.operating_point(pretension=20.0)

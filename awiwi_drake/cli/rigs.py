@@ -24,7 +24,7 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="simulate joint_rig (pretension ramp + position step), write plots and diagrams",
                        formatter_class=fmt)
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--backend", choices=["python", "symbolic"], default="symbolic")
+    p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("export-diagrams", help="write the rig diagram graphs (.dot, and .svg/.png with Graphviz)")

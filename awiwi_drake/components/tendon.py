@@ -6,7 +6,8 @@ import numpy as np
 
 from awiwi_drake.parameters.components import GuideFrictionParams, TendonParams
 
-__all__ = ["tendon_stiffness", "series_stiffness", "guide_friction_force", "capstan_friction_force"]
+__all__ = ["tendon_stiffness", "series_stiffness", "guide_friction_force", "capstan_friction_force",
+           "guide_friction_tension"]
 
 
 def tendon_stiffness(p: TendonParams) -> float:
@@ -47,3 +48,14 @@ def capstan_friction_force(tension, bending_angle, p: GuideFrictionParams = Guid
     if np.any(a < 0) or not np.all(np.isfinite(a)):
         raise ValueError(f"capstan_friction_force: bending_angle must be finite and >= 0 [rad], got {bending_angle}")
     return tension * (1.0 - np.exp(-p.mu * a))
+
+
+def guide_friction_tension(sliding_speed, magnitude, smoothing_velocity: float):
+    """Friction force of the guides on a tendon sliding at ``sliding_speed`` [m/s]: ``F tanh(v / v_s)`` [N].
+
+    ``magnitude`` F from (4.1) (:func:`guide_friction_force`) or the capstan form
+    (:func:`capstan_friction_force`); ``tanh(v / v_s)`` is a smooth ``sign(v)``, so the
+    power ``-F tanh(v / v_s) v`` taken from the tendon is never positive. Generic in the
+    scalar type.
+    """
+    return magnitude * np.tanh(sliding_speed / smoothing_velocity)
