@@ -215,7 +215,8 @@ def test_fixed_step_rk3_at_the_control_period_matches_error_control():
     for fixed in (False, True):
         ctx = rig.context(op)
         rig.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque + [0.8, -0.8])
-        res = simulate(rig.diagram, ctx, 0.1, log=("state",), max_step=1 / 3000, accuracy=1e-7, fixed_step=fixed)
+        res = simulate(rig.diagram, ctx, 0.1, log=("state",), max_step=1 / 3000, accuracy=1e-7,
+                       mode="fixed_step" if fixed else "error_controlled")
         finals.append(res["state"][-1])
         if fixed:
             assert np.allclose(np.diff(res.t[1:]), 1 / 3000)   # really fixed steps

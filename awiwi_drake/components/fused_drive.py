@@ -5,9 +5,8 @@ physics is one function, :func:`drive_laws`, that calls the law functions of
 this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
 tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
 :func:`~awiwi_drake.components.spring.hysteresis_rate`,
-:func:`~awiwi_drake.components.tendon.guide_friction_force` /
-:func:`~awiwi_drake.components.tendon.capstan_friction_force`,
-:func:`~awiwi_drake.components.tendon.guide_friction_tension`):
+:func:`~awiwi_drake.components.friction.guide_friction_force` (4.1) and
+:func:`~awiwi_drake.components.friction.guide_friction`):
 
 * for ``AutoDiffXd`` and ``Expression`` (``Linearize``, LQR, symbolic
   analysis) the system evaluates :func:`drive_laws` directly;
@@ -21,7 +20,7 @@ Model (docs/ARCHITECTURE.md sign convention), per tendon i::
     x_i   = r_m theta_i + h_i(q) - h_i(0) + x0_i              elongation
     f_i   = max(f_el,i(x_i) + z_i, 0)                         spring force (z: hysteresis, Fig 4.8b)
     dz_i  = hysteresis_rate(z_i, x_i, xdot_i, f_el,i)         xdot = r_m omega + P(q) qdot
-    g_i   = F_i tanh((P(q) qdot)_i / v_s)                     guide friction, F_i by (4.1) or capstan
+    g_i   = guide_friction((P(q) qdot)_i, f_i, C_i, mu alpha_i)  C s + f (exp(mu alpha s) - 1), s = tanh(v / v_s)
     B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
     tau   = -P(q)^T (f + g)                                   generalised force on the joints
 
@@ -54,7 +53,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import asarray_like, is_float, positive_part
 from awiwi_drake.components.motor import motor_acceleration, saturate_torque
 from awiwi_drake.components.spring import hysteresis_rate
-from awiwi_drake.components.tendon import capstan_friction_force, guide_friction_force, guide_friction_tension
+from awiwi_drake.components.friction import guide_friction, guide_friction_force
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
 __all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "TendonDrive_", "TendonDrive_System"]
@@ -62,12 +61,12 @@ __all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "TendonDrive_", "Te
 
 @dataclass(frozen=True)
 class GuideFrictionModel:
-    """Guide friction on every tendon path.
+    """Guide friction on every tendon path (:func:`~awiwi_drake.components.friction.guide_friction`).
 
-    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides;
-    magnitude (4.1) ``C0 (1 - exp(-C1 alpha))`` or, with ``capstan=True``,
-    ``f (1 - exp(-mu alpha))``; direction ``tanh(v / smoothing_velocity)`` of the
-    tendon's sliding speed ``v = (P(q) qdot)_i``.
+    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides. With
+    ``capstan=False`` the tension-independent (4.1) ``C0 (1 - exp(-C1 alpha))``, with
+    ``capstan=True`` the capstan form ``f (exp(mu alpha s) - 1)``; ``s = tanh(v / v_s)`` of the
+    tendon's sliding speed ``v = (P(q) qdot)_i`` at the finger.
     """
 
     bending_angles: tuple
@@ -220,9 +219,10 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
         tension = f
         if model.guide_friction is not None and slide is not None:
             g = model.guide_friction
-            magnitude = capstan_friction_force(f, np.asarray(g.bending_angles), g.params) if g.capstan \
-                else guide_friction_force(np.asarray(g.bending_angles), g.params)
-            tension = f + guide_friction_tension(slide, magnitude, g.smoothing_velocity)
+            alpha = np.asarray(g.bending_angles, dtype=float)
+            constant = np.zeros_like(alpha) if g.capstan else guide_friction_force(alpha, g.params)
+            exponent = g.params.mu * alpha if g.capstan else np.zeros_like(alpha)
+            tension = f + guide_friction(slide, f, constant, exponent, g.smoothing_velocity)
         tau = -(P.T @ tension) if model.num_joints else np.zeros(0, dtype=x.dtype)
         out["generalized_force"] = asarray_like(tau, x)
     if u is not None and ("all" in want or "derivatives" in want):
