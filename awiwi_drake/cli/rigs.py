@@ -29,9 +29,9 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="simulate joint-rig (pretension ramp + position step), write plots and diagrams",
                        formatter_class=fmt)
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--backend", choices=["python", "symbolic"], default="symbolic",
-                   help="tendon-drive backend: symbolic (default here: the fused C++ drive, ~4x faster in this "
-                        "sampled 3 kHz loop) or python (separate TemplateSystems, the library default)")
+    p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
+                   help="tendon-drive backend: compiled (default: one system with a numba kernel generated from "
+                        "the laws), python (separate TemplateSystems) or symbolic (one C++ SymbolicVectorSystem)")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("export-diagrams", help="write the rig diagram graphs (.dot, and .svg/.png with Graphviz)")
