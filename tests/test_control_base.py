@@ -196,7 +196,7 @@ def test_registry_errors_and_names():
     assert {"pole-placement", "lqr", "sdre"} <= set(controller_names("flexible-joint"))
     with pytest.raises(ValueError, match="unknown controller 'nope'"):
         get_entry("nope")
-    with pytest.raises(ValueError, match="does not fit rig 'flexible_joint'"):
+    with pytest.raises(ValueError, match="does not fit rig 'flexible-joint'"):
         get_entry("tendon-pd", "flexible-joint")
     with pytest.raises(ValueError, match="already registered"):
         register_controller("lqr", lambda rig: None, rigs=("joint_rig",), description="dup")
