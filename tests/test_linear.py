@@ -165,3 +165,26 @@ def test_results_save_load_and_plot(tmp_path):
     np.testing.assert_allclose(design.closed_loop_poles, closed_loop_poles(design.linearization.A,
                                                                             design.linearization.B, design.K))
     assert np.all(design.closed_loop.poles.real < 0)
+
+
+def test_cli_linearize_writes_bode_prints_damp_and_saves(tmp_path, capsys):
+    import json
+
+    from awiwi_drake.cli import main
+
+    png, saved = tmp_path / "bode.png", tmp_path / "lin.json"
+    assert main(["linearize", "flexible-joint", "--damp", "--bode", str(png), "--save", str(saved)]) == 0
+    out = capsys.readouterr().out
+    assert png.stat().st_size > 10_000 and "zeta" in out and "phase margin" in out
+    back = LinearizationResult.load(saved)
+    assert back.state_names == tuple(flexible_joint_rig().state_names)
+    assert main(["linearize", "tendon-rig", "--json", "--bode", str(png)]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {"A", "B", "poles", "damp", "bode", "state_names"} <= set(data)
+    assert data["bode"]["output"] == "tendon_force" and len(data["bode"]["magnitude_db"]) == 400
+    for args, msg in ((["--bode", str(tmp_path / "no" / "b.png")], "--bode .* does not exist"),
+                      (["--bode", str(tmp_path)], "--bode .* must end in"),
+                      (["--save", str(tmp_path / "x.txt")], "--save .* must end in .json"),
+                      (["--bode", str(png), "--output", "torque"], "unknown output 'torque'")):
+        assert main(["linearize", "joint-rig", *args]) == 2
+        assert __import__("re").search(msg, capsys.readouterr().err)

@@ -286,6 +286,8 @@ class LinearizationResult:
             return int(which)
         if which in names:
             return list(names).index(which)
+        if len(names) == 1 and which in (f"{names[0]}[0]", names[0].split("[")[0]):   # x == x[0] for one channel
+            return 0
         raise ValueError(f"bode: unknown {kind} {which!r}; {kind}s: {', '.join(names)}")
 
     def bode(self, input=0, output=None, *, omega: Sequence[float] | None = None, n: int = 400) -> FrequencyResponse:  # noqa: A002
@@ -313,6 +315,7 @@ class LinearizationResult:
                     rows.setdefault(nm, (om.C[i], om.D[i]))
                 if len(om.names) == 1:
                     rows.setdefault(port, (om.C[0], om.D[0]))
+                    rows.setdefault(f"{port}[0]", (om.C[0], om.D[0]))
             if isinstance(output, (int, np.integer)) and not isinstance(output, bool):
                 output = self.output_names[self._channel(output, self.output_names, "output")]
             if output not in rows:
