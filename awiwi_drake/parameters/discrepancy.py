@@ -53,7 +53,7 @@ class DiscrepancySettings(Parameters):
         doc="differentiation window at 40 dB")
     max_effects: int = param(
         2, unit="-", low=0, high=6,
-        source="issue 6: up to two hidden effects", doc="physical effects added at most")
+        source="chosen: up to two hidden effects at once keeps the search over effect pairs small (workflow scope)", doc="physical effects added at most")
     max_nuisance: int = param(
         2, unit="-", low=0, high=6,
         source="chosen: at most two calibration corrections per diagnosis",
@@ -178,9 +178,9 @@ class CatalogBounds(Parameters):
 class TruthGeneratorParams(Parameters):
     """Ranges for hidden-effect truth datasets (random physical parameters)."""
 
-    duration: float = param(10.0, unit="s", low=0.1, source="issue 6: 10 s datasets",
+    duration: float = param(10.0, unit="s", low=0.1, source="chosen: 10 s holds every lab excitation (multisine, chirp, steps, slow reversals) once",
                             doc="dataset length")
-    sample_rate: float = param(1000.0, unit="Hz", low=10.0, source="issue 6: 1 kHz logging",
+    sample_rate: float = param(1000.0, unit="Hz", low=10.0, source="chosen: 1 kHz logging resolves the 3 kHz loop's dynamics below 500 Hz, like a lab logger",
                                doc="logging and control rate")
     parameter_spread: float = param(
         0.3, unit="-", low=0.0, high=0.9,
