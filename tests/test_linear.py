@@ -182,9 +182,9 @@ def test_cli_linearize_writes_bode_prints_damp_and_saves(tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     assert {"A", "B", "poles", "damp", "bode", "state_names"} <= set(data)
     assert data["bode"]["output"] == "tendon_force" and len(data["bode"]["magnitude_db"]) == 400
-    for args, msg in ((["--bode", str(tmp_path / "no" / "b.png")], "--bode .* does not exist"),
-                      (["--bode", str(tmp_path)], "--bode .* must end in"),
-                      (["--save", str(tmp_path / "x.txt")], "--save .* must end in .json"),
+    for args, msg in ((["--bode", str(tmp_path / "b.txt")], "--bode .* ending in .png"),
+                      (["--bode", str(tmp_path / "d.png"), "--save", str(tmp_path)], "--save .* ending in .json"),
+                      (["--save", str(tmp_path / "x.txt")], "--save .* ending in .json"),
                       (["--bode", str(png), "--output", "torque"], "unknown output 'torque'")):
         assert main(["linearize", "joint-rig", *args]) == 2
         assert __import__("re").search(msg, capsys.readouterr().err)

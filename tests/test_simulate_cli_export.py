@@ -84,7 +84,7 @@ def test_cli_lqr_json_gain_and_poles(capsys):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["linearize", "nope"], "unknown rig 'nope'"),
+    (["linearize", "nope"], "argument RIG: invalid choice: 'nope'"),
     (["linearize", "joint-rig", "--set", "bogus=1"], "unknown parameter 'bogus'"),
     (["linearize", "joint-rig", "--set", "link_inertia=abc"], "cannot parse 'abc'"),
     (["linearize", "joint-rig", "--set", "link_inertia"], "NAME=VALUE"),

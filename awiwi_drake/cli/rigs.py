@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import pathlib
 
 import numpy as np
 
-from awiwi_drake.cli import CliError, parse_sets
+from awiwi_drake.cli import CliError, add_parameter_options, load_parameters, output_dir, output_file
 
 __all__ = ["register"]
 
@@ -19,12 +18,20 @@ def _targets_help() -> str:
     return "\n".join(f"  {name}: {entry['description']}" for name, entry in TARGETS.items())
 
 
+def _target_names() -> list[str]:
+    from awiwi_drake.rigs import TARGETS
+
+    return list(TARGETS)
+
+
 def register(sub) -> None:
     fmt = argparse.RawDescriptionHelpFormatter
-    p = sub.add_parser("demo", help="simulate joint_rig (pretension ramp + position step), write plots and diagrams",
+    p = sub.add_parser("demo", help="simulate joint-rig (pretension ramp + position step), write plots and diagrams",
                        formatter_class=fmt)
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--backend", choices=["python", "symbolic"], default="symbolic")
+    p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
+                   help="tendon-drive backend: compiled (default: one system with a numba kernel generated from "
+                        "the laws), python (separate TemplateSystems) or symbolic (one C++ SymbolicVectorSystem)")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("export-diagrams", help="write the rig diagram graphs (.dot, and .svg/.png with Graphviz)")
@@ -32,12 +39,13 @@ def register(sub) -> None:
     p.set_defaults(func=_export)
 
     epilog = "targets:\n" + _targets_help() + (
-        "\n\n--set NAME=VALUE overrides any parameter by its dataclass field name (nested sets are searched,"
-        "\ndotted paths like motor.inertia also work). Run 'awiwi-drake params RIG' to list the names.")
+        "\n\nParameters: --config FILE.yaml, then --set NAME=VALUE (field names as listed by"
+        "\n'awiwi-drake params RIG'; nested sets are searched, dotted paths like motor.inertia also work).")
+    rig_help = "target rig: " + ", ".join(_target_names())
     p = sub.add_parser("linearize", help="print A, B and the poles at a rig's default operating point",
                        epilog=epilog, formatter_class=fmt)
-    p.add_argument("rig", metavar="RIG")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
+    add_parameter_options(p)
     p.add_argument("--json", action="store_true",
                    help="print one JSON object {A, B, C, D, poles, damp, state_names, input_names, x0, u0, ...}")
     p.add_argument("--damp", action="store_true",
@@ -55,16 +63,21 @@ def register(sub) -> None:
 
     p = sub.add_parser("lqr", help="LQR gain and closed-loop poles at a rig's default operating point",
                        epilog=epilog + "\n\n--q gives the diagonal of Q in the rig's state order.", formatter_class=fmt)
-    p.add_argument("rig", metavar="RIG")
-    p.add_argument("--q", required=True, help="comma-separated diagonal of Q (state order)")
-    p.add_argument("--r", required=True, help="comma-separated diagonal of R (one per motor)")
-    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
+    p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
+    req = p.add_argument_group("required options")
+    req.add_argument("--q", required=True, help="comma-separated diagonal of Q (state order)")
+    req.add_argument("--r", required=True, help="comma-separated diagonal of R (one per motor)")
+    add_parameter_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object {K, closed_loop_poles}")
     p.set_defaults(func=_lqr)
 
-    p = sub.add_parser("params", help="list a rig's parameters with units, ranges and sources", epilog=epilog,
+    p = sub.add_parser("params", help="list a rig's parameters with units, ranges and sources (or print them as YAML)",
+                       epilog=epilog + "\n\n'params RIG --yaml > my.yaml' writes a file that --config reads back.",
                        formatter_class=fmt)
-    p.add_argument("rig", metavar="RIG")
+    p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
+    add_parameter_options(p)
+    p.add_argument("--yaml", action="store_true",
+                   help="print the parameter set as YAML (Drake's yaml_dump_typed) instead of the table")
     p.set_defaults(func=_params)
 
 
@@ -78,24 +91,16 @@ def _floats(text: str, what: str) -> np.ndarray:
     return vals
 
 
-def _build(name: str, sets) -> object:
+def _params_of(args):
+    from awiwi_drake.rigs import TARGETS
+
+    return load_parameters(TARGETS[args.rig]["params"](), args)
+
+
+def _build(args) -> object:
     from awiwi_drake.rigs import build_target
 
-    return build_target(name, parse_sets(sets))
-
-
-def _output_path(text: str | None, option: str, suffixes: tuple) -> pathlib.Path | None:
-    """Check an output file option before any work: suffix, existing folder, not a folder."""
-    if text is None:
-        return None
-    path = pathlib.Path(text)
-    if path.suffix.lower() not in suffixes:
-        raise CliError(f"{option} {text!r}: the file name must end in {' or '.join(suffixes)}")
-    if path.is_dir():
-        raise CliError(f"{option} {text!r} is a directory; give a file name")
-    if not path.parent.is_dir():
-        raise CliError(f"{option} {text!r}: folder {str(path.parent)!r} does not exist")
-    return path
+    return build_target(args.rig, params=_params_of(args))
 
 
 def _default_bode_output(lin) -> str:
@@ -108,9 +113,9 @@ def _default_bode_output(lin) -> str:
 def _linearize(args) -> int:
     from awiwi_drake.analysis import linearize, poles_table
 
-    bode_path = _output_path(args.bode, "--bode", (".png", ".pdf", ".svg"))
-    save_path = _output_path(args.save, "--save", (".json",))
-    rig = _build(args.rig, args.set)
+    bode_path = None if args.bode is None else output_file(args.bode, "--bode", suffixes=(".png", ".pdf", ".svg"))
+    save_path = None if args.save is None else output_file(args.save, "--save", suffixes=(".json",))
+    rig = _build(args)
     outputs = ["state"] + [n for n in ("link_angle", "joint_angle", "tendon_force") if n in rig.output_names]
     res = linearize(rig, outputs=outputs)
     if save_path is not None:
@@ -150,7 +155,7 @@ def _linearize(args) -> int:
 def _lqr(args) -> int:
     from awiwi_drake.analysis import lqr
 
-    rig = _build(args.rig, args.set)
+    rig = _build(args)
     q = _floats(args.q, "--q")
     r = _floats(args.r, "--r")
     if q.size != rig.num_states:
@@ -173,18 +178,17 @@ def _lqr(args) -> int:
 
 def _params(args) -> int:
     from awiwi_drake.parameters import provenance_table
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.parameters.yaml_io import to_yaml
 
-    if args.rig not in TARGETS:
-        raise CliError(f"unknown rig {args.rig!r}; choose one of {', '.join(sorted(TARGETS))}")
-    print(provenance_table(TARGETS[args.rig]["params"]()))
+    params = _params_of(args)
+    print(to_yaml(params) if args.yaml else provenance_table(params), end="\n" if not args.yaml else "")
     return 0
 
 
 def _export(args) -> int:
     from awiwi_drake.diagrams import export_all
 
-    for line in export_all(args.out):
+    for line in export_all(output_dir(args.out)):
         print(line)
     return 0
 
@@ -192,6 +196,6 @@ def _export(args) -> int:
 def _demo(args) -> int:
     from awiwi_drake.rigs.demo_run import run_demo
 
-    report = run_demo(pathlib.Path(args.out), backend=args.backend)
+    report = run_demo(output_dir(args.out), backend=args.backend)
     print(report)
     return 0

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from .base import Parameters, param
 
-__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams"]
+__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams", "DatasetChecks"]
 
 
 @dataclass(frozen=True)
@@ -226,3 +226,50 @@ class TruthGeneratorParams(Parameters):
                                doc="force sensor full scale")
     force_bits: int = param(12, unit="bit", low=1, high=32, source="Ch. 4: 12-bit Hall sensor",
                             doc="force quantisation")
+
+
+@dataclass(frozen=True)
+class DatasetChecks(Parameters):
+    """Plausibility limits applied when a dataset is loaded (``load_dataset``).
+
+    A value outside these limits is almost always a unit mistake (degrees for
+    radians, kN or mN for N, a pulley in mm read as m) or a broken recording;
+    it is rejected with the file, key or column named instead of producing a
+    diverging or meaningless diagnosis.
+    """
+
+    max_motor_inertia: float = param(
+        0.1, unit="kg m^2", low=0.0, low_inclusive=False,
+        source="chosen: 50x the largest output-side motor inertia used here (2.2e-3 kg m^2, "
+               "Table 12.1 / discrepancy defaults)", doc="upper bound of motor_inertia")
+    max_link_inertia: float = param(
+        0.01, unit="kg m^2", low=0.0, low_inclusive=False,
+        source="chosen: 100x a finger link (7e-5 kg m^2, Tables 14.2 / 15.1)", doc="upper bound of link_inertia")
+    max_damping: float = param(
+        10.0, unit="Nm s/rad", low=0.0, low_inclusive=False,
+        source="chosen: 1e4x the motor/link damping used here (1e-3 Nm s/rad)",
+        doc="upper bound of motor_damping and link_damping")
+    max_pulley_radius: float = param(
+        0.1, unit="m", low=0.0, low_inclusive=False,
+        source="chosen: 10x any pulley of a hand (6-8 mm, Table 12.1); a 10 m pulley is a unit mistake",
+        doc="upper bound of motor_pulley_radius and link_pulley_radius")
+    max_spring_coefficient: float = param(
+        1e12, unit="N/m^k", low=0.0, low_inclusive=False,
+        source="chosen: c2 of the lever fit is ~2e6 N/m^2 (Fig 4.8b); 1e12 only excludes absurd values",
+        doc="upper bound of |c_k| in spring_poly")
+    max_angle_excursion: float = param(
+        3.1416, unit="rad", low=0.0, low_inclusive=False,
+        source="chosen: a finger joint moves less than half a turn (joint ranges of Table 5.1 are < 2 rad); "
+               "angles in degrees are 57x larger", doc="largest plausible max - min of link_angle")
+    max_elongation: float = param(
+        0.05, unit="m", low=0.0, low_inclusive=False,
+        source="chosen: 10x the ~5 mm travel of the lever spring mechanism (Fig 4.8b); motor angles in degrees "
+               "give r_m * 57 rad ~ 0.3 m", doc="largest plausible r_m max|motor angle|")
+    max_torque: float = param(
+        1000.0, unit="Nm", low=0.0, low_inclusive=False,
+        source="chosen: 300x the 3 Nm motor limit (Table 12.1)", doc="largest plausible |commanded torque|")
+    force_ratio: float = param(
+        30.0, unit="-", low=1.0,
+        source="chosen: measured forces of generated datasets lie within 0.2-1.2x the spring force at the "
+               "observed elongation; 30x either way is a unit mistake (kN, mN)",
+        doc="allowed factor between measured forces and the nominal spring force at the observed elongation")

@@ -24,7 +24,7 @@ def pole_sweep_pretension(rig, pretensions):
     return np.array(poles), np.array(stiffness)
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
+def run_demo(out: pathlib.Path, *, backend: str = "compiled") -> str:
     """Run the demo, write ``out/*.png`` and the diagram graphs; return a text summary."""
     import matplotlib
 
