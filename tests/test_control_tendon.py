@@ -216,7 +216,7 @@ def test_sdre_printed_14_9_gains_do_not_depend_on_the_spring_and_friction_moves_
     from scipy.linalg import solve_continuous_are
 
     from awiwi_drake.components.spring import tendon_spring
-    from awiwi_drake.control.lqr import lqr_gain
+    from awiwi_drake.analysis.linear import lqr_gain
     from awiwi_drake.control.sdre import PrintedTendonFactorisation, RigJacobian
     p = SdreTendonParams()
     rig = tendon_rig()
