@@ -15,8 +15,8 @@ __all__ = ["register"]
 
 
 def _diagnose(args) -> int:
-    from awiwi_drake.discrepancy import diagnose, load_dataset
-    from awiwi_drake.discrepancy.report import json_summary, write_report
+    from awiwi_drake.discrepancy import DiagnosisInterrupted, diagnose, load_dataset
+    from awiwi_drake.discrepancy.report import findings_text, json_summary, write_report
     from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
     from . import parse_sets
@@ -24,20 +24,38 @@ def _diagnose(args) -> int:
     ds = load_dataset(args.dataset)
     settings = DiscrepancySettings().with_overrides(parse_sets(args.set))
     progress = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    dx = diagnose(ds, settings=settings, progress=progress)
+
+    def write_json(dx):
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(json_summary(dx), fh, indent=1, default=float)
+
+    try:
+        dx = diagnose(ds, settings=settings, progress=progress, checkpoint=write_json)
+    except DiagnosisInterrupted as exc:
+        dx = exc.diagnosis
+        write_json(dx)
+        if args.report:
+            write_report(dx, args.report, figures=False)
+        print(f"{dx.dataset}: interrupted after {len(dx.steps)} accepted step(s); partial summary written"
+              + (f" to {args.json}" if args.json else "") + (f" and {args.report}" if args.report else ""),
+              file=sys.stderr)
+        return 130
     if args.report:
         md = write_report(dx, args.report)
         print(f"report: {md}", file=sys.stderr)
-    if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(json_summary(dx), fh, indent=1, default=float)
-    named = ", ".join(dx.named_effects) or "none (no missing effect)"
+    write_json(dx)
+    named = ", ".join(dx.named_effects) or "none"
     print(f"{dx.dataset}: {dx.verdict}; named effects: {named}")
     if dx.nuisance_corrections:
         print(f"calibration corrections: {', '.join(dx.nuisance_corrections)}")
     for s in dx.steps:
         ps = ", ".join(f"{k}={v:.4g}" for k, v in s.parameters.items())
         print(f"  {s.effect} [{s.status}, confidence {s.confidence:.2f}]: {ps}")
+        if s.status == "not separable":
+            print(f"    not separable with these data from {', '.join(s.members[1:])}; "
+                  f"to separate them: {s.experiment}")
+    print(findings_text(dx))
     print(f"NRMSE {dx.nrmse_before:.4f} -> {dx.nrmse_after:.4f} "
           f"(fit {dx.fit_percent_before:.1f}% -> {dx.fit_percent_after:.1f}%)")
     return 0
