@@ -28,8 +28,15 @@ def _joint():
 
 def _joint_loop():
     from awiwi_drake.rigs import joint_rig
-    from awiwi_drake.rigs.demo import joint_rig_position_loop
-    return joint_rig_position_loop(joint_rig())[0]
+    from awiwi_drake.control.motor_position import joint_rig_position_loop
+    return joint_rig_position_loop(joint_rig()).diagram
+
+
+def _index_loop_wrist():
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.hand.diagrams import finger_diagram
+    rig = finger_diagram(finger="index", wrist=True)
+    return closed_loop(rig, make_controller("joint-pd", rig)).diagram
 
 
 def _hand(stem):
@@ -47,7 +54,7 @@ DIAGRAM_EXPORTS = [
     ("joint_rig_position_loop", _joint_loop, 1),
     ("hand_top", _hand("hand_top"), 1),
     ("hand_deep", _hand("hand_deep"), None),
-    ("hand_finger_index_control_wrist", _hand("hand_finger_index_control_wrist"), 1),
+    ("hand_finger_index_control_wrist", _index_loop_wrist, 1),
     ("hand_finger_ring_deep", _hand("hand_finger_ring_deep"), None),
 ]
 

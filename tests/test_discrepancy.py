@@ -23,16 +23,17 @@ JOINT = {"motor_inertia": 2e-3, "motor_damping": 1.2e-3, "motor_pulley_radius": 
 
 def _tiny_dataset(rig="joint") -> Dataset:
     t = np.arange(50) * 1e-3
+    w = np.sin(2 * np.pi * 20 * t)  # some excitation (load_dataset rejects constant recordings)
     if rig == "joint":
-        ins = {"motor_torque_1": 0.2 + 0 * t, "motor_torque_2": 0.2 + 0 * t}
-        outs = {"motor_angle_1": 0.3 + 0 * t, "motor_angle_2": 0.3 + 0 * t, "tendon_force_1": 30 + 0 * t,
-                "tendon_force_2": 30 + 0 * t, "link_angle": 0 * t}
+        ins = {"motor_torque_1": 0.2 + 0.05 * w, "motor_torque_2": 0.2 - 0.05 * w}
+        outs = {"motor_angle_1": 0.3 + 0.01 * w, "motor_angle_2": 0.3 - 0.01 * w, "tendon_force_1": 30 + w,
+                "tendon_force_2": 30 - w, "link_angle": 0.01 * w}
         init = {k: 0.0 for k in ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
                                  "link_angle", "link_velocity")}
         params = dict(JOINT)
     else:
-        ins = {"motor_torque": 0.2 + 0 * t}
-        outs = {"motor_angle": 0.3 + 0 * t, "tendon_force": 30 + 0 * t}
+        ins = {"motor_torque": 0.2 + 0.05 * w}
+        outs = {"motor_angle": 0.3 + 0.01 * w, "tendon_force": 30 + w}
         init = {"motor_angle": 0.3, "motor_velocity": 0.0}
         params = {k: JOINT[k] for k in ("motor_inertia", "motor_damping", "motor_pulley_radius", "spring_poly")}
     return Dataset("tiny", rig, t, ins, outs, params, init)

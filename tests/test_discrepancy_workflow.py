@@ -53,10 +53,11 @@ def test_hidden_delay_on_tendon_rig_is_named_with_its_value():
 def test_cli_make_dataset_and_diagnose(tmp_path, capsys):
     from awiwi_drake.cli import main
 
-    assert main(["make-dataset", "--rig", "tendon", "--hide", "motor_friction", "--snr", "30", "--seed", "14",
+    assert main(["make-dataset", "--rig", "tendon-rig", "--hide", "motor_friction", "--snr", "30", "--seed", "14",
                  "--duration", "3", "--name", "mf", "--out", str(tmp_path)]) == 0
     ds = load_dataset(tmp_path / "mf.csv")
-    assert ds.meta["truth"]["hidden"] == ["motor_friction"]
+    assert "truth" not in ds.meta and "truth" not in json.loads((tmp_path / "mf.json").read_text())
+    assert json.loads((tmp_path / "mf.truth.json").read_text())["hidden"] == ["motor_friction"]
     out_json = tmp_path / "dx.json"
     assert main(["diagnose", str(tmp_path / "mf.csv"), "--json", str(out_json),
                  "--report", str(tmp_path / "rep")]) == 0

@@ -239,15 +239,20 @@ def test_fig_6_9_constraint_errors(study):
 def test_fig_6_10_tendon_displacements(study):
     """Fig 6.10: abduction moves tendons in proportion to their distance from the median axis.
 
-    Flexion moves them less.  Magnitude: NOT reproduced (docs/REPRODUCTIONS.md).  The thesis's
-    axis spans -0.015..0.03 m; our displacements span -8.4..+13.8 mm (22.2 mm, ~half), set by
-    the reconstructed linkage (the lengths are not printed).  We assert our numbers, and that
-    the span stays about half the thesis axis, so a change of the reconstruction shows up here.
+    Flexion moves them less.  Magnitude: NOT reproduced (docs/REPRODUCTIONS.md: the thesis's
+    axis spans -0.015..0.03 m, ours about half, set by the reconstructed linkage whose lengths
+    are not printed).  Checked here: the displacements are the path integral of the tendon
+    Jacobian along the recorded wrist motion (the Jacobian itself is checked against the
+    closed-form screw at neutral above), and their shape.
     """
-    lo, hi = float(np.min(study.offsets)), float(np.max(study.offsets))
-    assert lo == pytest.approx(-8.4e-3, abs=0.2e-3) and hi == pytest.approx(13.8e-3, abs=0.2e-3)
+    hi = float(np.max(study.offsets))
     assert study.abduction_peak == pytest.approx(hi, abs=1e-9)          # the peak is the abduction's
-    assert (hi - lo) / (0.03 - (-0.015)) == pytest.approx(0.49, abs=0.03)
+    q = np.asarray(study.wrist_angle)
+    J = np.array([wrist_jacobian(*qk) for qk in q])                       # (N, 38, 2)
+    rate = np.einsum("kij,kj->ki", 0.5 * (J[1:] + J[:-1]), np.diff(q, axis=0))
+    integral = study.offsets[0] + np.concatenate([np.zeros((1, 38)), np.cumsum(rate, axis=0)])
+    # trapezoid rule: error of order (third derivative of h) |dq|^2 per unit path, below 1e-3 of the peak at this sampling
+    np.testing.assert_allclose(integral, study.offsets, atol=1e-3 * hi)
     assert study.abduction_r2 > 0.99
     # tendons on the y > b/2 side shorten, slope about 2 x 20 deg (crossed linkage)
     assert -2.5 * 20 * DEG < study.abduction_slope < -1.5 * 20 * DEG

@@ -23,7 +23,7 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from awiwi_drake.components import MotorBank, motor_friction_torque
+from awiwi_drake.components import MotorBank, atan_friction, motor_friction_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, closed_loop
 from awiwi_drake.control.compare import simulate_loop
 from awiwi_drake.parameters.components import MotorParams
@@ -158,7 +158,7 @@ class FrictionFit:
 
     def torque(self, omega):
         """Torque needed to turn at ``omega`` (= minus the friction torque (3.8))."""
-        return self.gamma2 * np.arctan(self.gamma1 * np.asarray(omega, float)) + self.gamma3 * np.asarray(omega, float)
+        return -atan_friction(np.asarray(omega, float), self.gamma2, self.gamma1, self.gamma3)
 
 
 def friction_identification_data(motor: MotorParams, params: FrictionIdentificationParams | None = None, *,
@@ -204,7 +204,7 @@ def fit_friction(speed, torque) -> FrictionFit:
     fast = np.abs(w) >= np.percentile(np.abs(w), 50)
     g3, c = np.polyfit(np.abs(w[fast]), np.sign(w[fast]) * tau[fast], 1)
     x0 = [5.0 / max(np.min(np.abs(w)), 1e-3) ** 0.5, max(2 * c / math.pi, 1e-3), max(g3, 1e-4)]
-    sol = least_squares(lambda g: g[1] * np.arctan(g[0] * w) + g[2] * w - tau, x0, bounds=([1e-3, 0, 0], np.inf),
+    sol = least_squares(lambda g: -atan_friction(w, g[1], g[0], g[2]) - tau, x0, bounds=([1e-3, 0, 0], np.inf),
                         x_scale="jac")
     g1, g2, g3 = sol.x
     return FrictionFit(float(g1), float(g2), float(g3), float(np.sqrt(np.mean(sol.fun ** 2))))

@@ -3,7 +3,7 @@
 The stiffness felt at a joint is the series connection of the controller's
 impedance and the mechanical (tendon) stiffness (8.1):
 
-    K_eff^-1 = K_imp^-1 + K_mech^-1.
+    K_eff^-1 = K_imp^-1 + K_mech^-1     (:func:`~awiwi_drake.components.tendon.series_stiffness`).
 
 The user sets ``K_eff,des``; the pretension is chosen for ``K_mech,des =
 eps K_eff,des`` (8.2, eps > 1); the controller gain is then recomputed online
@@ -31,16 +31,11 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip, smax
+from awiwi_drake.components.tendon import series_stiffness
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 
-__all__ = ["impedance_for_effective_stiffness", "effective_stiffness", "pretension_elongation",
+__all__ = ["impedance_for_effective_stiffness", "pretension_elongation",
            "StiffnessCorrectedImpedance_", "StiffnessCorrectedImpedance", "StiffnessRun", "stiffness_correction_run"]
-
-
-def effective_stiffness(K_imp, K_mech):
-    """(8.1): ``(K_imp^-1 + K_mech^-1)^-1`` for symmetric positive definite matrices (or scalars)."""
-    K_imp, K_mech = np.atleast_2d(K_imp).astype(float), np.atleast_2d(K_mech).astype(float)
-    return np.linalg.inv(np.linalg.inv(K_imp) + np.linalg.inv(K_mech))
 
 
 def impedance_for_effective_stiffness(K_eff_des, K_mech, params: StiffnessCorrectionParams | None = None):
@@ -145,20 +140,26 @@ def StiffnessCorrectedImpedance_(T):
             return u, k_imp, k_mech
 
         def _elongation(self, k_eff):
-            """(8.2) pretension for K_mech,des = eps K_eff (cached per target value)."""
+            """(8.2) pretension for K_mech,des = eps K_eff: the common elongation ``x_c`` with
+            ``2 r_q^2 k(x_c) = eps K_eff`` (root cached per target value). Its derivative follows from
+            the implicit function theorem, ``dx_c/dK_eff = eps / (2 r_q^2 k'(x_c))``, so AutoDiffXd
+            sees how the pretension moves with the stiffness target."""
             key = float(k_eff.value() if hasattr(k_eff, "value") else k_eff)
             cache = self.__dict__.setdefault("_xc", {})
             if key not in cache:
-                cache[key] = pretension_elongation(self.spring, self.params.epsilon * key,
-                                                   self.rig_params.link_pulley_radius)
-            return cache[key]
+                rq, eps = self.rig_params.link_pulley_radius, self.params.epsilon
+                x_c = pretension_elongation(self.spring, eps * key, rq)
+                slope = eps / (2.0 * rq * rq * float(self.spring.stiffness_derivative(np.array([x_c]))[0]))
+                cache[key] = (x_c, slope)
+            x_c, slope = cache[key]
+            return x_c + slope * (k_eff - key)
 
         def _calc_u(self, context, output):
             output.SetFromVector(self._law(context)[0])
 
         def _calc_k(self, context, output):
             _, k_imp, k_mech = self._law(context)
-            output.SetFromVector(np.array([k_imp, k_mech, 1.0 / (1.0 / k_imp + 1.0 / k_mech)]))
+            output.SetFromVector(np.array([k_imp, k_mech, series_stiffness(k_imp, k_mech)]))
 
     return Impl
 

@@ -16,15 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Adder, ConstantVectorSource, Demultiplexer, MatrixGain, Sine
+from pydrake.systems.primitives import Adder, ConstantVectorSource, Demultiplexer, MatrixGain
 
 from ..analysis.linear import linearize
-from ..analysis.simulate import rig_monitors, simulate
+from ..analysis import PerEntry, Sine, rig_monitors, simulate
 from ..components.routing import TendonRouting_
 from ..components.spring import SpringBank_, tendon_spring
 from ..parameters.hand import FingerRigParams, JointControllerParams
 from .coupling import finger_coupling
-from .diagrams import HandRig, closed_loop, finger_diagram
+from .diagrams import HandRig, finger_diagram
 from .plant import coupling_force_gain, make_finger_plant
 from .systems import CoriolisCancellation
 
@@ -195,13 +195,15 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     fp = rig.params.finger
     if not getattr(fp, "pip_dip_coupled", False):
         raise ValueError(f"coupling_hold_study: finger {finger!r} has no PIP/DIP coupling")
-    cl = closed_loop(rig, params=controller)
+    from ..control import closed_loop
+    from ..control.joint_pd import joint_pd_controller
+    cl = closed_loop(rig, joint_pd_controller(rig, controller))
     n = rig.num_joints
     q_ref = np.zeros(n)
     q_ref[n - 2] = pip_step
     q_ref[n - 1] = pip_step * fp.dip_pip_ratio
-    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), t_final, log=("joint_angle",),
-                   max_step=cl.controller.hold.period(), accuracy=1e-4)
+    ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
+    res = simulate(cl.diagram, ctx, t_final, log=("joint_angle",), max_step=1.0 / cl.rate_hz, accuracy=1e-4)
     q = res["joint_angle"]
     return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
 
@@ -234,32 +236,25 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
     without and once with the feedforward ``-h_wrist / r_m``.  ``target`` is
     a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run).
     """
+    from ..control import closed_loop
+    from ..control.joint_pd import joint_pd_controller
     from .diagrams import hand_diagram
     drift, fmin, events = {}, {}, {}
     t_grid = np.linspace(0.0, t_final, 201)
     for comp in (False, True):
         rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
                else finger_diagram(finger=target, backend=backend, wrist=True))
-        cl = closed_loop(rig, params=controller, wrist_compensation=comp)
-        b = DiagramBuilder()
-        sys = b.AddSystem(cl.diagram)
-        sine = b.AddNamedSystem("wrist_sweep", Sine(np.array([amplitude, 0.0]),
-                                                    np.array([2 * np.pi * frequency, 0.0]), np.zeros(2)))
-        b.Connect(sine.get_output_port(0), sys.GetInputPort("wrist_angle"))
-        b.ExportInput(sys.GetInputPort("joint_angle_reference"), "joint_angle_reference")
-        b.ExportInput(sys.GetInputPort("external_torque"), "external_torque")
-        b.ExportOutput(sys.GetOutputPort("joint_angle"), "joint_angle")
-        b.ExportOutput(sys.GetOutputPort("tendon_force"), "tendon_force")
-        d = b.Build()
+        cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
+        d = cl.diagram
         ctx = d.CreateDefaultContext()
-        ctx.SetContinuousState(cl.operating_point.state)
-        cl.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
-            np.asarray(cl.operating_point.motor_torque, float))
-        q_op = cl.operating_point.info["joint_angles"]
+        op = rig.operating_point()
+        cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
+        q_op = op.info["joint_angles"]
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
-        res = simulate(d, ctx, t_final, log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
-                       max_step=cl.controller.hold.period(), accuracy=accuracy)
+        res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},
+                       log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
+                       max_step=1.0 / cl.rate_hz, accuracy=accuracy)
         events[comp] = list(res.events)
         res = res.resample(t_grid)
         drift[comp] = res["joint_angle"] - q_op

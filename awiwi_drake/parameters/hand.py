@@ -384,7 +384,7 @@ class HandRigParams(FingerDriveParams):
 
 @dataclass(frozen=True)
 class JointControllerParams(Parameters):
-    """Motor-side PD with a joint-space reference (:func:`awiwi_drake.hand.systems.add_joint_space_controller`)."""
+    """Motor-side PD with a joint-space reference (:func:`awiwi_drake.control.joint_pd.joint_pd_controller`)."""
 
     kp: float = param(100.0, unit="N m/rad", low=0.0,
                       source=("chosen: motor loop at sqrt(kp/B) = 224 rad/s with B = 2e-3 kg m^2 (well "
@@ -393,4 +393,4 @@ class JointControllerParams(Parameters):
     kd: float = param(0.6, unit="N m s/rad", low=0.0,
                       source="chosen: damping ratio ~0.67 of the motor loop (2 * 0.67 * 224 * 2e-3)")
     period: float = param(1.0 / 3000.0, unit="s", low=0.0, low_inclusive=False,
-                          source="thesis: 3 kHz control rate")
+                          source="section 3.3 (\"the high control frequency of 3kHz\") and section 4.1 (lever sensors read at 3 kHz)")

@@ -8,7 +8,7 @@ import numpy as np
 
 from awiwi_drake.analysis import linearize, rig_monitors, simulate
 from awiwi_drake.config import short_mode
-from awiwi_drake.rigs.demo import DemoScenario, joint_rig_position_loop, start_loop_at
+from awiwi_drake.rigs.demo import DemoScenario
 from awiwi_drake.rigs.rigs import joint_rig
 
 __all__ = ["run_demo", "pole_sweep_pretension"]
@@ -24,7 +24,7 @@ def pole_sweep_pretension(rig, pretensions):
     return np.array(poles), np.array(stiffness)
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
+def run_demo(out: pathlib.Path, *, backend: str = "compiled") -> str:
     """Run the demo, write ``out/*.png`` and the diagram graphs; return a text summary."""
     import matplotlib
 
@@ -39,9 +39,11 @@ def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
     out.mkdir(parents=True, exist_ok=True)
     rig = joint_rig(backend=backend)
     scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
-    diagram, t_ref, refs = joint_rig_position_loop(rig, scenario)
-    ctx = diagram.CreateDefaultContext()
-    start_loop_at(diagram, ctx, rig, rig.operating_point(pretension=scenario.f_start))
+    from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
+    loop = joint_rig_position_loop(rig, scenario)
+    t_ref, refs = demo_references(rig, scenario)
+    diagram = loop.diagram
+    ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final, log=("link_angle", "tendon_force", "motor_torque"),
                       monitors=rig_monitors(rig), max_step=1.0 / 3000)
     fig, _ = plot_signals(result, ["link_angle", "tendon_force", "motor_torque"],
