@@ -103,8 +103,11 @@ def _make_dataset(args) -> int:
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
     rig = CLI_RIG_NAMES[args.rig]
-    ds = make_truth_dataset(rig, hidden, snr_db=args.snr, seed=args.seed, nuisance=nuisance, gen=gen,
-                            name=args.name, keep_clean=False)
+    from awiwi_drake.config import SimulationProgress
+
+    with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
+        ds = make_truth_dataset(rig, hidden, snr_db=args.snr, seed=args.seed, nuisance=nuisance, gen=gen,
+                                name=args.name, keep_clean=False, progress=progress)
     path = save_dataset(ds, out)
     snr = "inf" if args.snr is None else f"{args.snr:g}"
     print(f"{path} (+ .json; answer in {path.stem}.truth.json): rig {args.rig}, hidden {hidden or 'none'}, "
@@ -138,6 +141,7 @@ def register(subparsers) -> None:
     m.add_argument("--duration", type=positive_float, default=None, metavar="S",
                    help="recorded seconds (default 10)")
     m.add_argument("--name", default=None, help="file stem (default from rig/effects/SNR/seed)")
+    m.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     req = m.add_argument_group("required options")
     req.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     m.set_defaults(func=_make_dataset)

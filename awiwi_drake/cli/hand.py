@@ -37,6 +37,7 @@ def register(sub) -> None:
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
     p.add_argument("--backend", choices=["python", "symbolic"], default="python",
                    help="tendon drive backend (python is faster for the whole hand)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=_animate)
 
     p = sub.add_parser("export-hand-diagrams",
@@ -50,7 +51,11 @@ def _animate(args) -> int:
     from awiwi_drake.hand.visualize import record_animation
 
     out = output_file(args.out, "--out", suffixes=(".html", ".htm"))
-    res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend)
+    from awiwi_drake.config import SimulationProgress
+
+    with SimulationProgress("animate", quiet=args.quiet) as progress:
+        res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend,
+                               progress=progress)
     print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
           f"max joint tracking error {res.max_tracking_error:.3g} rad)")
     return 0
