@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.linalg
 
+from _fd import fd_jacobian
 from awiwi_drake.analysis import linearize, lqr, simulate
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.lqr import lqr_controller
@@ -146,18 +147,14 @@ def test_frictionless_joint_rig_conserves_energy_and_friction_dissipates(backend
     assert E[-1] < E[0]
 
 
-def _fd_jacobian(rig, op, h=1e-7):
+def _fd_jacobian(rig, op):
+    """d xdot / d x of the rig diagram at ``op`` by the shared central differences."""
     ctx = rig.context(op)
-    n = rig.num_states
-    A = np.zeros((n, n))
-    for j in range(n):
-        for s in (1, -1):
-            x = op.state.copy()
-            x[j] += s * h * max(1.0, abs(x[j]))
-            ctx.SetContinuousState(x)
-            A[:, j] += s * rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
-        A[:, j] /= 2 * h * max(1.0, abs(op.state[j]))
-    return A
+
+    def xdot(x):
+        ctx.SetContinuousState(x)
+        return rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+    return fd_jacobian(xdot, op.state)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
