@@ -31,6 +31,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.analysis import ResetIntegratorFromFlags
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.analysis.simulate import SimulationDivergedError
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
@@ -239,7 +240,7 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: C
         inputs["external_torque"] = disturbance or (lambda t: 0.0)
     y = loop.tracked_outputs[0]
     outputs = [y, "motor_torque_command"]
-    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
         outputs.append("tendon_force")
     log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=outputs,
@@ -421,8 +422,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     u = np.abs(run.command)
     m.peak_input = float(np.max(u))
     limit = loop.saturation
-    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
-        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
     if limit is not None:
         m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
     if "tendon_force" in run.meta:
