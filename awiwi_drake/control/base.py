@@ -262,6 +262,10 @@ class ClosedLoop:
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} continuous states")
             rig_ctx.SetContinuousState(x)
+            init = getattr(self.controller, "initialize_state", None)
+            if init is not None:   # controllers with internal state (e.g. the force distribution)
+                ctrl_sys = self.diagram.GetSubsystemByName("controller")
+                init(ctrl_sys.GetMyMutableContextFromRoot(context), x)
             if self.estimator is not None and hasattr(self.estimator, "initialize"):
                 est_sys = self.diagram.GetSubsystemByName("estimator")
                 self.estimator.initialize(est_sys.GetMyMutableContextFromRoot(context),
