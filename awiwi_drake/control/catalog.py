@@ -48,5 +48,9 @@ _BUILTIN.append(("cascaded", _lazy("chain", "chain_controller"), ("finger", "han
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15)"))
 
+_BUILTIN.append(("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller"), ("finger", "hand"),
+                 "antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor torques "
+                 "directly; joint angles estimated from tendon lengths (5.15)"))
+
 for _name, _factory, _rigs, _doc in _BUILTIN:
     register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)

@@ -75,8 +75,9 @@ def JointImpedanceBank_(T):
 
     Inputs ``joint_angle_reference``, ``joint_angle``, ``joint_velocity`` (n plant joints) [rad,
     rad/s].  Outputs ``joint_torque_reference`` (n_dof) [Nm] ``= tau_op + K S^+ (q_ref - q) -
-    D S^+ qdot`` (feedthrough) and ``joint_stiffness_reference`` (n_dof) [Nm/rad] (constant: the
-    desired mechanical stiffness).  ``S`` maps DoF to plant joints (``q = S q_dof``).
+    D S^+ qdot`` (feedthrough) and ``joint_stiffness_reference`` [Nm/rad] (constant: the desired
+    mechanical stiffness, in the layout of the force distribution: per DoF, or the row-major block
+    of each finger).  ``S`` maps DoF to plant joints (``q = S q_dof``).
     """
 
     class Impl(LeafSystem_[T]):
@@ -91,8 +92,8 @@ def JointImpedanceBank_(T):
             self.K = check_gains("joint_stiffness", stiffness, shape=(k,), owner="JointImpedanceBank", positive=True)
             self.D = check_gains("damping", damping, shape=(k,), owner="JointImpedanceBank")
             self.tau0 = check_gains("torque_offset", torque_offset, shape=(k,), owner="JointImpedanceBank")
-            self.Kmech = check_gains("mechanical_stiffness", mechanical_stiffness, shape=(k,),
-                                     owner="JointImpedanceBank", positive=True)
+            self.Kmech = check_gains("mechanical_stiffness", np.ravel(mechanical_stiffness),
+                                     owner="JointImpedanceBank")
             if np.any(self.D < 0):
                 raise ValueError(f"JointImpedanceBank: damping must be >= 0, got {self.D}")
             self._Sp = np.linalg.pinv(S)
@@ -101,7 +102,7 @@ def JointImpedanceBank_(T):
             self._v = self.DeclareVectorInputPort("joint_velocity", n)
             self.DeclareVectorOutputPort("joint_torque_reference", k, self._calc_tau,
                                          prerequisites_of_calc={self._r.ticket(), self._q.ticket(), self._v.ticket()})
-            self.DeclareVectorOutputPort("joint_stiffness_reference", k, self._calc_K,
+            self.DeclareVectorOutputPort("joint_stiffness_reference", self.Kmech.size, self._calc_K,
                                          prerequisites_of_calc={self.nothing_ticket()})
 
         def _construct_copy(self, other, converter=None):
@@ -162,9 +163,10 @@ class TendonChainController(Diagram):
     op : OperatingPoint, optional
         Design point (default: the rig's); ``tau_op``, the inertias and the default mechanical
         stiffness are taken there, and the distribution starts at its tendon forces.
-    mechanical_stiffness : array (n_dof,), optional
-        Desired mechanical joint stiffness [Nm/rad] per DoF (co-contraction); default
-        ``params.stiffness_scale`` times the diagonal of the operating point's (5.12).
+    mechanical_stiffness : list of arrays, optional
+        Desired mechanical joint stiffness [Nm/rad] (co-contraction), one symmetric n_f x n_f block
+        per finger on its DoF; default ``params.stiffness_scale`` times the operating point's own
+        (5.12) blocks (then the distribution's optimum at the operating point is its forces).
     joint_stiffness : array (n_dof,) or float, optional
         Impedance ``K`` per DoF (default ``params.joint_stiffness`` for all).
     rate_hz : float
@@ -191,21 +193,29 @@ class TendonChainController(Diagram):
         f_op = np.asarray(op.info["tendon_force"], dtype=float)
         P = np.asarray(coupling.P(q_op), dtype=float)
         tau_op = -(P @ S).T @ f_op
-        K_mech_op = np.diag(S.T @ np.asarray(op.info["joint_stiffness"], dtype=float) @ S)
-        K_mech = p.stiffness_scale * K_mech_op if mechanical_stiffness is None else \
-            check_gains("mechanical_stiffness", mechanical_stiffness, shape=(k,), owner="TendonChainController",
-                        positive=True)
+        K_dof = S.T @ np.asarray(op.info["joint_stiffness"], dtype=float) @ S
+        sizes = [c.dof_selection.shape[1] for c in (coupling.parts.values() if hasattr(coupling, "parts")
+                                                     else [coupling])]
+        starts = np.cumsum([0] + sizes)
+        if mechanical_stiffness is None:
+            blocks = [p.stiffness_scale * K_dof[a:b, a:b] for a, b in zip(starts[:-1], starts[1:])]
+        else:
+            blocks = [np.asarray(B_, dtype=float) for B_ in mechanical_stiffness]
+            if len(blocks) != len(sizes) or any(B_.shape != (s_, s_) for B_, s_ in zip(blocks, sizes)):
+                raise ValueError(f"TendonChainController: mechanical_stiffness must be {len(sizes)} blocks of "
+                                 f"shapes {[(s_, s_) for s_ in sizes]}")
+        K_mech = np.concatenate([B_.ravel() for B_ in blocks])
         M = joint_inertia(rig, q_op)
-        K = M * p.joint_bandwidth ** 2 if joint_stiffness is None else \
+        K = np.minimum(p.joint_stiffness, M * p.joint_bandwidth ** 2) if joint_stiffness is None else \
             np.broadcast_to(np.asarray(joint_stiffness, dtype=float), (k,)).copy()
         D = 2.0 * p.damping_ratio * np.sqrt(K * M)
         self.design = dict(selection=S, joint_stiffness=K, damping=D, inertia=M, torque_offset=tau_op,
-                           mechanical_stiffness=K_mech, tendon_force=f_op)
+                           mechanical_stiffness=blocks, tendon_force=f_op)
         b = DiagramBuilder()
         joint = b.AddNamedSystem("joint_impedance", JointImpedanceBank(S, K, D, tau_op, K_mech))
         dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(
             fingers, method=p.distribution_method, period=1.0 / rate_hz,
-            iterations_per_period=p.distribution_iterations, stiffness="diagonal", params=distribution,
+            iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution,
             drive=rig.params))
         fmap = ForceMap.from_spring(rig.spring, rig.params.motor.pulley_radius)
         gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth)

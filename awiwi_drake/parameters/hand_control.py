@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from awiwi_drake.parameters.base import Parameters, param
 
 __all__ = ["ForceDistributionParams", "StiffnessCorrectionParams", "FrictionObserverParams", "LinkFrictionParams",
-           "HandChainParams"]
+           "HandChainParams", "LinkEstimatorParams"]
 
 
 @dataclass(frozen=True)
@@ -86,8 +86,8 @@ class HandChainParams(Parameters):
     """The hand's control chain (ch. 7-11): joint impedance -> force distribution -> tendon force PD.
 
     Per independent DoF the joint law is ``tau = tau_op + K (q_ref - q) - D qdot``, designed from
-    the joint's own inertia ``M_jj`` (mass matrix at the operating point): ``K = M_jj w^2``,
-    ``D = 2 zeta w M_jj`` (a second-order joint response of bandwidth ``w`` behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
+    the joint's own inertia ``M_jj`` (mass matrix at the operating point): ``D = 2 zeta sqrt(K M_jj)``;
+    the cascade limits ``K <= M_jj joint_bandwidth^2`` (its joint loop must stay behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
     is ``stiffness_scale`` times the operating point's own (5.12) unless given per DoF.  The force
     loop is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) and the ripple
     feed-forward ``RippleCompensationParams.amplitude_scale``.
@@ -98,9 +98,13 @@ class HandChainParams(Parameters):
                                           "the 3 kHz rate; 3x the tendon rig's 100 rad/s so that the joint loop "
                                           "behind it can reach a useful stiffness (measured: 100/30 rad/s leaves "
                                           "25 % step error after 0.4 s against motor friction, 300/60 rad/s 0.5 %)")
+    joint_stiffness: float = param(0.5, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                   source="Fig 15.22: impedance gain 0.5 Nm/rad on the finger (5 Nm/rad the stiff "
+                                          "setting)", doc="impedance K per DoF (backstepping: every DoF)")
     joint_bandwidth: float = param(60.0, unit="rad/s", low=0.0, low_inclusive=False,
-                                   source="chosen: a fifth of force_bandwidth (the joint loop acts through the "
-                                          "force loop and must be slower); K = M_jj w^2, D = 2 zeta w M_jj")
+                                   source="chosen: a fifth of force_bandwidth (the cascade's joint loop acts through "
+                                          "the force loop and must be slower): cascaded K = min(joint_stiffness, "
+                                          "M_jj w^2), the limit 15.5.3 names for the cascaded controller")
     damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
                                  source="chosen: well damped joint response (as (10.10) for the force loop)")
     stiffness_scale: float = param(1.0, unit="-", low=0.0, low_inclusive=False,
@@ -111,3 +115,17 @@ class HandChainParams(Parameters):
                                          source="chosen: one warm-started QP per control period (the optimum "
                                                 "moves little in 1/3000 s; converges over a few periods)")
     scheduled: bool = param(True, unit="-", source="(10.12): force-loop gains scheduled on the reference force")
+
+
+@dataclass(frozen=True)
+class LinkEstimatorParams(Parameters):
+    """Joint-state estimation from tendon lengths ((5.15), Algorithm 1) at the control rate."""
+
+    iterations: int = param(15, unit="-", low=1,
+                            source="chosen: Algorithm 1 steps per period, warm-started (converged to < 1e-4 rad "
+                                   "in tests/test_hand_diagrams.py)")
+    initial_step: float = param(0.1, unit="rad", low=0.0, low_inclusive=False,
+                                source="chosen: s0 of Algorithm 1")
+    velocity_time_constant: float = param(3e-3, unit="s", low=0.0, low_inclusive=False,
+                                          source="chosen: dirty derivative s/(T s + 1) of the estimate, cutoff "
+                                                 "1000 rad/s (3 periods at 3 kHz)")
