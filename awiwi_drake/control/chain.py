@@ -60,13 +60,14 @@ def dof_selection(coupling) -> np.ndarray:
     return S
 
 
-def joint_inertia(rig: Any, q) -> np.ndarray:
-    """Inertia of each independent DoF, ``diag(S^T M(q) S)`` [kg m^2], from the rig's MultibodyPlant."""
+def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
+    """Inertia of each independent DoF, ``diag(S^T M(q) S)`` [kg m^2] (``full``: the matrix), from the rig's plant."""
     plant = rig.plant
     ctx = plant.CreateDefaultContext()
     plant.SetPositions(ctx, np.asarray(q, dtype=float))
     S = dof_selection(rig.extra["coupling"])
-    return np.diag(S.T @ plant.CalcMassMatrix(ctx) @ S).copy()
+    M = S.T @ plant.CalcMassMatrix(ctx) @ S
+    return M if full else np.diag(M).copy()
 
 
 @TemplateSystem.define("JointImpedanceBank_")
@@ -218,7 +219,7 @@ class TendonChainController(Diagram):
             iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution,
             drive=rig.params))
         fmap = ForceMap.from_spring(rig.spring, rig.params.motor.pulley_radius)
-        gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth)
+        gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth, friction_scale=p.friction_scale)
         self.design["force_gains"] = gains
         law = TendonForceLaw(fmap, rig.params.motor, gains, scheduled=p.scheduled, size=m,
                              ripple_scale=RippleCompensationParams().amplitude_scale if rig.params.motor.ripple else 0.0,

@@ -13,14 +13,17 @@ selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
     z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
     u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
 
-with the tendon force ``f = phi(x)`` of the measured spring elongation ``x``, ``f' = phi'(x) x'``,
+with the tendon force ``f = phi(x)`` of the measured spring elongation ``x``, the motor friction
+(3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
+cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
 ``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
 phi' (r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B + P qddot)``.  The joint accelerations
-come from the decoupled link model ``M_d e'' = -(P S)^T f`` (``M_d`` = the DoF inertias at the
-operating point, "decoupled" as in 15.5) and their derivative from ``f'``.  For that model
+come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``, the DoF
+inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
+rest, are left out) and their derivative from ``f'``.  For that model
 
     V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,
-    V' = -e'^T Kd e' - K3 |z3|^2 - K4 |z4|^2 <= 0
+    V' = -e'^T (Kd + B_q) e' - K3 |z3|^2 - K4 |z4|^2 <= 0
 
 (the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
 ``beta``).  Output port ``lyapunov`` gives ``V``.  With one DoF and ``P = [-r_q, r_q]^T`` it is the
@@ -31,7 +34,8 @@ tendon force error that is close to the cascaded case"): per DoF ``Kp = M_jj w_j
 zeta w_j M_jj`` and per tendon ``K3 = K4 = w_f``, so that the force-error feedback ``(1 + K3 K4)
 / g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at the same bandwidth (``alpha = r_m
 phi'``; critically damped); per DoF ``Kp = joint_stiffness`` (the impedance gain of Fig 15.22) and
-``Kd = 2 zeta sqrt(Kp M_jj)``, with ``w_f``, ``zeta`` of :class:`HandChainParams`.  Unlike the
+``Kd = 2 zeta sqrt(Kp M_jj)`` (``M_jj`` the DoF's own inertia), with ``w_f``, ``zeta`` of
+:class:`HandChainParams`.  Unlike the
 cascade (15.5.3) the joint gain is not limited by the force loop's bandwidth.
 
 Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand),
@@ -82,11 +86,16 @@ class FingerBacksteppingLaw(StaticLaw):
         self.q_op = np.asarray(op.info["joint_angles"], dtype=float)
         self.f_op = np.asarray(op.info["tendon_force"], dtype=float)
         self.tau_op = -(np.asarray(coupling.P(self.q_op), dtype=float) @ self.S).T @ self.f_op
-        self.M = joint_inertia(rig, self.q_op)
+        self.M = joint_inertia(rig, self.q_op, full=True)          # S^T M(q_op) S (DoF inertia matrix)
+        self._Minv = np.linalg.inv(self.M)
+        plant = rig.plant
+        b_q = np.array([plant.get_joint(j).default_damping_vector()[0] for j in plant.GetJointIndices()])
+        self.Bq = self.S.T @ np.diag(b_q) @ self.S                # joint damping on the DoF
         wf, zeta = p.force_bandwidth, p.damping_ratio
         self.Kp = np.full(k, p.joint_stiffness)
-        self.Kd = 2.0 * zeta * np.sqrt(self.Kp * self.M)
+        self.Kd = 2.0 * zeta * np.sqrt(self.Kp * np.diag(self.M))
         self.K3 = self.K4 = float(wf)
+        self.friction_scale = float(p.friction_scale)
         self.inputs = {"joint_angle_reference": n, "joint_angle": n, "joint_velocity": n, "elongation": m,
                        "motor_angle": m, "motor_velocity": m}
         self.output_size = m
@@ -110,8 +119,8 @@ class FingerBacksteppingLaw(StaticLaw):
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
-        edd = tau / self.M                                     # decoupled link model M_d e'' = -(PS)^T f
-        eddd = -(PS.T @ fd) / self.M
+        edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e'
+        eddd = self._Minv @ (-(PS.T @ fd) - self.Bq @ edd)
         a0 = -self.Kp * e - self.Kd * ed
         a1 = -self.Kp * ed - self.Kd * edd
         a2 = -self.Kp * edd - self.Kd * eddd
@@ -120,11 +129,12 @@ class FingerBacksteppingLaw(StaticLaw):
         beta = W @ a1 - self.K3 * z3 + PS @ ed
         z4 = fd - beta
         beta_d = W @ a2 - self.K3 * (fd - W @ a1) + PS @ edd
-        wd0 = (motor_friction_torque(w, self.motor) + motor_ripple_torque(th, self.motor) - self.r_m * f) / self.B
+        wd0 = (self.friction_scale * motor_friction_torque(w, self.motor) + motor_ripple_torque(th, self.motor)
+               - self.r_m * f) / self.B
         f0 = k2 * xd * xd + k1 * (self.r_m * wd0 + P @ (S @ edd))
         g = k1 * self.r_m / self.B
         cmd = (beta_d - f0 - z3 - self.K4 * z4) / g
-        V = 0.5 * (ed @ (self.M * ed)) + 0.5 * (e @ (self.Kp * e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
+        V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp * e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
     def __call__(self, u):
