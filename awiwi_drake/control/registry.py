@@ -133,8 +133,10 @@ def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
         if kind in e.rigs:
             return e
     fits = controller_names(rig)
-    raise ValueError(f"controller {name!r} does not fit rig {kind!r} (it is for "
-                     f"{', '.join(_kinds(name))}); controllers for {kind!r}: {', '.join(fits)}")
+    cli = kind.replace("_", "-")  # errors use the CLI spelling (joint-rig, flexible-joint, ...)
+    raise ValueError(f"controller {name!r} does not fit rig {cli!r} (it is for "
+                     f"{', '.join(r.replace('_', '-') for r in _kinds(name))}); controllers for {cli!r}: "
+                     f"{', '.join(fits)}")
 
 
 def make_controller(name: str, rig: Any):
