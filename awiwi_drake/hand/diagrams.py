@@ -46,6 +46,7 @@ from ..components.friction import guide_friction, guide_friction_force
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
+from ..rigs.base import state_names as rig_state_names
 from .coupling import FingerCoupling, HandCoupling, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
 
@@ -170,12 +171,6 @@ def GuideFriction_(T):
 GuideFriction = GuideFriction_[None]
 
 
-def _state_names(plant_joint_names, tendon_names):
-    names = list(plant_joint_names) + [f"{j}_dot" for j in plant_joint_names]
-    names += [f"theta_{t}" for t in tendon_names] + [f"omega_{t}" for t in tendon_names]
-    return tuple(names)
-
-
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
     """Shared builder of finger and hand diagrams."""
     if p.spring.hysteresis.enabled:
@@ -255,7 +250,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = _state_names(joint_names, coupling.tendon_names)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names)
     extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
                  torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                  drive_coupling=drive_coupling, models=models, joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
