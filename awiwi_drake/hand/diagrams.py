@@ -87,16 +87,23 @@ class HandRig(Rig):
     def num_joints(self) -> int:
         return len(self.joint_names)
 
-    def link_estimator(self, period: float = 1.0 / 3000.0):
+    def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
         Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
         ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.
+        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
+        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
+        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
         """
+        from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator
+        p = params or LinkEstimatorParams()
+        period = 1.0 / p.rate_hz if period is None else max(float(period), 1.0 / p.rate_hz)
         return link_state_estimator(self.coupling, self.params.motor.pulley_radius, self.offsets,
-                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"))
+                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"),
+                                    iterations=p.iterations, step0=p.initial_step,
+                                    velocity_time_constant=max(p.velocity_time_constant, period))
 
     def joint_angles_of(self, state) -> np.ndarray:
         """The joint angles (plant positions) in a rig state vector."""
