@@ -25,8 +25,8 @@ from scipy.integrate import solve_ivp
 
 from awiwi_drake.components.motor import motor_acceleration
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
-from awiwi_drake.rigs.demo import (
-    DemoScenario, MotorPositionGains, joint_rig_position_loop, motor_references, start_loop_at)
+from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+from awiwi_drake.rigs.demo import joint_rig_position_loop, motor_references, start_loop_at
 
 RATE = 3000.0
 

@@ -7,9 +7,9 @@ import pytest
 
 from _control_plants import autodiff_vs_fd
 from awiwi_drake.control.base import StaticLawController
-from awiwi_drake.control.motor_compensation import (MotorPdLaw, RippleEstimate, fit_friction,
-                                                    friction_identification_data, harmonic,
-                                                    ripple_compensation_experiment)
+from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
+from awiwi_drake.reproductions.ch03_motor import (fit_friction, friction_identification_data, harmonic,
+                                                  ripple_compensation_experiment)
 from awiwi_drake.parameters import MotorParams
 from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleCompensationParams
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from awiwi_drake.control.friction_observer import (
-    DisturbanceObserver, LinkFriction, chattering, friction_tracking_run, observer_rate, stick_slip_friction)
+from awiwi_drake.control.friction_observer import DisturbanceObserver, LinkFriction, observer_rate, stick_slip_friction
+from awiwi_drake.reproductions.ch09_friction_observer import chattering, friction_tracking_run
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 
 

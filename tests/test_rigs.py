@@ -8,7 +8,8 @@ import scipy.linalg
 
 from awiwi_drake.analysis import linearize, lqr, lqr_closed_loop, simulate
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
-from awiwi_drake.rigs import build_target, flexible_joint_rig, joint_rig, tendon_rig
+from awiwi_drake.diagrams import build_target
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
 
 BACKENDS = ("python", "symbolic")
 

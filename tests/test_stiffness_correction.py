@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from awiwi_drake.control.stiffness_correction import (
-    StiffnessCorrectedImpedance, effective_stiffness, impedance_for_effective_stiffness, pretension_elongation,
-    stiffness_correction_run)
+    StiffnessCorrectedImpedance, effective_stiffness, impedance_for_effective_stiffness, pretension_elongation)
+from awiwi_drake.reproductions.ch08_stiffness_correction import stiffness_correction_run
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 from awiwi_drake.rigs import joint_rig
 

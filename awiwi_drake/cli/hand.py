@@ -1,7 +1,7 @@
 """Hand commands: ``animate`` (Meshcat recording to HTML) and ``export-hand-diagrams``.
 
 ``awiwi-drake linearize finger-index|finger-middle|finger-ring|finger-fifth|finger-thumb|hand``
-comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.rigs.TARGETS``).
+comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.diagrams.TARGETS``).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ def register(sub) -> None:
 
 
 def _animate(args) -> int:
-    from awiwi_drake.hand.visualize import record_animation
+    from awiwi_drake.export.animation import record_animation
 
     res = record_animation(args.out, target=args.target, duration=args.duration, backend=args.backend)
     print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
@@ -43,7 +43,7 @@ def _animate(args) -> int:
 
 
 def _export(args) -> int:
-    from awiwi_drake.hand.diagrams import export_hand_diagrams
+    from awiwi_drake.diagrams import export_hand_diagrams
 
     for line in export_hand_diagrams(args.out):
         print(line)

@@ -14,7 +14,7 @@ __all__ = ["register"]
 
 
 def _targets_help() -> str:
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return "\n".join(f"  {name}: {entry['description']}" for name, entry in TARGETS.items())
 
@@ -67,7 +67,7 @@ def _floats(text: str, what: str) -> np.ndarray:
 
 
 def _build(name: str, sets) -> object:
-    from awiwi_drake.rigs import build_target
+    from awiwi_drake.diagrams import build_target
 
     return build_target(name, parse_sets(sets))
 
@@ -114,7 +114,7 @@ def _lqr(args) -> int:
 
 def _params(args) -> int:
     from awiwi_drake.parameters import provenance_table
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     if args.rig not in TARGETS:
         raise CliError(f"unknown rig {args.rig!r}; choose one of {', '.join(sorted(TARGETS))}")
@@ -131,8 +131,11 @@ def _export(args) -> int:
 
 
 def _demo(args) -> int:
-    from awiwi_drake.rigs.demo_run import run_demo
+    from awiwi_drake.export import export_diagram
+    from awiwi_drake.reproductions.demo import run_demo
 
-    report = run_demo(pathlib.Path(args.out), backend=args.backend)
+    report, graphs = run_demo(pathlib.Path(args.out), backend=args.backend)
+    for stem, diagram in graphs.items():
+        export_diagram(diagram, args.out, stem, max_depth=1, quiet=True)
     print(report)
     return 0

@@ -32,17 +32,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff, ExtractGradient
-from pydrake.systems.controllers import LinearQuadraticRegulator
 
 from awiwi_drake.analysis.linear import lqr
 from awiwi_drake.analysis.sweep import monte_carlo_points, run_sweep
-from awiwi_drake.control.backstepping import ImpedanceBackstepping, JointModel, impedance_backstepping
+from awiwi_drake.control.backstepping import JointModel, impedance_backstepping, joint_model
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
-from awiwi_drake.parameters.rigs import FlexibleJointParams
 
-__all__ = ["GainFit", "table_16_1_rig", "torque_coordinates", "backstepping_feedback", "system_feedback",
-           "optimal_feedback", "printed_model_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains",
-           "OMEGA_NAMES"]
+__all__ = ["GainFit", "torque_coordinates", "backstepping_feedback", "system_feedback", "optimal_feedback",
+           "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
 
 OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
 
@@ -75,15 +72,6 @@ class GainFit:
     evaluations: int
     wall_time: float
     method: str
-
-
-def table_16_1_rig(case: OptimalGainsCase | None = None, **kw):
-    """``flexible_joint_rig`` with Table 16.1 values (M, Bm, K; no damping: the table lists none)."""
-    from awiwi_drake.rigs import flexible_joint_rig
-    c = case or OptimalGainsCase()
-    p = FlexibleJointParams(link_inertia=c.link_inertia, motor_inertia=c.motor_inertia, stiffness=c.stiffness,
-                            link_damping=0.0, motor_damping=0.0)
-    return flexible_joint_rig(params=p, spring="linear", **kw)
 
 
 def torque_coordinates(stiffness: float) -> np.ndarray:
@@ -129,18 +117,6 @@ def optimal_feedback(rig, case: OptimalGainsCase | None = None) -> tuple[np.ndar
     return (K_rig @ np.linalg.inv(T)).ravel(), K_rig.ravel()
 
 
-def printed_model_feedback(case: OptimalGainsCase | None = None) -> np.ndarray:
-    """ARE gain for the A, B printed in Table 16.1 (Drake ``LinearQuadraticRegulator(A, B, Q, R)``).
-
-    Returned as ``u = K x`` (the sign of the printed Kdes) for direct comparison.
-    """
-    c = case or OptimalGainsCase()
-    A = np.array([[0, 1, 0, 0], [0, 0, 1 / c.link_inertia, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
-    B = np.array([[0], [0], [0], [c.stiffness / c.motor_inertia]])
-    K, _ = LinearQuadraticRegulator(A, B, np.diag(c.q_weights), np.array([[c.r_weight]]))
-    return -np.asarray(K).ravel()
-
-
 def gain_distance(feedback_tau: np.ndarray, target_tau: np.ndarray) -> float:
     """``||(K_bs - K_opt) / |K_opt| ||_2`` (element-wise relative)."""
     return float(np.linalg.norm((np.asarray(feedback_tau) - target_tau) / np.abs(target_tau)))
@@ -161,7 +137,6 @@ def evaluate_sample(*, model: JointModel, T_inv: np.ndarray, target: np.ndarray,
 
 
 def _setup(rig, case):
-    from awiwi_drake.control.backstepping_studies import joint_model
     c = case or OptimalGainsCase()
     target, _ = optimal_feedback(rig, c)
     T_inv = np.linalg.inv(torque_coordinates(_rig_stiffness(rig)))

@@ -50,7 +50,7 @@ from .coupling import FingerCoupling, HandCoupling, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
 from .systems import add_joint_space_controller
 
-__all__ = ["HandRig", "finger_diagram", "hand_diagram", "HAND_DIAGRAM_EXPORTS", "export_hand_diagrams", "tendon_bending_angles", "GuideFriction_",
+__all__ = ["HandRig", "finger_diagram", "hand_diagram", "tendon_bending_angles", "GuideFriction_",
            "GuideFriction", "closed_loop", "ClosedLoop", "DEFAULT_BACKEND"]
 
 DEFAULT_BACKEND = "symbolic"
@@ -487,34 +487,3 @@ def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op
     diagram = b.Build()
     diagram.set_name(f"{rig.name}_joint_control")
     return ClosedLoop(diagram, rig, op, ctrl, est if estimator else None)
-
-
-def _export_hand():
-    return hand_diagram(backend="symbolic").diagram
-
-
-def _export_hand_python():
-    return hand_diagram(backend="python").diagram
-
-
-def _export_index_loop():
-    return closed_loop(finger_diagram(finger="index", wrist=True), wrist_compensation=True).diagram
-
-
-def _export_ring():
-    return finger_diagram(finger="ring", backend="python").diagram
-
-
-# (file_stem, builder, max_depth) in the format of awiwi_drake.diagrams.DIAGRAM_EXPORTS
-HAND_DIAGRAM_EXPORTS = [
-    ("hand_top", _export_hand, 1),
-    ("hand_deep", _export_hand_python, None),
-    ("hand_finger_index_control_wrist", _export_index_loop, 1),
-    ("hand_finger_ring_deep", _export_ring, None),
-]
-
-
-def export_hand_diagrams(out_dir="diagrams") -> list[str]:
-    """Write the hand/finger diagram graphs (``hand_*.dot``, and .svg/.png with Graphviz)."""
-    from ..diagrams import export_entries
-    return export_entries(HAND_DIAGRAM_EXPORTS, out_dir)

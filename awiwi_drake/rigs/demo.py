@@ -11,40 +11,15 @@ control rate), so it is C++, linear and scalar-convertible.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, Multiplexer, TrajectorySource, ZeroOrderHold
 from pydrake.trajectories import PiecewisePolynomial
 
-from awiwi_drake.parameters.base import Parameters, param
+from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["DemoScenario", "MotorPositionGains", "motor_references", "joint_rig_position_loop", "start_loop_at"]
-
-
-@dataclass(frozen=True)
-class MotorPositionGains(Parameters):
-    """Per-motor PD gains of the demo controller (output shaft)."""
-
-    kp: float = param(40.0, unit="Nm/rad", low=0.0, low_inclusive=False,
-                      source="chosen: 0.56 Nm Coulomb friction (Table 3.3) leaves a 0.014 rad motor error")
-    kd: float = param(0.4, unit="Nm s/rad", low=0.0,
-                      source="chosen: with B = 2e-3 and the linearised friction (5.6 Nm s/rad) the loop is overdamped")
-    rate_hz: float = param(3000.0, unit="Hz", low=1.0, source="ch. 1/10: Awiwi control rate 3 kHz")
-
-
-@dataclass(frozen=True)
-class DemoScenario(Parameters):
-    """Pretension ramp then a link position step."""
-
-    f_start: float = param(5.0, unit="N", low=0.0, low_inclusive=False, source="chosen: light pretension")
-    f_end: float = param(30.0, unit="N", low=0.0, low_inclusive=False, source="chosen: Fig 15.26 range (20 N) and above")
-    ramp_time: float = param(0.5, unit="s", low=0.0, low_inclusive=False, source="chosen")
-    step_time: float = param(0.7, unit="s", low=0.0, source="chosen: after the ramp settles")
-    link_step: float = param(0.3, unit="rad", low=-1.5, high=1.5, source="chosen: a finger-sized step")
-    t_final: float = param(1.2, unit="s", low=0.0, low_inclusive=False, source="chosen")
+__all__ = ["motor_references", "joint_rig_position_loop", "start_loop_at"]
 
 
 def motor_references(rig: Rig, t: np.ndarray, pretension: np.ndarray, link_angle: np.ndarray):

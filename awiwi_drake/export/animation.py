@@ -16,9 +16,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from ..analysis.simulate import simulate
-from ..parameters.hand import FINGERS
-from .diagrams import closed_loop, finger_diagram, hand_diagram
+from awiwi_drake.analysis.simulate import simulate
+from awiwi_drake.hand.diagrams import closed_loop, finger_diagram, hand_diagram
+from awiwi_drake.parameters.hand import FINGERS
 
 __all__ = ["GRASP_POSE", "grasp_pose", "AnimationResult", "record_animation"]
 

@@ -7,8 +7,11 @@ import pathlib
 import numpy as np
 
 from awiwi_drake.analysis import linearize, rig_monitors, simulate
+from awiwi_drake.components.spring import LeverSpringMechanism
 from awiwi_drake.config import short_mode
-from awiwi_drake.rigs.demo import DemoScenario, joint_rig_position_loop, start_loop_at
+from awiwi_drake.parameters.rigs import DemoScenario
+from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
+from awiwi_drake.rigs.demo import joint_rig_position_loop, start_loop_at
 from awiwi_drake.rigs.rigs import joint_rig
 
 __all__ = ["run_demo", "pole_sweep_pretension"]
@@ -24,16 +27,16 @@ def pole_sweep_pretension(rig, pretensions):
     return np.array(poles), np.array(stiffness)
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
-    """Run the demo, write ``out/*.png`` and the diagram graphs; return a text summary."""
+def run_demo(out: pathlib.Path, *, backend: str = "symbolic"):
+    """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
+
+    The caller (``awiwi-drake demo``) writes the returned diagrams' graphs with
+    :func:`awiwi_drake.export.export_diagram` (export sits above this layer).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from awiwi_drake.components.spring import LeverSpringMechanism
-    from awiwi_drake.export import export_diagram
-    from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
 
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -62,8 +65,6 @@ def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
     ax.set_title("joint_rig poles versus pretension (Linearize)")
     fig.savefig(out / "poles_vs_pretension.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
-    export_diagram(diagram, out, "joint_rig_position_loop", max_depth=1, quiet=True)
-    export_diagram(rig.diagram, out, "joint_rig", max_depth=1, quiet=True)
     q_end = float(result["link_angle"][-1, 0])
     f_end = result["tendon_force"][-1]
     lines = [
@@ -74,4 +75,4 @@ def run_demo(out: pathlib.Path, *, backend: str = "symbolic") -> str:
         f"  events: {len(result.events)}" + "".join(f"\n    {e}" for e in result.events),
         "  files: demo_joint_rig.png, spring_curve.png, poles_vs_pretension.png, joint_rig*.dot/.svg/.png",
     ]
-    return "\n".join(lines)
+    return "\n".join(lines), {"joint_rig_position_loop": diagram, "joint_rig": rig.diagram}
