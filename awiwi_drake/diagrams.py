@@ -96,8 +96,8 @@ def _joint():
 
 
 def _joint_loop():
-    from awiwi_drake.rigs.demo import joint_rig_position_loop
-    return joint_rig_position_loop(joint_rig())[0]
+    from awiwi_drake.control.motor_position import joint_rig_position_loop
+    return joint_rig_position_loop(joint_rig()).diagram
 
 
 def _export_hand():
@@ -111,8 +111,10 @@ def _export_hand_python():
 
 
 def _export_index_loop():
-    from awiwi_drake.hand.diagrams import closed_loop, finger_diagram
-    return closed_loop(finger_diagram(finger="index", wrist=True), wrist_compensation=True).diagram
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.hand.diagrams import finger_diagram
+    rig = finger_diagram(finger="index", wrist=True)
+    return closed_loop(rig, make_controller("joint-pd", rig)).diagram
 
 
 def _export_ring():

@@ -27,7 +27,8 @@ import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
 from awiwi_drake.analysis.linear import linearize
-from awiwi_drake.hand.diagrams import closed_loop, finger_diagram, hand_diagram
+from awiwi_drake.control import closed_loop, make_controller
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 
 
 def _run(diagram, context, t_final, *, fixed_step=None, accuracy=1e-4, max_step=1e-3):
@@ -75,8 +76,10 @@ def bench(target: str, backend: str, sim_time: float, repeat: int) -> dict:
     for mode, kw in (("closed_loop_rtf", {}), ("closed_loop_fixed_step_rtf", {"fixed_step": 1.0 / 3000})):
         best = 0.0
         for _ in range(repeat):
-            cl = closed_loop(_build(target, backend))
-            rtf, steps = _run(cl.diagram, cl.context(joint_angle_reference=q_ref), sim_time, **kw)
+            r = _build(target, backend)
+            cl = closed_loop(r, make_controller("joint-pd", r))
+            ctx = cl.create_context(r.operating_point(), references={"joint_angle_reference": q_ref})
+            rtf, steps = _run(cl.diagram, ctx, sim_time, **kw)
             best = max(best, rtf)
         out[mode], out[mode.replace("rtf", "steps")] = best, steps
     return out

@@ -25,8 +25,9 @@ from scipy.integrate import solve_ivp
 
 from awiwi_drake.components.motor import motor_acceleration
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
+from awiwi_drake.control.motor_position import joint_rig_position_loop
 from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
-from awiwi_drake.rigs.demo import joint_rig_position_loop, motor_references, start_loop_at
+from awiwi_drake.rigs.demo import motor_references
 
 RATE = 3000.0
 
@@ -61,10 +62,9 @@ def open_loop_rtf(build, backend, seconds):
 def closed_loop_rtf_joint(backend, seconds, integrator="runge_kutta3"):
     rig = joint_rig(backend=backend)
     scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
-    diagram, _, _ = joint_rig_position_loop(rig, scen)
-    ctx = diagram.CreateDefaultContext()
-    start_loop_at(diagram, ctx, rig, rig.operating_point(pretension=scen.f_start))
-    return _advance(diagram, ctx, seconds, integrator)
+    loop = joint_rig_position_loop(rig, scen)
+    ctx = loop.create_context(rig.operating_point(pretension=scen.f_start))
+    return _advance(loop.diagram, ctx, seconds, integrator)
 
 
 def scipy_reference_rtf(seconds):

@@ -201,7 +201,7 @@ def test_registry_errors_and_names():
     with pytest.raises(ValueError, match="already registered"):
         register_controller("lqr", lambda rig: None, rigs=("joint_rig",), description="dup")
     with pytest.raises(ValueError, match="unknown rig"):
-        controller_names("hand")
+        controller_names("gripper")
 
 
 def test_continuous_loop_on_fused_backend_gives_clear_error():

@@ -106,6 +106,34 @@ def test_fig_12_3_open_loop_poles_vs_stiffness_and_link_damping():
         assert np.ptp(np.abs(table[:, 0])) > 500.0             # rad/s: the fast poles move strongly
 
 
+def test_printed_12_18_gains_give_neither_the_printed_poles_nor_a_stable_loop():
+    """(12.18) alpha = [4395, 6.177, -4395, 288.99] on (12.8) with Table 12.1: u = +alpha x puts a
+    pole at +1.44e5 1/s, u = -alpha x leaves the rigid-body pole at 0 (alpha1 + alpha3 = 0: no
+    feedback of the absolute position); neither gives the printed -100 +- 0.66i, -10 +- 0.38i."""
+    A, B, _ = flexible_joint_matrices()
+    alpha = np.array([[4395.0, 6.177, -4395.0, 288.99]])
+    plus = np.linalg.eigvals(A + B @ alpha)
+    minus = np.linalg.eigvals(A - B @ alpha)
+    assert np.max(plus.real) == pytest.approx(1.4448e5, rel=1e-3)
+    assert np.min(np.abs(minus)) < 1e-6 and np.max(minus.real) < 1e-6
+    printed = np.array([-100 + 0.66j, -100 - 0.66j, -10 + 0.38j, -10 - 0.38j])
+    for poles in (plus, minus):
+        assert min(np.min(np.abs(poles - p)) for p in printed) > 5.0     # nearest: 0 vs -10
+
+
+def test_fig_12_3_needs_a_less_damped_plant_than_table_12_1():
+    """Table 12.1 (d_q = 1.2e-3) gives four real open-loop poles (-2359, -641, -1.2, 0); the
+    oscillatory pair plotted in Fig 12.3 appears only for lighter link damping: d_q = 4.3e-4 gives
+    -537 +- 1106i (Drake linearisation of the rig)."""
+    from awiwi_drake.analysis import linearize
+    nominal = np.linalg.eigvals(linearize(flexible_joint_rig()).A)
+    assert np.max(np.abs(nominal.imag)) < 1e-9
+    np.testing.assert_allclose(np.sort(nominal.real), [-2358.8, -640.6, -1.201, 0.0], atol=0.5)
+    light = np.linalg.eigvals(linearize(flexible_joint_rig(params=FlexibleJointParams(link_damping=4.3e-4))).A)
+    pair = light[np.argmax(light.imag)]
+    assert pair.real == pytest.approx(-537.4, abs=0.5) and pair.imag == pytest.approx(1106.2, abs=0.5)
+
+
 def test_lqr_gain_equals_independent_riccati_solution():
     rig = flexible_joint_rig()
     for r in LQR_R_VALUES:

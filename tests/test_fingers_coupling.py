@@ -64,6 +64,19 @@ def test_index_matrix_is_the_derivative_of_5_5():
         assert (P[:, j] > 0).any() and (P[:, j] < 0).any()
 
 
+def test_printed_5_9_differs_from_d_dq_of_5_5_in_rows_1_to_6():
+    """(5.9) as printed beside d/dq of (5.5): rows 1-4 and 5-6 differ (rows 5 and 6 are swapped),
+    rows 7-8 agree; the printed rows are a permutation of ours (the same spanned torques)."""
+    r0, r1, r2, r3 = 0.006, 0.008, 0.007, 0.005
+    printed = np.array([[r0, -r1, 0, 0], [-r0, -r1, 0, 0], [r0, r1, 0, 0], [-r0, r1, 0, 0],
+                        [0, 0, -r2, 0], [0, 0, r2, 0], [0, 0, r2, -r3], [0, 0, -r2, r3]])
+    ours = index_coupling_matrix(r0, r1, r2, r3)
+    differs = [i + 1 for i in range(8) if not np.array_equal(printed[i], ours[i])]
+    assert differs == [1, 2, 3, 4, 5, 6]
+    np.testing.assert_array_equal(printed[[4, 5]], ours[[5, 4]])
+    assert sorted(map(tuple, printed)) == sorted(map(tuple, ours))
+
+
 def test_ring_coupling_reduces_to_5_18_for_equal_radii():
     p = RingFingerParams(pip_radius=0.006, dip_radius=0.006)
     c = finger_coupling("ring", p)

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from pydrake.systems.analysis import Simulator
 
-from awiwi_drake.control.friction_observer import DisturbanceObserver, LinkFriction, observer_rate, stick_slip_friction
+from _fd import check_system_autodiff_matches_fd
+from awiwi_drake.control.friction_observer import DisturbanceObserver, LinkFriction, observer_rate
 from awiwi_drake.reproductions.ch09_friction_observer import chattering, friction_tracking_run
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 
@@ -29,14 +30,27 @@ def test_observer_estimate_is_a_first_order_filter_of_the_disturbance():
     assert dh == pytest.approx(L * J) and wdot == pytest.approx(L)
 
 
-def test_systems_convert_and_friction_opposes_motion():
-    assert DisturbanceObserver(1e-5).ToAutoDiffXd() is not None
-    assert LinkFriction().ToAutoDiffXd() is not None
+def test_systems_convert_and_autodiff_matches_closed_form_derivatives():
+    """Observer (9.2) and link friction: AutoDiffXd derivatives equal central differences and the
+    closed forms d(w_hat')/dw = L, d(w_hat')/dw_hat = -L - d/J, d d_hat/dw = L J; friction slope
+    at v from the Stribeck law written here."""
+    J, L, d = 1e-5, 200.0, 3e-6
+    obs = DisturbanceObserver(J, FrictionObserverParams(gain=L), damping=d)
+    jac = check_system_autodiff_matches_fd(obs, [0.3], {"link_velocity": [0.5], "joint_torque": [0.01]})
+    xdot_ad, _ = jac["xdot"]
+    est_ad, _ = jac["disturbance_estimate"]
+    # d/d[w_hat, w, tau]: w_hat' = (tau + L J (w - w_hat) - d w)/J  (the estimate's damping is known)
+    np.testing.assert_allclose(xdot_ad[0], [-L, L - d / J, 1.0 / J], rtol=1e-12)
+    np.testing.assert_allclose(est_ad[0], [-L * J, L * J, 0.0], rtol=1e-12, atol=1e-18)
     p = LinkFrictionParams()
-    v = np.linspace(-1, 1, 41)
-    f = stick_slip_friction(v, p)
-    assert np.all(f * v <= 0)                                   # dissipative
-    assert np.max(np.abs(f)) <= p.static + p.viscous * 1.0 + 1e-12
+    fr = LinkFriction(p)
+    for v in (-0.2, -0.01, 0.0, 0.003, 0.4):
+        (J_ad, J_fd), = check_system_autodiff_matches_fd(fr, [], {"link_velocity": [v]}).values()
+        s, e = p.stribeck_velocity, p.smoothing_velocity
+        level = p.coulomb + (p.static - p.coulomb) * np.exp(-(v / s) ** 2)
+        dlevel = -2 * v / s ** 2 * (p.static - p.coulomb) * np.exp(-(v / s) ** 2)
+        slope = -(dlevel * np.tanh(v / e) + level / (e * np.cosh(v / e) ** 2)) - p.viscous
+        assert J_ad[0, 0] == pytest.approx(slope, rel=1e-12)
 
 
 def test_compensation_reduces_the_tracking_error_and_costs_chattering():

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from _fd import check_system_autodiff_matches_fd
 import pytest
-from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
 
 from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.hand.coupling import finger_coupling
@@ -132,15 +132,14 @@ def test_guide_friction_is_passive_and_converts_to_autodiff():
 
         tau = out(x)
         assert x[4:] @ tau < 0                                   # dissipates
-        ad = sys.ToAutoDiffXd()
-        actx = ad.CreateDefaultContext()
-        ad.GetInputPort("state").FixValue(actx, InitializeAutoDiff(x).ravel())
-        ad.GetInputPort("tendon_force").FixValue(actx, f)
-        y = ad.get_output_port(0).Eval(actx)
-        eps = 1e-7
-        J = np.array([(out(x + eps * e) - out(x - eps * e)) / (2 * eps) for e in np.eye(8)]).T
-        np.testing.assert_allclose(ExtractValue(y).ravel(), tau, rtol=1e-12)
-        np.testing.assert_allclose(ExtractGradient(y), J, rtol=1e-5, atol=1e-7)
+        # each tendon carries its guide friction against its sliding speed P v (direction smoothed by
+        # tanh below v_s): (4.1) C0 (1 - exp(-C1 alpha)), or the capstan f (exp(+-mu alpha) - 1)
+        P = np.asarray(c.P(x[:4]))
+        s = np.tanh(P @ x[4:] / p.friction_smoothing_velocity)
+        F = f * (np.exp(p.friction.mu * alpha * s) - 1) if capstan \
+            else s * p.friction.c0 * (1 - np.exp(-p.friction.c1 * alpha))
+        np.testing.assert_allclose(tau, -P.T @ F, rtol=1e-6)
+        check_system_autodiff_matches_fd(sys, [], {"state": x, "tendon_force": f})
 
 
 def test_guide_friction_in_the_finger_diagram_dissipates_link_motion():
@@ -181,13 +180,14 @@ def test_hand_simulates_under_joint_control():
     """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
     stay put (decoupled routing, palm fixed), no tendon goes slack."""
     from awiwi_drake.analysis.simulate import rig_monitors, simulate
-    from awiwi_drake.hand.diagrams import closed_loop
+    from awiwi_drake.control import closed_loop, make_controller
     hand = hand_diagram(backend="python")
-    cl = closed_loop(hand)
+    cl = closed_loop(hand, make_controller("joint-pd", hand))
     q_ref = np.zeros(hand.num_joints)
     i_mcp = hand.extra["joint_names"].index("q21")
     q_ref[i_mcp] = 0.2
-    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.06, log=("joint_angle", "tendon_force"),
+    ctx = cl.create_context(hand.operating_point(), references={"joint_angle_reference": q_ref})
+    res = simulate(cl.diagram, ctx, 0.06, log=("joint_angle", "tendon_force"),
                    monitors=rig_monitors(hand), max_step=1.0 / 3000, accuracy=1e-3)
     q = res["joint_angle"][-1]
     assert q[i_mcp] > 0.1
@@ -224,12 +224,13 @@ def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
 def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
     """No joint sensors: the 3 kHz estimator (motor angles + spring elongations) follows the plant."""
     from awiwi_drake.analysis.simulate import simulate
-    from awiwi_drake.hand.diagrams import closed_loop
+    from awiwi_drake.control import closed_loop, make_controller
     rig = finger_diagram(finger=finger)
-    cl = closed_loop(rig, estimator=True)
+    cl = closed_loop(rig, make_controller("joint-pd", rig), estimator=rig.link_estimator())
     q_ref = np.asarray(OPS[finger + "_ref"] if finger + "_ref" in OPS else
                        rig.extra["coupling"].dof_selection @ np.array(OPS[finger]), float)
-    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.1,
+    res = simulate(cl.diagram, cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref}),
+                   0.1,
                    log=("joint_angle", "joint_angle_estimate", "joint_velocity"), max_step=1.0 / 3000,
                    accuracy=1e-3)
     late = res.t > 0.05
@@ -258,11 +259,12 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
 
 def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
     from awiwi_drake.analysis.simulate import rig_monitors, simulate
-    from awiwi_drake.hand.diagrams import closed_loop
+    from awiwi_drake.control import closed_loop, make_controller
     rig = finger_diagram(finger="thumb")
-    cl = closed_loop(rig)
+    cl = closed_loop(rig, make_controller("joint-pd", rig))
     q_ref = np.array([0.5, 0.35, 0.0, 0.0])
-    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), 0.3, log=("joint_angle",),
+    res = simulate(cl.diagram, cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref}),
+                   0.3, log=("joint_angle",),
                    monitors=rig_monitors(rig), max_step=1.0 / 3000, accuracy=1e-3)
     # the springs are held at their 20 N elongation at q_ref; the residual comes from the tendon
     # forces no longer balancing exactly there (P(q_ref)^T f_op != 0) and from motor friction

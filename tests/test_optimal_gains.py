@@ -12,20 +12,57 @@ from awiwi_drake.reproductions.ch16_optimal_backstepping import printed_model_fe
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
 
-def test_state_feedback_matches_the_printed_structure_of_16_3():
-    """K_bs from AutoDiff of the law = through the TemplateSystem = the closed forms of (15.70)/(16.3)."""
+def _k_bs_closed_form(M, Bm, k, Kp, Kd, K3, K4):
+    """(16.3) derived by hand from the design of section 15.3 (no damping, r = 0, no external torque).
+
+    tau coordinates x = [q, qd, tau, taud], M qdd = tau, taudd = k (u - tau)/Bm - k tau/M.
+    alpha = -Kp q - Kd qd, z3 = tau - alpha, beta = alpha' - K3 z3 - qd, z4 = taud - beta,
+    taudd := beta' - z3 - K4 z4  =>  u = b (beta' - z3 - K4 z4) + tau (1 + Bm/M), b = Bm/k;
+    u = -K x collects to the four entries below.
+    """
+    b = Bm / k
+    return np.array([
+        b * Kp * (1 + K3 * K4),
+        b * (K3 * Kp + Kd + K4 * (Kp + K3 * Kd + 1)),
+        b / M * (Kp + K3 * Kd + 1 + K4 * Kd) + b * (1 + K3 * K4) - 1 - Bm / M,
+        b * (Kd / M + K3 + K4)])
+
+
+def test_state_feedback_equals_an_independent_derivation_of_16_3():
+    """All four entries of K_bs (AutoDiff of the law, and through the TemplateSystem) equal the
+    hand derivation for random gains; the printed constants of entries 1, 2, 4 (0.0033 = Bm/k,
+    4600 = Bm/(k M)) agree, entry 3's constant does not: printed 7400 = Bm/(kM) + Bm/M, the
+    derivation gives Bm/(kM) - Bm/M - 1 + Bm/k = 1812.6 (a sign error in the thesis)."""
     rig = table_16_1_rig()
     c = OptimalGainsCase()
     model = joint_model(rig)
-    g = ImpedanceBacksteppingGains(stiffness=0.7, damping=0.03, k3=40.0, k4=90.0)
-    K_law = backstepping_feedback(model, g).ravel()
-    K_sys = system_feedback(ImpedanceBackstepping(model, g, external_torque="none"), np.zeros(4)).ravel()
-    np.testing.assert_allclose(K_sys, K_law, rtol=1e-12)
-    K_tau = K_law @ np.linalg.inv(torque_coordinates(c.stiffness))
-    bk = c.motor_inertia / c.stiffness                               # the 0.0033 of (16.3)
-    Kp, Kd, K3, K4 = g.stiffness, g.damping, g.k3, g.k4
-    np.testing.assert_allclose(K_tau[0], bk * (K4 * K3 * Kp + Kp), rtol=1e-9)
-    np.testing.assert_allclose(K_tau[1], bk * (K3 * Kp + K4 * (K3 * Kd + Kp + 1) + Kd), rtol=1e-9)
+    Tinv = np.linalg.inv(torque_coordinates(c.stiffness))
+    rng = np.random.default_rng(5)
+    for i in range(5):
+        Kp, Kd, K3, K4 = np.exp(rng.uniform(np.log([1e-2, 1e-4, 1.0, 1.0]), np.log([2.0, 0.1, 200.0, 500.0])))
+        g = ImpedanceBacksteppingGains(stiffness=Kp, damping=Kd, k3=K3, k4=K4)
+        K_law = backstepping_feedback(model, g).ravel()
+        if i == 0:
+            K_sys = system_feedback(ImpedanceBackstepping(model, g, external_torque="none"), np.zeros(4)).ravel()
+            np.testing.assert_allclose(K_sys, K_law, rtol=1e-12)
+        expected = _k_bs_closed_form(c.link_inertia, c.motor_inertia, c.stiffness, Kp, Kd, K3, K4)
+        np.testing.assert_allclose(K_law @ Tinv, expected, rtol=1e-9)
+    b, b_over_M = c.motor_inertia / c.stiffness, c.motor_inertia / (c.stiffness * c.link_inertia)
+    assert round(b, 4) == 0.0033 and round(b_over_M, -2) == 4600          # printed coefficients
+    constant = _k_bs_closed_form(c.link_inertia, c.motor_inertia, c.stiffness, 0, 0, 0, 0)[2]
+    assert constant == pytest.approx(1812.6, abs=0.1)
+    assert b_over_M + c.motor_inertia / c.link_inertia == pytest.approx(7400, rel=5e-3)   # the printed 7400
+
+
+def test_printed_kdes_of_table_16_1_destabilises_the_printed_model():
+    """Table 16.1's Kdes with its own (A, B): unstable under u = -K x and under u = +K x."""
+    c = OptimalGainsCase()
+    M, Bm, k = c.link_inertia, c.motor_inertia, c.stiffness
+    A = np.array([[0, 1, 0, 0], [0, 0, 1 / M, 0], [0, 0, 0, 1], [0, 0, 0, 0.0]])
+    B = np.array([[0], [0], [0], [k / Bm]])
+    K = np.array([c.printed_kdes])
+    for sign in (-1.0, 1.0):
+        assert np.max(np.linalg.eigvals(A + sign * B @ K).real) > 500.0   # +1175 / +586 1/s
 
 
 def test_lqr_from_framework_and_the_printed_table():

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from awiwi_drake.analysis import linearize, lqr, lqr_closed_loop, simulate
+from awiwi_drake.analysis import linearize, lqr, simulate
+from awiwi_drake.control import closed_loop
+from awiwi_drake.control.lqr import lqr_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
 from awiwi_drake.diagrams import build_target
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
@@ -58,12 +60,10 @@ def test_lqr_closed_loop_converges_and_cost_matches_riccati():
     rig = flexible_joint_rig()
     Q, R = np.diag([10, 0.01, 1, 0.01]), np.array([[1e-2]])
     op = rig.operating_point(link_angle=0.0)
-    diagram, _ = lqr_closed_loop(rig, Q, R, op)
-    ctx = diagram.CreateDefaultContext()
+    loop = closed_loop(rig, lqr_controller(rig, op=op, Q=Q, R=R), rate_hz=None)
     x0 = np.array([0.2, 0.0, 0.1, 0.0])
-    ctx.SetContinuousState(x0)
-    diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
-    res = simulate(diagram, ctx, 1.0, log=("state", "motor_torque"), max_step=1e-4, accuracy=1e-8)
+    ctx = loop.create_context(state=x0, references={"link_angle_reference": 0.0})
+    res = simulate(loop.diagram, ctx, 1.0, log=("state", "motor_torque"), max_step=1e-4, accuracy=1e-8)
     assert np.max(np.abs(res["state"][-1])) < 1e-3 * np.max(np.abs(x0))
     # The realised quadratic cost equals x0^T S x0 (Riccati value function).
     x, u, t = res["state"], res["motor_torque"], res.t
@@ -77,12 +77,11 @@ def test_joint_rig_lqr_closed_loop_stiffness_against_an_external_push():
     op = rig.operating_point(pretension=20.0)
     Q, R = np.diag([1e3, 1e-4, 1e3, 1e3, 1e-4, 1e-4]), np.diag([1.0, 1.0])  # slowest pole -5.6 1/s
     design = lqr(rig, Q, R, op)
-    diagram, _ = lqr_closed_loop(rig, Q, R, op)
-    ctx = diagram.CreateDefaultContext()
-    ctx.SetContinuousState(op.state)
+    loop = closed_loop(rig, lqr_controller(rig, op=op, Q=Q, R=R), rate_hz=None)
     push = 0.01  # Nm on the link
-    diagram.GetInputPort("external_torque").FixValue(ctx, [push])
-    res = simulate(diagram, ctx, 2.5, log=("state",), max_step=1e-3)
+    ctx = loop.create_context(op, references={"link_angle_reference": op.state[0]},
+                              disturbances={"external_torque": [push]})
+    res = simulate(loop.diagram, ctx, 2.5, log=("state",), max_step=1e-3)
     # Linear prediction of the steady state: 0 = (A - B K) dx + E push, E = d xdot / d tau_ext = e_qdot / m.
     lin = design.linearization
     E = np.zeros(rig.num_states)

@@ -7,12 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.controllers import LinearQuadraticRegulator
-from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Linearize
 
 from awiwi_drake.rigs.base import OperatingPoint, Rig
 
-__all__ = ["LinearizationResult", "LqrResult", "linearize", "lqr", "lqr_closed_loop", "poles_table"]
+__all__ = ["LinearizationResult", "LqrResult", "linearize", "lqr", "poles_table"]
 
 
 @dataclass(frozen=True)
@@ -120,34 +119,6 @@ def lqr(rig: Rig, Q, R, op: OperatingPoint | None = None) -> LqrResult:
     from pydrake.systems.controllers import LinearQuadraticRegulator as _lqr_ab
     _, S = _lqr_ab(lin.A, lin.B, Q, R)
     return LqrResult(K, np.array(S), _sorted_eig(lin.A - lin.B @ K), lin, Q, R)
-
-
-def lqr_closed_loop(rig: Rig, Q, R, op: OperatingPoint | None = None):
-    """The rig in closed loop with its LQR controller (continuous, from the framework).
-
-    Returns ``(diagram, controller)``; the rig is added as the subsystem named
-    ``rig.name`` and its ``external_torque`` (if any) is exported. Requires a
-    rig whose ``state`` output has no direct feedthrough from ``motor_torque``
-    (``backend="python"``; the fused ``symbolic`` drive reports port-level
-    feedthrough, so use a discrete controller with it).
-    """
-    op = rig.operating_point() if op is None else op
-    Q, R = _check_weights(Q, R, rig.num_states, np.size(op.motor_torque))
-    controller = LinearQuadraticRegulator(rig.diagram, rig.context(op), Q, R,
-                                          input_port_index=rig.diagram.GetInputPort("motor_torque").get_index())
-    controller.set_name("lqr")
-    b = DiagramBuilder()
-    plant = b.AddSystem(rig.diagram)
-    ctrl = b.AddSystem(controller)
-    b.Connect(plant.GetOutputPort("state"), ctrl.get_input_port())
-    b.Connect(ctrl.get_output_port(), plant.GetInputPort("motor_torque"))
-    if plant.HasInputPort("external_torque"):
-        b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
-    b.ExportOutput(plant.GetOutputPort("state"), "state")
-    b.ExportOutput(ctrl.get_output_port(), "motor_torque")
-    diagram = b.Build()
-    diagram.set_name(f"{rig.name}_lqr")
-    return diagram, controller
 
 
 def poles_table(result: LinearizationResult) -> str:

@@ -21,8 +21,10 @@ def register(sub) -> None:
         epilog="The motion: open -> closed -> open joint references tracked by the 3 kHz joint-space\n"
                "controller through the full tendon model (motors, lever springs, routing). Offline.")
     p.add_argument("--out", default="hand.html", help="HTML file to write (default hand.html)")
-    p.add_argument("--target", choices=_TARGETS, default="hand")
-    p.add_argument("--duration", type=float, default=1.5, help="simulated seconds (default 1.5)")
+    p.add_argument("--target", choices=_TARGETS, default="hand",
+                   help="the whole hand (palm, forearm stub, five fingers) or one finger (default hand)")
+    p.add_argument("--duration", type=float, default=1.5,
+                   help="simulated seconds of the open -> closed -> open motion (default 1.5)")
     p.add_argument("--backend", choices=["python", "symbolic"], default="python",
                    help="tendon drive backend (python is faster for the whole hand)")
     p.set_defaults(func=_animate)

@@ -8,5 +8,6 @@ from awiwi_drake.components.routing import ConstantCoupling, TendonRouting, Tend
 from awiwi_drake.components.spring import (
     AntagonisticPairSpring, LeverSpringMechanism, LinearSpring, PolynomialSpring, SpringBank, SpringBank_,
     hysteresis_rate, tendon_spring)
-from awiwi_drake.components.tendon import (
-    capstan_friction_force, guide_friction_force, series_stiffness, tendon_stiffness)
+from awiwi_drake.components.friction import (
+    atan_friction, capstan_friction_force, guide_friction, guide_friction_force, regularized_sign, stribeck_friction)
+from awiwi_drake.components.tendon import series_stiffness, tendon_stiffness

@@ -17,6 +17,7 @@ from pydrake.systems.framework import BasicVector_, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip, is_float
+from awiwi_drake.components.friction import atan_friction
 from awiwi_drake.parameters.components import MotorParams
 
 __all__ = [
@@ -52,7 +53,7 @@ def motor_friction_torque(omega, p: MotorParams):
     """
     tau = -p.damping * omega
     if p.friction:
-        tau = tau - (p.coulomb_torque * np.arctan(p.friction_slope * omega) + p.viscous_friction * omega)
+        tau = tau + atan_friction(omega, p.coulomb_torque, p.friction_slope, p.viscous_friction)
     return tau
 
 

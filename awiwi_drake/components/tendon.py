@@ -1,12 +1,16 @@
-"""Tendon elasticity and guide friction (thesis ch. 4, section 5.1)."""
+"""Tendon elasticity and springs in series (thesis ch. 4, section 5.1, (8.1)).
+
+The guide friction laws (4.1) are in :mod:`awiwi_drake.components.friction`.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from awiwi_drake.parameters.components import GuideFrictionParams, TendonParams
+from awiwi_drake._math import is_float
+from awiwi_drake.parameters.components import TendonParams
 
-__all__ = ["tendon_stiffness", "series_stiffness", "guide_friction_force", "capstan_friction_force"]
+__all__ = ["tendon_stiffness", "series_stiffness"]
 
 
 def tendon_stiffness(p: TendonParams) -> float:
@@ -14,36 +18,25 @@ def tendon_stiffness(p: TendonParams) -> float:
     return p.youngs_modulus * p.cross_section / p.rest_length
 
 
-def series_stiffness(k_mechanism, k_tendon):
-    """Stiffness of the mechanism and the tendon in series: ``(1/k_m + 1/k_t)^-1``.
+def series_stiffness(k_a, k_b):
+    """Two stiffnesses in series (8.1): ``(k_a^-1 + k_b^-1)^-1``.
 
-    A slack mechanism (``k_m = 0``) gives 0.
+    Scalars and arrays combine element-wise as ``k_a k_b / (k_a + k_b)``, generic in the
+    scalar type (float, AutoDiffXd, Expression): a slack element (``k = 0``) gives 0.
+    Two square matrices (2-D arrays, e.g. a controller impedance and the mechanical
+    joint stiffness of (8.1)) combine as ``K_a (K_a + K_b)^-1 K_b``, which equals
+    ``(K_a^-1 + K_b^-1)^-1`` for invertible ``K_a``, ``K_b``.
+    Float inputs must be >= 0 (element-wise) with a positive sum.
     """
-    k_mechanism = np.asarray(k_mechanism, dtype=float)
-    if np.any(k_mechanism < 0) or k_tendon <= 0:
-        raise ValueError("series_stiffness: k_mechanism must be >= 0 and k_tendon > 0 [N/m]")
-    return np.where(k_mechanism > 0, k_mechanism * k_tendon / np.where(k_mechanism > 0, k_mechanism + k_tendon, 1.0), 0.0)
-
-
-def guide_friction_force(bending_angle, p: GuideFrictionParams = GuideFrictionParams()):
-    """Guide friction magnitude (4.1): ``F = C0 (1 - exp(-C1 alpha))`` [N].
-
-    ``bending_angle`` alpha [rad] is the total angle the tendon wraps on its
-    guides (>= 0). Independent of tension and speed (Fig 4.10).
-    """
-    a = np.asarray(bending_angle, dtype=float)
-    if np.any(a < 0) or not np.all(np.isfinite(a)):
-        raise ValueError(f"guide_friction_force: bending_angle must be finite and >= 0 [rad], got {bending_angle}")
-    return p.c0 * (1.0 - np.exp(-p.c1 * a))
-
-
-def capstan_friction_force(tension, bending_angle, p: GuideFrictionParams = GuideFrictionParams()):
-    """Tension-proportional (capstan) guide friction: ``F = f (1 - exp(-mu alpha))`` [N].
-
-    The force lost between the two ends of a tendon pulled with tension ``f``
-    around a total angle alpha. Generic in the scalar type of ``tension``.
-    """
-    a = np.asarray(bending_angle, dtype=float)
-    if np.any(a < 0) or not np.all(np.isfinite(a)):
-        raise ValueError(f"capstan_friction_force: bending_angle must be finite and >= 0 [rad], got {bending_angle}")
-    return tension * (1.0 - np.exp(-p.mu * a))
+    a, b = np.asarray(k_a), np.asarray(k_b)
+    if a.ndim == 2 or b.ndim == 2:
+        a, b = np.atleast_2d(a).astype(float), np.atleast_2d(b).astype(float)
+        if a.shape != b.shape or a.shape[0] != a.shape[1]:
+            raise ValueError(f"series_stiffness: matrices must be square and of one shape, got {a.shape} and {b.shape}")
+        return a @ np.linalg.solve(a + b, b)
+    if is_float(a) and is_float(b):
+        if np.any(a < 0) or np.any(b < 0) or np.any(a + b <= 0):
+            raise ValueError("series_stiffness: stiffnesses must be >= 0 with a positive sum, "
+                             f"got k_a = {k_a}, k_b = {k_b}")
+    out = a * b / (a + b)
+    return out[()] if isinstance(out, np.ndarray) and out.shape == () else out

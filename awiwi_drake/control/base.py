@@ -12,11 +12,18 @@ Conventions (binding for every controller in :mod:`awiwi_drake.control`)
     output port (``state``, ``tendon_force``, ``motor_velocity``, ...);
   - one output port ``motor_torque`` [Nm] is the command (size = rig input).
 
-* :func:`closed_loop` wires a rig and a controller by these names, optionally
-  sampled at ``rate_hz`` (zero-order hold on the command, 3 kHz in the hand),
-  with a round-trip ``delay`` (a :class:`DiscreteTimeDelay` of whole control
-  periods), a torque ``saturation`` and sensor models, and returns a
-  :class:`ClosedLoop` handle.
+* :func:`closed_loop` wires a rig (tendon rig, flexible joint, joint rig, a
+  finger or the hand) and a controller by these names, optionally sampled at
+  ``rate_hz`` (zero-order hold on the command, 3 kHz in the hand), with a
+  round-trip ``delay`` (a :class:`DiscreteTimeDelay` of whole control
+  periods), a torque ``saturation``, sensor models and a state
+  ``estimator``, and returns a :class:`ClosedLoop` handle.
+* Fingers and the hand have no joint sensors (section 5.2.3): their
+  controllers' ``joint_angle`` / ``joint_velocity`` measurements come from the
+  rig's tendon-length estimator ((5.15), Algorithm 1 for the thumb base;
+  ``rig.link_estimator``) unless ``sensors="ideal"`` asks for the true joint
+  state.  A controller that reads the full ``state`` (which holds the true
+  joint angles) is refused there without ``sensors="ideal"``.
 
 Most controllers of the thesis are static laws ``u = law(inputs)``; they are
 built with :class:`StaticLawController_`, which evaluates a pure, scalar-generic
@@ -33,7 +40,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem_, System
-from pydrake.systems.primitives import DiscreteTimeDelay, Saturation, ZeroOrderHold
+from pydrake.systems.primitives import DiscreteTimeDelay, MatrixGain, Multiplexer, Saturation, ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 __all__ = [
@@ -178,10 +185,12 @@ class ClosedLoop:
 
     Exported diagram ports: inputs ``<signal>_reference`` (one per controller
     reference) and every rig input other than ``motor_torque`` (e.g.
-    ``external_torque``); outputs: every rig output under its own name, the
-    controller command ``motor_torque_command`` and the torque entering the rig
-    ``motor_torque`` (after hold, delay and saturation), and any other controller
-    output ``<name>`` as ``controller_<name>``.
+    ``external_torque``, ``wrist_angle``); outputs: every rig output under its own
+    name, the controller command ``motor_torque_command`` and the torque entering
+    the rig ``motor_torque`` (after hold, delay and saturation), any other
+    controller output ``<name>`` as ``controller_<name>``, and with an estimator,
+    for each estimated quantity ``<q>`` (e.g. ``joint_angle``) ``<q>_estimate``
+    and ``<q>_estimation_error`` = estimate - true value.
     """
 
     diagram: Diagram
@@ -194,6 +203,8 @@ class ClosedLoop:
     references: tuple[str, ...]
     disturbances: tuple[str, ...]
     tracked_outputs: tuple[str, ...]
+    estimator: Any = None
+    estimated: tuple[str, ...] = ()
     _holds: list = field(default_factory=list, repr=False)
     _delays: list = field(default_factory=list, repr=False)
 
@@ -202,20 +213,28 @@ class ClosedLoop:
         """Size of the command ``motor_torque``."""
         return self.diagram.GetOutputPort(COMMAND_PORT).size()
 
-    def create_context(self, *, state: Sequence[float] | None = None,
+    def create_context(self, op: Any = None, *, state: Sequence[float] | None = None,
                        motor_torque: Sequence[float] | float | None = None,
                        references: Mapping[str, Any] | None = None,
                        disturbances: Mapping[str, Any] | None = None) -> Context:
         """A context with the rig state set, references/disturbances fixed.
 
-        ``motor_torque`` initialises the sample-and-hold and delay buffers (so
-        the first control periods apply the operating-point torque instead of
-        zero).  Unspecified references/disturbances are fixed to zero.
+        ``op`` (an :class:`~awiwi_drake.rigs.OperatingPoint`) gives the state,
+        the holding torques and the external torque at once (``state`` /
+        ``motor_torque`` / ``disturbances`` override it).  ``motor_torque``
+        initialises the sample-and-hold and delay buffers (so the first control
+        periods apply the operating-point torque instead of zero).  Unspecified
+        references/disturbances are fixed to zero.
         """
+        disturbances = dict(disturbances or {})
+        if op is not None:
+            state = op.state if state is None else state
+            motor_torque = op.motor_torque if motor_torque is None else motor_torque
+            if op.external_torque is not None and "external_torque" in self.disturbances:
+                disturbances.setdefault("external_torque", op.external_torque)
         ctx = self.diagram.CreateDefaultContext()
         self.initialize(ctx, state=state, motor_torque=motor_torque)
         references = dict(references or {})
-        disturbances = dict(disturbances or {})
         for name in self.references:
             port = self.diagram.GetInputPort(name)
             port.FixValue(ctx, _vector(references.pop(name, 0.0), port.size(), name))
@@ -229,7 +248,12 @@ class ClosedLoop:
         return ctx
 
     def initialize(self, context: Context, *, state=None, motor_torque=None) -> None:
-        """Set the rig state and the hold/delay buffers in a (root) context."""
+        """Set the rig state and the hold/delay buffers in a (root) context.
+
+        ``context`` may be the root context of a larger diagram holding this
+        closed loop.  With an estimator, the estimate starts at the joint angles
+        of ``state`` (a pose known after homing).
+        """
         if state is not None:
             rig_sys = self.diagram.GetSubsystemByName("rig")
             rig_ctx = rig_sys.GetMyMutableContextFromRoot(context)
@@ -238,6 +262,10 @@ class ClosedLoop:
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} continuous states")
             rig_ctx.SetContinuousState(x)
+            if self.estimator is not None and hasattr(self.estimator, "initialize"):
+                est_sys = self.diagram.GetSubsystemByName("estimator")
+                self.estimator.initialize(est_sys.GetMyMutableContextFromRoot(context),
+                                          self.rig.joint_angles_of(x))
         if motor_torque is not None:
             u = _vector(motor_torque, self.num_inputs, "motor_torque")
             for zoh in self._holds:
@@ -261,14 +289,16 @@ def _vector(value, size: int, name: str) -> np.ndarray:
 
 def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                 delay: float | None = None, saturation: float | Sequence[float] | None = None,
-                sensors: Mapping[str, System] | None = None, name: str | None = None) -> ClosedLoop:
+                sensors: Mapping[str, System] | str | None = None, estimator: Any = "auto",
+                sources: Mapping[str, System] | None = None, name: str | None = None) -> ClosedLoop:
     """Close the loop between a rig and a controller by port names.
 
     Parameters
     ----------
     rig : Rig
         Any object with a ``diagram`` exporting the input ``motor_torque`` and
-        the measurement outputs (the :class:`awiwi_drake.rigs.Rig` contract).
+        the measurement outputs (the :class:`awiwi_drake.rigs.Rig` contract):
+        the tendon rig, the flexible joint, the joint rig, a finger or the hand.
     controller : System
         Controller following the naming conventions of this module.
     rate_hz : float or None
@@ -282,9 +312,23 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     saturation : float or sequence or None
         Symmetric torque limit [Nm] applied to the command (Drake
         ``Saturation``).  ``None``: the rig's own limit (if any) applies.
-    sensors : mapping, optional
+    sensors : mapping, "ideal" or None
         ``{rig_output_name: system}``: a sensor model with one input and one
         output inserted between that rig output and the controller input.
+        ``"ideal"``: every measurement is the rig's true output (no estimator,
+        e.g. the true joint state of a finger for an "ideal sensor" comparison).
+    estimator : "auto", None or object
+        ``"auto"`` (default): the rig's own state estimator when it has one
+        (fingers and the hand: ``rig.link_estimator(period)``, joint angles
+        from tendon lengths) and ``sensors`` is not ``"ideal"``.  ``None``: no
+        estimator.  Or an object with ``system`` (a Drake System whose inputs
+        are named after rig outputs and whose outputs replace the rig outputs of
+        the same name as controller measurements) and optionally
+        ``initialize(context, joint_angles)``.
+    sources : mapping, optional
+        ``{input_name: system}``: a signal source (one output port, e.g. a
+        ``TrajectorySource`` or ``Sine``) wired to a reference input or a rig
+        input (``external_torque``, ``wrist_angle``) instead of exporting it.
     name : str, optional
         Diagram name (default ``"<rig>_<controller>"``).
 
@@ -297,10 +341,11 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         raise ValueError(f"closed_loop: rig must have a Drake system in .diagram, got {type(rig).__name__}")
     if not isinstance(controller, System):
         raise ValueError(f"closed_loop: controller must be a Drake System, got {type(controller).__name__}")
+    rig_name = getattr(rig, "name", "?")
     rig_in, rig_out = _input_names(rig_diagram), _output_names(rig_diagram)
     ctrl_in, ctrl_out = _input_names(controller), _output_names(controller)
     if COMMAND_PORT not in rig_in:
-        raise ValueError(f"closed_loop: rig {getattr(rig, 'name', '?')!r} has no input port {COMMAND_PORT!r}")
+        raise ValueError(f"closed_loop: rig {rig_name!r} has no input port {COMMAND_PORT!r}")
     if COMMAND_PORT not in ctrl_out:
         raise ValueError(f"closed_loop: controller {controller.get_name()!r} has no output port "
                          f"{COMMAND_PORT!r} (outputs: {', '.join(ctrl_out) or 'none'})")
@@ -314,16 +359,37 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         sig = r[: -len(REFERENCE_SUFFIX)]
         if sig not in rig_out:
             raise ValueError(f"closed_loop: controller reference port {r!r} refers to {sig!r}, which the rig "
-                             f"{getattr(rig, 'name', '?')!r} does not output (outputs: {', '.join(rig_out)})")
+                             f"{rig_name!r} does not output (outputs: {', '.join(rig_out)})")
         tracked.append(sig)
     for m in measurement_ports(controller):
         if m not in rig_out:
             raise ValueError(f"closed_loop: controller measurement port {m!r} is not an output of rig "
-                             f"{getattr(rig, 'name', '?')!r} (outputs: {', '.join(rig_out)})")
+                             f"{rig_name!r} (outputs: {', '.join(rig_out)})")
         if controller.GetInputPort(m).size() != rig_diagram.GetOutputPort(m).size():
             raise ValueError(f"closed_loop: port {m!r} has size {controller.GetInputPort(m).size()} on the "
                              f"controller but {rig_diagram.GetOutputPort(m).size()} on the rig")
-    sensors = dict(sensors or {})
+    ideal = isinstance(sensors, str)
+    if ideal and sensors != "ideal":
+        raise ValueError(f"closed_loop: sensors = {sensors!r}; give 'ideal', a mapping {{rig output: system}} "
+                         f"or None")
+    est = _resolve_estimator(rig, estimator, ideal, rate_hz, measurement_ports(controller))
+    est_sys = None if est is None else getattr(est, "system", est)
+    est_out = [] if est_sys is None else _output_names(est_sys)
+    estimated = tuple(m for m in measurement_ports(controller) if m in est_out)
+    if est_sys is not None:
+        if not isinstance(est_sys, System):
+            raise ValueError(f"closed_loop: estimator must be a Drake System or have one in .system, got "
+                             f"{type(est_sys).__name__}")
+        for m in _input_names(est_sys):
+            if m not in rig_out:
+                raise ValueError(f"closed_loop: estimator input {m!r} is not an output of rig {rig_name!r} "
+                                 f"(outputs: {', '.join(rig_out)})")
+        if "state" in measurement_ports(controller):
+            raise ValueError(f"closed_loop: controller {controller.get_name()!r} reads the rig's full 'state' "
+                             f"(true joint angles), but rig {rig_name!r} has no joint sensors: its joint state "
+                             f"comes from the estimator ({', '.join(est_out)}); use sensors='ideal' for a "
+                             f"true-state comparison")
+    sensors = {} if ideal else dict(sensors or {})
     for s in sensors:
         if s not in rig_out:
             raise ValueError(f"closed_loop: sensor given for {s!r}, which is not a rig output")
@@ -354,10 +420,28 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     ctrl = builder.AddNamedSystem("controller", controller)
     handles = ClosedLoop(diagram=None, rig=rig, controller=controller, rate_hz=rate_hz,
                          delay=(steps / rate_hz if steps else None), delay_steps=steps, saturation=sat,
-                         references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked))
-    # measurements (optionally through sensor models)
+                         references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked),
+                         estimator=est, estimated=estimated)
+    estimate_ports = {}
+    if est_sys is not None:
+        e = builder.AddNamedSystem("estimator", est_sys)
+        for m in _input_names(est_sys):
+            builder.Connect(plant.GetOutputPort(m), e.GetInputPort(m))
+        for q in est_out:
+            estimate_ports[q] = e.GetOutputPort(q)
+            builder.ExportOutput(e.GetOutputPort(q), f"{q}_estimate")
+            if q in rig_out:  # estimation error = estimate - truth
+                nq = e.GetOutputPort(q).size()
+                mux = builder.AddNamedSystem(f"{q}_error_inputs", Multiplexer([nq, nq]))
+                diff = builder.AddNamedSystem(f"{q}_estimation_error",
+                                              MatrixGain(np.hstack([np.eye(nq), -np.eye(nq)])))
+                builder.Connect(e.GetOutputPort(q), mux.get_input_port(0))
+                builder.Connect(plant.GetOutputPort(q), mux.get_input_port(1))
+                builder.Connect(mux.get_output_port(), diff.get_input_port())
+                builder.ExportOutput(diff.get_output_port(), f"{q}_estimation_error")
+    # measurements (from the estimator, optionally through sensor models)
     for m in measurement_ports(controller):
-        src = plant.GetOutputPort(m)
+        src = estimate_ports.get(m, plant.GetOutputPort(m))
         if m in sensors:
             sensor = builder.AddNamedSystem(f"sensor_{m}", sensors[m])
             if sensor.num_input_ports() != 1 or sensor.num_output_ports() != 1:
@@ -387,12 +471,27 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         cmd = satsys.get_output_port(0)
     builder.Connect(cmd, plant.GetInputPort(COMMAND_PORT))
     builder.ExportOutput(cmd, COMMAND_PORT)
-    for r in refs:
-        builder.ExportInput(ctrl.GetInputPort(r), r)
+    sources = dict(sources or {})
+    unknown = sorted(set(sources) - set(refs) - (set(rig_in) - {COMMAND_PORT}))
+    if unknown:
+        raise ValueError(f"closed_loop: source given for {unknown[0]!r}, which is neither a controller reference "
+                         f"nor a rig input (inputs: {', '.join(refs + [n for n in rig_in if n != COMMAND_PORT])})")
+
+    def _feed(name, port):
+        if name not in sources:
+            builder.ExportInput(port, name)
+            return True
+        src = builder.AddNamedSystem(f"{name}_source", sources[name])
+        if src.num_output_ports() != 1 or src.get_output_port(0).size() != port.size():
+            raise ValueError(f"closed_loop: the source for {name!r} must have one output port of size {port.size()}")
+        builder.Connect(src.get_output_port(0), port)
+        return False
+
+    refs = [r for r in refs if _feed(r, ctrl.GetInputPort(r))]
+    handles.references = tuple(refs)
     dist = []
     for n in rig_in:
-        if n != COMMAND_PORT:
-            builder.ExportInput(plant.GetInputPort(n), n)
+        if n != COMMAND_PORT and _feed(n, plant.GetInputPort(n)):
             dist.append(n)
     for n in rig_out:
         if n != COMMAND_PORT:
@@ -419,3 +518,32 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     handles.diagram = diagram
     handles.disturbances = tuple(dist)
     return handles
+
+
+def _resolve_estimator(rig: Any, estimator: Any, ideal: bool, rate_hz: float | None, measured: list[str]):
+    """The estimator object for :func:`closed_loop` (None: measurements straight from the rig).
+
+    ``"auto"`` uses the rig's estimator only when the controller measures one
+    of its outputs (a motor-side controller such as the joint PD needs none).
+    """
+    if estimator is None:
+        return None
+    if isinstance(estimator, str):
+        if estimator != "auto":
+            raise ValueError(f"closed_loop: estimator = {estimator!r}; give 'auto', None or an estimator")
+        make = getattr(rig, "link_estimator", None)
+        if ideal or make is None:
+            return None
+        est = make(1.0 / rate_hz if rate_hz is not None else 1.0 / 3000.0)
+        used = [m for m in measured if m in _output_names(est.system)]
+        if not used:
+            return None
+        if rate_hz is None:
+            raise ValueError(f"closed_loop: rig {getattr(rig, 'name', '?')!r} has no joint sensors; "
+                             f"{', '.join(used)} come from its tendon-length estimator, which runs at the "
+                             f"control rate: give rate_hz, or sensors='ideal' for a continuous loop on the "
+                             f"true joint state")
+        return est
+    if ideal:
+        raise ValueError("closed_loop: sensors='ideal' and an estimator exclude each other")
+    return estimator

@@ -42,5 +42,8 @@ _BUILTIN = [
      "SDRE state feedback (14.10)-(14.12), Table 14.2, gains at 200 Hz"),
 ]
 
+_BUILTIN.append(("joint-pd", _lazy("joint_pd", "joint_pd_controller"), ("finger", "hand"),
+                 "motor PD towards the motor angles of the joint reference (exact routing), pretension held"))
+
 for _name, _factory, _rigs, _doc in _BUILTIN:
     register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)

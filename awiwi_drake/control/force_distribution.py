@@ -27,8 +27,27 @@ coupling (the thumb) they are recomputed by an SVD at every call (online).
 
 The search starts at the mid-range co-contraction or, when that is not
 inside the bounds, at the max-margin feasible point of a linear program.
-Requests that no force in the bounds can satisfy are detected by that program and returned with ``status="infeasible"``: forces are never clipped
-silently.
+Requests that no force in the bounds can satisfy are detected by that program and returned with
+``status="infeasible"``: forces are never clipped silently.
+
+Optimal solver ((7.6) solved, not approximated)
+-----------------------------------------------
+The thesis states the problem it wants, (7.6): minimise the stiffness error subject to the
+*exact* torque ``P^T f = tau_des`` and the force bounds, and drops it as too slow for the
+real-time machine.  :class:`OptimalForceDistribution` solves it with Drake's
+``MathematicalProgram``: a sequence of convex QPs (Gauss-Newton on the stiffness residual,
+``K_q(f)`` linearised through ``dk_t/df``), each with the torque as a linear *equality* and the
+bounds as a bounding box, solved by Clarabel, followed by a line search on the true nonlinear
+cost inside the (convex) feasible set.  Every accepted iterate is feasible and lowers the cost;
+the iteration stops at a first-order (KKT) point.  Warm-started with the previous forces it needs
+1-3 QPs per control period.  On the index finger with the hand's spring curve it reaches a
+stiffness error several times below Algorithm 2's (``docs/REPRODUCTIONS.md``, ch. 7), whose step
+halving never recovers once the barrier has shrunk the step.
+
+Both solvers take either a constant matrix or a finger coupling object of
+:mod:`awiwi_drake.hand.coupling` (then ``solve(..., q=...)`` evaluates ``P(q)`` and the
+tension Hessian, e.g. for the thumb base); :func:`finger_force_distribution` builds either solver
+for one finger of the hand with its own coupling, radii and calibrated spring curve.
 """
 
 from __future__ import annotations
@@ -38,31 +57,21 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+from pydrake.autodiffutils import AutoDiffXd, ExtractValue
+from pydrake.solvers import ClarabelSolver, MathematicalProgram
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy.optimize import linprog
 
+from awiwi_drake.components.spring import tendon_spring
+from awiwi_drake.hand.coupling import FingerCoupling, finger_coupling, reduced_coupling_matrix
+from awiwi_drake.parameters.hand import FINGERS, FingerDriveParams
 from awiwi_drake.parameters.hand_control import ForceDistributionParams
 
-__all__ = ["DistributionResult", "TendonStiffnessMap", "TendonForceDistribution", "coupling_nullspace",
-           "joint_stiffness", "index_finger_coupling"]
-
-
-def index_finger_coupling(radii=(0.008, 0.008, 0.007, 0.006)) -> np.ndarray:
-    """Coupling ``P = dh/dq`` (8 x 4) of the index finger from the tendon lengths (5.5).
-
-    Radii ``(r20, r21, r22, r23)`` [m] are not given in the thesis (MODEL_NOTES ch. 5);
-    the default is a plausible 6-8 mm choice (see :class:`ForceDistributionParams`).
-    """
-    r20, r21, r22, r23 = radii
-    return np.array([
-        [r20, r21, 0, 0],
-        [r20, -r21, 0, 0],
-        [-r20, r21, 0, 0],
-        [-r20, -r21, 0, 0],
-        [0, 0, r22, 0],
-        [0, 0, -r22, 0],
-        [0, 0, r22, -r23],
-        [0, 0, -r22, r23],
-    ], dtype=float)
+__all__ = ["DistributionResult", "TendonStiffnessMap", "TendonForceDistribution", "OptimalForceDistribution",
+           "coupling_nullspace", "joint_stiffness", "stiffness_cost", "hand_stiffness_map",
+           "finger_force_distribution", "optimum_sensitivity", "TendonForceDistribution_",
+           "TendonForceDistributionSystem"]
 
 
 def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
@@ -180,28 +189,44 @@ class TendonStiffnessMap:
         return np.interp(f, self.forces, self.k), np.interp(f, self.forces, self.dk)
 
 
-class TendonForceDistribution:
-    """Algorithm 2 of the thesis: exact torque, closest stiffness, forces kept off the bounds.
 
-    Parameters
-    ----------
-    stiffness_map : callable
-        ``f -> (k_t(f), dk_t/df)`` (arrays of shape (m,)), e.g. :class:`TendonStiffnessMap`.
-    params : ForceDistributionParams
-        Bounds, weights, barrier width, iteration count, initial step.
-    coupling : array (m, n), optional
-        Constant coupling: ``W`` and ``(P^T)^+`` are computed once here (offline).
-        Omit it for a position-dependent coupling and pass ``P`` (and ``hessian``) to :meth:`solve`.
-    """
+def stiffness_cost(K_des, K) -> float:
+    """Relative stiffness error ``||K_des - K||_F^2 / ||K_des||_F^2`` (the gamma1 term of (7.7))."""
+    K_des = np.asarray(K_des, dtype=float)
+    return float(np.sum((K_des - K) ** 2) / max(float(np.sum(K_des * K_des)), 1e-300))
 
-    def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
-                 coupling: np.ndarray | None = None):
+
+def _max_margin_alpha(f_p, W, f_min, f_max):
+    """Max-margin alpha with f_min + t <= f_p + W alpha <= f_max - t (LP, HiGHS); None if infeasible."""
+    m, r = W.shape
+    c = np.zeros(r + 1)
+    c[-1] = -1.0                                   # variables [alpha (r), t]; maximise t
+    A = np.vstack([np.hstack([-W, np.ones((m, 1))]), np.hstack([W, np.ones((m, 1))])])
+    b = np.concatenate([f_p - f_min, f_max - f_p])
+    res = linprog(c, A_ub=A, b_ub=b, bounds=[(None, None)] * r + [(None, 0.5 * (f_max - f_min))],
+                  method="highs")
+    if res.status != 0 or res.x[-1] < 0.0:
+        return None
+    return res.x[:r]
+
+
+class _DistributionBase:
+    """Shared input handling of the two solvers: coupling (matrix or coupling object), checks."""
+
+    def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None,
+                 coupling, owner: str):
         self.params = params or ForceDistributionParams()
+        self._owner = owner
         if not callable(stiffness_map):
-            raise ValueError("TendonForceDistribution: stiffness_map must be callable f -> (k_t, dk_t/df)")
+            raise ValueError(f"{owner}: stiffness_map must be callable f -> (k_t, dk_t/df)")
         self.stiffness_map = stiffness_map
+        self.coupling_object = coupling if isinstance(coupling, FingerCoupling) else None
         self._offline = None
-        if coupling is not None:
+        if self.coupling_object is not None:
+            if coupling.is_constant:
+                P = self._check_P(coupling.P(np.zeros(coupling.num_joints)))
+                self._offline = (P,) + coupling_nullspace(P)
+        elif coupling is not None:
             P = self._check_P(coupling)
             self._offline = (P,) + coupling_nullspace(P)
 
@@ -213,6 +238,85 @@ class TendonForceDistribution:
         if not np.all(np.isfinite(P)):
             raise ValueError("coupling P has non-finite entries")
         return P
+
+    def _coupling_at(self, P, hessian, q):
+        """(P, pinv(P^T), W, rank, hessian) for this call (offline, given P, or coupling object at q)."""
+        if P is None and q is not None and self.coupling_object is not None and self._offline is None:
+            c = self.coupling_object
+            q = np.asarray(q, dtype=float)
+            if q.shape != (c.num_joints,):
+                raise ValueError(f"solve: q has shape {q.shape}; the coupling has {c.num_joints} joints "
+                                 f"({', '.join(c.joint_names)})")
+            P = c.P(q)
+            m = c.num_tendons
+            hessian = np.stack([c.tension_hessian(q, e) for e in np.eye(m)], axis=0)
+        if P is None:
+            if self._offline is None:
+                need = "q" if self.coupling_object is not None else "P"
+                raise ValueError(f"solve: pass {need} (the coupling depends on the posture)")
+            P, pinv_PT, W, rank = self._offline
+        else:
+            P = self._check_P(P)
+            pinv_PT, W, rank = coupling_nullspace(P)
+        if hessian is not None:
+            hessian = np.asarray(hessian, dtype=float)
+            m, n = P.shape
+            if hessian.shape != (m, n, n):
+                raise ValueError(f"solve: hessian has shape {hessian.shape}; expected ({m}, {n}, {n})")
+        return P, pinv_PT, W, rank, hessian
+
+    @staticmethod
+    def _check_request(tau_des, K_des, n):
+        tau_des = np.asarray(tau_des, dtype=float).ravel()
+        K_des = np.asarray(K_des, dtype=float)
+        if tau_des.shape != (n,):
+            raise ValueError(f"solve: tau_des has shape {tau_des.shape}; the coupling has {n} joints")
+        if not np.all(np.isfinite(tau_des)):
+            raise ValueError("solve: tau_des has non-finite entries")
+        if K_des.shape != (n, n):
+            raise ValueError(f"solve: K_des has shape {K_des.shape}; expected ({n}, {n})")
+        if not np.all(np.isfinite(K_des)):
+            raise ValueError("solve: K_des has non-finite entries")
+        if not np.allclose(K_des, K_des.T, rtol=1e-9, atol=1e-12):
+            raise ValueError("solve: K_des must be symmetric")
+        return tau_des, K_des
+
+    def _result(self, f, status, P, hessian, tau_des, K_des, iterations, cost) -> DistributionResult:
+        p = self.params
+        K = joint_stiffness(P, self.stiffness_map(f)[0], f, hessian)
+        viol = float(max(0.0, np.max(p.f_min - f), np.max(f - p.f_max)))
+        if status == "ok" and viol > p.bound_tolerance:
+            status = "bound_violation"
+        return DistributionResult(
+            forces=f, status=status, torque_error=float(np.linalg.norm(-P.T @ f - tau_des)),
+            bound_violation=viol, stiffness=K, stiffness_error=float(np.sqrt(stiffness_cost(K_des, K))),
+            iterations=iterations, cost=float(cost))
+
+    def timed_solve(self, *args, **kw) -> tuple[DistributionResult, float]:
+        """:meth:`solve` and its wall time [s] (for benchmarks)."""
+        t0 = time.perf_counter()
+        res = self.solve(*args, **kw)
+        return res, time.perf_counter() - t0
+
+
+class TendonForceDistribution(_DistributionBase):
+    """Algorithm 2 of the thesis: exact torque, closest stiffness, forces kept off the bounds.
+
+    Parameters
+    ----------
+    stiffness_map : callable
+        ``f -> (k_t(f), dk_t/df)`` (arrays of shape (m,)), e.g. :class:`TendonStiffnessMap`.
+    params : ForceDistributionParams
+        Bounds, weights, barrier width, iteration count, initial step.
+    coupling : array (m, n) or FingerCoupling, optional
+        Constant coupling: ``W`` and ``(P^T)^+`` are computed once here (offline).  A
+        position-dependent coupling object (thumb) is evaluated at ``solve(..., q=...)`` (online
+        SVD); without any coupling pass ``P`` (and ``hessian``) to :meth:`solve`.
+    """
+
+    def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
+                 coupling=None):
+        super().__init__(stiffness_map, params, coupling, "TendonForceDistribution")
 
     # -- cost ---------------------------------------------------------------
     def _cost(self, f, P, hessian, K_des, K_norm2):
@@ -253,22 +357,7 @@ class TendonForceDistribution:
                 s *= 0.5
         return alpha, C, K, it
 
-    def _feasible_start(self, f_p, W):
-        """Max-margin alpha with f_min + t <= f_p + W alpha <= f_max - t (LP); None if infeasible."""
-        p = self.params
-        m, r = W.shape
-        # variables [alpha (r), t]; maximise t
-        c = np.zeros(r + 1)
-        c[-1] = -1.0
-        A = np.vstack([np.hstack([-W, np.ones((m, 1))]), np.hstack([W, np.ones((m, 1))])])
-        b = np.concatenate([f_p - p.f_min, p.f_max - f_p])
-        res = linprog(c, A_ub=A, b_ub=b, bounds=[(None, None)] * r + [(None, 0.5 * (p.f_max - p.f_min))],
-                      method="highs")
-        if res.status != 0 or res.x[-1] <= 0.0:
-            return None
-        return res.x[:r]
-
-    def solve(self, tau_des, K_des, *, P=None, hessian=None, alpha0=None) -> DistributionResult:
+    def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, alpha0=None) -> DistributionResult:
         """Distribute ``tau_des`` (n) with target stiffness ``K_des`` (n x n).
 
         Parameters
@@ -278,32 +367,17 @@ class TendonForceDistribution:
         K_des : array (n, n)
             Desired joint stiffness [Nm/rad] (symmetric).
         P : array (m, n), optional
-            Coupling at the current posture (required without a constant coupling; online SVD).
+            Coupling at the current posture (online SVD).
         hessian : array (m, n, n), optional
             ``dP_ij/dq_k`` for a position-dependent coupling (geometric stiffness term).
+        q : array (n,), optional
+            Posture, for a position-dependent coupling object given to the constructor.
         alpha0 : array, optional
             Warm start in the null space (e.g. the previous call's solution).
         """
-        if P is None:
-            if self._offline is None:
-                raise ValueError("solve: pass P (no constant coupling was given to the constructor)")
-            P, pinv_PT, W, _ = self._offline
-        else:
-            P = self._check_P(P)
-            pinv_PT, W, _ = coupling_nullspace(P)
+        P, pinv_PT, W, _, hessian = self._coupling_at(P, hessian, q)
         m, n = P.shape
-        tau_des = np.asarray(tau_des, dtype=float).ravel()
-        K_des = np.asarray(K_des, dtype=float)
-        if tau_des.shape != (n,):
-            raise ValueError(f"solve: tau_des has shape {tau_des.shape}; the coupling has {n} joints")
-        if K_des.shape != (n, n):
-            raise ValueError(f"solve: K_des has shape {K_des.shape}; expected ({n}, {n})")
-        if not np.allclose(K_des, K_des.T, rtol=1e-9, atol=1e-12):
-            raise ValueError("solve: K_des must be symmetric")
-        if hessian is not None:
-            hessian = np.asarray(hessian, dtype=float)
-            if hessian.shape != (m, n, n):
-                raise ValueError(f"solve: hessian has shape {hessian.shape}; expected ({m}, {n}, {n})")
+        tau_des, K_des = self._check_request(tau_des, K_des, n)
         p = self.params
         f_p = -pinv_PT @ tau_des
         K_norm2 = max(float(np.sum(K_des * K_des)), 1e-300)
@@ -316,34 +390,385 @@ class TendonForceDistribution:
             alpha = np.asarray(alpha0, dtype=float).ravel()
             if alpha.shape != (r,):
                 raise ValueError(f"solve: alpha0 has shape {alpha.shape}; the null space has dimension {r}")
-        def violation(a):
-            f = f_p + W @ a
-            return float(max(0.0, np.max(p.f_min - f), np.max(f - p.f_max)))
-
         f_start = f_p + W @ alpha
         inside = np.all(f_start > p.f_min) and np.all(f_start < p.f_max)
-        status, iters, C, K = "ok", 0, np.inf, None
-        if not inside:
-            start = self._feasible_start(f_p, W)
-            if start is None:
-                status = "infeasible"     # no force in the bounds produces tau_des
+        status, iters, C = "ok", 0, np.inf
+        if np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des)):
+            status = "infeasible"         # tau_des is outside the range of P^T: no force produces it
+        elif not inside:
+            start = _max_margin_alpha(f_p, W, p.f_min, p.f_max)
+            if start is None or not np.all((f_p + W @ start > p.f_min) & (f_p + W @ start < p.f_max)):
+                status = "infeasible"     # no force strictly inside the bounds produces tau_des
             else:
                 alpha = start
         if status == "ok":
-            alpha, C, K, iters = self._search(alpha, f_p, W, P, hessian, K_des, K_norm2)
-        f = f_p + W @ alpha
-        if K is None:
-            K = joint_stiffness(P, self.stiffness_map(f)[0], f, hessian)
-        viol = violation(alpha)
-        if status == "ok" and viol > p.bound_tolerance:
-            status = "bound_violation"
-        return DistributionResult(
-            forces=f, status=status, torque_error=float(np.linalg.norm(-P.T @ f - tau_des)),
-            bound_violation=viol, stiffness=K,
-            stiffness_error=float(np.linalg.norm(K_des - K) / np.sqrt(K_norm2)), iterations=iters, cost=float(C))
+            alpha, C, _, iters = self._search(alpha, f_p, W, P, hessian, K_des, K_norm2)
+        return self._result(f_p + W @ alpha, status, P, hessian, tau_des, K_des, iters, C)
 
-    def timed_solve(self, *args, **kw) -> tuple[DistributionResult, float]:
-        """:meth:`solve` and its wall time [s] (for benchmarks)."""
-        t0 = time.perf_counter()
-        res = self.solve(*args, **kw)
-        return res, time.perf_counter() - t0
+
+class OptimalForceDistribution(_DistributionBase):
+    """(7.6) solved with Drake's ``MathematicalProgram``: exact torque, bounds, stiffness tracking.
+
+    ``min_f ||K_des - K_q(f)||_F^2 / ||K_des||_F^2`` subject to ``-P^T f = tau_des`` (linear
+    equality) and ``f_min <= f <= f_max`` (bounding box), ``K_q(f) = P^T diag(k_t(f)) P +
+    sum_i f_i H_i`` (5.12) with the tendon stiffness ``k_t(f)`` of the spring curve.
+
+    Each iteration linearises ``K_q`` at the current feasible ``f_k`` (``dK_q/df_i = dk_t,i p_i
+    p_i^T + H_i``) and solves the convex QP ``min ||E_k - G (f - f_k)||^2 + mu ||f - f_k||^2``
+    over the feasible set (Clarabel, interior point); the step to the QP solution is then
+    projected onto ``ker P^T`` (the torque stays exact to rounding), cut at the bounds and
+    halved until the *true* cost decreases.  Stops when the relative cost decrease falls below
+    ``tolerance`` or after ``max_iterations`` QPs.  ``mu = levenberg x trace(G^T G) / m``
+    keeps the QP strictly convex when ``G`` has a null space (e.g. the 4 x 2 thumb base).
+
+    Parameters
+    ----------
+    stiffness_map, params, coupling
+        As for :class:`TendonForceDistribution` (the barrier settings are not used: the bounds
+        are hard constraints).
+    max_iterations : int
+        QPs per call without a warm start (chosen: 30; converged in the tests).
+    tolerance : float
+        Relative cost decrease that ends the iteration.
+    levenberg : float
+        Relative Levenberg damping (chosen: 1e-6, negligible against the Gauss-Newton term).
+    """
+
+    def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
+                 coupling=None, *, max_iterations: int = 30, tolerance: float = 1e-10,
+                 levenberg: float = 1e-6):
+        super().__init__(stiffness_map, params, coupling, "OptimalForceDistribution")
+        if int(max_iterations) < 1:
+            raise ValueError(f"OptimalForceDistribution: max_iterations = {max_iterations} must be >= 1")
+        if not tolerance > 0.0:
+            raise ValueError(f"OptimalForceDistribution: tolerance = {tolerance} must be > 0")
+        if not levenberg > 0.0:
+            raise ValueError(f"OptimalForceDistribution: levenberg = {levenberg} must be > 0")
+        self.max_iterations = int(max_iterations)
+        self.tolerance = float(tolerance)
+        self.levenberg = float(levenberg)
+        self._solver = ClarabelSolver()
+        self._programs: dict = {}
+
+    def _program(self, m: int, rank: int):
+        """The QP, built once per (m, rank); its coefficients are updated at every iteration."""
+        key = (m, rank)
+        if key not in self._programs:
+            p = self.params
+            prog = MathematicalProgram()
+            f = prog.NewContinuousVariables(m, "f")
+            cost = prog.AddQuadraticCost(np.eye(m), np.zeros(m), f, is_convex=True)
+            eq = prog.AddLinearEqualityConstraint(np.zeros((rank, m)), np.zeros(rank), f)
+            prog.AddBoundingBoxConstraint(np.full(m, p.f_min), np.full(m, p.f_max), f)
+            self._programs[key] = (prog, cost.evaluator(), eq.evaluator())
+        return self._programs[key]
+
+    def _stiffness(self, f, P, hessian):
+        k, dk = self.stiffness_map(f)
+        return joint_stiffness(P, k, f, hessian), dk
+
+    def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, warm_start=None,
+              max_iterations: int | None = None) -> DistributionResult:
+        """Distribute ``tau_des`` (n) with target stiffness ``K_des`` (n x n).
+
+        Parameters
+        ----------
+        tau_des, K_des, P, hessian, q
+            As :meth:`TendonForceDistribution.solve`.
+        warm_start : array (m,), optional
+            Previous tendon forces [N]; used when, moved onto the exact torque, they are inside
+            the bounds (inside a control loop: the previous period's result).
+        max_iterations : int, optional
+            QPs for this call (e.g. 1-3 inside a 3 kHz loop with a warm start).
+
+        Returns
+        -------
+        DistributionResult
+            ``status`` ``"ok"`` or ``"infeasible"`` (no force in the bounds produces ``tau_des``;
+            the returned forces produce it and violate the bounds, reported, never clipped);
+            ``cost`` is the relative stiffness cost ``||K_des - K_q||_F^2 / ||K_des||_F^2``.
+        """
+        P, pinv_PT, W, rank, hessian = self._coupling_at(P, hessian, q)
+        m, n = P.shape
+        tau_des, K_des = self._check_request(tau_des, K_des, n)
+        p = self.params
+        iters_max = self.max_iterations if max_iterations is None else int(max_iterations)
+        if iters_max < 0:
+            raise ValueError(f"solve: max_iterations = {max_iterations} must be >= 0")
+        f_p = -pinv_PT @ tau_des
+        if np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des)):
+            return self._result(f_p, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
+        f = None
+        if warm_start is not None:
+            f0 = np.asarray(warm_start, dtype=float).ravel()
+            if f0.shape != (m,):
+                raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
+            f0 = f_p + W @ (W.T @ f0)                     # the same internal forces, exact torque
+            if np.all(f0 >= p.f_min) and np.all(f0 <= p.f_max):
+                f = f0
+        if f is None:
+            alpha = _max_margin_alpha(f_p, W, p.f_min, p.f_max)
+            if alpha is None:
+                mid = W.T @ (np.full(m, 0.5 * (p.f_min + p.f_max)) - f_p)
+                return self._result(f_p + W @ mid, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
+            f = f_p + W @ alpha
+            if not (np.all(f >= p.f_min) and np.all(f <= p.f_max)):   # LP tolerance at a tight bound
+                return self._result(f, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
+        prog, cost_eval, eq_eval = self._program(m, rank)
+        # the torque equality on the range rows: U_r^T f = -S_r^-1 V_r^T tau  (P = U S V^T)
+        U, s, Vt = np.linalg.svd(P, full_matrices=False)
+        eq_eval.UpdateCoefficients(U[:, :rank].T, -(Vt[:rank] @ tau_des) / s[:rank])
+        K_norm2 = max(float(np.sum(K_des * K_des)), 1e-300)
+        K, dk = self._stiffness(f, P, hessian)
+        C = float(np.sum((K_des - K) ** 2) / K_norm2)
+        outer = np.einsum("ij,ik->ijk", P, P)             # p_i p_i^T
+        it = 0
+        for it in range(1, iters_max + 1):
+            G = (dk[:, None, None] * outer + (hessian if hessian is not None else 0.0)).reshape(m, n * n).T
+            e = (K_des - K).ravel()
+            H = G.T @ G / K_norm2
+            mu = self.levenberg * max(np.trace(H), 1e-300) / m
+            Q = 2.0 * (H + mu * np.eye(m))
+            b = -2.0 * (G.T @ (e + G @ f)) / K_norm2 - 2.0 * mu * f
+            cost_eval.UpdateCoefficients(Q, b, 0.0, True)
+            result = self._solver.Solve(prog, f, None)
+            if not result.is_success():
+                break
+            d = W @ (W.T @ (result.GetSolution() - f))   # null-space step: the torque stays exact
+            if not np.linalg.norm(d) > 1e-12 * max(1.0, np.linalg.norm(f)):
+                break
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_hi = np.where(d > 0, (p.f_max - f) / d, np.inf)
+                t_lo = np.where(d < 0, (p.f_min - f) / d, np.inf)
+            t = min(1.0, float(np.min(t_hi)), float(np.min(t_lo)))
+            accepted = False
+            while t > 1e-8:
+                f_new = f + t * d
+                K_new, dk_new = self._stiffness(f_new, P, hessian)
+                C_new = float(np.sum((K_des - K_new) ** 2) / K_norm2)
+                if C_new < C:
+                    accepted = True
+                    break
+                t *= 0.5
+            if not accepted:
+                break
+            decrease = C - C_new
+            f, K, dk, C = f_new, K_new, dk_new, C_new
+            if decrease <= self.tolerance * max(C, 1e-12):
+                break
+        return self._result(f, "ok", P, hessian, tau_des, K_des, it, C)
+
+
+def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnessMap:
+    """``k_t(f)`` of the hand's calibrated tendon spring (lever mechanism in series with the tendon,
+    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``)."""
+    drive = drive or FingerDriveParams()
+    spring = tendon_spring(drive.spring)
+    return TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+
+
+def finger_force_distribution(finger: str, *, method: str = "optimal", params: ForceDistributionParams | None = None,
+                              drive: FingerDriveParams | None = None, finger_params=None, **solver_options):
+    """Force distribution of one finger of the hand with its own coupling, radii and spring curve.
+
+    Parameters
+    ----------
+    finger : str
+        ``thumb``, ``index``, ``middle``, ``ring`` or ``fifth``.
+    method : str
+        ``"optimal"`` (:class:`OptimalForceDistribution`, (7.6) as a Drake program) or
+        ``"algorithm2"`` (:class:`TendonForceDistribution`, the thesis's projected gradient).
+    params : ForceDistributionParams, optional
+        Bounds and search settings.
+    drive : FingerDriveParams, optional
+        Supplies the spring law (``drive.spring``); default: the hand's.
+    finger_params : FingerParams or ThumbParams, optional
+        Radii and geometry; default: the finger's defaults (``parameters.hand``).
+
+    The joints are the finger's *independent* DoF: for the ring and fifth fingers the coupled
+    DIP follows the PIP (5.16), so ``tau_des``/``K_des`` are on (abd, MCP, PIP) (plus HMC first
+    for the fifth) and the coupling is ``P S`` (``reduced_coupling_matrix``).  The thumb's
+    coupling depends on the posture: call ``solve(tau_des, K_des, q=q)``.
+    """
+    if finger not in FINGERS:
+        raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
+    methods = {"optimal": OptimalForceDistribution, "algorithm2": TendonForceDistribution}
+    if method not in methods:
+        raise ValueError(f"method must be one of {sorted(methods)}, got {method!r}")
+    coupling = finger_coupling(finger, finger_params)
+    if coupling.is_constant and coupling.dof_selection.shape[0] != coupling.dof_selection.shape[1]:
+        coupling = reduced_coupling_matrix(coupling)
+    return methods[method](hand_stiffness_map(drive), params, coupling, **solver_options)
+
+
+# ----------------------------------------------------------------------------
+# sensitivity of the optimum (implicit-function theorem) and the loop system
+def optimum_sensitivity(solver: OptimalForceDistribution, result: DistributionResult, tau_des, K_des, *,
+                        P=None, hessian=None, q=None, active_tolerance: float = 1e-5):
+    """Derivatives ``(df/dtau (m x n), df/dvec(K_des) (m x n^2))`` of a converged optimum of (7.6).
+
+    Implicit-function theorem on the first-order conditions with the active set held: the
+    torque equality and the active bounds fix ``f`` on a subspace, the reduced gradient
+    ``Z^T grad C`` stays zero on its complement.  The Hessian of the true cost is
+    ``2/N (G^T G - diag(d2k_t/df2_i p_i^T E p_i))`` (``G`` as in the solver, ``E = K_des - K_q``,
+    ``N = ||K_des||_F^2``); ``d grad C / d vec(K_des) = -2/N G^T`` at a stationary point.
+    Valid at a strict (non-degenerate) optimum; ``result`` must come from ``solver`` at these inputs.
+    """
+    P, _, _, rank, hessian = solver._coupling_at(P, hessian, q)
+    m, n = P.shape
+    tau_des, K_des = solver._check_request(tau_des, K_des, n)
+    p = solver.params
+    f = np.asarray(result.forces, dtype=float)
+    k, dk = solver.stiffness_map(f)
+    grid = getattr(solver.stiffness_map, "forces", None)
+    h = 1e-3 if grid is None else float(np.min(np.diff(grid)))
+    ddk = (solver.stiffness_map(f + h)[1] - solver.stiffness_map(f - h)[1]) / (2 * h)
+    outer = np.einsum("ij,ik->ijk", P, P)
+    G = (dk[:, None, None] * outer + (hessian if hessian is not None else 0.0)).reshape(m, n * n).T
+    E = K_des - joint_stiffness(P, k, f, hessian)
+    N = max(float(np.sum(K_des * K_des)), 1e-300)
+    Hc = 2.0 / N * (G.T @ G - np.diag(ddk * np.einsum("ij,jk,ik->i", P, E, P)))
+    U, s, Vt = np.linalg.svd(P, full_matrices=False)
+    active = np.nonzero((f - p.f_min <= active_tolerance) | (p.f_max - f <= active_tolerance))[0]
+    C = np.vstack([U[:, :rank].T, np.eye(m)[active]])
+    C_pinv = np.linalg.pinv(C)
+    _, sc, Vc = np.linalg.svd(C)
+    Z = Vc[int(np.sum(sc > 1e-10 * sc.max())):].T                  # null space of the fixed constraints
+    drhs_dtau = np.vstack([-(Vt[:rank].T / s[:rank]).T, np.zeros((len(active), n))])
+    df_p = C_pinv @ drhs_dtau                                      # m x n
+    if Z.shape[1] == 0:
+        return df_p, np.zeros((m, n * n))
+    ZHZ = Z.T @ Hc @ Z
+    dtau = df_p - Z @ np.linalg.solve(ZHZ, Z.T @ Hc @ df_p)
+    dK = Z @ np.linalg.solve(ZHZ, Z.T @ (2.0 / N * G.T))
+    return dtau, dK
+
+
+@TemplateSystem.define("TendonForceDistribution_", T_list=[float, AutoDiffXd])
+def TendonForceDistribution_(T):
+    """Tendon force distribution (ch. 7) for one or several fingers, sampled (the thesis's 3 kHz).
+
+    Inputs ``joint_torque_reference`` (n) [Nm] and ``joint_stiffness_reference`` [Nm/rad] on the
+    fingers' *independent* DoF (ring/fifth: DIP follows PIP, see :func:`finger_force_distribution`),
+    fingers in the order given; the stiffness is either per joint (``stiffness="diagonal"``, n
+    entries) or the row-major n_f x n_f block of each finger, concatenated (``"full"``).  With the
+    thumb, input ``joint_angle`` carries the *plant* joint angles of the fingers given (P(q) of the
+    thumb base).  Output ``tendon_force_reference`` (m) [N] = the discrete state, updated every
+    ``period`` by the finger solvers warm-started at the previous forces
+    (``iterations_per_period`` QPs for the optimal method), initialised at the mid-range forces.
+    Output ``distribution_status`` (number of fingers) is 0 (ok), 1 (infeasible request: the
+    forces produce the torque and violate the bounds, reported, never clipped) or 2 (bound
+    violation), sampled with the state.
+
+    Scalar types float and AutoDiffXd.  For AutoDiffXd the solver runs on values; with
+    ``method="optimal"`` the update adds ``J_tau dtau + J_K dK`` in the scalar type, the exact
+    derivatives of the optimum (:func:`optimum_sensitivity`; for the thumb's posture ``q``, which
+    moves P(q) in both the constraint and the cost, central differences of the converged optimum);
+    with ``"algorithm2"`` only the
+    torque-producing part ``-(P^T)^+ tau`` carries derivatives (its step-halving search is not a
+    smooth function of the inputs).  Not symbolic: the solvers branch on values.
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, fingers=("index",), method: str = "optimal", period: float = 1.0 / 3000.0,
+                       iterations_per_period: int = 3, stiffness: str = "diagonal",
+                       params: ForceDistributionParams | None = None, drive: FingerDriveParams | None = None,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            fingers = (fingers,) if isinstance(fingers, str) else tuple(fingers)
+            if not fingers or len(set(fingers)) != len(fingers):
+                raise ValueError(f"TendonForceDistribution: fingers must be distinct names from {FINGERS}, "
+                                 f"got {fingers}")
+            if stiffness not in ("diagonal", "full"):
+                raise ValueError(f"TendonForceDistribution: stiffness must be 'diagonal' or 'full', got {stiffness!r}")
+            if not period > 0:
+                raise ValueError(f"TendonForceDistribution: period = {period} must be > 0 [s]")
+            if int(iterations_per_period) < 1:
+                raise ValueError(f"TendonForceDistribution: iterations_per_period = {iterations_per_period} "
+                                 "must be >= 1")
+            self.fingers, self.method, self.period = fingers, method, float(period)
+            self.iterations_per_period, self.stiffness_kind = int(iterations_per_period), stiffness
+            self.params, self.drive = params, drive
+            self.solvers = [finger_force_distribution(f, method=method, params=params, drive=drive) for f in fingers]
+            self._parts = []                 # (solver, dof slice, tendon slice, K slice, plant-joint slice)
+            dof = ten = kk = pj = 0
+            for f, s in zip(fingers, self.solvers):
+                c = finger_coupling(f)
+                n_f = c.dof_selection.shape[1]
+                m_f = c.num_tendons
+                nk = n_f if stiffness == "diagonal" else n_f * n_f
+                self._parts.append((s, slice(dof, dof + n_f), slice(ten, ten + m_f), slice(kk, kk + nk),
+                                    slice(pj, pj + c.num_joints)))
+                dof, ten, kk, pj = dof + n_f, ten + m_f, kk + nk, pj + c.num_joints
+            self.num_dof, self.num_tendons = dof, ten
+            p = self.solvers[0].params
+            self._tau = self.DeclareVectorInputPort("joint_torque_reference", dof)
+            self._K = self.DeclareVectorInputPort("joint_stiffness_reference", kk)
+            self._q = (self.DeclareVectorInputPort("joint_angle", pj)
+                       if any(s._offline is None for s in self.solvers) else None)
+            self._state = self.DeclareDiscreteState(np.full(ten, 0.5 * (p.f_min + p.f_max)))
+            self._status = self.DeclareDiscreteState(np.zeros(len(fingers)))
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
+            self.DeclareStateOutputPort("tendon_force_reference", self._state)
+            self.DeclareStateOutputPort("distribution_status", self._status)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.fingers, other.method, other.period, other.iterations_per_period,
+                            other.stiffness_kind, other.params, other.drive, converter=converter)
+
+        @staticmethod
+        def _posture_jacobian(s, tau, K_des, q, res, h=1e-6):
+            """df*/dq (m x n_plant) of the converged optimum by central differences (warm-started)."""
+            cols = []
+            for e in np.eye(len(q)):
+                fp = s.solve(tau, K_des, q=q + h * e, warm_start=res.forces).forces
+                fm = s.solve(tau, K_des, q=q - h * e, warm_start=res.forces).forces
+                cols.append((fp - fm) / (2 * h))
+            return np.stack(cols, axis=1)
+
+        def _K_block(self, Kv, n_f):
+            return np.diag(Kv) if self.stiffness_kind == "diagonal" else Kv.reshape(n_f, n_f)
+
+        def _update(self, context, discrete_state):
+            tau_T = self._tau.Eval(context)
+            K_T = self._K.Eval(context)
+            f_prev = context.get_discrete_state(self._state).CopyToVector()
+            as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
+            tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
+            f_prev_v = as_float(f_prev).ravel()
+            q = None if self._q is None else as_float(self._q.Eval(context)).ravel()
+            f_new = np.empty(self.num_tendons, dtype=object if T is not float else float)
+            status = np.zeros(len(self.fingers))
+            codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
+            for k, (s, sd, st, sk, sq) in enumerate(self._parts):
+                n_f = sd.stop - sd.start
+                K_des = self._K_block(Kv[sk], n_f)
+                kw = {} if s._offline is not None else dict(q=q[sq])
+                if isinstance(s, OptimalForceDistribution):
+                    res = s.solve(tau[sd], K_des, warm_start=f_prev_v[st], max_iterations=self.iterations_per_period, **kw)
+                else:
+                    res = s.solve(tau[sd], K_des, **kw)
+                status[k] = codes[res.status]
+                if T is float:
+                    f_new[st] = res.forces
+                    continue
+                # AutoDiffXd: value of the solver plus the derivatives of the optimum
+                dtau = tau_T[sd] - tau[sd]
+                if isinstance(s, OptimalForceDistribution) and res.status == "ok":
+                    J_tau, J_K = optimum_sensitivity(s, res, tau[sd], K_des, **kw)
+                    dK = (self._K_block(K_T[sk], n_f) - K_des).ravel()
+                    f_new[st] = res.forces + J_tau @ dtau + J_K @ dK
+                    if "q" in kw:      # thumb: P(q) moves the optimum; central differences of the optimum
+                        q_T = self._q.Eval(context)[sq]
+                        f_new[st] = f_new[st] + self._posture_jacobian(s, tau[sd], K_des, kw["q"], res) @ (
+                            q_T - kw["q"])
+                else:
+                    P, pinv_PT, *_ = s._coupling_at(None, None, kw.get("q"))
+                    f_new[st] = res.forces - pinv_PT @ dtau
+            discrete_state.set_value(self._state, f_new)
+            discrete_state.set_value(self._status, status)
+
+    return Impl
+
+
+TendonForceDistributionSystem = TendonForceDistribution_[None]

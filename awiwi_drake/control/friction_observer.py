@@ -17,36 +17,26 @@ The thesis writes the friction torque with the opposite sign
 :func:`observer_rate` is the law (float, AutoDiffXd); :class:`DisturbanceObserver_`
 the TemplateSystem; the impedance backstepping controller embeds the same law
 to estimate the external torque that its design (15.62) formally requires.
-:func:`stick_slip_friction` is a smooth Stribeck law for the link-side
-friction of the test joint (:class:`LinkFriction_`). The Fig 9.3 run is
-:mod:`awiwi_drake.reproductions.ch09_friction_observer`.
+:class:`LinkFriction_` applies the smooth Stribeck law
+(:func:`~awiwi_drake.components.friction.stribeck_friction`) to the link of the test joint.
+The Fig 9.3 run is :mod:`awiwi_drake.reproductions.ch09_friction_observer`.
 """
 
 from __future__ import annotations
 
-import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 
-__all__ = ["observer_rate", "stick_slip_friction", "DisturbanceObserver_", "DisturbanceObserver", "LinkFriction_",
-           "LinkFriction"]
+__all__ = ["observer_rate", "DisturbanceObserver_", "DisturbanceObserver", "LinkFriction_", "LinkFriction"]
 
 
 def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
     """``(w_hat', d_hat)`` of the observer (9.2) for velocity ``w`` and known torque ``tau_a``."""
     d_hat = gain * inertia * (w - w_hat)
     return (known_torque + d_hat) / inertia, d_hat
-
-
-def stick_slip_friction(v, p: LinkFrictionParams):
-    """Link friction torque [Nm] acting on the link at velocity ``v`` [rad/s] (smooth Stribeck law).
-
-    ``-(Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/v_eps) - d v``.
-    """
-    level = p.coulomb + (p.static - p.coulomb) * np.exp(-(v / p.stribeck_velocity) ** 2)
-    return -level * np.tanh(v / p.smoothing_velocity) - p.viscous * v
 
 
 @TemplateSystem.define("DisturbanceObserver_")
@@ -108,7 +98,9 @@ def LinkFriction_(T):
             Impl._construct(self, other.params, converter=converter)
 
         def _calc(self, context, output):
-            output.SetAtIndex(0, stick_slip_friction(self.get_input_port(0).Eval(context)[0], self.params))
+            p = self.params
+            output.SetAtIndex(0, stribeck_friction(self.get_input_port(0).Eval(context)[0], p.coulomb, p.static,
+                                                   p.stribeck_velocity, p.smoothing_velocity, p.viscous))
 
     return Impl
 

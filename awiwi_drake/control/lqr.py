@@ -62,14 +62,25 @@ def lqr_gain(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
 
 
 def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None,
-               lin: RigLinearization | None = None) -> LqrDesign:
-    """LQR design on the rig linearised at ``op`` (Table 13.1 by default; ``r`` overrides R)."""
+               lin: RigLinearization | None = None, Q=None, R=None) -> LqrDesign:
+    """LQR design on the rig linearised at ``op``.
+
+    Weights: Table 13.1 by default (``params``); ``r`` overrides R = r I;
+    full matrices ``Q`` (n x n, on the rig state) / ``R`` (m x m) override both.
+    """
     p = params or LqrParams()
-    r_val = check_gain("R", p.r if r is None else r, owner="lqr")
     lin = lin or linearize_rig(rig, op, outputs=("state", "link_angle"))
     n, m = lin.B.shape
-    Q = expand_q(p.q_diag, n)
-    R = r_val * np.eye(m)
+    if Q is None:
+        Q = expand_q(p.q_diag, n)
+    else:
+        Q = check_gains("Q", Q, shape=(n, n), owner="lqr")
+        if np.any(np.linalg.eigvalsh(0.5 * (Q + Q.T)) < -1e-12):
+            raise ValueError(f"lqr gain 'Q' must be positive semidefinite, got {Q!r}")
+    if R is None:
+        R = check_gain("R", p.r if r is None else r, owner="lqr") * np.eye(m)
+    else:
+        R = check_gains("R", np.atleast_2d(R), shape=(m, m), owner="lqr")
     if hasattr(rig, "equilibrium"):  # the framework: LinearQuadraticRegulator(system, context, Q, R)
         from awiwi_drake.analysis import lqr as framework_lqr
         res = framework_lqr(rig, Q, R, op if op is not None else rig.operating_point())
@@ -79,9 +90,17 @@ def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = N
     return LqrDesign(K, S, Q, R, closed_loop_poles(lin.A, lin.B, K), lin)
 
 
-def lqr_controller(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None):
-    """Registered factory ``lqr``: LQR state feedback tracking ``link_angle_reference``."""
-    d = design_lqr(rig, params, r=r, op=op)
+def lqr_controller(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None,
+                   Q=None, R=None):
+    """Registered factory ``lqr``: LQR state feedback tracking ``link_angle_reference``.
+
+    ``u = u_ref(r) - K (x - x_ref(r))`` with ``(x_ref, u_ref)`` the equilibrium of the
+    linear model holding the link at ``r`` (equal to ``op`` at ``r`` = the op's link
+    angle).  Weights as :func:`design_lqr`.  Close it with
+    ``closed_loop(rig, lqr_controller(rig, Q=Q, R=R), rate_hz=None)`` (continuous,
+    as ``LinearQuadraticRegulator`` designs it) or at 3 kHz.
+    """
+    d = design_lqr(rig, params, r=r, op=op, Q=Q, R=R)
     return state_feedback_controller(d.linearization, d.K, reference="link_angle", name="lqr")
 
 

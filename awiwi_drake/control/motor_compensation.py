@@ -66,6 +66,3 @@ class MotorPdLaw(StaticLaw):
         th, w = u["motor_angle"][0], u["motor_velocity"][0]
         fb = self.kp * (u["motor_angle_reference"][0] - th) + self.kd * (u["motor_velocity_reference"][0] - w)
         return np.array([fb + self.feedforward(th, w)])
-
-
-# ----------------------------------------------------------------------------- ripple

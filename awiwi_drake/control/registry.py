@@ -5,9 +5,10 @@ Built-in controllers are registered by the modules listed in
 imports Drake-heavy modules at package import).  Other parts of the package
 (and users) add controllers with :func:`register_controller`.
 
-Rig kinds are ``"tendon_rig"``, ``"flexible_joint"`` and ``"joint_rig"``;
-:func:`rig_kind` maps a rig object (or a CLI spelling such as
-``"flexible-joint"``) to its kind.
+Rig kinds are ``"tendon_rig"``, ``"flexible_joint"``, ``"joint_rig"``,
+``"finger"`` (any of the five fingers) and ``"hand"``; :func:`rig_kind` maps a
+rig object (or a CLI spelling such as ``"flexible-joint"``, ``"finger-index"``)
+to its kind.
 """
 
 from __future__ import annotations
@@ -16,14 +17,18 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
+from awiwi_drake.parameters.hand import FINGERS
+
 __all__ = ["ControllerEntry", "register_controller", "make_controller", "controller_names",
            "get_entry", "rig_kind", "RIG_KINDS", "PROVIDER_MODULES"]
 
-RIG_KINDS = ("tendon_rig", "flexible_joint", "joint_rig")
+RIG_KINDS = ("tendon_rig", "flexible_joint", "joint_rig", "finger", "hand")
 _ALIASES = {
     "tendon": "tendon_rig", "tendon_rig": "tendon_rig",
     "flexible_joint": "flexible_joint", "flexible_joint_rig": "flexible_joint", "flexible": "flexible_joint",
     "joint_rig": "joint_rig", "joint": "joint_rig", "antagonistic_joint": "joint_rig",
+    "finger": "finger", "hand": "hand",
+    **{f"finger_{f}": "finger" for f in FINGERS},
 }
 # Modules whose import registers controllers (append yours).
 PROVIDER_MODULES = ["awiwi_drake.control.catalog", "awiwi_drake.control.backstepping_registry"]
@@ -59,7 +64,7 @@ def _ensure_loaded() -> None:
 
 
 def rig_kind(rig: Any) -> str:
-    """The kind of a rig object or rig name (``tendon_rig``, ``flexible_joint``, ``joint_rig``)."""
+    """The kind of a rig object or rig name (``tendon_rig``, ``flexible_joint``, ``joint_rig``, ``finger``, ``hand``)."""
     name = rig if isinstance(rig, str) else getattr(rig, "name", None)
     if not isinstance(name, str):
         raise ValueError(f"cannot tell the rig kind of {rig!r}: it has no name")
@@ -69,7 +74,8 @@ def rig_kind(rig: Any) -> str:
     for alias, kind in _ALIASES.items():  # e.g. "flexible_joint_linear"
         if key.startswith(alias):
             return kind
-    raise ValueError(f"unknown rig {name!r}; known rigs: tendon-rig, flexible-joint, joint-rig")
+    raise ValueError(f"unknown rig {name!r}; known rigs: tendon-rig, flexible-joint, joint-rig, "
+                     f"{', '.join('finger-' + f for f in FINGERS)}, hand")
 
 
 def register_controller(name: str, factory: Callable[[Any], Any], *, rigs: tuple[str, ...] | list[str],

@@ -3,7 +3,7 @@
 The stiffness felt at a joint is the series connection of the controller's
 impedance and the mechanical (tendon) stiffness (8.1):
 
-    K_eff^-1 = K_imp^-1 + K_mech^-1.
+    K_eff^-1 = K_imp^-1 + K_mech^-1     (:func:`~awiwi_drake.components.tendon.series_stiffness`).
 
 The user sets ``K_eff,des``; the pretension is chosen for ``K_mech,des =
 eps K_eff,des`` (8.2, eps > 1); the controller gain is then recomputed online
@@ -29,16 +29,11 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip, smax
+from awiwi_drake.components.tendon import series_stiffness
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 
-__all__ = ["impedance_for_effective_stiffness", "effective_stiffness", "pretension_elongation",
-           "StiffnessCorrectedImpedance_", "StiffnessCorrectedImpedance"]
-
-
-def effective_stiffness(K_imp, K_mech):
-    """(8.1): ``(K_imp^-1 + K_mech^-1)^-1`` for symmetric positive definite matrices (or scalars)."""
-    K_imp, K_mech = np.atleast_2d(K_imp).astype(float), np.atleast_2d(K_mech).astype(float)
-    return np.linalg.inv(np.linalg.inv(K_imp) + np.linalg.inv(K_mech))
+__all__ = ["impedance_for_effective_stiffness", "pretension_elongation", "StiffnessCorrectedImpedance_",
+           "StiffnessCorrectedImpedance"]
 
 
 def impedance_for_effective_stiffness(K_eff_des, K_mech, params: StiffnessCorrectionParams | None = None):
@@ -156,7 +151,7 @@ def StiffnessCorrectedImpedance_(T):
 
         def _calc_k(self, context, output):
             _, k_imp, k_mech = self._law(context)
-            output.SetFromVector(np.array([k_imp, k_mech, 1.0 / (1.0 / k_imp + 1.0 / k_mech)]))
+            output.SetFromVector(np.array([k_imp, k_mech, series_stiffness(k_imp, k_mech)]))
 
     return Impl
 

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from awiwi_drake._math import clip, is_float
-from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain
+from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains
 from awiwi_drake.parameters.control import TendonForceGains
 
 __all__ = ["ForceMap", "force_map", "interp", "TendonForceLaw", "tendon_pd_controller",
@@ -171,9 +171,10 @@ def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
     return ForceMap(th[keep], fo[keep], alpha[keep], slack_angle)
 
 
-def identified_gains(alpha: float, inertia: float, omega: float, xi: float) -> tuple[float, float]:
-    """(10.11): ``Kp = w^2 B / alpha``, ``Kd = 2 xi w B / alpha`` (float)."""
-    check_gain("alpha", alpha, owner="tendon force design")
+def identified_gains(alpha, inertia: float, omega: float, xi: float):
+    """(10.11): ``Kp = w^2 B / alpha``, ``Kd = 2 xi w B / alpha`` for a force slope ``alpha`` [N/rad]
+    (a number or an array of slopes, e.g. a gain-schedule table)."""
+    check_gains("alpha", alpha, owner="tendon force design", positive=True)
     return omega ** 2 * inertia / alpha, 2.0 * xi * omega * inertia / alpha
 
 
@@ -209,9 +210,7 @@ class TendonForceLaw(StaticLaw):
         fmap.check_force(g.min_schedule_force, "min_schedule_force")
         self.alpha_floor = float(fmap.alpha_of_force(g.min_schedule_force))
         # table of gains over the force table: scheduled = interpolation in it (held at min_schedule_force below)
-        alpha = np.maximum(fmap.alpha, self.alpha_floor)
-        self._kp_tab = w ** 2 * self.inertia / alpha
-        self._kd_tab = 2 * xi * w * self.inertia / alpha
+        self._kp_tab, self._kd_tab = identified_gains(np.maximum(fmap.alpha, self.alpha_floor), self.inertia, w, xi)
         self.kp_fixed, self.kd_fixed = identified_gains(float(fmap.alpha_of_force(g.design_force)),
                                                         self.inertia, w, xi)
 

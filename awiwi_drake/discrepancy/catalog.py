@@ -14,7 +14,7 @@ Catalog (names are part of the contract):
 ``motor_ripple``     ``tau = sum_k a_k sin(n_k theta) + b_k cos(n_k theta)`` (orders per rev)
 ``spring_hysteresis`` force offset ``h w``, Dahl state ``w' = (x' - |x'| w) / delta``
 ``joint_friction``   link Coulomb ``-F_c tanh(q'/v_s)`` (stick-slip, regularised)
-``guide_friction``   tendon-path friction ``(C0 + mu f) tanh(v/v0)`` opposing the tendon motion
+``guide_friction``   tendon-path friction ``C0 s + f (exp(mu_a s) - 1)``, ``s = tanh(v/v0)``, opposing the tendon motion
 ``delay``            applied torque ``u(t - T)``
 =================== ======================================================================
 

@@ -1,11 +1,10 @@
 """Catalog laws, vectorised over model copies and generic in the scalar type.
 
 One truth: the catalog forms call the foundation laws
-(:func:`~awiwi_drake.components.motor.motor_friction_torque` (3.8),
+(:mod:`awiwi_drake.components.friction` (3.8), guide and stick-slip friction,
 :func:`~awiwi_drake.components.motor.motor_ripple_torque`,
 :class:`~awiwi_drake.components.spring.PolynomialSpring`,
-:func:`~awiwi_drake.components.spring.hysteresis_rate`,
-:func:`~awiwi_drake.components.tendon.capstan_friction_force`).  Catalog
+:func:`~awiwi_drake.components.spring.hysteresis_rate`).  Catalog
 parameters arrive as arrays (one value per model copy), so the laws, which
 read attributes of parameter dataclasses, receive a namespace holding arrays.
 Every function works with float arrays (fast path) and numpy object arrays of
@@ -19,9 +18,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from awiwi_drake.components.motor import motor_friction_torque, motor_ripple_torque
+from awiwi_drake.components.friction import atan_friction, stribeck_friction
+from awiwi_drake.components.friction import guide_friction as guide_friction_law
+from awiwi_drake.components.motor import motor_ripple_torque
 from awiwi_drake.components.spring import PolynomialSpring, hysteresis_rate
-from awiwi_drake.components.tendon import capstan_friction_force
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
 __all__ = ["spring_force", "spring_with_hysteresis", "hysteresis_force_rate", "motor_friction", "ripple",
@@ -57,10 +57,8 @@ def hysteresis_force_rate(z, x, xd, f_elastic, width, length):
 
 
 def motor_friction(omega, coulomb, slope, viscous):
-    """(3.8): torque acting on the motor ``-(g2 atan(g1 w) + g3 w)``."""
-    p = SimpleNamespace(damping=0.0, friction=True, coulomb_torque=coulomb, friction_slope=slope,
-                        viscous_friction=viscous)
-    return motor_friction_torque(omega, p)
+    """(3.8): torque acting on the motor ``-(g2 atan(g1 w) + g3 w)`` (:func:`atan_friction`)."""
+    return atan_friction(omega, coulomb, slope, viscous)
 
 
 def ripple(theta, harmonics):
@@ -76,19 +74,16 @@ def ripple(theta, harmonics):
 
 
 def guide_friction(tendon_velocity, tension, c0, mu_alpha, v0):
-    """Path friction on the tendon [N] between motor and spring, opposing the tendon motion.
+    """Path friction on the tendon [N] between motor and spring, opposing the tendon motion
+    (:func:`~awiwi_drake.components.friction.guide_friction`).
 
     ``c0``: the speed- and tension-independent magnitude of (4.1) at the rig's
-    bending angle; ``mu_alpha``: capstan exponent (tension-proportional part, ch. 9).
-    Capstan: pulling the tendon in (``v > 0``) the motor-side tension is ``f e^(mu alpha)``,
-    releasing it ``f e^(-mu alpha)`` (the loss :func:`capstan_friction_force`); the two
-    branches are blended with ``s = tanh(v / v0)``."""
-    s = np.tanh(tendon_velocity / v0)
-    release = capstan_friction_force(tension, 1.0, SimpleNamespace(mu=mu_alpha))
-    pull = tension * (np.exp(mu_alpha) - 1.0)
-    return c0 * s + 0.5 * (1.0 + s) * pull - 0.5 * (1.0 - s) * release
+    bending angle; ``mu_alpha``: capstan exponent (tension-proportional part, ch. 9);
+    ``v0``: velocity scale of the smoothed sliding direction."""
+    return guide_friction_law(tendon_velocity, tension, c0, mu_alpha, v0)
 
 
 def joint_friction(qd, coulomb, velocity):
-    """Link-side Coulomb friction, regularised stick-slip: ``-F_c tanh(q'/v_s)``."""
-    return -coulomb * np.tanh(qd / velocity)
+    """Link-side Coulomb friction, regularised stick-slip: ``-F_c tanh(q'/v_s)``
+    (:func:`~awiwi_drake.components.friction.stribeck_friction` without a breakaway peak)."""
+    return stribeck_friction(qd, coulomb, coulomb, velocity, velocity)

@@ -27,6 +27,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import positive_part
+from awiwi_drake.components.friction import guide_friction, stribeck_friction
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 
 from . import laws
@@ -46,10 +47,6 @@ def default_nominal(rig: str) -> dict:
     :func:`awiwi_drake.parameters.discrepancy` and the foundation defaults."""
     from .defaults import nominal_defaults
     return nominal_defaults(rig)
-
-
-def _truth_friction(v, fc, fs, vs, eps, s2):
-    return -((fc + (fs - fc) * np.exp(-(v / vs) ** 2)) * np.tanh(v / eps) + s2 * v)
 
 
 @TemplateSystem.define("HiddenEffectPlant_")
@@ -103,17 +100,15 @@ def HiddenEffectPlant_(T):
                 tau = U[i] - nom.motor_damping * omega[i]
                 if "motor_friction" in tr:
                     p = tr["motor_friction"]
-                    tau = tau + _truth_friction(omega[i], p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
+                    tau = tau + stribeck_friction(omega[i], p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
                 if "motor_ripple" in tr:
                     p = tr["motor_ripple"]
                     tau = tau + laws.ripple(theta[i], [(o, a, b) for o, a, b in p["harmonics"][i]])
                 tension = f[i]
                 if "guide_friction" in tr:
                     p = tr["guide_friction"]
-                    v = r * omega[i]
-                    sgn = np.tanh(v / p["v0"])
-                    tension = tension + positive_part(f[i]) * (np.exp(p["mu_angle"] * sgn) - 1.0) \
-                        + p["c0"] * sgn
+                    tension = tension + guide_friction(r * omega[i], positive_part(f[i]), p["c0"],
+                                                       p["mu_angle"], p["v0"])
                 tau = tau - r * tension
                 acc.append(tau / B)
                 if "spring_hysteresis" in tr:
@@ -129,7 +124,7 @@ def HiddenEffectPlant_(T):
                 tq = nom.link_pulley_radius * (f[0] - f[1]) - nom.link_damping * qd
                 if "joint_friction" in tr:
                     p = tr["joint_friction"]
-                    tq = tq + _truth_friction(qd, p["fc"], p["fs"], p["vs"], p["eps"], 0.0)
+                    tq = tq + stribeck_friction(qd, p["fc"], p["fs"], p["vs"], p["eps"])
                 out += [qd, tq / nom.link_inertia]
             out += zd
             derivatives.get_mutable_vector().SetFromVector(np.array(out))

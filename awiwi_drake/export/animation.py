@@ -1,26 +1,41 @@
 """Meshcat recording of a finger or the hand to a self-contained HTML file (offline).
 
-The geometry is one cylinder per link (``plant.add_finger(visual=True)``);
-the motion is a joint-space grasp (open -> closed -> open) tracked by the
-3 kHz joint controller through the full tendon model.
+The geometry is one cylinder per link with a sphere at each joint, coloured per
+finger (``plant.add_finger(visual=True)``, link lengths and radii from the
+kinematic tables), the palm box and a forearm stub; the motion is a joint-space
+grasp (open -> closed -> open) tracked by the 3 kHz joint controller through
+the full tendon model.  The camera frames the moving links (see
+:class:`~awiwi_drake.parameters.display.AnimationParams`); the Meshcat server
+that Drake needs to build the scene is started without log output.
 """
 
 from __future__ import annotations
 
+import logging
+import math
 import pathlib
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
+from pydrake.geometry import Cylinder, Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Rgba
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from awiwi_drake.analysis.simulate import simulate
-from awiwi_drake.hand.diagrams import closed_loop, finger_diagram, hand_diagram
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+from awiwi_drake.parameters.display import AnimationParams
 from awiwi_drake.parameters.hand import FINGERS
 
-__all__ = ["GRASP_POSE", "grasp_pose", "AnimationResult", "record_animation"]
+__all__ = ["GRASP_POSE", "grasp_pose", "AnimationResult", "record_animation", "quiet_meshcat", "DISPLAY_ROTATION",
+           "frame_camera"]
+
+# Palm frame -> display frame: fingers (palm x) up (display z), palmar normal (palm z) towards display x,
+# thumb side (palm y) towards display -y.  A proper rotation (det = +1).
+DISPLAY_ROTATION = np.array([[0.0, 0.0, 1.0],
+                             [0.0, -1.0, 0.0],
+                             [1.0, 0.0, 0.0]])
 
 # Chosen closed-hand pose [rad] per finger (plant joints; coupled DIPs follow (5.16)).
 GRASP_POSE = {"thumb": [0.5, 0.35, 0.5, 0.4], "index": [0.05, 0.8, 0.9, 0.6], "middle": [0.0, 0.85, 0.9, 0.6],
@@ -39,32 +54,96 @@ def grasp_pose(rig) -> np.ndarray:
 
 @dataclass
 class AnimationResult:
-    """Where the HTML went and what was simulated."""
+    """Where the HTML went, what was simulated and where the camera looks.
+
+    ``camera_position`` and ``camera_target`` are in Drake's z-up world frame
+    of the viewer [m] (the display frame, see :data:`DISPLAY_ROTATION`).
+    """
 
     path: pathlib.Path
     duration: float
     max_tracking_error: float     # [rad] over the motion
     num_frames: int
+    camera_position: np.ndarray
+    camera_target: np.ndarray
+
+
+def quiet_meshcat() -> Meshcat:
+    """A Meshcat instance whose "listening for connections" log line is suppressed.
+
+    Drake must run a Meshcat server to build a scene even when only
+    :meth:`Meshcat.StaticHtml` is wanted; the log line would be noise then.
+    """
+    logger = logging.getLogger("drake")
+    old = logger.level
+    logger.setLevel(logging.WARNING)
+    try:
+        return Meshcat()
+    finally:
+        logger.setLevel(old)
+
+
+def _link_points(rig, joint_angle_sets) -> np.ndarray:
+    """Positions [m] (palm frame) of every body origin and fingertip over the given joint angles."""
+    plant = rig.plant
+    ctx = plant.CreateDefaultContext()
+    models = rig.extra["models"]
+    models = models.values() if isinstance(models, dict) else (models if isinstance(models, (list, tuple))
+                                                                else [models])
+    pts = []
+    for q in joint_angle_sets:
+        plant.SetPositions(ctx, np.asarray(q, float))
+        for m in models:
+            for b in m.bodies:
+                pts.append(plant.EvalBodyPoseInWorld(ctx, b).translation())
+            X = plant.EvalBodyPoseInWorld(ctx, m.tip_body)
+            pts.append(X.multiply(np.asarray(m.tip_offset, float)))
+    return np.array(pts)
+
+
+def frame_camera(points: np.ndarray, params: AnimationParams | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Camera position and target [m] (display frame) that show all ``points`` (display frame).
+
+    The target is the centre of the points' bounding box (grown by
+    ``params.margin``); the camera sits along the chosen azimuth/elevation at
+    the distance where the box's bounding sphere fills ``fill_fraction`` of the
+    height of the view (vertical field of view ``field_of_view``).
+    """
+    p = params or AnimationParams()
+    pts = np.asarray(points, float).reshape(-1, 3)
+    lo, hi = pts.min(axis=0) - p.margin, pts.max(axis=0) + p.margin
+    target = 0.5 * (lo + hi)
+    radius = 0.5 * float(np.linalg.norm(hi - lo))
+    half_fov = math.radians(p.field_of_view) / 2
+    distance = radius / (p.fill_fraction * math.tan(half_fov))
+    az, el = p.camera_azimuth, p.camera_elevation
+    direction = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    return target + distance * direction, target
 
 
 def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "python",
-                     meshcat: Meshcat | None = None) -> AnimationResult:
+                     meshcat: Meshcat | None = None, params: AnimationParams | None = None) -> AnimationResult:
     """Simulate a grasp of ``target`` ("hand" or a finger name) and write ``out`` (HTML).
 
-    ``backend="python"`` is the faster drive for the whole hand (see
-    benchmarks/bench_hand.py).  Returns an :class:`AnimationResult`.
+    The HTML is self-contained (opens offline) and holds the geometry, the
+    motion and the camera framed on the moving links.  ``backend="python"`` is
+    the faster drive for the whole hand (see benchmarks/bench_hand.py).
+    Returns an :class:`AnimationResult`.
     """
     if target != "hand" and target not in FINGERS:
-        raise ValueError(f"target must be 'hand' or one of {FINGERS}, got {target!r}")
-    if not duration > 0:
-        raise ValueError(f"duration = {duration} must be > 0 [s]")
+        raise ValueError(f"target must be 'hand' or one of {', '.join(FINGERS)}, got {target!r}")
+    if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration = {duration} must be a finite number > 0 [s]")
+    p = params or AnimationParams()
     out = pathlib.Path(out)
     if out.suffix.lower() not in (".html", ".htm"):
         raise ValueError(f"out = {str(out)!r}: the recording is written as HTML (use a .html file name)")
     rig = (hand_diagram(backend=backend, visual=True) if target == "hand"
            else finger_diagram(finger=target, backend=backend, visual=True))
-    cl = closed_loop(rig)
-    q0 = cl.operating_point.info["joint_angles"]
+    from awiwi_drake.control import closed_loop, make_controller
+    cl = closed_loop(rig, make_controller("joint-pd", rig))
+    op = rig.operating_point()
+    q0 = op.info["joint_angles"]
     q1 = grasp_pose(rig)
     b = DiagramBuilder()
     sys = b.AddSystem(cl.diagram)
@@ -77,16 +156,30 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     if sys.HasInputPort("wrist_angle"):
         w = b.AddNamedSystem("wrist_neutral", ConstantVectorSource(np.zeros(2)))
         b.Connect(w.get_output_port(), sys.GetInputPort("wrist_angle"))
-    meshcat = meshcat or Meshcat()
+    meshcat = meshcat or quiet_meshcat()
     vis = MeshcatVisualizer.AddToBuilder(b, sys.GetOutputPort("query_object"), meshcat,
-                                         MeshcatVisualizerParams(publish_period=1.0 / 30))
+                                         MeshcatVisualizerParams(publish_period=1.0 / p.frame_rate))
     b.ExportOutput(sys.GetOutputPort("joint_angle"), "joint_angle")
     b.ExportOutput(ref.get_output_port(), "joint_angle_reference")
     d = b.Build()
     ctx = d.CreateDefaultContext()
-    ctx.SetContinuousState(cl.operating_point.state)
-    cl.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
-        np.asarray(cl.operating_point.motor_torque, float))
+    cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
+    # the scene: display frame, forearm stub (hand only), camera on the moving links
+    R = RotationMatrix(DISPLAY_ROTATION)
+    meshcat.SetTransform("/drake", RigidTransform(R, np.zeros(3)))
+    if target == "hand" and p.forearm_length > 0:
+        hp = rig.params.hand
+        meshcat.SetObject("/drake/forearm_stub", Cylinder(p.forearm_radius, p.forearm_length),
+                          Rgba(0.62, 0.62, 0.62, 1.0))
+        # cylinder axis along palm -x, from the wrist (palm x = 0) backwards, under the palm centre
+        X = RigidTransform(RotationMatrix.MakeYRotation(np.pi / 2),
+                           [-p.forearm_length / 2, 0.25 * hp.finger_spacing, -0.008])
+        meshcat.SetTransform("/drake/forearm_stub", X)
+    meshcat.SetProperty("/Grid", "visible", bool(p.show_grid))
+    meshcat.SetProperty("/Axes", "visible", False)
+    pts = _link_points(rig, [q0, q1]) @ DISPLAY_ROTATION.T
+    cam, look_at = frame_camera(pts, p)
+    meshcat.SetCameraPose(cam, look_at)
     vis.StartRecording(set_transforms_while_recording=False)
     res = simulate(d, ctx, duration, log=("joint_angle", "joint_angle_reference"), max_step=1.0 / 3000,
                    accuracy=1e-3)
@@ -95,4 +188,4 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(meshcat.StaticHtml())
     err = float(np.max(np.abs(res["joint_angle"] - res["joint_angle_reference"])))
-    return AnimationResult(out, duration, err, int(np.ceil(duration * 30)))
+    return AnimationResult(out, duration, err, int(np.ceil(duration * p.frame_rate)), cam, look_at)

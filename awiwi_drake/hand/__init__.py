@@ -7,12 +7,16 @@
   Algorithm 1 (thumb base).
 * :mod:`.plant`: continuous MultibodyPlant builders for each finger and the hand.
 * :mod:`.diagrams`: ``finger_diagram`` / ``hand_diagram`` (motors, springs,
-  routing, plant; Rig-compatible), ``closed_loop`` (3 kHz joint-space PD, wrist
-  feedforward).
-* :mod:`.studies`: Fig 5.7, poles vs pretension, coupling hold, wrist compensation.
-* :mod:`.plots`, :mod:`.visualize` (Meshcat HTML recording).
+  routing, plant; Rig-compatible; close them with
+  :func:`awiwi_drake.control.closed_loop`, e.g. the ``joint-pd`` controller).
+* :mod:`.plots`.
 
-``finger_diagram``, ``hand_diagram`` and ``closed_loop`` are importable from
+The chapter 5-6 studies (Fig 5.7, poles vs pretension, coupling hold, wrist
+compensation) are :mod:`awiwi_drake.reproductions.ch05_fingers` and
+:mod:`~awiwi_drake.reproductions.ch06_wrist`; the Meshcat HTML recording is
+:mod:`awiwi_drake.export.animation`.
+
+``finger_diagram`` and ``hand_diagram`` are importable from
 here (loaded on first use, so ``import awiwi_drake.hand`` stays light).
 """
 
@@ -23,9 +27,9 @@ from .kinematics import finger_frames, finger_joint_names, thumb_base_transform,
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
            "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
            "finger_frames", "finger_joint_names", "thumb_base_transform", "thumb_frames",
-           "finger_diagram", "hand_diagram", "closed_loop"]
+           "finger_diagram", "hand_diagram"]
 
-_LAZY = {"finger_diagram": "diagrams", "hand_diagram": "diagrams", "closed_loop": "diagrams"}
+_LAZY = {"finger_diagram": "diagrams", "hand_diagram": "diagrams"}
 
 
 def __getattr__(name):

@@ -42,16 +42,15 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from ..components.drive import build_tendon_drive
 from ..components.motor import motor_ripple_torque
 from ..components.spring import tendon_spring
-from ..components.tendon import capstan_friction_force, guide_friction_force
+from ..components.friction import guide_friction, guide_friction_force
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
-                               HandRigParams, JointControllerParams)
+                               HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
 from .coupling import FingerCoupling, HandCoupling, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
-from .systems import add_joint_space_controller
 
-__all__ = ["HandRig", "finger_diagram", "hand_diagram", "tendon_bending_angles", "GuideFriction_",
-           "GuideFriction", "closed_loop", "ClosedLoop", "DEFAULT_BACKEND"]
+__all__ = ["HandRig", "finger_diagram", "hand_diagram", "tendon_bending_angles", "GuideFriction_", "GuideFriction",
+           "DEFAULT_BACKEND"]
 
 DEFAULT_BACKEND = "symbolic"
 
@@ -75,6 +74,21 @@ class HandRig(Rig):
     @property
     def num_joints(self) -> int:
         return len(self.extra["joint_names"])
+
+    def link_estimator(self, period: float = 1.0 / 3000.0):
+        """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
+
+        Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
+        ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
+        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.
+        """
+        from .estimation import link_state_estimator
+        return link_state_estimator(self.extra["coupling"], self.params.motor.pulley_radius, self.extra["offsets"],
+                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"))
+
+    def joint_angles_of(self, state) -> np.ndarray:
+        """The joint angles (plant positions) in a rig state vector."""
+        return np.asarray(state, dtype=float)[: self.num_joints]
 
     @property
     def num_tendons(self) -> int:
@@ -107,11 +121,11 @@ def GuideFriction_(T):
 
     Inputs ``state`` = plant ``[q; v]`` (2n), ``tendon_force`` (m) [N].
     Output ``generalized_force`` (n) = ``-P(q)^T f_fr`` with
-    ``f_fr = F tanh(P(q) v / v_s)``: the friction opposes the sliding of each
-    tendon through its guides (speed ``P v``, the path-length rate at the
-    finger), so its power ``-F . |P v|`` is never positive.  ``F`` is (4.1)
+    ``f_fr`` the guide friction law :func:`~awiwi_drake.components.friction.guide_friction`
+    of each tendon sliding through its guides at ``P(q) v`` (the path-length rate at the
+    finger), so its power ``-f_fr . P v`` is never positive: the constant part is (4.1)
     ``C0 (1 - exp(-C1 alpha))`` (speed and tension independent) or, with
-    ``capstan=True``, ``f (1 - exp(-mu alpha))``.
+    ``capstan=True``, the capstan part ``f (exp(mu alpha s) - 1)`` (tension proportional).
     """
 
     class Impl(LeafSystem_[T]):
@@ -126,7 +140,9 @@ def GuideFriction_(T):
             self._n = n
             self._x = self.DeclareVectorInputPort("state", 2 * n)
             self._f = self.DeclareVectorInputPort("tendon_force", m)
-            self._F_const = guide_friction_force(self.alpha, params)
+            zero = np.zeros(m)
+            self._constant = zero if self.capstan else guide_friction_force(self.alpha, params)
+            self._exponent = params.mu * self.alpha if self.capstan else zero
             self.DeclareVectorOutputPort("generalized_force", n, self._calc,
                                          prerequisites_of_calc={self._x.ticket(), self._f.ticket()})
 
@@ -138,9 +154,7 @@ def GuideFriction_(T):
             x = self._x.Eval(context)
             q, v = x[: self._n], x[self._n:]
             P = np.asarray(self.coupling.P(q))
-            F = capstan_friction_force(self._f.Eval(context), self.alpha, self.params) if self.capstan \
-                else self._F_const
-            f_fr = F * np.tanh((P @ v) / self.v_s)
+            f_fr = guide_friction(P @ v, self._f.Eval(context), self._constant, self._exponent, self.v_s)
             out.SetFromVector(-(P.T @ f_fr))
 
     return Impl
@@ -392,98 +406,3 @@ def hand_diagram(*, params: HandRigParams | None = None, backend: str = "python"
     return _build("hand", p, plant_factory, parts, backend, wrist, visual)
 
 
-@dataclass
-class ClosedLoop:
-    """A rig with the 3 kHz joint-space controller (and optional wrist compensation)."""
-
-    diagram: object
-    rig: HandRig
-    operating_point: OperatingPoint
-    controller: object
-    estimator: object = None
-
-    def context(self, *, joint_angle_reference=None, wrist_angle=None, external_torque=None):
-        """Context at the rig's operating point with the reference inputs fixed."""
-        ctx = self.diagram.CreateDefaultContext()
-        ctx.SetContinuousState(self.operating_point.state)
-        # start the 3 kHz hold at the holding torques (not at zero)
-        self.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
-            np.asarray(self.operating_point.motor_torque, float))
-        if self.estimator is not None:   # the estimator starts at the operating point (known pose)
-            self.estimator.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
-                np.asarray(self.operating_point.info["joint_angles"], float))
-        n = self.rig.num_joints
-        q_ref = self.operating_point.info["joint_angles"] if joint_angle_reference is None else joint_angle_reference
-        if np.shape(q_ref) != (n,):
-            raise ValueError(f"{self.diagram.get_name()}: joint_angle_reference must have {n} entries "
-                             f"({', '.join(self.rig.extra['joint_names'])}), got shape {np.shape(q_ref)}")
-        self.diagram.GetInputPort("joint_angle_reference").FixValue(ctx, np.asarray(q_ref, float))
-        self.diagram.GetInputPort("external_torque").FixValue(
-            ctx, np.zeros(n) if external_torque is None else np.asarray(external_torque, float))
-        if self.diagram.HasInputPort("wrist_angle"):
-            self.diagram.GetInputPort("wrist_angle").FixValue(
-                ctx, np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, float))
-        return ctx
-
-
-def closed_loop(rig: HandRig, *, params: JointControllerParams | None = None, op: OperatingPoint | None = None,
-                wrist_compensation: bool = False, estimator: bool = False) -> ClosedLoop:
-    """``rig`` with the joint-space motor PD (:func:`add_joint_space_controller`) at 3 kHz.
-
-    Exported inputs: ``joint_angle_reference`` (n), ``external_torque`` (n),
-    ``wrist_angle`` (2, when the rig has a wrist; it drives both the rig and,
-    with ``wrist_compensation``, the feedforward
-    :class:`~awiwi_drake.hand.wrist.WristCompensation_` that shifts the motor
-    references by ``-h_wrist / r_m``).  Outputs: the rig's, plus
-    ``motor_torque``, and with ``estimator`` ``joint_angle_estimate`` from a
-    :class:`~awiwi_drake.hand.estimation.LinkPositionEstimator_` at the
-    control rate (fed by the motor angles and the spring elongations only).
-    """
-    c = params or JointControllerParams()
-    op = op or rig.operating_point()
-    coupling = rig.extra["coupling"]
-    q_op = op.info["joint_angles"]
-    m, n = rig.num_tendons, rig.num_joints
-    has_wrist = rig.diagram.HasInputPort("wrist_angle")
-    if wrist_compensation and not has_wrist:
-        raise ValueError("closed_loop: wrist_compensation needs a rig built with wrist=True")
-    theta_op = op.state[2 * n: 2 * n + m]
-    b = DiagramBuilder()
-    plant = b.AddNamedSystem(rig.name, rig.diagram)
-    ctrl = add_joint_space_controller(b, coupling=coupling, motor_pulley_radius=rig.params.motor.pulley_radius,
-                                      theta_op=theta_op, u_op=np.asarray(op.motor_torque, float), q_op=q_op,
-                                      kp=c.kp, kd=c.kd, period=c.period,
-                                      motor_angle_offset=wrist_compensation)
-    b.Connect(plant.GetOutputPort("motor_state"), ctrl.motor_state)
-    b.Connect(ctrl.motor_torque, plant.GetInputPort("motor_torque"))
-    b.ExportInput(ctrl.joint_angle_reference, "joint_angle_reference")
-    b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
-    if has_wrist:
-        if wrist_compensation:
-            from .wrist import WristCompensation
-            comp = b.AddNamedSystem("wrist_compensation", WristCompensation(rig.params.motor.pulley_radius))
-            select = np.zeros((m, 38))
-            select[np.arange(m), rig.extra["wrist_rows"]] = 1.0
-            sel = b.AddNamedSystem("wrist_compensation_select", MatrixGain(select))
-            b.Connect(comp.get_output_port(0), sel.get_input_port())
-            b.Connect(sel.get_output_port(), ctrl.motor_angle_offset)
-            # one exported wrist_angle input feeding both the rig and the feedforward
-            b.ConnectInput(b.ExportInput(plant.GetInputPort("wrist_angle"), "wrist_angle"), comp.get_input_port(0))
-        else:
-            b.ExportInput(plant.GetInputPort("wrist_angle"), "wrist_angle")
-    for i in range(rig.diagram.num_output_ports()):
-        port = plant.get_output_port(i)
-        b.ExportOutput(port, port.get_name())
-    b.ExportOutput(ctrl.motor_torque, "motor_torque")
-    if estimator:
-        from .estimation import LinkPositionEstimator
-        est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
-            coupling, rig.params.motor.pulley_radius, rig.extra["offsets"], period=c.period))
-        b.Connect(plant.GetOutputPort("motor_angle"), est.GetInputPort("motor_angle"))
-        b.Connect(plant.GetOutputPort("elongation"), est.GetInputPort("elongation"))
-        if has_wrist:
-            b.Connect(plant.GetOutputPort("wrist_tendon_offset"), est.GetInputPort("wrist_offset"))
-        b.ExportOutput(est.get_output_port(0), "joint_angle_estimate")
-    diagram = b.Build()
-    diagram.set_name(f"{rig.name}_joint_control")
-    return ClosedLoop(diagram, rig, op, ctrl, est if estimator else None)

@@ -40,14 +40,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import DiscreteDerivative
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
            "estimate_thumb", "EstimationStudy", "thumb_estimation_study", "noise_error_bound",
-           "LinkPositionEstimator_", "LinkPositionEstimator"]
+           "LinkPositionEstimator_", "LinkPositionEstimator", "LinkStateEstimator", "link_state_estimator"]
 
 
 def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
@@ -352,3 +353,55 @@ def _selection_of(coupling) -> np.ndarray:
         S[sl, col:col + b.shape[1]] = b
         col += b.shape[1]
     return S
+
+
+@dataclass
+class LinkStateEstimator:
+    """The hand's joint-state "sensor": :class:`LinkPositionEstimator_` + a discrete derivative.
+
+    ``system`` is a Diagram with inputs named after the rig outputs it reads
+    (``motor_angle``, ``elongation`` and, with the wrist, ``wrist_tendon_offset``)
+    and outputs ``joint_angle`` (n) [rad] (the estimate of (5.15) / Algorithm 1)
+    and ``joint_velocity`` (n) [rad/s] = backward difference of that estimate
+    over one period (the hand has no joint encoders or tachometers).  Both are
+    discrete (updated every ``period``); the velocity lags the angle by one
+    period.  :meth:`initialize` starts both at a known pose (after homing).
+    """
+
+    system: Diagram
+    num_joints: int
+    period: float
+
+    def initialize(self, context, joint_angles) -> None:
+        """Write the start pose into the estimator's (sub)context ``context``."""
+        q = np.asarray(joint_angles, dtype=float).reshape(-1)
+        if q.shape != (self.num_joints,):
+            raise ValueError(f"LinkStateEstimator.initialize: joint_angles must have {self.num_joints} "
+                             f"entries, got {q.size}")
+        est = self.system.GetSubsystemByName("link_position_estimator")
+        self.system.GetMutableSubsystemContext(est, context).SetDiscreteState(q)
+        der = self.system.GetSubsystemByName("joint_velocity_difference")
+        dctx = self.system.GetMutableSubsystemContext(der, context)
+        dctx.SetDiscreteState(0, q)
+        dctx.SetDiscreteState(1, q)
+
+
+def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, period: float = 1.0 / 3000,
+                         wrist: bool = False, iterations: int = 15, step0: float = 0.1) -> LinkStateEstimator:
+    """Build the :class:`LinkStateEstimator` of a finger/hand coupling (see there)."""
+    b = DiagramBuilder()
+    est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
+        coupling, motor_pulley_radius, offsets, period=period, iterations=iterations, step0=step0))
+    n = coupling.num_joints
+    der = b.AddNamedSystem("joint_velocity_difference",
+                           DiscreteDerivative(n, period, suppress_initial_transient=False))
+    b.Connect(est.get_output_port(0), der.get_input_port())
+    b.ExportInput(est.GetInputPort("motor_angle"), "motor_angle")
+    b.ExportInput(est.GetInputPort("elongation"), "elongation")
+    if wrist:
+        b.ExportInput(est.GetInputPort("wrist_offset"), "wrist_tendon_offset")
+    b.ExportOutput(est.get_output_port(0), "joint_angle")
+    b.ExportOutput(der.get_output_port(), "joint_velocity")
+    d = b.Build()
+    d.set_name("link_state_estimator")
+    return LinkStateEstimator(d, n, float(period))

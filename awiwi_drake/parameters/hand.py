@@ -384,7 +384,7 @@ class HandRigParams(FingerDriveParams):
 
 @dataclass(frozen=True)
 class JointControllerParams(Parameters):
-    """Motor-side PD with a joint-space reference (:func:`awiwi_drake.hand.systems.add_joint_space_controller`)."""
+    """Motor-side PD with a joint-space reference (:func:`awiwi_drake.control.joint_pd.joint_pd_controller`)."""
 
     kp: float = param(100.0, unit="N m/rad", low=0.0,
                       source=("chosen: motor loop at sqrt(kp/B) = 224 rad/s with B = 2e-3 kg m^2 (well "

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from awiwi_drake.components import motor_friction_torque
+from awiwi_drake.components import atan_friction, motor_friction_torque
 from awiwi_drake.control.base import StaticLawController, closed_loop
 from awiwi_drake.control.compare import simulate_loop
 from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
@@ -91,7 +91,7 @@ class FrictionFit:
 
     def torque(self, omega):
         """Torque needed to turn at ``omega`` (= minus the friction torque (3.8))."""
-        return self.gamma2 * np.arctan(self.gamma1 * np.asarray(omega, float)) + self.gamma3 * np.asarray(omega, float)
+        return -atan_friction(np.asarray(omega, float), self.gamma2, self.gamma1, self.gamma3)
 
 
 def friction_identification_data(motor: MotorParams, params: FrictionIdentificationParams | None = None, *,
@@ -137,7 +137,7 @@ def fit_friction(speed, torque) -> FrictionFit:
     fast = np.abs(w) >= np.percentile(np.abs(w), 50)
     g3, c = np.polyfit(np.abs(w[fast]), np.sign(w[fast]) * tau[fast], 1)
     x0 = [5.0 / max(np.min(np.abs(w)), 1e-3) ** 0.5, max(2 * c / math.pi, 1e-3), max(g3, 1e-4)]
-    sol = least_squares(lambda g: g[1] * np.arctan(g[0] * w) + g[2] * w - tau, x0, bounds=([1e-3, 0, 0], np.inf),
+    sol = least_squares(lambda g: -atan_friction(w, g[1], g[0], g[2]) - tau, x0, bounds=([1e-3, 0, 0], np.inf),
                         x_scale="jac")
     g1, g2, g3 = sol.x
     return FrictionFit(float(g1), float(g2), float(g3), float(np.sqrt(np.mean(sol.fun ** 2))))

@@ -20,8 +20,10 @@ from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.analysis.simulate import simulate
 from awiwi_drake.components.routing import TendonRouting_
 from awiwi_drake.components.spring import SpringBank_, tendon_spring
+from awiwi_drake.control import closed_loop
+from awiwi_drake.control.joint_pd import joint_pd_controller
 from awiwi_drake.hand.coupling import finger_coupling
-from awiwi_drake.hand.diagrams import HandRig, closed_loop, finger_diagram
+from awiwi_drake.hand.diagrams import HandRig, finger_diagram
 from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant
 from awiwi_drake.hand.systems import CoriolisCancellation
 from awiwi_drake.parameters.hand import FingerRigParams, JointControllerParams
@@ -193,13 +195,13 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     fp = rig.params.finger
     if not getattr(fp, "pip_dip_coupled", False):
         raise ValueError(f"coupling_hold_study: finger {finger!r} has no PIP/DIP coupling")
-    cl = closed_loop(rig, params=controller)
+    cl = closed_loop(rig, joint_pd_controller(rig, controller))
     n = rig.num_joints
     q_ref = np.zeros(n)
     q_ref[n - 2] = pip_step
     q_ref[n - 1] = pip_step * fp.dip_pip_ratio
-    res = simulate(cl.diagram, cl.context(joint_angle_reference=q_ref), t_final, log=("joint_angle",),
-                   max_step=cl.controller.hold.period(), accuracy=1e-4)
+    ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
+    res = simulate(cl.diagram, ctx, t_final, log=("joint_angle",), max_step=1.0 / cl.rate_hz, accuracy=1e-4)
     q = res["joint_angle"]
     return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
 

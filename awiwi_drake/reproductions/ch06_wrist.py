@@ -13,7 +13,9 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Sine
 
 from awiwi_drake.analysis.simulate import rig_monitors, simulate
-from awiwi_drake.hand.diagrams import closed_loop, finger_diagram, hand_diagram
+from awiwi_drake.control import closed_loop
+from awiwi_drake.control.joint_pd import joint_pd_controller
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.parameters.hand import JointControllerParams
 
 __all__ = ["WristCompensationStudy", "wrist_compensation_study"]
@@ -52,7 +54,7 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
     for comp in (False, True):
         rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
                else finger_diagram(finger=target, backend=backend, wrist=True))
-        cl = closed_loop(rig, params=controller, wrist_compensation=comp)
+        cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
         b = DiagramBuilder()
         sys = b.AddSystem(cl.diagram)
         sine = b.AddNamedSystem("wrist_sweep", Sine(np.array([amplitude, 0.0]),
@@ -64,14 +66,13 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         b.ExportOutput(sys.GetOutputPort("tendon_force"), "tendon_force")
         d = b.Build()
         ctx = d.CreateDefaultContext()
-        ctx.SetContinuousState(cl.operating_point.state)
-        cl.controller.hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(
-            np.asarray(cl.operating_point.motor_torque, float))
-        q_op = cl.operating_point.info["joint_angles"]
+        op = rig.operating_point()
+        cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
+        q_op = op.info["joint_angles"]
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
         res = simulate(d, ctx, t_final, log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
-                       max_step=cl.controller.hold.period(), accuracy=accuracy)
+                       max_step=1.0 / cl.rate_hz, accuracy=accuracy)
         events[comp] = list(res.events)
         res = res.resample(t_grid)
         drift[comp] = res["joint_angle"] - q_op

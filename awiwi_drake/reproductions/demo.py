@@ -9,9 +9,9 @@ import numpy as np
 from awiwi_drake.analysis import linearize, rig_monitors, simulate
 from awiwi_drake.components.spring import LeverSpringMechanism
 from awiwi_drake.config import short_mode
+from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
 from awiwi_drake.parameters.rigs import DemoScenario
 from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
-from awiwi_drake.rigs.demo import joint_rig_position_loop, start_loop_at
 from awiwi_drake.rigs.rigs import joint_rig
 
 __all__ = ["run_demo", "pole_sweep_pretension"]
@@ -42,9 +42,10 @@ def run_demo(out: pathlib.Path, *, backend: str = "symbolic"):
     out.mkdir(parents=True, exist_ok=True)
     rig = joint_rig(backend=backend)
     scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
-    diagram, t_ref, refs = joint_rig_position_loop(rig, scenario)
-    ctx = diagram.CreateDefaultContext()
-    start_loop_at(diagram, ctx, rig, rig.operating_point(pretension=scenario.f_start))
+    loop = joint_rig_position_loop(rig, scenario)
+    t_ref, refs = demo_references(rig, scenario)
+    diagram = loop.diagram
+    ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final, log=("link_angle", "tendon_force", "motor_torque"),
                       monitors=rig_monitors(rig), max_step=1.0 / 3000)
     fig, _ = plot_signals(result, ["link_angle", "tendon_force", "motor_torque"],

@@ -1,0 +1,106 @@
+"""Friction laws (thesis ch. 3, 4 and 9): the one place each friction law is written.
+
+Every law returns the force or torque *acting on* the moving body (it opposes
+the motion, so its power is never positive), except the two magnitudes of the
+guide friction, (4.1) and the capstan loss, which are the non-negative size of
+the force lost along a tendon path. The laws are generic in the scalar type:
+float (numpy), AutoDiffXd and ``pydrake.symbolic.Expression`` (numpy object
+arrays) pass through, so the LeafSystems, the controllers, the
+model-discrepancy catalog, its truth plant, tests and plots evaluate the same
+function. Parameters are plain numbers (or arrays, one value per copy), so a
+caller passes the fields of its own parameter dataclass.
+
+========================  ====================================================
+:func:`regularized_sign`  ``tanh(v / v_s)``: smooth ``sign(v)`` below ``v_s``
+:func:`atan_friction`     (3.8), Table 3.3: ``-(g2 atan(g1 w) + g3 w)``
+:func:`stribeck_friction` smooth Stribeck (stick-slip) law
+:func:`guide_friction_force`    (4.1), Fig 4.10: ``C0 (1 - exp(-C1 alpha))``
+:func:`capstan_friction_force`  capstan loss ``f (1 - exp(-mu alpha))`` (Fig 4.11)
+:func:`guide_friction`    directional guide friction on a sliding tendon
+========================  ====================================================
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from awiwi_drake.parameters.components import GuideFrictionParams
+
+__all__ = ["regularized_sign", "atan_friction", "stribeck_friction", "guide_friction_force",
+           "capstan_friction_force", "guide_friction"]
+
+
+def regularized_sign(v, smoothing_velocity):
+    """``tanh(v / v_s)``: ``sign(v)`` smoothed below ``smoothing_velocity`` ``v_s`` (> 0).
+
+    The argument is used as is (no clipping): ``tanh`` saturates to +-1 in
+    float, AutoDiffXd and symbolic arithmetic alike.
+    """
+    return np.tanh(v / smoothing_velocity)
+
+
+def atan_friction(v, coulomb, slope, viscous):
+    """Friction (3.8), Table 3.3, acting on a shaft turning at ``v`` [rad/s].
+
+    ``tau = -(gamma2 atan(gamma1 v) + gamma3 v)`` with ``coulomb`` gamma2 [Nm],
+    ``slope`` gamma1 [s/rad] and ``viscous`` gamma3 [Nm s/rad]. The torque
+    needed to turn the shaft at constant speed is its negative.
+    """
+    return -(coulomb * np.arctan(slope * v) + viscous * v)
+
+
+def stribeck_friction(v, coulomb, static, stribeck_velocity, smoothing_velocity, viscous=0.0):
+    """Smooth Stribeck (stick-slip) friction acting on a body moving at ``v``.
+
+    ``-(Fc + (Fs - Fc) exp(-(v/v_s)^2)) tanh(v/v_eps) - d v`` with Coulomb level
+    ``coulomb`` Fc, breakaway level ``static`` Fs, Stribeck velocity ``v_s``,
+    sign-smoothing velocity ``v_eps`` and viscous coefficient ``viscous`` d.
+    With ``static == coulomb`` it is regularised Coulomb friction.
+    """
+    level = coulomb + (static - coulomb) * np.exp(-(v / stribeck_velocity) ** 2)
+    return -level * regularized_sign(v, smoothing_velocity) - viscous * v
+
+
+def _bending_angle(bending_angle, who):
+    a = np.asarray(bending_angle, dtype=float)
+    if np.any(a < 0) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{who}: bending_angle must be finite and >= 0 [rad], got {bending_angle}")
+    return a
+
+
+def guide_friction_force(bending_angle, p: GuideFrictionParams = GuideFrictionParams()):
+    """Guide friction magnitude (4.1): ``F = C0 (1 - exp(-C1 alpha))`` [N].
+
+    ``bending_angle`` alpha [rad] is the total angle the tendon wraps on its
+    guides (>= 0). Independent of tension and speed (Fig 4.10).
+    """
+    a = _bending_angle(bending_angle, "guide_friction_force")
+    return p.c0 * (1.0 - np.exp(-p.c1 * a))
+
+
+def capstan_friction_force(tension, bending_angle, p: GuideFrictionParams = GuideFrictionParams()):
+    """Tension-proportional (capstan) guide friction: ``F = f (1 - exp(-mu alpha))`` [N].
+
+    The force lost between the two ends of a tendon pulled with tension ``f``
+    around a total angle alpha (Euler-Eytelwein). Generic in the scalar type of ``tension``.
+    """
+    a = _bending_angle(bending_angle, "capstan_friction_force")
+    return tension * (1.0 - np.exp(-p.mu * a))
+
+
+def guide_friction(sliding_velocity, tension, constant, capstan_exponent, smoothing_velocity):
+    """Directional friction on a tendon sliding through its guides [N].
+
+    The tension added at the pulling end of a tendon that slides at
+    ``sliding_velocity`` (> 0: pulled towards that end)::
+
+        F = C s + f (exp(mu alpha s) - 1),   s = tanh(v / v_s)
+
+    with ``constant`` C [N] the tension-independent part (e.g. (4.1) at the
+    path's bending angle), ``capstan_exponent`` ``mu alpha`` [-] (capstan:
+    ``f e^{+mu alpha}`` at the pulling end, ``f e^{-mu alpha}`` when released, the
+    loss :func:`capstan_friction_force`) and ``tension`` f >= 0 at the other end.
+    ``F`` has the sign of the sliding velocity, so it dissipates: ``F v >= 0``.
+    """
+    s = regularized_sign(sliding_velocity, smoothing_velocity)
+    return constant * s + tension * (np.exp(capstan_exponent * s) - 1.0)
