@@ -281,8 +281,8 @@ def test_window_start_profile_is_generalised_least_squares():
 def test_catalog_names_are_the_contract():
     from awiwi_drake.discrepancy import EFFECTS, PHYSICAL_EFFECTS
     assert set(PHYSICAL_EFFECTS) == {"motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
-                                     "guide_friction", "delay"}
-    assert {"force_sensor", "nominal_motor", "nominal_spring"} <= set(EFFECTS)
+                                     "guide_friction", "delay", "spring_drift"}
+    assert {"force_sensor", "nominal_motor", "nominal_spring", "link_sensor", "motor_sensor"} <= set(EFFECTS)
     assert len(PARAM_NAMES) == len(set(PARAM_NAMES))
 
 
