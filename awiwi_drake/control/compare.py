@@ -31,7 +31,9 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.analysis import ResetIntegratorFromFlags
 
-from awiwi_drake.analysis.simulate import SimulationDivergedError
+from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step, simulate
+from awiwi_drake.analysis.schedules import Schedule
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
@@ -231,25 +233,29 @@ def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
     return out
 
 
-def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
-              disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
+def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Schedule,
+              disturbance: Schedule | None, max_step: float, controller: str, test: str,
               meta: dict | None = None) -> TestRun:
+    """One test through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` (the control period)."""
     inputs = {r: reference for r in loop.references}
     if "external_torque" in loop.disturbances:
-        inputs["external_torque"] = disturbance or (lambda t: 0.0)
+        inputs["external_torque"] = disturbance if disturbance is not None else 0.0
     y = loop.tracked_outputs[0]
-    outputs = [y, "motor_torque_command"]
-    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    log = [y, "motor_torque_command", "state", loop.references[0]]
+    if "external_torque" in inputs:
+        log.append("external_torque")
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
-        outputs.append("tendon_force")
-    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=outputs,
-                        max_step=max_step, label=f"{controller}/{test}")
-    w = log["external_torque"][:, 0] if "external_torque" in log else np.zeros(len(log["t"]))
+        log.append("tendon_force")
+    res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                   max_step=max_step, accuracy=1e-6)
+    t = res.t - res.t[0]
+    w = res["external_torque"][:, 0] if "external_torque" in res else np.zeros(len(t))
     meta = dict(meta or {})
     if slack:
-        meta["tendon_force"] = log["tendon_force"]
-    return TestRun(controller, test, log["t"], log[loop.references[0]][:, 0], log[y][:, 0],
-                   log["motor_torque_command"], w, log["x"], meta)
+        meta["tendon_force"] = res["tendon_force"]
+    return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
+                   res["motor_torque_command"], w, res["state"], meta)
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: CompareTestParams | None = None,
@@ -271,10 +277,7 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: Compa
     ctx = loop.create_context(state=state, motor_torque=motor_torque,
                               references={r: reference for r in loop.references})
     if t_settle > 0:
-        sim = _make_simulator(loop, ctx, params.max_step)
-        sim.AdvanceTo(t_settle)
-        if not np.all(np.isfinite(ctx.get_continuous_state_vector().CopyToVector())):
-            raise SimulationDivergedError(f"closed loop diverged while settling at reference {reference}")
+        simulate(loop, ctx, t_settle, log=(), max_step=params.max_step, accuracy=1e-6)  # advances ctx
     ctx.SetTime(0.0)
     return ctx
 
@@ -399,21 +402,18 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     meta: dict[str, Any] = {}
     dist = None
     if test == "step":
-        t0, r1 = p.step_delay, r0 + p.step_size
-        ref = (lambda t: r1 if t >= t0 - 1e-12 else r0)
+        ref = Step(p.step_delay, r0 + p.step_size, before=r0)
         t_final = p.step_duration
     elif test == "sine":
-        ref = (lambda t: r0 + p.sine_amplitude * math.sin(2 * math.pi * p.sine_frequency * t))
+        ref = Sine(p.sine_amplitude, p.sine_frequency, offset=r0)
         t_final = p.sine_periods / p.sine_frequency
     elif test == "disturbance":
-        t0 = p.step_delay
-        ref = (lambda t: r0)
-        dist = (lambda t: p.disturbance_torque if t >= t0 - 1e-12 else 0.0)
+        ref = Constant(r0)
+        dist = Step(p.step_delay, p.disturbance_torque)
         t_final = p.step_duration
     else:
         f0, f1, T = p.sweep_start, p.sweep_stop, p.sweep_duration
-        k = (f1 - f0) / T
-        ref = (lambda t: r0 + p.sweep_amplitude * math.sin(2 * math.pi * (f0 * t + 0.5 * k * t * t)))
+        ref = Chirp(p.sweep_amplitude, f0, f1, T, offset=r0)
         t_final = T
         meta.update(f_low=f0, f_high=f1)
     run = _simulate(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
@@ -421,8 +421,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     u = np.abs(run.command)
     m.peak_input = float(np.max(u))
     limit = loop.saturation
-    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
-        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
     if limit is not None:
         m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
     if "tendon_force" in run.meta:
