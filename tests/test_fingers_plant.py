@@ -180,7 +180,7 @@ def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
         ctx.SetContinuousState(np.r_[q, np.zeros(n)])
         return diagram.EvalTimeDerivatives(ctx).CopyToVector()[n:]
 
-    q_lin = np.linalg.solve(op.info["joint_stiffness"], tau)   # linear prediction: start of the search
+    q_lin = np.linalg.solve(op.joint_stiffness, tau)   # linear prediction: start of the search
     q_eq, info, ok, msg = fsolve(vdot, q_lin, full_output=True, xtol=1e-13)
     assert ok == 1, msg
     err = c @ q_eq
