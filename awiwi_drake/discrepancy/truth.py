@@ -13,7 +13,11 @@ physics allows, so that identifying them is not circular:
 ``joint_friction``   Stribeck at the link
 ``guide_friction``   capstan ``f (exp(mu_a sgn v) - 1)`` plus constant (4.1) part
 ``delay``            exact delay of the zero-order-hold command (interval split)
+``spring_drift``     creep: spring force scaled by ``1 + c (1 - exp(-t / tau))`` (catalog: linear)
 ================== ================================================================
+
+``strength`` scales every hidden effect's size (friction levels, ripple and
+hysteresis amplitudes, guide friction, delay, creep) for half-strength studies.
 
 Sensor noise is white at a given SNR (relative to each signal's standard
 deviation); forces are quantised to 12 bit over the sensor range.
@@ -39,7 +43,7 @@ from .model import NominalParameters, rig_kinematics, split_state
 __all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
 
 HIDDEN_EFFECTS = ("motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
-                  "guide_friction", "delay")
+                  "guide_friction", "delay", "spring_drift")
 NUISANCES = ("force_sensor", "nominal_motor")
 
 
@@ -76,13 +80,17 @@ def HiddenEffectPlant_(T):
         def _split(self, X):
             return split_state(self._nom, X)
 
-        def _forces(self, X):
+        def _forces(self, X, t):
             nom, tr = self._nom, self._truth
             theta, omega, q, qd, z = self._split(X)
             x, xd = rig_kinematics(nom, theta, omega, q, qd)
+            scale = tr.get("spring_scale", 1.0)
+            if "spring_drift" in tr:
+                p = tr["spring_drift"]
+                scale = scale * (1.0 + p["creep"] * (1.0 - np.exp(-t / p["tau"])))
             f = []
             for i in range(nom.num_motors):
-                f0 = laws.spring_force(x[i], nom.spring_poly) * tr.get("spring_scale", 1.0)
+                f0 = laws.spring_force(x[i], nom.spring_poly) * scale
                 if "spring_hysteresis" in tr:
                     f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
                 f.append(f0)
@@ -93,7 +101,7 @@ def HiddenEffectPlant_(T):
             U = self.get_input_port(0).Eval(context)
             nom, tr, n = self._nom, self._truth, self._nom.num_motors
             theta, omega, q, qd, z = self._split(X)
-            f, x, xd = self._forces(X)
+            f, x, xd = self._forces(X, context.get_time())
             B = nom.motor_inertia * tr.get("inertia_scale", 1.0)
             r = nom.motor_pulley_radius
             acc, zd = [], []
@@ -132,7 +140,7 @@ def HiddenEffectPlant_(T):
 
         def _calc_y(self, context, output):
             X = context.get_continuous_state_vector().CopyToVector()
-            f, _, _ = self._forces(X)
+            f, _, _ = self._forces(X, context.get_time())
             theta, omega, q, qd, z = self._split(X)
             y = list(theta) + list(f) + ([q] if self._nom.has_link else [])
             output.SetFromVector(np.array(y))
@@ -143,8 +151,9 @@ def HiddenEffectPlant_(T):
     return Impl
 
 
-def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
-    """Random truth parameters for the hidden effects (and optional miscalibrations)."""
+def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0) -> dict:
+    """Random truth parameters for the hidden effects (and optional miscalibrations);
+    ``strength`` scales each effect's size."""
     hidden = list(hidden)
     for h in hidden:
         if h not in HIDDEN_EFFECTS:
@@ -180,6 +189,10 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
         tr["guide_friction"] = dict(mu_angle=u(0.08, 0.2), c0=u(0.3, 1.5), v0=2e-4)
     if "delay" in hidden:
         tr["delay"] = float(u(0.002, 0.006))
+    if "spring_drift" in hidden:
+        tr["spring_drift"] = dict(creep=float(u(0.08, 0.2) * rng.choice([-1, 1])), tau=float(u(3.0, 8.0)))
+    if strength != 1.0:
+        _scale_truth(tr, strength)
     if "force_sensor" in nuisance:
         tr["force_gain"] = float(1.0 + u(0.05, 0.12) * rng.choice([-1, 1]))
         tr["force_offset"] = float(u(1.0, 3.0) * rng.choice([-1, 1]))
@@ -188,6 +201,22 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
     tr["hidden"] = hidden
     tr["nuisance"] = list(nuisance)
     return tr
+
+
+def _scale_truth(tr: dict, k: float) -> None:
+    """Scale every hidden effect's size by ``k`` in place (shapes unchanged)."""
+    sizes = {"motor_friction": ("fc", "fs", "viscous"), "joint_friction": ("fc", "fs"),
+             "spring_hysteresis": ("width",), "guide_friction": ("c0", "mu_angle"), "spring_drift": ("creep",)}
+    for eff, keys in sizes.items():
+        if eff in tr:
+            for key in keys:
+                tr[eff][key] = tr[eff][key] * k
+    if "motor_ripple" in tr:
+        tr["motor_ripple"]["harmonics"] = [[(o, a * k, b * k) for o, a, b in hm]
+                                           for hm in tr["motor_ripple"]["harmonics"]]
+    if "delay" in tr:
+        tr["delay"] = tr["delay"] * k
+    tr["strength"] = k
 
 
 def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -274,7 +303,7 @@ def _hold_initial_command(diagram, ctx, u0: np.ndarray) -> None:
 
 def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
-                       keep_clean: bool = True, progress=None) -> Dataset:
+                       keep_clean: bool = True, progress=None, strength: float = 1.0) -> Dataset:
     """Simulate one closed-loop experiment on a truth rig with hidden effects.
 
     ``progress(t, duration)`` (optional) is called every ~2 % of the run, e.g.
@@ -290,6 +319,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         Random physical parameters, effect parameters, excitation and noise.
     nuisance : sequence of "force_sensor" | "nominal_motor"
         Miscalibrations: the JSON's nominal values or the sensor differ from the truth.
+    strength : float
+        Scale of every hidden effect's size (1: the generator's ranges; 0.5: half strength).
 
     Returns
     -------
@@ -313,7 +344,7 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         else:
             params[k] = float(v * rng.uniform(1 - spread, 1 + spread))
     nom = NominalParameters.from_dataset(rig, params)
-    truth = draw_truth(rig, hidden, rng, nuisance)
+    truth = draw_truth(rig, hidden, rng, nuisance, strength)
     plant_sys = HiddenEffectPlant_[float](nom, truth)
     dt = 1.0 / gen.sample_rate
     N = int(round(gen.duration / dt))
