@@ -27,6 +27,7 @@ import importlib.util
 import math
 import os
 import pathlib
+import re
 import sys
 from typing import Mapping, Sequence
 
@@ -44,6 +45,7 @@ _UNARY = {
     _EK.Acos: "math.acos", _EK.Atan: "math.atan", _EK.Sinh: "math.sinh", _EK.Cosh: "math.cosh",
     _EK.Tanh: "math.tanh", _EK.Ceil: "math.ceil", _EK.Floor: "math.floor",
 }
+_TEMP = re.compile(r"\bt\d+\b")
 _COMPARE = {_FK.Gt: ">", _FK.Geq: ">=", _FK.Lt: "<", _FK.Leq: "<=", _FK.Eq: "==", _FK.Neq: "!="}
 
 
@@ -67,7 +69,7 @@ class _Emitter:
 
     def __init__(self, var_names: Mapping):
         self.var_names = var_names          # Variable.get_id() -> source name
-        self.lines: list[str] = []
+        self.lines: list[tuple[str, str]] = []
         self.used: set[str] = set()
         self._memo: dict[str, str] = {}     # emitted code of a node -> its temporary
         self._count = 0
@@ -75,8 +77,43 @@ class _Emitter:
     def _new(self, code: str) -> str:
         name = f"t{self._count}"
         self._count += 1
-        self.lines.append(f"    {name} = {code}")
+        self.lines.append((name, code))
         return name
+
+    def body(self, results: Sequence[str]) -> tuple[list[str], list[str]]:
+        """(statement lines, result expressions) with single-use temporaries inlined.
+
+        Fewer statements make numba's compile time (type inference is per statement)
+        several times shorter for the hand's drive; nesting is capped for the parser.
+        """
+        uses: dict[str, int] = {}
+        for _, code in self.lines:
+            for ref in _TEMP.findall(code):
+                uses[ref] = uses.get(ref, 0) + 1
+        for r in results:
+            for ref in _TEMP.findall(r):
+                uses[ref] = uses.get(ref, 0) + 1
+        inline: dict[str, tuple[str, int]] = {}   # name -> (code, nesting depth)
+
+        def expand(code: str) -> tuple[str, int]:
+            depth = [0]
+
+            def rep(m):
+                got = inline.get(m.group(0))
+                if got is None:
+                    return m.group(0)
+                depth[0] = max(depth[0], got[1] + 1)
+                return f"({got[0]})"
+            return _TEMP.sub(rep, code), depth[0]
+
+        out = []
+        for name, code in self.lines:
+            code, depth = expand(code)
+            if uses.get(name, 0) == 1 and depth < 40:
+                inline[name] = (code, depth)
+            else:
+                out.append(f"    {name} = {code}")
+        return out, [expand(r)[0] for r in results]
 
     def expr(self, e) -> str:
         if not isinstance(e, sym.Expression):
@@ -129,10 +166,17 @@ class _Emitter:
             return f"{_UNARY[kind]}({self.expr(args[0])})"
         if kind == _EK.Atan2:
             return f"math.atan2({self.expr(args[0])}, {self.expr(args[1])})"
-        if kind == _EK.Min:
-            return f"min({self.expr(args[0])}, {self.expr(args[1])})"
-        if kind == _EK.Max:
-            return f"max({self.expr(args[0])}, {self.expr(args[1])})"
+        if kind in (_EK.Min, _EK.Max):
+            # branch-free: numba's compile time grows steeply with builtin min/max call sites and
+            # with branches (the hand's drive: 40 s and 100 s). max(a, 0) = (a + |a|)/2 is exact;
+            # otherwise the result is within one rounding of the larger magnitude.
+            a, b = self.expr(args[0]), self.expr(args[1])
+            sign = "-" if kind == _EK.Min else "+"
+            if b == "0.0":
+                return f"0.5 * ({a} {sign} abs({a}))"
+            if a == "0.0":
+                return f"0.5 * ({b} {sign} abs({b}))"
+            return f"0.5 * ({a} + {b} {sign} abs({a} - {b}))"
         if kind == _EK.IfThenElse:
             cond = self.formula(args[0])
             a, b = self.expr(args[1]), self.expr(args[2])
@@ -176,11 +220,11 @@ def emit_source(functions: Mapping[str, tuple[Sequence[Sequence], Sequence]]) ->
                 var_names[v.get_id()] = nm
                 body_in.append(f"    {nm} = a{a}[{i}]")
         em = _Emitter(var_names)
-        results = [em.expr(o) for o in outputs]
+        statements, results = em.body([em.expr(o) for o in outputs])
         lines.append("@numba.njit(cache=True, fastmath=False, error_model='numpy')")
         lines.append(f"def {fname}({', '.join(args + ['out'])}):")
         lines.extend(ln for ln in body_in if ln.split(" = ")[0].strip() in em.used)
-        lines.extend(em.lines)
+        lines.extend(statements)
         lines.extend(f"    out[{i}] = {r}" for i, r in enumerate(results))
         lines.append("    return out")
         lines.append("")

@@ -188,7 +188,7 @@ class CouplingHoldStudy:
 
 
 def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final: float = 0.3,
-                        backend: str = "symbolic", controller: JointControllerParams | None = None
+                        backend: str = "compiled", controller: JointControllerParams | None = None
                         ) -> CouplingHoldStudy:
     """Step the PIP reference of a coupled finger by ``pip_step`` [rad] and log PIP/DIP."""
     rig = finger_diagram(finger=finger, backend=backend)
@@ -226,7 +226,7 @@ class WristCompensationStudy:
                 "compensated": float(np.max(np.abs(self.drift_compensated)))}
 
 
-def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic", amplitude: float = np.radians(5.0), frequency: float = 2.0,
+def wrist_compensation_study(target: str = "index", *, backend: str = "compiled", amplitude: float = np.radians(5.0), frequency: float = 2.0,
                              t_final: float = 0.5, controller: JointControllerParams | None = None,
                              accuracy: float = 1e-3) -> WristCompensationStudy:
     """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
