@@ -7,6 +7,7 @@ import pytest
 from pydrake.autodiffutils import InitializeAutoDiff, ExtractGradient
 from pydrake.systems.primitives import Linearize
 
+from _fd import system_jacobians
 from awiwi_drake.control.backstepping import (
     ImpedanceBackstepping, PositionBackstepping, impedance_backstepping, position_backstepping)
 from awiwi_drake.control.backstepping_example import ScalarBackstepping, ScalarExamplePlant, example_control
@@ -18,32 +19,6 @@ from awiwi_drake.control.base import closed_loop
 from awiwi_drake.parameters.backstepping import (
     ImpedanceBacksteppingGains, ImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
 from awiwi_drake.rigs import joint_rig
-
-
-def _output_jacobian(system, port, inputs, wrt):
-    """d(output)/d(input ``wrt``) of a feedthrough system via ToAutoDiffXd, and by central differences."""
-    ad = system.ToAutoDiffXd()
-    ctx = ad.CreateDefaultContext()
-    for name, v in inputs.items():
-        val = InitializeAutoDiff(np.asarray(v, float)).ravel() if name == wrt else \
-            np.array([type(InitializeAutoDiff(np.zeros(1))[0, 0])(float(x)) for x in v])
-        ad.GetInputPort(name).FixValue(ctx, val)
-    J_ad = ExtractGradient(np.asarray(ad.GetOutputPort(port).Eval(ctx), dtype=object))
-    if J_ad.shape[1] == 0:
-        J_ad = np.zeros((J_ad.shape[0], len(inputs[wrt])))
-    fctx = system.CreateDefaultContext()
-    cols = []
-    for i in range(len(inputs[wrt])):
-        vals = []
-        for s in (+1, -1):
-            for name, v in inputs.items():
-                v = np.array(v, float)
-                if name == wrt:
-                    v[i] += s * 1e-6 * max(1.0, abs(v[i]))
-                system.GetInputPort(name).FixValue(fctx, v)
-            vals.append(np.array(system.GetOutputPort(port).Eval(fctx)))
-        cols.append((vals[0] - vals[1]) / (2e-6 * max(1.0, abs(inputs[wrt][i]))))
-    return J_ad, np.array(cols).T
 
 
 @pytest.mark.parametrize("case", ["position", "impedance_linear", "impedance_nonlinear", "antagonistic"])
@@ -62,13 +37,14 @@ def test_controllers_convert_and_autodiff_matches_finite_differences(case):
         sys = impedance_controller(rig, external_torque="none")
         x = rng.normal(0, 0.05, 4)
     assert sys.ToAutoDiffXd() is not None
-    J_ad, J_fd = _output_jacobian(sys, "motor_torque", {"state": x, "link_angle_reference": [0.3]}, "state")
+    J_ad, J_fd = system_jacobians(sys, [], {"state": x, "link_angle_reference": [0.3]}, wrt=["state"],
+                                  outputs=["motor_torque"])["motor_torque"]
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(J_ad)))
 
 
 def test_scalar_example_systems_convert():
     plant, ctrl = ScalarExamplePlant(), ScalarBackstepping(ScalarExampleGains(k1=2.0, k2=3.0))
-    J_ad, J_fd = _output_jacobian(ctrl, "u", {"state": [0.4, -0.7]}, "state")
+    J_ad, J_fd = system_jacobians(ctrl, [], {"state": [0.4, -0.7]}, outputs=["u"])["u"]
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6)
     ad = plant.ToAutoDiffXd()
     ctx = ad.CreateDefaultContext()

@@ -77,3 +77,24 @@ def test_yaml_rejects_unknown_keys_wrong_types_and_bad_values():
                           ("motor: 5", "does not fit"), ("[1, 2", "while parsing")]:
         with pytest.raises(ValueError, match=message):
             from_yaml(JointRigParams, text, where="x.yaml")
+
+
+def test_progress_is_quiet_unless_asked(monkeypatch, capsys):
+    """Progress bars: off when quiet, piped or in short mode; on with AWIWI_PROGRESS=1."""
+    from awiwi_drake.config import SimulationProgress, progress_enabled
+
+    monkeypatch.delenv("AWIWI_PROGRESS", raising=False)
+    assert progress_enabled(quiet=True) is False
+    monkeypatch.setenv("AWIWI_SHORT", "1")
+    assert progress_enabled() is False
+    monkeypatch.setenv("AWIWI_PROGRESS", "1")
+    assert progress_enabled() is True and progress_enabled(quiet=True) is False
+    with SimulationProgress("run") as p:
+        p(0.5, 1.0)
+        p(1.0, 1.0)
+    err = capsys.readouterr().err
+    assert "run" in err and "1/1 s simulated" in err
+    monkeypatch.setenv("AWIWI_PROGRESS", "0")
+    with SimulationProgress("run") as p:
+        p(0.5, 1.0)
+    assert capsys.readouterr().err == ""

@@ -7,10 +7,12 @@ import pytest
 from pydrake.systems.primitives import Linearize
 from scipy.linalg import solve_continuous_are
 
-from _control_plants import autodiff_vs_fd, flexible_joint_matrices, linear_flexible_joint_rig
+from _control_plants import flexible_joint_matrices, linear_flexible_joint_rig
+from _fd import autodiff_vs_fd
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.linear import StateFeedbackLaw, closed_loop_poles
+from awiwi_drake.analysis.linear import closed_loop_poles
+from awiwi_drake.control.linear import StateFeedbackLaw
 from awiwi_drake.control.lqr import design_lqr, lqr_controller, quadratic_cost
 from awiwi_drake.control.pole_placement import (design_pole_placement, identification_system,
                                                 pole_placement_controller, pole_sensitivity)

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from _control_plants import autodiff_vs_fd
-from _fd import fd_jacobian
+from _fd import autodiff_vs_fd, fd_jacobian
 from awiwi_drake.components import atan_friction
 from awiwi_drake.control.base import StaticLawController
 from awiwi_drake.control.motor_compensation import (MotorPdLaw, RippleEstimate, fit_friction,

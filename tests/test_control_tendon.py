@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from _control_plants import autodiff_vs_fd
+from _fd import autodiff_vs_fd
 from awiwi_drake.analysis import lqr
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.compare import fit_second_order_step, simulate_loop
@@ -186,11 +186,10 @@ def test_tendon_controllers_convert_to_autodiff(fmap):
     inputs = {"tendon_force_reference": [25.0], "tendon_force": [22.0], "motor_velocity": [0.3]}
     for factory in (tendon_pd_controller, tendon_scheduled_controller):
         ctrl = factory(rig, fmap=fmap)
-        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs, h=1e-5)
+        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs)
         np.testing.assert_allclose(J_ad, J_fd, rtol=1e-4, atol=1e-6)
     sd = tendon_sdre_controller(rig, fmap=fmap)
-    J_ad, J_fd = autodiff_vs_fd(sd, {"tendon_force_reference": [25.0], "motor_angle": [0.5], "motor_velocity": [0.1]},
-                                h=1e-5)
+    J_ad, J_fd = autodiff_vs_fd(sd, {"tendon_force_reference": [25.0], "motor_angle": [0.5], "motor_velocity": [0.1]})
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-4, atol=1e-6)
 
 
@@ -216,7 +215,7 @@ def test_sdre_printed_14_9_gains_do_not_depend_on_the_spring_and_friction_moves_
     from scipy.linalg import solve_continuous_are
 
     from awiwi_drake.components.spring import tendon_spring
-    from awiwi_drake.control.lqr import lqr_gain
+    from awiwi_drake.analysis.linear import lqr_gain
     from awiwi_drake.control.sdre import PrintedTendonFactorisation, RigJacobian
     p = SdreTendonParams()
     rig = tendon_rig()

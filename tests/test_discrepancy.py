@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 
+from _fd import fd_jacobian
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.discrepancy import Dataset, load_dataset, save_dataset
 from awiwi_drake.discrepancy.catalog import PARAM_INDEX, PARAM_NAMES, default_vector
@@ -162,8 +163,7 @@ def test_unforced_rig_is_passive(effects):
         X = _random_state(nom, rng)
         X[-2:] = 0.0
         xdot = model_derivatives(nom, X[:, None], np.zeros((2, 1)), p[:, None])[:, 0]
-        h = 1e-6
-        grad = np.array([(_energy(nom, X + h * e) - _energy(nom, X - h * e)) / (2 * h) for e in np.eye(len(X))])
+        grad = fd_jacobian(lambda x: _energy(nom, x), X, h=1e-6).ravel()
         dEdt = grad @ xdot
         natural = -nom.motor_damping * np.sum(X[2:4] ** 2) - nom.link_damping * X[5] ** 2
         if not effects:
@@ -195,14 +195,11 @@ def _autodiff_check(system, ctx_setup, nx):
     ctx_setup(ad, actx, autodiff=True)
     actx.SetContinuousState(InitializeAutoDiff(X).ravel())
     grad = ExtractGradient(ad.EvalTimeDerivatives(actx).CopyToVector())
-    fd = np.zeros((len(f0), nx))
-    for j in range(nx):
-        h = 1e-7 * max(1.0, abs(X[j]))
-        ctx.SetContinuousState(X + h * np.eye(nx)[j])
-        fp = system.EvalTimeDerivatives(ctx).CopyToVector()
-        ctx.SetContinuousState(X - h * np.eye(nx)[j])
-        fm = system.EvalTimeDerivatives(ctx).CopyToVector()
-        fd[:, j] = (fp - fm) / (2 * h)
+
+    def xdot(x):
+        ctx.SetContinuousState(x)
+        return system.EvalTimeDerivatives(ctx).CopyToVector()
+    fd = fd_jacobian(xdot, X)
     np.testing.assert_allclose(grad, fd, rtol=2e-5, atol=1e-4 * np.abs(fd).max())
     return grad, fd
 

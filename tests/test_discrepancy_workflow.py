@@ -70,4 +70,28 @@ def test_cli_make_dataset_and_diagnose(tmp_path, capsys):
     assert step["effect"] == "motor_friction" and 0 < step["confidence"] <= 1
     assert step["parameters"]["motor_coulomb"] > 0 and np.isfinite(step["nrmse_after"])
     assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "residual_maps_nominal.png").exists()
+    # units on every fitted parameter: JSON, report and CLI
+    assert summary["units"]["motor_coulomb"] == "Nm" and set(summary["units"]) >= set(step["parameters"])
+    assert "| `motor_coulomb` |" in (tmp_path / "rep" / "report.md").read_text()
+    assert " Nm" in captured.out and "motor_coulomb = " in captured.out
     assert main(["diagnose", str(tmp_path / "missing.csv")]) == 2
+
+
+def test_out_of_catalog_link_encoder_bias_is_flagged_not_named(tmp_path):
+    """A link-encoder bias is not in the catalog's physics: no physical effect may be
+    named for it (issue 12: it was named spring_hysteresis), and the verdict says a
+    discrepancy remains, with where, unless a calibration explains it."""
+    from awiwi_drake.discrepancy.report import write_report
+
+    ds = make_truth_dataset("joint", [], snr_db=30, seed=15, gen=SHORT)
+    ds.outputs["link_angle"] = ds.outputs["link_angle"] + 0.05  # rad, ~10x the noise floor
+    dx = diagnose(ds)
+    assert dx.named_effects == []
+    assert dx.unexplained_residual or dx.nuisance_corrections
+    if dx.unexplained_residual:
+        assert dx.verdict == "unexplained discrepancy remains"
+        assert dx.floor_ratio_after > dx.unexplained_ratio
+        assert dx.unexplained["signals_above"] and dx.unexplained["text"]
+        md = write_report(dx, tmp_path / "rep").read_text()
+        assert "Unexplained discrepancy remains" in md and "nothing is missing" not in md
+        assert json.loads((tmp_path / "rep" / "summary.json").read_text())["unexplained_residual"] is True

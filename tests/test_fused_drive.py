@@ -15,7 +15,7 @@ from awiwi_drake.hand.coupling import finger_coupling
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
 from awiwi_drake.parameters.components import GuideFrictionParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
-from tests.test_systems import _check_autodiff_matches_fd
+from _fd import check_system_autodiff_matches_fd
 
 RNG = np.random.default_rng(7)
 SPRING = tendon_spring(SpringModelParams())
@@ -103,7 +103,7 @@ def test_drive_system_converts_and_autodiff_matches_finite_differences():
     s[8:16] *= 0.1   # moderate speeds keep the finite differences away from the tanh knees
     inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
                   joint_velocity=RNG.normal(scale=0.01, size=4))
-    _check_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
+    check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
 
 
 def test_float_system_equals_its_autodiff_conversion_values():
@@ -242,7 +242,7 @@ def test_finger_with_hysteresis_and_guide_friction_builds_and_dissipates():
     p = FingerRigParams.for_finger("index").with_physics(hysteresis=True, guide_friction=True)
     rig = finger_diagram(finger="index", params=p)
     n, m = rig.num_joints, rig.num_tendons
-    assert rig.num_states == 2 * n + 3 * m and rig.state_names[-1] == f"hysteresis_force_{rig.extra['tendon_names'][-1]}"
+    assert rig.num_states == 2 * n + 3 * m and rig.state_names[-1] == f"hysteresis_force[{rig.extra['tendon_names'][-1]}]"
     op = rig.operating_point()
     ctx = rig.context(op)
     x = op.state.copy()

@@ -211,27 +211,12 @@ def test_hand_simulates_under_joint_control():
 
 
 def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
-    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
     from awiwi_drake.components.routing import TendonRouting_
     sys = TendonRouting_[float](finger_coupling("thumb"), 0.005, np.full(8, 1e-3))
-    ad = sys.ToAutoDiffXd()
     rng = np.random.default_rng(5)
     theta, q, f = rng.uniform(-1, 1, 8), rng.uniform(-1, 1, 4), rng.uniform(5, 40, 8)
-    x = np.concatenate([theta, q, f])
-
-    def out(xx, system, ctx, port):
-        system.GetInputPort("motor_angle").FixValue(ctx, xx[:8])
-        system.GetInputPort("joint_angle").FixValue(ctx, xx[8:12])
-        system.GetInputPort("tendon_force").FixValue(ctx, xx[12:])
-        return system.GetOutputPort(port).Eval(ctx)
-
-    fctx, actx = sys.CreateDefaultContext(), ad.CreateDefaultContext()
-    for port in ("elongation", "generalized_force"):
-        J = ExtractGradient(out(InitializeAutoDiff(x).ravel(), ad, actx, port))
-        eps = 1e-6
-        J_fd = np.array([(out(x + eps * e, sys, fctx, port) - out(x - eps * e, sys, fctx, port)) / (2 * eps)
-                         for e in np.eye(x.size)]).T
-        np.testing.assert_allclose(J, J_fd, atol=1e-7)
+    check_system_autodiff_matches_fd(sys, [], {"motor_angle": theta, "joint_angle": q, "tendon_force": f},
+                                     outputs=["elongation", "generalized_force"], rtol=1e-6)
 
 
 @pytest.mark.parametrize("finger", ["thumb", "ring"])

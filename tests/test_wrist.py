@@ -9,6 +9,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.symbolic import Expression, Variable
 
+from _fd import fd_jacobian
 from awiwi_drake.hand.wrist import (
     TENDON_FINGERS,
     WristCoupling,
@@ -154,10 +155,7 @@ def test_jacobian_at_neutral_is_twice_rotation_about_centre():
 @pytest.mark.parametrize("q", CONFIGS[1:])
 def test_jacobian_matches_finite_differences(q):
     J = wrist_jacobian(*q)
-    e = 1e-6
-    fd = np.column_stack([
-        (wrist_tendon_offsets(q[0] + e, q[1]) - wrist_tendon_offsets(q[0] - e, q[1])) / (2 * e),
-        (wrist_tendon_offsets(q[0], q[1] + e) - wrist_tendon_offsets(q[0], q[1] - e)) / (2 * e)])
+    fd = fd_jacobian(lambda qq: wrist_tendon_offsets(*qq), q, h=1e-6)
     assert J.shape == (38, 2)
     np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-9)
 
@@ -174,10 +172,8 @@ def test_coupling_object_is_generic_and_consistent():
     P_ad = cp.P(np.array([AutoDiffXd(q[0], [1.0, 0.0]), AutoDiffXd(q[1], [0.0, 1.0])]))
     H = np.array([[e.derivatives() for e in row] for row in P_ad])           # (38, 2, 2)
     np.testing.assert_allclose(H[:, 0, 1], H[:, 1, 0], atol=1e-14)
-    e = 1e-6
-    for j in range(2):
-        dq = e * np.eye(2)[j]
-        np.testing.assert_allclose(H[:, :, j], (cp.P(q + dq) - cp.P(q - dq)) / (2 * e), rtol=1e-5, atol=1e-8)
+    H_fd = fd_jacobian(lambda qq: cp.P(qq), q, h=1e-6).reshape(38, 2, 2)
+    np.testing.assert_allclose(H, H_fd, rtol=1e-5, atol=1e-8)
     x = [Variable("a"), Variable("b")]
     P_sym = cp.P(np.array([Expression(v) for v in x]))
     env = {x[0]: q[0], x[1]: q[1]}

@@ -56,6 +56,7 @@ def register(subparsers) -> None:
     p.add_argument("--delay", type=_delay, default=None, metavar="S", help="round-trip delay [s], e.g. 333e-6")
     p.add_argument("--saturation", type=positive_float, default=None, metavar="NM", help="torque limit [Nm]")
     p.add_argument("--short", action="store_true", help="shorter runs (as AWIWI_SHORT=1)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=run)
 
 
@@ -111,7 +112,16 @@ def run(args) -> int:
         opts["delay"] = args.delay
     if args.saturation is not None:
         opts["saturation"] = args.saturation
-    result = compare_controllers(make_rig, names, tests=tests, params=params, **opts)
+    from awiwi_drake.config import progress_bar
+
+    n_tests = len(tests) if tests is not None else len([t for t in TESTS if t != "disturbance"
+                                                          or args.rig != "tendon-rig"])
+    with progress_bar(total=len(names) * n_tests, desc="compare", unit="test", quiet=args.quiet) as bar:
+        def advance(label: str) -> None:
+            bar.set_postfix_str(label, refresh=False)
+            bar.update(1)
+
+        result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance, **opts)
     result.table.to_csv(out / "metrics.csv")
     (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n" + result.table.to_markdown())
     import matplotlib

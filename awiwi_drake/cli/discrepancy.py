@@ -15,8 +15,9 @@ __all__ = ["register"]
 
 
 def _diagnose(args) -> int:
-    from awiwi_drake.discrepancy import diagnose, load_dataset
-    from awiwi_drake.discrepancy.report import json_summary, write_report
+    from awiwi_drake.discrepancy import DiagnosisInterrupted, diagnose, load_dataset
+    from awiwi_drake.discrepancy.catalog import PARAM_UNITS
+    from awiwi_drake.discrepancy.report import findings_text, json_summary, write_report
     from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
     from . import load_parameters, output_dir, output_file
@@ -27,22 +28,41 @@ def _diagnose(args) -> int:
     ds = load_dataset(args.dataset)
     settings = load_parameters(DiscrepancySettings(), args)
     progress = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    dx = diagnose(ds, settings=settings, progress=progress)
-    if json_path is not None:  # first the small file, so a failure leaves no report that looks complete
-        text = json.dumps(json_summary(dx), indent=1, default=float)
-        tmp = json_path.with_name(json_path.name + ".part")
-        tmp.write_text(text)
-        tmp.replace(json_path)
+
+    def write_json(dx):
+        if json_path is not None:  # atomic: an interruption never leaves a half-written file
+            text = json.dumps(json_summary(dx), indent=1, default=float)
+            tmp = json_path.with_name(json_path.name + ".part")
+            tmp.write_text(text)
+            tmp.replace(json_path)
+
+    try:
+        dx = diagnose(ds, settings=settings, progress=progress, checkpoint=write_json)
+    except DiagnosisInterrupted as exc:
+        dx = exc.diagnosis
+        write_json(dx)
+        if report_dir is not None:
+            write_report(dx, report_dir, figures=False)
+        print(f"{dx.dataset}: interrupted after {len(dx.steps)} accepted step(s); partial summary written"
+              + (f" to {json_path}" if json_path else "") + (f" and {report_dir}" if report_dir else ""),
+              file=sys.stderr)
+        return 130
+    write_json(dx)  # first the small file, so a failure leaves no report that looks complete
     if report_dir is not None:
         md = write_report(dx, report_dir)
         print(f"report: {md}", file=sys.stderr)
-    named = ", ".join(dx.named_effects) or "none (no missing effect)"
+    named = ", ".join(dx.named_effects) or "none"
     print(f"{dx.dataset}: {dx.verdict}; named effects: {named}")
     if dx.nuisance_corrections:
         print(f"calibration corrections: {', '.join(dx.nuisance_corrections)}")
     for s in dx.steps:
-        ps = ", ".join(f"{k}={v:.4g}" for k, v in s.parameters.items())
+        ps = ", ".join(f"{k} = {v:.4g} +- {s.uncertainties.get(k, float('nan')):.2g} {PARAM_UNITS.get(k, '?')}"
+                       for k, v in s.parameters.items())
         print(f"  {s.effect} [{s.status}, confidence {s.confidence:.2f}]: {ps}")
+        if s.status == "not separable":
+            print(f"    not separable with these data from {', '.join(s.members[1:])}; "
+                  f"to separate them: {s.experiment}")
+    print(findings_text(dx))
     print(f"NRMSE {dx.nrmse_before:.4f} -> {dx.nrmse_after:.4f} "
           f"(fit {dx.fit_percent_before:.1f}% -> {dx.fit_percent_after:.1f}%)")
     return 0
@@ -85,8 +105,11 @@ def _make_dataset(args) -> int:
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
     rig = CLI_RIG_NAMES[args.rig]
-    ds = make_truth_dataset(rig, hidden, snr_db=args.snr, seed=args.seed, nuisance=nuisance, gen=gen,
-                            name=args.name, keep_clean=False)
+    from awiwi_drake.config import SimulationProgress
+
+    with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
+        ds = make_truth_dataset(rig, hidden, snr_db=args.snr, seed=args.seed, nuisance=nuisance, gen=gen,
+                                name=args.name, keep_clean=False, progress=progress)
     path = save_dataset(ds, out)
     snr = "inf" if args.snr is None else f"{args.snr:g}"
     print(f"{path} (+ .json; answer in {path.stem}.truth.json): rig {args.rig}, hidden {hidden or 'none'}, "
@@ -120,6 +143,7 @@ def register(subparsers) -> None:
     m.add_argument("--duration", type=positive_float, default=None, metavar="S",
                    help="recorded seconds (default 10)")
     m.add_argument("--name", default=None, help="file stem (default from rig/effects/SNR/seed)")
+    m.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     req = m.add_argument_group("required options")
     req.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     m.set_defaults(func=_make_dataset)

@@ -36,8 +36,8 @@ def register(sub) -> None:
     p.add_argument("--duration", type=_duration, default=1.5, metavar="S",
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
     p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
-                   help="tendon drive backend (compiled: the fast default with the thesis's physics; python and "
-                        "symbolic need params without spring hysteresis)")
+                   help="tendon drive backend (compiled: one fused system with a numba kernel, the fast default)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=_animate)
 
     p = sub.add_parser("export-hand-diagrams",
@@ -51,7 +51,11 @@ def _animate(args) -> int:
     from awiwi_drake.hand.visualize import record_animation
 
     out = output_file(args.out, "--out", suffixes=(".html", ".htm"))
-    res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend)
+    from awiwi_drake.config import SimulationProgress
+
+    with SimulationProgress("animate", quiet=args.quiet) as progress:
+        res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend,
+                               progress=progress)
     print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
           f"max joint tracking error {res.max_tracking_error:.3g} rad)")
     return 0

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from awiwi_drake.cli import CliError, add_parameter_options, load_parameters, output_dir
+from awiwi_drake.cli import CliError, add_parameter_options, load_parameters, output_dir, output_file
 
 __all__ = ["register"]
 
@@ -46,7 +46,19 @@ def register(sub) -> None:
                        epilog=epilog, formatter_class=fmt)
     p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
     add_parameter_options(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object {A, B, poles, state_names}")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object {A, B, C, D, poles, damp, state_names, input_names, x0, u0, ...}")
+    p.add_argument("--damp", action="store_true",
+                   help="print the damping table: natural frequency, damping ratio, time constant per pole")
+    p.add_argument("--bode", metavar="OUT.png", default=None,
+                   help="write a Bode diagram (dB and phase on log axes, gain/phase margins) of --output / --input")
+    p.add_argument("--output", default=None, metavar="NAME",
+                   help="output channel of the Bode diagram, e.g. link_angle, tendon_force, joint_angle[1] "
+                        "(default: the rig's link/joint angle, or its tendon force)")
+    p.add_argument("--input", default="motor_torque[0]", metavar="CHANNEL",
+                   help="input channel of the Bode diagram (default motor_torque[0])")
+    p.add_argument("--save", metavar="OUT.json", default=None,
+                   help="save the linearisation (reload with LinearizationResult.load)")
     p.set_defaults(func=_linearize)
 
     p = sub.add_parser("lqr", help="LQR gain and closed-loop poles at a rig's default operating point",
@@ -56,7 +68,9 @@ def register(sub) -> None:
     req.add_argument("--q", required=True, help="comma-separated diagonal of Q (state order)")
     req.add_argument("--r", required=True, help="comma-separated diagonal of R (one per motor)")
     add_parameter_options(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object {K, closed_loop_poles}")
+    p.add_argument("--json", action="store_true", help="print one JSON object {K, S, Q, R, closed_loop_poles, ...}")
+    p.add_argument("--save", metavar="OUT.json", default=None,
+                   help="save the design with its linearisation (reload with LqrResult.load)")
     p.set_defaults(func=_lqr)
 
     p = sub.add_parser("params", help="list a rig's parameters with units, ranges and sources (or print them as YAML)",
@@ -91,25 +105,59 @@ def _build(args) -> object:
     return build_target(args.rig, params=_params_of(args))
 
 
+def _default_bode_output(lin) -> str:
+    for name in ("link_angle", "joint_angle", "tendon_force"):
+        if name in lin.outputs:
+            return lin.outputs[name].names[0]
+    return lin.output_names[0]
+
+
 def _linearize(args) -> int:
     from awiwi_drake.analysis import linearize, poles_table
 
+    bode_path = None if args.bode is None else output_file(args.bode, "--bode", suffixes=(".png", ".pdf", ".svg"))
+    save_path = None if args.save is None else output_file(args.save, "--save", suffixes=(".json",))
     rig = _build(args)
-    res = linearize(rig)
+    outputs = ["state"] + [n for n in ("link_angle", "joint_angle", "tendon_force") if n in rig.output_names]
+    res = linearize(rig, outputs=outputs)
+    if save_path is not None:
+        res.save(save_path)
+    fr = None
+    if bode_path is not None:
+        import matplotlib
+        matplotlib.use("Agg")
+        fr = res.bode(input=args.input, output=args.output or _default_bode_output(res))
+        fig, _ = fr.plot()
+        fig.suptitle(f"{rig.name}: {fr.output_name} / {fr.input_name}")
+        fig.tight_layout()
+        fig.savefig(bode_path, dpi=120)
     if args.json:
-        print(json.dumps(res.to_json()))
+        data = res.to_json()
+        if fr is not None:
+            data["bode"] = fr.to_json()
+        print(json.dumps(data))
         return 0
     np.set_printoptions(precision=6, suppress=False, linewidth=140)
     print(f"{rig.name}: state = [{', '.join(rig.state_names)}], input = motor_torque")
     print("A =\n" + str(res.A))
     print("B =\n" + str(res.B))
-    print("poles:\n" + poles_table(res))
+    print("poles [1/s]:\n" + poles_table(res))
+    if args.damp:
+        print("damping:\n" + str(res.damp()))
+    if fr is not None:
+        m = fr.margins()
+        print(f"Bode {fr.output_name} / {fr.input_name} written to {bode_path}: gain margin "
+              f"{m['gain_margin_db']:.4g} dB at {m['phase_crossover']:.4g} rad/s, phase margin "
+              f"{m['phase_margin']:.4g} deg at {m['gain_crossover']:.4g} rad/s (unity feedback)")
+    if save_path is not None:
+        print(f"linearisation saved to {save_path}")
     return 0
 
 
 def _lqr(args) -> int:
     from awiwi_drake.analysis import lqr
 
+    save_path = None if args.save is None else output_file(args.save, "--save", suffixes=(".json",))
     rig = _build(args)
     q = _floats(args.q, "--q")
     r = _floats(args.r, "--r")
@@ -120,14 +168,17 @@ def _lqr(args) -> int:
     if r.size != m:
         raise CliError(f"--r has {r.size} entries; {args.rig} has {m} motor input(s)")
     res = lqr(rig, np.diag(q), np.diag(r))
+    if save_path is not None:
+        res.save(save_path)
     if args.json:
         print(json.dumps(res.to_json()))
         return 0
     np.set_printoptions(precision=6, linewidth=140)
     print(f"{rig.name}: state = [{', '.join(rig.state_names)}]")
     print("K =\n" + str(res.K))
-    print("closed-loop poles:\n" + "\n".join(f"  {p.real: .6g} {'+' if p.imag >= 0 else '-'} {abs(p.imag):.6g}j"
-                                             for p in res.closed_loop_poles))
+    print("closed-loop damping:\n" + str(res.closed_loop.damp()))
+    if save_path is not None:
+        print(f"design saved to {save_path}")
     return 0
 
 

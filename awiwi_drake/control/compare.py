@@ -31,7 +31,8 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.analysis import ResetIntegratorFromFlags
 
-from awiwi_drake.analysis.simulate import SimulationDivergedError
+from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step, simulate
+from awiwi_drake.analysis.schedules import Schedule
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
@@ -231,25 +232,29 @@ def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
     return out
 
 
-def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
-              disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
+def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: Schedule,
+              disturbance: Schedule | None, max_step: float, controller: str, test: str,
               meta: dict | None = None) -> TestRun:
+    """One test through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` (the control period)."""
     inputs = {r: reference for r in loop.references}
     if "external_torque" in loop.disturbances:
-        inputs["external_torque"] = disturbance or (lambda t: 0.0)
+        inputs["external_torque"] = disturbance if disturbance is not None else 0.0
     y = loop.tracked_outputs[0]
-    outputs = [y, "motor_torque_command"]
+    log = [y, "motor_torque_command", "state", loop.references[0]]
+    if "external_torque" in inputs:
+        log.append("external_torque")
     slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
-        outputs.append("tendon_force")
-    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=outputs,
-                        max_step=max_step, label=f"{controller}/{test}")
-    w = log["external_torque"][:, 0] if "external_torque" in log else np.zeros(len(log["t"]))
+        log.append("tendon_force")
+    res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                   max_step=max_step, accuracy=1e-6)
+    t = res.t - res.t[0]
+    w = res["external_torque"][:, 0] if "external_torque" in res else np.zeros(len(t))
     meta = dict(meta or {})
     if slack:
-        meta["tendon_force"] = log["tendon_force"]
-    return TestRun(controller, test, log["t"], log[loop.references[0]][:, 0], log[y][:, 0],
-                   log["motor_torque_command"], w, log["x"], meta)
+        meta["tendon_force"] = res["tendon_force"]
+    return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
+                   res["motor_torque_command"], w, res["state"], meta)
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: CompareTestParams | None = None,
@@ -271,10 +276,7 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: Compa
     ctx = loop.create_context(state=state, motor_torque=motor_torque,
                               references={r: reference for r in loop.references})
     if t_settle > 0:
-        sim = _make_simulator(loop, ctx, params.max_step)
-        sim.AdvanceTo(t_settle)
-        if not np.all(np.isfinite(ctx.get_continuous_state_vector().CopyToVector())):
-            raise SimulationDivergedError(f"closed loop diverged while settling at reference {reference}")
+        simulate(loop, ctx, t_settle, log=(), max_step=params.max_step, accuracy=1e-6)  # advances ctx
     ctx.SetTime(0.0)
     return ctx
 
@@ -399,21 +401,18 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     meta: dict[str, Any] = {}
     dist = None
     if test == "step":
-        t0, r1 = p.step_delay, r0 + p.step_size
-        ref = (lambda t: r1 if t >= t0 - 1e-12 else r0)
+        ref = Step(p.step_delay, r0 + p.step_size, before=r0)
         t_final = p.step_duration
     elif test == "sine":
-        ref = (lambda t: r0 + p.sine_amplitude * math.sin(2 * math.pi * p.sine_frequency * t))
+        ref = Sine(p.sine_amplitude, p.sine_frequency, offset=r0)
         t_final = p.sine_periods / p.sine_frequency
     elif test == "disturbance":
-        t0 = p.step_delay
-        ref = (lambda t: r0)
-        dist = (lambda t: p.disturbance_torque if t >= t0 - 1e-12 else 0.0)
+        ref = Constant(r0)
+        dist = Step(p.step_delay, p.disturbance_torque)
         t_final = p.step_duration
     else:
         f0, f1, T = p.sweep_start, p.sweep_stop, p.sweep_duration
-        k = (f1 - f0) / T
-        ref = (lambda t: r0 + p.sweep_amplitude * math.sin(2 * math.pi * (f0 * t + 0.5 * k * t * t)))
+        ref = Chirp(p.sweep_amplitude, f0, f1, T, offset=r0)
         t_final = T
         meta.update(f_low=f0, f_high=f1)
     run = _simulate(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
@@ -473,8 +472,12 @@ def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
 
 
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
-                       params: CompareTestParams | None = None) -> tuple[list[TestRun], list[Metrics]]:
-    """All applicable standard tests on one closed loop (``disturbance`` only with ``external_torque``)."""
+                       params: CompareTestParams | None = None,
+                       progress: Callable[[str], Any] | None = None) -> tuple[list[TestRun], list[Metrics]]:
+    """All applicable standard tests on one closed loop (``disturbance`` only with ``external_torque``).
+
+    ``progress(label)`` is called after each test (e.g. to advance a progress bar).
+    """
     p = params or compare_test_params(loop.rig)
     if tests is None:
         tests = [t for t in TESTS if t != "disturbance" or "external_torque" in loop.disturbances]
@@ -485,21 +488,25 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
             run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
         except SimulationDivergedError as exc:
             rows.append(Metrics(controller, test, status=f"diverged: {exc}"))
+            if progress is not None:
+                progress(f"{controller}/{test}")
             continue
         runs.append(run)
         rows.append(m)
+        if progress is not None:
+            progress(f"{controller}/{test}")
     return runs, rows
 
 
 def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = None,
-            params: CompareTestParams | None = None) -> Comparison:
-    """Run the standard tests on every closed loop ``{name: loop}``."""
+            params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None) -> Comparison:
+    """Run the standard tests on every closed loop ``{name: loop}`` (``progress(label)`` after each test)."""
     if not loops:
         raise ValueError("compare: give at least one closed loop")
     runs, rows = [], []
     rig = ""
     for name, loop in loops.items():
-        r, m = run_standard_tests(loop, controller=name, tests=tests, params=params)
+        r, m = run_standard_tests(loop, controller=name, tests=tests, params=params, progress=progress)
         runs += r
         rows += m
         rig = getattr(loop.rig, "name", rig)
@@ -507,7 +514,8 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
 
 
 def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
-                        params: CompareTestParams | None = None, **loop_options: Any) -> Comparison:
+                        params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None,
+                        **loop_options: Any) -> Comparison:
     """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
 
     ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
@@ -526,7 +534,7 @@ def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, te
         rig = make_rig()
         opts = {**entry.loop_options, **loop_options}
         loops[n] = closed_loop(rig, entry.factory(rig), **opts)
-    return compare(loops, tests=tests, params=params or compare_test_params(probe))
+    return compare(loops, tests=tests, params=params or compare_test_params(probe), progress=progress)
 
 
 # ----------------------------------------------------------------------------

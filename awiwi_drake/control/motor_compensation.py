@@ -28,7 +28,7 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain,
 from awiwi_drake.control.compare import simulate_loop
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleCompensationParams
-from awiwi_drake.rigs.base import OperatingPoint, Rig
+from awiwi_drake.rigs.base import OperatingPoint, Rig, state_names
 
 __all__ = ["motor_rig", "RippleEstimate", "MotorPdLaw", "constant_velocity_run", "FrictionData", "FrictionFit",
            "friction_identification_data", "fit_friction", "identify_ripple", "harmonic", "amplitude_spectrum",
@@ -52,7 +52,7 @@ def motor_rig(motor: MotorParams | None = None) -> Rig:
         w = float(motor_velocity)
         return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
 
-    return Rig("motor_rig", d, p, ("theta", "omega"), "python", equilibrium)
+    return Rig("motor_rig", d, p, state_names(motors=1), "python", equilibrium)
 
 
 @dataclass(frozen=True)

@@ -40,8 +40,9 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import is_float
 from awiwi_drake.control.base import COMMAND_PORT, REFERENCE_SUFFIX, check_gain, check_gains
-from awiwi_drake.control.linear import linearize_rig, reference_maps
-from awiwi_drake.control.lqr import expand_q, lqr_gain
+from awiwi_drake.analysis.linear import linearize, lqr_gain
+from awiwi_drake.control.linear import reference_maps
+from awiwi_drake.control.lqr import expand_q
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
 __all__ = ["RigJacobian", "PrintedTendonFactorisation", "PrintedJointFactorisation", "TendonSdreModel", "LinearReferenceModel", "SdreController_", "SdreController",
@@ -152,9 +153,9 @@ class LinearReferenceModel:
     reference = "link_angle"
 
     def __init__(self, lin):
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.C["link_angle"])
+        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("link_angle").C)
         self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(np.ravel(lin.y0["link_angle"])[0])
+        self.r0 = float(lin.output("link_angle").y0[0])
         self.inputs = {"link_angle_reference": 1, "state": lin.A.shape[0]}
 
     def state(self, values):
@@ -249,7 +250,7 @@ def tendon_sdre_controller(rig: Any, params: SdreTendonParams | None = None, *, 
 def joint_sdre_controller(rig: Any, params: SdreJointParams | None = None, *, op: Any = None, fixed: bool = False):
     """Registered factory ``sdre`` for the joint rigs (Table 14.2); ``fixed=True``: LQR at ``op``."""
     p = params or SdreJointParams()
-    lin = linearize_rig(rig, op, outputs=("state", "link_angle"))
+    lin = linearize(rig, op, outputs=("state", "link_angle"))
     model = LinearReferenceModel(lin)
     jac = RigJacobian(rig) if p.factorisation == "jacobian" else PrintedJointFactorisation(rig)
     n, m = lin.B.shape

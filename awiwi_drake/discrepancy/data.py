@@ -115,7 +115,8 @@ def dataset_paths(path) -> tuple[pathlib.Path, pathlib.Path]:
     """``(csv, json)`` paths of a dataset given either file or the stem."""
     p = pathlib.Path(path)
     stem = p.with_suffix("") if p.suffix.lower() in (".csv", ".json") else p
-    return stem.with_suffix(".csv"), stem.with_suffix(".json")
+    # append, never replace: a stem may contain dots (``run_x0.5``)
+    return stem.with_name(stem.name + ".csv"), stem.with_name(stem.name + ".json")
 
 
 def _is_number(v) -> bool:

@@ -49,6 +49,7 @@ from ..components.friction import guide_friction, guide_friction_force
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
+from ..rigs.base import state_names as rig_state_names
 from .coupling import FingerCoupling, HandCoupling, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
 
@@ -78,16 +79,23 @@ class HandRig(Rig):
     def num_joints(self) -> int:
         return len(self.extra["joint_names"])
 
-    def link_estimator(self, period: float = 1.0 / 3000.0):
+    def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
         Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
         ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.
+        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
+        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
+        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
         """
+        from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator
+        p = params or LinkEstimatorParams()
+        period = 1.0 / p.rate_hz if period is None else max(float(period), 1.0 / p.rate_hz)
         return link_state_estimator(self.extra["coupling"], self.params.motor.pulley_radius, self.extra["offsets"],
-                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"))
+                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"),
+                                    iterations=p.iterations, step0=p.initial_step,
+                                    velocity_time_constant=max(p.velocity_time_constant, period))
 
     def joint_angles_of(self, state) -> np.ndarray:
         """The joint angles (plant positions) in a rig state vector."""
@@ -164,14 +172,6 @@ def GuideFriction_(T):
 
 
 GuideFriction = GuideFriction_[None]
-
-
-def _state_names(plant_joint_names, tendon_names, hysteresis=False):
-    names = list(plant_joint_names) + [f"{j}_dot" for j in plant_joint_names]
-    names += [f"theta_{t}" for t in tendon_names] + [f"omega_{t}" for t in tendon_names]
-    if hysteresis:
-        names += [f"hysteresis_force_{t}" for t in tendon_names]
-    return tuple(names)
 
 
 def tendon_spring_laws(p, tendon_names):
@@ -298,7 +298,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = _state_names(joint_names, coupling.tendon_names, drive.hysteresis)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis)
     extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
                  torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                  drive_coupling=drive_coupling, models=models, joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,

@@ -52,8 +52,10 @@ class DiscrepancySettings(Parameters):
                "benchmark)",
         doc="differentiation window at 40 dB")
     max_effects: int = param(
-        2, unit="-", low=0, high=6,
-        source="chosen: up to two hidden effects at once keeps the search over effect pairs small (workflow scope)", doc="physical effects added at most")
+        4, unit="-", low=0, high=6,
+        source="chosen: up to four effects in one dataset (three-effect datasets need a fourth slot "
+               "for a calibration-like leftover); each must pass every acceptance test",
+        doc="physical effects added at most")
     max_nuisance: int = param(
         2, unit="-", low=0, high=6,
         source="chosen: at most two calibration corrections per diagnosis",
@@ -101,9 +103,29 @@ class DiscrepancySettings(Parameters):
                "and is not significantly worse: 'ambiguous'",
         doc="runner-up/winner gain ratio for 'ambiguous'")
     max_nfev: int = param(
-        15, unit="-", low=1, high=1000,
-        source="chosen: trust-region Gauss-Newton converges in < 10 iterations from the "
-               "screening/probe estimate; 15 bounds the cost", doc="fit iterations")
+        40, unit="-", low=1, high=1000,
+        source="chosen: trust-region Gauss-Newton from the screening/probe estimate converges "
+               "in < 20 evaluations on the benchmark; 15 stalled a joint_friction fit at 63 % "
+               "of its screened gain", doc="fit function evaluations per round")
+    fit_tolerance: float = param(
+        1e-4, unit="-", low=0.0, high=1.0,
+        source="chosen: a relative cost change of 1e-4 at ~10^4 training residuals is < 1 BIC "
+               "unit per parameter", doc="relative cost tolerance of the fit (ftol)")
+    fit_rounds: int = param(
+        3, unit="-", low=1, high=20,
+        source="chosen: optimise with the window-start profile of the current point, refresh it, "
+               "repeat; two refreshes suffice for the stateful effects on the benchmark",
+        doc="profile refreshes of one fit at most")
+    fit_tolerance_refresh: float = param(
+        2e-3, unit="-", low=0.0, high=1.0,
+        source="chosen: the refreshed profile changes the training cost by < 0.2 % (a few BIC "
+               "units at 10^4 residuals): the fit and its score agree", doc="profile refresh tolerance")
+    unexplained_ratio: float = param(
+        1.5, unit="-", low=1.0, high=100.0,
+        source="chosen: an independent evaluation judged held-out residuals above 1.5x the noise "
+               "floor unexplained; null datasets reach 0.99-1.05 and correctly named effects with a form mismatch "
+               "(Stribeck truth vs catalog Coulomb) stay below 1.5 (benchmark)",
+        doc="held-out residual / noise floor above which a discrepancy is 'unexplained'")
 
 
 @dataclass(frozen=True)
