@@ -254,3 +254,23 @@ def test_finger_with_hysteresis_and_guide_friction_builds_and_dissipates():
     f = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
     tau_fr = tau + P.T @ f
     assert tau_fr @ x[n:2 * n] < 0               # guide friction takes power from the links
+
+
+def test_batched_joint_rigs_equal_the_single_rig_copy_by_copy():
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    br = batched_joint_rig(5)
+    rig = br.single
+    ops = [rig.operating_point(pretension=f, link_angle=a) for f, a in zip((10, 20, 30, 40, 50), (0, .1, -.1, .2, 0))]
+    ctx = br.context(ops)
+    x = ctx.get_continuous_state_vector().CopyToVector() + RNG.normal(scale=0.01, size=30)
+    ctx.SetContinuousState(x)
+    d = br.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+    f = br.diagram.GetOutputPort("tendon_force").Eval(ctx)
+    c1 = rig.context()
+    for i, op in enumerate(ops):
+        c1.SetContinuousState(x[6 * i:6 * i + 6])
+        rig.diagram.GetInputPort("motor_torque").FixValue(c1, op.motor_torque)
+        np.testing.assert_allclose(d[6 * i:6 * i + 6], rig.diagram.EvalTimeDerivatives(c1).CopyToVector(), rtol=1e-12)
+        np.testing.assert_allclose(f[2 * i:2 * i + 2], rig.diagram.GetOutputPort("tendon_force").Eval(c1), rtol=1e-12)
+    ad = br.diagram.ToAutoDiffXd()       # the batch converts too (law path per copy)
+    assert ad.num_continuous_states() == 30
