@@ -216,7 +216,7 @@ def test_finger_per_tendon_spring_override_changes_only_that_tendon():
     stiff_tendon = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))   # 4x the section: stiffer in series
     p = base.replace(tendon_springs=(("index_h3", stiff_tendon),))
     rig, ref = finger_diagram(finger="index", params=p), finger_diagram(finger="index", params=base)
-    names = rig.extra["tendon_names"]
+    names = rig.tendon_names
     i = names.index("index_h3")
     op, op_ref = rig.operating_point(pretension=30.0), ref.operating_point(pretension=30.0)
     k = rig.diagram.GetOutputPort("tendon_stiffness").Eval(rig.context(op))
@@ -242,7 +242,7 @@ def test_finger_with_hysteresis_and_guide_friction_builds_and_dissipates():
     p = FingerRigParams.for_finger("index").with_physics(hysteresis=True, guide_friction=True)
     rig = finger_diagram(finger="index", params=p)
     n, m = rig.num_joints, rig.num_tendons
-    assert rig.num_states == 2 * n + 3 * m and rig.state_names[-1] == f"hysteresis_force[{rig.extra['tendon_names'][-1]}]"
+    assert rig.num_states == 2 * n + 3 * m and rig.state_names[-1] == f"hysteresis_force[{rig.tendon_names[-1]}]"
     op = rig.operating_point()
     ctx = rig.context(op)
     x = op.state.copy()
@@ -250,7 +250,7 @@ def test_finger_with_hysteresis_and_guide_friction_builds_and_dissipates():
     ctx.SetContinuousState(x)
     tau = rig.diagram.GetOutputPort("joint_torque").Eval(ctx)
     # friction part of the joint torque: total minus the elastic -P^T f
-    P = np.asarray(rig.extra["coupling"].P(x[:n]))
+    P = np.asarray(rig.coupling.P(x[:n]))
     f = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
     tau_fr = tau + P.T @ f
     assert tau_fr @ x[n:2 * n] < 0               # guide friction takes power from the links

@@ -59,7 +59,7 @@ class BatchedRig:
 def batched_joint_rig(num_copies: int, *, params: JointRigParams | None = None) -> BatchedRig:
     """``num_copies`` joint rigs with ``params`` in one system (see the module docstring)."""
     single = joint_rig(params=params)
-    model = single.extra["drive"].model
+    model = single.drive.model
     b = DiagramBuilder()
     sys_ = b.AddNamedSystem("joint_rigs", TendonDriveBatch_[float](model, num_copies))
     for name in ("motor_torque", "external_torque"):
