@@ -171,7 +171,7 @@ def _hand_like(target, seconds, repeats, params=None):
     def run():
         rig = hand_diagram(params=params) if target == "hand" else finger_diagram(finger=target, params=params)
         cl = closed_loop(rig, joint_pd_controller(rig))
-        q_ref = np.array(rig.operating_point().info["joint_angles"], dtype=float)
+        q_ref = np.array(rig.operating_point().joint_angle, dtype=float)
         q_ref[1 if target != "hand" else 5] += 0.2
         ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
         out = _fixed_rk3(cl.diagram, ctx, seconds)

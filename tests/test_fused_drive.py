@@ -224,10 +224,10 @@ def test_finger_per_tendon_spring_override_changes_only_that_tendon():
     others = [j for j in range(len(names)) if j != i]
     np.testing.assert_allclose(k[others], k_ref[others], rtol=1e-12)
     law = tendon_spring(stiff_tendon)
-    assert k[i] == pytest.approx(float(law.stiffness(np.array([op.info["elongation"][i]]))[0]), rel=1e-12)
+    assert k[i] == pytest.approx(float(law.stiffness(np.array([op.elongation[i]]))[0]), rel=1e-12)
     assert k[i] > k_ref[i]                       # a stiffer tendon in series stiffens the drive
     # both operating points hold the same forces: the override moved only that tendon's motor angle
-    np.testing.assert_allclose(op.info["tendon_force"], op_ref.info["tendon_force"], rtol=1e-9)
+    np.testing.assert_allclose(op.tendon_force, op_ref.tendon_force, rtol=1e-9)
     with pytest.raises(ValueError, match="unknown tendon 'x9'"):
         finger_diagram(finger="index", params=base.replace(tendon_springs=(("x9", stiff_tendon),)))
     with pytest.raises(ValueError, match="needs backend='compiled'"):

@@ -29,12 +29,12 @@ def test_operating_point_is_an_equilibrium_and_linearization_gives_the_stiffness
     op = rig.operating_point(pretension=25.0, joint_angles=OPS[finger])
     lin = linearize(rig, op, equilibrium_tolerance=1e-6)     # Drake checks xdot(op) ~ 0
     n = rig.num_joints
-    q = op.info["joint_angles"]
+    q = op.joint_angle
     # link rows: M qdd = -K_q dq + ...  =>  M A[v, q] = -K_q  with K_q of (5.12) (+ coupling element)
     K_from_drake = -_mass_matrix(rig, q) @ lin.A[n:2 * n, :n]
-    np.testing.assert_allclose(K_from_drake, op.info["joint_stiffness"], rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(op.info["tendon_force"].mean(), 25.0, rtol=1e-12)
-    assert np.all(op.info["tendon_force"] > 0)
+    np.testing.assert_allclose(K_from_drake, op.joint_stiffness, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(op.tendon_force.mean(), 25.0, rtol=1e-12)
+    assert np.all(op.tendon_force > 0)
     # the three backends give the same linearisation (python/symbolic: without hysteresis, which
     # only they cannot carry in a finger; the plant and motor rows are unaffected by it at z = 0)
     p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
@@ -259,7 +259,7 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
     rig.plant.SetPositions(plant_ctx, q)
     tau_g = rig.plant.CalcGravityGeneralizedForces(plant_ctx)
     P = np.asarray(finger_coupling("index").P(q))
-    np.testing.assert_allclose(P.T @ (op.info["tendon_force"] - op0.info["tendon_force"]), tau_g,
+    np.testing.assert_allclose(P.T @ (op.tendon_force - op0.tendon_force), tau_g,
                                rtol=1e-9, atol=1e-12)
     assert 0.002 <= np.max(np.abs(tau_g)) <= 0.008
 

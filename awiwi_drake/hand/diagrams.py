@@ -86,7 +86,7 @@ class HandRig(Rig):
         super().set_operating_point(context, op, fix_inputs=fix_inputs)
         if fix_inputs and self.diagram.HasInputPort("wrist_angle"):
             self.diagram.GetInputPort("wrist_angle").FixValue(
-                context, np.asarray(op.info.get("wrist_angle", np.zeros(2)), dtype=float))
+                context, np.zeros(2) if op.wrist_angle is None else np.asarray(op.wrist_angle, dtype=float))
 
     @property
     def num_joints(self) -> int:
@@ -405,8 +405,8 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
     K_t = _per_tendon(laws, "stiffness", x)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
-    return OperatingPoint(state, u, tau_ext, dict(pretension=f0, joint_angles=q, tendon_force=f, elongation=x,
-                                                  tendon_stiffness=K_t, joint_stiffness=Kq, wrist_angle=wa))
+    return OperatingPoint(state, u, tau_ext, pretension=f0, joint_angle=q, tendon_force=f, elongation=x,
+                          tendon_stiffness=K_t, joint_stiffness=Kq, wrist_angle=wa)
 
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,

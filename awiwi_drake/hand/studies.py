@@ -249,7 +249,7 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "compiled"
         ctx = d.CreateDefaultContext()
         op = rig.operating_point()
         cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
-        q_op = op.info["joint_angles"]
+        q_op = op.joint_angle
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
         res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},

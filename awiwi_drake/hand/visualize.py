@@ -145,7 +145,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     from ..control import closed_loop, make_controller
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     op = rig.operating_point()
-    q0 = op.info["joint_angles"]
+    q0 = op.joint_angle
     q1 = grasp_pose(rig)
     b = DiagramBuilder()
     sys = b.AddSystem(cl.diagram)
