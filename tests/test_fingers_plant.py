@@ -163,7 +163,7 @@ def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
     from awiwi_drake.parameters.hand import FingerRigParams
     p = FingerRigParams.for_finger(finger)
     fp = p.finger
-    rig = finger_diagram(finger=finger, params=p, backend="python")
+    rig = finger_diagram(finger=finger, params=p)
     op = rig.operating_point(pretension=p.pretension)
     c = rig.models.coupling_vector
     comp = coupling_compliance(op.joint_stiffness, c)

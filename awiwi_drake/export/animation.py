@@ -121,14 +121,14 @@ def frame_camera(points: np.ndarray, params: AnimationParams | None = None) -> t
     return target + distance * direction, target
 
 
-def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "python",
+def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "compiled",
                      meshcat: Meshcat | None = None, params: AnimationParams | None = None,
                      progress=None) -> AnimationResult:
     """Simulate a grasp of ``target`` ("hand" or a finger name) and write ``out`` (HTML).
 
     The HTML is self-contained (opens offline) and holds the geometry, the
-    motion and the camera framed on the moving links.  ``backend="python"`` is
-    the faster drive for the whole hand (see benchmarks/bench_hand.py).
+    motion and the camera framed on the moving links.  ``backend="compiled"`` (the
+    default) is the fast drive (see benchmarks/bench_rigs.py).
     ``progress(t, duration)`` is passed to :func:`simulate` (e.g.
     :class:`awiwi_drake.config.SimulationProgress`).  Returns an :class:`AnimationResult`.
     """

@@ -37,7 +37,7 @@ class WristCompensationStudy:
                 "compensated": float(np.max(np.abs(self.drift_compensated)))}
 
 
-def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic", amplitude: float = np.radians(5.0), frequency: float = 2.0,
+def wrist_compensation_study(target: str = "index", *, backend: str = "compiled", amplitude: float = np.radians(5.0), frequency: float = 2.0,
                              t_final: float = 0.5, controller: JointControllerParams | None = None,
                              accuracy: float = 1e-3) -> WristCompensationStudy:
     """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
