@@ -13,7 +13,8 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain,
 from awiwi_drake.control.compare import (gain_diagram, run_test, simulate_loop, sine_metrics, step_metrics)
 from awiwi_drake.control.registry import controller_names, get_entry, register_controller
 from awiwi_drake.control.sensors import Quantizer, force_sensor, quantize
-from awiwi_drake.parameters.control import ForceSensorParams, compare_test_params
+from awiwi_drake.control.compare import compare_test_params
+from awiwi_drake.parameters.control import ForceSensorParams
 
 
 class _PassThrough(StaticLaw):
@@ -209,7 +210,7 @@ def test_registry_errors_and_names():
 
 def test_each_rig_has_one_name_in_api_cli_and_registry():
     from awiwi_drake.control.registry import RIG_NAMES, rig_kind
-    from awiwi_drake.rigs import TARGETS, build_target
+    from awiwi_drake.diagrams import TARGETS, build_target
     assert sorted(TARGETS) == sorted(RIG_NAMES)
     for name in ("tendon-rig", "flexible-joint", "joint-rig", "finger-index"):
         rig = build_target(name)
