@@ -270,3 +270,29 @@ def test_augmented_parameters_build_a_rig_with_the_same_dynamics():
     with pytest.raises(ValueError, match="JointRigParams"):
         from awiwi_drake.parameters import TendonRigParams
         augmented_rig_parameters(dx, TendonRigParams())
+
+
+def _dx(ratio_after, steps=(), stop="no candidate passes the acceptance tests", unexplained=None):
+    from awiwi_drake.discrepancy.result import Diagnosis, Step
+    s = [Step(e, "physical", "confirmed", 1.0, {}, {}, 0.1, {}, [], []) for e in steps]
+    unexpl = ratio_after > 1.5 if unexplained is None else unexplained
+    return Diagnosis("d", "joint", "unexplained discrepancy remains" if unexpl else "effects found", list(steps), [],
+                     s, 0.2, 0.1, {}, {}, 30.0, ratio_after, {}, default_vector(), 1.0, 1,
+                     unexplained_residual=unexpl, unexplained_ratio=1.5,
+                     unexplained={"text": "tendon_force_1 (3.1x floor)"} if unexpl else {}, stop_reason=stop)
+
+
+def test_findings_never_say_nothing_is_missing_while_a_discrepancy_remains():
+    """The report and CLI text: "unexplained" with where when the residual stays above the
+    threshold (with or without named steps); "nothing is missing" only when the nominal
+    residual is at the floor; otherwise the ratio is stated, never "nothing missing"."""
+    from awiwi_drake.discrepancy.report import findings_text
+
+    for dx in (_dx(3.1), _dx(3.1, ["motor_friction"])):
+        t = findings_text(dx)
+        assert t.startswith("Unexplained discrepancy remains") and "tendon_force_1" in t
+        assert "nothing is missing" not in t
+    assert "nothing is missing" in findings_text(_dx(1.01, stop="residual at the noise floor (ratio 1.01 < 1.03)"))
+    t = findings_text(_dx(1.3))
+    assert "nothing is missing" not in t and "1.30x" in t
+    assert "1.20x" in findings_text(_dx(1.2, ["delay"]))
