@@ -13,7 +13,8 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain,
 from awiwi_drake.control.compare import (gain_diagram, run_test, simulate_loop, sine_metrics, step_metrics)
 from awiwi_drake.control.registry import controller_names, get_entry, register_controller
 from awiwi_drake.control.sensors import Quantizer, force_sensor, quantize
-from awiwi_drake.parameters.control import ForceSensorParams, compare_test_params
+from awiwi_drake.control.compare import compare_test_params
+from awiwi_drake.parameters.control import ForceSensorParams
 
 
 class _PassThrough(StaticLaw):

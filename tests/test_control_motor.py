@@ -8,9 +8,9 @@ import pytest
 from _fd import autodiff_vs_fd, fd_jacobian
 from awiwi_drake.components import atan_friction
 from awiwi_drake.control.base import StaticLawController
-from awiwi_drake.control.motor_compensation import (MotorPdLaw, RippleEstimate, fit_friction,
-                                                    friction_identification_data, harmonic,
-                                                    ripple_compensation_experiment)
+from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
+from awiwi_drake.reproductions.ch03_motor import (fit_friction, friction_identification_data, harmonic,
+                                                  ripple_compensation_experiment)
 from awiwi_drake.parameters import MotorParams
 from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleCompensationParams
 

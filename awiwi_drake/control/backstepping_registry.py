@@ -40,7 +40,7 @@ def _sampled_damping(rig, damping: float) -> float:
 
 
 def _backstepping(rig):
-    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
     from awiwi_drake.parameters.rigs import JointRigParams
     g = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else ImpedanceBacksteppingGains()
@@ -48,12 +48,12 @@ def _backstepping(rig):
 
 
 def _position(rig):
-    from awiwi_drake.control.backstepping_studies import position_controller
+    from awiwi_drake.control.backstepping import position_controller
     return position_controller(rig)
 
 
 def _optimal(rig):
-    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.control.optimal_gains import optimize_gains, rate_limited_case
     from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase, OptimalGainsCase
     from awiwi_drake.parameters.rigs import JointRigParams

@@ -35,13 +35,26 @@ from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine,
 from awiwi_drake.analysis.schedules import Schedule
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import ClosedLoop
-from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
+from awiwi_drake.control.registry import rig_kind
+from awiwi_drake.parameters.control import CompareTestParams
 
-__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
+__all__ = ["compare_test_params", "TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
            "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
            "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
+
+
+def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
+    """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
+    kind = rig_kind(rig)
+    if kind == "tendon_rig":
+        base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
+                                 sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
+                                 sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
+    else:
+        base = CompareTestParams()
+    return base.replace(**overrides) if overrides else base
 
 
 @dataclass

@@ -27,7 +27,8 @@ from pydrake.systems.primitives import AffineSystem, Multiplexer, TrajectorySour
 from pydrake.trajectories import PiecewisePolynomial
 
 from awiwi_drake.control.base import ClosedLoop, closed_loop
-from awiwi_drake.rigs.demo import DemoScenario, MotorPositionGains, motor_references
+from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+from awiwi_drake.rigs.demo import motor_references
 
 __all__ = ["motor_position_controller", "demo_references", "joint_rig_position_loop"]
 

@@ -146,7 +146,7 @@ def _index_mode(x: _Inputs) -> float:
 
 
 def _fig5_7(x: _Inputs) -> float:
-    from awiwi_drake.hand.studies import coriolis_study
+    from awiwi_drake.reproductions.ch05_fingers import coriolis_study
     r = coriolis_study("index", deflection=0.1, t_final=0.05, num_samples=51, params=_index_rig_params(x))
     return float(r.max_abs_difference[-1])
 

@@ -1,5 +1,7 @@
-"""The three test rigs of the thesis as Drake diagrams.
+"""The test rigs of the thesis as Drake diagrams.
 
+* :func:`motor_rig` - one free motor, no tendon: the plant of ch. 3 ((3.5)).
+  State ``[theta, omega]``.
 * :func:`tendon_rig` - one motor winding one tendon through a spring mechanism,
   far end fixed: the plant of ch. 10 (10.1) and 14.2.1. State ``[theta, omega]``.
 * :func:`flexible_joint_rig` - motor, spring, link: the 4th-order plant (12.8)
@@ -24,18 +26,18 @@ from __future__ import annotations
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer, Multiplexer
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer
 
 from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
 from awiwi_drake.components.fused_drive import DriveModel, TendonDrive_
-from awiwi_drake.components.motor import motor_ripple_torque
+from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link, state_names
 
-__all__ = ["tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
+__all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 
 DEFAULT_BACKEND = "compiled"
 
@@ -250,3 +252,24 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
 
     return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
+
+
+
+def motor_rig(motor: MotorParams | None = None) -> Rig:
+    """One free motor (no tendon): ``B thdd = sat(u) + tau_fric + tau_ripple`` ((3.5)); state [theta, omega]."""
+    p = motor or MotorParams()
+    b = DiagramBuilder()
+    bank = b.AddNamedSystem("motor", MotorBank(p, 1))
+    zero = b.AddNamedSystem("no_tendon", ConstantVectorSource([0.0]))
+    b.Connect(zero.get_output_port(), bank.GetInputPort("tendon_force"))
+    b.ExportInput(bank.GetInputPort("motor_torque"), "motor_torque")
+    for nm in ("state", "motor_angle", "motor_velocity", "applied_torque"):
+        b.ExportOutput(bank.GetOutputPort(nm), nm)
+    d = b.Build()
+    d.set_name("motor_rig")
+
+    def equilibrium(motor_velocity: float = 0.0) -> OperatingPoint:
+        w = float(motor_velocity)
+        return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
+
+    return Rig("motor_rig", d, p, state_names(motors=1), "python", equilibrium)
