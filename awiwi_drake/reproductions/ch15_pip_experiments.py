@@ -66,7 +66,7 @@ def _friction_params():
 
 
 def _controller(name: str, rig):
-    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.control.impedance import impedance_controller as linear_impedance
     from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains
     if name == "backstepping":
