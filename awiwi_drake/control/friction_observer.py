@@ -42,7 +42,7 @@ def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
 @TemplateSystem.define("DisturbanceObserver_")
 def DisturbanceObserver_(T):
     class Impl(LeafSystem_[T]):
-        """Observer (9.2). Inputs ``link_velocity`` (1) [rad/s], ``joint_torque`` (1) [Nm] (known
+        """Observer (9.2). Inputs ``joint_velocity`` (1) [rad/s], ``joint_torque`` (1) [Nm] (known
         driving torque); output ``disturbance_estimate`` (1) [Nm] (``-tau_fric_hat``); state ``w_hat``.
         """
 
@@ -53,7 +53,7 @@ def DisturbanceObserver_(T):
                 raise ValueError(f"DisturbanceObserver: inertia = {inertia} must be > 0 [kg m^2]")
             self.inertia, self.params, self.damping = float(inertia), params or FrictionObserverParams(), float(damping)
             self.DeclareContinuousState(1)
-            self.DeclareVectorInputPort("link_velocity", 1)
+            self.DeclareVectorInputPort("joint_velocity", 1)
             self.DeclareVectorInputPort("joint_torque", 1)
             self.DeclareVectorOutputPort("disturbance_estimate", 1, self._calc,
                                          prerequisites_of_calc={self.all_state_ticket(),
@@ -85,12 +85,12 @@ DisturbanceObserver = DisturbanceObserver_[None]
 @TemplateSystem.define("LinkFriction_")
 def LinkFriction_(T):
     class Impl(LeafSystem_[T]):
-        """Link-side stick-slip friction: input ``link_velocity`` (1), output ``friction_torque`` (1) [Nm]."""
+        """Link-side stick-slip friction: input ``joint_velocity`` (1), output ``friction_torque`` (1) [Nm]."""
 
         def _construct(self, params: LinkFrictionParams | None = None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params or LinkFrictionParams()
-            self.DeclareVectorInputPort("link_velocity", 1)
+            self.DeclareVectorInputPort("joint_velocity", 1)
             self.DeclareVectorOutputPort("friction_torque", 1, self._calc,
                                          prerequisites_of_calc={self.get_input_port(0).ticket()})
 

@@ -45,15 +45,15 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     b = DiagramBuilder()
     cl = b.AddNamedSystem("loop", loop.diagram)
     fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
+    b.Connect(cl.GetOutputPort("joint_velocity"), fr.get_input_port())
     b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
+    b.ExportInput(cl.GetInputPort("joint_angle_reference"), "joint_angle_reference")
     diagram = b.Build()
     ctx = diagram.CreateDefaultContext()
     op = rig.operating_point(pretension=g.pretension)
     loop.diagram.GetSubsystemByName("rig").GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
     w = 2 * math.pi * frequency
-    ref_port = diagram.GetInputPort("link_angle_reference")
+    ref_port = diagram.GetInputPort("joint_angle_reference")
 
     def ref(t):
         s, c = math.sin(w * t), math.cos(w * t)

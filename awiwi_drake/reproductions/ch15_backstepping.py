@@ -40,7 +40,7 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "antagonistic_step", "antagonistic_sine",
     "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
-    "plot_link_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
+    "plot_joint_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
 ]
 
 
@@ -112,7 +112,7 @@ def simulate_events(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=N
                     extra_outputs: Sequence[str] = ()) -> BacksteppingRun:
     """Simulate a :class:`ClosedLoop` from ``state0`` with piecewise-constant inputs.
 
-    ``inputs0`` fixes the exported inputs at t = 0 (``link_angle_reference``,
+    ``inputs0`` fixes the exported inputs at t = 0 (``joint_angle_reference``,
     ``external_torque``; missing ones are 0); ``events`` = ``[(t, {port: value})]``
     re-fix them at given times; ``input_functions`` = ``{port: f(t)}`` are
     re-fixed at every sample (sample-and-hold at ``dt``, e.g. a sine reference
@@ -325,7 +325,7 @@ def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: 
     loop = closed_loop(rig, impedance_controller(rig, gains, **kw), rate_hz=None)
     ctx = loop.create_context(state=rig.operating_point().state)
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
-                    output_port_index=loop.diagram.GetOutputPort("link_angle").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index(),
                     equilibrium_check_tolerance=1e-6)
     x_ss = -np.linalg.solve(lin.A(), lin.B() @ [disturbance])
     return float((lin.C() @ x_ss)[0])
@@ -394,7 +394,7 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
     ref = _sine_reference(amplitude, frequency, offset)
     ctrl = impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0)
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    op = rig.operating_point(pretension=g.pretension, link_angle=offset)
+    op = rig.operating_point(pretension=g.pretension, joint_angle=offset)
     fn = ref if feedforward else (lambda t: ref(t)[:1])
     return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
                            input_functions={REFERENCE_PORT: fn}, dt=dt, max_step=dt, label="backstepping sine",
@@ -442,7 +442,7 @@ def _time_series(runs, signal, ylabel, *, ax, title, log=False, reference=False)
     return fig, ax
 
 
-def plot_link_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
+def plot_joint_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
     """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
     return _time_series(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
 

@@ -107,16 +107,16 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     rig = joint_rig(params=pip_parameters(pretension))
     ctrl = _controller(controller, rig)
     loop = closed_loop(rig, ctrl, rate_hz=RATE_HZ)
-    op = rig.operating_point(pretension=pretension, link_angle=ref(0.0)[0])
+    op = rig.operating_point(pretension=pretension, joint_angle=ref(0.0)[0])
     loop_ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                                   references={"link_angle_reference": ref(0.0)[0]})   # before embedding
+                                   references={"joint_angle_reference": ref(0.0)[0]})   # before embedding
     b = DiagramBuilder()
     cl = b.AddNamedSystem("loop", loop.diagram)
     fp = _friction_params() if friction else _friction_params().replace(coulomb=0.0, static=0.0, viscous=0.0)
     fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
+    b.Connect(cl.GetOutputPort("joint_velocity"), fr.get_input_port())
     b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
+    b.ExportInput(cl.GetInputPort("joint_angle_reference"), "joint_angle_reference")
     diagram = b.Build()
     ctx = diagram.CreateDefaultContext()
     # copy the loop's initialised state (rig at the operating point, hold buffers, controller states)
@@ -126,7 +126,7 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
         cl_ctx.SetDiscreteState(i, loop_ctx.get_discrete_state(i).CopyToVector())
     if loop_ctx.num_abstract_states():
         raise RuntimeError("pip_experiment: the loop has abstract state; copy it too")
-    ref_port = diagram.GetInputPort("link_angle_reference")
+    ref_port = diagram.GetInputPort("joint_angle_reference")
     size = ref_port.size()
     ref_port.FixValue(ctx, ref(0.0)[:size])
     sim = Simulator(diagram, ctx)
