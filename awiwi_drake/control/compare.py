@@ -38,7 +38,8 @@ from awiwi_drake.parameters.control import CompareTestParams, compare_test_param
 
 __all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
            "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
-           "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
+           "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step",
+           "dominant_time_constant"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
 
@@ -68,7 +69,8 @@ class Metrics:
     overshoot: float = math.nan          # % of the step size
     settling_time: float = math.nan      # s, band CompareTestParams.settling_band (2 %; 5 % on the tendon rig)
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
-    peak_input: float = math.nan         # max |motor_torque_command| [Nm]
+    peak_input: float = math.nan         # max |torque applied to the motors| (after saturation) [Nm]
+    peak_command: float = math.nan       # max |motor_torque_command| (before saturation) [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
     damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
@@ -76,7 +78,7 @@ class Metrics:
     phase_deg: float = math.nan          # phase of Y/R at the sine frequency
     peak_gain: float = math.nan          # max |Y/R| over the sweep
     resonance_hz: float = math.nan       # frequency of the peak gain
-    bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
+    bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its low-frequency value (log-interpolated)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
@@ -86,6 +88,7 @@ class Metrics:
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
 NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status", "flags")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
+             peak_command="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
              slack_fraction="-")
@@ -117,13 +120,21 @@ class MetricsTable:
                 w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(r).items()})
         return path
 
-    def to_markdown(self) -> str:
+    def to_markdown(self, ref_unit: str = "ref") -> str:
+        """Markdown tables per test; ``ref_unit`` names the unit of the tracked output
+        (``rad`` for the link rigs, ``N`` for the tendon rig) in the column headers."""
+        def unit(c):
+            u = UNITS[c]
+            if c in ("gain", "peak_gain"):
+                return f"{ref_unit}/{ref_unit}" if ref_unit != "ref" else u
+            return ref_unit if u == "ref" else u
+
         lines = []
         for test in dict.fromkeys(r.test for r in self.rows):
             rows = [r for r in self.rows if r.test == test]
             cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
+            lines.append("| controller | " + " | ".join(f"{c} [{unit(c)}]" for c in cols) + " | status |")
             lines.append("|---" * (len(cols) + 2) + "|")
             for r in rows:
                 status = f"{r.status}: {r.flags}" if r.flags else r.status
@@ -246,6 +257,9 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: S
     slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
         log.append("tendon_force")
+    applied = loop.diagram.HasOutputPort("applied_torque")  # the motors' torque after their saturation
+    if applied:
+        log.append("applied_torque")
     res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                    max_step=max_step, accuracy=1e-6)
     t = res.t - res.t[0]
@@ -253,8 +267,45 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: S
     meta = dict(meta or {})
     if slack:
         meta["tendon_force"] = res["tendon_force"]
+    if applied:
+        meta["applied_torque"] = res["applied_torque"]
     return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
                    res["motor_torque_command"], w, res["state"], meta)
+
+
+def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = None, *,
+                           min_share: float = 0.01) -> float | None:
+    """``1 / sigma`` [s] of the slowest closed-loop pole that matters for tracking, or None.
+
+    The loop (continuous: ``rate_hz=None``) is linearised with Drake's ``Linearize``
+    from its first reference to its tracked output at the settled start; each
+    pole's share of the DC gain is ``|c_i b_i / lambda_i|`` in modal coordinates,
+    and poles with less than ``min_share`` of the total (e.g. a co-contraction
+    mode that the link angle does not see) are ignored.  Sampled loops or loops
+    with discrete controller state (which ``Linearize`` cannot take in a mixed
+    diagram) return None.
+    """
+    from awiwi_drake.analysis import linearize
+
+    p = params or compare_test_params(loop.rig)
+    ctx = settle(loop, p.initial_reference, t_settle=0.0, params=p)
+    if not ctx.has_only_continuous_state():
+        return None
+    try:
+        lin = linearize(loop.diagram, context=ctx, input=loop.references[0], outputs=(loop.tracked_outputs[0],),
+                        equilibrium_tolerance=None)
+    except ValueError:
+        return None
+    lam, V = np.linalg.eig(lin.A)
+    try:
+        W = np.linalg.inv(V)
+    except np.linalg.LinAlgError:
+        return None
+    share = np.abs((lin.C @ V).ravel() * (W @ lin.B).ravel() / np.where(np.abs(lam) > 1e-12, lam, 1e-12))
+    if not np.all(np.isfinite(share)) or share.sum() == 0 or np.any(lam.real >= 0):
+        return None
+    keep = share / share.sum() > min_share
+    return float(1.0 / np.min(-lam.real[keep]))
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: CompareTestParams | None = None,
@@ -374,12 +425,28 @@ def gain_diagram(t, r, y, f_low: float, f_high: float, *, smooth: int = 3) -> tu
 
 
 def _sweep_metrics(f, g) -> dict[str, float]:
+    """Peak gain, its frequency and the -3 dB bandwidth of a measured gain diagram.
+
+    The bandwidth is where ``|Y/R|`` first falls below ``1/sqrt(2)`` of its
+    low-frequency value (the mean over the lowest 5 % of the log-frequency span),
+    interpolated in log frequency between the bins; NaN when the gain never
+    falls that low in the sweep, so that the first grid point is never reported.  (A corner
+    within a few bins of the sweep start reads high: the sweep does not see the DC gain.)
+    """
     if len(f) == 0:
         return {}
+    f, g = np.asarray(f, float), np.asarray(g, float)
     i = int(np.argmax(g))
-    below = np.nonzero(g < 1.0 / math.sqrt(2.0))[0]
-    return dict(peak_gain=float(g[i]), resonance_hz=float(f[i]),
-                bandwidth_hz=float(f[below[0]]) if len(below) else math.nan)
+    low = f <= f[0] * (f[-1] / f[0]) ** 0.05
+    level = float(np.mean(g[low])) / math.sqrt(2.0)
+    below = np.nonzero(g < level)[0]
+    below = below[below > 0]
+    bw = math.nan
+    if len(below):
+        k = int(below[0])
+        a = (g[k - 1] - level) / (g[k - 1] - g[k])
+        bw = float(np.exp(np.log(f[k - 1]) + a * (np.log(f[k]) - np.log(f[k - 1]))))
+    return dict(peak_gain=float(g[i]), resonance_hz=float(f[i]), bandwidth_hz=bw)
 
 
 # ----------------------------------------------------------------------------
@@ -418,7 +485,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     run = _simulate(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
     m = Metrics(controller, test)
     u = np.abs(run.command)
-    m.peak_input = float(np.max(u))
+    m.peak_command = float(np.max(u))
+    m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
     limit = loop.saturation
     if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
         limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
@@ -550,26 +618,34 @@ def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: st
         ax.plot(r.t, r.output, label=r.controller)
     ax.plot(runs[0].t, runs[0].reference, "k--", lw=1, label="reference")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel(ylabel or "tracked output")
-    ax.set_title(f"{comparison.rig}: {test}")
+    ax.set_ylabel(ylabel or "tracked output [unit of the reference]")
+    ax.set_title(f"{comparison.rig}: {test} test (solid: output, dashed: reference)")
     ax.legend()
     ax.grid(True, alpha=0.3)
     return fig, ax
 
 
-def plot_gain_diagram(comparison: Comparison, *, ax=None):
-    """Gain diagrams |Y/R|(f) of the sweep test (Fig 11.4 style)."""
+def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = None):
+    """Gain diagrams |Y/R|(f) of the sweep test (Fig 11.4 style) on a log frequency axis,
+    with each controller's -3 dB bandwidth marked (dotted, named in the legend)."""
     import matplotlib.pyplot as plt
     runs = [r for r in comparison.runs if r.test == "sweep"]
     if not runs:
         raise ValueError("plot_gain_diagram: no sweep runs")
     fig, ax = (plt.subplots(figsize=(7, 4)) if ax is None else (ax.figure, ax))
     for r in runs:
-        ax.plot(r.meta["freq"], r.meta["gain"], label=r.controller)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("gain |Y/R|")
-    ax.legend()
-    ax.grid(True, alpha=0.3)
+        line, = ax.semilogx(r.meta["freq"], r.meta["gain"], label=r.controller)
+        try:
+            bw = comparison.table.get(r.controller, "sweep").bandwidth_hz
+        except KeyError:
+            bw = math.nan
+        if math.isfinite(bw):
+            ax.axvline(bw, color=line.get_color(), ls=":", lw=1.2, label=f"{r.controller}: -3 dB at {bw:.3g} Hz")
+    ax.set_xlabel("frequency [Hz] (log)")
+    ax.set_ylabel(f"gain |Y/R| [{unit}/{unit}]" if unit else "gain |Y/R| [-]")
+    ax.set_title(f"{comparison.rig}: closed-loop gain from the chirp test")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
     return fig, ax
 
 
