@@ -58,7 +58,7 @@ def test_registry_and_port_contract_on_a_finger():
 
 def test_new_systems_convert_to_autodiff_and_match_finite_differences():
     rig = _rig("ring")                      # coupled PIP/DIP: S is not the identity
-    coupling = rig.extra["coupling"]
+    coupling = rig.coupling
     S = dof_selection(coupling)
     n, k = S.shape
     rng = np.random.default_rng(3)
@@ -68,10 +68,10 @@ def test_new_systems_convert_to_autodiff_and_match_finite_differences():
                                                     joint_velocity=rng.normal(0, 1, n)),
                                      outputs=["joint_torque_reference"])   # the stiffness output is constant
     thumb = _rig("thumb")
-    path = TendonPathVelocity(thumb.extra["coupling"])      # P(q) of the thumb base
+    path = TendonPathVelocity(thumb.coupling)      # P(q) of the thumb base
     check_system_autodiff_matches_fd(path, [], dict(joint_angle=rng.normal(0, 0.3, 4),
                                                     joint_velocity=rng.normal(0, 1, 4)))
-    m = rig.extra["coupling"].num_tendons
+    m = rig.coupling.num_tendons
     fmap = ForceMap.from_spring(rig.spring, rig.params.motor.pulley_radius)
     law = TendonForceLaw(fmap, rig.params.motor, scheduled=True, size=m, ripple_scale=0.8, path_velocity=True)
     check_system_autodiff_matches_fd(StaticLawController(law), [], dict(
@@ -104,7 +104,7 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
     tau, with the thumb's P(q) at the estimated pose) and stay within [f_min, f_max]."""
     rig = _rig(finger)
     ctrl = TendonChainController(rig)
-    coupling = rig.extra["coupling"]
+    coupling = rig.coupling
     S = dof_selection(coupling)
     n, m = S.shape[0], coupling.num_tendons
     op = rig.operating_point()
@@ -144,7 +144,7 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger):
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
                     output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index())
     S = law.S
-    PS = np.asarray(rig.extra["coupling"].P(op.info["joint_angles"])) @ S
+    PS = np.asarray(rig.coupling.P(op.info["joint_angles"])) @ S
     k, m = S.shape[1], PS.shape[0]
     Mi = np.linalg.inv(law.M)
     A = np.zeros((2 * k + 2 * m, 2 * k + 2 * m))          # d/dt [e, e', z3, z4]

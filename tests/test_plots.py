@@ -58,7 +58,7 @@ def test_demo_figure_has_legends_units_limit_and_applied_torque(demo_run):
     from awiwi_drake.rigs.demo_run import demo_figure
 
     rig, sc, t_ref, refs, res = demo_run
-    limit = rig.extra["torque_limit"]
+    limit = rig.torque_limit
     fig = demo_figure(res, t_ref, refs, sc, torque_limit=limit)
     axes = np.array(fig.axes).reshape(3, 2)
     _check_axes_explained(axes[:, 0])
@@ -151,7 +151,7 @@ def test_compare_figures_have_legends_labels_and_bandwidth(tmp_path):
     plt.close(fig)
     # peak_input is the applied torque (saturated at the motor's limit), beside the command
     step = res.table.get("pd", "step")
-    limit = joint_rig().extra["torque_limit"]
+    limit = joint_rig().torque_limit
     assert step.peak_input <= limit + 1e-9 < step.peak_command
     md = res.table.to_markdown(ref_unit="rad")
     assert "steady_state_error [rad]" in md and "[ref]" not in md and "peak_gain [rad/rad]" in md

@@ -36,6 +36,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import StaticLawController, check_gains
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
@@ -65,7 +66,7 @@ def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
     plant = rig.plant
     ctx = plant.CreateDefaultContext()
     plant.SetPositions(ctx, np.asarray(q, dtype=float))
-    S = dof_selection(rig.extra["coupling"])
+    S = dof_selection(rig.coupling)
     M = S.T @ plant.CalcMassMatrix(ctx) @ S
     return M if full else np.diag(M).copy()
 
@@ -179,7 +180,7 @@ class TendonChainController(Diagram):
                  distribution: ForceDistributionParams | None = None, rate_hz: float = 3000.0):
         super().__init__()
         p = params or HandChainParams()
-        coupling = rig.extra.get("coupling") if hasattr(rig, "extra") else None
+        coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"TendonChainController: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
         fingers = tuple(coupling.parts) if hasattr(coupling, "parts") else (rig.params.finger_name,)

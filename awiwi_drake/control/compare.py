@@ -33,6 +33,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags
 
 from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step, simulate
 from awiwi_drake.analysis.schedules import Schedule
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
@@ -254,7 +255,7 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: S
     log = [y, "motor_torque_command", "state", loop.references[0]]
     if "external_torque" in inputs:
         log.append("external_torque")
-    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
         log.append("tendon_force")
     applied = loop.diagram.HasOutputPort("applied_torque")  # the motors' torque after their saturation
@@ -488,8 +489,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     m.peak_command = float(np.max(u))
     m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
     limit = loop.saturation
-    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
-        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
     if limit is not None:
         m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
     if "tendon_force" in run.meta:

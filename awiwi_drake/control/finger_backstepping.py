@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
@@ -72,7 +73,7 @@ class FingerBacksteppingLaw(StaticLaw):
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None):
         p = params or HandChainParams()
-        coupling = rig.extra.get("coupling") if hasattr(rig, "extra") else None
+        coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
         op = op or rig.operating_point()

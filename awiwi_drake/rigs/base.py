@@ -75,6 +75,20 @@ class Rig:
         ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
     spring : object
         The spring law used (``force``, ``stiffness``).
+    drive : TendonDrive or None
+        The tendon-drive handle inside the diagram.
+    coupling : object or None
+        The routing coupling (``h(q)``, ``P(q)``) of the drive.
+    tension_only : bool
+        Tendon forces cannot push (slack is monitored on ``tendon_force``).
+    torque_limit : float or None
+        Amplifier limit [Nm] on ``motor_torque`` (None: no saturation).
+    max_force : float or None
+        Upper end of the calibrated spring range [N] (over-range monitor).
+    pair_slack : tuple or None
+        ``(x0, r)`` of an antagonistic torsion-spring pair whose hidden tendons can slacken.
+    spring_kind : str or None
+        ``"linear"`` or ``"nonlinear"`` for the flexible joint.
     """
 
     name: str
@@ -85,7 +99,13 @@ class Rig:
     equilibrium: Callable[..., OperatingPoint]
     plant: MultibodyPlant | None = None
     spring: Any = None
-    extra: dict = field(default_factory=dict)
+    drive: Any = None
+    coupling: Any = None
+    tension_only: bool = True
+    torque_limit: float | None = None
+    max_force: float | None = None
+    pair_slack: tuple | None = None
+    spring_kind: str | None = None
 
     @property
     def num_states(self) -> int:

@@ -95,8 +95,8 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
                               dict(tendon_force=tendon_force, elongation=x,
                                    tendon_stiffness=float(spring.stiffness(np.array([x]))[0])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring,
-               dict(drive=drive, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force))
+    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
+               tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
 
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
@@ -201,10 +201,9 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
                               dict(link_angle=link_angle, external_torque=external_torque, spring_torque=tau_s,
                                    stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0])))
 
-    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law,
-               dict(drive=drive, spring_kind=spring, tension_only=False,
-                    torque_limit=p.torque_limit if finite_limit else None,
-                    pair_slack=(law.x0, law.r) if spring == "nonlinear" else None))
+    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
+               spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
+               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None)
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -251,6 +250,5 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                                    tendon_force=f, elongation=x, tendon_stiffness=k,
                                    joint_stiffness=float(rq ** 2 * k.sum())))
 
-    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring,
-               dict(drive=drive, coupling=coupling, tension_only=True, torque_limit=_limit(p.motor),
-                    max_force=spring.max_force))
+    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
+               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
