@@ -39,12 +39,13 @@ TARGETS = {
 }
 
 
-def build_target(name: str, overrides: dict | None = None, **kwargs) -> Rig:
-    """Build a registered target by CLI name with ``NAME=VALUE`` parameter overrides."""
+def build_target(name: str, overrides: dict | None = None, *, params=None, **kwargs) -> Rig:
+    """Build a registered target by CLI name, from ``params`` (default: the target's defaults)
+    with ``NAME=VALUE`` parameter ``overrides`` applied."""
     if name not in TARGETS:
         raise ValueError(f"unknown rig {name!r}; choose one of {', '.join(sorted(TARGETS))}")
     entry = TARGETS[name]
-    params = entry["params"]()
+    params = entry["params"]() if params is None else params
     if overrides:
         params = params.with_overrides(overrides)
     return entry["builder"](params=params, **kwargs)

@@ -62,32 +62,3 @@ def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible_joint"):
         builder.ExportOutput(g.get_output_port(), nm)
     return SimpleRig(name, builder.Build(), ["q", "qdot", "theta", "thetadot"])
 
-
-def autodiff_vs_fd(system, inputs: dict, output: str = "motor_torque", h: float = 1e-6, state=None):
-    """(J_autodiff, J_fd) of ``output`` w.r.t. the concatenated ``inputs`` (float system + its AutoDiff copy)."""
-    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
-
-    names = list(inputs)
-    sizes = [np.size(inputs[n]) for n in names]
-    x0 = np.concatenate([np.ravel(inputs[n]).astype(float) for n in names])
-
-    def eval_float(x):
-        ctx = system.CreateDefaultContext()
-        if state is not None:
-            ctx.SetDiscreteState(state) if ctx.num_discrete_state_groups() else None
-        i = 0
-        for n, s in zip(names, sizes):
-            system.GetInputPort(n).FixValue(ctx, x[i:i + s])
-            i += s
-        return np.array(system.GetOutputPort(output).Eval(ctx))
-
-    ad = system.ToAutoDiffXd()
-    ctx = ad.CreateDefaultContext()
-    xa = InitializeAutoDiff(x0).reshape(-1)
-    i = 0
-    for n, s in zip(names, sizes):
-        ad.GetInputPort(n).FixValue(ctx, xa[i:i + s])
-        i += s
-    J_ad = ExtractGradient(ad.GetOutputPort(output).Eval(ctx))
-    J_fd = np.column_stack([(eval_float(x0 + h * e) - eval_float(x0 - h * e)) / (2 * h) for e in np.eye(len(x0))])
-    return J_ad, J_fd

@@ -10,7 +10,7 @@ derivatives and every output port, with respect to state and inputs).
 from __future__ import annotations
 
 import numpy as np
-from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 
 
 def fd_jacobian(fun, x, h=None):
@@ -50,33 +50,36 @@ def _fix(system, ctx, names, values):
         system.GetInputPort(n).FixValue(ctx, v)
 
 
-def system_jacobians(system, x, inputs: dict, *, ad=None, outputs=None, discrete_state=None):
+def system_jacobians(system, x, inputs: dict, *, wrt=None, ad=None, outputs=None, discrete_state=None):
     """AutoDiffXd and finite-difference Jacobians of a system's time derivatives (when it has
-    continuous state) and its output ports, with respect to ``[x; inputs...]``.
+    continuous state) and its output ports, with respect to ``[x; inputs in wrt...]``.
 
-    Returns ``{name: (J_autodiff, J_fd)}`` with ``name`` ``"xdot"`` or an output port's name.
-    ``discrete_state`` (float) is set in every context (not differentiated).
+    ``wrt`` names the inputs to differentiate by (default: all of ``inputs``; the others are
+    fixed at their values). Returns ``{name: (J_autodiff, J_fd)}`` with ``name`` ``"xdot"`` or an
+    output port's name. ``discrete_state`` (float) is set in every context (not differentiated).
     """
     ad = system.ToAutoDiffXd() if ad is None else ad
     assert ad is not None, f"{system.get_name()} does not convert to AutoDiffXd"
     x = np.asarray(x, dtype=float).ravel()
-    names = list(inputs)
+    names = list(inputs) if wrt is None else list(wrt)
+    fixed = {n: np.ravel(np.asarray(v, dtype=float)) for n, v in inputs.items() if n not in names}
     flat = np.concatenate([x] + [np.ravel(np.asarray(inputs[n], dtype=float)) for n in names])
     offs = np.cumsum([0, x.size] + [np.size(inputs[n]) for n in names])
     ports = [system.get_output_port(i).get_name() for i in range(system.num_output_ports())] \
         if outputs is None else list(outputs)
 
-    def split(v):
-        return v[offs[0]:offs[1]], [v[offs[i + 1]:offs[i + 2]] for i in range(len(names))]
-
-    def evaluate(sys_, v):
+    def evaluate(sys_, v, autodiff):
         ctx = sys_.CreateDefaultContext()
-        xx, us = split(v)
+        xx = v[offs[0]:offs[1]]
         if xx.size:
             ctx.SetContinuousState(xx)
+        lift = (lambda a: np.array([AutoDiffXd(float(e)) for e in a], dtype=object)) if autodiff else (lambda a: a)
         if discrete_state is not None:
-            ctx.SetDiscreteState(discrete_state)
-        _fix(sys_, ctx, names, us)
+            ctx.SetDiscreteState(lift(np.asarray(discrete_state, float)))
+        for i, n in enumerate(names):
+            sys_.GetInputPort(n).FixValue(ctx, v[offs[i + 1]:offs[i + 2]])
+        for n, value in fixed.items():
+            sys_.GetInputPort(n).FixValue(ctx, lift(value))
         out = {}
         if xx.size:
             out["xdot"] = sys_.EvalTimeDerivatives(ctx).CopyToVector()
@@ -85,11 +88,13 @@ def system_jacobians(system, x, inputs: dict, *, ad=None, outputs=None, discrete
         return out
 
     za = InitializeAutoDiff(flat).ravel()
-    grads = {k: ExtractGradient(np.asarray(v, dtype=object)).reshape(np.size(v), flat.size)
-             for k, v in evaluate(ad, za).items()}
+    grads = {}
+    for k, v in evaluate(ad, za, True).items():
+        g = ExtractGradient(np.asarray(v, dtype=object))
+        grads[k] = g.reshape(np.size(v), flat.size) if g.size else np.zeros((np.size(v), flat.size))
     result = {}
     for key in grads:
-        J_fd = fd_jacobian(lambda v, key=key: evaluate(system, v)[key], flat)
+        J_fd = fd_jacobian(lambda v, key=key: evaluate(system, v, False)[key], flat)
         result[key] = (grads[key], J_fd.reshape(grads[key].shape))
     return result
 
@@ -100,3 +105,9 @@ def check_system_autodiff_matches_fd(system, x, inputs: dict, rtol=1e-5, **kw):
     for key, (J_ad, J_fd) in jac.items():
         assert_jacobians_close(J_ad, J_fd, rtol=rtol, name=key)
     return jac
+
+
+def autodiff_vs_fd(system, inputs: dict, output: str = "motor_torque", state=None):
+    """(J_autodiff, J_fd) of one output port w.r.t. the concatenated ``inputs`` of a stateless (or
+    discrete-state, ``state``) system."""
+    return system_jacobians(system, [], inputs, outputs=[output], discrete_state=state)[output]

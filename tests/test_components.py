@@ -7,6 +7,8 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff
 import pydrake.symbolic as sym
 
+from _fd import assert_jacobians_close, autodiff_jacobian, fd_jacobian
+
 from awiwi_drake.components import (
     LeverSpringMechanism, LinearSpring, AntagonisticPairSpring, PolynomialSpring, capstan_friction_force,
     guide_friction_force, hysteresis_rate, motor_friction_torque, motor_ripple_torque, reflected_inertia,
@@ -65,8 +67,7 @@ def test_laws_accept_autodiff_and_symbolic():
     p = MotorParams(ripple=True)
     w = InitializeAutoDiff(np.array([0.7])).ravel()
     d_ad = motor_friction_torque(w, p)[0].derivatives()[0]
-    h = 1e-6
-    d_fd = (motor_friction_torque(np.array([0.7 + h]), p)[0] - motor_friction_torque(np.array([0.7 - h]), p)[0]) / (2 * h)
+    d_fd = fd_jacobian(lambda v: motor_friction_torque(v, p), [0.7], h=1e-6)[0, 0]
     assert d_ad == pytest.approx(d_fd, rel=1e-6)
     x = sym.Variable("w")
     with np.errstate(invalid="ignore"):  # numpy inspects FPU flags after object-array ufuncs
@@ -112,16 +113,17 @@ def test_lever_force_is_virtual_work_of_the_spring(lever):
 
 
 def test_lever_autodiff_equals_finite_difference(lever):
-    x0 = 0.003
-    ad = lever.force(AutoDiffXd(x0, np.array([1.0])))
-    h = 1e-8
-    fd = (lever.force(x0 + h) - lever.force(x0 - h)) / (2 * h)
-    assert ad.value() == pytest.approx(lever.force(x0), rel=1e-12)
-    assert ad.derivatives()[0] == pytest.approx(fd, rel=1e-5)
-    assert lever.stiffness(x0) == pytest.approx(fd, rel=1e-5)
+    x = np.array([0.0005, 0.003, 0.006])
+    J_ad = autodiff_jacobian(lever.force, x)
+    J_fd = fd_jacobian(lever.force, x, h=1e-9)
+    assert_jacobians_close(J_ad, J_fd, rtol=1e-5)
+    np.testing.assert_allclose(np.diag(J_ad), lever.stiffness(x), rtol=1e-9)   # stiffness = d force / dx
     assert lever.force(-1e-3) == 0.0 and lever.stiffness(-1e-3) == 0.0  # slack
-    assert lever.inverse_force(100.0) == pytest.approx(0.0050036, rel=1e-4)
-    assert lever.force(lever.inverse_force(100.0)) == pytest.approx(100.0, rel=1e-9)
+    # the inverse lands on the force and the elongation grows with the force
+    f = np.array([1.0, 50.0, 100.0, 150.0])
+    x_f = np.array([lever.inverse_force(fi) for fi in f])
+    np.testing.assert_allclose(lever.force(x_f), f, rtol=1e-9)
+    assert np.all(np.diff(x_f) > 0)
 
 
 def test_lever_rejects_symbolic_with_clear_message(lever):
@@ -147,10 +149,10 @@ def test_calibration_polynomial_fits_the_mechanism_in_series_with_the_tendon(lev
 def test_spring_stiffness_and_energy_are_derivative_and_integral_of_force(spring):
     x = np.linspace(-1e-3, 5e-3, 61)
     h = 1e-8
-    fd = (spring.force(x + h) - spring.force(x - h)) / (2 * h)
+    fd = np.diag(fd_jacobian(spring.force, x, h=h))
     mask = np.abs(x) > 2 * h
     np.testing.assert_allclose(spring.stiffness(x)[mask], fd[mask], rtol=1e-6, atol=1e-6)
-    e_fd = (spring.energy(x + h) - spring.energy(x - h)) / (2 * h)
+    e_fd = np.diag(fd_jacobian(spring.energy, x, h=h))
     np.testing.assert_allclose(e_fd[mask], spring.force(x)[mask], rtol=1e-6, atol=1e-6)
     assert np.all(spring.force(x[x <= 0]) == 0.0)   # tension only
     assert np.all(spring.stiffness(x[x <= 0]) == 0.0)

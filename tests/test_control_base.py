@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from _control_plants import autodiff_vs_fd, flexible_joint_matrices, linear_flexible_joint_rig
+from _control_plants import flexible_joint_matrices, linear_flexible_joint_rig
+from _fd import autodiff_vs_fd
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains, closed_loop
 from awiwi_drake.control.compare import (gain_diagram, run_test, simulate_loop, sine_metrics, step_metrics)
 from awiwi_drake.control.registry import controller_names, get_entry, register_controller
@@ -196,7 +197,7 @@ def test_registry_errors_and_names():
     assert {"pole-placement", "lqr", "sdre"} <= set(controller_names("flexible-joint"))
     with pytest.raises(ValueError, match="unknown controller 'nope'"):
         get_entry("nope")
-    with pytest.raises(ValueError, match="does not fit rig 'flexible_joint'"):
+    with pytest.raises(ValueError, match="does not fit rig 'flexible-joint'"):
         get_entry("tendon-pd", "flexible-joint")
     with pytest.raises(ValueError, match="already registered"):
         register_controller("lqr", lambda rig: None, rigs=("joint_rig",), description="dup")

@@ -31,7 +31,7 @@ def test_compare_writes_metrics_and_plots(tmp_path):
 
 @pytest.mark.parametrize("args,needle", [
     (["--rig", "flexible-joint", "--controllers", "pd,nope"], "unknown controller 'nope'"),
-    (["--rig", "flexible-joint", "--controllers", "tendon-pd"], "does not fit rig 'flexible_joint'"),
+    (["--rig", "flexible-joint", "--controllers", "tendon-pd"], "does not fit rig 'flexible-joint'"),
     (["--rig", "tendon-rig", "--controllers", "tendon-pd", "--tests", "disturbance"], "external torque"),
     (["--rig", "joint-rig", "--controllers", "pd", "--tests", "ramp"], "unknown test 'ramp'"),
     (["--rig", "joint-rig", "--controllers", "pd,pd"], "duplicate"),

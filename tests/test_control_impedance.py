@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from _control_plants import autodiff_vs_fd
+from _fd import autodiff_vs_fd
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.compare import run_test
 from awiwi_drake.control.impedance import ImpedanceLaw, impedance_controller, transmission
@@ -101,7 +101,7 @@ def test_impedance_laws_convert_to_autodiff_and_reject_bad_gains():
         ctrl = impedance_controller(rig, mode=mode)
         inputs = {"link_angle_reference": [0.1], "link_angle": [0.05], "link_velocity": [0.2],
                   "motor_velocity": [0.1, -0.1], "tendon_force": [22.0, 18.0], "tendon_stiffness": [9000.0, 8000.0]}
-        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs, h=1e-6)
+        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs)
         np.testing.assert_allclose(J_ad, J_fd, rtol=1e-5, atol=1e-7)
     ctrl = impedance_controller(rig, mode="pd")
     J_ad, J_fd = autodiff_vs_fd(ctrl, {"link_angle_reference": [0.1], "state": rig.operating_point().state + 0.01})

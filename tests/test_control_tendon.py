@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from _control_plants import autodiff_vs_fd
+from _fd import autodiff_vs_fd
 from awiwi_drake.analysis import lqr
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.compare import fit_second_order_step, simulate_loop
@@ -69,7 +69,9 @@ def test_steady_state_error_with_and_without_feedforward(fmap):
     log, _, ctrl = _step(tendon_pd_controller, fmap, 20.0, 30.0, t_final=0.4, gains=no_ff)
     kp = ctrl.law.kp_fixed
     r_m = tendon_rig().params.motor.pulley_radius
-    expected = steady_state_force_without_feedforward(30.0, kp, r_m)
+    # at rest the smooth friction vanishes and the motor balances the tendon: Kp (f_des - f) = r_m f
+    expected = 30.0 * kp / (kp + r_m)
+    assert steady_state_force_without_feedforward(30.0, kp, r_m) == pytest.approx(expected, rel=1e-15)
     assert 30.0 - expected > 0.05  # a visible error ...
     assert log["tendon_force"][-1, 0] == pytest.approx(expected, abs=2e-3)  # ... exactly as (10.3) says
     log, _, _ = _step(tendon_pd_controller, fmap, 20.0, 30.0, t_final=0.4)
@@ -184,11 +186,10 @@ def test_tendon_controllers_convert_to_autodiff(fmap):
     inputs = {"tendon_force_reference": [25.0], "tendon_force": [22.0], "motor_velocity": [0.3]}
     for factory in (tendon_pd_controller, tendon_scheduled_controller):
         ctrl = factory(rig, fmap=fmap)
-        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs, h=1e-5)
+        J_ad, J_fd = autodiff_vs_fd(ctrl, inputs)
         np.testing.assert_allclose(J_ad, J_fd, rtol=1e-4, atol=1e-6)
     sd = tendon_sdre_controller(rig, fmap=fmap)
-    J_ad, J_fd = autodiff_vs_fd(sd, {"tendon_force_reference": [25.0], "motor_angle": [0.5], "motor_velocity": [0.1]},
-                                h=1e-5)
+    J_ad, J_fd = autodiff_vs_fd(sd, {"tendon_force_reference": [25.0], "motor_angle": [0.5], "motor_velocity": [0.1]})
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-4, atol=1e-6)
 
 
@@ -204,3 +205,43 @@ def test_sdre_rejects_bad_weights():
         SdreTendonParams(r=0.0)
     with pytest.raises(ValueError, match="update_rate"):
         SdreTendonParams(update_rate=float("nan"))
+
+
+def test_sdre_printed_14_9_gains_do_not_depend_on_the_spring_and_friction_moves_the_jacobian_gain(fmap):
+    """Table 14.1 on (14.9) as printed: K = LQR of [[0, 1], [-r_m^2 k_t(f) / B, 0]], [0, 1/B] with k_t from
+    the spring law directly (scipy CARE): K_theta 999.5-1000, K_omega 10.198 at every force. The
+    full-Jacobian variant gives K_omega 6.02 at rest and ~10.1 in motion; with the (3.8) motor friction
+    switched off it equals the printed factorisation: the gain change is the friction slope, not the spring."""
+    from scipy.linalg import solve_continuous_are
+
+    from awiwi_drake.components.spring import tendon_spring
+    from awiwi_drake.analysis.linear import lqr_gain
+    from awiwi_drake.control.sdre import PrintedTendonFactorisation, RigJacobian
+    p = SdreTendonParams()
+    rig = tendon_rig()
+    mp = rig.params.motor
+    B, r_m = mp.inertia, mp.pulley_radius
+    Q, R = np.diag(p.q_diag), np.array([[p.r]])
+    printed = PrintedTendonFactorisation(fmap, B, r_m)
+    jac = RigJacobian(rig)
+    jac_nofric = RigJacobian(tendon_rig(params=TendonRigParams(motor=MotorParams(friction=False))))
+    spring = tendon_spring(rig.params.spring)
+    gains = []
+    for f in (10.0, 20.0, 30.0, 40.0, 45.0):
+        th = float(fmap.theta_of_force(f))
+        k_t = float(spring.stiffness(spring.inverse_force(f)))
+        A = np.array([[0.0, 1.0], [-r_m ** 2 * k_t / B, 0.0]])
+        Bv = np.array([[0.0], [1.0 / B]])
+        S = solve_continuous_are(A, Bv, Q, R)
+        K_indep = (Bv.T @ S / p.r).ravel()
+        K_printed = lqr_gain(*printed([th, 0.0], [r_m * f]), Q, R)[0].ravel()
+        np.testing.assert_allclose(K_printed, K_indep, rtol=1e-3)
+        gains.append(K_printed)
+        K_rest = lqr_gain(*jac([th, 0.0], [r_m * f]), Q, R)[0].ravel()
+        K_move = lqr_gain(*jac([th, 5.0], [r_m * f]), Q, R)[0].ravel()
+        K_nofric = lqr_gain(*jac_nofric([th, 0.0], [r_m * f]), Q, R)[0].ravel()
+        assert K_rest[1] == pytest.approx(6.02, abs=0.01) and K_move[1] > 10.0
+        np.testing.assert_allclose(K_nofric, K_printed, rtol=5e-3)
+    gains = np.array(gains)
+    assert np.all((gains[:, 0] > 999.4) & (gains[:, 0] <= 1000.0))
+    np.testing.assert_allclose(gains[:, 1], np.sqrt(p.q_diag[1] / p.r + 2 * B * gains[:, 0]), rtol=1e-3)

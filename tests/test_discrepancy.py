@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 
+from _fd import fd_jacobian
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.discrepancy import Dataset, load_dataset, save_dataset
 from awiwi_drake.discrepancy.catalog import PARAM_INDEX, PARAM_NAMES, default_vector
@@ -23,16 +24,17 @@ JOINT = {"motor_inertia": 2e-3, "motor_damping": 1.2e-3, "motor_pulley_radius": 
 
 def _tiny_dataset(rig="joint") -> Dataset:
     t = np.arange(50) * 1e-3
+    w = np.sin(2 * np.pi * 20 * t)  # some excitation (load_dataset rejects constant recordings)
     if rig == "joint":
-        ins = {"motor_torque_1": 0.2 + 0 * t, "motor_torque_2": 0.2 + 0 * t}
-        outs = {"motor_angle_1": 0.3 + 0 * t, "motor_angle_2": 0.3 + 0 * t, "tendon_force_1": 30 + 0 * t,
-                "tendon_force_2": 30 + 0 * t, "link_angle": 0 * t}
+        ins = {"motor_torque_1": 0.2 + 0.05 * w, "motor_torque_2": 0.2 - 0.05 * w}
+        outs = {"motor_angle_1": 0.3 + 0.01 * w, "motor_angle_2": 0.3 - 0.01 * w, "tendon_force_1": 30 + w,
+                "tendon_force_2": 30 - w, "link_angle": 0.01 * w}
         init = {k: 0.0 for k in ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
                                  "link_angle", "link_velocity")}
         params = dict(JOINT)
     else:
-        ins = {"motor_torque": 0.2 + 0 * t}
-        outs = {"motor_angle": 0.3 + 0 * t, "tendon_force": 30 + 0 * t}
+        ins = {"motor_torque": 0.2 + 0.05 * w}
+        outs = {"motor_angle": 0.3 + 0.01 * w, "tendon_force": 30 + w}
         init = {"motor_angle": 0.3, "motor_velocity": 0.0}
         params = {k: JOINT[k] for k in ("motor_inertia", "motor_damping", "motor_pulley_radius", "spring_poly")}
     return Dataset("tiny", rig, t, ins, outs, params, init)
@@ -161,8 +163,7 @@ def test_unforced_rig_is_passive(effects):
         X = _random_state(nom, rng)
         X[-2:] = 0.0
         xdot = model_derivatives(nom, X[:, None], np.zeros((2, 1)), p[:, None])[:, 0]
-        h = 1e-6
-        grad = np.array([(_energy(nom, X + h * e) - _energy(nom, X - h * e)) / (2 * h) for e in np.eye(len(X))])
+        grad = fd_jacobian(lambda x: _energy(nom, x), X, h=1e-6).ravel()
         dEdt = grad @ xdot
         natural = -nom.motor_damping * np.sum(X[2:4] ** 2) - nom.link_damping * X[5] ** 2
         if not effects:
@@ -194,14 +195,11 @@ def _autodiff_check(system, ctx_setup, nx):
     ctx_setup(ad, actx, autodiff=True)
     actx.SetContinuousState(InitializeAutoDiff(X).ravel())
     grad = ExtractGradient(ad.EvalTimeDerivatives(actx).CopyToVector())
-    fd = np.zeros((len(f0), nx))
-    for j in range(nx):
-        h = 1e-7 * max(1.0, abs(X[j]))
-        ctx.SetContinuousState(X + h * np.eye(nx)[j])
-        fp = system.EvalTimeDerivatives(ctx).CopyToVector()
-        ctx.SetContinuousState(X - h * np.eye(nx)[j])
-        fm = system.EvalTimeDerivatives(ctx).CopyToVector()
-        fd[:, j] = (fp - fm) / (2 * h)
+
+    def xdot(x):
+        ctx.SetContinuousState(x)
+        return system.EvalTimeDerivatives(ctx).CopyToVector()
+    fd = fd_jacobian(xdot, X)
     np.testing.assert_allclose(grad, fd, rtol=2e-5, atol=1e-4 * np.abs(fd).max())
     return grad, fd
 

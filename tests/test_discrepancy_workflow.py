@@ -53,10 +53,11 @@ def test_hidden_delay_on_tendon_rig_is_named_with_its_value():
 def test_cli_make_dataset_and_diagnose(tmp_path, capsys):
     from awiwi_drake.cli import main
 
-    assert main(["make-dataset", "--rig", "tendon", "--hide", "motor_friction", "--snr", "30", "--seed", "14",
+    assert main(["make-dataset", "--rig", "tendon-rig", "--hide", "motor_friction", "--snr", "30", "--seed", "14",
                  "--duration", "3", "--name", "mf", "--out", str(tmp_path)]) == 0
     ds = load_dataset(tmp_path / "mf.csv")
-    assert ds.meta["truth"]["hidden"] == ["motor_friction"]
+    assert "truth" not in ds.meta and "truth" not in json.loads((tmp_path / "mf.json").read_text())
+    assert json.loads((tmp_path / "mf.truth.json").read_text())["hidden"] == ["motor_friction"]
     out_json = tmp_path / "dx.json"
     assert main(["diagnose", str(tmp_path / "mf.csv"), "--json", str(out_json),
                  "--report", str(tmp_path / "rep")]) == 0
@@ -70,3 +71,23 @@ def test_cli_make_dataset_and_diagnose(tmp_path, capsys):
     assert step["parameters"]["motor_coulomb"] > 0 and np.isfinite(step["nrmse_after"])
     assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "residual_maps_nominal.png").exists()
     assert main(["diagnose", str(tmp_path / "missing.csv")]) == 2
+
+
+def test_out_of_catalog_link_encoder_bias_is_flagged_not_named(tmp_path):
+    """A link-encoder bias is not in the catalog's physics: no physical effect may be
+    named for it (issue 12: it was named spring_hysteresis), and the verdict says a
+    discrepancy remains, with where, unless a calibration explains it."""
+    from awiwi_drake.discrepancy.report import write_report
+
+    ds = make_truth_dataset("joint", [], snr_db=30, seed=15, gen=SHORT)
+    ds.outputs["link_angle"] = ds.outputs["link_angle"] + 0.05  # rad, ~10x the noise floor
+    dx = diagnose(ds)
+    assert dx.named_effects == []
+    assert dx.unexplained_residual or dx.nuisance_corrections
+    if dx.unexplained_residual:
+        assert dx.verdict == "unexplained discrepancy remains"
+        assert dx.floor_ratio_after > dx.unexplained_ratio
+        assert dx.unexplained["signals_above"] and dx.unexplained["text"]
+        md = write_report(dx, tmp_path / "rep").read_text()
+        assert "Unexplained discrepancy remains" in md and "nothing is missing" not in md
+        assert json.loads((tmp_path / "rep" / "summary.json").read_text())["unexplained_residual"] is True

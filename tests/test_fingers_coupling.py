@@ -7,6 +7,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 from pydrake.symbolic import Evaluate, Expression, Jacobian, Variable
 
+from _fd import fd_jacobian
 from awiwi_drake.hand.coupling import (finger_coupling, hand_coupling, index_coupling_matrix,
                                        joint_stiffness, reduced_coupling_matrix)
 from awiwi_drake.hand.kinematics import finger_frames, thumb_base_transform, thumb_frames
@@ -20,11 +21,6 @@ def _random_q(c, scale=0.8):
     return RNG.uniform(-scale, scale, c.num_joints)
 
 
-def _fd_jacobian(fun, q, eps=1e-6):
-    cols = [(fun(q + eps * e) - fun(q - eps * e)) / (2 * eps) for e in np.eye(len(q))]
-    return np.array(cols).T
-
-
 @pytest.mark.parametrize("finger", FINGERS)
 def test_P_matches_autodiff_and_finite_differences(finger):
     c = finger_coupling(finger)
@@ -32,7 +28,7 @@ def test_P_matches_autodiff_and_finite_differences(finger):
         q = _random_q(c, 1.2)
         P = c.P(q)
         assert P.shape == (c.num_tendons, c.num_joints)
-        np.testing.assert_allclose(P, _fd_jacobian(c.h, q), atol=1e-9)
+        np.testing.assert_allclose(P, fd_jacobian(c.h, q, h=1e-6), atol=1e-9)
         h_ad = c.h(InitializeAutoDiff(q).ravel())
         np.testing.assert_allclose(ExtractGradient(h_ad), P, atol=1e-14)
         # AutoDiff P (values) equals float P; tau = -P^T f
@@ -108,7 +104,7 @@ def test_stiffness_map_is_symmetric_pd_and_equals_minus_dtau_dq(finger):
 
         K = joint_stiffness(c, q0, f0, k_t)
         np.testing.assert_allclose(K, K.T, atol=1e-12)
-        np.testing.assert_allclose(K, -_fd_jacobian(tau, q0), rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(K, -fd_jacobian(tau, q0, h=1e-6), rtol=1e-6, atol=1e-8)
         # positive definite on the independent DoF (ring/fifth: the DIP is held by the
         # coupling element, not by tendons, so K itself is singular along q_DIP - c q_PIP).
         # Constant P: K = S^T P^T K_t P S is PD for any k_t > 0 since P S has full column rank.
@@ -126,7 +122,7 @@ def test_thumb_geometric_stiffness_term_is_the_tension_hessian():
     q = np.array([0.5, 0.3, 0.0, 0.0])
     f = np.array([30.0, 10, 20, 25, 0, 0, 0, 0])
     H = c.tension_hessian(q, f)
-    np.testing.assert_allclose(H, _fd_jacobian(lambda qq: c.P(qq).T @ f, q), atol=1e-8)
+    np.testing.assert_allclose(H, fd_jacobian(lambda qq: c.P(qq).T @ f, q, h=1e-6), atol=1e-8)
     assert np.abs(H[:2, :2]).max() > 0.1   # not negligible: ~f * L
 
 
@@ -144,7 +140,7 @@ def test_hand_coupling_is_block_diagonal_in_the_chosen_global_order():
         off[js] = False
         assert not P[ts, :21][:, off].any()
     np.testing.assert_array_equal(P[:, 21:], np.eye(38))
-    np.testing.assert_allclose(P, _fd_jacobian(hc.h, q), atol=1e-9)
+    np.testing.assert_allclose(P, fd_jacobian(hc.h, q, h=1e-6), atol=1e-9)
 
 
 def test_table_5_1_fingertip_closed_form():

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
 
+from _fd import fd_jacobian
 from awiwi_drake.hand.kinematics import finger_frames, thumb_frames
 from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant, make_hand_plant
 from awiwi_drake.hand.systems import CoriolisCancellation
@@ -78,7 +79,7 @@ def test_coriolis_term_system_converts_and_satisfies_skew_symmetry():
         return sys.get_output_port(0).Eval(fctx).copy()
 
     eps = 1e-6
-    J = np.array([(f(x + eps * e) - f(x - eps * e)) / (2 * eps) for e in np.eye(8)]).T
+    J = fd_jacobian(f, x, h=eps)
     np.testing.assert_allclose(ExtractValue(y).ravel(), f(x), rtol=1e-12)
     np.testing.assert_allclose(ExtractGradient(y), J, atol=1e-9)
     # physics: v^T C(q,v) v = 1/2 v^T Mdot v, and C(q, a v) a v = a^2 C(q,v) v

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 
 from awiwi_drake.cli import main
+from awiwi_drake.hand.diagrams import hand_diagram
 
 
 @pytest.mark.parametrize("name", ["finger-index", "finger-middle", "finger-ring", "finger-fifth", "finger-thumb"])
@@ -48,8 +50,27 @@ def test_animate_writes_self_contained_html(tmp_path, capsys):
     assert "html" in capsys.readouterr().err
 
 
+def _dot_graph(text):
+    """(node id by system name, set of edges (src node, output index, dst node, input index)) of a
+    Drake Graphviz export, top level only (``max_depth=1``)."""
+    nodes = dict((name, node) for node, name in
+                 re.findall(r"^(s\d+) \[shape=none, border=0, label=<.*?name=(\S+)\n", text, re.M | re.S))
+    edges = {(a, int(i), b, int(j)) for a, i, b, j in re.findall(r"^(s\d+):y(\d+):e -> (s\d+):u(\d+):w", text, re.M)}
+    return nodes, edges
+
+
 def test_export_hand_diagrams(tmp_path):
+    """The exported top-level hand graph shows every block of the hand diagram under its name and every
+    internal connection between the right ports."""
     assert main(["export-hand-diagrams", "--out", str(tmp_path)]) == 0
-    top = (tmp_path / "hand_top.dot").read_text()
+    nodes, edges = _dot_graph((tmp_path / "hand_top.dot").read_text())
+    diagram = hand_diagram(backend="symbolic").diagram
+    names = [s.get_name() for s in diagram.GetSystems()]
+    assert sorted(nodes) == sorted(names)
     for block in ("tendon_drive", "hand_plant", "wrist_tendon_offsets", "coupling_element"):
-        assert block in top
+        assert block in nodes
+    conn = diagram.connection_map()
+    assert len(conn) >= len(names) - 1
+    for (dst, j), (src, i) in conn.items():
+        assert (nodes[src.get_name()], int(i), nodes[dst.get_name()], int(j)) in edges, (src.get_name(), i, dst.get_name(), j)
+    assert len(edges) == len(conn)

@@ -179,7 +179,7 @@ def test_bad_operating_points_raise_named_errors():
 def test_hand_simulates_under_joint_control():
     """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
     stay put (decoupled routing, palm fixed), no tendon goes slack."""
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
     hand = hand_diagram(backend="python")
     cl = closed_loop(hand, make_controller("joint-pd", hand))
@@ -197,27 +197,12 @@ def test_hand_simulates_under_joint_control():
 
 
 def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
-    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
     from awiwi_drake.components.routing import TendonRouting_
     sys = TendonRouting_[float](finger_coupling("thumb"), 0.005, np.full(8, 1e-3))
-    ad = sys.ToAutoDiffXd()
     rng = np.random.default_rng(5)
     theta, q, f = rng.uniform(-1, 1, 8), rng.uniform(-1, 1, 4), rng.uniform(5, 40, 8)
-    x = np.concatenate([theta, q, f])
-
-    def out(xx, system, ctx, port):
-        system.GetInputPort("motor_angle").FixValue(ctx, xx[:8])
-        system.GetInputPort("joint_angle").FixValue(ctx, xx[8:12])
-        system.GetInputPort("tendon_force").FixValue(ctx, xx[12:])
-        return system.GetOutputPort(port).Eval(ctx)
-
-    fctx, actx = sys.CreateDefaultContext(), ad.CreateDefaultContext()
-    for port in ("elongation", "generalized_force"):
-        J = ExtractGradient(out(InitializeAutoDiff(x).ravel(), ad, actx, port))
-        eps = 1e-6
-        J_fd = np.array([(out(x + eps * e, sys, fctx, port) - out(x - eps * e, sys, fctx, port)) / (2 * eps)
-                         for e in np.eye(x.size)]).T
-        np.testing.assert_allclose(J, J_fd, atol=1e-7)
+    check_system_autodiff_matches_fd(sys, [], {"motor_angle": theta, "joint_angle": q, "tendon_force": f},
+                                     outputs=["elongation", "generalized_force"], rtol=1e-6)
 
 
 @pytest.mark.parametrize("finger", ["thumb", "ring"])
@@ -247,18 +232,26 @@ def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
 
 
 def test_gravity_option_keeps_the_operating_point_an_equilibrium():
+    """With gravity on, the operating point's tendon forces change by exactly what holds the links up:
+    ``P(q)^T (f_g - f_0) = tau_g(q)``, the gravity generalised force from MultibodyPlant; its size is the
+    0.002-0.008 Nm of section 5.2.2."""
+    q = np.array([0.0, 0.5, 0.3, 0.2])
     p = FingerRigParams.for_finger("index", gravity=True)
     rig = finger_diagram(finger="index", params=p)
-    op = rig.operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
+    op = rig.operating_point(joint_angles=q)
     linearize(rig, op, equilibrium_tolerance=1e-6)
-    op0 = finger_diagram(finger="index").operating_point(joint_angles=[0.0, 0.5, 0.3, 0.2])
-    # section 5.2.2: gravity ~ 0.002-0.008 N m, i.e. well under a newton of tendon force change
-    df = np.abs(op.info["tendon_force"] - op0.info["tendon_force"]).max()
-    assert 0.0 < df < 1.0
+    op0 = finger_diagram(finger="index").operating_point(joint_angles=q)
+    plant_ctx = rig.plant.CreateDefaultContext()
+    rig.plant.SetPositions(plant_ctx, q)
+    tau_g = rig.plant.CalcGravityGeneralizedForces(plant_ctx)
+    P = np.asarray(finger_coupling("index").P(q))
+    np.testing.assert_allclose(P.T @ (op.info["tendon_force"] - op0.info["tendon_force"]), tau_g,
+                               rtol=1e-9, atol=1e-12)
+    assert 0.002 <= np.max(np.abs(tau_g)) <= 0.008
 
 
 def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
-    from awiwi_drake.analysis.simulate import rig_monitors, simulate
+    from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
     rig = finger_diagram(finger="thumb")
     cl = closed_loop(rig, make_controller("joint-pd", rig))

@@ -99,3 +99,59 @@ def test_reachable_case_optimizer_beats_monte_carlo():
         mc = monte_carlo_gains(rig, case, samples=300, executor=ex)
     assert mc.distance > fit.distance
     assert all(v > 0 for v in (fit.gains.stiffness, fit.gains.damping, fit.gains.k3, fit.gains.k4))
+
+
+def test_torque_state_map_is_the_tendon_torque_jacobian_of_the_joint_rig():
+    """N motors: T = d[q, qd, tau_i, taud_i]/dx at rest; tau_i = -P_i f_i from the rig's own tendon_force
+    output (central differences), and for one torsion spring it is torque_coordinates(k)."""
+    from awiwi_drake.control.optimal_gains import torque_state_map
+    from awiwi_drake.rigs import joint_rig
+    rig = table_16_1_rig()
+    np.testing.assert_allclose(torque_state_map(joint_model(rig), np.zeros(4)),
+                               torque_coordinates(OptimalGainsCase().stiffness), rtol=1e-12)
+    rig = joint_rig()
+    op = rig.operating_point()
+    T = torque_state_map(joint_model(rig), op.state)
+    ctx = rig.context(op)
+    P = np.array([-rig.params.link_pulley_radius, rig.params.link_pulley_radius])
+
+    def tau(x):
+        ctx.SetContinuousState(x)
+        return -P * rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
+    x0 = np.asarray(op.state, float)
+    for j in (0, 2, 3):                      # positions: q, theta1, theta2
+        h = 1e-7
+        e = np.zeros(6)
+        e[j] = h
+        np.testing.assert_allclose(T[2:4, j], (tau(x0 + e) - tau(x0 - e)) / (2 * h), rtol=1e-5, atol=1e-9)
+    # rates: taud_i = -P_i k_i (r_m omega_i + P_i qd) has the same coefficients on (qd, omega_i)
+    np.testing.assert_allclose(T[4:6][:, [1, 4, 5]], T[2:4][:, [0, 2, 3]], rtol=1e-12)
+
+
+def test_optimal_backstepping_on_the_antagonistic_joint_rig():
+    """Ch. 16 beyond the flexible joint: gains fitted to the joint rig's LQR (N = 2) at 20 N; K_bs of the
+    fit through the controller system equals the law's; the continuous closed loop (Drake Linearize of
+    rig + controller) is stable; the fit is close (distance < 0.3)."""
+    from pydrake.systems.primitives import Linearize
+
+    from awiwi_drake.control.backstepping import impedance_controller
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.optimal_gains import torque_state_map
+    from awiwi_drake.control.registry import controller_names
+    from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase
+    from awiwi_drake.rigs import joint_rig
+    rig = joint_rig()
+    fit = optimize_gains(rig, JointRigOptimalGainsCase(), starts=16)
+    assert fit.distance < 0.3 and fit.target.shape == (2, 6)
+    op = rig.operating_point()
+    ctrl = impedance_controller(rig, fit.gains, external_torque="none")
+    K_sys = system_feedback(ctrl, op.state)
+    T_inv = np.linalg.inv(torque_state_map(joint_model(rig), op.state))
+    np.testing.assert_allclose(K_sys @ T_inv, fit.feedback, rtol=1e-9, atol=1e-9 * np.abs(fit.feedback).max())
+    loop = closed_loop(rig, ctrl, rate_hz=None)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
+    d = loop.diagram
+    lin = Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
+                    output_port_index=d.GetOutputPort("link_angle").get_index())
+    assert np.max(np.linalg.eigvals(lin.A()).real) < 0
+    assert "optimal-backstepping" in controller_names("joint-rig")

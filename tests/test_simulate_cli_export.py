@@ -2,8 +2,10 @@
 
 import dataclasses
 import json
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -82,7 +84,7 @@ def test_cli_lqr_json_gain_and_poles(capsys):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["linearize", "nope"], "unknown rig 'nope'"),
+    (["linearize", "nope"], "argument RIG: invalid choice: 'nope'"),
     (["linearize", "joint-rig", "--set", "bogus=1"], "unknown parameter 'bogus'"),
     (["linearize", "joint-rig", "--set", "link_inertia=abc"], "cannot parse 'abc'"),
     (["linearize", "joint-rig", "--set", "link_inertia"], "NAME=VALUE"),
@@ -122,26 +124,58 @@ def test_committed_diagrams_are_current(tmp_path):
 
 
 def _all_parameter_classes():
-    import awiwi_drake.parameters as P
-    return [c for c in vars(P).values() if isinstance(c, type) and issubclass(c, Parameters) and c is not Parameters]
+    """Every ``Parameters`` subclass defined anywhere in the package (all modules imported)."""
+    import importlib
+    import pkgutil
+    import awiwi_drake
+    for mod in pkgutil.walk_packages(awiwi_drake.__path__, "awiwi_drake."):
+        if not mod.name.endswith("__main__"):
+            importlib.import_module(mod.name)
+
+    def subclasses(cls):
+        return [c for s in cls.__subclasses__() for c in (s, *subclasses(s))]
+    return sorted({c for c in subclasses(Parameters) if c.__module__.startswith("awiwi_drake.")},
+                  key=lambda c: (c.__module__, c.__name__))
+
+
+# A thesis citation: a table, figure, equation number, section, chapter or algorithm.
+_THESIS_CITATION = re.compile(
+    r"\btables?\s*\d+\.\d+|\bfig(ure)?s?\.?\s*\d+\.\d+|\(\d+\.\d+[a-z]?\)|\bsections?\s+\d+(\.\d+)*"
+    r"|\bch(apter|\.)\s*\d+|\balgorithm\s+\d+", re.IGNORECASE)
+# Or a choice with its reason: "chosen: <why>" (at least two words of reason).
+_CHOSEN = re.compile(r"^chosen:\s*\S+\s+\S+", re.IGNORECASE)
+_FILE = re.compile(r"\b[\w./-]+\.(?:md|py|txt|csv|json|yaml|yml|ipynb|npz)\b", re.IGNORECASE)
 
 
 def test_every_parameter_has_unit_source_and_valid_default():
+    """Each field of each parameter class has a unit and a source that cites the thesis (table, figure,
+    equation, section, chapter, algorithm) or says ``chosen: why``; a cited file exists in the repository."""
+    repo = Path(__file__).resolve().parents[1]
+    tracked = {p.name for p in repo.rglob("*") if ".git" not in p.parts}
     classes = _all_parameter_classes()
-    assert len(classes) >= 10
-    cites = ("table", "fig", "(", "ch.", "chapter", "section", "algorithm", "eq", "thesis", "model_notes",
-             "issue", "requirement", "contract")
+    assert len(classes) >= 40
     bad = []
     for cls in classes:
         inst = cls()
         for name, info in cls.info().items():
-            src = info.source.lower()
-            if not (info.source and info.unit):
-                bad.append(f"{cls.__name__}.{name}: no unit or source")
-            elif not (src.startswith(("chosen", "derived")) or any(c in src for c in cites)):
-                bad.append(f"{cls.__name__}.{name}: source {info.source!r} neither cites nor says why it was chosen")
+            where, src = f"{cls.__module__}.{cls.__name__}.{name}", info.source.strip()
+            if not info.unit:
+                bad.append(f"{where}: no unit")
+            if not (_THESIS_CITATION.search(src) or _CHOSEN.match(src)):
+                bad.append(f"{where}: source {src!r} neither cites the thesis nor says 'chosen: why'")
+            bad += [f"{where}: source cites {f!r}, not a file of the repository"
+                    for f in _FILE.findall(src) if Path(f).name not in tracked]
         assert provenance_table(inst).count("\n") >= 2
     assert not bad, "\n".join(bad)
+
+
+def test_the_provenance_rule_rejects_what_it_should():
+    assert not _THESIS_CITATION.search("issue 6: 10 s datasets") and not _CHOSEN.match("chosen")
+    assert not _THESIS_CITATION.search("see the (equation) in eq form") and not _CHOSEN.match("chosen: why")
+    for ok in ("Table 3.3", "Fig 4.10 range", "(12.8)", "Tables 14.2, 15.1", "section 5.2.2", "ch. 9",
+               "Algorithm 2"):
+        assert _THESIS_CITATION.search(ok), ok
+    assert _FILE.findall("see MODEL_NOTES.md") == ["MODEL_NOTES.md"]
 
 
 @pytest.mark.parametrize("cls, field, value, message", [
@@ -215,7 +249,8 @@ def test_fixed_step_rk3_at_the_control_period_matches_error_control():
     for fixed in (False, True):
         ctx = rig.context(op)
         rig.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque + [0.8, -0.8])
-        res = simulate(rig.diagram, ctx, 0.1, log=("state",), max_step=1 / 3000, accuracy=1e-7, fixed_step=fixed)
+        res = simulate(rig.diagram, ctx, 0.1, log=("state",), max_step=1 / 3000, accuracy=1e-7,
+                       mode="fixed_step" if fixed else "error_controlled")
         finals.append(res["state"][-1])
         if fixed:
             assert np.allclose(np.diff(res.t[1:]), 1 / 3000)   # really fixed steps

@@ -6,6 +6,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 from pydrake.symbolic import Expression
 
+from _fd import check_system_autodiff_matches_fd
 from awiwi_drake.components import (
     ConstantCoupling, MotorBank_, SpringBank_, TendonRouting_, build_tendon_drive, tendon_spring)
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
@@ -30,51 +31,11 @@ def _evaluate(system, x, inputs):
     return xdot, outs
 
 
-def _check_autodiff_matches_fd(system, x, inputs, rtol=1e-5):
-    """Gradient of xdot and outputs w.r.t. (x, inputs) by AutoDiff vs central differences."""
-    ad = system.ToAutoDiffXd()
-    assert ad is not None
-    names = list(inputs)
-    flat = np.concatenate([x] + [np.asarray(inputs[n], dtype=float) for n in names])
-    sizes = [x.size] + [np.size(inputs[n]) for n in names]
-    z = InitializeAutoDiff(flat).ravel()
-    ctx = ad.CreateDefaultContext()
-    offs = np.cumsum([0] + sizes)
-    if x.size:
-        ctx.SetContinuousState(z[offs[0]:offs[1]])
-    for i, n in enumerate(names):
-        ad.GetInputPort(n).FixValue(ctx, z[offs[i + 1]:offs[i + 2]])
-    grads = {}
-    if x.size:
-        grads["xdot"] = ExtractGradient(ad.EvalTimeDerivatives(ctx).CopyToVector())
-    for i in range(ad.num_output_ports()):
-        port = ad.get_output_port(i)
-        grads[port.get_name()] = ExtractGradient(port.Eval(ctx))
-
-    def f(v):
-        xx = v[offs[0]:offs[1]]
-        inp = {n: v[offs[i + 1]:offs[i + 2]] for i, n in enumerate(names)}
-        xdot, outs = _evaluate(system, xx, inp)
-        return {"xdot": xdot, **outs}
-
-    h = 1e-7 * np.maximum(1.0, np.abs(flat))
-    cols = []
-    for j in range(flat.size):
-        e = np.zeros_like(flat)
-        e[j] = h[j]
-        fp, fm = f(flat + e), f(flat - e)
-        cols.append({k: (fp[k] - fm[k]) / (2 * h[j]) for k in fp})
-    for key, g in grads.items():
-        fd = np.stack([c[key] for c in cols], axis=1) if flat.size else np.zeros_like(g)
-        scale = max(1.0, np.max(np.abs(fd)))
-        np.testing.assert_allclose(g, fd, rtol=rtol, atol=rtol * scale, err_msg=f"gradient of {key}")
-
-
 def test_motor_bank_converts_and_autodiff_matches_fd():
     p = MotorParams(ripple=True)
     sys = MotorBank_[float](p, 3)
     x = np.array([0.1, 0.5, -0.3, 1.0, -2.0, 0.01])
-    _check_autodiff_matches_fd(sys, x, {"motor_torque": np.array([0.3, -0.2, 0.1]),
+    check_system_autodiff_matches_fd(sys, x, {"motor_torque": np.array([0.3, -0.2, 0.1]),
                                         "tendon_force": np.array([20.0, 35.0, 5.0])})
     assert sys.ToSymbolic() is not None  # symbolic conversion too (atan, sin, min/max)
 
@@ -98,7 +59,7 @@ def test_spring_bank_converts_and_autodiff_matches_fd(hysteresis):
     if hysteresis:
         inputs["elongation_rate"] = np.array([0.01, -0.02])
         x = np.array([1.0, -2.0])
-    _check_autodiff_matches_fd(sys, x, inputs, rtol=2e-5)
+    check_system_autodiff_matches_fd(sys, x, inputs, rtol=2e-5)
     assert sys.ToSymbolic() is not None
 
 
@@ -106,7 +67,7 @@ def test_lever_spring_bank_autodiff_matches_fd_and_refuses_symbolic():
     from awiwi_drake.components import LeverSpringMechanism
     sys = SpringBank_[float](LeverSpringMechanism(), 2)
     # force and stiffness gradients (the stiffness slope is a difference of exact values: looser tolerance)
-    _check_autodiff_matches_fd(sys, np.zeros(0), {"elongation": np.array([0.002, 0.004])}, rtol=1e-3)
+    check_system_autodiff_matches_fd(sys, np.zeros(0), {"elongation": np.array([0.002, 0.004])}, rtol=1e-3)
     with pytest.raises(ValueError, match="cannot be evaluated symbolically"):
         SpringBank_[Expression](LeverSpringMechanism(), 1)
 
@@ -117,7 +78,7 @@ def test_routing_converts_and_autodiff_matches_fd():
     inputs = {"motor_angle": np.array([0.3, -0.1, 0.2]), "joint_angle": np.array([0.2, -0.4]),
               "tendon_force": np.array([10.0, 20.0, 5.0]), "motor_velocity": np.array([1.0, 2.0, 3.0]),
               "joint_velocity": np.array([0.5, -0.5])}
-    _check_autodiff_matches_fd(sys, np.zeros(0), inputs)
+    check_system_autodiff_matches_fd(sys, np.zeros(0), inputs)
     _, outs = _evaluate(sys, np.zeros(0), inputs)
     P = coupling.P()
     np.testing.assert_allclose(outs["generalized_force"], -P.T @ inputs["tendon_force"])  # tau = -P^T f

@@ -10,6 +10,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, FirstOrderTaylorApproximation, VectorLogSink
 
+from _fd import fd_jacobian
 from awiwi_drake.hand.systems import WristCompensation, WristCompensation_, WristTendonOffsets, WristTendonOffsets_
 from awiwi_drake.hand.wrist import wrist_jacobian, wrist_tendon_offsets
 from awiwi_drake.parameters.wrist import WristParams
@@ -47,9 +48,7 @@ def test_autodiff_matches_finite_differences(make):
     ad.get_input_port(0).FixValue(ctx, InitializeAutoDiff(Q).ravel())
     y = ad.get_output_port(0).Eval(ctx)
     J = np.array([e.derivatives() for e in y])
-    e = 1e-6
-    fd = np.column_stack([(_output(system, Q + e * d) - _output(system, Q - e * d)) / (2 * e)
-                          for d in np.eye(2)])
+    fd = fd_jacobian(lambda q: _output(system, q), Q, h=1e-6)
     np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-7)
     # the copy keeps the parameters: float values agree
     np.testing.assert_allclose([v.value() for v in y], _output(system, Q), atol=0.0)

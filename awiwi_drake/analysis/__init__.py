@@ -1,6 +1,10 @@
-"""Analysis from the framework: linearisation, LQR, simulation (with monitors), sweeps."""
+"""Analysis from the framework: simulation (schedules, monitors, results), linearisation, LQR, sweeps."""
 
 from awiwi_drake.analysis.linear import LinearizationResult, LqrResult, linearize, lqr, poles_table
+from awiwi_drake.analysis.monitors import (
+    Event, Monitor, OverrangeMonitor, PairSlackMonitor, SaturationMonitor, SlackMonitor, rig_monitors)
+from awiwi_drake.analysis.results import SimulationResult
+from awiwi_drake.analysis.schedules import Chirp, Constant, PerEntry, Ramp, Samples, Sine, Step
 from awiwi_drake.analysis.simulate import (
-    Event, OverrangeMonitor, PairSlackMonitor, SaturationMonitor, SimulationDivergedError, SimulationResult, SlackMonitor, rig_monitors, simulate)
+    SimulationDivergedError, SimulationError, SimulationEventError, control_period, simulate)
 from awiwi_drake.analysis.sweep import run_sweep

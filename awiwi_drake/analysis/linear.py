@@ -1,45 +1,519 @@
-"""Linearisation and LQR from the framework (Drake's ``Linearize`` and
-``LinearQuadraticRegulator``) on composed rig diagrams."""
+"""The one linearisation / LQR API: Drake's ``Linearize`` and ``LinearQuadraticRegulator`` on any plant.
+
+* :func:`linearize` -- ``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du``
+  from ``pydrake.systems.primitives.Linearize`` at a rig's operating point (its
+  context from :meth:`Rig.context`, the one way to get it), at any other state /
+  input, or of any Drake system at a given context.  The
+  :class:`LinearizationResult` names its states, inputs and outputs, keeps the
+  operating point ``(x0, u0)``, and offers :meth:`~LinearizationResult.damp`
+  (natural frequency, damping ratio, time constant per pole),
+  :meth:`~LinearizationResult.bode` (a :class:`FrequencyResponse` with
+  ``.plot()`` and gain/phase margins) and :meth:`~LinearizationResult.to_control`
+  (a python-control ``StateSpace``; optional extra ``control``).
+* :func:`lqr` -- ``u = u0 - K (x - x0)`` from Drake's ``LinearQuadraticRegulator``
+  on that linearisation; :class:`LqrResult` carries ``K``, the Riccati solution
+  ``S``, the weights and the closed loop as a :class:`LinearizationResult`.
+  :func:`lqr_gain` is the same on bare matrices (state-dependent Riccati, ch. 14).
+
+Poles within round-off of zero (``|Re|`` or ``|Im|`` below ``100 n eps ||A||``)
+are reported as exactly 0, so an integrator does not print as ``+1.42e-13``.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Sequence
 
 import numpy as np
 from pydrake.systems.controllers import LinearQuadraticRegulator
+from pydrake.systems.framework import Context, System
 from pydrake.systems.primitives import Linearize
 
-from awiwi_drake.rigs.base import OperatingPoint, Rig
+__all__ = ["LinearizationResult", "OutputMap", "DampRow", "DampTable", "FrequencyResponse", "LqrResult",
+           "linearize", "lqr", "lqr_gain", "closed_loop_poles", "clean_poles", "poles_table"]
 
-__all__ = ["LinearizationResult", "LqrResult", "linearize", "lqr", "poles_table"]
+_EPS = np.finfo(float).eps
+
+
+def clean_poles(poles: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Poles sorted by real then imaginary part, with parts within round-off of zero set to 0.
+
+    ``scale`` is the norm of the matrix they came from (round-off ~ ``100 n eps scale``).
+    """
+    p = np.asarray(poles, dtype=complex).ravel()
+    tol = 100.0 * max(len(p), 1) * _EPS * max(float(scale), 1.0)
+    re = np.where(np.abs(p.real) < tol, 0.0, p.real)
+    im = np.where(np.abs(p.imag) < tol, 0.0, p.imag)
+    p = re + 1j * im
+    return p[np.lexsort((p.imag, p.real))]
+
+
+def closed_loop_poles(A: np.ndarray, B: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Eigenvalues of ``A - B K`` (sorted, round-off zeros cleaned)."""
+    M = np.asarray(A, float) - np.asarray(B, float) @ np.atleast_2d(np.asarray(K, float))
+    return clean_poles(np.linalg.eigvals(M), np.linalg.norm(M, 1) if M.size else 1.0)
+
+
+def _fmt_pole(p: complex) -> str:
+    if p.imag == 0:
+        return f"{p.real: .6g}"
+    return f"{p.real: .6g} {'+' if p.imag >= 0 else '-'} {abs(p.imag):.6g}j"
+
+
+@dataclass(frozen=True)
+class OutputMap:
+    """Rows of one output port: ``y = y0 + C dx + D du``; ``names`` label the channels."""
+
+    C: np.ndarray
+    D: np.ndarray
+    y0: np.ndarray
+    names: tuple
+
+
+@dataclass(frozen=True)
+class DampRow:
+    """One pole: natural frequency ``wn = |p|`` [rad/s], damping ratio ``zeta = -Re p / |p|``,
+    time constant ``tau = -1 / Re p`` [s] (inf on the imaginary axis, negative when unstable)."""
+
+    pole: complex
+    natural_frequency: float
+    damping_ratio: float
+    time_constant: float
+
+    @property
+    def natural_frequency_hz(self) -> float:
+        return self.natural_frequency / (2 * math.pi)
+
+
+@dataclass(frozen=True)
+class DampTable:
+    """The damping table of a linear model (as ``damp`` in MATLAB / python-control)."""
+
+    rows: tuple
+
+    def __iter__(self):
+        return iter(self.rows)
+
+    def __len__(self):
+        return len(self.rows)
+
+    def __str__(self) -> str:
+        lines = [f"{'pole [1/s]':>28} {'wn [rad/s]':>12} {'wn [Hz]':>10} {'zeta [-]':>9} {'tau [s]':>11}"]
+        for r in self.rows:
+            zeta = "-" if math.isnan(r.damping_ratio) else f"{r.damping_ratio:.4g}"
+            tau = "inf" if math.isinf(r.time_constant) else f"{r.time_constant:.4g}"
+            lines.append(f"{_fmt_pole(r.pole):>28} {r.natural_frequency:12.5g} {r.natural_frequency_hz:10.4g} "
+                         f"{zeta:>9} {tau:>11}")
+        return "\n".join(lines)
+
+    def to_json(self) -> list:
+        return [dict(pole=[r.pole.real, r.pole.imag], natural_frequency=r.natural_frequency,
+                     damping_ratio=None if math.isnan(r.damping_ratio) else r.damping_ratio,
+                     time_constant=None if math.isinf(r.time_constant) else r.time_constant) for r in self.rows]
+
+
+def _crossings(w: np.ndarray, g: np.ndarray, level: float) -> list[tuple[int, float]]:
+    """Indices and log-interpolated frequencies where ``g`` crosses ``level``."""
+    s = g - level
+    out = []
+    for i in np.nonzero(np.sign(s[:-1]) * np.sign(s[1:]) < 0)[0]:
+        a = s[i] / (s[i] - s[i + 1])
+        out.append((int(i), float(np.exp(np.log(w[i]) + a * (np.log(w[i + 1]) - np.log(w[i]))))))
+    return out
+
+
+@dataclass(frozen=True)
+class FrequencyResponse:
+    """``H(j w) = C (j w I - A)^-1 B + D`` of one input channel to one output channel.
+
+    Attributes
+    ----------
+    omega : ndarray
+        Frequencies [rad/s] (log-spaced).
+    response : ndarray (complex)
+        ``H(j omega)`` in output unit per input unit.
+    input_name, output_name : str
+    """
+
+    omega: np.ndarray
+    response: np.ndarray
+    input_name: str
+    output_name: str
+
+    @property
+    def frequency_hz(self) -> np.ndarray:
+        return self.omega / (2 * math.pi)
+
+    @property
+    def magnitude_db(self) -> np.ndarray:
+        return 20.0 * np.log10(np.abs(self.response))
+
+    @property
+    def phase_deg(self) -> np.ndarray:
+        """Unwrapped phase [deg], starting in (-180, 180]."""
+        return np.degrees(np.unwrap(np.angle(self.response)))
+
+    def margins(self) -> dict:
+        """Gain and phase margins of the loop ``L = H`` under unity negative feedback.
+
+        ``gain_margin`` (factor) and ``gain_margin_db`` at the first phase
+        crossover (phase = -180 deg mod 360) ``phase_crossover`` [rad/s];
+        ``phase_margin`` [deg] = 180 + phase at the first gain crossover
+        (|H| = 1) ``gain_crossover`` [rad/s]; inf / NaN where there is no
+        crossing in the frequency range.  Values are interpolated between the
+        grid points (log frequency).
+        """
+        w, mag, ph = self.omega, np.abs(self.response), self.phase_deg
+        out = dict(gain_margin=math.inf, gain_margin_db=math.inf, phase_crossover=math.nan,
+                   phase_margin=math.inf, gain_crossover=math.nan)
+        # phase crossovers: phase = -180 + 360 k
+        best = None
+        for k in range(int(np.floor((ph.min() + 180) / 360)), int(np.ceil((ph.max() + 180) / 360)) + 1):
+            for i, wc in _crossings(w, ph, -180.0 + 360.0 * k):
+                if best is None or wc < best[1]:
+                    best = (i, wc)
+        if best is not None:
+            gm = 1.0 / float(np.exp(np.interp(np.log(best[1]), np.log(w), np.log(mag))))
+            out.update(gain_margin=gm, gain_margin_db=20 * math.log10(gm), phase_crossover=best[1])
+        cross = _crossings(w, np.log(mag), 0.0)
+        if cross:
+            i, wc = cross[0]
+            phc = float(np.interp(np.log(wc), np.log(w), ph))
+            pm = (phc + 180.0) % 360.0
+            out.update(phase_margin=pm if pm <= 180.0 else pm - 360.0, gain_crossover=wc)
+        return out
+
+    def plot(self, *, ax=None, hz: bool = True, label: str | None = None, margins: bool = True):
+        """Bode diagram: magnitude [dB] and phase [deg] on a log frequency axis; returns ``(fig, (ax_mag, ax_phase))``."""
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            fig, ax = plt.subplots(2, 1, figsize=(6.5, 5.0), sharex=True)
+        fig = ax[0].figure
+        x = self.frequency_hz if hz else self.omega
+        lab = label or f"{self.output_name} / {self.input_name}"
+        ax[0].semilogx(x, self.magnitude_db, label=lab)
+        ax[1].semilogx(x, self.phase_deg, label=lab)
+        ax[0].set_ylabel("magnitude [dB]")
+        ax[1].set_ylabel("phase [deg]")
+        ax[1].set_xlabel("frequency [Hz]" if hz else "frequency [rad/s]")
+        if margins:
+            m = self.margins()
+            sc = 1 / (2 * math.pi) if hz else 1.0
+            if math.isfinite(m["gain_crossover"]):
+                ax[1].axvline(m["gain_crossover"] * sc, color="tab:green", ls=":",
+                              label=f"phase margin {m['phase_margin']:.1f} deg")
+            if math.isfinite(m["phase_crossover"]):
+                ax[0].axvline(m["phase_crossover"] * sc, color="tab:red", ls=":",
+                              label=f"gain margin {m['gain_margin_db']:.1f} dB")
+        for a in ax:
+            a.grid(True, which="both", alpha=0.3)
+            a.legend(fontsize=8)
+        return fig, ax
+
+    def to_json(self) -> dict:
+        m = {k: (None if not math.isfinite(v) else v) for k, v in self.margins().items()}
+        return dict(input=self.input_name, output=self.output_name, omega=self.omega.tolist(),
+                    magnitude_db=self.magnitude_db.tolist(), phase_deg=self.phase_deg.tolist(), margins=m)
 
 
 @dataclass(frozen=True)
 class LinearizationResult:
-    """``xdot = A dx + B du``, ``y = C dx + D du`` around an operating point.
+    """``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du`` around ``(x0, u0)``.
 
     Attributes
     ----------
     A, B, C, D : ndarray
-        From ``pydrake.systems.primitives.Linearize`` of the rig diagram,
-        input ``motor_torque``, output ``state``.
-    poles : ndarray (complex)
-        Eigenvalues of A, sorted by real part then imaginary part.
-    state_names : tuple of str
-    operating_point : OperatingPoint
+        From Drake's ``Linearize``; ``C, D`` of the first output port (``state`` for rigs).
+    state_names, input_names, output_names : tuple of str
+        Names of the states, the input channels (``motor_torque[i]``) and the
+        output channels of ``C``.
+    x0, u0, f0 : ndarray
+        State, input and ``xdot`` at the linearisation point (``f0 = 0`` at an equilibrium).
+    outputs : dict name -> OutputMap
+        Every linearised output port.
+    operating_point : OperatingPoint or None
+    input_port : str
     """
 
     A: np.ndarray
     B: np.ndarray
     C: np.ndarray
     D: np.ndarray
-    poles: np.ndarray
     state_names: tuple
-    operating_point: OperatingPoint
+    input_names: tuple = ()
+    output_names: tuple = ()
+    x0: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    u0: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    f0: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    outputs: dict = field(default_factory=dict)
+    operating_point: Any = None
+    input_port: str = "motor_torque"
+
+    @property
+    def poles(self) -> np.ndarray:
+        """Eigenvalues of A, sorted, round-off zeros set to 0."""
+        return clean_poles(np.linalg.eigvals(self.A), np.linalg.norm(self.A, 1) if self.A.size else 1.0)
+
+    @property
+    def num_states(self) -> int:
+        return self.A.shape[0]
+
+    def output(self, name: str) -> OutputMap:
+        """The rows of output port ``name`` (clear error naming the linearised outputs)."""
+        if name not in self.outputs:
+            raise ValueError(f"linearisation has no output {name!r}; linearised outputs: {', '.join(self.outputs)} "
+                             f"(pass outputs=(..., {name!r}) to linearize)")
+        return self.outputs[name]
+
+    def damp(self) -> DampTable:
+        """Natural frequency, damping ratio and time constant of every pole."""
+        rows = []
+        for p in self.poles:
+            wn = abs(p)
+            zeta = -p.real / wn + 0.0 if wn > 0 else math.nan   # + 0.0: no "-0"
+            tau = -1.0 / p.real if p.real != 0 else math.inf
+            rows.append(DampRow(complex(p), float(wn), float(zeta), float(tau)))
+        return DampTable(tuple(rows))
+
+    def _channel(self, which, names: Sequence[str], kind: str) -> int:
+        if isinstance(which, (int, np.integer)) and not isinstance(which, bool):
+            if not 0 <= which < len(names):
+                raise ValueError(f"bode: {kind} channel {which} out of range 0..{len(names) - 1} ({', '.join(names)})")
+            return int(which)
+        if which in names:
+            return list(names).index(which)
+        if len(names) == 1 and which in (f"{names[0]}[0]", names[0].split("[")[0]):   # x == x[0] for one channel
+            return 0
+        raise ValueError(f"bode: unknown {kind} {which!r}; {kind}s: {', '.join(names)}")
+
+    def bode(self, input=0, output=None, *, omega: Sequence[float] | None = None, n: int = 400) -> FrequencyResponse:  # noqa: A002
+        """Frequency response from one input channel to one output channel.
+
+        Parameters
+        ----------
+        input : int or str
+            Input channel (index or name, e.g. ``"motor_torque[0]"``).
+        output : str or int or None
+            An output channel name (of ``output_names`` or of any linearised port,
+            e.g. ``"link_angle"``), an index into ``output_names``, or None: the
+            first channel of the first output port.
+        omega : sequence, optional
+            Frequencies [rad/s]; default ``n`` log-spaced points from a decade below
+            the slowest non-zero pole to a decade above the fastest.
+        """
+        iu = self._channel(input, self.input_names, "input")
+        if output is None:
+            c, d, oname = self.C[0], self.D[0], self.output_names[0] if self.output_names else "y[0]"
+        else:
+            rows = {nm: (self.C[i], self.D[i]) for i, nm in enumerate(self.output_names)}
+            for port, om in self.outputs.items():
+                for i, nm in enumerate(om.names):
+                    rows.setdefault(nm, (om.C[i], om.D[i]))
+                if len(om.names) == 1:
+                    rows.setdefault(port, (om.C[0], om.D[0]))
+                    rows.setdefault(f"{port}[0]", (om.C[0], om.D[0]))
+            if isinstance(output, (int, np.integer)) and not isinstance(output, bool):
+                output = self.output_names[self._channel(output, self.output_names, "output")]
+            if output not in rows:
+                raise ValueError(f"bode: unknown output {output!r}; outputs: {', '.join(rows)}")
+            (c, d), oname = rows[output], output
+        if omega is None:
+            mags = np.abs(self.poles)
+            nz = mags[mags > 0]
+            lo = 0.1 * (nz.min() if nz.size else 1.0)
+            hi = 10.0 * (nz.max() if nz.size else 1.0)
+            omega = np.logspace(np.log10(lo), np.log10(hi), int(n))
+        w = np.asarray(omega, dtype=float).ravel()
+        if w.size == 0 or np.any(~np.isfinite(w)) or np.any(w <= 0):
+            raise ValueError("bode: omega must be finite frequencies > 0 [rad/s]")
+        nx = self.A.shape[0]
+        b = self.B[:, iu]
+        H = np.array([c @ np.linalg.solve(1j * wk * np.eye(nx) - self.A, b) + d[iu] for wk in w])
+        return FrequencyResponse(w, H, self.input_names[iu], oname)
+
+    def to_control(self):
+        """The model as a python-control ``StateSpace`` (``pip install awiwi_drake[control]``)."""
+        try:
+            import control
+        except ImportError:
+            raise ImportError("to_control() needs python-control: pip install 'awiwi_drake[control]'") from None
+        return control.ss(self.A, self.B, self.C, self.D, states=list(self.state_names),
+                          inputs=list(self.input_names), outputs=list(self.output_names))
 
     def to_json(self) -> dict:
-        return dict(A=self.A.tolist(), B=self.B.tolist(), state_names=list(self.state_names),
-                    poles=[[float(p.real), float(p.imag)] for p in self.poles])
+        poles = [[float(p.real), float(p.imag)] for p in self.poles]
+        return dict(A=self.A.tolist(), B=self.B.tolist(), C=self.C.tolist(), D=self.D.tolist(),
+                    state_names=list(self.state_names), input_names=list(self.input_names),
+                    output_names=list(self.output_names), x0=np.asarray(self.x0).tolist(),
+                    u0=np.asarray(self.u0).tolist(), f0=np.asarray(self.f0).tolist(), poles=poles,
+                    damp=self.damp().to_json(), input_port=self.input_port,
+                    outputs={k: dict(C=v.C.tolist(), D=v.D.tolist(), y0=np.asarray(v.y0).tolist(), names=list(v.names))
+                             for k, v in self.outputs.items()})
+
+    def save(self, path: str | Path) -> Path:
+        """Write :meth:`to_json` to ``path`` (``.json``); read it back with :meth:`load`."""
+        path = Path(path)
+        if path.suffix != ".json":
+            raise ValueError(f"LinearizationResult.save: {str(path)!r} must end in .json")
+        if not path.parent.is_dir():
+            raise ValueError(f"LinearizationResult.save: directory {str(path.parent)!r} does not exist")
+        path.write_text(json.dumps(self.to_json(), indent=1))
+        return path
+
+    @classmethod
+    def from_json(cls, d: dict) -> "LinearizationResult":
+        try:
+            outs = {k: OutputMap(np.atleast_2d(np.array(v["C"], float)), np.atleast_2d(np.array(v["D"], float)),
+                                 np.array(v["y0"], float), tuple(v["names"])) for k, v in d.get("outputs", {}).items()}
+            return cls(np.atleast_2d(np.array(d["A"], float)), np.atleast_2d(np.array(d["B"], float)),
+                       np.atleast_2d(np.array(d["C"], float)), np.atleast_2d(np.array(d["D"], float)),
+                       tuple(d["state_names"]), tuple(d.get("input_names", ())), tuple(d.get("output_names", ())),
+                       np.array(d.get("x0", []), float), np.array(d.get("u0", []), float),
+                       np.array(d.get("f0", []), float), outs, None, d.get("input_port", "motor_torque"))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"LinearizationResult: malformed JSON ({type(exc).__name__}: {exc})") from None
+
+    @classmethod
+    def load(cls, path: str | Path) -> "LinearizationResult":
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"LinearizationResult.load: {str(path)!r} is not a file")
+        try:
+            return cls.from_json(json.loads(path.read_text()))
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"LinearizationResult.load: {str(path)!r} is not valid JSON: {exc}") from None
+
+
+def _channel_names(port_name: str, size: int, names: Sequence[str] = ()) -> tuple:
+    if len(names) == size:
+        return tuple(names)
+    return (port_name,) if size == 1 else tuple(f"{port_name}[{i}]" for i in range(size))
+
+
+def linearize(plant, op=None, *, context: Context | None = None, input: str = "motor_torque",  # noqa: A002
+              outputs: Sequence[str] | None = None, state: Sequence[float] | None = None,
+              motor_torque: Sequence[float] | None = None,
+              equilibrium_tolerance: float | None = 1e-6) -> LinearizationResult:
+    """Linearise ``plant`` with Drake's ``Linearize``.
+
+    Parameters
+    ----------
+    plant : Rig (finger, hand) or Drake System
+        A rig is linearised at ``op`` (default: its default operating point) in
+        the context :meth:`Rig.context` builds; a bare system at ``context``
+        (default: its default context, inputs must be fixed there).
+    op : OperatingPoint, optional
+    context : Context, optional
+        For a bare system (or to linearise a rig at a context you prepared).
+    input : str
+        The input port (default ``motor_torque``); other inputs stay at their fixed values.
+    outputs : sequence of str, optional
+        Output ports to linearise; the first gives ``C, D``.  Default: ``state``
+        if the system has it, else its first output port.
+    state, motor_torque : sequence, optional
+        Override the state / the input value of the point (a non-equilibrium
+        point: the equilibrium check is skipped and ``f0`` holds ``xdot``).
+    equilibrium_tolerance : float or None
+        Drake checks ``|xdot| <=`` this at the point (None: no check).
+    """
+    if isinstance(plant, System):
+        system, names = plant, ()
+        ctx = (context.Clone() if context is not None else system.CreateDefaultContext())
+        op = None
+    else:
+        system = getattr(plant, "diagram", None)
+        if not isinstance(system, System):
+            raise ValueError(f"linearize: expected a Rig or a Drake System, got {type(plant).__name__}")
+        names = tuple(plant.state_names)
+        if context is not None:
+            ctx = context.Clone()
+        else:
+            op = plant.operating_point() if op is None else op
+            ctx = plant.context(op)
+    if not system.HasInputPort(input):
+        ins = [system.get_input_port(i).get_name() for i in range(system.num_input_ports())]
+        raise ValueError(f"linearize: {system.get_name()!r} has no input port {input!r}; inputs: {', '.join(ins)}")
+    in_port = system.GetInputPort(input)
+    if outputs is None:
+        outputs = ("state",) if system.HasOutputPort("state") or system.num_output_ports() == 0 else \
+            (system.get_output_port(0).get_name(),)
+    outputs = tuple(outputs)
+    if not outputs:
+        raise ValueError("linearize: outputs must name at least one output port")
+    for name in outputs:
+        if not system.HasOutputPort(name):
+            outs = [system.get_output_port(i).get_name() for i in range(system.num_output_ports())]
+            raise ValueError(f"linearize: {system.get_name()!r} has no output port {name!r}; outputs: {', '.join(outs)}")
+    if state is not None:
+        x = np.asarray(state, float).reshape(-1)
+        if x.size != ctx.num_continuous_states():
+            raise ValueError(f"linearize: state has {x.size} entries, the system has {ctx.num_continuous_states()}")
+        ctx.SetContinuousState(x)
+    if motor_torque is not None:
+        u = np.asarray(motor_torque, float).reshape(-1)
+        if u.size != in_port.size():
+            raise ValueError(f"linearize: {input} has {u.size} entries, the port has {in_port.size()}")
+        in_port.FixValue(ctx, u)
+    if not in_port.HasValue(ctx):
+        raise ValueError(f"linearize: input port {input!r} has no value in the context (fix it or give an op)")
+    tol = None if (state is not None or motor_torque is not None) else equilibrium_tolerance
+    maps = {}
+    A = B = None
+    for k, name in enumerate(outputs):
+        try:
+            lin = Linearize(system, ctx, input_port_index=in_port.get_index(),
+                            output_port_index=system.GetOutputPort(name).get_index(),
+                            equilibrium_check_tolerance=tol if (k == 0 and tol is not None) else math.inf)
+        except RuntimeError as exc:
+            raise ValueError(f"linearize: {system.get_name()!r}: {exc}") from None
+        if k == 0:
+            A, B = np.array(lin.A()), np.array(lin.B())
+        y0 = np.array(system.GetOutputPort(name).Eval(ctx), float).reshape(-1)
+        cn = _channel_names(name, y0.size, names if name == "state" else ())
+        maps[name] = OutputMap(np.array(lin.C()), np.array(lin.D()), y0, cn)
+    x0 = ctx.get_continuous_state_vector().CopyToVector()
+    u0 = np.array(in_port.Eval(ctx), float).reshape(-1)
+    f0 = system.EvalTimeDerivatives(ctx).CopyToVector() if x0.size else np.zeros(0)
+    first = maps[outputs[0]]
+    snames = names if len(names) == x0.size else tuple(f"x[{i}]" for i in range(x0.size))
+    return LinearizationResult(A, B, first.C, first.D, snames, _channel_names(input, u0.size), first.names,
+                               x0, u0, f0, maps, op, input)
+
+
+def _check_weights(Q, R, n, m, owner: str = "lqr"):
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    R = np.atleast_2d(np.asarray(R, dtype=float))
+    if Q.shape == (1, n) or (Q.shape == (n, 1) and n > 1):
+        Q = np.diag(Q.ravel())
+    if R.shape == (1, m) and m > 1:
+        R = np.diag(R.ravel())
+    if Q.shape != (n, n):
+        raise ValueError(f"{owner}: Q must be {n}x{n} (or {n} diagonal entries), got shape {Q.shape}")
+    if R.shape != (m, m):
+        raise ValueError(f"{owner}: R must be {m}x{m} (or {m} diagonal entries), got shape {R.shape}")
+    if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(R))):
+        raise ValueError(f"{owner}: Q and R must be finite")
+    if not np.allclose(Q, Q.T) or np.min(np.linalg.eigvalsh(0.5 * (Q + Q.T))) < -1e-12 * max(1.0, np.abs(Q).max()):
+        raise ValueError(f"{owner}: Q must be symmetric positive semi-definite")
+    if not np.allclose(R, R.T) or np.min(np.linalg.eigvalsh(0.5 * (R + R.T))) <= 0:
+        raise ValueError(f"{owner}: R must be symmetric positive definite")
+    return Q, R
+
+
+def lqr_gain(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
+    """``(K, S)`` from Drake's ``LinearQuadraticRegulator(A, B, Q, R)`` (``u = -K x``); weights validated."""
+    A = np.atleast_2d(np.asarray(A, float))
+    B = np.asarray(B, float).reshape(A.shape[0], -1)
+    Q, R = _check_weights(Q, R, A.shape[0], B.shape[1])
+    try:
+        K, S = LinearQuadraticRegulator(A, B, Q, R)
+    except RuntimeError as exc:
+        raise ValueError(f"lqr: no stabilising solution (is (A, B) stabilisable, (A, Q) detectable?): {exc}") from None
+    return np.asarray(K), np.asarray(S)
 
 
 @dataclass(frozen=True)
@@ -47,80 +521,49 @@ class LqrResult:
     """LQR design at an operating point: ``u = u0 - K (x - x0)``.
 
     ``S`` solves the continuous algebraic Riccati equation; the optimal cost
-    from an initial deviation ``dx`` is ``dx^T S dx``.
+    from an initial deviation ``dx`` is ``dx^T S dx``.  ``closed_loop`` is the
+    linear closed loop ``xdot = (A - B K) dx + B v`` (input ``v`` added to the
+    command) with the same outputs, so ``design.closed_loop.damp()`` and
+    ``.bode()`` work as for the plant.
     """
 
     K: np.ndarray
     S: np.ndarray
-    closed_loop_poles: np.ndarray
-    linearization: LinearizationResult
     Q: np.ndarray
     R: np.ndarray
+    linearization: LinearizationResult
+
+    @property
+    def closed_loop(self) -> LinearizationResult:
+        lin = self.linearization
+        BK = lin.B @ self.K
+        outs = {k: replace(v, C=v.C - v.D @ self.K) for k, v in lin.outputs.items()}
+        return replace(lin, A=lin.A - BK, C=lin.C - lin.D @ self.K, outputs=outs)
+
+    @property
+    def closed_loop_poles(self) -> np.ndarray:
+        return closed_loop_poles(self.linearization.A, self.linearization.B, self.K)
 
     def to_json(self) -> dict:
-        return dict(K=self.K.tolist(), closed_loop_poles=[[float(p.real), float(p.imag)]
-                                                          for p in self.closed_loop_poles])
+        return dict(K=self.K.tolist(), S=self.S.tolist(), Q=self.Q.tolist(), R=self.R.tolist(),
+                    closed_loop_poles=[[float(p.real), float(p.imag)] for p in self.closed_loop_poles],
+                    state_names=list(self.linearization.state_names))
 
 
-def _sorted_eig(M):
-    ev = np.linalg.eigvals(M)
-    return ev[np.lexsort((ev.imag, ev.real))]
+def lqr(plant, Q, R, op=None, *, context: Context | None = None, input: str = "motor_torque",  # noqa: A002
+        linearization: LinearizationResult | None = None) -> LqrResult:
+    """LQR from Drake's ``LinearQuadraticRegulator`` on the :func:`linearize` model of ``plant`` at ``op``.
 
-
-def linearize(rig: Rig, op: OperatingPoint | None = None, *, equilibrium_tolerance: float | None = 1e-6
-              ) -> LinearizationResult:
-    """Linearise ``rig.diagram`` at ``op`` (default operating point if None) with Drake's ``Linearize``.
-
-    Input ``motor_torque``, output ``state``; other inputs are held at the
-    operating point. ``equilibrium_tolerance`` makes Drake check that ``op`` is
-    an equilibrium (None: skip the check, e.g. for trajectories).
+    ``Q`` (n x n or n diagonal entries), ``R`` (m x m or m entries); pass
+    ``linearization`` to reuse one.  ``plant`` may be ``None`` when a
+    linearisation is given.
     """
-    op = rig.operating_point() if op is None else op
-    ctx = rig.context(op)
-    sys = Linearize(rig.diagram, ctx,
-                    input_port_index=rig.diagram.GetInputPort("motor_torque").get_index(),
-                    output_port_index=rig.diagram.GetOutputPort("state").get_index(),
-                    equilibrium_check_tolerance=equilibrium_tolerance)
-    A, B, C, D = (np.array(m) for m in (sys.A(), sys.B(), sys.C(), sys.D()))
-    return LinearizationResult(A, B, C, D, _sorted_eig(A), tuple(rig.state_names), op)
-
-
-def _check_weights(Q, R, n, m):
-    Q = np.atleast_2d(np.asarray(Q, dtype=float))
-    R = np.atleast_2d(np.asarray(R, dtype=float))
-    if Q.shape == (1, n) or Q.shape == (n, 1):
-        Q = np.diag(Q.ravel())
-    if R.shape == (1, m) and m > 1:
-        R = np.diag(R.ravel())
-    if Q.shape != (n, n):
-        raise ValueError(f"lqr: Q must be {n}x{n} (or {n} diagonal entries), got shape {Q.shape}")
-    if R.shape != (m, m):
-        raise ValueError(f"lqr: R must be {m}x{m} (or {m} diagonal entries), got shape {R.shape}")
-    if not (np.all(np.isfinite(Q)) and np.all(np.isfinite(R))):
-        raise ValueError("lqr: Q and R must be finite")
-    if np.min(np.linalg.eigvalsh(0.5 * (Q + Q.T))) < -1e-12:
-        raise ValueError("lqr: Q must be symmetric positive semi-definite")
-    if np.min(np.linalg.eigvalsh(0.5 * (R + R.T))) <= 0:
-        raise ValueError("lqr: R must be symmetric positive definite")
-    return Q, R
-
-
-def lqr(rig: Rig, Q, R, op: OperatingPoint | None = None) -> LqrResult:
-    """LQR gain from Drake's ``LinearQuadraticRegulator(system, context, Q, R)`` at ``op``."""
-    op = rig.operating_point() if op is None else op
-    lin = linearize(rig, op)
-    Q, R = _check_weights(Q, R, lin.A.shape[0], lin.B.shape[1])
-    ctx = rig.context(op)
-    controller = LinearQuadraticRegulator(rig.diagram, ctx, Q, R,
-                                          input_port_index=rig.diagram.GetInputPort("motor_torque").get_index())
-    K = -np.array(controller.D())  # controller: u = u0 + D (x - x0), D = -K
-    # Drake's LinearQuadraticRegulator(system, ...) returns the controller only; S from the same
-    # linearisation via the (A, B) overload.
-    from pydrake.systems.controllers import LinearQuadraticRegulator as _lqr_ab
-    _, S = _lqr_ab(lin.A, lin.B, Q, R)
-    return LqrResult(K, np.array(S), _sorted_eig(lin.A - lin.B @ K), lin, Q, R)
+    lin = linearization if linearization is not None else linearize(plant, op, context=context, input=input)
+    K, S = lqr_gain(lin.A, lin.B, Q, R)
+    Qm, Rm = _check_weights(Q, R, lin.A.shape[0], lin.B.shape[1])
+    return LqrResult(K, S, Qm, Rm, lin)
 
 
 def poles_table(result: LinearizationResult) -> str:
-    """Poles as text lines ``re +- im j`` (for the CLI)."""
-    return "\n".join(f"  {p.real: .6g} {'+' if p.imag >= 0 else '-'} {abs(p.imag):.6g}j" for p in result.poles)
+    """Poles as text lines ``re +- im j`` (round-off zeros print as 0)."""
+    return "\n".join(f"  {_fmt_pole(p)}" for p in result.poles)

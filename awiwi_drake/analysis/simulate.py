@@ -1,325 +1,411 @@
-"""Simulation with Drake's ``Simulator``, logging and health monitors.
+"""The one simulation entry point: :func:`simulate` (Drake's ``Simulator`` on any diagram).
 
-:func:`simulate` runs a diagram, records named output ports at every
-integrator step, and watches for
+:func:`simulate` takes any diagram with named ports (a rig, a finger, the hand,
+a closed loop: anything with a ``diagram`` attribute works too), and
 
-* divergence - a non-finite or exploding state raises :class:`SimulationDivergedError`
-  naming the time and the state entry;
-* tendon slack - tendon force at or below ``slack_force`` (a tendon-driven hand's
-  model is invalid then, ch. 7);
-* actuator saturation - commanded torque beyond the motor's limit.
+* drives named input ports with schedules (:mod:`~awiwi_drake.analysis.schedules`:
+  steps, ramps, sines, chirps, recorded samples), each wired in as a Drake
+  source system; inputs not scheduled keep the value fixed in the given context;
+* logs named ports with Drake's C++ ``VectorLogSink`` (every integrator step, or
+  every ``log_period``);
+* watches for divergence (non-finite or exploding state, checked at every
+  progress chunk, raising :class:`SimulationDivergedError`) and evaluates
+  monitors (:mod:`~awiwi_drake.analysis.monitors`: slack, saturation, spring
+  over-range) on the logged samples with numpy; no Python runs per step;
+* integrates error-controlled, or with a fixed step; ``mode="auto"`` (default)
+  uses the fixed step at the control period for sampled loops (a diagram
+  with one periodic discrete update, e.g. a 3 kHz zero-order hold) and
+  error control otherwise;
+* calls ``progress(t, duration)`` (simulated seconds since the start) after
+  every chunk, for progress bars.
 
-Slack and saturation are recorded as :class:`Event` intervals in the
-:class:`SimulationResult` (and optionally raise).
+The simulated diagram is a clone (``System.Clone()``, scalar conversion) of the
+one given, wrapped with the sources and sinks, so the user's diagram can be
+simulated again or embedded elsewhere; the given context is advanced to the end
+time like ``Simulator`` would, and is returned as ``final_context``.
 """
 
 from __future__ import annotations
 
-import abc
-from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
+import math
+import time
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-from pydrake.systems.framework import Context, Diagram, EventStatus, OutputPort, System
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, InputPort, OutputPort, PortDataType, System
+from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
-__all__ = ["SimulationDivergedError", "Event", "SimulationResult", "SlackMonitor", "SaturationMonitor",
-           "OverrangeMonitor", "PairSlackMonitor",
-           "simulate", "rig_monitors"]
+from awiwi_drake.analysis.monitors import Monitor
+from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
+from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
+
+__all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "simulate", "MODES",
+           "control_period"]
+
+MODES = ("auto", "fixed_step", "error_controlled")
+_FIXED_STEP_INTEGRATORS = ("explicit_euler", "semi_explicit_euler", "runge_kutta2")
+_CHUNKS = 40  # divergence/monitor/progress checks per run
 
 
-class SimulationDivergedError(RuntimeError):
+class SimulationError(RuntimeError):
+    """A simulation could not be run or completed (bad times, Drake refused, integrator failure)."""
+
+
+class SimulationDivergedError(SimulationError):
     """The state became non-finite or exceeded the divergence bound."""
 
 
-@dataclass
-class Event:
-    """An interval during which a condition held for one channel.
-
-    Conditions are checked after every integrator step, so ``t_start`` and
-    ``t_end`` are the first and last step times at which it held (within one
-    step, at most ``max_step``, of the true crossing), and ``extreme`` is the
-    most extreme sampled value.
-    """
-
-    kind: str
-    channel: str
-    t_start: float
-    t_end: float
-    extreme: float
-
-    def __str__(self) -> str:
-        return f"{self.kind} on {self.channel} from {self.t_start:.4g} s to {self.t_end:.4g} s (extreme {self.extreme:.4g})"
+class SimulationEventError(SimulationError):
+    """A monitor created with ``raise_on_event=True`` saw its condition."""
 
 
-@dataclass
-class SimulationResult:
-    """Logged signals (one row per integrator step) and detected events.
-
-    Attributes
-    ----------
-    t : ndarray (T,)
-    signals : dict of name -> ndarray (T, k)
-    events : list of Event
-    final_context : Context
-    """
-
-    t: np.ndarray
-    signals: dict
-    events: list = field(default_factory=list)
-    final_context: Context | None = None
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        if name not in self.signals:
-            raise KeyError(f"signal {name!r} was not logged; logged: {', '.join(self.signals)}")
-        return self.signals[name]
-
-    def events_of(self, kind: str) -> list:
-        return [e for e in self.events if e.kind == kind]
-
-    def resample(self, t: np.ndarray) -> "SimulationResult":
-        """Signals linearly interpolated at times ``t`` (for comparisons and plots)."""
-        out = {k: np.stack([np.interp(t, self.t, v[:, j]) for j in range(v.shape[1])], axis=1)
-               for k, v in self.signals.items()}
-        return SimulationResult(np.asarray(t), out, list(self.events), self.final_context)
-
-
-class _IntervalMonitor(abc.ABC):
-    """Track per-channel intervals where ``condition(value)`` holds on one port."""
-
-    kind = "condition"
-
-    def __init__(self, system: System, port, labels: Sequence[str] | None = None, raise_on_event: bool = False):
-        self.system, self.port = system, port
-        self.labels = labels
-        self.raise_on_event = raise_on_event
-        self._open: dict[int, Event] = {}
-        self.events: list[Event] = []
-
-    @abc.abstractmethod
-    def _condition(self, v: np.ndarray) -> np.ndarray:
-        """Boolean per channel: does the condition hold?"""
-
-    def _extreme(self, old: float, v: float) -> float:
-        return max(old, v)
-
-    def reset(self) -> None:
-        """Forget events (called by :func:`simulate` before each run)."""
-        self._open, self.events = {}, []
-
-    def check(self, root: Context) -> str | None:
-        return self._check_values(root.get_time(), self.port.Eval(self.system.GetMyContextFromRoot(root)))
-
-    def _check_values(self, t: float, v) -> str | None:
-        hit = self._condition(v)
-        for i in range(len(v)):
-            if hit[i]:
-                if i not in self._open:
-                    label = self.labels[i] if self.labels else f"{self.port.get_name()}[{i}]"
-                    self._open[i] = Event(self.kind, label, t, t, float(v[i]))
-                    if self.raise_on_event:
-                        return f"{self.kind} on {label} at t = {t:.6g} s (value {v[i]:.6g})"
-                ev = self._open[i]
-                ev.t_end, ev.extreme = t, self._extreme(ev.extreme, float(v[i]))
-            elif i in self._open:
-                self.events.append(self._open.pop(i))
+def control_period(diagram: System) -> float | None:
+    """Period [s] of the diagram's unique periodic discrete update (its control period), else None."""
+    try:
+        attr = diagram.GetUniquePeriodicDiscreteUpdateAttribute()
+    except RuntimeError:
         return None
-
-    def finish(self) -> list[Event]:
-        self.events.extend(self._open.values())
-        self._open.clear()
-        return sorted(self.events, key=lambda e: e.t_start)
+    return None if attr is None else float(attr.period_sec())
 
 
-class SlackMonitor(_IntervalMonitor):
-    """Tendon slack: the force on output ``port_name`` at or below ``slack_force`` [N]."""
-
-    kind = "tendon_slack"
-
-    def __init__(self, system, port_name="tendon_force", slack_force: float = 0.0, **kw):
-        super().__init__(system, system.GetOutputPort(port_name), **kw)
-        self.slack_force = slack_force
-
-    def _condition(self, v):
-        return v <= self.slack_force
-
-    def _extreme(self, old, v):
-        return min(old, v)
+def _unwrap(system) -> tuple[System, tuple]:
+    """``(diagram, state_names)`` from a System or a handle with ``diagram`` (Rig, ClosedLoop, ...)."""
+    if isinstance(system, System):
+        return system, ()
+    diagram = getattr(system, "diagram", None)
+    if not isinstance(diagram, System):
+        raise ValueError(f"simulate: expected a Drake System or an object with a 'diagram' (Rig, ClosedLoop), "
+                         f"got {type(system).__name__}")
+    names = getattr(system, "state_names", None)
+    if names is None and getattr(system, "rig", None) is not None:
+        names = getattr(system.rig, "state_names", None)
+    return diagram, tuple(names or ())
 
 
-class OverrangeMonitor(_IntervalMonitor):
-    """Spring beyond its calibrated range: force on ``port_name`` above ``max_force`` [N]."""
-
-    kind = "spring_overrange"
-
-    def __init__(self, system, max_force: float, port_name="tendon_force", **kw):
-        super().__init__(system, system.GetOutputPort(port_name), **kw)
-        self.max_force = max_force
-
-    def _condition(self, v):
-        return v > self.max_force
+def _port_names(ports_of: Callable[[int], Any], n: int) -> list[str]:
+    return [ports_of(i).get_name() for i in range(n)]
 
 
-class SaturationMonitor(_IntervalMonitor):
-    """Actuator saturation: ``|commanded torque| >= torque_limit`` on input ``port_name``."""
-
-    kind = "actuator_saturation"
-
-    def __init__(self, system, torque_limit: float, port_name="motor_torque", **kw):
-        super().__init__(system, system.GetInputPort(port_name), **kw)
-        self.torque_limit = torque_limit
-
-    def _condition(self, v):
-        return np.abs(v) >= self.torque_limit
-
-    def _extreme(self, old, v):
-        return old if abs(old) >= abs(v) else v
+def _path(root: System, target: System) -> list[str] | None:
+    """Subsystem names from ``root`` down to ``target`` ([] for the root itself), or None."""
+    if target is root:
+        return []
+    if isinstance(root, Diagram):
+        for s in root.GetSystems():
+            sub = _path(s, target)
+            if sub is not None:
+                return [s.get_name()] + sub
+    return None
 
 
-class PairSlackMonitor(_IntervalMonitor):
-    """Slack in an antagonistic torsional spring ``phi(d)`` (flexible joint, nonlinear spring).
-
-    The pair's tendons have elongations ``x0 + r d`` and ``x0 - r d`` with
-    ``d = theta - q`` (state entries ``i_theta`` and ``i_q``); a tendon is slack when
-    its elongation is <= 0.
-    """
-
-    kind = "tendon_slack"
-
-    def __init__(self, system, x0: float, radius: float, i_q: int = 0, i_theta: int = 2, **kw):
-        super().__init__(system, system.GetOutputPort("state"), labels=["pair tendon 1", "pair tendon 2"], **kw)
-        self.x0, self.r, self.i_q, self.i_theta = x0, radius, i_q, i_theta
-
-    def check(self, root):
-        x = self.port.Eval(self.system.GetMyContextFromRoot(root))
-        d = x[self.i_theta] - x[self.i_q]
-        elong = np.array([self.x0 + self.r * d, self.x0 - self.r * d])
-        return self._check_values(root.get_time(), elong)
-
-    def _condition(self, v):
-        return v <= 0.0
+def _follow(root: System, path: list[str]) -> System:
+    s = root
+    for name in path:
+        s = s.GetSubsystemByName(name)
+    return s
 
 
-def rig_monitors(rig, *, raise_on_slack: bool = False, raise_on_saturation: bool = False) -> list:
-    """Slack, over-range and saturation monitors for a rig.
-
-    ``rig.extra`` says what applies: ``tension_only`` (slack on ``tendon_force``),
-    ``pair_slack`` (slack of the two hidden tendons of an antagonistic torsional
-    spring, from the ``state`` output), ``max_force`` (calibrated spring range)
-    and ``torque_limit``.
-    """
-    monitors = []
-    if rig.extra.get("tension_only", True):
-        monitors.append(SlackMonitor(rig.diagram, raise_on_event=raise_on_slack))
-    if rig.extra.get("pair_slack") is not None:
-        monitors.append(PairSlackMonitor(rig.diagram, *rig.extra["pair_slack"], raise_on_event=raise_on_slack))
-    if rig.extra.get("max_force") is not None:
-        monitors.append(OverrangeMonitor(rig.diagram, rig.extra["max_force"]))
-    limit = rig.extra.get("torque_limit")
-    if limit is not None:
-        monitors.append(SaturationMonitor(rig.diagram, limit, raise_on_event=raise_on_saturation))
-    return monitors
-
-
-def _resolve_ports(diagram: Diagram, log) -> list[tuple[str, System, OutputPort]]:
-    out = []
-    if isinstance(log, Mapping):
-        items = list(log.items())
-    else:
-        items = [(name, name) for name in (log or [])]
-    for name, port in items:
-        if isinstance(port, str):
-            if not diagram.HasOutputPort(port):
-                names = [diagram.get_output_port(i).get_name() for i in range(diagram.num_output_ports())]
-                raise ValueError(f"simulate: diagram {diagram.get_name()!r} has no output port {port!r}; "
-                                 f"ports: {', '.join(names)}")
-            out.append((name, diagram, diagram.GetOutputPort(port)))
-        else:
-            out.append((name, port.get_system(), port))
-    return out
-
-
-def simulate(diagram: Diagram, context: Context | None, t_final: float, *,
-             log: Iterable[str] | Mapping[str, object] = ("state",),
-             monitors: Sequence = (), integrator: str = "runge_kutta3", max_step: float = 1e-3,
-             accuracy: float = 1e-5, divergence_bound: float = 1e6, t_start: float | None = None,
-             fixed_step: bool = False) -> SimulationResult:
-    """Simulate ``diagram`` from ``context`` to ``t_final`` [s] with Drake's ``Simulator``.
+def simulate(system, context: Context | None, t_final: float, *,
+             inputs: Mapping[str, Any] | None = None,
+             log: Iterable[str] | Mapping[str, Any] | None = None,
+             monitors: Sequence[Monitor] = (), mode: str = "auto", step: float | None = None,
+             integrator: str = "runge_kutta3", max_step: float = 1e-3, accuracy: float = 1e-5,
+             divergence_bound: float = 1e6, t_start: float | None = None, log_period: float | None = None,
+             progress: Callable[[float, float], Any] | None = None,
+             state_names: Sequence[str] | None = None) -> SimulationResult:
+    """Simulate ``system`` from ``context`` to the time ``t_final`` [s] with Drake's ``Simulator``.
 
     Parameters
     ----------
-    diagram : Diagram
+    system : Diagram, System, or an object with ``diagram`` (Rig, ClosedLoop, finger/hand handle)
     context : Context or None
-        Initial root context (inputs fixed as needed); None: default context.
+        Initial context of ``system`` (state set, inputs fixed as needed); None:
+        its default context.  It is advanced to ``t_final`` (like ``Simulator``).
     t_final : float
-        End time [s].
-    log : names or mapping
-        Exported output port names of ``diagram`` (or ``{label: OutputPort}`` for
-        ports of subsystems) recorded at every step.
-    monitors : sequence
-        Objects with ``check(root_context) -> str | None`` and ``finish() -> list[Event]``
-        (see :func:`rig_monitors`).
+        End time [s] (absolute: the run starts at the context's time, or ``t_start``).
+    inputs : mapping port name -> schedule, number or vector, optional
+        Input ports driven by a signal instead of their fixed value
+        (:class:`~awiwi_drake.analysis.schedules.Step`, ``Ramp``, ``Sine``,
+        ``Chirp``, ``Samples``, ``PerEntry``, sums); times relative to the start.
+    log : names or mapping, optional
+        Ports recorded: names of output ports (or input ports: their driving
+        signal) of ``system``, or ``{label: port}`` with ports of subsystems.
+        Default: ``("state",)`` when the diagram has a ``state`` output.
+    monitors : sequence of Monitor
+        Slack / saturation / over-range monitors (:func:`~awiwi_drake.analysis.rig_monitors`).
+    mode : {"auto", "fixed_step", "error_controlled"}
+        ``auto``: fixed step at the control period for sampled loops (a unique
+        periodic discrete update in the diagram), error control otherwise.
+    step : float, optional
+        Fixed step [s]; default the control period (or ``max_step`` for a
+        continuous diagram).  For a sampled loop it must divide the control period.
     integrator : str
-        Drake integrator name (``runge_kutta3`` error-controlled is the default:
-        it beats implicit integrators, which finite-difference through Python).
+        Drake integrator name (``runge_kutta3`` default: for the hand the cheapest
+        stable fixed-step choice at 3 kHz; ``runge_kutta2`` diverges there).
     max_step, accuracy : float
-        Maximum step [s] and target accuracy of the integrator.
+        Error-controlled mode: maximum step [s] and target accuracy.
     divergence_bound : float
-        Any state entry beyond this magnitude counts as divergence.
-    fixed_step : bool
-        Run the integrator at ``max_step`` without error control (e.g. RK3 at
-        the 3 kHz control period: several times faster under a sample-and-hold
-        controller; check the accuracy against an error-controlled run).
+        A state entry beyond this magnitude counts as divergence.
+    t_start : float, optional
+        Start time [s] (default: the context's time).
+    log_period : float, optional
+        Log every ``log_period`` [s] instead of every integrator step.
+    progress : callable, optional
+        ``progress(t, duration)`` in simulated seconds since the start, called
+        about 40 times per run (and at the end).
+    state_names : sequence of str, optional
+        Channel names of the ``state`` output (default: the handle's ``state_names``).
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    ValueError
+        A bad argument (names the argument, port or value).
+    SimulationDivergedError
+        Non-finite or exploding state (names the time and the state entry).
+    SimulationEventError
+        A monitor with ``raise_on_event=True`` saw its condition.
+    SimulationError
+        Drake could not complete the run (its message included).
     """
-    if not (np.isfinite(t_final) and t_final > 0):
-        raise ValueError(f"simulate: t_final = {t_final} must be finite and > 0 [s]")
-    if not isinstance(fixed_step, bool):
-        raise ValueError(f"simulate: fixed_step = {fixed_step!r} must be True or False "
-                         "(the step size is max_step)")
-    ports = _resolve_ports(diagram, log)
-    sim = Simulator(diagram, context) if context is not None else Simulator(diagram)
-    ResetIntegratorFromFlags(sim, integrator, max_step)
-    integ = sim.get_mutable_integrator()
-    if fixed_step:
-        integ.set_fixed_step_mode(True)
-    elif integrator not in ("runge_kutta2", "explicit_euler", "semi_explicit_euler"):  # fixed-step ones
-        integ.set_target_accuracy(accuracy)
-    root = sim.get_mutable_context()
-    if t_start is not None:
-        root.SetTime(t_start)
-    times: list[float] = []
-    rows: dict[str, list] = {name: [] for name, _, _ in ports}
-    failure: list[str] = []
+    diagram, names_from_handle = _unwrap(system)
+    state_names = tuple(state_names) if state_names is not None else names_from_handle
+    if mode not in MODES:
+        raise ValueError(f"simulate: mode = {mode!r} must be one of {', '.join(MODES)}")
+    for label, v, lo in (("t_final", t_final, None), ("max_step", max_step, 0.0), ("accuracy", accuracy, 0.0),
+                         ("divergence_bound", divergence_bound, 0.0)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
+            raise ValueError(f"simulate: {label} = {v!r} must be a finite number")
+        if lo is not None and v <= lo:
+            raise ValueError(f"simulate: {label} = {v!r} must be > {lo}")
+    for label, v in (("step", step), ("log_period", log_period), ("t_start", t_start)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.floating))
+                              or not math.isfinite(v) or (label != "t_start" and v <= 0)):
+            raise ValueError(f"simulate: {label} = {v!r} must be a finite number" + ("" if label == "t_start" else " > 0"))
+    user_ctx = context if context is not None else diagram.CreateDefaultContext()
+    start = float(user_ctx.get_time() if t_start is None else t_start)
+    if not float(t_final) > start:
+        raise ValueError(f"simulate: t_final = {t_final} s must be after the start time {start} s")
+    duration = float(t_final) - start
 
-    def monitor(ctx: Context):
-        x = ctx.get_continuous_state_vector().CopyToVector()
-        if not np.all(np.isfinite(x)) or (x.size and np.max(np.abs(x)) > divergence_bound):
-            bad = int(np.argmax(~np.isfinite(x) | (np.abs(x) > divergence_bound)))
-            failure.append(f"simulation diverged at t = {ctx.get_time():.6g} s: state[{bad}] = {x[bad]}")
-            return EventStatus.Failed(diagram, failure[-1])
-        times.append(ctx.get_time())
-        for name, system, port in ports:
-            rows[name].append(np.array(port.Eval(system.GetMyContextFromRoot(ctx)), dtype=float).ravel())
-        for m in monitors:
-            msg = m.check(ctx)
-            if msg:
-                failure.append(msg)
-                return EventStatus.Failed(diagram, msg)
-        return EventStatus.Succeeded()
+    # -- integration mode ---------------------------------------------------
+    period = control_period(diagram)
+    if mode == "auto":
+        mode = "fixed_step" if (period is not None or integrator in _FIXED_STEP_INTEGRATORS) else "error_controlled"
+    if mode == "fixed_step":
+        h = float(step) if step is not None else (period if period is not None else float(max_step))
+        if period is not None:
+            ratio = period / h
+            if abs(ratio - round(ratio)) > 1e-9 * max(1.0, ratio) or round(ratio) < 1:
+                raise ValueError(f"simulate: step = {h:g} s must be the control period {period:g} s or a divisor of it")
+    else:
+        if integrator in _FIXED_STEP_INTEGRATORS:
+            raise ValueError(f"simulate: integrator {integrator!r} has no error control; use mode='fixed_step'")
+        h = float(max_step)
 
+    # -- wrap a clone with sources and sinks ---------------------------------
+    try:
+        clone = diagram.Clone()
+    except RuntimeError as exc:
+        raise ValueError(f"simulate: diagram {diagram.get_name()!r} cannot be cloned (every subsystem must "
+                         f"support scalar conversion): {exc}") from None
+    b = DiagramBuilder()
+    sub = b.AddNamedSystem("simulated", clone)
+    inputs = dict(inputs or {})
+    in_names = _port_names(diagram.get_input_port, diagram.num_input_ports())
+    unknown = sorted(set(inputs) - set(in_names))
+    if unknown:
+        raise ValueError(f"simulate: diagram {diagram.get_name()!r} has no input port {unknown[0]!r}; "
+                         f"inputs: {', '.join(in_names) or 'none'}")
+    sources: dict[str, OutputPort] = {}
+    for i, name in enumerate(in_names):
+        port = diagram.get_input_port(i)
+        if port.get_data_type() != PortDataType.kVectorValued:
+            if name in inputs:
+                raise ValueError(f"simulate: input port {name!r} is abstract-valued and cannot take a schedule")
+            b.ExportInput(sub.get_input_port(i), name)
+            continue
+        if name in inputs:
+            try:
+                src = b.AddNamedSystem(f"input_{name}", InputSchedule(as_schedule(inputs[name]), port.size(), start))
+            except ValueError as exc:
+                raise ValueError(f"simulate: input {name!r}: {exc}") from None
+        elif port.HasValue(user_ctx):
+            src = b.AddNamedSystem(f"fixed_{name}", ConstantVectorSource(np.asarray(port.Eval(user_ctx), float)))
+        else:
+            raise ValueError(f"simulate: input port {name!r} of {diagram.get_name()!r} is neither fixed in the "
+                             "context nor given in inputs=")
+        b.Connect(src.get_output_port(0), sub.get_input_port(i))
+        sources[name] = src.get_output_port(0)
+
+    def resolve(label: str, port) -> OutputPort:
+        if isinstance(port, str):
+            if clone.HasOutputPort(port):
+                return sub.GetOutputPort(port)
+            if port in sources:
+                return sources[port]
+            outs = _port_names(diagram.get_output_port, diagram.num_output_ports())
+            raise ValueError(f"simulate: diagram {diagram.get_name()!r} has no port {port!r} to log ({label!r}); "
+                             f"outputs: {', '.join(outs)}; inputs: {', '.join(in_names) or 'none'}")
+        if not isinstance(port, (OutputPort, InputPort)):
+            raise ValueError(f"simulate: log entry {label!r} must be a port name or a port, got {type(port).__name__}")
+        path = _path(diagram, port.get_system())
+        if path is None:
+            raise ValueError(f"simulate: port {port.get_name()!r} ({label!r}) is not in diagram {diagram.get_name()!r}")
+        if not path:
+            return sub.get_output_port(port.get_index()) if isinstance(port, OutputPort) else sources[port.get_name()]
+        # a subsystem's port: only exported signals can be logged (Drake connects sinks to the top level);
+        # closed loops export the plant's ports under their own names (motor_torque: the torque entering it)
+        if clone.HasOutputPort(port.get_name()):
+            return sub.GetOutputPort(port.get_name())
+        raise ValueError(f"simulate: port {port.get_name()!r} of subsystem {'/'.join(path)!r} ({label!r}) is not "
+                         f"exported by {diagram.get_name()!r}; export it (DiagramBuilder.ExportOutput) to log it")
+
+    if log is None:
+        log = ("state",) if diagram.HasOutputPort("state") else ()
+    items = list(log.items()) if isinstance(log, Mapping) else [(n, n) for n in log]
+    sink_of: dict[int, Any] = {}  # id(output port) -> sink
+    period_log = 0.0 if log_period is None else float(log_period)
+
+    def sink(port: OutputPort):
+        key = (id(port.get_system()), port.get_index())
+        if key not in sink_of:
+            sink_of[key] = LogVectorOutput(port, b, period_log)
+        return sink_of[key]
+
+    logged = [(label, sink(resolve(label, port))) for label, port in items]
+    watched = []
     for m in monitors:
-        if hasattr(m, "reset"):
-            m.reset()
-    sim.set_monitor(monitor)
+        if not isinstance(m, Monitor):
+            raise ValueError(f"simulate: monitors must be Monitor objects (see rig_monitors), got {type(m).__name__}")
+        owner = diagram if m.system is None else m.system
+        target = None
+        if owner is not diagram and diagram.HasOutputPort(m.port_name):
+            target = diagram.GetOutputPort(m.port_name)   # exported under its own name (closed loops)
+        elif owner.HasOutputPort(m.port_name):
+            target = owner.GetOutputPort(m.port_name)
+        elif owner.HasInputPort(m.port_name):
+            target = owner.GetInputPort(m.port_name)
+        if target is None:
+            raise ValueError(f"simulate: monitor {m.kind!r} watches port {m.port_name!r}, which "
+                             f"{owner.get_name()!r} does not have")
+        watched.append((m, sink(resolve(f"monitor {m.kind}", target))))
+    wrapper = b.Build()
+    wrapper.set_name(f"simulate({diagram.get_name()})")
+
+    root = wrapper.CreateDefaultContext()
+    sub_ctx = clone.GetMyMutableContextFromRoot(root)
+    sub_ctx.SetStateAndParametersFrom(user_ctx)
+    for i, name in enumerate(in_names):
+        p = diagram.get_input_port(i)
+        if p.get_data_type() != PortDataType.kVectorValued and p.HasValue(user_ctx):
+            wrapper.GetInputPort(name).FixValue(root, p.EvalAbstract(user_ctx).Clone())
+    root.SetTime(start)
+
+    sim = Simulator(wrapper, root)
+    try:
+        ResetIntegratorFromFlags(sim, integrator, h)
+    except RuntimeError as exc:
+        raise ValueError(f"simulate: integrator {integrator!r}: {exc}") from None
+    integ = sim.get_mutable_integrator()
+    if mode == "fixed_step":
+        integ.set_fixed_step_mode(True)
+    else:
+        integ.set_target_accuracy(float(accuracy))
+
+    # chunk boundaries: whole numbers of steps (fixed step) so chunking does not change the run
+    n_chunks = max(1, min(_CHUNKS, int(duration / h)))
+    if mode == "fixed_step":
+        steps = max(1, int(round(duration / h / n_chunks)))
+        if period is None:  # the integrator's times are repeated sums t + h: chunk at the same doubles
+            bounds, tb = [], start
+            for k in range(1, int(duration / h + 1e-9) + 1):
+                tb = tb + h
+                if k % steps == 0:
+                    bounds.append(tb)
+        else:               # event times are multiples of the period
+            bounds = [start + k * steps * h for k in range(1, int(duration / (steps * h) + 1e-9) + 1)]
+    else:
+        bounds = list(start + duration * np.arange(1, n_chunks + 1) / n_chunks)
+    bounds = [t for t in bounds if t < t_final - 1e-12 * max(1.0, abs(t_final))] + [float(t_final)]
+
+    state_label = (lambda i: f"state[{i}] ({state_names[i]})" if i < len(state_names) == clone.num_continuous_states()
+                   else f"state[{i}]")
+
+    def check_state(t_now: float):
+        x = root.get_continuous_state_vector().CopyToVector()
+        bad = ~np.isfinite(x) | (np.abs(np.nan_to_num(x, nan=np.inf)) > divergence_bound)
+        if x.size and bad.any():
+            i = int(np.argmax(bad))
+            raise SimulationDivergedError(
+                f"simulation of {diagram.get_name()!r} diverged at t = {t_now:.6g} s: {state_label(i)} = {x[i]:.6g} "
+                f"(bound {divergence_bound:g}; checked every {duration / len(bounds):.3g} s)")
+
+    def read(s):
+        """Logged ``(t, values)``; samples closer than 1e-9 step to the next (a chunk boundary met
+        within round-off of a step) are dropped in favour of the later one."""
+        lg = s.FindLog(root)
+        t, v = np.array(lg.sample_times()), np.array(lg.data().T)
+        if len(t) > 1:
+            keep = np.append(np.diff(t) > 1e-9 * h, True)
+            t, v = t[keep], v[keep]
+        return t, v
+
+    def check_events():
+        for m, s in watched:
+            if not m.raise_on_event:
+                continue
+            evs = m.events(*read(s))
+            if evs:
+                e = evs[0]
+                raise SimulationEventError(f"{e.kind} on {e.channel} at t = {e.t_start:.6g} s (value {e.extreme:.6g})")
+
+    wall = time.perf_counter()
     try:
         sim.Initialize()
-        sim.AdvanceTo(t_final)
-    except RuntimeError as exc:
-        if failure and failure[-1].startswith("simulation diverged"):
-            raise SimulationDivergedError(failure[-1]) from None
-        if failure:
-            raise RuntimeError(failure[-1]) from None
+        for tb in bounds:
+            sim.AdvanceTo(tb)
+            check_state(tb)
+            check_events()
+            if progress is not None:
+                progress(tb - start, duration)
+    except (SimulationDivergedError, SimulationEventError):
         raise
-    events = [e for m in monitors for e in m.finish()]
-    signals = {k: np.array(v) for k, v in rows.items()}
-    return SimulationResult(np.array(times), signals, sorted(events, key=lambda e: e.t_start), sim.get_context())
+    except (RuntimeError, SystemExit) as exc:
+        t_now = root.get_time()
+        check_state(t_now)
+        raise SimulationError(f"simulation of {diagram.get_name()!r} failed at t = {t_now:.6g} s: {exc}") from None
+    wall = time.perf_counter() - wall
+
+    # -- collect -----------------------------------------------------------
+    user_ctx.SetTimeStateAndParametersFrom(sub_ctx)
+    t = None
+    signals, units, labels = {}, {}, {}
+    for label, s in logged:
+        ts, v = read(s)
+        t = ts if t is None else t
+        signals[label] = v
+        port_name = label if isinstance(label, str) else str(label)
+        if port_name == "state" and len(state_names) == v.shape[1]:
+            units[label] = [state_unit(n) for n in state_names]
+            labels[label] = list(state_names)
+        else:
+            units[label] = port_unit(port_name)
+            labels[label] = [f"{port_name}[{j}]" for j in range(v.shape[1])] if v.shape[1] > 1 else [port_name]
+    if t is None:
+        t = read(watched[0][1])[0] if watched else np.array([start, float(t_final)])
+    events = []
+    for m, s in watched:
+        events.extend(m.events(*read(s)))
+    events.sort(key=lambda e: (e.t_start, e.kind, e.channel))
+    info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
+                max_step=h if mode == "error_controlled" else None,
+                accuracy=float(accuracy) if mode == "error_controlled" else None,
+                control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
+                realtime_factor=duration / wall if wall > 0 else math.inf,
+                steps=int(integ.get_num_steps_taken()), system=diagram.get_name())
+    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)

@@ -138,7 +138,7 @@ def _run_chunk(fn: Callable, points: list[dict], fixed: dict, record: bool) -> l
 def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[Mapping[str, Any]], *,
               executor: cf.Executor | str | None = None, max_workers: int | None = None,
               chunksize: int | None = None, fixed: Mapping[str, Any] | None = None,
-              on_error: str = "raise") -> SweepResult:
+              on_error: str = "raise", quiet: bool | None = None) -> SweepResult:
     """Evaluate ``fn(**fixed, **point)`` at every point.
 
     Parameters
@@ -160,7 +160,12 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
         Keyword arguments passed unchanged to every call.
     on_error : {"raise", "record"}
         Re-raise the first failing point (named), or record failures in ``SweepResult.errors``.
+    quiet : bool, optional
+        No progress bar (points done / total); by default it shows on a terminal or in a
+        notebook, see :func:`awiwi_drake.config.progress_enabled`.
     """
+    from awiwi_drake.config import progress_bar
+
     if on_error not in ("raise", "record"):
         raise ValueError(f"run_sweep: on_error must be 'raise' or 'record', got {on_error!r}")
     if not callable(fn):
@@ -178,7 +183,11 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
     if isinstance(executor, str):
         if executor != "serial":
             raise ValueError(f"run_sweep: executor must be an Executor, 'serial' or None, got {executor!r}")
-        results = _run_chunk(fn, pts, fixed, record)
+        results = []
+        with progress_bar(total=len(pts), desc="sweep", unit="point", quiet=quiet) as bar:
+            for p in pts:
+                results.extend(_run_chunk(fn, [p], fixed, record))
+                bar.update(1)
         name = "serial"
     else:
         owned = executor is None
@@ -191,6 +200,10 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
         chunks = [pts[i:i + size] for i in range(0, len(pts), size)]
         try:
             futures = [ex.submit(_run_chunk, fn, c, fixed, record) for c in chunks]
+            sizes = {f: len(c) for f, c in zip(futures, chunks)}
+            with progress_bar(total=len(pts), desc="sweep", unit="point", quiet=quiet) as bar:
+                for f in cf.as_completed(futures):  # points done, as chunks finish
+                    bar.update(sizes[f])
             results = []
             for f in futures:  # keeps input order
                 results.extend(f.result())

@@ -4,18 +4,26 @@ Each command group lives in its own module in this package and exposes
 ``register(subparsers)``, which adds sub-commands whose ``func(args) -> int``
 does the work.  To add a group, create the module and list it in
 ``_COMMAND_MODULES``.  User errors (``ValueError``, ``FileNotFoundError``,
-``KeyError``, ``CliError``) print one line on stderr and exit 2; failures of
-the computation itself (``RuntimeError``, e.g. a diverged simulation) print
-one line and exit 1. No traceback either way.
+``KeyError``, ``OSError`` on a named path, ``CliError``, argparse errors) print
+one line on stderr and exit 2; failures of the computation itself
+(``RuntimeError``, ``FloatingPointError``, e.g. a diverged simulation) print one
+line and exit 1.  No traceback either way; an unexpected exception also prints
+one line (exit 1) naming its type, and ``AWIWI_DEBUG=1`` shows the traceback.
+Output paths are checked (:func:`output_dir`, :func:`output_file`) before any
+long computation starts.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import math
+import os
+import pathlib
 import sys
 
-__all__ = ["main", "CliError", "parse_sets"]
+__all__ = ["main", "CliError", "parse_sets", "output_dir", "output_file", "finite_float", "positive_float",
+           "add_parameter_options", "load_parameters"]
 
 # One module per command group (see each module's register()).
 _COMMAND_MODULES = [
@@ -44,10 +52,99 @@ def parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
+def add_parameter_options(p: argparse.ArgumentParser, what: str = "the rig's parameter set") -> None:
+    """``--config FILE`` (YAML) and repeated ``--set NAME=VALUE`` (applied after the file)."""
+    p.add_argument("--config", metavar="FILE.yaml",
+                   help=f"YAML file with {what} (all or some fields; e.g. from 'params RIG --yaml'); "
+                        "read with Drake's yaml_load_typed")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override one parameter by field name (nested sets searched, dotted paths like "
+                        "motor.inertia work); repeatable; applied after --config")
+
+
+def load_parameters(defaults, args):
+    """``defaults`` with ``args.config`` (YAML) and then ``args.set`` applied."""
+    from awiwi_drake.parameters.yaml_io import load_yaml
+
+    params = defaults
+    if getattr(args, "config", None):
+        params = load_yaml(params, args.config)
+    sets = parse_sets(getattr(args, "set", None))
+    return params.with_overrides(sets) if sets else params
+
+
+def output_dir(path, option: str = "--out") -> pathlib.Path:
+    """Create (if needed) and return the output folder ``path``; a one-line ``CliError`` if it cannot be used."""
+    p = pathlib.Path(path)
+    if p.exists() and not p.is_dir():
+        raise CliError(f"{option} {p}: exists and is not a directory")
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CliError(f"{option} {p}: cannot create the folder ({exc.strerror or exc})") from None
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise CliError(f"{option} {p}: the folder is not writable")
+    return p
+
+
+def output_file(path, option: str = "--out", *, suffixes: tuple[str, ...] = ()) -> pathlib.Path:
+    """Check that the file ``path`` can be written (its folder is created); returns the path.
+
+    An existing file is overwritten; a directory, an unwritable file or folder, or
+    a wrong suffix (when ``suffixes`` is given) raise a one-line ``CliError``.
+    """
+    p = pathlib.Path(path)
+    if suffixes and p.suffix.lower() not in suffixes:
+        raise CliError(f"{option} {p}: expected a file name ending in {' or '.join(suffixes)}")
+    if p.is_dir():
+        raise CliError(f"{option} {p}: is a directory; give a file name")
+    output_dir(p.parent if str(p.parent) else ".", option=f"{option} folder")
+    if p.exists() and not os.access(p, os.W_OK):
+        raise CliError(f"{option} {p}: the file is not writable")
+    return p
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite real number (argparse names the option on error)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not finite")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
+    return value
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("awiwi_drake")
+    except Exception:  # noqa: BLE001 - not installed (source checkout on PYTHONPATH)
+        return "unknown (not installed)"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors (the option is named by argparse)."""
+
+    def error(self, message: str):  # noqa: D401 - argparse hook
+        print(f"{self.prog}: error: {message} (see '{self.prog} --help')", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="awiwi-drake",
         description="Model, simulate, linearise and control the DLR Awiwi hand (Drake).")
+    parser.add_argument("--version", action="version", version=f"awiwi-drake {_version()}",
+                        help="print the package version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in _COMMAND_MODULES:
@@ -56,18 +153,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the CLI; returns the exit status (0 ok, 1 failed computation, 2 user error)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse: usage error (2) or --help/--version (0); message already printed
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    cmd = f"awiwi-drake {args.command}"
     try:
         return int(args.func(args) or 0)
     except (CliError, ValueError, FileNotFoundError, KeyError) as exc:
         msg = exc.args[0] if (isinstance(exc, KeyError) and exc.args) else str(exc)
-        print(f"awiwi-drake {args.command}: error: {msg}", file=sys.stderr)
+        print(f"{cmd}: error: {_one_line(msg)}", file=sys.stderr)
         return 2
-    except RuntimeError as exc:  # e.g. Drake refusing a non-equilibrium, a diverged simulation
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        print(f"awiwi-drake {args.command}: error: {first}", file=sys.stderr)
+    except OSError as exc:  # a path the user gave: name it
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"{cmd}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except (RuntimeError, FloatingPointError, ArithmeticError) as exc:  # e.g. a diverged simulation
+        print(f"{cmd}: error: {_one_line(str(exc)) or type(exc).__name__}", file=sys.stderr)
         return 1
+    except Exception as exc:  # noqa: BLE001 - never a traceback for the user; AWIWI_DEBUG=1 shows it
+        if os.environ.get("AWIWI_DEBUG", "0") not in ("", "0"):
+            raise
+        print(f"{cmd}: internal error ({type(exc).__name__}): {_one_line(str(exc))} "
+              f"(set AWIWI_DEBUG=1 for the traceback and please report it)", file=sys.stderr)
+        return 1
+
+
+def _one_line(text: str) -> str:
+    text = str(text).strip()
+    return text.splitlines()[0] if text else ""
 
 
 if __name__ == "__main__":  # pragma: no cover

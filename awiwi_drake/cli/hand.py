@@ -13,6 +13,16 @@ __all__ = ["register"]
 _TARGETS = ("hand", "thumb", "index", "middle", "ring", "fifth")
 
 
+def _duration(text: str) -> float:
+    from awiwi_drake.cli import positive_float
+    from awiwi_drake.parameters.cli import CliLimits
+
+    value, top = positive_float(text), CliLimits().max_animation_duration
+    if value > top:
+        raise argparse.ArgumentTypeError(f"{text!r} must be <= {top:g} s (CliLimits)")
+    return value
+
+
 def register(sub) -> None:
     fmt = argparse.RawDescriptionHelpFormatter
     p = sub.add_parser(
@@ -20,13 +30,14 @@ def register(sub) -> None:
         help="simulate a grasp of the hand (or one finger) and write a self-contained Meshcat HTML file",
         epilog="The motion: open -> closed -> open joint references tracked by the 3 kHz joint-space\n"
                "controller through the full tendon model (motors, lever springs, routing). Offline.")
-    p.add_argument("--out", default="hand.html", help="HTML file to write (default hand.html)")
+    p.add_argument("--out", default="hand.html", metavar="FILE.html", help="HTML file to write (default hand.html)")
     p.add_argument("--target", choices=_TARGETS, default="hand",
                    help="the whole hand (palm, forearm stub, five fingers) or one finger (default hand)")
-    p.add_argument("--duration", type=float, default=1.5,
+    p.add_argument("--duration", type=_duration, default=1.5, metavar="S",
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
     p.add_argument("--backend", choices=["python", "symbolic"], default="python",
                    help="tendon drive backend (python is faster for the whole hand)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=_animate)
 
     p = sub.add_parser("export-hand-diagrams",
@@ -36,9 +47,15 @@ def register(sub) -> None:
 
 
 def _animate(args) -> int:
+    from awiwi_drake.cli import output_file
     from awiwi_drake.export.animation import record_animation
 
-    res = record_animation(args.out, target=args.target, duration=args.duration, backend=args.backend)
+    out = output_file(args.out, "--out", suffixes=(".html", ".htm"))
+    from awiwi_drake.config import SimulationProgress
+
+    with SimulationProgress("animate", quiet=args.quiet) as progress:
+        res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend,
+                               progress=progress)
     print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
           f"max joint tracking error {res.max_tracking_error:.3g} rad)")
     return 0
@@ -47,6 +64,8 @@ def _animate(args) -> int:
 def _export(args) -> int:
     from awiwi_drake.diagrams import export_hand_diagrams
 
-    for line in export_hand_diagrams(args.out):
+    from awiwi_drake.cli import output_dir
+
+    for line in export_hand_diagrams(output_dir(args.out)):
         print(line)
     return 0

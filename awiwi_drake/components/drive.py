@@ -1,7 +1,12 @@
 """Tendon drive: N motors + N spring mechanisms + routing to n joints, as one sub-diagram.
 
-Two backends build the same physics with the same port names:
+Three backends build the same physics with the same port names:
 
+``backend="compiled"`` (default)
+    one :class:`~awiwi_drake.components.fused_drive.TendonDrive_` system: numba
+    kernels generated from the law functions for float, the law functions
+    themselves for AutoDiffXd/Expression; one spring law per tendon, guide
+    friction and hysteresis; every output port computes only its own quantity.
 ``backend="python"``
     :class:`MotorBank_`, :class:`SpringBank_` and :class:`TendonRouting_` wired
     together (the modular reference; any spring law, hysteresis).
@@ -17,8 +22,8 @@ Two backends build the same physics with the same port names:
 The returned sub-diagram exports:
 
 * inputs ``motor_torque`` (m) [Nm], ``joint_angle`` (n) [rad], and with
-  hysteresis ``joint_velocity`` (n) [rad/s] (no joint ports when n = 0, the
-  tendon rig whose far end is fixed);
+  hysteresis or guide friction ``joint_velocity`` (``rate_joints``) [rad/s] (no
+  joint ports when n = 0, the tendon rig whose far end is fixed);
 * outputs ``motor_angle``, ``motor_velocity`` (m), ``motor_state`` (2m),
   ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``elongation`` (m) [m],
   ``generalized_force`` (n) [Nm] (``-P^T f``), ``applied_torque`` (m) [Nm].
@@ -35,6 +40,7 @@ import pydrake.symbolic as sym
 from pydrake.systems.framework import Diagram, DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Gain, Multiplexer, SymbolicVectorSystem
 
+from awiwi_drake.components.fused_drive import DriveModel, GuideFrictionModel, TendonDrive_
 from awiwi_drake.components.motor import MotorBank_, motor_acceleration, saturate_torque
 from awiwi_drake.components.routing import TendonRouting_
 from awiwi_drake.components.spring import SpringBank_, hysteresis_rate
@@ -42,7 +48,7 @@ from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 
 __all__ = ["build_tendon_drive", "TendonDrive", "BACKENDS", "DRIVE_OUTPUTS"]
 
-BACKENDS = ("python", "symbolic")
+BACKENDS = ("compiled", "python", "symbolic")
 DRIVE_OUTPUTS = ("motor_angle", "motor_velocity", "motor_state", "tendon_force", "tendon_stiffness",
                  "elongation", "generalized_force", "applied_torque")
 
@@ -56,6 +62,7 @@ class TendonDrive:
     num_joints: int
     backend: str
     hysteresis: bool
+    model: DriveModel | None = None
 
     @property
     def num_states(self) -> int:
@@ -67,23 +74,26 @@ def _check_backend(backend: str) -> None:
         raise ValueError(f"backend = {backend!r} is unknown; use one of {', '.join(BACKENDS)}")
 
 
-def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, backend: str = "python",
+def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, backend: str = "compiled",
                        hysteresis: HysteresisParams = HysteresisParams(),
-                       motor_pulley_radius: float | None = None, name: str = "tendon_drive") -> TendonDrive:
+                       motor_pulley_radius: float | None = None, name: str = "tendon_drive",
+                       guide_friction: GuideFrictionModel | None = None,
+                       rate_joints: int | None = None) -> TendonDrive:
     """Build the motors + springs + routing sub-diagram (see module docstring).
 
     Parameters
     ----------
     motor : MotorParams
         Shared by all m motors.
-    spring : spring law
-        ``force(x)``/``stiffness(x)`` object (e.g. :func:`tendon_spring`).
+    spring : spring law, or a sequence of m spring laws
+        ``force(x)``/``stiffness(x)`` object (e.g. :func:`tendon_spring`); one per
+        tendon with ``backend="compiled"`` only.
     coupling : coupling object
         ``h(q)``, ``P(q)``, ``num_tendons``, ``num_joints`` (see :mod:`routing`).
     offsets : (m,) array, optional
         Elongation offsets x0 [m] (pretension with all angles zero).
-    backend : {"python", "symbolic"}
-        Default "python", like the rigs (see the module docstring for the trade-off).
+    backend : {"compiled", "python", "symbolic"}
+        Default "compiled" (see the module docstring for the trade-off).
     hysteresis : HysteresisParams
         Spring hysteresis (adds m states and the ``joint_velocity`` input).
     motor_pulley_radius : float, optional
@@ -91,6 +101,11 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
         ``motor.pulley_radius``. The flexible joint uses 1 (torsional spring).
     name : str
         Name of the sub-diagram.
+    guide_friction : GuideFrictionModel, optional
+        Guide friction on every tendon path (``backend="compiled"`` only).
+    rate_joints : int, optional
+        Number of leading coupling joints with a ``joint_velocity`` input (default
+        all); the rest (the hand's wrist length offsets) are quasi-static.
     """
     _check_backend(backend)
     if not isinstance(motor, MotorParams):
@@ -102,6 +117,23 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
     offsets = np.zeros(m) if offsets is None else np.asarray(offsets, dtype=float)
     if offsets.shape != (m,) or not np.all(np.isfinite(offsets)):
         raise ValueError(f"build_tendon_drive: offsets must be {m} finite numbers [m], got {offsets!r}")
+    per_tendon = isinstance(spring, (list, tuple))
+    if per_tendon and backend != "compiled":
+        raise ValueError(f"build_tendon_drive: one spring law per tendon needs backend='compiled', not {backend!r}")
+    if guide_friction is not None and backend != "compiled":
+        raise ValueError(f"build_tendon_drive: guide_friction needs backend='compiled', not {backend!r}")
+    if backend == "compiled":
+        model = DriveModel(motor, tuple(spring) if per_tendon else (spring,) * m, coupling, offsets, r_m,
+                           hysteresis, guide_friction, rate_joints)
+        builder = DiagramBuilder()
+        sys_ = builder.AddNamedSystem("drive", TendonDrive_[float](model))
+        for i in range(sys_.num_input_ports()):
+            builder.ExportInput(sys_.get_input_port(i), sys_.get_input_port(i).get_name())
+        for i in range(sys_.num_output_ports()):
+            builder.ExportOutput(sys_.get_output_port(i), sys_.get_output_port(i).get_name())
+        diagram = builder.Build()
+        diagram.set_name(name)
+        return TendonDrive(diagram, m, n, backend, bool(hysteresis.enabled), model)
     if backend == "symbolic" and not getattr(spring, "supports_symbolic", False):
         raise ValueError(f"build_tendon_drive: spring {type(spring).__name__} cannot be used with backend='symbolic' "
                          "(use its calibration polynomial, or backend='python')")

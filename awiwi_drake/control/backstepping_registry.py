@@ -11,7 +11,9 @@
   LQR of the rig with Table 16.1's weights in torque coordinates
   (``R = 1e-3``: with Table 16.1's ``R = 0.1`` the LQR gain is below the
   structural floor of the backstepping feedback, see REPRODUCTIONS.md).
-  Flexible joint only.
+  On the joint rig: the antagonistic law with gains fitted to the LQR of the
+  rig at its operating point (:class:`JointRigOptimalGainsCase`, N = 2 torque
+  coordinates).
 
 Loop option: sampled at 30 kHz, with Kd,imp limited to ``m f_s / 4`` (the
 impedance damping puts a link pole at ``-Kd,imp / m``: -1.25e5 1/s for the
@@ -50,8 +52,12 @@ def _position(rig):
 def _optimal(rig):
     from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.control.optimal_gains import optimize_gains
-    from awiwi_drake.parameters.backstepping import OptimalGainsCase
-    fit = optimize_gains(rig, OptimalGainsCase(r_weight=1e-3))
+    from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase, OptimalGainsCase
+    from awiwi_drake.parameters.rigs import JointRigParams
+    if isinstance(rig.params, JointRigParams):
+        fit = optimize_gains(rig, JointRigOptimalGainsCase(), starts=16)
+    else:
+        fit = optimize_gains(rig, OptimalGainsCase(r_weight=1e-3))
     return impedance_controller(rig, fit.gains)
 
 
@@ -59,5 +65,5 @@ register_controller("backstepping", _backstepping, rigs=("flexible_joint", "join
                     description="impedance backstepping (ch. 15.3-15.5), rig's spring law, external-torque observer")
 register_controller("backstepping-position", _position, rigs=("flexible_joint",), loop_options=_LOOP,
                     description="position backstepping of the linear flexible joint (15.11)-(15.50)")
-register_controller("optimal-backstepping", _optimal, rigs=("flexible_joint",), loop_options=_LOOP,
+register_controller("optimal-backstepping", _optimal, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
                     description="impedance backstepping with gains fitted to the LQR (ch. 16)")

@@ -264,9 +264,9 @@ class LinkReferenceMotorPdLaw(StaticLaw):
         xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=self.name)
         B = check_gain("inertia", inertia, owner=self.name)
         self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.C["link_angle"])
+        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("link_angle").C)
         self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(np.ravel(lin.y0["link_angle"])[0])
+        self.r0 = float(lin.output("link_angle").y0[0])
         self.ith, self.iw = list(motor_index[0]), list(motor_index[1])
         self.inputs = {"link_angle_reference": 1, "state": lin.A.shape[0]}
         self.output_size = lin.B.shape[1]
@@ -282,9 +282,9 @@ class LinkReferenceMotorPdLaw(StaticLaw):
 def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mode: str = "two-time-scale"):
     """Registered factories ``pd``, ``two-time-scale``, ``cascaded``."""
     if mode == "pd":
-        from awiwi_drake.control.linear import linearize_rig
+        from awiwi_drake.analysis.linear import linearize
         tr = transmission(rig)
-        lin = linearize_rig(rig, outputs=("state", "link_angle"))
+        lin = linearize(rig, outputs=("state", "link_angle"))
         names = list(rig.state_names)
         n = len(tr.coupling)
         ith = [names.index(nm) for nm in (("theta",) if n == 1 else ("theta1", "theta2"))]

@@ -11,29 +11,16 @@ repeated for both motors (:func:`expand_q`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
-from pydrake.systems.controllers import LinearQuadraticRegulator
 
+from awiwi_drake.analysis.linear import LinearizationResult, LqrResult, linearize, lqr
 from awiwi_drake.control.base import check_gain, check_gains
-from awiwi_drake.control.linear import RigLinearization, closed_loop_poles, linearize_rig, state_feedback_controller
+from awiwi_drake.control.linear import state_feedback_controller
 from awiwi_drake.parameters.control import LqrParams
 
-__all__ = ["LqrDesign", "expand_q", "lqr_gain", "design_lqr", "lqr_controller", "quadratic_cost"]
-
-
-@dataclass
-class LqrDesign:
-    """LQR gain ``K`` (u = -K dx), cost-to-go ``S`` and closed-loop poles."""
-
-    K: np.ndarray
-    S: np.ndarray
-    Q: np.ndarray
-    R: np.ndarray
-    closed_loop_poles: np.ndarray
-    linearization: RigLinearization
+__all__ = ["expand_q", "design_lqr", "lqr_controller", "quadratic_cost"]
 
 
 def expand_q(q_diag: Sequence[float], n: int) -> np.ndarray:
@@ -52,42 +39,26 @@ def expand_q(q_diag: Sequence[float], n: int) -> np.ndarray:
     raise ValueError(f"lqr: Q diagonal has {len(q)} entries but the rig has {n} states")
 
 
-def lqr_gain(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
-    """``(K, S)`` from Drake's ``LinearQuadraticRegulator`` (u = -K x)."""
-    R = np.atleast_2d(np.asarray(R, float))
-    if not np.all(np.isfinite(R)) or np.any(np.linalg.eigvalsh(0.5 * (R + R.T)) <= 0):
-        raise ValueError(f"lqr gain 'R' must be positive definite and finite, got {R!r}")
-    K, S = LinearQuadraticRegulator(np.asarray(A, float), np.asarray(B, float), np.asarray(Q, float), R)
-    return np.asarray(K), np.asarray(S)
-
-
 def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None,
-               lin: RigLinearization | None = None, Q=None, R=None) -> LqrDesign:
-    """LQR design on the rig linearised at ``op``.
+               lin: LinearizationResult | None = None, Q=None, R=None) -> LqrResult:
+    """LQR design (:func:`awiwi_drake.analysis.lqr`) on the rig linearised at ``op``.
 
     Weights: Table 13.1 by default (``params``); ``r`` overrides R = r I;
     full matrices ``Q`` (n x n, on the rig state) / ``R`` (m x m) override both.
+    The linearisation includes the ``link_angle`` output (for the reference maps).
     """
     p = params or LqrParams()
-    lin = lin or linearize_rig(rig, op, outputs=("state", "link_angle"))
+    lin = lin or linearize(rig, op, outputs=("state", "link_angle"))
     n, m = lin.B.shape
     if Q is None:
         Q = expand_q(p.q_diag, n)
     else:
         Q = check_gains("Q", Q, shape=(n, n), owner="lqr")
-        if np.any(np.linalg.eigvalsh(0.5 * (Q + Q.T)) < -1e-12):
-            raise ValueError(f"lqr gain 'Q' must be positive semidefinite, got {Q!r}")
     if R is None:
         R = check_gain("R", p.r if r is None else r, owner="lqr") * np.eye(m)
     else:
         R = check_gains("R", np.atleast_2d(R), shape=(m, m), owner="lqr")
-    if hasattr(rig, "equilibrium"):  # the framework: LinearQuadraticRegulator(system, context, Q, R)
-        from awiwi_drake.analysis import lqr as framework_lqr
-        res = framework_lqr(rig, Q, R, op if op is not None else rig.operating_point())
-        K, S = np.asarray(res.K), np.asarray(res.S)
-    else:
-        K, S = lqr_gain(lin.A, lin.B, Q, R)
-    return LqrDesign(K, S, Q, R, closed_loop_poles(lin.A, lin.B, K), lin)
+    return lqr(None, Q, R, linearization=lin)
 
 
 def lqr_controller(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None,

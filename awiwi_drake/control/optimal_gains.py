@@ -17,8 +17,18 @@ linear spring, ``u = -K_bs(Omega) x`` (16.1)-(16.3), with
   weights are mapped to the rig state ``[q, qd, theta, thetad]`` by the
   similarity ``x_tau = T x``: ``Q_rig = T^T Q T``.
 * The distance is measured on the gains in Table 16.1's coordinates,
-  element-wise relative to ``|K_opt|`` (the four entries differ by orders of
-  magnitude): ``d = ||(K_bs - K_opt) / |K_opt| ||_2``.
+  column-wise relative to ``K_opt`` (the columns differ by orders of
+  magnitude and in unit): ``d = ||(K_bs - K_opt) / s||_F``, ``s_j = max_i |K_opt,ij|``
+  (one motor: the element-wise ``|K_opt|``).
+
+Beyond the flexible joint (ch. 16 applies the method to "the 38 tendons"):
+the antagonistic joint rig (N = 2 motors, state ``[q, qd, theta1, theta2,
+omega1, omega2]``) uses the same steps at its operating point (pretension):
+the torque coordinates become ``[q, qd, tau_1..N, taud_1..N]`` with
+``tau_i = -P_i f_i`` the joint torque of tendon ``i`` (:func:`torque_state_map`),
+Table 16.1's weights are repeated per tendon (``tau``, ``taud`` entries) and
+``R = r I_N``; ``K_bs`` (N x 2 + 2N) comes from AutoDiff of the same law at the
+operating point.
 * :func:`monte_carlo_gains` is Algorithm 3 (best of N random draws, log-uniform
   in a box; through the sweep runner); :func:`optimize_gains` is a
   least-squares search on ``log Omega`` (scipy ``least_squares``, positivity by
@@ -38,8 +48,8 @@ from awiwi_drake.analysis.sweep import monte_carlo_points, run_sweep
 from awiwi_drake.control.backstepping import JointModel, impedance_backstepping, joint_model
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
-__all__ = ["GainFit", "torque_coordinates", "backstepping_feedback", "system_feedback", "optimal_feedback",
-           "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
+__all__ = ["GainFit", "torque_coordinates", "torque_state_map", "backstepping_feedback", "system_feedback",
+           "optimal_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
 
 OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
 
@@ -80,13 +90,40 @@ def torque_coordinates(stiffness: float) -> np.ndarray:
     return np.array([[1, 0, 0, 0], [0, 1, 0, 0], [-k, 0, k, 0], [0, -k, 0, k]], dtype=float)
 
 
-def _rig_stiffness(rig) -> float:
-    op = rig.operating_point()
-    return float(op.info.get("stiffness", rig.params.stiffness))
+def torque_state_map(model: JointModel, state0) -> np.ndarray:
+    """``T`` with ``[q, qd, tau_1..N, taud_1..N] ~= T [q, qd, theta_1..N, omega_1..N]`` at rest at ``state0``.
+
+    ``tau_i = -P_i f(x_i)``, ``x_i = r_m theta_i + P_i q + x0_i``: ``dtau_i/dq = -P_i^2 k_i``,
+    ``dtau_i/dtheta_i = -P_i k_i r_m`` (and the same for the rates). One torsion spring (P = -1,
+    r_m = 1) gives :func:`torque_coordinates` with ``k = phi'``.
+    """
+    n_m = model.num_motors
+    x = np.asarray(state0, dtype=float)
+    P, rm = np.array(model.coupling, float), float(model.motor_pulley_radius)
+    xs = rm * x[2:2 + n_m] + P * x[0] + np.array(model.elongation_offset, float)
+    k = np.array([float(np.ravel(model.spring.stiffness(np.array([v])))[0]) for v in xs])
+    if np.any(k <= 0):
+        raise ValueError(f"torque_state_map: a spring is slack at the operating point (stiffness {k}); "
+                         "the torque coordinates need taut tendons")
+    n = 2 + 2 * n_m
+    T = np.zeros((n, n))
+    T[0, 0] = T[1, 1] = 1.0
+    for i in range(n_m):
+        T[2 + i, 0] = T[2 + n_m + i, 1] = -P[i] ** 2 * k[i]
+        T[2 + i, 2 + i] = T[2 + n_m + i, 2 + n_m + i] = -P[i] * k[i] * rm
+    return T
+
+
+def _rig_point(rig, op=None):
+    """(operating point, design model, T) of a rig for the gain fit."""
+    op = rig.operating_point() if op is None else op
+    model = joint_model(rig)
+    return op, model, torque_state_map(model, op.state)
 
 
 def backstepping_feedback(model: JointModel, gains: ImpedanceBacksteppingGains, state0=None) -> np.ndarray:
-    """``K_bs = -du/dx`` (rig coordinates) of the impedance law at ``state0`` (default: rest at 0), by AutoDiffXd."""
+    """``K_bs = -du/dx`` (N x n, rig coordinates) of the impedance law at ``state0`` (default: rest at 0),
+    by AutoDiffXd; the reference is the link angle of ``state0``."""
     n = model.state_size
     x0 = np.zeros(n) if state0 is None else np.asarray(state0, dtype=float)
     x = InitializeAutoDiff(x0).ravel()
@@ -107,80 +144,90 @@ def system_feedback(controller, state0) -> np.ndarray:
     return -ExtractGradient(np.asarray(u, dtype=object))
 
 
-def optimal_feedback(rig, case: OptimalGainsCase | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(K_opt in Table 16.1 coordinates, K_opt in rig coordinates)`` from the framework's LQR."""
+def optimal_feedback(rig, case: OptimalGainsCase | None = None, op=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(K_opt in Table 16.1 coordinates, K_opt in rig coordinates)`` from the framework's LQR at ``op``.
+
+    One motor: vectors (4,); N motors: (N, 2 + 2N), weights ``diag(Q11, Q22, Q33 I_N, Q44 I_N)``, ``R = r I_N``.
+    """
     c = case or OptimalGainsCase()
-    T = torque_coordinates(_rig_stiffness(rig))
-    Q = T.T @ np.diag(c.q_weights) @ T
-    res = lqr(rig, Q, [[c.r_weight]])
-    K_rig = np.asarray(res.K).reshape(1, -1)
-    return (K_rig @ np.linalg.inv(T)).ravel(), K_rig.ravel()
+    op, model, T = _rig_point(rig, op)
+    n_m = model.num_motors
+    q = np.concatenate([c.q_weights[:2], np.repeat(c.q_weights[2], n_m), np.repeat(c.q_weights[3], n_m)])
+    Q = T.T @ np.diag(q) @ T
+    res = lqr(rig, Q, c.r_weight * np.eye(n_m), op)
+    K_rig = np.asarray(res.K).reshape(n_m, -1)
+    K_tau = K_rig @ np.linalg.inv(T)
+    return (K_tau.ravel(), K_rig.ravel()) if n_m == 1 else (K_tau, K_rig)
 
 
 def gain_distance(feedback_tau: np.ndarray, target_tau: np.ndarray) -> float:
-    """``||(K_bs - K_opt) / |K_opt| ||_2`` (element-wise relative)."""
-    return float(np.linalg.norm((np.asarray(feedback_tau) - target_tau) / np.abs(target_tau)))
+    """``||(K_bs - K_opt) / s||_F``, ``s_j = max_i |K_opt,ij|`` (column-wise relative; one motor: ``|K_opt|``)."""
+    target = np.atleast_2d(target_tau)
+    scale = np.max(np.abs(target), axis=0)
+    return float(np.linalg.norm((np.atleast_2d(feedback_tau) - target) / scale))
 
 
 def _gains(omega) -> ImpedanceBacksteppingGains:
     return ImpedanceBacksteppingGains(**dict(zip(OMEGA_NAMES, (float(v) for v in omega))))
 
 
-def _feedback_tau(model, T_inv, omega) -> np.ndarray:
-    return (backstepping_feedback(model, _gains(omega)).reshape(1, -1) @ T_inv).ravel()
+def _feedback_tau(model, T_inv, omega, state0=None) -> np.ndarray:
+    K = backstepping_feedback(model, _gains(omega), state0).reshape(model.num_motors, -1) @ T_inv
+    return K.ravel() if model.num_motors == 1 else K
 
 
 def evaluate_sample(*, model: JointModel, T_inv: np.ndarray, target: np.ndarray, stiffness: float,
-                    damping: float, k3: float, k4: float) -> float:
+                    damping: float, k3: float, k4: float, state0=None) -> float:
     """Distance of one Omega sample (module-level: runs in the sweep runner's workers)."""
-    return gain_distance(_feedback_tau(model, T_inv, (stiffness, damping, k3, k4)), target)
+    return gain_distance(_feedback_tau(model, T_inv, (stiffness, damping, k3, k4), state0), target)
 
 
-def _setup(rig, case):
+def _setup(rig, case, op=None):
     c = case or OptimalGainsCase()
-    target, _ = optimal_feedback(rig, c)
-    T_inv = np.linalg.inv(torque_coordinates(_rig_stiffness(rig)))
-    return c, joint_model(rig), T_inv, target
+    op, model, T = _rig_point(rig, op)
+    target, _ = optimal_feedback(rig, c, op)
+    return c, model, np.linalg.inv(T), target, np.asarray(op.state, float)
 
 
 def monte_carlo_gains(rig, case: OptimalGainsCase | None = None, *, samples: int | None = None,
-                      seed: int | None = None, executor=None) -> GainFit:
+                      seed: int | None = None, executor=None, op=None) -> GainFit:
     """Algorithm 3: the best of ``samples`` log-uniform draws of Omega in the case's box.
 
     ``executor`` goes to :func:`awiwi_drake.analysis.sweep.run_sweep` (default: a process pool).
     """
-    c, model, T_inv, target = _setup(rig, case)
+    c, model, T_inv, target, x0 = _setup(rig, case, op)
     n = int(samples if samples is not None else c.samples)
     pts = monte_carlo_points(dict(zip(OMEGA_NAMES, c.gain_low)), dict(zip(OMEGA_NAMES, c.gain_high)), n,
                              seed=c.seed if seed is None else seed, log=True)
     t0 = time.perf_counter()
     res = run_sweep(evaluate_sample, pts, executor=executor,
-                    fixed=dict(model=model, T_inv=T_inv, target=target))
+                    fixed=dict(model=model, T_inv=T_inv, target=target, state0=x0))
     d = np.array(res.values, dtype=float)
     i = int(np.argmin(d))
     omega = [pts[i][k] for k in OMEGA_NAMES]
-    return GainFit(_gains(omega), _feedback_tau(model, T_inv, omega), target, float(d[i]), n,
+    return GainFit(_gains(omega), _feedback_tau(model, T_inv, omega, x0), target, float(d[i]), n,
                    time.perf_counter() - t0, "monte-carlo (Algorithm 3)")
 
 
-def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8, seed: int | None = None
-                   ) -> GainFit:
-    """Least squares on ``log Omega`` (scipy ``least_squares``), from the best of ``starts`` draws."""
+def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8, seed: int | None = None,
+                   op=None) -> GainFit:
+    """Least squares on ``log Omega`` (scipy ``least_squares``), from the best of ``starts`` draws, at ``op``."""
     from scipy.optimize import least_squares
-    c, model, T_inv, target = _setup(rig, case)
+    c, model, T_inv, target, x0 = _setup(rig, case, op)
+    scale = np.max(np.abs(np.atleast_2d(target)), axis=0)
     t0 = time.perf_counter()
     lo, hi = np.log(c.gain_low), np.log(c.gain_high)
     count = [0]
 
     def resid(z):
         count[0] += 1
-        return (_feedback_tau(model, T_inv, np.exp(z)) - target) / np.abs(target)
+        return ((np.atleast_2d(_feedback_tau(model, T_inv, np.exp(z), x0)) - np.atleast_2d(target)) / scale).ravel()
 
     rng = np.random.default_rng(c.seed if seed is None else seed)
     z0s = rng.uniform(lo, hi, size=(int(starts), 4))
     best = min(z0s, key=lambda z: float(np.sum(resid(z) ** 2)))
     sol = least_squares(resid, best, method="trf", x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
     omega = np.exp(sol.x)
-    fb = _feedback_tau(model, T_inv, omega)
+    fb = _feedback_tau(model, T_inv, omega, x0)
     return GainFit(_gains(omega), fb, target, gain_distance(fb, target), count[0], time.perf_counter() - t0,
                    "least squares on log(Omega) (scipy)")

@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from awiwi_drake.control.base import check_gain
-from awiwi_drake.control.linear import (RigLinearization, closed_loop_poles, linearize_rig,
-                                        state_feedback_controller)
+from awiwi_drake.analysis.linear import LinearizationResult, closed_loop_poles, linearize
+from awiwi_drake.control.linear import state_feedback_controller
 from awiwi_drake.parameters.control import PolePlacementParams
 
 __all__ = ["double_oscillator_polynomial", "double_oscillator_poles", "identification_system",
@@ -76,14 +76,14 @@ class PolePlacementDesign:
     K: np.ndarray
     target_poles: np.ndarray
     closed_loop_poles: np.ndarray
-    linearization: RigLinearization
+    linearization: LinearizationResult
     params: PolePlacementParams
 
 
 def design_pole_placement(rig: Any, params: PolePlacementParams | None = None, op: Any = None) -> PolePlacementDesign:
     """Pole placement on the rig linearised at ``op`` (Table 12.1 target by default)."""
     p = params or PolePlacementParams()
-    lin = linearize_rig(rig, op, outputs=("state", "link_angle"))
+    lin = linearize(rig, op, outputs=("state", "link_angle"))
     target = double_oscillator_poles(p)
     m = lin.B.shape[1]
     if m == 1 and lin.A.shape[0] == 4:

@@ -113,8 +113,10 @@ def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
         kind = rig_kind(rig)
         if kind not in entry.rigs:
             fits = controller_names(rig)
-            raise ValueError(f"controller {name!r} does not fit rig {kind!r} (it is for "
-                             f"{', '.join(entry.rigs)}); controllers for {kind!r}: {', '.join(fits)}")
+            cli = kind.replace("_", "-")  # errors use the CLI spelling (joint-rig, flexible-joint, ...)
+            raise ValueError(f"controller {name!r} does not fit rig {cli!r} (it is for "
+                             f"{', '.join(r.replace('_', '-') for r in entry.rigs)}); controllers for {cli!r}: "
+                             f"{', '.join(fits)}")
     return entry
 
 

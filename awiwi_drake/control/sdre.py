@@ -13,6 +13,20 @@ the SDRE gain equals the LQR gain (tested).
 
 With ``update_rate=None`` the gain stays at its design value: the fixed-gain
 LQR comparator of Fig 14.3-14.5.
+
+Two pointwise-linear forms (``params.factorisation``):
+
+* ``"jacobian"`` (default): the tangent of the whole rig at the measured state
+  (:class:`RigJacobian`).  For the tendon rig this includes the slope of the (3.8)
+  motor friction, ``-(gamma1 gamma2 / (1 + (gamma1 w)^2) + gamma3) / B`` in ``A[1, 1]``:
+  5.6 Nm s/rad at rest, ~0 at speed, which is what moves K_omega (6.0 at rest ->
+  10.2 in motion with Table 14.1), not the spring stiffness.
+* ``"printed"``: (14.9) for the tendon (``A = [[0, 1], [-r_m alpha(theta) / B, 0]]``,
+  ``B = [0, 1/B]``, alpha = df/dtheta of the spring at the measured motor angle, no
+  friction) and (14.10) for the flexible joint with the *secant* stiffness
+  ``k(x1 - x3) = tau_s(x3 - x1) / (x3 - x1)`` (so that ``A(x) x`` is the spring torque
+  exactly), link/motor damping as in (12.8).  (:class:`PrintedTendonFactorisation`,
+  :class:`PrintedJointFactorisation`.)
 """
 
 from __future__ import annotations
@@ -26,11 +40,12 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import is_float
 from awiwi_drake.control.base import COMMAND_PORT, REFERENCE_SUFFIX, check_gain, check_gains
-from awiwi_drake.control.linear import linearize_rig, reference_maps
-from awiwi_drake.control.lqr import expand_q, lqr_gain
+from awiwi_drake.analysis.linear import linearize, lqr_gain
+from awiwi_drake.control.linear import reference_maps
+from awiwi_drake.control.lqr import expand_q
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
-__all__ = ["RigJacobian", "TendonSdreModel", "LinearReferenceModel", "SdreController_", "SdreController",
+__all__ = ["RigJacobian", "PrintedTendonFactorisation", "PrintedJointFactorisation", "TendonSdreModel", "LinearReferenceModel", "SdreController_", "SdreController",
            "tendon_sdre_controller", "joint_sdre_controller"]
 
 
@@ -59,6 +74,59 @@ class RigJacobian:
         return J[:, :n], J[:, n:]
 
 
+class PrintedTendonFactorisation:
+    """(14.9): ``A(x) = [[0, 1], [-r_m alpha(theta) / B, 0]]``, ``B = [0, 1/B]`` (no friction, no damping).
+
+    ``alpha(theta) = df/dtheta`` [N/rad] from the rig's force map at the measured motor angle
+    (the load torque of (14.7) is ``r_m f``).  Same call signature as :class:`RigJacobian`.
+    """
+
+    def __init__(self, fmap, motor_inertia: float, pulley_radius: float):
+        self.fmap = fmap
+        self.b = check_gain("motor_inertia", motor_inertia, owner="tendon sdre (14.9)")
+        self.r_m = check_gain("pulley_radius", pulley_radius, owner="tendon sdre (14.9)")
+        self.n, self.m = 2, 1
+
+    def __call__(self, x, u, external: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        theta = float(np.asarray(x, float).reshape(-1)[0])
+        f = float(self.fmap.force_at(theta)) if theta > self.fmap.slack_angle else 0.0
+        alpha = float(self.fmap.alpha_of_force(f))
+        A = np.array([[0.0, 1.0], [-self.r_m * alpha / self.b, 0.0]])
+        return A, np.array([[0.0], [1.0 / self.b]])
+
+
+class PrintedJointFactorisation:
+    """(14.10): the flexible joint's ``A(x)`` with the secant stiffness ``k(x1 - x3)``.
+
+    ``k = tau_s(delta) / delta``, ``delta = theta - q`` (tangent ``tau_s'(0)`` at ``delta = 0``), so
+    ``A(x) x`` equals the spring torques exactly; ``d_q``, ``d_theta``, ``m``, ``b`` from the rig's
+    parameters.  Only for ``flexible_joint_rig`` (state ``[q, qd, theta, thetad]``, (12.8)).
+    """
+
+    def __init__(self, rig: Any):
+        if getattr(rig, "name", None) != "flexible_joint_rig":
+            raise ValueError(f"sdre factorisation 'printed' (14.10) needs the flexible_joint_rig; rig "
+                             f"{getattr(rig, 'name', '?')!r} is not a 4-state flexible joint (use 'jacobian')")
+        p = rig.params
+        self.spring, self.m_, self.b = rig.spring, p.link_inertia, p.motor_inertia
+        self.d_q, self.d_th = p.link_damping, p.motor_damping
+        self.n, self.m = 4, 1
+
+    def stiffness(self, x) -> float:
+        """Secant stiffness ``tau_s(delta) / delta`` [Nm/rad] at state ``x``."""
+        x = np.asarray(x, float).reshape(-1)
+        delta = x[2] - x[0]
+        if abs(delta) < 1e-9:
+            return float(np.ravel(self.spring.stiffness(np.array([delta])))[0])
+        return float(np.ravel(self.spring.force(np.array([delta])))[0]) / delta
+
+    def __call__(self, x, u, external: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        k, m, b = self.stiffness(x), self.m_, self.b
+        A = np.array([[0.0, 1.0, 0.0, 0.0], [-k / m, -self.d_q / m, k / m, 0.0],
+                      [0.0, 0.0, 0.0, 1.0], [k / b, 0.0, -k / b, -self.d_th / b]])
+        return A, np.array([[0.0], [0.0], [0.0], [1.0 / b]])
+
+
 class TendonSdreModel:
     """Tendon rig ``x = [theta, omega]``; equilibrium ``theta_ref = f^-1(f_ref)``, ``u_ref = r_m f_ref``."""
 
@@ -85,9 +153,9 @@ class LinearReferenceModel:
     reference = "link_angle"
 
     def __init__(self, lin):
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.C["link_angle"])
+        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("link_angle").C)
         self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(np.ravel(lin.y0["link_angle"])[0])
+        self.r0 = float(lin.output("link_angle").y0[0])
         self.inputs = {"link_angle_reference": 1, "state": lin.A.shape[0]}
 
     def state(self, values):
@@ -170,7 +238,8 @@ def tendon_sdre_controller(rig: Any, params: SdreTendonParams | None = None, *, 
     p = params or SdreTendonParams()
     fmap = fmap or force_map(rig)
     model = TendonSdreModel(fmap, _motor(rig).pulley_radius)
-    jac = RigJacobian(rig)
+    jac = (RigJacobian(rig) if p.factorisation == "jacobian"
+           else PrintedTendonFactorisation(fmap, _motor(rig).inertia, _motor(rig).pulley_radius))
     Q, R = np.diag(p.q_diag), np.array([[p.r]])
     x0, u0 = model.equilibrium(design_force)
     K0 = lqr_gain(*jac(x0, u0), Q, R)[0]
@@ -181,11 +250,11 @@ def tendon_sdre_controller(rig: Any, params: SdreTendonParams | None = None, *, 
 def joint_sdre_controller(rig: Any, params: SdreJointParams | None = None, *, op: Any = None, fixed: bool = False):
     """Registered factory ``sdre`` for the joint rigs (Table 14.2); ``fixed=True``: LQR at ``op``."""
     p = params or SdreJointParams()
-    lin = linearize_rig(rig, op, outputs=("state", "link_angle"))
+    lin = linearize(rig, op, outputs=("state", "link_angle"))
     model = LinearReferenceModel(lin)
-    jac = RigJacobian(rig)
+    jac = RigJacobian(rig) if p.factorisation == "jacobian" else PrintedJointFactorisation(rig)
     n, m = lin.B.shape
     Q, R = expand_q(p.q_diag, n), p.r * np.eye(m)
-    K0 = lqr_gain(lin.A, lin.B, Q, R)[0]
+    K0 = lqr_gain(*(jac(lin.x0, lin.u0) if p.factorisation == "printed" else (lin.A, lin.B)), Q, R)[0]
     return SdreController(model, jac, Q, R, None if fixed else 1.0 / p.update_rate, K0,
                           "joint_lqr_fixed" if fixed else "sdre")

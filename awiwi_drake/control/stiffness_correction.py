@@ -138,13 +138,19 @@ def StiffnessCorrectedImpedance_(T):
             return u, k_imp, k_mech
 
         def _elongation(self, k_eff):
-            """(8.2) pretension for K_mech,des = eps K_eff (cached per target value)."""
+            """(8.2) pretension for K_mech,des = eps K_eff: the common elongation ``x_c`` with
+            ``2 r_q^2 k(x_c) = eps K_eff`` (root cached per target value). Its derivative follows from
+            the implicit function theorem, ``dx_c/dK_eff = eps / (2 r_q^2 k'(x_c))``, so AutoDiffXd
+            sees how the pretension moves with the stiffness target."""
             key = float(k_eff.value() if hasattr(k_eff, "value") else k_eff)
             cache = self.__dict__.setdefault("_xc", {})
             if key not in cache:
-                cache[key] = pretension_elongation(self.spring, self.params.epsilon * key,
-                                                   self.rig_params.link_pulley_radius)
-            return cache[key]
+                rq, eps = self.rig_params.link_pulley_radius, self.params.epsilon
+                x_c = pretension_elongation(self.spring, eps * key, rq)
+                slope = eps / (2.0 * rq * rq * float(self.spring.stiffness_derivative(np.array([x_c]))[0]))
+                cache[key] = (x_c, slope)
+            x_c, slope = cache[key]
+            return x_c + slope * (k_eff - key)
 
         def _calc_u(self, context, output):
             output.SetFromVector(self._law(context)[0])

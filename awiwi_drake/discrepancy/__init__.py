@@ -5,7 +5,9 @@ Entry points: :func:`load_dataset`, :func:`diagnose` (returns a :class:`Diagnosi
 :func:`write_report`, :func:`make_truth_dataset` (hidden-effect test data).
 See ``docs`` of each module: ``catalog`` (named effects), ``model`` (the
 augmented Drake system), ``replay`` (multiple shooting), ``localise``
-(residual maps), ``workflow`` (screen, fit, decide), ``truth`` (generator).
+(residual maps), ``screen``, ``fit``, ``decide`` (acceptance, materiality,
+separability), ``workflow`` (the loop), ``result`` (result types), ``truth``
+(generator).
 """
 
 from .catalog import EFFECTS, NUISANCE_EFFECTS, PHYSICAL_EFFECTS
@@ -13,16 +15,17 @@ from .data import RIGS, Dataset, load_dataset, save_dataset
 from .model import DiscrepancyModel_, NominalParameters
 from .replay import ReplayEngine
 from .truth import HIDDEN_EFFECTS, HiddenEffectPlant_, make_truth_dataset
-from .workflow import Diagnosis, diagnose, gap_metrics
+from .result import Diagnosis
+from .workflow import DiagnosisInterrupted, diagnose, gap_metrics
 
 
-def write_report(dx, directory):
+def write_report(dx, directory, *, figures: bool = True):
     """Write the report folder (see :mod:`awiwi_drake.discrepancy.report`)."""
     from .report import write_report as _w
-    return _w(dx, directory)
+    return _w(dx, directory, figures=figures)
 
 
 __all__ = ["EFFECTS", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS", "RIGS", "Dataset", "load_dataset",
            "save_dataset", "DiscrepancyModel_", "NominalParameters", "ReplayEngine", "HIDDEN_EFFECTS",
-           "HiddenEffectPlant_", "make_truth_dataset", "Diagnosis", "diagnose", "gap_metrics",
+           "HiddenEffectPlant_", "make_truth_dataset", "Diagnosis", "DiagnosisInterrupted", "diagnose", "gap_metrics",
            "write_report"]

@@ -12,7 +12,7 @@ Catalog (names are part of the contract):
 =================== ======================================================================
 ``motor_friction``   (3.8): ``tau = -(g2 atan(g1 w) + g3 w)`` on each motor
 ``motor_ripple``     ``tau = sum_k a_k sin(n_k theta) + b_k cos(n_k theta)`` (orders per rev)
-``spring_hysteresis`` force offset ``h w``, Dahl state ``w' = (x' - |x'| w) / delta``
+``spring_hysteresis`` force offset ``h w``, Dahl state ``w' = (x' - |x'| w) / delta``, ``w(0)`` fitted
 ``joint_friction``   link Coulomb ``-F_c tanh(q'/v_s)`` (stick-slip, regularised)
 ``guide_friction``   tendon-path friction ``C0 s + f (exp(mu_a s) - 1)``, ``s = tanh(v/v0)``, opposing the tendon motion
 ``delay``            applied torque ``u(t - T)``
@@ -46,6 +46,10 @@ class ParamSpec:
     high: float
     perturbation: float
     doc: str
+    regularisation: bool = False
+    """A sharpness parameter whose bound is a numerical limit (integrator stability or
+    regularisation): resting on it means "as sharp as the model allows", not an
+    unidentified parameter, so it does not count as "at a bound"."""
 
 
 def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
@@ -55,7 +59,8 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
     nrel = b.nominal_relative_max
     specs = [
         ParamSpec("motor_coulomb", "Nm", 0.0, 0.0, b.motor_coulomb_max, 0.02, "gamma2 of (3.8)"),
-        ParamSpec("motor_slope", "s/rad", 10.0, *b.motor_slope_range, 1.0, "gamma1 of (3.8) (Table 3.3 default)"),
+        ParamSpec("motor_slope", "s/rad", 10.0, *b.motor_slope_range, 1.0, "gamma1 of (3.8) (Table 3.3 default)",
+                  regularisation=True),
         ParamSpec("motor_viscous", "Nm s/rad", 0.0, 0.0, b.motor_viscous_max, 0.005, "gamma3 of (3.8)"),
     ]
     for m in (1, 2):
@@ -69,8 +74,11 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
         ParamSpec("ripple_order_2", "1/rev", 2.0, 1.0, 200.0, 0.0, "order of ripple harmonic 2"),
         ParamSpec("hysteresis_width", "N", 0.0, 0.0, b.hysteresis_width_max, 0.5, "hysteresis half-width h"),
         ParamSpec("hysteresis_length", "m", 2e-4, *b.hysteresis_length_range, 0.0, "Dahl transition length"),
+        ParamSpec("hysteresis_initial", "-", 0.0, -1.0, 1.0, 0.2,
+                  "Dahl state w/h at the dataset start (one unknown shared by all windows)", regularisation=True),
         ParamSpec("joint_coulomb", "Nm", 0.0, 0.0, b.joint_coulomb_max, 0.002, "link Coulomb torque"),
-        ParamSpec("joint_velocity", "rad/s", 0.05, *b.joint_velocity_range, 0.0, "link friction velocity scale"),
+        ParamSpec("joint_velocity", "rad/s", 0.05, *b.joint_velocity_range, 0.0, "link friction velocity scale",
+                  regularisation=True),
         ParamSpec("guide_c0", "N", 0.0, 0.0, b.guide_c0_max, 0.3, "C0 of (4.1) (at the rig's bending angle)"),
         ParamSpec("guide_mu", "-", 0.0, 0.0, b.guide_mu_max, 0.01, "capstan exponent mu*alpha (tension-proportional part)"),
         ParamSpec("delay", "s", 0.0, 0.0, b.delay_max, 0.002, "pure input delay"),
@@ -136,7 +144,7 @@ EFFECTS = {
         {}, ("tendon", "joint"),
         "residual periodic in motor angle: lines at integer cycles per revolution"),
     "spring_hysteresis": Effect(
-        "spring_hysteresis", "physical", ("hysteresis_width",),
+        "spring_hysteresis", "physical", ("hysteresis_width", "hysteresis_initial"),
         {"hysteresis_length": (5e-5, 2e-4, 8e-4)}, ("tendon", "joint"),
         "force residual depends on the direction of elongation (loop in force vs elongation)"),
     "joint_friction": Effect(

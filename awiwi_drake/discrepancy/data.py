@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths"]
+__all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths", "check_plausibility",
+           "CLI_RIG_NAMES"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,10 @@ RIGS = {
         ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
          "link_angle", "link_velocity"), 2, True),
 }
+
+
+# the command line's spelling of the dataset rigs (awiwi-drake make-dataset --rig joint-rig)
+CLI_RIG_NAMES = {"tendon-rig": "tendon", "joint-rig": "joint"}
 
 
 @dataclass
@@ -110,13 +115,19 @@ def dataset_paths(path) -> tuple[pathlib.Path, pathlib.Path]:
     """``(csv, json)`` paths of a dataset given either file or the stem."""
     p = pathlib.Path(path)
     stem = p.with_suffix("") if p.suffix.lower() in (".csv", ".json") else p
-    return stem.with_suffix(".csv"), stem.with_suffix(".json")
+    # append, never replace: a stem may contain dots (``run_x0.5``)
+    return stem.with_name(stem.name + ".csv"), stem.with_name(stem.name + ".json")
 
 
-def _check_parameters(rig: str, params: dict, where: str) -> dict:
+def _is_number(v) -> bool:
+    """A real number that is not a bool (JSON ``true`` must not read as 1.0)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _check_parameters(rig: str, params, where: str, checks) -> dict:
     spec = RIGS[rig]
     if not isinstance(params, dict):
-        raise ValueError(f"{where}: 'parameters' must be an object")
+        raise ValueError(f"{where}: 'parameters' must be an object, got {type(params).__name__}")
     missing = [k for k in spec.parameters if k not in params]
     if missing:
         raise ValueError(f"{where}: missing parameter {missing[0]!r} for rig {rig!r} "
@@ -124,34 +135,110 @@ def _check_parameters(rig: str, params: dict, where: str) -> dict:
     unknown = sorted(set(params) - set(spec.parameters))
     if unknown:
         raise ValueError(f"{where}: unknown parameter {unknown[0]!r} for rig {rig!r}")
+    upper = {"motor_inertia": (checks.max_motor_inertia, "kg m^2"), "link_inertia": (checks.max_link_inertia, "kg m^2"),
+             "motor_damping": (checks.max_damping, "Nm s/rad"), "link_damping": (checks.max_damping, "Nm s/rad"),
+             "motor_pulley_radius": (checks.max_pulley_radius, "m"), "link_pulley_radius": (checks.max_pulley_radius, "m")}
     out = {}
     for k in spec.parameters:
         v = params[k]
         if k == "spring_poly":
-            if not isinstance(v, (list, tuple)) or not v:
-                raise ValueError(f"{where}: parameter 'spring_poly' must be a non-empty list [c1, c2, ...]")
+            if not isinstance(v, list) or not v:
+                raise ValueError(f"{where}: parameter 'spring_poly' must be a non-empty list [c1, c2, ...], "
+                                 f"got {v!r}")
+            for i, c in enumerate(v):
+                if not _is_number(c):
+                    raise ValueError(f"{where}: parameter 'spring_poly'[{i}] = {c!r} is not a number [N/m^{i + 1}]")
+                if not math.isfinite(c) or abs(c) > checks.max_spring_coefficient:
+                    raise ValueError(f"{where}: parameter 'spring_poly'[{i}] = {c!r} is not finite or larger than "
+                                     f"{checks.max_spring_coefficient:g} [N/m^{i + 1}]")
             vals = [float(c) for c in v]
-            if not all(math.isfinite(c) for c in vals):
-                raise ValueError(f"{where}: parameter 'spring_poly' has a non-finite coefficient")
             if vals[0] <= 0:
                 raise ValueError(f"{where}: parameter 'spring_poly' needs c1 > 0 (got {vals[0]})")
             out[k] = vals
             continue
-        try:
-            x = float(v)
-        except (TypeError, ValueError):
-            raise ValueError(f"{where}: parameter {k!r} = {v!r} is not a number") from None
+        if not _is_number(v):
+            raise ValueError(f"{where}: parameter {k!r} = {v!r} is not a number")
+        x = float(v)
         if not math.isfinite(x):
             raise ValueError(f"{where}: parameter {k!r} is not finite")
         positive = k in ("motor_inertia", "motor_pulley_radius", "link_inertia", "link_pulley_radius")
         if (positive and x <= 0) or x < 0:
             raise ValueError(f"{where}: parameter {k!r} = {x} must be {'> 0' if positive else '>= 0'}")
+        hi, unit = upper[k]
+        if x > hi:
+            raise ValueError(f"{where}: parameter {k!r} = {x:g} [{unit}] is implausibly large (> {hi:g}; "
+                             f"DatasetChecks): check the unit")
         out[k] = x
     return out
 
 
-def load_dataset(path) -> Dataset:
+def _read_text(path: pathlib.Path) -> str:
+    """The file as text (UTF-8, a byte-order mark accepted); errors name the file."""
+    if path.is_dir():
+        raise ValueError(f"{path}: is a directory, not a dataset file (a dataset is NAME.csv + NAME.json)")
+    try:
+        return path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
+
+
+def _name_list(meta: dict, key: str, where) -> list:
+    v = meta[key]
+    if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+        raise ValueError(f"{where}: {key!r} must be a list of names, e.g. [\"link_angle\"], got {v!r}")
+    return v
+
+
+def _read_csv(csv_path: pathlib.Path) -> tuple[list, np.ndarray]:
+    """Header and numeric table of the CSV, streamed: memory is about one float64 array.
+
+    A bad row is named (a second, line-by-line pass runs only then).
+    """
+    if csv_path.is_dir():
+        raise ValueError(f"{csv_path}: is a directory, not a dataset file (a dataset is NAME.csv + NAME.json)")
+    try:
+        with open(csv_path, encoding="utf-8-sig", newline=None) as fh:
+            head_line = fh.readline().strip()
+            if not head_line:
+                raise ValueError(f"{csv_path}: empty file (or empty header line)")
+            header = [h.strip() for h in head_line.split(",")]
+            try:
+                data = np.loadtxt(fh, delimiter=",", dtype=float, ndmin=2)
+            except ValueError:
+                data = None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{csv_path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"{csv_path}: cannot read ({exc.strerror or exc})") from None
+    ncol = len(header)
+    if data is not None and (data.size == 0 or data.shape[1] == ncol):
+        return header, data.reshape(-1, ncol) if data.size else np.zeros((0, ncol))
+    with open(csv_path, encoding="utf-8-sig", newline=None) as fh:
+        fh.readline()
+        for i, line in enumerate(fh, start=2):
+            if not line.strip():
+                continue
+            cells = line.split(",")
+            if len(cells) != ncol:
+                raise ValueError(f"{csv_path}: row {i} has {len(cells)} cells, header has {ncol}")
+            for c, cell in zip(header, cells):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise ValueError(f"{csv_path}: row {i}, column {c!r}: not a number: {cell.strip()!r}") from None
+    raise ValueError(f"{csv_path}: cannot read the table")  # pragma: no cover - loadtxt and the scan disagree
+
+
+def load_dataset(path, *, checks=None) -> Dataset:
     """Read and validate ``NAME.csv`` + ``NAME.json``.
+
+    Besides the format (columns, rows, uniform time, types), the data must be
+    plausible for the declared units and the nominal model
+    (:func:`check_plausibility`, limits in
+    :class:`~awiwi_drake.parameters.discrepancy.DatasetChecks`).  Files may be
+    UTF-8 with or without a byte-order mark, with LF or CRLF line ends.
 
     Raises
     ------
@@ -160,12 +247,17 @@ def load_dataset(path) -> Dataset:
     ValueError
         Naming the file and the column/row/key at fault.
     """
+    from awiwi_drake.parameters.discrepancy import DatasetChecks
+
+    checks = checks or DatasetChecks()
     csv_path, json_path = dataset_paths(path)
+    if pathlib.Path(path).is_dir():
+        raise ValueError(f"{path}: is a directory; give NAME.csv (with NAME.json beside it)")
     for p in (csv_path, json_path):
         if not p.exists():
             raise FileNotFoundError(f"{p}: no such file (a dataset is NAME.csv + NAME.json)")
     try:
-        meta = json.loads(json_path.read_text())
+        meta = json.loads(_read_text(json_path))
     except json.JSONDecodeError as exc:
         raise ValueError(f"{json_path}: invalid JSON ({exc})") from None
     if not isinstance(meta, dict):
@@ -174,11 +266,14 @@ def load_dataset(path) -> Dataset:
         if key not in meta:
             raise ValueError(f"{json_path}: missing key {key!r}")
     rig = meta["rig"]
+    if not isinstance(rig, str):
+        raise ValueError(f"{json_path}: 'rig' must be a name ({', '.join(RIGS)}), got {rig!r}")
+    rig = CLI_RIG_NAMES.get(rig, rig)
     if rig not in RIGS:
-        raise ValueError(f"{json_path}: unknown rig {rig!r} (known: {', '.join(RIGS)})")
+        raise ValueError(f"{json_path}: unknown rig {rig!r} (known: {', '.join(RIGS)}; or {', '.join(CLI_RIG_NAMES)})")
     spec = RIGS[rig]
-    params = _check_parameters(rig, meta["parameters"], str(json_path))
-    inputs, outputs = list(meta["inputs"]), list(meta["outputs"])
+    params = _check_parameters(rig, meta["parameters"], str(json_path), checks)
+    inputs, outputs = _name_list(meta, "inputs", json_path), _name_list(meta, "outputs", json_path)
     if sorted(inputs) != sorted(spec.inputs):
         raise ValueError(f"{json_path}: 'inputs' must be {list(spec.inputs)} for rig {rig!r}, got {inputs}")
     bad = [o for o in outputs if o not in spec.outputs]
@@ -195,17 +290,16 @@ def load_dataset(path) -> Dataset:
     for k in spec.initial_state:
         if k not in init:
             raise ValueError(f"{json_path}: initial_state misses {k!r}")
-        if not math.isfinite(float(init[k])):
+        if not _is_number(init[k]):
+            raise ValueError(f"{json_path}: initial_state {k!r} = {init[k]!r} is not a number")
+        if not math.isfinite(init[k]):
             raise ValueError(f"{json_path}: initial_state {k!r} is not finite")
     unknown = sorted(set(init) - set(spec.initial_state))
     if unknown:
         raise ValueError(f"{json_path}: unknown initial_state key {unknown[0]!r}")
 
     # ---- CSV
-    lines = csv_path.read_text().splitlines()
-    if not lines:
-        raise ValueError(f"{csv_path}: empty file")
-    header = [h.strip() for h in lines[0].split(",")]
+    header, data = _read_csv(csv_path)
     if header[0] != "time":
         raise ValueError(f"{csv_path}: first column must be 'time', got {header[0]!r}")
     if len(set(header)) != len(header):
@@ -219,24 +313,12 @@ def load_dataset(path) -> Dataset:
     for col in sorted(expected):
         if col not in header:
             raise ValueError(f"{csv_path}: missing column {col!r}")
-    rows = []
-    for i, line in enumerate(lines[1:], start=2):
-        if not line.strip():
-            continue
-        cells = line.split(",")
-        if len(cells) != len(header):
-            raise ValueError(f"{csv_path}: row {i} has {len(cells)} cells, header has {len(header)}")
-        try:
-            vals = [float(c) for c in cells]
-        except ValueError:
-            raise ValueError(f"{csv_path}: row {i}: not a number in {line!r}") from None
-        for c, v in zip(header, vals):
-            if not math.isfinite(v):
-                raise ValueError(f"{csv_path}: row {i}, column {c!r}: value {v} is not finite")
-        rows.append(vals)
-    if len(rows) < 3:
-        raise ValueError(f"{csv_path}: needs at least 3 rows of data, got {len(rows)}")
-    data = np.asarray(rows)
+    bad_rows, bad_cols = np.nonzero(~np.isfinite(data))
+    if bad_rows.size:
+        i, j = int(bad_rows[0]), int(bad_cols[0])
+        raise ValueError(f"{csv_path}: row {i + 2}, column {header[j]!r}: value {data[i, j]} is not finite")
+    if len(data) < 3:
+        raise ValueError(f"{csv_path}: needs at least 3 rows of data, got {len(data)}")
     t = data[:, 0]
     dts = np.diff(t)
     if np.any(dts <= 0):
@@ -254,11 +336,75 @@ def load_dataset(path) -> Dataset:
                  {k: float(init[k]) for k in spec.initial_state},
                  {k: v for k, v in meta.items()
                   if k not in ("rig", "parameters", "initial_state", "inputs", "outputs")})
+    check_plausibility(ds, checks, where=str(csv_path))
     return ds
 
 
+def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) -> None:
+    """Reject a dataset whose numbers cannot be what its JSON declares.
+
+    Checks (limits in :class:`~awiwi_drake.parameters.discrepancy.DatasetChecks`):
+    excitation present (the commanded torques vary), every measured column
+    varies (a sensor is connected), magnitudes plausible for SI units (torques,
+    link angle excursion, motor angle excursion times the pulley radius) and
+    measured tendon forces within ``force_ratio`` of the nominal spring force
+    at the largest elongation the measured angles imply.  Raises a
+    ``ValueError`` naming the column and the likely unit mistake.
+    """
+    from awiwi_drake.parameters.discrepancy import DatasetChecks
+
+    c = checks or DatasetChecks()
+    where = where or ds.name
+    u = ds.input_matrix
+    if np.all(np.ptp(u, axis=0) == 0.0):
+        raise ValueError(f"{where}: no excitation: the commanded torques ({', '.join(ds.spec.inputs)}) are "
+                         f"constant over the whole recording; nothing can be identified")
+    for k, v in list(ds.inputs.items()) + list(ds.outputs.items()):
+        if np.ptp(v) == 0.0 and k in ds.outputs:
+            raise ValueError(f"{where}: column {k!r} is constant ({v[0]:g}) over the whole recording: "
+                             f"no sensor signal")
+    big = float(np.max(np.abs(u)))
+    if big > c.max_torque:
+        col = ds.spec.inputs[int(np.argmax(np.max(np.abs(u), axis=0)))]
+        raise ValueError(f"{where}: column {col!r} reaches {big:.3g} Nm (> {c.max_torque:g} Nm): not a motor "
+                         f"torque in Nm")
+    p = ds.parameters
+    if "link_angle" in ds.outputs:
+        span = float(np.ptp(ds.outputs["link_angle"]))
+        if span > c.max_angle_excursion:
+            raise ValueError(f"{where}: column 'link_angle' spans {span:.3g} rad (> {c.max_angle_excursion:g}): "
+                             f"angles must be in rad (degrees are 57x larger)")
+    rm = p["motor_pulley_radius"]
+    elong = 0.0
+    for k in ds.output_names:
+        if k.startswith("motor_angle"):
+            travel = rm * float(np.max(np.abs(ds.outputs[k])))
+            if travel > c.max_elongation:
+                raise ValueError(f"{where}: column {k!r} moves the tendon by r_m * max|angle| = {travel:.3g} m "
+                                 f"(> {c.max_elongation:g} m): motor angles must be in rad, or "
+                                 f"motor_pulley_radius is wrong")
+            elong = max(elong, travel)
+    if "link_angle" in ds.outputs:
+        elong += p["link_pulley_radius"] * float(np.max(np.abs(ds.outputs["link_angle"])))
+    forces = [k for k in ds.output_names if k.startswith("tendon_force")]
+    if forces and elong > 0:
+        nominal = sum(ck * elong ** (i + 1) for i, ck in enumerate(p["spring_poly"]))
+        for k in forces:
+            peak = float(np.max(np.abs(ds.outputs[k])))
+            ratio = peak / nominal if nominal > 0 else math.inf
+            if not (1.0 / c.force_ratio <= ratio <= c.force_ratio):
+                raise ValueError(f"{where}: column {k!r} peaks at {peak:.3g} N, {ratio:.3g}x the nominal spring "
+                                 f"force at the measured elongation ({nominal:.3g} N): forces must be in N "
+                                 f"(kN or mN?), or spring_poly/angles are in other units")
+
+
 def save_dataset(ds: Dataset, directory, name: str | None = None) -> pathlib.Path:
-    """Write ``NAME.csv`` + ``NAME.json`` into ``directory``; returns the CSV path."""
+    """Write ``NAME.csv`` + ``NAME.json`` into ``directory``; returns the CSV path.
+
+    A generated dataset's answer (``meta["truth"]``: the hidden effects and their
+    parameters) goes to a separate ``NAME.truth.json``, so that the data handed to
+    :func:`~awiwi_drake.discrepancy.diagnose` does not contain it.
+    """
     d = pathlib.Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     name = name or ds.name
@@ -269,6 +415,8 @@ def save_dataset(ds: Dataset, directory, name: str | None = None) -> pathlib.Pat
     np.savetxt(csv_path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
     meta = {"rig": ds.rig, "parameters": ds.parameters, "initial_state": ds.initial_state,
             "inputs": list(ds.spec.inputs), "outputs": ds.output_names}
-    meta.update({k: v for k, v in ds.meta.items() if not k.startswith("clean_")})
+    meta.update({k: v for k, v in ds.meta.items() if not k.startswith("clean_") and k != "truth"})
     (d / f"{name}.json").write_text(json.dumps(meta, indent=1, default=float))
+    if "truth" in ds.meta:
+        (d / f"{name}.truth.json").write_text(json.dumps(ds.meta["truth"], indent=1, default=float))
     return csv_path

@@ -13,7 +13,24 @@ from scipy.signal import coherence, welch
 
 from .replay import ReplayEngine, project
 
-__all__ = ["ResidualMaps", "residual_maps"]
+__all__ = ["ResidualMaps", "residual_maps", "cpr_spectrum", "locate", "CPR_MAX_ORDER"]
+
+CPR_MAX_ORDER = 300
+"""Highest ripple order scanned (cycles per motor revolution).  Chosen: issue 12 asks
+for any order up to at least 300; motor-side orders of a 1:100 gear (Ch. 3) are
+multiples of 100."""
+
+
+def cpr_spectrum(residual: np.ndarray, angles: list, orders: np.ndarray) -> np.ndarray:
+    """Amplitude of the component of ``residual`` periodic in each angle with each
+    order (least squares on ``sin, cos, 1`` per order; largest over ``angles``)."""
+    amps = np.zeros(len(orders))
+    for theta in angles:
+        for i, k in enumerate(orders):
+            A = np.column_stack([np.sin(k * theta), np.cos(k * theta), np.ones_like(theta)])
+            c, *_ = np.linalg.lstsq(A, residual, rcond=None)
+            amps[i] = max(amps[i], float(np.hypot(c[0], c[1])))
+    return amps
 
 
 @dataclass
@@ -63,19 +80,13 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
         for i, u in enumerate(eng.ds.spec.inputs):
             _, c = coherence(x, eng.U[ok, i], fs=fs, nperseg=nper)
             coh[(n, u)] = c
-    # periodicity in motor angle (cycles per revolution of the output shaft)
+    # periodicity in motor angle (cycles per revolution), every integer order up to CPR_MAX_ORDER,
+    # against each motor's angle (largest amplitude kept)
     nmot = eng.nom.num_motors
     theta = eng.xhat[0][ok]
-    orders = np.array([1, 2, 3, 4, 5, 6, 8, 100])
-    cpr = {}
-    for j, n in enumerate(eng.out_names):
-        x = full[ok, j]
-        amps = []
-        for k in orders:
-            A = np.column_stack([np.sin(k * theta), np.cos(k * theta), np.ones_like(theta)])
-            c, *_ = np.linalg.lstsq(A, x, rcond=None)
-            amps.append(float(np.hypot(c[0], c[1])))
-        cpr[n] = np.array(amps)
+    orders = np.arange(1, CPR_MAX_ORDER + 1)
+    cpr = {n: cpr_spectrum(full[ok, j], [eng.xhat[i][ok] for i in range(nmot)], orders)
+           for j, n in enumerate(eng.out_names)}
     cpr_noise = float(2.0 / np.sqrt(max(ok.sum(), 1)))
     # operating regions: quantile bins of motor velocity, motor angle and tendon force
     def profile(v):
@@ -119,6 +130,7 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
         "peak_excess_frequency_hz": float(band),
         "max_coherence": {f"{a}|{b}": float(np.max(c)) for (a, b), c in coh.items()},
         "top_cpr_order": top_order,
+        "band_above_floor_hz": {n: _band(freq, p) for n, p in psd_ratio.items()},
         "top_cpr_amplitude": {n: float(np.max(cpr[n])) for n in eng.out_names},
         "cpr_noise_amplitude": cpr_noise,
         "velocity_sign_asymmetry": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in vprof.items()},
@@ -130,3 +142,58 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
     return ResidualMaps(eng.ds.time, res, freq, psd_ratio, coh, orders, cpr, cpr_noise, centers, vprof,
                         pos_centers, pprof, force_centers, fprof,
                         asym, lags * eng.dt, xc, summary)
+
+
+def _band(freq: np.ndarray, ratio: np.ndarray, level: float = 2.0) -> list:
+    """Contiguous frequency band around the PSD peak where the residual PSD is above
+    ``level`` times the noise floor's ([f_lo, f_hi] in Hz; empty when nowhere)."""
+    i = int(np.argmax(ratio))
+    if ratio[i] < level:
+        return []
+    lo = hi = i
+    while lo > 0 and ratio[lo - 1] >= level:
+        lo -= 1
+    while hi < len(ratio) - 1 and ratio[hi + 1] >= level:
+        hi += 1
+    return [float(freq[lo]), float(freq[hi])]
+
+
+def locate(maps: ResidualMaps, threshold: float) -> dict:
+    """Where an unexplained residual is: signals above ``threshold`` times the noise
+    floor, frequency band, operating region, cycles per revolution, and one line of text.
+
+    Energies are mean squared residuals in noise units (1 = the noise floor)."""
+    s = maps.summary
+    energy = dict(sorted(s["energy_per_signal"].items(), key=lambda kv: -kv[1]))
+    above = [n for n, e in energy.items() if e > threshold] or [next(iter(energy))]
+    worst = above[0]
+    band = s["band_above_floor_hz"][worst]
+    regions = []
+    for quantity, bins, prof in (("motor velocity [rad/s]", maps.velocity_bins, maps.velocity_profile),
+                                 ("motor angle [rad]", maps.position_bins, maps.position_profile),
+                                 ("tendon force [N]", maps.force_bins, maps.force_profile)):
+        if bins is None or worst not in prof or not np.any(np.isfinite(prof[worst])):
+            continue
+        b = int(np.nanargmax(np.abs(prof[worst])))
+        regions.append({"quantity": quantity, "bin_centre": float(bins[b]), "mean_residual": float(prof[worst][b])})
+    region = max(regions, key=lambda r: abs(r["mean_residual"])) if regions else {}
+    # orders with at least two periods over the angle range covered (lower orders are a
+    # generic function of the angle there, not a periodicity)
+    span = float(maps.position_bins[-1] - maps.position_bins[0]) if len(maps.position_bins) > 1 else 0.0
+    amp = np.where(maps.cpr_orders * span / (2 * np.pi) >= 2.0, maps.cpr_amplitude[worst], 0.0)
+    k = int(np.argmax(amp))
+    # a periodic component stands out of the other orders (a coloured residual fits every low order
+    # over a limited angle range) and of white noise of the residual's own size
+    rms = float(np.sqrt(np.nanmean(maps.residual[worst] ** 2)))
+    n_ok = int(np.sum(np.isfinite(maps.residual[worst])))
+    line_noise = max(maps.cpr_noise, 2.0 * rms / np.sqrt(max(n_ok, 1)), 3.0 * float(np.median(amp)))
+    cpr = ({"order": int(maps.cpr_orders[k]), "amplitude": float(amp[k]), "noise_amplitude": line_noise}
+           if amp[k] > 3.0 * line_noise else {})
+    text = (f"{', '.join(f'{n} ({energy[n]:.2f}x floor)' for n in above)}; "
+            + (f"band {band[0]:.2g}-{band[1]:.2g} Hz" if band else "broadband (no band 2x above the floor)")
+            + (f"; largest mean residual {region['mean_residual']:+.2f} (noise units) at {region['quantity']} "
+               f"~ {region['bin_centre']:.3g}" if region else "")
+            + (f"; periodic at {cpr['order']} cycles/rev ({cpr['amplitude']:.2g} vs noise "
+               f"{cpr['noise_amplitude']:.2g})" if cpr else ""))
+    return {"signals": energy, "signals_above": above, "frequency_band_hz": band, "operating_region": region,
+            "cycles_per_revolution": cpr, "text": text}

@@ -88,6 +88,8 @@ class ReplayEngine:
         self.spread = np.maximum(spread, 1e-12)
         self._estimate_states()
         self._sims = {}
+        self._dahl_cache = {}
+        self._played = None
         self.simulations = 0
         self.sim_time = 0.0
 
@@ -117,8 +119,6 @@ class ReplayEngine:
             cols += [qs[None], qd[None]]
             self.q_est = qs
         self.xhat = np.vstack(cols)  # (ns - n, N)
-        fk = [f"tendon_force{s}" for s in sfx]
-        self._force_smooth = [savgol_filter(ds.outputs[k], win, 3) if k in ds.outputs else None for k in fk]
         x, xd = laws_kinematics(nom, self.xhat)
         self.elong = np.array(x)  # (n, N)
 
@@ -139,38 +139,73 @@ class ReplayEngine:
             return np.mean(est, axis=0)
         return r * (ths[0] - ths[1]) / (2 * rq)
 
+    def _played_elongation(self) -> np.ndarray:
+        """Elongation through a play operator of half-width three times its noise
+        (Prandtl-Ishlinskii stop): sensor noise on the smoothed elongation would
+        otherwise reverse the direction every few samples and wash out the Dahl state."""
+        if self._played is None:
+            nom, n = self.nom, self.nom.num_motors
+            g0 = float(np.sqrt(np.sum(savgol_coeffs(self._sg_window, 3) ** 2)))
+            sfx = ["_1", "_2"] if n == 2 else [""]
+            sig = [nom.motor_pulley_radius * self.sigma[self.out_names.index(f"motor_angle{s}")] for s in sfx]
+            if nom.has_link:
+                sig = [float(np.hypot(v, nom.link_pulley_radius * noise_floor(self._q_raw))) for v in sig]
+            out = np.empty_like(self.elong)
+            for i in range(n):
+                b = 3.0 * g0 * sig[i]
+                y, row = float(self.elong[i, 0]), []
+                for x in self.elong[i].tolist():
+                    y = min(max(y, x - b), x + b)
+                    row.append(y)
+                out[i] = row
+            self._played = out
+        return self._played
+
+    def _dahl_history(self, length: float, initial: float = 0.0) -> np.ndarray:
+        """Normalised Dahl state ``w/h`` (num_motors, N) at every sample, run on the
+        (play-filtered, smoothed) elongation from ``w = initial`` at the dataset start."""
+        key = (float(length), float(initial))
+        hit = self._dahl_cache.get(key)
+        if hit is not None:
+            return hit
+        dx = np.diff(self._played_elongation(), axis=1)
+        n, N = self.elong.shape
+        w = np.zeros((n, N))
+        for i in range(n):
+            a = np.exp(-np.abs(dx[i]) / key[0]).tolist()
+            sg = np.sign(dx[i]).tolist()
+            wi = key[1]
+            out = [wi]
+            for ak, sk in zip(a, sg):
+                if sk != 0.0:
+                    wi = sk + (wi - sk) * ak
+                out.append(wi)
+            w[i] = out
+        if len(self._dahl_cache) > 64:
+            self._dahl_cache.clear()
+        self._dahl_cache[key] = w
+        return w
+
     def initial_states(self, starts: np.ndarray, P: np.ndarray) -> np.ndarray:
         """Estimated window-start states (num_states, len(starts)) for copies with
         catalog parameters ``P`` (num_params, len(starts)).
 
         Angles and velocities come from the smoothed measurements.  The hysteresis
-        state ``w`` is read from the measured force where it is measured
-        (``w = (f_meas - f(x)) / (h tanh f)``, clipped to [-1, 1]); otherwise the Dahl
-        law is run over the 200 samples before each start on the smoothed elongation."""
+        force is physics, not a reading: the Dahl law of the copy's loop width,
+        transition length and initial state (``hysteresis_initial``, fitted) run on
+        the smoothed elongation from the dataset start (:meth:`_dahl_history`).
+        Reading it from the measured force instead would let it absorb any slow force
+        error as a per-window offset (issue 12)."""
         n = self.nom.num_motors
         X0 = np.empty((self.nom.num_states, len(starts)))
         X0[:-n] = self.xhat[:, starts]
-        length = P[PARAM_INDEX["hysteresis_length"]]
+        shape = P[[PARAM_INDEX["hysteresis_length"], PARAM_INDEX["hysteresis_initial"]]]
         width = P[PARAM_INDEX["hysteresis_width"]]
         w = np.zeros((n, len(starts)))
-        back = 200
-        for k in range(back, 0, -1):
-            i1 = np.clip(starts - k + 1, 0, None)
-            i0 = np.clip(starts - k, 0, None)
-            dx = self.elong[:, i1] - self.elong[:, i0]
-            sg = np.sign(dx)
-            w = sg + (w - sg) * np.exp(-np.abs(dx) / length)
-        w = w * width
-        for i in range(n):
-            if self._force_smooth[i] is None:
-                continue
-            f0 = laws.spring_force(self.elong[i, starts], self.nom.spring_poly)
-            f_true = (self._force_smooth[i][starts] - P[PARAM_INDEX[f"force_offset_{i + 1}"]]) \
-                / (1.0 + P[PARAM_INDEX["force_gain"]])
-            gate = np.tanh(f0)
-            ok = (gate > 1e-6) & (width > 0)
-            est = (f_true - (1.0 + P[PARAM_INDEX["spring_scale_rel"]]) * f0) / np.where(ok, gate, 1.0)
-            w[i] = np.where(ok, np.clip(est, -width, width), w[i])
+        on = width != 0
+        for L, w0 in np.unique(shape[:, on].T, axis=0) if on.any() else []:
+            sel = on & (shape[0] == L) & (shape[1] == w0)
+            w[:, sel] = self._dahl_history(L, w0)[:, starts[sel]] * width[sel]
         X0[-n:] = w
         return X0
 
@@ -264,7 +299,9 @@ class ReplayEngine:
         return self.residual(starts, Ym).reshape(S + K, W, -1)
 
     def state_steps(self) -> np.ndarray:
-        """Initial-state perturbations used for the projection (num_states x num_states)."""
+        """Initial-state perturbations used for the profile, one row per profiled state
+        (angles, velocities; not the hysteresis force, which is physics, see
+        :meth:`initial_states`): shape (num_states - num_motors, num_states)."""
         nom = self.nom
         n = nom.num_motors
         th_scale = np.maximum(self.xhat[:n].std(axis=1), 1e-3) * 1e-2
@@ -272,15 +309,18 @@ class ReplayEngine:
         steps = list(th_scale) + list(om_scale)
         if nom.has_link:
             steps += [max(self.xhat[2 * n].std(), 1e-3) * 1e-2, max(self.xhat[2 * n + 1].std(), 1e-2) * 1e-2]
-        steps += [0.05] * n  # N of hysteresis force
-        return np.diag(steps)
+        D = np.zeros((len(steps), nom.num_states))
+        D[np.arange(len(steps)), np.arange(len(steps))] = steps
+        return D
 
-    def state_prior_std(self, P: np.ndarray | None = None) -> np.ndarray:
+    def state_prior_std(self) -> np.ndarray:
         """Standard deviation of the window-start state estimate (prior of the profile).
 
         Angles: twice the noise floor times the Savitzky-Golay noise gain; velocities:
         twice the derivative-filter noise gain plus 2 % of their RMS (smoothing bias at
-        fast transients); hysteresis force: the loop half-width of ``P`` (unknown sign)."""
+        fast transients); hysteresis force: none, it is physics (the Dahl state follows
+        from the elongation history and the fitted initial state), so it cannot act as a
+        free per-window force offset (issue 12)."""
         n = self.nom.num_motors
         win = self._sg_window
         g0 = float(np.sqrt(np.sum(savgol_coeffs(win, 3) ** 2)))
@@ -293,8 +333,6 @@ class ReplayEngine:
             sq = noise_floor(self._q_raw)
             qd_rms = float(np.sqrt(np.mean(self.xhat[2 * n + 1] ** 2)))
             std += [max(2 * g0 * sq, 1e-9), 2 * g1 * sq + 0.02 * qd_rms]
-        width = 0.0 if P is None else float(P[PARAM_INDEX["hysteresis_width"]])
-        std += [width] * n
         return np.maximum(np.array(std), 1e-12)
 
     def profiled(self, Psets: np.ndarray, windows: np.ndarray) -> list:
@@ -305,6 +343,7 @@ class ReplayEngine:
         the window initial states (sensitivities by finite differences at that set)."""
         Psets = np.atleast_2d(Psets)
         D = self.state_steps()
+        prior = self.state_prior_std()
         ns = D.shape[0]
         Sn, W = len(Psets), len(windows)
         starts = np.tile(self.starts[windows], Sn * (1 + ns))
@@ -318,9 +357,8 @@ class ReplayEngine:
         R = self.residual(starts, Ym).reshape(Sn, 1 + ns, W, -1)
         out = []
         for s in range(Sn):
-            prior = self.state_prior_std(Psets[s])
             r0 = R[s, 0]
-            S = (r0[None] - R[s, 1:]) / np.diag(D)[:, None, None]  # d(pred)/dx0: (ns, W, m)
+            S = (r0[None] - R[s, 1:]) / D.sum(axis=1)[:, None, None]  # d(pred)/dx0: (ns, W, m)
             out.append((r0, Projection(np.transpose(S, (1, 2, 0)) * prior[None, None, :])))
         return out
 

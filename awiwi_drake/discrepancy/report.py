@@ -14,9 +14,9 @@ import numpy as np
 
 from .catalog import default_vector
 from .localise import ResidualMaps, residual_maps
-from .workflow import Diagnosis
+from .result import Diagnosis
 
-__all__ = ["plot_overlay", "plot_residual_maps", "plot_candidates", "write_report", "json_summary"]
+__all__ = ["plot_overlay", "plot_residual_maps", "plot_candidates", "write_report", "json_summary", "findings_text"]
 
 
 def _plt():
@@ -51,9 +51,10 @@ def plot_overlay(dx: Diagnosis, *, windows: int = 4):
         t = eng.ds.time[idx]
         for j, name in enumerate(eng.out_names):
             a = ax[j, w_i]
-            a.plot(t, eng.Y[idx, j], color="0.6", lw=1, label="measured")
-            a.plot(t, preds["nominal"][w_i, :, j], color="C3", lw=1, label="nominal")
-            a.plot(t, preds["augmented"][w_i, :, j], color="C0", lw=1, label="augmented")
+            a.plot(t, preds["nominal"][w_i, :, j], color="C3", lw=1, label="nominal", zorder=1)
+            a.plot(t, preds["augmented"][w_i, :, j], color="C0", lw=1, label="augmented", zorder=2)
+            # measured last and on top: the models are judged against it
+            a.plot(t, eng.Y[idx, j], ".", color="k", ms=1.5, label="measured", zorder=3)
             a.tick_params(labelsize=6)
             if w_i == 0:
                 a.set_ylabel(name, fontsize=7)
@@ -79,14 +80,12 @@ def plot_residual_maps(maps: ResidualMaps, title: str = ""):
         ax[1].plot(maps.freq, c, lw=0.6, label=f"{n} | {u}")
     ax[1].set(xlabel="frequency [Hz]", ylabel="coherence", title="residual-input coherence", ylim=(0, 1))
     ax[1].legend(fontsize=5)
-    xo = np.arange(len(maps.cpr_orders))
-    wdt = 0.8 / max(len(maps.cpr_amplitude), 1)
-    for i, (n, a) in enumerate(maps.cpr_amplitude.items()):
-        ax[2].bar(xo + i * wdt, a, width=wdt, label=n)
-    ax[2].axhline(maps.cpr_noise, color="k", ls="--", lw=0.8)
-    ax[2].set_xticks(xo + 0.4, [f"{o:g}" for o in maps.cpr_orders])
+    for n, a in maps.cpr_amplitude.items():
+        ax[2].plot(maps.cpr_orders, a, lw=0.7, label=n)
+    ax[2].axhline(3.0 * maps.cpr_noise, color="k", ls="--", lw=0.8, label="3x noise amplitude")
     ax[2].set(xlabel="cycles per motor revolution", ylabel="amplitude [noise units]",
-              title="residual vs motor angle")
+              title="residual vs motor angle", xlim=(0, maps.cpr_orders[-1]))
+    ax[2].legend(fontsize=5)
     for n, v in maps.velocity_profile.items():
         ax[3].plot(maps.velocity_bins, v, "o-", ms=3, lw=0.8, label=n)
     ax[3].axhline(0, color="k", lw=0.5)
@@ -142,24 +141,46 @@ def json_summary(dx: Diagnosis, maps_before: ResidualMaps | None = None) -> dict
     return out
 
 
-def write_report(dx: Diagnosis, directory) -> pathlib.Path:
-    """Write ``report.md``, ``summary.json`` and PNGs into ``directory``; returns the Markdown path."""
+def findings_text(dx: Diagnosis) -> str:
+    """One paragraph on what the diagnosis found and what is left (report and CLI)."""
+    if dx.unexplained_residual:
+        out = (f"Unexplained discrepancy remains: after the last accepted step the held-out residual is "
+               f"{dx.floor_ratio_after:.2f}x the noise floor (threshold {dx.unexplained_ratio:g}x); the "
+               "catalog does not explain it.")
+        if dx.unexplained:
+            out += f" Where: {dx.unexplained['text']}."
+        return out
+    if dx.steps:
+        return (f"The held-out residual is {dx.floor_ratio_after:.2f}x the noise floor after the named steps "
+                f"(below the {dx.unexplained_ratio:g}x threshold for an unexplained discrepancy).")
+    if dx.stop_reason.startswith("residual at the noise floor"):
+        return "The nominal model's residual is at the noise floor: nothing is missing from the model."
+    return (f"No catalog candidate passed the acceptance tests; the residual is {dx.floor_ratio_after:.2f}x "
+            f"the noise floor, below the {dx.unexplained_ratio:g}x threshold for an unexplained discrepancy.")
+
+
+def write_report(dx: Diagnosis, directory, *, figures: bool = True) -> pathlib.Path:
+    """Write ``report.md``, ``summary.json`` and (with ``figures``) PNGs into ``directory``;
+    returns the Markdown path.  ``figures=False`` simulates nothing (used for the partial
+    report of an interrupted run)."""
     plt = _plt()
     d = pathlib.Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     eng = dx.engine
-    maps0 = residual_maps(eng, default_vector())
-    maps1 = residual_maps(eng, dx.final_parameters)
-    figs = {
-        "overlay.png": plot_overlay(dx)[0],
-        "residual_maps_nominal.png": plot_residual_maps(maps0, "nominal model residual")[0],
-        "residual_maps_augmented.png": plot_residual_maps(maps1, "augmented model residual")[0],
-    }
-    if dx.history:
-        figs["candidates.png"] = plot_candidates(dx)[0]
-    for name, fig in figs.items():
-        fig.savefig(d / name, dpi=110)
-        plt.close(fig)
+    maps0 = None
+    if figures:
+        maps0 = residual_maps(eng, default_vector())
+        maps1 = residual_maps(eng, dx.final_parameters)
+        figs = {
+            "overlay.png": plot_overlay(dx)[0],
+            "residual_maps_nominal.png": plot_residual_maps(maps0, "nominal model residual")[0],
+            "residual_maps_augmented.png": plot_residual_maps(maps1, "augmented model residual")[0],
+        }
+        if dx.history:
+            figs["candidates.png"] = plot_candidates(dx)[0]
+        for name, fig in figs.items():
+            fig.savefig(d / name, dpi=110)
+            plt.close(fig)
     summary = json_summary(dx, maps0)
     (d / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     L = [f"# Model-discrepancy diagnosis: {dx.dataset}", "",
@@ -177,9 +198,12 @@ def write_report(dx: Diagnosis, directory) -> pathlib.Path:
           f"{dx.fit_percent_after:.1f} |", "",
           f"Residual energy / noise floor on held-out windows: {dx.floor_ratio_before:.3f} before, "
           f"{dx.floor_ratio_after:.3f} after (1 = nothing left to explain).", "",
-          "![overlay](overlay.png)", "", "## Steps", ""]
-    if not dx.steps:
-        L.append("No candidate beat the noise floor: nothing is missing from the model.")
+          "![overlay](overlay.png)" if figures else "", "", "## Findings", "", findings_text(dx), "",
+          "## Steps", ""]
+    if not dx.complete:
+        L += ["", "**Partial result**: the run was interrupted; steps below are those accepted so far.", ""]
+    if dx.stop_reason:
+        L += ["", f"Stopped: {dx.stop_reason}.", ""]
     for i, s in enumerate(dx.steps, 1):
         L.append(f"### {i}. `{s.effect}` ({s.kind}, {s.status}, confidence {s.confidence:.2f})")
         L.append("")
@@ -189,19 +213,25 @@ def write_report(dx: Diagnosis, directory) -> pathlib.Path:
             L.append(f"| `{k}` | {v:.5g} | {s.uncertainties.get(k, float('nan')):.2g} |")
         L.append("")
         L.append(f"NRMSE after: {s.nrmse_after:.4f}." + (f" Alternatives: {s.alternatives}." if s.alternatives else ""))
+        if s.status == "not separable":
+            L += ["", f"Not separable with these data: {', '.join(f'`{m}`' for m in s.members)} explain the "
+                  f"same residual (listed: lowest BIC first). Suggested experiment: {s.experiment}."]
         L.append("")
-        L.append("| candidate | stage | held-out gain [% excess] | z | dBIC | parameters |")
-        L.append("|---|---|---|---|---|---|")
+        L.append("| candidate | stage | held-out gain [% excess] | z | dBIC | parameters | rejected |")
+        L.append("|---|---|---|---|---|---|---|")
         for c in s.candidates:
             ps = ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
-            L.append(f"| {c.effect} | {c.stage} | {100 * c.relative_gain:.1f} | {c.z:.1f} | {c.delta_bic:.0f} | {ps} |")
+            L.append(f"| {c.effect} | {c.stage} | {100 * c.relative_gain:.1f} | {c.z:.1f} | {c.delta_bic:.0f} | {ps} "
+                     f"| {c.rejected} |")
         L.append("")
-    L += ["## Residual maps", "", "Nominal model:", "", "![nominal](residual_maps_nominal.png)", "",
-          "Augmented model:", "", "![augmented](residual_maps_augmented.png)", ""]
-    if dx.history:
-        L += ["## Candidates", "", "![candidates](candidates.png)", ""]
-    L += ["## Localisation (nominal residual)", "", "```", json.dumps(maps0.summary, indent=1, default=float),
-          "```", "", "Standard errors assume white residuals (they understate the uncertainty when "
+    if figures:
+        L += ["## Residual maps", "", "Nominal model:", "", "![nominal](residual_maps_nominal.png)", "",
+              "Augmented model:", "", "![augmented](residual_maps_augmented.png)", ""]
+        if dx.history:
+            L += ["## Candidates", "", "![candidates](candidates.png)", ""]
+        L += ["## Localisation (nominal residual)", "", "```", json.dumps(maps0.summary, indent=1, default=float),
+              "```", ""]
+    L += ["Standard errors assume white residuals (they understate the uncertainty when "
           "the residual is coloured).", ""]
     md = d / "report.md"
     md.write_text("\n".join(L))

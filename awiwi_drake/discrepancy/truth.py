@@ -222,8 +222,11 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
-                       keep_clean: bool = True) -> Dataset:
+                       keep_clean: bool = True, progress=None) -> Dataset:
     """Simulate one closed-loop experiment on a truth rig with hidden effects.
+
+    ``progress(t, duration)`` (optional) is called every ~2 % of the run, e.g.
+    :class:`awiwi_drake.config.SimulationProgress`.
 
     Parameters
     ----------
@@ -301,7 +304,10 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     Y = np.zeros((N, nom.num_measurements))
     port.FixValue(ctx, np.full(n, ff))
     sim.Initialize()
+    every = max(1, N // 50)
     for k in range(N):
+        if progress is not None and k % every == 0:
+            progress(float(t[k] - t[0]), float(t[-1] - t[0]))
         xk = xport.Eval(ctx)
         Y[k] = yport.Eval(ctx)
         th, om = xk[:n], xk[n:2 * n]

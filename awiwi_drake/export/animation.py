@@ -122,13 +122,15 @@ def frame_camera(points: np.ndarray, params: AnimationParams | None = None) -> t
 
 
 def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "python",
-                     meshcat: Meshcat | None = None, params: AnimationParams | None = None) -> AnimationResult:
+                     meshcat: Meshcat | None = None, params: AnimationParams | None = None,
+                     progress=None) -> AnimationResult:
     """Simulate a grasp of ``target`` ("hand" or a finger name) and write ``out`` (HTML).
 
     The HTML is self-contained (opens offline) and holds the geometry, the
     motion and the camera framed on the moving links.  ``backend="python"`` is
     the faster drive for the whole hand (see benchmarks/bench_hand.py).
-    Returns an :class:`AnimationResult`.
+    ``progress(t, duration)`` is passed to :func:`simulate` (e.g.
+    :class:`awiwi_drake.config.SimulationProgress`).  Returns an :class:`AnimationResult`.
     """
     if target != "hand" and target not in FINGERS:
         raise ValueError(f"target must be 'hand' or one of {', '.join(FINGERS)}, got {target!r}")
@@ -182,7 +184,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     meshcat.SetCameraPose(cam, look_at)
     vis.StartRecording(set_transforms_while_recording=False)
     res = simulate(d, ctx, duration, log=("joint_angle", "joint_angle_reference"), max_step=1.0 / 3000,
-                   accuracy=1e-3)
+                   accuracy=1e-3, progress=progress)
     vis.StopRecording()
     vis.PublishRecording()
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,7 @@ __all__ = [
     "NonlinearImpedanceStudy",
     "AntagonisticBacksteppingGains",
     "OptimalGainsCase",
+    "JointRigOptimalGainsCase",
 ]
 
 
@@ -200,3 +201,17 @@ class OptimalGainsCase(Parameters):
         for i, (lo, hi) in enumerate(zip(self.gain_low, self.gain_high)):
             if not lo < hi:
                 raise ValueError(f"OptimalGainsCase.gain_low[{i}] = {lo} must be below gain_high[{i}] = {hi}")
+
+
+@dataclass(frozen=True)
+class JointRigOptimalGainsCase(OptimalGainsCase):
+    """Ch. 16 gain selection on the antagonistic joint rig (N = 2 motors, its own spring law and pretension).
+
+    Table 16.1's weights repeated per tendon (``tau_i``, ``taud_i``), ``R = r I_2``; the link/motor
+    inertias and stiffness fields of :class:`OptimalGainsCase` are not used (the rig's own are).
+    """
+
+    r_weight: float = param(1e-6, unit="-", low=0.0, low_inclusive=False,
+                            source=("chosen: on the joint rig at 20 N the least-squares fit reaches relative "
+                                    "distance 0.18 at R = 1e-6 (5.2 at 1e-4, 0.94 at 1e-5, 1.2 at 1e-7 and 1e-8, "
+                                    "16 starts): the R whose LQR the backstepping structure can imitate"))

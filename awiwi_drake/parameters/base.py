@@ -49,7 +49,10 @@ class ParameterInfo:
         hi = "+inf" if self.high is None else repr(self.high)
         lb = "[" if (self.low is not None and self.low_inclusive) else "("
         rb = "]" if (self.high is not None and self.high_inclusive) else ")"
-        return f"{lb}{lo}, {hi}{rb}"
+        text = f"{lb}{lo}, {hi}{rb}"
+        if self.high is None and self.unit in UNIT_CEILINGS:
+            text += f", abs <= {UNIT_CEILINGS[self.unit]:g}"
+        return text
 
 
 def param(
@@ -106,6 +109,22 @@ def param(
     return field(default=default, metadata=meta)
 
 
+# Physical ceilings by unit, applied to every finite value of a field that declares no ``high``.
+# chosen: generous limits for a hand-sized robot, so that unit mistakes and absurd inputs (1e30 kg m^2,
+# a 10 km pulley) are rejected while every studied value passes (the largest defaults are ~1e-2 kg m^2,
+# 0.4 m, 250 N, 1e3 Nm/rad, 10 s, 1e3 Hz, 1e11 Pa).  A field with ``finite=False`` may still be infinite
+# (e.g. "no torque limit").
+UNIT_CEILINGS: dict[str, float] = {
+    "kg": 100.0, "kg m^2": 1.0, "m": 10.0, "N": 1e5, "Nm": 1e4, "Nm s/rad": 1e4, "N m s/rad": 1e4,
+    "s": 1e5, "Hz": 1e7, "rad/s": 1e7, "m/s": 1e3, "Pa": 1e13, "N/m": 1e12,
+}
+
+
+def _ceiling(m: Mapping[str, Any]) -> float | None:
+    """The upper bound that applies to a field: its own ``high`` or its unit's ceiling."""
+    return m["high"] if m["high"] is not None else UNIT_CEILINGS.get(m["unit"])
+
+
 def _kind(f) -> str:
     """'bool', 'int', 'str' or 'float' from a dataclass field's annotation."""
     t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
@@ -139,6 +158,10 @@ def _check_scalar(cls_name: str, name: str, v: Any, m: Mapping[str, Any], where:
     if hi is not None and (v > hi or (v == hi and not m["high_inclusive"])):
         op = "<=" if m["high_inclusive"] else "<"
         raise ValueError(f"{label} = {v!r} is out of range: must be {op} {hi} [{m['unit']}]")
+    ceiling = _ceiling(m)
+    if hi is None and ceiling is not None and math.isfinite(v) and abs(v) > ceiling:
+        raise ValueError(f"{label} = {v!r} is implausible: |value| must be <= {ceiling:g} [{m['unit']}] "
+                         f"(physical ceiling of the unit; check the unit)")
 
 
 @dataclass(frozen=True)
@@ -154,6 +177,12 @@ class Parameters:
         for f in fields(self):
             m = f.metadata
             if not m.get("is_param"):
+                expected = _nested_type(type(self), f.name)
+                if expected is not None and not isinstance(getattr(self, f.name), expected):
+                    v = getattr(self, f.name)
+                    raise ValueError(f"{type(self).__name__}.{f.name} = {v!r} must be a "
+                                     f"{' or '.join(t.__name__ for t in expected)} (a nested parameter set), "
+                                     f"got {type(v).__name__}")
                 continue
             v = getattr(self, f.name)
             if m.get("vector"):
@@ -201,8 +230,13 @@ class Parameters:
         String values are parsed as floats, or comma-separated float lists for
         vector fields.  Unknown names and malformed values raise ValueError.
         """
+        if not isinstance(overrides, Mapping):
+            raise ValueError(f"{type(self).__name__}.with_overrides: expected a mapping NAME -> VALUE "
+                             f"(e.g. {{'pretension': 40}}), got {type(overrides).__name__}")
         result = self
         for key, raw in overrides.items():
+            if not isinstance(key, str):
+                raise ValueError(f"{type(self).__name__}.with_overrides: parameter names are text, got {key!r}")
             result = result._override_one(key, raw)
         return result
 
@@ -269,6 +303,34 @@ class Parameters:
                 rows.append(dict(name=prefix + f.name, value=child, unit=info.unit,
                                  range=info.range_text(), source=info.source, doc=info.doc))
         return rows
+
+
+_NESTED_TYPES: dict = {}
+
+
+def _nested_type(cls, name: str):
+    """The Parameters class(es) a non-``param`` field holds, from its annotation, or None.
+
+    An annotation that does not resolve falls back to :class:`Parameters` when the
+    default is a parameter set.
+    """
+    key = (cls, name)
+    if key not in _NESTED_TYPES:
+        import typing
+
+        f = next(f for f in fields(cls) if f.name == name)
+        try:
+            hint = typing.get_type_hints(cls).get(name)
+        except Exception:  # noqa: BLE001 - unresolvable annotation: fall back to the default's kind
+            hint = None
+        options = typing.get_args(hint) if typing.get_args(hint) else (hint,)
+        classes = tuple(t for t in options if isinstance(t, type) and issubclass(t, Parameters))
+        if not classes and f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+            fac = f.default_factory  # type: ignore[misc]
+            if (isinstance(fac, type) and issubclass(fac, Parameters)):
+                classes = (Parameters,)
+        _NESTED_TYPES[key] = classes or None
+    return _NESTED_TYPES[key]
 
 
 def _parse_value(cls_name: str, name: str, raw: Any, *, vector: bool, current: Any) -> Any:

@@ -95,6 +95,10 @@ class SdreTendonParams(Parameters):
     r: float = param(1e-6, unit="1/Nm^2", low=0.0, low_inclusive=False, source="Table 14.1")
     update_rate: float = param(200.0, unit="Hz", low=0.0, low_inclusive=False,
                                source="section 14.4: 'a rate of about 200 Hz is sufficient'")
+    factorisation: str = param("jacobian", unit="-", choices=("jacobian", "printed"),
+                               source=("chosen default: A(x) = tangent of the whole rig (Drake autodiff Jacobian, "
+                                       "the (3.8) friction slope included); 'printed' = (14.9) as printed "
+                                       "(spring slope only, no friction, no damping)"))
 
 
 @dataclass(frozen=True)
@@ -106,6 +110,10 @@ class SdreJointParams(Parameters):
     link_inertia: float = param(7.2e-7, unit="kg m^2", low=0.0, low_inclusive=False, source="Table 14.2")
     update_rate: float = param(200.0, unit="Hz", low=0.0, low_inclusive=False,
                                source="section 14.4: 'a rate of about 200 Hz is sufficient'")
+    factorisation: str = param("jacobian", unit="-", choices=("jacobian", "printed"),
+                               source=("chosen default: A(x) = tangent of the whole rig (Drake autodiff Jacobian); "
+                                       "'printed' = (14.10) with the secant stiffness k(x1 - x3) = tau_s / (x3 - x1), "
+                                       "for which A(x) x reproduces the spring torque exactly"))
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from .base import Parameters, param
 
-__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams"]
+__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams", "DatasetChecks"]
 
 
 @dataclass(frozen=True)
@@ -52,8 +52,10 @@ class DiscrepancySettings(Parameters):
                "benchmark)",
         doc="differentiation window at 40 dB")
     max_effects: int = param(
-        2, unit="-", low=0, high=6,
-        source="issue 6: up to two hidden effects", doc="physical effects added at most")
+        4, unit="-", low=0, high=6,
+        source="chosen: up to four effects in one dataset (three-effect datasets need a fourth slot "
+               "for a calibration-like leftover); each must pass every acceptance test",
+        doc="physical effects added at most")
     max_nuisance: int = param(
         2, unit="-", low=0, high=6,
         source="chosen: at most two calibration corrections per diagnosis",
@@ -101,9 +103,29 @@ class DiscrepancySettings(Parameters):
                "and is not significantly worse: 'ambiguous'",
         doc="runner-up/winner gain ratio for 'ambiguous'")
     max_nfev: int = param(
-        15, unit="-", low=1, high=1000,
-        source="chosen: trust-region Gauss-Newton converges in < 10 iterations from the "
-               "screening/probe estimate; 15 bounds the cost", doc="fit iterations")
+        40, unit="-", low=1, high=1000,
+        source="chosen: trust-region Gauss-Newton from the screening/probe estimate converges "
+               "in < 20 evaluations on the benchmark; 15 stalled a joint_friction fit at 63 % "
+               "of its screened gain", doc="fit function evaluations per round")
+    fit_tolerance: float = param(
+        1e-4, unit="-", low=0.0, high=1.0,
+        source="chosen: a relative cost change of 1e-4 at ~10^4 training residuals is < 1 BIC "
+               "unit per parameter", doc="relative cost tolerance of the fit (ftol)")
+    fit_rounds: int = param(
+        3, unit="-", low=1, high=20,
+        source="chosen: optimise with the window-start profile of the current point, refresh it, "
+               "repeat; two refreshes suffice for the stateful effects on the benchmark",
+        doc="profile refreshes of one fit at most")
+    fit_tolerance_refresh: float = param(
+        2e-3, unit="-", low=0.0, high=1.0,
+        source="chosen: the refreshed profile changes the training cost by < 0.2 % (a few BIC "
+               "units at 10^4 residuals): the fit and its score agree", doc="profile refresh tolerance")
+    unexplained_ratio: float = param(
+        1.5, unit="-", low=1.0, high=100.0,
+        source="chosen: an independent evaluation judged held-out residuals above 1.5x the noise "
+               "floor unexplained; null datasets reach 0.99-1.05 and correctly named effects with a form mismatch "
+               "(Stribeck truth vs catalog Coulomb) stay below 1.5 (benchmark)",
+        doc="held-out residual / noise floor above which a discrepancy is 'unexplained'")
 
 
 @dataclass(frozen=True)
@@ -178,9 +200,9 @@ class CatalogBounds(Parameters):
 class TruthGeneratorParams(Parameters):
     """Ranges for hidden-effect truth datasets (random physical parameters)."""
 
-    duration: float = param(10.0, unit="s", low=0.1, source="issue 6: 10 s datasets",
+    duration: float = param(10.0, unit="s", low=0.1, source="chosen: 10 s holds every lab excitation (multisine, chirp, steps, slow reversals) once",
                             doc="dataset length")
-    sample_rate: float = param(1000.0, unit="Hz", low=10.0, source="issue 6: 1 kHz logging",
+    sample_rate: float = param(1000.0, unit="Hz", low=10.0, source="chosen: 1 kHz logging resolves the 3 kHz loop's dynamics below 500 Hz, like a lab logger",
                                doc="logging and control rate")
     parameter_spread: float = param(
         0.3, unit="-", low=0.0, high=0.9,
@@ -226,3 +248,50 @@ class TruthGeneratorParams(Parameters):
                                doc="force sensor full scale")
     force_bits: int = param(12, unit="bit", low=1, high=32, source="Ch. 4: 12-bit Hall sensor",
                             doc="force quantisation")
+
+
+@dataclass(frozen=True)
+class DatasetChecks(Parameters):
+    """Plausibility limits applied when a dataset is loaded (``load_dataset``).
+
+    A value outside these limits is almost always a unit mistake (degrees for
+    radians, kN or mN for N, a pulley in mm read as m) or a broken recording;
+    it is rejected with the file, key or column named instead of producing a
+    diverging or meaningless diagnosis.
+    """
+
+    max_motor_inertia: float = param(
+        0.1, unit="kg m^2", low=0.0, low_inclusive=False,
+        source="chosen: 50x the largest output-side motor inertia used here (2.2e-3 kg m^2, "
+               "Table 12.1 / discrepancy defaults)", doc="upper bound of motor_inertia")
+    max_link_inertia: float = param(
+        0.01, unit="kg m^2", low=0.0, low_inclusive=False,
+        source="chosen: 100x a finger link (7e-5 kg m^2, Tables 14.2 / 15.1)", doc="upper bound of link_inertia")
+    max_damping: float = param(
+        10.0, unit="Nm s/rad", low=0.0, low_inclusive=False,
+        source="chosen: 1e4x the motor/link damping used here (1e-3 Nm s/rad)",
+        doc="upper bound of motor_damping and link_damping")
+    max_pulley_radius: float = param(
+        0.1, unit="m", low=0.0, low_inclusive=False,
+        source="chosen: 10x any pulley of a hand (6-8 mm, Table 12.1); a 10 m pulley is a unit mistake",
+        doc="upper bound of motor_pulley_radius and link_pulley_radius")
+    max_spring_coefficient: float = param(
+        1e12, unit="N/m^k", low=0.0, low_inclusive=False,
+        source="chosen: c2 of the lever fit is ~2e6 N/m^2 (Fig 4.8b); 1e12 only excludes absurd values",
+        doc="upper bound of |c_k| in spring_poly")
+    max_angle_excursion: float = param(
+        3.1416, unit="rad", low=0.0, low_inclusive=False,
+        source="chosen: a finger joint moves less than half a turn (joint ranges of Table 5.1 are < 2 rad); "
+               "angles in degrees are 57x larger", doc="largest plausible max - min of link_angle")
+    max_elongation: float = param(
+        0.05, unit="m", low=0.0, low_inclusive=False,
+        source="chosen: 10x the ~5 mm travel of the lever spring mechanism (Fig 4.8b); motor angles in degrees "
+               "give r_m * 57 rad ~ 0.3 m", doc="largest plausible r_m max|motor angle|")
+    max_torque: float = param(
+        1000.0, unit="Nm", low=0.0, low_inclusive=False,
+        source="chosen: 300x the 3 Nm motor limit (Table 12.1)", doc="largest plausible |commanded torque|")
+    force_ratio: float = param(
+        30.0, unit="-", low=1.0,
+        source="chosen: measured forces of generated datasets lie within 0.2-1.2x the spring force at the "
+               "observed elongation; 30x either way is a unit mistake (kN, mN)",
+        doc="allowed factor between measured forces and the nominal spring force at the observed elongation")

@@ -34,7 +34,7 @@ class AnimationParams(Parameters):
     camera_elevation: float = param(0.35, unit="rad", low=-1.5, high=1.5,
                                     source="chosen: slightly from above, fingertips not hidden by the palm")
     field_of_view: float = param(75.0, unit="deg", low=10.0, high=120.0,
-                                 source="Meshcat's default perspective camera (three.js fov 75 deg)")
+                                 source="chosen: Meshcat's default perspective camera (three.js fov 75 deg)")
     fill_fraction: float = param(0.95, unit="-", low=0.2, high=1.5,
                                  source="chosen: the bounding sphere of the moving links fills 95 % of the view height")
     margin: float = param(0.015, unit="m", low=0.0, high=0.1,

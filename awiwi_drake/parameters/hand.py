@@ -393,4 +393,4 @@ class JointControllerParams(Parameters):
     kd: float = param(0.6, unit="N m s/rad", low=0.0,
                       source="chosen: damping ratio ~0.67 of the motor loop (2 * 0.67 * 224 * 2e-3)")
     period: float = param(1.0 / 3000.0, unit="s", low=0.0, low_inclusive=False,
-                          source="thesis: 3 kHz control rate")
+                          source="section 3.3 (\"the high control frequency of 3kHz\") and section 4.1 (lever sensors read at 3 kHz)")

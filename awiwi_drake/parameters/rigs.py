@@ -123,7 +123,7 @@ class DemoScenario(Parameters):
 
     f_start: float = param(5.0, unit="N", low=0.0, low_inclusive=False, source="chosen: light pretension")
     f_end: float = param(30.0, unit="N", low=0.0, low_inclusive=False, source="chosen: Fig 15.26 range (20 N) and above")
-    ramp_time: float = param(0.5, unit="s", low=0.0, low_inclusive=False, source="chosen")
+    ramp_time: float = param(0.5, unit="s", low=0.0, low_inclusive=False, source="chosen: slow against the joint rig's fastest mode, so the ramp is quasi-static")
     step_time: float = param(0.7, unit="s", low=0.0, source="chosen: after the ramp settles")
     link_step: float = param(0.3, unit="rad", low=-1.5, high=1.5, source="chosen: a finger-sized step")
-    t_final: float = param(1.2, unit="s", low=0.0, low_inclusive=False, source="chosen")
+    t_final: float = param(1.2, unit="s", low=0.0, low_inclusive=False, source="chosen: 0.5 s after the step, enough for it to settle")

@@ -13,10 +13,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Sine
 
-from awiwi_drake.analysis.simulate import rig_monitors, simulate
+from awiwi_drake.analysis import PerEntry, Sine, rig_monitors, simulate
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_pd import joint_pd_controller
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -257,23 +255,15 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
                else finger_diagram(finger=target, backend=backend, wrist=True))
         cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
-        b = DiagramBuilder()
-        sys = b.AddSystem(cl.diagram)
-        sine = b.AddNamedSystem("wrist_sweep", Sine(np.array([amplitude, 0.0]),
-                                                    np.array([2 * np.pi * frequency, 0.0]), np.zeros(2)))
-        b.Connect(sine.get_output_port(0), sys.GetInputPort("wrist_angle"))
-        b.ExportInput(sys.GetInputPort("joint_angle_reference"), "joint_angle_reference")
-        b.ExportInput(sys.GetInputPort("external_torque"), "external_torque")
-        b.ExportOutput(sys.GetOutputPort("joint_angle"), "joint_angle")
-        b.ExportOutput(sys.GetOutputPort("tendon_force"), "tendon_force")
-        d = b.Build()
+        d = cl.diagram
         ctx = d.CreateDefaultContext()
         op = rig.operating_point()
         cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
         q_op = op.info["joint_angles"]
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
-        res = simulate(d, ctx, t_final, log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
+        res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},
+                       log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
                        max_step=1.0 / cl.rate_hz, accuracy=accuracy)
         events[comp] = list(res.events)
         res = res.resample(t_grid)

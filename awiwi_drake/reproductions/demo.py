@@ -27,7 +27,7 @@ def pole_sweep_pretension(rig, pretensions):
     return np.array(poles), np.array(stiffness)
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "symbolic"):
+def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
 
     The caller (``awiwi-drake demo``) writes the returned diagrams' graphs with

@@ -81,8 +81,26 @@ class Rig:
         return [self.diagram.get_output_port(i).get_name() for i in range(self.diagram.num_output_ports())]
 
     def operating_point(self, **kwargs) -> OperatingPoint:
-        """The equilibrium named by ``kwargs`` (see the rig's builder for the keys)."""
-        return self.equilibrium(**kwargs)
+        """The equilibrium named by ``kwargs`` (see the rig's builder for the keys).
+
+        Every given value must be finite (NaN/inf raise a ``ValueError`` naming the
+        key), and so must the resulting state and torques.
+        """
+        for key, value in kwargs.items():
+            if value is None or isinstance(value, str):
+                continue
+            try:
+                arr = np.asarray(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"{self.name}.operating_point: {key} = {value!r} is not a number "
+                                 f"or a sequence of numbers") from None
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{self.name}.operating_point: {key} = {value!r} must be finite")
+        op = self.equilibrium(**kwargs)
+        if not (np.all(np.isfinite(op.state)) and np.all(np.isfinite(op.motor_torque))):
+            raise ValueError(f"{self.name}.operating_point({', '.join(f'{k}={v!r}' for k, v in kwargs.items())}) "
+                             f"has no finite equilibrium")
+        return op
 
     def context(self, op: OperatingPoint | None = None) -> Context:
         """A context at ``op`` (default operating point if None) with all inputs fixed."""

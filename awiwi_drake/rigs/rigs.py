@@ -7,10 +7,16 @@
 * :func:`flexible_joint_rig` - motor, spring, link: the 4th-order plant (12.8)
   (and ch. 15.2-15.4). State ``[q, qdot, theta, thetadot]`` as in (12.10).
 * :func:`joint_rig` - one link driven antagonistically by two motors through two
-  nonlinear springs with pretension (Fig 5.9, ch. 15.5). The link is a
-  MultibodyPlant revolute joint (continuous time) receiving the tendon torque as
-  a generalised force, so the same pieces scale to the fingers.
+  nonlinear springs with pretension (Fig 5.9, ch. 15.5).
   State ``[q, qdot, theta1, theta2, omega1, omega2]``.
+
+The link rigs have two structures with the same ports and state order:
+``backend="compiled"`` (default) is *one* system
+(:class:`~awiwi_drake.components.fused_drive.TendonDrive_` with the link inside:
+``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no MultibodyPlant,
+no Mux/Demux; ``Rig.plant`` is None); ``"python"``/``"symbolic"`` put the link in
+a MultibodyPlant revolute joint receiving the tendon torque as a generalised
+force, as the fingers do. A test checks both at random states to 1e-9.
 
 Every block is named; ports are named after physical quantities.
 """
@@ -22,7 +28,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer
 
-from awiwi_drake.components.drive import build_tendon_drive
+from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
+from awiwi_drake.components.fused_drive import DriveModel, TendonDrive_
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
@@ -32,7 +39,7 @@ from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
 
 __all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 
-DEFAULT_BACKEND = "python"
+DEFAULT_BACKEND = "compiled"
 
 
 def _limit(motor: MotorParams):
@@ -69,7 +76,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
     b = DiagramBuilder()
     d = b.AddSystem(drive.diagram)
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    b.ExportOutput(d.GetOutputPort("motor_state"), "state")
+    b.ExportOutput(d.GetOutputPort("state" if drive.backend == "compiled" else "motor_state"), "state")
     for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
@@ -96,7 +103,26 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
               motor_pulley_radius=None, names_motor):
-    """Shared builder: MultibodyPlant link(s) + tendon drive, exported ports."""
+    """Shared builder: MultibodyPlant link(s) + tendon drive (or one fused system), exported ports."""
+    names = ("q", "qdot") + names_motor + tuple(f"hysteresis_force{i + 1}" for i in range(coupling.num_tendons)
+                                                  if hysteresis.enabled)
+    if backend == "compiled":
+        r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
+        model = DriveModel(motor, (spring,) * coupling.num_tendons, coupling, np.zeros(coupling.num_tendons), r_m,
+                           hysteresis, link_inertia=(float(inertia),), link_damping=(float(damping),))
+        b = DiagramBuilder()
+        rig = b.AddNamedSystem("tendon_drive_and_link", TendonDrive_[float](model))
+        b.ExportInput(rig.GetInputPort("motor_torque"), "motor_torque")
+        b.ExportInput(rig.GetInputPort("external_torque"), "external_torque")
+        for port, nm in (("state", "state"), ("link_angle", "link_angle"), ("link_velocity", "link_velocity"),
+                         ("generalized_force", "joint_torque"), ("motor_angle", "motor_angle"),
+                         ("motor_velocity", "motor_velocity"), ("tendon_force", "tendon_force"),
+                         ("tendon_stiffness", "tendon_stiffness"), ("applied_torque", "applied_torque")):
+            b.ExportOutput(rig.GetOutputPort(port), nm)
+        diagram = b.Build()
+        diagram.set_name(name)
+        drive = TendonDrive(diagram, coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled), model)
+        return diagram, None, drive, names
     b = DiagramBuilder()
     plant = b.AddNamedSystem("link", MultibodyPlant(0.0))
     add_revolute_link(plant, name="joint", inertia=inertia, damping=damping)
@@ -123,8 +149,6 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name(name)
-    names = ("q", "qdot") + names_motor + tuple(f"hysteresis_force{i + 1}" for i in range(coupling.num_tendons)
-                                                  if drive.hysteresis)
     return diagram, plant, drive, names
 
 

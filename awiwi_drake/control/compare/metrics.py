@@ -210,6 +210,8 @@ def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> di
     y = np.asarray(y, float)
     m = t >= t_step
     tt, e = t[m] - t_step, (y[m] - r0) / (r1 - r0)
+    if len(tt) < 8:  # too few samples after the step (e.g. a very slow sampled loop): nothing to fit
+        return dict(natural_frequency=math.nan, damping_ratio=math.nan, final=math.nan, dead_time=math.nan)
 
     def model(p):
         wn, z, fin, td = p

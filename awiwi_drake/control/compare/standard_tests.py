@@ -162,8 +162,12 @@ def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
 
 
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
-                       params: CompareTestParams | None = None) -> tuple[list[TestRun], list[Metrics]]:
-    """All applicable standard tests on one closed loop (``disturbance`` only with ``external_torque``)."""
+                       params: CompareTestParams | None = None,
+                       progress: Callable[[str], Any] | None = None) -> tuple[list[TestRun], list[Metrics]]:
+    """All applicable standard tests on one closed loop (``disturbance`` only with ``external_torque``).
+
+    ``progress(label)`` is called after each test (e.g. to advance a progress bar).
+    """
     p = params or compare_test_params(loop.rig)
     if tests is None:
         tests = [t for t in TESTS if t != "disturbance" or "external_torque" in loop.disturbances]
@@ -174,21 +178,25 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
             run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
         except SimulationDivergedError as exc:
             rows.append(Metrics(controller, test, status=f"diverged: {exc}"))
+            if progress is not None:
+                progress(f"{controller}/{test}")
             continue
         runs.append(run)
         rows.append(m)
+        if progress is not None:
+            progress(f"{controller}/{test}")
     return runs, rows
 
 
 def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = None,
-            params: CompareTestParams | None = None) -> Comparison:
-    """Run the standard tests on every closed loop ``{name: loop}``."""
+            params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None) -> Comparison:
+    """Run the standard tests on every closed loop ``{name: loop}`` (``progress(label)`` after each test)."""
     if not loops:
         raise ValueError("compare: give at least one closed loop")
     runs, rows = [], []
     rig = ""
     for name, loop in loops.items():
-        r, m = run_standard_tests(loop, controller=name, tests=tests, params=params)
+        r, m = run_standard_tests(loop, controller=name, tests=tests, params=params, progress=progress)
         runs += r
         rows += m
         rig = getattr(loop.rig, "name", rig)
@@ -196,7 +204,8 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
 
 
 def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
-                        params: CompareTestParams | None = None, **loop_options: Any) -> Comparison:
+                        params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None,
+                        **loop_options: Any) -> Comparison:
     """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
 
     ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
@@ -213,7 +222,7 @@ def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, te
         rig = make_rig()
         opts = {**entry.loop_options, **loop_options}
         loops[n] = closed_loop(rig, entry.factory(rig), **opts)
-    return compare(loops, tests=tests, params=params or compare_test_params(probe))
+    return compare(loops, tests=tests, params=params or compare_test_params(probe), progress=progress)
 
 
 # plotting (data in, (fig, ax) out)

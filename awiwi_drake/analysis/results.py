@@ -1,0 +1,241 @@
+"""The result of :func:`~awiwi_drake.analysis.simulate`: named signals with units, events, plot, save/load."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from awiwi_drake.analysis.monitors import Event
+
+__all__ = ["SimulationResult", "PORT_UNITS", "port_unit", "state_unit"]
+
+#: Units of the package's port names (ARCHITECTURE.md: ports are physical quantities, SI).
+PORT_UNITS = {
+    "motor_torque": "Nm", "motor_torque_command": "Nm", "applied_torque": "Nm", "external_torque": "Nm",
+    "joint_torque": "Nm", "generalized_force": "Nm", "load_torque": "Nm",
+    "tendon_force": "N", "tendon_stiffness": "N/m", "elongation": "m", "tendon_velocity": "m/s",
+    "link_angle": "rad", "joint_angle": "rad", "motor_angle": "rad",
+    "link_velocity": "rad/s", "joint_velocity": "rad/s", "motor_velocity": "rad/s",
+    "joint_stiffness": "Nm/rad", "wrist_angle": "rad", "wrist_velocity": "rad/s",
+}
+
+
+def state_unit(name: str) -> str:
+    """Unit of a state entry from its name (angles [rad], velocities [rad/s])."""
+    n = name.lower()
+    if any(k in n for k in ("dot", "omega", "velocity", "_v", "speed")):
+        return "rad/s"
+    if any(k in n for k in ("q", "theta", "angle", "phi")):
+        return "rad"
+    return "-"
+
+
+def port_unit(name: str) -> str:
+    """Unit of a port by name (``*_reference`` and ``controller_*`` take the quantity's unit); ``-`` if unknown."""
+    base = name
+    for suffix in ("_reference", "_command", "_measured", "_estimate"):
+        if base.endswith(suffix) and base[: -len(suffix)] in PORT_UNITS:
+            base = base[: -len(suffix)]
+    if base.startswith("controller_"):
+        base = base[len("controller_"):]
+    return PORT_UNITS.get(base, "-")
+
+
+def _jsonable(v: Any):
+    if isinstance(v, (np.floating, float)):
+        return float(v) if math.isfinite(v) else str(v)
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, np.ndarray):
+        return [_jsonable(x) for x in v.tolist()]
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if v is None or isinstance(v, (bool, int, str)):
+        return v
+    return str(v)
+
+
+@dataclass
+class SimulationResult:
+    """Logged signals and detected events of one run.
+
+    Attributes
+    ----------
+    t : ndarray (T,)
+        Log times [s] (every integrator step, or every ``log_period``).
+    signals : dict name -> ndarray (T, k)
+        One array per logged port (or input schedule).
+    units : dict name -> str or list of str
+        Unit of each signal (one per channel where they differ, e.g. ``state``).
+    labels : dict name -> list of str
+        Channel names (``state_names`` for ``state``; ``port[i]`` otherwise).
+    events : list of Event
+        Monitor events (slack, saturation, over-range) in time order.
+    info : dict
+        How the run was made: ``mode`` (``fixed_step``/``error_controlled``),
+        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``.
+    final_context : Context or None
+        Context of the simulated diagram at the end (not saved by :meth:`save`).
+    """
+
+    t: np.ndarray
+    signals: dict
+    events: list = field(default_factory=list)
+    final_context: Any = None
+    units: dict = field(default_factory=dict)
+    labels: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+
+    # -- access ------------------------------------------------------------
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self.signals:
+            raise KeyError(f"signal {name!r} was not logged; logged: {', '.join(self.signals) or 'nothing'}")
+        return self.signals[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.signals
+
+    @property
+    def final_state(self) -> np.ndarray | None:
+        """Continuous state at the end (None if no context was kept)."""
+        if self.final_context is None:
+            return None
+        return self.final_context.get_continuous_state_vector().CopyToVector()
+
+    def events_of(self, kind: str) -> list:
+        return [e for e in self.events if e.kind == kind]
+
+    def unit(self, name: str, channel: int = 0) -> str:
+        u = self.units.get(name, "-")
+        return u[channel] if isinstance(u, (list, tuple)) else u
+
+    def channel_labels(self, name: str) -> list[str]:
+        k = self[name].shape[1]
+        lab = list(self.labels.get(name, []))
+        return lab if len(lab) == k else [f"{name}[{i}]" for i in range(k)]
+
+    def resample(self, t: np.ndarray) -> "SimulationResult":
+        """Signals linearly interpolated at times ``t`` (for comparisons and plots)."""
+        t = np.asarray(t, float)
+        out = {k: np.stack([np.interp(t, self.t, v[:, j]) for j in range(v.shape[1])], axis=1)
+               for k, v in self.signals.items()}
+        return SimulationResult(t, out, list(self.events), self.final_context, dict(self.units),
+                                dict(self.labels), dict(self.info))
+
+    # -- plot --------------------------------------------------------------
+    def plot(self, names: Sequence[str] | None = None, *, ax=None, channels: dict | None = None,
+             events: bool = True):
+        """One subplot per signal (per unit for mixed signals such as ``state``); returns ``(fig, axes)``.
+
+        Every trace has a legend entry (its channel name), every axis its unit,
+        and monitor events are shaded with one legend entry per kind.
+        ``channels`` optionally selects channels per signal (``{"state": [0, 2]}``).
+        """
+        import matplotlib.pyplot as plt
+
+        names = list(names) if names is not None else list(self.signals)
+        for n in names:
+            self[n]  # noqa: B018 - clear KeyError naming the logged signals
+        panels = []   # (title, [(name, channel)], unit)
+        for n in names:
+            chans = list((channels or {}).get(n, range(self[n].shape[1])))
+            by_unit: dict[str, list] = {}
+            for j in chans:
+                by_unit.setdefault(self.unit(n, j), []).append(j)
+            for u, js in by_unit.items():
+                panels.append((n, [(n, j) for j in js], u))
+        if ax is None:
+            fig, axes = plt.subplots(len(panels), 1, figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True,
+                                     squeeze=False)
+            axes = list(axes[:, 0])
+        else:
+            axes = list(np.ravel(ax))
+            fig = axes[0].figure
+            if len(axes) < len(panels):
+                raise ValueError(f"SimulationResult.plot: {len(panels)} panels need {len(panels)} axes, got {len(axes)}")
+        colors = {"tendon_slack": "tab:red", "actuator_saturation": "tab:orange", "spring_overrange": "tab:purple"}
+        for a, (title, chans, u) in zip(axes, panels):
+            labels = self.channel_labels(title)
+            for n, j in chans:
+                a.plot(self.t, self[n][:, j], label=labels[j])
+            a.set_ylabel(f"{title} [{u}]")
+            a.grid(True, alpha=0.3)
+            if events:
+                seen = set()
+                for ev in self.events:
+                    lab = None if ev.kind in seen else ev.kind.replace("_", " ")
+                    seen.add(ev.kind)
+                    a.axvspan(ev.t_start, max(ev.t_end, ev.t_start + 1e-4 * max(self.t[-1] - self.t[0], 1e-9)
+                                              if len(self.t) else ev.t_end),
+                              color=colors.get(ev.kind, "tab:gray"), alpha=0.12, label=lab)
+            a.legend(fontsize=7, loc="best", ncol=1 + len(chans) // 6)
+        axes[len(panels) - 1].set_xlabel("time [s]")
+        return fig, axes
+
+    # -- save / load -------------------------------------------------------
+    def _meta(self) -> dict:
+        return dict(format="awiwi_drake.SimulationResult", version=1, signals=list(self.signals),
+                    units=_jsonable(self.units), labels=_jsonable(self.labels),
+                    events=[e.to_json() for e in self.events], info=_jsonable(self.info))
+
+    def save(self, path: str | Path) -> Path:
+        """Write ``path`` (``.npz``: arrays; ``.csv``: one column per channel) and ``path + '.json'`` (units, labels, events, info).
+
+        Returns the data file's path.  The directory must exist.
+        """
+        path = Path(path)
+        if path.suffix not in (".npz", ".csv"):
+            raise ValueError(f"SimulationResult.save: {str(path)!r} must end in .npz or .csv")
+        if not path.parent.is_dir():
+            raise ValueError(f"SimulationResult.save: directory {str(path.parent)!r} does not exist")
+        if path.is_dir():
+            raise ValueError(f"SimulationResult.save: {str(path)!r} is a directory")
+        meta = self._meta()
+        if path.suffix == ".npz":
+            np.savez(path, t=self.t, **{f"signal:{k}": v for k, v in self.signals.items()})
+        else:
+            cols, header = [self.t], ["time"]
+            for k, v in self.signals.items():
+                cols.append(v)
+                header += [f"{k}[{j}]" for j in range(v.shape[1])]
+            meta["columns"] = {k: v.shape[1] for k, v in self.signals.items()}
+            np.savetxt(path, np.column_stack(cols), delimiter=",", header=",".join(header), comments="")
+        Path(str(path) + ".json").write_text(json.dumps(meta, indent=1))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "SimulationResult":
+        """Read a result written by :meth:`save` (``final_context`` is None)."""
+        path = Path(path)
+        side = Path(str(path) + ".json")
+        for p in (path, side):
+            if not p.is_file():
+                raise ValueError(f"SimulationResult.load: {str(p)!r} is not a file")
+        try:
+            meta = json.loads(side.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise ValueError(f"SimulationResult.load: {str(side)!r} is not valid JSON: {exc}") from None
+        if not isinstance(meta, dict) or meta.get("format") != "awiwi_drake.SimulationResult":
+            raise ValueError(f"SimulationResult.load: {str(side)!r} is not a SimulationResult sidecar")
+        if path.suffix == ".npz":
+            with np.load(path) as z:
+                t = np.asarray(z["t"])
+                signals = {k: np.asarray(z[f"signal:{k}"]) for k in meta["signals"]}
+        elif path.suffix == ".csv":
+            data = np.atleast_2d(np.loadtxt(path, delimiter=",", skiprows=1))
+            t, col, signals = data[:, 0], 1, {}
+            for k in meta["signals"]:
+                n = int(meta["columns"][k])
+                signals[k] = data[:, col:col + n]
+                col += n
+        else:
+            raise ValueError(f"SimulationResult.load: {str(path)!r} must end in .npz or .csv")
+        events = [Event(**e) for e in meta.get("events", [])]
+        return cls(t, signals, events, None, meta.get("units", {}), meta.get("labels", {}), meta.get("info", {}))

@@ -1,0 +1,412 @@
+"""One system per tendon drive: motors + springs + routing + guide friction + hysteresis.
+
+:class:`TendonDrive_` is the fast path of every rig, finger and the hand. Its
+physics is one function, :func:`drive_laws`, that calls the law functions of
+this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
+tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
+:func:`~awiwi_drake.components.spring.hysteresis_rate`,
+:func:`~awiwi_drake.components.friction.guide_friction_force` (4.1) and
+:func:`~awiwi_drake.components.friction.guide_friction`):
+
+* for ``AutoDiffXd`` and ``Expression`` (``Linearize``, LQR, symbolic
+  analysis) the system evaluates :func:`drive_laws` directly;
+* for ``float`` it evaluates numba kernels generated from :func:`drive_laws`
+  (:mod:`awiwi_drake.components.codegen`): the laws are evaluated once on
+  symbolic variables and the expression tree is compiled. Tests check kernel =
+  laws at random states to 1e-12 for every switch.
+
+Model (docs/ARCHITECTURE.md sign convention), per tendon i::
+
+    x_i   = r_m theta_i + h_i(q) - h_i(0) + x0_i              elongation
+    f_i   = max(f_el,i(x_i) + z_i, 0)                         spring force (z: hysteresis, Fig 4.8b)
+    dz_i  = hysteresis_rate(z_i, x_i, xdot_i, f_el,i)         xdot = r_m omega + P(q) qdot
+    g_i   = guide_friction((P(q) qdot)_i, f_i, C_i, mu alpha_i)  C s + f (exp(mu alpha s) - 1), s = tanh(v / v_s)
+    B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
+    tau   = -P(q)^T (f + g)                                   generalised force on the joints
+
+With ``link=(inertia, damping)`` the drive also carries the joints as
+decoupled links ``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint
+rigs: no MultibodyPlant, no Mux/Demux). State order: ``[q, qdot]`` (with a
+link), then ``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis.
+
+Ports (each computes only its own quantity; prerequisites declared):
+
+* inputs ``motor_torque`` (m); without a link ``joint_angle`` (n) and, when
+  hysteresis or guide friction need it, ``joint_velocity`` (``rate_joints``);
+  with a link ``external_torque`` (n);
+* outputs ``state`` (all drive states), ``motor_angle``, ``motor_velocity``,
+  ``motor_state`` ([theta, omega]), ``tendon_force`` [N], ``tendon_stiffness``
+  [N/m] (elastic curve), ``elongation`` [m], ``generalized_force`` (n) [N m],
+  ``applied_torque`` (m) [N m]; with a link also ``link_angle``,
+  ``link_velocity``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pydrake.symbolic as sym
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import asarray_like, is_float, positive_part
+from awiwi_drake.components.motor import motor_acceleration, saturate_torque
+from awiwi_drake.components.spring import hysteresis_rate
+from awiwi_drake.components.friction import guide_friction, guide_friction_force
+from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
+
+__all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "TendonDrive_", "TendonDrive_System"]
+
+
+@dataclass(frozen=True)
+class GuideFrictionModel:
+    """Guide friction on every tendon path (:func:`~awiwi_drake.components.friction.guide_friction`).
+
+    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides. With
+    ``capstan=False`` the tension-independent (4.1) ``C0 (1 - exp(-C1 alpha))``, with
+    ``capstan=True`` the capstan form ``f (exp(mu alpha s) - 1)``; ``s = tanh(v / v_s)`` of the
+    tendon's sliding speed ``v = (P(q) qdot)_i`` at the finger.
+    """
+
+    bending_angles: tuple
+    params: GuideFrictionParams = field(default_factory=GuideFrictionParams)
+    capstan: bool = False
+    smoothing_velocity: float = 1e-3
+
+    def __post_init__(self):
+        a = np.asarray(self.bending_angles, dtype=float)
+        if a.ndim != 1 or np.any(a < 0) or not np.all(np.isfinite(a)):
+            raise ValueError(f"GuideFrictionModel.bending_angles must be finite and >= 0 [rad], got {self.bending_angles}")
+        if not self.smoothing_velocity > 0:
+            raise ValueError(f"GuideFrictionModel.smoothing_velocity = {self.smoothing_velocity} must be > 0 [m/s]")
+
+
+@dataclass(frozen=True, eq=False)
+class DriveModel:
+    """Everything :func:`drive_laws` needs (see the module docstring).
+
+    ``springs`` holds one spring law per tendon (the same object may repeat).
+    ``rate_joints`` is the number of leading coupling joints whose velocity
+    enters (``joint_velocity`` input); further coupling "joints" (the hand's
+    wrist length offsets) are taken as quasi-static.
+    """
+
+    motor: MotorParams
+    springs: tuple
+    coupling: object
+    offsets: np.ndarray
+    motor_pulley_radius: float
+    hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
+    guide_friction: GuideFrictionModel | None = None
+    rate_joints: int | None = None
+    link_inertia: tuple | None = None
+    link_damping: tuple | None = None
+
+    def __post_init__(self):
+        m, n = int(self.coupling.num_tendons), int(self.coupling.num_joints)
+        if len(self.springs) != m:
+            raise ValueError(f"DriveModel: springs must hold one spring law per tendon ({m}), got {len(self.springs)}")
+        for i, s in enumerate(self.springs):
+            if not hasattr(s, "force") or not hasattr(s, "stiffness"):
+                raise ValueError(f"DriveModel: springs[{i}] is not a spring law (needs force(x), stiffness(x))")
+        off = np.asarray(self.offsets, dtype=float)
+        if off.shape != (m,) or not np.all(np.isfinite(off)):
+            raise ValueError(f"DriveModel: offsets must be {m} finite numbers [m], got {self.offsets!r}")
+        object.__setattr__(self, "offsets", off)
+        if not self.motor_pulley_radius > 0:
+            raise ValueError(f"DriveModel: motor_pulley_radius = {self.motor_pulley_radius} must be > 0 [m]")
+        nr = n if self.rate_joints is None else int(self.rate_joints)
+        if not 0 <= nr <= n:
+            raise ValueError(f"DriveModel: rate_joints = {self.rate_joints} must be in [0, {n}]")
+        object.__setattr__(self, "rate_joints", nr)
+        if self.guide_friction is not None and len(self.guide_friction.bending_angles) != m:
+            raise ValueError(f"DriveModel: guide_friction.bending_angles must have {m} entries, "
+                             f"got {len(self.guide_friction.bending_angles)}")
+        if (self.link_inertia is None) != (self.link_damping is None):
+            raise ValueError("DriveModel: give both link_inertia and link_damping, or neither")
+        if self.link_inertia is not None:
+            li, ld = np.asarray(self.link_inertia, float), np.asarray(self.link_damping, float)
+            if li.shape != (n,) or ld.shape != (n,) or np.any(li <= 0) or np.any(ld < 0):
+                raise ValueError(f"DriveModel: link_inertia (> 0) and link_damping (>= 0) need {n} entries each")
+        object.__setattr__(self, "_h0", np.asarray(self.coupling.h(np.zeros(n)), dtype=float))
+        groups = {}
+        for i, s in enumerate(self.springs):
+            groups.setdefault(id(s), (s, []))[1].append(i)
+        object.__setattr__(self, "_spring_groups", [(s, np.array(ix)) for s, ix in groups.values()])
+
+    # sizes -------------------------------------------------------------------------
+    @property
+    def num_tendons(self) -> int:
+        return int(self.coupling.num_tendons)
+
+    @property
+    def num_joints(self) -> int:
+        return int(self.coupling.num_joints)
+
+    @property
+    def has_link(self) -> bool:
+        return self.link_inertia is not None
+
+    @property
+    def has_hysteresis(self) -> bool:
+        return bool(self.hysteresis.enabled)
+
+    @property
+    def needs_joint_velocity(self) -> bool:
+        return (self.has_hysteresis or self.guide_friction is not None) and self.rate_joints > 0
+
+    @property
+    def num_states(self) -> int:
+        return (2 * self.num_joints if self.has_link else 0) + (3 if self.has_hysteresis else 2) * self.num_tendons
+
+    @property
+    def supports_symbolic(self) -> bool:
+        return all(getattr(s, "supports_symbolic", False) for s in self.springs)
+
+    # laws on tendon groups -----------------------------------------------------------
+    def spring_apply(self, method: str, x):
+        out = np.empty(len(x), dtype=x.dtype)
+        for s, ix in self._spring_groups:
+            out[ix] = np.asarray(getattr(s, method)(x[ix]), dtype=x.dtype)
+        return out
+
+    def split_state(self, state):
+        """(q, qdot, theta, omega, z) views of a drive state (q, qdot None without a link)."""
+        n, m = self.num_joints, self.num_tendons
+        k = 2 * n if self.has_link else 0
+        q, qd = (state[:n], state[n:k]) if self.has_link else (None, None)
+        theta, omega = state[k:k + m], state[k + m:k + 2 * m]
+        z = state[k + 2 * m:k + 3 * m] if self.has_hysteresis else None
+        return q, qd, theta, omega, z
+
+
+def _full_rates(model: DriveModel, qd):
+    """Velocities of all coupling joints (zeros beyond ``rate_joints``)."""
+    n, nr = model.num_joints, model.rate_joints
+    if qd is None or nr == n:
+        return qd
+    pad = np.zeros(n - nr, dtype=object if not is_float(qd) else float)
+    if not is_float(qd):
+        pad = pad + 0.0 * qd[0]
+    return np.concatenate([qd, pad])
+
+
+def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, *, want=("all",)):
+    """All quantities of the drive at a state, generic in the scalar type.
+
+    Returns a dict with ``elongation``, ``tendon_force``, ``tendon_stiffness``,
+    ``generalized_force`` and (with ``u``) ``derivatives``, ``applied_torque``.
+    Without a link, ``q`` (n) and ``qd`` (``rate_joints``) are the joint inputs;
+    with a link they come from ``state`` and ``tau_ext`` is the external torque.
+    """
+    m = model.num_tendons
+    qs, qds, theta, omega, z = model.split_state(state)
+    if model.has_link:
+        q, qd = qs, qds
+    qd_all = _full_rates(model, qd)
+    x = model.motor_pulley_radius * theta + np.asarray(model.coupling.h(q)) - model._h0 + model.offsets
+    x = asarray_like(x, theta)
+    f_el = model.spring_apply("force", x)
+    f = positive_part(f_el + z) if model.has_hysteresis else f_el
+    out = dict(elongation=x, tendon_force=asarray_like(f, x))
+    if "all" in want or "tendon_stiffness" in want:
+        out["tendon_stiffness"] = model.spring_apply("stiffness", x)
+    need_P = any(w in want for w in ("all", "generalized_force", "derivatives"))
+    if need_P:
+        P = np.asarray(model.coupling.P(q))
+        slide = P @ qd_all if qd_all is not None and model.num_joints else None
+        tension = f
+        if model.guide_friction is not None and slide is not None:
+            g = model.guide_friction
+            alpha = np.asarray(g.bending_angles, dtype=float)
+            constant = np.zeros_like(alpha) if g.capstan else guide_friction_force(alpha, g.params)
+            exponent = g.params.mu * alpha if g.capstan else np.zeros_like(alpha)
+            tension = f + guide_friction(slide, f, constant, exponent, g.smoothing_velocity)
+        tau = -(P.T @ tension) if model.num_joints else np.zeros(0, dtype=x.dtype)
+        out["generalized_force"] = asarray_like(tau, x)
+    if u is not None and ("all" in want or "derivatives" in want):
+        r_m = model.motor_pulley_radius
+        acc = motor_acceleration(theta, omega, u, r_m * f, model.motor)
+        parts = []
+        if model.has_link:
+            I = np.asarray(model.link_inertia, float)
+            d = np.asarray(model.link_damping, float)
+            ext = 0.0 if tau_ext is None else tau_ext
+            qdd = (out["generalized_force"] - d * qd + ext) / I
+            parts += [qd, qdd]
+        parts += [omega, acc]
+        if model.has_hysteresis:
+            xdot = r_m * omega + (slide if slide is not None else 0.0 * omega)
+            parts.append(hysteresis_rate(z, x, xdot, f_el, model.hysteresis))
+        out["derivatives"] = np.concatenate([asarray_like(p_, x) for p_ in parts])
+        out["applied_torque"] = saturate_torque(u, model.motor)
+    return out
+
+
+def _variables(prefix: str, size: int):
+    v = [sym.Variable(f"{prefix}{i}") for i in range(size)]
+    return v, np.array([sym.Expression(x) for x in v], dtype=object)
+
+
+def build_kernels(model: DriveModel, *, jit: bool = True):
+    """numba kernels of :func:`drive_laws` (float path), one per output group.
+
+    Returns ``{name: fn}`` with signatures (all float64 1-D arrays, ``out`` last):
+    ``derivatives(state, u, q, qd, out)`` / with a link ``derivatives(state, u, tau_ext, out)``;
+    ``tendon_force``, ``tendon_stiffness``, ``elongation`` ``(state, q, out)`` / ``(state, out)``;
+    ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
+    ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
+    """
+    if not model.supports_symbolic:
+        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
+        raise ValueError(f"compiled tendon drive: spring law(s) {', '.join(bad)} cannot be compiled; use their "
+                         "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
+    m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
+    with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
+        return _build_kernels(model, m, n, nr, jit)
+
+
+def _build_kernels(model, m, n, nr, jit):
+    sv, s = _variables("s", model.num_states)
+    uv, u = _variables("u", m)
+    if model.has_link:
+        ev, e = _variables("e", n)
+        res = drive_laws(model, s, u, tau_ext=e)
+        ins = dict(derivatives=[sv, uv, ev], tendon_force=[sv], tendon_stiffness=[sv], elongation=[sv],
+                   generalized_force=[sv])
+    else:
+        qv, q = _variables("q", n)
+        dv, d = _variables("qd", nr)
+        res = drive_laws(model, s, u, q, d if model.needs_joint_velocity else None)
+        ins = dict(derivatives=[sv, uv, qv, dv], tendon_force=[sv, qv], tendon_stiffness=[sv, qv],
+                   elongation=[sv, qv], generalized_force=[sv, qv, dv])
+    functions = {name: (ins[name], list(res[name])) for name in ins}
+    from awiwi_drake.components.codegen import compile_kernels
+    return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit)
+
+
+@TemplateSystem.define("TendonDrive_")
+def TendonDrive_(T):
+    """The fused tendon drive (see the module docstring); ``TendonDrive_[T](model)``."""
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, model: DriveModel = None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(model, DriveModel):
+                raise ValueError(f"TendonDrive: model must be a DriveModel, got {type(model).__name__}")
+            if T is sym.Expression and not model.supports_symbolic:
+                raise ValueError("TendonDrive: a spring law of this drive cannot be evaluated symbolically")
+            self.model = model
+            m, n = model.num_tendons, model.num_joints
+            self._m, self._n = m, n
+            self._float = T is float
+            self._kernels = None
+            self._kd = None
+            self._dbuf = np.empty(model.num_states)
+            self._empty = np.zeros(0)
+            self.DeclareContinuousState(model.num_states)
+            self._u = self.DeclareVectorInputPort("motor_torque", m)
+            state = self.all_state_ticket()
+            if model.has_link:
+                self._ext = self.DeclareVectorInputPort("external_torque", n)
+                pos = vel = {state}
+                self._k = 2 * n
+            else:
+                self._ext = None
+                self._q = self.DeclareVectorInputPort("joint_angle", n) if n else None
+                self._qd = self.DeclareVectorInputPort("joint_velocity", model.rate_joints) \
+                    if model.needs_joint_velocity else None
+                pos = {state} | ({self._q.ticket()} if self._q is not None else set())
+                vel = pos | ({self._qd.ticket()} if self._qd is not None else set())
+                self._k = 0
+            self._nq = n
+            k = self._k
+            self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(k, k + m),
+                                motor_velocity=slice(k + m, k + 2 * m), motor_state=slice(k, k + 2 * m))
+            if model.has_link:
+                self._slices.update(link_angle=slice(0, n), link_velocity=slice(n, 2 * n))
+            for name, sl in self._slices.items():
+                self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
+                                             prerequisites_of_calc={state})
+            for name, size, deps in (("tendon_force", m, pos), ("tendon_stiffness", m, pos), ("elongation", m, pos),
+                                     ("generalized_force", n, vel)):
+                self.DeclareVectorOutputPort(name, size, self._law_output(name), prerequisites_of_calc=set(deps))
+            self.DeclareVectorOutputPort("applied_torque", m, self._calc_applied,
+                                         prerequisites_of_calc={self._u.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.model, converter=converter)
+
+        # -- helpers --------------------------------------------------------------------
+        def kernels(self):
+            """The compiled float kernels (generated on first use)."""
+            if self._kernels is None:
+                self._kernels = build_kernels(self.model)
+                self._bufs = {name: np.empty(size) for name, size in (
+                    ("derivatives", self.model.num_states), ("tendon_force", self._m), ("tendon_stiffness", self._m),
+                    ("elongation", self._m), ("generalized_force", self._n))}
+            return self._kernels
+
+        def _state(self, context):
+            return context.get_continuous_state_vector().CopyToVector()
+
+        def _inputs(self, context, velocity: bool):
+            if self.model.has_link:
+                return ()
+            q = self._q.Eval(context) if self._q is not None else (self._empty if self._float else np.zeros(0))
+            if not velocity:
+                return (q,)
+            qd = self._qd.Eval(context) if self._qd is not None else (self._empty if self._float else None)
+            return (q, qd)
+
+        def _slicer(self, sl):
+            def calc(context, out):
+                out.SetFromVector(self._state(context)[sl])
+            return calc
+
+        def _law_output(self, name):
+            velocity = name == "generalized_force"
+
+            def calc(context, out):
+                x = self._state(context)
+                if self._float:
+                    fn = self.kernels()[name]
+                    out.SetFromVector(fn(x, *self._inputs(context, velocity), self._bufs[name]))
+                    return
+                args = self._inputs(context, velocity)
+                q = args[0] if args else None
+                qd = args[1] if len(args) > 1 else None
+                out.SetFromVector(drive_laws(self.model, x, q=q, qd=qd, want=(name,))[name])
+            return calc
+
+        def _calc_applied(self, context, out):
+            out.SetFromVector(saturate_torque(self._u.Eval(context), self.model.motor))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            # The float branch is the simulation hot path: one kernel call, no helper calls.
+            if self._float:
+                fn = self._kd
+                if fn is None:
+                    fn = self._kd = self.kernels()["derivatives"]
+                x = context.get_continuous_state_vector().CopyToVector()
+                if self._ext is not None:
+                    derivatives.SetFromVector(fn(x, self._u.Eval(context), self._ext.Eval(context), self._dbuf))
+                else:
+                    q = self._q.Eval(context) if self._q is not None else self._empty
+                    qd = self._qd.Eval(context) if self._qd is not None else self._empty
+                    derivatives.SetFromVector(fn(x, self._u.Eval(context), q, qd, self._dbuf))
+                return
+            x = self._state(context)
+            u = self._u.Eval(context)
+            if self.model.has_link:
+                d = drive_laws(self.model, x, u, tau_ext=self._ext.Eval(context), want=("derivatives",))
+            else:
+                q, qd = self._inputs(context, True)
+                d = drive_laws(self.model, x, u, q, qd, want=("derivatives",))
+            derivatives.SetFromVector(d["derivatives"])
+
+    return Impl
+
+
+TendonDrive_System = TendonDrive_[None]

@@ -1,0 +1,174 @@
+"""Decisions: which fitted candidate is accepted, which effects cannot be told apart,
+and whether a discrepancy remains that the catalog does not explain (issue 12).
+
+A candidate is accepted only if all of these hold:
+
+* **significant** on held-out windows: gain above ``min_z`` null standard
+  deviations, most windows improve (``min_rank_z``), at least ``min_gain`` of the
+  excess and ``min_floor_gain`` of the noise floor;
+* **better than the simpler model** on training data by BIC (``delta_bic < 0``);
+* **identifiable**: no fitted parameter rests on a bound (a bound is not an estimate);
+* **material**: the fitted effect is larger than what the sensor noise can show
+  (:func:`materiality`: a delay of at least one sample; a hysteresis half-width,
+  guide friction, force-sensor error above the noise-equivalent force; a friction
+  or ripple torque above the noise-equivalent torque).
+
+Candidates that explain the same residual equally well (held-out gain within
+``ambiguous_ratio`` and no significant paired difference) form one class "not
+separable with these data"; the lowest-BIC member is listed first and an
+experiment that would separate them is suggested (:func:`separating_experiment`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from awiwi_drake.parameters.discrepancy import DiscrepancySettings
+
+from . import laws
+from .catalog import EFFECTS
+from .replay import ReplayEngine
+
+__all__ = ["NoiseEquivalent", "noise_equivalent", "materiality", "rejection_reason", "separating_experiment",
+           "SEPARATING_EXPERIMENTS"]
+
+
+class NoiseEquivalent:
+    """What the sensor noise of one dataset can show, per quantity.
+
+    Attributes
+    ----------
+    force : float
+        Noise-equivalent tendon force [N]: the per-sample noise floor of the force
+        sensors (smallest of them); without a force sensor, the motor-angle noise
+        through the spring stiffness at the median elongation, ``k r sigma_theta``.
+    motor_torque : float
+        ``r * force`` [Nm]: the motor torque the noise-equivalent force exerts.
+    link_torque : float
+        ``r_q * force`` [Nm] (joint rig).
+    sample : float
+        Sample period [s].
+    """
+
+    def __init__(self, eng: ReplayEngine):
+        nom = eng.nom
+        sig = dict(zip(eng.out_names, eng.sigma))
+        forces = [s for n, s in sig.items() if n.startswith("tendon_force")]
+        if forces:
+            f = float(min(forces))
+        else:
+            x = float(np.median(eng.elong))
+            h = 1e-6
+            k = float((laws.spring_force(x + h, nom.spring_poly) - laws.spring_force(x - h, nom.spring_poly)) / (2 * h))
+            th = min(s for n, s in sig.items() if n.startswith("motor_angle"))
+            f = k * nom.motor_pulley_radius * th
+        self.force = f
+        self.motor_torque = nom.motor_pulley_radius * f
+        self.link_torque = nom.link_pulley_radius * f if nom.has_link else float("nan")
+        self.sample = eng.dt
+        n = nom.num_motors
+        self.omega_rms = float(np.sqrt(np.mean(eng.xhat[n:2 * n] ** 2)))
+        self.force_rms = float(np.sqrt(np.mean([np.mean(eng.ds.outputs[k] ** 2) for k in eng.out_names
+                                                 if k.startswith("tendon_force")] or [0.0])))
+
+
+def noise_equivalent(eng: ReplayEngine) -> NoiseEquivalent:
+    """:class:`NoiseEquivalent` of the dataset replayed by ``eng``."""
+    return NoiseEquivalent(eng)
+
+
+def _ripple_size(p: dict) -> float:
+    amps = [np.hypot(p.get(f"ripple_sin{k}_m{m}", 0.0), p.get(f"ripple_cos{k}_m{m}", 0.0))
+            for k in (1, 2) for m in (1, 2)]
+    return float(max(amps))
+
+
+def materiality(effect: str, params: dict, ne: NoiseEquivalent) -> dict:
+    """Size of a fitted effect against its floor: ``{"size", "floor", "unit", "material", "measure"}``.
+
+    The floors are stated per effect (issue 12): a delay of one sample; hysteresis
+    half-width, guide friction and force-sensor errors against the noise-equivalent
+    force; motor friction, ripple and motor-parameter errors against the
+    noise-equivalent motor torque; joint friction and link-parameter errors against
+    the noise-equivalent link torque.  Spring-scale errors are forces at the RMS force.
+    """
+    g = params.get
+    if effect == "delay":
+        size, floor, unit, what = g("delay", 0.0), ne.sample, "s", "delay vs one sample"
+    elif effect == "spring_hysteresis":
+        size, floor, unit, what = g("hysteresis_width", 0.0), ne.force, "N", "loop half-width vs noise force"
+    elif effect == "motor_friction":
+        size = g("motor_coulomb", 0.0) + g("motor_viscous", 0.0) * ne.omega_rms
+        floor, unit, what = ne.motor_torque, "Nm", "friction torque at RMS speed vs noise torque"
+    elif effect == "motor_ripple":
+        size, floor, unit, what = _ripple_size(params), ne.motor_torque, "Nm", "ripple amplitude vs noise torque"
+    elif effect == "joint_friction":
+        size, floor, unit, what = g("joint_coulomb", 0.0), ne.link_torque, "Nm", "link friction vs noise torque"
+    elif effect == "guide_friction":
+        size = g("guide_c0", 0.0) + g("guide_mu", 0.0) * ne.force_rms
+        floor, unit, what = ne.force, "N", "path friction at RMS tension vs noise force"
+    elif effect == "force_sensor":
+        size = max(abs(g("force_gain", 0.0)) * ne.force_rms, abs(g("force_offset_1", 0.0)),
+                   abs(g("force_offset_2", 0.0)))
+        floor, unit, what = ne.force, "N", "sensor error vs noise force"
+    elif effect == "nominal_spring":
+        size, floor, unit, what = abs(g("spring_scale_rel", 0.0)) * ne.force_rms, ne.force, "N", \
+            "spring-force error at RMS force vs noise force"
+    else:  # nominal_motor / nominal_link: no single size; the significance tests decide
+        return {"size": float("nan"), "floor": float("nan"), "unit": "", "material": True,
+                "measure": "no materiality floor (parameter correction)"}
+    return {"size": float(size), "floor": float(floor), "unit": unit, "material": bool(size >= floor),
+            "measure": what}
+
+
+def rejection_reason(c, st, settings: DiscrepancySettings) -> str:
+    """Why the fitted candidate ``c`` (:class:`~awiwi_drake.discrepancy.result.CandidateResult`)
+    cannot be accepted against the state ``st``; ``""`` when it passes every test."""
+    if c.z_gain < settings.min_z:
+        return f"held-out gain {c.z_gain:.1f} null std < {settings.min_z:g}"
+    if c.z < settings.min_rank_z:
+        return f"window rank z {c.z:.1f} < {settings.min_rank_z:g}"
+    if c.relative_gain < settings.min_gain:
+        return f"removes {100 * c.relative_gain:.1f} % of the excess < {100 * settings.min_gain:g} %"
+    if c.gain < settings.min_floor_gain * st.floor_test:
+        return f"gain below {100 * settings.min_floor_gain:g} % of the noise floor"
+    if not c.delta_bic < 0:
+        return f"BIC not better than the simpler model (dBIC {c.delta_bic:+.0f})"
+    if c.at_bound:
+        return f"parameter at a bound: {', '.join(c.at_bound)}"
+    m = c.materiality
+    if m and not m["material"]:
+        return f"not material: {m['measure']} ({m['size']:.3g} < {m['floor']:.3g} {m['unit']})"
+    return ""
+
+
+SEPARATING_EXPERIMENTS = {
+    frozenset(("motor_friction", "guide_friction")):
+        "step the tendon tension (pretension or an external load) at a constant motor speed: "
+        "guide friction grows with tension, motor friction does not",
+    frozenset(("motor_friction", "joint_friction")):
+        "move the link slowly with the co-contraction held constant and measure the link angle: "
+        "joint friction acts at link reversals, motor friction at motor reversals",
+    frozenset(("spring_hysteresis", "guide_friction")):
+        "slow load-unload cycles with the motor still and the tendon pulled from the link side: "
+        "spring hysteresis stays a loop in force vs elongation, guide friction needs tendon sliding "
+        "over the guide",
+    frozenset(("spring_hysteresis", "motor_friction")):
+        "slow force cycles at several speeds: spring hysteresis is rate-independent in force vs "
+        "elongation, motor friction depends on motor velocity",
+    frozenset(("delay", "nominal_motor")):
+        "a high-frequency chirp (beyond the motor-spring mode): a delay adds phase lag growing "
+        "linearly with frequency, an inertia or damping error changes the gain",
+    frozenset(("motor_ripple", "motor_friction")):
+        "slow constant-speed runs over several motor revolutions in both directions: ripple is "
+        "periodic in the motor angle, friction depends on the direction only",
+}
+
+
+def separating_experiment(members: list) -> str:
+    """A suggested experiment that would tell the effects in ``members`` apart."""
+    pair = frozenset(members[:2])
+    if pair in SEPARATING_EXPERIMENTS:
+        return SEPARATING_EXPERIMENTS[pair]
+    sig = "; ".join(f"{m}: {EFFECTS[m].signature}" for m in members if m in EFFECTS)
+    return ("excite the operating region where their signatures differ (see the residual maps): " + sig)

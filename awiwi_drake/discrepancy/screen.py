@@ -1,0 +1,274 @@
+"""Screening: linear regression of the residual on each candidate's signature.
+
+:class:`ResidualState` holds the base residual of the current model (profiled
+over the window initial states, see :mod:`~awiwi_drake.discrepancy.replay`);
+:func:`screen` regresses it on the finite-difference output sensitivities of
+every candidate's amplitude parameters (shape parameters on a small grid, ripple
+orders from the residual's cycles-per-revolution spectrum), fitting on training
+windows and scoring on held-out windows; :func:`probe` evaluates effects whose
+signature changes with amplitude at finite amplitudes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import rankdata
+
+from awiwi_drake.parameters.discrepancy import CatalogBounds
+
+from .catalog import PARAM_INDEX, Effect, param_specs
+from .replay import ReplayEngine, project
+
+__all__ = ["ResidualState", "nrmse", "paired_z", "gain_z", "screen", "probe", "free_params",
+           "STATEFUL_EFFECTS"]
+
+
+class ResidualState:
+    """Base residual of the current model ``base`` (catalog vector): profiled residual
+    ``rp`` per window, window energies ``e``, held-out energy ``E_test`` against its
+    noise floor ``floor_test`` (degrees of freedom left by the profile), ``ratio``."""
+
+    def __init__(self, eng: ReplayEngine, base: np.ndarray):
+        self.eng = eng
+        self.base = base.copy()
+        self.W = np.arange(len(eng.starts))
+        r0, Q = eng.projector(base, self.W)
+        self.Q = Q
+        self.r0 = r0
+        self.rp = project(r0, Q)
+        self.e = (self.rp ** 2).sum(axis=1)
+        self.dof = Q.dof
+        te, tr = eng.test, eng.train
+        self.E_test = float(self.e[te].sum())
+        self.E_train = float(self.e[tr].sum())
+        self.floor_test = float(self.dof[te].sum())
+        self.excess = max(self.E_test - self.floor_test, 0.0)
+        self.ratio = self.E_test / max(self.floor_test, 1.0)
+        self.n_train = int(r0[tr].size)
+
+
+def nrmse(eng: ReplayEngine, rp: np.ndarray, windows: np.ndarray) -> dict:
+    ny = len(eng.out_names)
+    R = rp[windows].reshape(len(windows), eng.L, ny) * eng.sigma
+    return {name: float(np.sqrt(np.mean(R[:, :, j] ** 2)) / eng.spread[j])
+            for j, name in enumerate(eng.out_names)}
+
+
+def paired_z(e_before: np.ndarray, e_after: np.ndarray) -> float:
+    """Wilcoxon signed-rank z of the per-window improvement ``e_before - e_after``.
+
+    Robust to the heavy tails of window energies (a few transient-rich windows
+    carry most of the energy); positive when most windows improve."""
+    d = np.asarray(e_before, float) - np.asarray(e_after, float)
+    d = d[d != 0]
+    n = len(d)
+    if n < 2:
+        return 0.0
+    ranks = rankdata(np.abs(d))
+    w_plus = ranks[d > 0].sum()
+    mean = n * (n + 1) / 4.0
+    sd = math.sqrt(n * (n + 1) * (2 * n + 1) / 24.0)
+    return float((w_plus - mean) / sd)
+
+
+def gain_z(rp_before: np.ndarray, rp_after: np.ndarray) -> float:
+    """Held-out gain over its null spread: with white residual ``r`` and a prediction
+    change ``delta`` unrelated to it, the gain ``|r|^2 - |r - delta|^2`` has mean
+    ``-|delta|^2`` and standard deviation ``2 |delta|``."""
+    delta = rp_before - rp_after
+    nd = math.sqrt(float((delta ** 2).sum()))
+    gain = float((rp_before ** 2).sum() - (rp_after ** 2).sum())
+    return gain / (2.0 * nd) if nd > 0 else 0.0
+
+
+def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBounds):
+    """Screening variants ``(label, shape_values, [(param, delta)...], ripple_order)``."""
+    specs = {s.name: s for s in param_specs(bounds)}
+    amps = effect.amplitude_for(rig)
+    if effect.name == "motor_ripple":
+        out = []
+        for order in bounds.ripple_orders:
+            cols = [a for a in amps if a.startswith(("ripple_sin1", "ripple_cos1"))]
+            out.append((f"order {order:g}", {"ripple_order_1": order},
+                        [(c, specs[c].perturbation) for c in cols], order))
+        return out
+    cols = [(a, specs[a].perturbation) for a in amps]
+    if not effect.shape:
+        return [("", {}, cols, None)]
+    (sname, grid), = effect.shape.items()
+    return [(f"{sname}={g:g}", {sname: g}, cols, None) for g in grid]
+
+
+def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) -> list:
+    """Linear-regression screening of every candidate; returns dicts sorted by held-out gain."""
+    eng, base = st.eng, st.base
+    variants = []  # (effect, label, shape, cols, order)
+    Psets = []
+    for eff in effects:
+        for label, shape, cols, order in candidate_grid(eff, rig, base, bounds):
+            p0 = base.copy()
+            for k, v in shape.items():
+                p0[PARAM_INDEX[k]] = v
+            idx = []
+            for name, delta in cols:
+                p = p0.copy()
+                p[PARAM_INDEX[name]] += delta
+                idx.append(len(Psets))
+                Psets.append(p)
+            shape_idx = None
+            if shape and order is None:
+                shape_idx = len(Psets)
+                Psets.append(p0)  # shape change alone (Dahl state init etc.): reference
+            variants.append((eff, label, shape, cols, order, idx, shape_idx))
+    R = eng.evaluate(np.array(Psets), st.W)
+    results = {}
+    tr, te = eng.train, eng.test
+    G = {}
+    for eff, label, shape, cols, order, idx, shape_idx in variants:
+        ref = st.r0 if shape_idx is None else R[shape_idx]
+        g = np.stack([(ref - R[i]) / d for i, (_, d) in zip(idx, cols)], axis=-1)  # (W, m, k)
+        g = np.stack([project(g[..., j], st.Q) for j in range(g.shape[-1])], axis=-1)
+        rp = st.rp if shape_idx is None else project(ref, st.Q)
+        G[(eff.name, label)] = (g, rp)
+        A = g[tr].reshape(-1, g.shape[-1])
+        b = rp[tr].ravel()
+        beta, *_ = np.linalg.lstsq(A, b, rcond=None)
+        res_tr = b - A @ beta
+        train_gain = float((st.rp[tr] ** 2).sum() - (res_tr ** 2).sum())
+        key = eff.name
+        entry = dict(effect=eff, label=label, shape=shape, cols=cols, order=order, beta=beta,
+                     train_gain=train_gain, g=g, rp=rp)
+        results.setdefault(key, []).append(entry)
+    out = []
+    for name, entries in results.items():
+        eff = entries[0]["effect"]
+        if name == "motor_ripple":
+            # sequential greedy: the best order, then the order that adds most to it
+            # (low orders alias each other over a limited angle range)
+            first = max(entries, key=lambda e: e["train_gain"])
+            b = st.rp[tr].ravel()
+
+            def joint_gain(e):
+                A = np.concatenate([first["g"], e["g"]], axis=-1)[tr].reshape(-1, 2 * first["g"].shape[-1])
+                coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+                return float(b @ b - np.sum((b - A @ coef) ** 2))
+
+            rest = [e for e in entries if e is not first]
+            ranked = [first] + ([max(rest, key=joint_gain)] if rest else [])
+            g = np.concatenate([e["g"] for e in ranked], axis=-1)
+            rp = st.rp
+            cols = []
+            params = {}
+            for slot, e in enumerate(ranked, start=1):
+                params[f"ripple_order_{slot}"] = e["order"]
+                for cname, d in e["cols"]:
+                    cols.append((cname.replace("1_m", f"{slot}_m"), d))
+            label = "orders " + ", ".join(f"{e['order']:g}" for e in ranked)
+            shape = params
+        else:
+            best = max(entries, key=lambda e: e["train_gain"])
+            g, rp, cols, label, shape = best["g"], best["rp"], best["cols"], best["label"], best["shape"]
+        A = g[tr].reshape(-1, g.shape[-1])
+        beta, *_ = np.linalg.lstsq(A, rp[tr].ravel(), rcond=None)
+        fit = np.einsum("wmk,k->wm", g, beta)
+        e_after = ((rp - fit) ** 2).sum(axis=1)
+        gain = float(st.e[te].sum() - e_after[te].sum())
+        z = paired_z(st.e[te], e_after[te])
+        k = len(beta)
+        rss0 = float(st.e[tr].sum())
+        rss1 = float(e_after[tr].sum())
+        dbic = st.n_train * math.log(max(rss1, 1e-300) / max(rss0, 1e-300)) + k * math.log(st.n_train)
+        params = dict(shape)
+        for (cname, d), b in zip(cols, beta):
+            params[cname] = float(st.base[PARAM_INDEX[cname]] + b * d)
+        out.append(dict(effect=eff, label=label, params=params, gain=gain, z=z, dbic=dbic,
+                        rel=gain / max(st.excess, 1e-12), e_after=e_after))
+    probe(st, out, bounds, rig)
+    out.sort(key=lambda d: -d["gain"])
+    return out
+
+
+PROBE_FRACTIONS = (0.03, 0.1, 0.3)  # of each amplitude's upper bound (chosen: log-spaced decade)
+# effects that add states (and stiffness) to the model: profiled at their own parameters
+STATEFUL_EFFECTS = {"spring_hysteresis": {"hysteresis_width": (0.05, 0.15, 0.4),
+                                          "hysteresis_length": (1e-4, 3e-4, 1e-3)}}
+
+
+def probe(st: ResidualState, screened: list, bounds: CatalogBounds, rig: str) -> None:
+    """Nonlinear probes: effects whose signature changes with amplitude (hysteresis
+    stiffening, friction sticking, delay) are also evaluated at finite amplitudes on
+    their shape grid; a probe that beats the linear screen replaces its estimate."""
+    eng, base = st.eng, st.base
+    specs = {s.name: s for s in param_specs(bounds)}
+    sets, owners = [], []
+    own_sets, own_owners = [], []
+    for entry in screened:
+        eff = entry["effect"]
+        if eff.name in STATEFUL_EFFECTS:
+            grid = STATEFUL_EFFECTS[eff.name]
+            (amp, fracs), (shp, vals) = grid.items()
+            for frac in fracs:
+                for v in vals:
+                    p = base.copy()
+                    p[PARAM_INDEX[amp]] = frac * specs[amp].high
+                    p[PARAM_INDEX[shp]] = v
+                    own_sets.append(p)
+                    own_owners.append(entry)
+            continue
+        if eff.kind != "physical" or eff.name == "motor_ripple":
+            continue
+        shapes = [{}] if not eff.shape else [{k: g} for k, gs in eff.shape.items() for g in gs]
+        for shape in shapes:
+            for amp in eff.amplitude_for(rig):
+                for frac in PROBE_FRACTIONS:
+                    p = base.copy()
+                    for k, v in shape.items():
+                        p[PARAM_INDEX[k]] = v
+                    p[PARAM_INDEX[amp]] = base[PARAM_INDEX[amp]] + frac * specs[amp].high
+                    sets.append(p)
+                    owners.append(entry)
+    E = []
+    if sets:
+        R = eng.evaluate(np.array(sets), st.W)
+        E.append((project(R, st.Q) ** 2).sum(axis=2))  # (S, W)
+    if own_sets:
+        E.append(np.array([(project(r, Q) ** 2).sum(axis=1) for r, Q in eng.profiled(np.array(own_sets), st.W)]))
+    if not E:
+        return
+    E = np.concatenate(E, axis=0)
+    sets, owners = sets + own_sets, owners + own_owners
+    tr, te = eng.train, eng.test
+    best = {}
+    for i, entry in enumerate(owners):
+        key = id(entry)
+        if key not in best or E[i, tr].sum() < E[best[key], tr].sum():
+            best[key] = i
+    for entry in screened:
+        i = best.get(id(entry))
+        if i is None:
+            continue
+        lin_train = float((entry["e_after"][tr]).sum())
+        if E[i, tr].sum() >= lin_train:
+            continue
+        gain = float(st.e[te].sum() - E[i, te].sum())
+        eff = entry["effect"]
+        entry["params"] = {n: float(sets[i][PARAM_INDEX[n]]) for n in free_params([eff], rig)}
+        entry["gain"] = gain
+        entry["rel"] = gain / max(st.excess, 1e-12)
+        entry["z"] = paired_z(st.e[te], E[i, te])
+        entry["e_after"] = E[i]
+        entry["label"] += " (probe)"
+
+
+def free_params(effects: list, rig: str) -> list:
+    names = []
+    for eff in effects:
+        names += list(eff.amplitude_for(rig))
+        names += list(eff.shape)
+    seen = []
+    for n in names:
+        if n not in seen:
+            seen.append(n)
+    return seen

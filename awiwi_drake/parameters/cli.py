@@ -1,0 +1,31 @@
+"""Limits the command line applies to its options before any work starts.
+
+An option outside these limits is a unit mistake or would run without end;
+the CLI rejects it with one line naming the option.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .base import Parameters, param
+
+__all__ = ["CliLimits"]
+
+
+@dataclass(frozen=True)
+class CliLimits(Parameters):
+    """Upper limits of ``compare --rate/--delay`` and ``animate --duration``."""
+
+    max_rate: float = param(1e5, unit="Hz", low=1.0, high=1e7,
+                            source="chosen: 33x the thesis's 3 kHz loops (ch. 10); above, a sampled "
+                                   "simulation of the sweep takes hours")
+    min_rate: float = param(1.0, unit="Hz", low=0.0, high=1e3,
+                            source="chosen: slower than the slowest rig mode (~2 Hz) still runs and is reported "
+                                   "as flagged or diverged")
+    max_delay: float = param(1.0, unit="s", low=0.0, high=100.0,
+                             source="chosen: 3000x the 333 us round trip of the hand (ch. 10); longer than "
+                                    "the standard tests")
+    max_animation_duration: float = param(60.0, unit="s", low=0.1, high=3600.0,
+                                          source="chosen: a minute of the 3 kHz hand loop already takes "
+                                                 "minutes of CPU")

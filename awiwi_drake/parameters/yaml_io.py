@@ -1,0 +1,164 @@
+"""Parameter sets as YAML, through Drake's ``yaml_load_typed`` / ``yaml_dump_typed``.
+
+Drake's typed YAML reads and writes dataclasses whose field annotations are
+real types.  A :class:`~awiwi_drake.parameters.base.Parameters` class declares
+vectors as tuples and is frozen, so each class gets a mirror *schema*
+dataclass (same name, same fields; vectors as ``list[float]``; nested sets as
+their schemas; ``A | B`` unions as Drake's tagged unions, e.g.
+``finger: !ThumbParams {...}``).  Loading goes YAML -> schema (Drake: unknown
+keys and wrong types are rejected) -> the frozen parameter set (our
+validation: units, ranges, ceilings).  A YAML file may give only some fields;
+the others keep the values of ``defaults``.
+
+>>> from awiwi_drake.parameters import JointRigParams
+>>> text = to_yaml(JointRigParams().replace(pretension=40.0))
+>>> from_yaml(JointRigParams, text).pretension
+40.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+import types
+import typing
+from typing import Union
+
+from .base import Parameters
+
+__all__ = ["yaml_schema", "to_yaml", "from_yaml", "save_yaml", "load_yaml"]
+
+_SCHEMAS: dict[type, type] = {}
+_BACK: dict[type, type] = {}
+
+
+def _with_subclasses(cls: type) -> list[type]:
+    out = [cls]
+    for sub in cls.__subclasses__():
+        out += [c for c in _with_subclasses(sub) if c not in out]
+    return out
+
+
+def _schema_type(hint, where: str):
+    """The schema type of a field: a nested class with subclasses becomes a tagged union of all of them."""
+    if isinstance(hint, type) and issubclass(hint, Parameters):
+        options = [yaml_schema(c) for c in _with_subclasses(hint)]
+        return options[0] if len(options) == 1 else Union[tuple(options)]  # type: ignore[valid-type]
+    if hint in (float, int, bool, str):
+        return hint
+    if hint is tuple or typing.get_origin(hint) is tuple:
+        return list[float]
+    args = typing.get_args(hint)
+    if args and typing.get_origin(hint) in (Union, types.UnionType):
+        options = []
+        for a in args:
+            m = _schema_type(a, where) if a is not type(None) else type(None)
+            for o in (typing.get_args(m) or (m,)):
+                if o not in options:
+                    options.append(o)
+        return Union[tuple(options)]  # type: ignore[valid-type]
+    raise NotImplementedError(f"{where}: the field type {hint!r} has no YAML form")
+
+
+def yaml_schema(cls: type) -> type:
+    """The plain dataclass that Drake's typed YAML uses for parameter class ``cls``."""
+    if cls not in _SCHEMAS:
+        if not (isinstance(cls, type) and issubclass(cls, Parameters)):
+            raise ValueError(f"yaml_schema: {cls!r} is not a Parameters class")
+        hints = typing.get_type_hints(cls)
+        specs = []
+        for f in dataclasses.fields(cls):
+            t = _schema_type(hints[f.name], f"{cls.__name__}.{f.name}")
+            specs.append((f.name, t, dataclasses.field(default=None)))
+        schema = dataclasses.make_dataclass(cls.__name__, specs)
+        schema.__module__ = __name__
+        _SCHEMAS[cls] = schema
+        _BACK[schema] = cls
+    return _SCHEMAS[cls]
+
+
+def _to_schema(params: Parameters):
+    schema = yaml_schema(type(params))
+    values = {}
+    for f in dataclasses.fields(params):
+        v = getattr(params, f.name)
+        if isinstance(v, Parameters):
+            v = _to_schema(v)
+        elif isinstance(v, tuple):
+            v = [float(x) for x in v]
+        values[f.name] = v
+    return schema(**values)
+
+
+def _from_schema(obj) -> Parameters:
+    cls = _BACK[type(obj)]
+    values = {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if type(v) in _BACK:
+            v = _from_schema(v)
+        elif isinstance(v, list):
+            v = tuple(v)
+        values[f.name] = v
+    return cls(**values)
+
+
+def to_yaml(params: Parameters) -> str:
+    """The parameter set as YAML text (Drake's ``yaml_dump_typed``): every field, nested sets included."""
+    from pydrake.common.yaml import yaml_dump_typed
+
+    if not isinstance(params, Parameters):
+        raise ValueError(f"to_yaml: expected a parameter set, got {type(params).__name__}")
+    return yaml_dump_typed(_to_schema(params))
+
+
+def from_yaml(cls_or_defaults, text: str, *, where: str = "YAML") -> Parameters:
+    """Parse YAML ``text`` into a parameter set (Drake's ``yaml_load_typed``).
+
+    ``cls_or_defaults`` is a Parameters class (defaults: its defaults) or an
+    instance whose values fill the fields the YAML leaves out.  Unknown keys,
+    wrong types and out-of-range values raise a ``ValueError`` that starts
+    with ``where`` (e.g. the file name).
+    """
+    from pydrake.common.yaml import yaml_load_typed
+
+    defaults = cls_or_defaults() if isinstance(cls_or_defaults, type) else cls_or_defaults
+    if not isinstance(defaults, Parameters):
+        raise ValueError(f"from_yaml: expected a Parameters class or instance, got {cls_or_defaults!r}")
+    if not isinstance(text, str):
+        raise ValueError(f"{where}: expected YAML text, got {type(text).__name__}")
+    if not text.strip():
+        return defaults
+    try:
+        obj = yaml_load_typed(schema=type(_to_schema(defaults)), data=text, defaults=_to_schema(defaults))
+    except Exception as exc:  # noqa: BLE001 - yaml.YAMLError, Drake's errors: name the source
+        msg = " ".join(str(exc).split())
+        if "field" not in msg and not msg.startswith(("while ", "mapping ", "expected ")):
+            msg = f"a value does not fit {type(defaults).__name__} ({type(exc).__name__}: {msg})"
+        raise ValueError(f"{where}: {msg}") from None
+    try:
+        return _from_schema(obj)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+
+
+def save_yaml(params: Parameters, path) -> pathlib.Path:
+    """Write ``params`` as YAML to ``path`` (folders created); returns the path."""
+    p = pathlib.Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_text(to_yaml(params), encoding="utf-8")
+    return p
+
+
+def load_yaml(cls_or_defaults, path) -> Parameters:
+    """Read a parameter set from the YAML file ``path`` (see :func:`from_yaml`); errors name the file."""
+    p = pathlib.Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"{p}: no such file")
+    if p.is_dir():
+        raise ValueError(f"{p}: is a directory, not a YAML file")
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{p}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    return from_yaml(cls_or_defaults, text, where=str(p))

@@ -1,0 +1,157 @@
+"""Discrepancy workflow II (issue 12): materiality floors, parameters at bounds,
+physics-bounded hysteresis window state, file names with dots, interruption."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from awiwi_drake.discrepancy import (DiagnosisInterrupted, diagnose, load_dataset, make_truth_dataset,
+                                     save_dataset, write_report)
+from awiwi_drake.discrepancy.catalog import PARAM_INDEX, default_vector
+from awiwi_drake.discrepancy.decide import materiality, noise_equivalent, rejection_reason
+from awiwi_drake.discrepancy.replay import ReplayEngine, project
+from awiwi_drake.discrepancy.result import CandidateResult
+from awiwi_drake.parameters.discrepancy import DiscrepancySettings, TruthGeneratorParams
+
+
+@pytest.fixture(scope="module")
+def joint_engine():
+    ds = make_truth_dataset("joint", [], snr_db=30, seed=21, gen=TruthGeneratorParams(duration=2.0))
+    return ReplayEngine(ds)
+
+
+def test_noise_equivalent_quantities_follow_the_sensor_noise(joint_engine):
+    """The noise-equivalent force is the force sensors' per-sample noise floor; the
+    torques are that force on the motor and link pulleys."""
+    eng = joint_engine
+    ne = noise_equivalent(eng)
+    sig = dict(zip(eng.out_names, eng.sigma))
+    assert ne.force == pytest.approx(min(sig["tendon_force_1"], sig["tendon_force_2"]))
+    assert ne.motor_torque == pytest.approx(eng.nom.motor_pulley_radius * ne.force)
+    assert ne.link_torque == pytest.approx(eng.nom.link_pulley_radius * ne.force)
+    assert ne.sample == pytest.approx(1e-3)
+
+
+def test_materiality_floors_reject_effects_below_the_noise(joint_engine):
+    """Issue 12's leftovers: a 0.22 ms delay (below one 1 ms sample) and a hysteresis
+    half-width far below the noise-equivalent force are not material; the same effects
+    above their floors are."""
+    ne = noise_equivalent(joint_engine)
+    assert not materiality("delay", {"delay": 0.22e-3}, ne)["material"]
+    assert materiality("delay", {"delay": 3e-3}, ne)["material"]
+    assert not materiality("spring_hysteresis", {"hysteresis_width": 0.08 * ne.force}, ne)["material"]
+    assert materiality("spring_hysteresis", {"hysteresis_width": 5.0 * ne.force}, ne)["material"]
+    small = 0.5 * ne.link_torque
+    assert not materiality("joint_friction", {"joint_coulomb": small}, ne)["material"]
+    assert not materiality("motor_ripple", {"ripple_sin1_m1": 0.3 * ne.motor_torque,
+                                            "ripple_cos1_m1": 0.3 * ne.motor_torque}, ne)["material"]
+    m = materiality("motor_ripple", {"ripple_sin1_m1": 3 * ne.motor_torque, "ripple_cos1_m1": 4 * ne.motor_torque}, ne)
+    assert m["size"] == pytest.approx(5 * ne.motor_torque) and m["material"]
+
+
+def _candidate(**kw):
+    base = dict(effect="guide_friction", kind="physical", stage="fit", parameters={}, uncertainties={},
+                gain=500.0, relative_gain=0.5, z=5.0, delta_bic=-200.0, z_gain=50.0,
+                materiality={"material": True, "size": 1.0, "floor": 0.1, "unit": "N", "measure": ""})
+    base.update(kw)
+    return CandidateResult(**base)
+
+
+class _St:
+    floor_test = 1000.0
+
+
+def test_acceptance_requires_every_test():
+    """A candidate that passes the significance tests is still rejected with a parameter
+    at a bound, a worse BIC, or an immaterial size; the reason names the failed test."""
+    s = DiscrepancySettings()
+    assert rejection_reason(_candidate(), _St, s) == ""
+    assert "bound" in rejection_reason(_candidate(at_bound=["guide_c0"]), _St, s)
+    assert "guide_c0" in rejection_reason(_candidate(at_bound=["guide_c0"]), _St, s)
+    assert "BIC" in rejection_reason(_candidate(delta_bic=3.0), _St, s)
+    immaterial = {"material": False, "size": 0.01, "floor": 0.15, "unit": "N", "measure": "half-width"}
+    assert "not material" in rejection_reason(_candidate(materiality=immaterial), _St, s)
+    assert "null std" in rejection_reason(_candidate(z_gain=1.0), _St, s)
+
+
+def test_hysteresis_window_state_cannot_absorb_a_force_offset(joint_engine):
+    """With the loop width at its largest and the transition length at its 2 mm bound,
+    a constant force offset keeps as much of its energy after the window-start profile
+    as without hysteresis: the Dahl state at a window start follows from the elongation
+    history and one fitted initial state, it is not free within the loop width (issue 12:
+    the loop-wide prior turned hysteresis into a per-window force offset)."""
+    eng = joint_engine
+    W = np.arange(len(eng.starts))
+    ny = len(eng.out_names)
+    offset = np.zeros((len(W), eng.L, ny))
+    offset[:, :, eng.out_names.index("tendon_force_1")] = 5.0  # noise units
+    r = offset.reshape(len(W), -1)
+    kept = {}
+    for width in (0.0, 40.0):
+        p = default_vector()
+        p[PARAM_INDEX["hysteresis_width"]] = width
+        p[PARAM_INDEX["hysteresis_length"]] = 2e-3
+        _, Q = eng.projector(p, W)
+        kept[width] = (project(r, Q) ** 2).sum() / (r ** 2).sum()
+    assert kept[0.0] > 0.3  # the angle states alone absorb part of an offset on one tendon
+    assert kept[40.0] >= kept[0.0] - 0.01  # hysteresis adds no offset freedom
+
+
+def test_hysteresis_initial_state_is_the_dahl_history(joint_engine):
+    """The window-start hysteresis force is width * w with w the Dahl state run on the
+    elongation from the fitted initial value: with a transition length far below the
+    travel, w is +-1 with the sign of the last motion; with a huge length it keeps its
+    initial value."""
+    eng = joint_engine
+    p = default_vector()
+    p[PARAM_INDEX["hysteresis_width"]] = 8.0
+    starts = eng.starts[5:10]
+    P = np.repeat(p[:, None], len(starts), axis=1)
+    P[PARAM_INDEX["hysteresis_length"]] = 1e-7  # far below the travel between reversals
+    X0 = eng.initial_states(starts, P)
+    z = X0[-2:]
+    np.testing.assert_allclose(np.abs(z), 8.0, rtol=1e-6)
+    played = eng._played_elongation()
+    for i in range(2):
+        for j, s in enumerate(starts):
+            d = np.diff(played[i, :s + 1])
+            assert np.sign(z[i, j]) == np.sign(d[d != 0][-1])  # direction of the last motion
+    P[PARAM_INDEX["hysteresis_length"]] = 1e3
+    P[PARAM_INDEX["hysteresis_initial"]] = 0.4
+    np.testing.assert_allclose(eng.initial_states(starts, P)[-2:], 8.0 * 0.4, rtol=1e-4)
+
+
+def test_dataset_name_with_dots_round_trips(tmp_path):
+    ds = make_truth_dataset("tendon", [], snr_db=30, seed=3, gen=TruthGeneratorParams(duration=0.2),
+                            keep_clean=False)
+    path = save_dataset(ds, tmp_path, name="run_x0.5")
+    assert path.name == "run_x0.5.csv" and (tmp_path / "run_x0.5.json").exists()
+    for given in (path, tmp_path / "run_x0.5", tmp_path / "run_x0.5.json"):
+        back = load_dataset(given)
+        assert back.name == "run_x0.5"
+        np.testing.assert_allclose(back.inputs["motor_torque"], ds.inputs["motor_torque"], rtol=1e-9)
+
+
+def test_interrupted_diagnosis_keeps_a_partial_result(tmp_path):
+    """Ctrl-C after the first accepted step: the exception carries the partial diagnosis
+    (that step, ``complete`` False, verdict "interrupted"), which serialises and reports."""
+    ds = make_truth_dataset("tendon", ["delay"], snr_db=30, seed=13, gen=TruthGeneratorParams(duration=3.0))
+    seen = []
+
+    def interrupt(partial):
+        seen.append(partial)
+        raise KeyboardInterrupt
+
+    with pytest.raises(DiagnosisInterrupted) as info:
+        diagnose(ds, checkpoint=interrupt)
+    dx = info.value.diagnosis
+    assert isinstance(info.value, KeyboardInterrupt)
+    assert len(seen) == 1 and not dx.complete and dx.verdict == "interrupted"
+    assert [s.effect for s in dx.steps] == ["delay"]
+    summary = json.loads(json.dumps(dx.to_json(), default=float))
+    assert summary["complete"] is False and summary["steps"][0]["effect"] == "delay"
+    md = write_report(dx, tmp_path / "rep", figures=False).read_text()
+    assert "Partial result" in md and "nothing is missing" not in md

@@ -1,0 +1,208 @@
+"""The fused tendon drive: compiled float kernel = the law functions, scalar conversion,
+lean ports, and the one-system single-joint rigs against their MultibodyPlant versions."""
+
+import itertools
+
+import numpy as np
+import pytest
+from pydrake.systems.controllers import LinearQuadraticRegulator
+from pydrake.systems.framework import DiagramBuilder
+
+from awiwi_drake.components import ConstantCoupling, antagonistic_coupling, tendon_spring
+from awiwi_drake.components.fused_drive import DriveModel, GuideFrictionModel, TendonDrive_, build_kernels, drive_laws
+from awiwi_drake.components.spring import PolynomialSpring
+from awiwi_drake.hand.coupling import finger_coupling
+from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
+from awiwi_drake.parameters.components import GuideFrictionParams
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
+from _fd import check_system_autodiff_matches_fd
+
+RNG = np.random.default_rng(7)
+SPRING = tendon_spring(SpringModelParams())
+SOFT = PolynomialSpring((1.5e4, 2.0e6))          # a second law for per-tendon springs
+
+
+def _thumb_model(*, friction, ripple, hysteresis, guide, capstan, per_tendon, rate_joints=None):
+    c = finger_coupling("thumb")
+    m = c.num_tendons
+    springs = tuple(SOFT if (per_tendon and i % 3 == 0) else SPRING for i in range(m))
+    gf = GuideFrictionModel(tuple(np.linspace(0.5, 3.0, m)), GuideFrictionParams(), capstan=capstan) if guide else None
+    return DriveModel(MotorParams(friction=friction, ripple=ripple), springs, c, np.full(m, 2e-3), 0.005,
+                      HysteresisParams(enabled=hysteresis), gf, rate_joints)
+
+
+def _random_state(model):
+    s = RNG.normal(size=model.num_states)
+    _, _, th, om, z = model.split_state(s)
+    th[:] = RNG.uniform(-0.3, 1.3, size=th.size)       # slack, inside and beyond the calibrated range
+    om[:] = RNG.normal(scale=3.0, size=om.size)
+    if z is not None:
+        z[:] = RNG.normal(scale=5.0, size=z.size)
+    return s
+
+
+SWITCHES = list(itertools.product([False, True], repeat=5))   # friction, ripple, hysteresis, guide, per-tendon
+
+
+@pytest.mark.parametrize("friction,ripple,hysteresis,guide,per_tendon", SWITCHES)
+def test_kernel_equals_laws_at_random_states_thumb(friction, ripple, hysteresis, guide, per_tendon):
+    model = _thumb_model(friction=friction, ripple=ripple, hysteresis=hysteresis, guide=guide,
+                         capstan=per_tendon, per_tendon=per_tendon)   # capstan rides on per_tendon: both forms covered
+    # all switches on / all off: the numba-compiled kernel; the others: the same generated source
+    # as plain Python (numba's compile time per variant would dominate the suite)
+    switches = (friction, ripple, hysteresis, guide, per_tendon)
+    k = build_kernels(model, jit=all(switches) or not any(switches))
+    n, m = model.num_joints, model.num_tendons
+    for _ in range(4):
+        s = _random_state(model)
+        u = RNG.normal(scale=4.0, size=m)                      # beyond the 3 Nm limit too
+        q, qd = RNG.normal(scale=0.5, size=n), RNG.normal(scale=2.0, size=n)
+        ref = drive_laws(model, s, u, q, qd if model.needs_joint_velocity else None)
+        got = dict(derivatives=k["derivatives"](s, u, q, qd, np.empty(model.num_states)),
+                   tendon_force=k["tendon_force"](s, q, np.empty(m)),
+                   tendon_stiffness=k["tendon_stiffness"](s, q, np.empty(m)),
+                   elongation=k["elongation"](s, q, np.empty(m)),
+                   generalized_force=k["generalized_force"](s, q, qd, np.empty(n)))
+        for name, val in got.items():
+            np.testing.assert_allclose(val, ref[name], rtol=1e-12, atol=1e-12 * max(1.0, np.max(np.abs(ref[name]))),
+                                       err_msg=name)
+
+
+@pytest.mark.parametrize("hysteresis,guide", [(False, False), (True, True)])
+def test_kernel_equals_laws_with_a_link_and_partial_rates(hysteresis, guide):
+    rq = 0.008
+    c = antagonistic_coupling(rq)
+    gf = GuideFrictionModel((1.0, 2.5)) if guide else None
+    model = DriveModel(MotorParams(ripple=True), (SPRING, SOFT), c, np.array([1e-3, 2e-3]), 0.005,
+                       HysteresisParams(enabled=hysteresis), gf, link_inertia=(2e-4,), link_damping=(1e-3,))
+    k = build_kernels(model)
+    for _ in range(5):
+        s = _random_state(model)
+        u, e = RNG.normal(scale=4.0, size=2), RNG.normal(size=1)
+        ref = drive_laws(model, s, u, tau_ext=e)
+        np.testing.assert_allclose(k["derivatives"](s, u, e, np.empty(model.num_states)), ref["derivatives"],
+                                   rtol=1e-12, atol=1e-12 * np.max(np.abs(ref["derivatives"])))
+        np.testing.assert_allclose(k["generalized_force"](s, np.empty(1)), ref["generalized_force"], rtol=1e-12)
+    # wrist-like quasi-static extra joints: only the first rate_joints velocities enter
+    thumb = _thumb_model(friction=True, ripple=False, hysteresis=True, guide=True, capstan=False, per_tendon=False,
+                         rate_joints=3)
+    kt = build_kernels(thumb)
+    s = _random_state(thumb)
+    q, qd = RNG.normal(size=4), RNG.normal(size=3)
+    u = RNG.normal(size=8)
+    ref = drive_laws(thumb, s, u, q, qd)
+    np.testing.assert_allclose(kt["derivatives"](s, u, q, qd, np.empty(thumb.num_states)), ref["derivatives"],
+                               rtol=1e-12, atol=1e-12 * np.max(np.abs(ref["derivatives"])))
+
+
+def test_drive_system_converts_and_autodiff_matches_finite_differences():
+    model = _thumb_model(friction=True, ripple=True, hysteresis=True, guide=True, capstan=True, per_tendon=True)
+    sys_ = TendonDrive_[float](model)
+    assert sys_.ToAutoDiffXd() is not None and sys_.ToSymbolic() is not None
+    s = _random_state(model)
+    s[8:16] *= 0.1   # moderate speeds keep the finite differences away from the tanh knees
+    inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
+                  joint_velocity=RNG.normal(scale=0.01, size=4))
+    check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
+
+
+def test_float_system_equals_its_autodiff_conversion_values():
+    """The float path (kernel) and the AutoDiff path (laws) of one system agree in value."""
+    model = _thumb_model(friction=True, ripple=True, hysteresis=True, guide=True, capstan=False, per_tendon=True)
+    f = TendonDrive_[float](model)
+    ad = f.ToAutoDiffXd()
+    cf, ca = f.CreateDefaultContext(), ad.CreateDefaultContext()
+    s = _random_state(model)
+    inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
+                  joint_velocity=RNG.normal(size=4))
+    cf.SetContinuousState(s)
+    ca.SetContinuousState(s)
+    for name, v in inputs.items():
+        f.GetInputPort(name).FixValue(cf, v)
+        ad.GetInputPort(name).FixValue(ca, v)
+    val = np.vectorize(lambda a: a.value())
+    np.testing.assert_allclose(f.EvalTimeDerivatives(cf).CopyToVector(),
+                               val(ad.EvalTimeDerivatives(ca).CopyToVector()), rtol=1e-12, atol=1e-9)
+    for i in range(f.num_output_ports()):
+        np.testing.assert_allclose(f.get_output_port(i).Eval(cf), val(ad.get_output_port(i).Eval(ca)),
+                                   rtol=1e-12, atol=1e-10, err_msg=f.get_output_port(i).get_name())
+
+
+def test_ports_are_lean_with_declared_prerequisites():
+    model = _thumb_model(friction=True, ripple=False, hysteresis=True, guide=True, capstan=False, per_tendon=False)
+    s = TendonDrive_[float](model)
+    u = s.GetInputPort("motor_torque").get_index()
+    q = s.GetInputPort("joint_angle").get_index()
+    qd = s.GetInputPort("joint_velocity").get_index()
+    feed = {s.get_output_port(i).get_name(): {j for j in (u, q, qd) if s.HasDirectFeedthrough(j, i)}
+            for i in range(s.num_output_ports())}
+    for name in ("state", "motor_angle", "motor_velocity", "motor_state"):
+        assert feed[name] == set(), name
+    for name in ("tendon_force", "tendon_stiffness", "elongation"):
+        assert feed[name] == {q}, name
+    assert feed["generalized_force"] == {q, qd}
+    assert feed["applied_torque"] == {u}
+
+
+def test_non_compilable_spring_is_refused_with_its_name():
+    from awiwi_drake.components.spring import LeverSpringMechanism
+    model = DriveModel(MotorParams(), (LeverSpringMechanism(),), ConstantCoupling(np.zeros((1, 0))), np.zeros(1), 0.005)
+    with pytest.raises(ValueError, match="LeverSpringMechanism"):
+        build_kernels(model)
+    with pytest.raises(ValueError, match="one spring law per tendon"):
+        DriveModel(MotorParams(), (SPRING,), antagonistic_coupling(0.008), np.zeros(2), 0.005)
+
+
+def _set(rig, ctx, x, u, e=None):
+    ctx.SetContinuousState(x)
+    rig.diagram.GetInputPort("motor_torque").FixValue(ctx, u)
+    if e is not None:
+        rig.diagram.GetInputPort("external_torque").FixValue(ctx, e)
+
+
+@pytest.mark.parametrize("build,kw", [(joint_rig, {}), (flexible_joint_rig, {"spring": "nonlinear"}),
+                                      (flexible_joint_rig, {"spring": "linear"}), (tendon_rig, {})])
+def test_one_system_rig_equals_multibody_version_at_random_states(build, kw):
+    fast, mbp = build(backend="compiled", **kw), build(backend="python", **kw)
+    assert fast.state_names == mbp.state_names and fast.plant is None
+    op = fast.operating_point()
+    cf, cm = fast.context(op), mbp.context(op)
+    common = [n for n in fast.output_names if n in mbp.output_names]
+    assert set(mbp.output_names) <= set(fast.output_names)
+    for _ in range(5):
+        x = op.state + RNG.normal(scale=0.05, size=op.state.size)
+        u = op.motor_torque + RNG.normal(scale=0.5, size=op.motor_torque.size)
+        e = RNG.normal(scale=0.05, size=1) if op.external_torque is not None else None
+        _set(fast, cf, x, u, e)
+        _set(mbp, cm, x, u, e)
+        a, b = fast.diagram.EvalTimeDerivatives(cf).CopyToVector(), mbp.diagram.EvalTimeDerivatives(cm).CopyToVector()
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.max(np.abs(b)))
+        for name in common:
+            np.testing.assert_allclose(fast.diagram.GetOutputPort(name).Eval(cf), mbp.diagram.GetOutputPort(name).Eval(cm),
+                                       rtol=1e-9, atol=1e-12, err_msg=name)
+
+
+def test_one_system_joint_rig_linearises_and_takes_lqr_in_a_composed_diagram():
+    from awiwi_drake.analysis import linearize
+    fast, mbp = joint_rig(), joint_rig(backend="python")
+    assert fast.backend == "compiled"          # the default is the fast path
+    op = fast.operating_point(pretension=25.0, link_angle=0.2)
+    la, lb = linearize(fast, op), linearize(mbp, op)
+    np.testing.assert_allclose(la.A, lb.A, rtol=1e-9, atol=1e-9 * np.max(np.abs(lb.A)))
+    np.testing.assert_allclose(la.B, lb.B, rtol=1e-12)
+    # LQR on a diagram that contains the rig (composed, exported inputs)
+    b = DiagramBuilder()
+    r = b.AddSystem(fast.diagram)
+    b.ExportInput(r.GetInputPort("motor_torque"), "u")
+    b.ExportOutput(r.GetOutputPort("state"), "x")
+    ext = b.ExportInput(r.GetInputPort("external_torque"), "ext")
+    d = b.Build()
+    ctx = d.CreateDefaultContext()
+    ctx.SetContinuousState(op.state)
+    d.get_input_port(0).FixValue(ctx, op.motor_torque)
+    d.get_input_port(ext).FixValue(ctx, [0.0])
+    Q, R = np.diag([100, 1, 1, 1, 0.01, 0.01]), np.eye(2)
+    ctrl = LinearQuadraticRegulator(d, ctx, Q, R, input_port_index=0)
+    K = -ctrl.D()
+    closed = np.linalg.eigvals(la.A - la.B @ K)
+    assert np.all(closed.real < 0)

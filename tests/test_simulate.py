@@ -1,0 +1,198 @@
+"""The one ``simulate``: schedules against closed forms, modes, monitors, progress, results save/load/plot."""
+
+import math
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import AffineSystem, Integrator, ZeroOrderHold
+
+from awiwi_drake.analysis import (
+    Chirp, PerEntry, Ramp, Samples, SimulationDivergedError, SimulationError, SimulationResult, Sine, Step, simulate)
+from awiwi_drake.analysis.schedules import InputSchedule_
+from awiwi_drake.analysis.simulate import control_period
+from awiwi_drake.rigs import joint_rig
+
+
+def _first_order(a=5.0, b=2.0):
+    """xdot = -a x + b u, y = x."""
+    sys = AffineSystem(A=[[-a]], B=[[b]], f0=[0.0], C=[[1.0]], D=[[0.0]], y0=[0.0])
+    sys.set_name("first_order")
+    return sys
+
+
+def _integrator(n=1):
+    sys = Integrator(n)
+    sys.set_name("integrator")
+    return sys
+
+
+def test_step_response_of_a_first_order_system_matches_the_closed_form():
+    a, b, u1, t0 = 5.0, 2.0, 3.0, 0.1
+    sys = _first_order(a, b)
+    res = simulate(sys, None, 1.0, inputs={"u0": Step(t0, u1)}, log={"x": sys.get_output_port()},
+                   accuracy=1e-9, max_step=1e-3)
+    t = res.t
+    exact = np.where(t >= t0, b * u1 / a * (1 - np.exp(-a * (t - t0))), 0.0)
+    np.testing.assert_allclose(res["x"][:, 0], exact, atol=2e-6)
+    assert res.info["mode"] == "error_controlled"
+
+
+def test_ramp_sine_and_chirp_integrate_to_their_closed_forms():
+    T = 0.8
+    w = 2 * math.pi * 4.0
+    cases = [
+        (Ramp(0.2, 0.6, 1.0, 3.0), 0.2 * 1.0 + 0.4 * (1.0 + 3.0) / 2 + 0.2 * 3.0),   # areas of the pieces
+        (Sine(1.5, 4.0, phase=0.3, offset=0.5), 0.5 * T + 1.5 / w * (math.cos(0.3) - math.cos(w * T + 0.3))),
+    ]
+    for sched, integral in cases:
+        res = simulate(_integrator(), None, T, inputs={"u0": sched}, accuracy=1e-10, max_step=1e-3)
+        assert res.final_state[0] == pytest.approx(integral, abs=1e-7), sched
+    # chirp: integral of sin(2 pi (f0 t + k t^2 / 2)) by a fine trapezoid on the schedule's own closed form
+    ch = Chirp(2.0, 1.0, 9.0, 0.7, start=0.05)
+    tt = np.linspace(0.0, T, 200001)
+    tau = np.clip(tt - 0.05, 0, None)
+    ref = np.where((tt >= 0.05) & (tt <= 0.75),
+                   2.0 * np.sin(2 * np.pi * (1.0 * tau + 0.5 * (8.0 / 0.7) * tau ** 2)), 0.0)
+    res = simulate(_integrator(), None, T, inputs={"u0": ch}, accuracy=1e-10, max_step=1e-3)
+    assert res.final_state[0] == pytest.approx(np.trapezoid(ref, tt), abs=1e-6)
+
+
+def test_samples_and_per_entry_schedules():
+    s = Samples([0.0, 0.5], [[1.0, -1.0], [2.0, -2.0]], hold="zoh")
+    res = simulate(_integrator(2), None, 1.0, inputs={"u0": s}, accuracy=1e-10)
+    np.testing.assert_allclose(res.final_state, [0.5 * 1 + 0.5 * 2, -(0.5 * 1 + 0.5 * 2)], atol=1e-8)
+    lin = Samples([0.0, 1.0], [0.0, 2.0], hold="linear")  # u = 2 t -> x = t^2
+    res = simulate(_integrator(2), None, 1.0, inputs={"u0": PerEntry([lin, 3.0])}, accuracy=1e-10)
+    np.testing.assert_allclose(res.final_state, [1.0, 3.0], atol=1e-8)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        Samples([0.0, 0.0], [1.0, 2.0])
+    with pytest.raises(ValueError, match="input .u0..*3 entries but the port has 2"):
+        simulate(_integrator(2), None, 1.0, inputs={"u0": PerEntry([1.0, 2.0, 3.0])})
+
+
+def test_input_schedule_converts_to_autodiff_and_its_time_derivative_is_the_signal_slope():
+    sched = Ramp(0.0, 2.0, 1.0, 5.0) + Sine(0.5, 3.0)
+    src = InputSchedule_[float](sched, 2)
+    ad = src.ToAutoDiffXd()
+    ctx = ad.CreateDefaultContext()
+    t = 0.37
+    ctx.SetTime(AutoDiffXd(t, [1.0]))
+    y = ad.get_output_port(0).Eval(ctx)
+    slope = 4.0 / 2.0 + 0.5 * 2 * math.pi * 3.0 * math.cos(2 * math.pi * 3.0 * t)
+    h = 1e-6
+    fd = (sched.value(t + h) - sched.value(t - h)) / (2 * h)
+    for yi in y:
+        assert yi.derivatives()[0] == pytest.approx(slope, rel=1e-12)
+        assert yi.derivatives()[0] == pytest.approx(fd, rel=1e-7)
+
+
+def _sampled_loop(period=1e-3):
+    """A plant xdot = -x + u under a sampled proportional controller u = 4 (r - x) held for ``period``."""
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("plant", AffineSystem(A=[[-1.0]], B=[[1.0]], f0=[0.0], C=[[1.0]], D=[[0.0]], y0=[0.0]))
+    ctrl = b.AddNamedSystem("ctrl", AffineSystem(A=np.zeros((0, 0)), B=np.zeros((0, 2)), f0=np.zeros(0),
+                                                 C=np.zeros((1, 0)), D=[[4.0, -4.0]], y0=[0.0]))
+    hold = b.AddNamedSystem("hold", ZeroOrderHold(period, 1))
+    from pydrake.systems.primitives import Multiplexer
+    mux = b.AddNamedSystem("mux", Multiplexer([1, 1]))
+    b.ExportInput(mux.get_input_port(0), "x_reference")
+    b.Connect(plant.get_output_port(), mux.get_input_port(1))
+    b.Connect(mux.get_output_port(), ctrl.get_input_port())
+    b.Connect(ctrl.get_output_port(), hold.get_input_port())
+    b.Connect(hold.get_output_port(), plant.get_input_port())
+    b.ExportOutput(plant.get_output_port(), "x")
+    b.ExportOutput(hold.get_output_port(), "motor_torque")
+    d = b.Build()
+    d.set_name("sampled_loop")
+    return d
+
+
+def test_sampled_loops_default_to_fixed_steps_at_the_control_period_and_match_error_control():
+    d = _sampled_loop(1e-3)
+    assert control_period(d) == pytest.approx(1e-3)
+    fixed = simulate(d, None, 0.5, inputs={"x_reference": Step(0.05, 1.0)}, log=("x", "motor_torque"))
+    assert fixed.info["mode"] == "fixed_step" and fixed.info["step"] == pytest.approx(1e-3)
+    np.testing.assert_allclose(np.diff(fixed.t), 1e-3, rtol=1e-9)
+    exact = simulate(d, None, 0.5, inputs={"x_reference": Step(0.05, 1.0)}, log=("x",), mode="error_controlled",
+                     accuracy=1e-10, max_step=1e-4)
+    xe = np.interp(fixed.t, exact.t, exact["x"][:, 0])
+    # the held input is piecewise constant on the steps: RK3 is exact to O(h^4) per step
+    assert np.max(np.abs(fixed["x"][:, 0] - xe)) < 1e-9
+    # exact sampled-data solution: x[k+1] = e^-h x[k] + (1 - e^-h) u[k], u[k] = 4 (r[k] - x[k])
+    h, xk, ref = 1e-3, 0.0, []
+    for k in range(len(fixed.t)):
+        ref.append(xk)
+        rk = 1.0 if k * h >= 0.05 - 1e-12 else 0.0
+        xk = math.exp(-h) * xk + (1 - math.exp(-h)) * 4.0 * (rk - xk)
+    np.testing.assert_allclose(fixed["x"][:, 0], ref, atol=1e-9)
+    with pytest.raises(ValueError, match="divisor"):
+        simulate(d, None, 0.1, inputs={"x_reference": 0.0}, step=3e-4)
+
+
+def test_progress_is_reported_up_to_the_duration_and_chunks_do_not_change_the_run():
+    calls = []
+    d = _sampled_loop()
+    a = simulate(d, None, 0.3, inputs={"x_reference": Sine(1.0, 5.0)}, log=("x",), progress=lambda t, T: calls.append((t, T)))
+    assert calls[-1] == (pytest.approx(0.3), pytest.approx(0.3)) and len(calls) > 5
+    assert all(t1 > t0 for (t0, _), (t1, _) in zip(calls, calls[1:]))
+    b = simulate(d, None, 0.3, inputs={"x_reference": Sine(1.0, 5.0)}, log=("x",))
+    np.testing.assert_array_equal(a["x"], b["x"])
+
+
+def test_divergence_in_fixed_step_mode_and_bad_times_raise_the_package_errors():
+    sys = AffineSystem(A=[[300.0]], B=[[0.0]], f0=[0.0], C=[[1.0]], D=[[0.0]], y0=[0.0])
+    ctx = sys.CreateDefaultContext()
+    ctx.SetContinuousState([1.0])
+    with pytest.raises(SimulationDivergedError, match=r"diverged at t = .*state\[0\]"):
+        simulate(sys, ctx, 2.0, inputs={"u0": 0.0}, mode="fixed_step", step=1e-2)
+    ctx = sys.CreateDefaultContext()
+    ctx.SetTime(1.0)
+    with pytest.raises(ValueError, match="t_final = 0.5 s must be after the start time 1.0 s"):
+        simulate(sys, ctx, 0.5, inputs={"u0": 0.0})
+    with pytest.raises(ValueError, match="t_final = inf"):
+        simulate(sys, None, math.inf, inputs={"u0": 0.0})
+    with pytest.raises(ValueError, match="no input port 'torque'"):
+        simulate(sys, None, 1.0, inputs={"torque": 0.0})
+    with pytest.raises(ValueError, match="input port 'u0' .* neither fixed"):
+        simulate(sys, None, 1.0)
+    assert issubclass(SimulationDivergedError, SimulationError)
+
+
+def test_the_context_is_advanced_and_the_diagram_can_be_simulated_again():
+    rig = joint_rig()
+    op = rig.operating_point(pretension=20.0)
+    ctx = rig.context(op)
+    r1 = simulate(rig, ctx, 0.01, inputs={"motor_torque": op.motor_torque + [0.3, -0.3]})
+    assert ctx.get_time() == pytest.approx(0.01)
+    r2 = simulate(rig, ctx, 0.02, inputs={"motor_torque": op.motor_torque + [0.3, -0.3]})
+    assert r2.t[0] == pytest.approx(0.01)
+    np.testing.assert_allclose(r2["state"][0], r1["state"][-1], rtol=0, atol=0)
+    assert r1.labels["state"] == list(rig.state_names) and r1.units["state"][0] == "rad"
+    assert r1.units["state"][1] == "rad/s"
+
+
+def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
+    rig = joint_rig()
+    op = rig.operating_point(pretension=20.0)
+    res = simulate(rig, rig.context(op), 0.02,
+                   inputs={"motor_torque": PerEntry([Step(0.005, op.motor_torque[0] + 0.5), op.motor_torque[1]])},
+                   log=("link_angle", "tendon_force", "motor_torque"))
+    for ext in ("npz", "csv"):
+        path = res.save(tmp_path / f"run.{ext}")
+        back = SimulationResult.load(path)
+        np.testing.assert_allclose(back.t, res.t)
+        for k in res.signals:
+            np.testing.assert_allclose(back[k], res[k], rtol=1e-15 if ext == "npz" else 1e-12)
+        assert back.units == res.units and back.info["mode"] == res.info["mode"]
+    assert res.units["tendon_force"] == "N" and res.units["motor_torque"] == "Nm"
+    fig, axes = res.plot()
+    for ax in axes:
+        assert "[" in ax.get_ylabel() and ax.get_legend() is not None
+        assert len(ax.get_legend().get_texts()) >= len(ax.get_lines())
+    assert axes[-1].get_xlabel() == "time [s]"
+    with pytest.raises(ValueError, match="must end in .npz or .csv"):
+        res.save(tmp_path / "run.txt")
+    with pytest.raises(ValueError, match="is not a file"):
+        SimulationResult.load(tmp_path / "missing.npz")
