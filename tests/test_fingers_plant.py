@@ -158,7 +158,7 @@ def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
     fp = p.finger
     rig = finger_diagram(finger=finger, params=p, backend="python")
     op = rig.operating_point(pretension=p.pretension)
-    c = rig.extra["models"].coupling_vector
+    c = rig.models.coupling_vector
     comp = coupling_compliance(op.info["joint_stiffness"], c)
     assert comp == pytest.approx(1.0 / (fp.coupling_stiffness * (1 + fp.dip_pip_ratio ** 2)), rel=1e-9)
 

@@ -9,7 +9,7 @@ import pytest
 from pydrake.systems.primitives import LinearSystem
 
 from _fd import fd_jacobian
-from awiwi_drake.analysis import LinearizationResult, linearize, lqr, poles_table
+from awiwi_drake.analysis import LinearizationResult, LqrResult, linearize, lqr, poles_table
 from awiwi_drake.analysis.linear import closed_loop_poles, lqr_gain
 from awiwi_drake.parameters import FlexibleJointParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
@@ -162,6 +162,9 @@ def test_results_save_load_and_plot(tmp_path):
     with pytest.raises(ValueError, match="no output 'tendon_force'"):
         lin.output("tendon_force")
     design = lqr(rig, np.diag([1e3, 1e-4, 1e3, 1e3, 1e-4, 1e-4]), np.eye(2))
+    back = LqrResult.load(design.save(tmp_path / "lqr.json"))
+    np.testing.assert_array_equal(back.K, design.K)
+    np.testing.assert_array_equal(back.closed_loop_poles, design.closed_loop_poles)
     np.testing.assert_allclose(design.closed_loop_poles, closed_loop_poles(design.linearization.A,
                                                                             design.linearization.B, design.K))
     assert np.all(design.closed_loop.poles.real < 0)

@@ -31,7 +31,7 @@ def expected_12_10(p: FlexibleJointParams):
 def test_flexible_joint_linearisation_equals_12_10(backend):
     p = FlexibleJointParams()  # Table 12.1
     rig = flexible_joint_rig(params=p, backend=backend)
-    assert rig.state_names == ("q", "qdot", "theta", "thetadot")
+    assert rig.state_names == ("joint_angle[0]", "joint_velocity[0]", "motor_angle[0]", "motor_velocity[0]")
     res = linearize(rig)
     A, B = expected_12_10(p)
     np.testing.assert_allclose(res.A, A, rtol=1e-12, atol=1e-9)

@@ -547,7 +547,30 @@ class LqrResult:
     def to_json(self) -> dict:
         return dict(K=self.K.tolist(), S=self.S.tolist(), Q=self.Q.tolist(), R=self.R.tolist(),
                     closed_loop_poles=[[float(p.real), float(p.imag)] for p in self.closed_loop_poles],
-                    state_names=list(self.linearization.state_names))
+                    state_names=list(self.linearization.state_names), linearization=self.linearization.to_json())
+
+    def save(self, path: str | Path) -> Path:
+        """Write :meth:`to_json` (with the linearisation) to ``path`` (``.json``); read back with :meth:`load`."""
+        path = Path(path)
+        if path.suffix != ".json":
+            raise ValueError(f"LqrResult.save: {str(path)!r} must end in .json")
+        if not path.parent.is_dir():
+            raise ValueError(f"LqrResult.save: directory {str(path.parent)!r} does not exist")
+        path.write_text(json.dumps(self.to_json(), indent=1))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "LqrResult":
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"LqrResult.load: {str(path)!r} is not a file")
+        try:
+            d = json.loads(path.read_text())
+            return cls(np.atleast_2d(np.array(d["K"], float)), np.atleast_2d(np.array(d["S"], float)),
+                       np.atleast_2d(np.array(d["Q"], float)), np.atleast_2d(np.array(d["R"], float)),
+                       LinearizationResult.from_json(d["linearization"]))
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"LqrResult.load: {str(path)!r} is not a saved LqrResult ({type(exc).__name__}: {exc})") from None
 
 
 def lqr(plant, Q, R, op=None, *, context: Context | None = None, input: str = "motor_torque",  # noqa: A002

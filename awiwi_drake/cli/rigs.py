@@ -68,7 +68,9 @@ def register(sub) -> None:
     req.add_argument("--q", required=True, help="comma-separated diagonal of Q (state order)")
     req.add_argument("--r", required=True, help="comma-separated diagonal of R (one per motor)")
     add_parameter_options(p)
-    p.add_argument("--json", action="store_true", help="print one JSON object {K, closed_loop_poles}")
+    p.add_argument("--json", action="store_true", help="print one JSON object {K, S, Q, R, closed_loop_poles, ...}")
+    p.add_argument("--save", metavar="OUT.json", default=None,
+                   help="save the design with its linearisation (reload with LqrResult.load)")
     p.set_defaults(func=_lqr)
 
     p = sub.add_parser("params", help="list a rig's parameters with units, ranges and sources (or print them as YAML)",
@@ -155,6 +157,7 @@ def _linearize(args) -> int:
 def _lqr(args) -> int:
     from awiwi_drake.analysis import lqr
 
+    save_path = None if args.save is None else output_file(args.save, "--save", suffixes=(".json",))
     rig = _build(args)
     q = _floats(args.q, "--q")
     r = _floats(args.r, "--r")
@@ -165,14 +168,17 @@ def _lqr(args) -> int:
     if r.size != m:
         raise CliError(f"--r has {r.size} entries; {args.rig} has {m} motor input(s)")
     res = lqr(rig, np.diag(q), np.diag(r))
+    if save_path is not None:
+        res.save(save_path)
     if args.json:
         print(json.dumps(res.to_json()))
         return 0
     np.set_printoptions(precision=6, linewidth=140)
     print(f"{rig.name}: state = [{', '.join(rig.state_names)}]")
     print("K =\n" + str(res.K))
-    print("closed-loop poles:\n" + "\n".join(f"  {p.real: .6g} {'+' if p.imag >= 0 else '-'} {abs(p.imag):.6g}j"
-                                             for p in res.closed_loop_poles))
+    print("closed-loop damping:\n" + str(res.closed_loop.damp()))
+    if save_path is not None:
+        print(f"design saved to {save_path}")
     return 0
 
 

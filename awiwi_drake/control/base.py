@@ -262,6 +262,10 @@ class ClosedLoop:
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} continuous states")
             rig_ctx.SetContinuousState(x)
+            init = getattr(self.controller, "initialize_state", None)
+            if init is not None:   # controllers with internal state (e.g. the force distribution)
+                ctrl_sys = self.diagram.GetSubsystemByName("controller")
+                init(ctrl_sys.GetMyMutableContextFromRoot(context), x)
             if self.estimator is not None and hasattr(self.estimator, "initialize"):
                 est_sys = self.diagram.GetSubsystemByName("estimator")
                 self.estimator.initialize(est_sys.GetMyMutableContextFromRoot(context),
@@ -320,7 +324,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     estimator : "auto", None or object
         ``"auto"`` (default): the rig's own state estimator when it has one
         (fingers and the hand: ``rig.link_estimator(period)``, joint angles
-        from tendon lengths) and ``sensors`` is not ``"ideal"``.  ``None``: no
+        from tendon lengths, at the control rate but never faster than the
+        sensors' 3 kHz) and ``sensors`` is not ``"ideal"``.  ``None``: no
         estimator.  Or an object with ``system`` (a Drake System whose inputs
         are named after rig outputs and whose outputs replace the rig outputs of
         the same name as controller measurements) and optionally
@@ -384,11 +389,11 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
             if m not in rig_out:
                 raise ValueError(f"closed_loop: estimator input {m!r} is not an output of rig {rig_name!r} "
                                  f"(outputs: {', '.join(rig_out)})")
-        if "state" in measurement_ports(controller):
-            raise ValueError(f"closed_loop: controller {controller.get_name()!r} reads the rig's full 'state' "
-                             f"(true joint angles), but rig {rig_name!r} has no joint sensors: its joint state "
-                             f"comes from the estimator ({', '.join(est_out)}); use sensors='ideal' for a "
-                             f"true-state comparison")
+    if not ideal and getattr(rig, "link_estimator", None) is not None and "state" in measurement_ports(controller):
+        raise ValueError(f"closed_loop: controller {controller.get_name()!r} reads the rig's full 'state' "
+                         f"(true joint angles), but rig {rig_name!r} has no joint sensors: its joint state "
+                         f"comes from the tendon-length estimator (joint_angle, joint_velocity); use "
+                         f"sensors='ideal' for a true-state comparison")
     sensors = {} if ideal else dict(sensors or {})
     for s in sensors:
         if s not in rig_out:
@@ -534,7 +539,7 @@ def _resolve_estimator(rig: Any, estimator: Any, ideal: bool, rate_hz: float | N
         make = getattr(rig, "link_estimator", None)
         if ideal or make is None:
             return None
-        est = make(1.0 / rate_hz if rate_hz is not None else 1.0 / 3000.0)
+        est = make(None if rate_hz is None else 1.0 / rate_hz)
         used = [m for m in measured if m in _output_names(est.system)]
         if not used:
             return None

@@ -44,6 +44,17 @@ _BUILTIN = [
 
 _BUILTIN.append(("joint-pd", _lazy("joint_pd", "joint_pd_controller"), ("finger", "hand"),
                  "motor PD towards the motor angles of the joint reference (exact routing), pretension held"))
+_BUILTIN.append(("cascaded", _lazy("chain", "chain_controller"), ("finger", "hand"),
+                 "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
+                 "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15)"))
 
 for _name, _factory, _rigs, _doc in _BUILTIN:
     register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)
+
+# The law at 30 kHz (sensing and estimation at 3 kHz): behind a 3 kHz hold it chatters between the
+# torque limits (measured on the index finger: command saturated in 100 % of the samples after the step,
+# clean at 30 kHz), as the joint-rig backstepping entries (backstepping_registry).
+register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller"),
+                    rigs=("finger", "hand"), loop_options={"rate_hz": 30000.0},
+                    description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
+                                "torques directly; law at 30 kHz, joint angles estimated at 3 kHz (5.15)")

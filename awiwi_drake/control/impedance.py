@@ -287,8 +287,8 @@ def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mod
         lin = linearize(rig, outputs=("state", "link_angle"))
         names = list(rig.state_names)
         n = len(tr.coupling)
-        ith = [names.index(nm) for nm in (("theta",) if n == 1 else ("theta1", "theta2"))]
-        iw = [names.index(nm) for nm in (("thetadot",) if n == 1 else ("omega1", "omega2"))]
+        ith = [names.index(f"motor_angle[{i}]") for i in range(n)]
+        iw = [names.index(f"motor_velocity[{i}]") for i in range(n)]
         return StaticLawController(LinkReferenceMotorPdLaw(lin, (ith, iw), tr.motor.inertia, params))
     law = ImpedanceLaw(transmission(rig), params, mode=mode)
     if mode == "cascaded":

@@ -29,6 +29,7 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, Multiplexer
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.hand.systems import MotorAngleReference
 from awiwi_drake.parameters.hand import JointControllerParams
 
@@ -46,7 +47,7 @@ def joint_pd_controller(rig: Any, params: JointControllerParams | None = None, *
     c = params or JointControllerParams()
     if not isinstance(c, JointControllerParams):
         raise ValueError(f"joint_pd_controller: params must be JointControllerParams, got {type(c).__name__}")
-    coupling = rig.extra.get("coupling") if hasattr(rig, "extra") else None
+    coupling = rig.coupling if isinstance(rig, Rig) else None
     if coupling is None:
         raise ValueError(f"joint_pd_controller: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig "
                          "(it has no tendon coupling)")

@@ -50,7 +50,9 @@ class ControllerEntry:
     loop_options: Mapping[str, Any] = field(default_factory=dict)
 
 
-_REGISTRY: dict[str, ControllerEntry] = {}
+# name -> entries; one name may have one entry per rig kind (e.g. ``cascaded`` on the joint rig
+# is (11.16), on a finger/hand the ch. 7-10 chain): the same concept, built for that plant.
+_REGISTRY: dict[str, list[ControllerEntry]] = {}
 _loaded = False
 
 
@@ -81,17 +83,29 @@ def rig_kind(rig: Any) -> str:
 def register_controller(name: str, factory: Callable[[Any], Any], *, rigs: tuple[str, ...] | list[str],
                         description: str, loop_options: Mapping[str, Any] | None = None,
                         replace: bool = False) -> ControllerEntry:
-    """Register a controller factory under ``name`` for the given rig kinds."""
+    """Register a controller factory under ``name`` for the given rig kinds.
+
+    A name already registered for *other* rig kinds gets this factory for these kinds
+    (the same controller built for another plant); registering a kind twice needs ``replace``.
+    """
     if not name or name != name.strip():
         raise ValueError(f"register_controller: bad controller name {name!r}")
     kinds = tuple(rig_kind(r) for r in rigs)
     if not kinds:
         raise ValueError(f"register_controller: controller {name!r} needs at least one rig kind")
-    if name in _REGISTRY and not replace:
-        raise ValueError(f"register_controller: controller {name!r} is already registered")
+    entries = _REGISTRY.get(name, [])
+    clash = [e for e in entries if set(e.rigs) & set(kinds)]
+    if clash and not replace:
+        raise ValueError(f"register_controller: controller {name!r} is already registered for "
+                         f"{', '.join(sorted(set(clash[0].rigs) & set(kinds)))}")
+    entries = [e for e in entries if not set(e.rigs) & set(kinds)]
     entry = ControllerEntry(name, factory, kinds, description, dict(loop_options or {}))
-    _REGISTRY[name] = entry
+    _REGISTRY[name] = entries + [entry]
     return entry
+
+
+def _kinds(name: str) -> tuple[str, ...]:
+    return tuple(k for e in _REGISTRY[name] for k in e.rigs)
 
 
 def controller_names(rig: Any | None = None) -> list[str]:
@@ -100,24 +114,29 @@ def controller_names(rig: Any | None = None) -> list[str]:
     if rig is None:
         return sorted(_REGISTRY)
     kind = rig_kind(rig)
-    return sorted(n for n, e in _REGISTRY.items() if kind in e.rigs)
+    return sorted(n for n in _REGISTRY if kind in _kinds(n))
 
 
 def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
-    """The entry of ``name``; ValueError when unknown or not fitting ``rig``."""
+    """The entry of ``name`` (for ``rig``'s kind when given); ValueError when unknown or not fitting ``rig``.
+
+    Without ``rig`` the first registration is returned.
+    """
     _ensure_loaded()
     if name not in _REGISTRY:
         raise ValueError(f"unknown controller {name!r}; known: {', '.join(sorted(_REGISTRY))}")
-    entry = _REGISTRY[name]
-    if rig is not None:
-        kind = rig_kind(rig)
-        if kind not in entry.rigs:
-            fits = controller_names(rig)
-            cli = kind.replace("_", "-")  # errors use the CLI spelling (joint-rig, flexible-joint, ...)
-            raise ValueError(f"controller {name!r} does not fit rig {cli!r} (it is for "
-                             f"{', '.join(r.replace('_', '-') for r in entry.rigs)}); controllers for {cli!r}: "
-                             f"{', '.join(fits)}")
-    return entry
+    entries = _REGISTRY[name]
+    if rig is None:
+        return entries[0]
+    kind = rig_kind(rig)
+    for e in entries:
+        if kind in e.rigs:
+            return e
+    fits = controller_names(rig)
+    cli = kind.replace("_", "-")  # errors use the CLI spelling (joint-rig, flexible-joint, ...)
+    raise ValueError(f"controller {name!r} does not fit rig {cli!r} (it is for "
+                     f"{', '.join(r.replace('_', '-') for r in _kinds(name))}); controllers for {cli!r}: "
+                     f"{', '.join(fits)}")
 
 
 def make_controller(name: str, rig: Any):

@@ -59,6 +59,12 @@ def interp(x, xp: np.ndarray, fp: np.ndarray):
     """
     xp = np.asarray(xp, float)
     fp = np.asarray(fp, float)
+    if np.ndim(x) > 0 and np.size(x) > 1:  # element-wise (a bank of tendons)
+        if is_float(x):
+            xa = np.asarray(x, dtype=float)
+            i = np.clip(np.searchsorted(xp, xa) - 1, 0, len(xp) - 2)
+            return fp[i] + (fp[i + 1] - fp[i]) / (xp[i + 1] - xp[i]) * (xa - xp[i])
+        return np.array([interp(xi, xp, fp) for xi in np.asarray(x, dtype=object).reshape(-1)], dtype=object)
     if is_float(x):
         xv = float(np.asarray(x).reshape(-1)[0]) if np.ndim(x) else float(x)
     else:
@@ -94,13 +100,30 @@ class ForceMap:
     def max_force(self) -> float:
         return float(self.force[-1])
 
-    def check_force(self, f, name: str = "tendon_force_reference") -> float:
-        """Validate a force argument against the table ``[0, max_force]``; return its float value."""
-        v = _value(f)
-        if not (math.isfinite(v) and 0.0 <= v <= self.max_force):
-            raise ValueError(f"{name} = {v!r} N is outside the tendon force table [0, {self.max_force:.4g}] N "
-                             f"(force_map(f_max=...) tabulates up to f_max)")
-        return v
+    def check_force(self, f, name: str = "tendon_force_reference"):
+        """Validate a force argument (or each of a bank's) against the table ``[0, max_force]``; return the float value(s)."""
+        vals = [_value(x) for x in np.asarray(f, dtype=object).reshape(-1)] if np.size(f) > 1 else [_value(f)]
+        for i, v in enumerate(vals):
+            if not (math.isfinite(v) and 0.0 <= v <= self.max_force):
+                where = f"[{i}]" if len(vals) > 1 else ""
+                raise ValueError(f"{name}{where} = {v!r} N is outside the tendon force table [0, {self.max_force:.4g}] N "
+                                 f"(force_map(f_max=...) tabulates up to f_max)")
+        return vals[0] if len(vals) == 1 else np.array(vals)
+
+    @classmethod
+    def from_spring(cls, spring, motor_pulley_radius: float, *, f_max: float = 200.0, num: int = 2000) -> "ForceMap":
+        """The map of a tendon whose spring elongation is ``r_m theta`` (+ a constant): ``f = spring.force(r_m theta)``,
+        ``alpha = r_m k_t``.  For a finger/hand tendon at fixed joints (the path term of the elongation is
+        constant), e.g. the hand's lever mechanism ``tendon_spring(params.spring)``."""
+        r_m = float(motor_pulley_radius)
+        x_hi = float(np.ravel(spring.inverse_force(np.array([f_max])))[0])
+        x_lo = float(np.ravel(spring.inverse_force(np.array([1e-3])))[0])
+        x = np.linspace(x_lo, x_hi, num)
+        fo = np.asarray(spring.force(x), dtype=float)
+        alpha = r_m * np.asarray(spring.stiffness(x), dtype=float)
+        keep = np.concatenate([[True], np.diff(fo) > 0]) & (fo > 0)
+        x_slack = float(np.ravel(spring.inverse_force(np.array([0.0])))[0])
+        return cls(x[keep] / r_m, fo[keep], alpha[keep], x_slack / r_m)
 
     def force_at(self, theta):
         return interp(theta, self.theta, self.force)
@@ -191,15 +214,36 @@ def _motor(rig):
 
 
 class TendonForceLaw(StaticLaw):
-    """(10.2) with fixed (design force) or scheduled (reference force) gains."""
+    """(10.2) with fixed (design force) or scheduled (reference force) gains.
+
+    ``size`` tendons (a bank: every port has ``size`` entries, one law per tendon, the same
+    force map and motor).  ``ripple_scale`` > 0 adds the ripple feed-forward of section 3.2,
+    ``-ripple_scale * tau_ripple(theta)`` (input ``motor_angle``; ch. 3: a conservative
+    amplitude, e.g. ``RippleCompensationParams.amplitude_scale``).  ``path_velocity=True`` adds the
+    input ``tendon_path_velocity`` [m/s] (``P(q) qdot``, a finger's joints moving the tendon path):
+    the force rate estimate becomes ``alpha (omega + v_path / r_m)``, the derivative of
+    ``f(r_m theta + h(q))``; on the tendon rig (far end fixed) ``v_path = 0``.
+    """
 
     inputs = {"tendon_force_reference": 1, "tendon_force": 1, "motor_velocity": 1}
     output_size = 1
 
     def __init__(self, fmap: ForceMap, motor: Any, gains: TendonForceGains | None = None, *,
-                 scheduled: bool = False, name: str | None = None):
+                 scheduled: bool = False, name: str | None = None, size: int = 1, ripple_scale: float = 0.0,
+                 path_velocity: bool = False):
         g = gains or TendonForceGains()
         self.name = name or ("tendon_scheduled" if scheduled else "tendon_pd")
+        size = int(size)
+        if size < 1:
+            raise ValueError(f"{self.name}: size = {size} must be >= 1")
+        self.ripple_scale = check_gain("ripple_scale", ripple_scale, allow_zero=True, owner=self.name)
+        self.inputs = {"tendon_force_reference": size, "tendon_force": size, "motor_velocity": size}
+        if self.ripple_scale > 0:
+            self.inputs["motor_angle"] = size
+        self.path_velocity = bool(path_velocity)
+        if self.path_velocity:
+            self.inputs["tendon_path_velocity"] = size
+        self.output_size = size
         check_gain("natural_frequency", g.natural_frequency, owner=self.name)
         check_gain("damping_ratio", g.damping_ratio, owner=self.name)
         self.fmap, self.motor, self.gains, self.scheduled = fmap, motor, g, bool(scheduled)
@@ -223,19 +267,25 @@ class TendonForceLaw(StaticLaw):
         return interp(fr, self.fmap.force, self._kp_tab), interp(fr, self.fmap.force, self._kd_tab)
 
     def __call__(self, u):
-        from awiwi_drake.components import motor_friction_torque
-        fd = u["tendon_force_reference"][0]
-        f = u["tendon_force"][0]
-        w = u["motor_velocity"][0]
+        from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
+        one = self.output_size == 1
+        fd = u["tendon_force_reference"][0] if one else u["tendon_force_reference"]
+        f = u["tendon_force"][0] if one else u["tendon_force"]
+        w = u["motor_velocity"][0] if one else u["motor_velocity"]
         kp, kd = self.gains_at(fd)
         # slope at the measured force clamped to [min_schedule_force, f_max]: > 0 even for readings <= 0
-        fdot = self.fmap.alpha_of_force(f, floor=self.gains.min_schedule_force) * w
+        w_el = w if not self.path_velocity else w + (
+            u["tendon_path_velocity"][0] if one else u["tendon_path_velocity"]) / self.r_m
+        fdot = self.fmap.alpha_of_force(f, floor=self.gains.min_schedule_force) * w_el
         tau = kp * (fd - f) - kd * fdot
         if self.gains.force_feedforward:
             tau = tau + self.r_m * f
         if self.gains.friction_compensation:
             tau = tau - self.gains.friction_scale * motor_friction_torque(w, self.motor)
-        return np.array([tau])
+        if self.ripple_scale > 0:
+            th = u["motor_angle"][0] if one else u["motor_angle"]
+            tau = tau - self.ripple_scale * motor_ripple_torque(th, self.motor)
+        return np.array([tau]) if one else np.asarray(tau).reshape(-1)
 
 
 def tendon_pd_controller(rig: Any, gains: TendonForceGains | None = None, *, fmap: ForceMap | None = None):

@@ -31,7 +31,7 @@ import numpy as np
 
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
-__all__ = ["ParamSpec", "Effect", "param_specs", "PARAM_NAMES", "PARAM_INDEX", "EFFECTS",
+__all__ = ["ParamSpec", "Effect", "param_specs", "PARAM_NAMES", "PARAM_INDEX", "PARAM_UNITS", "EFFECTS",
            "effects_for_rig", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS"]
 
 
@@ -96,6 +96,7 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
 
 PARAM_NAMES = [s.name for s in param_specs()]
 PARAM_INDEX = {n: i for i, n in enumerate(PARAM_NAMES)}
+PARAM_UNITS = {s.name: s.unit for s in param_specs()}  # the unit of every fitted parameter (reports, CLI)
 
 
 @dataclass(frozen=True)

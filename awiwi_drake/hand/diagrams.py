@@ -32,7 +32,8 @@ finger coupling plus ``m`` length-offset "joints" (identity columns of
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
@@ -44,6 +45,7 @@ from ..components.spring import tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
+from ..rigs.base import state_names as rig_state_names
 from .coupling import HandCoupling, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
 from .systems import GuideFriction, tendon_bending_angles
@@ -57,11 +59,21 @@ DEFAULT_BACKEND = "symbolic"
 class HandRig(Rig):
     """A :class:`Rig` for fingers and the hand; fixes the ``wrist_angle`` input too.
 
-    Extra attributes live in ``extra``: ``coupling`` (the finger/hand
-    coupling without wrist offsets), ``drive_coupling`` (what the drive
-    uses), ``models`` (FingerModel handles), ``joint_names``,
-    ``tendon_names``, ``offsets`` (x0 [m]), ``coupling_gain`` (G).
+    Beyond :class:`Rig`: ``coupling`` is the finger/hand coupling without wrist
+    offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
+    handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
+    spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
+    rows of the tendons, ``spring_law`` the spring of every tendon.
     """
+
+    drive_coupling: Any = None
+    models: Any = None
+    joint_names: list = field(default_factory=list)
+    tendon_names: list = field(default_factory=list)
+    offsets: Any = None
+    coupling_gain: Any = None
+    wrist_rows: Any = None
+    spring_law: Any = None
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
         super().set_operating_point(context, op, fix_inputs=fix_inputs)
@@ -71,18 +83,25 @@ class HandRig(Rig):
 
     @property
     def num_joints(self) -> int:
-        return len(self.extra["joint_names"])
+        return len(self.joint_names)
 
-    def link_estimator(self, period: float = 1.0 / 3000.0):
+    def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
         Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
         ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.
+        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
+        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
+        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
         """
+        from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator
-        return link_state_estimator(self.extra["coupling"], self.params.motor.pulley_radius, self.extra["offsets"],
-                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"))
+        p = params or LinkEstimatorParams()
+        period = 1.0 / p.rate_hz if period is None else max(float(period), 1.0 / p.rate_hz)
+        return link_state_estimator(self.coupling, self.params.motor.pulley_radius, self.offsets,
+                                    period=period, wrist=self.diagram.HasInputPort("wrist_angle"),
+                                    iterations=p.iterations, step0=p.initial_step,
+                                    velocity_time_constant=max(p.velocity_time_constant, period))
 
     def joint_angles_of(self, state) -> np.ndarray:
         """The joint angles (plant positions) in a rig state vector."""
@@ -90,13 +109,9 @@ class HandRig(Rig):
 
     @property
     def num_tendons(self) -> int:
-        return len(self.extra["tendon_names"])
+        return len(self.tendon_names)
 
 
-def _state_names(plant_joint_names, tendon_names):
-    names = list(plant_joint_names) + [f"{j}_dot" for j in plant_joint_names]
-    names += [f"theta_{t}" for t in tendon_names] + [f"omega_{t}" for t in tendon_names]
-    return tuple(names)
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
@@ -178,18 +193,17 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = _state_names(joint_names, coupling.tendon_names)
-    extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
-                 torque_limit=p.motor.torque_limit if p.motor.saturation else None,
-                 drive_coupling=drive_coupling, models=models, joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
-                 coupling_gain=G, spring_law=spring)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, spring, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle)
 
-    return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, extra)
+    return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, drive=drive, coupling=coupling,
+                   wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
+                   drive_coupling=drive_coupling, models=models, joint_names=joint_names,
+                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring)
 
 
 def _wrist_rows(parts) -> np.ndarray:

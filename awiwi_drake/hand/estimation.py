@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
-from pydrake.systems.primitives import DiscreteDerivative
+from pydrake.systems.primitives import LinearSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
@@ -362,10 +362,12 @@ class LinkStateEstimator:
     ``system`` is a Diagram with inputs named after the rig outputs it reads
     (``motor_angle``, ``elongation`` and, with the wrist, ``wrist_tendon_offset``)
     and outputs ``joint_angle`` (n) [rad] (the estimate of (5.15) / Algorithm 1)
-    and ``joint_velocity`` (n) [rad/s] = backward difference of that estimate
-    over one period (the hand has no joint encoders or tachometers).  Both are
-    discrete (updated every ``period``); the velocity lags the angle by one
-    period.  :meth:`initialize` starts both at a known pose (after homing).
+    and ``joint_velocity`` (n) [rad/s], the "dirty derivative" ``s / (T s + 1)`` of
+    that estimate (the hand has no joint encoders or tachometers), discretised
+    at the period ``h``: ``z+ = z + h/T (q - z)``, ``v = (q - z) / T``
+    (``T = h``: the backward difference over one period).  Both are discrete
+    (updated every ``period``).  :meth:`initialize` starts both at a known pose
+    (after homing).
     """
 
     system: Diagram
@@ -380,21 +382,27 @@ class LinkStateEstimator:
                              f"entries, got {q.size}")
         est = self.system.GetSubsystemByName("link_position_estimator")
         self.system.GetMutableSubsystemContext(est, context).SetDiscreteState(q)
-        der = self.system.GetSubsystemByName("joint_velocity_difference")
-        dctx = self.system.GetMutableSubsystemContext(der, context)
-        dctx.SetDiscreteState(0, q)
-        dctx.SetDiscreteState(1, q)
+        der = self.system.GetSubsystemByName("joint_velocity_filter")
+        self.system.GetMutableSubsystemContext(der, context).SetDiscreteState(q)
 
 
 def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, period: float = 1.0 / 3000,
-                         wrist: bool = False, iterations: int = 15, step0: float = 0.1) -> LinkStateEstimator:
-    """Build the :class:`LinkStateEstimator` of a finger/hand coupling (see there)."""
+                         wrist: bool = False, iterations: int = 15, step0: float = 0.1,
+                         velocity_time_constant: float | None = None) -> LinkStateEstimator:
+    """Build the :class:`LinkStateEstimator` of a finger/hand coupling (see there).
+
+    ``velocity_time_constant`` T [s] of the velocity filter (>= ``period``; default: ``period``,
+    the plain backward difference).
+    """
     b = DiagramBuilder()
     est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
         coupling, motor_pulley_radius, offsets, period=period, iterations=iterations, step0=step0))
     n = coupling.num_joints
-    der = b.AddNamedSystem("joint_velocity_difference",
-                           DiscreteDerivative(n, period, suppress_initial_transient=False))
+    T = float(period if velocity_time_constant is None else velocity_time_constant)
+    if not T >= period * (1 - 1e-12):
+        raise ValueError(f"link_state_estimator: velocity_time_constant = {T} s must be >= the period {period} s")
+    a, I = period / T, np.eye(n)
+    der = b.AddNamedSystem("joint_velocity_filter", LinearSystem((1 - a) * I, a * I, -I / T, I / T, period))
     b.Connect(est.get_output_port(0), der.get_input_port())
     b.ExportInput(est.GetInputPort("motor_angle"), "motor_angle")
     b.ExportInput(est.GetInputPort("elongation"), "elongation")

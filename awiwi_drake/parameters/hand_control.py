@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 from awiwi_drake.parameters.base import Parameters, param
 
-__all__ = ["ForceDistributionParams", "StiffnessCorrectionParams", "FrictionObserverParams", "LinkFrictionParams"]
+__all__ = ["ForceDistributionParams", "StiffnessCorrectionParams", "FrictionObserverParams", "LinkFrictionParams",
+           "HandChainParams", "LinkEstimatorParams"]
 
 
 @dataclass(frozen=True)
@@ -78,3 +79,60 @@ class LinkFrictionParams(Parameters):
                                       source="chosen: link + distal chain of a finger on the test fixture; the "
                                              "7.2e-7 of Table 15.1 makes stick-slip too stiff to integrate explicitly")
     viscous: float = param(1e-4, unit="Nm s/rad", low=0.0, source="chosen: small viscous part")
+
+
+@dataclass(frozen=True)
+class HandChainParams(Parameters):
+    """The hand's control chain (ch. 7-11): joint impedance -> force distribution -> tendon force PD.
+
+    Per independent DoF the joint law is ``tau = tau_op + K (q_ref - q) - D qdot``, designed from
+    the joint's own inertia ``M_jj`` (mass matrix at the operating point): ``D = 2 zeta sqrt(K M_jj)``;
+    the cascade limits ``K <= M_jj joint_bandwidth^2`` (its joint loop must stay behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
+    is ``stiffness_scale`` times the operating point's own (5.12) unless given per DoF.  The force
+    loop is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) and the ripple
+    feed-forward ``RippleCompensationParams.amplitude_scale``.
+    """
+
+    force_bandwidth: float = param(300.0, unit="rad/s", low=0.0, low_inclusive=False,
+                                   source="chosen: w of the tendon force loop (10.10)-(10.11) on the hand, 1/60 of "
+                                          "the 3 kHz rate; 3x the tendon rig's 100 rad/s so that the joint loop "
+                                          "behind it can reach a useful stiffness (measured: 100/30 rad/s leaves "
+                                          "25 % step error after 0.4 s against motor friction, 300/60 rad/s 0.5 %)")
+    joint_stiffness: float = param(0.5, unit="Nm/rad", low=0.0, low_inclusive=False,
+                                   source="Fig 15.22: impedance gain 0.5 Nm/rad on the finger (5 Nm/rad the stiff "
+                                          "setting)", doc="impedance K per DoF (backstepping: every DoF)")
+    joint_bandwidth: float = param(60.0, unit="rad/s", low=0.0, low_inclusive=False,
+                                   source="chosen: a fifth of force_bandwidth (the cascade's joint loop acts through "
+                                          "the force loop and must be slower): cascaded K = min(joint_stiffness, "
+                                          "M_jj w^2), the limit 15.5.3 names for the cascaded controller")
+    damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
+                                 source="chosen: well damped joint response (as (10.10) for the force loop)")
+    stiffness_scale: float = param(1.0, unit="-", low=0.0, low_inclusive=False,
+                                   source="chosen: 1 holds the operating point's co-contraction (its pretension)")
+    distribution_method: str = param("optimal", unit="-", choices=("optimal", "algorithm2"),
+                                     source="ch. 7: (7.6) solved by a MathematicalProgram, or Algorithm 2")
+    distribution_iterations: int = param(1, unit="-", low=1,
+                                         source="chosen: one warm-started QP per control period (the optimum "
+                                                "moves little in 1/3000 s; converges over a few periods)")
+    scheduled: bool = param(True, unit="-", source="(10.12): force-loop gains scheduled on the reference force")
+    friction_scale: float = param(0.5, unit="-", low=0.0, high=1.0,
+                                  source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
+                                         "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "
+                                         "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter")
+
+
+@dataclass(frozen=True)
+class LinkEstimatorParams(Parameters):
+    """Joint-state estimation from tendon lengths ((5.15), Algorithm 1) at the control rate."""
+
+    iterations: int = param(15, unit="-", low=1,
+                            source="chosen: Algorithm 1 steps per period, warm-started (converged to < 1e-4 rad "
+                                   "in tests/test_hand_diagrams.py)")
+    initial_step: float = param(0.1, unit="rad", low=0.0, low_inclusive=False,
+                                source="chosen: s0 of Algorithm 1")
+    rate_hz: float = param(3000.0, unit="Hz", low=0.0, low_inclusive=False,
+                           source="thesis: the hand's sensors and control run at 3 kHz (ch. 1); the estimator "
+                                  "never runs faster, also under a faster control law")
+    velocity_time_constant: float = param(1e-3, unit="s", low=0.0, low_inclusive=False,
+                                          source="chosen: dirty derivative s/(T s + 1) of the estimate, cutoff "
+                                                 "1000 rad/s (3 periods at 3 kHz)")

@@ -270,6 +270,6 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         drift[comp] = res["joint_angle"] - q_op
         fmin[comp] = float(np.min(res["tendon_force"]))
     return WristCompensationStudy(t_grid, amplitude * np.sin(2 * np.pi * frequency * t_grid), drift[False],
-                                  drift[True], list(rig.extra["joint_names"]),
+                                  drift[True], list(rig.joint_names),
                                   {"uncompensated": fmin[False], "compensated": fmin[True]},
                                   {"uncompensated": events[False], "compensated": events[True]})

@@ -14,7 +14,7 @@ from awiwi_drake.parameters.rigs import DemoScenario
 from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
 from awiwi_drake.rigs.rigs import joint_rig
 
-__all__ = ["run_demo", "pole_sweep_pretension"]
+__all__ = ["run_demo", "pole_sweep_pretension", "demo_figure"]
 
 
 def pole_sweep_pretension(rig, pretensions):
@@ -25,6 +25,46 @@ def pole_sweep_pretension(rig, pretensions):
         poles.append(linearize(rig, op).poles)
         stiffness.append(op.info["joint_stiffness"])
     return np.array(poles), np.array(stiffness)
+
+
+def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
+    """The demo's figure: the whole run (left) and a zoom on the link step (right).
+
+    Link angle with its reference; both tendon forces with the pretension
+    reference; the torque applied to each motor (after the motor's saturation,
+    solid) beside the commanded torque (dotted) and the torque limit.  Shaded
+    intervals are events (named in the legend).
+    """
+    from awiwi_drake.plotting import _plt
+
+    plt = _plt()
+    names = ["link_angle", "tendon_force", "applied_torque"]
+    labels = dict(link_angle="link angle [rad]", tendon_force="tendon force [N]",
+                  applied_torque="motor torque [Nm]")
+    kw = dict(labels=labels,
+              reference=dict(link_angle=(t_ref, refs["link_reference"]), tendon_force=(t_ref, refs["pretension"])),
+              components=dict(link_angle=["link angle"], tendon_force=["tendon 1", "tendon 2"],
+                              applied_torque=["motor 1 applied", "motor 2 applied"]),
+              overlay=dict(applied_torque=(result["motor_torque_command"], ["motor 1 commanded", "motor 2 commanded"])),
+              limits=dict(applied_torque=torque_limit) if torque_limit else None)
+    fig, ax = plt.subplots(3, 2, figsize=(12, 7.5), sharex="col", gridspec_kw=dict(width_ratios=[1.6, 1]))
+    plot_signals(result, names, ax=ax[:, 0], **kw)
+    window = (scenario.step_time - 0.02, min(scenario.step_time + 0.15, float(result.t[-1])))
+    plot_signals(result, names, ax=ax[:, 1], xlim=window, legend=False, **kw)
+    for a in ax[:, 1]:  # y range of the zoom from the data inside the window
+        ys = [ln.get_ydata()[(ln.get_xdata() >= window[0]) & (ln.get_xdata() <= window[1])]
+              for ln in a.get_lines() if len(np.atleast_1d(ln.get_xdata())) > 2]
+        ys = np.concatenate([y for y in ys if y.size]) if ys else np.zeros(1)
+        pad = 0.08 * (np.ptp(ys) or 1.0)
+        a.set_ylim(ys.min() - pad, ys.max() + pad)
+        a.set_ylabel("")
+    ax[0, 0].set_title(f"whole run: pretension ramp {scenario.f_start:g} -> {scenario.f_end:g} N, "
+                       f"then a {scenario.link_step:g} rad step", fontsize=9)
+    ax[0, 1].set_title(f"zoom on the step at {scenario.step_time:g} s", fontsize=9)
+    ax[-1, 1].set_xlabel("time [s]")
+    fig.suptitle("joint-rig: motor-position PD at 3 kHz (applied = after the motor's torque saturation)")
+    fig.tight_layout()
+    return fig
 
 
 def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
@@ -46,14 +86,10 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     t_ref, refs = demo_references(rig, scenario)
     diagram = loop.diagram
     ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
-    result = simulate(diagram, ctx, scenario.t_final, log=("link_angle", "tendon_force", "motor_torque"),
+    result = simulate(diagram, ctx, scenario.t_final,
+                      log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
                       monitors=rig_monitors(rig), max_step=1.0 / 3000)
-    fig, _ = plot_signals(result, ["link_angle", "tendon_force", "motor_torque"],
-                          labels=dict(link_angle="link angle [rad]", tendon_force="tendon force [N]",
-                                      motor_torque="motor torque [Nm]"),
-                          reference=dict(link_angle=(t_ref, refs["link_reference"]),
-                                         tendon_force=(t_ref, refs["pretension"])))
-    fig.suptitle("joint_rig: pretension ramp, then a link step (3 kHz motor PD)")
+    fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.torque_limit)
     fig.savefig(out / "demo_joint_rig.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     lever = LeverSpringMechanism(rig.params.spring.geometry)
@@ -62,8 +98,8 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     plt.close(fig)
     pre = np.linspace(5, 60, 8 if short_mode() else 23)
     poles, stiff = pole_sweep_pretension(joint_rig(backend=backend), pre)
-    fig, ax = plot_pole_sweep(pre, poles, "pretension [N]")
-    ax.set_title("joint_rig poles versus pretension (Linearize)")
+    fig, ax = plot_pole_sweep(pre, poles, "pretension [N]", symlog=0.01)  # slow poles at -0.03..-0.1 1/s
+    ax.set_title("joint-rig poles versus pretension (Linearize)")
     fig.savefig(out / "poles_vs_pretension.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     q_end = float(result["link_angle"][-1, 0])

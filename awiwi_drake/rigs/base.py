@@ -10,7 +10,26 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import RevoluteJoint, SpatialInertia, UnitInertia
 from pydrake.systems.framework import Context, Diagram
 
-__all__ = ["OperatingPoint", "Rig", "add_revolute_link"]
+__all__ = ["OperatingPoint", "Rig", "add_revolute_link", "state_names"]
+
+
+def _labels(items) -> list[str]:
+    return [str(i) for i in range(items)] if isinstance(items, int) else [str(s) for s in items]
+
+
+def state_names(*, joints=0, motors=0, hysteresis: bool = False) -> tuple[str, ...]:
+    """The one state-naming scheme of every rig, finger and the hand (diagram state order).
+
+    ``joint_angle[j]``, ``joint_velocity[j]`` (the MultibodyPlant's ``[q, v]``), then
+    ``motor_angle[i]``, ``motor_velocity[i]`` (the drive's ``[theta, omega]``, output shaft), then
+    ``hysteresis_force[i]`` when the springs carry a hysteresis state. ``joints`` and ``motors``
+    are counts (labels ``0, 1, ...``) or sequences of labels (joint names such as ``q21``,
+    tendon names).
+    """
+    j, m = _labels(joints), _labels(motors)
+    return tuple([f"joint_angle[{a}]" for a in j] + [f"joint_velocity[{a}]" for a in j]
+                 + [f"motor_angle[{a}]" for a in m] + [f"motor_velocity[{a}]" for a in m]
+                 + ([f"hysteresis_force[{a}]" for a in m] if hysteresis else []))
 
 
 @dataclass(frozen=True)
@@ -56,6 +75,20 @@ class Rig:
         ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
     spring : object
         The spring law used (``force``, ``stiffness``).
+    drive : TendonDrive or None
+        The tendon-drive handle inside the diagram.
+    coupling : object or None
+        The routing coupling (``h(q)``, ``P(q)``) of the drive.
+    tension_only : bool
+        Tendon forces cannot push (slack is monitored on ``tendon_force``).
+    torque_limit : float or None
+        Amplifier limit [Nm] on ``motor_torque`` (None: no saturation).
+    max_force : float or None
+        Upper end of the calibrated spring range [N] (over-range monitor).
+    pair_slack : tuple or None
+        ``(x0, r)`` of an antagonistic torsion-spring pair whose hidden tendons can slacken.
+    spring_kind : str or None
+        ``"linear"`` or ``"nonlinear"`` for the flexible joint.
     """
 
     name: str
@@ -66,7 +99,13 @@ class Rig:
     equilibrium: Callable[..., OperatingPoint]
     plant: MultibodyPlant | None = None
     spring: Any = None
-    extra: dict = field(default_factory=dict)
+    drive: Any = None
+    coupling: Any = None
+    tension_only: bool = True
+    torque_limit: float | None = None
+    max_force: float | None = None
+    pair_slack: tuple | None = None
+    spring_kind: str | None = None
 
     @property
     def num_states(self) -> int:

@@ -35,7 +35,7 @@ from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupli
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
-from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
+from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link, state_names
 
 __all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 
@@ -81,7 +81,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name("tendon_rig")
-    names = ("theta", "omega") + (("hysteresis_force",) if drive.hysteresis else ())
+    names = state_names(motors=1, hysteresis=drive.hysteresis)
 
     def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
         tendon_force = p.operating_force if tendon_force is None else float(tendon_force)
@@ -97,15 +97,14 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
                               dict(tendon_force=tendon_force, elongation=x,
                                    tendon_stiffness=float(spring.stiffness(np.array([x]))[0])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring,
-               dict(drive=drive, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force))
+    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
+               tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
 
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
-              motor_pulley_radius=None, names_motor):
+              motor_pulley_radius=None):
     """Shared builder: MultibodyPlant link(s) + tendon drive (or one fused system), exported ports."""
-    names = ("q", "qdot") + names_motor + tuple(f"hysteresis_force{i + 1}" for i in range(coupling.num_tendons)
-                                                  if hysteresis.enabled)
+    names = state_names(joints=coupling.num_joints, motors=coupling.num_tendons, hysteresis=hysteresis.enabled)
     if backend == "compiled":
         r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
         model = DriveModel(motor, (spring,) * coupling.num_tendons, coupling, np.zeros(coupling.num_tendons), r_m,
@@ -191,7 +190,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
         name="flexible_joint_rig", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
         inertia=p.link_inertia, damping=p.link_damping, backend=backend,
         hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
-        motor_pulley_radius=1.0, names_motor=("theta", "thetadot"))
+        motor_pulley_radius=1.0)
 
     def equilibrium(link_angle: float = 0.0, external_torque: float = 0.0) -> OperatingPoint:
         tau_s = -float(external_torque)
@@ -204,10 +203,9 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
                               dict(link_angle=link_angle, external_torque=external_torque, spring_torque=tau_s,
                                    stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0])))
 
-    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law,
-               dict(drive=drive, spring_kind=spring, tension_only=False,
-                    torque_limit=p.torque_limit if finite_limit else None,
-                    pair_slack=(law.x0, law.r) if spring == "nonlinear" else None))
+    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
+               spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
+               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None)
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -230,8 +228,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     coupling = antagonistic_coupling(p.link_pulley_radius)
     diagram, plant, drive, names = _link_rig(
         name="joint_rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
-        damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis,
-        names_motor=("theta1", "theta2", "omega1", "omega2"))
+        damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis)
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
 
     def equilibrium(pretension: float | None = None, link_angle: float = 0.0,
@@ -255,9 +252,9 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                                    tendon_force=f, elongation=x, tendon_stiffness=k,
                                    joint_stiffness=float(rq ** 2 * k.sum())))
 
-    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring,
-               dict(drive=drive, coupling=coupling, tension_only=True, torque_limit=_limit(p.motor),
-                    max_force=spring.max_force))
+    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
+               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
+
 
 
 def motor_rig(motor: MotorParams | None = None) -> Rig:
@@ -277,4 +274,4 @@ def motor_rig(motor: MotorParams | None = None) -> Rig:
         w = float(motor_velocity)
         return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
 
-    return Rig("motor_rig", d, p, ("theta", "omega"), "python", equilibrium)
+    return Rig("motor_rig", d, p, state_names(motors=1), "python", equilibrium)

@@ -12,8 +12,10 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
-from awiwi_drake.analysis.simulate import SimulationDivergedError
+from awiwi_drake.analysis import SimulationDivergedError, simulate
+from awiwi_drake.analysis.schedules import Schedule
 from awiwi_drake.control.base import ClosedLoop
+from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TestRun", "simulate_loop", "simulate_test", "settle"]
 
@@ -107,26 +109,30 @@ def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
     return out
 
 
-def simulate_test(loop: ClosedLoop, context, t_final: float, dt: float, reference: Callable[[float], float],
-                  disturbance: Callable[[float], float] | None, max_step: float, controller: str, test: str,
+def simulate_test(loop: ClosedLoop, context, t_final: float, dt: float, reference: Schedule,
+                  disturbance: Schedule | None, max_step: float, controller: str, test: str,
                   meta: dict | None = None) -> TestRun:
-    """One test run: ``reference(t)`` on every reference input, ``disturbance(t)`` on ``external_torque``."""
+    """One test through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` (the control period):
+    ``reference`` on every reference input, ``disturbance`` on ``external_torque``."""
     inputs = {r: reference for r in loop.references}
     if "external_torque" in loop.disturbances:
-        inputs["external_torque"] = disturbance or (lambda t: 0.0)
+        inputs["external_torque"] = disturbance if disturbance is not None else 0.0
     y = loop.tracked_outputs[0]
-    outputs = [y, "motor_torque_command"]
-    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    log = [y, "motor_torque_command", "state", loop.references[0]]
+    if "external_torque" in inputs:
+        log.append("external_torque")
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
-        outputs.append("tendon_force")
-    log = simulate_loop(loop, context, t_final, dt, inputs=inputs, outputs=outputs,
-                        max_step=max_step, label=f"{controller}/{test}")
-    w = log["external_torque"][:, 0] if "external_torque" in log else np.zeros(len(log["t"]))
+        log.append("tendon_force")
+    res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                   max_step=max_step, accuracy=1e-6)
+    t = res.t - res.t[0]
+    w = res["external_torque"][:, 0] if "external_torque" in res else np.zeros(len(t))
     meta = dict(meta or {})
     if slack:
-        meta["tendon_force"] = log["tendon_force"]
-    return TestRun(controller, test, log["t"], log[loop.references[0]][:, 0], log[y][:, 0],
-                   log["motor_torque_command"], w, log["x"], meta)
+        meta["tendon_force"] = res["tendon_force"]
+    return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
+                   res["motor_torque_command"], w, res["state"], meta)
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: float = 2e-4, state=None,
@@ -147,9 +153,6 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: flo
     ctx = loop.create_context(state=state, motor_torque=motor_torque,
                               references={r: reference for r in loop.references})
     if t_settle > 0:
-        sim = _make_simulator(loop, ctx, max_step)
-        sim.AdvanceTo(t_settle)
-        if not np.all(np.isfinite(ctx.get_continuous_state_vector().CopyToVector())):
-            raise SimulationDivergedError(f"closed loop diverged while settling at reference {reference}")
+        simulate(loop, ctx, t_settle, log=(), max_step=max_step, accuracy=1e-6)  # advances ctx
     ctx.SetTime(0.0)
     return ctx

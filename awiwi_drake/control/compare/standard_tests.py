@@ -25,13 +25,14 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from awiwi_drake.analysis.simulate import SimulationDivergedError
+from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step
 from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, sine_metrics, step_metrics,
                                                  sweep_metrics)
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
 from awiwi_drake.control.registry import get_entry, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
+from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "flag_run", "run_standard_tests", "compare",
            "compare_controllers"]
@@ -88,21 +89,18 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     meta: dict[str, Any] = {}
     dist = None
     if test == "step":
-        t0, r1 = p.step_delay, r0 + p.step_size
-        ref = (lambda t: r1 if t >= t0 - 1e-12 else r0)
+        ref = Step(p.step_delay, r0 + p.step_size, before=r0)
         t_final = p.step_duration
     elif test == "sine":
-        ref = (lambda t: r0 + p.sine_amplitude * math.sin(2 * math.pi * p.sine_frequency * t))
+        ref = Sine(p.sine_amplitude, p.sine_frequency, offset=r0)
         t_final = p.sine_periods / p.sine_frequency
     elif test == "disturbance":
-        t0 = p.step_delay
-        ref = (lambda t: r0)
-        dist = (lambda t: p.disturbance_torque if t >= t0 - 1e-12 else 0.0)
+        ref = Constant(r0)
+        dist = Step(p.step_delay, p.disturbance_torque)
         t_final = p.step_duration
     else:
         f0, f1, T = p.sweep_start, p.sweep_stop, p.sweep_duration
-        k = (f1 - f0) / T
-        ref = (lambda t: r0 + p.sweep_amplitude * math.sin(2 * math.pi * (f0 * t + 0.5 * k * t * t)))
+        ref = Chirp(p.sweep_amplitude, f0, f1, T, offset=r0)
         t_final = T
         meta.update(f_low=f0, f_high=f1)
     run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
@@ -110,8 +108,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     u = np.abs(run.command)
     m.peak_input = float(np.max(u))
     limit = loop.saturation
-    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
-        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
     if limit is not None:
         m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
     if "tendon_force" in run.meta:

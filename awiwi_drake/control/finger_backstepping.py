@@ -1,0 +1,149 @@
+"""Antagonistic backstepping (thesis 15.5, (15.82)-(15.106)) for a finger or the whole hand.
+
+Section 15.5 keeps the symmetry of the antagonistic joint by letting "the motors not be aware of
+one another": the desired link torque is *shared* among the tendons, a pretension is added, and
+the backstepping steps on the tendon force are done per tendon; the motor torques come out of the
+law directly (no force distribution, no force loop).  Here that construction is written for ``n``
+independent DoF and ``m`` tendons with the coupling ``P(q)`` (m x n plant joints) and the DoF
+selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
+
+    e = S^+ (q - q_ref),  e' = S^+ qdot                            DoF errors (references held)
+    alpha = tau_op - Kp e - Kd e'                                   (15.54) per DoF
+    f_d = f_op + W (alpha - tau_op),  W = -((P S)^T)^+              sharing (15.88): -(PS)^T f_d = alpha
+    z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
+    u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
+
+with the tendon force ``f = phi(x)`` of the measured spring elongation ``x``, the motor friction
+(3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
+cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
+``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
+phi' (r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B + P qddot)``.  The joint accelerations
+come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``, the DoF
+inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
+rest, are left out) and their derivative from ``f'``.  For that model
+
+    V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,
+    V' = -e'^T (Kd + B_q) e' - K3 |z3|^2 - K4 |z4|^2 <= 0
+
+(the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
+``beta``).  Output port ``lyapunov`` gives ``V``.  With one DoF and ``P = [-r_q, r_q]^T`` it is the
+antagonistic joint of 15.5.
+
+Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
+tendon force error that is close to the cascaded case"): per DoF ``Kp = M_jj w_j^2``, ``Kd = 2
+zeta w_j M_jj`` and per tendon ``K3 = K4 = w_f``, so that the force-error feedback ``(1 + K3 K4)
+/ g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at the same bandwidth (``alpha = r_m
+phi'``; critically damped); per DoF ``Kp = joint_stiffness`` (the impedance gain of Fig 15.22) and
+``Kd = 2 zeta sqrt(Kp M_jj)`` (``M_jj`` the DoF's own inertia), with ``w_f``, ``zeta`` of
+:class:`HandChainParams`.  Unlike the
+cascade (15.5.3) the joint gain is not limited by the force loop's bandwidth.
+
+Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand),
+``elongation`` (the spring sensors), ``motor_angle``, ``motor_velocity``; reference
+``joint_angle_reference`` (n plant joints, derivatives taken as zero: a set-point law).
+Scalar types float and AutoDiffXd (``W`` is evaluated at the value of ``q``: exact for the
+constant-coupling fingers, the thumb base's ``dW/dq`` is not differentiated).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from awiwi_drake.rigs.base import Rig
+from awiwi_drake._math import is_float
+from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
+from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.control.chain import dof_selection, joint_inertia
+from awiwi_drake.parameters.hand_control import HandChainParams
+
+__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller"]
+
+
+def _values(a) -> np.ndarray:
+    a = np.asarray(a)
+    if a.dtype != object:
+        return a.astype(float)
+    return np.array([float(v.value()) if hasattr(v, "value") else float(v) for v in a.reshape(-1)]).reshape(a.shape)
+
+
+class FingerBacksteppingLaw(StaticLaw):
+    """The law of the module docstring (one call: all DoF and tendons of a finger or the hand)."""
+
+    def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None):
+        p = params or HandChainParams()
+        coupling = rig.coupling if isinstance(rig, Rig) else None
+        if coupling is None:
+            raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
+        op = op or rig.operating_point()
+        self.name = "finger_backstepping"
+        self.coupling, self.spring, self.motor = coupling, rig.spring, rig.params.motor
+        self.S = dof_selection(coupling)
+        self.Sp = np.linalg.pinv(self.S)
+        n, k = self.S.shape
+        m = coupling.num_tendons
+        self.r_m, self.B = float(self.motor.pulley_radius), float(self.motor.inertia)
+        self.q_op = np.asarray(op.info["joint_angles"], dtype=float)
+        self.f_op = np.asarray(op.info["tendon_force"], dtype=float)
+        self.tau_op = -(np.asarray(coupling.P(self.q_op), dtype=float) @ self.S).T @ self.f_op
+        self.M = joint_inertia(rig, self.q_op, full=True)          # S^T M(q_op) S (DoF inertia matrix)
+        self._Minv = np.linalg.inv(self.M)
+        plant = rig.plant
+        b_q = np.array([plant.get_joint(j).default_damping_vector()[0] for j in plant.GetJointIndices()])
+        self.Bq = self.S.T @ np.diag(b_q) @ self.S                # joint damping on the DoF
+        wf, zeta = p.force_bandwidth, p.damping_ratio
+        self.Kp = np.full(k, p.joint_stiffness)
+        self.Kd = 2.0 * zeta * np.sqrt(self.Kp * np.diag(self.M))
+        self.K3 = self.K4 = float(wf)
+        self.friction_scale = float(p.friction_scale)
+        self.inputs = {"joint_angle_reference": n, "joint_angle": n, "joint_velocity": n, "elongation": m,
+                       "motor_angle": m, "motor_velocity": m}
+        self.output_size = m
+        self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
+                           tendon_force=self.f_op, torque_offset=self.tau_op)
+
+    def terms(self, u) -> dict:
+        """All intermediate quantities (``z3``, ``z4``, ``e``, ``V``, ``command``) for inputs ``u``."""
+        S, Sp = self.S, self.Sp
+        q, v = u["joint_angle"], u["joint_velocity"]
+        x, th, w = u["elongation"], u["motor_angle"], u["motor_velocity"]
+        P = np.asarray(self.coupling.P(q))
+        P_val = _values(P)
+        PS = P @ S
+        W = -np.linalg.pinv((P_val @ S).T)                     # m x k, frozen at the value of q
+        e = Sp @ (q - u["joint_angle_reference"])
+        ed = Sp @ v
+        f = self.spring.force(x)
+        k1 = self.spring.stiffness(x)
+        k2 = self.spring.stiffness_derivative(x)
+        xd = self.r_m * w + P @ v
+        fd = k1 * xd
+        tau = -(PS.T @ f)
+        edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e'
+        eddd = self._Minv @ (-(PS.T @ fd) - self.Bq @ edd)
+        a0 = -self.Kp * e - self.Kd * ed
+        a1 = -self.Kp * ed - self.Kd * edd
+        a2 = -self.Kp * edd - self.Kd * eddd
+        f_des = self.f_op + W @ a0
+        z3 = f - f_des
+        beta = W @ a1 - self.K3 * z3 + PS @ ed
+        z4 = fd - beta
+        beta_d = W @ a2 - self.K3 * (fd - W @ a1) + PS @ edd
+        wd0 = (self.friction_scale * motor_friction_torque(w, self.motor) + motor_ripple_torque(th, self.motor)
+               - self.r_m * f) / self.B
+        f0 = k2 * xd * xd + k1 * (self.r_m * wd0 + P @ (S @ edd))
+        g = k1 * self.r_m / self.B
+        cmd = (beta_d - f0 - z3 - self.K4 * z4) / g
+        V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp * e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
+        return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
+
+    def __call__(self, u):
+        return self.terms(u)["command"]
+
+
+def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None):
+    """Registered factory ``backstepping`` for fingers and the hand (see the module docstring)."""
+    if not (np.all(np.asarray(rig.spring.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
+        raise ValueError("finger backstepping needs a strictly increasing spring (phi' > 0, section 15.4)")
+    return StaticLawController(FingerBacksteppingLaw(rig, params, op=op))

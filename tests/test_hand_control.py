@@ -1,0 +1,203 @@
+"""The thesis's control chain on fingers and the hand (issue 10 items 1-3): closed_loop with the
+tendon-length estimator, the cascaded chain (joint impedance -> force distribution -> force PD)
+and the antagonistic backstepping of 15.5 generalised to a finger."""
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.primitives import Linearize
+
+from _fd import check_system_autodiff_matches_fd
+from awiwi_drake.analysis import simulate
+from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
+from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.control.chain import (JointImpedanceBank, TendonChainController, TendonPathVelocity,
+                                       dof_selection)
+from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
+from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
+from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandChainParams
+
+PERIOD = 1.0 / 3000.0
+
+
+def _rig(finger="index"):
+    return finger_diagram(finger=finger, backend="python")
+
+
+def test_registry_and_port_contract_on_a_finger():
+    for target in ("finger-index", "finger-thumb", "hand"):
+        assert {"joint-pd", "cascaded", "backstepping"} <= set(controller_names(target))
+    rig = _rig()
+    loop = closed_loop(rig, make_controller("cascaded", rig))
+    # no joint sensors: the controller's joint state comes from the tendon-length estimator
+    assert loop.estimated == ("joint_angle", "joint_velocity")
+    for port in ("joint_angle_estimate", "joint_angle_estimation_error", "joint_velocity_estimate"):
+        assert loop.diagram.HasOutputPort(port)
+    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")
+    assert ideal.estimated == () and not ideal.diagram.HasOutputPort("joint_angle_estimate")
+    # a motor-side controller needs no estimator
+    assert closed_loop(_rig(), make_controller("joint-pd", rig)).estimated == ()
+
+    class ReadsState(StaticLaw):
+        inputs = {"state": 24, "joint_angle_reference": 4}
+        output_size = 8
+
+        def __call__(self, u):
+            return np.zeros(8)
+
+    with pytest.raises(ValueError, match="reads the rig's full 'state'.*no joint sensors"):
+        closed_loop(_rig(), StaticLawController(ReadsState()))
+    with pytest.raises(ValueError, match="runs at the control rate"):
+        closed_loop(_rig(), make_controller("cascaded", rig), rate_hz=None)
+    with pytest.raises(ValueError, match="sensors = 'perfect'"):
+        closed_loop(_rig(), make_controller("joint-pd", rig), sensors="perfect")
+    with pytest.raises(ValueError, match="source given for 'wrist'"):
+        closed_loop(_rig(), make_controller("joint-pd", rig), sources={"wrist": None})
+
+
+def test_new_systems_convert_to_autodiff_and_match_finite_differences():
+    rig = _rig("ring")                      # coupled PIP/DIP: S is not the identity
+    coupling = rig.coupling
+    S = dof_selection(coupling)
+    n, k = S.shape
+    rng = np.random.default_rng(3)
+    bank = JointImpedanceBank(S, np.full(k, 0.5), np.full(k, 1e-3), rng.normal(0, 0.01, k), np.ones(k))
+    check_system_autodiff_matches_fd(bank, [], dict(joint_angle_reference=rng.normal(0, 0.2, n),
+                                                    joint_angle=rng.normal(0, 0.2, n),
+                                                    joint_velocity=rng.normal(0, 1, n)),
+                                     outputs=["joint_torque_reference"])   # the stiffness output is constant
+    thumb = _rig("thumb")
+    path = TendonPathVelocity(thumb.coupling)      # P(q) of the thumb base
+    check_system_autodiff_matches_fd(path, [], dict(joint_angle=rng.normal(0, 0.3, 4),
+                                                    joint_velocity=rng.normal(0, 1, 4)))
+    m = rig.coupling.num_tendons
+    fmap = ForceMap.from_spring(rig.spring, rig.params.motor.pulley_radius)
+    law = TendonForceLaw(fmap, rig.params.motor, scheduled=True, size=m, ripple_scale=0.8, path_velocity=True)
+    check_system_autodiff_matches_fd(StaticLawController(law), [], dict(
+        tendon_force_reference=rng.uniform(10, 40, m), tendon_force=rng.uniform(10, 40, m),
+        motor_velocity=rng.normal(0, 0.5, m), motor_angle=rng.normal(0, 0.3, m),
+        tendon_path_velocity=rng.normal(0, 0.01, m)), rtol=1e-4)
+    index = _rig("index")
+    op = index.operating_point()
+    bs = StaticLawController(FingerBacksteppingLaw(index))
+    check_system_autodiff_matches_fd(bs, [], dict(
+        joint_angle_reference=rng.normal(0, 0.1, 4), joint_angle=rng.normal(0, 0.1, 4),
+        joint_velocity=rng.normal(0, 0.5, 4), elongation=op.info["elongation"] + rng.normal(0, 1e-4, 8),
+        motor_angle=rng.normal(0, 0.1, 8), motor_velocity=rng.normal(0, 0.5, 8)), rtol=1e-4)
+
+
+def test_force_map_of_the_hand_spring_is_the_spring():
+    """ForceMap.from_spring tabulates f(r_m theta) and alpha = r_m k_t of the finger's own spring."""
+    rig = _rig()
+    r_m = rig.params.motor.pulley_radius
+    fmap = ForceMap.from_spring(rig.spring, r_m)
+    x = np.array([float(np.ravel(rig.spring.inverse_force(np.array([f])))[0]) for f in (5.0, 20.0, 60.0, 150.0)])
+    np.testing.assert_allclose([fmap.force_at(t) for t in x / r_m], [5.0, 20.0, 60.0, 150.0], rtol=1e-4)
+    np.testing.assert_allclose([fmap.alpha_of_force(f) for f in (5.0, 20.0, 60.0, 150.0)],
+                               r_m * rig.spring.stiffness(x), rtol=2e-3)
+
+
+@pytest.mark.parametrize("finger", ["index", "ring", "thumb"])
+def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bounds(finger):
+    """Inside the chain the distribution's forces produce the joint law's torque exactly (-(PS)^T f =
+    tau, with the thumb's P(q) at the estimated pose) and stay within [f_min, f_max]."""
+    rig = _rig(finger)
+    ctrl = TendonChainController(rig)
+    coupling = rig.coupling
+    S = dof_selection(coupling)
+    n, m = S.shape[0], coupling.num_tendons
+    op = rig.operating_point()
+    rng = np.random.default_rng({"index": 1, "ring": 2, "thumb": 3}[finger])
+    q = op.info["joint_angles"] + S @ rng.normal(0, 0.1, S.shape[1])
+    ctx = ctrl.CreateDefaultContext()
+    ctrl.initialize_state(ctx)
+    fixed = dict(joint_angle_reference=q + S @ rng.normal(0, 0.2, S.shape[1]), joint_angle=q,
+                 joint_velocity=S @ rng.normal(0, 0.5, S.shape[1]), tendon_force=op.info["tendon_force"],
+                 motor_velocity=np.zeros(m), motor_angle=np.zeros(m))
+    for name, value in fixed.items():
+        if ctrl.HasInputPort(name):
+            ctrl.GetInputPort(name).FixValue(ctx, value)
+    sim = Simulator(ctrl, ctx)
+    sim.AdvanceTo(30.5 * PERIOD)           # warm-started: one QP per period
+    f = ctrl.GetOutputPort("tendon_force_reference").Eval(ctx)
+    tau = ctrl.GetOutputPort("joint_torque_reference").Eval(ctx)
+    P = np.asarray(coupling.P(q), float)
+    np.testing.assert_allclose(-(P @ S).T @ f, tau, atol=1e-9 * max(1.0, np.abs(f).max()))
+    p = ForceDistributionParams()
+    assert np.all(f >= p.f_min - 1e-9) and np.all(f <= p.f_max + 1e-9)
+    assert np.all(ctrl.GetOutputPort("distribution_status").Eval(ctx) == 0)
+    assert np.abs(tau - ctrl.design["torque_offset"]).max() > 1e-3     # a real request, not the op
+
+
+@pytest.mark.parametrize("finger", ["index", "middle"])
+def test_finger_backstepping_closed_loop_poles_equal_the_design(finger):
+    """Linearize (Drake) of the finger under the 15.5 backstepping (continuous, true joint state) has
+    exactly the poles of the designed error system (e, e', z3, z4): the per-joint design is what the
+    plant does, not an approximation (constant-coupling fingers; Coriolis vanish at rest)."""
+    rig = _rig(finger)
+    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))   # the continuous design: exact cancellation
+    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
+    op = rig.operating_point()
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.info["joint_angles"]})
+    assert np.abs(loop.diagram.EvalTimeDerivatives(ctx).CopyToVector()).max() < 1e-8   # op is an equilibrium
+    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index())
+    S = law.S
+    PS = np.asarray(rig.coupling.P(op.info["joint_angles"])) @ S
+    k, m = S.shape[1], PS.shape[0]
+    Mi = np.linalg.inv(law.M)
+    A = np.zeros((2 * k + 2 * m, 2 * k + 2 * m))          # d/dt [e, e', z3, z4]
+    A[:k, k:2 * k] = np.eye(k)
+    A[k:2 * k, :k] = -Mi @ np.diag(law.Kp)
+    A[k:2 * k, k:2 * k] = -Mi @ (np.diag(law.Kd) + law.Bq)
+    A[k:2 * k, 2 * k:2 * k + m] = -Mi @ PS.T
+    A[2 * k:2 * k + m, k:2 * k] = PS
+    A[2 * k:2 * k + m, 2 * k:2 * k + m] = -law.K3 * np.eye(m)
+    A[2 * k:2 * k + m, 2 * k + m:] = np.eye(m)
+    A[2 * k + m:, 2 * k:2 * k + m] = -np.eye(m)
+    A[2 * k + m:, 2 * k + m:] = -law.K4 * np.eye(m)
+    designed = np.linalg.eigvals(A)
+    actual = np.linalg.eigvals(lin.A())
+    assert actual.size == designed.size
+    for lam in designed:                     # every designed pole is a pole of the linearisation
+        assert np.min(np.abs(actual - lam)) < 1e-5 * max(1.0, abs(lam)), lam
+    assert np.all(actual.real < 0)
+
+
+def test_finger_backstepping_lyapunov_function_decreases():
+    """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
+    loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index."""
+    rig = _rig()
+    law = FingerBacksteppingLaw(rig)
+    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
+    op = rig.operating_point()
+    ref = op.info["joint_angles"] + 0.1
+    ctx = loop.create_context(op, references={"joint_angle_reference": ref})
+    names = ("joint_angle", "joint_velocity", "elongation", "motor_angle", "motor_velocity")
+    res = simulate(loop.diagram, ctx, 0.05, log=names, max_step=5e-4, accuracy=1e-7)
+    V = np.array([law.terms(dict(joint_angle_reference=ref, **{n: res[n][i] for n in names}))["V"]
+                  for i in range(len(res.t))])
+    assert V[-1] < 0.05 * V[0]
+    assert np.max(np.diff(V)) <= 1e-6 * V[0], np.max(np.diff(V)) / V[0]
+
+
+@pytest.mark.parametrize("controller", ["cascaded", "backstepping"])
+def test_index_finger_step_with_estimated_joint_angles(controller):
+    """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
+    tendons never go slack, and the estimation error stays below one period of motion |v| / 3000
+    (the estimate is exact at the samples for a constant coupling, (5.15))."""
+    rig = _rig()
+    loop = closed_loop(rig, make_controller(controller, rig), **get_entry(controller, rig).loop_options)
+    op = rig.operating_point()
+    q_ref = op.info["joint_angles"].copy()
+    q_ref[1] += 0.2
+    ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
+    res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle", "joint_velocity", "joint_angle_estimation_error",
+                                                 "tendon_force"), max_step=1.0 / loop.rate_hz, accuracy=1e-3)
+    q_end = res["joint_angle"][-1]
+    assert abs(q_end[1] - q_ref[1]) < 0.02 * 0.2
+    assert np.all(res["tendon_force"] > 0.0)
+    err = np.abs(res["joint_angle_estimation_error"])
+    bound = np.abs(res["joint_velocity"]).max(axis=0) * PERIOD
+    assert np.all(err.max(axis=0) <= bound + 1e-9), (err.max(axis=0), bound)

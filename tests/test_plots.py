@@ -1,0 +1,98 @@
+"""Figures explain themselves: every trace in a legend, units on every axis, limits and events drawn.
+
+The demo figure is drawn from a real (short) simulation of the demo loop; the checks are on the
+matplotlib objects, plus the physics the figure claims: the applied torque is the commanded one
+clipped at the motor's torque limit.
+"""
+
+from __future__ import annotations
+
+import re
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+UNIT = re.compile(r"\[[^\]]+\]")
+
+
+def _traces(ax):
+    return [ln for ln in ax.get_lines() if len(np.atleast_1d(ln.get_xdata())) > 2]
+
+
+def _check_axes_explained(axes, *, need_legend=True):
+    for a in axes:
+        assert UNIT.search(a.get_ylabel()), f"no unit on y axis {a.get_ylabel()!r}"
+        if need_legend:
+            leg = a.get_legend()
+            assert leg is not None, f"panel {a.get_ylabel()!r} has no legend"
+            labels = {t.get_text() for t in leg.get_texts()}
+            for ln in _traces(a):
+                assert ln.get_label() in labels, f"trace {ln.get_label()!r} of {a.get_ylabel()!r} not in the legend"
+
+
+@pytest.fixture(scope="module")
+def demo_run():
+    from awiwi_drake.analysis import rig_monitors, simulate
+    from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
+    from awiwi_drake.parameters.rigs import DemoScenario
+    from awiwi_drake.rigs.rigs import joint_rig
+
+    rig = joint_rig()
+    sc = DemoScenario(t_final=0.85, ramp_time=0.3, step_time=0.7)
+    loop = joint_rig_position_loop(rig, sc)
+    t_ref, refs = demo_references(rig, sc)
+    ctx = loop.create_context(rig.operating_point(pretension=sc.f_start))
+    res = simulate(loop.diagram, ctx, sc.t_final,
+                   log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
+                   monitors=rig_monitors(rig), max_step=1.0 / 3000)
+    return rig, sc, t_ref, refs, res
+
+
+def test_demo_figure_has_legends_units_limit_and_applied_torque(demo_run):
+    import matplotlib.pyplot as plt
+
+    from awiwi_drake.reproductions.demo import demo_figure
+
+    rig, sc, t_ref, refs, res = demo_run
+    limit = rig.torque_limit
+    fig = demo_figure(res, t_ref, refs, sc, torque_limit=limit)
+    axes = np.array(fig.axes).reshape(3, 2)
+    _check_axes_explained(axes[:, 0])
+    for a in axes[-1]:
+        assert "[s]" in a.get_xlabel()
+    labels = {t.get_text() for t in axes[2, 0].get_legend().get_texts()}
+    assert {"motor 1 applied", "motor 2 applied", "motor 1 commanded", "motor 2 commanded"} <= labels
+    assert any(lab.startswith("limit") for lab in labels)
+    assert "actuator saturation (event)" in labels            # the shaded interval is named
+    hlines = [ln.get_ydata()[0] for ln in axes[2, 0].get_lines() if np.ptp(ln.get_ydata()) == 0]
+    assert limit in hlines and -limit in hlines
+    # the zoom column shows the step window
+    lo, hi = axes[0, 1].get_xlim()
+    assert lo < sc.step_time < hi and hi - lo < 0.3
+    plt.close(fig)
+    # physics the figure claims: applied = commanded clipped at the limit
+    cmd, app = res["motor_torque_command"], res["applied_torque"]
+    assert np.max(np.abs(cmd)) > limit                       # the step saturates (why the limit is drawn)
+    np.testing.assert_allclose(app, np.clip(res["motor_torque"], -limit, limit), atol=1e-9)
+
+
+def test_pole_sweep_symlog_keeps_slow_poles_visible():
+    import matplotlib.pyplot as plt
+
+    from awiwi_drake.plotting import plot_pole_sweep
+
+    poles = [np.array([-2800.0, -700 + 1500j, -700 - 1500j, -0.05, 1e-13]) * s for s in (1.0, 1.1)]
+    fig, ax = plot_pole_sweep([10.0, 20.0], poles, "pretension [N]", symlog=0.01)
+    assert ax.get_xscale() == "symlog"
+    # -0.05 1/s lies a visible distance from the origin on the transformed axis (> 5 % of the axis width)
+    tr = ax.transData.transform
+    x0, x1 = tr((0.0, 0.0))[0], tr((-0.05, 0.0))[0]
+    width = ax.get_window_extent().width
+    assert abs(x1 - x0) > 0.05 * width
+    lo, hi = ax.get_xlim()
+    assert lo < -2800 and hi > 0
+    plt.close(fig)
