@@ -55,9 +55,10 @@ def build_target(name: str, overrides: dict | None = None, *, params=None, **kwa
 def _hand_target(finger: str | None):
     def build(*, params=None, backend: str | None = None):
         from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
-        if finger is None:  # python banks are faster than the fused drive for 38 tendons
-            return hand_diagram(params=params, backend=backend or "python", wrist=True)
-        return finger_diagram(finger=finger, params=params, backend=backend or "symbolic")
+        kw = {} if backend is None else {"backend": backend}
+        if finger is None:
+            return hand_diagram(params=params, wrist=True, **kw)
+        return finger_diagram(finger=finger, params=params, **kw)
     build.__name__ = f"{finger or 'hand'}_target"
     return build
 
@@ -103,12 +104,12 @@ def _joint_loop():
 
 def _export_hand():
     from awiwi_drake.hand.diagrams import hand_diagram
-    return hand_diagram(backend="symbolic").diagram
+    return hand_diagram().diagram
 
 
 def _export_hand_python():
     from awiwi_drake.hand.diagrams import hand_diagram
-    return hand_diagram(backend="python").diagram
+    return hand_diagram().diagram
 
 
 def _export_index_loop():
@@ -120,7 +121,7 @@ def _export_index_loop():
 
 def _export_ring():
     from awiwi_drake.hand.diagrams import finger_diagram
-    return finger_diagram(finger="ring", backend="python").diagram
+    return finger_diagram(finger="ring").diagram
 
 
 HAND_DIAGRAM_EXPORTS = [

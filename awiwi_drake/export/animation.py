@@ -121,14 +121,14 @@ def frame_camera(points: np.ndarray, params: AnimationParams | None = None) -> t
     return target + distance * direction, target
 
 
-def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "python",
+def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "compiled",
                      meshcat: Meshcat | None = None, params: AnimationParams | None = None,
                      progress=None) -> AnimationResult:
     """Simulate a grasp of ``target`` ("hand" or a finger name) and write ``out`` (HTML).
 
     The HTML is self-contained (opens offline) and holds the geometry, the
-    motion and the camera framed on the moving links.  ``backend="python"`` is
-    the faster drive for the whole hand (see benchmarks/bench_hand.py).
+    motion and the camera framed on the moving links.  ``backend="compiled"`` (the
+    default) is the fast drive (see benchmarks/bench_rigs.py).
     ``progress(t, duration)`` is passed to :func:`simulate` (e.g.
     :class:`awiwi_drake.config.SimulationProgress`).  Returns an :class:`AnimationResult`.
     """
@@ -145,7 +145,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     from awiwi_drake.control import closed_loop, make_controller
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     op = rig.operating_point()
-    q0 = op.info["joint_angles"]
+    q0 = op.joint_angle
     q1 = grasp_pose(rig)
     b = DiagramBuilder()
     sys = b.AddSystem(cl.diagram)

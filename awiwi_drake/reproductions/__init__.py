@@ -22,6 +22,7 @@ ch. 14 SDRE (Fig 14.3-14.5)                    :mod:`.ch14_sdre`
 ch. 15 backstepping (Fig 15.2-15.27)           :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`
 ch. 16 optimal backstepping gains (Tab 16.1)   :mod:`.ch16_optimal_backstepping`
 ``awiwi-drake demo`` (joint rig)               :mod:`.demo`
+invented parameters (figure sensitivity)      :mod:`.invented_parameters`
 =============================================  =========================================
 
 Modules are imported on demand (``from awiwi_drake.reproductions import ch15_backstepping``).

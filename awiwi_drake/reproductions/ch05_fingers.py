@@ -188,7 +188,7 @@ class CouplingHoldStudy:
 
 
 def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final: float = 0.3,
-                        backend: str = "symbolic", controller: JointControllerParams | None = None
+                        backend: str = "compiled", controller: JointControllerParams | None = None
                         ) -> CouplingHoldStudy:
     """Step the PIP reference of a coupled finger by ``pip_step`` [rad] and log PIP/DIP."""
     rig = finger_diagram(finger=finger, backend=backend)

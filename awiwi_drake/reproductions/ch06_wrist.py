@@ -239,7 +239,7 @@ class WristCompensationStudy:
                 "compensated": float(np.max(np.abs(self.drift_compensated)))}
 
 
-def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic", amplitude: float = np.radians(5.0), frequency: float = 2.0,
+def wrist_compensation_study(target: str = "index", *, backend: str = "compiled", amplitude: float = np.radians(5.0), frequency: float = 2.0,
                              t_final: float = 0.5, controller: JointControllerParams | None = None,
                              accuracy: float = 1e-3) -> WristCompensationStudy:
     """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
@@ -259,7 +259,7 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         ctx = d.CreateDefaultContext()
         op = rig.operating_point()
         cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
-        q_op = op.info["joint_angles"]
+        q_op = op.joint_angle
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
         res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},

@@ -23,7 +23,7 @@ def pole_sweep_pretension(rig, pretensions):
     for f0 in pretensions:
         op = rig.operating_point(pretension=float(f0))
         poles.append(linearize(rig, op).poles)
-        stiffness.append(op.info["joint_stiffness"])
+        stiffness.append(op.joint_stiffness)
     return np.array(poles), np.array(stiffness)
 
 
