@@ -38,7 +38,7 @@ def _check_axes_explained(axes, *, need_legend=True):
 def demo_run():
     from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
-    from awiwi_drake.rigs.demo import DemoScenario
+    from awiwi_drake.parameters.rigs import DemoScenario
     from awiwi_drake.rigs.rigs import joint_rig
 
     rig = joint_rig()
@@ -55,7 +55,7 @@ def demo_run():
 def test_demo_figure_has_legends_units_limit_and_applied_torque(demo_run):
     import matplotlib.pyplot as plt
 
-    from awiwi_drake.rigs.demo_run import demo_figure
+    from awiwi_drake.reproductions.demo import demo_figure
 
     rig, sc, t_ref, refs, res = demo_run
     limit = rig.torque_limit
@@ -100,14 +100,14 @@ def test_pole_sweep_symlog_keeps_slow_poles_visible():
 
 def test_bandwidth_of_a_first_order_gain_is_its_corner_frequency():
     """-3 dB bandwidth from a linear FFT grid: log-interpolated, not the first grid point."""
-    from awiwi_drake.control.compare import _sweep_metrics
+    from awiwi_drake.control.compare import sweep_metrics
 
     f = np.arange(1.0, 70.0, 1.0)               # the chirp's 1 Hz bins
     for fc in (5.0, 7.7, 31.4):                  # corners well above the sweep start (1 Hz)
         g = 0.8 / np.abs(1 + 1j * f / fc)        # DC gain 0.8 (a loop with steady-state error)
-        bw = _sweep_metrics(f, g)["bandwidth_hz"]
+        bw = sweep_metrics(f, g)["bandwidth_hz"]
         assert bw == pytest.approx(fc, rel=0.06), (fc, bw)
-    assert np.isnan(_sweep_metrics(f, np.ones_like(f))["bandwidth_hz"])   # never falls: NaN, not 69 Hz
+    assert np.isnan(sweep_metrics(f, np.ones_like(f))["bandwidth_hz"])   # never falls: NaN, not 69 Hz
 
 
 def test_dominant_time_constant_of_pole_placement_is_its_slowest_pole():
@@ -133,7 +133,7 @@ def test_compare_figures_have_legends_labels_and_bandwidth(tmp_path):
     import matplotlib.pyplot as plt
 
     from awiwi_drake.control.compare import compare_controllers, plot_gain_diagram, plot_runs
-    from awiwi_drake.parameters.control import compare_test_params
+    from awiwi_drake.control.compare import compare_test_params
     from awiwi_drake.rigs import joint_rig
 
     params = compare_test_params("joint-rig").replace(step_duration=0.15, sweep_duration=1.0, settle_time=0.05)

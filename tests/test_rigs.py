@@ -11,7 +11,8 @@ from awiwi_drake.analysis import linearize, lqr, simulate
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.lqr import lqr_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
-from awiwi_drake.rigs import build_target, flexible_joint_rig, joint_rig, tendon_rig
+from awiwi_drake.diagrams import build_target
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
 
 BACKENDS = ("compiled", "python", "symbolic")
 
@@ -179,7 +180,7 @@ def test_tendon_rig_linearisation_closed_form():
     op = rig.operating_point(tendon_force=30.0)
     res = linearize(rig, op)
     p = rig.params.motor
-    k = op.info["tendon_stiffness"]
+    k = float(op.tendon_stiffness[0])
     friction_slope = p.coulomb_torque * p.friction_slope + p.viscous_friction  # d(3.8)/dw at w = 0
     A = np.array([[0, 1], [-p.pulley_radius ** 2 * k / p.inertia, -friction_slope / p.inertia]])
     np.testing.assert_allclose(res.A, A, rtol=1e-9)

@@ -191,11 +191,11 @@ class TendonChainController(Diagram):
         S = dof_selection(coupling)
         n, k = S.shape
         m = coupling.num_tendons
-        q_op = np.asarray(op.info["joint_angles"], dtype=float)
-        f_op = np.asarray(op.info["tendon_force"], dtype=float)
+        q_op = np.asarray(op.joint_angle, dtype=float)
+        f_op = np.asarray(op.tendon_force, dtype=float)
         P = np.asarray(coupling.P(q_op), dtype=float)
         tau_op = -(P @ S).T @ f_op
-        K_dof = S.T @ np.asarray(op.info["joint_stiffness"], dtype=float) @ S
+        K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S
         sizes = [c.dof_selection.shape[1] for c in (coupling.parts.values() if hasattr(coupling, "parts")
                                                      else [coupling])]
         starts = np.cumsum([0] + sizes)

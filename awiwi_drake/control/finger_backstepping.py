@@ -84,8 +84,8 @@ class FingerBacksteppingLaw(StaticLaw):
         n, k = self.S.shape
         m = coupling.num_tendons
         self.r_m, self.B = float(self.motor.pulley_radius), float(self.motor.inertia)
-        self.q_op = np.asarray(op.info["joint_angles"], dtype=float)
-        self.f_op = np.asarray(op.info["tendon_force"], dtype=float)
+        self.q_op = np.asarray(op.joint_angle, dtype=float)
+        self.f_op = np.asarray(op.tendon_force, dtype=float)
         self.tau_op = -(np.asarray(coupling.P(self.q_op), dtype=float) @ self.S).T @ self.f_op
         self.M = joint_inertia(rig, self.q_op, full=True)          # S^T M(q_op) S (DoF inertia matrix)
         self._Minv = np.linalg.inv(self.M)

@@ -64,7 +64,7 @@ def joint_pd_controller(rig: Any, params: JointControllerParams | None = None, *
     kp, kd = c.kp, c.kd
     b = DiagramBuilder()
     ref = b.AddNamedSystem("motor_angle_reference", MotorAngleReference(coupling, r_m, theta_op,
-                                                                        op.info["joint_angles"]))
+                                                                        op.joint_angle))
     sizes = [m, 2 * m] + ([m] if wrist_compensation else [])
     mux = b.AddNamedSystem("joint_pd_inputs", Multiplexer(sizes))
     # u = u_op + kp (theta_ref - theta) - kd omega [- kp offset / r_m]
