@@ -375,7 +375,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     def plant_factory(b):
         return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity)
 
-    return _build(f"finger_{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
+    return _build(f"finger-{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
                   wrist, visual)
 
 

@@ -304,5 +304,6 @@ def sensitivity_markdown(rows: list[SensitivityRow], *, threshold: float = 0.05)
             fmt = lambda v: "unreachable" if not np.isfinite(v) else f"{100 * v:+.1f} %"
             cells.append(f"{HEADLINES[r.headline][0]}: {fmt(r.minus)} / {fmt(r.plus)}{mark}")
         src = r0.source if len(r0.source) <= 160 else r0.source[:157] + "..."
+        src = src.replace("|", "\\|")
         lines.append(f"| `{name}` | {r0.value:.4g} {r0.unit} | {src} | " + "; ".join(cells) + " |")
     return "\n".join(lines)

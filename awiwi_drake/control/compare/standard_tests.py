@@ -43,7 +43,7 @@ TESTS = ("step", "sine", "disturbance", "sweep")
 def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
     """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
     kind = rig_kind(rig)
-    if kind == "tendon_rig":
+    if kind == "tendon-rig":
         base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
                                  sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
                                  sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
