@@ -8,18 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from awiwi_drake.plotting import figure_axes
+
 __all__ = ["plot_coupling_matrix", "plot_stiffness_map"]
-
-
-def _plt():
-    import matplotlib.pyplot as plt  # backend chosen by MPLBACKEND / the notebook
-    return plt
 
 
 def plot_coupling_matrix(P, *, joint_names=None, tendon_names=None, ax=None, title="P = dh/dq [m]"):
     """Heat map of a coupling matrix (rows: tendons, columns: joints), values printed in mm."""
-    plt = _plt()
-    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(4, 4.5))
+    fig, ax = figure_axes(ax, figsize=(4, 4.5))
     P = np.asarray(P, dtype=float)
     lim = np.abs(P).max() or 1.0
     ax.imshow(P, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
@@ -34,8 +30,7 @@ def plot_coupling_matrix(P, *, joint_names=None, tendon_names=None, ax=None, tit
 
 def plot_stiffness_map(K, *, joint_names=None, ax=None, title="K_q [N m/rad]"):
     """Heat map of a joint stiffness matrix (5.12)."""
-    plt = _plt()
-    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(4, 3.5))
+    fig, ax = figure_axes(ax, figsize=(4, 3.5))
     K = np.asarray(K, dtype=float)
     lim = np.abs(K).max() or 1.0
     im = ax.imshow(K, cmap="RdBu_r", vmin=-lim, vmax=lim)
