@@ -199,5 +199,7 @@ def test_index_finger_step_with_estimated_joint_angles(controller):
     assert abs(q_end[1] - q_ref[1]) < 0.02 * 0.2
     assert np.all(res["tendon_force"] > 0.0)
     err = np.abs(res["joint_angle_estimation_error"])
-    bound = np.abs(res["joint_velocity"]).max(axis=0) * PERIOD
+    # |q(t_k) - q(t)| <= max |v| (t - t_k) <= max |v| / 3000; the velocity is logged once per period, so its
+    # maximum between two logs may exceed the logged one: 5 % allowance for that sampling only
+    bound = 1.05 * np.abs(res["joint_velocity"]).max(axis=0) * PERIOD
     assert np.all(err.max(axis=0) <= bound + 1e-9), (err.max(axis=0), bound)

@@ -32,11 +32,12 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.analysis import ResetIntegratorFromFlags
 
 from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step, simulate
-from awiwi_drake.analysis.schedules import Schedule
+from awiwi_drake.analysis.schedules import PerEntry, Schedule
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
-__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "flag_run",
+__all__ = ["TestRun", "Metrics", "MetricsTable", "Comparison", "settle", "run_test", "run_joint_test",
+           "joint_channels", "JointChannels", "flag_run",
            "run_standard_tests", "compare", "compare_controllers", "simulate_loop", "step_metrics", "sine_metrics", "gain_diagram",
            "plot_runs", "plot_gain_diagram", "plot_metric", "TESTS", "fit_second_order_step"]
 
@@ -64,11 +65,12 @@ class Metrics:
 
     controller: str
     test: str
+    joint: str = ""                      # joint (DoF) of a finger/hand row; "link" / "tendon" on the 1-DoF rigs
     rise_time: float = math.nan          # s, 10-90 % of the step
     overshoot: float = math.nan          # % of the step size
     settling_time: float = math.nan      # s, band CompareTestParams.settling_band (2 %; 5 % on the tendon rig)
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
-    peak_input: float = math.nan         # max |motor_torque_command| [Nm]
+    peak_input: float = math.nan         # max |applied motor torque| (after saturation) [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
     damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
@@ -84,7 +86,7 @@ class Metrics:
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
-NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status", "flags")]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "status", "flags")]
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
@@ -97,16 +99,22 @@ class MetricsTable:
 
     rows: list[Metrics] = field(default_factory=list)
 
-    def get(self, controller: str, test: str) -> Metrics:
+    def get(self, controller: str, test: str, joint: str | None = None) -> Metrics:
         for r in self.rows:
-            if r.controller == controller and r.test == test:
+            if r.controller == controller and r.test == test and (joint is None or r.joint == joint):
                 return r
-        raise KeyError(f"no metrics for controller {controller!r} and test {test!r}")
+        raise KeyError(f"no metrics for controller {controller!r}, test {test!r}"
+                       + (f", joint {joint!r}" if joint is not None else ""))
 
-    def column(self, name: str, test: str) -> dict[str, float]:
+    def column(self, name: str, test: str, joint: str | None = None) -> dict[str, float]:
         if name not in NUMERIC:
             raise ValueError(f"unknown metric {name!r}; known: {', '.join(NUMERIC)}")
-        return {r.controller: getattr(r, name) for r in self.rows if r.test == test}
+        return {r.controller: getattr(r, name) for r in self.rows
+                if r.test == test and (joint is None or r.joint == joint)}
+
+    def joints(self) -> list[str]:
+        """The joints of the rows, in order of appearance."""
+        return list(dict.fromkeys(r.joint for r in self.rows))
 
     def to_csv(self, path: str | Path) -> Path:
         path = Path(path)
@@ -123,11 +131,11 @@ class MetricsTable:
             rows = [r for r in self.rows if r.test == test]
             cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
-            lines.append("|---" * (len(cols) + 2) + "|")
+            lines.append("| controller | joint | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
+            lines.append("|---" * (len(cols) + 3) + "|")
             for r in rows:
                 status = f"{r.status}: {r.flags}" if r.flags else r.status
-                lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
+                lines.append(f"| {r.controller} | {r.joint} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
                              + f" | {status} |")
             lines.append("")
         return "\n".join(lines)
@@ -246,6 +254,9 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: S
     slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
         log.append("tendon_force")
+    applied = _applied_port(loop)
+    if applied != "motor_torque_command":
+        log.append(applied)
     res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                    max_step=max_step, accuracy=1e-6)
     t = res.t - res.t[0]
@@ -253,6 +264,7 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: S
     meta = dict(meta or {})
     if slack:
         meta["tendon_force"] = res["tendon_force"]
+    meta["applied_torque"] = res[applied]
     return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
                    res["motor_torque_command"], w, res["state"], meta)
 
@@ -273,8 +285,11 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, params: Compa
             op = loop.rig.operating_point()
         state = np.asarray(op.state, dtype=float)
         motor_torque = op.motor_torque if motor_torque is None else motor_torque
-    ctx = loop.create_context(state=state, motor_torque=motor_torque,
-                              references={r: reference for r in loop.references})
+    refs = {r: reference for r in loop.references}
+    ch = joint_channels(loop)
+    if ch is not None:   # finger/hand: the reference on every DoF, relative to the operating point
+        refs = {loop.references[0]: ch.S @ (ch.q0 + reference)}
+    ctx = loop.create_context(state=state, motor_torque=motor_torque, references=refs)
     if t_settle > 0:
         simulate(loop, ctx, t_settle, log=(), max_step=params.max_step, accuracy=1e-6)  # advances ctx
     ctx.SetTime(0.0)
@@ -416,12 +431,11 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         t_final = T
         meta.update(f_low=f0, f_high=f1)
     run = _simulate(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
-    m = Metrics(controller, test)
+    m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
     u = np.abs(run.command)
-    m.peak_input = float(np.max(u))
-    limit = loop.saturation
-    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
-        limit = np.full(u.shape[1], float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    applied = np.abs(run.meta.get("applied_torque", run.command))
+    m.peak_input = float(np.max(applied))
+    limit = _torque_limit(loop, u.shape[1])
     if limit is not None:
         m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
     if "tendon_force" in run.meta:
@@ -447,6 +461,193 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
             setattr(m, k_, v)
     flag_run(m, p)
     return run, m
+
+
+def _applied_port(loop: ClosedLoop) -> str:
+    """The torque the motors receive: the rig's ``applied_torque`` (after its amplifier limit) when it has one."""
+    return "applied_torque" if loop.diagram.HasOutputPort("applied_torque") else "motor_torque"
+
+
+def _torque_limit(loop: ClosedLoop, size: int):
+    limit = loop.saturation
+    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
+        limit = np.full(size, float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    return limit
+
+
+@dataclass(frozen=True)
+class _Affine(Schedule):
+    """``offset + gain * inner(t)``: one DoF's schedule on a plant joint (``q = S q_dof``)."""
+
+    inner: Schedule
+    gain: float
+    offset: float
+
+    def value(self, t):
+        return self.offset + self.gain * self.inner.value(t)
+
+    def breakpoints(self):
+        return self.inner.breakpoints()
+
+
+@dataclass
+class JointChannels:
+    """The independent DoF of a finger/hand loop, one metrics row each.
+
+    ``S`` maps them to the plant joints (``q = S q_dof``; ring/fifth: the DIP follows the PIP,
+    (5.16)); a DoF is named after its plant joint.  ``fingers``/``tendons``: the finger of each DoF
+    and the slice of its tendons (its motors' torques are the DoF's input).  ``position``: index of
+    the DoF within its finger.
+    """
+
+    names: list
+    S: np.ndarray
+    q0: np.ndarray
+    fingers: list
+    tendons: list
+    position: list
+
+    def disturbance_groups(self) -> list[list[int]]:
+        """DoF loaded together in the disturbance test: the k-th joint of every finger (the fingers are
+        mechanically independent, the palm is fixed), so each load sees the other joints free."""
+        return [[i for i, p in enumerate(self.position) if p == k] for k in range(max(self.position) + 1)]
+
+
+def joint_channels(loop: ClosedLoop) -> JointChannels | None:
+    """:class:`JointChannels` of a finger/hand loop tracking ``joint_angle`` (None for the 1-DoF rigs)."""
+    rig = loop.rig
+    coupling = getattr(rig, "extra", {}).get("coupling")
+    if coupling is None or not loop.tracked_outputs or loop.tracked_outputs[0] != "joint_angle":
+        return None
+    from awiwi_drake.control.chain import dof_selection
+    S = dof_selection(coupling)
+    parts = coupling.parts if hasattr(coupling, "parts") else {rig.params.finger_name: coupling}
+    joint_names = rig.extra["joint_names"]
+    names, fingers, tendons, position = [], [], [], []
+    col = ten = 0
+    for fname, part in parts.items():
+        k, m = part.dof_selection.shape[1], part.num_tendons
+        for jj in range(k):
+            names.append(joint_names[int(np.flatnonzero(S[:, col + jj])[0])])
+            fingers.append(fname)
+            tendons.append(slice(ten, ten + m))
+            position.append(jj)
+        col, ten = col + k, ten + m
+    q0 = np.linalg.pinv(S) @ np.asarray(rig.operating_point().info["joint_angles"], dtype=float)
+    return JointChannels(names, S, q0, fingers, tendons, position)
+
+
+def _joint_inputs(ch: JointChannels, dof_schedules: Sequence[Schedule]) -> PerEntry:
+    """Plant-joint schedules ``q_i = S_ij (q0_j + s_j(t))`` from one schedule per DoF."""
+    entries = []
+    for i in range(ch.S.shape[0]):
+        j = int(np.flatnonzero(ch.S[i])[0])
+        a = float(ch.S[i, j])
+        entries.append(_Affine(dof_schedules[j], a, a * ch.q0[j]))
+    return PerEntry(entries)
+
+
+def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
+                   params: CompareTestParams | None = None, settled=None) -> tuple[TestRun, list[Metrics]]:
+    """One standard test on a finger/hand loop: every DoF at once, one :class:`Metrics` row per DoF.
+
+    ``step``/``sine``/``sweep``: the same reference change on every DoF (relative to the operating
+    point) in one simulation: the rows include the interaction of a finger's joints moving together.
+    ``disturbance``: ``disturbance_torque`` on the k-th joint of every finger at once (one
+    simulation per k; the other joints of the finger are held by the controller only), stiffness
+    ``dtau / dq`` of the loaded joint.  Peak input and saturation are per finger (its motors).
+    """
+    if test not in TESTS:
+        raise ValueError(f"unknown test {test!r}; known: {', '.join(TESTS)}")
+    ch = joint_channels(loop)
+    if ch is None:
+        raise ValueError("run_joint_test: the loop does not track the joint angles of a finger/hand")
+    p = params or compare_test_params(loop.rig)
+    dt = _sample_dt(loop, p)
+    k = len(ch.names)
+    r0 = p.initial_reference
+    ref_port = loop.references[0]
+    base = settled if settled is not None else settle(loop, r0, t_settle=p.settle_time, params=p)
+    groups = ch.disturbance_groups() if test == "disturbance" else [list(range(k))]
+    n_ext = loop.diagram.GetInputPort("external_torque").size() if "external_torque" in loop.disturbances else 0
+    if test == "disturbance" and not n_ext:
+        raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
+                         f"{getattr(loop.rig, 'name', '?')!r} has none")
+    applied = _applied_port(loop)
+    out_y = np.full((0, k), np.nan)
+    rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
+    meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
+    runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
+    for group in groups:
+        ctx = base.Clone()
+        ctx.SetTime(0.0)
+        if test == "step":
+            sched, t_final = Step(p.step_delay, r0 + p.step_size, before=r0), p.step_duration
+        elif test == "sine":
+            sched, t_final = Sine(p.sine_amplitude, p.sine_frequency, offset=r0), p.sine_periods / p.sine_frequency
+        elif test == "disturbance":
+            sched, t_final = Constant(r0), p.step_duration
+        else:
+            sched, t_final = Chirp(p.sweep_amplitude, p.sweep_start, p.sweep_stop, p.sweep_duration, offset=r0), \
+                p.sweep_duration
+            meta.update(f_low=p.sweep_start, f_high=p.sweep_stop)
+        inputs = {ref_port: _joint_inputs(ch, [sched] * k)}
+        if n_ext:
+            ext = [Constant(0.0)] * n_ext
+            if test == "disturbance":
+                for j in group:
+                    ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, p.disturbance_torque)
+            inputs["external_torque"] = PerEntry(ext)
+        log = ["joint_angle", ref_port, "motor_torque_command", "state"]
+        if applied != "motor_torque_command":
+            log.append(applied)
+        if loop.diagram.HasOutputPort("tendon_force"):
+            log.append("tendon_force")
+        res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                       max_step=p.max_step, accuracy=1e-6)
+        t = res.t - res.t[0]
+        Sp = np.linalg.pinv(ch.S)
+        y = res["joint_angle"] @ Sp.T - ch.q0
+        r = res[ref_port] @ Sp.T - ch.q0
+        if runs_t is None:
+            runs_t, runs_r, runs_u, runs_a, runs_x = t, r, res["motor_torque_command"], res[applied], res["state"]
+            runs_y = y.copy()
+            runs_w = np.zeros((len(t), k))
+        for j in group:
+            runs_y[:, j] = y[:, j]
+            row = rows[j]
+            sl = ch.tendons[j]
+            u = np.abs(res["motor_torque_command"][:, sl])
+            row.peak_input = float(np.max(np.abs(res[applied][:, sl])))
+            limit = _torque_limit(loop, res["motor_torque_command"].shape[1])
+            if limit is not None:
+                row.saturated_fraction = float(np.mean(np.any(u > limit[None, sl] * (1 + 1e-9), axis=1)))
+            if "tendon_force" in res:
+                row.slack_fraction = float(np.mean(np.any(res["tendon_force"][:, sl] <= 0.0, axis=1)))
+            if test == "step":
+                for k_, v in step_metrics(t, y[:, j], r0, r0 + p.step_size, p.step_delay, band=p.settling_band,
+                                          fit=True).items():
+                    setattr(row, k_, v)
+            elif test == "sine":
+                skip = t >= 1.0 / p.sine_frequency
+                for k_, v in sine_metrics(t[skip], r[skip, j], y[skip, j], p.sine_frequency).items():
+                    setattr(row, k_, v)
+            elif test == "disturbance":
+                pre = t < p.step_delay
+                tail = t >= t[-1] - 0.1 * t[-1]
+                dq = float(np.mean(y[tail, j]) - np.mean(y[pre, j]))
+                row.stiffness = p.disturbance_torque / dq if dq != 0 else math.inf
+                row.steady_state_error = float(r0 - np.mean(y[tail, j]))
+                runs_w[:, j] = np.where(t >= p.step_delay, p.disturbance_torque, 0.0)
+            else:
+                f, g = gain_diagram(t, r[:, j], y[:, j], p.sweep_start, p.sweep_stop)
+                meta.setdefault("freq", f)
+                meta.setdefault("gain_by_joint", {})[ch.names[j]] = g
+                for k_, v in _sweep_metrics(f, g).items():
+                    setattr(row, k_, v)
+            flag_run(row, p)
+    meta["applied_torque"] = runs_a
+    return TestRun(controller, test, runs_t, runs_r, runs_y, runs_u, runs_w, runs_x, meta), rows
 
 
 def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
@@ -479,20 +680,27 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     ``progress(label)`` is called after each test (e.g. to advance a progress bar).
     """
     p = params or compare_test_params(loop.rig)
+    channels = joint_channels(loop)
     if tests is None:
-        tests = [t for t in TESTS if t != "disturbance" or "external_torque" in loop.disturbances]
+        tests = [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
+                 and (t != "sweep" or channels is None)]  # fingers/hand: step, sine, external-torque step
     settled = settle(loop, p.initial_reference, t_settle=p.settle_time, params=p)
     runs, rows = [], []
     for test in tests:
         try:
-            run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+            if channels is None:
+                run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+                ms = [m]
+            else:
+                run, ms = run_joint_test(loop, test, controller=controller, params=p, settled=settled)
         except SimulationDivergedError as exc:
-            rows.append(Metrics(controller, test, status=f"diverged: {exc}"))
+            names = channels.names if channels is not None else [""]
+            rows += [Metrics(controller, test, joint=nm, status=f"diverged: {exc}") for nm in names]
             if progress is not None:
                 progress(f"{controller}/{test}")
             continue
         runs.append(run)
-        rows.append(m)
+        rows += ms
         if progress is not None:
             progress(f"{controller}/{test}")
     return runs, rows

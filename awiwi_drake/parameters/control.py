@@ -254,6 +254,12 @@ def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
         base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
                                  sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
                                  sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
+    elif kind in ("finger", "hand"):
+        # per DoF, relative to the operating point [rad]; chosen: a 0.2 rad (11 deg) step (Fig 15.24 steps the
+        # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the 0.5 Nm/rad impedance of Fig 15.22), 0.3 s covers the
+        # cascade's settling (joint loop at 60 rad/s); no sweep by default (Fig 15.26 is the joint rig's)
+        base = CompareTestParams(step_size=0.2, step_duration=0.3, sine_amplitude=0.1, sine_frequency=2.0,
+                                 sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01)
     else:
         base = CompareTestParams()
     return base.replace(**overrides) if overrides else base
