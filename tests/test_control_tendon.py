@@ -45,7 +45,7 @@ def test_force_map_and_identified_gains(fmap):
     for f in (10.0, 30.0, 45.0):
         op = rig.operating_point(tendon_force=f)
         assert fmap.theta_of_force(f) == pytest.approx(op.state[0], abs=2e-4)
-        assert fmap.alpha_of_force(f) == pytest.approx(r_m * op.info["tendon_stiffness"], rel=2e-3)
+        assert fmap.alpha_of_force(f) == pytest.approx(r_m * op.tendon_stiffness[0], rel=2e-3)
     # the slope table (r_m k_t from the rig's stiffness output) is the derivative of the tabulated force:
     # centred differences of the force column agree to O(h^2) away from the ends
     grad = np.gradient(fmap.force, fmap.theta)

@@ -281,27 +281,38 @@ def test_window_start_profile_is_generalised_least_squares():
 def test_catalog_names_are_the_contract():
     from awiwi_drake.discrepancy import EFFECTS, PHYSICAL_EFFECTS
     assert set(PHYSICAL_EFFECTS) == {"motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
-                                     "guide_friction", "delay"}
-    assert {"force_sensor", "nominal_motor", "nominal_spring"} <= set(EFFECTS)
+                                     "guide_friction", "delay", "spring_drift"}
+    assert {"force_sensor", "nominal_motor", "nominal_spring", "link_sensor", "motor_sensor"} <= set(EFFECTS)
     assert len(PARAM_NAMES) == len(set(PARAM_NAMES))
 
 
 def test_benchmark_scores_follow_their_definitions():
-    """top-1, false-positive and exact-set rates of benchmarks/bench_discrepancy.py."""
+    """Issue-12 rows of benchmarks/bench_discrepancy.py: exact set, spurious names,
+    out-of-catalog wrong names and flags, any name when nothing is hidden."""
     import importlib.util
     import pathlib
     path = pathlib.Path(__file__).parent.parent / "benchmarks" / "bench_discrepancy.py"
     spec = importlib.util.spec_from_file_location("bench_discrepancy", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    row = dict(rig="joint", snr_db=30, nuisance=[], nuisance_named=[], seconds=1.0, cpu_seconds=1.0)
-    rows = [dict(row, hidden=["delay"], named=["delay", "motor_friction"], gap_closed=0.9),
-            dict(row, hidden=["delay"], named=["motor_friction"], gap_closed=0.1),
-            dict(row, hidden=[], named=[], gap_closed=0.0),
-            dict(row, hidden=[], named=["delay"], gap_closed=0.0),
-            dict(row, hidden=["delay", "motor_ripple"], named=["motor_ripple", "delay"], gap_closed=0.95)]
-    s = bench.summarise(rows)
-    assert s["top1_by_snr"][30] == (0.5, 2)
-    assert s["false_positive"][30] == (0.5, 2)
-    assert s["exact_set"]["two_hidden"] == (1.0, 1)
-    assert s["gap_closed"]["median"] == pytest.approx(0.9)
+    row = dict(rig="joint", snr_db=30, strength=1.0, transform=None, nuisance_named=[], unexplained=False,
+               seconds=1.0, cpu_seconds=1.0, baseline_named=[], baseline_calibration=[])
+    rows = [dict(row, row="single_full", hidden=["delay"], named=["delay", "motor_friction"]),
+            dict(row, row="single_full", hidden=["delay"], named=["delay"], baseline_named=["delay"]),
+            dict(row, row="nothing", hidden=[], named=[], nuisance_named=["force_sensor"]),
+            dict(row, row="nothing", hidden=[], named=[]),
+            dict(row, row="out_of_catalog", hidden=[], named=["spring_hysteresis"], transform="link_bias"),
+            dict(row, row="out_of_catalog", hidden=[], named=[], transform="link_bias", unexplained=True),
+            dict(row, row="out_of_catalog", hidden=[], named=[], transform="motor_bias",
+                 nuisance_named=["motor_sensor"]),
+            dict(row, row="three", hidden=["delay", "motor_ripple", "joint_friction"],
+                 named=["motor_ripple", "joint_friction", "delay"])]
+    s = bench.summarise(rows)["workflow"]
+    assert s["exact_single_full"] == (0.5, 2)
+    assert s["spurious"] == (pytest.approx(1 / 3), 3)
+    assert s["nothing_any_name"] == (0.5, 2) and s["nothing_physical_name"] == (0.0, 2)
+    assert s["out_of_catalog_wrong_name"] == (pytest.approx(1 / 3), 3)
+    assert s["out_of_catalog_flagged"] == (pytest.approx(2 / 3), 3)
+    assert s["exact_three"] == (1.0, 1)
+    b = bench.summarise(rows)["baseline"]
+    assert b["exact_single_full"] == (0.5, 2) and b["nothing_any_name"] == (0.0, 2)

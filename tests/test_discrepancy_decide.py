@@ -155,3 +155,63 @@ def test_interrupted_diagnosis_keeps_a_partial_result(tmp_path):
     assert summary["complete"] is False and summary["steps"][0]["effect"] == "delay"
     md = write_report(dx, tmp_path / "rep", figures=False).read_text()
     assert "Partial result" in md and "nothing is missing" not in md
+
+
+def test_cpr_spectrum_finds_any_order_up_to_300():
+    """A ripple line at 137 or 283 cycles per revolution (not in any fixed list) is the
+    spectrum's peak, with its amplitude; the fit equals plain least squares per order."""
+    from awiwi_drake.discrepancy.localise import cpr_spectrum
+
+    rng = np.random.default_rng(3)
+    theta = np.cumsum(rng.uniform(0.0, 2e-3, 8000))  # slow, monotone motor angle (~8 rad)
+    orders = np.arange(1, 301)
+    for k, amp in ((137, 0.3), (283, 0.05)):
+        r = amp * np.sin(k * theta + 0.4) + rng.normal(0.0, 0.1, theta.size)
+        a = cpr_spectrum(r, [theta], orders)
+        assert orders[np.argmax(a)] == k
+        assert a.max() == pytest.approx(amp, abs=4 * 0.1 / np.sqrt(theta.size / 2))
+        A = np.column_stack([np.sin(5 * theta), np.cos(5 * theta), np.ones_like(theta)])
+        c, *_ = np.linalg.lstsq(A, r, rcond=None)
+        assert a[4] == pytest.approx(np.hypot(c[0], c[1]), rel=1e-8)
+
+
+def test_calibration_parameters_act_on_the_measurements(joint_engine):
+    """Encoder calibrations are measurement maps: a motor-encoder bias adds to the
+    measured motor angle, the link encoder reads (1 + s) q + b, and the window-start
+    estimate inverts them so the replayed physical state is the same."""
+    from awiwi_drake.discrepancy.model import model_measurements
+
+    eng = joint_engine
+    nom = eng.nom
+    starts = eng.starts[2:5]
+    p0 = default_vector()
+    p = p0.copy()
+    p[PARAM_INDEX["motor_bias_1"]] = 0.02
+    p[PARAM_INDEX["link_bias"]] = -0.03
+    p[PARAM_INDEX["link_scale_rel"]] = 0.1
+    P0 = np.repeat(p0[:, None], len(starts), axis=1)
+    P = np.repeat(p[:, None], len(starts), axis=1)
+    X0, X = eng.initial_states(starts, P0), eng.initial_states(starts, P)
+    y0, y = model_measurements(nom, X, P0), model_measurements(nom, X, P)
+    names = nom.measurement_names()
+    np.testing.assert_allclose(y[names.index("motor_angle_1")] - y0[names.index("motor_angle_1")], 0.02)
+    np.testing.assert_allclose(y[names.index("link_angle")], 1.1 * X[4] - 0.03)
+    # the measured angles are explained by the calibrated state: the estimate is consistent
+    np.testing.assert_allclose(model_measurements(nom, X, P)[names.index("link_angle")],
+                               model_measurements(nom, X0, P0)[names.index("link_angle")], atol=1e-12)
+    np.testing.assert_allclose(y[names.index("motor_angle_1")], model_measurements(nom, X0, P0)[0], atol=1e-12)
+
+
+def test_spring_drift_scales_the_spring_at_each_window_mid_time(joint_engine):
+    """spring_drift c acts as a spring scale 1 + c (t_window_mid - t_record_mid): the
+    replay with drift equals the replay with that scale set per window."""
+    eng = joint_engine
+    W = np.array([1, len(eng.starts) - 2])
+    p = default_vector()
+    p[PARAM_INDEX["spring_drift"]] = 0.02
+    drift = eng.evaluate(p[None], W)[0]
+    t = eng.ds.time
+    for j, w in enumerate(W):
+        q = default_vector()
+        q[PARAM_INDEX["spring_scale_rel"]] = 0.02 * (t[eng.starts[w]] + 0.5 * eng.L * eng.dt - 0.5 * (t[0] + t[-1]))
+        np.testing.assert_allclose(drift[j], eng.evaluate(q[None], W[j:j + 1])[0, 0], rtol=1e-10, atol=1e-10)

@@ -70,6 +70,10 @@ def test_cli_make_dataset_and_diagnose(tmp_path, capsys):
     assert step["effect"] == "motor_friction" and 0 < step["confidence"] <= 1
     assert step["parameters"]["motor_coulomb"] > 0 and np.isfinite(step["nrmse_after"])
     assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "residual_maps_nominal.png").exists()
+    # units on every fitted parameter: JSON, report and CLI
+    assert summary["units"]["motor_coulomb"] == "Nm" and set(summary["units"]) >= set(step["parameters"])
+    assert "| `motor_coulomb` |" in (tmp_path / "rep" / "report.md").read_text()
+    assert " Nm" in captured.out and "motor_coulomb = " in captured.out
     assert main(["diagnose", str(tmp_path / "missing.csv")]) == 2
 
 

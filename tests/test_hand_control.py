@@ -58,7 +58,7 @@ def test_registry_and_port_contract_on_a_finger():
 
 def test_new_systems_convert_to_autodiff_and_match_finite_differences():
     rig = _rig("ring")                      # coupled PIP/DIP: S is not the identity
-    coupling = rig.extra["coupling"]
+    coupling = rig.coupling
     S = dof_selection(coupling)
     n, k = S.shape
     rng = np.random.default_rng(3)
@@ -68,10 +68,10 @@ def test_new_systems_convert_to_autodiff_and_match_finite_differences():
                                                     joint_velocity=rng.normal(0, 1, n)),
                                      outputs=["joint_torque_reference"])   # the stiffness output is constant
     thumb = _rig("thumb")
-    path = TendonPathVelocity(thumb.extra["coupling"])      # P(q) of the thumb base
+    path = TendonPathVelocity(thumb.coupling)      # P(q) of the thumb base
     check_system_autodiff_matches_fd(path, [], dict(joint_angle=rng.normal(0, 0.3, 4),
                                                     joint_velocity=rng.normal(0, 1, 4)))
-    m = rig.extra["coupling"].num_tendons
+    m = rig.coupling.num_tendons
     fmap = ForceMap.from_spring(rig.spring, rig.params.motor.pulley_radius)
     law = TendonForceLaw(fmap, rig.params.motor, scheduled=True, size=m, ripple_scale=0.8, path_velocity=True)
     check_system_autodiff_matches_fd(StaticLawController(law), [], dict(
@@ -83,7 +83,7 @@ def test_new_systems_convert_to_autodiff_and_match_finite_differences():
     bs = StaticLawController(FingerBacksteppingLaw(index))
     check_system_autodiff_matches_fd(bs, [], dict(
         joint_angle_reference=rng.normal(0, 0.1, 4), joint_angle=rng.normal(0, 0.1, 4),
-        joint_velocity=rng.normal(0, 0.5, 4), elongation=op.info["elongation"] + rng.normal(0, 1e-4, 8),
+        joint_velocity=rng.normal(0, 0.5, 4), elongation=op.elongation + rng.normal(0, 1e-4, 8),
         motor_angle=rng.normal(0, 0.1, 8), motor_velocity=rng.normal(0, 0.5, 8)), rtol=1e-4)
 
 
@@ -104,16 +104,16 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
     tau, with the thumb's P(q) at the estimated pose) and stay within [f_min, f_max]."""
     rig = _rig(finger)
     ctrl = TendonChainController(rig)
-    coupling = rig.extra["coupling"]
+    coupling = rig.coupling
     S = dof_selection(coupling)
     n, m = S.shape[0], coupling.num_tendons
     op = rig.operating_point()
     rng = np.random.default_rng({"index": 1, "ring": 2, "thumb": 3}[finger])
-    q = op.info["joint_angles"] + S @ rng.normal(0, 0.1, S.shape[1])
+    q = op.joint_angle + S @ rng.normal(0, 0.1, S.shape[1])
     ctx = ctrl.CreateDefaultContext()
     ctrl.initialize_state(ctx)
     fixed = dict(joint_angle_reference=q + S @ rng.normal(0, 0.2, S.shape[1]), joint_angle=q,
-                 joint_velocity=S @ rng.normal(0, 0.5, S.shape[1]), tendon_force=op.info["tendon_force"],
+                 joint_velocity=S @ rng.normal(0, 0.5, S.shape[1]), tendon_force=op.tendon_force,
                  motor_velocity=np.zeros(m), motor_angle=np.zeros(m))
     for name, value in fixed.items():
         if ctrl.HasInputPort(name):
@@ -139,12 +139,12 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger):
     law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))   # the continuous design: exact cancellation
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
-    ctx = loop.create_context(op, references={"joint_angle_reference": op.info["joint_angles"]})
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
     assert np.abs(loop.diagram.EvalTimeDerivatives(ctx).CopyToVector()).max() < 1e-8   # op is an equilibrium
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
                     output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index())
     S = law.S
-    PS = np.asarray(rig.extra["coupling"].P(op.info["joint_angles"])) @ S
+    PS = np.asarray(rig.coupling.P(op.joint_angle)) @ S
     k, m = S.shape[1], PS.shape[0]
     Mi = np.linalg.inv(law.M)
     A = np.zeros((2 * k + 2 * m, 2 * k + 2 * m))          # d/dt [e, e', z3, z4]
@@ -172,7 +172,7 @@ def test_finger_backstepping_lyapunov_function_decreases():
     law = FingerBacksteppingLaw(rig)
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
-    ref = op.info["joint_angles"] + 0.1
+    ref = op.joint_angle + 0.1
     ctx = loop.create_context(op, references={"joint_angle_reference": ref})
     names = ("joint_angle", "joint_velocity", "elongation", "motor_angle", "motor_velocity")
     res = simulate(loop.diagram, ctx, 0.05, log=names, max_step=5e-4, accuracy=1e-7)
@@ -190,7 +190,7 @@ def test_index_finger_step_with_estimated_joint_angles(controller):
     rig = _rig()
     loop = closed_loop(rig, make_controller(controller, rig), **get_entry(controller, rig).loop_options)
     op = rig.operating_point()
-    q_ref = op.info["joint_angles"].copy()
+    q_ref = op.joint_angle.copy()
     q_ref[1] += 0.2
     ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
     res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle", "joint_velocity", "joint_angle_estimation_error",

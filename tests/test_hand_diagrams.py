@@ -29,12 +29,12 @@ def test_operating_point_is_an_equilibrium_and_linearization_gives_the_stiffness
     op = rig.operating_point(pretension=25.0, joint_angles=OPS[finger])
     lin = linearize(rig, op, equilibrium_tolerance=1e-6)     # Drake checks xdot(op) ~ 0
     n = rig.num_joints
-    q = op.info["joint_angles"]
+    q = op.joint_angle
     # link rows: M qdd = -K_q dq + ...  =>  M A[v, q] = -K_q  with K_q of (5.12) (+ coupling element)
     K_from_drake = -_mass_matrix(rig, q) @ lin.A[n:2 * n, :n]
-    np.testing.assert_allclose(K_from_drake, op.info["joint_stiffness"], rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(op.info["tendon_force"].mean(), 25.0, rtol=1e-12)
-    assert np.all(op.info["tendon_force"] > 0)
+    np.testing.assert_allclose(K_from_drake, op.joint_stiffness, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(op.tendon_force.mean(), 25.0, rtol=1e-12)
+    assert np.all(op.tendon_force > 0)
     # the python backend (separate TemplateSystems) gives the same linearisation
     lin_py = linearize(finger_diagram(finger=finger, backend="python"), op)
     np.testing.assert_allclose(lin_py.A, lin.A, rtol=1e-7, atol=1e-6 * np.abs(lin.A).max())
@@ -52,7 +52,7 @@ def test_stiffest_link_mode_rises_with_pretension():
 def test_hand_is_five_decoupled_fingers_in_the_global_tendon_order():
     hand = hand_diagram(wrist=False)
     assert (hand.num_joints, hand.num_tendons, hand.num_states) == (21, 38, 118)
-    assert hand.extra["tendon_names"][TENDON_SLICES["ring"]][0] == "ring_h1"
+    assert hand.tendon_names[TENDON_SLICES["ring"]][0] == "ring_h1"
     lin_h = linearize(hand, hand.operating_point())
     index = finger_diagram(finger="index")
     lin_i = linearize(index, index.operating_point())
@@ -183,14 +183,14 @@ def test_hand_simulates_under_joint_control():
     hand = hand_diagram(backend="python")
     cl = closed_loop(hand, make_controller("joint-pd", hand))
     q_ref = np.zeros(hand.num_joints)
-    i_mcp = hand.extra["joint_names"].index("q21")
+    i_mcp = hand.joint_names.index("q21")
     q_ref[i_mcp] = 0.2
     ctx = cl.create_context(hand.operating_point(), references={"joint_angle_reference": q_ref})
     res = simulate(cl.diagram, ctx, 0.06, log=("joint_angle", "tendon_force"),
                    monitors=rig_monitors(hand), max_step=1.0 / 3000, accuracy=1e-3)
     q = res["joint_angle"][-1]
     assert q[i_mcp] > 0.1
-    others = [i for i, n in enumerate(hand.extra["joint_names"]) if not n.startswith("q2")]
+    others = [i for i, n in enumerate(hand.joint_names) if not n.startswith("q2")]
     assert np.max(np.abs(q[others])) < 1e-9
     assert not [e for e in res.events if e.kind == "tendon_slack"]
 
@@ -212,7 +212,7 @@ def test_estimated_joint_angles_track_the_plant_in_closed_loop(finger):
     rig = finger_diagram(finger=finger)
     cl = closed_loop(rig, make_controller("joint-pd", rig), estimator=rig.link_estimator())
     q_ref = np.asarray(OPS[finger + "_ref"] if finger + "_ref" in OPS else
-                       rig.extra["coupling"].dof_selection @ np.array(OPS[finger]), float)
+                       rig.coupling.dof_selection @ np.array(OPS[finger]), float)
     res = simulate(cl.diagram, cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref}),
                    0.1,
                    log=("joint_angle", "joint_angle_estimate", "joint_velocity"), max_step=1.0 / 3000,
@@ -244,7 +244,7 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
     rig.plant.SetPositions(plant_ctx, q)
     tau_g = rig.plant.CalcGravityGeneralizedForces(plant_ctx)
     P = np.asarray(finger_coupling("index").P(q))
-    np.testing.assert_allclose(P.T @ (op.info["tendon_force"] - op0.info["tendon_force"]), tau_g,
+    np.testing.assert_allclose(P.T @ (op.tendon_force - op0.tendon_force), tau_g,
                                rtol=1e-9, atol=1e-12)
     assert 0.002 <= np.max(np.abs(tau_g)) <= 0.008
 

@@ -58,7 +58,7 @@ def test_demo_figure_has_legends_units_limit_and_applied_torque(demo_run):
     from awiwi_drake.rigs.demo_run import demo_figure
 
     rig, sc, t_ref, refs, res = demo_run
-    limit = rig.extra["torque_limit"]
+    limit = rig.torque_limit
     fig = demo_figure(res, t_ref, refs, sc, torque_limit=limit)
     axes = np.array(fig.axes).reshape(3, 2)
     _check_axes_explained(axes[:, 0])

@@ -18,5 +18,5 @@ def test_readme_quickstart_runs_and_shows_physics(capsys):
     assert lin_A[1, 0] == pytest.approx(-0.605 / 4e-7, rel=1e-12)   # (12.10) with Table 12.1
     from awiwi_drake.rigs import joint_rig
     op = namespace["op"]
-    assert op.info["joint_stiffness"] > joint_rig().operating_point(pretension=10.0).info["joint_stiffness"]
+    assert op.joint_stiffness > joint_rig().operating_point(pretension=10.0).joint_stiffness
     assert "Nm/rad" in capsys.readouterr().out

@@ -179,7 +179,7 @@ def test_tendon_rig_linearisation_closed_form():
     op = rig.operating_point(tendon_force=30.0)
     res = linearize(rig, op)
     p = rig.params.motor
-    k = op.info["tendon_stiffness"]
+    k = float(op.tendon_stiffness[0])
     friction_slope = p.coulomb_torque * p.friction_slope + p.viscous_friction  # d(3.8)/dw at w = 0
     A = np.array([[0, 1], [-p.pulley_radius ** 2 * k / p.inertia, -friction_slope / p.inertia]])
     np.testing.assert_allclose(res.A, A, rtol=1e-9)

@@ -226,7 +226,7 @@ def test_spring_overrange_is_reported_and_the_curve_stays_monotonic_beyond_it():
 
 def test_pair_slack_of_the_nonlinear_flexible_joint_is_detected():
     rig = flexible_joint_rig(spring="nonlinear")
-    x0, r = rig.extra["pair_slack"]
+    x0, r = rig.pair_slack
     ctx = rig.context()
     d = 1.5 * x0 / r                                      # deflection beyond the slack limit x0 / r
     ctx.SetContinuousState([0.0, 0.0, d, 0.0])

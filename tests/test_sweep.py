@@ -62,7 +62,7 @@ def joint_rig_point(*, pretension, link_angle):
     rig = joint_rig()
     op = rig.operating_point(pretension=pretension, link_angle=link_angle)
     poles = linearize(rig, op).poles
-    return float(op.info["joint_stiffness"]), float(np.min(np.abs(poles[poles != 0])))
+    return float(op.joint_stiffness), float(np.min(np.abs(poles[poles != 0])))
 
 
 def test_sweep_on_a_local_dask_cluster_gives_the_serial_numbers():

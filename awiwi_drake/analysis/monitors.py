@@ -182,21 +182,21 @@ class PairSlackMonitor(Monitor):
 def rig_monitors(rig, *, raise_on_slack: bool = False, raise_on_saturation: bool = False) -> list[Monitor]:
     """Slack, over-range and saturation monitors for a rig (its ports, wherever the rig sits in a diagram).
 
-    ``rig.extra`` says what applies: ``tension_only`` (slack on ``tendon_force``),
+    The rig's fields say what applies: ``tension_only`` (slack on ``tendon_force``),
     ``pair_slack`` (slack of the two hidden tendons of an antagonistic torsional
     spring, from the ``state`` output), ``max_force`` (calibrated spring range)
     and ``torque_limit`` (on the rig's ``motor_torque`` input).
     """
     d = rig.diagram
     monitors: list[Monitor] = []
-    if rig.extra.get("tension_only", True) and d.HasOutputPort("tendon_force"):
+    if rig.tension_only and d.HasOutputPort("tendon_force"):
         monitors.append(SlackMonitor(d, raise_on_event=raise_on_slack))
-    if rig.extra.get("pair_slack") is not None:
-        x0, r = rig.extra["pair_slack"]
+    if rig.pair_slack is not None:
+        x0, r = rig.pair_slack
         monitors.append(PairSlackMonitor(d, x0, r, raise_on_event=raise_on_slack))
-    if rig.extra.get("max_force") is not None and d.HasOutputPort("tendon_force"):
-        monitors.append(OverrangeMonitor(d, rig.extra["max_force"]))
-    limit = rig.extra.get("torque_limit")
+    if rig.max_force is not None and d.HasOutputPort("tendon_force"):
+        monitors.append(OverrangeMonitor(d, rig.max_force))
+    limit = rig.torque_limit
     if limit is not None:
         monitors.append(SaturationMonitor(d, limit, raise_on_event=raise_on_saturation))
     return monitors

@@ -97,8 +97,8 @@ class Step(Schedule):
     def __post_init__(self):
         _finite("Step", time=self.time, after=self.after, before=self.before)
 
-    def value(self, t):
-        return 0.0 * t + (self.after if _value(t) >= self.time else self.before)
+    def value(self, t):  # a time within round-off (1e-12 s) of the step is after it
+        return 0.0 * t + (self.after if _value(t) >= self.time - 1e-12 * max(1.0, abs(self.time)) else self.before)
 
     def breakpoints(self):
         return (self.time,)
@@ -190,6 +190,8 @@ class Chirp(Schedule):
 class Samples(Schedule):
     """Recorded samples ``values[i]`` at ``times[i]`` (increasing), held (``"zoh"``) or interpolated (``"linear"``).
 
+    A time within 1e-9 of the first sample spacing before a sample counts as that sample (round-off).
+
     ``values`` is ``(N,)`` (broadcast) or ``(N, size)`` (one column per port entry).
     Before the first and after the last sample the end values are held.
     """
@@ -221,7 +223,8 @@ class Samples(Schedule):
 
     def value(self, t):
         tv = _value(t)
-        i = int(np.searchsorted(self.times, tv, side="right")) - 1
+        tol = 1e-9 * (self.times[1] - self.times[0]) if len(self.times) > 1 else 1e-12  # round-off of a sample time
+        i = int(np.searchsorted(self.times, tv + tol, side="right")) - 1
         if i < 0:
             row = self.values[0]
         elif i >= len(self.times) - 1 or self.hold == "zoh":

@@ -16,6 +16,7 @@ __all__ = ["register"]
 
 def _diagnose(args) -> int:
     from awiwi_drake.discrepancy import DiagnosisInterrupted, diagnose, load_dataset
+    from awiwi_drake.discrepancy.catalog import PARAM_UNITS
     from awiwi_drake.discrepancy.report import findings_text, json_summary, write_report
     from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
@@ -55,7 +56,8 @@ def _diagnose(args) -> int:
     if dx.nuisance_corrections:
         print(f"calibration corrections: {', '.join(dx.nuisance_corrections)}")
     for s in dx.steps:
-        ps = ", ".join(f"{k}={v:.4g}" for k, v in s.parameters.items())
+        ps = ", ".join(f"{k} = {v:.4g} +- {s.uncertainties.get(k, float('nan')):.2g} {PARAM_UNITS.get(k, '?')}"
+                       for k, v in s.parameters.items())
         print(f"  {s.effect} [{s.status}, confidence {s.confidence:.2f}]: {ps}")
         if s.status == "not separable":
             print(f"    not separable with these data from {', '.join(s.members[1:])}; "

@@ -13,22 +13,25 @@
   structural floor of the backstepping feedback, see REPRODUCTIONS.md).
   On the joint rig: the antagonistic law with gains fitted to the LQR of the
   rig at its operating point (:class:`JointRigOptimalGainsCase`, N = 2 torque
-  coordinates).
+  coordinates), inside a gain box bounded by the loop rate (``rate_limited_case``).
 
-Loop option: sampled at 30 kHz, with Kd,imp limited to ``m f_s / 4`` (the
-impedance damping puts a link pole at ``-Kd,imp / m``: -1.25e5 1/s for the
-default gains on Table 12.1's 4e-7 kg m^2 link, unstable once sampled). The design cancels the joint dynamics exactly and
-is fragile to sampling: at the hand's 3 kHz the joint-rig step saturates and does
-not move (``awiwi-drake compare --rig joint-rig --rate 3000``), at 30 kHz it
-tracks (slower than the continuous loop). ``--rate 0`` runs it continuously on a
-rig without direct feedthrough (python backend; the CLI's symbolic rigs have one).
+Loop option: sampled at the thesis's 3 kHz, with Kd,imp limited to ``m f_s / 4``
+(the impedance damping puts a link pole at ``-Kd,imp / m``; the limit keeps
+``h lambda >= -1/4``).  Why: with the limit computed for 30 kHz (Kd,imp = 5.4e-3 on
+the joint rig's 7.2e-7 kg m^2 link, ``h lambda = -2.5`` at 3 kHz) the 3 kHz step
+saturated 48 % of the time and did not settle (a one-period-delay model of the
+sampled linear loop has spectral radius 1.018); with Kd,imp = m f_s / 4 = 5.4e-4
+the 3 kHz step settles in 0.22 s without saturation (docs/REPRODUCTIONS.md,
+ch. 15).  The limit is conservative at higher rates (``--rate 30000``).
+``--rate 0`` runs it continuously on a rig without direct feedthrough (python
+backend; the CLI's symbolic rigs have one).
 """
 
 from __future__ import annotations
 
 from awiwi_drake.control.registry import register_controller
 
-_LOOP = {"rate_hz": 30000.0}   # chosen: 10x the hand's 3 kHz, see the module docstring
+_LOOP = {"rate_hz": 3000.0}   # the thesis's control rate (section 15.5 experiments); see the module docstring
 
 
 def _sampled_damping(rig, damping: float) -> float:
@@ -51,11 +54,12 @@ def _position(rig):
 
 def _optimal(rig):
     from awiwi_drake.control.backstepping_studies import impedance_controller
-    from awiwi_drake.control.optimal_gains import optimize_gains
+    from awiwi_drake.control.optimal_gains import optimize_gains, rate_limited_case
     from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase, OptimalGainsCase
     from awiwi_drake.parameters.rigs import JointRigParams
     if isinstance(rig.params, JointRigParams):
-        fit = optimize_gains(rig, JointRigOptimalGainsCase(), starts=16)
+        case = rate_limited_case(JointRigOptimalGainsCase(), rig.params.link_inertia, _LOOP["rate_hz"])
+        fit = optimize_gains(rig, case, starts=16)
     else:
         fit = optimize_gains(rig, OptimalGainsCase(r_weight=1e-3))
     return impedance_controller(rig, fit.gains)

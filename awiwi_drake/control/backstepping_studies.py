@@ -106,9 +106,9 @@ def table_15_1_rig(*, spring: str = "linear", **changes):
 def plant_params(rig) -> BacksteppingPlantParams:
     """The design model of the position controller from a linear ``flexible_joint_rig``."""
     p = rig.params
-    if not isinstance(p, FlexibleJointParams) or rig.extra.get("spring_kind") != "linear":
+    if not isinstance(p, FlexibleJointParams) or rig.spring_kind != "linear":
         raise ValueError(f"plant_params: the position controller (15.11)-(15.50) needs a linear flexible_joint_rig, "
-                         f"got {rig.name} ({rig.extra.get('spring_kind', '?')})")
+                         f"got {rig.name} ({rig.spring_kind})")
     return BacksteppingPlantParams(link_inertia=p.link_inertia, motor_inertia=p.motor_inertia,
                                    motor_damping=p.motor_damping, link_damping=p.link_damping, stiffness=p.stiffness)
 

@@ -36,6 +36,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import StaticLawController, check_gains
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
@@ -65,7 +66,7 @@ def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
     plant = rig.plant
     ctx = plant.CreateDefaultContext()
     plant.SetPositions(ctx, np.asarray(q, dtype=float))
-    S = dof_selection(rig.extra["coupling"])
+    S = dof_selection(rig.coupling)
     M = S.T @ plant.CalcMassMatrix(ctx) @ S
     return M if full else np.diag(M).copy()
 
@@ -179,7 +180,7 @@ class TendonChainController(Diagram):
                  distribution: ForceDistributionParams | None = None, rate_hz: float = 3000.0):
         super().__init__()
         p = params or HandChainParams()
-        coupling = rig.extra.get("coupling") if hasattr(rig, "extra") else None
+        coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"TendonChainController: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
         fingers = tuple(coupling.parts) if hasattr(coupling, "parts") else (rig.params.finger_name,)
@@ -190,11 +191,11 @@ class TendonChainController(Diagram):
         S = dof_selection(coupling)
         n, k = S.shape
         m = coupling.num_tendons
-        q_op = np.asarray(op.info["joint_angles"], dtype=float)
-        f_op = np.asarray(op.info["tendon_force"], dtype=float)
+        q_op = np.asarray(op.joint_angle, dtype=float)
+        f_op = np.asarray(op.tendon_force, dtype=float)
         P = np.asarray(coupling.P(q_op), dtype=float)
         tau_op = -(P @ S).T @ f_op
-        K_dof = S.T @ np.asarray(op.info["joint_stiffness"], dtype=float) @ S
+        K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S
         sizes = [c.dof_selection.shape[1] for c in (coupling.parts.values() if hasattr(coupling, "parts")
                                                      else [coupling])]
         starts = np.cumsum([0] + sizes)

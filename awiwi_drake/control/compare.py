@@ -33,6 +33,7 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags
 
 from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step, simulate
 from awiwi_drake.analysis.schedules import PerEntry, Schedule
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.parameters.control import CompareTestParams, compare_test_params
 
@@ -251,7 +252,7 @@ def _simulate(loop: ClosedLoop, context, t_final: float, dt: float, reference: S
     log = [y, "motor_torque_command", "state", loop.references[0]]
     if "external_torque" in inputs:
         log.append("external_torque")
-    slack = bool(getattr(loop.rig, "extra", {}).get("tension_only")) and loop.diagram.HasOutputPort("tendon_force")
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
         log.append("tendon_force")
     applied = _applied_port(loop)
@@ -470,8 +471,8 @@ def _applied_port(loop: ClosedLoop) -> str:
 
 def _torque_limit(loop: ClosedLoop, size: int):
     limit = loop.saturation
-    if limit is None and getattr(loop.rig, "extra", {}).get("torque_limit") is not None:
-        limit = np.full(size, float(loop.rig.extra["torque_limit"]))  # the rig's own amplifier limit
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(size, float(loop.rig.torque_limit))  # the rig's own amplifier limit
     return limit
 
 
@@ -516,13 +517,14 @@ class JointChannels:
 def joint_channels(loop: ClosedLoop) -> JointChannels | None:
     """:class:`JointChannels` of a finger/hand loop tracking ``joint_angle`` (None for the 1-DoF rigs)."""
     rig = loop.rig
-    coupling = getattr(rig, "extra", {}).get("coupling")
-    if coupling is None or not loop.tracked_outputs or loop.tracked_outputs[0] != "joint_angle":
+    coupling = getattr(rig, "coupling", None)
+    if (coupling is None or not getattr(rig, "joint_names", None) or not loop.tracked_outputs
+            or loop.tracked_outputs[0] != "joint_angle"):
         return None
     from awiwi_drake.control.chain import dof_selection
     S = dof_selection(coupling)
     parts = coupling.parts if hasattr(coupling, "parts") else {rig.params.finger_name: coupling}
-    joint_names = rig.extra["joint_names"]
+    joint_names = rig.joint_names
     names, fingers, tendons, position = [], [], [], []
     col = ten = 0
     for fname, part in parts.items():
@@ -533,7 +535,7 @@ def joint_channels(loop: ClosedLoop) -> JointChannels | None:
             tendons.append(slice(ten, ten + m))
             position.append(jj)
         col, ten = col + k, ten + m
-    q0 = np.linalg.pinv(S) @ np.asarray(rig.operating_point().info["joint_angles"], dtype=float)
+    q0 = np.linalg.pinv(S) @ np.asarray(rig.operating_point().joint_angle, dtype=float)
     return JointChannels(names, S, q0, fingers, tendons, position)
 
 

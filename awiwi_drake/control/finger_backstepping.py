@@ -51,6 +51,7 @@ from typing import Any
 
 import numpy as np
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
@@ -72,7 +73,7 @@ class FingerBacksteppingLaw(StaticLaw):
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None):
         p = params or HandChainParams()
-        coupling = rig.extra.get("coupling") if hasattr(rig, "extra") else None
+        coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
         op = op or rig.operating_point()
@@ -83,8 +84,8 @@ class FingerBacksteppingLaw(StaticLaw):
         n, k = self.S.shape
         m = coupling.num_tendons
         self.r_m, self.B = float(self.motor.pulley_radius), float(self.motor.inertia)
-        self.q_op = np.asarray(op.info["joint_angles"], dtype=float)
-        self.f_op = np.asarray(op.info["tendon_force"], dtype=float)
+        self.q_op = np.asarray(op.joint_angle, dtype=float)
+        self.f_op = np.asarray(op.tendon_force, dtype=float)
         self.tau_op = -(np.asarray(coupling.P(self.q_op), dtype=float) @ self.S).T @ self.f_op
         self.M = joint_inertia(rig, self.q_op, full=True)          # S^T M(q_op) S (DoF inertia matrix)
         self._Minv = np.linalg.inv(self.M)

@@ -121,7 +121,7 @@ def transmission(rig: Any) -> Transmission:
                             p.link_inertia, p.link_damping)
     if kind == "joint_rig":
         rq = p.link_pulley_radius
-        k_pre = float(np.ravel(rig.operating_point().info["tendon_stiffness"])[0])
+        k_pre = float(np.ravel(rig.operating_point().tendon_stiffness)[0])
         # floor: 5 % of the stiffness at pretension (chosen: keeps the laws finite when a tendon goes slack)
         return Transmission(np.array([rq, -rq]), p.motor.pulley_radius, np.full(2, p.pretension), p.motor, True,
                             0.05 * p.motor.pulley_radius * k_pre, p.link_inertia, p.link_damping)

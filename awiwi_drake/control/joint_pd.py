@@ -29,6 +29,7 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, Multiplexer
 
+from awiwi_drake.rigs.base import Rig
 from awiwi_drake.hand.systems import MotorAngleReference
 from awiwi_drake.parameters.hand import JointControllerParams
 
@@ -46,7 +47,7 @@ def joint_pd_controller(rig: Any, params: JointControllerParams | None = None, *
     c = params or JointControllerParams()
     if not isinstance(c, JointControllerParams):
         raise ValueError(f"joint_pd_controller: params must be JointControllerParams, got {type(c).__name__}")
-    coupling = rig.extra.get("coupling") if hasattr(rig, "extra") else None
+    coupling = rig.coupling if isinstance(rig, Rig) else None
     if coupling is None:
         raise ValueError(f"joint_pd_controller: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig "
                          "(it has no tendon coupling)")
@@ -63,7 +64,7 @@ def joint_pd_controller(rig: Any, params: JointControllerParams | None = None, *
     kp, kd = c.kp, c.kd
     b = DiagramBuilder()
     ref = b.AddNamedSystem("motor_angle_reference", MotorAngleReference(coupling, r_m, theta_op,
-                                                                        op.info["joint_angles"]))
+                                                                        op.joint_angle))
     sizes = [m, 2 * m] + ([m] if wrist_compensation else [])
     mux = b.AddNamedSystem("joint_pd_inputs", Multiplexer(sizes))
     # u = u_op + kp (theta_ref - theta) - kd omega [- kp offset / r_m]

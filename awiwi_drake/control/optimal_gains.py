@@ -50,7 +50,7 @@ from awiwi_drake.control.backstepping import ImpedanceBackstepping, JointModel, 
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 from awiwi_drake.parameters.rigs import FlexibleJointParams
 
-__all__ = ["GainFit", "table_16_1_rig", "torque_coordinates", "torque_state_map", "backstepping_feedback",
+__all__ = ["GainFit", "rate_limited_case", "table_16_1_rig", "torque_coordinates", "torque_state_map", "backstepping_feedback",
            "system_feedback",
            "optimal_feedback", "printed_model_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains",
            "OMEGA_NAMES"]
@@ -215,6 +215,23 @@ def _setup(rig, case, op=None):
     return c, model, np.linalg.inv(T), target, np.asarray(op.state, float)
 
 
+def rate_limited_case(case: OptimalGainsCase, link_inertia: float, rate_hz: float) -> OptimalGainsCase:
+    """``case`` with the gain box's upper corner bounded by a sampled loop at ``rate_hz``.
+
+    The design places poles at ``-K3``, ``-K4`` (the z3, z4 error dynamics) and ``-Kd,imp / m`` (the
+    impedance damping): each is kept at ``|h lambda| <= 1/4`` (``K3, K4 <= f_s / 4``,
+    ``Kd,imp <= m f_s / 4``).  Unbounded, the joint rig's fit asks for K3 = 2.6e4 1/s, which the
+    3 kHz loop cannot realise (the command saturates 97 % of a step).
+    """
+    if not rate_hz > 0:
+        raise ValueError(f"rate_limited_case: rate_hz = {rate_hz} must be > 0")
+    hi = list(case.gain_high)
+    hi[1] = min(hi[1], link_inertia * rate_hz / 4.0)
+    hi[2] = min(hi[2], rate_hz / 4.0)
+    hi[3] = min(hi[3], rate_hz / 4.0)
+    return case.replace(gain_high=tuple(hi))
+
+
 def monte_carlo_gains(rig, case: OptimalGainsCase | None = None, *, samples: int | None = None,
                       seed: int | None = None, executor=None, op=None) -> GainFit:
     """Algorithm 3: the best of ``samples`` log-uniform draws of Omega in the case's box.
@@ -237,7 +254,9 @@ def monte_carlo_gains(rig, case: OptimalGainsCase | None = None, *, samples: int
 
 def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8, seed: int | None = None,
                    op=None) -> GainFit:
-    """Least squares on ``log Omega`` (scipy ``least_squares``), from the best of ``starts`` draws, at ``op``."""
+    """Least squares on ``log Omega`` inside the case's box ``[gain_low, gain_high]`` (scipy ``least_squares``),
+    from the best of ``starts`` draws, at ``op``.  A sampled loop bounds the box by its rate (see
+    :class:`~awiwi_drake.parameters.backstepping.JointRigOptimalGainsCase`)."""
     from scipy.optimize import least_squares
     c, model, T_inv, target, x0 = _setup(rig, case, op)
     scale = np.max(np.abs(np.atleast_2d(target)), axis=0)
@@ -252,7 +271,8 @@ def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8
     rng = np.random.default_rng(c.seed if seed is None else seed)
     z0s = rng.uniform(lo, hi, size=(int(starts), 4))
     best = min(z0s, key=lambda z: float(np.sum(resid(z) ** 2)))
-    sol = least_squares(resid, best, method="trf", x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
+    sol = least_squares(resid, best, method="trf", bounds=(lo, hi), x_scale=1.0, xtol=1e-12, ftol=1e-12, gtol=1e-12,
+                        max_nfev=2000)
     omega = np.exp(sol.x)
     fb = _feedback_tau(model, T_inv, omega, x0)
     return GainFit(_gains(omega), fb, target, gain_distance(fb, target), count[0], time.perf_counter() - t0,

@@ -15,12 +15,15 @@ Catalog (names are part of the contract):
 ``spring_hysteresis`` force offset ``h w``, Dahl state ``w' = (x' - |x'| w) / delta``, ``w(0)`` fitted
 ``joint_friction``   link Coulomb ``-F_c tanh(q'/v_s)`` (stick-slip, regularised)
 ``guide_friction``   tendon-path friction ``C0 s + f (exp(mu_a s) - 1)``, ``s = tanh(v/v0)``, opposing the tendon motion
+``spring_drift``     spring force scaled by ``1 + c (t - t_mid)`` (creep over the run)
 ``delay``            applied torque ``u(t - T)``
 =================== ======================================================================
 
 Nuisance candidates (calibration, not new physics): ``force_sensor`` (gain and
-offsets), ``nominal_motor`` (B, d), ``nominal_spring`` (stiffness scale),
-``nominal_link`` (m, d_q).
+offsets), ``link_sensor`` (link-encoder bias and scale), ``motor_sensor``
+(motor-encoder biases), ``nominal_motor`` (B, d), ``nominal_spring`` (stiffness
+scale), ``nominal_link`` (m, d_q).  ``spring_drift`` acts per shooting window
+(the scale at the window's mid-time), see :meth:`ReplayEngine.simulate`.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import numpy as np
 
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
-__all__ = ["ParamSpec", "Effect", "param_specs", "PARAM_NAMES", "PARAM_INDEX", "EFFECTS",
+__all__ = ["ParamSpec", "Effect", "param_specs", "PARAM_NAMES", "PARAM_INDEX", "PARAM_UNITS", "EFFECTS",
            "effects_for_rig", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS"]
 
 
@@ -70,8 +73,8 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
                       ParamSpec(f"ripple_cos{k}_m{m}", "Nm", 0.0, -rmax, rmax, 0.01,
                                 f"ripple cosine coefficient, harmonic {k}, motor {m}")]
     specs += [
-        ParamSpec("ripple_order_1", "1/rev", 1.0, 1.0, 200.0, 0.0, "order of ripple harmonic 1"),
-        ParamSpec("ripple_order_2", "1/rev", 2.0, 1.0, 200.0, 0.0, "order of ripple harmonic 2"),
+        ParamSpec("ripple_order_1", "1/rev", 1.0, 1.0, b.ripple_order_max, 0.0, "order of ripple harmonic 1"),
+        ParamSpec("ripple_order_2", "1/rev", 2.0, 1.0, b.ripple_order_max, 0.0, "order of ripple harmonic 2"),
         ParamSpec("hysteresis_width", "N", 0.0, 0.0, b.hysteresis_width_max, 0.5, "hysteresis half-width h"),
         ParamSpec("hysteresis_length", "m", 2e-4, *b.hysteresis_length_range, 0.0, "Dahl transition length"),
         ParamSpec("hysteresis_initial", "-", 0.0, -1.0, 1.0, 0.2,
@@ -90,12 +93,20 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
         ParamSpec("spring_scale_rel", "-", 0.0, -nrel, nrel, 0.02, "relative error of the spring force"),
         ParamSpec("link_inertia_rel", "-", 0.0, -nrel, nrel, 0.05, "relative error of m"),
         ParamSpec("link_damping_add", "Nm s/rad", 0.0, -0.05, 0.2, 2e-4, "added link damping"),
+        ParamSpec("spring_drift", "1/s", 0.0, -b.spring_drift_max, b.spring_drift_max, 2e-3,
+                  "relative spring-force change per second of the run (creep), zero at mid-record"),
+        ParamSpec("link_bias", "rad", 0.0, -b.encoder_bias_max, b.encoder_bias_max, 0.01, "link encoder bias"),
+        ParamSpec("link_scale_rel", "-", 0.0, -b.encoder_scale_max, b.encoder_scale_max, 0.02,
+                  "link encoder scale error"),
+        ParamSpec("motor_bias_1", "rad", 0.0, -b.encoder_bias_max, b.encoder_bias_max, 0.01, "motor 1 encoder bias"),
+        ParamSpec("motor_bias_2", "rad", 0.0, -b.encoder_bias_max, b.encoder_bias_max, 0.01, "motor 2 encoder bias"),
     ]
     return specs
 
 
 PARAM_NAMES = [s.name for s in param_specs()]
 PARAM_INDEX = {n: i for i, n in enumerate(PARAM_NAMES)}
+PARAM_UNITS = {s.name: s.unit for s in param_specs()}  # the unit of every fitted parameter (reports, CLI)
 
 
 @dataclass(frozen=True)
@@ -129,7 +140,7 @@ class Effect:
         """Amplitude parameters that exist on ``rig`` (drop motor-2/link/force-2 ones)."""
         if rig == "joint":
             return self.amplitude
-        return tuple(a for a in self.amplitude if not a.endswith("_m2") and a != "force_offset_2")
+        return tuple(a for a in self.amplitude if not a.endswith(("_m2", "_2")))
 
 
 EFFECTS = {
@@ -154,12 +165,21 @@ EFFECTS = {
     "guide_friction": Effect(
         "guide_friction", "physical", ("guide_c0", "guide_mu"), {}, ("tendon", "joint"),
         "motor-torque residual odd in tendon velocity and growing with tension"),
+    "spring_drift": Effect(
+        "spring_drift", "physical", ("spring_drift",), {}, ("tendon", "joint"),
+        "force residual proportional to the force and growing over the run (creep of the spring mechanism)"),
     "delay": Effect(
         "delay", "physical", ("delay",), {}, ("tendon", "joint"),
         "residual-input cross-correlation peaks at a positive lag; phase lag growing with frequency"),
     "force_sensor": Effect(
         "force_sensor", "nuisance", ("force_gain", "force_offset_1", "force_offset_2"), {},
         ("tendon", "joint"), "force residual proportional to force or constant"),
+    "link_sensor": Effect(
+        "link_sensor", "nuisance", ("link_bias", "link_scale_rel"), {}, ("joint",),
+        "link-angle residual constant or proportional to the link angle; forces consistent"),
+    "motor_sensor": Effect(
+        "motor_sensor", "nuisance", ("motor_bias_1", "motor_bias_2"), {}, ("tendon", "joint"),
+        "motor-angle residual constant, force residual following the spring stiffness"),
     "nominal_motor": Effect(
         "nominal_motor", "nuisance", ("motor_inertia_rel", "motor_damping_add"), {},
         ("tendon", "joint"), "motor-torque residual in phase with acceleration or velocity"),
@@ -183,6 +203,8 @@ def effects_for_rig(rig: str, outputs: list[str]) -> list[Effect]:
         if rig not in e.rigs:
             continue
         if e.name == "force_sensor" and not has_force:
+            continue
+        if e.name == "link_sensor" and "link_angle" not in outputs:
             continue
         out.append(e)
     return out

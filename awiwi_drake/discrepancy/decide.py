@@ -159,6 +159,13 @@ SEPARATING_EXPERIMENTS = {
     frozenset(("delay", "nominal_motor")):
         "a high-frequency chirp (beyond the motor-spring mode): a delay adds phase lag growing "
         "linearly with frequency, an inertia or damping error changes the gain",
+    frozenset(("link_sensor", "motor_sensor")):
+        "read the link angle against an independent reference (a jig at known angles) or zero the "
+        "motor encoders at a mechanical stop: a link-encoder bias and motor-encoder biases shift the "
+        "tendon elongations alike",
+    frozenset(("force_sensor", "nominal_spring")):
+        "load the tendon with known weights: a force-sensor gain error scales the reading, a "
+        "stiffness error the elongation at a given force",
     frozenset(("motor_ripple", "motor_friction")):
         "slow constant-speed runs over several motor revolutions in both directions: ripple is "
         "periodic in the motor angle, friction depends on the direction only",

@@ -23,14 +23,29 @@ multiples of 100."""
 
 def cpr_spectrum(residual: np.ndarray, angles: list, orders: np.ndarray) -> np.ndarray:
     """Amplitude of the component of ``residual`` periodic in each angle with each
-    order (least squares on ``sin, cos, 1`` per order; largest over ``angles``)."""
-    amps = np.zeros(len(orders))
+    order (least squares on ``sin, cos, 1`` per order; largest over ``angles``).
+
+    ``residual`` is (N,) or (N, k) (k signals at once); returns (len(orders),) or
+    (len(orders), k)."""
+    R = np.asarray(residual, float)
+    flat = R.ndim == 1
+    R = R[:, None] if flat else R
+    amps = np.zeros((len(orders), R.shape[1]))
+    ones = np.ones(R.shape[0])
     for theta in angles:
-        for i, k in enumerate(orders):
-            A = np.column_stack([np.sin(k * theta), np.cos(k * theta), np.ones_like(theta)])
-            c, *_ = np.linalg.lstsq(A, residual, rcond=None)
-            amps[i] = max(amps[i], float(np.hypot(c[0], c[1])))
-    return amps
+        # normal equations of all orders at once: a 3x3 Gram matrix per order
+        S = np.sin(np.outer(orders, theta))
+        C = np.cos(np.outer(orders, theta))
+        G = np.empty((len(orders), 3, 3))
+        G[:, 0, 0], G[:, 1, 1], G[:, 2, 2] = (S * S).sum(1), (C * C).sum(1), float(len(theta))
+        G[:, 0, 1] = G[:, 1, 0] = (S * C).sum(1)
+        G[:, 0, 2] = G[:, 2, 0] = S.sum(1)
+        G[:, 1, 2] = G[:, 2, 1] = C.sum(1)
+        B = np.stack([S @ R, C @ R, np.repeat((ones @ R)[None], len(orders), axis=0)], axis=1)
+        G += 1e-12 * len(theta) * np.eye(3)  # an order aliasing a constant over the range stays solvable
+        coef = np.linalg.solve(G, B)  # (orders, 3, k)
+        amps = np.maximum(amps, np.hypot(coef[:, 0], coef[:, 1]))
+    return amps[:, 0] if flat else amps
 
 
 @dataclass
@@ -85,8 +100,8 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
     nmot = eng.nom.num_motors
     theta = eng.xhat[0][ok]
     orders = np.arange(1, CPR_MAX_ORDER + 1)
-    cpr = {n: cpr_spectrum(full[ok, j], [eng.xhat[i][ok] for i in range(nmot)], orders)
-           for j, n in enumerate(eng.out_names)}
+    amps = cpr_spectrum(full[ok], [eng.xhat[i][ok] for i in range(nmot)], orders)
+    cpr = {n: amps[:, j] for j, n in enumerate(eng.out_names)}
     cpr_noise = float(2.0 / np.sqrt(max(ok.sum(), 1)))
     # operating regions: quantile bins of motor velocity, motor angle and tendon force
     def profile(v):

@@ -196,12 +196,12 @@ def model_measurements(nom: NominalParameters, X, P):
     n = nom.num_motors
     theta, omega, q, qd, z = split_state(nom, X)
     x, _ = rig_kinematics(nom, theta, omega, q, qd)
-    out = [theta[i] for i in range(n)]
+    out = [theta[i] + _p(P, f"motor_bias_{i + 1}") for i in range(n)]  # encoder bias
     for i in range(n):
         f, _ = laws.spring_with_hysteresis(x[i], z[i], nom.spring_poly, _p(P, "spring_scale_rel"))
         out.append((1.0 + _p(P, "force_gain")) * f + _p(P, f"force_offset_{i + 1}"))
     if nom.has_link:
-        out.append(q)
+        out.append((1.0 + _p(P, "link_scale_rel")) * q + _p(P, "link_bias"))  # link encoder calibration
     return np.array(out)
 
 

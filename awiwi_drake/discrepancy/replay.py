@@ -199,6 +199,14 @@ class ReplayEngine:
         n = self.nom.num_motors
         X0 = np.empty((self.nom.num_states, len(starts)))
         X0[:-n] = self.xhat[:, starts]
+        # encoder calibration: the estimate is of the measured angles
+        for i in range(n):
+            X0[i] -= P[PARAM_INDEX[f"motor_bias_{i + 1}"]]
+        if self.nom.has_link and "link_angle" in self.ds.outputs:
+            k = 2 * n
+            scale = 1.0 + P[PARAM_INDEX["link_scale_rel"]]
+            X0[k] = (X0[k] - P[PARAM_INDEX["link_bias"]]) / scale
+            X0[k + 1] = X0[k + 1] / scale
         shape = P[[PARAM_INDEX["hysteresis_length"], PARAM_INDEX["hysteresis_initial"]]]
         width = P[PARAM_INDEX["hysteresis_width"]]
         w = np.zeros((n, len(starts)))
@@ -237,7 +245,11 @@ class ReplayEngine:
         n = self.nom.num_motors
         ctx.SetTime(0.0)
         ctx.SetContinuousState(np.asarray(X0, float).ravel())
-        ctx.get_mutable_numeric_parameter(0).SetFromVector(np.asarray(P, float).ravel())
+        P = np.array(P, float)
+        # spring drift (creep): the spring scale of each copy at its window's mid-time
+        t_mid = self.ds.time[starts] + 0.5 * self.L * self.dt - 0.5 * (self.ds.time[0] + self.ds.time[-1])
+        P[PARAM_INDEX["spring_scale_rel"]] += P[PARAM_INDEX["spring_drift"]] * t_mid
+        ctx.get_mutable_numeric_parameter(0).SetFromVector(P.ravel())
         delay = P[PARAM_INDEX["delay"]] / self.dt
         nd = np.floor(delay).astype(int)
         a = delay - nd

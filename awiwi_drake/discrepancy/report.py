@@ -12,7 +12,7 @@ import pathlib
 
 import numpy as np
 
-from .catalog import default_vector
+from .catalog import PARAM_UNITS, default_vector
 from .localise import ResidualMaps, residual_maps
 from .result import Diagnosis
 
@@ -136,6 +136,7 @@ def plot_candidates(dx: Diagnosis):
 def json_summary(dx: Diagnosis, maps_before: ResidualMaps | None = None) -> dict:
     """The JSON summary (contract keys: named_effects, nrmse_before, nrmse_after, steps)."""
     out = dx.to_json()
+    out["units"] = {k: PARAM_UNITS.get(k, "?") for st in dx.steps for k in st.parameters}  # of every fitted value
     if maps_before is not None:
         out["localisation"] = maps_before.summary
     return out
@@ -207,10 +208,10 @@ def write_report(dx: Diagnosis, directory, *, figures: bool = True) -> pathlib.P
     for i, s in enumerate(dx.steps, 1):
         L.append(f"### {i}. `{s.effect}` ({s.kind}, {s.status}, confidence {s.confidence:.2f})")
         L.append("")
-        L.append("| parameter | value | std. error |")
-        L.append("|---|---|---|")
+        L.append("| parameter | value | std. error | unit |")
+        L.append("|---|---|---|---|")
         for k, v in s.parameters.items():
-            L.append(f"| `{k}` | {v:.5g} | {s.uncertainties.get(k, float('nan')):.2g} |")
+            L.append(f"| `{k}` | {v:.5g} | {s.uncertainties.get(k, float('nan')):.2g} | {PARAM_UNITS.get(k, '?')} |")
         L.append("")
         L.append(f"NRMSE after: {s.nrmse_after:.4f}." + (f" Alternatives: {s.alternatives}." if s.alternatives else ""))
         if s.status == "not separable":
@@ -220,7 +221,7 @@ def write_report(dx: Diagnosis, directory, *, figures: bool = True) -> pathlib.P
         L.append("| candidate | stage | held-out gain [% excess] | z | dBIC | parameters | rejected |")
         L.append("|---|---|---|---|---|---|---|")
         for c in s.candidates:
-            ps = ", ".join(f"{k}={v:.3g}" for k, v in c.parameters.items())
+            ps = ", ".join(f"{k}={v:.3g} {PARAM_UNITS.get(k, '?')}" for k, v in c.parameters.items())
             L.append(f"| {c.effect} | {c.stage} | {100 * c.relative_gain:.1f} | {c.z:.1f} | {c.delta_bic:.0f} | {ps} "
                      f"| {c.rejected} |")
         L.append("")

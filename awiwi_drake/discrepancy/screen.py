@@ -19,6 +19,7 @@ from scipy.stats import rankdata
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
 from .catalog import PARAM_INDEX, Effect, param_specs
+from .localise import cpr_spectrum
 from .replay import ReplayEngine, project
 
 __all__ = ["ResidualState", "nrmse", "paired_z", "gain_z", "screen", "probe", "free_params",
@@ -83,13 +84,28 @@ def gain_z(rp_before: np.ndarray, rp_after: np.ndarray) -> float:
     return gain / (2.0 * nd) if nd > 0 else 0.0
 
 
-def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBounds):
-    """Screening variants ``(label, shape_values, [(param, delta)...], ripple_order)``."""
+def ripple_orders_from_spectrum(st: "ResidualState", bounds: CatalogBounds) -> list:
+    """The ``bounds.ripple_candidates`` strongest lines (orders 1..``ripple_order_max``)
+    of the current residual's cycles-per-revolution spectrum, summed over the signals,
+    against every motor angle."""
+    eng = st.eng
+    ny = len(eng.out_names)
+    idx = (eng.starts[st.W][:, None] + 1 + np.arange(eng.L)[None, :]).ravel()
+    R = st.rp.reshape(len(st.W), eng.L, ny).reshape(-1, ny)
+    orders = np.arange(1, int(bounds.ripple_order_max) + 1)
+    amps = cpr_spectrum(R, [eng.xhat[i][idx] for i in range(eng.nom.num_motors)], orders)
+    power = (amps ** 2).sum(axis=1)
+    return [float(o) for o in orders[np.argsort(-power)[:bounds.ripple_candidates]]]
+
+
+def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBounds, ripple_orders=()):
+    """Screening variants ``(label, shape_values, [(param, delta)...], ripple_order)``
+    (``ripple_orders``: the orders screened for ``motor_ripple``)."""
     specs = {s.name: s for s in param_specs(bounds)}
     amps = effect.amplitude_for(rig)
     if effect.name == "motor_ripple":
         out = []
-        for order in bounds.ripple_orders:
+        for order in ripple_orders:
             cols = [a for a in amps if a.startswith(("ripple_sin1", "ripple_cos1"))]
             out.append((f"order {order:g}", {"ripple_order_1": order},
                         [(c, specs[c].perturbation) for c in cols], order))
@@ -106,8 +122,9 @@ def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) ->
     eng, base = st.eng, st.base
     variants = []  # (effect, label, shape, cols, order)
     Psets = []
+    orders = ripple_orders_from_spectrum(st, bounds) if any(e.name == "motor_ripple" for e in effects) else []
     for eff in effects:
-        for label, shape, cols, order in candidate_grid(eff, rig, base, bounds):
+        for label, shape, cols, order in candidate_grid(eff, rig, base, bounds, orders):
             p0 = base.copy()
             for k, v in shape.items():
                 p0[PARAM_INDEX[k]] = v

@@ -13,7 +13,11 @@ physics allows, so that identifying them is not circular:
 ``joint_friction``   Stribeck at the link
 ``guide_friction``   capstan ``f (exp(mu_a sgn v) - 1)`` plus constant (4.1) part
 ``delay``            exact delay of the zero-order-hold command (interval split)
+``spring_drift``     creep: spring force scaled by ``1 + c (1 - exp(-t / tau))`` (catalog: linear)
 ================== ================================================================
+
+``strength`` scales every hidden effect's size (friction levels, ripple and
+hysteresis amplitudes, guide friction, delay, creep) for half-strength studies.
 
 Sensor noise is white at a given SNR (relative to each signal's standard
 deviation); forces are quantised to 12 bit over the sensor range.
@@ -22,11 +26,12 @@ deviation); forces are quantised to 12 bit over the sensor range.
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import AffineSystem, DiscreteTimeDelay, Multiplexer, ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import positive_part
+from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
 from awiwi_drake.components.friction import guide_friction, stribeck_friction
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 
@@ -38,7 +43,7 @@ from .model import NominalParameters, rig_kinematics, split_state
 __all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
 
 HIDDEN_EFFECTS = ("motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
-                  "guide_friction", "delay")
+                  "guide_friction", "delay", "spring_drift")
 NUISANCES = ("force_sensor", "nominal_motor")
 
 
@@ -75,13 +80,17 @@ def HiddenEffectPlant_(T):
         def _split(self, X):
             return split_state(self._nom, X)
 
-        def _forces(self, X):
+        def _forces(self, X, t):
             nom, tr = self._nom, self._truth
             theta, omega, q, qd, z = self._split(X)
             x, xd = rig_kinematics(nom, theta, omega, q, qd)
+            scale = tr.get("spring_scale", 1.0)
+            if "spring_drift" in tr:
+                p = tr["spring_drift"]
+                scale = scale * (1.0 + p["creep"] * (1.0 - np.exp(-t / p["tau"])))
             f = []
             for i in range(nom.num_motors):
-                f0 = laws.spring_force(x[i], nom.spring_poly) * tr.get("spring_scale", 1.0)
+                f0 = laws.spring_force(x[i], nom.spring_poly) * scale
                 if "spring_hysteresis" in tr:
                     f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
                 f.append(f0)
@@ -92,7 +101,7 @@ def HiddenEffectPlant_(T):
             U = self.get_input_port(0).Eval(context)
             nom, tr, n = self._nom, self._truth, self._nom.num_motors
             theta, omega, q, qd, z = self._split(X)
-            f, x, xd = self._forces(X)
+            f, x, xd = self._forces(X, context.get_time())
             B = nom.motor_inertia * tr.get("inertia_scale", 1.0)
             r = nom.motor_pulley_radius
             acc, zd = [], []
@@ -131,7 +140,7 @@ def HiddenEffectPlant_(T):
 
         def _calc_y(self, context, output):
             X = context.get_continuous_state_vector().CopyToVector()
-            f, _, _ = self._forces(X)
+            f, _, _ = self._forces(X, context.get_time())
             theta, omega, q, qd, z = self._split(X)
             y = list(theta) + list(f) + ([q] if self._nom.has_link else [])
             output.SetFromVector(np.array(y))
@@ -142,8 +151,9 @@ def HiddenEffectPlant_(T):
     return Impl
 
 
-def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
-    """Random truth parameters for the hidden effects (and optional miscalibrations)."""
+def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0) -> dict:
+    """Random truth parameters for the hidden effects (and optional miscalibrations);
+    ``strength`` scales each effect's size."""
     hidden = list(hidden)
     for h in hidden:
         if h not in HIDDEN_EFFECTS:
@@ -179,6 +189,10 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
         tr["guide_friction"] = dict(mu_angle=u(0.08, 0.2), c0=u(0.3, 1.5), v0=2e-4)
     if "delay" in hidden:
         tr["delay"] = float(u(0.002, 0.006))
+    if "spring_drift" in hidden:
+        tr["spring_drift"] = dict(creep=float(u(0.08, 0.2) * rng.choice([-1, 1])), tau=float(u(3.0, 8.0)))
+    if strength != 1.0:
+        _scale_truth(tr, strength)
     if "force_sensor" in nuisance:
         tr["force_gain"] = float(1.0 + u(0.05, 0.12) * rng.choice([-1, 1]))
         tr["force_offset"] = float(u(1.0, 3.0) * rng.choice([-1, 1]))
@@ -187,6 +201,22 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=()) -> dict:
     tr["hidden"] = hidden
     tr["nuisance"] = list(nuisance)
     return tr
+
+
+def _scale_truth(tr: dict, k: float) -> None:
+    """Scale every hidden effect's size by ``k`` in place (shapes unchanged)."""
+    sizes = {"motor_friction": ("fc", "fs", "viscous"), "joint_friction": ("fc", "fs"),
+             "spring_hysteresis": ("width",), "guide_friction": ("c0", "mu_angle"), "spring_drift": ("creep",)}
+    for eff, keys in sizes.items():
+        if eff in tr:
+            for key in keys:
+                tr[eff][key] = tr[eff][key] * k
+    if "motor_ripple" in tr:
+        tr["motor_ripple"]["harmonics"] = [[(o, a * k, b * k) for o, a, b in hm]
+                                           for hm in tr["motor_ripple"]["harmonics"]]
+    if "delay" in tr:
+        tr["delay"] = tr["delay"] * k
+    tr["strength"] = k
 
 
 def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -220,9 +250,60 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return a
 
 
+def _closed_loop(plant_sys, n: int, ns: int, dt: float, ff: float, kp: float, kd: float, delay: float,
+                 ref0: np.ndarray, X0: np.ndarray):
+    """The truth rig under the lab's discrete motor PD, from Drake primitives.
+
+    ``u_k = ff + kp (theta_ref,k - theta_k) - kd omega_k`` is sampled every ``dt``
+    (``motor_torque_command``) and reaches the plant ``delay`` [s] later: whole
+    periods through a ``DiscreteTimeDelay``, the fraction through a hold sampling
+    at ``k dt + frac dt`` (the interval split of the ``delay`` effect).  Returns
+    the diagram (input ``motor_angle_reference``) and the first command ``u_0``.
+    """
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("truth_plant", plant_sys)
+    mux = b.AddNamedSystem("pd_inputs", Multiplexer([n, ns]))
+    D = np.zeros((n, n + ns))
+    D[:, :n] = kp * np.eye(n)
+    D[:, n:2 * n] = -kp * np.eye(n)
+    D[:, 2 * n:3 * n] = -kd * np.eye(n)
+    pd = b.AddNamedSystem("motor_pd", AffineSystem(A=np.zeros((0, 0)), B=np.zeros((0, n + ns)), f0=np.zeros(0),
+                                                   C=np.zeros((n, 0)), D=D, y0=np.full(n, ff)))
+    b.Connect(plant.GetOutputPort("state"), mux.get_input_port(1))
+    b.Connect(mux.get_output_port(0), pd.get_input_port())
+    b.ExportInput(mux.get_input_port(0), "motor_angle_reference")
+    nd = int(np.floor(delay / dt + 1e-12))
+    frac = delay / dt - nd
+    src = (b.AddNamedSystem("command_delay", DiscreteTimeDelay(dt, nd, n)) if nd > 0
+           else b.AddNamedSystem("command_hold", ZeroOrderHold(dt, n)))
+    b.Connect(pd.get_output_port(), src.get_input_port())
+    if frac > 1e-9:
+        split = b.AddNamedSystem("delay_split", ZeroOrderHold(dt, n, frac * dt))
+        b.Connect(src.get_output_port(), split.get_input_port())
+        src = split
+    b.Connect(src.get_output_port(), plant.GetInputPort("motor_torque"))
+    b.ExportOutput(plant.GetOutputPort("measurement"), "measurement")
+    b.ExportOutput(pd.get_output_port(), "motor_torque_command")
+    diagram = b.Build()
+    diagram.set_name("truth_loop")
+    th, om = X0[:n], X0[n:2 * n]
+    u0 = ff + kp * (np.asarray(ref0, float) - th) - kd * om
+    return diagram, u0
+
+
+def _hold_initial_command(diagram, ctx, u0: np.ndarray) -> None:
+    """Fill every hold/delay buffer with the first command (the bench starts at rest at ``u_0``)."""
+    for name in ("command_delay", "command_hold", "delay_split"):
+        if diagram.HasSubsystemNamed(name):
+            sub = diagram.GetSubsystemByName(name)
+            sctx = sub.GetMyMutableContextFromRoot(ctx)
+            size = sctx.get_discrete_state_vector().size()
+            sctx.SetDiscreteState(np.resize(np.asarray(u0, float), size))
+
+
 def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
-                       keep_clean: bool = True, progress=None) -> Dataset:
+                       keep_clean: bool = True, progress=None, strength: float = 1.0) -> Dataset:
     """Simulate one closed-loop experiment on a truth rig with hidden effects.
 
     ``progress(t, duration)`` (optional) is called every ~2 % of the run, e.g.
@@ -238,6 +319,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         Random physical parameters, effect parameters, excitation and noise.
     nuisance : sequence of "force_sensor" | "nominal_motor"
         Miscalibrations: the JSON's nominal values or the sensor differ from the truth.
+    strength : float
+        Scale of every hidden effect's size (1: the generator's ranges; 0.5: half strength).
 
     Returns
     -------
@@ -261,15 +344,11 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         else:
             params[k] = float(v * rng.uniform(1 - spread, 1 + spread))
     nom = NominalParameters.from_dataset(rig, params)
-    truth = draw_truth(rig, hidden, rng, nuisance)
-    plant = HiddenEffectPlant_[float](nom, truth)
-    sim = Simulator(plant)
+    truth = draw_truth(rig, hidden, rng, nuisance, strength)
+    plant_sys = HiddenEffectPlant_[float](nom, truth)
     dt = 1.0 / gen.sample_rate
     N = int(round(gen.duration / dt))
     t = np.arange(N) * dt
-    ResetIntegratorFromFlags(sim, "runge_kutta3", dt)
-    sim.get_mutable_integrator().set_target_accuracy(1e-6)
-    ctx = sim.get_mutable_context()
     n = nom.num_motors
     r = nom.motor_pulley_radius
     xs = np.linspace(0, 0.05, 20001)
@@ -293,36 +372,20 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         X0 = np.zeros(nom.num_states)
         X0[0] = th0
     ff = r * gen.pretension
-    ctx.SetContinuousState(X0)
-    port = plant.get_input_port(0)
-    yport = plant.get_output_port(0)
-    xport = plant.get_output_port(1)
     delay = float(truth.get("delay", 0.0))
-    nd = int(np.floor(delay / dt + 1e-12))
-    frac = delay / dt - nd
-    Ucmd = np.zeros((N, n))
-    Y = np.zeros((N, nom.num_measurements))
-    port.FixValue(ctx, np.full(n, ff))
-    sim.Initialize()
-    every = max(1, N // 50)
-    for k in range(N):
-        if progress is not None and k % every == 0:
-            progress(float(t[k] - t[0]), float(t[-1] - t[0]))
-        xk = xport.Eval(ctx)
-        Y[k] = yport.Eval(ctx)
-        th, om = xk[:n], xk[n:2 * n]
-        Ucmd[k] = ff + gen.kp * (ref[k] - th) - gen.kd * om
-        if k == N - 1:
-            break
-        u_new = Ucmd[max(k - nd, 0)]
-        if frac > 1e-9:
-            u_old = Ucmd[max(k - nd - 1, 0)]
-            port.FixValue(ctx, u_old)
-            sim.AdvanceTo(t[k] + frac * dt)
-        port.FixValue(ctx, u_new)
-        sim.AdvanceTo(t[k + 1])
-        if not np.all(np.isfinite(ctx.get_continuous_state_vector().CopyToVector())):
-            raise FloatingPointError(f"truth simulation diverged at t = {t[k + 1]:.4f} s")
+    diagram, u0 = _closed_loop(plant_sys, n, nom.num_states, dt, ff, gen.kp, gen.kd, delay, ref[0], X0)
+    ctx = diagram.CreateDefaultContext()
+    ctx.SetContinuousState(X0)
+    _hold_initial_command(diagram, ctx, u0)
+    try:
+        res = simulate(diagram, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh")},
+                       log=("measurement", "motor_torque_command"), log_period=dt, mode="error_controlled",
+                       max_step=dt, accuracy=1e-6, progress=progress)
+    except SimulationDivergedError as exc:
+        raise FloatingPointError(f"truth simulation diverged: {exc}") from None
+    Y, Ucmd = res["measurement"], res["motor_torque_command"]
+    if Y.shape[0] != N:
+        raise RuntimeError(f"truth simulation logged {Y.shape[0]} samples, expected {N}")
     names = nom.measurement_names()
     clean = {nm: Y[:, j].copy() for j, nm in enumerate(names)}
     meas = {}

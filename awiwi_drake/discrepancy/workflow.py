@@ -122,8 +122,8 @@ class _Run:
         conf = float(norm.cdf(paired_z(others[0].window_energy[te], win.window_energy[te]))) if others else 1.0
         conf = float(min(conf, norm.cdf(win.z - settings.min_rank_z + 2.0)))
         if passing_tied:
-            physical = [c for c in members if c.kind == "physical"]
-            status = "not separable" if len(physical) >= 2 else "ambiguous"
+            same_kind = [c for c in members if c.kind == win.kind]
+            status = "not separable" if len(same_kind) >= 2 else "ambiguous"
             return win, status, conf, [c.effect for c in members], [c.effect for c in members if c is not win]
         # a rejected runner-up that explains as much still makes the choice uncertain
         alts = [c.effect for c in tied]

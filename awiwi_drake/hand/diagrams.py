@@ -32,7 +32,8 @@ finger coupling plus ``m`` length-offset "joints" (identity columns of
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
@@ -60,21 +61,31 @@ DEFAULT_BACKEND = "symbolic"
 class HandRig(Rig):
     """A :class:`Rig` for fingers and the hand; fixes the ``wrist_angle`` input too.
 
-    Extra attributes live in ``extra``: ``coupling`` (the finger/hand
-    coupling without wrist offsets), ``drive_coupling`` (what the drive
-    uses), ``models`` (FingerModel handles), ``joint_names``,
-    ``tendon_names``, ``offsets`` (x0 [m]), ``coupling_gain`` (G).
+    Beyond :class:`Rig`: ``coupling`` is the finger/hand coupling without wrist
+    offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
+    handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
+    spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
+    rows of the tendons, ``spring_law`` the spring of every tendon.
     """
+
+    drive_coupling: Any = None
+    models: Any = None
+    joint_names: list = field(default_factory=list)
+    tendon_names: list = field(default_factory=list)
+    offsets: Any = None
+    coupling_gain: Any = None
+    wrist_rows: Any = None
+    spring_law: Any = None
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
         super().set_operating_point(context, op, fix_inputs=fix_inputs)
         if fix_inputs and self.diagram.HasInputPort("wrist_angle"):
             self.diagram.GetInputPort("wrist_angle").FixValue(
-                context, np.asarray(op.info.get("wrist_angle", np.zeros(2)), dtype=float))
+                context, np.zeros(2) if op.wrist_angle is None else np.asarray(op.wrist_angle, dtype=float))
 
     @property
     def num_joints(self) -> int:
-        return len(self.extra["joint_names"])
+        return len(self.joint_names)
 
     def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
@@ -89,7 +100,7 @@ class HandRig(Rig):
         from .estimation import link_state_estimator
         p = params or LinkEstimatorParams()
         period = 1.0 / p.rate_hz if period is None else max(float(period), 1.0 / p.rate_hz)
-        return link_state_estimator(self.extra["coupling"], self.params.motor.pulley_radius, self.extra["offsets"],
+        return link_state_estimator(self.coupling, self.params.motor.pulley_radius, self.offsets,
                                     period=period, wrist=self.diagram.HasInputPort("wrist_angle"),
                                     iterations=p.iterations, step0=p.initial_step,
                                     velocity_time_constant=max(p.velocity_time_constant, period))
@@ -100,7 +111,7 @@ class HandRig(Rig):
 
     @property
     def num_tendons(self) -> int:
-        return len(self.extra["tendon_names"])
+        return len(self.tendon_names)
 
 
 def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
@@ -251,17 +262,16 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names)
-    extra = dict(drive=drive, coupling=coupling, wrist_rows=rows, tension_only=True,
-                 torque_limit=p.motor.torque_limit if p.motor.saturation else None,
-                 drive_coupling=drive_coupling, models=models, joint_names=joint_names, tendon_names=list(coupling.tendon_names), offsets=offsets,
-                 coupling_gain=G, spring_law=spring)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, spring, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle)
 
-    return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, extra)
+    return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, drive=drive, coupling=coupling,
+                   wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
+                   drive_coupling=drive_coupling, models=models, joint_names=joint_names,
+                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring)
 
 
 def _wrist_rows(parts) -> np.ndarray:
@@ -344,8 +354,8 @@ def _equilibrium(name, p, plant, coupling, spring, offsets, G, wrist_rows, prete
     K_t = np.asarray(spring.stiffness(x), dtype=float)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
-    return OperatingPoint(state, u, tau_ext, dict(pretension=f0, joint_angles=q, tendon_force=f, elongation=x,
-                                                  tendon_stiffness=K_t, joint_stiffness=Kq, wrist_angle=wa))
+    return OperatingPoint(state, u, tau_ext, pretension=f0, joint_angle=q, tendon_force=f, elongation=x,
+                          tendon_stiffness=K_t, joint_stiffness=Kq, wrist_angle=wa)
 
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,

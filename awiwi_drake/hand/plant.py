@@ -260,7 +260,7 @@ def coupling_compliance(joint_stiffness: np.ndarray, coupling_vector: np.ndarray
 
     ``joint_stiffness`` is the full motors-held stiffness ``K_q`` (n x n, the
     tendons' (5.12) plus the coupling element ``k_c c c^T``, e.g.
-    ``op.info["joint_stiffness"]`` of a finger rig), ``coupling_vector`` the
+    ``op.joint_stiffness`` of a finger rig), ``coupling_vector`` the
     ``c`` of :attr:`FingerModel.coupling_vector` placed in the n plant joints
     (``c . q = q_DIP - (r_x3/r_x2) q_PIP``).  ``joint`` defaults to the DIP
     (the joint where ``c`` is 1).  A static torque ``tau`` on that joint

@@ -249,7 +249,7 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         ctx = d.CreateDefaultContext()
         op = rig.operating_point()
         cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
-        q_op = op.info["joint_angles"]
+        q_op = op.joint_angle
         d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
         d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
         res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},
@@ -260,6 +260,6 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic"
         drift[comp] = res["joint_angle"] - q_op
         fmin[comp] = float(np.min(res["tendon_force"]))
     return WristCompensationStudy(t_grid, amplitude * np.sin(2 * np.pi * frequency * t_grid), drift[False],
-                                  drift[True], list(rig.extra["joint_names"]),
+                                  drift[True], list(rig.joint_names),
                                   {"uncompensated": fmin[False], "compensated": fmin[True]},
                                   {"uncompensated": events[False], "compensated": events[True]})

@@ -44,7 +44,7 @@ GRASP_POSE = {"thumb": [0.5, 0.35, 0.5, 0.4], "index": [0.05, 0.8, 0.9, 0.6], "m
 
 def grasp_pose(rig) -> np.ndarray:
     """The grasp pose as plant joint angles of ``rig`` (DIPs of ring/fifth from (5.16)-(5.17))."""
-    coupling = rig.extra["coupling"]
+    coupling = rig.coupling
     parts = coupling.parts if hasattr(coupling, "parts") else {rig.name.replace("finger_", ""): coupling}
     q = []
     for name, c in parts.items():
@@ -87,7 +87,7 @@ def _link_points(rig, joint_angle_sets) -> np.ndarray:
     """Positions [m] (palm frame) of every body origin and fingertip over the given joint angles."""
     plant = rig.plant
     ctx = plant.CreateDefaultContext()
-    models = rig.extra["models"]
+    models = rig.models
     models = models.values() if isinstance(models, dict) else (models if isinstance(models, (list, tuple))
                                                                 else [models])
     pts = []
@@ -145,7 +145,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     from ..control import closed_loop, make_controller
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     op = rig.operating_point()
-    q0 = op.info["joint_angles"]
+    q0 = op.joint_angle
     q1 = grasp_pose(rig)
     b = DiagramBuilder()
     sys = b.AddSystem(cl.diagram)

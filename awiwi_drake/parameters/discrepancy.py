@@ -143,10 +143,16 @@ class CatalogBounds(Parameters):
         source="Table 3.3: gamma1 = 10 s/rad; upper end 60 keeps gamma1 gamma2 / B * h < 2.5 "
                "(explicit RK3 stability at h = 0.25 ms, gamma2 <= 0.2 Nm, B = 2e-3)",
         doc="range of gamma1")
-    ripple_orders: tuple = param(
-        (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 100.0), unit="cycles/rev", low=1.0,
-        source="Ch. 3: output bearing (1 /rev and its harmonics) and motor bearing "
-               "(100 /rev at the output, gear 1:100)", doc="ripple orders screened")
+    ripple_order_max: float = param(
+        300.0, unit="cycles/rev", low=1.0,
+        source="chosen: ripple orders are read from the residual's cycles-per-revolution spectrum up "
+               "to 300 (motor-side orders of a 1:100 gear, Ch. 3, are multiples of 100)",
+        doc="highest ripple order")
+    ripple_candidates: int = param(
+        6, unit="-", low=1, high=50,
+        source="chosen: the six strongest lines of the residual's cycles-per-revolution spectrum are "
+               "screened (two are fitted); the spectrum of a coloured residual has a few dominant lines",
+        doc="ripple orders screened per step")
     ripple_amplitude_max: float = param(
         1.0, unit="Nm", low=0.0,
         source="chosen: Fig 3.4b ripple ~ 0.2 A p-p of ~0.5 A mean, i.e. well below the "
@@ -184,6 +190,18 @@ class CatalogBounds(Parameters):
         0.02, unit="s", low=0.0,
         source="chosen: 60x the 333 us round trip of the thesis (Ch. 1) covers bus and "
                "amplifier delays of lab rigs", doc="bound on the input delay")
+    spring_drift_max: float = param(
+        0.05, unit="1/s", low=0.0,
+        source="chosen: a spring-force change of +-25 % over a 10 s run bounds creep of the "
+               "spring mechanism (Fig 4.8 shows hysteresis, not creep; no thesis value)",
+        doc="bound on the relative spring-force drift rate")
+    encoder_bias_max: float = param(
+        0.5, unit="rad", low=0.0,
+        source="chosen: a mis-set encoder zero of up to ~30 deg", doc="bound on encoder biases")
+    encoder_scale_max: float = param(
+        0.3, unit="-", low=0.0,
+        source="chosen: a link-encoder scale error below 30 % (wrong pulley ratio or counts per rev)",
+        doc="bound on the link-encoder scale error")
     nominal_relative_max: float = param(
         0.5, unit="-", low=0.0,
         source="chosen: a mis-set nominal value is off by less than 50 %",

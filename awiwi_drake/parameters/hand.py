@@ -6,19 +6,21 @@ M32 last row ``0 0 0 1``, M98 translation 0.0201 m rather than the printed
 no pulley radii, masses or inertias per link; the values below are chosen and
 say why.
 
-Mass/inertia reconciliation
----------------------------
-The thesis gives a finger mass of about 0.02 kg with its centre about 0.01 m
-from the base (section 5.2.2), and uses a link inertia of 7.2e-7 kg m^2 in the
-single-joint studies (Tables 14.2, 15.1).  These are not the same quantity:
-0.02 kg at 0.01 m alone gives 2e-6 kg m^2 about the base.  We keep both:
-the total finger mass is 0.02 kg (split over the links), and the *distal*
-link mass is chosen so that its inertia about the DIP axis (slender cylinder
-about its end, radius ``link_radius``) is about 7.2e-7 kg m^2, the value a
-single-joint rig at the finger tip sees.  The resulting centre of mass lies
-~4 cm from the MCP, not 1 cm: with the Table 5.1 bone lengths (9 cm finger)
-the 0.01 m of section 5.2.2 cannot hold; it only served the thesis's gravity
-estimate (negligible either way: 0.02 kg x 9.81 x 0.04 m = 0.008 N m).
+Masses and inertias
+-------------------
+The thesis gives a finger mass of about 0.02 kg (section 5.2.2, a gravity
+estimate for the whole finger: 0.02 kg at ~0.01 m) and a link inertia of
+7.2e-7 kg m^2 (Tables 14.2, 15.1).  The latter is the link of the single-joint
+test rig (Fig 15.14), not a phalanx of the finger, so the two are not in
+conflict: the rigs keep 7.2e-7 kg m^2 (``parameters.rigs``).  The finger's
+links are uniform cylinders of radius ``link_radius`` whose masses split the
+finger mass in proportion to the Table 5.1 link lengths (equal cross-section):
+0.019 kg (0.02 kg less the 1 g abduction link) over 40.38 / 29.8 / 20.1 mm gives
+8.50 / 6.27 / 4.23 g.  The distal inertia about the DIP axis is then
+m (L^2/3 + R^2/4) = 6.2e-7 kg m^2, close to the test rig's value by coincidence
+of scale.  The whole finger's centre of mass lies ~4 cm from the MCP (the
+0.01 m of section 5.2.2 only served the thesis's gravity estimate, negligible
+either way: 0.02 kg x 9.81 x 0.04 m = 0.008 N m).
 
 Global tendon order
 -------------------
@@ -49,10 +51,8 @@ __all__ = [
 _T51 = "Table 5.1"
 _RADIUS_SRC = ("chosen: the thesis prints no pulley radii (Fig 5.8 names r20..r23); "
                "5-10 mm fits the finger width (MODEL_NOTES ch. 5)")
-_MASS_SRC = ("chosen: finger mass ~0.02 kg (section 5.2.2) split over the links "
-             "roughly in proportion to their length")
-_DISTAL_SRC = ("chosen: distal inertia about the DIP axis m (L^2/3 + R^2/4) ~ 7.2e-7 kg m^2 "
-               "(Tables 14.2, 15.1) with L = distal_length, R = link_radius")
+_MASS_SRC = ("chosen: finger mass 0.02 kg (section 5.2.2) less the 1 g abduction link, split in proportion "
+             "to the Table 5.1 link lengths (uniform cylinders of equal radius): 0.019 kg x L_i / 90.28 mm")
 
 
 @dataclass(frozen=True)
@@ -85,9 +85,9 @@ class FingerParams(Parameters):
                                doc="cylinder radius for inertia and drawing")
     abduction_link_mass: float = param(0.001, unit="kg", low=0.0, high=0.1, low_inclusive=False,
                                        source=_MASS_SRC)
-    proximal_mass: float = param(0.008, unit="kg", low=0.0, high=0.1, low_inclusive=False, source=_MASS_SRC)
-    middle_mass: float = param(0.006, unit="kg", low=0.0, high=0.1, low_inclusive=False, source=_MASS_SRC)
-    distal_mass: float = param(0.005, unit="kg", low=0.0, high=0.1, low_inclusive=False, source=_DISTAL_SRC)
+    proximal_mass: float = param(0.00850, unit="kg", low=0.0, high=0.1, low_inclusive=False, source=_MASS_SRC)
+    middle_mass: float = param(0.00627, unit="kg", low=0.0, high=0.1, low_inclusive=False, source=_MASS_SRC)
+    distal_mass: float = param(0.00423, unit="kg", low=0.0, high=0.1, low_inclusive=False, source=_MASS_SRC)
     joint_damping: float = param(
         1e-5, unit="N m s/rad", low=0.0, high=1.0,
         source=("chosen: light joint damping, of the order of the 0.1 % damping of the "
@@ -102,13 +102,13 @@ class FingerParams(Parameters):
                 "stiffness K_q (5.12) + k_c c c^T is 1/(k_c (1 + (r43/r42)^2)) = 0.166 rad/N m, because the "
                 "PIP/DIP tendon pair acts along (r42, r43), orthogonal to c = (-r43/r42, 1) "
                 "(hand.plant.coupling_compliance).  Stiffer is limited by the coupling mode sqrt(k_c/I_eff): "
-                "5.8e3 rad/s (ring, I_eff = 1/(c^T M^-1 c) = 1.21e-7 kg m^2) and 6.4e3 rad/s (fifth, "
-                "9.9e-8 kg m^2) at damping ratios 0.70 / 0.77, where fixed-step RK3 at the 3 kHz control period "
-                "still contracts (|R(lambda h)| = 0.59 / 0.78); k_c = 6 would put the fifth at 7.8e3 rad/s, "
-                "|R| = 1.35 at damping ratio 0.7: unstable"))
+                "5.9e3 rad/s (ring, I_eff = 1/(c^T M^-1 c) = 1.15e-7 kg m^2) and 6.65e3 rad/s (fifth, "
+                "9.0e-8 kg m^2) at damping ratios 0.71 / 0.81, where fixed-step RK3 at the 3 kHz control period "
+                "still contracts (|R(lambda h)| = 0.62 / 0.87); k_c = 6 would put the fifth at 8.1e3 rad/s, "
+                "|R| = 1.6 at damping ratio 0.7: unstable"))
     coupling_damping: float = param(
         9.7e-4, unit="N m s/rad", low=0.0, high=1.0,
-        source="chosen: damping ratio 0.7 of the ring's coupling mode (2 * 0.7 * sqrt(k_c I_eff), I_eff = 1.21e-7 kg m^2)")
+        source="chosen: damping ratio 0.7 of the ring's coupling mode (2 * 0.7 * sqrt(k_c I_eff) with I_eff = 1.21e-7 kg m^2 of earlier masses; 0.71 with I_eff = 1.15e-7 now)")
     # Fifth finger hematometacarpal joint (section 5.5); unused when has_hmc is False.
     has_hmc: bool = param(False, unit="-", source="section 5.5: fifth finger only (fixed per finger: FINGER_STRUCTURE, validated)")
     hmc_radius: float = param(0.008, unit="m", low=0.001, high=0.03, source=_RADIUS_SRC,

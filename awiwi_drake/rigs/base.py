@@ -43,16 +43,37 @@ class OperatingPoint:
     motor_torque : ndarray
         Commanded motor torques [Nm] that hold the equilibrium.
     external_torque : ndarray or None
-        External link torques [Nm] (link rigs).
-    info : dict
-        What defined the point (e.g. ``pretension``, ``link_angle``) and derived
-        quantities (``tendon_force``, ...).
+        External joint torques [Nm] (rigs with joints).
+    pretension : float or None
+        Common tendon pretension [N] that defined the point (joint rig, fingers, hand).
+    joint_angle : ndarray or None
+        Joint angles q [rad] at the point (one per joint).
+    wrist_angle : ndarray or None
+        Wrist angles [rad] (fingers and the hand).
+    tendon_force : ndarray or None
+        Tendon (spring-mechanism) forces [N].
+    elongation : ndarray or None
+        Spring elongations [m].
+    tendon_stiffness : ndarray or None
+        Tendon stiffness df/dx [N/m] per tendon.
+    joint_stiffness : float, ndarray or None
+        Joint stiffness [Nm/rad]: a number for one joint (``r_q^2 (k1 + k2)`` of the joint rig,
+        the torsion spring of the flexible joint), the matrix (5.12) for fingers and the hand.
+    spring_torque : float or None
+        Torque in the torsion spring [Nm] (flexible joint).
     """
 
     state: np.ndarray
     motor_torque: np.ndarray
     external_torque: np.ndarray | None = None
-    info: dict = field(default_factory=dict)
+    pretension: float | None = None
+    joint_angle: np.ndarray | None = None
+    wrist_angle: np.ndarray | None = None
+    tendon_force: np.ndarray | None = None
+    elongation: np.ndarray | None = None
+    tendon_stiffness: np.ndarray | None = None
+    joint_stiffness: float | np.ndarray | None = None
+    spring_torque: float | None = None
 
 
 @dataclass
@@ -75,6 +96,20 @@ class Rig:
         ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
     spring : object
         The spring law used (``force``, ``stiffness``).
+    drive : TendonDrive or None
+        The tendon-drive handle inside the diagram.
+    coupling : object or None
+        The routing coupling (``h(q)``, ``P(q)``) of the drive.
+    tension_only : bool
+        Tendon forces cannot push (slack is monitored on ``tendon_force``).
+    torque_limit : float or None
+        Amplifier limit [Nm] on ``motor_torque`` (None: no saturation).
+    max_force : float or None
+        Upper end of the calibrated spring range [N] (over-range monitor).
+    pair_slack : tuple or None
+        ``(x0, r)`` of an antagonistic torsion-spring pair whose hidden tendons can slacken.
+    spring_kind : str or None
+        ``"linear"`` or ``"nonlinear"`` for the flexible joint.
     """
 
     name: str
@@ -85,7 +120,13 @@ class Rig:
     equilibrium: Callable[..., OperatingPoint]
     plant: MultibodyPlant | None = None
     spring: Any = None
-    extra: dict = field(default_factory=dict)
+    drive: Any = None
+    coupling: Any = None
+    tension_only: bool = True
+    torque_limit: float | None = None
+    max_force: float | None = None
+    pair_slack: tuple | None = None
+    spring_kind: str | None = None
 
     @property
     def num_states(self) -> int:

@@ -20,7 +20,7 @@ def pole_sweep_pretension(rig, pretensions):
     for f0 in pretensions:
         op = rig.operating_point(pretension=float(f0))
         poles.append(linearize(rig, op).poles)
-        stiffness.append(op.info["joint_stiffness"])
+        stiffness.append(op.joint_stiffness)
     return np.array(poles), np.array(stiffness)
 
 
@@ -87,7 +87,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled") -> str:
     result = simulate(diagram, ctx, scenario.t_final,
                       log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
                       monitors=rig_monitors(rig), max_step=1.0 / 3000)
-    fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.extra.get("torque_limit"))
+    fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.torque_limit)
     fig.savefig(out / "demo_joint_rig.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     lever = LeverSpringMechanism(rig.params.spring.geometry)

@@ -91,12 +91,11 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
         u = p.motor.pulley_radius * tendon_force - float(motor_ripple_torque(np.array([theta]), p.motor)[0])
         _check_torque("tendon_rig", np.array([u]), p.motor, f"tendon_force = {tendon_force} N")
         state = [theta, 0.0] + ([0.0] if drive.hysteresis else [])
-        return OperatingPoint(np.array(state), np.array([u]), None,
-                              dict(tendon_force=tendon_force, elongation=x,
-                                   tendon_stiffness=float(spring.stiffness(np.array([x]))[0])))
+        return OperatingPoint(np.array(state), np.array([u]), None, tendon_force=np.array([tendon_force]),
+                              elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring,
-               dict(drive=drive, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force))
+    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
+               tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
 
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
@@ -198,13 +197,12 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
             raise ValueError(f"flexible_joint_rig: external_torque = {external_torque} Nm needs a motor torque "
                              f"beyond torque_limit = {p.torque_limit} Nm")
         return OperatingPoint(state, np.array([tau_s]), np.array([float(external_torque)]),
-                              dict(link_angle=link_angle, external_torque=external_torque, spring_torque=tau_s,
-                                   stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0])))
+                              joint_angle=np.array([link_angle]), spring_torque=tau_s,
+                              joint_stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0]))
 
-    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law,
-               dict(drive=drive, spring_kind=spring, tension_only=False,
-                    torque_limit=p.torque_limit if finite_limit else None,
-                    pair_slack=(law.x0, law.r) if spring == "nonlinear" else None))
+    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
+               spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
+               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None)
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -246,11 +244,9 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
         _check_torque("joint_rig", u, p.motor, f"pretension = {f0} N")
         state = np.concatenate([[link_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
         k = np.asarray(spring.stiffness(x), dtype=float)
-        return OperatingPoint(state, u, np.array([float(external_torque)]),
-                              dict(pretension=f0, link_angle=link_angle, external_torque=external_torque,
-                                   tendon_force=f, elongation=x, tendon_stiffness=k,
-                                   joint_stiffness=float(rq ** 2 * k.sum())))
+        return OperatingPoint(state, u, np.array([float(external_torque)]), pretension=f0,
+                              joint_angle=np.array([link_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
+                              joint_stiffness=float(rq ** 2 * k.sum()))
 
-    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring,
-               dict(drive=drive, coupling=coupling, tension_only=True, torque_limit=_limit(p.motor),
-                    max_force=spring.max_force))
+    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
+               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
