@@ -1,14 +1,38 @@
-"""Real-time factor of the rigs, open loop and with a 3 kHz discrete controller.
+"""Real-time factors of the rigs, fingers and hand under 3 kHz control, beside scipy and MuJoCo.
 
-Run: ``python benchmarks/bench_rigs.py [--seconds 2] [--json out/bench_rigs.json]``
+Run::
 
-For each rig and backend we time ``Simulator.AdvanceTo`` (error-controlled RK3,
-max step 1/3000 s, accuracy 1e-4, no logging) and report the real-time factor
-RTF = simulated seconds / wall seconds. The joint rig with the 3 kHz motor PD
-(the demo controller, Drake primitives) is compared with a hand-written numpy +
-``scipy.integrate.solve_ivp`` implementation of the same equations in the same
-process (one ``solve_ivp`` call per control period, zero-order hold), so the
-ratio does not depend on the machine. Timings are medians of ``--repeats`` runs.
+    PYTHONPATH=. python benchmarks/bench_rigs.py [--seconds 1.0] [--repeats 3] [--json out/bench_rigs.json]
+
+Every case runs in its own process (``--case NAME`` runs one and prints its JSON),
+one after the other, so a JIT cache, a warm-up or a leak of one case cannot help or
+hurt another. Real-time factor (RTF) = simulated seconds / seconds; we report it on
+the process CPU clock (``*_rtf``, robust to other jobs on a shared machine) and on
+the wall clock (``*_wall_rtf``). Best of ``--repeats`` runs after one warm-up run
+(numba kernels compile once and are cached on disk; the warm-up hides that).
+
+Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
+
+* ``joint_rig_3khz``: the default ``joint_rig()`` under the demo's motor PD
+  (``rigs.demo.joint_rig_position_loop``), fixed-step RK3 at the control period
+  (the default of ``analysis.simulate`` for sampled loops); also through
+  ``analysis.simulate`` itself (logging and monitors on) and the error against a
+  tight error-controlled run (RK3, accuracy 1e-9).
+* ``scipy_reference``: the same equations and controller in numpy with
+  ``scipy.integrate.solve_ivp`` (RK23, rtol 1e-4) per control period.
+* ``finger_index_3khz``: the index finger under the joint-space motor PD.
+* ``hand_3khz``: the whole hand (19 DoF, 38 tendons, wrist input at 0) under the
+  joint PD, with the thesis's physics on (motor friction and ripple, guide friction,
+  spring hysteresis) and, beside it, off.
+* ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
+  (one vectorised discrete system at 3 kHz), rig-seconds per CPU-second.
+* ``mujoco_callback`` / ``mujoco_linear``: the same antagonistic joint (two motor
+  rotors, two fixed tendons, one link) in MuJoCo, RK4 at 1/3000 s with the PD in the
+  stepping loop: (a) the exact nonlinear tension-only spring and the (3.8) motor
+  friction through ``mjcb_passive`` (a Python callback per evaluation); (b) MuJoCo's
+  native tendon spring, a *different model*: linear and two-sided, stiffness and
+  rest length from the spring at the pretension, motor friction as joint damping.
+  null when MuJoCo is absent (``pip install .[bench]``).
 """
 
 from __future__ import annotations
@@ -16,134 +40,371 @@ from __future__ import annotations
 import argparse
 import json
 import pathlib
-import statistics
+import subprocess
+import sys
 import time
 
 import numpy as np
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-from scipy.integrate import solve_ivp
-
-from awiwi_drake.components.motor import motor_acceleration
-from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
-from awiwi_drake.control.motor_position import joint_rig_position_loop
-from awiwi_drake.rigs.demo import DemoScenario, MotorPositionGains, motor_references
 
 RATE = 3000.0
+CASES = ("joint_rig_3khz", "scipy_reference", "finger_index_3khz", "hand_3khz", "batch_rigs",
+         "mujoco_callback", "mujoco_linear")
 
 
-def _advance(diagram, context, seconds: float, integrator: str = "runge_kutta3") -> float:
-    """RTF of one run; ``integrator`` may end in ``"-fixed"`` (fixed step at the control period)."""
-    fixed = integrator.endswith("-fixed")
-    integrator = integrator.replace("-fixed", "")
-    sim = Simulator(diagram, context)
-    ResetIntegratorFromFlags(sim, integrator, 1.0 / RATE)
-    if fixed:
-        sim.get_mutable_integrator().set_fixed_step_mode(True)
-    elif integrator == "runge_kutta3":
-        sim.get_mutable_integrator().set_target_accuracy(1e-4)
+def _clock():
+    return time.process_time(), time.perf_counter()
+
+
+def _rtf(seconds, t0):
+    cpu, wall = _clock()
+    return seconds / (cpu - t0[0]), seconds / (wall - t0[1])
+
+
+def _best(fn, repeats):
+    """(cpu rtf, wall rtf, extra) of the best of ``repeats`` runs after one warm-up."""
+    fn()
+    runs = [fn() for _ in range(repeats)]
+    best = max(runs, key=lambda r: r[0])
+    return best
+
+
+# --- cases -----------------------------------------------------------------------------------------
+def _fixed_rk3(diagram, ctx, seconds):
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    sim = Simulator(diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1.0 / RATE)
+    sim.get_mutable_integrator().set_fixed_step_mode(True)
     sim.Initialize()
-    t0 = time.perf_counter()
+    t0 = _clock()
     sim.AdvanceTo(seconds)
-    _advance.last_state = sim.get_context().get_continuous_state_vector().CopyToVector()
-    return seconds / (time.perf_counter() - t0)
+    return _rtf(seconds, t0) + (ctx.get_continuous_state_vector().CopyToVector(),)
 
 
-def open_loop_rtf(build, backend, seconds):
-    rig = build(backend=backend)
-    op = rig.operating_point()
-    ctx = rig.context(op)
-    state = op.state.copy()
-    state[min(1, len(state) - 1)] += 0.5   # start with some motion
-    ctx.SetContinuousState(state)
-    return _advance(rig.diagram, ctx, seconds)
-
-
-def closed_loop_rtf_joint(backend, seconds, integrator="runge_kutta3"):
-    rig = joint_rig(backend=backend)
+def _joint_loop(seconds):
+    from awiwi_drake.control.motor_position import joint_rig_position_loop
+    from awiwi_drake.rigs import joint_rig
+    from awiwi_drake.parameters.rigs import DemoScenario
+    rig = joint_rig()
     scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
     loop = joint_rig_position_loop(rig, scen)
     ctx = loop.create_context(rig.operating_point(pretension=scen.f_start))
-    return _advance(loop.diagram, ctx, seconds, integrator)
+    return rig, scen, loop.diagram, ctx
 
 
-def scipy_reference_rtf(seconds):
-    """Same joint-rig equations and controller, numpy + solve_ivp, ZOH at 3 kHz."""
+def case_joint_rig_3khz(seconds, repeats):
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+
+    from awiwi_drake.analysis import rig_monitors, simulate
+
+    def run():
+        _, _, d, ctx = _joint_loop(seconds)
+        return _fixed_rk3(d, ctx, seconds)
+    cpu, wall, x_fixed = _best(run, repeats)
+
+    def run_simulate():
+        rig, _, d, ctx = _joint_loop(seconds)
+        t0 = _clock()
+        res = simulate(d, ctx, seconds, log=("link_angle",), monitors=rig_monitors(rig))
+        return _rtf(seconds, t0) + (res,)
+    s_cpu, s_wall, res = _best(run_simulate, repeats)
+    # tight reference: error-controlled RK3 at accuracy 1e-9, sampled at the same times
+    _, _, d, ctx = _joint_loop(seconds)
+    sim = Simulator(d, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1.0 / RATE)
+    sim.get_mutable_integrator().set_target_accuracy(1e-9)
+    sim.Initialize()
+    q_ref = []
+    port = d.GetOutputPort("link_angle")
+    for t in res.t:
+        sim.AdvanceTo(float(t))
+        q_ref.append(port.Eval(sim.get_context())[0])
+    err = float(np.max(np.abs(res["link_angle"][:, 0] - np.asarray(q_ref))))
+    return dict(joint_rig_3khz_rtf=cpu, joint_rig_3khz_wall_rtf=wall, joint_rig_3khz_simulate_rtf=s_cpu,
+                joint_rig_3khz_simulate_wall_rtf=s_wall, joint_rig_3khz_max_error_rad=err,
+                joint_rig_3khz_final_link_angle=float(x_fixed[0]))
+
+
+def case_scipy_reference(seconds, repeats):
+    from scipy.integrate import solve_ivp
+
+    from awiwi_drake.components.motor import motor_acceleration
+    from awiwi_drake.parameters.rigs import MotorPositionGains
+    from awiwi_drake.rigs.demo import motor_references
+
+    def run():
+        rig, scen, _, _ = _joint_loop(seconds)
+        p, spring = rig.params, rig.spring
+        r, rq, m, dq = p.motor.pulley_radius, p.link_pulley_radius, p.link_inertia, p.link_damping
+        gains = MotorPositionGains()
+        t_knots = np.linspace(0.0, seconds, 601)
+        pre = np.interp(t_knots, [0.0, scen.ramp_time, scen.t_final], [scen.f_start, scen.f_end, scen.f_end])
+        q_ref = np.where(t_knots >= scen.step_time, scen.link_step, 0.0)
+        theta_ref, ff = motor_references(rig, t_knots, pre, q_ref)
+
+        def rhs(t, x, u):
+            q, qd, th, w = x[0], x[1], x[2:4], x[4:6]
+            xs = np.array([r * th[0] - rq * q, r * th[1] + rq * q])
+            f = spring.force(xs)
+            acc = motor_acceleration(th, w, u, r * f, p.motor)
+            return np.concatenate([[qd, (rq * (f[0] - f[1]) - dq * qd) / m], w, acc])
+
+        x = rig.operating_point(pretension=scen.f_start).state.copy()
+        u_hold = rig.operating_point(pretension=scen.f_start).motor_torque.copy()
+        dt = 1.0 / RATE
+        t0 = _clock()
+        for k in range(int(round(seconds * RATE))):
+            t = k * dt
+            sol = solve_ivp(rhs, (t, t + dt), x, method="RK23", args=(u_hold,), rtol=1e-4, atol=1e-7)
+            x = sol.y[:, -1]
+            th_ref = np.array([np.interp(t + dt, t_knots, theta_ref[0]), np.interp(t + dt, t_knots, theta_ref[1])])
+            u_hold = (np.array([np.interp(t + dt, t_knots, ff[0]), np.interp(t + dt, t_knots, ff[1])])
+                      + gains.kp * (th_ref - x[2:4]) - gains.kd * x[4:6])
+        return _rtf(seconds, t0) + (x,)
+    cpu, wall, x = _best(run, max(1, repeats - 1))
+    return dict(scipy_reference_rtf=cpu, scipy_reference_wall_rtf=wall, scipy_final_link_angle=float(x[0]))
+
+
+def _hand_like(target, seconds, repeats, params=None):
+    from awiwi_drake.control import closed_loop
+    from awiwi_drake.control.joint_pd import joint_pd_controller
+    from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+
+    def run():
+        rig = hand_diagram(params=params) if target == "hand" else finger_diagram(finger=target, params=params)
+        cl = closed_loop(rig, joint_pd_controller(rig))
+        q_ref = np.array(rig.operating_point().joint_angle, dtype=float)
+        q_ref[1 if target != "hand" else 5] += 0.2
+        ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
+        out = _fixed_rk3(cl.diagram, ctx, seconds)
+        if not np.all(np.isfinite(out[2])) or np.max(np.abs(out[2])) > 1e6:
+            raise FloatingPointError("diverged")
+        return out
+    return _best(run, repeats)
+
+
+def case_finger_index_3khz(seconds, repeats):
+    cpu, wall, _ = _hand_like("index", seconds, repeats)
+    return dict(finger_index_3khz_rtf=cpu, finger_index_3khz_wall_rtf=wall)
+
+
+def case_hand_3khz(seconds, repeats):
+    from awiwi_drake.parameters.hand import HandRigParams
+    out = {}
+    cpu, wall, _ = _hand_like("hand", seconds, repeats)
+    out.update(hand_3khz_physics_off_rtf=cpu, hand_3khz_physics_off_wall_rtf=wall)
+    on = HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)
+    try:
+        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=on)
+        out.update(hand_3khz_rtf=cpu, hand_3khz_wall_rtf=wall)
+    except (FloatingPointError, RuntimeError) as exc:   # divergence of fixed-step RK3 at 3 kHz
+        out.update(hand_3khz_rtf=None, hand_3khz_wall_rtf=None, hand_3khz_note=f"physics on: {exc}")
+    return out
+
+
+def case_batch_rigs(seconds, repeats, num_copies=512):
+    from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    from awiwi_drake.parameters.rigs import MotorPositionGains
+
+    class BatchedMotorPD(LeafSystem):
+        """u_i = u0_i + kp_i (theta*_i - theta_i) - kd omega_i for every copy, sampled and held at 3 kHz."""
+
+        def __init__(self, N, theta_ref, u0, kp, kd):
+            super().__init__()
+            self.N, self.theta_ref, self.u0, self.kp, self.kd = N, theta_ref, u0, kp, kd
+            self._x = self.DeclareVectorInputPort("state", 6 * N)
+            held = self.DeclareDiscreteState(2 * N)
+            self.DeclarePeriodicDiscreteUpdateEvent(1.0 / RATE, 0.0, self._update)
+            self.DeclareStateOutputPort("motor_torque", held)
+
+        def _update(self, context, discrete):
+            X = self._x.Eval(context).reshape(self.N, 6)
+            u = self.u0 + self.kp * (self.theta_ref - X[:, 2:4]) - self.kd * X[:, 4:6]
+            discrete.get_mutable_vector().SetFromVector(u.ravel())
+
+    def run():
+        br = batched_joint_rig(num_copies)
+        rig = br.single
+        rng = np.random.default_rng(0)
+        pre = rng.uniform(10.0, 40.0, num_copies)
+        ops = [rig.operating_point(pretension=f) for f in pre]
+        g = MotorPositionGains()
+        kp = rng.uniform(0.5, 1.5, (num_copies, 1)) * g.kp
+        theta_ref = np.array([op.state[2:4] for op in ops]) + rng.normal(scale=0.05, size=(num_copies, 2))
+        u0 = np.array([op.motor_torque for op in ops])
+        b = DiagramBuilder()
+        plant = b.AddSystem(br.diagram)
+        pd = b.AddSystem(BatchedMotorPD(num_copies, theta_ref, u0, kp, g.kd))
+        b.Connect(plant.GetOutputPort("state"), pd.get_input_port(0))
+        b.Connect(pd.get_output_port(0), plant.GetInputPort("motor_torque"))
+        b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        x, u, e = br.stack(ops)
+        plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(x)
+        pd.GetMyMutableContextFromRoot(ctx).SetDiscreteState(u)
+        d.GetInputPort("external_torque").FixValue(ctx, e)
+        return _fixed_rk3(d, ctx, seconds)
+    cpu, wall, x = _best(run, max(1, repeats - 1))
+    if not np.all(np.isfinite(x)):
+        raise FloatingPointError("batched run diverged")
+    return dict(batch_rig_seconds_per_cpu_second=cpu * num_copies,
+                batch_rig_seconds_per_wall_second=wall * num_copies, batch_num_copies=num_copies)
+
+
+_MJCF = """
+<mujoco model="antagonistic_joint">
+  <option timestep="{dt}" integrator="RK4" gravity="0 0 0"/>
+  <worldbody>
+    <body name="link"><joint name="q" type="hinge" axis="0 0 1" damping="{dq}"/>
+      <inertial pos="0 0 0" mass="0.02" diaginertia="{m} {m} {m}"/></body>
+    <body name="rotor1"><joint name="th1" type="hinge" axis="0 0 1" damping="{dm}"/>
+      <inertial pos="0 0 0" mass="0.1" diaginertia="{B} {B} {B}"/></body>
+    <body name="rotor2"><joint name="th2" type="hinge" axis="0 0 1" damping="{dm}"/>
+      <inertial pos="0 0 0" mass="0.1" diaginertia="{B} {B} {B}"/></body>
+  </worldbody>
+  <tendon>
+    <fixed name="t1" {spring}><joint joint="th1" coef="{r}"/><joint joint="q" coef="{mrq}"/></fixed>
+    <fixed name="t2" {spring}><joint joint="th2" coef="{r}"/><joint joint="q" coef="{rq}"/></fixed>
+  </tendon>
+  <actuator>
+    <motor joint="th1" ctrllimited="true" ctrlrange="-{lim} {lim}"/>
+    <motor joint="th2" ctrllimited="true" ctrlrange="-{lim} {lim}"/>
+  </actuator>
+</mujoco>
+"""
+
+
+def _mujoco_case(seconds, repeats, linear: bool):
+    try:
+        import mujoco
+    except ImportError:
+        return None
+    from awiwi_drake.components.motor import motor_friction_torque
+    from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+    from awiwi_drake.rigs.demo import motor_references
+    from awiwi_drake.rigs import joint_rig
     rig = joint_rig()
-    p = rig.params
-    spring = rig.spring
-    r, rq, m, dq = p.motor.pulley_radius, p.link_pulley_radius, p.link_inertia, p.link_damping
-    gains = MotorPositionGains()
+    p, spring = rig.params, rig.spring
+    r, rq = p.motor.pulley_radius, p.link_pulley_radius
     scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
+    op = rig.operating_point(pretension=scen.f_start)
+    x0 = float(np.ravel(spring.inverse_force(np.array([scen.f_end])))[0])
+    if linear:   # different model: linear two-sided tendon springs at the end pretension's stiffness
+        k = float(spring.stiffness(np.array([x0]))[0])
+        spring_attr = f'stiffness="{k!r}" springlength="{x0 - scen.f_end / k!r}"'
+        # linearised (3.8) at rest as joint damping
+        dm = p.motor.coulomb_torque * p.motor.friction_slope + p.motor.viscous_friction
+    else:
+        spring_attr, dm = "", 0.0
+    xml = _MJCF.format(dt=1.0 / RATE, dq=p.link_damping, m=p.link_inertia, B=p.motor.inertia, dm=dm,
+                       r=r, rq=rq, mrq=-rq, lim=p.motor.torque_limit, spring=spring_attr)
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
     t_knots = np.linspace(0.0, seconds, 601)
     pre = np.interp(t_knots, [0.0, scen.ramp_time, scen.t_final], [scen.f_start, scen.f_end, scen.f_end])
     q_ref = np.where(t_knots >= scen.step_time, scen.link_step, 0.0)
     theta_ref, ff = motor_references(rig, t_knots, pre, q_ref)
+    gains = MotorPositionGains()
 
-    def rhs(t, x, u):
-        q, qd, th, w = x[0], x[1], x[2:4], x[4:6]
-        xs = np.array([r * th[0] - rq * q, r * th[1] + rq * q])
-        f = spring.force(xs)
-        acc = motor_acceleration(th, w, u, r * f, p.motor)
-        return np.concatenate([[qd, (rq * (f[0] - f[1]) - dq * qd) / m], w, acc])
+    def passive(m_, d_):
+        # exact spring: tension-only polynomial on the tendon elongation (MuJoCo's tendon length
+        # is our x up to the constant set by the initial state), plus the (3.8) motor friction
+        f = spring.force(d_.ten_length.copy())
+        # -J^T f with J = [[-rq, r, 0], [rq, 0, r]] (the fixed tendons above)
+        d_.qfrc_passive[0] += rq * (f[0] - f[1])
+        d_.qfrc_passive[1:3] += -r * f + motor_friction_torque(d_.qvel[1:3], p.motor)
 
-    op = rig.operating_point(pretension=scen.f_start)
-    x = op.state.copy()
-    dt = 1.0 / RATE
-    n = int(round(seconds * RATE))
-    t0 = time.perf_counter()
-    for k in range(n):
-        t = k * dt
-        th_ref = np.array([np.interp(t, t_knots, theta_ref[0]), np.interp(t, t_knots, theta_ref[1])])
-        u = np.array([np.interp(t, t_knots, ff[0]), np.interp(t, t_knots, ff[1])]) \
-            + gains.kp * (th_ref - x[2:4]) - gains.kd * x[4:6]
-        sol = solve_ivp(rhs, (t, t + dt), x, method="RK23", args=(u,), rtol=1e-4, atol=1e-7)
-        x = sol.y[:, -1]
-    return seconds / (time.perf_counter() - t0), x
+    def run():
+        mujoco.set_mjcb_passive(None if linear else passive)
+        mujoco.mj_resetData(model, data)
+        # tendon length = r th - rq q (t1), r th + rq q (t2): equal to our elongation x with offsets 0
+        data.qpos[:] = [op.state[0], op.state[2], op.state[3]]
+        mujoco.mj_forward(model, data)
+        dt = 1.0 / RATE
+        n = int(round(seconds * RATE))
+        t0 = _clock()
+        for k in range(n):
+            t = k * dt
+            th = np.array([np.interp(t, t_knots, theta_ref[0]), np.interp(t, t_knots, theta_ref[1])])
+            u = (np.array([np.interp(t, t_knots, ff[0]), np.interp(t, t_knots, ff[1])])
+                 + gains.kp * (th - data.qpos[1:3]) - gains.kd * data.qvel[1:3])
+            data.ctrl[:] = u
+            mujoco.mj_step(model, data)
+        out = _rtf(seconds, t0) + (data.qpos.copy(),)
+        mujoco.set_mjcb_passive(None)
+        return out
+    cpu, wall, qpos = _best(run, repeats)
+    return cpu, wall, float(qpos[0])
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seconds", type=float, default=2.0, help="simulated seconds per run")
+def case_mujoco_callback(seconds, repeats):
+    res = _mujoco_case(seconds, repeats, linear=False)
+    if res is None:
+        return dict(mujoco_callback_rtf=None, mujoco_note="mujoco not installed (pip install .[bench])")
+    return dict(mujoco_callback_rtf=res[0], mujoco_callback_wall_rtf=res[1], mujoco_callback_final_link_angle=res[2])
+
+
+def case_mujoco_linear(seconds, repeats):
+    res = _mujoco_case(seconds, repeats, linear=True)
+    if res is None:
+        return dict(mujoco_linear_rtf=None)
+    return dict(mujoco_linear_rtf=res[0], mujoco_linear_wall_rtf=res[1], mujoco_linear_final_link_angle=res[2])
+
+
+# --- driver ------------------------------------------------------------------------------------------
+def run_case(name, seconds, repeats):
+    return globals()[f"case_{name}"](seconds, repeats)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=1.0, help="simulated seconds per run (rigs)")
+    ap.add_argument("--hand-seconds", type=float, default=0.2, help="simulated seconds per run (finger, hand)")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--json", default=None, help="write the figures to this JSON file")
+    ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated subset of {', '.join(CASES)}")
+    ap.add_argument("--case", default=None, help=argparse.SUPPRESS)   # one case, in this process
+    ap.add_argument("--json", default=None, metavar="OUT", help="write every figure to this JSON file")
     args = ap.parse_args(argv)
-    rows = []
-
-    def record(name, backend, fn):
-        vals = [fn() for _ in range(args.repeats)]
-        rtf = statistics.median(vals)
-        rows.append(dict(case=name, backend=backend, rtf=rtf))
-        print(f"{name:34s} {backend:9s} RTF {rtf:8.2f}x", flush=True)
-        return rtf
-
-    for build in (tendon_rig, flexible_joint_rig, joint_rig):
-        for backend in ("python", "symbolic"):
-            record(f"{build.__name__} open loop", backend, lambda: open_loop_rtf(build, backend, args.seconds))
-    cl = {}
-    for backend in ("python", "symbolic"):
-        cl[backend] = record("joint_rig + 3 kHz motor PD", backend, lambda: closed_loop_rtf_joint(backend, args.seconds))
-    closed_loop_rtf_joint("symbolic", args.seconds)
-    x_rk3 = _advance.last_state
-    cl["symbolic+rk2"] = record("joint_rig + 3 kHz PD, fixed RK2 @ 1/3 ms", "symbolic",
-                                lambda: closed_loop_rtf_joint("symbolic", args.seconds, "runge_kutta2"))
-    x_rk2 = _advance.last_state
-    print(f"fixed RK2 vs RK3 (1e-4): final link angle differs by {abs(x_rk2[0] - x_rk3[0]):.2e} rad, "
-          f"motor angles by {np.max(np.abs(x_rk2[2:4] - x_rk3[2:4])):.2e} rad")
-    for backend in ("python", "symbolic"):
-        cl[f"{backend}+rk3-fixed"] = record("joint_rig + 3 kHz PD, fixed RK3 @ 1/3 ms", backend,
-                                           lambda: closed_loop_rtf_joint(backend, args.seconds, "runge_kutta3-fixed"))
-    x_rk3f = _advance.last_state
-    print(f"fixed RK3 vs RK3 (1e-4): final link angle differs by {abs(x_rk3f[0] - x_rk3[0]):.2e} rad")
-    ref = record("joint_rig + 3 kHz PD (numpy+solve_ivp)", "scipy", lambda: scipy_reference_rtf(args.seconds)[0])
-    for backend, v in cl.items():
-        print(f"ratio drake/{backend} : scipy reference = {v / ref:.2f}")
-    best = max(cl.values())
-    print(f"target: joint_rig with 3 kHz controller >= 20x real time -> best {best:.1f}x "
-          f"({'met' if best >= 20 else 'NOT met'}); no slower than scipy -> {'met' if best >= ref else 'NOT met'}")
+    if args.case:
+        secs = args.hand_seconds if args.case in ("finger_index_3khz", "hand_3khz") else args.seconds
+        print(json.dumps(run_case(args.case, secs, args.repeats)))
+        return 0
+    cases = [c.strip() for c in args.cases.split(",") if c.strip()]
+    for c in cases:
+        if c not in CASES:
+            ap.error(f"--cases: unknown case {c!r}; known: {', '.join(CASES)}")
+    out = dict(seconds=args.seconds, hand_seconds=args.hand_seconds, repeats=args.repeats, clock="process CPU time")
+    for c in cases:
+        cmd = [sys.executable, __file__, "--case", c, "--seconds", str(args.seconds),
+               "--hand-seconds", str(args.hand_seconds), "--repeats", str(args.repeats)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            out[f"{c}_error"] = proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else "failed"
+            print(f"{c:20s} FAILED: {out[f'{c}_error']}", flush=True)
+            continue
+        res = json.loads(proc.stdout.strip().splitlines()[-1])
+        out.update(res)
+        print(f"{c:20s} " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in res.items()),
+              flush=True)
+    for key in ("joint_rig_3khz_rtf", "scipy_reference_rtf", "finger_index_3khz_rtf", "hand_3khz_rtf",
+                "batch_rig_seconds_per_cpu_second", "mujoco_callback_rtf", "mujoco_linear_rtf"):
+        out.setdefault(key, None)
+    if out["joint_rig_3khz_rtf"] and out["scipy_reference_rtf"]:
+        out["joint_rig_vs_scipy"] = out["joint_rig_3khz_rtf"] / out["scipy_reference_rtf"]
+    else:
+        out["joint_rig_vs_scipy"] = None
+    for other in ("mujoco_callback", "mujoco_linear"):
+        if out.get(f"{other}_rtf") and out["joint_rig_3khz_rtf"]:
+            out[f"joint_rig_vs_{other}"] = out["joint_rig_3khz_rtf"] / out[f"{other}_rtf"]
+    print(f"joint_rig_vs_scipy = {out['joint_rig_vs_scipy']}")
     if args.json:
         pathlib.Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        pathlib.Path(args.json).write_text(json.dumps(dict(rows=rows, seconds=args.seconds), indent=1))
+        pathlib.Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))
+    raise SystemExit(main())

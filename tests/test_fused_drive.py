@@ -206,3 +206,71 @@ def test_one_system_joint_rig_linearises_and_takes_lqr_in_a_composed_diagram():
     K = -ctrl.D()
     closed = np.linalg.eigvals(la.A - la.B @ K)
     assert np.all(closed.real < 0)
+
+
+def test_finger_per_tendon_spring_override_changes_only_that_tendon():
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters.hand import FingerRigParams
+    from awiwi_drake.parameters.components import TendonParams
+    base = FingerRigParams.for_finger("index")
+    stiff_tendon = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))   # 4x the section: stiffer in series
+    p = base.replace(tendon_springs=(("index_h3", stiff_tendon),))
+    rig, ref = finger_diagram(finger="index", params=p), finger_diagram(finger="index", params=base)
+    names = rig.tendon_names
+    i = names.index("index_h3")
+    op, op_ref = rig.operating_point(pretension=30.0), ref.operating_point(pretension=30.0)
+    k = rig.diagram.GetOutputPort("tendon_stiffness").Eval(rig.context(op))
+    k_ref = ref.diagram.GetOutputPort("tendon_stiffness").Eval(ref.context(op_ref))
+    others = [j for j in range(len(names)) if j != i]
+    np.testing.assert_allclose(k[others], k_ref[others], rtol=1e-12)
+    law = tendon_spring(stiff_tendon)
+    assert k[i] == pytest.approx(float(law.stiffness(np.array([op.elongation[i]]))[0]), rel=1e-12)
+    assert k[i] > k_ref[i]                       # a stiffer tendon in series stiffens the drive
+    # both operating points hold the same forces: the override moved only that tendon's motor angle
+    np.testing.assert_allclose(op.tendon_force, op_ref.tendon_force, rtol=1e-9)
+    with pytest.raises(ValueError, match="unknown tendon 'x9'"):
+        finger_diagram(finger="index", params=base.replace(tendon_springs=(("x9", stiff_tendon),)))
+    with pytest.raises(ValueError, match="needs backend='compiled'"):
+        finger_diagram(finger="index", params=p, backend="python")
+
+
+def test_finger_with_hysteresis_and_guide_friction_builds_and_dissipates():
+    """Hysteresis and guide friction in the finger (compiled drive): z joins the state, and with the
+    motors held the total mechanical energy (links, rotors, springs) cannot rise."""
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters.hand import FingerRigParams
+    p = FingerRigParams.for_finger("index").with_physics(hysteresis=True, guide_friction=True)
+    rig = finger_diagram(finger="index", params=p)
+    n, m = rig.num_joints, rig.num_tendons
+    assert rig.num_states == 2 * n + 3 * m and rig.state_names[-1] == f"hysteresis_force[{rig.tendon_names[-1]}]"
+    op = rig.operating_point()
+    ctx = rig.context(op)
+    x = op.state.copy()
+    x[n:2 * n] = [0.0, 0.3, -0.2, 0.1]           # link velocities: the guides slide
+    ctx.SetContinuousState(x)
+    tau = rig.diagram.GetOutputPort("joint_torque").Eval(ctx)
+    # friction part of the joint torque: total minus the elastic -P^T f
+    P = np.asarray(rig.coupling.P(x[:n]))
+    f = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
+    tau_fr = tau + P.T @ f
+    assert tau_fr @ x[n:2 * n] < 0               # guide friction takes power from the links
+
+
+def test_batched_joint_rigs_equal_the_single_rig_copy_by_copy():
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    br = batched_joint_rig(5)
+    rig = br.single
+    ops = [rig.operating_point(pretension=f, link_angle=a) for f, a in zip((10, 20, 30, 40, 50), (0, .1, -.1, .2, 0))]
+    ctx = br.context(ops)
+    x = ctx.get_continuous_state_vector().CopyToVector() + RNG.normal(scale=0.01, size=30)
+    ctx.SetContinuousState(x)
+    d = br.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+    f = br.diagram.GetOutputPort("tendon_force").Eval(ctx)
+    c1 = rig.context()
+    for i, op in enumerate(ops):
+        c1.SetContinuousState(x[6 * i:6 * i + 6])
+        rig.diagram.GetInputPort("motor_torque").FixValue(c1, op.motor_torque)
+        np.testing.assert_allclose(d[6 * i:6 * i + 6], rig.diagram.EvalTimeDerivatives(c1).CopyToVector(), rtol=1e-12)
+        np.testing.assert_allclose(f[2 * i:2 * i + 2], rig.diagram.GetOutputPort("tendon_force").Eval(c1), rtol=1e-12)
+    ad = br.diagram.ToAutoDiffXd()       # the batch converts too (law path per copy)
+    assert ad.num_continuous_states() == 30

@@ -64,7 +64,7 @@ def test_export_hand_diagrams(tmp_path):
     internal connection between the right ports."""
     assert main(["export-hand-diagrams", "--out", str(tmp_path)]) == 0
     nodes, edges = _dot_graph((tmp_path / "hand_top.dot").read_text())
-    diagram = hand_diagram(backend="symbolic").diagram
+    diagram = hand_diagram().diagram
     names = [s.get_name() for s in diagram.GetSystems()]
     assert sorted(nodes) == sorted(names)
     for block in ("tendon_drive", "hand_plant", "wrist_tendon_offsets", "coupling_element"):

@@ -5,11 +5,10 @@ import concurrent.futures as cf
 import numpy as np
 import pytest
 
-from awiwi_drake.control.backstepping_studies import joint_model
-from awiwi_drake.control.backstepping import ImpedanceBackstepping
+from awiwi_drake.control.backstepping import ImpedanceBackstepping, joint_model
 from awiwi_drake.control.optimal_gains import (
-    backstepping_feedback, monte_carlo_gains, optimal_feedback, optimize_gains, printed_model_feedback,
-    system_feedback, table_16_1_rig, torque_coordinates)
+    backstepping_feedback, monte_carlo_gains, optimal_feedback, optimize_gains, system_feedback, torque_coordinates)
+from awiwi_drake.reproductions.ch16_optimal_backstepping import printed_model_feedback, table_16_1_rig
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
 
@@ -139,7 +138,7 @@ def test_optimal_backstepping_on_the_antagonistic_joint_rig():
     from scipy.linalg import expm
 
     from awiwi_drake.analysis import linearize
-    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.control.base import closed_loop
     from awiwi_drake.control.optimal_gains import rate_limited_case, torque_state_map
     from awiwi_drake.control.registry import controller_names

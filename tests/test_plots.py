@@ -38,7 +38,7 @@ def _check_axes_explained(axes, *, need_legend=True):
 def demo_run():
     from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
-    from awiwi_drake.rigs.demo import DemoScenario
+    from awiwi_drake.parameters.rigs import DemoScenario
     from awiwi_drake.rigs.rigs import joint_rig
 
     rig = joint_rig()
@@ -55,7 +55,7 @@ def demo_run():
 def test_demo_figure_has_legends_units_limit_and_applied_torque(demo_run):
     import matplotlib.pyplot as plt
 
-    from awiwi_drake.rigs.demo_run import demo_figure
+    from awiwi_drake.reproductions.demo import demo_figure
 
     rig, sc, t_ref, refs, res = demo_run
     limit = rig.torque_limit

@@ -83,7 +83,7 @@ def run(args) -> int:
     from awiwi_drake.config import short_mode
     from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
     from awiwi_drake.control.registry import controller_names, get_entry
-    from awiwi_drake.parameters.control import compare_test_params
+    from awiwi_drake.control.compare import compare_test_params
 
     if args.list:
         for n in controller_names(args.rig):

@@ -13,13 +13,13 @@ __all__ = ["register"]
 
 
 def _targets_help() -> str:
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return "\n".join(f"  {name}: {entry['description']}" for name, entry in TARGETS.items())
 
 
 def _target_names() -> list[str]:
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return list(TARGETS)
 
@@ -94,13 +94,13 @@ def _floats(text: str, what: str) -> np.ndarray:
 
 
 def _params_of(args):
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return load_parameters(TARGETS[args.rig]["params"](), args)
 
 
 def _build(args) -> object:
-    from awiwi_drake.rigs import build_target
+    from awiwi_drake.diagrams import build_target
 
     return build_target(args.rig, params=_params_of(args))
 
@@ -200,8 +200,12 @@ def _export(args) -> int:
 
 
 def _demo(args) -> int:
-    from awiwi_drake.rigs.demo_run import run_demo
+    from awiwi_drake.export import export_diagram
+    from awiwi_drake.reproductions.demo import run_demo
 
-    report = run_demo(output_dir(args.out), backend=args.backend)
+    out = output_dir(args.out)
+    report, graphs = run_demo(out, backend=args.backend)
+    for stem, diagram in graphs.items():
+        export_diagram(diagram, out, stem, max_depth=1, quiet=True)
     print(report)
     return 0

@@ -56,7 +56,8 @@ from awiwi_drake.components.spring import hysteresis_rate
 from awiwi_drake.components.friction import guide_friction, guide_friction_force
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
-__all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "TendonDrive_", "TendonDrive_System"]
+__all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "build_kernels", "TendonDrive_", "TendonDrive_System",
+           "TendonDriveBatch_"]
 
 
 @dataclass(frozen=True)
@@ -410,3 +411,77 @@ def TendonDrive_(T):
 
 
 TendonDrive_System = TendonDrive_[None]
+
+
+@TemplateSystem.define("TendonDriveBatch_")
+def TendonDriveBatch_(T):
+    """N copies of one link-carrying drive (a single-joint rig) in one system.
+
+    ``TendonDriveBatch_[T](model, num_copies)``; ``model`` must carry its links
+    (``DriveModel.link_inertia``). State: the copies' states one after the other
+    (copy ``i`` at ``[i k, (i + 1) k)`` with ``k = model.num_states``, each in the
+    single rig's order). Inputs ``motor_torque`` (N m) and ``external_torque``
+    (N n), copy-major; outputs ``state``, ``link_angle`` (N n), ``tendon_force``
+    (N m). The float path runs the generated kernel's ``_batch`` twin (one
+    compiled loop over the copies); AutoDiffXd/Expression call :func:`drive_laws`
+    per copy.
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, model: DriveModel = None, num_copies: int = 1, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(model, DriveModel) or not model.has_link:
+                raise ValueError("TendonDriveBatch: model must be a DriveModel with link_inertia/link_damping")
+            if int(num_copies) != num_copies or num_copies < 1:
+                raise ValueError(f"TendonDriveBatch: num_copies = {num_copies!r} must be a positive integer")
+            self.model, self.num_copies = model, int(num_copies)
+            N, k, m, n = self.num_copies, model.num_states, model.num_tendons, model.num_joints
+            self._shape = (N, k, m, n)
+            self._float = T is float
+            self._kernels = None
+            self.DeclareContinuousState(N * k)
+            self._u = self.DeclareVectorInputPort("motor_torque", N * m)
+            self._ext = self.DeclareVectorInputPort("external_torque", N * n)
+            state = {self.all_state_ticket()}
+            self.DeclareVectorOutputPort("state", N * k, lambda c, o: o.SetFromVector(self._x(c)),
+                                         prerequisites_of_calc=state)
+            self.DeclareVectorOutputPort("link_angle", N * n, self._calc_link_angle, prerequisites_of_calc=state)
+            self.DeclareVectorOutputPort("tendon_force", N * m, self._calc_force, prerequisites_of_calc=state)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.model, other.num_copies, converter=converter)
+
+        def _x(self, context):
+            return context.get_continuous_state_vector().CopyToVector()
+
+        def kernels(self):
+            if self._kernels is None:
+                self._kernels = build_kernels(self.model)
+            return self._kernels
+
+        def _calc_link_angle(self, context, out):
+            N, k, m, n = self._shape
+            out.SetFromVector(self._x(context).reshape(N, k)[:, :n].ravel())
+
+        def _calc_force(self, context, out):
+            N, k, m, n = self._shape
+            X = self._x(context).reshape(N, k)
+            if self._float:
+                out.SetFromVector(self.kernels()["tendon_force_batch"](X, np.empty((N, m))).ravel())
+                return
+            out.SetFromVector(np.concatenate([drive_laws(self.model, X[i], want=("tendon_force",))["tendon_force"]
+                                              for i in range(N)]))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            N, k, m, n = self._shape
+            X = self._x(context).reshape(N, k)
+            U = self._u.Eval(context).reshape(N, m)
+            E = self._ext.Eval(context).reshape(N, n)
+            if self._float:
+                d = self.kernels()["derivatives_batch"](X, U, E, np.empty((N, k)))
+            else:
+                d = np.concatenate([drive_laws(self.model, X[i], U[i], tau_ext=E[i], want=("derivatives",))
+                                    ["derivatives"] for i in range(N)])
+            derivatives.SetFromVector(np.ravel(d))
+
+    return Impl

@@ -42,18 +42,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff, ExtractGradient
-from pydrake.systems.controllers import LinearQuadraticRegulator
 
 from awiwi_drake.analysis.linear import lqr
 from awiwi_drake.analysis.sweep import monte_carlo_points, run_sweep
-from awiwi_drake.control.backstepping import ImpedanceBackstepping, JointModel, impedance_backstepping
+from awiwi_drake.control.backstepping import JointModel, impedance_backstepping, joint_model
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
-from awiwi_drake.parameters.rigs import FlexibleJointParams
 
-__all__ = ["GainFit", "rate_limited_case", "table_16_1_rig", "torque_coordinates", "torque_state_map", "backstepping_feedback",
-           "system_feedback",
-           "optimal_feedback", "printed_model_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains",
-           "OMEGA_NAMES"]
+__all__ = ["GainFit", "rate_limited_case", "torque_coordinates", "torque_state_map", "backstepping_feedback",
+           "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
 
 OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
 
@@ -88,15 +84,6 @@ class GainFit:
     method: str
 
 
-def table_16_1_rig(case: OptimalGainsCase | None = None, **kw):
-    """``flexible_joint_rig`` with Table 16.1 values (M, Bm, K; no damping: the table lists none)."""
-    from awiwi_drake.rigs import flexible_joint_rig
-    c = case or OptimalGainsCase()
-    p = FlexibleJointParams(link_inertia=c.link_inertia, motor_inertia=c.motor_inertia, stiffness=c.stiffness,
-                            link_damping=0.0, motor_damping=0.0)
-    return flexible_joint_rig(params=p, spring="linear", **kw)
-
-
 def torque_coordinates(stiffness: float) -> np.ndarray:
     """``T`` with ``[q, qd, tau, taud] = T [q, qd, theta, thetad]``, ``tau = k (theta - q)``."""
     k = float(stiffness)
@@ -129,7 +116,6 @@ def torque_state_map(model: JointModel, state0) -> np.ndarray:
 
 def _rig_point(rig, op=None):
     """(operating point, design model, T) of a rig for the gain fit."""
-    from awiwi_drake.control.backstepping_studies import joint_model
     op = rig.operating_point() if op is None else op
     model = joint_model(rig)
     return op, model, torque_state_map(model, op.state)
@@ -172,18 +158,6 @@ def optimal_feedback(rig, case: OptimalGainsCase | None = None, op=None) -> tupl
     K_rig = np.asarray(res.K).reshape(n_m, -1)
     K_tau = K_rig @ np.linalg.inv(T)
     return (K_tau.ravel(), K_rig.ravel()) if n_m == 1 else (K_tau, K_rig)
-
-
-def printed_model_feedback(case: OptimalGainsCase | None = None) -> np.ndarray:
-    """ARE gain for the A, B printed in Table 16.1 (Drake ``LinearQuadraticRegulator(A, B, Q, R)``).
-
-    Returned as ``u = K x`` (the sign of the printed Kdes) for direct comparison.
-    """
-    c = case or OptimalGainsCase()
-    A = np.array([[0, 1, 0, 0], [0, 0, 1 / c.link_inertia, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
-    B = np.array([[0], [0], [0], [c.stiffness / c.motor_inertia]])
-    K, _ = LinearQuadraticRegulator(A, B, np.diag(c.q_weights), np.array([[c.r_weight]]))
-    return -np.asarray(K).ravel()
 
 
 def gain_distance(feedback_tau: np.ndarray, target_tau: np.ndarray) -> float:

@@ -21,12 +21,15 @@ order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
 ``tendon_stiffness`` [N/m], ``elongation`` [m], ``joint_torque`` (n, tendon
 part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
 
-State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``
-(spring hysteresis is not supported here: ValueError).
+State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
+then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces.
+The default ``backend="compiled"`` drive also carries the guide friction of every
+tendon path in its ``generalized_force`` (the ``guide_friction`` block below is the
+python/symbolic backends' form).
 
 The wrist enters the routing like extra joints: the drive's coupling is the
 finger coupling plus ``m`` length-offset "joints" (identity columns of
-``P``) fed by :class:`~awiwi_drake.hand.wrist.WristTendonOffsets_`
+``P``) fed by :class:`~awiwi_drake.hand.systems.WristTendonOffsets_`
 (Table 6.2 order = our global tendon order, ``parameters.hand.TENDON_SLICES``).
 """
 
@@ -36,25 +39,23 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from ..components.drive import build_tendon_drive
 from ..components.motor import motor_ripple_torque
 from ..components.spring import tendon_spring
-from ..components.friction import guide_friction, guide_friction_force
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
-from .coupling import FingerCoupling, HandCoupling, finger_coupling
+from .coupling import HandCoupling, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
+from .systems import GuideFriction, tendon_bending_angles
 
-__all__ = ["HandRig", "finger_diagram", "hand_diagram", "HAND_DIAGRAM_EXPORTS", "export_hand_diagrams", "tendon_bending_angles", "GuideFriction_",
-           "GuideFriction", "DEFAULT_BACKEND"]
+__all__ = ["HandRig", "finger_diagram", "hand_diagram", "DEFAULT_BACKEND"]
 
-DEFAULT_BACKEND = "symbolic"
+DEFAULT_BACKEND = "compiled"
 
 
 @dataclass
@@ -65,7 +66,8 @@ class HandRig(Rig):
     offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
     spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
-    rows of the tendons, ``spring_law`` the spring of every tendon.
+    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` one law
+    per tendon (``params.tendon_springs`` overrides).
     """
 
     drive_coupling: Any = None
@@ -76,6 +78,7 @@ class HandRig(Rig):
     coupling_gain: Any = None
     wrist_rows: Any = None
     spring_law: Any = None
+    spring_laws: Any = None
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
         super().set_operating_point(context, op, fix_inputs=fix_inputs)
@@ -114,79 +117,49 @@ class HandRig(Rig):
         return len(self.tendon_names)
 
 
-def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
-    """Total bending angle per tendon [rad] at the straight pose (input of (4.1)).
 
-    ``palm_bending_angle`` plus ``joint_wrap_angle`` for every joint pulley the
-    tendon crosses (non-zero entry of ``P(0)``); the thumb base tendons run
-    straight from the palm (no pulley), so they get the palm bend only.
+
+def tendon_spring_laws(p, tendon_names):
+    """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
+
+    Equal parameter sets share one law object (one fit, one kernel branch).
     """
-    P = np.asarray(coupling.P(np.zeros(coupling.num_joints)), dtype=float)
-    crossed = (np.abs(P) > 0).sum(axis=1)
-    if isinstance(coupling, HandCoupling):
-        parts = coupling.parts
-    else:
-        parts = {"finger": coupling}
-    for name, c in parts.items():
-        if not c.is_constant:  # thumb: base rows are straight tendons
-            ts = coupling.tendon_slices[name] if isinstance(coupling, HandCoupling) else slice(0, c.num_tendons)
-            crossed[ts.start:ts.start + 4] = 0
-    return p.palm_bending_angle + p.joint_wrap_angle * crossed
+    names = list(tendon_names)
+    laws = [tendon_spring(p.spring)] * len(names)
+    seen = set()
+    for tendon, sp in p.tendon_springs:
+        if tendon not in names:
+            raise ValueError(f"tendon_springs: unknown tendon {tendon!r}; tendons are {', '.join(names)}")
+        if tendon in seen:
+            raise ValueError(f"tendon_springs: tendon {tendon!r} is given twice")
+        seen.add(tendon)
+        if sp.hysteresis != p.spring.hysteresis:
+            raise ValueError(f"tendon_springs[{tendon!r}]: hysteresis is set for all tendons by spring.hysteresis")
+        laws[names.index(tendon)] = tendon_spring(sp)
+    return laws
 
 
-@TemplateSystem.define("GuideFriction_")
-def GuideFriction_(T):
-    """Routing (guide) friction as a generalised force on the joints.
-
-    Inputs ``state`` = plant ``[q; v]`` (2n), ``tendon_force`` (m) [N].
-    Output ``generalized_force`` (n) = ``-P(q)^T f_fr`` with
-    ``f_fr`` the guide friction law :func:`~awiwi_drake.components.friction.guide_friction`
-    of each tendon sliding through its guides at ``P(q) v`` (the path-length rate at the
-    finger), so its power ``-f_fr . P v`` is never positive: the constant part is (4.1)
-    ``C0 (1 - exp(-C1 alpha))`` (speed and tension independent) or, with
-    ``capstan=True``, the capstan part ``f (exp(mu alpha s) - 1)`` (tension proportional).
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, coupling, bending_angles, params, capstan: bool, smoothing_velocity: float,
-                       converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self.coupling, self.alpha, self.params = coupling, np.asarray(bending_angles, float), params
-            self.capstan, self.v_s = bool(capstan), float(smoothing_velocity)
-            n, m = coupling.num_joints, coupling.num_tendons
-            if self.alpha.shape != (m,):
-                raise ValueError(f"GuideFriction: bending_angles must have {m} entries, got {self.alpha.shape}")
-            self._n = n
-            self._x = self.DeclareVectorInputPort("state", 2 * n)
-            self._f = self.DeclareVectorInputPort("tendon_force", m)
-            zero = np.zeros(m)
-            self._constant = zero if self.capstan else guide_friction_force(self.alpha, params)
-            self._exponent = params.mu * self.alpha if self.capstan else zero
-            self.DeclareVectorOutputPort("generalized_force", n, self._calc,
-                                         prerequisites_of_calc={self._x.ticket(), self._f.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.coupling, other.alpha, other.params, other.capstan, other.v_s,
-                            converter=converter)
-
-        def _calc(self, context, out):
-            x = self._x.Eval(context)
-            q, v = x[: self._n], x[self._n:]
-            P = np.asarray(self.coupling.P(q))
-            f_fr = guide_friction(P @ v, self._f.Eval(context), self._constant, self._exponent, self.v_s)
-            out.SetFromVector(-(P.T @ f_fr))
-
-    return Impl
-
-
-GuideFriction = GuideFriction_[None]
+def _per_tendon(laws, method, values):
+    """``law_i.method(values_i)`` for each tendon (float arrays), grouping shared laws."""
+    values = np.asarray(values, dtype=float)
+    out = np.empty_like(values)
+    groups = {}
+    for i, law in enumerate(laws):
+        groups.setdefault(id(law), (law, []))[1].append(i)
+    for law, idx in groups.values():
+        out[idx] = np.asarray(getattr(law, method)(values[idx]), dtype=float)
+    return out
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
     """Shared builder of finger and hand diagrams."""
-    if p.spring.hysteresis.enabled:
-        raise ValueError(f"{name}: spring.hysteresis.enabled=True is not supported by the finger/hand "
-                         "diagrams (the drive does not export the hysteresis state); use the joint rig")
+    compiled = backend == "compiled"
+    if p.spring.hysteresis.enabled and not compiled:
+        raise ValueError(f"{name}: spring.hysteresis.enabled=True needs backend='compiled' (the python and "
+                         f"symbolic drives do not carry the hysteresis state here), got backend={backend!r}")
+    if p.tendon_springs and not compiled:
+        raise ValueError(f"{name}: tendon_springs (one spring law per tendon) needs backend='compiled', "
+                         f"got backend={backend!r}")
     b = DiagramBuilder()
     plant, models = plant_factory(b)
     n = plant.num_positions()
@@ -195,21 +168,30 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     if coupling.num_joints != n:
         raise ValueError(f"{name}: coupling has {coupling.num_joints} joints, plant {n}")
     drive_coupling = HandCoupling(parts, num_offsets=m) if wrist else coupling
-    spring = tendon_spring(p.spring)
-    x_pre = float(np.ravel(spring.inverse_force(np.array([p.pretension])))[0])
-    offsets = np.full(m, x_pre)
-    drive = build_tendon_drive(motor=p.motor, spring=spring, coupling=drive_coupling, offsets=offsets,
-                               backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
+    laws = tendon_spring_laws(p, coupling.tendon_names)
+    spring = laws[0]
+    offsets = _per_tendon(laws, "inverse_force", np.full(m, p.pretension))
+    extra_drive = {}
+    if compiled:
+        from ..components.fused_drive import GuideFrictionModel
+        gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
+                                p.friction_smoothing_velocity) if p.guide_friction else None
+        extra_drive = dict(guide_friction=gf, rate_joints=n)
+    drive = build_tendon_drive(motor=p.motor, spring=laws if compiled else spring, coupling=drive_coupling,
+                               offsets=offsets, backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive",
+                               **extra_drive)
     d = b.AddSystem(drive.diagram)
     split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
     b.Connect(plant.get_state_output_port(), split.get_input_port())
+    if d.HasInputPort("joint_velocity"):
+        b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
     rows = _wrist_rows(parts)
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
                          f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
     if wrist:
-        from .wrist import WristTendonOffsets
+        from .systems import WristTendonOffsets
         w = b.AddNamedSystem("wrist_tendon_offsets", WristTendonOffsets())
         select = np.zeros((m, 38))
         select[np.arange(m), rows] = 1.0
@@ -233,7 +215,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
         b.Connect(plant.get_state_output_port(), ce.get_input_port())
         sources.append(ce.get_output_port())
-    if p.guide_friction:
+    if p.guide_friction and not compiled:   # the compiled drive carries it in its generalized_force
         gfr = b.AddNamedSystem("guide_friction", GuideFriction(
             coupling, tendon_bending_angles(coupling, p), p.friction, p.capstan_friction,
             p.friction_smoothing_velocity))
@@ -248,7 +230,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
     state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
     b.Connect(plant.get_state_output_port(), state.get_input_port(0))
-    b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
+    b.Connect(d.GetOutputPort("state" if compiled else "motor_state"), state.get_input_port(1))
     b.ExportOutput(state.get_output_port(), "state")
     b.ExportOutput(split.get_output_port(0), "joint_angle")
     b.ExportOutput(split.get_output_port(1), "joint_velocity")
@@ -261,17 +243,18 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
-        return _equilibrium(name, p, plant, coupling, spring, offsets, G, rows if wrist else None, pretension,
-                            joint_angles, external_torque, wrist_angle)
+        return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
+                            joint_angles, external_torque, wrist_angle, drive.hysteresis)
 
     return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                    drive_coupling=drive_coupling, models=models, joint_names=joint_names,
-                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring)
+                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring,
+                   spring_laws=laws)
 
 
 def _wrist_rows(parts) -> np.ndarray:
@@ -291,8 +274,8 @@ def _selection(coupling) -> np.ndarray:
     return S
 
 
-def _equilibrium(name, p, plant, coupling, spring, offsets, G, wrist_rows, pretension, joint_angles,
-                 external_torque, wrist_angle):
+def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
+                 external_torque, wrist_angle, hysteresis=False):
     """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
     n, m = coupling.num_joints, coupling.num_tendons
     f0 = p.pretension if pretension is None else float(pretension)
@@ -333,7 +316,7 @@ def _equilibrium(name, p, plant, coupling, spring, offsets, G, wrist_rows, prete
         bad = [coupling.tendon_names[i] for i in np.flatnonzero(f <= 0)]
         raise ValueError(f"{name}: pretension {f0} N leaves tendon(s) {', '.join(bad)} slack at this "
                          f"operating point (forces {np.round(f, 3)} N)")
-    x = np.asarray(spring.inverse_force(f), dtype=float)
+    x = _per_tendon(laws, "inverse_force", f)
     h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
     w_off = np.zeros(m)
     wa = np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, dtype=float).ravel()
@@ -350,8 +333,8 @@ def _equilibrium(name, p, plant, coupling, spring, offsets, G, wrist_rows, prete
     if p.motor.saturation and np.any(np.abs(u) > p.motor.torque_limit):
         raise ValueError(f"{name}: holding torques up to {np.abs(u).max():.3g} N m exceed "
                          f"motor.torque_limit = {p.motor.torque_limit} N m")
-    state = np.concatenate([q, np.zeros(n), theta, np.zeros(m)])
-    K_t = np.asarray(spring.stiffness(x), dtype=float)
+    state = np.concatenate([q, np.zeros(n), theta, np.zeros(m), np.zeros(m) if hysteresis else []])
+    K_t = _per_tendon(laws, "stiffness", x)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
     return OperatingPoint(state, u, tau_ext, pretension=f0, joint_angle=q, tendon_force=f, elongation=x,
@@ -367,8 +350,9 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     finger : {"thumb", "index", "middle", "ring", "fifth"}
     params : FingerRigParams, optional
         Default ``FingerRigParams.for_finger(finger)``.
-    backend : {"symbolic", "python"}
-        The tendon drive's backend (``awiwi_drake.components.drive``).
+    backend : {"compiled", "symbolic", "python"}
+        The tendon drive's backend (``awiwi_drake.components.drive``); the thesis's
+        physics (hysteresis, per-tendon springs, guide friction in the drive) needs "compiled".
     wrist : bool
         Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
         finger's tendons enter the routing.
@@ -391,17 +375,17 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     def plant_factory(b):
         return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity)
 
-    return _build(f"finger_{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
+    return _build(f"finger-{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
                   wrist, visual)
 
 
-def hand_diagram(*, params: HandRigParams | None = None, backend: str = "python", wrist: bool = True,
+def hand_diagram(*, params: HandRigParams | None = None, backend: str = DEFAULT_BACKEND, wrist: bool = True,
                  visual: bool = False) -> HandRig:
     """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
 
-    The default backend is ``"python"``: for 38 tendons the numpy banks are
-    faster than the fused symbolic drive (benchmarks/bench_hand.py: 0.44x vs
-    0.17x real time under 3 kHz control; Linearize 0.15 s vs 1.2 s).
+    The default backend is ``"compiled"`` (one fused drive, numba kernel; see
+    ``benchmarks/bench_rigs.py``), with the thesis's physics on (see
+    :class:`~awiwi_drake.parameters.hand.FingerDriveParams`).
 
     Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
     (Table 6.2 numbering, chosen: see ``parameters.hand``).  Same ports and
@@ -418,27 +402,3 @@ def hand_diagram(*, params: HandRigParams | None = None, backend: str = "python"
     return _build("hand", p, plant_factory, parts, backend, wrist, visual)
 
 
-def _export_hand():
-    return hand_diagram(backend="symbolic").diagram
-
-
-def _export_hand_python():
-    return hand_diagram(backend="python").diagram
-
-
-def _export_ring():
-    return finger_diagram(finger="ring", backend="python").diagram
-
-
-# (file_stem, builder, max_depth) in the format of awiwi_drake.diagrams.DIAGRAM_EXPORTS
-HAND_DIAGRAM_EXPORTS = [
-    ("hand_top", _export_hand, 1),
-    ("hand_deep", _export_hand_python, None),
-    ("hand_finger_ring_deep", _export_ring, None),
-]
-
-
-def export_hand_diagrams(out_dir="diagrams") -> list[str]:
-    """Write the hand/finger diagram graphs (``hand_*.dot``, and .svg/.png with Graphviz)."""
-    from ..diagrams import export_entries
-    return export_entries(HAND_DIAGRAM_EXPORTS, out_dir)

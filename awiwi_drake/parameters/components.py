@@ -24,7 +24,7 @@ __all__ = [
 
 # Torque constant, roughly: the friction law (3.8) with Table 3.3 gives 1.41 Nm at
 # 15 rad/s where Fig 3.3b reads about 1.3 A, i.e. about 1.1 Nm/A (reading accuracy
-# of the figure: +-10 %). Used only to turn the ripple currents of Fig 3.4b into torques.
+# of the figure: +-10 %). MotorParams.torque_constant; also turns the ripple currents of Fig 3.4b into torques.
 _TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
 
 
@@ -57,6 +57,9 @@ class MotorParams(Parameters):
         Amplitude [Nm] of the output-bearing ripple (period 2 pi).
     ripple_motor_phase, ripple_output_phase : float
         Phases [rad] of the two ripple components.
+    torque_constant : float
+        Motor current to output torque [Nm/A] (output side); converts the thesis's currents
+        (Fig 3.3b, 3.4b in A) to torques.
     gear_ratio : float
         Input/output speed ratio of the harmonic drive (1/alpha_gear); domain [1, inf).
     saturation : bool
@@ -86,6 +89,11 @@ class MotorParams(Parameters):
         source="chosen from Fig 3.4b: 0.05 A peak-to-peak x 1.08 Nm/A (the slower, smaller component)")
     ripple_motor_phase: float = param(0.0, unit="rad", source="chosen: arbitrary reference")
     ripple_output_phase: float = param(0.0, unit="rad", source="chosen: arbitrary reference")
+    torque_constant: float = param(
+        round(_TORQUE_PER_AMPERE, 4), unit="Nm/A", low=0.0, low_inclusive=False,
+        source=("fitted: the thesis measured it at the output shaft (section 3.2) but prints no value; "
+                "(3.8) with Table 3.3 gives 1.408 Nm at 15 rad/s where Fig 3.3b reads ~1.3 A: "
+                "1.083 Nm/A (output side)"))
     gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100")
     saturation: bool = param(True, unit="-", source="chosen: real amplifiers saturate")
     torque_limit: float = param(3.0, unit="Nm", low=0.0, low_inclusive=False,

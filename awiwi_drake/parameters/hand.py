@@ -318,15 +318,29 @@ def finger_params(name: str):
 
 @dataclass(frozen=True)
 class FingerDriveParams(Parameters):
-    """Motors, springs, pretension and routing friction shared by finger and hand diagrams."""
+    """Motors, springs, pretension and routing friction shared by finger and hand diagrams.
+
+    The thesis's physics, each effect switchable (``with_physics``): motor friction (3.8)
+    and ripple (``motor.friction`` on, ``motor.ripple``), guide friction on every tendon path
+    (``guide_friction``; (4.1) at each tendon's bending angle, or the capstan form), spring
+    hysteresis (``spring.hysteresis.enabled``, Fig 4.8b), one spring law per tendon (``spring``
+    for all, ``tendon_springs`` overrides tendons one by one) and the tendon's own elasticity
+    ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``, on).
+    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs. Guide friction,
+    ripple and hysteresis are off by default: with them on, the finger links (7.2e-7 kg m^2) see
+    the tanh-regularised guide friction as ~2000 N s/m per tendon and the Dahl hysteresis as a
+    2e5 N/m presliding spring, which makes the default fixed-step RK3 at the 3 kHz control
+    period diverge (README "Backends, and speed").
+    """
 
     motor: MotorParams = field(default_factory=MotorParams)
     spring: SpringModelParams = field(default_factory=SpringModelParams)
+    tendon_springs: tuple = ()
     pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
                               source="Fig 15.26: f_pre = 20 N (as the joint rig)",
                               doc="tendon force of every tendon at the default operating point")
     guide_friction: bool = param(False, unit="-",
-                                 source="chosen: off by default (keeps the model smooth for Linearize)")
+                                 source="chosen: off by default (stiff for explicit RK3 at 3 kHz, see the class doc)")
     capstan_friction: bool = param(False, unit="-",
                                    source=("chosen: False = speed-independent (4.1); True = tension-"
                                            "proportional capstan law (ch. 9: 10-50 % of the force)"))
@@ -341,6 +355,36 @@ class FingerDriveParams(Parameters):
         1e-3, unit="m/s", low=0.0, low_inclusive=False,
         source="chosen: tanh(v/v_s) replaces sign(v) below 1 mm/s tendon sliding speed")
     gravity: bool = param(False, unit="-", source="section 5.2.2: ~0.002 N m, negligible")
+
+    def with_physics(self, *, ripple: bool | None = None, hysteresis: bool | None = None,
+                     guide_friction: bool | None = None, motor_friction: bool | None = None):
+        """A copy with the named thesis effects switched (None leaves one as it is).
+
+        E.g. ``p.with_physics(hysteresis=False)`` for the python/symbolic drive backends,
+        which do not carry the hysteresis state in the finger/hand diagrams.
+        """
+        p = self
+        if ripple is not None or motor_friction is not None:
+            p = p.replace(motor=p.motor.replace(**{k: v for k, v in (("ripple", ripple), ("friction", motor_friction))
+                                                   if v is not None}))
+        if hysteresis is not None:
+            p = p.replace(spring=p.spring.replace(hysteresis=p.spring.hysteresis.replace(enabled=bool(hysteresis))),
+                          tendon_springs=tuple((t, s.replace(hysteresis=s.hysteresis.replace(enabled=bool(hysteresis))))
+                                               for t, s in p.tendon_springs))
+        if guide_friction is not None:
+            p = p.replace(guide_friction=bool(guide_friction))
+        return p
+
+    def _validate(self) -> None:
+        super()._validate()
+        if not isinstance(self.tendon_springs, tuple):
+            raise ValueError(f"{type(self).__name__}.tendon_springs must be a tuple of (tendon_name, "
+                             f"SpringModelParams) pairs, got {type(self.tendon_springs).__name__}")
+        for i, entry in enumerate(self.tendon_springs):
+            if (not isinstance(entry, tuple) or len(entry) != 2 or not isinstance(entry[0], str)
+                    or not isinstance(entry[1], SpringModelParams)):
+                raise ValueError(f"{type(self).__name__}.tendon_springs[{i}] = {entry!r} must be a "
+                                 "(tendon_name, SpringModelParams) pair")
 
 
 _FINGER_PARAM_TYPES = {"thumb": ThumbParams, "index": IndexFingerParams, "middle": MiddleFingerParams,

@@ -1,4 +1,4 @@
-"""Numerical studies of chapter 5 and 6 on the finger/hand models (results are data).
+"""Thesis ch. 5: numerical studies on the finger models (results are data).
 
 * :func:`coriolis_study` - Fig 5.7: release a 0.1 rad deflection of the second
   joint (MCP flexion, abduction at 0) with the motors fixed, with and without
@@ -6,8 +6,6 @@
 * :func:`poles_vs_pretension` - poles of a finger/hand rig (``Linearize``) versus pretension.
 * :func:`coupling_hold_study` - the ring/fifth PIP/DIP coupling element holds
   ``q_DIP = (r_x3/r_x2) q_PIP`` during a controlled PIP motion.
-* :func:`wrist_compensation_study` - finger joint drift during a wrist
-  abduction sweep, with and without the feedforward compensation (ch. 6).
 """
 
 from __future__ import annotations
@@ -18,18 +16,20 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, ConstantVectorSource, Demultiplexer, MatrixGain
 
-from ..analysis.linear import linearize
-from ..analysis import PerEntry, Sine, rig_monitors, simulate
-from ..components.routing import TendonRouting_
-from ..components.spring import SpringBank_, tendon_spring
-from ..parameters.hand import FingerRigParams, JointControllerParams
-from .coupling import finger_coupling
-from .diagrams import HandRig, finger_diagram
-from .plant import coupling_force_gain, make_finger_plant
-from .systems import CoriolisCancellation
+from awiwi_drake.analysis.linear import linearize
+from awiwi_drake.analysis.simulate import simulate
+from awiwi_drake.components.routing import TendonRouting_
+from awiwi_drake.components.spring import SpringBank_, tendon_spring
+from awiwi_drake.control import closed_loop
+from awiwi_drake.control.joint_pd import joint_pd_controller
+from awiwi_drake.hand.coupling import finger_coupling
+from awiwi_drake.hand.diagrams import HandRig, finger_diagram
+from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant
+from awiwi_drake.hand.systems import CoriolisCancellation
+from awiwi_drake.parameters.hand import FingerRigParams, JointControllerParams
 
 __all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
-           "CouplingHoldStudy", "coupling_hold_study", "WristCompensationStudy", "wrist_compensation_study"]
+           "CouplingHoldStudy", "coupling_hold_study"]
 
 
 def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = None, *,
@@ -188,15 +188,13 @@ class CouplingHoldStudy:
 
 
 def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final: float = 0.3,
-                        backend: str = "symbolic", controller: JointControllerParams | None = None
+                        backend: str = "compiled", controller: JointControllerParams | None = None
                         ) -> CouplingHoldStudy:
     """Step the PIP reference of a coupled finger by ``pip_step`` [rad] and log PIP/DIP."""
     rig = finger_diagram(finger=finger, backend=backend)
     fp = rig.params.finger
     if not getattr(fp, "pip_dip_coupled", False):
         raise ValueError(f"coupling_hold_study: finger {finger!r} has no PIP/DIP coupling")
-    from ..control import closed_loop
-    from ..control.joint_pd import joint_pd_controller
     cl = closed_loop(rig, joint_pd_controller(rig, controller))
     n = rig.num_joints
     q_ref = np.zeros(n)
@@ -208,58 +206,3 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
 
 
-@dataclass
-class WristCompensationStudy:
-    """Finger joint drift during a wrist abduction sweep (rows: time; columns: joints)."""
-
-    t: np.ndarray
-    wrist_abduction: np.ndarray
-    drift_uncompensated: np.ndarray
-    drift_compensated: np.ndarray
-    joint_names: list
-    min_tendon_force: dict
-    events: dict            # "uncompensated"/"compensated" -> list of analysis.simulate.Event (slack, saturation)
-
-    def max_drift(self) -> dict:
-        """Largest |q - q_ref| [rad] over time and joints, per case."""
-        return {"uncompensated": float(np.max(np.abs(self.drift_uncompensated))),
-                "compensated": float(np.max(np.abs(self.drift_compensated)))}
-
-
-def wrist_compensation_study(target: str = "index", *, backend: str = "symbolic", amplitude: float = np.radians(5.0), frequency: float = 2.0,
-                             t_final: float = 0.5, controller: JointControllerParams | None = None,
-                             accuracy: float = 1e-3) -> WristCompensationStudy:
-    """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
-
-    The joint references stay at the operating point; the drift is the joint
-    motion the wrist causes through the tendon path change (6.9).  Run once
-    without and once with the feedforward ``-h_wrist / r_m``.  ``target`` is
-    a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run).
-    """
-    from ..control import closed_loop
-    from ..control.joint_pd import joint_pd_controller
-    from .diagrams import hand_diagram
-    drift, fmin, events = {}, {}, {}
-    t_grid = np.linspace(0.0, t_final, 201)
-    for comp in (False, True):
-        rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
-               else finger_diagram(finger=target, backend=backend, wrist=True))
-        cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
-        d = cl.diagram
-        ctx = d.CreateDefaultContext()
-        op = rig.operating_point()
-        cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
-        q_op = op.joint_angle
-        d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
-        d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
-        res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},
-                       log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
-                       max_step=1.0 / cl.rate_hz, accuracy=accuracy)
-        events[comp] = list(res.events)
-        res = res.resample(t_grid)
-        drift[comp] = res["joint_angle"] - q_op
-        fmin[comp] = float(np.min(res["tendon_force"]))
-    return WristCompensationStudy(t_grid, amplitude * np.sin(2 * np.pi * frequency * t_grid), drift[False],
-                                  drift[True], list(rig.joint_names),
-                                  {"uncompensated": fmin[False], "compensated": fmin[True]},
-                                  {"uncompensated": events[False], "compensated": events[True]})

@@ -1,0 +1,71 @@
+"""N copies of a single-joint rig in one system (Monte-Carlo runs, sweeps over inputs).
+
+:func:`batched_joint_rig` builds ``num_copies`` joint rigs (Fig 5.9) as one
+:class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_`: one compiled
+loop over the copies per derivative evaluation instead of one diagram and one
+Python callback per copy. The copies share the rig's parameters; inputs and
+initial states differ per copy. State: copy ``i`` occupies
+``[6 i, 6 i + 6)`` in the joint rig's order ``[q, qdot, theta1, theta2, omega1,
+omega2]``; inputs are copy-major (``motor_torque[2 i : 2 i + 2]``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.framework import Diagram, DiagramBuilder
+
+from awiwi_drake.components.fused_drive import TendonDriveBatch_
+from awiwi_drake.parameters.rigs import JointRigParams
+from awiwi_drake.rigs.base import OperatingPoint
+from awiwi_drake.rigs.rigs import joint_rig
+
+__all__ = ["BatchedRig", "batched_joint_rig"]
+
+
+@dataclass
+class BatchedRig:
+    """``num_copies`` copies of ``single`` (a :class:`~awiwi_drake.rigs.base.Rig`) in ``diagram``."""
+
+    diagram: Diagram
+    single: object
+    num_copies: int
+
+    @property
+    def copy_states(self) -> int:
+        return self.single.num_states
+
+    def stack(self, ops) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(state, motor_torque, external_torque) of the batch from one operating point per copy
+        (or one for all)."""
+        ops = [ops] * self.num_copies if isinstance(ops, OperatingPoint) else list(ops)
+        if len(ops) != self.num_copies:
+            raise ValueError(f"batched rig: {len(ops)} operating points for {self.num_copies} copies")
+        ext = [np.zeros(1) if op.external_torque is None else np.asarray(op.external_torque, float) for op in ops]
+        return (np.concatenate([op.state for op in ops]), np.concatenate([op.motor_torque for op in ops]),
+                np.concatenate(ext))
+
+    def context(self, ops=None):
+        """A context with every copy at ``ops`` (default: the rig's default operating point), inputs fixed."""
+        x, u, e = self.stack(self.single.operating_point() if ops is None else ops)
+        ctx = self.diagram.CreateDefaultContext()
+        ctx.SetContinuousState(x)
+        self.diagram.GetInputPort("motor_torque").FixValue(ctx, u)
+        self.diagram.GetInputPort("external_torque").FixValue(ctx, e)
+        return ctx
+
+
+def batched_joint_rig(num_copies: int, *, params: JointRigParams | None = None) -> BatchedRig:
+    """``num_copies`` joint rigs with ``params`` in one system (see the module docstring)."""
+    single = joint_rig(params=params)
+    model = single.drive.model
+    b = DiagramBuilder()
+    sys_ = b.AddNamedSystem("joint_rigs", TendonDriveBatch_[float](model, num_copies))
+    for name in ("motor_torque", "external_torque"):
+        b.ExportInput(sys_.GetInputPort(name), name)
+    for name in ("state", "link_angle", "tendon_force"):
+        b.ExportOutput(sys_.GetOutputPort(name), name)
+    diagram = b.Build()
+    diagram.set_name(f"joint_rig_x{num_copies}")
+    return BatchedRig(diagram, single, int(num_copies))
