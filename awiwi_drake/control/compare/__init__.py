@@ -16,11 +16,11 @@ from awiwi_drake.control.compare.channels import JointChannels, joint_channels
 from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_metric, plot_runs
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_loop, simulate_test
 from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compare, compare_controllers,
-                                                        compare_test_params, flag_run, run_joint_test, run_standard_tests,
-                                                        run_test)
+                                                        compare_test_params, dominant_time_constant, flag_run,
+                                                        run_joint_test, run_standard_tests, run_test)
 
 __all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable", "Comparison", "COLUMNS", "NUMERIC",
            "UNITS", "settle", "run_test", "flag_run", "run_standard_tests", "compare", "compare_controllers",
            "simulate_loop", "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
            "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric",
-           "run_joint_test", "joint_channels", "JointChannels"]
+           "dominant_time_constant", "run_joint_test", "joint_channels", "JointChannels"]

@@ -24,7 +24,8 @@ class Metrics:
     overshoot: float = math.nan          # % of the step size
     settling_time: float = math.nan      # s, band CompareTestParams.settling_band (2 %; 5 % on the tendon rig)
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
-    peak_input: float = math.nan         # max |applied motor torque| (after saturation) [Nm]
+    peak_input: float = math.nan         # max |torque applied to the motors| (after saturation) [Nm]
+    peak_command: float = math.nan       # max |motor_torque_command| (before saturation) [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
     damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
@@ -32,7 +33,7 @@ class Metrics:
     phase_deg: float = math.nan          # phase of Y/R at the sine frequency
     peak_gain: float = math.nan          # max |Y/R| over the sweep
     resonance_hz: float = math.nan       # frequency of the peak gain
-    bandwidth_hz: float = math.nan       # first frequency where |Y/R| < 1/sqrt(2)
+    bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its low-frequency value (log-interpolated)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
@@ -46,6 +47,7 @@ NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "statu
 
 
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
+             peak_command="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
              slack_fraction="-")
@@ -83,13 +85,21 @@ class MetricsTable:
                 w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in asdict(r).items()})
         return path
 
-    def to_markdown(self) -> str:
+    def to_markdown(self, ref_unit: str = "ref") -> str:
+        """Markdown tables per test; ``ref_unit`` names the unit of the tracked output
+        (``rad`` for the link rigs, ``N`` for the tendon rig) in the column headers."""
+        def unit(c):
+            u = UNITS[c]
+            if c in ("gain", "peak_gain"):
+                return f"{ref_unit}/{ref_unit}" if ref_unit != "ref" else u
+            return ref_unit if u == "ref" else u
+
         lines = []
         for test in dict.fromkeys(r.test for r in self.rows):
             rows = [r for r in self.rows if r.test == test]
             cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | joint | " + " | ".join(f"{c} [{UNITS[c]}]" for c in cols) + " | status |")
+            lines.append("| controller | joint | " + " | ".join(f"{c} [{unit(c)}]" for c in cols) + " | status |")
             lines.append("|---" * (len(cols) + 3) + "|")
             for r in rows:
                 status = f"{r.status}: {r.flags}" if r.flags else r.status
@@ -196,13 +206,29 @@ def gain_diagram(t, r, y, f_low: float, f_high: float, *, smooth: int = 3) -> tu
 
 
 def sweep_metrics(f, g) -> dict[str, float]:
-    """Peak gain, its frequency and the -3 dB bandwidth of a gain diagram ``g(f)``."""
+    """Peak gain, its frequency and the -3 dB bandwidth of a measured gain diagram ``g(f)``.
+
+    The bandwidth is where ``|Y/R|`` first falls below ``1/sqrt(2)`` of its
+    low-frequency value (the mean over the lowest 5 % of the log-frequency span),
+    interpolated in log frequency between the bins; NaN when the gain never
+    falls that low in the sweep, so that the first grid point is never reported.
+    (A corner within a few bins of the sweep start reads high: the sweep does
+    not see the DC gain.)
+    """
     if len(f) == 0:
         return {}
+    f, g = np.asarray(f, float), np.asarray(g, float)
     i = int(np.argmax(g))
-    below = np.nonzero(g < 1.0 / math.sqrt(2.0))[0]
-    return dict(peak_gain=float(g[i]), resonance_hz=float(f[i]),
-                bandwidth_hz=float(f[below[0]]) if len(below) else math.nan)
+    low = f <= f[0] * (f[-1] / f[0]) ** 0.05
+    level = float(np.mean(g[low])) / math.sqrt(2.0)
+    below = np.nonzero(g < level)[0]
+    below = below[below > 0]
+    bw = math.nan
+    if len(below):
+        k = int(below[0])
+        a = (g[k - 1] - level) / (g[k - 1] - g[k])
+        bw = float(np.exp(np.log(f[k - 1]) + a * (np.log(f[k]) - np.log(f[k - 1]))))
+    return dict(peak_gain=float(g[i]), resonance_hz=float(f[i]), bandwidth_hz=bw)
 
 
 def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> dict[str, float]:

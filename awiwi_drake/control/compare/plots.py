@@ -21,8 +21,8 @@ def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: st
         ax.plot(r.t, r.output, label=r.controller)
     ax.plot(runs[0].t, runs[0].reference, "k--", lw=1, label="reference")
     ax.set_xlabel("time [s]")
-    ax.set_ylabel(ylabel or "tracked output")
-    ax.set_title(f"{comparison.rig}: {test}")
+    ax.set_ylabel(ylabel or "tracked output [unit of the reference]")
+    ax.set_title(f"{comparison.rig}: {test} test (solid: output, dashed: reference)")
     ax.legend()
     ax.grid(True, alpha=0.3)
     return fig, ax
@@ -53,19 +53,27 @@ def plot_joint_runs(comparison: Comparison, test: str, finger: str):
     return fig, axes
 
 
-def plot_gain_diagram(comparison: Comparison, *, ax=None):
-    """Gain diagrams |Y/R|(f) of the sweep test (Fig 11.4 style)."""
+def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = None):
+    """Gain diagrams |Y/R|(f) of the sweep test (Fig 11.4 style) on a log frequency axis,
+    with each controller's -3 dB bandwidth marked (dotted, named in the legend)."""
     import matplotlib.pyplot as plt
     runs = [r for r in comparison.runs if r.test == "sweep"]
     if not runs:
         raise ValueError("plot_gain_diagram: no sweep runs")
     fig, ax = (plt.subplots(figsize=(7, 4)) if ax is None else (ax.figure, ax))
     for r in runs:
-        ax.plot(r.meta["freq"], r.meta["gain"], label=r.controller)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("gain |Y/R|")
-    ax.legend()
-    ax.grid(True, alpha=0.3)
+        line, = ax.semilogx(r.meta["freq"], r.meta["gain"], label=r.controller)
+        try:
+            bw = comparison.table.get(r.controller, "sweep").bandwidth_hz
+        except KeyError:
+            bw = math.nan
+        if math.isfinite(bw):
+            ax.axvline(bw, color=line.get_color(), ls=":", lw=1.2, label=f"{r.controller}: -3 dB at {bw:.3g} Hz")
+    ax.set_xlabel("frequency [Hz] (log)")
+    ax.set_ylabel(f"gain |Y/R| [{unit}/{unit}]" if unit else "gain |Y/R| [-]")
+    ax.set_title(f"{comparison.rig}: closed-loop gain from the chirp test")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
     return fig, ax
 
 

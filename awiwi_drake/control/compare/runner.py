@@ -137,9 +137,9 @@ def simulate_test(loop: ClosedLoop, context, t_final: float, dt: float, referenc
     slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
     if slack and y != "tendon_force":
         log.append("tendon_force")
-    applied = applied_port(loop)
-    if applied != "motor_torque_command":
-        log.append(applied)
+    applied = loop.diagram.HasOutputPort("applied_torque")  # the motors' torque after their saturation
+    if applied:
+        log.append("applied_torque")
     res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                    max_step=max_step, accuracy=1e-6)
     t = res.t - res.t[0]
@@ -147,7 +147,8 @@ def simulate_test(loop: ClosedLoop, context, t_final: float, dt: float, referenc
     meta = dict(meta or {})
     if slack:
         meta["tendon_force"] = res["tendon_force"]
-    meta["applied_torque"] = res[applied]
+    if applied:
+        meta["applied_torque"] = res["applied_torque"]
     return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
                    res["motor_torque_command"], w, res["state"], meta)
 

@@ -36,7 +36,7 @@ from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "run_standard_tests",
-           "compare",
+           "compare", "dominant_time_constant",
            "compare_controllers"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -73,6 +73,41 @@ class Comparison:
             if r.controller == controller and r.test == test:
                 return r
         raise KeyError(f"no run for controller {controller!r} and test {test!r}")
+
+
+def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = None, *,
+                           min_share: float = 0.01) -> float | None:
+    """``1 / sigma`` [s] of the slowest closed-loop pole that matters for tracking, or None.
+
+    The loop (continuous: ``rate_hz=None``) is linearised with Drake's ``Linearize``
+    from its first reference to its tracked output at the settled start; each
+    pole's share of the DC gain is ``|c_i b_i / lambda_i|`` in modal coordinates,
+    and poles with less than ``min_share`` of the total (e.g. a co-contraction
+    mode that the link angle does not see) are ignored.  Sampled loops or loops
+    with discrete controller state (which ``Linearize`` cannot take in a mixed
+    diagram) return None, as do unstable ones.
+    """
+    from awiwi_drake.analysis import linearize
+
+    p = params or compare_test_params(loop.rig)
+    ctx = settle(loop, p.initial_reference, t_settle=0.0, max_step=p.max_step)
+    if not ctx.has_only_continuous_state():
+        return None
+    try:
+        lin = linearize(loop.diagram, context=ctx, input=loop.references[0], outputs=(loop.tracked_outputs[0],),
+                        equilibrium_tolerance=None)
+    except ValueError:
+        return None
+    lam, V = np.linalg.eig(lin.A)
+    try:
+        W = np.linalg.inv(V)
+    except np.linalg.LinAlgError:
+        return None
+    share = np.abs((lin.C @ V).ravel() * (W @ lin.B).ravel() / np.where(np.abs(lam) > 1e-12, lam, 1e-12))
+    if not np.all(np.isfinite(share)) or share.sum() == 0 or np.any(lam.real >= 0):
+        return None
+    keep = share / share.sum() > min_share
+    return float(1.0 / np.min(-lam.real[keep]))
 
 
 def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
@@ -114,8 +149,11 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
     m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
     u = np.abs(run.command)
-    m.peak_input = float(np.max(np.abs(run.meta.get("applied_torque", run.command))))
-    limit = torque_limit(loop, u.shape[1])
+    m.peak_command = float(np.max(u))
+    m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
+    limit = loop.saturation
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
     if limit is not None:
         m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
     if "tendon_force" in run.meta:
@@ -214,6 +252,7 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             row = rows[j]
             sl = ch.tendons[j]
             u = np.abs(res["motor_torque_command"][:, sl])
+            row.peak_command = float(np.max(u))
             row.peak_input = float(np.max(np.abs(res[applied][:, sl])))
             limit = torque_limit(loop, res["motor_torque_command"].shape[1])
             if limit is not None:
