@@ -41,3 +41,16 @@ def test_contracts_catch_an_upward_import_inside_a_function_and_a_circle(tmp_pat
     assert res.returncode != 0
     assert "awiwi_drake.parameters.base -> awiwi_drake.control.registry" in res.stdout
     assert ".friction_observer -> .backstepping" in res.stdout
+
+
+def test_every_reproduction_module_is_on_the_chapter_maps():
+    """Each module of reproductions/ is named in the package's chapter table and in docs/ARCHITECTURE.md."""
+    import awiwi_drake.reproductions as rep
+    modules = sorted(p.stem for p in (ROOT / "awiwi_drake" / "reproductions").glob("*.py")
+                     if not p.stem.startswith("_"))
+    assert modules, "no reproduction modules found"
+    architecture = (ROOT / "docs" / "ARCHITECTURE.md").read_text()
+    missing_init = [m for m in modules if f":mod:`.{m}`" not in rep.__doc__]
+    missing_doc = [m for m in modules if f"{m}.py" not in architecture]
+    assert not missing_init, f"not in awiwi_drake/reproductions/__init__.py's table: {', '.join(missing_init)}"
+    assert not missing_doc, f"not in docs/ARCHITECTURE.md: {', '.join(missing_doc)}"

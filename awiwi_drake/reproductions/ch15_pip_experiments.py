@@ -28,9 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
+
 __all__ = ["PipRun", "pip_parameters", "pip_experiment", "pip_metrics"]
 
-RATE_HZ = 3000.0
+RATE_HZ = CONTROL_RATE_HZ
 
 
 @dataclass
