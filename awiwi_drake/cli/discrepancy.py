@@ -105,6 +105,12 @@ def _make_dataset(args) -> int:
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
     rig = CLI_RIG_NAMES[args.rig]
+    from awiwi_drake.discrepancy.catalog import EFFECTS
+
+    for h in hidden:  # checked here so that the message uses the CLI's rig name
+        if h in EFFECTS and rig not in EFFECTS[h].rigs:
+            raise ValueError(f"--hide {h}: the effect does not exist on {args.rig} "
+                             f"(it needs {' or '.join(r + '-rig' for r in EFFECTS[h].rigs)})")
     from awiwi_drake.config import SimulationProgress
 
     with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
