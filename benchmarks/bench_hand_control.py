@@ -10,7 +10,8 @@ force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-for
 tendon-length estimator; ``backstepping``: 15.5 for the hand, 6 kHz law, 3 kHz estimator) the hand
 (``hand_diagram()``, wrist input at 0, the thesis physics of the plant as it is configured by default) is
 closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad, and simulated
-with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period).  Real-time factor =
+with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period), after a warm-up
+run of two control periods (JIT compilation of the drive kernels is not timed).  Real-time factor =
 simulated time / wall time on one core.  ``--profile`` prints the functions that take the time (cProfile,
 tottime), grouped by module.  The figures depend on the machine load.
 """
@@ -37,12 +38,15 @@ def run(name: str, sim_time: float, profile: bool = False) -> dict:
     loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
+    inputs = {"joint_angle_reference": op.joint_angle + 0.05}
+    # warm-up: the first simulation compiles the drive's kernels (numba) and fills caches
+    simulate(loop, loop.create_context(op), 2.0 / loop.rate_hz, inputs=inputs, log=("joint_angle",))
     ctx = loop.create_context(op)
     prof = cProfile.Profile() if profile else None
     t0 = time.perf_counter()
     if prof:
         prof.enable()
-    simulate(loop, ctx, sim_time, inputs={"joint_angle_reference": op.joint_angle + 0.05}, log=("joint_angle",))
+    simulate(loop, ctx, sim_time, inputs=inputs, log=("joint_angle",))
     if prof:
         prof.disable()
     wall = time.perf_counter() - t0

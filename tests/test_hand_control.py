@@ -233,3 +233,20 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     assert all(r["status"] != "diverged" for r in rows), [r["status"] for r in rows]
     # the step moves every joint towards its reference (0.2 rad)
     assert all(abs(float(r["steady_state_error"])) < 0.1 for r in step.values()), step
+
+
+def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
+    """The registered finger controllers as wholes (joint-pd: C++ primitives + MotorAngleReference_;
+    cascaded: the chain diagram) convert with ToAutoDiffXd; their command's derivatives equal differences."""
+    from awiwi_drake.control.joint_pd import joint_pd_controller
+    rig = _rig("thumb")                                   # the thumb's P(q) in the reference map
+    op = rig.operating_point()
+    rng = np.random.default_rng(8)
+    check_system_autodiff_matches_fd(joint_pd_controller(rig), [], dict(
+        joint_angle_reference=op.joint_angle + rng.normal(0, 0.2, 4), motor_state=rng.normal(0, 0.3, 16)))
+    index = _rig()
+    chain = TendonChainController(index)
+    check_system_autodiff_matches_fd(chain, [], dict(
+        joint_angle_reference=rng.normal(0, 0.2, 4), joint_angle=rng.normal(0, 0.2, 4),
+        joint_velocity=rng.normal(0, 1, 4), tendon_force=rng.uniform(10, 40, 8),
+        motor_velocity=rng.normal(0, 0.5, 8)), outputs=["motor_torque", "joint_torque_reference"], rtol=1e-4)

@@ -68,8 +68,11 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     return fig
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
+def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScenario | None = None):
     """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
+
+    ``scenario`` (default: :class:`DemoScenario`, 1 s long in short mode) sets the
+    pretension ramp and the link step; ``awiwi-drake demo --config FILE.yaml`` reads it.
 
     The caller (``awiwi-drake demo``) writes the returned diagrams' graphs with
     :func:`awiwi_drake.export.export_diagram` (export sits above this layer).
@@ -82,7 +85,8 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rig = joint_rig(backend=backend)
-    scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
+    if scenario is None:
+        scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
     loop = joint_rig_position_loop(rig, scenario)
     t_ref, refs = demo_references(rig, scenario)
     diagram = loop.diagram
