@@ -212,7 +212,7 @@ def LinkPositionEstimator_(T):
 
     class Impl(LeafSystem_[T]):
         def _construct(self, coupling, motor_pulley_radius: float, offsets, period: float = 1.0 / 3000,
-                       iterations: int = 15, step0: float = 0.1, converter=None):
+                       iterations: int = 15, step0: float = 0.1, refine: bool = False, converter=None):
             LeafSystem_[T].__init__(self, converter)
             m, n = coupling.num_tendons, coupling.num_joints
             offsets = np.asarray(offsets, dtype=float)
@@ -222,6 +222,7 @@ def LinkPositionEstimator_(T):
                 raise ValueError(f"LinkPositionEstimator: period = {period} must be > 0 [s]")
             self.coupling, self.r_m, self.offsets = coupling, float(motor_pulley_radius), offsets
             self.period, self.iterations, self.step0 = float(period), int(iterations), float(step0)
+            self.refine = bool(refine)
             self.limit_hits = 0
             self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
             self._theta = self.DeclareVectorInputPort("motor_angle", m)
@@ -233,7 +234,7 @@ def LinkPositionEstimator_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.coupling, other.r_m, other.offsets, other.period, other.iterations,
-                            other.step0, converter=converter)
+                            other.step0, other.refine, converter=converter)
 
         def _update(self, context, discrete_state):
             theta = self._theta.Eval(context)
@@ -260,7 +261,7 @@ def LinkPositionEstimator_(T):
                                           f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
                                           "further hits are counted in limit_hits", RuntimeWarning,
                                           stacklevel=2)
-            if T is not float:  # one Gauss-Newton step in the scalar type carries the derivatives
+            if T is not float or self.refine:  # one Gauss-Newton step (in the scalar type: carries the derivatives)
                 r = dh - (self.coupling.h(q_new) - self._h0)
                 S = _selection_of(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
@@ -322,7 +323,7 @@ class LinkStateEstimator:
 
 
 def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, period: float = 1.0 / 3000,
-                         wrist: bool = False, iterations: int = 15, step0: float = 0.1,
+                         wrist: bool = False, iterations: int = 15, step0: float = 0.1, refine: bool = False,
                          velocity_time_constant: float | None = None) -> LinkStateEstimator:
     """Build the :class:`LinkStateEstimator` of a finger/hand coupling (see there).
 
@@ -331,7 +332,7 @@ def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, perio
     """
     b = DiagramBuilder()
     est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
-        coupling, motor_pulley_radius, offsets, period=period, iterations=iterations, step0=step0))
+        coupling, motor_pulley_radius, offsets, period=period, iterations=iterations, step0=step0, refine=refine))
     n = coupling.num_joints
     T = float(period if velocity_time_constant is None else velocity_time_constant)
     if not T >= period * (1 - 1e-12):
