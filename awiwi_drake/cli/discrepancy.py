@@ -134,7 +134,7 @@ def register(subparsers) -> None:
     p.add_argument("dataset", help="NAME.csv (with NAME.json beside it)")
     p.add_argument("--report", metavar="DIR", help="write report.md, PNGs and summary.json into this folder")
     p.add_argument("--json", metavar="OUT.json", help="write the JSON summary to this file")
-    add_parameter_options(p, what="DiscrepancySettings (e.g. window: 0.05)")
+    add_parameter_options(p, what="DiscrepancySettings", example="e.g. 'window: 0.05'")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_diagnose)
 
