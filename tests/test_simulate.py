@@ -9,7 +9,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import AffineSystem, Integrator, ZeroOrderHold
 
 from awiwi_drake.analysis import (
-    Chirp, PerEntry, Ramp, Samples, SimulationDivergedError, SimulationError, SimulationResult, Sine, Step, simulate)
+    rig_monitors, Chirp, PerEntry, Ramp, Samples, SimulationDivergedError, SimulationError, SimulationResult, Sine, Step, simulate)
 from awiwi_drake.analysis.schedules import InputSchedule_
 from awiwi_drake.analysis.simulate import control_period
 from awiwi_drake.rigs import joint_rig
@@ -176,9 +176,14 @@ def test_the_context_is_advanced_and_the_diagram_can_be_simulated_again():
 def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
     rig = joint_rig()
     op = rig.operating_point(pretension=20.0)
+    limit = rig.torque_limit
     res = simulate(rig, rig.context(op), 0.02,
-                   inputs={"motor_torque": PerEntry([Step(0.005, op.motor_torque[0] + 0.5), op.motor_torque[1]])},
-                   log=("link_angle", "tendon_force", "motor_torque"))
+                   inputs={"motor_torque": PerEntry([Step(0.005, limit + 0.5, before=op.motor_torque[0]),
+                                                     op.motor_torque[1]])},
+                   log=("link_angle", "tendon_force", "motor_torque"), monitors=rig_monitors(rig))
+    sat = res.events_of("actuator_saturation")
+    assert [e.channel for e in sat] == ["motor_torque[0]"] and sat[0].t_start == pytest.approx(0.005, abs=2e-3)
+    assert sat[0].extreme == pytest.approx(limit + 0.5)
     for ext in ("npz", "csv"):
         path = res.save(tmp_path / f"run.{ext}")
         back = SimulationResult.load(path)
@@ -190,7 +195,11 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
     fig, axes = res.plot()
     for ax in axes:
         assert "[" in ax.get_ylabel() and ax.get_legend() is not None
-        assert len(ax.get_legend().get_texts()) >= len(ax.get_lines())
+        assert len(ax.get_legend().get_texts()) >= 1
+    torque_ax = next(a for a in axes if a.get_ylabel() == "motor_torque [Nm]")
+    texts = [t.get_text() for t in torque_ax.get_legend().get_texts()]
+    assert any("torque limit" in t for t in texts) and "actuator saturation" in texts
+    assert {round(ln.get_ydata()[0], 9) for ln in torque_ax.get_lines() if ln.get_linestyle() == "--"} == {limit, -limit}
     assert axes[-1].get_xlabel() == "time [s]"
     with pytest.raises(ValueError, match="must end in .npz or .csv"):
         res.save(tmp_path / "run.txt")

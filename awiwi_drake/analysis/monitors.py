@@ -83,6 +83,10 @@ class Monitor(abc.ABC):
     def label(self, i: int) -> str:
         return self.labels[i] if self.labels else f"{self.port_name}[{i}]"
 
+    def limits(self) -> list[tuple[str, float]]:
+        """Thresholds on the watched port's own values, for plots: ``[(description, value), ...]``."""
+        return []
+
     def events(self, t: np.ndarray, v: np.ndarray) -> list[Event]:
         """Intervals of consecutive samples where the condition holds (vectorised)."""
         c = self.channels(np.asarray(v, float).reshape(len(t), -1))
@@ -127,6 +131,9 @@ class SlackMonitor(Monitor):
     def condition(self, v):
         return v <= self.slack_force
 
+    def limits(self):
+        return [("slack (tendon force <= %g N)" % self.slack_force, self.slack_force)]
+
 
 class OverrangeMonitor(Monitor):
     """Spring beyond its calibrated range: force on ``port_name`` above ``max_force`` [N]."""
@@ -139,6 +146,9 @@ class OverrangeMonitor(Monitor):
 
     def condition(self, v):
         return v > self.max_force
+
+    def limits(self):
+        return [("spring calibrated range %g N" % self.max_force, self.max_force)]
 
 
 class SaturationMonitor(Monitor):
@@ -153,6 +163,10 @@ class SaturationMonitor(Monitor):
 
     def condition(self, v):
         return np.abs(v) >= self.torque_limit
+
+    def limits(self):
+        return [("torque limit +-%g Nm" % self.torque_limit, self.torque_limit),
+                ("torque limit +-%g Nm" % self.torque_limit, -self.torque_limit)]
 
 
 class PairSlackMonitor(Monitor):

@@ -135,7 +135,8 @@ class SimulationResult:
         """One subplot per signal (per unit for mixed signals such as ``state``); returns ``(fig, axes)``.
 
         Every trace has a legend entry (its channel name), every axis its unit,
-        and monitor events are shaded with one legend entry per kind.
+        monitor thresholds on a logged signal (torque limit, spring range, slack) are
+        dashed lines, and monitor events are shaded with one legend entry per kind.
         ``channels`` optionally selects channels per signal (``{"state": [0, 2]}``).
         """
         import matplotlib.pyplot as plt
@@ -165,6 +166,10 @@ class SimulationResult:
             labels = self.channel_labels(title)
             for n, j in chans:
                 a.plot(self.t, self[n][:, j], label=labels[j])
+            seen_lim = set()
+            for desc, val in self.info.get("limits", {}).get(title, []):
+                a.axhline(val, color="k", ls="--", lw=0.8, label=None if desc in seen_lim else desc)
+                seen_lim.add(desc)
             a.set_ylabel(f"{title} [{u}]")
             a.grid(True, alpha=0.3)
             if events:

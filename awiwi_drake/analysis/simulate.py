@@ -402,10 +402,15 @@ def simulate(system, context: Context | None, t_final: float, *,
     for m, s in watched:
         events.extend(m.events(*read(s)))
     events.sort(key=lambda e: (e.t_start, e.kind, e.channel))
+    limits = {}   # thresholds of monitors watching a logged signal, drawn by SimulationResult.plot
+    for m, s in watched:
+        for label, ls in logged:
+            if ls is s and m.limits():
+                limits.setdefault(label, []).extend([list(x) for x in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
                 max_step=h if mode == "error_controlled" else None,
                 accuracy=float(accuracy) if mode == "error_controlled" else None,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
                 realtime_factor=duration / wall if wall > 0 else math.inf,
-                steps=int(integ.get_num_steps_taken()), system=diagram.get_name())
+                steps=int(integ.get_num_steps_taken()), system=diagram.get_name(), limits=limits)
     return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)
