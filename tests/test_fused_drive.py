@@ -319,3 +319,49 @@ def test_hysteresis_loop_width_equals_the_dahl_closed_form():
     # the branches lag the moving half-width by about beta k(x) / sigma ~ 0.015 N each (k ~ 3e4 N/m);
     # the lags nearly cancel in the width: bound 0.02 N of 9 N
     assert widths[0] - widths[1] == pytest.approx(expected, abs=0.02)
+
+
+def _push_response_single(pretension):
+    """Link angle 30 ms after a 0.5 N m motor-torque imbalance, one joint rig (fixed-step RK3)."""
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    rig = joint_rig()
+    op = rig.operating_point(pretension=pretension)
+    ctx = rig.context(op)
+    rig.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque + [0.5, -0.5])
+    sim = Simulator(rig.diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-4)
+    sim.get_mutable_integrator().set_fixed_step_mode(True)
+    sim.AdvanceTo(0.03)
+    return float(ctx.get_continuous_state_vector().CopyToVector()[0])
+
+
+def _push_response_batch(points):
+    """The same for every point at once: the copies of one batched rig."""
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    br = batched_joint_rig(len(points))
+    ops = [br.single.operating_point(pretension=p["pretension"]) for p in points]
+    ctx = br.context(ops)
+    _, u, _ = br.stack(ops)
+    br.diagram.GetInputPort("motor_torque").FixValue(ctx, u + np.tile([0.5, -0.5], len(points)))
+    sim = Simulator(br.diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-4)
+    sim.get_mutable_integrator().set_fixed_step_mode(True)
+    sim.AdvanceTo(0.03)
+    return list(ctx.get_continuous_state_vector().CopyToVector().reshape(len(points), 6)[:, 0])
+
+
+def test_run_sweep_batch_gives_the_serial_numbers():
+    from concurrent.futures import ThreadPoolExecutor
+    from awiwi_drake.analysis import run_sweep
+    grid = {"pretension": [10.0, 20.0, 30.0, 40.0, 50.0]}
+    serial = run_sweep(_push_response_single, grid, executor="serial", quiet=True)
+    batched = run_sweep(_push_response_batch, grid, executor="serial", batch=2, quiet=True)
+    with ThreadPoolExecutor(2) as ex:
+        threaded = run_sweep(_push_response_batch, grid, executor=ex, batch=3, quiet=True)
+    # fixed-step RK3 acts element-wise on the stacked state: the copies reproduce the single runs
+    np.testing.assert_allclose(batched.values, serial.values, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(threaded.values, serial.values, rtol=1e-12, atol=1e-15)
+    assert len(set(np.round(serial.values, 9))) == 5     # the pretension matters (stiffer joint, smaller push)
+    with pytest.raises(ValueError, match="batch = 0"):
+        run_sweep(_push_response_batch, grid, executor="serial", batch=0)
