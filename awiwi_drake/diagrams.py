@@ -1,50 +1,135 @@
-"""The diagram graphs committed under ``diagrams/`` (regenerate: ``awiwi-drake export-diagrams``).
+"""Named plants and diagram lists (top layer: it may use every plant package).
 
-``DIAGRAM_EXPORTS`` lists ``(file_stem, builder, max_depth)``: ``builder()``
-returns a Diagram. Other parts of the package append their entries.
+* ``TARGETS`` maps the names the CLI accepts (``awiwi-drake linearize NAME``) to
+  ``dict(builder, params, description)``; ``builder(params=..., backend=...)``
+  returns a :class:`~awiwi_drake.rigs.Rig` (the rigs, each finger, the hand);
+  :func:`build_target` builds one with ``NAME=VALUE`` overrides.
+* ``DIAGRAM_EXPORTS`` lists ``(file_stem, builder, max_depth)`` of the graphs
+  committed under ``diagrams/`` (regenerate: ``awiwi-drake export-diagrams``);
+  ``builder()`` returns a Diagram. ``HAND_DIAGRAM_EXPORTS`` are the hand's
+  (``awiwi-drake export-hand-diagrams``).
 """
 
 from __future__ import annotations
 
+import functools
+
 from awiwi_drake.export import export_diagram, graphviz_available
+from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
+from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
+from awiwi_drake.rigs import Rig, flexible_joint_rig, joint_rig, tendon_rig
 
-__all__ = ["DIAGRAM_EXPORTS", "export_all", "export_entries"]
+__all__ = ["TARGETS", "build_target", "DIAGRAM_EXPORTS", "HAND_DIAGRAM_EXPORTS", "export_all", "export_entries",
+           "export_hand_diagrams"]
+
+TARGETS = {
+    "tendon-rig": dict(
+        builder=tendon_rig, params=TendonRigParams,
+        description="one motor + spring mechanism, far end fixed (ch. 10); state [theta, omega]; "
+                    "operating point: tendon_force=20 N"),
+    "flexible-joint": dict(
+        builder=flexible_joint_rig, params=FlexibleJointParams,
+        description="4th-order flexible joint (12.8), Table 12.1; state [q, q_dot, theta, theta_dot] as in (12.10); "
+                    "fields link_inertia (m), motor_inertia (b), stiffness (k), link_damping (d_q), "
+                    "motor_damping (d_theta)"),
+    "joint-rig": dict(
+        builder=joint_rig, params=JointRigParams,
+        description="one link, two antagonistic motors + lever springs (Fig 5.9); "
+                    "state [q, q_dot, theta1, theta2, omega1, omega2]; operating point: pretension=20 N, q=0"),
+}
 
 
+def build_target(name: str, overrides: dict | None = None, *, params=None, **kwargs) -> Rig:
+    """Build a registered target by CLI name, from ``params`` (default: the target's defaults)
+    with ``NAME=VALUE`` parameter ``overrides`` applied."""
+    if name not in TARGETS:
+        raise ValueError(f"unknown rig {name!r}; choose one of {', '.join(sorted(TARGETS))}")
+    entry = TARGETS[name]
+    params = entry["params"]() if params is None else params
+    if overrides:
+        params = params.with_overrides(overrides)
+    return entry["builder"](params=params, **kwargs)
+
+
+# --- fingers and hand (thesis ch. 5-6), with lazy imports ----------------------------------------
+def _hand_target(finger: str | None):
+    def build(*, params=None, backend: str | None = None):
+        from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+        kw = {} if backend is None else {"backend": backend}
+        if finger is None:
+            return hand_diagram(params=params, wrist=True, **kw)
+        return finger_diagram(finger=finger, params=params, **kw)
+    build.__name__ = f"{finger or 'hand'}_target"
+    return build
+
+
+def _register_hand_targets() -> None:
+    dof = {"thumb": "4 DoF (tensegrity base (5.20)-(5.22), PIP, DIP), 8 tendons",
+           "index": "4 DoF (Table 5.1, (5.5)), 8 tendons", "middle": "4 DoF (as the index), 8 tendons",
+           "ring": "3 DoF (PIP/DIP coupled (5.16), 4 plant joints), 6 tendons",
+           "fifth": "4 DoF (hematometacarpal + ring-like), 5 plant joints, 8 tendons"}
+    for f in FINGERS:
+        TARGETS[f"finger-{f}"] = dict(
+            builder=_hand_target(f), params=functools.partial(FingerRigParams.for_finger, f),
+            description=f"{f} finger: {dof[f]}; state [q, q_dot, theta, omega]; operating point: "
+                        "pretension=20 N, q=0")
+    TARGETS["hand"] = dict(
+        builder=_hand_target(None), params=HandRigParams,
+        description="whole hand: 21 plant joints (19 DoF), 38 motors and springs, wrist input held at 0; "
+                    "state [q (21), q_dot (21), theta (38), omega (38)]")
+
+
+_register_hand_targets()
+
+
+
+
+# --- diagram graphs ---------------------------------------------------------------------------
 def _tendon():
-    from awiwi_drake.rigs import tendon_rig
     return tendon_rig().diagram
 
 
 def _flexible():
-    from awiwi_drake.rigs import flexible_joint_rig
     return flexible_joint_rig().diagram
 
 
 def _joint():
-    from awiwi_drake.rigs import joint_rig
     return joint_rig().diagram
 
 
 def _joint_loop():
-    from awiwi_drake.rigs import joint_rig
     from awiwi_drake.control.motor_position import joint_rig_position_loop
     return joint_rig_position_loop(joint_rig()).diagram
 
 
-def _index_loop_wrist():
+def _export_hand():
+    from awiwi_drake.hand.diagrams import hand_diagram
+    return hand_diagram().diagram
+
+
+def _export_hand_python():
+    from awiwi_drake.hand.diagrams import hand_diagram
+    return hand_diagram().diagram
+
+
+def _export_index_loop():
     from awiwi_drake.control import closed_loop, make_controller
     from awiwi_drake.hand.diagrams import finger_diagram
     rig = finger_diagram(finger="index", wrist=True)
     return closed_loop(rig, make_controller("joint-pd", rig)).diagram
 
 
-def _hand(stem):
-    def build():
-        from awiwi_drake.hand.diagrams import HAND_DIAGRAM_EXPORTS
-        return dict((s, b) for s, b, _ in HAND_DIAGRAM_EXPORTS)[stem]()
-    return build
+def _export_ring():
+    from awiwi_drake.hand.diagrams import finger_diagram
+    return finger_diagram(finger="ring").diagram
 
+
+HAND_DIAGRAM_EXPORTS = [
+    ("hand_top", _export_hand, 1),
+    ("hand_deep", _export_hand_python, None),
+    ("hand_finger_index_control_wrist", _export_index_loop, 1),
+    ("hand_finger_ring_deep", _export_ring, None),
+]
 
 DIAGRAM_EXPORTS = [
     ("tendon_rig", _tendon, None),
@@ -52,11 +137,7 @@ DIAGRAM_EXPORTS = [
     ("joint_rig", _joint, 1),
     ("joint_rig_deep", _joint, None),
     ("joint_rig_position_loop", _joint_loop, 1),
-    ("hand_top", _hand("hand_top"), 1),
-    ("hand_deep", _hand("hand_deep"), None),
-    ("hand_finger_index_control_wrist", _index_loop_wrist, 1),
-    ("hand_finger_ring_deep", _hand("hand_finger_ring_deep"), None),
-]
+] + HAND_DIAGRAM_EXPORTS
 
 
 def export_all(out_dir="diagrams") -> list[str]:
@@ -76,3 +157,8 @@ def export_entries(entries, out_dir="diagrams") -> list[str]:
         lines.append("note: Graphviz 'dot' not found: only .dot files were written "
                      "(install the Debian package 'graphviz' for .svg/.png)")
     return lines
+
+
+def export_hand_diagrams(out_dir="diagrams") -> list[str]:
+    """Write the hand/finger diagram graphs (``hand_*.dot``, and .svg/.png with Graphviz)."""
+    return export_entries(HAND_DIAGRAM_EXPORTS, out_dir)

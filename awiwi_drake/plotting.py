@@ -4,13 +4,34 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["plot_friction_curve", "plot_spring_curve", "plot_signals", "plot_poles", "plot_pole_sweep"]
+__all__ = ["figure_axes", "plot_traces", "plot_friction_curve", "plot_spring_curve", "plot_signals", "plot_poles",
+           "plot_pole_sweep"]
 
 
 def _plt():
     import matplotlib
     import matplotlib.pyplot as plt  # noqa: F401  (backend chosen by MPLBACKEND / notebook)
     return matplotlib.pyplot
+
+
+def figure_axes(ax=None, **subplots_kw):
+    """``(fig, ax)``: a new figure (``plt.subplots(**subplots_kw)``) when ``ax`` is None, else ``ax``'s figure."""
+    if ax is None:
+        return _plt().subplots(**subplots_kw)
+    return ax.figure, ax
+
+
+def plot_traces(t, traces: dict, *, ylabel: str, ax=None, styles: dict | None = None, title: str = ""):
+    """Several time series ``{label: y}`` over ``t`` [s]."""
+    fig, ax = figure_axes(ax, figsize=(7, 4))
+    for label, y in traces.items():
+        ax.plot(t, y, (styles or {}).get(label, "-"), label=label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    return fig, ax
 
 
 def plot_friction_curve(params, omega_max: float = 15.0, ax=None, measured=None):

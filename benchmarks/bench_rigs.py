@@ -83,7 +83,7 @@ def _fixed_rk3(diagram, ctx, seconds):
 def _joint_loop(seconds):
     from awiwi_drake.control.motor_position import joint_rig_position_loop
     from awiwi_drake.rigs import joint_rig
-    from awiwi_drake.rigs.demo import DemoScenario
+    from awiwi_drake.parameters.rigs import DemoScenario
     rig = joint_rig()
     scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
     loop = joint_rig_position_loop(rig, scen)
@@ -128,7 +128,8 @@ def case_scipy_reference(seconds, repeats):
     from scipy.integrate import solve_ivp
 
     from awiwi_drake.components.motor import motor_acceleration
-    from awiwi_drake.rigs.demo import MotorPositionGains, motor_references
+    from awiwi_drake.parameters.rigs import MotorPositionGains
+    from awiwi_drake.rigs.demo import motor_references
 
     def run():
         rig, scen, _, _ = _joint_loop(seconds)
@@ -204,7 +205,7 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
     from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
     from awiwi_drake.rigs.batch import batched_joint_rig
-    from awiwi_drake.rigs.demo import MotorPositionGains
+    from awiwi_drake.parameters.rigs import MotorPositionGains
 
     class BatchedMotorPD(LeafSystem):
         """u_i = u0_i + kp_i (theta*_i - theta_i) - kd omega_i for every copy, sampled and held at 3 kHz."""
@@ -281,7 +282,8 @@ def _mujoco_case(seconds, repeats, linear: bool):
     except ImportError:
         return None
     from awiwi_drake.components.motor import motor_friction_torque
-    from awiwi_drake.rigs.demo import DemoScenario, MotorPositionGains, motor_references
+    from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+    from awiwi_drake.rigs.demo import motor_references
     from awiwi_drake.rigs import joint_rig
     rig = joint_rig()
     p, spring = rig.params, rig.spring

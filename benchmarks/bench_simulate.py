@@ -32,7 +32,7 @@ import numpy as np
 from awiwi_drake.analysis import rig_monitors, simulate
 from awiwi_drake.control.motor_position import joint_rig_position_loop
 from awiwi_drake.rigs import joint_rig
-from awiwi_drake.rigs.demo import DemoScenario
+from awiwi_drake.parameters.rigs import DemoScenario
 
 
 def _run(seconds: float, **kw):

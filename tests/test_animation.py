@@ -105,7 +105,7 @@ def test_finger_recording_is_framed_on_the_finger(tmp_path):
 
 def test_frame_camera_closed_form():
     """Points on a sphere of radius r: the camera sits r / (fill tan(fov/2)) from the centre."""
-    from awiwi_drake.hand.visualize import frame_camera
+    from awiwi_drake.export.animation import frame_camera
 
     p = AnimationParams(margin=0.0, fill_fraction=1.0, camera_azimuth=0.0, camera_elevation=0.0)
     pts = np.array([[1, 2, 3], [1, 2, 3]]) + 0.1 * np.array([[1, 1, 1], [-1, -1, -1]]) / math.sqrt(3)

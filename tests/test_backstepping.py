@@ -9,12 +9,13 @@ from pydrake.systems.primitives import Linearize
 
 from _fd import system_jacobians
 from awiwi_drake.control.backstepping import (
-    ImpedanceBackstepping, PositionBackstepping, impedance_backstepping, position_backstepping)
-from awiwi_drake.control.backstepping_example import ScalarBackstepping, ScalarExamplePlant, example_control
-from awiwi_drake.control.backstepping_studies import (
+    ImpedanceBackstepping, PositionBackstepping, impedance_backstepping, impedance_controller, joint_model,
+    position_backstepping, position_controller)
+from awiwi_drake.reproductions.ch15_backstepping import (
     antagonistic_step, antagonistic_stiffness_check, count_oscillations, delay_study, example_phase_portrait,
-    impedance_controller, impedance_steady_state, impedance_study, is_monotone_nonincreasing, joint_model,
-    position_controller, position_gain_study, saturation_study, table_15_1_params, table_15_1_rig)
+    impedance_steady_state, impedance_study, is_monotone_nonincreasing, position_gain_study, saturation_study,
+    table_15_1_params, table_15_1_rig)
+from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, ScalarExamplePlant, example_control
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.parameters.backstepping import (
     ImpedanceBacksteppingGains, ImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)

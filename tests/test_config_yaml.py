@@ -12,7 +12,7 @@ import awiwi_drake.parameters as P
 from awiwi_drake.cli import main
 from awiwi_drake.parameters.base import Parameters
 from awiwi_drake.parameters.yaml_io import from_yaml, load_yaml, save_yaml, to_yaml
-from awiwi_drake.rigs import TARGETS
+from awiwi_drake.diagrams import TARGETS
 
 ALL_SETS = [c for _, c in inspect.getmembers(P, inspect.isclass) if issubclass(c, Parameters) and c is not Parameters]
 

@@ -10,7 +10,8 @@ from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.compare import run_test
 from awiwi_drake.control.impedance import ImpedanceLaw, impedance_controller, transmission
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
-from awiwi_drake.parameters.control import ImpedanceParams, compare_test_params
+from awiwi_drake.control.compare import compare_test_params
+from awiwi_drake.parameters.control import ImpedanceParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 
@@ -54,7 +55,7 @@ def test_fig_11_4_two_time_scale_resonance_shifts_with_pretension():
     mechanical stiffness (pretension).  Linearised continuous loop (Drake Linearize): 39.2 / 29.5 / 19.2 Hz at
     10 / 20 / 40 N (Kp_imp = 4 Nm/rad, ImpedanceSweepParams); the simulated 3 kHz chirp agrees within 2 Hz.
     The cascaded (linearising) loop is independent of the mechanical stiffness, as section 11.7 states."""
-    from awiwi_drake.control.experiments import impedance_frequency_response, impedance_sweep
+    from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response, impedance_sweep
     lin = {pre: impedance_frequency_response("two-time-scale", pretension=pre) for pre in (10.0, 20.0, 40.0)}
     res = [lin[p]["resonance_hz"] for p in (10.0, 20.0, 40.0)]
     peaks = [lin[p]["peak_gain"] for p in (10.0, 20.0, 40.0)]
@@ -116,10 +117,10 @@ def test_impedance_laws_convert_to_autodiff_and_reject_bad_gains():
 def test_fig_11_2_and_11_3_in_the_gain_diagram():
     """Simulated chirp 5-50 Hz (two-time-scale, flexible joint): the resonance peak grows with the impedance
     stiffness and shrinks with the mechanical stiffness (linearised loop: 1.0 -> 1.24; 1.75 -> 1.0)."""
-    from awiwi_drake.control.experiments import impedance_sweep
+    from awiwi_drake.reproductions.ch11_impedance import impedance_sweep
 
     def peak(kp, k):
-        return impedance_sweep("two-time-scale", joint_stiffness=kp, rig="flexible_joint", stiffness=k,
+        return impedance_sweep("two-time-scale", joint_stiffness=kp, rig="flexible-joint", stiffness=k,
                                f_start=5.0, f_stop=50.0, duration=1.5)["peak_gain"]
     assert peak(1.2, 0.605) > peak(0.3, 0.605) + 0.2
     assert peak(1.2, 0.43) > peak(1.2, 1.15) + 0.5

@@ -98,7 +98,7 @@ def test_fig_12_3_open_loop_poles_vs_stiffness_and_link_damping():
     of (12.8), s (m b s^3 + (m d_th + b d_q) s^2 + (k (m + b) + d_q d_th) s + k (d_q + d_th)) / (m b).
     As in the caption, two poles barely move (the rigid-body 0 and the slow damping pole) while the fast pair
     moves strongly with k and d_q."""
-    from awiwi_drake.control.pole_placement import open_loop_pole_sweep
+    from awiwi_drake.reproductions.ch12_pole_placement import open_loop_pole_sweep
     sw = open_loop_pole_sweep(num=9)
     m, b, dth = P12.link_inertia, P12.motor_inertia, P12.motor_damping
 

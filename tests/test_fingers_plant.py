@@ -113,7 +113,7 @@ def test_fig_5_7_coriolis_effect_vanishes_at_least_quadratically_with_the_deflec
     MCP/PIP/DIP (in a planar chain the terms are ~ sin(q) v^2 ~ d^3).  We assert
     >= 3.9x and >= 7x.  The thesis's 1e-3 rad bound over 0.2 s holds at 0.025 rad.
     """
-    from awiwi_drake.hand.studies import coriolis_study
+    from awiwi_drake.reproductions.ch05_fingers import coriolis_study
     big = coriolis_study("index", deflection=0.05, t_final=0.02)
     small = coriolis_study("index", deflection=0.025, t_final=0.02)
     ratio = big.max_abs_difference / small.max_abs_difference
@@ -159,7 +159,7 @@ def test_loaded_dip_coupling_error_matches_the_predicted_compliance(finger):
 
     from awiwi_drake.hand.diagrams import finger_diagram
     from awiwi_drake.hand.plant import coupling_compliance
-    from awiwi_drake.hand.studies import fixed_motor_diagram
+    from awiwi_drake.reproductions.ch05_fingers import fixed_motor_diagram
     from awiwi_drake.parameters.hand import FingerRigParams
     p = FingerRigParams.for_finger(finger)
     fp = p.finger

@@ -5,8 +5,8 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from _fd import check_system_autodiff_matches_fd
-from awiwi_drake.control.friction_observer import (
-    DisturbanceObserver, LinkFriction, chattering, friction_tracking_run, observer_rate)
+from awiwi_drake.control.friction_observer import DisturbanceObserver, LinkFriction, observer_rate
+from awiwi_drake.reproductions.ch09_friction_observer import chattering, friction_tracking_run
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 
 

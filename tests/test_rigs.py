@@ -11,7 +11,8 @@ from awiwi_drake.analysis import linearize, lqr, simulate
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.lqr import lqr_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
-from awiwi_drake.rigs import build_target, flexible_joint_rig, joint_rig, tendon_rig
+from awiwi_drake.diagrams import build_target
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
 
 BACKENDS = ("compiled", "python", "symbolic")
 

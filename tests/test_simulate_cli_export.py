@@ -202,7 +202,7 @@ def test_int_fields_take_whole_numbers_only():
 
 
 def test_infeasible_operating_points_and_unused_fields_are_rejected():
-    from awiwi_drake.rigs import build_target
+    from awiwi_drake.diagrams import build_target
     with pytest.raises(ValueError, match="pretension = 700.0 N exceeds the calibrated range"):
         build_target("joint-rig", {"pretension": "700"})
     with pytest.raises(ValueError, match="beyond motor.torque_limit = 0.05 Nm"):

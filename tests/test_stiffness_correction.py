@@ -6,8 +6,8 @@ import pytest
 from _fd import check_system_autodiff_matches_fd
 
 from awiwi_drake.control.stiffness_correction import (
-    StiffnessCorrectedImpedance, impedance_for_effective_stiffness, pretension_elongation,
-    stiffness_correction_run)
+    StiffnessCorrectedImpedance, impedance_for_effective_stiffness, pretension_elongation)
+from awiwi_drake.reproductions.ch08_stiffness_correction import stiffness_correction_run
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 from awiwi_drake.rigs import joint_rig
 

@@ -1,7 +1,7 @@
 """Hand commands: ``animate`` (Meshcat recording to HTML) and ``export-hand-diagrams``.
 
 ``awiwi-drake linearize finger-index|finger-middle|finger-ring|finger-fifth|finger-thumb|hand``
-comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.rigs.TARGETS``).
+comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.diagrams.TARGETS``).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ def register(sub) -> None:
 
 def _animate(args) -> int:
     from awiwi_drake.cli import output_file
-    from awiwi_drake.hand.visualize import record_animation
+    from awiwi_drake.export.animation import record_animation
 
     out = output_file(args.out, "--out", suffixes=(".html", ".htm"))
     from awiwi_drake.config import SimulationProgress
@@ -62,7 +62,7 @@ def _animate(args) -> int:
 
 
 def _export(args) -> int:
-    from awiwi_drake.hand.diagrams import export_hand_diagrams
+    from awiwi_drake.diagrams import export_hand_diagrams
 
     from awiwi_drake.cli import output_dir
 

@@ -13,13 +13,13 @@ __all__ = ["register"]
 
 
 def _targets_help() -> str:
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return "\n".join(f"  {name}: {entry['description']}" for name, entry in TARGETS.items())
 
 
 def _target_names() -> list[str]:
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return list(TARGETS)
 
@@ -32,6 +32,8 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
                    help="tendon-drive backend: compiled (default: one system with a numba kernel generated from "
                         "the laws), python (separate TemplateSystems) or symbolic (one C++ SymbolicVectorSystem)")
+    add_parameter_options(p, what="the DemoScenario (pretension ramp f_start -> f_end over ramp_time, link_step at "
+                                  "step_time, t_final)")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("export-diagrams", help="write the rig diagram graphs (.dot, and .svg/.png with Graphviz)")
@@ -94,13 +96,13 @@ def _floats(text: str, what: str) -> np.ndarray:
 
 
 def _params_of(args):
-    from awiwi_drake.rigs import TARGETS
+    from awiwi_drake.diagrams import TARGETS
 
     return load_parameters(TARGETS[args.rig]["params"](), args)
 
 
 def _build(args) -> object:
-    from awiwi_drake.rigs import build_target
+    from awiwi_drake.diagrams import build_target
 
     return build_target(args.rig, params=_params_of(args))
 
@@ -200,8 +202,17 @@ def _export(args) -> int:
 
 
 def _demo(args) -> int:
-    from awiwi_drake.rigs.demo_run import run_demo
+    from awiwi_drake.export import export_diagram
+    from awiwi_drake.reproductions.demo import run_demo
 
-    report = run_demo(output_dir(args.out), backend=args.backend)
+    from awiwi_drake.config import short_mode
+    from awiwi_drake.parameters.rigs import DemoScenario
+
+    out = output_dir(args.out)
+    default = DemoScenario(t_final=1.0) if short_mode() else DemoScenario()
+    scenario = load_parameters(default, args)
+    report, graphs = run_demo(out, backend=args.backend, scenario=scenario)
+    for stem, diagram in graphs.items():
+        export_diagram(diagram, out, stem, max_depth=1, quiet=True)
     print(report)
     return 0

@@ -41,6 +41,7 @@ of section 15.4).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -49,12 +50,15 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import is_float, smax
+from awiwi_drake.components.motor import motor_friction_torque
 from awiwi_drake.control.friction_observer import observer_rate
 from awiwi_drake.parameters.backstepping import (
+    AntagonisticBacksteppingGains,
     BacksteppingPlantParams,
     ImpedanceBacksteppingGains,
     PositionBacksteppingGains,
 )
+from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams
 
 __all__ = [
     "REFERENCE_SIZE",
@@ -68,6 +72,10 @@ __all__ = [
     "PositionBackstepping",
     "ImpedanceBackstepping_",
     "ImpedanceBackstepping",
+    "plant_params",
+    "joint_model",
+    "position_controller",
+    "impedance_controller",
 ]
 
 #: Sources of the external torque used by the impedance design (see :class:`ImpedanceBackstepping_`).
@@ -454,3 +462,78 @@ def ImpedanceBackstepping_(T):
 
 
 ImpedanceBackstepping = ImpedanceBackstepping_[None]
+
+
+# ---------------------------------------------------------------------------
+# controllers for the rigs (design model from the rig's parameters)
+def plant_params(rig) -> BacksteppingPlantParams:
+    """The design model of the position controller from a linear ``flexible_joint_rig``."""
+    p = rig.params
+    if not isinstance(p, FlexibleJointParams) or rig.spring_kind != "linear":
+        raise ValueError(f"plant_params: the position controller (15.11)-(15.50) needs a linear flexible_joint_rig, "
+                         f"got {rig.name} ({rig.spring_kind})")
+    return BacksteppingPlantParams(link_inertia=p.link_inertia, motor_inertia=p.motor_inertia,
+                                   motor_damping=p.motor_damping, link_damping=p.link_damping, stiffness=p.stiffness)
+
+
+def joint_model(rig, *, spring=None, pretension: float | None = None, damping: bool = True) -> JointModel:
+    """The controller design model of a rig (single flexible joint or antagonistic joint rig).
+
+    Parameters
+    ----------
+    rig : Rig
+        ``flexible_joint_rig`` (N = 1, torsion spring ``tau = phi(theta - q)``) or ``joint_rig``
+        (N = 2, tendons ``x_i = r_m theta_i + P_i q``, P = [-r_q, r_q], equal torque share, pretension).
+    spring : spring law, optional
+        Design spring law (default: the rig's own law: the nominal design). Pass
+        ``LinearSpring(k, tension_only=False)`` for the "linear controller" of section 15.4.
+    pretension : float, optional
+        Tendon pretension [N] of the joint rig (default: the rig's).
+    damping : bool
+        Keep link/motor damping and motor friction in the design model (the nominal design;
+        the thesis neglects them: ``False``).
+    """
+    p = rig.params
+    law = rig.spring if spring is None else spring
+    if isinstance(p, FlexibleJointParams):
+        return JointModel(link_inertia=p.link_inertia, link_damping=p.link_damping if damping else 0.0,
+                          motor_inertia=(p.motor_inertia,), coupling=(-1.0,), motor_pulley_radius=1.0, spring=law,
+                          elongation_offset=(0.0,), motor_damping=p.motor_damping if damping else 0.0,
+                          name=rig.name)
+    if isinstance(p, JointRigParams):
+        rq = p.link_pulley_radius
+        f0 = p.pretension if pretension is None else float(pretension)
+        if not f0 > 0:
+            raise ValueError(f"joint_model: pretension = {f0} N must be > 0 (tendons must stay taut)")
+        friction = functools.partial(motor_friction_torque, p=p.motor) if damping else None
+        return JointModel(link_inertia=p.link_inertia, link_damping=p.link_damping if damping else 0.0,
+                          motor_inertia=(p.motor.inertia,) * 2, coupling=(-rq, rq),
+                          motor_pulley_radius=p.motor.pulley_radius, spring=law, elongation_offset=(0.0, 0.0),
+                          motor_friction=friction, torque_share=(0.5, 0.5), torque_offset=(rq * f0, -rq * f0),
+                          name=rig.name)
+    raise ValueError(f"joint_model: no backstepping design model for rig {rig.name!r}")
+
+
+def position_controller(rig, gains: PositionBacksteppingGains | None = None, **kw):
+    """:class:`PositionBackstepping` for a linear flexible-joint rig."""
+    return PositionBackstepping(plant_params(rig), gains or PositionBacksteppingGains(), **kw)
+
+
+def impedance_controller(rig, gains=None, *, spring=None, pretension=None, damping=True, **kw):
+    """:class:`ImpedanceBackstepping` for a flexible-joint rig (N = 1) or the joint rig (N = 2).
+
+    ``gains`` may be :class:`AntagonisticBacksteppingGains` (its pretension is used) or
+    :class:`ImpedanceBacksteppingGains`; ``kw`` go to the controller (``external_torque``,
+    ``reference_derivatives``, ``compensate``).
+    """
+    if gains is None:
+        gains = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else \
+            ImpedanceBacksteppingGains()
+    if isinstance(gains, AntagonisticBacksteppingGains):
+        pretension = gains.pretension if pretension is None else pretension
+        gains = ImpedanceBacksteppingGains(stiffness=gains.stiffness, damping=gains.damping, k3=gains.k3,
+                                           k4=gains.k4)
+    if pretension is None and isinstance(rig.params, JointRigParams):
+        pretension = rig.params.pretension
+    model = joint_model(rig, spring=spring, pretension=pretension, damping=damping)
+    return ImpedanceBackstepping(model, gains, **kw)

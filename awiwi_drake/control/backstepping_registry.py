@@ -40,7 +40,7 @@ def _sampled_damping(rig, damping: float) -> float:
 
 
 def _backstepping(rig):
-    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
     from awiwi_drake.parameters.rigs import JointRigParams
     g = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else ImpedanceBacksteppingGains()
@@ -48,12 +48,12 @@ def _backstepping(rig):
 
 
 def _position(rig):
-    from awiwi_drake.control.backstepping_studies import position_controller
+    from awiwi_drake.control.backstepping import position_controller
     return position_controller(rig)
 
 
 def _optimal(rig):
-    from awiwi_drake.control.backstepping_studies import impedance_controller
+    from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.control.optimal_gains import optimize_gains, rate_limited_case
     from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase, OptimalGainsCase
     from awiwi_drake.parameters.rigs import JointRigParams
@@ -65,9 +65,9 @@ def _optimal(rig):
     return impedance_controller(rig, fit.gains)
 
 
-register_controller("backstepping", _backstepping, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
+register_controller("backstepping", _backstepping, rigs=("flexible-joint", "joint-rig"), loop_options=_LOOP,
                     description="impedance backstepping (ch. 15.3-15.5), rig's spring law, external-torque observer")
-register_controller("backstepping-position", _position, rigs=("flexible_joint",), loop_options=_LOOP,
+register_controller("backstepping-position", _position, rigs=("flexible-joint",), loop_options=_LOOP,
                     description="position backstepping of the linear flexible joint (15.11)-(15.50)")
-register_controller("optimal-backstepping", _optimal, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
+register_controller("optimal-backstepping", _optimal, rigs=("flexible-joint", "joint-rig"), loop_options=_LOOP,
                     description="impedance backstepping with gains fitted to the LQR (ch. 16)")

@@ -1,58 +1,22 @@
-"""Motor-level identification and compensation (ch. 3).
+"""Motor-level compensation (ch. 3): a motor PD with friction (3.8) and ripple feed-forward.
 
-* Friction identification (Fig 3.3): the motor follows piecewise-constant
-  velocities (a PD on a position ramp); the mean commanded torque per plateau,
-  averaged over whole periods of the motor-shaft ripple and over forward and
-  backward passes over the same angles, balances the velocity-dependent
-  friction; (3.8) ``tau(w) = gamma2 atan(gamma1 w) + gamma3 w`` is fitted to it.
-* Ripple compensation (Fig 3.5-3.6): at constant speed the position-dependent
-  ripple shows in the controller torque at the motor rotation frequency.  The
-  ripple is identified from that torque (regression on the measured angle at
-  the known period, i.e. known phase), and fed forward with a conservative
-  amplitude (``amplitude_scale`` < 1, ch. 3: over-compensation injects energy).
-  Success metric: attenuation of the first harmonic of the controller's
-  feedback torque.
+``u = Kp (th_r - th) + Kd (w_r - w) - s_f tau_fric(w) - tau_r_hat(th)``: the
+ripple estimate is fed forward with a conservative amplitude (ch. 3:
+over-compensation injects energy). The identification experiments (Fig 3.3,
+3.5-3.6) are :mod:`awiwi_drake.reproductions.ch03_motor`.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource
 
-from awiwi_drake.components import MotorBank, atan_friction, motor_friction_torque
-from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, closed_loop
-from awiwi_drake.control.compare import simulate_loop
+from awiwi_drake.components import motor_friction_torque
+from awiwi_drake.control.base import StaticLaw, check_gain
 from awiwi_drake.parameters.components import MotorParams
-from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleCompensationParams
-from awiwi_drake.rigs.base import OperatingPoint, Rig, state_names
 
-__all__ = ["motor_rig", "RippleEstimate", "MotorPdLaw", "constant_velocity_run", "FrictionData", "FrictionFit",
-           "friction_identification_data", "fit_friction", "identify_ripple", "harmonic", "amplitude_spectrum",
-           "RippleCompensationResult", "ripple_compensation_experiment"]
-
-
-def motor_rig(motor: MotorParams | None = None) -> Rig:
-    """One free motor (no tendon): ``B thdd = sat(u) + tau_fric + tau_ripple`` ((3.5)); state [theta, omega]."""
-    p = motor or MotorParams()
-    b = DiagramBuilder()
-    bank = b.AddNamedSystem("motor", MotorBank(p, 1))
-    zero = b.AddNamedSystem("no_tendon", ConstantVectorSource([0.0]))
-    b.Connect(zero.get_output_port(), bank.GetInputPort("tendon_force"))
-    b.ExportInput(bank.GetInputPort("motor_torque"), "motor_torque")
-    for nm in ("state", "motor_angle", "motor_velocity", "applied_torque"):
-        b.ExportOutput(bank.GetOutputPort(nm), nm)
-    d = b.Build()
-    d.set_name("motor_rig")
-
-    def equilibrium(motor_velocity: float = 0.0) -> OperatingPoint:
-        w = float(motor_velocity)
-        return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
-
-    return Rig("motor_rig", d, p, state_names(motors=1), "python", equilibrium)
+__all__ = ["RippleEstimate", "MotorPdLaw"]
 
 
 @dataclass(frozen=True)
@@ -102,181 +66,3 @@ class MotorPdLaw(StaticLaw):
         th, w = u["motor_angle"][0], u["motor_velocity"][0]
         fb = self.kp * (u["motor_angle_reference"][0] - th) + self.kd * (u["motor_velocity_reference"][0] - w)
         return np.array([fb + self.feedforward(th, w)])
-
-
-def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,
-                          theta0: float = 0.0, friction_scale: float = 0.0, ripple: RippleEstimate | None = None,
-                          rate_hz: float = 3000.0, start_at_rest: bool = False) -> dict[str, np.ndarray]:
-    """The motor following ``theta0 + speed t`` under a sampled PD (one row per control period).
-
-    ``start_at_rest``: the motor starts at rest with zero torque in the hold buffer (an experiment that
-    knows nothing about the friction it is about to identify); otherwise it starts at ``speed`` with the
-    (model) friction torque held, which removes the start transient (ripple study).
-
-    Returns per control period ``k`` (``[t_k, t_k+1)``): ``t`` (midpoint),
-    ``theta``/``omega`` (midpoint values), ``command`` (the torque applied during
-    the period), ``feedback`` (its PD part, i.e. without the feed-forward),
-    ``acceleration`` (mean over the period).
-    """
-    rig = motor_rig(motor)
-    law = MotorPdLaw(motor, kp, kd, friction_scale=friction_scale, ripple=ripple)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=rate_hz)
-    u0 = 0.0 if start_at_rest else float(-motor_friction_torque(np.array([speed]), motor)[0])
-    ctx = loop.create_context(state=[theta0, 0.0 if start_at_rest else speed], motor_torque=u0,
-                              references={"motor_angle_reference": theta0, "motor_velocity_reference": speed})
-    dt = 1.0 / rate_hz
-    log = simulate_loop(loop, ctx, duration, dt, outputs=("motor_angle", "motor_velocity", "motor_torque"),
-                        inputs={"motor_angle_reference": lambda t: theta0 + speed * t,
-                                "motor_velocity_reference": lambda t: speed}, label="constant velocity run")
-    th, w = log["motor_angle"][:, 0], log["motor_velocity"][:, 0]
-    applied = log["motor_torque"][1:, 0]  # left limit at t_k+1 = torque held on [t_k, t_k+1)
-    ff = np.array([float(np.ravel(law.feedforward(a, b))[0]) for a, b in zip(th[:-1], w[:-1])])
-    return dict(t=0.5 * (log["t"][1:] + log["t"][:-1]), theta=0.5 * (th[1:] + th[:-1]),
-                omega=0.5 * (w[1:] + w[:-1]), command=applied, feedback=applied - ff,
-                acceleration=np.diff(w) / dt)
-
-
-# ----------------------------------------------------------------------------- friction
-@dataclass
-class FrictionData:
-    """Mean (min, max) commanded torque per velocity plateau (Fig 3.3b)."""
-
-    speed: np.ndarray
-    torque: np.ndarray
-    torque_min: np.ndarray
-    torque_max: np.ndarray
-
-
-@dataclass(frozen=True)
-class FrictionFit:
-    """(3.8) parameters ``gamma1`` [s/rad], ``gamma2`` [Nm], ``gamma3`` [Nm s/rad] and the fit residual."""
-
-    gamma1: float
-    gamma2: float
-    gamma3: float
-    rms_residual: float
-
-    def torque(self, omega):
-        """Torque needed to turn at ``omega`` (= minus the friction torque (3.8))."""
-        return -atan_friction(np.asarray(omega, float), self.gamma2, self.gamma1, self.gamma3)
-
-
-def friction_identification_data(motor: MotorParams, params: FrictionIdentificationParams | None = None, *,
-                                 seed: int = 0) -> FrictionData:
-    """Simulated Fig 3.3 protocol: forward and backward plateaus at log-spaced speeds, noisy torque readings.
-
-    Each plateau starts with the motor at rest and zero torque (nothing about the friction is assumed);
-    the start transient is discarded (``settle_fraction``).
-    """
-    p = params or FrictionIdentificationParams()
-    rng = np.random.default_rng(seed)
-    speeds = np.geomspace(p.min_speed, p.max_speed, p.num_speeds)
-    period = 2 * math.pi / motor.gear_ratio  # motor-shaft ripple period at the output [rad]
-    out_v, out_m, out_lo, out_hi = [], [], [], []
-    for v in speeds:
-        travel = v * p.plateau_time
-        for sign, th0 in ((1.0, 0.0), (-1.0, travel)):  # forward, then back over the same angles
-            run = constant_velocity_run(motor, sign * v, p.plateau_time, kp=p.position_gain, kd=p.velocity_gain,
-                                        theta0=th0, start_at_rest=True)
-            tau = run["command"] + rng.normal(0.0, p.torque_noise_std, size=run["command"].shape)
-            t_steady = p.settle_fraction * p.plateau_time
-            steady = run["t"] >= t_steady
-            n_per = math.floor(v * (p.plateau_time - t_steady) / period)
-            if n_per >= 1:  # whole ripple periods only
-                steady &= run["t"] < t_steady + n_per * period / v
-            out_v.append(sign * v)
-            out_m.append(float(np.mean(tau[steady])))
-            out_lo.append(float(np.min(tau[steady])))
-            out_hi.append(float(np.max(tau[steady])))
-    order = np.argsort(out_v)
-    return FrictionData(*(np.array(a)[order] for a in (out_v, out_m, out_lo, out_hi)))
-
-
-def fit_friction(speed, torque) -> FrictionFit:
-    """Least-squares fit of (3.8) ``tau = gamma2 atan(gamma1 w) + gamma3 w`` to plateau means."""
-    from scipy.optimize import least_squares
-    w = np.asarray(speed, float)
-    tau = np.asarray(torque, float)
-    if w.shape != tau.shape or w.size < 3:
-        raise ValueError("fit_friction: need >= 3 (speed, torque) pairs of equal length")
-    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(tau))):
-        raise ValueError("fit_friction: speeds and torques must be finite")
-    fast = np.abs(w) >= np.percentile(np.abs(w), 50)
-    g3, c = np.polyfit(np.abs(w[fast]), np.sign(w[fast]) * tau[fast], 1)
-    x0 = [5.0 / max(np.min(np.abs(w)), 1e-3) ** 0.5, max(2 * c / math.pi, 1e-3), max(g3, 1e-4)]
-    sol = least_squares(lambda g: -atan_friction(w, g[1], g[0], g[2]) - tau, x0, bounds=([1e-3, 0, 0], np.inf),
-                        x_scale="jac")
-    g1, g2, g3 = sol.x
-    return FrictionFit(float(g1), float(g2), float(g3), float(np.sqrt(np.mean(sol.fun ** 2))))
-
-
-# ----------------------------------------------------------------------------- ripple
-def harmonic(t, y, freq_hz: float) -> complex:
-    """Complex amplitude of ``y`` at ``freq_hz`` (least squares on sin/cos + mean + linear trend)."""
-    t = np.asarray(t, float)
-    A = np.column_stack([np.sin(2 * np.pi * freq_hz * t), np.cos(2 * np.pi * freq_hz * t), np.ones_like(t), t])
-    c = np.linalg.lstsq(A, np.asarray(y, float), rcond=None)[0]
-    return complex(c[0], c[1])
-
-
-def amplitude_spectrum(t, y) -> tuple[np.ndarray, np.ndarray]:
-    """Single-sided amplitude spectrum |Y(f)| of the mean-removed signal (Hann window, amplitude-corrected)."""
-    y = np.asarray(y, float) - np.mean(y)
-    win = np.hanning(len(y))
-    Y = np.fft.rfft(y * win) * 2.0 / np.sum(win)
-    return np.fft.rfftfreq(len(y), float(np.median(np.diff(t)))), np.abs(Y)
-
-
-def identify_ripple(run: dict, motor: MotorParams) -> RippleEstimate:
-    """Ripple from a constant-speed run by the torque balance of (3.5).
-
-    ``tau_r(theta) = B thdd - u - tau_fric(thd)`` per control period, regressed on
-    ``sin(N theta), cos(N theta)`` at the known period (the phase follows from
-    the measured angle) plus a constant and a linear term in ``theta`` (they
-    absorb the slow output-bearing component over a fraction of a revolution).
-    """
-    th = np.asarray(run["theta"], float)
-    resid = (motor.inertia * np.asarray(run["acceleration"], float) - np.asarray(run["command"], float)
-             - motor_friction_torque(np.asarray(run["omega"], float), motor))
-    N = motor.gear_ratio
-    A = np.column_stack([np.sin(N * th), np.cos(N * th), np.ones_like(th), th])
-    c = np.linalg.lstsq(A, resid, rcond=None)[0]
-    return RippleEstimate(float(math.hypot(c[0], c[1])), float(math.atan2(c[1], c[0])), gear_ratio=N)
-
-
-@dataclass
-class RippleCompensationResult:
-    """Spectra of the feedback torque without/with compensation and the first-harmonic attenuation."""
-
-    frequency: np.ndarray
-    spectrum_without: np.ndarray
-    spectrum_with: np.ndarray
-    first_harmonic_hz: float
-    amplitude_without: float
-    amplitude_with: float
-    estimate: RippleEstimate
-    runs: dict = field(default_factory=dict)
-
-    @property
-    def attenuation(self) -> float:
-        """|A_with| / |A_without| at the motor rotation frequency (0 = removed, 1 = unchanged)."""
-        return self.amplitude_with / self.amplitude_without
-
-
-def ripple_compensation_experiment(motor: MotorParams | None = None,
-                                   params: RippleCompensationParams | None = None) -> RippleCompensationResult:
-    """Fig 3.5-3.6: constant speed, PD with friction compensation, ripple feed-forward off/on."""
-    p = params or RippleCompensationParams()
-    m = motor or MotorParams(ripple=True)
-    if not m.ripple:
-        raise ValueError("ripple_compensation_experiment: motor.ripple is off; nothing to compensate")
-    common = dict(kp=p.position_gain, kd=p.velocity_gain, friction_scale=1.0)
-    before = constant_velocity_run(m, p.speed, p.duration, **common)
-    estimate = identify_ripple(before, m)
-    after = constant_velocity_run(m, p.speed, p.duration, ripple=estimate.scaled(p.amplitude_scale), **common)
-    f1 = m.gear_ratio * p.speed / (2 * math.pi)  # motor rotation frequency [Hz]
-    f, s0 = amplitude_spectrum(before["t"], before["feedback"])
-    _, s1 = amplitude_spectrum(after["t"], after["feedback"])
-    a0 = abs(harmonic(before["t"], before["feedback"], f1))
-    a1 = abs(harmonic(after["t"], after["feedback"], f1))
-    return RippleCompensationResult(f, s0, s1, f1, a0, a1, estimate, dict(without=before, with_=after))

@@ -27,7 +27,8 @@ from pydrake.systems.primitives import AffineSystem, Multiplexer, TrajectorySour
 from pydrake.trajectories import PiecewisePolynomial
 
 from awiwi_drake.control.base import ClosedLoop, closed_loop
-from awiwi_drake.rigs.demo import DemoScenario, MotorPositionGains, motor_references
+from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+from awiwi_drake.rigs.demo import motor_references
 
 __all__ = ["motor_position_controller", "demo_references", "joint_rig_position_loop"]
 
@@ -76,7 +77,7 @@ def joint_rig_position_loop(rig: Any, scenario: DemoScenario | None = None,
     loop's remaining input is ``external_torque``.  Start it with
     ``loop.create_context(rig.operating_point(pretension=scenario.f_start))``.
     """
-    if getattr(rig, "name", None) != "joint_rig":
+    if getattr(rig, "name", None) != "joint-rig":
         raise ValueError(f"joint_rig_position_loop: needs a joint_rig, got {getattr(rig, 'name', rig)!r}")
     g = gains or MotorPositionGains()
     t, refs = demo_references(rig, scenario)

@@ -42,18 +42,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff, ExtractGradient
-from pydrake.systems.controllers import LinearQuadraticRegulator
 
 from awiwi_drake.analysis.linear import lqr
 from awiwi_drake.analysis.sweep import monte_carlo_points, run_sweep
-from awiwi_drake.control.backstepping import ImpedanceBackstepping, JointModel, impedance_backstepping
+from awiwi_drake.control.backstepping import JointModel, impedance_backstepping, joint_model
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
-from awiwi_drake.parameters.rigs import FlexibleJointParams
 
-__all__ = ["GainFit", "rate_limited_case", "table_16_1_rig", "torque_coordinates", "torque_state_map", "backstepping_feedback",
-           "system_feedback",
-           "optimal_feedback", "printed_model_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains",
-           "OMEGA_NAMES"]
+__all__ = ["GainFit", "rate_limited_case", "finger_optimal_gains", "torque_coordinates", "torque_state_map", "backstepping_feedback",
+           "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
 
 OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
 
@@ -88,15 +84,6 @@ class GainFit:
     method: str
 
 
-def table_16_1_rig(case: OptimalGainsCase | None = None, **kw):
-    """``flexible_joint_rig`` with Table 16.1 values (M, Bm, K; no damping: the table lists none)."""
-    from awiwi_drake.rigs import flexible_joint_rig
-    c = case or OptimalGainsCase()
-    p = FlexibleJointParams(link_inertia=c.link_inertia, motor_inertia=c.motor_inertia, stiffness=c.stiffness,
-                            link_damping=0.0, motor_damping=0.0)
-    return flexible_joint_rig(params=p, spring="linear", **kw)
-
-
 def torque_coordinates(stiffness: float) -> np.ndarray:
     """``T`` with ``[q, qd, tau, taud] = T [q, qd, theta, thetad]``, ``tau = k (theta - q)``."""
     k = float(stiffness)
@@ -129,7 +116,6 @@ def torque_state_map(model: JointModel, state0) -> np.ndarray:
 
 def _rig_point(rig, op=None):
     """(operating point, design model, T) of a rig for the gain fit."""
-    from awiwi_drake.control.backstepping_studies import joint_model
     op = rig.operating_point() if op is None else op
     model = joint_model(rig)
     return op, model, torque_state_map(model, op.state)
@@ -172,18 +158,6 @@ def optimal_feedback(rig, case: OptimalGainsCase | None = None, op=None) -> tupl
     K_rig = np.asarray(res.K).reshape(n_m, -1)
     K_tau = K_rig @ np.linalg.inv(T)
     return (K_tau.ravel(), K_rig.ravel()) if n_m == 1 else (K_tau, K_rig)
-
-
-def printed_model_feedback(case: OptimalGainsCase | None = None) -> np.ndarray:
-    """ARE gain for the A, B printed in Table 16.1 (Drake ``LinearQuadraticRegulator(A, B, Q, R)``).
-
-    Returned as ``u = K x`` (the sign of the printed Kdes) for direct comparison.
-    """
-    c = case or OptimalGainsCase()
-    A = np.array([[0, 1, 0, 0], [0, 0, 1 / c.link_inertia, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
-    B = np.array([[0], [0], [0], [c.stiffness / c.motor_inertia]])
-    K, _ = LinearQuadraticRegulator(A, B, np.diag(c.q_weights), np.array([[c.r_weight]]))
-    return -np.asarray(K).ravel()
 
 
 def gain_distance(feedback_tau: np.ndarray, target_tau: np.ndarray) -> float:
@@ -277,3 +251,40 @@ def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8
     fb = _feedback_tau(model, T_inv, omega, x0)
     return GainFit(_gains(omega), fb, target, gain_distance(fb, target), count[0], time.perf_counter() - t0,
                    "least squares on log(Omega) (scipy)")
+
+
+def finger_optimal_gains(finger: str, *, pretension: float = 20.0, rate_hz: float = 3000.0,
+                         case=None, starts: int = 16) -> list[tuple[str, GainFit, object]]:
+    """Ch. 16 gain selection for each independent DoF of a finger (the thesis: 'applied to the 19 joints').
+
+    Each DoF ``j`` is designed as an antagonistic joint (:func:`awiwi_drake.rigs.joint_rig`) with the
+    DoF's own inertia ``(S^T M S)_jj`` (finger MultibodyPlant, straight finger), an equivalent pulley
+    radius ``r_eq = sqrt(sum_i (P S)_ij^2 / 2)`` (so that the pair's stiffness ``r_eq^2 (k1 + k2)``
+    equals the diagonal of ``(P S)^T K_t (P S)`` at equal tendon stiffness), the finger's joint damping,
+    the hand's spring law and ``pretension``; Table 16.1's weights per tendon, the gain box bounded
+    by ``rate_hz`` (:func:`rate_limited_case`).  The thumb uses ``P(0)`` (its P depends on q).
+    Returns ``(joint name, GainFit, JointRigParams)`` per DoF.
+    """
+    from awiwi_drake.hand.coupling import finger_coupling
+    from awiwi_drake.hand.plant import make_finger_plant
+    from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase
+    from awiwi_drake.parameters.hand import finger_params
+    from awiwi_drake.parameters.rigs import JointRigParams
+    from awiwi_drake.rigs import joint_rig
+    c = finger_coupling(finger)
+    S = c.dof_selection
+    PS = np.asarray(c.P(np.zeros(c.num_joints)), dtype=float) @ S
+    plant, _ = make_finger_plant(finger)
+    M = S.T @ plant.CalcMassMatrix(plant.CreateDefaultContext()) @ S
+    fp = finger_params(finger)
+    damping = float(getattr(fp, "joint_damping", 1e-5))
+    names = [c.joint_names[int(np.argmax(np.abs(S[:, j])))] for j in range(S.shape[1])]
+    out = []
+    for j, name in enumerate(names):
+        r_eq = float(np.sqrt(np.sum(PS[:, j] ** 2) / 2.0))
+        p = JointRigParams(link_inertia=float(M[j, j]), link_pulley_radius=r_eq, link_damping=damping,
+                           pretension=float(pretension))
+        rig = joint_rig(params=p)
+        cs = rate_limited_case(case or JointRigOptimalGainsCase(), p.link_inertia, rate_hz)
+        out.append((name, optimize_gains(rig, cs, starts=starts), p))
+    return out

@@ -27,8 +27,7 @@ from awiwi_drake.parameters.control import PolePlacementParams
 
 __all__ = ["double_oscillator_polynomial", "double_oscillator_poles", "identification_system",
            "place_by_identification", "PolePlacementDesign", "design_pole_placement",
-           "pole_placement_controller", "pole_sensitivity", "OpenLoopPoleSweep", "open_loop_pole_sweep",
-           "stable_stiffness_interval"]
+           "pole_placement_controller", "pole_sensitivity", "stable_stiffness_interval"]
 
 
 def double_oscillator_polynomial(omega1: float, xi1: float, omega2: float, xi2: float) -> np.ndarray:
@@ -120,38 +119,6 @@ def pole_placement_controller(rig: Any, params: PolePlacementParams | None = Non
 def pole_sensitivity(A_of_k, B: np.ndarray, K: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
     """Closed-loop poles (rows) for each stiffness value under the fixed gain ``K`` (Fig 12.4)."""
     return np.array([closed_loop_poles(A_of_k(k), B, K) for k in np.asarray(stiffness, float)])
-
-
-@dataclass
-class OpenLoopPoleSweep:
-    """Fig 12.3: open-loop poles of the flexible joint (rows) over a stiffness grid and a link-damping grid."""
-
-    stiffness: np.ndarray
-    poles_vs_stiffness: np.ndarray
-    link_damping: np.ndarray
-    poles_vs_damping: np.ndarray
-
-
-def _sorted_poles(A: np.ndarray) -> np.ndarray:
-    ev = np.linalg.eigvals(A)
-    return ev[np.lexsort((ev.imag, ev.real))]
-
-
-def open_loop_pole_sweep(params: PolePlacementParams | None = None, *, num: int = 25,
-                         base: Any = None) -> OpenLoopPoleSweep:
-    """Fig 12.3: poles of the framework linearisation (``Linearize``) of the flexible-joint rig, varying one
-    parameter of Table 12.1 at a time: ``k`` in [stiffness_low, stiffness_high] and ``d_q`` in
-    [link_damping_low, link_damping_high] (:class:`PolePlacementParams`)."""
-    from awiwi_drake.analysis import linearize
-    from awiwi_drake.parameters import FlexibleJointParams
-    from awiwi_drake.rigs import flexible_joint_rig
-    p = params or PolePlacementParams()
-    base = base or FlexibleJointParams()
-    ks = np.linspace(p.stiffness_low, p.stiffness_high, int(num))
-    ds = np.linspace(p.link_damping_low, p.link_damping_high, int(num))
-    pk = np.array([_sorted_poles(linearize(flexible_joint_rig(params=base.replace(stiffness=k))).A) for k in ks])
-    pd = np.array([_sorted_poles(linearize(flexible_joint_rig(params=base.replace(link_damping=d))).A) for d in ds])
-    return OpenLoopPoleSweep(ks, pk, ds, pd)
 
 
 def stable_stiffness_interval(A_of_k, B: np.ndarray, K: np.ndarray, k0: float, *, half_width: float = 1e-3,

@@ -3,21 +3,25 @@
 :func:`force_sensor` models the tendon force sensor of the hand (ch. 4, 10.4):
 white Gaussian noise (Drake ``RandomSource``, sampled at 3 kHz) added to the
 true force, then quantisation to ``full_scale / 2**bits``.
+:func:`with_external_torque_sensor` gives a link rig an ideal external-torque
+sensor (the measurement the backstepping design (15.62) formally requires).
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from pydrake.common import RandomDistribution
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
-from pydrake.systems.primitives import RandomSource
+from pydrake.systems.primitives import PassThrough, RandomSource
 from pydrake.systems.scalar_conversion import TemplateSystem
 from pydrake.autodiffutils import AutoDiffXd
 
 from awiwi_drake._math import is_float
 from awiwi_drake.parameters.control import ForceSensorParams
 
-__all__ = ["quantize", "Quantizer_", "Quantizer", "force_sensor"]
+__all__ = ["quantize", "Quantizer_", "Quantizer", "force_sensor", "with_external_torque_sensor"]
 
 
 def quantize(x, resolution: float):
@@ -82,3 +86,30 @@ def force_sensor(params: ForceSensorParams | None = None, size: int = 1):
     d = builder.Build()
     d.set_name("force_sensor")
     return d
+
+
+def with_external_torque_sensor(rig):
+    """A copy of a link rig whose diagram also outputs the applied ``external_torque`` as
+    ``external_torque_measured`` (an ideal torque sensor: the thesis's formal design (15.62)).
+
+    The external torque input is routed through a pass-through so that the controller can
+    read it as a measurement (ctrl1's closed-loop convention: measurements are rig outputs).
+    """
+    if not rig.diagram.HasInputPort("external_torque"):
+        raise ValueError(f"with_external_torque_sensor: rig {rig.name!r} has no input 'external_torque'")
+    b = DiagramBuilder()
+    inner = b.AddNamedSystem("plant", rig.diagram)
+    tap = b.AddNamedSystem("external_torque_tap", PassThrough(inner.GetInputPort("external_torque").size()))
+    b.ExportInput(tap.get_input_port(), "external_torque")
+    b.Connect(tap.get_output_port(), inner.GetInputPort("external_torque"))
+    b.ExportOutput(tap.get_output_port(), "external_torque_measured")
+    for i in range(rig.diagram.num_input_ports()):
+        name = rig.diagram.get_input_port(i).get_name()
+        if name != "external_torque":
+            b.ExportInput(inner.GetInputPort(name), name)
+    for i in range(rig.diagram.num_output_ports()):
+        name = rig.diagram.get_output_port(i).get_name()
+        b.ExportOutput(inner.GetOutputPort(name), name)
+    diagram = b.Build()
+    diagram.set_name(rig.name)
+    return dataclasses.replace(rig, diagram=diagram)

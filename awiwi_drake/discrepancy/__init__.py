@@ -10,6 +10,7 @@ separability), ``workflow`` (the loop), ``result`` (result types), ``truth``
 (generator).
 """
 
+from .augment import AugmentedParameters, augmented_rig_parameters
 from .catalog import EFFECTS, NUISANCE_EFFECTS, PHYSICAL_EFFECTS
 from .data import RIGS, Dataset, load_dataset, save_dataset
 from .model import DiscrepancyModel_, NominalParameters
@@ -28,4 +29,4 @@ def write_report(dx, directory, *, figures: bool = True):
 __all__ = ["EFFECTS", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS", "RIGS", "Dataset", "load_dataset",
            "save_dataset", "DiscrepancyModel_", "NominalParameters", "ReplayEngine", "HIDDEN_EFFECTS",
            "HiddenEffectPlant_", "make_truth_dataset", "Diagnosis", "DiagnosisInterrupted", "diagnose", "gap_metrics",
-           "write_report"]
+           "write_report", "AugmentedParameters", "augmented_rig_parameters"]

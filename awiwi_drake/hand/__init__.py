@@ -9,8 +9,12 @@
 * :mod:`.diagrams`: ``finger_diagram`` / ``hand_diagram`` (motors, springs,
   routing, plant; Rig-compatible; close them with
   :func:`awiwi_drake.control.closed_loop`, e.g. the ``joint-pd`` controller).
-* :mod:`.studies`: Fig 5.7, poles vs pretension, coupling hold, wrist compensation.
-* :mod:`.plots`, :mod:`.visualize` (Meshcat HTML recording).
+* :mod:`.plots`.
+
+The chapter 5-6 studies (Fig 5.7, poles vs pretension, coupling hold, wrist
+compensation) are :mod:`awiwi_drake.reproductions.ch05_fingers` and
+:mod:`~awiwi_drake.reproductions.ch06_wrist`; the Meshcat HTML recording is
+:mod:`awiwi_drake.export.animation`.
 
 ``finger_diagram`` and ``hand_diagram`` are importable from
 here (loaded on first use, so ``import awiwi_drake.hand`` stays light).

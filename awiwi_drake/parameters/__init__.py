@@ -7,7 +7,8 @@ from awiwi_drake.parameters.base import ParameterInfo, Parameters, param, proven
 from awiwi_drake.parameters.components import (
     GuideFrictionParams, HysteresisParams, LinearSpringParams, MotorParams, PolynomialSpringParams,
     SpringMechanismGeometry, TendonParams)
-from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, SpringModelParams, TendonRigParams
+from awiwi_drake.parameters.rigs import (
+    DemoScenario, FlexibleJointParams, JointRigParams, MotorPositionGains, SpringModelParams, TendonRigParams)
 from awiwi_drake.parameters.control import (
     CompareTestParams, ForceSensorParams, FrictionIdentificationParams, ImpedanceParams, LqrParams, PolePlacementParams,
     RippleCompensationParams, SdreJointParams, SdreTendonParams, TendonForceGains)
@@ -22,4 +23,4 @@ from awiwi_drake.parameters.hand_control import (
     ForceDistributionParams, FrictionObserverParams, LinkFrictionParams, StiffnessCorrectionParams)
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings, TruthGeneratorParams
 from awiwi_drake.parameters.display import AnimationParams
-from awiwi_drake.parameters.cli import CliLimits
+from awiwi_drake.parameters.cli import CliLimits, CompareShortMode

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 from awiwi_drake.parameters.base import Parameters, param
 
 __all__ = ["TendonForceGains", "ForceSensorParams", "PolePlacementParams", "LqrParams", "SdreTendonParams",
            "SdreJointParams", "ImpedanceParams", "ImpedanceSweepParams", "RippleCompensationParams", "FrictionIdentificationParams",
-           "CompareTestParams", "compare_test_params", "LQR_R_VALUES"]
+           "CompareTestParams", "LQR_R_VALUES", "CONTROL_RATE_HZ"]
+
+#: The hand's control rate [Hz] (ch. 1: 3 kHz, 333 us round trip; the rate of the thesis's experiments).
+CONTROL_RATE_HZ = 3000.0
 
 #: Table 13.1: the three input costs of Fig 13.2-13.3.
 LQR_R_VALUES = (1e-4, 1e-2, 1.0)
@@ -208,7 +210,7 @@ class CompareTestParams(Parameters):
 
     initial_reference: float = param(0.0, unit="ref", finite=True,
                                      source="chosen: link rigs start at their rest angle 0 rad (the tendon rig: "
-                                            "10 N, the lowest initial force of Fig 10.2, compare_test_params)")
+                                            "10 N, the lowest initial force of Fig 10.2, control.compare.compare_test_params)")
     step_size: float = param(0.3, unit="ref", finite=True,
                              source="chosen: 0.3 rad link step, large enough to show the transient, small enough "
                                     "for the 20 N pretension to keep both tendons taut under impedance control "
@@ -246,14 +248,3 @@ class CompareTestParams(Parameters):
                             source="chosen: RK3 max step, resolves the ~100 Hz modes")
 
 
-def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
-    """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
-    from awiwi_drake.control.registry import rig_kind
-    kind = rig_kind(rig)
-    if kind == "tendon_rig":
-        base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
-                                 sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
-                                 sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
-    else:
-        base = CompareTestParams()
-    return base.replace(**overrides) if overrides else base

@@ -1,4 +1,4 @@
-"""Parameters of the three test rigs (ch. 10/14.2.1, 12/15.2-15.4, 15.5/Fig 5.9)."""
+"""Parameters of the three test rigs (ch. 10/14.2.1, 12/15.2-15.4, 15.5/Fig 5.9) and of the joint-rig demo loop."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from awiwi_drake.parameters.base import Parameters, param
 from awiwi_drake.parameters.components import (
     HysteresisParams, MotorParams, SpringMechanismGeometry, TendonParams)
 
-__all__ = ["SpringModelParams", "TendonRigParams", "FlexibleJointParams", "JointRigParams"]
+__all__ = ["SpringModelParams", "TendonRigParams", "FlexibleJointParams", "JointRigParams", "MotorPositionGains",
+           "DemoScenario"]
 
 
 @dataclass(frozen=True)
@@ -103,3 +104,26 @@ class JointRigParams(Parameters):
         if self.pretension > self.spring.max_force:
             raise ValueError(f"JointRigParams.pretension = {self.pretension} N exceeds the calibrated range "
                              f"spring.max_force = {self.spring.max_force} N")
+
+
+@dataclass(frozen=True)
+class MotorPositionGains(Parameters):
+    """Per-motor PD gains of the joint-rig demo loop (:mod:`awiwi_drake.rigs.demo`, output shaft)."""
+
+    kp: float = param(40.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                      source="chosen: 0.56 Nm Coulomb friction (Table 3.3) leaves a 0.014 rad motor error")
+    kd: float = param(0.4, unit="Nm s/rad", low=0.0,
+                      source="chosen: with B = 2e-3 and the linearised friction (5.6 Nm s/rad) the loop is overdamped")
+    rate_hz: float = param(3000.0, unit="Hz", low=1.0, source="ch. 1/10: Awiwi control rate 3 kHz")
+
+
+@dataclass(frozen=True)
+class DemoScenario(Parameters):
+    """Joint-rig demo scenario (``awiwi-drake demo``): pretension ramp then a link position step."""
+
+    f_start: float = param(5.0, unit="N", low=0.0, low_inclusive=False, source="chosen: light pretension")
+    f_end: float = param(30.0, unit="N", low=0.0, low_inclusive=False, source="chosen: Fig 15.26 range (20 N) and above")
+    ramp_time: float = param(0.5, unit="s", low=0.0, low_inclusive=False, source="chosen: slow against the joint rig's fastest mode, so the ramp is quasi-static")
+    step_time: float = param(0.7, unit="s", low=0.0, source="chosen: after the ramp settles")
+    link_step: float = param(0.3, unit="rad", low=-1.5, high=1.5, source="chosen: a finger-sized step")
+    t_final: float = param(1.2, unit="s", low=0.0, low_inclusive=False, source="chosen: 0.5 s after the step, enough for it to settle")

@@ -1,5 +1,7 @@
-"""The three test rigs of the thesis as Drake diagrams.
+"""The test rigs of the thesis as Drake diagrams.
 
+* :func:`motor_rig` - one free motor, no tendon: the plant of ch. 3 ((3.5)).
+  State ``[theta, omega]``.
 * :func:`tendon_rig` - one motor winding one tendon through a spring mechanism,
   far end fixed: the plant of ch. 10 (10.1) and 14.2.1. State ``[theta, omega]``.
 * :func:`flexible_joint_rig` - motor, spring, link: the 4th-order plant (12.8)
@@ -24,18 +26,18 @@ from __future__ import annotations
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer, Multiplexer
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer
 
 from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
 from awiwi_drake.components.fused_drive import DriveModel, TendonDrive_
-from awiwi_drake.components.motor import motor_ripple_torque
+from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link, state_names
 
-__all__ = ["tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
+__all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 
 DEFAULT_BACKEND = "compiled"
 
@@ -78,7 +80,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
     for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
-    diagram.set_name("tendon_rig")
+    diagram.set_name("tendon-rig")
     names = state_names(motors=1, hysteresis=drive.hysteresis)
 
     def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
@@ -94,7 +96,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
         return OperatingPoint(np.array(state), np.array([u]), None, tendon_force=np.array([tendon_force]),
                               elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
+    return Rig("tendon-rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
                tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
 
 
@@ -184,7 +186,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                         saturation=finite_limit, torque_limit=p.torque_limit if finite_limit else 1.0)
     diagram, plant, drive, names = _link_rig(
-        name="flexible_joint_rig", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
+        name="flexible-joint", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
         inertia=p.link_inertia, damping=p.link_damping, backend=backend,
         hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
         motor_pulley_radius=1.0)
@@ -200,7 +202,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
                               joint_angle=np.array([link_angle]), spring_torque=tau_s,
                               joint_stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0]))
 
-    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
+    return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
                spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
                pair_slack=(law.x0, law.r) if spring == "nonlinear" else None)
 
@@ -224,7 +226,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     spring = tendon_spring(p.spring)
     coupling = antagonistic_coupling(p.link_pulley_radius)
     diagram, plant, drive, names = _link_rig(
-        name="joint_rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
+        name="joint-rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
         damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis)
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
 
@@ -248,5 +250,26 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                               joint_angle=np.array([link_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
                               joint_stiffness=float(rq ** 2 * k.sum()))
 
-    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
+    return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
+
+
+
+def motor_rig(motor: MotorParams | None = None) -> Rig:
+    """One free motor (no tendon): ``B thdd = sat(u) + tau_fric + tau_ripple`` ((3.5)); state [theta, omega]."""
+    p = motor or MotorParams()
+    b = DiagramBuilder()
+    bank = b.AddNamedSystem("motor", MotorBank(p, 1))
+    zero = b.AddNamedSystem("no_tendon", ConstantVectorSource([0.0]))
+    b.Connect(zero.get_output_port(), bank.GetInputPort("tendon_force"))
+    b.ExportInput(bank.GetInputPort("motor_torque"), "motor_torque")
+    for nm in ("state", "motor_angle", "motor_velocity", "applied_torque"):
+        b.ExportOutput(bank.GetOutputPort(nm), nm)
+    d = b.Build()
+    d.set_name("motor-rig")
+
+    def equilibrium(motor_velocity: float = 0.0) -> OperatingPoint:
+        w = float(motor_velocity)
+        return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
+
+    return Rig("motor-rig", d, p, state_names(motors=1), "python", equilibrium)

@@ -7,8 +7,12 @@ import pathlib
 import numpy as np
 
 from awiwi_drake.analysis import linearize, rig_monitors, simulate
+from awiwi_drake.components.spring import LeverSpringMechanism
 from awiwi_drake.config import short_mode
-from awiwi_drake.rigs.demo import DemoScenario
+from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
+from awiwi_drake.parameters.rigs import DemoScenario
+from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
 from awiwi_drake.rigs.rigs import joint_rig
 
 __all__ = ["run_demo", "pole_sweep_pretension", "demo_figure"]
@@ -32,7 +36,7 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     solid) beside the commanded torque (dotted) and the torque limit.  Shaded
     intervals are events (named in the legend).
     """
-    from awiwi_drake.plotting import _plt, plot_signals
+    from awiwi_drake.plotting import _plt
 
     plt = _plt()
     names = ["link_angle", "tendon_force", "applied_torque"]
@@ -64,29 +68,32 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     return fig
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "compiled") -> str:
-    """Run the demo, write ``out/*.png`` and the diagram graphs; return a text summary."""
+def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScenario | None = None):
+    """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
+
+    ``scenario`` (default: :class:`DemoScenario`, 1 s long in short mode) sets the
+    pretension ramp and the link step; ``awiwi-drake demo --config FILE.yaml`` reads it.
+
+    The caller (``awiwi-drake demo``) writes the returned diagrams' graphs with
+    :func:`awiwi_drake.export.export_diagram` (export sits above this layer).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from awiwi_drake.components.spring import LeverSpringMechanism
-    from awiwi_drake.export import export_diagram
-    from awiwi_drake.plotting import plot_pole_sweep, plot_spring_curve
-
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rig = joint_rig(backend=backend)
-    scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
-    from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
+    if scenario is None:
+        scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
     loop = joint_rig_position_loop(rig, scenario)
     t_ref, refs = demo_references(rig, scenario)
     diagram = loop.diagram
     ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final,
                       log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
-                      monitors=rig_monitors(rig), max_step=1.0 / 3000)
+                      monitors=rig_monitors(rig), max_step=1.0 / CONTROL_RATE_HZ)
     fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.torque_limit)
     fig.savefig(out / "demo_joint_rig.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -100,8 +107,6 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled") -> str:
     ax.set_title("joint-rig poles versus pretension (Linearize)")
     fig.savefig(out / "poles_vs_pretension.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
-    export_diagram(diagram, out, "joint_rig_position_loop", max_depth=1, quiet=True)
-    export_diagram(rig.diagram, out, "joint_rig", max_depth=1, quiet=True)
     q_end = float(result["link_angle"][-1, 0])
     f_end = result["tendon_force"][-1]
     lines = [
@@ -112,4 +117,4 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled") -> str:
         f"  events: {len(result.events)}" + "".join(f"\n    {e}" for e in result.events),
         "  files: demo_joint_rig.png, spring_curve.png, poles_vs_pretension.png, joint_rig*.dot/.svg/.png",
     ]
-    return "\n".join(lines)
+    return "\n".join(lines), {"joint_rig_position_loop": diagram, "joint_rig": rig.diagram}

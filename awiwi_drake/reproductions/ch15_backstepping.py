@@ -1,10 +1,10 @@
-"""Closed-loop studies of the backstepping controllers (thesis section 15.1-15.5).
+"""Thesis ch. 15: closed-loop studies of the backstepping controllers (sections 15.1-15.5).
 
-Builders tie the control laws of :mod:`.backstepping` to the foundation rigs
-(``flexible_joint_rig``, ``joint_rig``) and to ctrl1's :func:`closed_loop`;
-study functions run the simulations behind Fig 15.2-15.4, 15.7-15.13,
-15.16-15.21 and 15.23-15.27 and return data (:class:`BacksteppingRun`);
-:mod:`.backstepping_plots` draws them.
+The controllers and their rig factories are :mod:`awiwi_drake.control.backstepping`
+(``position_controller``, ``impedance_controller``); the scalar example of section
+15.1 is :mod:`.ch15_scalar_example`. The study functions here run the simulations
+behind Fig 15.2-15.4, 15.7-15.13, 15.16-15.21 and 15.23-15.27 and return data
+(:class:`BacksteppingRun`); the ``plot_*`` functions at the end draw them.
 
 All simulations use Drake's ``Simulator`` with error-controlled RK3. Inputs
 that change at given times (reference steps, disturbance steps) are applied
@@ -22,26 +22,25 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource
 
-from awiwi_drake.components.motor import motor_friction_torque
 from awiwi_drake.components.spring import LinearSpring
-from awiwi_drake.control.backstepping import (
-    REFERENCE_PORT, REFERENCE_SIZE, ImpedanceBackstepping, JointModel, PositionBackstepping)
-from awiwi_drake.control.backstepping_example import ScalarBackstepping, ScalarExamplePlant
+from awiwi_drake.control.backstepping import REFERENCE_PORT, REFERENCE_SIZE, impedance_controller, position_controller
 from awiwi_drake.control.base import ClosedLoop, closed_loop
+from awiwi_drake.control.sensors import with_external_torque_sensor
 from awiwi_drake.parameters.backstepping import (
     AntagonisticBacksteppingGains, BacksteppingPlantParams, ImpedanceBacksteppingGains, ImpedanceStudy,
     NonlinearImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams
+from awiwi_drake.plotting import figure_axes
+from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, ScalarExamplePlant, example_dynamics
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = [
-    "BacksteppingRun", "SimulationDivergedError", "table_15_1_params", "table_15_1_rig", "plant_params",
-    "joint_model", "position_controller", "impedance_controller", "simulate_events",
+    "BacksteppingRun", "SimulationDivergedError", "table_15_1_params", "table_15_1_rig", "simulate_events",
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "antagonistic_step", "antagonistic_sine",
-    "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations", "with_external_torque_sensor",
+    "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
+    "plot_link_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
 ]
 
 
@@ -101,79 +100,6 @@ def table_15_1_params(**changes) -> FlexibleJointParams:
 def table_15_1_rig(*, spring: str = "linear", **changes):
     """``flexible_joint_rig`` with Table 15.1 parameters (``spring="nonlinear"``: lever-spring pair)."""
     return flexible_joint_rig(params=table_15_1_params(**changes), spring=spring)
-
-
-def plant_params(rig) -> BacksteppingPlantParams:
-    """The design model of the position controller from a linear ``flexible_joint_rig``."""
-    p = rig.params
-    if not isinstance(p, FlexibleJointParams) or rig.spring_kind != "linear":
-        raise ValueError(f"plant_params: the position controller (15.11)-(15.50) needs a linear flexible_joint_rig, "
-                         f"got {rig.name} ({rig.spring_kind})")
-    return BacksteppingPlantParams(link_inertia=p.link_inertia, motor_inertia=p.motor_inertia,
-                                   motor_damping=p.motor_damping, link_damping=p.link_damping, stiffness=p.stiffness)
-
-
-def joint_model(rig, *, spring=None, pretension: float | None = None, damping: bool = True) -> JointModel:
-    """The controller design model of a rig (single flexible joint or antagonistic joint rig).
-
-    Parameters
-    ----------
-    rig : Rig
-        ``flexible_joint_rig`` (N = 1, torsion spring ``tau = phi(theta - q)``) or ``joint_rig``
-        (N = 2, tendons ``x_i = r_m theta_i + P_i q``, P = [-r_q, r_q], equal torque share, pretension).
-    spring : spring law, optional
-        Design spring law (default: the rig's own law: the nominal design). Pass
-        ``LinearSpring(k, tension_only=False)`` for the "linear controller" of section 15.4.
-    pretension : float, optional
-        Tendon pretension [N] of the joint rig (default: the rig's).
-    damping : bool
-        Keep link/motor damping and motor friction in the design model (the nominal design;
-        the thesis neglects them: ``False``).
-    """
-    p = rig.params
-    law = rig.spring if spring is None else spring
-    if isinstance(p, FlexibleJointParams):
-        return JointModel(link_inertia=p.link_inertia, link_damping=p.link_damping if damping else 0.0,
-                          motor_inertia=(p.motor_inertia,), coupling=(-1.0,), motor_pulley_radius=1.0, spring=law,
-                          elongation_offset=(0.0,), motor_damping=p.motor_damping if damping else 0.0,
-                          name=rig.name)
-    if isinstance(p, JointRigParams):
-        rq = p.link_pulley_radius
-        f0 = p.pretension if pretension is None else float(pretension)
-        if not f0 > 0:
-            raise ValueError(f"joint_model: pretension = {f0} N must be > 0 (tendons must stay taut)")
-        friction = functools.partial(motor_friction_torque, p=p.motor) if damping else None
-        return JointModel(link_inertia=p.link_inertia, link_damping=p.link_damping if damping else 0.0,
-                          motor_inertia=(p.motor.inertia,) * 2, coupling=(-rq, rq),
-                          motor_pulley_radius=p.motor.pulley_radius, spring=law, elongation_offset=(0.0, 0.0),
-                          motor_friction=friction, torque_share=(0.5, 0.5), torque_offset=(rq * f0, -rq * f0),
-                          name=rig.name)
-    raise ValueError(f"joint_model: no backstepping design model for rig {rig.name!r}")
-
-
-def position_controller(rig, gains: PositionBacksteppingGains | None = None, **kw):
-    """:class:`PositionBackstepping` for a linear flexible-joint rig."""
-    return PositionBackstepping(plant_params(rig), gains or PositionBacksteppingGains(), **kw)
-
-
-def impedance_controller(rig, gains=None, *, spring=None, pretension=None, damping=True, **kw):
-    """:class:`ImpedanceBackstepping` for a flexible-joint rig (N = 1) or the joint rig (N = 2).
-
-    ``gains`` may be :class:`AntagonisticBacksteppingGains` (its pretension is used) or
-    :class:`ImpedanceBacksteppingGains`; ``kw`` go to the controller (``external_torque``,
-    ``reference_derivatives``, ``compensate``).
-    """
-    if gains is None:
-        gains = AntagonisticBacksteppingGains() if isinstance(rig.params, JointRigParams) else \
-            ImpedanceBacksteppingGains()
-    if isinstance(gains, AntagonisticBacksteppingGains):
-        pretension = gains.pretension if pretension is None else pretension
-        gains = ImpedanceBacksteppingGains(stiffness=gains.stiffness, damping=gains.damping, k3=gains.k3,
-                                           k4=gains.k4)
-    if pretension is None and isinstance(rig.params, JointRigParams):
-        pretension = rig.params.pretension
-    model = joint_model(rig, spring=spring, pretension=pretension, damping=damping)
-    return ImpedanceBackstepping(model, gains, **kw)
 
 
 # ---------------------------------------------------------------------------
@@ -500,30 +426,46 @@ def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflectio
                 torque=k_eff * deflection, deflection=deflection)
 
 
-def with_external_torque_sensor(rig):
-    """A copy of a link rig whose diagram also outputs the applied ``external_torque`` as
-    ``external_torque_measured`` (an ideal torque sensor: the thesis's formal design (15.62)).
+# ---------------------------------------------------------------------------
+# plots: runs in, ``(fig, ax)`` out
+def _time_series(runs, signal, ylabel, *, ax, title, log=False, reference=False):
+    fig, ax = figure_axes(ax)
+    plot = ax.semilogy if log else ax.plot
+    for r in runs:
+        plot(r.t, signal(r), label=r.label)
+    if reference and len(runs) and np.all(np.isfinite(runs[0].reference)):
+        ax.plot(runs[0].t, runs[0].reference, "k--", lw=0.8, label="reference")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize="small")
+    return fig, ax
 
-    The external torque input is routed through a pass-through so that the controller can
-    read it as a measurement (ctrl1's closed-loop convention: measurements are rig outputs).
-    """
-    import dataclasses
-    from pydrake.systems.primitives import PassThrough
-    if not rig.diagram.HasInputPort("external_torque"):
-        raise ValueError(f"with_external_torque_sensor: rig {rig.name!r} has no input 'external_torque'")
-    b = DiagramBuilder()
-    inner = b.AddNamedSystem("plant", rig.diagram)
-    tap = b.AddNamedSystem("external_torque_tap", PassThrough(inner.GetInputPort("external_torque").size()))
-    b.ExportInput(tap.get_input_port(), "external_torque")
-    b.Connect(tap.get_output_port(), inner.GetInputPort("external_torque"))
-    b.ExportOutput(tap.get_output_port(), "external_torque_measured")
-    for i in range(rig.diagram.num_input_ports()):
-        name = rig.diagram.get_input_port(i).get_name()
-        if name != "external_torque":
-            b.ExportInput(inner.GetInputPort(name), name)
-    for i in range(rig.diagram.num_output_ports()):
-        name = rig.diagram.get_output_port(i).get_name()
-        b.ExportOutput(inner.GetOutputPort(name), name)
-    diagram = b.Build()
-    diagram.set_name(rig.name)
-    return dataclasses.replace(rig, diagram=diagram)
+
+def plot_link_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
+    """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
+    return _time_series(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
+
+
+def plot_command(runs, *, ax=None, title: str = ""):
+    """Motor torque entering the plant (Fig 15.11)."""
+    return _time_series(runs, lambda r: r.command[:, 0], "motor torque [Nm]", ax=ax, title=title)
+
+
+def plot_lyapunov(runs, *, ax=None, title: str = "Lyapunov function"):
+    """The controller's Lyapunov function along each run (log scale)."""
+    return _time_series(runs, lambda r: np.maximum(r.lyapunov, 1e-300), "V", ax=ax, title=title, log=True)
+
+
+def plot_phase_portrait(runs, *, ax=None, title: str = ""):
+    """Phase diagram ``x1' (x1)`` of the scalar example (Fig 15.2-15.4); crosses mark the starts."""
+    fig, ax = figure_axes(ax)
+    for r in runs:
+        x1 = r.state[:, 0]
+        x1d = np.array([example_dynamics(x, 0.0)[0] for x in r.state])
+        ax.plot(x1, x1d, lw=1)
+        ax.plot(x1[0], x1d[0], "kx")
+    ax.set_xlabel("x1")
+    ax.set_ylabel("dx1/dt")
+    ax.set_title(title)
+    return fig, ax

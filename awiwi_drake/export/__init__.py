@@ -1,4 +1,7 @@
-"""Diagram export: Graphviz ``.dot`` always, ``.svg``/``.png`` when ``dot`` is installed."""
+"""Diagram export: Graphviz ``.dot`` always, ``.svg``/``.png`` when ``dot`` is installed.
+
+Meshcat HTML recordings of a finger or the hand are :mod:`awiwi_drake.export.animation`.
+"""
 
 from __future__ import annotations
 

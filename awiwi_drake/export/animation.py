@@ -23,10 +23,10 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from ..analysis.simulate import simulate
-from ..parameters.display import AnimationParams
-from ..parameters.hand import FINGERS
-from .diagrams import finger_diagram, hand_diagram
+from awiwi_drake.analysis.simulate import simulate
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+from awiwi_drake.parameters.display import AnimationParams
+from awiwi_drake.parameters.hand import FINGERS
 
 __all__ = ["GRASP_POSE", "grasp_pose", "AnimationResult", "record_animation", "quiet_meshcat", "DISPLAY_ROTATION",
            "frame_camera"]
@@ -45,7 +45,7 @@ GRASP_POSE = {"thumb": [0.5, 0.35, 0.5, 0.4], "index": [0.05, 0.8, 0.9, 0.6], "m
 def grasp_pose(rig) -> np.ndarray:
     """The grasp pose as plant joint angles of ``rig`` (DIPs of ring/fifth from (5.16)-(5.17))."""
     coupling = rig.coupling
-    parts = coupling.parts if hasattr(coupling, "parts") else {rig.name.replace("finger_", ""): coupling}
+    parts = coupling.parts if hasattr(coupling, "parts") else {rig.name.replace("finger-", ""): coupling}
     q = []
     for name, c in parts.items():
         q.append(c.dof_selection @ np.asarray(GRASP_POSE[name], float))
@@ -142,7 +142,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
         raise ValueError(f"out = {str(out)!r}: the recording is written as HTML (use a .html file name)")
     rig = (hand_diagram(backend=backend, visual=True) if target == "hand"
            else finger_diagram(finger=target, backend=backend, visual=True))
-    from ..control import closed_loop, make_controller
+    from awiwi_drake.control import closed_loop, make_controller
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     op = rig.operating_point()
     q0 = op.joint_angle

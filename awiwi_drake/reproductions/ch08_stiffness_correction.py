@@ -1,0 +1,101 @@
+"""Thesis ch. 8: stiffness correction held while loads change the mechanical stiffness (Fig 8.3).
+
+The law (8.1)-(8.2) and the controller are :mod:`awiwi_drake.control.stiffness_correction`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
+
+from awiwi_drake.control.stiffness_correction import StiffnessCorrectedImpedance, pretension_elongation
+from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
+from awiwi_drake.plotting import figure_axes
+from awiwi_drake.rigs import joint_rig
+
+__all__ = ["StiffnessRun", "stiffness_correction_run", "plot_stiffness_run"]
+
+
+@dataclass
+class StiffnessRun:
+    """Time series of a stiffness-correction run: ``t``, link angle ``q``, external torque ``tau_ext``,
+    ``k_imp``, ``k_mech``, ``k_eff`` ((8.1) of the logged gains) and the target ``k_target``."""
+
+    t: np.ndarray
+    q: np.ndarray
+    tau_ext: np.ndarray
+    k_imp: np.ndarray
+    k_mech: np.ndarray
+    k_eff: np.ndarray
+    k_target: np.ndarray
+    corrected: bool
+
+
+def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segment: float = 0.15,
+                             corrected: bool = True, params: StiffnessCorrectionParams | None = None,
+                             dt: float = 1e-3) -> StiffnessRun:
+    """Fig 8.3: K_eff held at each target (1, then 0.7 Nm/rad) while load steps change K_mech.
+
+    Each target is held for ``len(loads)`` segments of ``segment`` s with the external torques
+    ``loads`` [Nm]. ``corrected=False`` uses K_imp from the nominal K_mech (no online correction).
+    """
+    p = params or StiffnessCorrectionParams()
+    targets = tuple(p.targets if targets is None else targets)
+    rig = joint_rig()
+    law = StiffnessCorrectedImpedance(rig.params, rig.spring, p, online=corrected)
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("rig", rig.diagram)
+    ctrl = b.AddNamedSystem("controller", law)
+    b.Connect(plant.GetOutputPort("state"), ctrl.GetInputPort("state"))
+    b.Connect(ctrl.GetOutputPort("motor_torque"), plant.GetInputPort("motor_torque"))
+    ref = b.AddNamedSystem("reference", ConstantVectorSource([0.0]))
+    b.Connect(ref.get_output_port(), ctrl.GetInputPort("link_angle_reference"))
+    b.ExportInput(ctrl.GetInputPort("effective_stiffness_reference"), "effective_stiffness_reference")
+    b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+    diagram = b.Build()
+    ctx = diagram.CreateDefaultContext()
+    rq = rig.params.link_pulley_radius
+    x_c = pretension_elongation(rig.spring, p.epsilon * targets[0], rq)
+    f0 = float(rig.spring.force(np.array([x_c]))[0])
+    op = rig.operating_point(pretension=f0)
+    plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
+    kport, eport = diagram.GetInputPort("effective_stiffness_reference"), diagram.GetInputPort("external_torque")
+    sim = Simulator(diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-3)
+    sim.get_mutable_integrator().set_target_accuracy(1e-6)
+    cctx = ctrl.GetMyContextFromRoot(ctx)
+    log = {k: [] for k in ("t", "q", "w", "ki", "km", "ke", "kt")}
+    t_now = 0.0
+    for target in targets:
+        kport.FixValue(ctx, [target])
+        for load in loads:
+            eport.FixValue(ctx, [load])
+            t_end = t_now + segment
+            while t_now < t_end - 1e-12:
+                t_now = min(t_end, t_now + dt)
+                sim.AdvanceTo(t_now)
+                s = ctrl.GetOutputPort("stiffness").Eval(cctx)
+                x = plant.GetOutputPort("state").Eval(plant.GetMyContextFromRoot(ctx))
+                if not np.all(np.isfinite(x)):
+                    raise RuntimeError(f"stiffness_correction_run: state not finite at t = {t_now:.4g} s")
+                for k, v in zip(("t", "q", "w", "ki", "km", "ke", "kt"), (t_now, x[0], load, s[0], s[1], s[2], target)):
+                    log[k].append(float(v))
+    a = {k: np.array(v) for k, v in log.items()}
+    return StiffnessRun(a["t"], a["q"], a["w"], a["ki"], a["km"], a["ke"], a["kt"], corrected)
+
+
+def plot_stiffness_run(run, *, ax=None):
+    """Fig 8.3: K_imp, K_mech and K_eff (8.1) over time, with the target."""
+    fig, ax = figure_axes(ax)
+    ax.plot(run.t, run.k_imp, label="K_imp (controller)")
+    ax.plot(run.t, run.k_mech, ":", label="K_mech (springs)")
+    ax.plot(run.t, run.k_eff, "-.", label="K_eff (8.1)")
+    ax.plot(run.t, run.k_target, "k--", lw=0.8, label="target")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("stiffness [Nm/rad]")
+    ax.legend(fontsize="small")
+    return fig, ax

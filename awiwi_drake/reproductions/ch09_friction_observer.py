@@ -1,0 +1,104 @@
+"""Thesis ch. 9: friction observer and compensation on the antagonistic joint (Fig 9.3).
+
+The observer (9.2) and the link-side friction law are :mod:`awiwi_drake.control.friction_observer`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from awiwi_drake.control.backstepping import impedance_controller
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.friction_observer import LinkFriction
+from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
+from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
+from awiwi_drake.parameters.rigs import JointRigParams
+from awiwi_drake.plotting import figure_axes
+from awiwi_drake.reproductions.ch15_backstepping import BacksteppingRun
+from awiwi_drake.rigs import joint_rig
+
+__all__ = ["friction_tracking_run", "chattering", "plot_friction_runs"]
+
+
+def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency: float = 0.5,
+                          t_final: float = 4.0, friction: LinkFrictionParams | None = None,
+                          observer: FrictionObserverParams | None = None, gains=None, dt: float = 1e-3):
+    """Fig 9.3: slow sinusoidal tracking of the antagonistic joint with link-side stick-slip friction.
+
+    The joint rig's link gets the friction torque of :class:`LinkFriction` on its
+    ``external_torque`` input; the antagonistic backstepping impedance controller estimates the
+    disturbance with the observer (9.2) and, with ``compensate=True``, cancels it (``u = u_c +
+    tau_fric_hat``). Returns a :class:`~awiwi_drake.reproductions.ch15_backstepping.BacksteppingRun`
+    with ``extra["friction"]`` (true) and ``extra["friction_estimate"]``.
+    """
+    fp = friction or LinkFrictionParams()
+    rig = joint_rig(params=JointRigParams().replace(link_inertia=fp.test_joint_inertia))
+    g = gains or AntagonisticBacksteppingGains()
+    obs = observer or FrictionObserverParams()
+    ig = ImpedanceBacksteppingGains(stiffness=g.stiffness, damping=g.damping, k3=g.k3, k4=g.k4, observer_gain=obs.gain)
+    ctrl = impedance_controller(rig, ig, pretension=g.pretension, reference_derivatives=4, compensate=compensate)
+    loop = closed_loop(rig, ctrl, rate_hz=None)
+    b = DiagramBuilder()
+    cl = b.AddNamedSystem("loop", loop.diagram)
+    fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
+    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
+    b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
+    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
+    diagram = b.Build()
+    ctx = diagram.CreateDefaultContext()
+    op = rig.operating_point(pretension=g.pretension)
+    loop.diagram.GetSubsystemByName("rig").GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
+    w = 2 * math.pi * frequency
+    ref_port = diagram.GetInputPort("link_angle_reference")
+
+    def ref(t):
+        s, c = math.sin(w * t), math.cos(w * t)
+        return [amplitude * s, amplitude * w * c, -amplitude * w ** 2 * s, -amplitude * w ** 3 * c, amplitude * w ** 4 * s]
+
+    ref_port.FixValue(ctx, ref(0.0))
+    sim = Simulator(diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", dt)
+    sim.get_mutable_integrator().set_target_accuracy(1e-6)
+    c_sys = loop.diagram.GetSubsystemByName("controller")
+    rig_sys = loop.diagram.GetSubsystemByName("rig")
+    ts = np.arange(int(round(t_final / dt)) + 1) * dt
+    X, U, V, R, F, E = [], [], [], [], [], []
+    for t in ts:
+        if t > 0:
+            sim.AdvanceTo(t)
+        ref_port.FixValue(ctx, ref(t))
+        x = rig_sys.GetMyContextFromRoot(ctx).get_continuous_state_vector().CopyToVector()
+        if not np.all(np.isfinite(x)):
+            raise RuntimeError(f"friction_tracking_run: state not finite at t = {t:.4g} s")
+        cctx = c_sys.GetMyContextFromRoot(ctx)
+        X.append(x)
+        U.append(np.array(c_sys.GetOutputPort("motor_torque").Eval(cctx)))
+        V.append(c_sys.GetOutputPort("lyapunov").Eval(cctx)[0])
+        R.append(ref(t)[0])
+        F.append(fr.get_output_port().Eval(fr.GetMyContextFromRoot(ctx))[0])
+        E.append(c_sys.GetOutputPort("external_torque_estimate").Eval(cctx)[0])
+    return BacksteppingRun("with compensation" if compensate else "without compensation", ts, np.array(X),
+                           np.array(U), np.array(V), np.array(R), np.array(F),
+                           dict(friction=np.array(F), friction_estimate=np.array(E)))
+
+
+def chattering(run, *, after: float = 0.0) -> float:
+    """Mean absolute rate of change of the motor torques [Nm/s] (total variation per second)."""
+    m = run.t >= after
+    u = run.command[m]
+    return float(np.sum(np.abs(np.diff(u, axis=0))) / (run.t[m][-1] - run.t[m][0]))
+
+
+def plot_friction_runs(runs, *, ax=None):
+    """Fig 9.3: tracking error with/without friction compensation."""
+    fig, ax = figure_axes(ax)
+    for r in runs:
+        ax.plot(r.t, r.q - r.reference, label=r.label)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("tracking error [rad]")
+    ax.legend(fontsize="small")
+    return fig, ax

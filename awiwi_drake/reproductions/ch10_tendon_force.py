@@ -1,0 +1,113 @@
+"""Thesis ch. 10: tendon force control experiments (Fig 10.1-10.3) as functions returning data.
+
+The controllers are :mod:`awiwi_drake.control.tendon_force`; :func:`plot_tendon_steps` draws Fig 10.3.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.compare import fit_second_order_step, simulate_loop, step_metrics
+from awiwi_drake.control.sensors import force_sensor
+from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_force_without_feedforward,
+                                              tendon_pd_controller, tendon_scheduled_controller)
+from awiwi_drake.parameters import MotorParams, TendonRigParams
+from awiwi_drake.parameters.control import ForceSensorParams, TendonForceGains
+from awiwi_drake.plotting import figure_axes
+from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.rigs import tendon_rig
+
+__all__ = ["TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
+
+def _tendon_loop(factory, *, realistic: bool, gains=None, fmap=None, **kw):
+    rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=realistic)), backend="symbolic")
+    ctrl = factory(rig, gains, fmap=fmap) if gains is not None or fmap is not None else factory(rig)
+    sensors = {"tendon_force": force_sensor(ForceSensorParams())} if realistic else None
+    return rig, closed_loop(rig, ctrl, rate_hz=RATE, delay=333e-6 if realistic else None, sensors=sensors, **kw)
+
+
+def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: float = 1.0,
+                                  fmap: ForceMap | None = None) -> dict:
+    """Fig 10.1: force step with and without the feed-forward terms of (10.2) (ideal sensor, no ripple).
+
+    Returns ``{"t", "with", "without", "reference", "expected_without"}`` where
+    ``expected_without`` is (10.3) at rest.
+    """
+    fmap = fmap or force_map(tendon_rig())
+    out = {}
+    for label, g in (("with", TendonForceGains()),
+                     ("without", TendonForceGains(force_feedforward=False, friction_compensation=False))):
+        rig, loop = _tendon_loop(tendon_pd_controller, realistic=False, gains=g, fmap=fmap)
+        op = rig.operating_point(tendon_force=f0)
+        ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
+                                  references={"tendon_force_reference": f0})
+        log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force",),
+                            inputs={"tendon_force_reference": reference_schedule([(0.05, f1)], f0)})
+        out[label] = log["tendon_force"][:, 0]
+        out["t"] = log["t"]
+        out["reference"] = log["tendon_force_reference"][:, 0]
+        if label == "without":
+            kp = loop.controller.law.kp_fixed
+            out["expected_without"] = steady_state_force_without_feedforward(f1, kp, rig.params.motor.pulley_radius)
+    return out
+
+
+@dataclass
+class TendonSteps:
+    """Force steps ``f0 -> f0 + step`` for one controller: traces and per-step metrics."""
+
+    controller: str
+    t: np.ndarray
+    t_step: float
+    step: float = 5.0
+    forces: dict = field(default_factory=dict)     # f0 -> force trace [N]
+    commands: dict = field(default_factory=dict)   # f0 -> command trace [Nm]
+    metrics: dict = field(default_factory=dict)    # f0 -> dict(overshoot, settling_time, damping_ratio, ...)
+
+
+def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] = (10.0, 20.0, 30.0, 40.0),
+                           step: float = 5.0, t_final: float = 0.25, realistic: bool = True,
+                           gains: TendonForceGains | None = None, fmap: ForceMap | None = None) -> TendonSteps:
+    """Fig 10.2-10.3: steps of ``step`` N from each initial force, fixed (30 N) or scheduled gains.
+
+    ``realistic``: friction (3.8), ripple, 12-bit quantised noisy force sensor, 333 us delay.
+    """
+    fmap = fmap or force_map(tendon_rig())
+    factory = tendon_scheduled_controller if scheduled else tendon_pd_controller
+    t_step = 0.02
+    res = TendonSteps("scheduled" if scheduled else "fixed", np.array([]), t_step, step)
+    for f0 in initial_forces:
+        rig, loop = _tendon_loop(factory, realistic=realistic, gains=gains or TendonForceGains(), fmap=fmap)
+        op = rig.operating_point(tendon_force=f0)
+        ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
+                                  references={"tendon_force_reference": f0})
+        log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force", "motor_torque_command"),
+                            inputs={"tendon_force_reference": reference_schedule([(t_step, f0 + step)], f0)})
+        f = log["tendon_force"][:, 0]
+        m = step_metrics(log["t"], f, f0, f0 + step, t_step, band=0.05)
+        m.update({k: v for k, v in fit_second_order_step(log["t"], f, f0, f0 + step, t_step).items()
+                  if k in ("damping_ratio", "natural_frequency")})
+        res.t = log["t"]
+        res.forces[f0] = f
+        res.commands[f0] = log["motor_torque_command"][:, 0]
+        res.metrics[f0] = m
+    return res
+
+
+def plot_tendon_steps(steps, *, ax=None):
+    """Fig 10.3 style: force steps of one controller (a :class:`TendonSteps`)."""
+    fig, ax = figure_axes(ax, figsize=(7, 4))
+    for f0, f in steps.forces.items():
+        m = steps.metrics[f0]
+        ax.plot(steps.t, f, label=f"{f0:g} N: xi = {m['damping_ratio']:.2f}, OS = {m['overshoot']:.0f} %")
+        ax.plot(steps.t, np.where(steps.t < steps.t_step, f0, f0 + steps.step), "k--", lw=0.8)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("tendon force [N]")
+    ax.set_title(f"{steps.controller} gains")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig, ax

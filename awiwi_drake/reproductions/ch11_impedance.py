@@ -1,0 +1,119 @@
+"""Thesis ch. 11: two-time-scale and cascaded impedance control (Fig 11.2-11.4).
+
+The controllers are :mod:`awiwi_drake.control.impedance`; :func:`plot_gain_diagrams` draws Fig 11.4.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from pydrake.systems.primitives import Linearize
+
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.compare import gain_diagram, simulate_loop, step_metrics
+from awiwi_drake.control.impedance import impedance_controller
+from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
+from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
+from awiwi_drake.plotting import figure_axes
+from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig
+
+__all__ = ["impedance_step", "impedance_sweep", "impedance_frequency_response", "plot_gain_diagrams"]
+
+
+def _joint(kind: str, *, stiffness=None, pretension=None):
+    if kind == "flexible-joint":
+        p = FlexibleJointParams() if stiffness is None else FlexibleJointParams(stiffness=stiffness)
+        return flexible_joint_rig(params=p, backend="symbolic")
+    return joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
+                     backend="symbolic")
+
+
+def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
+                   stiffness: float | None = None, pretension: float | None = None, step: float = 0.3,
+                   t_final: float = 0.3) -> dict:
+    """Fig 11.2-11.3: link step under impedance control (``stiffness``: mechanical k of the flexible joint)."""
+    r = _joint(rig, stiffness=stiffness, pretension=pretension)
+    loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
+                       rate_hz=RATE)
+    op = r.operating_point()
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
+    log = simulate_loop(loop, ctx, t_final, DT, outputs=("link_angle",),
+                        inputs={"link_angle_reference": reference_schedule([(0.02, step)], 0.0),
+                                "external_torque": lambda t: 0.0})
+    m = step_metrics(log["t"], log["link_angle"][:, 0], 0.0, step, 0.02)
+    return dict(t=log["t"], link_angle=log["link_angle"][:, 0], reference=log["link_angle_reference"][:, 0], **m)
+
+
+def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint-rig",
+                    stiffness: float | None = None, pretension: float | None = None, f_start: float | None = None,
+                    f_stop: float | None = None, duration: float | None = None,
+                    amplitude: float | None = None) -> dict:
+    """Fig 11.4: chirp of the link reference (3 kHz loop), gain diagram |q / q_des|(f).
+
+    Defaults (:class:`ImpedanceSweepParams`): the two-time-scale (singular perturbation) impedance of
+    Fig 11.4 on the antagonistic joint rig, Kp_imp = 4 Nm/rad, chirp 5-60 Hz over 3 s, 0.02 rad.
+    """
+    sp = ImpedanceSweepParams()
+    joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
+    f_start = sp.f_start if f_start is None else f_start
+    f_stop = sp.f_stop if f_stop is None else f_stop
+    duration = sp.duration if duration is None else duration
+    amplitude = sp.amplitude if amplitude is None else amplitude
+    r = _joint(rig, stiffness=stiffness, pretension=pretension)
+    loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
+                       rate_hz=RATE)
+    op = r.operating_point()
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
+    k = (f_stop - f_start) / duration
+    log = simulate_loop(loop, ctx, duration, DT, outputs=("link_angle",),
+                        inputs={"link_angle_reference": lambda t: amplitude * np.sin(2 * np.pi * (f_start * t + 0.5 * k * t * t)),
+                                "external_torque": lambda t: 0.0})
+    f, g = gain_diagram(log["t"], log["link_angle_reference"][:, 0], log["link_angle"][:, 0], f_start, f_stop)
+    i = int(np.argmax(g))
+    return dict(freq=f, gain=g, resonance_hz=float(f[i]), peak_gain=float(g[i]))
+
+
+def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffness: float | None = None,
+                                 rig: str = "joint-rig", stiffness: float | None = None,
+                                 pretension: float | None = None, freqs: Sequence[float] | None = None) -> dict:
+    """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize`` (python backend).
+
+    The exact small-signal counterpart of :func:`impedance_sweep` (no 3 kHz hold); also returns the
+    closed-loop eigenvalues.  Default frequencies: 0.5-70 Hz (Fig 11.4).
+    """
+    sp = ImpedanceSweepParams()
+    joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
+    freqs = np.linspace(0.5, 70.0, 700) if freqs is None else np.asarray(freqs, float)
+    if rig == "flexible-joint":
+        r = flexible_joint_rig(params=FlexibleJointParams() if stiffness is None else
+                               FlexibleJointParams(stiffness=stiffness), backend="python")
+    else:
+        r = joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
+                      backend="python")
+    loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
+                       rate_hz=None)
+    op = r.operating_point()
+    ctx = loop.create_context(state=op.state, references={"link_angle_reference": 0.0})
+    d = loop.diagram
+    lin = Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
+                    output_port_index=d.GetOutputPort("link_angle").get_index())
+    A, B, C, D = (np.asarray(m) for m in (lin.A(), lin.B(), lin.C(), lin.D()))
+    eye = np.eye(A.shape[0])
+    g = np.array([abs((C @ np.linalg.solve(2j * np.pi * f * eye - A, B) + D)[0, 0]) for f in freqs])
+    i = int(np.argmax(g))
+    return dict(freq=freqs, gain=g, resonance_hz=float(freqs[i]), peak_gain=float(g[i]),
+                eigenvalues=np.linalg.eigvals(A))
+
+
+def plot_gain_diagrams(curves: dict, *, ax=None):
+    """Fig 11.4: ``{label: (freq, gain)}``."""
+    fig, ax = figure_axes(ax, figsize=(7, 4))
+    for label, (f, g) in curves.items():
+        ax.plot(f, g, label=label)
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("gain |q / q_des|")
+    ax.legend()
+    ax.grid(True, alpha=0.3)
+    return fig, ax

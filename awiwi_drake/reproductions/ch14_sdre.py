@@ -1,0 +1,64 @@
+"""Thesis ch. 14: SDRE control of the tendon rig (Fig 14.3) and of the nonlinear flexible joint (Fig 14.4-14.5).
+
+The controllers are :mod:`awiwi_drake.control.sdre`.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.compare import simulate_loop
+from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controller
+from awiwi_drake.control.tendon_force import ForceMap, force_map
+from awiwi_drake.parameters import FlexibleJointParams
+from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
+from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
+
+__all__ = ["tendon_sdre_experiment", "joint_sdre_experiment"]
+
+
+def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float]] = ((0.05, 40.0), (0.5, 45.0)),
+                           t_final: float = 1.0, params: SdreTendonParams | None = None,
+                           fmap: ForceMap | None = None) -> dict:
+    """Fig 14.3: 0 -> 40 -> 45 N with SDRE gains (200 Hz) or gains frozen at 30 N.
+
+    ``torque`` is the command; ``saturated`` flags samples beyond the rig's ``torque_limit`` (3 Nm): with the
+    Table 14.1 weights (position gain ~ sqrt(Q11 / R) = 1000 Nm/rad) both controllers saturate during most of
+    the 0 -> 40 N transient.
+    """
+    fmap = fmap or force_map(tendon_rig())
+    rig = tendon_rig(backend="symbolic")
+    loop = closed_loop(rig, tendon_sdre_controller(rig, params, fixed=fixed, fmap=fmap), rate_hz=RATE)
+    op = rig.operating_point(tendon_force=0.0)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
+    log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force", "controller_gain", "motor_torque"),
+                        inputs={"tendon_force_reference": reference_schedule(schedule, 0.0)})
+    u = log["motor_torque"][:, 0]
+    limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
+    return dict(t=log["t"], force=log["tendon_force"][:, 0], reference=log["tendon_force_reference"][:, 0],
+                gain=log["controller_gain"], torque=u, torque_limit=limit, saturated=np.abs(u) > limit)
+
+
+def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: float = 0.0,
+                          t_final: float = 1.5, params: SdreJointParams | None = None) -> dict:
+    """Fig 14.4-14.5: nonlinear flexible joint (Table 14.2 link inertia), link step, optional external load.
+
+    The load is applied from t = 0 while the reference steps at 0.1 s.
+    """
+    p = params or SdreJointParams()
+    rig = flexible_joint_rig(params=FlexibleJointParams(link_inertia=p.link_inertia), spring="nonlinear",
+                             backend="symbolic")
+    loop = closed_loop(rig, joint_sdre_controller(rig, p, fixed=fixed), rate_hz=RATE)
+    op = rig.operating_point(external_torque=external_torque)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
+                              references={"link_angle_reference": 0.0},
+                              disturbances={"external_torque": external_torque})
+    log = simulate_loop(loop, ctx, t_final, DT, outputs=("link_angle", "controller_gain", "motor_torque"),
+                        inputs={"link_angle_reference": reference_schedule([(0.1, target)], 0.0),
+                                "external_torque": lambda t: external_torque})
+    return dict(t=log["t"], link_angle=log["link_angle"][:, 0], gain=log["controller_gain"],
+                torque=log["motor_torque"][:, 0], reference=log["link_angle_reference"][:, 0])
