@@ -230,7 +230,9 @@ def test_saturation_and_slack_are_reported():
     rig = joint_rig(backend="symbolic")
     loop = closed_loop(rig, impedance_controller(rig, mode="pd"), rate_hz=3000.0)
     _, m = run_test(loop, "step", params=compare_test_params(rig, step_size=1.0, step_duration=0.1, settle_time=0.0))
-    assert m.peak_input > rig.torque_limit and 0.1 < m.saturated_fraction < 1.0
+    # the command exceeds the amplifier limit; the torque applied to the motors is clipped at it
+    assert m.peak_command > rig.torque_limit and 0.1 < m.saturated_fraction < 1.0
+    assert m.peak_input == pytest.approx(rig.torque_limit, rel=1e-9)
     assert m.slack_fraction == 0.0  # antagonistic motors keep the pretension
     # 0.5 Nm on the link needs 31 N of force difference: one tendon (20 N pretension) goes slack
     loop = closed_loop(joint_rig(backend="symbolic"), impedance_controller(joint_rig(), mode="two-time-scale"),
