@@ -47,7 +47,7 @@ class SimpleRig:
         return ctx
 
 
-def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible_joint"):
+def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible-joint"):
     A, B, E = flexible_joint_matrices(k=k, m=m)
     builder = DiagramBuilder()
     sys = builder.AddNamedSystem("plant", LinearSystem(A, np.hstack([B, E]), np.eye(4), np.zeros((4, 2))))

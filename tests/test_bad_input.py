@@ -274,3 +274,27 @@ def test_simulate_start_after_end_raises_not_exits():
     rig = flexible_joint_rig()
     with pytest.raises(ValueError, match="must be after the start time"):
         simulate(rig.diagram, rig.context(), 0.1, t_start=0.5)
+
+
+def test_every_option_has_help_and_no_raw_rst():
+    """CLI: every option and positional of every command has help text; no RST markup in help."""
+    import argparse
+
+    from awiwi_drake.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    missing = []
+    for name, p in sub.choices.items():
+        text = p.format_help()
+        assert "``" not in text and ":func:" not in text and ":class:" not in text, f"{name}: raw RST in help"
+        for a in p._actions:
+            if isinstance(a, argparse._HelpAction):
+                continue
+            if not (a.help or "").strip():
+                missing.append(f"{name} {'/'.join(a.option_strings) or a.dest}")
+        for a in p._actions:  # required options are listed under a "required" heading
+            if a.required and a.option_strings:
+                group = next(g for g in p._action_groups if a in g._group_actions)
+                assert "required" in (group.title or ""), f"{name} {a.option_strings[0]} required but not shown so"
+    assert not missing, "options without help: " + ", ".join(missing)

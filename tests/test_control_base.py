@@ -190,7 +190,7 @@ def test_disturbance_stiffness_matches_closed_form():
     """Stiffness from the simulated torque step = tau / q_ss from (A - BK) x + E tau = 0."""
     kp, kd = 0.5, 0.01
     loop = closed_loop(linear_flexible_joint_rig(), StaticLawController(_Pd(kp, kd)), rate_hz=None)
-    p = compare_test_params("flexible_joint", step_duration=1.5, settle_time=0.0)
+    p = compare_test_params("flexible-joint", step_duration=1.5, settle_time=0.0)
     _, m = run_test(loop, "disturbance", params=p)
     A, B, E = flexible_joint_matrices()
     K = np.array([[kp, 0, 0, kd]])
@@ -207,9 +207,21 @@ def test_registry_errors_and_names():
     with pytest.raises(ValueError, match="does not fit rig 'flexible-joint'"):
         get_entry("tendon-pd", "flexible-joint")
     with pytest.raises(ValueError, match="already registered"):
-        register_controller("lqr", lambda rig: None, rigs=("joint_rig",), description="dup")
+        register_controller("lqr", lambda rig: None, rigs=("joint-rig",), description="dup")
     with pytest.raises(ValueError, match="unknown rig"):
         controller_names("gripper")
+    for alias in ("joint", "joint_rig", "antagonistic_joint", "flexible"):     # one spelling per rig
+        with pytest.raises(ValueError, match="unknown rig"):
+            controller_names(alias)
+
+
+def test_each_rig_has_one_name_in_api_cli_and_registry():
+    from awiwi_drake.control.registry import RIG_NAMES, rig_kind
+    from awiwi_drake.diagrams import TARGETS, build_target
+    assert sorted(TARGETS) == sorted(RIG_NAMES)
+    for name in ("tendon-rig", "flexible-joint", "joint-rig", "finger-index"):
+        rig = build_target(name)
+        assert rig.name == name and rig_kind(rig) == ("finger" if name.startswith("finger") else name)
 
 
 def test_continuous_loop_on_fused_backend_gives_clear_error():
@@ -225,7 +237,9 @@ def test_saturation_and_slack_are_reported():
     rig = joint_rig(backend="symbolic")
     loop = closed_loop(rig, impedance_controller(rig, mode="pd"), rate_hz=3000.0)
     _, m = run_test(loop, "step", params=compare_test_params(rig, step_size=1.0, step_duration=0.1, settle_time=0.0))
-    assert m.peak_input > rig.torque_limit and 0.1 < m.saturated_fraction < 1.0
+    # the command exceeds the amplifier limit; the torque applied to the motors is clipped at it
+    assert m.peak_command > rig.torque_limit and 0.1 < m.saturated_fraction < 1.0
+    assert m.peak_input == pytest.approx(rig.torque_limit, rel=1e-9)
     assert m.slack_fraction == 0.0  # antagonistic motors keep the pretension
     # 0.5 Nm on the link needs 31 N of force difference: one tendon (20 N pretension) goes slack
     loop = closed_loop(joint_rig(backend="symbolic"), impedance_controller(joint_rig(), mode="two-time-scale"),
@@ -242,7 +256,7 @@ def test_failed_runs_are_flagged_in_csv_and_markdown(tmp_path):
     import warnings
     from awiwi_drake.control.compare import compare_controllers
     from awiwi_drake.rigs import joint_rig
-    p = compare_test_params("joint_rig", step_duration=0.15, settle_time=0.05)
+    p = compare_test_params("joint-rig", step_duration=0.15, settle_time=0.05)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the place_poles convergence warning is handled, not leaked
         res = compare_controllers(lambda: joint_rig(backend="symbolic"), ["pole-placement"],

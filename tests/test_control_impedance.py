@@ -120,7 +120,7 @@ def test_fig_11_2_and_11_3_in_the_gain_diagram():
     from awiwi_drake.reproductions.ch11_impedance import impedance_sweep
 
     def peak(kp, k):
-        return impedance_sweep("two-time-scale", joint_stiffness=kp, rig="flexible_joint", stiffness=k,
+        return impedance_sweep("two-time-scale", joint_stiffness=kp, rig="flexible-joint", stiffness=k,
                                f_start=5.0, f_stop=50.0, duration=1.5)["peak_gain"]
     assert peak(1.2, 0.605) > peak(0.3, 0.605) + 0.2
     assert peak(1.2, 0.43) > peak(1.2, 1.15) + 0.5

@@ -176,3 +176,15 @@ def test_optimal_backstepping_on_the_antagonistic_joint_rig():
     assert free.distance < 0.5 * fit.distance and free.gains.k3 > 5e3
     assert sampled_radius(free.gains) > 1.0
     assert "optimal-backstepping" in controller_names("joint-rig")
+
+
+def test_fig_16_3_table_16_2_weights_collapse_the_gains_and_a_reachable_R_gives_steps():
+    """Table 16.2 (= Table 16.1, R = 0.1): Algorithm 3's gains collapse (the target is below the
+    structural floor) and a 1 rad step moves the link by < 5 % in 0.3 s, unlike Fig 16.3; with the
+    reachable R = 1e-3 every sampled gain set moves the link past half the step in 0.3 s."""
+    from awiwi_drake.reproductions.ch16_optimal_backstepping import fig_16_3_gain_samples
+    printed = fig_16_3_gain_samples(runs=2, samples=300, t_final=0.3, num=31)
+    assert np.all(np.abs(printed["q"][:, -1]) < 0.05)
+    assert np.all(printed["distance"] > 5.0)                 # the structural floor (REPRODUCTIONS ch. 16)
+    reach = fig_16_3_gain_samples(runs=2, samples=300, r_weight=1e-3, t_final=0.3, num=31)
+    assert np.all(reach["q"][:, -1] > 0.5) and np.all(reach["q"] < 1.2)

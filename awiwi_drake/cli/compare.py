@@ -60,6 +60,29 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _short_params(params, rig_fn, kw, names, rig_name):
+    """Shortened tests whose step window lets the compared loops settle (CompareShortMode)."""
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.compare import dominant_time_constant
+    from awiwi_drake.control.registry import get_entry
+    from awiwi_drake.parameters.cli import CompareShortMode
+
+    sm = CompareShortMode()
+    taus = []
+    for n in names:  # continuous loops on the python backend: Drake can linearise them
+        rig = rig_fn(**dict(kw, backend="python"))
+        entry = get_entry(n, rig_name)
+        loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": None, "delay": None})
+        taus.append(dominant_time_constant(loop, params))
+    if any(t is None for t in taus):  # a loop Drake cannot linearise: keep the full step window
+        step = params.step_duration
+    else:
+        step = min(params.step_duration, max(sm.min_step_duration, params.step_delay
+                                             + sm.step_time_constants * max(taus)))
+    return params.replace(step_duration=step, sweep_duration=min(params.sweep_duration, sm.sweep_duration),
+                          settle_time=min(params.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
+
+
 def _parse_list(text: str, what: str) -> list[str]:
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
@@ -102,9 +125,7 @@ def run(args) -> int:
     short = args.short or short_mode()
     params = compare_test_params(args.rig)
     if short:
-        params = params.replace(step_duration=min(params.step_duration, 0.15),
-                                sweep_duration=min(params.sweep_duration, 1.0),
-                                settle_time=min(params.settle_time, 0.1), sine_periods=2.0)
+        params = _short_params(params, rig_fn, kw, names, args.rig)
     opts = {}
     if args.rate is not None:
         opts["rate_hz"] = None if args.rate == 0 else args.rate
@@ -123,14 +144,16 @@ def run(args) -> int:
 
         result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance, **opts)
     result.table.to_csv(out / "metrics.csv")
-    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n" + result.table.to_markdown())
+    ref_unit = "N" if args.rig == "tendon-rig" else "rad"
+    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n"
+                                    + result.table.to_markdown(ref_unit=ref_unit))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     ylabel = "tendon force [N]" if args.rig == "tendon-rig" else "link angle [rad]"
     for test in dict.fromkeys(r.test for r in result.runs):
         if test == "sweep":
-            fig, _ = plot_gain_diagram(result)
+            fig, _ = plot_gain_diagram(result, unit=ref_unit)
             fig.savefig(out / "sweep_gain.png", dpi=110)
         else:
             fig, _ = plot_runs(result, test, ylabel=ylabel)

@@ -120,8 +120,11 @@ def _make_dataset(args) -> int:
 def register(subparsers) -> None:
     from . import add_parameter_options, positive_float
 
-    p = subparsers.add_parser("diagnose", help="find, name and add missing effects in a dataset",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "diagnose", help="find, name and add missing effects in a dataset",
+        description="Compare a measured dataset (NAME.csv + NAME.json) with the nominal model, localise the "
+                    "disagreement, name the missing effects from the catalog, fit and add them (progress on "
+                    "stderr, summary on stdout).")
     p.add_argument("dataset", help="NAME.csv (with NAME.json beside it)")
     p.add_argument("--report", metavar="DIR", help="write report.md, PNGs and summary.json into this folder")
     p.add_argument("--json", metavar="OUT.json", help="write the JSON summary to this file")

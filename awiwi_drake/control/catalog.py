@@ -9,7 +9,7 @@ import importlib
 
 from awiwi_drake.control.registry import register_controller
 
-_JOINTS = ("flexible_joint", "joint_rig")
+_JOINTS = ("flexible-joint", "joint-rig")
 _SAMPLED = {"rate_hz": 3000.0}
 
 
@@ -22,11 +22,11 @@ def _lazy(module: str, function: str, **kwargs):
 
 
 _BUILTIN = [
-    ("tendon-pd", _lazy("tendon_force", "tendon_pd_controller"), ("tendon_rig",),
+    ("tendon-pd", _lazy("tendon_force", "tendon_pd_controller"), ("tendon-rig",),
      "(10.2) PD + force/friction feed-forward, gains (10.11) fixed at 30 N"),
-    ("tendon-scheduled", _lazy("tendon_force", "tendon_scheduled_controller"), ("tendon_rig",),
+    ("tendon-scheduled", _lazy("tendon_force", "tendon_scheduled_controller"), ("tendon-rig",),
      "(10.2) with gains (10.11) scheduled on the reference force (10.12)"),
-    ("tendon-sdre", _lazy("sdre", "tendon_sdre_controller"), ("tendon_rig",),
+    ("tendon-sdre", _lazy("sdre", "tendon_sdre_controller"), ("tendon-rig",),
      "SDRE tendon force control (14.7)-(14.9), Table 14.1, gains at 200 Hz"),
     ("pd", _lazy("impedance", "impedance_controller", mode="pd"), _JOINTS,
      "PD on the motor angles towards the link reference (baseline)"),

@@ -113,13 +113,13 @@ def transmission(rig: Any) -> Transmission:
     """The :class:`Transmission` of a flexible-joint or joint rig (from its parameters)."""
     kind = rig_kind(rig)
     p = rig.params
-    if kind == "flexible_joint":
+    if kind == "flexible-joint":
         # the rig's motor: no (3.8) friction, linear damping d_theta (12.8); nothing to compensate
         motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                             saturation=False)
         return Transmission(np.array([1.0]), 1.0, np.array([0.0]), motor, False, 0.05 * p.stiffness,
                             p.link_inertia, p.link_damping)
-    if kind == "joint_rig":
+    if kind == "joint-rig":
         rq = p.link_pulley_radius
         k_pre = float(np.ravel(rig.operating_point().tendon_stiffness)[0])
         # floor: 5 % of the stiffness at pretension (chosen: keeps the laws finite when a tendon goes slack)

@@ -104,7 +104,7 @@ class PrintedJointFactorisation:
     """
 
     def __init__(self, rig: Any):
-        if getattr(rig, "name", None) != "flexible_joint_rig":
+        if getattr(rig, "name", None) != "flexible-joint":
             raise ValueError(f"sdre factorisation 'printed' (14.10) needs the flexible_joint_rig; rig "
                              f"{getattr(rig, 'name', '?')!r} is not a 4-state flexible joint (use 'jacobian')")
         p = rig.params

@@ -20,6 +20,7 @@ ch. 12 pole placement (Fig 12.3-12.4)          :mod:`.ch12_pole_placement`
 ch. 13 LQR (Fig 13.2-13.3)                     :mod:`.ch13_lqr`
 ch. 14 SDRE (Fig 14.3-14.5)                    :mod:`.ch14_sdre`
 ch. 15 backstepping (Fig 15.2-15.27)           :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`
+ch. 15 PIP of a finger (Fig 15.24-15.25)       :mod:`.ch15_pip_experiments`
 ch. 16 optimal backstepping gains (Tab 16.1)   :mod:`.ch16_optimal_backstepping`
 ``awiwi-drake demo`` (joint rig)               :mod:`.demo`
 invented parameters (figure sensitivity)      :mod:`.invented_parameters`

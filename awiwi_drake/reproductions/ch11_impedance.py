@@ -23,14 +23,14 @@ __all__ = ["impedance_step", "impedance_sweep", "impedance_frequency_response", 
 
 
 def _joint(kind: str, *, stiffness=None, pretension=None):
-    if kind == "flexible_joint":
+    if kind == "flexible-joint":
         p = FlexibleJointParams() if stiffness is None else FlexibleJointParams(stiffness=stiffness)
         return flexible_joint_rig(params=p, backend="symbolic")
     return joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
                      backend="symbolic")
 
 
-def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible_joint",
+def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
                    stiffness: float | None = None, pretension: float | None = None, step: float = 0.3,
                    t_final: float = 0.3) -> dict:
     """Fig 11.2-11.3: link step under impedance control (``stiffness``: mechanical k of the flexible joint)."""
@@ -46,7 +46,7 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
     return dict(t=log.t, link_angle=log["link_angle"][:, 0], reference=log["link_angle_reference"][:, 0], **m)
 
 
-def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint_rig",
+def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint-rig",
                     stiffness: float | None = None, pretension: float | None = None, f_start: float | None = None,
                     f_stop: float | None = None, duration: float | None = None,
                     amplitude: float | None = None) -> dict:
@@ -75,7 +75,7 @@ def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | No
 
 
 def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffness: float | None = None,
-                                 rig: str = "joint_rig", stiffness: float | None = None,
+                                 rig: str = "joint-rig", stiffness: float | None = None,
                                  pretension: float | None = None, freqs: Sequence[float] | None = None) -> dict:
     """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize`` (python backend).
 
@@ -85,7 +85,7 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     sp = ImpedanceSweepParams()
     joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
     freqs = np.linspace(0.5, 70.0, 700) if freqs is None else np.asarray(freqs, float)
-    if rig == "flexible_joint":
+    if rig == "flexible-joint":
         r = flexible_joint_rig(params=FlexibleJointParams() if stiffness is None else
                                FlexibleJointParams(stiffness=stiffness), backend="python")
     else:

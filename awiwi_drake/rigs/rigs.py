@@ -80,7 +80,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
     for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
-    diagram.set_name("tendon_rig")
+    diagram.set_name("tendon-rig")
     names = state_names(motors=1, hysteresis=drive.hysteresis)
 
     def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
@@ -96,7 +96,7 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
         return OperatingPoint(np.array(state), np.array([u]), None, tendon_force=np.array([tendon_force]),
                               elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
-    return Rig("tendon_rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
+    return Rig("tendon-rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
                tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
 
 
@@ -186,7 +186,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                         saturation=finite_limit, torque_limit=p.torque_limit if finite_limit else 1.0)
     diagram, plant, drive, names = _link_rig(
-        name="flexible_joint_rig", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
+        name="flexible-joint", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
         inertia=p.link_inertia, damping=p.link_damping, backend=backend,
         hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
         motor_pulley_radius=1.0)
@@ -202,7 +202,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
                               joint_angle=np.array([link_angle]), spring_torque=tau_s,
                               joint_stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0]))
 
-    return Rig("flexible_joint_rig", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
+    return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
                spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
                pair_slack=(law.x0, law.r) if spring == "nonlinear" else None)
 
@@ -226,7 +226,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     spring = tendon_spring(p.spring)
     coupling = antagonistic_coupling(p.link_pulley_radius)
     diagram, plant, drive, names = _link_rig(
-        name="joint_rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
+        name="joint-rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
         damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis)
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
 
@@ -250,7 +250,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                               joint_angle=np.array([link_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
                               joint_stiffness=float(rq ** 2 * k.sum()))
 
-    return Rig("joint_rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
+    return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
 
 
@@ -266,10 +266,10 @@ def motor_rig(motor: MotorParams | None = None) -> Rig:
     for nm in ("state", "motor_angle", "motor_velocity", "applied_torque"):
         b.ExportOutput(bank.GetOutputPort(nm), nm)
     d = b.Build()
-    d.set_name("motor_rig")
+    d.set_name("motor-rig")
 
     def equilibrium(motor_velocity: float = 0.0) -> OperatingPoint:
         w = float(motor_velocity)
         return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
 
-    return Rig("motor_rig", d, p, state_names(motors=1), "python", equilibrium)
+    return Rig("motor-rig", d, p, state_names(motors=1), "python", equilibrium)
