@@ -221,6 +221,11 @@ CLI_CASES = [
     ("linearize-config-bad-value", lambda t, d: ["linearize", "joint-rig", "--config",
                                                  str((t / "c.yaml").write_text("pretension: -5") and t / "c.yaml")],
      2, "JointRigParams.pretension = -5.0 is out of range"),
+    ("demo-config-bad-value", lambda t, d: ["demo", "--out", str(t), "--config",
+                                            str((t / "s.yaml").write_text("link_step: 9") and t / "s.yaml")], 2,
+     "DemoScenario.link_step = 9.0 is out of range"),
+    ("demo-set-unknown", lambda t, d: ["demo", "--out", str(t), "--set", "nope=1"], 2,
+     "unknown parameter 'nope' for DemoScenario"),
     ("lqr-missing-q", lambda t, d: ["lqr", "joint-rig", "--r", "1,1"], 2, "--q"),
     ("unknown-command", lambda t, d: ["simulate-everything"], 2, "invalid choice"),
 ]

@@ -12,7 +12,6 @@ from pydrake.symbolic import Expression, Variable
 from _fd import fd_jacobian
 from awiwi_drake.hand.wrist import (
     TENDON_FINGERS,
-    WristCoupling,
     wrist_compensation,
     wrist_constraint_errors,
     wrist_jacobian,
@@ -21,6 +20,7 @@ from awiwi_drake.hand.wrist import (
     wrist_tendon_offsets,
 )
 from awiwi_drake.reproductions.ch06_wrist import wrist_motion_study
+from awiwi_drake.hand.coupling import WristCoupling
 from awiwi_drake.parameters.wrist import TABLE_6_2_FOREARM, TABLE_6_2_PALM, WristParams
 
 P = WristParams()

@@ -96,7 +96,7 @@ def test_in_a_diagram_with_custom_params():
 def test_wrist_coupling_in_the_generic_tendon_routing():
     """WristCoupling plugs into TendonRouting_: tau = -P^T f, converts to AutoDiffXd."""
     from awiwi_drake.components.routing import TendonRouting
-    from awiwi_drake.hand.wrist import WristCoupling
+    from awiwi_drake.hand.coupling import WristCoupling
 
     cp = WristCoupling()
     routing = TendonRouting(cp, motor_pulley_radius=R_M)

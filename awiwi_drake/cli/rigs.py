@@ -32,6 +32,8 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
                    help="tendon-drive backend: compiled (default: one system with a numba kernel generated from "
                         "the laws), python (separate TemplateSystems) or symbolic (one C++ SymbolicVectorSystem)")
+    add_parameter_options(p, what="the DemoScenario (pretension ramp f_start -> f_end over ramp_time, link_step at "
+                                  "step_time, t_final)", example="e.g. 'link_step: 0.2'")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("export-diagrams", help="write the rig diagram graphs (.dot, and .svg/.png with Graphviz)")
@@ -203,8 +205,13 @@ def _demo(args) -> int:
     from awiwi_drake.export import export_diagram
     from awiwi_drake.reproductions.demo import run_demo
 
+    from awiwi_drake.config import short_mode
+    from awiwi_drake.parameters.rigs import DemoScenario
+
     out = output_dir(args.out)
-    report, graphs = run_demo(out, backend=args.backend)
+    default = DemoScenario(t_final=1.0) if short_mode() else DemoScenario()
+    scenario = load_parameters(default, args)
+    report, graphs = run_demo(out, backend=args.backend, scenario=scenario)
     for stem, diagram in graphs.items():
         export_diagram(diagram, out, stem, max_depth=1, quiet=True)
     print(report)

@@ -105,7 +105,7 @@ class HandRig(Rig):
         period = 1.0 / p.rate_hz if period is None else max(float(period), 1.0 / p.rate_hz)
         return link_state_estimator(self.coupling, self.params.motor.pulley_radius, self.offsets,
                                     period=period, wrist=self.diagram.HasInputPort("wrist_angle"),
-                                    iterations=p.iterations, step0=p.initial_step,
+                                    iterations=p.iterations, step0=p.initial_step, refine=p.gauss_newton_refinement,
                                     velocity_time_constant=max(p.velocity_time_constant, period))
 
     def joint_angles_of(self, state) -> np.ndarray:

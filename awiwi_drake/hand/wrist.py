@@ -1,4 +1,7 @@
-"""Wrist of the Awiwi hand (thesis ch. 6): kinematics, tendon lengths, the wrist coupling object.
+"""Wrist of the Awiwi hand (thesis ch. 6): kinematics and tendon lengths, generic in the scalar type.
+
+The wrist's coupling object (``h(q)``, ``P(q)`` for the routing) is
+:class:`awiwi_drake.hand.coupling.WristCoupling`.
 
 The wrist's systems (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`,
 :class:`~awiwi_drake.hand.systems.WristCompensation_`) are in :mod:`awiwi_drake.hand.systems`;
@@ -102,7 +105,6 @@ __all__ = [
     "wrist_tendon_offsets",
     "wrist_jacobian",
     "wrist_lengths_and_jacobian",
-    "WristCoupling",
     "wrist_compensation",
     "wrist_params",
     "check_motor_pulley_radius",
@@ -423,57 +425,6 @@ def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
     in the scalar type (see :func:`wrist_lengths_and_jacobian`).
     """
     return wrist_lengths_and_jacobian(q71, q73, params)[1]
-
-
-class WristCoupling:
-    """The wrist as a routing coupling object: ``h(q)`` (38,) and ``P(q)`` (38 x 2).
-
-    ``q = [q71, q73]`` [rad]; ``h`` are the absolute tendon path lengths
-    through the wrist (6.9) and ``P = dh/dq``, both generic in the scalar type
-    so :class:`TendonRouting_` (``-P^T f`` on the wrist joints) converts to
-    AutoDiffXd.  Rows follow Table 6.2 (tendon 1..38).
-
-    Parameters
-    ----------
-    params : WristParams, optional
-    """
-
-    num_joints = 2
-
-    def __init__(self, params: WristParams | None = None):
-        self.params = wrist_params(params)
-        self.num_tendons = self.params.num_tendons
-
-    def _split(self, q):
-        q = np.asarray(q) if not isinstance(q, np.ndarray) else q
-        if q.shape != (2,):
-            raise ValueError(f"wrist joint vector q must have 2 entries [q71, q73], got shape {q.shape}")
-        return q[0], q[1]
-
-    def h(self, q) -> np.ndarray:
-        """Tendon path lengths through the wrist [m]."""
-        return wrist_tendon_lengths(*self._split(q), self.params)
-
-    def P(self, q) -> np.ndarray:
-        """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
-        return wrist_jacobian(*self._split(q), self.params)
-
-    def dPT_f_dq(self, q, f) -> np.ndarray:
-        """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
-
-        The geometric stiffness of the wrist joints due to the tendon forces
-        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + dPT_f_dq``).  Exact:
-        forward-mode tangents nested over the scalar type.
-        """
-        q71, q73 = self._split(q)
-        f = np.asarray(f)
-        if f.shape != (self.num_tendons,):
-            raise ValueError(f"tendon force f must have {self.num_tendons} entries, got shape {f.shape}")
-        unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
-        P = wrist_jacobian(Tangent(q71, unit[0]), Tangent(q73, unit[1]), self.params)
-        scalar = is_float(q71) and is_float(q73) and is_float(f)
-        dP = np.array([[e.d for e in row] for row in P], dtype=float if scalar else object)  # (m, 2, 2)
-        return np.tensordot(f, dP, axes=(0, 0))
 
 
 def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:

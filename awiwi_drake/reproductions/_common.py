@@ -5,8 +5,9 @@ from __future__ import annotations
 from typing import Sequence
 
 from awiwi_drake.analysis import Samples
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 
-RATE = 3000.0  # thesis ch. 1: the hand's 3 kHz control rate [Hz]
+RATE = CONTROL_RATE_HZ
 DT = 1.0 / RATE
 
 

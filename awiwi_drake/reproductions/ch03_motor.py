@@ -29,7 +29,7 @@ from awiwi_drake.components import atan_friction, motor_friction_torque
 from awiwi_drake.control.base import StaticLawController, closed_loop
 from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
 from awiwi_drake.parameters.components import MotorParams
-from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleCompensationParams
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificationParams, RippleCompensationParams
 from awiwi_drake.plotting import figure_axes
 from awiwi_drake.rigs import motor_rig
 
@@ -41,7 +41,7 @@ __all__ = ["constant_velocity_run", "FrictionData", "FrictionFit", "friction_ide
 
 def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,
                           theta0: float = 0.0, friction_scale: float = 0.0, ripple: RippleEstimate | None = None,
-                          rate_hz: float = 3000.0, start_at_rest: bool = False) -> dict[str, np.ndarray]:
+                          rate_hz: float = CONTROL_RATE_HZ, start_at_rest: bool = False) -> dict[str, np.ndarray]:
     """The motor following ``theta0 + speed t`` under a sampled PD (one row per control period).
 
     ``start_at_rest``: the motor starts at rest with zero torque in the hold buffer (an experiment that

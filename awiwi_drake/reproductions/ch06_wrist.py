@@ -22,9 +22,10 @@ from awiwi_drake.hand.wrist import (TENDON_FINGERS, wrist_constraint_errors, wri
                                     wrist_tendon_offsets)
 from awiwi_drake.parameters.hand import JointControllerParams
 from awiwi_drake.parameters.wrist import WristParams
+from awiwi_drake.plotting import figure_axes
 
 __all__ = ["WristMotionResult", "wrist_motion_study", "plot_wrist_displacements", "plot_wrist_constraint_errors",
-           "FINGER_COLORS", "WristCompensationStudy", "wrist_compensation_study"]
+           "FINGER_COLORS", "WristCompensationStudy", "wrist_compensation_study", "plot_wrist_compensation"]
 
 
 @dataclass
@@ -273,3 +274,22 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "compiled"
                                   drift[True], list(rig.joint_names),
                                   {"uncompensated": fmin[False], "compensated": fmin[True]},
                                   {"uncompensated": events[False], "compensated": events[True]})
+
+
+def plot_wrist_compensation(study, ax=None):
+    """Finger joint drift during a wrist abduction sweep, without and with compensation."""
+    if ax is None:
+        fig, ax = figure_axes(None, ncols=2, figsize=(10, 3.5), sharey=True)
+    else:
+        fig = np.ravel(ax)[0].figure
+    for a, drift, title in ((ax[0], study.drift_uncompensated, "uncompensated"),
+                            (ax[1], study.drift_compensated, "with wrist feedforward")):
+        for j, name in enumerate(study.joint_names):
+            if np.max(np.abs(drift[:, j])) > 1e-6:
+                a.plot(study.t, drift[:, j], label=name)
+        a.set_title(title, fontsize=9)
+        a.set_xlabel("time [s]")
+        a.grid(True, alpha=0.3)
+    ax[0].set_ylabel("q - q_ref [rad]")
+    ax[0].legend(fontsize=7, ncol=2)
+    return fig, ax

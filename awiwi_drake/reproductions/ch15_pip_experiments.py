@@ -28,9 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
+
 __all__ = ["PipRun", "pip_parameters", "pip_experiment", "pip_metrics"]
 
-RATE_HZ = 3000.0
+RATE_HZ = CONTROL_RATE_HZ
 
 
 @dataclass
@@ -95,11 +97,9 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
                    dt: float = 1.0 / RATE_HZ) -> PipRun:
     """Run one controller on one test (see the module docstring); ``friction=False`` removes the
     stick-slip friction (to show what it costs)."""
-    from pydrake.systems.framework import DiagramBuilder
-
     from awiwi_drake.analysis import PerEntry, simulate
     from awiwi_drake.control.base import closed_loop
-    from awiwi_drake.control.friction_observer import LinkFriction
+    from awiwi_drake.control.friction_observer import with_link_friction
     from awiwi_drake.rigs import joint_rig
     ref, t_end, pretension = _reference(test)
     t_end = t_end if t_final is None else float(t_final)
@@ -110,17 +110,8 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     op = rig.operating_point(pretension=pretension, link_angle=q0)
     loop_ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                    references={"link_angle_reference": q0})   # before embedding
-    b = DiagramBuilder()
-    cl = b.AddNamedSystem("loop", loop.diagram)
     fp = _friction_params() if friction else _friction_params().replace(coulomb=0.0, static=0.0, viscous=0.0)
-    fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
-    b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
-    for name in ("link_angle", "applied_torque", "tendon_force"):
-        b.ExportOutput(cl.GetOutputPort(name), name)
-    b.ExportOutput(fr.get_output_port(), "friction")
-    diagram = b.Build()
+    diagram, cl, fr = with_link_friction(loop.diagram, fp)
     ctx = diagram.CreateDefaultContext()
     # copy the loop's initialised state (rig at the operating point, hold buffers, controller states)
     cl_ctx = cl.GetMyMutableContextFromRoot(ctx)
@@ -132,10 +123,10 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     size = diagram.GetInputPort("link_angle_reference").size()
     # error control (steps near 0.1 ms): the stick-slip friction is stiff for a fixed 3 kHz step
     res = simulate(diagram, ctx, t_end, inputs={"link_angle_reference": PerEntry(ref.entries[:size])},
-                   log=("link_angle", "link_angle_reference", "applied_torque", "friction", "tendon_force"),
+                   log=("link_angle", "link_angle_reference", "applied_torque", "link_friction", "tendon_force"),
                    log_period=dt, mode="error_controlled", max_step=1e-4, accuracy=1e-6)
     return PipRun(controller, test, res.t, res["link_angle"][:, 0], res["link_angle_reference"][:, 0],
-                  res["applied_torque"], res["friction"][:, 0], res["tendon_force"])
+                  res["applied_torque"], res["link_friction"][:, 0], res["tendon_force"])
 
 
 def pip_metrics(run: PipRun) -> dict:

@@ -10,6 +10,7 @@ from awiwi_drake.analysis import linearize, rig_monitors, simulate
 from awiwi_drake.components.spring import LeverSpringMechanism
 from awiwi_drake.config import short_mode
 from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 from awiwi_drake.parameters.rigs import DemoScenario
 from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
 from awiwi_drake.rigs.rigs import joint_rig
@@ -67,8 +68,11 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     return fig
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
+def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScenario | None = None):
     """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
+
+    ``scenario`` (default: :class:`DemoScenario`, 1 s long in short mode) sets the
+    pretension ramp and the link step; ``awiwi-drake demo --config FILE.yaml`` reads it.
 
     The caller (``awiwi-drake demo``) writes the returned diagrams' graphs with
     :func:`awiwi_drake.export.export_diagram` (export sits above this layer).
@@ -81,14 +85,15 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rig = joint_rig(backend=backend)
-    scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
+    if scenario is None:
+        scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
     loop = joint_rig_position_loop(rig, scenario)
     t_ref, refs = demo_references(rig, scenario)
     diagram = loop.diagram
     ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final,
                       log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
-                      monitors=rig_monitors(rig), max_step=1.0 / 3000)
+                      monitors=rig_monitors(rig), max_step=1.0 / CONTROL_RATE_HZ)
     fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.torque_limit)
     fig.savefig(out / "demo_joint_rig.png", dpi=110, bbox_inches="tight")
     plt.close(fig)

@@ -180,7 +180,7 @@ def _thumb_stiffness(x: _Inputs) -> float:
 
 def _fig5_17(x: _Inputs) -> float:
     from awiwi_drake.hand.coupling import ThumbCoupling
-    from awiwi_drake.hand.estimation import thumb_estimation_study
+    from awiwi_drake.reproductions.ch05_fingers import thumb_estimation_study
     e = thumb_estimation_study(ThumbCoupling(x.thumb), iterations=(30,), noise=(0.0,), starts=("cold",))
     return float(np.max(e.errors[(30, 0.0, "cold")]))
 

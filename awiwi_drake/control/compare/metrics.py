@@ -19,6 +19,7 @@ class Metrics:
 
     controller: str
     test: str
+    joint: str = ""                      # joint (DoF) of a finger/hand row; "link" / "tendon" on the 1-DoF rigs
     rise_time: float = math.nan          # s, 10-90 % of the step
     overshoot: float = math.nan          # % of the step size
     settling_time: float = math.nan      # s, band CompareTestParams.settling_band (2 %; 5 % on the tendon rig)
@@ -42,7 +43,7 @@ class Metrics:
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
 
 
-NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "status", "flags")]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "status", "flags")]
 
 
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
@@ -58,16 +59,22 @@ class MetricsTable:
 
     rows: list[Metrics] = field(default_factory=list)
 
-    def get(self, controller: str, test: str) -> Metrics:
+    def get(self, controller: str, test: str, joint: str | None = None) -> Metrics:
         for r in self.rows:
-            if r.controller == controller and r.test == test:
+            if r.controller == controller and r.test == test and (joint is None or r.joint == joint):
                 return r
-        raise KeyError(f"no metrics for controller {controller!r} and test {test!r}")
+        raise KeyError(f"no metrics for controller {controller!r}, test {test!r}"
+                       + (f", joint {joint!r}" if joint is not None else ""))
 
-    def column(self, name: str, test: str) -> dict[str, float]:
+    def column(self, name: str, test: str, joint: str | None = None) -> dict[str, float]:
         if name not in NUMERIC:
             raise ValueError(f"unknown metric {name!r}; known: {', '.join(NUMERIC)}")
-        return {r.controller: getattr(r, name) for r in self.rows if r.test == test}
+        return {r.controller: getattr(r, name) for r in self.rows
+                if r.test == test and (joint is None or r.joint == joint)}
+
+    def joints(self) -> list[str]:
+        """The joints of the rows, in order of appearance."""
+        return list(dict.fromkeys(r.joint for r in self.rows))
 
     def to_csv(self, path: str | Path) -> Path:
         path = Path(path)
@@ -92,11 +99,11 @@ class MetricsTable:
             rows = [r for r in self.rows if r.test == test]
             cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | " + " | ".join(f"{c} [{unit(c)}]" for c in cols) + " | status |")
-            lines.append("|---" * (len(cols) + 2) + "|")
+            lines.append("| controller | joint | " + " | ".join(f"{c} [{unit(c)}]" for c in cols) + " | status |")
+            lines.append("|---" * (len(cols) + 3) + "|")
             for r in rows:
                 status = f"{r.status}: {r.flags}" if r.flags else r.status
-                lines.append(f"| {r.controller} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
+                lines.append(f"| {r.controller} | {r.joint} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
                              + f" | {status} |")
             lines.append("")
         return "\n".join(lines)

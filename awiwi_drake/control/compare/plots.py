@@ -7,7 +7,7 @@ import math
 from awiwi_drake.control.compare.metrics import UNITS, MetricsTable
 from awiwi_drake.control.compare.standard_tests import Comparison
 
-__all__ = ["plot_runs", "plot_gain_diagram", "plot_metric"]
+__all__ = ["plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric"]
 
 
 def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: str | None = None):
@@ -26,6 +26,31 @@ def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: st
     ax.legend()
     ax.grid(True, alpha=0.3)
     return fig, ax
+
+
+def plot_joint_runs(comparison: Comparison, test: str, finger: str):
+    """One finger of a finger/hand comparison: a panel per joint (DoF), output of every controller
+    (solid) and reference (dashed), relative to the operating point."""
+    import matplotlib.pyplot as plt
+    runs = [r for r in comparison.runs if r.test == test and "joints" in r.meta]
+    if not runs:
+        raise ValueError(f"plot_joint_runs: no finger/hand runs for test {test!r}")
+    cols = [j for j, f in enumerate(runs[0].meta["fingers"]) if f == finger]
+    if not cols:
+        raise ValueError(f"plot_joint_runs: no joints of finger {finger!r} "
+                         f"(fingers: {', '.join(dict.fromkeys(runs[0].meta['fingers']))})")
+    fig, axes = plt.subplots(len(cols), 1, figsize=(7, 1.9 * len(cols) + 0.8), sharex=True, squeeze=False)
+    for ax, j in zip(axes[:, 0], cols):
+        for r in runs:
+            ax.plot(r.t, r.output[:, j], label=r.controller)
+        ax.plot(runs[0].t, runs[0].reference[:, j], "k--", lw=1, label="reference")
+        ax.set_ylabel(f"{runs[0].meta['joints'][j]} [rad]")
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].set_title(f"{comparison.rig}, {finger}: {test} (joint angle - operating point)")
+    axes[0, 0].legend(fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    return fig, axes
 
 
 def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = None):

@@ -33,6 +33,19 @@ class TestRun:
     meta: dict = field(default_factory=dict)
 
 
+def applied_port(loop: ClosedLoop) -> str:
+    """The torque the motors receive: the rig's ``applied_torque`` (after its amplifier limit) when it has one."""
+    return "applied_torque" if loop.diagram.HasOutputPort("applied_torque") else "motor_torque"
+
+
+def torque_limit(loop: ClosedLoop, size: int):
+    """The command limit [Nm] per motor: the loop's ``saturation`` or the rig's amplifier limit (None: none)."""
+    limit = loop.saturation
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(size, float(loop.rig.torque_limit))  # the rig's own amplifier limit
+    return limit
+
+
 def simulate_test(loop: ClosedLoop, context, t_final: float, dt: float, reference: Schedule,
                   disturbance: Schedule | None, max_step: float, controller: str, test: str,
                   meta: dict | None = None) -> TestRun:
@@ -79,8 +92,12 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: flo
             op = loop.rig.operating_point()
         state = np.asarray(op.state, dtype=float)
         motor_torque = op.motor_torque if motor_torque is None else motor_torque
-    ctx = loop.create_context(state=state, motor_torque=motor_torque,
-                              references={r: reference for r in loop.references})
+    refs = {r: reference for r in loop.references}
+    from awiwi_drake.control.compare.channels import joint_channels
+    ch = joint_channels(loop)
+    if ch is not None:   # finger/hand: the reference on every DoF, relative to the operating point
+        refs = {loop.references[0]: ch.S @ (ch.q0 + reference)}
+    ctx = loop.create_context(state=state, motor_torque=motor_torque, references=refs)
     if t_settle > 0:
         simulate(loop, ctx, t_settle, log=(), max_step=max_step, accuracy=1e-6)  # advances ctx
     ctx.SetTime(0.0)

@@ -25,17 +25,18 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from awiwi_drake.analysis import Chirp, Constant, SimulationDivergedError, Sine, Step
+from awiwi_drake.analysis import Chirp, Constant, PerEntry, SimulationDivergedError, Sine, Step, simulate
 from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, sine_metrics, step_metrics,
                                                  sweep_metrics)
-from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
+from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
+from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
 from awiwi_drake.control.registry import get_entry, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "flag_run", "run_standard_tests", "compare",
-           "dominant_time_constant",
+__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "run_standard_tests",
+           "compare", "dominant_time_constant",
            "compare_controllers"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -48,6 +49,12 @@ def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
         base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
                                  sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
                                  sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
+    elif kind in ("finger", "hand"):
+        # per DoF, relative to the operating point [rad]; chosen: a 0.2 rad (11 deg) step (Fig 15.24 steps the
+        # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the 0.5 Nm/rad impedance of Fig 15.22), 0.3 s covers the
+        # cascade's settling (joint loop at 60 rad/s); no sweep by default (Fig 15.26 is the joint rig's)
+        base = CompareTestParams(step_size=0.2, step_duration=0.3, sine_amplitude=0.1, sine_frequency=2.0,
+                                 sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01)
     else:
         base = CompareTestParams()
     return base.replace(**overrides) if overrides else base
@@ -140,7 +147,7 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         t_final = T
         meta.update(f_low=f0, f_high=f1)
     run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
-    m = Metrics(controller, test)
+    m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
     u = np.abs(run.command)
     m.peak_command = float(np.max(u))
     m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
@@ -174,6 +181,110 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     return run, m
 
 
+def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
+                   params: CompareTestParams | None = None, settled=None) -> tuple[TestRun, list[Metrics]]:
+    """One standard test on a finger/hand loop: every DoF at once, one :class:`Metrics` row per DoF.
+
+    ``step``/``sine``/``sweep``: the same reference change on every DoF (relative to the operating
+    point) in one simulation: the rows include the interaction of a finger's joints moving together.
+    ``disturbance``: ``disturbance_torque`` on the k-th joint of every finger at once (one
+    simulation per k; the other joints of the finger are held by the controller only), stiffness
+    ``dtau / dq`` of the loaded joint.  Peak input and saturation are per finger (its motors).
+    """
+    if test not in TESTS:
+        raise ValueError(f"unknown test {test!r}; known: {', '.join(TESTS)}")
+    ch = joint_channels(loop)
+    if ch is None:
+        raise ValueError("run_joint_test: the loop does not track the joint angles of a finger/hand")
+    p = params or compare_test_params(loop.rig)
+    dt = _sample_dt(loop, p)
+    k = len(ch.names)
+    r0 = p.initial_reference
+    ref_port = loop.references[0]
+    base = settled if settled is not None else settle(loop, r0, t_settle=p.settle_time, max_step=p.max_step)
+    groups = ch.disturbance_groups() if test == "disturbance" else [list(range(k))]
+    n_ext = loop.diagram.GetInputPort("external_torque").size() if "external_torque" in loop.disturbances else 0
+    if test == "disturbance" and not n_ext:
+        raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
+                         f"{getattr(loop.rig, 'name', '?')!r} has none")
+    applied = applied_port(loop)
+    out_y = np.full((0, k), np.nan)
+    rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
+    meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
+    runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
+    for group in groups:
+        ctx = base.Clone()
+        ctx.SetTime(0.0)
+        if test == "step":
+            sched, t_final = Step(p.step_delay, r0 + p.step_size, before=r0), p.step_duration
+        elif test == "sine":
+            sched, t_final = Sine(p.sine_amplitude, p.sine_frequency, offset=r0), p.sine_periods / p.sine_frequency
+        elif test == "disturbance":
+            sched, t_final = Constant(r0), p.step_duration
+        else:
+            sched, t_final = Chirp(p.sweep_amplitude, p.sweep_start, p.sweep_stop, p.sweep_duration, offset=r0), \
+                p.sweep_duration
+            meta.update(f_low=p.sweep_start, f_high=p.sweep_stop)
+        inputs = {ref_port: joint_inputs(ch, [sched] * k)}
+        if n_ext:
+            ext = [Constant(0.0)] * n_ext
+            if test == "disturbance":
+                for j in group:
+                    ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, p.disturbance_torque)
+            inputs["external_torque"] = PerEntry(ext)
+        log = ["joint_angle", ref_port, "motor_torque_command", "state"]
+        if applied != "motor_torque_command":
+            log.append(applied)
+        if loop.diagram.HasOutputPort("tendon_force"):
+            log.append("tendon_force")
+        res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                       max_step=p.max_step, accuracy=1e-6)
+        t = res.t - res.t[0]
+        Sp = np.linalg.pinv(ch.S)
+        y = res["joint_angle"] @ Sp.T - ch.q0
+        r = res[ref_port] @ Sp.T - ch.q0
+        if runs_t is None:
+            runs_t, runs_r, runs_u, runs_a, runs_x = t, r, res["motor_torque_command"], res[applied], res["state"]
+            runs_y = y.copy()
+            runs_w = np.zeros((len(t), k))
+        for j in group:
+            runs_y[:, j] = y[:, j]
+            row = rows[j]
+            sl = ch.tendons[j]
+            u = np.abs(res["motor_torque_command"][:, sl])
+            row.peak_command = float(np.max(u))
+            row.peak_input = float(np.max(np.abs(res[applied][:, sl])))
+            limit = torque_limit(loop, res["motor_torque_command"].shape[1])
+            if limit is not None:
+                row.saturated_fraction = float(np.mean(np.any(u > limit[None, sl] * (1 + 1e-9), axis=1)))
+            if "tendon_force" in res:
+                row.slack_fraction = float(np.mean(np.any(res["tendon_force"][:, sl] <= 0.0, axis=1)))
+            if test == "step":
+                for k_, v in step_metrics(t, y[:, j], r0, r0 + p.step_size, p.step_delay, band=p.settling_band,
+                                          fit=True).items():
+                    setattr(row, k_, v)
+            elif test == "sine":
+                skip = t >= 1.0 / p.sine_frequency
+                for k_, v in sine_metrics(t[skip], r[skip, j], y[skip, j], p.sine_frequency).items():
+                    setattr(row, k_, v)
+            elif test == "disturbance":
+                pre = t < p.step_delay
+                tail = t >= t[-1] - 0.1 * t[-1]
+                dq = float(np.mean(y[tail, j]) - np.mean(y[pre, j]))
+                row.stiffness = p.disturbance_torque / dq if dq != 0 else math.inf
+                row.steady_state_error = float(r0 - np.mean(y[tail, j]))
+                runs_w[:, j] = np.where(t >= p.step_delay, p.disturbance_torque, 0.0)
+            else:
+                f, g = gain_diagram(t, r[:, j], y[:, j], p.sweep_start, p.sweep_stop)
+                meta.setdefault("freq", f)
+                meta.setdefault("gain_by_joint", {})[ch.names[j]] = g
+                for k_, v in sweep_metrics(f, g).items():
+                    setattr(row, k_, v)
+            flag_run(row, p)
+    meta["applied_torque"] = runs_a
+    return TestRun(controller, test, runs_t, runs_r, runs_y, runs_u, runs_w, runs_x, meta), rows
+
+
 def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
     """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
 
@@ -204,20 +315,28 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     ``progress(label)`` is called after each test (e.g. to advance a progress bar).
     """
     p = params or compare_test_params(loop.rig)
+    channels = joint_channels(loop)
     if tests is None:
-        tests = [t for t in TESTS if t != "disturbance" or "external_torque" in loop.disturbances]
+        tests = [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
+                 and (t != "sweep" or channels is None)]  # fingers/hand: step, sine, external-torque step
     settled = settle(loop, p.initial_reference, t_settle=p.settle_time, max_step=p.max_step)
     runs, rows = [], []
     for test in tests:
         try:
-            run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+            if channels is None:
+                run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+                ms = [m]
+            else:
+                run, ms = run_joint_test(loop, test, controller=controller, params=p, settled=settled)
         except SimulationDivergedError as exc:
-            rows.append(Metrics(controller, test, status=f"diverged: {exc}"))
+            names = channels.names if channels is not None else ["tendon" if loop.tracked_outputs[0] ==
+                                                                  "tendon_force" else "link"]
+            rows += [Metrics(controller, test, joint=nm, status=f"diverged: {exc}") for nm in names]
             if progress is not None:
                 progress(f"{controller}/{test}")
             continue
         runs.append(run)
-        rows.append(m)
+        rows += ms
         if progress is not None:
             progress(f"{controller}/{test}")
     return runs, rows
