@@ -303,3 +303,18 @@ def test_algorithm2_system_autodiff_carries_the_exact_torque_part():
     J = ExtractGradient(ad.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector())
     P = _index_P()
     np.testing.assert_allclose(J, -np.linalg.pinv(P.T), atol=1e-12)
+
+
+def test_algorithm2_warm_start_never_loses_what_it_had():
+    """Algorithm 2 warm-started at its previous forces (the in-loop use): the same request ends at a cost
+    no higher than before (accepted steps only lower it); a wrong-sized warm start is named."""
+    fd = finger_force_distribution("thumb", method="algorithm2")
+    q = np.array([0.2, -0.1, 0.1, 0.0])
+    tau = np.array([0.02, 0.01, -0.01, 0.005])
+    K = np.diag([3.0, 3.0, 2.0, 1.0])
+    first = fd.solve(tau, K, q=q)
+    again = fd.solve(tau, K, q=q, warm_start=first.forces)
+    assert again.status == "ok" and again.torque_error < 1e-12
+    assert again.cost <= first.cost + 1e-15
+    with pytest.raises(ValueError, match="warm_start"):
+        fd.solve(tau, K, q=q, warm_start=np.ones(3))

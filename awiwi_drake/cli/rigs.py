@@ -33,7 +33,7 @@ def register(sub) -> None:
                    help="tendon-drive backend: compiled (default: one system with a numba kernel generated from "
                         "the laws), python (separate TemplateSystems) or symbolic (one C++ SymbolicVectorSystem)")
     add_parameter_options(p, what="the DemoScenario (pretension ramp f_start -> f_end over ramp_time, link_step at "
-                                  "step_time, t_final)")
+                                  "step_time, t_final)", example="e.g. 'link_step: 0.2'")
     p.set_defaults(func=_demo)
 
     p = sub.add_parser("export-diagrams", help="write the rig diagram graphs (.dot, and .svg/.png with Graphviz)")

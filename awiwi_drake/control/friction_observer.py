@@ -30,7 +30,8 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 
-__all__ = ["observer_rate", "DisturbanceObserver_", "DisturbanceObserver", "LinkFriction_", "LinkFriction"]
+__all__ = ["observer_rate", "DisturbanceObserver_", "DisturbanceObserver", "LinkFriction_", "LinkFriction",
+           "with_link_friction"]
 
 
 def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
@@ -106,5 +107,19 @@ def LinkFriction_(T):
 
 
 LinkFriction = LinkFriction_[None]
+
+
+def with_link_friction(loop_diagram, params: LinkFrictionParams | None = None):
+    """``(diagram, loop_system, friction_system)``: a closed loop whose link gets the stick-slip friction
+    of :class:`LinkFriction` on its ``external_torque`` input (feedback from ``link_velocity``); the
+    loop's ``link_angle_reference`` is exported under the same name."""
+    from pydrake.systems.framework import DiagramBuilder
+    b = DiagramBuilder()
+    cl = b.AddNamedSystem("loop", loop_diagram)
+    fr = b.AddNamedSystem("link_friction", LinkFriction(params))
+    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
+    b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
+    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
+    return b.Build(), cl, fr
 
 

@@ -9,11 +9,10 @@ import math
 
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-from pydrake.systems.framework import DiagramBuilder
 
 from awiwi_drake.control.backstepping import impedance_controller
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.friction_observer import LinkFriction
+from awiwi_drake.control.friction_observer import with_link_friction
 from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 from awiwi_drake.parameters.rigs import JointRigParams
@@ -42,13 +41,7 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     ig = ImpedanceBacksteppingGains(stiffness=g.stiffness, damping=g.damping, k3=g.k3, k4=g.k4, observer_gain=obs.gain)
     ctrl = impedance_controller(rig, ig, pretension=g.pretension, reference_derivatives=4, compensate=compensate)
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    b = DiagramBuilder()
-    cl = b.AddNamedSystem("loop", loop.diagram)
-    fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
-    b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
-    diagram = b.Build()
+    diagram, cl, fr = with_link_friction(loop.diagram, fp)
     ctx = diagram.CreateDefaultContext()
     op = rig.operating_point(pretension=g.pretension)
     loop.diagram.GetSubsystemByName("rig").GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)

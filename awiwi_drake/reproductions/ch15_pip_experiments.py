@@ -99,10 +99,9 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     """Run one controller on one test (see the module docstring); ``friction=False`` removes the
     stick-slip friction (to show what it costs)."""
     from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-    from pydrake.systems.framework import DiagramBuilder
 
     from awiwi_drake.control.base import closed_loop
-    from awiwi_drake.control.friction_observer import LinkFriction
+    from awiwi_drake.control.friction_observer import with_link_friction
     from awiwi_drake.rigs import joint_rig
     ref, t_end, pretension = _reference(test)
     t_end = t_end if t_final is None else float(t_final)
@@ -112,14 +111,8 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     op = rig.operating_point(pretension=pretension, link_angle=ref(0.0)[0])
     loop_ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                    references={"link_angle_reference": ref(0.0)[0]})   # before embedding
-    b = DiagramBuilder()
-    cl = b.AddNamedSystem("loop", loop.diagram)
     fp = _friction_params() if friction else _friction_params().replace(coulomb=0.0, static=0.0, viscous=0.0)
-    fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
-    b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
-    diagram = b.Build()
+    diagram, cl, fr = with_link_friction(loop.diagram, fp)
     ctx = diagram.CreateDefaultContext()
     # copy the loop's initialised state (rig at the operating point, hold buffers, controller states)
     cl_ctx = cl.GetMyMutableContextFromRoot(ctx)
