@@ -10,7 +10,8 @@ import pytest
 from _control_plants import flexible_joint_matrices, linear_flexible_joint_rig
 from _fd import autodiff_vs_fd
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains, closed_loop
-from awiwi_drake.control.compare import (gain_diagram, run_test, simulate_loop, sine_metrics, step_metrics)
+from awiwi_drake.analysis import Step, simulate
+from awiwi_drake.control.compare import (gain_diagram, run_test, sine_metrics, step_metrics)
 from awiwi_drake.control.registry import controller_names, get_entry, register_controller
 from awiwi_drake.control.sensors import Quantizer, force_sensor, quantize
 from awiwi_drake.control.compare import compare_test_params
@@ -50,13 +51,19 @@ def test_closed_loop_ports_and_round_trip_delay():
     # the buffers start at the operating-point torque: no kick at t = 0
     assert loop.diagram.GetOutputPort("motor_torque").Eval(ctx)[0] == pytest.approx(0.25)
     dt = 1 / 3000.0
-    log = simulate_loop(loop, ctx, 20 * dt, dt, inputs={"link_angle_reference": lambda t: 1.0 if t >= 5 * dt - 1e-12 else 0.25},
-                        outputs=("motor_torque", "motor_torque_command"))
-    cmd, applied = log["motor_torque_command"][:, 0], log["motor_torque"][:, 0]
-    k_cmd = int(np.argmax(cmd > 0.5))
-    k_app = int(np.argmax(applied > 0.5))
-    # hold + one period of round-trip delay: the applied torque follows the command one period later
-    assert k_app - k_cmd == 1
+    first = {}
+    for delay in (None, 333e-6):
+        lp = closed_loop(linear_flexible_joint_rig(), StaticLawController(_PassThrough()), rate_hz=3000.0, delay=delay)
+        log = simulate(lp, lp.create_context(motor_torque=0.25, references={"link_angle_reference": 0.25}), 20 * dt,
+                       inputs={"link_angle_reference": Step(5 * dt, 1.0, before=0.25)},
+                       log=("motor_torque", "motor_torque_command"), log_period=dt)
+        cmd, applied = log["motor_torque_command"][:, 0], log["motor_torque"][:, 0]
+        # the command (feedthrough of the reference) jumps at the step sample; the hold applies it on
+        # [t_5, t_6), which the left-limit log shows at t_6
+        first[delay] = (int(np.argmax(cmd > 0.5)), int(np.argmax(applied > 0.5)))
+    assert first[None] == (5, 6)
+    # one period of round-trip delay: the applied torque follows one period later than without delay
+    assert first[333e-6] == (5, 7)
 
 
 def test_closed_loop_rejects_bad_wiring():

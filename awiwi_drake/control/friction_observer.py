@@ -112,7 +112,8 @@ LinkFriction = LinkFriction_[None]
 def with_link_friction(loop_diagram, params: LinkFrictionParams | None = None):
     """``(diagram, loop_system, friction_system)``: a closed loop whose link gets the stick-slip friction
     of :class:`LinkFriction` on its ``external_torque`` input (feedback from ``link_velocity``); the
-    loop's ``link_angle_reference`` is exported under the same name."""
+    loop's ``link_angle_reference`` and every loop output are exported under the same names, the
+    friction torque [Nm] as ``link_friction``."""
     from pydrake.systems.framework import DiagramBuilder
     b = DiagramBuilder()
     cl = b.AddNamedSystem("loop", loop_diagram)
@@ -120,6 +121,9 @@ def with_link_friction(loop_diagram, params: LinkFrictionParams | None = None):
     b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
     b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
     b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
+    for i in range(loop_diagram.num_output_ports()):
+        b.ExportOutput(cl.get_output_port(i), loop_diagram.get_output_port(i).get_name())
+    b.ExportOutput(fr.get_output_port(), "link_friction")
     return b.Build(), cl, fr
 
 
