@@ -250,3 +250,20 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
         joint_angle_reference=rng.normal(0, 0.2, 4), joint_angle=rng.normal(0, 0.2, 4),
         joint_velocity=rng.normal(0, 1, 4), tendon_force=rng.uniform(10, 40, 8),
         motor_velocity=rng.normal(0, 0.5, 8)), outputs=["motor_torque", "joint_torque_reference"], rtol=1e-4)
+
+
+@pytest.mark.parametrize("controller", ["cascaded", "backstepping"])
+def test_finger_controllers_refuse_per_tendon_spring_laws(controller):
+    """The chain's force map / distribution and the backstepping's phi(x) model every tendon with the
+    rig's one spring law: a rig with params.tendon_springs is refused with a line naming the option
+    (not controlled as if it had one law); designing on the nominal rig stays possible."""
+    from awiwi_drake.parameters.components import TendonParams
+    from awiwi_drake.parameters.hand import FingerRigParams
+    base = FingerRigParams.for_finger("index")
+    stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
+    rig = finger_diagram(finger="index", params=base.replace(tendon_springs=(("index_h3", stiff),)))
+    with pytest.raises(ValueError, match=r"tendon_springs: index_h3"):
+        make_controller(controller, rig)
+    nominal = finger_diagram(finger="index", params=base)
+    loop = closed_loop(rig, make_controller(controller, nominal), **get_entry(controller, nominal).loop_options)
+    assert loop.diagram.HasOutputPort("joint_angle_estimate")
