@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from awiwi_drake.analysis import Ramp, simulate
 from awiwi_drake.components import atan_friction, motor_friction_torque
 from awiwi_drake.control.base import StaticLawController, closed_loop
-from awiwi_drake.control.compare import simulate_loop
 from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificationParams, RippleCompensationParams
@@ -60,13 +60,13 @@ def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, 
     ctx = loop.create_context(state=[theta0, 0.0 if start_at_rest else speed], motor_torque=u0,
                               references={"motor_angle_reference": theta0, "motor_velocity_reference": speed})
     dt = 1.0 / rate_hz
-    log = simulate_loop(loop, ctx, duration, dt, outputs=("motor_angle", "motor_velocity", "motor_torque"),
-                        inputs={"motor_angle_reference": lambda t: theta0 + speed * t,
-                                "motor_velocity_reference": lambda t: speed}, label="constant velocity run")
+    log = simulate(loop, ctx, duration, inputs={"motor_angle_reference": Ramp(0.0, duration, theta0, theta0 + speed * duration),
+                                                "motor_velocity_reference": speed},
+                   log=("motor_angle", "motor_velocity", "motor_torque"), log_period=dt)
     th, w = log["motor_angle"][:, 0], log["motor_velocity"][:, 0]
     applied = log["motor_torque"][1:, 0]  # left limit at t_k+1 = torque held on [t_k, t_k+1)
     ff = np.array([float(np.ravel(law.feedforward(a, b))[0]) for a, b in zip(th[:-1], w[:-1])])
-    return dict(t=0.5 * (log["t"][1:] + log["t"][:-1]), theta=0.5 * (th[1:] + th[:-1]),
+    return dict(t=0.5 * (log.t[1:] + log.t[:-1]), theta=0.5 * (th[1:] + th[:-1]),
                 omega=0.5 * (w[1:] + w[:-1]), command=applied, feedback=applied - ff,
                 acceleration=np.diff(w) / dt)
 

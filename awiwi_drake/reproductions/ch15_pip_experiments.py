@@ -81,16 +81,15 @@ def _controller(name: str, rig):
 
 
 def _reference(test: str):
+    """(schedule of the reference port: angle and four derivatives, duration [s], pretension [N])."""
+    from awiwi_drake.analysis import PerEntry, Sine, Step
     if test == "step":
-        q1 = math.radians(30.0)
-        return (lambda t: [q1 if t >= 0.05 else 0.0, 0.0, 0.0, 0.0, 0.0]), 0.8, 10.0
+        return PerEntry([Step(0.05, math.radians(30.0)), 0.0, 0.0, 0.0, 0.0]), 0.8, 10.0
     if test == "sine":
-        a, c, w = math.radians(20.0), math.radians(30.0), 2 * math.pi * 1.0
-
-        def ref(t):
-            s, co = math.sin(w * t), math.cos(w * t)
-            return [c + a * s, a * w * co, -a * w ** 2 * s, -a * w ** 3 * co, a * w ** 4 * s]
-        return ref, 2.6, 15.0
+        a, c, f = math.radians(20.0), math.radians(30.0), 1.0
+        w = 2 * math.pi * f
+        return PerEntry([Sine(a * w ** k, f, phase=k * math.pi / 2, offset=c if k == 0 else 0.0)
+                         for k in range(5)]), 2.6, 15.0
     raise ValueError(f"pip_experiment: test must be 'step' or 'sine', got {test!r}")
 
 
@@ -98,8 +97,7 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
                    dt: float = 1.0 / RATE_HZ) -> PipRun:
     """Run one controller on one test (see the module docstring); ``friction=False`` removes the
     stick-slip friction (to show what it costs)."""
-    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-
+    from awiwi_drake.analysis import PerEntry, simulate
     from awiwi_drake.control.base import closed_loop
     from awiwi_drake.control.friction_observer import with_link_friction
     from awiwi_drake.rigs import joint_rig
@@ -108,9 +106,10 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     rig = joint_rig(params=pip_parameters(pretension))
     ctrl = _controller(controller, rig)
     loop = closed_loop(rig, ctrl, rate_hz=RATE_HZ)
-    op = rig.operating_point(pretension=pretension, link_angle=ref(0.0)[0])
+    q0 = float(ref.value(0.0)[0])
+    op = rig.operating_point(pretension=pretension, joint_angle=q0)
     loop_ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                                   references={"link_angle_reference": ref(0.0)[0]})   # before embedding
+                                   references={"joint_angle_reference": q0})   # before embedding
     fp = _friction_params() if friction else _friction_params().replace(coulomb=0.0, static=0.0, viscous=0.0)
     diagram, cl, fr = with_link_friction(loop.diagram, fp)
     ctx = diagram.CreateDefaultContext()
@@ -121,30 +120,13 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
         cl_ctx.SetDiscreteState(i, loop_ctx.get_discrete_state(i).CopyToVector())
     if loop_ctx.num_abstract_states():
         raise RuntimeError("pip_experiment: the loop has abstract state; copy it too")
-    ref_port = diagram.GetInputPort("link_angle_reference")
-    size = ref_port.size()
-    ref_port.FixValue(ctx, ref(0.0)[:size])
-    sim = Simulator(diagram, ctx)
-    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-4)
-    sim.get_mutable_integrator().set_target_accuracy(1e-6)
-    sim.Initialize()
-    rig_sys = loop.diagram.GetSubsystemByName("rig")
-    ts = np.arange(int(round(t_end / dt)) + 1) * dt
-    Q, R, U, F, T = [], [], [], [], []
-    for t in ts:
-        if t > 0:
-            sim.AdvanceTo(t)
-        ref_port.FixValue(ctx, ref(t)[:size])
-        rctx = rig_sys.GetMyContextFromRoot(ctx)
-        x = rctx.get_continuous_state_vector().CopyToVector()
-        if not np.all(np.isfinite(x)):
-            raise RuntimeError(f"pip_experiment({controller!r}, {test!r}): state not finite at t = {t:.4g} s")
-        Q.append(x[0])
-        R.append(ref(t)[0])
-        U.append(np.array(rig_sys.GetOutputPort("applied_torque").Eval(rctx)))
-        F.append(fr.get_output_port().Eval(fr.GetMyContextFromRoot(ctx))[0])
-        T.append(np.array(rig_sys.GetOutputPort("tendon_force").Eval(rctx)))
-    return PipRun(controller, test, ts, np.array(Q), np.array(R), np.array(U), np.array(F), np.array(T))
+    size = diagram.GetInputPort("joint_angle_reference").size()
+    # error control (steps near 0.1 ms): the stick-slip friction is stiff for a fixed 3 kHz step
+    res = simulate(diagram, ctx, t_end, inputs={"joint_angle_reference": PerEntry(ref.entries[:size])},
+                   log=("joint_angle", "joint_angle_reference", "applied_torque", "link_friction", "tendon_force"),
+                   log_period=dt, mode="error_controlled", max_step=1e-4, accuracy=1e-6)
+    return PipRun(controller, test, res.t, res["joint_angle"][:, 0], res["joint_angle_reference"][:, 0],
+                  res["applied_torque"], res["link_friction"][:, 0], res["tendon_force"])
 
 
 def pip_metrics(run: PipRun) -> dict:

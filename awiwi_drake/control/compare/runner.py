@@ -1,23 +1,21 @@
-"""Simulation of a closed loop for the standard tests: inputs held between samples, divergence detected.
+"""Simulation of a closed loop for the standard tests, through :func:`awiwi_drake.analysis.simulate`.
 
-References and disturbances are applied as inputs held between samples of period
-``dt`` (the control period for sampled loops); outputs are logged at the samples.
+References and disturbances are input schedules (``Step``, ``Sine``, ``Chirp``) wired in as Drake
+sources; outputs are logged every ``dt`` (the control period for sampled loops).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
-from awiwi_drake.analysis import SimulationDivergedError, simulate
+from awiwi_drake.analysis import simulate
 from awiwi_drake.analysis.schedules import Schedule
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TestRun", "simulate_loop", "simulate_test", "settle"]
+__all__ = ["TestRun", "simulate_test", "settle"]
 
 
 @dataclass
@@ -33,80 +31,6 @@ class TestRun:
     disturbance: np.ndarray
     state: np.ndarray
     meta: dict = field(default_factory=dict)
-
-
-def _make_simulator(loop: ClosedLoop, context, max_step: float):
-    sim = Simulator(loop.diagram, context)
-    ResetIntegratorFromFlags(sim, "runge_kutta3", max_step)
-    sim.get_mutable_integrator().set_target_accuracy(1e-6)
-    sim.Initialize()
-    return sim
-
-
-def simulate_loop(loop: ClosedLoop, context, t_final: float, dt: float, *,
-                  inputs: Mapping[str, Callable[[float], Any]] | None = None,
-                  outputs: Sequence[str] = (), max_step: float = 2e-4,
-                  label: str = "closed loop", divergence_bound: float = 1e6) -> dict[str, np.ndarray]:
-    """Advance ``context`` from its time to ``+t_final`` sampling every ``dt``.
-
-    ``inputs`` maps exported input ports (references, ``external_torque``) to
-    functions of time (relative to the start), held constant between samples.
-    Returns ``{"t", "x", <input names>, <output names>}`` arrays (one row per sample).
-
-    Raises
-    ------
-    SimulationDivergedError
-        When the state or an output becomes non-finite.
-    ValueError
-        When an input or output name is not a port of the closed loop.
-    """
-    d = loop.diagram
-    inputs = dict(inputs or {})
-    in_ports = {}
-    for nm in inputs:
-        if not d.HasInputPort(nm):
-            raise ValueError(f"simulate_loop: no input port {nm!r} (inputs: "
-                             f"{', '.join(loop.references + loop.disturbances)})")
-        in_ports[nm] = d.GetInputPort(nm)
-    out_ports = {}
-    for nm in outputs:
-        if not d.HasOutputPort(nm):
-            raise ValueError(f"simulate_loop: no output port {nm!r}")
-        out_ports[nm] = d.GetOutputPort(nm)
-    n = int(round(t_final / dt)) + 1
-    t_start = context.get_time()
-    ts = np.arange(n) * dt
-    log: dict[str, list] = {k: [] for k in ["x", *inputs, *outputs]}
-
-    def _apply(t):
-        vals = {}
-        for nm, fn in inputs.items():
-            v = np.atleast_1d(np.asarray(fn(t), float))
-            port = in_ports[nm]
-            in_ports[nm].FixValue(context, np.full(port.size(), v[0]) if v.size == 1 else v)
-            vals[nm] = v
-        return vals
-
-    cur = _apply(0.0)
-    sim = _make_simulator(loop, context, max_step)
-    for i, t in enumerate(ts):
-        if i > 0:
-            sim.AdvanceTo(t_start + t)
-        x = context.get_continuous_state_vector().CopyToVector()
-        row = {nm: np.array(p.Eval(context), dtype=float) for nm, p in out_ports.items()}
-        if not np.all(np.isfinite(x)) or not all(np.all(np.isfinite(v)) for v in row.values()):
-            raise SimulationDivergedError(f"{label}: state or output not finite at t = {t:.4g} s")
-        if np.max(np.abs(x)) > divergence_bound:
-            raise SimulationDivergedError(f"{label}: |state| > {divergence_bound:g} at t = {t:.4g} s")
-        log["x"].append(x)
-        for nm, v in row.items():
-            log[nm].append(v)
-        cur = _apply(t)  # inputs held on [t, t + dt); logged outputs are left limits at t
-        for nm in inputs:
-            log[nm].append(cur[nm])
-    out = {k: np.array(v) for k, v in log.items()}
-    out["t"] = ts
-    return out
 
 
 def applied_port(loop: ClosedLoop) -> str:
@@ -158,7 +82,7 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: flo
     """A context of ``loop`` settled at the constant ``reference`` (time reset to 0).
 
     The start is the rig's operating point for the tracked output at ``reference``
-    (``tendon_force=...``, ``link_angle=...``; else its default one) unless
+    (``tendon_force=...``, ``joint_angle=...``; else its default one) unless
     ``state`` is given.
     """
     if state is None and hasattr(loop.rig, "operating_point"):
