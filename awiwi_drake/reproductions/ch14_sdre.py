@@ -55,10 +55,10 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     loop = closed_loop(rig, joint_sdre_controller(rig, p, fixed=fixed), rate_hz=RATE)
     op = rig.operating_point(external_torque=external_torque)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                              references={"link_angle_reference": 0.0},
+                              references={"joint_angle_reference": 0.0},
                               disturbances={"external_torque": external_torque})
-    log = simulate(loop, ctx, t_final, inputs={"link_angle_reference": reference_schedule([(0.1, target)], 0.0),
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.1, target)], 0.0),
                                                "external_torque": external_torque},
-                   log=("link_angle", "controller_gain", "motor_torque", "link_angle_reference"), log_period=DT)
-    return dict(t=log.t, link_angle=log["link_angle"][:, 0], gain=log["controller_gain"],
-                torque=log["motor_torque"][:, 0], reference=log["link_angle_reference"][:, 0])
+                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
+    return dict(t=log.t, joint_angle=log["joint_angle"][:, 0], gain=log["controller_gain"],
+                torque=log["motor_torque"][:, 0], reference=log["joint_angle_reference"][:, 0])
