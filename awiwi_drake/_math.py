@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pydrake.math as _pm
 
-__all__ = ["is_float", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like", "where_positive"]
+__all__ = ["is_float", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like", "where_positive",
+           "Tangent"]
 
 
 def is_float(x) -> bool:
@@ -97,3 +98,83 @@ def where_positive(x, a):
             xv = xi.value() if hasattr(xi, "value") else float(xi)
             out[idx] = ai if xv > 0.0 else 0.0 * ai
     return out[()] if out.shape == () else out
+
+
+class Tangent:
+    """Forward-mode pair ``(v, d)``: a value of any scalar type T and its derivative(s) ``d``.
+
+    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and
+    Expression alike. Drake's AutoDiffXd cannot nest, so a Jacobian that must itself
+    be AutoDiffXd-generic (the wrist coupling matrix ``P(q) = dh/dq`` inside a
+    routing system converted with ``ToAutoDiffXd()``, and its Hessian) needs this
+    second, outer derivative layer. numpy ufuncs on object arrays call the methods
+    ``sin``, ``cos``, ``sqrt``, ``arctan2``. Supports ``+ - * /`` and those four.
+    """
+
+    __slots__ = ("v", "d")
+
+    def __init__(self, v, d):
+        self.v = v
+        self.d = d
+
+    @staticmethod
+    def _lift(o):
+        return o if isinstance(o, Tangent) else Tangent(o, 0.0)
+
+    def __add__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = Tangent._lift(o)
+        return Tangent(self.v + o.v, self.d + o.d)
+
+    __radd__ = __add__
+
+    def __sub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        o = Tangent._lift(o)
+        return Tangent(self.v - o.v, self.d - o.d)
+
+    def __rsub__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return Tangent._lift(o) - self
+
+    def __neg__(self):
+        return Tangent(-self.v, -self.d)
+
+    def __mul__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, Tangent):
+            return Tangent(self.v * o, self.d * o)
+        return Tangent(self.v * o.v, self.d * o.v + self.v * o.d)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        if not isinstance(o, Tangent):
+            return Tangent(self.v / o, self.d / o)
+        q = self.v / o.v
+        return Tangent(q, (self.d - q * o.d) / o.v)
+
+    def __rtruediv__(self, o):
+        if isinstance(o, np.ndarray):
+            return NotImplemented
+        return Tangent._lift(o) / self
+
+    def sin(self):
+        return Tangent(np.sin(self.v), np.cos(self.v) * self.d)
+
+    def cos(self):
+        return Tangent(np.cos(self.v), -np.sin(self.v) * self.d)
+
+    def sqrt(self):
+        r = np.sqrt(self.v)
+        return Tangent(r, self.d / (2.0 * r))
+
+    def arctan2(self, x):
+        x = Tangent._lift(x)
+        return Tangent(np.arctan2(self.v, x.v), (x.v * self.d - self.v * x.d) / (x.v * x.v + self.v * self.v))

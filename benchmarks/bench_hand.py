@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sim-time", type=float, default=0.2, help="simulated seconds per run")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--targets", default="index,hand")
-    ap.add_argument("--backends", default="symbolic,python")
+    ap.add_argument("--backends", default="compiled,python,symbolic")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
     rows = []

@@ -221,6 +221,11 @@ CLI_CASES = [
     ("linearize-config-bad-value", lambda t, d: ["linearize", "joint-rig", "--config",
                                                  str((t / "c.yaml").write_text("pretension: -5") and t / "c.yaml")],
      2, "JointRigParams.pretension = -5.0 is out of range"),
+    ("demo-config-bad-value", lambda t, d: ["demo", "--out", str(t), "--config",
+                                            str((t / "s.yaml").write_text("link_step: 9") and t / "s.yaml")], 2,
+     "DemoScenario.link_step = 9.0 is out of range"),
+    ("demo-set-unknown", lambda t, d: ["demo", "--out", str(t), "--set", "nope=1"], 2,
+     "unknown parameter 'nope' for DemoScenario"),
     ("lqr-missing-q", lambda t, d: ["lqr", "joint-rig", "--r", "1,1"], 2, "--q"),
     ("unknown-command", lambda t, d: ["simulate-everything"], 2, "invalid choice"),
 ]
@@ -260,7 +265,11 @@ def test_library_rejects_nonsense_with_value_errors():
         (lambda: MotorParams(inertia=True), "MotorParams.inertia = True is not a number"),
         (lambda: MotorParams(inertia=1e30), "MotorParams.inertia = 1e+30 is implausible"),
         (lambda: JointRigParams().with_overrides(["pretension=3"]), "expected a mapping"),
-        (lambda: joint_rig().operating_point(link_angle=float("nan")), "link_angle = nan must be finite"),
+        (lambda: joint_rig().operating_point(joint_angle=float("nan")), "joint_angle = nan must be finite"),
+        # a key the rig does not have (the link rigs call it joint_angle): named with the known keys,
+        # not a TypeError from the rig's internal equilibrium function
+        (lambda: joint_rig().operating_point(link_angle=0.1),
+         "joint-rig.operating_point: unknown key 'link_angle'; known: pretension, joint_angle, external_torque"),
     ]
     for fn, message in cases:
         with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("+", r"\+")):
@@ -274,3 +283,27 @@ def test_simulate_start_after_end_raises_not_exits():
     rig = flexible_joint_rig()
     with pytest.raises(ValueError, match="must be after the start time"):
         simulate(rig.diagram, rig.context(), 0.1, t_start=0.5)
+
+
+def test_every_option_has_help_and_no_raw_rst():
+    """CLI: every option and positional of every command has help text; no RST markup in help."""
+    import argparse
+
+    from awiwi_drake.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    missing = []
+    for name, p in sub.choices.items():
+        text = p.format_help()
+        assert "``" not in text and ":func:" not in text and ":class:" not in text, f"{name}: raw RST in help"
+        for a in p._actions:
+            if isinstance(a, argparse._HelpAction):
+                continue
+            if not (a.help or "").strip():
+                missing.append(f"{name} {'/'.join(a.option_strings) or a.dest}")
+        for a in p._actions:  # required options are listed under a "required" heading
+            if a.required and a.option_strings:
+                group = next(g for g in p._action_groups if a in g._group_actions)
+                assert "required" in (group.title or ""), f"{name} {a.option_strings[0]} required but not shown so"
+    assert not missing, "options without help: " + ", ".join(missing)

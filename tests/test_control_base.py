@@ -10,7 +10,8 @@ import pytest
 from _control_plants import flexible_joint_matrices, linear_flexible_joint_rig
 from _fd import autodiff_vs_fd
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains, closed_loop
-from awiwi_drake.control.compare import (gain_diagram, run_test, simulate_loop, sine_metrics, step_metrics)
+from awiwi_drake.analysis import Step, simulate
+from awiwi_drake.control.compare import (gain_diagram, run_test, sine_metrics, step_metrics)
 from awiwi_drake.control.registry import controller_names, get_entry, register_controller
 from awiwi_drake.control.sensors import Quantizer, force_sensor, quantize
 from awiwi_drake.control.compare import compare_test_params
@@ -18,18 +19,18 @@ from awiwi_drake.parameters.control import ForceSensorParams
 
 
 class _PassThrough(StaticLaw):
-    """u = link_angle_reference (open loop), to observe the command path."""
+    """u = joint_angle_reference (open loop), to observe the command path."""
     name = "pass"
-    inputs = {"link_angle_reference": 1, "state": 4}
+    inputs = {"joint_angle_reference": 1, "state": 4}
     output_size = 1
 
     def __call__(self, u):
-        return np.array([u["link_angle_reference"][0] + 0.0 * u["state"][0]])
+        return np.array([u["joint_angle_reference"][0] + 0.0 * u["state"][0]])
 
 
 class _Pd(StaticLaw):
     name = "pd_test"
-    inputs = {"link_angle_reference": 1, "state": 4}
+    inputs = {"joint_angle_reference": 1, "state": 4}
     output_size = 1
 
     def __init__(self, kp=0.5, kd=0.01):
@@ -37,37 +38,43 @@ class _Pd(StaticLaw):
 
     def __call__(self, u):
         x = u["state"]
-        return np.array([self.kp * (u["link_angle_reference"][0] - x[0]) - self.kd * x[3]])
+        return np.array([self.kp * (u["joint_angle_reference"][0] - x[0]) - self.kd * x[3]])
 
 
 def test_closed_loop_ports_and_round_trip_delay():
     loop = closed_loop(linear_flexible_joint_rig(), StaticLawController(_PassThrough()), rate_hz=3000.0,
                        delay=333e-6)
-    assert loop.references == ("link_angle_reference",)
+    assert loop.references == ("joint_angle_reference",)
     assert loop.disturbances == ("external_torque",)
     assert loop.delay_steps == 1 and loop.delay == pytest.approx(1 / 3000.0)
-    ctx = loop.create_context(motor_torque=0.25, references={"link_angle_reference": 0.25})
+    ctx = loop.create_context(motor_torque=0.25, references={"joint_angle_reference": 0.25})
     # the buffers start at the operating-point torque: no kick at t = 0
     assert loop.diagram.GetOutputPort("motor_torque").Eval(ctx)[0] == pytest.approx(0.25)
     dt = 1 / 3000.0
-    log = simulate_loop(loop, ctx, 20 * dt, dt, inputs={"link_angle_reference": lambda t: 1.0 if t >= 5 * dt - 1e-12 else 0.25},
-                        outputs=("motor_torque", "motor_torque_command"))
-    cmd, applied = log["motor_torque_command"][:, 0], log["motor_torque"][:, 0]
-    k_cmd = int(np.argmax(cmd > 0.5))
-    k_app = int(np.argmax(applied > 0.5))
-    # hold + one period of round-trip delay: the applied torque follows the command one period later
-    assert k_app - k_cmd == 1
+    first = {}
+    for delay in (None, 333e-6):
+        lp = closed_loop(linear_flexible_joint_rig(), StaticLawController(_PassThrough()), rate_hz=3000.0, delay=delay)
+        log = simulate(lp, lp.create_context(motor_torque=0.25, references={"joint_angle_reference": 0.25}), 20 * dt,
+                       inputs={"joint_angle_reference": Step(5 * dt, 1.0, before=0.25)},
+                       log=("motor_torque", "motor_torque_command"), log_period=dt)
+        cmd, applied = log["motor_torque_command"][:, 0], log["motor_torque"][:, 0]
+        # the command (feedthrough of the reference) jumps at the step sample; the hold applies it on
+        # [t_5, t_6), which the left-limit log shows at t_6
+        first[delay] = (int(np.argmax(cmd > 0.5)), int(np.argmax(applied > 0.5)))
+    assert first[None] == (5, 6)
+    # one period of round-trip delay: the applied torque follows one period later than without delay
+    assert first[333e-6] == (5, 7)
 
 
 def test_closed_loop_rejects_bad_wiring():
     class BadMeas(_PassThrough):
-        inputs = {"link_angle_reference": 1, "joint_torque": 1}
+        inputs = {"joint_angle_reference": 1, "joint_torque": 1}
 
     class BadRef(_PassThrough):
         inputs = {"spring_force_reference": 1, "state": 4}
 
     class BadSize(_PassThrough):
-        inputs = {"link_angle_reference": 1, "state": 3}
+        inputs = {"joint_angle_reference": 1, "state": 3}
 
     rig = linear_flexible_joint_rig
     with pytest.raises(ValueError, match="'joint_torque'"):
@@ -94,7 +101,7 @@ def test_gain_validation_names_the_gain(bad):
 
 def test_static_law_controller_autodiff_matches_fd():
     sys = StaticLawController(_Pd(0.7, 0.02))
-    J_ad, J_fd = autodiff_vs_fd(sys, {"link_angle_reference": [0.1], "state": [0.05, 0.2, 0.04, -0.3]})
+    J_ad, J_fd = autodiff_vs_fd(sys, {"joint_angle_reference": [0.1], "state": [0.05, 0.2, 0.04, -0.3]})
     np.testing.assert_allclose(J_ad, J_fd, atol=1e-8)
     np.testing.assert_allclose(J_ad, [[0.7, -0.7, 0, 0, -0.02]], atol=1e-12)
 
@@ -183,7 +190,7 @@ def test_disturbance_stiffness_matches_closed_form():
     """Stiffness from the simulated torque step = tau / q_ss from (A - BK) x + E tau = 0."""
     kp, kd = 0.5, 0.01
     loop = closed_loop(linear_flexible_joint_rig(), StaticLawController(_Pd(kp, kd)), rate_hz=None)
-    p = compare_test_params("flexible_joint", step_duration=1.5, settle_time=0.0)
+    p = compare_test_params("flexible-joint", step_duration=1.5, settle_time=0.0)
     _, m = run_test(loop, "disturbance", params=p)
     A, B, E = flexible_joint_matrices()
     K = np.array([[kp, 0, 0, kd]])
@@ -200,9 +207,21 @@ def test_registry_errors_and_names():
     with pytest.raises(ValueError, match="does not fit rig 'flexible-joint'"):
         get_entry("tendon-pd", "flexible-joint")
     with pytest.raises(ValueError, match="already registered"):
-        register_controller("lqr", lambda rig: None, rigs=("joint_rig",), description="dup")
+        register_controller("lqr", lambda rig: None, rigs=("joint-rig",), description="dup")
     with pytest.raises(ValueError, match="unknown rig"):
         controller_names("gripper")
+    for alias in ("joint", "joint_rig", "antagonistic_joint", "flexible"):     # one spelling per rig
+        with pytest.raises(ValueError, match="unknown rig"):
+            controller_names(alias)
+
+
+def test_each_rig_has_one_name_in_api_cli_and_registry():
+    from awiwi_drake.control.registry import RIG_NAMES, rig_kind
+    from awiwi_drake.diagrams import TARGETS, build_target
+    assert sorted(TARGETS) == sorted(RIG_NAMES)
+    for name in ("tendon-rig", "flexible-joint", "joint-rig", "finger-index"):
+        rig = build_target(name)
+        assert rig.name == name and rig_kind(rig) == ("finger" if name.startswith("finger") else name)
 
 
 def test_continuous_loop_on_fused_backend_gives_clear_error():
@@ -218,7 +237,9 @@ def test_saturation_and_slack_are_reported():
     rig = joint_rig(backend="symbolic")
     loop = closed_loop(rig, impedance_controller(rig, mode="pd"), rate_hz=3000.0)
     _, m = run_test(loop, "step", params=compare_test_params(rig, step_size=1.0, step_duration=0.1, settle_time=0.0))
-    assert m.peak_input > rig.torque_limit and 0.1 < m.saturated_fraction < 1.0
+    # the command exceeds the amplifier limit; the torque applied to the motors is clipped at it
+    assert m.peak_command > rig.torque_limit and 0.1 < m.saturated_fraction < 1.0
+    assert m.peak_input == pytest.approx(rig.torque_limit, rel=1e-9)
     assert m.slack_fraction == 0.0  # antagonistic motors keep the pretension
     # 0.5 Nm on the link needs 31 N of force difference: one tendon (20 N pretension) goes slack
     loop = closed_loop(joint_rig(backend="symbolic"), impedance_controller(joint_rig(), mode="two-time-scale"),
@@ -235,7 +256,7 @@ def test_failed_runs_are_flagged_in_csv_and_markdown(tmp_path):
     import warnings
     from awiwi_drake.control.compare import compare_controllers
     from awiwi_drake.rigs import joint_rig
-    p = compare_test_params("joint_rig", step_duration=0.15, settle_time=0.05)
+    p = compare_test_params("joint-rig", step_duration=0.15, settle_time=0.05)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the place_poles convergence warning is handled, not leaked
         res = compare_controllers(lambda: joint_rig(backend="symbolic"), ["pole-placement"],

@@ -8,7 +8,8 @@ import pytest
 from _fd import autodiff_vs_fd
 from awiwi_drake.analysis import lqr
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.compare import fit_second_order_step, simulate_loop
+from awiwi_drake.analysis import Samples, Step, simulate
+from awiwi_drake.control.compare import fit_second_order_step
 from awiwi_drake.control.sensors import force_sensor
 from awiwi_drake.control.sdre import tendon_sdre_controller
 from awiwi_drake.control.tendon_force import (TendonForceLaw, force_map, steady_state_force_without_feedforward,
@@ -34,8 +35,8 @@ def _step(controller_factory, fmap, f0, f1, *, t_final, ripple=False, noise=0.0,
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                               references={"tendon_force_reference": f0})
     t_step = 0.02
-    log = simulate_loop(loop, ctx, t_final, DT, inputs={"tendon_force_reference": lambda t: f0 if t < t_step else f1},
-                        outputs=("tendon_force", "motor_torque_command"))
+    log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(t_step, f1, before=f0)},
+                   log=("tendon_force", "motor_torque_command", "state"), log_period=DT)
     return log, t_step, ctrl
 
 
@@ -90,7 +91,7 @@ def test_scheduled_gains_are_well_damped_everywhere_fixed_are_not(fmap):
     for name, factory in (("fixed", tendon_pd_controller), ("scheduled", tendon_scheduled_controller)):
         for f0 in (10.0, 20.0, 30.0, 40.0):
             log, t_step, _ = _step(factory, fmap, f0, f0 + 5.0, t_final=0.15, ripple=True, noise=0.1, delay=333e-6)
-            fit = fit_second_order_step(log["t"], log["tendon_force"][:, 0], f0, f0 + 5.0, t_step)
+            fit = fit_second_order_step(log.t, log["tendon_force"][:, 0], f0, f0 + 5.0, t_step)
             xi[name].append(fit["damping_ratio"])
     sched, fixed = np.array(xi["scheduled"]), np.array(xi["fixed"])
     assert np.all(np.abs(sched - design) < 0.10), sched
@@ -118,10 +119,10 @@ def test_tendon_pd_near_slack_with_noisy_sensor_stays_bounded(fmap):
     for factory in (tendon_pd_controller, tendon_scheduled_controller):
         for f1 in (0.0, 0.3, 1.0):
             log, _, _ = _step(factory, fmap, 5.0, f1, t_final=0.3, noise=0.1)
-            th, f = log["x"][:, 0], log["tendon_force"][:, 0]
+            th, f = log["state"][:, 0], log["tendon_force"][:, 0]
             assert np.min(th) > fmap.slack_angle - 0.15, (factory.__name__, f1, np.min(th))  # was -9 rad
             # after the step transient the noisy readings near slack do not drive the motor to its limit
-            assert np.max(np.abs(log["motor_torque_command"][log["t"] > 0.1])) < 0.5 * limit
+            assert np.max(np.abs(log["motor_torque_command"][log.t > 0.1])) < 0.5 * limit
             if f1 > 0:
                 assert np.mean(f[-300:]) == pytest.approx(f1, abs=0.1)
 
@@ -157,12 +158,12 @@ def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fma
         o = r.operating_point(tendon_force=0.0)
         ctx = loop.create_context(state=o.state, motor_torque=o.motor_torque,
                                   references={"tendon_force_reference": 0.0})
-        ref = (lambda t: 0.0 if t < 0.05 else (40.0 if t < 0.3 else 45.0))
-        log = simulate_loop(loop, ctx, 0.6, DT, outputs=("tendon_force", "controller_gain", "motor_torque_command"),
-                            inputs={"tendon_force_reference": ref})
+        ref = Samples([0.0, 0.05, 0.3], [0.0, 40.0, 45.0])
+        log = simulate(loop, ctx, 0.6, inputs={"tendon_force_reference": ref}, log_period=DT,
+                       log=("tendon_force", "controller_gain", "motor_torque_command", "state"))
         f, K, u = log["tendon_force"][:, 0], log["controller_gain"], log["motor_torque_command"][:, 0]
         # both settle at the targets: within 0.5 N from 0.2 s after each step, to 0.01 N at the end
-        t = log["t"]
+        t = log.t
         assert np.max(np.abs(f[(t > 0.25) & (t < 0.3)] - 40.0)) < 0.5
         assert np.max(np.abs(f[t > 0.5] - 45.0)) < 0.5 and abs(f[-1] - 45.0) < 0.01
         # Table 14.1 weights: position gain ~ sqrt(Q11 / R) = 1000 Nm/rad -> the command is far beyond the 3 Nm
@@ -176,8 +177,8 @@ def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fma
         changes = np.nonzero(np.any(np.diff(K, axis=0) != 0.0, axis=1))[0] + 1  # first sample showing a new gain
         assert len(changes) > 10 and np.all((changes - 1) % period == 0), changes
         for i in changes[:: max(1, len(changes) // 12)]:
-            x = log["x"][i - 1, :2]  # state at the refresh instant (continuous across it)
-            _, u_ref = loop.controller.model.equilibrium(ref(t[i - 1]))
+            x = log["state"][i - 1, :2]  # state at the refresh instant (continuous across it)
+            _, u_ref = loop.controller.model.equilibrium(ref.value(t[i - 1]))
             np.testing.assert_allclose(K[i], loop.controller.gain_at(x, u_ref).ravel(), rtol=1e-9)
 
 

@@ -52,6 +52,27 @@ def test_materiality_floors_reject_effects_below_the_noise(joint_engine):
     assert m["size"] == pytest.approx(5 * ne.motor_torque) and m["material"]
 
 
+def test_calibration_corrections_need_a_material_torque(joint_engine):
+    """Issue 13 item 9: ``nominal_link`` with link_inertia_rel = 0.0006 (the issue's case) changes the link
+    torque by m * 0.0006 * rms(q'') -- far below the noise-equivalent link torque: not material; a 50 %
+    inertia error at the same motion is.  The size is that torque, computed here by hand."""
+    eng = joint_engine
+    ne = noise_equivalent(eng)
+    n = eng.nom.num_motors
+    qd = eng.xhat[2 * n + 1]
+    qdd_rms = float(np.sqrt(np.mean((np.diff(qd) / eng.dt) ** 2)))
+    m = materiality("nominal_link", {"link_inertia_rel": 0.0006}, ne)
+    assert m["size"] == pytest.approx(0.0006 * eng.nom.link_inertia * qdd_rms, rel=1e-9)
+    assert m["unit"] == "Nm" and m["floor"] == pytest.approx(ne.link_torque) and not m["material"]
+    big = 2.0 * ne.link_torque / (eng.nom.link_inertia * qdd_rms)
+    assert materiality("nominal_link", {"link_inertia_rel": big}, ne)["material"]
+    om = eng.xhat[n:2 * n]
+    wd_rms = float(np.sqrt(np.mean((np.diff(om, axis=1) / eng.dt) ** 2)))
+    mm = materiality("nominal_motor", {"motor_inertia_rel": 0.01, "motor_damping_add": 1e-4}, ne)
+    assert mm["size"] == pytest.approx(0.01 * eng.nom.motor_inertia * wd_rms
+                                       + 1e-4 * float(np.sqrt(np.mean(om ** 2))), rel=1e-9)
+
+
 def _candidate(**kw):
     base = dict(effect="guide_friction", kind="physical", stage="fit", parameters={}, uncertainties={},
                 gain=500.0, relative_gain=0.5, z=5.0, delta_bic=-200.0, z_gain=50.0,

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from awiwi_drake.hand.coupling import finger_coupling
-from awiwi_drake.hand.estimation import (estimate_linear, estimate_thumb, noise_error_bound,
-                                         thumb_base_gradient_search, thumb_estimation_study)
+from awiwi_drake.hand.estimation import estimate_linear, estimate_thumb, noise_error_bound, thumb_base_gradient_search
+from awiwi_drake.reproductions.ch05_fingers import thumb_estimation_study
 from awiwi_drake.parameters.hand import finger_params
 
 

@@ -248,3 +248,73 @@ def test_system_update_is_the_warm_started_solver_and_reports_status():
                                   [1.0, 0.0])                     # the infeasible index request is reported
     with pytest.raises(ValueError, match="stiffness"):
         TendonForceDistributionSystem(stiffness="sparse")
+
+
+def test_system_runs_at_3khz_in_a_simulator_with_the_thumb():
+    """The thumb's position-dependent distribution inside a Drake Simulator at 3 kHz (one warm-started
+    QP per period): a sinusoidal torque request and a moving posture; after each periodic update the held
+    forces produce the request sampled at that update exactly and stay in the bounds."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import ConstantVectorSource, Sine
+
+    from awiwi_drake.hand.coupling import finger_coupling
+    b = DiagramBuilder()
+    fd = b.AddSystem(TendonForceDistributionSystem(fingers=("thumb",), iterations_per_period=1))
+    tau0 = np.array([0.02, 0.01, -0.01, 0.005])
+    tau = b.AddSystem(Sine(0.01 * np.ones(4), 2 * np.pi * 5 * np.ones(4), np.zeros(4)))
+    from pydrake.systems.primitives import Adder
+    add = b.AddSystem(Adder(2, 4))
+    off = b.AddSystem(ConstantVectorSource(tau0))
+    b.Connect(tau.get_output_port(0), add.get_input_port(0))
+    b.Connect(off.get_output_port(), add.get_input_port(1))
+    b.Connect(add.get_output_port(), fd.GetInputPort("joint_torque_reference"))
+    K = b.AddSystem(ConstantVectorSource(np.array([3.0, 3.0, 2.0, 1.0])))
+    b.Connect(K.get_output_port(), fd.GetInputPort("joint_stiffness_reference"))
+    q = b.AddSystem(Sine(np.array([0.3, 0.2, 0.0, 0.0]), 2 * np.pi * 2 * np.ones(4), np.zeros(4)))
+    b.Connect(q.get_output_port(0), fd.GetInputPort("joint_angle"))
+    d = b.Build()
+    sim = Simulator(d)
+    ctx = sim.get_mutable_context()
+    c = finger_coupling("thumb")
+    p = fd.solvers[0].params
+    fctx = fd.GetMyContextFromRoot(ctx)
+    for k in range(1, 16):
+        t_prev = k / 3000.0                      # the update at t_k samples the inputs at t_k
+        sim.AdvanceTo(t_prev + 1e-9)
+        f = fd.GetOutputPort("tendon_force_reference").Eval(fctx)
+        request = tau0 + 0.01 * np.sin(2 * np.pi * 5 * t_prev)
+        q_prev = np.array([0.3, 0.2, 0.0, 0.0]) * np.sin(2 * np.pi * 2 * t_prev)
+        np.testing.assert_allclose(-c.P(q_prev).T @ f, request, atol=1e-12)
+        assert np.all(f >= p.f_min - 1e-9) and np.all(f <= p.f_max + 1e-9)
+        assert fd.GetOutputPort("distribution_status").Eval(fctx)[0] == 0.0
+
+
+def test_algorithm2_system_autodiff_carries_the_exact_torque_part():
+    """Algorithm 2 in the system: its derivative w.r.t. the torque request is -(P^T)^+ (the exact-torque
+    part; the internal forces of the step-halving search carry none): closed form."""
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
+    system = TendonForceDistributionSystem(fingers=("index",), method="algorithm2")
+    ad = system.ToAutoDiffXd()
+    ctx = ad.CreateDefaultContext()
+    x = InitializeAutoDiff(np.array([0.05, -0.02, 0.03, 0.01])).ravel()
+    ad.GetInputPort("joint_torque_reference").FixValue(ctx, x)
+    ad.GetInputPort("joint_stiffness_reference").FixValue(ctx, np.array([2.0, 3.0, 1.5, 0.6]))
+    J = ExtractGradient(ad.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector())
+    P = _index_P()
+    np.testing.assert_allclose(J, -np.linalg.pinv(P.T), atol=1e-12)
+
+
+def test_algorithm2_warm_start_never_loses_what_it_had():
+    """Algorithm 2 warm-started at its previous forces (the in-loop use): the same request ends at a cost
+    no higher than before (accepted steps only lower it); a wrong-sized warm start is named."""
+    fd = finger_force_distribution("thumb", method="algorithm2")
+    q = np.array([0.2, -0.1, 0.1, 0.0])
+    tau = np.array([0.02, 0.01, -0.01, 0.005])
+    K = np.diag([3.0, 3.0, 2.0, 1.0])
+    first = fd.solve(tau, K, q=q)
+    again = fd.solve(tau, K, q=q, warm_start=first.forces)
+    assert again.status == "ok" and again.torque_error < 1e-12
+    assert again.cost <= first.cost + 1e-15
+    with pytest.raises(ValueError, match="warm_start"):
+        fd.solve(tau, K, q=q, warm_start=np.ones(3))

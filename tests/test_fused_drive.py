@@ -186,7 +186,7 @@ def test_one_system_joint_rig_linearises_and_takes_lqr_in_a_composed_diagram():
     from awiwi_drake.analysis import linearize
     fast, mbp = joint_rig(), joint_rig(backend="python")
     assert fast.backend == "compiled"          # the default is the fast path
-    op = fast.operating_point(pretension=25.0, link_angle=0.2)
+    op = fast.operating_point(pretension=25.0, joint_angle=0.2)
     la, lb = linearize(fast, op), linearize(mbp, op)
     np.testing.assert_allclose(la.A, lb.A, rtol=1e-9, atol=1e-9 * np.max(np.abs(lb.A)))
     np.testing.assert_allclose(la.B, lb.B, rtol=1e-12)
@@ -260,7 +260,7 @@ def test_batched_joint_rigs_equal_the_single_rig_copy_by_copy():
     from awiwi_drake.rigs.batch import batched_joint_rig
     br = batched_joint_rig(5)
     rig = br.single
-    ops = [rig.operating_point(pretension=f, link_angle=a) for f, a in zip((10, 20, 30, 40, 50), (0, .1, -.1, .2, 0))]
+    ops = [rig.operating_point(pretension=f, joint_angle=a) for f, a in zip((10, 20, 30, 40, 50), (0, .1, -.1, .2, 0))]
     ctx = br.context(ops)
     x = ctx.get_continuous_state_vector().CopyToVector() + RNG.normal(scale=0.01, size=30)
     ctx.SetContinuousState(x)
@@ -274,3 +274,94 @@ def test_batched_joint_rigs_equal_the_single_rig_copy_by_copy():
         np.testing.assert_allclose(f[2 * i:2 * i + 2], rig.diagram.GetOutputPort("tendon_force").Eval(c1), rtol=1e-12)
     ad = br.diagram.ToAutoDiffXd()       # the batch converts too (law path per copy)
     assert ad.num_continuous_states() == 30
+
+
+def test_hysteresis_loop_width_equals_the_dahl_closed_form():
+    """A spring stretched back and forth far beyond the presliding range: the loaded and unloaded
+    branches at the same elongation differ by the saturated Dahl width 2 (beta f_el(x) + z0 + 1e-3 N)
+    of :func:`hysteresis_rate` (Fig 4.8b loop)."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Sine
+    from awiwi_drake.components.drive import build_tendon_drive
+    hyst = HysteresisParams(enabled=True, width_ratio=0.1, width_offset=0.5)
+    motor = MotorParams(inertia=1.0, friction=False, saturation=False)
+    x0 = float(np.ravel(SPRING.inverse_force(np.array([40.0])))[0])
+    r_m = 1e-4          # a heavy motor on a tiny pulley holding ~40 N: it barely moves (x is logged anyway)
+    drive = build_tendon_drive(motor=motor, spring=SPRING, coupling=ConstantCoupling([[1.0]]), offsets=[x0],
+                               hysteresis=hyst, motor_pulley_radius=r_m)
+    b = DiagramBuilder()
+    d = b.AddSystem(drive.diagram)
+    amp, freq = 5e-4, 4.0
+    sine = b.AddSystem(Sine(amp, 2 * np.pi * freq, 0.0, 1))
+    b.Connect(sine.get_output_port(0), d.GetInputPort("joint_angle"))
+    b.Connect(sine.get_output_port(1), d.GetInputPort("joint_velocity"))
+    u = b.AddSystem(ConstantVectorSource([r_m * 40.0]))
+    b.Connect(u.get_output_port(), d.GetInputPort("motor_torque"))
+    log_f = LogVectorOutput(d.GetOutputPort("tendon_force"), b)
+    log_x = LogVectorOutput(d.GetOutputPort("elongation"), b)
+    diagram = b.Build()
+    sim = Simulator(diagram)
+    sim.get_mutable_integrator().set_target_accuracy(1e-9)
+    sim.AdvanceTo(0.6)
+    ctx = sim.get_context()
+    t = log_f.FindLog(ctx).sample_times()
+    f, x = log_f.FindLog(ctx).data()[0], log_x.FindLog(ctx).data()[0]
+    last = t > 0.35                                 # one full cycle after the first loading
+    t, f, x = t[last], f[last], x[last]
+    xdot = np.gradient(x, t)
+    widths = []
+    for sign in (1, -1):
+        sel = sign * xdot > 0
+        order = np.argsort(x[sel])
+        widths.append(np.interp(x0, x[sel][order], f[sel][order]))
+    f_el = float(SPRING.force(np.array([x0]))[0])
+    expected = 2 * (hyst.width_ratio * f_el + hyst.width_offset + 1e-3)
+    # the branches lag the moving half-width by about beta k(x) / sigma ~ 0.015 N each (k ~ 3e4 N/m);
+    # the lags nearly cancel in the width: bound 0.02 N of 9 N
+    assert widths[0] - widths[1] == pytest.approx(expected, abs=0.02)
+
+
+def _push_response_single(pretension):
+    """Link angle 30 ms after a 0.5 N m motor-torque imbalance, one joint rig (fixed-step RK3)."""
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    rig = joint_rig()
+    op = rig.operating_point(pretension=pretension)
+    ctx = rig.context(op)
+    rig.diagram.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque + [0.5, -0.5])
+    sim = Simulator(rig.diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-4)
+    sim.get_mutable_integrator().set_fixed_step_mode(True)
+    sim.AdvanceTo(0.03)
+    return float(ctx.get_continuous_state_vector().CopyToVector()[0])
+
+
+def _push_response_batch(points):
+    """The same for every point at once: the copies of one batched rig."""
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    br = batched_joint_rig(len(points))
+    ops = [br.single.operating_point(pretension=p["pretension"]) for p in points]
+    ctx = br.context(ops)
+    _, u, _ = br.stack(ops)
+    br.diagram.GetInputPort("motor_torque").FixValue(ctx, u + np.tile([0.5, -0.5], len(points)))
+    sim = Simulator(br.diagram, ctx)
+    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-4)
+    sim.get_mutable_integrator().set_fixed_step_mode(True)
+    sim.AdvanceTo(0.03)
+    return list(ctx.get_continuous_state_vector().CopyToVector().reshape(len(points), 6)[:, 0])
+
+
+def test_run_sweep_batch_gives_the_serial_numbers():
+    from concurrent.futures import ThreadPoolExecutor
+    from awiwi_drake.analysis import run_sweep
+    grid = {"pretension": [10.0, 20.0, 30.0, 40.0, 50.0]}
+    serial = run_sweep(_push_response_single, grid, executor="serial", quiet=True)
+    batched = run_sweep(_push_response_batch, grid, executor="serial", batch=2, quiet=True)
+    with ThreadPoolExecutor(2) as ex:
+        threaded = run_sweep(_push_response_batch, grid, executor=ex, batch=3, quiet=True)
+    # fixed-step RK3 acts element-wise on the stacked state: the copies reproduce the single runs
+    np.testing.assert_allclose(batched.values, serial.values, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(threaded.values, serial.values, rtol=1e-12, atol=1e-15)
+    assert len(set(np.round(serial.values, 9))) == 5     # the pretension matters (stiffer joint, smaller push)
+    with pytest.raises(ValueError, match="batch = 0"):
+        run_sweep(_push_response_batch, grid, executor="serial", batch=0)

@@ -166,13 +166,49 @@ def test_optimal_backstepping_on_the_antagonistic_joint_rig():
     T_inv = np.linalg.inv(torque_state_map(joint_model(rig), op.state))
     np.testing.assert_allclose(K_sys @ T_inv, fit.feedback, rtol=1e-9, atol=1e-9 * np.abs(fit.feedback).max())
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
     d = loop.diagram
-    cl = Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
-                   output_port_index=d.GetOutputPort("link_angle").get_index())
+    cl = Linearize(d, ctx, input_port_index=d.GetInputPort("joint_angle_reference").get_index(),
+                   output_port_index=d.GetOutputPort("joint_angle").get_index())
     assert np.max(np.linalg.eigvals(cl.A()).real) < 0
     assert sampled_radius(g) < 1.0
     free = optimize_gains(rig, JointRigOptimalGainsCase(r_weight=1e-6), starts=16)   # the default box
     assert free.distance < 0.5 * fit.distance and free.gains.k3 > 5e3
     assert sampled_radius(free.gains) > 1.0
     assert "optimal-backstepping" in controller_names("joint-rig")
+
+
+def test_fig_16_3_table_16_2_weights_collapse_the_gains_and_a_reachable_R_gives_steps():
+    """Table 16.2 (= Table 16.1, R = 0.1): Algorithm 3's gains collapse (the target is below the
+    structural floor) and a 1 rad step moves the link by < 5 % in 0.3 s, unlike Fig 16.3; with the
+    reachable R = 1e-3 every sampled gain set moves the link past half the step in 0.3 s."""
+    from awiwi_drake.reproductions.ch16_optimal_backstepping import fig_16_3_gain_samples
+    printed = fig_16_3_gain_samples(runs=2, samples=300, t_final=0.3, num=31)
+    assert np.all(np.abs(printed["q"][:, -1]) < 0.05)
+    assert np.all(printed["distance"] > 5.0)                 # the structural floor (REPRODUCTIONS ch. 16)
+    reach = fig_16_3_gain_samples(runs=2, samples=300, r_weight=1e-3, t_final=0.3, num=31)
+    assert np.all(reach["q"][:, -1] > 0.5) and np.all(reach["q"] < 1.2)
+
+
+def test_finger_optimal_gains_per_dof_use_the_finger_data_and_the_rate_box():
+    """Ch. 16 per DoF of the index finger: each DoF's design rig has the DoF's inertia from the finger
+    plant and the equivalent radius sqrt(sum_i P_ij^2 / 2) of its tendons ((5.5): 4 base tendons of
+    r_x0 / r_x1 each, PIP pair r_x2 plus the DIP pair's r_x2, DIP pair r_x3); the fitted gains respect
+    the 3 kHz box."""
+    from awiwi_drake.control.optimal_gains import finger_optimal_gains
+    from awiwi_drake.hand.plant import make_finger_plant
+    from awiwi_drake.parameters.hand import finger_params
+    fp = finger_params("index")
+    plant, _ = make_finger_plant("index")
+    M = plant.CalcMassMatrix(plant.CreateDefaultContext())
+    expected_r = [np.sqrt(4 * fp.abduction_radius ** 2 / 2), np.sqrt(4 * fp.mcp_radius ** 2 / 2),
+                  np.sqrt(4 * fp.pip_radius ** 2 / 2), np.sqrt(2 * fp.dip_radius ** 2 / 2)]
+    res = finger_optimal_gains("index", starts=4)
+    assert [name for name, _, _ in res] == ["q20", "q21", "q22", "q23"]
+    for j, (name, fit, p) in enumerate(res):
+        assert p.link_pulley_radius == pytest.approx(expected_r[j], rel=1e-12)
+        assert p.link_inertia == pytest.approx(M[j, j], rel=1e-12)
+        g = fit.gains
+        assert g.k3 <= 750.0 * (1 + 1e-9) and g.k4 <= 750.0 * (1 + 1e-9)
+        assert g.damping <= p.link_inertia * 750.0 * (1 + 1e-9)
+        assert np.isfinite(fit.distance)

@@ -47,7 +47,7 @@ def demo_run():
     t_ref, refs = demo_references(rig, sc)
     ctx = loop.create_context(rig.operating_point(pretension=sc.f_start))
     res = simulate(loop.diagram, ctx, sc.t_final,
-                   log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
+                   log=("joint_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
                    monitors=rig_monitors(rig), max_step=1.0 / 3000)
     return rig, sc, t_ref, refs, res
 
@@ -96,3 +96,62 @@ def test_pole_sweep_symlog_keeps_slow_poles_visible():
     lo, hi = ax.get_xlim()
     assert lo < -2800 and hi > 0
     plt.close(fig)
+
+
+def test_bandwidth_of_a_first_order_gain_is_its_corner_frequency():
+    """-3 dB bandwidth from a linear FFT grid: log-interpolated, not the first grid point."""
+    from awiwi_drake.control.compare import sweep_metrics
+
+    f = np.arange(1.0, 70.0, 1.0)               # the chirp's 1 Hz bins
+    for fc in (5.0, 7.7, 31.4):                  # corners well above the sweep start (1 Hz)
+        g = 0.8 / np.abs(1 + 1j * f / fc)        # DC gain 0.8 (a loop with steady-state error)
+        bw = sweep_metrics(f, g)["bandwidth_hz"]
+        assert bw == pytest.approx(fc, rel=0.06), (fc, bw)
+    assert np.isnan(sweep_metrics(f, np.ones_like(f))["bandwidth_hz"])   # never falls: NaN, not 69 Hz
+
+
+def test_dominant_time_constant_of_pole_placement_is_its_slowest_pole():
+    """Pole placement (ch. 12) puts the closed-loop poles at xi_i omega_i: the slowest is 0.7 * 30 = 21 1/s."""
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.compare import dominant_time_constant
+    from awiwi_drake.control.registry import get_entry
+    from awiwi_drake.parameters.control import PolePlacementParams
+    from awiwi_drake.rigs import flexible_joint_rig
+
+    rig = flexible_joint_rig(backend="python")
+    entry = get_entry("pole-placement", rig)
+    loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": None})
+    p = PolePlacementParams()
+    tau = dominant_time_constant(loop)
+    assert tau == pytest.approx(1.0 / min(p.xi1 * p.omega1, p.xi2 * p.omega2), rel=1e-6)
+    rig = flexible_joint_rig(backend="python")
+    sampled = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": 3000.0})
+    assert dominant_time_constant(sampled) is None    # mixed discrete/continuous: no Linearize, no guess
+
+
+def test_compare_figures_have_legends_labels_and_bandwidth(tmp_path):
+    import matplotlib.pyplot as plt
+
+    from awiwi_drake.control.compare import compare_controllers, plot_gain_diagram, plot_runs
+    from awiwi_drake.control.compare import compare_test_params
+    from awiwi_drake.rigs import joint_rig
+
+    params = compare_test_params("joint-rig").replace(step_duration=0.15, sweep_duration=1.0, settle_time=0.05)
+    res = compare_controllers(lambda: joint_rig(), ["pd"], tests=["step", "sweep"], params=params)
+    fig, ax = plot_runs(res, "step", ylabel="link angle [rad]")
+    _check_axes_explained([ax])
+    assert "[s]" in ax.get_xlabel()
+    plt.close(fig)
+    fig, ax = plot_gain_diagram(res, unit="rad")
+    _check_axes_explained([ax])
+    assert ax.get_xscale() == "log" and "[Hz]" in ax.get_xlabel() and "[rad/rad]" in ax.get_ylabel()
+    m = res.table.get("pd", "sweep")
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any("-3 dB" in lab for lab in labels) and np.isfinite(m.bandwidth_hz)
+    plt.close(fig)
+    # peak_input is the applied torque (saturated at the motor's limit), beside the command
+    step = res.table.get("pd", "step")
+    limit = joint_rig().torque_limit
+    assert step.peak_input <= limit + 1e-9 < step.peak_command
+    md = res.table.to_markdown(ref_unit="rad")
+    assert "steady_state_error [rad]" in md and "[ref]" not in md and "peak_gain [rad/rad]" in md

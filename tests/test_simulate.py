@@ -180,7 +180,7 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
     res = simulate(rig, rig.context(op), 0.02,
                    inputs={"motor_torque": PerEntry([Step(0.005, limit + 0.5, before=op.motor_torque[0]),
                                                      op.motor_torque[1]])},
-                   log=("link_angle", "tendon_force", "motor_torque"), monitors=rig_monitors(rig))
+                   log=("joint_angle", "tendon_force", "motor_torque"), monitors=rig_monitors(rig))
     sat = res.events_of("actuator_saturation")
     assert [e.channel for e in sat] == ["motor_torque[0]"] and sat[0].t_start == pytest.approx(0.005, abs=2e-3)
     assert sat[0].extreme == pytest.approx(limit + 0.5)
@@ -205,3 +205,20 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
         res.save(tmp_path / "run.txt")
     with pytest.raises(ValueError, match="is not a file"):
         SimulationResult.load(tmp_path / "missing.npz")
+
+
+def test_one_simulation_loop_and_one_divergence_error():
+    """Architecture (issue 9): the package drives Drake's Simulator in one place (plus the batched
+    discrepancy replay) and defines one SimulationDivergedError."""
+    import pathlib
+
+    import awiwi_drake
+
+    pkg = pathlib.Path(awiwi_drake.__file__).parent
+    allowed = {"analysis/simulate.py", "discrepancy/replay.py"}
+    loops = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
+                   if "Simulator(" in p.read_text() and p.relative_to(pkg).as_posix() not in allowed)
+    assert loops == [], f"Simulator driven outside analysis.simulate: {loops}"
+    errors = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
+                    if "class SimulationDivergedError" in p.read_text())
+    assert errors == ["analysis/simulate.py"]

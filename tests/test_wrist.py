@@ -12,15 +12,15 @@ from pydrake.symbolic import Expression, Variable
 from _fd import fd_jacobian
 from awiwi_drake.hand.wrist import (
     TENDON_FINGERS,
-    WristCoupling,
     wrist_compensation,
     wrist_constraint_errors,
     wrist_jacobian,
     wrist_kinematics,
-    wrist_motion_study,
     wrist_tendon_lengths,
     wrist_tendon_offsets,
 )
+from awiwi_drake.reproductions.ch06_wrist import wrist_motion_study
+from awiwi_drake.hand.coupling import WristCoupling
 from awiwi_drake.parameters.wrist import TABLE_6_2_FOREARM, TABLE_6_2_PALM, WristParams
 
 P = WristParams()
@@ -291,7 +291,7 @@ def test_plot_uses_the_study(study):
     import matplotlib
 
     matplotlib.use("Agg")
-    from awiwi_drake.hand.wrist_plots import plot_wrist_constraint_errors, plot_wrist_displacements
+    from awiwi_drake.reproductions.ch06_wrist import plot_wrist_constraint_errors, plot_wrist_displacements
 
     fig, ax = plot_wrist_displacements(study)
     lines = ax.get_lines()

@@ -11,14 +11,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, FirstOrderTaylorApproximation, VectorLogSink
 
 from _fd import fd_jacobian
-from awiwi_drake.hand.wrist import (
-    WristCompensation,
-    WristCompensation_,
-    WristTendonOffsets,
-    WristTendonOffsets_,
-    wrist_jacobian,
-    wrist_tendon_offsets,
-)
+from awiwi_drake.hand.systems import WristCompensation, WristCompensation_, WristTendonOffsets, WristTendonOffsets_
+from awiwi_drake.hand.wrist import wrist_jacobian, wrist_tendon_offsets
 from awiwi_drake.parameters.wrist import WristParams
 
 R_M = 0.005   # motor pulley radius used by the tests [m] (any positive value)
@@ -102,7 +96,7 @@ def test_in_a_diagram_with_custom_params():
 def test_wrist_coupling_in_the_generic_tendon_routing():
     """WristCoupling plugs into TendonRouting_: tau = -P^T f, converts to AutoDiffXd."""
     from awiwi_drake.components.routing import TendonRouting
-    from awiwi_drake.hand.wrist import WristCoupling
+    from awiwi_drake.hand.coupling import WristCoupling
 
     cp = WristCoupling()
     routing = TendonRouting(cp, motor_pulley_radius=R_M)

@@ -135,11 +135,25 @@ def _run_chunk(fn: Callable, points: list[dict], fixed: dict, record: bool) -> l
     return out
 
 
+def _run_batch(fn: Callable, points: list[dict], fixed: dict, record: bool) -> list[tuple[bool, Any]]:
+    """``fn(points, **fixed)`` once for a whole chunk (a batched simulation), one value per point."""
+    try:
+        values = list(fn(points, **fixed))
+    except Exception as exc:  # noqa: BLE001 - reported for the batch
+        if not record:
+            raise SweepPointError(f"sweep batch of {len(points)} points from {points[0]}: {type(exc).__name__}: "
+                                  f"{exc}\n{traceback.format_exc()}") from exc
+        return [(False, f"{type(exc).__name__}: {exc}")] * len(points)
+    if len(values) != len(points):
+        raise SweepPointError(f"sweep batch: fn returned {len(values)} values for {len(points)} points")
+    return [(True, v) for v in values]
+
+
 def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[Mapping[str, Any]], *,
               executor: cf.Executor | str | None = None, max_workers: int | None = None,
               chunksize: int | None = None, fixed: Mapping[str, Any] | None = None,
-              on_error: str = "raise", quiet: bool | None = None) -> SweepResult:
-    """Evaluate ``fn(**fixed, **point)`` at every point.
+              on_error: str = "raise", quiet: bool | None = None, batch: int | None = None) -> SweepResult:
+    """Evaluate ``fn(**fixed, **point)`` at every point (or, with ``batch``, ``fn(points, **fixed)`` per chunk).
 
     Parameters
     ----------
@@ -163,6 +177,11 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
     quiet : bool, optional
         No progress bar (points done / total); by default it shows on a terminal or in a
         notebook, see :func:`awiwi_drake.config.progress_enabled`.
+    batch : int, optional
+        Batched evaluation: ``fn`` takes a *list* of up to ``batch`` point dicts (and
+        ``**fixed``) and returns one value per point, e.g. by simulating them as the
+        copies of one :func:`awiwi_drake.rigs.batch.batched_joint_rig`. Each chunk is one
+        task (``chunksize`` is then ``batch``); a failing batch fails all its points.
     """
     from awiwi_drake.config import progress_bar
 
@@ -178,6 +197,13 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
     if clash:
         raise ValueError(f"run_sweep: parameter {clash[0]!r} is both swept and fixed")
     record = on_error == "record"
+    if batch is not None:
+        if int(batch) != batch or batch < 1:
+            raise ValueError(f"run_sweep: batch = {batch!r} must be a positive integer (points per call of fn)")
+        if chunksize is not None:
+            raise ValueError("run_sweep: give batch or chunksize, not both (a batch is one task)")
+        chunksize = int(batch)
+    runner = _run_chunk if batch is None else _run_batch
     t0 = time.perf_counter()
 
     if isinstance(executor, str):
@@ -185,9 +211,10 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
             raise ValueError(f"run_sweep: executor must be an Executor, 'serial' or None, got {executor!r}")
         results = []
         with progress_bar(total=len(pts), desc="sweep", unit="point", quiet=quiet) as bar:
-            for p in pts:
-                results.extend(_run_chunk(fn, [p], fixed, record))
-                bar.update(1)
+            step = 1 if batch is None else int(batch)
+            for i in range(0, len(pts), step):
+                results.extend(runner(fn, pts[i:i + step], fixed, record))
+                bar.update(len(pts[i:i + step]))
         name = "serial"
     else:
         owned = executor is None
@@ -199,7 +226,7 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
             raise ValueError(f"run_sweep: chunksize = {chunksize} must be >= 1")
         chunks = [pts[i:i + size] for i in range(0, len(pts), size)]
         try:
-            futures = [ex.submit(_run_chunk, fn, c, fixed, record) for c in chunks]
+            futures = [ex.submit(runner, fn, c, fixed, record) for c in chunks]
             sizes = {f: len(c) for f, c in zip(futures, chunks)}
             with progress_bar(total=len(pts), desc="sweep", unit="point", quiet=quiet) as bar:
                 for f in cf.as_completed(futures):  # points done, as chunks finish

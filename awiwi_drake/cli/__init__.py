@@ -52,10 +52,11 @@ def parse_sets(items: list[str] | None) -> dict[str, str]:
     return out
 
 
-def add_parameter_options(p: argparse.ArgumentParser, what: str = "the rig's parameter set") -> None:
+def add_parameter_options(p: argparse.ArgumentParser, what: str = "the rig's parameter set",
+                          example: str = "e.g. written by 'params RIG --yaml'") -> None:
     """``--config FILE`` (YAML) and repeated ``--set NAME=VALUE`` (applied after the file)."""
     p.add_argument("--config", metavar="FILE.yaml",
-                   help=f"YAML file with {what} (all or some fields; e.g. from 'params RIG --yaml'); "
+                   help=f"YAML file with {what} (all or some fields; {example}); "
                         "read with Drake's yaml_load_typed")
     p.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                    help="override one parameter by field name (nested sets searched, dotted paths like "

@@ -1,7 +1,10 @@
 """awiwi-drake compare: run the standard closed-loop tests on registered controllers.
 
-Writes metrics.csv (one row per controller and test), metrics.md and plots
-(step.png, sine.png, disturbance.png, sweep_gain.png) into --out.  Unknown
+Writes metrics.csv (one row per controller, test and joint), metrics.md and plots
+(step.png, sine.png, disturbance.png, sweep_gain.png; on a finger or the hand one
+figure per finger and test, e.g. step_index.png) into --out.  On fingers and the
+hand every joint (independent DoF) is tested at once: step, sine and an
+external-torque step on the k-th joint of every finger.  Unknown
 controller names or controllers that do not fit the rig exit with status 2
 and a one-line error; a loop that diverges or saturates is a row with status
 "diverged" or "flagged", not an error.
@@ -20,7 +23,12 @@ RIG_FACTORIES = {
     "tendon-rig": ("awiwi_drake.rigs", "tendon_rig", {}),
     "flexible-joint": ("awiwi_drake.rigs", "flexible_joint_rig", {}),
     "joint-rig": ("awiwi_drake.rigs", "joint_rig", {}),
+    **{f"finger-{f}": ("awiwi_drake.hand.diagrams", "finger_diagram", {"finger": f, "backend": "python"})
+       for f in ("thumb", "index", "middle", "ring", "fifth")},
+    # the wrist held at neutral: without the wrist input (its tendon offsets are then zero), which is faster
+    "hand": ("awiwi_drake.hand.diagrams", "hand_diagram", {"wrist": False}),
 }
+FINGER_RIGS = tuple(k for k in RIG_FACTORIES if k.startswith("finger-")) + ("hand",)
 
 
 def _rate(text: str) -> float:
@@ -60,6 +68,29 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def _short_params(params, rig_fn, kw, names, rig_name):
+    """Shortened tests whose step window lets the compared loops settle (CompareShortMode)."""
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.compare import dominant_time_constant
+    from awiwi_drake.control.registry import get_entry
+    from awiwi_drake.parameters.cli import CompareShortMode
+
+    sm = CompareShortMode()
+    taus = []
+    for n in names:  # continuous loops on the python backend: Drake can linearise them
+        rig = rig_fn(**dict(kw, backend="python"))
+        entry = get_entry(n, rig_name)
+        loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": None, "delay": None})
+        taus.append(dominant_time_constant(loop, params))
+    if any(t is None for t in taus):  # a loop Drake cannot linearise: keep the full step window
+        step = params.step_duration
+    else:
+        step = min(params.step_duration, max(sm.min_step_duration, params.step_delay
+                                             + sm.step_time_constants * max(taus)))
+    return params.replace(step_duration=step, sweep_duration=min(params.sweep_duration, sm.sweep_duration),
+                          settle_time=min(params.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
+
+
 def _parse_list(text: str, what: str) -> list[str]:
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
@@ -73,13 +104,13 @@ def run(args) -> int:
     import importlib
 
     from awiwi_drake.config import short_mode
-    from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_runs
+    from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
     from awiwi_drake.control.registry import controller_names, get_entry
     from awiwi_drake.control.compare import compare_test_params
 
     if args.list:
         for n in controller_names(args.rig):
-            print(f"{n:16s} {get_entry(n).description}")
+            print(f"{n:16s} {get_entry(n, args.rig).description}")
         return 0
     if not args.controllers or not args.out:
         raise ValueError("give --controllers and --out (or --list)")
@@ -102,9 +133,12 @@ def run(args) -> int:
     short = args.short or short_mode()
     params = compare_test_params(args.rig)
     if short:
-        params = params.replace(step_duration=min(params.step_duration, 0.15),
-                                sweep_duration=min(params.sweep_duration, 1.0),
-                                settle_time=min(params.settle_time, 0.1), sine_periods=2.0)
+        if args.rig in FINGER_RIGS:   # no continuous linearisation (the estimator is sampled): fixed windows
+            params = params.replace(step_duration=min(params.step_duration, 0.15),
+                                    settle_time=min(params.settle_time, 0.1), sine_periods=2.0,
+                                    sine_frequency=max(params.sine_frequency, 4.0))  # two periods in 0.5 s
+        else:
+            params = _short_params(params, rig_fn, kw, names, args.rig)
     opts = {}
     if args.rate is not None:
         opts["rate_hz"] = None if args.rate == 0 else args.rate
@@ -114,8 +148,8 @@ def run(args) -> int:
         opts["saturation"] = args.saturation
     from awiwi_drake.config import progress_bar
 
-    n_tests = len(tests) if tests is not None else len([t for t in TESTS if t != "disturbance"
-                                                          or args.rig != "tendon-rig"])
+    n_tests = len(tests) if tests is not None else len([t for t in TESTS if (t != "disturbance"
+                                                        or args.rig != "tendon-rig") and (t != "sweep" or args.rig not in FINGER_RIGS)])
     with progress_bar(total=len(names) * n_tests, desc="compare", unit="test", quiet=args.quiet) as bar:
         def advance(label: str) -> None:
             bar.set_postfix_str(label, refresh=False)
@@ -123,14 +157,23 @@ def run(args) -> int:
 
         result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance, **opts)
     result.table.to_csv(out / "metrics.csv")
-    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n" + result.table.to_markdown())
+    ref_unit = "N" if args.rig == "tendon-rig" else "rad"
+    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n"
+                                    + result.table.to_markdown(ref_unit=ref_unit))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     ylabel = "tendon force [N]" if args.rig == "tendon-rig" else "link angle [rad]"
     for test in dict.fromkeys(r.test for r in result.runs):
+        if args.rig in FINGER_RIGS:
+            fingers = dict.fromkeys(next(r for r in result.runs if r.test == test).meta["fingers"])
+            for finger in fingers:
+                fig, _ = plot_joint_runs(result, test, finger)
+                fig.savefig(out / f"{test}_{finger}.png", dpi=110)
+                plt.close(fig)
+            continue
         if test == "sweep":
-            fig, _ = plot_gain_diagram(result)
+            fig, _ = plot_gain_diagram(result, unit=ref_unit)
             fig.savefig(out / "sweep_gain.png", dpi=110)
         else:
             fig, _ = plot_runs(result, test, ylabel=ylabel)

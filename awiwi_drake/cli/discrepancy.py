@@ -105,6 +105,12 @@ def _make_dataset(args) -> int:
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
     rig = CLI_RIG_NAMES[args.rig]
+    from awiwi_drake.discrepancy.catalog import EFFECTS
+
+    for h in hidden:  # checked here so that the message uses the CLI's rig name
+        if h in EFFECTS and rig not in EFFECTS[h].rigs:
+            raise ValueError(f"--hide {h}: the effect does not exist on {args.rig} "
+                             f"(it needs {' or '.join(r + '-rig' for r in EFFECTS[h].rigs)})")
     from awiwi_drake.config import SimulationProgress
 
     with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
@@ -120,12 +126,15 @@ def _make_dataset(args) -> int:
 def register(subparsers) -> None:
     from . import add_parameter_options, positive_float
 
-    p = subparsers.add_parser("diagnose", help="find, name and add missing effects in a dataset",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "diagnose", help="find, name and add missing effects in a dataset",
+        description="Compare a measured dataset (NAME.csv + NAME.json) with the nominal model, localise the "
+                    "disagreement, name the missing effects from the catalog, fit and add them (progress on "
+                    "stderr, summary on stdout).")
     p.add_argument("dataset", help="NAME.csv (with NAME.json beside it)")
     p.add_argument("--report", metavar="DIR", help="write report.md, PNGs and summary.json into this folder")
     p.add_argument("--json", metavar="OUT.json", help="write the JSON summary to this file")
-    add_parameter_options(p, what="DiscrepancySettings (e.g. window: 0.05)")
+    add_parameter_options(p, what="DiscrepancySettings", example="e.g. 'window: 0.05'")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=_diagnose)
 

@@ -272,18 +272,31 @@ def compile_kernels(functions: Mapping[str, tuple[Sequence[Sequence], Sequence]]
         mod = _LOADED[modname]
     else:
         folder = kernel_cache_dir()
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / f"{modname}.py"
-        if not path.exists() or path.read_text() != source:
-            tmp = path.with_suffix(f".{os.getpid()}.tmp")
-            tmp.write_text(source)
-            os.replace(tmp, path)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            path = _write_module(folder, modname, source)
+        except OSError as exc:   # unwritable cache: compile from a temporary folder (no reuse across runs)
+            import tempfile
+            import warnings
+            warnings.warn(f"kernel cache {folder} is not writable ({exc}); set AWIWI_KERNEL_CACHE to a writable "
+                          "folder to keep compiled kernels between runs", RuntimeWarning, stacklevel=2)
+            folder = pathlib.Path(tempfile.mkdtemp(prefix="awiwi_kernels_"))
+            path = _write_module(folder, modname, source)
         spec = importlib.util.spec_from_file_location(modname, path)
         mod = importlib.util.module_from_spec(spec)
         sys.modules[modname] = mod
         spec.loader.exec_module(mod)
         _LOADED[modname] = mod
     return {name: getattr(mod, name) for name in _with_batch(functions)}
+
+
+def _write_module(folder: pathlib.Path, modname: str, source: str) -> pathlib.Path:
+    path = folder / f"{modname}.py"
+    if not path.exists() or path.read_text() != source:
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(source)
+        os.replace(tmp, path)       # atomic: concurrent processes never see a half-written module
+    return path
 
 
 def _with_batch(functions):

@@ -65,9 +65,9 @@ def _optimal(rig):
     return impedance_controller(rig, fit.gains)
 
 
-register_controller("backstepping", _backstepping, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
+register_controller("backstepping", _backstepping, rigs=("flexible-joint", "joint-rig"), loop_options=_LOOP,
                     description="impedance backstepping (ch. 15.3-15.5), rig's spring law, external-torque observer")
-register_controller("backstepping-position", _position, rigs=("flexible_joint",), loop_options=_LOOP,
+register_controller("backstepping-position", _position, rigs=("flexible-joint",), loop_options=_LOOP,
                     description="position backstepping of the linear flexible joint (15.11)-(15.50)")
-register_controller("optimal-backstepping", _optimal, rigs=("flexible_joint", "joint_rig"), loop_options=_LOOP,
+register_controller("optimal-backstepping", _optimal, rigs=("flexible-joint", "joint-rig"), loop_options=_LOOP,
                     description="impedance backstepping with gains fitted to the LQR (ch. 16)")

@@ -55,7 +55,8 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import dof_selection, joint_inertia
+from awiwi_drake.control.chain import joint_inertia
+from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
 
 __all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller"]
@@ -97,6 +98,16 @@ class FingerBacksteppingLaw(StaticLaw):
         self.Kd = 2.0 * zeta * np.sqrt(self.Kp * np.diag(self.M))
         self.K3 = self.K4 = float(wf)
         self.friction_scale = float(p.friction_scale)
+        # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
+        parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
+        self._blocks = []                 # (tendon slice, plant-joint slice, DoF slice, constant W or None)
+        t0 = j0 = d0 = 0
+        for c in parts.values():
+            m_f, n_f, k_f = c.num_tendons, c.num_joints, c.dof_selection.shape[1]
+            sl = (slice(t0, t0 + m_f), slice(j0, j0 + n_f), slice(d0, d0 + k_f))
+            W_f = -np.linalg.pinv((np.asarray(c.P(np.zeros(n_f)), float) @ c.dof_selection).T) if c.is_constant else None
+            self._blocks.append(sl + (W_f,))
+            t0, j0, d0 = t0 + m_f, j0 + n_f, d0 + k_f
         self.inputs = {"joint_angle_reference": n, "joint_angle": n, "joint_velocity": n, "elongation": m,
                        "motor_angle": m, "motor_velocity": m}
         self.output_size = m
@@ -111,7 +122,9 @@ class FingerBacksteppingLaw(StaticLaw):
         P = np.asarray(self.coupling.P(q))
         P_val = _values(P)
         PS = P @ S
-        W = -np.linalg.pinv((P_val @ S).T)                     # m x k, frozen at the value of q
+        W = np.zeros((P_val.shape[0], S.shape[1]))             # m x k, frozen at the value of q
+        for ts, js, ds, W_f in self._blocks:
+            W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
         f = self.spring.force(x)

@@ -357,7 +357,7 @@ class TendonForceDistribution(_DistributionBase):
                 s *= 0.5
         return alpha, C, K, it
 
-    def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, alpha0=None) -> DistributionResult:
+    def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, warm_start=None) -> DistributionResult:
         """Distribute ``tau_des`` (n) with target stiffness ``K_des`` (n x n).
 
         Parameters
@@ -372,8 +372,9 @@ class TendonForceDistribution(_DistributionBase):
             ``dP_ij/dq_k`` for a position-dependent coupling (geometric stiffness term).
         q : array (n,), optional
             Posture, for a position-dependent coupling object given to the constructor.
-        alpha0 : array, optional
-            Warm start in the null space (e.g. the previous call's solution).
+        warm_start : array (m,), optional
+            Previous tendon forces [N]: the search starts from their internal (null-space) part
+            (inside a control loop: the previous period's result), as for the optimal solver.
         """
         P, pinv_PT, W, _, hessian = self._coupling_at(P, hessian, q)
         m, n = P.shape
@@ -382,14 +383,15 @@ class TendonForceDistribution(_DistributionBase):
         f_p = -pinv_PT @ tau_des
         K_norm2 = max(float(np.sum(K_des * K_des)), 1e-300)
         r = W.shape[1]
-        if alpha0 is None:
+        if warm_start is None:
             # start at the pretension that puts the mean force mid-range (the null space of an
             # antagonistic coupling contains the all-positive co-contraction direction)
             alpha = W.T @ (np.full(m, 0.5 * (p.f_min + p.f_max)) - f_p) if r else np.zeros(0)
         else:
-            alpha = np.asarray(alpha0, dtype=float).ravel()
-            if alpha.shape != (r,):
-                raise ValueError(f"solve: alpha0 has shape {alpha.shape}; the null space has dimension {r}")
+            f0 = np.asarray(warm_start, dtype=float).ravel()
+            if f0.shape != (m,):
+                raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
+            alpha = W.T @ (f0 - f_p)
         f_start = f_p + W @ alpha
         inside = np.all(f_start > p.f_min) and np.all(f_start < p.f_max)
         status, iters, C = "ok", 0, np.inf
@@ -654,8 +656,9 @@ def TendonForceDistribution_(T):
     entries) or the row-major n_f x n_f block of each finger, concatenated (``"full"``).  With the
     thumb, input ``joint_angle`` carries the *plant* joint angles of the fingers given (P(q) of the
     thumb base).  Output ``tendon_force_reference`` (m) [N] = the discrete state, updated every
-    ``period`` by the finger solvers warm-started at the previous forces
-    (``iterations_per_period`` QPs for the optimal method), initialised at the mid-range forces.
+    ``period`` by the finger solvers warm-started at the previous forces (both methods;
+    ``iterations_per_period`` QPs for the optimal one, Algorithm 2's N iterations from there), initialised
+    at the mid-range forces.
     Output ``distribution_status`` (number of fingers) is 0 (ok), 1 (infeasible request: the
     forces produce the torque and violate the bounds, reported, never clipped) or 2 (bound
     violation), sampled with the state.
@@ -747,7 +750,7 @@ def TendonForceDistribution_(T):
                 if isinstance(s, OptimalForceDistribution):
                     res = s.solve(tau[sd], K_des, warm_start=f_prev_v[st], max_iterations=self.iterations_per_period, **kw)
                 else:
-                    res = s.solve(tau[sd], K_des, **kw)
+                    res = s.solve(tau[sd], K_des, warm_start=f_prev_v[st], **kw)
                 status[k] = codes[res.status]
                 if T is float:
                     f_new[st] = res.forces

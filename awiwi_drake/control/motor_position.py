@@ -77,7 +77,7 @@ def joint_rig_position_loop(rig: Any, scenario: DemoScenario | None = None,
     loop's remaining input is ``external_torque``.  Start it with
     ``loop.create_context(rig.operating_point(pretension=scenario.f_start))``.
     """
-    if getattr(rig, "name", None) != "joint_rig":
+    if getattr(rig, "name", None) != "joint-rig":
         raise ValueError(f"joint_rig_position_loop: needs a joint_rig, got {getattr(rig, 'name', rig)!r}")
     g = gains or MotorPositionGains()
     t, refs = demo_references(rig, scenario)

@@ -48,7 +48,7 @@ from awiwi_drake.analysis.sweep import monte_carlo_points, run_sweep
 from awiwi_drake.control.backstepping import JointModel, impedance_backstepping, joint_model
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
-__all__ = ["GainFit", "rate_limited_case", "torque_coordinates", "torque_state_map", "backstepping_feedback",
+__all__ = ["GainFit", "rate_limited_case", "finger_optimal_gains", "torque_coordinates", "torque_state_map", "backstepping_feedback",
            "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
 
 OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
@@ -138,7 +138,7 @@ def system_feedback(controller, state0) -> np.ndarray:
     ctx = ad.CreateDefaultContext()
     x = InitializeAutoDiff(np.asarray(state0, dtype=float)).ravel()
     ad.GetInputPort("state").FixValue(ctx, x)
-    rport = ad.GetInputPort("link_angle_reference")
+    rport = ad.GetInputPort("joint_angle_reference")
     rport.FixValue(ctx, np.array([AutoDiffXd(float(state0[0]))] + [AutoDiffXd(0.0)] * (rport.size() - 1)))
     u = ad.GetOutputPort("motor_torque").Eval(ctx)
     return -ExtractGradient(np.asarray(u, dtype=object))
@@ -251,3 +251,40 @@ def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8
     fb = _feedback_tau(model, T_inv, omega, x0)
     return GainFit(_gains(omega), fb, target, gain_distance(fb, target), count[0], time.perf_counter() - t0,
                    "least squares on log(Omega) (scipy)")
+
+
+def finger_optimal_gains(finger: str, *, pretension: float = 20.0, rate_hz: float = 3000.0,
+                         case=None, starts: int = 16) -> list[tuple[str, GainFit, object]]:
+    """Ch. 16 gain selection for each independent DoF of a finger (the thesis: 'applied to the 19 joints').
+
+    Each DoF ``j`` is designed as an antagonistic joint (:func:`awiwi_drake.rigs.joint_rig`) with the
+    DoF's own inertia ``(S^T M S)_jj`` (finger MultibodyPlant, straight finger), an equivalent pulley
+    radius ``r_eq = sqrt(sum_i (P S)_ij^2 / 2)`` (so that the pair's stiffness ``r_eq^2 (k1 + k2)``
+    equals the diagonal of ``(P S)^T K_t (P S)`` at equal tendon stiffness), the finger's joint damping,
+    the hand's spring law and ``pretension``; Table 16.1's weights per tendon, the gain box bounded
+    by ``rate_hz`` (:func:`rate_limited_case`).  The thumb uses ``P(0)`` (its P depends on q).
+    Returns ``(joint name, GainFit, JointRigParams)`` per DoF.
+    """
+    from awiwi_drake.hand.coupling import finger_coupling
+    from awiwi_drake.hand.plant import make_finger_plant
+    from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase
+    from awiwi_drake.parameters.hand import finger_params
+    from awiwi_drake.parameters.rigs import JointRigParams
+    from awiwi_drake.rigs import joint_rig
+    c = finger_coupling(finger)
+    S = c.dof_selection
+    PS = np.asarray(c.P(np.zeros(c.num_joints)), dtype=float) @ S
+    plant, _ = make_finger_plant(finger)
+    M = S.T @ plant.CalcMassMatrix(plant.CreateDefaultContext()) @ S
+    fp = finger_params(finger)
+    damping = float(getattr(fp, "joint_damping", 1e-5))
+    names = [c.joint_names[int(np.argmax(np.abs(S[:, j])))] for j in range(S.shape[1])]
+    out = []
+    for j, name in enumerate(names):
+        r_eq = float(np.sqrt(np.sum(PS[:, j] ** 2) / 2.0))
+        p = JointRigParams(link_inertia=float(M[j, j]), link_pulley_radius=r_eq, link_damping=damping,
+                           pretension=float(pretension))
+        rig = joint_rig(params=p)
+        cs = rate_limited_case(case or JointRigOptimalGainsCase(), p.link_inertia, rate_hz)
+        out.append((name, optimize_gains(rig, cs, starts=starts), p))
+    return out

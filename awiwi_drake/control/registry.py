@@ -5,10 +5,10 @@ Built-in controllers are registered by the modules listed in
 imports Drake-heavy modules at package import).  Other parts of the package
 (and users) add controllers with :func:`register_controller`.
 
-Rig kinds are ``"tendon_rig"``, ``"flexible_joint"``, ``"joint_rig"``,
-``"finger"`` (any of the five fingers) and ``"hand"``; :func:`rig_kind` maps a
-rig object (or a CLI spelling such as ``"flexible-joint"``, ``"finger-index"``)
-to its kind.
+Rigs have one name each, the same in the API (``Rig.name``), the CLI and errors:
+``tendon-rig``, ``flexible-joint``, ``joint-rig``, ``finger-index`` ... ``finger-thumb`` and
+``hand``. Controllers are registered for rig kinds, which are these names except that the
+five fingers share the kind ``"finger"``; :func:`rig_kind` maps a rig (or its name) to its kind.
 """
 
 from __future__ import annotations
@@ -20,16 +20,10 @@ from typing import Any, Callable, Mapping
 from awiwi_drake.parameters.hand import FINGERS
 
 __all__ = ["ControllerEntry", "register_controller", "make_controller", "controller_names",
-           "get_entry", "rig_kind", "RIG_KINDS", "PROVIDER_MODULES"]
+           "get_entry", "rig_kind", "RIG_KINDS", "RIG_NAMES", "PROVIDER_MODULES"]
 
-RIG_KINDS = ("tendon_rig", "flexible_joint", "joint_rig", "finger", "hand")
-_ALIASES = {
-    "tendon": "tendon_rig", "tendon_rig": "tendon_rig",
-    "flexible_joint": "flexible_joint", "flexible_joint_rig": "flexible_joint", "flexible": "flexible_joint",
-    "joint_rig": "joint_rig", "joint": "joint_rig", "antagonistic_joint": "joint_rig",
-    "finger": "finger", "hand": "hand",
-    **{f"finger_{f}": "finger" for f in FINGERS},
-}
+RIG_KINDS = ("tendon-rig", "flexible-joint", "joint-rig", "finger", "hand")
+RIG_NAMES = ("tendon-rig", "flexible-joint", "joint-rig", *(f"finger-{f}" for f in FINGERS), "hand")
 # Modules whose import registers controllers (append yours).
 PROVIDER_MODULES = ["awiwi_drake.control.catalog", "awiwi_drake.control.backstepping_registry"]
 
@@ -66,18 +60,15 @@ def _ensure_loaded() -> None:
 
 
 def rig_kind(rig: Any) -> str:
-    """The kind of a rig object or rig name (``tendon_rig``, ``flexible_joint``, ``joint_rig``, ``finger``, ``hand``)."""
+    """The kind of a rig object or rig name (``tendon-rig``, ``flexible-joint``, ``joint-rig``, ``finger``, ``hand``)."""
     name = rig if isinstance(rig, str) else getattr(rig, "name", None)
     if not isinstance(name, str):
         raise ValueError(f"cannot tell the rig kind of {rig!r}: it has no name")
-    key = name.strip().lower().replace("-", "_").replace(" ", "_")
-    if key in _ALIASES:
-        return _ALIASES[key]
-    for alias, kind in _ALIASES.items():  # e.g. "flexible_joint_linear"
-        if key.startswith(alias):
-            return kind
-    raise ValueError(f"unknown rig {name!r}; known rigs: tendon-rig, flexible-joint, joint-rig, "
-                     f"{', '.join('finger-' + f for f in FINGERS)}, hand")
+    if name in RIG_KINDS:
+        return name
+    if name in RIG_NAMES:
+        return "finger"
+    raise ValueError(f"unknown rig {name!r}; known rigs: {', '.join(RIG_NAMES)} (kinds: {', '.join(RIG_KINDS)})")
 
 
 def register_controller(name: str, factory: Callable[[Any], Any], *, rigs: tuple[str, ...] | list[str],
@@ -133,10 +124,8 @@ def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
         if kind in e.rigs:
             return e
     fits = controller_names(rig)
-    cli = kind.replace("_", "-")  # errors use the CLI spelling (joint-rig, flexible-joint, ...)
-    raise ValueError(f"controller {name!r} does not fit rig {cli!r} (it is for "
-                     f"{', '.join(r.replace('_', '-') for r in _kinds(name))}); controllers for {cli!r}: "
-                     f"{', '.join(fits)}")
+    raise ValueError(f"controller {name!r} does not fit rig {kind!r} (it is for "
+                     f"{', '.join(_kinds(name))}); controllers for {kind!r}: {', '.join(fits)}")
 
 
 def make_controller(name: str, rig: Any):

@@ -70,6 +70,16 @@ class NoiseEquivalent:
         self.omega_rms = float(np.sqrt(np.mean(eng.xhat[n:2 * n] ** 2)))
         self.force_rms = float(np.sqrt(np.mean([np.mean(eng.ds.outputs[k] ** 2) for k in eng.out_names
                                                  if k.startswith("tendon_force")] or [0.0])))
+        # RMS motor / link accelerations and link speed of the estimated states (sizes of inertia and
+        # damping corrections in torque units)
+        rms = (lambda v: float(np.sqrt(np.mean(np.asarray(v) ** 2))) if np.size(v) else 0.0)
+        self.omega_dot_rms = rms(np.diff(eng.xhat[n:2 * n], axis=1) / eng.dt)
+        if nom.has_link:
+            self.qd_rms = rms(eng.xhat[2 * n + 1])
+            self.qdd_rms = rms(np.diff(eng.xhat[2 * n + 1]) / eng.dt)
+        else:
+            self.qd_rms = self.qdd_rms = float("nan")
+        self.nom = nom
 
 
 def noise_equivalent(eng: ReplayEngine) -> NoiseEquivalent:
@@ -90,7 +100,9 @@ def materiality(effect: str, params: dict, ne: NoiseEquivalent) -> dict:
     half-width, guide friction and force-sensor errors against the noise-equivalent
     force; motor friction, ripple and motor-parameter errors against the
     noise-equivalent motor torque; joint friction and link-parameter errors against
-    the noise-equivalent link torque.  Spring-scale errors are forces at the RMS force.
+    the noise-equivalent link torque.  Spring-scale errors are forces at the RMS force;
+    inertia and damping corrections (``nominal_motor``, ``nominal_link``) are the
+    torques they change at the dataset's RMS acceleration and speed.
     """
     g = params.get
     if effect == "delay":
@@ -114,7 +126,15 @@ def materiality(effect: str, params: dict, ne: NoiseEquivalent) -> dict:
     elif effect == "nominal_spring":
         size, floor, unit, what = abs(g("spring_scale_rel", 0.0)) * ne.force_rms, ne.force, "N", \
             "spring-force error at RMS force vs noise force"
-    else:  # nominal_motor / nominal_link: no single size; the significance tests decide
+    elif effect == "nominal_motor":  # inertia and damping corrections as torques at the RMS motion
+        size = (abs(g("motor_inertia_rel", 0.0)) * ne.nom.motor_inertia * ne.omega_dot_rms
+                + abs(g("motor_damping_add", 0.0)) * ne.omega_rms)
+        floor, unit, what = ne.motor_torque, "Nm", "inertia/damping correction torque at RMS motion vs noise torque"
+    elif effect == "nominal_link":
+        size = (abs(g("link_inertia_rel", 0.0)) * ne.nom.link_inertia * ne.qdd_rms
+                + abs(g("link_damping_add", 0.0)) * ne.qd_rms)
+        floor, unit, what = ne.link_torque, "Nm", "inertia/damping correction torque at RMS motion vs noise torque"
+    else:  # no single size (e.g. sensor biases): the significance tests decide
         return {"size": float("nan"), "floor": float("nan"), "unit": "", "material": True,
                 "measure": "no materiality floor (parameter correction)"}
     return {"size": float(size), "floor": float(floor), "unit": unit, "material": bool(size >= floor),

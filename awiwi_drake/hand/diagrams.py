@@ -29,7 +29,7 @@ python/symbolic backends' form).
 
 The wrist enters the routing like extra joints: the drive's coupling is the
 finger coupling plus ``m`` length-offset "joints" (identity columns of
-``P``) fed by :class:`~awiwi_drake.hand.wrist.WristTendonOffsets_`
+``P``) fed by :class:`~awiwi_drake.hand.systems.WristTendonOffsets_`
 (Table 6.2 order = our global tendon order, ``parameters.hand.TENDON_SLICES``).
 """
 
@@ -39,23 +39,21 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from ..components.drive import build_tendon_drive
 from ..components.motor import motor_ripple_torque
 from ..components.spring import tendon_spring
-from ..components.friction import guide_friction, guide_friction_force
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
-from .coupling import FingerCoupling, HandCoupling, finger_coupling
+from .coupling import HandCoupling, dof_selection, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
+from .systems import GuideFriction, tendon_bending_angles
 
-__all__ = ["HandRig", "finger_diagram", "hand_diagram", "tendon_bending_angles", "GuideFriction_", "GuideFriction",
-           "DEFAULT_BACKEND"]
+__all__ = ["HandRig", "finger_diagram", "hand_diagram", "DEFAULT_BACKEND"]
 
 DEFAULT_BACKEND = "compiled"
 
@@ -107,7 +105,7 @@ class HandRig(Rig):
         period = 1.0 / p.rate_hz if period is None else max(float(period), 1.0 / p.rate_hz)
         return link_state_estimator(self.coupling, self.params.motor.pulley_radius, self.offsets,
                                     period=period, wrist=self.diagram.HasInputPort("wrist_angle"),
-                                    iterations=p.iterations, step0=p.initial_step,
+                                    iterations=p.iterations, step0=p.initial_step, refine=p.gauss_newton_refinement,
                                     velocity_time_constant=max(p.velocity_time_constant, period))
 
     def joint_angles_of(self, state) -> np.ndarray:
@@ -119,72 +117,6 @@ class HandRig(Rig):
         return len(self.tendon_names)
 
 
-def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
-    """Total bending angle per tendon [rad] at the straight pose (input of (4.1)).
-
-    ``palm_bending_angle`` plus ``joint_wrap_angle`` for every joint pulley the
-    tendon crosses (non-zero entry of ``P(0)``); the thumb base tendons run
-    straight from the palm (no pulley), so they get the palm bend only.
-    """
-    P = np.asarray(coupling.P(np.zeros(coupling.num_joints)), dtype=float)
-    crossed = (np.abs(P) > 0).sum(axis=1)
-    if isinstance(coupling, HandCoupling):
-        parts = coupling.parts
-    else:
-        parts = {"finger": coupling}
-    for name, c in parts.items():
-        if not c.is_constant:  # thumb: base rows are straight tendons
-            ts = coupling.tendon_slices[name] if isinstance(coupling, HandCoupling) else slice(0, c.num_tendons)
-            crossed[ts.start:ts.start + 4] = 0
-    return p.palm_bending_angle + p.joint_wrap_angle * crossed
-
-
-@TemplateSystem.define("GuideFriction_")
-def GuideFriction_(T):
-    """Routing (guide) friction as a generalised force on the joints.
-
-    Inputs ``state`` = plant ``[q; v]`` (2n), ``tendon_force`` (m) [N].
-    Output ``generalized_force`` (n) = ``-P(q)^T f_fr`` with
-    ``f_fr`` the guide friction law :func:`~awiwi_drake.components.friction.guide_friction`
-    of each tendon sliding through its guides at ``P(q) v`` (the path-length rate at the
-    finger), so its power ``-f_fr . P v`` is never positive: the constant part is (4.1)
-    ``C0 (1 - exp(-C1 alpha))`` (speed and tension independent) or, with
-    ``capstan=True``, the capstan part ``f (exp(mu alpha s) - 1)`` (tension proportional).
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, coupling, bending_angles, params, capstan: bool, smoothing_velocity: float,
-                       converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self.coupling, self.alpha, self.params = coupling, np.asarray(bending_angles, float), params
-            self.capstan, self.v_s = bool(capstan), float(smoothing_velocity)
-            n, m = coupling.num_joints, coupling.num_tendons
-            if self.alpha.shape != (m,):
-                raise ValueError(f"GuideFriction: bending_angles must have {m} entries, got {self.alpha.shape}")
-            self._n = n
-            self._x = self.DeclareVectorInputPort("state", 2 * n)
-            self._f = self.DeclareVectorInputPort("tendon_force", m)
-            zero = np.zeros(m)
-            self._constant = zero if self.capstan else guide_friction_force(self.alpha, params)
-            self._exponent = params.mu * self.alpha if self.capstan else zero
-            self.DeclareVectorOutputPort("generalized_force", n, self._calc,
-                                         prerequisites_of_calc={self._x.ticket(), self._f.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.coupling, other.alpha, other.params, other.capstan, other.v_s,
-                            converter=converter)
-
-        def _calc(self, context, out):
-            x = self._x.Eval(context)
-            q, v = x[: self._n], x[self._n:]
-            P = np.asarray(self.coupling.P(q))
-            f_fr = guide_friction(P @ v, self._f.Eval(context), self._constant, self._exponent, self.v_s)
-            out.SetFromVector(-(P.T @ f_fr))
-
-    return Impl
-
-
-GuideFriction = GuideFriction_[None]
 
 
 def tendon_spring_laws(p, tendon_names):
@@ -259,7 +191,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
                          f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
     if wrist:
-        from .wrist import WristTendonOffsets
+        from .systems import WristTendonOffsets
         w = b.AddNamedSystem("wrist_tendon_offsets", WristTendonOffsets())
         select = np.zeros((m, 38))
         select[np.arange(m), rows] = 1.0
@@ -330,18 +262,6 @@ def _wrist_rows(parts) -> np.ndarray:
     return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
 
 
-def _selection(coupling) -> np.ndarray:
-    """``S`` with ``q_plant = S q_dof`` over all parts."""
-    parts = coupling.parts if isinstance(coupling, HandCoupling) else {"f": coupling}
-    blocks = [c.dof_selection for c in parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
-
-
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
                  external_torque, wrist_angle, hysteresis=False):
     """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
@@ -349,7 +269,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
     f0 = p.pretension if pretension is None else float(pretension)
     if not f0 > 0:
         raise ValueError(f"{name}: pretension = {f0} must be > 0 [N]")
-    S = _selection(coupling)
+    S = dof_selection(coupling)
     if joint_angles is None:
         q = np.zeros(n)
     else:
@@ -443,7 +363,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     def plant_factory(b):
         return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity)
 
-    return _build(f"finger_{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
+    return _build(f"finger-{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
                   wrist, visual)
 
 

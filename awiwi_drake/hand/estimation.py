@@ -31,6 +31,7 @@ Error bound (used by the tests and docs/REPRODUCTIONS.md): at a converged
 least-squares solution a measurement error ``e`` moves the estimate by
 ``dq ~ P^+ e`` to first order, so ``|dq| <= |e| / sigma_min(P)``; with
 ``|e_i| <= a`` on each of the four base tendons, ``|e| <= 2 a``.
+The Fig 5.16-5.17 study is :func:`awiwi_drake.reproductions.ch05_fingers.thumb_estimation_study`.
 """
 
 from __future__ import annotations
@@ -44,10 +45,10 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import LinearSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
+from .coupling import LinearFingerCoupling, ThumbCoupling, dof_selection, reduced_coupling_matrix
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
-           "estimate_thumb", "EstimationStudy", "thumb_estimation_study", "noise_error_bound",
+           "estimate_thumb", "noise_error_bound",
            "LinkPositionEstimator_", "LinkPositionEstimator", "LinkStateEstimator", "link_state_estimator"]
 
 
@@ -169,72 +170,6 @@ def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> floa
     return 2.0 * amplitude / np.linalg.svd(P, compute_uv=False)[-1]
 
 
-@dataclass
-class EstimationStudy:
-    """Fig 5.16-5.17 study: grid truth, estimates and errors per (iterations, noise, start)."""
-
-    grid: np.ndarray                # (N, 2) true (q10, q11)
-    estimates: dict                 # (iterations, noise [m], start) -> (N, 2)
-    errors: dict                    # same keys -> (N,) |q_hat - q| [rad]
-    bounds: dict                    # same keys -> (N,) first-order noise bound + final step
-    at_limit: dict = None           # same keys -> (N,) bool: the estimate sits on the +-pi/2 projection bound
-
-    def summary_rows(self) -> list[dict]:
-        """One row per case: iterations, noise [mm], start, mean/median/max error [rad]."""
-        rows = []
-        for key, e in self.errors.items():
-            it, a, start = key
-            rows.append(dict(iterations=it, noise_mm=1e3 * a, start=start, mean=float(np.mean(e)),
-                             median=float(np.median(e)), max=float(np.max(e)),
-                             frac_within_0p1=float(np.mean(e < 0.1)),
-                             at_limit=int(np.sum(self.at_limit[key])) if self.at_limit else 0))
-        return rows
-
-
-def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int = 13,
-                           limit: float = 1.5, iterations=(15, 30, 50), noise=(0.0, 5e-4, 1e-3),
-                           starts=("cold", "warm"), step0: float = 0.1, seed: int = 0) -> EstimationStudy:
-    """Reproduce Fig 5.16-5.17 on an ``n_grid`` x ``n_grid`` grid over ``[-limit, limit]^2``.
-
-    Noise: uniform in ``[-a, a]`` on each base tendon length ("amplitude").
-    Cold start: every estimate starts at (0, 0) (the thesis's evaluation).
-    Warm start: the grid is visited in a serpentine order and each estimate
-    starts from the previous estimate (the thesis's real-time use); the first
-    one starts at the true first grid point (an estimator initialised at a
-    known pose, e.g. after homing).
-    """
-    coupling = coupling or ThumbCoupling()
-    if n_grid < 2:
-        raise ValueError(f"n_grid must be >= 2, got {n_grid}")
-    axis = np.linspace(-limit, limit, n_grid)
-    grid = np.array([(a, b if i % 2 == 0 else -b) for i, a in enumerate(axis) for b in axis])
-    h0 = coupling.h(np.zeros(4))[:4]
-    dh_true = np.array([coupling.h(np.array([a, b, 0, 0]))[:4] - h0 for a, b in grid])
-    rng = np.random.default_rng(seed)
-    noise_unit = rng.uniform(-1.0, 1.0, size=dh_true.shape)
-    sig_bound = np.array([noise_error_bound(coupling, g, 1.0) for g in grid])
-    est, err, bnd, lim = {}, {}, {}, {}
-    for a in noise:
-        meas = dh_true + a * noise_unit
-        for it in iterations:
-            for start in starts:
-                if start not in ("cold", "warm"):
-                    raise ValueError(f"starts: expected 'cold' or 'warm', got {start!r}")
-                q_prev = grid[0].copy()
-                out = np.zeros_like(grid)
-                steps = np.zeros(len(grid))
-                hit = np.zeros(len(grid), dtype=bool)
-                for k, m in enumerate(meas):
-                    q0 = (0.0, 0.0) if start == "cold" else q_prev
-                    r = thumb_base_gradient_search(coupling, m, q0, iterations=it, step0=step0)
-                    out[k], steps[k], q_prev, hit[k] = r.q, r.step, r.q, r.at_limit
-                est[(it, a, start)] = out
-                lim[(it, a, start)] = hit
-                err[(it, a, start)] = np.linalg.norm(out - grid, axis=1)
-                bnd[(it, a, start)] = a * sig_bound + 2.0 * steps
-    return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd, at_limit=lim)
-
-
 # ---------------------------------------------------------------------------------------------
 # The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
 
@@ -277,7 +212,7 @@ def LinkPositionEstimator_(T):
 
     class Impl(LeafSystem_[T]):
         def _construct(self, coupling, motor_pulley_radius: float, offsets, period: float = 1.0 / 3000,
-                       iterations: int = 15, step0: float = 0.1, converter=None):
+                       iterations: int = 15, step0: float = 0.1, refine: bool = False, converter=None):
             LeafSystem_[T].__init__(self, converter)
             m, n = coupling.num_tendons, coupling.num_joints
             offsets = np.asarray(offsets, dtype=float)
@@ -287,6 +222,7 @@ def LinkPositionEstimator_(T):
                 raise ValueError(f"LinkPositionEstimator: period = {period} must be > 0 [s]")
             self.coupling, self.r_m, self.offsets = coupling, float(motor_pulley_radius), offsets
             self.period, self.iterations, self.step0 = float(period), int(iterations), float(step0)
+            self.refine = bool(refine)
             self.limit_hits = 0
             self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
             self._theta = self.DeclareVectorInputPort("motor_angle", m)
@@ -298,7 +234,7 @@ def LinkPositionEstimator_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.coupling, other.r_m, other.offsets, other.period, other.iterations,
-                            other.step0, converter=converter)
+                            other.step0, other.refine, converter=converter)
 
         def _update(self, context, discrete_state):
             theta = self._theta.Eval(context)
@@ -325,9 +261,9 @@ def LinkPositionEstimator_(T):
                                           f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
                                           "further hits are counted in limit_hits", RuntimeWarning,
                                           stacklevel=2)
-            if T is not float:  # one Gauss-Newton step in the scalar type carries the derivatives
+            if T is not float or self.refine:  # one Gauss-Newton step (in the scalar type: carries the derivatives)
                 r = dh - (self.coupling.h(q_new) - self._h0)
-                S = _selection_of(self.coupling)
+                S = dof_selection(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
                 q_new = q_new + S @ (np.linalg.pinv(PS) @ r)
             discrete_state.set_value(0, q_new)
@@ -341,18 +277,6 @@ LinkPositionEstimator = LinkPositionEstimator_[None]
 def _value(v) -> float:
     return float(v) if isinstance(v, (float, int, np.floating)) else float(v.value()) \
         if hasattr(v, "value") else float(v.Evaluate())
-
-
-def _selection_of(coupling) -> np.ndarray:
-    parts, js, _ = _estimator_parts(coupling)
-    n = coupling.num_joints
-    blocks = [(js[k], c.dof_selection) for k, c in parts.items()]
-    S = np.zeros((n, sum(b.shape[1] for _, b in blocks)))
-    col = 0
-    for sl, b in blocks:
-        S[sl, col:col + b.shape[1]] = b
-        col += b.shape[1]
-    return S
 
 
 @dataclass
@@ -387,7 +311,7 @@ class LinkStateEstimator:
 
 
 def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, period: float = 1.0 / 3000,
-                         wrist: bool = False, iterations: int = 15, step0: float = 0.1,
+                         wrist: bool = False, iterations: int = 15, step0: float = 0.1, refine: bool = False,
                          velocity_time_constant: float | None = None) -> LinkStateEstimator:
     """Build the :class:`LinkStateEstimator` of a finger/hand coupling (see there).
 
@@ -396,7 +320,7 @@ def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, perio
     """
     b = DiagramBuilder()
     est = b.AddNamedSystem("link_position_estimator", LinkPositionEstimator(
-        coupling, motor_pulley_radius, offsets, period=period, iterations=iterations, step0=step0))
+        coupling, motor_pulley_radius, offsets, period=period, iterations=iterations, step0=step0, refine=refine))
     n = coupling.num_joints
     T = float(period if velocity_time_constant is None else velocity_time_constant)
     if not T >= period * (1 - 1e-12):

@@ -1,4 +1,11 @@
-"""Wrist of the Awiwi hand (thesis ch. 6): kinematics, tendon lengths, systems.
+"""Wrist of the Awiwi hand (thesis ch. 6): kinematics and tendon lengths, generic in the scalar type.
+
+The wrist's coupling object (``h(q)``, ``P(q)`` for the routing) is
+:class:`awiwi_drake.hand.coupling.WristCoupling`.
+
+The wrist's systems (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`,
+:class:`~awiwi_drake.hand.systems.WristCompensation_`) are in :mod:`awiwi_drake.hand.systems`;
+the Fig 6.9-6.10 study in :mod:`awiwi_drake.reproductions.ch06_wrist`.
 
 The wrist is a *double inverted parallelogram* (crossed four-bar linkages).
 The thesis (6.1)-(6.9) gives the method but not the link lengths; this module
@@ -82,14 +89,12 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import is_float
+from awiwi_drake._math import Tangent, is_float
 from awiwi_drake.parameters.wrist import WristParams
 
 __all__ = [
@@ -100,14 +105,9 @@ __all__ = [
     "wrist_tendon_offsets",
     "wrist_jacobian",
     "wrist_lengths_and_jacobian",
-    "WristCoupling",
     "wrist_compensation",
-    "WristMotionResult",
-    "wrist_motion_study",
-    "WristTendonOffsets_",
-    "WristTendonOffsets",
-    "WristCompensation_",
-    "WristCompensation",
+    "wrist_params",
+    "check_motor_pulley_radius",
     "TENDON_FINGERS",
 ]
 
@@ -130,87 +130,9 @@ def _norm(u):
     return np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
 
 
-class _Tangent:
-    """Forward-mode pair (value, d value / d [q71, q73]) over any scalar type T.
-
-    Used to differentiate the closed-form kinematics once, exactly, for
-    float, AutoDiffXd and Expression alike (AutoDiffXd cannot nest), so the
-    coupling matrix P(q) is itself generic in the scalar type.  numpy ufuncs
-    on object arrays call the methods ``sin``, ``cos``, ``sqrt``, ``arctan2``.
-    """
-
-    __slots__ = ("v", "d")
-
-    def __init__(self, v, d):
-        self.v = v
-        self.d = d
-
-    @staticmethod
-    def _lift(o):
-        return o if isinstance(o, _Tangent) else _Tangent(o, 0.0)
-
-    def __add__(self, o):
-        if isinstance(o, np.ndarray):
-            return NotImplemented
-        o = _Tangent._lift(o)
-        return _Tangent(self.v + o.v, self.d + o.d)
-
-    __radd__ = __add__
-
-    def __sub__(self, o):
-        if isinstance(o, np.ndarray):
-            return NotImplemented
-        o = _Tangent._lift(o)
-        return _Tangent(self.v - o.v, self.d - o.d)
-
-    def __rsub__(self, o):
-        if isinstance(o, np.ndarray):
-            return NotImplemented
-        return _Tangent._lift(o) - self
-
-    def __neg__(self):
-        return _Tangent(-self.v, -self.d)
-
-    def __mul__(self, o):
-        if isinstance(o, np.ndarray):
-            return NotImplemented
-        if not isinstance(o, _Tangent):
-            return _Tangent(self.v * o, self.d * o)
-        return _Tangent(self.v * o.v, self.d * o.v + self.v * o.d)
-
-    __rmul__ = __mul__
-
-    def __truediv__(self, o):
-        if isinstance(o, np.ndarray):
-            return NotImplemented
-        if not isinstance(o, _Tangent):
-            return _Tangent(self.v / o, self.d / o)
-        q = self.v / o.v
-        return _Tangent(q, (self.d - q * o.d) / o.v)
-
-    def __rtruediv__(self, o):
-        if isinstance(o, np.ndarray):
-            return NotImplemented
-        return _Tangent._lift(o) / self
-
-    def sin(self):
-        return _Tangent(np.sin(self.v), np.cos(self.v) * self.d)
-
-    def cos(self):
-        return _Tangent(np.cos(self.v), -np.sin(self.v) * self.d)
-
-    def sqrt(self):
-        r = np.sqrt(self.v)
-        return _Tangent(r, self.d / (2.0 * r))
-
-    def arctan2(self, x):
-        x = _Tangent._lift(x)
-        return _Tangent(np.arctan2(self.v, x.v), (x.v * self.d - self.v * x.d) / (x.v * x.v + self.v * self.v))
-
-
 def _value(x) -> float:
     """Float value of a float or AutoDiffXd scalar (None for symbolic)."""
-    if isinstance(x, _Tangent):
+    if isinstance(x, Tangent):
         return _value(x.v)
     if isinstance(x, AutoDiffXd):
         return x.value()
@@ -220,7 +142,7 @@ def _value(x) -> float:
 
 
 def _is_symbolic(x) -> bool:
-    if isinstance(x, _Tangent):
+    if isinstance(x, Tangent):
         return _is_symbolic(x.v)
     return not is_float(x) and not isinstance(x, AutoDiffXd)
 
@@ -234,7 +156,8 @@ def _symbolic_errstate(*args):
     return contextlib.nullcontext()
 
 
-def _default(params):
+def wrist_params(params=None) -> WristParams:
+    """``params`` validated (a :class:`WristParams`), or the default wrist when None."""
     if params is None:
         return _default_params()
     if not isinstance(params, WristParams):
@@ -311,7 +234,7 @@ def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool
     WristPose
         Palm points, palm frame ABC and circle parameters, in frame 0.
     """
-    p = _default(params)
+    p = wrist_params(params)
     with _symbolic_errstate(q71, q73):
         return _solve(q71, q73, p, check)
 
@@ -395,7 +318,7 @@ def wrist_constraint_errors(pose: WristPose, params: WristParams | None = None) 
     twice, ``coupler_length``); also checks nothing else, so orthonormality of
     the palm frame is tested separately.
     """
-    p = _default(params)
+    p = wrist_params(params)
     P = pose
     d = [_norm(P.A - P.A0) - p.link_length,
          _norm(P.B - P.B0) - p.crank_length,
@@ -423,7 +346,7 @@ def wrist_tendon_lengths(q71, q73, params: WristParams | None = None) -> np.ndar
     ndarray (num_tendons,)
         Lengths [m] (object dtype for AutoDiffXd/Expression input).
     """
-    p = _default(params)
+    p = wrist_params(params)
     pose = wrist_kinematics(q71, q73, p)
     with _symbolic_errstate(q71, q73):
         palm_in_0 = pose.origin + p.palm_offset_array @ pose.rotation.T
@@ -452,7 +375,7 @@ def wrist_tendon_offsets(q71, q73, params: WristParams | None = None) -> np.ndar
     >>> off.shape
     (38,)
     """
-    p = _default(params)
+    p = wrist_params(params)
     return wrist_tendon_lengths(q71, q73, p) - _neutral_lengths(p)
 
 
@@ -476,10 +399,10 @@ def wrist_lengths_and_jacobian(q71, q73, params: WristParams | None = None):
     P : ndarray (num_tendons, 2)
         ``dh/d[q71, q73]`` [m/rad] (the wrist block of the coupling matrix).
     """
-    p = _default(params)
+    p = wrist_params(params)
     scalar = is_float(q71) and is_float(q73)
     unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
-    pose = wrist_kinematics(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), p)
+    pose = wrist_kinematics(Tangent(q71, unit[0]), Tangent(q73, unit[1]), p)
     dtype = float if scalar else object
     O = np.array([e.v for e in pose.origin], dtype=dtype)
     dO = np.array([e.d for e in pose.origin], dtype=dtype)                      # (3, 2)
@@ -504,57 +427,6 @@ def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
     return wrist_lengths_and_jacobian(q71, q73, params)[1]
 
 
-class WristCoupling:
-    """The wrist as a routing coupling object: ``h(q)`` (38,) and ``P(q)`` (38 x 2).
-
-    ``q = [q71, q73]`` [rad]; ``h`` are the absolute tendon path lengths
-    through the wrist (6.9) and ``P = dh/dq``, both generic in the scalar type
-    so :class:`TendonRouting_` (``-P^T f`` on the wrist joints) converts to
-    AutoDiffXd.  Rows follow Table 6.2 (tendon 1..38).
-
-    Parameters
-    ----------
-    params : WristParams, optional
-    """
-
-    num_joints = 2
-
-    def __init__(self, params: WristParams | None = None):
-        self.params = _default(params)
-        self.num_tendons = self.params.num_tendons
-
-    def _split(self, q):
-        q = np.asarray(q) if not isinstance(q, np.ndarray) else q
-        if q.shape != (2,):
-            raise ValueError(f"wrist joint vector q must have 2 entries [q71, q73], got shape {q.shape}")
-        return q[0], q[1]
-
-    def h(self, q) -> np.ndarray:
-        """Tendon path lengths through the wrist [m]."""
-        return wrist_tendon_lengths(*self._split(q), self.params)
-
-    def P(self, q) -> np.ndarray:
-        """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
-        return wrist_jacobian(*self._split(q), self.params)
-
-    def dPT_f_dq(self, q, f) -> np.ndarray:
-        """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
-
-        The geometric stiffness of the wrist joints due to the tendon forces
-        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + dPT_f_dq``).  Exact:
-        forward-mode tangents nested over the scalar type.
-        """
-        q71, q73 = self._split(q)
-        f = np.asarray(f)
-        if f.shape != (self.num_tendons,):
-            raise ValueError(f"tendon force f must have {self.num_tendons} entries, got shape {f.shape}")
-        unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
-        P = wrist_jacobian(_Tangent(q71, unit[0]), _Tangent(q73, unit[1]), self.params)
-        scalar = is_float(q71) and is_float(q73) and is_float(f)
-        dP = np.array([[e.d for e in row] for row in P], dtype=float if scalar else object)  # (m, 2, 2)
-        return np.tensordot(f, dP, axes=(0, 0))
-
-
 def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:
     """Motor angle change that cancels the wrist offset: ``-offset / r_m`` [rad].
 
@@ -565,11 +437,12 @@ def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None
     motor_pulley_radius : float or array (num_tendons,)
         r_m [m], > 0.
     """
-    r = _check_radius(motor_pulley_radius, _default(params).num_tendons)
+    r = check_motor_pulley_radius(motor_pulley_radius, wrist_params(params).num_tendons)
     return -wrist_tendon_offsets(q71, q73, params) / r
 
 
-def _check_radius(r, n: int) -> np.ndarray:
+def check_motor_pulley_radius(r, n: int) -> np.ndarray:
+    """``r`` as ``n`` finite positive radii [m] (a scalar is broadcast); ValueError naming ``motor_pulley_radius``."""
     arr = np.asarray(r, dtype=float)
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
@@ -581,209 +454,3 @@ def _check_radius(r, n: int) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------
-@dataclass
-class WristMotionResult:
-    """Data of the thesis's wrist check (Fig 6.9, 6.10): flexion, then abduction.
-
-    Attributes
-    ----------
-    t : ndarray (N,)
-        Time [s].
-    wrist_angle : ndarray (N, 2)
-        [q71, q73] [rad] along the motion.
-    offsets : ndarray (N, num_tendons)
-        Tendon displacement ``h_wrist(q) - h_wrist(0)`` [m] (Fig 6.10).
-    constraint_errors : ndarray (N, 6)
-        Distance constraint errors [m] (Fig 6.9), order of
-        :func:`wrist_constraint_errors`.
-    phase : ndarray (N,) of str
-        ``"flexion"`` or ``"abduction"``.
-    median_distance : ndarray (num_tendons,)
-        Signed lateral distance of each tendon's forearm point from the wrist's
-        median axis, ``y - b/2`` [m].
-    flexion_peak, abduction_peak : float
-        Largest |displacement| in each phase [m] (abduction: relative to the
-        start of the abduction phase).
-    abduction_slope : float
-        Least-squares slope of the abduction-induced displacement at the
-        abduction peak vs ``median_distance`` [m/m].
-    abduction_r2 : float
-        Coefficient of determination of that linear fit.
-    abduction_intercept : float
-        Intercept of that fit [m].
-    """
-
-    t: np.ndarray
-    wrist_angle: np.ndarray
-    offsets: np.ndarray
-    constraint_errors: np.ndarray
-    phase: np.ndarray
-    median_distance: np.ndarray
-    flexion_peak: float = 0.0
-    abduction_peak: float = 0.0
-    abduction_slope: float = 0.0
-    abduction_intercept: float = 0.0
-    abduction_r2: float = 0.0
-    fingers: tuple = field(default=TENDON_FINGERS)
-
-    @property
-    def max_constraint_error(self) -> float:
-        """max over time and constraints of |error| [m] (Fig 6.9)."""
-        return float(np.max(np.abs(self.constraint_errors)))
-
-    @property
-    def flexion_to_abduction_ratio(self) -> float:
-        """flexion_peak / abduction_peak (small: flexion barely moves the tendons)."""
-        return self.flexion_peak / self.abduction_peak
-
-
-def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
-                       duration: float = 4.0, num_samples: int = 201, hold_flexion: bool = False,
-                       params: WristParams | None = None) -> WristMotionResult:
-    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10).
-
-    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``
-    (out to ``flexion`` and back), the second half moves q71 likewise (s the
-    phase time / phase duration).  With ``hold_flexion=True`` q73 ramps to
-    ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.
-
-    The abduction statistics use the displacement caused by the abduction
-    alone: offsets at the abduction peak minus offsets at the start of the
-    abduction phase, fitted linearly against the signed distance of each
-    tendon's forearm point from the median axis (y - b/2).
-
-    Parameters
-    ----------
-    flexion, abduction : float
-        Peak q73 and q71 [rad] (thesis: 30 deg and 20 deg).
-    duration : float
-        Total time [s] (Fig 6.10: 4 s; Fig 6.9: 10 s).
-    num_samples : int
-        Time samples (>= 5).
-    hold_flexion : bool
-        Keep the flexion during the abduction phase.
-    params : WristParams, optional
-
-    Returns
-    -------
-    WristMotionResult
-        Displacements, constraint errors and the proportionality statistics.
-    """
-    if not (duration > 0.0):
-        raise ValueError(f"duration must be > 0 [s], got {duration}")
-    if int(num_samples) < 5:
-        raise ValueError(f"num_samples must be >= 5, got {num_samples}")
-    p = _default(params)
-    t = np.linspace(0.0, duration, int(num_samples))
-    half = 0.5 * duration
-    in_flex = t < half
-    s = np.where(in_flex, t / half, (t - half) / half)
-    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
-    if hold_flexion:
-        q73 = np.where(in_flex, flexion * 0.5 * (1.0 - np.cos(np.pi * s)), flexion)
-    else:
-        q73 = np.where(in_flex, flexion * bump, 0.0)
-    q71 = np.where(in_flex, 0.0, abduction * bump)
-    offsets = np.empty((t.size, p.num_tendons))
-    errors = np.empty((t.size, 6))
-    for i in range(t.size):  # analysis loop over samples (not a system calc)
-        offsets[i] = wrist_tendon_offsets(q71[i], q73[i], p)
-        errors[i] = wrist_constraint_errors(wrist_kinematics(q71[i], q73[i], p), p)
-    dist = p.forearm_offset_array[:, 1] - 0.5 * p.width
-    start = int(np.argmax(~in_flex))
-    abd = offsets[int(np.argmax(np.abs(q71)))] - offsets[start]
-    slope, intercept = np.polyfit(dist, abd, 1)
-    ss_res = float(np.sum((abd - (slope * dist + intercept)) ** 2))
-    ss_tot = float(np.sum((abd - abd.mean()) ** 2))
-    return WristMotionResult(
-        t=t, wrist_angle=np.column_stack([q71, q73]), offsets=offsets, constraint_errors=errors,
-        phase=np.where(in_flex, "flexion", "abduction"), median_distance=dist,
-        flexion_peak=float(np.max(np.abs(offsets[in_flex]))),
-        abduction_peak=float(np.max(np.abs(offsets[~in_flex] - offsets[start]))),
-        abduction_slope=float(slope), abduction_intercept=float(intercept),
-        abduction_r2=1.0 - ss_res / ss_tot)
-
-
-# ---------------------------------------------------------------------------
-@TemplateSystem.define("WristTendonOffsets_")
-def WristTendonOffsets_(T):
-    """Wrist tendon offsets as a system.
-
-    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output
-    ``wrist_tendon_offset`` (38) [m] = ``h_wrist(q) - h_wrist(0)``, Table 6.2
-    order (direct feedthrough).  Scalar types: float, AutoDiffXd, Expression.
-
-    Parameters
-    ----------
-    params : WristParams, optional
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, params: WristParams | None = None, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self._params = _default(params)
-            n = self._params.num_tendons
-            self._u = self.DeclareVectorInputPort("wrist_angle", 2)
-            self.DeclareVectorOutputPort("wrist_tendon_offset", n, self._calc,
-                                         prerequisites_of_calc={self._u.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other._params, converter=converter)
-
-        @property
-        def params(self) -> WristParams:
-            return self._params
-
-        def _calc(self, context, output):
-            q = self._u.Eval(context)
-            output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
-
-    return Impl
-
-
-@TemplateSystem.define("WristCompensation_")
-def WristCompensation_(T):
-    """Feedforward that cancels the wrist-induced tendon elongation.
-
-    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output ``motor_angle_offset``
-    (38) [rad] = ``-(h_wrist(q) - h_wrist(0)) / r_m``: adding it to the motor
-    angle references keeps every elongation ``r_m theta + h(q) - h(0) + x0``
-    unchanged when the wrist moves (ARCHITECTURE.md sign convention).
-
-    Parameters
-    ----------
-    motor_pulley_radius : float or array (38,)
-        r_m [m] (``MotorParams.pulley_radius``), > 0.
-    params : WristParams, optional
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, motor_pulley_radius, params: WristParams | None = None, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self._params = _default(params)
-            n = self._params.num_tendons
-            self._r = _check_radius(motor_pulley_radius, n)
-            self._u = self.DeclareVectorInputPort("wrist_angle", 2)
-            self.DeclareVectorOutputPort("motor_angle_offset", n, self._calc,
-                                         prerequisites_of_calc={self._u.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other._r.copy(), other._params, converter=converter)
-
-        @property
-        def params(self) -> WristParams:
-            return self._params
-
-        @property
-        def motor_pulley_radius(self) -> np.ndarray:
-            return self._r.copy()
-
-        def _calc(self, context, output):
-            q = self._u.Eval(context)
-            output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
-
-    return Impl
-
-
-WristTendonOffsets = WristTendonOffsets_[None]
-WristCompensation = WristCompensation_[None]

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from .base import Parameters, param
 
-__all__ = ["CliLimits"]
+__all__ = ["CliLimits", "CompareShortMode"]
 
 
 @dataclass(frozen=True)
@@ -29,3 +29,27 @@ class CliLimits(Parameters):
     max_animation_duration: float = param(60.0, unit="s", low=0.1, high=3600.0,
                                           source="chosen: a minute of the 3 kHz hand loop already takes "
                                                  "minutes of CPU")
+
+
+@dataclass(frozen=True)
+class CompareShortMode(Parameters):
+    """How ``compare --short`` (and ``AWIWI_SHORT=1``) shortens the standard tests.
+
+    The step window comes from the closed loops themselves: ``step_time_constants``
+    times the slowest tracking time constant of the compared loops
+    (:func:`awiwi_drake.control.compare.dominant_time_constant`), so that a
+    well-tuned loop settles; never shorter than ``min_step_duration`` and never
+    longer than the full test.
+    """
+
+    step_time_constants: float = param(5.0, unit="-", low=1.0, high=20.0,
+                                       source="chosen: a first-order mode is within 0.7 % after 5 time constants "
+                                              "(inside the 2 % settling band)")
+    min_step_duration: float = param(0.15, unit="s", low=0.01, high=10.0,
+                                     source="chosen: the earlier fixed short window, kept as a floor")
+    sweep_duration: float = param(1.0, unit="s", low=0.1, high=100.0,
+                                  source="chosen: 1 Hz frequency resolution of the chirp's gain diagram")
+    settle_time: float = param(0.1, unit="s", low=0.0, high=10.0,
+                               source="chosen: start transients of the sampled loops decay within 0.1 s")
+    sine_periods: float = param(2.0, unit="-", low=2.0, high=100.0,
+                                source="chosen: the first period is dropped as transient, one is measured")

@@ -8,7 +8,10 @@ from awiwi_drake.parameters.base import Parameters, param
 
 __all__ = ["TendonForceGains", "ForceSensorParams", "PolePlacementParams", "LqrParams", "SdreTendonParams",
            "SdreJointParams", "ImpedanceParams", "ImpedanceSweepParams", "RippleCompensationParams", "FrictionIdentificationParams",
-           "CompareTestParams", "LQR_R_VALUES"]
+           "CompareTestParams", "LQR_R_VALUES", "CONTROL_RATE_HZ"]
+
+#: The hand's control rate [Hz] (ch. 1: 3 kHz, 333 us round trip; the rate of the thesis's experiments).
+CONTROL_RATE_HZ = 3000.0
 
 #: Table 13.1: the three input costs of Fig 13.2-13.3.
 LQR_R_VALUES = (1e-4, 1e-2, 1.0)

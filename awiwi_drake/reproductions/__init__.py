@@ -11,6 +11,7 @@ thesis                                         module
 =============================================  =========================================
 ch. 3 motor: friction (Fig 3.3), ripple        :mod:`.ch03_motor`
 ch. 5 fingers: Coriolis (Fig 5.7), poles       :mod:`.ch05_fingers`
+ch. 5.5 fifth finger HMC four-bar vs revolute  :mod:`.ch05_fifth_hmc`
 ch. 6 wrist: finger drift under wrist motion   :mod:`.ch06_wrist`
 ch. 8 stiffness correction (Fig 8.3)           :mod:`.ch08_stiffness_correction`
 ch. 9 friction observer (Fig 9.3)              :mod:`.ch09_friction_observer`
@@ -19,7 +20,9 @@ ch. 11 impedance control (Fig 11.2-11.4)       :mod:`.ch11_impedance`
 ch. 12 pole placement (Fig 12.3-12.4)          :mod:`.ch12_pole_placement`
 ch. 13 LQR (Fig 13.2-13.3)                     :mod:`.ch13_lqr`
 ch. 14 SDRE (Fig 14.3-14.5)                    :mod:`.ch14_sdre`
-ch. 15 backstepping (Fig 15.2-15.27)           :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`
+ch. 15 backstepping (Fig 15.2-15.27)           :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`,
+                                               :mod:`.ch15_pip_experiments` (Fig 15.24-15.25 on a PIP)
+ch. 15 PIP of a finger (Fig 15.24-15.25)       :mod:`.ch15_pip_experiments`
 ch. 16 optimal backstepping gains (Tab 16.1)   :mod:`.ch16_optimal_backstepping`
 ``awiwi-drake demo`` (joint rig)               :mod:`.demo`
 invented parameters (figure sensitivity)      :mod:`.invented_parameters`

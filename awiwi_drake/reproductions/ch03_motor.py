@@ -24,23 +24,24 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from awiwi_drake.analysis import Ramp, simulate
 from awiwi_drake.components import atan_friction, motor_friction_torque
 from awiwi_drake.control.base import StaticLawController, closed_loop
-from awiwi_drake.control.compare import simulate_loop
 from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
 from awiwi_drake.parameters.components import MotorParams
-from awiwi_drake.parameters.control import FrictionIdentificationParams, RippleCompensationParams
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificationParams, RippleCompensationParams
 from awiwi_drake.plotting import figure_axes
 from awiwi_drake.rigs import motor_rig
 
 __all__ = ["constant_velocity_run", "FrictionData", "FrictionFit", "friction_identification_data", "fit_friction",
            "identify_ripple", "harmonic", "amplitude_spectrum", "RippleCompensationResult",
-           "ripple_compensation_experiment", "plot_spectra", "plot_friction_fit"]
+           "ripple_compensation_experiment", "plot_spectra", "plot_friction_fit", "InertiaIdentification",
+           "inertia_identification", "friction_curve_in_ampere"]
 
 
 def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,
                           theta0: float = 0.0, friction_scale: float = 0.0, ripple: RippleEstimate | None = None,
-                          rate_hz: float = 3000.0, start_at_rest: bool = False) -> dict[str, np.ndarray]:
+                          rate_hz: float = CONTROL_RATE_HZ, start_at_rest: bool = False) -> dict[str, np.ndarray]:
     """The motor following ``theta0 + speed t`` under a sampled PD (one row per control period).
 
     ``start_at_rest``: the motor starts at rest with zero torque in the hold buffer (an experiment that
@@ -59,13 +60,13 @@ def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, 
     ctx = loop.create_context(state=[theta0, 0.0 if start_at_rest else speed], motor_torque=u0,
                               references={"motor_angle_reference": theta0, "motor_velocity_reference": speed})
     dt = 1.0 / rate_hz
-    log = simulate_loop(loop, ctx, duration, dt, outputs=("motor_angle", "motor_velocity", "motor_torque"),
-                        inputs={"motor_angle_reference": lambda t: theta0 + speed * t,
-                                "motor_velocity_reference": lambda t: speed}, label="constant velocity run")
+    log = simulate(loop, ctx, duration, inputs={"motor_angle_reference": Ramp(0.0, duration, theta0, theta0 + speed * duration),
+                                                "motor_velocity_reference": speed},
+                   log=("motor_angle", "motor_velocity", "motor_torque"), log_period=dt)
     th, w = log["motor_angle"][:, 0], log["motor_velocity"][:, 0]
     applied = log["motor_torque"][1:, 0]  # left limit at t_k+1 = torque held on [t_k, t_k+1)
     ff = np.array([float(np.ravel(law.feedforward(a, b))[0]) for a, b in zip(th[:-1], w[:-1])])
-    return dict(t=0.5 * (log["t"][1:] + log["t"][:-1]), theta=0.5 * (th[1:] + th[:-1]),
+    return dict(t=0.5 * (log.t[1:] + log.t[:-1]), theta=0.5 * (th[1:] + th[:-1]),
                 omega=0.5 * (w[1:] + w[:-1]), command=applied, feedback=applied - ff,
                 acceleration=np.diff(w) / dt)
 
@@ -243,3 +244,71 @@ def plot_friction_fit(data, fit, *, true=None, ax=None):
     ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
     return fig, ax
+
+
+# ----------------------------------------------------------------------------
+# (3.6): inertia from a current step; Fig 3.3b in ampere
+@dataclass
+class InertiaIdentification:
+    """(3.6) ``B thdd = tau_m`` fitted to current-step responses of the simulated motor.
+
+    ``current`` [A] per step, ``identified`` [kg m^2] per step (least squares of
+    ``theta(t) = theta0 + k_t i t^2 / (2 B)`` over the window, friction neglected as in the
+    thesis), ``true`` the motor's B, ``friction_at_start`` the Coulomb torque the fit ignores.
+    """
+
+    current: np.ndarray
+    identified: np.ndarray
+    true: float
+    friction_at_start: float
+    acceleration: np.ndarray = None
+
+    @property
+    def relative_error(self) -> np.ndarray:
+        return self.identified / self.true - 1.0
+
+    @property
+    def from_difference(self) -> float:
+        """B from the slope of acceleration over torque between the steps (least squares): the
+        Coulomb friction, equal for all steps of one sign, drops out."""
+        tau = self.current * (self.identified * self.acceleration / self.current)   # k_t i
+        A = np.vstack([tau, np.ones_like(tau)]).T
+        slope = np.linalg.lstsq(A, self.acceleration, rcond=None)[0][0]
+        return float(1.0 / slope)
+
+
+def inertia_identification(currents=(1.0, 1.5, 2.5), *, window: float = 0.01,
+                           motor: MotorParams | None = None) -> InertiaIdentification:
+    """(3.6): step the motor current from rest, fit B on ``window`` seconds (friction neglected).
+
+    The simulated motor has the (3.8) friction, which the thesis's identification neglects: the fit
+    returns ``B k_t i / (k_t i - tau_f)``-ish values, biased up by the Coulomb part at small currents
+    (a sizing rule for the experiment, not given in the thesis).
+    """
+    from awiwi_drake.analysis import simulate
+    p = motor or MotorParams()
+    rig = motor_rig(p)
+    out = []
+    for i in currents:
+        tau = p.torque_constant * float(i)
+        if abs(tau) > p.torque_limit:
+            raise ValueError(f"inertia_identification: current {i} A needs {tau:.3g} Nm, beyond the "
+                             f"motor's torque_limit {p.torque_limit} Nm")
+        ctx = rig.diagram.CreateDefaultContext()
+        ctx.SetContinuousState([0.0, 0.0])
+        rig.diagram.GetInputPort("motor_torque").FixValue(ctx, [tau])
+        res = simulate(rig.diagram, ctx, window, log=("motor_angle",), max_step=window / 500, accuracy=1e-9)
+        t, th = res.t, res["motor_angle"][:, 0]
+        a = float(np.sum(th * t ** 2 / 2) / np.sum((t ** 2 / 2) ** 2))     # least squares theta = a t^2 / 2
+        out.append((tau / a, a))
+    out = np.array(out)
+    return InertiaIdentification(np.asarray(currents, float), out[:, 0], p.inertia,
+                                 float(p.coulomb_torque * math.atan(p.friction_slope * 1e3) if p.friction else 0.0),
+                                 out[:, 1])
+
+
+def friction_curve_in_ampere(speeds, motor: MotorParams | None = None) -> np.ndarray:
+    """Fig 3.3b's axis: the (3.8) friction torque at ``speeds`` [rad/s] as motor current [A]."""
+    p = motor or MotorParams()
+    return -atan_friction(np.asarray(speeds, float), p.coulomb_torque, p.friction_slope,
+                          p.viscous_friction) / p.torque_constant

@@ -6,6 +6,10 @@
 * :func:`poles_vs_pretension` - poles of a finger/hand rig (``Linearize``) versus pretension.
 * :func:`coupling_hold_study` - the ring/fifth PIP/DIP coupling element holds
   ``q_DIP = (r_x3/r_x2) q_PIP`` during a controlled PIP motion.
+* :func:`thumb_estimation_study` - Fig 5.16-5.17: Algorithm 1 (thumb base estimation,
+  :mod:`awiwi_drake.hand.estimation`) on a grid of poses, per iterations, noise and start.
+
+``plot_*`` draw the results (data in, ``(fig, ax)`` out).
 """
 
 from __future__ import annotations
@@ -22,14 +26,18 @@ from awiwi_drake.components.routing import TendonRouting_
 from awiwi_drake.components.spring import SpringBank_, tendon_spring
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_pd import joint_pd_controller
-from awiwi_drake.hand.coupling import finger_coupling
+from awiwi_drake.hand.coupling import ThumbCoupling, finger_coupling
+from awiwi_drake.hand.estimation import noise_error_bound, thumb_base_gradient_search
 from awiwi_drake.hand.diagrams import HandRig, finger_diagram
 from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant
 from awiwi_drake.hand.systems import CoriolisCancellation
 from awiwi_drake.parameters.hand import FingerRigParams, JointControllerParams
+from awiwi_drake.plotting import figure_axes
 
 __all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
-           "CouplingHoldStudy", "coupling_hold_study"]
+           "CouplingHoldStudy", "coupling_hold_study",
+           "EstimationStudy", "thumb_estimation_study", "plot_estimation_grid", "plot_estimation_study",
+           "plot_coriolis_study", "plot_coupling_hold"]
 
 
 def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = None, *,
@@ -206,3 +214,121 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
 
 
+@dataclass
+class EstimationStudy:
+    """Fig 5.16-5.17 study: grid truth, estimates and errors per (iterations, noise, start)."""
+
+    grid: np.ndarray                # (N, 2) true (q10, q11)
+    estimates: dict                 # (iterations, noise [m], start) -> (N, 2)
+    errors: dict                    # same keys -> (N,) |q_hat - q| [rad]
+    bounds: dict                    # same keys -> (N,) first-order noise bound + final step
+    at_limit: dict = None           # same keys -> (N,) bool: the estimate sits on the +-pi/2 projection bound
+
+    def summary_rows(self) -> list[dict]:
+        """One row per case: iterations, noise [mm], start, mean/median/max error [rad]."""
+        rows = []
+        for key, e in self.errors.items():
+            it, a, start = key
+            rows.append(dict(iterations=it, noise_mm=1e3 * a, start=start, mean=float(np.mean(e)),
+                             median=float(np.median(e)), max=float(np.max(e)),
+                             frac_within_0p1=float(np.mean(e < 0.1)),
+                             at_limit=int(np.sum(self.at_limit[key])) if self.at_limit else 0))
+        return rows
+
+
+def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int = 13,
+                           limit: float = 1.5, iterations=(15, 30, 50), noise=(0.0, 5e-4, 1e-3),
+                           starts=("cold", "warm"), step0: float = 0.1, seed: int = 0) -> EstimationStudy:
+    """Reproduce Fig 5.16-5.17 on an ``n_grid`` x ``n_grid`` grid over ``[-limit, limit]^2``.
+
+    Noise: uniform in ``[-a, a]`` on each base tendon length ("amplitude").
+    Cold start: every estimate starts at (0, 0) (the thesis's evaluation).
+    Warm start: the grid is visited in a serpentine order and each estimate
+    starts from the previous estimate (the thesis's real-time use); the first
+    one starts at the true first grid point (an estimator initialised at a
+    known pose, e.g. after homing).
+    """
+    coupling = coupling or ThumbCoupling()
+    if n_grid < 2:
+        raise ValueError(f"n_grid must be >= 2, got {n_grid}")
+    axis = np.linspace(-limit, limit, n_grid)
+    grid = np.array([(a, b if i % 2 == 0 else -b) for i, a in enumerate(axis) for b in axis])
+    h0 = coupling.h(np.zeros(4))[:4]
+    dh_true = np.array([coupling.h(np.array([a, b, 0, 0]))[:4] - h0 for a, b in grid])
+    rng = np.random.default_rng(seed)
+    noise_unit = rng.uniform(-1.0, 1.0, size=dh_true.shape)
+    sig_bound = np.array([noise_error_bound(coupling, g, 1.0) for g in grid])
+    est, err, bnd, lim = {}, {}, {}, {}
+    for a in noise:
+        meas = dh_true + a * noise_unit
+        for it in iterations:
+            for start in starts:
+                if start not in ("cold", "warm"):
+                    raise ValueError(f"starts: expected 'cold' or 'warm', got {start!r}")
+                q_prev = grid[0].copy()
+                out = np.zeros_like(grid)
+                steps = np.zeros(len(grid))
+                hit = np.zeros(len(grid), dtype=bool)
+                for k, m in enumerate(meas):
+                    q0 = (0.0, 0.0) if start == "cold" else q_prev
+                    r = thumb_base_gradient_search(coupling, m, q0, iterations=it, step0=step0)
+                    out[k], steps[k], q_prev, hit[k] = r.q, r.step, r.q, r.at_limit
+                est[(it, a, start)] = out
+                lim[(it, a, start)] = hit
+                err[(it, a, start)] = np.linalg.norm(out - grid, axis=1)
+                bnd[(it, a, start)] = a * sig_bound + 2.0 * steps
+    return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd, at_limit=lim)
+
+
+def plot_estimation_grid(study, key, ax=None):
+    """Fig 5.16: true (q10, q11) grid (red circles) and estimates (blue crosses) for one case."""
+    fig, ax = figure_axes(ax, figsize=(4, 4))
+    est = study.estimates[key]
+    ax.plot(study.grid[:, 0], study.grid[:, 1], "o", mfc="none", mec="r", ms=5, label="true")
+    ax.plot(est[:, 0], est[:, 1], "x", color="b", ms=4, label="estimate")
+    it, a, start = key
+    ax.set_title(f"{it} it., {1e3 * a:g} mm, {start}", fontsize=9)
+    ax.set_xlabel("q10 [rad]")
+    ax.set_ylabel("q11 [rad]")
+    ax.set_xlim(-1.8, 1.8)
+    ax.set_ylim(-1.8, 1.8)
+    ax.set_aspect("equal")
+    return fig, ax
+
+
+def plot_estimation_study(study, start="cold"):
+    """Fig 5.17: 3 x 3 panels (rows 50/30/15 iterations, columns 0/0.5/1 mm noise)."""
+    import matplotlib.pyplot as plt
+    its = sorted({k[0] for k in study.estimates}, reverse=True)
+    noises = sorted({k[1] for k in study.estimates})
+    fig, axes = plt.subplots(len(its), len(noises), figsize=(3 * len(noises), 3 * len(its)), squeeze=False)
+    for i, it in enumerate(its):
+        for j, a in enumerate(noises):
+            plot_estimation_grid(study, (it, a, start), ax=axes[i, j])
+    fig.tight_layout()
+    return fig, axes
+
+
+def plot_coriolis_study(study, ax=None):
+    """Fig 5.7: joint position difference full minus simplified (no Coriolis) model."""
+    fig, ax = figure_axes(ax, figsize=(6, 3.5))
+    for j, name in enumerate(study.joint_names):
+        ax.plot(study.t, study.difference[:, j], label=name)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("position error [rad]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig, ax
+
+
+def plot_coupling_hold(study, ax=None):
+    """PIP, DIP and the coupling error q_DIP - c q_PIP during a PIP step."""
+    fig, ax = figure_axes(ax, figsize=(6, 3.5))
+    ax.plot(study.t, study.q_pip, label="q_PIP")
+    ax.plot(study.t, study.q_dip, label="q_DIP")
+    ax.plot(study.t, study.coupling_error, label="q_DIP - c q_PIP")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("[rad]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig, ax

@@ -1,12 +1,16 @@
-"""Thesis ch. 6: the wrist seen from the fingers (results are data).
+"""Thesis ch. 6: the wrist study of Fig 6.9-6.10 and the finger drift under wrist motion (results are data).
 
+* :func:`wrist_motion_study` - Fig 6.9, 6.10: flexion then abduction of the wrist
+  (:mod:`awiwi_drake.hand.wrist` kinematics): tendon displacements and constraint errors;
+  :func:`plot_wrist_displacements`, :func:`plot_wrist_constraint_errors` draw them.
 * :func:`wrist_compensation_study` - finger joint drift during a wrist
   abduction sweep, with and without the feedforward compensation ``-h_wrist / r_m`` ((6.9)).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,9 +18,208 @@ from awiwi_drake.analysis import PerEntry, Sine, rig_monitors, simulate
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_pd import joint_pd_controller
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+from awiwi_drake.hand.wrist import (TENDON_FINGERS, wrist_constraint_errors, wrist_kinematics, wrist_params,
+                                    wrist_tendon_offsets)
 from awiwi_drake.parameters.hand import JointControllerParams
+from awiwi_drake.parameters.wrist import WristParams
+from awiwi_drake.plotting import figure_axes
 
-__all__ = ["WristCompensationStudy", "wrist_compensation_study"]
+__all__ = ["WristMotionResult", "wrist_motion_study", "plot_wrist_displacements", "plot_wrist_constraint_errors",
+           "FINGER_COLORS", "WristCompensationStudy", "wrist_compensation_study", "plot_wrist_compensation"]
+
+
+@dataclass
+class WristMotionResult:
+    """Data of the thesis's wrist check (Fig 6.9, 6.10): flexion, then abduction.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        Time [s].
+    wrist_angle : ndarray (N, 2)
+        [q71, q73] [rad] along the motion.
+    offsets : ndarray (N, num_tendons)
+        Tendon displacement ``h_wrist(q) - h_wrist(0)`` [m] (Fig 6.10).
+    constraint_errors : ndarray (N, 6)
+        Distance constraint errors [m] (Fig 6.9), order of
+        :func:`wrist_constraint_errors`.
+    phase : ndarray (N,) of str
+        ``"flexion"`` or ``"abduction"``.
+    median_distance : ndarray (num_tendons,)
+        Signed lateral distance of each tendon's forearm point from the wrist's
+        median axis, ``y - b/2`` [m].
+    flexion_peak, abduction_peak : float
+        Largest |displacement| in each phase [m] (abduction: relative to the
+        start of the abduction phase).
+    abduction_slope : float
+        Least-squares slope of the abduction-induced displacement at the
+        abduction peak vs ``median_distance`` [m/m].
+    abduction_r2 : float
+        Coefficient of determination of that linear fit.
+    abduction_intercept : float
+        Intercept of that fit [m].
+    """
+
+    t: np.ndarray
+    wrist_angle: np.ndarray
+    offsets: np.ndarray
+    constraint_errors: np.ndarray
+    phase: np.ndarray
+    median_distance: np.ndarray
+    flexion_peak: float = 0.0
+    abduction_peak: float = 0.0
+    abduction_slope: float = 0.0
+    abduction_intercept: float = 0.0
+    abduction_r2: float = 0.0
+    fingers: tuple = field(default=TENDON_FINGERS)
+
+    @property
+    def max_constraint_error(self) -> float:
+        """max over time and constraints of |error| [m] (Fig 6.9)."""
+        return float(np.max(np.abs(self.constraint_errors)))
+
+    @property
+    def flexion_to_abduction_ratio(self) -> float:
+        """flexion_peak / abduction_peak (small: flexion barely moves the tendons)."""
+        return self.flexion_peak / self.abduction_peak
+
+
+def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
+                       duration: float = 4.0, num_samples: int = 201, hold_flexion: bool = False,
+                       params: WristParams | None = None) -> WristMotionResult:
+    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10).
+
+    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``
+    (out to ``flexion`` and back), the second half moves q71 likewise (s the
+    phase time / phase duration).  With ``hold_flexion=True`` q73 ramps to
+    ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.
+
+    The abduction statistics use the displacement caused by the abduction
+    alone: offsets at the abduction peak minus offsets at the start of the
+    abduction phase, fitted linearly against the signed distance of each
+    tendon's forearm point from the median axis (y - b/2).
+
+    Parameters
+    ----------
+    flexion, abduction : float
+        Peak q73 and q71 [rad] (thesis: 30 deg and 20 deg).
+    duration : float
+        Total time [s] (Fig 6.10: 4 s; Fig 6.9: 10 s).
+    num_samples : int
+        Time samples (>= 5).
+    hold_flexion : bool
+        Keep the flexion during the abduction phase.
+    params : WristParams, optional
+
+    Returns
+    -------
+    WristMotionResult
+        Displacements, constraint errors and the proportionality statistics.
+    """
+    if not (duration > 0.0):
+        raise ValueError(f"duration must be > 0 [s], got {duration}")
+    if int(num_samples) < 5:
+        raise ValueError(f"num_samples must be >= 5, got {num_samples}")
+    p = wrist_params(params)
+    t = np.linspace(0.0, duration, int(num_samples))
+    half = 0.5 * duration
+    in_flex = t < half
+    s = np.where(in_flex, t / half, (t - half) / half)
+    bump = 0.5 * (1.0 - np.cos(2.0 * np.pi * s))
+    if hold_flexion:
+        q73 = np.where(in_flex, flexion * 0.5 * (1.0 - np.cos(np.pi * s)), flexion)
+    else:
+        q73 = np.where(in_flex, flexion * bump, 0.0)
+    q71 = np.where(in_flex, 0.0, abduction * bump)
+    offsets = np.empty((t.size, p.num_tendons))
+    errors = np.empty((t.size, 6))
+    for i in range(t.size):  # analysis loop over samples (not a system calc)
+        offsets[i] = wrist_tendon_offsets(q71[i], q73[i], p)
+        errors[i] = wrist_constraint_errors(wrist_kinematics(q71[i], q73[i], p), p)
+    dist = p.forearm_offset_array[:, 1] - 0.5 * p.width
+    start = int(np.argmax(~in_flex))
+    abd = offsets[int(np.argmax(np.abs(q71)))] - offsets[start]
+    slope, intercept = np.polyfit(dist, abd, 1)
+    ss_res = float(np.sum((abd - (slope * dist + intercept)) ** 2))
+    ss_tot = float(np.sum((abd - abd.mean()) ** 2))
+    return WristMotionResult(
+        t=t, wrist_angle=np.column_stack([q71, q73]), offsets=offsets, constraint_errors=errors,
+        phase=np.where(in_flex, "flexion", "abduction"), median_distance=dist,
+        flexion_peak=float(np.max(np.abs(offsets[in_flex]))),
+        abduction_peak=float(np.max(np.abs(offsets[~in_flex] - offsets[start]))),
+        abduction_slope=float(slope), abduction_intercept=float(intercept),
+        abduction_r2=1.0 - ss_res / ss_tot)
+
+
+#: One colour per finger for tendon plots.
+FINGER_COLORS = {"thumb": "tab:red", "index": "tab:blue", "middle": "tab:green",
+                 "ring": "tab:orange", "fifth": "tab:purple"}
+
+
+def _start(result, ax):
+    """Validate the data and return (fig, ax), creating them when ax is None."""
+    import matplotlib.pyplot as plt
+
+    if not isinstance(result, WristMotionResult):
+        raise ValueError(f"result must be a WristMotionResult, got {type(result).__name__}")
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(7.0, 4.0))
+    else:
+        fig = ax.figure
+    return fig, ax
+
+
+def plot_wrist_displacements(result: WristMotionResult, ax=None):
+    """Tendon displacement through the wrist vs time (Fig 6.10).
+
+    One line per tendon (Table 6.2 order), coloured by finger; the flexion
+    and abduction phases are shaded and annotated with the proportionality
+    fit of the abduction peak.
+
+    Parameters
+    ----------
+    result : WristMotionResult
+        From :func:`~awiwi_drake.hand.wrist.wrist_motion_study` (uses ``offsets``).
+    ax : matplotlib Axes, optional
+        Axes to draw into (default: a new figure).
+
+    Returns
+    -------
+    (fig, ax) : the figure and the axes holding one line per tendon.
+    """
+    fig, ax = _start(result, ax)
+    seen = set()
+    for i, finger in enumerate(result.fingers):
+        label = finger if finger not in seen else None
+        seen.add(finger)
+        ax.plot(result.t, result.offsets[:, i], color=FINGER_COLORS.get(finger, "k"), lw=0.9, label=label)
+    flex = result.phase == "flexion"
+    if np.any(flex):
+        ax.axvspan(result.t[flex][0], result.t[flex][-1], color="0.92", zorder=0)
+    peak_q = np.degrees(np.max(np.abs(result.wrist_angle), axis=0))
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("tendon displacement [m]")
+    ax.set_title(f"wrist: flexion {peak_q[1]:.0f} deg (shaded), then abduction {peak_q[0]:.0f} deg")
+    ax.text(0.99, 0.02,
+            f"abduction peak vs distance from median axis: slope {result.abduction_slope:.3f} m/m, "
+            f"R$^2$ = {result.abduction_r2:.4f}\nflexion/abduction peak ratio "
+            f"{result.flexion_to_abduction_ratio:.2f}",
+            transform=ax.transAxes, ha="right", va="bottom", fontsize=8)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.grid(True, alpha=0.3)
+    return fig, ax
+
+
+def plot_wrist_constraint_errors(result: WristMotionResult, ax=None):
+    """Largest distance-constraint error vs time (Fig 6.9); ``ax`` optional, returns ``(fig, ax)``."""
+    fig, ax = _start(result, ax)
+    ax.plot(result.t, np.max(np.abs(result.constraint_errors), axis=1), color="k")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("max constraint error [m]")
+    ax.set_title("max(|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|) errors")
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
+    ax.grid(True, alpha=0.3)
+    return fig, ax
 
 
 @dataclass
@@ -71,3 +274,22 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "compiled"
                                   drift[True], list(rig.joint_names),
                                   {"uncompensated": fmin[False], "compensated": fmin[True]},
                                   {"uncompensated": events[False], "compensated": events[True]})
+
+
+def plot_wrist_compensation(study, ax=None):
+    """Finger joint drift during a wrist abduction sweep, without and with compensation."""
+    if ax is None:
+        fig, ax = figure_axes(None, ncols=2, figsize=(10, 3.5), sharey=True)
+    else:
+        fig = np.ravel(ax)[0].figure
+    for a, drift, title in ((ax[0], study.drift_uncompensated, "uncompensated"),
+                            (ax[1], study.drift_compensated, "with wrist feedforward")):
+        for j, name in enumerate(study.joint_names):
+            if np.max(np.abs(drift[:, j])) > 1e-6:
+                a.plot(study.t, drift[:, j], label=name)
+        a.set_title(title, fontsize=9)
+        a.set_xlabel("time [s]")
+        a.grid(True, alpha=0.3)
+    ax[0].set_ylabel("q - q_ref [rad]")
+    ax[0].legend(fontsize=7, ncol=2)
+    return fig, ax

@@ -8,10 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
+from awiwi_drake.analysis import Samples, simulate
 from awiwi_drake.control.stiffness_correction import StiffnessCorrectedImpedance, pretension_elongation
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 from awiwi_drake.plotting import figure_axes
@@ -53,9 +53,11 @@ def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segm
     b.Connect(plant.GetOutputPort("state"), ctrl.GetInputPort("state"))
     b.Connect(ctrl.GetOutputPort("motor_torque"), plant.GetInputPort("motor_torque"))
     ref = b.AddNamedSystem("reference", ConstantVectorSource([0.0]))
-    b.Connect(ref.get_output_port(), ctrl.GetInputPort("link_angle_reference"))
+    b.Connect(ref.get_output_port(), ctrl.GetInputPort("joint_angle_reference"))
     b.ExportInput(ctrl.GetInputPort("effective_stiffness_reference"), "effective_stiffness_reference")
     b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+    b.ExportOutput(plant.GetOutputPort("state"), "state")
+    b.ExportOutput(ctrl.GetOutputPort("stiffness"), "stiffness")
     diagram = b.Build()
     ctx = diagram.CreateDefaultContext()
     rq = rig.params.link_pulley_radius
@@ -63,29 +65,16 @@ def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segm
     f0 = float(rig.spring.force(np.array([x_c]))[0])
     op = rig.operating_point(pretension=f0)
     plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
-    kport, eport = diagram.GetInputPort("effective_stiffness_reference"), diagram.GetInputPort("external_torque")
-    sim = Simulator(diagram, ctx)
-    ResetIntegratorFromFlags(sim, "runge_kutta3", 1e-3)
-    sim.get_mutable_integrator().set_target_accuracy(1e-6)
-    cctx = ctrl.GetMyContextFromRoot(ctx)
-    log = {k: [] for k in ("t", "q", "w", "ki", "km", "ke", "kt")}
-    t_now = 0.0
-    for target in targets:
-        kport.FixValue(ctx, [target])
-        for load in loads:
-            eport.FixValue(ctx, [load])
-            t_end = t_now + segment
-            while t_now < t_end - 1e-12:
-                t_now = min(t_end, t_now + dt)
-                sim.AdvanceTo(t_now)
-                s = ctrl.GetOutputPort("stiffness").Eval(cctx)
-                x = plant.GetOutputPort("state").Eval(plant.GetMyContextFromRoot(ctx))
-                if not np.all(np.isfinite(x)):
-                    raise RuntimeError(f"stiffness_correction_run: state not finite at t = {t_now:.4g} s")
-                for k, v in zip(("t", "q", "w", "ki", "km", "ke", "kt"), (t_now, x[0], load, s[0], s[1], s[2], target)):
-                    log[k].append(float(v))
-    a = {k: np.array(v) for k, v in log.items()}
-    return StiffnessRun(a["t"], a["q"], a["w"], a["ki"], a["km"], a["ke"], a["kt"], corrected)
+    starts = segment * np.arange(len(targets) * len(loads))          # one segment per (target, load)
+    k_ref = np.repeat(np.asarray(targets, float), len(loads))
+    w = np.tile(np.asarray(loads, float), len(targets))
+    res = simulate(diagram, ctx, float(starts[-1] + segment),
+                   inputs={"effective_stiffness_reference": Samples(starts, k_ref), "external_torque": Samples(starts, w)},
+                   log=("state", "stiffness", "external_torque", "effective_stiffness_reference"), log_period=dt,
+                   max_step=1e-3, accuracy=1e-6)
+    s = res["stiffness"]
+    return StiffnessRun(res.t, res["state"][:, 0], res["external_torque"][:, 0], s[:, 0], s[:, 1], s[:, 2],
+                        res["effective_stiffness_reference"][:, 0], corrected)
 
 
 def plot_stiffness_run(run, *, ax=None):

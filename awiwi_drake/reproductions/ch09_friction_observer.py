@@ -8,12 +8,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
-from pydrake.systems.framework import DiagramBuilder
 
+from awiwi_drake.analysis import PerEntry, Sine, simulate
 from awiwi_drake.control.backstepping import impedance_controller
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.friction_observer import LinkFriction
+from awiwi_drake.control.friction_observer import with_link_friction
 from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 from awiwi_drake.parameters.rigs import JointRigParams
@@ -42,48 +41,20 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     ig = ImpedanceBacksteppingGains(stiffness=g.stiffness, damping=g.damping, k3=g.k3, k4=g.k4, observer_gain=obs.gain)
     ctrl = impedance_controller(rig, ig, pretension=g.pretension, reference_derivatives=4, compensate=compensate)
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    b = DiagramBuilder()
-    cl = b.AddNamedSystem("loop", loop.diagram)
-    fr = b.AddNamedSystem("link_friction", LinkFriction(fp))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
-    b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
-    diagram = b.Build()
+    diagram, cl, fr = with_link_friction(loop.diagram, fp)
     ctx = diagram.CreateDefaultContext()
     op = rig.operating_point(pretension=g.pretension)
     loop.diagram.GetSubsystemByName("rig").GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
     w = 2 * math.pi * frequency
-    ref_port = diagram.GetInputPort("link_angle_reference")
-
-    def ref(t):
-        s, c = math.sin(w * t), math.cos(w * t)
-        return [amplitude * s, amplitude * w * c, -amplitude * w ** 2 * s, -amplitude * w ** 3 * c, amplitude * w ** 4 * s]
-
-    ref_port.FixValue(ctx, ref(0.0))
-    sim = Simulator(diagram, ctx)
-    ResetIntegratorFromFlags(sim, "runge_kutta3", dt)
-    sim.get_mutable_integrator().set_target_accuracy(1e-6)
-    c_sys = loop.diagram.GetSubsystemByName("controller")
-    rig_sys = loop.diagram.GetSubsystemByName("rig")
-    ts = np.arange(int(round(t_final / dt)) + 1) * dt
-    X, U, V, R, F, E = [], [], [], [], [], []
-    for t in ts:
-        if t > 0:
-            sim.AdvanceTo(t)
-        ref_port.FixValue(ctx, ref(t))
-        x = rig_sys.GetMyContextFromRoot(ctx).get_continuous_state_vector().CopyToVector()
-        if not np.all(np.isfinite(x)):
-            raise RuntimeError(f"friction_tracking_run: state not finite at t = {t:.4g} s")
-        cctx = c_sys.GetMyContextFromRoot(ctx)
-        X.append(x)
-        U.append(np.array(c_sys.GetOutputPort("motor_torque").Eval(cctx)))
-        V.append(c_sys.GetOutputPort("lyapunov").Eval(cctx)[0])
-        R.append(ref(t)[0])
-        F.append(fr.get_output_port().Eval(fr.GetMyContextFromRoot(ctx))[0])
-        E.append(c_sys.GetOutputPort("external_torque_estimate").Eval(cctx)[0])
-    return BacksteppingRun("with compensation" if compensate else "without compensation", ts, np.array(X),
-                           np.array(U), np.array(V), np.array(R), np.array(F),
-                           dict(friction=np.array(F), friction_estimate=np.array(E)))
+    # the reference and its four derivatives: A sin(w t), A w cos(w t), -A w^2 sin(w t), ...
+    ref = PerEntry([Sine(amplitude * w ** k, frequency, phase=k * math.pi / 2) for k in range(5)])
+    res = simulate(diagram, ctx, t_final, inputs={"joint_angle_reference": ref},
+                   log=("state", "motor_torque", "controller_lyapunov", "controller_external_torque_estimate",
+                        "link_friction", "joint_angle_reference"), log_period=dt, max_step=dt, accuracy=1e-6)
+    F = res["link_friction"][:, 0]
+    return BacksteppingRun("with compensation" if compensate else "without compensation", res.t, res["state"],
+                           res["motor_torque"], res["controller_lyapunov"][:, 0], res["joint_angle_reference"][:, 0],
+                           F, dict(friction=F, friction_estimate=res["controller_external_torque_estimate"][:, 0]))
 
 
 def chattering(run, *, after: float = 0.0) -> float:

@@ -11,7 +11,8 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.compare import fit_second_order_step, simulate_loop, step_metrics
+from awiwi_drake.analysis import simulate
+from awiwi_drake.control.compare import fit_second_order_step, step_metrics
 from awiwi_drake.control.sensors import force_sensor
 from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_force_without_feedforward,
                                               tendon_pd_controller, tendon_scheduled_controller)
@@ -45,10 +46,10 @@ def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: f
         op = rig.operating_point(tendon_force=f0)
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
-        log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force",),
-                            inputs={"tendon_force_reference": reference_schedule([(0.05, f1)], f0)})
+        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(0.05, f1)], f0)},
+                       log=("tendon_force", "tendon_force_reference"), log_period=DT)
         out[label] = log["tendon_force"][:, 0]
-        out["t"] = log["t"]
+        out["t"] = log.t
         out["reference"] = log["tendon_force_reference"][:, 0]
         if label == "without":
             kp = loop.controller.law.kp_fixed
@@ -85,13 +86,13 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
         op = rig.operating_point(tendon_force=f0)
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
-        log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force", "motor_torque_command"),
-                            inputs={"tendon_force_reference": reference_schedule([(t_step, f0 + step)], f0)})
+        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(t_step, f0 + step)], f0)},
+                       log=("tendon_force", "motor_torque_command"), log_period=DT)
         f = log["tendon_force"][:, 0]
-        m = step_metrics(log["t"], f, f0, f0 + step, t_step, band=0.05)
-        m.update({k: v for k, v in fit_second_order_step(log["t"], f, f0, f0 + step, t_step).items()
+        m = step_metrics(log.t, f, f0, f0 + step, t_step, band=0.05)
+        m.update({k: v for k, v in fit_second_order_step(log.t, f, f0, f0 + step, t_step).items()
                   if k in ("damping_ratio", "natural_frequency")})
-        res.t = log["t"]
+        res.t = log.t
         res.forces[f0] = f
         res.commands[f0] = log["motor_torque_command"][:, 0]
         res.metrics[f0] = m

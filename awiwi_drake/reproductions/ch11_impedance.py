@@ -8,10 +8,10 @@ from __future__ import annotations
 from typing import Sequence
 
 import numpy as np
-from pydrake.systems.primitives import Linearize
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.compare import gain_diagram, simulate_loop, step_metrics
+from awiwi_drake.analysis import Chirp, linearize, simulate
+from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
 from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
@@ -23,14 +23,14 @@ __all__ = ["impedance_step", "impedance_sweep", "impedance_frequency_response", 
 
 
 def _joint(kind: str, *, stiffness=None, pretension=None):
-    if kind == "flexible_joint":
+    if kind == "flexible-joint":
         p = FlexibleJointParams() if stiffness is None else FlexibleJointParams(stiffness=stiffness)
         return flexible_joint_rig(params=p, backend="symbolic")
     return joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
                      backend="symbolic")
 
 
-def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible_joint",
+def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
                    stiffness: float | None = None, pretension: float | None = None, step: float = 0.3,
                    t_final: float = 0.3) -> dict:
     """Fig 11.2-11.3: link step under impedance control (``stiffness``: mechanical k of the flexible joint)."""
@@ -38,15 +38,15 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=RATE)
     op = r.operating_point()
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
-    log = simulate_loop(loop, ctx, t_final, DT, outputs=("link_angle",),
-                        inputs={"link_angle_reference": reference_schedule([(0.02, step)], 0.0),
-                                "external_torque": lambda t: 0.0})
-    m = step_metrics(log["t"], log["link_angle"][:, 0], 0.0, step, 0.02)
-    return dict(t=log["t"], link_angle=log["link_angle"][:, 0], reference=log["link_angle_reference"][:, 0], **m)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.02, step)], 0.0),
+                                               "external_torque": 0.0},
+                   log=("joint_angle", "joint_angle_reference"), log_period=DT)
+    m = step_metrics(log.t, log["joint_angle"][:, 0], 0.0, step, 0.02)
+    return dict(t=log.t, joint_angle=log["joint_angle"][:, 0], reference=log["joint_angle_reference"][:, 0], **m)
 
 
-def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint_rig",
+def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint-rig",
                     stiffness: float | None = None, pretension: float | None = None, f_start: float | None = None,
                     f_stop: float | None = None, duration: float | None = None,
                     amplitude: float | None = None) -> dict:
@@ -65,18 +65,17 @@ def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | No
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=RATE)
     op = r.operating_point()
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
-    k = (f_stop - f_start) / duration
-    log = simulate_loop(loop, ctx, duration, DT, outputs=("link_angle",),
-                        inputs={"link_angle_reference": lambda t: amplitude * np.sin(2 * np.pi * (f_start * t + 0.5 * k * t * t)),
-                                "external_torque": lambda t: 0.0})
-    f, g = gain_diagram(log["t"], log["link_angle_reference"][:, 0], log["link_angle"][:, 0], f_start, f_stop)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
+    log = simulate(loop, ctx, duration, inputs={"joint_angle_reference": Chirp(amplitude, f_start, f_stop, duration),
+                                                "external_torque": 0.0},
+                   log=("joint_angle", "joint_angle_reference"), log_period=DT)
+    f, g = gain_diagram(log.t, log["joint_angle_reference"][:, 0], log["joint_angle"][:, 0], f_start, f_stop)
     i = int(np.argmax(g))
     return dict(freq=f, gain=g, resonance_hz=float(f[i]), peak_gain=float(g[i]))
 
 
 def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffness: float | None = None,
-                                 rig: str = "joint_rig", stiffness: float | None = None,
+                                 rig: str = "joint-rig", stiffness: float | None = None,
                                  pretension: float | None = None, freqs: Sequence[float] | None = None) -> dict:
     """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize`` (python backend).
 
@@ -86,7 +85,7 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     sp = ImpedanceSweepParams()
     joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
     freqs = np.linspace(0.5, 70.0, 700) if freqs is None else np.asarray(freqs, float)
-    if rig == "flexible_joint":
+    if rig == "flexible-joint":
         r = flexible_joint_rig(params=FlexibleJointParams() if stiffness is None else
                                FlexibleJointParams(stiffness=stiffness), backend="python")
     else:
@@ -95,16 +94,11 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=None)
     op = r.operating_point()
-    ctx = loop.create_context(state=op.state, references={"link_angle_reference": 0.0})
-    d = loop.diagram
-    lin = Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
-                    output_port_index=d.GetOutputPort("link_angle").get_index())
-    A, B, C, D = (np.asarray(m) for m in (lin.A(), lin.B(), lin.C(), lin.D()))
-    eye = np.eye(A.shape[0])
-    g = np.array([abs((C @ np.linalg.solve(2j * np.pi * f * eye - A, B) + D)[0, 0]) for f in freqs])
+    ctx = loop.create_context(state=op.state, references={"joint_angle_reference": 0.0})
+    lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
+    g = np.abs(lin.bode(omega=2 * np.pi * freqs).response)
     i = int(np.argmax(g))
-    return dict(freq=freqs, gain=g, resonance_hz=float(freqs[i]), peak_gain=float(g[i]),
-                eigenvalues=np.linalg.eigvals(A))
+    return dict(freq=freqs, gain=g, resonance_hz=float(freqs[i]), peak_gain=float(g[i]), eigenvalues=lin.poles)
 
 
 def plot_gain_diagrams(curves: dict, *, ax=None):

@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.control.compare import simulate_loop
+from awiwi_drake.analysis import simulate
 from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controller
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
@@ -35,11 +35,11 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     loop = closed_loop(rig, tendon_sdre_controller(rig, params, fixed=fixed, fmap=fmap), rate_hz=RATE)
     op = rig.operating_point(tendon_force=0.0)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
-    log = simulate_loop(loop, ctx, t_final, DT, outputs=("tendon_force", "controller_gain", "motor_torque"),
-                        inputs={"tendon_force_reference": reference_schedule(schedule, 0.0)})
+    log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule(schedule, 0.0)},
+                   log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=DT)
     u = log["motor_torque"][:, 0]
     limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
-    return dict(t=log["t"], force=log["tendon_force"][:, 0], reference=log["tendon_force_reference"][:, 0],
+    return dict(t=log.t, force=log["tendon_force"][:, 0], reference=log["tendon_force_reference"][:, 0],
                 gain=log["controller_gain"], torque=u, torque_limit=limit, saturated=np.abs(u) > limit)
 
 
@@ -55,10 +55,10 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     loop = closed_loop(rig, joint_sdre_controller(rig, p, fixed=fixed), rate_hz=RATE)
     op = rig.operating_point(external_torque=external_torque)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                              references={"link_angle_reference": 0.0},
+                              references={"joint_angle_reference": 0.0},
                               disturbances={"external_torque": external_torque})
-    log = simulate_loop(loop, ctx, t_final, DT, outputs=("link_angle", "controller_gain", "motor_torque"),
-                        inputs={"link_angle_reference": reference_schedule([(0.1, target)], 0.0),
-                                "external_torque": lambda t: external_torque})
-    return dict(t=log["t"], link_angle=log["link_angle"][:, 0], gain=log["controller_gain"],
-                torque=log["motor_torque"][:, 0], reference=log["link_angle_reference"][:, 0])
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.1, target)], 0.0),
+                                               "external_torque": external_torque},
+                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
+    return dict(t=log.t, joint_angle=log["joint_angle"][:, 0], gain=log["controller_gain"],
+                torque=log["motor_torque"][:, 0], reference=log["joint_angle_reference"][:, 0])

@@ -6,10 +6,10 @@ The controllers and their rig factories are :mod:`awiwi_drake.control.backsteppi
 behind Fig 15.2-15.4, 15.7-15.13, 15.16-15.21 and 15.23-15.27 and return data
 (:class:`BacksteppingRun`); the ``plot_*`` functions at the end draw them.
 
-All simulations use Drake's ``Simulator`` with error-controlled RK3. Inputs
-that change at given times (reference steps, disturbance steps) are applied
-as events: the simulation advances to the event time, the input is re-fixed,
-and the integration continues.
+All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`):
+inputs that change at given times (reference steps, disturbance steps) are
+piecewise-constant schedules (:func:`event_schedules`), the sine references
+(with their derivatives) ``Sine`` schedules, all wired in as Drake sources.
 """
 
 from __future__ import annotations
@@ -17,12 +17,12 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Mapping, Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
-from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from awiwi_drake.analysis import PerEntry, Samples, Sine, simulate
 from awiwi_drake.components.spring import LinearSpring
 from awiwi_drake.control.backstepping import REFERENCE_PORT, REFERENCE_SIZE, impedance_controller, position_controller
 from awiwi_drake.control.base import ClosedLoop, closed_loop
@@ -36,16 +36,12 @@ from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, Sc
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = [
-    "BacksteppingRun", "SimulationDivergedError", "table_15_1_params", "table_15_1_rig", "simulate_events",
+    "BacksteppingRun", "table_15_1_params", "table_15_1_rig", "event_schedules", "run_loop",
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "antagonistic_step", "antagonistic_sine",
     "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
-    "plot_link_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
+    "plot_joint_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
 ]
-
-
-class SimulationDivergedError(RuntimeError):
-    """The closed-loop state became non-finite."""
 
 
 @dataclass
@@ -103,73 +99,52 @@ def table_15_1_rig(*, spring: str = "linear", **changes):
 
 
 # ---------------------------------------------------------------------------
-# simulation with input events
-def simulate_events(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None,
-                    inputs0: Mapping[str, object] | None = None,
-                    events: Sequence[tuple[float, Mapping[str, object]]] = (),
-                    input_functions: Mapping[str, Callable[[float], object]] | None = None,
-                    dt: float = 1e-3, max_step: float = 1e-3, accuracy: float = 1e-6, label: str = "",
-                    extra_outputs: Sequence[str] = ()) -> BacksteppingRun:
-    """Simulate a :class:`ClosedLoop` from ``state0`` with piecewise-constant inputs.
+# simulation: schedules from input events, one run through analysis.simulate
+def event_schedules(events: Sequence[tuple[float, Mapping[str, object]]], initial: Mapping[str, object] | None = None
+                    ) -> dict:
+    """Piecewise-constant input schedules from ``initial`` values and ``[(t, {port: value}), ...]`` events.
 
-    ``inputs0`` fixes the exported inputs at t = 0 (``link_angle_reference``,
-    ``external_torque``; missing ones are 0); ``events`` = ``[(t, {port: value})]``
-    re-fix them at given times; ``input_functions`` = ``{port: f(t)}`` are
-    re-fixed at every sample (sample-and-hold at ``dt``, e.g. a sine reference
-    with derivatives). Raises :class:`SimulationDivergedError` on a non-finite state.
+    Each port gets a :class:`~awiwi_drake.analysis.Samples` (zero-order hold) starting at its
+    initial value (0 if not given); a value is a number (every entry of the port) or a vector.
     """
-    if t_final <= 0 or dt <= 0:
-        raise ValueError(f"simulate_events: t_final = {t_final} and dt = {dt} must be > 0")
+    initial = dict(initial or {})
+    names = list(dict.fromkeys([*initial, *(k for _, vals in events for k in vals)]))
+    out = {}
+    for name in names:
+        times, values = [0.0], [initial.get(name, 0.0)]
+        for te, vals in sorted(events, key=lambda e: e[0]):
+            if name in vals:
+                if te <= 0.0:
+                    values[0] = vals[name]
+                else:
+                    times.append(float(te))
+                    values.append(vals[name])
+        arr = np.array([np.ravel(np.asarray(v, float)) for v in values], dtype=float)
+        out[name] = Samples(times, arr[:, 0] if arr.shape[1] == 1 else arr)
+    return out
+
+
+def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, inputs: Mapping[str, object] | None = None,
+             dt: float = 1e-3, max_step: float = 1e-3, accuracy: float = 1e-6, label: str = "",
+             extra_outputs: Sequence[str] = ()) -> BacksteppingRun:
+    """One closed-loop run through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` as a :class:`BacksteppingRun`.
+
+    ``inputs`` maps exported inputs (``joint_angle_reference``, ``external_torque``) to schedules
+    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0.
+    """
     d = loop.diagram
-    ctx = loop.create_context(state=state0, motor_torque=motor_torque0,
-                              references={k: v for k, v in (inputs0 or {}).items() if k in loop.references},
-                              disturbances={k: v for k, v in (inputs0 or {}).items() if k in loop.disturbances})
-    ctrl = d.GetSubsystemByName("controller")
-    cctx = ctrl.GetMyContextFromRoot(ctx)
-    has_v = ctrl.HasOutputPort("lyapunov")
-    rig_sys = d.GetSubsystemByName("rig")
-    rctx = rig_sys.GetMyContextFromRoot(ctx)
-
-    def fix(values):
-        for name, v in values.items():
-            port = d.GetInputPort(name)
-            port.FixValue(ctx, np.broadcast_to(np.asarray(v, dtype=float), (port.size(),)).copy())
-
-    funcs = dict(input_functions or {})
-    fix({k: f(0.0) for k, f in funcs.items()})
-    sim = Simulator(d, ctx)
-    ResetIntegratorFromFlags(sim, "runge_kutta3", max_step)
-    sim.get_mutable_integrator().set_target_accuracy(accuracy)
-    sim.Initialize()
-    n = int(round(t_final / dt)) + 1
-    ts = np.arange(n) * dt
-    pending = sorted(events, key=lambda e: e[0])
-    ref_port = d.GetInputPort(REFERENCE_PORT) if d.HasInputPort(REFERENCE_PORT) else None
-    ext_port = d.GetInputPort("external_torque") if d.HasInputPort("external_torque") else None
-    X, U, V, R, W = [], [], [], [], []
-    extra = {k: [] for k in extra_outputs}
-    for i, t in enumerate(ts):
-        while pending and pending[0][0] <= t + 1e-12:
-            te, vals = pending.pop(0)
-            if te > ctx.get_time():
-                sim.AdvanceTo(te)
-            fix(vals)
-        if t > ctx.get_time():
-            sim.AdvanceTo(t)
-        if funcs:
-            fix({k: f(t) for k, f in funcs.items()})
-        x = rctx.get_continuous_state_vector().CopyToVector()
-        if not np.all(np.isfinite(x)):
-            raise SimulationDivergedError(f"{label or d.get_name()}: state not finite at t = {t:.4g} s")
-        X.append(x)
-        U.append(np.array(d.GetOutputPort("motor_torque").Eval(ctx), dtype=float))
-        V.append(float(ctrl.GetOutputPort("lyapunov").Eval(cctx)[0]) if has_v else math.nan)
-        R.append(float(ref_port.Eval(ctx)[0]) if ref_port is not None else math.nan)
-        W.append(float(ext_port.Eval(ctx)[0]) if ext_port is not None else 0.0)
-        for k in extra_outputs:
-            extra[k].append(np.array(d.GetOutputPort(k).Eval(ctx), dtype=float))
-    return BacksteppingRun(label, ts, np.array(X), np.array(U), np.array(V), np.array(R), np.array(W),
-                           {k: np.array(v) for k, v in extra.items()})
+    ctx = loop.create_context(state=state0, motor_torque=motor_torque0)
+    log = ["state", "motor_torque", *extra_outputs]
+    has_v = d.HasOutputPort("controller_lyapunov")
+    ref = REFERENCE_PORT if d.HasInputPort(REFERENCE_PORT) else None
+    ext = "external_torque" if d.HasInputPort("external_torque") else None
+    log += [p for p in (("controller_lyapunov" if has_v else None), ref, ext) if p]
+    res = simulate(loop, ctx, t_final, inputs=inputs, log=log, log_period=dt, max_step=max_step, accuracy=accuracy)
+    n = len(res.t)
+    return BacksteppingRun(label, res.t, res["state"], res["motor_torque"],
+                           res["controller_lyapunov"][:, 0] if has_v else np.full(n, math.nan),
+                           res[ref][:, 0] if ref else np.full(n, math.nan),
+                           res[ext][:, 0] if ext else np.zeros(n), {k: res[k] for k in extra_outputs})
 
 
 def is_monotone_nonincreasing(v, *, rtol: float = 1e-6, atol: float = 1e-12) -> bool:
@@ -204,10 +179,13 @@ def example_phase_portrait(gains: ScalarExampleGains, initial_states, *, t_final
         b.Connect(plant.get_output_port(0), ctrl.get_input_port(0))
         b.Connect(ctrl.GetOutputPort("u"), plant.get_input_port(0))
         b.ExportOutput(ctrl.GetOutputPort("u"), "motor_torque")
+        b.ExportOutput(plant.get_output_port(0), "state")
+        if ctrl.HasOutputPort("lyapunov"):
+            b.ExportOutput(ctrl.GetOutputPort("lyapunov"), "controller_lyapunov")
         loop = ClosedLoop(diagram=b.Build(), rig=None, controller=ctrl, rate_hz=None, delay=None, delay_steps=0,
                           saturation=None, references=(), disturbances=(), tracked_outputs=())
-        runs.append(simulate_events(loop, t_final=t_final, state0=x0, dt=dt, max_step=0.05,
-                                    label=f"x0 = ({x0[0]:g}, {x0[1]:g})"))
+        runs.append(run_loop(loop, t_final=t_final, state0=x0, dt=dt, max_step=0.05,
+                             label=f"x0 = ({x0[0]:g}, {x0[1]:g})"))
     return runs
 
 
@@ -222,8 +200,8 @@ def _step_run(make_controller, *, step, t_final, label, dt=2e-3, saturation=None
     # ClosedLoop.initialize sizes the delay buffer as steps * n, DiscreteTimeDelay holds (steps + 1) * n:
     # leave the buffers at their default (zero = the rest torque of this rig) when delayed.
     u0 = None if loop.delay_steps else op.motor_torque
-    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=u0,
-                           inputs0={REFERENCE_PORT: step}, dt=dt, max_step=max_step, label=label)
+    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=u0,
+                    inputs=event_schedules((), {REFERENCE_PORT: step}), dt=dt, max_step=max_step, label=label)
 
 
 def position_gain_study(which: str = "k1", study: PositionStudy | None = None, *, t_final: float | None = None,
@@ -280,8 +258,9 @@ def _impedance_run(make_rig, make_controller, *, step, step_time, disturbance, d
     loop = closed_loop(rig, make_controller(rig), rate_hz=None, saturation=saturation)
     op = rig.operating_point()
     events = [(step_time, {REFERENCE_PORT: step}), (disturbance_time, {"external_torque": disturbance})]
-    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque, events=events,
-                           dt=dt, max_step=max_step, label=label, extra_outputs=extra_outputs)
+    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
+                    inputs=event_schedules(events), dt=dt, max_step=max_step, label=label,
+                    extra_outputs=extra_outputs)
 
 
 def impedance_study(which: str = "stiffness", study: ImpedanceStudy | None = None, *,
@@ -325,7 +304,7 @@ def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: 
     loop = closed_loop(rig, impedance_controller(rig, gains, **kw), rate_hz=None)
     ctx = loop.create_context(state=rig.operating_point().state)
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
-                    output_port_index=loop.diagram.GetOutputPort("link_angle").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index(),
                     equilibrium_check_tolerance=1e-6)
     x_ss = -np.linalg.solve(lin.A(), lin.B() @ [disturbance])
     return float((lin.C() @ x_ss)[0])
@@ -359,14 +338,11 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
 
 # ---------------------------------------------------------------------------
 # 15.5: antagonistic joint
-def _sine_reference(amplitude, freq, offset=0.0):
+def _sine_reference(amplitude, freq, offset=0.0) -> PerEntry:
+    """``offset + A sin(w t)`` and its four derivatives ``A w^k sin(w t + k pi / 2)`` (the reference port)."""
     w = 2 * math.pi * freq
-
-    def f(t):
-        s, c = math.sin(w * t), math.cos(w * t)
-        return np.array([offset + amplitude * s, amplitude * w * c, -amplitude * w * w * s,
-                         -amplitude * w ** 3 * c, amplitude * w ** 4 * s])
-    return f
+    return PerEntry([Sine(amplitude * w ** k, freq, phase=k * math.pi / 2, offset=offset if k == 0 else 0.0)
+                     for k in range(REFERENCE_SIZE)])
 
 
 def antagonistic_step(gains: AntagonisticBacksteppingGains | None = None, *, step: float = math.radians(30.0),
@@ -376,9 +352,9 @@ def antagonistic_step(gains: AntagonisticBacksteppingGains | None = None, *, ste
     g = gains or AntagonisticBacksteppingGains()
     op = rig.operating_point(pretension=g.pretension)
     loop = closed_loop(rig, impedance_controller(rig, g), rate_hz=None)
-    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
-                           events=[(0.05, {REFERENCE_PORT: step})], dt=dt, max_step=1e-3,
-                           label="backstepping step", extra_outputs=("tendon_force", "joint_torque"))
+    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
+                    inputs=event_schedules([(0.05, {REFERENCE_PORT: step})]), dt=dt, max_step=1e-3,
+                    label="backstepping step", extra_outputs=("tendon_force", "joint_torque"))
 
 
 def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amplitude: float = math.radians(25.0),
@@ -394,11 +370,10 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
     ref = _sine_reference(amplitude, frequency, offset)
     ctrl = impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0)
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    op = rig.operating_point(pretension=g.pretension, link_angle=offset)
-    fn = ref if feedforward else (lambda t: ref(t)[:1])
-    return simulate_events(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
-                           input_functions={REFERENCE_PORT: fn}, dt=dt, max_step=dt, label="backstepping sine",
-                           extra_outputs=("tendon_force",))
+    op = rig.operating_point(pretension=g.pretension, joint_angle=offset)
+    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
+                    inputs={REFERENCE_PORT: ref if feedforward else PerEntry(ref.entries[:1])}, dt=dt, max_step=dt,
+                    label="backstepping sine", extra_outputs=("tendon_force",))
 
 
 def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflection: float = 0.3,
@@ -442,7 +417,7 @@ def _time_series(runs, signal, ylabel, *, ax, title, log=False, reference=False)
     return fig, ax
 
 
-def plot_link_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
+def plot_joint_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
     """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
     return _time_series(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
 

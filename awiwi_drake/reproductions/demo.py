@@ -10,6 +10,7 @@ from awiwi_drake.analysis import linearize, rig_monitors, simulate
 from awiwi_drake.components.spring import LeverSpringMechanism
 from awiwi_drake.config import short_mode
 from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 from awiwi_drake.parameters.rigs import DemoScenario
 from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
 from awiwi_drake.rigs.rigs import joint_rig
@@ -38,12 +39,12 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     from awiwi_drake.plotting import _plt
 
     plt = _plt()
-    names = ["link_angle", "tendon_force", "applied_torque"]
-    labels = dict(link_angle="link angle [rad]", tendon_force="tendon force [N]",
+    names = ["joint_angle", "tendon_force", "applied_torque"]
+    labels = dict(joint_angle="link angle [rad]", tendon_force="tendon force [N]",
                   applied_torque="motor torque [Nm]")
     kw = dict(labels=labels,
-              reference=dict(link_angle=(t_ref, refs["link_reference"]), tendon_force=(t_ref, refs["pretension"])),
-              components=dict(link_angle=["link angle"], tendon_force=["tendon 1", "tendon 2"],
+              reference=dict(joint_angle=(t_ref, refs["link_reference"]), tendon_force=(t_ref, refs["pretension"])),
+              components=dict(joint_angle=["link angle"], tendon_force=["tendon 1", "tendon 2"],
                               applied_torque=["motor 1 applied", "motor 2 applied"]),
               overlay=dict(applied_torque=(result["motor_torque_command"], ["motor 1 commanded", "motor 2 commanded"])),
               limits=dict(applied_torque=torque_limit) if torque_limit else None)
@@ -67,8 +68,11 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     return fig
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
+def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScenario | None = None):
     """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
+
+    ``scenario`` (default: :class:`DemoScenario`, 1 s long in short mode) sets the
+    pretension ramp and the link step; ``awiwi-drake demo --config FILE.yaml`` reads it.
 
     The caller (``awiwi-drake demo``) writes the returned diagrams' graphs with
     :func:`awiwi_drake.export.export_diagram` (export sits above this layer).
@@ -81,14 +85,15 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rig = joint_rig(backend=backend)
-    scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
+    if scenario is None:
+        scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
     loop = joint_rig_position_loop(rig, scenario)
     t_ref, refs = demo_references(rig, scenario)
     diagram = loop.diagram
     ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final,
-                      log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
-                      monitors=rig_monitors(rig), max_step=1.0 / 3000)
+                      log=("joint_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
+                      monitors=rig_monitors(rig), max_step=1.0 / CONTROL_RATE_HZ)
     fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.torque_limit)
     fig.savefig(out / "demo_joint_rig.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
@@ -102,7 +107,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled"):
     ax.set_title("joint-rig poles versus pretension (Linearize)")
     fig.savefig(out / "poles_vs_pretension.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
-    q_end = float(result["link_angle"][-1, 0])
+    q_end = float(result["joint_angle"][-1, 0])
     f_end = result["tendon_force"][-1]
     lines = [
         f"demo: joint_rig ({backend} backend) simulated {scenario.t_final} s; outputs in {out}/",

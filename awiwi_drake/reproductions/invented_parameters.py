@@ -105,7 +105,7 @@ def _scaled_wrist(prop: str, scale: float) -> WristParams:
 def fig_6_10_length_scale(prop: str, scale: float) -> float:
     """Fig 6.10 abduction peak with one derived wrist length scaled, relative to the nominal peak
     (nan when the wrist cannot reach the motion with that length)."""
-    from awiwi_drake.hand.wrist import wrist_motion_study
+    from awiwi_drake.reproductions.ch06_wrist import wrist_motion_study
     base = wrist_motion_study(num_samples=61).abduction_peak
     try:
         return wrist_motion_study(num_samples=61, params=_scaled_wrist(prop, scale)).abduction_peak / base
@@ -165,7 +165,7 @@ def _ring_compliance(x: _Inputs) -> float:
 
 
 def _fig6_10(x: _Inputs) -> float:
-    from awiwi_drake.hand.wrist import wrist_motion_study
+    from awiwi_drake.reproductions.ch06_wrist import wrist_motion_study
     return float(wrist_motion_study(num_samples=61, params=x.wrist).abduction_peak)
 
 
@@ -180,7 +180,7 @@ def _thumb_stiffness(x: _Inputs) -> float:
 
 def _fig5_17(x: _Inputs) -> float:
     from awiwi_drake.hand.coupling import ThumbCoupling
-    from awiwi_drake.hand.estimation import thumb_estimation_study
+    from awiwi_drake.reproductions.ch05_fingers import thumb_estimation_study
     e = thumb_estimation_study(ThumbCoupling(x.thumb), iterations=(30,), noise=(0.0,), starts=("cold",))
     return float(np.max(e.errors[(30, 0.0, "cold")]))
 
@@ -304,5 +304,6 @@ def sensitivity_markdown(rows: list[SensitivityRow], *, threshold: float = 0.05)
             fmt = lambda v: "unreachable" if not np.isfinite(v) else f"{100 * v:+.1f} %"
             cells.append(f"{HEADLINES[r.headline][0]}: {fmt(r.minus)} / {fmt(r.plus)}{mark}")
         src = r0.source if len(r0.source) <= 160 else r0.source[:157] + "..."
+        src = src.replace("|", "\\|")
         lines.append(f"| `{name}` | {r0.value:.4g} {r0.unit} | {src} | " + "; ".join(cells) + " |")
     return "\n".join(lines)

@@ -1,0 +1,26 @@
+"""Controller comparison: standard closed-loop tests, metrics table, plots.
+
+* :mod:`.standard_tests` -- the tests (step, sine, disturbance, sweep), their defaults per rig kind
+  (:func:`compare_test_params`), :func:`run_standard_tests`, :func:`compare`, :func:`compare_controllers`.
+* :mod:`.metrics` -- step / sine / chirp metrics, :class:`Metrics`, :class:`MetricsTable` (CSV, Markdown).
+* :mod:`.runner` -- the closed-loop simulation behind the tests (:func:`simulate_test`, :func:`settle`).
+* :mod:`.channels` -- the independent DoF of a finger/hand loop (one metrics row per joint).
+* :mod:`.plots` -- :func:`plot_runs`, :func:`plot_joint_runs` (per finger), :func:`plot_gain_diagram`, :func:`plot_metric`.
+
+CLI: ``awiwi-drake compare``.
+"""
+
+from awiwi_drake.control.compare.metrics import (COLUMNS, NUMERIC, UNITS, Metrics, MetricsTable, fit_second_order_step,
+                                                 gain_diagram, sine_metrics, step_metrics, sweep_metrics)
+from awiwi_drake.control.compare.channels import JointChannels, joint_channels
+from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_metric, plot_runs
+from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
+from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compare, compare_controllers,
+                                                        compare_test_params, dominant_time_constant, flag_run,
+                                                        run_joint_test, run_standard_tests, run_test)
+
+__all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable", "Comparison", "COLUMNS", "NUMERIC",
+           "UNITS", "settle", "run_test", "flag_run", "run_standard_tests", "compare", "compare_controllers",
+           "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
+           "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric",
+           "dominant_time_constant", "run_joint_test", "joint_channels", "JointChannels"]

@@ -1,0 +1,88 @@
+"""Plots of a :class:`~awiwi_drake.control.compare.standard_tests.Comparison`: data in, ``(fig, ax)`` out."""
+
+from __future__ import annotations
+
+import math
+
+from awiwi_drake.control.compare.metrics import UNITS, MetricsTable
+from awiwi_drake.control.compare.standard_tests import Comparison
+
+__all__ = ["plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric"]
+
+
+def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: str | None = None):
+    """Output (solid) and reference (dashed) of every controller for one test."""
+    import matplotlib.pyplot as plt
+    runs = [r for r in comparison.runs if r.test == test]
+    if not runs:
+        raise ValueError(f"plot_runs: no runs for test {test!r}")
+    fig, ax = (plt.subplots(figsize=(7, 4)) if ax is None else (ax.figure, ax))
+    for r in runs:
+        ax.plot(r.t, r.output, label=r.controller)
+    ax.plot(runs[0].t, runs[0].reference, "k--", lw=1, label="reference")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel(ylabel or "tracked output [unit of the reference]")
+    ax.set_title(f"{comparison.rig}: {test} test (solid: output, dashed: reference)")
+    ax.legend()
+    ax.grid(True, alpha=0.3)
+    return fig, ax
+
+
+def plot_joint_runs(comparison: Comparison, test: str, finger: str):
+    """One finger of a finger/hand comparison: a panel per joint (DoF), output of every controller
+    (solid) and reference (dashed), relative to the operating point."""
+    import matplotlib.pyplot as plt
+    runs = [r for r in comparison.runs if r.test == test and "joints" in r.meta]
+    if not runs:
+        raise ValueError(f"plot_joint_runs: no finger/hand runs for test {test!r}")
+    cols = [j for j, f in enumerate(runs[0].meta["fingers"]) if f == finger]
+    if not cols:
+        raise ValueError(f"plot_joint_runs: no joints of finger {finger!r} "
+                         f"(fingers: {', '.join(dict.fromkeys(runs[0].meta['fingers']))})")
+    fig, axes = plt.subplots(len(cols), 1, figsize=(7, 1.9 * len(cols) + 0.8), sharex=True, squeeze=False)
+    for ax, j in zip(axes[:, 0], cols):
+        for r in runs:
+            ax.plot(r.t, r.output[:, j], label=r.controller)
+        ax.plot(runs[0].t, runs[0].reference[:, j], "k--", lw=1, label="reference")
+        ax.set_ylabel(f"{runs[0].meta['joints'][j]} [rad]")
+        ax.grid(True, alpha=0.3)
+    axes[0, 0].set_title(f"{comparison.rig}, {finger}: {test} (joint angle - operating point)")
+    axes[0, 0].legend(fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.tight_layout()
+    return fig, axes
+
+
+def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = None):
+    """Gain diagrams |Y/R|(f) of the sweep test (Fig 11.4 style) on a log frequency axis,
+    with each controller's -3 dB bandwidth marked (dotted, named in the legend)."""
+    import matplotlib.pyplot as plt
+    runs = [r for r in comparison.runs if r.test == "sweep"]
+    if not runs:
+        raise ValueError("plot_gain_diagram: no sweep runs")
+    fig, ax = (plt.subplots(figsize=(7, 4)) if ax is None else (ax.figure, ax))
+    for r in runs:
+        line, = ax.semilogx(r.meta["freq"], r.meta["gain"], label=r.controller)
+        try:
+            bw = comparison.table.get(r.controller, "sweep").bandwidth_hz
+        except KeyError:
+            bw = math.nan
+        if math.isfinite(bw):
+            ax.axvline(bw, color=line.get_color(), ls=":", lw=1.2, label=f"{r.controller}: -3 dB at {bw:.3g} Hz")
+    ax.set_xlabel("frequency [Hz] (log)")
+    ax.set_ylabel(f"gain |Y/R| [{unit}/{unit}]" if unit else "gain |Y/R| [-]")
+    ax.set_title(f"{comparison.rig}: closed-loop gain from the chirp test")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    return fig, ax
+
+
+def plot_metric(table: MetricsTable, metric: str, test: str, *, ax=None):
+    """Bar chart of one metric over controllers."""
+    import matplotlib.pyplot as plt
+    col = table.column(metric, test)
+    fig, ax = (plt.subplots(figsize=(6, 3.5)) if ax is None else (ax.figure, ax))
+    ax.bar(list(col), [v if math.isfinite(v) else 0.0 for v in col.values()])
+    ax.set_ylabel(f"{metric} [{UNITS[metric]}]")
+    ax.set_title(test)
+    return fig, ax

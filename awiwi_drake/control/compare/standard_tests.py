@@ -1,0 +1,382 @@
+"""The standard closed-loop tests, their default parameters, and the comparison of controllers.
+
+:func:`run_standard_tests` runs, on one :class:`~awiwi_drake.control.base.ClosedLoop`,
+
+* ``step``: reference step ``r0 -> r0 + step`` (rise time 10-90 %, overshoot,
+  settling time in ``settling_band`` (2 %; 5 % on the noisy tendon rig), steady-state
+  error, damping ratio of a fitted 2nd-order model);
+* ``sine``: sinusoidal tracking (RMS error, gain and phase at the frequency);
+* ``disturbance``: an ``external_torque`` step at constant reference
+  (achieved stiffness ``dtau / dq``; link rigs only);
+* ``sweep``: a linear chirp of the reference, gain diagram ``|Y/R|(f)``
+  (as in Fig 11.4);
+
+and :func:`compare` does so for several controllers and returns a
+:class:`Comparison` (runs + :class:`~awiwi_drake.control.compare.metrics.MetricsTable`).
+Each test starts from the closed loop settled at the initial reference.
+"""
+
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from awiwi_drake.analysis import Chirp, Constant, PerEntry, SimulationDivergedError, Sine, Step, simulate
+from awiwi_drake.control.base import ClosedLoop, closed_loop
+from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, sine_metrics, step_metrics,
+                                                 sweep_metrics)
+from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
+from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
+from awiwi_drake.control.registry import get_entry, rig_kind
+from awiwi_drake.parameters.control import CompareTestParams
+from awiwi_drake.rigs.base import Rig
+
+__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "run_standard_tests",
+           "compare", "dominant_time_constant",
+           "compare_controllers"]
+
+TESTS = ("step", "sine", "disturbance", "sweep")
+
+
+def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
+    """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
+    kind = rig_kind(rig)
+    if kind == "tendon-rig":
+        base = CompareTestParams(initial_reference=10.0, step_size=5.0, step_duration=0.25, sine_amplitude=2.0,
+                                 sine_frequency=5.0, sweep_amplitude=1.0, sweep_start=1.0, sweep_stop=60.0,
+                                 sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
+    elif kind in ("finger", "hand"):
+        # per DoF, relative to the operating point [rad]; chosen: a 0.2 rad (11 deg) step (Fig 15.24 steps the
+        # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the 0.5 Nm/rad impedance of Fig 15.22), 0.3 s covers the
+        # cascade's settling (joint loop at 60 rad/s); no sweep by default (Fig 15.26 is the joint rig's)
+        base = CompareTestParams(step_size=0.2, step_duration=0.3, sine_amplitude=0.1, sine_frequency=2.0,
+                                 sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01)
+    else:
+        base = CompareTestParams()
+    return base.replace(**overrides) if overrides else base
+
+
+@dataclass
+class Comparison:
+    """Result of :func:`compare`: all runs and the metrics table."""
+
+    runs: list[TestRun]
+    table: MetricsTable
+    rig: str = ""
+
+    def run(self, controller: str, test: str) -> TestRun:
+        for r in self.runs:
+            if r.controller == controller and r.test == test:
+                return r
+        raise KeyError(f"no run for controller {controller!r} and test {test!r}")
+
+
+def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = None, *,
+                           min_share: float = 0.01) -> float | None:
+    """``1 / sigma`` [s] of the slowest closed-loop pole that matters for tracking, or None.
+
+    The loop (continuous: ``rate_hz=None``) is linearised with Drake's ``Linearize``
+    from its first reference to its tracked output at the settled start; each
+    pole's share of the DC gain is ``|c_i b_i / lambda_i|`` in modal coordinates,
+    and poles with less than ``min_share`` of the total (e.g. a co-contraction
+    mode that the link angle does not see) are ignored.  Sampled loops or loops
+    with discrete controller state (which ``Linearize`` cannot take in a mixed
+    diagram) return None, as do unstable ones.
+    """
+    from awiwi_drake.analysis import linearize
+
+    p = params or compare_test_params(loop.rig)
+    ctx = settle(loop, p.initial_reference, t_settle=0.0, max_step=p.max_step)
+    if not ctx.has_only_continuous_state():
+        return None
+    try:
+        lin = linearize(loop.diagram, context=ctx, input=loop.references[0], outputs=(loop.tracked_outputs[0],),
+                        equilibrium_tolerance=None)
+    except ValueError:
+        return None
+    lam, V = np.linalg.eig(lin.A)
+    try:
+        W = np.linalg.inv(V)
+    except np.linalg.LinAlgError:
+        return None
+    share = np.abs((lin.C @ V).ravel() * (W @ lin.B).ravel() / np.where(np.abs(lam) > 1e-12, lam, 1e-12))
+    if not np.all(np.isfinite(share)) or share.sum() == 0 or np.any(lam.real >= 0):
+        return None
+    keep = share / share.sum() > min_share
+    return float(1.0 / np.min(-lam.real[keep]))
+
+
+def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
+    return 1.0 / loop.rate_hz if loop.rate_hz else params.sample_period
+
+
+def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
+             params: CompareTestParams | None = None, settled=None) -> tuple[TestRun, Metrics]:
+    """Run one standard test (``step``, ``sine``, ``disturbance``, ``sweep``) on a closed loop."""
+    if test not in TESTS:
+        raise ValueError(f"unknown test {test!r}; known: {', '.join(TESTS)}")
+    if not loop.references:
+        raise ValueError(f"controller {controller!r} has no *_reference input: cannot run {test!r}")
+    p = params or compare_test_params(loop.rig)
+    if test == "disturbance" and "external_torque" not in loop.disturbances:
+        raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
+                         f"{getattr(loop.rig, 'name', '?')!r} has none")
+    dt = _sample_dt(loop, p)
+    r0 = p.initial_reference
+    ctx = (settled.Clone() if settled is not None else settle(loop, r0, t_settle=p.settle_time, max_step=p.max_step))
+    ctx.SetTime(0.0)
+    meta: dict[str, Any] = {}
+    dist = None
+    if test == "step":
+        ref = Step(p.step_delay, r0 + p.step_size, before=r0)
+        t_final = p.step_duration
+    elif test == "sine":
+        ref = Sine(p.sine_amplitude, p.sine_frequency, offset=r0)
+        t_final = p.sine_periods / p.sine_frequency
+    elif test == "disturbance":
+        ref = Constant(r0)
+        dist = Step(p.step_delay, p.disturbance_torque)
+        t_final = p.step_duration
+    else:
+        f0, f1, T = p.sweep_start, p.sweep_stop, p.sweep_duration
+        ref = Chirp(p.sweep_amplitude, f0, f1, T, offset=r0)
+        t_final = T
+        meta.update(f_low=f0, f_high=f1)
+    run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
+    m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
+    u = np.abs(run.command)
+    m.peak_command = float(np.max(u))
+    m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
+    limit = loop.saturation
+    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
+        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
+    if limit is not None:
+        m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
+    if "tendon_force" in run.meta:
+        m.slack_fraction = float(np.mean(np.any(run.meta["tendon_force"] <= 0.0, axis=1)))
+    if test == "step":
+        for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay,
+                                 band=p.settling_band, fit=True).items():
+            setattr(m, k_, v)
+    elif test == "sine":
+        skip = run.t >= 1.0 / p.sine_frequency  # drop the first period (transient)
+        for k_, v in sine_metrics(run.t[skip], run.reference[skip], run.output[skip], p.sine_frequency).items():
+            setattr(m, k_, v)
+    elif test == "disturbance":
+        pre = run.t < p.step_delay
+        tail = run.t >= run.t[-1] - 0.1 * run.t[-1]
+        dq = float(np.mean(run.output[tail]) - np.mean(run.output[pre]))
+        m.stiffness = p.disturbance_torque / dq if dq != 0 else math.inf
+        m.steady_state_error = float(r0 - np.mean(run.output[tail]))
+    else:
+        f, g = gain_diagram(run.t, run.reference, run.output, p.sweep_start, p.sweep_stop)
+        run.meta.update(freq=f, gain=g)
+        for k_, v in sweep_metrics(f, g).items():
+            setattr(m, k_, v)
+    flag_run(m, p)
+    return run, m
+
+
+def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
+                   params: CompareTestParams | None = None, settled=None) -> tuple[TestRun, list[Metrics]]:
+    """One standard test on a finger/hand loop: every DoF at once, one :class:`Metrics` row per DoF.
+
+    ``step``/``sine``/``sweep``: the same reference change on every DoF (relative to the operating
+    point) in one simulation: the rows include the interaction of a finger's joints moving together.
+    ``disturbance``: ``disturbance_torque`` on the k-th joint of every finger at once (one
+    simulation per k; the other joints of the finger are held by the controller only), stiffness
+    ``dtau / dq`` of the loaded joint.  Peak input and saturation are per finger (its motors).
+    """
+    if test not in TESTS:
+        raise ValueError(f"unknown test {test!r}; known: {', '.join(TESTS)}")
+    ch = joint_channels(loop)
+    if ch is None:
+        raise ValueError("run_joint_test: the loop does not track the joint angles of a finger/hand")
+    p = params or compare_test_params(loop.rig)
+    dt = _sample_dt(loop, p)
+    k = len(ch.names)
+    r0 = p.initial_reference
+    ref_port = loop.references[0]
+    base = settled if settled is not None else settle(loop, r0, t_settle=p.settle_time, max_step=p.max_step)
+    groups = ch.disturbance_groups() if test == "disturbance" else [list(range(k))]
+    n_ext = loop.diagram.GetInputPort("external_torque").size() if "external_torque" in loop.disturbances else 0
+    if test == "disturbance" and not n_ext:
+        raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
+                         f"{getattr(loop.rig, 'name', '?')!r} has none")
+    applied = applied_port(loop)
+    out_y = np.full((0, k), np.nan)
+    rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
+    meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
+    runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
+    for group in groups:
+        ctx = base.Clone()
+        ctx.SetTime(0.0)
+        if test == "step":
+            sched, t_final = Step(p.step_delay, r0 + p.step_size, before=r0), p.step_duration
+        elif test == "sine":
+            sched, t_final = Sine(p.sine_amplitude, p.sine_frequency, offset=r0), p.sine_periods / p.sine_frequency
+        elif test == "disturbance":
+            sched, t_final = Constant(r0), p.step_duration
+        else:
+            sched, t_final = Chirp(p.sweep_amplitude, p.sweep_start, p.sweep_stop, p.sweep_duration, offset=r0), \
+                p.sweep_duration
+            meta.update(f_low=p.sweep_start, f_high=p.sweep_stop)
+        inputs = {ref_port: joint_inputs(ch, [sched] * k)}
+        if n_ext:
+            ext = [Constant(0.0)] * n_ext
+            if test == "disturbance":
+                for j in group:
+                    ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, p.disturbance_torque)
+            inputs["external_torque"] = PerEntry(ext)
+        log = ["joint_angle", ref_port, "motor_torque_command", "state"]
+        if applied != "motor_torque_command":
+            log.append(applied)
+        if loop.diagram.HasOutputPort("tendon_force"):
+            log.append("tendon_force")
+        res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                       max_step=p.max_step, accuracy=1e-6)
+        t = res.t - res.t[0]
+        Sp = np.linalg.pinv(ch.S)
+        y = res["joint_angle"] @ Sp.T - ch.q0
+        r = res[ref_port] @ Sp.T - ch.q0
+        if runs_t is None:
+            runs_t, runs_r, runs_u, runs_a, runs_x = t, r, res["motor_torque_command"], res[applied], res["state"]
+            runs_y = y.copy()
+            runs_w = np.zeros((len(t), k))
+        for j in group:
+            runs_y[:, j] = y[:, j]
+            row = rows[j]
+            sl = ch.tendons[j]
+            u = np.abs(res["motor_torque_command"][:, sl])
+            row.peak_command = float(np.max(u))
+            row.peak_input = float(np.max(np.abs(res[applied][:, sl])))
+            limit = torque_limit(loop, res["motor_torque_command"].shape[1])
+            if limit is not None:
+                row.saturated_fraction = float(np.mean(np.any(u > limit[None, sl] * (1 + 1e-9), axis=1)))
+            if "tendon_force" in res:
+                row.slack_fraction = float(np.mean(np.any(res["tendon_force"][:, sl] <= 0.0, axis=1)))
+            if test == "step":
+                for k_, v in step_metrics(t, y[:, j], r0, r0 + p.step_size, p.step_delay, band=p.settling_band,
+                                          fit=True).items():
+                    setattr(row, k_, v)
+            elif test == "sine":
+                skip = t >= 1.0 / p.sine_frequency
+                for k_, v in sine_metrics(t[skip], r[skip, j], y[skip, j], p.sine_frequency).items():
+                    setattr(row, k_, v)
+            elif test == "disturbance":
+                pre = t < p.step_delay
+                tail = t >= t[-1] - 0.1 * t[-1]
+                dq = float(np.mean(y[tail, j]) - np.mean(y[pre, j]))
+                row.stiffness = p.disturbance_torque / dq if dq != 0 else math.inf
+                row.steady_state_error = float(r0 - np.mean(y[tail, j]))
+                runs_w[:, j] = np.where(t >= p.step_delay, p.disturbance_torque, 0.0)
+            else:
+                f, g = gain_diagram(t, r[:, j], y[:, j], p.sweep_start, p.sweep_stop)
+                meta.setdefault("freq", f)
+                meta.setdefault("gain_by_joint", {})[ch.names[j]] = g
+                for k_, v in sweep_metrics(f, g).items():
+                    setattr(row, k_, v)
+            flag_run(row, p)
+    meta["applied_torque"] = runs_a
+    return TestRun(controller, test, runs_t, runs_r, runs_y, runs_u, runs_w, runs_x, meta), rows
+
+
+def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
+    """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
+
+    Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``slack`` (slack
+    fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band),
+    ``negative stiffness`` (disturbance test: the link moves *with* the load).
+    """
+    flags = []
+    if m.saturated_fraction > params.max_saturated_fraction:
+        flags.append(f"saturated {100 * m.saturated_fraction:.0f} %")
+    if m.slack_fraction > params.max_slack_fraction:
+        flags.append(f"slack {100 * m.slack_fraction:.0f} %")
+    if m.test == "step" and not math.isfinite(m.settling_time):
+        flags.append("not settled")
+    if m.test == "disturbance" and m.stiffness < 0:
+        flags.append("negative stiffness")
+    m.flags = "; ".join(flags)
+    if flags and m.status == "ok":
+        m.status = "flagged"
+    return m
+
+
+def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
+                       params: CompareTestParams | None = None,
+                       progress: Callable[[str], Any] | None = None) -> tuple[list[TestRun], list[Metrics]]:
+    """All applicable standard tests on one closed loop (``disturbance`` only with ``external_torque``).
+
+    ``progress(label)`` is called after each test (e.g. to advance a progress bar).
+    """
+    p = params or compare_test_params(loop.rig)
+    channels = joint_channels(loop)
+    if tests is None:
+        tests = [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
+                 and (t != "sweep" or channels is None)]  # fingers/hand: step, sine, external-torque step
+    settled = settle(loop, p.initial_reference, t_settle=p.settle_time, max_step=p.max_step)
+    runs, rows = [], []
+    for test in tests:
+        try:
+            if channels is None:
+                run, m = run_test(loop, test, controller=controller, params=p, settled=settled)
+                ms = [m]
+            else:
+                run, ms = run_joint_test(loop, test, controller=controller, params=p, settled=settled)
+        except SimulationDivergedError as exc:
+            names = channels.names if channels is not None else ["tendon" if loop.tracked_outputs[0] ==
+                                                                  "tendon_force" else "link"]
+            rows += [Metrics(controller, test, joint=nm, status=f"diverged: {exc}") for nm in names]
+            if progress is not None:
+                progress(f"{controller}/{test}")
+            continue
+        runs.append(run)
+        rows += ms
+        if progress is not None:
+            progress(f"{controller}/{test}")
+    return runs, rows
+
+
+def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = None,
+            params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None) -> Comparison:
+    """Run the standard tests on every closed loop ``{name: loop}`` (``progress(label)`` after each test)."""
+    if not loops:
+        raise ValueError("compare: give at least one closed loop")
+    runs, rows = [], []
+    rig = ""
+    for name, loop in loops.items():
+        r, m = run_standard_tests(loop, controller=name, tests=tests, params=params, progress=progress)
+        runs += r
+        rows += m
+        rig = getattr(loop.rig, "name", rig)
+    return Comparison(runs, MetricsTable(rows), rig)
+
+
+def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
+                        params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None,
+                        **loop_options: Any) -> Comparison:
+    """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
+
+    ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
+    registry's defaults for :func:`awiwi_drake.control.base.closed_loop`.  Names are
+    validated (unknown / not fitting the rig: ValueError) before any simulation.
+    """
+    names = list(names)
+    if not names:
+        raise ValueError("compare_controllers: give at least one controller name")
+    probe = make_rig()
+    entries = [get_entry(n, probe) for n in names]
+    loops = {}
+    for n, entry in zip(names, entries):
+        rig = make_rig()
+        opts = {**entry.loop_options, **loop_options}
+        loops[n] = closed_loop(rig, entry.factory(rig), **opts)
+    return compare(loops, tests=tests, params=params or compare_test_params(probe), progress=progress)
+
+
+# plotting (data in, (fig, ax) out)
