@@ -23,7 +23,7 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 * ``finger_index_3khz``: the index finger under the joint-space motor PD.
 * ``hand_3khz``: the whole hand (19 DoF, 38 tendons, wrist input at 0) under the
   joint PD, with the thesis's physics on (motor friction and ripple, guide friction,
-  spring hysteresis) and, beside it, off.
+  spring hysteresis), with ripple and guide friction only, and with both off.
 * ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
   (one vectorised discrete system at 3 kHz), rig-seconds per CPU-second.
 * ``mujoco_callback`` / ``mujoco_linear``: the same antagonistic joint (two motor
@@ -104,7 +104,7 @@ def case_joint_rig_3khz(seconds, repeats):
     def run_simulate():
         rig, _, d, ctx = _joint_loop(seconds)
         t0 = _clock()
-        res = simulate(d, ctx, seconds, log=("link_angle",), monitors=rig_monitors(rig))
+        res = simulate(d, ctx, seconds, log=("joint_angle",), monitors=rig_monitors(rig))
         return _rtf(seconds, t0) + (res,)
     s_cpu, s_wall, res = _best(run_simulate, repeats)
     # tight reference: error-controlled RK3 at accuracy 1e-9, sampled at the same times
@@ -114,14 +114,14 @@ def case_joint_rig_3khz(seconds, repeats):
     sim.get_mutable_integrator().set_target_accuracy(1e-9)
     sim.Initialize()
     q_ref = []
-    port = d.GetOutputPort("link_angle")
+    port = d.GetOutputPort("joint_angle")
     for t in res.t:
         sim.AdvanceTo(float(t))
         q_ref.append(port.Eval(sim.get_context())[0])
-    err = float(np.max(np.abs(res["link_angle"][:, 0] - np.asarray(q_ref))))
+    err = float(np.max(np.abs(res["joint_angle"][:, 0] - np.asarray(q_ref))))
     return dict(joint_rig_3khz_rtf=cpu, joint_rig_3khz_wall_rtf=wall, joint_rig_3khz_simulate_rtf=s_cpu,
                 joint_rig_3khz_simulate_wall_rtf=s_wall, joint_rig_3khz_max_error_rad=err,
-                joint_rig_3khz_final_link_angle=float(x_fixed[0]))
+                joint_rig_3khz_final_joint_angle=float(x_fixed[0]))
 
 
 def case_scipy_reference(seconds, repeats):
@@ -161,7 +161,7 @@ def case_scipy_reference(seconds, repeats):
                       + gains.kp * (th_ref - x[2:4]) - gains.kd * x[4:6])
         return _rtf(seconds, t0) + (x,)
     cpu, wall, x = _best(run, max(1, repeats - 1))
-    return dict(scipy_reference_rtf=cpu, scipy_reference_wall_rtf=wall, scipy_final_link_angle=float(x[0]))
+    return dict(scipy_reference_rtf=cpu, scipy_reference_wall_rtf=wall, scipy_final_joint_angle=float(x[0]))
 
 
 def _hand_like(target, seconds, repeats, params=None):
@@ -192,6 +192,12 @@ def case_hand_3khz(seconds, repeats):
     out = {}
     cpu, wall, _ = _hand_like("hand", seconds, repeats)
     out.update(hand_3khz_physics_off_rtf=cpu, hand_3khz_physics_off_wall_rtf=wall)
+    part = HandRigParams().with_physics(ripple=True, guide_friction=True)
+    try:
+        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=part)
+        out.update(hand_3khz_ripple_guide_friction_rtf=cpu, hand_3khz_ripple_guide_friction_wall_rtf=wall)
+    except (FloatingPointError, RuntimeError) as exc:
+        out.update(hand_3khz_ripple_guide_friction_rtf=None, hand_3khz_ripple_guide_friction_note=str(exc))
     on = HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)
     try:
         cpu, wall, _ = _hand_like("hand", seconds, repeats, params=on)
@@ -343,14 +349,14 @@ def case_mujoco_callback(seconds, repeats):
     res = _mujoco_case(seconds, repeats, linear=False)
     if res is None:
         return dict(mujoco_callback_rtf=None, mujoco_note="mujoco not installed (pip install .[bench])")
-    return dict(mujoco_callback_rtf=res[0], mujoco_callback_wall_rtf=res[1], mujoco_callback_final_link_angle=res[2])
+    return dict(mujoco_callback_rtf=res[0], mujoco_callback_wall_rtf=res[1], mujoco_callback_final_joint_angle=res[2])
 
 
 def case_mujoco_linear(seconds, repeats):
     res = _mujoco_case(seconds, repeats, linear=True)
     if res is None:
         return dict(mujoco_linear_rtf=None)
-    return dict(mujoco_linear_rtf=res[0], mujoco_linear_wall_rtf=res[1], mujoco_linear_final_link_angle=res[2])
+    return dict(mujoco_linear_rtf=res[0], mujoco_linear_wall_rtf=res[1], mujoco_linear_final_joint_angle=res[2])
 
 
 # --- driver ------------------------------------------------------------------------------------------

@@ -4,7 +4,7 @@ Run: ``python benchmarks/bench_simulate.py [--seconds 1.2] [--repeats 3] [--json
 
 The demo loop (joint rig, pretension ramp then a 0.3 rad link step under the 3 kHz
 motor-position PD; ``awiwi-drake demo``) is run through
-:func:`awiwi_drake.analysis.simulate` four ways, each logging ``link_angle`` and
+:func:`awiwi_drake.analysis.simulate` four ways, each logging ``joint_angle`` and
 ``tendon_force`` at every step:
 
 * ``mode="auto"`` -- fixed-step RK3 at the control period 1/3000 s (the default for a sampled loop);
@@ -13,7 +13,7 @@ motor-position PD; ``awiwi-drake demo``) is run through
   or something happens (the step saturates the motors briefly);
 * a tight reference: error-controlled RK3 at accuracy 1e-10, max step 2e-5 s.
 
-Accuracy is the largest ``|link_angle - reference|`` [rad] over the whole run (ramp and step
+Accuracy is the largest ``|joint_angle - reference|`` [rad] over the whole run (ramp and step
 transient), the reference interpolated at the run's log times. JSON keys (all floats):
 ``simulate_fixed_step_rtf``, ``simulate_error_controlled_rtf``, ``simulate_fixed_step_max_error_rad``,
 ``simulate_error_controlled_max_error_rad``, ``simulate_monitored_rtf``, ``simulate_monitor_overhead``
@@ -41,7 +41,7 @@ def _run(seconds: float, **kw):
     loop = joint_rig_position_loop(rig, scen)
     ctx = loop.create_context(rig.operating_point(pretension=scen.f_start))
     monitors = rig_monitors(rig) if kw.pop("monitored", False) else ()
-    return simulate(loop.diagram, ctx, seconds, log=("link_angle", "tendon_force"), monitors=monitors, **kw)
+    return simulate(loop.diagram, ctx, seconds, log=("joint_angle", "tendon_force"), monitors=monitors, **kw)
 
 
 def main(argv=None) -> dict:
@@ -58,7 +58,7 @@ def main(argv=None) -> dict:
         runs = [_run(T, **kw) for _ in range(args.repeats)]
         wall = statistics.median(r.info["wall_time"] for r in runs)
         res = runs[-1]
-        err = float(np.max(np.abs(res["link_angle"][:, 0] - np.interp(res.t, ref.t, ref["link_angle"][:, 0]))))
+        err = float(np.max(np.abs(res["joint_angle"][:, 0] - np.interp(res.t, ref.t, ref["joint_angle"][:, 0]))))
         return T / wall, err, res, wall
 
     fixed_rtf, fixed_err, fixed, fixed_wall = timed()

@@ -56,7 +56,7 @@ def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible-joint"):
     builder.ExportInput(mux.get_input_port(0), "motor_torque")
     builder.ExportInput(mux.get_input_port(1), "external_torque")
     builder.ExportOutput(sys.get_output_port(), "state")
-    for i, nm in enumerate(["link_angle", "link_velocity", "motor_angle", "motor_velocity"]):
+    for i, nm in enumerate(["joint_angle", "joint_velocity", "motor_angle", "motor_velocity"]):
         g = builder.AddNamedSystem(nm, MatrixGain(np.eye(4)[i:i + 1]))
         builder.Connect(sys.get_output_port(), g.get_input_port())
         builder.ExportOutput(g.get_output_port(), nm)

@@ -38,7 +38,7 @@ def test_controllers_convert_and_autodiff_matches_finite_differences(case):
         sys = impedance_controller(rig, external_torque="none")
         x = rng.normal(0, 0.05, 4)
     assert sys.ToAutoDiffXd() is not None
-    J_ad, J_fd = system_jacobians(sys, [], {"state": x, "link_angle_reference": [0.3]}, wrt=["state"],
+    J_ad, J_fd = system_jacobians(sys, [], {"state": x, "joint_angle_reference": [0.3]}, wrt=["state"],
                                   outputs=["motor_torque"])["motor_torque"]
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(J_ad)))
 
@@ -59,7 +59,7 @@ def test_scalar_example_systems_convert():
 def _closed_loop_vdot(rig, controller, x, ref, rel=1e-7):
     """dV/dt along the closed loop at state x: central difference of V along Drake's derivatives."""
     loop = closed_loop(rig, controller, rate_hz=None)
-    ctx = loop.create_context(state=x, references={"link_angle_reference": ref})
+    ctx = loop.create_context(state=x, references={"joint_angle_reference": ref})
     d = loop.diagram
     ctrl = d.GetSubsystemByName("controller")
     if ctrl.num_continuous_states():       # observer: start without a disturbance estimate (w_hat = qd)
@@ -102,8 +102,8 @@ def test_position_closed_loop_poles_are_the_designed_ones():
     rig = table_15_1_rig()
     loop = closed_loop(rig, position_controller(rig, g), rate_hz=None)
     ctx = loop.create_context(state=np.zeros(4))
-    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("link_angle_reference").get_index(),
-                    output_port_index=loop.diagram.GetOutputPort("link_angle").get_index())
+    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index())
     Az = np.array([[-g.k1, 1, 0, 0], [-1, -g.k2, 1, 0], [0, -1, -g.k3, 1], [0, 0, -1, -g.k4]])
     got = np.sort_complex(np.linalg.eigvals(lin.A()))
     want = np.sort_complex(np.linalg.eigvals(Az))

@@ -19,18 +19,18 @@ from awiwi_drake.parameters.control import ForceSensorParams
 
 
 class _PassThrough(StaticLaw):
-    """u = link_angle_reference (open loop), to observe the command path."""
+    """u = joint_angle_reference (open loop), to observe the command path."""
     name = "pass"
-    inputs = {"link_angle_reference": 1, "state": 4}
+    inputs = {"joint_angle_reference": 1, "state": 4}
     output_size = 1
 
     def __call__(self, u):
-        return np.array([u["link_angle_reference"][0] + 0.0 * u["state"][0]])
+        return np.array([u["joint_angle_reference"][0] + 0.0 * u["state"][0]])
 
 
 class _Pd(StaticLaw):
     name = "pd_test"
-    inputs = {"link_angle_reference": 1, "state": 4}
+    inputs = {"joint_angle_reference": 1, "state": 4}
     output_size = 1
 
     def __init__(self, kp=0.5, kd=0.01):
@@ -38,24 +38,24 @@ class _Pd(StaticLaw):
 
     def __call__(self, u):
         x = u["state"]
-        return np.array([self.kp * (u["link_angle_reference"][0] - x[0]) - self.kd * x[3]])
+        return np.array([self.kp * (u["joint_angle_reference"][0] - x[0]) - self.kd * x[3]])
 
 
 def test_closed_loop_ports_and_round_trip_delay():
     loop = closed_loop(linear_flexible_joint_rig(), StaticLawController(_PassThrough()), rate_hz=3000.0,
                        delay=333e-6)
-    assert loop.references == ("link_angle_reference",)
+    assert loop.references == ("joint_angle_reference",)
     assert loop.disturbances == ("external_torque",)
     assert loop.delay_steps == 1 and loop.delay == pytest.approx(1 / 3000.0)
-    ctx = loop.create_context(motor_torque=0.25, references={"link_angle_reference": 0.25})
+    ctx = loop.create_context(motor_torque=0.25, references={"joint_angle_reference": 0.25})
     # the buffers start at the operating-point torque: no kick at t = 0
     assert loop.diagram.GetOutputPort("motor_torque").Eval(ctx)[0] == pytest.approx(0.25)
     dt = 1 / 3000.0
     first = {}
     for delay in (None, 333e-6):
         lp = closed_loop(linear_flexible_joint_rig(), StaticLawController(_PassThrough()), rate_hz=3000.0, delay=delay)
-        log = simulate(lp, lp.create_context(motor_torque=0.25, references={"link_angle_reference": 0.25}), 20 * dt,
-                       inputs={"link_angle_reference": Step(5 * dt, 1.0, before=0.25)},
+        log = simulate(lp, lp.create_context(motor_torque=0.25, references={"joint_angle_reference": 0.25}), 20 * dt,
+                       inputs={"joint_angle_reference": Step(5 * dt, 1.0, before=0.25)},
                        log=("motor_torque", "motor_torque_command"), log_period=dt)
         cmd, applied = log["motor_torque_command"][:, 0], log["motor_torque"][:, 0]
         # the command (feedthrough of the reference) jumps at the step sample; the hold applies it on
@@ -68,13 +68,13 @@ def test_closed_loop_ports_and_round_trip_delay():
 
 def test_closed_loop_rejects_bad_wiring():
     class BadMeas(_PassThrough):
-        inputs = {"link_angle_reference": 1, "joint_torque": 1}
+        inputs = {"joint_angle_reference": 1, "joint_torque": 1}
 
     class BadRef(_PassThrough):
         inputs = {"spring_force_reference": 1, "state": 4}
 
     class BadSize(_PassThrough):
-        inputs = {"link_angle_reference": 1, "state": 3}
+        inputs = {"joint_angle_reference": 1, "state": 3}
 
     rig = linear_flexible_joint_rig
     with pytest.raises(ValueError, match="'joint_torque'"):
@@ -101,7 +101,7 @@ def test_gain_validation_names_the_gain(bad):
 
 def test_static_law_controller_autodiff_matches_fd():
     sys = StaticLawController(_Pd(0.7, 0.02))
-    J_ad, J_fd = autodiff_vs_fd(sys, {"link_angle_reference": [0.1], "state": [0.05, 0.2, 0.04, -0.3]})
+    J_ad, J_fd = autodiff_vs_fd(sys, {"joint_angle_reference": [0.1], "state": [0.05, 0.2, 0.04, -0.3]})
     np.testing.assert_allclose(J_ad, J_fd, atol=1e-8)
     np.testing.assert_allclose(J_ad, [[0.7, -0.7, 0, 0, -0.02]], atol=1e-12)
 

@@ -80,9 +80,9 @@ def test_cascaded_law_linearises_the_force_loop_11_16():
             rig = make(backend="python")
             loop = closed_loop(rig, impedance_controller(rig, ip, mode="cascaded"), rate_hz=None)
             d = loop.diagram
-            ctx = loop.create_context(state=rig.operating_point().state, references={"link_angle_reference": 0.0})
-            A = np.asarray(Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
-                                     output_port_index=d.GetOutputPort("link_angle").get_index()).A())
+            ctx = loop.create_context(state=rig.operating_point().state, references={"joint_angle_reference": 0.0})
+            A = np.asarray(Linearize(d, ctx, input_port_index=d.GetInputPort("joint_angle_reference").get_index(),
+                                     output_port_index=d.GetOutputPort("joint_angle").get_index()).A())
             w, xi = ip.force_bandwidth, ip.force_damping_ratio
             force_pair = [complex(-xi * w, s * w * np.sqrt(1 - xi ** 2)) for s in (1, -1)]
             p = rig.params
@@ -99,12 +99,12 @@ def test_impedance_laws_convert_to_autodiff_and_reject_bad_gains():
     rig = joint_rig()
     for mode in ("two-time-scale", "cascaded"):
         ctrl = impedance_controller(rig, mode=mode)
-        inputs = {"link_angle_reference": [0.1], "link_angle": [0.05], "link_velocity": [0.2],
+        inputs = {"joint_angle_reference": [0.1], "joint_angle": [0.05], "joint_velocity": [0.2],
                   "motor_velocity": [0.1, -0.1], "tendon_force": [22.0, 18.0], "tendon_stiffness": [9000.0, 8000.0]}
         J_ad, J_fd = autodiff_vs_fd(ctrl, inputs)
         np.testing.assert_allclose(J_ad, J_fd, rtol=1e-5, atol=1e-7)
     ctrl = impedance_controller(rig, mode="pd")
-    J_ad, J_fd = autodiff_vs_fd(ctrl, {"link_angle_reference": [0.1], "state": rig.operating_point().state + 0.01})
+    J_ad, J_fd = autodiff_vs_fd(ctrl, {"joint_angle_reference": [0.1], "state": rig.operating_point().state + 0.01})
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6, atol=1e-7)
     with pytest.raises(ValueError, match="joint_stiffness"):
         ImpedanceParams(joint_stiffness=0.0)

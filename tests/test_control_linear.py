@@ -24,11 +24,11 @@ from awiwi_drake.rigs import flexible_joint_rig
 P12 = FlexibleJointParams()  # Table 12.1
 
 
-def _closed_loop_A(loop, ref="link_angle_reference"):
+def _closed_loop_A(loop, ref="joint_angle_reference"):
     d = loop.diagram
     ctx = loop.create_context(references={ref: 0.0})
     lin = Linearize(d, ctx, input_port_index=d.GetInputPort(ref).get_index(),
-                    output_port_index=d.GetOutputPort("link_angle").get_index())
+                    output_port_index=d.GetOutputPort("joint_angle").get_index())
     return np.array(lin.A())
 
 
@@ -165,7 +165,7 @@ def test_lqr_cost_matches_riccati_and_grows_with_R():
         d = design_lqr(rig, r=r)
         loop = closed_loop(rig, lqr_controller(rig, r=r), rate_hz=None)
         dx0 = np.array([0.1, 0.0, 0.0, 0.0])  # link displaced by 0.1 rad, reference 0
-        ctx = loop.create_context(state=dx0, references={"link_angle_reference": 0.0})
+        ctx = loop.create_context(state=dx0, references={"joint_angle_reference": 0.0})
         res = simulate(loop.diagram, ctx, 0.6, log=("state", "motor_torque"), max_step=2e-4, accuracy=1e-8)
         costs.append(quadratic_cost(res.t, res.signals["state"], res.signals["motor_torque"], d.Q, d.R))
         predicted.append(float(dx0 @ d.S @ dx0))
@@ -227,12 +227,12 @@ def test_rig_jacobian_matches_framework_linearisation():
 def test_state_feedback_controllers_convert_to_autodiff():
     rig = flexible_joint_rig()
     for ctrl in (pole_placement_controller(rig), lqr_controller(rig)):
-        J_ad, J_fd = autodiff_vs_fd(ctrl, {"link_angle_reference": [0.1], "state": [0.02, 0.1, 0.03, -0.2]})
+        J_ad, J_fd = autodiff_vs_fd(ctrl, {"joint_angle_reference": [0.1], "state": [0.02, 0.1, 0.03, -0.2]})
         np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6, atol=1e-6)
         K = ctrl.law.K
         np.testing.assert_allclose(J_ad[:, 1:], -K, rtol=1e-9)
     sd = joint_sdre_controller(flexible_joint_rig(spring="nonlinear"))
-    J_ad, J_fd = autodiff_vs_fd(sd, {"link_angle_reference": [0.1], "state": [0.02, 0.1, 0.03, -0.2]})
+    J_ad, J_fd = autodiff_vs_fd(sd, {"joint_angle_reference": [0.1], "state": [0.02, 0.1, 0.03, -0.2]})
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6, atol=1e-6)
 
 

@@ -36,7 +36,7 @@ def test_systems_convert_and_autodiff_matches_closed_form_derivatives():
     at v from the Stribeck law written here."""
     J, L, d = 1e-5, 200.0, 3e-6
     obs = DisturbanceObserver(J, FrictionObserverParams(gain=L), damping=d)
-    jac = check_system_autodiff_matches_fd(obs, [0.3], {"link_velocity": [0.5], "joint_torque": [0.01]})
+    jac = check_system_autodiff_matches_fd(obs, [0.3], {"joint_velocity": [0.5], "joint_torque": [0.01]})
     xdot_ad, _ = jac["xdot"]
     est_ad, _ = jac["disturbance_estimate"]
     # d/d[w_hat, w, tau]: w_hat' = (tau + L J (w - w_hat) - d w)/J  (the estimate's damping is known)
@@ -45,7 +45,7 @@ def test_systems_convert_and_autodiff_matches_closed_form_derivatives():
     p = LinkFrictionParams()
     fr = LinkFriction(p)
     for v in (-0.2, -0.01, 0.0, 0.003, 0.4):
-        (J_ad, J_fd), = check_system_autodiff_matches_fd(fr, [], {"link_velocity": [v]}).values()
+        (J_ad, J_fd), = check_system_autodiff_matches_fd(fr, [], {"joint_velocity": [v]}).values()
         s, e = p.stribeck_velocity, p.smoothing_velocity
         level = p.coulomb + (p.static - p.coulomb) * np.exp(-(v / s) ** 2)
         dlevel = -2 * v / s ** 2 * (p.static - p.coulomb) * np.exp(-(v / s) ** 2)

@@ -186,7 +186,7 @@ def test_one_system_joint_rig_linearises_and_takes_lqr_in_a_composed_diagram():
     from awiwi_drake.analysis import linearize
     fast, mbp = joint_rig(), joint_rig(backend="python")
     assert fast.backend == "compiled"          # the default is the fast path
-    op = fast.operating_point(pretension=25.0, link_angle=0.2)
+    op = fast.operating_point(pretension=25.0, joint_angle=0.2)
     la, lb = linearize(fast, op), linearize(mbp, op)
     np.testing.assert_allclose(la.A, lb.A, rtol=1e-9, atol=1e-9 * np.max(np.abs(lb.A)))
     np.testing.assert_allclose(la.B, lb.B, rtol=1e-12)
@@ -260,7 +260,7 @@ def test_batched_joint_rigs_equal_the_single_rig_copy_by_copy():
     from awiwi_drake.rigs.batch import batched_joint_rig
     br = batched_joint_rig(5)
     rig = br.single
-    ops = [rig.operating_point(pretension=f, link_angle=a) for f, a in zip((10, 20, 30, 40, 50), (0, .1, -.1, .2, 0))]
+    ops = [rig.operating_point(pretension=f, joint_angle=a) for f, a in zip((10, 20, 30, 40, 50), (0, .1, -.1, .2, 0))]
     ctx = br.context(ops)
     x = ctx.get_continuous_state_vector().CopyToVector() + RNG.normal(scale=0.01, size=30)
     ctx.SetContinuousState(x)

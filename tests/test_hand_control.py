@@ -11,10 +11,10 @@ from _fd import check_system_autodiff_matches_fd
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import (JointImpedanceBank, TendonChainController, TendonPathVelocity,
-                                       dof_selection)
+from awiwi_drake.control.chain import JointImpedanceBank, TendonChainController, TendonPathVelocity
 from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
+from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.hand.diagrams import finger_diagram
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandChainParams
 

@@ -102,7 +102,7 @@ def test_linearisation_of_the_joint_rig_equals_finite_differences_of_its_dynamic
     """Drake's Linearize (AutoDiffXd through every system of the rig) against central differences
     of the float diagram's time derivatives, at an equilibrium and off it (f0 = xdot there)."""
     rig = joint_rig()
-    op = rig.operating_point(pretension=25.0, link_angle=0.1)
+    op = rig.operating_point(pretension=25.0, joint_angle=0.1)
     d = rig.diagram
     for dx in (np.zeros(rig.num_states), np.array([0.02, 0.3, 0.01, -0.02, 0.5, -0.4])):
         x0 = op.state + dx
@@ -133,7 +133,7 @@ def test_linearisation_of_the_joint_rig_equals_finite_differences_of_its_dynamic
 def test_python_control_agrees_on_damp_and_frequency_response():
     control = pytest.importorskip("control")
     rig = flexible_joint_rig()
-    lin = linearize(rig, outputs=("link_angle",))
+    lin = linearize(rig, outputs=("joint_angle",))
     ss = lin.to_control()
     assert ss.nstates == 4 and list(ss.state_labels) == list(rig.state_names)
     wn, zeta, poles = control.damp(ss, doprint=False)
@@ -147,13 +147,13 @@ def test_python_control_agrees_on_damp_and_frequency_response():
 
 def test_results_save_load_and_plot(tmp_path):
     rig = joint_rig()
-    lin = linearize(rig, outputs=("state", "link_angle"))
+    lin = linearize(rig, outputs=("state", "joint_angle"))
     back = LinearizationResult.load(lin.save(tmp_path / "lin.json"))
     np.testing.assert_array_equal(back.A, lin.A)
     np.testing.assert_array_equal(back.poles, lin.poles)
-    np.testing.assert_array_equal(back.output("link_angle").C, lin.output("link_angle").C)
+    np.testing.assert_array_equal(back.output("joint_angle").C, lin.output("joint_angle").C)
     assert back.state_names == lin.state_names
-    fr = lin.bode(input="motor_torque[0]", output="link_angle")
+    fr = lin.bode(input="motor_torque[0]", output="joint_angle")
     fig, (am, ap) = fr.plot()
     assert am.get_xscale() == "log" and "dB" in am.get_ylabel() and "deg" in ap.get_ylabel()
     assert "Hz" in ap.get_xlabel() and am.get_legend() is not None

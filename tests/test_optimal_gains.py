@@ -166,10 +166,10 @@ def test_optimal_backstepping_on_the_antagonistic_joint_rig():
     T_inv = np.linalg.inv(torque_state_map(joint_model(rig), op.state))
     np.testing.assert_allclose(K_sys @ T_inv, fit.feedback, rtol=1e-9, atol=1e-9 * np.abs(fit.feedback).max())
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
     d = loop.diagram
-    cl = Linearize(d, ctx, input_port_index=d.GetInputPort("link_angle_reference").get_index(),
-                   output_port_index=d.GetOutputPort("link_angle").get_index())
+    cl = Linearize(d, ctx, input_port_index=d.GetInputPort("joint_angle_reference").get_index(),
+                   output_port_index=d.GetOutputPort("joint_angle").get_index())
     assert np.max(np.linalg.eigvals(cl.A()).real) < 0
     assert sampled_radius(g) < 1.0
     free = optimize_gains(rig, JointRigOptimalGainsCase(r_weight=1e-6), starts=16)   # the default box

@@ -47,7 +47,7 @@ def demo_run():
     t_ref, refs = demo_references(rig, sc)
     ctx = loop.create_context(rig.operating_point(pretension=sc.f_start))
     res = simulate(loop.diagram, ctx, sc.t_final,
-                   log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
+                   log=("joint_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
                    monitors=rig_monitors(rig), max_step=1.0 / 3000)
     return rig, sc, t_ref, refs, res
 

@@ -39,7 +39,7 @@ def test_flexible_joint_linearisation_equals_12_10(backend):
     # Also away from the nominal values and at a loaded operating point (linear spring: same A).
     p2 = p.replace(link_inertia=7.2e-7, stiffness=1.15, link_damping=1e-3)
     res2 = linearize(flexible_joint_rig(params=p2, backend=backend),
-                     flexible_joint_rig(params=p2).operating_point(link_angle=0.4, external_torque=0.05))
+                     flexible_joint_rig(params=p2).operating_point(joint_angle=0.4, external_torque=0.05))
     np.testing.assert_allclose(res2.A, expected_12_10(p2)[0], rtol=1e-12, atol=1e-9)
 
 
@@ -60,10 +60,10 @@ def test_lqr_equals_independent_riccati_solution():
 def test_lqr_closed_loop_converges_and_cost_matches_riccati():
     rig = flexible_joint_rig()
     Q, R = np.diag([10, 0.01, 1, 0.01]), np.array([[1e-2]])
-    op = rig.operating_point(link_angle=0.0)
+    op = rig.operating_point(joint_angle=0.0)
     loop = closed_loop(rig, lqr_controller(rig, op=op, Q=Q, R=R), rate_hz=None)
     x0 = np.array([0.2, 0.0, 0.1, 0.0])
-    ctx = loop.create_context(state=x0, references={"link_angle_reference": 0.0})
+    ctx = loop.create_context(state=x0, references={"joint_angle_reference": 0.0})
     res = simulate(loop.diagram, ctx, 1.0, log=("state", "motor_torque"), max_step=1e-4, accuracy=1e-8)
     assert np.max(np.abs(res["state"][-1])) < 1e-3 * np.max(np.abs(x0))
     # The realised quadratic cost equals x0^T S x0 (Riccati value function).
@@ -80,7 +80,7 @@ def test_joint_rig_lqr_closed_loop_stiffness_against_an_external_push():
     design = lqr(rig, Q, R, op)
     loop = closed_loop(rig, lqr_controller(rig, op=op, Q=Q, R=R), rate_hz=None)
     push = 0.01  # Nm on the link
-    ctx = loop.create_context(op, references={"link_angle_reference": op.state[0]},
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.state[0]},
                               disturbances={"external_torque": [push]})
     res = simulate(loop.diagram, ctx, 2.5, log=("state",), max_step=1e-3, accuracy=1e-8)
     # Linear prediction of the steady state: 0 = (A - B K) dx + E push, E = d xdot / d tau_ext = e_qdot / m.
@@ -161,7 +161,7 @@ def _fd_jacobian(rig, op):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_joint_rig_linearisation_agrees_with_finite_differences(backend):
     rig = joint_rig(params=JointRigParams(motor=MotorParams(ripple=True)), backend=backend)
-    op = rig.operating_point(pretension=25.0, link_angle=0.3, external_torque=0.02)
+    op = rig.operating_point(pretension=25.0, joint_angle=0.3, external_torque=0.02)
     res = linearize(rig, op)
     A_fd = _fd_jacobian(rig, op)
     np.testing.assert_allclose(res.A, A_fd, rtol=1e-5, atol=1e-5 * np.max(np.abs(A_fd)))

@@ -180,7 +180,7 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
     res = simulate(rig, rig.context(op), 0.02,
                    inputs={"motor_torque": PerEntry([Step(0.005, limit + 0.5, before=op.motor_torque[0]),
                                                      op.motor_torque[1]])},
-                   log=("link_angle", "tendon_force", "motor_torque"), monitors=rig_monitors(rig))
+                   log=("joint_angle", "tendon_force", "motor_torque"), monitors=rig_monitors(rig))
     sat = res.events_of("actuator_saturation")
     assert [e.channel for e in sat] == ["motor_torque[0]"] and sat[0].t_start == pytest.approx(0.005, abs=2e-3)
     assert sat[0].extreme == pytest.approx(limit + 0.5)

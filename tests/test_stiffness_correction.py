@@ -45,10 +45,10 @@ def test_controller_autodiff_matches_finite_differences_and_closed_form_gains():
     rig = joint_rig()
     for online in (True, False):
         law = StiffnessCorrectedImpedance(rig.params, rig.spring, online=online)
-        op = rig.operating_point(pretension=20.0, link_angle=0.1)
+        op = rig.operating_point(pretension=20.0, joint_angle=0.1)
         x = np.asarray(op.state, float) + np.array([0.01, 0.2, 0.002, -0.001, 0.3, -0.1])
         jac = check_system_autodiff_matches_fd(
-            law, [], {"state": x, "link_angle_reference": [0.05], "effective_stiffness_reference": [0.8]}, rtol=1e-6)
+            law, [], {"state": x, "joint_angle_reference": [0.05], "effective_stiffness_reference": [0.8]}, rtol=1e-6)
         J_u, _ = jac["motor_torque"]
         kd = law.motor_gains[1]
         np.testing.assert_allclose(J_u[:, 4:6], -kd * np.eye(2), rtol=1e-12)

@@ -54,20 +54,20 @@ def test_monte_carlo_points_are_reproducible_and_inside_the_box():
         monte_carlo_points({"x": 2.0}, {"x": 1.0}, 3)
 
 
-def joint_rig_point(*, pretension, link_angle):
+def joint_rig_point(*, pretension, joint_angle):
     """Joint stiffness [Nm/rad] and slowest non-zero pole [1/s] of the joint rig (Drake in the worker)."""
     from awiwi_drake.analysis import linearize
     from awiwi_drake.rigs import joint_rig
 
     rig = joint_rig()
-    op = rig.operating_point(pretension=pretension, link_angle=link_angle)
+    op = rig.operating_point(pretension=pretension, joint_angle=joint_angle)
     poles = linearize(rig, op).poles
     return float(op.joint_stiffness), float(np.min(np.abs(poles[poles != 0])))
 
 
 def test_sweep_on_a_local_dask_cluster_gives_the_serial_numbers():
     distributed = pytest.importorskip("dask.distributed")
-    grid = {"pretension": [10.0, 20.0, 40.0], "link_angle": [0.1]}
+    grid = {"pretension": [10.0, 20.0, 40.0], "joint_angle": [0.1]}
     serial = run_sweep(joint_rig_point, grid, executor="serial")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                   silence_logs=40) as cluster, distributed.Client(cluster) as client:
@@ -76,5 +76,5 @@ def test_sweep_on_a_local_dask_cluster_gives_the_serial_numbers():
         pids = set(client.run(__import__("os").getpid).values())
     assert len(pids) == 2 and __import__("os").getpid() not in pids          # two separate worker processes
     assert res.points == serial.points and res.values == serial.values         # bit-identical numbers
-    stiff = {(p["pretension"], p["link_angle"]): v[0] for p, v in zip(res.points, res.values)}
+    stiff = {(p["pretension"], p["joint_angle"]): v[0] for p, v in zip(res.points, res.values)}
     assert stiff[(10.0, 0.1)] < stiff[(20.0, 0.1)] < stiff[(40.0, 0.1)]        # co-contraction stiffens the joint

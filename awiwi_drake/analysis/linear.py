@@ -299,7 +299,7 @@ class LinearizationResult:
             Input channel (index or name, e.g. ``"motor_torque[0]"``).
         output : str or int or None
             An output channel name (of ``output_names`` or of any linearised port,
-            e.g. ``"link_angle"``), an index into ``output_names``, or None: the
+            e.g. ``"joint_angle"``), an index into ``output_names``, or None: the
             first channel of the first output port.
         omega : sequence, optional
             Frequencies [rad/s]; default ``n`` log-spaced points from a decade below

@@ -19,8 +19,8 @@ PORT_UNITS = {
     "motor_torque": "Nm", "motor_torque_command": "Nm", "applied_torque": "Nm", "external_torque": "Nm",
     "joint_torque": "Nm", "generalized_force": "Nm", "load_torque": "Nm",
     "tendon_force": "N", "tendon_stiffness": "N/m", "elongation": "m", "tendon_velocity": "m/s",
-    "link_angle": "rad", "joint_angle": "rad", "motor_angle": "rad",
-    "link_velocity": "rad/s", "joint_velocity": "rad/s", "motor_velocity": "rad/s",
+    "joint_angle": "rad", "motor_angle": "rad",
+    "joint_velocity": "rad/s", "motor_velocity": "rad/s",
     "joint_stiffness": "Nm/rad", "wrist_angle": "rad", "wrist_velocity": "rad/s",
 }
 

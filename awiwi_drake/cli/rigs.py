@@ -55,7 +55,7 @@ def register(sub) -> None:
     p.add_argument("--bode", metavar="OUT.png", default=None,
                    help="write a Bode diagram (dB and phase on log axes, gain/phase margins) of --output / --input")
     p.add_argument("--output", default=None, metavar="NAME",
-                   help="output channel of the Bode diagram, e.g. link_angle, tendon_force, joint_angle[1] "
+                   help="output channel of the Bode diagram, e.g. joint_angle, tendon_force, joint_angle[1] "
                         "(default: the rig's link/joint angle, or its tendon force)")
     p.add_argument("--input", default="motor_torque[0]", metavar="CHANNEL",
                    help="input channel of the Bode diagram (default motor_torque[0])")
@@ -108,7 +108,7 @@ def _build(args) -> object:
 
 
 def _default_bode_output(lin) -> str:
-    for name in ("link_angle", "joint_angle", "tendon_force"):
+    for name in ("joint_angle", "tendon_force"):
         if name in lin.outputs:
             return lin.outputs[name].names[0]
     return lin.output_names[0]
@@ -120,7 +120,7 @@ def _linearize(args) -> int:
     bode_path = None if args.bode is None else output_file(args.bode, "--bode", suffixes=(".png", ".pdf", ".svg"))
     save_path = None if args.save is None else output_file(args.save, "--save", suffixes=(".json",))
     rig = _build(args)
-    outputs = ["state"] + [n for n in ("link_angle", "joint_angle", "tendon_force") if n in rig.output_names]
+    outputs = ["state"] + [n for n in ("joint_angle", "tendon_force") if n in rig.output_names]
     res = linearize(rig, outputs=outputs)
     if save_path is not None:
         res.save(save_path)

@@ -37,8 +37,8 @@ Ports (each computes only its own quantity; prerequisites declared):
 * outputs ``state`` (all drive states), ``motor_angle``, ``motor_velocity``,
   ``motor_state`` ([theta, omega]), ``tendon_force`` [N], ``tendon_stiffness``
   [N/m] (elastic curve), ``elongation`` [m], ``generalized_force`` (n) [N m],
-  ``applied_torque`` (m) [N m]; with a link also ``link_angle``,
-  ``link_velocity``.
+  ``applied_torque`` (m) [N m]; with a link also ``joint_angle``,
+  ``joint_velocity``.
 """
 
 from __future__ import annotations
@@ -326,7 +326,7 @@ def TendonDrive_(T):
             self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(k, k + m),
                                 motor_velocity=slice(k + m, k + 2 * m), motor_state=slice(k, k + 2 * m))
             if model.has_link:
-                self._slices.update(link_angle=slice(0, n), link_velocity=slice(n, 2 * n))
+                self._slices.update(joint_angle=slice(0, n), joint_velocity=slice(n, 2 * n))
             for name, sl in self._slices.items():
                 self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
                                              prerequisites_of_calc={state})
@@ -421,7 +421,7 @@ def TendonDriveBatch_(T):
     (``DriveModel.link_inertia``). State: the copies' states one after the other
     (copy ``i`` at ``[i k, (i + 1) k)`` with ``k = model.num_states``, each in the
     single rig's order). Inputs ``motor_torque`` (N m) and ``external_torque``
-    (N n), copy-major; outputs ``state``, ``link_angle`` (N n), ``tendon_force``
+    (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
     (N m). The float path runs the generated kernel's ``_batch`` twin (one
     compiled loop over the copies); AutoDiffXd/Expression call :func:`drive_laws`
     per copy.
@@ -445,7 +445,7 @@ def TendonDriveBatch_(T):
             state = {self.all_state_ticket()}
             self.DeclareVectorOutputPort("state", N * k, lambda c, o: o.SetFromVector(self._x(c)),
                                          prerequisites_of_calc=state)
-            self.DeclareVectorOutputPort("link_angle", N * n, self._calc_link_angle, prerequisites_of_calc=state)
+            self.DeclareVectorOutputPort("joint_angle", N * n, self._calc_joint_angle, prerequisites_of_calc=state)
             self.DeclareVectorOutputPort("tendon_force", N * m, self._calc_force, prerequisites_of_calc=state)
 
         def _construct_copy(self, other, converter=None):
@@ -459,7 +459,7 @@ def TendonDriveBatch_(T):
                 self._kernels = build_kernels(self.model)
             return self._kernels
 
-        def _calc_link_angle(self, context, out):
+        def _calc_joint_angle(self, context, out):
             N, k, m, n = self._shape
             out.SetFromVector(self._x(context).reshape(N, k)[:, :n].ravel())
 

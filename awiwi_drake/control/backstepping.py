@@ -83,7 +83,7 @@ EXTERNAL_TORQUE_SOURCES = ("observer", "input", "none")
 #: Entries of a full reference ``[r, r', r'', r''', r'''']``.
 REFERENCE_SIZE = 5
 #: Name of the reference input (ctrl1 convention: ``<rig output>_reference``).
-REFERENCE_PORT = "link_angle_reference"
+REFERENCE_PORT = "joint_angle_reference"
 
 
 def _reference_port_size(reference_derivatives: int) -> int:
@@ -323,7 +323,7 @@ def PositionBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Position backstepping controller of a linear flexible joint (15.11)-(15.50).
 
-        Input ports: ``state`` (4: ``[q, qd, theta, thetad]``), ``link_angle_reference``
+        Input ports: ``state`` (4: ``[q, qd, theta, thetad]``), ``joint_angle_reference``
         (1, or 5 = reference and four derivatives with ``reference_derivatives=4``).
         Output ports: ``motor_torque`` (1) [Nm], ``lyapunov`` (1).
         """
@@ -366,7 +366,7 @@ def ImpedanceBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Impedance backstepping controller of a joint driven by N motors (15.51)-(15.106).
 
-        Input ports: ``state`` (2 + 2N: ``[q, qd, theta_1..N, omega_1..N]``), ``link_angle_reference``
+        Input ports: ``state`` (2 + 2N: ``[q, qd, theta_1..N, omega_1..N]``), ``joint_angle_reference``
         (1, or 5 with ``reference_derivatives=4``) and, with ``external_torque="input"``,
         ``external_torque_measured`` (1) [Nm].
         Output ports: ``motor_torque`` (N) [Nm], ``lyapunov`` (1), ``joint_torque_desired`` (1) [Nm],

@@ -7,7 +7,7 @@ Conventions (binding for every controller in :mod:`awiwi_drake.control`)
 
   - input ports named ``<signal>_reference`` carry the reference of the rig
     output ``<signal>`` (e.g. ``tendon_force_reference`` tracks the rig output
-    ``tendon_force``; ``link_angle_reference`` tracks ``link_angle``);
+    ``tendon_force``; ``joint_angle_reference`` tracks ``joint_angle``);
   - other input ports are *measurements* and carry exactly the name of a rig
     output port (``state``, ``tendon_force``, ``motor_velocity``, ...);
   - one output port ``motor_torque`` [Nm] is the command (size = rig input).

@@ -41,24 +41,13 @@ from awiwi_drake.control.base import StaticLawController, check_gains
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.parameters.control import RippleCompensationParams, TendonForceGains
+from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandChainParams
 
 __all__ = ["JointImpedanceBank_", "JointImpedanceBank", "TendonPathVelocity_", "TendonPathVelocity",
-           "TendonChainController", "dof_selection",
+           "TendonChainController",
            "joint_inertia", "chain_controller"]
-
-
-def dof_selection(coupling) -> np.ndarray:
-    """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of ``coupling``."""
-    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
-    blocks = [c.dof_selection for c in parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
 
 
 def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:

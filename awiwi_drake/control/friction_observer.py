@@ -43,7 +43,7 @@ def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
 @TemplateSystem.define("DisturbanceObserver_")
 def DisturbanceObserver_(T):
     class Impl(LeafSystem_[T]):
-        """Observer (9.2). Inputs ``link_velocity`` (1) [rad/s], ``joint_torque`` (1) [Nm] (known
+        """Observer (9.2). Inputs ``joint_velocity`` (1) [rad/s], ``joint_torque`` (1) [Nm] (known
         driving torque); output ``disturbance_estimate`` (1) [Nm] (``-tau_fric_hat``); state ``w_hat``.
         """
 
@@ -54,7 +54,7 @@ def DisturbanceObserver_(T):
                 raise ValueError(f"DisturbanceObserver: inertia = {inertia} must be > 0 [kg m^2]")
             self.inertia, self.params, self.damping = float(inertia), params or FrictionObserverParams(), float(damping)
             self.DeclareContinuousState(1)
-            self.DeclareVectorInputPort("link_velocity", 1)
+            self.DeclareVectorInputPort("joint_velocity", 1)
             self.DeclareVectorInputPort("joint_torque", 1)
             self.DeclareVectorOutputPort("disturbance_estimate", 1, self._calc,
                                          prerequisites_of_calc={self.all_state_ticket(),
@@ -86,12 +86,12 @@ DisturbanceObserver = DisturbanceObserver_[None]
 @TemplateSystem.define("LinkFriction_")
 def LinkFriction_(T):
     class Impl(LeafSystem_[T]):
-        """Link-side stick-slip friction: input ``link_velocity`` (1), output ``friction_torque`` (1) [Nm]."""
+        """Link-side stick-slip friction: input ``joint_velocity`` (1), output ``friction_torque`` (1) [Nm]."""
 
         def _construct(self, params: LinkFrictionParams | None = None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.params = params or LinkFrictionParams()
-            self.DeclareVectorInputPort("link_velocity", 1)
+            self.DeclareVectorInputPort("joint_velocity", 1)
             self.DeclareVectorOutputPort("friction_torque", 1, self._calc,
                                          prerequisites_of_calc={self.get_input_port(0).ticket()})
 
@@ -111,16 +111,16 @@ LinkFriction = LinkFriction_[None]
 
 def with_link_friction(loop_diagram, params: LinkFrictionParams | None = None):
     """``(diagram, loop_system, friction_system)``: a closed loop whose link gets the stick-slip friction
-    of :class:`LinkFriction` on its ``external_torque`` input (feedback from ``link_velocity``); the
-    loop's ``link_angle_reference`` and every loop output are exported under the same names, the
+    of :class:`LinkFriction` on its ``external_torque`` input (feedback from ``joint_velocity``); the
+    loop's ``joint_angle_reference`` and every loop output are exported under the same names, the
     friction torque [Nm] as ``link_friction``."""
     from pydrake.systems.framework import DiagramBuilder
     b = DiagramBuilder()
     cl = b.AddNamedSystem("loop", loop_diagram)
     fr = b.AddNamedSystem("link_friction", LinkFriction(params))
-    b.Connect(cl.GetOutputPort("link_velocity"), fr.get_input_port())
+    b.Connect(cl.GetOutputPort("joint_velocity"), fr.get_input_port())
     b.Connect(fr.get_output_port(), cl.GetInputPort("external_torque"))
-    b.ExportInput(cl.GetInputPort("link_angle_reference"), "link_angle_reference")
+    b.ExportInput(cl.GetInputPort("joint_angle_reference"), "joint_angle_reference")
     for i in range(loop_diagram.num_output_ports()):
         b.ExportOutput(cl.get_output_port(i), loop_diagram.get_output_port(i).get_name())
     b.ExportOutput(fr.get_output_port(), "link_friction")

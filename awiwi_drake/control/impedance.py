@@ -61,7 +61,7 @@ tendon ``i`` on a pulley of radius ``r_m``):
     the loop is a triangular cascade (observer error -> force errors -> link):
     eigenvalues = force pair(s) + link pair + ``-K_O``, and at rest under a
     load ``f = f_des`` (stiffness = Kp_imp).
-    The reference is a set point (``link_angle_reference`` only):
+    The reference is a set point (``joint_angle_reference`` only):
     ``qdot_des = qdd_des = 0`` between its changes (:meth:`ImpedanceLaw.desired_force_rates`
     takes them for trajectory use).
 
@@ -150,7 +150,7 @@ class ImpedanceLaw(StaticLaw):
         xf = check_gain("force_damping_ratio", p.force_damping_ratio, owner=self.name)
         self.kf, self.kfd = wf ** 2, 2 * xf * wf
         n = len(tr.coupling)
-        self.inputs = {"link_angle_reference": 1, "link_angle": 1, "link_velocity": 1, "motor_velocity": n,
+        self.inputs = {"joint_angle_reference": 1, "joint_angle": 1, "joint_velocity": 1, "motor_velocity": n,
                        "tendon_force": n, "tendon_stiffness": n}
         self.output_size = n
 
@@ -180,9 +180,9 @@ class ImpedanceLaw(StaticLaw):
         """Motor torques; ``tau_hat``: external link torque estimate (cascaded law only)."""
         from awiwi_drake.components import motor_friction_torque
         tr = self.tr
-        q, qd = u["link_angle"][0], u["link_velocity"][0]
+        q, qd = u["joint_angle"][0], u["joint_velocity"][0]
         w, f, k = u["motor_velocity"], u["tendon_force"], u["tendon_stiffness"]
-        f_des = self.desired_forces(u["link_angle_reference"][0], q, qd)
+        f_des = self.desired_forces(u["joint_angle_reference"][0], q, qd)
         B, r = tr.motor.inertia, tr.pulley_radius
         alpha = smax(r * k, tr.min_alpha)
         if self.mode == "two-time-scale":
@@ -221,7 +221,7 @@ def CascadedImpedanceController_(T):
             self.DeclareVectorOutputPort(COMMAND_PORT, int(law.output_size), self._calc,
                                          prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("external_torque_estimate", 1, self._calc_estimate,
-                                         prerequisites_of_calc={self._ports["link_velocity"].ticket(),
+                                         prerequisites_of_calc={self._ports["joint_velocity"].ticket(),
                                                                 self.all_state_ticket()})
             self.set_name(law.name)
 
@@ -230,7 +230,7 @@ def CascadedImpedanceController_(T):
 
         def _estimate(self, context):
             z = context.get_continuous_state_vector().CopyToVector()[0]
-            qd = self._ports["link_velocity"].Eval(context)[0]
+            qd = self._ports["joint_velocity"].Eval(context)[0]
             return self.observer_gain * (self.law.tr.link_inertia * qd - z)
 
         def _calc(self, context, output):
@@ -243,7 +243,7 @@ def CascadedImpedanceController_(T):
         def DoCalcTimeDerivatives(self, context, derivatives):
             tr = self.law.tr
             f = self._ports["tendon_force"].Eval(context)
-            qd = self._ports["link_velocity"].Eval(context)[0]
+            qd = self._ports["joint_velocity"].Eval(context)[0]
             zdot = tr.coupling @ f - tr.link_damping * qd + self._estimate(context)
             derivatives.get_mutable_vector().SetFromVector(np.array([zdot]))
 
@@ -264,16 +264,16 @@ class LinkReferenceMotorPdLaw(StaticLaw):
         xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=self.name)
         B = check_gain("inertia", inertia, owner=self.name)
         self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("link_angle").C)
+        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("joint_angle").C)
         self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(lin.output("link_angle").y0[0])
+        self.r0 = float(lin.output("joint_angle").y0[0])
         self.ith, self.iw = list(motor_index[0]), list(motor_index[1])
-        self.inputs = {"link_angle_reference": 1, "state": lin.A.shape[0]}
+        self.inputs = {"joint_angle_reference": 1, "state": lin.A.shape[0]}
         self.output_size = lin.B.shape[1]
 
     def __call__(self, u):
         x = u["state"]
-        dr = u["link_angle_reference"][0] - self.r0
+        dr = u["joint_angle_reference"][0] - self.r0
         x_ref = self.x0 + self.Nx * dr
         return (self.u0 + self.Nu * dr + self.kp_m * (x_ref[self.ith] - x[self.ith])
                 - self.kd_m * (x[self.iw] - x_ref[self.iw]))
@@ -284,7 +284,7 @@ def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mod
     if mode == "pd":
         from awiwi_drake.analysis.linear import linearize
         tr = transmission(rig)
-        lin = linearize(rig, outputs=("state", "link_angle"))
+        lin = linearize(rig, outputs=("state", "joint_angle"))
         names = list(rig.state_names)
         n = len(tr.coupling)
         ith = [names.index(f"motor_angle[{i}]") for i in range(n)]

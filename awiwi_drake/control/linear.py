@@ -34,7 +34,7 @@ def reference_maps(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndar
 class StateFeedbackLaw(StaticLaw):
     """``u = u0 + Nu (r - r0) - K (x - x0 - Nx (r - r0))`` (float and AutoDiffXd)."""
 
-    def __init__(self, K, *, x0, u0, Nx, Nu, r0: float = 0.0, reference: str = "link_angle",
+    def __init__(self, K, *, x0, u0, Nx, Nu, r0: float = 0.0, reference: str = "joint_angle",
                  state_port: str = "state", name: str = "state_feedback"):
         K = np.atleast_2d(check_gains("K", K, owner=name))
         m, n = K.shape
@@ -57,7 +57,7 @@ class StateFeedbackLaw(StaticLaw):
         return self.u0 + self.Nu * dr - self.K @ err
 
 
-def state_feedback_controller(lin: LinearizationResult, K, *, reference: str = "link_angle",
+def state_feedback_controller(lin: LinearizationResult, K, *, reference: str = "joint_angle",
                               name: str = "state_feedback"):
     """A :class:`StaticLawController` for gain ``K`` around the linearisation ``lin``.
 

@@ -3,7 +3,7 @@
 The gain comes from Drake's ``LinearQuadraticRegulator`` applied to the rig
 diagram at its operating point (:func:`awiwi_drake.analysis.lqr`); the
 controller is a :class:`~awiwi_drake.control.linear.StateFeedbackLaw` that
-tracks ``link_angle_reference`` through the equilibrium family of the linear
+tracks ``joint_angle_reference`` through the equilibrium family of the linear
 model.  Q is given on the flexible-joint state ``[q, qd, theta, thetad]``
 ((13.9)); for the antagonistic joint rig (two motors) the motor weights are
 repeated for both motors (:func:`expand_q`).
@@ -45,10 +45,10 @@ def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = N
 
     Weights: Table 13.1 by default (``params``); ``r`` overrides R = r I;
     full matrices ``Q`` (n x n, on the rig state) / ``R`` (m x m) override both.
-    The linearisation includes the ``link_angle`` output (for the reference maps).
+    The linearisation includes the ``joint_angle`` output (for the reference maps).
     """
     p = params or LqrParams()
-    lin = lin or linearize(rig, op, outputs=("state", "link_angle"))
+    lin = lin or linearize(rig, op, outputs=("state", "joint_angle"))
     n, m = lin.B.shape
     if Q is None:
         Q = expand_q(p.q_diag, n)
@@ -63,7 +63,7 @@ def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = N
 
 def lqr_controller(rig: Any, params: LqrParams | None = None, *, r: float | None = None, op: Any = None,
                    Q=None, R=None):
-    """Registered factory ``lqr``: LQR state feedback tracking ``link_angle_reference``.
+    """Registered factory ``lqr``: LQR state feedback tracking ``joint_angle_reference``.
 
     ``u = u_ref(r) - K (x - x_ref(r))`` with ``(x_ref, u_ref)`` the equilibrium of the
     linear model holding the link at ``r`` (equal to ``op`` at ``r`` = the op's link
@@ -72,7 +72,7 @@ def lqr_controller(rig: Any, params: LqrParams | None = None, *, r: float | None
     as ``LinearQuadraticRegulator`` designs it) or at 3 kHz.
     """
     d = design_lqr(rig, params, r=r, op=op, Q=Q, R=R)
-    return state_feedback_controller(d.linearization, d.K, reference="link_angle", name="lqr")
+    return state_feedback_controller(d.linearization, d.K, reference="joint_angle", name="lqr")
 
 
 def quadratic_cost(t: np.ndarray, x: np.ndarray, u: np.ndarray, Q: np.ndarray, R: np.ndarray) -> float:

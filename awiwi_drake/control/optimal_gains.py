@@ -138,7 +138,7 @@ def system_feedback(controller, state0) -> np.ndarray:
     ctx = ad.CreateDefaultContext()
     x = InitializeAutoDiff(np.asarray(state0, dtype=float)).ravel()
     ad.GetInputPort("state").FixValue(ctx, x)
-    rport = ad.GetInputPort("link_angle_reference")
+    rport = ad.GetInputPort("joint_angle_reference")
     rport.FixValue(ctx, np.array([AutoDiffXd(float(state0[0]))] + [AutoDiffXd(0.0)] * (rport.size() - 1)))
     u = ad.GetOutputPort("motor_torque").Eval(ctx)
     return -ExtractGradient(np.asarray(u, dtype=object))

@@ -83,7 +83,7 @@ class PolePlacementDesign:
 def design_pole_placement(rig: Any, params: PolePlacementParams | None = None, op: Any = None) -> PolePlacementDesign:
     """Pole placement on the rig linearised at ``op`` (Table 12.1 target by default)."""
     p = params or PolePlacementParams()
-    lin = linearize(rig, op, outputs=("state", "link_angle"))
+    lin = linearize(rig, op, outputs=("state", "joint_angle"))
     target = double_oscillator_poles(p)
     m = lin.B.shape[1]
     if m == 1 and lin.A.shape[0] == 4:
@@ -111,9 +111,9 @@ def design_pole_placement(rig: Any, params: PolePlacementParams | None = None, o
 
 
 def pole_placement_controller(rig: Any, params: PolePlacementParams | None = None, op: Any = None):
-    """Registered factory ``pole-placement``: state feedback tracking ``link_angle_reference``."""
+    """Registered factory ``pole-placement``: state feedback tracking ``joint_angle_reference``."""
     d = design_pole_placement(rig, params, op)
-    return state_feedback_controller(d.linearization, d.K, reference="link_angle", name="pole_placement")
+    return state_feedback_controller(d.linearization, d.K, reference="joint_angle", name="pole_placement")
 
 
 def pole_sensitivity(A_of_k, B: np.ndarray, K: np.ndarray, stiffness: np.ndarray) -> np.ndarray:

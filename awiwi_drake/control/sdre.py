@@ -150,13 +150,13 @@ class TendonSdreModel:
 class LinearReferenceModel:
     """Joint rigs: equilibrium family ``x0 + Nx (r - r0)``, ``u0 + Nu (r - r0)`` of the linearisation."""
 
-    reference = "link_angle"
+    reference = "joint_angle"
 
     def __init__(self, lin):
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("link_angle").C)
+        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("joint_angle").C)
         self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(lin.output("link_angle").y0[0])
-        self.inputs = {"link_angle_reference": 1, "state": lin.A.shape[0]}
+        self.r0 = float(lin.output("joint_angle").y0[0])
+        self.inputs = {"joint_angle_reference": 1, "state": lin.A.shape[0]}
 
     def state(self, values):
         return values["state"]
@@ -250,7 +250,7 @@ def tendon_sdre_controller(rig: Any, params: SdreTendonParams | None = None, *, 
 def joint_sdre_controller(rig: Any, params: SdreJointParams | None = None, *, op: Any = None, fixed: bool = False):
     """Registered factory ``sdre`` for the joint rigs (Table 14.2); ``fixed=True``: LQR at ``op``."""
     p = params or SdreJointParams()
-    lin = linearize(rig, op, outputs=("state", "link_angle"))
+    lin = linearize(rig, op, outputs=("state", "joint_angle"))
     model = LinearReferenceModel(lin)
     jac = RigJacobian(rig) if p.factorisation == "jacobian" else PrintedJointFactorisation(rig)
     n, m = lin.B.shape

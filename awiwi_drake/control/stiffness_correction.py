@@ -83,7 +83,7 @@ def StiffnessCorrectedImpedance_(T):
     class Impl(LeafSystem_[T]):
         """Motor-side joint impedance with online stiffness correction on the antagonistic joint rig.
 
-        Inputs: ``state`` (6, joint rig order), ``link_angle_reference`` (1) [rad],
+        Inputs: ``state`` (6, joint rig order), ``joint_angle_reference`` (1) [rad],
         ``effective_stiffness_reference`` (1) [Nm/rad]. ``online=False`` computes K_imp once from the
         nominal K_mech = eps K_eff (no correction), for comparison.
         Outputs: ``motor_torque`` (2) [Nm]; ``stiffness`` (3) = ``[K_imp, K_mech, K_eff (8.1)]`` [Nm/rad].
@@ -103,7 +103,7 @@ def StiffnessCorrectedImpedance_(T):
             if min(self.motor_gains) <= 0:
                 raise ValueError(f"StiffnessCorrectedImpedance: motor_gains = {motor_gains} must be > 0")
             self.DeclareVectorInputPort("state", 6)
-            self.DeclareVectorInputPort("link_angle_reference", 1)
+            self.DeclareVectorInputPort("joint_angle_reference", 1)
             self.DeclareVectorInputPort("effective_stiffness_reference", 1)
             t = {self.all_input_ports_ticket()}
             self.DeclareVectorOutputPort("motor_torque", 2, self._calc_u, prerequisites_of_calc=t)

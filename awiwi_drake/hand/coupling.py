@@ -61,7 +61,7 @@ from .wrist import wrist_jacobian, wrist_params, wrist_tendon_lengths
 
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
            "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
-           "coupling_selection", "index_coupling_matrix", "WristCoupling"]
+           "coupling_selection", "dof_selection", "index_coupling_matrix", "WristCoupling"]
 
 
 def _is_float_array(q) -> bool:
@@ -419,6 +419,19 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
                              f"{c.num_tendons}, but the global tendon order (parameters.hand.TENDON_SLICES, "
                              f"Table 6.2 rows) puts them at {TENDON_SLICES[f].start + 1}-{TENDON_SLICES[f].stop}")
     return c
+
+
+def dof_selection(coupling) -> np.ndarray:
+    """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
+    coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
+    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
+    blocks = [c.dof_selection for c in parts.values()]
+    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
+    i = j = 0
+    for blk in blocks:
+        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
+        i, j = i + blk.shape[0], j + blk.shape[1]
+    return S
 
 
 def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:

@@ -49,7 +49,7 @@ from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
-from .coupling import HandCoupling, finger_coupling
+from .coupling import HandCoupling, dof_selection, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
 from .systems import GuideFriction, tendon_bending_angles
 
@@ -262,18 +262,6 @@ def _wrist_rows(parts) -> np.ndarray:
     return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
 
 
-def _selection(coupling) -> np.ndarray:
-    """``S`` with ``q_plant = S q_dof`` over all parts."""
-    parts = coupling.parts if isinstance(coupling, HandCoupling) else {"f": coupling}
-    blocks = [c.dof_selection for c in parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
-
-
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
                  external_torque, wrist_angle, hysteresis=False):
     """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
@@ -281,7 +269,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
     f0 = p.pretension if pretension is None else float(pretension)
     if not f0 > 0:
         raise ValueError(f"{name}: pretension = {f0} must be > 0 [N]")
-    S = _selection(coupling)
+    S = dof_selection(coupling)
     if joint_angles is None:
         q = np.zeros(n)
     else:

@@ -45,7 +45,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import LinearSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from .coupling import LinearFingerCoupling, ThumbCoupling, reduced_coupling_matrix
+from .coupling import LinearFingerCoupling, ThumbCoupling, dof_selection, reduced_coupling_matrix
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
            "estimate_thumb", "noise_error_bound",
@@ -263,7 +263,7 @@ def LinkPositionEstimator_(T):
                                           stacklevel=2)
             if T is not float or self.refine:  # one Gauss-Newton step (in the scalar type: carries the derivatives)
                 r = dh - (self.coupling.h(q_new) - self._h0)
-                S = _selection_of(self.coupling)
+                S = dof_selection(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
                 q_new = q_new + S @ (np.linalg.pinv(PS) @ r)
             discrete_state.set_value(0, q_new)
@@ -277,18 +277,6 @@ LinkPositionEstimator = LinkPositionEstimator_[None]
 def _value(v) -> float:
     return float(v) if isinstance(v, (float, int, np.floating)) else float(v.value()) \
         if hasattr(v, "value") else float(v.Evaluate())
-
-
-def _selection_of(coupling) -> np.ndarray:
-    parts, js, _ = _estimator_parts(coupling)
-    n = coupling.num_joints
-    blocks = [(js[k], c.dof_selection) for k, c in parts.items()]
-    S = np.zeros((n, sum(b.shape[1] for _, b in blocks)))
-    col = 0
-    for sl, b in blocks:
-        S[sl, col:col + b.shape[1]] = b
-        col += b.shape[1]
-    return S
 
 
 @dataclass

@@ -53,7 +53,7 @@ def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segm
     b.Connect(plant.GetOutputPort("state"), ctrl.GetInputPort("state"))
     b.Connect(ctrl.GetOutputPort("motor_torque"), plant.GetInputPort("motor_torque"))
     ref = b.AddNamedSystem("reference", ConstantVectorSource([0.0]))
-    b.Connect(ref.get_output_port(), ctrl.GetInputPort("link_angle_reference"))
+    b.Connect(ref.get_output_port(), ctrl.GetInputPort("joint_angle_reference"))
     b.ExportInput(ctrl.GetInputPort("effective_stiffness_reference"), "effective_stiffness_reference")
     b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
     b.ExportOutput(plant.GetOutputPort("state"), "state")

@@ -48,12 +48,12 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     w = 2 * math.pi * frequency
     # the reference and its four derivatives: A sin(w t), A w cos(w t), -A w^2 sin(w t), ...
     ref = PerEntry([Sine(amplitude * w ** k, frequency, phase=k * math.pi / 2) for k in range(5)])
-    res = simulate(diagram, ctx, t_final, inputs={"link_angle_reference": ref},
+    res = simulate(diagram, ctx, t_final, inputs={"joint_angle_reference": ref},
                    log=("state", "motor_torque", "controller_lyapunov", "controller_external_torque_estimate",
-                        "link_friction", "link_angle_reference"), log_period=dt, max_step=dt, accuracy=1e-6)
+                        "link_friction", "joint_angle_reference"), log_period=dt, max_step=dt, accuracy=1e-6)
     F = res["link_friction"][:, 0]
     return BacksteppingRun("with compensation" if compensate else "without compensation", res.t, res["state"],
-                           res["motor_torque"], res["controller_lyapunov"][:, 0], res["link_angle_reference"][:, 0],
+                           res["motor_torque"], res["controller_lyapunov"][:, 0], res["joint_angle_reference"][:, 0],
                            F, dict(friction=F, friction_estimate=res["controller_external_torque_estimate"][:, 0]))
 
 

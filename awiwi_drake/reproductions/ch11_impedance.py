@@ -38,12 +38,12 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=RATE)
     op = r.operating_point()
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
-    log = simulate(loop, ctx, t_final, inputs={"link_angle_reference": reference_schedule([(0.02, step)], 0.0),
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.02, step)], 0.0),
                                                "external_torque": 0.0},
-                   log=("link_angle", "link_angle_reference"), log_period=DT)
-    m = step_metrics(log.t, log["link_angle"][:, 0], 0.0, step, 0.02)
-    return dict(t=log.t, link_angle=log["link_angle"][:, 0], reference=log["link_angle_reference"][:, 0], **m)
+                   log=("joint_angle", "joint_angle_reference"), log_period=DT)
+    m = step_metrics(log.t, log["joint_angle"][:, 0], 0.0, step, 0.02)
+    return dict(t=log.t, joint_angle=log["joint_angle"][:, 0], reference=log["joint_angle_reference"][:, 0], **m)
 
 
 def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint-rig",
@@ -65,11 +65,11 @@ def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | No
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=RATE)
     op = r.operating_point()
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"link_angle_reference": 0.0})
-    log = simulate(loop, ctx, duration, inputs={"link_angle_reference": Chirp(amplitude, f_start, f_stop, duration),
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
+    log = simulate(loop, ctx, duration, inputs={"joint_angle_reference": Chirp(amplitude, f_start, f_stop, duration),
                                                 "external_torque": 0.0},
-                   log=("link_angle", "link_angle_reference"), log_period=DT)
-    f, g = gain_diagram(log.t, log["link_angle_reference"][:, 0], log["link_angle"][:, 0], f_start, f_stop)
+                   log=("joint_angle", "joint_angle_reference"), log_period=DT)
+    f, g = gain_diagram(log.t, log["joint_angle_reference"][:, 0], log["joint_angle"][:, 0], f_start, f_stop)
     i = int(np.argmax(g))
     return dict(freq=f, gain=g, resonance_hz=float(f[i]), peak_gain=float(g[i]))
 
@@ -94,8 +94,8 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=None)
     op = r.operating_point()
-    ctx = loop.create_context(state=op.state, references={"link_angle_reference": 0.0})
-    lin = linearize(loop.diagram, context=ctx, input="link_angle_reference", outputs=("link_angle",))
+    ctx = loop.create_context(state=op.state, references={"joint_angle_reference": 0.0})
+    lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
     g = np.abs(lin.bode(omega=2 * np.pi * freqs).response)
     i = int(np.argmax(g))
     return dict(freq=freqs, gain=g, resonance_hz=float(freqs[i]), peak_gain=float(g[i]), eigenvalues=lin.poles)

@@ -57,7 +57,7 @@ def lqr_trajectories(r_values: Sequence[float] = (1e-4, 1e-2, 1.0), *, x0=(0.3, 
         rig = flexible_joint_rig(backend="python")
         design = design_lqr(rig, params, r=r)
         loop = closed_loop(rig, lqr_controller(rig, params, r=r), rate_hz=None)
-        ctx = loop.create_context(state=np.asarray(x0, float), references={"link_angle_reference": 0.0})
+        ctx = loop.create_context(state=np.asarray(x0, float), references={"joint_angle_reference": 0.0})
         res = simulate(loop.diagram, ctx, t_final, log=("state", "motor_torque"), max_step=1e-4, accuracy=1e-7)
         out[r] = LqrRun(float(r), res.t, res["state"], res["motor_torque"][:, 0], design.K, design.S, design.Q,
                         design.R)

@@ -25,7 +25,7 @@ __all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
 
 @dataclass
 class SdreRun:
-    """One SDRE (or frozen-gain) run: the tracked output (``tendon_force`` [N] or ``link_angle`` [rad])
+    """One SDRE (or frozen-gain) run: the tracked output (``tendon_force`` [N] or ``joint_angle`` [rad])
     and its reference, the controller gain row(s), the command torque [Nm] and the rig's torque limit."""
 
     label: str
@@ -98,11 +98,11 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     loop = closed_loop(rig, joint_sdre_controller(rig, p, fixed=fixed), rate_hz=RATE)
     op = rig.operating_point(external_torque=external_torque)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                              references={"link_angle_reference": 0.0},
+                              references={"joint_angle_reference": 0.0},
                               disturbances={"external_torque": external_torque})
-    log = simulate(loop, ctx, t_final, inputs={"link_angle_reference": reference_schedule([(0.1, target)], 0.0),
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.1, target)], 0.0),
                                                "external_torque": external_torque},
-                   log=("link_angle", "controller_gain", "motor_torque", "link_angle_reference"), log_period=DT)
-    return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "link_angle", "rad",
-                   log.t, log["link_angle"][:, 0], log["link_angle_reference"][:, 0], log["controller_gain"],
+                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
+    return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "joint_angle", "rad",
+                   log.t, log["joint_angle"][:, 0], log["joint_angle_reference"][:, 0], log["controller_gain"],
                    log["motor_torque"][:, 0], rig.torque_limit)

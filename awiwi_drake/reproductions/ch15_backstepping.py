@@ -40,7 +40,7 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "antagonistic_step", "antagonistic_sine",
     "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
-    "plot_link_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
+    "plot_joint_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
 ]
 
 
@@ -129,7 +129,7 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
              extra_outputs: Sequence[str] = ()) -> BacksteppingRun:
     """One closed-loop run through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` as a :class:`BacksteppingRun`.
 
-    ``inputs`` maps exported inputs (``link_angle_reference``, ``external_torque``) to schedules
+    ``inputs`` maps exported inputs (``joint_angle_reference``, ``external_torque``) to schedules
     (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0.
     """
     d = loop.diagram
@@ -304,7 +304,7 @@ def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: 
     loop = closed_loop(rig, impedance_controller(rig, gains, **kw), rate_hz=None)
     ctx = loop.create_context(state=rig.operating_point().state)
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
-                    output_port_index=loop.diagram.GetOutputPort("link_angle").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index(),
                     equilibrium_check_tolerance=1e-6)
     x_ss = -np.linalg.solve(lin.A(), lin.B() @ [disturbance])
     return float((lin.C() @ x_ss)[0])
@@ -370,7 +370,7 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
     ref = _sine_reference(amplitude, frequency, offset)
     ctrl = impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0)
     loop = closed_loop(rig, ctrl, rate_hz=None)
-    op = rig.operating_point(pretension=g.pretension, link_angle=offset)
+    op = rig.operating_point(pretension=g.pretension, joint_angle=offset)
     return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
                     inputs={REFERENCE_PORT: ref if feedforward else PerEntry(ref.entries[:1])}, dt=dt, max_step=dt,
                     label="backstepping sine", extra_outputs=("tendon_force",))
@@ -417,7 +417,7 @@ def _time_series(runs, signal, ylabel, *, ax, title, log=False, reference=False)
     return fig, ax
 
 
-def plot_link_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
+def plot_joint_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
     """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
     return _time_series(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
 

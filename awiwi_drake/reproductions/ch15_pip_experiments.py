@@ -107,9 +107,9 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     ctrl = _controller(controller, rig)
     loop = closed_loop(rig, ctrl, rate_hz=RATE_HZ)
     q0 = float(ref.value(0.0)[0])
-    op = rig.operating_point(pretension=pretension, link_angle=q0)
+    op = rig.operating_point(pretension=pretension, joint_angle=q0)
     loop_ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                                   references={"link_angle_reference": q0})   # before embedding
+                                   references={"joint_angle_reference": q0})   # before embedding
     fp = _friction_params() if friction else _friction_params().replace(coulomb=0.0, static=0.0, viscous=0.0)
     diagram, cl, fr = with_link_friction(loop.diagram, fp)
     ctx = diagram.CreateDefaultContext()
@@ -120,12 +120,12 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
         cl_ctx.SetDiscreteState(i, loop_ctx.get_discrete_state(i).CopyToVector())
     if loop_ctx.num_abstract_states():
         raise RuntimeError("pip_experiment: the loop has abstract state; copy it too")
-    size = diagram.GetInputPort("link_angle_reference").size()
+    size = diagram.GetInputPort("joint_angle_reference").size()
     # error control (steps near 0.1 ms): the stick-slip friction is stiff for a fixed 3 kHz step
-    res = simulate(diagram, ctx, t_end, inputs={"link_angle_reference": PerEntry(ref.entries[:size])},
-                   log=("link_angle", "link_angle_reference", "applied_torque", "link_friction", "tendon_force"),
+    res = simulate(diagram, ctx, t_end, inputs={"joint_angle_reference": PerEntry(ref.entries[:size])},
+                   log=("joint_angle", "joint_angle_reference", "applied_torque", "link_friction", "tendon_force"),
                    log_period=dt, mode="error_controlled", max_step=1e-4, accuracy=1e-6)
-    return PipRun(controller, test, res.t, res["link_angle"][:, 0], res["link_angle_reference"][:, 0],
+    return PipRun(controller, test, res.t, res["joint_angle"][:, 0], res["joint_angle_reference"][:, 0],
                   res["applied_torque"], res["link_friction"][:, 0], res["tendon_force"])
 
 

@@ -39,12 +39,12 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     from awiwi_drake.plotting import _plt
 
     plt = _plt()
-    names = ["link_angle", "tendon_force", "applied_torque"]
-    labels = dict(link_angle="link angle [rad]", tendon_force="tendon force [N]",
+    names = ["joint_angle", "tendon_force", "applied_torque"]
+    labels = dict(joint_angle="link angle [rad]", tendon_force="tendon force [N]",
                   applied_torque="motor torque [Nm]")
     kw = dict(labels=labels,
-              reference=dict(link_angle=(t_ref, refs["link_reference"]), tendon_force=(t_ref, refs["pretension"])),
-              components=dict(link_angle=["link angle"], tendon_force=["tendon 1", "tendon 2"],
+              reference=dict(joint_angle=(t_ref, refs["link_reference"]), tendon_force=(t_ref, refs["pretension"])),
+              components=dict(joint_angle=["link angle"], tendon_force=["tendon 1", "tendon 2"],
                               applied_torque=["motor 1 applied", "motor 2 applied"]),
               overlay=dict(applied_torque=(result["motor_torque_command"], ["motor 1 commanded", "motor 2 commanded"])),
               limits=dict(applied_torque=torque_limit) if torque_limit else None)
@@ -92,7 +92,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
     diagram = loop.diagram
     ctx = loop.create_context(rig.operating_point(pretension=scenario.f_start))
     result = simulate(diagram, ctx, scenario.t_final,
-                      log=("link_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
+                      log=("joint_angle", "tendon_force", "motor_torque", "motor_torque_command", "applied_torque"),
                       monitors=rig_monitors(rig), max_step=1.0 / CONTROL_RATE_HZ)
     fig = demo_figure(result, t_ref, refs, scenario, torque_limit=rig.torque_limit)
     fig.savefig(out / "demo_joint_rig.png", dpi=110, bbox_inches="tight")
@@ -107,7 +107,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
     ax.set_title("joint-rig poles versus pretension (Linearize)")
     fig.savefig(out / "poles_vs_pretension.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
-    q_end = float(result["link_angle"][-1, 0])
+    q_end = float(result["joint_angle"][-1, 0])
     f_end = result["tendon_force"][-1]
     lines = [
         f"demo: joint_rig ({backend} backend) simulated {scenario.t_final} s; outputs in {out}/",

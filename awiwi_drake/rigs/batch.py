@@ -64,7 +64,7 @@ def batched_joint_rig(num_copies: int, *, params: JointRigParams | None = None) 
     sys_ = b.AddNamedSystem("joint_rigs", TendonDriveBatch_[float](model, num_copies))
     for name in ("motor_torque", "external_torque"):
         b.ExportInput(sys_.GetInputPort(name), name)
-    for name in ("state", "link_angle", "tendon_force"):
+    for name in ("state", "joint_angle", "tendon_force"):
         b.ExportOutput(sys_.GetOutputPort(name), name)
     diagram = b.Build()
     diagram.set_name(f"joint_rig_x{num_copies}")

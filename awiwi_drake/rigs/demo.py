@@ -16,7 +16,7 @@ from awiwi_drake.rigs.base import Rig
 __all__ = ["motor_references"]
 
 
-def motor_references(rig: Rig, t: np.ndarray, pretension: np.ndarray, link_angle: np.ndarray):
+def motor_references(rig: Rig, t: np.ndarray, pretension: np.ndarray, joint_angle: np.ndarray):
     """Motor-angle set points and feedforward torques realising pretension and link angle.
 
     Returns ``(theta_ref (2, T), torque_ff (2, T))`` for the joint rig.
@@ -24,6 +24,6 @@ def motor_references(rig: Rig, t: np.ndarray, pretension: np.ndarray, link_angle
     p = rig.params
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
     x = np.asarray(rig.spring.inverse_force(np.asarray(pretension, dtype=float)), dtype=float)
-    theta = np.stack([(x + rq * link_angle) / r, (x - rq * link_angle) / r])
+    theta = np.stack([(x + rq * joint_angle) / r, (x - rq * joint_angle) / r])
     ff = np.stack([r * np.asarray(pretension), r * np.asarray(pretension)])
     return theta, ff

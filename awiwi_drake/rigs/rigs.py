@@ -112,7 +112,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         rig = b.AddNamedSystem("tendon_drive_and_link", TendonDrive_[float](model))
         b.ExportInput(rig.GetInputPort("motor_torque"), "motor_torque")
         b.ExportInput(rig.GetInputPort("external_torque"), "external_torque")
-        for port, nm in (("state", "state"), ("link_angle", "link_angle"), ("link_velocity", "link_velocity"),
+        for port, nm in (("state", "state"), ("joint_angle", "joint_angle"), ("joint_velocity", "joint_velocity"),
                          ("generalized_force", "joint_torque"), ("motor_angle", "motor_angle"),
                          ("motor_velocity", "motor_velocity"), ("tendon_force", "tendon_force"),
                          ("tendon_stiffness", "tendon_stiffness"), ("applied_torque", "applied_torque")):
@@ -140,8 +140,8 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
     b.Connect(plant.get_state_output_port(), state.get_input_port(0))
     b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
     b.ExportOutput(state.get_output_port(), "state")
-    b.ExportOutput(split.get_output_port(0), "link_angle")
-    b.ExportOutput(split.get_output_port(1), "link_velocity")
+    b.ExportOutput(split.get_output_port(0), "joint_angle")
+    b.ExportOutput(split.get_output_port(1), "joint_velocity")
     b.ExportOutput(d.GetOutputPort("generalized_force"), "joint_torque")
     for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
         b.ExportOutput(d.GetOutputPort(nm), nm)
@@ -160,12 +160,12 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     The motor has no (3.8) friction here: (12.8) uses the linear damping d_theta.
 
     Ports: in ``motor_torque`` (1), ``external_torque`` (1) [Nm]; out ``state`` =
-    [q, qdot, theta, thetadot] (the order of (12.10)), ``link_angle``,
-    ``link_velocity``, ``motor_angle``, ``motor_velocity``, ``tendon_force`` (=
+    [q, qdot, theta, thetadot] (the order of (12.10)), ``joint_angle``,
+    ``joint_velocity``, ``motor_angle``, ``motor_velocity``, ``tendon_force`` (=
     spring torque tau_s [Nm]), ``tendon_stiffness`` [Nm/rad], ``joint_torque``,
     ``applied_torque``.
 
-    Operating point keys: ``link_angle`` [rad], ``external_torque`` [Nm].
+    Operating point keys: ``joint_angle`` [rad], ``external_torque`` [Nm].
     """
     p = _check_params(params, FlexibleJointParams, "flexible_joint_rig")
     if spring is not None:  # keyword shortcut for params.spring_model
@@ -191,15 +191,15 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
         hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
         motor_pulley_radius=1.0)
 
-    def equilibrium(link_angle: float = 0.0, external_torque: float = 0.0) -> OperatingPoint:
+    def equilibrium(joint_angle: float = 0.0, external_torque: float = 0.0) -> OperatingPoint:
         tau_s = -float(external_torque)
         delta = float(np.ravel(law.inverse_force(np.array([tau_s])))[0]) if spring == "nonlinear" else tau_s / p.stiffness
-        state = np.array([link_angle, 0.0, link_angle + delta, 0.0] + ([0.0] if drive.hysteresis else []))
+        state = np.array([joint_angle, 0.0, joint_angle + delta, 0.0] + ([0.0] if drive.hysteresis else []))
         if finite_limit and abs(tau_s) > p.torque_limit:
             raise ValueError(f"flexible_joint_rig: external_torque = {external_torque} Nm needs a motor torque "
                              f"beyond torque_limit = {p.torque_limit} Nm")
         return OperatingPoint(state, np.array([tau_s]), np.array([float(external_torque)]),
-                              joint_angle=np.array([link_angle]), spring_torque=tau_s,
+                              joint_angle=np.array([joint_angle]), spring_torque=tau_s,
                               joint_stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0]))
 
     return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
@@ -214,12 +214,12 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     ``m qdd = r_q (f1 - f2) - d_q qd + tau_ext``, motors per (3.5).
 
     Ports: in ``motor_torque`` (2), ``external_torque`` (1) [Nm]; out ``state`` =
-    [q, qdot, theta1, theta2, omega1, omega2], ``link_angle``, ``link_velocity``,
+    [q, qdot, theta1, theta2, omega1, omega2], ``joint_angle``, ``joint_velocity``,
     ``motor_angle`` (2), ``motor_velocity`` (2), ``tendon_force`` (2) [N],
     ``tendon_stiffness`` (2) [N/m], ``joint_torque`` [Nm], ``applied_torque`` (2).
 
     Operating point keys: ``pretension`` [N] (default ``params.pretension``),
-    ``link_angle`` [rad], ``external_torque`` [Nm]. The joint stiffness there is
+    ``joint_angle`` [rad], ``external_torque`` [Nm]. The joint stiffness there is
     ``r_q^2 (k1 + k2)``.
     """
     p = _check_params(params, JointRigParams, "joint_rig")
@@ -230,7 +230,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
         damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis)
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
 
-    def equilibrium(pretension: float | None = None, link_angle: float = 0.0,
+    def equilibrium(pretension: float | None = None, joint_angle: float = 0.0,
                     external_torque: float = 0.0) -> OperatingPoint:
         f0 = p.pretension if pretension is None else float(pretension)
         f = np.array([f0 - external_torque / (2 * rq), f0 + external_torque / (2 * rq)])
@@ -241,13 +241,13 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
             raise ValueError(f"joint_rig: pretension {f0} N cannot hold external_torque {external_torque} Nm "
                              f"without slack (tendon forces would be {f} N)")
         x = np.asarray(spring.inverse_force(f), dtype=float)
-        theta = np.array([(x[0] + rq * link_angle) / r, (x[1] - rq * link_angle) / r])
+        theta = np.array([(x[0] + rq * joint_angle) / r, (x[1] - rq * joint_angle) / r])
         u = r * f - motor_ripple_torque(theta, p.motor)
         _check_torque("joint_rig", u, p.motor, f"pretension = {f0} N")
-        state = np.concatenate([[link_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
+        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
         k = np.asarray(spring.stiffness(x), dtype=float)
         return OperatingPoint(state, u, np.array([float(external_torque)]), pretension=f0,
-                              joint_angle=np.array([link_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
+                              joint_angle=np.array([joint_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
                               joint_stiffness=float(rq ** 2 * k.sum()))
 
     return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,

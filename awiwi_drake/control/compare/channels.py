@@ -58,7 +58,7 @@ def joint_channels(loop: ClosedLoop) -> JointChannels | None:
     if (coupling is None or not getattr(rig, "joint_names", None) or not loop.tracked_outputs
             or loop.tracked_outputs[0] != "joint_angle"):
         return None
-    from awiwi_drake.control.chain import dof_selection
+    from awiwi_drake.hand.coupling import dof_selection
     S = dof_selection(coupling)
     parts = coupling.parts if hasattr(coupling, "parts") else {rig.params.finger_name: coupling}
     joint_names = rig.joint_names

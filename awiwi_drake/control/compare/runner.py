@@ -82,7 +82,7 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: flo
     """A context of ``loop`` settled at the constant ``reference`` (time reset to 0).
 
     The start is the rig's operating point for the tracked output at ``reference``
-    (``tendon_force=...``, ``link_angle=...``; else its default one) unless
+    (``tendon_force=...``, ``joint_angle=...``; else its default one) unless
     ``state`` is given.
     """
     if state is None and hasattr(loop.rig, "operating_point"):
