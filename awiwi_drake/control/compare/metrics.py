@@ -37,7 +37,8 @@ class Metrics:
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
-    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness
+    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
+    #                                      force distribution out of bounds (finger/hand chain)
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
