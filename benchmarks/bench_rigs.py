@@ -23,7 +23,7 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 * ``finger_index_3khz``: the index finger under the joint-space motor PD.
 * ``hand_3khz``: the whole hand (19 DoF, 38 tendons, wrist input at 0) under the
   joint PD, with the thesis's physics on (motor friction and ripple, guide friction,
-  spring hysteresis) and, beside it, off.
+  spring hysteresis), with ripple and guide friction only, and with both off.
 * ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
   (one vectorised discrete system at 3 kHz), rig-seconds per CPU-second.
 * ``mujoco_callback`` / ``mujoco_linear``: the same antagonistic joint (two motor
@@ -192,6 +192,12 @@ def case_hand_3khz(seconds, repeats):
     out = {}
     cpu, wall, _ = _hand_like("hand", seconds, repeats)
     out.update(hand_3khz_physics_off_rtf=cpu, hand_3khz_physics_off_wall_rtf=wall)
+    part = HandRigParams().with_physics(ripple=True, guide_friction=True)
+    try:
+        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=part)
+        out.update(hand_3khz_ripple_guide_friction_rtf=cpu, hand_3khz_ripple_guide_friction_wall_rtf=wall)
+    except (FloatingPointError, RuntimeError) as exc:
+        out.update(hand_3khz_ripple_guide_friction_rtf=None, hand_3khz_ripple_guide_friction_note=str(exc))
     on = HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)
     try:
         cpu, wall, _ = _hand_like("hand", seconds, repeats, params=on)

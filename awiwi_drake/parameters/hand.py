@@ -327,10 +327,11 @@ class FingerDriveParams(Parameters):
     for all, ``tendon_springs`` overrides tendons one by one) and the tendon's own elasticity
     ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``, on).
     ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs. Guide friction,
-    ripple and hysteresis are off by default: with them on, the finger links (7.2e-7 kg m^2) see
-    the tanh-regularised guide friction as ~2000 N s/m per tendon and the Dahl hysteresis as a
-    2e5 N/m presliding spring, which makes the default fixed-step RK3 at the 3 kHz control
-    period diverge (README "Backends, and speed").
+    ripple and hysteresis are off by default. Measured (index finger, joint PD, fixed-step RK3 at
+    the 3 kHz control period): ripple or guide friction alone run; the Dahl hysteresis (a 2e5 N/m
+    presliding spring on the 7.2e-7 kg m^2 links) makes the step diverge; and at rest the
+    tanh-regularised guide friction linearises to ~2000 N s/m per tendon, which overdamps the
+    finger modes that the linear studies (poles vs pretension) rely on.
     """
 
     motor: MotorParams = field(default_factory=MotorParams)
@@ -340,7 +341,7 @@ class FingerDriveParams(Parameters):
                               source="Fig 15.26: f_pre = 20 N (as the joint rig)",
                               doc="tendon force of every tendon at the default operating point")
     guide_friction: bool = param(False, unit="-",
-                                 source="chosen: off by default (stiff for explicit RK3 at 3 kHz, see the class doc)")
+                                 source="chosen: off by default (it overdamps the linearised finger, see the class doc)")
     capstan_friction: bool = param(False, unit="-",
                                    source=("chosen: False = speed-independent (4.1); True = tension-"
                                            "proportional capstan law (ch. 9: 10-50 % of the force)"))
