@@ -266,6 +266,10 @@ def test_library_rejects_nonsense_with_value_errors():
         (lambda: MotorParams(inertia=1e30), "MotorParams.inertia = 1e+30 is implausible"),
         (lambda: JointRigParams().with_overrides(["pretension=3"]), "expected a mapping"),
         (lambda: joint_rig().operating_point(joint_angle=float("nan")), "joint_angle = nan must be finite"),
+        # a key the rig does not have (the link rigs call it joint_angle): named with the known keys,
+        # not a TypeError from the rig's internal equilibrium function
+        (lambda: joint_rig().operating_point(link_angle=0.1),
+         "joint-rig.operating_point: unknown key 'link_angle'; known: pretension, joint_angle, external_torque"),
     ]
     for fn, message in cases:
         with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("+", r"\+")):

@@ -47,3 +47,19 @@ def test_compare_list(capsys):
     assert main(["compare", "--rig", "tendon-rig", "--list"]) == 0
     out = capsys.readouterr().out
     assert [line.split()[0] for line in out.splitlines()] == ["tendon-pd", "tendon-scheduled", "tendon-sdre"]
+
+
+def test_metrics_markdown_tables_have_one_cell_per_column_also_when_every_row_diverged():
+    """A test whose rows all diverged has no numeric column: the header, the delimiter row and every
+    row must still have the same number of cells, else the Markdown is not a table."""
+    from awiwi_drake.control.compare.metrics import Metrics, MetricsTable
+    t = MetricsTable([Metrics("pd", "step", joint="link", status="diverged: state[1] = 6e6"),
+                      Metrics("lqr", "sine", joint="link", rise_time=0.01, gain=0.9)])
+    md = t.to_markdown(ref_unit="rad")
+    for block in md.split("### ")[1:]:
+        table = [ln for ln in block.splitlines() if ln.startswith("|")]
+        assert len(table) == 3
+        cells = [ln.count("|") - 1 for ln in table]
+        assert len(set(cells)) == 1, (block, cells)
+    assert "| pd | link | diverged: state[1] = 6e6 |" in md
+    assert "| controller | joint | rise_time [s] | gain [rad/rad] | status |" in md

@@ -85,9 +85,10 @@ def gain_z(rp_before: np.ndarray, rp_after: np.ndarray) -> float:
 
 
 def ripple_orders_from_spectrum(st: "ResidualState", bounds: CatalogBounds) -> list:
-    """The ``bounds.ripple_candidates`` strongest lines (orders 1..``ripple_order_max``)
-    of the current residual's cycles-per-revolution spectrum, summed over the signals,
-    against every motor angle."""
+    """Ripple orders to screen: the expected ``bounds.ripple_orders`` plus
+    ``bounds.ripple_candidates`` other lines (orders 1..``ripple_order_max``) of the current
+    residual's cycles-per-revolution spectrum (summed over the signals, against every
+    motor angle): half the strongest, half the most prominent over their neighbours."""
     eng = st.eng
     ny = len(eng.out_names)
     idx = (eng.starts[st.W][:, None] + 1 + np.arange(eng.L)[None, :]).ravel()
@@ -95,7 +96,16 @@ def ripple_orders_from_spectrum(st: "ResidualState", bounds: CatalogBounds) -> l
     orders = np.arange(1, int(bounds.ripple_order_max) + 1)
     amps = cpr_spectrum(R, [eng.xhat[i][idx] for i in range(eng.nom.num_motors)], orders)
     power = (amps ** 2).sum(axis=1)
-    return [float(o) for o in orders[np.argsort(-power)[:bounds.ripple_candidates]]]
+    # half by power, half by prominence over the neighbouring orders (+-10): a coloured residual
+    # fills the low orders with power, a weak gear line at 100/rev stands out only locally
+    local = np.array([np.median(power[max(0, i - 10):i + 11]) for i in range(len(power))])
+    prominence = power / np.maximum(local, 1e-300)
+    expected = [float(o) for o in bounds.ripple_orders if o <= bounds.ripple_order_max]
+    fresh = [i for i in range(len(orders)) if float(orders[i]) not in expected]
+    k = bounds.ripple_candidates
+    picked = sorted(fresh, key=lambda i: -power[i])[:(k + 1) // 2]
+    picked += [i for i in sorted(fresh, key=lambda i: -prominence[i]) if i not in picked][:k - len(picked)]
+    return expected + [float(orders[i]) for i in picked]
 
 
 def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBounds, ripple_orders=()):

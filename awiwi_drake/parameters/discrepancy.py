@@ -148,11 +148,18 @@ class CatalogBounds(Parameters):
         source="chosen: ripple orders are read from the residual's cycles-per-revolution spectrum up "
                "to 300 (motor-side orders of a 1:100 gear, Ch. 3, are multiples of 100)",
         doc="highest ripple order")
+    ripple_orders: tuple = param(
+        (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 100.0, 200.0, 300.0), unit="cycles/rev", low=1.0,
+        source="Ch. 3: output bearing (1 /rev and its harmonics) and motor bearing and gear "
+               "(100 /rev at the output, gear 1:100, and its harmonics)",
+        doc="ripple orders always screened (expected lines)")
     ripple_candidates: int = param(
-        6, unit="-", low=1, high=50,
-        source="chosen: the six strongest lines of the residual's cycles-per-revolution spectrum are "
-               "screened (two are fitted); the spectrum of a coloured residual has a few dominant lines",
-        doc="ripple orders screened per step")
+        4, unit="-", low=0, high=50,
+        source="chosen: four more lines from the residual's cycles-per-revolution spectrum (two by "
+               "power, two by prominence over their neighbours) are screened besides the expected "
+               "orders; a 100 /rev torque line is filtered by the motor-spring dynamics and need not "
+               "stand out in the output residual, so the expected orders stay",
+        doc="ripple orders screened from the spectrum per step")
     ripple_amplitude_max: float = param(
         1.0, unit="Nm", low=0.0,
         source="chosen: Fig 3.4b ripple ~ 0.2 A p-p of ~0.5 A mean, i.e. well below the "

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -146,6 +147,14 @@ class Rig:
         Every given value must be finite (NaN/inf raise a ``ValueError`` naming the
         key), and so must the resulting state and torques.
         """
+        params = inspect.signature(self.equilibrium).parameters
+        if not any(q.kind is inspect.Parameter.VAR_KEYWORD for q in params.values()):
+            known = [n for n, q in params.items()
+                     if q.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)]
+            for key in kwargs:
+                if key not in known:
+                    raise ValueError(f"{self.name}.operating_point: unknown key {key!r}; known: "
+                                     f"{', '.join(known) if known else '(none)'}")
         for key, value in kwargs.items():
             if value is None or isinstance(value, str):
                 continue

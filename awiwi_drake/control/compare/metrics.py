@@ -37,7 +37,8 @@ class Metrics:
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
-    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness
+    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
+    #                                      force distribution out of bounds (finger/hand chain)
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
@@ -99,12 +100,13 @@ class MetricsTable:
             rows = [r for r in self.rows if r.test == test]
             cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            lines.append("| controller | joint | " + " | ".join(f"{c} [{unit(c)}]" for c in cols) + " | status |")
-            lines.append("|---" * (len(cols) + 3) + "|")
+            header = ["controller", "joint", *(f"{c} [{unit(c)}]" for c in cols), "status"]
+            lines.append("| " + " | ".join(header) + " |")
+            lines.append("|---" * len(header) + "|")
             for r in rows:
                 status = f"{r.status}: {r.flags}" if r.flags else r.status
-                lines.append(f"| {r.controller} | {r.joint} | " + " | ".join(_fmt(getattr(r, c)) for c in cols)
-                             + f" | {status} |")
+                cells = [r.controller, r.joint, *(_fmt(getattr(r, c)) for c in cols), status]
+                lines.append("| " + " | ".join(cells) + " |")
             lines.append("")
         return "\n".join(lines)
 

@@ -42,6 +42,9 @@ __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_
 TESTS = ("step", "sine", "disturbance", "sweep")
 
 
+# output of a loop whose controller contains the force distribution (ch. 7): 0 ok, 1 infeasible, 2 bounds
+DISTRIBUTION_STATUS = "controller_distribution_status"
+
 def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
     """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
     kind = rig_kind(rig)
@@ -237,6 +240,8 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             log.append(applied)
         if loop.diagram.HasOutputPort("tendon_force"):
             log.append("tendon_force")
+        if loop.diagram.HasOutputPort(DISTRIBUTION_STATUS):
+            log.append(DISTRIBUTION_STATUS)
         res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                        max_step=p.max_step, accuracy=1e-6)
         t = res.t - res.t[0]
@@ -281,6 +286,13 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 for k_, v in sweep_metrics(f, g).items():
                     setattr(row, k_, v)
             flag_run(row, p)
+            if DISTRIBUTION_STATUS in res:       # the chain's force distribution, one status per finger
+                finger = list(dict.fromkeys(ch.fingers)).index(ch.fingers[j])
+                bad = float(np.mean(res[DISTRIBUTION_STATUS][:, finger] != 0.0))
+                if bad > 0.0:
+                    row.flags = "; ".join(f for f in (row.flags, f"force distribution out of bounds "
+                                                                 f"{100 * bad:.0f} %") if f)
+                    row.status = "flagged" if row.status == "ok" else row.status
     meta["applied_torque"] = runs_a
     return TestRun(controller, test, runs_t, runs_r, runs_y, runs_u, runs_w, runs_x, meta), rows
 
