@@ -145,8 +145,15 @@ def test_utf8_bom_and_crlf_are_accepted(good):
 
 
 def test_cli_rig_spelling_in_dataset_json(good):
-    _edit_json(good, lambda m: m.update(rig="joint-rig"))
+    """One spelling per rig: the written JSON and the messages use the CLI name ('joint-rig'); the
+    short internal name is still read."""
+    assert json.loads(good.with_suffix(".json").read_text())["rig"] == "joint-rig"
     assert load_dataset(good).rig == "joint"
+    _edit_json(good, lambda m: m.update(rig="joint"))
+    assert load_dataset(good).rig == "joint"
+    _edit_json(good, lambda m: m["parameters"].update(bogus=1.0))
+    with pytest.raises(ValueError, match="unknown parameter 'bogus' for rig 'joint-rig'"):
+        load_dataset(good)
 
 
 def test_dataset_memory_is_a_few_times_the_file(tmp_path):

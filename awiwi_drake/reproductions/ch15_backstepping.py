@@ -188,10 +188,7 @@ def _step_run(make_controller, *, step, t_final, label, dt=2e-3, saturation=None
     rig = (make_rig or table_15_1_rig)()
     loop = closed_loop(rig, make_controller(rig), rate_hz=rate_hz, delay=delay, saturation=saturation)
     op = rig.operating_point()
-    # ClosedLoop.initialize sizes the delay buffer as steps * n, DiscreteTimeDelay holds (steps + 1) * n:
-    # leave the buffers at their default (zero = the rest torque of this rig) when delayed.
-    u0 = None if loop.delay_steps else op.motor_torque
-    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=u0,
+    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
                     inputs=event_schedules((), {REFERENCE_PORT: step}), dt=dt, max_step=max_step, label=label)
 
 
