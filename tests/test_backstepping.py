@@ -45,7 +45,7 @@ def test_controllers_convert_and_autodiff_matches_finite_differences(case):
 
 def test_scalar_example_systems_convert():
     plant, ctrl = ScalarExamplePlant(), ScalarBackstepping(ScalarExampleGains(k1=2.0, k2=3.0))
-    J_ad, J_fd = system_jacobians(ctrl, [], {"state": [0.4, -0.7]}, outputs=["u"])["u"]
+    J_ad, J_fd = system_jacobians(ctrl, [], {"state": [0.4, -0.7]}, outputs=["motor_torque"])["motor_torque"]
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6)
     ad = plant.ToAutoDiffXd()
     ctx = ad.CreateDefaultContext()

@@ -250,3 +250,44 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
         joint_angle_reference=rng.normal(0, 0.2, 4), joint_angle=rng.normal(0, 0.2, 4),
         joint_velocity=rng.normal(0, 1, 4), tendon_force=rng.uniform(10, 40, 8),
         motor_velocity=rng.normal(0, 0.5, 8)), outputs=["motor_torque", "joint_torque_reference"], rtol=1e-4)
+
+
+@pytest.mark.parametrize("controller", ["cascaded", "backstepping"])
+def test_finger_controllers_refuse_per_tendon_spring_laws(controller):
+    """The chain's force map / distribution and the backstepping's phi(x) model every tendon with the
+    rig's one spring law: a rig with params.tendon_springs is refused with a line naming the option
+    (not controlled as if it had one law); designing on the nominal rig stays possible."""
+    from awiwi_drake.parameters.components import TendonParams
+    from awiwi_drake.parameters.hand import FingerRigParams
+    base = FingerRigParams.for_finger("index")
+    stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
+    rig = finger_diagram(finger="index", params=base.replace(tendon_springs=(("index_h3", stiff),)))
+    with pytest.raises(ValueError, match=r"tendon_springs: index_h3"):
+        make_controller(controller, rig)
+    nominal = finger_diagram(finger="index", params=base)
+    loop = closed_loop(rig, make_controller(controller, nominal), **get_entry(controller, nominal).loop_options)
+    assert loop.diagram.HasOutputPort("joint_angle_estimate")
+
+
+def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_estimation_error():
+    """A step the distribution cannot serve within [f_min, f_max] (bounds 20 +- 1 N around the 20 N
+    pretension; the 0.2 rad step asks for more torque than 1 N of force difference gives) is flagged in
+    the metrics rows of that finger; with the default bounds (5-170 N) the same step is not."""
+    from awiwi_drake.control.compare.standard_tests import compare_test_params, run_joint_test
+    flags = {}
+    for tight in (False, True):
+        rig = _rig()
+        dist = ForceDistributionParams(f_min=19.0, f_max=21.0) if tight else None
+        loop = closed_loop(rig, TendonChainController(rig, distribution=dist))
+        run, rows = run_joint_test(loop, "step", controller="cascaded", params=compare_test_params(rig, step_duration=0.1))
+        flags[tight] = [r.flags for r in rows]
+        # the estimation error is reported per joint and, for the constant coupling, stays below one period
+        # of motion |v| / 3000 (exact at the samples, (5.15)); 5 % for the velocity's sampling (as above)
+        v = np.abs(run.state[:, 4:8]).max(axis=0)
+        est = np.array([r.estimation_error for r in rows])
+        assert np.all(np.isfinite(est)) and np.all(est <= 1.05 * v * PERIOD + 1e-9), (est, v * PERIOD)
+        assert est.max() > 0.0
+        if tight:
+            assert all(r.status == "flagged" for r in rows)
+    assert all("force distribution out of bounds" in f for f in flags[True]), flags[True]
+    assert not any("force distribution" in f for f in flags[False]), flags[False]

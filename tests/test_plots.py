@@ -110,6 +110,21 @@ def test_bandwidth_of_a_first_order_gain_is_its_corner_frequency():
     assert np.isnan(sweep_metrics(f, np.ones_like(f))["bandwidth_hz"])   # never falls: NaN, not 69 Hz
 
 
+def test_resonance_is_an_interior_peak_of_the_gain_diagram():
+    """A second-order gain |w0^2 / (w0^2 - w^2 + 2 i xi w0 w)| peaks at w0 sqrt(1 - 2 xi^2) (xi < 1/sqrt 2);
+    a monotone (first-order) diagram has no resonance in the sweep: NaN, not the first grid point."""
+    from awiwi_drake.control.compare import sweep_metrics
+
+    f = np.arange(2.0, 70.0, 0.25)
+    f0, xi = 20.0, 0.2
+    g = f0 ** 2 / np.abs(f0 ** 2 - f ** 2 + 2j * xi * f0 * f)
+    m = sweep_metrics(f, g)
+    assert m["resonance_hz"] == pytest.approx(f0 * np.sqrt(1 - 2 * xi ** 2), abs=0.25)
+    assert m["peak_gain"] == pytest.approx(1 / (2 * xi * np.sqrt(1 - xi ** 2)), rel=1e-3)
+    mono = sweep_metrics(f, 1 / np.abs(1 + 1j * f / 5.0))
+    assert np.isnan(mono["resonance_hz"]) and mono["peak_gain"] == pytest.approx(1 / np.sqrt(1 + 0.16))
+
+
 def test_dominant_time_constant_of_pole_placement_is_its_slowest_pole():
     """Pole placement (ch. 12) puts the closed-loop poles at xi_i omega_i: the slowest is 0.7 * 30 = 21 1/s."""
     from awiwi_drake.control.base import closed_loop

@@ -222,3 +222,7 @@ def test_one_simulation_loop_and_one_divergence_error():
     errors = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
                     if "class SimulationDivergedError" in p.read_text())
     assert errors == ["analysis/simulate.py"]
+    # one closed-loop builder: ClosedLoop handles come from control.closed_loop only
+    handles = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
+                     if "ClosedLoop(" in p.read_text().replace("class ClosedLoop(", ""))
+    assert handles == ["control/base.py"], f"ClosedLoop built outside closed_loop: {handles}"

@@ -70,3 +70,26 @@ def test_effective_stiffness_held_while_loads_change_the_springs():
         err = {c: abs(r.tau_ext[end] / r.q[end] / target - 1.0) for c, r in runs.items()}
         assert err[True] < 0.02 and err[True] < err[False]
         assert np.all(run.k_imp > 0)
+
+
+def test_stiffness_correction_closes_through_closed_loop():
+    """The ch. 8 loop is built by closed_loop: ``effective_stiffness_reference`` is accepted because the
+    controller reports ``effective_stiffness`` (the rig cannot measure it) and is not a tracked rig output;
+    at the (8.2) operating point with the target equal to that K_mech / eps the reported K_eff is the target
+    only when K_imp = (1/K_eff - 1/K_mech)^-1 (8.1), i.e. K_imp = K_eff eps / (eps - 1)."""
+    from awiwi_drake.control import closed_loop
+    rig = joint_rig()
+    p = StiffnessCorrectionParams()
+    loop = closed_loop(rig, StiffnessCorrectedImpedance(rig.params, rig.spring, p), rate_hz=None)
+    assert set(loop.references) == {"joint_angle_reference", "effective_stiffness_reference"}
+    assert loop.tracked_outputs == ("joint_angle",)
+    target = p.targets[0]
+    rq = rig.params.link_pulley_radius
+    x_c = pretension_elongation(rig.spring, p.epsilon * target, rq)
+    op = rig.operating_point(pretension=float(rig.spring.force(np.array([x_c]))[0]))
+    ctx = loop.create_context(state=op.state, references={"effective_stiffness_reference": target})
+    k_imp, k_mech, _ = loop.diagram.GetOutputPort("controller_stiffness").Eval(ctx)
+    assert k_mech == pytest.approx(p.epsilon * target, rel=1e-9)              # (8.2) pretension
+    assert k_imp == pytest.approx(target * p.epsilon / (p.epsilon - 1.0), rel=1e-9)
+    k_eff = loop.diagram.GetOutputPort("controller_effective_stiffness").Eval(ctx)[0]
+    assert k_eff == pytest.approx(target, rel=1e-9)

@@ -7,7 +7,10 @@ Conventions (binding for every controller in :mod:`awiwi_drake.control`)
 
   - input ports named ``<signal>_reference`` carry the reference of the rig
     output ``<signal>`` (e.g. ``tendon_force_reference`` tracks the rig output
-    ``tendon_force``; ``joint_angle_reference`` tracks ``joint_angle``);
+    ``tendon_force``; ``joint_angle_reference`` tracks ``joint_angle``), or of a
+    quantity the controller itself outputs under the name ``<signal>`` when the
+    rig cannot measure it (``effective_stiffness_reference`` of the ch. 8
+    stiffness correction: the controller reports ``effective_stiffness``);
   - other input ports are *measurements* and carry exactly the name of a rig
     output port (``state``, ``tendon_force``, ``motor_velocity``, ...);
   - one output port ``motor_torque`` [Nm] is the command (size = rig input).
@@ -362,10 +365,11 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     tracked = []
     for r in refs:
         sig = r[: -len(REFERENCE_SUFFIX)]
-        if sig not in rig_out:
-            raise ValueError(f"closed_loop: controller reference port {r!r} refers to {sig!r}, which the rig "
-                             f"{rig_name!r} does not output (outputs: {', '.join(rig_out)})")
-        tracked.append(sig)
+        if sig in rig_out:
+            tracked.append(sig)
+        elif sig not in ctrl_out:
+            raise ValueError(f"closed_loop: controller reference port {r!r} refers to {sig!r}, which neither the rig "
+                             f"{rig_name!r} outputs (outputs: {', '.join(rig_out)}) nor the controller reports")
     for m in measurement_ports(controller):
         if m not in rig_out:
             raise ValueError(f"closed_loop: controller measurement port {m!r} is not an output of rig "

@@ -47,7 +47,23 @@ from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandCha
 
 __all__ = ["JointImpedanceBank_", "JointImpedanceBank", "TendonPathVelocity_", "TendonPathVelocity",
            "TendonChainController",
-           "joint_inertia", "chain_controller"]
+           "joint_inertia", "check_one_spring_law", "chain_controller"]
+
+
+def check_one_spring_law(rig: Any, owner: str) -> None:
+    """Refuse a rig whose tendons have their own spring laws (``params.tendon_springs``).
+
+    The force map, the distribution's ``k_t(f)`` and the backstepping's ``phi(x)`` model every
+    tendon with the rig's one spring law; with per-tendon laws they would control a different
+    plant without saying so (nothing silently dropped).
+    """
+    overrides = getattr(getattr(rig, "params", None), "tendon_springs", ())
+    if overrides:
+        names = ", ".join(t for t, _ in overrides)
+        raise ValueError(f"{owner}: rig {getattr(rig, 'name', '?')!r} has per-tendon spring laws "
+                         f"(params.tendon_springs: {names}); this controller models every tendon with "
+                         f"params.spring: design it on a rig without tendon_springs (a deliberate model mismatch: "
+                         f"closed_loop(rig, make_controller(name, nominal_rig)))")
 
 
 def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
@@ -172,6 +188,7 @@ class TendonChainController(Diagram):
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"TendonChainController: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
+        check_one_spring_law(rig, "TendonChainController")
         fingers = tuple(coupling.parts) if hasattr(coupling, "parts") else (rig.params.finger_name,)
         if any(f not in FINGERS for f in fingers):
             raise ValueError(f"TendonChainController: unknown fingers {fingers}")

@@ -30,12 +30,11 @@ rest, are left out) and their derivative from ``f'``.  For that model
 antagonistic joint of 15.5.
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
-tendon force error that is close to the cascaded case"): per DoF ``Kp = M_jj w_j^2``, ``Kd = 2
-zeta w_j M_jj`` and per tendon ``K3 = K4 = w_f``, so that the force-error feedback ``(1 + K3 K4)
-/ g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at the same bandwidth (``alpha = r_m
-phi'``; critically damped); per DoF ``Kp = joint_stiffness`` (the impedance gain of Fig 15.22) and
-``Kd = 2 zeta sqrt(Kp M_jj)`` (``M_jj`` the DoF's own inertia), with ``w_f``, ``zeta`` of
-:class:`HandChainParams`.  Unlike the
+tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
+the force-error feedback ``(1 + K3 K4) / g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at
+the same bandwidth (``alpha = r_m phi'``; critically damped); per DoF ``Kp = joint_stiffness``
+(the impedance gain of Fig 15.22, the same for every DoF) and ``Kd = 2 zeta sqrt(Kp M_jj)``
+(``M_jj`` the DoF's own inertia), with ``w_f``, ``zeta`` of :class:`HandChainParams`.  Unlike the
 cascade (15.5.3) the joint gain is not limited by the force loop's bandwidth.
 
 Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand),
@@ -55,7 +54,7 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import joint_inertia
+from awiwi_drake.control.chain import check_one_spring_law, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
 
@@ -77,6 +76,7 @@ class FingerBacksteppingLaw(StaticLaw):
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
+        check_one_spring_law(rig, "finger backstepping")
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
         self.coupling, self.spring, self.motor = coupling, rig.spring, rig.params.motor

@@ -86,7 +86,9 @@ def StiffnessCorrectedImpedance_(T):
         Inputs: ``state`` (6, joint rig order), ``joint_angle_reference`` (1) [rad],
         ``effective_stiffness_reference`` (1) [Nm/rad]. ``online=False`` computes K_imp once from the
         nominal K_mech = eps K_eff (no correction), for comparison.
-        Outputs: ``motor_torque`` (2) [Nm]; ``stiffness`` (3) = ``[K_imp, K_mech, K_eff (8.1)]`` [Nm/rad].
+        Outputs: ``motor_torque`` (2) [Nm]; ``stiffness`` (3) = ``[K_imp, K_mech, K_eff (8.1)]`` [Nm/rad];
+        ``effective_stiffness`` (1) = ``K_eff`` [Nm/rad], the quantity ``effective_stiffness_reference``
+        sets (the rig cannot measure it).
 
         ``q_m = r_m (theta1 - theta2) / (2 r_q)`` is the motor-side joint angle, ``tau = r_q (f1 - f2)``
         the joint torque of the tendons. The motors track ``q_m,des = q_ref - tau / K_imp`` (the
@@ -108,6 +110,7 @@ def StiffnessCorrectedImpedance_(T):
             t = {self.all_input_ports_ticket()}
             self.DeclareVectorOutputPort("motor_torque", 2, self._calc_u, prerequisites_of_calc=t)
             self.DeclareVectorOutputPort("stiffness", 3, self._calc_k, prerequisites_of_calc=t)
+            self.DeclareVectorOutputPort("effective_stiffness", 1, self._calc_k_eff, prerequisites_of_calc=t)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.rig_params, other.spring, other.params, other.motor_gains,
@@ -158,6 +161,10 @@ def StiffnessCorrectedImpedance_(T):
         def _calc_k(self, context, output):
             _, k_imp, k_mech = self._law(context)
             output.SetFromVector(np.array([k_imp, k_mech, series_stiffness(k_imp, k_mech)]))
+
+        def _calc_k_eff(self, context, output):
+            _, k_imp, k_mech = self._law(context)
+            output.SetAtIndex(0, series_stiffness(k_imp, k_mech))
 
     return Impl
 

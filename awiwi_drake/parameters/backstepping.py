@@ -20,6 +20,7 @@ __all__ = [
     "ImpedanceBacksteppingGains",
     "ImpedanceStudy",
     "NonlinearImpedanceStudy",
+    "PipStudy",
     "AntagonisticBacksteppingGains",
     "OptimalGainsCase",
     "JointRigOptimalGainsCase",
@@ -150,6 +151,37 @@ class NonlinearImpedanceStudy(Parameters):
     torque_limit: float = param(2.0, unit="Nm", low=0.0, low_inclusive=False,
                                 source="chosen: above the 0.5 Nm holding torque, far below the unsaturated "
                                        "step peak (Fig 15.21 saturates the step only)")
+
+
+@dataclass(frozen=True)
+class PipStudy(Parameters):
+    """Fig 15.24 / 15.25 (section 15.5.3): the PIP of a finger, backstepping vs cascaded, step and sine
+    (:mod:`awiwi_drake.reproductions.ch15_pip_experiments`)."""
+
+    step: float = param(math.radians(30.0), unit="rad", source="Fig 15.24: step to 30 deg (position axis 0-30 deg)")
+    step_time: float = param(0.05, unit="s", low=0.0,
+                             source="chosen: shortly after the start, so the run begins at rest")
+    step_duration: float = param(0.8, unit="s", low=0.0, low_inclusive=False,
+                                 source="Fig 15.24 time axis: 0-800 ms")
+    step_pretension: float = param(10.0, unit="N", low=0.0, low_inclusive=False,
+                                   source="Fig 15.24 caption: f_int = 10 N")
+    sine_offset: float = param(math.radians(30.0), unit="rad", source="Fig 15.25: the sine spans 10-50 deg")
+    sine_amplitude: float = param(math.radians(20.0), unit="rad", low=0.0,
+                                  source="Fig 15.25: the sine spans 10-50 deg")
+    sine_frequency: float = param(1.0, unit="Hz", low=0.0, low_inclusive=False,
+                                  source="chosen: the thesis prints no frequency for Fig 15.25")
+    sine_duration: float = param(2.6, unit="s", low=0.0, low_inclusive=False,
+                                 source="Fig 15.25 time axis ends at 2.6 s")
+    sine_pretension: float = param(15.0, unit="N", low=0.0, low_inclusive=False,
+                                   source="Fig 15.25 caption: f_pre = 15 N")
+    friction_smoothing_velocity: float = param(
+        0.05, unit="rad/s", low=0.0, low_inclusive=False,
+        source="chosen: smoothing of the Stribeck friction's sign (LinkFrictionParams) that keeps the "
+               "error-controlled integrator's steps near 0.1 ms at the PIP inertia")
+    max_step: float = param(1e-4, unit="s", low=0.0, low_inclusive=False,
+                            source="chosen: the stick-slip friction is too stiff for a fixed 3 kHz step")
+    accuracy: float = param(1e-6, unit="-", low=0.0, low_inclusive=False,
+                            source="chosen: error-control accuracy of the stick-slip runs")
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
 from awiwi_drake.analysis import Samples, simulate
+from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.stiffness_correction import StiffnessCorrectedImpedance, pretension_elongation
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 from awiwi_drake.plotting import figure_axes
@@ -47,32 +47,20 @@ def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segm
     targets = tuple(p.targets if targets is None else targets)
     rig = joint_rig()
     law = StiffnessCorrectedImpedance(rig.params, rig.spring, p, online=corrected)
-    b = DiagramBuilder()
-    plant = b.AddNamedSystem("rig", rig.diagram)
-    ctrl = b.AddNamedSystem("controller", law)
-    b.Connect(plant.GetOutputPort("state"), ctrl.GetInputPort("state"))
-    b.Connect(ctrl.GetOutputPort("motor_torque"), plant.GetInputPort("motor_torque"))
-    ref = b.AddNamedSystem("reference", ConstantVectorSource([0.0]))
-    b.Connect(ref.get_output_port(), ctrl.GetInputPort("joint_angle_reference"))
-    b.ExportInput(ctrl.GetInputPort("effective_stiffness_reference"), "effective_stiffness_reference")
-    b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
-    b.ExportOutput(plant.GetOutputPort("state"), "state")
-    b.ExportOutput(ctrl.GetOutputPort("stiffness"), "stiffness")
-    diagram = b.Build()
-    ctx = diagram.CreateDefaultContext()
+    loop = closed_loop(rig, law, rate_hz=None, sources={"joint_angle_reference": ConstantVectorSource([0.0])})
     rq = rig.params.link_pulley_radius
     x_c = pretension_elongation(rig.spring, p.epsilon * targets[0], rq)
     f0 = float(rig.spring.force(np.array([x_c]))[0])
     op = rig.operating_point(pretension=f0)
-    plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
+    ctx = loop.create_context(state=op.state)
     starts = segment * np.arange(len(targets) * len(loads))          # one segment per (target, load)
     k_ref = np.repeat(np.asarray(targets, float), len(loads))
     w = np.tile(np.asarray(loads, float), len(targets))
-    res = simulate(diagram, ctx, float(starts[-1] + segment),
+    res = simulate(loop, ctx, float(starts[-1] + segment),
                    inputs={"effective_stiffness_reference": Samples(starts, k_ref), "external_torque": Samples(starts, w)},
-                   log=("state", "stiffness", "external_torque", "effective_stiffness_reference"), log_period=dt,
+                   log=("state", "controller_stiffness", "external_torque", "effective_stiffness_reference"), log_period=dt,
                    max_step=1e-3, accuracy=1e-6)
-    s = res["stiffness"]
+    s = res["controller_stiffness"]
     return StiffnessRun(res.t, res["state"][:, 0], res["external_torque"][:, 0], s[:, 0], s[:, 1], s[:, 2],
                         res["effective_stiffness_reference"][:, 0], corrected)
 

@@ -22,7 +22,7 @@ from awiwi_drake.plotting import figure_axes
 from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
 from awiwi_drake.rigs import tendon_rig
 
-__all__ = ["TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
+__all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
 
 def _tendon_loop(factory, *, realistic: bool, gains=None, fmap=None, **kw):
     rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=realistic)), backend="symbolic")
@@ -31,13 +31,39 @@ def _tendon_loop(factory, *, realistic: bool, gains=None, fmap=None, **kw):
     return rig, closed_loop(rig, ctrl, rate_hz=RATE, delay=333e-6 if realistic else None, sensors=sensors, **kw)
 
 
-def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: float = 1.0,
-                                  fmap: ForceMap | None = None) -> dict:
-    """Fig 10.1: force step with and without the feed-forward terms of (10.2) (ideal sensor, no ripple).
+@dataclass
+class FeedforwardRun:
+    """Fig 10.1: the same force step with and without the feed-forward terms of (10.2).
 
-    Returns ``{"t", "with", "without", "reference", "expected_without"}`` where
-    ``expected_without`` is (10.3) at rest.
+    ``with_feedforward`` / ``without_feedforward`` [N] over ``t`` [s], the ``reference`` [N] and
+    ``expected_without`` [N], (10.3) at rest.
     """
+
+    t: np.ndarray
+    with_feedforward: np.ndarray
+    without_feedforward: np.ndarray
+    reference: np.ndarray
+    expected_without: float
+
+    def plot(self, ax=None):
+        """Both force traces, the reference and (10.3); returns ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        ax.plot(self.t, self.with_feedforward, label="with feed-forward (10.2)")
+        ax.plot(self.t, self.without_feedforward, label="without feed-forward")
+        ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
+        ax.axhline(self.expected_without, color="gray", ls=":", lw=1, label="(10.3): steady state without")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("tendon force [N]")
+        ax.set_title("Fig 10.1")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        return fig, ax
+
+
+def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: float = 1.0,
+                                  fmap: ForceMap | None = None) -> FeedforwardRun:
+    """Fig 10.1: force step ``f0 -> f1`` [N] at 0.05 s with and without the feed-forward terms of (10.2)
+    (ideal sensor, no ripple)."""
     fmap = fmap or force_map(tendon_rig())
     out = {}
     for label, g in (("with", TendonForceGains()),
@@ -48,13 +74,12 @@ def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: f
                                   references={"tendon_force_reference": f0})
         log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(0.05, f1)], f0)},
                        log=("tendon_force", "tendon_force_reference"), log_period=DT)
-        out[label] = log["tendon_force"][:, 0]
-        out["t"] = log.t
-        out["reference"] = log["tendon_force_reference"][:, 0]
+        out[label] = log
         if label == "without":
             kp = loop.controller.law.kp_fixed
-            out["expected_without"] = steady_state_force_without_feedforward(f1, kp, rig.params.motor.pulley_radius)
-    return out
+            expected = steady_state_force_without_feedforward(f1, kp, rig.params.motor.pulley_radius)
+    return FeedforwardRun(out["with"].t, out["with"]["tendon_force"][:, 0], out["without"]["tendon_force"][:, 0],
+                          out["with"]["tendon_force_reference"][:, 0], float(expected))
 
 
 @dataclass

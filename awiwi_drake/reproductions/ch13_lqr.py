@@ -5,6 +5,7 @@ The design is :mod:`awiwi_drake.control.lqr` (Drake ``LinearQuadraticRegulator``
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -13,13 +14,43 @@ from awiwi_drake.analysis import simulate
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.lqr import design_lqr, lqr_controller
 from awiwi_drake.parameters.control import LqrParams
+from awiwi_drake.plotting import figure_axes
 from awiwi_drake.rigs import flexible_joint_rig
 
-__all__ = ["lqr_trajectories"]
+__all__ = ["LqrRun", "lqr_trajectories"]
+
+
+@dataclass
+class LqrRun:
+    """One Fig 13.2-13.3 regulation: time [s], state ``[q, qdot, theta, thetadot]`` [rad, rad/s], input ``u`` [Nm],
+    the gain ``K``, Riccati solution ``S`` and weights ``Q``, ``R``."""
+
+    r: float
+    t: np.ndarray
+    state: np.ndarray
+    u: np.ndarray
+    K: np.ndarray
+    S: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+
+    def plot(self, ax=None):
+        """Link and motor positions [rad] and the input [Nm]; returns ``(fig, (ax_pos, ax_u))``."""
+        fig, ax = figure_axes(ax, nrows=1, ncols=2, figsize=(11, 3.8))
+        ax[0].plot(self.t, self.state[:, 0], label=f"link q, R = {self.r:g}")
+        ax[0].plot(self.t, self.state[:, 2], ":", label=f"motor theta, R = {self.r:g}")
+        ax[1].plot(self.t, self.u, label=f"u, R = {self.r:g}")
+        ax[0].set_ylabel("position [rad]")
+        ax[1].set_ylabel("input u [Nm]")
+        for a in ax:
+            a.set_xlabel("time [s]")
+            a.grid(True, alpha=0.3)
+            a.legend(fontsize=8)
+        return fig, ax
 
 
 def lqr_trajectories(r_values: Sequence[float] = (1e-4, 1e-2, 1.0), *, x0=(0.3, 0.0, 0.3, 0.0),
-                     t_final: float = 0.2, params: LqrParams | None = None) -> dict:
+                     t_final: float = 0.2, params: LqrParams | None = None) -> dict[float, LqrRun]:
     """Fig 13.2-13.3: regulation of the flexible joint (Table 13.1) from ``x0`` for each R (continuous loop)."""
     out = {}
     for r in r_values:
@@ -28,6 +59,6 @@ def lqr_trajectories(r_values: Sequence[float] = (1e-4, 1e-2, 1.0), *, x0=(0.3, 
         loop = closed_loop(rig, lqr_controller(rig, params, r=r), rate_hz=None)
         ctx = loop.create_context(state=np.asarray(x0, float), references={"joint_angle_reference": 0.0})
         res = simulate(loop.diagram, ctx, t_final, log=("state", "motor_torque"), max_step=1e-4, accuracy=1e-7)
-        out[r] = dict(t=res.t, state=res.signals["state"], u=res.signals["motor_torque"][:, 0], K=design.K,
-                      S=design.S, Q=design.Q, R=design.R)
+        out[r] = LqrRun(float(r), res.t, res["state"], res["motor_torque"][:, 0], design.K, design.S, design.Q,
+                        design.R)
     return out

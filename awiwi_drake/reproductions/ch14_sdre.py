@@ -5,6 +5,7 @@ The controllers are :mod:`awiwi_drake.control.sdre`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -15,15 +16,57 @@ from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controll
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
+from awiwi_drake.plotting import figure_axes
 from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
 from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
 
-__all__ = ["tendon_sdre_experiment", "joint_sdre_experiment"]
+__all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
+
+
+@dataclass
+class SdreRun:
+    """One SDRE (or frozen-gain) run: the tracked output (``tendon_force`` [N] or ``joint_angle`` [rad])
+    and its reference, the controller gain row(s), the command torque [Nm] and the rig's torque limit."""
+
+    label: str
+    output_name: str
+    unit: str
+    t: np.ndarray
+    output: np.ndarray
+    reference: np.ndarray
+    gain: np.ndarray
+    torque: np.ndarray
+    torque_limit: float | None = None
+
+    @property
+    def saturated(self) -> np.ndarray:
+        """Samples where the command exceeds the torque limit (the rig's amplifier clips it)."""
+        if self.torque_limit is None:
+            return np.zeros(len(self.t), bool)
+        return np.abs(self.torque) > self.torque_limit
+
+    def plot(self, ax=None):
+        """Output against its reference, and the command with the torque limit; returns ``(fig, axes)``."""
+        fig, ax = figure_axes(ax, nrows=2, ncols=1, figsize=(7, 5.5), sharex=True)
+        ax[0].plot(self.t, self.output, label=f"{self.output_name} ({self.label})")
+        ax[0].plot(self.t, self.reference, "k--", lw=0.8, label="reference")
+        ax[0].set_ylabel(f"{self.output_name} [{self.unit}]")
+        ax[1].plot(self.t, self.torque, label=f"commanded torque ({self.label})")
+        if self.torque_limit is not None:
+            for s in (1, -1):
+                ax[1].axhline(s * self.torque_limit, color="r", ls=":", lw=0.8,
+                              label=f"torque limit +-{self.torque_limit:g} Nm" if s > 0 else None)
+        ax[1].set_ylabel("motor torque [Nm]")
+        ax[1].set_xlabel("time [s]")
+        for a in ax:
+            a.grid(True, alpha=0.3)
+            a.legend(fontsize=8)
+        return fig, ax
 
 
 def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float]] = ((0.05, 40.0), (0.5, 45.0)),
                            t_final: float = 1.0, params: SdreTendonParams | None = None,
-                           fmap: ForceMap | None = None) -> dict:
+                           fmap: ForceMap | None = None) -> SdreRun:
     """Fig 14.3: 0 -> 40 -> 45 N with SDRE gains (200 Hz) or gains frozen at 30 N.
 
     ``torque`` is the command; ``saturated`` flags samples beyond the rig's ``torque_limit`` (3 Nm): with the
@@ -39,12 +82,12 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
                    log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=DT)
     u = log["motor_torque"][:, 0]
     limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
-    return dict(t=log.t, force=log["tendon_force"][:, 0], reference=log["tendon_force_reference"][:, 0],
-                gain=log["controller_gain"], torque=u, torque_limit=limit, saturated=np.abs(u) > limit)
+    return SdreRun("fixed gains" if fixed else "SDRE", "tendon_force", "N", log.t, log["tendon_force"][:, 0],
+                   log["tendon_force_reference"][:, 0], log["controller_gain"], u, limit)
 
 
 def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: float = 0.0,
-                          t_final: float = 1.5, params: SdreJointParams | None = None) -> dict:
+                          t_final: float = 1.5, params: SdreJointParams | None = None) -> SdreRun:
     """Fig 14.4-14.5: nonlinear flexible joint (Table 14.2 link inertia), link step, optional external load.
 
     The load is applied from t = 0 while the reference steps at 0.1 s.
@@ -60,5 +103,6 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.1, target)], 0.0),
                                                "external_torque": external_torque},
                    log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
-    return dict(t=log.t, joint_angle=log["joint_angle"][:, 0], gain=log["controller_gain"],
-                torque=log["motor_torque"][:, 0], reference=log["joint_angle_reference"][:, 0])
+    return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "joint_angle", "rad",
+                   log.t, log["joint_angle"][:, 0], log["joint_angle_reference"][:, 0], log["controller_gain"],
+                   log["motor_torque"][:, 0], rig.torque_limit)

@@ -17,10 +17,10 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 from typing import Mapping, Sequence
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder
 
 from awiwi_drake.analysis import PerEntry, Samples, Sine, simulate
 from awiwi_drake.components.spring import LinearSpring
@@ -173,17 +173,8 @@ def example_phase_portrait(gains: ScalarExampleGains, initial_states, *, t_final
     """Trajectories of (15.1) under (15.10) from each initial state (Fig 15.2-15.4)."""
     runs = []
     for x0 in initial_states:
-        b = DiagramBuilder()
-        plant = b.AddNamedSystem("rig", ScalarExamplePlant())
-        ctrl = b.AddNamedSystem("controller", ScalarBackstepping(gains, variant))
-        b.Connect(plant.get_output_port(0), ctrl.get_input_port(0))
-        b.Connect(ctrl.GetOutputPort("u"), plant.get_input_port(0))
-        b.ExportOutput(ctrl.GetOutputPort("u"), "motor_torque")
-        b.ExportOutput(plant.get_output_port(0), "state")
-        if ctrl.HasOutputPort("lyapunov"):
-            b.ExportOutput(ctrl.GetOutputPort("lyapunov"), "controller_lyapunov")
-        loop = ClosedLoop(diagram=b.Build(), rig=None, controller=ctrl, rate_hz=None, delay=None, delay_steps=0,
-                          saturation=None, references=(), disturbances=(), tracked_outputs=())
+        plant = SimpleNamespace(name="scalar-example", diagram=ScalarExamplePlant())   # (15.1) as the rig
+        loop = closed_loop(plant, ScalarBackstepping(gains, variant), rate_hz=None)
         runs.append(run_loop(loop, t_final=t_final, state0=x0, dt=dt, max_step=0.05,
                              label=f"x0 = ({x0[0]:g}, {x0[1]:g})"))
     return runs
@@ -197,10 +188,7 @@ def _step_run(make_controller, *, step, t_final, label, dt=2e-3, saturation=None
     rig = (make_rig or table_15_1_rig)()
     loop = closed_loop(rig, make_controller(rig), rate_hz=rate_hz, delay=delay, saturation=saturation)
     op = rig.operating_point()
-    # ClosedLoop.initialize sizes the delay buffer as steps * n, DiscreteTimeDelay holds (steps + 1) * n:
-    # leave the buffers at their default (zero = the rest torque of this rig) when delayed.
-    u0 = None if loop.delay_steps else op.motor_torque
-    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=u0,
+    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
                     inputs=event_schedules((), {REFERENCE_PORT: step}), dt=dt, max_step=max_step, label=label)
 
 

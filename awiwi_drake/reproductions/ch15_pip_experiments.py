@@ -18,7 +18,8 @@ Model (chosen where the thesis gives no numbers):
   (:mod:`awiwi_drake.control.backstepping_registry`, Kd,imp clamped to m f_s / 4) and cascaded
   (11.16) (:mod:`awiwi_drake.control.impedance`);
 * step 0 -> 30 deg at 0.05 s, 0.8 s, pretension 10 N; sine 30 + 20 sin(2 pi t) deg, 2.6 s,
-  pretension 15 N (the figure's axes), reference derivatives given to both.
+  pretension 15 N (the figure's axes), reference derivatives given to both; these numbers and their
+  sources are :class:`awiwi_drake.parameters.PipStudy`.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from awiwi_drake.parameters.backstepping import PipStudy
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 
 __all__ = ["PipRun", "pip_parameters", "pip_experiment", "pip_metrics"]
@@ -64,7 +66,7 @@ def pip_parameters(pretension: float):
 
 def _friction_params():
     from awiwi_drake.parameters.hand_control import LinkFrictionParams
-    return LinkFrictionParams(smoothing_velocity=0.05)
+    return LinkFrictionParams(smoothing_velocity=PipStudy().friction_smoothing_velocity)
 
 
 def _controller(name: str, rig):
@@ -83,13 +85,14 @@ def _controller(name: str, rig):
 def _reference(test: str):
     """(schedule of the reference port: angle and four derivatives, duration [s], pretension [N])."""
     from awiwi_drake.analysis import PerEntry, Sine, Step
+    s = PipStudy()
     if test == "step":
-        return PerEntry([Step(0.05, math.radians(30.0)), 0.0, 0.0, 0.0, 0.0]), 0.8, 10.0
+        return PerEntry([Step(s.step_time, s.step), 0.0, 0.0, 0.0, 0.0]), s.step_duration, s.step_pretension
     if test == "sine":
-        a, c, f = math.radians(20.0), math.radians(30.0), 1.0
+        a, c, f = s.sine_amplitude, s.sine_offset, s.sine_frequency
         w = 2 * math.pi * f
         return PerEntry([Sine(a * w ** k, f, phase=k * math.pi / 2, offset=c if k == 0 else 0.0)
-                         for k in range(5)]), 2.6, 15.0
+                         for k in range(5)]), s.sine_duration, s.sine_pretension
     raise ValueError(f"pip_experiment: test must be 'step' or 'sine', got {test!r}")
 
 
@@ -124,7 +127,8 @@ def pip_experiment(controller: str, test: str, *, friction: bool = True, t_final
     # error control (steps near 0.1 ms): the stick-slip friction is stiff for a fixed 3 kHz step
     res = simulate(diagram, ctx, t_end, inputs={"joint_angle_reference": PerEntry(ref.entries[:size])},
                    log=("joint_angle", "joint_angle_reference", "applied_torque", "link_friction", "tendon_force"),
-                   log_period=dt, mode="error_controlled", max_step=1e-4, accuracy=1e-6)
+                   log_period=dt, mode="error_controlled", max_step=PipStudy().max_step,
+                   accuracy=PipStudy().accuracy)
     return PipRun(controller, test, res.t, res["joint_angle"][:, 0], res["joint_angle_reference"][:, 0],
                   res["applied_torque"], res["link_friction"][:, 0], res["tendon_force"])
 

@@ -56,11 +56,11 @@ def example_control(x, gains: ScalarExampleGains, variant: str = "textbook"):
 @TemplateSystem.define("ScalarExamplePlant_")
 def ScalarExamplePlant_(T):
     class Impl(LeafSystem_[T]):
-        """Plant (15.1). Input ``u`` (1); output ``state`` (2) = ``[x1, x2]``."""
+        """Plant (15.1). Input ``motor_torque`` (1) = ``u``; output ``state`` (2) = ``[x1, x2]``."""
 
         def _construct(self, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.DeclareVectorInputPort("u", 1)
+            self.DeclareVectorInputPort("motor_torque", 1)
             state = self.DeclareContinuousState(2)
             self.DeclareStateOutputPort("state", state)
 
@@ -81,7 +81,7 @@ ScalarExamplePlant = ScalarExamplePlant_[None]
 @TemplateSystem.define("ScalarBackstepping_")
 def ScalarBackstepping_(T):
     class Impl(LeafSystem_[T]):
-        """Controller (15.10). Input ``state`` (2); outputs ``u`` (1), ``lyapunov`` (1)."""
+        """Controller (15.10). Input ``state`` (2); outputs ``motor_torque`` (1) = ``u``, ``lyapunov`` (1)."""
 
         def _construct(self, gains=None, variant="textbook", converter=None):
             LeafSystem_[T].__init__(self, converter)
@@ -91,7 +91,7 @@ def ScalarBackstepping_(T):
             self.variant = variant
             self.DeclareVectorInputPort("state", 2)
             tickets = {self.all_input_ports_ticket()}
-            self.DeclareVectorOutputPort("u", 1, self._calc_u, prerequisites_of_calc=tickets)
+            self.DeclareVectorOutputPort("motor_torque", 1, self._calc_u, prerequisites_of_calc=tickets)
             self.DeclareVectorOutputPort("lyapunov", 1, self._calc_v, prerequisites_of_calc=tickets)
 
         def _construct_copy(self, other, converter=None):

@@ -32,12 +32,14 @@ class Metrics:
     gain: float = math.nan               # |Y/R| at the sine frequency
     phase_deg: float = math.nan          # phase of Y/R at the sine frequency
     peak_gain: float = math.nan          # max |Y/R| over the sweep
-    resonance_hz: float = math.nan       # frequency of the peak gain
+    resonance_hz: float = math.nan       # frequency of the peak gain (NaN: peak at an end of the sweep)
     bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its low-frequency value (log-interpolated)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
+    estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad]
     status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
-    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness
+    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
+    #                                      force distribution out of bounds (finger/hand chain)
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
@@ -50,7 +52,7 @@ UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error
              peak_command="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
-             slack_fraction="-")
+             slack_fraction="-", estimation_error="rad")
 
 
 @dataclass
@@ -207,7 +209,8 @@ def gain_diagram(t, r, y, f_low: float, f_high: float, *, smooth: int = 3) -> tu
 
 
 def sweep_metrics(f, g) -> dict[str, float]:
-    """Peak gain, its frequency and the -3 dB bandwidth of a measured gain diagram ``g(f)``.
+    """Peak gain, its frequency (the resonance; NaN when the peak sits at an end of the sweep, i.e.
+    the diagram has no interior maximum) and the -3 dB bandwidth of a measured gain diagram ``g(f)``.
 
     The bandwidth is where ``|Y/R|`` first falls below ``1/sqrt(2)`` of its
     low-frequency value (the mean over the lowest 5 % of the log-frequency span),
@@ -229,7 +232,10 @@ def sweep_metrics(f, g) -> dict[str, float]:
         k = int(below[0])
         a = (g[k - 1] - level) / (g[k - 1] - g[k])
         bw = float(np.exp(np.log(f[k - 1]) + a * (np.log(f[k]) - np.log(f[k - 1]))))
-    return dict(peak_gain=float(g[i]), resonance_hz=float(f[i]), bandwidth_hz=bw)
+    # a peak at either end of the sweep is no resonance inside it (a monotone diagram): NaN, not the
+    # first or last grid point
+    res = float(f[i]) if 0 < i < len(f) - 1 else math.nan
+    return dict(peak_gain=float(g[i]), resonance_hz=res, bandwidth_hz=bw)
 
 
 def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> dict[str, float]:
