@@ -145,8 +145,15 @@ def test_utf8_bom_and_crlf_are_accepted(good):
 
 
 def test_cli_rig_spelling_in_dataset_json(good):
-    _edit_json(good, lambda m: m.update(rig="joint-rig"))
+    """One spelling per rig: the written JSON and the messages use the CLI name ('joint-rig'); the
+    short internal name is still read."""
+    assert json.loads(good.with_suffix(".json").read_text())["rig"] == "joint-rig"
     assert load_dataset(good).rig == "joint"
+    _edit_json(good, lambda m: m.update(rig="joint"))
+    assert load_dataset(good).rig == "joint"
+    _edit_json(good, lambda m: m["parameters"].update(bogus=1.0))
+    with pytest.raises(ValueError, match="unknown parameter 'bogus' for rig 'joint-rig'"):
+        load_dataset(good)
 
 
 def test_dataset_memory_is_a_few_times_the_file(tmp_path):
@@ -203,6 +210,12 @@ CLI_CASES = [
      "argument --rig"),
     ("make-dataset-out-file", lambda t, d: ["make-dataset", "--out", str(_file(t))], 2, "--out"),
     ("make-dataset-no-out", lambda t, d: ["make-dataset"], 2, "--out"),
+    ("make-dataset-name-escapes-out", lambda t, d: ["make-dataset", "--name", "../evil", "--out", str(t)], 2,
+     "--name '../evil': a plain file stem"),
+    ("make-dataset-name-folder", lambda t, d: ["make-dataset", "--name", "a/b", "--out", str(t)], 2,
+     "--name 'a/b': a plain file stem"),
+    ("compare-tests-empty", lambda t, d: ["compare", "--rig", "joint-rig", "--controllers", "pd", "--out", str(t),
+                                          "--tests", ""], 2, "--tests: give at least one name"),
     ("diagnose-report-file", lambda t, d: ["diagnose", str(d), "--report", str(_file(t))], 2, "--report"),
     ("diagnose-json-dir", lambda t, d: ["diagnose", str(d), "--json", str(t)], 2, "--json"),
     ("diagnose-json-unwritable", lambda t, d: ["diagnose", str(d), "--json", str(_file(t) / "x.json")], 2,

@@ -57,16 +57,16 @@ def test_fig_11_4_two_time_scale_resonance_shifts_with_pretension():
     The cascaded (linearising) loop is independent of the mechanical stiffness, as section 11.7 states."""
     from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response, impedance_sweep
     lin = {pre: impedance_frequency_response("two-time-scale", pretension=pre) for pre in (10.0, 20.0, 40.0)}
-    res = [lin[p]["resonance_hz"] for p in (10.0, 20.0, 40.0)]
-    peaks = [lin[p]["peak_gain"] for p in (10.0, 20.0, 40.0)]
+    res = [lin[p].resonance_hz for p in (10.0, 20.0, 40.0)]
+    peaks = [lin[p].peak_gain for p in (10.0, 20.0, 40.0)]
     assert res[0] - res[1] > 5.0 and res[1] - res[2] > 5.0, res  # Hz: the resonance moves down
     assert peaks[0] > 1.5 and peaks[0] > peaks[1] > peaks[2] > 1.0, peaks
     sim = impedance_sweep("two-time-scale", pretension=10.0, f_start=20.0, f_stop=50.0, duration=1.5)
-    assert sim["resonance_hz"] == pytest.approx(res[0], abs=2.0)
-    assert sim["peak_gain"] == pytest.approx(peaks[0], rel=0.15)
+    assert sim.resonance_hz == pytest.approx(res[0], abs=2.0)
+    assert sim.peak_gain == pytest.approx(peaks[0], rel=0.15)
     casc = [impedance_frequency_response("cascaded", pretension=p) for p in (10.0, 40.0)]
-    np.testing.assert_allclose(casc[0]["gain"], casc[1]["gain"], rtol=1e-6)
-    assert casc[0]["peak_gain"] < 1.01
+    np.testing.assert_allclose(casc[0].gain, casc[1].gain, rtol=1e-6)
+    assert casc[0].peak_gain < 1.01
 
 
 def test_cascaded_law_linearises_the_force_loop_11_16():
@@ -121,6 +121,6 @@ def test_fig_11_2_and_11_3_in_the_gain_diagram():
 
     def peak(kp, k):
         return impedance_sweep("two-time-scale", joint_stiffness=kp, rig="flexible-joint", stiffness=k,
-                               f_start=5.0, f_stop=50.0, duration=1.5)["peak_gain"]
+                               f_start=5.0, f_stop=50.0, duration=1.5).peak_gain
     assert peak(1.2, 0.605) > peak(0.3, 0.605) + 0.2
     assert peak(1.2, 0.43) > peak(1.2, 1.15) + 0.5

@@ -365,3 +365,23 @@ def test_run_sweep_batch_gives_the_serial_numbers():
     assert len(set(np.round(serial.values, 9))) == 5     # the pretension matters (stiffer joint, smaller push)
     with pytest.raises(ValueError, match="batch = 0"):
         run_sweep(_push_response_batch, grid, executor="serial", batch=0)
+
+
+def test_drive_stiffness_is_the_lever_in_series_with_the_tendon():
+    """Tendon elasticity k_t = E S / l0 in series with the lever mechanism (ch. 4): the compiled joint rig's
+    tendon_stiffness at a pretension equals (1/k_lever(f) + 1/k_t)^-1 at that force, to the calibration
+    polynomial's accuracy (1 %; the tendon halves the stiffness at high force, so the check has teeth)."""
+    from awiwi_drake.components.spring import LeverSpringMechanism
+    from awiwi_drake.components.tendon import series_stiffness, tendon_stiffness
+    rig = joint_rig()
+    sp = rig.params.spring
+    assert sp.include_tendon
+    lever, k_t = LeverSpringMechanism(sp.geometry), tendon_stiffness(sp.tendon)
+    for f in (10.0, 40.0, 80.0, 150.0):
+        op = rig.operating_point(pretension=f)
+        k = rig.diagram.GetOutputPort("tendon_stiffness").Eval(rig.context(op))
+        k_lever = float(np.ravel(lever.stiffness(np.atleast_1d(lever.inverse_force(np.array([f])))))[0])
+        expected = float(series_stiffness(k_lever, k_t))
+        np.testing.assert_allclose(k, expected, rtol=0.01)
+        if f >= 80.0:
+            assert k_lever > 1.3 * expected          # without the tendon: >= 30 % off (1 % tolerance)

@@ -5,6 +5,8 @@ The controllers are :mod:`awiwi_drake.control.impedance`; :func:`plot_gain_diagr
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from typing import Sequence
 
 import numpy as np
@@ -19,7 +21,58 @@ from awiwi_drake.plotting import figure_axes
 from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
-__all__ = ["impedance_step", "impedance_sweep", "impedance_frequency_response", "plot_gain_diagrams"]
+__all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
+           "plot_gain_diagrams"]
+
+
+@dataclass
+class ImpedanceStep:
+    """Fig 11.2-11.3: a joint step under impedance control: ``t`` [s], ``joint_angle`` and ``reference``
+    [rad], and the step metrics of :func:`~awiwi_drake.control.compare.step_metrics` (``overshoot`` [%],
+    ``rise_time``, ``settling_time`` [s], ...)."""
+
+    label: str
+    t: np.ndarray
+    joint_angle: np.ndarray
+    reference: np.ndarray
+    metrics: dict
+
+    @property
+    def overshoot(self) -> float:
+        """Overshoot [% of the step]."""
+        return float(self.metrics["overshoot"])
+
+    def plot(self, ax=None):
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        ax.plot(self.t, self.joint_angle, label=f"{self.label}: overshoot {self.overshoot:.1f} %")
+        ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("joint angle [rad]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=8)
+        return fig, ax
+
+
+@dataclass
+class GainDiagram:
+    """Fig 11.4: gain ``|q / q_des|`` [-] over ``freq`` [Hz] (a simulated chirp, or the linearised loop with
+    its ``eigenvalues`` [1/s]), with the resonance [Hz] and the peak gain."""
+
+    label: str
+    freq: np.ndarray
+    gain: np.ndarray
+    eigenvalues: np.ndarray | None = None
+
+    @property
+    def resonance_hz(self) -> float:
+        return float(self.freq[int(np.argmax(self.gain))])
+
+    @property
+    def peak_gain(self) -> float:
+        return float(np.max(self.gain))
+
+    def plot(self, ax=None):
+        return plot_gain_diagrams({self.label: (self.freq, self.gain)}, ax=ax)
 
 
 def _joint(kind: str, *, stiffness=None, pretension=None):
@@ -32,7 +85,7 @@ def _joint(kind: str, *, stiffness=None, pretension=None):
 
 def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
                    stiffness: float | None = None, pretension: float | None = None, step: float = 0.3,
-                   t_final: float = 0.3) -> dict:
+                   t_final: float = 0.3) -> ImpedanceStep:
     """Fig 11.2-11.3: link step under impedance control (``stiffness``: mechanical k of the flexible joint)."""
     r = _joint(rig, stiffness=stiffness, pretension=pretension)
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
@@ -43,13 +96,14 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
                                                "external_torque": 0.0},
                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
     m = step_metrics(log.t, log["joint_angle"][:, 0], 0.0, step, 0.02)
-    return dict(t=log.t, joint_angle=log["joint_angle"][:, 0], reference=log["joint_angle_reference"][:, 0], **m)
+    return ImpedanceStep(f"{mode}, Kp_imp = {joint_stiffness:g} Nm/rad", log.t, log["joint_angle"][:, 0],
+                         log["joint_angle_reference"][:, 0], m)
 
 
 def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | None = None, rig: str = "joint-rig",
                     stiffness: float | None = None, pretension: float | None = None, f_start: float | None = None,
                     f_stop: float | None = None, duration: float | None = None,
-                    amplitude: float | None = None) -> dict:
+                    amplitude: float | None = None) -> GainDiagram:
     """Fig 11.4: chirp of the link reference (3 kHz loop), gain diagram |q / q_des|(f).
 
     Defaults (:class:`ImpedanceSweepParams`): the two-time-scale (singular perturbation) impedance of
@@ -70,13 +124,12 @@ def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | No
                                                 "external_torque": 0.0},
                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
     f, g = gain_diagram(log.t, log["joint_angle_reference"][:, 0], log["joint_angle"][:, 0], f_start, f_stop)
-    i = int(np.argmax(g))
-    return dict(freq=f, gain=g, resonance_hz=float(f[i]), peak_gain=float(g[i]))
+    return GainDiagram(f"{mode}, simulated chirp", f, g)
 
 
 def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffness: float | None = None,
                                  rig: str = "joint-rig", stiffness: float | None = None,
-                                 pretension: float | None = None, freqs: Sequence[float] | None = None) -> dict:
+                                 pretension: float | None = None, freqs: Sequence[float] | None = None) -> GainDiagram:
     """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize`` (python backend).
 
     The exact small-signal counterpart of :func:`impedance_sweep` (no 3 kHz hold); also returns the
@@ -97,8 +150,7 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     ctx = loop.create_context(state=op.state, references={"joint_angle_reference": 0.0})
     lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
     g = np.abs(lin.bode(omega=2 * np.pi * freqs).response)
-    i = int(np.argmax(g))
-    return dict(freq=freqs, gain=g, resonance_hz=float(freqs[i]), peak_gain=float(g[i]), eigenvalues=lin.poles)
+    return GainDiagram(f"{mode}, linearised", freqs, g, lin.poles)
 
 
 def plot_gain_diagrams(curves: dict, *, ax=None):

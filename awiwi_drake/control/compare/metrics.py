@@ -36,6 +36,7 @@ class Metrics:
     bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its low-frequency value (log-interpolated)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
+    estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad]
     status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
     flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
     #                                      force distribution out of bounds (finger/hand chain)
@@ -51,7 +52,7 @@ UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error
              peak_command="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
-             slack_fraction="-")
+             slack_fraction="-", estimation_error="rad")
 
 
 @dataclass

@@ -44,6 +44,7 @@ TESTS = ("step", "sine", "disturbance", "sweep")
 
 # output of a loop whose controller contains the force distribution (ch. 7): 0 ok, 1 infeasible, 2 bounds
 DISTRIBUTION_STATUS = "controller_distribution_status"
+ESTIMATION_ERROR = "joint_angle_estimation_error"
 
 def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
     """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
@@ -242,6 +243,8 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             log.append("tendon_force")
         if loop.diagram.HasOutputPort(DISTRIBUTION_STATUS):
             log.append(DISTRIBUTION_STATUS)
+        if loop.diagram.HasOutputPort(ESTIMATION_ERROR):   # no joint sensors: the estimator's error
+            log.append(ESTIMATION_ERROR)
         res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                        max_step=p.max_step, accuracy=1e-6)
         t = res.t - res.t[0]
@@ -264,6 +267,9 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 row.saturated_fraction = float(np.mean(np.any(u > limit[None, sl] * (1 + 1e-9), axis=1)))
             if "tendon_force" in res:
                 row.slack_fraction = float(np.mean(np.any(res["tendon_force"][:, sl] <= 0.0, axis=1)))
+            if ESTIMATION_ERROR in res:
+                joint = int(np.flatnonzero(ch.S[:, j])[0])          # the plant joint the DoF is named after
+                row.estimation_error = float(np.max(np.abs(res[ESTIMATION_ERROR][:, joint])))
             if test == "step":
                 for k_, v in step_metrics(t, y[:, j], r0, r0 + p.step_size, p.step_delay, band=p.settling_band,
                                           fit=True).items():
