@@ -89,6 +89,10 @@ def test_pole_placement_sensitivity_to_stiffness():
     from awiwi_drake.control.pole_placement import stable_stiffness_interval
     lo, hi = stable_stiffness_interval(lambda k: flexible_joint_matrices(k=k)[0], B, design.K, 0.605)
     assert lo < 0.605 < hi and hi - lo < 2e-4, (lo, hi)
+    # the boundaries are where the closed loop loses stability (largest real part crosses 0)
+    growth = lambda k: np.max(closed_loop_poles(flexible_joint_matrices(k=k)[0], B, design.K).real)
+    for edge, outward in ((lo, -1.0), (hi, 1.0)):
+        assert growth(edge - outward * 1e-8) < 0 <= growth(edge + outward * 1e-8)
     assert np.max(np.abs(table[0] - design.closed_loop_poles)) > 100.0 * np.max(np.abs(ks[1] - ks[0]))
     del nominal
 

@@ -1,6 +1,7 @@
 """Fig 15.24/15.25: PIP of a finger, antagonistic backstepping vs cascaded, 3 kHz, stick-slip link friction."""
 
 import numpy as np
+import pytest
 
 from awiwi_drake.reproductions.ch15_pip_experiments import pip_experiment, pip_metrics, pip_parameters
 
@@ -11,11 +12,13 @@ def test_pip_parameters_come_from_the_finger():
     p = pip_parameters(10.0)
     fp = finger_params("index")
     assert p.link_pulley_radius == fp.pip_radius and p.pretension == 10.0
-    # middle + distal about the PIP (straight finger): cylinders about the PIP axis, parallel axis theorem
+    # middle + distal about the PIP (straight finger): cylinders about the PIP axis, parallel axis theorem;
+    # the distal link's lateral offset (M76 z) lies along the joint axis and adds nothing
     R, Lm, Ld = fp.link_radius, fp.middle_length, fp.distal_length
+    assert fp.middle_lateral != 0.0
     I = (fp.middle_mass * (Lm ** 2 / 3 + R ** 2 / 4)
-         + fp.distal_mass * (Ld ** 2 / 12 + R ** 2 / 4 + (Lm + Ld / 2) ** 2 + fp.middle_lateral ** 2))
-    assert abs(p.link_inertia - I) < 0.05 * I
+         + fp.distal_mass * (Ld ** 2 / 12 + R ** 2 / 4 + (Lm + Ld / 2) ** 2))
+    assert p.link_inertia == pytest.approx(I, rel=1e-7)
 
 
 def test_step_backstepping_is_more_accurate_than_cascaded_under_stick_slip():

@@ -118,7 +118,7 @@ def run(args) -> int:
     names = _parse_list(args.controllers, "controllers")
     for n in names:  # validate every name before any simulation
         get_entry(n, args.rig)
-    tests = _parse_list(args.tests, "tests") if args.tests else None
+    tests = _parse_list(args.tests, "tests") if args.tests is not None else None
     for t in tests or []:
         if t not in TESTS:
             raise ValueError(f"--tests: unknown test {t!r}; known: {', '.join(TESTS)}")

@@ -94,6 +94,10 @@ def _make_dataset(args) -> int:
 
     from . import output_dir
 
+    if args.name is not None and (args.name in ("", ".", "..") or "/" in args.name or "\\" in args.name
+                                  or args.name != args.name.strip()):
+        raise ValueError(f"--name {args.name!r}: a plain file stem is expected (no folders: the files go "
+                         f"into --out)")
     out = output_dir(args.out)
     hidden = []
     for h in args.hide or []:

@@ -54,7 +54,7 @@ for _name, _factory, _rigs, _doc in _BUILTIN:
 # The law at 6 kHz (sensing and estimation at 3 kHz): behind a 3 kHz hold it chatters between the
 # torque limits (measured on the index finger, 0.2 rad MCP step: command saturated in 100 % of the samples
 # after 0.1 s; at 6 kHz and 10 kHz |u| < 0.55 Nm and the step settles), cf. the joint-rig entries
-# (backstepping_registry, 30 kHz) and issue 10 item 6.
+# (backstepping_registry: 3 kHz once Kd,imp is limited to m f_s / 4 at the run rate) and issue 10 item 6.
 register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller"),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 6000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "

@@ -122,19 +122,30 @@ def pole_sensitivity(A_of_k, B: np.ndarray, K: np.ndarray, stiffness: np.ndarray
 
 
 def stable_stiffness_interval(A_of_k, B: np.ndarray, K: np.ndarray, k0: float, *, half_width: float = 1e-3,
-                              num: int = 2001) -> tuple[float, float]:
-    """The interval of ``k`` around ``k0`` (scanned on ``k0 +- half_width``) where ``A(k) - B K`` is Hurwitz.
+                              num: int = 41, xtol: float = 1e-10) -> tuple[float, float]:
+    """The interval of ``k`` around ``k0`` (within ``k0 +- half_width``) where ``A(k) - B K`` is Hurwitz.
 
+    A scan on ``num`` points brackets the first loss of stability on each side; Brent's method
+    then finds the boundary, where the largest real part of the closed-loop poles crosses 0, to
+    ``xtol``. A side that stays stable up to the scan's end returns that end.
     Raises ValueError when the closed loop is unstable at ``k0`` itself.
     """
-    ks = k0 + np.linspace(-half_width, half_width, int(num))
-    stable = np.array([np.max(closed_loop_poles(A_of_k(k), B, K).real) < 0 for k in ks])
-    i0 = int(np.argmin(np.abs(ks - k0)))
-    if not stable[i0]:
+    from scipy.optimize import brentq
+
+    def growth(k):
+        return float(np.max(closed_loop_poles(A_of_k(k), B, K).real))
+
+    if growth(k0) >= 0:
         raise ValueError(f"stable_stiffness_interval: the closed loop is unstable at k0 = {k0}")
-    lo, hi = i0, i0
-    while lo > 0 and stable[lo - 1]:
-        lo -= 1
-    while hi < len(ks) - 1 and stable[hi + 1]:
-        hi += 1
-    return float(ks[lo]), float(ks[hi])
+    ends = []
+    for side in (-1.0, 1.0):
+        inner = k0
+        for step in np.linspace(0.0, half_width, int(num))[1:]:
+            k = k0 + side * step
+            if growth(k) >= 0:
+                ends.append(brentq(growth, inner, k, xtol=xtol) if side > 0 else brentq(growth, k, inner, xtol=xtol))
+                break
+            inner = k
+        else:
+            ends.append(k0 + side * half_width)
+    return float(ends[0]), float(ends[1])
