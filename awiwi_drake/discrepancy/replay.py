@@ -24,7 +24,7 @@ from scipy.signal import savgol_coeffs, savgol_filter
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
 from . import laws
-from .catalog import PARAM_INDEX, default_vector
+from .catalog import PARAM_INDEX
 from .data import Dataset
 from .model import DiscrepancyModel_, NominalParameters
 
@@ -242,7 +242,6 @@ class ReplayEngine:
         t0 = _time.perf_counter()
         M = len(starts)
         sys, sim, ctx = self._simulator(M)
-        n = self.nom.num_motors
         ctx.SetTime(0.0)
         ctx.SetContinuousState(np.asarray(X0, float).ravel())
         P = np.array(P, float)
