@@ -11,7 +11,8 @@ CLI: ``awiwi-drake compare``.
 """
 
 from awiwi_drake.control.compare.metrics import (COLUMNS, NUMERIC, UNITS, Metrics, MetricsTable, fit_second_order_step,
-                                                 gain_diagram, sine_metrics, step_metrics, sweep_metrics)
+                                                 gain_diagram, linear_bandwidth, response_bandwidth, sine_metrics,
+                                                 step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import JointChannels, joint_channels
 from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_metric, plot_runs
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
@@ -22,5 +23,6 @@ from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compa
 __all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable", "Comparison", "COLUMNS", "NUMERIC",
            "UNITS", "settle", "run_test", "flag_run", "run_standard_tests", "compare", "compare_controllers",
            "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
+           "response_bandwidth", "linear_bandwidth",
            "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric",
            "dominant_time_constant", "run_joint_test", "joint_channels", "JointChannels"]

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Metrics", "MetricsTable", "COLUMNS", "NUMERIC", "UNITS", "step_metrics", "sine_metrics", "gain_diagram",
-           "sweep_metrics", "fit_second_order_step"]
+           "sweep_metrics", "response_bandwidth", "linear_bandwidth", "fit_second_order_step"]
 
 
 @dataclass
@@ -33,7 +33,8 @@ class Metrics:
     phase_deg: float = math.nan          # phase of Y/R at the sine frequency
     peak_gain: float = math.nan          # max |Y/R| over the sweep
     resonance_hz: float = math.nan       # frequency of the peak gain (NaN: peak at an end of the sweep)
-    bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its low-frequency value (log-interpolated)
+    bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its DC / low-frequency value (see bandwidth_source)
+    bandwidth_source: str = ""           # "linearization" (continuous loops) or "chirp" (log-spaced estimate)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad]
@@ -45,7 +46,7 @@ class Metrics:
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
 
 
-NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "status", "flags")]
+NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "bandwidth_source", "status", "flags")]
 
 
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
@@ -101,12 +102,15 @@ class MetricsTable:
             rows = [r for r in self.rows if r.test == test]
             cols = [c for c in NUMERIC if any(math.isfinite(getattr(r, c)) for r in rows)]
             lines.append(f"### {test}\n")
-            header = ["controller", "joint", *(f"{c} [{unit(c)}]" for c in cols), "status"]
+            src = any(r.bandwidth_source for r in rows)
+            header = ["controller", "joint", *(f"{c} [{unit(c)}]" for c in cols),
+                      *(["bandwidth_source"] if src else []), "status"]
             lines.append("| " + " | ".join(header) + " |")
             lines.append("|---" * len(header) + "|")
             for r in rows:
                 status = f"{r.status}: {r.flags}" if r.flags else r.status
-                cells = [r.controller, r.joint, *(_fmt(getattr(r, c)) for c in cols), status]
+                cells = [r.controller, r.joint, *(_fmt(getattr(r, c)) for c in cols),
+                         *([r.bandwidth_source or "-"] if src else []), status]
                 lines.append("| " + " | ".join(cells) + " |")
             lines.append("")
         return "\n".join(lines)
@@ -185,57 +189,106 @@ def sine_metrics(t, r, y, freq_hz: float) -> dict[str, float]:
                 phase_deg=math.degrees(math.atan2(h.imag, h.real)))
 
 
-def gain_diagram(t, r, y, f_low: float, f_high: float, *, smooth: int = 3) -> tuple[np.ndarray, np.ndarray]:
-    """Gain |Y/R| of a swept-sine (chirp) test, restricted to [f_low, f_high].
+def gain_diagram(t, r, y, f_low: float, f_high: float, *, per_decade: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    """Gain |Y/R| of a swept-sine (chirp) test at ``per_decade`` log-spaced frequencies in [f_low, f_high].
 
-    Ratio of the Fourier transforms of the whole (mean-removed) records, which
-    resolves ``1 / T``; a centred moving average over ``smooth`` bins of both
-    auto/cross spectra tames the ripple of the finite chirp.
+    At each frequency ``f`` the Fourier transforms of the whole (mean-removed)
+    records are evaluated directly (not on the FFT's linear ``1 / T`` bins), and
+    the auto/cross spectra are averaged over ``f - 1/T, f, f + 1/T`` to tame the
+    ripple of the finite chirp; ``|Y/R| = |P_ry| / P_rr``.  Frequencies where
+    the reference carries no energy (``P_rr`` below 1e-9 of its maximum) are
+    dropped.
     """
     t, r, y = (np.asarray(a, float) for a in (t, r, y))
     if len(t) < 16:
         raise ValueError("gain_diagram: need at least 16 samples")
-    dt = float(np.median(np.diff(t)))
-    R = np.fft.rfft(r - np.mean(r))
-    Y = np.fft.rfft(y - np.mean(y))
-    f = np.fft.rfftfreq(len(t), dt)
-    prr, pry = np.abs(R) ** 2, np.conj(R) * Y
-    if smooth > 1:
-        ker = np.ones(smooth) / smooth
-        prr = np.convolve(prr, ker, mode="same")
-        pry = np.convolve(pry, ker, mode="same")
-    m = (f >= f_low) & (f <= f_high) & (prr > 1e-9 * np.max(prr))
+    if not (0.0 < f_low < f_high):
+        raise ValueError(f"gain_diagram: need 0 < f_low < f_high, got f_low={f_low}, f_high={f_high}")
+    span = t[-1] - t[0] + float(np.median(np.diff(t)))
+    n = max(2, int(math.ceil(per_decade * math.log10(f_high / f_low))) + 1)
+    f = np.logspace(math.log10(f_low), math.log10(f_high), n)
+    r0, y0 = r - np.mean(r), y - np.mean(y)
+    prr = np.zeros(n)
+    pry = np.zeros(n, complex)
+    for df in (-1.0 / span, 0.0, 1.0 / span):
+        E = np.exp(-2j * np.pi * np.outer(f + df, t - t[0]))      # DTFT at arbitrary frequencies
+        R, Y = E @ r0, E @ y0
+        prr += np.abs(R) ** 2
+        pry += np.conj(R) * Y
+    m = prr > 1e-9 * np.max(prr)
     return f[m], np.abs(pry[m] / prr[m])
+
+
+def response_bandwidth(f, g, level: float) -> float:
+    """First frequency where the gain ``g(f)`` falls below ``level``, interpolated in log frequency
+    between the grid points; NaN when it never does (never the first grid point)."""
+    f, g = np.asarray(f, float), np.asarray(g, float)
+    below = np.nonzero(g < level)[0]
+    below = below[below > 0]
+    if not len(below):
+        return math.nan
+    k = int(below[0])
+    a = (g[k - 1] - level) / (g[k - 1] - g[k])
+    return float(np.exp(np.log(f[k - 1]) + a * (np.log(f[k]) - np.log(f[k - 1]))))
 
 
 def sweep_metrics(f, g) -> dict[str, float]:
     """Peak gain, its frequency (the resonance; NaN when the peak sits at an end of the sweep, i.e.
-    the diagram has no interior maximum) and the -3 dB bandwidth of a measured gain diagram ``g(f)``.
+    the diagram has no interior maximum) and the -3 dB bandwidth of a measured gain diagram ``g(f)``
+    (``f`` log-spaced, as :func:`gain_diagram` returns it).
 
     The bandwidth is where ``|Y/R|`` first falls below ``1/sqrt(2)`` of its
     low-frequency value (the mean over the lowest 5 % of the log-frequency span),
-    interpolated in log frequency between the bins; NaN when the gain never
-    falls that low in the sweep, so that the first grid point is never reported.
-    (A corner within a few bins of the sweep start reads high: the sweep does
-    not see the DC gain.)
+    interpolated in log frequency (:func:`response_bandwidth`); NaN when the gain
+    never falls that low in the sweep.  (A corner within the lowest 5 % of the
+    span reads high: the sweep does not see the DC gain; a loop that can be
+    linearised gets :func:`linear_bandwidth` instead.)
     """
     if len(f) == 0:
         return {}
     f, g = np.asarray(f, float), np.asarray(g, float)
     i = int(np.argmax(g))
     low = f <= f[0] * (f[-1] / f[0]) ** 0.05
-    level = float(np.mean(g[low])) / math.sqrt(2.0)
-    below = np.nonzero(g < level)[0]
-    below = below[below > 0]
-    bw = math.nan
-    if len(below):
-        k = int(below[0])
-        a = (g[k - 1] - level) / (g[k - 1] - g[k])
-        bw = float(np.exp(np.log(f[k - 1]) + a * (np.log(f[k]) - np.log(f[k - 1]))))
+    bw = response_bandwidth(f, g, float(np.mean(g[low])) / math.sqrt(2.0))
     # a peak at either end of the sweep is no resonance inside it (a monotone diagram): NaN, not the
     # first or last grid point
     res = float(f[i]) if 0 < i < len(f) - 1 else math.nan
     return dict(peak_gain=float(g[i]), resonance_hz=res, bandwidth_hz=bw)
+
+
+def linear_bandwidth(lin, output=None, *, per_decade: int = 100) -> float:
+    """-3 dB bandwidth [Hz] of a linearised loop (a
+    :class:`~awiwi_drake.analysis.LinearizationResult` from the reference to the tracked output).
+
+    ``|H(j w)|`` (:meth:`~awiwi_drake.analysis.LinearizationResult.bode`) on a log-spaced grid
+    from a decade below the slowest pole to a decade above the fastest (``per_decade`` points
+    per decade) brackets the first frequency where it falls below ``|H(0)| / sqrt(2)``; Brent's
+    method on ``|H(j w)|`` then finds it to 1e-10.  NaN when ``H(0)`` is not finite and non-zero
+    (a pole at the origin) or the gain never falls that low.
+    """
+    from scipy.optimize import brentq
+
+    def H(w: float) -> complex:
+        return complex(lin.bode(0, output, omega=[w]).response[0])
+
+    mags = np.abs(np.asarray(lin.poles))
+    if mags.size and mags.min() == 0.0:      # a pole at the origin: no finite DC gain
+        return math.nan
+    lo, hi = (0.1 * mags.min(), 10.0 * mags.max()) if mags.size else (1e-3, 1e3)
+    dc = abs(H(1e-6 * lo))                    # |H(0)| to ~1e-12 relative
+    if not (math.isfinite(dc) and dc > 0.0):
+        return math.nan
+    w = np.logspace(math.log10(lo), math.log10(hi), max(2, int(per_decade * math.log10(hi / lo)) + 1))
+    g = np.abs(lin.bode(0, output, omega=w).response)
+    level = dc / math.sqrt(2.0)
+    below = np.nonzero(g < level)[0]
+    if not len(below):
+        return math.nan
+    k = int(below[0])
+    if k == 0:
+        return math.nan
+    wb = brentq(lambda x: abs(H(x)) - level, w[k - 1], w[k], xtol=1e-12, rtol=1e-10)
+    return float(wb / (2 * math.pi))
 
 
 def fit_second_order_step(t, y, r0: float, r1: float, t_step: float = 0.0) -> dict[str, float]:

@@ -55,7 +55,8 @@ def plot_joint_runs(comparison: Comparison, test: str, finger: str):
 
 def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = None):
     """Gain diagrams |Y/R|(f) of the sweep test (Fig 11.4 style) on a log frequency axis,
-    with each controller's -3 dB bandwidth marked (dotted, named in the legend)."""
+    with each controller's -3 dB bandwidth marked (dotted, named in the legend with its source:
+    the linearisation or the chirp)."""
     import matplotlib.pyplot as plt
     runs = [r for r in comparison.runs if r.test == "sweep"]
     if not runs:
@@ -64,11 +65,13 @@ def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = Non
     for r in runs:
         line, = ax.semilogx(r.meta["freq"], r.meta["gain"], label=r.controller)
         try:
-            bw = comparison.table.get(r.controller, "sweep").bandwidth_hz
+            row = comparison.table.get(r.controller, "sweep")
+            bw, src = row.bandwidth_hz, row.bandwidth_source
         except KeyError:
-            bw = math.nan
+            bw, src = math.nan, ""
         if math.isfinite(bw):
-            ax.axvline(bw, color=line.get_color(), ls=":", lw=1.2, label=f"{r.controller}: -3 dB at {bw:.3g} Hz")
+            ax.axvline(bw, color=line.get_color(), ls=":", lw=1.2,
+                       label=f"{r.controller}: -3 dB at {bw:.3g} Hz" + (f" ({src})" if src else ""))
     ax.set_xlabel("frequency [Hz] (log)")
     ax.set_ylabel(f"gain |Y/R| [{unit}/{unit}]" if unit else "gain |Y/R| [-]")
     ax.set_title(f"{comparison.rig}: closed-loop gain from the chirp test")

@@ -27,8 +27,8 @@ import numpy as np
 
 from awiwi_drake.analysis import Chirp, Constant, PerEntry, SimulationDivergedError, Sine, Step, simulate
 from awiwi_drake.control.base import ClosedLoop, closed_loop
-from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, sine_metrics, step_metrics,
-                                                 sweep_metrics)
+from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, linear_bandwidth, sine_metrics,
+                                                 step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
 from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
 from awiwi_drake.control.registry import get_entry, rig_kind
@@ -114,6 +114,25 @@ def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = 
     return float(1.0 / np.min(-lam.real[keep]))
 
 
+def _linearized_bandwidth(loop: ClosedLoop, ctx) -> float | None:
+    """-3 dB bandwidth [Hz] of the loop linearised (Drake ``Linearize``) at the settled context ``ctx``,
+    from its first reference to its tracked output; None for loops ``Linearize`` cannot take (sampled
+    or discrete controller state) or that are not asymptotically stable there (then the chirp decides)."""
+    from awiwi_drake.analysis import linearize
+
+    if loop.rate_hz or not ctx.has_only_continuous_state():
+        return None
+    try:
+        lin = linearize(loop.diagram, context=ctx.Clone(), input=loop.references[0],
+                        outputs=(loop.tracked_outputs[0],), equilibrium_tolerance=None)
+    except ValueError:
+        return None
+    if lin.A.shape[0] == 0 or np.any(np.linalg.eigvals(lin.A).real >= 0):
+        return None
+    bw = linear_bandwidth(lin)
+    return bw if math.isfinite(bw) else None
+
+
 def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
     return 1.0 / loop.rate_hz if loop.rate_hz else params.sample_period
 
@@ -150,6 +169,7 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         ref = Chirp(p.sweep_amplitude, f0, f1, T, offset=r0)
         t_final = T
         meta.update(f_low=f0, f_high=f1)
+        lin_bw = _linearized_bandwidth(loop, ctx)
     run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
     m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
     u = np.abs(run.command)
@@ -181,6 +201,9 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         run.meta.update(freq=f, gain=g)
         for k_, v in sweep_metrics(f, g).items():
             setattr(m, k_, v)
+        m.bandwidth_source = "chirp"
+        if lin_bw is not None:
+            m.bandwidth_hz, m.bandwidth_source = lin_bw, "linearization"
     flag_run(m, p)
     return run, m
 
@@ -291,6 +314,7 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 meta.setdefault("gain_by_joint", {})[ch.names[j]] = g
                 for k_, v in sweep_metrics(f, g).items():
                     setattr(row, k_, v)
+                row.bandwidth_source = "chirp"
             flag_run(row, p)
             if DISTRIBUTION_STATUS in res:       # the chain's force distribution, one status per finger
                 finger = list(dict.fromkeys(ch.fingers)).index(ch.fingers[j])
