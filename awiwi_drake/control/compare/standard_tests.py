@@ -8,8 +8,10 @@
 * ``sine``: sinusoidal tracking (RMS error, gain and phase at the frequency);
 * ``disturbance``: an ``external_torque`` step at constant reference
   (achieved stiffness ``dtau / dq``; link rigs only);
-* ``sweep``: a linear chirp of the reference, gain diagram ``|Y/R|(f)``
-  (as in Fig 11.4);
+* ``sweep``: a linear chirp of the reference, gain diagram ``|Y/R|(f)`` on log-spaced
+  frequencies (as in Fig 11.4); the -3 dB bandwidth comes from the loop's linearisation
+  where Drake can linearise it (continuous loops), else from the chirp
+  (``Metrics.bandwidth_source``);
 
 and :func:`compare` does so for several controllers and returns a
 :class:`Comparison` (runs + :class:`~awiwi_drake.control.compare.metrics.MetricsTable`).
