@@ -236,8 +236,8 @@ def response_bandwidth(f, g, level: float) -> float:
 
 
 def sweep_metrics(f, g) -> dict[str, float]:
-    """Peak gain, its frequency (the resonance; NaN when the peak sits at an end of the sweep, i.e.
-    the diagram has no interior maximum) and the -3 dB bandwidth of a measured gain diagram ``g(f)``
+    """Peak gain, its frequency (the resonance; NaN when the peak sits at the top end of the sweep or
+    in its lowest 5 % of the log-frequency span, i.e. the diagram has no interior maximum) and the -3 dB bandwidth of a measured gain diagram ``g(f)``
     (``f`` log-spaced, as :func:`gain_diagram` returns it).
 
     The bandwidth is where ``|Y/R|`` first falls below ``1/sqrt(2)`` of its
@@ -253,9 +253,9 @@ def sweep_metrics(f, g) -> dict[str, float]:
     i = int(np.argmax(g))
     low = f <= f[0] * (f[-1] / f[0]) ** 0.05
     bw = response_bandwidth(f, g, float(np.mean(g[low])) / math.sqrt(2.0))
-    # a peak at either end of the sweep is no resonance inside it (a monotone diagram): NaN, not the
-    # first or last grid point
-    res = float(f[i]) if 0 < i < len(f) - 1 else math.nan
+    # a peak at the top end of the sweep or within its low-frequency band (where the level is taken and the
+    # chirp's start ripples) is no resonance inside it (a monotone diagram): NaN, not a grid point there
+    res = float(f[i]) if (not low[i]) and i < len(f) - 1 else math.nan
     return dict(peak_gain=float(g[i]), resonance_hz=res, bandwidth_hz=bw)
 
 
