@@ -18,8 +18,8 @@ from awiwi_drake.parameters.hand import (
     JointControllerParams, MiddleFingerParams, RingFingerParams, ThumbParams)
 from awiwi_drake.parameters.backstepping import (
     AntagonisticBacksteppingGains, BacksteppingPlantParams, ImpedanceBacksteppingGains, ImpedanceStudy,
-    NonlinearImpedanceStudy, OptimalGainsCase, PipStudy, PositionBacksteppingGains, PositionStudy,
-    ScalarExampleGains)
+    NonlinearImpedanceStudy, OptimalGainsCase, OptimalGainsStudy, PipStudy, PositionBacksteppingGains,
+    PositionStudy, ScalarExampleGains)
 from awiwi_drake.parameters.hand_control import (
     ForceDistributionParams, FrictionObserverParams, LinkFrictionParams, StiffnessCorrectionParams)
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings, TruthGeneratorParams

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from pydrake.systems.controllers import LinearQuadraticRegulator
 
-from awiwi_drake.parameters.backstepping import OptimalGainsCase
+from awiwi_drake.parameters.backstepping import OptimalGainsCase, OptimalGainsStudy
 from awiwi_drake.parameters.rigs import FlexibleJointParams
 from awiwi_drake.plotting import figure_axes
 from awiwi_drake.rigs import flexible_joint_rig
@@ -53,30 +53,33 @@ def plot_gain_fit(fits, *, ax=None):
     return fig, ax
 
 
-def fig_16_3_gain_samples(*, runs: int = 10, samples: int = 2000, r_weight: float | None = None,
-                          step: float = 1.0, t_final: float = 1.2, num: int = 241, executor="serial") -> dict:
-    """Fig 16.3 / Table 16.2: ``runs`` independent Algorithm 3 gain selections (seeds 0..runs-1) and the
-    link step response of each on the Table 16.2 model (= Table 16.1; continuous loop, no damping).
+def fig_16_3_gain_samples(study: OptimalGainsStudy | None = None, *, r_weight: float | None = None,
+                          executor="serial") -> dict:
+    """Fig 16.3 / Table 16.2: ``study.runs`` independent Algorithm 3 gain selections (seeds 0..runs-1,
+    ``study.samples`` draws each) and the link response of each to a ``study.step`` reference on the
+    Table 16.2 model (= Table 16.1; continuous loop, no damping), sampled at ``study.num`` points up to
+    ``study.t_final`` (defaults: :class:`~awiwi_drake.parameters.backstepping.OptimalGainsStudy`).
 
-    ``r_weight`` None: Table 16.2's R = 0.1.  Returns ``t``, ``q`` (runs x num), ``distance``, ``gains``
-    and ``deviation`` (max |q - median trajectory| per run [rad]).
+    ``r_weight`` None: Table 16.2's R = 0.1.  Returns ``t``, ``q`` (runs x num), ``distance``, ``gains``,
+    ``deviation`` (max |q - median trajectory| per run [rad]), ``r_weight`` and ``step``.
     """
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.backstepping import impedance_controller
     from awiwi_drake.control.base import closed_loop
     from awiwi_drake.control.optimal_gains import monte_carlo_gains
+    s = study or OptimalGainsStudy()
     case = OptimalGainsCase() if r_weight is None else OptimalGainsCase(r_weight=r_weight)
-    t = np.linspace(0.0, t_final, num)
+    t = np.linspace(0.0, s.t_final, s.num)
     Q, dist, gains = [], [], []
-    for seed in range(int(runs)):
-        fit = monte_carlo_gains(table_16_1_rig(case), case, samples=samples, seed=seed, executor=executor)
+    for seed in range(int(s.runs)):
+        fit = monte_carlo_gains(table_16_1_rig(case), case, samples=s.samples, seed=seed, executor=executor)
         rig = table_16_1_rig(case)
         loop = closed_loop(rig, impedance_controller(rig, fit.gains, external_torque="none"), rate_hz=None)
-        ctx = loop.create_context(references={"joint_angle_reference": step})
-        res = simulate(loop.diagram, ctx, t_final, log=("joint_angle",), max_step=1e-3, accuracy=1e-6)
+        ctx = loop.create_context(references={"joint_angle_reference": s.step})
+        res = simulate(loop.diagram, ctx, s.t_final, log=("joint_angle",), max_step=s.max_step, accuracy=s.accuracy)
         Q.append(np.interp(t, res.t, res["joint_angle"][:, 0]))
         dist.append(fit.distance)
         gains.append(fit.gains)
     Q = np.array(Q)
     return dict(t=t, q=Q, distance=np.array(dist), gains=gains,
-                deviation=np.max(np.abs(Q - np.median(Q, axis=0)), axis=1), r_weight=case.r_weight)
+                deviation=np.max(np.abs(Q - np.median(Q, axis=0)), axis=1), r_weight=case.r_weight, step=s.step)
