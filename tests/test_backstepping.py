@@ -13,12 +13,14 @@ from awiwi_drake.control.backstepping import (
     position_backstepping, position_controller)
 from awiwi_drake.reproductions.ch15_backstepping import (
     antagonistic_step, antagonistic_stiffness_check, count_oscillations, delay_study, example_phase_portrait,
-    impedance_steady_state, impedance_study, is_monotone_nonincreasing, position_gain_study, saturation_study,
-    table_15_1_params, table_15_1_rig)
+    impedance_steady_state, impedance_study, is_monotone_nonincreasing, load_step_command_jump, position_gain_study,
+    saturation_study, table_15_1_params, table_15_1_rig)
 from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, ScalarExamplePlant, example_control
 from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.sensors import with_external_torque_sensor
 from awiwi_drake.parameters.backstepping import (
-    ImpedanceBacksteppingGains, ImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
+    ImpedanceBacksteppingGains, ImpedanceStudy, NonlinearImpedanceStudy, PositionBacksteppingGains, PositionStudy,
+    ScalarExampleGains)
 from awiwi_drake.rigs import joint_rig
 
 
@@ -167,6 +169,51 @@ def test_impedance_steady_state_is_disturbance_over_stiffness():
     for kp in ImpedanceStudy().stiffness_values:
         dq = impedance_steady_state(table_15_1_rig(), g.replace(stiffness=kp), 0.2)
         assert dq == pytest.approx(0.2 / kp, rel=1e-6)
+
+
+def _nonlinear_impedance_loop():
+    """Sec 15.4.3 rig (lever-spring pair) and nonlinear controller with an ideal load sensor."""
+    ns = NonlinearImpedanceStudy()
+    rig = with_external_torque_sensor(table_15_1_rig(spring="nonlinear"))
+    g = ImpedanceBacksteppingGains(stiffness=ns.stiffness, damping=ns.damping, k3=ns.k3, k4=ns.k4)
+    return ns, rig, g, closed_loop(rig, impedance_controller(rig, g, external_torque="input"), rate_hz=None)
+
+
+def test_nonlinear_impedance_holds_load_at_load_over_kp():
+    """Fig 15.19/15.20: under the 0.5 Nm load the nonlinear-spring loop rests at q = r + load / Kp,imp
+    (the impedance law (15.54)), with spring deflection phi^-1(-load); that equilibrium is exponentially
+    stable and its local compliance dq/dtau_ext is 1 / Kp,imp although the spring stiffens (Drake Linearize)."""
+    ns, rig, g, loop = _nonlinear_impedance_loop()
+    q_ss = ns.step + ns.disturbance / ns.stiffness
+    op = rig.operating_point(joint_angle=q_ss, external_torque=ns.disturbance)
+    assert op.joint_stiffness > 1.1 * float(np.ravel(rig.spring.stiffness(np.array([0.0])))[0])  # load stiffens
+    ctx = loop.create_context(op, references={"joint_angle_reference": ns.step})
+    xdot = loop.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+    assert np.max(np.abs(xdot)) < 1e-6
+    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index(),
+                    equilibrium_check_tolerance=1e-6)
+    assert np.max(np.linalg.eigvals(lin.A()).real) < 0
+    compliance = float((lin.C() @ -np.linalg.solve(lin.A(), lin.B()))[0, 0])
+    assert compliance == pytest.approx(1.0 / ns.stiffness, rel=1e-6)
+
+
+def test_load_step_jumps_impedance_command_by_closed_form():
+    """Why the Fig 15.19 run leaves its yield for tens of rad after the load: a step dtau in the measured load
+    enters qdd and qddd of (15.62), so the command jumps by
+    du = B dtau / (phi' m) (phi' - 1 - Kp - (K3 + K4) Kd + Kd b_q / m) (derived from (15.54)-(15.63));
+    with Table 15.1 (m = 7.2e-7 kg m^2) that is ~1e4 times the holding torque."""
+    ns, rig, g, loop = _nonlinear_impedance_loop()
+    model = joint_model(rig)
+    x = np.array([ns.step, 0.0, ns.step, 0.0])
+    r = np.array([ns.step, 0.0, 0.0, 0.0, 0.0])
+    du = (impedance_backstepping(x, r, model, g, ns.disturbance)[0] - impedance_backstepping(x, r, model, g, 0.0)[0])[0]
+    k = float(np.ravel(rig.spring.stiffness(np.array([0.0])))[0])
+    m, b, bq = model.link_inertia, model.motor_inertia[0], model.link_damping
+    closed = b * ns.disturbance / (k * m) * (k - 1 - g.stiffness - (g.k3 + g.k4) * g.damping + g.damping * bq / m)
+    assert du == pytest.approx(closed, rel=1e-9)
+    assert load_step_command_jump(ns) == pytest.approx(closed, rel=1e-9)   # what the study reports
+    assert du > 5e3 * ns.disturbance
 
 
 def test_impedance_simulation_deflection_within_tolerance():

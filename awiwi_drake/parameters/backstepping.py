@@ -151,7 +151,7 @@ class NonlinearImpedanceStudy(Parameters):
     k4: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False, source="Table 15.1, K4")
     torque_limit: float = param(2.0, unit="Nm", low=0.0, low_inclusive=False,
                                 source="chosen: above the 0.5 Nm holding torque, far below the unsaturated "
-                                       "step peak (Fig 15.21 saturates the step only)")
+                                       "command peak (4.9e3 Nm, the kick of the ideal load step)")
 
 
 @dataclass(frozen=True)

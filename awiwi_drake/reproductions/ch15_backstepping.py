@@ -24,7 +24,8 @@ import numpy as np
 
 from awiwi_drake.analysis import PerEntry, Samples, Sine, simulate
 from awiwi_drake.components.spring import LinearSpring
-from awiwi_drake.control.backstepping import REFERENCE_PORT, REFERENCE_SIZE, impedance_controller, position_controller
+from awiwi_drake.control.backstepping import (
+    REFERENCE_PORT, REFERENCE_SIZE, impedance_backstepping, impedance_controller, joint_model, position_controller)
 from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.control.sensors import with_external_torque_sensor
 from awiwi_drake.parameters.backstepping import (
@@ -38,8 +39,8 @@ from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 __all__ = [
     "BacksteppingRun", "table_15_1_params", "table_15_1_rig", "event_schedules", "run_loop",
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
-    "impedance_steady_state", "nonlinear_impedance_study", "antagonistic_step", "antagonistic_sine",
-    "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
+    "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
+    "antagonistic_sine", "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
     "plot_joint_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
 ]
 
@@ -307,6 +308,12 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
     The "linear controller" designs with the spring's stiffness at zero deflection; the
     "nonlinear controller" uses the real spring curve and its first two derivatives.
     ``saturation=True`` limits the motor torque (Fig 15.21).
+
+    The load is an ideal step, measured by an ideal sensor: it enters the design's
+    ``qdd``/``qddd`` and the command jumps by :func:`load_step_command_jump` (4.9e3 Nm for
+    the defaults, Table 15.1's tiny link inertia). Unsaturated, that kick throws the link
+    tens of rad away (peak 37.6 rad) before the nonlinear controller returns it to
+    ``step + load / Kp,imp``; the linear controller does not return (docs/REPRODUCTIONS.md).
     """
     s = study or NonlinearImpedanceStudy()
     base = functools.partial(table_15_1_rig, spring="nonlinear")
@@ -322,6 +329,22 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
                                    t_final=t_final or s.duration, label=label, saturation=sat,
                                    extra_outputs=("tendon_stiffness",)))
     return runs
+
+
+def load_step_command_jump(study: NonlinearImpedanceStudy | None = None, *, spring=None) -> float:
+    """Jump of the impedance command [Nm] when the measured load steps from 0 to ``study.disturbance``.
+
+    Evaluated with the law :func:`~awiwi_drake.control.backstepping.impedance_backstepping` at rest
+    at the reference ``study.step`` (the state just before the load of Fig 15.19); ``spring`` is the
+    design law as in :func:`nonlinear_impedance_study` (``None``: the rig's nonlinear spring).
+    """
+    s = study or NonlinearImpedanceStudy()
+    model = joint_model(table_15_1_rig(spring="nonlinear"), spring=spring)
+    g = ImpedanceBacksteppingGains(stiffness=s.stiffness, damping=s.damping, k3=s.k3, k4=s.k4)
+    x = np.array([s.step, 0.0, s.step, 0.0])
+    r = np.array([s.step, 0.0, 0.0, 0.0, 0.0])
+    u = [impedance_backstepping(x, r, model, g, w)[0][0] for w in (0.0, s.disturbance)]
+    return float(u[1] - u[0])
 
 
 # ---------------------------------------------------------------------------
