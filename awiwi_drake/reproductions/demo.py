@@ -110,7 +110,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
     q_end = float(result["joint_angle"][-1, 0])
     f_end = result["tendon_force"][-1]
     lines = [
-        f"demo: joint_rig ({backend} backend) simulated {scenario.t_final} s; outputs in {out}/",
+        f"demo: joint-rig ({backend} backend) simulated {scenario.t_final} s; outputs in {out}/",
         f"  link angle at the end: {q_end:.4f} rad (reference {scenario.link_step} rad)",
         f"  tendon forces at the end: {f_end[0]:.2f} N, {f_end[1]:.2f} N (pretension {scenario.f_end} N)",
         f"  joint stiffness from {pre[0]:.0f} N to {pre[-1]:.0f} N pretension: {stiff[0]:.3f} -> {stiff[-1]:.3f} Nm/rad",
