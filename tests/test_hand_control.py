@@ -63,14 +63,23 @@ def test_new_systems_convert_to_autodiff_and_match_finite_differences():
     n, k = S.shape
     rng = np.random.default_rng(3)
     bank = JointImpedanceBank(S, np.full(k, 0.5), np.full(k, 1e-3), rng.normal(0, 0.01, k), np.ones(k))
-    check_system_autodiff_matches_fd(bank, [], dict(joint_angle_reference=rng.normal(0, 0.2, n),
-                                                    joint_angle=rng.normal(0, 0.2, n),
-                                                    joint_velocity=rng.normal(0, 1, n)),
-                                     outputs=["joint_torque_reference"])   # the stiffness output is constant
+    jac = check_system_autodiff_matches_fd(bank, [], dict(joint_angle_reference=rng.normal(0, 0.2, n),
+                                                          joint_angle=rng.normal(0, 0.2, n),
+                                                          joint_velocity=rng.normal(0, 1, n)),
+                                           outputs=["joint_torque_reference"])   # the stiffness output is constant
+    # (11.4) on the DoF: tau = tau_op + K S^+ (q_ref - q) - D S^+ qdot, so the Jacobian blocks are closed forms
+    J = jac["joint_torque_reference"][0]
+    Sp = np.linalg.pinv(S)
+    np.testing.assert_allclose(J[:, :n], 0.5 * Sp, atol=1e-12)
+    np.testing.assert_allclose(J[:, n:2 * n], -0.5 * Sp, atol=1e-12)
+    np.testing.assert_allclose(J[:, 2 * n:], -1e-3 * Sp, atol=1e-12)
     thumb = _rig("thumb")
     path = TendonPathVelocity(thumb.coupling)      # P(q) of the thumb base
-    check_system_autodiff_matches_fd(path, [], dict(joint_angle=rng.normal(0, 0.3, 4),
-                                                    joint_velocity=rng.normal(0, 1, 4)))
+    q_t, v_t = rng.normal(0, 0.3, 4), rng.normal(0, 1, 4)
+    jac = check_system_autodiff_matches_fd(path, [], dict(joint_angle=q_t, joint_velocity=v_t))
+    # the path velocity is P(q) qdot: its derivative by qdot is P(q) itself (the thumb base's P varies with q)
+    (J_path, _), = jac.values()
+    np.testing.assert_allclose(J_path[:, 4:], np.asarray(thumb.coupling.P(q_t), float), rtol=1e-9, atol=1e-12)
     m = rig.coupling.num_tendons
     fmap = ForceMap.from_spring(rig.spring, rig.params.motor.pulley_radius)
     law = TendonForceLaw(fmap, rig.params.motor, scheduled=True, size=m, ripple_scale=0.8, path_velocity=True)
@@ -242,14 +251,28 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
     rig = _rig("thumb")                                   # the thumb's P(q) in the reference map
     op = rig.operating_point()
     rng = np.random.default_rng(8)
-    check_system_autodiff_matches_fd(joint_pd_controller(rig), [], dict(
+    jac = check_system_autodiff_matches_fd(joint_pd_controller(rig), [], dict(
         joint_angle_reference=op.joint_angle + rng.normal(0, 0.2, 4), motor_state=rng.normal(0, 0.3, 16)))
+    # a decentralised motor-position PD: each motor's torque falls with its own angle and velocity only,
+    # with the same gains for every motor (u_i = -Kp theta_i - Kd omega_i + f(q_ref))
+    J = jac["motor_torque"][0]
+    for block in (J[:, 4:12], J[:, 12:20]):
+        gain = -block[0, 0]
+        assert gain > 0.0
+        np.testing.assert_allclose(block, -gain * np.eye(8), atol=1e-12)
     index = _rig()
     chain = TendonChainController(index)
-    check_system_autodiff_matches_fd(chain, [], dict(
+    jac = check_system_autodiff_matches_fd(chain, [], dict(
         joint_angle_reference=rng.normal(0, 0.2, 4), joint_angle=rng.normal(0, 0.2, 4),
         joint_velocity=rng.normal(0, 1, 4), tendon_force=rng.uniform(10, 40, 8),
         motor_velocity=rng.normal(0, 0.5, 8)), outputs=["motor_torque", "joint_torque_reference"], rtol=1e-4)
+    # the impedance depends on the error only (dtau/dq_ref = -dtau/dq = diag(K) > 0 on the index's
+    # independent joints), and each tendon's force loop (10.2) opposes its own force error (du_i/df_i < 0)
+    T = jac["joint_torque_reference"][0]
+    np.testing.assert_allclose(T[:, :4], -T[:, 4:8], atol=1e-12)
+    assert np.all(np.diag(T[:, :4]) > 0.0)
+    np.testing.assert_allclose(T[:, :4], np.diag(np.diag(T[:, :4])), atol=1e-12)
+    assert np.all(np.diag(jac["motor_torque"][0][:, 12:20]) < 0.0)
 
 
 @pytest.mark.parametrize("controller", ["cascaded", "backstepping"])

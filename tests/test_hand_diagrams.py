@@ -216,8 +216,14 @@ def test_routing_system_with_the_thumb_coupling_converts_to_autodiff():
     sys = TendonRouting_[float](finger_coupling("thumb"), 0.005, np.full(8, 1e-3))
     rng = np.random.default_rng(5)
     theta, q, f = rng.uniform(-1, 1, 8), rng.uniform(-1, 1, 4), rng.uniform(5, 40, 8)
-    check_system_autodiff_matches_fd(sys, [], {"motor_angle": theta, "joint_angle": q, "tendon_force": f},
-                                     outputs=["elongation", "generalized_force"], rtol=1e-6)
+    jac = check_system_autodiff_matches_fd(sys, [], {"motor_angle": theta, "joint_angle": q, "tendon_force": f},
+                                           outputs=["elongation", "generalized_force"], rtol=1e-6)
+    # x = r_m theta + h(q) - h(0) + x0 and tau = -P(q)^T f: d x/d theta = r_m I, d x/d q = P(q), d tau/d f = -P(q)^T
+    P = np.asarray(finger_coupling("thumb").P(q), float)
+    J_x, J_tau = jac["elongation"][0], jac["generalized_force"][0]
+    np.testing.assert_allclose(J_x[:, :8], 0.005 * np.eye(8), atol=1e-12)
+    np.testing.assert_allclose(J_x[:, 8:12], P, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(J_tau[:, 12:], -P.T, rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("finger", ["thumb", "ring"])
