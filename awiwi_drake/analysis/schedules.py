@@ -15,6 +15,7 @@ context's start time).
 
 from __future__ import annotations
 
+import abc
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -38,13 +39,14 @@ def _finite(owner: str, **values) -> None:
             raise ValueError(f"{owner}: {k} = {v!r} must be a finite number")
 
 
-class Schedule:
+class Schedule(abc.ABC):
     """Base class: ``value(t)`` for time ``t`` [s] after the start; ``+`` builds a sum."""
 
     size: int | None = None  # None: broadcast to the port size
 
-    def value(self, t):  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def value(self, t):
+        """The signal at time ``t`` [s] after the start (float or AutoDiffXd ``t``)."""
 
     def __add__(self, other: "Schedule") -> "Schedule":
         return _Sum((self, as_schedule(other)))

@@ -57,7 +57,7 @@ def _schema_type(hint, where: str):
                 if o not in options:
                     options.append(o)
         return Union[tuple(options)]  # type: ignore[valid-type]
-    raise NotImplementedError(f"{where}: the field type {hint!r} has no YAML form")
+    raise TypeError(f"{where}: the field type {hint!r} has no YAML form")
 
 
 def yaml_schema(cls: type) -> type:
