@@ -10,6 +10,7 @@ import pytest
 
 from awiwi_drake.discrepancy import (DiagnosisInterrupted, diagnose, load_dataset, make_truth_dataset,
                                      save_dataset, write_report)
+from _joint_rig_check import assert_models_match_joint_rig
 from awiwi_drake.discrepancy.catalog import PARAM_INDEX, default_vector
 from awiwi_drake.discrepancy.decide import materiality, noise_equivalent, rejection_reason
 from awiwi_drake.discrepancy.replay import ReplayEngine, project
@@ -270,24 +271,11 @@ def test_augmented_parameters_build_a_rig_with_the_same_dynamics():
     model = DiscrepancyModel(nominal)
     P_nodelay = P.copy()
     P_nodelay[PARAM_INDEX["delay"]] = 0.0  # the replay applies the delay to the input, not in the model
-    rig_ctx, model_ctx = rig.diagram.CreateDefaultContext(), model.CreateDefaultContext()
+    model_ctx = model.CreateDefaultContext()
     model_ctx.get_mutable_numeric_parameter(0).SetFromVector(P_nodelay)
-    rig.diagram.GetInputPort("external_torque").FixValue(rig_ctx, [0.0])
-    r, rq = motor.pulley_radius, base.link_pulley_radius
-    rng = np.random.default_rng(4)
-    for _ in range(6):
-        q, qd = rng.uniform(-0.4, 0.4), rng.uniform(-3, 3)
-        x = rng.uniform(1e-4, 3e-3, 2)
-        theta = np.array([(x[0] + rq * q) / r, (x[1] - rq * q) / r])
-        omega, u = rng.uniform(-5, 5, 2), rng.uniform(-1, 1, 2)
-        rig_ctx.SetContinuousState(np.r_[q, qd, theta, omega])
-        rig.diagram.GetInputPort("motor_torque").FixValue(rig_ctx, u)
-        xdot_rig = rig.diagram.EvalTimeDerivatives(rig_ctx).CopyToVector()
-        model_ctx.SetContinuousState(np.r_[theta, omega, q, qd, 0.0, 0.0])
-        model.get_input_port(0).FixValue(model_ctx, u)
-        xdot = model.EvalTimeDerivatives(model_ctx).CopyToVector()
-        np.testing.assert_allclose(np.r_[xdot[4:6], xdot[0:4]], xdot_rig, rtol=1e-9,
-                                   atol=1e-9 * np.max(np.abs(xdot_rig)))
+    assert_models_match_joint_rig([(model, model_ctx)], rig, motor_pulley_radius=motor.pulley_radius,
+                                  link_pulley_radius=base.link_pulley_radius, seed=4, samples=6,
+                                  min_elongation=1e-4)
     with pytest.raises(ValueError, match="JointRigParams"):
         from awiwi_drake.parameters import TendonRigParams
         augmented_rig_parameters(dx, TendonRigParams())
