@@ -84,7 +84,9 @@ class FingerCoupling(abc.ABC):
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
     Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
-    ``joint_names``; ``is_constant`` when ``P`` does not depend on ``q``.
+    ``joint_names``, ``finger`` (its name); ``is_constant`` when ``P`` does not depend on ``q``.
+    ``parts``, ``joint_slices``, ``tendon_slices`` map each finger the routing spans to its coupling,
+    joints and tendons (one finger: itself; :class:`HandCoupling`: the five).
     All methods accept float arrays and numpy object arrays of AutoDiffXd or
     symbolic Expression.
     """
@@ -94,6 +96,19 @@ class FingerCoupling(abc.ABC):
     tendon_names: list[str]
     joint_names: list[str]
     is_constant: bool = True
+    finger: str = "finger"
+
+    @property
+    def parts(self) -> dict:
+        return {self.finger: self}
+
+    @property
+    def joint_slices(self) -> dict:
+        return {self.finger: slice(0, self.num_joints)}
+
+    @property
+    def tendon_slices(self) -> dict:
+        return {self.finger: slice(0, self.num_tendons)}
 
     def _check_q(self, q):
         q = np.asarray(q) if _is_float_array(q) else np.asarray(q, dtype=object)
@@ -132,11 +147,11 @@ class LinearFingerCoupling(FingerCoupling):
     """Constant coupling: ``h(q) = P q`` (index, middle, ring, fifth)."""
 
     def __init__(self, P: np.ndarray, *, joint_names: Sequence[str], tendon_names: Sequence[str],
-                 dof_selection: np.ndarray | None = None):
+                 dof_selection: np.ndarray | None = None, finger: str = "finger"):
         P = np.asarray(P, dtype=float)
         if P.shape != (len(tendon_names), len(joint_names)):
             raise ValueError(f"P has shape {P.shape}, expected ({len(tendon_names)}, {len(joint_names)})")
-        self._P = P
+        self._P, self.finger = P, finger
         self.num_tendons, self.num_joints = P.shape
         self.joint_names = list(joint_names)
         self.tendon_names = list(tendon_names)
@@ -188,7 +203,7 @@ def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
         P = np.vstack([np.hstack([[[rh], [-rh]], np.zeros((2, 4))]), np.hstack([np.zeros((len(P), 1)), P])])
     names = [f"{finger}_h{k + 1}" for k in range(P.shape[0])]
     return LinearFingerCoupling(P, joint_names=finger_joint_names(finger), tendon_names=names,
-                                dof_selection=coupling_selection(p))
+                                dof_selection=coupling_selection(p), finger=finger)
 
 
 def _rz(c, s, like):
@@ -211,6 +226,7 @@ class ThumbCoupling(FingerCoupling):
     """Thumb (5.20)-(5.22): tensegrity base (nonlinear) + PIP/DIP (linear)."""
 
     is_constant = False
+    finger = "thumb"
 
     def __init__(self, p: ThumbParams | None = None):
         self.params = p = p or ThumbParams()
@@ -341,6 +357,8 @@ class HandCoupling(FingerCoupling):
     generalised force ``-f`` is the tendon force itself.
     """
 
+    parts = joint_slices = tendon_slices = finger = None   # per instance (not the one-finger properties)
+
     def __init__(self, parts: dict[str, FingerCoupling], *, num_offsets: int = 0):
         self.parts = dict(parts)
         self.joint_slices, self.tendon_slices = {}, {}
@@ -450,8 +468,7 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
 def dof_selection(coupling) -> np.ndarray:
     """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
     coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
-    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
-    blocks = [c.dof_selection for c in parts.values()]
+    blocks = [c.dof_selection for c in coupling.parts.values()]
     S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
     i = j = 0
     for blk in blocks:

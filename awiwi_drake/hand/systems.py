@@ -21,7 +21,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.components.friction import guide_friction, guide_friction_force
-from awiwi_drake.hand.coupling import FingerCoupling, HandCoupling
+from awiwi_drake.hand.coupling import FingerCoupling
 from awiwi_drake.hand.wrist import check_motor_pulley_radius, wrist_params, wrist_tendon_offsets
 from awiwi_drake.parameters.wrist import WristParams
 
@@ -218,13 +218,9 @@ def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
     """
     P = np.asarray(coupling.P(np.zeros(coupling.num_joints)), dtype=float)
     crossed = (np.abs(P) > 0).sum(axis=1)
-    if isinstance(coupling, HandCoupling):
-        parts = coupling.parts
-    else:
-        parts = {"finger": coupling}
-    for name, c in parts.items():
+    for name, c in coupling.parts.items():
         if not c.is_constant:  # thumb: base rows are straight tendons
-            ts = coupling.tendon_slices[name] if isinstance(coupling, HandCoupling) else slice(0, c.num_tendons)
+            ts = coupling.tendon_slices[name]
             crossed[ts.start:ts.start + 4] = 0
     return p.palm_bending_angle + p.joint_wrap_angle * crossed
 
