@@ -129,6 +129,10 @@ class FingerCoupling(abc.ABC):
         """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
         return np.zeros((self.num_joints, self.num_joints))
 
+    def tension_hessians(self, q) -> np.ndarray:
+        """``d^2 h_i/dq^2`` of every tendon (m x n x n): ``tension_hessian(q, f) = sum_i f_i [i]``."""
+        return np.stack([self.tension_hessian(q, e) for e in np.eye(self.num_tendons)], axis=0)
+
     def dPT_f_dq(self, q, f) -> np.ndarray:
         """``d(P(q)^T f)/dq`` at fixed ``f``: the same matrix as :meth:`tension_hessian`
         (name used by ``components.routing.ConstantCoupling``)."""
@@ -297,6 +301,28 @@ class ThumbCoupling(FingerCoupling):
             P[i, 1] = np.dot(d[i], dA1[:, i]) / norm[i]
         P[4:, 2:] = self._P_distal
         return P
+
+    def tension_hessians(self, q) -> np.ndarray:
+        """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the base kinematics once, vectorised over the tendons."""
+        q = self._check_q(q)
+        if q.dtype == object:
+            return super().tension_hessians(q)
+        d, norm, A, R = self._float_base(q)
+        b = self.bone_points.T
+        dA0, dA1 = _KZ @ A, R @ (_KY @ b)
+        d00, d01, d11 = _KZ @ dA0, _KZ @ dA1, R @ (_KY @ _KY @ b)
+        u = d / norm[:, None]                                            # 4 x 3
+        J = np.stack([dA0.T, dA1.T], axis=2)                             # 4 x 3 x 2
+        uJ = np.einsum("ik,ikl->il", u, J)                               # 4 x 2
+        Hb = (np.einsum("ikl,ikm->ilm", J, J) - uJ[:, :, None] * uJ[:, None, :]) / norm[:, None, None]
+        c00, c01, c11 = (np.einsum("ik,ki->i", u, x) for x in (d00, d01, d11))
+        Hb[:, 0, 0] += c00
+        Hb[:, 0, 1] += c01
+        Hb[:, 1, 0] += c01
+        Hb[:, 1, 1] += c11
+        H = np.zeros((8, 4, 4))
+        H[:4, :2, :2] = Hb
+        return H
 
     @_quiet_fp
     def tension_hessian(self, q, f):

@@ -123,6 +123,7 @@ def WristTendonOffsets_(T):
         def _construct(self, params: WristParams | None = None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._params = wrist_params(params)
+            self._last = None
             n = self._params.num_tendons
             self._u = self.DeclareVectorInputPort("wrist_angle", 2)
             self.DeclareVectorOutputPort("wrist_tendon_offset", n, self._calc,
@@ -137,7 +138,16 @@ def WristTendonOffsets_(T):
 
         def _calc(self, context, output):
             q = self._u.Eval(context)
-            output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
+            if T is not float:
+                output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
+                return
+            # (6.9) costs ~0.1 ms (an iterative solve per tendon), and Drake re-evaluates this port
+            # whenever its source's cache entry is invalidated (a ConstantVectorSource's output
+            # follows time): the last float result is kept while the wrist angle is unchanged
+            key = (float(q[0]), float(q[1]))
+            if self._last is None or self._last[0] != key:
+                self._last = (key, np.asarray(wrist_tendon_offsets(q[0], q[1], self._params), dtype=float))
+            output.SetFromVector(self._last[1])
 
     return Impl
 
@@ -162,6 +172,7 @@ def WristCompensation_(T):
         def _construct(self, motor_pulley_radius, params: WristParams | None = None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._params = wrist_params(params)
+            self._last = None
             n = self._params.num_tendons
             self._r = check_motor_pulley_radius(motor_pulley_radius, n)
             self._u = self.DeclareVectorInputPort("wrist_angle", 2)
@@ -181,7 +192,13 @@ def WristCompensation_(T):
 
         def _calc(self, context, output):
             q = self._u.Eval(context)
-            output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
+            if T is not float:
+                output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
+                return
+            key = (float(q[0]), float(q[1]))       # the last result, as in WristTendonOffsets_
+            if self._last is None or self._last[0] != key:
+                self._last = (key, -np.asarray(wrist_tendon_offsets(q[0], q[1], self._params), dtype=float) / self._r)
+            output.SetFromVector(self._last[1])
 
     return Impl
 
