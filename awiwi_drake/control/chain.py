@@ -134,10 +134,6 @@ def TendonForceSharing_(T):
 TendonForceSharing = TendonForceSharing_[None]
 
 
-def _parts(coupling) -> dict:
-    return dict(coupling.parts) if hasattr(coupling, "parts") else {"finger": coupling}
-
-
 def chain_design_point(rig: Any, op: Any = None, params: HandChainParams | None = None,
                        mechanical_stiffness=None) -> dict:
     """The chain's design point: ``S``, ``q_op``, ``f_op``, ``tau_op = -(P S)^T f_op`` and the desired
@@ -146,7 +142,7 @@ def chain_design_point(rig: Any, op: Any = None, params: HandChainParams | None 
     coupling = rig.coupling if isinstance(rig, Rig) else None
     if coupling is None:
         raise ValueError(f"TendonChainController: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
-    fingers = tuple(coupling.parts) if hasattr(coupling, "parts") else (rig.params.finger_name,)
+    fingers = tuple(coupling.parts)
     if any(f not in FINGERS for f in fingers):
         raise ValueError(f"TendonChainController: unknown fingers {fingers}")
     op = op or rig.operating_point()
@@ -155,7 +151,7 @@ def chain_design_point(rig: Any, op: Any = None, params: HandChainParams | None 
     f_op = np.asarray(op.tendon_force, dtype=float)
     PS = np.asarray(coupling.P(q_op), dtype=float) @ S
     K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S
-    sizes = [c.dof_selection.shape[1] for c in _parts(coupling).values()]
+    sizes = [c.dof_selection.shape[1] for c in coupling.parts.values()]
     starts = np.cumsum([0] + sizes)
     if mechanical_stiffness is None:
         blocks = [p.stiffness_scale * K_dof[a:b, a:b] for a, b in zip(starts[:-1], starts[1:])]
