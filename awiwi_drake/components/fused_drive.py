@@ -264,8 +264,32 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
         raise ValueError(f"compiled tendon drive: spring law(s) {', '.join(bad)} cannot be compiled; use their "
                          "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
+    key = _model_key(model, jit)
+    if key is not None and key in _KERNELS:
+        return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
-        return _build_kernels(model, m, n, nr, jit)
+        kernels = _build_kernels(model, m, n, nr, jit)
+    if key is not None:
+        _KERNELS[key] = kernels
+    return kernels
+
+
+# Kernels of drive models already traced in this process, by the model's content. Tracing the
+# laws symbolically costs ~0.4-0.6 s for the hand; every new diagram (and every scalar-converted
+# or cloned copy, e.g. inside ``analysis.simulate``) would otherwise pay it again at its first
+# evaluation, inside the simulation.
+_KERNELS: dict = {}
+
+
+def _model_key(model: DriveModel, jit: bool):
+    """A content key of ``model`` (pickle digest), or None when it cannot be pickled (no caching)."""
+    import hashlib
+    import pickle
+    try:
+        blob = pickle.dumps(model, protocol=4)
+    except Exception:       # e.g. a spring law holding a lambda: trace it every time
+        return None
+    return hashlib.sha1(blob).hexdigest(), bool(jit)
 
 
 def _build_kernels(model, m, n, nr, jit):

@@ -189,7 +189,7 @@ class TendonChainController(Diagram):
         if coupling is None:
             raise ValueError(f"TendonChainController: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
         check_one_spring_law(rig, "TendonChainController")
-        fingers = tuple(coupling.parts) if hasattr(coupling, "parts") else (rig.params.finger_name,)
+        fingers = tuple(coupling.parts)
         if any(f not in FINGERS for f in fingers):
             raise ValueError(f"TendonChainController: unknown fingers {fingers}")
         op = op or rig.operating_point()
@@ -202,8 +202,7 @@ class TendonChainController(Diagram):
         P = np.asarray(coupling.P(q_op), dtype=float)
         tau_op = -(P @ S).T @ f_op
         K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S
-        sizes = [c.dof_selection.shape[1] for c in (coupling.parts.values() if hasattr(coupling, "parts")
-                                                     else [coupling])]
+        sizes = [c.dof_selection.shape[1] for c in coupling.parts.values()]
         starts = np.cumsum([0] + sizes)
         if mechanical_stiffness is None:
             blocks = [p.stiffness_scale * K_dof[a:b, a:b] for a, b in zip(starts[:-1], starts[1:])]

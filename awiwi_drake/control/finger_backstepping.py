@@ -99,7 +99,7 @@ class FingerBacksteppingLaw(StaticLaw):
         self.K3 = self.K4 = float(wf)
         self.friction_scale = float(p.friction_scale)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
-        parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
+        parts = coupling.parts
         self._blocks = []                 # (tendon slice, plant-joint slice, DoF slice, constant W or None)
         t0 = j0 = d0 = 0
         for c in parts.values():

@@ -119,6 +119,9 @@ class DistributionResult:
         Gradient iterations performed.
     cost : float
         Final cost C(alpha).
+    program_qps : int
+        Optimal solver: QPs solved by the ``MathematicalProgram`` (a force bound would have been
+        violated by the equality-constrained optimum); the other iterations took the closed form.
     """
 
     forces: np.ndarray
@@ -129,6 +132,7 @@ class DistributionResult:
     stiffness_error: float
     iterations: int
     cost: float
+    program_qps: int = 0
 
 
 def _barrier(d):
@@ -248,8 +252,7 @@ class _DistributionBase:
                 raise ValueError(f"solve: q has shape {q.shape}; the coupling has {c.num_joints} joints "
                                  f"({', '.join(c.joint_names)})")
             P = c.P(q)
-            m = c.num_tendons
-            hessian = np.stack([c.tension_hessian(q, e) for e in np.eye(m)], axis=0)
+            hessian = c.tension_hessians(q)
         if P is None:
             if self._offline is None:
                 need = "q" if self.coupling_object is not None else "P"
@@ -277,11 +280,11 @@ class _DistributionBase:
             raise ValueError(f"solve: K_des has shape {K_des.shape}; expected ({n}, {n})")
         if not np.all(np.isfinite(K_des)):
             raise ValueError("solve: K_des has non-finite entries")
-        if not np.allclose(K_des, K_des.T, rtol=1e-9, atol=1e-12):
+        if not np.all(np.abs(K_des - K_des.T) <= 1e-12 + 1e-9 * np.abs(K_des.T)):   # np.allclose, 10x cheaper
             raise ValueError("solve: K_des must be symmetric")
         return tau_des, K_des
 
-    def _result(self, f, status, P, hessian, tau_des, K_des, iterations, cost) -> DistributionResult:
+    def _result(self, f, status, P, hessian, tau_des, K_des, iterations, cost, program_qps=0) -> DistributionResult:
         p = self.params
         K = joint_stiffness(P, self.stiffness_map(f)[0], f, hessian)
         viol = float(max(0.0, np.max(p.f_min - f), np.max(f - p.f_max)))
@@ -290,7 +293,7 @@ class _DistributionBase:
         return DistributionResult(
             forces=f, status=status, torque_error=float(np.linalg.norm(-P.T @ f - tau_des)),
             bound_violation=viol, stiffness=K, stiffness_error=float(np.sqrt(stiffness_cost(K_des, K))),
-            iterations=iterations, cost=float(cost))
+            iterations=iterations, cost=float(cost), program_qps=int(program_qps))
 
     def timed_solve(self, *args, **kw) -> tuple[DistributionResult, float]:
         """:meth:`solve` and its wall time [s] (for benchmarks)."""
@@ -417,11 +420,17 @@ class OptimalForceDistribution(_DistributionBase):
 
     Each iteration linearises ``K_q`` at the current feasible ``f_k`` (``dK_q/df_i = dk_t,i p_i
     p_i^T + H_i``) and solves the convex QP ``min ||E_k - G (f - f_k)||^2 + mu ||f - f_k||^2``
-    over the feasible set (Clarabel, interior point); the step to the QP solution is then
+    over the feasible set; the step to the QP solution is then
     projected onto ``ker P^T`` (the torque stays exact to rounding), cut at the bounds and
     halved until the *true* cost decreases.  Stops when the relative cost decrease falls below
     ``tolerance`` or after ``max_iterations`` QPs.  ``mu = levenberg x trace(G^T G) / m``
     keeps the QP strictly convex when ``G`` has a null space (e.g. the 4 x 2 thumb base).
+
+    The QP: when its equality-constrained optimum (closed form on ``ker P^T``: ``f_k + W z`` with
+    ``(W^T Q W) z = -W^T (Q f_k + b)``, the KKT conditions without the bounds) lies inside the
+    bounds, it is the QP's optimum (the problem is convex) and is taken as is; otherwise the QP is
+    solved with its bounds as a Drake ``MathematicalProgram`` (Clarabel, interior point).  So the
+    program is only solved where a bound is active; ``fast_path=False`` always solves it.
 
     Parameters
     ----------
@@ -434,11 +443,15 @@ class OptimalForceDistribution(_DistributionBase):
         Relative cost decrease that ends the iteration.
     levenberg : float
         Relative Levenberg damping (chosen: 1e-6, negligible against the Gauss-Newton term).
+    fast_path : bool
+        Take the closed-form QP optimum when no bound is active (default); False: always the program.
+    solver_options : pydrake.solvers.SolverOptions, optional
+        Options of the program's solver (Clarabel), e.g. tighter tolerances.
     """
 
     def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
                  coupling=None, *, max_iterations: int = 30, tolerance: float = 1e-10,
-                 levenberg: float = 1e-6):
+                 levenberg: float = 1e-6, fast_path: bool = True, solver_options=None):
         super().__init__(stiffness_map, params, coupling, "OptimalForceDistribution")
         if int(max_iterations) < 1:
             raise ValueError(f"OptimalForceDistribution: max_iterations = {max_iterations} must be >= 1")
@@ -449,6 +462,8 @@ class OptimalForceDistribution(_DistributionBase):
         self.max_iterations = int(max_iterations)
         self.tolerance = float(tolerance)
         self.levenberg = float(levenberg)
+        self.fast_path = bool(fast_path)
+        self.solver_options = solver_options
         self._solver = ClarabelSolver()
         self._programs: dict = {}
 
@@ -464,6 +479,31 @@ class OptimalForceDistribution(_DistributionBase):
             prog.AddBoundingBoxConstraint(np.full(m, p.f_min), np.full(m, p.f_max), f)
             self._programs[key] = (prog, cost.evaluator(), eq.evaluator())
         return self._programs[key]
+
+    def _qp(self, Q, b, f, W, P, tau_des, rank, equality):
+        """Minimiser of ``f'^T Q f' / 2 + b^T f'`` on ``{-P^T f' = tau_des, f_min <= f' <= f_max}``
+        and whether the program solved it (``f``: a feasible point; see the class docstring);
+        None when the program fails.  ``equality``: a one-element list caching the SVD rows.
+        """
+        p = self.params
+        r = W.shape[1]
+        if self.fast_path:
+            if r == 0:
+                return f, False                           # the torque alone fixes the forces
+            z = np.linalg.solve(W.T @ Q @ W, -(W.T @ (Q @ f + b)))
+            f_star = f + W @ z
+            if np.all(f_star >= p.f_min) and np.all(f_star <= p.f_max):
+                return f_star, False
+        m = f.size
+        prog, cost_eval, eq_eval = self._program(m, rank)
+        if not equality:
+            # the torque equality on the range rows: U_r^T f = -S_r^-1 V_r^T tau  (P = U S V^T)
+            U, sv, Vt = np.linalg.svd(P, full_matrices=False)
+            equality.append((U[:, :rank].T, -(Vt[:rank] @ tau_des) / sv[:rank]))
+        eq_eval.UpdateCoefficients(*equality[0])
+        cost_eval.UpdateCoefficients(Q, b, 0.0, True)
+        result = self._solver.Solve(prog, f, self.solver_options)
+        return (result.GetSolution() if result.is_success() else None), True
 
     def _stiffness(self, f, P, hessian):
         k, dk = self.stiffness_map(f)
@@ -516,10 +556,8 @@ class OptimalForceDistribution(_DistributionBase):
             f = f_p + W @ alpha
             if not (np.all(f >= p.f_min) and np.all(f <= p.f_max)):   # LP tolerance at a tight bound
                 return self._result(f, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
-        prog, cost_eval, eq_eval = self._program(m, rank)
-        # the torque equality on the range rows: U_r^T f = -S_r^-1 V_r^T tau  (P = U S V^T)
-        U, s, Vt = np.linalg.svd(P, full_matrices=False)
-        eq_eval.UpdateCoefficients(U[:, :rank].T, -(Vt[:rank] @ tau_des) / s[:rank])
+        equality = []
+        program_qps = 0
         K_norm2 = max(float(np.sum(K_des * K_des)), 1e-300)
         K, dk = self._stiffness(f, P, hessian)
         C = float(np.sum((K_des - K) ** 2) / K_norm2)
@@ -532,11 +570,11 @@ class OptimalForceDistribution(_DistributionBase):
             mu = self.levenberg * max(np.trace(H), 1e-300) / m
             Q = 2.0 * (H + mu * np.eye(m))
             b = -2.0 * (G.T @ (e + G @ f)) / K_norm2 - 2.0 * mu * f
-            cost_eval.UpdateCoefficients(Q, b, 0.0, True)
-            result = self._solver.Solve(prog, f, None)
-            if not result.is_success():
+            f_qp, used_program = self._qp(Q, b, f, W, P, tau_des, rank, equality)
+            program_qps += used_program
+            if f_qp is None:
                 break
-            d = W @ (W.T @ (result.GetSolution() - f))   # null-space step: the torque stays exact
+            d = W @ (W.T @ (f_qp - f))                   # null-space step: the torque stays exact
             if not np.linalg.norm(d) > 1e-12 * max(1.0, np.linalg.norm(f)):
                 break
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -558,7 +596,7 @@ class OptimalForceDistribution(_DistributionBase):
             f, K, dk, C = f_new, K_new, dk_new, C_new
             if decrease <= self.tolerance * max(C, 1e-12):
                 break
-        return self._result(f, "ok", P, hessian, tau_des, K_des, it, C)
+        return self._result(f, "ok", P, hessian, tau_des, K_des, it, C, program_qps)
 
 
 def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnessMap:

@@ -173,15 +173,6 @@ def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> floa
 # ---------------------------------------------------------------------------------------------
 # The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
 
-
-
-def _estimator_parts(coupling):
-    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
-    js = coupling.joint_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_joints)}
-    ts = coupling.tendon_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_tendons)}
-    return parts, js, ts
-
-
 @TemplateSystem.define("LinkPositionEstimator_", T_list=[float, AutoDiffXd])
 def LinkPositionEstimator_(T):
     """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
@@ -244,9 +235,9 @@ def LinkPositionEstimator_(T):
             q_prev = context.get_discrete_state(0).CopyToVector()
             q_val = np.array([_value(v) for v in q_prev])
             dh_val = np.array([_value(v) for v in dh])
-            parts, js, ts = _estimator_parts(self.coupling)
+            js, ts = self.coupling.joint_slices, self.coupling.tendon_slices
             q_new = np.zeros(len(q_val))
-            for name, c in parts.items():
+            for name, c in self.coupling.parts.items():
                 if c.is_constant:
                     q_new[js[name]] = estimate_linear(c, dh_val[ts[name]])
                 else:  # thumb: Algorithm 1 warm-started at the previous estimate
