@@ -284,4 +284,4 @@ def test_antagonistic_step_and_impedance_check():
     # Fig 15.27: the tendon torque under an imposed deflection is proportional to Kp,imp
     kp = np.array([0.01, 0.02, 0.05, 0.1])
     d = antagonistic_stiffness_check(kp, deflection=0.3)
-    np.testing.assert_allclose(d["torque"], kp * 0.3, rtol=1e-6)
+    np.testing.assert_allclose(d.torque, kp * 0.3, rtol=1e-6)

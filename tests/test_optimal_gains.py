@@ -220,11 +220,11 @@ def test_fig_16_3_table_16_2_weights_collapse_the_gains_and_every_reachable_sele
     from awiwi_drake.reproductions.ch16_optimal_backstepping import fig_16_3_gain_samples
     study = OptimalGainsStudy(runs=3, samples=300)
     printed = fig_16_3_gain_samples(study.replace(runs=2, t_final=study.rise_time, num=31))
-    assert np.all(np.abs(printed["q"][:, -1]) < 0.05 * study.step)
-    assert np.all(printed["distance"] > 5.0)                 # the structural floor (REPRODUCTIONS ch. 16)
+    assert np.all(np.abs(printed.q[:, -1]) < 0.05 * study.step)
+    assert np.all(printed.distance > 5.0)                 # the structural floor (REPRODUCTIONS ch. 16)
     reach = fig_16_3_gain_samples(study, r_weight=study.reachable_r_weight)
     case = OptimalGainsCase(r_weight=study.reachable_r_weight)
-    for g, q in zip(reach["gains"], reach["q"]):
+    for g, q in zip(reach.gains, reach.q):
         rig = table_16_1_rig(case)
         loop = closed_loop(rig, impedance_controller(rig, g, external_torque="none"), rate_hz=None)
         d = loop.diagram
