@@ -24,21 +24,21 @@ Model (docs/ARCHITECTURE.md sign convention), per tendon i::
     B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
     tau   = -P(q)^T (f + g)                                   generalised force on the joints
 
-With ``link=(inertia, damping)`` the drive also carries the joints as
+With ``link_inertia``/``link_damping`` the model also carries the joints as
 decoupled links ``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint
-rigs: no MultibodyPlant, no Mux/Demux). State order: ``[q, qdot]`` (with a
-link), then ``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis.
+rigs, no MultibodyPlant); such a model is built into a rig by
+:mod:`awiwi_drake.components.rig_system` (C++ dynamics) or batched by
+:class:`TendonDriveBatch_`. State order: ``[q, qdot]`` (with a link), then
+``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis.
 
-Ports (each computes only its own quantity; prerequisites declared):
+Ports of :class:`TendonDrive_` (each computes only its own quantity; prerequisites declared):
 
-* inputs ``motor_torque`` (m); without a link ``joint_angle`` (n) and, when
-  hysteresis or guide friction need it, ``joint_velocity`` (``rate_joints``);
-  with a link ``external_torque`` (n);
+* inputs ``motor_torque`` (m), ``joint_angle`` (n) and, when hysteresis or
+  guide friction need it, ``joint_velocity`` (``rate_joints``);
 * outputs ``state`` (all drive states), ``motor_angle``, ``motor_velocity``,
   ``motor_state`` ([theta, omega]), ``tendon_force`` [N], ``tendon_stiffness``
   [N/m] (elastic curve), ``elongation`` [m], ``generalized_force`` (n) [N m],
-  ``applied_torque`` (m) [N m]; with a link also ``joint_angle``,
-  ``joint_velocity``.
+  ``applied_torque`` (m) [N m].
 """
 
 from __future__ import annotations
@@ -322,6 +322,9 @@ def TendonDrive_(T):
                 raise ValueError(f"TendonDrive: model must be a DriveModel, got {type(model).__name__}")
             if T is sym.Expression and not model.supports_symbolic:
                 raise ValueError("TendonDrive: a spring law of this drive cannot be evaluated symbolically")
+            if model.has_link:
+                raise ValueError("TendonDrive: a model with link_inertia is a single-joint rig; build it with "
+                                 "components.rig_system (rig_dynamics_system, LinkRigOutputs_)")
             self.model = model
             m, n = model.num_tendons, model.num_joints
             self._m, self._n = m, n
@@ -333,24 +336,13 @@ def TendonDrive_(T):
             self.DeclareContinuousState(model.num_states)
             self._u = self.DeclareVectorInputPort("motor_torque", m)
             state = self.all_state_ticket()
-            if model.has_link:
-                self._ext = self.DeclareVectorInputPort("external_torque", n)
-                pos = vel = {state}
-                self._k = 2 * n
-            else:
-                self._ext = None
-                self._q = self.DeclareVectorInputPort("joint_angle", n) if n else None
-                self._qd = self.DeclareVectorInputPort("joint_velocity", model.rate_joints) \
-                    if model.needs_joint_velocity else None
-                pos = {state} | ({self._q.ticket()} if self._q is not None else set())
-                vel = pos | ({self._qd.ticket()} if self._qd is not None else set())
-                self._k = 0
-            self._nq = n
-            k = self._k
-            self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(k, k + m),
-                                motor_velocity=slice(k + m, k + 2 * m), motor_state=slice(k, k + 2 * m))
-            if model.has_link:
-                self._slices.update(joint_angle=slice(0, n), joint_velocity=slice(n, 2 * n))
+            self._q = self.DeclareVectorInputPort("joint_angle", n) if n else None
+            self._qd = self.DeclareVectorInputPort("joint_velocity", model.rate_joints) \
+                if model.needs_joint_velocity else None
+            pos = {state} | ({self._q.ticket()} if self._q is not None else set())
+            vel = pos | ({self._qd.ticket()} if self._qd is not None else set())
+            self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(0, m),
+                                motor_velocity=slice(m, 2 * m), motor_state=slice(0, 2 * m))
             for name, sl in self._slices.items():
                 self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
                                              prerequisites_of_calc={state})
@@ -377,8 +369,6 @@ def TendonDrive_(T):
             return context.get_continuous_state_vector().CopyToVector()
 
         def _inputs(self, context, velocity: bool):
-            if self.model.has_link:
-                return ()
             q = self._q.Eval(context) if self._q is not None else (self._empty if self._float else np.zeros(0))
             if not velocity:
                 return (q,)
@@ -415,20 +405,13 @@ def TendonDrive_(T):
                 if fn is None:
                     fn = self._kd = self.kernels()["derivatives"]
                 x = context.get_continuous_state_vector().CopyToVector()
-                if self._ext is not None:
-                    derivatives.SetFromVector(fn(x, self._u.Eval(context), self._ext.Eval(context), self._dbuf))
-                else:
-                    q = self._q.Eval(context) if self._q is not None else self._empty
-                    qd = self._qd.Eval(context) if self._qd is not None else self._empty
-                    derivatives.SetFromVector(fn(x, self._u.Eval(context), q, qd, self._dbuf))
+                q = self._q.Eval(context) if self._q is not None else self._empty
+                qd = self._qd.Eval(context) if self._qd is not None else self._empty
+                derivatives.SetFromVector(fn(x, self._u.Eval(context), q, qd, self._dbuf))
                 return
             x = self._state(context)
-            u = self._u.Eval(context)
-            if self.model.has_link:
-                d = drive_laws(self.model, x, u, tau_ext=self._ext.Eval(context), want=("derivatives",))
-            else:
-                q, qd = self._inputs(context, True)
-                d = drive_laws(self.model, x, u, q, qd, want=("derivatives",))
+            q, qd = self._inputs(context, True)
+            d = drive_laws(self.model, x, self._u.Eval(context), q, qd, want=("derivatives",))
             derivatives.SetFromVector(d["derivatives"])
 
     return Impl
