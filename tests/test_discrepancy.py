@@ -350,3 +350,24 @@ def test_benchmark_scores_follow_their_definitions():
     assert s["exact_three"] == (1.0, 1)
     b = bench.summarise(rows)["baseline"]
     assert b["exact_single_full"] == (0.5, 2) and b["nothing_any_name"] == (0.0, 2)
+
+
+def test_benchmark_is_resumable_and_claims_each_case_once(tmp_path, monkeypatch):
+    """One JSON per dataset; a finished or claimed case is skipped (a second run, or a parallel one)."""
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).parent.parent / "benchmarks" / "bench_discrepancy.py"
+    spec = importlib.util.spec_from_file_location("bench_discrepancy", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    calls = []
+    monkeypatch.setattr(bench, "run_case", lambda case: calls.append(case) or {"row": case[0], "seed": case[4]})
+    a = ("nothing", "joint", [], 30, 5, 1.0, None, 10.0)
+    b = ("single_full", "joint", ["delay"], 30, 6, 1.0, None, 10.0)
+    assert bench.run_and_store(a, str(tmp_path))["seed"] == 5
+    assert bench.run_and_store(a, str(tmp_path)) is None                 # finished: skipped
+    (tmp_path / f"{bench.case_id(b)}.claim").write_text("1\n")           # another process runs it
+    assert bench.run_and_store(b, str(tmp_path)) is None
+    assert calls == [a]
+    assert [r["seed"] for r in bench.collect(tmp_path)] == [5]
+    assert not list(tmp_path.glob("*.claim"))[1:] and not list(tmp_path.glob("*.tmp"))
