@@ -167,6 +167,12 @@ class LinearFingerCoupling(FingerCoupling):
             self._check_q(q)
         return self._P.copy()
 
+    def dof_pseudo_inverse(self) -> np.ndarray:
+        """``(P S)^+`` (n_dof x m): the least-squares inverse of (5.15) on the independent DoF (computed once)."""
+        if getattr(self, "_dof_pinv", None) is None:
+            self._dof_pinv = np.linalg.pinv(self._P @ self.dof_selection)
+        return self._dof_pinv
+
 
 def index_coupling_matrix(r0: float, r1: float, r2: float, r3: float) -> np.ndarray:
     """``P = dh/dq`` of (5.5) (8 x 4; joints abd, MCP, PIP, DIP)."""
@@ -260,6 +266,21 @@ class ThumbCoupling(FingerCoupling):
         A = R @ self.bone_points.T
         d = A.T - self.palm_points
         return d, np.sqrt(np.einsum("ij,ij->i", d, d)), A, R
+
+    def distal_pseudo_inverse(self) -> np.ndarray:
+        """``P_distal^+`` (2 x 4) of the PIP/DIP rows (5.22), computed once."""
+        if getattr(self, "_distal_pinv", None) is None:
+            self._distal_pinv = np.linalg.pinv(self._P_distal)
+        return self._distal_pinv
+
+    def base_lengths_and_jacobian(self, q10: float, q11: float):
+        """Float fast path: the base tendon lengths ``h_0..3`` (4,) and ``dh/d(q10, q11)`` (4 x 2) from
+        one evaluation of the base kinematics (Algorithm 1 needs both at every trial point)."""
+        d, norm, A, R = self._float_base((q10, q11))
+        J = np.empty((4, 2))
+        J[:, 0] = np.einsum("ij,ji->i", d, _KZ @ A) / norm
+        J[:, 1] = np.einsum("ij,ji->i", d, R @ (_KY @ self.bone_points.T)) / norm
+        return norm, J
 
     @_quiet_fp
     def h(self, q):
