@@ -246,13 +246,14 @@ def test_thumb_stiffness_is_pd_over_the_workspace_for_balanced_forces_with_the_r
 
 
 def test_thumb_base_lengths_and_jacobian_from_one_kinematics_evaluation():
-    """Algorithm 1's fast path (lengths and dh/dq of the base tendons together) against h(q) and finite
-    differences of it."""
+    """Algorithm 1's fast path (lengths and dh/dq of the base tendons together, a kernel compiled from the
+    laws h and P) against h(q) and P(q) to 1e-12 and against finite differences of h."""
     c = finger_coupling("thumb")
     for q in RNG.uniform(-1.2, 1.2, size=(5, 2)):
         h, J = c.base_lengths_and_jacobian(*q)
         full = np.concatenate([q, [0.0, 0.0]])
-        np.testing.assert_array_equal(h, c.h(full)[:4])
+        np.testing.assert_allclose(h, c.h(full)[:4], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(J, c.P(full)[:4, :2], rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(J, fd_jacobian(lambda qq: c.h(np.concatenate([qq, [0.0, 0.0]]))[:4], q, h=1e-6),
                                    atol=1e-9)
     np.testing.assert_allclose(c.distal_pseudo_inverse() @ c.P(np.zeros(4))[4:, 2:], np.eye(2), atol=1e-12)

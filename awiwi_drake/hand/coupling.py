@@ -228,6 +228,9 @@ _KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz
 _KY = np.array([[0.0, 0, 1], [0, 0, 0], [-1, 0, 0]])  # dRy/dq = Ry Ky
 
 
+_THUMB_BASE_KERNELS: dict = {}     # compiled base kinematics per thumb geometry (ThumbCoupling._base_kernel)
+
+
 class ThumbCoupling(FingerCoupling):
     """Thumb (5.20)-(5.22): tensegrity base (nonlinear) + PIP/DIP (linear)."""
 
@@ -274,13 +277,24 @@ class ThumbCoupling(FingerCoupling):
         return self._distal_pinv
 
     def base_lengths_and_jacobian(self, q10: float, q11: float):
-        """Float fast path: the base tendon lengths ``h_0..3`` (4,) and ``dh/d(q10, q11)`` (4 x 2) from
-        one evaluation of the base kinematics (Algorithm 1 needs both at every trial point)."""
-        d, norm, A, R = self._float_base((q10, q11))
-        J = np.empty((4, 2))
-        J[:, 0] = np.einsum("ij,ji->i", d, _KZ @ A) / norm
-        J[:, 1] = np.einsum("ij,ji->i", d, R @ (_KY @ self.bone_points.T)) / norm
-        return norm, J
+        """Float fast path: the base tendon lengths ``h_0..3`` (4,) and ``dh/d(q10, q11)`` (4 x 2) together
+        (Algorithm 1 needs both at every trial point), from a compiled kernel generated from :meth:`h` and
+        :meth:`P` (:mod:`awiwi_drake.components.codegen`: the laws evaluated once on symbolic variables)."""
+        out = self._base_kernel()(np.array([q10, q11], dtype=float), np.empty(12))
+        return out[:4], out[4:].reshape(4, 2)
+
+    def _base_kernel(self):
+        key = (self.palm_points.tobytes(), self.bone_points.tobytes())
+        fn = _THUMB_BASE_KERNELS.get(key)
+        if fn is None:
+            import pydrake.symbolic as sym
+            from ..components.codegen import compile_kernels
+            qv = [sym.Variable("q10"), sym.Variable("q11")]
+            q = np.array([sym.Expression(qv[0]), sym.Expression(qv[1]), sym.Expression(0.0), sym.Expression(0.0)])
+            with np.errstate(invalid="ignore"):
+                outs = list(self.h(q)[:4]) + list(np.asarray(self.P(q))[:4, :2].ravel())
+            fn = _THUMB_BASE_KERNELS[key] = compile_kernels({"thumb_base": ([qv], outs)}, tag="thumb_base")["thumb_base"]
+        return fn
 
     @_quiet_fp
     def h(self, q):

@@ -233,8 +233,11 @@ def LinkPositionEstimator_(T):
             if self._w.HasValue(context):
                 dh = dh - self._w.Eval(context)
             q_prev = context.get_discrete_state(0).CopyToVector()
-            q_val = np.array([_value(v) for v in q_prev])
-            dh_val = np.array([_value(v) for v in dh])
+            if T is float:
+                q_val, dh_val = q_prev, np.asarray(dh, dtype=float)
+            else:
+                q_val = np.array([_value(v) for v in q_prev])
+                dh_val = np.array([_value(v) for v in dh])
             js, ts = self.coupling.joint_slices, self.coupling.tendon_slices
             q_new = np.zeros(len(q_val))
             for name, c in self.coupling.parts.items():
