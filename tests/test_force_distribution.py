@@ -410,3 +410,37 @@ def test_thumb_tension_hessians_are_the_derivative_of_the_coupling():
         np.testing.assert_allclose(H[i], fd_jacobian(lambda qq: c.P(qq)[i], q, h=1e-6), atol=1e-8)
     f = np.linspace(10.0, 80.0, 8)
     np.testing.assert_allclose(np.einsum("i,ijk->jk", f, H), c.tension_hessian(q, f), atol=1e-14)
+
+
+def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver():
+    """The loop system iterates all five fingers at once (float path); at random requests, near the design
+    point (batched) and at the bounds (left to the finger's own solver: LP start, MathematicalProgram), the
+    update equals each finger's warm-started solve to 1e-12."""
+    fingers = ("thumb", "index", "middle", "ring", "fifth")
+    system = TendonForceDistributionSystem(fingers=fingers, iterations_per_period=2, stiffness="full")
+    assert system._batch is not None
+    rng = np.random.default_rng(3)
+    ctx = system.CreateDefaultContext()
+    served = left = 0
+    for trial in range(6):
+        q = np.concatenate([rng.uniform(-0.3, 0.3, 4), np.zeros(17)])
+        taus, Ks, f_prev = [], [], []
+        for k, (s, sd, st, sk, sq) in enumerate(system._parts):
+            P, _, _, _, H = s._coupling_at(None, None, q[sq] if s._offline is None else None)
+            f0 = rng.uniform(30.0, 110.0, P.shape[0])
+            scale = 1.2 if trial % 2 == 0 else 40.0              # 40x: the optimum presses on a bound
+            Ks.append(scale * joint_stiffness(P, s.stiffness_map(f0)[0], f0, H))
+            taus.append(-P.T @ f0 + rng.normal(scale=0.01, size=P.shape[1]))
+            f_prev.append(f0 + rng.normal(scale=2.0, size=f0.size) if trial != 5 else np.full(f0.size, 200.0))
+        system.GetInputPort("joint_torque_reference").FixValue(ctx, np.concatenate(taus))
+        system.GetInputPort("joint_stiffness_reference").FixValue(ctx, np.concatenate([K.ravel() for K in Ks]))
+        system.GetInputPort("joint_angle").FixValue(ctx, q)
+        ctx.SetDiscreteState(0, np.concatenate(f_prev))
+        got = system.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector()
+        _, fallback = system._batch.update(taus, Ks, f_prev, q, 2)
+        served, left = served + int(np.sum(~fallback)), left + int(np.sum(fallback))
+        for k, (s, sd, st, sk, sq) in enumerate(system._parts):
+            kw = {} if s._offline is not None else dict(q=q[sq])
+            ref = s.solve(taus[k], Ks[k], warm_start=f_prev[k], max_iterations=2, **kw).forces
+            np.testing.assert_allclose(got[st], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max(), err_msg=s)
+    assert served > 0 and left > 0

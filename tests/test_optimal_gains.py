@@ -7,7 +7,8 @@ import pytest
 
 from awiwi_drake.control.backstepping import ImpedanceBackstepping, joint_model
 from awiwi_drake.control.optimal_gains import (
-    backstepping_feedback, monte_carlo_gains, optimal_feedback, optimize_gains, system_feedback, torque_coordinates)
+    backstepping_feedback, backstepping_feedback_batch, evaluate_samples, monte_carlo_gains, optimal_feedback,
+    optimize_gains, system_feedback, torque_coordinates)
 from awiwi_drake.reproductions.ch16_optimal_backstepping import printed_model_feedback, table_16_1_rig
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
@@ -52,6 +53,40 @@ def test_state_feedback_equals_an_independent_derivation_of_16_3():
     constant = _k_bs_closed_form(c.link_inertia, c.motor_inertia, c.stiffness, 0, 0, 0, 0)[2]
     assert constant == pytest.approx(1812.6, abs=0.1)
     assert b_over_M + c.motor_inertia / c.link_inertia == pytest.approx(7400, rel=5e-3)   # the printed 7400
+
+
+def test_batched_feedback_equals_the_closed_form_and_the_controller_system_sample_by_sample():
+    """Algorithm 3's batch (one AutoDiff evaluation of the law for many Omega, run_sweep(batch=...)):
+    every sample equals the hand derivation (16.3) (flexible joint) and, for the two-motor joint rig,
+    the controller *system* converted to AutoDiffXd with that sample's gains."""
+    from awiwi_drake.control.optimal_gains import gain_distance, torque_state_map
+    from awiwi_drake.rigs import joint_rig
+    rng = np.random.default_rng(9)
+    c = OptimalGainsCase()
+    model = joint_model(table_16_1_rig())
+    omegas = np.exp(rng.uniform(np.log([1e-2, 1e-4, 1.0, 1.0]), np.log([2.0, 0.1, 200.0, 500.0]), size=(64, 4)))
+    K = backstepping_feedback_batch(model, omegas)
+    assert K.shape == (64, 1, 4)
+    Tinv = np.linalg.inv(torque_coordinates(c.stiffness))
+    for s_, om in enumerate(omegas):
+        expected = _k_bs_closed_form(c.link_inertia, c.motor_inertia, c.stiffness, *om)
+        np.testing.assert_allclose(K[s_, 0] @ Tinv, expected, rtol=1e-9)
+    target = expected * 1.1
+    d = evaluate_samples([dict(zip(("stiffness", "damping", "k3", "k4"), om)) for om in omegas], model=model,
+                         T_inv=Tinv, target=target)
+    assert d[-1] == pytest.approx(2 * 0.1 / 1.1, rel=1e-9)     # 4 entries, each 0.1/1.1 off (relative to target)
+    rig = joint_rig()
+    jm, op = joint_model(rig), rig.operating_point(pretension=25.0)
+    Kj = backstepping_feedback_batch(jm, omegas[:3], op.state)
+    assert Kj.shape == (3, 2, 6)
+    for s_, om in enumerate(omegas[:3]):
+        g = ImpedanceBacksteppingGains(stiffness=om[0], damping=om[1], k3=om[2], k4=om[3])
+        K_sys = system_feedback(ImpedanceBackstepping(jm, g, external_torque="none"), op.state)
+        np.testing.assert_allclose(Kj[s_], K_sys, rtol=1e-12, atol=1e-12 * np.max(np.abs(K_sys)))
+    Tj = np.linalg.inv(torque_state_map(jm, op.state))
+    dj = evaluate_samples([dict(zip(("stiffness", "damping", "k3", "k4"), om)) for om in omegas[:3]], model=jm,
+                          T_inv=Tj, target=Kj[0] @ Tj * 2.0, state0=op.state)
+    assert dj[0] == pytest.approx(gain_distance(Kj[0] @ Tj, Kj[0] @ Tj * 2.0), rel=1e-12) and dj[0] > 0
 
 
 def test_printed_kdes_of_table_16_1_destabilises_the_printed_model():

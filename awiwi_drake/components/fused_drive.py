@@ -135,6 +135,9 @@ class DriveModel:
         for i, s in enumerate(self.springs):
             groups.setdefault(id(s), (s, []))[1].append(i)
         object.__setattr__(self, "_spring_groups", [(s, np.array(ix)) for s, ix in groups.values()])
+        # content key of the kernels (taken now, before any lazily cached attribute of the coupling or
+        # the springs changes the pickle): equal models built apart share one trace
+        object.__setattr__(self, "_content_key", _content_digest(self))
 
     # sizes -------------------------------------------------------------------------
     @property
@@ -282,14 +285,19 @@ _KERNELS: dict = {}
 
 
 def _model_key(model: DriveModel, jit: bool):
-    """A content key of ``model`` (pickle digest), or None when it cannot be pickled (no caching)."""
+    """The content key of ``model`` (taken at its construction), or None (no caching)."""
+    key = getattr(model, "_content_key", None)
+    return None if key is None else (key, bool(jit))
+
+
+def _content_digest(model) -> str | None:
+    """sha1 of the pickled model, or None when it cannot be pickled (e.g. a spring law holding a lambda)."""
     import hashlib
     import pickle
     try:
-        blob = pickle.dumps(model, protocol=4)
-    except Exception:       # e.g. a spring law holding a lambda: trace it every time
+        return hashlib.sha1(pickle.dumps(model, protocol=4)).hexdigest()
+    except Exception:
         return None
-    return hashlib.sha1(blob).hexdigest(), bool(jit)
 
 
 def _build_kernels(model, m, n, nr, jit):

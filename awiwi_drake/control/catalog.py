@@ -48,6 +48,9 @@ _BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", des
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
                  "joint from its reduced model"))
+_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement"),
+                 ("finger", "hand"), "per joint: double oscillator (12.13) placed on the joint's reduced model "
+                 "[q, qdot, tau, tau_dot] (link through its closed force loop) -> the chain"))
 _BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr"), ("finger", "hand"),
                  "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson weights) -> the chain"))
 

@@ -35,8 +35,12 @@ reference maps from :func:`~awiwi_drake.control.linear.reference_maps`):
   +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
   mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
 * ``pole-placement``: the double oscillator (12.13) by coefficient identification
-  (:func:`~awiwi_drake.control.pole_placement.place_by_identification`) with
-  ``(position_bandwidth, force_pair_bandwidth)``;
+  (:func:`~awiwi_drake.control.pole_placement.place_by_identification`): ``omega1 = position_bandwidth``,
+  ``omega2`` the modulus of the joint's own open-loop pair (the link on its tendons through the force
+  loop, 270-1070 rad/s on the index), both damped to ``damping_ratio``.  Measured on the index (whole
+  finger, :func:`check_design_poles`): a fixed ``omega2`` of 300 or 1000 rad/s needs large torque
+  feedback and the neglected MCP/PIP/DIP coupling makes the finger unstable (+408 and +483 1/s);
+  with the joint's own pair the slowest whole-finger pole is -31 1/s;
 * ``lqr``: Drake ``LinearQuadraticRegulator`` on ``(F, G)`` with Bryson weights
   (:class:`~awiwi_drake.parameters.joint_design.JointDesignParams`);
 * ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque
@@ -67,7 +71,7 @@ from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig
 from awiwi_drake.rigs.rigs import _link_rig
 
-__all__ = ["JointReducedModel", "joint_subsystem", "reduced_joint_models", "pair_remainder_gains",
+__all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models", "pair_remainder_gains",
            "design_joint_gains", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
 
 DESIGNS = ("cascaded", "pole-placement", "lqr", "sdre")
@@ -113,10 +117,12 @@ def design_motor(motor: MotorParams) -> MotorParams:
 
 def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: HandChainParams | None = None,
                     torque: float | None = None, friction: str = "motion"):
-    """The per-DoF subsystem of the module docstring, closed by the chain's force stage (continuous).
+    """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
-    Returns ``(loop, op, tau_ref)``: the :class:`~awiwi_drake.control.base.ClosedLoop` (input
-    ``joint_torque_reference``), its operating point and the torque reference holding it.
+    Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (python backend), its
+    operating point and its chain design point (:func:`~awiwi_drake.control.chain.chain_design_point`
+    layout; close it with :func:`force_loop` or a :class:`~awiwi_drake.control.chain.TendonChainController`
+    with ``distribution="sharing"``).
     ``torque``: the DoF torque at the point (default ``tau_op``); the tendon forces are
     ``f_op + W_j (torque - tau_op)`` and an external torque ``-torque`` holds the link.
     ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor, (3.8) at rest).
@@ -157,11 +163,20 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
                         joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
     sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, rig.spring,
               drive=drive, coupling=coupling, tension_only=True)
-    sub_point = dict(fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
-                     torque_offset=np.array([tau]), joint_angle=np.zeros(1))
-    stage = TendonForceStage(coupling, rig.spring, design_params, p, point=sub_point, distribution="sharing")
+    sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
+                     torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])
+    return sub, op, sub_point
+
+
+def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None):
+    """A subsystem of :func:`joint_subsystem` closed by the chain's force stage (sharing, continuous):
+    the :class:`~awiwi_drake.control.base.ClosedLoop` with input ``joint_torque_reference``, and a context
+    at its operating point."""
+    stage = TendonForceStage(sub.coupling, sub.spring, sub.params, params or HandChainParams(), point=point,
+                             distribution="sharing")
     loop = closed_loop(sub, stage, rate_hz=None, estimator=None)
-    return loop, op, tau
+    op = point["op"]
+    return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
 
 
 def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
@@ -194,8 +209,8 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None,
         tendons = tuple(int(i) for i in np.flatnonzero(np.abs(col) > 0))
         pair = []
         for friction in ("motion", "rest"):
-            loop, op, tau = joint_subsystem(rig, j, point=point, params=p, friction=friction)
-            ctx = loop.create_context(op, references={"joint_torque_reference": tau})
+            sub, _, sub_point = joint_subsystem(rig, j, point=point, params=p, friction=friction)
+            loop, ctx = force_loop(sub, sub_point, p)
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
             F, G, res = _restrict(lin)
@@ -260,8 +275,9 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     if design == "cascaded":
         return _impedance_gains(model, min(c.joint_stiffness, model.inertia * c.joint_bandwidth ** 2), p.damping_ratio)
     if design == "pole-placement":
-        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, p.force_pair_bandwidth,
-                                              p.damping_ratio)
+        lam = np.linalg.eigvals(F)
+        pair = lam[np.argmax(np.abs(lam.imag))]          # the link on its tendons through the force loop
+        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, abs(pair), p.damping_ratio)
         return place_by_identification(F, G, target).ravel()
     if design in ("lqr", "sdre"):
         Q = np.diag(1.0 / np.array([p.lqr_angle_error, p.lqr_velocity, p.lqr_torque_error, p.lqr_torque_rate]) ** 2)
@@ -325,9 +341,8 @@ def _sdre_law(rig, point, c, p, gains, kw):
     table = np.empty((k, grid.size, 4))
     for j in range(k):
         for i, dt in enumerate(grid):
-            loop, op, tau = joint_subsystem(rig, j, point=point, params=c, torque=point["torque_offset"][j] + dt)
-            ctx = loop.create_context(op, references={"joint_torque_reference": tau},
-                                      disturbances={"external_torque": op.external_torque})
+            sub, _, sub_point = joint_subsystem(rig, j, point=point, params=c, torque=point["torque_offset"][j] + dt)
+            loop, ctx = force_loop(sub, sub_point, c)
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
             F, G, _ = _restrict(lin)
@@ -351,3 +366,74 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
                                  name=f"{design.replace('-', '_')}_chain", **kw)
     ctrl.design["joint_design"] = d
     return ctrl
+
+
+@dataclass
+class PoleCheck:
+    """The per-DoF designs against the whole loop's linearisation (:func:`check_design_poles`).
+
+    ``poles``: eigenvalues of the whole continuous loop (Drake ``Linearize``); ``z_poles``: those of its
+    restriction ``A_z = T A T^+`` to the DoF coordinates ``z`` (a subset of ``poles`` when
+    ``invariance_residual`` ~ 0); ``design``: the per-DoF closed loops ``F_j - G_j K_j`` (block
+    diagonal ``D``).  ``A_z = D + E`` with ``E`` the coupling the per-joint models neglect (the mass
+    matrix, tendons shared by joints, the joints' inertia seen through ``M^-1``).  In the design's
+    eigenvector basis ``V^-1 A_z V = Lambda + V^-1 E V``; by Gershgorin's theorem every z pole lies in a
+    disc around ``lambda_i + (V^-1 E V)_ii`` of radius ``sum_{l != i} |(V^-1 E V)_il|`` (:meth:`discs`):
+    the tolerance that the neglected coupling allows, zero for a decoupled joint.
+    """
+
+    poles: np.ndarray
+    z_poles: np.ndarray
+    design: np.ndarray                # D (4k x 4k)
+    coupling: np.ndarray              # E (4k x 4k)
+    invariance_residual: float
+    dof_names: list
+
+    @property
+    def design_poles(self) -> np.ndarray:
+        return np.linalg.eigvals(self.design)
+
+    def discs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(design poles, disc centres, radii)`` of the Gershgorin discs (class docstring)."""
+        lam, V = np.linalg.eig(self.design)
+        F = np.linalg.solve(V, self.coupling @ V)
+        return lam, lam + np.diag(F), np.abs(F).sum(axis=1) - np.abs(np.diag(F))
+
+    def outside_discs(self, rtol: float = 1e-9) -> np.ndarray:
+        """The z poles outside every disc (empty: the coupling bound holds)."""
+        _, c, r = self.discs()
+        return np.array([z for z in self.z_poles
+                         if not np.any(np.abs(z - c) <= r + rtol * max(1.0, abs(z)))])
+
+    @property
+    def stable(self) -> bool:
+        return bool(np.all(self.poles.real < 0))
+
+
+def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainParams | None = None,
+                       params: JointDesignParams | None = None) -> PoleCheck:
+    """Linearise a finger/the hand closed by the chain with the per-DoF ``design`` (continuous: sharing
+    (15.88), the true joint state) and compare its poles with the designs (:class:`PoleCheck`).
+
+    Use a rig built with the design's motor model (``params.replace(motor=design_motor(params.motor))``)
+    and ``backend="python"`` for the comparison the per-joint models make."""
+    c = chain or HandChainParams()
+    ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing")
+    d = ctrl.design["joint_design"]
+    loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+    op = ctrl.operating_point
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
+    lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle", "joint_torque"))
+    A = lin.A
+    S = ctrl.design["selection"]
+    Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
+    Ct = S.T @ lin.output("joint_torque").C
+    k = S.shape[1]
+    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Ct[j] @ A]) for j in range(k)])
+    TA = T @ A
+    Az = TA @ np.linalg.pinv(T)
+    res = float(np.linalg.norm(TA - Az @ T) / np.linalg.norm(TA))
+    D = np.zeros_like(Az)
+    for j, (m, K) in enumerate(zip(d.models, d.gains)):
+        D[4 * j:4 * j + 4, 4 * j:4 * j + 4] = m.A - m.B @ K[None, :]
+    return PoleCheck(np.linalg.eigvals(A), np.linalg.eigvals(Az), D, Az - D, res, [m.name for m in d.models])

@@ -24,15 +24,10 @@ class JointDesignParams(Parameters):
         60.0, unit="rad/s", low=0.0, low_inclusive=False,
         source="chosen: the chain's joint_bandwidth (HandChainParams): a fifth of the 300 rad/s force loop, so "
                "the joint pair stays behind the force loop it acts through (15.5.3)",
-        doc="pd: the dominant closed-loop pair's natural frequency; pole placement: omega1 of (12.13)")
+        doc="pole placement: omega1 of (12.13) (omega2: the joint's own tendon-link pair, see joint_design)")
     damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
                                  source="chosen: as xi1 = xi2 = 0.7 of Table 12.1",
-                                 doc="pd, cascaded, pole placement: damping of the placed pairs")
-    force_pair_bandwidth: float = param(
-        1000.0, unit="rad/s", low=0.0, low_inclusive=False,
-        source="chosen: omega2 of (12.13) between the force loop's 300 rad/s design and the fast real pole of the "
-               "joint's reduced model at rest (~1700 rad/s, the motor friction left uncompensated); measured on "
-               "the index: 300 rad/s needs positive torque feedback and drives a tendon reference below 0 N")
+                                 doc="cascaded: of the slowest mode; pole placement: xi1 = xi2 of (12.13)")
     lqr_angle_error: float = param(
         0.05, unit="rad", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule, an acceptable joint error of ~3 deg (the compare step is 0.2 rad)")
