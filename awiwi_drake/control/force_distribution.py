@@ -629,10 +629,28 @@ class OptimalForceDistribution(_DistributionBase):
 
 def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnessMap:
     """``k_t(f)`` of the hand's calibrated tendon spring (lever mechanism in series with the tendon,
-    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``)."""
+    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``).
+
+    Tabulated once per spring parameter set (the fit of the lever mechanism takes ~30 ms): equal
+    parameters return the same map object.
+    """
     drive = drive or FingerDriveParams()
+    try:
+        return _STIFFNESS_MAPS[drive.spring]
+    except TypeError:                       # unhashable parameters: no reuse
+        pass
+    except KeyError:
+        pass
     spring = tendon_spring(drive.spring)
-    return TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+    table = TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+    try:
+        _STIFFNESS_MAPS[drive.spring] = table
+    except TypeError:
+        pass
+    return table
+
+
+_STIFFNESS_MAPS: dict = {}
 
 
 def finger_force_distribution(finger: str, *, method: str = "optimal", params: ForceDistributionParams | None = None,
@@ -667,6 +685,11 @@ def finger_force_distribution(finger: str, *, method: str = "optimal", params: F
     if coupling.is_constant and coupling.dof_selection.shape[0] != coupling.dof_selection.shape[1]:
         coupling = reduced_coupling_matrix(coupling)
     return methods[method](hand_stiffness_map(drive), params, coupling, **solver_options)
+
+
+def _mv(A, x):
+    """Stacked matrix-vector products ``A[k] @ x[k]``."""
+    return (A @ x[..., None])[..., 0]
 
 
 class _FingerBatch:
@@ -752,10 +775,10 @@ class _FingerBatch:
             Kd[k, :n, :n] = K_blocks[k]
             fp0[k, :m] = f_prev[k]
         W, Wt = self.W, np.swapaxes(self.W, 1, 2)
-        f_p = -np.einsum("fmn,fn->fm", self.pinv, tauP)
-        resid = np.linalg.norm(np.einsum("fmn,fm->fn", self.P, f_p) + tauP, axis=1)
+        f_p = -_mv(self.pinv, tauP)
+        resid = np.linalg.norm(_mv(np.swapaxes(self.P, 1, 2), f_p) + tauP, axis=1)
         fallback |= resid > 1e-9 * np.maximum(1.0, np.linalg.norm(tauP, axis=1))
-        f = f_p + np.einsum("fmr,fr->fm", W, np.einsum("frm,fm->fr", Wt, fp0))
+        f = f_p + _mv(W, _mv(Wt, fp0))
         inside = (f >= p.f_min) & (f <= p.f_max) | ~self.real
         fallback |= ~np.all(inside, axis=1)
         Kn = np.maximum(np.sum(Kd * Kd, axis=(1, 2)), 1e-300)
@@ -771,7 +794,7 @@ class _FingerBatch:
             out = np.any(((f_star < p.f_min) | (f_star > p.f_max)) & self.real, axis=1)
             fallback |= active & out
             active &= ~out
-            d = np.einsum("fmr,fr->fm", W, np.einsum("frm,fm->fr", Wt, f_star - f))
+            d = _mv(W, _mv(Wt, f_star - f))
             moved = np.linalg.norm(d, axis=1) > 1e-12 * np.maximum(1.0, np.linalg.norm(f, axis=1))
             active &= moved
             with np.errstate(divide="ignore", invalid="ignore"):
