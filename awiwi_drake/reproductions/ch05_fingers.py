@@ -287,7 +287,8 @@ def plot_estimation_grid(study, key, ax=None):
     ax.plot(study.grid[:, 0], study.grid[:, 1], "o", mfc="none", mec="r", ms=5, label="true")
     ax.plot(est[:, 0], est[:, 1], "x", color="b", ms=4, label="estimate")
     it, a, start = key
-    label_axes(ax, "q11 [rad]", xlabel="q10 [rad]", title=f"{it} it., {1e3 * a:g} mm, {start}", fontsize=9, legend=None)
+    label_axes(ax, "q11 [rad]", xlabel="q10 [rad]", legend=None)
+    ax.set_title(f"{it} it., {1e3 * a:g} mm, {start}", fontsize=9)
     ax.set_xlim(-1.8, 1.8)
     ax.set_ylim(-1.8, 1.8)
     ax.set_aspect("equal")
