@@ -8,7 +8,7 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDif
 from pydrake.symbolic import Evaluate, Expression, Jacobian, Variable
 
 from _fd import fd_jacobian
-from awiwi_drake.hand.coupling import (finger_coupling, hand_coupling, index_coupling_matrix,
+from awiwi_drake.hand.coupling import (FingerCoupling, finger_coupling, hand_coupling, index_coupling_matrix,
                                        joint_stiffness, reduced_coupling_matrix)
 from awiwi_drake.hand.kinematics import finger_frames, thumb_base_transform, thumb_frames
 from awiwi_drake.parameters.hand import (FINGERS, TENDON_SLICES, RingFingerParams, ThumbParams,
@@ -246,13 +246,20 @@ def test_thumb_stiffness_is_pd_over_the_workspace_for_balanced_forces_with_the_r
 
 
 def test_thumb_base_lengths_and_jacobian_from_one_kinematics_evaluation():
-    """Algorithm 1's fast path (lengths and dh/dq of the base tendons together) against h(q) and finite
-    differences of it."""
+    """Algorithm 1's fast path (lengths and dh/dq of the base tendons together, a kernel compiled from the
+    laws h and P) against h(q) and P(q) to 1e-12 and against finite differences of h."""
     c = finger_coupling("thumb")
     for q in RNG.uniform(-1.2, 1.2, size=(5, 2)):
         h, J = c.base_lengths_and_jacobian(*q)
         full = np.concatenate([q, [0.0, 0.0]])
-        np.testing.assert_array_equal(h, c.h(full)[:4])
+        np.testing.assert_allclose(h, c.h(full)[:4], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(J, c.P(full)[:4, :2], rtol=1e-12, atol=1e-14)
         np.testing.assert_allclose(J, fd_jacobian(lambda qq: c.h(np.concatenate([qq, [0.0, 0.0]]))[:4], q, h=1e-6),
                                    atol=1e-9)
     np.testing.assert_allclose(c.distal_pseudo_inverse() @ c.P(np.zeros(4))[4:, 2:], np.eye(2), atol=1e-12)
+    # the float P(q) and tension Hessians come from the same kernel: equal to the laws' generic path
+    for q in RNG.uniform(-1.2, 1.2, size=(3, 4)):
+        generic = np.array(q, dtype=object)
+        np.testing.assert_allclose(c.P(q), np.asarray(c.P(generic), dtype=float), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(c.tension_hessians(q), np.asarray(FingerCoupling.tension_hessians(c, generic),
+                                                                     dtype=float), rtol=1e-12, atol=1e-15)

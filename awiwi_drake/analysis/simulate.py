@@ -410,7 +410,7 @@ def simulate(system, context: Context | None, t_final: float, *,
     limits = {}   # thresholds of monitors watching a logged signal, drawn by SimulationResult.plot
     for m, s in watched:
         for label, ls in logged:
-            if ls is s and m.limits():
+            if (ls is s if m.limits_on is None else label == m.limits_on) and m.limits():
                 limits.setdefault(label, []).extend([list(x) for x in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
                 max_step=h if mode == "error_controlled" else None,

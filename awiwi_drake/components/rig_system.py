@@ -31,7 +31,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_laws
 from awiwi_drake.components.motor import saturate_torque
 
-__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "LinkRigOutputs_"]
+__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "LinkRigOutputs_", "tendon_force_of_states"]
 
 
 def _check(model) -> None:
@@ -65,6 +65,27 @@ def rig_dynamics_system(model: DriveModel) -> SymbolicVectorSystem:
     dynamics :func:`drive_laws`, output the state (no direct feedthrough)."""
     xs, us, xdot = rig_dynamics_expressions(model)
     return SymbolicVectorSystem(state=xs, input=us, dynamics=xdot, output=xs)
+
+
+class tendon_force_of_states:
+    """``states (T, num_states) -> tendon forces (T, m)``: the compiled ``tendon_force`` kernel of
+    ``model`` (= :func:`drive_laws`) over many samples at once (monitors on logged states).
+    A class, not a closure, so a rig holding it pickles (process pools)."""
+
+    def __init__(self, model: DriveModel):
+        _check(model)
+        self.model = model
+        self._kernel = None
+
+    def __getstate__(self):
+        return {"model": self.model, "_kernel": None}
+
+    def __call__(self, states):
+        model = self.model
+        if self._kernel is None:
+            self._kernel = build_kernels(model)["tendon_force_batch"]
+        X = np.ascontiguousarray(np.asarray(states, dtype=float).reshape(-1, model.num_states))
+        return self._kernel(X, np.empty((len(X), model.num_tendons)))
 
 
 @TemplateSystem.define("LinkRigOutputs_")

@@ -8,8 +8,9 @@ every finite-difference perturbation of a fit as one copy, so a whole
 residual/Jacobian evaluation is one pass of one Drake ``Simulator``
 ("banks, not swarms": one Python call per step for all copies).
 
-State of copy ``j`` (``n`` motors): ``[theta_1..n, omega_1..n, (q, q'), z_1..n]``
-where ``z`` [N] is the Dahl hysteresis force of each spring mechanism; stored
+State of copy ``j`` (``n`` motors): the rigs' order ``[(q, q'), theta_1..n, omega_1..n, z_1..n]``
+(``tendon_rig``/``joint_rig``, :func:`awiwi_drake.rigs.base.state_names`) where ``z`` [N] is the
+Dahl hysteresis force of each spring mechanism; stored
 variable-major (index ``s * copies + j``).  Input ``motor_torque``
 (``n * copies``, applied torque, already delayed).  Output ``measurement``:
 ``[theta_1..n, f_1..n, (q)]`` per copy, ``f`` the spring-mechanism force as the
@@ -43,7 +44,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import is_float
 from awiwi_drake.components.codegen import compile_kernels
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
-from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
+from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling, joint_backlash_angle
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.parameters.components import MotorParams
 
@@ -93,11 +94,11 @@ class NominalParameters:
         return 2 * self.num_motors + (1 if self.has_link else 0)
 
     def state_names(self) -> list[str]:
+        """The rigs' state order ``[(q, q'), theta, omega, z]`` with the dataset's column names."""
         n = self.num_motors
         sfx = [f"_{i + 1}" for i in range(n)] if n > 1 else [""]
-        names = [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
-        if self.has_link:
-            names += ["link_angle", "link_velocity"]
+        names = ["link_angle", "link_velocity"] if self.has_link else []
+        names += [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
         return names + [f"hysteresis_force{s}" for s in sfx]
 
     def measurement_names(self) -> list[str]:
@@ -143,13 +144,14 @@ def _switch(gates, term, like):
 
 
 def split_state(nom: NominalParameters, X):
-    """``(theta, omega, q, q', z)`` from a stacked state ``[theta, omega, (q, q'), z]``
+    """``(theta, omega, q, q', z)`` from a state in the rigs' order ``[(q, q'), theta, omega, z]``
     (``q``, ``q'`` are None without a link)."""
     n = nom.num_motors
     q = qd = None
+    k = 0
     if nom.has_link:
-        q, qd = X[2 * n], X[2 * n + 1]
-    return X[:n], X[n:2 * n], q, qd, X[-n:]
+        q, qd, k = X[0], X[1], 2
+    return X[k:k + n], X[k + n:k + 2 * n], q, qd, X[k + 2 * n:k + 3 * n]
 
 
 def rig_kinematics(nom: NominalParameters, theta, omega, q=None, qd=None):
@@ -172,6 +174,19 @@ def _to_drive(nom, theta, omega, q, qd):
     return np.array(parts, dtype=object if not all(is_float(v) for v in parts) else float)
 
 
+def _backlash_offset(nom, model, theta, omega, q, qd, b):
+    """Pulley angle minus link angle with joint backlash ``b``
+    (:func:`~awiwi_drake.components.routing.joint_backlash_angle` on the drive's tendon torque and stiffness)."""
+    P = model.coupling.P()[:, 0]
+
+    def torque_and_stiffness(a):
+        got = drive_laws(model, _to_drive(nom, theta, omega, a, qd), want=("tendon_force", "tendon_stiffness"))
+        f, k = got["tendon_force"], got["tendon_stiffness"]
+        return (-sum(P[i] * f[i] for i in range(nom.num_motors)),
+                sum(P[i] * P[i] * k[i] for i in range(nom.num_motors)))
+    return joint_backlash_angle(q, torque_and_stiffness, b, laws.BACKLASH_SMOOTHING, laws.BACKLASH_NEWTON_STEPS) - q
+
+
 def replay_laws(nom: NominalParameters, x, u, p):
     """Time derivatives and measurements of one copy, generic in the scalar type.
 
@@ -181,11 +196,13 @@ def replay_laws(nom: NominalParameters, x, u, p):
     and the spring correction's reaction ``-r (g + df)``, added damping), torques on the link input
     (``-P^T df``, link Coulomb friction, added damping); the inertia corrections scale the drive's
     accelerations. ``df = s f_el + z tanh(f_el)`` is the spring-scale and hysteresis force on top
-    of the drive's elastic force ``f_el``.
+    of the drive's elastic force ``f_el``. Joint backlash replaces the link angle the drive sees by the
+    tendon pulley's (:func:`~awiwi_drake.components.routing.joint_backlash_angle`); the link encoder
+    still reads the link.
 
     Parameters
     ----------
-    x : (num_states,) ``[theta, omega, (q, q'), z]``
+    x : (num_states,) ``[(q, q'), theta, omega, z]``
     u : (num_motors,) applied motor torques
     p : (num_params,) catalog parameters
 
@@ -196,9 +213,13 @@ def replay_laws(nom: NominalParameters, x, u, p):
     n = nom.num_motors
     model = drive_model(nom)
     r = nom.motor_pulley_radius
-    theta, omega, q, qd, z = split_state(nom, x)
-    s = _to_drive(nom, theta, omega, q, qd)
+    theta, omega, q_link, qd, z = split_state(nom, x)
     q_in = None if nom.has_link else np.zeros(0)   # the tendon rig's drive has no joint
+    q = q_link
+    if nom.has_link:   # backlash: the tendons wrap a pulley with play on the link; the drive sees its angle
+        b = _p(p, "backlash")
+        q = q_link + _switch((b,), lambda: _backlash_offset(nom, model, theta, omega, q_link, qd, b), q_link)
+    s = _to_drive(nom, theta, omega, q, qd)
     f_el = drive_laws(model, s, q=q_in, want=("tendon_force",))["tendon_force"]
     xs, xds = rig_kinematics(nom, theta, omega, q, qd)
     width = _p(p, "hysteresis_width")
@@ -230,16 +251,14 @@ def replay_laws(nom: NominalParameters, x, u, p):
     like = np.array(v, dtype=object) if not all(is_float(w) for w in v) else np.array(v, float)
     xdot = drive_laws(model, s, like, q=q_in, tau_ext=None if ext is None else np.array(ext, dtype=like.dtype),
                       want=("derivatives",))["derivatives"]
-    k = 2 if nom.has_link else 0
-    acc = [xdot[k + n + i] / (1.0 + _p(p, "motor_inertia_rel")) for i in range(n)]
-    out = [xdot[k + i] for i in range(n)] + acc
-    if nom.has_link:
-        out += [xdot[0], xdot[1] / (1.0 + _p(p, "link_inertia_rel"))]
+    k = 2 if nom.has_link else 0   # the drive's order is the rigs' order: [(q, q'), theta, omega]
+    out = [xdot[0], xdot[1] / (1.0 + _p(p, "link_inertia_rel"))] if nom.has_link else []
+    out += [xdot[k + i] for i in range(n)] + [xdot[k + n + i] / (1.0 + _p(p, "motor_inertia_rel")) for i in range(n)]
     out += zdot
     y = [theta[i] + _p(p, f"motor_bias_{i + 1}") for i in range(n)]  # encoder bias
     y += [(1.0 + _p(p, "force_gain")) * force[i] + _p(p, f"force_offset_{i + 1}") for i in range(n)]
     if nom.has_link:
-        y.append((1.0 + _p(p, "link_scale_rel")) * q + _p(p, "link_bias"))  # link encoder calibration
+        y.append((1.0 + _p(p, "link_scale_rel")) * q_link + _p(p, "link_bias"))  # link encoder calibration
     return np.array(out, dtype=like.dtype), np.array(y, dtype=like.dtype)
 
 

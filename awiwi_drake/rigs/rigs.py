@@ -34,7 +34,7 @@ from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Mult
 
 from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
 from awiwi_drake.components.fused_drive import DriveModel
-from awiwi_drake.components.rig_system import LinkRigOutputs_, rig_dynamics_system
+from awiwi_drake.components.rig_system import LinkRigOutputs_, rig_dynamics_system, tendon_force_of_states
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
@@ -266,7 +266,8 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                               joint_stiffness=float(rq ** 2 * k.sum()))
 
     return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
-               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
+               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
+               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None)
 
 
 
