@@ -38,15 +38,16 @@ def rk3_excess_growth(A, h=H):
 
 def test_the_finger_plant_has_the_thesis_physics_on_by_default():
     p = FingerRigParams.for_finger("index")
-    assert p.motor.friction and p.motor.ripple and p.spring.hysteresis.enabled and p.guide_friction
+    assert p.motor.friction and p.motor.ripple and p.spring.hysteresis.enabled and not p.guide_friction
     assert p.spring.include_tendon                               # k_t = E S / l0 in series
-    rig = finger_diagram(finger="index")
+    p = p.with_physics(guide_friction=True)
+    rig = finger_diagram(finger="index", params=p)
     n, m = rig.num_joints, rig.num_tendons
     assert rig.num_states == 2 * n + 4 * m
     assert rig.state_names[2 * n + 2 * m] == f"hysteresis_force[{rig.tendon_names[0]}]"
     assert rig.state_names[-1] == f"guide_friction_force[{rig.tendon_names[-1]}]"
     hand = HandRigParams()
-    assert hand.motor.ripple and hand.spring.hysteresis.enabled and hand.guide_friction
+    assert hand.motor.ripple and hand.spring.hysteresis.enabled and not hand.guide_friction
     with pytest.raises(ValueError, match="guide_friction=True needs backend='compiled'"):
         finger_diagram(finger="index", params=p.with_physics(hysteresis=False), backend="python")
 
@@ -63,7 +64,7 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
     rotor, the hysteresis force z on spring and rotor, the guide friction g on the joints only, and
     the two Dahl rates in closed form. The ideal compiled plant equals the python backend's (separate
     MotorBank_/SpringBank_/TendonRouting_ systems) to 1e-9."""
-    p_on = FingerRigParams.for_finger(finger)
+    p_on = FingerRigParams.for_finger(finger).with_physics(guide_friction=True)
     on, off = finger_diagram(finger=finger, params=p_on), finger_diagram(finger=finger,
                                                                           params=p_on.with_physics(**IDEAL))
     ref = finger_diagram(finger=finger, params=p_on.with_physics(**IDEAL), backend="python")
@@ -166,10 +167,10 @@ def _rk3_check(rig, pretension):
 
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth"])
 def test_default_finger_physics_is_stable_for_rk3_at_the_control_period(finger):
-    """Every eigenvalue of the Drake linearisation of the default finger (all physics on) times the
+    """Every eigenvalue of the Drake linearisation of the finger with all physics on times the
     3 kHz period lies in RK3's stability region, at the default 20 N and at 35 N pretension; the
     old Dahl parameters (presliding stiffness 2e5 N/m: delta = 2 N / 2e5 N/m = 1e-5 m at 20 N) do not."""
-    p = FingerRigParams.for_finger(finger)
+    p = FingerRigParams.for_finger(finger).with_physics(guide_friction=True)
     for pre in (20.0, 35.0):
         assert _rk3_check(finger_diagram(finger=finger, params=p), pre) <= 1e-9, (finger, pre)
     if finger == "index":
@@ -178,5 +179,5 @@ def test_default_finger_physics_is_stable_for_rk3_at_the_control_period(finger):
 
 
 def test_default_hand_physics_is_stable_for_rk3_at_the_control_period():
-    hand = hand_diagram()
+    hand = hand_diagram(params=HandRigParams().with_physics(guide_friction=True))
     assert _rk3_check(hand, 20.0) <= 1e-9

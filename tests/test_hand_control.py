@@ -16,13 +16,22 @@ from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.hand import FingerRigParams
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandChainParams
 
 PERIOD = 1.0 / 3000.0
 
 
 def _rig(finger="index"):
-    return finger_diagram(finger=finger, backend="python")
+    return finger_diagram(finger=finger)
+
+
+def _ideal_rig(finger="index"):
+    """The finger without motor friction, ripple, hysteresis and guide friction: the plant the 15.5
+    design models (its error system (e, e', z3, z4) has no friction or hysteresis states)."""
+    p = FingerRigParams.for_finger(finger).with_physics(ripple=False, hysteresis=False, guide_friction=False,
+                                                        motor_friction=False)
+    return finger_diagram(finger=finger, params=p)
 
 
 def test_registry_and_port_contract_on_a_finger():
@@ -40,7 +49,7 @@ def test_registry_and_port_contract_on_a_finger():
     assert closed_loop(_rig(), make_controller("joint-pd", rig)).estimated == ()
 
     class ReadsState(StaticLaw):
-        inputs = {"state": 24, "joint_angle_reference": 4}
+        inputs = {"state": rig.num_states, "joint_angle_reference": 4}
         output_size = 8
 
         def __call__(self, u):
@@ -143,8 +152,9 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
 def test_finger_backstepping_closed_loop_poles_equal_the_design(finger):
     """Linearize (Drake) of the finger under the 15.5 backstepping (continuous, true joint state) has
     exactly the poles of the designed error system (e, e', z3, z4): the per-joint design is what the
-    plant does, not an approximation (constant-coupling fingers; Coriolis vanish at rest)."""
-    rig = _rig(finger)
+    plant does, not an approximation (constant-coupling fingers; Coriolis vanish at rest). The ideal
+    plant: the design has no hysteresis state and cancels the motor friction exactly."""
+    rig = _ideal_rig(finger)
     law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))   # the continuous design: exact cancellation
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
@@ -176,8 +186,9 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger):
 
 def test_finger_backstepping_lyapunov_function_decreases():
     """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
-    loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index."""
-    rig = _rig()
+    loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index.
+    The ideal plant: V is the Lyapunov function of the frictionless, hysteresis-free design model."""
+    rig = _ideal_rig()
     law = FingerBacksteppingLaw(rig)
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
@@ -265,7 +276,8 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
     jac = check_system_autodiff_matches_fd(chain, [], dict(
         joint_angle_reference=rng.normal(0, 0.2, 4), joint_angle=rng.normal(0, 0.2, 4),
         joint_velocity=rng.normal(0, 1, 4), tendon_force=rng.uniform(10, 40, 8),
-        motor_velocity=rng.normal(0, 0.5, 8)), outputs=["motor_torque", "joint_torque_reference"], rtol=1e-4)
+        motor_velocity=rng.normal(0, 0.5, 8), motor_angle=rng.normal(0, 0.5, 8)),
+        outputs=["motor_torque", "joint_torque_reference"], rtol=1e-4)
     # the impedance depends on the error only (dtau/dq_ref = -dtau/dq = diag(K) > 0 on the index's
     # independent joints), and each tendon's force loop (10.2) opposes its own force error (du_i/df_i < 0)
     T = jac["joint_torque_reference"][0]

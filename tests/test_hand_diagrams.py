@@ -74,8 +74,8 @@ def test_stiffest_link_mode_rises_with_pretension():
 
 def test_hand_is_five_decoupled_fingers_in_the_global_tendon_order():
     hand = hand_diagram(wrist=False)
-    # 21 joints (q, v), 38 tendons (motor angle and velocity, hysteresis and guide friction forces)
-    assert (hand.num_joints, hand.num_tendons, hand.num_states) == (21, 38, 2 * 21 + 4 * 38)
+    # 21 joints (q, v), 38 tendons (motor angle and velocity, hysteresis force; guide friction off)
+    assert (hand.num_joints, hand.num_tendons, hand.num_states) == (21, 38, 2 * 21 + 3 * 38)
     assert hand.tendon_names[TENDON_SLICES["ring"]][0] == "ring_h1"
     lin_h = linearize(hand, hand.operating_point())
     index = finger_diagram(finger="index")
@@ -148,7 +148,7 @@ def test_guide_friction_and_hysteresis_at_rest_linearise_to_presliding_springs_n
     tendon): Drake's linearisation gives dg/dt = (C/delta_g) P v, dz/dt = (w/delta)(r_m omega + P v),
     and no damping (d(dg)/dg = d(dz)/dz = 0). A regularised sign tanh(v/v_s) would instead add the
     damping C/v_s = 2000 N s/m per tendon that overdamps the light links (and puts h lambda at -536)."""
-    rig = finger_diagram(finger="index")
+    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(guide_friction=True))
     p = rig.params
     n, m = rig.num_joints, rig.num_tendons
     op = rig.operating_point()
