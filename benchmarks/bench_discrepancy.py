@@ -30,9 +30,12 @@ Usage::
 
     PYTHONPATH=. python benchmarks/bench_discrepancy.py [--quick] [--per-row N] [--jobs J] [--out DIR]
 
-Cases are interleaved over the rows, and rows are written after every dataset
-(``discrepancy_benchmark_rows.json``), so a run stopped early still scores every
-row on what it has.  Writes ``discrepancy_benchmark.json`` and ``.md`` into
+Cases are interleaved over the rows. Every dataset's result is one JSON file
+(``--out``/cases/ID.json); a rerun skips the finished ones and several runs may share
+one folder (a case is claimed exclusively before it runs), so the benchmark is
+resumable and parallel-safe.  After every dataset the rows so far are scored
+(``discrepancy_benchmark_rows.json``, ``.md``), so a run stopped early still scores
+every row on what it has.  Writes ``discrepancy_benchmark.json`` and ``.md`` into
 ``--out`` (default ``$AWIWI_OUT`` or ``out/bench_discrepancy``).
 """
 
@@ -334,34 +337,81 @@ def markdown(summ: dict, rows: list) -> str:
     return "\n".join(L)
 
 
+def case_id(case) -> str:
+    """File stem of one dataset's result: row, rig, hidden effects or transform, strength, seed, duration."""
+    row, rig, hidden, snr, seed, strength, transform, duration = case
+    what = "+".join(hidden) or (transform or "none")
+    return f"{row}_{rig}_{what}_x{strength:g}_{snr:g}dB_s{seed}_{duration:g}s"
+
+
+def run_and_store(case, folder: str):
+    """Run one case unless its JSON exists or another process has claimed it; returns its row or None.
+
+    Parallel-safe and resumable: a case is claimed by creating ``cases/ID.claim`` exclusively
+    (a stopped run leaves the claim of the case it was running: delete stale ``.claim`` files, or
+    pass ``--reclaim``), and its result is written atomically to ``cases/ID.json``."""
+    d = pathlib.Path(folder)
+    cid = case_id(case)
+    done, claim = d / f"{cid}.json", d / f"{cid}.claim"
+    if done.exists():
+        return None
+    try:
+        fd = os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:
+        return None
+    os.write(fd, f"{os.getpid()}\n".encode())
+    os.close(fd)
+    r = run_case(case)
+    r["case_id"] = cid
+    tmp = d / f"{cid}.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(r, indent=1, default=float))
+    os.replace(tmp, done)
+    claim.unlink(missing_ok=True)
+    return r
+
+
+def collect(folder) -> list:
+    """Every finished case in ``folder/cases`` (in the interleaved case order of their seeds)."""
+    rows = [json.loads(f.read_text()) for f in sorted(pathlib.Path(folder).glob("*.json"))]
+    return sorted(rows, key=lambda r: r["seed"])
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="4 datasets (smoke run)")
     ap.add_argument("--per-row", type=int, default=20, help="datasets per row (issue 12: >= 20)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--duration", type=float, default=10.0, help="seconds per dataset (issue 6: 10)")
+    ap.add_argument("--reclaim", action="store_true", help="delete claims left by stopped runs before starting")
     ap.add_argument("--out", default=os.environ.get("AWIWI_OUT", "out/bench_discrepancy"))
     args = ap.parse_args(argv)
     todo = [c + (args.duration,) for c in cases(args.per_row, args.quick)]
     out = pathlib.Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = []
+    folder = out / "cases"
+    folder.mkdir(parents=True, exist_ok=True)
+    if args.reclaim:
+        for f in folder.glob("*.claim"):
+            f.unlink(missing_ok=True)
     t0 = time.perf_counter()
 
     def record(i, r):
-        rows.append(r)
+        if r is None:
+            return
         print(f"[{i + 1}/{len(todo)}] {r['row']}: {r['rig']} {r['hidden'] or r['transform']} -> {r['named']} "
               f"{r['nuisance_named']} {r['verdict']} | baseline {r['baseline_named']} ({r['cpu_seconds']:.0f} CPU s)",
               flush=True)
+        rows = collect(folder)
         (out / "discrepancy_benchmark_rows.json").write_text(json.dumps(rows, indent=1, default=float))
+        (out / "discrepancy_benchmark.md").write_text(markdown(summarise(rows), rows))
 
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as ex:
-            for i, r in enumerate(ex.map(run_case, todo)):
+            for i, r in enumerate(ex.map(run_and_store, todo, [str(folder)] * len(todo))):
                 record(i, r)
     else:
         for i, c in enumerate(todo):
-            record(i, run_case(c))
+            record(i, run_and_store(c, str(folder)))
+    rows = collect(folder)
     summ = summarise(rows)
     summ["wall_seconds"] = time.perf_counter() - t0
     (out / "discrepancy_benchmark.json").write_text(json.dumps({"summary": summ, "rows": rows}, indent=1,

@@ -2,18 +2,27 @@
 
 Usage::
 
-    PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.05] [--controllers joint-pd,cascaded,backstepping]
-                                                         [--json out.json] [--profile]
+    PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.1] [--controllers joint-pd,cascaded,backstepping]
+                                                         [--json out.json] [--no-profile]
 
-For each registered hand controller (``joint-pd``: today's 3 kHz motor PD; ``cascaded``: joint impedance ->
+For each registered hand controller (``joint-pd``: the 3 kHz motor PD; ``cascaded``: joint impedance ->
 force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-forward, joint angles from the
 tendon-length estimator; ``backstepping``: 15.5 for the hand, 6 kHz law, 3 kHz estimator) the hand
 (``hand_diagram()``, wrist input at 0, the thesis physics of the plant as it is configured by default) is
 closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad, and simulated
 with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period), after a warm-up
-run of two control periods (JIT compilation of the drive kernels is not timed).  Real-time factor =
-simulated time / wall time on one core.  ``--profile`` prints the functions that take the time (cProfile,
-tottime), grouped by module.  The figures depend on the machine load.
+run of two control periods (kernel generation and JIT compilation are not timed).  All controllers run in
+one process, one after the other, so their ratios are measured under the same load.
+
+Real-time factor (RTF) = simulated seconds per second of the process's CPU clock (``rtf``; robust to other
+jobs on a shared machine) and of the wall clock (``wall_rtf``).  Where the time goes (unless
+``--no-profile``): the CPU time of each system's work measured apart on a copy of its loop context
+(``isolated_us_per_call``: every continuous system's derivatives, MultibodyPlant included; every Python
+system's periodic update and vector outputs), and how often Drake calls each Python callback per control
+period (``callbacks_per_period``, counted by cProfile in a 0.01 s run; cProfile's times are not used, it
+slows the many small Python calls several-fold).  Cost per period ~ sum of cost x calls; the C++ primitives
+(Mux, Demux, MatrixGain, Adder, ZeroOrderHold) and the integrator make the rest.  The machine's load
+average is printed with the figures.
 """
 
 from __future__ import annotations
@@ -21,66 +30,170 @@ from __future__ import annotations
 import argparse
 import cProfile
 import json
+import os
 import pstats
 import time
-from collections import defaultdict
 
 import numpy as np
+from pydrake.systems.framework import Diagram, PortDataType
 
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, get_entry, make_controller
 from awiwi_drake.hand.diagrams import hand_diagram
 
 
-def run(name: str, sim_time: float, profile: bool = False) -> dict:
+def _calls(prof: cProfile.Profile, periods: float) -> dict:
+    """Calls per control period of each Python callback that Drake's C++ calls (exact counts)."""
+    out = {}
+    for (file, line, fn), (_cc, nc, _tt, _ct, callers) in pstats.Stats(prof).stats.items():
+        if file != "~" and callers and all(c[0] == "~" for c in callers) and "awiwi_drake/" in file:
+            out[f"{file.split('awiwi_drake/')[-1]}:{line}:{fn}"] = nc / periods
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+
+def _time(fn, n: int = 200) -> float:
+    """CPU time of one call [us], best of three batches of ``n``."""
+    fn()
+    best = np.inf
+    for _ in range(3):
+        t0 = time.process_time()
+        for _ in range(n):
+            fn()
+        best = min(best, (time.process_time() - t0) / n)
+    return best * 1e6
+
+
+def isolated_costs(diagram, root) -> dict:
+    """CPU time per call [us] of each system's work, measured apart on a copy of its loop context.
+
+    For every system with continuous state: ``CalcTimeDerivatives`` (the state nudged each call so nothing
+    is cached; MultibodyPlant included); every periodic discrete update of a Python system; every vector
+    output of a Python system (an input re-fixed each call to invalidate it; the cost of that is subtracted).
+    """
+    out = {}
+    for sys_ in _leaves(diagram):
+        python = not type(sys_).__module__.startswith("pydrake")
+        sub = diagram.GetSubsystemContext(sys_, root)
+        ctx = sys_.CreateDefaultContext()
+        ctx.SetTimeStateAndParametersFrom(sub)
+        fixed = []
+        for i in range(sys_.num_input_ports()):
+            port = sys_.get_input_port(i)
+            if port.HasValue(sub) and port.get_data_type() == PortDataType.kVectorValued:
+                v = np.array(port.Eval(sub), dtype=float)
+                port.FixValue(ctx, v)
+                fixed.append((port, v))
+        name = sys_.GetSystemPathname()
+        if sys_.num_continuous_states():
+            x = ctx.get_continuous_state_vector().CopyToVector()
+            d = sys_.AllocateTimeDerivatives()
+
+            def deriv():
+                x[0] += 1e-12
+                ctx.SetContinuousState(x)
+                sys_.CalcTimeDerivatives(ctx, d)
+
+            def nudge():
+                x[0] += 1e-12
+                ctx.SetContinuousState(x)
+            out[f"{name}: derivatives"] = _time(deriv) - _time(nudge)
+        if not python:
+            continue
+        xc = ctx.get_continuous_state_vector().CopyToVector() if sys_.num_continuous_states() else None
+
+        def invalidate():               # every input re-fixed and the state nudged: nothing stays cached
+            for port, v in fixed:
+                port.FixValue(ctx, v)
+            if xc is not None:
+                xc[0] += 1e-12
+                ctx.SetContinuousState(xc)
+        base = _time(invalidate)
+        if sys_.num_discrete_state_groups():
+            def update():
+                invalidate()
+                sys_.EvalUniquePeriodicDiscreteUpdate(ctx)
+            try:
+                out[f"{name}: discrete update"] = _time(update, 50) - base
+            except RuntimeError:        # no unique periodic update
+                pass
+        for i in range(sys_.num_output_ports()):
+            op = sys_.get_output_port(i)
+            if op.get_data_type() != PortDataType.kVectorValued:
+                continue
+
+            def ev(op=op):
+                invalidate()
+                op.Eval(ctx)
+            t = _time(ev) - base
+            if t > 1.0:
+                out[f"{name}: output {op.get_name()}"] = t
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+
+def _leaves(system):
+    for s in system.GetSystems():
+        if isinstance(s, Diagram):
+            yield from _leaves(s)
+        else:
+            yield s
+
+
+def run(name: str, sim_time: float, profile: bool = True) -> dict:
     rig = hand_diagram()
     t0 = time.perf_counter()
     loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
     inputs = {"joint_angle_reference": op.joint_angle + 0.05}
-    # warm-up: the first simulation compiles the drive's kernels (numba) and fills caches
+    # warm-up: the first simulation generates/compiles the drive's kernels (numba) and fills caches
     simulate(loop, loop.create_context(op), 2.0 / loop.rate_hz, inputs=inputs, log=("joint_angle",))
     ctx = loop.create_context(op)
-    prof = cProfile.Profile() if profile else None
-    t0 = time.perf_counter()
-    if prof:
-        prof.enable()
+    c0, w0 = time.process_time(), time.perf_counter()
     simulate(loop, ctx, sim_time, inputs=inputs, log=("joint_angle",))
-    if prof:
-        prof.disable()
-    wall = time.perf_counter() - t0
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    periods = sim_time * loop.rate_hz
     row = dict(controller=name, rate_hz=loop.rate_hz, estimator=bool(loop.estimated), build_s=build,
-               sim_time=sim_time, wall_s=wall, rtf=sim_time / wall)
-    if prof:
-        by_module = defaultdict(float)
-        for (file, _line, _fn), (_cc, _nc, tt, _ct, _callers) in pstats.Stats(prof).stats.items():
-            key = file.split("awiwi_drake/")[-1] if "awiwi_drake/" in file else (
-                "numpy" if "numpy" in file else "drake (C++ and bindings)" if file == "~" else file.rsplit("/", 1)[-1])
-            by_module[key] += tt
-        row["time_by_module"] = dict(sorted(by_module.items(), key=lambda kv: -kv[1])[:8])
+               sim_time=sim_time, cpu_s=cpu, wall_s=wall, rtf=sim_time / cpu, wall_rtf=sim_time / wall,
+               cpu_us_per_period=cpu / periods * 1e6)
+    if profile:
+        prof = cProfile.Profile()
+        prof.enable()
+        simulate(loop, loop.create_context(op), 0.01, inputs=inputs, log=("joint_angle",))
+        prof.disable()
+        row["callbacks_per_period"] = _calls(prof, 0.01 * loop.rate_hz)
+        ictx = loop.create_context(op)
+        loop.diagram.GetInputPort("joint_angle_reference").FixValue(ictx, inputs["joint_angle_reference"])
+        row["isolated_us_per_call"] = isolated_costs(loop.diagram, ictx)
     return row
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sim-time", type=float, default=0.05, help="simulated seconds per controller")
+    ap.add_argument("--sim-time", type=float, default=0.1, help="simulated seconds per controller")
     ap.add_argument("--controllers", default="joint-pd,cascaded,backstepping")
-    ap.add_argument("--profile", action="store_true", help="also print where the time goes")
+    ap.add_argument("--no-profile", action="store_true", help="skip where the time goes (isolated costs, call counts)")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
+    load = os.getloadavg()
+    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs")
     rows = []
-    print(f"{'controller':14s} {'rate Hz':>8s} {'estimator':>9s} {'build s':>8s} {'wall s':>8s} {'RTF':>8s}")
+    print(f"{'controller':14s} {'rate Hz':>8s} {'estimator':>9s} {'build s':>8s} {'RTF cpu':>8s} {'RTF wall':>9s} "
+          f"{'us/period':>10s}")
     for name in [n.strip() for n in args.controllers.split(",") if n.strip()]:
-        r = run(name, args.sim_time, args.profile)
+        r = run(name, args.sim_time, not args.no_profile)
         rows.append(r)
-        print(f"{name:14s} {r['rate_hz']:8.0f} {str(r['estimator']):>9s} {r['build_s']:8.2f} {r['wall_s']:8.2f} "
-              f"{r['rtf']:8.4f}")
-        for mod, tt in r.get("time_by_module", {}).items():
-            print(f"    {tt:7.2f} s  {mod}")
+        print(f"{name:14s} {r['rate_hz']:8.0f} {str(r['estimator']):>9s} {r['build_s']:8.2f} {r['rtf']:8.3f} "
+              f"{r['wall_rtf']:9.3f} {r['cpu_us_per_period']:10.0f}", flush=True)
+        if "isolated_us_per_call" in r:
+            print("    CPU time per call, measured apart:")
+            for where, us in r["isolated_us_per_call"].items():
+                print(f"    {us:9.1f} us  {where}")
+            print("    calls per control period (Python callbacks):")
+            for where, k in r["callbacks_per_period"].items():
+                print(f"    {k:9.1f}     {where}")
     if args.json:
         with open(args.json, "w") as fh:
-            json.dump(rows, fh, indent=1)
+            json.dump(dict(load_average=load, rows=rows), fh, indent=1)
     return 0
 
 

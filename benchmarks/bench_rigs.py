@@ -25,7 +25,8 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
   joint PD, with the thesis's physics on (motor friction and ripple, guide friction,
   spring hysteresis), with ripple and guide friction only, and with both off.
 * ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
-  (one vectorised discrete system at 3 kHz), rig-seconds per CPU-second.
+  (C++: a sparse gain on the batch state plus a constant, zero-order hold at 3 kHz),
+  rig-seconds per CPU-second.
 * ``mujoco_callback`` / ``mujoco_linear``: the same antagonistic joint (two motor
   rotors, two fixed tendons, one link) in MuJoCo, RK4 at 1/3000 s with the PD in the
   stepping loop: (a) the exact nonlinear tension-only spring and the (3.8) motor
@@ -208,26 +209,23 @@ def case_hand_3khz(seconds, repeats):
 
 
 def case_batch_rigs(seconds, repeats, num_copies=512):
-    from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+    import scipy.sparse as sp
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import Adder, ConstantVectorSource, SparseMatrixGain, ZeroOrderHold
 
     from awiwi_drake.rigs.batch import batched_joint_rig
     from awiwi_drake.parameters.rigs import MotorPositionGains
 
-    class BatchedMotorPD(LeafSystem):
-        """u_i = u0_i + kp_i (theta*_i - theta_i) - kd omega_i for every copy, sampled and held at 3 kHz."""
-
-        def __init__(self, N, theta_ref, u0, kp, kd):
-            super().__init__()
-            self.N, self.theta_ref, self.u0, self.kp, self.kd = N, theta_ref, u0, kp, kd
-            self._x = self.DeclareVectorInputPort("state", 6 * N)
-            held = self.DeclareDiscreteState(2 * N)
-            self.DeclarePeriodicDiscreteUpdateEvent(1.0 / RATE, 0.0, self._update)
-            self.DeclareStateOutputPort("motor_torque", held)
-
-        def _update(self, context, discrete):
-            X = self._x.Eval(context).reshape(self.N, 6)
-            u = self.u0 + self.kp * (self.theta_ref - X[:, 2:4]) - self.kd * X[:, 4:6]
-            discrete.get_mutable_vector().SetFromVector(u.ravel())
+    def motor_pd(N, theta_ref, u0, kp, kd):
+        """u_i = u0_i + kp_i (theta*_i - theta_i) - kd omega_i for every copy, in C++: a sparse gain on the
+        batch state plus a constant, sampled and held at 3 kHz."""
+        rows = np.arange(2 * N)
+        copy, motor = rows // 2, rows % 2
+        cols_th, cols_om = 6 * copy + 2 + motor, 6 * copy + 4 + motor
+        K = sp.csc_matrix((np.r_[-kp.repeat(2), np.full(2 * N, -kd)], (np.r_[rows, rows], np.r_[cols_th, cols_om])),
+                          shape=(2 * N, 6 * N))
+        offset = (u0 + kp[:, None] * theta_ref).ravel()
+        return K, offset
 
     def run():
         br = batched_joint_rig(num_copies)
@@ -239,17 +237,24 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
         kp = rng.uniform(0.5, 1.5, (num_copies, 1)) * g.kp
         theta_ref = np.array([op.state[2:4] for op in ops]) + rng.normal(scale=0.05, size=(num_copies, 2))
         u0 = np.array([op.motor_torque for op in ops])
+        K, offset = motor_pd(num_copies, theta_ref, u0, kp.ravel(), g.kd)
         b = DiagramBuilder()
         plant = b.AddSystem(br.diagram)
-        pd = b.AddSystem(BatchedMotorPD(num_copies, theta_ref, u0, kp, g.kd))
-        b.Connect(plant.GetOutputPort("state"), pd.get_input_port(0))
-        b.Connect(pd.get_output_port(0), plant.GetInputPort("motor_torque"))
+        gain = b.AddSystem(SparseMatrixGain(K))
+        const = b.AddSystem(ConstantVectorSource(offset))
+        add = b.AddSystem(Adder(2, 2 * num_copies))
+        hold = b.AddSystem(ZeroOrderHold(1.0 / RATE, 2 * num_copies))
+        b.Connect(plant.GetOutputPort("state"), gain.get_input_port())
+        b.Connect(gain.get_output_port(), add.get_input_port(0))
+        b.Connect(const.get_output_port(), add.get_input_port(1))
+        b.Connect(add.get_output_port(), hold.get_input_port())
+        b.Connect(hold.get_output_port(), plant.GetInputPort("motor_torque"))
         b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
         d = b.Build()
         ctx = d.CreateDefaultContext()
         x, u, e = br.stack(ops)
         plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(x)
-        pd.GetMyMutableContextFromRoot(ctx).SetDiscreteState(u)
+        hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(u)
         d.GetInputPort("external_torque").FixValue(ctx, e)
         return _fixed_rk3(d, ctx, seconds)
     cpu, wall, x = _best(run, max(1, repeats - 1))

@@ -135,6 +135,40 @@ def test_nominal_model_matches_foundation_joint_rig():
         np.testing.assert_allclose(y[2:4], f_ref, rtol=1e-12)
 
 
+@pytest.mark.parametrize("rig", ["joint", "tendon"])
+def test_replay_kernel_equals_the_laws_for_every_switch(rig):
+    """The replay's compiled float path (generated from replay_laws through codegen) equals the law
+    functions at random states with random catalog parameters, each effect on or off per copy."""
+    from awiwi_drake.discrepancy.catalog import param_specs
+    from awiwi_drake.discrepancy.model import replay_kernels
+    params = JOINT if rig == "joint" else {k: JOINT[k] for k in ("motor_inertia", "motor_damping",
+                                                                 "motor_pulley_radius", "spring_poly")}
+    nom = NominalParameters.from_dataset(rig, params)
+    rng = np.random.default_rng(21)
+    M = 40
+    specs = param_specs()
+    drawn = np.array([[rng.uniform(s.low, s.high) for s in specs] for _ in range(M)]).T
+    off = np.array([s.off for s in specs])[:, None]
+    P = np.where(rng.random(drawn.shape) < 0.5, off, drawn)
+    X = np.stack([_random_state(nom, rng) for _ in range(M)], axis=1)
+    U = rng.uniform(-1, 1, (nom.num_motors, M))
+    k = replay_kernels(nom)
+    ref = model_derivatives(nom, X, U, P)
+    got = k["derivatives_batch"](X.T.copy(), U.T.copy(), P.T.copy(), np.empty((M, nom.num_states))).T
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    y_ref = model_measurements(nom, X, P)
+    y = k["measurements_batch"](X.T.copy(), P.T.copy(), np.empty((M, nom.num_measurements))).T
+    np.testing.assert_allclose(y, y_ref, rtol=1e-12, atol=1e-12 * np.abs(y_ref).max())
+    # the system's float path is the kernel, its AutoDiff path the laws
+    sys = DiscrepancyModel_[float](nom, M)
+    ctx = sys.CreateDefaultContext()
+    ctx.SetContinuousState(X.ravel())
+    ctx.get_mutable_numeric_parameter(0).SetFromVector(P.ravel())
+    sys.get_input_port(0).FixValue(ctx, U.ravel())
+    np.testing.assert_allclose(sys.EvalTimeDerivatives(ctx).CopyToVector().reshape(-1, M), ref,
+                               rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
 def _energy(nom, X):
     n = nom.num_motors
     spring = PolynomialSpring(nom.spring_poly)
@@ -316,3 +350,24 @@ def test_benchmark_scores_follow_their_definitions():
     assert s["exact_three"] == (1.0, 1)
     b = bench.summarise(rows)["baseline"]
     assert b["exact_single_full"] == (0.5, 2) and b["nothing_any_name"] == (0.0, 2)
+
+
+def test_benchmark_is_resumable_and_claims_each_case_once(tmp_path, monkeypatch):
+    """One JSON per dataset; a finished or claimed case is skipped (a second run, or a parallel one)."""
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).parent.parent / "benchmarks" / "bench_discrepancy.py"
+    spec = importlib.util.spec_from_file_location("bench_discrepancy", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    calls = []
+    monkeypatch.setattr(bench, "run_case", lambda case: calls.append(case) or {"row": case[0], "seed": case[4]})
+    a = ("nothing", "joint", [], 30, 5, 1.0, None, 10.0)
+    b = ("single_full", "joint", ["delay"], 30, 6, 1.0, None, 10.0)
+    assert bench.run_and_store(a, str(tmp_path))["seed"] == 5
+    assert bench.run_and_store(a, str(tmp_path)) is None                 # finished: skipped
+    (tmp_path / f"{bench.case_id(b)}.claim").write_text("1\n")           # another process runs it
+    assert bench.run_and_store(b, str(tmp_path)) is None
+    assert calls == [a]
+    assert [r["seed"] for r in bench.collect(tmp_path)] == [5]
+    assert not list(tmp_path.glob("*.claim"))[1:] and not list(tmp_path.glob("*.tmp"))

@@ -243,3 +243,17 @@ def test_thumb_stiffness_is_pd_over_the_workspace_for_balanced_forces_with_the_r
     lam_eq = [min(lam_min((a, b), np.full(4, f0)) for a, b in itertools.product(ax, ax)) for f0 in (1, 20, 170)]
     assert 0 < lam_eq[0] < lam_eq[1] < lam_eq[2]
     assert lam_min((0.5, -1.5), (2.0, 170.0, 2.0, 2.0)) < 0.0
+
+
+def test_thumb_base_lengths_and_jacobian_from_one_kinematics_evaluation():
+    """Algorithm 1's fast path (lengths and dh/dq of the base tendons together, a kernel compiled from the
+    laws h and P) against h(q) and P(q) to 1e-12 and against finite differences of h."""
+    c = finger_coupling("thumb")
+    for q in RNG.uniform(-1.2, 1.2, size=(5, 2)):
+        h, J = c.base_lengths_and_jacobian(*q)
+        full = np.concatenate([q, [0.0, 0.0]])
+        np.testing.assert_allclose(h, c.h(full)[:4], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(J, c.P(full)[:4, :2], rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(J, fd_jacobian(lambda qq: c.h(np.concatenate([qq, [0.0, 0.0]]))[:4], q, h=1e-6),
+                                   atol=1e-9)
+    np.testing.assert_allclose(c.distal_pseudo_inverse() @ c.P(np.zeros(4))[4:, 2:], np.eye(2), atol=1e-12)

@@ -10,7 +10,8 @@ from scipy.optimize import minimize
 
 from awiwi_drake.components.spring import tendon_spring
 from awiwi_drake.control.force_distribution import (
-    OptimalForceDistribution, TendonForceDistribution, TendonForceDistributionSystem, coupling_nullspace,
+    OptimalForceDistribution, TendonForceDistribution, TendonForceDistributionSystem, _max_margin_alpha,
+    coupling_nullspace,
     finger_force_distribution,
     hand_stiffness_map, joint_stiffness, stiffness_cost)
 from awiwi_drake.hand.coupling import finger_coupling, index_coupling_matrix
@@ -318,3 +319,128 @@ def test_algorithm2_warm_start_never_loses_what_it_had():
     assert again.cost <= first.cost + 1e-15
     with pytest.raises(ValueError, match="warm_start"):
         fd.solve(tau, K, q=q, warm_start=np.ones(3))
+
+
+def _tight_program_options():
+    """Clarabel at tolerances tight enough to compare optima to 1e-9."""
+    from pydrake.solvers import ClarabelSolver, SolverOptions
+    opts = SolverOptions()
+    for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas", "tol_ktratio"):
+        opts.SetOption(ClarabelSolver.id(), k, 1e-11)
+    return opts
+
+
+def _kkt(Q, b, P, tau):
+    """Equality-constrained QP optimum from the full KKT system (independent of the solver's null-space form)."""
+    m, n = P.shape
+    A = -P.T
+    KKT = np.block([[Q, A.T], [A, np.zeros((n, n))]])
+    return np.linalg.lstsq(KKT, np.concatenate([-b, tau]), rcond=None)[0][:m]
+
+
+@pytest.mark.parametrize("finger", ["index", "ring", "thumb"])
+def test_closed_form_qp_equals_the_program_and_switches_exactly_at_the_bounds(finger):
+    """The optimal solver's QP step: inside the bounds the closed-form (KKT) optimum equals the Drake
+    MathematicalProgram's (Clarabel at tight tolerances) to 1e-9; a bound just below the closed-form
+    optimum switches to the program, whose answer then respects it; just above, the closed form stays."""
+    rng = np.random.default_rng(11)
+    q = np.array([0.3, -0.2, 0.1, 0.2])
+    for trial in range(4):
+        fast = finger_force_distribution(finger)
+        P, pinv_PT, W, rank, _ = fast._coupling_at(None, None, q if finger == "thumb" else None)
+        m = P.shape[0]
+        f = 60.0 + 30.0 * rng.uniform(-1, 1, m)                  # a feasible point (f_min 5, f_max 170)
+        tau = -P.T @ f
+        A = rng.normal(size=(m, m))
+        Q = A @ A.T + 0.1 * np.eye(m)
+        # unconstrained optimum f_target: another torque-exact point plus a 1 N push off the torque manifold
+        f_target = f + W @ rng.uniform(-20, 20, W.shape[1]) + P @ rng.normal(scale=1.0 / np.abs(P).max(), size=P.shape[1])
+        b = -Q @ f_target
+        f_star = _kkt(Q, b, P, tau)
+        assert np.all(f_star > 5.0) and np.all(f_star < 170.0)
+        got, used = fast._qp(Q, b, f, W, P, tau, rank, [])
+        assert not used
+        np.testing.assert_allclose(got, f_star, rtol=0, atol=1e-9 * np.abs(f_star).max())
+        prog = finger_force_distribution(finger, fast_path=False, solver_options=_tight_program_options())
+        via, used = prog._qp(Q, b, f, W, P, tau, rank, [])
+        assert used
+        np.testing.assert_allclose(via, f_star, rtol=0, atol=1e-9 * np.abs(f_star).max())
+        top = float(f_star.max())
+        for f_max, expect_program in ((top * (1 + 1e-12), False), (top - 1e-6, True)):
+            s = finger_force_distribution(finger, params=ForceDistributionParams(f_max=f_max),
+                                          solver_options=_tight_program_options())
+            f_p = -pinv_PT @ tau
+            start = f_p + W @ _max_margin_alpha(f_p, W, 5.0, f_max)   # a feasible point under this bound
+            x, used = s._qp(Q, b, start, W, P, tau, rank, [])
+            assert used == expect_program
+            assert x.max() <= f_max + 1e-8
+            np.testing.assert_allclose(-P.T @ x, tau, atol=1e-9)
+
+
+@pytest.mark.parametrize("finger", ["index", "fifth", "thumb"])
+def test_fast_solver_equals_the_program_at_random_interior_states(finger):
+    """Whole solves (several Gauss-Newton QPs, warm-started) at random requests whose optimum is inside the
+    bounds: closed form and MathematicalProgram give the same forces to 1e-9 and the same iterations."""
+    rng = np.random.default_rng(5)
+    fast = finger_force_distribution(finger)
+    prog = finger_force_distribution(finger, fast_path=False, solver_options=_tight_program_options())
+    for trial in range(3):
+        q = rng.uniform(-0.3, 0.3, 4) if finger == "thumb" else None
+        P, _, _, _, H = fast._coupling_at(None, None, q)
+        f0 = rng.uniform(30.0, 110.0, P.shape[0])
+        K_des = rng.uniform(1.0, 1.3) * joint_stiffness(P, fast.stiffness_map(f0)[0], f0, H)
+        tau = -P.T @ f0 + rng.normal(scale=0.02, size=P.shape[1])
+        ws = f0 + rng.normal(scale=3.0, size=f0.size)
+        kw = {} if q is None else dict(q=q)
+        a = fast.solve(tau, K_des, warm_start=ws, max_iterations=4, **kw)
+        b = prog.solve(tau, K_des, warm_start=ws, max_iterations=4, **kw)
+        assert a.status == b.status == "ok" and a.iterations == b.iterations
+        assert a.program_qps == 0 and b.program_qps == b.iterations > 0
+        np.testing.assert_allclose(a.forces, b.forces, rtol=0, atol=1e-9 * np.abs(b.forces).max())
+
+
+def test_thumb_tension_hessians_are_the_derivative_of_the_coupling():
+    """d^2 h_i/dq^2 of every thumb tendon (vectorised float path) against central differences of P(q)."""
+    from _fd import fd_jacobian
+    c = finger_coupling("thumb")
+    q = np.array([0.35, -0.25, 0.3, 0.1])
+    H = c.tension_hessians(q)
+    assert H.shape == (8, 4, 4)
+    for i in range(8):
+        np.testing.assert_allclose(H[i], fd_jacobian(lambda qq: c.P(qq)[i], q, h=1e-6), atol=1e-8)
+    f = np.linspace(10.0, 80.0, 8)
+    np.testing.assert_allclose(np.einsum("i,ijk->jk", f, H), c.tension_hessian(q, f), atol=1e-14)
+
+
+def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver():
+    """The loop system iterates all five fingers at once (float path); at random requests, near the design
+    point (batched) and at the bounds (left to the finger's own solver: LP start, MathematicalProgram), the
+    update equals each finger's warm-started solve to 1e-12."""
+    fingers = ("thumb", "index", "middle", "ring", "fifth")
+    system = TendonForceDistributionSystem(fingers=fingers, iterations_per_period=2, stiffness="full")
+    assert system._batch is not None
+    rng = np.random.default_rng(3)
+    ctx = system.CreateDefaultContext()
+    served = left = 0
+    for trial in range(6):
+        q = np.concatenate([rng.uniform(-0.3, 0.3, 4), np.zeros(17)])
+        taus, Ks, f_prev = [], [], []
+        for k, (s, sd, st, sk, sq) in enumerate(system._parts):
+            P, _, _, _, H = s._coupling_at(None, None, q[sq] if s._offline is None else None)
+            f0 = rng.uniform(30.0, 110.0, P.shape[0])
+            scale = 1.2 if trial % 2 == 0 else 40.0              # 40x: the optimum presses on a bound
+            Ks.append(scale * joint_stiffness(P, s.stiffness_map(f0)[0], f0, H))
+            taus.append(-P.T @ f0 + rng.normal(scale=0.01, size=P.shape[1]))
+            f_prev.append(f0 + rng.normal(scale=2.0, size=f0.size) if trial != 5 else np.full(f0.size, 200.0))
+        system.GetInputPort("joint_torque_reference").FixValue(ctx, np.concatenate(taus))
+        system.GetInputPort("joint_stiffness_reference").FixValue(ctx, np.concatenate([K.ravel() for K in Ks]))
+        system.GetInputPort("joint_angle").FixValue(ctx, q)
+        ctx.SetDiscreteState(0, np.concatenate(f_prev))
+        got = system.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector()
+        _, fallback = system._batch.update(taus, Ks, f_prev, q, 2)
+        served, left = served + int(np.sum(~fallback)), left + int(np.sum(fallback))
+        for k, (s, sd, st, sk, sq) in enumerate(system._parts):
+            kw = {} if s._offline is not None else dict(q=q[sq])
+            ref = s.solve(taus[k], Ks[k], warm_start=f_prev[k], max_iterations=2, **kw).forces
+            np.testing.assert_allclose(got[st], ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max(), err_msg=s)
+    assert served > 0 and left > 0

@@ -155,6 +155,22 @@ def test_non_compilable_spring_is_refused_with_its_name():
         DriveModel(MotorParams(), (SPRING,), antagonistic_coupling(0.008), np.zeros(2), 0.005)
 
 
+def test_kernels_are_traced_once_per_model_content():
+    """Equal models (built apart, e.g. two diagrams or a clone) share one trace; any change re-traces."""
+    def model(x0):
+        return DriveModel(MotorParams(ripple=True), (SPRING, SOFT), antagonistic_coupling(0.008),
+                          np.array([x0, 2e-3]), 0.005, link_inertia=(2e-4,), link_damping=(1e-3,))
+    a, b, c = model(1e-3), model(1e-3), model(1.5e-3)
+    ka = build_kernels(a, jit=False)
+    assert build_kernels(b, jit=False) is ka
+    kc = build_kernels(c, jit=False)
+    assert kc is not ka
+    s = np.array([0.05, 0.0, 0.3, 0.3, 0.0, 0.0])      # both tendons stretched
+    for mdl, k in ((a, ka), (c, kc)):      # each kernel is its own model's laws
+        np.testing.assert_allclose(k["tendon_force"](s, np.empty(2)), drive_laws(mdl, s)["tendon_force"], rtol=1e-12)
+    assert not np.allclose(ka["tendon_force"](s, np.empty(2)), kc["tendon_force"](s, np.empty(2)))
+
+
 def _set(rig, ctx, x, u, e=None):
     ctx.SetContinuousState(x)
     rig.diagram.GetInputPort("motor_torque").FixValue(ctx, u)

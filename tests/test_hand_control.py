@@ -11,7 +11,9 @@ from _fd import check_system_autodiff_matches_fd
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import JointImpedanceBank, TendonChainController, TendonPathVelocity
+from awiwi_drake.control.chain import TendonPathVelocity
+from awiwi_drake.control.joint_design import joint_stage_controller
+from awiwi_drake.control.joint_stage import JointStage, JointStateFeedbackLaw
 from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.hand.coupling import dof_selection
@@ -71,7 +73,10 @@ def test_new_systems_convert_to_autodiff_and_match_finite_differences():
     S = dof_selection(coupling)
     n, k = S.shape
     rng = np.random.default_rng(3)
-    bank = JointImpedanceBank(S, np.full(k, 0.5), np.full(k, 1e-3), rng.normal(0, 0.01, k), np.ones(k))
+    impedance = JointStateFeedbackLaw(coupling, S, rig.params.motor.pulley_radius, np.tile([0.5, 1e-3, 0.0, 0.0], (k, 1)),
+                                      state_map=np.tile([1.0, 0.0, 0.0, 0.0], (k, 1)), input_map=np.zeros(k),
+                                      joint_angle_op=rng.normal(0, 0.1, k), torque_op=rng.normal(0, 0.01, k))
+    bank = JointStage(impedance, np.ones(k))
     jac = check_system_autodiff_matches_fd(bank, [], dict(joint_angle_reference=rng.normal(0, 0.2, n),
                                                           joint_angle=rng.normal(0, 0.2, n),
                                                           joint_velocity=rng.normal(0, 1, n)),
@@ -121,7 +126,7 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
     """Inside the chain the distribution's forces produce the joint law's torque exactly (-(PS)^T f =
     tau, with the thumb's P(q) at the estimated pose) and stay within [f_min, f_max]."""
     rig = _rig(finger)
-    ctrl = TendonChainController(rig)
+    ctrl = joint_stage_controller(rig, "cascaded")
     coupling = rig.coupling
     S = dof_selection(coupling)
     n, m = S.shape[0], coupling.num_tendons
@@ -202,7 +207,7 @@ def test_finger_backstepping_lyapunov_function_decreases():
     assert np.max(np.diff(V)) <= 1e-6 * V[0], np.max(np.diff(V)) / V[0]
 
 
-@pytest.mark.parametrize("controller", ["cascaded", "backstepping"])
+@pytest.mark.parametrize("controller", ["lqr", "backstepping"])
 def test_index_finger_step_with_estimated_joint_angles(controller):
     """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
     tendons never go slack, and the estimation error stays below one period of motion |v| / 3000
@@ -272,7 +277,7 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
         assert gain > 0.0
         np.testing.assert_allclose(block, -gain * np.eye(8), atol=1e-12)
     index = _rig()
-    chain = TendonChainController(index)
+    chain = joint_stage_controller(index, "cascaded")
     jac = check_system_autodiff_matches_fd(chain, [], dict(
         joint_angle_reference=rng.normal(0, 0.2, 4), joint_angle=rng.normal(0, 0.2, 4),
         joint_velocity=rng.normal(0, 1, 4), tendon_force=rng.uniform(10, 40, 8),
@@ -313,7 +318,7 @@ def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_es
     for tight in (False, True):
         rig = _rig()
         dist = ForceDistributionParams(f_min=19.0, f_max=21.0) if tight else None
-        loop = closed_loop(rig, TendonChainController(rig, distribution=dist))
+        loop = closed_loop(rig, joint_stage_controller(rig, "cascaded", distribution_params=dist))
         run, rows = run_joint_test(loop, "step", controller="cascaded", params=compare_test_params(rig, step_duration=0.1))
         flags[tight] = [r.flags for r in rows]
         # the estimation error is reported per joint and, for the constant coupling, stays below one period

@@ -184,22 +184,28 @@ def test_bad_operating_points_raise_named_errors():
 
 
 def test_hand_simulates_under_joint_control():
-    """The whole hand with the 3 kHz controller: the commanded index MCP moves, the other fingers
-    stay put (decoupled routing, palm fixed), no tendon goes slack."""
+    """The whole hand with the 3 kHz controller is its fingers side by side (decoupled routing, palm
+    fixed, wrist at 0): the commanded index joints follow exactly the trajectory of the index finger rig
+    built and closed on its own (same controller, integrator and step; equal to round-off, 1e-12 rad),
+    the other fingers stay put, no tendon goes slack."""
     from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
-    hand = hand_diagram()
-    cl = closed_loop(hand, make_controller("joint-pd", hand))
+
+    def run(rig, q_ref):
+        cl = closed_loop(rig, make_controller("joint-pd", rig))
+        ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
+        return simulate(cl.diagram, ctx, 0.06, log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
+                        max_step=1.0 / 3000, accuracy=1e-3)
+    hand, finger = hand_diagram(), finger_diagram(finger="index")
     q_ref = np.zeros(hand.num_joints)
-    i_mcp = hand.joint_names.index("q21")
-    q_ref[i_mcp] = 0.2
-    ctx = cl.create_context(hand.operating_point(), references={"joint_angle_reference": q_ref})
-    res = simulate(cl.diagram, ctx, 0.06, log=("joint_angle", "tendon_force"),
-                   monitors=rig_monitors(hand), max_step=1.0 / 3000, accuracy=1e-3)
-    q = res["joint_angle"][-1]
-    assert q[i_mcp] > 0.1
-    others = [i for i, n in enumerate(hand.joint_names) if not n.startswith("q2")]
-    assert np.max(np.abs(q[others])) < 1e-9
+    q_ref[hand.joint_names.index("q21")] = 0.2
+    idx = [hand.joint_names.index(n) for n in finger.joint_names]
+    res, alone = run(hand, q_ref), run(finger, q_ref[idx])
+    np.testing.assert_array_equal(res.t, alone.t)
+    np.testing.assert_allclose(res["joint_angle"][:, idx], alone["joint_angle"], rtol=0, atol=1e-12)
+    assert abs(alone["joint_angle"][-1, 1]) > 0.1 * 0.2        # the MCP moved (the comparison is not 0 = 0)
+    others = [i for i in range(hand.num_joints) if i not in idx]
+    assert np.max(np.abs(res["joint_angle"][:, others])) < 1e-9
     assert not [e for e in res.events if e.kind == "tendon_slack"]
 
 
@@ -264,15 +270,36 @@ def test_gravity_option_keeps_the_operating_point_an_equilibrium():
 
 
 def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
+    """A 0.5/0.35 rad thumb-base step under joint PD ends at the static equilibrium of the exact routing,
+    solved here without the simulator: the motors hold theta_ref (compliance r_m/kp in series), the springs
+    sit at the operating elongation plus h(q) - h(q_ref), and P(q)^T f(x) = 0.  The equilibrium is not
+    q_ref (P(q_ref)^T f_op != 0 for the nonlinear base)."""
+    from scipy.optimize import fsolve
     from awiwi_drake.analysis import rig_monitors, simulate
     from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.parameters.hand import JointControllerParams
     rig = finger_diagram(finger="thumb")
+    op, c, law = rig.operating_point(), rig.coupling, rig.spring_law
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     q_ref = np.array([0.5, 0.35, 0.0, 0.0])
-    res = simulate(cl.diagram, cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref}),
-                   0.3, log=("joint_angle",),
-                   monitors=rig_monitors(rig), max_step=1.0 / 3000, accuracy=1e-3)
-    # the springs are held at their 20 N elongation at q_ref; the residual comes from the tendon
-    # forces no longer balancing exactly there (P(q_ref)^T f_op != 0) and from motor friction
-    assert np.abs(res["joint_angle"][-1] - q_ref).max() < 0.05
+    res = simulate(cl.diagram, cl.create_context(op, references={"joint_angle_reference": q_ref}),
+                   0.5, log=("joint_angle",), monitors=rig_monitors(rig), max_step=1.0 / 3000, accuracy=1e-3)
     assert not [e for e in res.events if e.kind == "tendon_slack"]
+    r_m, kp, tau_c = rig.params.motor.pulley_radius, JointControllerParams().kp, rig.params.motor.coulomb_torque
+    f_op, x_op = np.asarray(op.tendon_force), np.asarray(op.elongation)
+
+    def balance(z):
+        q, f = z[:4], z[4:]
+        x = x_op + c.h(q) - c.h(q_ref) - r_m ** 2 * (f - f_op) / kp
+        return np.r_[c.P(q).T @ f, f - np.asarray(law.force(x), float)]
+    z = fsolve(balance, np.r_[q_ref, f_op], xtol=1e-13)
+    assert np.max(np.abs(balance(z))) < 1e-9
+    q_eq = z[:4]
+    assert np.max(np.abs(q_eq - q_ref)[:2]) > 0.01                      # the base does not reach q_ref
+    # band: motor Coulomb friction lets each motor stick up to tau_c / kp off theta_ref, i.e. r_m tau_c / kp
+    # of tendon; through the joint stiffness that moves q by at most |K^-1 P^T diag(k_t)| r_m tau_c / kp
+    op_eq = rig.operating_point(joint_angles=q_eq)
+    K, k_t = np.asarray(op_eq.joint_stiffness), np.asarray(op_eq.tendon_stiffness)
+    band = np.abs(np.linalg.solve(K, c.P(q_eq).T @ np.diag(k_t))).sum(axis=1) * r_m * tau_c / kp
+    late = res.t >= 0.25                                                 # the base settles within 0.2 s
+    assert np.all(np.abs(res["joint_angle"][late].mean(axis=0) - q_eq) < band), (q_eq, band)

@@ -170,3 +170,31 @@ def test_compare_figures_have_legends_labels_and_bandwidth(tmp_path):
     assert step.peak_input <= limit + 1e-9 < step.peak_command
     md = res.table.to_markdown(ref_unit="rad")
     assert "steady_state_error [rad]" in md and "[ref]" not in md and "peak_gain [rad/rad]" in md
+
+
+def test_study_results_plot_themselves():
+    """The chapter studies return typed results whose ``.plot()`` labels every trace and axis unit
+    (ch. 3 constant-speed run, ch. 12 pole sweep, ch. 15 runs and stiffness check, ch. 16 gain samples)."""
+    import matplotlib.pyplot as plt
+
+    from awiwi_drake.parameters.backstepping import OptimalGainsStudy
+    from awiwi_drake.parameters.components import MotorParams
+    from awiwi_drake.reproductions.ch03_motor import constant_velocity_run
+    from awiwi_drake.reproductions.ch12_pole_placement import open_loop_pole_sweep
+    from awiwi_drake.reproductions.ch15_backstepping import antagonistic_stiffness_check, position_gain_study
+    from awiwi_drake.reproductions.ch15_pip_experiments import pip_experiment
+    from awiwi_drake.reproductions.ch16_optimal_backstepping import fig_16_3_gain_samples
+
+    results = [constant_velocity_run(MotorParams(), 1.0, 0.02, kp=10.0, kd=0.1),
+               position_gain_study(values=(5.0,), t_final=0.05)[0],
+               antagonistic_stiffness_check([0.02, 0.05]),
+               pip_experiment("cascaded", "step", t_final=0.06),
+               fig_16_3_gain_samples(OptimalGainsStudy(runs=1, samples=20, t_final=0.05, num=11))]
+    for r in results:
+        fig, ax = r.plot()
+        _check_axes_explained([ax])
+        plt.close(fig)
+    fig, axes = open_loop_pole_sweep(num=3).plot()
+    _check_axes_explained(axes, need_legend=False)
+    assert all(a.collections for a in axes)                    # one scatter of poles per panel
+    plt.close(fig)

@@ -226,3 +226,29 @@ def test_one_simulation_loop_and_one_divergence_error():
     handles = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
                      if "ClosedLoop(" in p.read_text().replace("class ClosedLoop(", ""))
     assert handles == ["control/base.py"], f"ClosedLoop built outside closed_loop: {handles}"
+
+
+def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find():
+    """The joint rig's slack and over-range monitors compute the tendon forces from the logged state
+    (numpy, once per chunk) instead of evaluating the port every step: same events, same extremes,
+    and the limits still drawn on a logged tendon_force."""
+    from awiwi_drake.analysis import OverrangeMonitor, SlackMonitor
+    rig = joint_rig()
+    op = rig.operating_point(pretension=5.0)
+    # both motors wind (2.5 Nm / r_m = 500 N > the 180 N range), then unwind (slack)
+    u = Step(0.003, 2.5, before=op.motor_torque[0]) + Step(0.1, -5.0)
+    from_state = rig_monitors(rig)
+    assert [m.port_name for m in from_state if m.kind in ("tendon_slack", "spring_overrange")] == ["state", "state"]
+    on_port = [SlackMonitor(rig.diagram), OverrangeMonitor(rig.diagram, rig.max_force)]
+    res_a = simulate(rig, rig.context(op), 0.2, inputs={"motor_torque": u}, log=("tendon_force",),
+                     monitors=from_state, mode="fixed_step", step=2e-4)
+    res_b = simulate(rig, rig.context(op), 0.2, inputs={"motor_torque": u}, log=("tendon_force",),
+                     monitors=on_port, mode="fixed_step", step=2e-4)
+    kinds = ("tendon_slack", "spring_overrange")
+    ev_a = [e.to_json() for e in res_a.events if e.kind in kinds]
+    ev_b = [e.to_json() for e in res_b.events if e.kind in kinds]
+    assert {e["kind"] for e in ev_b} == set(kinds)          # the run does hit both conditions
+    assert [(e["kind"], e["channel"], e["t_start"], e["t_end"]) for e in ev_a] == \
+        [(e["kind"], e["channel"], e["t_start"], e["t_end"]) for e in ev_b]
+    np.testing.assert_allclose([e["extreme"] for e in ev_a], [e["extreme"] for e in ev_b], rtol=1e-12, atol=1e-12)
+    assert res_a.info["limits"]["tendon_force"] == res_b.info["limits"]["tendon_force"]

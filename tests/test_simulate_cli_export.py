@@ -105,7 +105,7 @@ def test_cli_error_through_the_console_entry_point():
 def test_export_writes_dot_and_images_or_says_why(tmp_path, monkeypatch, capsys):
     res = export_diagram(joint_rig().diagram, tmp_path, "jr", max_depth=1)
     text = res.dot.read_text()
-    assert "digraph" in text and "motor_torque" in text and "tendon_drive" in text
+    assert "digraph" in text and "motor_torque" in text and "rig_dynamics" in text
     monkeypatch.setattr("awiwi_drake.export.graphviz_available", lambda: False)
     res = export_diagram(joint_rig().diagram, tmp_path, "jr2")
     assert res.images == [] and res.skipped == ["jr2.svg", "jr2.png"]

@@ -37,6 +37,17 @@ def test_ports_and_values():
     np.testing.assert_allclose(R_M * _output(comp, Q) + _output(off, Q), 0.0, atol=1e-18)
 
 
+def test_kept_float_result_follows_every_change_of_the_wrist_angle():
+    """The float systems keep their last result for an unchanged angle; any change recomputes (6.9)."""
+    off, comp = WristTendonOffsets(), WristCompensation(R_M)
+    for system, law in ((off, lambda q: wrist_tendon_offsets(*q)), (comp, lambda q: -wrist_tendon_offsets(*q) / R_M)):
+        ctx = system.CreateDefaultContext()
+        for q in (Q, Q, Q + [1e-12, 0.0], np.array([-0.3, 0.2]), Q):
+            system.get_input_port(0).FixValue(ctx, q)
+            np.testing.assert_array_equal(system.get_output_port(0).Eval(ctx), law(q))
+    assert not np.array_equal(wrist_tendon_offsets(*Q), wrist_tendon_offsets(*(Q + [1e-12, 0.0])))
+
+
 @pytest.mark.parametrize("make", [lambda: WristTendonOffsets(),
                                   lambda: WristCompensation(np.linspace(0.004, 0.006, 38))],
                          ids=["offsets", "compensation"])

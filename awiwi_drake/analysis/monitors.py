@@ -87,6 +87,9 @@ class Monitor(abc.ABC):
         """Thresholds on the watched port's own values, for plots: ``[(description, value), ...]``."""
         return []
 
+    #: label of the logged signal the limits belong to (None: the watched port's own log)
+    limits_on = None
+
     def events(self, t: np.ndarray, v: np.ndarray) -> list[Event]:
         """Intervals of consecutive samples where the condition holds (vectorised)."""
         c = self.channels(np.asarray(v, float).reshape(len(t), -1))
@@ -118,7 +121,33 @@ def find_events(kind: str, labels: Sequence[str], t: np.ndarray, values: np.ndar
     return out
 
 
-class SlackMonitor(Monitor):
+class _ForceMonitor(Monitor):
+    """A condition on tendon forces: the ``tendon_force`` port, or (``of_state``) the forces computed
+    with numpy from the logged ``state`` after each chunk, so no force is evaluated per step.
+
+    ``of_state(states (T, n)) -> forces (T, m)`` must be the law behind the ``tendon_force`` port
+    (e.g. :attr:`awiwi_drake.rigs.base.Rig.tendon_force_of_state`).
+    """
+
+    def __init__(self, system=None, port_name: str = "tendon_force", of_state=None, **kw):
+        self.of_state = of_state
+        if of_state is not None:
+            port_name = "state"
+        super().__init__(system, port_name, **kw)
+
+    def channels(self, v):
+        return v if self.of_state is None else np.asarray(self.of_state(v), float).reshape(len(v), -1)
+
+    def label(self, i: int) -> str:
+        return self.labels[i] if self.labels else f"tendon_force[{i}]"
+
+    @property
+    def limits_on(self):
+        """The logged signal the limits are drawn on (``tendon_force``, not the watched ``state``)."""
+        return "tendon_force" if self.of_state is not None else None
+
+
+class SlackMonitor(_ForceMonitor):
     """Tendon slack: the force on ``port_name`` at or below ``slack_force`` [N]."""
 
     kind = "tendon_slack"
@@ -135,7 +164,7 @@ class SlackMonitor(Monitor):
         return [("slack (tendon force <= %g N)" % self.slack_force, self.slack_force)]
 
 
-class OverrangeMonitor(Monitor):
+class OverrangeMonitor(_ForceMonitor):
     """Spring beyond its calibrated range: force on ``port_name`` above ``max_force`` [N]."""
 
     kind = "spring_overrange"
@@ -196,20 +225,23 @@ class PairSlackMonitor(Monitor):
 def rig_monitors(rig, *, raise_on_slack: bool = False, raise_on_saturation: bool = False) -> list[Monitor]:
     """Slack, over-range and saturation monitors for a rig (its ports, wherever the rig sits in a diagram).
 
-    The rig's fields say what applies: ``tension_only`` (slack on ``tendon_force``),
+    The rig's fields say what applies: ``tension_only`` (slack on ``tendon_force``, computed from the
+    logged ``state`` with ``tendon_force_of_state`` when the rig has it),
     ``pair_slack`` (slack of the two hidden tendons of an antagonistic torsional
     spring, from the ``state`` output), ``max_force`` (calibrated spring range)
     and ``torque_limit`` (on the rig's ``motor_torque`` input).
     """
     d = rig.diagram
     monitors: list[Monitor] = []
+    # forces from the logged state (numpy, once per chunk) where the rig gives their law
+    of_state = getattr(rig, "tendon_force_of_state", None)
     if rig.tension_only and d.HasOutputPort("tendon_force"):
-        monitors.append(SlackMonitor(d, raise_on_event=raise_on_slack))
+        monitors.append(SlackMonitor(d, of_state=of_state, raise_on_event=raise_on_slack))
     if rig.pair_slack is not None:
         x0, r = rig.pair_slack
         monitors.append(PairSlackMonitor(d, x0, r, raise_on_event=raise_on_slack))
     if rig.max_force is not None and d.HasOutputPort("tendon_force"):
-        monitors.append(OverrangeMonitor(d, rig.max_force))
+        monitors.append(OverrangeMonitor(d, rig.max_force, of_state=of_state))
     limit = rig.torque_limit
     if limit is not None:
         monitors.append(SaturationMonitor(d, limit, raise_on_event=raise_on_saturation))

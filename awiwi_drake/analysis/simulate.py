@@ -222,6 +222,12 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: diagram {diagram.get_name()!r} has no input port {unknown[0]!r}; "
                          f"inputs: {', '.join(in_names) or 'none'}")
     sources: dict[str, OutputPort] = {}
+    fixed_inputs: dict[str, np.ndarray] = {}
+    # a fixed input is a fixed value in the wrapper's context (no source system to notify at every
+    # step) unless a log or a monitor reads it: then a ConstantVectorSource gives it an output port
+    read_ports = {p if isinstance(p, str) else p.get_name()
+                  for p in (log.values() if isinstance(log, Mapping) else (log or ())) if isinstance(p, (str, InputPort))}
+    read_ports |= {m.port_name for m in monitors if isinstance(m, Monitor)}
     for i, name in enumerate(in_names):
         port = diagram.get_input_port(i)
         if port.get_data_type() != PortDataType.kVectorValued:
@@ -234,6 +240,10 @@ def simulate(system, context: Context | None, t_final: float, *,
                 src = b.AddNamedSystem(f"input_{name}", InputSchedule(as_schedule(inputs[name]), port.size(), start))
             except ValueError as exc:
                 raise ValueError(f"simulate: input {name!r}: {exc}") from None
+        elif port.HasValue(user_ctx) and name not in read_ports:
+            b.ExportInput(sub.get_input_port(i), name)
+            fixed_inputs[name] = np.asarray(port.Eval(user_ctx), float)
+            continue
         elif port.HasValue(user_ctx):
             src = b.AddNamedSystem(f"fixed_{name}", ConstantVectorSource(np.asarray(port.Eval(user_ctx), float)))
         else:
@@ -304,6 +314,8 @@ def simulate(system, context: Context | None, t_final: float, *,
         p = diagram.get_input_port(i)
         if p.get_data_type() != PortDataType.kVectorValued and p.HasValue(user_ctx):
             wrapper.GetInputPort(name).FixValue(root, p.EvalAbstract(user_ctx).Clone())
+        elif name in fixed_inputs:
+            wrapper.GetInputPort(name).FixValue(root, fixed_inputs[name])
     root.SetTime(start)
 
     sim = Simulator(wrapper, root)
@@ -405,7 +417,7 @@ def simulate(system, context: Context | None, t_final: float, *,
     limits = {}   # thresholds of monitors watching a logged signal, drawn by SimulationResult.plot
     for m, s in watched:
         for label, ls in logged:
-            if ls is s and m.limits():
+            if (ls is s if m.limits_on is None else label == m.limits_on) and m.limits():
                 limits.setdefault(label, []).extend([list(x) for x in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
                 max_step=h if mode == "error_controlled" else None,

@@ -24,23 +24,23 @@ Model (docs/ARCHITECTURE.md sign convention), per tendon i::
     B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
     tau   = -P(q)^T (f + g)                                   generalised force on the joints
 
-With ``link=(inertia, damping)`` the drive also carries the joints as
+With ``link_inertia``/``link_damping`` the model also carries the joints as
 decoupled links ``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint
-rigs: no MultibodyPlant, no Mux/Demux). State order: ``[q, qdot]`` (with a
-link), then ``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)``
-with guide friction (the guide friction forces, a Dahl state: see
+rigs, no MultibodyPlant); such a model is built into a rig by
+:mod:`awiwi_drake.components.rig_system` (C++ dynamics) or batched by
+:class:`TendonDriveBatch_`. State order: ``[q, qdot]`` (with a link), then
+``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)`` with
+guide friction (the guide friction forces, a Dahl state: see
 :func:`~awiwi_drake.components.friction.guide_friction_rate`).
 
-Ports (each computes only its own quantity; prerequisites declared):
+Ports of :class:`TendonDrive_` (each computes only its own quantity; prerequisites declared):
 
-* inputs ``motor_torque`` (m); without a link ``joint_angle`` (n) and, when
-  hysteresis or guide friction need it, ``joint_velocity`` (``rate_joints``);
-  with a link ``external_torque`` (n);
+* inputs ``motor_torque`` (m), ``joint_angle`` (n) and, when hysteresis or
+  guide friction need it, ``joint_velocity`` (``rate_joints``);
 * outputs ``state`` (all drive states), ``motor_angle``, ``motor_velocity``,
   ``motor_state`` ([theta, omega]), ``tendon_force`` [N], ``tendon_stiffness``
   [N/m] (elastic curve), ``elongation`` [m], ``generalized_force`` (n) [N m],
-  ``applied_torque`` (m) [N m]; with a link also ``joint_angle``,
-  ``joint_velocity``.
+  ``applied_torque`` (m) [N m].
 """
 
 from __future__ import annotations
@@ -142,6 +142,9 @@ class DriveModel:
         for i, s in enumerate(self.springs):
             groups.setdefault(id(s), (s, []))[1].append(i)
         object.__setattr__(self, "_spring_groups", [(s, np.array(ix)) for s, ix in groups.values()])
+        # content key of the kernels (taken now, before any lazily cached attribute of the coupling or
+        # the springs changes the pickle): equal models built apart share one trace
+        object.__setattr__(self, "_content_key", _content_digest(self))
 
     # sizes -------------------------------------------------------------------------
     @property
@@ -282,8 +285,37 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
         raise ValueError(f"compiled tendon drive: spring law(s) {', '.join(bad)} cannot be compiled; use their "
                          "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
+    key = _model_key(model, jit)
+    if key is not None and key in _KERNELS:
+        return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
-        return _build_kernels(model, m, n, nr, jit)
+        kernels = _build_kernels(model, m, n, nr, jit)
+    if key is not None:
+        _KERNELS[key] = kernels
+    return kernels
+
+
+# Kernels of drive models already traced in this process, by the model's content. Tracing the
+# laws symbolically costs ~0.4-0.6 s for the hand; every new diagram (and every scalar-converted
+# or cloned copy, e.g. inside ``analysis.simulate``) would otherwise pay it again at its first
+# evaluation, inside the simulation.
+_KERNELS: dict = {}
+
+
+def _model_key(model: DriveModel, jit: bool):
+    """The content key of ``model`` (taken at its construction), or None (no caching)."""
+    key = getattr(model, "_content_key", None)
+    return None if key is None else (key, bool(jit))
+
+
+def _content_digest(model) -> str | None:
+    """sha1 of the pickled model, or None when it cannot be pickled (e.g. a spring law holding a lambda)."""
+    import hashlib
+    import pickle
+    try:
+        return hashlib.sha1(pickle.dumps(model, protocol=4)).hexdigest()
+    except Exception:
+        return None
 
 
 def _build_kernels(model, m, n, nr, jit):
@@ -316,6 +348,9 @@ def TendonDrive_(T):
                 raise ValueError(f"TendonDrive: model must be a DriveModel, got {type(model).__name__}")
             if T is sym.Expression and not model.supports_symbolic:
                 raise ValueError("TendonDrive: a spring law of this drive cannot be evaluated symbolically")
+            if model.has_link:
+                raise ValueError("TendonDrive: a model with link_inertia is a single-joint rig; build it with "
+                                 "components.rig_system (rig_dynamics_system, LinkRigOutputs_)")
             self.model = model
             m, n = model.num_tendons, model.num_joints
             self._m, self._n = m, n
@@ -327,24 +362,13 @@ def TendonDrive_(T):
             self.DeclareContinuousState(model.num_states)
             self._u = self.DeclareVectorInputPort("motor_torque", m)
             state = self.all_state_ticket()
-            if model.has_link:
-                self._ext = self.DeclareVectorInputPort("external_torque", n)
-                pos = vel = {state}
-                self._k = 2 * n
-            else:
-                self._ext = None
-                self._q = self.DeclareVectorInputPort("joint_angle", n) if n else None
-                self._qd = self.DeclareVectorInputPort("joint_velocity", model.rate_joints) \
-                    if model.needs_joint_velocity else None
-                pos = {state} | ({self._q.ticket()} if self._q is not None else set())
-                vel = pos | ({self._qd.ticket()} if self._qd is not None else set())
-                self._k = 0
-            self._nq = n
-            k = self._k
-            self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(k, k + m),
-                                motor_velocity=slice(k + m, k + 2 * m), motor_state=slice(k, k + 2 * m))
-            if model.has_link:
-                self._slices.update(joint_angle=slice(0, n), joint_velocity=slice(n, 2 * n))
+            self._q = self.DeclareVectorInputPort("joint_angle", n) if n else None
+            self._qd = self.DeclareVectorInputPort("joint_velocity", model.rate_joints) \
+                if model.needs_joint_velocity else None
+            pos = {state} | ({self._q.ticket()} if self._q is not None else set())
+            vel = pos | ({self._qd.ticket()} if self._qd is not None else set())
+            self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(0, m),
+                                motor_velocity=slice(m, 2 * m), motor_state=slice(0, 2 * m))
             for name, sl in self._slices.items():
                 self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
                                              prerequisites_of_calc={state})
@@ -371,8 +395,6 @@ def TendonDrive_(T):
             return context.get_continuous_state_vector().CopyToVector()
 
         def _inputs(self, context, velocity: bool):
-            if self.model.has_link:
-                return ()
             q = self._q.Eval(context) if self._q is not None else (self._empty if self._float else np.zeros(0))
             if not velocity:
                 return (q,)
@@ -409,20 +431,13 @@ def TendonDrive_(T):
                 if fn is None:
                     fn = self._kd = self.kernels()["derivatives"]
                 x = context.get_continuous_state_vector().CopyToVector()
-                if self._ext is not None:
-                    derivatives.SetFromVector(fn(x, self._u.Eval(context), self._ext.Eval(context), self._dbuf))
-                else:
-                    q = self._q.Eval(context) if self._q is not None else self._empty
-                    qd = self._qd.Eval(context) if self._qd is not None else self._empty
-                    derivatives.SetFromVector(fn(x, self._u.Eval(context), q, qd, self._dbuf))
+                q = self._q.Eval(context) if self._q is not None else self._empty
+                qd = self._qd.Eval(context) if self._qd is not None else self._empty
+                derivatives.SetFromVector(fn(x, self._u.Eval(context), q, qd, self._dbuf))
                 return
             x = self._state(context)
-            u = self._u.Eval(context)
-            if self.model.has_link:
-                d = drive_laws(self.model, x, u, tau_ext=self._ext.Eval(context), want=("derivatives",))
-            else:
-                q, qd = self._inputs(context, True)
-                d = drive_laws(self.model, x, u, q, qd, want=("derivatives",))
+            q, qd = self._inputs(context, True)
+            d = drive_laws(self.model, x, self._u.Eval(context), q, qd, want=("derivatives",))
             derivatives.SetFromVector(d["derivatives"])
 
     return Impl

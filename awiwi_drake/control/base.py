@@ -370,13 +370,17 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         elif sig not in ctrl_out:
             raise ValueError(f"closed_loop: controller reference port {r!r} refers to {sig!r}, which neither the rig "
                              f"{rig_name!r} outputs (outputs: {', '.join(rig_out)}) nor the controller reports")
-    for m in measurement_ports(controller):
-        if m not in rig_out:
-            raise ValueError(f"closed_loop: controller measurement port {m!r} is not an output of rig "
-                             f"{rig_name!r} (outputs: {', '.join(rig_out)})")
-        if controller.GetInputPort(m).size() != rig_diagram.GetOutputPort(m).size():
-            raise ValueError(f"closed_loop: port {m!r} has size {controller.GetInputPort(m).size()} on the "
-                             f"controller but {rig_diagram.GetOutputPort(m).size()} on the rig")
+
+    def check_reads_rig(what, system, names):
+        """Each input ``names`` of ``system`` is a rig output of the same size."""
+        for m in names:
+            if m not in rig_out:
+                raise ValueError(f"closed_loop: {what} {m!r} is not an output of rig {rig_name!r} "
+                                 f"(outputs: {', '.join(rig_out)})")
+            if system.GetInputPort(m).size() != rig_diagram.GetOutputPort(m).size():
+                raise ValueError(f"closed_loop: {what} {m!r} has size {system.GetInputPort(m).size()} but "
+                                 f"{rig_diagram.GetOutputPort(m).size()} on rig {rig_name!r}")
+    check_reads_rig("controller measurement port", controller, measurement_ports(controller))
     ideal = isinstance(sensors, str)
     if ideal and sensors != "ideal":
         raise ValueError(f"closed_loop: sensors = {sensors!r}; give 'ideal', a mapping {{rig output: system}} "
@@ -389,10 +393,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         if not isinstance(est_sys, System):
             raise ValueError(f"closed_loop: estimator must be a Drake System or have one in .system, got "
                              f"{type(est_sys).__name__}")
-        for m in _input_names(est_sys):
-            if m not in rig_out:
-                raise ValueError(f"closed_loop: estimator input {m!r} is not an output of rig {rig_name!r} "
-                                 f"(outputs: {', '.join(rig_out)})")
+        check_reads_rig("estimator input", est_sys, _input_names(est_sys))
     if not ideal and getattr(rig, "link_estimator", None) is not None and "state" in measurement_ports(controller):
         raise ValueError(f"closed_loop: controller {controller.get_name()!r} reads the rig's full 'state' "
                          f"(true joint angles), but rig {rig_name!r} has no joint sensors: its joint state "

@@ -44,9 +44,15 @@ _BUILTIN = [
 
 _BUILTIN.append(("joint-pd", _lazy("joint_pd", "joint_pd_controller"), ("finger", "hand"),
                  "motor PD towards the motor angles of the joint reference (exact routing), pretension held"))
-_BUILTIN.append(("cascaded", _lazy("chain", "chain_controller"), ("finger", "hand"),
+_BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", design="cascaded"), ("finger", "hand"),
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
-                 "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15)"))
+                 "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
+                 "joint from its reduced model"))
+_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement"),
+                 ("finger", "hand"), "per joint: double oscillator (12.13) placed on the joint's reduced model "
+                 "[q, qdot, tau, tau_dot] (link through its closed force loop) -> the chain"))
+_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr"), ("finger", "hand"),
+                 "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson weights) -> the chain"))
 
 for _name, _factory, _rigs, _doc in _BUILTIN:
     register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)

@@ -54,7 +54,8 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import check_one_spring_law, joint_inertia
+from awiwi_drake.control.chain import check_one_spring_law
+from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
 
@@ -99,7 +100,7 @@ class FingerBacksteppingLaw(StaticLaw):
         self.K3 = self.K4 = float(wf)
         self.friction_scale = float(p.friction_scale)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
-        parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
+        parts = coupling.parts
         self._blocks = []                 # (tendon slice, plant-joint slice, DoF slice, constant W or None)
         t0 = j0 = d0 = 0
         for c in parts.values():

@@ -87,12 +87,46 @@ def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
 def joint_stiffness(P: np.ndarray, k_t: np.ndarray, f: np.ndarray, hessian: np.ndarray | None = None) -> np.ndarray:
     """Joint stiffness ``K_q = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2`` (5.12), (7.1).
 
-    ``hessian[i, j, k] = d P_ij / d q_k`` (m x n x n), omitted for a constant coupling.
+    ``hessian[i, j, k] = d P_ij / d q_k`` (m x n x n), omitted for a constant coupling.  Leading axes
+    (several fingers at once) broadcast.
     """
-    K = P.T @ (k_t[:, None] * P)
+    K = np.swapaxes(P, -1, -2) @ (k_t[..., :, None] * P)
     if hessian is not None:
-        K = K + np.einsum("i,ijk->jk", f, hessian)
+        K = K + np.einsum("...i,...ijk->...jk", f, hessian)
     return K
+
+
+def _gauss_newton_qp(outer, dk, hessian, E, f, K_norm2, m, levenberg):
+    """``(Q, b)`` of the optimal solver's QP ``min f'^T Q f' / 2 + b^T f'`` at the iterate ``f``.
+
+    ``||E - G (f' - f)||^2 / N + mu ||f' - f||^2`` with ``G[:, i] = vec(dk_i p_i p_i^T + H_i)`` (the
+    linearised ``dK_q/df_i``), ``E = K_des - K_q(f)``, ``N = K_norm2``, ``mu = levenberg tr(G^T G / N) / m``;
+    ``outer[i] = p_i p_i^T``.  Leading axes (several fingers) broadcast; ``m`` per finger.
+    """
+    Gt = dk[..., :, None, None] * outer
+    if hessian is not None:
+        Gt = Gt + hessian
+    Gt = Gt.reshape(Gt.shape[:-2] + (-1,))                       # G^T (m x n^2)
+    N = np.asarray(K_norm2, dtype=float)
+    H = Gt @ np.swapaxes(Gt, -1, -2) / N[..., None, None]
+    mu = levenberg * np.maximum(np.trace(H, axis1=-2, axis2=-1), 1e-300) / m
+    Q = 2.0 * (H + mu[..., None, None] * np.eye(H.shape[-1]))
+    e = E.reshape(E.shape[:-2] + (-1,))
+    Gf = np.einsum("...ij,...i->...j", Gt, f)
+    b = -2.0 * np.einsum("...ij,...j->...i", Gt, e + Gf) / N[..., None] - 2.0 * mu[..., None] * f
+    return Q, b
+
+
+def _closed_form_step(Q, b, f, W, pad=None):
+    """Minimiser of ``f'^T Q f' / 2 + b^T f'`` on ``{f + W z}`` (the torque-exact set through ``f``):
+    ``f + W z`` with ``(W^T Q W) z = -W^T (Q f + b)``, the KKT conditions without the bounds.
+    ``pad``: 1 on zero columns of ``W`` (fingers padded to a common size), 0 elsewhere."""
+    Wt = np.swapaxes(W, -1, -2)
+    A = Wt @ Q @ W
+    if pad is not None:
+        A = A + pad[..., :, None] * np.eye(A.shape[-1])
+    r = -np.einsum("...ij,...j->...i", Wt, np.einsum("...ij,...j->...i", Q, f) + b)
+    return f + np.einsum("...ij,...j->...i", W, np.linalg.solve(A, r[..., None])[..., 0])
 
 
 @dataclass
@@ -119,6 +153,9 @@ class DistributionResult:
         Gradient iterations performed.
     cost : float
         Final cost C(alpha).
+    program_qps : int
+        Optimal solver: QPs solved by the ``MathematicalProgram`` (a force bound would have been
+        violated by the equality-constrained optimum); the other iterations took the closed form.
     """
 
     forces: np.ndarray
@@ -129,6 +166,7 @@ class DistributionResult:
     stiffness_error: float
     iterations: int
     cost: float
+    program_qps: int = 0
 
 
 def _barrier(d):
@@ -248,8 +286,7 @@ class _DistributionBase:
                 raise ValueError(f"solve: q has shape {q.shape}; the coupling has {c.num_joints} joints "
                                  f"({', '.join(c.joint_names)})")
             P = c.P(q)
-            m = c.num_tendons
-            hessian = np.stack([c.tension_hessian(q, e) for e in np.eye(m)], axis=0)
+            hessian = c.tension_hessians(q)
         if P is None:
             if self._offline is None:
                 need = "q" if self.coupling_object is not None else "P"
@@ -277,11 +314,11 @@ class _DistributionBase:
             raise ValueError(f"solve: K_des has shape {K_des.shape}; expected ({n}, {n})")
         if not np.all(np.isfinite(K_des)):
             raise ValueError("solve: K_des has non-finite entries")
-        if not np.allclose(K_des, K_des.T, rtol=1e-9, atol=1e-12):
+        if not np.all(np.abs(K_des - K_des.T) <= 1e-12 + 1e-9 * np.abs(K_des.T)):   # np.allclose, 10x cheaper
             raise ValueError("solve: K_des must be symmetric")
         return tau_des, K_des
 
-    def _result(self, f, status, P, hessian, tau_des, K_des, iterations, cost) -> DistributionResult:
+    def _result(self, f, status, P, hessian, tau_des, K_des, iterations, cost, program_qps=0) -> DistributionResult:
         p = self.params
         K = joint_stiffness(P, self.stiffness_map(f)[0], f, hessian)
         viol = float(max(0.0, np.max(p.f_min - f), np.max(f - p.f_max)))
@@ -290,7 +327,7 @@ class _DistributionBase:
         return DistributionResult(
             forces=f, status=status, torque_error=float(np.linalg.norm(-P.T @ f - tau_des)),
             bound_violation=viol, stiffness=K, stiffness_error=float(np.sqrt(stiffness_cost(K_des, K))),
-            iterations=iterations, cost=float(cost))
+            iterations=iterations, cost=float(cost), program_qps=int(program_qps))
 
     def timed_solve(self, *args, **kw) -> tuple[DistributionResult, float]:
         """:meth:`solve` and its wall time [s] (for benchmarks)."""
@@ -417,11 +454,17 @@ class OptimalForceDistribution(_DistributionBase):
 
     Each iteration linearises ``K_q`` at the current feasible ``f_k`` (``dK_q/df_i = dk_t,i p_i
     p_i^T + H_i``) and solves the convex QP ``min ||E_k - G (f - f_k)||^2 + mu ||f - f_k||^2``
-    over the feasible set (Clarabel, interior point); the step to the QP solution is then
+    over the feasible set; the step to the QP solution is then
     projected onto ``ker P^T`` (the torque stays exact to rounding), cut at the bounds and
     halved until the *true* cost decreases.  Stops when the relative cost decrease falls below
     ``tolerance`` or after ``max_iterations`` QPs.  ``mu = levenberg x trace(G^T G) / m``
     keeps the QP strictly convex when ``G`` has a null space (e.g. the 4 x 2 thumb base).
+
+    The QP: when its equality-constrained optimum (closed form on ``ker P^T``: ``f_k + W z`` with
+    ``(W^T Q W) z = -W^T (Q f_k + b)``, the KKT conditions without the bounds) lies inside the
+    bounds, it is the QP's optimum (the problem is convex) and is taken as is; otherwise the QP is
+    solved with its bounds as a Drake ``MathematicalProgram`` (Clarabel, interior point).  So the
+    program is only solved where a bound is active; ``fast_path=False`` always solves it.
 
     Parameters
     ----------
@@ -434,11 +477,15 @@ class OptimalForceDistribution(_DistributionBase):
         Relative cost decrease that ends the iteration.
     levenberg : float
         Relative Levenberg damping (chosen: 1e-6, negligible against the Gauss-Newton term).
+    fast_path : bool
+        Take the closed-form QP optimum when no bound is active (default); False: always the program.
+    solver_options : pydrake.solvers.SolverOptions, optional
+        Options of the program's solver (Clarabel), e.g. tighter tolerances.
     """
 
     def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
                  coupling=None, *, max_iterations: int = 30, tolerance: float = 1e-10,
-                 levenberg: float = 1e-6):
+                 levenberg: float = 1e-6, fast_path: bool = True, solver_options=None):
         super().__init__(stiffness_map, params, coupling, "OptimalForceDistribution")
         if int(max_iterations) < 1:
             raise ValueError(f"OptimalForceDistribution: max_iterations = {max_iterations} must be >= 1")
@@ -449,6 +496,8 @@ class OptimalForceDistribution(_DistributionBase):
         self.max_iterations = int(max_iterations)
         self.tolerance = float(tolerance)
         self.levenberg = float(levenberg)
+        self.fast_path = bool(fast_path)
+        self.solver_options = solver_options
         self._solver = ClarabelSolver()
         self._programs: dict = {}
 
@@ -464,6 +513,30 @@ class OptimalForceDistribution(_DistributionBase):
             prog.AddBoundingBoxConstraint(np.full(m, p.f_min), np.full(m, p.f_max), f)
             self._programs[key] = (prog, cost.evaluator(), eq.evaluator())
         return self._programs[key]
+
+    def _qp(self, Q, b, f, W, P, tau_des, rank, equality):
+        """Minimiser of ``f'^T Q f' / 2 + b^T f'`` on ``{-P^T f' = tau_des, f_min <= f' <= f_max}``
+        and whether the program solved it (``f``: a feasible point; see the class docstring);
+        None when the program fails.  ``equality``: a one-element list caching the SVD rows.
+        """
+        p = self.params
+        r = W.shape[1]
+        if self.fast_path:
+            if r == 0:
+                return f, False                           # the torque alone fixes the forces
+            f_star = _closed_form_step(Q, b, f, W)
+            if np.all(f_star >= p.f_min) and np.all(f_star <= p.f_max):
+                return f_star, False
+        m = f.size
+        prog, cost_eval, eq_eval = self._program(m, rank)
+        if not equality:
+            # the torque equality on the range rows: U_r^T f = -S_r^-1 V_r^T tau  (P = U S V^T)
+            U, sv, Vt = np.linalg.svd(P, full_matrices=False)
+            equality.append((U[:, :rank].T, -(Vt[:rank] @ tau_des) / sv[:rank]))
+        eq_eval.UpdateCoefficients(*equality[0])
+        cost_eval.UpdateCoefficients(Q, b, 0.0, True)
+        result = self._solver.Solve(prog, f, self.solver_options)
+        return (result.GetSolution() if result.is_success() else None), True
 
     def _stiffness(self, f, P, hessian):
         k, dk = self.stiffness_map(f)
@@ -516,27 +589,20 @@ class OptimalForceDistribution(_DistributionBase):
             f = f_p + W @ alpha
             if not (np.all(f >= p.f_min) and np.all(f <= p.f_max)):   # LP tolerance at a tight bound
                 return self._result(f, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
-        prog, cost_eval, eq_eval = self._program(m, rank)
-        # the torque equality on the range rows: U_r^T f = -S_r^-1 V_r^T tau  (P = U S V^T)
-        U, s, Vt = np.linalg.svd(P, full_matrices=False)
-        eq_eval.UpdateCoefficients(U[:, :rank].T, -(Vt[:rank] @ tau_des) / s[:rank])
+        equality = []
+        program_qps = 0
         K_norm2 = max(float(np.sum(K_des * K_des)), 1e-300)
         K, dk = self._stiffness(f, P, hessian)
         C = float(np.sum((K_des - K) ** 2) / K_norm2)
         outer = np.einsum("ij,ik->ijk", P, P)             # p_i p_i^T
         it = 0
         for it in range(1, iters_max + 1):
-            G = (dk[:, None, None] * outer + (hessian if hessian is not None else 0.0)).reshape(m, n * n).T
-            e = (K_des - K).ravel()
-            H = G.T @ G / K_norm2
-            mu = self.levenberg * max(np.trace(H), 1e-300) / m
-            Q = 2.0 * (H + mu * np.eye(m))
-            b = -2.0 * (G.T @ (e + G @ f)) / K_norm2 - 2.0 * mu * f
-            cost_eval.UpdateCoefficients(Q, b, 0.0, True)
-            result = self._solver.Solve(prog, f, None)
-            if not result.is_success():
+            Q, b = _gauss_newton_qp(outer, dk, hessian, K_des - K, f, K_norm2, m, self.levenberg)
+            f_qp, used_program = self._qp(Q, b, f, W, P, tau_des, rank, equality)
+            program_qps += used_program
+            if f_qp is None:
                 break
-            d = W @ (W.T @ (result.GetSolution() - f))   # null-space step: the torque stays exact
+            d = W @ (W.T @ (f_qp - f))                   # null-space step: the torque stays exact
             if not np.linalg.norm(d) > 1e-12 * max(1.0, np.linalg.norm(f)):
                 break
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -558,15 +624,33 @@ class OptimalForceDistribution(_DistributionBase):
             f, K, dk, C = f_new, K_new, dk_new, C_new
             if decrease <= self.tolerance * max(C, 1e-12):
                 break
-        return self._result(f, "ok", P, hessian, tau_des, K_des, it, C)
+        return self._result(f, "ok", P, hessian, tau_des, K_des, it, C, program_qps)
 
 
 def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnessMap:
     """``k_t(f)`` of the hand's calibrated tendon spring (lever mechanism in series with the tendon,
-    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``)."""
+    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``).
+
+    Tabulated once per spring parameter set (the fit of the lever mechanism takes ~30 ms): equal
+    parameters return the same map object.
+    """
     drive = drive or FingerDriveParams()
+    try:
+        return _STIFFNESS_MAPS[drive.spring]
+    except TypeError:                       # unhashable parameters: no reuse
+        pass
+    except KeyError:
+        pass
     spring = tendon_spring(drive.spring)
-    return TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+    table = TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+    try:
+        _STIFFNESS_MAPS[drive.spring] = table
+    except TypeError:
+        pass
+    return table
+
+
+_STIFFNESS_MAPS: dict = {}
 
 
 def finger_force_distribution(finger: str, *, method: str = "optimal", params: ForceDistributionParams | None = None,
@@ -601,6 +685,134 @@ def finger_force_distribution(finger: str, *, method: str = "optimal", params: F
     if coupling.is_constant and coupling.dof_selection.shape[0] != coupling.dof_selection.shape[1]:
         coupling = reduced_coupling_matrix(coupling)
     return methods[method](hand_stiffness_map(drive), params, coupling, **solver_options)
+
+
+def _mv(A, x):
+    """Stacked matrix-vector products ``A[k] @ x[k]``."""
+    return (A @ x[..., None])[..., 0]
+
+
+class _FingerBatch:
+    """Warm-started (7.6) iterations of several fingers at once (the float path of the loop system).
+
+    The fingers are padded to common sizes (zero rows of ``P`` for missing tendons, zero columns of
+    ``W``) and iterated together with the same formulas as :meth:`OptimalForceDistribution.solve`
+    (:func:`_gauss_newton_qp`, :func:`_closed_form_step`, the same step cut and cost test).  A finger
+    leaves the batch and is solved by its own :meth:`~OptimalForceDistribution.solve` (same inputs,
+    from the start) whenever that would do anything else: a warm start outside the bounds (the LP
+    start), an infeasible request, a bound the closed-form QP optimum would violate (the
+    MathematicalProgram), a step that does not lower the cost at once (step halving), or the
+    thumb's P(q) losing rank.  So the result is always the per-finger solver's.
+    """
+
+    def __init__(self, parts, coupling_objects):
+        self.parts = parts
+        solvers = [pt[0] for pt in parts]
+        s0 = solvers[0]
+        self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
+        self.smap = s0.stiffness_map
+        F = len(parts)
+        dims = []
+        for (s, sd, st, _, _), c in zip(parts, coupling_objects):
+            m, n = st.stop - st.start, sd.stop - sd.start
+            dims.append((m, n))
+        self.M, self.N = max(d[0] for d in dims), max(d[1] for d in dims)
+        self.R = max(m - n for m, n in dims)
+        M, N, R = self.M, self.N, self.R
+        self.dims, self.couplings = dims, coupling_objects
+        self.P, self.pinv = np.zeros((F, M, N)), np.zeros((F, M, N))
+        self.W, self.pad = np.zeros((F, M, R)), np.ones((F, R))
+        self.H = np.zeros((F, M, N, N))
+        self.real = np.zeros((F, M), dtype=bool)
+        self.m = np.array([d[0] for d in dims], dtype=float)
+        self.dynamic = []
+        for k, ((s, *_), (m, n)) in enumerate(zip(parts, dims)):
+            self.real[k, :m] = True
+            if s._offline is None:
+                self.dynamic.append(k)
+            else:
+                self._fill(k, *s._offline[:3])
+        self.outer = np.einsum("fij,fik->fijk", self.P, self.P)
+
+    @staticmethod
+    def compatible(solvers) -> bool:
+        """All optimal solvers on the fast path with one shared setting (bounds, map, iteration rules)."""
+        s0 = solvers[0]
+        if not all(isinstance(s, OptimalForceDistribution) and s.fast_path for s in solvers):
+            return False
+        same = lambda a, b: all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("forces", "k", "dk"))
+        return all(s.params == s0.params and s.levenberg == s0.levenberg and s.tolerance == s0.tolerance
+                   and isinstance(s.stiffness_map, TendonStiffnessMap) and same(s.stiffness_map, s0.stiffness_map)
+                   for s in solvers)
+
+    def _fill(self, k, P, pinv_PT, W):
+        m, n = P.shape
+        r = W.shape[1]
+        self.P[k], self.pinv[k], self.W[k] = 0.0, 0.0, 0.0
+        self.P[k, :m, :n], self.pinv[k, :m, :n], self.W[k, :m, :r] = P, pinv_PT, W
+        self.pad[k] = 1.0
+        self.pad[k, :r] = 0.0
+
+    def update(self, tau, K_blocks, f_prev, q, iterations):
+        """New forces (F x M padded) and the fingers left to their own solver (bool F)."""
+        F, M, N = len(self.parts), self.M, self.N
+        p = self.params
+        fallback = np.zeros(F, dtype=bool)
+        for k in self.dynamic:
+            c = self.couplings[k]
+            sq = self.parts[k][4]
+            P = np.asarray(c.P(q[sq]), dtype=float)
+            pinv_PT, W, rank = coupling_nullspace(P)
+            if rank != P.shape[1] or not np.all(np.isfinite(P)):
+                fallback[k] = True
+                continue
+            self._fill(k, P, pinv_PT, W)
+            self.H[k, :P.shape[0], :P.shape[1], :P.shape[1]] = c.tension_hessians(q[sq])
+            self.outer[k] = np.einsum("ij,ik->ijk", self.P[k], self.P[k])
+        tauP, Kd, fp0 = np.zeros((F, N)), np.zeros((F, N, N)), np.zeros((F, M))
+        for k, (m, n) in enumerate(self.dims):
+            tauP[k, :n] = tau[k]
+            Kd[k, :n, :n] = K_blocks[k]
+            fp0[k, :m] = f_prev[k]
+        W, Wt = self.W, np.swapaxes(self.W, 1, 2)
+        f_p = -_mv(self.pinv, tauP)
+        resid = np.linalg.norm(_mv(np.swapaxes(self.P, 1, 2), f_p) + tauP, axis=1)
+        fallback |= resid > 1e-9 * np.maximum(1.0, np.linalg.norm(tauP, axis=1))
+        f = f_p + _mv(W, _mv(Wt, fp0))
+        inside = (f >= p.f_min) & (f <= p.f_max) | ~self.real
+        fallback |= ~np.all(inside, axis=1)
+        Kn = np.maximum(np.sum(Kd * Kd, axis=(1, 2)), 1e-300)
+        k_t, dk = self.smap(f)
+        K = joint_stiffness(self.P, k_t, f, self.H)
+        C = np.sum((Kd - K) ** 2, axis=(1, 2)) / Kn
+        active = ~fallback
+        for _ in range(iterations):
+            if not active.any():
+                break
+            Q, b = _gauss_newton_qp(self.outer, dk, self.H, Kd - K, f, Kn, self.m, self.levenberg)
+            f_star = _closed_form_step(Q, b, f, W, self.pad)
+            out = np.any(((f_star < p.f_min) | (f_star > p.f_max)) & self.real, axis=1)
+            fallback |= active & out
+            active &= ~out
+            d = _mv(W, _mv(Wt, f_star - f))
+            moved = np.linalg.norm(d, axis=1) > 1e-12 * np.maximum(1.0, np.linalg.norm(f, axis=1))
+            active &= moved
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t_hi = np.where(d > 0, (p.f_max - f) / d, np.inf)
+                t_lo = np.where(d < 0, (p.f_min - f) / d, np.inf)
+            t = np.minimum(1.0, np.minimum(t_hi.min(axis=1), t_lo.min(axis=1)))
+            f_new = f + t[:, None] * d
+            k_new, dk_new = self.smap(f_new)
+            K_new = joint_stiffness(self.P, k_new, f_new, self.H)
+            C_new = np.sum((Kd - K_new) ** 2, axis=(1, 2)) / Kn
+            halve = active & ~(C_new < C) & (t > 1e-8)      # solve() would halve the step: its own solver
+            fallback |= halve
+            active &= ~halve & (t > 1e-8)
+            a = active
+            decrease = C - C_new
+            f[a], K[a], dk[a], C[a] = f_new[a], K_new[a], dk_new[a], C_new[a]
+            active &= ~(decrease <= self.tolerance * np.maximum(C, 1e-12))
+        return f, fallback
 
 
 # ----------------------------------------------------------------------------
@@ -714,6 +926,9 @@ def TendonForceDistribution_(T):
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             self.DeclareStateOutputPort("tendon_force_reference", self._state)
             self.DeclareStateOutputPort("distribution_status", self._status)
+            self._batch = None
+            if T is float and _FingerBatch.compatible(self.solvers):
+                self._batch = _FingerBatch(self._parts, [finger_coupling(f) for f in fingers])
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.fingers, other.method, other.period, other.iterations_per_period,
@@ -743,7 +958,17 @@ def TendonForceDistribution_(T):
             f_new = np.empty(self.num_tendons, dtype=object if T is not float else float)
             status = np.zeros(len(self.fingers))
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
-            for k, (s, sd, st, sk, sq) in enumerate(self._parts):
+            todo = range(len(self._parts))
+            if self._batch is not None:       # all fingers at once; the rest by their own solver
+                blocks = [self._K_block(Kv[sk], sd.stop - sd.start) for _, sd, _, sk, _ in self._parts]
+                f_b, fallback = self._batch.update([tau[sd] for _, sd, *_ in self._parts], blocks,
+                                                   [f_prev_v[st] for _, _, st, _, _ in self._parts], q,
+                                                   self.iterations_per_period)
+                for k, (_, _, st, _, _) in enumerate(self._parts):
+                    f_new[st] = f_b[k, :st.stop - st.start]
+                todo = np.flatnonzero(fallback)
+            for k in todo:
+                s, sd, st, sk, sq = self._parts[k]
                 n_f = sd.stop - sd.start
                 K_des = self._K_block(Kv[sk], n_f)
                 kw = {} if s._offline is not None else dict(q=q[sq])

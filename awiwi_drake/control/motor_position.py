@@ -33,13 +33,15 @@ from awiwi_drake.rigs.demo import motor_references
 __all__ = ["motor_position_controller", "demo_references", "joint_rig_position_loop"]
 
 
-def motor_position_controller(rig: Any, gains: MotorPositionGains | None = None):
-    """The motor-position PD of the module docstring for a rig with ``m`` motors."""
+def motor_position_controller(rig: Any, gains: MotorPositionGains | None = None, *,
+                              pulley_radius: float | None = None):
+    """The motor-position PD of the module docstring for a rig with ``m`` motors (motor pulley radius
+    ``pulley_radius`` [m], default the rig's ``params.motor.pulley_radius``)."""
     g = gains or MotorPositionGains()
     if not isinstance(g, MotorPositionGains):
         raise ValueError(f"motor_position_controller: gains must be MotorPositionGains, got {type(g).__name__}")
     m = rig.diagram.GetInputPort("motor_torque").size()
-    r_m = rig.params.motor.pulley_radius
+    r_m = rig.params.motor.pulley_radius if pulley_radius is None else float(pulley_radius)
     names = ("motor_angle_reference", "tendon_force_reference", "motor_angle", "motor_velocity")
     I = np.eye(m)
     D = np.hstack([g.kp * I, r_m * I, -g.kp * I, -g.kd * I])

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff, ExtractGradient
@@ -49,7 +50,8 @@ from awiwi_drake.control.backstepping import JointModel, impedance_backstepping,
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
 __all__ = ["GainFit", "rate_limited_case", "finger_optimal_gains", "torque_coordinates", "torque_state_map", "backstepping_feedback",
-           "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains", "optimize_gains", "OMEGA_NAMES"]
+           "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains",
+           "backstepping_feedback_batch", "gain_distances", "evaluate_samples", "optimize_gains", "OMEGA_NAMES"]
 
 OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
 
@@ -124,12 +126,29 @@ def _rig_point(rig, op=None):
 def backstepping_feedback(model: JointModel, gains: ImpedanceBacksteppingGains, state0=None) -> np.ndarray:
     """``K_bs = -du/dx`` (N x n, rig coordinates) of the impedance law at ``state0`` (default: rest at 0),
     by AutoDiffXd; the reference is the link angle of ``state0``."""
+    omega = [[getattr(gains, name) for name in OMEGA_NAMES]]
+    return backstepping_feedback_batch(model, omega, state0)[0]
+
+
+def backstepping_feedback_batch(model: JointModel, omegas, state0=None) -> np.ndarray:
+    """``K_bs(Omega_s)`` for many samples at once: ``(S, N, n)`` for ``omegas`` of shape ``(S, 4)``.
+
+    One AutoDiffXd evaluation of the same law (:func:`~awiwi_drake.control.backstepping.impedance_backstepping`)
+    with each gain a column of ``S`` values: numpy broadcasts the law over the samples (the law is
+    element-wise in the gains), so the Python overhead of the law is paid once per batch.
+    """
+    om = np.asarray(omegas, dtype=float)
+    if om.ndim != 2 or om.shape[1] != len(OMEGA_NAMES) or not np.all(om > 0):
+        raise ValueError(f"backstepping_feedback_batch: omegas must be (samples, 4) positive "
+                         f"({', '.join(OMEGA_NAMES)}), got shape {om.shape}")
     n = model.state_size
     x0 = np.zeros(n) if state0 is None else np.asarray(state0, dtype=float)
     x = InitializeAutoDiff(x0).ravel()
     ref = [AutoDiffXd(float(x0[0]))] + [AutoDiffXd(0.0)] * 4
+    gains = SimpleNamespace(**{name: om[:, j:j + 1] for j, name in enumerate(OMEGA_NAMES)})
     u, _, _ = impedance_backstepping(x, ref, model, gains)
-    return -ExtractGradient(np.asarray(u, dtype=object))
+    u = np.broadcast_to(np.asarray(u, dtype=object), (om.shape[0], model.num_motors))
+    return -ExtractGradient(np.ascontiguousarray(u).ravel()).reshape(om.shape[0], model.num_motors, n)
 
 
 def system_feedback(controller, state0) -> np.ndarray:
@@ -162,9 +181,14 @@ def optimal_feedback(rig, case: OptimalGainsCase | None = None, op=None) -> tupl
 
 def gain_distance(feedback_tau: np.ndarray, target_tau: np.ndarray) -> float:
     """``||(K_bs - K_opt) / s||_F``, ``s_j = max_i |K_opt,ij|`` (column-wise relative; one motor: ``|K_opt|``)."""
+    return float(gain_distances(np.atleast_2d(feedback_tau)[None], target_tau)[0])
+
+
+def gain_distances(feedback_tau: np.ndarray, target_tau: np.ndarray) -> np.ndarray:
+    """:func:`gain_distance` of each of ``S`` feedbacks ``(S, N, n)`` to one target."""
     target = np.atleast_2d(target_tau)
     scale = np.max(np.abs(target), axis=0)
-    return float(np.linalg.norm((np.atleast_2d(feedback_tau) - target) / scale))
+    return np.sqrt(np.sum(((np.asarray(feedback_tau, float) - target) / scale) ** 2, axis=(1, 2)))
 
 
 def _gains(omega) -> ImpedanceBacksteppingGains:
@@ -176,10 +200,13 @@ def _feedback_tau(model, T_inv, omega, state0=None) -> np.ndarray:
     return K.ravel() if model.num_motors == 1 else K
 
 
-def evaluate_sample(*, model: JointModel, T_inv: np.ndarray, target: np.ndarray, stiffness: float,
-                    damping: float, k3: float, k4: float, state0=None) -> float:
-    """Distance of one Omega sample (module-level: runs in the sweep runner's workers)."""
-    return gain_distance(_feedback_tau(model, T_inv, (stiffness, damping, k3, k4), state0), target)
+def evaluate_samples(points, *, model: JointModel, T_inv: np.ndarray, target: np.ndarray, state0=None) -> list:
+    """Distances of a batch of Omega samples (``points``: dicts with the :data:`OMEGA_NAMES`), one
+    :func:`backstepping_feedback_batch` evaluation per batch (module-level: runs in the sweep
+    runner's workers, ``run_sweep(..., batch=...)``)."""
+    omegas = np.array([[p[k] for k in OMEGA_NAMES] for p in points], dtype=float)
+    K = backstepping_feedback_batch(model, omegas, state0) @ T_inv
+    return [float(d) for d in gain_distances(K, target)]
 
 
 def _setup(rig, case, op=None):
@@ -207,17 +234,18 @@ def rate_limited_case(case: OptimalGainsCase, link_inertia: float, rate_hz: floa
 
 
 def monte_carlo_gains(rig, case: OptimalGainsCase | None = None, *, samples: int | None = None,
-                      seed: int | None = None, executor=None, op=None) -> GainFit:
+                      seed: int | None = None, executor=None, op=None, batch: int = 500) -> GainFit:
     """Algorithm 3: the best of ``samples`` log-uniform draws of Omega in the case's box.
 
-    ``executor`` goes to :func:`awiwi_drake.analysis.sweep.run_sweep` (default: a process pool).
+    ``executor`` goes to :func:`awiwi_drake.analysis.sweep.run_sweep` (default: a process pool);
+    the samples are evaluated ``batch`` at a time (:func:`evaluate_samples`).
     """
     c, model, T_inv, target, x0 = _setup(rig, case, op)
     n = int(samples if samples is not None else c.samples)
     pts = monte_carlo_points(dict(zip(OMEGA_NAMES, c.gain_low)), dict(zip(OMEGA_NAMES, c.gain_high)), n,
                              seed=c.seed if seed is None else seed, log=True)
     t0 = time.perf_counter()
-    res = run_sweep(evaluate_sample, pts, executor=executor,
+    res = run_sweep(evaluate_samples, pts, executor=executor, batch=batch,
                     fixed=dict(model=model, T_inv=T_inv, target=target, state0=x0))
     d = np.array(res.values, dtype=float)
     i = int(np.argmin(d))

@@ -24,7 +24,7 @@ from awiwi_drake.components.motor import motor_ripple_torque
 from awiwi_drake.components.spring import PolynomialSpring, hysteresis_rate
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
-__all__ = ["spring_force", "spring_with_hysteresis", "hysteresis_force_rate", "motor_friction", "ripple",
+__all__ = ["spring_force", "hysteresis_force", "hysteresis_force_rate", "motor_friction", "ripple",
            "guide_friction", "joint_friction", "GUIDE_VELOCITY", "HYSTERESIS_VELOCITY"]
 
 GUIDE_VELOCITY = CatalogBounds().guide_velocity
@@ -41,11 +41,9 @@ def spring_force(x, coefficients):
     return _spring(tuple(coefficients)).force(x)
 
 
-def spring_with_hysteresis(x, z, coefficients, scale_rel, gate_force=1.0):
-    """Spring-mechanism force: elastic force with a stiffness-scale correction plus the
-    hysteresis force ``z`` [N], gated by tension (no friction force when slack)."""
-    f0 = spring_force(x, coefficients)
-    return (1.0 + scale_rel) * f0 + z * np.tanh(f0 / gate_force), f0
+def hysteresis_force(z, f_elastic, gate_force=1.0):
+    """The hysteresis force ``z`` [N] on top of the elastic force, gated by tension (none when slack)."""
+    return z * np.tanh(f_elastic / gate_force)
 
 
 def hysteresis_force_rate(z, x, xd, f_elastic, width, length):

@@ -15,26 +15,43 @@ variable-major (index ``s * copies + j``).  Input ``motor_torque``
 ``[theta_1..n, f_1..n, (q)]`` per copy, ``f`` the spring-mechanism force as the
 force sensor reports it.
 
-Nominal dynamics (issue 6 data contract)::
-
-    x_i = r theta_i + h_i(q),  h = [-r_q q, +r_q q]  (joint; tendon: h = 0)
-    B theta_i'' = u_i - d theta_i' - r (f_i + F_guide,i) + tau_fric + tau_ripple
-    m q'' = r_q (f_1 - f_2) - d_q q' + tau_joint_friction
+Generated from the package's components, not a copy of the rig dynamics
+(issue 12): :func:`replay_laws` is the dataset's nominal rig as the package
+builds it (:func:`drive_model`, the :class:`~awiwi_drake.components.fused_drive.DriveModel`
+of ``tendon_rig``/``joint_rig`` with the dataset's polynomial spring, evaluated
+by :func:`~awiwi_drake.components.fused_drive.drive_laws`), with every catalog
+effect a law of :mod:`.laws` switched in through the drive's motor-torque and
+link-torque inputs.  The float path runs a numba kernel that
+:mod:`awiwi_drake.components.codegen` generates from :func:`replay_laws`
+(symbolic -> compiled, each effect behind an ``if_then_else`` switch so copies
+where it is off skip it); AutoDiffXd/Expression evaluate :func:`replay_laws`.
+Tests: kernel = laws for every switch to 1e-12; with the rig's effects the model
+equals the ``joint_rig`` diagram at random states to 1e-9.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.framework import BasicVector_, LeafSystem_
+import pydrake.symbolic as sym
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import is_float
+from awiwi_drake.components.codegen import compile_kernels
+from awiwi_drake.components.fused_drive import DriveModel, drive_laws
+from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
+from awiwi_drake.components.spring import PolynomialSpring
+from awiwi_drake.parameters.components import MotorParams
 
 from . import laws
 from .catalog import PARAM_INDEX, PARAM_NAMES, default_vector
 
-__all__ = ["NominalParameters", "DiscrepancyModel_", "DiscrepancyModel"]
-
+__all__ = ["NominalParameters", "DiscrepancyModel_", "DiscrepancyModel", "drive_model", "replay_laws",
+           "replay_kernels"]
 
 
 @dataclass(frozen=True)
@@ -94,16 +111,35 @@ def _p(P, name):
     return P[PARAM_INDEX[name]]
 
 
-def _activity(P):
-    """Per catalog parameter: nonzero in any copy (None off the float path: all active)."""
-    if P.dtype == object:
-        return None
-    return np.any(P != 0.0, axis=1)
+
+@functools.lru_cache(maxsize=32)
+def drive_model(nom: NominalParameters) -> DriveModel:
+    """The package's tendon drive of the dataset's nominal rig (:class:`~awiwi_drake.components.fused_drive.DriveModel`,
+    the law function of ``tendon_rig``/``joint_rig``): motor (3.5) with the dataset's ``B``, ``d`` and no
+    friction/ripple/saturation, :class:`~awiwi_drake.components.spring.PolynomialSpring` per tendon, the rig's
+    coupling and (joint) the link ``I q'' = tau - d_q q' + tau_ext``. Catalog effects enter through its inputs."""
+    motor = MotorParams(inertia=nom.motor_inertia, damping=nom.motor_damping, friction=False, ripple=False,
+                        saturation=False, pulley_radius=nom.motor_pulley_radius)
+    spring = PolynomialSpring(nom.spring_poly)
+    if nom.has_link:
+        coupling = antagonistic_coupling(nom.link_pulley_radius)
+        link = dict(link_inertia=(nom.link_inertia,), link_damping=(nom.link_damping,))
+    else:
+        coupling, link = ConstantCoupling(np.zeros((1, 0))), {}
+    n = nom.num_motors
+    return DriveModel(motor, (spring,) * n, coupling, np.zeros(n), nom.motor_pulley_radius, **link)
 
 
-def _active(act, *names) -> bool:
-    """Whether any of ``names`` is switched on in some copy."""
-    return True if act is None else bool(any(act[PARAM_INDEX[n]] for n in names))
+def _switch(gates, term, like):
+    """A catalog effect as a switch: ``term()`` when any of its ``gates`` (amplitude parameters) is
+    nonzero, else zero. Symbolic: ``if_then_else``, so the generated kernel evaluates an effect's
+    transcendental functions only in copies where it is on (the replay's hot path)."""
+    if any(isinstance(g, sym.Expression) for g in gates):
+        on = sum(g * g for g in gates) > 0.0
+        value = term()
+        return sym.if_then_else(on, value if isinstance(value, sym.Expression) else sym.Expression(float(value)),
+                                sym.Expression(0.0))
+    return term() if any(g != 0.0 for g in gates) else 0.0 * like
 
 
 def split_state(nom: NominalParameters, X):
@@ -117,17 +153,98 @@ def split_state(nom: NominalParameters, X):
 
 
 def rig_kinematics(nom: NominalParameters, theta, omega, q=None, qd=None):
-    """Spring elongations and their rates ``(x, xd)`` per motor (lists of arrays)."""
+    """Spring elongations and their rates ``(x, xd)`` per motor (lists), from the drive's routing
+    (``x = r theta + h(q) - h(0)``, ``x' = r omega + P(q) q'``, :mod:`awiwi_drake.components.routing`);
+    ``theta``/``omega`` rows may be arrays over copies or samples."""
     r = nom.motor_pulley_radius
-    if not nom.has_link:
-        return [r * theta[0]], [r * omega[0]]
-    rq = nom.link_pulley_radius
-    return ([r * theta[0] - rq * q, r * theta[1] + rq * q],
-            [r * omega[0] - rq * qd, r * omega[1] + rq * qd])
+    x = [r * theta[i] for i in range(nom.num_motors)]
+    xd = [r * omega[i] for i in range(nom.num_motors)]
+    if nom.has_link:
+        P = drive_model(nom).coupling.P()
+        x = [x[i] + P[i, 0] * q for i in range(nom.num_motors)]
+        xd = [xd[i] + P[i, 0] * qd for i in range(nom.num_motors)]
+    return x, xd
+
+
+def _to_drive(nom, theta, omega, q, qd):
+    """Drive state order ``[(q, q'), theta, omega]`` (no drive hysteresis: the catalog's is its own state)."""
+    parts = ([q, qd] if nom.has_link else []) + list(theta) + list(omega)
+    return np.array(parts, dtype=object if not all(is_float(v) for v in parts) else float)
+
+
+def replay_laws(nom: NominalParameters, x, u, p):
+    """Time derivatives and measurements of one copy, generic in the scalar type.
+
+    The nominal rig is :func:`~awiwi_drake.components.fused_drive.drive_laws` of :func:`drive_model`;
+    each catalog effect is a law of :mod:`.laws` entering through the drive's inputs, as a block in
+    front of the drive would: torques on the motor input (friction, ripple, the guide friction's
+    and the spring correction's reaction ``-r (g + df)``, added damping), torques on the link input
+    (``-P^T df``, link Coulomb friction, added damping); the inertia corrections scale the drive's
+    accelerations. ``df = s f_el + z tanh(f_el)`` is the spring-scale and hysteresis force on top
+    of the drive's elastic force ``f_el``.
+
+    Parameters
+    ----------
+    x : (num_states,) ``[theta, omega, (q, q'), z]``
+    u : (num_motors,) applied motor torques
+    p : (num_params,) catalog parameters
+
+    Returns
+    -------
+    (xdot (num_states,), y (num_measurements,))
+    """
+    n = nom.num_motors
+    model = drive_model(nom)
+    r = nom.motor_pulley_radius
+    theta, omega, q, qd, z = split_state(nom, x)
+    s = _to_drive(nom, theta, omega, q, qd)
+    q_in = None if nom.has_link else np.zeros(0)   # the tendon rig's drive has no joint
+    f_el = drive_laws(model, s, q=q_in, want=("tendon_force",))["tendon_force"]
+    xs, xds = rig_kinematics(nom, theta, omega, q, qd)
+    width = _p(p, "hysteresis_width")
+    df, force, zdot, v = [], [], [], []
+    for i in range(n):
+        f = (1.0 + _p(p, "spring_scale_rel")) * f_el[i] + _switch(
+            (width,), lambda: laws.hysteresis_force(z[i], f_el[i]), f_el[i])
+        force.append(f)
+        df.append(f - f_el[i])
+        zdot.append(_switch((width,), lambda: laws.hysteresis_force_rate(
+            z[i], xs[i], xds[i], f_el[i], width, _p(p, "hysteresis_length")), f_el[i]))
+        m = i + 1
+        tau = -_p(p, "motor_damping_add") * omega[i]
+        tau = tau + _switch((_p(p, "motor_coulomb"), _p(p, "motor_viscous")), lambda: laws.motor_friction(
+            omega[i], _p(p, "motor_coulomb"), _p(p, "motor_slope"), _p(p, "motor_viscous")), omega[i])
+        for k in (1, 2):
+            a, b = _p(p, f"ripple_sin{k}_m{m}"), _p(p, f"ripple_cos{k}_m{m}")
+            tau = tau + _switch((a, b), lambda: laws.ripple(theta[i], [(_p(p, f"ripple_order_{k}"), a, b)]),
+                                theta[i])
+        g = _switch((_p(p, "guide_c0"), _p(p, "guide_mu")), lambda: laws.guide_friction(
+            r * omega[i], f, _p(p, "guide_c0"), _p(p, "guide_mu"), laws.GUIDE_VELOCITY), omega[i])
+        v.append(u[i] + tau - r * (g + df[i]))
+    ext = None
+    if nom.has_link:
+        P = model.coupling.P()
+        ext = [-(P[0, 0] * df[0] + P[1, 0] * df[1]) - _p(p, "link_damping_add") * qd
+               + _switch((_p(p, "joint_coulomb"),), lambda: laws.joint_friction(
+                   qd, _p(p, "joint_coulomb"), _p(p, "joint_velocity")), qd)]
+    like = np.array(v, dtype=object) if not all(is_float(w) for w in v) else np.array(v, float)
+    xdot = drive_laws(model, s, like, q=q_in, tau_ext=None if ext is None else np.array(ext, dtype=like.dtype),
+                      want=("derivatives",))["derivatives"]
+    k = 2 if nom.has_link else 0
+    acc = [xdot[k + n + i] / (1.0 + _p(p, "motor_inertia_rel")) for i in range(n)]
+    out = [xdot[k + i] for i in range(n)] + acc
+    if nom.has_link:
+        out += [xdot[0], xdot[1] / (1.0 + _p(p, "link_inertia_rel"))]
+    out += zdot
+    y = [theta[i] + _p(p, f"motor_bias_{i + 1}") for i in range(n)]  # encoder bias
+    y += [(1.0 + _p(p, "force_gain")) * force[i] + _p(p, f"force_offset_{i + 1}") for i in range(n)]
+    if nom.has_link:
+        y.append((1.0 + _p(p, "link_scale_rel")) * q + _p(p, "link_bias"))  # link encoder calibration
+    return np.array(out, dtype=like.dtype), np.array(y, dtype=like.dtype)
 
 
 def model_derivatives(nom: NominalParameters, X, U, P):
-    """Time derivatives of all copies.
+    """Time derivatives of all copies by the law functions (:func:`replay_laws` per copy).
 
     Parameters
     ----------
@@ -139,70 +256,31 @@ def model_derivatives(nom: NominalParameters, X, U, P):
     -------
     array (num_states, copies), generic in the scalar type.
     """
-    n = nom.num_motors
-    theta, omega, q, qd, z = split_state(nom, X)
-    x, xd = rig_kinematics(nom, theta, omega, q, qd)
-    B = nom.motor_inertia * (1.0 + _p(P, "motor_inertia_rel"))
-    d = nom.motor_damping + _p(P, "motor_damping_add")
-    r = nom.motor_pulley_radius
-    forces, elastic = [], []
-    for i in range(n):
-        f, f0 = laws.spring_with_hysteresis(x[i], z[i], nom.spring_poly, _p(P, "spring_scale_rel"))
-        forces.append(f)
-        elastic.append(f0)
-    # switches: a catalog effect whose parameters are zero in every copy is skipped
-    # (float path only; AutoDiffXd/Expression always evaluate every term)
-    act = _activity(P)
-    fric_on = _active(act, "motor_coulomb", "motor_viscous")
-    guide_on = _active(act, "guide_c0", "guide_mu")
-    hyst_on = _active(act, "hysteresis_width")
-    acc, zdot = [], []
-    for i in range(n):
-        m = i + 1
-        tau = U[i] - d * omega[i]
-        if fric_on:
-            tau = tau + laws.motor_friction(omega[i], _p(P, "motor_coulomb"), _p(P, "motor_slope"),
-                                            _p(P, "motor_viscous"))
-        harmonics = [(_p(P, f"ripple_order_{k}"), _p(P, f"ripple_sin{k}_m{m}"), _p(P, f"ripple_cos{k}_m{m}"))
-                     for k in (1, 2) if _active(act, f"ripple_sin{k}_m{m}", f"ripple_cos{k}_m{m}")]
-        if harmonics:
-            tau = tau + laws.ripple(theta[i], harmonics)
-        tension = forces[i]
-        if guide_on:
-            tension = tension + laws.guide_friction(r * omega[i], forces[i], _p(P, "guide_c0"),
-                                                    _p(P, "guide_mu"), laws.GUIDE_VELOCITY)
-        acc.append((tau - r * tension) / B)
-        if hyst_on:
-            zdot.append(laws.hysteresis_force_rate(z[i], x[i], xd[i], elastic[i], _p(P, "hysteresis_width"),
-                                                   _p(P, "hysteresis_length")))
-        else:
-            zdot.append(0.0 * z[i])
-    out = [omega[i] for i in range(n)] + acc
-    if nom.has_link:
-        mq = nom.link_inertia * (1.0 + _p(P, "link_inertia_rel"))
-        dq = nom.link_damping + _p(P, "link_damping_add")
-        rq = nom.link_pulley_radius
-        tq = rq * (forces[0] - forces[1]) - dq * qd
-        if _active(act, "joint_coulomb"):
-            tq = tq + laws.joint_friction(qd, _p(P, "joint_coulomb"), _p(P, "joint_velocity"))
-        qdd = tq / mq
-        out += [qd, qdd]
-    out += zdot
-    return np.array(out)
+    return np.stack([replay_laws(nom, X[:, j], U[:, j], P[:, j])[0] for j in range(X.shape[1])], axis=1)
 
 
 def model_measurements(nom: NominalParameters, X, P):
     """Measured signals ``[theta..., f_meas..., (q)]`` of all copies (num_measurements, copies)."""
-    n = nom.num_motors
-    theta, omega, q, qd, z = split_state(nom, X)
-    x, _ = rig_kinematics(nom, theta, omega, q, qd)
-    out = [theta[i] + _p(P, f"motor_bias_{i + 1}") for i in range(n)]  # encoder bias
-    for i in range(n):
-        f, _ = laws.spring_with_hysteresis(x[i], z[i], nom.spring_poly, _p(P, "spring_scale_rel"))
-        out.append((1.0 + _p(P, "force_gain")) * f + _p(P, f"force_offset_{i + 1}"))
-    if nom.has_link:
-        out.append((1.0 + _p(P, "link_scale_rel")) * q + _p(P, "link_bias"))  # link encoder calibration
-    return np.array(out)
+    U = np.zeros((nom.num_motors, X.shape[1]), dtype=X.dtype)
+    return np.stack([replay_laws(nom, X[:, j], U[:, j], P[:, j])[1] for j in range(X.shape[1])], axis=1)
+
+
+@functools.lru_cache(maxsize=8)
+def replay_kernels(nom: NominalParameters, jit: bool = True) -> dict:
+    """Compiled float kernels of :func:`replay_laws` (:func:`~awiwi_drake.components.codegen.compile_kernels`):
+    ``derivatives(x, u, p, out)``, ``measurements(x, p, out)`` and their ``_batch`` twins
+    (2-D arguments, one row per copy). The laws are evaluated once on symbolic variables, so the
+    kernel is the same physics, not a copy; a test checks kernel = laws at random states."""
+    xv = [sym.Variable(f"x{i}") for i in range(nom.num_states)]
+    uv = [sym.Variable(f"u{i}") for i in range(nom.num_motors)]
+    pv = [sym.Variable(f"p{i}") for i in range(len(PARAM_NAMES))]
+    E = lambda vs: np.array([sym.Expression(v) for v in vs], dtype=object)  # noqa: E731
+    with np.errstate(invalid="ignore"):
+        xdot, _ = replay_laws(nom, E(xv), E(uv), E(pv))
+        _, y = replay_laws(nom, E(xv), E(uv) * 0.0, E(pv))
+    rig = "joint" if nom.has_link else "tendon"
+    return compile_kernels({"derivatives": ([xv, uv, pv], list(xdot)), "measurements": ([xv, pv], list(y))},
+                           tag=f"replay_{rig}", jit=jit)
 
 
 @TemplateSystem.define("DiscrepancyModel_")
@@ -221,8 +299,19 @@ def DiscrepancyModel_(T):
             M = self._copies
             self._ns = nominal.num_states
             self._np = len(PARAM_NAMES)
+            self._float = T is float
+            self._kernels = None
+            self._dbuf = np.empty((self._copies, self._ns))
+            self._ybuf = np.empty((self._copies, nominal.num_measurements))
             self.DeclareContinuousState(self._ns * M)
             self.DeclareNumericParameter(BasicVector_[T](np.tile(default_vector()[:, None], (1, M)).ravel()))
+            if self._float:   # the parameters one row per copy, as the kernel reads them (recomputed on change)
+                self._p_rows = self.DeclareCacheEntry(
+                    "parameters_by_copy", ValueProducer(
+                        allocate=AbstractValue.Make(np.zeros((M, self._np))).Clone,
+                        calc=lambda ctx, val: val.set_value(np.ascontiguousarray(
+                            ctx.get_numeric_parameter(0).CopyToVector().reshape(self._np, M).T))),
+                    prerequisites_of_calc={self.all_parameters_ticket()})
             self.DeclareVectorInputPort("motor_torque", n * M)
             self.DeclareVectorOutputPort(
                 "measurement", nominal.num_measurements * M, self._calc_measurement,
@@ -248,13 +337,28 @@ def DiscrepancyModel_(T):
             P = context.get_numeric_parameter(0).CopyToVector().reshape(self._np, M)
             return X, P
 
+        def _kernel(self, name):
+            if self._kernels is None:
+                self._kernels = replay_kernels(self._nom)
+            return self._kernels[f"{name}_batch"]
+
         def DoCalcTimeDerivatives(self, context, derivatives):
+            if self._float:   # hot path: the kernel generated from replay_laws, all copies in one call
+                X = context.get_continuous_state_vector().CopyToVector().reshape(self._ns, self._copies)
+                U = self.get_input_port(0).Eval(context).reshape(self._nom.num_motors, self._copies)
+                P = self._p_rows.Eval(context)
+                derivatives.SetFromVector(self._kernel("derivatives")(X.T, U.T, P, self._dbuf).T.ravel())
+                return
             X, P = self._arrays(context)
             U = self.get_input_port(0).Eval(context).reshape(self._nom.num_motors, self._copies)
-            xdot = model_derivatives(self._nom, X, U, P)
-            derivatives.get_mutable_vector().SetFromVector(np.asarray(xdot).ravel())
+            derivatives.get_mutable_vector().SetFromVector(np.ravel(model_derivatives(self._nom, X, U, P)))
 
         def _calc_measurement(self, context, output):
+            if self._float:
+                X = context.get_continuous_state_vector().CopyToVector().reshape(self._ns, self._copies)
+                y = self._kernel("measurements")(X.T, self._p_rows.Eval(context), self._ybuf)
+                output.SetFromVector(y.T.ravel())
+                return
             X, P = self._arrays(context)
             output.SetFromVector(np.asarray(model_measurements(self._nom, X, P)).ravel())
 

@@ -25,15 +25,20 @@ deviation); forces are quantised to 12 bit over the sensor range.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
-from pydrake.systems.primitives import AffineSystem, DiscreteTimeDelay, Multiplexer, ZeroOrderHold
+from pydrake.systems.primitives import ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import positive_part
 from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
 from awiwi_drake.components.friction import guide_friction, stribeck_friction
+from awiwi_drake.control import closed_loop
+from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+from awiwi_drake.parameters.rigs import MotorPositionGains
 
 from . import laws
 from .catalog import EFFECTS
@@ -59,7 +64,8 @@ def HiddenEffectPlant_(T):
 
     class Impl(LeafSystem_[T]):
         """Truth rig with hidden effects; state ``[theta, omega, (q, q'), z]``, input
-        ``motor_torque`` (applied), outputs ``measurement`` ``[theta, f, (q)]`` and ``state``."""
+        ``motor_torque`` (applied), outputs ``measurement`` ``[theta, f, (q)]``, ``state``, and the
+        controller's measurements ``motor_angle``, ``motor_velocity``, ``tendon_force``."""
 
         def _construct(self, nominal: NominalParameters, truth: dict, converter=None):
             LeafSystem_[T].__init__(self, converter)
@@ -73,6 +79,13 @@ def HiddenEffectPlant_(T):
                                          prerequisites_of_calc={self.all_state_ticket()})
             self.DeclareVectorOutputPort("state", self._ns, self._calc_x,
                                          prerequisites_of_calc={self.all_state_ticket()})
+            for name, calc in (("motor_angle", lambda X, c: self._split(X)[0]),
+                               ("motor_velocity", lambda X, c: self._split(X)[1]),
+                               ("tendon_force", lambda X, c: self._forces(X, c.get_time())[0])):
+                self.DeclareVectorOutputPort(
+                    name, n, lambda c, o, calc=calc: o.SetFromVector(
+                        np.array(calc(c.get_continuous_state_vector().CopyToVector(), c))),
+                    prerequisites_of_calc={self.all_state_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._nom, other._truth, converter=converter)
@@ -250,55 +263,28 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return a
 
 
-def _closed_loop(plant_sys, n: int, ns: int, dt: float, ff: float, kp: float, kd: float, delay: float,
-                 ref0: np.ndarray, X0: np.ndarray):
-    """The truth rig under the lab's discrete motor PD, from Drake primitives.
-
-    ``u_k = ff + kp (theta_ref,k - theta_k) - kd omega_k`` is sampled every ``dt``
-    (``motor_torque_command``) and reaches the plant ``delay`` [s] later: whole
-    periods through a ``DiscreteTimeDelay``, the fraction through a hold sampling
-    at ``k dt + frac dt`` (the interval split of the ``delay`` effect).  Returns
-    the diagram (input ``motor_angle_reference``) and the first command ``u_0``.
-    """
-    b = DiagramBuilder()
-    plant = b.AddNamedSystem("truth_plant", plant_sys)
-    mux = b.AddNamedSystem("pd_inputs", Multiplexer([n, ns]))
-    D = np.zeros((n, n + ns))
-    D[:, :n] = kp * np.eye(n)
-    D[:, n:2 * n] = -kp * np.eye(n)
-    D[:, 2 * n:3 * n] = -kd * np.eye(n)
-    pd = b.AddNamedSystem("motor_pd", AffineSystem(A=np.zeros((0, 0)), B=np.zeros((0, n + ns)), f0=np.zeros(0),
-                                                   C=np.zeros((n, 0)), D=D, y0=np.full(n, ff)))
-    b.Connect(plant.GetOutputPort("state"), mux.get_input_port(1))
-    b.Connect(mux.get_output_port(0), pd.get_input_port())
-    b.ExportInput(mux.get_input_port(0), "motor_angle_reference")
+def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float):
+    """The truth rig under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
+    ``u_k = r_m f_pre + kp (theta_ref,k - theta_k) - kd omega_k``), closed by :func:`~awiwi_drake.control.closed_loop`
+    at the logging rate: the command reaches the plant ``delay`` [s] later, whole periods through the loop's
+    ``DiscreteTimeDelay``, the fraction through a hold in front of the plant sampling at ``k dt + frac dt``
+    (the interval split of the ``delay`` effect).  Returns the loop and that hold (or None)."""
+    dt = 1.0 / gen.sample_rate
     nd = int(np.floor(delay / dt + 1e-12))
     frac = delay / dt - nd
-    src = (b.AddNamedSystem("command_delay", DiscreteTimeDelay(dt, nd, n)) if nd > 0
-           else b.AddNamedSystem("command_hold", ZeroOrderHold(dt, n)))
-    b.Connect(pd.get_output_port(), src.get_input_port())
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("truth_plant", plant_sys)
+    split = None
     if frac > 1e-9:
-        split = b.AddNamedSystem("delay_split", ZeroOrderHold(dt, n, frac * dt))
-        b.Connect(src.get_output_port(), split.get_input_port())
-        src = split
-    b.Connect(src.get_output_port(), plant.GetInputPort("motor_torque"))
-    b.ExportOutput(plant.GetOutputPort("measurement"), "measurement")
-    b.ExportOutput(pd.get_output_port(), "motor_torque_command")
-    diagram = b.Build()
-    diagram.set_name("truth_loop")
-    th, om = X0[:n], X0[n:2 * n]
-    u0 = ff + kp * (np.asarray(ref0, float) - th) - kd * om
-    return diagram, u0
-
-
-def _hold_initial_command(diagram, ctx, u0: np.ndarray) -> None:
-    """Fill every hold/delay buffer with the first command (the bench starts at rest at ``u_0``)."""
-    for name in ("command_delay", "command_hold", "delay_split"):
-        if diagram.HasSubsystemNamed(name):
-            sub = diagram.GetSubsystemByName(name)
-            sctx = sub.GetMyMutableContextFromRoot(ctx)
-            size = sctx.get_discrete_state_vector().size()
-            sctx.SetDiscreteState(np.resize(np.asarray(u0, float), size))
+        split = b.AddNamedSystem("delay_split", ZeroOrderHold(dt, nom.num_motors, frac * dt))
+        b.Connect(split.get_output_port(), plant.GetInputPort("motor_torque"))
+    b.ExportInput((split or plant).get_input_port(0), "motor_torque")
+    for name in ("measurement", "motor_angle", "motor_velocity", "tendon_force"):
+        b.ExportOutput(plant.GetOutputPort(name), name)
+    rig = SimpleNamespace(name=f"truth-{nom.rig}", diagram=b.Build())
+    gains = MotorPositionGains(kp=gen.kp, kd=gen.kd, rate_hz=gen.sample_rate)
+    ctrl = motor_position_controller(rig, gains, pulley_radius=nom.motor_pulley_radius)
+    return closed_loop(rig, ctrl, rate_hz=gen.sample_rate, delay=nd * dt if nd else None), split
 
 
 def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
@@ -371,14 +357,14 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         ref = (th0 + 0.6 * th0 * a)[:, None]
         X0 = np.zeros(nom.num_states)
         X0[0] = th0
-    ff = r * gen.pretension
-    delay = float(truth.get("delay", 0.0))
-    diagram, u0 = _closed_loop(plant_sys, n, nom.num_states, dt, ff, gen.kp, gen.kd, delay, ref[0], X0)
-    ctx = diagram.CreateDefaultContext()
-    ctx.SetContinuousState(X0)
-    _hold_initial_command(diagram, ctx, u0)
+    loop, split = _truth_loop(plant_sys, nom, gen, float(truth.get("delay", 0.0)))
+    u0 = r * gen.pretension + gen.kp * (ref[0] - X0[:n]) - gen.kd * X0[n:2 * n]   # the bench starts at rest at u_0
+    ctx = loop.create_context(state=X0, motor_torque=u0)
+    if split is not None:
+        split.SetVectorState(split.GetMyMutableContextFromRoot(ctx), u0)
     try:
-        res = simulate(diagram, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh")},
+        res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
+                                                 "tendon_force_reference": gen.pretension},
                        log=("measurement", "motor_torque_command"), log_period=dt, mode="error_controlled",
                        max_step=dt, accuracy=1e-6, progress=progress)
     except SimulationDivergedError as exc:

@@ -44,10 +44,8 @@ GRASP_POSE = {"thumb": [0.5, 0.35, 0.5, 0.4], "index": [0.05, 0.8, 0.9, 0.6], "m
 
 def grasp_pose(rig) -> np.ndarray:
     """The grasp pose as plant joint angles of ``rig`` (DIPs of ring/fifth from (5.16)-(5.17))."""
-    coupling = rig.coupling
-    parts = coupling.parts if hasattr(coupling, "parts") else {rig.name.replace("finger-", ""): coupling}
     q = []
-    for name, c in parts.items():
+    for name, c in rig.coupling.parts.items():
         q.append(c.dof_selection @ np.asarray(GRASP_POSE[name], float))
     return np.concatenate(q)
 

@@ -84,7 +84,9 @@ class FingerCoupling(abc.ABC):
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
     Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
-    ``joint_names``; ``is_constant`` when ``P`` does not depend on ``q``.
+    ``joint_names``, ``finger`` (its name); ``is_constant`` when ``P`` does not depend on ``q``.
+    ``parts``, ``joint_slices``, ``tendon_slices`` map each finger the routing spans to its coupling,
+    joints and tendons (one finger: itself; :class:`HandCoupling`: the five).
     All methods accept float arrays and numpy object arrays of AutoDiffXd or
     symbolic Expression.
     """
@@ -94,6 +96,19 @@ class FingerCoupling(abc.ABC):
     tendon_names: list[str]
     joint_names: list[str]
     is_constant: bool = True
+    finger: str = "finger"
+
+    @property
+    def parts(self) -> dict:
+        return {self.finger: self}
+
+    @property
+    def joint_slices(self) -> dict:
+        return {self.finger: slice(0, self.num_joints)}
+
+    @property
+    def tendon_slices(self) -> dict:
+        return {self.finger: slice(0, self.num_tendons)}
 
     def _check_q(self, q):
         q = np.asarray(q) if _is_float_array(q) else np.asarray(q, dtype=object)
@@ -114,6 +129,10 @@ class FingerCoupling(abc.ABC):
         """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
         return np.zeros((self.num_joints, self.num_joints))
 
+    def tension_hessians(self, q) -> np.ndarray:
+        """``d^2 h_i/dq^2`` of every tendon (m x n x n): ``tension_hessian(q, f) = sum_i f_i [i]``."""
+        return np.stack([self.tension_hessian(q, e) for e in np.eye(self.num_tendons)], axis=0)
+
     def dPT_f_dq(self, q, f) -> np.ndarray:
         """``d(P(q)^T f)/dq`` at fixed ``f``: the same matrix as :meth:`tension_hessian`
         (name used by ``components.routing.ConstantCoupling``)."""
@@ -128,11 +147,11 @@ class LinearFingerCoupling(FingerCoupling):
     """Constant coupling: ``h(q) = P q`` (index, middle, ring, fifth)."""
 
     def __init__(self, P: np.ndarray, *, joint_names: Sequence[str], tendon_names: Sequence[str],
-                 dof_selection: np.ndarray | None = None):
+                 dof_selection: np.ndarray | None = None, finger: str = "finger"):
         P = np.asarray(P, dtype=float)
         if P.shape != (len(tendon_names), len(joint_names)):
             raise ValueError(f"P has shape {P.shape}, expected ({len(tendon_names)}, {len(joint_names)})")
-        self._P = P
+        self._P, self.finger = P, finger
         self.num_tendons, self.num_joints = P.shape
         self.joint_names = list(joint_names)
         self.tendon_names = list(tendon_names)
@@ -147,6 +166,12 @@ class LinearFingerCoupling(FingerCoupling):
         if q is not None:
             self._check_q(q)
         return self._P.copy()
+
+    def dof_pseudo_inverse(self) -> np.ndarray:
+        """``(P S)^+`` (n_dof x m): the least-squares inverse of (5.15) on the independent DoF (computed once)."""
+        if getattr(self, "_dof_pinv", None) is None:
+            self._dof_pinv = np.linalg.pinv(self._P @ self.dof_selection)
+        return self._dof_pinv
 
 
 def index_coupling_matrix(r0: float, r1: float, r2: float, r3: float) -> np.ndarray:
@@ -184,7 +209,7 @@ def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
         P = np.vstack([np.hstack([[[rh], [-rh]], np.zeros((2, 4))]), np.hstack([np.zeros((len(P), 1)), P])])
     names = [f"{finger}_h{k + 1}" for k in range(P.shape[0])]
     return LinearFingerCoupling(P, joint_names=finger_joint_names(finger), tendon_names=names,
-                                dof_selection=coupling_selection(p))
+                                dof_selection=coupling_selection(p), finger=finger)
 
 
 def _rz(c, s, like):
@@ -203,10 +228,14 @@ _KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz
 _KY = np.array([[0.0, 0, 1], [0, 0, 0], [-1, 0, 0]])  # dRy/dq = Ry Ky
 
 
+_THUMB_BASE_KERNELS: dict = {}     # compiled base kinematics per thumb geometry (ThumbCoupling._base_kernel)
+
+
 class ThumbCoupling(FingerCoupling):
     """Thumb (5.20)-(5.22): tensegrity base (nonlinear) + PIP/DIP (linear)."""
 
     is_constant = False
+    finger = "thumb"
 
     def __init__(self, p: ThumbParams | None = None):
         self.params = p = p or ThumbParams()
@@ -240,6 +269,32 @@ class ThumbCoupling(FingerCoupling):
         A = R @ self.bone_points.T
         d = A.T - self.palm_points
         return d, np.sqrt(np.einsum("ij,ij->i", d, d)), A, R
+
+    def distal_pseudo_inverse(self) -> np.ndarray:
+        """``P_distal^+`` (2 x 4) of the PIP/DIP rows (5.22), computed once."""
+        if getattr(self, "_distal_pinv", None) is None:
+            self._distal_pinv = np.linalg.pinv(self._P_distal)
+        return self._distal_pinv
+
+    def base_lengths_and_jacobian(self, q10: float, q11: float):
+        """Float fast path: the base tendon lengths ``h_0..3`` (4,) and ``dh/d(q10, q11)`` (4 x 2) together
+        (Algorithm 1 needs both at every trial point), from a compiled kernel generated from :meth:`h` and
+        :meth:`P` (:mod:`awiwi_drake.components.codegen`: the laws evaluated once on symbolic variables)."""
+        out = self._base_kernel()(np.array([q10, q11], dtype=float), np.empty(12))
+        return out[:4], out[4:].reshape(4, 2)
+
+    def _base_kernel(self):
+        key = (self.palm_points.tobytes(), self.bone_points.tobytes())
+        fn = _THUMB_BASE_KERNELS.get(key)
+        if fn is None:
+            import pydrake.symbolic as sym
+            from ..components.codegen import compile_kernels
+            qv = [sym.Variable("q10"), sym.Variable("q11")]
+            q = np.array([sym.Expression(qv[0]), sym.Expression(qv[1]), sym.Expression(0.0), sym.Expression(0.0)])
+            with np.errstate(invalid="ignore"):
+                outs = list(self.h(q)[:4]) + list(np.asarray(self.P(q))[:4, :2].ravel())
+            fn = _THUMB_BASE_KERNELS[key] = compile_kernels({"thumb_base": ([qv], outs)}, tag="thumb_base")["thumb_base"]
+        return fn
 
     @_quiet_fp
     def h(self, q):
@@ -282,6 +337,28 @@ class ThumbCoupling(FingerCoupling):
         P[4:, 2:] = self._P_distal
         return P
 
+    def tension_hessians(self, q) -> np.ndarray:
+        """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the base kinematics once, vectorised over the tendons."""
+        q = self._check_q(q)
+        if q.dtype == object:
+            return super().tension_hessians(q)
+        d, norm, A, R = self._float_base(q)
+        b = self.bone_points.T
+        dA0, dA1 = _KZ @ A, R @ (_KY @ b)
+        d00, d01, d11 = _KZ @ dA0, _KZ @ dA1, R @ (_KY @ _KY @ b)
+        u = d / norm[:, None]                                            # 4 x 3
+        J = np.stack([dA0.T, dA1.T], axis=2)                             # 4 x 3 x 2
+        uJ = np.einsum("ik,ikl->il", u, J)                               # 4 x 2
+        Hb = (np.einsum("ikl,ikm->ilm", J, J) - uJ[:, :, None] * uJ[:, None, :]) / norm[:, None, None]
+        c00, c01, c11 = (np.einsum("ik,ki->i", u, x) for x in (d00, d01, d11))
+        Hb[:, 0, 0] += c00
+        Hb[:, 0, 1] += c01
+        Hb[:, 1, 0] += c01
+        Hb[:, 1, 1] += c11
+        H = np.zeros((8, 4, 4))
+        H[:4, :2, :2] = Hb
+        return H
+
     @_quiet_fp
     def tension_hessian(self, q, f):
         """``sum_i f_i d^2 h_i/dq^2``; only the base block (q10, q11) is non-zero."""
@@ -314,6 +391,8 @@ class HandCoupling(FingerCoupling):
     so that a wrist motion enters the drive like any joint motion.  Their
     generalised force ``-f`` is the tendon force itself.
     """
+
+    parts = joint_slices = tendon_slices = finger = None   # per instance (not the one-finger properties)
 
     def __init__(self, parts: dict[str, FingerCoupling], *, num_offsets: int = 0):
         self.parts = dict(parts)
@@ -424,8 +503,7 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
 def dof_selection(coupling) -> np.ndarray:
     """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
     coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
-    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
-    blocks = [c.dof_selection for c in parts.values()]
+    blocks = [c.dof_selection for c in coupling.parts.values()]
     S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
     i = j = 0
     for blk in blocks:

@@ -45,7 +45,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import LinearSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from .coupling import LinearFingerCoupling, ThumbCoupling, dof_selection, reduced_coupling_matrix
+from .coupling import LinearFingerCoupling, ThumbCoupling, dof_selection
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
            "estimate_thumb", "noise_error_bound",
@@ -57,7 +57,7 @@ def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
     dh = np.asarray(dh, dtype=float)
     if dh.shape != (coupling.num_tendons,):
         raise ValueError(f"dh must have shape ({coupling.num_tendons},), got {dh.shape}")
-    q_dof = np.linalg.pinv(reduced_coupling_matrix(coupling)) @ dh
+    q_dof = coupling.dof_pseudo_inverse() @ dh
     return coupling.dof_selection @ q_dof
 
 
@@ -116,12 +116,12 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
         raise ValueError(f"dh_base must have shape (4,), got {dh_base.shape}")
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
-    h0 = coupling.h(np.zeros(4))[:4]
+    h0 = coupling.base_lengths_and_jacobian(0.0, 0.0)[0]
     q = np.array([q_start[0], q_start[1], 0.0, 0.0], dtype=float)
 
     def cost_grad(qq):
-        r = coupling.h(qq)[:4] - h0 - dh_base
-        P = coupling.P(qq)[:4, :2]
+        h, P = coupling.base_lengths_and_jacobian(qq[0], qq[1])    # h and P: the kinematics once
+        r = h - h0 - dh_base
         return float(r @ r), 2.0 * P.T @ r
 
     if not limit > 0:
@@ -156,7 +156,7 @@ def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_se
     if dh.shape != (8,):
         raise ValueError(f"dh must have shape (8,), got {dh.shape}")
     search = thumb_base_gradient_search(coupling, dh[:4], q_start, **kw)
-    distal = np.linalg.pinv(coupling.P(np.zeros(4))[4:, 2:]) @ dh[4:]
+    distal = coupling.distal_pseudo_inverse() @ dh[4:]
     q = np.concatenate([search.q, distal])
     return (q, search) if return_search else q
 
@@ -172,15 +172,6 @@ def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> floa
 
 # ---------------------------------------------------------------------------------------------
 # The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
-
-
-
-def _estimator_parts(coupling):
-    parts = coupling.parts if hasattr(coupling, "parts") else {"finger": coupling}
-    js = coupling.joint_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_joints)}
-    ts = coupling.tendon_slices if hasattr(coupling, "parts") else {"finger": slice(0, coupling.num_tendons)}
-    return parts, js, ts
-
 
 @TemplateSystem.define("LinkPositionEstimator_", T_list=[float, AutoDiffXd])
 def LinkPositionEstimator_(T):
@@ -242,11 +233,14 @@ def LinkPositionEstimator_(T):
             if self._w.HasValue(context):
                 dh = dh - self._w.Eval(context)
             q_prev = context.get_discrete_state(0).CopyToVector()
-            q_val = np.array([_value(v) for v in q_prev])
-            dh_val = np.array([_value(v) for v in dh])
-            parts, js, ts = _estimator_parts(self.coupling)
+            if T is float:
+                q_val, dh_val = q_prev, np.asarray(dh, dtype=float)
+            else:
+                q_val = np.array([_value(v) for v in q_prev])
+                dh_val = np.array([_value(v) for v in dh])
+            js, ts = self.coupling.joint_slices, self.coupling.tendon_slices
             q_new = np.zeros(len(q_val))
-            for name, c in parts.items():
+            for name, c in self.coupling.parts.items():
                 if c.is_constant:
                     q_new[js[name]] = estimate_linear(c, dh_val[ts[name]])
                 else:  # thumb: Algorithm 1 warm-started at the previous estimate

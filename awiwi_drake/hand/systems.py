@@ -19,7 +19,7 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake.hand.coupling import FingerCoupling, HandCoupling
+from awiwi_drake.hand.coupling import FingerCoupling
 from awiwi_drake.hand.wrist import check_motor_pulley_radius, wrist_params, wrist_tendon_offsets
 from awiwi_drake.parameters.wrist import WristParams
 
@@ -121,6 +121,7 @@ def WristTendonOffsets_(T):
         def _construct(self, params: WristParams | None = None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._params = wrist_params(params)
+            self._last = None
             n = self._params.num_tendons
             self._u = self.DeclareVectorInputPort("wrist_angle", 2)
             self.DeclareVectorOutputPort("wrist_tendon_offset", n, self._calc,
@@ -135,7 +136,16 @@ def WristTendonOffsets_(T):
 
         def _calc(self, context, output):
             q = self._u.Eval(context)
-            output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
+            if T is not float:
+                output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
+                return
+            # (6.9) costs ~0.1 ms (an iterative solve per tendon), and Drake re-evaluates this port
+            # whenever its source's cache entry is invalidated (a ConstantVectorSource's output
+            # follows time): the last float result is kept while the wrist angle is unchanged
+            key = (float(q[0]), float(q[1]))
+            if self._last is None or self._last[0] != key:
+                self._last = (key, np.asarray(wrist_tendon_offsets(q[0], q[1], self._params), dtype=float))
+            output.SetFromVector(self._last[1])
 
     return Impl
 
@@ -160,6 +170,7 @@ def WristCompensation_(T):
         def _construct(self, motor_pulley_radius, params: WristParams | None = None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._params = wrist_params(params)
+            self._last = None
             n = self._params.num_tendons
             self._r = check_motor_pulley_radius(motor_pulley_radius, n)
             self._u = self.DeclareVectorInputPort("wrist_angle", 2)
@@ -179,7 +190,13 @@ def WristCompensation_(T):
 
         def _calc(self, context, output):
             q = self._u.Eval(context)
-            output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
+            if T is not float:
+                output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
+                return
+            key = (float(q[0]), float(q[1]))       # the last result, as in WristTendonOffsets_
+            if self._last is None or self._last[0] != key:
+                self._last = (key, -np.asarray(wrist_tendon_offsets(q[0], q[1], self._params), dtype=float) / self._r)
+            output.SetFromVector(self._last[1])
 
     return Impl
 
@@ -199,12 +216,8 @@ def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
     """
     P = np.asarray(coupling.P(np.zeros(coupling.num_joints)), dtype=float)
     crossed = (np.abs(P) > 0).sum(axis=1)
-    if isinstance(coupling, HandCoupling):
-        parts = coupling.parts
-    else:
-        parts = {"finger": coupling}
-    for name, c in parts.items():
+    for name, c in coupling.parts.items():
         if not c.is_constant:  # thumb: base rows are straight tendons
-            ts = coupling.tendon_slices[name] if isinstance(coupling, HandCoupling) else slice(0, c.num_tendons)
+            ts = coupling.tendon_slices[name]
             crossed[ts.start:ts.start + 4] = 0
     return p.palm_bending_angle + p.joint_wrap_angle * crossed

@@ -22,6 +22,7 @@ from awiwi_drake.parameters.backstepping import (
     PositionStudy, ScalarExampleGains)
 from awiwi_drake.parameters.hand_control import (
     ForceDistributionParams, FrictionObserverParams, LinkFrictionParams, StiffnessCorrectionParams)
+from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings, TruthGeneratorParams
 from awiwi_drake.parameters.display import AnimationParams
 from awiwi_drake.parameters.cli import CliLimits, CompareShortMode

@@ -20,7 +20,7 @@ plant :func:`awiwi_drake.rigs.motor_rig`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,25 +33,48 @@ from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificati
 from awiwi_drake.plotting import figure_axes
 from awiwi_drake.rigs import motor_rig
 
-__all__ = ["constant_velocity_run", "FrictionData", "FrictionFit", "friction_identification_data", "fit_friction",
+__all__ = ["ConstantVelocityRun", "constant_velocity_run", "FrictionData", "FrictionFit", "friction_identification_data", "fit_friction",
            "identify_ripple", "harmonic", "amplitude_spectrum", "RippleCompensationResult",
            "ripple_compensation_experiment", "plot_spectra", "plot_friction_fit", "InertiaIdentification",
            "inertia_identification", "friction_curve_in_ampere"]
 
 
+@dataclass
+class ConstantVelocityRun:
+    """A motor run at constant speed, one row per control period ``k`` (``[t_k, t_k+1)``): ``t`` (midpoint)
+    [s], ``theta`` [rad] / ``omega`` [rad/s] (midpoint values), ``command`` (the torque applied during the
+    period) [Nm], ``feedback`` (its PD part, i.e. without the feed-forward) [Nm], ``acceleration`` (mean over
+    the period) [rad/s^2]."""
+
+    t: np.ndarray
+    theta: np.ndarray
+    omega: np.ndarray
+    command: np.ndarray
+    feedback: np.ndarray
+    acceleration: np.ndarray
+
+    def plot(self, ax=None):
+        """Applied torque and its PD part over time (Fig 3.5a)."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        ax.plot(self.t, self.command, label="applied torque")
+        ax.plot(self.t, self.feedback, label="PD part (feedback)")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("motor torque [Nm]")
+        ax.legend()
+        ax.grid(True, alpha=0.3)
+        return fig, ax
+
+
 def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,
                           theta0: float = 0.0, friction_scale: float = 0.0, ripple: RippleEstimate | None = None,
-                          rate_hz: float = CONTROL_RATE_HZ, start_at_rest: bool = False) -> dict[str, np.ndarray]:
+                          rate_hz: float = CONTROL_RATE_HZ, start_at_rest: bool = False) -> ConstantVelocityRun:
     """The motor following ``theta0 + speed t`` under a sampled PD (one row per control period).
 
     ``start_at_rest``: the motor starts at rest with zero torque in the hold buffer (an experiment that
     knows nothing about the friction it is about to identify); otherwise it starts at ``speed`` with the
     (model) friction torque held, which removes the start transient (ripple study).
 
-    Returns per control period ``k`` (``[t_k, t_k+1)``): ``t`` (midpoint),
-    ``theta``/``omega`` (midpoint values), ``command`` (the torque applied during
-    the period), ``feedback`` (its PD part, i.e. without the feed-forward),
-    ``acceleration`` (mean over the period).
+    Returns a :class:`ConstantVelocityRun` (one row per control period).
     """
     rig = motor_rig(motor)
     law = MotorPdLaw(motor, kp, kd, friction_scale=friction_scale, ripple=ripple)
@@ -66,9 +89,9 @@ def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, 
     th, w = log["motor_angle"][:, 0], log["motor_velocity"][:, 0]
     applied = log["motor_torque"][1:, 0]  # left limit at t_k+1 = torque held on [t_k, t_k+1)
     ff = np.array([float(np.ravel(law.feedforward(a, b))[0]) for a, b in zip(th[:-1], w[:-1])])
-    return dict(t=0.5 * (log.t[1:] + log.t[:-1]), theta=0.5 * (th[1:] + th[:-1]),
-                omega=0.5 * (w[1:] + w[:-1]), command=applied, feedback=applied - ff,
-                acceleration=np.diff(w) / dt)
+    return ConstantVelocityRun(t=0.5 * (log.t[1:] + log.t[:-1]), theta=0.5 * (th[1:] + th[:-1]),
+                               omega=0.5 * (w[1:] + w[:-1]), command=applied, feedback=applied - ff,
+                               acceleration=np.diff(w) / dt)
 
 
 @dataclass
@@ -112,12 +135,12 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
         for sign, th0 in ((1.0, 0.0), (-1.0, travel)):  # forward, then back over the same angles
             run = constant_velocity_run(motor, sign * v, p.plateau_time, kp=p.position_gain, kd=p.velocity_gain,
                                         theta0=th0, start_at_rest=True)
-            tau = run["command"] + rng.normal(0.0, p.torque_noise_std, size=run["command"].shape)
+            tau = run.command + rng.normal(0.0, p.torque_noise_std, size=run.command.shape)
             t_steady = p.settle_fraction * p.plateau_time
-            steady = run["t"] >= t_steady
+            steady = run.t >= t_steady
             n_per = math.floor(v * (p.plateau_time - t_steady) / period)
             if n_per >= 1:  # whole ripple periods only
-                steady &= run["t"] < t_steady + n_per * period / v
+                steady &= run.t < t_steady + n_per * period / v
             out_v.append(sign * v)
             out_m.append(float(np.mean(tau[steady])))
             out_lo.append(float(np.min(tau[steady])))
@@ -160,7 +183,7 @@ def amplitude_spectrum(t, y) -> tuple[np.ndarray, np.ndarray]:
     return np.fft.rfftfreq(len(y), float(np.median(np.diff(t)))), np.abs(Y)
 
 
-def identify_ripple(run: dict, motor: MotorParams) -> RippleEstimate:
+def identify_ripple(run: ConstantVelocityRun, motor: MotorParams) -> RippleEstimate:
     """Ripple from a constant-speed run by the torque balance of (3.5).
 
     ``tau_r(theta) = B thdd - u - tau_fric(thd)`` per control period, regressed on
@@ -168,9 +191,8 @@ def identify_ripple(run: dict, motor: MotorParams) -> RippleEstimate:
     the measured angle) plus a constant and a linear term in ``theta`` (they
     absorb the slow output-bearing component over a fraction of a revolution).
     """
-    th = np.asarray(run["theta"], float)
-    resid = (motor.inertia * np.asarray(run["acceleration"], float) - np.asarray(run["command"], float)
-             - motor_friction_torque(np.asarray(run["omega"], float), motor))
+    th = run.theta
+    resid = motor.inertia * run.acceleration - run.command - motor_friction_torque(run.omega, motor)
     N = motor.gear_ratio
     A = np.column_stack([np.sin(N * th), np.cos(N * th), np.ones_like(th), th])
     c = np.linalg.lstsq(A, resid, rcond=None)[0]
@@ -188,12 +210,17 @@ class RippleCompensationResult:
     amplitude_without: float
     amplitude_with: float
     estimate: RippleEstimate
-    runs: dict = field(default_factory=dict)
+    run_without: ConstantVelocityRun | None = None
+    run_with: ConstantVelocityRun | None = None
 
     @property
     def attenuation(self) -> float:
         """|A_with| / |A_without| at the motor rotation frequency (0 = removed, 1 = unchanged)."""
         return self.amplitude_with / self.amplitude_without
+
+    def plot(self, ax=None, **kw):
+        """Fig 3.6b (:func:`plot_spectra`)."""
+        return plot_spectra(self, ax=ax, **kw)
 
 
 def ripple_compensation_experiment(motor: MotorParams | None = None,
@@ -208,11 +235,11 @@ def ripple_compensation_experiment(motor: MotorParams | None = None,
     estimate = identify_ripple(before, m)
     after = constant_velocity_run(m, p.speed, p.duration, ripple=estimate.scaled(p.amplitude_scale), **common)
     f1 = m.gear_ratio * p.speed / (2 * math.pi)  # motor rotation frequency [Hz]
-    f, s0 = amplitude_spectrum(before["t"], before["feedback"])
-    _, s1 = amplitude_spectrum(after["t"], after["feedback"])
-    a0 = abs(harmonic(before["t"], before["feedback"], f1))
-    a1 = abs(harmonic(after["t"], after["feedback"], f1))
-    return RippleCompensationResult(f, s0, s1, f1, a0, a1, estimate, dict(without=before, with_=after))
+    f, s0 = amplitude_spectrum(before.t, before.feedback)
+    _, s1 = amplitude_spectrum(after.t, after.feedback)
+    a0 = abs(harmonic(before.t, before.feedback, f1))
+    a1 = abs(harmonic(after.t, after.feedback, f1))
+    return RippleCompensationResult(f, s0, s1, f1, a0, a1, estimate, before, after)
 
 
 def plot_spectra(result, *, fmax: float = 60.0, ax=None):

@@ -28,6 +28,16 @@ class OpenLoopPoleSweep:
     link_damping: np.ndarray
     poles_vs_damping: np.ndarray
 
+    def plot(self, axes=None):
+        """Both root loci side by side (:func:`plot_root_locus`); returns ``(fig, axes)``."""
+        if axes is None:
+            fig, axes = figure_axes(None, ncols=2, figsize=(12, 5))
+        plot_root_locus(self.stiffness, self.poles_vs_stiffness, ax=axes[0])
+        plot_root_locus(self.link_damping, self.poles_vs_damping, ax=axes[1], label="d_q [Nm s/rad]")
+        axes[0].set_title("Fig 12.3: open-loop poles vs k")
+        axes[1].set_title("Fig 12.3: open-loop poles vs d_q")
+        return axes[0].figure, axes
+
 
 def _sorted_poles(A: np.ndarray) -> np.ndarray:
     ev = np.linalg.eigvals(A)

@@ -37,7 +37,7 @@ from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, Sc
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = [
-    "BacksteppingRun", "table_15_1_params", "table_15_1_rig", "event_schedules", "run_loop",
+    "BacksteppingRun", "StiffnessCheck", "table_15_1_params", "table_15_1_rig", "event_schedules", "run_loop",
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
     "antagonistic_sine", "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
@@ -82,6 +82,29 @@ class BacksteppingRun:
     def q(self) -> np.ndarray:
         """Link angle [rad]."""
         return self.state[:, 0]
+
+    def plot(self, ax=None, **kw):
+        """Link angle and reference (:func:`plot_joint_angle`)."""
+        return plot_joint_angle([self], ax=ax, **kw)
+
+
+@dataclass
+class StiffnessCheck:
+    """Fig 15.27: closed-loop static stiffness ``effective_stiffness`` [Nm/rad] per ``stiffness`` (Kp,imp)
+    [Nm/rad], and the joint ``torque`` [Nm] it gives under the imposed ``deflection`` [rad]."""
+
+    stiffness: np.ndarray
+    effective_stiffness: np.ndarray
+    torque: np.ndarray
+    deflection: float
+
+    def plot(self, ax=None):
+        fig, ax = figure_axes(ax)
+        ax.plot(self.stiffness, self.torque, "o-", label=f"deflection {self.deflection:g} rad")
+        ax.set_xlabel("Kp,imp [Nm/rad]")
+        ax.set_ylabel("joint torque [Nm]")
+        ax.legend(fontsize="small")
+        return fig, ax
 
 
 # ---------------------------------------------------------------------------
@@ -388,7 +411,8 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
 
 
 def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflection: float = 0.3,
-                                 gains: AntagonisticBacksteppingGains | None = None, load: float = 0.01) -> dict:
+                                 gains: AntagonisticBacksteppingGains | None = None,
+                                 load: float = 0.01) -> StiffnessCheck:
     """Fig 15.27: joint torque from the tendon forces under an imposed deflection, per Kp,imp.
 
     At steady state the tendon torque balances whatever holds the link, so imposing a
@@ -408,8 +432,7 @@ def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflectio
         dq = impedance_steady_state(rig, g, load)
         k_eff.append(load / dq)
     k_eff = np.array(k_eff)
-    return dict(stiffness=np.array(stiffness_values, dtype=float), effective_stiffness=k_eff,
-                torque=k_eff * deflection, deflection=deflection)
+    return StiffnessCheck(np.array(stiffness_values, dtype=float), k_eff, k_eff * deflection, float(deflection))
 
 
 # ---------------------------------------------------------------------------

@@ -31,6 +31,7 @@ import numpy as np
 
 from awiwi_drake.parameters.backstepping import PipStudy
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ
+from awiwi_drake.plotting import figure_axes
 
 __all__ = ["PipRun", "pip_parameters", "pip_experiment", "pip_metrics"]
 
@@ -50,6 +51,17 @@ class PipRun:
     torque: np.ndarray
     friction: np.ndarray
     tendon_force: np.ndarray
+
+    def plot(self, ax=None):
+        """Link angle and reference [deg] (Fig 15.24 / 15.25)."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        ax.plot(self.t, np.degrees(self.q), label=f"{self.controller} ({self.test})")
+        ax.plot(self.t, np.degrees(self.reference), "k--", lw=0.8, label="reference")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("PIP angle [deg]")
+        ax.legend(fontsize="small")
+        ax.grid(True, alpha=0.3)
+        return fig, ax
 
 
 def pip_parameters(pretension: float):

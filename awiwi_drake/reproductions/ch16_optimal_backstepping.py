@@ -7,6 +7,8 @@ the ARE gain of the model printed in Table 16.1, and the plot of a gain fit.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from pydrake.systems.controllers import LinearQuadraticRegulator
 
@@ -15,7 +17,7 @@ from awiwi_drake.parameters.rigs import FlexibleJointParams
 from awiwi_drake.plotting import figure_axes
 from awiwi_drake.rigs import flexible_joint_rig
 
-__all__ = ["table_16_1_rig", "printed_model_feedback", "plot_gain_fit", "fig_16_3_gain_samples"]
+__all__ = ["table_16_1_rig", "printed_model_feedback", "plot_gain_fit", "GainSamples", "fig_16_3_gain_samples"]
 
 
 def table_16_1_rig(case: OptimalGainsCase | None = None, **kw):
@@ -53,15 +55,40 @@ def plot_gain_fit(fits, *, ax=None):
     return fig, ax
 
 
+@dataclass
+class GainSamples:
+    """Fig 16.3 / Table 16.2: link angle ``q`` [rad] (runs x len(t)) over ``t`` [s] for each gain selection
+    (``gains``, relative gain ``distance`` to the LQR target), ``deviation`` (max |q - median trajectory|
+    per run [rad]), the weight ``r_weight`` and the ``step`` [rad]."""
+
+    t: np.ndarray
+    q: np.ndarray
+    distance: np.ndarray
+    gains: list
+    deviation: np.ndarray
+    r_weight: float
+    step: float
+
+    def plot(self, ax=None):
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        for i, (q, d) in enumerate(zip(self.q, self.distance)):
+            ax.plot(self.t, q, lw=1, label=f"run {i}: distance {d:.2g}")
+        ax.axhline(self.step, color="k", ls="--", lw=0.8, label="reference")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel("link angle [rad]")
+        ax.set_title(f"Fig 16.3: R = {self.r_weight:g}")
+        ax.legend(fontsize="x-small")
+        return fig, ax
+
+
 def fig_16_3_gain_samples(study: OptimalGainsStudy | None = None, *, r_weight: float | None = None,
-                          executor="serial") -> dict:
+                          executor="serial") -> GainSamples:
     """Fig 16.3 / Table 16.2: ``study.runs`` independent Algorithm 3 gain selections (seeds 0..runs-1,
     ``study.samples`` draws each) and the link response of each to a ``study.step`` reference on the
     Table 16.2 model (= Table 16.1; continuous loop, no damping), sampled at ``study.num`` points up to
     ``study.t_final`` (defaults: :class:`~awiwi_drake.parameters.backstepping.OptimalGainsStudy`).
 
-    ``r_weight`` None: Table 16.2's R = 0.1.  Returns ``t``, ``q`` (runs x num), ``distance``, ``gains``,
-    ``deviation`` (max |q - median trajectory| per run [rad]), ``r_weight`` and ``step``.
+    ``r_weight`` None: Table 16.2's R = 0.1.
     """
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.backstepping import impedance_controller
@@ -81,5 +108,5 @@ def fig_16_3_gain_samples(study: OptimalGainsStudy | None = None, *, r_weight: f
         dist.append(fit.distance)
         gains.append(fit.gains)
     Q = np.array(Q)
-    return dict(t=t, q=Q, distance=np.array(dist), gains=gains,
-                deviation=np.max(np.abs(Q - np.median(Q, axis=0)), axis=1), r_weight=case.r_weight, step=s.step)
+    return GainSamples(t, Q, np.array(dist), gains, np.max(np.abs(Q - np.median(Q, axis=0)), axis=1),
+                       case.r_weight, s.step)

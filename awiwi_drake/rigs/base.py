@@ -113,6 +113,10 @@ class Rig:
         ``(x0, r)`` of an antagonistic torsion-spring pair whose hidden tendons can slacken.
     spring_kind : str or None
         ``"linear"`` or ``"nonlinear"`` for the flexible joint.
+    tendon_force_of_state : callable or None
+        ``states (T, n_states) -> tendon forces (T, m)``, the law of the ``tendon_force`` port
+        vectorised over samples; the slack/over-range monitors apply it to the logged state
+        instead of evaluating the port at every step.
     """
 
     name: str
@@ -130,6 +134,7 @@ class Rig:
     max_force: float | None = None
     pair_slack: tuple | None = None
     spring_kind: str | None = None
+    tendon_force_of_state: Callable | None = None
 
     @property
     def num_states(self) -> int:

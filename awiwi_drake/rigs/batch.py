@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.framework import System
 
 from awiwi_drake.components.fused_drive import TendonDriveBatch_
 from awiwi_drake.parameters.rigs import JointRigParams
@@ -28,7 +28,7 @@ __all__ = ["BatchedRig", "batched_joint_rig"]
 class BatchedRig:
     """``num_copies`` copies of ``single`` (a :class:`~awiwi_drake.rigs.base.Rig`) in ``diagram``."""
 
-    diagram: Diagram
+    diagram: System
     single: object
     num_copies: int
 
@@ -57,15 +57,14 @@ class BatchedRig:
 
 
 def batched_joint_rig(num_copies: int, *, params: JointRigParams | None = None) -> BatchedRig:
-    """``num_copies`` joint rigs with ``params`` in one system (see the module docstring)."""
+    """``num_copies`` joint rigs with ``params`` in one system (see the module docstring).
+
+    ``BatchedRig.diagram`` is the :class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_`
+    itself (ports ``motor_torque``, ``external_torque``, ``state``, ``joint_angle``,
+    ``tendon_force``), not wrapped in a Diagram: a diagram that adds controllers then holds the
+    copies' state in one contiguous block (no nested sub-vectors for the integrator to walk).
+    """
     single = joint_rig(params=params)
-    model = single.drive.model
-    b = DiagramBuilder()
-    sys_ = b.AddNamedSystem("joint_rigs", TendonDriveBatch_[float](model, num_copies))
-    for name in ("motor_torque", "external_torque"):
-        b.ExportInput(sys_.GetInputPort(name), name)
-    for name in ("state", "joint_angle", "tendon_force"):
-        b.ExportOutput(sys_.GetOutputPort(name), name)
-    diagram = b.Build()
-    diagram.set_name(f"joint_rig_x{num_copies}")
-    return BatchedRig(diagram, single, int(num_copies))
+    system = TendonDriveBatch_[float](single.drive.model, num_copies)
+    system.set_name(f"joint_rig_x{num_copies}")
+    return BatchedRig(system, single, int(num_copies))

@@ -11,12 +11,16 @@
   State ``[q, qdot, theta1, theta2, omega1, omega2]``.
 
 The link rigs have two structures with the same ports and state order:
-``backend="compiled"`` (default) is *one* system
-(:class:`~awiwi_drake.components.fused_drive.TendonDrive_` with the link inside:
-``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no MultibodyPlant,
-no Mux/Demux; ``Rig.plant`` is None); ``"python"``/``"symbolic"`` put the link in
-a MultibodyPlant revolute joint receiving the tendon torque as a generalised
-force, as the fingers do. A test checks both at random states to 1e-9.
+``backend="compiled"`` (default) is the rig's dynamics as *one* C++
+``SymbolicVectorSystem`` generated from the law functions
+(:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive with the
+link inside, ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
+MultibodyPlant; output the state) plus the stateless
+:class:`~awiwi_drake.components.rig_system.LinkRigOutputs_` for the tendon forces,
+stiffnesses, joint torque and applied torque (evaluated only when read);
+``Rig.plant`` is None. ``"python"``/``"symbolic"`` put the link in a
+MultibodyPlant revolute joint receiving the tendon torque as a generalised force,
+as the fingers do. A test checks both at random states to 1e-9.
 
 Every block is named; ports are named after physical quantities.
 """
@@ -29,7 +33,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer
 
 from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
-from awiwi_drake.components.fused_drive import DriveModel, TendonDrive_
+from awiwi_drake.components.fused_drive import DriveModel
+from awiwi_drake.components.rig_system import LinkRigOutputs_, rig_dynamics_system, tendon_force_of_states
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
@@ -108,15 +113,25 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
         model = DriveModel(motor, (spring,) * coupling.num_tendons, coupling, np.zeros(coupling.num_tendons), r_m,
                            hysteresis, link_inertia=(float(inertia),), link_damping=(float(damping),))
+        m, n = coupling.num_tendons, coupling.num_joints
         b = DiagramBuilder()
-        rig = b.AddNamedSystem("tendon_drive_and_link", TendonDrive_[float](model))
-        b.ExportInput(rig.GetInputPort("motor_torque"), "motor_torque")
-        b.ExportInput(rig.GetInputPort("external_torque"), "external_torque")
-        for port, nm in (("state", "state"), ("joint_angle", "joint_angle"), ("joint_velocity", "joint_velocity"),
-                         ("generalized_force", "joint_torque"), ("motor_angle", "motor_angle"),
-                         ("motor_velocity", "motor_velocity"), ("tendon_force", "tendon_force"),
-                         ("tendon_stiffness", "tendon_stiffness"), ("applied_torque", "applied_torque")):
-            b.ExportOutput(rig.GetOutputPort(port), nm)
+        dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
+        inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
+        b.Connect(inputs.get_output_port(), dyn.get_input_port())
+        b.ExportInput(inputs.get_input_port(0), "motor_torque")
+        b.ExportInput(inputs.get_input_port(1), "external_torque")
+        b.ExportOutput(dyn.get_output_port(), "state")
+        parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
+        parts += [("hysteresis_force", m)] if model.has_hysteresis else []
+        split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
+        b.Connect(dyn.get_output_port(), split.get_input_port())
+        for i, (nm, _) in enumerate(parts[:4]):
+            b.ExportOutput(split.get_output_port(i), nm)
+        outs = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
+        b.Connect(dyn.get_output_port(), outs.GetInputPort("state"))
+        b.ConnectInput("motor_torque", outs.GetInputPort("motor_torque"))
+        for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
+            b.ExportOutput(outs.GetOutputPort(nm), nm)
         diagram = b.Build()
         diagram.set_name(name)
         drive = TendonDrive(diagram, coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled), model)
@@ -251,7 +266,8 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                               joint_stiffness=float(rq ** 2 * k.sum()))
 
     return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
-               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
+               coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
+               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None)
 
 
 

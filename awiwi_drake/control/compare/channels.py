@@ -60,7 +60,7 @@ def joint_channels(loop: ClosedLoop) -> JointChannels | None:
         return None
     from awiwi_drake.hand.coupling import dof_selection
     S = dof_selection(coupling)
-    parts = coupling.parts if hasattr(coupling, "parts") else {rig.params.finger_name: coupling}
+    parts = coupling.parts
     joint_names = rig.joint_names
     names, fingers, tendons, position = [], [], [], []
     col = ten = 0

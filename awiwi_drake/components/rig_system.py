@@ -1,0 +1,136 @@
+"""A single-joint rig as C++ systems generated from the law functions.
+
+The continuous dynamics of a link-carrying drive (:class:`~awiwi_drake.components.fused_drive.DriveModel`
+with ``link_inertia``: the joint rig, the flexible joint) are :func:`~awiwi_drake.components.fused_drive.drive_laws`
+evaluated *once* on ``pydrake.symbolic`` variables and handed to Drake's C++
+``SymbolicVectorSystem`` (:func:`rig_dynamics_system`). Its only output is the
+state, so it has no direct feedthrough and no Python runs in the integrator's
+derivative path. Drake differentiates the same expressions for ``AutoDiffXd``
+(``Linearize``, LQR) and converts them to ``Expression``.
+
+Why this structure (measured on this project's machine, joint rig under the 3 kHz
+motor PD, fixed-step RK3): a Python ``DoCalcTimeDerivatives`` costs about 6 us per
+call even around a compiled kernel (10x real time); the C++ expression evaluation
+about 3 us (13-14x); see README "Performance" for the framework's own share.
+
+The quantities that are not state slices (``tendon_force``, ``tendon_stiffness``,
+``joint_torque``, ``applied_torque``) come from :class:`LinkRigOutputs_`, a
+stateless system evaluated only when a port is read (logging, monitors), never in
+the derivative path: the numba kernels of :func:`~awiwi_drake.components.fused_drive.build_kernels`
+for float, :func:`~awiwi_drake.components.fused_drive.drive_laws` for AutoDiffXd and Expression.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pydrake.symbolic as sym
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.primitives import SymbolicVectorSystem
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_laws
+from awiwi_drake.components.motor import saturate_torque
+
+__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "LinkRigOutputs_", "tendon_force_of_states"]
+
+
+def _check(model) -> None:
+    if not isinstance(model, DriveModel) or not model.has_link:
+        raise ValueError("rig_dynamics_system: model must be a DriveModel with link_inertia/link_damping")
+    if not model.supports_symbolic:
+        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
+        raise ValueError(f"rig_dynamics_system: spring law(s) {', '.join(bad)} cannot be evaluated symbolically; "
+                         "use their calibration polynomial or backend='python'")
+
+
+def rig_dynamics_expressions(model: DriveModel):
+    """``(state_vars, input_vars, xdot)``: :func:`drive_laws` on symbolic variables.
+
+    The input is ``[motor_torque (m), external_torque (n)]``; ``xdot`` is the
+    drive's ``derivatives`` (state order of :class:`DriveModel`).
+    """
+    _check(model)
+    m, n = model.num_tendons, model.num_joints
+    xs = [sym.Variable(f"x{i}") for i in range(model.num_states)]
+    us = [sym.Variable(f"u{i}") for i in range(m)] + [sym.Variable(f"tau_ext{j}") for j in range(n)]
+    X = np.array([sym.Expression(v) for v in xs], dtype=object)
+    U = np.array([sym.Expression(v) for v in us], dtype=object)
+    with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
+        xdot = drive_laws(model, X, U[:m], tau_ext=U[m:], want=("derivatives",))["derivatives"]
+    return xs, us, list(xdot)
+
+
+def rig_dynamics_system(model: DriveModel) -> SymbolicVectorSystem:
+    """One C++ ``SymbolicVectorSystem``: state of ``model``, input ``[motor_torque, external_torque]``,
+    dynamics :func:`drive_laws`, output the state (no direct feedthrough)."""
+    xs, us, xdot = rig_dynamics_expressions(model)
+    return SymbolicVectorSystem(state=xs, input=us, dynamics=xdot, output=xs)
+
+
+class tendon_force_of_states:
+    """``states (T, num_states) -> tendon forces (T, m)``: the compiled ``tendon_force`` kernel of
+    ``model`` (= :func:`drive_laws`) over many samples at once (monitors on logged states).
+    A class, not a closure, so a rig holding it pickles (process pools)."""
+
+    def __init__(self, model: DriveModel):
+        _check(model)
+        self.model = model
+        self._kernel = None
+
+    def __getstate__(self):
+        return {"model": self.model, "_kernel": None}
+
+    def __call__(self, states):
+        model = self.model
+        if self._kernel is None:
+            self._kernel = build_kernels(model)["tendon_force_batch"]
+        X = np.ascontiguousarray(np.asarray(states, dtype=float).reshape(-1, model.num_states))
+        return self._kernel(X, np.empty((len(X), model.num_tendons)))
+
+
+@TemplateSystem.define("LinkRigOutputs_")
+def LinkRigOutputs_(T):
+    """The non-state outputs of a link-carrying drive; ``LinkRigOutputs_[T](model)``.
+
+    Inputs ``state`` (the model's state), ``motor_torque`` (m). Outputs
+    ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``joint_torque``
+    (n) [N m] (the tendons' generalised force ``-P^T f``), each depending on
+    ``state`` only, and ``applied_torque`` (m) [N m] (``motor_torque`` after the
+    motors' saturation), depending on ``motor_torque`` only.
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, model: DriveModel = None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            _check(model)
+            self.model = model
+            self._float = T is float
+            self._kernels = None
+            m, n = model.num_tendons, model.num_joints
+            self._x = self.DeclareVectorInputPort("state", model.num_states)
+            self._u = self.DeclareVectorInputPort("motor_torque", m)
+            deps = {self._x.ticket()}
+            for port, law, size in (("tendon_force", "tendon_force", m), ("tendon_stiffness", "tendon_stiffness", m),
+                                    ("joint_torque", "generalized_force", n)):
+                self.DeclareVectorOutputPort(port, size, self._law_output(law, size), prerequisites_of_calc=deps)
+            self.DeclareVectorOutputPort("applied_torque", m, self._calc_applied,
+                                         prerequisites_of_calc={self._u.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.model, converter=converter)
+
+        def _law_output(self, law, size):
+            def calc(context, out):
+                x = self._x.Eval(context)
+                if self._float:
+                    if self._kernels is None:
+                        self._kernels = build_kernels(self.model)
+                    out.SetFromVector(self._kernels[law](x, np.empty(size)))
+                    return
+                out.SetFromVector(drive_laws(self.model, x, want=(law,))[law])
+            return calc
+
+        def _calc_applied(self, context, out):
+            out.SetFromVector(saturate_torque(self._u.Eval(context), self.model.motor))
+
+    return Impl

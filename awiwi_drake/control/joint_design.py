@@ -1,0 +1,439 @@
+"""Per-joint design of the chain's joint-level stage for every finger and the hand (issue 10 item 2).
+
+The thesis designs its joint laws (impedance ch. 11, pole placement ch. 12, LQR ch. 13, SDRE
+ch. 14) on one joint and "applies them systematically to the 19 joints of the hand".  Here each
+independent DoF ``j`` of a finger/the hand gets its own *reduced model*: the link driven through
+its closed tendon force loop, built from the same components as the finger and linearised by
+Drake (:func:`joint_subsystem`, :func:`reduced_joint_models`):
+
+* a one-DoF link with the DoF's inertia ``M_jj = (S^T M(q_op) S)_jj`` and bearing damping;
+* the tendons acting on it (column ``j`` of ``P(q_op) S``, ``h = P_j q``) with the finger's motors,
+  spring law and operating-point forces (``components`` drive, the rig builder of ``rigs``);
+* the motor friction linearised in motion (:func:`design_motor`);
+* closed by the chain's own force stage (:class:`~awiwi_drake.control.chain.TendonForceStage`:
+  sharing (15.88), the (10.2) force law bank with the chain's gains, friction and ripple
+  compensation) with the desired joint torque ``tau_ref`` as input.
+
+Drake ``Linearize`` of that loop gives ``(A, B)`` on its full state; the model used for the
+design is its restriction to the measurable coordinates ``z = [q, qdot, tau, tau_dot]``
+(``T = [C_q; C_q A; C_tau; C_tau A]``, ``F = T A T^+``, ``G = T B``).  The restriction is exact
+when the row space of ``T`` is invariant under ``A`` (every tendon's force loop has the same
+dynamics: the other force combinations are neither excited by ``tau_ref`` nor seen in ``tau``);
+:attr:`JointReducedModel.invariance_residual` reports ``|T A - F T| / |T A|``.  Physically
+``M_jj qdd = tau - b qdot`` and ``tau`` follows ``tau_ref`` through the force loop, disturbed by
+the joint's own tendon stiffness ``K_jj = P_j^T K_t P_j`` (5.12) times ``qdd``.
+
+Designs on ``(F, G)`` (gains ``K_j`` of :class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw`,
+reference maps from :func:`~awiwi_drake.control.linear.reference_maps`):
+
+* ``pd``: ``K_j = [Kp, Kd, 0, 0]`` placing a closed-loop pole pair at
+  (``position_bandwidth``, ``damping_ratio``) exactly (the remainder of the characteristic
+  polynomial by the target pair is affine in ``(Kp, Kd)``: a 2 x 2 solve);
+* ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, M_jj
+  joint_bandwidth^2)`` (Fig 15.22, limited as 15.5.3 says for the cascade; measured: 0.5 Nm/rad on the
+  index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
+  +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
+  mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
+* ``pole-placement``: the double oscillator (12.13) by coefficient identification
+  (:func:`~awiwi_drake.control.pole_placement.place_by_identification`): ``omega1 = position_bandwidth``,
+  ``omega2`` the modulus of the joint's own open-loop pair (the link on its tendons through the force
+  loop, 270-1070 rad/s on the index), both damped to ``damping_ratio``.  Measured on the index (whole
+  finger, :func:`check_design_poles`): a fixed ``omega2`` of 300 or 1000 rad/s needs large torque
+  feedback and the neglected MCP/PIP/DIP coupling makes the finger unstable (+408 and +483 1/s);
+  with the joint's own pair the slowest whole-finger pole is -31 1/s;
+* ``lqr``: Drake ``LinearQuadraticRegulator`` on ``(F, G)`` with Bryson weights
+  (:class:`~awiwi_drake.parameters.joint_design.JointDesignParams`);
+* ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque
+  (each at its own equilibrium: the tendon forces, spring slopes and scheduled force gains move
+  with ``tau``), gains interpolated at the measured torque.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from pydrake.systems.controllers import LinearQuadraticRegulator
+
+from awiwi_drake.analysis.linear import LinearizationResult, linearize
+from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point
+from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
+                                             joint_inertia)
+from awiwi_drake.control.linear import reference_maps
+from awiwi_drake.control.pole_placement import (double_oscillator_polynomial, identification_system,
+                                                place_by_identification)
+from awiwi_drake.hand.coupling import LinearFingerCoupling
+from awiwi_drake.parameters.components import HysteresisParams, MotorParams
+from awiwi_drake.parameters.hand_control import HandChainParams
+from awiwi_drake.parameters.joint_design import JointDesignParams
+from awiwi_drake.rigs.base import OperatingPoint, Rig
+from awiwi_drake.rigs.rigs import _link_rig
+
+__all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models", "pair_remainder_gains",
+           "design_joint_gains", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
+
+DESIGNS = ("cascaded", "pole-placement", "lqr", "sdre")
+_TENDON_TOL = 1e-12
+
+
+@dataclass
+class JointReducedModel:
+    """One DoF's reduced model ``z' = F z + G tau_ref`` on ``z = [q - q_op, qdot, tau - tau_op, tau_dot]``."""
+
+    name: str
+    dof: int
+    A: np.ndarray                     # F (4 x 4)
+    B: np.ndarray                     # G (4 x 1)
+    inertia: float                    # M_jj [kg m^2]
+    damping: float                    # b_jj [Nm s/rad]
+    stiffness: float                  # K_jj = P_j^T K_t P_j [Nm/rad] (5.12), the joint's own tendons
+    tendons: tuple                    # indices of the tendons acting on the DoF
+    invariance_residual: float        # |T A - F T| / |T A| (0: the restriction is exact)
+    linearization: LinearizationResult
+    at_rest: "JointReducedModel | None" = None   # the same with (3.8) linearised at rest (the rig's own motor)
+
+    @property
+    def poles(self) -> np.ndarray:
+        return np.linalg.eigvals(self.A)
+
+
+def _dof_names(rig, S) -> list[str]:
+    names = list(rig.joint_names)
+    return [names[int(np.flatnonzero(S[:, j])[0])] for j in range(S.shape[1])]
+
+
+def design_motor(motor: MotorParams) -> MotorParams:
+    """The motor of the design model: (3.8) linearised *in motion* (its slope there is the viscous
+    ``gamma3``), no ripple.  Chosen: at rest ``atan``'s slope ``gamma1 gamma2 = 5.6 Nm s/rad`` (half of it
+    left by the force law's under-compensation) reflects through the tendons as a viscous joint damping
+    that vanishes as soon as the motors move faster than ``1/gamma1 = 0.1 rad/s``; a design counting on it
+    (``Kd = 0``) rings on a 0.2 rad step (measured on the index: +-0.15 rad at 10 Hz after 0.2 s).  The
+    ripple is a periodic disturbance of the motor angle, not a property of the joint."""
+    viscous = motor.viscous_friction if motor.friction else 0.0
+    return motor.replace(friction=False, ripple=False, damping=motor.damping + viscous)
+
+
+def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: HandChainParams | None = None,
+                    torque: float | None = None, friction: str = "motion"):
+    """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
+
+    Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (python backend), its
+    operating point and its chain design point (:func:`~awiwi_drake.control.chain.chain_design_point`
+    layout; close it with :func:`force_loop` or a :class:`~awiwi_drake.control.chain.TendonChainController`
+    with ``distribution="sharing"``).
+    ``torque``: the DoF torque at the point (default ``tau_op``); the tendon forces are
+    ``f_op + W_j (torque - tau_op)`` and an external torque ``-torque`` holds the link.
+    ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor, (3.8) at rest).
+    """
+    if friction not in ("motion", "rest"):
+        raise ValueError(f"joint_subsystem: friction = {friction!r}; use 'motion' or 'rest'")
+    p = params or HandChainParams()
+    point = point or chain_design_point(rig, params=p)
+    S, PS = point["selection"], point["coupling_matrix"]
+    k = S.shape[1]
+    if not 0 <= dof < k:
+        raise ValueError(f"joint_subsystem: dof = {dof} is not an independent DoF of {rig.name!r} (0..{k - 1})")
+    col = PS[:, dof]
+    active = np.flatnonzero(np.abs(col) > _TENDON_TOL * np.abs(col).max())
+    P_j = col[active][:, None]
+    name = _dof_names(rig, S)[dof]
+    coupling = LinearFingerCoupling(P_j, joint_names=[name], tendon_names=[rig.tendon_names[i] for i in active])
+    M = float(joint_inertia(rig, point["joint_angle"])[dof])
+    b = float(joint_damping(rig)[dof, dof])
+    design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
+    diagram, plant, drive, names = _link_rig(
+        name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=rig.spring,
+        coupling=coupling, inertia=M, damping=b, backend="python", hysteresis=HysteresisParams())
+    tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
+    tau = tau0 if torque is None else float(torque)
+    W = -np.linalg.pinv(P_j.T)
+    f = point["tendon_force"][active] + W[:, 0] * (tau - tau0)
+    if np.any(f <= 0):
+        raise ValueError(f"joint_subsystem: joint torque {tau} Nm slackens a tendon of {name} (forces {f} N)")
+    r_m = design_params.motor.pulley_radius
+    x = np.asarray(rig.spring.inverse_force(f), dtype=float)
+    theta = x / r_m                                    # h(0) = 0, no offsets: x = r_m theta at q = 0
+    from awiwi_drake.components.motor import motor_ripple_torque
+    u = r_m * f - np.asarray(motor_ripple_torque(theta, design_params.motor), dtype=float)
+    kt = np.asarray(rig.spring.stiffness(x), dtype=float)
+    op = OperatingPoint(np.concatenate([[0.0, 0.0], theta, np.zeros(active.size)]), u, np.array([-tau]),
+                        joint_angle=np.zeros(1), tendon_force=f, elongation=x, tendon_stiffness=kt,
+                        joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
+    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, rig.spring,
+              drive=drive, coupling=coupling, tension_only=True)
+    sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
+                     torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])
+    return sub, op, sub_point
+
+
+def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None):
+    """A subsystem of :func:`joint_subsystem` closed by the chain's force stage (sharing, continuous):
+    the :class:`~awiwi_drake.control.base.ClosedLoop` with input ``joint_torque_reference``, and a context
+    at its operating point."""
+    stage = TendonForceStage(sub.coupling, sub.spring, sub.params, params or HandChainParams(), point=point,
+                             distribution="sharing")
+    loop = closed_loop(sub, stage, rate_hz=None, estimator=None)
+    op = point["op"]
+    return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
+
+
+def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
+    A, B = lin.A, lin.B
+    Cq, Ct = lin.output("joint_angle").C, lin.output("joint_torque").C
+    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A])
+    scale = np.abs(T @ B).max() if np.abs(T @ B).max() > 0 else 1.0
+    for row, nm in ((Cq, "q"), (Cq @ A, "qdot"), (Ct, "tau")):
+        if np.abs(row @ B).max() > 1e-9 * scale:          # only tau_dot' may see the input directly
+            raise ValueError(f"reduced joint model: {nm} depends on tau_ref directly (|{nm}' B| > 0)")
+    TA = T @ A
+    F = TA @ np.linalg.pinv(T)
+    res = float(np.linalg.norm(TA - F @ T) / max(np.linalg.norm(TA), 1e-300))
+    return F, T @ B, res
+
+
+def reduced_joint_models(rig: Any, *, point: dict | None = None,
+                         params: HandChainParams | None = None) -> list[JointReducedModel]:
+    """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring)."""
+    p = params or HandChainParams()
+    point = point or chain_design_point(rig, params=p)
+    S = point["selection"]
+    names = _dof_names(rig, S)
+    M = joint_inertia(rig, point["joint_angle"])
+    b = np.diag(joint_damping(rig))
+    kt = np.asarray(point["op"].tendon_stiffness, dtype=float)
+    models = []
+    for j in range(S.shape[1]):
+        col = point["coupling_matrix"][:, j]
+        tendons = tuple(int(i) for i in np.flatnonzero(np.abs(col) > 0))
+        pair = []
+        for friction in ("motion", "rest"):
+            sub, _, sub_point = joint_subsystem(rig, j, point=point, params=p, friction=friction)
+            loop, ctx = force_loop(sub, sub_point, p)
+            lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
+                            outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
+            F, G, res = _restrict(lin)
+            pair.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
+                                          res, lin))
+        pair[0].at_rest = pair[1]
+        models.append(pair[0])
+    return models
+
+
+def pair_remainder_gains(F: np.ndarray, G: np.ndarray, omega: float, zeta: float, columns=(0, 1)) -> np.ndarray:
+    """Gains on the state ``columns`` (others 0) making ``s^2 + 2 zeta omega s + omega^2`` a factor of
+    ``det(sI - F + G K)`` (the remainder of the division is affine in the gains: a square solve)."""
+    J, c0 = identification_system(F, G)
+    d = np.array([1.0, 2.0 * zeta * omega, omega ** 2])
+
+    def rem(c):
+        return np.polydiv(np.concatenate([[1.0], c]), d)[1][-2:]
+
+    r0 = rem(c0)
+    R = np.stack([rem(c0 + J[:, c]) - r0 for c in columns], axis=1)
+    g = np.linalg.solve(R, -r0)
+    K = np.zeros(F.shape[0])
+    K[list(columns)] = g
+    return K
+
+
+def _slowest_damping(F, G, K) -> float:
+    """Damping ratio of the slowest closed-loop mode (1 for a real pole)."""
+    lam = np.linalg.eigvals(F - G @ K)
+    s = lam[np.argmin(np.abs(lam))]
+    return float(-s.real / abs(s)) if abs(s) > 0 else 1.0
+
+
+def _impedance_gains(model: JointReducedModel, kp: float, zeta: float) -> np.ndarray:
+    """``[Kp, Kd, 0, 0]`` with ``Kp`` given and ``Kd >= 0`` giving the slowest closed-loop mode of the reduced
+    model (friction in motion) the damping ratio ``zeta`` (the smallest such ``Kd`` on ``[0, 20 sqrt(Kp M_jj)]``;
+    ``Kd = 0`` when the drive alone damps it that much).  At rest the reflected motor friction adds damping."""
+    from scipy.optimize import brentq
+    F, G = model.A, model.B
+
+    def excess(kd):
+        return _slowest_damping(F, G, np.array([[kp, kd, 0.0, 0.0]])) - zeta
+
+    grid = np.linspace(0.0, 20.0 * np.sqrt(kp * model.inertia), 81)
+    ex = np.array([excess(k) for k in grid])
+    if ex[0] >= 0:
+        return np.array([kp, 0.0, 0.0, 0.0])
+    i = int(np.argmax(ex >= 0))
+    if ex[i] < 0:
+        raise ValueError(f"cascaded design of {model.name}: no Kd <= {grid[-1]:.3g} gives the slowest mode a damping "
+                         f"ratio {zeta} (best {ex.max() + zeta:.3f})")
+    return np.array([kp, brentq(excess, grid[i - 1], grid[i], xtol=1e-12 * grid[-1]), 0.0, 0.0])
+
+
+def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDesignParams | None = None,
+                       chain: HandChainParams | None = None) -> np.ndarray:
+    """The gain row ``K_j`` (4,) of one DoF for ``design`` in :data:`DESIGNS` (module docstring)."""
+    p = params or JointDesignParams()
+    c = chain or HandChainParams()
+    F, G = model.A, model.B
+    if design == "cascaded":
+        return _impedance_gains(model, min(c.joint_stiffness, model.inertia * c.joint_bandwidth ** 2), p.damping_ratio)
+    if design == "pole-placement":
+        lam = np.linalg.eigvals(F)
+        pair = lam[np.argmax(np.abs(lam.imag))]          # the link on its tendons through the force loop
+        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, abs(pair), p.damping_ratio)
+        return place_by_identification(F, G, target).ravel()
+    if design in ("lqr", "sdre"):
+        Q = np.diag(1.0 / np.array([p.lqr_angle_error, p.lqr_velocity, p.lqr_torque_error, p.lqr_torque_rate]) ** 2)
+        R = np.array([[1.0 / p.lqr_input ** 2]])
+        K, _ = LinearQuadraticRegulator(F, G, Q, R)
+        return np.asarray(K).ravel()
+    raise ValueError(f"unknown joint design {design!r}; use one of {', '.join(DESIGNS)}")
+
+
+@dataclass
+class JointDesign:
+    """A designed joint stage: the law for all DoF, its reduced models and the designed closed-loop poles."""
+
+    design: str
+    law: JointStateFeedbackLaw
+    models: list
+    gains: np.ndarray                 # (k, 4)
+    design_poles: list                # per DoF: eigenvalues of F - G K_j
+
+    def table(self) -> str:
+        rows = [f"{'DoF':>10} {'M_jj':>10} {'K_jj':>9} {'Kp':>10} {'Kd':>10} {'K_tau':>9} {'K_taud':>9}  slowest pole"]
+        for m, K, lam in zip(self.models, self.gains, self.design_poles):
+            s = lam[np.argmin(np.abs(lam))]
+            rows.append(f"{m.name:>10} {m.inertia:10.3g} {m.stiffness:9.3g} {K[0]:10.4g} {K[1]:10.4g} {K[2]:9.4g} "
+                        f"{K[3]:9.4g}  {s.real:.4g}{s.imag:+.4g}j")
+        return "\n".join(rows)
+
+
+def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None = None,
+                       params: JointDesignParams | None = None, chain: HandChainParams | None = None,
+                       models: list | None = None) -> JointDesign:
+    """Design the joint stage ``design`` for every DoF of a finger/the hand (module docstring)."""
+    if design not in DESIGNS:
+        raise ValueError(f"unknown joint design {design!r}; use one of {', '.join(DESIGNS)}")
+    c = chain or HandChainParams()
+    p = params or JointDesignParams()
+    point = point or chain_design_point(rig, params=c)
+    models = models or reduced_joint_models(rig, point=point, params=c)
+    gains = np.array([design_joint_gains(m, design, params=p, chain=c) for m in models])
+    Nx, Nu = [], []
+    for m in models:
+        nx, nu = reference_maps(m.A, m.B, np.array([1.0, 0.0, 0.0, 0.0]))
+        Nx.append(nx)
+        Nu.append(float(nu[0]))
+    S = point["selection"]
+    kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point["joint_angle"],
+              torque_op=point["torque_offset"], name=design.replace("-", "_"))
+    if design == "sdre":
+        law = _sdre_law(rig, point, c, p, gains, kw)
+    else:
+        law = JointStateFeedbackLaw(rig.coupling, S, rig.params.motor.pulley_radius, gains, **kw)
+    poles = [np.linalg.eigvals(m.A - m.B @ K[None, :]) for m, K in zip(models, gains)]
+    return JointDesign(design, law, models, gains, poles)
+
+
+def _sdre_law(rig, point, c, p, gains, kw):
+    """The SDRE (ch. 14) per DoF: LQR on the pointwise-linear model at each tabulated joint torque."""
+    S = point["selection"]
+    k = S.shape[1]
+    grid = np.linspace(-p.sdre_torque_range, p.sdre_torque_range, p.sdre_points)
+    table = np.empty((k, grid.size, 4))
+    for j in range(k):
+        for i, dt in enumerate(grid):
+            sub, _, sub_point = joint_subsystem(rig, j, point=point, params=c, torque=point["torque_offset"][j] + dt)
+            loop, ctx = force_loop(sub, sub_point, c)
+            lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
+                            outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
+            F, G, _ = _restrict(lin)
+            model = JointReducedModel("", j, F, G, 0.0, 0.0, 0.0, (), 0.0, lin)
+            table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c)
+    return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
+
+
+def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None,
+                           params: JointDesignParams | None = None, chain: HandChainParams | None = None,
+                           distribution: str | None = None, rate_hz: float = 3000.0, **kw) -> TendonChainController:
+    """Registered factories ``cascaded``, ``lqr`` (...) for fingers and the hand: the chain with the joint
+    stage ``design`` (:func:`design_joint_stage`) designed at ``op`` (default: the rig's operating point).
+
+    ``kw``: ``mechanical_stiffness`` (:func:`~awiwi_drake.control.chain.chain_design_point`), ``gains``,
+    ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    c = chain or HandChainParams()
+    point = chain_design_point(rig, op, params=c, mechanical_stiffness=kw.pop("mechanical_stiffness", None))
+    d = design_joint_stage(rig, design, point=point, params=params, chain=c)
+    ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
+                                 name=f"{design.replace('-', '_')}_chain", **kw)
+    ctrl.design["joint_design"] = d
+    return ctrl
+
+
+@dataclass
+class PoleCheck:
+    """The per-DoF designs against the whole loop's linearisation (:func:`check_design_poles`).
+
+    ``poles``: eigenvalues of the whole continuous loop (Drake ``Linearize``); ``z_poles``: those of its
+    restriction ``A_z = T A T^+`` to the DoF coordinates ``z`` (a subset of ``poles`` when
+    ``invariance_residual`` ~ 0); ``design``: the per-DoF closed loops ``F_j - G_j K_j`` (block
+    diagonal ``D``).  ``A_z = D + E`` with ``E`` the coupling the per-joint models neglect (the mass
+    matrix, tendons shared by joints, the joints' inertia seen through ``M^-1``).  In the design's
+    eigenvector basis ``V^-1 A_z V = Lambda + V^-1 E V``; by Gershgorin's theorem every z pole lies in a
+    disc around ``lambda_i + (V^-1 E V)_ii`` of radius ``sum_{l != i} |(V^-1 E V)_il|`` (:meth:`discs`):
+    the tolerance that the neglected coupling allows, zero for a decoupled joint.
+    """
+
+    poles: np.ndarray
+    z_poles: np.ndarray
+    design: np.ndarray                # D (4k x 4k)
+    coupling: np.ndarray              # E (4k x 4k)
+    invariance_residual: float
+    dof_names: list
+
+    @property
+    def design_poles(self) -> np.ndarray:
+        return np.linalg.eigvals(self.design)
+
+    def discs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(design poles, disc centres, radii)`` of the Gershgorin discs (class docstring)."""
+        lam, V = np.linalg.eig(self.design)
+        F = np.linalg.solve(V, self.coupling @ V)
+        return lam, lam + np.diag(F), np.abs(F).sum(axis=1) - np.abs(np.diag(F))
+
+    def outside_discs(self, rtol: float = 1e-9) -> np.ndarray:
+        """The z poles outside every disc (empty: the coupling bound holds)."""
+        _, c, r = self.discs()
+        return np.array([z for z in self.z_poles
+                         if not np.any(np.abs(z - c) <= r + rtol * max(1.0, abs(z)))])
+
+    @property
+    def stable(self) -> bool:
+        return bool(np.all(self.poles.real < 0))
+
+
+def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainParams | None = None,
+                       params: JointDesignParams | None = None) -> PoleCheck:
+    """Linearise a finger/the hand closed by the chain with the per-DoF ``design`` (continuous: sharing
+    (15.88), the true joint state) and compare its poles with the designs (:class:`PoleCheck`).
+
+    Use a rig built with the design's motor model (``params.replace(motor=design_motor(params.motor))``)
+    and ``backend="python"`` for the comparison the per-joint models make."""
+    c = chain or HandChainParams()
+    ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing")
+    d = ctrl.design["joint_design"]
+    loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+    op = ctrl.operating_point
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
+    lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle", "joint_torque"))
+    A = lin.A
+    S = ctrl.design["selection"]
+    Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
+    Ct = S.T @ lin.output("joint_torque").C
+    k = S.shape[1]
+    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Ct[j] @ A]) for j in range(k)])
+    TA = T @ A
+    Az = TA @ np.linalg.pinv(T)
+    res = float(np.linalg.norm(TA - Az @ T) / np.linalg.norm(TA))
+    D = np.zeros_like(Az)
+    for j, (m, K) in enumerate(zip(d.models, d.gains)):
+        D[4 * j:4 * j + 4, 4 * j:4 * j + 4] = m.A - m.B @ K[None, :]
+    return PoleCheck(np.linalg.eigvals(A), np.linalg.eigvals(Az), D, Az - D, res, [m.name for m in d.models])

@@ -1,0 +1,198 @@
+"""The joint-level stage of the hand's control chain (ch. 11-14 laws per joint): one vectorised system.
+
+The chain (:mod:`awiwi_drake.control.chain`) turns desired joint torques into motor torques
+(force distribution, ch. 7, and the tendon force loop, ch. 10).  Its first stage is a plug-in:
+:class:`JointStage_` evaluates a *joint law* for all independent DoF ``q_d = S^+ q`` of a finger
+or the hand at once and outputs
+
+* ``joint_torque_reference`` (n_dof) [Nm] -- the desired DoF torques ``tau_ref``;
+* ``joint_stiffness_reference`` [Nm/rad] -- the desired mechanical stiffness (co-contraction) for
+  the distribution, constant (per DoF, or each finger's row-major block).
+
+Each DoF ``j`` is controlled on its own *measurable* coordinates (what the real hand has: the
+tendon-length estimate of ``q``, ``qdot`` and the spring sensors' tendon forces)::
+
+    z_j = [q_j - q_op_j,  qdot_j,  tau_j - tau_op_j,  tau_dot_j],
+    tau = -(P(q) S)^T f                     the joint torque of the measured tendon forces,
+    tau_dot = -(P(q) S)^T k_t(f) (r_m omega + P(q) qdot)     its rate (f = phi(x), x = r_m theta + h(q) + x0),
+
+with the per-DoF linear law of :class:`JointStateFeedbackLaw`::
+
+    tau_ref_j = tau_op_j + Nu_j dr_j - K_j . (z_j - Nx_j dr_j),     dr_j = (S^+ q_ref)_j - q_op_j,
+
+(``(Nx, Nu)`` the equilibrium family of :func:`awiwi_drake.control.linear.reference_maps`).
+PD / impedance (11.4) is the case ``K_j = [K, D, 0, 0]`` (then no force input is read); pole
+placement (ch. 12) and LQR (ch. 13) use the full ``K_j``; the gains come from each joint's own
+reduced model (:mod:`awiwi_drake.control.joint_design`).  ``state_dependent`` laws (SDRE, ch. 14)
+use :class:`JointGainScheduleLaw`, gains interpolated in the joint torque.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import clip
+from awiwi_drake.control.base import StaticLaw, check_gains
+from awiwi_drake.control.tendon_force import interp
+from awiwi_drake.hand.coupling import dof_selection
+
+__all__ = ["joint_inertia", "joint_damping", "JointStateFeedbackLaw", "JointGainScheduleLaw", "JointStage_",
+           "JointStage", "measured_joint_coordinates"]
+
+Z_NAMES = ("joint_angle", "joint_velocity", "joint_torque", "joint_torque_rate")
+
+
+def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
+    """Inertia of each independent DoF, ``diag(S^T M(q) S)`` [kg m^2] (``full``: the matrix), from the rig's plant."""
+    plant = rig.plant
+    ctx = plant.CreateDefaultContext()
+    plant.SetPositions(ctx, np.asarray(q, dtype=float))
+    S = dof_selection(rig.coupling)
+    M = S.T @ plant.CalcMassMatrix(ctx) @ S
+    return M if full else np.diag(M).copy()
+
+
+def joint_damping(rig: Any) -> np.ndarray:
+    """Bearing damping of each independent DoF, ``S^T diag(b) S`` (matrix) [Nm s/rad], from the rig's plant."""
+    plant = rig.plant
+    b = np.array([plant.get_joint(j).default_damping_vector()[0] for j in plant.GetJointIndices()])
+    S = dof_selection(rig.coupling)
+    return S.T @ np.diag(b) @ S
+
+
+def measured_joint_coordinates(coupling, S, Sp, r_m: float, u) -> tuple:
+    """``(q_d, qdot_d, tau, tau_dot)`` of the DoF from the measurements ``u`` (module docstring)."""
+    q, v = u["joint_angle"], u["joint_velocity"]
+    P = np.asarray(coupling.P(q))
+    PS = P @ S
+    f, kt, w = u["tendon_force"], u["tendon_stiffness"], u["motor_velocity"]
+    tau = -(PS.T @ f)
+    tau_dot = -(PS.T @ (kt * (r_m * w + P @ v)))
+    return Sp @ q, Sp @ v, tau, tau_dot
+
+
+class JointStateFeedbackLaw(StaticLaw):
+    """Per-DoF linear state feedback on ``z_j`` (module docstring); one call for all DoF.
+
+    Parameters
+    ----------
+    coupling : the finger/hand coupling (``P(q)``), ``selection`` ``S`` (n x k)
+    pulley_radius : r_m [m] (the tendon force rate)
+    gains : (k, 4) ``K_j``; ``state_map`` (k, 4) ``Nx_j``; ``input_map`` (k,) ``Nu_j``
+    joint_angle_op, torque_op : (k,) ``q_op`` on the DoF and ``tau_op``
+    """
+
+    def __init__(self, coupling, selection, pulley_radius: float, gains, *, state_map, input_map,
+                 joint_angle_op, torque_op, name: str = "joint_state_feedback"):
+        S = np.asarray(selection, dtype=float)
+        if S.ndim != 2 or S.shape[0] < S.shape[1]:
+            raise ValueError(f"{name}: selection must be n x n_dof (n >= n_dof), got {S.shape}")
+        n, k = S.shape
+        self.name = name
+        self.coupling, self.S, self.Sp = coupling, S, np.linalg.pinv(S)
+        self.r_m = float(pulley_radius)
+        self.K = check_gains("K", gains, shape=(k, 4), owner=name)
+        self.Nx = check_gains("state_map", state_map, shape=(k, 4), owner=name)
+        self.Nu = check_gains("input_map", input_map, shape=(k,), owner=name)
+        self.q0 = check_gains("joint_angle_op", joint_angle_op, shape=(k,), owner=name)
+        self.tau0 = check_gains("torque_op", torque_op, shape=(k,), owner=name)
+        self.uses_forces = bool(np.any(self.K[:, 2:] != 0.0))
+        m = coupling.num_tendons
+        self.inputs = {"joint_angle_reference": n, "joint_angle": n, "joint_velocity": n}
+        if self.uses_forces:
+            self.inputs.update(tendon_force=m, tendon_stiffness=m, motor_velocity=m)
+        self.output_size = k
+
+    def coordinates(self, u):
+        """``z`` (k x 4) and ``dr`` (k,) for the inputs ``u``."""
+        if self.uses_forces:
+            qd, vd, tau, taud = measured_joint_coordinates(self.coupling, self.S, self.Sp, self.r_m, u)
+            z = np.stack([qd - self.q0, vd, tau - self.tau0, taud], axis=1)
+        else:
+            qd, vd = self.Sp @ u["joint_angle"], self.Sp @ u["joint_velocity"]
+            zero = 0.0 * vd
+            z = np.stack([qd - self.q0, vd, zero, zero], axis=1)
+        dr = self.Sp @ u["joint_angle_reference"] - self.q0
+        return z, dr
+
+    def gains(self, z):
+        return self.K
+
+    def __call__(self, u):
+        z, dr = self.coordinates(u)
+        K = self.gains(z)
+        err = z - self.Nx * dr[:, None]
+        return self.tau0 + self.Nu * dr - np.sum(K * err, axis=1)
+
+
+class JointGainScheduleLaw(JointStateFeedbackLaw):
+    """:class:`JointStateFeedbackLaw` with gains interpolated in the measured joint torque deviation.
+
+    ``schedule`` (p,) torque deviations ``tau - tau_op`` [Nm] (increasing) and ``table`` (k, p, 4)
+    the gains designed there (the SDRE's pointwise-linear models, ch. 14, tabulated per DoF).
+    Outside the table the end gains are held (clamped, not extrapolated).
+    """
+
+    def __init__(self, coupling, selection, pulley_radius, schedule, table, **kw):
+        table = np.asarray(table, dtype=float)
+        super().__init__(coupling, selection, pulley_radius, table[:, table.shape[1] // 2, :], **kw)
+        self.schedule = check_gains("schedule", schedule, owner=self.name)
+        if self.schedule.ndim != 1 or np.any(np.diff(self.schedule) <= 0):
+            raise ValueError(f"{self.name}: schedule must be strictly increasing, got {self.schedule}")
+        if table.shape != (self.S.shape[1], self.schedule.size, 4):
+            raise ValueError(f"{self.name}: table has shape {table.shape}, expected "
+                             f"{(self.S.shape[1], self.schedule.size, 4)}")
+        self.table = table
+        if not self.uses_forces:
+            raise ValueError(f"{self.name}: a torque-scheduled law needs the torque feedback (K[:, 2:] != 0)")
+
+    def gains(self, z):
+        lo, hi = float(self.schedule[0]), float(self.schedule[-1])
+        rows = []
+        for j in range(self.S.shape[1]):
+            t = clip(z[j, 2], lo, hi)
+            rows.append([interp(t, self.schedule, self.table[j, :, c]) for c in range(4)])
+        return np.array(rows, dtype=object if np.asarray(z).dtype == object else float)
+
+
+@TemplateSystem.define("JointStage_")
+def JointStage_(T):
+    """The chain's joint-level stage: a joint law for all DoF (module docstring).
+
+    Inputs: the law's ports (``joint_angle_reference``, ``joint_angle``, ``joint_velocity`` (n plant
+    joints) and, for laws with torque feedback, ``tendon_force``, ``tendon_stiffness``,
+    ``motor_velocity`` (m)).  Outputs ``joint_torque_reference`` (n_dof, feedthrough) and
+    ``joint_stiffness_reference`` (constant).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, law, mechanical_stiffness, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not isinstance(law, StaticLaw):
+                raise ValueError(f"JointStage: law must be a StaticLaw, got {type(law).__name__}")
+            self.law = law
+            self.Kmech = check_gains("mechanical_stiffness", np.ravel(mechanical_stiffness), owner="JointStage")
+            self._ports = [(nm, self.DeclareVectorInputPort(nm, int(sz))) for nm, sz in law.inputs.items()]
+            self.DeclareVectorOutputPort("joint_torque_reference", int(law.output_size), self._calc_tau,
+                                         prerequisites_of_calc={p.ticket() for _, p in self._ports})
+            self.DeclareVectorOutputPort("joint_stiffness_reference", self.Kmech.size, self._calc_K,
+                                         prerequisites_of_calc={self.nothing_ticket()})
+            self.set_name(law.name)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.law, other.Kmech, converter=converter)
+
+        def _calc_tau(self, context, out):
+            out.SetFromVector(np.asarray(self.law({nm: p.Eval(context) for nm, p in self._ports})).reshape(-1))
+
+        def _calc_K(self, context, out):
+            out.SetFromVector(self.Kmech.copy())
+
+    return Impl
+
+
+JointStage = JointStage_[None]

@@ -1,0 +1,53 @@
+"""Per-joint design targets of the hand's joint-level stage (:mod:`awiwi_drake.control.joint_design`).
+
+Each independent DoF of a finger/the hand is designed on its own reduced model: the link (its
+inertia ``M_jj`` at the operating point) driven through the closed tendon force loop, in the
+measurable coordinates ``z = [q, qdot, tau, tau_dot]`` (Drake ``Linearize``).  The thesis designed
+its laws on the flexible joint (Tables 12.1, 13.1, 14.2) and says only that they were "applied to
+the 19 joints of the hand"; the per-joint targets below are chosen and say why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from awiwi_drake.parameters.base import Parameters, param
+
+__all__ = ["JointDesignParams"]
+
+
+@dataclass(frozen=True)
+class JointDesignParams(Parameters):
+    """Targets of the per-joint designs on the reduced model ``z = [q, qdot, tau, tau_dot]``."""
+
+    position_bandwidth: float = param(
+        60.0, unit="rad/s", low=0.0, low_inclusive=False,
+        source="chosen: the chain's joint_bandwidth (HandChainParams): a fifth of the 300 rad/s force loop, so "
+               "the joint pair stays behind the force loop it acts through (15.5.3)",
+        doc="pole placement: omega1 of (12.13) (omega2: the joint's own tendon-link pair, see joint_design)")
+    damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
+                                 source="chosen: as xi1 = xi2 = 0.7 of Table 12.1",
+                                 doc="cascaded: of the slowest mode; pole placement: xi1 = xi2 of (12.13)")
+    lqr_angle_error: float = param(
+        0.05, unit="rad", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule, an acceptable joint error of ~3 deg (the compare step is 0.2 rad)")
+    lqr_velocity: float = param(
+        5.0, unit="rad/s", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule, ~ the velocity of a 0.2 rad step at the 60 rad/s joint bandwidth (12 rad/s) "
+               "halved")
+    lqr_torque_error: float = param(
+        0.05, unit="Nm", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule, 0.05 Nm ~ 10 % of a finger joint's torque range (Fig 15.22: 0.5 Nm/rad x 0.2 rad "
+               "is 0.1 Nm)")
+    lqr_torque_rate: float = param(
+        5.0, unit="Nm/s", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule, the torque error above over ~10 ms")
+    lqr_input: float = param(
+        0.1, unit="Nm", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule on the desired joint torque (twice the torque error: the input may move more "
+               "than the state)")
+    sdre_torque_range: float = param(
+        0.2, unit="Nm", low=0.0, low_inclusive=False,
+        source="chosen: the SDRE table spans tau_op +- 0.2 Nm (a 0.2 rad step on 0.5-1 Nm/rad joints)")
+    sdre_points: int = param(5, unit="-", low=2,
+                             source="chosen: 5 pointwise-linear models per DoF (the spring slope is smooth, Fig 4.8b)")

@@ -1,0 +1,148 @@
+"""Per-joint design of the chain's joint stage (issue 10 item 2): each DoF's reduced model is the link
+driven through its closed tendon force loop (Drake Linearize of a subsystem built from the finger's own
+parts); the designed poles appear in the linearised closed loop exactly where the reduced model is exact,
+and within the Gershgorin discs of the neglected coupling otherwise."""
+
+import numpy as np
+import pytest
+from pydrake.systems.primitives import Linearize
+
+from _fd import check_system_autodiff_matches_fd
+from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
+from awiwi_drake.control.chain import TendonChainController
+from awiwi_drake.control.joint_design import (check_design_poles, design_joint_stage, design_motor, joint_subsystem,
+                                              reduced_joint_models)
+from awiwi_drake.control.joint_stage import JointStage, JointStateFeedbackLaw
+from awiwi_drake.control.pole_placement import double_oscillator_polynomial
+from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.hand import FingerRigParams
+from awiwi_drake.parameters.hand_control import HandChainParams
+from awiwi_drake.parameters.joint_design import JointDesignParams
+
+DESIGNS = ("cascaded", "pole-placement", "lqr")
+
+
+def _design_rig(finger="index"):
+    """The finger with the design model's motor ((3.8) linearised in motion), python backend."""
+    p = FingerRigParams.for_finger(finger)
+    return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
+
+
+def test_reduced_model_is_the_link_on_its_closed_force_loop():
+    """z = [q, qdot, tau, tau_dot]: the restriction of the subsystem's Linearize is exact (the other tendon
+    force combinations are neither excited nor seen), its link row is M_jj qdd = tau - b qdot, and its torque
+    row is the force loop's: with (10.11) every tendon's force obeys f'' = w^2 (f_ref - f) - 2 xi w f' +
+    k_t P_j qdd, so tau'' = w^2 tau_ref - (w^2 + K_jj / M_jj) tau + ... (qdd = tau / M_jj - ...; the joint's
+    own tendon stiffness K_jj = P_j^T K_t P_j (5.12) stiffens the torque loop)."""
+    rig = finger_diagram(finger="index", backend="python")
+    w = HandChainParams().force_bandwidth
+    for m in reduced_joint_models(rig):
+        assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
+        np.testing.assert_allclose(m.A[0], [0, 1, 0, 0], atol=1e-9)
+        np.testing.assert_allclose(m.A[1], [0, -m.damping / m.inertia, 1 / m.inertia, 0],
+                                   atol=1e-9 / m.inertia, rtol=1e-9)
+        np.testing.assert_allclose(m.A[2], [0, 0, 0, 1], atol=1e-9)
+        np.testing.assert_allclose(m.B[:3, 0], 0, atol=1e-12 * abs(m.B[3, 0]))
+        assert m.B[3, 0] == pytest.approx(w ** 2, rel=1e-5)            # (10.11): w^2 of the force error
+        assert m.A[3, 2] == pytest.approx(-(w ** 2 + m.stiffness / m.inertia), rel=1e-5)
+        # the joint's stiffness is its own tendons' P_j^T K_t P_j (5.12)
+        assert m.stiffness == pytest.approx(float(np.sum(rig.operating_point().joint_stiffness[m.dof, m.dof])), rel=1e-9)
+
+
+@pytest.mark.parametrize("design", DESIGNS)
+def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
+    """Where the reduced model is exact -- the one-DoF subsystem of the index MCP built from the finger's
+    parts, closed by the whole chain (joint stage reading tau from the measured forces, sharing, force law)
+    -- Drake's Linearize has the designed poles (plus the force modes the joint does not see)."""
+    rig = finger_diagram(finger="index", backend="python")
+    d = design_joint_stage(rig, design)
+    j = 1
+    sub, op, point = joint_subsystem(rig, j, point=None)
+    m, K = d.models[j], d.gains[j]
+    law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
+                                state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
+                                torque_op=point["torque_offset"])
+    loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
+                       estimator=None)
+    ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
+    assert np.abs(loop.diagram.EvalTimeDerivatives(ctx).CopyToVector()).max() < 1e-9
+    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
+                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index())
+    actual = np.linalg.eigvals(lin.A())
+    designed = np.linalg.eigvals(m.A - m.B @ K[None, :])
+    for lam in designed:
+        assert np.min(np.abs(actual - lam)) < 1e-8 * abs(lam), (lam, actual)
+    assert np.all(actual.real < 0)
+    # and the loop's DC gain from the reference to the joint angle is 1 (reference maps)
+    assert (lin.D() - lin.C() @ np.linalg.solve(lin.A(), lin.B()))[0, 0] == pytest.approx(1.0, rel=1e-8)
+
+
+@pytest.mark.parametrize("design", DESIGNS)
+def test_whole_finger_poles_against_the_per_joint_designs(design):
+    """Linearize of the whole index closed by the chain (continuous): the DoF coordinates z span an invariant
+    subspace (its poles are poles of the loop); the abduction, decoupled from the others by the routing's
+    symmetry, has exactly its designed poles; every other z pole lies in a Gershgorin disc of the coupling
+    E = A_z - D the per-joint models neglect (mass matrix, shared PIP/DIP tendons); the loop is stable."""
+    c = check_design_poles(_design_rig(), design)
+    assert c.invariance_residual < 1e-10
+    for z in c.z_poles:
+        assert np.min(np.abs(c.poles - z)) < 1e-8 * max(1.0, abs(z)), z
+    E = c.coupling
+    assert np.abs(E[:4]).max() < 1e-9 * np.abs(c.design).max() and np.abs(E[:, :4]).max() < 1e-9 * np.abs(c.design).max()
+    for lam in np.linalg.eigvals(c.design[:4, :4]):     # the abduction q20
+        assert np.min(np.abs(c.z_poles - lam)) < 1e-8 * abs(lam)
+    assert c.outside_discs().size == 0
+    assert c.stable, c.poles[c.poles.real >= 0]
+
+
+def test_pole_placement_places_the_double_oscillator_on_each_joint():
+    """(12.13) per DoF: omega1 = position_bandwidth, omega2 = |the joint's own open-loop pair|, both damped."""
+    rig = finger_diagram(finger="ring", backend="python")
+    p = JointDesignParams()
+    d = design_joint_stage(rig, "pole-placement", params=p)
+    for m, poles in zip(d.models, d.design_poles):
+        lam = m.poles
+        w2 = abs(lam[np.argmax(np.abs(lam.imag))])
+        want = np.roots(double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, w2, p.damping_ratio))
+        np.testing.assert_allclose(np.sort_complex(poles), np.sort_complex(want), rtol=1e-7)
+
+
+def test_joint_stage_with_torque_feedback_converts_to_autodiff():
+    """The LQR stage reads tau = -(PS)^T f and tau_dot = -(PS)^T k_t (r_m omega + P qdot) from the
+    measurements; its derivatives equal finite differences (thumb: P(q) varies), and d tau_ref / d f is
+    the closed form K_tau * (-(PS)^T) per DoF."""
+    rig = finger_diagram(finger="thumb", backend="python")
+    d = design_joint_stage(rig, "lqr")
+    S = d.law.S
+    n, k = S.shape
+    m = rig.coupling.num_tendons
+    op = rig.operating_point()
+    rng = np.random.default_rng(5)
+    q = op.joint_angle + rng.normal(0, 0.05, n)
+    jac = check_system_autodiff_matches_fd(JointStage(d.law, np.ones(k)), [], dict(
+        joint_angle_reference=op.joint_angle + rng.normal(0, 0.1, n), joint_angle=q,
+        joint_velocity=rng.normal(0, 0.5, n), tendon_force=op.tendon_force + rng.normal(0, 1, m),
+        tendon_stiffness=op.tendon_stiffness * (1 + rng.normal(0, 0.05, m)), motor_velocity=rng.normal(0, 0.5, m)),
+        outputs=["joint_torque_reference"], rtol=1e-5)
+    J = jac["joint_torque_reference"][0]
+    PS = np.asarray(rig.coupling.P(q), float) @ S
+    df = J[:, 3 * n:3 * n + m]                     # inputs in port order: q_ref, q, qdot, f, k_t, omega
+    np.testing.assert_allclose(df, d.gains[:, 2:3] * PS.T, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("finger", ["ring", "thumb"])
+def test_joint_stage_controllers_run_on_other_fingers(finger):
+    """Registered for every finger and the hand; designed per DoF; a short 3 kHz step through the
+    estimator keeps the tendons taut and the loop finite (tracking is measured by compare)."""
+    from awiwi_drake.analysis import simulate
+    for name in ("pole-placement", "lqr"):
+        assert name in controller_names(f"finger-{finger}") and name in controller_names("hand")
+        rig = finger_diagram(finger=finger)
+        loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
+        op = rig.operating_point()
+        ref = op.joint_angle.copy()
+        ref[1] += 0.1
+        ctx = loop.create_context(op, references={"joint_angle_reference": ref})
+        res = simulate(loop.diagram, ctx, 0.1, log=("joint_angle", "tendon_force"), max_step=1 / 3000, accuracy=1e-3)
+        assert np.all(res["tendon_force"] > 0.0)
+        assert abs(res["joint_angle"][-1][1] - ref[1]) < abs(res["joint_angle"][0][1] - ref[1])
