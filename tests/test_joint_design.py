@@ -22,9 +22,17 @@ from awiwi_drake.parameters.joint_design import JointDesignParams
 DESIGNS = ("cascaded", "pole-placement", "lqr")
 
 
+def _python_rig(finger="index"):
+    """The finger on the python backend (every state-only output declared so, for the continuous linearisations
+    of these design checks), without the spring hysteresis: that backend does not carry its state, and the
+    per-joint design models have none."""
+    return finger_diagram(finger=finger, backend="python",
+                          params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False))
+
+
 def _design_rig(finger="index"):
-    """The finger with the design model's motor ((3.8) linearised in motion), python backend."""
-    p = FingerRigParams.for_finger(finger)
+    """The finger with the design model's motor ((3.8) linearised in motion), python backend (as `_python_rig`)."""
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
     return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
 
 
@@ -34,7 +42,7 @@ def test_reduced_model_is_the_link_on_its_closed_force_loop():
     row is the force loop's: with (10.11) every tendon's force obeys f'' = w^2 (f_ref - f) - 2 xi w f' +
     k_t P_j qdd, so tau'' = w^2 tau_ref - (w^2 + K_jj / M_jj) tau + ... (qdd = tau / M_jj - ...; the joint's
     own tendon stiffness K_jj = P_j^T K_t P_j (5.12) stiffens the torque loop)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     w = HandChainParams().force_bandwidth
     for m in reduced_joint_models(rig):
         assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
@@ -54,7 +62,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     """Where the reduced model is exact -- the one-DoF subsystem of the index MCP built from the finger's
     parts, closed by the whole chain (joint stage reading tau from the measured forces, sharing, force law)
     -- Drake's Linearize has the designed poles (plus the force modes the joint does not see)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     d = design_joint_stage(rig, design)
     j = 1
     sub, op, point = joint_subsystem(rig, j, point=None)
@@ -97,7 +105,7 @@ def test_whole_finger_poles_against_the_per_joint_designs(design):
 
 def test_pole_placement_places_the_double_oscillator_on_each_joint():
     """(12.13) per DoF: omega1 = position_bandwidth, omega2 = |the joint's own open-loop pair|, both damped."""
-    rig = finger_diagram(finger="ring", backend="python")
+    rig = _python_rig("ring")
     p = JointDesignParams()
     d = design_joint_stage(rig, "pole-placement", params=p)
     for m, poles in zip(d.models, d.design_poles):
@@ -111,7 +119,7 @@ def test_joint_stage_with_torque_feedback_converts_to_autodiff():
     """The LQR stage reads tau = -(PS)^T f and tau_dot = -(PS)^T k_t (r_m omega + P qdot) from the
     measurements; its derivatives equal finite differences (thumb: P(q) varies), and d tau_ref / d f is
     the closed form K_tau * (-(PS)^T) per DoF."""
-    rig = finger_diagram(finger="thumb", backend="python")
+    rig = _python_rig("thumb")
     d = design_joint_stage(rig, "lqr")
     S = d.law.S
     n, k = S.shape
