@@ -169,6 +169,32 @@ def test_replay_kernel_equals_the_laws_for_every_switch(rig):
                                rtol=1e-12, atol=1e-12 * np.abs(ref).max())
 
 
+def test_joint_backlash_is_a_dead_zone_between_link_and_pulley():
+    """components.routing.joint_backlash_angle on the antagonistic pair: inside the play the link feels no
+    tendon torque (the pulley rests where the torque vanishes); beyond it the pulley sits at the stop
+    q + b, up to the rounding's closed-form bound e^2 / (4 (y - b)), e = smoothing * b."""
+    from scipy.optimize import brentq
+    from awiwi_drake.components.routing import joint_backlash_angle
+    spring = PolynomialSpring(tuple(JOINT["spring_poly"]))
+    r, rq, b, sm = JOINT["motor_pulley_radius"], JOINT["link_pulley_radius"], 0.02, 0.05
+    theta = np.array([0.45, 0.35])
+
+    def tau_k(a):
+        x = np.array([r * theta[0] - rq * a, r * theta[1] + rq * a])
+        return rq * (spring.force(x)[0] - spring.force(x)[1]), rq * rq * float(np.sum(spring.stiffness(x)))
+    rest = brentq(lambda a: tau_k(a)[0], -1.0, 1.0)           # pulley angle where the tendons balance
+    K = tau_k(rest)[1]
+    for q in rest + np.array([-0.5, -0.2, 0.0, 0.3, 0.5]) * b:   # inside the play: no torque on the link
+        qp = joint_backlash_angle(q, tau_k, b, sm)
+        assert abs(tau_k(qp)[0]) < 1e-3 * K * b
+    for y in (3 * b, 10 * b):                                   # beyond it: at the stop
+        for sgn in (1.0, -1.0):
+            q = rest - sgn * y
+            qp = joint_backlash_angle(q, tau_k, b, sm)
+            assert abs(qp - (q + sgn * b)) <= (sm * b) ** 2 / (4 * (y - b))
+            assert np.sign(tau_k(qp)[0]) == sgn                 # the stop transmits the spring torque
+
+
 def _energy(nom, X):
     n = nom.num_motors
     spring = PolynomialSpring(nom.spring_poly)
@@ -315,7 +341,7 @@ def test_window_start_profile_is_generalised_least_squares():
 def test_catalog_names_are_the_contract():
     from awiwi_drake.discrepancy import EFFECTS, PHYSICAL_EFFECTS
     assert set(PHYSICAL_EFFECTS) == {"motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
-                                     "guide_friction", "delay", "spring_drift"}
+                                     "guide_friction", "delay", "spring_drift", "backlash"}
     assert {"force_sensor", "nominal_motor", "nominal_spring", "link_sensor", "motor_sensor"} <= set(EFFECTS)
     assert len(PARAM_NAMES) == len(set(PARAM_NAMES))
 

@@ -95,3 +95,21 @@ def test_out_of_catalog_link_encoder_bias_is_flagged_not_named(tmp_path):
         md = write_report(dx, tmp_path / "rep").read_text()
         assert "Unexplained discrepancy remains" in md and "nothing is missing" not in md
         assert json.loads((tmp_path / "rep" / "summary.json").read_text())["unexplained_residual"] is True
+
+
+def test_hidden_joint_backlash_is_screened_first_with_its_play():
+    """Backlash at the joint (truth: exact massless pulley, hard stops) is the screen's first candidate, its
+    grid probe within two grid steps (1.25^2) of the hidden play: one step of the grid, one for the catalog's
+    rounded stops and 1.5 s of noisy data. The linear screen alone misses it (the residual is not monotone
+    in the play: at a quarter of the hidden play it is larger than with none)."""
+    from awiwi_drake.discrepancy.catalog import default_vector, effects_for_rig
+    from awiwi_drake.discrepancy.replay import ReplayEngine
+    from awiwi_drake.discrepancy.screen import ResidualState, screen
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds = make_truth_dataset("joint", ["backlash"], snr_db=30, seed=3, gen=TruthGeneratorParams(duration=1.5))
+    eng = ReplayEngine(ds)
+    st = ResidualState(eng, default_vector())
+    out = screen(st, effects_for_rig("joint", eng.out_names), CatalogBounds(), "joint")
+    assert out[0]["effect"].name == "backlash" and out[0]["rel"] > 0.5
+    b = ds.meta["truth"]["backlash"]
+    assert b / 1.25 ** 2 <= out[0]["params"]["backlash"] <= b * 1.25 ** 2

@@ -8,7 +8,7 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDif
 from pydrake.symbolic import Evaluate, Expression, Jacobian, Variable
 
 from _fd import fd_jacobian
-from awiwi_drake.hand.coupling import (finger_coupling, hand_coupling, index_coupling_matrix,
+from awiwi_drake.hand.coupling import (FingerCoupling, finger_coupling, hand_coupling, index_coupling_matrix,
                                        joint_stiffness, reduced_coupling_matrix)
 from awiwi_drake.hand.kinematics import finger_frames, thumb_base_transform, thumb_frames
 from awiwi_drake.parameters.hand import (FINGERS, TENDON_SLICES, RingFingerParams, ThumbParams,
@@ -257,3 +257,9 @@ def test_thumb_base_lengths_and_jacobian_from_one_kinematics_evaluation():
         np.testing.assert_allclose(J, fd_jacobian(lambda qq: c.h(np.concatenate([qq, [0.0, 0.0]]))[:4], q, h=1e-6),
                                    atol=1e-9)
     np.testing.assert_allclose(c.distal_pseudo_inverse() @ c.P(np.zeros(4))[4:, 2:], np.eye(2), atol=1e-12)
+    # the float P(q) and tension Hessians come from the same kernel: equal to the laws' generic path
+    for q in RNG.uniform(-1.2, 1.2, size=(3, 4)):
+        generic = np.array(q, dtype=object)
+        np.testing.assert_allclose(c.P(q), np.asarray(c.P(generic), dtype=float), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(c.tension_hessians(q), np.asarray(FingerCoupling.tension_hessians(c, generic),
+                                                                     dtype=float), rtol=1e-12, atol=1e-15)

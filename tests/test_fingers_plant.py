@@ -142,6 +142,10 @@ def test_motor_angle_reference_converts_and_keeps_the_springs_at_their_operating
     theta = out(q)
     # elongation r_m theta + h(q) - h(0) equals its operating value for every tendon
     np.testing.assert_allclose(r_m * theta + c.h(q), r_m * theta_op + c.h(q_op), atol=1e-15)
+    # the float system keeps its last result for a repeated reference; any change recomputes
+    for qq in (q, q + [0.0, 1e-9, 0.0, 0.0], q_op, q):
+        np.testing.assert_allclose(r_m * out(qq) + c.h(qq), r_m * theta_op + c.h(q_op), atol=1e-15)
+    assert not np.array_equal(out(q), out(q + [0.0, 1e-9, 0.0, 0.0]))
     ad = sys.ToAutoDiffXd()
     actx = ad.CreateDefaultContext()
     ad.get_input_port(0).FixValue(actx, InitializeAutoDiff(q).ravel())

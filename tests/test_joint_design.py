@@ -66,7 +66,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     d = design_joint_stage(rig, design)
     j = 1
     sub, op, point = joint_subsystem(rig, j, point=None)
-    m, K = d.models[j], d.gains[j]
+    m, K = d.models[j], d.gains[j, :4]          # continuous design (no delay gain)
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
                                 torque_op=point["torque_offset"])

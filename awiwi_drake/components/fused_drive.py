@@ -408,13 +408,30 @@ def TendonDrive_(T):
 
         def _law_output(self, name):
             velocity = name == "generalized_force"
+            if self._float:
+                # the simulation hot path (generalized_force at every derivative evaluation): the kernel,
+                # its buffer and the input ports bound once, no helper calls
+                link = self.model.has_link
+                qp, qdp, empty = self._q if not link else None, self._qd if not link else None, self._empty
+                bound = []
+
+                def calc_float(context, out):
+                    if not bound:
+                        bound.extend((self.kernels()[name], self._bufs[name]))
+                    fn, buf = bound
+                    x = context.get_continuous_state_vector().CopyToVector()
+                    if link:
+                        out.SetFromVector(fn(x, buf))
+                        return
+                    q = qp.Eval(context) if qp is not None else empty
+                    if velocity:
+                        out.SetFromVector(fn(x, q, qdp.Eval(context) if qdp is not None else empty, buf))
+                    else:
+                        out.SetFromVector(fn(x, q, buf))
+                return calc_float
 
             def calc(context, out):
                 x = self._state(context)
-                if self._float:
-                    fn = self.kernels()[name]
-                    out.SetFromVector(fn(x, *self._inputs(context, velocity), self._bufs[name]))
-                    return
                 args = self._inputs(context, velocity)
                 q = args[0] if args else None
                 qd = args[1] if len(args) > 1 else None

@@ -18,7 +18,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import asarray_like
 
-__all__ = ["ConstantCoupling", "TendonRouting_", "TendonRouting", "antagonistic_coupling"]
+__all__ = ["ConstantCoupling", "TendonRouting_", "TendonRouting", "antagonistic_coupling", "joint_backlash_angle"]
 
 
 class ConstantCoupling:
@@ -48,6 +48,28 @@ def antagonistic_coupling(link_pulley_radius: float) -> ConstantCoupling:
     if not link_pulley_radius > 0:
         raise ValueError(f"antagonistic_coupling: link_pulley_radius = {link_pulley_radius} must be > 0 [m]")
     return ConstantCoupling([[-link_pulley_radius], [link_pulley_radius]], name="antagonistic")
+
+
+def joint_backlash_angle(q, torque_and_stiffness, half_width, smoothing: float = 0.05, newton_steps: int = 2,
+                         stiffness_floor: float = 1e-6):
+    """Angle of a tendon pulley that turns with play ``+-b`` on its link at ``q`` (backlash at the joint).
+
+    The pulley is massless: inside the play it rests where the tendons' torque on it vanishes,
+    ``tau(q_p0) = 0`` (``newton_steps`` Newton steps from the link angle; ``torque_and_stiffness(a)``
+    returns the tendons' torque ``tau = -P^T f`` on the pulley at angle ``a`` and the joint stiffness
+    ``K = -dtau/da = P^T diag(k) P``); at an end of the play the link holds it, ``q_p = q -+ b``.
+    So ``q_p = q + sat_b(q_p0 - q)``, the saturation rounded over ``smoothing * b``
+    (``0.5 (sqrt((y + b)^2 + e^2) - sqrt((y - b)^2 + e^2))``) for the integrator. The link then
+    feels the tendons' torque at ``q_p``: none inside the play (a dead zone), the spring torque at
+    ``q -+ b`` outside. ``stiffness_floor`` [Nm/rad] keeps the step finite with both tendons slack.
+    Generic in the scalar type; ``b > 0``.
+    """
+    a = q
+    for _ in range(newton_steps):
+        tau, K = torque_and_stiffness(a)
+        a = a + tau / (K + stiffness_floor)
+    y, e = a - q, smoothing * half_width
+    return q + 0.5 * (np.sqrt((y + half_width) ** 2 + e * e) - np.sqrt((y - half_width) ** 2 + e * e))
 
 
 def _check_coupling(coupling):

@@ -274,12 +274,14 @@ class TendonChainController(Diagram):
         b.Connect(joint.GetOutputPort("joint_torque_reference"), force.GetInputPort("joint_torque_reference"))
         if force.HasInputPort("joint_stiffness_reference"):
             b.Connect(joint.GetOutputPort("joint_stiffness_reference"), force.GetInputPort("joint_stiffness_reference"))
+        if joint.HasInputPort("tendon_force_reference"):    # the previous request, read back (sampled chain)
+            b.Connect(force.GetOutputPort("tendon_force_reference"), joint.GetInputPort("tendon_force_reference"))
         exported = {}
         for sys_ in (joint, force):
             for i in range(sys_.num_input_ports()):
                 port = sys_.get_input_port(i)
                 nm = port.get_name()
-                if nm in ("joint_torque_reference", "joint_stiffness_reference"):
+                if nm in ("joint_torque_reference", "joint_stiffness_reference", "tendon_force_reference"):
                     continue
                 if nm in exported:
                     b.ConnectInput(exported[nm], port)

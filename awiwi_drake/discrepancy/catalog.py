@@ -16,6 +16,7 @@ Catalog (names are part of the contract):
 ``joint_friction``   link Coulomb ``-F_c tanh(q'/v_s)`` (stick-slip, regularised)
 ``guide_friction``   tendon-path friction ``C0 s + f (exp(mu_a s) - 1)``, ``s = tanh(v/v0)``, opposing the tendon motion
 ``spring_drift``     spring force scaled by ``1 + c (t - t_mid)`` (creep over the run)
+``backlash``         play ``+-b`` between link and tendon pulley (:func:`~awiwi_drake.components.routing.joint_backlash_angle`)
 ``delay``            applied torque ``u(t - T)``
 =================== ======================================================================
 
@@ -100,6 +101,8 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
                   "link encoder scale error"),
         ParamSpec("motor_bias_1", "rad", 0.0, -b.encoder_bias_max, b.encoder_bias_max, 0.01, "motor 1 encoder bias"),
         ParamSpec("motor_bias_2", "rad", 0.0, -b.encoder_bias_max, b.encoder_bias_max, 0.01, "motor 2 encoder bias"),
+        ParamSpec("backlash", "rad", 0.0, 0.0, b.backlash_max, 0.005,
+                  "half-width of the play between link and tendon pulley (dead zone at the joint)"),
     ]
     return specs
 
@@ -168,6 +171,9 @@ EFFECTS = {
     "spring_drift": Effect(
         "spring_drift", "physical", ("spring_drift",), {}, ("tendon", "joint"),
         "force residual proportional to the force and growing over the run (creep of the spring mechanism)"),
+    "backlash": Effect(
+        "backlash", "physical", ("backlash",), {}, ("joint",),
+        "link angle moves without a tendon-force change where the joint torque reverses (dead zone at the joint)"),
     "delay": Effect(
         "delay", "physical", ("delay",), {}, ("tendon", "joint"),
         "residual-input cross-correlation peaks at a positive lag; phase lag growing with frequency"),

@@ -46,6 +46,9 @@ class NoiseEquivalent:
         ``r * force`` [Nm]: the motor torque the noise-equivalent force exerts.
     link_torque : float
         ``r_q * force`` [Nm] (joint rig).
+    link_angle : float
+        Link-encoder noise floor [rad]; without a link encoder, the link angle that moves one
+        spring by the noise-equivalent force, ``force / (k r_q)`` (joint rig).
     sample : float
         Sample period [s].
     """
@@ -54,17 +57,23 @@ class NoiseEquivalent:
         nom = eng.nom
         sig = dict(zip(eng.out_names, eng.sigma))
         forces = [s for n, s in sig.items() if n.startswith("tendon_force")]
+        x, h = float(np.median(eng.elong)), 1e-6   # spring stiffness at the median elongation
+        k = float((laws.spring_force(x + h, nom.spring_poly) - laws.spring_force(x - h, nom.spring_poly)) / (2 * h))
         if forces:
             f = float(min(forces))
         else:
-            x = float(np.median(eng.elong))
-            h = 1e-6
-            k = float((laws.spring_force(x + h, nom.spring_poly) - laws.spring_force(x - h, nom.spring_poly)) / (2 * h))
             th = min(s for n, s in sig.items() if n.startswith("motor_angle"))
             f = k * nom.motor_pulley_radius * th
         self.force = f
         self.motor_torque = nom.motor_pulley_radius * f
         self.link_torque = nom.link_pulley_radius * f if nom.has_link else float("nan")
+        # link angle: the link encoder's noise floor, else the angle the noise force moves one spring by
+        if "link_angle" in sig:
+            self.link_angle = float(sig["link_angle"])
+        elif nom.has_link:
+            self.link_angle = f / max(k * nom.link_pulley_radius, 1e-12)
+        else:
+            self.link_angle = float("nan")
         self.sample = eng.dt
         n = nom.num_motors
         self.omega_rms = float(np.sqrt(np.mean(eng.xhat[n:2 * n] ** 2)))
@@ -100,7 +109,7 @@ def materiality(effect: str, params: dict, ne: NoiseEquivalent) -> dict:
     half-width, guide friction and force-sensor errors against the noise-equivalent
     force; motor friction, ripple and motor-parameter errors against the
     noise-equivalent motor torque; joint friction and link-parameter errors against
-    the noise-equivalent link torque.  Spring-scale errors are forces at the RMS force;
+    the noise-equivalent link torque; backlash against the link-angle noise.  Spring-scale errors are forces at the RMS force;
     inertia and damping corrections (``nominal_motor``, ``nominal_link``) are the
     torques they change at the dataset's RMS acceleration and speed.
     """
@@ -116,6 +125,8 @@ def materiality(effect: str, params: dict, ne: NoiseEquivalent) -> dict:
         size, floor, unit, what = _ripple_size(params), ne.motor_torque, "Nm", "ripple amplitude vs noise torque"
     elif effect == "joint_friction":
         size, floor, unit, what = g("joint_coulomb", 0.0), ne.link_torque, "Nm", "link friction vs noise torque"
+    elif effect == "backlash":
+        size, floor, unit, what = g("backlash", 0.0), ne.link_angle, "rad", "play half-width vs link-angle noise"
     elif effect == "guide_friction":
         size = g("guide_c0", 0.0) + g("guide_mu", 0.0) * ne.force_rms
         floor, unit, what = ne.force, "N", "path friction at RMS tension vs noise force"

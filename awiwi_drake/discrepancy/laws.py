@@ -29,6 +29,8 @@ __all__ = ["spring_force", "hysteresis_force", "hysteresis_force_rate", "motor_f
 
 GUIDE_VELOCITY = CatalogBounds().guide_velocity
 HYSTERESIS_VELOCITY = CatalogBounds().hysteresis_velocity
+BACKLASH_SMOOTHING = CatalogBounds().backlash_smoothing
+BACKLASH_NEWTON_STEPS = CatalogBounds().backlash_newton_steps
 
 
 @functools.lru_cache(maxsize=64)

@@ -43,7 +43,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import is_float
 from awiwi_drake.components.codegen import compile_kernels
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
-from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
+from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling, joint_backlash_angle
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.parameters.components import MotorParams
 
@@ -172,6 +172,19 @@ def _to_drive(nom, theta, omega, q, qd):
     return np.array(parts, dtype=object if not all(is_float(v) for v in parts) else float)
 
 
+def _backlash_offset(nom, model, theta, omega, q, qd, b):
+    """Pulley angle minus link angle with joint backlash ``b``
+    (:func:`~awiwi_drake.components.routing.joint_backlash_angle` on the drive's tendon torque and stiffness)."""
+    P = model.coupling.P()[:, 0]
+
+    def torque_and_stiffness(a):
+        got = drive_laws(model, _to_drive(nom, theta, omega, a, qd), want=("tendon_force", "tendon_stiffness"))
+        f, k = got["tendon_force"], got["tendon_stiffness"]
+        return (-sum(P[i] * f[i] for i in range(nom.num_motors)),
+                sum(P[i] * P[i] * k[i] for i in range(nom.num_motors)))
+    return joint_backlash_angle(q, torque_and_stiffness, b, laws.BACKLASH_SMOOTHING, laws.BACKLASH_NEWTON_STEPS) - q
+
+
 def replay_laws(nom: NominalParameters, x, u, p):
     """Time derivatives and measurements of one copy, generic in the scalar type.
 
@@ -181,7 +194,9 @@ def replay_laws(nom: NominalParameters, x, u, p):
     and the spring correction's reaction ``-r (g + df)``, added damping), torques on the link input
     (``-P^T df``, link Coulomb friction, added damping); the inertia corrections scale the drive's
     accelerations. ``df = s f_el + z tanh(f_el)`` is the spring-scale and hysteresis force on top
-    of the drive's elastic force ``f_el``.
+    of the drive's elastic force ``f_el``. Joint backlash replaces the link angle the drive sees by the
+    tendon pulley's (:func:`~awiwi_drake.components.routing.joint_backlash_angle`); the link encoder
+    still reads the link.
 
     Parameters
     ----------
@@ -196,9 +211,13 @@ def replay_laws(nom: NominalParameters, x, u, p):
     n = nom.num_motors
     model = drive_model(nom)
     r = nom.motor_pulley_radius
-    theta, omega, q, qd, z = split_state(nom, x)
-    s = _to_drive(nom, theta, omega, q, qd)
+    theta, omega, q_link, qd, z = split_state(nom, x)
     q_in = None if nom.has_link else np.zeros(0)   # the tendon rig's drive has no joint
+    q = q_link
+    if nom.has_link:   # backlash: the tendons wrap a pulley with play on the link; the drive sees its angle
+        b = _p(p, "backlash")
+        q = q_link + _switch((b,), lambda: _backlash_offset(nom, model, theta, omega, q_link, qd, b), q_link)
+    s = _to_drive(nom, theta, omega, q, qd)
     f_el = drive_laws(model, s, q=q_in, want=("tendon_force",))["tendon_force"]
     xs, xds = rig_kinematics(nom, theta, omega, q, qd)
     width = _p(p, "hysteresis_width")
@@ -239,7 +258,7 @@ def replay_laws(nom: NominalParameters, x, u, p):
     y = [theta[i] + _p(p, f"motor_bias_{i + 1}") for i in range(n)]  # encoder bias
     y += [(1.0 + _p(p, "force_gain")) * force[i] + _p(p, f"force_offset_{i + 1}") for i in range(n)]
     if nom.has_link:
-        y.append((1.0 + _p(p, "link_scale_rel")) * q + _p(p, "link_bias"))  # link encoder calibration
+        y.append((1.0 + _p(p, "link_scale_rel")) * q_link + _p(p, "link_bias"))  # link encoder calibration
     return np.array(out, dtype=like.dtype), np.array(y, dtype=like.dtype)
 
 

@@ -223,6 +223,13 @@ STATEFUL_EFFECTS = {"spring_hysteresis": {"hysteresis_width": (0.05, 0.15, 0.4),
                                           "hysteresis_length": (1e-4, 3e-4, 1e-3)}}
 
 
+def grid_probes(bounds: CatalogBounds) -> dict:
+    """Effects whose residual is not monotone in their size (neither the linear screen nor the
+    decade probes find them): ``{effect: (parameter, values)}`` probed on a geometric grid."""
+    n = int(np.floor(np.log(bounds.backlash_max / bounds.backlash_probe_min) / np.log(bounds.backlash_probe_ratio)))
+    return {"backlash": ("backlash", bounds.backlash_probe_min * bounds.backlash_probe_ratio ** np.arange(n + 1))}
+
+
 def probe(st: ResidualState, screened: list, bounds: CatalogBounds, rig: str) -> None:
     """Nonlinear probes: effects whose signature changes with amplitude (hysteresis
     stiffening, friction sticking, delay) are also evaluated at finite amplitudes on
@@ -231,8 +238,17 @@ def probe(st: ResidualState, screened: list, bounds: CatalogBounds, rig: str) ->
     specs = {s.name: s for s in param_specs(bounds)}
     sets, owners = [], []
     own_sets, own_owners = [], []
+    grids = grid_probes(bounds)
     for entry in screened:
         eff = entry["effect"]
+        if eff.name in grids:
+            name, values = grids[eff.name]
+            for v in values:
+                p = base.copy()
+                p[PARAM_INDEX[name]] = v
+                sets.append(p)
+                owners.append(entry)
+            continue
         if eff.name in STATEFUL_EFFECTS:
             grid = STATEFUL_EFFECTS[eff.name]
             (amp, fracs), (shp, vals) = grid.items()

@@ -14,6 +14,7 @@ physics allows, so that identifying them is not circular:
 ``guide_friction``   capstan ``f (exp(mu_a sgn v) - 1)`` plus constant (4.1) part
 ``delay``            exact delay of the zero-order-hold command (interval split)
 ``spring_drift``     creep: spring force scaled by ``1 + c (1 - exp(-t / tau))`` (catalog: linear)
+``backlash``         play at the joint, massless pulley solved exactly, hard stops (catalog: one Newton step, rounded)
 ================== ================================================================
 
 ``strength`` scales every hidden effect's size (friction levels, ripple and
@@ -32,9 +33,10 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import positive_part
+from awiwi_drake._math import clip, positive_part
 from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
 from awiwi_drake.components.friction import guide_friction, stribeck_friction
+from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
@@ -48,7 +50,7 @@ from .model import NominalParameters, rig_kinematics, split_state
 __all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
 
 HIDDEN_EFFECTS = ("motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
-                  "guide_friction", "delay", "spring_drift")
+                  "guide_friction", "delay", "spring_drift", "backlash")
 NUISANCES = ("force_sensor", "nominal_motor")
 
 
@@ -93,9 +95,25 @@ def HiddenEffectPlant_(T):
         def _split(self, X):
             return split_state(self._nom, X)
 
+        def _pulley_angle(self, theta, q, b):
+            """Joint backlash, exact for a massless pulley with hard stops (the catalog: one Newton
+            step and rounded stops): the tendons' torque on the pulley vanishes at ``q_p0`` (Newton
+            to convergence from the link angle), the stops hold it within ``q +- b``."""
+            nom = self._nom
+            r, rq = nom.motor_pulley_radius, nom.link_pulley_radius
+            spring = PolynomialSpring(nom.spring_poly)
+            qp = q
+            for _ in range(6):
+                x = np.array([r * theta[0] - rq * qp, r * theta[1] + rq * qp])
+                f, k = spring.force(x), spring.stiffness(x)
+                qp = qp + rq * (f[0] - f[1]) / (rq * rq * (k[0] + k[1]) + 1e-6)
+            return clip(qp, q - b, q + b)
+
         def _forces(self, X, t):
             nom, tr = self._nom, self._truth
             theta, omega, q, qd, z = self._split(X)
+            if "backlash" in tr:
+                q = self._pulley_angle(theta, q, tr["backlash"])
             x, xd = rig_kinematics(nom, theta, omega, q, qd)
             scale = tr.get("spring_scale", 1.0)
             if "spring_drift" in tr:
@@ -202,6 +220,8 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         tr["guide_friction"] = dict(mu_angle=u(0.08, 0.2), c0=u(0.3, 1.5), v0=2e-4)
     if "delay" in hidden:
         tr["delay"] = float(u(0.002, 0.006))
+    if "backlash" in hidden:
+        tr["backlash"] = float(u(*TruthGeneratorParams().backlash_range))
     if "spring_drift" in hidden:
         tr["spring_drift"] = dict(creep=float(u(0.08, 0.2) * rng.choice([-1, 1])), tau=float(u(3.0, 8.0)))
     if strength != 1.0:
@@ -227,8 +247,9 @@ def _scale_truth(tr: dict, k: float) -> None:
     if "motor_ripple" in tr:
         tr["motor_ripple"]["harmonics"] = [[(o, a * k, b * k) for o, a, b in hm]
                                            for hm in tr["motor_ripple"]["harmonics"]]
-    if "delay" in tr:
-        tr["delay"] = tr["delay"] * k
+    for eff in ("delay", "backlash"):
+        if eff in tr:
+            tr[eff] = tr[eff] * k
     tr["strength"] = k
 
 

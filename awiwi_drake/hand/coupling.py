@@ -278,10 +278,11 @@ class ThumbCoupling(FingerCoupling):
 
     def base_lengths_and_jacobian(self, q10: float, q11: float):
         """Float fast path: the base tendon lengths ``h_0..3`` (4,) and ``dh/d(q10, q11)`` (4 x 2) together
-        (Algorithm 1 needs both at every trial point), from a compiled kernel generated from :meth:`h` and
-        :meth:`P` (:mod:`awiwi_drake.components.codegen`: the laws evaluated once on symbolic variables)."""
-        out = self._base_kernel()(np.array([q10, q11], dtype=float), np.empty(12))
-        return out[:4], out[4:].reshape(4, 2)
+        (Algorithm 1 needs both at every trial point), from a compiled kernel generated from :meth:`h`,
+        :meth:`P` and :meth:`tension_hessian` (:mod:`awiwi_drake.components.codegen`: the laws evaluated once
+        on symbolic variables; the base kinematics shared by all three)."""
+        out = self._base_kernel()(np.array([q10, q11], dtype=float), np.empty(28))
+        return out[:4], out[4:12].reshape(4, 2)
 
     def _base_kernel(self):
         key = (self.palm_points.tobytes(), self.bone_points.tobytes())
@@ -292,7 +293,8 @@ class ThumbCoupling(FingerCoupling):
             qv = [sym.Variable("q10"), sym.Variable("q11")]
             q = np.array([sym.Expression(qv[0]), sym.Expression(qv[1]), sym.Expression(0.0), sym.Expression(0.0)])
             with np.errstate(invalid="ignore"):
-                outs = list(self.h(q)[:4]) + list(np.asarray(self.P(q))[:4, :2].ravel())
+                hess = [np.asarray(self.tension_hessian(q, e))[:2, :2].ravel() for e in np.eye(8)[:4]]
+                outs = list(self.h(q)[:4]) + list(np.asarray(self.P(q))[:4, :2].ravel()) + list(np.concatenate(hess))
             fn = _THUMB_BASE_KERNELS[key] = compile_kernels({"thumb_base": ([qv], outs)}, tag="thumb_base")["thumb_base"]
         return fn
 
@@ -317,13 +319,10 @@ class ThumbCoupling(FingerCoupling):
     @_quiet_fp
     def P(self, q):
         q = self._check_q(q)
-        if q.dtype != object:
-            d, norm, A, R = self._float_base(q)
-            dA0 = _KZ @ A                                   # Kz Rz = Rz Kz
-            dA1 = R @ (_KY @ self.bone_points.T)
+        if q.dtype != object:             # the compiled base kinematics (see base_lengths_and_jacobian)
+            out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
             P = np.zeros((8, 4))
-            P[:4, 0] = np.einsum("ij,ji->i", d, dA0) / norm
-            P[:4, 1] = np.einsum("ij,ji->i", d, dA1) / norm
+            P[:4, :2] = out[4:12].reshape(4, 2)
             P[4:, 2:] = self._P_distal
             return P
         d = self.base_vectors(q)
@@ -338,25 +337,13 @@ class ThumbCoupling(FingerCoupling):
         return P
 
     def tension_hessians(self, q) -> np.ndarray:
-        """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the base kinematics once, vectorised over the tendons."""
+        """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the compiled base kinematics (``base_lengths_and_jacobian``)."""
         q = self._check_q(q)
         if q.dtype == object:
             return super().tension_hessians(q)
-        d, norm, A, R = self._float_base(q)
-        b = self.bone_points.T
-        dA0, dA1 = _KZ @ A, R @ (_KY @ b)
-        d00, d01, d11 = _KZ @ dA0, _KZ @ dA1, R @ (_KY @ _KY @ b)
-        u = d / norm[:, None]                                            # 4 x 3
-        J = np.stack([dA0.T, dA1.T], axis=2)                             # 4 x 3 x 2
-        uJ = np.einsum("ik,ikl->il", u, J)                               # 4 x 2
-        Hb = (np.einsum("ikl,ikm->ilm", J, J) - uJ[:, :, None] * uJ[:, None, :]) / norm[:, None, None]
-        c00, c01, c11 = (np.einsum("ik,ki->i", u, x) for x in (d00, d01, d11))
-        Hb[:, 0, 0] += c00
-        Hb[:, 0, 1] += c01
-        Hb[:, 1, 0] += c01
-        Hb[:, 1, 1] += c11
+        out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
         H = np.zeros((8, 4, 4))
-        H[:4, :2, :2] = Hb
+        H[:4, :2, :2] = out[12:].reshape(4, 2, 2)
         return H
 
     @_quiet_fp

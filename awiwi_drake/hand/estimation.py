@@ -36,6 +36,7 @@ The Fig 5.16-5.17 study is :func:`awiwi_drake.reproductions.ch05_fingers.thumb_e
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -116,32 +117,42 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
         raise ValueError(f"dh_base must have shape (4,), got {dh_base.shape}")
     if iterations < 1:
         raise ValueError(f"iterations must be >= 1, got {iterations}")
-    h0 = coupling.base_lengths_and_jacobian(0.0, 0.0)[0]
-    q = np.array([q_start[0], q_start[1], 0.0, 0.0], dtype=float)
-
-    def cost_grad(qq):
-        h, P = coupling.base_lengths_and_jacobian(qq[0], qq[1])    # h and P: the kinematics once
-        r = h - h0 - dh_base
-        return float(r @ r), 2.0 * P.T @ r
-
     if not limit > 0:
         raise ValueError(f"limit must be > 0 [rad], got {limit}")
-    c_best, grad = cost_grad(q)
+    # plain float arithmetic around one compiled call of the base kinematics per trial point (lengths
+    # and their Jacobian together, ThumbCoupling.base_lengths_and_jacobian): numpy's per-call overhead
+    # on 2- and 4-vectors would dominate the 3 kHz loop
+    h0 = coupling.base_lengths_and_jacobian(0.0, 0.0)[0].tolist()
+    dh = dh_base.tolist()
+
+    def cost_grad(a, b):
+        h, P = coupling.base_lengths_and_jacobian(a, b)    # h and P: the kinematics once
+        h, P = h.tolist(), P.tolist()
+        c = g0 = g1 = 0.0
+        for i in range(4):
+            r = h[i] - h0[i] - dh[i]
+            c += r * r
+            g0 += P[i][0] * r
+            g1 += P[i][1] * r
+        return c, 2.0 * g0, 2.0 * g1
+
+    qa, qb = float(q_start[0]), float(q_start[1])
+    c_best, g0, g1 = cost_grad(qa, qb)
     step, accepted, projected = float(step0), 0, 0
     for _ in range(iterations):
-        g_norm = np.linalg.norm(grad)
+        g_norm = math.hypot(g0, g1)
         if g_norm == 0.0 or step < min_step:
             break
-        trial = q.copy()
-        free = trial[:2] - step * grad / g_norm
-        trial[:2] = np.clip(free, -limit, limit)
-        projected += int(np.any(trial[:2] != free))
-        c, g = cost_grad(trial)
+        fa, fb = qa - step * g0 / g_norm, qb - step * g1 / g_norm
+        ta, tb = min(max(fa, -limit), limit), min(max(fb, -limit), limit)
+        projected += int(ta != fa or tb != fb)
+        c, h0_, h1_ = cost_grad(ta, tb)
         if c < c_best:
-            q, c_best, grad, accepted = trial, c, g, accepted + 1
+            qa, qb, c_best, g0, g1, accepted = ta, tb, c, h0_, h1_, accepted + 1
         else:
             step *= 0.5
-    return GradientSearchResult(q=q[:2].copy(), cost=c_best, step=step, accepted=accepted,
+    q = np.array([qa, qb])
+    return GradientSearchResult(q=q, cost=c_best, step=step, accepted=accepted,
                                 iterations=iterations, projected=projected,
                                 at_limit=bool(np.any(np.abs(q[:2]) >= limit)), limit=float(limit))
 

@@ -87,6 +87,7 @@ def MotorAngleReference_(T):
                 raise ValueError(f"MotorAngleReference: motor_pulley_radius = {motor_pulley_radius} must be > 0 [m]")
             self.coupling, self.r_m, self.theta_op, self.q_op = coupling, float(motor_pulley_radius), theta_op, q_op
             self._h_op = np.asarray(coupling.h(q_op), dtype=float)
+            self._last = None
             self._q = self.DeclareVectorInputPort("joint_angle_reference", n)
             self.DeclareVectorOutputPort("motor_angle_reference", m, self._calc,
                                          prerequisites_of_calc={self._q.ticket()})
@@ -96,7 +97,14 @@ def MotorAngleReference_(T):
 
         def _calc(self, context, out):
             q = self._q.Eval(context)
-            out.SetFromVector(self.theta_op - (self.coupling.h(q) - self._h_op) / self.r_m)
+            if T is not float:
+                out.SetFromVector(self.theta_op - (self.coupling.h(q) - self._h_op) / self.r_m)
+                return
+            # a step or hold reference repeats its value: the last result is kept (h(q) of the hand ~15 us)
+            key = np.asarray(q, dtype=float).tobytes()
+            if self._last is None or self._last[0] != key:
+                self._last = (key, self.theta_op - (self.coupling.h(q) - self._h_op) / self.r_m)
+            out.SetFromVector(self._last[1])
 
     return Impl
 

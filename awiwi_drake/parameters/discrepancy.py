@@ -202,6 +202,32 @@ class CatalogBounds(Parameters):
         source="chosen: a spring-force change of +-25 % over a 10 s run bounds creep of the "
                "spring mechanism (Fig 4.8 shows hysteresis, not creep; no thesis value)",
         doc="bound on the relative spring-force drift rate")
+    backlash_max: float = param(
+        0.1, unit="rad", low=0.0,
+        source="chosen: a play of +-6 deg between link and tendon pulley is far beyond a worn finger joint "
+               "(the thesis prints no play); the bound only keeps the fit finite",
+        doc="bound on the backlash half-width at the joint")
+    backlash_smoothing: float = param(
+        0.05, unit="-", low=0.0, low_inclusive=False, high=1.0,
+        source="chosen: the play's ends are rounded over 5 % of its half-width so the fixed-step RK3 replay "
+               "sees a continuous torque (a regularisation, like the friction tanh scales)",
+        doc="rounding of the backlash saturation, relative to its half-width")
+    backlash_newton_steps: int = param(
+        1, unit="-", low=1, high=10,
+        source="chosen: the pulley's rest angle inside the play by one Newton step from the link angle, exact for "
+               "the quadratic spring pair with both tendons taut (x1 + x2 does not depend on the pulley angle, so the "
+               "tendon torque is linear in it); 2-3 steps left the residual of a backlash dataset unchanged (seed 3)",
+        doc="Newton steps of the catalog's backlash law")
+    backlash_probe_min: float = param(
+        0.002, unit="rad", low=0.0, low_inclusive=False,
+        source="chosen: smallest play probed, below the link-encoder noise at 30 dB (~0.005 rad)",
+        doc="smallest backlash half-width of the screening grid")
+    backlash_probe_ratio: float = param(
+        1.25, unit="-", low=1.0, low_inclusive=False,
+        source="chosen: the replay residual is not monotone in the play (a wrong play can be worse than none) "
+               "but has a valley about +-30 % wide around the true value (benchmark dataset seed 3: residual/floor "
+               "17.5 nominal, 1.64 at the truth, 2.7 / 2.3 at -14 % / +7 %); a geometric grid with ratio 1.25 "
+               "lands within +-12 % of any play", doc="ratio of successive backlash values of the screening grid")
     encoder_bias_max: float = param(
         0.5, unit="rad", low=0.0,
         source="chosen: a mis-set encoder zero of up to ~30 deg", doc="bound on encoder biases")
@@ -268,6 +294,11 @@ class TruthGeneratorParams(Parameters):
     link_excursion: float = param(0.3, unit="rad", low=0.0,
                                   source="chosen: +-17 deg, inside a finger joint's range; keeps both tendons taut at 30 N pretension",
                                   doc="link reference amplitude")
+    backlash_range: tuple = param(
+        (0.01, 0.03), unit="rad", low=0.0,
+        source="chosen: +-0.6-1.7 deg of play at the joint, 2-6x the link-encoder noise at 30 dB on the "
+               "+-0.3 rad excursion (a worn pin joint; the thesis prints none)",
+        doc="half-width of hidden joint backlash (truth: exact massless pulley, hard stops)")
     force_range: float = param(250.0, unit="N", low=0.0, low_inclusive=False,
                                source="chosen: 12-bit Hall sensor over 0-250 N (Ch. 4; Fig 4.8 tops at 180 N)",
                                doc="force sensor full scale")

@@ -148,13 +148,23 @@ def event_schedules(events: Sequence[tuple[float, Mapping[str, object]]], initia
     return out
 
 
+#: Integrator of the impedance and antagonistic backstepping runs (continuous loops). Their closed loops
+#: have fast poles (K3, K4 and Kd,imp / m with the small link inertias of Table 15.1 and the joint rig), so
+#: error-controlled explicit RK3 is stability-limited: accuracy 1e-4 and 1e-6 took the same 7.4-8.2 s for
+#: the Fig 15.19 pair. The L-stable Radau IIA (3rd order) at the same accuracy took 2.8 s and agreed to
+#: 6e-9 rad; Fig 15.16's run 4.3 s -> 1.0 s (2e-11 rad). Not for the position/saturation studies (linear,
+#: not stiff: RK3 is 4-10x faster there).
+STIFF_INTEGRATOR = "radau3"
+
+
 def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, inputs: Mapping[str, object] | None = None,
              dt: float = 1e-3, max_step: float = 1e-3, accuracy: float = 1e-6, label: str = "",
-             extra_outputs: Sequence[str] = ()) -> BacksteppingRun:
+             extra_outputs: Sequence[str] = (), integrator: str = "runge_kutta3") -> BacksteppingRun:
     """One closed-loop run through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` as a :class:`BacksteppingRun`.
 
     ``inputs`` maps exported inputs (``joint_angle_reference``, ``external_torque``) to schedules
-    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0.
+    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``integrator``: the
+    error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
     """
     d = loop.diagram
     ctx = loop.create_context(state=state0, motor_torque=motor_torque0)
@@ -163,7 +173,8 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     ref = REFERENCE_PORT if d.HasInputPort(REFERENCE_PORT) else None
     ext = "external_torque" if d.HasInputPort("external_torque") else None
     log += [p for p in (("controller_lyapunov" if has_v else None), ref, ext) if p]
-    res = simulate(loop, ctx, t_final, inputs=inputs, log=log, log_period=dt, max_step=max_step, accuracy=accuracy)
+    res = simulate(loop, ctx, t_final, inputs=inputs, log=log, log_period=dt, max_step=max_step, accuracy=accuracy,
+                   integrator=integrator)
     n = len(res.t)
     return BacksteppingRun(label, res.t, res["state"], res["motor_torque"],
                            res["controller_lyapunov"][:, 0] if has_v else np.full(n, math.nan),
@@ -272,7 +283,7 @@ def _impedance_run(make_rig, make_controller, *, step, step_time, disturbance, d
     events = [(step_time, {REFERENCE_PORT: step}), (disturbance_time, {"external_torque": disturbance})]
     return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
                     inputs=event_schedules(events), dt=dt, max_step=max_step, label=label,
-                    extra_outputs=extra_outputs)
+                    extra_outputs=extra_outputs, integrator=STIFF_INTEGRATOR)
 
 
 def impedance_study(which: str = "stiffness", study: ImpedanceStudy | None = None, *,
@@ -388,7 +399,8 @@ def antagonistic_step(gains: AntagonisticBacksteppingGains | None = None, *, ste
     loop = closed_loop(rig, impedance_controller(rig, g), rate_hz=None)
     return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
                     inputs=event_schedules([(0.05, {REFERENCE_PORT: step})]), dt=dt, max_step=1e-3,
-                    label="backstepping step", extra_outputs=("tendon_force", "joint_torque"))
+                    label="backstepping step", extra_outputs=("tendon_force", "joint_torque"),
+                    integrator=STIFF_INTEGRATOR)
 
 
 def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amplitude: float = math.radians(25.0),
