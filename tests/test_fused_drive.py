@@ -15,7 +15,7 @@ from awiwi_drake.hand.coupling import finger_coupling
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
 from awiwi_drake.parameters.components import GuideFrictionParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
-from _fd import check_system_autodiff_matches_fd
+from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
 
 RNG = np.random.default_rng(7)
 SPRING = tendon_spring(SpringModelParams())
@@ -100,12 +100,12 @@ def test_kernel_equals_laws_with_a_link_and_partial_rates(hysteresis, guide):
 def test_drive_system_converts_and_autodiff_matches_finite_differences():
     model = _thumb_model(friction=True, ripple=True, hysteresis=True, guide=True, capstan=True, per_tendon=True)
     sys_ = TendonDrive_[float](model)
-    assert sys_.ToAutoDiffXd() is not None and sys_.ToSymbolic() is not None
     s = _random_state(model)
     s[8:16] *= 0.1   # moderate speeds keep the finite differences away from the tanh knees
     inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
                   joint_velocity=RNG.normal(scale=0.01, size=4))
     check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
+    assert_symbolic_matches_float(sys_, s, inputs, rtol=1e-9)     # symbolic (laws) = float (kernel)
 
 
 def test_float_system_equals_its_autodiff_conversion_values():

@@ -19,7 +19,8 @@ from awiwi_drake.parameters.hand import FingerRigParams
 from awiwi_drake.parameters.hand_control import HandChainParams
 from awiwi_drake.parameters.joint_design import JointDesignParams
 
-DESIGNS = ("cascaded", "pole-placement", "lqr")
+DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr")
+TENDON_LAW = {"two-time-scale": "motor-position"}
 
 
 def _python_rig(finger="index"):
@@ -70,8 +71,8 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
                                 torque_op=point["torque_offset"])
-    loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
-                       estimator=None)
+    loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing",
+                                                  tendon_law=TENDON_LAW.get(design, "force")), rate_hz=None, estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
     assert np.abs(loop.diagram.EvalTimeDerivatives(ctx).CopyToVector()).max() < 1e-9
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
@@ -143,7 +144,7 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
     """Registered for every finger and the hand; designed per DoF; a short 3 kHz step through the
     estimator keeps the tendons taut and the loop finite (tracking is measured by compare)."""
     from awiwi_drake.analysis import simulate
-    for name in ("pole-placement", "lqr"):
+    for name in ("two-time-scale", "pole-placement", "lqr"):
         assert name in controller_names(f"finger-{finger}") and name in controller_names("hand")
         rig = finger_diagram(finger=finger)
         loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
@@ -154,3 +155,19 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
         res = simulate(loop.diagram, ctx, 0.1, log=("joint_angle", "tendon_force"), max_step=1 / 3000, accuracy=1e-3)
         assert np.all(res["tendon_force"] > 0.0)
         assert abs(res["joint_angle"][-1][1] - ref[1]) < abs(res["joint_angle"][0][1] - ref[1])
+
+
+def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slope():
+    """Ch. 14: the SDRE's pointwise-linear model at the design point is the linearisation, so its gain there is
+    the LQR gain; away from it the tendon forces f_op + W dtau move the spring slopes (Fig 4.8b stiffens with
+    force) and the torque-row gain changes, symmetrically in +-dtau (the joint's tendons are antagonistic pairs
+    at equal pretension)."""
+    rig = finger_diagram(finger="index", backend="python")
+    h = 1.0 / 6000.0
+    sdre = design_joint_stage(rig, "sdre", period=h)
+    lqr = design_joint_stage(rig, "lqr", period=h)
+    table, grid = sdre.law.table, sdre.law.schedule
+    mid = int(np.flatnonzero(grid == 0.0)[0])
+    np.testing.assert_allclose(table[:, mid], lqr.gains, rtol=1e-12)
+    np.testing.assert_allclose(table[:, ::-1, :], table, rtol=1e-6)           # symmetric in dtau
+    assert np.all(np.abs(table[:, 0, 2] - table[:, mid, 2]) > 1e-6 * np.abs(table[:, mid, 2]))

@@ -49,6 +49,9 @@ _BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", des
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
                  "joint from its reduced model"))
+_BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
+                 ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
+                 "tendon towards the force (11.3); damping per joint from its reduced model"))
 _BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement",
                                          rate_hz=_FAST_HZ), ("finger", "hand"),
                  "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, tau_dot] "
@@ -56,12 +59,15 @@ _BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller
 _BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr", rate_hz=_FAST_HZ),
                  ("finger", "hand"), "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson "
                  "weights) -> force distribution (ch. 7) -> force PD (10.2); at 6 kHz"))
+_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre", rate_hz=_FAST_HZ),
+                 ("finger", "hand"), "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in "
+                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain; at 6 kHz"))
 
 # The full-state joint stages (torque feedback) run the chain at 6 kHz, the estimator at its 3 kHz: at 3 kHz they
 # limit-cycle in saturation through the estimator (measured on the index, 0.2 rad MCP step, designs for the
 # sampled chain's one-period delay: LQR 85 %, pole placement 57 % of the samples saturated; with the true joint
 # state 2 % / 1 %; at 6 kHz 4 % / 1 %, the step's first kick), cf. the finger backstepping below.
-_FAST = {"lqr", "pole-placement"}
+_FAST = {"lqr", "pole-placement", "sdre"}
 for _name, _factory, _rigs, _doc in _BUILTIN:
     fast = _name in _FAST and "finger" in _rigs
     register_controller(_name, _factory, rigs=_rigs, description=_doc,

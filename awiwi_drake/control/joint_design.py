@@ -34,6 +34,8 @@ reference maps from :func:`~awiwi_drake.control.linear.reference_maps`):
   index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
   +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
   mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
+* ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon
+  (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`), its reduced model built with that law;
 * ``pole-placement``: the double oscillator (12.13) by coefficient identification
   (:func:`~awiwi_drake.control.pole_placement.place_by_identification`): ``omega1 = position_bandwidth``,
   ``omega2`` the modulus of the joint's own open-loop pair (the link on its tendons through the force
@@ -74,7 +76,8 @@ from awiwi_drake.rigs.rigs import _link_rig
 __all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models", "pair_remainder_gains",
            "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
 
-DESIGNS = ("cascaded", "pole-placement", "lqr", "sdre")
+DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr", "sdre")
+_TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
 _TENDON_TOL = 1e-12
 
 
@@ -168,12 +171,12 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     return sub, op, sub_point
 
 
-def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None):
+def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, tendon_law: str = "force"):
     """A subsystem of :func:`joint_subsystem` closed by the chain's force stage (sharing, continuous):
     the :class:`~awiwi_drake.control.base.ClosedLoop` with input ``joint_torque_reference``, and a context
     at its operating point."""
     stage = TendonForceStage(sub.coupling, sub.spring, sub.params, params or HandChainParams(), point=point,
-                             distribution="sharing")
+                             distribution="sharing", tendon_law=tendon_law)
     loop = closed_loop(sub, stage, rate_hz=None, estimator=None)
     op = point["op"]
     return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
@@ -193,9 +196,10 @@ def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
     return F, T @ B, res
 
 
-def reduced_joint_models(rig: Any, *, point: dict | None = None,
-                         params: HandChainParams | None = None) -> list[JointReducedModel]:
-    """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring)."""
+def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
+                         tendon_law: str = "force") -> list[JointReducedModel]:
+    """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
+    ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`)."""
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
     S = point["selection"]
@@ -210,7 +214,7 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None,
         pair = []
         for friction in ("motion", "rest"):
             sub, _, sub_point = joint_subsystem(rig, j, point=point, params=p, friction=friction)
-            loop, ctx = force_loop(sub, sub_point, p)
+            loop, ctx = force_loop(sub, sub_point, p, tendon_law)
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
             F, G, res = _restrict(lin)
@@ -296,7 +300,7 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     p = params or JointDesignParams()
     c = chain or HandChainParams()
     F, G = model.A, model.B
-    if design == "cascaded":
+    if design in ("cascaded", "two-time-scale"):
         K = _impedance_gains(model, min(c.joint_stiffness, model.inertia * c.joint_bandwidth ** 2), p.damping_ratio)
         return np.append(K, 0.0)
     if design == "pole-placement":
@@ -353,7 +357,7 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
     c = chain or HandChainParams()
     p = params or JointDesignParams()
     point = point or chain_design_point(rig, params=c)
-    models = models or reduced_joint_models(rig, point=point, params=c)
+    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_TENDON_LAW.get(design, "force"))
     gains = np.array([design_joint_gains(m, design, params=p, chain=c, period=period) for m in models])
     Nx, Nu = [], []
     for m in models:
@@ -409,7 +413,8 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     d = design_joint_stage(rig, design, point=point, params=params, chain=c,
                            period=1.0 / rate_hz if sampled else None)
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
-                                 name=f"{design.replace('-', '_')}_chain", **kw)
+                                 tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
+                                 **kw)
     ctrl.design["joint_design"] = d
     return ctrl
 

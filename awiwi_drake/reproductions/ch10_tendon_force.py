@@ -18,7 +18,7 @@ from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_
                                               tendon_pd_controller, tendon_scheduled_controller)
 from awiwi_drake.parameters import MotorParams, TendonRigParams
 from awiwi_drake.parameters.control import ForceSensorParams, TendonForceGains
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
 from awiwi_drake.rigs import tendon_rig
 
@@ -52,11 +52,7 @@ class FeedforwardRun:
         ax.plot(self.t, self.without_feedforward, label="without feed-forward")
         ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
         ax.axhline(self.expected_without, color="gray", ls=":", lw=1, label="(10.3): steady state without")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("tendon force [N]")
-        ax.set_title("Fig 10.1")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        label_axes(ax, "tendon force [N]", title="Fig 10.1", legend=dict(fontsize=8))
         return fig, ax
 
 
@@ -131,9 +127,5 @@ def plot_tendon_steps(steps, *, ax=None):
         m = steps.metrics[f0]
         ax.plot(steps.t, f, label=f"{f0:g} N: xi = {m['damping_ratio']:.2f}, OS = {m['overshoot']:.0f} %")
         ax.plot(steps.t, np.where(steps.t < steps.t_step, f0, f0 + steps.step), "k--", lw=0.8)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("tendon force [N]")
-    ax.set_title(f"{steps.controller} gains")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    label_axes(ax, "tendon force [N]", title=f"{steps.controller} gains", legend=dict(fontsize=8))
     return fig, ax

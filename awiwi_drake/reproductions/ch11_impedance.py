@@ -17,7 +17,7 @@ from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
 from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
@@ -46,10 +46,7 @@ class ImpedanceStep:
         fig, ax = figure_axes(ax, figsize=(7, 4))
         ax.plot(self.t, self.joint_angle, label=f"{self.label}: overshoot {self.overshoot:.1f} %")
         ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("joint angle [rad]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        label_axes(ax, "joint angle [rad]", legend=dict(fontsize=8))
         return fig, ax
 
 
@@ -158,8 +155,5 @@ def plot_gain_diagrams(curves: dict, *, ax=None):
     fig, ax = figure_axes(ax, figsize=(7, 4))
     for label, (f, g) in curves.items():
         ax.plot(f, g, label=label)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("gain |q / q_des|")
-    ax.legend()
-    ax.grid(True, alpha=0.3)
+    label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]")
     return fig, ax

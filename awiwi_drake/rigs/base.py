@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import inspect
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -198,13 +198,6 @@ class Rig:
                 ext = op.external_torque if op.external_torque is not None else \
                     np.zeros(self.diagram.GetInputPort("external_torque").size())
                 self.diagram.GetInputPort("external_torque").FixValue(context, np.asarray(ext, dtype=float))
-
-    def state_index(self, name: str) -> int:
-        """Index of a state by name (clear error for unknown names)."""
-        try:
-            return self.state_names.index(name)
-        except ValueError:
-            raise ValueError(f"{self.name}: unknown state {name!r}; states are {', '.join(self.state_names)}") from None
 
 
 def add_revolute_link(plant: MultibodyPlant, *, name: str, inertia: float, damping: float,
