@@ -162,7 +162,7 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     the LQR gain; away from it the tendon forces f_op + W dtau move the spring slopes (Fig 4.8b stiffens with
     force) and the torque-row gain changes, symmetrically in +-dtau (the joint's tendons are antagonistic pairs
     at equal pretension)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     h = 1.0 / 6000.0
     sdre = design_joint_stage(rig, "sdre", period=h)
     lqr = design_joint_stage(rig, "lqr", period=h)
