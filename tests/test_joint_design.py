@@ -171,3 +171,38 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     np.testing.assert_allclose(table[:, mid], lqr.gains, rtol=1e-12)
     np.testing.assert_allclose(table[:, ::-1, :], table, rtol=1e-6)           # symmetric in dtau
     assert np.all(np.abs(table[:, 0, 2] - table[:, mid, 2]) > 1e-6 * np.abs(table[:, mid, 2]))
+
+
+def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
+    """Ch. 9 in the chain: the observer (9.2) per DoF estimates a constant external torque on the index MCP
+    (d_hat -> tau_ext, its steady state), and its compensation cancels it: without the observer the impedance
+    yields the static error tau_ext / Kp (closed form: the force loop's feed-forward holds f = f_ref at rest),
+    with it the error vanishes.  Continuous chain (sharing), true joint state; the observer converts to
+    AutoDiffXd and matches finite differences."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.control.joint_stage import JointFrictionObserver
+    from awiwi_drake.parameters.hand_control import FrictionObserverParams
+    load = 0.01
+    errors = {}
+    for obs in (None, FrictionObserverParams()):
+        rig = _design_rig()                          # (3.8) in motion: the joint's slowest mode at -35 1/s
+        ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing", friction_observer=obs)
+        kp = ctrl.design["joint_design"].gains[1, 0]
+        loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+        op = rig.operating_point()
+        tau = np.zeros(4)
+        tau[1] = load
+        ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                                  disturbances={"external_torque": tau})
+        res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle",), max_step=2e-3, accuracy=1e-5)
+        errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
+    assert errors[False] == pytest.approx(load / kp, rel=0.02)
+    assert abs(errors[True]) < 0.02 * load / kp
+    rig = finger_diagram(finger="thumb", backend="python")
+    rng = np.random.default_rng(2)
+    obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)
+    op = rig.operating_point()
+    check_system_autodiff_matches_fd(obs, rng.normal(0, 0.3, 4), dict(
+        joint_angle=op.joint_angle + rng.normal(0, 0.05, 4), joint_velocity=rng.normal(0, 0.5, 4),
+        tendon_force=op.tendon_force + rng.normal(0, 1, 8)), rtol=1e-5)

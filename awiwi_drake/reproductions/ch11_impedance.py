@@ -12,13 +12,13 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.analysis import Chirp, linearize, simulate
+from awiwi_drake.analysis import Chirp, Step, linearize, simulate
 from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
 from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
 from awiwi_drake.plotting import figure_axes, label_axes
-from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
@@ -89,7 +89,7 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
                        rate_hz=RATE)
     op = r.operating_point()
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
-    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.02, step)], 0.0),
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": Step(0.02, step),
                                                "external_torque": 0.0},
                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
     m = step_metrics(log.t, log["joint_angle"][:, 0], 0.0, step, 0.02)
