@@ -21,16 +21,27 @@ def figure_axes(ax=None, **subplots_kw):
     return ax.figure, ax
 
 
+def label_axes(ax, ylabel: str, *, xlabel: str | None = "time [s]", title: str | None = None, grid: bool = True,
+               legend: bool | dict | None = True) -> None:
+    """Finish a panel: axis labels (units in brackets), optional title, a light grid and the legend
+    (``legend``: True, a dict of ``ax.legend`` options, or None for none)."""
+    if xlabel is not None:
+        ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title is not None:
+        ax.set_title(title)
+    if grid:
+        ax.grid(True, alpha=0.3)
+    if legend is not None:
+        ax.legend(**(legend if isinstance(legend, dict) else {}))
+
+
 def plot_traces(t, traces: dict, *, ylabel: str, ax=None, styles: dict | None = None, title: str = ""):
     """Several time series ``{label: y}`` over ``t`` [s]."""
     fig, ax = figure_axes(ax, figsize=(7, 4))
     for label, y in traces.items():
         ax.plot(t, y, (styles or {}).get(label, "-"), label=label)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.grid(True, alpha=0.3)
-    ax.legend()
+    label_axes(ax, ylabel, title=title)
     return fig, ax
 
 
@@ -44,10 +55,7 @@ def plot_friction_curve(params, omega_max: float = 15.0, ax=None, measured=None)
     ax.plot(w, -motor_friction_torque(w, params), label="(3.8), Table 3.3")
     if measured is not None:
         ax.plot(*measured, "o", ms=4, label="measured")
-    ax.set_xlabel("output velocity [rad/s]")
-    ax.set_ylabel("friction torque [Nm]")
-    ax.grid(True, alpha=0.3)
-    ax.legend()
+    label_axes(ax, "friction torque [Nm]", xlabel="output velocity [rad/s]")
     return fig, ax
 
 
@@ -160,9 +168,7 @@ def plot_poles(poles, ax=None, label=None, marker="x"):
     poles = np.asarray(poles)
     ax.plot(poles.real, poles.imag, marker, ls="", label=label)
     ax.axvline(0, color="k", lw=0.5)
-    ax.set_xlabel("Re [1/s]")
-    ax.set_ylabel("Im [rad/s]")
-    ax.grid(True, alpha=0.3)
+    label_axes(ax, "Im [rad/s]", xlabel="Re [1/s]", legend=None)
     if label:
         ax.legend()
     return fig, ax
@@ -197,7 +203,6 @@ def plot_pole_sweep(values, poles, name: str, ax=None, *, symlog: float | None =
             axis.set_major_locator(SymmetricalLogLocator(base=100.0, linthresh=symlog))
         ax.axvspan(-symlog, symlog, color="0.9", zorder=0, label=f"|Re| < {symlog:g} 1/s (linear scale)")
         ax.legend(fontsize=7, loc="center right")
-    ax.set_xlabel("Re [1/s]" + (" (symlog)" if symlog is not None else ""))
-    ax.set_ylabel("Im [rad/s]" + (" (symlog)" if symlog is not None else ""))
-    ax.grid(True, alpha=0.3)
+    tag = " (symlog)" if symlog is not None else ""
+    label_axes(ax, "Im [rad/s]" + tag, xlabel="Re [1/s]" + tag, legend=None)
     return fig, ax

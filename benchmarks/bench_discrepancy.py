@@ -51,7 +51,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 SINGLE = ["motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction", "guide_friction", "delay",
-          "spring_drift"]
+          "spring_drift", "backlash"]
 TRIPLES = [("motor_friction", "joint_friction", "delay"), ("motor_ripple", "spring_hysteresis", "joint_friction"),
            ("guide_friction", "delay", "motor_ripple"), ("spring_drift", "motor_friction", "joint_friction")]
 OUT_OF_CATALOG = ["link_scale", "link_bias", "motor_bias"]
@@ -236,6 +236,17 @@ def _select(cols: list, owner: list, err: np.ndarray, threshold: float) -> list:
 
 
 # ----------------------------------------------------------------------------- one case
+def _code_version() -> str:
+    """The git commit of the package that ran a case (results of different code are not mixed silently)."""
+    import subprocess
+    root = pathlib.Path(__file__).resolve().parent.parent
+    try:
+        return subprocess.run(["git", "-C", str(root), "rev-parse", "--short", "HEAD"], capture_output=True,
+                              text=True, timeout=10).stdout.strip() or os.environ.get("AWIWI_CODE_VERSION", "")
+    except OSError:
+        return os.environ.get("AWIWI_CODE_VERSION", "")
+
+
 def run_case(case) -> dict:
     from awiwi_drake.discrepancy import diagnose, gap_metrics, make_truth_dataset
 
@@ -251,6 +262,7 @@ def run_case(case) -> dict:
     t1 = time.process_time()
     base = sindy_baseline(ds, calibrated_threshold())
     return {"row": row, "rig": rig, "hidden": list(hidden), "snr_db": snr, "seed": seed, "strength": strength,
+            "code": _code_version(),
             "duration": duration,
             "transform": transform, "applied": applied, "named": dx.named_effects,
             "nuisance_named": dx.nuisance_corrections, "verdict": dx.verdict,

@@ -23,7 +23,9 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 * ``finger_index_3khz``: the index finger under the joint-space motor PD.
 * ``hand_3khz``: the whole hand (19 DoF, 38 tendons, wrist input at 0) under the
   joint PD, with the thesis's physics on (motor friction and ripple, guide friction,
-  spring hysteresis), with ripple and guide friction only, and with both off.
+  spring hysteresis), with ripple and guide friction only, with all three off, and with
+  the default ``HandRigParams()`` (keys ``hand_3khz_rtf``, ``..._ripple_guide_friction_rtf``,
+  ``..._physics_off_rtf``, ``..._default_rtf``).
 * ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
   (C++: a sparse gain on the batch state plus a constant, zero-order hold at 3 kHz),
   rig-seconds per CPU-second.
@@ -189,22 +191,22 @@ def case_finger_index_3khz(seconds, repeats):
 
 
 def case_hand_3khz(seconds, repeats):
+    """The hand under the joint PD: physics off, ripple + guide friction, all on (``hand_3khz_rtf``), and the
+    default ``HandRigParams()`` (whatever the defaults switch on), each stated explicitly."""
     from awiwi_drake.parameters.hand import HandRigParams
     out = {}
-    cpu, wall, _ = _hand_like("hand", seconds, repeats)
-    out.update(hand_3khz_physics_off_rtf=cpu, hand_3khz_physics_off_wall_rtf=wall)
-    part = HandRigParams().with_physics(ripple=True, guide_friction=True)
-    try:
-        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=part)
-        out.update(hand_3khz_ripple_guide_friction_rtf=cpu, hand_3khz_ripple_guide_friction_wall_rtf=wall)
-    except (FloatingPointError, RuntimeError) as exc:
-        out.update(hand_3khz_ripple_guide_friction_rtf=None, hand_3khz_ripple_guide_friction_note=str(exc))
-    on = HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)
-    try:
-        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=on)
-        out.update(hand_3khz_rtf=cpu, hand_3khz_wall_rtf=wall)
-    except (FloatingPointError, RuntimeError) as exc:   # divergence of fixed-step RK3 at 3 kHz
-        out.update(hand_3khz_rtf=None, hand_3khz_wall_rtf=None, hand_3khz_note=f"physics on: {exc}")
+    cases = (("hand_3khz_physics_off", HandRigParams().with_physics(ripple=False, hysteresis=False,
+                                                                    guide_friction=False)),
+             ("hand_3khz_ripple_guide_friction", HandRigParams().with_physics(ripple=True, hysteresis=False,
+                                                                              guide_friction=True)),
+             ("hand_3khz", HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)),
+             ("hand_3khz_default", HandRigParams()))
+    for key, params in cases:
+        try:
+            cpu, wall, _ = _hand_like("hand", seconds, repeats, params=params)
+            out.update({f"{key}_rtf": cpu, f"{key}_wall_rtf": wall})
+        except (FloatingPointError, RuntimeError) as exc:   # divergence of fixed-step RK3 at 3 kHz
+            out.update({f"{key}_rtf": None, f"{key}_wall_rtf": None, f"{key}_note": str(exc)})
     return out
 
 

@@ -45,9 +45,26 @@ def assert_jacobians_close(J, J_ref, rtol=1e-6, name=""):
     np.testing.assert_allclose(J, J_ref, rtol=rtol, atol=rtol * scale, err_msg=f"Jacobian {name}")
 
 
-def _fix(system, ctx, names, values):
-    for n, v in zip(names, values):
-        system.GetInputPort(n).FixValue(ctx, v)
+def assert_symbolic_matches_float(system, x, inputs: dict, rtol=1e-12):
+    """``ToSymbolic()`` converts ``system`` and, evaluated at the numbers ``x`` / ``inputs``, its time
+    derivatives and every output equal the float system's (the laws pass Expression through)."""
+    from pydrake.symbolic import Expression
+    sym = system.ToSymbolic()
+    x = np.asarray(x, dtype=float).ravel()
+
+    def evaluate(sys_, lift):
+        ctx = sys_.CreateDefaultContext()
+        if x.size:
+            ctx.SetContinuousState(lift(x))
+        for n, v in inputs.items():
+            sys_.GetInputPort(n).FixValue(ctx, lift(np.ravel(np.asarray(v, dtype=float))))
+        out = [sys_.EvalTimeDerivatives(ctx).CopyToVector()] if x.size else []
+        return out + [np.asarray(sys_.get_output_port(i).Eval(ctx)) for i in range(sys_.num_output_ports())]
+    ref = evaluate(system, lambda a: a)
+    got = evaluate(sym, lambda a: np.array([Expression(float(e)) for e in a], dtype=object))
+    for r, g in zip(ref, got):
+        np.testing.assert_allclose([e.Evaluate() for e in np.ravel(g)], np.ravel(r), rtol=rtol,
+                                   atol=rtol * max(1.0, float(np.max(np.abs(r), initial=0.0))))
 
 
 def system_jacobians(system, x, inputs: dict, *, wrt=None, ad=None, outputs=None, discrete_state=None):

@@ -1,4 +1,4 @@
-"""One check shared by the cross-check tests: a discrepancy replay model (state ``[theta, omega, q, q', z]``)
+"""One check shared by the cross-check tests: a discrepancy replay model (state ``[q, q', theta, omega, z]``)
 has the joint rig diagram's time derivatives (state ``[q, q', theta, omega]``) at random states."""
 import numpy as np
 
@@ -20,10 +20,9 @@ def assert_models_match_joint_rig(models, rig, *, motor_pulley_radius, link_pull
         rig.diagram.GetInputPort("motor_torque").FixValue(rig_ctx, u)
         xdot_rig = rig.diagram.EvalTimeDerivatives(rig_ctx).CopyToVector()
         for system, ctx in models:
-            ctx.SetContinuousState(np.r_[theta, omega, q, qd, 0.0, 0.0])
+            ctx.SetContinuousState(np.r_[q, qd, theta, omega, 0.0, 0.0])   # the rig's order, then z
             system.get_input_port(0).FixValue(ctx, u)
             xdot = system.EvalTimeDerivatives(ctx).CopyToVector()
-            # model order [theta, omega, q, q', z] -> rig order [q, q', theta, omega]
-            np.testing.assert_allclose(np.r_[xdot[4:6], xdot[0:4]], xdot_rig, rtol=rtol,
+            np.testing.assert_allclose(xdot[:6], xdot_rig, rtol=rtol,
                                        atol=rtol * np.max(np.abs(xdot_rig)),
                                        err_msg=f"{system.get_name()} vs {rig.name} at q={q:.3g}, x={x}")

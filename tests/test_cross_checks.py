@@ -1,10 +1,11 @@
 """Hand-written models against the framework at random states (as Drake's examples check a
 hand-written pendulum against MultibodyPlant to 1e-8).
 
-The model-discrepancy workflow integrates its own copies of the joint rig (``DiscrepancyModel_``,
-written for batched replay, and the truth generator's ``HiddenEffectPlant_``); with the same
-parameters and the catalog effects that the rig also has, their time derivatives must equal
-those of the rig's Drake diagram (MultibodyPlant link, motor bank, spring bank, routing).
+The model-discrepancy workflow integrates batched copies of the joint rig (``DiscrepancyModel_``, generated
+from the rig's drive law with the catalog effects as switches, and compiled) and the truth generator's
+hand-written ``HiddenEffectPlant_``; with the same parameters and the catalog effects that the rig also
+has, their time derivatives must equal those of the rig's Drake diagram (MultibodyPlant link, motor bank,
+spring bank, routing).
 """
 
 import numpy as np

@@ -96,11 +96,10 @@ def test_missing_file_is_named(tmp_path):
 
 # ---------------------------------------------------------------- model physics
 def _random_state(nom, rng):
+    """A state in the rigs' order ``[(q, q'), theta, omega, z]``."""
     n = nom.num_motors
-    x = [rng.uniform(0.3, 0.5, n), rng.uniform(-2, 2, n)]
-    if nom.has_link:
-        x += [rng.uniform(-0.1, 0.1, 1), rng.uniform(-3, 3, 1)]
-    x += [rng.uniform(-1, 1, n)]
+    x = [rng.uniform(-0.1, 0.1, 1), rng.uniform(-3, 3, 1)] if nom.has_link else []
+    x += [rng.uniform(0.3, 0.5, n), rng.uniform(-2, 2, n), rng.uniform(-1, 1, n)]
     return np.concatenate(x)
 
 
@@ -123,13 +122,12 @@ def test_nominal_model_matches_foundation_joint_rig():
         X = _random_state(nom, rng)
         X[-2:] = 0.0
         u = rng.uniform(-0.5, 0.5, 2)
-        # foundation order [q, qd, th1, th2, w1, w2]
-        ctx.SetContinuousState(np.r_[X[4], X[5], X[0], X[1], X[2], X[3]])
+        ctx.SetContinuousState(X[:6])   # the same order [q, qd, th1, th2, w1, w2]
         rig.diagram.GetInputPort("motor_torque").FixValue(ctx, u)
         rig.diagram.GetInputPort("external_torque").FixValue(ctx, [0.0])
         ref = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
         ours = model_derivatives(nom, X[:, None], u[:, None], default_vector()[:, None])[:, 0]
-        np.testing.assert_allclose(ours[[4, 5, 0, 1, 2, 3]], ref, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(ours[:6], ref, rtol=1e-9, atol=1e-9)
         f_ref = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
         y = model_measurements(nom, X[:, None], default_vector()[:, None])[:, 0]
         np.testing.assert_allclose(y[2:4], f_ref, rtol=1e-12)
@@ -198,11 +196,8 @@ def test_joint_backlash_is_a_dead_zone_between_link_and_pulley():
 def _energy(nom, X):
     n = nom.num_motors
     spring = PolynomialSpring(nom.spring_poly)
-    from awiwi_drake.discrepancy.model import rig_kinematics
-    th, om = X[:n], X[n:2 * n]
-    q = qd = None
-    if nom.has_link:
-        q, qd = X[2 * n], X[2 * n + 1]
+    from awiwi_drake.discrepancy.model import rig_kinematics, split_state
+    th, om, q, qd, _ = split_state(nom, X)
     x, _ = rig_kinematics(nom, th, om, q, qd)
     e = 0.5 * nom.motor_inertia * np.sum(om ** 2) + sum(float(spring.energy(np.array([xi]))[0]) for xi in x)
     if nom.has_link:
@@ -225,7 +220,7 @@ def test_unforced_rig_is_passive(effects):
         xdot = model_derivatives(nom, X[:, None], np.zeros((2, 1)), p[:, None])[:, 0]
         grad = fd_jacobian(lambda x: _energy(nom, x), X, h=1e-6).ravel()
         dEdt = grad @ xdot
-        natural = -nom.motor_damping * np.sum(X[2:4] ** 2) - nom.link_damping * X[5] ** 2
+        natural = -nom.motor_damping * np.sum(X[4:6] ** 2) - nom.link_damping * X[1] ** 2   # [q, q', th, w, z]
         if not effects:
             assert dEdt == pytest.approx(natural, rel=1e-4, abs=1e-8)
         else:

@@ -19,12 +19,21 @@ from awiwi_drake.parameters.hand import FingerRigParams
 from awiwi_drake.parameters.hand_control import HandChainParams
 from awiwi_drake.parameters.joint_design import JointDesignParams
 
-DESIGNS = ("cascaded", "pole-placement", "lqr")
+DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr")
+TENDON_LAW = {"two-time-scale": "motor-position"}
+
+
+def _python_rig(finger="index"):
+    """The finger on the python backend (every state-only output declared so, for the continuous linearisations
+    of these design checks), without the spring hysteresis: that backend does not carry its state, and the
+    per-joint design models have none."""
+    return finger_diagram(finger=finger, backend="python",
+                          params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False))
 
 
 def _design_rig(finger="index"):
-    """The finger with the design model's motor ((3.8) linearised in motion), python backend."""
-    p = FingerRigParams.for_finger(finger)
+    """The finger with the design model's motor ((3.8) linearised in motion), python backend (as `_python_rig`)."""
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
     return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
 
 
@@ -34,7 +43,7 @@ def test_reduced_model_is_the_link_on_its_closed_force_loop():
     row is the force loop's: with (10.11) every tendon's force obeys f'' = w^2 (f_ref - f) - 2 xi w f' +
     k_t P_j qdd, so tau'' = w^2 tau_ref - (w^2 + K_jj / M_jj) tau + ... (qdd = tau / M_jj - ...; the joint's
     own tendon stiffness K_jj = P_j^T K_t P_j (5.12) stiffens the torque loop)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     w = HandChainParams().force_bandwidth
     for m in reduced_joint_models(rig):
         assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
@@ -54,16 +63,16 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     """Where the reduced model is exact -- the one-DoF subsystem of the index MCP built from the finger's
     parts, closed by the whole chain (joint stage reading tau from the measured forces, sharing, force law)
     -- Drake's Linearize has the designed poles (plus the force modes the joint does not see)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     d = design_joint_stage(rig, design)
     j = 1
     sub, op, point = joint_subsystem(rig, j, point=None)
-    m, K = d.models[j], d.gains[j]
+    m, K = d.models[j], d.gains[j, :4]          # continuous design (no delay gain)
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
                                 torque_op=point["torque_offset"])
-    loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
-                       estimator=None)
+    loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing",
+                                                  tendon_law=TENDON_LAW.get(design, "force")), rate_hz=None, estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
     assert np.abs(loop.diagram.EvalTimeDerivatives(ctx).CopyToVector()).max() < 1e-9
     lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
@@ -97,7 +106,7 @@ def test_whole_finger_poles_against_the_per_joint_designs(design):
 
 def test_pole_placement_places_the_double_oscillator_on_each_joint():
     """(12.13) per DoF: omega1 = position_bandwidth, omega2 = |the joint's own open-loop pair|, both damped."""
-    rig = finger_diagram(finger="ring", backend="python")
+    rig = _python_rig("ring")
     p = JointDesignParams()
     d = design_joint_stage(rig, "pole-placement", params=p)
     for m, poles in zip(d.models, d.design_poles):
@@ -111,7 +120,7 @@ def test_joint_stage_with_torque_feedback_converts_to_autodiff():
     """The LQR stage reads tau = -(PS)^T f and tau_dot = -(PS)^T k_t (r_m omega + P qdot) from the
     measurements; its derivatives equal finite differences (thumb: P(q) varies), and d tau_ref / d f is
     the closed form K_tau * (-(PS)^T) per DoF."""
-    rig = finger_diagram(finger="thumb", backend="python")
+    rig = _python_rig("thumb")
     d = design_joint_stage(rig, "lqr")
     S = d.law.S
     n, k = S.shape
@@ -135,7 +144,7 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
     """Registered for every finger and the hand; designed per DoF; a short 3 kHz step through the
     estimator keeps the tendons taut and the loop finite (tracking is measured by compare)."""
     from awiwi_drake.analysis import simulate
-    for name in ("pole-placement", "lqr"):
+    for name in ("two-time-scale", "pole-placement", "lqr"):
         assert name in controller_names(f"finger-{finger}") and name in controller_names("hand")
         rig = finger_diagram(finger=finger)
         loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
@@ -146,3 +155,54 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
         res = simulate(loop.diagram, ctx, 0.1, log=("joint_angle", "tendon_force"), max_step=1 / 3000, accuracy=1e-3)
         assert np.all(res["tendon_force"] > 0.0)
         assert abs(res["joint_angle"][-1][1] - ref[1]) < abs(res["joint_angle"][0][1] - ref[1])
+
+
+def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slope():
+    """Ch. 14: the SDRE's pointwise-linear model at the design point is the linearisation, so its gain there is
+    the LQR gain; away from it the tendon forces f_op + W dtau move the spring slopes (Fig 4.8b stiffens with
+    force) and the torque-row gain changes, symmetrically in +-dtau (the joint's tendons are antagonistic pairs
+    at equal pretension)."""
+    rig = _python_rig("index")
+    h = 1.0 / 6000.0
+    sdre = design_joint_stage(rig, "sdre", period=h)
+    lqr = design_joint_stage(rig, "lqr", period=h)
+    table, grid = sdre.law.table, sdre.law.schedule
+    mid = int(np.flatnonzero(grid == 0.0)[0])
+    np.testing.assert_allclose(table[:, mid], lqr.gains, rtol=1e-12)
+    np.testing.assert_allclose(table[:, ::-1, :], table, rtol=1e-6)           # symmetric in dtau
+    assert np.all(np.abs(table[:, 0, 2] - table[:, mid, 2]) > 1e-6 * np.abs(table[:, mid, 2]))
+
+
+def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
+    """Ch. 9 in the chain: the observer (9.2) per DoF estimates a constant external torque on the index MCP
+    (d_hat -> tau_ext, its steady state), and its compensation cancels it: without the observer the impedance
+    yields the static error tau_ext / Kp (closed form: the force loop's feed-forward holds f = f_ref at rest),
+    with it the error vanishes.  Continuous chain (sharing), true joint state; the observer converts to
+    AutoDiffXd and matches finite differences."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.control.joint_stage import JointFrictionObserver
+    from awiwi_drake.parameters.hand_control import FrictionObserverParams
+    load = 0.01
+    errors = {}
+    for obs in (None, FrictionObserverParams()):
+        rig = _design_rig()                          # (3.8) in motion: the joint's slowest mode at -35 1/s
+        ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing", friction_observer=obs)
+        kp = ctrl.design["joint_design"].gains[1, 0]
+        loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+        op = rig.operating_point()
+        tau = np.zeros(4)
+        tau[1] = load
+        ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                                  disturbances={"external_torque": tau})
+        res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle",), max_step=2e-3, accuracy=1e-5)
+        errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
+    assert errors[False] == pytest.approx(load / kp, rel=0.02)
+    assert abs(errors[True]) < 0.02 * load / kp
+    rig = finger_diagram(finger="thumb", backend="python")
+    rng = np.random.default_rng(2)
+    obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)
+    op = rig.operating_point()
+    check_system_autodiff_matches_fd(obs, rng.normal(0, 0.3, 4), dict(
+        joint_angle=op.joint_angle + rng.normal(0, 0.05, 4), joint_velocity=rng.normal(0, 0.5, 4),
+        tendon_force=op.tendon_force + rng.normal(0, 1, 8)), rtol=1e-5)

@@ -6,7 +6,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 from pydrake.symbolic import Expression
 
-from _fd import check_system_autodiff_matches_fd
+from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
 from awiwi_drake.components import (
     ConstantCoupling, MotorBank_, SpringBank_, TendonRouting_, build_tendon_drive, tendon_spring)
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
@@ -35,9 +35,9 @@ def test_motor_bank_converts_and_autodiff_matches_fd():
     p = MotorParams(ripple=True)
     sys = MotorBank_[float](p, 3)
     x = np.array([0.1, 0.5, -0.3, 1.0, -2.0, 0.01])
-    check_system_autodiff_matches_fd(sys, x, {"motor_torque": np.array([0.3, -0.2, 0.1]),
-                                        "tendon_force": np.array([20.0, 35.0, 5.0])})
-    assert sys.ToSymbolic() is not None  # symbolic conversion too (atan, sin, min/max)
+    inputs = {"motor_torque": np.array([0.3, -0.2, 0.1]), "tendon_force": np.array([20.0, 35.0, 5.0])}
+    check_system_autodiff_matches_fd(sys, x, inputs)
+    assert_symbolic_matches_float(sys, x, inputs)   # symbolic conversion too (atan, sin, min/max)
 
 
 def test_motor_bank_load_torque_variant_and_bad_arguments():
@@ -60,7 +60,7 @@ def test_spring_bank_converts_and_autodiff_matches_fd(hysteresis):
         inputs["elongation_rate"] = np.array([0.01, -0.02])
         x = np.array([1.0, -2.0])
     check_system_autodiff_matches_fd(sys, x, inputs, rtol=2e-5)
-    assert sys.ToSymbolic() is not None
+    assert_symbolic_matches_float(sys, x, inputs)
 
 
 def test_lever_spring_bank_autodiff_matches_fd_and_refuses_symbolic():

@@ -220,8 +220,33 @@ class FrequencyResponse:
                     magnitude_db=self.magnitude_db.tolist(), phase_deg=self.phase_deg.tolist(), margins=m)
 
 
+class _JsonFile:
+    """``save(path)`` / ``load(path)``: one ``.json`` file of ``to_json()`` / ``from_json()``."""
+
+    def save(self, path: str | Path) -> Path:
+        """Write :meth:`to_json` to ``path`` (``.json``); read it back with :meth:`load`."""
+        path, name = Path(path), type(self).__name__
+        if path.suffix != ".json":
+            raise ValueError(f"{name}.save: {str(path)!r} must end in .json")
+        if not path.parent.is_dir():
+            raise ValueError(f"{name}.save: directory {str(path.parent)!r} does not exist")
+        path.write_text(json.dumps(self.to_json(), indent=1))
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path):
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"{cls.__name__}.load: {str(path)!r} is not a file")
+        try:
+            return cls.from_json(json.loads(path.read_text()))
+        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{cls.__name__}.load: {str(path)!r} is not a saved {cls.__name__} "
+                             f"({type(exc).__name__}: {exc})") from None
+
+
 @dataclass(frozen=True)
-class LinearizationResult:
+class LinearizationResult(_JsonFile):
     """``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du`` around ``(x0, u0)``.
 
     Attributes
@@ -354,38 +379,15 @@ class LinearizationResult:
                     outputs={k: dict(C=v.C.tolist(), D=v.D.tolist(), y0=np.asarray(v.y0).tolist(), names=list(v.names))
                              for k, v in self.outputs.items()})
 
-    def save(self, path: str | Path) -> Path:
-        """Write :meth:`to_json` to ``path`` (``.json``); read it back with :meth:`load`."""
-        path = Path(path)
-        if path.suffix != ".json":
-            raise ValueError(f"LinearizationResult.save: {str(path)!r} must end in .json")
-        if not path.parent.is_dir():
-            raise ValueError(f"LinearizationResult.save: directory {str(path.parent)!r} does not exist")
-        path.write_text(json.dumps(self.to_json(), indent=1))
-        return path
-
     @classmethod
     def from_json(cls, d: dict) -> "LinearizationResult":
-        try:
-            outs = {k: OutputMap(np.atleast_2d(np.array(v["C"], float)), np.atleast_2d(np.array(v["D"], float)),
-                                 np.array(v["y0"], float), tuple(v["names"])) for k, v in d.get("outputs", {}).items()}
-            return cls(np.atleast_2d(np.array(d["A"], float)), np.atleast_2d(np.array(d["B"], float)),
-                       np.atleast_2d(np.array(d["C"], float)), np.atleast_2d(np.array(d["D"], float)),
-                       tuple(d["state_names"]), tuple(d.get("input_names", ())), tuple(d.get("output_names", ())),
-                       np.array(d.get("x0", []), float), np.array(d.get("u0", []), float),
-                       np.array(d.get("f0", []), float), outs, None, d.get("input_port", "motor_torque"))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"LinearizationResult: malformed JSON ({type(exc).__name__}: {exc})") from None
-
-    @classmethod
-    def load(cls, path: str | Path) -> "LinearizationResult":
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"LinearizationResult.load: {str(path)!r} is not a file")
-        try:
-            return cls.from_json(json.loads(path.read_text()))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"LinearizationResult.load: {str(path)!r} is not valid JSON: {exc}") from None
+        outs = {k: OutputMap(np.atleast_2d(np.array(v["C"], float)), np.atleast_2d(np.array(v["D"], float)),
+                             np.array(v["y0"], float), tuple(v["names"])) for k, v in d.get("outputs", {}).items()}
+        return cls(np.atleast_2d(np.array(d["A"], float)), np.atleast_2d(np.array(d["B"], float)),
+                   np.atleast_2d(np.array(d["C"], float)), np.atleast_2d(np.array(d["D"], float)),
+                   tuple(d["state_names"]), tuple(d.get("input_names", ())), tuple(d.get("output_names", ())),
+                   np.array(d.get("x0", []), float), np.array(d.get("u0", []), float),
+                   np.array(d.get("f0", []), float), outs, None, d.get("input_port", "motor_torque"))
 
 
 def _channel_names(port_name: str, size: int, names: Sequence[str] = ()) -> tuple:
@@ -517,7 +519,7 @@ def lqr_gain(A, B, Q, R) -> tuple[np.ndarray, np.ndarray]:
 
 
 @dataclass(frozen=True)
-class LqrResult:
+class LqrResult(_JsonFile):
     """LQR design at an operating point: ``u = u0 - K (x - x0)``.
 
     ``S`` solves the continuous algebraic Riccati equation; the optimal cost
@@ -549,28 +551,11 @@ class LqrResult:
                     closed_loop_poles=[[float(p.real), float(p.imag)] for p in self.closed_loop_poles],
                     state_names=list(self.linearization.state_names), linearization=self.linearization.to_json())
 
-    def save(self, path: str | Path) -> Path:
-        """Write :meth:`to_json` (with the linearisation) to ``path`` (``.json``); read back with :meth:`load`."""
-        path = Path(path)
-        if path.suffix != ".json":
-            raise ValueError(f"LqrResult.save: {str(path)!r} must end in .json")
-        if not path.parent.is_dir():
-            raise ValueError(f"LqrResult.save: directory {str(path.parent)!r} does not exist")
-        path.write_text(json.dumps(self.to_json(), indent=1))
-        return path
-
     @classmethod
-    def load(cls, path: str | Path) -> "LqrResult":
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"LqrResult.load: {str(path)!r} is not a file")
-        try:
-            d = json.loads(path.read_text())
-            return cls(np.atleast_2d(np.array(d["K"], float)), np.atleast_2d(np.array(d["S"], float)),
-                       np.atleast_2d(np.array(d["Q"], float)), np.atleast_2d(np.array(d["R"], float)),
-                       LinearizationResult.from_json(d["linearization"]))
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"LqrResult.load: {str(path)!r} is not a saved LqrResult ({type(exc).__name__}: {exc})") from None
+    def from_json(cls, d: dict) -> "LqrResult":
+        return cls(np.atleast_2d(np.array(d["K"], float)), np.atleast_2d(np.array(d["S"], float)),
+                   np.atleast_2d(np.array(d["Q"], float)), np.atleast_2d(np.array(d["R"], float)),
+                   LinearizationResult.from_json(d["linearization"]))
 
 
 def lqr(plant, Q, R, op=None, *, context: Context | None = None, input: str = "motor_torque",  # noqa: A002

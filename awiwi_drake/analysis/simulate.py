@@ -99,13 +99,6 @@ def _path(root: System, target: System) -> list[str] | None:
     return None
 
 
-def _follow(root: System, path: list[str]) -> System:
-    s = root
-    for name in path:
-        s = s.GetSubsystemByName(name)
-    return s
-
-
 def simulate(system, context: Context | None, t_final: float, *,
              inputs: Mapping[str, Any] | None = None,
              log: Iterable[str] | Mapping[str, Any] | None = None,

@@ -147,7 +147,8 @@ def register(subparsers) -> None:
                    help="the rig of the truth experiment (default joint-rig)")
     m.add_argument("--hide", action="append", metavar="EFFECT",
                    help="catalog effect hidden in the truth (repeat or comma-separate; 'none'): motor_friction, "
-                        "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay")
+                        "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay, spring_drift, "
+                        "backlash")
     m.add_argument("--nuisance", action="append", metavar="NAME",
                    help="miscalibration in the truth: force_sensor, nominal_motor")
     m.add_argument("--snr", type=_snr, default=30.0, metavar="DB",

@@ -11,6 +11,7 @@ from awiwi_drake.control.registry import register_controller
 
 _JOINTS = ("flexible-joint", "joint-rig")
 _SAMPLED = {"rate_hz": 3000.0}
+_FAST_HZ = 6000.0      # the full-state joint stages on fingers/hand (see below)
 
 
 def _lazy(module: str, function: str, **kwargs):
@@ -48,20 +49,35 @@ _BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", des
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
                  "joint from its reduced model"))
-_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement"),
-                 ("finger", "hand"), "per joint: double oscillator (12.13) placed on the joint's reduced model "
-                 "[q, qdot, tau, tau_dot] (link through its closed force loop) -> the chain"))
-_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr"), ("finger", "hand"),
-                 "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson weights) -> the chain"))
+_BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
+                 ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
+                 "tendon towards the force (11.3); damping per joint from its reduced model"))
+_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement",
+                                         rate_hz=_FAST_HZ), ("finger", "hand"),
+                 "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, tau_dot] "
+                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2); at 6 kHz"))
+_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr", rate_hz=_FAST_HZ),
+                 ("finger", "hand"), "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson "
+                 "weights) -> force distribution (ch. 7) -> force PD (10.2); at 6 kHz"))
+_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre", rate_hz=_FAST_HZ),
+                 ("finger", "hand"), "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in "
+                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain; at 6 kHz"))
 
+# The full-state joint stages (torque feedback) run the chain at 6 kHz, the estimator at its 3 kHz: at 3 kHz they
+# limit-cycle in saturation through the estimator (measured on the index, 0.2 rad MCP step, designs for the
+# sampled chain's one-period delay: LQR 85 %, pole placement 57 % of the samples saturated; with the true joint
+# state 2 % / 1 %; at 6 kHz 4 % / 1 %, the step's first kick), cf. the finger backstepping below.
+_FAST = {"lqr", "pole-placement", "sdre"}
 for _name, _factory, _rigs, _doc in _BUILTIN:
-    register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)
+    fast = _name in _FAST and "finger" in _rigs
+    register_controller(_name, _factory, rigs=_rigs, description=_doc,
+                        loop_options={"rate_hz": _FAST_HZ} if fast else _SAMPLED)
 
-# The law at 6 kHz (sensing and estimation at 3 kHz): behind a 3 kHz hold it chatters between the
-# torque limits (measured on the index finger, 0.2 rad MCP step: command saturated in 100 % of the samples
-# after 0.1 s; at 6 kHz and 10 kHz |u| < 0.55 Nm and the step settles), cf. the joint-rig entries
-# (backstepping_registry: 3 kHz once Kd,imp is limited to m f_s / 4 at the run rate) and issue 10 item 6.
+# The law at the thesis's 3 kHz: its joint gains are designed for that rate (every designed joint mode
+# |h lambda| <= 1/4, HandChainParams.sampled_pole_limit). It used to run at 6 kHz: the per-DoF design put a
+# pole at -6838 1/s on the index (h lambda = -2.3 at 3 kHz, sampled spectral radius 1.18, the command
+# chattered between the torque limits); see control/finger_backstepping.py and issue 10 item 6.
 register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller"),
-                    rigs=("finger", "hand"), loop_options={"rate_hz": 6000.0},
+                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
-                                "torques directly; law at 6 kHz, joint angles estimated at 3 kHz (5.15)")
+                                "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")

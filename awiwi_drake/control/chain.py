@@ -173,12 +173,15 @@ class TendonForceStage(Diagram):
     (distribution) ``distribution_status``.
 
     ``distribution``: ``"optimal"`` / ``"algorithm2"`` (ch. 7, sampled every ``1/rate_hz``, needs
-    ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).
+    ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).  ``tendon_law``: ``"force"``
+    (10.2) or ``"motor-position"`` (the tendon level of the two-time-scale (11.3),
+    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``).
     """
 
     def __init__(self, coupling, spring, drive_params, params: HandChainParams | None = None, *,
                  point: dict, distribution: str | None = None, gains: TendonForceGains | None = None,
-                 distribution_params: ForceDistributionParams | None = None, rate_hz: float = 3000.0):
+                 distribution_params: ForceDistributionParams | None = None, rate_hz: float = 3000.0,
+                 tendon_law: str = "force"):
         super().__init__()
         p = params or HandChainParams()
         method = distribution or p.distribution_method
@@ -195,24 +198,36 @@ class TendonForceStage(Diagram):
                 drive=drive_params))
         else:
             raise ValueError(f"TendonForceStage: distribution = {method!r}; use 'optimal', 'algorithm2' or 'sharing'")
-        fmap = ForceMap.from_spring(spring, drive_params.motor.pulley_radius)
         gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth, friction_scale=p.friction_scale)
         self.gains = gains
-        law = TendonForceLaw(fmap, drive_params.motor, gains, scheduled=p.scheduled, size=m,
-                             ripple_scale=RippleCompensationParams().amplitude_scale
-                             if drive_params.motor.ripple else 0.0,
-                             name="tendon_force_control", path_velocity=True)
+        if tendon_law == "force":
+            fmap = ForceMap.from_spring(spring, drive_params.motor.pulley_radius)
+            law = TendonForceLaw(fmap, drive_params.motor, gains, scheduled=p.scheduled, size=m,
+                                 ripple_scale=RippleCompensationParams().amplitude_scale
+                                 if drive_params.motor.ripple else 0.0,
+                                 name="tendon_force_control", path_velocity=True)
+        elif tendon_law == "motor-position":
+            from awiwi_drake.control.impedance import MotorPositionForceLaw
+            k_min = float(np.ravel(spring.stiffness(spring.inverse_force(np.array([gains.min_schedule_force]))))[0])
+            law = MotorPositionForceLaw(drive_params.motor, size=m, friction_scale=p.friction_scale,
+                                        min_alpha=drive_params.motor.pulley_radius * k_min)
+        else:
+            raise ValueError(f"TendonForceStage: tendon_law = {tendon_law!r}; use 'force' or 'motor-position'")
         force = b.AddNamedSystem("tendon_force_control", StaticLawController(law))
-        path = b.AddNamedSystem("tendon_path_velocity", TendonPathVelocity(coupling))
-        b.Connect(path.get_output_port(0), force.GetInputPort("tendon_path_velocity"))
+        if force.HasInputPort("tendon_path_velocity"):
+            path = b.AddNamedSystem("tendon_path_velocity", TendonPathVelocity(coupling))
+            b.Connect(path.get_output_port(0), force.GetInputPort("tendon_path_velocity"))
         b.Connect(dist.GetOutputPort("tendon_force_reference"), force.GetInputPort("tendon_force_reference"))
         b.ExportInput(dist.GetInputPort("joint_torque_reference"), "joint_torque_reference")
         if dist.HasInputPort("joint_stiffness_reference"):
             b.ExportInput(dist.GetInputPort("joint_stiffness_reference"), "joint_stiffness_reference")
-        q_in = b.ExportInput(path.GetInputPort("joint_angle"), "joint_angle")
-        if dist.HasInputPort("joint_angle"):       # the thumb's P(q)
-            b.ConnectInput(q_in, dist.GetInputPort("joint_angle"))
-        b.ExportInput(path.GetInputPort("joint_velocity"), "joint_velocity")
+        if force.HasInputPort("tendon_path_velocity"):
+            q_in = b.ExportInput(path.GetInputPort("joint_angle"), "joint_angle")
+            b.ExportInput(path.GetInputPort("joint_velocity"), "joint_velocity")
+            if dist.HasInputPort("joint_angle"):       # the thumb's P(q)
+                b.ConnectInput(q_in, dist.GetInputPort("joint_angle"))
+        elif dist.HasInputPort("joint_angle"):
+            b.ExportInput(dist.GetInputPort("joint_angle"), "joint_angle")
         for nm in law.inputs:
             if nm not in ("tendon_force_reference", "tendon_path_velocity"):
                 b.ExportInput(force.GetInputPort(nm), nm)
@@ -249,12 +264,17 @@ class TendonChainController(Diagram):
         Default ``params.distribution_method``; ``"sharing"`` gives a continuous chain (linear analysis).
     rate_hz : float
         Rate of the distribution (the thesis's 3 kHz).
+    friction_observer : FrictionObserverParams, optional
+        Add the joint friction observer (9.2) per DoF
+        (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat`` is added to the joint
+        stage's torques (ch. 9); output ``friction_compensation``.
     """
 
     def __init__(self, rig: Any, joint_law: StaticLaw, params: HandChainParams | None = None, *,
                  point: dict | None = None, gains: TendonForceGains | None = None,
                  distribution: str | None = None, distribution_params: ForceDistributionParams | None = None,
-                 rate_hz: float = 3000.0, name: str = "cascaded_chain"):
+                 rate_hz: float = 3000.0, tendon_law: str = "force", friction_observer=None,
+                 name: str = "cascaded_chain"):
         super().__init__()
         p = params or HandChainParams()
         check_one_spring_law(rig, "TendonChainController")
@@ -269,17 +289,32 @@ class TendonChainController(Diagram):
         joint = b.AddNamedSystem("joint_stage", JointStage(joint_law, K_mech))
         force = b.AddNamedSystem("force_stage", TendonForceStage(
             rig.coupling, rig.spring, rig.params, p, point=point, distribution=distribution, gains=gains,
-            distribution_params=distribution_params, rate_hz=rate_hz))
+            distribution_params=distribution_params, rate_hz=rate_hz, tendon_law=tendon_law))
         self.design = dict(point, joint_law=joint_law, force_gains=force.gains)
-        b.Connect(joint.GetOutputPort("joint_torque_reference"), force.GetInputPort("joint_torque_reference"))
+        tau_ref = joint.GetOutputPort("joint_torque_reference")
+        observer = None
+        if friction_observer is not None:            # ch. 9: -d_hat added to the desired torques
+            from pydrake.systems.primitives import Adder
+            from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_damping, joint_inertia
+            S = point["selection"]
+            observer = b.AddNamedSystem("friction_observer", JointFrictionObserver(
+                rig.coupling, S, joint_inertia(rig, point["joint_angle"]), np.diag(joint_damping(rig)),
+                friction_observer.gain))
+            add = b.AddNamedSystem("friction_compensated_torque", Adder(2, S.shape[1]))
+            b.Connect(tau_ref, add.get_input_port(0))
+            b.Connect(observer.GetOutputPort("friction_compensation"), add.get_input_port(1))
+            tau_ref = add.get_output_port()
+        b.Connect(tau_ref, force.GetInputPort("joint_torque_reference"))
         if force.HasInputPort("joint_stiffness_reference"):
             b.Connect(joint.GetOutputPort("joint_stiffness_reference"), force.GetInputPort("joint_stiffness_reference"))
+        if joint.HasInputPort("tendon_force_reference"):    # the previous request, read back (sampled chain)
+            b.Connect(force.GetOutputPort("tendon_force_reference"), joint.GetInputPort("tendon_force_reference"))
         exported = {}
-        for sys_ in (joint, force):
+        for sys_ in (joint, force) + ((observer,) if observer is not None else ()):
             for i in range(sys_.num_input_ports()):
                 port = sys_.get_input_port(i)
                 nm = port.get_name()
-                if nm in ("joint_torque_reference", "joint_stiffness_reference"):
+                if nm in ("joint_torque_reference", "joint_stiffness_reference", "tendon_force_reference"):
                     continue
                 if nm in exported:
                     b.ConnectInput(exported[nm], port)
@@ -289,12 +324,20 @@ class TendonChainController(Diagram):
         b.ExportOutput(force.GetOutputPort("tendon_force_reference"), "tendon_force_reference")
         if force.HasOutputPort("distribution_status"):
             b.ExportOutput(force.GetOutputPort("distribution_status"), "distribution_status")
-        b.ExportOutput(joint.GetOutputPort("joint_torque_reference"), "joint_torque_reference")
+        b.ExportOutput(tau_ref, "joint_torque_reference")
+        if observer is not None:
+            b.ExportOutput(observer.GetOutputPort("friction_compensation"), "friction_compensation")
         b.ExportOutput(joint.GetOutputPort("joint_stiffness_reference"), "joint_stiffness_reference")
         b.BuildInto(self)
         self.set_name(name)
-        self._force = force
+        self._force, self._observer = force, observer
 
     def initialize_state(self, context, rig_state=None) -> None:
-        """Start the distribution at the design point's tendon forces (``context``: this controller's)."""
+        """Start the distribution at the design point's tendon forces and the friction observer at the
+        joints' velocity in ``rig_state`` (``context``: this controller's)."""
         self._force.initialize_state(self.GetMutableSubsystemContext(self._force, context))
+        if self._observer is not None:
+            obs = self.GetMutableSubsystemContext(self._observer, context)
+            S = self._observer.S
+            v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
+            obs.SetContinuousState(self._observer.Sp @ v)

@@ -56,6 +56,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+import numba
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
 from pydrake.solvers import ClarabelSolver, MathematicalProgram
@@ -687,16 +688,110 @@ def finger_force_distribution(finger: str, *, method: str = "optimal", params: F
     return methods[method](hand_stiffness_map(drive), params, coupling, **solver_options)
 
 
-def _mv(A, x):
-    """Stacked matrix-vector products ``A[k] @ x[k]``."""
-    return (A @ x[..., None])[..., 0]
+@numba.njit(cache=True)
+def _stiffness_of(P, kt, f, H):
+    """(5.12) ``P^T diag(k_t) P + sum_i f_i H_i`` (compiled twin of :func:`joint_stiffness` for the batch)."""
+    M, N = P.shape
+    K = np.zeros((N, N))
+    for i in range(M):
+        for a in range(N):
+            for b in range(N):
+                K[a, b] += kt[i] * P[i, a] * P[i, b] + f[i] * H[i, a, b]
+    return K
+
+
+@numba.njit(cache=True)
+def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallback, iterations, f_min, f_max,
+                   levenberg, tolerance, grid_f, grid_k, grid_dk):
+    """The warm-started Gauss-Newton iterations of :meth:`OptimalForceDistribution.solve` for padded fingers,
+    compiled: the same start (torque-exact projection of the previous forces), QP ((:func:`_gauss_newton_qp`),
+    closed form as :func:`_closed_form_step`), step cut at the bounds and cost test.  Sets ``fallback[k]``
+    wherever ``solve`` would take another branch (see :class:`_FingerBatch`); returns the forces."""
+    F, M, N = P.shape
+    R = W.shape[2]
+    out = np.zeros((F, M))
+    for k in range(F):
+        if fallback[k]:
+            continue
+        Pk, Wk, Kdk = P[k], W[k], Kd[k]
+        WkT = np.ascontiguousarray(Wk.T)
+        f_p = -(pinv[k] @ tau[k])
+        resid = np.ascontiguousarray(Pk.T) @ f_p + tau[k]
+        if np.sqrt(np.sum(resid * resid)) > 1e-9 * max(1.0, np.sqrt(np.sum(tau[k] * tau[k]))):
+            fallback[k] = True
+            continue
+        f = f_p + Wk @ (WkT @ fp0[k])
+        inside = True
+        for i in range(M):
+            if real[k, i] and (f[i] < f_min or f[i] > f_max):
+                inside = False
+        if not inside:
+            fallback[k] = True
+            continue
+        Kn = max(np.sum(Kdk * Kdk), 1e-300)
+        dk = np.interp(f, grid_f, grid_dk)
+        K = _stiffness_of(Pk, np.interp(f, grid_f, grid_k), f, H[k])
+        E = Kdk - K
+        C = np.sum(E * E) / Kn
+        for _ in range(iterations):
+            Gt = np.empty((M, N * N))
+            for i in range(M):
+                Gt[i] = (dk[i] * outer[k, i] + H[k, i]).ravel()
+            Hq = Gt @ np.ascontiguousarray(Gt.T) / Kn
+            tr = 0.0
+            for i in range(M):
+                tr += Hq[i, i]
+            mu = levenberg * max(tr, 1e-300) / m_real[k]
+            Q = 2.0 * Hq
+            for i in range(M):
+                Q[i, i] += 2.0 * mu
+            e = (Kdk - K).ravel()
+            b = -2.0 * (Gt @ (e + np.ascontiguousarray(Gt.T) @ f)) / Kn - 2.0 * mu * f
+            A = WkT @ Q @ Wk
+            for j in range(R):
+                A[j, j] += pad[k, j]
+            z = np.linalg.solve(A, -(WkT @ (Q @ f + b)))
+            f_star = f + Wk @ z
+            bound = False
+            for i in range(M):
+                if real[k, i] and (f_star[i] < f_min or f_star[i] > f_max):
+                    bound = True
+            if bound:                       # the MathematicalProgram's case
+                fallback[k] = True
+                break
+            d = Wk @ (WkT @ (f_star - f))
+            if not np.sqrt(np.sum(d * d)) > 1e-12 * max(1.0, np.sqrt(np.sum(f * f))):
+                break
+            t = 1.0
+            for i in range(M):
+                if d[i] > 0:
+                    t = min(t, (f_max - f[i]) / d[i])
+                elif d[i] < 0:
+                    t = min(t, (f_min - f[i]) / d[i])
+            if not t > 1e-8:
+                break
+            f_new = f + t * d
+            dk_new = np.interp(f_new, grid_f, grid_dk)
+            K_new = _stiffness_of(Pk, np.interp(f_new, grid_f, grid_k), f_new, H[k])
+            E = Kdk - K_new
+            C_new = np.sum(E * E) / Kn
+            if not C_new < C:               # solve() would halve the step
+                fallback[k] = True
+                break
+            decrease = C - C_new
+            f, K, dk, C = f_new, K_new, dk_new, C_new
+            if decrease <= tolerance * max(C, 1e-12):
+                break
+        out[k] = f
+    return out
 
 
 class _FingerBatch:
     """Warm-started (7.6) iterations of several fingers at once (the float path of the loop system).
 
     The fingers are padded to common sizes (zero rows of ``P`` for missing tendons, zero columns of
-    ``W``) and iterated together with the same formulas as :meth:`OptimalForceDistribution.solve`
+    ``W``) and iterated by one compiled call (:func:`_batch_iterate`, numba, cached on disk; its first
+    compile takes ~10-15 s) with the formulas of :meth:`OptimalForceDistribution.solve`
     (:func:`_gauss_newton_qp`, :func:`_closed_form_step`, the same step cut and cost test).  A finger
     leaves the batch and is solved by its own :meth:`~OptimalForceDistribution.solve` (same inputs,
     from the start) whenever that would do anything else: a warm start outside the bounds (the LP
@@ -774,44 +869,10 @@ class _FingerBatch:
             tauP[k, :n] = tau[k]
             Kd[k, :n, :n] = K_blocks[k]
             fp0[k, :m] = f_prev[k]
-        W, Wt = self.W, np.swapaxes(self.W, 1, 2)
-        f_p = -_mv(self.pinv, tauP)
-        resid = np.linalg.norm(_mv(np.swapaxes(self.P, 1, 2), f_p) + tauP, axis=1)
-        fallback |= resid > 1e-9 * np.maximum(1.0, np.linalg.norm(tauP, axis=1))
-        f = f_p + _mv(W, _mv(Wt, fp0))
-        inside = (f >= p.f_min) & (f <= p.f_max) | ~self.real
-        fallback |= ~np.all(inside, axis=1)
-        Kn = np.maximum(np.sum(Kd * Kd, axis=(1, 2)), 1e-300)
-        k_t, dk = self.smap(f)
-        K = joint_stiffness(self.P, k_t, f, self.H)
-        C = np.sum((Kd - K) ** 2, axis=(1, 2)) / Kn
-        active = ~fallback
-        for _ in range(iterations):
-            if not active.any():
-                break
-            Q, b = _gauss_newton_qp(self.outer, dk, self.H, Kd - K, f, Kn, self.m, self.levenberg)
-            f_star = _closed_form_step(Q, b, f, W, self.pad)
-            out = np.any(((f_star < p.f_min) | (f_star > p.f_max)) & self.real, axis=1)
-            fallback |= active & out
-            active &= ~out
-            d = _mv(W, _mv(Wt, f_star - f))
-            moved = np.linalg.norm(d, axis=1) > 1e-12 * np.maximum(1.0, np.linalg.norm(f, axis=1))
-            active &= moved
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t_hi = np.where(d > 0, (p.f_max - f) / d, np.inf)
-                t_lo = np.where(d < 0, (p.f_min - f) / d, np.inf)
-            t = np.minimum(1.0, np.minimum(t_hi.min(axis=1), t_lo.min(axis=1)))
-            f_new = f + t[:, None] * d
-            k_new, dk_new = self.smap(f_new)
-            K_new = joint_stiffness(self.P, k_new, f_new, self.H)
-            C_new = np.sum((Kd - K_new) ** 2, axis=(1, 2)) / Kn
-            halve = active & ~(C_new < C) & (t > 1e-8)      # solve() would halve the step: its own solver
-            fallback |= halve
-            active &= ~halve & (t > 1e-8)
-            a = active
-            decrease = C - C_new
-            f[a], K[a], dk[a], C[a] = f_new[a], K_new[a], dk_new[a], C_new[a]
-            active &= ~(decrease <= self.tolerance * np.maximum(C, 1e-12))
+        sm = self.smap
+        f = _batch_iterate(self.P, self.pinv, self.W, self.pad, self.H, self.outer, self.real, self.m, tauP, Kd,
+                           fp0, fallback, int(iterations), float(p.f_min), float(p.f_max), float(self.levenberg),
+                           float(self.tolerance), sm.forces, sm.k, sm.dk)
         return f, fallback
 
 

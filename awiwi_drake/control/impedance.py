@@ -84,7 +84,7 @@ from awiwi_drake.control.registry import rig_kind
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import ImpedanceParams
 
-__all__ = ["Transmission", "transmission", "ImpedanceLaw", "CascadedImpedanceController_",
+__all__ = ["Transmission", "transmission", "ImpedanceLaw", "motor_position_command", "MotorPositionForceLaw", "CascadedImpedanceController_",
            "CascadedImpedanceController", "LinkReferenceMotorPdLaw", "impedance_controller", "MODES"]
 
 MODES = ("pd", "two-time-scale", "cascaded")
@@ -188,8 +188,7 @@ class ImpedanceLaw(StaticLaw):
         if self.mode == "two-time-scale":
             comp = -motor_friction_torque(w, tr.motor) if (tr.compensate_friction and
                                                            self.params.friction_compensation) else 0.0 * w
-            theta_err = (f_des - f) / alpha  # theta_des - theta
-            return r * f + self.kp_m * theta_err - self.kd_m * w + comp
+            return motor_position_command(f_des, f, w, alpha, r, self.kp_m, self.kd_m) + comp
         # linearising force law: model-based, so the modelled motor damping/friction is always cancelled
         comp = -motor_friction_torque(w, tr.motor) if self.params.friction_compensation else 0.0 * w
         fdot = k * (r * w - tr.coupling * qd)
@@ -197,6 +196,46 @@ class ImpedanceLaw(StaticLaw):
         fdot_des, fdd_des = self.desired_force_rates(qd, qdd, qddd)
         return r * f + comp + (B / alpha) * (fdd_des + k * tr.coupling * qdd + self.kfd * (fdot_des - fdot)
                                              + self.kf * (f_des - f))
+
+
+def motor_position_command(f_des, f, omega, alpha, pulley_radius, kp_m, kd_m):
+    """The tendon level of (11.3): a motor-position loop towards the motor angle that generates ``f_des``,
+    ``u = r_m f + Kp_m (theta_des - theta) - Kd_m thetadot`` with ``theta_des - theta = (f_des - f) / alpha``
+    (``alpha = r_m k_t``: exact for a linear spring, first order otherwise).  Element-wise (a bank)."""
+    return pulley_radius * f + kp_m * (f_des - f) / alpha - kd_m * omega
+
+
+class MotorPositionForceLaw(StaticLaw):
+    """(11.3)'s tendon level as a bank of ``size`` tendons (the two-time-scale chain of a finger/the hand).
+
+    Inputs ``tendon_force_reference``, ``tendon_force``, ``tendon_stiffness``, ``motor_velocity`` (size);
+    ``Kp_m = B w_m^2``, ``Kd_m = 2 xi_m w_m B`` (:class:`ImpedanceParams` motor bandwidth), ``alpha`` floored
+    at ``min_alpha`` (a slack tendon has ``k_t = 0``), motor friction (3.8) fed forward times ``friction_scale``.
+    """
+
+    def __init__(self, motor: MotorParams, params: ImpedanceParams | None = None, *, size: int,
+                 min_alpha: float, friction_scale: float = 1.0, name: str = "motor_position_control"):
+        p = params or ImpedanceParams()
+        self.name, self.motor = name, motor
+        B = check_gain("inertia", motor.inertia, owner=name)
+        wm = check_gain("motor_bandwidth", p.motor_bandwidth, owner=name)
+        xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=name)
+        self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
+        self.min_alpha = check_gain("min_alpha", min_alpha, owner=name)
+        self.friction_scale = check_gain("friction_scale", friction_scale, allow_zero=True, owner=name)
+        self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=name)
+        size = int(size)
+        self.inputs = {"tendon_force_reference": size, "tendon_force": size, "tendon_stiffness": size,
+                       "motor_velocity": size}
+        self.output_size = size
+
+    def __call__(self, u):
+        from awiwi_drake.components import motor_friction_torque
+        w = u["motor_velocity"]
+        alpha = smax(self.r_m * u["tendon_stiffness"], self.min_alpha)
+        return (motor_position_command(u["tendon_force_reference"], u["tendon_force"], w, alpha, self.r_m,
+                                       self.kp_m, self.kd_m)
+                - self.friction_scale * motor_friction_torque(w, self.motor))
 
 
 @TemplateSystem.define("CascadedImpedanceController_")

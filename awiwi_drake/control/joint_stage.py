@@ -41,7 +41,7 @@ from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.hand.coupling import dof_selection
 
 __all__ = ["joint_inertia", "joint_damping", "JointStateFeedbackLaw", "JointGainScheduleLaw", "JointStage_",
-           "JointStage", "measured_joint_coordinates"]
+           "JointStage", "measured_joint_coordinates", "JointFrictionObserver_", "JointFrictionObserver"]
 
 Z_NAMES = ("joint_angle", "joint_velocity", "joint_torque", "joint_torque_rate")
 
@@ -82,7 +82,10 @@ class JointStateFeedbackLaw(StaticLaw):
     ----------
     coupling : the finger/hand coupling (``P(q)``), ``selection`` ``S`` (n x k)
     pulley_radius : r_m [m] (the tendon force rate)
-    gains : (k, 4) ``K_j``; ``state_map`` (k, 4) ``Nx_j``; ``input_map`` (k,) ``Nu_j``
+    gains : (k, 4) ``K_j``, or (k, 5) with the gain on the previous request ``tau_ref(t - h)`` of a
+        sampled chain (its distribution answers one period late; the law reads it back from the
+        distribution's ``tendon_force_reference``: ``-(P S)^T f_ref``, exact torque)
+    state_map : (k, 4) ``Nx_j``; ``input_map`` (k,) ``Nu_j``
     joint_angle_op, torque_op : (k,) ``q_op`` on the DoF and ``tau_op``
     """
 
@@ -95,29 +98,39 @@ class JointStateFeedbackLaw(StaticLaw):
         self.name = name
         self.coupling, self.S, self.Sp = coupling, S, np.linalg.pinv(S)
         self.r_m = float(pulley_radius)
-        self.K = check_gains("K", gains, shape=(k, 4), owner=name)
+        K = np.asarray(gains, dtype=float)
+        if K.ndim == 2 and K.shape == (k, 4):
+            K = np.hstack([K, np.zeros((k, 1))])
+        self.K = check_gains("K", K, shape=(k, 5), owner=name)
         self.Nx = check_gains("state_map", state_map, shape=(k, 4), owner=name)
         self.Nu = check_gains("input_map", input_map, shape=(k,), owner=name)
         self.q0 = check_gains("joint_angle_op", joint_angle_op, shape=(k,), owner=name)
         self.tau0 = check_gains("torque_op", torque_op, shape=(k,), owner=name)
-        self.uses_forces = bool(np.any(self.K[:, 2:] != 0.0))
+        self.uses_forces = bool(np.any(self.K[:, 2:4] != 0.0))
+        self.uses_previous = bool(np.any(self.K[:, 4] != 0.0))
         m = coupling.num_tendons
         self.inputs = {"joint_angle_reference": n, "joint_angle": n, "joint_velocity": n}
         if self.uses_forces:
             self.inputs.update(tendon_force=m, tendon_stiffness=m, motor_velocity=m)
+        if self.uses_previous:
+            self.inputs.update(tendon_force_reference=m)
         self.output_size = k
 
     def coordinates(self, u):
-        """``z`` (k x 4) and ``dr`` (k,) for the inputs ``u``."""
+        """``z`` (k x 5: ``[q - q_op, qdot, tau - tau_op, tau_dot, tau_ref(t - h) - tau_op]``) and ``dr`` (k,)."""
         if self.uses_forces:
             qd, vd, tau, taud = measured_joint_coordinates(self.coupling, self.S, self.Sp, self.r_m, u)
-            z = np.stack([qd - self.q0, vd, tau - self.tau0, taud], axis=1)
+            cols = [qd - self.q0, vd, tau - self.tau0, taud]
         else:
             qd, vd = self.Sp @ u["joint_angle"], self.Sp @ u["joint_velocity"]
-            zero = 0.0 * vd
-            z = np.stack([qd - self.q0, vd, zero, zero], axis=1)
+            cols = [qd - self.q0, vd, 0.0 * vd, 0.0 * vd]
+        if self.uses_previous:
+            PS = np.asarray(self.coupling.P(u["joint_angle"])) @ self.S
+            cols.append(-(PS.T @ u["tendon_force_reference"]) - self.tau0)
+        else:
+            cols.append(0.0 * vd)
         dr = self.Sp @ u["joint_angle_reference"] - self.q0
-        return z, dr
+        return np.stack(cols, axis=1), dr
 
     def gains(self, z):
         return self.K
@@ -125,14 +138,15 @@ class JointStateFeedbackLaw(StaticLaw):
     def __call__(self, u):
         z, dr = self.coordinates(u)
         K = self.gains(z)
-        err = z - self.Nx * dr[:, None]
+        ref = np.hstack([self.Nx, self.Nu[:, None]])       # equilibrium: z = Nx dr, tau_ref(t - h) = Nu dr
+        err = z - ref * dr[:, None]
         return self.tau0 + self.Nu * dr - np.sum(K * err, axis=1)
 
 
 class JointGainScheduleLaw(JointStateFeedbackLaw):
     """:class:`JointStateFeedbackLaw` with gains interpolated in the measured joint torque deviation.
 
-    ``schedule`` (p,) torque deviations ``tau - tau_op`` [Nm] (increasing) and ``table`` (k, p, 4)
+    ``schedule`` (p,) torque deviations ``tau - tau_op`` [Nm] (increasing) and ``table`` (k, p, 5)
     the gains designed there (the SDRE's pointwise-linear models, ch. 14, tabulated per DoF).
     Outside the table the end gains are held (clamped, not extrapolated).
     """
@@ -143,9 +157,9 @@ class JointGainScheduleLaw(JointStateFeedbackLaw):
         self.schedule = check_gains("schedule", schedule, owner=self.name)
         if self.schedule.ndim != 1 or np.any(np.diff(self.schedule) <= 0):
             raise ValueError(f"{self.name}: schedule must be strictly increasing, got {self.schedule}")
-        if table.shape != (self.S.shape[1], self.schedule.size, 4):
+        if table.shape != (self.S.shape[1], self.schedule.size, 5):
             raise ValueError(f"{self.name}: table has shape {table.shape}, expected "
-                             f"{(self.S.shape[1], self.schedule.size, 4)}")
+                             f"{(self.S.shape[1], self.schedule.size, 5)}")
         self.table = table
         if not self.uses_forces:
             raise ValueError(f"{self.name}: a torque-scheduled law needs the torque feedback (K[:, 2:] != 0)")
@@ -155,7 +169,7 @@ class JointGainScheduleLaw(JointStateFeedbackLaw):
         rows = []
         for j in range(self.S.shape[1]):
             t = clip(z[j, 2], lo, hi)
-            rows.append([interp(t, self.schedule, self.table[j, :, c]) for c in range(4)])
+            rows.append([interp(t, self.schedule, self.table[j, :, c]) for c in range(5)])
         return np.array(rows, dtype=object if np.asarray(z).dtype == object else float)
 
 
@@ -196,3 +210,57 @@ def JointStage_(T):
 
 
 JointStage = JointStage_[None]
+
+
+@TemplateSystem.define("JointFrictionObserver_")
+def JointFrictionObserver_(T):
+    """The joint friction observer (9.2) on every DoF of a finger/the hand, as a compensating torque (ch. 9).
+
+    Per DoF ``j`` (inertia ``M_jj``, bearing damping ``b_jj``): ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``,
+    ``d_hat_j = L M_jj (qdot_j - w_hat_j)`` (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the
+    one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces.
+    Inputs ``joint_angle``, ``joint_velocity`` (n, the estimates on the hand), ``tendon_force`` (m); output
+    ``friction_compensation`` (k) ``= -d_hat`` [Nm], added to the joint stage's desired torques; state ``w_hat``
+    (k), to be started at the measured velocity (0 at rest).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, coupling, selection, inertia, damping, gain: float, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.coupling, self.S = coupling, np.asarray(selection, dtype=float)
+            n, k = self.S.shape
+            self.Sp = np.linalg.pinv(self.S)
+            self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
+            self.b = check_gains("damping", damping, shape=(k,), owner="JointFrictionObserver")
+            self.gain = float(check_gains("gain", [gain], owner="JointFrictionObserver", positive=True)[0])
+            self.DeclareContinuousState(k)
+            self._q = self.DeclareVectorInputPort("joint_angle", n)
+            self._v = self.DeclareVectorInputPort("joint_velocity", n)
+            self._f = self.DeclareVectorInputPort("tendon_force", coupling.num_tendons)
+            self.DeclareVectorOutputPort("friction_compensation", k, self._calc,
+                                         prerequisites_of_calc={self.all_state_ticket(), self._v.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.coupling, other.S, other.M, other.b, other.gain, converter=converter)
+
+        def _terms(self, context):
+            from awiwi_drake.control.friction_observer import observer_rate
+            w_hat = context.get_continuous_state_vector().CopyToVector()
+            v = self.Sp @ self._v.Eval(context)
+            return w_hat, v, observer_rate
+
+        def _calc(self, context, out):
+            w_hat, v, _ = self._terms(context)
+            out.SetFromVector(-self.gain * self.M * (v - w_hat))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            w_hat, v, observer_rate = self._terms(context)
+            PS = np.asarray(self.coupling.P(self._q.Eval(context))) @ self.S
+            tau = -(PS.T @ self._f.Eval(context)) - self.b * v
+            rate, _ = observer_rate(w_hat, v, tau, self.M, self.gain)
+            derivatives.get_mutable_vector().SetFromVector(rate)
+
+    return Impl
+
+
+JointFrictionObserver = JointFrictionObserver_[None]

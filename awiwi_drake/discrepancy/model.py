@@ -8,8 +8,9 @@ every finite-difference perturbation of a fit as one copy, so a whole
 residual/Jacobian evaluation is one pass of one Drake ``Simulator``
 ("banks, not swarms": one Python call per step for all copies).
 
-State of copy ``j`` (``n`` motors): ``[theta_1..n, omega_1..n, (q, q'), z_1..n]``
-where ``z`` [N] is the Dahl hysteresis force of each spring mechanism; stored
+State of copy ``j`` (``n`` motors): the rigs' order ``[(q, q'), theta_1..n, omega_1..n, z_1..n]``
+(``tendon_rig``/``joint_rig``, :func:`awiwi_drake.rigs.base.state_names`) where ``z`` [N] is the
+Dahl hysteresis force of each spring mechanism; stored
 variable-major (index ``s * copies + j``).  Input ``motor_torque``
 (``n * copies``, applied torque, already delayed).  Output ``measurement``:
 ``[theta_1..n, f_1..n, (q)]`` per copy, ``f`` the spring-mechanism force as the
@@ -93,11 +94,11 @@ class NominalParameters:
         return 2 * self.num_motors + (1 if self.has_link else 0)
 
     def state_names(self) -> list[str]:
+        """The rigs' state order ``[(q, q'), theta, omega, z]`` with the dataset's column names."""
         n = self.num_motors
         sfx = [f"_{i + 1}" for i in range(n)] if n > 1 else [""]
-        names = [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
-        if self.has_link:
-            names += ["link_angle", "link_velocity"]
+        names = ["link_angle", "link_velocity"] if self.has_link else []
+        names += [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
         return names + [f"hysteresis_force{s}" for s in sfx]
 
     def measurement_names(self) -> list[str]:
@@ -143,13 +144,14 @@ def _switch(gates, term, like):
 
 
 def split_state(nom: NominalParameters, X):
-    """``(theta, omega, q, q', z)`` from a stacked state ``[theta, omega, (q, q'), z]``
+    """``(theta, omega, q, q', z)`` from a state in the rigs' order ``[(q, q'), theta, omega, z]``
     (``q``, ``q'`` are None without a link)."""
     n = nom.num_motors
     q = qd = None
+    k = 0
     if nom.has_link:
-        q, qd = X[2 * n], X[2 * n + 1]
-    return X[:n], X[n:2 * n], q, qd, X[-n:]
+        q, qd, k = X[0], X[1], 2
+    return X[k:k + n], X[k + n:k + 2 * n], q, qd, X[k + 2 * n:k + 3 * n]
 
 
 def rig_kinematics(nom: NominalParameters, theta, omega, q=None, qd=None):
@@ -200,7 +202,7 @@ def replay_laws(nom: NominalParameters, x, u, p):
 
     Parameters
     ----------
-    x : (num_states,) ``[theta, omega, (q, q'), z]``
+    x : (num_states,) ``[(q, q'), theta, omega, z]``
     u : (num_motors,) applied motor torques
     p : (num_params,) catalog parameters
 
@@ -249,11 +251,9 @@ def replay_laws(nom: NominalParameters, x, u, p):
     like = np.array(v, dtype=object) if not all(is_float(w) for w in v) else np.array(v, float)
     xdot = drive_laws(model, s, like, q=q_in, tau_ext=None if ext is None else np.array(ext, dtype=like.dtype),
                       want=("derivatives",))["derivatives"]
-    k = 2 if nom.has_link else 0
-    acc = [xdot[k + n + i] / (1.0 + _p(p, "motor_inertia_rel")) for i in range(n)]
-    out = [xdot[k + i] for i in range(n)] + acc
-    if nom.has_link:
-        out += [xdot[0], xdot[1] / (1.0 + _p(p, "link_inertia_rel"))]
+    k = 2 if nom.has_link else 0   # the drive's order is the rigs' order: [(q, q'), theta, omega]
+    out = [xdot[0], xdot[1] / (1.0 + _p(p, "link_inertia_rel"))] if nom.has_link else []
+    out += [xdot[k + i] for i in range(n)] + [xdot[k + n + i] / (1.0 + _p(p, "motor_inertia_rel")) for i in range(n)]
     out += zdot
     y = [theta[i] + _p(p, f"motor_bias_{i + 1}") for i in range(n)]  # encoder bias
     y += [(1.0 + _p(p, "force_gain")) * force[i] + _p(p, f"force_offset_{i + 1}") for i in range(n)]

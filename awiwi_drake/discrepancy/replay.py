@@ -118,7 +118,8 @@ class ReplayEngine:
             qd = savgol_filter(q, win, 3, deriv=1, delta=dt)
             cols += [qs[None], qd[None]]
             self.q_est = qs
-        self.xhat = np.vstack(cols)  # (ns - n, N)
+        self.xhat = np.vstack(cols)  # (ns - n, N), rows [theta, omega, (q, q')]
+        self.xpos = xhat_positions(nom)  # model-state index of each xhat row
         x, xd = laws_kinematics(nom, self.xhat)
         self.elong = np.array(x)  # (n, N)
 
@@ -198,15 +199,14 @@ class ReplayEngine:
         error as a per-window offset (issue 12)."""
         n = self.nom.num_motors
         X0 = np.empty((self.nom.num_states, len(starts)))
-        X0[:-n] = self.xhat[:, starts]
+        X0[self.xpos] = self.xhat[:, starts]
         # encoder calibration: the estimate is of the measured angles
         for i in range(n):
-            X0[i] -= P[PARAM_INDEX[f"motor_bias_{i + 1}"]]
+            X0[self.xpos[i]] -= P[PARAM_INDEX[f"motor_bias_{i + 1}"]]
         if self.nom.has_link and "link_angle" in self.ds.outputs:
-            k = 2 * n
             scale = 1.0 + P[PARAM_INDEX["link_scale_rel"]]
-            X0[k] = (X0[k] - P[PARAM_INDEX["link_bias"]]) / scale
-            X0[k + 1] = X0[k + 1] / scale
+            X0[0] = (X0[0] - P[PARAM_INDEX["link_bias"]]) / scale
+            X0[1] = X0[1] / scale
         shape = P[[PARAM_INDEX["hysteresis_length"], PARAM_INDEX["hysteresis_initial"]]]
         width = P[PARAM_INDEX["hysteresis_width"]]
         w = np.zeros((n, len(starts)))
@@ -312,7 +312,7 @@ class ReplayEngine:
     def state_steps(self) -> np.ndarray:
         """Initial-state perturbations used for the profile, one row per profiled state
         (angles, velocities; not the hysteresis force, which is physics, see
-        :meth:`initial_states`): shape (num_states - num_motors, num_states)."""
+        :meth:`initial_states`), in the order of :attr:`xhat`: shape (num_states - num_motors, num_states)."""
         nom = self.nom
         n = nom.num_motors
         th_scale = np.maximum(self.xhat[:n].std(axis=1), 1e-3) * 1e-2
@@ -321,7 +321,7 @@ class ReplayEngine:
         if nom.has_link:
             steps += [max(self.xhat[2 * n].std(), 1e-3) * 1e-2, max(self.xhat[2 * n + 1].std(), 1e-2) * 1e-2]
         D = np.zeros((len(steps), nom.num_states))
-        D[np.arange(len(steps)), np.arange(len(steps))] = steps
+        D[np.arange(len(steps)), self.xpos] = steps
         return D
 
     def state_prior_std(self) -> np.ndarray:
@@ -425,8 +425,16 @@ def project(R: np.ndarray, proj: Projection) -> np.ndarray:
     return R - np.einsum("wmk,...wk->...wm", proj.U, coef)
 
 
+def xhat_positions(nom: NominalParameters) -> np.ndarray:
+    """Model-state index (rigs' order ``[(q, q'), theta, omega, z]``) of each row of the estimate
+    ``[theta, omega, (q, q')]``."""
+    n, k = nom.num_motors, 2 if nom.has_link else 0
+    return np.array(list(range(k, k + 2 * n)) + ([0, 1] if nom.has_link else []))
+
+
 def laws_kinematics(nom: NominalParameters, xhat: np.ndarray):
     """Elongation and rate from the stacked estimate ``[theta, omega, (q, q')]``."""
-    from .model import rig_kinematics, split_state
-    theta, omega, q, qd, _ = split_state(nom, np.vstack([xhat, np.zeros((nom.num_motors, xhat.shape[1]))]))
-    return rig_kinematics(nom, theta, omega, q, qd)
+    from .model import rig_kinematics
+    n = nom.num_motors
+    q, qd = (xhat[2 * n], xhat[2 * n + 1]) if nom.has_link else (None, None)
+    return rig_kinematics(nom, xhat[:n], xhat[n:2 * n], q, qd)

@@ -65,7 +65,7 @@ def default_nominal(rig: str) -> dict:
 def HiddenEffectPlant_(T):
 
     class Impl(LeafSystem_[T]):
-        """Truth rig with hidden effects; state ``[theta, omega, (q, q'), z]``, input
+        """Truth rig with hidden effects; state ``[(q, q'), theta, omega, z]`` (the rigs' order), input
         ``motor_torque`` (applied), outputs ``measurement`` ``[theta, f, (q)]``, ``state``, and the
         controller's measurements ``motor_angle``, ``motor_velocity``, ``tendon_force``."""
 
@@ -159,14 +159,14 @@ def HiddenEffectPlant_(T):
                               / p["length"])
                 else:
                     zd.append(0.0 * z[i])
-            out = [omega[i] for i in range(n)] + acc
+            out = []
             if nom.has_link:
                 tq = nom.link_pulley_radius * (f[0] - f[1]) - nom.link_damping * qd
                 if "joint_friction" in tr:
                     p = tr["joint_friction"]
                     tq = tq + stribeck_friction(qd, p["fc"], p["fs"], p["vs"], p["eps"])
                 out += [qd, tq / nom.link_inertia]
-            out += zd
+            out += [omega[i] for i in range(n)] + acc + zd
             derivatives.get_mutable_vector().SetFromVector(np.array(out))
 
         def _calc_y(self, context, output):
@@ -373,13 +373,14 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         cc = 0.2 * th0 * np.sin(2 * np.pi * 0.13 * t + rng.uniform(0, 2 * np.pi))
         ref = np.stack([th0 + rq / r * qref + cc, th0 - rq / r * qref + cc], axis=1)
         X0 = np.zeros(nom.num_states)
-        X0[:2] = th0
+        X0[2:4] = th0       # [q, q', theta_1, theta_2, ...]: link at 0, both motors at the pretension angle
     else:
         ref = (th0 + 0.6 * th0 * a)[:, None]
         X0 = np.zeros(nom.num_states)
         X0[0] = th0
     loop, split = _truth_loop(plant_sys, nom, gen, float(truth.get("delay", 0.0)))
-    u0 = r * gen.pretension + gen.kp * (ref[0] - X0[:n]) - gen.kd * X0[n:2 * n]   # the bench starts at rest at u_0
+    th_0, om_0 = split_state(nom, X0)[:2]
+    u0 = r * gen.pretension + gen.kp * (ref[0] - th_0) - gen.kd * om_0   # the bench starts at rest at u_0
     ctx = loop.create_context(state=X0, motor_torque=u0)
     if split is not None:
         split.SetVectorState(split.GetMyMutableContextFromRoot(ctx), u0)

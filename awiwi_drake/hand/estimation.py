@@ -266,7 +266,14 @@ def LinkPositionEstimator_(T):
                                           f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
                                           "further hits are counted in limit_hits", RuntimeWarning,
                                           stacklevel=2)
-            if T is not float or self.refine:  # one Gauss-Newton step (in the scalar type: carries the derivatives)
+            if T is float and self.refine:    # the same Gauss-Newton step finger by finger (P S is block-diagonal)
+                for name, c in self.coupling.parts.items():
+                    j, t = js[name], ts[name]
+                    if c.is_constant:             # linear h: the least-squares estimate is already exact
+                        continue
+                    r = dh_val[t] - (c.h(q_new[j]) - self._h0[t])
+                    q_new[j] = q_new[j] + c.dof_selection @ (np.linalg.pinv(c.P(q_new[j]) @ c.dof_selection) @ r)
+            elif T is not float:  # one Gauss-Newton step in the scalar type: carries the derivatives
                 r = dh - (self.coupling.h(q_new) - self._h0)
                 S = dof_selection(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S

@@ -30,7 +30,7 @@ from awiwi_drake.control.base import StaticLawController, closed_loop
 from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificationParams, RippleCompensationParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 from awiwi_drake.rigs import motor_rig
 
 __all__ = ["ConstantVelocityRun", "constant_velocity_run", "FrictionData", "FrictionFit", "friction_identification_data", "fit_friction",
@@ -58,10 +58,7 @@ class ConstantVelocityRun:
         fig, ax = figure_axes(ax, figsize=(7, 4))
         ax.plot(self.t, self.command, label="applied torque")
         ax.plot(self.t, self.feedback, label="PD part (feedback)")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("motor torque [Nm]")
-        ax.legend()
-        ax.grid(True, alpha=0.3)
+        label_axes(ax, "motor torque [Nm]")
         return fig, ax
 
 
@@ -249,11 +246,8 @@ def plot_spectra(result, *, fmax: float = 60.0, ax=None):
     ax.plot(result.frequency[m], result.spectrum_without[m], label="without compensation")
     ax.plot(result.frequency[m], result.spectrum_with[m], label="with compensation")
     ax.axvline(result.first_harmonic_hz, color="k", ls=":", lw=0.8, label="motor rotation frequency")
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("|Y(f)| [Nm]")
-    ax.set_title(f"first harmonic attenuated to {100 * result.attenuation:.0f} %")
-    ax.legend()
-    ax.grid(True, alpha=0.3)
+    label_axes(ax, "|Y(f)| [Nm]", xlabel="frequency [Hz]",
+               title=f"first harmonic attenuated to {100 * result.attenuation:.0f} %")
     return fig, ax
 
 
@@ -266,10 +260,7 @@ def plot_friction_fit(data, fit, *, true=None, ax=None):
     ax.plot(w, fit.torque(w), label=f"fit (3.8): g1={fit.gamma1:.2f}, g2={fit.gamma2:.3f}, g3={fit.gamma3:.4f}")
     if true is not None:
         ax.plot(w, true(w), "k--", lw=0.8, label="simulated motor")
-    ax.set_xlabel("motor velocity [rad/s]")
-    ax.set_ylabel("motor torque [Nm]")
-    ax.legend(fontsize=8)
-    ax.grid(True, alpha=0.3)
+    label_axes(ax, "motor torque [Nm]", xlabel="motor velocity [rad/s]", legend=dict(fontsize=8))
     return fig, ax
 
 

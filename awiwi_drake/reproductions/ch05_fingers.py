@@ -32,7 +32,7 @@ from awiwi_drake.hand.diagrams import HandRig, finger_diagram
 from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant
 from awiwi_drake.hand.systems import CoriolisCancellation
 from awiwi_drake.parameters.hand import FingerRigParams, JointControllerParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 
 __all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
            "CouplingHoldStudy", "coupling_hold_study",
@@ -287,9 +287,8 @@ def plot_estimation_grid(study, key, ax=None):
     ax.plot(study.grid[:, 0], study.grid[:, 1], "o", mfc="none", mec="r", ms=5, label="true")
     ax.plot(est[:, 0], est[:, 1], "x", color="b", ms=4, label="estimate")
     it, a, start = key
+    label_axes(ax, "q11 [rad]", xlabel="q10 [rad]", legend=None)
     ax.set_title(f"{it} it., {1e3 * a:g} mm, {start}", fontsize=9)
-    ax.set_xlabel("q10 [rad]")
-    ax.set_ylabel("q11 [rad]")
     ax.set_xlim(-1.8, 1.8)
     ax.set_ylim(-1.8, 1.8)
     ax.set_aspect("equal")
@@ -314,10 +313,7 @@ def plot_coriolis_study(study, ax=None):
     fig, ax = figure_axes(ax, figsize=(6, 3.5))
     for j, name in enumerate(study.joint_names):
         ax.plot(study.t, study.difference[:, j], label=name)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("position error [rad]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    label_axes(ax, "position error [rad]", legend=dict(fontsize=8))
     return fig, ax
 
 
@@ -327,8 +323,5 @@ def plot_coupling_hold(study, ax=None):
     ax.plot(study.t, study.q_pip, label="q_PIP")
     ax.plot(study.t, study.q_dip, label="q_DIP")
     ax.plot(study.t, study.coupling_error, label="q_DIP - c q_PIP")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("[rad]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    label_axes(ax, "[rad]", legend=dict(fontsize=8))
     return fig, ax

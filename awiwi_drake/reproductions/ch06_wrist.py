@@ -22,7 +22,7 @@ from awiwi_drake.hand.wrist import (TENDON_FINGERS, wrist_constraint_errors, wri
                                     wrist_tendon_offsets)
 from awiwi_drake.parameters.hand import JointControllerParams
 from awiwi_drake.parameters.wrist import WristParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 
 __all__ = ["WristMotionResult", "wrist_motion_study", "plot_wrist_displacements", "plot_wrist_constraint_errors",
            "FINGER_COLORS", "WristCompensationStudy", "wrist_compensation_study", "plot_wrist_compensation"]
@@ -197,9 +197,8 @@ def plot_wrist_displacements(result: WristMotionResult, ax=None):
     if np.any(flex):
         ax.axvspan(result.t[flex][0], result.t[flex][-1], color="0.92", zorder=0)
     peak_q = np.degrees(np.max(np.abs(result.wrist_angle), axis=0))
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("tendon displacement [m]")
-    ax.set_title(f"wrist: flexion {peak_q[1]:.0f} deg (shaded), then abduction {peak_q[0]:.0f} deg")
+    label_axes(ax, "tendon displacement [m]", xlabel="t [s]", legend=None,
+               title=f"wrist: flexion {peak_q[1]:.0f} deg (shaded), then abduction {peak_q[0]:.0f} deg")
     ax.text(0.99, 0.02,
             f"abduction peak vs distance from median axis: slope {result.abduction_slope:.3f} m/m, "
             f"R$^2$ = {result.abduction_r2:.4f}\nflexion/abduction peak ratio "
@@ -214,9 +213,8 @@ def plot_wrist_constraint_errors(result: WristMotionResult, ax=None):
     """Largest distance-constraint error vs time (Fig 6.9); ``ax`` optional, returns ``(fig, ax)``."""
     fig, ax = _start(result, ax)
     ax.plot(result.t, np.max(np.abs(result.constraint_errors), axis=1), color="k")
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("max constraint error [m]")
-    ax.set_title("max(|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|) errors")
+    label_axes(ax, "max constraint error [m]", xlabel="t [s]", legend=None,
+               title="max(|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|) errors")
     ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
     ax.grid(True, alpha=0.3)
     return fig, ax
@@ -242,19 +240,20 @@ class WristCompensationStudy:
 
 def wrist_compensation_study(target: str = "index", *, backend: str = "compiled", amplitude: float = np.radians(5.0), frequency: float = 2.0,
                              t_final: float = 0.5, controller: JointControllerParams | None = None,
-                             accuracy: float = 1e-3) -> WristCompensationStudy:
+                             accuracy: float = 1e-3, params=None) -> WristCompensationStudy:
     """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
 
     The joint references stay at the operating point; the drift is the joint
     motion the wrist causes through the tendon path change (6.9).  Run once
     without and once with the feedforward ``-h_wrist / r_m``.  ``target`` is
-    a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run).
+    a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run); ``params`` its
+    ``FingerRigParams``/``HandRigParams`` (default: the defaults, thesis physics on).
     """
     drift, fmin, events = {}, {}, {}
     t_grid = np.linspace(0.0, t_final, 201)
     for comp in (False, True):
-        rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
-               else finger_diagram(finger=target, backend=backend, wrist=True))
+        rig = (hand_diagram(backend=backend, wrist=True, params=params) if target == "hand"
+               else finger_diagram(finger=target, backend=backend, wrist=True, params=params))
         cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
         d = cl.diagram
         ctx = d.CreateDefaultContext()

@@ -14,7 +14,7 @@ from awiwi_drake.analysis import Samples, simulate
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.stiffness_correction import StiffnessCorrectedImpedance, pretension_elongation
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 from awiwi_drake.rigs import joint_rig
 
 __all__ = ["StiffnessRun", "stiffness_correction_run", "plot_stiffness_run"]
@@ -72,7 +72,5 @@ def plot_stiffness_run(run, *, ax=None):
     ax.plot(run.t, run.k_mech, ":", label="K_mech (springs)")
     ax.plot(run.t, run.k_eff, "-.", label="K_eff (8.1)")
     ax.plot(run.t, run.k_target, "k--", lw=0.8, label="target")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("stiffness [Nm/rad]")
-    ax.legend(fontsize="small")
+    label_axes(ax, "stiffness [Nm/rad]", legend=dict(fontsize="small"))
     return fig, ax

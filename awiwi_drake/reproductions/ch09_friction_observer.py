@@ -16,7 +16,7 @@ from awiwi_drake.control.friction_observer import with_link_friction
 from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 from awiwi_drake.parameters.rigs import JointRigParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 from awiwi_drake.reproductions.ch15_backstepping import BacksteppingRun
 from awiwi_drake.rigs import joint_rig
 
@@ -69,7 +69,5 @@ def plot_friction_runs(runs, *, ax=None):
     fig, ax = figure_axes(ax)
     for r in runs:
         ax.plot(r.t, r.q - r.reference, label=r.label)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("tracking error [rad]")
-    ax.legend(fontsize="small")
+    label_axes(ax, "tracking error [rad]", legend=dict(fontsize="small"))
     return fig, ax

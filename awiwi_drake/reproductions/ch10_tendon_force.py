@@ -11,15 +11,15 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.analysis import simulate
+from awiwi_drake.analysis import Step, simulate
 from awiwi_drake.control.compare import fit_second_order_step, step_metrics
 from awiwi_drake.control.sensors import force_sensor
 from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_force_without_feedforward,
                                               tendon_pd_controller, tendon_scheduled_controller)
 from awiwi_drake.parameters import MotorParams, TendonRigParams
 from awiwi_drake.parameters.control import ForceSensorParams, TendonForceGains
-from awiwi_drake.plotting import figure_axes
-from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import tendon_rig
 
 __all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
@@ -52,11 +52,7 @@ class FeedforwardRun:
         ax.plot(self.t, self.without_feedforward, label="without feed-forward")
         ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
         ax.axhline(self.expected_without, color="gray", ls=":", lw=1, label="(10.3): steady state without")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("tendon force [N]")
-        ax.set_title("Fig 10.1")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        label_axes(ax, "tendon force [N]", title="Fig 10.1", legend=dict(fontsize=8))
         return fig, ax
 
 
@@ -72,7 +68,7 @@ def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: f
         op = rig.operating_point(tendon_force=f0)
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
-        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(0.05, f1)], f0)},
+        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(0.05, f1, f0)},
                        log=("tendon_force", "tendon_force_reference"), log_period=DT)
         out[label] = log
         if label == "without":
@@ -111,7 +107,7 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
         op = rig.operating_point(tendon_force=f0)
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
-        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(t_step, f0 + step)], f0)},
+        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(t_step, f0 + step, f0)},
                        log=("tendon_force", "motor_torque_command"), log_period=DT)
         f = log["tendon_force"][:, 0]
         m = step_metrics(log.t, f, f0, f0 + step, t_step, band=0.05)
@@ -131,9 +127,5 @@ def plot_tendon_steps(steps, *, ax=None):
         m = steps.metrics[f0]
         ax.plot(steps.t, f, label=f"{f0:g} N: xi = {m['damping_ratio']:.2f}, OS = {m['overshoot']:.0f} %")
         ax.plot(steps.t, np.where(steps.t < steps.t_step, f0, f0 + steps.step), "k--", lw=0.8)
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("tendon force [N]")
-    ax.set_title(f"{steps.controller} gains")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
+    label_axes(ax, "tendon force [N]", title=f"{steps.controller} gains", legend=dict(fontsize=8))
     return fig, ax

@@ -12,13 +12,13 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.analysis import Chirp, linearize, simulate
+from awiwi_drake.analysis import Chirp, Step, linearize, simulate
 from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
 from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
-from awiwi_drake.plotting import figure_axes
-from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
@@ -46,10 +46,7 @@ class ImpedanceStep:
         fig, ax = figure_axes(ax, figsize=(7, 4))
         ax.plot(self.t, self.joint_angle, label=f"{self.label}: overshoot {self.overshoot:.1f} %")
         ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("joint angle [rad]")
-        ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        label_axes(ax, "joint angle [rad]", legend=dict(fontsize=8))
         return fig, ax
 
 
@@ -92,7 +89,7 @@ def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3
                        rate_hz=RATE)
     op = r.operating_point()
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
-    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.02, step)], 0.0),
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": Step(0.02, step),
                                                "external_torque": 0.0},
                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
     m = step_metrics(log.t, log["joint_angle"][:, 0], 0.0, step, 0.02)
@@ -158,8 +155,5 @@ def plot_gain_diagrams(curves: dict, *, ax=None):
     fig, ax = figure_axes(ax, figsize=(7, 4))
     for label, (f, g) in curves.items():
         ax.plot(f, g, label=label)
-    ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("gain |q / q_des|")
-    ax.legend()
-    ax.grid(True, alpha=0.3)
+    label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]")
     return fig, ax

@@ -32,7 +32,7 @@ from awiwi_drake.parameters.backstepping import (
     AntagonisticBacksteppingGains, BacksteppingPlantParams, ImpedanceBacksteppingGains, ImpedanceStudy,
     NonlinearImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, ScalarExamplePlant, example_dynamics
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
@@ -41,7 +41,7 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
     "antagonistic_sine", "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
-    "plot_joint_angle", "plot_command", "plot_lyapunov", "plot_phase_portrait",
+    "plot_joint_angle", "plot_command", "plot_phase_portrait",
 ]
 
 
@@ -101,9 +101,7 @@ class StiffnessCheck:
     def plot(self, ax=None):
         fig, ax = figure_axes(ax)
         ax.plot(self.stiffness, self.torque, "o-", label=f"deflection {self.deflection:g} rad")
-        ax.set_xlabel("Kp,imp [Nm/rad]")
-        ax.set_ylabel("joint torque [Nm]")
-        ax.legend(fontsize="small")
+        label_axes(ax, "joint torque [Nm]", xlabel="Kp,imp [Nm/rad]", legend=dict(fontsize="small"))
         return fig, ax
 
 
@@ -449,17 +447,13 @@ def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflectio
 
 # ---------------------------------------------------------------------------
 # plots: runs in, ``(fig, ax)`` out
-def _time_series(runs, signal, ylabel, *, ax, title, log=False, reference=False):
+def _time_series(runs, signal, ylabel, *, ax, title, reference=False):
     fig, ax = figure_axes(ax)
-    plot = ax.semilogy if log else ax.plot
     for r in runs:
-        plot(r.t, signal(r), label=r.label)
+        ax.plot(r.t, signal(r), label=r.label)
     if reference and len(runs) and np.all(np.isfinite(runs[0].reference)):
         ax.plot(runs[0].t, runs[0].reference, "k--", lw=0.8, label="reference")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(ylabel)
-    ax.set_title(title)
-    ax.legend(fontsize="small")
+    label_axes(ax, ylabel, title=title, legend=dict(fontsize="small"))
     return fig, ax
 
 
@@ -473,11 +467,6 @@ def plot_command(runs, *, ax=None, title: str = ""):
     return _time_series(runs, lambda r: r.command[:, 0], "motor torque [Nm]", ax=ax, title=title)
 
 
-def plot_lyapunov(runs, *, ax=None, title: str = "Lyapunov function"):
-    """The controller's Lyapunov function along each run (log scale)."""
-    return _time_series(runs, lambda r: np.maximum(r.lyapunov, 1e-300), "V", ax=ax, title=title, log=True)
-
-
 def plot_phase_portrait(runs, *, ax=None, title: str = ""):
     """Phase diagram ``x1' (x1)`` of the scalar example (Fig 15.2-15.4); crosses mark the starts."""
     fig, ax = figure_axes(ax)
@@ -486,7 +475,5 @@ def plot_phase_portrait(runs, *, ax=None, title: str = ""):
         x1d = np.array([example_dynamics(x, 0.0)[0] for x in r.state])
         ax.plot(x1, x1d, lw=1)
         ax.plot(x1[0], x1d[0], "kx")
-    ax.set_xlabel("x1")
-    ax.set_ylabel("dx1/dt")
-    ax.set_title(title)
+    label_axes(ax, "dx1/dt", xlabel="x1", title=title, legend=None)
     return fig, ax

@@ -31,7 +31,7 @@ import numpy as np
 
 from awiwi_drake.parameters.backstepping import PipStudy
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, label_axes
 
 __all__ = ["PipRun", "pip_parameters", "pip_experiment", "pip_metrics"]
 
@@ -57,10 +57,7 @@ class PipRun:
         fig, ax = figure_axes(ax, figsize=(7, 4))
         ax.plot(self.t, np.degrees(self.q), label=f"{self.controller} ({self.test})")
         ax.plot(self.t, np.degrees(self.reference), "k--", lw=0.8, label="reference")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("PIP angle [deg]")
-        ax.legend(fontsize="small")
-        ax.grid(True, alpha=0.3)
+        label_axes(ax, "PIP angle [deg]", legend=dict(fontsize="small"))
         return fig, ax
 
 

@@ -6,6 +6,7 @@ import math
 
 from awiwi_drake.control.compare.metrics import UNITS, MetricsTable
 from awiwi_drake.control.compare.standard_tests import Comparison
+from awiwi_drake.plotting import label_axes
 
 __all__ = ["plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric"]
 
@@ -20,11 +21,8 @@ def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: st
     for r in runs:
         ax.plot(r.t, r.output, label=r.controller)
     ax.plot(runs[0].t, runs[0].reference, "k--", lw=1, label="reference")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel(ylabel or "tracked output [unit of the reference]")
-    ax.set_title(f"{comparison.rig}: {test} test (solid: output, dashed: reference)")
-    ax.legend()
-    ax.grid(True, alpha=0.3)
+    label_axes(ax, ylabel or "tracked output [unit of the reference]",
+               title=f"{comparison.rig}: {test} test (solid: output, dashed: reference)")
     return fig, ax
 
 
