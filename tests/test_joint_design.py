@@ -23,9 +23,17 @@ DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr")
 TENDON_LAW = {"two-time-scale": "motor-position"}
 
 
+def _python_rig(finger="index"):
+    """The finger on the python backend (every state-only output declared so, for the continuous linearisations
+    of these design checks), without the spring hysteresis: that backend does not carry its state, and the
+    per-joint design models have none."""
+    return finger_diagram(finger=finger, backend="python",
+                          params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False))
+
+
 def _design_rig(finger="index"):
-    """The finger with the design model's motor ((3.8) linearised in motion), python backend."""
-    p = FingerRigParams.for_finger(finger)
+    """The finger with the design model's motor ((3.8) linearised in motion), python backend (as `_python_rig`)."""
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
     return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
 
 
@@ -35,7 +43,7 @@ def test_reduced_model_is_the_link_on_its_closed_force_loop():
     row is the force loop's: with (10.11) every tendon's force obeys f'' = w^2 (f_ref - f) - 2 xi w f' +
     k_t P_j qdd, so tau'' = w^2 tau_ref - (w^2 + K_jj / M_jj) tau + ... (qdd = tau / M_jj - ...; the joint's
     own tendon stiffness K_jj = P_j^T K_t P_j (5.12) stiffens the torque loop)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     w = HandChainParams().force_bandwidth
     for m in reduced_joint_models(rig):
         assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
@@ -55,7 +63,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     """Where the reduced model is exact -- the one-DoF subsystem of the index MCP built from the finger's
     parts, closed by the whole chain (joint stage reading tau from the measured forces, sharing, force law)
     -- Drake's Linearize has the designed poles (plus the force modes the joint does not see)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     d = design_joint_stage(rig, design)
     j = 1
     sub, op, point = joint_subsystem(rig, j, point=None)
@@ -98,7 +106,7 @@ def test_whole_finger_poles_against_the_per_joint_designs(design):
 
 def test_pole_placement_places_the_double_oscillator_on_each_joint():
     """(12.13) per DoF: omega1 = position_bandwidth, omega2 = |the joint's own open-loop pair|, both damped."""
-    rig = finger_diagram(finger="ring", backend="python")
+    rig = _python_rig("ring")
     p = JointDesignParams()
     d = design_joint_stage(rig, "pole-placement", params=p)
     for m, poles in zip(d.models, d.design_poles):
@@ -112,7 +120,7 @@ def test_joint_stage_with_torque_feedback_converts_to_autodiff():
     """The LQR stage reads tau = -(PS)^T f and tau_dot = -(PS)^T k_t (r_m omega + P qdot) from the
     measurements; its derivatives equal finite differences (thumb: P(q) varies), and d tau_ref / d f is
     the closed form K_tau * (-(PS)^T) per DoF."""
-    rig = finger_diagram(finger="thumb", backend="python")
+    rig = _python_rig("thumb")
     d = design_joint_stage(rig, "lqr")
     S = d.law.S
     n, k = S.shape
@@ -154,7 +162,7 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     the LQR gain; away from it the tendon forces f_op + W dtau move the spring slopes (Fig 4.8b stiffens with
     force) and the torque-row gain changes, symmetrically in +-dtau (the joint's tendons are antagonistic pairs
     at equal pretension)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     h = 1.0 / 6000.0
     sdre = design_joint_stage(rig, "sdre", period=h)
     lqr = design_joint_stage(rig, "lqr", period=h)
