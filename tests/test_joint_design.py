@@ -199,7 +199,7 @@ def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
         errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
     assert errors[False] == pytest.approx(load / kp, rel=0.02)
     assert abs(errors[True]) < 0.02 * load / kp
-    rig = finger_diagram(finger="thumb", backend="python")
+    rig = _python_rig("thumb")
     rng = np.random.default_rng(2)
     obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)
     op = rig.operating_point()
