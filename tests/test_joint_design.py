@@ -199,10 +199,48 @@ def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
         errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
     assert errors[False] == pytest.approx(load / kp, rel=0.02)
     assert abs(errors[True]) < 0.02 * load / kp
-    rig = finger_diagram(finger="thumb", backend="python")
+    rig = _python_rig("thumb")
     rng = np.random.default_rng(2)
     obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)
     op = rig.operating_point()
     check_system_autodiff_matches_fd(obs, rng.normal(0, 0.3, 4), dict(
         joint_angle=op.joint_angle + rng.normal(0, 0.05, 4), joint_velocity=rng.normal(0, 0.5, 4),
         tendon_force=op.tendon_force + rng.normal(0, 1, 8)), rtol=1e-5)
+
+
+def test_static_stiffness_of_a_torque_feedback_stage_and_the_8_2_co_contraction():
+    """The LQR stage under a constant 0.01 Nm load on the index MCP: the static error is load / K_eff with
+    K_eff = Kp / (1 + K_tau) (the force loop holds tau = tau_ref at rest; continuous design, the springs do not
+    appear), and with stiffness_correction the distribution is asked for K_mech = eps K_eff (8.2) per DoF."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
+    rig = _design_rig()
+    ctrl = joint_stage_controller(rig, "lqr", distribution="sharing", stiffness_correction=StiffnessCorrectionParams())
+    d = ctrl.design["joint_design"]
+    K = d.gains[1]
+    k_eff = K[0] / (1 + K[2])
+    assert d.static_stiffness[1] == pytest.approx(k_eff, rel=1e-12) and k_eff < 0.5 * K[0]
+    np.testing.assert_allclose(ctrl.design["mechanical_stiffness"][0], np.diag(1.5 * d.static_stiffness), rtol=1e-12)
+    loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+    op = rig.operating_point()
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                              disturbances={"external_torque": [0, 0.01, 0, 0]})
+    res = simulate(loop.diagram, ctx, 0.15, log=("joint_angle",), max_step=2e-3, accuracy=1e-5)
+    assert res["joint_angle"][-1][1] - op.joint_angle[1] == pytest.approx(0.01 / k_eff, rel=0.02)
+
+
+def test_every_dof_of_the_hand_gets_its_own_design():
+    """The hand: 19 DoF, each designed on its own reduced model (thumb base from P(q_op), ring/fifth DIP
+    following the PIP); the per-DoF designs of the index inside the hand equal those of the index alone
+    (the reduced model uses only the DoF's own tendons and inertia), and the loop builds at the 6 kHz entry."""
+    from awiwi_drake.hand import hand_diagram
+    hand = hand_diagram(wrist=False)
+    ctrl = make_controller("lqr", hand)
+    d = ctrl.design["joint_design"]
+    assert d.gains.shape == (19, 5) and [m.name for m in d.models][4:8] == ["q20", "q21", "q22", "q23"]
+    alone = design_joint_stage(finger_diagram(finger="index"), "lqr", period=1.0 / 6000.0)
+    np.testing.assert_allclose(d.gains[4:8], alone.gains, rtol=1e-6)
+    assert all(np.all(np.abs(p) < 1.0) for p in d.design_poles)          # sampled designs: inside the unit circle
+    loop = closed_loop(hand, ctrl, **get_entry("lqr", hand).loop_options)
+    assert loop.rate_hz == 6000.0 and loop.estimated == ("joint_angle", "joint_velocity")
