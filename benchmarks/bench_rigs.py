@@ -10,6 +10,8 @@ hurt another. Real-time factor (RTF) = simulated seconds / seconds; we report it
 the process CPU clock (``*_rtf``, robust to other jobs on a shared machine) and on
 the wall clock (``*_wall_rtf``). Best of ``--repeats`` runs after one warm-up run
 (numba kernels compile once and are cached on disk; the warm-up hides that).
+The JSON also records the machine's load average at the start and the end of the run
+(``load_average_start``/``_end``: 1, 5, 15 min) and the start time (UTC).
 
 Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 
@@ -23,7 +25,9 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 * ``finger_index_3khz``: the index finger under the joint-space motor PD.
 * ``hand_3khz``: the whole hand (19 DoF, 38 tendons, wrist input at 0) under the
   joint PD, with the thesis's physics on (motor friction and ripple, guide friction,
-  spring hysteresis), with ripple and guide friction only, and with both off.
+  spring hysteresis), with ripple and guide friction only, with all three off, and with
+  the default ``HandRigParams()`` (keys ``hand_3khz_rtf``, ``..._ripple_guide_friction_rtf``,
+  ``..._physics_off_rtf``, ``..._default_rtf``).
 * ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
   (C++: a sparse gain on the batch state plus a constant, zero-order hold at 3 kHz),
   rig-seconds per CPU-second.
@@ -40,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -189,22 +194,22 @@ def case_finger_index_3khz(seconds, repeats):
 
 
 def case_hand_3khz(seconds, repeats):
+    """The hand under the joint PD: physics off, ripple + guide friction, all on (``hand_3khz_rtf``), and the
+    default ``HandRigParams()`` (whatever the defaults switch on), each stated explicitly."""
     from awiwi_drake.parameters.hand import HandRigParams
     out = {}
-    cpu, wall, _ = _hand_like("hand", seconds, repeats)
-    out.update(hand_3khz_physics_off_rtf=cpu, hand_3khz_physics_off_wall_rtf=wall)
-    part = HandRigParams().with_physics(ripple=True, guide_friction=True)
-    try:
-        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=part)
-        out.update(hand_3khz_ripple_guide_friction_rtf=cpu, hand_3khz_ripple_guide_friction_wall_rtf=wall)
-    except (FloatingPointError, RuntimeError) as exc:
-        out.update(hand_3khz_ripple_guide_friction_rtf=None, hand_3khz_ripple_guide_friction_note=str(exc))
-    on = HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)
-    try:
-        cpu, wall, _ = _hand_like("hand", seconds, repeats, params=on)
-        out.update(hand_3khz_rtf=cpu, hand_3khz_wall_rtf=wall)
-    except (FloatingPointError, RuntimeError) as exc:   # divergence of fixed-step RK3 at 3 kHz
-        out.update(hand_3khz_rtf=None, hand_3khz_wall_rtf=None, hand_3khz_note=f"physics on: {exc}")
+    cases = (("hand_3khz_physics_off", HandRigParams().with_physics(ripple=False, hysteresis=False,
+                                                                    guide_friction=False)),
+             ("hand_3khz_ripple_guide_friction", HandRigParams().with_physics(ripple=True, hysteresis=False,
+                                                                              guide_friction=True)),
+             ("hand_3khz", HandRigParams().with_physics(ripple=True, hysteresis=True, guide_friction=True)),
+             ("hand_3khz_default", HandRigParams()))
+    for key, params in cases:
+        try:
+            cpu, wall, _ = _hand_like("hand", seconds, repeats, params=params)
+            out.update({f"{key}_rtf": cpu, f"{key}_wall_rtf": wall})
+        except (FloatingPointError, RuntimeError) as exc:   # divergence of fixed-step RK3 at 3 kHz
+            out.update({f"{key}_rtf": None, f"{key}_wall_rtf": None, f"{key}_note": str(exc)})
     return out
 
 
@@ -386,7 +391,8 @@ def main(argv=None) -> int:
     for c in cases:
         if c not in CASES:
             ap.error(f"--cases: unknown case {c!r}; known: {', '.join(CASES)}")
-    out = dict(seconds=args.seconds, hand_seconds=args.hand_seconds, repeats=args.repeats, clock="process CPU time")
+    out = dict(seconds=args.seconds, hand_seconds=args.hand_seconds, repeats=args.repeats, clock="process CPU time",
+               load_average_start=list(os.getloadavg()), started_utc=time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()))
     for c in cases:
         cmd = [sys.executable, __file__, "--case", c, "--seconds", str(args.seconds),
                "--hand-seconds", str(args.hand_seconds), "--repeats", str(args.repeats)]
@@ -409,7 +415,9 @@ def main(argv=None) -> int:
     for other in ("mujoco_callback", "mujoco_linear"):
         if out.get(f"{other}_rtf") and out["joint_rig_3khz_rtf"]:
             out[f"joint_rig_vs_{other}"] = out["joint_rig_3khz_rtf"] / out[f"{other}_rtf"]
-    print(f"joint_rig_vs_scipy = {out['joint_rig_vs_scipy']}")
+    out["load_average_end"] = list(os.getloadavg())      # a shared machine: the load beside the figures
+    print(f"joint_rig_vs_scipy = {out['joint_rig_vs_scipy']}; load average {out['load_average_start'][0]:.1f} "
+          f"at the start, {out['load_average_end'][0]:.1f} at the end")
     if args.json:
         pathlib.Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         pathlib.Path(args.json).write_text(json.dumps(out, indent=1))

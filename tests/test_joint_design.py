@@ -23,9 +23,17 @@ DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr")
 TENDON_LAW = {"two-time-scale": "motor-position"}
 
 
+def _python_rig(finger="index"):
+    """The finger on the python backend (every state-only output declared so, for the continuous linearisations
+    of these design checks), without the spring hysteresis: that backend does not carry its state, and the
+    per-joint design models have none."""
+    return finger_diagram(finger=finger, backend="python",
+                          params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False))
+
+
 def _design_rig(finger="index"):
-    """The finger with the design model's motor ((3.8) linearised in motion), python backend."""
-    p = FingerRigParams.for_finger(finger)
+    """The finger with the design model's motor ((3.8) linearised in motion), python backend (as `_python_rig`)."""
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
     return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
 
 
@@ -35,7 +43,7 @@ def test_reduced_model_is_the_link_on_its_closed_force_loop():
     row is the force loop's: with (10.11) every tendon's force obeys f'' = w^2 (f_ref - f) - 2 xi w f' +
     k_t P_j qdd, so tau'' = w^2 tau_ref - (w^2 + K_jj / M_jj) tau + ... (qdd = tau / M_jj - ...; the joint's
     own tendon stiffness K_jj = P_j^T K_t P_j (5.12) stiffens the torque loop)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     w = HandChainParams().force_bandwidth
     for m in reduced_joint_models(rig):
         assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
@@ -55,7 +63,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     """Where the reduced model is exact -- the one-DoF subsystem of the index MCP built from the finger's
     parts, closed by the whole chain (joint stage reading tau from the measured forces, sharing, force law)
     -- Drake's Linearize has the designed poles (plus the force modes the joint does not see)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     d = design_joint_stage(rig, design)
     j = 1
     sub, op, point = joint_subsystem(rig, j, point=None)
@@ -98,7 +106,7 @@ def test_whole_finger_poles_against_the_per_joint_designs(design):
 
 def test_pole_placement_places_the_double_oscillator_on_each_joint():
     """(12.13) per DoF: omega1 = position_bandwidth, omega2 = |the joint's own open-loop pair|, both damped."""
-    rig = finger_diagram(finger="ring", backend="python")
+    rig = _python_rig("ring")
     p = JointDesignParams()
     d = design_joint_stage(rig, "pole-placement", params=p)
     for m, poles in zip(d.models, d.design_poles):
@@ -112,7 +120,7 @@ def test_joint_stage_with_torque_feedback_converts_to_autodiff():
     """The LQR stage reads tau = -(PS)^T f and tau_dot = -(PS)^T k_t (r_m omega + P qdot) from the
     measurements; its derivatives equal finite differences (thumb: P(q) varies), and d tau_ref / d f is
     the closed form K_tau * (-(PS)^T) per DoF."""
-    rig = finger_diagram(finger="thumb", backend="python")
+    rig = _python_rig("thumb")
     d = design_joint_stage(rig, "lqr")
     S = d.law.S
     n, k = S.shape
@@ -154,7 +162,7 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     the LQR gain; away from it the tendon forces f_op + W dtau move the spring slopes (Fig 4.8b stiffens with
     force) and the torque-row gain changes, symmetrically in +-dtau (the joint's tendons are antagonistic pairs
     at equal pretension)."""
-    rig = finger_diagram(finger="index", backend="python")
+    rig = _python_rig("index")
     h = 1.0 / 6000.0
     sdre = design_joint_stage(rig, "sdre", period=h)
     lqr = design_joint_stage(rig, "lqr", period=h)
@@ -163,3 +171,76 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     np.testing.assert_allclose(table[:, mid], lqr.gains, rtol=1e-12)
     np.testing.assert_allclose(table[:, ::-1, :], table, rtol=1e-6)           # symmetric in dtau
     assert np.all(np.abs(table[:, 0, 2] - table[:, mid, 2]) > 1e-6 * np.abs(table[:, mid, 2]))
+
+
+def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
+    """Ch. 9 in the chain: the observer (9.2) per DoF estimates a constant external torque on the index MCP
+    (d_hat -> tau_ext, its steady state), and its compensation cancels it: without the observer the impedance
+    yields the static error tau_ext / Kp (closed form: the force loop's feed-forward holds f = f_ref at rest),
+    with it the error vanishes.  Continuous chain (sharing), true joint state; the observer converts to
+    AutoDiffXd and matches finite differences."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.control.joint_stage import JointFrictionObserver
+    from awiwi_drake.parameters.hand_control import FrictionObserverParams
+    load = 0.01
+    errors = {}
+    for obs in (None, FrictionObserverParams()):
+        rig = _design_rig()                          # (3.8) in motion: the joint's slowest mode at -35 1/s
+        ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing", friction_observer=obs)
+        kp = ctrl.design["joint_design"].gains[1, 0]
+        loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+        op = rig.operating_point()
+        tau = np.zeros(4)
+        tau[1] = load
+        ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                                  disturbances={"external_torque": tau})
+        res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle",), max_step=2e-3, accuracy=1e-5)
+        errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
+    assert errors[False] == pytest.approx(load / kp, rel=0.02)
+    assert abs(errors[True]) < 0.02 * load / kp
+    rig = _python_rig("thumb")
+    rng = np.random.default_rng(2)
+    obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)
+    op = rig.operating_point()
+    check_system_autodiff_matches_fd(obs, rng.normal(0, 0.3, 4), dict(
+        joint_angle=op.joint_angle + rng.normal(0, 0.05, 4), joint_velocity=rng.normal(0, 0.5, 4),
+        tendon_force=op.tendon_force + rng.normal(0, 1, 8)), rtol=1e-5)
+
+
+def test_static_stiffness_of_a_torque_feedback_stage_and_the_8_2_co_contraction():
+    """The LQR stage under a constant 0.01 Nm load on the index MCP: the static error is load / K_eff with
+    K_eff = Kp / (1 + K_tau) (the force loop holds tau = tau_ref at rest; continuous design, the springs do not
+    appear), and with stiffness_correction the distribution is asked for K_mech = eps K_eff (8.2) per DoF."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
+    rig = _design_rig()
+    ctrl = joint_stage_controller(rig, "lqr", distribution="sharing", stiffness_correction=StiffnessCorrectionParams())
+    d = ctrl.design["joint_design"]
+    K = d.gains[1]
+    k_eff = K[0] / (1 + K[2])
+    assert d.static_stiffness[1] == pytest.approx(k_eff, rel=1e-12) and k_eff < 0.5 * K[0]
+    np.testing.assert_allclose(ctrl.design["mechanical_stiffness"][0], np.diag(1.5 * d.static_stiffness), rtol=1e-12)
+    loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
+    op = rig.operating_point()
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                              disturbances={"external_torque": [0, 0.01, 0, 0]})
+    res = simulate(loop.diagram, ctx, 0.15, log=("joint_angle",), max_step=2e-3, accuracy=1e-5)
+    assert res["joint_angle"][-1][1] - op.joint_angle[1] == pytest.approx(0.01 / k_eff, rel=0.02)
+
+
+def test_every_dof_of_the_hand_gets_its_own_design():
+    """The hand: 19 DoF, each designed on its own reduced model (thumb base from P(q_op), ring/fifth DIP
+    following the PIP); the per-DoF designs of the index inside the hand equal those of the index alone
+    (the reduced model uses only the DoF's own tendons and inertia), and the loop builds at the 6 kHz entry."""
+    from awiwi_drake.hand import hand_diagram
+    hand = hand_diagram(wrist=False)
+    ctrl = make_controller("lqr", hand)
+    d = ctrl.design["joint_design"]
+    assert d.gains.shape == (19, 5) and [m.name for m in d.models][4:8] == ["q20", "q21", "q22", "q23"]
+    alone = design_joint_stage(finger_diagram(finger="index"), "lqr", period=1.0 / 6000.0)
+    np.testing.assert_allclose(d.gains[4:8], alone.gains, rtol=1e-6)
+    assert all(np.all(np.abs(p) < 1.0) for p in d.design_poles)          # sampled designs: inside the unit circle
+    loop = closed_loop(hand, ctrl, **get_entry("lqr", hand).loop_options)
+    assert loop.rate_hz == 6000.0 and loop.estimated == ("joint_angle", "joint_velocity")

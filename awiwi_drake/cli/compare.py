@@ -23,7 +23,7 @@ RIG_FACTORIES = {
     "tendon-rig": ("awiwi_drake.rigs", "tendon_rig", {}),
     "flexible-joint": ("awiwi_drake.rigs", "flexible_joint_rig", {}),
     "joint-rig": ("awiwi_drake.rigs", "joint_rig", {}),
-    **{f"finger-{f}": ("awiwi_drake.hand.diagrams", "finger_diagram", {"finger": f, "backend": "python"})
+    **{f"finger-{f}": ("awiwi_drake.hand.diagrams", "finger_diagram", {"finger": f})
        for f in ("thumb", "index", "middle", "ring", "fifth")},
     # the wrist held at neutral: without the wrist input (its tendon offsets are then zero), which is faster
     "hand": ("awiwi_drake.hand.diagrams", "hand_diagram", {"wrist": False}),
@@ -77,8 +77,8 @@ def _short_params(params, rig_fn, kw, names, rig_name):
 
     sm = CompareShortMode()
     taus = []
-    for n in names:  # continuous loops on the python backend: Drake can linearise them
-        rig = rig_fn(**dict(kw, backend="python"))
+    for n in names:  # continuous loops (the compiled drive declares no spurious feedthrough): Drake linearises them
+        rig = rig_fn(**kw)
         entry = get_entry(n, rig_name)
         loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": None, "delay": None})
         taus.append(dominant_time_constant(loop, params))

@@ -28,7 +28,8 @@ The returned sub-diagram exports:
   ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``elongation`` (m) [m],
   ``generalized_force`` (n) [Nm] (``-P^T f``), ``applied_torque`` (m) [Nm].
 
-State: ``[theta (m), omega (m)]`` then, with hysteresis, ``z (m)``.
+State: ``[theta (m), omega (m)]`` then, with hysteresis, ``z (m)``, then with guide friction
+``g (m)`` (compiled drive).
 """
 
 from __future__ import annotations
@@ -65,7 +66,14 @@ class TendonDrive:
     model: DriveModel | None = None
 
     @property
+    def guide_friction(self) -> bool:
+        """Whether the drive carries the guide friction state (compiled drive only)."""
+        return self.model is not None and self.model.has_guide_friction
+
+    @property
     def num_states(self) -> int:
+        if self.model is not None:
+            return self.model.num_states - (2 * self.num_joints if self.model.has_link else 0)
         return (3 if self.hysteresis else 2) * self.num_tendons
 
 

@@ -16,7 +16,9 @@ caller passes the fields of its own parameter dataclass.
 :func:`stribeck_friction` smooth Stribeck (stick-slip) law
 :func:`guide_friction_force`    (4.1), Fig 4.10: ``C0 (1 - exp(-C1 alpha))``
 :func:`capstan_friction_force`  capstan loss ``f (1 - exp(-mu alpha))`` (Fig 4.11)
-:func:`guide_friction`    directional guide friction on a sliding tendon
+:func:`guide_friction`    directional guide friction on a sliding tendon (regularised sign)
+:func:`dahl_rate`         rate-independent Dahl friction state ``dF/dt = (v/delta)(W - s F)``
+:func:`guide_friction_rate`     guide friction as a Dahl state (the finger and hand drive)
 ========================  ====================================================
 """
 
@@ -24,10 +26,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from awiwi_drake._math import clip
 from awiwi_drake.parameters.components import GuideFrictionParams
 
 __all__ = ["regularized_sign", "atan_friction", "stribeck_friction", "guide_friction_force",
-           "capstan_friction_force", "guide_friction"]
+           "capstan_friction_force", "guide_friction", "dahl_rate", "guide_friction_level", "guide_friction_rate"]
 
 
 def regularized_sign(v, smoothing_velocity):
@@ -104,3 +107,49 @@ def guide_friction(sliding_velocity, tension, constant, capstan_exponent, smooth
     """
     s = regularized_sign(sliding_velocity, smoothing_velocity)
     return constant * s + tension * (np.exp(capstan_exponent * s) - 1.0)
+
+
+def dahl_rate(state, velocity, level, presliding_length, smoothing_velocity):
+    """Rate-independent Dahl friction state: ``dF/dt = (v / delta) (W - s F)``, ``s = tanh(v / v_s)``.
+
+    ``F`` [N] is the friction force carried by a contact sliding at ``velocity`` v [m/s]; it
+    moves with the sliding distance, not with time: after a reversal it crosses from ``-W`` to
+    ``+W`` (``level`` W >= 0 [N], the sliding friction) within a few ``presliding_length``
+    delta [m]. At rest it is a spring of stiffness ``W / delta`` (presliding, no damping), and
+    while sliding its relaxation rate is ``|v| / delta`` (independent of W), so explicit fixed-step
+    integration at step h is stable for ``|v| h / delta`` inside the method's real-axis bound.
+    The power ``F v`` taken from the motion is non-negative over every closed sliding cycle
+    (Dahl's model is passive for ``|F| <= W``). The argument of tanh is clipped at +-40 only
+    to keep its AutoDiff derivative finite (tanh is +-1 there).
+    """
+    s = np.tanh(clip(velocity / smoothing_velocity, -40.0, 40.0))
+    return (velocity / presliding_length) * (level - s * state)
+
+
+def guide_friction_level(tension, constant, capstan_exponent, direction):
+    """Sliding level W [N] of the guide friction of a tendon moving in ``direction`` s in [-1, 1].
+
+    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the constant
+    (4.1) part C, plus the capstan rise ``f (e^{mu alpha} - 1)`` at the pulling end when the
+    tendon is pulled (s = +1) and the loss ``f (1 - e^{-mu alpha})`` when it is released
+    (s = -1), so that the Dahl state's steady sliding force ``s W`` equals
+    :func:`guide_friction` at ``s = +-1``.
+    """
+    rise = np.exp(capstan_exponent) - 1.0
+    loss = 1.0 - np.exp(-capstan_exponent)
+    return constant + tension * (rise * (1.0 + direction) + loss * (1.0 - direction)) * 0.5
+
+
+def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_exponent, presliding_length,
+                        smoothing_velocity):
+    """``dF/dt`` of the guide friction ``F`` [N] of a tendon sliding through its guides (Dahl form).
+
+    :func:`dahl_rate` with the level :func:`guide_friction_level`: ``F`` is the tension added at
+    the pulling end; steady sliding gives ``+-W`` (the (4.1) constant and/or the capstan law),
+    and at rest the guides hold the tendon with the presliding stiffness ``W / delta`` instead
+    of the damping ``C / v_s`` of a regularised sign (which makes the light finger links stiff
+    for explicit integration).
+    """
+    s = np.tanh(clip(sliding_velocity / smoothing_velocity, -40.0, 40.0))
+    level = guide_friction_level(tension, constant, capstan_exponent, s)
+    return dahl_rate(force, sliding_velocity, level, presliding_length, smoothing_velocity)

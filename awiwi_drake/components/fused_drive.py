@@ -20,7 +20,7 @@ Model (docs/ARCHITECTURE.md sign convention), per tendon i::
     x_i   = r_m theta_i + h_i(q) - h_i(0) + x0_i              elongation
     f_i   = max(f_el,i(x_i) + z_i, 0)                         spring force (z: hysteresis, Fig 4.8b)
     dz_i  = hysteresis_rate(z_i, x_i, xdot_i, f_el,i)         xdot = r_m omega + P(q) qdot
-    g_i   = guide_friction((P(q) qdot)_i, f_i, C_i, mu alpha_i)  C s + f (exp(mu alpha s) - 1), s = tanh(v / v_s)
+    dg_i  = guide_friction_rate(g_i, (P(q) qdot)_i, f_i, C_i, mu alpha_i, delta_g)   Dahl state, -> +-W_i sliding
     B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
     tau   = -P(q)^T (f + g)                                   generalised force on the joints
 
@@ -29,7 +29,9 @@ decoupled links ``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint
 rigs, no MultibodyPlant); such a model is built into a rig by
 :mod:`awiwi_drake.components.rig_system` (C++ dynamics) or batched by
 :class:`TendonDriveBatch_`. State order: ``[q, qdot]`` (with a link), then
-``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis.
+``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)`` with
+guide friction (the guide friction forces, a Dahl state: see
+:func:`~awiwi_drake.components.friction.guide_friction_rate`).
 
 Ports of :class:`TendonDrive_` (each computes only its own quantity; prerequisites declared):
 
@@ -53,7 +55,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import asarray_like, is_float, positive_part
 from awiwi_drake.components.motor import motor_acceleration, saturate_torque
 from awiwi_drake.components.spring import hysteresis_rate
-from awiwi_drake.components.friction import guide_friction, guide_friction_force
+from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
 __all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "build_kernels", "TendonDrive_", "TendonDrive_System",
@@ -66,14 +68,17 @@ class GuideFrictionModel:
 
     ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides. With
     ``capstan=False`` the tension-independent (4.1) ``C0 (1 - exp(-C1 alpha))``, with
-    ``capstan=True`` the capstan form ``f (exp(mu alpha s) - 1)``; ``s = tanh(v / v_s)`` of the
-    tendon's sliding speed ``v = (P(q) qdot)_i`` at the finger.
+    ``capstan=True`` the capstan form (``f (e^{mu alpha} - 1)`` pulled, ``f (1 - e^{-mu alpha})``
+    released). Each tendon's friction force is a Dahl state driven by its sliding speed
+    ``v = (P(q) qdot)_i`` at the finger: it reaches the sliding level within a few
+    ``presliding_length`` of travel; ``s = tanh(v / v_s)`` smooths the direction.
     """
 
     bending_angles: tuple
     params: GuideFrictionParams = field(default_factory=GuideFrictionParams)
     capstan: bool = False
     smoothing_velocity: float = 1e-3
+    presliding_length: float = 4e-4
 
     def __post_init__(self):
         a = np.asarray(self.bending_angles, dtype=float)
@@ -81,6 +86,8 @@ class GuideFrictionModel:
             raise ValueError(f"GuideFrictionModel.bending_angles must be finite and >= 0 [rad], got {self.bending_angles}")
         if not self.smoothing_velocity > 0:
             raise ValueError(f"GuideFrictionModel.smoothing_velocity = {self.smoothing_velocity} must be > 0 [m/s]")
+        if not self.presliding_length > 0:
+            raise ValueError(f"GuideFrictionModel.presliding_length = {self.presliding_length} must be > 0 [m]")
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,12 +164,17 @@ class DriveModel:
         return bool(self.hysteresis.enabled)
 
     @property
+    def has_guide_friction(self) -> bool:
+        return self.guide_friction is not None
+
+    @property
     def needs_joint_velocity(self) -> bool:
-        return (self.has_hysteresis or self.guide_friction is not None) and self.rate_joints > 0
+        return (self.has_hysteresis or self.has_guide_friction) and self.rate_joints > 0
 
     @property
     def num_states(self) -> int:
-        return (2 * self.num_joints if self.has_link else 0) + (3 if self.has_hysteresis else 2) * self.num_tendons
+        per_tendon = 2 + int(self.has_hysteresis) + int(self.has_guide_friction)
+        return (2 * self.num_joints if self.has_link else 0) + per_tendon * self.num_tendons
 
     @property
     def supports_symbolic(self) -> bool:
@@ -176,13 +188,17 @@ class DriveModel:
         return out
 
     def split_state(self, state):
-        """(q, qdot, theta, omega, z) views of a drive state (q, qdot None without a link)."""
+        """(q, qdot, theta, omega, z, g) views of a drive state (q, qdot None without a link; z None
+        without hysteresis, g None without guide friction)."""
         n, m = self.num_joints, self.num_tendons
         k = 2 * n if self.has_link else 0
         q, qd = (state[:n], state[n:k]) if self.has_link else (None, None)
         theta, omega = state[k:k + m], state[k + m:k + 2 * m]
-        z = state[k + 2 * m:k + 3 * m] if self.has_hysteresis else None
-        return q, qd, theta, omega, z
+        k += 2 * m
+        z = state[k:k + m] if self.has_hysteresis else None
+        k += m if self.has_hysteresis else 0
+        g = state[k:k + m] if self.has_guide_friction else None
+        return q, qd, theta, omega, z, g
 
 
 def _full_rates(model: DriveModel, qd):
@@ -205,7 +221,7 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     with a link they come from ``state`` and ``tau_ext`` is the external torque.
     """
     m = model.num_tendons
-    qs, qds, theta, omega, z = model.split_state(state)
+    qs, qds, theta, omega, z, g_state = model.split_state(state)
     if model.has_link:
         q, qd = qs, qds
     qd_all = _full_rates(model, qd)
@@ -220,13 +236,7 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     if need_P:
         P = np.asarray(model.coupling.P(q))
         slide = P @ qd_all if qd_all is not None and model.num_joints else None
-        tension = f
-        if model.guide_friction is not None and slide is not None:
-            g = model.guide_friction
-            alpha = np.asarray(g.bending_angles, dtype=float)
-            constant = np.zeros_like(alpha) if g.capstan else guide_friction_force(alpha, g.params)
-            exponent = g.params.mu * alpha if g.capstan else np.zeros_like(alpha)
-            tension = f + guide_friction(slide, f, constant, exponent, g.smoothing_velocity)
+        tension = f + g_state if model.has_guide_friction else f
         tau = -(P.T @ tension) if model.num_joints else np.zeros(0, dtype=x.dtype)
         out["generalized_force"] = asarray_like(tau, x)
     if u is not None and ("all" in want or "derivatives" in want):
@@ -243,6 +253,14 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
         if model.has_hysteresis:
             xdot = r_m * omega + (slide if slide is not None else 0.0 * omega)
             parts.append(hysteresis_rate(z, x, xdot, f_el, model.hysteresis))
+        if model.has_guide_friction:
+            gm = model.guide_friction
+            alpha = np.asarray(gm.bending_angles, dtype=float)
+            constant = np.zeros_like(alpha) if gm.capstan else guide_friction_force(alpha, gm.params)
+            exponent = gm.params.mu * alpha if gm.capstan else np.zeros_like(alpha)
+            v = slide if slide is not None else 0.0 * omega
+            parts.append(guide_friction_rate(g_state, v, f, constant, exponent, gm.presliding_length,
+                                             gm.smoothing_velocity))
         out["derivatives"] = np.concatenate([asarray_like(p_, x) for p_ in parts])
         out["applied_torque"] = saturate_torque(u, model.motor)
     return out

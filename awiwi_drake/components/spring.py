@@ -25,7 +25,8 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 from pydrake.symbolic import Expression
 
-from awiwi_drake._math import asarray_like, clip, is_float, positive_part, smin, where_positive
+from awiwi_drake._math import asarray_like, is_float, positive_part, smin, where_positive
+from awiwi_drake.components.friction import dahl_rate
 from awiwi_drake.parameters.components import (
     HysteresisParams, LinearSpringParams, PolynomialSpringParams, SpringMechanismGeometry, TendonParams)
 
@@ -467,17 +468,19 @@ def tendon_spring(spring_params) -> PolynomialSpring:
 
 
 def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
-    """Dahl-type hysteresis force rate ``dz/dt`` (see :class:`HysteresisParams`).
+    """Rate-independent Dahl hysteresis force rate ``dz/dt`` (see :class:`HysteresisParams`).
 
-    ``dz/dt = sigma xdot (1 - tanh(xdot / v_s) z / (beta f_el + z0 + 1e-3))``: ``z``
-    tends to ``+-(beta f_el + z0)`` on loading/unloading, giving a loop of full
-    width ``2 (beta f + z0)`` around the elastic curve.
+    ``dz/dt = (xdot / delta) (w - tanh(xdot / v_s) z)``, ``w = beta f_el + z0``
+    (:func:`~awiwi_drake.components.friction.dahl_rate`, the friction in the lever):
+    ``z`` tends to ``+-w`` on loading/unloading, a loop of full width ``2 w`` around the
+    elastic curve, reached within a few presliding lengths ``delta`` of elongation after a
+    reversal.  The presliding stiffness ``w / delta`` (slope at a reversal) scales with the loop,
+    and the state's relaxation rate ``|xdot| / delta`` does not depend on the force, so the
+    fixed-step integration bound (``|xdot| h / delta`` within the integrator's real-axis
+    stability) holds at every load.  ``p`` needs ``width_ratio`` beta, ``width_offset`` z0,
+    ``presliding_length`` delta and ``smoothing_velocity`` v_s.
     """
-    half_width = p.width_ratio * f_elastic + p.width_offset + 1e-3
-    # tanh saturates to +-1 long before 40: clipping its argument only avoids overflow in
-    # the AutoDiff derivative (1 - tanh^2) at large rates.
-    direction = np.tanh(clip(xdot / p.smoothing_velocity, -40.0, 40.0))
-    return p.rate * xdot * (1.0 - direction * z / half_width)
+    return dahl_rate(z, xdot, p.width_ratio * f_elastic + p.width_offset, p.presliding_length, p.smoothing_velocity)
 
 
 @TemplateSystem.define("SpringBank_")

@@ -73,11 +73,11 @@ for _name, _factory, _rigs, _doc in _BUILTIN:
     register_controller(_name, _factory, rigs=_rigs, description=_doc,
                         loop_options={"rate_hz": _FAST_HZ} if fast else _SAMPLED)
 
-# The law at 6 kHz (sensing and estimation at 3 kHz): behind a 3 kHz hold it chatters between the
-# torque limits (measured on the index finger, 0.2 rad MCP step: command saturated in 100 % of the samples
-# after 0.1 s; at 6 kHz and 10 kHz |u| < 0.55 Nm and the step settles), cf. the joint-rig entries
-# (backstepping_registry: 3 kHz once Kd,imp is limited to m f_s / 4 at the run rate) and issue 10 item 6.
+# The law at the thesis's 3 kHz: its joint gains are designed for that rate (every designed joint mode
+# |h lambda| <= 1/4, HandChainParams.sampled_pole_limit). It used to run at 6 kHz: the per-DoF design put a
+# pole at -6838 1/s on the index (h lambda = -2.3 at 3 kHz, sampled spectral radius 1.18, the command
+# chattered between the torque limits); see control/finger_backstepping.py and issue 10 item 6.
 register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller"),
-                    rigs=("finger", "hand"), loop_options={"rate_hz": 6000.0},
+                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
-                                "torques directly; law at 6 kHz, joint angles estimated at 3 kHz (5.15)")
+                                "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")

@@ -264,12 +264,17 @@ class TendonChainController(Diagram):
         Default ``params.distribution_method``; ``"sharing"`` gives a continuous chain (linear analysis).
     rate_hz : float
         Rate of the distribution (the thesis's 3 kHz).
+    friction_observer : FrictionObserverParams, optional
+        Add the joint friction observer (9.2) per DoF
+        (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat`` is added to the joint
+        stage's torques (ch. 9); output ``friction_compensation``.
     """
 
     def __init__(self, rig: Any, joint_law: StaticLaw, params: HandChainParams | None = None, *,
                  point: dict | None = None, gains: TendonForceGains | None = None,
                  distribution: str | None = None, distribution_params: ForceDistributionParams | None = None,
-                 rate_hz: float = 3000.0, tendon_law: str = "force", name: str = "cascaded_chain"):
+                 rate_hz: float = 3000.0, tendon_law: str = "force", friction_observer=None,
+                 name: str = "cascaded_chain"):
         super().__init__()
         p = params or HandChainParams()
         check_one_spring_law(rig, "TendonChainController")
@@ -286,13 +291,26 @@ class TendonChainController(Diagram):
             rig.coupling, rig.spring, rig.params, p, point=point, distribution=distribution, gains=gains,
             distribution_params=distribution_params, rate_hz=rate_hz, tendon_law=tendon_law))
         self.design = dict(point, joint_law=joint_law, force_gains=force.gains)
-        b.Connect(joint.GetOutputPort("joint_torque_reference"), force.GetInputPort("joint_torque_reference"))
+        tau_ref = joint.GetOutputPort("joint_torque_reference")
+        observer = None
+        if friction_observer is not None:            # ch. 9: -d_hat added to the desired torques
+            from pydrake.systems.primitives import Adder
+            from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_damping, joint_inertia
+            S = point["selection"]
+            observer = b.AddNamedSystem("friction_observer", JointFrictionObserver(
+                rig.coupling, S, joint_inertia(rig, point["joint_angle"]), np.diag(joint_damping(rig)),
+                friction_observer.gain))
+            add = b.AddNamedSystem("friction_compensated_torque", Adder(2, S.shape[1]))
+            b.Connect(tau_ref, add.get_input_port(0))
+            b.Connect(observer.GetOutputPort("friction_compensation"), add.get_input_port(1))
+            tau_ref = add.get_output_port()
+        b.Connect(tau_ref, force.GetInputPort("joint_torque_reference"))
         if force.HasInputPort("joint_stiffness_reference"):
             b.Connect(joint.GetOutputPort("joint_stiffness_reference"), force.GetInputPort("joint_stiffness_reference"))
         if joint.HasInputPort("tendon_force_reference"):    # the previous request, read back (sampled chain)
             b.Connect(force.GetOutputPort("tendon_force_reference"), joint.GetInputPort("tendon_force_reference"))
         exported = {}
-        for sys_ in (joint, force):
+        for sys_ in (joint, force) + ((observer,) if observer is not None else ()):
             for i in range(sys_.num_input_ports()):
                 port = sys_.get_input_port(i)
                 nm = port.get_name()
@@ -306,12 +324,20 @@ class TendonChainController(Diagram):
         b.ExportOutput(force.GetOutputPort("tendon_force_reference"), "tendon_force_reference")
         if force.HasOutputPort("distribution_status"):
             b.ExportOutput(force.GetOutputPort("distribution_status"), "distribution_status")
-        b.ExportOutput(joint.GetOutputPort("joint_torque_reference"), "joint_torque_reference")
+        b.ExportOutput(tau_ref, "joint_torque_reference")
+        if observer is not None:
+            b.ExportOutput(observer.GetOutputPort("friction_compensation"), "friction_compensation")
         b.ExportOutput(joint.GetOutputPort("joint_stiffness_reference"), "joint_stiffness_reference")
         b.BuildInto(self)
         self.set_name(name)
-        self._force = force
+        self._force, self._observer = force, observer
 
     def initialize_state(self, context, rig_state=None) -> None:
-        """Start the distribution at the design point's tendon forces (``context``: this controller's)."""
+        """Start the distribution at the design point's tendon forces and the friction observer at the
+        joints' velocity in ``rig_state`` (``context``: this controller's)."""
         self._force.initialize_state(self.GetMutableSubsystemContext(self._force, context))
+        if self._observer is not None:
+            obs = self.GetMutableSubsystemContext(self._observer, context)
+            S = self._observer.S
+            v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
+            obs.SetContinuousState(self._observer.Sp @ v)

@@ -8,12 +8,14 @@ independent DoF and ``m`` tendons with the coupling ``P(q)`` (m x n plant joints
 selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
 
     e = S^+ (q - q_ref),  e' = S^+ qdot                            DoF errors (references held)
-    alpha = tau_op - Kp e - Kd e'                                   (15.54) per DoF
+    alpha = tau_op - Kp e - Kd e'                                   (15.54), Kp and Kd k x k
     f_d = f_op + W (alpha - tau_op),  W = -((P S)^T)^+              sharing (15.88): -(PS)^T f_d = alpha
     z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
     u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
 
-with the tendon force ``f = phi(x)`` of the measured spring elongation ``x``, the motor friction
+with the tendon force ``f = phi_i(x_i)`` of each tendon's own spring law (``rig.spring_laws``: the
+lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
+spring elongation ``x_i``, the motor friction
 (3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
 cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
 ``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
@@ -22,7 +24,7 @@ come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) 
 inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
 rest, are left out) and their derivative from ``f'``.  For that model
 
-    V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,
+    V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,   (Kp symmetric positive definite)
     V' = -e'^T (Kd + B_q) e' - K3 |z3|^2 - K4 |z4|^2 <= 0
 
 (the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
@@ -32,10 +34,18 @@ antagonistic joint of 15.5.
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
 the force-error feedback ``(1 + K3 K4) / g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at
-the same bandwidth (``alpha = r_m phi'``; critically damped); per DoF ``Kp = joint_stiffness``
-(the impedance gain of Fig 15.22, the same for every DoF) and ``Kd = 2 zeta sqrt(Kp M_jj)``
-(``M_jj`` the DoF's own inertia), with ``w_f``, ``zeta`` of :class:`HandChainParams`.  Unlike the
-cascade (15.5.3) the joint gain is not limited by the force loop's bandwidth.
+the same bandwidth (``alpha = r_m phi'``; critically damped). The joint gains are designed on the
+modes of the DoF inertia matrix ``M_d = V diag(mu) V^T``: mode i gets the stiffness
+``k_i = min(joint_stiffness, mu_i w_max^2)`` and the damping ``2 zeta sqrt(k_i mu_i)``, so
+``Kp = V diag(k) V^T``, ``Kd = V diag(d) V^T`` and every mode of ``M_d e'' + Kd e' + Kp e = 0`` has
+``|lambda| = sqrt(k_i / mu_i) <= w_max = sampled_pole_limit * rate_hz`` (|h lambda| <= 1/4 at the
+control period h = 1/rate_hz): the impedance gain of Fig 15.22 on every mode slow enough to be
+sampled, less on the light distal modes (index at 3 kHz: the lightest mode 0.5 -> 0.092 Nm/rad). Why: the
+former per-DoF design (``Kd = 2 zeta sqrt(Kp M_jj)`` with the diagonal of ``M_d``) put a pole at
+-6838 1/s on the index (h lambda = -2.3 at 3 kHz; sampled spectral radius 1.18: the chatter that had it
+registered at 6 kHz). ``rate_hz=None`` designs for continuous time (no limit). ``w_f``, ``zeta`` of
+:class:`HandChainParams`.  Unlike the cascade (15.5.3) the joint gain is not limited by the force
+loop's bandwidth.
 
 Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand),
 ``elongation`` (the spring sensors), ``motor_angle``, ``motor_velocity``; reference
@@ -54,7 +64,6 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import check_one_spring_law
 from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
@@ -72,15 +81,26 @@ def _values(a) -> np.ndarray:
 class FingerBacksteppingLaw(StaticLaw):
     """The law of the module docstring (one call: all DoF and tendons of a finger or the hand)."""
 
-    def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None):
+    def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None,
+                 rate_hz: float | None = 3000.0):
         p = params or HandChainParams()
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
-        check_one_spring_law(rig, "finger backstepping")
+        if getattr(rig.params, "guide_friction", False):
+            raise ValueError(
+                f"finger backstepping: rig {rig.name!r} has guide_friction=True; the 15.5 law differentiates its "
+                "frictionless link model and is unstable with the guides' friction state (measured on the index: "
+                "a closed-loop pole at +833 1/s, sampled spectral radius 1.27 at 3 kHz): use "
+                "params.with_physics(guide_friction=False), or another controller (joint-pd, cascaded)")
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
-        self.coupling, self.spring, self.motor = coupling, rig.spring, rig.params.motor
+        self.coupling, self.motor = coupling, rig.params.motor
+        laws = list(getattr(rig, "spring_laws", None) or [rig.spring] * coupling.num_tendons)
+        groups = {}
+        for i, law in enumerate(laws):
+            groups.setdefault(id(law), (law, []))[1].append(i)
+        self._spring_groups = [(law, np.array(ix)) for law, ix in groups.values()]   # tendons sharing a law
         self.S = dof_selection(coupling)
         self.Sp = np.linalg.pinv(self.S)
         n, k = self.S.shape
@@ -95,8 +115,15 @@ class FingerBacksteppingLaw(StaticLaw):
         b_q = np.array([plant.get_joint(j).default_damping_vector()[0] for j in plant.GetJointIndices()])
         self.Bq = self.S.T @ np.diag(b_q) @ self.S                # joint damping on the DoF
         wf, zeta = p.force_bandwidth, p.damping_ratio
-        self.Kp = np.full(k, p.joint_stiffness)
-        self.Kd = 2.0 * zeta * np.sqrt(self.Kp * np.diag(self.M))
+        if rate_hz is not None and not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"finger backstepping: rate_hz = {rate_hz} must be > 0 [Hz] (None: continuous design)")
+        self.rate_hz = rate_hz
+        mu, V = np.linalg.eigh(self.M)
+        w_max = np.inf if rate_hz is None else p.sampled_pole_limit * float(rate_hz)
+        k_modes = np.minimum(p.joint_stiffness, mu * w_max ** 2)
+        self.Kp = (V * k_modes) @ V.T
+        self.Kd = (V * (2.0 * zeta * np.sqrt(k_modes * mu))) @ V.T
+        self.mode_stiffness = k_modes
         self.K3 = self.K4 = float(wf)
         self.friction_scale = float(p.friction_scale)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
@@ -128,17 +155,17 @@ class FingerBacksteppingLaw(StaticLaw):
             W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
-        f = self.spring.force(x)
-        k1 = self.spring.stiffness(x)
-        k2 = self.spring.stiffness_derivative(x)
+        f = self._springs("force", x)
+        k1 = self._springs("stiffness", x)
+        k2 = self._springs("stiffness_derivative", x)
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
         edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e'
         eddd = self._Minv @ (-(PS.T @ fd) - self.Bq @ edd)
-        a0 = -self.Kp * e - self.Kd * ed
-        a1 = -self.Kp * ed - self.Kd * edd
-        a2 = -self.Kp * edd - self.Kd * eddd
+        a0 = -self.Kp @ e - self.Kd @ ed
+        a1 = -self.Kp @ ed - self.Kd @ edd
+        a2 = -self.Kp @ edd - self.Kd @ eddd
         f_des = self.f_op + W @ a0
         z3 = f - f_des
         beta = W @ a1 - self.K3 * z3 + PS @ ed
@@ -149,15 +176,26 @@ class FingerBacksteppingLaw(StaticLaw):
         f0 = k2 * xd * xd + k1 * (self.r_m * wd0 + P @ (S @ edd))
         g = k1 * self.r_m / self.B
         cmd = (beta_d - f0 - z3 - self.K4 * z4) / g
-        V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp * e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
+        V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
+
+    def _springs(self, method: str, x):
+        """``law_i.method(x_i)`` with each tendon's own spring law (float or AutoDiffXd arrays)."""
+        x = np.asarray(x)
+        out = np.empty(x.shape, dtype=x.dtype)
+        for law, ix in self._spring_groups:
+            out[ix] = np.asarray(getattr(law, method)(x[ix]), dtype=x.dtype)
+        return out
 
     def __call__(self, u):
         return self.terms(u)["command"]
 
 
-def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None):
-    """Registered factory ``backstepping`` for fingers and the hand (see the module docstring)."""
-    if not (np.all(np.asarray(rig.spring.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
-        raise ValueError("finger backstepping needs a strictly increasing spring (phi' > 0, section 15.4)")
-    return StaticLawController(FingerBacksteppingLaw(rig, params, op=op))
+def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None,
+                                   rate_hz: float | None = 3000.0):
+    """Registered factory ``backstepping`` for fingers and the hand (see the module docstring);
+    ``rate_hz`` is the control rate the joint gains are designed for (the registry's 3 kHz)."""
+    for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
+        if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
+            raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")
+    return StaticLawController(FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz))

@@ -337,6 +337,15 @@ class JointDesign:
     design_poles: list                # per DoF
     period: float | None = None
 
+    @property
+    def static_stiffness(self) -> np.ndarray:
+        """The joint stiffness the designed loop shows to a constant load, per DoF [Nm/rad]: at rest the force
+        loop holds ``tau = tau_ref`` (its feed-forward) and ``tau_ref(t - h) = tau_ref``, so
+        ``tau (1 + K_tau + K_prev) = -Kp e``: ``K_eff = Kp / (1 + K_tau + K_prev)`` (the springs' own stiffness
+        does not appear: the series law (8.1) of a motor-side impedance is not the chain's)."""
+        K = self.gains
+        return K[:, 0] / (1.0 + K[:, 2] + K[:, 4])
+
     def table(self) -> str:
         rows = [f"{'DoF':>10} {'M_jj':>10} {'K_jj':>9} {'Kp':>10} {'Kd':>10} {'K_tau':>9} {'K_taud':>9} "
                 f"{'K_prev':>8}  slowest pole"]
@@ -405,13 +414,24 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     """Registered factories ``cascaded``, ``lqr`` (...) for fingers and the hand: the chain with the joint
     stage ``design`` (:func:`design_joint_stage`) designed at ``op`` (default: the rig's operating point).
 
+    ``stiffness_correction`` (ch. 8, :class:`~awiwi_drake.parameters.hand_control.StiffnessCorrectionParams`):
+    the distribution is asked for the mechanical stiffness ``K_mech = eps K_eff`` (8.2) per DoF, ``K_eff`` the
+    design's :attr:`JointDesign.static_stiffness` (the (8.1) impedance correction is the identity here: the
+    chain acts on the estimated joint angle through force control, so no spring is in series with it).
     ``kw``: ``mechanical_stiffness`` (:func:`~awiwi_drake.control.chain.chain_design_point`), ``gains``,
-    ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    ``distribution_params``, ``friction_observer`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
     c = chain or HandChainParams()
+    correction = kw.pop("stiffness_correction", None)
     point = chain_design_point(rig, op, params=c, mechanical_stiffness=kw.pop("mechanical_stiffness", None))
     sampled = (distribution or c.distribution_method) != "sharing"
     d = design_joint_stage(rig, design, point=point, params=params, chain=c,
                            period=1.0 / rate_hz if sampled else None)
+    if correction is not None:                          # (8.2): K_mech,des = eps K_eff,des per DoF
+        sizes = [cp.dof_selection.shape[1] for cp in rig.coupling.parts.values()]
+        starts = np.cumsum([0] + sizes)
+        K_mech = correction.epsilon * d.static_stiffness
+        point = chain_design_point(rig, op, params=c, mechanical_stiffness=[
+            np.diag(K_mech[a:b]) for a, b in zip(starts[:-1], starts[1:])])
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
                                  tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
                                  **kw)

@@ -41,7 +41,7 @@ from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.hand.coupling import dof_selection
 
 __all__ = ["joint_inertia", "joint_damping", "JointStateFeedbackLaw", "JointGainScheduleLaw", "JointStage_",
-           "JointStage", "measured_joint_coordinates"]
+           "JointStage", "measured_joint_coordinates", "JointFrictionObserver_", "JointFrictionObserver"]
 
 Z_NAMES = ("joint_angle", "joint_velocity", "joint_torque", "joint_torque_rate")
 
@@ -210,3 +210,57 @@ def JointStage_(T):
 
 
 JointStage = JointStage_[None]
+
+
+@TemplateSystem.define("JointFrictionObserver_")
+def JointFrictionObserver_(T):
+    """The joint friction observer (9.2) on every DoF of a finger/the hand, as a compensating torque (ch. 9).
+
+    Per DoF ``j`` (inertia ``M_jj``, bearing damping ``b_jj``): ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``,
+    ``d_hat_j = L M_jj (qdot_j - w_hat_j)`` (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the
+    one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces.
+    Inputs ``joint_angle``, ``joint_velocity`` (n, the estimates on the hand), ``tendon_force`` (m); output
+    ``friction_compensation`` (k) ``= -d_hat`` [Nm], added to the joint stage's desired torques; state ``w_hat``
+    (k), to be started at the measured velocity (0 at rest).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, coupling, selection, inertia, damping, gain: float, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.coupling, self.S = coupling, np.asarray(selection, dtype=float)
+            n, k = self.S.shape
+            self.Sp = np.linalg.pinv(self.S)
+            self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
+            self.b = check_gains("damping", damping, shape=(k,), owner="JointFrictionObserver")
+            self.gain = float(check_gains("gain", [gain], owner="JointFrictionObserver", positive=True)[0])
+            self.DeclareContinuousState(k)
+            self._q = self.DeclareVectorInputPort("joint_angle", n)
+            self._v = self.DeclareVectorInputPort("joint_velocity", n)
+            self._f = self.DeclareVectorInputPort("tendon_force", coupling.num_tendons)
+            self.DeclareVectorOutputPort("friction_compensation", k, self._calc,
+                                         prerequisites_of_calc={self.all_state_ticket(), self._v.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.coupling, other.S, other.M, other.b, other.gain, converter=converter)
+
+        def _terms(self, context):
+            from awiwi_drake.control.friction_observer import observer_rate
+            w_hat = context.get_continuous_state_vector().CopyToVector()
+            v = self.Sp @ self._v.Eval(context)
+            return w_hat, v, observer_rate
+
+        def _calc(self, context, out):
+            w_hat, v, _ = self._terms(context)
+            out.SetFromVector(-self.gain * self.M * (v - w_hat))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            w_hat, v, observer_rate = self._terms(context)
+            PS = np.asarray(self.coupling.P(self._q.Eval(context))) @ self.S
+            tau = -(PS.T @ self._f.Eval(context)) - self.b * v
+            rate, _ = observer_rate(w_hat, v, tau, self.M, self.gain)
+            derivatives.get_mutable_vector().SetFromVector(rate)
+
+    return Impl
+
+
+JointFrictionObserver = JointFrictionObserver_[None]

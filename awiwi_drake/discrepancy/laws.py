@@ -51,7 +51,7 @@ def hysteresis_force(z, f_elastic, gate_force=1.0):
 def hysteresis_force_rate(z, x, xd, f_elastic, width, length):
     """Dahl hysteresis of the foundation (:func:`hysteresis_rate`) with a constant loop
     half-width ``width`` [N] reached within ``length`` [m] of travel: ``sigma = width / length``."""
-    p = SimpleNamespace(width_ratio=0.0, width_offset=width, rate=width / length,
+    p = SimpleNamespace(width_ratio=0.0, width_offset=width, presliding_length=length,
                         smoothing_velocity=HYSTERESIS_VELOCITY)
     return hysteresis_rate(z, x, xd, f_elastic, p)
 

@@ -11,7 +11,6 @@ Diagram (names as in the exported graph)::
     <finger>_plant ─────┘  (q [, wrist offsets]) v
         ^ applied_generalized_force <── generalized_force_sum <── coupling_element (-G [q; v])
                                                               <── external_torque (input)
-                                                              <── guide_friction (optional)
 
 Exported inputs: ``motor_torque`` (m) [N m], ``external_torque`` (n) [N m],
 and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad].
@@ -22,10 +21,10 @@ order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
 part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
 
 State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
-then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces.
-The default ``backend="compiled"`` drive also carries the guide friction of every
-tendon path in its ``generalized_force`` (the ``guide_friction`` block below is the
-python/symbolic backends' form).
+then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces, then with
+guide friction (on by default) ``g (m)``, the guide friction forces of the tendon paths
+(both Dahl states of the default ``backend="compiled"`` drive, which adds ``-P^T g`` to its
+``generalized_force``; the python and symbolic backends carry neither).
 
 The wrist enters the routing like extra joints: the drive's coupling is the
 finger coupling plus ``m`` length-offset "joints" (identity columns of
@@ -51,7 +50,7 @@ from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
 from .coupling import HandCoupling, dof_selection, finger_coupling
 from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
-from .systems import GuideFriction, tendon_bending_angles
+from .systems import tendon_bending_angles
 
 __all__ = ["HandRig", "finger_diagram", "hand_diagram", "DEFAULT_BACKEND"]
 
@@ -157,6 +156,10 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     if p.spring.hysteresis.enabled and not compiled:
         raise ValueError(f"{name}: spring.hysteresis.enabled=True needs backend='compiled' (the python and "
                          f"symbolic drives do not carry the hysteresis state here), got backend={backend!r}")
+    if p.guide_friction and not compiled:
+        raise ValueError(f"{name}: guide_friction=True needs backend='compiled' (the python and symbolic "
+                         f"drives do not carry the guide friction state), got backend={backend!r}; "
+                         "use params.with_physics(hysteresis=False, guide_friction=False) for them")
     if p.tendon_springs and not compiled:
         raise ValueError(f"{name}: tendon_springs (one spring law per tendon) needs backend='compiled', "
                          f"got backend={backend!r}")
@@ -175,7 +178,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     if compiled:
         from ..components.fused_drive import GuideFrictionModel
         gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
-                                p.friction_smoothing_velocity) if p.guide_friction else None
+                                p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
         extra_drive = dict(guide_friction=gf, rate_joints=n)
     drive = build_tendon_drive(motor=p.motor, spring=laws if compiled else spring, coupling=drive_coupling,
                                offsets=offsets, backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive",
@@ -215,13 +218,6 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
         b.Connect(plant.get_state_output_port(), ce.get_input_port())
         sources.append(ce.get_output_port())
-    if p.guide_friction and not compiled:   # the compiled drive carries it in its generalized_force
-        gfr = b.AddNamedSystem("guide_friction", GuideFriction(
-            coupling, tendon_bending_angles(coupling, p), p.friction, p.capstan_friction,
-            p.friction_smoothing_velocity))
-        b.Connect(plant.get_state_output_port(), gfr.GetInputPort("state"))
-        b.Connect(d.GetOutputPort("tendon_force"), gfr.GetInputPort("tendon_force"))
-        sources.append(gfr.get_output_port())
     adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
     for i, src in enumerate(sources):
         b.Connect(src, adder.get_input_port(i))
@@ -243,12 +239,13 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
+                                  guide_friction=drive.guide_friction)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
-                            joint_angles, external_torque, wrist_angle, drive.hysteresis)
+                            joint_angles, external_torque, wrist_angle, drive.num_states - 2 * m)
 
     return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
@@ -263,7 +260,7 @@ def _wrist_rows(parts) -> np.ndarray:
 
 
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
-                 external_torque, wrist_angle, hysteresis=False):
+                 external_torque, wrist_angle, num_friction_states=0):
     """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
     n, m = coupling.num_joints, coupling.num_tendons
     f0 = p.pretension if pretension is None else float(pretension)
@@ -321,7 +318,8 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
     if p.motor.saturation and np.any(np.abs(u) > p.motor.torque_limit):
         raise ValueError(f"{name}: holding torques up to {np.abs(u).max():.3g} N m exceed "
                          f"motor.torque_limit = {p.motor.torque_limit} N m")
-    state = np.concatenate([q, np.zeros(n), theta, np.zeros(m), np.zeros(m) if hysteresis else []])
+    # the hysteresis and guide friction states (Dahl) rest at 0: the pretension is the elastic force
+    state = np.concatenate([q, np.zeros(n), theta, np.zeros(m), np.zeros(num_friction_states)])
     K_t = _per_tendon(laws, "stiffness", x)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
@@ -340,7 +338,8 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
         Default ``FingerRigParams.for_finger(finger)``.
     backend : {"compiled", "symbolic", "python"}
         The tendon drive's backend (``awiwi_drake.components.drive``); the thesis's
-        physics (hysteresis, per-tendon springs, guide friction in the drive) needs "compiled".
+        physics (hysteresis, per-tendon springs, guide friction in the drive) needs "compiled":
+        pass ``params.with_physics(hysteresis=False, guide_friction=False)`` for the others.
     wrist : bool
         Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
         finger's tendons enter the routing.

@@ -5,9 +5,8 @@
   terms (the "simplified model" of Fig 5.7).
 * :class:`MotorAngleReference_`: joint reference -> motor angle reference
   through the exact routing ``h(q)``.
-* :class:`GuideFriction_`: guide friction (4.1) / capstan friction of the tendons sliding through
-  their guides, as a generalised force ``-P(q)^T f_fr``; :func:`tendon_bending_angles` gives the
-  bending angles it needs.
+* :func:`tendon_bending_angles`: the bending angle of each tendon path, input of the guide
+  friction (4.1) that the compiled tendon drive carries (``components.fused_drive``).
 * :class:`WristTendonOffsets_`: wrist angles -> tendon path offsets ``h_wrist(q) - h_wrist(0)`` (6.9).
 * :class:`WristCompensation_`: wrist angles -> motor angle feed-forward ``-offset / r_m``.
 (The joint-space motor PD that uses it is the ``joint-pd`` controller,
@@ -20,13 +19,12 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake.components.friction import guide_friction, guide_friction_force
 from awiwi_drake.hand.coupling import FingerCoupling
 from awiwi_drake.hand.wrist import check_motor_pulley_radius, wrist_params, wrist_tendon_offsets
 from awiwi_drake.parameters.wrist import WristParams
 
 __all__ = ["CoriolisCancellation_", "CoriolisCancellation", "MotorAngleReference_", "MotorAngleReference",
-           "tendon_bending_angles", "GuideFriction_", "GuideFriction",
+           "tendon_bending_angles",
            "WristTendonOffsets_", "WristTendonOffsets", "WristCompensation_", "WristCompensation"]
 
 
@@ -231,53 +229,3 @@ def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
             ts = coupling.tendon_slices[name]
             crossed[ts.start:ts.start + 4] = 0
     return p.palm_bending_angle + p.joint_wrap_angle * crossed
-
-
-@TemplateSystem.define("GuideFriction_")
-def GuideFriction_(T):
-    """Routing (guide) friction as a generalised force on the joints.
-
-    Inputs ``state`` = plant ``[q; v]`` (2n), ``tendon_force`` (m) [N].
-    Output ``generalized_force`` (n) = ``-P(q)^T f_fr`` with
-    ``f_fr`` the guide friction law :func:`~awiwi_drake.components.friction.guide_friction`
-    of each tendon sliding through its guides at ``P(q) v`` (the path-length rate at the
-    finger), so its power ``-f_fr . P v`` is never positive: the constant part is (4.1)
-    ``C0 (1 - exp(-C1 alpha))`` (speed and tension independent) or, with
-    ``capstan=True``, the capstan part ``f (exp(mu alpha s) - 1)`` (tension proportional).
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, coupling, bending_angles, params, capstan: bool, smoothing_velocity: float,
-                       converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self.coupling, self.alpha, self.params = coupling, np.asarray(bending_angles, float), params
-            self.capstan, self.v_s = bool(capstan), float(smoothing_velocity)
-            n, m = coupling.num_joints, coupling.num_tendons
-            if self.alpha.shape != (m,):
-                raise ValueError(f"GuideFriction: bending_angles must have {m} entries, got {self.alpha.shape}")
-            self._n = n
-            self._x = self.DeclareVectorInputPort("state", 2 * n)
-            self._f = self.DeclareVectorInputPort("tendon_force", m)
-            zero = np.zeros(m)
-            self._constant = zero if self.capstan else guide_friction_force(self.alpha, params)
-            self._exponent = params.mu * self.alpha if self.capstan else zero
-            self.DeclareVectorOutputPort("generalized_force", n, self._calc,
-                                         prerequisites_of_calc={self._x.ticket(), self._f.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.coupling, other.alpha, other.params, other.capstan, other.v_s,
-                            converter=converter)
-
-        def _calc(self, context, out):
-            x = self._x.Eval(context)
-            q, v = x[: self._n], x[self._n:]
-            P = np.asarray(self.coupling.P(q))
-            f_fr = guide_friction(P @ v, self._f.Eval(context), self._constant, self._exponent, self.v_s)
-            out.SetFromVector(-(P.T @ f_fr))
-
-    return Impl
-
-
-GuideFriction = GuideFriction_[None]
-
-

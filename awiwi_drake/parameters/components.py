@@ -201,18 +201,23 @@ class SpringMechanismGeometry(Parameters):
 class HysteresisParams(Parameters):
     """Rate-independent hysteresis of the spring mechanism (Fig 4.8b, point A).
 
-    A Dahl-type friction force ``z`` in the lever adds to the elastic force:
-    ``dz/dt = sigma * xdot * (1 - tanh(xdot / v_s) * z / (beta f_el(x) + z0))``.
+    A Dahl-type friction force ``z`` in the lever adds to the elastic force
+    (:func:`~awiwi_drake.components.spring.hysteresis_rate`):
+    ``dz/dt = (w / delta) xdot (1 - tanh(xdot / v_s) z / w)``, ``w = beta f_el(x) + z0``.
     The loop half-width at force f is ``beta f + z0``: the full width at 70 N is
-    ``2 (70 beta + z0)``.
+    ``2 (70 beta + z0)``; after a reversal ``z`` crosses the loop within a few ``delta``.
     """
 
     enabled: bool = param(False, unit="-", source="chosen: off by default (optional effect)")
     width_ratio: float = param(0.1, unit="-", low=0.0,
                                source="chosen: full width 2 x 0.1 x 70 N = 14 N at 70 N (Fig 4.8b: 10-20 N)")
     width_offset: float = param(0.0, unit="N", low=0.0, source="chosen: loop closes at zero force")
-    rate: float = param(2.0e5, unit="N/m", low=0.0, low_inclusive=False,
-                        source="chosen: sigma; the loop saturates within ~0.1 mm of reversal")
+    presliding_length: float = param(
+        4e-4, unit="m", low=0.0, low_inclusive=False,
+        source=("chosen: the thesis prints no reversal shape; delta is the smallest presliding length for "
+                "which fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand "
+                "(docs/REPRODUCTIONS.md, 'Hysteresis at 3 kHz'): the state's relaxation rate |xdot|/delta "
+                "and the presliding stiffness w/delta in parallel with the spring both enter |h lambda|"))
     smoothing_velocity: float = param(1e-4, unit="m/s", low=0.0, low_inclusive=False,
                                       source="chosen: v_s, smooth sign(xdot) for integration")
 

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from .base import Parameters, param
-from .components import GuideFrictionParams, MotorParams
+from .components import GuideFrictionParams, HysteresisParams, MotorParams
 from .rigs import SpringModelParams
 
 __all__ = [
@@ -320,28 +320,36 @@ def finger_params(name: str):
 class FingerDriveParams(Parameters):
     """Motors, springs, pretension and routing friction shared by finger and hand diagrams.
 
-    The thesis's physics, each effect switchable (``with_physics``): motor friction (3.8)
-    and ripple (``motor.friction`` on, ``motor.ripple``), guide friction on every tendon path
+    The thesis's physics, each switchable (``with_physics``; all on by default except guide friction,
+    see its source): motor friction
+    (3.8) and ripple (``motor.friction``, ``motor.ripple``), guide friction on every tendon path
     (``guide_friction``; (4.1) at each tendon's bending angle, or the capstan form), spring
     hysteresis (``spring.hysteresis.enabled``, Fig 4.8b), one spring law per tendon (``spring``
     for all, ``tendon_springs`` overrides tendons one by one) and the tendon's own elasticity
-    ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``, on).
-    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs. Guide friction,
-    ripple and hysteresis are off by default. Measured (index finger, joint PD, fixed-step RK3 at
-    the 3 kHz control period): ripple or guide friction alone run; the Dahl hysteresis (a 2e5 N/m
-    presliding spring on the 7.2e-7 kg m^2 links) makes the step diverge; and at rest the
-    tanh-regularised guide friction linearises to ~2000 N s/m per tendon, which overdamps the
-    finger modes that the linear studies (poles vs pretension) rely on.
+    ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``).
+    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs.
+    Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
+    :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
+    fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
+    (docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz"). They need ``backend="compiled"``;
+    ``with_physics(hysteresis=False, guide_friction=False)`` gives the plant the python and
+    symbolic backends can build.
     """
 
-    motor: MotorParams = field(default_factory=MotorParams)
-    spring: SpringModelParams = field(default_factory=SpringModelParams)
+    motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
+    spring: SpringModelParams = field(
+        default_factory=lambda: SpringModelParams(hysteresis=HysteresisParams(enabled=True)))
     tendon_springs: tuple = ()
     pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
                               source="Fig 15.26: f_pre = 20 N (as the joint rig)",
                               doc="tendon force of every tendon at the default operating point")
-    guide_friction: bool = param(False, unit="-",
-                                 source="chosen: off by default (it overdamps the linearised finger, see the class doc)")
+    guide_friction: bool = param(
+        False, unit="-",
+        source=("chosen: off by default. Measured (index, continuous loop, ideal sensors): with the guides' Dahl "
+                "state the 15.5 finger backstepping, which differentiates its frictionless link model through "
+                "the light links, has a real pole at +833 1/s (presliding 0.4 mm; +202 at 3 mm, +123 at 3 cm; "
+                "sampled at 3 kHz: spectral radius 1.27 / 1.07 / 1.007), so it refuses such a rig; joint-pd and "
+                "the cascaded chain stay stable (friction-limited). Switch on with with_physics(guide_friction=True)"))
     capstan_friction: bool = param(False, unit="-",
                                    source=("chosen: False = speed-independent (4.1); True = tension-"
                                            "proportional capstan law (ch. 9: 10-50 % of the force)"))
@@ -354,15 +362,22 @@ class FingerDriveParams(Parameters):
         source="chosen: ~90 deg wrap on each joint pulley a tendon crosses (Fig 5.10), straight finger")
     friction_smoothing_velocity: float = param(
         1e-3, unit="m/s", low=0.0, low_inclusive=False,
-        source="chosen: tanh(v/v_s) replaces sign(v) below 1 mm/s tendon sliding speed")
+        source="chosen: tanh(v/v_s) replaces sign(v) below 1 mm/s tendon sliding speed (direction of the Dahl state)")
+    guide_presliding_length: float = param(
+        4e-4, unit="m", low=0.0, low_inclusive=False,
+        source=("chosen: the thesis prints no presliding; the guide friction reaches its sliding level within a "
+                "few 0.4 mm of tendon travel, the shortest length for which fixed-step RK3 at 3 kHz is stable on "
+                "every finger and the hand with hysteresis on (docs/REPRODUCTIONS.md, 'Thesis physics at 3 kHz')"))
     gravity: bool = param(False, unit="-", source="section 5.2.2: ~0.002 N m, negligible")
 
     def with_physics(self, *, ripple: bool | None = None, hysteresis: bool | None = None,
                      guide_friction: bool | None = None, motor_friction: bool | None = None):
         """A copy with the named thesis effects switched (None leaves one as it is).
 
-        E.g. ``p.with_physics(hysteresis=False)`` for the python/symbolic drive backends,
-        which do not carry the hysteresis state in the finger/hand diagrams.
+        E.g. ``p.with_physics(hysteresis=False, guide_friction=False)`` for the python/symbolic
+        drive backends, which do not carry these two states in the finger/hand diagrams;
+        ``p.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)``
+        is the ideal plant (frictionless motors, elastic springs).
         """
         p = self
         if ripple is not None or motor_friction is not None:

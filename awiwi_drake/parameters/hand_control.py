@@ -115,6 +115,12 @@ class HandChainParams(Parameters):
                                          source="chosen: one warm-started QP per control period (the optimum "
                                                 "moves little in 1/3000 s; converges over a few periods)")
     scheduled: bool = param(True, unit="-", source="(10.12): force-loop gains scheduled on the reference force")
+    sampled_pole_limit: float = param(
+        0.25, unit="-", low=0.0, high=1.0, low_inclusive=False,
+        source=("chosen: |h lambda| <= 1/4 for the designed joint modes of the finger backstepping at its control "
+                "period h (the rule that fixed the joint-rig backstepping at 3 kHz, control/backstepping_registry.py); "
+                "measured on the index: unclamped the 15.5 joint design has a pole at -6838 1/s (h lambda = -2.3 "
+                "at 3 kHz) and the sampled loop's spectral radius is 1.18"))
     friction_scale: float = param(0.5, unit="-", low=0.0, high=1.0,
                                   source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
                                          "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "

@@ -240,19 +240,20 @@ class WristCompensationStudy:
 
 def wrist_compensation_study(target: str = "index", *, backend: str = "compiled", amplitude: float = np.radians(5.0), frequency: float = 2.0,
                              t_final: float = 0.5, controller: JointControllerParams | None = None,
-                             accuracy: float = 1e-3) -> WristCompensationStudy:
+                             accuracy: float = 1e-3, params=None) -> WristCompensationStudy:
     """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
 
     The joint references stay at the operating point; the drift is the joint
     motion the wrist causes through the tendon path change (6.9).  Run once
     without and once with the feedforward ``-h_wrist / r_m``.  ``target`` is
-    a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run).
+    a finger name or ``"hand"`` (a fresh rig with ``wrist=True`` per run); ``params`` its
+    ``FingerRigParams``/``HandRigParams`` (default: the defaults, thesis physics on).
     """
     drift, fmin, events = {}, {}, {}
     t_grid = np.linspace(0.0, t_final, 201)
     for comp in (False, True):
-        rig = (hand_diagram(backend=backend, wrist=True) if target == "hand"
-               else finger_diagram(finger=target, backend=backend, wrist=True))
+        rig = (hand_diagram(backend=backend, wrist=True, params=params) if target == "hand"
+               else finger_diagram(finger=target, backend=backend, wrist=True, params=params))
         cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
         d = cl.diagram
         ctx = d.CreateDefaultContext()

@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.analysis import simulate
+from awiwi_drake.analysis import Step, simulate
 from awiwi_drake.control.compare import fit_second_order_step, step_metrics
 from awiwi_drake.control.sensors import force_sensor
 from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_force_without_feedforward,
@@ -19,7 +19,7 @@ from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_
 from awiwi_drake.parameters import MotorParams, TendonRigParams
 from awiwi_drake.parameters.control import ForceSensorParams, TendonForceGains
 from awiwi_drake.plotting import figure_axes, label_axes
-from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import tendon_rig
 
 __all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
@@ -68,7 +68,7 @@ def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: f
         op = rig.operating_point(tendon_force=f0)
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
-        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(0.05, f1)], f0)},
+        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(0.05, f1, f0)},
                        log=("tendon_force", "tendon_force_reference"), log_period=DT)
         out[label] = log
         if label == "without":
@@ -107,7 +107,7 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
         op = rig.operating_point(tendon_force=f0)
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
-        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule([(t_step, f0 + step)], f0)},
+        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(t_step, f0 + step, f0)},
                        log=("tendon_force", "motor_torque_command"), log_period=DT)
         f = log["tendon_force"][:, 0]
         m = step_metrics(log.t, f, f0, f0 + step, t_step, band=0.05)

@@ -12,13 +12,13 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.analysis import Chirp, linearize, simulate
+from awiwi_drake.analysis import Chirp, Step, linearize, simulate
 from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
 from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
 from awiwi_drake.plotting import figure_axes, label_axes
-from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
@@ -80,18 +80,22 @@ def _joint(kind: str, *, stiffness=None, pretension=None):
                      backend="symbolic")
 
 
-def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
-                   stiffness: float | None = None, pretension: float | None = None, step: float = 0.3,
-                   t_final: float = 0.3) -> ImpedanceStep:
-    """Fig 11.2-11.3: link step under impedance control (``stiffness``: mechanical k of the flexible joint)."""
+def _run(mode, joint_stiffness, rig, stiffness, pretension, t_final, reference):
+    """The impedance loop at 3 kHz from rest under the link ``reference`` schedule; the run's log."""
     r = _joint(rig, stiffness=stiffness, pretension=pretension)
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=RATE)
     op = r.operating_point()
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
-    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.02, step)], 0.0),
-                                               "external_torque": 0.0},
-                   log=("joint_angle", "joint_angle_reference"), log_period=DT)
+    return simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference, "external_torque": 0.0},
+                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
+
+
+def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
+                   stiffness: float | None = None, pretension: float | None = None, step: float = 0.3,
+                   t_final: float = 0.3) -> ImpedanceStep:
+    """Fig 11.2-11.3: link step under impedance control (``stiffness``: mechanical k of the flexible joint)."""
+    log = _run(mode, joint_stiffness, rig, stiffness, pretension, t_final, Step(0.02, step))
     m = step_metrics(log.t, log["joint_angle"][:, 0], 0.0, step, 0.02)
     return ImpedanceStep(f"{mode}, Kp_imp = {joint_stiffness:g} Nm/rad", log.t, log["joint_angle"][:, 0],
                          log["joint_angle_reference"][:, 0], m)
@@ -106,21 +110,11 @@ def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | No
     Defaults (:class:`ImpedanceSweepParams`): the two-time-scale (singular perturbation) impedance of
     Fig 11.4 on the antagonistic joint rig, Kp_imp = 4 Nm/rad, chirp 5-60 Hz over 3 s, 0.02 rad.
     """
-    sp = ImpedanceSweepParams()
-    joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
-    f_start = sp.f_start if f_start is None else f_start
-    f_stop = sp.f_stop if f_stop is None else f_stop
-    duration = sp.duration if duration is None else duration
-    amplitude = sp.amplitude if amplitude is None else amplitude
-    r = _joint(rig, stiffness=stiffness, pretension=pretension)
-    loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
-                       rate_hz=RATE)
-    op = r.operating_point()
-    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
-    log = simulate(loop, ctx, duration, inputs={"joint_angle_reference": Chirp(amplitude, f_start, f_stop, duration),
-                                                "external_torque": 0.0},
-                   log=("joint_angle", "joint_angle_reference"), log_period=DT)
-    f, g = gain_diagram(log.t, log["joint_angle_reference"][:, 0], log["joint_angle"][:, 0], f_start, f_stop)
+    given = dict(joint_stiffness=joint_stiffness, f_start=f_start, f_stop=f_stop, duration=duration, amplitude=amplitude)
+    sp = ImpedanceSweepParams().replace(**{k: v for k, v in given.items() if v is not None})
+    log = _run(mode, sp.joint_stiffness, rig, stiffness, pretension, sp.duration,
+               Chirp(sp.amplitude, sp.f_start, sp.f_stop, sp.duration))
+    f, g = gain_diagram(log.t, log["joint_angle_reference"][:, 0], log["joint_angle"][:, 0], sp.f_start, sp.f_stop)
     return GainDiagram(f"{mode}, simulated chirp", f, g)
 
 

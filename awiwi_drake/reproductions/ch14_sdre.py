@@ -11,13 +11,13 @@ from typing import Sequence
 import numpy as np
 
 from awiwi_drake.control.base import closed_loop
-from awiwi_drake.analysis import simulate
+from awiwi_drake.analysis import Samples, Step, simulate
 from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controller
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 from awiwi_drake.plotting import figure_axes
-from awiwi_drake.reproductions._common import DT, RATE, reference_schedule
+from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
 
 __all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
@@ -78,7 +78,8 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     loop = closed_loop(rig, tendon_sdre_controller(rig, params, fixed=fixed, fmap=fmap), rate_hz=RATE)
     op = rig.operating_point(tendon_force=0.0)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
-    log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": reference_schedule(schedule, 0.0)},
+    ref = Samples([0.0, *(t for t, _ in schedule)], [0.0, *(r for _, r in schedule)])   # piecewise constant
+    log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": ref},
                    log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=DT)
     u = log["motor_torque"][:, 0]
     limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
@@ -100,7 +101,7 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                               references={"joint_angle_reference": 0.0},
                               disturbances={"external_torque": external_torque})
-    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference_schedule([(0.1, target)], 0.0),
+    log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": Step(0.1, target),
                                                "external_torque": external_torque},
                    log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
     return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "joint_angle", "rad",
