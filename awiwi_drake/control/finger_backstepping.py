@@ -87,6 +87,12 @@ class FingerBacksteppingLaw(StaticLaw):
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
+        if getattr(rig.params, "guide_friction", False):
+            raise ValueError(
+                f"finger backstepping: rig {rig.name!r} has guide_friction=True; the 15.5 law differentiates its "
+                "frictionless link model and is unstable with the guides' friction state (measured on the index: "
+                "a closed-loop pole at +833 1/s, sampled spectral radius 1.27 at 3 kHz): use "
+                "params.with_physics(guide_friction=False), or another controller (joint-pd, cascaded)")
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
         self.coupling, self.motor = coupling, rig.params.motor
