@@ -10,6 +10,8 @@ hurt another. Real-time factor (RTF) = simulated seconds / seconds; we report it
 the process CPU clock (``*_rtf``, robust to other jobs on a shared machine) and on
 the wall clock (``*_wall_rtf``). Best of ``--repeats`` runs after one warm-up run
 (numba kernels compile once and are cached on disk; the warm-up hides that).
+The JSON also records the machine's load average at the start and the end of the run
+(``load_average_start``/``_end``: 1, 5, 15 min) and the start time (UTC).
 
 Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 
@@ -42,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
 import subprocess
 import sys
@@ -388,7 +391,8 @@ def main(argv=None) -> int:
     for c in cases:
         if c not in CASES:
             ap.error(f"--cases: unknown case {c!r}; known: {', '.join(CASES)}")
-    out = dict(seconds=args.seconds, hand_seconds=args.hand_seconds, repeats=args.repeats, clock="process CPU time")
+    out = dict(seconds=args.seconds, hand_seconds=args.hand_seconds, repeats=args.repeats, clock="process CPU time",
+               load_average_start=list(os.getloadavg()), started_utc=time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()))
     for c in cases:
         cmd = [sys.executable, __file__, "--case", c, "--seconds", str(args.seconds),
                "--hand-seconds", str(args.hand_seconds), "--repeats", str(args.repeats)]
@@ -411,7 +415,9 @@ def main(argv=None) -> int:
     for other in ("mujoco_callback", "mujoco_linear"):
         if out.get(f"{other}_rtf") and out["joint_rig_3khz_rtf"]:
             out[f"joint_rig_vs_{other}"] = out["joint_rig_3khz_rtf"] / out[f"{other}_rtf"]
-    print(f"joint_rig_vs_scipy = {out['joint_rig_vs_scipy']}")
+    out["load_average_end"] = list(os.getloadavg())      # a shared machine: the load beside the figures
+    print(f"joint_rig_vs_scipy = {out['joint_rig_vs_scipy']}; load average {out['load_average_start'][0]:.1f} "
+          f"at the start, {out['load_average_end'][0]:.1f} at the end")
     if args.json:
         pathlib.Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         pathlib.Path(args.json).write_text(json.dumps(out, indent=1))

@@ -181,3 +181,13 @@ def test_default_finger_physics_is_stable_for_rk3_at_the_control_period(finger):
 def test_default_hand_physics_is_stable_for_rk3_at_the_control_period():
     hand = hand_diagram(params=HandRigParams().with_physics(guide_friction=True))
     assert _rk3_check(hand, 20.0) <= 1e-9
+
+
+def test_finger_backstepping_refuses_guide_friction_with_the_measured_reason():
+    """The 15.5 law is unstable with the guides' Dahl state (continuous closed loop, ideal sensors: a real pole
+    at +833 1/s on the index; +202 / +123 1/s with 3 mm / 3 cm presliding): refused in one line naming
+    the option, instead of a loop that diverges."""
+    from awiwi_drake.control import make_controller
+    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(guide_friction=True))
+    with pytest.raises(ValueError, match="guide_friction=True.*unstable"):
+        make_controller("backstepping", rig)

@@ -74,6 +74,12 @@ def test_sweep_on_a_local_dask_cluster_gives_the_serial_numbers():
         assert len(client.scheduler_info()["workers"]) == 2
         res = run_sweep(joint_rig_point, grid, executor=client.get_executor(), chunksize=1)
         pids = set(client.run(__import__("os").getpid).values())
+        # ch. 16 Algorithm 3 goes through the same runner in batches: the cluster finds the serial search's gains
+        from awiwi_drake.control.optimal_gains import monte_carlo_gains
+        from awiwi_drake.reproductions.ch16_optimal_backstepping import table_16_1_rig
+        mc = monte_carlo_gains(table_16_1_rig(), samples=300, seed=4, executor=client.get_executor(), batch=100)
+    mc_serial = monte_carlo_gains(table_16_1_rig(), samples=300, seed=4, executor="serial", batch=100)
+    assert mc.gains == mc_serial.gains and mc.distance == mc_serial.distance
     assert len(pids) == 2 and __import__("os").getpid() not in pids          # two separate worker processes
     assert res.points == serial.points and res.values == serial.values         # bit-identical numbers
     stiff = {(p["pretension"], p["joint_angle"]): v[0] for p, v in zip(res.points, res.values)}

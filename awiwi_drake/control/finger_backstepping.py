@@ -13,7 +13,9 @@ selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
     z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
     u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
 
-with the tendon force ``f = phi(x)`` of the measured spring elongation ``x``, the motor friction
+with the tendon force ``f = phi_i(x_i)`` of each tendon's own spring law (``rig.spring_laws``: the
+lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
+spring elongation ``x_i``, the motor friction
 (3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
 cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
 ``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
@@ -62,7 +64,6 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.control.chain import check_one_spring_law
 from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
@@ -86,10 +87,20 @@ class FingerBacksteppingLaw(StaticLaw):
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
-        check_one_spring_law(rig, "finger backstepping")
+        if getattr(rig.params, "guide_friction", False):
+            raise ValueError(
+                f"finger backstepping: rig {rig.name!r} has guide_friction=True; the 15.5 law differentiates its "
+                "frictionless link model and is unstable with the guides' friction state (measured on the index: "
+                "a closed-loop pole at +833 1/s, sampled spectral radius 1.27 at 3 kHz): use "
+                "params.with_physics(guide_friction=False), or another controller (joint-pd, cascaded)")
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
-        self.coupling, self.spring, self.motor = coupling, rig.spring, rig.params.motor
+        self.coupling, self.motor = coupling, rig.params.motor
+        laws = list(getattr(rig, "spring_laws", None) or [rig.spring] * coupling.num_tendons)
+        groups = {}
+        for i, law in enumerate(laws):
+            groups.setdefault(id(law), (law, []))[1].append(i)
+        self._spring_groups = [(law, np.array(ix)) for law, ix in groups.values()]   # tendons sharing a law
         self.S = dof_selection(coupling)
         self.Sp = np.linalg.pinv(self.S)
         n, k = self.S.shape
@@ -144,9 +155,9 @@ class FingerBacksteppingLaw(StaticLaw):
             W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
-        f = self.spring.force(x)
-        k1 = self.spring.stiffness(x)
-        k2 = self.spring.stiffness_derivative(x)
+        f = self._springs("force", x)
+        k1 = self._springs("stiffness", x)
+        k2 = self._springs("stiffness_derivative", x)
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
@@ -168,6 +179,14 @@ class FingerBacksteppingLaw(StaticLaw):
         V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
+    def _springs(self, method: str, x):
+        """``law_i.method(x_i)`` with each tendon's own spring law (float or AutoDiffXd arrays)."""
+        x = np.asarray(x)
+        out = np.empty(x.shape, dtype=x.dtype)
+        for law, ix in self._spring_groups:
+            out[ix] = np.asarray(getattr(law, method)(x[ix]), dtype=x.dtype)
+        return out
+
     def __call__(self, u):
         return self.terms(u)["command"]
 
@@ -176,6 +195,7 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
                                    rate_hz: float | None = 3000.0):
     """Registered factory ``backstepping`` for fingers and the hand (see the module docstring);
     ``rate_hz`` is the control rate the joint gains are designed for (the registry's 3 kHz)."""
-    if not (np.all(np.asarray(rig.spring.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
-        raise ValueError("finger backstepping needs a strictly increasing spring (phi' > 0, section 15.4)")
+    for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
+        if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
+            raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")
     return StaticLawController(FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz))

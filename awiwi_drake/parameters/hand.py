@@ -347,9 +347,9 @@ class FingerDriveParams(Parameters):
         False, unit="-",
         source=("chosen: off by default. Measured (index, continuous loop, ideal sensors): with the guides' Dahl "
                 "state the 15.5 finger backstepping, which differentiates its frictionless link model through "
-                "the 1e-8 kg m^2 links, has a real pole at +369 1/s (presliding 0.4 mm; still +24 1/s at 3 cm); "
-                "joint-pd and the cascaded chain stay stable (friction-limited). Switch on with "
-                "with_physics(guide_friction=True)"))
+                "the light links, has a real pole at +833 1/s (presliding 0.4 mm; +202 at 3 mm, +123 at 3 cm; "
+                "sampled at 3 kHz: spectral radius 1.27 / 1.07 / 1.007), so it refuses such a rig; joint-pd and "
+                "the cascaded chain stay stable (friction-limited). Switch on with with_physics(guide_friction=True)"))
     capstan_friction: bool = param(False, unit="-",
                                    source=("chosen: False = speed-independent (4.1); True = tension-"
                                            "proportional capstan law (ch. 9: 10-50 % of the force)"))
