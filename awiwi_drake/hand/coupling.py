@@ -170,7 +170,7 @@ class LinearFingerCoupling(FingerCoupling):
     def dof_pseudo_inverse(self) -> np.ndarray:
         """``(P S)^+`` (n_dof x m): the least-squares inverse of (5.15) on the independent DoF (computed once)."""
         if getattr(self, "_dof_pinv", None) is None:
-            self._dof_pinv = np.linalg.pinv(self._P @ self.dof_selection)
+            self._dof_pinv = np.linalg.pinv(reduced_coupling_matrix(self))
         return self._dof_pinv
 
 
