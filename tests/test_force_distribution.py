@@ -189,6 +189,10 @@ def test_bad_input_names_the_argument():
         finger_force_distribution("index").solve(np.zeros(4), np.eye(4), warm_start=np.ones(3))
     with pytest.raises(ValueError, match="max_iterations"):
         OptimalForceDistribution(hand_stiffness_map(), max_iterations=0)
+    with pytest.raises(ValueError, match="fast_path = 'no'"):         # not read as a truthy string
+        finger_force_distribution("index", fast_path="no")
+    with pytest.raises(ValueError, match="solver_options"):
+        finger_force_distribution("index", solver_options={"tol_feas": 1e-9})
 
 
 def _ad_update(system, x, forces, n):

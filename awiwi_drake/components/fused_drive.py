@@ -489,12 +489,11 @@ def TendonDriveBatch_(T):
             self._shape = (N, k, m, n)
             self._float = T is float
             self._kernels = None
-            self.DeclareContinuousState(N * k)
+            xc = self.DeclareContinuousState(N * k)
             self._u = self.DeclareVectorInputPort("motor_torque", N * m)
             self._ext = self.DeclareVectorInputPort("external_torque", N * n)
             state = {self.all_state_ticket()}
-            self.DeclareVectorOutputPort("state", N * k, lambda c, o: o.SetFromVector(self._x(c)),
-                                         prerequisites_of_calc=state)
+            self.DeclareStateOutputPort("state", xc)          # copied in C++ (read at every control sample)
             self.DeclareVectorOutputPort("joint_angle", N * n, self._calc_joint_angle, prerequisites_of_calc=state)
             self.DeclareVectorOutputPort("tendon_force", N * m, self._calc_force, prerequisites_of_calc=state)
 

@@ -59,7 +59,7 @@ from typing import Callable
 import numba
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
-from pydrake.solvers import ClarabelSolver, MathematicalProgram
+from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy.optimize import linprog
@@ -497,6 +497,11 @@ class OptimalForceDistribution(_DistributionBase):
         self.max_iterations = int(max_iterations)
         self.tolerance = float(tolerance)
         self.levenberg = float(levenberg)
+        if not isinstance(fast_path, (bool, np.bool_)):
+            raise ValueError(f"OptimalForceDistribution: fast_path = {fast_path!r} must be True or False")
+        if solver_options is not None and not isinstance(solver_options, SolverOptions):
+            raise ValueError(f"OptimalForceDistribution: solver_options must be a pydrake.solvers.SolverOptions, "
+                             f"got {type(solver_options).__name__}")
         self.fast_path = bool(fast_path)
         self.solver_options = solver_options
         self._solver = ClarabelSolver()
