@@ -441,7 +441,8 @@ def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver():
         system.GetInputPort("joint_angle").FixValue(ctx, q)
         ctx.SetDiscreteState(0, np.concatenate(f_prev))
         got = system.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector()
-        _, fallback = system._batch.update(taus, Ks, f_prev, q, 2)
+        _, fallback = system._batch.update(np.concatenate(taus), np.concatenate([K.ravel() for K in Ks]),
+                                           np.concatenate(f_prev), q, 2)
         served, left = served + int(np.sum(~fallback)), left + int(np.sum(fallback))
         for k, (s, sd, st, sk, sq) in enumerate(system._parts):
             kw = {} if s._offline is not None else dict(q=q[sq])
