@@ -193,6 +193,25 @@ def test_joint_backlash_is_a_dead_zone_between_link_and_pulley():
             assert np.sign(tau_k(qp)[0]) == sgn                 # the stop transmits the spring torque
 
 
+def test_place_masks_put_a_per_tendon_effect_on_one_tendon_only():
+    """place_1/place_2: guide friction on tendon 2 alone changes only motor 2's acceleration, by exactly the
+    both-tendon model's change there; motor 1 is as without the effect."""
+    nom = NominalParameters.from_dataset("joint", JOINT)
+    rng = np.random.default_rng(8)
+    X = _random_state(nom, rng)
+    X[-2:] = 0.0
+    u = np.array([[0.3], [0.2]])
+    p0 = default_vector()
+    both = p0.copy()
+    both[PARAM_INDEX["guide_c0"]], both[PARAM_INDEX["guide_mu"]] = 1.0, 0.2
+    two = both.copy()
+    two[PARAM_INDEX["place_1"]] = 0.0
+    d0, db, d2 = (model_derivatives(nom, X[:, None], u, p[:, None])[:, 0] for p in (p0, both, two))
+    theta1, omega1, theta2, omega2 = 2, 4, 3, 5          # [q, q', th1, th2, w1, w2, z1, z2]
+    assert d2[omega1] == d0[omega1] and d2[omega2] == db[omega2] and db[omega1] != d0[omega1]
+    np.testing.assert_array_equal(d2[[0, 1, theta1, theta2]], d0[[0, 1, theta1, theta2]])
+
+
 def _energy(nom, X):
     n = nom.num_motors
     spring = PolynomialSpring(nom.spring_poly)
@@ -338,6 +357,8 @@ def test_catalog_names_are_the_contract():
     assert set(PHYSICAL_EFFECTS) == {"motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
                                      "guide_friction", "delay", "spring_drift", "backlash"}
     assert {"force_sensor", "nominal_motor", "nominal_spring", "link_sensor", "motor_sensor"} <= set(EFFECTS)
+    from awiwi_drake.discrepancy.catalog import PLACED_EFFECTS
+    assert set(PLACED_EFFECTS) == {"motor_friction", "guide_friction", "spring_hysteresis"}
     assert len(PARAM_NAMES) == len(set(PARAM_NAMES))
 
 

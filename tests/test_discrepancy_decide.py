@@ -279,6 +279,11 @@ def test_augmented_parameters_build_a_rig_with_the_same_dynamics():
     with pytest.raises(ValueError, match="JointRigParams"):
         from awiwi_drake.parameters import TendonRigParams
         augmented_rig_parameters(dx, TendonRigParams())
+    # motor friction on one tendon only: the rig's two motors share one MotorParams, so it is not written
+    dx.steps[0].place = "tendon 2"
+    one = augmented_rig_parameters(dx, base)
+    assert one.applied == ["nominal_link"] and one.not_representable == ["motor_friction on tendon 2", "delay"]
+    assert not one.params.motor.friction
 
 
 def _dx(ratio_after, steps=(), stop="no candidate passes the acceptance tests", unexplained=None):

@@ -169,6 +169,8 @@ def test_kernels_are_traced_once_per_model_content():
     for mdl, k in ((a, ka), (c, kc)):      # each kernel is its own model's laws
         np.testing.assert_allclose(k["tendon_force"](s, np.empty(2)), drive_laws(mdl, s)["tendon_force"], rtol=1e-12)
     assert not np.allclose(ka["tendon_force"](s, np.empty(2)), kc["tendon_force"](s, np.empty(2)))
+    with pytest.raises(ValueError, match="read-only"):     # an in-place change would leave a stale kernel
+        a.offsets[0] = 3e-3
 
 
 def _set(rig, ctx, x, u, e=None):
@@ -268,8 +270,10 @@ def test_batched_joint_rigs_equal_the_single_rig_copy_by_copy():
         rig.diagram.GetInputPort("motor_torque").FixValue(c1, op.motor_torque)
         np.testing.assert_allclose(d[6 * i:6 * i + 6], rig.diagram.EvalTimeDerivatives(c1).CopyToVector(), rtol=1e-12)
         np.testing.assert_allclose(f[2 * i:2 * i + 2], rig.diagram.GetOutputPort("tendon_force").Eval(c1), rtol=1e-12)
-    ad = br.diagram.ToAutoDiffXd()       # the batch converts too (law path per copy)
-    assert ad.num_continuous_states() == 30
+    # the batch converts too (law path per copy): its AutoDiffXd derivatives equal central differences of the
+    # float (compiled) batch, for the time derivatives and every output, w.r.t. state and both inputs
+    check_system_autodiff_matches_fd(br.diagram, x, dict(motor_torque=np.concatenate([op.motor_torque for op in ops]),
+                                                         external_torque=RNG.normal(scale=0.01, size=5)), rtol=1e-5)
 
 
 def test_hysteresis_loop_width_equals_the_dahl_closed_form():

@@ -109,6 +109,48 @@ def _sampled_loop(period=1e-3):
     return d
 
 
+def test_two_rate_loops_step_at_the_common_period_and_match_the_sampled_data_closed_form():
+    """A 6 kHz law reading a 3 kHz sensor hold (the hand's chain and estimator): the fixed step is 1/6000 s."""
+    from pydrake.systems.primitives import Multiplexer
+    b = DiagramBuilder()
+    plant = b.AddNamedSystem("plant", AffineSystem(A=[[-1.0]], B=[[1.0]], f0=[0.0], C=[[1.0]], D=[[0.0]], y0=[0.0]))
+    sensor = b.AddNamedSystem("sensor", ZeroOrderHold(1.0 / 3000, 1))
+    ctrl = b.AddNamedSystem("ctrl", AffineSystem(A=np.zeros((0, 0)), B=np.zeros((0, 2)), f0=np.zeros(0),
+                                                 C=np.zeros((1, 0)), D=[[4.0, -4.0]], y0=[0.0]))
+    hold = b.AddNamedSystem("hold", ZeroOrderHold(1.0 / 6000, 1))
+    mux = b.AddNamedSystem("mux", Multiplexer([1, 1]))
+    b.ExportInput(mux.get_input_port(0), "x_reference")
+    b.Connect(plant.get_output_port(), sensor.get_input_port())
+    b.Connect(sensor.get_output_port(), mux.get_input_port(1))
+    b.Connect(mux.get_output_port(), ctrl.get_input_port())
+    b.Connect(ctrl.get_output_port(), hold.get_input_port())
+    b.Connect(hold.get_output_port(), plant.get_input_port())
+    b.ExportOutput(plant.get_output_port(), "x")
+    d = b.Build()
+    assert d.GetUniquePeriodicDiscreteUpdateAttribute() is None   # Drake sees no single rate
+    h = 1.0 / 6000
+    assert control_period(d) == h
+    t_step = 0.0051                                               # between ticks 30 and 31
+    res = simulate(d, None, 3000 * h, inputs={"x_reference": Step(t_step, 1.0)}, log=("x",))
+    assert res.info["mode"] == "fixed_step" and res.info["step"] == h
+    np.testing.assert_allclose(np.diff(res.t), h, rtol=1e-6)
+    # sampled-data closed form: at tick n both holds update from the pre-update values,
+    # y <- x(t_n) on even n (3 kHz), u <- 4 (r(t_n) - y_old); then x(t_{n+1}) = e^-h x + (1 - e^-h) u
+    x, y, ref = 0.0, 0.0, []
+    for n in range(len(res.t)):
+        ref.append(x)
+        u = 4.0 * ((1.0 if n * h > t_step else 0.0) - y)
+        y = x if n % 2 == 0 else y
+        x = math.exp(-h) * x + (1 - math.exp(-h)) * u
+    assert abs(ref[-1]) > 0.5                                     # the step has been followed
+    np.testing.assert_allclose(res["x"][:, 0], ref, atol=1e-10)
+    # a rate that is not commensurate leaves the common period undefined: error control
+    b2 = DiagramBuilder()
+    for p in (1e-3, math.pi * 1e-3):
+        b2.ExportInput(b2.AddSystem(ZeroOrderHold(p, 1)).get_input_port())
+    assert control_period(b2.Build()) is None
+
+
 def test_sampled_loops_default_to_fixed_steps_at_the_control_period_and_match_error_control():
     d = _sampled_loop(1e-3)
     assert control_period(d) == pytest.approx(1e-3)
@@ -228,14 +270,16 @@ def test_one_simulation_loop_and_one_divergence_error():
     assert handles == ["control/base.py"], f"ClosedLoop built outside closed_loop: {handles}"
 
 
-def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find():
-    """The joint rig's slack and over-range monitors compute the tendon forces from the logged state
-    (numpy, once per chunk) instead of evaluating the port every step: same events, same extremes,
-    and the limits still drawn on a logged tendon_force."""
+@pytest.mark.parametrize("which", ["joint_rig", "tendon_rig"])
+def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find(which):
+    """The slack and over-range monitors of the joint rig and the tendon rig compute the tendon forces
+    from the logged state (numpy, once per chunk) instead of evaluating the port every step: same
+    events, same extremes, and the limits still drawn on a logged tendon_force."""
     from awiwi_drake.analysis import OverrangeMonitor, SlackMonitor
-    rig = joint_rig()
-    op = rig.operating_point(pretension=5.0)
-    # both motors wind (2.5 Nm / r_m = 500 N > the 180 N range), then unwind (slack)
+    from awiwi_drake.rigs import tendon_rig
+    rig = joint_rig() if which == "joint_rig" else tendon_rig()
+    op = rig.operating_point(pretension=5.0) if which == "joint_rig" else rig.operating_point(tendon_force=5.0)
+    # the motor(s) wind (2.5 Nm / r_m = 500 N > the 180 N range), then unwind (slack)
     u = Step(0.003, 2.5, before=op.motor_torque[0]) + Step(0.1, -5.0)
     from_state = rig_monitors(rig)
     assert [m.port_name for m in from_state if m.kind in ("tendon_slack", "spring_overrange")] == ["state", "state"]

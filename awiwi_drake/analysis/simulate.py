@@ -14,8 +14,8 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   over-range) on the logged samples with numpy; no Python runs per step;
 * integrates error-controlled, or with a fixed step; ``mode="auto"`` (default)
   uses the fixed step at the control period for sampled loops (a diagram
-  with one periodic discrete update, e.g. a 3 kHz zero-order hold) and
-  error control otherwise;
+  with periodic discrete updates, e.g. a 3 kHz zero-order hold; with several
+  rates their common period, :func:`control_period`) and error control otherwise;
 * calls ``progress(t, duration)`` (simulated seconds since the start) after
   every chunk, for progress bars.
 
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import time
+from fractions import Fraction
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
@@ -60,13 +61,39 @@ class SimulationEventError(SimulationError):
     """A monitor created with ``raise_on_event=True`` saw its condition."""
 
 
+_MAX_RATE_RATIO = 1000  # a common period this many times below the shortest one: rates not commensurate
+
+
+def _leaf_timings(system: System) -> list[tuple[float, float]]:
+    """``(period, offset)`` of every leaf system's unique periodic discrete update under ``system``."""
+    if isinstance(system, Diagram):
+        return [pt for s in system.GetSystems() for pt in _leaf_timings(s)]
+    attr = system.GetUniquePeriodicDiscreteUpdateAttribute()
+    return [] if attr is None else [(float(attr.period_sec()), float(attr.offset_sec()))]
+
+
 def control_period(diagram: System) -> float | None:
-    """Period [s] of the diagram's unique periodic discrete update (its control period), else None."""
-    try:
-        attr = diagram.GetUniquePeriodicDiscreteUpdateAttribute()
-    except RuntimeError:
+    """The sampled loop's fixed step [s]: the common period of its periodic discrete updates, else None.
+
+    One rate (e.g. a 3 kHz zero-order hold): that period.  Several (e.g. a 6 kHz law with the 3 kHz
+    tendon-length estimator of the hand): their greatest common divisor (periods and offsets as
+    fractions, so 1/6000 and 1/3000 give 1/6000), the longest step on which every sample instant
+    falls.  None when there is no periodic discrete update, or the rates are not commensurate (the
+    common period would be over 1000x shorter than the shortest one).
+    """
+    attr = diagram.GetUniquePeriodicDiscreteUpdateAttribute()
+    if attr is not None and attr.offset_sec() == 0.0:
+        return float(attr.period_sec())
+    times = [v for pt in _leaf_timings(diagram) for v in pt if v > 0.0]
+    if not times:
         return None
-    return None if attr is None else float(attr.period_sec())
+    fr = [Fraction(v).limit_denominator(10 ** 12) for v in times]
+    den = math.lcm(*(f.denominator for f in fr))
+    common = math.gcd(*(f.numerator * (den // f.denominator) for f in fr)) / den
+    if common < min(times) / _MAX_RATE_RATIO or any(abs(v / common - round(v / common)) > 1e-9 * v / common
+                                                     for v in times):
+        return None
+    return float(common)
 
 
 def _unwrap(system) -> tuple[System, tuple]:
@@ -128,8 +155,9 @@ def simulate(system, context: Context | None, t_final: float, *,
     monitors : sequence of Monitor
         Slack / saturation / over-range monitors (:func:`~awiwi_drake.analysis.rig_monitors`).
     mode : {"auto", "fixed_step", "error_controlled"}
-        ``auto``: fixed step at the control period for sampled loops (a unique
-        periodic discrete update in the diagram), error control otherwise.
+        ``auto``: fixed step at the control period for sampled loops (the common
+        period of the diagram's periodic discrete updates, :func:`control_period`),
+        error control otherwise.
     step : float, optional
         Fixed step [s]; default the control period (or ``max_step`` for a
         continuous diagram).  For a sampled loop it must divide the control period.

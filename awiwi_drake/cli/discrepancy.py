@@ -51,7 +51,7 @@ def _diagnose(args) -> int:
     if report_dir is not None:
         md = write_report(dx, report_dir)
         print(f"report: {md}", file=sys.stderr)
-    named = ", ".join(dx.named_effects) or "none"
+    named = ", ".join(e + (f" on {dx.places[e]}" if e in dx.places else "") for e in dx.named_effects) or "none"
     print(f"{dx.dataset}: {dx.verdict}; named effects: {named}")
     if dx.nuisance_corrections:
         print(f"calibration corrections: {', '.join(dx.nuisance_corrections)}")
@@ -119,11 +119,11 @@ def _make_dataset(args) -> int:
 
     with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
         ds = make_truth_dataset(rig, hidden, snr_db=args.snr, seed=args.seed, nuisance=nuisance, gen=gen,
-                                name=args.name, keep_clean=False, progress=progress)
+                                name=args.name, keep_clean=False, progress=progress, place=args.place)
     path = save_dataset(ds, out)
     snr = "inf" if args.snr is None else f"{args.snr:g}"
     print(f"{path} (+ .json; answer in {path.stem}.truth.json): rig {args.rig}, hidden {hidden or 'none'}, "
-          f"SNR {snr} dB, seed {args.seed}")
+          f"SNR {snr} dB, seed {args.seed}" + (f", on tendon {args.place}" if args.place else ""))
     return 0
 
 
@@ -149,6 +149,9 @@ def register(subparsers) -> None:
                    help="catalog effect hidden in the truth (repeat or comma-separate; 'none'): motor_friction, "
                         "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay, spring_drift, "
                         "backlash")
+    m.add_argument("--place", type=int, choices=[1, 2], default=None,
+                   help="joint-rig: the per-tendon hidden effects (motor_friction, guide_friction, "
+                        "spring_hysteresis) act on tendon 1 or 2 only (default: both)")
     m.add_argument("--nuisance", action="append", metavar="NAME",
                    help="miscalibration in the truth: force_sensor, nominal_motor")
     m.add_argument("--snr", type=_snr, default=30.0, metavar="DB",

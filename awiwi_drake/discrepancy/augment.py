@@ -14,7 +14,8 @@ catalog                   rig parameters
 ``nominal_link``          ``link_inertia * (1 + rel)``, ``link_damping + add``
 ========================= =========================================================
 
-Everything else that was accepted is listed in ``not_representable``: the rig
+Everything else that was accepted is listed in ``not_representable`` (so is an effect localised to one
+tendon, e.g. ``motor_friction on tendon 2``: the rig's motors share one ``MotorParams``): the rig
 builders have no input delay, link-side Coulomb friction, guide friction on the
 rig's tendon, spring drift or sensor calibrations, their ripple is one harmonic at
 the gear ratio, and their spring polynomial is derived from the lever geometry
@@ -66,7 +67,11 @@ def augmented_rig_parameters(dx, base) -> AugmentedParameters:
     accepted = [s.effect for s in dx.steps]
     motor = base.motor
     applied, missing = [], []
+    single = {e: pl for e, pl in dx.places.items() if pl.startswith("tendon ")}
     for eff in accepted:
+        if eff in single:   # the rig's motors share one MotorParams: a one-tendon effect has no place there
+            missing.append(f"{eff} on {single[eff]}")
+            continue
         if eff == "motor_friction":
             motor = motor.replace(friction=True, coulomb_torque=g("motor_coulomb"),
                                   friction_slope=g("motor_slope"), viscous_friction=g("motor_viscous"))

@@ -36,7 +36,7 @@ import numpy as np
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
 __all__ = ["ParamSpec", "Effect", "param_specs", "PARAM_NAMES", "PARAM_INDEX", "PARAM_UNITS", "EFFECTS",
-           "effects_for_rig", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS"]
+           "effects_for_rig", "PHYSICAL_EFFECTS", "NUISANCE_EFFECTS", "PLACED_EFFECTS"]
 
 
 @dataclass(frozen=True)
@@ -103,6 +103,11 @@ def param_specs(bounds: CatalogBounds | None = None) -> list[ParamSpec]:
         ParamSpec("motor_bias_2", "rad", 0.0, -b.encoder_bias_max, b.encoder_bias_max, 0.01, "motor 2 encoder bias"),
         ParamSpec("backlash", "rad", 0.0, 0.0, b.backlash_max, 0.005,
                   "half-width of the play between link and tendon pulley (dead zone at the joint)"),
+        ParamSpec("place_1", "-", 1.0, 0.0, 1.0, 0.0,
+                  "place mask: the per-tendon effects (PLACED_EFFECTS) act on tendon/motor 1 (1) or not (0)",
+                  regularisation=True),
+        ParamSpec("place_2", "-", 1.0, 0.0, 1.0, 0.0,
+                  "place mask: the per-tendon effects act on tendon/motor 2 (1) or not (0)", regularisation=True),
     ]
     return specs
 
@@ -198,6 +203,9 @@ EFFECTS = {
 }
 
 PHYSICAL_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.kind == "physical")
+PLACED_EFFECTS = ("motor_friction", "guide_friction", "spring_hysteresis")
+"""Effects that act on each tendon (its motor, its guide path, its spring mechanism) and can be
+localised to one of them by the place masks ``place_1``/``place_2`` (the joint rig's two tendons)."""
 NUISANCE_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.kind == "nuisance")
 
 

@@ -222,25 +222,27 @@ def replay_laws(nom: NominalParameters, x, u, p):
     s = _to_drive(nom, theta, omega, q, qd)
     f_el = drive_laws(model, s, q=q_in, want=("tendon_force",))["tendon_force"]
     xs, xds = rig_kinematics(nom, theta, omega, q, qd)
-    width = _p(p, "hysteresis_width")
     df, force, zdot, v = [], [], [], []
     for i in range(n):
+        m = i + 1
+        place = _p(p, f"place_{m}")   # the per-tendon effects (PLACED_EFFECTS) on this tendon or not
+        width = _p(p, "hysteresis_width") * place
         f = (1.0 + _p(p, "spring_scale_rel")) * f_el[i] + _switch(
             (width,), lambda: laws.hysteresis_force(z[i], f_el[i]), f_el[i])
         force.append(f)
         df.append(f - f_el[i])
         zdot.append(_switch((width,), lambda: laws.hysteresis_force_rate(
             z[i], xs[i], xds[i], f_el[i], width, _p(p, "hysteresis_length")), f_el[i]))
-        m = i + 1
         tau = -_p(p, "motor_damping_add") * omega[i]
-        tau = tau + _switch((_p(p, "motor_coulomb"), _p(p, "motor_viscous")), lambda: laws.motor_friction(
-            omega[i], _p(p, "motor_coulomb"), _p(p, "motor_slope"), _p(p, "motor_viscous")), omega[i])
+        coulomb, viscous = _p(p, "motor_coulomb") * place, _p(p, "motor_viscous") * place
+        tau = tau + _switch((coulomb, viscous), lambda: laws.motor_friction(
+            omega[i], coulomb, _p(p, "motor_slope"), viscous), omega[i])
         for k in (1, 2):
             a, b = _p(p, f"ripple_sin{k}_m{m}"), _p(p, f"ripple_cos{k}_m{m}")
             tau = tau + _switch((a, b), lambda: laws.ripple(theta[i], [(_p(p, f"ripple_order_{k}"), a, b)]),
                                 theta[i])
-        g = _switch((_p(p, "guide_c0"), _p(p, "guide_mu")), lambda: laws.guide_friction(
-            r * omega[i], f, _p(p, "guide_c0"), _p(p, "guide_mu"), laws.GUIDE_VELOCITY), omega[i])
+        c0, mu = _p(p, "guide_c0") * place, _p(p, "guide_mu") * place
+        g = _switch((c0, mu), lambda: laws.guide_friction(r * omega[i], f, c0, mu, laws.GUIDE_VELOCITY), omega[i])
         v.append(u[i] + tau - r * (g + df[i]))
     ext = None
     if nom.has_link:

@@ -186,7 +186,7 @@ def write_report(dx: Diagnosis, directory, *, figures: bool = True) -> pathlib.P
     (d / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     L = [f"# Model-discrepancy diagnosis: {dx.dataset}", "",
          f"Rig `{dx.rig}`; verdict: **{dx.verdict}**; "
-         f"named effects: {', '.join(f'`{e}`' for e in dx.named_effects) or 'none'}"
+         f"named effects: {', '.join(f'`{e}`' + (f' on {dx.places[e]}' if e in dx.places else '') for e in dx.named_effects) or 'none'}"
          + (f"; calibration: {', '.join(dx.nuisance_corrections)}" if dx.nuisance_corrections else "")
          + f". {dx.simulations} batched Drake simulations, {dx.seconds:.1f} s.", "",
          "## Gap (held-out multiple-shooting windows)", "",

@@ -60,13 +60,14 @@ class Step:
     candidates: list
     members: list = field(default_factory=list)  # the class when not separable (winner first)
     experiment: str = ""  # an experiment that would separate the members
+    place: str = ""  # per-tendon effects: "tendon 1", "tendon 2", "both tendons" or "not localised"
 
     def summary(self) -> dict:
         return {"effect": self.effect, "kind": self.kind, "status": self.status,
                 "confidence": self.confidence, "parameters": self.parameters,
                 "uncertainties": self.uncertainties, "nrmse_after": self.nrmse_after,
                 "nrmse_after_signals": self.nrmse_after_signals, "alternatives": self.alternatives,
-                "members": self.members, "experiment": self.experiment,
+                "members": self.members, "experiment": self.experiment, "place": self.place,
                 "candidates": [c.summary() for c in self.candidates]}
 
 
@@ -106,6 +107,11 @@ class Diagnosis:
     complete: bool = True
 
     @property
+    def places(self) -> dict:
+        """Where each localised per-tendon effect acts: ``{effect: "tendon 1" | "tendon 2" | ...}``."""
+        return {s.effect: s.place for s in self.steps if s.place}
+
+    @property
     def fit_percent_before(self) -> float:
         return 100.0 * (1.0 - self.nrmse_before)
 
@@ -117,7 +123,8 @@ class Diagnosis:
         off = default_vector()
         return {
             "dataset": self.dataset, "rig": self.rig, "verdict": self.verdict, "complete": self.complete,
-            "named_effects": self.named_effects, "nuisance_corrections": self.nuisance_corrections,
+            "named_effects": self.named_effects, "places": self.places,
+            "nuisance_corrections": self.nuisance_corrections,
             "unexplained_residual": self.unexplained_residual, "unexplained_ratio": self.unexplained_ratio,
             "unexplained": self.unexplained, "stop_reason": self.stop_reason,
             "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,

@@ -18,7 +18,7 @@ from scipy.stats import rankdata
 
 from awiwi_drake.parameters.discrepancy import CatalogBounds
 
-from .catalog import PARAM_INDEX, Effect, param_specs
+from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, Effect, param_specs
 from .localise import cpr_spectrum
 from .replay import ReplayEngine, project
 
@@ -122,9 +122,18 @@ def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBo
         return out
     cols = [(a, specs[a].perturbation) for a in amps]
     if not effect.shape:
-        return [("", {}, cols, None)]
-    (sname, grid), = effect.shape.items()
-    return [(f"{sname}={g:g}", {sname: g}, cols, None) for g in grid]
+        out = [("", {}, cols, None)]
+    else:
+        (sname, grid), = effect.shape.items()
+        out = [(f"{sname}={g:g}", {sname: g}, cols, None) for g in grid]
+    # a per-tendon effect is screened on both tendons and on each alone (its place), unless a
+    # per-tendon effect is already in the model (the place masks are shared)
+    placed = [n for e in PLACED_EFFECTS for n in EFFECTS[e].amplitude_for(rig)]
+    if (effect.name in PLACED_EFFECTS and rig == "joint" and not np.any(base[[PARAM_INDEX[n] for n in placed]])
+            and base[PARAM_INDEX["place_1"]] == 1.0 and base[PARAM_INDEX["place_2"]] == 1.0):
+        out += [(f"{label} tendon {i}".strip(), {**shape, "place_1": float(i == 1), "place_2": float(i == 2)},
+                 c, o) for i in (1, 2) for label, shape, c, o in list(out)]
+    return out
 
 
 def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) -> list:

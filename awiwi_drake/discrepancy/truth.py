@@ -122,7 +122,7 @@ def HiddenEffectPlant_(T):
             f = []
             for i in range(nom.num_motors):
                 f0 = laws.spring_force(x[i], nom.spring_poly) * scale
-                if "spring_hysteresis" in tr:
+                if "spring_hysteresis" in tr and _here(tr, i):
                     f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
                 f.append(f0)
             return f, x, xd
@@ -138,20 +138,20 @@ def HiddenEffectPlant_(T):
             acc, zd = [], []
             for i in range(n):
                 tau = U[i] - nom.motor_damping * omega[i]
-                if "motor_friction" in tr:
+                if "motor_friction" in tr and _here(tr, i):
                     p = tr["motor_friction"]
                     tau = tau + stribeck_friction(omega[i], p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
                 if "motor_ripple" in tr:
                     p = tr["motor_ripple"]
                     tau = tau + laws.ripple(theta[i], [(o, a, b) for o, a, b in p["harmonics"][i]])
                 tension = f[i]
-                if "guide_friction" in tr:
+                if "guide_friction" in tr and _here(tr, i):
                     p = tr["guide_friction"]
                     tension = tension + guide_friction(r * omega[i], positive_part(f[i]), p["c0"],
                                                        p["mu_angle"], p["v0"])
                 tau = tau - r * tension
                 acc.append(tau / B)
-                if "spring_hysteresis" in tr:
+                if "spring_hysteresis" in tr and _here(tr, i):
                     p = tr["spring_hysteresis"]
                     v = xd[i]
                     av = np.sqrt(v * v + 1e-12)
@@ -182,10 +182,19 @@ def HiddenEffectPlant_(T):
     return Impl
 
 
-def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0) -> dict:
+def _here(tr: dict, i: int) -> bool:
+    """Whether the per-tendon hidden effects (catalog PLACED_EFFECTS) act on tendon ``i`` (0-based)."""
+    return tr.get("place") in (None, i + 1)
+
+
+def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0,
+               place: int | None = None) -> dict:
     """Random truth parameters for the hidden effects (and optional miscalibrations);
-    ``strength`` scales each effect's size."""
+    ``strength`` scales each effect's size; ``place`` (1 or 2, joint rig) puts the per-tendon
+    effects (motor friction, guide friction, spring hysteresis) on that tendon only."""
     hidden = list(hidden)
+    if place is not None and (rig != "joint" or place not in (1, 2)):
+        raise ValueError(f"place = {place!r}: a per-tendon place is 1 or 2 on the joint rig")
     for h in hidden:
         if h not in HIDDEN_EFFECTS:
             raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")
@@ -233,6 +242,8 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         tr["inertia_scale"] = float(1.0 + u(0.15, 0.3) * rng.choice([-1, 1]))
     tr["hidden"] = hidden
     tr["nuisance"] = list(nuisance)
+    if place is not None:
+        tr["place"] = int(place)
     return tr
 
 
@@ -310,7 +321,8 @@ def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, de
 
 def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
-                       keep_clean: bool = True, progress=None, strength: float = 1.0) -> Dataset:
+                       keep_clean: bool = True, progress=None, strength: float = 1.0,
+                       place: int | None = None) -> Dataset:
     """Simulate one closed-loop experiment on a truth rig with hidden effects.
 
     ``progress(t, duration)`` (optional) is called every ~2 % of the run, e.g.
@@ -328,6 +340,9 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         Miscalibrations: the JSON's nominal values or the sensor differ from the truth.
     strength : float
         Scale of every hidden effect's size (1: the generator's ranges; 0.5: half strength).
+    place : 1, 2 or None
+        Joint rig: the per-tendon effects (motor friction, guide friction, spring hysteresis) act on
+        that tendon (its motor, guide path and spring) only; None: on both.
 
     Returns
     -------
@@ -351,7 +366,7 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         else:
             params[k] = float(v * rng.uniform(1 - spread, 1 + spread))
     nom = NominalParameters.from_dataset(rig, params)
-    truth = draw_truth(rig, hidden, rng, nuisance, strength)
+    truth = draw_truth(rig, hidden, rng, nuisance, strength, place)
     plant_sys = HiddenEffectPlant_[float](nom, truth)
     dt = 1.0 / gen.sample_rate
     N = int(round(gen.duration / dt))

@@ -31,7 +31,7 @@ from scipy.stats import norm
 
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
-from .catalog import EFFECTS, PARAM_INDEX, default_vector, effects_for_rig
+from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset
 from .decide import materiality, noise_equivalent, rejection_reason, separating_experiment
 from .fit import fit_parameters
@@ -139,8 +139,10 @@ class _Run:
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         experiment = separating_experiment(members) if status == "not separable" else ""
         self.steps.append(Step(win.effect, win.kind, status, conf, win.parameters, win.uncertainties,
-                               float(np.mean(list(nr.values()))), nr, alts, cands, members, experiment))
-        self.say(f"added {win.effect} ({win.kind}, {status}, confidence {conf:.2f}); "
+                               float(np.mean(list(nr.values()))), nr, alts, cands, members, experiment,
+                               place_of(win.effect, self.st.base, self.eng.nom.num_motors)))
+        where = self.steps[-1].place
+        self.say(f"added {win.effect}{' on ' + where if where else ''} ({win.kind}, {status}, confidence {conf:.2f}); "
                  f"NRMSE {np.mean(list(nr.values())):.4f}, residual/floor {self.st.ratio:.3f}"
                  + (f"; not separable from {', '.join(alts)} with these data: {experiment}" if experiment else ""))
 
@@ -211,6 +213,15 @@ class _Run:
             unexplained, settings.unexplained_ratio, where, self.stop_reason, complete)
 
 
+def place_of(effect: str, p: np.ndarray, num_motors: int) -> str:
+    """Where a per-tendon effect (:data:`PLACED_EFFECTS`) acts by the place masks of ``p``
+    (screened as variants: both tendons, tendon 1 only, tendon 2 only); "" for other effects."""
+    if effect not in PLACED_EFFECTS or num_motors != 2:
+        return ""
+    on = [i + 1 for i in range(2) if p[PARAM_INDEX[f"place_{i + 1}"]] > 0.5]
+    return "both tendons" if len(on) == 2 else f"tendon {on[0]}"
+
+
 def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
              bounds: CatalogBounds | None = None, progress=None, checkpoint=None) -> Diagnosis:
     """Run the whole workflow on one dataset (see module docstring).
@@ -254,6 +265,7 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
     say(run.stop_reason + ": stop")
     dx = run.result(complete=True)
     say(f"done in {dx.seconds:.1f} s: {dx.verdict}; named {dx.named_effects or 'nothing'}"
+        + "".join(f", {e} on {pl}" for e, pl in dx.places.items())
         + (f", calibration {dx.nuisance_corrections}" if dx.nuisance_corrections else "")
         + (f"; residual/floor {dx.floor_ratio_after:.2f} > {settings.unexplained_ratio:g}: "
            + dx.unexplained.get("text", "") if dx.unexplained_residual else ""))
