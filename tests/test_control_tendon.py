@@ -141,6 +141,29 @@ def test_tendon_force_references_outside_the_table_are_rejected(fmap):
         sdre.model.equilibrium(-2.0)
 
 
+def test_tendon_force_bank_equals_the_one_tendon_law_per_tendon_and_names_a_bad_entry(fmap):
+    """The bank's vectorised float path (one table look-up for all tendons) equals the one-tendon law tendon by
+    tendon to 1e-12 (also off the table's ends, where the slope and gains are held), and a bad reference in a
+    bank is named by its index."""
+    motor = MotorParams(ripple=True)
+    n = 40
+    rng = np.random.default_rng(5)
+    fd = np.concatenate([[0.0, fmap.max_force], rng.uniform(0.0, fmap.max_force, n - 2)])
+    u = {"tendon_force_reference": fd,
+         "tendon_force": np.concatenate([[-3.0, 1.2 * fmap.max_force], rng.uniform(0.0, fmap.max_force, n - 2)]),
+         "motor_velocity": rng.normal(0, 5, n), "motor_angle": rng.uniform(-3, 3, n),
+         "tendon_path_velocity": rng.normal(0, 0.01, n)}
+    for scheduled in (False, True):
+        kw = dict(scheduled=scheduled, ripple_scale=0.8, path_velocity=True)
+        bank = TendonForceLaw(fmap, motor, TendonForceGains(), size=n, **kw)(u)
+        one = TendonForceLaw(fmap, motor, TendonForceGains(), **kw)
+        each = [one({k: v[i:i + 1] for k, v in u.items()})[0] for i in range(n)]
+        np.testing.assert_allclose(bank, each, rtol=1e-12, atol=1e-12)
+    bad = dict(u, tendon_force_reference=np.where(np.arange(n) == 7, -1.0, fd))
+    with pytest.raises(ValueError, match=r"tendon_force_reference\[7\] = -1.0"):
+        TendonForceLaw(fmap, motor, TendonForceGains(), size=n, ripple_scale=0.8, path_velocity=True)(bad)
+
+
 def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fmap):
     rig = tendon_rig(backend="symbolic")
     p = SdreTendonParams()

@@ -257,9 +257,10 @@ def test_thumb_base_lengths_and_jacobian_from_one_kinematics_evaluation():
         np.testing.assert_allclose(J, fd_jacobian(lambda qq: c.h(np.concatenate([qq, [0.0, 0.0]]))[:4], q, h=1e-6),
                                    atol=1e-9)
     np.testing.assert_allclose(c.distal_pseudo_inverse() @ c.P(np.zeros(4))[4:, 2:], np.eye(2), atol=1e-12)
-    # the float P(q) and tension Hessians come from the same kernel: equal to the laws' generic path
+    # the float h(q), P(q) and tension Hessians come from the same kernel: equal to the laws' generic path
     for q in RNG.uniform(-1.2, 1.2, size=(3, 4)):
         generic = np.array(q, dtype=object)
+        np.testing.assert_allclose(c.h(q), np.asarray(c.h(generic), dtype=float), rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(c.P(q), np.asarray(c.P(generic), dtype=float), rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(c.tension_hessians(q), np.asarray(FingerCoupling.tension_hessians(c, generic),
                                                                      dtype=float), rtol=1e-12, atol=1e-15)

@@ -162,3 +162,44 @@ def test_hand_estimator_float_update_equals_its_autodiff_values():
                               dtype=float).ravel())
     np.testing.assert_allclose(out[0], out[1], rtol=0, atol=1e-12)
     assert np.abs(out[0] - q).max() < 1e-2                # 10 um of length noise: ~1e-3 rad
+
+
+@pytest.mark.parametrize("refine", [False, True])
+def test_hand_estimator_update_equals_the_law_functions(refine):
+    """The float update (one block product for the constant-coupling fingers, the compiled Algorithm 1, the
+    thumb's Gauss-Newton step on its 4 x 2 base block) equals the law functions finger by finger
+    (estimate_linear (5.15), estimate_thumb, q + (P S)^+ r with numpy's pinv) to 1e-12 rad at random states."""
+    from awiwi_drake.hand.diagrams import hand_diagram
+    from awiwi_drake.hand.coupling import dof_selection
+    from awiwi_drake.hand.estimation import link_state_estimator
+    rig = hand_diagram()
+    c = rig.coupling
+    lpe = link_state_estimator(c, rig.params.motor.pulley_radius, rig.offsets, iterations=15,
+                               refine=refine).system.GetSubsystemByName("link_position_estimator")
+    ctx = lpe.CreateDefaultContext()
+    S = dof_selection(c)
+    rng = np.random.default_rng(11)
+    h0 = c.h(np.zeros(c.num_joints))
+    for _ in range(5):
+        q = S @ rng.uniform(-0.6, 0.6, S.shape[1])
+        q_prev = q + rng.normal(scale=0.05, size=q.size)
+        theta = rng.uniform(-0.5, 0.5, rig.num_tendons)
+        dh = c.h(q) - h0 + rng.normal(scale=1e-5, size=rig.num_tendons)   # a non-zero residual
+        ctx.SetDiscreteState(q_prev)
+        lpe.GetInputPort("motor_angle").FixValue(ctx, theta)
+        lpe.GetInputPort("elongation").FixValue(ctx, rig.params.motor.pulley_radius * theta + dh + rig.offsets)
+        lpe.GetInputPort("wrist_offset").FixValue(ctx, np.zeros(rig.num_tendons))
+        got = lpe.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector().CopyToVector()
+        want = np.zeros(c.num_joints)
+        for name, part in c.parts.items():
+            j, t = c.joint_slices[name], c.tendon_slices[name]
+            if part.is_constant:
+                want[j] = estimate_linear(part, dh[t])
+            else:
+                want[j] = estimate_thumb(part, dh[t], q_prev[j][:2], iterations=15)
+                if refine:
+                    r = dh[t] - (part.h(want[j]) - part.h(np.zeros(4)))
+                    Sp = part.dof_selection
+                    want[j] = want[j] + Sp @ (np.linalg.pinv(part.P(want[j]) @ Sp) @ r)
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        assert np.abs(got - q).max() < 1e-2

@@ -189,6 +189,10 @@ def test_bad_input_names_the_argument():
         finger_force_distribution("index").solve(np.zeros(4), np.eye(4), warm_start=np.ones(3))
     with pytest.raises(ValueError, match="max_iterations"):
         OptimalForceDistribution(hand_stiffness_map(), max_iterations=0)
+    with pytest.raises(ValueError, match="fast_path = 'no'"):         # not read as a truthy string
+        finger_force_distribution("index", fast_path="no")
+    with pytest.raises(ValueError, match="solver_options"):
+        finger_force_distribution("index", solver_options={"tol_feas": 1e-9})
 
 
 def _ad_update(system, x, forces, n):
@@ -437,7 +441,8 @@ def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver():
         system.GetInputPort("joint_angle").FixValue(ctx, q)
         ctx.SetDiscreteState(0, np.concatenate(f_prev))
         got = system.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector()
-        _, fallback = system._batch.update(taus, Ks, f_prev, q, 2)
+        _, fallback = system._batch.update(np.concatenate(taus), np.concatenate([K.ravel() for K in Ks]),
+                                           np.concatenate(f_prev), q, 2)
         served, left = served + int(np.sum(~fallback)), left + int(np.sum(fallback))
         for k, (s, sd, st, sk, sq) in enumerate(system._parts):
             kw = {} if s._offline is not None else dict(q=q[sq])

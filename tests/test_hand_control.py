@@ -256,6 +256,14 @@ def test_finger_backstepping_sampled_at_3khz_is_stable_on_every_finger(finger):
         assert old > 1.1, old                       # measured 1.18
 
 
+def test_hand_backstepping_sampled_at_3khz_is_stable():
+    """The whole hand (19 DoF, 38 tendons, physics on) under the 15.5 law at 3 kHz behind a ZOH: the sampled
+    linearisation's eigenvalues are in the unit circle (|z| = 1 only for the marginal Dahl states, to 1e-9)."""
+    from awiwi_drake.hand import hand_diagram
+    radius, _ = _sampled_backstepping_radius(hand_diagram(wrist=False), 3000.0, 3000.0)
+    assert radius <= 1.0 + 1e-9, radius
+
+
 def test_finger_backstepping_lyapunov_function_decreases():
     """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
     loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index.
@@ -404,3 +412,26 @@ def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_es
             assert all(r.status == "flagged" for r in rows)
     assert all("force distribution out of bounds" in f for f in flags[True]), flags[True]
     assert not any("force distribution" in f for f in flags[False]), flags[False]
+
+
+@pytest.mark.parametrize("finger", ["ring", "thumb"])
+def test_force_sharing_stage_gives_the_exact_joint_torque_and_converts(finger):
+    """The chain's static sharing (15.88) for continuous loops (``distribution="sharing"``): the requested DoF
+    torques come out of the rig's own coupling exactly, -(P S)^T f_ref = tau_ref at the design posture (ring: the
+    coupled DIP, thumb: P(q_op)), the design point maps to its tendon forces, and the system converts to
+    AutoDiffXd with derivatives equal to central differences of the float system."""
+    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False),
+                         backend="python")
+    ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing")
+    sharing = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_sharing")
+    op = rig.operating_point()
+    PS = np.asarray(rig.coupling.P(op.joint_angle), float) @ dof_selection(rig.coupling)
+    ctx = sharing.CreateDefaultContext()
+    rng = np.random.default_rng(8)
+    port = sharing.GetInputPort("joint_torque_reference")
+    for tau in (sharing.tau0, sharing.tau0 + rng.normal(0.0, 0.05, PS.shape[1])):
+        port.FixValue(ctx, tau)
+        f = sharing.GetOutputPort("tendon_force_reference").Eval(ctx)
+        np.testing.assert_allclose(-PS.T @ f, tau, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(sharing.f0, op.tendon_force, rtol=1e-12)
+    check_system_autodiff_matches_fd(sharing, [], dict(joint_torque_reference=rng.normal(0.0, 0.05, PS.shape[1])))

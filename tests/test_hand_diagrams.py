@@ -305,5 +305,10 @@ def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
     op_eq = rig.operating_point(joint_angles=q_eq)
     K, k_t = np.asarray(op_eq.joint_stiffness), np.asarray(op_eq.tendon_stiffness)
     band = np.abs(np.linalg.solve(K, c.P(q_eq).T @ np.diag(k_t))).sum(axis=1) * r_m * tau_c / kp
+    # plus the spring hysteresis (on by default): the lever's Dahl force |z_i| <= w_i = beta f_i + z0 adds to
+    # each tendon force, which moves q by at most |K^-1 P^T| w (about 5x the friction band here)
+    hyst = rig.params.spring.hysteresis
+    if hyst.enabled:
+        band = band + np.abs(np.linalg.solve(K, c.P(q_eq).T)) @ (hyst.width_ratio * z[4:] + hyst.width_offset)
     late = res.t >= 0.25                                                 # the base settles within 0.2 s
     assert np.all(np.abs(res["joint_angle"][late].mean(axis=0) - q_eq) < band), (q_eq, band)

@@ -233,14 +233,15 @@ def test_static_stiffness_of_a_torque_feedback_stage_and_the_8_2_co_contraction(
 def test_every_dof_of_the_hand_gets_its_own_design():
     """The hand: 19 DoF, each designed on its own reduced model (thumb base from P(q_op), ring/fifth DIP
     following the PIP); the per-DoF designs of the index inside the hand equal those of the index alone
-    (the reduced model uses only the DoF's own tendons and inertia), and the loop builds at the 6 kHz entry."""
+    (the reduced model uses only the DoF's own tendons and inertia), and the loop builds at the registered rate."""
     from awiwi_drake.hand import hand_diagram
     hand = hand_diagram(wrist=False)
     ctrl = make_controller("lqr", hand)
     d = ctrl.design["joint_design"]
     assert d.gains.shape == (19, 5) and [m.name for m in d.models][4:8] == ["q20", "q21", "q22", "q23"]
-    alone = design_joint_stage(finger_diagram(finger="index"), "lqr", period=1.0 / 6000.0)
+    rate = get_entry("lqr", hand).loop_options["rate_hz"]
+    alone = design_joint_stage(finger_diagram(finger="index"), "lqr", period=1.0 / rate)
     np.testing.assert_allclose(d.gains[4:8], alone.gains, rtol=1e-6)
     assert all(np.all(np.abs(p) < 1.0) for p in d.design_poles)          # sampled designs: inside the unit circle
     loop = closed_loop(hand, ctrl, **get_entry("lqr", hand).loop_options)
-    assert loop.rate_hz == 6000.0 and loop.estimated == ("joint_angle", "joint_velocity")
+    assert loop.rate_hz == rate and loop.estimated == ("joint_angle", "joint_velocity")

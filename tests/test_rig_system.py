@@ -9,7 +9,7 @@ from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_
 from awiwi_drake.components.rig_system import LinkRigOutputs_, rig_dynamics_system
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
-from _fd import check_system_autodiff_matches_fd
+from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
 
 RNG = np.random.default_rng(11)
 
@@ -53,9 +53,9 @@ def test_symbolic_dynamics_equal_the_laws_and_the_kernel_at_random_states(hyster
 def test_outputs_system_equals_the_laws_and_converts_with_autodiff_equal_to_finite_differences():
     model = _model(hysteresis=True)
     outs = LinkRigOutputs_[float](model)
-    assert outs.ToAutoDiffXd() is not None and outs.ToSymbolic() is not None
     ctx = outs.CreateDefaultContext()
     x, u = _random_state(model), RNG.normal(scale=2.0, size=2)
+    assert_symbolic_matches_float(outs, [], dict(state=x, motor_torque=u))   # Expression path = float kernel
     outs.GetInputPort("state").FixValue(ctx, x)
     outs.GetInputPort("motor_torque").FixValue(ctx, u)
     laws = drive_laws(model, x, u)
@@ -74,9 +74,9 @@ def test_default_single_joint_rig_is_scalar_convertible_and_autodiff_matches_fd(
     rig = build()
     assert rig.backend == "compiled" and rig.plant is None
     d = rig.diagram
-    assert d.ToAutoDiffXd() is not None and d.ToSymbolic() is not None
     op = rig.operating_point()
     x = op.state + RNG.normal(scale=0.01, size=op.state.size)
+    assert_symbolic_matches_float(d, x, dict(motor_torque=op.motor_torque, external_torque=np.array([0.01])))
     check_system_autodiff_matches_fd(d, x, dict(motor_torque=op.motor_torque, external_torque=np.array([0.01])),
                                      rtol=2e-5)
 

@@ -270,14 +270,16 @@ def test_one_simulation_loop_and_one_divergence_error():
     assert handles == ["control/base.py"], f"ClosedLoop built outside closed_loop: {handles}"
 
 
-def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find():
-    """The joint rig's slack and over-range monitors compute the tendon forces from the logged state
-    (numpy, once per chunk) instead of evaluating the port every step: same events, same extremes,
-    and the limits still drawn on a logged tendon_force."""
+@pytest.mark.parametrize("which", ["joint_rig", "tendon_rig"])
+def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find(which):
+    """The slack and over-range monitors of the joint rig and the tendon rig compute the tendon forces
+    from the logged state (numpy, once per chunk) instead of evaluating the port every step: same
+    events, same extremes, and the limits still drawn on a logged tendon_force."""
     from awiwi_drake.analysis import OverrangeMonitor, SlackMonitor
-    rig = joint_rig()
-    op = rig.operating_point(pretension=5.0)
-    # both motors wind (2.5 Nm / r_m = 500 N > the 180 N range), then unwind (slack)
+    from awiwi_drake.rigs import tendon_rig
+    rig = joint_rig() if which == "joint_rig" else tendon_rig()
+    op = rig.operating_point(pretension=5.0) if which == "joint_rig" else rig.operating_point(tendon_force=5.0)
+    # the motor(s) wind (2.5 Nm / r_m = 500 N > the 180 N range), then unwind (slack)
     u = Step(0.003, 2.5, before=op.motor_torque[0]) + Step(0.1, -5.0)
     from_state = rig_monitors(rig)
     assert [m.port_name for m in from_state if m.kind in ("tendon_slack", "spring_overrange")] == ["state", "state"]

@@ -121,6 +121,8 @@ class DriveModel:
         off = np.asarray(self.offsets, dtype=float)
         if off.shape != (m,) or not np.all(np.isfinite(off)):
             raise ValueError(f"DriveModel: offsets must be {m} finite numbers [m], got {self.offsets!r}")
+        off = off.copy()
+        off.setflags(write=False)       # the kernels bake the offsets in (traced once per content): no in-place change
         object.__setattr__(self, "offsets", off)
         if not self.motor_pulley_radius > 0:
             raise ValueError(f"DriveModel: motor_pulley_radius = {self.motor_pulley_radius} must be > 0 [m]")
@@ -489,12 +491,11 @@ def TendonDriveBatch_(T):
             self._shape = (N, k, m, n)
             self._float = T is float
             self._kernels = None
-            self.DeclareContinuousState(N * k)
+            xc = self.DeclareContinuousState(N * k)
             self._u = self.DeclareVectorInputPort("motor_torque", N * m)
             self._ext = self.DeclareVectorInputPort("external_torque", N * n)
             state = {self.all_state_ticket()}
-            self.DeclareVectorOutputPort("state", N * k, lambda c, o: o.SetFromVector(self._x(c)),
-                                         prerequisites_of_calc=state)
+            self.DeclareStateOutputPort("state", xc)          # copied in C++ (read at every control sample)
             self.DeclareVectorOutputPort("joint_angle", N * n, self._calc_joint_angle, prerequisites_of_calc=state)
             self.DeclareVectorOutputPort("tendon_force", N * m, self._calc_force, prerequisites_of_calc=state)
 

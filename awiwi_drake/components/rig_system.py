@@ -80,7 +80,11 @@ class tendon_force_of_states:
     A class, not a closure, so a rig holding it pickles (process pools)."""
 
     def __init__(self, model: DriveModel):
-        _check(model)
+        if not isinstance(model, DriveModel) or not (model.has_link or model.num_joints == 0):
+            raise ValueError("tendon_force_of_states: model must be a DriveModel whose forces depend on its state "
+                             "only (a link-carrying drive, or no joints: the tendon rig)")
+        if not model.supports_symbolic:
+            raise ValueError("tendon_force_of_states: the model's spring laws cannot be compiled")
         self.model = model
         self._kernel = None
 
@@ -92,7 +96,10 @@ class tendon_force_of_states:
         if self._kernel is None:
             self._kernel = build_kernels(model)["tendon_force_batch"]
         X = np.ascontiguousarray(np.asarray(states, dtype=float).reshape(-1, model.num_states))
-        return self._kernel(X, np.empty((len(X), model.num_tendons)))
+        out = np.empty((len(X), model.num_tendons))
+        if model.has_link:
+            return self._kernel(X, out)
+        return self._kernel(X, np.zeros((len(X), 0)), out)     # no joints: the kernel's empty q input
 
 
 @TemplateSystem.define("LinkRigOutputs_")

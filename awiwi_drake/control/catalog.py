@@ -11,7 +11,7 @@ from awiwi_drake.control.registry import register_controller
 
 _JOINTS = ("flexible-joint", "joint-rig")
 _SAMPLED = {"rate_hz": 3000.0}
-_FAST_HZ = 6000.0      # the full-state joint stages on fingers/hand (see below)
+_FAST_HZ = 9000.0      # the full-state joint stages on fingers/hand (see below)
 
 
 def _lazy(module: str, function: str, **kwargs):
@@ -55,20 +55,20 @@ _BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller
 _BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement",
                                          rate_hz=_FAST_HZ), ("finger", "hand"),
                  "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, tau_dot] "
-                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2); at 6 kHz"))
+                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2); at 9 kHz"))
 _BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr", rate_hz=_FAST_HZ),
                  ("finger", "hand"), "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson "
-                 "weights) -> force distribution (ch. 7) -> force PD (10.2); at 6 kHz"))
+                 "weights) -> force distribution (ch. 7) -> force PD (10.2); at 9 kHz"))
 _BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre", rate_hz=_FAST_HZ),
                  ("finger", "hand"), "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in "
-                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain; at 6 kHz"))
+                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain; at 9 kHz"))
 
-# The full-state joint stages (torque feedback) run the chain at 6 kHz, the estimator at its 3 kHz: at 3 kHz they
-# limit-cycle in saturation through the estimator (measured on the index, 0.2 rad MCP step, thesis physics off:
-# LQR 85 %, pole placement 57 % of the samples saturated; with the true joint state 2 % / 1 %; at 6 kHz 4 % / 1 %).
-# With the spring hysteresis and ripple on (the default plant since this wave) they saturate at 6 kHz too
-# (compare --short on finger-index: LQR/SDRE 83-86 %, pole placement 59-83 %, flagged); the impedance stages
-# (cascaded 3 %, two-time-scale 0 %) are not affected. Not solved: see docs/REPRODUCTIONS.md.
+# The full-state joint stages (torque feedback) run the chain at 9 kHz, the estimator at its 3 kHz (each estimate
+# serves three periods). Measured on the index (0.2 rad step, estimator, 3 Nm limit): physics off, at 3 kHz they
+# limit-cycle in saturation (LQR 85 %, pole placement 57 % of the samples; with the true joint state 2 % / 1 %), at
+# 6 kHz 4 % / 1 %. With the default plant's spring hysteresis and ripple, at 6 kHz LQR 99 % (true joint state: 4 %),
+# at 9 kHz 4 % / 2 % (12 kHz 3 % / 2 %); compare --short at 9 kHz: steps 7 % / 3 %, the 0.01 Nm load on the
+# PIP/DIP still 55-60 % / 17-26 % (flagged). The impedance stages (cascaded, two-time-scale) run at 3 kHz.
 _FAST = {"lqr", "pole-placement", "sdre"}
 for _name, _factory, _rigs, _doc in _BUILTIN:
     fast = _name in _FAST and "finger" in _rigs

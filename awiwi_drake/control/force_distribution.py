@@ -59,7 +59,7 @@ from typing import Callable
 import numba
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd, ExtractValue
-from pydrake.solvers import ClarabelSolver, MathematicalProgram
+from pydrake.solvers import ClarabelSolver, MathematicalProgram, SolverOptions
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy.optimize import linprog
@@ -79,9 +79,9 @@ def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
     """``(pinv(P^T), W, rank)`` with ``W`` an orthonormal basis of ``ker(P^T)`` (SVD)."""
     P = np.asarray(P, dtype=float)
     U, s, Vt = np.linalg.svd(P, full_matrices=True)  # P = U S V^T, P^T = V S U^T
-    rank = int(np.sum(s > rtol * max(s.max(initial=0.0), 1e-300)))
+    rank = int(np.count_nonzero(s > rtol * max(float(s[0]) if s.size else 0.0, 1e-300)))   # s descending
     W = U[:, rank:]
-    pinv_PT = U[:, :rank] @ np.diag(1.0 / s[:rank]) @ Vt[:rank, :]   # (P^T)^+ = U S^-1 V^T (m x n)
+    pinv_PT = (U[:, :rank] / s[:rank]) @ Vt[:rank, :]   # (P^T)^+ = U S^-1 V^T (m x n)
     return pinv_PT, W, rank
 
 
@@ -497,6 +497,11 @@ class OptimalForceDistribution(_DistributionBase):
         self.max_iterations = int(max_iterations)
         self.tolerance = float(tolerance)
         self.levenberg = float(levenberg)
+        if not isinstance(fast_path, (bool, np.bool_)):
+            raise ValueError(f"OptimalForceDistribution: fast_path = {fast_path!r} must be True or False")
+        if solver_options is not None and not isinstance(solver_options, SolverOptions):
+            raise ValueError(f"OptimalForceDistribution: solver_options must be a pydrake.solvers.SolverOptions, "
+                             f"got {type(solver_options).__name__}")
         self.fast_path = bool(fast_path)
         self.solver_options = solver_options
         self._solver = ClarabelSolver()
@@ -800,8 +805,24 @@ class _FingerBatch:
     thumb's P(q) losing rank.  So the result is always the per-finger solver's.
     """
 
-    def __init__(self, parts, coupling_objects):
+    def __init__(self, parts, coupling_objects, diagonal: bool = False):
         self.parts = parts
+        # gather/scatter indices between the loop's stacked vectors and the padded per-finger arrays
+        # (tendons, DoF, stiffness entries: ``diagonal`` n_f per finger, else n_f x n_f row-major)
+        t, d, kk = ([], [], []), ([], [], []), ([], [], [], [])
+        for k, (_, sd, st, sk, _) in enumerate(parts):
+            n = sd.stop - sd.start
+            for i in range(st.stop - st.start):
+                t[0].append(k), t[1].append(i), t[2].append(st.start + i)
+            for i in range(n):
+                d[0].append(k), d[1].append(i), d[2].append(sd.start + i)
+            for a in range(n):
+                for b in ((a,) if diagonal else range(n)):
+                    kk[0].append(k), kk[1].append(a), kk[2].append(b)
+                    kk[3].append(sk.start + (a if diagonal else a * n + b))
+        self._t, self._t_src = (np.array(t[0]), np.array(t[1])), np.array(t[2])
+        self._d, self._d_src = (np.array(d[0]), np.array(d[1])), np.array(d[2])
+        self._k, self._k_src = (np.array(kk[0]), np.array(kk[1]), np.array(kk[2])), np.array(kk[3])
         solvers = [pt[0] for pt in parts]
         s0 = solvers[0]
         self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
@@ -848,8 +869,9 @@ class _FingerBatch:
         self.pad[k] = 1.0
         self.pad[k, :r] = 0.0
 
-    def update(self, tau, K_blocks, f_prev, q, iterations):
-        """New forces (F x M padded) and the fingers left to their own solver (bool F)."""
+    def update(self, tau, Kv, f_prev, q, iterations):
+        """New forces (all tendons, stacked as the loop system's) and the fingers left to their own solver
+        (bool F), from the stacked torque, stiffness entries and previous forces."""
         F, M, N = len(self.parts), self.M, self.N
         p = self.params
         fallback = np.zeros(F, dtype=bool)
@@ -865,15 +887,16 @@ class _FingerBatch:
             self.H[k, :P.shape[0], :P.shape[1], :P.shape[1]] = c.tension_hessians(q[sq])
             self.outer[k] = np.einsum("ij,ik->ijk", self.P[k], self.P[k])
         tauP, Kd, fp0 = np.zeros((F, N)), np.zeros((F, N, N)), np.zeros((F, M))
-        for k, (m, n) in enumerate(self.dims):
-            tauP[k, :n] = tau[k]
-            Kd[k, :n, :n] = K_blocks[k]
-            fp0[k, :m] = f_prev[k]
+        tauP[self._d] = tau[self._d_src]
+        Kd[self._k] = Kv[self._k_src]
+        fp0[self._t] = f_prev[self._t_src]
         sm = self.smap
         f = _batch_iterate(self.P, self.pinv, self.W, self.pad, self.H, self.outer, self.real, self.m, tauP, Kd,
                            fp0, fallback, int(iterations), float(p.f_min), float(p.f_max), float(self.levenberg),
                            float(self.tolerance), sm.forces, sm.k, sm.dk)
-        return f, fallback
+        f_all = np.empty(len(self._t_src))
+        f_all[self._t_src] = f[self._t]
+        return f_all, fallback
 
 
 # ----------------------------------------------------------------------------
@@ -989,7 +1012,8 @@ def TendonForceDistribution_(T):
             self.DeclareStateOutputPort("distribution_status", self._status)
             self._batch = None
             if T is float and _FingerBatch.compatible(self.solvers):
-                self._batch = _FingerBatch(self._parts, [finger_coupling(f) for f in fingers])
+                self._batch = _FingerBatch(self._parts, [finger_coupling(f) for f in fingers],
+                                           diagonal=stiffness == "diagonal")
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.fingers, other.method, other.period, other.iterations_per_period,
@@ -1021,12 +1045,7 @@ def TendonForceDistribution_(T):
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
             todo = range(len(self._parts))
             if self._batch is not None:       # all fingers at once; the rest by their own solver
-                blocks = [self._K_block(Kv[sk], sd.stop - sd.start) for _, sd, _, sk, _ in self._parts]
-                f_b, fallback = self._batch.update([tau[sd] for _, sd, *_ in self._parts], blocks,
-                                                   [f_prev_v[st] for _, _, st, _, _ in self._parts], q,
-                                                   self.iterations_per_period)
-                for k, (_, _, st, _, _) in enumerate(self._parts):
-                    f_new[st] = f_b[k, :st.stop - st.start]
+                f_new, fallback = self._batch.update(tau, Kv, f_prev_v, q, self.iterations_per_period)
                 todo = np.flatnonzero(fallback)
             for k in todo:
                 s, sd, st, sk, sq = self._parts[k]

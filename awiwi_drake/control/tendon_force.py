@@ -59,6 +59,10 @@ def interp(x, xp: np.ndarray, fp: np.ndarray):
     """
     xp = np.asarray(xp, float)
     fp = np.asarray(fp, float)
+    if isinstance(x, np.ndarray) and x.dtype == float and x.size > 1:   # a float bank: the lean path
+        i = np.minimum(np.maximum(np.searchsorted(xp, x) - 1, 0), len(xp) - 2)
+        x0, f0 = xp[i], fp[i]
+        return f0 + (fp[i + 1] - f0) / (xp[i + 1] - x0) * (x - x0)
     if np.ndim(x) > 0 and np.size(x) > 1:  # element-wise (a bank of tendons)
         if is_float(x):
             xa = np.asarray(x, dtype=float)
@@ -102,6 +106,10 @@ class ForceMap:
 
     def check_force(self, f, name: str = "tendon_force_reference"):
         """Validate a force argument (or each of a bank's) against the table ``[0, max_force]``; return the float value(s)."""
+        if isinstance(f, np.ndarray) and f.dtype == float and f.size > 1:   # a float bank: one vectorised check
+            vals = f.reshape(-1)
+            if np.all(np.isfinite(vals) & (vals >= 0.0) & (vals <= self.max_force)):
+                return vals.copy()
         vals = [_value(x) for x in np.asarray(f, dtype=object).reshape(-1)] if np.size(f) > 1 else [_value(f)]
         for i, v in enumerate(vals):
             if not (math.isfinite(v) and 0.0 <= v <= self.max_force):

@@ -170,7 +170,7 @@ class LinearFingerCoupling(FingerCoupling):
     def dof_pseudo_inverse(self) -> np.ndarray:
         """``(P S)^+`` (n_dof x m): the least-squares inverse of (5.15) on the independent DoF (computed once)."""
         if getattr(self, "_dof_pinv", None) is None:
-            self._dof_pinv = np.linalg.pinv(self._P @ self.dof_selection)
+            self._dof_pinv = np.linalg.pinv(reduced_coupling_matrix(self))
         return self._dof_pinv
 
 
@@ -262,14 +262,6 @@ class ThumbCoupling(FingerCoupling):
         Rz, Ry = self._base(q[0], q[1])
         return (Rz @ Ry @ self.bone_points.T).T - self.palm_points
 
-    def _float_base(self, q):
-        """Float fast path: tendon vectors d (4 x 3), norms, and d/dq of the bone points (3 x 4 each)."""
-        c0, s0, c1, s1 = np.cos(q[0]), np.sin(q[0]), np.cos(q[1]), np.sin(q[1])
-        R = np.array([[c0 * c1, -s0, c0 * s1], [s0 * c1, c0, s0 * s1], [-s1, 0.0, c1]])   # Rz(q10) Ry(q11)
-        A = R @ self.bone_points.T
-        d = A.T - self.palm_points
-        return d, np.sqrt(np.einsum("ij,ij->i", d, d)), A, R
-
     def distal_pseudo_inverse(self) -> np.ndarray:
         """``P_distal^+`` (2 x 4) of the PIP/DIP rows (5.22), computed once."""
         if getattr(self, "_distal_pinv", None) is None:
@@ -301,9 +293,9 @@ class ThumbCoupling(FingerCoupling):
     @_quiet_fp
     def h(self, q):
         q = self._check_q(q)
-        if q.dtype != object:
-            _, norm, _, _ = self._float_base(q)
-            return np.concatenate([norm, self._P_distal @ q[2:]])
+        if q.dtype != object:             # the compiled base kinematics (see base_lengths_and_jacobian)
+            out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
+            return np.concatenate([out[:4], self._P_distal @ q[2:]])
         d = self.base_vectors(q)
         base = np.sqrt(np.sum(d * d, axis=1))
         distal = self._P_distal @ q[2:]

@@ -40,6 +40,7 @@ import math
 import warnings
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
@@ -82,6 +83,47 @@ class GradientSearchResult:
     limit: float = np.pi / 2
 
 
+# not cached on disk: numba keys a function taking a compiled function by that function's identity, which
+# changes from process to process (the cache would grow by one entry per process); ~1.7 s JIT at first use
+@numba.njit(cache=False)
+def _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf):
+    """Algorithm 1's loop (see :func:`thumb_base_gradient_search`), compiled: ``base`` is the thumb's compiled
+    base kinematics (lengths and their Jacobian at ``x``, :meth:`ThumbCoupling.base_lengths_and_jacobian`),
+    ``x`` (2) and ``buf`` (28) its work arrays.  Returns ``(qa, qb, cost, step, accepted, projected)``."""
+    x[0] = 0.0
+    x[1] = 0.0
+    base(x, buf)
+    h0 = buf[:4].copy()
+
+    def cost_grad(a, b):
+        x[0] = a
+        x[1] = b
+        base(x, buf)                       # h and P: the kinematics once per trial point
+        c = g0 = g1 = 0.0
+        for i in range(4):
+            r = buf[i] - h0[i] - dh[i]
+            c += r * r
+            g0 += buf[4 + 2 * i] * r
+            g1 += buf[5 + 2 * i] * r
+        return c, 2.0 * g0, 2.0 * g1
+
+    c_best, g0, g1 = cost_grad(qa, qb)
+    step, accepted, projected = step0, 0, 0
+    for _ in range(iterations):
+        g_norm = math.hypot(g0, g1)
+        if g_norm == 0.0 or step < min_step:
+            break
+        fa, fb = qa - step * g0 / g_norm, qb - step * g1 / g_norm
+        ta, tb = min(max(fa, -limit), limit), min(max(fb, -limit), limit)
+        projected += int(ta != fa or tb != fb)
+        c, h0_, h1_ = cost_grad(ta, tb)
+        if c < c_best:
+            qa, qb, c_best, g0, g1, accepted = ta, tb, c, h0_, h1_, accepted + 1
+        else:
+            step *= 0.5
+    return qa, qb, c_best, step, accepted, projected
+
+
 def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0.0), *,
                                iterations: int = 30, step0: float = 0.1,
                                min_step: float = 1e-7,
@@ -119,38 +161,9 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
         raise ValueError(f"iterations must be >= 1, got {iterations}")
     if not limit > 0:
         raise ValueError(f"limit must be > 0 [rad], got {limit}")
-    # plain float arithmetic around one compiled call of the base kinematics per trial point (lengths
-    # and their Jacobian together, ThumbCoupling.base_lengths_and_jacobian): numpy's per-call overhead
-    # on 2- and 4-vectors would dominate the 3 kHz loop
-    h0 = coupling.base_lengths_and_jacobian(0.0, 0.0)[0].tolist()
-    dh = dh_base.tolist()
-
-    def cost_grad(a, b):
-        h, P = coupling.base_lengths_and_jacobian(a, b)    # h and P: the kinematics once
-        h, P = h.tolist(), P.tolist()
-        c = g0 = g1 = 0.0
-        for i in range(4):
-            r = h[i] - h0[i] - dh[i]
-            c += r * r
-            g0 += P[i][0] * r
-            g1 += P[i][1] * r
-        return c, 2.0 * g0, 2.0 * g1
-
-    qa, qb = float(q_start[0]), float(q_start[1])
-    c_best, g0, g1 = cost_grad(qa, qb)
-    step, accepted, projected = float(step0), 0, 0
-    for _ in range(iterations):
-        g_norm = math.hypot(g0, g1)
-        if g_norm == 0.0 or step < min_step:
-            break
-        fa, fb = qa - step * g0 / g_norm, qb - step * g1 / g_norm
-        ta, tb = min(max(fa, -limit), limit), min(max(fb, -limit), limit)
-        projected += int(ta != fa or tb != fb)
-        c, h0_, h1_ = cost_grad(ta, tb)
-        if c < c_best:
-            qa, qb, c_best, g0, g1, accepted = ta, tb, c, h0_, h1_, accepted + 1
-        else:
-            step *= 0.5
+    qa, qb, c_best, step, accepted, projected = _search(
+        coupling._base_kernel(), dh_base, float(q_start[0]), float(q_start[1]), int(iterations), float(step0),
+        float(min_step), float(limit), np.empty(2), np.empty(28))
     q = np.array([qa, qb])
     return GradientSearchResult(q=q, cost=c_best, step=step, accepted=accepted,
                                 iterations=iterations, projected=projected,
@@ -227,6 +240,16 @@ def LinkPositionEstimator_(T):
             self.refine = bool(refine)
             self.limit_hits = 0
             self._h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
+            # the float path: (S (P S)^+) of every constant-coupling finger as one block matrix (n x m), the
+            # thumbs (nonlinear, identity S) by estimate_thumb; a test checks it equals the law functions
+            js, ts = coupling.joint_slices, coupling.tendon_slices
+            self._linear = np.zeros((n, m))
+            self._thumbs = []
+            for name, c in coupling.parts.items():
+                if c.is_constant:
+                    self._linear[js[name], ts[name]] = c.dof_selection @ c.dof_pseudo_inverse()
+                else:
+                    self._thumbs.append((name, c, js[name], ts[name]))
             self._theta = self.DeclareVectorInputPort("motor_angle", m)
             self._x = self.DeclareVectorInputPort("elongation", m)
             self._w = self.DeclareVectorInputPort("wrist_offset", m)
@@ -249,31 +272,27 @@ def LinkPositionEstimator_(T):
             else:
                 q_val = np.array([_value(v) for v in q_prev])
                 dh_val = np.array([_value(v) for v in dh])
-            js, ts = self.coupling.joint_slices, self.coupling.tendon_slices
-            q_new = np.zeros(len(q_val))
-            for name, c in self.coupling.parts.items():
-                if c.is_constant:
-                    q_new[js[name]] = estimate_linear(c, dh_val[ts[name]])
-                else:  # thumb: Algorithm 1 warm-started at the previous estimate
-                    q_new[js[name]], search = estimate_thumb(c, dh_val[ts[name]], q_val[js[name]][:2],
-                                                             iterations=self.iterations, step0=self.step0,
-                                                             return_search=True)
-                    if search.at_limit:
-                        self.limit_hits += 1
-                        if self.limit_hits == 1:
-                            warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
-                                          f"{np.round(search.q, 4)} rad sits on the search bound "
-                                          f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
-                                          "further hits are counted in limit_hits", RuntimeWarning,
-                                          stacklevel=2)
-            if T is float and self.refine:    # the same Gauss-Newton step finger by finger (P S is block-diagonal)
-                for name, c in self.coupling.parts.items():
-                    j, t = js[name], ts[name]
-                    if c.is_constant:             # linear h: the least-squares estimate is already exact
-                        continue
-                    r = dh_val[t] - (c.h(q_new[j]) - self._h0[t])
-                    q_new[j] = q_new[j] + c.dof_selection @ (np.linalg.pinv(c.P(q_new[j]) @ c.dof_selection) @ r)
-            elif T is not float:  # one Gauss-Newton step in the scalar type: carries the derivatives
+            q_new = self._linear @ dh_val         # every constant-coupling finger (5.15) in one product
+            for name, c, j, t in self._thumbs:    # thumb: Algorithm 1 warm-started at the previous estimate
+                q_new[j], search = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations,
+                                                  step0=self.step0, return_search=True)
+                if search.at_limit:
+                    self.limit_hits += 1
+                    if self.limit_hits == 1:
+                        warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
+                                      f"{np.round(search.q, 4)} rad sits on the search bound "
+                                      f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
+                                      "further hits are counted in limit_hits", RuntimeWarning,
+                                      stacklevel=2)
+                if T is float and self.refine:
+                    # the Gauss-Newton step q + (P S)^+ r finger by finger (P S is block-diagonal; linear fingers
+                    # are exact already).  The thumb's P is block-diagonal too: the PIP/DIP least-squares estimate
+                    # is a fixed point of the step (P_d^+ P_d = I), the base step is the 2 x 2 normal equations
+                    # of the 4 x 2 base block at the kinematics evaluated once
+                    h_b, P_b = c.base_lengths_and_jacobian(q_new[j][0], q_new[j][1])
+                    r_b = dh_val[t][:4] - (h_b - self._h0[t][:4])
+                    q_new[j.start:j.start + 2] += np.linalg.solve(P_b.T @ P_b, P_b.T @ r_b)
+            if T is not float:  # one Gauss-Newton step in the scalar type: carries the derivatives
                 r = dh - (self.coupling.h(q_new) - self._h0)
                 S = dof_selection(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S

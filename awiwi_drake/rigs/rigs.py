@@ -102,7 +102,8 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
                               elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
     return Rig("tendon-rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
-               tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force)
+               tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
+               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None)
 
 
 def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
