@@ -20,6 +20,10 @@ Catalog (names are part of the contract):
 ``delay``            applied torque ``u(t - T)``
 =================== ======================================================================
 
+Per-tendon effects (``PLACED_EFFECTS``: motor friction, guide friction, hysteresis) carry a place on
+the joint rig: the masks ``place_1``/``place_2`` switch them per tendon; the screen tries both tendons
+and each alone, so a diagnosis names effect and place ("guide_friction on tendon 2").
+
 Nuisance candidates (calibration, not new physics): ``force_sensor`` (gain and
 offsets), ``link_sensor`` (link-encoder bias and scale), ``motor_sensor``
 (motor-encoder biases), ``nominal_motor`` (B, d), ``nominal_spring`` (stiffness
