@@ -245,3 +245,16 @@ def test_every_dof_of_the_hand_gets_its_own_design():
     assert all(np.all(np.abs(p) < 1.0) for p in d.design_poles)          # sampled designs: inside the unit circle
     loop = closed_loop(hand, ctrl, **get_entry("lqr", hand).loop_options)
     assert loop.rate_hz == rate and loop.estimated == ("joint_angle", "joint_velocity")
+
+
+def test_sampled_model_is_the_zero_order_hold_with_one_period_of_delay():
+    """Closed form of the ZOH of z' = a z + b u over h: Phi = e^{ah}, Gamma = b (e^{ah} - 1) / a; the chain's
+    one sample of delay appends the previous request as a state fed by the new one."""
+    from awiwi_drake.control.joint_design import sampled_model
+    a, b, h = np.diag([-3.0, 2.0]), np.array([[1.5], [0.5]]), 0.01
+    Phi, Gamma = sampled_model(a, b, h)
+    e = np.exp(np.diag(a) * h)
+    np.testing.assert_allclose(Phi[:2, :2], np.diag(e), rtol=1e-13)
+    np.testing.assert_allclose(Phi[:2, 2], b[:, 0] * (e - 1) / np.diag(a), rtol=1e-12)
+    np.testing.assert_array_equal(Phi[2], 0.0)
+    np.testing.assert_array_equal(Gamma[:, 0], [0.0, 0.0, 1.0])
