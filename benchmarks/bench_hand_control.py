@@ -108,14 +108,11 @@ def isolated_costs(diagram, root) -> dict:
                 xc[0] += 1e-12
                 ctx.SetContinuousState(xc)
         base = _time(invalidate)
-        if sys_.num_discrete_state_groups():
+        if sys_.num_discrete_state_groups() and sys_.GetUniquePeriodicDiscreteUpdateAttribute() is not None:
             def update():
                 invalidate()
                 sys_.EvalUniquePeriodicDiscreteUpdate(ctx)
-            try:
-                out[f"{name}: discrete update"] = _time(update, 50) - base
-            except RuntimeError:        # no unique periodic update
-                pass
+            out[f"{name}: discrete update"] = _time(update, 50) - base
         for i in range(sys_.num_output_ports()):
             op = sys_.get_output_port(i)
             if op.get_data_type() != PortDataType.kVectorValued:

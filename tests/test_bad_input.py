@@ -289,6 +289,31 @@ def test_library_rejects_nonsense_with_value_errors():
             fn()
 
 
+def _finger_stage_controller(**kw):
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.hand.diagrams import finger_diagram
+    return joint_stage_controller(finger_diagram(finger="index"), "lqr", **kw)
+
+
+# (id, options of joint_stage_controller on the index, exception, message): one line naming the option
+STAGE_CASES = [
+    ("observer-string", {"friction_observer": "yes"}, TypeError,
+     "TendonChainController: friction_observer = 'yes' must be None or a FrictionObserverParams"),
+    ("correction-number", {"stiffness_correction": 3}, TypeError,
+     "joint_stage_controller: stiffness_correction = 3 must be None or a StiffnessCorrectionParams"),
+    ("rate-negative", {"rate_hz": -5}, ValueError, r"joint_stage_controller: rate_hz = -5 must be a finite number > 0"),
+    ("rate-zero", {"rate_hz": 0.0}, ValueError, r"joint_stage_controller: rate_hz = 0.0 must be a finite number > 0"),
+    ("rate-string", {"rate_hz": "3k"}, ValueError, r"joint_stage_controller: rate_hz = '3k' must be a finite number"),
+]
+
+
+@pytest.mark.parametrize("options,error,message", [c[1:] for c in STAGE_CASES], ids=[c[0] for c in STAGE_CASES])
+def test_bad_chain_options_are_one_named_line(options, error, message):
+    with pytest.raises(error) as info:
+        _finger_stage_controller(**options)
+    assert str(info.value).startswith(message) and "\n" not in str(info.value), str(info.value)
+
+
 def test_simulate_start_after_end_raises_not_exits():
     from awiwi_drake.analysis import simulate
     from awiwi_drake.rigs import flexible_joint_rig

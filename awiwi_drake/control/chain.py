@@ -49,7 +49,7 @@ from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.parameters.control import RippleCompensationParams, TendonForceGains
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand import FINGERS
-from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandChainParams
+from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
 __all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceSharing_", "TendonForceSharing",
            "TendonForceStage", "TendonChainController", "chain_design_point", "check_one_spring_law"]
@@ -293,6 +293,9 @@ class TendonChainController(Diagram):
         self.design = dict(point, joint_law=joint_law, force_gains=force.gains)
         tau_ref = joint.GetOutputPort("joint_torque_reference")
         observer = None
+        if friction_observer is not None and not isinstance(friction_observer, FrictionObserverParams):
+            raise TypeError(f"TendonChainController: friction_observer = {friction_observer!r} must be None or a "
+                            f"FrictionObserverParams")
         if friction_observer is not None:            # ch. 9: -d_hat added to the desired torques
             from pydrake.systems.primitives import Adder
             from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_damping, joint_inertia

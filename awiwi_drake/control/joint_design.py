@@ -53,6 +53,7 @@ joint and leaves the abduction unstable, +16.8 1/s; the finger's PD is ``joint-p
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,7 +69,7 @@ from awiwi_drake.control.linear import reference_maps
 from awiwi_drake.control.pole_placement import double_oscillator_polynomial, place_by_identification
 from awiwi_drake.hand.coupling import LinearFingerCoupling
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
-from awiwi_drake.parameters.hand_control import HandChainParams
+from awiwi_drake.parameters.hand_control import HandChainParams, StiffnessCorrectionParams
 from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig
 from awiwi_drake.rigs.rigs import _link_rig
@@ -407,6 +408,11 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     ``distribution_params``, ``friction_observer`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
     c = chain or HandChainParams()
     correction = kw.pop("stiffness_correction", None)
+    if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
+        raise TypeError(f"joint_stage_controller: stiffness_correction = {correction!r} must be None or a "
+                        f"StiffnessCorrectionParams")
+    if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float)) or not 0.0 < rate_hz < math.inf:
+        raise ValueError(f"joint_stage_controller: rate_hz = {rate_hz!r} must be a finite number > 0 [Hz]")
     point = chain_design_point(rig, op, params=c, mechanical_stiffness=kw.pop("mechanical_stiffness", None))
     sampled = (distribution or c.distribution_method) != "sharing"
     d = design_joint_stage(rig, design, point=point, params=params, chain=c,
