@@ -198,7 +198,12 @@ def main(argv=None) -> int:
     print(f"{'controller':14s} {'physics':>8s} {'rate Hz':>8s} {'estimator':>9s} {'build s':>8s} {'RTF cpu':>8s} "
           f"{'RTF wall':>9s} {'us/period':>10s}")
     for name, phys in [(n.strip(), p) for p in physics for n in args.controllers.split(",") if n.strip()]:
-        r = run(name, args.sim_time, not args.no_profile, phys)
+        try:
+            r = run(name, args.sim_time, not args.no_profile, phys)
+        except ValueError as exc:       # a controller that refuses this plant says why (e.g. guide friction)
+            rows.append(dict(controller=name, physics=phys, rtf=None, note=str(exc)))
+            print(f"{name:14s} {phys:>8s} refused: {exc}", flush=True)
+            continue
         rows.append(r)
         print(f"{name:14s} {phys:>8s} {r['rate_hz']:8.0f} {str(r['estimator']):>9s} {r['build_s']:8.2f} "
               f"{r['rtf']:8.3f} {r['wall_rtf']:9.3f} {r['cpu_us_per_period']:10.0f}", flush=True)
