@@ -115,14 +115,17 @@ def test_hidden_joint_backlash_is_screened_first_with_its_play():
     assert b / 1.25 ** 2 <= out[0]["params"]["backlash"] <= b * 1.25 ** 2
 
 
-def test_effect_on_one_tendon_is_named_with_its_place():
-    """Guide friction hidden on tendon 2 only (truth: capstan law on that path): the screen's place variants
-    (both tendons, tendon 1, tendon 2) name the effect and the tendon; the place is in the JSON."""
-    ds = make_truth_dataset("joint", ["guide_friction"], snr_db=30, seed=21, gen=SHORT, place=2)
+@pytest.mark.parametrize("effect, seed", [("guide_friction", 21), ("spring_hysteresis", 32)])
+def test_effect_on_one_tendon_is_named_with_its_place(effect, seed):
+    """An effect hidden on tendon 2 only (truth: capstan guide friction on that path; Bouc-Wen hysteresis in
+    that spring) is named with its tendon: guide friction by the screen's place variants (both tendons,
+    tendon 1, tendon 2), hysteresis (screened by probes on both tendons) by the place refit after the
+    loop; the place is in the JSON and the final parameters."""
+    ds = make_truth_dataset("joint", [effect], snr_db=30, seed=seed, gen=SHORT, place=2)
     dx = diagnose(ds)
-    assert dx.named_effects == ["guide_friction"]
-    assert dx.places == {"guide_friction": "tendon 2"}
-    assert dx.to_json()["places"] == {"guide_friction": "tendon 2"}
+    assert dx.named_effects == [effect]
+    assert dx.places == {effect: "tendon 2"}
+    assert dx.to_json()["places"] == {effect: "tendon 2"}
     p = dx.final_parameters
     from awiwi_drake.discrepancy.catalog import PARAM_INDEX
     assert p[PARAM_INDEX["place_1"]] == 0.0 and p[PARAM_INDEX["place_2"]] == 1.0

@@ -191,3 +191,74 @@ def test_finger_backstepping_refuses_guide_friction_with_the_measured_reason():
     rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(guide_friction=True))
     with pytest.raises(ValueError, match="guide_friction=True.*unstable"):
         make_controller("backstepping", rig)
+
+
+def test_fixed_step_rk3_at_the_control_period_follows_the_error_controlled_solution():
+    """The index finger with all the physics on (guide friction too) under the 3 kHz joint PD, a 0.3 rad MCP
+    step: the default fixed-step RK3 at the control period stays finite and equals an error-controlled run
+    (RK3, accuracy 1e-6) within 1 % of the step; the Dahl states do move (the loop is not trivially at rest)."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control import closed_loop, make_controller
+    p = FingerRigParams.for_finger("index").with_physics(guide_friction=True)
+    out = {}
+    for mode in ("fixed_step", "error_controlled"):
+        rig = finger_diagram(finger="index", params=p)
+        loop = closed_loop(rig, make_controller("joint-pd", rig))
+        op = rig.operating_point()
+        ref = op.joint_angle.copy()
+        ref[1] += 0.3
+        ctx = loop.create_context(op, references={"joint_angle_reference": ref})
+        kw = dict(accuracy=1e-6, max_step=H) if mode == "error_controlled" else {}
+        res = simulate(loop.diagram, ctx, 0.15, log=("joint_angle", "state"), mode=mode, log_period=H, **kw)
+        out[mode] = res
+    a, b = out["fixed_step"], out["error_controlled"]
+    assert np.all(np.isfinite(a["state"]))
+    n = min(len(a.t), len(b.t))
+    assert np.max(np.abs(a["joint_angle"][:n] - b["joint_angle"][:n])) < 0.01 * 0.3
+    n_j, m = 4, 8
+    z = a["state"][:, 2 * n_j + 2 * m:2 * n_j + 3 * m]
+    g = a["state"][:, 2 * n_j + 3 * m:]
+    assert np.abs(z).max() > 0.1 and np.abs(g).max() > 0.1          # [N]: hysteresis and guide friction act
+
+
+def test_finger_energy_balance_with_guide_friction_and_its_passivity_bound():
+    """Index finger, motors under constant torques (no motor friction, ripple or hysteresis), guide friction
+    on, links launched: the mechanical energy (links, rotors, springs, minus the constant torques' work)
+    falls by exactly the work into the guides int g . (P qdot) dt plus the joint damping's int b qdot^2 dt
+    (energy balance, 1e-3 of the initial kinetic energy), and the guides' work is at least the change of
+    their Dahl storage delta g^2 / (2 C) (passivity: dg/dt = (v/delta)(C - s g) gives
+    g v >= d/dt(delta g^2 / (2 C)))."""
+    from awiwi_drake.analysis import simulate
+    p = FingerRigParams.for_finger("index").with_physics(ripple=False, hysteresis=False, motor_friction=False,
+                                                         guide_friction=True)
+    rig = finger_diagram(finger="index", params=p)
+    n, m = rig.num_joints, rig.num_tendons
+    op = rig.operating_point()
+    ctx = rig.context(op)
+    x0 = op.state.copy()
+    x0[n:2 * n] = [0.0, 3.0, -2.0, 1.5]                        # [rad/s]: the tendons slide through the guides
+    ctx.SetContinuousState(x0)
+    res = simulate(rig.diagram, ctx, 0.02, log=("state", "elongation"), mode="error_controlled",
+                   accuracy=1e-9, max_step=2e-5, log_period=2e-6)
+    X, xs, t = res["state"], res["elongation"], res.t
+    q, v = X[:, :n], X[:, n:2 * n]
+    theta, omega, g = X[:, 2 * n:2 * n + m], X[:, 2 * n + m:2 * n + 2 * m], X[:, 2 * n + 2 * m:]
+    b = np.array([rig.plant.get_joint(j).default_damping_vector()[0] for j in rig.plant.GetJointIndices()])
+    E, slide_power, damp_power = [], [], []
+    for k in range(len(t)):
+        M = _mass_matrix(rig, q[k])
+        P = np.asarray(rig.coupling.P(q[k]))
+        springs = sum(float(law.energy(np.array([xs[k, i]]))[0]) for i, law in enumerate(rig.spring_laws))
+        E.append(0.5 * v[k] @ M @ v[k] + 0.5 * p.motor.inertia * omega[k] @ omega[k] + springs
+                 - op.motor_torque @ theta[k])
+        slide_power.append(g[k] @ (P @ v[k]))
+        damp_power.append(b @ v[k] ** 2)
+    E = np.array(E)
+    W_guides = np.concatenate([[0.0], np.cumsum(np.diff(t) * 0.5 * (np.array(slide_power)[1:] + slide_power[:-1]))])
+    W_damp = np.concatenate([[0.0], np.cumsum(np.diff(t) * 0.5 * (np.array(damp_power)[1:] + damp_power[:-1]))])
+    ke0 = 0.5 * v[0] @ _mass_matrix(rig, q[0]) @ v[0]
+    np.testing.assert_allclose(E + W_guides + W_damp, E[0], atol=1e-3 * ke0)
+    C = guide_friction_force(tendon_bending_angles(rig.coupling, p), p.friction)
+    storage = (p.guide_presliding_length * g ** 2 / (2 * C)).sum(axis=1)
+    assert np.all(W_guides >= storage - storage[0] - 1e-3 * ke0)
+    assert W_guides[-1] > 0.1 * ke0                             # the guides took a real share of the energy

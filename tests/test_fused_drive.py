@@ -169,6 +169,8 @@ def test_kernels_are_traced_once_per_model_content():
     for mdl, k in ((a, ka), (c, kc)):      # each kernel is its own model's laws
         np.testing.assert_allclose(k["tendon_force"](s, np.empty(2)), drive_laws(mdl, s)["tendon_force"], rtol=1e-12)
     assert not np.allclose(ka["tendon_force"](s, np.empty(2)), kc["tendon_force"](s, np.empty(2)))
+    with pytest.raises(ValueError, match="read-only"):     # an in-place change would leave a stale kernel
+        a.offsets[0] = 3e-3
 
 
 def _set(rig, ctx, x, u, e=None):

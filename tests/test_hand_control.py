@@ -256,6 +256,14 @@ def test_finger_backstepping_sampled_at_3khz_is_stable_on_every_finger(finger):
         assert old > 1.1, old                       # measured 1.18
 
 
+def test_hand_backstepping_sampled_at_3khz_is_stable():
+    """The whole hand (19 DoF, 38 tendons, physics on) under the 15.5 law at 3 kHz behind a ZOH: the sampled
+    linearisation's eigenvalues are in the unit circle (|z| = 1 only for the marginal Dahl states, to 1e-9)."""
+    from awiwi_drake.hand import hand_diagram
+    radius, _ = _sampled_backstepping_radius(hand_diagram(wrist=False), 3000.0, 3000.0)
+    assert radius <= 1.0 + 1e-9, radius
+
+
 def test_finger_backstepping_lyapunov_function_decreases():
     """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
     loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index.

@@ -121,6 +121,8 @@ class DriveModel:
         off = np.asarray(self.offsets, dtype=float)
         if off.shape != (m,) or not np.all(np.isfinite(off)):
             raise ValueError(f"DriveModel: offsets must be {m} finite numbers [m], got {self.offsets!r}")
+        off = off.copy()
+        off.setflags(write=False)       # the kernels bake the offsets in (traced once per content): no in-place change
         object.__setattr__(self, "offsets", off)
         if not self.motor_pulley_radius > 0:
             raise ValueError(f"DriveModel: motor_pulley_radius = {self.motor_pulley_radius} must be > 0 [m]")

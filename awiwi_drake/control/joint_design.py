@@ -24,11 +24,12 @@ dynamics: the other force combinations are neither excited by ``tau_ref`` nor se
 the joint's own tendon stiffness ``K_jj = P_j^T K_t P_j`` (5.12) times ``qdd``.
 
 Designs on ``(F, G)`` (gains ``K_j`` of :class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw`,
-reference maps from :func:`~awiwi_drake.control.linear.reference_maps`):
+reference maps from :func:`~awiwi_drake.control.linear.reference_maps`; for the sampled chain on the
+model sampled with its one period of delay, :func:`sampled_model`)
 
-* ``pd``: ``K_j = [Kp, Kd, 0, 0]`` placing a closed-loop pole pair at
-  (``position_bandwidth``, ``damping_ratio``) exactly (the remainder of the characteristic
-  polynomial by the target pair is affine in ``(Kp, Kd)``: a 2 x 2 solve);
+(no ``pd`` stage: placing one pair at 60 rad/s with ``(Kp, Kd)`` alone needs ``Kd < 0`` on every index
+joint and leaves the abduction unstable, +16.8 1/s; the finger's PD is ``joint-pd``, motor side)
+
 * ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, M_jj
   joint_bandwidth^2)`` (Fig 15.22, limited as 15.5.3 says for the cascade; measured: 0.5 Nm/rad on the
   index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
@@ -64,8 +65,7 @@ from awiwi_drake.control.chain import TendonChainController, TendonForceStage, c
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
 from awiwi_drake.control.linear import reference_maps
-from awiwi_drake.control.pole_placement import (double_oscillator_polynomial, identification_system,
-                                                place_by_identification)
+from awiwi_drake.control.pole_placement import double_oscillator_polynomial, place_by_identification
 from awiwi_drake.hand.coupling import LinearFingerCoupling
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.hand_control import HandChainParams
@@ -73,7 +73,7 @@ from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig
 from awiwi_drake.rigs.rigs import _link_rig
 
-__all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models", "pair_remainder_gains",
+__all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
            "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
 
 DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr", "sdre")
@@ -95,7 +95,6 @@ class JointReducedModel:
     tendons: tuple                    # indices of the tendons acting on the DoF
     invariance_residual: float        # |T A - F T| / |T A| (0: the restriction is exact)
     linearization: LinearizationResult
-    at_rest: "JointReducedModel | None" = None   # the same with (3.8) linearised at rest (the rig's own motor)
 
     @property
     def poles(self) -> np.ndarray:
@@ -197,9 +196,10 @@ def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
-                         tendon_law: str = "force") -> list[JointReducedModel]:
+                         tendon_law: str = "force", friction: str = "motion") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
-    ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`)."""
+    ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`);
+    ``friction``: the motor friction (3.8) linearised in ``"motion"`` (the design model) or at ``"rest"``."""
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
     S = point["selection"]
@@ -211,35 +211,14 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
     for j in range(S.shape[1]):
         col = point["coupling_matrix"][:, j]
         tendons = tuple(int(i) for i in np.flatnonzero(np.abs(col) > 0))
-        pair = []
-        for friction in ("motion", "rest"):
-            sub, _, sub_point = joint_subsystem(rig, j, point=point, params=p, friction=friction)
-            loop, ctx = force_loop(sub, sub_point, p, tendon_law)
-            lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
-                            outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-            F, G, res = _restrict(lin)
-            pair.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
-                                          res, lin))
-        pair[0].at_rest = pair[1]
-        models.append(pair[0])
+        sub, _, sub_point = joint_subsystem(rig, j, point=point, params=p, friction=friction)
+        loop, ctx = force_loop(sub, sub_point, p, tendon_law)
+        lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
+                        outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
+        F, G, res = _restrict(lin)
+        models.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
+                                        res, lin))
     return models
-
-
-def pair_remainder_gains(F: np.ndarray, G: np.ndarray, omega: float, zeta: float, columns=(0, 1)) -> np.ndarray:
-    """Gains on the state ``columns`` (others 0) making ``s^2 + 2 zeta omega s + omega^2`` a factor of
-    ``det(sI - F + G K)`` (the remainder of the division is affine in the gains: a square solve)."""
-    J, c0 = identification_system(F, G)
-    d = np.array([1.0, 2.0 * zeta * omega, omega ** 2])
-
-    def rem(c):
-        return np.polydiv(np.concatenate([[1.0], c]), d)[1][-2:]
-
-    r0 = rem(c0)
-    R = np.stack([rem(c0 + J[:, c]) - r0 for c in columns], axis=1)
-    g = np.linalg.solve(R, -r0)
-    K = np.zeros(F.shape[0])
-    K[list(columns)] = g
-    return K
 
 
 def _slowest_damping(F, G, K) -> float:

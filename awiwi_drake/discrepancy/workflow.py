@@ -38,7 +38,7 @@ from .fit import fit_parameters
 from .localise import locate, residual_maps
 from .replay import ReplayEngine, project
 from .result import CandidateResult, Diagnosis, Step
-from .screen import ResidualState, free_params, gain_z, nrmse, paired_z, screen
+from .screen import STATEFUL_EFFECTS, ResidualState, free_params, gain_z, nrmse, paired_z, screen
 
 __all__ = ["diagnose", "gap_metrics", "DiagnosisInterrupted"]
 
@@ -184,6 +184,30 @@ class _Run:
         self.accept(win, status, conf, members, alts, fitted + screen_results)
         return True
 
+    def refine_place(self) -> None:
+        """The stateful hysteresis (screened by probes on both tendons only), accepted on both tendons as
+        the only per-tendon effect in the model, is refitted on each tendon alone (same parameters, place
+        masks). With the same number of parameters this is model selection on held-out data: a tendon
+        replaces "both tendons" when its variant has the lower held-out residual and the difference is
+        significant (held-out gain >= ``min_z`` null standard deviations, as for accepting an effect)."""
+        placed = [s for s in self.steps if s.kind == "physical" and s.effect in PLACED_EFFECTS]
+        if len(placed) != 1 or placed[0].place != "both tendons" or placed[0].effect not in STATEFUL_EFFECTS:
+            return   # the other per-tendon effects had their place variants in the screen
+        step, te = placed[0], self.eng.test
+        names = [n for n in free_params([EFFECTS[step.effect]], self.rig) if not n.startswith("ripple_order")]
+        best, best_st = "both tendons", self.st
+        for i in (1, 2):
+            p0 = self.st.base.copy()
+            p0[PARAM_INDEX["place_1"]], p0[PARAM_INDEX["place_2"]] = float(i == 1), float(i == 2)
+            st = ResidualState(self.eng, fit_parameters(self.st, names, p0, self.bounds, self.settings).p)
+            if st.E_test < best_st.E_test:
+                best, best_st = f"tendon {i}", st
+        z = gain_z(self.st.rp[te], best_st.rp[te])
+        self.say(f"place of {step.effect}: best {best} (held-out residual/floor {best_st.ratio:.3f} vs "
+                 f"{self.st.ratio:.3f} on both tendons, gain {z:.1f} null std)")
+        if best != "both tendons" and z >= self.settings.min_z:
+            step.place, self.st = best, best_st
+
     # ---------------------------------------------------------------- result
     def result(self, complete: bool) -> Diagnosis:
         eng, st, settings = self.eng, self.st, self.settings
@@ -263,6 +287,10 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
     except KeyboardInterrupt as exc:
         raise DiagnosisInterrupted(run.result(complete=False)) from exc
     say(run.stop_reason + ": stop")
+    try:
+        run.refine_place()
+    except KeyboardInterrupt as exc:
+        raise DiagnosisInterrupted(run.result(complete=False)) from exc
     dx = run.result(complete=True)
     say(f"done in {dx.seconds:.1f} s: {dx.verdict}; named {dx.named_effects or 'nothing'}"
         + "".join(f", {e} on {pl}" for e, pl in dx.places.items())
