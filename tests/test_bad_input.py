@@ -345,3 +345,16 @@ def test_every_option_has_help_and_no_raw_rst():
                 group = next(g for g in p._action_groups if a in g._group_actions)
                 assert "required" in (group.title or ""), f"{name} {a.option_strings[0]} required but not shown so"
     assert not missing, "options without help: " + ", ".join(missing)
+
+
+def test_bad_rates_of_the_chain_and_the_loop_are_one_named_line():
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.control.chain import TendonChainController
+    from awiwi_drake.control.joint_design import design_joint_stage
+    from awiwi_drake.hand.diagrams import finger_diagram
+    rig = finger_diagram(finger="index")
+    law = design_joint_stage(rig, "cascaded").law
+    with pytest.raises(ValueError, match=r"^TendonChainController: rate_hz = 0 must be a finite number > 0 \[Hz\]$"):
+        TendonChainController(rig, law, rate_hz=0)
+    with pytest.raises(ValueError, match=r"^closed_loop \(None: continuous\): rate_hz = '3k' must be a finite number"):
+        closed_loop(rig, make_controller("joint-pd", rig), rate_hz="3k")

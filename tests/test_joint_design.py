@@ -171,6 +171,18 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     np.testing.assert_allclose(table[:, mid], lqr.gains, rtol=1e-12)
     np.testing.assert_allclose(table[:, ::-1, :], table, rtol=1e-6)           # symmetric in dtau
     assert np.all(np.abs(table[:, 0, 2] - table[:, mid, 2]) > 1e-6 * np.abs(table[:, mid, 2]))
+    # outside the table the end gains are held, not silently: a warning once and a count per DoF
+    law, k = sdre.law, table.shape[0]
+    z = np.zeros((k, 5))
+    z[:, 2] = grid[-1]                                        # on the table's edge: inside
+    np.testing.assert_allclose(law.gains(z), table[:, -1], rtol=1e-12)
+    assert not law.outside_count.any()
+    z[1, 2] = grid[-1] + 0.05
+    with pytest.warns(RuntimeWarning, match=r"DoF 1 is outside the gain schedule"):
+        np.testing.assert_allclose(law.gains(z), table[:, -1], rtol=1e-12)
+    z[0, 2] = grid[0] - 0.05
+    law.gains(z)
+    np.testing.assert_array_equal(law.outside_count, [1, 2] + [0] * (k - 2))
 
 
 def test_friction_observer_block_removes_the_static_error_of_a_constant_load():

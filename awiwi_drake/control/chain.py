@@ -42,7 +42,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.rigs.base import Rig
-from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains
+from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains, check_rate
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.joint_stage import JointStage
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
@@ -277,6 +277,7 @@ class TendonChainController(Diagram):
                  name: str = "cascaded_chain"):
         super().__init__()
         p = params or HandChainParams()
+        rate_hz = check_rate("TendonChainController", rate_hz)
         check_one_spring_law(rig, "TendonChainController")
         point = point or chain_design_point(rig, params=p)
         self.operating_point = point["op"]

@@ -53,7 +53,6 @@ joint and leaves the abduction unstable, +16.8 1/s; the finger's PD is ``joint-p
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -61,7 +60,7 @@ import numpy as np
 from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator, LinearQuadraticRegulator
 
 from awiwi_drake.analysis.linear import LinearizationResult, linearize
-from awiwi_drake.control.base import closed_loop
+from awiwi_drake.control.base import check_rate, closed_loop
 from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
@@ -411,8 +410,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
         raise TypeError(f"joint_stage_controller: stiffness_correction = {correction!r} must be None or a "
                         f"StiffnessCorrectionParams")
-    if isinstance(rate_hz, bool) or not isinstance(rate_hz, (int, float)) or not 0.0 < rate_hz < math.inf:
-        raise ValueError(f"joint_stage_controller: rate_hz = {rate_hz!r} must be a finite number > 0 [Hz]")
+    rate_hz = check_rate("joint_stage_controller", rate_hz)
     point = chain_design_point(rig, op, params=c, mechanical_stiffness=kw.pop("mechanical_stiffness", None))
     sampled = (distribution or c.distribution_method) != "sharing"
     d = design_joint_stage(rig, design, point=point, params=params, chain=c,
