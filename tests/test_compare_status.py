@@ -72,4 +72,5 @@ def test_cli_writes_every_row_names_the_failed_one_and_exits_nonzero(tmp_path, m
     assert len(failed_lines) == 1 and "tendon-pd / step / tendon: infeasible_force at t = " in failed_lines[0]
     assert "1 of 2 rows FAILED" in out
     assert (tmp_path / "sine.png").exists() and not (tmp_path / "step.png").exists()
-    assert "infeasible_force" in (tmp_path / "metrics.md").read_text()
+    md = (tmp_path / "metrics.md").read_text()
+    assert "**1 of 2 rows FAILED**" in md and "| tendon-pd | tendon | 0.02" in md and "infeasible_force: " in md

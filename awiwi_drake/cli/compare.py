@@ -105,6 +105,7 @@ def _parse_list(text: str, what: str) -> list[str]:
 
 def run(args) -> int:
     import importlib
+    import math
     import sys
 
     from awiwi_drake.config import short_mode
@@ -162,7 +163,10 @@ def run(args) -> int:
         result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance, **opts)
     result.table.to_csv(out / "metrics.csv")
     ref_unit = "N" if args.rig == "tendon-rig" else "rad"
-    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n"
+    failed, n = result.table.failed(), len(result.table.rows)
+    summary = (f"**{len(failed)} of {n} rows FAILED**: their simulation stopped (status = the cause, failed_at = "
+               f"when; metrics NaN).\n\n" if failed else "")
+    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n{summary}"
                                     + result.table.to_markdown(ref_unit=ref_unit))
     import matplotlib
     matplotlib.use("Agg")
@@ -183,11 +187,9 @@ def run(args) -> int:
             fig, _ = plot_runs(result, test, ylabel=ylabel)
             fig.savefig(out / f"{test}.png", dpi=110)
         plt.close(fig)
-    failed = result.table.failed()
     for r in failed:
-        at = f" at t = {r.failed_at:.4g} s" if r.failed_at == r.failed_at else ""
+        at = f" at t = {r.failed_at:.4g} s" if math.isfinite(r.failed_at) else ""
         print(f"compare: {r.controller} / {r.test} / {r.joint}: {r.status}{at}: {r.flags}", file=sys.stderr)
-    n = len(result.table.rows)
     print(f"wrote {out / 'metrics.csv'}, {out / 'metrics.md'} and plots; "
           + (f"{len(failed)} of {n} rows FAILED (status in metrics.csv)" if failed else f"all {n} rows ran"))
     return 1 if failed else 0
