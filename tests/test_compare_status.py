@@ -100,3 +100,13 @@ def test_finger_disturbance_groups_are_independent():
     (run,) = runs
     assert np.isnan(run.output[:, stopped]).all() and np.isfinite(run.output[:, ran]).all()
     assert run.t[-1] == pytest.approx(p.step_duration, abs=1e-9)
+    # the figure names the stopped joint's cause and time in its panel, not an empty axis
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from awiwi_drake.control.compare import Comparison, MetricsTable, plot_joint_runs
+    fig, axes = plot_joint_runs(Comparison(runs, MetricsTable(rows), "finger-index"), "disturbance", "index")
+    texts = [" ".join(t.get_text() for t in ax.texts) for ax in axes[:, 0]]
+    for i, text in enumerate(texts):
+        assert ("lqr: infeasible_force at t = " in text) == (i in stopped), texts
+    plt.close(fig)
