@@ -3,14 +3,16 @@
 Usage::
 
     PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.1] [--controllers joint-pd,cascaded,backstepping]
-                                                         [--json out.json] [--no-profile]
+                                                         [--physics default,off,on] [--json out.json] [--no-profile]
 
 For each registered hand controller (``joint-pd``: the 3 kHz motor PD; ``cascaded``: joint impedance ->
 force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-forward, joint angles from the
-tendon-length estimator; ``backstepping``: 15.5 for the hand, 6 kHz law, 3 kHz estimator) the hand
-(``hand_diagram()``, wrist input at 0, the thesis physics of the plant as it is configured by default) is
+tendon-length estimator; ``backstepping``: 15.5 for the hand at 3 kHz, joint angles estimated) the hand
+(``hand_diagram()``, wrist input at 0; ``--physics``: the plant's thesis effects as configured by default,
+all off, or all on, each row says which) is
 closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad, and simulated
-with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period), after a warm-up
+with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period; with several rates
+at their common period), after a warm-up
 run of two control periods (kernel generation and JIT compilation are not timed).  All controllers run in
 one process, one after the other, so their ratios are measured under the same load.
 
@@ -108,14 +110,11 @@ def isolated_costs(diagram, root) -> dict:
                 xc[0] += 1e-12
                 ctx.SetContinuousState(xc)
         base = _time(invalidate)
-        if sys_.num_discrete_state_groups():
+        if sys_.num_discrete_state_groups() and sys_.GetUniquePeriodicDiscreteUpdateAttribute() is not None:
             def update():
                 invalidate()
                 sys_.EvalUniquePeriodicDiscreteUpdate(ctx)
-            try:
-                out[f"{name}: discrete update"] = _time(update, 50) - base
-            except RuntimeError:        # no unique periodic update
-                pass
+            out[f"{name}: discrete update"] = _time(update, 50) - base
         for i in range(sys_.num_output_ports()):
             op = sys_.get_output_port(i)
             if op.get_data_type() != PortDataType.kVectorValued:
@@ -138,8 +137,17 @@ def _leaves(system):
             yield s
 
 
-def run(name: str, sim_time: float, profile: bool = True) -> dict:
-    rig = hand_diagram()
+PHYSICS = {  # the hand plant's thesis effects, each case stated explicitly (the defaults may change)
+    "default": None,
+    "off": dict(ripple=False, hysteresis=False, guide_friction=False),
+    "on": dict(ripple=True, hysteresis=True, guide_friction=True),
+}
+
+
+def run(name: str, sim_time: float, profile: bool = True, physics: str = "default") -> dict:
+    from awiwi_drake.parameters.hand import HandRigParams
+    switches = PHYSICS[physics]
+    rig = hand_diagram(params=None if switches is None else HandRigParams().with_physics(**switches))
     t0 = time.perf_counter()
     loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
     build = time.perf_counter() - t0
@@ -152,7 +160,7 @@ def run(name: str, sim_time: float, profile: bool = True) -> dict:
     simulate(loop, ctx, sim_time, inputs=inputs, log=("joint_angle",))
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     periods = sim_time * loop.rate_hz
-    row = dict(controller=name, rate_hz=loop.rate_hz, estimator=bool(loop.estimated), build_s=build,
+    row = dict(controller=name, physics=physics, rate_hz=loop.rate_hz, estimator=bool(loop.estimated), build_s=build,
                sim_time=sim_time, cpu_s=cpu, wall_s=wall, rtf=sim_time / cpu, wall_rtf=sim_time / wall,
                cpu_us_per_period=cpu / periods * 1e6)
     if profile:
@@ -172,18 +180,30 @@ def main(argv=None) -> int:
     ap.add_argument("--sim-time", type=float, default=0.1, help="simulated seconds per controller")
     ap.add_argument("--controllers", default="joint-pd,cascaded,backstepping")
     ap.add_argument("--no-profile", action="store_true", help="skip where the time goes (isolated costs, call counts)")
+    ap.add_argument("--physics", default="default",
+                    help="comma list of the hand plant's physics: default (HandRigParams()), off (no ripple, "
+                         "hysteresis, guide friction), on (all three)")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
+    physics = [p.strip() for p in args.physics.split(",") if p.strip()]
+    for p in physics:
+        if p not in PHYSICS:
+            ap.error(f"--physics: {p!r} is not one of {', '.join(PHYSICS)}")
     load = os.getloadavg()
     print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} CPUs")
     rows = []
-    print(f"{'controller':14s} {'rate Hz':>8s} {'estimator':>9s} {'build s':>8s} {'RTF cpu':>8s} {'RTF wall':>9s} "
-          f"{'us/period':>10s}")
-    for name in [n.strip() for n in args.controllers.split(",") if n.strip()]:
-        r = run(name, args.sim_time, not args.no_profile)
+    print(f"{'controller':14s} {'physics':>8s} {'rate Hz':>8s} {'estimator':>9s} {'build s':>8s} {'RTF cpu':>8s} "
+          f"{'RTF wall':>9s} {'us/period':>10s}")
+    for name, phys in [(n.strip(), p) for p in physics for n in args.controllers.split(",") if n.strip()]:
+        try:
+            r = run(name, args.sim_time, not args.no_profile, phys)
+        except ValueError as exc:       # a controller that refuses this plant says why (e.g. guide friction)
+            rows.append(dict(controller=name, physics=phys, rtf=None, note=str(exc)))
+            print(f"{name:14s} {phys:>8s} refused: {exc}", flush=True)
+            continue
         rows.append(r)
-        print(f"{name:14s} {r['rate_hz']:8.0f} {str(r['estimator']):>9s} {r['build_s']:8.2f} {r['rtf']:8.3f} "
-              f"{r['wall_rtf']:9.3f} {r['cpu_us_per_period']:10.0f}", flush=True)
+        print(f"{name:14s} {phys:>8s} {r['rate_hz']:8.0f} {str(r['estimator']):>9s} {r['build_s']:8.2f} "
+              f"{r['rtf']:8.3f} {r['wall_rtf']:9.3f} {r['cpu_us_per_period']:10.0f}", flush=True)
         if "isolated_us_per_call" in r:
             print("    CPU time per call, measured apart:")
             for where, us in r["isolated_us_per_call"].items():

@@ -289,6 +289,31 @@ def test_library_rejects_nonsense_with_value_errors():
             fn()
 
 
+def _finger_stage_controller(**kw):
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.hand.diagrams import finger_diagram
+    return joint_stage_controller(finger_diagram(finger="index"), "lqr", **kw)
+
+
+# (id, options of joint_stage_controller on the index, exception, message): one line naming the option
+STAGE_CASES = [
+    ("observer-string", {"friction_observer": "yes"}, TypeError,
+     "TendonChainController: friction_observer = 'yes' must be None or a FrictionObserverParams"),
+    ("correction-number", {"stiffness_correction": 3}, TypeError,
+     "joint_stage_controller: stiffness_correction = 3 must be None or a StiffnessCorrectionParams"),
+    ("rate-negative", {"rate_hz": -5}, ValueError, r"joint_stage_controller: rate_hz = -5 must be a finite number > 0"),
+    ("rate-zero", {"rate_hz": 0.0}, ValueError, r"joint_stage_controller: rate_hz = 0.0 must be a finite number > 0"),
+    ("rate-string", {"rate_hz": "3k"}, ValueError, r"joint_stage_controller: rate_hz = '3k' must be a finite number"),
+]
+
+
+@pytest.mark.parametrize("options,error,message", [c[1:] for c in STAGE_CASES], ids=[c[0] for c in STAGE_CASES])
+def test_bad_chain_options_are_one_named_line(options, error, message):
+    with pytest.raises(error) as info:
+        _finger_stage_controller(**options)
+    assert str(info.value).startswith(message) and "\n" not in str(info.value), str(info.value)
+
+
 def test_simulate_start_after_end_raises_not_exits():
     from awiwi_drake.analysis import simulate
     from awiwi_drake.rigs import flexible_joint_rig
@@ -320,3 +345,16 @@ def test_every_option_has_help_and_no_raw_rst():
                 group = next(g for g in p._action_groups if a in g._group_actions)
                 assert "required" in (group.title or ""), f"{name} {a.option_strings[0]} required but not shown so"
     assert not missing, "options without help: " + ", ".join(missing)
+
+
+def test_bad_rates_of_the_chain_and_the_loop_are_one_named_line():
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.control.chain import TendonChainController
+    from awiwi_drake.control.joint_design import design_joint_stage
+    from awiwi_drake.hand.diagrams import finger_diagram
+    rig = finger_diagram(finger="index")
+    law = design_joint_stage(rig, "cascaded").law
+    with pytest.raises(ValueError, match=r"^TendonChainController: rate_hz = 0 must be a finite number > 0 \[Hz\]$"):
+        TendonChainController(rig, law, rate_hz=0)
+    with pytest.raises(ValueError, match=r"^closed_loop \(None: continuous\): rate_hz = '3k' must be a finite number"):
+        closed_loop(rig, make_controller("joint-pd", rig), rate_hz="3k")

@@ -483,3 +483,13 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
     assert 3 * n <= derivs <= 3 * n + 3
     for key, k in counts.items():
         assert n <= k <= n + 1, (key, k)
+
+
+def test_shared_stiffness_map_is_read_only():
+    """hand_stiffness_map returns one map per spring to every diagram: writing its table must fail, not
+    change every other finger's stiffness."""
+    kmap = hand_stiffness_map()
+    assert hand_stiffness_map() is kmap
+    for a in (kmap.forces, kmap.k, kmap.dk):
+        with pytest.raises(ValueError, match="read-only"):
+            a[0] = 1.0

@@ -335,7 +335,7 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     assert all(float(r["peak_input"]) <= 3.0 + 1e-9 for r in rows)
     assert (out / "step_ring.png").exists() and (out / "disturbance_ring.png").exists()
     step = {(r["controller"], r["joint"]): r for r in rows if r["test"] == "step"}
-    assert all(r["status"] != "diverged" for r in rows), [r["status"] for r in rows]
+    assert all(r["status"] in ("ok", "flagged") for r in rows), [r["status"] for r in rows]   # none stopped
     # the step moves every joint towards its reference (0.2 rad)
     assert all(abs(float(r["steady_state_error"])) < 0.1 for r in step.values()), step
 

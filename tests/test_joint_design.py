@@ -171,6 +171,18 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     np.testing.assert_allclose(table[:, mid], lqr.gains, rtol=1e-12)
     np.testing.assert_allclose(table[:, ::-1, :], table, rtol=1e-6)           # symmetric in dtau
     assert np.all(np.abs(table[:, 0, 2] - table[:, mid, 2]) > 1e-6 * np.abs(table[:, mid, 2]))
+    # outside the table the end gains are held, not silently: a warning once and a count per DoF
+    law, k = sdre.law, table.shape[0]
+    z = np.zeros((k, 5))
+    z[:, 2] = grid[-1]                                        # on the table's edge: inside
+    np.testing.assert_allclose(law.gains(z), table[:, -1], rtol=1e-12)
+    assert not law.outside_count.any()
+    z[1, 2] = grid[-1] + 0.05
+    with pytest.warns(RuntimeWarning, match=r"DoF 1 is outside the gain schedule"):
+        np.testing.assert_allclose(law.gains(z), table[:, -1], rtol=1e-12)
+    z[0, 2] = grid[0] - 0.05
+    law.gains(z)
+    np.testing.assert_array_equal(law.outside_count, [1, 2] + [0] * (k - 2))
 
 
 def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
@@ -245,3 +257,16 @@ def test_every_dof_of_the_hand_gets_its_own_design():
     assert all(np.all(np.abs(p) < 1.0) for p in d.design_poles)          # sampled designs: inside the unit circle
     loop = closed_loop(hand, ctrl, **get_entry("lqr", hand).loop_options)
     assert loop.rate_hz == rate and loop.estimated == ("joint_angle", "joint_velocity")
+
+
+def test_sampled_model_is_the_zero_order_hold_with_one_period_of_delay():
+    """Closed form of the ZOH of z' = a z + b u over h: Phi = e^{ah}, Gamma = b (e^{ah} - 1) / a; the chain's
+    one sample of delay appends the previous request as a state fed by the new one."""
+    from awiwi_drake.control.joint_design import sampled_model
+    a, b, h = np.diag([-3.0, 2.0]), np.array([[1.5], [0.5]]), 0.01
+    Phi, Gamma = sampled_model(a, b, h)
+    e = np.exp(np.diag(a) * h)
+    np.testing.assert_allclose(Phi[:2, :2], np.diag(e), rtol=1e-13)
+    np.testing.assert_allclose(Phi[:2, 2], b[:, 0] * (e - 1) / np.diag(a), rtol=1e-12)
+    np.testing.assert_array_equal(Phi[2], 0.0)
+    np.testing.assert_array_equal(Gamma[:, 0], [0.0, 0.0, 1.0])

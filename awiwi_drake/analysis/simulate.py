@@ -41,8 +41,8 @@ from awiwi_drake.analysis.monitors import Monitor
 from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 
-__all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "simulate", "MODES",
-           "control_period"]
+__all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
+           "PHYSICAL_FAILURES", "simulate", "MODES", "control_period"]
 
 MODES = ("auto", "fixed_step", "error_controlled")
 _FIXED_STEP_INTEGRATORS = ("explicit_euler", "semi_explicit_euler", "runge_kutta2")
@@ -54,11 +54,36 @@ class SimulationError(RuntimeError):
 
 
 class SimulationDivergedError(SimulationError):
-    """The state became non-finite or exceeded the divergence bound."""
+    """The state became non-finite or exceeded the divergence bound (``t``: when it was seen [s])."""
+
+    status = "diverged"
+
+    def __init__(self, message: str, t: float = float("nan")):
+        super().__init__(message)
+        self.t = float(t)
 
 
 class SimulationEventError(SimulationError):
-    """A monitor created with ``raise_on_event=True`` saw its condition."""
+    """A monitor created with ``raise_on_event=True`` saw its condition (``status``: the event's kind,
+    e.g. ``actuator_saturation``; ``t``: its start [s])."""
+
+    def __init__(self, message: str, kind: str = "event", t: float = float("nan")):
+        super().__init__(message)
+        self.status, self.t = kind, float(t)
+
+
+class InfeasibleForceError(ValueError):
+    """A tendon force law was asked for a force it cannot produce (a negative or beyond-range tendon force,
+    e.g. from an infeasible force distribution: a tendon would have to push).  :func:`simulate` sets ``t``
+    to the simulated time at which it was raised [s]."""
+
+    status = "infeasible_force"
+    t = float("nan")
+
+
+# the package's own physical failures that stop a simulation (status names the cause, t the time):
+# studies that run many cases record them per case and go on; anything else is a programming error
+PHYSICAL_FAILURES = (SimulationDivergedError, SimulationEventError, InfeasibleForceError)
 
 
 _MAX_RATE_RATIO = 1000  # a common period this many times below the shortest one: rates not commensurate
@@ -376,7 +401,7 @@ def simulate(system, context: Context | None, t_final: float, *,
             i = int(np.argmax(bad))
             raise SimulationDivergedError(
                 f"simulation of {diagram.get_name()!r} diverged at t = {t_now:.6g} s: {state_label(i)} = {x[i]:.6g} "
-                f"(bound {divergence_bound:g}; checked every {duration / len(bounds):.3g} s)")
+                f"(bound {divergence_bound:g}; checked every {duration / len(bounds):.3g} s)", t=t_now)
 
     def read(s):
         """Logged ``(t, values)``; samples closer than 1e-9 step to the next (a chunk boundary met
@@ -395,7 +420,8 @@ def simulate(system, context: Context | None, t_final: float, *,
             evs = m.events(*read(s))
             if evs:
                 e = evs[0]
-                raise SimulationEventError(f"{e.kind} on {e.channel} at t = {e.t_start:.6g} s (value {e.extreme:.6g})")
+                raise SimulationEventError(f"{e.kind} on {e.channel} at t = {e.t_start:.6g} s (value {e.extreme:.6g})",
+                                           kind=e.kind, t=e.t_start)
 
     wall = time.perf_counter()
     try:
@@ -407,6 +433,9 @@ def simulate(system, context: Context | None, t_final: float, *,
             if progress is not None:
                 progress(tb - start, duration)
     except (SimulationDivergedError, SimulationEventError):
+        raise
+    except InfeasibleForceError as exc:   # raised by a law inside the diagram: when
+        exc.t = float(root.get_time())
         raise
     except (RuntimeError, SystemExit) as exc:
         t_now = root.get_time()

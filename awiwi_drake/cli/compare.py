@@ -6,8 +6,11 @@ figure per finger and test, e.g. step_index.png) into --out.  On fingers and the
 hand every joint (independent DoF) is tested at once: step, sine and an
 external-torque step on the k-th joint of every finger.  Unknown
 controller names or controllers that do not fit the rig exit with status 2
-and a one-line error; a loop that diverges or saturates is a row with status
-"diverged" or "flagged", not an error.
+and a one-line error.  Every (controller, test, joint) row is independent: a
+finished run that saturates or goes slack has status "flagged"; a simulation
+stopped by a physical failure has the cause as status ("diverged",
+"infeasible_force", ...), the time in "failed_at", NaN metrics and one line on
+stderr, the other rows and plots are still written, and the exit status is 1.
 """
 
 from __future__ import annotations
@@ -102,6 +105,8 @@ def _parse_list(text: str, what: str) -> list[str]:
 
 def run(args) -> int:
     import importlib
+    import math
+    import sys
 
     from awiwi_drake.config import short_mode
     from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
@@ -158,7 +163,10 @@ def run(args) -> int:
         result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance, **opts)
     result.table.to_csv(out / "metrics.csv")
     ref_unit = "N" if args.rig == "tendon-rig" else "rad"
-    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n"
+    failed, n = result.table.failed(), len(result.table.rows)
+    summary = (f"**{len(failed)} of {n} rows FAILED**: their simulation stopped (status = the cause, failed_at = "
+               f"when; metrics NaN).\n\n" if failed else "")
+    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n{summary}"
                                     + result.table.to_markdown(ref_unit=ref_unit))
     import matplotlib
     matplotlib.use("Agg")
@@ -179,5 +187,9 @@ def run(args) -> int:
             fig, _ = plot_runs(result, test, ylabel=ylabel)
             fig.savefig(out / f"{test}.png", dpi=110)
         plt.close(fig)
-    print(f"wrote {out / 'metrics.csv'}, {out / 'metrics.md'} and plots")
-    return 0
+    for r in failed:
+        at = f" at t = {r.failed_at:.4g} s" if math.isfinite(r.failed_at) else ""
+        print(f"compare: {r.controller} / {r.test} / {r.joint}: {r.status}{at}: {r.flags}", file=sys.stderr)
+    print(f"wrote {out / 'metrics.csv'}, {out / 'metrics.md'} and plots; "
+          + (f"{len(failed)} of {n} rows FAILED (status in metrics.csv)" if failed else f"all {n} rows ran"))
+    return 1 if failed else 0

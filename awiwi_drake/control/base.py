@@ -51,6 +51,7 @@ __all__ = [
     "REFERENCE_SUFFIX",
     "check_gain",
     "check_gains",
+    "check_rate",
     "StaticLaw",
     "StaticLawController_",
     "StaticLawController",
@@ -90,6 +91,20 @@ def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negativ
         need = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{label} = {v!r} must be {need}")
     return v
+
+
+def check_rate(owner: str, rate_hz: Any) -> float:
+    """Validate a sampling rate ``rate_hz`` [Hz] (a finite real number > 0); return it as float.
+
+    Raises
+    ------
+    ValueError
+        One line naming ``owner`` and ``rate_hz``.
+    """
+    if isinstance(rate_hz, (bool, np.bool_)) or not isinstance(rate_hz, (int, float, np.integer, np.floating)) \
+            or not 0.0 < float(rate_hz) < math.inf:
+        raise ValueError(f"{owner}: rate_hz = {rate_hz!r} must be a finite number > 0 [Hz]")
+    return float(rate_hz)
 
 
 def check_gains(name: str, values: Any, *, shape: tuple[int, ...] | None = None,
@@ -385,6 +400,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     if ideal and sensors != "ideal":
         raise ValueError(f"closed_loop: sensors = {sensors!r}; give 'ideal', a mapping {{rig output: system}} "
                          f"or None")
+    if rate_hz is not None:
+        rate_hz = check_rate("closed_loop (None: continuous)", rate_hz)
     est = _resolve_estimator(rig, estimator, ideal, rate_hz, measurement_ports(controller))
     est_sys = None if est is None else getattr(est, "system", est)
     est_out = [] if est_sys is None else _output_names(est_sys)
@@ -403,10 +420,6 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     for s in sensors:
         if s not in rig_out:
             raise ValueError(f"closed_loop: sensor given for {s!r}, which is not a rig output")
-    if rate_hz is not None:
-        rate_hz = float(rate_hz)
-        if not (math.isfinite(rate_hz) and rate_hz > 0.0):
-            raise ValueError(f"closed_loop: rate_hz = {rate_hz!r} must be > 0 (or None for continuous)")
     steps = 0
     if delay is not None:
         delay = float(delay)

@@ -42,14 +42,14 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.rigs.base import Rig
-from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains
+from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains, check_rate
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.joint_stage import JointStage
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.parameters.control import RippleCompensationParams, TendonForceGains
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand import FINGERS
-from awiwi_drake.parameters.hand_control import ForceDistributionParams, HandChainParams
+from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
 __all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceSharing_", "TendonForceSharing",
            "TendonForceStage", "TendonChainController", "chain_design_point", "check_one_spring_law"]
@@ -277,6 +277,7 @@ class TendonChainController(Diagram):
                  name: str = "cascaded_chain"):
         super().__init__()
         p = params or HandChainParams()
+        rate_hz = check_rate("TendonChainController", rate_hz)
         check_one_spring_law(rig, "TendonChainController")
         point = point or chain_design_point(rig, params=p)
         self.operating_point = point["op"]
@@ -293,6 +294,9 @@ class TendonChainController(Diagram):
         self.design = dict(point, joint_law=joint_law, force_gains=force.gains)
         tau_ref = joint.GetOutputPort("joint_torque_reference")
         observer = None
+        if friction_observer is not None and not isinstance(friction_observer, FrictionObserverParams):
+            raise TypeError(f"TendonChainController: friction_observer = {friction_observer!r} must be None or a "
+                            f"FrictionObserverParams")
         if friction_observer is not None:            # ch. 9: -d_hat added to the desired torques
             from pydrake.systems.primitives import Adder
             from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_damping, joint_inertia

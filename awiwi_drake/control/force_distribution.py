@@ -194,9 +194,11 @@ class TendonStiffnessMap:
     """
 
     def __init__(self, forces, stiffness, stiffness_slope):
-        self.forces = np.asarray(forces, dtype=float)
-        self.k = np.asarray(stiffness, dtype=float)
-        self.dk = np.asarray(stiffness_slope, dtype=float)
+        self.forces = np.array(forces, dtype=float)
+        self.k = np.array(stiffness, dtype=float)
+        self.dk = np.array(stiffness_slope, dtype=float)
+        for a in (self.forces, self.k, self.dk):    # own read-only copies: hand_stiffness_map shares one map
+            a.flags.writeable = False
         if self.forces.ndim != 1 or self.forces.size < 2 or np.any(np.diff(self.forces) <= 0):
             raise ValueError("TendonStiffnessMap.forces must be an increasing 1-D grid of at least 2 forces")
         if self.k.shape != self.forces.shape or self.dk.shape != self.forces.shape:

@@ -29,6 +29,7 @@ use :class:`JointGainScheduleLaw`, gains interpolated in the joint torque.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -148,7 +149,10 @@ class JointGainScheduleLaw(JointStateFeedbackLaw):
 
     ``schedule`` (p,) torque deviations ``tau - tau_op`` [Nm] (increasing) and ``table`` (k, p, 5)
     the gains designed there (the SDRE's pointwise-linear models, ch. 14, tabulated per DoF).
-    Outside the table the end gains are held (clamped, not extrapolated).
+    Outside the table the end gains are held (clamped, not extrapolated), and not silently: the first
+    double-valued evaluation outside it warns (``RuntimeWarning`` naming the DoF, the deviation and the
+    table's range) and :attr:`outside_count` counts every such evaluation (per DoF; Drake may evaluate the
+    output more than once per step, so it counts evaluations, not samples).
     """
 
     def __init__(self, coupling, selection, pulley_radius, schedule, table, **kw):
@@ -161,16 +165,30 @@ class JointGainScheduleLaw(JointStateFeedbackLaw):
             raise ValueError(f"{self.name}: table has shape {table.shape}, expected "
                              f"{(self.S.shape[1], self.schedule.size, 5)}")
         self.table = table
+        self.outside_count = np.zeros(self.S.shape[1], dtype=int)
         if not self.uses_forces:
             raise ValueError(f"{self.name}: a torque-scheduled law needs the torque feedback (K[:, 2:] != 0)")
 
     def gains(self, z):
         lo, hi = float(self.schedule[0]), float(self.schedule[-1])
+        if np.asarray(z).dtype != object:
+            self._note_outside(np.asarray(z, dtype=float)[:, 2], lo, hi)
         rows = []
         for j in range(self.S.shape[1]):
             t = clip(z[j, 2], lo, hi)
             rows.append([interp(t, self.schedule, self.table[j, :, c]) for c in range(5)])
         return np.array(rows, dtype=object if np.asarray(z).dtype == object else float)
+
+    def _note_outside(self, dev, lo, hi):
+        out = (dev < lo) | (dev > hi)
+        if not out.any():
+            return
+        if not self.outside_count.any():
+            j = int(np.argmax(out))
+            warnings.warn(f"{self.name}: measured joint torque deviation {dev[j]:.4g} Nm of DoF {j} is outside the "
+                          f"gain schedule [{lo:.4g}, {hi:.4g}] Nm: the end gains are held (warned once; "
+                          f"outside_count counts such evaluations)", RuntimeWarning, stacklevel=2)
+        self.outside_count += out
 
 
 @TemplateSystem.define("JointStage_")

@@ -28,7 +28,8 @@ f_floor, f_max))`` with ``f_floor = min_schedule_force`` (2 N): a noisy or
 negative force reading (the sensor noise reaches below 0 N near slack)
 therefore never extrapolates the slope below the table, which would make
 ``alpha < 0`` and turn the ``-Kd fdot_hat`` damping into positive feedback.
-References outside ``[0, f_max]`` of the table raise ``ValueError``.
+References outside ``[0, f_max]`` of the table raise
+:class:`~awiwi_drake.analysis.InfeasibleForceError` (a ``ValueError``; in a simulation it carries the time).
 
 Steady state (all derivatives zero, friction (3.8) vanishes at rest):
 without the force feed-forward ``Kp (f_des - f) = r_m f`` (10.3), i.e.
@@ -44,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from awiwi_drake._math import clip, is_float
+from awiwi_drake.analysis.simulate import InfeasibleForceError
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains
 from awiwi_drake.parameters.control import TendonForceGains
 
@@ -114,7 +116,7 @@ class ForceMap:
         for i, v in enumerate(vals):
             if not (math.isfinite(v) and 0.0 <= v <= self.max_force):
                 where = f"[{i}]" if len(vals) > 1 else ""
-                raise ValueError(f"{name}{where} = {v!r} N is outside the tendon force table [0, {self.max_force:.4g}] N "
+                raise InfeasibleForceError(f"{name}{where} = {v!r} N is outside the tendon force table [0, {self.max_force:.4g}] N "
                                  f"(force_map(f_max=...) tabulates up to f_max)")
         return vals[0] if len(vals) == 1 else np.array(vals)
 

@@ -84,7 +84,7 @@ class GradientSearchResult:
 
 
 # not cached on disk: numba keys a function taking a compiled function by that function's identity, which
-# changes from process to process (the cache would grow by one entry per process); ~1.7 s JIT at first use
+# changes from process to process (the cache would grow by one entry per process); ~1.4 s JIT at first use
 @numba.njit(cache=False)
 def _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf):
     """Algorithm 1's loop (see :func:`thumb_base_gradient_search`), compiled: ``base`` is the thumb's compiled
@@ -124,6 +124,21 @@ def _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf):
     return qa, qb, c_best, step, accepted, projected
 
 
+_SEARCHES: dict = {}   # Algorithm 1 specialised per compiled kinematics (id of the kernel -> (kernel, search))
+
+
+def _search_for(base):
+    """:func:`_search` with ``base`` bound at compile time: numba types a compiled-function argument anew at
+    every call from Python (~5 us); the bound version takes plain numbers and arrays."""
+    hit = _SEARCHES.get(id(base))
+    if hit is None or hit[0] is not base:
+        @numba.njit(cache=False)
+        def bound(dh, qa, qb, iterations, step0, min_step, limit, x, buf):
+            return _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf)
+        hit = _SEARCHES[id(base)] = (base, bound)
+    return hit[1]
+
+
 def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0.0), *,
                                iterations: int = 30, step0: float = 0.1,
                                min_step: float = 1e-7,
@@ -161,8 +176,8 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
         raise ValueError(f"iterations must be >= 1, got {iterations}")
     if not limit > 0:
         raise ValueError(f"limit must be > 0 [rad], got {limit}")
-    qa, qb, c_best, step, accepted, projected = _search(
-        coupling._base_kernel(), dh_base, float(q_start[0]), float(q_start[1]), int(iterations), float(step0),
+    qa, qb, c_best, step, accepted, projected = _search_for(coupling._base_kernel())(
+        dh_base, float(q_start[0]), float(q_start[1]), int(iterations), float(step0),
         float(min_step), float(limit), np.empty(2), np.empty(28))
     q = np.array([qa, qb])
     return GradientSearchResult(q=q, cost=c_best, step=step, accepted=accepted,

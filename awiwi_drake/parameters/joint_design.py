@@ -44,7 +44,8 @@ class JointDesignParams(Parameters):
         source="chosen: Bryson's rule, the torque error above over ~50 ms; measured on the index (6 kHz chain, "
                "estimator, 3 Nm limit, compare --short): over 10 ms (5 Nm/s) the step saturates 75 % of the samples, "
                "1 Nm/s 65 %; 0.5 Nm/s settles the step (5 %) but the 0.01 Nm disturbance then asks the DIP's "
-               "distribution for a negative force and the run stops: the full-state stage is not robust here")
+               "distribution for a negative force and that case stops (compare: DIP row status infeasible_force): the "
+               "full-state stage is not robust here")
     lqr_input: float = param(
         0.1, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule on the desired joint torque (twice the torque error: the input may move more "

@@ -38,9 +38,12 @@ class Metrics:
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad]
-    status: str = "ok"                   # "ok", "flagged" (see flags) or "diverged: <reason>" (metrics NaN)
+    failed_at: float = math.nan          # s, test time at which the simulation stopped (status a failure cause)
+    status: str = "ok"                   # "ok", "flagged" (see flags), or the cause that stopped the simulation
+    #                                      (metrics NaN): "diverged", "infeasible_force", a monitor's event kind
     flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
-    #                                      force distribution out of bounds (finger/hand chain)
+    #                                      force distribution out of bounds (finger/hand chain); a stopped
+    #                                      row: the error's message
 
 
 COLUMNS = [f for f in Metrics.__dataclass_fields__]
@@ -53,7 +56,7 @@ UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error
              peak_command="Nm",
              stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
-             slack_fraction="-", estimation_error="rad")
+             slack_fraction="-", estimation_error="rad", failed_at="s")
 
 
 @dataclass
@@ -74,6 +77,10 @@ class MetricsTable:
             raise ValueError(f"unknown metric {name!r}; known: {', '.join(NUMERIC)}")
         return {r.controller: getattr(r, name) for r in self.rows
                 if r.test == test and (joint is None or r.joint == joint)}
+
+    def failed(self) -> list[Metrics]:
+        """The rows whose simulation stopped on a physical failure (status neither ``ok`` nor ``flagged``)."""
+        return [r for r in self.rows if r.status not in ("ok", "flagged")]
 
     def joints(self) -> list[str]:
         """The joints of the rows, in order of appearance."""

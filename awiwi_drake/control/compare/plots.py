@@ -21,9 +21,23 @@ def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: st
     for r in runs:
         ax.plot(r.t, r.output, label=r.controller)
     ax.plot(runs[0].t, runs[0].reference, "k--", lw=1, label="reference")
+    _mark_stopped(ax, comparison, test)
     label_axes(ax, ylabel or "tracked output [unit of the reference]",
                title=f"{comparison.rig}: {test} test (solid: output, dashed: reference)")
     return fig, ax
+
+
+def _mark_stopped(ax, comparison: Comparison, test: str, joint: str | None = None) -> None:
+    """Name on ``ax`` the controllers whose simulation of ``test`` (``joint``) stopped, with a line at the time."""
+    stopped = [r for r in comparison.table.failed() if r.test == test and (joint is None or r.joint == joint)]
+    for r in stopped:
+        if math.isfinite(r.failed_at):
+            ax.axvline(r.failed_at, color="r", ls=":", lw=1)
+    if stopped:
+        ax.text(0.01, 0.97, "\n".join(f"{r.controller}: {r.status}"
+                                      + (f" at t = {r.failed_at:.4g} s" if math.isfinite(r.failed_at) else "")
+                                      for r in stopped),
+                transform=ax.transAxes, va="top", fontsize=8, color="r")
 
 
 def plot_joint_runs(comparison: Comparison, test: str, finger: str):
@@ -44,6 +58,7 @@ def plot_joint_runs(comparison: Comparison, test: str, finger: str):
         ax.plot(runs[0].t, runs[0].reference[:, j], "k--", lw=1, label="reference")
         ax.set_ylabel(f"{runs[0].meta['joints'][j]} [rad]")
         ax.grid(True, alpha=0.3)
+        _mark_stopped(ax, comparison, test, runs[0].meta["joints"][j])
     axes[0, 0].set_title(f"{comparison.rig}, {finger}: {test} (joint angle - operating point)")
     axes[0, 0].legend(fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")

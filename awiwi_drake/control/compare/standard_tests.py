@@ -27,7 +27,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from awiwi_drake.analysis import Chirp, Constant, PerEntry, SimulationDivergedError, Sine, Step, simulate
+from awiwi_drake.analysis import PHYSICAL_FAILURES, Chirp, Constant, PerEntry, Sine, Step, simulate
 from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, linear_bandwidth, sine_metrics,
                                                  step_metrics, sweep_metrics)
@@ -37,8 +37,8 @@ from awiwi_drake.control.registry import get_entry, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "run_standard_tests",
-           "compare", "dominant_time_constant",
+__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
+           "run_standard_tests", "compare", "dominant_time_constant",
            "compare_controllers"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -211,8 +211,11 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
 
 
 def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
-                   params: CompareTestParams | None = None, settled=None) -> tuple[TestRun, list[Metrics]]:
+                   params: CompareTestParams | None = None, settled=None) -> tuple[TestRun | None, list[Metrics]]:
     """One standard test on a finger/hand loop: every DoF at once, one :class:`Metrics` row per DoF.
+
+    A simulation stopped by a physical failure (:data:`~awiwi_drake.analysis.PHYSICAL_FAILURES`) gives its
+    joints :func:`stopped_row` rows; the run is None when every simulation of the test stopped.
 
     ``step``/``sine``/``sweep``: the same reference change on every DoF (relative to the operating
     point) in one simulation: the rows include the interaction of a finger's joints moving together.
@@ -241,6 +244,7 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
     rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
     meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
     runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
+    failed: list[int] = []
     for group in groups:
         ctx = base.Clone()
         ctx.SetTime(0.0)
@@ -270,8 +274,14 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             log.append(DISTRIBUTION_STATUS)
         if loop.diagram.HasOutputPort(ESTIMATION_ERROR):   # no joint sensors: the estimator's error
             log.append(ESTIMATION_ERROR)
-        res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
-                       max_step=p.max_step, accuracy=1e-6)
+        try:
+            res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
+                           max_step=p.max_step, accuracy=1e-6)
+        except PHYSICAL_FAILURES as exc:   # this group's rows only; the other groups' simulations go on
+            for j in group:
+                rows[j] = stopped_row(controller, test, ch.names[j], exc)
+            failed += group
+            continue
         t = res.t - res.t[0]
         Sp = np.linalg.pinv(ch.S)
         y = res["joint_angle"] @ Sp.T - ch.q0
@@ -325,6 +335,9 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                     row.flags = "; ".join(f for f in (row.flags, f"force distribution out of bounds "
                                                                  f"{100 * bad:.0f} %") if f)
                     row.status = "flagged" if row.status == "ok" else row.status
+    if runs_t is None:   # every simulation of the test stopped: rows only, nothing to plot
+        return None, rows
+    runs_y[:, failed] = np.nan   # the stopped groups' joints have no trace
     meta["applied_torque"] = runs_a
     return TestRun(controller, test, runs_t, runs_r, runs_y, runs_u, runs_w, runs_x, meta), rows
 
@@ -351,10 +364,23 @@ def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
     return m
 
 
+def stopped_row(controller: str, test: str, joint: str, exc: Exception, *, settling: bool = False) -> Metrics:
+    """The row of a case whose simulation stopped on a physical failure: metrics NaN, ``status`` the cause
+    (``diverged``, ``infeasible_force``, a monitor's event kind), ``failed_at`` the test time [s] (while
+    ``settling`` at the start reference: NaN, and the flags say so), ``flags`` the error's message."""
+    return Metrics(controller, test, joint=joint, status=exc.status, failed_at=math.nan if settling else exc.t,
+                   flags=("while settling at the initial reference: " if settling else "") + str(exc))
+
+
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
                        params: CompareTestParams | None = None,
                        progress: Callable[[str], Any] | None = None) -> tuple[list[TestRun], list[Metrics]]:
     """All applicable standard tests on one closed loop (``disturbance`` only with ``external_torque``).
+
+    Each case is independent: a simulation stopped by a physical failure
+    (:data:`~awiwi_drake.analysis.PHYSICAL_FAILURES`: divergence, an infeasible tendon force, a
+    raising monitor) becomes :func:`stopped_row` rows (status = the cause, ``failed_at``, NaN
+    metrics) and the other tests go on; programming errors propagate.
 
     ``progress(label)`` is called after each test (e.g. to advance a progress bar).
     """
@@ -363,8 +389,17 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     if tests is None:
         tests = [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
                  and (t != "sweep" or channels is None)]  # fingers/hand: step, sine, external-torque step
-    settled = settle(loop, p.initial_reference, t_settle=p.settle_time, max_step=p.max_step)
+    names = channels.names if channels is not None else ["tendon" if loop.tracked_outputs[0] == "tendon_force"
+                                                          else "link"]
     runs, rows = [], []
+    try:
+        settled = settle(loop, p.initial_reference, t_settle=p.settle_time, max_step=p.max_step)
+    except PHYSICAL_FAILURES as exc:   # no test can start: every row of this loop says why
+        for test in tests:
+            rows += [stopped_row(controller, test, nm, exc, settling=True) for nm in names]
+            if progress is not None:
+                progress(f"{controller}/{test}")
+        return runs, rows
     for test in tests:
         try:
             if channels is None:
@@ -372,14 +407,10 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
                 ms = [m]
             else:
                 run, ms = run_joint_test(loop, test, controller=controller, params=p, settled=settled)
-        except SimulationDivergedError as exc:
-            names = channels.names if channels is not None else ["tendon" if loop.tracked_outputs[0] ==
-                                                                  "tendon_force" else "link"]
-            rows += [Metrics(controller, test, joint=nm, status=f"diverged: {exc}") for nm in names]
-            if progress is not None:
-                progress(f"{controller}/{test}")
-            continue
-        runs.append(run)
+        except PHYSICAL_FAILURES as exc:   # this case's rows only; the other tests and controllers go on
+            run, ms = None, [stopped_row(controller, test, nm, exc) for nm in names]
+        if run is not None:
+            runs.append(run)
         rows += ms
         if progress is not None:
             progress(f"{controller}/{test}")

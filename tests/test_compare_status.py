@@ -1,0 +1,112 @@
+"""compare: each (controller, test, joint) row is independent of the others.
+
+A step reference below slack (10 N -> -5 N on the tendon rig) asks the tendon force law for a force the
+tendon cannot produce (it would have to push): that case stops at the step instant with status
+``infeasible_force``; the sine test of the same controller around 10 N (amplitude 2 N, always taut) runs.
+"""
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from awiwi_drake.analysis import InfeasibleForceError, SimulationDivergedError, SimulationEventError
+from awiwi_drake.cli import main
+from awiwi_drake.control import compare as compare_pkg
+from awiwi_drake.control.compare import compare_controllers, compare_test_params, stopped_row
+from awiwi_drake.rigs import tendon_rig
+
+STEP_BELOW_SLACK = -15.0   # 10 N + (-15 N) = -5 N: a pushing tendon
+
+
+def _params():
+    # chosen: the shortest windows that still hold the step instant and one sine period after the transient
+    return compare_test_params("tendon-rig", step_size=STEP_BELOW_SLACK, step_duration=0.05, settle_time=0.02,
+                               sine_periods=2.0, sine_frequency=20.0)
+
+
+def test_infeasible_force_row_is_recorded_and_the_other_tests_run():
+    p = _params()
+    cmp = compare_controllers(tendon_rig, ["tendon-pd"], tests=["step", "sine"], params=p)
+    step, sine = cmp.table.get("tendon-pd", "step"), cmp.table.get("tendon-pd", "sine")
+    assert step.status == "infeasible_force"
+    # the law is sampled at 3 kHz: the first sample at or after the step instant asks for -5 N
+    period = 1.0 / 3000.0
+    assert p.step_delay - 1e-9 <= step.failed_at <= p.step_delay + period + 1e-9, step.failed_at
+    assert "tendon_force_reference" in step.flags and "-5" in step.flags
+    assert all(math.isnan(getattr(step, c)) for c in ("rise_time", "overshoot", "peak_input", "tracking_rms"))
+    assert sine.status in ("ok", "flagged") and math.isnan(sine.failed_at)
+    # the sine ran to the end of its window, its metrics are measured, and its tendon never went slack
+    assert [r.test for r in cmp.runs] == ["sine"]          # the stopped case has no trace to plot
+    assert cmp.run("tendon-pd", "sine").t[-1] == pytest.approx(p.sine_periods / p.sine_frequency, abs=1e-9)
+    assert np.isfinite([sine.tracking_rms, sine.gain, sine.phase_deg, sine.peak_input]).all()
+    assert sine.slack_fraction == 0.0
+    assert cmp.table.failed() == [step]
+
+
+def test_stopped_row_names_each_physical_cause():
+    div = SimulationDivergedError("state[0] = inf", t=0.3)
+    ev = SimulationEventError("actuator_saturation on u[0]", kind="actuator_saturation", t=0.1)
+    bad = InfeasibleForceError("f = -1 N")
+    bad.t = 0.2
+    rows = [stopped_row("c", "step", "link", e) for e in (div, ev, bad)]
+    assert [r.status for r in rows] == ["diverged", "actuator_saturation", "infeasible_force"]
+    assert [r.failed_at for r in rows] == [0.3, 0.1, 0.2]
+    settling = stopped_row("c", "step", "link", div, settling=True)
+    assert math.isnan(settling.failed_at) and settling.flags.startswith("while settling")
+
+
+def test_cli_writes_every_row_names_the_failed_one_and_exits_nonzero(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(compare_pkg, "compare_test_params", lambda rig, **kw: _params())
+    code = main(["compare", "--rig", "tendon-rig", "--controllers", "tendon-pd", "--tests", "step,sine",
+                 "--quiet", "--out", str(tmp_path)])
+    out, err = capsys.readouterr()
+    assert code == 1
+    rows = list(csv.DictReader((tmp_path / "metrics.csv").open()))
+    assert [(r["test"], r["status"]) for r in rows][0] == ("step", "infeasible_force")
+    assert rows[1]["test"] == "sine" and rows[1]["status"] in ("ok", "flagged")
+    assert float(rows[0]["failed_at"]) == pytest.approx(_params().step_delay, abs=1.0 / 3000.0 + 1e-9)
+    assert np.isnan(float(rows[0]["rise_time"])) and np.isfinite(float(rows[1]["tracking_rms"]))
+    failed_lines = [ln for ln in err.splitlines() if ln.startswith("compare: ")]
+    assert len(failed_lines) == 1 and "tendon-pd / step / tendon: infeasible_force at t = " in failed_lines[0]
+    assert "1 of 2 rows FAILED" in out
+    assert (tmp_path / "sine.png").exists() and not (tmp_path / "step.png").exists()
+    md = (tmp_path / "metrics.md").read_text()
+    assert "**1 of 2 rows FAILED**" in md and "| tendon-pd | tendon | 0.02" in md and "infeasible_force: " in md
+
+
+def test_finger_disturbance_groups_are_independent():
+    """On a finger the external-torque step is one simulation per joint: the case measured in
+    ``JointDesignParams.lqr_torque_rate``'s source (LQR with a 0.5 Nm/s torque-rate weight: the 0.01 Nm
+    load asks the distribution for a negative force) stops only its own joint's row, after the load starts."""
+    from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.compare import run_standard_tests
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.control.registry import get_entry
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters.joint_design import JointDesignParams
+
+    rig = finger_diagram(finger="index")
+    ctrl = joint_stage_controller(rig, "lqr", params=JointDesignParams().replace(lqr_torque_rate=0.5), rate_hz=9000.0)
+    loop = closed_loop(rig, ctrl, **get_entry("lqr", rig).loop_options)
+    p = compare_test_params(rig, step_duration=0.15, settle_time=0.05)
+    runs, rows = run_standard_tests(loop, controller="lqr", tests=["disturbance"], params=p)
+    stopped = [i for i, r in enumerate(rows) if r.status not in ("ok", "flagged")]
+    ran = [i for i in range(len(rows)) if i not in stopped]
+    assert stopped and ran, [r.status for r in rows]
+    assert all(rows[i].status == "infeasible_force" and rows[i].failed_at >= p.step_delay for i in stopped)
+    assert all(math.isnan(rows[i].stiffness) for i in stopped) and all(np.isfinite(rows[i].stiffness) for i in ran)
+    (run,) = runs
+    assert np.isnan(run.output[:, stopped]).all() and np.isfinite(run.output[:, ran]).all()
+    assert run.t[-1] == pytest.approx(p.step_duration, abs=1e-9)
+    # the figure names the stopped joint's cause and time in its panel, not an empty axis
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from awiwi_drake.control.compare import Comparison, MetricsTable, plot_joint_runs
+    fig, axes = plot_joint_runs(Comparison(runs, MetricsTable(rows), "finger-index"), "disturbance", "index")
+    texts = [" ".join(t.get_text() for t in ax.texts) for ax in axes[:, 0]]
+    for i, text in enumerate(texts):
+        assert ("lqr: infeasible_force at t = " in text) == (i in stopped), texts
+    plt.close(fig)
