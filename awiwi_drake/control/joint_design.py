@@ -181,10 +181,10 @@ def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, ten
     return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
 
 
-def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
+def _restrict(lin: LinearizationResult, stiffness: float) -> tuple[np.ndarray, np.ndarray, float]:
     A, B = lin.A, lin.B
     Cq, Ct = lin.output("joint_angle").C, lin.output("joint_torque").C
-    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A])
+    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A + stiffness * (Cq @ A)])
     scale = np.abs(T @ B).max() if np.abs(T @ B).max() > 0 else 1.0
     for row, nm in ((Cq, "q"), (Cq @ A, "qdot"), (Ct, "tau")):
         if np.abs(row @ B).max() > 1e-9 * scale:          # only tau_dot' may see the input directly
@@ -215,7 +215,7 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
         loop, ctx = force_loop(sub, sub_point, p, tendon_law)
         lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                         outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-        F, G, res = _restrict(lin)
+        F, G, res = _restrict(lin, sub_point["op"].joint_stiffness)
         models.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
                                         res, lin))
     return models
@@ -387,7 +387,7 @@ def _sdre_law(rig, point, c, p, kw, period):
             loop, ctx = force_loop(sub, sub_point, c)
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-            F, G, _ = _restrict(lin)
+            F, G, _ = _restrict(lin, sub_point["op"].joint_stiffness)
             model = JointReducedModel("", j, F, G, 0.0, 0.0, 0.0, (), 0.0, lin)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
@@ -489,7 +489,9 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
     Ct = S.T @ lin.output("joint_torque").C
     k = S.shape[1]
-    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Ct[j] @ A]) for j in range(k)])
+    K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S      # sigma = tau_dot + K_dof qdot (all DoF)
+    Sg = Ct @ A + K_dof @ (Cq @ A)
+    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Sg[j]]) for j in range(k)])
     TA = T @ A
     Az = TA @ np.linalg.pinv(T)
     res = float(np.linalg.norm(TA - Az @ T) / np.linalg.norm(TA))

@@ -72,8 +72,8 @@ def measured_joint_coordinates(coupling, S, Sp, r_m: float, u) -> tuple:
     PS = P @ S
     f, kt, w = u["tendon_force"], u["tendon_stiffness"], u["motor_velocity"]
     tau = -(PS.T @ f)
-    tau_dot = -(PS.T @ (kt * (r_m * w + P @ v)))
-    return Sp @ q, Sp @ v, tau, tau_dot
+    sigma = -(PS.T @ (kt * (r_m * w)))
+    return Sp @ q, Sp @ v, tau, sigma
 
 
 class JointStateFeedbackLaw(StaticLaw):
