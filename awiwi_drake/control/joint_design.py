@@ -145,7 +145,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     M = float(joint_inertia(rig, point["joint_angle"])[dof])
     b = float(joint_damping(rig)[dof, dof])
     design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
-    diagram, plant, drive, names = _link_rig(
+    diagram, plant, drive, names, _ = _link_rig(
         name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=rig.spring,
         coupling=coupling, inertia=M, damping=b, backend="python", hysteresis=HysteresisParams())
     tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
