@@ -79,7 +79,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import smax
-from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain
+from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain, check_gains
 from awiwi_drake.control.registry import rig_kind
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import ImpedanceParams
@@ -210,7 +210,7 @@ class MotorPositionForceLaw(StaticLaw):
 
     Inputs ``tendon_force_reference``, ``tendon_force``, ``tendon_stiffness``, ``motor_velocity`` (size);
     ``Kp_m = B w_m^2``, ``Kd_m = 2 xi_m w_m B`` (:class:`ImpedanceParams` motor bandwidth), ``alpha`` floored
-    at ``min_alpha`` (a slack tendon has ``k_t = 0``), motor friction (3.8) fed forward times ``friction_scale``.
+    at ``min_alpha`` (a slack tendon has ``k_t = 0``; one number, or one per tendon), motor friction (3.8) fed forward times ``friction_scale``.
     """
 
     def __init__(self, motor: MotorParams, params: ImpedanceParams | None = None, *, size: int,
@@ -221,10 +221,11 @@ class MotorPositionForceLaw(StaticLaw):
         wm = check_gain("motor_bandwidth", p.motor_bandwidth, owner=name)
         xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=name)
         self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
-        self.min_alpha = check_gain("min_alpha", min_alpha, owner=name)
+        size = int(size)
+        self.min_alpha = (check_gains("min_alpha", min_alpha, shape=(size,), owner=name, positive=True)
+                          if np.ndim(min_alpha) else check_gain("min_alpha", min_alpha, owner=name))
         self.friction_scale = check_gain("friction_scale", friction_scale, allow_zero=True, owner=name)
         self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=name)
-        size = int(size)
         self.inputs = {"tendon_force_reference": size, "tendon_force": size, "tendon_stiffness": size,
                        "motor_velocity": size}
         self.output_size = size
