@@ -8,7 +8,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
 from _fd import check_system_autodiff_matches_fd
-from awiwi_drake.analysis import linearize, simulate
+from _sampled import sampled_radius
+from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import TendonPathVelocity
@@ -209,25 +210,12 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
 
 
 def _sampled_backstepping_radius(rig, rate_hz, design_rate_hz, regain=None):
-    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold (ideal
-    sensors): the law's state feedback K from Drake's Linearize of the continuous loop (B K = A_cl - A), the plant
-    discretised exactly (matrix exponential of Drake's linearisation)."""
-    from scipy.linalg import expm
+    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold
+    (:func:`_sampled.sampled_radius`), with the law designed for ``design_rate_hz``."""
     law = FingerBacksteppingLaw(rig, rate_hz=design_rate_hz)
     if regain is not None:
         regain(law)
-    op = rig.operating_point()
-    lin = linearize(rig, op)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
-    A_cl = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
-                     output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
-    A, B = lin.A, lin.B
-    K = np.linalg.lstsq(B, A_cl - A, rcond=None)[0]
-    np.testing.assert_allclose(B @ K, A_cl - A, atol=1e-8 * np.abs(A_cl).max())     # the law is state feedback
-    n, m = B.shape
-    E = expm(np.block([[A, B], [np.zeros((m, n + m))]]) / rate_hz)
-    return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ K)))), law
+    return sampled_radius(rig, law, rate_hz), law
 
 
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth"])

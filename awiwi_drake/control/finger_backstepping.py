@@ -25,7 +25,7 @@ inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms
 rest, are left out) and their derivative from ``f'``.  For that model
 
     V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,   (Kp symmetric positive definite)
-    V' = -e'^T (Kd + B_q) e' - K3 |z3|^2 - K4 |z4|^2 <= 0
+    V' = -e'^T (Kd + B_q) e' - z3^T K3 z3 - z4^T K4 z4 <= 0      (K3, K4 diagonal, one gain per tendon)
 
 (the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
 ``beta``).  Output port ``lyapunov`` gives ``V``.  With one DoF and ``P = [-r_q, r_q]^T`` it is the
@@ -68,7 +68,7 @@ from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
 
-__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller"]
+__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "check_backstepping_springs"]
 
 
 def _values(a) -> np.ndarray:
@@ -82,7 +82,10 @@ class FingerBacksteppingLaw(StaticLaw):
     """The law of the module docstring (one call: all DoF and tendons of a finger or the hand)."""
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None,
-                 rate_hz: float | None = 3000.0):
+                 rate_hz: float | None = 3000.0, joint_gains: tuple | None = None, force_gains: tuple | None = None):
+        """``joint_gains = (Kp, Kd)`` (k x k) replaces the mode design, ``force_gains = (K3, K4)`` (per tendon,
+        (m,) or scalars) the ``force_bandwidth`` of every tendon (e.g. the ch. 16 selection,
+        :func:`awiwi_drake.control.optimal_gains.select_finger_force_gains`); each must be positive."""
         p = params or HandChainParams()
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
@@ -124,7 +127,24 @@ class FingerBacksteppingLaw(StaticLaw):
         self.Kp = (V * k_modes) @ V.T
         self.Kd = (V * (2.0 * zeta * np.sqrt(k_modes * mu))) @ V.T
         self.mode_stiffness = k_modes
-        self.K3 = self.K4 = float(wf)
+        if joint_gains is not None:
+            Kp, Kd = (np.asarray(g, dtype=float) for g in joint_gains)
+            if Kp.shape != (k, k) or Kd.shape != (k, k):
+                raise ValueError(f"finger backstepping: joint_gains must be two {k} x {k} matrices (Kp, Kd), got "
+                                 f"{Kp.shape}, {Kd.shape}")
+            if np.linalg.eigvalsh(0.5 * (Kp + Kp.T)).min() <= 0 or np.linalg.eigvalsh(0.5 * (Kd + Kd.T)).min() < 0:
+                raise ValueError("finger backstepping: joint_gains Kp must be positive definite and Kd positive "
+                                 "semi-definite (the Lyapunov function of the module docstring)")
+            self.Kp, self.Kd = Kp, Kd
+        self.K3 = np.full(m, float(wf))
+        self.K4 = np.full(m, float(wf))
+        if force_gains is not None:
+            for name, g in zip(("K3", "K4"), force_gains):
+                g = np.broadcast_to(np.asarray(g, dtype=float), (m,)).copy()
+                if not np.all(np.isfinite(g) & (g > 0)):
+                    raise ValueError(f"finger backstepping: force_gains {name} = {g} must be finite and > 0 [1/s] "
+                                     f"(one per tendon, {m})")
+                setattr(self, name, g)
         self.friction_scale = float(p.friction_scale)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
         parts = coupling.parts
@@ -195,7 +215,12 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
                                    rate_hz: float | None = 3000.0):
     """Registered factory ``backstepping`` for fingers and the hand (see the module docstring);
     ``rate_hz`` is the control rate the joint gains are designed for (the registry's 3 kHz)."""
+    check_backstepping_springs(rig)
+    return StaticLawController(FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz))
+
+
+def check_backstepping_springs(rig: Any) -> None:
+    """Raise unless every tendon's spring law is strictly increasing (phi' > 0, section 15.4)."""
     for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
         if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
             raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")
-    return StaticLawController(FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz))
