@@ -172,7 +172,8 @@ class TendonForceStage(Diagram):
     ``distribution``: ``"optimal"`` / ``"algorithm2"`` (ch. 7, sampled every ``1/rate_hz``, needs
     ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).  ``tendon_law``: ``"force"``
     (10.2) or ``"motor-position"`` (the tendon level of the two-time-scale (11.3),
-    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``).
+    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``, its motor
+    damping relative to the tendon path).
     ``spring``: one spring law for every tendon, or a
     :class:`~awiwi_drake.components.spring.TendonSprings` (:func:`rig_springs`): each tendon's force map
     (slope ``alpha_i = r_m k_t,i``, gains (10.11)), slope floor and distribution stiffness table
@@ -216,7 +217,7 @@ class TendonForceStage(Diagram):
             from awiwi_drake.control.impedance import MotorPositionForceLaw
             k_min = springs.stiffness(springs.inverse_force(np.full(m, gains.min_schedule_force)))
             law = MotorPositionForceLaw(drive_params.motor, size=m, friction_scale=p.friction_scale,
-                                        min_alpha=r_m * (k_min[0] if springs.uniform else k_min))
+                                        min_alpha=r_m * (k_min[0] if springs.uniform else k_min), path_velocity=True)
         else:
             raise ValueError(f"TendonForceStage: tendon_law = {tendon_law!r}; use 'force' or 'motor-position'")
         force = b.AddNamedSystem("tendon_force_control", StaticLawController(law))

@@ -211,10 +211,20 @@ class MotorPositionForceLaw(StaticLaw):
     Inputs ``tendon_force_reference``, ``tendon_force``, ``tendon_stiffness``, ``motor_velocity`` (size);
     ``Kp_m = B w_m^2``, ``Kd_m = 2 xi_m w_m B`` (:class:`ImpedanceParams` motor bandwidth), ``alpha`` floored
     at ``min_alpha`` (a slack tendon has ``k_t = 0``; one number, or one per tendon), motor friction (3.8) fed forward times ``friction_scale``.
+
+    ``path_velocity=True`` (the finger/hand chain) adds the input ``tendon_path_velocity`` ``v = P(q) qdot``
+    [m/s] and damps the motor velocity *relative to the tendon path*, ``Kd_m (thetadot + v / r_m)`` (the
+    spring's elongation rate over ``r_m``, as (10.2)'s force rate estimate): the motor velocity that keeps the
+    force constant while the joints move is ``-v / r_m``, not 0.  Damping the absolute motor velocity instead
+    acts on the joints as a viscous damping ``sum_i P_ij^2 Kd_m / r_m^2`` (about 4 Nm s/rad on an index joint,
+    against stiffnesses of 0.002-0.2 Nm/rad): measured on the index, the per-joint designs then had real
+    poles at -13.7, -5.9, -1.3 and -0.35 1/s (abduction .. DIP), and on the hand a 2 Hz sine reached 3 % of
+    its amplitude.  On the joint rig (ch. 11) the link is far heavier and this term is the thesis's.
     """
 
     def __init__(self, motor: MotorParams, params: ImpedanceParams | None = None, *, size: int,
-                 min_alpha: float, friction_scale: float = 1.0, name: str = "motor_position_control"):
+                 min_alpha: float, friction_scale: float = 1.0, name: str = "motor_position_control",
+                 path_velocity: bool = False):
         p = params or ImpedanceParams()
         self.name, self.motor = name, motor
         B = check_gain("inertia", motor.inertia, owner=name)
@@ -228,13 +238,17 @@ class MotorPositionForceLaw(StaticLaw):
         self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=name)
         self.inputs = {"tendon_force_reference": size, "tendon_force": size, "tendon_stiffness": size,
                        "motor_velocity": size}
+        self.path_velocity = bool(path_velocity)
+        if self.path_velocity:
+            self.inputs["tendon_path_velocity"] = size
         self.output_size = size
 
     def __call__(self, u):
         from awiwi_drake.components import motor_friction_torque
         w = u["motor_velocity"]
+        w_rel = w + u["tendon_path_velocity"] / self.r_m if self.path_velocity else w
         alpha = smax(self.r_m * u["tendon_stiffness"], self.min_alpha)
-        return (motor_position_command(u["tendon_force_reference"], u["tendon_force"], w, alpha, self.r_m,
+        return (motor_position_command(u["tendon_force_reference"], u["tendon_force"], w_rel, alpha, self.r_m,
                                        self.kp_m, self.kd_m)
                 - self.friction_scale * motor_friction_torque(w, self.motor))
 
