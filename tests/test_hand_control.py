@@ -342,24 +342,6 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
     assert np.all(np.diag(jac["motor_torque"][0][:, 12:20]) < 0.0)
 
 
-@pytest.mark.parametrize("controller", ["cascaded"])
-def test_finger_controllers_refuse_per_tendon_spring_laws(controller):
-    """The chain's force map / distribution model every tendon with the rig's one spring law: a rig with
-    params.tendon_springs is refused with a line naming the option (not controlled as if it had one law);
-    designing on the nominal rig stays possible. (The backstepping uses each tendon's own law: see
-    test_finger_backstepping_closed_loop_poles_equal_the_design.)"""
-    from awiwi_drake.parameters.components import TendonParams
-    from awiwi_drake.parameters.hand import FingerRigParams
-    base = FingerRigParams.for_finger("index")
-    stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
-    rig = finger_diagram(finger="index", params=base.replace(tendon_springs=(("index_h3", stiff),)))
-    with pytest.raises(ValueError, match=r"tendon_springs: index_h3"):
-        make_controller(controller, rig)
-    nominal = finger_diagram(finger="index", params=base)
-    loop = closed_loop(rig, make_controller(controller, nominal), **get_entry(controller, nominal).loop_options)
-    assert loop.diagram.HasOutputPort("joint_angle_estimate")
-
-
 def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_estimation_error():
     """A step the distribution cannot serve within [f_min, f_max] (bounds 20 +- 1 N around the 20 N
     pretension; the 0.2 rad step asks for more torque than 1 N of force difference gives) is flagged in
