@@ -43,7 +43,7 @@ from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multipl
 
 from ..components.drive import build_tendon_drive
 from ..components.motor import motor_ripple_torque
-from ..components.spring import tendon_spring
+from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
@@ -65,8 +65,9 @@ class HandRig(Rig):
     offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
     spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
-    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` one law
-    per tendon (``params.tendon_springs`` overrides).
+    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` the
+    :class:`~awiwi_drake.components.spring.TendonSprings` of the tendons (one law per tendon,
+    ``params.tendon_springs`` overrides).
     """
 
     drive_coupling: Any = None
@@ -118,7 +119,7 @@ class HandRig(Rig):
 
 
 
-def tendon_spring_laws(p, tendon_names):
+def tendon_spring_laws(p, tendon_names) -> TendonSprings:
     """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
 
     Equal parameter sets share one law object (one fit, one kernel branch).
@@ -135,19 +136,7 @@ def tendon_spring_laws(p, tendon_names):
         if sp.hysteresis != p.spring.hysteresis:
             raise ValueError(f"tendon_springs[{tendon!r}]: hysteresis is set for all tendons by spring.hysteresis")
         laws[names.index(tendon)] = tendon_spring(sp)
-    return laws
-
-
-def _per_tendon(laws, method, values):
-    """``law_i.method(values_i)`` for each tendon (float arrays), grouping shared laws."""
-    values = np.asarray(values, dtype=float)
-    out = np.empty_like(values)
-    groups = {}
-    for i, law in enumerate(laws):
-        groups.setdefault(id(law), (law, []))[1].append(i)
-    for law, idx in groups.values():
-        out[idx] = np.asarray(getattr(law, method)(values[idx]), dtype=float)
-    return out
+    return TendonSprings(laws)
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
@@ -160,9 +149,6 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         raise ValueError(f"{name}: guide_friction=True needs backend='compiled' (the python and symbolic "
                          f"drives do not carry the guide friction state), got backend={backend!r}; "
                          "use params.with_physics(hysteresis=False, guide_friction=False) for them")
-    if p.tendon_springs and not compiled:
-        raise ValueError(f"{name}: tendon_springs (one spring law per tendon) needs backend='compiled', "
-                         f"got backend={backend!r}")
     b = DiagramBuilder()
     plant, models = plant_factory(b)
     n = plant.num_positions()
@@ -173,14 +159,14 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     drive_coupling = HandCoupling(parts, num_offsets=m) if wrist else coupling
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
-    offsets = _per_tendon(laws, "inverse_force", np.full(m, p.pretension))
+    offsets = laws.inverse_force(np.full(m, p.pretension))
     extra_drive = {}
     if compiled:
         from ..components.fused_drive import GuideFrictionModel
         gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
                                 p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
         extra_drive = dict(guide_friction=gf, rate_joints=n)
-    drive = build_tendon_drive(motor=p.motor, spring=laws if compiled else spring, coupling=drive_coupling,
+    drive = build_tendon_drive(motor=p.motor, spring=laws, coupling=drive_coupling,
                                offsets=offsets, backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive",
                                **extra_drive)
     d = b.AddSystem(drive.diagram)
@@ -301,7 +287,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
         bad = [coupling.tendon_names[i] for i in np.flatnonzero(f <= 0)]
         raise ValueError(f"{name}: pretension {f0} N leaves tendon(s) {', '.join(bad)} slack at this "
                          f"operating point (forces {np.round(f, 3)} N)")
-    x = _per_tendon(laws, "inverse_force", f)
+    x = laws.inverse_force(f)
     h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
     w_off = np.zeros(m)
     wa = np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, dtype=float).ravel()
@@ -320,7 +306,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
                          f"motor.torque_limit = {p.motor.torque_limit} N m")
     # the hysteresis and guide friction states (Dahl) rest at 0: the pretension is the elastic force
     state = np.concatenate([q, np.zeros(n), theta, np.zeros(m), np.zeros(num_friction_states)])
-    K_t = _per_tendon(laws, "stiffness", x)
+    K_t = laws.stiffness(x)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
     return OperatingPoint(state, u, tau_ext, pretension=f0, joint_angle=q, tendon_force=f, elongation=x,
@@ -338,7 +324,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
         Default ``FingerRigParams.for_finger(finger)``.
     backend : {"compiled", "symbolic", "python"}
         The tendon drive's backend (``awiwi_drake.components.drive``); the thesis's
-        physics (hysteresis, per-tendon springs, guide friction in the drive) needs "compiled":
+        physics (hysteresis, guide friction in the drive) needs "compiled":
         pass ``params.with_physics(hysteresis=False, guide_friction=False)`` for the others.
     wrist : bool
         Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
