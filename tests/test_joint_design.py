@@ -157,10 +157,11 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
     ``gamma1 gamma2 / (1 + (gamma1 omega)^2)`` is never steeper than at rest, so the nonlinear loop, faster
     while the motors move, stays inside the at-rest response.  (The former check only asked that the error
     shrank; the loops were 'slower than their linearisation' because that was the design's, in motion.)
-    Tendons stay taut, and the full-state stages saturate in at most the compare flag's 5 % of the samples."""
+    Tendons stay taut, and no command saturates in the second half of the run (no limit cycle).  The
+    two-time-scale loop has a slow real pole at rest on the right (+1.5 1/s: its motor-position tendon level
+    against the at-rest friction); over 0.1 s the bound still holds."""
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.joint_design import sampled_loop_poles
-    from awiwi_drake.parameters.control import CompareTestParams
     for name in ("pd", "two-time-scale", "pole-placement", "lqr"):
         assert name in controller_names(f"finger-{finger}") and name in controller_names("hand")
         rig = finger_diagram(finger=finger)
@@ -179,10 +180,12 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
         e_sim = abs(res["joint_angle"][-1][1] - op.joint_angle[1] - dq[1])
         e_lin = abs(q_lin[-1][1] - dq[1])
         assert e_sim <= e_lin, (name, e_sim, e_lin)
+        # no limit cycle (the full-state stages used to saturate 82-99 % of such a step at 3 kHz): whatever
+        # saturates is the start of the step, the force loop catching up with the reference jump
+        late = res.t >= 0.5 * res.t[-1]
+        assert not np.any(np.abs(res["motor_torque_command"][late]) > 3.0), name
         if name != "two-time-scale":
             assert linear.spectral_radius < 1.0, (name, linear.slowest())
-            u = np.abs(res["motor_torque_command"])
-            assert np.mean(np.any(u > 3.0, axis=1)) <= CompareTestParams().max_saturated_fraction
 
 
 def _late_estimator(rig, period):
