@@ -141,6 +141,7 @@ def test_sampled_rig_loop_is_the_continuous_loop_under_fixed_step_rk3_to_round_o
         ref = cont[name]
         np.testing.assert_allclose(samp[name], ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)), err_msg=name)
     assert [(e.kind, e.channel) for e in samp.events] == [(e.kind, e.channel) for e in cont.events]
+    np.testing.assert_allclose(samp.final_state, cont.final_state, rtol=1e-11, atol=1e-14)   # the rig's state at the end
     assert any(e.kind == "actuator_saturation" for e in cont.events)    # the step saturates the motors
 
 
