@@ -107,19 +107,20 @@ def test_per_tendon_gains_and_the_sampled_loop_is_stable_on_the_index(index_sele
 
 
 def test_compare_cli_runs_optimal_backstepping_on_the_index(tmp_path):
-    """`awiwi-drake compare --rig finger-index --controllers backstepping,optimal-backstepping --short` (sine test):
-    one row per controller and joint, none stopped, and the selected gains track the 2 Hz sine through the
-    estimator without saturating (the box's upper corner FingerOptimalGainsCase.gain_high was chosen for this:
-    the f_s / 4 corner saturated 86 % of this sine), the sine moving every joint (gain > 0.5)."""
+    """`awiwi-drake compare --rig finger-index --controllers backstepping,optimal-backstepping --short` (sine test;
+    with the position variant too): one row per controller and joint, none stopped, and the selected gains track
+    the 2 Hz sine through the estimator without saturating (the box's upper corner FingerOptimalGainsCase.gain_high
+    was chosen for this: the f_s / 4 corner saturated 86 % of this sine), the sine moving every joint (gain > 0.5);
+    so does the position variant."""
     import csv
     from awiwi_drake.cli import main
     out = tmp_path / "index"
-    rc = main(["compare", "--rig", "finger-index", "--controllers", "backstepping,optimal-backstepping",
+    rc = main(["compare", "--rig", "finger-index", "--controllers", "backstepping,optimal-backstepping,backstepping-position",
                "--tests", "sine", "--short", "--quiet", "--out", str(out)])
     assert rc == 0
     rows = list(csv.DictReader((out / "metrics.csv").open()))
     assert {(r["controller"], r["joint"]) for r in rows} == {
-        (c, j) for c in ("backstepping", "optimal-backstepping") for j in ("q20", "q21", "q22", "q23")}
+        (c, j) for c in ("backstepping", "optimal-backstepping", "backstepping-position") for j in ("q20", "q21", "q22", "q23")}
     assert all(r["status"] == "ok" for r in rows), [r["status"] for r in rows]
-    opt = [r for r in rows if r["controller"] == "optimal-backstepping"]
+    opt = [r for r in rows if r["controller"] in ("optimal-backstepping", "backstepping-position")]
     assert all(float(r["saturated_fraction"]) == 0.0 and float(r["gain"]) > 0.5 for r in opt), opt

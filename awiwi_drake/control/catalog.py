@@ -49,6 +49,9 @@ _BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", des
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
                  "joint from its reduced model"))
+_BUILTIN.append(("pd", _lazy("joint_design", "joint_stage_controller", design="pd"), ("finger", "hand"),
+                 "PD on the estimated joint angle per joint, (Kp, Kd) placing one pair at 60 rad/s, damping 0.7, on the "
+                 "joint's reduced model (torque chain, own tendons) -> force distribution (ch. 7) -> force PD (10.2)"))
 _BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
                  ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
                  "tendon towards the force (11.3); damping per joint from its reduced model"))
@@ -83,6 +86,15 @@ register_controller("backstepping", _lazy("finger_backstepping", "finger_backste
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
                                 "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")
+for _variant, _doc in (("position", "position backstepping per DoF (15.2 steps on the link: z2 = e' + k1 e, "
+                                     "V = |e|^2/2 + |z2|^2/2 + ...) through the 15.5 tendon steps, motor torques "
+                                     "directly; 3 kHz"),
+                        ("nonlinear-spring", "impedance backstepping with the steps on the joint torques (15.71)-"
+                                             "(15.81), tau = -(P S)^T phi(x) with each tendon's spring law, the "
+                                             "tendon forces' null space held at the pretension; 3 kHz")):
+    register_controller(f"backstepping-{_variant}", _lazy("finger_backstepping", "finger_backstepping_controller",
+                                                          variant=_variant),
+                        rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0}, description=_doc)
 
 # Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
 # against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).
