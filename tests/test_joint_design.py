@@ -158,8 +158,9 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
     while the motors move, stays inside the at-rest response.  (The former check only asked that the error
     shrank; the loops were 'slower than their linearisation' because that was the design's, in motion.)
     Tendons stay taut, and no command saturates in the second half of the run (no limit cycle).  The
-    two-time-scale loop has a slow real pole at rest on the right (+1.5 1/s: its motor-position tendon level
-    against the at-rest friction); over 0.1 s the bound still holds."""
+    two-time-scale loop has a slow real pole at rest on the right (+1.5 1/s on the ring: the motor ripple's slope
+    at the operating point is a negative stiffness on the motor angles, a cogging detent's edge, which its
+    motor-position tendon level does not cancel; with the ripple off it is stable); over 0.1 s the bound holds."""
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.joint_design import sampled_loop_poles
     for name in ("pd", "two-time-scale", "pole-placement", "lqr"):
