@@ -8,7 +8,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
 from _fd import check_system_autodiff_matches_fd
-from awiwi_drake.analysis import linearize, simulate
+from _sampled import sampled_radius
+from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import TendonPathVelocity
@@ -209,25 +210,12 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
 
 
 def _sampled_backstepping_radius(rig, rate_hz, design_rate_hz, regain=None):
-    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold (ideal
-    sensors): the law's state feedback K from Drake's Linearize of the continuous loop (B K = A_cl - A), the plant
-    discretised exactly (matrix exponential of Drake's linearisation)."""
-    from scipy.linalg import expm
+    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold
+    (:func:`_sampled.sampled_radius`), with the law designed for ``design_rate_hz``."""
     law = FingerBacksteppingLaw(rig, rate_hz=design_rate_hz)
     if regain is not None:
         regain(law)
-    op = rig.operating_point()
-    lin = linearize(rig, op)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
-    A_cl = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
-                     output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
-    A, B = lin.A, lin.B
-    K = np.linalg.lstsq(B, A_cl - A, rcond=None)[0]
-    np.testing.assert_allclose(B @ K, A_cl - A, atol=1e-8 * np.abs(A_cl).max())     # the law is state feedback
-    n, m = B.shape
-    E = expm(np.block([[A, B], [np.zeros((m, n + m))]]) / rate_hz)
-    return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ K)))), law
+    return sampled_radius(rig, law, rate_hz), law
 
 
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth"])
@@ -262,24 +250,6 @@ def test_hand_backstepping_sampled_at_3khz_is_stable():
     from awiwi_drake.hand import hand_diagram
     radius, _ = _sampled_backstepping_radius(hand_diagram(wrist=False), 3000.0, 3000.0)
     assert radius <= 1.0 + 1e-9, radius
-
-
-def test_finger_backstepping_lyapunov_function_decreases():
-    """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
-    loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index.
-    The ideal plant: V is the Lyapunov function of the frictionless, hysteresis-free design model."""
-    rig = _ideal_rig()
-    law = FingerBacksteppingLaw(rig)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    op = rig.operating_point()
-    ref = op.joint_angle + 0.1
-    ctx = loop.create_context(op, references={"joint_angle_reference": ref})
-    names = ("joint_angle", "joint_velocity", "elongation", "motor_angle", "motor_velocity")
-    res = simulate(loop.diagram, ctx, 0.05, log=names, max_step=5e-4, accuracy=1e-7)
-    V = np.array([law.terms(dict(joint_angle_reference=ref, **{n: res[n][i] for n in names}))["V"]
-                  for i in range(len(res.t))])
-    assert V[-1] < 0.05 * V[0]
-    assert np.max(np.diff(V)) <= 1e-6 * V[0], np.max(np.diff(V)) / V[0]
 
 
 @pytest.mark.parametrize("controller", ["lqr", "backstepping"])
@@ -370,24 +340,6 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
     assert np.all(np.diag(T[:, :4]) > 0.0)
     np.testing.assert_allclose(T[:, :4], np.diag(np.diag(T[:, :4])), atol=1e-12)
     assert np.all(np.diag(jac["motor_torque"][0][:, 12:20]) < 0.0)
-
-
-@pytest.mark.parametrize("controller", ["cascaded"])
-def test_finger_controllers_refuse_per_tendon_spring_laws(controller):
-    """The chain's force map / distribution model every tendon with the rig's one spring law: a rig with
-    params.tendon_springs is refused with a line naming the option (not controlled as if it had one law);
-    designing on the nominal rig stays possible. (The backstepping uses each tendon's own law: see
-    test_finger_backstepping_closed_loop_poles_equal_the_design.)"""
-    from awiwi_drake.parameters.components import TendonParams
-    from awiwi_drake.parameters.hand import FingerRigParams
-    base = FingerRigParams.for_finger("index")
-    stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
-    rig = finger_diagram(finger="index", params=base.replace(tendon_springs=(("index_h3", stiff),)))
-    with pytest.raises(ValueError, match=r"tendon_springs: index_h3"):
-        make_controller(controller, rig)
-    nominal = finger_diagram(finger="index", params=base)
-    loop = closed_loop(rig, make_controller(controller, nominal), **get_entry(controller, nominal).loop_options)
-    assert loop.diagram.HasOutputPort("joint_angle_estimate")
 
 
 def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_estimation_error():

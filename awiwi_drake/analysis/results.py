@@ -80,7 +80,9 @@ class SimulationResult:
         Monitor events (slack, saturation, over-range) in time order.
     info : dict
         How the run was made: ``mode`` (``fixed_step``/``error_controlled``),
-        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``.
+        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``,
+        ``steps`` (integrator steps; discrete updates when the diagram has no continuous state),
+        ``sampled_plants`` (names of the plants integrated inside their discrete update).
     final_context : Context or None
         Context of the simulated diagram at the end (not saved by :meth:`save`).
     """

@@ -83,3 +83,20 @@ register_controller("backstepping", _lazy("finger_backstepping", "finger_backste
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
                                 "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")
+for _variant, _doc in (("position", "position backstepping per DoF (15.2 steps on the link: z2 = e' + k1 e, "
+                                     "V = |e|^2/2 + |z2|^2/2 + ...) through the 15.5 tendon steps, motor torques "
+                                     "directly; 3 kHz"),
+                        ("nonlinear-spring", "impedance backstepping with the steps on the joint torques (15.71)-"
+                                             "(15.81), tau = -(P S)^T phi(x) with each tendon's spring law, the "
+                                             "tendon forces' null space held at the pretension; 3 kHz")):
+    register_controller(f"backstepping-{_variant}", _lazy("finger_backstepping", "finger_backstepping_controller",
+                                                          variant=_variant),
+                        rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0}, description=_doc)
+
+# Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
+# against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).
+register_controller("optimal-backstepping", _lazy("optimal_gains", "finger_optimal_backstepping_controller"),
+                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
+                    description="15.5 backstepping with K3, K4 per DoF selected by ch. 16 (least squares to the "
+                                "DoF's LQR, Table 16.1 weights, R the most aggressive the 3 kHz loop follows); "
+                                "impedance as backstepping")

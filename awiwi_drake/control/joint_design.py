@@ -8,7 +8,8 @@ Drake (:func:`joint_subsystem`, :func:`reduced_joint_models`):
 
 * a one-DoF link with the DoF's inertia ``M_jj = (S^T M(q_op) S)_jj`` and bearing damping;
 * the tendons acting on it (column ``j`` of ``P(q_op) S``, ``h = P_j q``) with the finger's motors,
-  spring law and operating-point forces (``components`` drive, the rig builder of ``rigs``);
+  each tendon's own spring law (:func:`~awiwi_drake.control.chain.rig_springs`: ``params.tendon_springs``
+  overrides) and operating-point forces (``components`` drive, the rig builder of ``rigs``);
 * the motor friction linearised in motion (:func:`design_motor`);
 * closed by the chain's own force stage (:class:`~awiwi_drake.control.chain.TendonForceStage`:
   sharing (15.88), the (10.2) force law bank with the chain's gains, friction and ripple
@@ -61,7 +62,7 @@ from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator, Li
 
 from awiwi_drake.analysis.linear import LinearizationResult, linearize
 from awiwi_drake.control.base import check_rate, closed_loop
-from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point
+from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point, rig_springs
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
 from awiwi_drake.control.linear import reference_maps
@@ -145,8 +146,9 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     M = float(joint_inertia(rig, point["joint_angle"])[dof])
     b = float(joint_damping(rig)[dof, dof])
     design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
-    diagram, plant, drive, names = _link_rig(
-        name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=rig.spring,
+    springs = rig_springs(rig).subset(active)          # each of the DoF's tendons with its own law
+    diagram, plant, drive, names, _ = _link_rig(
+        name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=springs,
         coupling=coupling, inertia=M, damping=b, backend="python", hysteresis=HysteresisParams())
     tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
     tau = tau0 if torque is None else float(torque)
@@ -155,15 +157,15 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     if np.any(f <= 0):
         raise ValueError(f"joint_subsystem: joint torque {tau} Nm slackens a tendon of {name} (forces {f} N)")
     r_m = design_params.motor.pulley_radius
-    x = np.asarray(rig.spring.inverse_force(f), dtype=float)
+    x = springs.inverse_force(f)
     theta = x / r_m                                    # h(0) = 0, no offsets: x = r_m theta at q = 0
     from awiwi_drake.components.motor import motor_ripple_torque
     u = r_m * f - np.asarray(motor_ripple_torque(theta, design_params.motor), dtype=float)
-    kt = np.asarray(rig.spring.stiffness(x), dtype=float)
+    kt = springs.stiffness(x)
     op = OperatingPoint(np.concatenate([[0.0, 0.0], theta, np.zeros(active.size)]), u, np.array([-tau]),
                         joint_angle=np.zeros(1), tendon_force=f, elongation=x, tendon_stiffness=kt,
                         joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
-    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, rig.spring,
+    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, springs,
               drive=drive, coupling=coupling, tension_only=True)
     sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
                      torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])

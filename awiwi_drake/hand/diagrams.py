@@ -52,7 +52,7 @@ from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multipl
 
 from ..components.drive import TendonDrive, build_tendon_drive
 from ..components.motor import motor_ripple_torque
-from ..components.spring import tendon_spring
+from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
@@ -74,8 +74,9 @@ class HandRig(Rig):
     offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
     spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
-    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` one law
-    per tendon (``params.tendon_springs`` overrides).
+    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` the
+    :class:`~awiwi_drake.components.spring.TendonSprings` of the tendons (one law per tendon,
+    ``params.tendon_springs`` overrides).
     """
 
     drive_coupling: Any = None
@@ -127,7 +128,7 @@ class HandRig(Rig):
 
 
 
-def tendon_spring_laws(p, tendon_names):
+def tendon_spring_laws(p, tendon_names) -> TendonSprings:
     """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
 
     Equal parameter sets share one law object (one fit, one kernel branch).
@@ -144,19 +145,7 @@ def tendon_spring_laws(p, tendon_names):
         if sp.hysteresis != p.spring.hysteresis:
             raise ValueError(f"tendon_springs[{tendon!r}]: hysteresis is set for all tendons by spring.hysteresis")
         laws[names.index(tendon)] = tendon_spring(sp)
-    return laws
-
-
-def _per_tendon(laws, method, values):
-    """``law_i.method(values_i)`` for each tendon (float arrays), grouping shared laws."""
-    values = np.asarray(values, dtype=float)
-    out = np.empty_like(values)
-    groups = {}
-    for i, law in enumerate(laws):
-        groups.setdefault(id(law), (law, []))[1].append(i)
-    for law, idx in groups.values():
-        out[idx] = np.asarray(getattr(law, method)(values[idx]), dtype=float)
-    return out
+    return TendonSprings(laws)
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
@@ -169,9 +158,6 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         raise ValueError(f"{name}: guide_friction=True needs backend='compiled' (the python and symbolic "
                          f"drives do not carry the guide friction state), got backend={backend!r}; "
                          "use params.with_physics(hysteresis=False, guide_friction=False) for them")
-    if p.tendon_springs and not compiled:
-        raise ValueError(f"{name}: tendon_springs (one spring law per tendon) needs backend='compiled', "
-                         f"got backend={backend!r}")
     b = DiagramBuilder()
     sg = SceneGraph() if compiled and visual else None
     plant, models = plant_factory(None, sg) if compiled else plant_factory(b, None)
@@ -183,7 +169,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     drive_coupling = HandCoupling(parts, num_offsets=m) if wrist else coupling
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
-    offsets = _per_tendon(laws, "inverse_force", np.full(m, p.pretension))
+    offsets = laws.inverse_force(np.full(m, p.pretension))
     rows = _wrist_rows(parts)
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
@@ -193,7 +179,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     if compiled:
         model = _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg)
     else:
-        drive = _add_multibody_plant(b, p, plant, spring, drive_coupling, offsets, backend, G, rows, wrist, visual)
+        drive = _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G, rows, wrist, visual)
     diagram = b.Build()
     diagram.set_name(name)
     if compiled:        # the drive lives inside the one plant system: its handle points at the rig
@@ -234,7 +220,7 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
     n, m = coupling.num_joints, coupling.num_tendons
     gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
                             p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
-    model = DriveModel(p.motor, tuple(laws), drive_coupling, offsets, p.motor.pulley_radius, p.spring.hysteresis,
+    model = DriveModel(p.motor, laws.laws, drive_coupling, offsets, p.motor.pulley_radius, p.spring.hysteresis,
                        gf, n)
     dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, LinkModel(plant, G)))
     if wrist:
@@ -254,10 +240,10 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
     return model
 
 
-def _add_multibody_plant(b, p, plant, spring, drive_coupling, offsets, backend, G, rows, wrist, visual):
+def _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G, rows, wrist, visual):
     """The python / symbolic backends: MultibodyPlant + the drive sub-diagram, wired through the plant's ports."""
     n, m = plant.num_positions(), drive_coupling.num_tendons
-    drive = build_tendon_drive(motor=p.motor, spring=spring, coupling=drive_coupling, offsets=offsets,
+    drive = build_tendon_drive(motor=p.motor, spring=laws, coupling=drive_coupling, offsets=offsets,
                                backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
     d = b.AddSystem(drive.diagram)
     split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
@@ -348,7 +334,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
         bad = [coupling.tendon_names[i] for i in np.flatnonzero(f <= 0)]
         raise ValueError(f"{name}: pretension {f0} N leaves tendon(s) {', '.join(bad)} slack at this "
                          f"operating point (forces {np.round(f, 3)} N)")
-    x = _per_tendon(laws, "inverse_force", f)
+    x = laws.inverse_force(f)
     h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
     w_off = np.zeros(m)
     wa = np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, dtype=float).ravel()
@@ -367,7 +353,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
                          f"motor.torque_limit = {p.motor.torque_limit} N m")
     # the hysteresis and guide friction states (Dahl) rest at 0: the pretension is the elastic force
     state = np.concatenate([q, np.zeros(n), theta, np.zeros(m), np.zeros(num_friction_states)])
-    K_t = _per_tendon(laws, "stiffness", x)
+    K_t = laws.stiffness(x)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
     return OperatingPoint(state, u, tau_ext, pretension=f0, joint_angle=q, tendon_force=f, elongation=x,
@@ -385,7 +371,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
         Default ``FingerRigParams.for_finger(finger)``.
     backend : {"compiled", "symbolic", "python"}
         The tendon drive's backend (``awiwi_drake.components.drive``); the thesis's
-        physics (hysteresis, per-tendon springs, guide friction in the drive) needs "compiled":
+        physics (hysteresis, guide friction in the drive) needs "compiled":
         pass ``params.with_physics(hysteresis=False, guide_friction=False)`` for the others.
     wrist : bool
         Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
