@@ -125,10 +125,11 @@ def test_plant_system_expression_equals_float_and_ports_are_lean(ring_on):
     assert HandDynamics_[AutoDiffXd] is not None
 
 
-def test_hand_with_physics_on_linearises_at_rest_with_the_multibody_mass_matrix():
-    """Linearize on the one-system hand: the joint rows of A are -M^-1 (K_q) with M from MultibodyPlant."""
+def test_hand_linearises_at_rest_with_the_multibody_mass_matrix():
+    """Linearize on the one-system hand (default physics: hysteresis states): the velocity block of A is
+    ``-M^-1 (D + G_v)`` with M and the joint damping D from MultibodyPlant."""
     from awiwi_drake.analysis import linearize
-    rig = hand_diagram(params=HandRigParams().with_physics(**ON))
+    rig = hand_diagram()
     op = rig.operating_point()
     lin = linearize(rig, op)
     n = rig.num_joints
