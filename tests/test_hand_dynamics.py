@@ -142,3 +142,27 @@ def test_hand_linearises_at_rest_with_the_multibody_mass_matrix():
     Gv = rig.coupling_gain[:, n:]
     Avv = lin.A[n:2 * n, n:2 * n]
     np.testing.assert_allclose(M @ Avv, -(D + Gv), atol=1e-9 * np.abs(D + Gv).max())
+
+
+def test_link_geometry_poses_are_the_plant_body_poses_and_convert():
+    """The compiled finger is drawn from its joint angles: every geometry frame gets its body's pose."""
+    from pydrake.geometry import SceneGraph
+    from awiwi_drake.hand.plant import make_finger_plant
+    from awiwi_drake.hand.systems import LinkGeometryPoses_
+    sg = SceneGraph()
+    plant, model = make_finger_plant("index", visual=True, scene_graph=sg)
+    sys_ = LinkGeometryPoses_[float](plant)
+    q = RNG.uniform(-0.5, 0.5, plant.num_positions())
+    ctx = sys_.CreateDefaultContext()
+    sys_.get_input_port().FixValue(ctx, q)
+    poses = sys_.get_output_port().Eval(ctx)
+    pctx = plant.CreateDefaultContext()
+    plant.SetPositions(pctx, q)
+    assert len(poses.ids()) == len(model.bodies)
+    for body in model.bodies:
+        X = poses.value(plant.GetBodyFrameIdOrThrow(body.index()))
+        np.testing.assert_allclose(X.GetAsMatrix4(), plant.EvalBodyPoseInWorld(pctx, body).GetAsMatrix4(), atol=1e-15)
+    ad = sys_.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    ad.get_input_port().FixValue(actx, np.array([AutoDiffXd(v) for v in q], dtype=object))
+    assert len(ad.get_output_port().Eval(actx).ids()) == len(model.bodies)

@@ -231,9 +231,9 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
                "motor_state", "tendon_force", "tendon_stiffness", "elongation", "applied_torque"):
         b.ExportOutput(dyn.GetOutputPort(nm), nm)
     if sg is not None:
-        from pydrake.systems.rendering import MultibodyPositionToGeometryPose
+        from .systems import LinkGeometryPoses
         b.AddNamedSystem("scene_graph", sg)
-        pose = b.AddNamedSystem("geometry_pose", MultibodyPositionToGeometryPose(plant))
+        pose = b.AddNamedSystem("geometry_pose", LinkGeometryPoses(plant))
         b.Connect(dyn.GetOutputPort("joint_angle"), pose.get_input_port())
         b.Connect(pose.get_output_port(), sg.get_source_pose_port(plant.get_source_id()))
         b.ExportOutput(sg.get_query_output_port(), "query_object")
