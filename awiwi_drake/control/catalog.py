@@ -49,6 +49,9 @@ _BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", des
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
                  "joint from its reduced model"))
+_BUILTIN.append(("pd", _lazy("joint_design", "joint_stage_controller", design="pd"), ("finger", "hand"),
+                 "PD on the estimated joint angle per joint, (Kp, Kd) placing one pair at 60 rad/s, damping 0.7, on the "
+                 "joint's reduced model (torque chain, own tendons) -> force distribution (ch. 7) -> force PD (10.2)"))
 _BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
                  ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
                  "tendon towards the force (11.3); damping per joint from its reduced model"))

@@ -28,14 +28,19 @@ Designs on ``(F, G)`` (gains ``K_j`` of :class:`~awiwi_drake.control.joint_stage
 reference maps from :func:`~awiwi_drake.control.linear.reference_maps`; for the sampled chain on the
 model sampled with its one period of delay, :func:`sampled_model`)
 
-(no ``pd`` stage: placing one pair at 60 rad/s with ``(Kp, Kd)`` alone needs ``Kd < 0`` on every index
-joint and leaves the abduction unstable, +16.8 1/s; the finger's PD is ``joint-pd``, motor side)
-
 * ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, M_jj
   joint_bandwidth^2)`` (Fig 15.22, limited as 15.5.3 says for the cascade; measured: 0.5 Nm/rad on the
   index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
   +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
   mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
+* ``pd``: PD on the (estimated) joint angle, ``tau_ref = tau_op + Kp (q_ref - q) - Kd qdot``, with ``(Kp, Kd)`` the
+  two real equations ``1 + K (s* I - F)^-1 G = 0`` that put one closed-loop pair exactly at
+  ``s* = position_bandwidth (-zeta +- i sqrt(1 - zeta^2))`` of the joint's reduced model (sampled chain: at
+  ``exp(h s*)`` of :func:`sampled_model`); refused with one line when that needs ``Kd < 0`` or leaves another pole
+  unstable.  Unlike ``cascaded`` (``Kp = M_jj w^2``, the rigid link) the placement counts the torque chain and
+  the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
+  0.032 / 0.0022 (with ``Kd = 0`` that pair would sit at -3.1 +- 29i / -4.7 +- 16i 1/s).  (An earlier
+  reduced model, the motor friction linearised at rest, needed ``Kd < 0`` for the same placement.)
 * ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon
   (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`), its reduced model built with that law;
 * ``pole-placement``: the double oscillator (12.13) by coefficient identification
@@ -77,7 +82,7 @@ from awiwi_drake.rigs.rigs import _link_rig
 __all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
            "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
 
-DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr", "sdre")
+DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
 _TENDON_TOL = 1e-12
 
@@ -270,6 +275,28 @@ def sampled_model(F: np.ndarray, G: np.ndarray, period: float) -> tuple[np.ndarr
     return Phi, Gamma
 
 
+def _placed_pd_gains(model: JointReducedModel, p: JointDesignParams, period: float | None) -> np.ndarray:
+    """``[Kp, Kd, 0, 0, 0]`` placing one closed-loop pair at ``s*`` (``pd`` in the module docstring)."""
+    s = p.position_bandwidth * (-p.damping_ratio + 1j * np.sqrt(max(0.0, 1.0 - p.damping_ratio ** 2)))
+    if period is None:
+        A, B, pole = model.A, model.B, s
+    else:
+        (A, B), pole = sampled_model(model.A, model.B, period), np.exp(period * s)
+    R = np.linalg.solve(pole * np.eye(A.shape[0]) - A, B).ravel()    # det(pole I - A + B K) = 0: 1 + K R = 0
+    M = np.array([[R[0].real, R[1].real], [R[0].imag, R[1].imag]])
+    kp, kd = np.linalg.solve(M, [-1.0, 0.0])
+    K = np.zeros(A.shape[0] if period is not None else 5)
+    K[:2] = kp, kd
+    cl = np.linalg.eigvals(A - B @ K[None, :A.shape[0]])
+    stable = np.all(np.abs(cl) < 1.0) if period is not None else np.all(cl.real < 0)
+    if not (kp > 0 and kd >= 0 and stable):
+        raise ValueError(f"pd design of {model.name}: placing a pair at {p.position_bandwidth} rad/s, damping "
+                         f"{p.damping_ratio} needs Kp = {kp:.4g}, Kd = {kd:.4g} and leaves poles "
+                         f"[{', '.join(f'{z:.4g}' for z in cl)}] "
+                         "(needs Kp > 0, Kd >= 0, the rest stable): change JointDesignParams.position_bandwidth")
+    return K
+
+
 def _lqr_weights(p: JointDesignParams):
     Q = np.diag(1.0 / np.array([p.lqr_angle_error, p.lqr_velocity, p.lqr_torque_error, p.lqr_torque_rate]) ** 2)
     return Q, np.array([[1.0 / p.lqr_input ** 2]])
@@ -285,6 +312,8 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     if design in ("cascaded", "two-time-scale"):
         K = _impedance_gains(model, min(c.joint_stiffness, model.inertia * c.joint_bandwidth ** 2), p.damping_ratio)
         return np.append(K, 0.0)
+    if design == "pd":
+        return _placed_pd_gains(model, p, period)
     if design == "pole-placement":
         lam = np.linalg.eigvals(F)
         pair = lam[np.argmax(np.abs(lam.imag))]          # the link on its tendons through the force loop
@@ -332,6 +361,35 @@ class JointDesign:
         does not appear: the series law (8.1) of a motor-side impedance is not the chain's)."""
         K = self.gains
         return K[:, 0] / (1.0 + K[:, 2] + K[:, 4])
+
+    def tracking_time_constant(self, min_share: float = 0.01) -> float:
+        """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
+        shows, over all DoF: each DoF's designed loop (continuous ``F - G K``, or the sampled chain's
+        ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``) with its reference maps as input; a pole's share
+        of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
+        ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
+        does for a linearised loop).  The compare's short mode sizes its step window with it."""
+        taus = []
+        for m, K, nx, nu in zip(self.models, self.gains, self.law.Nx, self.law.Nu):
+            if self.period is None:
+                A = m.A - m.B @ K[None, :4]
+                b = m.B[:, 0] * (nu + K[:4] @ nx)
+            else:
+                Phi, Gamma = sampled_model(m.A, m.B, self.period)
+                A = Phi - Gamma @ K[None, :]
+                b = Gamma[:, 0] * (nu + K[:4] @ nx + K[4] * nu)
+            lam, V = np.linalg.eig(A)
+            cv = V[0]
+            wb = np.linalg.solve(V, b)
+            if self.period is None:
+                share, s = np.abs(cv * wb / lam), lam
+            else:
+                share = np.abs(cv * wb / (1.0 - lam))
+                with np.errstate(divide="ignore"):
+                    s = np.log(lam.astype(complex)) / self.period
+            keep = (share / share.sum() > min_share) & np.isfinite(s)
+            taus.append(float(1.0 / np.min(-s.real[keep])))
+        return max(taus)
 
     def table(self) -> str:
         rows = [f"{'DoF':>10} {'M_jj':>10} {'K_jj':>9} {'Kp':>10} {'Kd':>10} {'K_tau':>9} {'K_taud':>9} "
@@ -427,6 +485,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
                                  tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
                                  **kw)
     ctrl.design["joint_design"] = d
+    ctrl.design["time_constant"] = d.tracking_time_constant()
     return ctrl
 
 
