@@ -84,6 +84,21 @@ def test_feedback_basis_is_the_law_and_the_target_respects_the_rate(index_select
     assert _law_feedback_basis(sub, sop, fit.stiffness, fit.damping, p, FS).shape == (4, N, 2 + 2 * N)
 
 
+def test_selection_table_and_plot_show_the_selected_gains(index_selection):
+    """``table()`` has a row per DoF; ``plot()`` draws the selected K3, K4 and the distances (the data itself)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    _, sel = index_selection
+    assert len(sel.table().splitlines()) == 1 + len(sel.fits)
+    fig, axes = sel.plot()
+    k3, k4 = (line.get_ydata() for line in axes[0].get_lines()[:2])
+    np.testing.assert_array_equal(k3, [f.k3 for f in sel.fits])
+    np.testing.assert_array_equal(k4, [f.k4 for f in sel.fits])
+    np.testing.assert_array_equal([b.get_height() for b in axes[1].patches], [f.distance for f in sel.fits])
+    import matplotlib.pyplot as plt
+    plt.close(fig)
+
+
 def test_per_tendon_gains_and_the_sampled_loop_is_stable_on_the_index(index_selection):
     """Each tendon gets the smallest K3, K4 of the DoFs it acts on, all inside the 3 kHz box; the index under the
     registered controller, sampled at 3 kHz behind a ZOH (physics on: the Dahl states are marginal at rest),
