@@ -226,6 +226,9 @@ class FingerBacksteppingLaw(StaticLaw):
         self.output_size = m
         self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
                            tendon_force=self.f_op, torque_offset=self.tau_op)
+        # the designed joint error dynamics M e'' + Kd e' + Kp e = 0: its slowest mode (compare's short window)
+        A_e = np.block([[np.zeros((k, k)), np.eye(k)], [-self._Minv @ self.Kp, -self._Minv @ self.Kd]])
+        self.design["time_constant"] = float(1.0 / np.min(-np.linalg.eigvals(A_e).real))
 
     def terms(self, u) -> dict:
         """All intermediate quantities (``z3``, ``z4``, ``e``, ``V``, ``command``) for inputs ``u``."""

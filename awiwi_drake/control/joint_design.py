@@ -362,6 +362,35 @@ class JointDesign:
         K = self.gains
         return K[:, 0] / (1.0 + K[:, 2] + K[:, 4])
 
+    def tracking_time_constant(self, min_share: float = 0.01) -> float:
+        """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
+        shows, over all DoF: each DoF's designed loop (continuous ``F - G K``, or the sampled chain's
+        ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``) with its reference maps as input; a pole's share
+        of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
+        ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
+        does for a linearised loop).  The compare's short mode sizes its step window with it."""
+        taus = []
+        for m, K, nx, nu in zip(self.models, self.gains, self.law.Nx, self.law.Nu):
+            if self.period is None:
+                A = m.A - m.B @ K[None, :4]
+                b = m.B[:, 0] * (nu + K[:4] @ nx)
+            else:
+                Phi, Gamma = sampled_model(m.A, m.B, self.period)
+                A = Phi - Gamma @ K[None, :]
+                b = Gamma[:, 0] * (nu + K[:4] @ nx + K[4] * nu)
+            lam, V = np.linalg.eig(A)
+            cv = V[0]
+            wb = np.linalg.solve(V, b)
+            if self.period is None:
+                share, s = np.abs(cv * wb / lam), lam
+            else:
+                share = np.abs(cv * wb / (1.0 - lam))
+                with np.errstate(divide="ignore"):
+                    s = np.log(lam.astype(complex)) / self.period
+            keep = (share / share.sum() > min_share) & np.isfinite(s)
+            taus.append(float(1.0 / np.min(-s.real[keep])))
+        return max(taus)
+
     def table(self) -> str:
         rows = [f"{'DoF':>10} {'M_jj':>10} {'K_jj':>9} {'Kp':>10} {'Kd':>10} {'K_tau':>9} {'K_taud':>9} "
                 f"{'K_prev':>8}  slowest pole"]
@@ -456,6 +485,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
                                  tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
                                  **kw)
     ctrl.design["joint_design"] = d
+    ctrl.design["time_constant"] = d.tracking_time_constant()
     return ctrl
 
 
