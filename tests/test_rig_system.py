@@ -141,6 +141,7 @@ def test_sampled_rig_loop_is_the_continuous_loop_under_fixed_step_rk3_to_round_o
         ref = cont[name]
         np.testing.assert_allclose(samp[name], ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)), err_msg=name)
     assert [(e.kind, e.channel) for e in samp.events] == [(e.kind, e.channel) for e in cont.events]
+    np.testing.assert_allclose(samp.final_state, cont.final_state, rtol=1e-11, atol=1e-14)   # the rig's state at the end
     assert any(e.kind == "actuator_saturation" for e in cont.events)    # the step saturates the motors
 
 
@@ -256,3 +257,52 @@ def test_sampled_rig_is_used_only_where_it_is_the_same_loop():
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="error_controlled")
     with pytest.raises(ValueError, match="step = .*sampled plant"):
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="fixed_step", step=H / 2)
+
+
+def test_sampled_batch_equals_the_continuous_batch_behind_a_hold_to_round_off():
+    """Three batched joint rigs under a C++ motor PD (a matrix gain on the batch state plus a constant): the batch as
+    one DiscreteTimeApproximation at 3 kHz reading the PD at the sample instant, against the continuous batch
+    behind a zero-order hold under fixed-step RK3 at the period (analysis.simulate's default) -- the same
+    trajectories to round-off, each copy moving (different set points)."""
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import Adder, ConstantVectorSource, MatrixGain, ZeroOrderHold
+
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    N = 3
+    ends = {}
+    for sampled in (False, True):
+        br = batched_joint_rig(N)
+        ops = [br.single.operating_point(pretension=f) for f in (15.0, 25.0, 35.0)]
+        K = np.zeros((2 * N, 6 * N))
+        theta_ref = np.concatenate([op.state[2:4] + d for op, d in zip(ops, (0.05, -0.05, 0.1))])
+        for i in range(2 * N):
+            K[i, 6 * (i // 2) + 2 + i % 2], K[i, 6 * (i // 2) + 4 + i % 2] = -40.0, -0.4
+        u0 = np.concatenate([op.motor_torque for op in ops]) + 40.0 * theta_ref
+        b = DiagramBuilder()
+        plant = b.AddSystem(br.sampled_diagram(H) if sampled else br.diagram)
+        gain, const = b.AddSystem(MatrixGain(K)), b.AddSystem(ConstantVectorSource(u0))
+        add = b.AddSystem(Adder(2, 2 * N))
+        b.Connect(plant.GetOutputPort("state"), gain.get_input_port())
+        b.Connect(gain.get_output_port(), add.get_input_port(0))
+        b.Connect(const.get_output_port(), add.get_input_port(1))
+        cmd = add.get_output_port()
+        if not sampled:
+            hold = b.AddSystem(ZeroOrderHold(H, 2 * N))
+            b.Connect(cmd, hold.get_input_port())
+            cmd = hold.get_output_port()
+        b.Connect(cmd, plant.GetInputPort("motor_torque"))
+        b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+        b.ExportOutput(plant.GetOutputPort("state"), "state")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        x, u, e = br.stack(ops)
+        pctx = plant.GetMyMutableContextFromRoot(ctx)
+        pctx.SetDiscreteState(0, x) if sampled else pctx.SetContinuousState(x)
+        d.GetInputPort("external_torque").FixValue(ctx, e)
+        res = simulate(d, ctx, 0.03, log=("state",))
+        assert res.info["step"] == pytest.approx(H)
+        ends[sampled] = res["state"]
+    moved = np.ptp(ends[False][:, [6 * i + 2 for i in range(N)]], axis=0)
+    assert np.all(moved > 0.01), moved                                  # every copy's motor moved to its set point
+    np.testing.assert_allclose(ends[True], ends[False], rtol=0, atol=1e-11 * np.max(np.abs(ends[False])))

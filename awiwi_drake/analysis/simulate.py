@@ -474,6 +474,7 @@ def simulate(system, context: Context | None, t_final: float, *,
 
     # -- collect -----------------------------------------------------------
     user_ctx.SetTimeStateAndParametersFrom(sub_ctx)
+    sampled_state = [p.GetMyContextFromRoot(root).get_discrete_state(0).CopyToVector() for p in sampled_plants(clone)]
     t = None
     signals, units, labels = {}, {}, {}
     for label, s in logged:
@@ -504,5 +505,6 @@ def simulate(system, context: Context | None, t_final: float, *,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
                 realtime_factor=duration / wall if wall > 0 else math.inf,
                 steps=int(integ.get_num_steps_taken() if clone.num_continuous_states() else sim.get_num_discrete_updates()),
-                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name(), limits=limits)
+                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name(), limits=limits,
+                final_sampled_state=np.concatenate(sampled_state) if sampled_state else None)
     return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)

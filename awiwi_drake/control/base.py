@@ -295,8 +295,9 @@ class ClosedLoop:
         if motor_torque is not None:
             u = _vector(motor_torque, self.num_inputs, "motor_torque")
             holds = list(self._holds)
-            if self.sampled_rig:   # the sampled rig's hold of its input (its applied_torque output)
-                holds.append(self.diagram.GetSubsystemByName("rig").GetSubsystemByName("motor_torque_hold"))
+            rig_sys = self.diagram.GetSubsystemByName("rig")
+            if self.sampled_rig and isinstance(rig_sys, Diagram) and rig_sys.HasSubsystemNamed("motor_torque_hold"):
+                holds.append(rig_sys.GetSubsystemByName("motor_torque_hold"))   # the sampled rig's held input
             for zoh in holds:
                 zoh.SetVectorState(zoh.GetMyMutableContextFromRoot(context), u)
             for d in self._delays:
@@ -505,8 +506,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     # A DiscreteTimeDelay samples its input every period and outputs it `steps` periods later, so it is
     # the sample-and-hold itself (a ZOH in front would add a period: simultaneous updates read the
     # pre-update hold value). A sampled rig samples its input itself: it reads the command at the
-    # instant (steps = 0), through a hold (1) or a delay of steps - 1 periods, and a hold after the
-    # saturation gives the loop's motor_torque output the held command, as the continuous rig sees it.
+    # instant (steps = 0), through a hold (1) or a delay of steps - 1 periods; its own hold of its input
+    # (held_motor_torque) gives the loop's motor_torque output the held command, as the continuous rig sees it.
     lag = steps - 1 if sample_rig else steps
     if rate_hz is not None and lag == 0:
         zoh = builder.AddNamedSystem("command_hold", ZeroOrderHold(1.0 / rate_hz, n_u))
@@ -523,12 +524,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         builder.Connect(cmd, satsys.get_input_port(0))
         cmd = satsys.get_output_port(0)
     builder.Connect(cmd, plant.GetInputPort(COMMAND_PORT))
-    if sample_rig:
-        applied = builder.AddNamedSystem("applied_command_hold", ZeroOrderHold(1.0 / rate_hz, n_u))
-        builder.Connect(cmd, applied.get_input_port(0))
-        cmd = applied.get_output_port(0)
-        handles._holds.append(applied)
-    builder.ExportOutput(cmd, COMMAND_PORT)
+    # the torque entering the rig over the current period: a sampled rig holds its input itself
+    builder.ExportOutput(plant.GetOutputPort("held_motor_torque") if sample_rig else cmd, COMMAND_PORT)
     sources = dict(sources or {})
     unknown = sorted(set(sources) - set(refs) - (set(rig_in) - {COMMAND_PORT}))
     if unknown:

@@ -121,8 +121,9 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
             as Drake's DiscreteTimeApproximation, :func:`~awiwi_drake.components.rig_system.sampled_dynamics`);
             the same ports and state order either way. A sampled rig's ``applied_torque`` is that of its
             current input, or with ``hold_applied_torque`` that of the input it holds over the current period
-            (a zero-order hold, a second discrete state: what a loop logs; the rig alone stays a difference
-            equation with one state group, which Drake's ``Linearize`` needs)."""
+            (a zero-order hold, a second discrete state, also exported as ``held_motor_torque``: what a loop
+            logs; the rig alone stays a difference equation with one state group, which Drake's ``Linearize``
+            needs)."""
             m, n = coupling.num_tendons, coupling.num_joints
             b = DiagramBuilder()
             dynamics = rig_dynamics_system(model)
@@ -150,6 +151,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
                 held = b.AddNamedSystem("motor_torque_hold", ZeroOrderHold(period, m))
                 b.ConnectInput("motor_torque", held.get_input_port())
                 b.Connect(held.get_output_port(), outs.GetInputPort("motor_torque"))
+                b.ExportOutput(held.get_output_port(), "held_motor_torque")   # for the loop's motor_torque
             for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
                 b.ExportOutput(outs.GetOutputPort(nm), nm)
             diagram = b.Build()
