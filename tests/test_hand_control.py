@@ -255,8 +255,8 @@ def test_hand_backstepping_sampled_at_3khz_is_stable():
 @pytest.mark.parametrize("controller", ["lqr", "backstepping"])
 def test_index_finger_step_with_estimated_joint_angles(controller):
     """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
-    tendons never go slack, and the estimation error stays below one period of motion |v| / 3000
-    (the estimate is exact at the samples for a constant coupling, (5.15)).
+    tendons never go slack, and the estimate is exact: (5.15) of the current sample, and the index's
+    coupling is constant (the least squares of consistent length changes is the joint angle itself).
 
     Without the spring hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
     model and leaves a steady joint offset of order Kp^-1 (P S)^T z (backstepping, index, 3 kHz design: up
@@ -273,11 +273,7 @@ def test_index_finger_step_with_estimated_joint_angles(controller):
     q_end = res["joint_angle"][-1]
     assert abs(q_end[1] - q_ref[1]) < 0.02 * 0.2
     assert np.all(res["tendon_force"] > 0.0)
-    err = np.abs(res["joint_angle_estimation_error"])
-    # |q(t_k) - q(t)| <= max |v| (t - t_k) <= max |v| / 3000; the velocity is logged once per period, so its
-    # maximum between two logs may exceed the logged one: 5 % allowance for that sampling only
-    bound = 1.05 * np.abs(res["joint_velocity"]).max(axis=0) * PERIOD
-    assert np.all(err.max(axis=0) <= bound + 1e-9), (err.max(axis=0), bound)
+    assert np.abs(res["joint_angle_estimation_error"]).max() < 1e-9
 
 
 def test_hand_loop_has_one_channel_per_independent_joint():
@@ -306,8 +302,24 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     assert (out / "step_ring.png").exists() and (out / "disturbance_ring.png").exists()
     step = {(r["controller"], r["joint"]): r for r in rows if r["test"] == "step"}
     assert all(r["status"] in ("ok", "flagged") for r in rows), [r["status"] for r in rows]   # none stopped
-    # the step moves every joint towards its reference (0.2 rad)
-    assert all(abs(float(r["steady_state_error"])) < 0.1 for r in step.values()), step
+    # The step's remaining error is bounded by the loop's own sampled linearisation at rest (sampled_loop_poles:
+    # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
+    # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
+    # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
+    from awiwi_drake.cli.compare import _short_params
+    from awiwi_drake.control.compare import compare_test_params
+    from awiwi_drake.control.joint_design import sampled_loop_poles
+    from awiwi_drake.hand.coupling import dof_selection
+    p = _short_params(compare_test_params(_rig("ring")), finger_diagram, {"finger": "ring"}, ["joint-pd", "cascaded"],
+                      "finger-ring")                                   # the window the CLI ran
+    for name in ("joint-pd", "cascaded"):
+        rig = _rig("ring")
+        S = dof_selection(rig.coupling)
+        t, q = sampled_loop_poles(rig, make_controller(name, rig)).step_response(
+            S @ np.full(S.shape[1], p.step_size), p.step_duration - p.step_delay)
+        e_lin = np.abs(p.step_size - (np.linalg.pinv(S) @ q.T).T)[t >= 0.9 * t[-1]].max(axis=0)
+        sse = np.array([abs(float(step[(name, j)]["steady_state_error"])) for j in ("q40", "q41", "q42")])
+        assert np.all(sse <= e_lin), (name, sse, e_lin)
 
 
 def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
@@ -354,12 +366,10 @@ def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_es
         loop = closed_loop(rig, joint_stage_controller(rig, "cascaded", distribution_params=dist))
         run, rows = run_joint_test(loop, "step", controller="cascaded", params=compare_test_params(rig, step_duration=0.1))
         flags[tight] = [r.flags for r in rows]
-        # the estimation error is reported per joint and, for the constant coupling, stays below one period
-        # of motion |v| / 3000 (exact at the samples, (5.15)); 5 % for the velocity's sampling (as above)
-        v = np.abs(run.state[:, 4:8]).max(axis=0)
+        # the estimation error is reported per joint: for the constant coupling the current sample's (5.15) is
+        # exact (as above)
         est = np.array([r.estimation_error for r in rows])
-        assert np.all(np.isfinite(est)) and np.all(est <= 1.05 * v * PERIOD + 1e-9), (est, v * PERIOD)
-        assert est.max() > 0.0
+        assert est.shape == (4,) and np.all(np.isfinite(est)) and np.all(est < 1e-9), est
         if tight:
             assert all(r.status == "flagged" for r in rows)
     assert all("force distribution out of bounds" in f for f in flags[True]), flags[True]

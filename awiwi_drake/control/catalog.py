@@ -11,7 +11,6 @@ from awiwi_drake.control.registry import register_controller
 
 _JOINTS = ("flexible-joint", "joint-rig")
 _SAMPLED = {"rate_hz": 3000.0}
-_FAST_HZ = 9000.0      # the full-state joint stages on fingers/hand (see below)
 
 
 def _lazy(module: str, function: str, **kwargs):
@@ -55,28 +54,24 @@ _BUILTIN.append(("pd", _lazy("joint_design", "joint_stage_controller", design="p
 _BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
                  ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
                  "tendon towards the force (11.3); damping per joint from its reduced model"))
-_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement",
-                                         rate_hz=_FAST_HZ), ("finger", "hand"),
+_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement"),
+                 ("finger", "hand"),
                  "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, tau_dot] "
-                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2); at 9 kHz"))
-_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr", rate_hz=_FAST_HZ),
+                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2)"))
+_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr"),
                  ("finger", "hand"), "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson "
-                 "weights) -> force distribution (ch. 7) -> force PD (10.2); at 9 kHz"))
-_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre", rate_hz=_FAST_HZ),
+                 "weights, the motors' torque rate measured) -> force distribution (ch. 7) -> force PD (10.2)"))
+_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre"),
                  ("finger", "hand"), "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in "
-                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain; at 9 kHz"))
+                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain"))
 
-# The full-state joint stages (torque feedback) run the chain at 9 kHz, the estimator at its 3 kHz (each estimate
-# serves three periods). Measured on the index (0.2 rad step, estimator, 3 Nm limit): physics off, at 3 kHz they
-# limit-cycle in saturation (LQR 85 %, pole placement 57 % of the samples; with the true joint state 2 % / 1 %), at
-# 6 kHz 4 % / 1 %. With the default plant's spring hysteresis and ripple, at 6 kHz LQR 99 % (true joint state: 4 %),
-# at 9 kHz 4 % / 2 % (12 kHz 3 % / 2 %); compare --short at 9 kHz: steps 7 % / 3 %, the 0.01 Nm load on the
-# PIP/DIP still 55-60 % / 17-26 % (flagged). The impedance stages (cascaded, two-time-scale) run at 3 kHz.
-_FAST = {"lqr", "pole-placement", "sdre"}
+# Every stage runs at the thesis's 3 kHz with the estimator at the same rate.  The full-state stages (lqr,
+# pole-placement, sdre) used to need 9 kHz (at 3 kHz they saturated 82-99 % of a step): the estimate was one period
+# older than the forces read with it, and its derivative, 1.5 periods late, destabilised the DIP's link mode
+# (sampled loop |z| = 1.09-1.14 at ~3600-4050 rad/s on the index, control.joint_design.sampled_loop_poles); the
+# estimate now comes from the current sample (hand.estimation) and the LQR/SDRE measure the motors' torque rate.
 for _name, _factory, _rigs, _doc in _BUILTIN:
-    fast = _name in _FAST and "finger" in _rigs
-    register_controller(_name, _factory, rigs=_rigs, description=_doc,
-                        loop_options={"rate_hz": _FAST_HZ} if fast else _SAMPLED)
+    register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)
 
 # The law at the thesis's 3 kHz: its joint gains are designed for that rate (every designed joint mode
 # |h lambda| <= 1/4, HandChainParams.sampled_pole_limit). It used to run at 6 kHz: the per-DoF design put a

@@ -51,16 +51,25 @@ loop's bandwidth.
 Variants (``variant``, registered ``backstepping-position`` and ``backstepping-nonlinear-spring`` on
 ``finger-*``/``hand``; the same force steps and motor-torque output):
 
-* ``"position"``: the link steps of the position law (15.27), (15.31) on every DoF, in the metric of ``M_d``:
-  ``z2 = e' + k1 e``, ``alpha = tau_op - (1 + k1 k2) M_d e - ((k1 + k2) M_d - B_q) e'``, so that
-  ``M_d z2' = -M_d e - k2 M_d z2 - (P S)^T z3``, and ``beta = f_d' - K3 z3 + (P S) z2``::
+* ``"position"``: the link steps of the position law (15.27), (15.31) on every DoF, in the metric of ``M_d``,
+  with the rates ``K1 = K2 = V diag(k) V^T`` on the modes of ``M_d``: ``z2 = e' + K1 e``,
+  ``alpha = tau_op - M_d (I + K2 K1) e - (M_d (K1 + K2) - B_q) e'``, so that
+  ``M_d z2' = -M_d e - M_d K2 z2 - (P S)^T z3``, and ``beta = f_d' - K3 z3 + (P S) z2``::
 
       V = e^T M_d e / 2 + z2^T M_d z2 / 2 + |z3|^2 / 2 + |z4|^2 / 2
-      V' = -k1 e^T M_d e - k2 z2^T M_d z2 - z3^T K3 z3 - z4^T K4 z4
+      V' = -e^T M_d K1 e - z2^T M_d K2 z2 - z3^T K3 z3 - z4^T K4 z4
 
-  Every mode of ``M_d`` gets ``e'' + (k1 + k2) e' + (1 + k1 k2) e = 0`` (poles ``-k +- i`` for ``k1 = k2 = k``,
-  :class:`~awiwi_drake.parameters.backstepping.FingerPositionBacksteppingGains`; refused beyond
-  ``sampled_pole_limit * rate_hz``).  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
+  Mode i gets ``eta'' + 2 k_i eta' + (1 + k_i^2) eta = 0`` (poles ``-k_i +- i``) and the stiffness
+  ``mu_i (1 + k_i^2)``; the same rules as the impedance design: ``k_i`` the largest with ``mu_i (1 + k_i^2) <=
+  joint_stiffness`` and ``sqrt(1 + k_i^2) <= sampled_pole_limit * rate_hz`` (index at 3 kHz: k = 89 / 92 / 568 /
+  750 1/s, the heavy modes at 0.5 Nm/rad, the lightest at 0.092 like the impedance design).  With one rate for
+  every mode (k = 60) the distal modes' stiffness ``mu (1 + k^2)`` is 6e-4-7e-3 Nm/rad, below what the lever's
+  hysteresis friction lets move: an all-joint 0.2 rad step left the index DIP and the ring PIP/DIP near their
+  start and drove the fifth 2 rad away (measured).  Through the estimator the light modes' ``k_i`` (up to 750 1/s)
+  amplify the estimate's error (``(P S) K1 e`` in ``beta``): compare --short on the index saturates 55 / 59 % of
+  the step / sine; capping ``k_i`` at the force steps' 300 1/s leaves the sine unsaturated but the hysteresis
+  offsets grow (hand step: index DIP 0.29, thumb 0.63 rad against 0.07 / 0.12): the cap is not taken, the
+  saturation is reported.  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
   one link) needs ``beta = ... + (P S) M_d^-1 z2``: ``M_d^-1`` (1.6e6 at the index DIP) in the force step puts
   the 3 kHz sampled loop's spectral radius at 164 (measured on the index), so the metric is ``M_d``'s.
 * ``"nonlinear-spring"``: the steps of (15.71)-(15.81) on the joint torques ``tau = -(P S)^T phi(x)`` (each
@@ -96,7 +105,6 @@ from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
-from awiwi_drake.parameters.backstepping import FingerPositionBacksteppingGains
 from awiwi_drake.parameters.hand_control import HandChainParams
 
 __all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "check_backstepping_springs", "VARIANTS"]
@@ -118,16 +126,17 @@ class FingerBacksteppingLaw(StaticLaw):
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None,
                  rate_hz: float | None = 3000.0, joint_gains: tuple | None = None, force_gains: tuple | None = None,
-                 variant: str = "antagonistic", position_gains: FingerPositionBacksteppingGains | None = None):
+                 variant: str = "antagonistic"):
         """``variant`` in :data:`VARIANTS` (module docstring); ``joint_gains = (Kp, Kd)`` (k x k) replaces the mode
-        design (``antagonistic``, ``nonlinear-spring``), ``position_gains`` the position variant's ``k1``, ``k2``;
+        design (``antagonistic``, ``nonlinear-spring``);
         ``force_gains = (K3, K4)`` (per tendon, (m,) or scalars; scalars for ``nonlinear-spring``, whose steps are
         on the joint torques) the ``force_bandwidth`` (e.g. the ch. 16 selection,
         :func:`awiwi_drake.control.optimal_gains.select_finger_force_gains`); each must be positive."""
         if variant not in VARIANTS:
             raise ValueError(f"finger backstepping: variant = {variant!r}; use one of {', '.join(VARIANTS)}")
         if variant == "position" and joint_gains is not None:
-            raise ValueError("finger backstepping: the position variant takes position_gains (k1, k2), not joint_gains")
+            raise ValueError("finger backstepping: the position variant's gains follow from its rates on the modes "
+                             "of M (module docstring), not from joint_gains")
         self.variant = variant
         p = params or HandChainParams()
         coupling = rig.coupling if isinstance(rig, Rig) else None
@@ -170,17 +179,16 @@ class FingerBacksteppingLaw(StaticLaw):
         self.Kp = (V * k_modes) @ V.T
         self.Kd = (V * (2.0 * zeta * np.sqrt(k_modes * mu))) @ V.T
         self.mode_stiffness = k_modes
-        if variant == "position":
-            g = position_gains or FingerPositionBacksteppingGains()
-            k1, k2 = float(g.k1), float(g.k2)
-            lam = np.abs(np.roots([1.0, k1 + k2, 1.0 + k1 * k2])).max()
-            if lam > w_max:
-                raise ValueError(f"finger backstepping (position): k1 = {k1}, k2 = {k2} put a joint pole at {lam:.4g} "
-                                 f"1/s beyond sampled_pole_limit x rate_hz = {w_max:.4g} 1/s")
-            self.k1, self.k2 = k1, k2
-            self.Kp = (1.0 + k1 * k2) * self.M                      # alpha = tau_op - M(1 + k1 k2) e - (M(k1 + k2) - B_q) e'
-            self.Kd = (k1 + k2) * self.M - self.Bq
-            self.mode_stiffness = (1.0 + k1 * k2) * mu
+        if variant == "position":                 # the same rules per mode: k_i from the stiffness cap and the rate
+            k_pos = np.sqrt(np.minimum(np.maximum(p.joint_stiffness / mu - 1.0, 0.0), w_max ** 2 - 1.0))
+            if not np.all(k_pos > 0):
+                raise ValueError(f"finger backstepping (position): mode inertias {mu} leave no positive k_i "
+                                 f"(joint_stiffness {p.joint_stiffness} Nm/rad, rate limit {w_max:.4g} 1/s)")
+            self.K1 = (V * k_pos) @ V.T                             # k1 = k2 per mode
+            self.Kp = (V * (mu * (1.0 + k_pos ** 2))) @ V.T         # M (I + K2 K1)
+            self.Kd = (V * (2.0 * mu * k_pos)) @ V.T - self.Bq      # M (K1 + K2) - B_q
+            self.mode_stiffness = mu * (1.0 + k_pos ** 2)
+            self.mode_rates = k_pos
         if joint_gains is not None:
             Kp, Kd = (np.asarray(g, dtype=float) for g in joint_gains)
             if Kp.shape != (k, k) or Kd.shape != (k, k):
@@ -202,8 +210,7 @@ class FingerBacksteppingLaw(StaticLaw):
                     raise ValueError(f"finger backstepping (nonlinear-spring): force_gains {name} must be one value "
                                      "(its steps act on the joint torques, not per tendon)")
                 setattr(self, name, g)
-        self.friction_scale = float(p.friction_scale if variant != "position" else
-                                    (position_gains or FingerPositionBacksteppingGains()).friction_scale)
+        self.friction_scale = float(p.friction_scale)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
         parts = coupling.parts
         self._blocks = []                 # (tendon slice, plant-joint slice, DoF slice, constant W or None)
@@ -269,8 +276,8 @@ class FingerBacksteppingLaw(StaticLaw):
                  + 0.5 * (zn3 @ zn3) + 0.5 * (zn4 @ zn4))
             return dict(e=e, ed=ed, z3=z3, z4=z4, null_z3=zn3, null_z4=zn4, f_des=f_des, V=V, command=cmd)
         if self.variant == "position":                    # 15.2 steps on the link: z2 = e' + k1 e
-            z2 = ed + self.k1 * e
-            cross, cross_d = PS @ z2, PS @ (edd + self.k1 * ed)
+            z2 = ed + self.K1 @ e
+            cross, cross_d = PS @ z2, PS @ (edd + self.K1 @ ed)
         else:
             cross, cross_d = PS @ ed, PS @ edd
         z3 = f - f_des

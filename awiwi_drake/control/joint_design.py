@@ -80,16 +80,19 @@ from awiwi_drake.rigs.base import OperatingPoint, Rig
 from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
-           "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
+           "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS",
+           "SampledLoopPoles", "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
+_TORQUE_RATE = {"lqr": "motor", "sdre": "motor"}       # the stage's 4th coordinate per design (else "joint", joint_stage)
 _TENDON_TOL = 1e-12
 
 
 @dataclass
 class JointReducedModel:
-    """One DoF's reduced model ``z' = F z + G tau_ref`` on ``z = [q - q_op, qdot, tau - tau_op, tau_dot]``."""
+    """One DoF's reduced model ``z' = F z + G tau_ref`` on ``z = [q - q_op, qdot, tau - tau_op, tau_dot]``
+    (``torque_rate="motor"``: ``sigma = tau_dot + K_jj qdot`` in place of ``tau_dot``, :mod:`.joint_stage`)."""
 
     name: str
     dof: int
@@ -101,6 +104,7 @@ class JointReducedModel:
     tendons: tuple                    # indices of the tendons acting on the DoF
     invariance_residual: float        # |T A - F T| / |T A| (0: the restriction is exact)
     linearization: LinearizationResult
+    torque_rate: str = "joint"        # the fourth coordinate: tau_dot ("joint") or sigma ("motor")
 
     @property
     def poles(self) -> np.ndarray:
@@ -188,10 +192,12 @@ def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, ten
     return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
 
 
-def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
+def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(F, G, residual)`` on ``[q, qdot, tau, tau_dot + stiffness qdot]`` (``stiffness`` 0: ``tau_dot``;
+    ``K_jj``: the motors' rate ``sigma``)."""
     A, B = lin.A, lin.B
     Cq, Ct = lin.output("joint_angle").C, lin.output("joint_torque").C
-    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A])
+    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A + stiffness * (Cq @ A)])
     scale = np.abs(T @ B).max() if np.abs(T @ B).max() > 0 else 1.0
     for row, nm in ((Cq, "q"), (Cq @ A, "qdot"), (Ct, "tau")):
         if np.abs(row @ B).max() > 1e-9 * scale:          # only tau_dot' may see the input directly
@@ -203,10 +209,14 @@ def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
-                         tendon_law: str = "force", friction: str = "motion") -> list[JointReducedModel]:
+                         tendon_law: str = "force", friction: str = "motion",
+                         torque_rate: str = "joint") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
     ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`);
-    ``friction``: the motor friction (3.8) linearised in ``"motion"`` (the design model) or at ``"rest"``."""
+    ``friction``: the motor friction (3.8) linearised in ``"motion"`` (the design model) or at ``"rest"``;
+    ``torque_rate``: the fourth coordinate, ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``)."""
+    if torque_rate not in ("joint", "motor"):
+        raise ValueError(f"reduced_joint_models: torque_rate = {torque_rate!r}; use 'joint' or 'motor'")
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
     S = point["selection"]
@@ -222,9 +232,9 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
         loop, ctx = force_loop(sub, sub_point, p, tendon_law)
         lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                         outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-        F, G, res = _restrict(lin)
+        F, G, res = _restrict(lin, sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0)
         models.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
-                                        res, lin))
+                                        res, lin, torque_rate))
     return models
 
 
@@ -411,7 +421,12 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
     c = chain or HandChainParams()
     p = params or JointDesignParams()
     point = point or chain_design_point(rig, params=c)
-    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_TENDON_LAW.get(design, "force"))
+    rate = _TORQUE_RATE.get(design, "joint")
+    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_TENDON_LAW.get(design, "force"),
+                                            torque_rate=rate)
+    if any(m.torque_rate != rate for m in models):
+        raise ValueError(f"design_joint_stage: the {design} stage measures torque_rate={rate!r}; the models given "
+                         f"are on {sorted({m.torque_rate for m in models})}")
     gains = np.array([design_joint_gains(m, design, params=p, chain=c, period=period) for m in models])
     Nx, Nu = [], []
     for m in models:
@@ -420,7 +435,7 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
         Nu.append(float(nu[0]))
     S = point["selection"]
     kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point["joint_angle"],
-              torque_op=point["torque_offset"], name=design.replace("-", "_"))
+              torque_op=point["torque_offset"], name=design.replace("-", "_"), torque_rate=rate)
     if design == "sdre":
         law = _sdre_law(rig, point, c, p, kw, period)
     else:
@@ -447,8 +462,8 @@ def _sdre_law(rig, point, c, p, kw, period):
             loop, ctx = force_loop(sub, sub_point, c)
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-            F, G, _ = _restrict(lin)
-            model = JointReducedModel("", j, F, G, 0.0, 0.0, 0.0, (), 0.0, lin)
+            F, G, _ = _restrict(lin, sub_point["op"].joint_stiffness if kw["torque_rate"] == "motor" else 0.0)
+            model = JointReducedModel("", j, F, G, 0.0, 0.0, float(sub_point["op"].joint_stiffness), (), 0.0, lin)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 
@@ -550,7 +565,9 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
     Ct = S.T @ lin.output("joint_torque").C
     k = S.shape[1]
-    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Ct[j] @ A]) for j in range(k)])
+    K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S      # sigma = tau_dot + K_dof qdot (all DoF)
+    Sg = Ct @ A + (K_dof @ (Cq @ A) if d.law.torque_rate == "motor" else 0.0)
+    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Sg[j]]) for j in range(k)])
     TA = T @ A
     Az = TA @ np.linalg.pinv(T)
     res = float(np.linalg.norm(TA - Az @ T) / np.linalg.norm(TA))
@@ -558,3 +575,146 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     for j, (m, K) in enumerate(zip(d.models, d.gains)):
         D[4 * j:4 * j + 4, 4 * j:4 * j + 4] = m.A - m.B @ K[None, :4]
     return PoleCheck(np.linalg.eigvals(A), np.linalg.eigvals(Az), D, Az - D, res, [m.name for m in d.models])
+
+
+@dataclass
+class SampledLoopPoles:
+    """The poles of a sampled closed loop (:func:`sampled_loop_poles`): the eigenvalues ``z`` of the Jacobian of
+    its one-period map ``x_{k+1} = Phi(x_k)`` at the operating point (all discrete states: the plant sampled
+    exactly with a zero-order hold, the controller's and the estimator's states), ``s = ln(z) / h``.
+
+    ``neutral``: the modes at ``z = 1`` to ``1e-9`` (a continuum of equilibria, e.g. the spring hysteresis's
+    memory: any Dahl force at rest is an equilibrium); :attr:`spectral_radius` is over the others.
+    ``residual``: ``max |Phi(x_0) - x_0|`` (0 at a fixed point of the sampled loop)."""
+
+    z: np.ndarray
+    period: float
+    jacobian: np.ndarray              # d x_k+1 / d x_k
+    residual: float
+    reference_map: np.ndarray         # d x_k+1 / d q_ref (the joint_angle_reference input)
+    joint_angle_map: np.ndarray       # d q_k / d x_k (the rig's joint_angle output)
+
+    def step_response(self, dq_ref, duration: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, dq)``: the linear sampled loop's joint angles (deviations, one row per sample) after a
+        reference step ``dq_ref`` at ``t = 0``, for ``duration`` s."""
+        n = int(round(duration / self.period))
+        x = np.zeros(self.jacobian.shape[0])
+        u = self.reference_map @ np.asarray(dq_ref, dtype=float)
+        out = [self.joint_angle_map @ x]
+        for _ in range(n):
+            x = self.jacobian @ x + u
+            out.append(self.joint_angle_map @ x)
+        return self.period * np.arange(n + 1), np.array(out)
+
+    @property
+    def neutral(self) -> np.ndarray:
+        return np.abs(self.z - 1.0) <= 1e-9
+
+    @property
+    def spectral_radius(self) -> float:
+        return float(np.abs(self.z[~self.neutral]).max())
+
+    @property
+    def s(self) -> np.ndarray:
+        """The equivalent continuous poles ``ln(z) / h`` [1/s] (``-inf`` for ``z = 0``)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.log(self.z.astype(complex)) / self.period
+
+    def slowest(self) -> complex:
+        """The non-neutral mode of largest ``|z|`` as ``s`` [1/s] (the slowest decay)."""
+        z = np.where(self.neutral, 0.0, np.abs(self.z))
+        return complex(self.s[int(np.argmax(z))])
+
+
+def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, estimator: Any = "auto",
+                       op: Any = None) -> SampledLoopPoles:
+    """Poles of ``rig`` closed by ``controller`` (a fresh system) sampled at ``rate_hz``, the linear analysis of
+    what :func:`~awiwi_drake.control.base.closed_loop` ``(rig, controller, rate_hz=rate_hz)`` simulates.
+
+    The rig is linearised at ``op`` by Drake (:func:`~awiwi_drake.analysis.linear.linearize`, its own laws: motor
+    friction (3.8) at rest, hysteresis as the presliding spring) and sampled exactly with Drake's
+    ``DiscreteTimeApproximation`` (zero-order hold); it replaces the rig in the same ``closed_loop`` wiring
+    (the command of sample ``k`` acts over ``[t_k, t_k+1)``, as the hold does) with the controller's own
+    discrete states (the force distribution) and the tendon-length estimator (``estimator``: ``"auto"``, the
+    rig's, at the same rate; ``None``/``"ideal"``: the true joint state).  Drake's ``Linearize`` takes a
+    discrete system with one state group only, so the Jacobian of the one-period map
+    (``EvalUniquePeriodicDiscreteUpdate``, every state group) is taken in ``AutoDiffXd``, what ``Linearize``
+    does for a single group.  Every periodic update of the loop must have the period ``1 / rate_hz``.
+    """
+    import dataclasses
+
+    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+    from pydrake.systems.analysis import DiscreteTimeApproximation
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import AffineSystem, Demultiplexer, LinearSystem
+
+    from awiwi_drake.control.base import measurement_ports
+    h = 1.0 / check_rate("sampled_loop_poles", rate_hz)
+    op = op or rig.operating_point()
+    ideal = estimator in (None, "ideal")
+    est = None if ideal else (rig.link_estimator(h) if estimator == "auto" else estimator)
+    if est is not None and abs(est.period - h) > 1e-12 * h:
+        raise ValueError(f"sampled_loop_poles: the estimator samples every {est.period:.6g} s, the loop every "
+                         f"{h:.6g} s: one rate only (the one-period map)")
+    need = set(measurement_ports(controller)) | {"joint_angle"}
+    if est is not None:
+        need |= {est.system.get_input_port(i).get_name() for i in range(est.system.num_input_ports())}
+    outputs = tuple(sorted(need))
+    lin = linearize(rig, op, outputs=outputs, equilibrium_tolerance=None)
+    C = np.vstack([lin.outputs[o].C for o in outputs])
+    D = np.vstack([lin.outputs[o].D for o in outputs])
+    y0 = np.concatenate([lin.outputs[o].y0 for o in outputs])
+    zoh = DiscreteTimeApproximation(LinearSystem(lin.A, lin.B, C, D), h)
+    b = DiagramBuilder()
+    aff = b.AddNamedSystem("sampled_rig", AffineSystem(zoh.A(), zoh.B(), -zoh.B() @ lin.u0, C, D,
+                                                       y0 - D @ lin.u0, h))
+    b.ExportInput(aff.get_input_port(), "motor_torque")
+    split = b.AddNamedSystem("outputs", Demultiplexer([lin.outputs[o].y0.size for o in outputs]))
+    b.Connect(aff.get_output_port(), split.get_input_port())
+    for i, o in enumerate(outputs):
+        b.ExportOutput(split.get_output_port(i), o)
+    sampled = b.Build()
+    sampled.set_name(rig.name)
+    loop = closed_loop(dataclasses.replace(rig, diagram=sampled), controller, rate_hz=None, estimator=est,
+                       sensors="ideal" if ideal else None)
+    diagram = loop.diagram
+    ctx = diagram.CreateDefaultContext()
+    init = getattr(controller, "initialize_state", None)
+    if init is not None:
+        init(controller.GetMyMutableContextFromRoot(ctx))
+    if est is not None:
+        est.initialize(diagram.GetSubsystemByName("estimator").GetMyMutableContextFromRoot(ctx), op.joint_angle)
+    diagram.GetInputPort("joint_angle_reference").FixValue(ctx, op.joint_angle)
+    for nm in loop.disturbances:
+        port = diagram.GetInputPort(nm)
+        port.FixValue(ctx, op.external_torque if nm == "external_torque" and op.external_torque is not None
+                      else np.zeros(port.size()))
+    groups = ctx.get_discrete_state()
+    sizes = [groups.get_vector(i).size() for i in range(groups.num_groups())]
+    x0 = np.concatenate([groups.get_vector(i).CopyToVector() for i in range(groups.num_groups())])
+    ad = diagram.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    actx.SetTimeStateAndParametersFrom(ctx)
+    ref = diagram.GetInputPort("joint_angle_reference")
+    r0 = np.asarray(ref.Eval(ctx), dtype=float)
+    xa = InitializeAutoDiff(np.concatenate([x0, r0])).ravel()
+    for i in range(diagram.num_input_ports()):
+        if i == ref.get_index():
+            ad.get_input_port(i).FixValue(actx, xa[x0.size:])
+        elif diagram.get_input_port(i).HasValue(ctx):
+            ad.get_input_port(i).FixValue(actx, np.array([AutoDiffXd(float(v)) for v in
+                                                           diagram.get_input_port(i).Eval(ctx)], dtype=object))
+    start = 0
+    for i, n in enumerate(sizes):
+        actx.SetDiscreteState(i, xa[start:start + n])
+        start += n
+    try:
+        new = ad.EvalUniquePeriodicDiscreteUpdate(actx)
+    except RuntimeError as exc:
+        raise ValueError(f"sampled_loop_poles: the loop is not one-rate at {rate_hz:g} Hz ({exc})") from None
+    x1 = np.concatenate([new.get_vector(i).CopyToVector() for i in range(new.num_groups())])
+    G = ExtractGradient(x1)
+    Cq = ExtractGradient(ad.GetOutputPort("joint_angle").Eval(actx))[:, :x0.size]
+    J = G[:, :x0.size]
+    return SampledLoopPoles(np.linalg.eigvals(J), h, J, float(np.abs(ExtractValue(x1).ravel() - x0).max()),
+                            G[:, x0.size:], Cq)

@@ -353,6 +353,25 @@ class FingerForceGains:
     k4: np.ndarray
     rate_hz: float | None
 
+    def plot(self, ax=None):
+        """``(fig, axes)``: the selected ``K3``, ``K4`` per DoF against the box (left) and the distance (16.4) of
+        each selection to its target (right); ``ax``: two axes."""
+        from awiwi_drake.plotting import figure_axes, label_axes
+        fig, axes = figure_axes(ax, ncols=2, figsize=(10, 3.5))
+        x = np.arange(len(self.fits))
+        names = [f.name for f in self.fits]
+        axes[0].semilogy(x, [f.k3 for f in self.fits], "o", label="K3")
+        axes[0].semilogy(x, [f.k4 for f in self.fits], "s", mfc="none", label="K4")
+        for b in self.fits[0].box if self.fits else ():
+            axes[0].axhline(b, color="0.5", ls=":", lw=1)
+        axes[1].bar(x, [f.distance for f in self.fits], color="C2")
+        for a in axes:
+            a.set_xticks(x, names, rotation=90 if len(x) > 6 else 0)
+        label_axes(axes[0], "gain [1/s]", xlabel="DoF", title="ch. 16 selection (dotted: the box)")
+        label_axes(axes[1], "distance to the LQR (16.4) [-]", xlabel="DoF", legend=None)
+        fig.tight_layout()
+        return fig, axes
+
     def table(self) -> str:
         rows = [f"{'DoF':>8} {'Kp,imp':>8} {'Kd,imp':>9} {'R':>9} {'K3':>8} {'K4':>8} {'distance':>9}  box"]
         for f in self.fits:

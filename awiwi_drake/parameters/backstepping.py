@@ -25,7 +25,6 @@ __all__ = [
     "OptimalGainsCase",
     "JointRigOptimalGainsCase",
     "FingerOptimalGainsCase",
-    "FingerPositionBacksteppingGains",
     "OptimalGainsStudy",
 ]
 
@@ -251,25 +250,6 @@ class JointRigOptimalGainsCase(OptimalGainsCase):
                                     "(optimal_gains.rate_limited_case): fit distance 4.4 at R = 1e-5 (304 / 46 "
                                     "at 1e-3 / 1e-4; 2.6 at 1e-6 but then a 1 Hz sine saturates 43 %); the 3 kHz "
                                     "loop settles a 0.3 rad step in 53 ms and tracks the sine unsaturated"))
-
-
-@dataclass(frozen=True)
-class FingerPositionBacksteppingGains(Parameters):
-    """Link-level gains of the position variant of the finger backstepping (15.2 steps (15.27), (15.31) on every
-    DoF, :mod:`awiwi_drake.control.finger_backstepping`): ``z2 = e' + k1 e`` and the DoF closed loop
-    ``e'' + (k1 + k2) e' + (1 + k1 k2) e = 0`` on every mode of M (poles ``-k +- i`` for ``k1 = k2 = k``)."""
-
-    k1: float = param(60.0, unit="1/s", low=0.0, low_inclusive=False,
-                      source="chosen: the chain's joint_bandwidth (HandChainParams, 60 rad/s) so that the variants "
-                             "compare at one joint bandwidth; Fig 15.13's K1 = 5 (a 7.2e-7 kg m^2 test link) "
-                             "would take ~1 s per step; |h lambda| = 0.02 at 3 kHz")
-    k2: float = param(60.0, unit="1/s", low=0.0, low_inclusive=False, source="chosen: k1 (double pole near -60 1/s)")
-    friction_scale: float = param(
-        0.75, unit="-", low=0.0, high=1.0,
-        source="chosen: the share of the motor friction (3.8) the position variant cancels (HandChainParams."
-               "friction_scale, 0.5, is the antagonistic law's). Measured, spectral radius of the 3 kHz sampled "
-               "loop at rest (default physics), thumb / index: 0 -> 1.047 / 1.050, 0.25 -> 1.023 / 1.005, "
-               "0.5 -> 1.0086 / 1.0 (the thumb unstable), 0.75 and 1 -> 1.0 (only the marginal Dahl states)")
 
 
 @dataclass(frozen=True)
