@@ -203,21 +203,21 @@ def test_one_joint_with_mixed_laws_closed_by_the_chain_has_exactly_the_designed_
 
 def test_two_time_scale_tendon_level_damps_the_elongation_rate_with_each_tendons_stiffness():
     """The two-time-scale chain's tendon level (11.3) on the finger with one law overridden, closed form of each
-    DoF's reduced model (per tendon: B thdd = Kp_m (f_d - f) / alpha_i - Kd_m (thd + v_path / r_m) - d_eff thd,
+    DoF's reduced model (Kp_m = B w_m^2, Kd_m = 2 xi w_m B at the chain's force bandwidth; per tendon: B thdd = Kp_m (f_d - f) / alpha_i - Kd_m (thd + v_path / r_m) - d_eff thd,
     alpha_i = r_m k_i, f = phi_i(r_m th + P q)): tau'' = w_m^2 (tau_d - tau) - (Kd_m + d_eff)/B tau'
     - K_jj qdd - K_jj d_eff/B qd with K_jj = sum_i P_ij^2 k_i (each tendon's own law), qdd = (tau - b qd)/M;
     d_eff = d (1 - friction_scale) (the law feeds forward friction_scale of the motor's viscous term).  Damping
     the absolute motor velocity instead would add -K_jj Kd_m / B to the qd entry: a viscous joint damping that
     made the finger designs crawl (slowest index pole -0.35 1/s)."""
-    from awiwi_drake.parameters.control import ImpedanceParams
+    from awiwi_drake.parameters.control import TendonForceGains
     rig = _mixed_rig()
     op = rig.operating_point()
     laws = rig_springs(rig)
     P = np.asarray(rig.coupling.P(op.joint_angle))
     k_own = np.array([_k_of_force(law, f) for law, f in zip(laws, op.tendon_force)])
-    ip, motor = ImpedanceParams(), rig.params.motor
-    B, wm = motor.inertia, ip.motor_bandwidth
-    kd_m = 2 * ip.motor_damping_ratio * wm * B
+    motor = rig.params.motor       # the motor loop runs at the chain's force bandwidth and damping ratio
+    B, wm = motor.inertia, HandChainParams().force_bandwidth
+    kd_m = 2 * TendonForceGains().damping_ratio * wm * B
     d_eff = (motor.damping + (motor.viscous_friction if motor.friction else 0.0)) * (1 - HandChainParams().friction_scale)
     for m in reduced_joint_models(rig, tendon_law="motor-position"):
         K_jj = float(P[:, m.dof] ** 2 @ k_own)
