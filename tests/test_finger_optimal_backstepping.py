@@ -141,3 +141,15 @@ def test_compare_cli_runs_optimal_backstepping_on_the_index(tmp_path):
     assert all(float(r["saturated_fraction"]) == 0.0 and float(r["gain"]) > 0.5 for r in opt), opt
     pos = [r for r in rows if r["controller"] == "backstepping-position"]     # saturates through the estimator
     assert all(float(r["gain"]) > 0.5 and float(r["tracking_rms"]) < 0.1 for r in pos), pos     # (docstring there)
+
+
+def test_thumb_selection_with_its_position_dependent_coupling_is_stable_at_3khz():
+    """The thumb (P(q): each DoF's model at the operating point's P): the registered controller's per-tendon gains
+    come from its four DoF selections inside the box, and its 3 kHz sampled loop (physics on) is stable."""
+    rig = finger_diagram(finger="thumb")
+    ctrl = make_controller("optimal-backstepping", rig)
+    sel = ctrl.law.design["force_gains"]
+    assert [f.name for f in sel.fits] == ["q10", "q11", "q12", "q13"]
+    assert all(f.box[0] <= f.k3 <= f.box[1] and f.box[0] <= f.k4 <= f.box[1] for f in sel.fits)
+    np.testing.assert_array_equal(ctrl.law.K4, sel.k4)
+    assert sampled_radius(rig, ctrl.law, FS) <= 1.0 + 1e-9
