@@ -257,6 +257,8 @@ def test_sampled_rig_is_used_only_where_it_is_the_same_loop():
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="error_controlled")
     with pytest.raises(ValueError, match="step = .*sampled plant"):
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="fixed_step", step=H / 2)
+    with pytest.raises(ValueError, match="integrator = 'runge_kutta2'.*sampled plant"):
+        simulate(loop.diagram, loop.create_context(op), 0.01, integrator="runge_kutta2")
 
 
 def test_sampled_batch_equals_the_continuous_batch_behind_a_hold_to_round_off():
