@@ -416,13 +416,26 @@ def test_thumb_tension_hessians_are_the_derivative_of_the_coupling():
     np.testing.assert_allclose(np.einsum("i,ijk->jk", f, H), c.tension_hessian(q, f), atol=1e-14)
 
 
-def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver():
+@pytest.mark.parametrize("laws", ["one", "per-tendon"])
+def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver(laws):
     """The loop system iterates all five fingers at once (float path); at random requests, near the design
     point (batched) and at the bounds (left to the finger's own solver: LP start, MathematicalProgram), the
-    update equals each finger's warm-started solve to 1e-12."""
+    update equals each finger's warm-started solve to 1e-12.  Also with a spring law per tendon (two
+    tendons overridden: the batch interpolates each tendon's own table row)."""
     fingers = ("thumb", "index", "middle", "ring", "fifth")
-    system = TendonForceDistributionSystem(fingers=fingers, iterations_per_period=2, stiffness="full")
+    springs = None
+    if laws == "per-tendon":
+        from awiwi_drake.components.spring import TendonSprings, tendon_spring
+        from awiwi_drake.parameters.components import TendonParams
+        from awiwi_drake.parameters.hand import FingerDriveParams
+        nominal = FingerDriveParams().spring
+        a, b = tendon_spring(nominal), tendon_spring(nominal.replace(tendon=TendonParams(diameter=2.0e-3)))
+        springs = TendonSprings([b if i in (2, 11) else a for i in range(38)])   # thumb h3, index h4
+    system = TendonForceDistributionSystem(fingers=fingers, iterations_per_period=2, stiffness="full",
+                                           springs=springs)
     assert system._batch is not None
+    if springs is not None:
+        assert system.solvers[0].stiffness_map.per_tendon and not system.solvers[2].stiffness_map.per_tendon
     rng = np.random.default_rng(3)
     ctx = system.CreateDefaultContext()
     served = left = 0
@@ -455,11 +468,11 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
     """The cascaded chain (distribution, estimator, tendon force law) is sampled: over N control periods of
     fixed-step RK3 it is evaluated N (+1 at the start) times while the plant's derivatives are evaluated 3N."""
     from awiwi_drake.analysis import simulate
-    from awiwi_drake.components.fused_drive import TendonDrive_
     from awiwi_drake.control import closed_loop, get_entry, make_controller
     from awiwi_drake.control.base import StaticLawController_
     from awiwi_drake.control.force_distribution import TendonForceDistribution_
     from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.hand.dynamics import HandDynamics_
     from awiwi_drake.hand.estimation import LinkPositionEstimator_
     counts = {}
 
@@ -471,7 +484,7 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
             return f(self, *a)
         monkeypatch.setattr(cls, name, w)
     for cls, name in ((TendonForceDistribution_[float], "_update"), (LinkPositionEstimator_[float], "_update"),
-                      (StaticLawController_[float], "_calc"), (TendonDrive_[float], "DoCalcTimeDerivatives")):
+                      (StaticLawController_[float], "_calc"), (HandDynamics_[float], "DoCalcTimeDerivatives")):
         counting(cls, name)
     rig = finger_diagram(finger="index")
     loop = closed_loop(rig, make_controller("cascaded", rig), **get_entry("cascaded", rig).loop_options)
@@ -479,7 +492,7 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
     n = 12
     counts.clear()                          # the design (per-joint linearisations) evaluates the laws too
     simulate(loop, loop.create_context(op), n / loop.rate_hz, inputs={"joint_angle_reference": op.joint_angle + 0.02})
-    derivs = counts.pop(TendonDrive_[float].__name__ + "DoCalcTimeDerivatives")
+    derivs = counts.pop(HandDynamics_[float].__name__ + "DoCalcTimeDerivatives")
     assert 3 * n <= derivs <= 3 * n + 3
     for key, k in counts.items():
         assert n <= k <= n + 1, (key, k)

@@ -8,7 +8,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
 from _fd import check_system_autodiff_matches_fd
-from awiwi_drake.analysis import linearize, simulate
+from _sampled import sampled_radius
+from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import TendonPathVelocity
@@ -209,25 +210,12 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
 
 
 def _sampled_backstepping_radius(rig, rate_hz, design_rate_hz, regain=None):
-    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold (ideal
-    sensors): the law's state feedback K from Drake's Linearize of the continuous loop (B K = A_cl - A), the plant
-    discretised exactly (matrix exponential of Drake's linearisation)."""
-    from scipy.linalg import expm
+    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold
+    (:func:`_sampled.sampled_radius`), with the law designed for ``design_rate_hz``."""
     law = FingerBacksteppingLaw(rig, rate_hz=design_rate_hz)
     if regain is not None:
         regain(law)
-    op = rig.operating_point()
-    lin = linearize(rig, op)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
-    A_cl = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
-                     output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
-    A, B = lin.A, lin.B
-    K = np.linalg.lstsq(B, A_cl - A, rcond=None)[0]
-    np.testing.assert_allclose(B @ K, A_cl - A, atol=1e-8 * np.abs(A_cl).max())     # the law is state feedback
-    n, m = B.shape
-    E = expm(np.block([[A, B], [np.zeros((m, n + m))]]) / rate_hz)
-    return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ K)))), law
+    return sampled_radius(rig, law, rate_hz), law
 
 
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth"])
@@ -264,29 +252,11 @@ def test_hand_backstepping_sampled_at_3khz_is_stable():
     assert radius <= 1.0 + 1e-9, radius
 
 
-def test_finger_backstepping_lyapunov_function_decreases():
-    """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
-    loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index.
-    The ideal plant: V is the Lyapunov function of the frictionless, hysteresis-free design model."""
-    rig = _ideal_rig()
-    law = FingerBacksteppingLaw(rig)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    op = rig.operating_point()
-    ref = op.joint_angle + 0.1
-    ctx = loop.create_context(op, references={"joint_angle_reference": ref})
-    names = ("joint_angle", "joint_velocity", "elongation", "motor_angle", "motor_velocity")
-    res = simulate(loop.diagram, ctx, 0.05, log=names, max_step=5e-4, accuracy=1e-7)
-    V = np.array([law.terms(dict(joint_angle_reference=ref, **{n: res[n][i] for n in names}))["V"]
-                  for i in range(len(res.t))])
-    assert V[-1] < 0.05 * V[0]
-    assert np.max(np.diff(V)) <= 1e-6 * V[0], np.max(np.diff(V)) / V[0]
-
-
 @pytest.mark.parametrize("controller", ["lqr", "backstepping"])
 def test_index_finger_step_with_estimated_joint_angles(controller):
     """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
-    tendons never go slack, and the estimation error stays below one period of motion |v| / 3000
-    (the estimate is exact at the samples for a constant coupling, (5.15)).
+    tendons never go slack, and the estimate is exact: (5.15) of the current sample, and the index's
+    coupling is constant (the least squares of consistent length changes is the joint angle itself).
 
     Without the spring hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
     model and leaves a steady joint offset of order Kp^-1 (P S)^T z (backstepping, index, 3 kHz design: up
@@ -303,11 +273,7 @@ def test_index_finger_step_with_estimated_joint_angles(controller):
     q_end = res["joint_angle"][-1]
     assert abs(q_end[1] - q_ref[1]) < 0.02 * 0.2
     assert np.all(res["tendon_force"] > 0.0)
-    err = np.abs(res["joint_angle_estimation_error"])
-    # |q(t_k) - q(t)| <= max |v| (t - t_k) <= max |v| / 3000; the velocity is logged once per period, so its
-    # maximum between two logs may exceed the logged one: 5 % allowance for that sampling only
-    bound = 1.05 * np.abs(res["joint_velocity"]).max(axis=0) * PERIOD
-    assert np.all(err.max(axis=0) <= bound + 1e-9), (err.max(axis=0), bound)
+    assert np.abs(res["joint_angle_estimation_error"]).max() < 1e-9
 
 
 def test_hand_loop_has_one_channel_per_independent_joint():
@@ -336,8 +302,22 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     assert (out / "step_ring.png").exists() and (out / "disturbance_ring.png").exists()
     step = {(r["controller"], r["joint"]): r for r in rows if r["test"] == "step"}
     assert all(r["status"] in ("ok", "flagged") for r in rows), [r["status"] for r in rows]   # none stopped
-    # the step moves every joint towards its reference (0.2 rad)
-    assert all(abs(float(r["steady_state_error"])) < 0.1 for r in step.values()), step
+    # The step's remaining error is bounded by the loop's own sampled linearisation at rest (sampled_loop_poles:
+    # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
+    # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
+    # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
+    from awiwi_drake.control.compare import short_test_params
+    from awiwi_drake.control.joint_design import sampled_loop_poles
+    from awiwi_drake.hand.coupling import dof_selection
+    p = short_test_params(lambda: _rig("ring"), ["joint-pd", "cascaded"])      # the window the CLI ran
+    for name in ("joint-pd", "cascaded"):
+        rig = _rig("ring")
+        S = dof_selection(rig.coupling)
+        t, q = sampled_loop_poles(rig, make_controller(name, rig)).step_response(
+            S @ np.full(S.shape[1], p.step_size), p.step_duration - p.step_delay)
+        e_lin = np.abs(p.step_size - (np.linalg.pinv(S) @ q.T).T)[t >= 0.9 * t[-1]].max(axis=0)
+        sse = np.array([abs(float(step[(name, j)]["steady_state_error"])) for j in ("q40", "q41", "q42")])
+        assert np.all(sse <= e_lin), (name, sse, e_lin)
 
 
 def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
@@ -372,24 +352,6 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
     assert np.all(np.diag(jac["motor_torque"][0][:, 12:20]) < 0.0)
 
 
-@pytest.mark.parametrize("controller", ["cascaded"])
-def test_finger_controllers_refuse_per_tendon_spring_laws(controller):
-    """The chain's force map / distribution model every tendon with the rig's one spring law: a rig with
-    params.tendon_springs is refused with a line naming the option (not controlled as if it had one law);
-    designing on the nominal rig stays possible. (The backstepping uses each tendon's own law: see
-    test_finger_backstepping_closed_loop_poles_equal_the_design.)"""
-    from awiwi_drake.parameters.components import TendonParams
-    from awiwi_drake.parameters.hand import FingerRigParams
-    base = FingerRigParams.for_finger("index")
-    stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
-    rig = finger_diagram(finger="index", params=base.replace(tendon_springs=(("index_h3", stiff),)))
-    with pytest.raises(ValueError, match=r"tendon_springs: index_h3"):
-        make_controller(controller, rig)
-    nominal = finger_diagram(finger="index", params=base)
-    loop = closed_loop(rig, make_controller(controller, nominal), **get_entry(controller, nominal).loop_options)
-    assert loop.diagram.HasOutputPort("joint_angle_estimate")
-
-
 def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_estimation_error():
     """A step the distribution cannot serve within [f_min, f_max] (bounds 20 +- 1 N around the 20 N
     pretension; the 0.2 rad step asks for more torque than 1 N of force difference gives) is flagged in
@@ -402,12 +364,10 @@ def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_es
         loop = closed_loop(rig, joint_stage_controller(rig, "cascaded", distribution_params=dist))
         run, rows = run_joint_test(loop, "step", controller="cascaded", params=compare_test_params(rig, step_duration=0.1))
         flags[tight] = [r.flags for r in rows]
-        # the estimation error is reported per joint and, for the constant coupling, stays below one period
-        # of motion |v| / 3000 (exact at the samples, (5.15)); 5 % for the velocity's sampling (as above)
-        v = np.abs(run.state[:, 4:8]).max(axis=0)
+        # the estimation error is reported per joint: for the constant coupling the current sample's (5.15) is
+        # exact (as above)
         est = np.array([r.estimation_error for r in rows])
-        assert np.all(np.isfinite(est)) and np.all(est <= 1.05 * v * PERIOD + 1e-9), (est, v * PERIOD)
-        assert est.max() > 0.0
+        assert est.shape == (4,) and np.all(np.isfinite(est)) and np.all(est < 1e-9), est
         if tight:
             assert all(r.status == "flagged" for r in rows)
     assert all("force distribution out of bounds" in f for f in flags[True]), flags[True]

@@ -71,29 +71,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _short_params(params, rig_fn, kw, names, rig_name):
-    """Shortened tests whose step window lets the compared loops settle (CompareShortMode)."""
-    from awiwi_drake.control.base import closed_loop
-    from awiwi_drake.control.compare import dominant_time_constant
-    from awiwi_drake.control.registry import get_entry
-    from awiwi_drake.parameters.cli import CompareShortMode
-
-    sm = CompareShortMode()
-    taus = []
-    for n in names:  # continuous loops (the compiled drive declares no spurious feedthrough): Drake linearises them
-        rig = rig_fn(**kw)
-        entry = get_entry(n, rig_name)
-        loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": None, "delay": None})
-        taus.append(dominant_time_constant(loop, params))
-    if any(t is None for t in taus):  # a loop Drake cannot linearise: keep the full step window
-        step = params.step_duration
-    else:
-        step = min(params.step_duration, max(sm.min_step_duration, params.step_delay
-                                             + sm.step_time_constants * max(taus)))
-    return params.replace(step_duration=step, sweep_duration=min(params.sweep_duration, sm.sweep_duration),
-                          settle_time=min(params.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
-
-
 def _parse_list(text: str, what: str) -> list[str]:
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
@@ -111,7 +88,7 @@ def run(args) -> int:
     from awiwi_drake.config import short_mode
     from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
     from awiwi_drake.control.registry import controller_names, get_entry
-    from awiwi_drake.control.compare import compare_test_params
+    from awiwi_drake.control.compare import compare_test_params, short_test_params
 
     if args.list:
         for n in controller_names(args.rig):
@@ -138,12 +115,7 @@ def run(args) -> int:
     short = args.short or short_mode()
     params = compare_test_params(args.rig)
     if short:
-        if args.rig in FINGER_RIGS:   # no continuous linearisation (the estimator is sampled): fixed windows
-            params = params.replace(step_duration=min(params.step_duration, 0.15),
-                                    settle_time=min(params.settle_time, 0.1), sine_periods=2.0,
-                                    sine_frequency=max(params.sine_frequency, 4.0))  # two periods in 0.5 s
-        else:
-            params = _short_params(params, rig_fn, kw, names, args.rig)
+        params = short_test_params(make_rig, names, params)
     opts = {}
     if args.rate is not None:
         opts["rate_hz"] = None if args.rate == 0 else args.rate
