@@ -173,7 +173,7 @@ def test_one_joint_with_mixed_laws_closed_by_the_chain_has_exactly_the_designed_
     K = d.gains[j, :4]
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
-                                torque_op=point["torque_offset"])
+                                torque_op=point["torque_offset"], torque_rate=d.law.torque_rate)
     loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
                        estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})

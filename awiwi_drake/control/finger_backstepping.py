@@ -101,8 +101,9 @@ import numpy as np
 
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
-from awiwi_drake.components import TendonSprings, motor_friction_torque, motor_ripple_torque
+from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.control.chain import rig_springs
 from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
@@ -151,7 +152,7 @@ class FingerBacksteppingLaw(StaticLaw):
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
         self.coupling, self.motor = coupling, rig.params.motor
-        self.springs = TendonSprings(getattr(rig, "spring_laws", None) or [rig.spring] * coupling.num_tendons)
+        self.springs = rig_springs(rig)
         self.S = dof_selection(coupling)
         self.Sp = np.linalg.pinv(self.S)
         n, k = self.S.shape
@@ -306,6 +307,6 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
 
 def check_backstepping_springs(rig: Any) -> None:
     """Raise unless every tendon's spring law is strictly increasing (phi' > 0, section 15.4)."""
-    for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
+    for law in rig_springs(rig).laws:
         if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
             raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")
