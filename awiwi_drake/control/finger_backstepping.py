@@ -65,11 +65,7 @@ Variants (``variant``, registered ``backstepping-position`` and ``backstepping-n
   750 1/s, the heavy modes at 0.5 Nm/rad, the lightest at 0.092 like the impedance design).  With one rate for
   every mode (k = 60) the distal modes' stiffness ``mu (1 + k^2)`` is 6e-4-7e-3 Nm/rad, below what the lever's
   hysteresis friction lets move: an all-joint 0.2 rad step left the index DIP and the ring PIP/DIP near their
-  start and drove the fifth 2 rad away (measured).  Through the estimator the light modes' ``k_i`` (up to 750 1/s)
-  amplify the estimate's error (``(P S) K1 e`` in ``beta``): compare --short on the index saturates 55 / 59 % of
-  the step / sine; capping ``k_i`` at the force steps' 300 1/s leaves the sine unsaturated but the hysteresis
-  offsets grow (hand step: index DIP 0.29, thumb 0.63 rad against 0.07 / 0.12): the cap is not taken, the
-  saturation is reported.  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
+  start and drove the fifth 2 rad away (measured).  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
   one link) needs ``beta = ... + (P S) M_d^-1 z2``: ``M_d^-1`` (1.6e6 at the index DIP) in the force step puts
   the 3 kHz sampled loop's spectral radius at 164 (measured on the index), so the metric is ``M_d``'s.
 * ``"nonlinear-spring"``: the steps of (15.71)-(15.81) on the joint torques ``tau = -(P S)^T phi(x)`` (each
@@ -80,8 +76,9 @@ Variants (``variant``, registered ``backstepping-position`` and ``backstepping-n
       V = e'^T M_d e'/2 + e^T Kp e/2 + |z3|^2/2 + |z4|^2/2 + |Pi (f - f_op)|^2/2 + |Pi (f' + K3 (f - f_op))|^2/2
 
   Its ``- e'`` cross term is in N m where 15.5's ``(P S) e'`` is in N: relative to 15.5 it multiplies the
-  joint-velocity error by ``1/|P S|^2`` (~3e4 on the index), so through the estimator its command saturates
-  (index, compare --short: 63-77 %; 0-7 % with ideal sensors).  Weighting ``z3``, ``z4`` by
+  joint-velocity error by ``1/|P S|^2`` (~3e4 on the index): with the estimate one period old (until this wave's
+  estimator change) its command saturated 63-77 % of compare --short's step and sine on the index; with the
+  estimate of the current sample, 7 % of the step, like 15.5.  Weighting ``z3``, ``z4`` by
   ``((P S)^T P S)^-1`` (the forces that realise them) turns it into the 15.5 law itself for a constant
   coupling: 15.5 is the 15.4 construction in the metric of the tendon forces (checked numerically on the index at
   a random state: the commands agree to 3e-14 of 139 Nm).

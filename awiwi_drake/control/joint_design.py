@@ -395,7 +395,7 @@ class JointDesign:
                 share, s = np.abs(cv * wb / lam), lam
             else:
                 share = np.abs(cv * wb / (1.0 - lam))
-                with np.errstate(divide="ignore"):
+                with np.errstate(divide="ignore", invalid="ignore"):      # log(0): the delay state's z = 0
                     s = np.log(lam.astype(complex)) / self.period
             keep = (share / share.sum() > min_share) & np.isfinite(s)
             taus.append(float(1.0 / np.min(-s.real[keep])))
