@@ -15,6 +15,7 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import TendonPathVelocity
 from awiwi_drake.control.joint_design import joint_stage_controller
 from awiwi_drake.control.joint_stage import JointStage, JointStateFeedbackLaw
+from awiwi_drake.components.spring import TendonSprings
 from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.hand.coupling import dof_selection
@@ -169,7 +170,7 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
         stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
         wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))
-        wrong._spring_groups = [(rig.spring, np.arange(rig.num_tendons))]      # the common law for every tendon
+        wrong.springs = TendonSprings([rig.spring] * rig.num_tendons)          # the common law for every tendon
         wrong_loop = closed_loop(rig, StaticLawController(wrong), rate_hz=None, sensors="ideal")
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
     law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))   # the continuous design: exact cancellation

@@ -100,6 +100,7 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.control.chain import rig_springs
 from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
@@ -148,11 +149,7 @@ class FingerBacksteppingLaw(StaticLaw):
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
         self.coupling, self.motor = coupling, rig.params.motor
-        laws = list(getattr(rig, "spring_laws", None) or [rig.spring] * coupling.num_tendons)
-        groups = {}
-        for i, law in enumerate(laws):
-            groups.setdefault(id(law), (law, []))[1].append(i)
-        self._spring_groups = [(law, np.array(ix)) for law, ix in groups.values()]   # tendons sharing a law
+        self.springs = rig_springs(rig)
         self.S = dof_selection(coupling)
         self.Sp = np.linalg.pinv(self.S)
         n, k = self.S.shape
@@ -240,9 +237,9 @@ class FingerBacksteppingLaw(StaticLaw):
             W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
-        f = self._springs("force", x)
-        k1 = self._springs("stiffness", x)
-        k2 = self._springs("stiffness_derivative", x)
+        f = self.springs.force(x)                       # each tendon's own law phi_i
+        k1 = self.springs.stiffness(x)
+        k2 = self.springs.stiffness_derivative(x)
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
@@ -289,14 +286,6 @@ class FingerBacksteppingLaw(StaticLaw):
             V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
-    def _springs(self, method: str, x):
-        """``law_i.method(x_i)`` with each tendon's own spring law (float or AutoDiffXd arrays)."""
-        x = np.asarray(x)
-        out = np.empty(x.shape, dtype=x.dtype)
-        for law, ix in self._spring_groups:
-            out[ix] = np.asarray(getattr(law, method)(x[ix]), dtype=x.dtype)
-        return out
-
     def __call__(self, u):
         return self.terms(u)["command"]
 
@@ -315,6 +304,6 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
 
 def check_backstepping_springs(rig: Any) -> None:
     """Raise unless every tendon's spring law is strictly increasing (phi' > 0, section 15.4)."""
-    for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
+    for law in rig_springs(rig).laws:
         if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
             raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")
