@@ -79,12 +79,13 @@ def cases(per_row: int, quick: bool) -> list:
         "finger_single": [("finger-index", [FINGER[i % len(FINGER)]], 30, 1.0, None) for i in range(per_row)],
         "finger_nothing": [("finger-index", [], 30, 1.0, None) for _ in range(per_row)],
     }
-    out, seed = [], 1000
+    out, seeds = [], {"rig": 1000, "finger": 5000}   # the rig rows keep the seeds of earlier runs
     for i in range(per_row):
         for row, lst in rows.items():
-            seed += 1
             rig, hidden, snr, strength, transform = lst[i]
-            out.append((row, rig, hidden, snr, seed, strength, transform))
+            key = "finger" if rig.startswith("finger-") else "rig"
+            seeds[key] += 1
+            out.append((row, rig, hidden, snr, seeds[key], strength, transform))
     return out
 
 
