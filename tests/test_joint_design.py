@@ -25,15 +25,15 @@ TENDON_LAW = {"two-time-scale": "motor-position"}
 
 def _python_rig(finger="index"):
     """The finger on the python backend (every state-only output declared so, for the continuous linearisations
-    of these design checks), without the spring hysteresis: that backend does not carry its state, and the
-    per-joint design models have none."""
-    return finger_diagram(finger=finger, backend="python",
-                          params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False))
+    of these design checks), without the spring hysteresis and the guide friction: that backend does not carry
+    their Dahl states, and the per-joint design models have none."""
+    return finger_diagram(finger=finger, backend="python", params=FingerRigParams.for_finger(finger).with_physics(
+        hysteresis=False, guide_friction=False))
 
 
 def _design_rig(finger="index"):
     """The finger with the design model's motor ((3.8) linearised in motion), python backend (as `_python_rig`)."""
-    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False, guide_friction=False)
     return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
 
 

@@ -17,19 +17,38 @@ with the tendon force ``f = phi_i(x_i)`` of each tendon's own spring law (``rig.
 lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
 spring elongation ``x_i``, the motor friction
 (3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
-cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
-``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
-phi' (r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B + P qddot)``.  The joint accelerations
-come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``, the DoF
-inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
-rest, are left out) and their derivative from ``f'``.  For that model
+cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``, ``f'' = f0 + g u``,
+``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 + phi' r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B``,
+where the force steps model the tendon as in ch. 10 ((10.1): fixed at the link end), ``x' = r_m omega``.
+The joint accelerations come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``,
+the DoF inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
+rest, are left out) and their derivative from ``f'``.
+
+``HandChainParams.link_motion_in_force_model=True`` is the exact design: ``x' = r_m omega + P qdot`` and
+``f0`` gains ``phi' P S e''``, the tendon force change of the link's modelled motion.  For that model
 
     V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,   (Kp symmetric positive definite)
     V' = -e'^T (Kd + B_q) e' - K3 |z3|^2 - K4 |z4|^2 <= 0
 
 (the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
-``beta``).  Output port ``lyapunov`` gives ``V``.  With one DoF and ``P = [-r_q, r_q]^T`` it is the
-antagonistic joint of 15.5.
+``beta``), and the linearised loop has exactly the designed error-system poles (tested on the ideal plant).
+With one DoF and ``P = [-r_q, r_q]^T`` it is the antagonistic joint of 15.5.  It is not the default,
+because on the finger the link's motion is the fastest and least known part of the model (measured with
+Drake's ``Linearize``, index, 3 kHz, ZOH):
+
+* the links are light (index DIP ~1e-6 kg m^2): the modelled ``e''`` reacts to every link-side force the
+  model lacks with ``M_d^-1 (P S)^T dF``, and ``phi' P S e''`` turns it into motor torque.  The guides'
+  friction (4.1) is such a force (at rest a presliding stiffness ``C/delta`` ~5 kN/m per tendon path): the
+  continuous loop on the true joint state has a pole at +833 1/s;
+* ``P qdot`` comes from the tendon-length estimate, one control period old when the command is sampled
+  and differentiated: the sampled loop with the estimator is unstable already without guide friction
+  (spectral radius 1.03: a 544 Hz DIP/PIP mode), 1.25 with it (a real mode, the one above).
+
+With the ch. 10 tendon model the link's motion is a disturbance of the force steps, rejected by ``K3``,
+``K4``: the sampled loop (the estimator in it) is stable on every finger and the hand, with and without
+guide friction (``tests/test_hand_control.py``).  The guide friction then leaves the steady joint offset of a
+friction dead band, ``Kp e = -(P S)^T (g + z)`` at rest (``|g_i| <= W_i`` the guides', ``|z_i| <= w_i`` the
+lever's friction).  ``terms(u)["V"]`` gives ``V``.
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
@@ -87,12 +106,6 @@ class FingerBacksteppingLaw(StaticLaw):
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")
-        if getattr(rig.params, "guide_friction", False):
-            raise ValueError(
-                f"finger backstepping: rig {rig.name!r} has guide_friction=True; the 15.5 law differentiates its "
-                "frictionless link model and is unstable with the guides' friction state (measured on the index: "
-                "a closed-loop pole at +833 1/s, sampled spectral radius 1.27 at 3 kHz): use "
-                "params.with_physics(guide_friction=False), or another controller (joint-pd, cascaded)")
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
         self.coupling, self.motor = coupling, rig.params.motor
@@ -126,6 +139,7 @@ class FingerBacksteppingLaw(StaticLaw):
         self.mode_stiffness = k_modes
         self.K3 = self.K4 = float(wf)
         self.friction_scale = float(p.friction_scale)
+        self.link_motion = bool(p.link_motion_in_force_model)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
         parts = coupling.parts
         self._blocks = []                 # (tendon slice, plant-joint slice, DoF slice, constant W or None)
@@ -140,7 +154,7 @@ class FingerBacksteppingLaw(StaticLaw):
                        "motor_angle": m, "motor_velocity": m}
         self.output_size = m
         self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
-                           tendon_force=self.f_op, torque_offset=self.tau_op)
+                           tendon_force=self.f_op, torque_offset=self.tau_op, link_motion=self.link_motion)
 
     def terms(self, u) -> dict:
         """All intermediate quantities (``z3``, ``z4``, ``e``, ``V``, ``command``) for inputs ``u``."""
@@ -158,7 +172,9 @@ class FingerBacksteppingLaw(StaticLaw):
         f = self._springs("force", x)
         k1 = self._springs("stiffness", x)
         k2 = self._springs("stiffness_derivative", x)
-        xd = self.r_m * w + P @ v
+        # the elongation rate the force steps model: the motor's (ch. 10, (10.1): tendon fixed at the link end), or
+        # with link_motion_in_force_model also the link's P qdot (the exact 15.5 design; see the module docstring)
+        xd = self.r_m * w + P @ v if self.link_motion else self.r_m * w
         fd = k1 * xd
         tau = -(PS.T @ f)
         edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e'
@@ -173,7 +189,9 @@ class FingerBacksteppingLaw(StaticLaw):
         beta_d = W @ a2 - self.K3 * (fd - W @ a1) + PS @ edd
         wd0 = (self.friction_scale * motor_friction_torque(w, self.motor) + motor_ripple_torque(th, self.motor)
                - self.r_m * f) / self.B
-        f0 = k2 * xd * xd + k1 * (self.r_m * wd0 + P @ (S @ edd))
+        f0 = k2 * xd * xd + k1 * self.r_m * wd0
+        if self.link_motion:                                   # the link model's acceleration: k1 P qdd
+            f0 = f0 + k1 * (P @ (S @ edd))
         g = k1 * self.r_m / self.B
         cmd = (beta_d - f0 - z3 - self.K4 * z4) / g
         V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
