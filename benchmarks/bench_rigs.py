@@ -16,10 +16,14 @@ The JSON also records the machine's load average at the start and the end of the
 Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 
 * ``joint_rig_3khz``: the default ``joint_rig()`` under the demo's motor PD
-  (``rigs.demo.joint_rig_position_loop``), fixed-step RK3 at the control period
-  (the default of ``analysis.simulate`` for sampled loops); also through
-  ``analysis.simulate`` itself (logging and monitors on) and the error against a
-  tight error-controlled run (RK3, accuracy 1e-9).
+  (``control.motor_position.joint_rig_position_loop``): the default loop, the rig sampled at the
+  control period (Drake's ``DiscreteTimeApproximation``, fixed-step RK3 at 1/3000 s inside one
+  discrete update per period; the default of ``closed_loop`` for sampled loops on single-joint
+  rigs); beside it the continuous rig behind the hold with fixed-step RK3 at the control period in
+  the outer ``Simulator`` (``..._continuous_rig_rtf``; the largest state difference between the two,
+  ``..._sampled_vs_continuous_max_difference``, is round-off); also through ``analysis.simulate``
+  itself (logging and monitors on) and the error against a tight error-controlled run of the
+  continuous rig (RK3, accuracy 1e-9).
 * ``scipy_reference``: the same equations and controller in numpy with
   ``scipy.integrate.solve_ivp`` (RK23, rtol 1e-4) per control period.
 * ``finger_index_3khz``: the index finger under the joint-space motor PD.
@@ -29,8 +33,10 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
   the default ``HandRigParams()`` (keys ``hand_3khz_rtf``, ``..._ripple_guide_friction_rtf``,
   ``..._physics_off_rtf``, ``..._default_rtf``).
 * ``batch_rigs``: 512 joint rigs in one system (``rigs.batch``) under 512 motor PDs
-  (C++: a sparse gain on the batch state plus a constant, zero-order hold at 3 kHz),
-  rig-seconds per CPU-second.
+  (C++: a sparse gain on the batch state plus a constant), the batch sampled at 3 kHz as one
+  ``DiscreteTimeApproximation`` (``BatchedRig.sampled_diagram``), rig-seconds per CPU-second;
+  beside it the continuous batch behind a zero-order hold (``batch_continuous_...``) and the largest
+  state difference between the two.
 * ``mujoco_callback`` / ``mujoco_linear``: the same antagonistic joint (two motor
   rotors, two fixed tendons, one link) in MuJoCo, RK4 at 1/3000 s with the PD in the
   stepping loop: (a) the exact nonlinear tension-only spring and the (3.8) motor
@@ -83,16 +89,18 @@ def _fixed_rk3(diagram, ctx, seconds):
     sim.Initialize()
     t0 = _clock()
     sim.AdvanceTo(seconds)
-    return _rtf(seconds, t0) + (ctx.get_continuous_state_vector().CopyToVector(),)
+    state = diagram.GetOutputPort("state").Eval(ctx) if diagram.HasOutputPort("state") else \
+        ctx.get_continuous_state_vector().CopyToVector()
+    return _rtf(seconds, t0) + (np.array(state),)
 
 
-def _joint_loop(seconds):
+def _joint_loop(seconds, sampled_rig=True):
     from awiwi_drake.control.motor_position import joint_rig_position_loop
     from awiwi_drake.rigs import joint_rig
     from awiwi_drake.parameters.rigs import DemoScenario
     rig = joint_rig()
     scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
-    loop = joint_rig_position_loop(rig, scen)
+    loop = joint_rig_position_loop(rig, scen, sampled_rig=sampled_rig)
     ctx = loop.create_context(rig.operating_point(pretension=scen.f_start))
     return rig, scen, loop.diagram, ctx
 
@@ -107,14 +115,19 @@ def case_joint_rig_3khz(seconds, repeats):
         return _fixed_rk3(d, ctx, seconds)
     cpu, wall, x_fixed = _best(run, repeats)
 
+    def run_continuous():   # the continuous rig behind the hold, fixed-step RK3 in the outer Simulator
+        _, _, d, ctx = _joint_loop(seconds, sampled_rig=False)
+        return _fixed_rk3(d, ctx, seconds)
+    c_cpu, c_wall, x_cont = _best(run_continuous, repeats)
+
     def run_simulate():
         rig, _, d, ctx = _joint_loop(seconds)
         t0 = _clock()
         res = simulate(d, ctx, seconds, log=("joint_angle",), monitors=rig_monitors(rig))
         return _rtf(seconds, t0) + (res,)
     s_cpu, s_wall, res = _best(run_simulate, repeats)
-    # tight reference: error-controlled RK3 at accuracy 1e-9, sampled at the same times
-    _, _, d, ctx = _joint_loop(seconds)
+    # tight reference: error-controlled RK3 at accuracy 1e-9 (the continuous rig), sampled at the same times
+    _, _, d, ctx = _joint_loop(seconds, sampled_rig=False)
     sim = Simulator(d, ctx)
     ResetIntegratorFromFlags(sim, "runge_kutta3", 1.0 / RATE)
     sim.get_mutable_integrator().set_target_accuracy(1e-9)
@@ -127,7 +140,9 @@ def case_joint_rig_3khz(seconds, repeats):
     err = float(np.max(np.abs(res["joint_angle"][:, 0] - np.asarray(q_ref))))
     return dict(joint_rig_3khz_rtf=cpu, joint_rig_3khz_wall_rtf=wall, joint_rig_3khz_simulate_rtf=s_cpu,
                 joint_rig_3khz_simulate_wall_rtf=s_wall, joint_rig_3khz_max_error_rad=err,
-                joint_rig_3khz_final_joint_angle=float(x_fixed[0]))
+                joint_rig_3khz_final_joint_angle=float(x_fixed[0]), joint_rig_3khz_continuous_rig_rtf=c_cpu,
+                joint_rig_3khz_continuous_rig_wall_rtf=c_wall,
+                joint_rig_3khz_sampled_vs_continuous_max_difference=float(np.max(np.abs(x_fixed - x_cont))))
 
 
 def case_scipy_reference(seconds, repeats):
@@ -232,7 +247,7 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
         offset = (u0 + kp[:, None] * theta_ref).ravel()
         return K, offset
 
-    def run():
+    def run(sampled=True):
         br = batched_joint_rig(num_copies)
         rig = br.single
         rng = np.random.default_rng(0)
@@ -244,29 +259,42 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
         u0 = np.array([op.motor_torque for op in ops])
         K, offset = motor_pd(num_copies, theta_ref, u0, kp.ravel(), g.kd)
         b = DiagramBuilder()
-        plant = b.AddSystem(br.diagram)
+        # the default: the batch sampled at the control period (it samples the PD itself); else behind a hold
+        plant = b.AddSystem(br.sampled_diagram(1.0 / RATE) if sampled else br.diagram)
         gain = b.AddSystem(SparseMatrixGain(K))
         const = b.AddSystem(ConstantVectorSource(offset))
         add = b.AddSystem(Adder(2, 2 * num_copies))
-        hold = b.AddSystem(ZeroOrderHold(1.0 / RATE, 2 * num_copies))
         b.Connect(plant.GetOutputPort("state"), gain.get_input_port())
         b.Connect(gain.get_output_port(), add.get_input_port(0))
         b.Connect(const.get_output_port(), add.get_input_port(1))
-        b.Connect(add.get_output_port(), hold.get_input_port())
-        b.Connect(hold.get_output_port(), plant.GetInputPort("motor_torque"))
+        if sampled:
+            b.Connect(add.get_output_port(), plant.GetInputPort("motor_torque"))
+        else:
+            hold = b.AddSystem(ZeroOrderHold(1.0 / RATE, 2 * num_copies))
+            b.Connect(add.get_output_port(), hold.get_input_port())
+            b.Connect(hold.get_output_port(), plant.GetInputPort("motor_torque"))
         b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
         d = b.Build()
         ctx = d.CreateDefaultContext()
         x, u, e = br.stack(ops)
-        plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(x)
-        hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(u)
+        if sampled:
+            plant.GetMyMutableContextFromRoot(ctx).SetDiscreteState(x)
+        else:
+            plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(x)
+            hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(u)
         d.GetInputPort("external_torque").FixValue(ctx, e)
-        return _fixed_rk3(d, ctx, seconds)
+        out = _fixed_rk3(d, ctx, seconds)
+        x_end = (plant.GetMyContextFromRoot(ctx).get_discrete_state_vector() if sampled else
+                 plant.GetMyContextFromRoot(ctx).get_continuous_state_vector()).CopyToVector()
+        return out[:2] + (x_end,)
     cpu, wall, x = _best(run, max(1, repeats - 1))
     if not np.all(np.isfinite(x)):
         raise FloatingPointError("batched run diverged")
+    c_cpu, c_wall, x_c = _best(lambda: run(sampled=False), max(1, repeats - 1))
     return dict(batch_rig_seconds_per_cpu_second=cpu * num_copies,
-                batch_rig_seconds_per_wall_second=wall * num_copies, batch_num_copies=num_copies)
+                batch_rig_seconds_per_wall_second=wall * num_copies, batch_num_copies=num_copies,
+                batch_continuous_rig_seconds_per_cpu_second=c_cpu * num_copies,
+                batch_sampled_vs_continuous_max_difference=float(np.max(np.abs(x - x_c))))
 
 
 _MJCF = """

@@ -81,10 +81,10 @@ def test_compare_reports_where_the_bandwidth_comes_from():
     from awiwi_drake.control.registry import get_entry
     from awiwi_drake.rigs import flexible_joint_rig
 
-    p = compare_test_params(flexible_joint_rig(backend="python"), sweep_duration=2.0)
+    p = compare_test_params(flexible_joint_rig(), sweep_duration=2.0)
     rows, runs = {}, {}
     for rate in (None, 3000.0):
-        rig = flexible_joint_rig(backend="python")
+        rig = flexible_joint_rig()
         entry = get_entry("pole-placement", rig)
         loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": rate})
         runs[rate], rows[rate] = run_test(loop, "sweep", controller="pole-placement", params=p)

@@ -183,12 +183,11 @@ def test_default_hand_physics_is_stable_for_rk3_at_the_control_period():
     assert _rk3_check(hand, 20.0) <= 1e-9
 
 
-def test_finger_backstepping_with_guide_friction_needs_the_ch10_tendon_model():
-    """Why the 15.5 finger law models the tendon force as ch. 10 does (tendon fixed at the link end) by default
-    (Drake's Linearize of the continuous loop, true joint state, index with guide friction on): with the link's
-    motion in the force model (the exact design, motor friction cancelled in full) the guides' presliding
-    stiffness, which the link model lacks, gives a real pole far in the right half plane (measured +833 1/s);
-    without it every pole has Re <= 0 (the Dahl states are marginal at rest)."""
+def test_finger_backstepping_with_guide_friction_drops_the_link_acceleration_feedforward():
+    """Why the 15.5 finger law does not feed its link model's acceleration forward by default (Drake's Linearize of
+    the continuous loop, true joint state, index with guide friction on): with it (the exact design, motor friction
+    cancelled in full) the guides' presliding stiffness, which the link model lacks, gives a real pole far in the
+    right half plane (measured +833 1/s); without it every pole has Re <= 0 (the Dahl states are marginal)."""
     from pydrake.systems.primitives import Linearize
     from awiwi_drake.control import closed_loop
     from awiwi_drake.control.base import StaticLawController
@@ -206,7 +205,7 @@ def test_finger_backstepping_with_guide_friction_needs_the_ch10_tendon_model():
                       output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
         return np.linalg.eigvals(A).real.max()
 
-    assert max_real(HandChainParams(friction_scale=1.0, link_motion_in_force_model=True)) > 500.0
+    assert max_real(HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True)) > 500.0
     assert max_real(HandChainParams()) <= 1e-6
 
 

@@ -416,13 +416,26 @@ def test_thumb_tension_hessians_are_the_derivative_of_the_coupling():
     np.testing.assert_allclose(np.einsum("i,ijk->jk", f, H), c.tension_hessian(q, f), atol=1e-14)
 
 
-def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver():
+@pytest.mark.parametrize("laws", ["one", "per-tendon"])
+def test_hand_system_batches_the_fingers_and_equals_each_fingers_solver(laws):
     """The loop system iterates all five fingers at once (float path); at random requests, near the design
     point (batched) and at the bounds (left to the finger's own solver: LP start, MathematicalProgram), the
-    update equals each finger's warm-started solve to 1e-12."""
+    update equals each finger's warm-started solve to 1e-12.  Also with a spring law per tendon (two
+    tendons overridden: the batch interpolates each tendon's own table row)."""
     fingers = ("thumb", "index", "middle", "ring", "fifth")
-    system = TendonForceDistributionSystem(fingers=fingers, iterations_per_period=2, stiffness="full")
+    springs = None
+    if laws == "per-tendon":
+        from awiwi_drake.components.spring import TendonSprings, tendon_spring
+        from awiwi_drake.parameters.components import TendonParams
+        from awiwi_drake.parameters.hand import FingerDriveParams
+        nominal = FingerDriveParams().spring
+        a, b = tendon_spring(nominal), tendon_spring(nominal.replace(tendon=TendonParams(diameter=2.0e-3)))
+        springs = TendonSprings([b if i in (2, 11) else a for i in range(38)])   # thumb h3, index h4
+    system = TendonForceDistributionSystem(fingers=fingers, iterations_per_period=2, stiffness="full",
+                                           springs=springs)
     assert system._batch is not None
+    if springs is not None:
+        assert system.solvers[0].stiffness_map.per_tendon and not system.solvers[2].stiffness_map.per_tendon
     rng = np.random.default_rng(3)
     ctx = system.CreateDefaultContext()
     served = left = 0

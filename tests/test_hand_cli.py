@@ -68,7 +68,7 @@ def test_export_hand_diagrams(tmp_path):
     diagram = hand_diagram().diagram
     names = [s.get_name() for s in diagram.GetSystems()]
     assert sorted(nodes) == sorted(names)
-    for block in ("tendon_drive", "hand_plant", "wrist_tendon_offsets", "coupling_element"):
+    for block in ("hand_dynamics", "wrist_tendon_offsets", "wrist_offset_select"):
         assert block in nodes
     conn = diagram.connection_map()
     assert len(conn) >= len(names) - 1

@@ -8,7 +8,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.primitives import Linearize
 
 from _fd import check_system_autodiff_matches_fd
-from awiwi_drake.analysis import linearize, simulate
+from _sampled import sampled_radius
+from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import TendonPathVelocity
@@ -155,10 +156,11 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
 
 @pytest.mark.parametrize("finger,per_tendon", [("index", False), ("middle", False), ("index", True)])
 def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tendon):
-    """Linearize (Drake) of the finger under the exact 15.5 backstepping (continuous, true joint state, the link's
-    motion in the force model) has exactly the poles of the designed error system (e, e', z3, z4): the per-joint
-    design is what the plant does, not an approximation (constant-coupling fingers; Coriolis vanish at rest). The
-    ideal plant: the design has no hysteresis or guide friction state and cancels the motor friction exactly. With one tendon's
+    """Linearize (Drake) of the finger under the exact 15.5 backstepping (continuous, true joint state, the link
+    model's acceleration fed forward) has exactly the poles of the designed error system (e, e', z3, z4): the
+    per-joint design is what the plant does, not an approximation (constant-coupling fingers; Coriolis vanish at
+    rest). The ideal plant: the design has no hysteresis or guide friction state and cancels the motor friction
+    exactly. With one tendon's
     spring law overridden (a 2 mm tendon: stiffer) the law cancels each tendon's own phi_i: the poles are
     still exactly the design's (with the common law for all they are not: checked)."""
     rig = _ideal_rig(finger)
@@ -167,11 +169,11 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
         base = rig.params
         stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
-        wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_motion_in_force_model=True))
+        wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True))
         wrong._spring_groups = [(rig.spring, np.arange(rig.num_tendons))]      # the common law for every tendon
         wrong_loop = closed_loop(rig, StaticLawController(wrong), rate_hz=None, sensors="ideal")
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
-    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_motion_in_force_model=True))   # the continuous design: exact cancellation
+    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True))   # the continuous design: exact cancellation
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
@@ -209,35 +211,24 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
 
 
 def _sampled_backstepping_radius(rig, rate_hz, design_rate_hz, regain=None):
-    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold (ideal
-    sensors): the law's state feedback K from Drake's Linearize of the continuous loop (B K = A_cl - A), the plant
-    discretised exactly (matrix exponential of Drake's linearisation)."""
-    from scipy.linalg import expm
+    """Spectral radius of the finger under the 15.5 law sampled at ``rate_hz`` behind a zero-order hold
+    (:func:`_sampled.sampled_radius`), with the law designed for ``design_rate_hz``."""
     law = FingerBacksteppingLaw(rig, rate_hz=design_rate_hz)
     if regain is not None:
         regain(law)
-    op = rig.operating_point()
-    lin = linearize(rig, op)
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
-    A_cl = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
-                     output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
-    A, B = lin.A, lin.B
-    K = np.linalg.lstsq(B, A_cl - A, rcond=None)[0]
-    np.testing.assert_allclose(B @ K, A_cl - A, atol=1e-8 * np.abs(A_cl).max())     # the law is state feedback
-    n, m = B.shape
-    E = expm(np.block([[A, B], [np.zeros((m, n + m))]]) / rate_hz)
-    return float(np.max(np.abs(np.linalg.eigvals(E[:n, :n] + E[:n, n:] @ K)))), law
+    return sampled_radius(rig, law, rate_hz), law
 
 
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth"])
 def test_finger_backstepping_sampled_at_3khz_is_stable_on_every_finger(finger):
     """Issue 10 item 6: the law sampled at the thesis's 3 kHz (ZOH) is stable on every finger with the thesis
     physics on (eigenvalues of the sampled linearisation in the unit circle; the Dahl hysteresis states are
-    marginal at rest: |z| = 1 to 1e-9), its designed joint modes keep |h lambda| <= 1/4, and the exact design's
-    sampled loop on the ideal plant is strictly inside. The former design (continuous, per-DoF Kd) is not stable
-    at 3 kHz."""
+    marginal at rest: |z| = 1 to 1e-9), its designed joint modes keep |h lambda| <= 1/4, and the ideal plant's
+    sampled loop is strictly inside. The former design (continuous, per-DoF Kd) is not stable at 3 kHz. The default
+    plant has guide friction on (the +833 1/s pole of the link-acceleration feed-forward:
+    test_finger_backstepping_through_the_estimator_at_3khz_is_stable)."""
     rig = finger_diagram(finger=finger)
+    assert rig.params.guide_friction
     radius, law = _sampled_backstepping_radius(rig, 3000.0, 3000.0)
     assert radius <= 1.0 + 1e-9, radius
     S = law.S
@@ -247,17 +238,14 @@ def test_finger_backstepping_sampled_at_3khz_is_stable_on_every_finger(finger):
     assert np.max(np.abs(np.linalg.eigvals(joint))) / 3000.0 <= 0.25 * (1 + 1e-9)
     np.testing.assert_allclose(law.Kp, law.Kp.T, atol=1e-15)
     assert np.all(law.mode_stiffness <= 0.5 + 1e-12) and np.linalg.eigvalsh(law.Kp).min() > 0
-    def exact(law):
-        law.link_motion = True
-    ideal, _ = _sampled_backstepping_radius(_ideal_rig(finger), 3000.0, 3000.0, exact)
-    assert ideal < 1.0 - 1e-4, ideal    # the exact design on its own model (the registered ch. 10 force model leans
-    #                                     on the motor friction (3.8): on the frictionless thumb it is at 1.0022)
+    ideal, _ = _sampled_backstepping_radius(_ideal_rig(finger), 3000.0, 3000.0)
+    assert ideal < 1.0 - 1e-4, ideal
     if finger == "index":   # the former per-DoF gains (diagonal of M_d): a -6838 1/s pole, the 3 kHz chatter
         def per_dof(law):
             law.Kp = np.diag(np.full(law.S.shape[1], HandChainParams().joint_stiffness))
             law.Kd = np.diag(2 * HandChainParams().damping_ratio * np.sqrt(np.diag(law.Kp) * np.diag(law.M)))
         old, _ = _sampled_backstepping_radius(finger_diagram(finger=finger), 3000.0, None, per_dof)
-        assert old > 1.02, old                      # measured 1.034 (1.18 with the link's motion in the force model)
+        assert old > 1.1, old                       # measured 1.18
 
 
 def test_hand_backstepping_sampled_at_3khz_is_stable():
@@ -268,116 +256,26 @@ def test_hand_backstepping_sampled_at_3khz_is_stable():
     assert radius <= 1.0 + 1e-9, radius
 
 
-def _sampled_radius_with_estimator(rig, law):
-    """Spectral radius of the finger under the law at 3 kHz (ZOH) with the tendon-length estimator in the loop.
-
-    The plant is discretised exactly (matrix exponential of Drake's linearisation); the law is linearised by
-    AutoDiff (``pydrake.forwarddiff.jacobian``) at the operating point; the estimator is
-    ``hand.estimation.LinkStateEstimator`` as its docstring states it: at the sample ``t_k`` its position state
-    is the least-squares estimate of ``t_{k-1}`` (exact, ``q(t_{k-1})``, for a constant coupling and at Algorithm
-    1's convergence for the thumb base) -- discrete updates read the pre-update state, so the command sampled at
-    ``t_k`` sees it -- and the velocity is its dirty derivative ``v = (q_hat - z) / T``, ``z+ = z + h/T (q_hat - z)``.
-    State ``[x (plant), q_hat, z]``."""
-    from scipy.linalg import expm
-    from pydrake.forwarddiff import jacobian
-    from awiwi_drake.parameters.hand_control import LinkEstimatorParams
-    h, T = PERIOD, LinkEstimatorParams().velocity_time_constant
-    op = rig.operating_point()
-    meas = ("elongation", "motor_angle", "motor_velocity", "joint_angle", "joint_velocity")
-    lin = linearize(rig, op, outputs=meas)
-    C = {k: lin.outputs[k].C for k in meas}
-    assert all(np.abs(lin.outputs[k].D).max() == 0 for k in meas)       # no feedthrough from the motor torque
-    u0 = {k: lin.outputs[k].y0 for k in meas}
-    u0["joint_angle_reference"] = op.joint_angle
-    keys = list(law.inputs)
-    cuts = np.cumsum([0] + [law.inputs[k] for k in keys])
-    J = jacobian(lambda z: law({k: z[a:b] for k, a, b in zip(keys, cuts[:-1], cuts[1:])}),
-                 np.concatenate([u0[k] for k in keys]))
-    Jk = {k: J[:, a:b] for k, a, b in zip(keys, cuts[:-1], cuts[1:])}
-    A, B = lin.A, lin.B
-    N, m = B.shape
-    n = C["joint_angle"].shape[0]
-    E = expm(np.block([[A, B], [np.zeros((m, N + m))]]) * h)
-    K = np.hstack([sum(Jk[k] @ C[k] for k in ("elongation", "motor_angle", "motor_velocity")),
-                   Jk["joint_angle"] + Jk["joint_velocity"] / T, -Jk["joint_velocity"] / T])
-    Ad = np.vstack([np.hstack([E[:N, :N], np.zeros((N, 2 * n))]) + E[:N, N:] @ K,
-                    np.hstack([C["joint_angle"], np.zeros((n, 2 * n))]),
-                    np.hstack([np.zeros((n, N)), h / T * np.eye(n), (1 - h / T) * np.eye(n)])])
-    ev = np.abs(np.linalg.eigvals(Ad))
-    return float(ev.max()), ev
-
-
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth", "hand"])
-def test_finger_backstepping_with_the_estimator_at_3khz_is_stable(finger):
-    """The registered law on the default plant (hysteresis and guide friction on) with the tendon-length estimator
-    in the sampled loop: every eigenvalue is in the unit circle (|z| = 1 only for the Dahl states, marginal at
-    rest, to 1e-9), and the others are at least 1e-3 inside. With the link's motion in its force model (the exact
-    design) the same loop is unstable on the index (measured 1.25; 1.03 without guide friction): why the
-    registered law models the tendon as ch. 10 does."""
+def test_finger_backstepping_through_the_estimator_at_3khz_is_stable(finger):
+    """The registered law on the default plant (guide friction and hysteresis on), sampled at 3 kHz with the
+    tendon-length estimator in the loop (``sampled_loop_poles``: the one-period map of what ``closed_loop``
+    simulates): every pole but the neutral Dahl modes inside the unit circle. With the link model's acceleration fed
+    forward (the exact design) the index's loop is unstable: the guides' presliding stiffness, absent from the link
+    model, becomes motor torque through the light links (continuous, true joint state: a pole at +833 1/s)."""
+    from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.hand import hand_diagram
-    rig = hand_diagram(wrist=False) if finger == "hand" else finger_diagram(finger=finger)
+    make = (lambda: hand_diagram(wrist=False)) if finger == "hand" else (lambda: finger_diagram(finger=finger))
+    rig = make()
     assert rig.params.guide_friction and rig.params.spring.hysteresis.enabled
-    radius, ev = _sampled_radius_with_estimator(rig, FingerBacksteppingLaw(rig))
-    assert radius <= 1.0 + 1e-9, radius
-    assert ev[np.abs(ev - 1.0) > 1e-7].max() < 1.0 - 1e-3
+    poles = sampled_loop_poles(rig, make_controller("backstepping", rig))
+    assert poles.spectral_radius < 1.0 - 1e-3, poles.spectral_radius
     if finger == "index":
-        exact, _ = _sampled_radius_with_estimator(rig, FingerBacksteppingLaw(
-            rig, HandChainParams(link_motion_in_force_model=True)))
-        assert exact > 1.1, exact
-
-
-def test_finger_backstepping_lyapunov_function_decreases():
-    """V = e'M e'/2 + e Kp e/2 + |z3|^2/2 + |z4|^2/2 is non-increasing along the continuous closed
-    loop (15.5; true joint state), from a 0.1 rad set-point change on every joint of the index.
-    The ideal plant: V is the Lyapunov function of the frictionless, hysteresis-free design model."""
-    rig = _ideal_rig()
-    law = FingerBacksteppingLaw(rig, HandChainParams(link_motion_in_force_model=True))   # the exact design
-    loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
-    op = rig.operating_point()
-    ref = op.joint_angle + 0.1
-    ctx = loop.create_context(op, references={"joint_angle_reference": ref})
-    names = ("joint_angle", "joint_velocity", "elongation", "motor_angle", "motor_velocity")
-    res = simulate(loop.diagram, ctx, 0.05, log=names, max_step=5e-4, accuracy=1e-7)
-    V = np.array([law.terms(dict(joint_angle_reference=ref, **{n: res[n][i] for n in names}))["V"]
-                  for i in range(len(res.t))])
-    assert V[-1] < 0.05 * V[0]
-    assert np.max(np.diff(V)) <= 1e-6 * V[0], np.max(np.diff(V)) / V[0]
-
-
-@pytest.mark.parametrize("controller", ["lqr", "backstepping"])
-def test_index_finger_step_with_estimated_joint_angles(controller):
-    """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
-    tendons never go slack, and the estimation error stays below one period of motion |v| / 3000
-    (the estimate is exact at the samples for a constant coupling, (5.15)).
-
-    Without the guide friction, whose dead band Kp^-1 (P S)^T g (|g_i| <= C_i ~ 2 N) stops the MCP 0.15-0.17 rad
-    short (test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band), and without the spring
-    hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
-    model and leaves a steady joint offset of order Kp^-1 (P S)^T z (backstepping, index, 3 kHz design: up
-    to 0.10 / 0.16 / 0.26 / 0.42 rad per DoF, measured 0.010 / 0.043 / 0.074 rad on MCP / PIP / DIP; lqr:
-    0.006 rad on the MCP), which this 2 % tracking check would only measure."""
-    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(
-        hysteresis=False, guide_friction=False))
-    loop = closed_loop(rig, make_controller(controller, rig), **get_entry(controller, rig).loop_options)
-    op = rig.operating_point()
-    q_ref = op.joint_angle.copy()
-    q_ref[1] += 0.2
-    ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
-    # backstepping's force steps model the tendon as ch. 10 does (the link's motion is left to the force loop), so
-    # the MCP settles with a ~0.1 s time constant (measured: 0.0175 rad left at 0.25 s, 7e-4 at 1 s; the exact
-    # design, link_motion_in_force_model=True, 3e-4 at 0.25 s, but its loop through the estimator is unstable: sampled
-    # spectral radius 1.002 on this plant, 1.25 with guide friction; test_finger_backstepping_with_the_estimator...)
-    t_final = 1.0 if controller == "backstepping" else 0.25
-    res = simulate(loop.diagram, ctx, t_final, log=("joint_angle", "joint_velocity", "joint_angle_estimation_error",
-                                                    "tendon_force"), max_step=1.0 / loop.rate_hz, accuracy=1e-3)
-    q_end = res["joint_angle"][-1]
-    assert abs(q_end[1] - q_ref[1]) < 0.02 * 0.2
-    assert np.all(res["tendon_force"] > 0.0)
-    err = np.abs(res["joint_angle_estimation_error"])
-    # |q(t_k) - q(t)| <= max |v| (t - t_k) <= max |v| / 3000; the velocity is logged once per period, so its
-    # maximum between two logs may exceed the logged one: 5 % allowance for that sampling only
-    bound = 1.05 * np.abs(res["joint_velocity"]).max(axis=0) * PERIOD
-    assert np.all(err.max(axis=0) <= bound + 1e-9), (err.max(axis=0), bound)
+        from awiwi_drake.control.finger_backstepping import finger_backstepping_controller
+        rig = make()
+        exact = sampled_loop_poles(rig, finger_backstepping_controller(
+            rig, HandChainParams(link_acceleration_feedforward=True)))
+        assert exact.spectral_radius > 1.1, exact.spectral_radius
 
 
 def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
@@ -385,7 +283,7 @@ def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
     0.2 rad MCP step settles where the law's rest equations put it. At rest (omega = 0, e' = 0) the friction
     forces z + g hold the link, tau_f = (P S)^T (z + g) = -(P S)^T f, while the law's link model, which lacks them,
     predicts e'' = M_d^-1 tau_f; its force steps then settle at (1 + K3 K4) z3 = W a2 + (K3 + K4) W a1 + P S e''
-    and the joint at
+    (one gain K3 = K4 for every tendon) and the joint at
 
         Kp e = -(I + G) tau_f,   G = (Kp + (K3 + K4) Kd - Kd M_d^-1 B_q + (P S)^T P S) M_d^-1 / (1 + K3 K4),
 
@@ -396,6 +294,8 @@ def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
     from awiwi_drake.hand.systems import tendon_bending_angles
     rig = _rig()
     law = FingerBacksteppingLaw(rig)
+    K3, K4 = float(law.K3[0]), float(law.K4[0])
+    assert np.all(law.K3 == K3) and np.all(law.K4 == K4)
     loop = closed_loop(rig, make_controller("backstepping", rig), **get_entry("backstepping", rig).loop_options)
     op = rig.operating_point()
     q_ref = op.joint_angle.copy()
@@ -407,10 +307,10 @@ def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
     g = res["state"][-1][[i for i, nm in enumerate(names) if nm.startswith("guide_friction_force")]]
     PS = np.asarray(rig.coupling.P(q_ref)) @ law.S
     Mi = np.linalg.inv(law.M)
-    G = (law.Kp + (law.K3 + law.K4) * law.Kd - law.Kd @ Mi @ law.Bq + PS.T @ PS) @ Mi / (1 + law.K3 * law.K4)
+    G = (law.Kp + (K3 + K4) * law.Kd - law.Kd @ Mi @ law.Bq + PS.T @ PS) @ Mi / (1 + K3 * K4)
     e = law.Sp @ (res["joint_angle"][-1] - q_ref)
     e_rest = -np.linalg.solve(law.Kp, (np.eye(len(e)) + G) @ (PS.T @ (z + g)))
-    np.testing.assert_allclose(e, e_rest, rtol=0, atol=1e-3)           # measured: 1.4e-4 rad apart
+    np.testing.assert_allclose(e, e_rest, rtol=0, atol=1e-3)
     assert abs(e[1]) > 0.1                                              # the dead band is real: ~0.15 rad on the MCP
     C = guide_friction_force(tendon_bending_angles(rig.coupling, rig.params), rig.params.friction)
     w = rig.params.spring.hysteresis.width_ratio * res["tendon_force"][-1]
@@ -419,6 +319,33 @@ def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
     assert np.all(np.abs(e) <= bound), (e, bound)
     assert np.all(res["tendon_force"] > 0.0)
     assert np.mean(np.abs(res["motor_torque_command"]) > rig.params.motor.torque_limit) < 0.02
+
+
+@pytest.mark.parametrize("controller", ["lqr", "backstepping"])
+def test_index_finger_step_with_estimated_joint_angles(controller):
+    """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
+    tendons never go slack, and the estimate is exact: (5.15) of the current sample, and the index's
+    coupling is constant (the least squares of consistent length changes is the joint angle itself).
+
+    Without the guide friction, whose dead band stops the MCP 0.15-0.17 rad short (the guides' ~2 N per tendon path
+    against the 0.5 Nm/rad impedance; test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band), and
+    without the spring hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
+    model and leaves a steady joint offset of order Kp^-1 (P S)^T z (backstepping, index, 3 kHz design: up
+    to 0.10 / 0.16 / 0.26 / 0.42 rad per DoF, measured 0.010 / 0.043 / 0.074 rad on MCP / PIP / DIP; lqr:
+    0.006 rad on the MCP), which this 2 % tracking check would only measure."""
+    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(
+        hysteresis=False, guide_friction=False))
+    loop = closed_loop(rig, make_controller(controller, rig), **get_entry(controller, rig).loop_options)
+    op = rig.operating_point()
+    q_ref = op.joint_angle.copy()
+    q_ref[1] += 0.2
+    ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
+    res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle", "joint_velocity", "joint_angle_estimation_error",
+                                                 "tendon_force"), max_step=1.0 / loop.rate_hz, accuracy=1e-3)
+    q_end = res["joint_angle"][-1]
+    assert abs(q_end[1] - q_ref[1]) < 0.02 * 0.2
+    assert np.all(res["tendon_force"] > 0.0)
+    assert np.abs(res["joint_angle_estimation_error"]).max() < 1e-9
 
 
 def test_hand_loop_has_one_channel_per_independent_joint():
@@ -447,11 +374,24 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     assert (out / "step_ring.png").exists() and (out / "disturbance_ring.png").exists()
     step = {(r["controller"], r["joint"]): r for r in rows if r["test"] == "step"}
     assert all(r["status"] in ("ok", "flagged") for r in rows), [r["status"] for r in rows]   # none stopped
-    # the joint-pd step moves every joint towards its reference (0.2 rad); the cascaded impedance (0.5 Nm/rad) stops
-    # in the guides' friction dead band (~2 N per tendon path: 0.12-0.19 rad measured on the ring; the dead band of
-    # the finger backstepping is checked against its closed form in
-    # test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band)
-    assert all(abs(float(r["steady_state_error"])) < 0.1 for (c, _), r in step.items() if c == "joint-pd"), step
+    # The step's remaining error is bounded by the loop's own sampled linearisation at rest (sampled_loop_poles:
+    # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
+    # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
+    # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
+    from awiwi_drake.cli.compare import _short_params
+    from awiwi_drake.control.compare import compare_test_params
+    from awiwi_drake.control.joint_design import sampled_loop_poles
+    from awiwi_drake.hand.coupling import dof_selection
+    p = _short_params(compare_test_params(_rig("ring")), finger_diagram, {"finger": "ring"}, ["joint-pd", "cascaded"],
+                      "finger-ring")                                   # the window the CLI ran
+    for name in ("joint-pd", "cascaded"):
+        rig = _rig("ring")
+        S = dof_selection(rig.coupling)
+        t, q = sampled_loop_poles(rig, make_controller(name, rig)).step_response(
+            S @ np.full(S.shape[1], p.step_size), p.step_duration - p.step_delay)
+        e_lin = np.abs(p.step_size - (np.linalg.pinv(S) @ q.T).T)[t >= 0.9 * t[-1]].max(axis=0)
+        sse = np.array([abs(float(step[(name, j)]["steady_state_error"])) for j in ("q40", "q41", "q42")])
+        assert np.all(sse <= e_lin), (name, sse, e_lin)
 
 
 def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
@@ -486,24 +426,6 @@ def test_finger_controllers_convert_to_autodiff_and_match_finite_differences():
     assert np.all(np.diag(jac["motor_torque"][0][:, 12:20]) < 0.0)
 
 
-@pytest.mark.parametrize("controller", ["cascaded"])
-def test_finger_controllers_refuse_per_tendon_spring_laws(controller):
-    """The chain's force map / distribution model every tendon with the rig's one spring law: a rig with
-    params.tendon_springs is refused with a line naming the option (not controlled as if it had one law);
-    designing on the nominal rig stays possible. (The backstepping uses each tendon's own law: see
-    test_finger_backstepping_closed_loop_poles_equal_the_design.)"""
-    from awiwi_drake.parameters.components import TendonParams
-    from awiwi_drake.parameters.hand import FingerRigParams
-    base = FingerRigParams.for_finger("index")
-    stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
-    rig = finger_diagram(finger="index", params=base.replace(tendon_springs=(("index_h3", stiff),)))
-    with pytest.raises(ValueError, match=r"tendon_springs: index_h3"):
-        make_controller(controller, rig)
-    nominal = finger_diagram(finger="index", params=base)
-    loop = closed_loop(rig, make_controller(controller, nominal), **get_entry(controller, nominal).loop_options)
-    assert loop.diagram.HasOutputPort("joint_angle_estimate")
-
-
 def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_estimation_error():
     """A step the distribution cannot serve within [f_min, f_max] (bounds 20 +- 1 N around the 20 N
     pretension; the 0.2 rad step asks for more torque than 1 N of force difference gives) is flagged in
@@ -516,12 +438,10 @@ def test_compare_flags_a_force_distribution_out_of_its_bounds_and_reports_the_es
         loop = closed_loop(rig, joint_stage_controller(rig, "cascaded", distribution_params=dist))
         run, rows = run_joint_test(loop, "step", controller="cascaded", params=compare_test_params(rig, step_duration=0.1))
         flags[tight] = [r.flags for r in rows]
-        # the estimation error is reported per joint and, for the constant coupling, stays below one period
-        # of motion |v| / 3000 (exact at the samples, (5.15)); 5 % for the velocity's sampling (as above)
-        v = np.abs(run.state[:, 4:8]).max(axis=0)
+        # the estimation error is reported per joint: for the constant coupling the current sample's (5.15) is
+        # exact (as above)
         est = np.array([r.estimation_error for r in rows])
-        assert np.all(np.isfinite(est)) and np.all(est <= 1.05 * v * PERIOD + 1e-9), (est, v * PERIOD)
-        assert est.max() > 0.0
+        assert est.shape == (4,) and np.all(np.isfinite(est)) and np.all(est < 1e-9), est
         if tight:
             assert all(r.status == "flagged" for r in rows)
     assert all("force distribution out of bounds" in f for f in flags[True]), flags[True]
@@ -534,8 +454,9 @@ def test_force_sharing_stage_gives_the_exact_joint_torque_and_converts(finger):
     torques come out of the rig's own coupling exactly, -(P S)^T f_ref = tau_ref at the design posture (ring: the
     coupled DIP, thumb: P(q_op)), the design point maps to its tendon forces, and the system converts to
     AutoDiffXd with derivatives equal to central differences of the float system."""
-    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(
-        hysteresis=False, guide_friction=False), backend="python")      # the python drive carries no Dahl states
+    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(  # python: no Dahl states
+                             hysteresis=False, guide_friction=False),
+                         backend="python")
     ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing")
     sharing = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_sharing")
     op = rig.operating_point()

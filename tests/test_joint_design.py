@@ -19,7 +19,7 @@ from awiwi_drake.parameters.hand import FingerRigParams
 from awiwi_drake.parameters.hand_control import HandChainParams
 from awiwi_drake.parameters.joint_design import JointDesignParams
 
-DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr")
+DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr")
 TENDON_LAW = {"two-time-scale": "motor-position"}
 
 
@@ -56,6 +56,13 @@ def test_reduced_model_is_the_link_on_its_closed_force_loop():
         assert m.A[3, 2] == pytest.approx(-(w ** 2 + m.stiffness / m.inertia), rel=1e-5)
         # the joint's stiffness is its own tendons' P_j^T K_t P_j (5.12)
         assert m.stiffness == pytest.approx(float(np.sum(rig.operating_point().joint_stiffness[m.dof, m.dof])), rel=1e-9)
+    # on the motors' rate sigma = tau_dot + K_jj qdot (the LQR/SDRE stages): tau' = sigma - K_jj qdot, and the
+    # same dynamics (a change of coordinates: equal poles)
+    for m, ms in zip(reduced_joint_models(rig), reduced_joint_models(rig, torque_rate="motor")):
+        assert ms.invariance_residual < 1e-12 and ms.torque_rate == "motor"
+        np.testing.assert_allclose(ms.A[2], [0, -m.stiffness, 0, 1], atol=1e-9 * m.stiffness)
+        np.testing.assert_allclose(np.sort_complex(ms.poles), np.sort_complex(m.poles), rtol=1e-7,
+                                   atol=1e-9 * np.abs(m.poles).max())
 
 
 @pytest.mark.parametrize("design", DESIGNS)
@@ -70,7 +77,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     m, K = d.models[j], d.gains[j, :4]          # continuous design (no delay gain)
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
-                                torque_op=point["torque_offset"])
+                                torque_op=point["torque_offset"], torque_rate=d.law.torque_rate)
     loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing",
                                                   tendon_law=TENDON_LAW.get(design, "force")), rate_hz=None, estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
@@ -141,20 +148,119 @@ def test_joint_stage_with_torque_feedback_converts_to_autodiff():
 
 @pytest.mark.parametrize("finger", ["ring", "thumb"])
 def test_joint_stage_controllers_run_on_other_fingers(finger):
-    """Registered for every finger and the hand; designed per DoF; a short 3 kHz step through the
-    estimator keeps the tendons taut and the loop finite (tracking is measured by compare)."""
+    """Registered for every finger and the hand, designed per DoF, at the thesis's 3 kHz through the estimator.
+
+    The bound on the step's error is the loop's own linearisation at rest, sampled (``sampled_loop_poles``: the
+    rig's motor friction (3.8) at rest, where its slope gamma1 gamma2 = 5.6 Nm s/rad is steepest, and the Drake
+    ZOH of the plant under the sampled chain and estimator): the designs count on the friction *in motion*
+    (``design_motor``), so they predict a faster tail than the loop has, while the friction's slope
+    ``gamma1 gamma2 / (1 + (gamma1 omega)^2)`` is never steeper than at rest, so the nonlinear loop, faster
+    while the motors move, stays inside the at-rest response.  (The former check only asked that the error
+    shrank; the loops were 'slower than their linearisation' because that was the design's, in motion.)
+    Tendons stay taut, and no command saturates in the second half of the run (no limit cycle).  The
+    two-time-scale loop has a slow real pole at rest on the right (+1.5 1/s: its motor-position tendon level
+    against the at-rest friction); over 0.1 s the bound still holds."""
     from awiwi_drake.analysis import simulate
-    for name in ("two-time-scale", "pole-placement", "lqr"):
+    from awiwi_drake.control.joint_design import sampled_loop_poles
+    for name in ("pd", "two-time-scale", "pole-placement", "lqr"):
         assert name in controller_names(f"finger-{finger}") and name in controller_names("hand")
+        rig = finger_diagram(finger=finger)
+        assert get_entry(name, rig).loop_options["rate_hz"] == 3000.0
+        linear = sampled_loop_poles(rig, make_controller(name, rig))
         rig = finger_diagram(finger=finger)
         loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
         op = rig.operating_point()
-        ref = op.joint_angle.copy()
-        ref[1] += 0.1
-        ctx = loop.create_context(op, references={"joint_angle_reference": ref})
-        res = simulate(loop.diagram, ctx, 0.1, log=("joint_angle", "tendon_force"), max_step=1 / 3000, accuracy=1e-3)
+        dq = np.zeros(rig.num_joints)
+        dq[1] = 0.1
+        ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle + dq})
+        res = simulate(loop.diagram, ctx, 0.1, log=("joint_angle", "tendon_force", "motor_torque_command"),
+                       max_step=1 / 3000, accuracy=1e-3)
         assert np.all(res["tendon_force"] > 0.0)
-        assert abs(res["joint_angle"][-1][1] - ref[1]) < abs(res["joint_angle"][0][1] - ref[1])
+        _, q_lin = linear.step_response(dq, 0.1)
+        e_sim = abs(res["joint_angle"][-1][1] - op.joint_angle[1] - dq[1])
+        e_lin = abs(q_lin[-1][1] - dq[1])
+        assert e_sim <= e_lin, (name, e_sim, e_lin)
+        # no limit cycle (the full-state stages used to saturate 82-99 % of such a step at 3 kHz): whatever
+        # saturates is the start of the step, the force loop catching up with the reference jump
+        late = res.t >= 0.5 * res.t[-1]
+        assert not np.any(np.abs(res["motor_torque_command"][late]) > 3.0), name
+        if name != "two-time-scale":
+            assert linear.spectral_radius < 1.0, (name, linear.slowest())
+
+
+def _late_estimator(rig, period):
+    """The tendon-length estimator with its estimate read one period late (as a state output read by
+    simultaneous discrete updates is): the joint angles through a one-period delay, their backward difference
+    as the velocity -- the estimator of the previous wave."""
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import DiscreteTimeDelay, LinearSystem
+
+    class Late:
+        def __init__(self):
+            est = rig.link_estimator(period)
+            n = est.num_joints
+            b = DiagramBuilder()
+            e = b.AddNamedSystem("current", est.system)
+            late = b.AddNamedSystem("late", DiscreteTimeDelay(period, 1, n))
+            I, Z = np.eye(n), np.zeros((n, n))
+            diff = b.AddNamedSystem("difference", LinearSystem(Z, I, -I / period, I / period, period))
+            b.Connect(e.GetOutputPort("joint_angle"), late.get_input_port())
+            b.Connect(late.get_output_port(), diff.get_input_port())
+            for nm in ("motor_angle", "elongation"):
+                b.ExportInput(e.GetInputPort(nm), nm)
+            b.ExportOutput(late.get_output_port(), "joint_angle")
+            b.ExportOutput(diff.get_output_port(), "joint_velocity")
+            self.system, self.period, self.num_joints, self._est = b.Build(), period, n, est
+
+        def initialize(self, context, q):
+            self._est.initialize(self.system.GetMutableSubsystemContext(
+                self.system.GetSubsystemByName("current"), context), q)
+            for nm in ("late", "difference"):
+                sub = self.system.GetSubsystemByName(nm)
+                sub_ctx = self.system.GetMutableSubsystemContext(sub, context)
+                sub_ctx.SetDiscreteState(np.tile(q, sub_ctx.get_discrete_state_vector().size() // q.size))
+    return Late()
+
+
+def test_full_state_stages_at_3khz_and_the_cause_of_their_saturation():
+    """Issue 10 item 1: the LQR/SDRE/pole-placement stages saturated 82-99 % of a step at 3 kHz on the index.
+    The sampled loop's poles (``sampled_loop_poles``: the plant linearised by Drake and sampled by its ZOH, the
+    chain's and the estimator's discrete states, the Jacobian of the one-period map) show why:
+
+    * with the estimate read one period late (the former estimator's state output) the loop has an unstable
+      pair at 3000-5000 rad/s, the DIP's link mode on its tendons: the joint velocity, a backward difference of
+      that estimate, arrives 1.5 periods (0.5 ms, ~110 deg at 600 Hz) late in the force law's and the stage's
+      damping terms;
+    * with the current sample's estimate an LQR that measures the joint's torque rate tau_dot (k_t (r_m omega
+      + P qdot), the estimated qdot times the tendon stiffness, the hysteresis's presliding stiffness not in
+      k_t) still leaves that mode unstable; on the motors' rate sigma = -(P S)^T k_t r_m omega it is damped;
+    * as registered (3 kHz, estimator, default physics: ripple, motor friction, hysteresis) every full-state
+      stage is stable; the modes at z = 1 are the hysteresis memory (any Dahl force at rest is an equilibrium:
+      one per tendon)."""
+    from awiwi_drake.control.chain import TendonChainController, chain_design_point
+    from awiwi_drake.control.joint_design import design_joint_gains, sampled_loop_poles
+    from awiwi_drake.control.linear import reference_maps
+    rig = finger_diagram(finger="index")
+    h = 1.0 / 3000.0
+    for name in ("lqr", "sdre", "pole-placement"):
+        r = sampled_loop_poles(rig, make_controller(name, rig))
+        assert r.spectral_radius < 1.0, (name, r.slowest())
+        assert r.neutral.sum() == rig.num_tendons
+    late = sampled_loop_poles(rig, make_controller("lqr", rig), estimator=_late_estimator(rig, h))
+    bad = late.s[np.abs(late.z) > 1.0 + 1e-9]
+    assert late.spectral_radius > 1.05 and bad.size and np.all((np.abs(bad.imag) > 3000) & (np.abs(bad.imag) < 5000))
+    point = chain_design_point(rig)
+    models = reduced_joint_models(rig, point=point)                          # on tau_dot
+    assert all(m.torque_rate == "joint" for m in models)
+    gains = np.array([design_joint_gains(m, "lqr", period=h) for m in models])
+    maps = [reference_maps(m.A, m.B, np.array([1.0, 0.0, 0.0, 0.0])) for m in models]
+    law = JointStateFeedbackLaw(rig.coupling, point["selection"], rig.params.motor.pulley_radius, gains,
+                                state_map=np.array([nx for nx, _ in maps]), input_map=np.array([nu[0] for _, nu in maps]),
+                                joint_angle_op=np.linalg.pinv(point["selection"]) @ point["joint_angle"],
+                                torque_op=point["torque_offset"], torque_rate="joint")
+    taud = sampled_loop_poles(rig, TendonChainController(rig, law, point=point))
+    bad = taud.s[np.abs(taud.z) > 1.0 + 1e-9]
+    assert taud.spectral_radius > 1.0 and np.all((np.abs(bad.imag) > 3000) & (np.abs(bad.imag) < 5000)), bad
 
 
 def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slope():
@@ -270,3 +376,30 @@ def test_sampled_model_is_the_zero_order_hold_with_one_period_of_delay():
     np.testing.assert_allclose(Phi[:2, 2], b[:, 0] * (e - 1) / np.diag(a), rtol=1e-12)
     np.testing.assert_array_equal(Phi[2], 0.0)
     np.testing.assert_array_equal(Gamma[:, 0], [0.0, 0.0, 1.0])
+
+
+def test_pd_stage_places_one_pair_with_positive_gains_on_every_finger_and_the_hand():
+    """The ``pd`` stage (PD on the joint angle, no torque feedback) puts one closed-loop pair of every DoF's
+    reduced model exactly at s* = w (-zeta +- i sqrt(1 - zeta^2)) (continuous) and at exp(h s*) for the 3 kHz
+    sampled chain with its delay, with Kp > 0, Kd >= 0 and every other pole stable, on all 19 DoF of the hand
+    (the former 'needs Kd < 0' is gone with the reduced model's friction in motion); its Kp exceeds the rigid
+    link's M_jj w^2 where the torque chain and the joint's own tendons matter (index PIP/DIP: x3.9 / x12);
+    a bandwidth that needs Kd < 0 is refused in one line naming the joint and the parameter."""
+    from awiwi_drake.hand import hand_diagram
+    p = JointDesignParams()
+    s = p.position_bandwidth * (-p.damping_ratio + 1j * np.sqrt(1 - p.damping_ratio ** 2))
+    hand = hand_diagram(wrist=False)
+    h = 1.0 / 3000.0
+    for period, target in ((None, s), (h, np.exp(h * s))):
+        d = design_joint_stage(hand, "pd", period=period)
+        assert len(d.models) == 19
+        for m, K, poles in zip(d.models, d.gains, d.design_poles):
+            assert K[0] > 0 and K[1] >= 0 and np.all(K[2:] == 0), (m.name, K)
+            for z in (target, np.conj(target)):
+                assert np.min(np.abs(poles - z)) < 1e-9 * abs(z), (m.name, poles)
+            assert np.all(np.abs(poles) < 1) if period else np.all(poles.real < 0)
+    d = design_joint_stage(finger_diagram(finger="index"), "pd")
+    ratio = d.gains[:, 0] / (np.array([m.inertia for m in d.models]) * p.position_bandwidth ** 2)
+    assert ratio[2] > 3.5 and ratio[3] > 10, ratio
+    with pytest.raises(ValueError, match=r"pd design of q20: .*Kd = -.*position_bandwidth"):
+        design_joint_stage(finger_diagram(finger="index"), "pd", params=JointDesignParams(position_bandwidth=400.0))

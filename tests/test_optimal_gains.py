@@ -278,27 +278,3 @@ def test_fig_16_3_table_16_2_weights_collapse_the_gains_and_every_reachable_sele
         bound = (np.linalg.norm(cl.C() @ V) * np.linalg.norm(np.linalg.solve(V, np.asarray(x0.CopyToVector()) - x_ss))
                  * np.exp(np.max(eig.real) * study.t_final))
         assert abs(q[-1] - study.step) <= bound + 1e-4 * study.step   # + the integrator's accuracy
-
-
-def test_finger_optimal_gains_per_dof_use_the_finger_data_and_the_rate_box():
-    """Ch. 16 per DoF of the index finger: each DoF's design rig has the DoF's inertia from the finger
-    plant and the equivalent radius sqrt(sum_i P_ij^2 / 2) of its tendons ((5.5): 4 base tendons of
-    r_x0 / r_x1 each, PIP pair r_x2 plus the DIP pair's r_x2, DIP pair r_x3); the fitted gains respect
-    the 3 kHz box."""
-    from awiwi_drake.control.optimal_gains import finger_optimal_gains
-    from awiwi_drake.hand.plant import make_finger_plant
-    from awiwi_drake.parameters.hand import finger_params
-    fp = finger_params("index")
-    plant, _ = make_finger_plant("index")
-    M = plant.CalcMassMatrix(plant.CreateDefaultContext())
-    expected_r = [np.sqrt(4 * fp.abduction_radius ** 2 / 2), np.sqrt(4 * fp.mcp_radius ** 2 / 2),
-                  np.sqrt(4 * fp.pip_radius ** 2 / 2), np.sqrt(2 * fp.dip_radius ** 2 / 2)]
-    res = finger_optimal_gains("index", starts=4)
-    assert [name for name, _, _ in res] == ["q20", "q21", "q22", "q23"]
-    for j, (name, fit, p) in enumerate(res):
-        assert p.link_pulley_radius == pytest.approx(expected_r[j], rel=1e-12)
-        assert p.link_inertia == pytest.approx(M[j, j], rel=1e-12)
-        g = fit.gains
-        assert g.k3 <= 750.0 * (1 + 1e-9) and g.k4 <= 750.0 * (1 + 1e-9)
-        assert g.damping <= p.link_inertia * 750.0 * (1 + 1e-9)
-        assert np.isfinite(fit.distance)

@@ -91,3 +91,218 @@ def test_state_path_has_no_direct_feedthrough():
         expect = name == "applied_torque"
         assert d.HasDirectFeedthrough(u, i) == expect, name
         assert not d.HasDirectFeedthrough(e, i), name
+
+
+# --- the rig sampled at the control period (Drake's DiscreteTimeApproximation) ------------------------
+H = 1.0 / 3000
+
+
+def _demo_loop(rig, sampled_rig, delay=None):
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from awiwi_drake.control import closed_loop
+    from awiwi_drake.control.motor_position import demo_references, motor_position_controller
+    from awiwi_drake.parameters.rigs import DemoScenario
+    scen = DemoScenario(t_final=0.12, ramp_time=0.04, step_time=0.06)
+    t, refs = demo_references(rig, scen)
+    sources = {k: TrajectorySource(PiecewisePolynomial.FirstOrderHold(t, refs[r]))
+               for k, r in (("motor_angle_reference", "theta_reference"),
+                            ("tendon_force_reference", "tendon_force_reference"))}
+    loop = closed_loop(rig, motor_position_controller(rig), rate_hz=1 / H, delay=delay, sources=sources,
+                       sampled_rig=sampled_rig)
+    return loop, rig.operating_point(pretension=scen.f_start), scen
+
+
+@pytest.mark.parametrize("delay_periods", [0, 1, 2])
+def test_sampled_rig_loop_is_the_continuous_loop_under_fixed_step_rk3_to_round_off(delay_periods):
+    """The sampled loop (rig as DiscreteTimeApproximation, RK3, one step per period) against the continuous rig
+    behind the hold under simulate's fixed-step RK3 at the period: the same arithmetic, so equal to round-off, with
+    the pretension ramp, the step transient, saturation and a round-trip delay; every logged signal at the same
+    times, the held command and the applied torque included."""
+    from awiwi_drake.analysis import rig_monitors, simulate
+    from awiwi_drake.analysis.simulate import sampled_plants
+    runs = {}
+    for sampled in (False, True):
+        rig = joint_rig()
+        loop, op, scen = _demo_loop(rig, sampled, delay=delay_periods * H or None)
+        assert loop.sampled_rig is sampled and bool(sampled_plants(loop.diagram)) is sampled
+        ctx = loop.create_context(op)
+        runs[sampled] = simulate(loop.diagram, ctx, scen.t_final, monitors=rig_monitors(rig),
+                                 log=("state", "motor_torque", "applied_torque", "tendon_force"))
+    cont, samp = runs[False], runs[True]
+    assert samp.info["mode"] == cont.info["mode"] == "fixed_step" and samp.info["step"] == pytest.approx(H)
+    np.testing.assert_allclose(samp.t, cont.t, rtol=0, atol=1e-12)
+    x = cont["state"]
+    assert np.ptp(x[:, 0]) > 0.05                    # the link moved (the step), so the comparison means something
+    err = np.max(np.abs(samp["state"] - x), axis=0) / np.max(np.abs(x), axis=0)
+    assert np.all(err < 1e-11), err
+    for name in ("motor_torque", "applied_torque", "tendon_force"):
+        ref = cont[name]
+        np.testing.assert_allclose(samp[name], ref, rtol=0, atol=1e-9 * np.max(np.abs(ref)), err_msg=name)
+    assert [(e.kind, e.channel) for e in samp.events] == [(e.kind, e.channel) for e in cont.events]
+    np.testing.assert_allclose(samp.final_state, cont.final_state, rtol=1e-11, atol=1e-14)   # the rig's state at the end
+    assert any(e.kind == "actuator_saturation" for e in cont.events)    # the step saturates the motors
+
+
+def test_sampled_rig_linearization_is_the_rk3_step_of_the_continuous_linearization():
+    """At an equilibrium every RK3 stage sits at the operating point, so Drake's Linearize of the sampled rig (with
+    its period) is exactly the RK3 step of the continuous linearisation (A, B): A_d = I + hA + (hA)^2/2 + (hA)^3/6,
+    B_d = h (I + hA/2 + (hA)^2/6) B."""
+    from pydrake.systems.primitives import Linearize
+    rig = joint_rig()
+    op = rig.operating_point(pretension=25.0, joint_angle=0.1)
+    cont = Linearize(rig.diagram, rig.context(op), input_port_index=rig.diagram.GetInputPort("motor_torque").get_index(),
+                     output_port_index=rig.diagram.GetOutputPort("state").get_index(), equilibrium_check_tolerance=1e-6)
+    A, B = np.array(cont.A()), np.array(cont.B())
+    sampled = rig.sampled_diagram(H)
+    ctx = sampled.CreateDefaultContext()
+    ctx.SetDiscreteState(0, op.state)
+    sampled.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
+    sampled.GetInputPort("external_torque").FixValue(ctx, op.external_torque)
+    lin = Linearize(sampled, ctx, input_port_index=sampled.GetInputPort("motor_torque").get_index(),
+                    output_port_index=sampled.GetOutputPort("state").get_index(), equilibrium_check_tolerance=1e-9)
+    assert lin.time_period() == pytest.approx(H)
+    hA = H * A
+    Ad = np.eye(6) + hA + hA @ hA / 2 + hA @ hA @ hA / 6
+    Bd = H * (np.eye(6) + hA / 2 + hA @ hA / 6) @ B
+    np.testing.assert_allclose(lin.A(), Ad, rtol=0, atol=1e-10 * np.max(np.abs(Ad)))
+    np.testing.assert_allclose(lin.B(), Bd, rtol=0, atol=1e-10 * np.max(np.abs(Bd)))
+    # the sampled step is stable where the continuous rig is (RK3 inside its stability region at 3 kHz)
+    assert np.max(np.abs(np.linalg.eigvals(Ad))) <= 1 + 1e-12
+
+
+def test_discrete_lqr_on_the_sampled_rig_is_the_discrete_riccati_solution_and_stabilises_it():
+    """Drake's DiscreteTimeLinearQuadraticRegulator on the sampled rig's linearisation equals scipy's discrete
+    Riccati gain on the closed-form RK3 matrices, and the sampled loop's spectral radius is below 1."""
+    from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator
+    from pydrake.systems.primitives import Linearize
+    from scipy.linalg import solve_discrete_are
+    rig = joint_rig()
+    op = rig.operating_point(pretension=20.0)
+    sampled = rig.sampled_diagram(H)
+    ctx = sampled.CreateDefaultContext()
+    ctx.SetDiscreteState(0, op.state)
+    sampled.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
+    sampled.GetInputPort("external_torque").FixValue(ctx, op.external_torque)
+    lin = Linearize(sampled, ctx, input_port_index=sampled.GetInputPort("motor_torque").get_index(),
+                    output_port_index=sampled.GetOutputPort("state").get_index(), equilibrium_check_tolerance=1e-9)
+    Q, R = np.diag([100.0, 1.0, 1.0, 1.0, 0.01, 0.01]), np.eye(2)
+    K, S = DiscreteTimeLinearQuadraticRegulator(lin.A(), lin.B(), Q, R)
+    Ad, Bd = np.array(lin.A()), np.array(lin.B())
+    P = solve_discrete_are(Ad, Bd, Q, R)
+    K_ref = np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
+    np.testing.assert_allclose(K, K_ref, rtol=1e-6, atol=1e-9 * np.max(np.abs(K_ref)))
+    assert np.max(np.abs(np.linalg.eigvals(Ad - Bd @ K))) < 1.0
+
+
+def test_sampled_rig_converts_to_autodiff_and_its_update_matches_finite_differences():
+    """The sampled rig's discrete update (the RK3 step) in AutoDiffXd equals central differences of the float
+    update at a non-equilibrium state."""
+    rig = joint_rig()
+    sampled = rig.sampled_diagram(H)
+    ad = sampled.ToAutoDiffXd()
+    op = rig.operating_point(pretension=25.0)
+    x0 = op.state + np.array([0.02, 0.5, 0.01, -0.01, 1.0, -2.0])
+    u0 = op.motor_torque + 0.1
+
+    def step(x):
+        ctx = sampled.CreateDefaultContext()
+        ctx.SetDiscreteState(0, x)
+        sampled.GetInputPort("motor_torque").FixValue(ctx, u0)
+        sampled.GetInputPort("external_torque").FixValue(ctx, [0.01])
+        return sampled.EvalUniquePeriodicDiscreteUpdate(ctx).get_vector(0).CopyToVector()
+
+    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+    actx = ad.CreateDefaultContext()
+    actx.SetDiscreteState(0, InitializeAutoDiff(x0).ravel())
+    ad.GetInputPort("motor_torque").FixValue(actx, u0)
+    ad.GetInputPort("external_torque").FixValue(actx, np.array([0.01]))
+    out = ad.EvalUniquePeriodicDiscreteUpdate(actx).get_vector(0).CopyToVector()
+    np.testing.assert_allclose(ExtractValue(out).ravel(), step(x0), rtol=1e-14, atol=1e-15)
+    J = ExtractGradient(out)
+    eps = 1e-6
+    J_fd = np.column_stack([(step(x0 + eps * e) - step(x0 - eps * e)) / (2 * eps) for e in np.eye(6)])
+    np.testing.assert_allclose(J, J_fd, rtol=1e-5, atol=1e-7 * np.max(np.abs(J_fd)))
+
+
+def test_sampled_rig_is_used_only_where_it_is_the_same_loop():
+    """Continuous loops, loops whose controller has continuous state (it would read a staircase) and
+    sampled_rig=False keep the continuous rig; simulate refuses error control on a sampled rig with one line."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control import closed_loop
+    from awiwi_drake.control.motor_position import motor_position_controller
+    rig = joint_rig()
+    assert not closed_loop(rig, motor_position_controller(rig), rate_hz=None).sampled_rig
+    rig = joint_rig()
+    assert not closed_loop(rig, motor_position_controller(rig), sampled_rig=False).sampled_rig
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import Integrator, PassThrough
+    b = DiagramBuilder()        # a controller with a continuous state (an integrator on a spare signal)
+    inner = b.AddSystem(motor_position_controller(rig))
+    integ = b.AddSystem(Integrator(1))
+    for i in range(inner.num_input_ports()):
+        b.ExportInput(inner.get_input_port(i), inner.get_input_port(i).get_name())
+    b.ExportOutput(inner.GetOutputPort("motor_torque"), "motor_torque")
+    spare = b.AddSystem(PassThrough(1))
+    b.Connect(spare.get_output_port(), integ.get_input_port())
+    b.ExportInput(spare.get_input_port(), "spare_reference")
+    b.ExportOutput(integ.get_output_port(), "spare")
+    ctrl = b.Build()
+    loop = closed_loop(joint_rig(), ctrl)
+    assert not loop.sampled_rig
+    rig = joint_rig()
+    loop, op, scen = _demo_loop(rig, True)
+    with pytest.raises(ValueError, match="mode = 'error_controlled'.*sampled plant.*sampled_rig=False"):
+        simulate(loop.diagram, loop.create_context(op), 0.01, mode="error_controlled")
+    with pytest.raises(ValueError, match="step = .*sampled plant"):
+        simulate(loop.diagram, loop.create_context(op), 0.01, mode="fixed_step", step=H / 2)
+
+
+def test_sampled_batch_equals_the_continuous_batch_behind_a_hold_to_round_off():
+    """Three batched joint rigs under a C++ motor PD (a matrix gain on the batch state plus a constant): the batch as
+    one DiscreteTimeApproximation at 3 kHz reading the PD at the sample instant, against the continuous batch
+    behind a zero-order hold under fixed-step RK3 at the period (analysis.simulate's default) -- the same
+    trajectories to round-off, each copy moving (different set points)."""
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import Adder, ConstantVectorSource, MatrixGain, ZeroOrderHold
+
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.rigs.batch import batched_joint_rig
+    N = 3
+    ends = {}
+    for sampled in (False, True):
+        br = batched_joint_rig(N)
+        ops = [br.single.operating_point(pretension=f) for f in (15.0, 25.0, 35.0)]
+        K = np.zeros((2 * N, 6 * N))
+        theta_ref = np.concatenate([op.state[2:4] + d for op, d in zip(ops, (0.05, -0.05, 0.1))])
+        for i in range(2 * N):
+            K[i, 6 * (i // 2) + 2 + i % 2], K[i, 6 * (i // 2) + 4 + i % 2] = -40.0, -0.4
+        u0 = np.concatenate([op.motor_torque for op in ops]) + 40.0 * theta_ref
+        b = DiagramBuilder()
+        plant = b.AddSystem(br.sampled_diagram(H) if sampled else br.diagram)
+        gain, const = b.AddSystem(MatrixGain(K)), b.AddSystem(ConstantVectorSource(u0))
+        add = b.AddSystem(Adder(2, 2 * N))
+        b.Connect(plant.GetOutputPort("state"), gain.get_input_port())
+        b.Connect(gain.get_output_port(), add.get_input_port(0))
+        b.Connect(const.get_output_port(), add.get_input_port(1))
+        cmd = add.get_output_port()
+        if not sampled:
+            hold = b.AddSystem(ZeroOrderHold(H, 2 * N))
+            b.Connect(cmd, hold.get_input_port())
+            cmd = hold.get_output_port()
+        b.Connect(cmd, plant.GetInputPort("motor_torque"))
+        b.ExportInput(plant.GetInputPort("external_torque"), "external_torque")
+        b.ExportOutput(plant.GetOutputPort("state"), "state")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        x, u, e = br.stack(ops)
+        pctx = plant.GetMyMutableContextFromRoot(ctx)
+        pctx.SetDiscreteState(0, x) if sampled else pctx.SetContinuousState(x)
+        d.GetInputPort("external_torque").FixValue(ctx, e)
+        res = simulate(d, ctx, 0.03, log=("state",))
+        assert res.info["step"] == pytest.approx(H)
+        ends[sampled] = res["state"]
+    moved = np.ptp(ends[False][:, [6 * i + 2 for i in range(N)]], axis=0)
+    assert np.all(moved > 0.01), moved                                  # every copy's motor moved to its set point
+    np.testing.assert_allclose(ends[True], ends[False], rtol=0, atol=1e-11 * np.max(np.abs(ends[False])))

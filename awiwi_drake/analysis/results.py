@@ -80,7 +80,9 @@ class SimulationResult:
         Monitor events (slack, saturation, over-range) in time order.
     info : dict
         How the run was made: ``mode`` (``fixed_step``/``error_controlled``),
-        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``.
+        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``,
+        ``steps`` (integrator steps; discrete updates when the diagram has no continuous state),
+        ``sampled_plants`` (names of the plants integrated inside their discrete update).
     final_context : Context or None
         Context of the simulated diagram at the end (not saved by :meth:`save`).
     """
@@ -104,10 +106,13 @@ class SimulationResult:
 
     @property
     def final_state(self) -> np.ndarray | None:
-        """Continuous state at the end (None if no context was kept)."""
+        """State at the end (None if no context was kept): the continuous state, then the state of each
+        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``)."""
         if self.final_context is None:
             return None
-        return self.final_context.get_continuous_state_vector().CopyToVector()
+        x = self.final_context.get_continuous_state_vector().CopyToVector()
+        sampled = self.info.get("final_sampled_state")
+        return x if sampled is None or not len(sampled) else np.concatenate([x, sampled])
 
     def events_of(self, kind: str) -> list:
         return [e for e in self.events if e.kind == kind]

@@ -16,6 +16,11 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   uses the fixed step at the control period for sampled loops (a diagram
   with periodic discrete updates, e.g. a 3 kHz zero-order hold; with several
   rates their common period, :func:`control_period`) and error control otherwise;
+  a *sampled plant* in the diagram (Drake's ``DiscreteTimeApproximation``, e.g. a
+  single-joint rig in a sampled loop, see :func:`~awiwi_drake.control.closed_loop`)
+  integrates itself with fixed-step RK3 at its period, so such a loop is
+  simulated with one discrete update per period, and error control or a shorter
+  step are refused for it (build the loop with ``sampled_rig=False`` for those);
 * calls ``progress(t, duration)`` (simulated seconds since the start) after
   every chunk, for progress bars.
 
@@ -42,7 +47,7 @@ from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 
 __all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
-           "PHYSICAL_FAILURES", "simulate", "MODES", "control_period"]
+           "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants"]
 
 MODES = ("auto", "fixed_step", "error_controlled")
 _FIXED_STEP_INTEGRATORS = ("explicit_euler", "semi_explicit_euler", "runge_kutta2")
@@ -87,6 +92,16 @@ PHYSICAL_FAILURES = (SimulationDivergedError, SimulationEventError, InfeasibleFo
 
 
 _MAX_RATE_RATIO = 1000  # a common period this many times below the shortest one: rates not commensurate
+SAMPLED_PLANT_PREFIX = "DiscreteTimeApproximated_"   # Drake's name of a DiscreteTimeApproximation of <name>
+
+
+def sampled_plants(system: System) -> list[System]:
+    """The leaf systems under ``system`` that are Drake ``DiscreteTimeApproximation`` s of a continuous
+    system (named ``DiscreteTimeApproximated_<name>`` by Drake): continuous plants integrated inside a
+    discrete update, whose discrete state is the plant's state."""
+    if isinstance(system, Diagram):
+        return [p for s in system.GetSystems() for p in sampled_plants(s)]
+    return [system] if system.get_name().startswith(SAMPLED_PLANT_PREFIX) else []
 
 
 def _leaf_timings(system: System) -> list[tuple[float, float]]:
@@ -240,6 +255,13 @@ def simulate(system, context: Context | None, t_final: float, *,
 
     # -- integration mode ---------------------------------------------------
     period = control_period(diagram)
+    sampled = sampled_plants(diagram)
+    if sampled and (mode == "error_controlled" or (step is not None and abs(float(step) - period) > 1e-12 * period)):
+        what = f"mode = {mode!r}" if mode == "error_controlled" else f"step = {step!r} s"
+        raise ValueError(f"simulate: {what}: diagram {diagram.get_name()!r} holds a sampled plant "
+                         f"({sampled[0].get_name()!r}, fixed-step RK3 at the control period {period:g} s inside "
+                         f"its discrete update); build the loop with closed_loop(..., sampled_rig=False) to "
+                         f"integrate the rig otherwise")
     if mode == "auto":
         mode = "fixed_step" if (period is not None or integrator in _FIXED_STEP_INTEGRATORS) else "error_controlled"
     if mode == "fixed_step":
@@ -391,17 +413,24 @@ def simulate(system, context: Context | None, t_final: float, *,
         bounds = list(start + duration * np.arange(1, n_chunks + 1) / n_chunks)
     bounds = [t for t in bounds if t < t_final - 1e-12 * max(1.0, abs(t_final))] + [float(t_final)]
 
-    state_label = (lambda i: f"state[{i}] ({state_names[i]})" if i < len(state_names) == clone.num_continuous_states()
-                   else f"state[{i}]")
+    # the plant states watched for divergence: the continuous state, then each sampled plant's discrete state
+    watched_states = [(lambda: root.get_continuous_state_vector().CopyToVector(), clone.num_continuous_states(),
+                       "state")]
+    for p in sampled_plants(clone):
+        p_ctx = p.GetMyContextFromRoot(root)
+        watched_states.append((lambda c=p_ctx: c.get_discrete_state(0).CopyToVector(),
+                               p_ctx.get_discrete_state(0).size(), f"{p.get_name()} state"))
 
     def check_state(t_now: float):
-        x = root.get_continuous_state_vector().CopyToVector()
-        bad = ~np.isfinite(x) | (np.abs(np.nan_to_num(x, nan=np.inf)) > divergence_bound)
-        if x.size and bad.any():
-            i = int(np.argmax(bad))
-            raise SimulationDivergedError(
-                f"simulation of {diagram.get_name()!r} diverged at t = {t_now:.6g} s: {state_label(i)} = {x[i]:.6g} "
-                f"(bound {divergence_bound:g}; checked every {duration / len(bounds):.3g} s)", t=t_now)
+        for get, size, what in watched_states:
+            x = get()
+            bad = ~np.isfinite(x) | (np.abs(np.nan_to_num(x, nan=np.inf)) > divergence_bound)
+            if x.size and bad.any():
+                i = int(np.argmax(bad))
+                label = f"{what}[{i}]" + (f" ({state_names[i]})" if i < len(state_names) == size else "")
+                raise SimulationDivergedError(
+                    f"simulation of {diagram.get_name()!r} diverged at t = {t_now:.6g} s: {label} = {x[i]:.6g} "
+                    f"(bound {divergence_bound:g}; checked every {duration / len(bounds):.3g} s)", t=t_now)
 
     def read(s):
         """Logged ``(t, values)``; samples closer than 1e-9 step to the next (a chunk boundary met
@@ -445,6 +474,7 @@ def simulate(system, context: Context | None, t_final: float, *,
 
     # -- collect -----------------------------------------------------------
     user_ctx.SetTimeStateAndParametersFrom(sub_ctx)
+    sampled_state = [p.GetMyContextFromRoot(root).get_discrete_state(0).CopyToVector() for p in sampled_plants(clone)]
     t = None
     signals, units, labels = {}, {}, {}
     for label, s in logged:
@@ -474,5 +504,7 @@ def simulate(system, context: Context | None, t_final: float, *,
                 accuracy=float(accuracy) if mode == "error_controlled" else None,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
                 realtime_factor=duration / wall if wall > 0 else math.inf,
-                steps=int(integ.get_num_steps_taken()), system=diagram.get_name(), limits=limits)
+                steps=int(integ.get_num_steps_taken() if clone.num_continuous_states() else sim.get_num_discrete_updates()),
+                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name(), limits=limits,
+                final_sampled_state=np.concatenate(sampled_state) if sampled_state else None)
     return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)

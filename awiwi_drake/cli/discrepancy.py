@@ -109,6 +109,12 @@ def _make_dataset(args) -> int:
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
     rig = CLI_RIG_NAMES[args.rig]
+    if rig.startswith("finger-"):
+        return _make_finger_dataset(args, out, hidden)
+    if args.joint_angles:
+        raise ValueError(f"--joint-angles: only for finger datasets (the {args.rig} records its link angle anyway)")
+    if args.place is not None and args.place not in (1, 2):
+        raise ValueError(f"--place {args.place}: the joint rig has tendons 1 and 2")
     from awiwi_drake.discrepancy.catalog import EFFECTS
 
     for h in hidden:  # checked here so that the message uses the CLI's rig name
@@ -124,6 +130,31 @@ def _make_dataset(args) -> int:
     snr = "inf" if args.snr is None else f"{args.snr:g}"
     print(f"{path} (+ .json; answer in {path.stem}.truth.json): rig {args.rig}, hidden {hidden or 'none'}, "
           f"SNR {snr} dB, seed {args.seed}" + (f", on tendon {args.place}" if args.place else ""))
+    return 0
+
+
+def _make_finger_dataset(args, out, hidden) -> int:
+    from awiwi_drake.config import SimulationProgress
+    from awiwi_drake.discrepancy import save_dataset
+    from awiwi_drake.discrepancy.finger_truth import make_finger_dataset
+    from awiwi_drake.parameters.discrepancy import FingerTruthParams
+
+    if args.nuisance:
+        raise ValueError(f"--nuisance: not available for {args.rig} (finger datasets hide physical effects only)")
+    if len(hidden) > 1:
+        raise ValueError(f"--hide {','.join(hidden)}: a finger dataset hides one effect at one place")
+    if hidden and args.place is None:
+        raise ValueError(f"--place: {args.rig} needs the tendon the hidden effect acts on (1-based)")
+    gen = FingerTruthParams() if args.duration is None else FingerTruthParams(duration=args.duration)
+    with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
+        ds = make_finger_dataset(args.rig[len("finger-"):], hidden, place=args.place, snr_db=args.snr,
+                                 seed=args.seed, gen=gen, joint_angles=args.joint_angles, name=args.name,
+                                 keep_clean=False, progress=progress)
+    path = save_dataset(ds, out)
+    snr = "inf" if args.snr is None else f"{args.snr:g}"
+    tendon = ds.meta["truth"].get("tendon")
+    print(f"{path} (+ .json; answer in {path.stem}.truth.json): rig {args.rig}, hidden {hidden or 'none'}"
+          + (f" on tendon {args.place} ({tendon})" if hidden else "") + f", SNR {snr} dB, seed {args.seed}")
     return 0
 
 
@@ -143,15 +174,20 @@ def register(subparsers) -> None:
     p.set_defaults(func=_diagnose)
 
     m = subparsers.add_parser("make-dataset", help="generate a hidden-effect truth dataset")
-    m.add_argument("--rig", choices=["tendon-rig", "joint-rig"], default="joint-rig",
-                   help="the rig of the truth experiment (default joint-rig)")
+    m.add_argument("--rig", choices=["tendon-rig", "joint-rig", "finger-index", "finger-middle", "finger-ring",
+                                     "finger-fifth"], default="joint-rig",
+                   help="the rig of the truth experiment (default joint-rig); finger-*: the package's finger "
+                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple, spring_hysteresis")
     m.add_argument("--hide", action="append", metavar="EFFECT",
                    help="catalog effect hidden in the truth (repeat or comma-separate; 'none'): motor_friction, "
                         "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay, spring_drift, "
                         "backlash")
-    m.add_argument("--place", type=int, choices=[1, 2], default=None,
+    m.add_argument("--place", type=int, default=None, metavar="TENDON",
                    help="joint-rig: the per-tendon hidden effects (motor_friction, guide_friction, "
-                        "spring_hysteresis) act on tendon 1 or 2 only (default: both)")
+                        "spring_hysteresis) act on tendon 1 or 2 only (default: both); finger-*: the tendon "
+                        "(1-based, <finger>_h1...) the hidden effect acts on (required)")
+    m.add_argument("--joint-angles", action="store_true",
+                   help="finger-*: also record the joint angles (the hand has no joint sensors)")
     m.add_argument("--nuisance", action="append", metavar="NAME",
                    help="miscalibration in the truth: force_sensor, nominal_motor")
     m.add_argument("--snr", type=_snr, default=30.0, metavar="DB",

@@ -7,7 +7,7 @@ from awiwi_drake.components.motor import (
 from awiwi_drake.components.routing import ConstantCoupling, TendonRouting, TendonRouting_, antagonistic_coupling
 from awiwi_drake.components.spring import (
     AntagonisticPairSpring, LeverSpringMechanism, LinearSpring, PolynomialSpring, SpringBank, SpringBank_,
-    hysteresis_rate, tendon_spring)
+    TendonSprings, hysteresis_rate, tendon_spring)
 from awiwi_drake.components.friction import (
     atan_friction, capstan_friction_force, guide_friction, guide_friction_force, regularized_sign, stribeck_friction)
 from awiwi_drake.components.tendon import series_stiffness, tendon_stiffness

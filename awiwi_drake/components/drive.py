@@ -44,7 +44,7 @@ from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Gain
 from awiwi_drake.components.fused_drive import DriveModel, GuideFrictionModel, TendonDrive_
 from awiwi_drake.components.motor import MotorBank_, motor_acceleration, saturate_torque
 from awiwi_drake.components.routing import TendonRouting_
-from awiwi_drake.components.spring import SpringBank_, hysteresis_rate
+from awiwi_drake.components.spring import SpringBank_, TendonSprings, hysteresis_rate
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 
 __all__ = ["build_tendon_drive", "TendonDrive", "BACKENDS", "DRIVE_OUTPUTS"]
@@ -93,9 +93,10 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
     ----------
     motor : MotorParams
         Shared by all m motors.
-    spring : spring law, or a sequence of m spring laws
-        ``force(x)``/``stiffness(x)`` object (e.g. :func:`tendon_spring`); one per
-        tendon with ``backend="compiled"`` only.
+    spring : spring law, or one law per tendon
+        ``force(x)``/``stiffness(x)`` object (e.g. :func:`tendon_spring`), or a
+        :class:`~awiwi_drake.components.spring.TendonSprings` (or a sequence of m laws):
+        every backend evaluates tendon ``i`` with its own law.
     coupling : coupling object
         ``h(q)``, ``P(q)``, ``num_tendons``, ``num_joints`` (see :mod:`routing`).
     offsets : (m,) array, optional
@@ -125,13 +126,18 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
     offsets = np.zeros(m) if offsets is None else np.asarray(offsets, dtype=float)
     if offsets.shape != (m,) or not np.all(np.isfinite(offsets)):
         raise ValueError(f"build_tendon_drive: offsets must be {m} finite numbers [m], got {offsets!r}")
-    per_tendon = isinstance(spring, (list, tuple))
-    if per_tendon and backend != "compiled":
-        raise ValueError(f"build_tendon_drive: one spring law per tendon needs backend='compiled', not {backend!r}")
+    if isinstance(spring, (list, tuple)):
+        spring = TendonSprings(spring)
+    per_tendon = isinstance(spring, TendonSprings)
+    if per_tendon and len(spring) != m:
+        raise ValueError(f"build_tendon_drive: spring has {len(spring)} laws, one per tendon ({m}) expected")
+    if per_tendon and spring.uniform and backend != "compiled":
+        spring = spring[0]                    # one law for all: the plain bank
+        per_tendon = False
     if guide_friction is not None and backend != "compiled":
         raise ValueError(f"build_tendon_drive: guide_friction needs backend='compiled', not {backend!r}")
     if backend == "compiled":
-        model = DriveModel(motor, tuple(spring) if per_tendon else (spring,) * m, coupling, offsets, r_m,
+        model = DriveModel(motor, spring.laws if per_tendon else (spring,) * m, coupling, offsets, r_m,
                            hysteresis, guide_friction, rate_joints)
         builder = DiagramBuilder()
         sys_ = builder.AddNamedSystem("drive", TendonDrive_[float](model))

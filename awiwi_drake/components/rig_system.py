@@ -24,14 +24,20 @@ from __future__ import annotations
 
 import numpy as np
 import pydrake.symbolic as sym
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.analysis import DiscreteTimeApproximation, SimulatorConfig
+from pydrake.systems.framework import LeafSystem_, System
 from pydrake.systems.primitives import SymbolicVectorSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_laws
 from awiwi_drake.components.motor import saturate_torque
 
-__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "LinkRigOutputs_", "tendon_force_of_states"]
+__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "sampled_dynamics", "SAMPLED_INTEGRATOR",
+           "LinkRigOutputs_", "tendon_force_of_states"]
+
+# the integration scheme of a sampled rig: one fixed step per control period, the scheme and step
+# analysis.simulate uses for sampled loops by default (so the two give the same trajectory to round-off)
+SAMPLED_INTEGRATOR = "runge_kutta3"
 
 
 def _check(model) -> None:
@@ -72,6 +78,29 @@ def rig_dynamics_system(model: DriveModel) -> SymbolicVectorSystem:
     """
     xs, us, xdot = rig_dynamics_expressions(model)
     return SymbolicVectorSystem(state=xs, input=us, dynamics=[e.Expand() for e in xdot], output=xs)
+
+
+def sampled_dynamics(system: System, period: float) -> System:
+    """``system`` (continuous, e.g. :func:`rig_dynamics_system`) as Drake's nonlinear
+    ``DiscreteTimeApproximation`` at ``period`` [s]: ``x[n+1] = x[n] + integral of f(x, u[n]) dt``
+    over one period with the input held (zero-order hold), integrated by Drake's
+    :data:`SAMPLED_INTEGRATOR` with one fixed step per period.
+
+    In a sampled loop (a controller read at the sample instants, its command held over the
+    period) this is the same trajectory as the continuous ``system`` integrated with fixed-step
+    RK3 at the period, to round-off (tests/test_rig_system.py), while the outer ``Simulator``
+    only performs one discrete update per period: no continuous state, no integrator stages over
+    the rest of the loop. The state is the discrete state, in ``system``'s order; outputs relay
+    ``system``'s outputs at the held state. Scalar types: float and AutoDiffXd (``Linearize`` with
+    the period, ``DiscreteTimeLinearQuadraticRegulator``); Drake's approximation has no symbolic form.
+    """
+    period = float(period)
+    if not period > 0.0:
+        raise ValueError(f"sampled_dynamics: period = {period!r} s must be > 0")
+    config = SimulatorConfig(integration_scheme=SAMPLED_INTEGRATOR, max_step_size=period, use_error_control=False)
+    sampled = DiscreteTimeApproximation(system, period, config)
+    sampled._continuous_system = system    # the approximation refers to `system` without owning it
+    return sampled
 
 
 class tendon_force_of_states:

@@ -38,6 +38,7 @@ __all__ = [
     "hysteresis_rate",
     "SpringBank_",
     "SpringBank",
+    "TendonSprings",
     "tendon_spring",
 ]
 
@@ -465,6 +466,103 @@ def tendon_spring(spring_params) -> PolynomialSpring:
     return lever.to_polynomial(
         spring_params.polynomial_degree, max_force=spring_params.max_force,
         tendon=spring_params.tendon if spring_params.include_tendon else None)
+
+
+class TendonSprings:
+    """One spring law per tendon of a drive (the hand's calibration table, ch. 4), evaluated element-wise.
+
+    ``laws[i]`` is the law of tendon ``i`` (the same object may repeat: tendons that share a law are
+    evaluated together, one call per distinct law).  ``force``, ``stiffness``, ``stiffness_derivative``,
+    ``energy`` take an elongation vector ``x`` of one entry per tendon and ``inverse_force`` a force
+    vector; entry ``i`` is ``laws[i]`` evaluated at ``x[i]``.  Float, AutoDiffXd and (when every law
+    supports it) Expression arrays pass through, so a :class:`SpringBank_` (python and symbolic drive
+    backends) takes a bank in place of one law.  This is the one place a vector of tendons meets its
+    laws: the drive, the operating points, the chain's force maps and distribution tables, the
+    per-joint reduced models and the finger backstepping all evaluate it.
+
+    Parameters
+    ----------
+    laws : sequence of spring laws
+        Objects with ``force(x)``, ``stiffness(x)`` and ``inverse_force(f)`` (:class:`PolynomialSpring`,
+        :class:`LinearSpring`, :class:`LeverSpringMechanism`).
+    """
+
+    def __init__(self, laws):
+        laws = tuple(laws.laws if isinstance(laws, TendonSprings) else laws)
+        if not laws:
+            raise ValueError("TendonSprings: give one spring law per tendon (got none)")
+        for i, law in enumerate(laws):
+            if not all(hasattr(law, a) for a in ("force", "stiffness", "inverse_force")):
+                raise ValueError(f"TendonSprings: laws[{i}] = {law!r} is not a spring law "
+                                 "(needs force(x), stiffness(x), inverse_force(f))")
+        self.laws = laws
+        groups: dict = {}
+        for i, law in enumerate(laws):
+            groups.setdefault(id(law), (law, []))[1].append(i)
+        self.groups = tuple((law, np.array(ix, dtype=int)) for law, ix in groups.values())
+        self.supports_symbolic = all(getattr(law, "supports_symbolic", False) for law in laws)
+        self.max_elongation = np.array([float(getattr(law, "max_elongation", math.inf)) for law in laws])
+
+    def __len__(self) -> int:
+        return len(self.laws)
+
+    def __getitem__(self, i):
+        return self.laws[i]
+
+    def __iter__(self):
+        return iter(self.laws)
+
+    def __repr__(self):
+        return f"TendonSprings({len(self.laws)} tendons, {len(self.groups)} distinct laws)"
+
+    @property
+    def uniform(self) -> bool:
+        """True when every tendon has the same law object."""
+        return len(self.groups) == 1
+
+    def subset(self, index) -> "TendonSprings":
+        """The laws of the tendons ``index`` (a slice or integer indices), e.g. one finger's."""
+        idx = np.arange(len(self.laws))[index]
+        return TendonSprings([self.laws[int(i)] for i in np.atleast_1d(idx)])
+
+    def _eval(self, method: str, x):
+        x = np.asarray(x) if isinstance(x, np.ndarray) else np.asarray(x, dtype=object if not is_float(x) else float)
+        if x.shape != (len(self.laws),):
+            raise ValueError(f"TendonSprings.{method}: expected one value per tendon ({len(self.laws)}), "
+                             f"got shape {x.shape}")
+        if self.uniform:
+            return asarray_like(getattr(self.laws[0], method)(x), x)
+        out = np.empty(x.shape, dtype=float if is_float(x) else object)
+        for law, ix in self.groups:
+            out[ix] = asarray_like(getattr(law, method)(x[ix]), x)
+        return out
+
+    def force(self, x):
+        """Tendon forces [N] at the elongations ``x`` [m], each with its tendon's law."""
+        return self._eval("force", x)
+
+    def stiffness(self, x):
+        """``df_i/dx_i`` [N/m] of each tendon's law."""
+        return self._eval("stiffness", x)
+
+    def stiffness_derivative(self, x):
+        """``d^2 f_i/dx_i^2`` [N/m^2] of each tendon's law."""
+        return self._eval("stiffness_derivative", x)
+
+    def energy(self, x):
+        """Stored energy [J] of each tendon's spring."""
+        return self._eval("energy", x)
+
+    def inverse_force(self, f):
+        """Elongations [m] at which each tendon's spring carries ``f_i`` [N] (float)."""
+        f = np.asarray(f, dtype=float)
+        if f.shape != (len(self.laws),):
+            raise ValueError(f"TendonSprings.inverse_force: expected one force per tendon ({len(self.laws)}), "
+                             f"got shape {f.shape}")
+        out = np.empty(f.shape)
+        for law, ix in self.groups:
+            out[ix] = np.asarray(law.inverse_force(f[ix]), dtype=float)
+        return out
 
 
 def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):

@@ -223,6 +223,7 @@ class ClosedLoop:
     tracked_outputs: tuple[str, ...]
     estimator: Any = None
     estimated: tuple[str, ...] = ()
+    sampled_rig: bool = False
     _holds: list = field(default_factory=list, repr=False)
     _delays: list = field(default_factory=list, repr=False)
 
@@ -276,10 +277,13 @@ class ClosedLoop:
             rig_sys = self.diagram.GetSubsystemByName("rig")
             rig_ctx = rig_sys.GetMyMutableContextFromRoot(context)
             x = np.asarray(state, dtype=float).reshape(-1)
-            n = rig_ctx.num_continuous_states()
+            n = rig_ctx.get_discrete_state(0).size() if self.sampled_rig else rig_ctx.num_continuous_states()
             if x.size != n:
-                raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} continuous states")
-            rig_ctx.SetContinuousState(x)
+                raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} states")
+            if self.sampled_rig:     # the rig's state is the sampled dynamics' discrete state (same order)
+                rig_ctx.SetDiscreteState(0, x)
+            else:
+                rig_ctx.SetContinuousState(x)
             init = getattr(self.controller, "initialize_state", None)
             if init is not None:   # controllers with internal state (e.g. the force distribution)
                 ctrl_sys = self.diagram.GetSubsystemByName("controller")
@@ -290,7 +294,11 @@ class ClosedLoop:
                                           self.rig.joint_angles_of(x))
         if motor_torque is not None:
             u = _vector(motor_torque, self.num_inputs, "motor_torque")
-            for zoh in self._holds:
+            holds = list(self._holds)
+            rig_sys = self.diagram.GetSubsystemByName("rig")
+            if self.sampled_rig and isinstance(rig_sys, Diagram) and rig_sys.HasSubsystemNamed("motor_torque_hold"):
+                holds.append(rig_sys.GetSubsystemByName("motor_torque_hold"))   # the sampled rig's held input
+            for zoh in holds:
                 zoh.SetVectorState(zoh.GetMyMutableContextFromRoot(context), u)
             for d in self._delays:
                 dctx = d.GetMyMutableContextFromRoot(context)
@@ -312,7 +320,8 @@ def _vector(value, size: int, name: str) -> np.ndarray:
 def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                 delay: float | None = None, saturation: float | Sequence[float] | None = None,
                 sensors: Mapping[str, System] | str | None = None, estimator: Any = "auto",
-                sources: Mapping[str, System] | None = None, name: str | None = None) -> ClosedLoop:
+                sources: Mapping[str, System] | None = None, name: str | None = None,
+                sampled_rig: bool = True) -> ClosedLoop:
     """Close the loop between a rig and a controller by port names.
 
     Parameters
@@ -354,6 +363,19 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         input (``external_torque``, ``wrist_angle``) instead of exporting it.
     name : str, optional
         Diagram name (default ``"<rig>_<controller>"``).
+    sampled_rig : bool
+        For a sampled loop (``rate_hz``) on a rig that offers ``rig.sampled_diagram`` (the
+        single-joint rigs) whose controller and sensors have no continuous state (default True):
+        the rig enters the loop as Drake's ``DiscreteTimeApproximation`` at the control period
+        (:func:`~awiwi_drake.components.rig_system.sampled_dynamics`: fixed-step RK3, one step per
+        period, its inputs held over the period), so the loop is a discrete-time system and the
+        ``Simulator`` does one update per period. It reads the command at the sample instant, so
+        it replaces the command's sample-and-hold (a round-trip delay keeps its length); the
+        trajectory equals the continuous rig's under ``simulate``'s default fixed-step RK3 at the
+        control period to round-off (tests/test_rig_system.py). Its other inputs
+        (``external_torque``) are held over each period too. ``Linearize`` takes the loop with the
+        period. The loop's ``motor_torque`` output is the held command as before. False: the
+        continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
 
     Returns
     -------
@@ -438,13 +460,19 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         if np.any(sat <= 0.0):
             raise ValueError(f"closed_loop: saturation = {sat} must be > 0 Nm")
 
+    # the rig as a discrete-time system at the control period where that is the same loop: every reader
+    # of the rig's outputs samples them at the control instants (no continuous state outside the rig)
+    sample_rig = bool(sampled_rig and rate_hz is not None and getattr(rig, "sampled_diagram", None) is not None
+                      and est_sys is None and controller.num_continuous_states() == 0
+                      and all(s.num_continuous_states() == 0 for s in sensors.values()))
     builder = DiagramBuilder()
-    plant = builder.AddNamedSystem("rig", rig_diagram)
+    plant = builder.AddNamedSystem("rig", rig.sampled_diagram(1.0 / rate_hz, hold_applied_torque=True)
+                                   if sample_rig else rig_diagram)
     ctrl = builder.AddNamedSystem("controller", controller)
     handles = ClosedLoop(diagram=None, rig=rig, controller=controller, rate_hz=rate_hz,
                          delay=(steps / rate_hz if steps else None), delay_steps=steps, saturation=sat,
                          references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked),
-                         estimator=est, estimated=estimated)
+                         estimator=est, estimated=estimated, sampled_rig=sample_rig)
     estimate_ports = {}
     if est_sys is not None:
         e = builder.AddNamedSystem("estimator", est_sys)
@@ -477,14 +505,17 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     builder.ExportOutput(cmd, "motor_torque_command")
     # A DiscreteTimeDelay samples its input every period and outputs it `steps` periods later, so it is
     # the sample-and-hold itself (a ZOH in front would add a period: simultaneous updates read the
-    # pre-update hold value).
-    if rate_hz is not None and not steps:
+    # pre-update hold value). A sampled rig samples its input itself: it reads the command at the
+    # instant (steps = 0), through a hold (1) or a delay of steps - 1 periods; its own hold of its input
+    # (held_motor_torque) gives the loop's motor_torque output the held command, as the continuous rig sees it.
+    lag = steps - 1 if sample_rig else steps
+    if rate_hz is not None and lag == 0:
         zoh = builder.AddNamedSystem("command_hold", ZeroOrderHold(1.0 / rate_hz, n_u))
         builder.Connect(cmd, zoh.get_input_port(0))
         cmd = zoh.get_output_port(0)
         handles._holds.append(zoh)
-    if steps:
-        dly = builder.AddNamedSystem("round_trip_delay", DiscreteTimeDelay(1.0 / rate_hz, steps, n_u))
+    if lag > 0:
+        dly = builder.AddNamedSystem("round_trip_delay", DiscreteTimeDelay(1.0 / rate_hz, lag, n_u))
         builder.Connect(cmd, dly.get_input_port())
         cmd = dly.get_output_port()
         handles._delays.append(dly)
@@ -493,7 +524,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         builder.Connect(cmd, satsys.get_input_port(0))
         cmd = satsys.get_output_port(0)
     builder.Connect(cmd, plant.GetInputPort(COMMAND_PORT))
-    builder.ExportOutput(cmd, COMMAND_PORT)
+    # the torque entering the rig over the current period: a sampled rig holds its input itself
+    builder.ExportOutput(plant.GetOutputPort("held_motor_torque") if sample_rig else cmd, COMMAND_PORT)
     sources = dict(sources or {})
     unknown = sorted(set(sources) - set(refs) - (set(rig_in) - {COMMAND_PORT}))
     if unknown:

@@ -11,7 +11,6 @@ from awiwi_drake.control.registry import register_controller
 
 _JOINTS = ("flexible-joint", "joint-rig")
 _SAMPLED = {"rate_hz": 3000.0}
-_FAST_HZ = 9000.0      # the full-state joint stages on fingers/hand (see below)
 
 
 def _lazy(module: str, function: str, **kwargs):
@@ -49,31 +48,30 @@ _BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", des
                  "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
                  "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
                  "joint from its reduced model"))
+_BUILTIN.append(("pd", _lazy("joint_design", "joint_stage_controller", design="pd"), ("finger", "hand"),
+                 "PD on the estimated joint angle per joint, (Kp, Kd) placing one pair at 60 rad/s, damping 0.7, on the "
+                 "joint's reduced model (torque chain, own tendons) -> force distribution (ch. 7) -> force PD (10.2)"))
 _BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
                  ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
                  "tendon towards the force (11.3); damping per joint from its reduced model"))
-_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement",
-                                         rate_hz=_FAST_HZ), ("finger", "hand"),
+_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement"),
+                 ("finger", "hand"),
                  "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, tau_dot] "
-                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2); at 9 kHz"))
-_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr", rate_hz=_FAST_HZ),
+                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2)"))
+_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr"),
                  ("finger", "hand"), "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson "
-                 "weights) -> force distribution (ch. 7) -> force PD (10.2); at 9 kHz"))
-_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre", rate_hz=_FAST_HZ),
+                 "weights, the motors' torque rate measured) -> force distribution (ch. 7) -> force PD (10.2)"))
+_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre"),
                  ("finger", "hand"), "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in "
-                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain; at 9 kHz"))
+                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain"))
 
-# The full-state joint stages (torque feedback) run the chain at 9 kHz, the estimator at its 3 kHz (each estimate
-# serves three periods). Measured on the index (0.2 rad step, estimator, 3 Nm limit): physics off, at 3 kHz they
-# limit-cycle in saturation (LQR 85 %, pole placement 57 % of the samples; with the true joint state 2 % / 1 %), at
-# 6 kHz 4 % / 1 %. With the default plant's spring hysteresis and ripple, at 6 kHz LQR 99 % (true joint state: 4 %),
-# at 9 kHz 4 % / 2 % (12 kHz 3 % / 2 %); compare --short at 9 kHz: steps 7 % / 3 %, the 0.01 Nm load on the
-# PIP/DIP still 55-60 % / 17-26 % (flagged). The impedance stages (cascaded, two-time-scale) run at 3 kHz.
-_FAST = {"lqr", "pole-placement", "sdre"}
+# Every stage runs at the thesis's 3 kHz with the estimator at the same rate.  The full-state stages (lqr,
+# pole-placement, sdre) used to need 9 kHz (at 3 kHz they saturated 82-99 % of a step): the estimate was one period
+# older than the forces read with it, and its derivative, 1.5 periods late, destabilised the DIP's link mode
+# (sampled loop |z| = 1.09-1.14 at ~3600-4050 rad/s on the index, control.joint_design.sampled_loop_poles); the
+# estimate now comes from the current sample (hand.estimation) and the LQR/SDRE measure the motors' torque rate.
 for _name, _factory, _rigs, _doc in _BUILTIN:
-    fast = _name in _FAST and "finger" in _rigs
-    register_controller(_name, _factory, rigs=_rigs, description=_doc,
-                        loop_options={"rate_hz": _FAST_HZ} if fast else _SAMPLED)
+    register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)
 
 # The law at the thesis's 3 kHz: its joint gains are designed for that rate (every designed joint mode
 # |h lambda| <= 1/4, HandChainParams.sampled_pole_limit). It used to run at 6 kHz: the per-DoF design put a
@@ -83,3 +81,20 @@ register_controller("backstepping", _lazy("finger_backstepping", "finger_backste
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
                                 "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")
+for _variant, _doc in (("position", "position backstepping per DoF (15.2 steps on the link: z2 = e' + k1 e, "
+                                     "V = |e|^2/2 + |z2|^2/2 + ...) through the 15.5 tendon steps, motor torques "
+                                     "directly; 3 kHz"),
+                        ("nonlinear-spring", "impedance backstepping with the steps on the joint torques (15.71)-"
+                                             "(15.81), tau = -(P S)^T phi(x) with each tendon's spring law, the "
+                                             "tendon forces' null space held at the pretension; 3 kHz")):
+    register_controller(f"backstepping-{_variant}", _lazy("finger_backstepping", "finger_backstepping_controller",
+                                                          variant=_variant),
+                        rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0}, description=_doc)
+
+# Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
+# against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).
+register_controller("optimal-backstepping", _lazy("optimal_gains", "finger_optimal_backstepping_controller"),
+                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
+                    description="15.5 backstepping with K3, K4 per DoF selected by ch. 16 (least squares to the "
+                                "DoF's LQR, Table 16.1 weights, R the most aggressive the 3 kHz loop follows); "
+                                "impedance as backstepping")

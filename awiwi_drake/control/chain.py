@@ -22,7 +22,8 @@
     (15.88) ``f_ref = f_op + W (tau_ref - tau_op)``, ``W = -((P S)^T)^+`` (:class:`TendonForceSharing_`);
   - :class:`~awiwi_drake.control.tendon_force.TendonForceLaw` with ``size = m`` -- (10.2) per tendon,
     gains (10.11) scheduled on the reference (10.12), slope ``alpha = r_m k_t(f)`` of the tendon's
-    own spring curve (:meth:`ForceMap.from_spring`), friction (3.8) and ripple (3.5) fed forward.
+    own spring curve (:meth:`ForceMap.from_spring` of each tendon's law, :func:`rig_springs`: the rig's
+    ``params.tendon_springs`` overrides are honoured), friction (3.8) and ripple (3.5) fed forward.
 
 :class:`TendonChainController` wires a joint stage and the force stage into one controller with
 the port contract of :mod:`awiwi_drake.control.base` (inputs ``joint_angle_reference``,
@@ -41,6 +42,7 @@ import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake.components.spring import TendonSprings
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains, check_rate
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
@@ -52,23 +54,18 @@ from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
 __all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceSharing_", "TendonForceSharing",
-           "TendonForceStage", "TendonChainController", "chain_design_point", "check_one_spring_law"]
+           "TendonForceStage", "TendonChainController", "chain_design_point", "rig_springs"]
 
 
-def check_one_spring_law(rig: Any, owner: str) -> None:
-    """Refuse a rig whose tendons have their own spring laws (``params.tendon_springs``).
-
-    The force map, the distribution's ``k_t(f)`` and the backstepping's ``phi(x)`` model every
-    tendon with the rig's one spring law; with per-tendon laws they would control a different
-    plant without saying so (nothing silently dropped).
-    """
-    overrides = getattr(getattr(rig, "params", None), "tendon_springs", ())
-    if overrides:
-        names = ", ".join(t for t, _ in overrides)
-        raise ValueError(f"{owner}: rig {getattr(rig, 'name', '?')!r} has per-tendon spring laws "
-                         f"(params.tendon_springs: {names}); this controller models every tendon with "
-                         f"params.spring: design it on a rig without tendon_springs (a deliberate model mismatch: "
-                         f"closed_loop(rig, make_controller(name, nominal_rig)))")
+def rig_springs(rig: Any) -> TendonSprings:
+    """The spring law of each tendon of a rig (:class:`~awiwi_drake.components.spring.TendonSprings`): a
+    finger's/the hand's ``spring_laws`` (``params.tendon_springs`` overrides), else ``rig.spring`` for all."""
+    laws = getattr(rig, "spring_laws", None)
+    if laws is not None:
+        return laws if isinstance(laws, TendonSprings) else TendonSprings(laws)
+    if isinstance(rig.spring, TendonSprings):          # e.g. a per-joint subsystem (joint_design.joint_subsystem)
+        return rig.spring
+    return TendonSprings([rig.spring] * rig.coupling.num_tendons)
 
 
 @TemplateSystem.define("TendonPathVelocity_")
@@ -175,7 +172,12 @@ class TendonForceStage(Diagram):
     ``distribution``: ``"optimal"`` / ``"algorithm2"`` (ch. 7, sampled every ``1/rate_hz``, needs
     ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).  ``tendon_law``: ``"force"``
     (10.2) or ``"motor-position"`` (the tendon level of the two-time-scale (11.3),
-    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``).
+    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``, its motor
+    damping relative to the tendon path).
+    ``spring``: one spring law for every tendon, or a
+    :class:`~awiwi_drake.components.spring.TendonSprings` (:func:`rig_springs`): each tendon's force map
+    (slope ``alpha_i = r_m k_t,i``, gains (10.11)), slope floor and distribution stiffness table
+    ``k_t,i(f)`` are then its own law's.
     """
 
     def __init__(self, coupling, spring, drive_params, params: HandChainParams | None = None, *,
@@ -186,6 +188,10 @@ class TendonForceStage(Diagram):
         p = params or HandChainParams()
         method = distribution or p.distribution_method
         m = coupling.num_tendons
+        springs = spring if isinstance(spring, TendonSprings) else TendonSprings([spring] * m)
+        if len(springs) != m:
+            raise ValueError(f"TendonForceStage: {len(springs)} spring laws for {m} tendons")
+        r_m = drive_params.motor.pulley_radius
         b = DiagramBuilder()
         if method == "sharing":
             W = -np.linalg.pinv(point["coupling_matrix"].T)
@@ -195,22 +201,23 @@ class TendonForceStage(Diagram):
             dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(
                 point["fingers"], method=method, period=1.0 / rate_hz,
                 iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution_params,
-                drive=drive_params))
+                drive=drive_params, springs=springs))
         else:
             raise ValueError(f"TendonForceStage: distribution = {method!r}; use 'optimal', 'algorithm2' or 'sharing'")
         gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth, friction_scale=p.friction_scale)
         self.gains = gains
         if tendon_law == "force":
-            fmap = ForceMap.from_spring(spring, drive_params.motor.pulley_radius)
+            maps = {id(law_): ForceMap.from_spring(law_, r_m) for law_, _ in springs.groups}
+            fmap = maps[id(springs[0])] if springs.uniform else [maps[id(law_)] for law_ in springs]
             law = TendonForceLaw(fmap, drive_params.motor, gains, scheduled=p.scheduled, size=m,
                                  ripple_scale=RippleCompensationParams().amplitude_scale
                                  if drive_params.motor.ripple else 0.0,
                                  name="tendon_force_control", path_velocity=True)
         elif tendon_law == "motor-position":
             from awiwi_drake.control.impedance import MotorPositionForceLaw
-            k_min = float(np.ravel(spring.stiffness(spring.inverse_force(np.array([gains.min_schedule_force]))))[0])
+            k_min = springs.stiffness(springs.inverse_force(np.full(m, gains.min_schedule_force)))
             law = MotorPositionForceLaw(drive_params.motor, size=m, friction_scale=p.friction_scale,
-                                        min_alpha=drive_params.motor.pulley_radius * k_min)
+                                        min_alpha=r_m * (k_min[0] if springs.uniform else k_min), path_velocity=True)
         else:
             raise ValueError(f"TendonForceStage: tendon_law = {tendon_law!r}; use 'force' or 'motor-position'")
         force = b.AddNamedSystem("tendon_force_control", StaticLawController(law))
@@ -278,7 +285,6 @@ class TendonChainController(Diagram):
         super().__init__()
         p = params or HandChainParams()
         rate_hz = check_rate("TendonChainController", rate_hz)
-        check_one_spring_law(rig, "TendonChainController")
         point = point or chain_design_point(rig, params=p)
         self.operating_point = point["op"]
         k = point["selection"].shape[1]
@@ -289,7 +295,7 @@ class TendonChainController(Diagram):
         b = DiagramBuilder()
         joint = b.AddNamedSystem("joint_stage", JointStage(joint_law, K_mech))
         force = b.AddNamedSystem("force_stage", TendonForceStage(
-            rig.coupling, rig.spring, rig.params, p, point=point, distribution=distribution, gains=gains,
+            rig.coupling, rig_springs(rig), rig.params, p, point=point, distribution=distribution, gains=gains,
             distribution_params=distribution_params, rate_hz=rate_hz, tendon_law=tendon_law))
         self.design = dict(point, joint_law=joint_law, force_gains=force.gains)
         tau_ref = joint.GetOutputPort("joint_torque_reference")

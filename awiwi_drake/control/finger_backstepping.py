@@ -1,4 +1,5 @@
-"""Antagonistic backstepping (thesis 15.5, (15.82)-(15.106)) for a finger or the whole hand.
+"""Antagonistic backstepping (thesis 15.5, (15.82)-(15.106)) for a finger or the whole hand, and its position
+(15.2) and nonlinear-spring (15.4) variants.
 
 Section 15.5 keeps the symmetry of the antagonistic joint by letting "the motors not be aware of
 one another": the desired link torque is *shared* among the tendons, a pretension is added, and
@@ -17,38 +18,37 @@ with the tendon force ``f = phi_i(x_i)`` of each tendon's own spring law (``rig.
 lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
 spring elongation ``x_i``, the motor friction
 (3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
-cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``, ``f'' = f0 + g u``,
-``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 + phi' r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B``,
-where the force steps model the tendon as in ch. 10 ((10.1): fixed at the link end), ``x' = r_m omega``.
-The joint accelerations come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``,
-the DoF inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
+cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
+``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
+phi' r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B``.  The joint accelerations
+come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``, the DoF
+inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
 rest, are left out) and their derivative from ``f'``.
 
-``HandChainParams.link_motion_in_force_model=True`` is the exact design: ``x' = r_m omega + P qdot`` and
-``f0`` gains ``phi' P S e''``, the tendon force change of the link's modelled motion.  For that model
+With ``HandChainParams.link_acceleration_feedforward=True`` ``f0`` also holds ``phi' P qddot``, the tendon
+force change of the link model's acceleration: the exact design.  For that model
 
     V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,   (Kp symmetric positive definite)
-    V' = -e'^T (Kd + B_q) e' - K3 |z3|^2 - K4 |z4|^2 <= 0
+    V' = -e'^T (Kd + B_q) e' - z3^T K3 z3 - z4^T K4 z4 <= 0      (K3, K4 diagonal, one gain per tendon)
 
 (the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
-``beta``), and the linearised loop has exactly the designed error-system poles (tested on the ideal plant).
-With one DoF and ``P = [-r_q, r_q]^T`` it is the antagonistic joint of 15.5.  It is not the default,
-because on the finger the link's motion is the fastest and least known part of the model (measured with
-Drake's ``Linearize``, index, 3 kHz, ZOH):
+``beta``), and the linearised loop on the ideal plant has exactly the designed error-system poles
+(tested).  ``terms(u)["V"]`` gives ``V``.  With one DoF and ``P = [-r_q, r_q]^T`` it is the
+antagonistic joint of 15.5.
 
-* the links are light (index DIP ~1e-6 kg m^2): the modelled ``e''`` reacts to every link-side force the
-  model lacks with ``M_d^-1 (P S)^T dF``, and ``phi' P S e''`` turns it into motor torque.  The guides'
-  friction (4.1) is such a force (at rest a presliding stiffness ``C/delta`` ~5 kN/m per tendon path): the
-  continuous loop on the true joint state has a pole at +833 1/s;
-* ``P qdot`` comes from the tendon-length estimate, one control period old when the command is sampled
-  and differentiated: the sampled loop with the estimator is unstable already without guide friction
-  (spectral radius 1.03: a 544 Hz DIP/PIP mode), 1.25 with it (a real mode, the one above).
-
-With the ch. 10 tendon model the link's motion is a disturbance of the force steps, rejected by ``K3``,
-``K4``: the sampled loop (the estimator in it) is stable on every finger and the hand, with and without
-guide friction (``tests/test_hand_control.py``).  The guide friction then leaves the steady joint offset of a
-friction dead band, ``Kp e = -(P S)^T (g + z)`` at rest (``|g_i| <= W_i`` the guides', ``|z_i| <= w_i`` the
-lever's friction).  ``terms(u)["V"]`` gives ``V``.
+**The feed-forward is off by default**: the finger links are light (index DIP ~1e-6 kg m^2), so the
+model's ``e''`` reacts to every link-side force the model lacks with ``M_d^-1 (P S)^T dF``, and
+``phi' P S e''`` turns it into motor torque (~8 Nm per N on the index DIP).  The guides' friction (4.1),
+on by default, is such a force: at rest it holds each tendon path with its presliding stiffness ``C/delta``
+(~5 kN/m), and with the feed-forward the loop has a real pole at +833 1/s (index, continuous, true joint
+state; sampled at 3 kHz through the estimator: spectral radius 1.26; Drake's ``Linearize``).  Without it
+the link's acceleration is a disturbance of the force steps, rejected by ``K3``, ``K4``: the sampled loop
+through the estimator is stable on every finger and the hand with guide friction and hysteresis on
+(``tests/test_hand_control.py``), and a 0.2 rad MCP step on the friction-free index settles as fast as
+with it (1.1e-3 rad left after 0.25 s, 0.9e-3 with it).  The friction then leaves the steady offset of a
+dead band: at rest the law settles at ``Kp e = -(I + G) (P S)^T (z + g)`` (``z``, ``g`` the lever's and
+the guides' friction forces, ``G`` from the model's phantom acceleration ``M_d^-1 (P S)^T (z + g)``, see
+``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
@@ -65,6 +65,44 @@ former per-DoF design (``Kd = 2 zeta sqrt(Kp M_jj)`` with the diagonal of ``M_d`
 registered at 6 kHz). ``rate_hz=None`` designs for continuous time (no limit). ``w_f``, ``zeta`` of
 :class:`HandChainParams`.  Unlike the cascade (15.5.3) the joint gain is not limited by the force
 loop's bandwidth.
+
+Variants (``variant``, registered ``backstepping-position`` and ``backstepping-nonlinear-spring`` on
+``finger-*``/``hand``; the same force steps and motor-torque output):
+
+* ``"position"``: the link steps of the position law (15.27), (15.31) on every DoF, in the metric of ``M_d``,
+  with the rates ``K1 = K2 = V diag(k) V^T`` on the modes of ``M_d``: ``z2 = e' + K1 e``,
+  ``alpha = tau_op - M_d (I + K2 K1) e - (M_d (K1 + K2) - B_q) e'``, so that
+  ``M_d z2' = -M_d e - M_d K2 z2 - (P S)^T z3``, and ``beta = f_d' - K3 z3 + (P S) z2``::
+
+      V = e^T M_d e / 2 + z2^T M_d z2 / 2 + |z3|^2 / 2 + |z4|^2 / 2
+      V' = -e^T M_d K1 e - z2^T M_d K2 z2 - z3^T K3 z3 - z4^T K4 z4
+
+  Mode i gets ``eta'' + 2 k_i eta' + (1 + k_i^2) eta = 0`` (poles ``-k_i +- i``) and the stiffness
+  ``mu_i (1 + k_i^2)``; the same rules as the impedance design: ``k_i`` the largest with ``mu_i (1 + k_i^2) <=
+  joint_stiffness`` and ``sqrt(1 + k_i^2) <= sampled_pole_limit * rate_hz`` (index at 3 kHz: k = 89 / 92 / 568 /
+  750 1/s, the heavy modes at 0.5 Nm/rad, the lightest at 0.092 like the impedance design).  With one rate for
+  every mode (k = 60) the distal modes' stiffness ``mu (1 + k^2)`` is 6e-4-7e-3 Nm/rad, below what the lever's
+  hysteresis friction lets move: an all-joint 0.2 rad step left the index DIP and the ring PIP/DIP near their
+  start and drove the fifth 2 rad away (measured).  Through the estimator the light modes' ``k_i`` (up to 750 1/s)
+  amplify the estimate's error (``(P S) K1 e`` in ``beta``): compare --short on the index saturates 55 / 59 % of
+  the step / sine; capping ``k_i`` at the force steps' 300 1/s leaves the sine unsaturated but the hysteresis
+  offsets grow (hand step: index DIP 0.29, thumb 0.63 rad against 0.07 / 0.12): the cap is not taken, the
+  saturation is reported.  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
+  one link) needs ``beta = ... + (P S) M_d^-1 z2``: ``M_d^-1`` (1.6e6 at the index DIP) in the force step puts
+  the 3 kHz sampled loop's spectral radius at 164 (measured on the index), so the metric is ``M_d``'s.
+* ``"nonlinear-spring"``: the steps of (15.71)-(15.81) on the joint torques ``tau = -(P S)^T phi(x)`` (each
+  tendon's own law; ``tau' = -(P S)^T phi'(x) x'``), ``z3 = tau - alpha``, ``beta = alpha' - K3 z3 - e'``,
+  ``z4 = tau' - beta`` (as (15.57)); the motor torques realise ``tau'' = beta' - z3 - K4 z4`` through ``W`` and
+  hold the tendon forces' null space (``Pi = I + W (P S)^T``) at the pretension by the same two steps::
+
+      V = e'^T M_d e'/2 + e^T Kp e/2 + |z3|^2/2 + |z4|^2/2 + |Pi (f - f_op)|^2/2 + |Pi (f' + K3 (f - f_op))|^2/2
+
+  Its ``- e'`` cross term is in N m where 15.5's ``(P S) e'`` is in N: relative to 15.5 it multiplies the
+  joint-velocity error by ``1/|P S|^2`` (~3e4 on the index), so through the estimator its command saturates
+  (index, compare --short: 63-77 %; 0-7 % with ideal sensors).  Weighting ``z3``, ``z4`` by
+  ``((P S)^T P S)^-1`` (the forces that realise them) turns it into the 15.5 law itself for a constant
+  coupling: 15.5 is the 15.4 construction in the metric of the tendon forces (checked numerically on the index at
+  a random state: the commands agree to 3e-14 of 139 Nm).
 
 Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand),
 ``elongation`` (the spring sensors), ``motor_angle``, ``motor_velocity``; reference
@@ -87,7 +125,11 @@ from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
 
-__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller"]
+__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "check_backstepping_springs", "VARIANTS"]
+
+#: The law's variants (module docstring): 15.5 per tendon (registered ``backstepping``), 15.2 link steps
+#: (``backstepping-position``), 15.4 steps on the joint torques (``backstepping-nonlinear-spring``).
+VARIANTS = ("antagonistic", "position", "nonlinear-spring")
 
 
 def _values(a) -> np.ndarray:
@@ -101,7 +143,19 @@ class FingerBacksteppingLaw(StaticLaw):
     """The law of the module docstring (one call: all DoF and tendons of a finger or the hand)."""
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None,
-                 rate_hz: float | None = 3000.0):
+                 rate_hz: float | None = 3000.0, joint_gains: tuple | None = None, force_gains: tuple | None = None,
+                 variant: str = "antagonistic"):
+        """``variant`` in :data:`VARIANTS` (module docstring); ``joint_gains = (Kp, Kd)`` (k x k) replaces the mode
+        design (``antagonistic``, ``nonlinear-spring``);
+        ``force_gains = (K3, K4)`` (per tendon, (m,) or scalars; scalars for ``nonlinear-spring``, whose steps are
+        on the joint torques) the ``force_bandwidth`` (e.g. the ch. 16 selection,
+        :func:`awiwi_drake.control.optimal_gains.select_finger_force_gains`); each must be positive."""
+        if variant not in VARIANTS:
+            raise ValueError(f"finger backstepping: variant = {variant!r}; use one of {', '.join(VARIANTS)}")
+        if variant == "position" and joint_gains is not None:
+            raise ValueError("finger backstepping: the position variant's gains follow from its rates on the modes "
+                             "of M (module docstring), not from joint_gains")
+        self.variant = variant
         p = params or HandChainParams()
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
@@ -137,9 +191,39 @@ class FingerBacksteppingLaw(StaticLaw):
         self.Kp = (V * k_modes) @ V.T
         self.Kd = (V * (2.0 * zeta * np.sqrt(k_modes * mu))) @ V.T
         self.mode_stiffness = k_modes
-        self.K3 = self.K4 = float(wf)
+        if variant == "position":                 # the same rules per mode: k_i from the stiffness cap and the rate
+            k_pos = np.sqrt(np.minimum(np.maximum(p.joint_stiffness / mu - 1.0, 0.0), w_max ** 2 - 1.0))
+            if not np.all(k_pos > 0):
+                raise ValueError(f"finger backstepping (position): mode inertias {mu} leave no positive k_i "
+                                 f"(joint_stiffness {p.joint_stiffness} Nm/rad, rate limit {w_max:.4g} 1/s)")
+            self.K1 = (V * k_pos) @ V.T                             # k1 = k2 per mode
+            self.Kp = (V * (mu * (1.0 + k_pos ** 2))) @ V.T         # M (I + K2 K1)
+            self.Kd = (V * (2.0 * mu * k_pos)) @ V.T - self.Bq      # M (K1 + K2) - B_q
+            self.mode_stiffness = mu * (1.0 + k_pos ** 2)
+            self.mode_rates = k_pos
+        if joint_gains is not None:
+            Kp, Kd = (np.asarray(g, dtype=float) for g in joint_gains)
+            if Kp.shape != (k, k) or Kd.shape != (k, k):
+                raise ValueError(f"finger backstepping: joint_gains must be two {k} x {k} matrices (Kp, Kd), got "
+                                 f"{Kp.shape}, {Kd.shape}")
+            if np.linalg.eigvalsh(0.5 * (Kp + Kp.T)).min() <= 0 or np.linalg.eigvalsh(0.5 * (Kd + Kd.T)).min() < 0:
+                raise ValueError("finger backstepping: joint_gains Kp must be positive definite and Kd positive "
+                                 "semi-definite (the Lyapunov function of the module docstring)")
+            self.Kp, self.Kd = Kp, Kd
+        self.K3 = np.full(m, float(wf))
+        self.K4 = np.full(m, float(wf))
+        if force_gains is not None:
+            for name, g in zip(("K3", "K4"), force_gains):
+                g = np.broadcast_to(np.asarray(g, dtype=float), (m,)).copy()
+                if not np.all(np.isfinite(g) & (g > 0)):
+                    raise ValueError(f"finger backstepping: force_gains {name} = {g} must be finite and > 0 [1/s] "
+                                     f"(one per tendon, {m})")
+                if variant == "nonlinear-spring" and np.ptp(g) > 0:
+                    raise ValueError(f"finger backstepping (nonlinear-spring): force_gains {name} must be one value "
+                                     "(its steps act on the joint torques, not per tendon)")
+                setattr(self, name, g)
         self.friction_scale = float(p.friction_scale)
-        self.link_motion = bool(p.link_motion_in_force_model)
+        self.link_feedforward = bool(p.link_acceleration_feedforward)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
         parts = coupling.parts
         self._blocks = []                 # (tendon slice, plant-joint slice, DoF slice, constant W or None)
@@ -154,7 +238,10 @@ class FingerBacksteppingLaw(StaticLaw):
                        "motor_angle": m, "motor_velocity": m}
         self.output_size = m
         self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
-                           tendon_force=self.f_op, torque_offset=self.tau_op, link_motion=self.link_motion)
+                           tendon_force=self.f_op, torque_offset=self.tau_op)
+        # the designed joint error dynamics M e'' + Kd e' + Kp e = 0: its slowest mode (compare's short window)
+        A_e = np.block([[np.zeros((k, k)), np.eye(k)], [-self._Minv @ self.Kp, -self._Minv @ self.Kd]])
+        self.design["time_constant"] = float(1.0 / np.min(-np.linalg.eigvals(A_e).real))
 
     def terms(self, u) -> dict:
         """All intermediate quantities (``z3``, ``z4``, ``e``, ``V``, ``command``) for inputs ``u``."""
@@ -172,9 +259,7 @@ class FingerBacksteppingLaw(StaticLaw):
         f = self._springs("force", x)
         k1 = self._springs("stiffness", x)
         k2 = self._springs("stiffness_derivative", x)
-        # the elongation rate the force steps model: the motor's (ch. 10, (10.1): tendon fixed at the link end), or
-        # with link_motion_in_force_model also the link's P qdot (the exact 15.5 design; see the module docstring)
-        xd = self.r_m * w + P @ v if self.link_motion else self.r_m * w
+        xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
         edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e'
@@ -183,18 +268,43 @@ class FingerBacksteppingLaw(StaticLaw):
         a1 = -self.Kp @ ed - self.Kd @ edd
         a2 = -self.Kp @ edd - self.Kd @ eddd
         f_des = self.f_op + W @ a0
-        z3 = f - f_des
-        beta = W @ a1 - self.K3 * z3 + PS @ ed
-        z4 = fd - beta
-        beta_d = W @ a2 - self.K3 * (fd - W @ a1) + PS @ edd
         wd0 = (self.friction_scale * motor_friction_torque(w, self.motor) + motor_ripple_torque(th, self.motor)
                - self.r_m * f) / self.B
         f0 = k2 * xd * xd + k1 * self.r_m * wd0
-        if self.link_motion:                                   # the link model's acceleration: k1 P qdd
+        if self.link_feedforward:                              # the exact design: phi' P qdd of the link model
             f0 = f0 + k1 * (P @ (S @ edd))
         g = k1 * self.r_m / self.B
-        cmd = (beta_d - f0 - z3 - self.K4 * z4) / g
-        V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
+        K3, K4 = self.K3, self.K4
+        if self.variant == "nonlinear-spring":           # 15.4 steps on the joint torques, null space at f_op
+            K3, K4 = K3[0], K4[0]
+            z3 = tau - (self.tau_op + a0)
+            beta = a1 - K3 * z3 - ed
+            taud = -(PS.T @ fd)
+            z4 = taud - beta
+            beta_d = a2 - K3 * (taud - a1) - edd
+            Pi = np.eye(W.shape[0]) + W @ _values(PS).T              # projector on the null space of (P S)^T
+            d = f - self.f_op
+            f2_des = W @ (beta_d - z3 - K4 * z4) - Pi @ (K3 * fd + d + K4 * (fd + K3 * d))
+            cmd = (f2_des - f0) / g
+            zn3, zn4 = Pi @ d, Pi @ (fd + K3 * d)
+            V = (0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
+                 + 0.5 * (zn3 @ zn3) + 0.5 * (zn4 @ zn4))
+            return dict(e=e, ed=ed, z3=z3, z4=z4, null_z3=zn3, null_z4=zn4, f_des=f_des, V=V, command=cmd)
+        if self.variant == "position":                    # 15.2 steps on the link: z2 = e' + k1 e
+            z2 = ed + self.K1 @ e
+            cross, cross_d = PS @ z2, PS @ (edd + self.K1 @ ed)
+        else:
+            cross, cross_d = PS @ ed, PS @ edd
+        z3 = f - f_des
+        beta = W @ a1 - K3 * z3 + cross
+        z4 = fd - beta
+        beta_d = W @ a2 - K3 * (fd - W @ a1) + cross_d
+        cmd = (beta_d - f0 - z3 - K4 * z4) / g
+        if self.variant == "position":
+            V = 0.5 * (e @ (self.M @ e)) + 0.5 * (z2 @ (self.M @ z2)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
+            return dict(e=e, ed=ed, z2=z2, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
+        else:
+            V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
     def _springs(self, method: str, x):
@@ -210,10 +320,19 @@ class FingerBacksteppingLaw(StaticLaw):
 
 
 def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None,
-                                   rate_hz: float | None = 3000.0):
-    """Registered factory ``backstepping`` for fingers and the hand (see the module docstring);
-    ``rate_hz`` is the control rate the joint gains are designed for (the registry's 3 kHz)."""
+                                   rate_hz: float | None = 3000.0, variant: str = "antagonistic"):
+    """Registered factories ``backstepping`` (``variant="antagonistic"``), ``backstepping-position`` and
+    ``backstepping-nonlinear-spring`` for fingers and the hand (see the module docstring); ``rate_hz`` is the control
+    rate the joint gains are designed for (the registry's 3 kHz)."""
+    check_backstepping_springs(rig)
+    law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, variant=variant)
+    if variant != "antagonistic":
+        law.name = f"finger_backstepping_{variant.replace('-', '_')}"
+    return StaticLawController(law)
+
+
+def check_backstepping_springs(rig: Any) -> None:
+    """Raise unless every tendon's spring law is strictly increasing (phi' > 0, section 15.4)."""
     for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
         if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
             raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")
-    return StaticLawController(FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz))

@@ -70,7 +70,7 @@ from awiwi_drake.parameters.hand import FINGERS, FingerDriveParams
 from awiwi_drake.parameters.hand_control import ForceDistributionParams
 
 __all__ = ["DistributionResult", "TendonStiffnessMap", "TendonForceDistribution", "OptimalForceDistribution",
-           "coupling_nullspace", "joint_stiffness", "stiffness_cost", "hand_stiffness_map",
+           "coupling_nullspace", "joint_stiffness", "stiffness_cost", "hand_stiffness_map", "law_stiffness_map",
            "finger_force_distribution", "optimum_sensitivity", "TendonForceDistribution_",
            "TendonForceDistributionSystem"]
 
@@ -185,12 +185,15 @@ class TendonStiffnessMap:
     """Tendon stiffness as a function of tendon force, ``f -> (k_t(f), dk_t/df)``, by table lookup.
 
     The thesis tabulates the calibrated spring curve (ch. 4, 15.4.3); so does this map:
-    ``k_t`` and ``dk_t/df`` are sampled on a force grid and interpolated linearly.
+    ``k_t`` and ``dk_t/df`` are sampled on a force grid and interpolated linearly.  One table
+    serves every tendon (1-D arrays), or each tendon has its own row (2-D arrays, ``m`` rows:
+    the calibration table of a hand whose tendons have their own spring laws,
+    :meth:`from_springs`); then the map is called with one force per tendon.
 
     Parameters
     ----------
-    forces, stiffness, stiffness_slope : array
-        Increasing force grid [N], k_t [N/m] and dk_t/df [1/m] at those forces.
+    forces, stiffness, stiffness_slope : array (G,) or (m, G)
+        Increasing force grid [N], k_t [N/m] and dk_t/df [1/m] at those forces (per row).
     """
 
     def __init__(self, forces, stiffness, stiffness_slope):
@@ -199,12 +202,40 @@ class TendonStiffnessMap:
         self.dk = np.array(stiffness_slope, dtype=float)
         for a in (self.forces, self.k, self.dk):    # own read-only copies: hand_stiffness_map shares one map
             a.flags.writeable = False
-        if self.forces.ndim != 1 or self.forces.size < 2 or np.any(np.diff(self.forces) <= 0):
-            raise ValueError("TendonStiffnessMap.forces must be an increasing 1-D grid of at least 2 forces")
+        if (self.forces.ndim not in (1, 2) or self.forces.shape[-1] < 2
+                or np.any(np.diff(self.forces, axis=-1) <= 0)):
+            raise ValueError("TendonStiffnessMap.forces must be an increasing grid of at least 2 forces "
+                             "(1-D, or one row per tendon)")
         if self.k.shape != self.forces.shape or self.dk.shape != self.forces.shape:
             raise ValueError("TendonStiffnessMap: stiffness and stiffness_slope must match the force grid")
         if np.any(self.k <= 0):
             raise ValueError("TendonStiffnessMap.stiffness must be > 0 on the grid (a slack tendon has no stiffness)")
+
+    @property
+    def per_tendon(self) -> bool:
+        """True when each tendon has its own row (called with one force per tendon)."""
+        return self.forces.ndim == 2
+
+    def rows(self, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(forces, k, dk)`` as ``m`` rows (one per tendon; a shared table repeated)."""
+        if self.per_tendon:
+            if self.forces.shape[0] != m:
+                raise ValueError(f"TendonStiffnessMap has {self.forces.shape[0]} tendon rows, not {m}")
+            return self.forces, self.k, self.dk
+        return tuple(np.broadcast_to(a, (m, a.size)) for a in (self.forces, self.k, self.dk))
+
+    @classmethod
+    def from_springs(cls, springs) -> "TendonStiffnessMap":
+        """The map of a :class:`~awiwi_drake.components.spring.TendonSprings` (each tendon its own law):
+        one shared table when every tendon has the same law, else one row per tendon, each tabulated
+        like :meth:`from_spring` (each distinct law once)."""
+        tables = {id(law): law_stiffness_map(law) for law, _ in springs.groups}
+        if springs.uniform:
+            return tables[id(springs[0])]
+        if len({t.forces.size for t in tables.values()}) != 1:
+            raise ValueError("TendonStiffnessMap.from_springs: the laws' tables have different lengths")
+        rows = [tables[id(law)] for law in springs]
+        return cls(np.stack([t.forces for t in rows]), np.stack([t.k for t in rows]), np.stack([t.dk for t in rows]))
 
     @classmethod
     def from_spring(cls, spring, max_elongation: float, n: int = 2001) -> "TendonStiffnessMap":
@@ -227,7 +258,16 @@ class TendonStiffnessMap:
 
     def __call__(self, f):
         f = np.asarray(f, dtype=float)
-        return np.interp(f, self.forces, self.k), np.interp(f, self.forces, self.dk)
+        if not self.per_tendon:
+            return np.interp(f, self.forces, self.k), np.interp(f, self.forces, self.dk)
+        m = self.forces.shape[0]
+        if f.shape != (m,):
+            raise ValueError(f"TendonStiffnessMap: one force per tendon ({m}) expected, got shape {f.shape}")
+        k, dk = np.empty(m), np.empty(m)
+        for i in range(m):
+            k[i] = np.interp(f[i], self.forces[i], self.k[i])
+            dk[i] = np.interp(f[i], self.forces[i], self.dk[i])
+        return k, dk
 
 
 
@@ -649,8 +689,7 @@ def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnes
         pass
     except KeyError:
         pass
-    spring = tendon_spring(drive.spring)
-    table = TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+    table = law_stiffness_map(tendon_spring(drive.spring))
     try:
         _STIFFNESS_MAPS[drive.spring] = table
     except TypeError:
@@ -661,8 +700,22 @@ def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnes
 _STIFFNESS_MAPS: dict = {}
 
 
+def law_stiffness_map(spring) -> TendonStiffnessMap:
+    """``k_t(f)`` of one spring law, tabulated over its calibrated range (:meth:`TendonStiffnessMap.from_spring`);
+    once per law object (the rigs share their law objects)."""
+    try:
+        return _LAW_MAPS[spring]
+    except KeyError:
+        table = _LAW_MAPS[spring] = TendonStiffnessMap.from_spring(spring, spring.max_elongation)
+        return table
+
+
+_LAW_MAPS: dict = {}     # law object (hashed by identity, kept alive here) -> its table
+
+
 def finger_force_distribution(finger: str, *, method: str = "optimal", params: ForceDistributionParams | None = None,
-                              drive: FingerDriveParams | None = None, finger_params=None, **solver_options):
+                              drive: FingerDriveParams | None = None, finger_params=None, springs=None,
+                              **solver_options):
     """Force distribution of one finger of the hand with its own coupling, radii and spring curve.
 
     Parameters
@@ -676,6 +729,10 @@ def finger_force_distribution(finger: str, *, method: str = "optimal", params: F
         Bounds and search settings.
     drive : FingerDriveParams, optional
         Supplies the spring law (``drive.spring``); default: the hand's.
+    springs : TendonSprings, optional
+        The spring law of each of the finger's tendons (routing order; e.g. ``rig_springs(rig)`` of a finger,
+        or the finger's slice of the hand's): the stiffness table ``k_t,i(f)`` of every tendon is its own
+        law's (:meth:`TendonStiffnessMap.from_springs`).  Default: ``drive.spring`` for all.
     finger_params : FingerParams or ThumbParams, optional
         Radii and geometry; default: the finger's defaults (``parameters.hand``).
 
@@ -690,9 +747,17 @@ def finger_force_distribution(finger: str, *, method: str = "optimal", params: F
     if method not in methods:
         raise ValueError(f"method must be one of {sorted(methods)}, got {method!r}")
     coupling = finger_coupling(finger, finger_params)
+    m = coupling.num_tendons
     if coupling.is_constant and coupling.dof_selection.shape[0] != coupling.dof_selection.shape[1]:
         coupling = reduced_coupling_matrix(coupling)
-    return methods[method](hand_stiffness_map(drive), params, coupling, **solver_options)
+    if springs is None:
+        table = hand_stiffness_map(drive)
+    else:
+        if len(springs) != m:
+            raise ValueError(f"finger_force_distribution: springs has {len(springs)} laws; the {finger} has "
+                             f"{m} tendons")
+        table = TendonStiffnessMap.from_springs(springs)
+    return methods[method](table, params, coupling, **solver_options)
 
 
 @numba.njit(cache=True)
@@ -705,6 +770,15 @@ def _stiffness_of(P, kt, f, H):
             for b in range(N):
                 K[a, b] += kt[i] * P[i, a] * P[i, b] + f[i] * H[i, a, b]
     return K
+
+
+@numba.njit(cache=True)
+def _interp_rows(f, gf, gv):
+    """``np.interp(f[i], gf[i], gv[i])`` per tendon (each tendon's own table row)."""
+    out = np.empty(f.shape[0])
+    for i in range(f.shape[0]):
+        out[i] = np.interp(f[i], gf[i], gv[i])
+    return out
 
 
 @numba.njit(cache=True)
@@ -736,8 +810,8 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
             fallback[k] = True
             continue
         Kn = max(np.sum(Kdk * Kdk), 1e-300)
-        dk = np.interp(f, grid_f, grid_dk)
-        K = _stiffness_of(Pk, np.interp(f, grid_f, grid_k), f, H[k])
+        dk = _interp_rows(f, grid_f[k], grid_dk[k])
+        K = _stiffness_of(Pk, _interp_rows(f, grid_f[k], grid_k[k]), f, H[k])
         E = Kdk - K
         C = np.sum(E * E) / Kn
         for _ in range(iterations):
@@ -778,8 +852,8 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
             if not t > 1e-8:
                 break
             f_new = f + t * d
-            dk_new = np.interp(f_new, grid_f, grid_dk)
-            K_new = _stiffness_of(Pk, np.interp(f_new, grid_f, grid_k), f_new, H[k])
+            dk_new = _interp_rows(f_new, grid_f[k], grid_dk[k])
+            K_new = _stiffness_of(Pk, _interp_rows(f_new, grid_f[k], grid_k[k]), f_new, H[k])
             E = Kdk - K_new
             C_new = np.sum(E * E) / Kn
             if not C_new < C:               # solve() would halve the step
@@ -828,7 +902,6 @@ class _FingerBatch:
         solvers = [pt[0] for pt in parts]
         s0 = solvers[0]
         self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
-        self.smap = s0.stiffness_map
         F = len(parts)
         dims = []
         for (s, sd, st, _, _), c in zip(parts, coupling_objects):
@@ -851,16 +924,23 @@ class _FingerBatch:
             else:
                 self._fill(k, *s._offline[:3])
         self.outer = np.einsum("fij,fik->fijk", self.P, self.P)
+        # each tendon's stiffness table row (a finger's shared table repeated; padded tendons: row 0)
+        G = solvers[0].stiffness_map.forces.shape[-1]
+        self.grid_f, self.grid_k, self.grid_dk = (np.zeros((F, M, G)) for _ in range(3))
+        for k, ((s, *_), (m, _)) in enumerate(zip(parts, dims)):
+            for grid, row in zip((self.grid_f, self.grid_k, self.grid_dk), s.stiffness_map.rows(m)):
+                grid[k, :m], grid[k, m:] = row, row[0]
 
     @staticmethod
     def compatible(solvers) -> bool:
-        """All optimal solvers on the fast path with one shared setting (bounds, map, iteration rules)."""
+        """All optimal solvers on the fast path with one shared setting (bounds, iteration rules) and
+        stiffness tables of one length (each finger's own tables, a row per tendon when its laws differ)."""
         s0 = solvers[0]
         if not all(isinstance(s, OptimalForceDistribution) and s.fast_path for s in solvers):
             return False
-        same = lambda a, b: all(np.array_equal(getattr(a, k), getattr(b, k)) for k in ("forces", "k", "dk"))
         return all(s.params == s0.params and s.levenberg == s0.levenberg and s.tolerance == s0.tolerance
-                   and isinstance(s.stiffness_map, TendonStiffnessMap) and same(s.stiffness_map, s0.stiffness_map)
+                   and isinstance(s.stiffness_map, TendonStiffnessMap)
+                   and s.stiffness_map.forces.shape[-1] == s0.stiffness_map.forces.shape[-1]
                    for s in solvers)
 
     def _fill(self, k, P, pinv_PT, W):
@@ -892,10 +972,9 @@ class _FingerBatch:
         tauP[self._d] = tau[self._d_src]
         Kd[self._k] = Kv[self._k_src]
         fp0[self._t] = f_prev[self._t_src]
-        sm = self.smap
         f = _batch_iterate(self.P, self.pinv, self.W, self.pad, self.H, self.outer, self.real, self.m, tauP, Kd,
                            fp0, fallback, int(iterations), float(p.f_min), float(p.f_max), float(self.levenberg),
-                           float(self.tolerance), sm.forces, sm.k, sm.dk)
+                           float(self.tolerance), self.grid_f, self.grid_k, self.grid_dk)
         f_all = np.empty(len(self._t_src))
         f_all[self._t_src] = f[self._t]
         return f_all, fallback
@@ -956,7 +1035,9 @@ def TendonForceDistribution_(T):
     thumb base).  Output ``tendon_force_reference`` (m) [N] = the discrete state, updated every
     ``period`` by the finger solvers warm-started at the previous forces (both methods;
     ``iterations_per_period`` QPs for the optimal one, Algorithm 2's N iterations from there), initialised
-    at the mid-range forces.
+    at the mid-range forces.  ``springs`` (a :class:`~awiwi_drake.components.spring.TendonSprings` of the
+    fingers' tendons, in order): each tendon's stiffness table is its own law's; default ``drive.spring``
+    for all.
     Output ``distribution_status`` (number of fingers) is 0 (ok), 1 (infeasible request: the
     forces produce the torque and violate the bounds, reported, never clipped) or 2 (bound
     violation), sampled with the state.
@@ -974,7 +1055,7 @@ def TendonForceDistribution_(T):
         def _construct(self, fingers=("index",), method: str = "optimal", period: float = 1.0 / 3000.0,
                        iterations_per_period: int = 3, stiffness: str = "diagonal",
                        params: ForceDistributionParams | None = None, drive: FingerDriveParams | None = None,
-                       converter=None):
+                       springs=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             fingers = (fingers,) if isinstance(fingers, str) else tuple(fingers)
             if not fingers or len(set(fingers)) != len(fingers):
@@ -989,12 +1070,19 @@ def TendonForceDistribution_(T):
                                  "must be >= 1")
             self.fingers, self.method, self.period = fingers, method, float(period)
             self.iterations_per_period, self.stiffness_kind = int(iterations_per_period), stiffness
-            self.params, self.drive = params, drive
-            self.solvers = [finger_force_distribution(f, method=method, params=params, drive=drive) for f in fingers]
+            self.params, self.drive, self.springs = params, drive, springs
+            m_all = sum(finger_coupling(f).num_tendons for f in fingers)
+            if springs is not None and len(springs) != m_all:
+                raise ValueError(f"TendonForceDistribution: springs has {len(springs)} laws; the fingers "
+                                 f"{', '.join(fingers)} have {m_all} tendons")
+            self.solvers = []
             self._parts = []                 # (solver, dof slice, tendon slice, K slice, plant-joint slice)
             dof = ten = kk = pj = 0
-            for f, s in zip(fingers, self.solvers):
+            for f in fingers:
                 c = finger_coupling(f)
+                s = finger_force_distribution(f, method=method, params=params, drive=drive, springs=(
+                    None if springs is None else springs.subset(slice(ten, ten + c.num_tendons))))
+                self.solvers.append(s)
                 n_f = c.dof_selection.shape[1]
                 m_f = c.num_tendons
                 nk = n_f if stiffness == "diagonal" else n_f * n_f
@@ -1019,7 +1107,7 @@ def TendonForceDistribution_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.fingers, other.method, other.period, other.iterations_per_period,
-                            other.stiffness_kind, other.params, other.drive, converter=converter)
+                            other.stiffness_kind, other.params, other.drive, other.springs, converter=converter)
 
         @staticmethod
         def _posture_jacobian(s, tau, K_des, q, res, h=1e-6):

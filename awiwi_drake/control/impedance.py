@@ -79,7 +79,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import smax
-from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain
+from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain, check_gains
 from awiwi_drake.control.registry import rig_kind
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import ImpedanceParams
@@ -210,30 +210,45 @@ class MotorPositionForceLaw(StaticLaw):
 
     Inputs ``tendon_force_reference``, ``tendon_force``, ``tendon_stiffness``, ``motor_velocity`` (size);
     ``Kp_m = B w_m^2``, ``Kd_m = 2 xi_m w_m B`` (:class:`ImpedanceParams` motor bandwidth), ``alpha`` floored
-    at ``min_alpha`` (a slack tendon has ``k_t = 0``), motor friction (3.8) fed forward times ``friction_scale``.
+    at ``min_alpha`` (a slack tendon has ``k_t = 0``; one number, or one per tendon), motor friction (3.8) fed forward times ``friction_scale``.
+
+    ``path_velocity=True`` (the finger/hand chain) adds the input ``tendon_path_velocity`` ``v = P(q) qdot``
+    [m/s] and damps the motor velocity *relative to the tendon path*, ``Kd_m (thetadot + v / r_m)`` (the
+    spring's elongation rate over ``r_m``, as (10.2)'s force rate estimate): the motor velocity that keeps the
+    force constant while the joints move is ``-v / r_m``, not 0.  Damping the absolute motor velocity instead
+    acts on the joints as a viscous damping ``sum_i P_ij^2 Kd_m / r_m^2`` (about 4 Nm s/rad on an index joint,
+    against stiffnesses of 0.002-0.2 Nm/rad): measured on the index, the per-joint designs then had real
+    poles at -13.7, -5.9, -1.3 and -0.35 1/s (abduction .. DIP), and on the hand a 2 Hz sine reached 3 % of
+    its amplitude.  On the joint rig (ch. 11) the link is far heavier and this term is the thesis's.
     """
 
     def __init__(self, motor: MotorParams, params: ImpedanceParams | None = None, *, size: int,
-                 min_alpha: float, friction_scale: float = 1.0, name: str = "motor_position_control"):
+                 min_alpha: float, friction_scale: float = 1.0, name: str = "motor_position_control",
+                 path_velocity: bool = False):
         p = params or ImpedanceParams()
         self.name, self.motor = name, motor
         B = check_gain("inertia", motor.inertia, owner=name)
         wm = check_gain("motor_bandwidth", p.motor_bandwidth, owner=name)
         xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=name)
         self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
-        self.min_alpha = check_gain("min_alpha", min_alpha, owner=name)
+        size = int(size)
+        self.min_alpha = (check_gains("min_alpha", min_alpha, shape=(size,), owner=name, positive=True)
+                          if np.ndim(min_alpha) else check_gain("min_alpha", min_alpha, owner=name))
         self.friction_scale = check_gain("friction_scale", friction_scale, allow_zero=True, owner=name)
         self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=name)
-        size = int(size)
         self.inputs = {"tendon_force_reference": size, "tendon_force": size, "tendon_stiffness": size,
                        "motor_velocity": size}
+        self.path_velocity = bool(path_velocity)
+        if self.path_velocity:
+            self.inputs["tendon_path_velocity"] = size
         self.output_size = size
 
     def __call__(self, u):
         from awiwi_drake.components import motor_friction_torque
         w = u["motor_velocity"]
+        w_rel = w + u["tendon_path_velocity"] / self.r_m if self.path_velocity else w
         alpha = smax(self.r_m * u["tendon_stiffness"], self.min_alpha)
-        return (motor_position_command(u["tendon_force_reference"], u["tendon_force"], w, alpha, self.r_m,
+        return (motor_position_command(u["tendon_force_reference"], u["tendon_force"], w_rel, alpha, self.r_m,
                                        self.kp_m, self.kd_m)
                 - self.friction_scale * motor_friction_torque(w, self.motor))
 

@@ -8,7 +8,8 @@ Drake (:func:`joint_subsystem`, :func:`reduced_joint_models`):
 
 * a one-DoF link with the DoF's inertia ``M_jj = (S^T M(q_op) S)_jj`` and bearing damping;
 * the tendons acting on it (column ``j`` of ``P(q_op) S``, ``h = P_j q``) with the finger's motors,
-  spring law and operating-point forces (``components`` drive, the rig builder of ``rigs``);
+  each tendon's own spring law (:func:`~awiwi_drake.control.chain.rig_springs`: ``params.tendon_springs``
+  overrides) and operating-point forces (``components`` drive, the rig builder of ``rigs``);
 * the motor friction linearised in motion (:func:`design_motor`);
 * closed by the chain's own force stage (:class:`~awiwi_drake.control.chain.TendonForceStage`:
   sharing (15.88), the (10.2) force law bank with the chain's gains, friction and ripple
@@ -27,14 +28,19 @@ Designs on ``(F, G)`` (gains ``K_j`` of :class:`~awiwi_drake.control.joint_stage
 reference maps from :func:`~awiwi_drake.control.linear.reference_maps`; for the sampled chain on the
 model sampled with its one period of delay, :func:`sampled_model`)
 
-(no ``pd`` stage: placing one pair at 60 rad/s with ``(Kp, Kd)`` alone needs ``Kd < 0`` on every index
-joint and leaves the abduction unstable, +16.8 1/s; the finger's PD is ``joint-pd``, motor side)
-
 * ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, M_jj
   joint_bandwidth^2)`` (Fig 15.22, limited as 15.5.3 says for the cascade; measured: 0.5 Nm/rad on the
   index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
   +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
   mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
+* ``pd``: PD on the (estimated) joint angle, ``tau_ref = tau_op + Kp (q_ref - q) - Kd qdot``, with ``(Kp, Kd)`` the
+  two real equations ``1 + K (s* I - F)^-1 G = 0`` that put one closed-loop pair exactly at
+  ``s* = position_bandwidth (-zeta +- i sqrt(1 - zeta^2))`` of the joint's reduced model (sampled chain: at
+  ``exp(h s*)`` of :func:`sampled_model`); refused with one line when that needs ``Kd < 0`` or leaves another pole
+  unstable.  Unlike ``cascaded`` (``Kp = M_jj w^2``, the rigid link) the placement counts the torque chain and
+  the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
+  0.032 / 0.0022 (with ``Kd = 0`` that pair would sit at -3.1 +- 29i / -4.7 +- 16i 1/s).  (An earlier
+  reduced model, the motor friction linearised at rest, needed ``Kd < 0`` for the same placement.)
 * ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon
   (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`), its reduced model built with that law;
 * ``pole-placement``: the double oscillator (12.13) by coefficient identification
@@ -61,7 +67,7 @@ from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator, Li
 
 from awiwi_drake.analysis.linear import LinearizationResult, linearize
 from awiwi_drake.control.base import check_rate, closed_loop
-from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point
+from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point, rig_springs
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
 from awiwi_drake.control.linear import reference_maps
@@ -74,16 +80,19 @@ from awiwi_drake.rigs.base import OperatingPoint, Rig
 from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
-           "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS"]
+           "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS",
+           "SampledLoopPoles", "sampled_loop_poles"]
 
-DESIGNS = ("cascaded", "two-time-scale", "pole-placement", "lqr", "sdre")
+DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
+_TORQUE_RATE = {"lqr": "motor", "sdre": "motor"}       # the stage's 4th coordinate per design (else "joint", joint_stage)
 _TENDON_TOL = 1e-12
 
 
 @dataclass
 class JointReducedModel:
-    """One DoF's reduced model ``z' = F z + G tau_ref`` on ``z = [q - q_op, qdot, tau - tau_op, tau_dot]``."""
+    """One DoF's reduced model ``z' = F z + G tau_ref`` on ``z = [q - q_op, qdot, tau - tau_op, tau_dot]``
+    (``torque_rate="motor"``: ``sigma = tau_dot + K_jj qdot`` in place of ``tau_dot``, :mod:`.joint_stage`)."""
 
     name: str
     dof: int
@@ -95,6 +104,7 @@ class JointReducedModel:
     tendons: tuple                    # indices of the tendons acting on the DoF
     invariance_residual: float        # |T A - F T| / |T A| (0: the restriction is exact)
     linearization: LinearizationResult
+    torque_rate: str = "joint"        # the fourth coordinate: tau_dot ("joint") or sigma ("motor")
 
     @property
     def poles(self) -> np.ndarray:
@@ -145,8 +155,9 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     M = float(joint_inertia(rig, point["joint_angle"])[dof])
     b = float(joint_damping(rig)[dof, dof])
     design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
-    diagram, plant, drive, names = _link_rig(
-        name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=rig.spring,
+    springs = rig_springs(rig).subset(active)          # each of the DoF's tendons with its own law
+    diagram, plant, drive, names, _ = _link_rig(
+        name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=springs,
         coupling=coupling, inertia=M, damping=b, backend="python", hysteresis=HysteresisParams())
     tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
     tau = tau0 if torque is None else float(torque)
@@ -155,15 +166,15 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     if np.any(f <= 0):
         raise ValueError(f"joint_subsystem: joint torque {tau} Nm slackens a tendon of {name} (forces {f} N)")
     r_m = design_params.motor.pulley_radius
-    x = np.asarray(rig.spring.inverse_force(f), dtype=float)
+    x = springs.inverse_force(f)
     theta = x / r_m                                    # h(0) = 0, no offsets: x = r_m theta at q = 0
     from awiwi_drake.components.motor import motor_ripple_torque
     u = r_m * f - np.asarray(motor_ripple_torque(theta, design_params.motor), dtype=float)
-    kt = np.asarray(rig.spring.stiffness(x), dtype=float)
+    kt = springs.stiffness(x)
     op = OperatingPoint(np.concatenate([[0.0, 0.0], theta, np.zeros(active.size)]), u, np.array([-tau]),
                         joint_angle=np.zeros(1), tendon_force=f, elongation=x, tendon_stiffness=kt,
                         joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
-    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, rig.spring,
+    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, springs,
               drive=drive, coupling=coupling, tension_only=True)
     sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
                      torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])
@@ -181,10 +192,12 @@ def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, ten
     return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
 
 
-def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
+def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(F, G, residual)`` on ``[q, qdot, tau, tau_dot + stiffness qdot]`` (``stiffness`` 0: ``tau_dot``;
+    ``K_jj``: the motors' rate ``sigma``)."""
     A, B = lin.A, lin.B
     Cq, Ct = lin.output("joint_angle").C, lin.output("joint_torque").C
-    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A])
+    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A + stiffness * (Cq @ A)])
     scale = np.abs(T @ B).max() if np.abs(T @ B).max() > 0 else 1.0
     for row, nm in ((Cq, "q"), (Cq @ A, "qdot"), (Ct, "tau")):
         if np.abs(row @ B).max() > 1e-9 * scale:          # only tau_dot' may see the input directly
@@ -196,10 +209,14 @@ def _restrict(lin: LinearizationResult) -> tuple[np.ndarray, np.ndarray, float]:
 
 
 def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
-                         tendon_law: str = "force", friction: str = "motion") -> list[JointReducedModel]:
+                         tendon_law: str = "force", friction: str = "motion",
+                         torque_rate: str = "joint") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
     ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`);
-    ``friction``: the motor friction (3.8) linearised in ``"motion"`` (the design model) or at ``"rest"``."""
+    ``friction``: the motor friction (3.8) linearised in ``"motion"`` (the design model) or at ``"rest"``;
+    ``torque_rate``: the fourth coordinate, ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``)."""
+    if torque_rate not in ("joint", "motor"):
+        raise ValueError(f"reduced_joint_models: torque_rate = {torque_rate!r}; use 'joint' or 'motor'")
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
     S = point["selection"]
@@ -215,9 +232,9 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
         loop, ctx = force_loop(sub, sub_point, p, tendon_law)
         lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                         outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-        F, G, res = _restrict(lin)
+        F, G, res = _restrict(lin, sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0)
         models.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
-                                        res, lin))
+                                        res, lin, torque_rate))
     return models
 
 
@@ -268,6 +285,28 @@ def sampled_model(F: np.ndarray, G: np.ndarray, period: float) -> tuple[np.ndarr
     return Phi, Gamma
 
 
+def _placed_pd_gains(model: JointReducedModel, p: JointDesignParams, period: float | None) -> np.ndarray:
+    """``[Kp, Kd, 0, 0, 0]`` placing one closed-loop pair at ``s*`` (``pd`` in the module docstring)."""
+    s = p.position_bandwidth * (-p.damping_ratio + 1j * np.sqrt(max(0.0, 1.0 - p.damping_ratio ** 2)))
+    if period is None:
+        A, B, pole = model.A, model.B, s
+    else:
+        (A, B), pole = sampled_model(model.A, model.B, period), np.exp(period * s)
+    R = np.linalg.solve(pole * np.eye(A.shape[0]) - A, B).ravel()    # det(pole I - A + B K) = 0: 1 + K R = 0
+    M = np.array([[R[0].real, R[1].real], [R[0].imag, R[1].imag]])
+    kp, kd = np.linalg.solve(M, [-1.0, 0.0])
+    K = np.zeros(A.shape[0] if period is not None else 5)
+    K[:2] = kp, kd
+    cl = np.linalg.eigvals(A - B @ K[None, :A.shape[0]])
+    stable = np.all(np.abs(cl) < 1.0) if period is not None else np.all(cl.real < 0)
+    if not (kp > 0 and kd >= 0 and stable):
+        raise ValueError(f"pd design of {model.name}: placing a pair at {p.position_bandwidth} rad/s, damping "
+                         f"{p.damping_ratio} needs Kp = {kp:.4g}, Kd = {kd:.4g} and leaves poles "
+                         f"[{', '.join(f'{z:.4g}' for z in cl)}] "
+                         "(needs Kp > 0, Kd >= 0, the rest stable): change JointDesignParams.position_bandwidth")
+    return K
+
+
 def _lqr_weights(p: JointDesignParams):
     Q = np.diag(1.0 / np.array([p.lqr_angle_error, p.lqr_velocity, p.lqr_torque_error, p.lqr_torque_rate]) ** 2)
     return Q, np.array([[1.0 / p.lqr_input ** 2]])
@@ -283,6 +322,8 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     if design in ("cascaded", "two-time-scale"):
         K = _impedance_gains(model, min(c.joint_stiffness, model.inertia * c.joint_bandwidth ** 2), p.damping_ratio)
         return np.append(K, 0.0)
+    if design == "pd":
+        return _placed_pd_gains(model, p, period)
     if design == "pole-placement":
         lam = np.linalg.eigvals(F)
         pair = lam[np.argmax(np.abs(lam.imag))]          # the link on its tendons through the force loop
@@ -331,6 +372,35 @@ class JointDesign:
         K = self.gains
         return K[:, 0] / (1.0 + K[:, 2] + K[:, 4])
 
+    def tracking_time_constant(self, min_share: float = 0.01) -> float:
+        """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
+        shows, over all DoF: each DoF's designed loop (continuous ``F - G K``, or the sampled chain's
+        ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``) with its reference maps as input; a pole's share
+        of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
+        ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
+        does for a linearised loop).  The compare's short mode sizes its step window with it."""
+        taus = []
+        for m, K, nx, nu in zip(self.models, self.gains, self.law.Nx, self.law.Nu):
+            if self.period is None:
+                A = m.A - m.B @ K[None, :4]
+                b = m.B[:, 0] * (nu + K[:4] @ nx)
+            else:
+                Phi, Gamma = sampled_model(m.A, m.B, self.period)
+                A = Phi - Gamma @ K[None, :]
+                b = Gamma[:, 0] * (nu + K[:4] @ nx + K[4] * nu)
+            lam, V = np.linalg.eig(A)
+            cv = V[0]
+            wb = np.linalg.solve(V, b)
+            if self.period is None:
+                share, s = np.abs(cv * wb / lam), lam
+            else:
+                share = np.abs(cv * wb / (1.0 - lam))
+                with np.errstate(divide="ignore"):
+                    s = np.log(lam.astype(complex)) / self.period
+            keep = (share / share.sum() > min_share) & np.isfinite(s)
+            taus.append(float(1.0 / np.min(-s.real[keep])))
+        return max(taus)
+
     def table(self) -> str:
         rows = [f"{'DoF':>10} {'M_jj':>10} {'K_jj':>9} {'Kp':>10} {'Kd':>10} {'K_tau':>9} {'K_taud':>9} "
                 f"{'K_prev':>8}  slowest pole"]
@@ -351,7 +421,12 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
     c = chain or HandChainParams()
     p = params or JointDesignParams()
     point = point or chain_design_point(rig, params=c)
-    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_TENDON_LAW.get(design, "force"))
+    rate = _TORQUE_RATE.get(design, "joint")
+    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_TENDON_LAW.get(design, "force"),
+                                            torque_rate=rate)
+    if any(m.torque_rate != rate for m in models):
+        raise ValueError(f"design_joint_stage: the {design} stage measures torque_rate={rate!r}; the models given "
+                         f"are on {sorted({m.torque_rate for m in models})}")
     gains = np.array([design_joint_gains(m, design, params=p, chain=c, period=period) for m in models])
     Nx, Nu = [], []
     for m in models:
@@ -360,7 +435,7 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
         Nu.append(float(nu[0]))
     S = point["selection"]
     kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point["joint_angle"],
-              torque_op=point["torque_offset"], name=design.replace("-", "_"))
+              torque_op=point["torque_offset"], name=design.replace("-", "_"), torque_rate=rate)
     if design == "sdre":
         law = _sdre_law(rig, point, c, p, kw, period)
     else:
@@ -387,8 +462,8 @@ def _sdre_law(rig, point, c, p, kw, period):
             loop, ctx = force_loop(sub, sub_point, c)
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-            F, G, _ = _restrict(lin)
-            model = JointReducedModel("", j, F, G, 0.0, 0.0, 0.0, (), 0.0, lin)
+            F, G, _ = _restrict(lin, sub_point["op"].joint_stiffness if kw["torque_rate"] == "motor" else 0.0)
+            model = JointReducedModel("", j, F, G, 0.0, 0.0, float(sub_point["op"].joint_stiffness), (), 0.0, lin)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 
@@ -425,6 +500,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
                                  tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
                                  **kw)
     ctrl.design["joint_design"] = d
+    ctrl.design["time_constant"] = d.tracking_time_constant()
     return ctrl
 
 
@@ -489,7 +565,9 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
     Ct = S.T @ lin.output("joint_torque").C
     k = S.shape[1]
-    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Ct[j] @ A]) for j in range(k)])
+    K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S      # sigma = tau_dot + K_dof qdot (all DoF)
+    Sg = Ct @ A + (K_dof @ (Cq @ A) if d.law.torque_rate == "motor" else 0.0)
+    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Sg[j]]) for j in range(k)])
     TA = T @ A
     Az = TA @ np.linalg.pinv(T)
     res = float(np.linalg.norm(TA - Az @ T) / np.linalg.norm(TA))
@@ -497,3 +575,146 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     for j, (m, K) in enumerate(zip(d.models, d.gains)):
         D[4 * j:4 * j + 4, 4 * j:4 * j + 4] = m.A - m.B @ K[None, :4]
     return PoleCheck(np.linalg.eigvals(A), np.linalg.eigvals(Az), D, Az - D, res, [m.name for m in d.models])
+
+
+@dataclass
+class SampledLoopPoles:
+    """The poles of a sampled closed loop (:func:`sampled_loop_poles`): the eigenvalues ``z`` of the Jacobian of
+    its one-period map ``x_{k+1} = Phi(x_k)`` at the operating point (all discrete states: the plant sampled
+    exactly with a zero-order hold, the controller's and the estimator's states), ``s = ln(z) / h``.
+
+    ``neutral``: the modes at ``z = 1`` to ``1e-9`` (a continuum of equilibria, e.g. the spring hysteresis's
+    memory: any Dahl force at rest is an equilibrium); :attr:`spectral_radius` is over the others.
+    ``residual``: ``max |Phi(x_0) - x_0|`` (0 at a fixed point of the sampled loop)."""
+
+    z: np.ndarray
+    period: float
+    jacobian: np.ndarray              # d x_k+1 / d x_k
+    residual: float
+    reference_map: np.ndarray         # d x_k+1 / d q_ref (the joint_angle_reference input)
+    joint_angle_map: np.ndarray       # d q_k / d x_k (the rig's joint_angle output)
+
+    def step_response(self, dq_ref, duration: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(t, dq)``: the linear sampled loop's joint angles (deviations, one row per sample) after a
+        reference step ``dq_ref`` at ``t = 0``, for ``duration`` s."""
+        n = int(round(duration / self.period))
+        x = np.zeros(self.jacobian.shape[0])
+        u = self.reference_map @ np.asarray(dq_ref, dtype=float)
+        out = [self.joint_angle_map @ x]
+        for _ in range(n):
+            x = self.jacobian @ x + u
+            out.append(self.joint_angle_map @ x)
+        return self.period * np.arange(n + 1), np.array(out)
+
+    @property
+    def neutral(self) -> np.ndarray:
+        return np.abs(self.z - 1.0) <= 1e-9
+
+    @property
+    def spectral_radius(self) -> float:
+        return float(np.abs(self.z[~self.neutral]).max())
+
+    @property
+    def s(self) -> np.ndarray:
+        """The equivalent continuous poles ``ln(z) / h`` [1/s] (``-inf`` for ``z = 0``)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.log(self.z.astype(complex)) / self.period
+
+    def slowest(self) -> complex:
+        """The non-neutral mode of largest ``|z|`` as ``s`` [1/s] (the slowest decay)."""
+        z = np.where(self.neutral, 0.0, np.abs(self.z))
+        return complex(self.s[int(np.argmax(z))])
+
+
+def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, estimator: Any = "auto",
+                       op: Any = None) -> SampledLoopPoles:
+    """Poles of ``rig`` closed by ``controller`` (a fresh system) sampled at ``rate_hz``, the linear analysis of
+    what :func:`~awiwi_drake.control.base.closed_loop` ``(rig, controller, rate_hz=rate_hz)`` simulates.
+
+    The rig is linearised at ``op`` by Drake (:func:`~awiwi_drake.analysis.linear.linearize`, its own laws: motor
+    friction (3.8) at rest, hysteresis as the presliding spring) and sampled exactly with Drake's
+    ``DiscreteTimeApproximation`` (zero-order hold); it replaces the rig in the same ``closed_loop`` wiring
+    (the command of sample ``k`` acts over ``[t_k, t_k+1)``, as the hold does) with the controller's own
+    discrete states (the force distribution) and the tendon-length estimator (``estimator``: ``"auto"``, the
+    rig's, at the same rate; ``None``/``"ideal"``: the true joint state).  Drake's ``Linearize`` takes a
+    discrete system with one state group only, so the Jacobian of the one-period map
+    (``EvalUniquePeriodicDiscreteUpdate``, every state group) is taken in ``AutoDiffXd``, what ``Linearize``
+    does for a single group.  Every periodic update of the loop must have the period ``1 / rate_hz``.
+    """
+    import dataclasses
+
+    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+    from pydrake.systems.analysis import DiscreteTimeApproximation
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import AffineSystem, Demultiplexer, LinearSystem
+
+    from awiwi_drake.control.base import measurement_ports
+    h = 1.0 / check_rate("sampled_loop_poles", rate_hz)
+    op = op or rig.operating_point()
+    ideal = estimator in (None, "ideal")
+    est = None if ideal else (rig.link_estimator(h) if estimator == "auto" else estimator)
+    if est is not None and abs(est.period - h) > 1e-12 * h:
+        raise ValueError(f"sampled_loop_poles: the estimator samples every {est.period:.6g} s, the loop every "
+                         f"{h:.6g} s: one rate only (the one-period map)")
+    need = set(measurement_ports(controller)) | {"joint_angle"}
+    if est is not None:
+        need |= {est.system.get_input_port(i).get_name() for i in range(est.system.num_input_ports())}
+    outputs = tuple(sorted(need))
+    lin = linearize(rig, op, outputs=outputs, equilibrium_tolerance=None)
+    C = np.vstack([lin.outputs[o].C for o in outputs])
+    D = np.vstack([lin.outputs[o].D for o in outputs])
+    y0 = np.concatenate([lin.outputs[o].y0 for o in outputs])
+    zoh = DiscreteTimeApproximation(LinearSystem(lin.A, lin.B, C, D), h)
+    b = DiagramBuilder()
+    aff = b.AddNamedSystem("sampled_rig", AffineSystem(zoh.A(), zoh.B(), -zoh.B() @ lin.u0, C, D,
+                                                       y0 - D @ lin.u0, h))
+    b.ExportInput(aff.get_input_port(), "motor_torque")
+    split = b.AddNamedSystem("outputs", Demultiplexer([lin.outputs[o].y0.size for o in outputs]))
+    b.Connect(aff.get_output_port(), split.get_input_port())
+    for i, o in enumerate(outputs):
+        b.ExportOutput(split.get_output_port(i), o)
+    sampled = b.Build()
+    sampled.set_name(rig.name)
+    loop = closed_loop(dataclasses.replace(rig, diagram=sampled), controller, rate_hz=None, estimator=est,
+                       sensors="ideal" if ideal else None)
+    diagram = loop.diagram
+    ctx = diagram.CreateDefaultContext()
+    init = getattr(controller, "initialize_state", None)
+    if init is not None:
+        init(controller.GetMyMutableContextFromRoot(ctx))
+    if est is not None:
+        est.initialize(diagram.GetSubsystemByName("estimator").GetMyMutableContextFromRoot(ctx), op.joint_angle)
+    diagram.GetInputPort("joint_angle_reference").FixValue(ctx, op.joint_angle)
+    for nm in loop.disturbances:
+        port = diagram.GetInputPort(nm)
+        port.FixValue(ctx, op.external_torque if nm == "external_torque" and op.external_torque is not None
+                      else np.zeros(port.size()))
+    groups = ctx.get_discrete_state()
+    sizes = [groups.get_vector(i).size() for i in range(groups.num_groups())]
+    x0 = np.concatenate([groups.get_vector(i).CopyToVector() for i in range(groups.num_groups())])
+    ad = diagram.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    actx.SetTimeStateAndParametersFrom(ctx)
+    ref = diagram.GetInputPort("joint_angle_reference")
+    r0 = np.asarray(ref.Eval(ctx), dtype=float)
+    xa = InitializeAutoDiff(np.concatenate([x0, r0])).ravel()
+    for i in range(diagram.num_input_ports()):
+        if i == ref.get_index():
+            ad.get_input_port(i).FixValue(actx, xa[x0.size:])
+        elif diagram.get_input_port(i).HasValue(ctx):
+            ad.get_input_port(i).FixValue(actx, np.array([AutoDiffXd(float(v)) for v in
+                                                           diagram.get_input_port(i).Eval(ctx)], dtype=object))
+    start = 0
+    for i, n in enumerate(sizes):
+        actx.SetDiscreteState(i, xa[start:start + n])
+        start += n
+    try:
+        new = ad.EvalUniquePeriodicDiscreteUpdate(actx)
+    except RuntimeError as exc:
+        raise ValueError(f"sampled_loop_poles: the loop is not one-rate at {rate_hz:g} Hz ({exc})") from None
+    x1 = np.concatenate([new.get_vector(i).CopyToVector() for i in range(new.num_groups())])
+    G = ExtractGradient(x1)
+    Cq = ExtractGradient(ad.GetOutputPort("joint_angle").Eval(actx))[:, :x0.size]
+    J = G[:, :x0.size]
+    return SampledLoopPoles(np.linalg.eigvals(J), h, J, float(np.abs(ExtractValue(x1).ravel() - x0).max()),
+                            G[:, x0.size:], Cq)

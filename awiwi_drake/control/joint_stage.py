@@ -12,9 +12,21 @@ or the hand at once and outputs
 Each DoF ``j`` is controlled on its own *measurable* coordinates (what the real hand has: the
 tendon-length estimate of ``q``, ``qdot`` and the spring sensors' tendon forces)::
 
-    z_j = [q_j - q_op_j,  qdot_j,  tau_j - tau_op_j,  tau_dot_j],
+    z_j = [q_j - q_op_j,  qdot_j,  tau_j - tau_op_j,  tau_dot_j]        (torque_rate="joint"), or
+    z_j = [q_j - q_op_j,  qdot_j,  tau_j - tau_op_j,  sigma_j]          (torque_rate="motor"),
     tau = -(P(q) S)^T f                     the joint torque of the measured tendon forces,
     tau_dot = -(P(q) S)^T k_t(f) (r_m omega + P(q) qdot)     its rate (f = phi(x), x = r_m theta + h(q) + x0),
+    sigma = -(P(q) S)^T k_t(f) r_m omega    the rate the motors drive (tau_dot = sigma - K qdot, K (5.12)).
+
+``sigma`` needs no joint velocity: motor encoders and spring sensors only.  ``tau_dot`` multiplies the
+differentiated tendon-length estimate ``qdot`` (a backward difference, half a period late at the
+sample) by the joints' tendon stiffness (and the spring hysteresis adds its presliding stiffness,
+which ``k_t`` does not hold); on the index that error, fed back through the LQR's torque-rate gain,
+drives the DIP's link mode on its tendons (~4450 rad/s, ~700 Hz) unstable at 3 kHz (sampled loop,
+:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  The LQR/SDRE stages therefore measure
+``sigma`` (and weight it in their cost); pole placement keeps ``tau_dot`` (its placed gains rely on the
+joint's own tendon stiffness through ``tau_dot``; written on ``sigma`` the same poles need a negative
+velocity gain, and the whole finger's neglected coupling makes that unstable).
 
 with the per-DoF linear law of :class:`JointStateFeedbackLaw`::
 
@@ -65,15 +77,16 @@ def joint_damping(rig: Any) -> np.ndarray:
     return S.T @ np.diag(b) @ S
 
 
-def measured_joint_coordinates(coupling, S, Sp, r_m: float, u) -> tuple:
-    """``(q_d, qdot_d, tau, tau_dot)`` of the DoF from the measurements ``u`` (module docstring)."""
+def measured_joint_coordinates(coupling, S, Sp, r_m: float, u, torque_rate: str = "joint") -> tuple:
+    """``(q_d, qdot_d, tau, tau_dot)`` (``torque_rate="joint"``) or ``(q_d, qdot_d, tau, sigma)`` (``"motor"``)
+    of the DoF from the measurements ``u`` (module docstring)."""
     q, v = u["joint_angle"], u["joint_velocity"]
     P = np.asarray(coupling.P(q))
     PS = P @ S
     f, kt, w = u["tendon_force"], u["tendon_stiffness"], u["motor_velocity"]
     tau = -(PS.T @ f)
-    tau_dot = -(PS.T @ (kt * (r_m * w + P @ v)))
-    return Sp @ q, Sp @ v, tau, tau_dot
+    rate = r_m * w if torque_rate == "motor" else r_m * w + P @ v
+    return Sp @ q, Sp @ v, tau, -(PS.T @ (kt * rate))
 
 
 class JointStateFeedbackLaw(StaticLaw):
@@ -88,10 +101,14 @@ class JointStateFeedbackLaw(StaticLaw):
         distribution's ``tendon_force_reference``: ``-(P S)^T f_ref``, exact torque)
     state_map : (k, 4) ``Nx_j``; ``input_map`` (k,) ``Nu_j``
     joint_angle_op, torque_op : (k,) ``q_op`` on the DoF and ``tau_op``
+    torque_rate : ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``): the fourth coordinate (module docstring)
     """
 
     def __init__(self, coupling, selection, pulley_radius: float, gains, *, state_map, input_map,
-                 joint_angle_op, torque_op, name: str = "joint_state_feedback"):
+                 joint_angle_op, torque_op, name: str = "joint_state_feedback", torque_rate: str = "joint"):
+        if torque_rate not in ("joint", "motor"):
+            raise ValueError(f"{name}: torque_rate = {torque_rate!r}; use 'joint' or 'motor'")
+        self.torque_rate = torque_rate
         S = np.asarray(selection, dtype=float)
         if S.ndim != 2 or S.shape[0] < S.shape[1]:
             raise ValueError(f"{name}: selection must be n x n_dof (n >= n_dof), got {S.shape}")
@@ -120,7 +137,8 @@ class JointStateFeedbackLaw(StaticLaw):
     def coordinates(self, u):
         """``z`` (k x 5: ``[q - q_op, qdot, tau - tau_op, tau_dot, tau_ref(t - h) - tau_op]``) and ``dr`` (k,)."""
         if self.uses_forces:
-            qd, vd, tau, taud = measured_joint_coordinates(self.coupling, self.S, self.Sp, self.r_m, u)
+            qd, vd, tau, taud = measured_joint_coordinates(self.coupling, self.S, self.Sp, self.r_m, u,
+                                                           self.torque_rate)
             cols = [qd - self.q0, vd, tau - self.tau0, taud]
         else:
             qd, vd = self.Sp @ u["joint_angle"], self.Sp @ u["joint_velocity"]

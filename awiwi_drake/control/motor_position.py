@@ -72,9 +72,11 @@ def demo_references(rig: Any, scenario: DemoScenario | None = None) -> tuple[np.
 
 
 def joint_rig_position_loop(rig: Any, scenario: DemoScenario | None = None,
-                            gains: MotorPositionGains | None = None) -> ClosedLoop:
+                            gains: MotorPositionGains | None = None, *, sampled_rig: bool = True) -> ClosedLoop:
     """The demo: ``rig`` (a joint rig) under :func:`motor_position_controller` at ``gains.rate_hz``.
 
+    ``sampled_rig``: as in :func:`~awiwi_drake.control.base.closed_loop` (True: the rig sampled at the
+    control period; False: the continuous rig behind a hold, e.g. for an error-controlled reference).
     The references of :func:`demo_references` are wired in as sources; the
     loop's remaining input is ``external_torque``.  Start it with
     ``loop.create_context(rig.operating_point(pretension=scenario.f_start))``.
@@ -89,4 +91,4 @@ def joint_rig_position_loop(rig: Any, scenario: DemoScenario | None = None,
             PiecewisePolynomial.FirstOrderHold(t, refs["tendon_force_reference"])),
     }
     return closed_loop(rig, motor_position_controller(rig, g), rate_hz=g.rate_hz, sources=sources,
-                       name="joint_rig_position_loop")
+                       name="joint_rig_position_loop", sampled_rig=sampled_rig)

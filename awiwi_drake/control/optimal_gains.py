@@ -29,6 +29,10 @@ the torque coordinates become ``[q, qd, tau_1..N, taud_1..N]`` with
 Table 16.1's weights are repeated per tendon (``tau``, ``taud`` entries) and
 ``R = r I_N``; ``K_bs`` (N x 2 + 2N) comes from AutoDiff of the same law at the
 operating point.
+Each DoF of a finger or the hand (:func:`select_finger_force_gains`, registered ``optimal-backstepping`` on
+``finger-*``/``hand``): as ch. 16 states, only "the two lower levels" ``(K3, K4)`` of the 15.5 finger law are
+selected, the impedance is the user's; ``K_bs`` is AutoDiffXd of that law on the DoF's one-link subsystem, the
+target Drake's LQR of the subsystem with Table 16.1's ``Q`` and the most aggressive ``R`` the gain box can follow.
 * :func:`monte_carlo_gains` is Algorithm 3 (best of N random draws, log-uniform
   in a box; through the sweep runner); :func:`optimize_gains` is a
   least-squares search on ``log Omega`` (scipy ``least_squares``, positivity by
@@ -49,7 +53,8 @@ from awiwi_drake.analysis.sweep import monte_carlo_points, run_sweep
 from awiwi_drake.control.backstepping import JointModel, impedance_backstepping, joint_model
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
-__all__ = ["GainFit", "rate_limited_case", "finger_optimal_gains", "torque_coordinates", "torque_state_map", "backstepping_feedback",
+__all__ = ["GainFit", "rate_limited_case", "JointForceGainFit", "FingerForceGains", "select_finger_force_gains",
+           "finger_optimal_backstepping_controller", "torque_coordinates", "torque_state_map", "backstepping_feedback",
            "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains",
            "backstepping_feedback_batch", "gain_distances", "evaluate_samples", "optimize_gains", "OMEGA_NAMES"]
 
@@ -104,9 +109,16 @@ def torque_state_map(model: JointModel, state0) -> np.ndarray:
     P, rm = np.array(model.coupling, float), float(model.motor_pulley_radius)
     xs = rm * x[2:2 + n_m] + P * x[0] + np.array(model.elongation_offset, float)
     k = np.array([float(np.ravel(model.spring.stiffness(np.array([v])))[0]) for v in xs])
+    return _tendon_torque_map(P, k, rm)
+
+
+def _tendon_torque_map(P, k, rm: float) -> np.ndarray:
+    """``T`` of :func:`torque_state_map` from the column ``P`` (N,), the spring slopes ``k`` (N,) and ``r_m``."""
+    P, k = np.asarray(P, float), np.asarray(k, float)
     if np.any(k <= 0):
         raise ValueError(f"torque_state_map: a spring is slack at the operating point (stiffness {k}); "
                          "the torque coordinates need taut tendons")
+    n_m = P.size
     n = 2 + 2 * n_m
     T = np.zeros((n, n))
     T[0, 0] = T[1, 1] = 1.0
@@ -281,38 +293,244 @@ def optimize_gains(rig, case: OptimalGainsCase | None = None, *, starts: int = 8
                    "least squares on log(Omega) (scipy)")
 
 
-def finger_optimal_gains(finger: str, *, pretension: float = 20.0, rate_hz: float = 3000.0,
-                         case=None, starts: int = 16) -> list[tuple[str, GainFit, object]]:
-    """Ch. 16 gain selection for each independent DoF of a finger (the thesis: 'applied to the 19 joints').
+# ---------------------------------------------------------------------------
+# Ch. 16 per DoF of a finger or the hand
+# ---------------------------------------------------------------------------
+@dataclass
+class JointForceGainFit:
+    """The ch. 16 selection of ``Omega = (K3, K4)`` for one DoF (:func:`select_finger_force_gains`).
 
-    Each DoF ``j`` is designed as an antagonistic joint (:func:`awiwi_drake.rigs.joint_rig`) with the
-    DoF's own inertia ``(S^T M S)_jj`` (finger MultibodyPlant, straight finger), an equivalent pulley
-    radius ``r_eq = sqrt(sum_i (P S)_ij^2 / 2)`` (so that the pair's stiffness ``r_eq^2 (k1 + k2)``
-    equals the diagonal of ``(P S)^T K_t (P S)`` at equal tendon stiffness), the finger's joint damping,
-    the hand's spring law and ``pretension``; Table 16.1's weights per tendon, the gain box bounded
-    by ``rate_hz`` (:func:`rate_limited_case`).  The thumb uses ``P(0)`` (its P depends on q).
-    Returns ``(joint name, GainFit, JointRigParams)`` per DoF.
+    ``K_bs`` of the DoF's law is bilinear in the selected gains, ``K_bs = B0 + K3 B1 + K4 B2 + K3 K4 B3``
+    (``basis``, torque coordinates ``[q, qd, tau_1..N, taud_1..N]``, ``u = -K x``): (15.63) is linear in
+    ``K4`` and in ``K3``, with ``K3 K4`` from ``K4 z4``, ``z4 = f' - beta`` and ``beta = ... - K3 z3``.
     """
-    from awiwi_drake.hand.coupling import finger_coupling
-    from awiwi_drake.hand.plant import make_finger_plant
-    from awiwi_drake.parameters.backstepping import JointRigOptimalGainsCase
-    from awiwi_drake.parameters.hand import finger_params
-    from awiwi_drake.parameters.rigs import JointRigParams
-    from awiwi_drake.rigs import joint_rig
-    c = finger_coupling(finger)
-    S = c.dof_selection
-    PS = np.asarray(c.P(np.zeros(c.num_joints)), dtype=float) @ S
-    plant, _ = make_finger_plant(finger)
-    M = S.T @ plant.CalcMassMatrix(plant.CreateDefaultContext()) @ S
-    fp = finger_params(finger)
-    damping = float(getattr(fp, "joint_damping", 1e-5))
-    names = [c.joint_names[int(np.argmax(np.abs(S[:, j])))] for j in range(S.shape[1])]
-    out = []
-    for j, name in enumerate(names):
-        r_eq = float(np.sqrt(np.sum(PS[:, j] ** 2) / 2.0))
-        p = JointRigParams(link_inertia=float(M[j, j]), link_pulley_radius=r_eq, link_damping=damping,
-                           pretension=float(pretension))
-        rig = joint_rig(params=p)
-        cs = rate_limited_case(case or JointRigOptimalGainsCase(), p.link_inertia, rate_hz)
-        out.append((name, optimize_gains(rig, cs, starts=starts), p))
-    return out
+
+    name: str
+    dof: int
+    tendons: tuple                    # the DoF's tendons (indices in the rig)
+    stiffness: float                  # Kp,imp of the DoF (given: the 15.5 mode design's diagonal)
+    damping: float                    # Kd,imp
+    k3: float
+    k4: float
+    box: tuple                        # (low, high) of K3 and K4 [1/s]
+    r_weight: float                   # R of the target LQR
+    target: np.ndarray                # K_opt (N, 2 + 2N), torque coordinates
+    target_poles: np.ndarray          # eig(A - B K_opt) of the DoF's one-link model
+    open_loop_poles: np.ndarray
+    basis: np.ndarray                 # (4, N, 2 + 2N)
+    distance: float
+    evaluations: int
+
+    def feedback(self, k3, k4) -> np.ndarray:
+        """``K_bs`` for gains ``k3``, ``k4`` (scalars: (N, n); arrays of S samples: (S, N, n))."""
+        a = np.asarray(k3, float)[..., None, None]
+        b = np.asarray(k4, float)[..., None, None]
+        B0, B1, B2, B3 = self.basis
+        return B0 + a * B1 + b * B2 + a * b * B3
+
+    def cost(self, k3, k4) -> np.ndarray:
+        """(16.4): :func:`gain_distance` of ``K_bs(k3, k4)`` to the target (vectorised over samples)."""
+        K = self.feedback(np.atleast_1d(k3), np.atleast_1d(k4))
+        return gain_distances(K, self.target)
+
+    def monte_carlo(self, samples: int, seed: int = 0) -> tuple[float, float, float]:
+        """Algorithm 3 in the same box on the same cost: ``(best distance, K3, K4)`` of ``samples``
+        log-uniform draws."""
+        rng = np.random.default_rng(seed)
+        lo, hi = np.log(self.box)
+        z = rng.uniform(lo, hi, size=(int(samples), 2))
+        d = self.cost(np.exp(z[:, 0]), np.exp(z[:, 1]))
+        i = int(np.argmin(d))
+        return float(d[i]), float(np.exp(z[i, 0])), float(np.exp(z[i, 1]))
+
+
+@dataclass
+class FingerForceGains:
+    """Per-DoF selections (:class:`JointForceGainFit`) and the per-tendon gains they give the 15.5 law."""
+
+    fits: list
+    k3: np.ndarray                    # (m,) per tendon
+    k4: np.ndarray
+    rate_hz: float | None
+
+    def plot(self, ax=None):
+        """``(fig, axes)``: the selected ``K3``, ``K4`` per DoF against the box (left) and the distance (16.4) of
+        each selection to its target (right); ``ax``: two axes."""
+        from awiwi_drake.plotting import figure_axes, label_axes
+        fig, axes = figure_axes(ax, ncols=2, figsize=(10, 3.5))
+        x = np.arange(len(self.fits))
+        names = [f.name for f in self.fits]
+        axes[0].semilogy(x, [f.k3 for f in self.fits], "o", label="K3")
+        axes[0].semilogy(x, [f.k4 for f in self.fits], "s", mfc="none", label="K4")
+        for b in self.fits[0].box if self.fits else ():
+            axes[0].axhline(b, color="0.5", ls=":", lw=1)
+        axes[1].bar(x, [f.distance for f in self.fits], color="C2")
+        for a in axes:
+            a.set_xticks(x, names, rotation=90 if len(x) > 6 else 0)
+        label_axes(axes[0], "gain [1/s]", xlabel="DoF", title="ch. 16 selection (dotted: the box)")
+        label_axes(axes[1], "distance to the LQR (16.4) [-]", xlabel="DoF", legend=None)
+        fig.tight_layout()
+        return fig, axes
+
+    def table(self) -> str:
+        rows = [f"{'DoF':>8} {'Kp,imp':>8} {'Kd,imp':>9} {'R':>9} {'K3':>8} {'K4':>8} {'distance':>9}  box"]
+        for f in self.fits:
+            rows.append(f"{f.name:>8} {f.stiffness:8.4g} {f.damping:9.3g} {f.r_weight:9.3g} {f.k3:8.4g} {f.k4:8.4g} "
+                        f"{f.distance:9.4g}  [{f.box[0]:g}, {f.box[1]:g}]")
+        return "\n".join(rows)
+
+
+def _law_feedback_basis(sub, sub_op, stiffness: float, damping: float, params, rate_hz) -> np.ndarray:
+    """``(B0, B1, B2, B3)`` (rig coordinates) of the 15.5 law on the one-link subsystem ``sub``: AutoDiffXd of
+    the law (:class:`~awiwi_drake.control.finger_backstepping.FingerBacksteppingLaw`, the registered
+    ``backstepping``'s law) at four gain pairs; bilinear in ``(K3, K4)`` (see :class:`JointForceGainFit`)."""
+    from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
+    x0 = np.asarray(sub_op.state, dtype=float)
+    N = sub.coupling.num_tendons
+    P = np.asarray(sub.coupling.P(np.zeros(1)), float)[:, 0]
+    rm = float(sub.params.motor.pulley_radius)
+    x = InitializeAutoDiff(x0).ravel()
+    q, v, th, w = x[:1], x[1:2], x[2:2 + N], x[2 + N:]
+    u = dict(joint_angle_reference=np.array([AutoDiffXd(0.0)]), joint_angle=q, joint_velocity=v,
+             elongation=rm * th + P * q[0], motor_angle=th, motor_velocity=w)
+    K = {}
+    for a, b in ((1.0, 1.0), (2.0, 1.0), (1.0, 2.0), (2.0, 2.0)):
+        law = FingerBacksteppingLaw(sub, params, op=sub_op, rate_hz=rate_hz, joint_gains=([[stiffness]], [[damping]]),
+                                    force_gains=(a, b))
+        K[a, b] = -ExtractGradient(np.asarray(law(u), dtype=object))
+    B3 = K[2, 2] - K[2, 1] - K[1, 2] + K[1, 1]
+    B1 = K[2, 1] - K[1, 1] - B3
+    B2 = K[1, 2] - K[1, 1] - B3
+    return np.stack([K[1, 1] - B1 - B2 - B3, B1, B2, B3])
+
+
+def select_finger_force_gains(rig, case=None, *, params=None, rate_hz: float | None = 3000.0,
+                              op=None) -> FingerForceGains:
+    """Ch. 16 on every independent DoF of a finger or the hand, for the 15.5 law
+    (:mod:`awiwi_drake.control.finger_backstepping`); the thesis's steps per DoF ``j``:
+
+    1. *The model*: the DoF's one-link subsystem (:func:`~awiwi_drake.control.joint_design.joint_subsystem`: its
+       inertia ``M_jj``, its own tendons (column ``j`` of ``P S``), spring slopes at the operating point, the
+       motors with (3.8) linearised in motion), linearised by Drake.
+    2. *State feedback* (16.1)-(16.3): ``K_bs(Omega)`` is AutoDiffXd of the registered law on that subsystem
+       (``Kp,imp``, ``Kd,imp`` given: the diagonal of the finger law's mode design), in Table 16.1's torque
+       coordinates (:func:`torque_state_map`).
+    3. *The target* ``K_opt``: Drake's LQR of the subsystem with Table 16.1's ``Q`` per tendon and
+       ``R = r I``, where ``r`` is the *smallest* weight (the most aggressive LQR) whose closed loop the
+       sampled law can follow: its fastest pole at most ``max(sampled_pole_limit * rate_hz,
+       target_margin * fastest open-loop mode)`` (bisection on ``log r``).  This scales Table 16.1 to the
+       joint as the thesis scaled it to its flexible joint: Table 16.1's ``R = 0.1`` is far below what the
+       structure produces on any finger joint (last wave: distance 118-304), and a free ``R`` ends in gains
+       the 3 kHz loop cannot realise.
+    4. *The selection* (16.4): least squares on ``log (K3, K4)`` in the box ``[gain_low,
+       min(gain_high, sampled_pole_limit * rate_hz)]`` (the (15.63) error poles ``-K3``, ``-K4`` at
+       ``|h lambda| <= 1/4``, and below what the estimated joint velocity tolerates: see
+       :class:`~awiwi_drake.parameters.backstepping.FingerOptimalGainsCase`), from the best of the box corners
+       and ``starts`` draws.
+
+    Each tendon gets the smallest ``K3`` and ``K4`` of the DoF it acts on (chosen: the conservative choice
+    for a tendon shared by two DoF, e.g. the index's DIP tendons on the PIP; the Lyapunov decrease of the
+    module holds for any positive per-tendon gains).  ``rate_hz=None``: a continuous design (no rate limit;
+    then the target's pole limit is 1e4 1/s or the open loop's).
+    """
+    from scipy.optimize import least_squares
+    from awiwi_drake.control.chain import chain_design_point
+    from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
+    from awiwi_drake.control.joint_design import joint_subsystem
+    from awiwi_drake.analysis.linear import linearize
+    from awiwi_drake.parameters.backstepping import FingerOptimalGainsCase
+    from awiwi_drake.parameters.hand_control import HandChainParams
+    c = case or FingerOptimalGainsCase()
+    p = params or HandChainParams()
+    op = op or rig.operating_point()
+    law = FingerBacksteppingLaw(rig, p, op=op, rate_hz=rate_hz)
+    point = chain_design_point(rig, op, params=p)
+    PS = point["coupling_matrix"]
+    k = PS.shape[1]
+    w_max = 1e4 if rate_hz is None else p.sampled_pole_limit * float(rate_hz)   # the target's pole limit
+    k_max = min(c.gain_high, w_max)                                             # the box's upper corner
+    if not c.gain_low < k_max:
+        raise ValueError(f"select_finger_force_gains: gain_low = {c.gain_low} 1/s is not below the box's upper corner "
+                         f"{k_max:g} 1/s (min(gain_high, sampled_pole_limit x rate_hz))")
+    fits = []
+    for j in range(k):
+        sub, sub_op, _ = joint_subsystem(rig, j, point=point, params=p)
+        col = PS[:, j]
+        tendons = tuple(int(i) for i in np.flatnonzero(np.abs(col) > 1e-12 * np.abs(col).max()))
+        N = sub.coupling.num_tendons
+        if len(tendons) != N:
+            raise AssertionError(f"select_finger_force_gains: DoF {j} has {len(tendons)} tendons, its subsystem {N}")
+        P = np.asarray(sub.coupling.P(np.zeros(1)), float)[:, 0]
+        T = _tendon_torque_map(P, sub_op.tendon_stiffness, float(sub.params.motor.pulley_radius))
+        T_inv = np.linalg.inv(T)
+        basis = np.einsum("snm,mk->snk", _law_feedback_basis(sub, sub_op, law.Kp[j, j], law.Kd[j, j], p, rate_hz),
+                          T_inv)
+        lin = linearize(sub, sub_op)
+        open_poles = np.linalg.eigvals(lin.A)
+        limit = max(k_max, c.target_margin * np.abs(open_poles).max())
+        qw = np.concatenate([c.q_weights[:2], np.repeat(c.q_weights[2], N), np.repeat(c.q_weights[3], N)])
+        Q = T.T @ np.diag(qw) @ T
+
+        def target(log_r):
+            K = np.asarray(lqr(sub, Q, 10.0 ** log_r * np.eye(N), sub_op, linearization=lin).K).reshape(N, -1)
+            return K, np.linalg.eigvals(lin.A - lin.B @ K)
+
+        lo, hi = np.log10(c.r_search)
+        if np.abs(target(hi)[1]).max() > limit:
+            raise ValueError(f"select_finger_force_gains: DoF {j} of {rig.name!r}: even R = {c.r_search[1]:g} gives an "
+                             f"LQR faster than {limit:.4g} 1/s (FingerOptimalGainsCase.r_search)")
+        if np.abs(target(lo)[1]).max() <= limit:
+            hi = lo
+        for _ in range(60):
+            if hi - lo < 1e-3:
+                break
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if np.abs(target(mid)[1]).max() <= limit else (mid, hi)
+        K_opt, cl = target(hi)
+        tgt = K_opt @ T_inv
+        fit = JointForceGainFit(str(sub.coupling.joint_names[0]), j, tendons, float(law.Kp[j, j]), float(law.Kd[j, j]),
+                                0.0, 0.0, (float(c.gain_low), float(k_max)), float(10.0 ** hi), tgt, cl, open_poles,
+                                basis, np.inf, 0)
+        scale = np.max(np.abs(np.atleast_2d(tgt)), axis=0)
+        zlo, zhi = np.log(fit.box)
+
+        def resid(z):
+            return ((fit.feedback(np.exp(z[0]), np.exp(z[1])) - tgt) / scale).ravel()
+
+        rng = np.random.default_rng(c.seed + j)
+        z0s = [np.array([a, b]) for a in (zlo, zhi) for b in (zlo, zhi)] + list(rng.uniform(zlo, zhi, (c.starts, 2)))
+        best = None
+        for z0 in z0s:
+            sol = least_squares(resid, z0, bounds=([zlo, zlo], [zhi, zhi]), xtol=1e-14, ftol=1e-14, gtol=1e-14,
+                                max_nfev=500)
+            fit.evaluations += int(sol.nfev)
+            if best is None or sol.cost < best.cost:
+                best = sol
+        fit.k3, fit.k4 = (float(v) for v in np.exp(best.x))
+        fit.distance = float(fit.cost(fit.k3, fit.k4)[0])
+        fits.append(fit)
+    m = PS.shape[0]
+    k3, k4 = np.full(m, np.inf), np.full(m, np.inf)
+    for fit in fits:
+        ix = list(fit.tendons)
+        k3[ix] = np.minimum(k3[ix], fit.k3)
+        k4[ix] = np.minimum(k4[ix], fit.k4)
+    if not np.all(np.isfinite(k3)):
+        raise ValueError(f"select_finger_force_gains: tendons {np.flatnonzero(~np.isfinite(k3))} of {rig.name!r} act "
+                         "on no DoF")
+    return FingerForceGains(fits, k3, k4, rate_hz)
+
+
+def finger_optimal_backstepping_controller(rig, case=None, *, params=None, op=None, rate_hz: float | None = 3000.0):
+    """Registered ``optimal-backstepping`` for fingers and the hand: the 15.5 law
+    (:func:`~awiwi_drake.control.finger_backstepping.finger_backstepping_controller`) with its force-level gains
+    ``(K3, K4)`` selected per DoF by ch. 16 (:func:`select_finger_force_gains`); the selection is
+    ``controller.law.design["force_gains"]``."""
+    from awiwi_drake.control.base import StaticLawController
+    from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw, check_backstepping_springs
+    check_backstepping_springs(rig)
+    sel = select_finger_force_gains(rig, case, params=params, rate_hz=rate_hz, op=op)
+    law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, force_gains=(sel.k3, sel.k4))
+    law.name = "finger_optimal_backstepping"
+    law.design["force_gains"] = sel
+    return StaticLawController(law)

@@ -227,7 +227,9 @@ class TendonForceLaw(StaticLaw):
     """(10.2) with fixed (design force) or scheduled (reference force) gains.
 
     ``size`` tendons (a bank: every port has ``size`` entries, one law per tendon, the same
-    force map and motor).  ``ripple_scale`` > 0 adds the ripple feed-forward of section 3.2,
+    motor).  ``fmap`` is one :class:`ForceMap` for every tendon, or a sequence of ``size`` maps, one
+    per tendon (each tendon's own spring curve: the gains (10.11) and the force rate use its slope;
+    tendons sharing a map object are evaluated together).  ``ripple_scale`` > 0 adds the ripple feed-forward of section 3.2,
     ``-ripple_scale * tau_ripple(theta)`` (input ``motor_angle``; ch. 3: a conservative
     amplitude, e.g. ``RippleCompensationParams.amplitude_scale``).  ``path_velocity=True`` adds the
     input ``tendon_path_velocity`` [m/s] (``P(q) qdot``, a finger's joints moving the tendon path):
@@ -238,7 +240,7 @@ class TendonForceLaw(StaticLaw):
     inputs = {"tendon_force_reference": 1, "tendon_force": 1, "motor_velocity": 1}
     output_size = 1
 
-    def __init__(self, fmap: ForceMap, motor: Any, gains: TendonForceGains | None = None, *,
+    def __init__(self, fmap, motor: Any, gains: TendonForceGains | None = None, *,
                  scheduled: bool = False, name: str | None = None, size: int = 1, ripple_scale: float = 0.0,
                  path_velocity: bool = False):
         g = gains or TendonForceGains()
@@ -246,6 +248,23 @@ class TendonForceLaw(StaticLaw):
         size = int(size)
         if size < 1:
             raise ValueError(f"{self.name}: size = {size} must be >= 1")
+        self._groups = None
+        if isinstance(fmap, (list, tuple)):          # one map per tendon
+            if len(fmap) != size or not all(isinstance(fm, ForceMap) for fm in fmap):
+                raise ValueError(f"{self.name}: fmap must be a ForceMap or {size} ForceMaps (one per tendon), "
+                                 f"got {len(fmap)} entries")
+            groups: dict = {}
+            for i, fm in enumerate(fmap):
+                groups.setdefault(id(fm), (fm, []))[1].append(i)
+            if len(groups) > 1:                      # a bank per distinct map, inputs scattered by tendon
+                self._groups = [(np.array(ix), TendonForceLaw(fm, motor, gains, scheduled=scheduled, name=self.name,
+                                                              size=len(ix), ripple_scale=ripple_scale,
+                                                              path_velocity=path_velocity))
+                                for fm, ix in groups.values()]
+            self.fmaps = tuple(fmap)
+            fmap = fmap[0]
+        else:
+            self.fmaps = (fmap,) * size
         self.ripple_scale = check_gain("ripple_scale", ripple_scale, allow_zero=True, owner=self.name)
         self.inputs = {"tendon_force_reference": size, "tendon_force": size, "motor_velocity": size}
         if self.ripple_scale > 0:
@@ -269,15 +288,39 @@ class TendonForceLaw(StaticLaw):
                                                         self.inertia, w, xi)
 
     def gains_at(self, f_ref):
-        """(Kp, Kd) used at reference force ``f_ref``."""
+        """(Kp, Kd) used at reference force ``f_ref`` (a bank: one entry per tendon, each with its own map)."""
+        if self._groups is not None:
+            self._check_bank(f_ref, "tendon_force_reference")
+            kp = np.empty(self.output_size, dtype=np.asarray(f_ref).dtype)
+            kd = np.empty_like(kp)
+            for ix, law in self._groups:
+                kp[ix], kd[ix] = law.gains_at(np.asarray(f_ref)[ix])
+            return kp, kd
         self.fmap.check_force(f_ref)
         if not self.scheduled:
             return self.kp_fixed, self.kd_fixed
         fr = clip(f_ref, float(self.fmap.force[0]), self.fmap.max_force)
         return interp(fr, self.fmap.force, self._kp_tab), interp(fr, self.fmap.force, self._kd_tab)
 
+    def _check_bank(self, f, name):
+        """Each tendon's reference against its own table; the error names the tendon's index in the bank."""
+        vals = np.asarray(f)
+        for ix, law in self._groups:
+            for i in ix:
+                v = _value(vals[i])
+                if not (math.isfinite(v) and 0.0 <= v <= law.fmap.max_force):
+                    raise InfeasibleForceError(f"{name}[{i}] = {v!r} N is outside the tendon force table of that "
+                                               f"tendon [0, {law.fmap.max_force:.4g}] N")
+
     def __call__(self, u):
         from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
+        if self._groups is not None:                 # one map per tendon: each group's bank, scattered back
+            self._check_bank(u["tendon_force_reference"], "tendon_force_reference")
+            sample = np.asarray(u["tendon_force_reference"])
+            out = np.empty(self.output_size, dtype=float if sample.dtype == float else object)
+            for ix, law in self._groups:
+                out[ix] = law({k: np.asarray(v)[ix] for k, v in u.items()})
+            return out
         one = self.output_size == 1
         fd = u["tendon_force_reference"][0] if one else u["tendon_force_reference"]
         f = u["tendon_force"][0] if one else u["tendon_force"]

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths", "check_plausibility",
-           "CLI_RIG_NAMES"]
+           "CLI_RIG_NAMES", "finger_rig_name", "finger_parameters_to_json", "finger_parameters_from_json",
+           "is_finger_rig"]
 
 
 @dataclass(frozen=True)
@@ -49,8 +50,97 @@ RIGS = {
 }
 
 
+
+
+def finger_rig_name(finger: str) -> str:
+    """The dataset rig of one finger: ``finger-<finger>`` (e.g. ``finger-index``)."""
+    return f"finger-{finger}"
+
+
+def is_finger_rig(rig: str) -> bool:
+    return isinstance(rig, str) and rig.startswith("finger-")
+
+
+def _finger_spec(finger: str) -> RigSpec:
+    """Columns of a finger dataset: the commanded torques of its ``m`` motors (inputs), their angles and
+    the tendon forces (outputs, required), the ``n`` plant joint angles (optional: the hand has no joint
+    sensors); numbered in the finger's tendon/joint order (``<finger>_h1...``, ``q..``)."""
+    from awiwi_drake.hand.coupling import finger_coupling
+    c = finger_coupling(finger)
+    m, n = c.num_tendons, c.num_joints
+    angles = tuple(f"motor_angle_{i + 1}" for i in range(m))
+    forces = tuple(f"tendon_force_{i + 1}" for i in range(m))
+    return RigSpec(finger_rig_name(finger), tuple(f"motor_torque_{i + 1}" for i in range(m)),
+                   angles + forces + tuple(f"joint_angle_{j + 1}" for j in range(n)), angles + forces,
+                   ("finger", "finger_rig"), (), m, True)
+
+
+class _Rigs(dict):
+    """The dataset rigs; finger specs are built on first use (they read the finger's coupling)."""
+
+    FINGERS = ("index", "middle", "ring", "fifth", "thumb")
+
+    def __missing__(self, key):
+        if is_finger_rig(key) and key[len("finger-"):] in self.FINGERS:
+            self[key] = _finger_spec(key[len("finger-"):])
+            return self[key]
+        raise KeyError(key)
+
+    def __contains__(self, key):
+        return dict.__contains__(self, key) or (is_finger_rig(key) and key[len("finger-"):] in self.FINGERS)
+
+
+RIGS = _Rigs(RIGS)
+
+
+def finger_parameters_to_json(finger: str, params) -> dict:
+    """The JSON ``parameters`` of a finger dataset: ``{"finger": name, "finger_rig": {...}}``, the
+    :class:`~awiwi_drake.parameters.hand.FingerRigParams` as nested values (its YAML form; the finger's
+    geometry is the package's default of that finger and is not written)."""
+    import dataclasses
+
+    def plain(v):
+        if dataclasses.is_dataclass(v):
+            return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+        if isinstance(v, tuple):
+            return [plain(x) for x in v]
+        return v
+    if params.tendon_springs:
+        raise ValueError("a finger dataset's nominal parameters cannot hold per-tendon spring overrides "
+                         "(tendon_springs) yet")
+    d = {k: v for k, v in plain(params).items() if k not in ("finger", "finger_name", "tendon_springs")}
+    return {"finger": finger, "finger_rig": d}
+
+
+def finger_parameters_from_json(params: dict, where: str):
+    """The :class:`~awiwi_drake.parameters.hand.FingerRigParams` of a finger dataset's ``parameters``
+    (errors name the file and the key)."""
+    from awiwi_drake.parameters.hand import FINGERS, FingerRigParams
+    from awiwi_drake.parameters.yaml_io import from_yaml
+    if not isinstance(params, dict):
+        raise ValueError(f"{where}: 'parameters' must be an object, got {type(params).__name__}")
+    for k in ("finger", "finger_rig"):
+        if k not in params:
+            raise ValueError(f"{where}: missing parameter {k!r} (a finger dataset needs 'finger' and 'finger_rig')")
+    unknown = sorted(set(params) - {"finger", "finger_rig"})
+    if unknown:
+        raise ValueError(f"{where}: unknown parameter {unknown[0]!r} (a finger dataset has 'finger', 'finger_rig')")
+    if params["finger"] not in FINGERS:
+        raise ValueError(f"{where}: parameter 'finger' = {params['finger']!r} is not one of {', '.join(FINGERS)}")
+    if not isinstance(params["finger_rig"], dict):
+        raise ValueError(f"{where}: parameter 'finger_rig' must be an object (FingerRigParams fields)")
+    rig = dict(params["finger_rig"])
+    for bad in ("finger", "finger_name"):
+        if bad in rig:
+            raise ValueError(f"{where}: parameters.finger_rig.{bad}: not allowed (the finger is 'finger'; its "
+                             f"geometry is the package's default)")
+    return from_yaml(FingerRigParams.for_finger(params["finger"]), json.dumps(rig),
+                     where=f"{where}: parameters.finger_rig")
+
+
 # the command line's spelling of the dataset rigs (awiwi-drake make-dataset --rig joint-rig)
-CLI_RIG_NAMES = {"tendon-rig": "tendon", "joint-rig": "joint"}
+CLI_RIG_NAMES = {"tendon-rig": "tendon", "joint-rig": "joint",
+                 **{f"finger-{f}": f"finger-{f}" for f in _Rigs.FINGERS}}
 _RIG_CLI_NAME = {v: k for k, v in CLI_RIG_NAMES.items()}      # messages and written files use the CLI spelling
 
 
@@ -277,7 +367,13 @@ def load_dataset(path, *, checks=None) -> Dataset:
     if rig not in RIGS:
         raise ValueError(f"{json_path}: unknown rig {rig!r} (known: {', '.join(CLI_RIG_NAMES)})")
     spec = RIGS[rig]
-    params = _check_parameters(rig, meta["parameters"], str(json_path), checks)
+    if is_finger_rig(rig):
+        fp = finger_parameters_from_json(meta["parameters"], str(json_path))
+        if f"finger-{meta['parameters']['finger']}" != rig:
+            raise ValueError(f"{json_path}: parameter 'finger' = {meta['parameters']['finger']!r} but rig is {rig!r}")
+        params = finger_parameters_to_json(meta["parameters"]["finger"], fp)
+    else:
+        params = _check_parameters(rig, meta["parameters"], str(json_path), checks)
     inputs, outputs = _name_list(meta, "inputs", json_path), _name_list(meta, "outputs", json_path)
     if sorted(inputs) != sorted(spec.inputs):
         raise ValueError(f"{json_path}: 'inputs' must be {list(spec.inputs)} for rig {_cli(rig)!r}, got {inputs}")
@@ -373,6 +469,9 @@ def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) ->
         col = ds.spec.inputs[int(np.argmax(np.max(np.abs(u), axis=0)))]
         raise ValueError(f"{where}: column {col!r} reaches {big:.3g} Nm (> {c.max_torque:g} Nm): not a motor "
                          f"torque in Nm")
+    if is_finger_rig(ds.rig):
+        _check_finger_plausibility(ds, c, where)
+        return
     p = ds.parameters
     if "link_angle" in ds.outputs:
         span = float(np.ptp(ds.outputs["link_angle"]))
@@ -401,6 +500,26 @@ def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) ->
                 raise ValueError(f"{where}: column {k!r} peaks at {peak:.3g} N, {ratio:.3g}x the nominal spring "
                                  f"force at the measured elongation ({nominal:.3g} N): forces must be in N "
                                  f"(kN or mN?), or spring_poly/angles are in other units")
+
+
+def _check_finger_plausibility(ds: Dataset, c, where: str) -> None:
+    """Finger datasets: angles in rad (joint excursion, motor travel at the pulley), forces in N
+    (within the spring mechanism's range, none far below zero)."""
+    fp = finger_parameters_from_json(ds.parameters, where)
+    rm = fp.motor.pulley_radius
+    for k, v in ds.outputs.items():
+        if k.startswith("joint_angle") and float(np.ptp(v)) > c.max_angle_excursion:
+            raise ValueError(f"{where}: column {k!r} spans {float(np.ptp(v)):.3g} rad (> {c.max_angle_excursion:g}): "
+                             f"angles must be in rad (degrees are 57x larger)")
+        if k.startswith("motor_angle") and rm * float(np.max(np.abs(v))) > c.max_elongation:
+            raise ValueError(f"{where}: column {k!r} moves the tendon by r_m * max|angle| = "
+                             f"{rm * float(np.max(np.abs(v))):.3g} m (> {c.max_elongation:g} m): motor angles must "
+                             f"be in rad")
+        if k.startswith("tendon_force"):
+            peak = float(np.max(np.abs(v)))
+            if peak > c.force_ratio * fp.spring.max_force or peak < fp.spring.max_force / (100 * c.force_ratio):
+                raise ValueError(f"{where}: column {k!r} peaks at {peak:.3g} N against the spring mechanism's "
+                                 f"{fp.spring.max_force:g} N range: forces must be in N (kN or mN?)")
 
 
 def save_dataset(ds: Dataset, directory, name: str | None = None) -> pathlib.Path:

@@ -4,7 +4,15 @@
 (a :class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` /
 ``analysis.simulate`` work on them.
 
-Diagram (names as in the exported graph)::
+Diagram (names as in the exported graph), default ``backend="compiled"``::
+
+    motor_torque, external_torque ──> hand_dynamics (links + tendon drive in one system,
+    wrist_angle ──> wrist_tendon_offsets ──> ...    :class:`~awiwi_drake.hand.dynamics.HandDynamics_`)
+
+``hand_dynamics`` evaluates the MultibodyPlant's dynamics (mass matrix, bias, damping) and the
+drive's laws in one compiled call (float) or through the plant and the laws (AutoDiffXd,
+Expression); ``rig.plant`` is that (standalone) MultibodyPlant.  With ``backend="python"`` or
+``"symbolic"`` the MultibodyPlant is in the diagram::
 
     motor_torque ──> tendon_drive (MotorBank + SpringBank + TendonRouting, or one C++ SVS)
                         ^ joint_angle            │ generalized_force (-P^T f)
@@ -38,12 +46,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
 
-from ..components.drive import build_tendon_drive
+from ..components.drive import TendonDrive, build_tendon_drive
 from ..components.motor import motor_ripple_torque
-from ..components.spring import tendon_spring
+from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
 from ..rigs.base import OperatingPoint, Rig
@@ -65,8 +74,9 @@ class HandRig(Rig):
     offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
     spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
-    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` one law
-    per tendon (``params.tendon_springs`` overrides).
+    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` the
+    :class:`~awiwi_drake.components.spring.TendonSprings` of the tendons (one law per tendon,
+    ``params.tendon_springs`` overrides).
     """
 
     drive_coupling: Any = None
@@ -118,7 +128,7 @@ class HandRig(Rig):
 
 
 
-def tendon_spring_laws(p, tendon_names):
+def tendon_spring_laws(p, tendon_names) -> TendonSprings:
     """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
 
     Equal parameter sets share one law object (one fit, one kernel branch).
@@ -135,19 +145,7 @@ def tendon_spring_laws(p, tendon_names):
         if sp.hysteresis != p.spring.hysteresis:
             raise ValueError(f"tendon_springs[{tendon!r}]: hysteresis is set for all tendons by spring.hysteresis")
         laws[names.index(tendon)] = tendon_spring(sp)
-    return laws
-
-
-def _per_tendon(laws, method, values):
-    """``law_i.method(values_i)`` for each tendon (float arrays), grouping shared laws."""
-    values = np.asarray(values, dtype=float)
-    out = np.empty_like(values)
-    groups = {}
-    for i, law in enumerate(laws):
-        groups.setdefault(id(law), (law, []))[1].append(i)
-    for law, idx in groups.values():
-        out[idx] = np.asarray(getattr(law, method)(values[idx]), dtype=float)
-    return out
+    return TendonSprings(laws)
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
@@ -160,11 +158,9 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         raise ValueError(f"{name}: guide_friction=True needs backend='compiled' (the python and symbolic "
                          f"drives do not carry the guide friction state), got backend={backend!r}; "
                          "use params.with_physics(hysteresis=False, guide_friction=False) for them")
-    if p.tendon_springs and not compiled:
-        raise ValueError(f"{name}: tendon_springs (one spring law per tendon) needs backend='compiled', "
-                         f"got backend={backend!r}")
     b = DiagramBuilder()
-    plant, models = plant_factory(b)
+    sg = SceneGraph() if compiled and visual else None
+    plant, models = plant_factory(None, sg) if compiled else plant_factory(b, None)
     n = plant.num_positions()
     coupling = HandCoupling(parts) if len(parts) > 1 else next(iter(parts.values()))
     m = coupling.num_tendons
@@ -173,71 +169,21 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     drive_coupling = HandCoupling(parts, num_offsets=m) if wrist else coupling
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
-    offsets = _per_tendon(laws, "inverse_force", np.full(m, p.pretension))
-    extra_drive = {}
-    if compiled:
-        from ..components.fused_drive import GuideFrictionModel
-        gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
-                                p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
-        extra_drive = dict(guide_friction=gf, rate_joints=n)
-    drive = build_tendon_drive(motor=p.motor, spring=laws if compiled else spring, coupling=drive_coupling,
-                               offsets=offsets, backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive",
-                               **extra_drive)
-    d = b.AddSystem(drive.diagram)
-    split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
-    b.Connect(plant.get_state_output_port(), split.get_input_port())
-    if d.HasInputPort("joint_velocity"):
-        b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
+    offsets = laws.inverse_force(np.full(m, p.pretension))
     rows = _wrist_rows(parts)
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
                          f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
-    if wrist:
-        from .systems import WristTendonOffsets
-        w = b.AddNamedSystem("wrist_tendon_offsets", WristTendonOffsets())
-        select = np.zeros((m, 38))
-        select[np.arange(m), rows] = 1.0
-        sel = b.AddNamedSystem("wrist_offset_select", MatrixGain(select))
-        b.Connect(w.get_output_port(0), sel.get_input_port())
-        b.ExportInput(w.get_input_port(0), "wrist_angle")
-        jmux = b.AddNamedSystem("joint_and_wrist", Multiplexer([n, m]))
-        b.Connect(split.get_output_port(0), jmux.get_input_port(0))
-        b.Connect(sel.get_output_port(), jmux.get_input_port(1))
-        b.Connect(jmux.get_output_port(), d.GetInputPort("joint_angle"))
-        b.ExportOutput(sel.get_output_port(), "wrist_tendon_offset")
-        gf_split = b.AddNamedSystem("generalized_force_split", Demultiplexer([n, m]))
-        b.Connect(d.GetOutputPort("generalized_force"), gf_split.get_input_port())
-        tendon_tau = gf_split.get_output_port(0)
-    else:
-        b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
-        tendon_tau = d.GetOutputPort("generalized_force")
     G = coupling_force_gain(plant, models)
-    sources = [tendon_tau]
-    if G is not None:
-        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
-        b.Connect(plant.get_state_output_port(), ce.get_input_port())
-        sources.append(ce.get_output_port())
-    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
-    for i, src in enumerate(sources):
-        b.Connect(src, adder.get_input_port(i))
-    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
-    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
-    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
-    b.Connect(plant.get_state_output_port(), state.get_input_port(0))
-    b.Connect(d.GetOutputPort("state" if compiled else "motor_state"), state.get_input_port(1))
-    b.ExportOutput(state.get_output_port(), "state")
-    b.ExportOutput(split.get_output_port(0), "joint_angle")
-    b.ExportOutput(split.get_output_port(1), "joint_velocity")
-    b.ExportOutput(tendon_tau, "joint_torque")
-    for nm in ("motor_angle", "motor_velocity", "motor_state", "tendon_force", "tendon_stiffness",
-               "elongation", "applied_torque"):
-        b.ExportOutput(d.GetOutputPort(nm), nm)
-    if visual:
-        b.ExportOutput(b.GetSubsystemByName("scene_graph").get_query_output_port(), "query_object")
+    if compiled:
+        model = _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg)
+    else:
+        drive = _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G, rows, wrist, visual)
     diagram = b.Build()
     diagram.set_name(name)
+    if compiled:        # the drive lives inside the one plant system: its handle points at the rig
+        drive = TendonDrive(diagram, m, drive_coupling.num_joints, backend, bool(p.spring.hysteresis.enabled), model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
                                   guide_friction=drive.guide_friction)
@@ -252,6 +198,93 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
                    drive_coupling=drive_coupling, models=models, joint_names=joint_names,
                    tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring,
                    spring_laws=laws)
+
+
+def _add_wrist_offsets(b, rows, m):
+    """``wrist_angle`` input -> the (6.9) length offsets of this rig's tendons (exported ``wrist_tendon_offset``)."""
+    from .systems import WristTendonOffsets
+    w = b.AddNamedSystem("wrist_tendon_offsets", WristTendonOffsets())
+    select = np.zeros((m, 38))
+    select[np.arange(m), rows] = 1.0
+    sel = b.AddNamedSystem("wrist_offset_select", MatrixGain(select))
+    b.Connect(w.get_output_port(0), sel.get_input_port())
+    b.ExportInput(w.get_input_port(0), "wrist_angle")
+    b.ExportOutput(sel.get_output_port(), "wrist_tendon_offset")
+    return sel.get_output_port()
+
+
+def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg):
+    """The default plant: links and drive in one :class:`~.dynamics.HandDynamics_` (compiled float path)."""
+    from ..components.fused_drive import DriveModel, GuideFrictionModel
+    from .dynamics import HandDynamics_, LinkModel
+    n, m = coupling.num_joints, coupling.num_tendons
+    gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
+                            p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
+    model = DriveModel(p.motor, laws.laws, drive_coupling, offsets, p.motor.pulley_radius, p.spring.hysteresis,
+                       gf, n)
+    dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, LinkModel(plant, G)))
+    if wrist:
+        b.Connect(_add_wrist_offsets(b, rows, m), dyn.GetInputPort("wrist_tendon_offset"))
+    for nm in ("motor_torque", "external_torque"):
+        b.ExportInput(dyn.GetInputPort(nm), nm)
+    for nm in ("state", "joint_angle", "joint_velocity", "joint_torque", "motor_angle", "motor_velocity",
+               "motor_state", "tendon_force", "tendon_stiffness", "elongation", "applied_torque"):
+        b.ExportOutput(dyn.GetOutputPort(nm), nm)
+    if sg is not None:
+        from .systems import LinkGeometryPoses
+        b.AddNamedSystem("scene_graph", sg)
+        pose = b.AddNamedSystem("geometry_pose", LinkGeometryPoses(plant))
+        b.Connect(dyn.GetOutputPort("joint_angle"), pose.get_input_port())
+        b.Connect(pose.get_output_port(), sg.get_source_pose_port(plant.get_source_id()))
+        b.ExportOutput(sg.get_query_output_port(), "query_object")
+    return model
+
+
+def _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G, rows, wrist, visual):
+    """The python / symbolic backends: MultibodyPlant + the drive sub-diagram, wired through the plant's ports."""
+    n, m = plant.num_positions(), drive_coupling.num_tendons
+    drive = build_tendon_drive(motor=p.motor, spring=laws, coupling=drive_coupling, offsets=offsets,
+                               backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
+    d = b.AddSystem(drive.diagram)
+    split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
+    b.Connect(plant.get_state_output_port(), split.get_input_port())
+    if d.HasInputPort("joint_velocity"):
+        b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
+    if wrist:
+        jmux = b.AddNamedSystem("joint_and_wrist", Multiplexer([n, m]))
+        b.Connect(split.get_output_port(0), jmux.get_input_port(0))
+        b.Connect(_add_wrist_offsets(b, rows, m), jmux.get_input_port(1))
+        b.Connect(jmux.get_output_port(), d.GetInputPort("joint_angle"))
+        gf_split = b.AddNamedSystem("generalized_force_split", Demultiplexer([n, m]))
+        b.Connect(d.GetOutputPort("generalized_force"), gf_split.get_input_port())
+        tendon_tau = gf_split.get_output_port(0)
+    else:
+        b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
+        tendon_tau = d.GetOutputPort("generalized_force")
+    sources = [tendon_tau]
+    if G is not None:
+        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
+        b.Connect(plant.get_state_output_port(), ce.get_input_port())
+        sources.append(ce.get_output_port())
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
+    for i, src in enumerate(sources):
+        b.Connect(src, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
+    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
+    state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
+    b.Connect(plant.get_state_output_port(), state.get_input_port(0))
+    b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
+    b.ExportOutput(state.get_output_port(), "state")
+    b.ExportOutput(split.get_output_port(0), "joint_angle")
+    b.ExportOutput(split.get_output_port(1), "joint_velocity")
+    b.ExportOutput(tendon_tau, "joint_torque")
+    for nm in ("motor_angle", "motor_velocity", "motor_state", "tendon_force", "tendon_stiffness",
+               "elongation", "applied_torque"):
+        b.ExportOutput(d.GetOutputPort(nm), nm)
+    if visual:
+        b.ExportOutput(b.GetSubsystemByName("scene_graph").get_query_output_port(), "query_object")
+    return drive
 
 
 def _wrist_rows(parts) -> np.ndarray:
@@ -301,7 +334,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
         bad = [coupling.tendon_names[i] for i in np.flatnonzero(f <= 0)]
         raise ValueError(f"{name}: pretension {f0} N leaves tendon(s) {', '.join(bad)} slack at this "
                          f"operating point (forces {np.round(f, 3)} N)")
-    x = _per_tendon(laws, "inverse_force", f)
+    x = laws.inverse_force(f)
     h0 = np.asarray(coupling.h(np.zeros(n)), dtype=float)
     w_off = np.zeros(m)
     wa = np.zeros(2) if wrist_angle is None else np.asarray(wrist_angle, dtype=float).ravel()
@@ -320,7 +353,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
                          f"motor.torque_limit = {p.motor.torque_limit} N m")
     # the hysteresis and guide friction states (Dahl) rest at 0: the pretension is the elastic force
     state = np.concatenate([q, np.zeros(n), theta, np.zeros(m), np.zeros(num_friction_states)])
-    K_t = _per_tendon(laws, "stiffness", x)
+    K_t = laws.stiffness(x)
     from .coupling import joint_stiffness
     Kq = joint_stiffness(coupling, q, f, K_t) + (0 if G is None else G[:, :n])
     return OperatingPoint(state, u, tau_ext, pretension=f0, joint_angle=q, tendon_force=f, elongation=x,
@@ -338,7 +371,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
         Default ``FingerRigParams.for_finger(finger)``.
     backend : {"compiled", "symbolic", "python"}
         The tendon drive's backend (``awiwi_drake.components.drive``); the thesis's
-        physics (hysteresis, per-tendon springs, guide friction in the drive) needs "compiled":
+        physics (hysteresis, guide friction in the drive) needs "compiled":
         pass ``params.with_physics(hysteresis=False, guide_friction=False)`` for the others.
     wrist : bool
         Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
@@ -359,8 +392,8 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
                          f"(use FingerRigParams.for_finger({finger!r}))")
     fp = p.finger
 
-    def plant_factory(b):
-        return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity)
+    def plant_factory(b, scene_graph):
+        return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity, scene_graph=scene_graph)
 
     return _build(f"finger-{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
                   wrist, visual)
@@ -382,8 +415,8 @@ def hand_diagram(*, params: HandRigParams | None = None, backend: str = DEFAULT_
     if not isinstance(p, HandRigParams):
         raise ValueError(f"hand_diagram: params must be HandRigParams, got {type(p).__name__}")
 
-    def plant_factory(b):
-        return make_hand_plant(p.hand, builder=b, visual=visual, gravity=p.gravity)
+    def plant_factory(b, scene_graph):
+        return make_hand_plant(p.hand, builder=b, visual=visual, gravity=p.gravity, scene_graph=scene_graph)
 
     parts = {f: finger_coupling(f, p.hand.finger(f)) for f in FINGERS}
     return _build("hand", p, plant_factory, parts, backend, wrist, visual)

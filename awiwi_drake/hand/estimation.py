@@ -220,11 +220,19 @@ def LinkPositionEstimator_(T):
     sensors); the length change at the finger base is
     ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (+ wrist offsets, which
     ``wrist_offset`` (m) removes when connected; leave it unconnected or 0
-    otherwise).  Every ``period`` the discrete state (the estimate, n plant
-    joints) is updated: constant-P fingers by the pseudo-inverse (5.15), the
-    thumb base by Algorithm 1 warm-started from the previous estimate (the
-    thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Output
-    ``joint_angle_estimate`` (n) = the state.
+    otherwise).  Output ``joint_angle_estimate`` (n plant joints) is the estimate
+    from the *current* measurements: constant-P fingers by the pseudo-inverse
+    (5.15), the thumb base by Algorithm 1 warm-started from the stored estimate
+    (the thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Every
+    ``period`` the discrete state stores it (the next warm start).  The estimate
+    comes from the same sensor sample as the forces a controller reads with it
+    (a sampled controller evaluates both at its sample): a state output would
+    be one period older than those forces (simultaneous discrete updates read
+    the pre-update state), and that lag, differentiated into the joint velocity,
+    destabilised the DIP's link mode on its tendons (~600 Hz on the index) in
+    every chain design at 3 kHz (``control/joint_design.py``,
+    :func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  A computation
+    delay is the loop's (``closed_loop(delay=...)``), for every measurement alike.
 
     Scalar types: float and AutoDiffXd only.  For AutoDiffXd the search runs
     on values and one Gauss-Newton step ``q + P(q)^+ (dh - dh(q))`` in the
@@ -234,10 +242,11 @@ def LinkPositionEstimator_(T):
     ``ToSymbolic()`` of a diagram holding this estimator fails (Drake names
     the system).
 
-    Projection bound: when the thumb base estimate sits on the search's
-    ``+-pi/2`` bound (the pose may lie beyond it) the update still stores it,
-    counts it in ``limit_hits`` (a diagnostic attribute of the system,
-    summed over all contexts) and warns once per system (RuntimeWarning).
+    Projection bound: when the thumb base estimate sits on (or, after the
+    Gauss-Newton refinement, beyond) the search's ``+-pi/2`` bound (the pose may
+    lie beyond it) the update still stores it, counts it in ``limit_hits`` (a
+    diagnostic attribute of the system, summed over all contexts) and warns once
+    per system (RuntimeWarning).
     """
 
     class Impl(LeafSystem_[T]):
@@ -270,13 +279,30 @@ def LinkPositionEstimator_(T):
             self._w = self.DeclareVectorInputPort("wrist_offset", m)
             self._state = self.DeclareDiscreteState(n)
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
-            self.DeclareStateOutputPort("joint_angle_estimate", self._state)
+            self._out = self.DeclareVectorOutputPort(
+                "joint_angle_estimate", n, self._calc,
+                prerequisites_of_calc={self.xd_ticket(), self._theta.ticket(), self._x.ticket(), self._w.ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.coupling, other.r_m, other.offsets, other.period, other.iterations,
                             other.step0, other.refine, converter=converter)
 
         def _update(self, context, discrete_state):
+            q = self._out.Eval(context)
+            if self._thumbs and T is float:
+                for name, c, j, t in self._thumbs:
+                    limit = GradientSearchResult.limit
+                    if np.any(np.abs(q[j][:2]) >= limit):
+                        self.limit_hits += 1
+                        if self.limit_hits == 1:
+                            warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
+                                          f"{np.round(q[j][:2], 4)} rad sits on the search bound "
+                                          f"+-{limit:.4g} rad (the pose may lie beyond it); "
+                                          "further hits are counted in limit_hits", RuntimeWarning,
+                                          stacklevel=2)
+            discrete_state.set_value(0, q)
+
+        def _calc(self, context, out):
             theta = self._theta.Eval(context)
             dh = self._x.Eval(context) - self.r_m * theta - self.offsets
             if self._w.HasValue(context):
@@ -289,16 +315,7 @@ def LinkPositionEstimator_(T):
                 dh_val = np.array([_value(v) for v in dh])
             q_new = self._linear @ dh_val         # every constant-coupling finger (5.15) in one product
             for name, c, j, t in self._thumbs:    # thumb: Algorithm 1 warm-started at the previous estimate
-                q_new[j], search = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations,
-                                                  step0=self.step0, return_search=True)
-                if search.at_limit:
-                    self.limit_hits += 1
-                    if self.limit_hits == 1:
-                        warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
-                                      f"{np.round(search.q, 4)} rad sits on the search bound "
-                                      f"+-{search.limit:.4g} rad (the pose may lie beyond it); "
-                                      "further hits are counted in limit_hits", RuntimeWarning,
-                                      stacklevel=2)
+                q_new[j] = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations, step0=self.step0)
                 if T is float and self.refine:
                     # the Gauss-Newton step q + (P S)^+ r finger by finger (P S is block-diagonal; linear fingers
                     # are exact already).  The thumb's P is block-diagonal too: the PIP/DIP least-squares estimate
@@ -312,7 +329,7 @@ def LinkPositionEstimator_(T):
                 S = dof_selection(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
                 q_new = q_new + S @ (np.linalg.pinv(PS) @ r)
-            discrete_state.set_value(0, q_new)
+            out.SetFromVector(q_new)
 
     return Impl
 
@@ -331,13 +348,13 @@ class LinkStateEstimator:
 
     ``system`` is a Diagram with inputs named after the rig outputs it reads
     (``motor_angle``, ``elongation`` and, with the wrist, ``wrist_tendon_offset``)
-    and outputs ``joint_angle`` (n) [rad] (the estimate of (5.15) / Algorithm 1)
-    and ``joint_velocity`` (n) [rad/s], the "dirty derivative" ``s / (T s + 1)`` of
-    that estimate (the hand has no joint encoders or tachometers), discretised
-    at the period ``h``: ``z+ = z + h/T (q - z)``, ``v = (q - z) / T``
-    (``T = h``: the backward difference over one period).  Both are discrete
-    (updated every ``period``).  :meth:`initialize` starts both at a known pose
-    (after homing).
+    and outputs ``joint_angle`` (n) [rad] (the estimate of (5.15) / Algorithm 1
+    from the current sample) and ``joint_velocity`` (n) [rad/s], the "dirty
+    derivative" ``s / (T s + 1)`` of that estimate (the hand has no joint encoders
+    or tachometers), discretised at the period ``h``: ``z+ = z + h/T (q - z)``,
+    ``v = (q - z) / T`` (``T = h``: the backward difference over the last period).
+    Their discrete states (the stored estimate, ``z``) are updated every
+    ``period``.  :meth:`initialize` starts both at a known pose (after homing).
     """
 
     system: Diagram

@@ -157,7 +157,8 @@ def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | Non
     """A finalised continuous plant holding one finger (base frame = world).
 
     With ``builder`` the plant (and a SceneGraph when ``visual``) is added to
-    it; otherwise a standalone plant is returned.  Gravity is off by default:
+    it; otherwise a standalone plant is returned (its visual geometry registered with
+    ``scene_graph`` when one is given).  Gravity is off by default:
     section 5.2.2 finds ~0.002 N m, negligible against the tendon torques.
     Returns ``(plant, FingerModel)``.
     """
@@ -170,6 +171,8 @@ def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | Non
             builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
     else:
         plant = MultibodyPlant(0.0)
+        if visual and scene_graph is not None:      # standalone plant drawn through its positions
+            plant.RegisterAsSourceForSceneGraph(scene_graph)
     model = add_finger(plant, finger, params, visual=visual)
     if not gravity:
         plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
@@ -195,12 +198,14 @@ def palm_centre(hp: HandParams) -> np.ndarray:
 
 
 def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: bool = False,
-                    gravity: bool = False):
+                    gravity: bool = False, scene_graph: SceneGraph | None = None):
     """A finalised continuous plant with all five fingers on a fixed palm.
 
     Joint (position) order: thumb q10..q13, index q20..q23, middle q30..q33,
     ring q40..q43, fifth q5h, q50..q53 (21 joints, 19 DoF with the two
     PIP/DIP couplings).  Returns ``(plant, {finger: FingerModel})``.
+    Without ``builder``, ``visual`` geometry is registered with ``scene_graph`` when one is given
+    (the plant is then drawn from its positions, e.g. ``MultibodyPositionToGeometryPose``).
     """
     hp = params or HandParams()
     if builder is not None:
@@ -212,6 +217,8 @@ def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: b
             builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
     else:
         plant = MultibodyPlant(0.0)
+        if visual and scene_graph is not None:
+            plant.RegisterAsSourceForSceneGraph(scene_graph)
     if visual and plant.geometry_source_is_registered():
         palm = plant.world_body()
         plant.RegisterVisualGeometry(

@@ -9,6 +9,8 @@
   friction (4.1) that the compiled tendon drive carries (``components.fused_drive``).
 * :class:`WristTendonOffsets_`: wrist angles -> tendon path offsets ``h_wrist(q) - h_wrist(0)`` (6.9).
 * :class:`WristCompensation_`: wrist angles -> motor angle feed-forward ``-offset / r_m``.
+* :class:`LinkGeometryPoses_`: joint angles -> the poses of a plant's geometry frames (drawing a
+  plant that is not itself in the diagram, e.g. the compiled hand's).
 (The joint-space motor PD that uses it is the ``joint-pd`` controller,
 :mod:`awiwi_drake.control.joint_pd`.)
 """
@@ -25,7 +27,8 @@ from awiwi_drake.parameters.wrist import WristParams
 
 __all__ = ["CoriolisCancellation_", "CoriolisCancellation", "MotorAngleReference_", "MotorAngleReference",
            "tendon_bending_angles",
-           "WristTendonOffsets_", "WristTendonOffsets", "WristCompensation_", "WristCompensation"]
+           "WristTendonOffsets_", "WristTendonOffsets", "WristCompensation_", "WristCompensation",
+           "LinkGeometryPoses_", "LinkGeometryPoses"]
 
 
 @TemplateSystem.define("CoriolisCancellation_")
@@ -229,3 +232,48 @@ def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
             ts = coupling.tendon_slices[name]
             crossed[ts.start:ts.start + 4] = 0
     return p.palm_bending_angle + p.joint_wrap_angle * crossed
+
+
+@TemplateSystem.define("LinkGeometryPoses_")
+def LinkGeometryPoses_(T):
+    """``geometry_pose`` (a ``FramePoseVector`` for SceneGraph) of ``plant``'s bodies at ``joint_angle`` (n).
+
+    ``plant``: a finalised float MultibodyPlant registered as a SceneGraph source but not in the
+    diagram (the compiled finger/hand evaluates its dynamics itself); connect the output to
+    ``scene_graph.get_source_pose_port(plant.get_source_id())``.  Other scalar types convert the
+    plant with ``ToScalarType``.
+    """
+    from pydrake.common.value import AbstractValue
+    from pydrake.geometry import FramePoseVector_
+    from pydrake.multibody.tree import BodyIndex
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, plant, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._plant_float = plant
+            self._plant = plant if T == float else plant.ToScalarType[T]()
+            self._ctx = self._plant.CreateDefaultContext()
+            world = plant.world_body().index()
+            self._frames = []
+            for i in range(plant.num_bodies()):
+                fid = plant.GetBodyFrameIdIfExists(BodyIndex(i))
+                if fid is not None and BodyIndex(i) != world:
+                    self._frames.append((self._plant.get_body(BodyIndex(i)), fid))
+            self._q = self.DeclareVectorInputPort("joint_angle", plant.num_positions())
+            self.DeclareAbstractOutputPort("geometry_pose", lambda: AbstractValue.Make(FramePoseVector_[T]()),
+                                           self._calc, prerequisites_of_calc={self._q.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._plant_float, converter=converter)
+
+        def _calc(self, context, output):
+            self._plant.SetPositions(self._ctx, self._q.Eval(context))
+            poses = output.get_mutable_value()
+            poses.clear()
+            for body, fid in self._frames:
+                poses.set_value(fid, self._plant.EvalBodyPoseInWorld(self._ctx, body))
+
+    return Impl
+
+
+LinkGeometryPoses = LinkGeometryPoses_[None]

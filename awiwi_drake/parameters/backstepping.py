@@ -24,6 +24,7 @@ __all__ = [
     "AntagonisticBacksteppingGains",
     "OptimalGainsCase",
     "JointRigOptimalGainsCase",
+    "FingerOptimalGainsCase",
     "OptimalGainsStudy",
 ]
 
@@ -249,6 +250,56 @@ class JointRigOptimalGainsCase(OptimalGainsCase):
                                     "(optimal_gains.rate_limited_case): fit distance 4.4 at R = 1e-5 (304 / 46 "
                                     "at 1e-3 / 1e-4; 2.6 at 1e-6 but then a 1 Hz sine saturates 43 %); the 3 kHz "
                                     "loop settles a 0.3 rad step in 53 ms and tracks the sine unsaturated"))
+
+
+@dataclass(frozen=True)
+class FingerOptimalGainsCase(Parameters):
+    """Ch. 16 gain selection for each DoF of a finger or the hand
+    (:func:`awiwi_drake.control.optimal_gains.select_finger_force_gains`).
+
+    What ch. 16 selects: "the two lower levels of the backstepping controller"; "the two upper gains,
+    namely the stiffness and the damping of the impedance controller are directly specified by the
+    user" (ch. 16 introduction). So ``Omega = (K3, K4)`` per DoF; ``Kp,imp``, ``Kd,imp`` are the 15.5
+    finger law's (the impedance of Fig 15.22 on the modes of M, |h lambda| <= 1/4). Algorithm 3 draws
+    ``rand(1, 4)`` (all four gains): that is what drove the former per-DoF fits to 55-177 Nm/rad.
+    """
+
+    q_weights: tuple = param((100.0, 0.01, 0.01, 0.01), unit="-", low=0.0, vector=True,
+                             source="Table 16.1, Q on [q, qd, tau, taud] (repeated per tendon: tau_i, taud_i)")
+    gain_low: float = param(1.0, unit="1/s", low=0.0, low_inclusive=False,
+                            source="chosen: lower corner of the (K3, K4) box, a force-error decay of 1 s, far below "
+                                   "every joint mode; Algorithm 3's rand(1, 4) has 0 as its lower corner, where "
+                                   "(15.63) loses its stability guarantee")
+    gain_high: float = param(300.0, unit="1/s", low=0.0, low_inclusive=False,
+                             source="chosen: upper corner of the (K3, K4) box (at most sampled_pole_limit x rate, "
+                                    "750 1/s at 3 kHz). Measured on the index at 3 kHz with the estimated joint "
+                                    "angles: with K3 = 300 the 2 Hz sine of compare --short saturates 0 / 0 / 34 / "
+                                    "69 / 86 % of the time for K4 = 300 / 400 / 500 / 600 / 750, and the selection "
+                                    "in a 400 box (K3 = 219-400, K4 = 400) 15 %; with ideal sensors 0 % at 750. The "
+                                    "linear sampled loop with the estimator's backward-difference velocity is stable "
+                                    "at all of them (radius 0.979-0.982, ideal index): K3 and K4 multiply the "
+                                    "estimate's error in (15.63). 300 is the finger law's force_bandwidth")
+    target_margin: float = param(1.05, unit="-", low=1.0,
+                                 source="chosen: the target LQR may be at most 5 % faster than the DoF's fastest "
+                                        "open-loop mode where that mode is already beyond the sampled-loop limit "
+                                        "(the index DIP: its link on its tendons rings at 1029 rad/s > 750)")
+    r_search: tuple = param((1e-12, 1e3), unit="-", low=0.0, low_inclusive=False, vector=True,
+                            source="chosen: the bracket of the search for R (Table 16.1's 0.1 inside it)")
+    starts: int = param(4, unit="-", low=1, source="chosen: least-squares starts, the best of a few box corners "
+                                                   "and draws (the cost is smooth in log Omega)")
+    samples: int = param(2000, unit="-", low=1,
+                         source="chosen: Algorithm 3 draws used to check the selection (the K_bs of a sample is "
+                                "a bilinear form in (K3, K4): 2000 draws cost milliseconds)")
+    seed: int = param(16, unit="-", low=0, source="chosen: reproducible draws")
+
+    def _validate(self) -> None:
+        if len(self.q_weights) != 4:
+            raise ValueError(f"FingerOptimalGainsCase.q_weights must have 4 entries, got {len(self.q_weights)}")
+        if not self.gain_low < self.gain_high:
+            raise ValueError(f"FingerOptimalGainsCase.gain_low = {self.gain_low} must be below gain_high = "
+                             f"{self.gain_high} [1/s]")
+        if len(self.r_search) != 2 or not self.r_search[0] < self.r_search[1]:
+            raise ValueError(f"FingerOptimalGainsCase.r_search = {self.r_search} must be (low, high), low < high")
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from .base import Parameters, param
 
-__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams", "DatasetChecks"]
+__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams", "DatasetChecks", "FingerTruthParams"]
 
 
 @dataclass(frozen=True)
@@ -351,3 +351,53 @@ class DatasetChecks(Parameters):
         source="chosen: measured forces of generated datasets lie within 0.2-1.2x the spring force at the "
                "observed elongation; 30x either way is a unit mistake (kN, mN)",
         doc="allowed factor between measured forces and the nominal spring force at the observed elongation")
+
+
+@dataclass(frozen=True)
+class FingerTruthParams(Parameters):
+    """Finger hidden-effect datasets (``make-dataset --rig finger-index``): the package's finger diagram
+    under a motor-position PD at the logging rate, with one effect switched on at one tendon."""
+
+    duration: float = param(10.0, unit="s", low=0.1,
+                            source="chosen: as the rig datasets (every excitation once)", doc="dataset length")
+    sample_rate: float = param(1000.0, unit="Hz", low=100.0,
+                               source="issue 12 item 5: closed loop at 1 kHz (or 3 kHz, section 3.3)",
+                               doc="logging and control rate")
+    kp: float = param(40.0, unit="Nm/rad", low=0.0, low_inclusive=False,
+                      source="MotorPositionGains default (0.56 Nm Coulomb friction of Table 3.3 -> 0.014 rad)",
+                      doc="motor position gain")
+    kd: float = param(0.4, unit="Nm s/rad", low=0.0, source="MotorPositionGains default (overdamped with B = 2e-3)",
+                      doc="motor velocity gain")
+    joint_excursion: float = param(0.35, unit="rad", low=0.0,
+                                   source="chosen: +-20 deg about 0.2 rad of flexion, inside every joint range "
+                                          "of Table 5.1; abduction at half of it",
+                                   doc="joint reference amplitude (flexion joints)")
+    reference_time_constant: float = param(
+        0.04, unit="s", low=0.0, source="chosen: two 40 ms first-order filters keep the commanded torques of the "
+                                        "reference steps below the 3 N m motor limit (Table 12.1)",
+        doc="time constant of each of the two reference filters")
+    flexion: float = param(0.2, unit="rad", low=0.0, source="chosen: mid-flexed posture, centre of the excursion",
+                           doc="operating flexion of the flexion joints")
+    force_modulation: float = param(8.0, unit="N", low=0.0,
+                                    source="chosen: +-8 N co-contraction about the 20 N pretension (Fig 15.26) "
+                                           "moves every spring mechanism along its curve; keeps every tendon taut",
+                                    doc="amplitude of the common tendon-force modulation")
+    modulation_hz: float = param(0.37, unit="Hz", low=0.0,
+                                 source="chosen: slow against the joint excitation (0.3-6 Hz), not a multiple of it",
+                                 doc="frequency of the co-contraction modulation")
+    motor_coulomb_range: tuple = param((0.03, 0.1), unit="Nm", low=0.0,
+                                       source="chosen: 5-18 % of the Coulomb torque of Table 3.3 (0.56 Nm): a worn "
+                                              "or badly lubricated gear on one motor",
+                                       doc="hidden Stribeck friction, Coulomb level")
+    guide_c0_range: tuple = param((0.5, 1.5), unit="N", low=0.0,
+                                  source="chosen: 25-70 % of C0 of (4.1) (2.2 N) on one tendon path",
+                                  doc="hidden guide friction, constant part")
+    guide_mu_range: tuple = param((0.05, 0.15), unit="-", low=0.0,
+                                  source="chosen: capstan mu*alpha of one extra guide (ch. 9: 10-50 % of the force)",
+                                  doc="hidden guide friction, capstan exponent")
+    ripple_amplitude_range: tuple = param((0.02, 0.05), unit="Nm", low=0.0,
+                                          source="chosen: 40-90 % of the motor ripple amplitude of Table 3.3 "
+                                                 "(0.054 Nm)", doc="hidden ripple amplitude per harmonic")
+    hysteresis_ratio_range: tuple = param((0.05, 0.1), unit="-", low=0.0,
+                                          source="chosen: half to all of the 10 % loop width of Fig 4.8b",
+                                          doc="hidden spring hysteresis, width / force")

@@ -125,17 +125,15 @@ class HandChainParams(Parameters):
                                   source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
                                          "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "
                                          "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter")
-    link_motion_in_force_model: bool = param(
+    link_acceleration_feedforward: bool = param(
         False, unit="-",
-        source=("chosen: False, the tendon force model of ch. 10 ((10.1): tendon fixed at the link end) in the "
-                "backstepping's force steps, f' = phi' r_m omega; True: the exact 15.5 design, x' = r_m omega + "
-                "P qdot and the link model's P qdd in f''. Measured (index, 3 kHz, ZOH, Drake Linearize): with "
-                "True and guide friction the continuous loop on the true joint state has a pole at +833 1/s (the "
-                "light links' modelled acceleration turns the guides' presliding stiffness, absent from the link "
-                "model, into motor torque); with True and the tendon-length estimator the sampled loop is "
-                "unstable on the default plant (spectral radius 1.03 without guide friction, a 544 Hz DIP/PIP mode "
-                "fed back through P qdot of the one-period-old estimate; 1.25 with it); with False it is stable on "
-                "every finger and the hand, with and without guide friction (tests/test_hand_control.py)"))
+        source=("chosen: False. The exact 15.5 design feeds the tendon force change phi' P qdd of its link model's "
+                "acceleration forward; on the light finger links that turns any link-side force the model lacks into "
+                "motor torque (index DIP: ~8 Nm per N), and with the guides' friction (its presliding stiffness, "
+                "absent from the link model) the loop has a pole at +833 1/s (index, continuous, true joint state; "
+                "3 kHz through the estimator: spectral radius 1.26). Without it the sampled loop is stable on every "
+                "finger and the hand with guide friction (tests/test_hand_control.py); True gives the exact design "
+                "(poles equal to the designed error system on the ideal plant)"))
 
 
 @dataclass(frozen=True)

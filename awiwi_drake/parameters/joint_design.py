@@ -40,12 +40,12 @@ class JointDesignParams(Parameters):
         source="chosen: Bryson's rule, 0.05 Nm ~ 10 % of a finger joint's torque range (Fig 15.22: 0.5 Nm/rad x 0.2 rad "
                "is 0.1 Nm)")
     lqr_torque_rate: float = param(
-        1.0, unit="Nm/s", low=0.0, low_inclusive=False,
-        source="chosen: Bryson's rule, the torque error above over ~50 ms; measured on the index (6 kHz chain, "
-               "estimator, 3 Nm limit, compare --short): over 10 ms (5 Nm/s) the step saturates 75 % of the samples, "
-               "1 Nm/s 65 %; 0.5 Nm/s settles the step (5 %) but the 0.01 Nm disturbance then asks the DIP's "
-               "distribution for a negative force and that case stops (compare: DIP row status infeasible_force): the "
-               "full-state stage is not robust here")
+        5.0, unit="Nm/s", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule on the motors' torque rate sigma (joint_stage: the LQR/SDRE stages measure "
+               "sigma = -(P S)^T k_t r_m omega), the torque error above within 10 ms; measured on the index at 3 kHz "
+               "with the estimator and the default physics (control.joint_design.sampled_loop_poles): 3 / 5 / 8 / 15 "
+               "Nm/s damp the DIP's link mode (~3930 rad/s) at -66 / -35 / -17 / -5 1/s with the slowest pole at "
+               "-8 / -12 / -15 / -5 1/s; 5 keeps twice the margin of 8 (ring, fifth, thumb: all stable over 3-15)")
     lqr_input: float = param(
         0.1, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule on the desired joint torque (twice the torque error: the input may move more "

@@ -117,6 +117,12 @@ class Rig:
         ``states (T, n_states) -> tendon forces (T, m)``, the law of the ``tendon_force`` port
         vectorised over samples; the slack/over-range monitors apply it to the logged state
         instead of evaluating the port at every step.
+    sampled_diagram : callable or None
+        ``sampled_diagram(period, hold_applied_torque=False) -> Diagram``: a new diagram with the same
+        ports and state order whose dynamics are Drake's ``DiscreteTimeApproximation`` at ``period`` [s]
+        (fixed-step RK3, one step per period, input held; ``Linearize`` with the period);
+        :func:`~awiwi_drake.control.closed_loop` puts it in sampled loops, with ``applied_torque`` held
+        over the period (the single-joint rigs; None: the rig has none).
     """
 
     name: str
@@ -135,6 +141,7 @@ class Rig:
     pair_slack: tuple | None = None
     spring_kind: str | None = None
     tendon_force_of_state: Callable | None = None
+    sampled_diagram: Callable[[float], Diagram] | None = None
 
     @property
     def num_states(self) -> int:

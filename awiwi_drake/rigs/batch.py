@@ -17,6 +17,7 @@ import numpy as np
 from pydrake.systems.framework import System
 
 from awiwi_drake.components.fused_drive import TendonDriveBatch_
+from awiwi_drake.components.rig_system import sampled_dynamics
 from awiwi_drake.parameters.rigs import JointRigParams
 from awiwi_drake.rigs.base import OperatingPoint
 from awiwi_drake.rigs.rigs import joint_rig
@@ -45,6 +46,16 @@ class BatchedRig:
         ext = [np.zeros(1) if op.external_torque is None else np.asarray(op.external_torque, float) for op in ops]
         return (np.concatenate([op.state for op in ops]), np.concatenate([op.motor_torque for op in ops]),
                 np.concatenate(ext))
+
+    def sampled_diagram(self, period: float) -> System:
+        """A new batch system sampled at ``period`` [s]: the copies as *one* Drake ``DiscreteTimeApproximation``
+        (:func:`~awiwi_drake.components.rig_system.sampled_dynamics`: fixed-step RK3, one step per period,
+        inputs held), the same ports and state order (the discrete state). In a loop sampled at ``period`` it
+        replaces the batch behind a zero-order hold: the same trajectories to round-off, and the integrator
+        steps the copies' contiguous state inside one system instead of walking a diagram's state."""
+        system = TendonDriveBatch_[float](self.single.drive.model, self.num_copies)
+        system.set_name(self.diagram.get_name())
+        return sampled_dynamics(system, period)
 
     def context(self, ops=None):
         """A context with every copy at ``ops`` (default: the rig's default operating point), inputs fixed."""

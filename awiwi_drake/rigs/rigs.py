@@ -30,11 +30,12 @@ from __future__ import annotations
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer, ZeroOrderHold
 
 from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
 from awiwi_drake.components.fused_drive import DriveModel
-from awiwi_drake.components.rig_system import LinkRigOutputs_, rig_dynamics_system, tendon_force_of_states
+from awiwi_drake.components.rig_system import (LinkRigOutputs_, rig_dynamics_system, sampled_dynamics,
+                                                tendon_force_of_states)
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
@@ -114,29 +115,52 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
         model = DriveModel(motor, (spring,) * coupling.num_tendons, coupling, np.zeros(coupling.num_tendons), r_m,
                            hysteresis, link_inertia=(float(inertia),), link_damping=(float(damping),))
-        m, n = coupling.num_tendons, coupling.num_joints
-        b = DiagramBuilder()
-        dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
-        inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
-        b.Connect(inputs.get_output_port(), dyn.get_input_port())
-        b.ExportInput(inputs.get_input_port(0), "motor_torque")
-        b.ExportInput(inputs.get_input_port(1), "external_torque")
-        b.ExportOutput(dyn.get_output_port(), "state")
-        parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
-        parts += [("hysteresis_force", m)] if model.has_hysteresis else []
-        split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
-        b.Connect(dyn.get_output_port(), split.get_input_port())
-        for i, (nm, _) in enumerate(parts[:4]):
-            b.ExportOutput(split.get_output_port(i), nm)
-        outs = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
-        b.Connect(dyn.get_output_port(), outs.GetInputPort("state"))
-        b.ConnectInput("motor_torque", outs.GetInputPort("motor_torque"))
-        for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
-            b.ExportOutput(outs.GetOutputPort(nm), nm)
-        diagram = b.Build()
-        diagram.set_name(name)
-        drive = TendonDrive(diagram, coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled), model)
-        return diagram, None, drive, names
+
+        def build(period=None, *, hold_applied_torque=False):
+            """The rig's diagram: continuous (``period`` None), or sampled at ``period`` [s] (the dynamics
+            as Drake's DiscreteTimeApproximation, :func:`~awiwi_drake.components.rig_system.sampled_dynamics`);
+            the same ports and state order either way. A sampled rig's ``applied_torque`` is that of its
+            current input, or with ``hold_applied_torque`` that of the input it holds over the current period
+            (a zero-order hold, a second discrete state, also exported as ``held_motor_torque``: what a loop
+            logs; the rig alone stays a difference equation with one state group, which Drake's ``Linearize``
+            needs)."""
+            m, n = coupling.num_tendons, coupling.num_joints
+            b = DiagramBuilder()
+            dynamics = rig_dynamics_system(model)
+            if period is None:
+                dyn = b.AddNamedSystem("rig_dynamics", dynamics)
+            else:
+                dynamics.set_name("rig_dynamics")     # Drake names the approximation DiscreteTimeApproximated_<name>
+                dyn = b.AddSystem(sampled_dynamics(dynamics, period))
+            inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
+            b.Connect(inputs.get_output_port(), dyn.get_input_port())
+            b.ExportInput(inputs.get_input_port(0), "motor_torque")
+            b.ExportInput(inputs.get_input_port(1), "external_torque")
+            b.ExportOutput(dyn.get_output_port(), "state")
+            parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
+            parts += [("hysteresis_force", m)] if model.has_hysteresis else []
+            split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
+            b.Connect(dyn.get_output_port(), split.get_input_port())
+            for i, (nm, _) in enumerate(parts[:4]):
+                b.ExportOutput(split.get_output_port(i), nm)
+            outs = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
+            b.Connect(dyn.get_output_port(), outs.GetInputPort("state"))
+            if not (period is not None and hold_applied_torque):
+                b.ConnectInput("motor_torque", outs.GetInputPort("motor_torque"))
+            else:   # applied_torque: the torque the sampled dynamics hold over the current period
+                held = b.AddNamedSystem("motor_torque_hold", ZeroOrderHold(period, m))
+                b.ConnectInput("motor_torque", held.get_input_port())
+                b.Connect(held.get_output_port(), outs.GetInputPort("motor_torque"))
+                b.ExportOutput(held.get_output_port(), "held_motor_torque")   # for the loop's motor_torque
+            for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
+                b.ExportOutput(outs.GetOutputPort(nm), nm)
+            diagram = b.Build()
+            diagram.set_name(name)
+            return diagram
+
+        drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled),
+                            model)
+        return drive.diagram, None, drive, names, build
     b = DiagramBuilder()
     plant = b.AddNamedSystem("link", MultibodyPlant(0.0))
     add_revolute_link(plant, name="joint", inertia=inertia, damping=damping)
@@ -163,7 +187,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name(name)
-    return diagram, plant, drive, names
+    return diagram, plant, drive, names, None
 
 
 def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None,
@@ -201,7 +225,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     finite_limit = bool(np.isfinite(p.torque_limit))
     motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                         saturation=finite_limit, torque_limit=p.torque_limit if finite_limit else 1.0)
-    diagram, plant, drive, names = _link_rig(
+    diagram, plant, drive, names, sampled = _link_rig(
         name="flexible-joint", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
         inertia=p.link_inertia, damping=p.link_damping, backend=backend,
         hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
@@ -220,7 +244,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
 
     return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
                spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
-               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None)
+               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None, sampled_diagram=sampled)
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -241,7 +265,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     p = _check_params(params, JointRigParams, "joint_rig")
     spring = tendon_spring(p.spring)
     coupling = antagonistic_coupling(p.link_pulley_radius)
-    diagram, plant, drive, names = _link_rig(
+    diagram, plant, drive, names, sampled = _link_rig(
         name="joint-rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
         damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis)
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
@@ -268,8 +292,8 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
 
     return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
-               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None)
-
+               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None,
+               sampled_diagram=sampled)
 
 
 def motor_rig(motor: MotorParams | None = None) -> Rig:

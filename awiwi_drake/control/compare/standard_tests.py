@@ -38,7 +38,7 @@ from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
-           "run_standard_tests", "compare", "dominant_time_constant",
+           "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant",
            "compare_controllers"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -87,33 +87,51 @@ def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = 
 
     The loop (continuous: ``rate_hz=None``) is linearised with Drake's ``Linearize``
     from its first reference to its tracked output at the settled start; each
-    pole's share of the DC gain is ``|c_i b_i / lambda_i|`` in modal coordinates,
+    pole's share of the DC gain is ``|c_i b_i / lambda_i|`` in modal coordinates (norms over the entries of
+    a vector reference and output, e.g. every joint of a finger),
     and poles with less than ``min_share`` of the total (e.g. a co-contraction
     mode that the link angle does not see) are ignored.  Sampled loops or loops
     with discrete controller state (which ``Linearize`` cannot take in a mixed
-    diagram) return None, as do unstable ones.
+    diagram) return their controller's designed tracking time constant
+    (:func:`design_time_constant`) or None; unstable loops return None.
     """
     from awiwi_drake.analysis import linearize
 
     p = params or compare_test_params(loop.rig)
     ctx = settle(loop, p.initial_reference, t_settle=0.0, max_step=p.max_step)
     if not ctx.has_only_continuous_state():
-        return None
+        return design_time_constant(loop)
     try:
         lin = linearize(loop.diagram, context=ctx, input=loop.references[0], outputs=(loop.tracked_outputs[0],),
                         equilibrium_tolerance=None)
     except ValueError:
-        return None
+        return design_time_constant(loop)
     lam, V = np.linalg.eig(lin.A)
     try:
         W = np.linalg.inv(V)
     except np.linalg.LinAlgError:
         return None
-    share = np.abs((lin.C @ V).ravel() * (W @ lin.B).ravel() / np.where(np.abs(lam) > 1e-12, lam, 1e-12))
+    # each mode's part of the DC gain C V diag(1/lambda) W B: |C v_i| |w_i B| / |lambda_i| (vector references and
+    # outputs, e.g. every joint of a finger: norms over them)
+    share = (np.linalg.norm(lin.C @ V, axis=0) * np.linalg.norm(W @ lin.B, axis=1)
+             / np.abs(np.where(np.abs(lam) > 1e-12, lam, 1e-12)))
     if not np.all(np.isfinite(share)) or share.sum() == 0 or np.any(lam.real >= 0):
         return None
     keep = share / share.sum() > min_share
     return float(1.0 / np.min(-lam.real[keep]))
+
+
+def design_time_constant(loop: ClosedLoop) -> float | None:
+    """The controller's own slowest designed tracking time constant [s] (``design["time_constant"]`` of the
+    controller or of its law: the finger/hand per-joint designs,
+    :meth:`~awiwi_drake.control.joint_design.JointDesign.tracking_time_constant`, and the finger
+    backstepping's joint modes), or None when it reports none."""
+    ctrl = loop.controller
+    design = getattr(ctrl, "design", None)
+    if not isinstance(design, dict):
+        design = getattr(getattr(ctrl, "law", None), "design", None)
+    tau = design.get("time_constant") if isinstance(design, dict) else None
+    return float(tau) if tau is not None and math.isfinite(tau) and tau > 0 else None
 
 
 def _linearized_bandwidth(loop: ClosedLoop, ctx) -> float | None:

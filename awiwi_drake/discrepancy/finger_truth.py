@@ -1,0 +1,267 @@
+"""Finger hidden-effect datasets: the package's own finger diagram with one effect on one tendon.
+
+:func:`make_finger_dataset` simulates :func:`~awiwi_drake.hand.diagrams.finger_diagram` (nominal: the
+ideal finger, ``with_physics`` all off, unless ``params`` says otherwise) in closed loop with the motor
+position PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`) at the logging rate,
+and records what the real hand measures: the commanded motor torques (inputs), the motor angles and the
+tendon forces (outputs); joint angles only on request (the hand has no joint sensors).
+
+The hidden effect acts at one place (tendon ``place``, 1-based in the finger's tendon order):
+
+==================== =========================================================================
+``motor_friction``    Stribeck friction on that motor (:func:`~awiwi_drake.components.friction.stribeck_friction`;
+                      the catalog's form is (3.8), an arctangent)
+``guide_friction``    friction of that tendon's path, constant plus capstan part
+                      (:func:`~awiwi_drake.components.friction.guide_friction`, tanh direction)
+``motor_ripple``      two harmonics on that motor, orders drawn from 1..6 and 100 per revolution
+``spring_hysteresis`` the package's Dahl hysteresis of that tendon's spring mechanism, loop width
+                      proportional to the force (``tendon_springs`` override; catalog: constant width)
+==================== =========================================================================
+
+The first three are torques on the motor from a block in front of the drive's ``motor_torque`` input
+(:class:`FingerHiddenTorque_`): guide friction acts between motor and spring, so the motor feels
+``r (f + g)`` while the force sensor at the spring reads ``f``; a torque ``-r g`` on the motor is that.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+from pydrake.systems.framework import DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import Adder, ConstantVectorSource
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake._math import positive_part
+from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
+from awiwi_drake.components.friction import guide_friction, stribeck_friction
+from awiwi_drake.control import closed_loop
+from awiwi_drake.control.motor_position import motor_position_controller
+from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.discrepancy import FingerTruthParams, TruthGeneratorParams
+from awiwi_drake.parameters.hand import FINGERS, FingerRigParams
+from awiwi_drake.parameters.rigs import MotorPositionGains
+
+from . import laws
+from .data import Dataset, finger_rig_name
+
+__all__ = ["FINGER_HIDDEN_EFFECTS", "FingerHiddenTorque_", "nominal_finger_params", "make_finger_dataset"]
+
+FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple", "spring_hysteresis")
+_TORQUE_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple")
+
+
+def nominal_finger_params(finger: str) -> FingerRigParams:
+    """The nominal finger of a dataset: the package's defaults with the thesis's physics off (the
+    ideal finger; a user's JSON may give any other set)."""
+    return FingerRigParams.for_finger(finger).with_physics(ripple=False, hysteresis=False, guide_friction=False,
+                                                           motor_friction=False)
+
+
+@TemplateSystem.define("FingerHiddenTorque_")
+def FingerHiddenTorque_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Torque of a hidden motor-side effect on one motor: inputs ``motor_state`` (2m: theta, omega)
+        and ``tendon_force`` (m) [N]; output ``torque`` (m) [N m], zero except at the effect's place."""
+
+        def _construct(self, num_tendons: int, pulley_radius: float, truth: dict, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._m, self._r, self._truth = int(num_tendons), float(pulley_radius), dict(truth)
+            self.DeclareVectorInputPort("motor_state", 2 * self._m)
+            self.DeclareVectorInputPort("tendon_force", self._m)
+            self.DeclareVectorOutputPort("torque", self._m, self._calc)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._m, other._r, other._truth, converter=converter)
+
+        def _calc(self, context, output):
+            xs = self.get_input_port(0).Eval(context)
+            f = self.get_input_port(1).Eval(context)
+            tr, m, k = self._truth, self._m, self._truth["place"] - 1
+            theta, omega = xs[k], xs[m + k]
+            tau = 0.0 * omega
+            if "motor_friction" in tr:
+                p = tr["motor_friction"]
+                tau = tau + stribeck_friction(omega, p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
+            if "guide_friction" in tr:
+                p = tr["guide_friction"]
+                tau = tau - self._r * guide_friction(self._r * omega, positive_part(f[k]), p["c0"], p["mu_angle"],
+                                                     p["v0"])
+            if "motor_ripple" in tr:
+                tau = tau + laws.ripple(theta, tr["motor_ripple"]["harmonics"])
+            out = [0.0 * omega] * m
+            out[k] = tau
+            output.SetFromVector(np.array(out))
+
+    return Impl
+
+
+def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Generator,
+                      gen: FingerTruthParams, strength: float = 1.0) -> dict:
+    """Random parameters of the hidden effects at tendon ``place`` (1-based)."""
+    for h in hidden:
+        if h not in FINGER_HIDDEN_EFFECTS:
+            raise ValueError(f"--hide {h}: not a finger effect (finger effects: {', '.join(FINGER_HIDDEN_EFFECTS)})")
+    if hidden and not (isinstance(place, int) and 1 <= place <= num_tendons):
+        raise ValueError(f"--place {place!r}: a finger effect needs the tendon it acts on, 1..{num_tendons}")
+    u, k = rng.uniform, float(strength)
+    tr: dict = {"hidden": list(hidden), "place": int(place) if hidden else None, "strength": k}
+    if "motor_friction" in hidden:
+        fc = k * u(*gen.motor_coulomb_range)
+        tr["motor_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.8), vs=u(0.5, 2.0), eps=u(0.05, 0.2),
+                                    viscous=k * u(0.0, 0.002))
+    if "guide_friction" in hidden:
+        tr["guide_friction"] = dict(c0=k * u(*gen.guide_c0_range), mu_angle=k * u(*gen.guide_mu_range), v0=2e-4)
+    if "motor_ripple" in hidden:
+        orders = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False)
+        harm = []
+        for o in orders:
+            amp, ph = k * u(*gen.ripple_amplitude_range), u(0, 2 * np.pi)
+            harm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
+        tr["motor_ripple"] = dict(harmonics=harm)
+    if "spring_hysteresis" in hidden:
+        tr["spring_hysteresis"] = dict(width_ratio=k * u(*gen.hysteresis_ratio_range))
+    return tr
+
+
+def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
+    """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
+    p = nominal
+    if "spring_hysteresis" in truth:
+        coupling_names = finger_diagram(finger=finger, params=nominal).tendon_names
+        name = coupling_names[truth["place"] - 1]
+        hyst = p.spring.hysteresis.replace(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
+        p = p.replace(tendon_springs=((name, p.spring.replace(hysteresis=hyst)),))
+    rig = finger_diagram(finger=finger, params=p)
+    m = rig.num_tendons
+    b = DiagramBuilder()
+    fd = b.AddNamedSystem(f"finger_{finger}", rig.diagram)
+    zero = b.AddNamedSystem("no_external_torque", ConstantVectorSource(np.zeros(rig.num_joints)))
+    b.Connect(zero.get_output_port(0), fd.GetInputPort("external_torque"))
+    if any(e in truth for e in _TORQUE_EFFECTS):
+        hid = b.AddNamedSystem("hidden_effect", FingerHiddenTorque_[float](m, p.motor.pulley_radius, truth))
+        add = b.AddNamedSystem("motor_torque_sum", Adder(2, m))
+        b.Connect(fd.GetOutputPort("motor_state"), hid.get_input_port(0))
+        b.Connect(fd.GetOutputPort("tendon_force"), hid.get_input_port(1))
+        b.Connect(hid.get_output_port(0), add.get_input_port(1))
+        b.Connect(add.get_output_port(0), fd.GetInputPort("motor_torque"))
+        b.ExportInput(add.get_input_port(0), "motor_torque")
+    else:
+        b.ExportInput(fd.GetInputPort("motor_torque"), "motor_torque")
+    for name in ("motor_angle", "motor_velocity", "tendon_force", "joint_angle", "state"):
+        b.ExportOutput(fd.GetOutputPort(name), name)
+    return rig, SimpleNamespace(name=f"truth-finger-{finger}", diagram=b.Build(), params=p)
+
+
+def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None = None, snr_db: float | None = 30.0,
+                        seed: int = 0, gen: FingerTruthParams | None = None, strength: float = 1.0,
+                        joint_angles: bool = False, name: str | None = None, keep_clean: bool = True,
+                        params: FingerRigParams | None = None, progress=None) -> Dataset:
+    """Simulate one closed-loop finger experiment with ``hidden`` effects at tendon ``place``.
+
+    Parameters
+    ----------
+    finger : one of FINGERS
+    hidden : sequence of :data:`FINGER_HIDDEN_EFFECTS`
+    place : int
+        The tendon (1-based, the finger's tendon order ``<finger>_h1...``) the effects act on.
+    snr_db : float or None
+        Sensor SNR [dB] of every output, relative to its standard deviation (None: noise-free); forces
+        are quantised as in :class:`~awiwi_drake.parameters.discrepancy.TruthGeneratorParams`.
+    joint_angles : bool
+        Also record the joint angles (the real hand has no joint sensors).
+    params : FingerRigParams, optional
+        The nominal finger (default :func:`nominal_finger_params`); the truth is it plus ``hidden``.
+
+    Returns
+    -------
+    Dataset (rig ``finger-<finger>``) whose ``meta["truth"]`` holds the hidden effects and place.
+    """
+    if finger not in FINGERS:
+        raise ValueError(f"finger must be one of {', '.join(FINGERS)}, got {finger!r}")
+    gen = gen or FingerTruthParams()
+    nominal = params if params is not None else nominal_finger_params(finger)
+    rng = np.random.default_rng(seed)
+    probe = finger_diagram(finger=finger, params=nominal)
+    m, n = probe.num_tendons, probe.num_joints
+    truth = draw_finger_truth(list(hidden), place, m, rng, gen, strength)
+    rig, truth_rig = _truth_rig(finger, nominal, truth)
+    dt = 1.0 / gen.sample_rate
+    N = int(round(gen.duration / dt))
+    t = np.arange(N) * dt
+    # references: each joint its own lab excitation, plus a common co-contraction of every tendon
+    from .truth import _excitation
+    q_op = np.full(n, gen.flexion)
+    q_op[0] = 0.0  # abduction (or the thumb's first joint) centred
+    op = probe.operating_point(joint_angles=q_op)
+    amp = np.full(n, gen.joint_excursion)
+    amp[0] *= 0.5
+    alpha = dt / (gen.reference_time_constant + dt)   # two first-order reference filters
+    Q = np.empty((N, n))
+    for j in range(n):
+        a = _excitation(t + rng.uniform(0, 3.0), rng)
+        for _ in range(2):
+            for k in range(1, N):
+                a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
+        Q[:, j] = q_op[j] + amp[j] * a
+    r_m = nominal.motor.pulley_radius
+    laws_t = probe.spring_laws
+    f_cc = nominal.pretension + gen.force_modulation * np.sin(2 * np.pi * gen.modulation_hz * t
+                                                              + rng.uniform(0, 2 * np.pi))
+    h = probe.coupling.h
+    h0 = np.asarray(h(np.zeros(n)), float)
+    ref = np.empty((N, m))
+    for k in range(N):
+        x = np.array([float(law.inverse_force(f_cc[k])) for law in laws_t])
+        ref[k] = (x - probe.offsets - (np.asarray(h(Q[k]), float) - h0)) / r_m
+    X0 = np.asarray(op.state, float).copy()
+    X0[2 * n:2 * n + m] = ref[0]
+    gains = MotorPositionGains(kp=gen.kp, kd=gen.kd, rate_hz=gen.sample_rate)
+    ctrl = motor_position_controller(truth_rig, gains, pulley_radius=r_m)
+    loop = closed_loop(truth_rig, ctrl, rate_hz=gen.sample_rate, estimator=None)
+    full = np.zeros(truth_rig.diagram.num_continuous_states())
+    full[:len(X0)] = X0          # the Dahl states (hysteresis of the hidden tendon) start at rest
+    u0 = r_m * nominal.pretension   # the PD holds the pretension: u = r f_pre at the reference
+    ctx = loop.create_context(state=full, motor_torque=np.full(m, u0))
+    try:
+        res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
+                                                 "tendon_force_reference": np.full(m, nominal.pretension)},
+                       log=("motor_angle", "tendon_force", "joint_angle", "motor_torque_command"), log_period=dt,
+                       mode="fixed_step", step=1.0 / 3000.0 if gen.sample_rate <= 3000 else dt, progress=progress)
+    except SimulationDivergedError as exc:
+        raise FloatingPointError(f"finger truth simulation diverged: {exc}") from None
+    U = res["motor_torque_command"]
+    if U.shape[0] != N:
+        raise RuntimeError(f"finger truth simulation logged {U.shape[0]} samples, expected {N}")
+    clean = {}
+    for i in range(m):
+        clean[f"motor_angle_{i + 1}"] = res["motor_angle"][:, i].copy()
+        clean[f"tendon_force_{i + 1}"] = res["tendon_force"][:, i].copy()
+    if joint_angles:
+        for j in range(n):
+            clean[f"joint_angle_{j + 1}"] = res["joint_angle"][:, j].copy()
+    rg = TruthGeneratorParams()
+    meas = {}
+    for key, y in clean.items():
+        y = y.copy()
+        if snr_db is not None:
+            y = y + rng.normal(0.0, clean[key].std() * 10 ** (-snr_db / 20.0), N)
+            if key.startswith("tendon_force"):
+                lsb = rg.force_range / 2 ** rg.force_bits
+                y = np.round(y / lsb) * lsb
+        meas[key] = y
+    if np.any(np.abs(U) >= nominal.motor.torque_limit) and nominal.motor.saturation:
+        raise FloatingPointError(f"finger truth: the commanded torque reaches the motor limit "
+                                 f"{nominal.motor.torque_limit} N m; the logged command would not be the applied one")
+    inputs = {f"motor_torque_{i + 1}": U[:, i].copy() for i in range(m)}
+    tag = "-".join(hidden) if hidden else "none"
+    where = f"_t{place}" if hidden else ""
+    name = name or f"finger-{finger}_{tag}{where}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
+    meta = {"truth": dict(truth, tendon=rig.tendon_names[place - 1] if hidden else None),
+            "generator": {"snr_db": snr_db, "seed": seed, "sample_rate": gen.sample_rate, "duration": gen.duration}}
+    from .data import finger_parameters_to_json
+    ds = Dataset(name, finger_rig_name(finger), t, inputs, meas, finger_parameters_to_json(finger, nominal), {}, meta)
+    if keep_clean:
+        ds.meta["clean_outputs"] = clean
+    return ds
