@@ -331,7 +331,9 @@ def test_index_finger_step_with_estimated_joint_angles(controller):
     against the 0.5 Nm/rad impedance; test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band), and
     without the spring hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
     model and leaves a steady joint offset of order Kp^-1 (P S)^T z (backstepping, index, 3 kHz design: up
-    to 0.10 / 0.16 / 0.26 / 0.42 rad per DoF, measured 0.010 / 0.043 / 0.074 rad on MCP / PIP / DIP; lqr:
+    to 0.10 / 0.16 / 0.26 / 0.42 rad per DoF, measured 0.0017 / 0.0055 / 0.0078 rad on MCP / PIP / DIP, the closed
+    form of test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band; 0.010 / 0.043 / 0.074 with the
+    link-acceleration feed-forward; lqr:
     0.006 rad on the MCP), which this 2 % tracking check would only measure."""
     rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(
         hysteresis=False, guide_friction=False))

@@ -14,7 +14,8 @@ selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
     z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
     u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
 
-with the tendon force ``f = phi_i(x_i)`` of each tendon's own spring law (``rig.spring_laws``: the
+with the tendon force ``f = phi_i(x_i)`` (what the hand measures: the lever's angle, ch. 4, mapped to force
+by the calibration; the lever's friction ``z`` and the guides' ``g`` are not measured) of each tendon's own spring law (``rig.spring_laws``: the
 lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
 spring elongation ``x_i``, the motor friction
 (3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
