@@ -55,16 +55,13 @@ def test_short_window_lets_each_designed_joint_loop_settle(name):
     assert max(late) > band            # at one tau the slowest DoF is still outside the band
 
 
-def test_short_cli_window_on_a_finger_is_five_design_time_constants(monkeypatch):
-    """``compare --short`` on a finger: the step window is min(full, delay + 5 tau) with tau the slowest of the
+def test_short_window_on_a_finger_is_five_design_time_constants():
+    """``compare --short`` (``short_test_params``) on a finger: the step window is min(full, delay + 5 tau) with tau the slowest of the
     compared controllers' designs (backstepping: its joint modes M e'' + Kd e' + Kp e = 0)."""
-    from awiwi_drake.cli.compare import RIG_FACTORIES, _short_params
-    import importlib
-    module, fn, kw = RIG_FACTORIES["finger-index"]
-    rig_fn = getattr(importlib.import_module(module), fn)
+    from awiwi_drake.control.compare import short_test_params
     full = compare_test_params("finger-index")
-    p = _short_params(full, rig_fn, kw, ["backstepping"], "finger-index")
-    law = make_controller("backstepping", rig_fn(**kw)).law
+    p = short_test_params(lambda: finger_diagram(finger="index"), ["backstepping"], full)
+    law = make_controller("backstepping", finger_diagram(finger="index")).law
     A_e = np.block([[np.zeros_like(law.M), np.eye(len(law.M))],
                     [-np.linalg.solve(law.M, law.Kp), -np.linalg.solve(law.M, law.Kd)]])
     tau = 1.0 / np.min(-np.linalg.eigvals(A_e).real)

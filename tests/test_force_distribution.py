@@ -468,11 +468,11 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
     """The cascaded chain (distribution, estimator, tendon force law) is sampled: over N control periods of
     fixed-step RK3 it is evaluated N (+1 at the start) times while the plant's derivatives are evaluated 3N."""
     from awiwi_drake.analysis import simulate
-    from awiwi_drake.components.fused_drive import TendonDrive_
     from awiwi_drake.control import closed_loop, get_entry, make_controller
     from awiwi_drake.control.base import StaticLawController_
     from awiwi_drake.control.force_distribution import TendonForceDistribution_
     from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.hand.dynamics import HandDynamics_
     from awiwi_drake.hand.estimation import LinkPositionEstimator_
     counts = {}
 
@@ -484,7 +484,7 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
             return f(self, *a)
         monkeypatch.setattr(cls, name, w)
     for cls, name in ((TendonForceDistribution_[float], "_update"), (LinkPositionEstimator_[float], "_update"),
-                      (StaticLawController_[float], "_calc"), (TendonDrive_[float], "DoCalcTimeDerivatives")):
+                      (StaticLawController_[float], "_calc"), (HandDynamics_[float], "DoCalcTimeDerivatives")):
         counting(cls, name)
     rig = finger_diagram(finger="index")
     loop = closed_loop(rig, make_controller("cascaded", rig), **get_entry("cascaded", rig).loop_options)
@@ -492,7 +492,7 @@ def test_chain_runs_once_per_control_period_never_in_derivative_evaluations(monk
     n = 12
     counts.clear()                          # the design (per-joint linearisations) evaluates the laws too
     simulate(loop, loop.create_context(op), n / loop.rate_hz, inputs={"joint_angle_reference": op.joint_angle + 0.02})
-    derivs = counts.pop(TendonDrive_[float].__name__ + "DoCalcTimeDerivatives")
+    derivs = counts.pop(HandDynamics_[float].__name__ + "DoCalcTimeDerivatives")
     assert 3 * n <= derivs <= 3 * n + 3
     for key, k in counts.items():
         assert n <= k <= n + 1, (key, k)

@@ -166,3 +166,19 @@ def test_link_geometry_poses_are_the_plant_body_poses_and_convert():
     actx = ad.CreateDefaultContext()
     ad.get_input_port().FixValue(actx, np.array([AutoDiffXd(v) for v in q], dtype=object))
     assert len(ad.get_output_port().Eval(actx).ids()) == len(model.bodies)
+
+
+def test_thumb_coupling_and_hessians_fast_path_equals_the_law_functions():
+    """The distribution's per-period thumb kinematics (one compiled call) = P(q) and d2h/dq2 of the laws."""
+    from awiwi_drake.control.force_distribution import _nullspace_jit, coupling_nullspace
+    from awiwi_drake.hand.coupling import finger_coupling
+    c = finger_coupling("thumb")
+    for _ in range(5):
+        q = RNG.uniform(-0.6, 0.6, 4)
+        P, H = c.coupling_and_hessians(q)
+        qo = q.astype(object)
+        np.testing.assert_allclose(P, np.asarray(c.P(qo), dtype=float), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(H, np.asarray(c.tension_hessians(qo), dtype=float),
+                                   rtol=1e-12, atol=1e-15)
+        for a, b in zip(_nullspace_jit(P, 1e-10), coupling_nullspace(P)):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-15)

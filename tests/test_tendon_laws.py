@@ -173,7 +173,7 @@ def test_one_joint_with_mixed_laws_closed_by_the_chain_has_exactly_the_designed_
     K = d.gains[j, :4]
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
-                                torque_op=point["torque_offset"])
+                                torque_op=point["torque_offset"], torque_rate=d.law.torque_rate)
     loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
                        estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
@@ -203,21 +203,21 @@ def test_one_joint_with_mixed_laws_closed_by_the_chain_has_exactly_the_designed_
 
 def test_two_time_scale_tendon_level_damps_the_elongation_rate_with_each_tendons_stiffness():
     """The two-time-scale chain's tendon level (11.3) on the finger with one law overridden, closed form of each
-    DoF's reduced model (per tendon: B thdd = Kp_m (f_d - f) / alpha_i - Kd_m (thd + v_path / r_m) - d_eff thd,
+    DoF's reduced model (Kp_m = B w_m^2, Kd_m = 2 xi w_m B at the chain's force bandwidth; per tendon: B thdd = Kp_m (f_d - f) / alpha_i - Kd_m (thd + v_path / r_m) - d_eff thd,
     alpha_i = r_m k_i, f = phi_i(r_m th + P q)): tau'' = w_m^2 (tau_d - tau) - (Kd_m + d_eff)/B tau'
     - K_jj qdd - K_jj d_eff/B qd with K_jj = sum_i P_ij^2 k_i (each tendon's own law), qdd = (tau - b qd)/M;
     d_eff = d (1 - friction_scale) (the law feeds forward friction_scale of the motor's viscous term).  Damping
     the absolute motor velocity instead would add -K_jj Kd_m / B to the qd entry: a viscous joint damping that
     made the finger designs crawl (slowest index pole -0.35 1/s)."""
-    from awiwi_drake.parameters.control import ImpedanceParams
+    from awiwi_drake.parameters.control import TendonForceGains
     rig = _mixed_rig()
     op = rig.operating_point()
     laws = rig_springs(rig)
     P = np.asarray(rig.coupling.P(op.joint_angle))
     k_own = np.array([_k_of_force(law, f) for law, f in zip(laws, op.tendon_force)])
-    ip, motor = ImpedanceParams(), rig.params.motor
-    B, wm = motor.inertia, ip.motor_bandwidth
-    kd_m = 2 * ip.motor_damping_ratio * wm * B
+    motor = rig.params.motor       # the motor loop runs at the chain's force bandwidth and damping ratio
+    B, wm = motor.inertia, HandChainParams().force_bandwidth
+    kd_m = 2 * TendonForceGains().damping_ratio * wm * B
     d_eff = (motor.damping + (motor.viscous_friction if motor.friction else 0.0)) * (1 - HandChainParams().friction_scale)
     for m in reduced_joint_models(rig, tendon_law="motor-position"):
         K_jj = float(P[:, m.dof] ** 2 @ k_own)
@@ -227,3 +227,29 @@ def test_two_time_scale_tendon_level_damps_the_elongation_rate_with_each_tendons
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * abs(want[1]))
         assert m.B[3, 0] == pytest.approx(wm ** 2, rel=1e-12)
         assert abs(K_jj * kd_m / B) > 1e3 * 1e-9 * abs(want[1])              # the absolute damping would show
+
+
+def test_hand_chain_gives_every_finger_its_own_tendons_laws():
+    """On the hand (38 tendons, the distribution one solver per finger, the force law one bank) with laws
+    overridden in two fingers: every tendon's distribution table row and force map are its own law's (the
+    fingers' slices of the hand's laws line up with their tendons)."""
+    from awiwi_drake.hand.diagrams import hand_diagram
+    from awiwi_drake.parameters.hand import HandRigParams
+    from awiwi_drake.control import make_controller
+    p = HandRigParams()
+    stiff = p.spring.replace(tendon=STIFF)
+    hand = hand_diagram(wrist=False, params=p.replace(tendon_springs=(("middle_h3", stiff), ("thumb_h8", stiff))))
+    springs = rig_springs(hand)
+    over = [hand.tendon_names.index(t) for t in ("middle_h3", "thumb_h8")]
+    assert [i for i, law in enumerate(springs) if law is not springs[0]] == sorted(over)
+    ctrl = make_controller("cascaded", hand)
+    dist = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_distribution")
+    assert dist._batch is not None                            # the compiled path serves the mixed hand
+    f = np.linspace(10.0, 120.0, 38)
+    k_law = springs.stiffness(springs.inverse_force(f))
+    k_table = np.concatenate([s.stiffness_map(f[st])[0] for s, _, st, _, _ in dist._parts])
+    np.testing.assert_allclose(k_table, k_law, rtol=1e-6)
+    law = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("tendon_force_control").law
+    r_m = hand.params.motor.pulley_radius
+    np.testing.assert_allclose([fm.alpha_of_force(fi) for fm, fi in zip(law.fmaps, f)], r_m * k_law, rtol=1e-6)
+    assert abs(k_law[over[0]] / _k_of_force(springs[0], f[over[0]]) - 1.0) > 0.02   # the overrides differ

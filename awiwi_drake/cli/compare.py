@@ -73,33 +73,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def _short_params(params, rig_fn, kw, names, rig_name):
-    """Shortened tests whose step window lets the compared loops settle (CompareShortMode)."""
-    from awiwi_drake.control.base import closed_loop
-    from awiwi_drake.control.compare import dominant_time_constant
-    from awiwi_drake.control.registry import get_entry
-    from awiwi_drake.parameters.cli import CompareShortMode
-
-    sm = CompareShortMode()
-    taus = []
-    # single-joint rigs: continuous loops (the compiled drive declares no spurious feedthrough), Drake linearises
-    # them; fingers and the hand: the registered (sampled) loops, whose controllers give their design's tracking
-    # time constant (design_time_constant; their Dahl hysteresis states put zero eigenvalues in a linearisation)
-    finger = rig_name in FINGER_RIGS
-    for n in names:
-        rig = rig_fn(**kw)
-        entry = get_entry(n, rig_name)
-        opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
-        taus.append(dominant_time_constant(closed_loop(rig, entry.factory(rig), **opts), params))
-    if any(t is None for t in taus):  # a loop with no time constant (unstable, or nothing known): the full window
-        step = params.step_duration
-    else:
-        step = min(params.step_duration, max(sm.min_step_duration, params.step_delay
-                                             + sm.step_time_constants * max(taus)))
-    return params.replace(step_duration=step, sweep_duration=min(params.sweep_duration, sm.sweep_duration),
-                          settle_time=min(params.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
-
-
 def _parse_list(text: str, what: str) -> list[str]:
     items = [t.strip() for t in text.split(",") if t.strip()]
     if not items:
@@ -117,7 +90,7 @@ def run(args) -> int:
     from awiwi_drake.config import short_mode
     from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
     from awiwi_drake.control.registry import controller_names, get_entry
-    from awiwi_drake.control.compare import compare_test_params
+    from awiwi_drake.control.compare import compare_test_params, short_test_params
 
     if args.list:
         for n in controller_names(args.rig):
@@ -147,9 +120,7 @@ def run(args) -> int:
     short = args.short or short_mode()
     params = compare_test_params(args.rig)
     if short:
-        if args.rig in FINGER_RIGS:   # two sine periods in 0.5 s
-            params = params.replace(sine_frequency=max(params.sine_frequency, 4.0))
-        params = _short_params(params, rig_fn, kw, names, args.rig)
+        params = short_test_params(make_rig, names, params)
     opts = {}
     if args.rate is not None:
         opts["rate_hz"] = None if args.rate == 0 else args.rate

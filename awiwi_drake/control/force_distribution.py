@@ -75,14 +75,22 @@ __all__ = ["DistributionResult", "TendonStiffnessMap", "TendonForceDistribution"
            "TendonForceDistributionSystem"]
 
 
+def _nullspace(P, rtol):
+    """:func:`coupling_nullspace` on a float array (plain numpy that numba compiles too: :data:`_nullspace_jit`)."""
+    U, s, Vt = np.linalg.svd(P)                       # full matrices: P = U S V^T, P^T = V S U^T
+    top = s[0] if s.size else 0.0
+    rank = int(np.sum(s > rtol * max(top, 1e-300)))   # s descending
+    W = np.ascontiguousarray(U[:, rank:])
+    pinv_PT = np.ascontiguousarray(U[:, :rank] / s[:rank]) @ np.ascontiguousarray(Vt[:rank, :])   # (P^T)^+
+    return pinv_PT, W, rank
+
+
+_nullspace_jit = numba.njit(cache=True)(_nullspace)
+
+
 def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
     """``(pinv(P^T), W, rank)`` with ``W`` an orthonormal basis of ``ker(P^T)`` (SVD)."""
-    P = np.asarray(P, dtype=float)
-    U, s, Vt = np.linalg.svd(P, full_matrices=True)  # P = U S V^T, P^T = V S U^T
-    rank = int(np.count_nonzero(s > rtol * max(float(s[0]) if s.size else 0.0, 1e-300)))   # s descending
-    W = U[:, rank:]
-    pinv_PT = (U[:, :rank] / s[:rank]) @ Vt[:rank, :]   # (P^T)^+ = U S^-1 V^T (m x n)
-    return pinv_PT, W, rank
+    return _nullspace(np.asarray(P, dtype=float), float(rtol))
 
 
 def joint_stiffness(P: np.ndarray, k_t: np.ndarray, f: np.ndarray, hessian: np.ndarray | None = None) -> np.ndarray:
@@ -957,17 +965,20 @@ class _FingerBatch:
         F, M, N = len(self.parts), self.M, self.N
         p = self.params
         fallback = np.zeros(F, dtype=bool)
-        for k in self.dynamic:
+        for k in self.dynamic:      # the thumb: P(q) and its Hessians from one kernel call, the SVD compiled
             c = self.couplings[k]
-            sq = self.parts[k][4]
-            P = np.asarray(c.P(q[sq]), dtype=float)
-            pinv_PT, W, rank = coupling_nullspace(P)
-            if rank != P.shape[1] or not np.all(np.isfinite(P)):
+            P, H = c.coupling_and_hessians(q[self.parts[k][4]])
+            if not np.isfinite(P).all():
+                fallback[k] = True
+                continue
+            pinv_PT, W, rank = _nullspace_jit(P, 1e-10)
+            if rank != P.shape[1]:
                 fallback[k] = True
                 continue
             self._fill(k, P, pinv_PT, W)
-            self.H[k, :P.shape[0], :P.shape[1], :P.shape[1]] = c.tension_hessians(q[sq])
-            self.outer[k] = np.einsum("ij,ik->ijk", self.P[k], self.P[k])
+            self.H[k, :P.shape[0], :P.shape[1], :P.shape[1]] = H
+            Pk = self.P[k]
+            self.outer[k] = Pk[:, :, None] * Pk[:, None, :]
         tauP, Kd, fp0 = np.zeros((F, N)), np.zeros((F, N, N)), np.zeros((F, M))
         tauP[self._d] = tau[self._d_src]
         Kd[self._k] = Kv[self._k_src]

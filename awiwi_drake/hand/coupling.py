@@ -312,11 +312,7 @@ class ThumbCoupling(FingerCoupling):
     def P(self, q):
         q = self._check_q(q)
         if q.dtype != object:             # the compiled base kinematics (see base_lengths_and_jacobian)
-            out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
-            P = np.zeros((8, 4))
-            P[:4, :2] = out[4:12].reshape(4, 2)
-            P[4:, 2:] = self._P_distal
-            return P
+            return self.coupling_and_hessians(q)[0]
         d = self.base_vectors(q)
         norm = np.sqrt(np.sum(d * d, axis=1))
         _, _, _, dA0, dA1 = self._base_jacobians(q)
@@ -328,15 +324,23 @@ class ThumbCoupling(FingerCoupling):
         P[4:, 2:] = self._P_distal
         return P
 
+    def coupling_and_hessians(self, q):
+        """Float fast path: ``(P(q), tension_hessians(q))`` from one call of the compiled base kinematics."""
+        q = self._check_q(q)
+        out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
+        P = np.zeros((8, 4))
+        P[:4, :2] = out[4:12].reshape(4, 2)
+        P[4:, 2:] = self._P_distal
+        H = np.zeros((8, 4, 4))
+        H[:4, :2, :2] = out[12:].reshape(4, 2, 2)
+        return P, H
+
     def tension_hessians(self, q) -> np.ndarray:
         """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the compiled base kinematics (``base_lengths_and_jacobian``)."""
         q = self._check_q(q)
         if q.dtype == object:
             return super().tension_hessians(q)
-        out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
-        H = np.zeros((8, 4, 4))
-        H[:4, :2, :2] = out[12:].reshape(4, 2, 2)
-        return H
+        return self.coupling_and_hessians(q)[1]
 
     @_quiet_fp
     def tension_hessian(self, q, f):

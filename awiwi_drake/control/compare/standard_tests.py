@@ -38,7 +38,7 @@ from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
-           "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant",
+           "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant", "short_test_params",
            "compare_controllers"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -448,6 +448,40 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
         rows += m
         rig = getattr(loop.rig, "name", rig)
     return Comparison(runs, MetricsTable(rows), rig)
+
+
+def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
+                      params: CompareTestParams | None = None) -> CompareTestParams:
+    """The standard tests shortened (``compare --short``, ``AWIWI_SHORT=1``) so that the compared loops still
+    settle (:class:`~awiwi_drake.parameters.cli.CompareShortMode`): the step window is ``step_delay +
+    step_time_constants x`` the slowest tracking time constant of the registered controllers ``names`` on
+    ``make_rig()``, at least ``min_step_duration`` and at most the full window (which is kept when a loop has
+    no known time constant); shorter sweep, settling and sine (fingers/hand: two periods at >= 4 Hz).
+
+    The time constant is :func:`dominant_time_constant`: single-joint rigs as continuous loops (Drake
+    ``Linearize``); fingers and the hand as their registered sampled loops, whose controllers report their
+    design's (:func:`design_time_constant`; the Dahl hysteresis states of their plant would put zero
+    eigenvalues in a linearisation)."""
+    from awiwi_drake.parameters.cli import CompareShortMode
+
+    names = list(names)
+    probe = make_rig()
+    p = params or compare_test_params(probe)
+    sm = CompareShortMode()
+    finger = rig_kind(probe) in ("finger", "hand")
+    taus = []
+    for n in names:
+        entry = get_entry(n, probe)
+        rig = make_rig()
+        opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
+        taus.append(dominant_time_constant(closed_loop(rig, entry.factory(rig), **opts), p))
+    if any(t is None for t in taus):     # a loop with no time constant (unstable, or nothing known): full window
+        step = p.step_duration
+    else:
+        step = min(p.step_duration, max(sm.min_step_duration, p.step_delay + sm.step_time_constants * max(taus)))
+    short = p.replace(step_duration=step, sweep_duration=min(p.sweep_duration, sm.sweep_duration),
+                      settle_time=min(p.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
+    return short.replace(sine_frequency=max(p.sine_frequency, 4.0)) if finger else short
 
 
 def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
