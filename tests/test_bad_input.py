@@ -216,6 +216,8 @@ CLI_CASES = [
      "--name 'a/b': a plain file stem"),
     ("compare-tests-empty", lambda t, d: ["compare", "--rig", "joint-rig", "--controllers", "pd", "--out", str(t),
                                           "--tests", ""], 2, "--tests: give at least one name"),
+    ("compare-set-unknown", lambda t, d: ["compare", "--rig", "finger-index", "--controllers", "backstepping", "--out",
+                                          str(t), "--set", "no_such=1"], 2, "unknown parameter 'no_such'"),
     ("diagnose-report-file", lambda t, d: ["diagnose", str(d), "--report", str(_file(t))], 2, "--report"),
     ("diagnose-json-dir", lambda t, d: ["diagnose", str(d), "--json", str(t)], 2, "--json"),
     ("diagnose-json-unwritable", lambda t, d: ["diagnose", str(d), "--json", str(_file(t) / "x.json")], 2,

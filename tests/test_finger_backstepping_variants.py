@@ -23,8 +23,7 @@ from awiwi_drake.parameters.hand_control import HandChainParams
 VARIANTS = ("position", "nonlinear-spring")
 # The exact design (the link's modelled motion in the force steps) where HandChainParams offers the choice: the error
 # system and the Lyapunov decrease are properties of that design.
-_EXACT = ({"link_motion_in_force_model": True}
-          if "link_motion_in_force_model" in {f.name for f in dataclasses.fields(HandChainParams)} else {})
+_EXACT = {"link_acceleration_feedforward": True}      # the exact design (its own error system and V)
 
 
 def _ideal_index():

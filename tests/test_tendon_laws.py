@@ -39,8 +39,9 @@ def _k_of_force(law, f):
 
 def _mixed_rig(finger="index", tendon="index_h3", backend="python"):
     """The finger with ``tendon``'s law overridden (python backend: continuous linearisations; the ideal
-    drive without hysteresis, which that backend does not carry; the design model's motor)."""
-    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
+    drive without hysteresis and guide friction, whose Dahl states that backend does not carry; the design model's
+    motor)."""
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False, guide_friction=False)
     p = p.replace(motor=design_motor(p.motor), tendon_springs=((tendon, p.spring.replace(tendon=STIFF)),))
     return finger_diagram(finger=finger, backend=backend, params=p)
 
