@@ -97,7 +97,8 @@ Variants (``variant``, registered ``backstepping-position`` and ``backstepping-n
   Its ``- e'`` cross term is in N m where 15.5's ``(P S) e'`` is in N: relative to 15.5 it multiplies the
   joint-velocity error by ``1/|P S|^2`` (~3e4 on the index): with the estimate one period old (until this wave's
   estimator change) its command saturated 63-77 % of compare --short's step and sine on the index; with the
-  estimate of the current sample, 7 % of the step, like 15.5.  Weighting ``z3``, ``z4`` by
+  estimate of the current sample, 7 % (26 % without the link-acceleration feed-forward; 15.5: 9 / 14 %).
+  Weighting ``z3``, ``z4`` by
   ``((P S)^T P S)^-1`` (the forces that realise them) turns it into the 15.5 law itself for a constant
   coupling: 15.5 is the 15.4 construction in the metric of the tendon forces (checked numerically on the index at
   a random state: the commands agree to 3e-14 of 139 Nm).
