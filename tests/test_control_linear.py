@@ -165,7 +165,7 @@ def test_lqr_cost_matches_riccati_and_grows_with_R():
     """Simulated cost int(x'Qx + u'Ru) = dx0' S dx0, S increases with R, input amplitude falls (Fig 13.3)."""
     costs, peaks, predicted = [], [], []
     for r in (1e-2, 1.0):
-        rig = flexible_joint_rig(backend="python")
+        rig = flexible_joint_rig()
         d = design_lqr(rig, r=r)
         loop = closed_loop(rig, lqr_controller(rig, r=r), rate_hz=None)
         dx0 = np.array([0.1, 0.0, 0.0, 0.0])  # link displaced by 0.1 rad, reference 0

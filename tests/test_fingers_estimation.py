@@ -9,6 +9,7 @@ from awiwi_drake.hand.coupling import finger_coupling
 from awiwi_drake.hand.estimation import estimate_linear, estimate_thumb, noise_error_bound, thumb_base_gradient_search
 from awiwi_drake.reproductions.ch05_fingers import thumb_estimation_study
 from awiwi_drake.parameters.hand import finger_params
+from awiwi_drake.parameters.hand_control import LinkEstimatorParams
 
 
 @pytest.mark.parametrize("finger", ["index", "middle", "ring", "fifth"])
@@ -210,3 +211,32 @@ def test_hand_estimator_update_equals_the_law_functions(refine):
                     want[j] = want[j] + Sp @ (np.linalg.pinv(part.P(want[j]) @ Sp) @ r)
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
         assert np.abs(got - q).max() < 1e-2
+
+
+@pytest.mark.parametrize("finger", ["index", "thumb"])
+def test_estimate_is_of_the_current_sample(finger):
+    """The estimator's joint angles come from the sensor sample at hand (the same sample the forces a sampled
+    controller reads with them come from), not from its stored state, which is only the next warm start: with
+    the state at q0 and the measurements of a pose q1, the output is q1 ((5.15) exact for the index; the thumb
+    base by Algorithm 1 warm-started at q0, within its 1e-4 rad convergence), the velocity the backward
+    difference (q1 - q0) / T of the filter, and one periodic update stores q1."""
+    from awiwi_drake.hand import finger_diagram
+    rig = finger_diagram(finger=finger)
+    est = rig.link_estimator()
+    sys_ = est.system
+    ctx = sys_.CreateDefaultContext()
+    q0 = rig.operating_point().joint_angle
+    q1 = q0 + np.array([0.05, 0.1, -0.08, 0.06])
+    est.initialize(ctx, q0)
+    c, r_m = rig.coupling, rig.params.motor.pulley_radius
+    theta = np.linspace(-0.2, 0.3, c.num_tendons)
+    x = r_m * theta + rig.offsets + np.asarray(c.h(q1)) - np.asarray(c.h(np.zeros(4)))
+    sys_.GetInputPort("motor_angle").FixValue(ctx, theta)
+    sys_.GetInputPort("elongation").FixValue(ctx, x)
+    tol = 1e-12 if finger == "index" else 1e-4
+    q = sys_.GetOutputPort("joint_angle").Eval(ctx)
+    np.testing.assert_allclose(q, q1, atol=tol)
+    T = max(LinkEstimatorParams().velocity_time_constant, est.period)
+    np.testing.assert_allclose(sys_.GetOutputPort("joint_velocity").Eval(ctx), (q - q0) / T, rtol=1e-9, atol=1e-9)
+    state = sys_.EvalUniquePeriodicDiscreteUpdate(ctx)
+    np.testing.assert_allclose(state.get_vector(0).CopyToVector(), q, atol=1e-15)

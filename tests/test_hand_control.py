@@ -15,6 +15,7 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import TendonPathVelocity
 from awiwi_drake.control.joint_design import joint_stage_controller
 from awiwi_drake.control.joint_stage import JointStage, JointStateFeedbackLaw
+from awiwi_drake.components.spring import TendonSprings
 from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.hand.coupling import dof_selection
@@ -169,7 +170,7 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
         stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
         wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))
-        wrong._spring_groups = [(rig.spring, np.arange(rig.num_tendons))]      # the common law for every tendon
+        wrong.springs = TendonSprings([rig.spring] * rig.num_tendons)          # the common law for every tendon
         wrong_loop = closed_loop(rig, StaticLawController(wrong), rate_hz=None, sensors="ideal")
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
     law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))   # the continuous design: exact cancellation
@@ -306,12 +307,10 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
     # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
     # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
-    from awiwi_drake.cli.compare import _short_params
-    from awiwi_drake.control.compare import compare_test_params
+    from awiwi_drake.control.compare import short_test_params
     from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.hand.coupling import dof_selection
-    p = _short_params(compare_test_params(_rig("ring")), finger_diagram, {"finger": "ring"}, ["joint-pd", "cascaded"],
-                      "finger-ring")                                   # the window the CLI ran
+    p = short_test_params(lambda: _rig("ring"), ["joint-pd", "cascaded"])      # the window the CLI ran
     for name in ("joint-pd", "cascaded"):
         rig = _rig("ring")
         S = dof_selection(rig.coupling)

@@ -158,8 +158,9 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
     while the motors move, stays inside the at-rest response.  (The former check only asked that the error
     shrank; the loops were 'slower than their linearisation' because that was the design's, in motion.)
     Tendons stay taut, and no command saturates in the second half of the run (no limit cycle).  The
-    two-time-scale loop has a slow real pole at rest on the right (+1.5 1/s: its motor-position tendon level
-    against the at-rest friction); over 0.1 s the bound still holds."""
+    two-time-scale loop has a slow real pole at rest on the right (+1.5 1/s on the ring: the motor ripple's slope
+    at the operating point is a negative stiffness on the motor angles, a cogging detent's edge, which its
+    motor-position tendon level does not cancel; with the ripple off it is stable); over 0.1 s the bound holds."""
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.joint_design import sampled_loop_poles
     for name in ("pd", "two-time-scale", "pole-placement", "lqr"):
@@ -186,6 +187,30 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
         assert not np.any(np.abs(res["motor_torque_command"][late]) > 3.0), name
         if name != "two-time-scale":
             assert linear.spectral_radius < 1.0, (name, linear.slowest())
+
+
+@pytest.mark.parametrize("design", ["lqr", "pole-placement"])
+def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
+    """The whole index sampled at 3 kHz by the chain (``sampled_loop_poles``; the plant of the design model: python
+    backend, motor friction in motion, no ripple or hysteresis; true joint state) against the per-DoF sampled
+    design ``eig(Phi - Gamma K)``.  The abduction q20 is decoupled from the other DoF, so its designed poles are
+    the loop's, up to the one approximation of the design model: it samples the *continuous* closed force loop,
+    the chain samples the force law itself, which agree to second order in ``h w_force`` (= 0.1 at 300 rad/s):
+    every designed joint mode well below the force loop (``|ln z| <= h w_force / 3``, at most 100 rad/s: the
+    position modes) lies within (h w_force)^2 = 1 % of its distance to z = 1 from a pole of the loop (the faster
+    ones feel the force loop's own sampling: LQR's 217 rad/s pair is 1.9 % off)."""
+    from awiwi_drake.control.joint_design import joint_stage_controller, sampled_loop_poles
+    p = FingerRigParams.for_finger("index").with_physics(hysteresis=False, ripple=False)
+    rig = finger_diagram(finger="index", backend="python", params=p.replace(motor=design_motor(p.motor)))
+    ctrl = joint_stage_controller(rig, design)
+    d = ctrl.design["joint_design"]
+    loop = sampled_loop_poles(rig, ctrl, estimator=None)
+    assert loop.spectral_radius < 1.0
+    hw = d.period * HandChainParams().force_bandwidth
+    slow = [z for z in d.design_poles[0] if 0 < abs(np.log(complex(z))) <= hw / 3]
+    assert len(slow) >= 1                          # the position pole(s) of q20
+    for z in slow:
+        assert np.min(np.abs(loop.z - z)) <= hw ** 2 * abs(1.0 - z), (z, loop.z[np.argmin(np.abs(loop.z - z))])
 
 
 def _late_estimator(rig, period):

@@ -145,53 +145,53 @@ def test_sampled_rig_loop_is_the_continuous_loop_under_fixed_step_rk3_to_round_o
     assert any(e.kind == "actuator_saturation" for e in cont.events)    # the step saturates the motors
 
 
+def _linearizations(rig, op):
+    """``(A, B)`` of Drake's Linearize of the continuous rig, ``(Ad, Bd)`` of the sampled rig (with its period) and
+    ``(Ad_rk3, Bd_rk3)``: the RK3 step of (A, B) in closed form, I + hA + (hA)^2/2 + (hA)^3/6 and
+    h (I + hA/2 + (hA)^2/6) B."""
+    from pydrake.systems.primitives import Linearize
+
+    def lin(d, ctx, tol):
+        return Linearize(d, ctx, input_port_index=d.GetInputPort("motor_torque").get_index(),
+                         output_port_index=d.GetOutputPort("state").get_index(), equilibrium_check_tolerance=tol)
+    cont = lin(rig.diagram, rig.context(op), 1e-6)
+    sampled = rig.sampled_diagram(H)
+    ctx = sampled.CreateDefaultContext()
+    ctx.SetDiscreteState(0, op.state)
+    sampled.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
+    sampled.GetInputPort("external_torque").FixValue(ctx, op.external_torque)
+    disc = lin(sampled, ctx, 1e-9)
+    assert disc.time_period() == pytest.approx(H)
+    A, B = np.array(cont.A()), np.array(cont.B())
+    hA = H * A
+    rk3 = (np.eye(6) + hA + hA @ hA / 2 + hA @ hA @ hA / 6, H * (np.eye(6) + hA / 2 + hA @ hA / 6) @ B)
+    return (A, B), (np.array(disc.A()), np.array(disc.B())), rk3
+
+
 def test_sampled_rig_linearization_is_the_rk3_step_of_the_continuous_linearization():
     """At an equilibrium every RK3 stage sits at the operating point, so Drake's Linearize of the sampled rig (with
     its period) is exactly the RK3 step of the continuous linearisation (A, B): A_d = I + hA + (hA)^2/2 + (hA)^3/6,
     B_d = h (I + hA/2 + (hA)^2/6) B."""
-    from pydrake.systems.primitives import Linearize
     rig = joint_rig()
-    op = rig.operating_point(pretension=25.0, joint_angle=0.1)
-    cont = Linearize(rig.diagram, rig.context(op), input_port_index=rig.diagram.GetInputPort("motor_torque").get_index(),
-                     output_port_index=rig.diagram.GetOutputPort("state").get_index(), equilibrium_check_tolerance=1e-6)
-    A, B = np.array(cont.A()), np.array(cont.B())
-    sampled = rig.sampled_diagram(H)
-    ctx = sampled.CreateDefaultContext()
-    ctx.SetDiscreteState(0, op.state)
-    sampled.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
-    sampled.GetInputPort("external_torque").FixValue(ctx, op.external_torque)
-    lin = Linearize(sampled, ctx, input_port_index=sampled.GetInputPort("motor_torque").get_index(),
-                    output_port_index=sampled.GetOutputPort("state").get_index(), equilibrium_check_tolerance=1e-9)
-    assert lin.time_period() == pytest.approx(H)
-    hA = H * A
-    Ad = np.eye(6) + hA + hA @ hA / 2 + hA @ hA @ hA / 6
-    Bd = H * (np.eye(6) + hA / 2 + hA @ hA / 6) @ B
-    np.testing.assert_allclose(lin.A(), Ad, rtol=0, atol=1e-10 * np.max(np.abs(Ad)))
-    np.testing.assert_allclose(lin.B(), Bd, rtol=0, atol=1e-10 * np.max(np.abs(Bd)))
+    _, (Ad, Bd), (Ad_rk3, Bd_rk3) = _linearizations(rig, rig.operating_point(pretension=25.0, joint_angle=0.1))
+    np.testing.assert_allclose(Ad, Ad_rk3, rtol=0, atol=1e-10 * np.max(np.abs(Ad_rk3)))
+    np.testing.assert_allclose(Bd, Bd_rk3, rtol=0, atol=1e-10 * np.max(np.abs(Bd_rk3)))
     # the sampled step is stable where the continuous rig is (RK3 inside its stability region at 3 kHz)
-    assert np.max(np.abs(np.linalg.eigvals(Ad))) <= 1 + 1e-12
+    assert np.max(np.abs(np.linalg.eigvals(Ad_rk3))) <= 1 + 1e-12
 
 
 def test_discrete_lqr_on_the_sampled_rig_is_the_discrete_riccati_solution_and_stabilises_it():
     """Drake's DiscreteTimeLinearQuadraticRegulator on the sampled rig's linearisation equals scipy's discrete
-    Riccati gain on the closed-form RK3 matrices, and the sampled loop's spectral radius is below 1."""
+    Riccati gain on the closed-form RK3 matrices of the continuous linearisation, and the sampled loop's spectral
+    radius is below 1."""
     from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator
-    from pydrake.systems.primitives import Linearize
     from scipy.linalg import solve_discrete_are
     rig = joint_rig()
-    op = rig.operating_point(pretension=20.0)
-    sampled = rig.sampled_diagram(H)
-    ctx = sampled.CreateDefaultContext()
-    ctx.SetDiscreteState(0, op.state)
-    sampled.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
-    sampled.GetInputPort("external_torque").FixValue(ctx, op.external_torque)
-    lin = Linearize(sampled, ctx, input_port_index=sampled.GetInputPort("motor_torque").get_index(),
-                    output_port_index=sampled.GetOutputPort("state").get_index(), equilibrium_check_tolerance=1e-9)
+    _, (Ad, Bd), (Ad_rk3, Bd_rk3) = _linearizations(rig, rig.operating_point(pretension=20.0))
     Q, R = np.diag([100.0, 1.0, 1.0, 1.0, 0.01, 0.01]), np.eye(2)
-    K, S = DiscreteTimeLinearQuadraticRegulator(lin.A(), lin.B(), Q, R)
-    Ad, Bd = np.array(lin.A()), np.array(lin.B())
-    P = solve_discrete_are(Ad, Bd, Q, R)
-    K_ref = np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
+    K, S = DiscreteTimeLinearQuadraticRegulator(Ad, Bd, Q, R)
+    P = solve_discrete_are(Ad_rk3, Bd_rk3, Q, R)
+    K_ref = np.linalg.solve(R + Bd_rk3.T @ P @ Bd_rk3, Bd_rk3.T @ P @ Ad_rk3)
     np.testing.assert_allclose(K, K_ref, rtol=1e-6, atol=1e-9 * np.max(np.abs(K_ref)))
     assert np.max(np.abs(np.linalg.eigvals(Ad - Bd @ K))) < 1.0
 
@@ -257,6 +257,8 @@ def test_sampled_rig_is_used_only_where_it_is_the_same_loop():
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="error_controlled")
     with pytest.raises(ValueError, match="step = .*sampled plant"):
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="fixed_step", step=H / 2)
+    with pytest.raises(ValueError, match="integrator = 'runge_kutta2'.*sampled plant"):
+        simulate(loop.diagram, loop.create_context(op), 0.01, integrator="runge_kutta2")
 
 
 def test_sampled_batch_equals_the_continuous_batch_behind_a_hold_to_round_off():

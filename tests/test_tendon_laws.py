@@ -173,7 +173,7 @@ def test_one_joint_with_mixed_laws_closed_by_the_chain_has_exactly_the_designed_
     K = d.gains[j, :4]
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
-                                torque_op=point["torque_offset"])
+                                torque_op=point["torque_offset"], torque_rate=d.law.torque_rate)
     loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
                        estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
@@ -227,3 +227,29 @@ def test_two_time_scale_tendon_level_damps_the_elongation_rate_with_each_tendons
         np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9 * abs(want[1]))
         assert m.B[3, 0] == pytest.approx(wm ** 2, rel=1e-12)
         assert abs(K_jj * kd_m / B) > 1e3 * 1e-9 * abs(want[1])              # the absolute damping would show
+
+
+def test_hand_chain_gives_every_finger_its_own_tendons_laws():
+    """On the hand (38 tendons, the distribution one solver per finger, the force law one bank) with laws
+    overridden in two fingers: every tendon's distribution table row and force map are its own law's (the
+    fingers' slices of the hand's laws line up with their tendons)."""
+    from awiwi_drake.hand.diagrams import hand_diagram
+    from awiwi_drake.parameters.hand import HandRigParams
+    from awiwi_drake.control import make_controller
+    p = HandRigParams()
+    stiff = p.spring.replace(tendon=STIFF)
+    hand = hand_diagram(wrist=False, params=p.replace(tendon_springs=(("middle_h3", stiff), ("thumb_h8", stiff))))
+    springs = rig_springs(hand)
+    over = [hand.tendon_names.index(t) for t in ("middle_h3", "thumb_h8")]
+    assert [i for i, law in enumerate(springs) if law is not springs[0]] == sorted(over)
+    ctrl = make_controller("cascaded", hand)
+    dist = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_distribution")
+    assert dist._batch is not None                            # the compiled path serves the mixed hand
+    f = np.linspace(10.0, 120.0, 38)
+    k_law = springs.stiffness(springs.inverse_force(f))
+    k_table = np.concatenate([s.stiffness_map(f[st])[0] for s, _, st, _, _ in dist._parts])
+    np.testing.assert_allclose(k_table, k_law, rtol=1e-6)
+    law = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("tendon_force_control").law
+    r_m = hand.params.motor.pulley_radius
+    np.testing.assert_allclose([fm.alpha_of_force(fi) for fm, fi in zip(law.fmaps, f)], r_m * k_law, rtol=1e-6)
+    assert abs(k_law[over[0]] / _k_of_force(springs[0], f[over[0]]) - 1.0) > 0.02   # the overrides differ

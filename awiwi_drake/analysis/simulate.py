@@ -19,8 +19,9 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   a *sampled plant* in the diagram (Drake's ``DiscreteTimeApproximation``, e.g. a
   single-joint rig in a sampled loop, see :func:`~awiwi_drake.control.closed_loop`)
   integrates itself with fixed-step RK3 at its period, so such a loop is
-  simulated with one discrete update per period, and error control or a shorter
-  step are refused for it (build the loop with ``sampled_rig=False`` for those);
+  simulated with one discrete update per period, and error control, another
+  integrator or a shorter step are refused for it (build the loop with
+  ``sampled_rig=False`` for those);
 * calls ``progress(t, duration)`` (simulated seconds since the start) after
   every chunk, for progress bars.
 
@@ -43,6 +44,7 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder, InputPor
 from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from awiwi_drake.analysis.monitors import Monitor
+from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCHEME
 from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 
@@ -256,8 +258,10 @@ def simulate(system, context: Context | None, t_final: float, *,
     # -- integration mode ---------------------------------------------------
     period = control_period(diagram)
     sampled = sampled_plants(diagram)
-    if sampled and (mode == "error_controlled" or (step is not None and abs(float(step) - period) > 1e-12 * period)):
-        what = f"mode = {mode!r}" if mode == "error_controlled" else f"step = {step!r} s"
+    if sampled and (mode == "error_controlled" or (step is not None and abs(float(step) - period) > 1e-12 * period)
+                    or integrator != _SAMPLED_SCHEME):
+        what = (f"mode = {mode!r}" if mode == "error_controlled" else f"integrator = {integrator!r}"
+                if integrator != _SAMPLED_SCHEME else f"step = {step!r} s")
         raise ValueError(f"simulate: {what}: diagram {diagram.get_name()!r} holds a sampled plant "
                          f"({sampled[0].get_name()!r}, fixed-step RK3 at the control period {period:g} s inside "
                          f"its discrete update); build the loop with closed_loop(..., sampled_rig=False) to "

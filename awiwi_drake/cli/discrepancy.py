@@ -51,6 +51,10 @@ def _diagnose(args) -> int:
     if report_dir is not None:
         md = write_report(dx, report_dir)
         print(f"report: {md}", file=sys.stderr)
+    if not hasattr(dx, "nrmse_before"):   # a finger diagnosis: effects with their tendon
+        print(dx.text())
+        print(findings_text(dx))
+        return 0
     named = ", ".join(e + (f" on {dx.places[e]}" if e in dx.places else "") for e in dx.named_effects) or "none"
     print(f"{dx.dataset}: {dx.verdict}; named effects: {named}")
     if dx.nuisance_corrections:
@@ -177,7 +181,7 @@ def register(subparsers) -> None:
     m.add_argument("--rig", choices=["tendon-rig", "joint-rig", "finger-index", "finger-middle", "finger-ring",
                                      "finger-fifth"], default="joint-rig",
                    help="the rig of the truth experiment (default joint-rig); finger-*: the package's finger "
-                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple, spring_hysteresis")
+                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple")
     m.add_argument("--hide", action="append", metavar="EFFECT",
                    help="catalog effect hidden in the truth (repeat or comma-separate; 'none'): motor_friction, "
                         "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay, spring_drift, "

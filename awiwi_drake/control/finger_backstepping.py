@@ -65,11 +65,7 @@ Variants (``variant``, registered ``backstepping-position`` and ``backstepping-n
   750 1/s, the heavy modes at 0.5 Nm/rad, the lightest at 0.092 like the impedance design).  With one rate for
   every mode (k = 60) the distal modes' stiffness ``mu (1 + k^2)`` is 6e-4-7e-3 Nm/rad, below what the lever's
   hysteresis friction lets move: an all-joint 0.2 rad step left the index DIP and the ring PIP/DIP near their
-  start and drove the fifth 2 rad away (measured).  Through the estimator the light modes' ``k_i`` (up to 750 1/s)
-  amplify the estimate's error (``(P S) K1 e`` in ``beta``): compare --short on the index saturates 55 / 59 % of
-  the step / sine; capping ``k_i`` at the force steps' 300 1/s leaves the sine unsaturated but the hysteresis
-  offsets grow (hand step: index DIP 0.29, thumb 0.63 rad against 0.07 / 0.12): the cap is not taken, the
-  saturation is reported.  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
+  start and drove the fifth 2 rad away (measured).  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
   one link) needs ``beta = ... + (P S) M_d^-1 z2``: ``M_d^-1`` (1.6e6 at the index DIP) in the force step puts
   the 3 kHz sampled loop's spectral radius at 164 (measured on the index), so the metric is ``M_d``'s.
 * ``"nonlinear-spring"``: the steps of (15.71)-(15.81) on the joint torques ``tau = -(P S)^T phi(x)`` (each
@@ -80,8 +76,9 @@ Variants (``variant``, registered ``backstepping-position`` and ``backstepping-n
       V = e'^T M_d e'/2 + e^T Kp e/2 + |z3|^2/2 + |z4|^2/2 + |Pi (f - f_op)|^2/2 + |Pi (f' + K3 (f - f_op))|^2/2
 
   Its ``- e'`` cross term is in N m where 15.5's ``(P S) e'`` is in N: relative to 15.5 it multiplies the
-  joint-velocity error by ``1/|P S|^2`` (~3e4 on the index), so through the estimator its command saturates
-  (index, compare --short: 63-77 %; 0-7 % with ideal sensors).  Weighting ``z3``, ``z4`` by
+  joint-velocity error by ``1/|P S|^2`` (~3e4 on the index): with the estimate one period old (until this wave's
+  estimator change) its command saturated 63-77 % of compare --short's step and sine on the index; with the
+  estimate of the current sample, 7 % of the step, like 15.5.  Weighting ``z3``, ``z4`` by
   ``((P S)^T P S)^-1`` (the forces that realise them) turns it into the 15.5 law itself for a constant
   coupling: 15.5 is the 15.4 construction in the metric of the tendon forces (checked numerically on the index at
   a random state: the commands agree to 3e-14 of 139 Nm).
@@ -103,6 +100,7 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.control.chain import rig_springs
 from awiwi_drake.control.joint_stage import joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import HandChainParams
@@ -151,11 +149,7 @@ class FingerBacksteppingLaw(StaticLaw):
         op = op or rig.operating_point()
         self.name = "finger_backstepping"
         self.coupling, self.motor = coupling, rig.params.motor
-        laws = list(getattr(rig, "spring_laws", None) or [rig.spring] * coupling.num_tendons)
-        groups = {}
-        for i, law in enumerate(laws):
-            groups.setdefault(id(law), (law, []))[1].append(i)
-        self._spring_groups = [(law, np.array(ix)) for law, ix in groups.values()]   # tendons sharing a law
+        self.springs = rig_springs(rig)
         self.S = dof_selection(coupling)
         self.Sp = np.linalg.pinv(self.S)
         n, k = self.S.shape
@@ -243,9 +237,9 @@ class FingerBacksteppingLaw(StaticLaw):
             W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
-        f = self._springs("force", x)
-        k1 = self._springs("stiffness", x)
-        k2 = self._springs("stiffness_derivative", x)
+        f = self.springs.force(x)                       # each tendon's own law phi_i
+        k1 = self.springs.stiffness(x)
+        k2 = self.springs.stiffness_derivative(x)
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
@@ -292,14 +286,6 @@ class FingerBacksteppingLaw(StaticLaw):
             V = 0.5 * (ed @ (self.M @ ed)) + 0.5 * (e @ (self.Kp @ e)) + 0.5 * (z3 @ z3) + 0.5 * (z4 @ z4)
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
-    def _springs(self, method: str, x):
-        """``law_i.method(x_i)`` with each tendon's own spring law (float or AutoDiffXd arrays)."""
-        x = np.asarray(x)
-        out = np.empty(x.shape, dtype=x.dtype)
-        for law, ix in self._spring_groups:
-            out[ix] = np.asarray(getattr(law, method)(x[ix]), dtype=x.dtype)
-        return out
-
     def __call__(self, u):
         return self.terms(u)["command"]
 
@@ -318,6 +304,6 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
 
 def check_backstepping_springs(rig: Any) -> None:
     """Raise unless every tendon's spring law is strictly increasing (phi' > 0, section 15.4)."""
-    for law in (getattr(rig, "spring_laws", None) or [rig.spring]):
+    for law in rig_springs(rig).laws:
         if not (np.all(np.asarray(law.stiffness(np.linspace(1e-4, 5e-3, 5))) > 0)):
             raise ValueError("finger backstepping needs strictly increasing springs (phi' > 0, section 15.4)")

@@ -307,8 +307,12 @@ def _placed_pd_gains(model: JointReducedModel, p: JointDesignParams, period: flo
     return K
 
 
-def _lqr_weights(p: JointDesignParams):
-    Q = np.diag(1.0 / np.array([p.lqr_angle_error, p.lqr_velocity, p.lqr_torque_error, p.lqr_torque_rate]) ** 2)
+def _lqr_weights(p: JointDesignParams, model: JointReducedModel):
+    """Bryson's weights on ``z``; on the motors' rate ``sigma = tau_dot + K_jj qdot`` its bound is the sum of the
+    torque-rate and the velocity bounds' (a motion at ``lqr_velocity`` under a steady torque needs
+    ``sigma = K_jj qdot``): a stiff joint (thumb base, K_jj = 47 Nm/rad) is not held to a crawl by it."""
+    rate = p.lqr_torque_rate + (model.stiffness * p.lqr_velocity if model.torque_rate == "motor" else 0.0)
+    Q = np.diag(1.0 / np.array([p.lqr_angle_error, p.lqr_velocity, p.lqr_torque_error, rate]) ** 2)
     return Q, np.array([[1.0 / p.lqr_input ** 2]])
 
 
@@ -334,7 +338,7 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
         zs = np.concatenate([np.exp(period * np.roots(target)), [0.0]])
         return place_by_identification(Phi, Gamma, np.real(np.poly(zs))).ravel()
     if design in ("lqr", "sdre"):
-        Q, R = _lqr_weights(p)
+        Q, R = _lqr_weights(p, model)
         if period is None:
             K, _ = LinearQuadraticRegulator(F, G, Q, R)
             return np.append(np.asarray(K).ravel(), 0.0)
@@ -395,7 +399,7 @@ class JointDesign:
                 share, s = np.abs(cv * wb / lam), lam
             else:
                 share = np.abs(cv * wb / (1.0 - lam))
-                with np.errstate(divide="ignore"):
+                with np.errstate(divide="ignore", invalid="ignore"):      # log(0): the delay state's z = 0
                     s = np.log(lam.astype(complex)) / self.period
             keep = (share / share.sum() > min_share) & np.isfinite(s)
             taus.append(float(1.0 / np.min(-s.real[keep])))
@@ -463,7 +467,8 @@ def _sdre_law(rig, point, c, p, kw, period):
             lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                             outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
             F, G, _ = _restrict(lin, sub_point["op"].joint_stiffness if kw["torque_rate"] == "motor" else 0.0)
-            model = JointReducedModel("", j, F, G, 0.0, 0.0, float(sub_point["op"].joint_stiffness), (), 0.0, lin)
+            model = JointReducedModel("", j, F, G, 0.0, 0.0, float(sub_point["op"].joint_stiffness), (), 0.0, lin,
+                                      kw["torque_rate"])
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 

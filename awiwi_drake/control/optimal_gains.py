@@ -418,20 +418,18 @@ def select_finger_force_gains(rig, case=None, *, params=None, rate_hz: float | N
     3. *The target* ``K_opt``: Drake's LQR of the subsystem with Table 16.1's ``Q`` per tendon and
        ``R = r I``, where ``r`` is the *smallest* weight (the most aggressive LQR) whose closed loop the
        sampled law can follow: its fastest pole at most ``max(sampled_pole_limit * rate_hz,
-       target_margin * fastest open-loop mode)`` (bisection on ``log r``).  This scales Table 16.1 to the
+       target_margin * fastest open-loop mode)``, the gain box's corner (bisection on ``log r``).  This scales Table 16.1 to the
        joint as the thesis scaled it to its flexible joint: Table 16.1's ``R = 0.1`` is far below what the
        structure produces on any finger joint (last wave: distance 118-304), and a free ``R`` ends in gains
        the 3 kHz loop cannot realise.
     4. *The selection* (16.4): least squares on ``log (K3, K4)`` in the box ``[gain_low,
-       min(gain_high, sampled_pole_limit * rate_hz)]`` (the (15.63) error poles ``-K3``, ``-K4`` at
-       ``|h lambda| <= 1/4``, and below what the estimated joint velocity tolerates: see
-       :class:`~awiwi_drake.parameters.backstepping.FingerOptimalGainsCase`), from the best of the box corners
-       and ``starts`` draws.
+       sampled_pole_limit * rate_hz]`` (the (15.63) error poles ``-K3``, ``-K4`` at ``|h lambda| <= 1/4``), from
+       the best of the box corners and ``starts`` draws.
 
     Each tendon gets the smallest ``K3`` and ``K4`` of the DoF it acts on (chosen: the conservative choice
     for a tendon shared by two DoF, e.g. the index's DIP tendons on the PIP; the Lyapunov decrease of the
     module holds for any positive per-tendon gains).  ``rate_hz=None``: a continuous design (no rate limit;
-    then the target's pole limit is 1e4 1/s or the open loop's).
+    then the box's corner is 1e4 1/s).
     """
     from scipy.optimize import least_squares
     from awiwi_drake.control.chain import chain_design_point
@@ -447,11 +445,10 @@ def select_finger_force_gains(rig, case=None, *, params=None, rate_hz: float | N
     point = chain_design_point(rig, op, params=p)
     PS = point["coupling_matrix"]
     k = PS.shape[1]
-    w_max = 1e4 if rate_hz is None else p.sampled_pole_limit * float(rate_hz)   # the target's pole limit
-    k_max = min(c.gain_high, w_max)                                             # the box's upper corner
+    k_max = 1e4 if rate_hz is None else p.sampled_pole_limit * float(rate_hz)   # the box's upper corner
     if not c.gain_low < k_max:
         raise ValueError(f"select_finger_force_gains: gain_low = {c.gain_low} 1/s is not below the box's upper corner "
-                         f"{k_max:g} 1/s (min(gain_high, sampled_pole_limit x rate_hz))")
+                         f"{k_max:g} 1/s (sampled_pole_limit x rate_hz)")
     fits = []
     for j in range(k):
         sub, sub_op, _ = joint_subsystem(rig, j, point=point, params=p)

@@ -14,11 +14,13 @@ The hidden effect acts at one place (tendon ``place``, 1-based in the finger's t
 ``guide_friction``    friction of that tendon's path, constant plus capstan part
                       (:func:`~awiwi_drake.components.friction.guide_friction`, tanh direction)
 ``motor_ripple``      two harmonics on that motor, orders drawn from 1..6 and 100 per revolution
-``spring_hysteresis`` the package's Dahl hysteresis of that tendon's spring mechanism, loop width
-                      proportional to the force (``tendon_springs`` override; catalog: constant width)
 ==================== =========================================================================
 
-The first three are torques on the motor from a block in front of the drive's ``motor_torque`` input
+Not here: spring hysteresis on one tendon. The finger diagram switches hysteresis for all tendons at once
+(``spring.hysteresis``; ``tendon_springs`` refuses a per-tendon setting), so a one-tendon truth would need a
+change of the diagram; the diagnosis still looks for it (spring side).
+
+The three are torques on the motor from a block in front of the drive's ``motor_torque`` input
 (:class:`FingerHiddenTorque_`): guide friction acts between motor and spring, so the motor feels
 ``r (f + g)`` while the force sensor at the spring reads ``f``; a torque ``-r g`` on the motor is that.
 """
@@ -47,7 +49,7 @@ from .data import Dataset, finger_rig_name
 
 __all__ = ["FINGER_HIDDEN_EFFECTS", "FingerHiddenTorque_", "nominal_finger_params", "make_finger_dataset"]
 
-FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple", "spring_hysteresis")
+FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple")
 _TORQUE_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple")
 
 
@@ -109,8 +111,8 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
     tr: dict = {"hidden": list(hidden), "place": int(place) if hidden else None, "strength": k}
     if "motor_friction" in hidden:
         fc = k * u(*gen.motor_coulomb_range)
-        tr["motor_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.8), vs=u(0.5, 2.0), eps=u(0.05, 0.2),
-                                    viscous=k * u(0.0, 0.002))
+        tr["motor_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.8), vs=u(0.1, 0.5), eps=u(0.02, 0.05),
+                                    viscous=k * u(0.0, 0.002))   # the rig truth's Stribeck shape (truth.draw_truth)
     if "guide_friction" in hidden:
         tr["guide_friction"] = dict(c0=k * u(*gen.guide_c0_range), mu_angle=k * u(*gen.guide_mu_range), v0=2e-4)
     if "motor_ripple" in hidden:
@@ -120,19 +122,12 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
             amp, ph = k * u(*gen.ripple_amplitude_range), u(0, 2 * np.pi)
             harm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
         tr["motor_ripple"] = dict(harmonics=harm)
-    if "spring_hysteresis" in hidden:
-        tr["spring_hysteresis"] = dict(width_ratio=k * u(*gen.hysteresis_ratio_range))
     return tr
 
 
 def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
     p = nominal
-    if "spring_hysteresis" in truth:
-        coupling_names = finger_diagram(finger=finger, params=nominal).tendon_names
-        name = coupling_names[truth["place"] - 1]
-        hyst = p.spring.hysteresis.replace(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
-        p = p.replace(tendon_springs=((name, p.spring.replace(hysteresis=hyst)),))
     rig = finger_diagram(finger=finger, params=p)
     m = rig.num_tendons
     b = DiagramBuilder()
@@ -211,10 +206,10 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
                                                               + rng.uniform(0, 2 * np.pi))
     h = probe.coupling.h
     h0 = np.asarray(h(np.zeros(n)), float)
+    X = np.stack([np.asarray(law.inverse_force(f_cc), float) for law in laws_t], axis=1)   # (N, m)
     ref = np.empty((N, m))
     for k in range(N):
-        x = np.array([float(law.inverse_force(f_cc[k])) for law in laws_t])
-        ref[k] = (x - probe.offsets - (np.asarray(h(Q[k]), float) - h0)) / r_m
+        ref[k] = (X[k] - probe.offsets - (np.asarray(h(Q[k]), float) - h0)) / r_m
     X0 = np.asarray(op.state, float).copy()
     X0[2 * n:2 * n + m] = ref[0]
     gains = MotorPositionGains(kp=gen.kp, kd=gen.kd, rate_hz=gen.sample_rate)

@@ -133,8 +133,61 @@ def plot_candidates(dx: Diagnosis):
     return fig, ax
 
 
+def plot_finger_tendons(dx):
+    """Held-out residual / noise floor per tendon, motor side, before and after the named effects (bars),
+    the places named marked; returns ``(fig, ax)``."""
+    plt = _plt()
+    names = dx.tendon_names
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(7, 3))
+    ax.bar(x - 0.2, dx.ratios_before["motor"], 0.4, label="nominal")
+    ax.bar(x + 0.2, dx.ratios_after["motor"], 0.4, label="with the named effects")
+    ax.axhline(1.0, color="k", lw=0.8, ls=":")
+    ax.set_yscale("log")
+    ax.set_xticks(x, [n + (" *" if any(s.tendon == i + 1 for s in dx.steps) else "") for i, n in enumerate(names)],
+                  rotation=30, fontsize=8)
+    ax.set_ylabel("residual / noise floor")
+    ax.set_title(f"{dx.dataset}: motor side per tendon (* named)", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig, ax
+
+
+def _write_finger_report(dx, directory, figures: bool) -> pathlib.Path:
+    plt = _plt()
+    d = pathlib.Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    if figures:
+        fig = plot_finger_tendons(dx)[0]
+        fig.savefig(d / "tendons.png", dpi=110)
+        plt.close(fig)
+    (d / "summary.json").write_text(json.dumps(dx.summary(), indent=1, default=float))
+    L = [f"# Model-discrepancy diagnosis: {dx.dataset}", "", f"Rig `{dx.rig}`; verdict: **{dx.verdict}**.", "",
+         "Motor side (motor law with the measured tendon force) and spring side (spring laws, joint angles "
+         "estimated from all tendons), consistent filtering, blocked 3-fold cross-validation "
+         "(`awiwi_drake.discrepancy.finger`).", "",
+         "| tendon | motor side before | after | spring side before |", "|---|---|---|---|"]
+    for i, n in enumerate(dx.tendon_names):
+        L.append(f"| {n} | {dx.ratios_before['motor'][i]:.2f} | {dx.ratios_after['motor'][i]:.2f} | "
+                 f"{dx.ratios_before['spring'][i]:.2f} |")
+    L += ["", f"Spring side, all tendons: {dx.ratios_before['spring_total']:.2f} before, "
+          f"{dx.ratios_after['spring_total']:.2f} after (1 = the noise floor).", "",
+          "![tendons](tendons.png)" if figures else "", "", "## Findings", "", findings_text(dx), "", "## Steps", ""]
+    for k, st in enumerate(dx.steps, 1):
+        L.append(f"{k}. `{st.effect}` on {st.place} ({st.kind}, {st.status}; held-out gain {st.z:.1f} null std, "
+                 f"dBIC {st.delta_bic:.0f}): " + ", ".join(f"`{p}` = {v:.4g} {PARAM_UNITS.get(p, '')}".rstrip()
+                                                            for p, v in st.parameters.items()))
+        if st.status == "not separable":
+            L.append(f"   Not separable with these data from {', '.join(st.members[1:])}: {st.experiment}.")
+    md = d / "report.md"
+    md.write_text("\n".join(L) + "\n")
+    return md
+
+
 def json_summary(dx: Diagnosis, maps_before: ResidualMaps | None = None) -> dict:
     """The JSON summary (contract keys: named_effects, nrmse_before, nrmse_after, steps)."""
+    if not isinstance(dx, Diagnosis):   # a finger diagnosis (awiwi_drake.discrepancy.finger)
+        return dx.summary()
     out = dx.to_json()
     out["units"] = {k: PARAM_UNITS.get(k, "?") for st in dx.steps for k in st.parameters}  # of every fitted value
     if maps_before is not None:
@@ -144,6 +197,14 @@ def json_summary(dx: Diagnosis, maps_before: ResidualMaps | None = None) -> dict
 
 def findings_text(dx: Diagnosis) -> str:
     """One paragraph on what the diagnosis found and what is left (report and CLI)."""
+    if not isinstance(dx, Diagnosis):   # a finger diagnosis
+        if dx.unexplained_residual:
+            return (f"Unexplained discrepancy remains: {dx.unexplained['text']} (threshold "
+                    f"{dx.unexplained_ratio:g}x); the catalog does not explain it.")
+        if dx.steps:
+            return (f"After the named steps every tendon's held-out residual is below {dx.unexplained_ratio:g}x "
+                    f"its noise floor.")
+        return f"No tendon's held-out residual is above {dx.unexplained_ratio:g}x its noise floor: nothing named."
     if dx.unexplained_residual:
         out = (f"Unexplained discrepancy remains: after the last accepted step the held-out residual is "
                f"{dx.floor_ratio_after:.2f}x the noise floor (threshold {dx.unexplained_ratio:g}x); the "
@@ -164,6 +225,8 @@ def write_report(dx: Diagnosis, directory, *, figures: bool = True) -> pathlib.P
     """Write ``report.md``, ``summary.json`` and (with ``figures``) PNGs into ``directory``;
     returns the Markdown path.  ``figures=False`` simulates nothing (used for the partial
     report of an interrupted run)."""
+    if not isinstance(dx, Diagnosis):   # a finger diagnosis
+        return _write_finger_report(dx, directory, figures)
     plt = _plt()
     d = pathlib.Path(directory)
     d.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ from scipy.stats import norm
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
-from .data import Dataset
+from .data import Dataset, is_finger_rig
 from .decide import materiality, noise_equivalent, rejection_reason, separating_experiment
 from .fit import fit_parameters
 from .localise import locate, residual_maps
@@ -263,7 +263,8 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
 
     Returns
     -------
-    Diagnosis
+    Diagnosis, or for a finger dataset (rig ``finger-*``) a
+    :class:`~awiwi_drake.discrepancy.finger.FingerDiagnosis` (effects named with their tendon)
 
     Raises
     ------
@@ -271,6 +272,9 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
         On Ctrl-C; its ``diagnosis`` attribute holds the partial result.
     """
     settings = settings or DiscrepancySettings()
+    if is_finger_rig(dataset.rig):   # motor and spring laws per tendon (awiwi_drake.discrepancy.finger)
+        from .finger import diagnose_finger
+        return diagnose_finger(dataset, settings=settings, bounds=bounds, progress=progress)
     say = progress or (lambda msg: None)
     run = _Run(dataset, settings, bounds or CatalogBounds(), say)
     eng = run.eng

@@ -270,15 +270,6 @@ class FingerOptimalGainsCase(Parameters):
                             source="chosen: lower corner of the (K3, K4) box, a force-error decay of 1 s, far below "
                                    "every joint mode; Algorithm 3's rand(1, 4) has 0 as its lower corner, where "
                                    "(15.63) loses its stability guarantee")
-    gain_high: float = param(300.0, unit="1/s", low=0.0, low_inclusive=False,
-                             source="chosen: upper corner of the (K3, K4) box (at most sampled_pole_limit x rate, "
-                                    "750 1/s at 3 kHz). Measured on the index at 3 kHz with the estimated joint "
-                                    "angles: with K3 = 300 the 2 Hz sine of compare --short saturates 0 / 0 / 34 / "
-                                    "69 / 86 % of the time for K4 = 300 / 400 / 500 / 600 / 750, and the selection "
-                                    "in a 400 box (K3 = 219-400, K4 = 400) 15 %; with ideal sensors 0 % at 750. The "
-                                    "linear sampled loop with the estimator's backward-difference velocity is stable "
-                                    "at all of them (radius 0.979-0.982, ideal index): K3 and K4 multiply the "
-                                    "estimate's error in (15.63). 300 is the finger law's force_bandwidth")
     target_margin: float = param(1.05, unit="-", low=1.0,
                                  source="chosen: the target LQR may be at most 5 % faster than the DoF's fastest "
                                         "open-loop mode where that mode is already beyond the sampled-loop limit "
@@ -295,9 +286,6 @@ class FingerOptimalGainsCase(Parameters):
     def _validate(self) -> None:
         if len(self.q_weights) != 4:
             raise ValueError(f"FingerOptimalGainsCase.q_weights must have 4 entries, got {len(self.q_weights)}")
-        if not self.gain_low < self.gain_high:
-            raise ValueError(f"FingerOptimalGainsCase.gain_low = {self.gain_low} must be below gain_high = "
-                             f"{self.gain_high} [1/s]")
         if len(self.r_search) != 2 or not self.r_search[0] < self.r_search[1]:
             raise ValueError(f"FingerOptimalGainsCase.r_search = {self.r_search} must be (low, high), low < high")
 

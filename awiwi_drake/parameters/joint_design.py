@@ -40,12 +40,13 @@ class JointDesignParams(Parameters):
         source="chosen: Bryson's rule, 0.05 Nm ~ 10 % of a finger joint's torque range (Fig 15.22: 0.5 Nm/rad x 0.2 rad "
                "is 0.1 Nm)")
     lqr_torque_rate: float = param(
-        5.0, unit="Nm/s", low=0.0, low_inclusive=False,
-        source="chosen: Bryson's rule on the motors' torque rate sigma (joint_stage: the LQR/SDRE stages measure "
-               "sigma = -(P S)^T k_t r_m omega), the torque error above within 10 ms; measured on the index at 3 kHz "
-               "with the estimator and the default physics (control.joint_design.sampled_loop_poles): 3 / 5 / 8 / 15 "
-               "Nm/s damp the DIP's link mode (~3930 rad/s) at -66 / -35 / -17 / -5 1/s with the slowest pole at "
-               "-8 / -12 / -15 / -5 1/s; 5 keeps twice the margin of 8 (ring, fifth, thumb: all stable over 3-15)")
+        1.0, unit="Nm/s", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule, the torque error above over ~50 ms. The LQR/SDRE stages measure the motors' "
+               "rate sigma = tau_dot + K_jj qdot (joint_stage), weighted with the bound lqr_torque_rate + K_jj "
+               "lqr_velocity (joint_design._lqr_weights). Measured at 3 kHz with the estimator and the default "
+               "physics (control.joint_design.sampled_loop_poles): index slowest pole -16 1/s, DIP link mode "
+               "(~3930 rad/s) damped at -30 1/s (5 Nm/s: -11 1/s); one bound sigma <= 5 Nm/s for every joint held "
+               "the thumb base (K_jj = 47 Nm/rad) to -0.66 1/s, with the sum -2.0 1/s")
     lqr_input: float = param(
         0.1, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule on the desired joint torque (twice the torque error: the input may move more "

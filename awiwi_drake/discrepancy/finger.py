@@ -1,0 +1,612 @@
+"""The discrepancy workflow on a finger: localise to tendons, name effect and place (issue 12 item 5).
+
+A finger dataset holds what the hand measures: the commanded motor torques, the motor angles and the tendon
+forces (joint angles optional).  With the force measured at every spring mechanism, the finger splits into
+two checks per tendon, each a law of the package's own finger (:func:`~awiwi_drake.hand.diagrams.finger_diagram`
+of the dataset's :class:`~awiwi_drake.parameters.hand.FingerRigParams`):
+
+* **motor side** (tendon ``i``): the motor law :func:`~awiwi_drake.components.motor.motor_acceleration`
+  ``B w' = u - d w - r f`` with the measured force as the load; its torque residual holds whatever acts on that
+  motor or on that tendon's path between motor and sensor (motor friction, guide friction, ripple, inertia and
+  damping errors) and nothing from the rest of the finger;
+* **spring side**: the spring laws ``f_i = F_i(x_i)`` with the routing ``x = x0 + r theta + h(q) - h(0)``;
+  the joint angles are estimated from all tendons at once (weighted least squares, ``m > n``), so the
+  ``m - n`` redundant tendon directions carry what one spring mechanism does differently (hysteresis, a
+  force-sensor offset, a scale error).
+
+Both are equation errors, made exact by **consistent filtering**: one Gaussian kernel ``H`` is applied to
+both sides (``H''`` to the angle for the acceleration, ``H'`` for the velocity, ``H`` to the force and the
+exact integral of ``H`` over each hold interval to the zero-order-held command), so the filtered law holds
+for the filtered signals without a derivative of noise.  The residual is decimated to about one sample per
+kernel width (so samples are nearly independent) and normalised by its noise level propagated from the
+sensor noise floors (:func:`~awiwi_drake.discrepancy.replay.noise_floor`).
+
+Each candidate (catalog effect x place, shape on the catalog's grid) is a regression of one tendon's
+residual on the effect's law (:mod:`.laws`, the catalog forms) fitted on training blocks and scored on
+held-out blocks; acceptance is the rigs' (:mod:`.decide`): held-out gain above ``min_z`` null standard
+deviations, BIC better than without it, no amplitude at a bound, material (effect RMS above
+``finger_material`` times the noise-equivalent torque/force); candidates that explain the same residual as
+well are one class "not separable" with the experiment that would separate them.  Greedy: the accepted
+effect is subtracted and the search repeats until the held-out residual is at the noise floor or nothing
+passes; above ``unexplained_ratio`` times the floor the verdict says an unexplained discrepancy remains,
+naming the tendons where it is.
+
+Why not a replay of the finger diagram (multiple shooting, as on the rigs): measured on the index, one
+multiple-shooting pass of the finger diagram over a 10 s dataset costs about as much as the dataset
+generation (the finger runs at ~0.5-4x real time), and a catalog screen needs tens to hundreds of passes; with
+motor angles and tendon forces measured, the motor and spring laws localise the effect exactly without
+integrating the links (docs/REPRODUCTIONS.md, issue 12).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import ndtr
+
+from awiwi_drake.components.motor import motor_acceleration
+from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
+
+from . import laws
+from .data import Dataset, finger_parameters_from_json, is_finger_rig
+from .decide import separating_experiment
+from .localise import cpr_spectrum
+from .replay import noise_floor
+from .screen import gain_z
+
+__all__ = ["FingerResiduals", "FingerStep", "FingerDiagnosis", "diagnose_finger", "JOINT_LABELS",
+           "tendon_place"]
+
+JOINT_LABELS = {"0": "abduction", "1": "MCP", "2": "PIP", "3": "DIP", "h": "HMC"}
+"""Plant joint ``q<digit><j>`` -> anatomical name (section 5.1: abduction, MCP, PIP, DIP; the fifth's HMC)."""
+
+MOTOR_SIDE = ("motor_friction", "guide_friction", "motor_ripple", "nominal_motor")
+SPRING_SIDE = ("spring_hysteresis", "nominal_spring", "force_sensor")
+NUISANCE = ("nominal_motor", "nominal_spring", "force_sensor")
+
+
+def tendon_place(rig, i: int) -> str:
+    """``"index_h5 (PIP)"``: the tendon's name and the joints it moves (nonzero routing entries)."""
+    P = np.asarray(rig.coupling.P(np.zeros(rig.num_joints)) if not rig.coupling.is_constant
+                   else rig.coupling.P(), float)
+    joints = [JOINT_LABELS.get(rig.joint_names[j][-1], rig.joint_names[j]) for j in range(P.shape[1])
+              if abs(P[i, j]) > 1e-12]
+    return f"{rig.tendon_names[i]} ({', '.join(joints)})" if joints else rig.tendon_names[i]
+
+
+# ---------------------------------------------------------------------------- consistent filtering
+def _kernel(sigma: float, dt: float):
+    """Gaussian kernel and its first two derivatives sampled on ``+-6 sigma`` (weights times dt). The span
+    matters: cut at 4 sigma, the second derivative's weights sum to 3e-4/sigma^2 instead of 0, which turns a
+    motor angle offset of 1 rad into a 0.03 N m torque residual (B = 2e-3)."""
+    half = int(math.ceil(6 * sigma / dt))
+    s = np.arange(-half, half + 1) * dt
+    g = np.exp(-0.5 * (s / sigma) ** 2) / (sigma * math.sqrt(2 * math.pi))
+    g0, g1, g2 = g * dt, -s / sigma ** 2 * g * dt, (s ** 2 / sigma ** 4 - 1 / sigma ** 2) * g * dt
+    g0 = g0 / g0.sum()
+    g2 = g2 - g2.sum() * g0          # the rest of the cut (6e-8 of 1/sigma^2): a constant has no acceleration
+    return s, g0, g1, g2
+
+
+def _filter(y: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``sum_j w(t_i - t_j) y_j`` (same length; the kernel's half-width at both ends is invalid and trimmed
+    by the caller)."""
+    return np.convolve(y, w, mode="same") if y.ndim == 1 else np.stack([_filter(c, w) for c in y])
+
+
+def _filter_held(u: np.ndarray, sigma: float, dt: float, half: int) -> np.ndarray:
+    """``integral H(t_i - s) u(s) ds`` for a command held on ``[t_k, t_k + dt)``: exact per interval."""
+    k = np.arange(-half, half + 1) * dt     # t_i - t_j for the kernel's span
+    w = ndtr(k / sigma) - ndtr((k - dt) / sigma)   # integral of H over [t_j, t_j + dt) seen from t_i
+    return _filter(u, w)
+
+
+# ---------------------------------------------------------------------------- residuals
+class FingerResiduals:
+    """Filtered motor- and spring-side residuals of one finger dataset (see the module docstring).
+
+    Attributes (``K`` decimated samples, ``m`` tendons)
+    ---------------------------------------------------
+    theta, omega, alpha, force, torque : (m, K) filtered angle, velocity, acceleration, force, command
+    tau : (m, K) motor-side torque residual [N m]; ``sigma_tau`` (m,) its noise level
+    eps : (m, K) spring-side residual, elongation [m] weighted to unit noise and projected on the
+        redundant tendon directions; ``proj`` (K, m, m) that projection (whitened)
+    elong : (m, K) elongations of the estimated joint angles [m]; ``stiff`` (m, K) [N/m]
+    train, test : (K,) bool, blocked split
+    """
+
+    def __init__(self, ds: Dataset, settings: DiscrepancySettings):
+        if not is_finger_rig(ds.rig):
+            raise ValueError(f"{ds.name}: rig {ds.rig!r} is not a finger")
+        self.ds, self.settings = ds, settings
+        self.params = fp = finger_parameters_from_json(ds.parameters, ds.name)
+        self.finger = ds.parameters["finger"]
+        rig = finger_diagram(finger=self.finger, params=fp)
+        if not rig.coupling.is_constant:
+            raise ValueError(f"{ds.name}: the {self.finger}'s routing depends on the joint angles; the finger "
+                             f"diagnosis supports constant routings (index, middle, ring, fifth)")
+        if fp.spring.hysteresis.enabled or fp.guide_friction or fp.motor.ripple or fp.motor.friction:
+            raise ValueError(f"{ds.name}: parameters.finger_rig: the nominal finger must be the ideal finger "
+                             f"(motor.friction, motor.ripple, spring.hysteresis.enabled, guide_friction all false): "
+                             f"its effects are what the diagnosis looks for")
+        self.rig = rig
+        m, n, dt = rig.num_tendons, rig.num_joints, ds.dt
+        self.m, self.n, self.dt = m, n, dt
+        r, B, d = fp.motor.pulley_radius, fp.motor.inertia, fp.motor.damping
+        self.r, self.B = r, B
+        TH = np.stack([ds.outputs[f"motor_angle_{i + 1}"] for i in range(m)])
+        F = np.stack([ds.outputs[f"tendon_force_{i + 1}"] for i in range(m)])
+        U = np.stack([ds.inputs[f"motor_torque_{i + 1}"] for i in range(m)])
+        if fp.motor.saturation and np.any(np.abs(U) > fp.motor.torque_limit):
+            i, k = np.unravel_index(int(np.argmax(np.abs(U))), U.shape)
+            raise ValueError(f"{ds.name}: column 'motor_torque_{i + 1}' reaches {U[i, k]:.3g} N m at t = "
+                             f"{ds.time[k]:.4g} s, beyond motor.torque_limit = {fp.motor.torque_limit} N m: the "
+                             f"applied torque is not the logged one")
+        self.sig_theta = np.array([noise_floor(v) for v in TH])
+        self.sig_force = np.array([noise_floor(v) for v in F])
+        sigma = settings.finger_filter
+        s, g0, g1, g2 = _kernel(sigma, dt)
+        half = (len(s) - 1) // 2
+        self._g0 = g0
+        th, om, al = _filter(TH, g0), _filter(TH, g1), _filter(TH, g2)
+        f = _filter(F, g0)
+        u = _filter_held(U, sigma, dt, half)
+        # motor law of the package; linear in (u, w, f) for the ideal motor, so the filtered law is exact
+        acc = np.stack([motor_acceleration(th[i], om[i], u[i], r * f[i], fp.motor) for i in range(m)])
+        tau = B * (al - acc)
+        # the inertia-error signature: the acceleration filtered 4x wider, nearly free of the angle noise
+        # that the residual's own acceleration carries (no errors-in-variables fit of noise on itself)
+        s4, _, _, g2w = _kernel(4 * sigma, dt)
+        self._acc_wide = _filter(TH, g2w)
+        # decimation: one sample per ``finger_decimation`` kernel deviations; laws evaluated on the filtered
+        # full-rate signals are filtered once more (:meth:`consistent`), so both filters' margins are cut
+        step = max(1, int(round(settings.finger_decimation * sigma / dt)))
+        trim = 2 * ((len(s4) - 1) // 2)
+        self._sl = slice(trim, len(ds.time) - trim, step)
+        sl = self._sl
+        self.full = {"theta": th, "omega": om, "force": f}
+        self._force_raw = F
+        self.time = ds.time[sl]
+        self.theta, self.omega, self.alpha, self.force, self.torque = th[:, sl], om[:, sl], al[:, sl], f[:, sl], u[:, sl]
+        self.tau = tau[:, sl]
+        # noise of the torque residual: B H'' theta-noise and r H f-noise (and d H' theta-noise)
+        self.sigma_tau = np.sqrt((B * np.linalg.norm(g2)) ** 2 * self.sig_theta ** 2
+                                 + (d * np.linalg.norm(g1)) ** 2 * self.sig_theta ** 2
+                                 + (r * np.linalg.norm(g0)) ** 2 * self.sig_force ** 2)
+        self._spring_side(np.linalg.norm(g0))
+        K = self.tau.shape[1]
+        nb = max(int(round(settings.finger_block / (step * dt))), 1)
+        self.folds = (np.arange(K) // nb) % 3      # blocked 3-fold cross-validation
+        self.test = self.folds == 2                 # the fold the reported ratios are held out on
+        self.train = ~self.test
+        self.step = step
+
+    def consistent(self, signal: np.ndarray) -> np.ndarray:
+        """A full-rate signal (a law evaluated on the filtered signals :attr:`full`, or on raw ones) filtered by
+        the same kernel and decimated: how it shows in the filtered residuals."""
+        return _filter(np.asarray(signal, float), self._g0)[..., self._sl]
+
+    def acceleration_wide(self) -> np.ndarray:
+        return self._acc_wide[:, self._sl]
+
+    def _spring_side(self, g0: float) -> None:
+        """Joint angles from all tendons (weighted least squares on the elongations the spring laws give for
+        the measured forces); residual in the redundant directions, whitened."""
+        rig, fp, m, n, r = self.rig, self.params, self.m, self.n, self.r
+        laws_t = rig.spring_laws
+        P = np.asarray(rig.coupling.P(), float)
+        # elongations the spring laws give for the measured forces, at full rate, then filtered: the routing
+        # is linear in them, so the filtered relation y = P q holds exactly (consistent filtering)
+        raw = np.maximum(self._force_raw, 1e-3)
+        xm = self.consistent(np.stack([np.asarray(laws_t[i].inverse_force(raw[i]), float) for i in range(m)]))
+        stiff = np.stack([np.asarray(laws_t[i].stiffness(xm[i]), float) for i in range(m)])
+        y = xm - rig.offsets[:, None] - r * self.theta            # = P q (+ noise + what the laws miss)
+        # noise of y_i: the force noise through the spring, the angle noise through the pulley (filtered)
+        var = (g0 * self.sig_force[:, None] / stiff) ** 2 + (g0 * r * self.sig_theta[:, None]) ** 2
+        wsq = 1.0 / np.sqrt(var)                                    # (m, K)
+        K = y.shape[1]
+        A = wsq.T[:, :, None] * P[None]                             # (K, m, n) whitened routing
+        Qm, _ = np.linalg.qr(A)                                     # (K, m, n)
+        proj = np.eye(m)[None] - Qm @ np.transpose(Qm, (0, 2, 1))   # whitened residual projector
+        yw = (wsq * y).T                                            # (K, m)
+        self.eps = np.einsum("kij,kj->ik", proj, yw)
+        self.proj, self.wsq, self.stiff = proj, wsq, stiff
+        self.q_hat = np.stack([np.linalg.lstsq(A[k], yw[k], rcond=None)[0] for k in range(0, K)], axis=1)
+        self.elong = rig.offsets[:, None] + r * self.theta + P @ self.q_hat
+
+    # ------------------------------------------------------------------ energies
+    def motor_energy(self, i: int, mask=None) -> float:
+        z = self.tau[i] / self.sigma_tau[i]
+        return float((z if mask is None else z[mask]) @ (z if mask is None else z[mask]))
+
+    def ratios(self) -> dict:
+        """Residual energy over its noise floor (all samples: a fitted effect has 2-4 parameters against
+        ~10 samples per second): per tendon, motor side and spring side."""
+        te = np.ones(self.tau.shape[1], dtype=bool)
+        mot = [float(np.mean((self.tau[i, te] / self.sigma_tau[i]) ** 2)) for i in range(self.m)]
+        dof = self.m - self.n
+        spr = [float(np.mean(self.eps[i, te] ** 2) * self.m / dof) for i in range(self.m)]
+        return {"motor": mot, "spring": spr,
+                "spring_total": float(np.mean(np.sum(self.eps[:, te] ** 2, axis=0)) / dof)}
+
+
+# ---------------------------------------------------------------------------- candidates
+@dataclass
+class Candidate:
+    effect: str
+    kind: str
+    side: str
+    tendon: int                 # 0-based
+    label: str
+    params: dict
+    gain: float                 # held-out energy drop (noise units)
+    z: float                    # held-out gain over its null spread
+    delta_bic: float
+    at_bound: list
+    size: float                 # RMS of the fitted effect [N m] or [N]
+    floor: float                # the noise-equivalent size it is compared with
+    rejected: str = ""
+    fitted: np.ndarray = field(default=None, repr=False)   # the effect's contribution to the residual
+    capstan_rms: float = 0.0    # guide friction: RMS torque of its tension-proportional part [N m]
+
+
+def _dahl(x: np.ndarray, length: float, play: float) -> np.ndarray:
+    """Normalised Dahl state (catalog ``spring_hysteresis``: ``w' = (x' - |x'| w)/delta``) on the elongation
+    ``x`` after a play operator of half-width ``play`` (noise must not flip the direction)."""
+    y, xs = float(x[0]), np.empty_like(x)
+    for k, v in enumerate(x.tolist()):
+        y = min(max(y, v - play), v + play)
+        xs[k] = y
+    dx = np.diff(xs)
+    w, out = 0.0, [0.0]
+    for a, sg in zip(np.exp(-np.abs(dx) / length).tolist(), np.sign(dx).tolist()):
+        if sg != 0.0:
+            w = sg + (w - sg) * a
+        out.append(w)
+    return np.array(out)
+
+
+def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
+    """Ripple order pairs to fit on motor ``i``: every order 1..``ripple_order_max`` is regressed alone
+    (its sine and cosine through the consistent filter) on the training folds' residual; the two best orders,
+    and the best with each of the next three, are the pairs."""
+    from scipy.signal import oaconvolve
+    th = fr.full["theta"][i]
+    orders = np.arange(1, int(bounds.ripple_order_max) + 1, dtype=float)
+    S = np.concatenate([np.sin(orders[:, None] * th[None]), np.cos(orders[:, None] * th[None])])
+    cols = oaconvolve(S, fr._g0[None], mode="same", axes=1)[:, fr._sl]
+    tr = fr.train
+    y = fr.tau[i, tr] / fr.sigma_tau[i]
+    gains = np.empty(len(orders))
+    for k in range(len(orders)):
+        A = np.stack([cols[k, tr], cols[len(orders) + k, tr]], axis=1) / fr.sigma_tau[i]
+        beta = np.linalg.lstsq(A, y, rcond=None)[0]
+        gains[k] = y @ y - np.sum((y - A @ beta) ** 2)
+    rank = [float(orders[k]) for k in np.argsort(-gains)[:5]]
+    return [(rank[0], rank[1])] + [(rank[0], o) for o in rank[2:]]
+
+
+def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds):
+    """Variants ``(label, columns (c, K), names, scale_to_params)`` of ``effect`` at tendon ``i`` (0-based):
+    the residual model is ``columns.T @ beta``; motor side in N m, spring side whitened elongation."""
+    r, om, f = fr.r, fr.omega[i], fr.force[i]
+    omf, thf, ff = fr.full["omega"][i], fr.full["theta"][i], fr.full["force"][i]
+    H = fr.consistent
+    out = []
+    if effect == "motor_friction":   # (3.8): tau = -(g2 atan(g1 w) + g3 w): the missing torque adds to u
+        for slope in (3.0, 10.0, 30.0):
+            out.append((f"slope {slope:g}", np.stack([H(laws.motor_friction(omf, 1.0, slope, 0.0)),
+                                                      H(laws.motor_friction(omf, 0.0, slope, 1.0))]),
+                        ["motor_coulomb", "motor_viscous"], {"motor_slope": slope}))
+    elif effect == "guide_friction":  # the motor feels -r g(v, f) = -r (C0 s + f (exp(mu s) - 1)): mu on a grid
+        s = np.tanh(r * omf / laws.GUIDE_VELOCITY)
+        c0 = H(-r * s)
+        fp = np.maximum(ff, 0.0)
+        for mu in np.linspace(0.0, bounds.guide_mu_max, 9)[1:]:
+            out.append((f"mu {mu:.3g}", np.stack([c0, H(-r * fp * (np.exp(mu * s) - 1.0))]),
+                        ["guide_c0", "guide_capstan"], {"guide_mu": float(mu)}))
+    elif effect == "motor_ripple":
+        for o1, o2 in _ripple_orders(fr, i, bounds):
+            cols, names = [], []
+            for k, o in enumerate((o1, o2)):
+                cols += [H(np.sin(o * thf)), H(np.cos(o * thf))]
+                names += [f"ripple_sin{k + 1}", f"ripple_cos{k + 1}"]
+            out.append((f"orders {o1:g}, {o2:g}", np.stack(cols), names,
+                        {"ripple_order_1": o1, "ripple_order_2": o2}))
+    elif effect == "nominal_motor":   # B error (acceleration), added damping: tau = -dB w' - dd w
+        out.append(("", np.stack([-fr.acceleration_wide()[i], -om]), ["motor_inertia_abs", "motor_damping_add"], {}))
+    elif effect in SPRING_SIDE:
+        e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]     # (K, m): a force error on tendon i
+        if effect == "spring_hysteresis":
+            play = 3.0 * float(np.median(np.abs(np.diff(fr.elong[i])))) + 1e-7
+            for length in (5e-5, 2e-4, 8e-4):
+                w = _dahl(fr.elong[i], length, play)
+                out.append((f"length {length:g} m", (e_i * (w * np.tanh(f))[:, None]).T[None],
+                            ["hysteresis_width"], {"hysteresis_length": length}))
+        elif effect == "nominal_spring":
+            out.append(("", (e_i * f[:, None]).T[None], ["spring_scale_rel"], {}))
+        else:
+            out.append(("", (e_i * 1.0).T[None], ["force_offset"], {}))
+    return out
+
+
+_BOUNDS = {"motor_coulomb": lambda b: (0.0, b.motor_coulomb_max), "motor_viscous": lambda b: (0.0, b.motor_viscous_max),
+           "guide_c0": lambda b: (0.0, b.guide_c0_max), "guide_mu": lambda b: (0.0, b.guide_mu_max),
+           "hysteresis_width": lambda b: (0.0, b.hysteresis_width_max), "guide_capstan": lambda b: (0.0, np.inf)}
+"""Physical ranges of the fitted amplitudes (``guide_capstan``: the scale of the capstan term at the grid's
+``guide_mu``, 1 when the grid value is right)."""
+
+
+def _lsq(A: np.ndarray, b: np.ndarray, names: list, bounds: CatalogBounds) -> np.ndarray:
+    """Least squares with the catalog's physical ranges (friction levels >= 0, ...)."""
+    lo = np.array([_BOUNDS[n](bounds)[0] if n in _BOUNDS else -np.inf for n in names])
+    hi = np.array([_BOUNDS[n](bounds)[1] if n in _BOUNDS else np.inf for n in names])
+    if np.all(np.isinf(lo)) and np.all(np.isinf(hi)):
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    from scipy.optimize import lsq_linear
+    scale = np.maximum(np.linalg.norm(A, axis=0), 1e-300)
+    res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale))
+    return res.x / scale
+
+
+def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settings, base_motor, base_spring):
+    """Best variant of ``effect`` at tendon ``i``: blocked cross-validation (each fold held out once, fitted
+    on the others): held-out gain, its null spread, and BIC of the fit on all data."""
+    folds = fr.folds
+    best = None
+    for label, X, names, shape in _signatures(fr, effect, i, bounds):
+        spring = effect in SPRING_SIDE
+        if spring:
+            R = base_spring                                        # (m, K) whitened
+            Xc = X.reshape(X.shape[0], fr.m, -1)                   # (c, m, K)
+            design = lambda sel: Xc[:, :, sel].reshape(len(names), -1).T   # noqa: E731
+            target = lambda sel: R[:, sel].ravel()                          # noqa: E731
+            s = 1.0
+        else:
+            s = fr.sigma_tau[i]
+            R, Xs = base_motor[i] / s, X / s
+            design = lambda sel: Xs[:, sel].T                      # noqa: E731
+            target = lambda sel: R[sel]                            # noqa: E731
+        before, after = [], []
+        for k in range(folds.max() + 1):
+            te = folds == k
+            beta = _lsq(design(~te), target(~te), names, bounds)
+            b = target(te)
+            before.append(b)
+            after.append(b - design(te) @ beta)
+        before, after = np.concatenate(before), np.concatenate(after)
+        gain = float(before @ before - after @ after)
+        z = gain_z(before, after)
+        allk = np.ones_like(folds, dtype=bool)
+        beta = _lsq(design(allk), target(allk), names, bounds)
+        b = target(allk)
+        e0, e1 = float(b @ b), float(np.sum((b - design(allk) @ beta) ** 2))
+        n_obs = b.size
+        dbic = n_obs * math.log(max(e1, 1e-300) / max(e0, 1e-300)) + len(names) * math.log(max(n_obs, 2))
+        if spring:
+            fit = np.tensordot(beta, Xc, axes=1)                   # (m, K)
+            # the effect's size in newtons on its own tendon (before projection and whitening)
+            cols = {"spring_hysteresis": lambda: np.tanh(fr.force[i]), "nominal_spring": lambda: fr.force[i],
+                    "force_sensor": lambda: np.ones(fr.force.shape[1])}
+            size = float(abs(beta[0]) * np.sqrt(np.mean(cols[effect]() ** 2)))
+            floor = float(fr.sig_force[i])
+        else:
+            fit = np.zeros_like(base_motor)
+            fit[i] = beta @ X
+            size = float(np.sqrt(np.mean((beta @ X) ** 2)))
+            floor = float(fr.r * fr.sig_force[i])          # the torque the force-sensor noise exerts
+        params = dict(zip(names, (float(v) for v in beta)))
+        params.update(shape)
+        c = Candidate(effect, "nuisance" if effect in NUISANCE else "physical", "spring" if spring else "motor", i,
+                      label, params, gain, z, dbic, _at_bound(effect, params, bounds), size, floor, fitted=fit)
+        if effect == "guide_friction":
+            c.capstan_rms = float(np.sqrt(np.mean((beta[1] * X[1]) ** 2)))
+        if best is None or c.gain > best.gain:
+            best = c
+    return best
+
+
+def _at_bound(effect: str, p: dict, bounds: CatalogBounds) -> list:
+    """Amplitudes resting on the upper end of their physical range (a bound is not an estimate); the lower
+    end 0 is the term switched off, which the materiality test judges."""
+    return [k for k, v in p.items() if k in _BOUNDS and v >= _BOUNDS[k](bounds)[1] * (1 - 1e-9)]
+
+
+def _reject(c: Candidate, settings: DiscrepancySettings) -> str:
+    if c.effect == "guide_friction" and c.capstan_rms < settings.finger_material * c.floor:
+        # without its tension-proportional part, guide friction on the finger is a torque of the motor's
+        # direction only: motor Coulomb friction's law (3.8) with a sharper sign; the data show no guide
+        return "no tension-proportional part: the same law as motor Coulomb friction"
+    if c.z < settings.min_z:
+        return f"held-out gain {c.z:.1f} null std < min_z {settings.min_z:g}"
+    if c.delta_bic >= 0:
+        return f"BIC not better than without it (dBIC {c.delta_bic:.1f})"
+    if c.at_bound:
+        return f"outside the physical range: {', '.join(c.at_bound)}"
+    if c.size < settings.finger_material * c.floor:
+        return (f"not material: effect RMS {c.size:.3g} < {settings.finger_material:g} x noise-equivalent "
+                f"{c.floor:.3g}")
+    return ""
+
+
+# ---------------------------------------------------------------------------- result
+@dataclass
+class FingerStep:
+    effect: str
+    kind: str
+    place: str
+    tendon: int                 # 1-based
+    status: str                 # confirmed | not separable
+    parameters: dict
+    members: list
+    experiment: str
+    z: float
+    delta_bic: float
+
+
+@dataclass
+class FingerDiagnosis:
+    dataset: str
+    rig: str
+    steps: list
+    ratios_before: dict
+    ratios_after: dict
+    unexplained_residual: bool
+    unexplained: dict
+    verdict: str
+    seconds: float
+    cpu_seconds: float
+    history: list
+    tendon_names: list
+    unexplained_ratio: float
+    complete: bool = True
+
+    @property
+    def named_effects(self) -> list:
+        return [s.effect for s in self.steps if s.kind == "physical"]
+
+    @property
+    def nuisance_corrections(self) -> list:
+        return [s.effect for s in self.steps if s.kind == "nuisance"]
+
+    @property
+    def places(self) -> dict:
+        return {s.effect: s.place for s in self.steps if s.kind == "physical"}
+
+    def summary(self) -> dict:
+        """The JSON summary (``diagnose --json``)."""
+        return {"dataset": self.dataset, "rig": self.rig, "verdict": self.verdict, "complete": self.complete,
+                "named_effects": self.named_effects, "places": self.places,
+                "nuisance_corrections": self.nuisance_corrections,
+                "steps": [dict(effect=s.effect, kind=s.kind, place=s.place, tendon=s.tendon, status=s.status,
+                               parameters=s.parameters, members=s.members, experiment=s.experiment, z=s.z,
+                               delta_bic=s.delta_bic) for s in self.steps],
+                "floor_ratio_before": self.ratios_before, "floor_ratio_after": self.ratios_after,
+                "unexplained_residual": self.unexplained_residual, "unexplained": self.unexplained,
+                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history}
+
+    def text(self) -> str:
+        lines = [f"{self.dataset}: {self.verdict}"]
+        for s in self.steps:
+            ps = ", ".join(f"{k} = {v:.4g}" for k, v in s.parameters.items())
+            lines.append(f"  {s.effect} on {s.place} [{s.status}]: {ps}")
+            if s.status == "not separable":
+                lines.append(f"    not separable with these data from {', '.join(s.members[1:])}; to separate "
+                             f"them: {s.experiment}")
+        if self.unexplained_residual:
+            lines.append(f"  unexplained: {self.unexplained['text']}")
+        return "\n".join(lines)
+
+
+def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
+                    bounds: CatalogBounds | None = None, progress=None) -> FingerDiagnosis:
+    """Localise the discrepancy of a finger dataset to tendons and name effect and place (module docstring)."""
+    settings = settings or DiscrepancySettings()
+    bounds = bounds or CatalogBounds()
+    say = progress or (lambda msg: None)
+    t0, c0 = time.perf_counter(), time.process_time()
+    fr = FingerResiduals(dataset, settings)
+    places = [tendon_place(fr.rig, i) for i in range(fr.m)]
+    before = fr.ratios()
+    say(f"{dataset.name}: {fr.finger} finger, {fr.m} tendons, {len(dataset.time)} samples "
+        f"({fr.tau.shape[1]} filtered, {int(fr.test.sum())} held out)")
+    say("motor side, residual/floor per tendon: " + ", ".join(f"{v:.2f}" for v in before["motor"]))
+    say("spring side, residual/floor per tendon: " + ", ".join(f"{v:.2f}" for v in before["spring"])
+        + f" (all: {before['spring_total']:.2f})")
+    base_motor, base_spring = fr.tau.copy(), fr.eps.copy()
+    steps, history, used = [], [], set()
+    floor = settings.floor_ratio
+
+    def current():
+        mot = [float(np.mean((base_motor[i] / fr.sigma_tau[i]) ** 2)) for i in range(fr.m)]
+        spr = float(np.mean(np.sum(base_spring ** 2, axis=0)) / (fr.m - fr.n))
+        return mot, spr
+
+    n_phys = n_nuis = 0
+    while True:
+        mot, spr = current()
+        if max(mot) < floor and spr < floor:
+            stop = "residual at the noise floor"
+            break
+        cands = []
+        for eff in MOTOR_SIDE + SPRING_SIDE:
+            kind = "nuisance" if eff in NUISANCE else "physical"
+            if (kind == "physical" and n_phys >= settings.max_effects) or \
+                    (kind == "nuisance" and n_nuis >= settings.max_nuisance):
+                continue
+            for i in range(fr.m):
+                if (eff, i) in used:
+                    continue
+                if eff in MOTOR_SIDE and mot[i] < floor:
+                    continue
+                if eff in SPRING_SIDE and spr < floor:
+                    continue
+                c = _fit(fr, eff, i, bounds, settings, base_motor, base_spring)
+                c.rejected = _reject(c, settings)
+                cands.append(c)
+        cands.sort(key=lambda c: -c.gain)
+        history.append({"screen": [dict(effect=c.effect, place=places[c.tendon], gain=c.gain, z=c.z,
+                                        delta_bic=c.delta_bic, rejected=c.rejected) for c in cands[:8]]})
+        say("candidates: " + "; ".join(f"{c.effect} on {fr.rig.tendon_names[c.tendon]} z {c.z:.1f}"
+                                        + (f" ({c.rejected})" if c.rejected else "") for c in cands[:4]))
+        passing = [c for c in cands if not c.rejected]
+        if not passing:
+            stop = "no candidate passes the acceptance tests"
+            break
+        win = passing[0]
+        # the simpler explanation: a calibration that explains as much wins over a physical effect
+        nuis = [c for c in passing if c.kind == "nuisance" and c.gain >= settings.ambiguous_ratio * win.gain]
+        if win.kind == "physical" and nuis:
+            win = nuis[0]
+        tied = [c for c in passing if c is not win and c.kind == win.kind
+                and c.gain >= settings.ambiguous_ratio * win.gain and c.side == win.side]
+        status, members, experiment = "confirmed", [win.effect], ""
+        if tied:
+            members = [win.effect] + [f"{c.effect}" + ("" if c.tendon == win.tendon else f" on {places[c.tendon]}")
+                                      for c in tied]
+            status = "not separable"
+            experiment = separating_experiment([win.effect] + [c.effect for c in tied])
+        if win.side == "motor":
+            base_motor = base_motor - win.fitted
+        else:
+            base_spring = base_spring - win.fitted
+        used.add((win.effect, win.tendon))
+        n_phys += win.kind == "physical"
+        n_nuis += win.kind == "nuisance"
+        steps.append(FingerStep(win.effect, win.kind, places[win.tendon], win.tendon + 1, status, win.params,
+                                members, experiment, win.z, win.delta_bic))
+        say(f"added {win.effect} on {places[win.tendon]} ({win.kind}, {status}, z {win.z:.1f}, "
+            f"dBIC {win.delta_bic:.1f}): " + ", ".join(f"{k} = {v:.4g}" for k, v in win.params.items()))
+    mot, spr = current()
+    after = {"motor": mot, "spring_total": spr}
+    # unexplained: above the threshold and beyond chance for the largest of m + 1 chi-square means over K
+    # samples (family-wise 0.1 %)
+    from scipy.stats import chi2
+    K = fr.tau.shape[1]
+    limit = max(settings.unexplained_ratio, float(chi2.ppf(1.0 - 1e-3 / (fr.m + 1), K)) / K)
+    worst = max(max(mot), spr)
+    unexplained = worst > limit
+    where = {}
+    if unexplained:
+        tendons = [places[i] for i in range(fr.m) if mot[i] > limit]
+        where = {"motor_side": tendons, "spring_side": spr > limit,
+                 "text": (f"held-out residual up to {worst:.2f}x the noise floor"
+                          + (f" on the motor side of {', '.join(tendons)}" if tendons else "")
+                          + (f"; spring side {spr:.2f}x" if spr > limit else ""))}
+    named = [f"{s.effect} on {s.place}" for s in steps if s.kind == "physical"]
+    if unexplained:
+        verdict = "unexplained discrepancy remains" + (f" after {', '.join(named)}" if named else "")
+    elif named:
+        verdict = "found " + ", ".join(named)
+    elif steps:
+        verdict = "calibration only: " + ", ".join(f"{s.effect} on {s.place}" for s in steps)
+    else:
+        verdict = "no discrepancy above the noise floor"
+    say(f"{stop}: {verdict}")
+    return FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
+                           time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
+                           settings.unexplained_ratio)
