@@ -17,7 +17,10 @@ exponential spring creep, exact delay, ...).  Rows (the issue-12 targets):
 * ``tendon``: single effects on the tendon rig (guide vs motor friction);
 * gap closed on held-out windows ``(E_nominal - E_augmented) / (E_nominal - E_truth)``
   (datasets with hidden physics; E_truth from the generator's clean outputs);
-* CPU seconds per 10 s joint diagnosis.
+* CPU seconds per 10 s joint diagnosis;
+* ``finger_single``: one effect (motor friction, guide friction, ripple) on one random tendon of the index
+  finger (the package's finger diagram at 1 kHz, 30 dB): effect and place named (``finger_nothing``: nothing
+  hidden: any name).  The baseline is not run on fingers (its library is the rigs' equations).
 
 Beside the workflow, a **sparse-regression baseline** a user would try instead
 (SINDy-style: sequentially thresholded least squares, ``pysindy.optimizers.STLSQ``
@@ -56,6 +59,7 @@ TRIPLES = [("motor_friction", "joint_friction", "delay"), ("motor_ripple", "spri
            ("guide_friction", "delay", "motor_ripple"), ("spring_drift", "motor_friction", "joint_friction")]
 OUT_OF_CATALOG = ["link_scale", "link_bias", "motor_bias"]
 TENDON = ["motor_friction", "guide_friction", "delay", "spring_hysteresis"]
+FINGER = ["motor_friction", "guide_friction", "motor_ripple"]
 
 
 def cases(per_row: int, quick: bool) -> list:
@@ -72,13 +76,16 @@ def cases(per_row: int, quick: bool) -> list:
         "out_of_catalog": [("joint", [], 30, 1.0, OUT_OF_CATALOG[i % 3]) for i in range(per_row)],
         "three": [("joint", list(TRIPLES[i % len(TRIPLES)]), 30, 1.0, None) for i in range(per_row)],
         "tendon": [("tendon", [TENDON[i % len(TENDON)]], 30, 1.0, None) for i in range(per_row)],
+        "finger_single": [("finger-index", [FINGER[i % len(FINGER)]], 30, 1.0, None) for i in range(per_row)],
+        "finger_nothing": [("finger-index", [], 30, 1.0, None) for _ in range(per_row)],
     }
-    out, seed = [], 1000
+    out, seeds = [], {"rig": 1000, "finger": 5000}   # the rig rows keep the seeds of earlier runs
     for i in range(per_row):
         for row, lst in rows.items():
-            seed += 1
             rig, hidden, snr, strength, transform = lst[i]
-            out.append((row, rig, hidden, snr, seed, strength, transform))
+            key = "finger" if rig.startswith("finger-") else "rig"
+            seeds[key] += 1
+            out.append((row, rig, hidden, snr, seeds[key], strength, transform))
     return out
 
 
@@ -247,9 +254,36 @@ def _code_version() -> str:
         return os.environ.get("AWIWI_CODE_VERSION", "")
 
 
+def run_finger_case(case) -> dict:
+    """A finger case: the effect on a tendon drawn from the seed; scored on effect and place."""
+    from awiwi_drake.discrepancy import diagnose
+    from awiwi_drake.discrepancy.finger_truth import make_finger_dataset
+    from awiwi_drake.parameters.discrepancy import FingerTruthParams
+
+    row, rig, hidden, snr, seed, strength, transform, duration = case
+    place = int(np.random.default_rng(seed).integers(1, 9)) if hidden else None
+    t0 = time.perf_counter()
+    ds = make_finger_dataset(rig[len("finger-"):], hidden, place=place, snr_db=snr, seed=seed, strength=strength,
+                             gen=FingerTruthParams(duration=duration), keep_clean=False)
+    t_gen = time.perf_counter() - t0
+    dx = diagnose(ds)
+    tendon = ds.meta["truth"].get("tendon")
+    return {"row": row, "rig": rig, "hidden": list(hidden), "snr_db": snr, "seed": seed, "strength": strength,
+            "code": _code_version(), "duration": duration, "transform": None, "applied": {},
+            "place": place, "tendon": tendon, "named": dx.named_effects, "places": dx.places,
+            "place_named": bool(hidden) and all(str(dx.places.get(h, "")).split(" ")[0] == tendon for h in hidden),
+            "nuisance_named": dx.nuisance_corrections, "verdict": dx.verdict,
+            "unexplained": dx.unexplained_residual, "floor_ratio_after": max(dx.ratios_after["motor"]),
+            "gap_closed": float("nan"), "status": [s.status for s in dx.steps], "members": [s.members for s in dx.steps],
+            "seconds": dx.seconds, "cpu_seconds": dx.cpu_seconds, "generate_seconds": t_gen,
+            "baseline_named": [], "baseline_calibration": [], "baseline_cpu_seconds": 0.0, "baseline_run": False}
+
+
 def run_case(case) -> dict:
     from awiwi_drake.discrepancy import diagnose, gap_metrics, make_truth_dataset
 
+    if case[1].startswith("finger-"):
+        return run_finger_case(case)
     row, rig, hidden, snr, seed, strength, transform, duration = case
     from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
     t0 = time.perf_counter()
@@ -281,7 +315,8 @@ def _scores(rows: list, named_key: str, calib_key: str) -> dict:
         return (float(np.mean([bool(ok(r)) for r in sel])) if sel else float("nan")), len(sel)
 
     exact = lambda r: sorted(r[named_key]) == sorted(r["hidden"])  # noqa: E731
-    catalog = lambda r: r["row"] in ("single_full", "single_half", "three", "tendon")  # noqa: E731
+    catalog = lambda r: (r["row"] in ("single_full", "single_half", "three", "tendon")  # noqa: E731
+                         or (r["row"] == "finger_single" and named_key == "named"))
     out = {
         "exact_single_full": rate(lambda r: r["row"] == "single_full", exact),
         "exact_single_half": rate(lambda r: r["row"] == "single_half", exact),
@@ -292,6 +327,11 @@ def _scores(rows: list, named_key: str, calib_key: str) -> dict:
         "nothing_physical_name": rate(lambda r: r["row"] == "nothing", lambda r: bool(r[named_key])),
         "exact_three": rate(lambda r: r["row"] == "three", exact),
         "exact_tendon": rate(lambda r: r["row"] == "tendon", exact),
+        # the baseline is not run on fingers: its finger rows are not scored
+        "finger_effect_and_place": rate(lambda r: r["row"] == "finger_single" and named_key == "named",
+                                        lambda r: exact(r) and r.get("place_named", False)),
+        "finger_nothing_any_name": rate(lambda r: r["row"] == "finger_nothing" and named_key == "named",
+                                        lambda r: bool(r[named_key] or r[calib_key])),
     }
     if named_key == "named":
         out["out_of_catalog_flagged"] = rate(
@@ -319,7 +359,7 @@ def summarise(rows: list) -> dict:
 TARGETS = {"exact_single_full": ">= 90 %", "exact_single_half": ">= 90 %", "exact_single": ">= 90 %",
            "spurious": "<= 5 %", "out_of_catalog_wrong_name": "<= 10 %", "out_of_catalog_flagged": "",
            "nothing_any_name": "<= 5 %", "nothing_physical_name": "<= 5 %", "exact_three": ">= 70 %",
-           "exact_tendon": ""}
+           "exact_tendon": "", "finger_effect_and_place": ">= 80 %", "finger_nothing_any_name": "<= 5 %"}
 
 
 def markdown(summ: dict, rows: list) -> str:
@@ -333,6 +373,10 @@ def markdown(summ: dict, rows: list) -> str:
         g = summ["gap_closed"]
         L.append(f"| gap closed on held-out windows, median / mean | {g['median']:.2f} / {g['mean']:.2f} | "
                  f"{g['datasets']} | | >= 0.8 |")
+    fcpu = [r["cpu_seconds"] for r in rows if r["rig"].startswith("finger-")]
+    if fcpu:
+        L.append(f"| CPU s per finger diagnosis, median / max | {np.median(fcpu):.1f} / {np.max(fcpu):.1f} | "
+                 f"{len(fcpu)} | | |")
     if summ["seconds_joint"]:
         sj = summ["seconds_joint"]
         dur = sorted({r.get("duration", 10.0) for r in rows})
@@ -396,8 +440,20 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0, help="seconds per dataset (issue 6: 10)")
     ap.add_argument("--reclaim", action="store_true", help="delete claims left by stopped runs before starting")
     ap.add_argument("--out", default=os.environ.get("AWIWI_OUT", "out/bench_discrepancy"))
+    ap.add_argument("--rows", default=None, help="comma-separated rows to run (default: all)")
     args = ap.parse_args(argv)
+    if args.per_row < 1 or args.jobs < 1:
+        ap.error(f"--per-row {args.per_row} / --jobs {args.jobs}: both must be >= 1")
+    if not (np.isfinite(args.duration) and args.duration > 0):
+        ap.error(f"--duration {args.duration}: a positive number of seconds")
     todo = [c + (args.duration,) for c in cases(args.per_row, args.quick)]
+    if args.rows:
+        keep = {x.strip() for x in args.rows.split(",") if x.strip()}
+        known = {c[0] for c in cases(1, False)}
+        if not keep or keep - known:
+            ap.error(f"--rows {args.rows!r}: unknown row(s) {', '.join(sorted(keep - known)) or '(none given)'}; "
+                     f"known: {', '.join(sorted(known))}")
+        todo = [c for c in todo if c[0] in keep]
     out = pathlib.Path(args.out)
     folder = out / "cases"
     folder.mkdir(parents=True, exist_ok=True)

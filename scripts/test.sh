@@ -5,4 +5,5 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
 export AWIWI_SHORT=1 MPLBACKEND=Agg
-python3 -m pytest -q "$@"
+# two worker processes (pytest-xdist, dev extra): the suite on both cores of the 2-core CI machine
+python3 -m pytest -q -n 2 "$@"

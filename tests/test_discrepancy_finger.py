@@ -108,6 +108,10 @@ def test_finger_diagnosis_names_effect_and_place(friction_noisy, tmp_path, capsy
 
 
 def test_finger_diagnosis_nothing_hidden_names_nothing():
-    ds = make_finger_dataset("index", [], seed=14, gen=THREE)
-    dx = diagnose(ds)
+    """Nothing hidden: no name; recorded joint angles are reported as not used (never dropped silently)."""
+    ds = make_finger_dataset("index", [], seed=14, gen=THREE, joint_angles=True)
+    lines = []
+    dx = diagnose(ds, progress=lines.append)
     assert dx.named_effects == [] and dx.nuisance_corrections == [] and not dx.unexplained_residual
+    assert dx.unused_columns == [f"joint_angle_{j}" for j in range(1, 5)]
+    assert any("joint_angle_1" in ln and "not used" in ln for ln in lines) and "not used" in dx.text()

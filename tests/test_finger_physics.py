@@ -38,16 +38,16 @@ def rk3_excess_growth(A, h=H):
 
 def test_the_finger_plant_has_the_thesis_physics_on_by_default():
     p = FingerRigParams.for_finger("index")
-    assert p.motor.friction and p.motor.ripple and p.spring.hysteresis.enabled and not p.guide_friction
+    assert p.motor.friction and p.motor.ripple and p.spring.hysteresis.enabled and p.guide_friction
     assert p.spring.include_tendon                               # k_t = E S / l0 in series
-    p = p.with_physics(guide_friction=True)
+    assert not p.with_physics(guide_friction=False).guide_friction
     rig = finger_diagram(finger="index", params=p)
     n, m = rig.num_joints, rig.num_tendons
     assert rig.num_states == 2 * n + 4 * m
     assert rig.state_names[2 * n + 2 * m] == f"hysteresis_force[{rig.tendon_names[0]}]"
     assert rig.state_names[-1] == f"guide_friction_force[{rig.tendon_names[-1]}]"
     hand = HandRigParams()
-    assert hand.motor.ripple and hand.spring.hysteresis.enabled and not hand.guide_friction
+    assert hand.motor.ripple and hand.spring.hysteresis.enabled and hand.guide_friction
     with pytest.raises(ValueError, match="guide_friction=True needs backend='compiled'"):
         finger_diagram(finger="index", params=p.with_physics(hysteresis=False), backend="python")
 
@@ -183,14 +183,30 @@ def test_default_hand_physics_is_stable_for_rk3_at_the_control_period():
     assert _rk3_check(hand, 20.0) <= 1e-9
 
 
-def test_finger_backstepping_refuses_guide_friction_with_the_measured_reason():
-    """The 15.5 law is unstable with the guides' Dahl state (continuous closed loop, ideal sensors: a real pole
-    at +833 1/s on the index; +202 / +123 1/s with 3 mm / 3 cm presliding): refused in one line naming
-    the option, instead of a loop that diverges."""
-    from awiwi_drake.control import make_controller
-    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(guide_friction=True))
-    with pytest.raises(ValueError, match="guide_friction=True.*unstable"):
-        make_controller("backstepping", rig)
+def test_finger_backstepping_with_guide_friction_drops_the_link_acceleration_feedforward():
+    """Why the 15.5 finger law does not feed its link model's acceleration forward by default (Drake's Linearize of
+    the continuous loop, true joint state, index with guide friction on): with it (the exact design, motor friction
+    cancelled in full) the guides' presliding stiffness, which the link model lacks, gives a real pole far in the
+    right half plane (measured +833 1/s); without it every pole has Re <= 0 (the Dahl states are marginal)."""
+    from pydrake.systems.primitives import Linearize
+    from awiwi_drake.control import closed_loop
+    from awiwi_drake.control.base import StaticLawController
+    from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
+    from awiwi_drake.parameters.hand_control import HandChainParams
+
+    def max_real(params):
+        rig = finger_diagram(finger="index")
+        assert rig.params.guide_friction                                  # on by default
+        loop = closed_loop(rig, StaticLawController(FingerBacksteppingLaw(rig, params)), rate_hz=None,
+                           sensors="ideal")
+        op = rig.operating_point()
+        ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
+        A = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("joint_angle_reference").get_index(),
+                      output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
+        return np.linalg.eigvals(A).real.max()
+
+    assert max_real(HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True)) > 500.0
+    assert max_real(HandChainParams()) <= 1e-6
 
 
 def test_fixed_step_rk3_at_the_control_period_follows_the_error_controlled_solution():

@@ -29,8 +29,8 @@ def test_linearize_finger_targets_match_the_builder(name, capsys):
 def test_linearize_hand_and_unknown_parameter(capsys):
     assert main(["linearize", "hand", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    # 21 joints (q, v) and 38 tendons (motor angle, velocity, hysteresis force: on by default)
-    assert len(data["state_names"]) == 2 * 21 + 3 * 38 and np.array(data["B"]).shape == (2 * 21 + 3 * 38, 38)
+    # 21 joints (q, v) and 38 tendons (motor angle, velocity, hysteresis and guide friction forces: on by default)
+    assert len(data["state_names"]) == 2 * 21 + 4 * 38 and np.array(data["B"]).shape == (2 * 21 + 4 * 38, 38)
     assert main(["linearize", "finger-index", "--set", "no_such_field=1"]) == 2
     assert "no_such_field" in capsys.readouterr().err
 

@@ -157,10 +157,11 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
 
 @pytest.mark.parametrize("finger,per_tendon", [("index", False), ("middle", False), ("index", True)])
 def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tendon):
-    """Linearize (Drake) of the finger under the 15.5 backstepping (continuous, true joint state) has
-    exactly the poles of the designed error system (e, e', z3, z4): the per-joint design is what the
-    plant does, not an approximation (constant-coupling fingers; Coriolis vanish at rest). The ideal
-    plant: the design has no hysteresis state and cancels the motor friction exactly. With one tendon's
+    """Linearize (Drake) of the finger under the exact 15.5 backstepping (continuous, true joint state, the link
+    model's acceleration fed forward) has exactly the poles of the designed error system (e, e', z3, z4): the
+    per-joint design is what the plant does, not an approximation (constant-coupling fingers; Coriolis vanish at
+    rest). The ideal plant: the design has no hysteresis or guide friction state and cancels the motor friction
+    exactly. With one tendon's
     spring law overridden (a 2 mm tendon: stiffer) the law cancels each tendon's own phi_i: the poles are
     still exactly the design's (with the common law for all they are not: checked)."""
     rig = _ideal_rig(finger)
@@ -169,11 +170,11 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
         base = rig.params
         stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
-        wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))
+        wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True))
         wrong.springs = TendonSprings([rig.spring] * rig.num_tendons)          # the common law for every tendon
         wrong_loop = closed_loop(rig, StaticLawController(wrong), rate_hz=None, sensors="ideal")
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
-    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0))   # the continuous design: exact cancellation
+    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True))   # the continuous design: exact cancellation
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
@@ -224,8 +225,11 @@ def test_finger_backstepping_sampled_at_3khz_is_stable_on_every_finger(finger):
     """Issue 10 item 6: the law sampled at the thesis's 3 kHz (ZOH) is stable on every finger with the thesis
     physics on (eigenvalues of the sampled linearisation in the unit circle; the Dahl hysteresis states are
     marginal at rest: |z| = 1 to 1e-9), its designed joint modes keep |h lambda| <= 1/4, and the ideal plant's
-    sampled loop is strictly inside. The former design (continuous, per-DoF Kd) is not stable at 3 kHz."""
+    sampled loop is strictly inside. The former design (continuous, per-DoF Kd) is not stable at 3 kHz. The default
+    plant has guide friction on (the +833 1/s pole of the link-acceleration feed-forward:
+    test_finger_backstepping_through_the_estimator_at_3khz_is_stable)."""
     rig = finger_diagram(finger=finger)
+    assert rig.params.guide_friction
     radius, law = _sampled_backstepping_radius(rig, 3000.0, 3000.0)
     assert radius <= 1.0 + 1e-9, radius
     S = law.S
@@ -253,17 +257,87 @@ def test_hand_backstepping_sampled_at_3khz_is_stable():
     assert radius <= 1.0 + 1e-9, radius
 
 
+@pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth", "hand"])
+def test_finger_backstepping_through_the_estimator_at_3khz_is_stable(finger):
+    """The registered law on the default plant (guide friction and hysteresis on), sampled at 3 kHz with the
+    tendon-length estimator in the loop (``sampled_loop_poles``: the one-period map of what ``closed_loop``
+    simulates): every pole but the neutral Dahl modes inside the unit circle. With the link model's acceleration fed
+    forward (the exact design) the index's loop is unstable: the guides' presliding stiffness, absent from the link
+    model, becomes motor torque through the light links (continuous, true joint state: a pole at +833 1/s)."""
+    from awiwi_drake.control.joint_design import sampled_loop_poles
+    from awiwi_drake.hand import hand_diagram
+    make = (lambda: hand_diagram(wrist=False)) if finger == "hand" else (lambda: finger_diagram(finger=finger))
+    rig = make()
+    assert rig.params.guide_friction and rig.params.spring.hysteresis.enabled
+    poles = sampled_loop_poles(rig, make_controller("backstepping", rig))
+    assert poles.spectral_radius < 1.0 - 1e-3, poles.spectral_radius
+    if finger == "index":
+        from awiwi_drake.control.finger_backstepping import finger_backstepping_controller
+        rig = make()
+        exact = sampled_loop_poles(rig, finger_backstepping_controller(
+            rig, HandChainParams(link_acceleration_feedforward=True)))
+        assert exact.spectral_radius > 1.1, exact.spectral_radius
+
+
+def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
+    """The registered law on the default index (guide friction and hysteresis on, estimated joint angles, 3 kHz): a
+    0.2 rad MCP step settles where the law's rest equations put it. At rest (omega = 0, e' = 0) the friction
+    forces z + g hold the link, tau_f = (P S)^T (z + g) = -(P S)^T f, while the law's link model, which lacks them,
+    predicts e'' = M_d^-1 tau_f; its force steps then settle at (1 + K3 K4) z3 = W a2 + (K3 + K4) W a1 + P S e''
+    (one gain K3 = K4 for every tendon) and the joint at
+
+        Kp e = -(I + G) tau_f,   G = (Kp + (K3 + K4) Kd - Kd M_d^-1 B_q + (P S)^T P S) M_d^-1 / (1 + K3 K4),
+
+    the friction dead band Kp^-1 tau_f amplified by the model's phantom acceleration (eigenvalues of I + G: 1.9 to
+    13.5 on the index). Checked against the logged friction states, and bounded by the Dahl levels |g_i| <= C_i
+    (4.1) and |z_i| <= beta f_i. No tendon goes slack and the command saturates in < 2 % of the samples."""
+    from awiwi_drake.components.friction import guide_friction_force
+    from awiwi_drake.hand.systems import tendon_bending_angles
+    rig = _rig()
+    law = FingerBacksteppingLaw(rig)
+    K3, K4 = float(law.K3[0]), float(law.K4[0])
+    assert np.all(law.K3 == K3) and np.all(law.K4 == K4)
+    loop = closed_loop(rig, make_controller("backstepping", rig), **get_entry("backstepping", rig).loop_options)
+    op = rig.operating_point()
+    q_ref = op.joint_angle.copy()
+    q_ref[1] += 0.2
+    ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
+    res = simulate(loop.diagram, ctx, 0.3, log=("joint_angle", "state", "tendon_force", "motor_torque_command"))
+    names = rig.state_names
+    z = res["state"][-1][[i for i, nm in enumerate(names) if nm.startswith("hysteresis_force")]]
+    g = res["state"][-1][[i for i, nm in enumerate(names) if nm.startswith("guide_friction_force")]]
+    PS = np.asarray(rig.coupling.P(q_ref)) @ law.S
+    Mi = np.linalg.inv(law.M)
+    G = (law.Kp + (K3 + K4) * law.Kd - law.Kd @ Mi @ law.Bq + PS.T @ PS) @ Mi / (1 + K3 * K4)
+    e = law.Sp @ (res["joint_angle"][-1] - q_ref)
+    e_rest = -np.linalg.solve(law.Kp, (np.eye(len(e)) + G) @ (PS.T @ (z + g)))
+    np.testing.assert_allclose(e, e_rest, rtol=0, atol=1e-3)
+    assert abs(e[1]) > 0.1                                              # the dead band is real: ~0.15 rad on the MCP
+    C = guide_friction_force(tendon_bending_angles(rig.coupling, rig.params), rig.params.friction)
+    w = rig.params.spring.hysteresis.width_ratio * res["tendon_force"][-1]
+    assert np.all(np.abs(g) <= C + 1e-9) and np.all(np.abs(z) <= w + 1e-9)
+    bound = np.abs(np.linalg.solve(law.Kp, np.eye(len(e)) + G)) @ np.abs(PS.T) @ (C + w)
+    assert np.all(np.abs(e) <= bound), (e, bound)
+    assert np.all(res["tendon_force"] > 0.0)
+    assert np.mean(np.abs(res["motor_torque_command"]) > rig.params.motor.torque_limit) < 0.02
+
+
 @pytest.mark.parametrize("controller", ["lqr", "backstepping"])
 def test_index_finger_step_with_estimated_joint_angles(controller):
     """Closed through the estimator at 3 kHz: the MCP step is tracked, the other joints held, the
     tendons never go slack, and the estimate is exact: (5.15) of the current sample, and the index's
     coupling is constant (the least squares of consistent length changes is the joint angle itself).
 
-    Without the spring hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
+    Without the guide friction, whose dead band stops the MCP 0.15-0.17 rad short (the guides' ~2 N per tendon path
+    against the 0.5 Nm/rad impedance; test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band), and
+    without the spring hysteresis: the lever friction force z (|z| <= 0.1 f) is in neither controller's
     model and leaves a steady joint offset of order Kp^-1 (P S)^T z (backstepping, index, 3 kHz design: up
-    to 0.10 / 0.16 / 0.26 / 0.42 rad per DoF, measured 0.010 / 0.043 / 0.074 rad on MCP / PIP / DIP; lqr:
+    to 0.10 / 0.16 / 0.26 / 0.42 rad per DoF, measured 0.0017 / 0.0055 / 0.0078 rad on MCP / PIP / DIP, the closed
+    form of test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band; 0.010 / 0.043 / 0.074 with the
+    link-acceleration feed-forward; lqr:
     0.006 rad on the MCP), which this 2 % tracking check would only measure."""
-    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(hysteresis=False))
+    rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(
+        hysteresis=False, guide_friction=False))
     loop = closed_loop(rig, make_controller(controller, rig), **get_entry(controller, rig).loop_options)
     op = rig.operating_point()
     q_ref = op.joint_angle.copy()
@@ -381,7 +455,8 @@ def test_force_sharing_stage_gives_the_exact_joint_torque_and_converts(finger):
     torques come out of the rig's own coupling exactly, -(P S)^T f_ref = tau_ref at the design posture (ring: the
     coupled DIP, thumb: P(q_op)), the design point maps to its tendon forces, and the system converts to
     AutoDiffXd with derivatives equal to central differences of the float system."""
-    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(hysteresis=False),
+    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(  # python: no Dahl states
+                             hysteresis=False, guide_friction=False),
                          backend="python")
     ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing")
     sharing = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_sharing")

@@ -74,8 +74,8 @@ def test_stiffest_link_mode_rises_with_pretension():
 
 def test_hand_is_five_decoupled_fingers_in_the_global_tendon_order():
     hand = hand_diagram(wrist=False)
-    # 21 joints (q, v), 38 tendons (motor angle and velocity, hysteresis force; guide friction off)
-    assert (hand.num_joints, hand.num_tendons, hand.num_states) == (21, 38, 2 * 21 + 3 * 38)
+    # 21 joints (q, v), 38 tendons (motor angle and velocity, hysteresis and guide friction forces)
+    assert (hand.num_joints, hand.num_tendons, hand.num_states) == (21, 38, 2 * 21 + 4 * 38)
     assert hand.tendon_names[TENDON_SLICES["ring"]][0] == "ring_h1"
     lin_h = linearize(hand, hand.operating_point())
     index = finger_diagram(finger="index")
@@ -105,8 +105,9 @@ def test_wrist_feedforward_reduces_finger_drift_down_to_the_friction_limit():
     of tendon, which the routing maps to at most |P^+| (r_m gamma2/kp) 1 per joint
     (abduction: 4.65e-3 rad).  Without the spring hysteresis: its force is not seen by the motor PD
     and adds its own offset K_q^-1 P^T z (measured with it: abduction 5.1e-3 rad, 1.1x the friction
-    bound)."""
-    no_hysteresis = FingerRigParams.for_finger("index").with_physics(hysteresis=False)
+    bound). Without the guide friction for the same reason: its forces g (|g_i| <= C_i ~ 2 N, (4.1)) add
+    K_q^-1 P^T g."""
+    no_hysteresis = FingerRigParams.for_finger("index").with_physics(hysteresis=False, guide_friction=False)
     s = wrist_compensation_study("index", amplitude=np.radians(5.0), frequency=0.5, t_final=0.4,
                                  params=no_hysteresis)
     rig_p = FingerRigParams.for_finger("index")
@@ -120,9 +121,10 @@ def test_wrist_feedforward_reduces_finger_drift_down_to_the_friction_limit():
 
 
 def test_large_uncompensated_wrist_motion_slackens_tendons_and_is_reported():
-    # without the spring hysteresis (as above): the slack threshold is about the elastic path change
+    # without the spring hysteresis and guide friction (as above): the slack threshold is about the elastic path change
     s = wrist_compensation_study("index", amplitude=np.radians(15.0), frequency=0.5, t_final=0.45,
-                                 params=FingerRigParams.for_finger("index").with_physics(hysteresis=False))
+                                 params=FingerRigParams.for_finger("index").with_physics(hysteresis=False,
+                                                                                         guide_friction=False))
     slack = [e for e in s.events["uncompensated"] if e.kind == "tendon_slack"]
     assert slack and s.min_tendon_force["uncompensated"] == 0.0
     assert s.min_tendon_force["compensated"] > 10.0

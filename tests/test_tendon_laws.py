@@ -39,8 +39,9 @@ def _k_of_force(law, f):
 
 def _mixed_rig(finger="index", tendon="index_h3", backend="python"):
     """The finger with ``tendon``'s law overridden (python backend: continuous linearisations; the ideal
-    drive without hysteresis, which that backend does not carry; the design model's motor)."""
-    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False)
+    drive without hysteresis and guide friction, whose Dahl states that backend does not carry; the design model's
+    motor)."""
+    p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False, guide_friction=False)
     p = p.replace(motor=design_motor(p.motor), tendon_springs=((tendon, p.spring.replace(tendon=STIFF)),))
     return finger_diagram(finger=finger, backend=backend, params=p)
 
@@ -253,3 +254,28 @@ def test_hand_chain_gives_every_finger_its_own_tendons_laws():
     r_m = hand.params.motor.pulley_radius
     np.testing.assert_allclose([fm.alpha_of_force(fi) for fm, fi in zip(law.fmaps, f)], r_m * k_law, rtol=1e-6)
     assert abs(k_law[over[0]] / _k_of_force(springs[0], f[over[0]]) - 1.0) > 0.02   # the overrides differ
+
+
+def test_every_drive_backend_evaluates_each_tendons_law():
+    """The finger with one law overridden (ideal drive: the python and symbolic backends carry no Dahl states) on
+    the three drive backends: the same state derivatives off the operating point (1e-12 relative)."""
+    base = FingerRigParams.for_finger("index").with_physics(hysteresis=False, guide_friction=False)
+    p = base.replace(tendon_springs=(("index_h3", base.spring.replace(tendon=STIFF)),))
+    derivs = {}
+    for backend in ("compiled", "python", "symbolic"):
+        rig = finger_diagram(finger="index", params=p, backend=backend)
+        op = rig.operating_point(pretension=30.0)
+        ctx = rig.context(op)
+        x = np.array(op.state, dtype=float)
+        x[:4] += 0.05                                            # joints off the equilibrium: the springs work
+        ctx.SetContinuousState(x)
+        derivs[backend] = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
+    scale = np.abs(derivs["compiled"]).max()
+    for backend in ("python", "symbolic"):
+        np.testing.assert_allclose(derivs[backend], derivs["compiled"], rtol=0, atol=1e-12 * scale, err_msg=backend)
+    one_law = finger_diagram(finger="index", params=base)        # the override changes the dynamics
+    ctx = one_law.context(one_law.operating_point(pretension=30.0))
+    x = np.array(one_law.operating_point(pretension=30.0).state, dtype=float)
+    x[:4] += 0.05
+    ctx.SetContinuousState(x)
+    assert np.abs(one_law.diagram.EvalTimeDerivatives(ctx).CopyToVector() - derivs["compiled"]).max() > 1e-6 * scale

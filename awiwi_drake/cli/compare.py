@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import argparse
 
-from awiwi_drake.cli import finite_float, output_dir, positive_float
+from awiwi_drake.cli import add_parameter_options, finite_float, load_parameters, output_dir, positive_float
 
 __all__ = ["register", "run", "RIG_FACTORIES"]
 
@@ -68,6 +68,8 @@ def register(subparsers) -> None:
     p.add_argument("--saturation", type=positive_float, default=None, metavar="NM", help="torque limit [Nm]")
     p.add_argument("--short", action="store_true", help="shorter runs (as AWIWI_SHORT=1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
+    add_parameter_options(p, "the rig's parameter set", "e.g. --set guide_friction=false for a finger without the "
+                          "guides' friction")
     p.set_defaults(func=run)
 
 
@@ -108,6 +110,9 @@ def run(args) -> int:
         raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
     module, fn, kw = RIG_FACTORIES[args.rig]
     rig_fn = getattr(importlib.import_module(module), fn)
+    if getattr(args, "config", None) or getattr(args, "set", None):    # the rig's parameters, --config then --set
+        from awiwi_drake.diagrams import TARGETS
+        kw = dict(kw, params=load_parameters(TARGETS[args.rig]["params"](), args))
 
     def make_rig():
         return rig_fn(**kw)

@@ -463,6 +463,7 @@ class FingerDiagnosis:
     history: list
     tendon_names: list
     unexplained_ratio: float
+    unused_columns: list = field(default_factory=list)   # recorded but not used (joint angles)
     complete: bool = True
 
     @property
@@ -487,10 +488,13 @@ class FingerDiagnosis:
                                delta_bic=s.delta_bic) for s in self.steps],
                 "floor_ratio_before": self.ratios_before, "floor_ratio_after": self.ratios_after,
                 "unexplained_residual": self.unexplained_residual, "unexplained": self.unexplained,
-                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history}
+                "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history,
+                "unused_columns": self.unused_columns}
 
     def text(self) -> str:
         lines = [f"{self.dataset}: {self.verdict}"]
+        if self.unused_columns:
+            lines.append(f"  not used: {', '.join(self.unused_columns)} (joint angles are estimated from the tendons)")
         for s in self.steps:
             ps = ", ".join(f"{k} = {v:.4g}" for k, v in s.parameters.items())
             lines.append(f"  {s.effect} on {s.place} [{s.status}]: {ps}")
@@ -511,6 +515,10 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     t0, c0 = time.perf_counter(), time.process_time()
     fr = FingerResiduals(dataset, settings)
     places = [tendon_place(fr.rig, i) for i in range(fr.m)]
+    unused = [k for k in dataset.output_names if k.startswith("joint_angle")]
+    if unused:   # said, not silently dropped
+        say(f"note: {', '.join(unused)} recorded but not used: the joint angles are estimated from the tendons "
+            f"(as on the hand, which has no joint sensors)")
     before = fr.ratios()
     say(f"{dataset.name}: {fr.finger} finger, {fr.m} tendons, {len(dataset.time)} samples "
         f"({fr.tau.shape[1]} filtered, {int(fr.test.sum())} held out)")
@@ -609,4 +617,4 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     say(f"{stop}: {verdict}")
     return FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
                            time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
-                           settings.unexplained_ratio)
+                           settings.unexplained_ratio, unused)

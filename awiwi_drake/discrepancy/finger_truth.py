@@ -105,6 +105,8 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
     for h in hidden:
         if h not in FINGER_HIDDEN_EFFECTS:
             raise ValueError(f"--hide {h}: not a finger effect (finger effects: {', '.join(FINGER_HIDDEN_EFFECTS)})")
+    if not hidden and place is not None:
+        raise ValueError(f"--place {place}: nothing hidden to place (give --hide)")
     if hidden and not (isinstance(place, int) and 1 <= place <= num_tendons):
         raise ValueError(f"--place {place!r}: a finger effect needs the tendon it acts on, 1..{num_tendons}")
     u, k = rng.uniform, float(strength)

@@ -39,6 +39,7 @@ from awiwi_drake.components.friction import guide_friction, stribeck_friction
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
+from awiwi_drake.discrepancy.catalog import PLACED_EFFECTS
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
 
@@ -195,6 +196,9 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
     hidden = list(hidden)
     if place is not None and (rig != "joint" or place not in (1, 2)):
         raise ValueError(f"place = {place!r}: a per-tendon place is 1 or 2 on the joint rig")
+    if place is not None and not set(hidden) & set(PLACED_EFFECTS):
+        raise ValueError(f"--place {place}: only a hidden per-tendon effect ({', '.join(PLACED_EFFECTS)}) takes a "
+                         f"place; hidden: {', '.join(hidden) or 'none'}")
     for h in hidden:
         if h not in HIDDEN_EFFECTS:
             raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")

@@ -320,8 +320,7 @@ def finger_params(name: str):
 class FingerDriveParams(Parameters):
     """Motors, springs, pretension and routing friction shared by finger and hand diagrams.
 
-    The thesis's physics, each switchable (``with_physics``; all on by default except guide friction,
-    see its source): motor friction
+    The thesis's physics, each switchable (``with_physics``; all on by default): motor friction
     (3.8) and ripple (``motor.friction``, ``motor.ripple``), guide friction on every tendon path
     (``guide_friction``; (4.1) at each tendon's bending angle, or the capstan form), spring
     hysteresis (``spring.hysteresis.enabled``, Fig 4.8b), one spring law per tendon (``spring``
@@ -344,12 +343,10 @@ class FingerDriveParams(Parameters):
                               source="Fig 15.26: f_pre = 20 N (as the joint rig)",
                               doc="tendon force of every tendon at the default operating point")
     guide_friction: bool = param(
-        False, unit="-",
-        source=("chosen: off by default. Measured (index, continuous loop, ideal sensors): with the guides' Dahl "
-                "state the 15.5 finger backstepping, which differentiates its frictionless link model through "
-                "the light links, has a real pole at +833 1/s (presliding 0.4 mm; +202 at 3 mm, +123 at 3 cm; "
-                "sampled at 3 kHz: spectral radius 1.27 / 1.07 / 1.007), so it refuses such a rig; joint-pd and "
-                "the cascaded chain stay stable (friction-limited). Switch on with with_physics(guide_friction=True)"))
+        True, unit="-",
+        source=("thesis (4.1), ch. 4 and 9: routing friction on every tendon path; on by default. The 15.5 finger "
+                "backstepping is stable with it (without the link-acceleration feed-forward, see "
+                "HandChainParams.link_acceleration_feedforward); with_physics(guide_friction=False) switches it off"))
     capstan_friction: bool = param(False, unit="-",
                                    source=("chosen: False = speed-independent (4.1); True = tension-"
                                            "proportional capstan law (ch. 9: 10-50 % of the force)"))

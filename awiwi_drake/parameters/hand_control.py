@@ -125,6 +125,15 @@ class HandChainParams(Parameters):
                                   source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
                                          "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "
                                          "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter")
+    link_acceleration_feedforward: bool = param(
+        False, unit="-",
+        source=("chosen: False. The exact 15.5 design feeds the tendon force change phi' P qdd of its link model's "
+                "acceleration forward; on the light finger links that turns any link-side force the model lacks into "
+                "motor torque (index DIP: ~8 Nm per N), and with the guides' friction (its presliding stiffness, "
+                "absent from the link model) the loop has a pole at +833 1/s (index, continuous, true joint state; "
+                "3 kHz through the estimator: spectral radius 1.26). Without it the sampled loop is stable on every "
+                "finger and the hand with guide friction (tests/test_hand_control.py); True gives the exact design "
+                "(poles equal to the designed error system on the ideal plant)"))
 
 
 @dataclass(frozen=True)
