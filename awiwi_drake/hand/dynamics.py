@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import os
 import pathlib
 from dataclasses import dataclass, field
 
@@ -269,8 +270,8 @@ def build_hand_kernels(model: DriveModel, links: LinkModel, *, jit: bool = True)
         if cache is not None:
             try:
                 cache.parent.mkdir(parents=True, exist_ok=True)
-                tmp = cache.with_suffix(".tmp")
-                tmp.write_text(source)
+                tmp = cache.with_suffix(f".{os.getpid()}.tmp")    # one per process: concurrent writers never
+                tmp.write_text(source)                              # share a half-written file
                 tmp.replace(cache)
             except OSError:
                 pass
