@@ -33,9 +33,10 @@ State: ``[q (n), v (n), theta (m), omega (m), z (m, hysteresis), g (m, guide fri
 (the order of the MultibodyPlant + drive diagram: ``rigs.base.state_names``).
 Ports (each computes only its own quantity; prerequisites declared): inputs ``motor_torque``
 (m) [N m], ``external_torque`` (n) [N m] and, with the wrist, ``wrist_tendon_offset`` (m) [m];
-outputs ``state``, ``joint_angle``, ``joint_velocity``, ``motor_angle``, ``motor_velocity``,
-``motor_state``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m], ``elongation`` [m],
-``joint_torque`` (n, the tendon part ``-P^T (f + g)``) [N m], ``applied_torque`` (m) [N m].
+outputs ``state`` (copied in C++: the finger/hand diagram slices ``joint_angle``, ``motor_angle``, ...
+from it with Drake's ``Demultiplexer``), ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
+``elongation`` [m], ``joint_torque`` (n, the tendon part ``-P^T (f + g)``) [N m], ``applied_torque``
+(m) [N m].
 
 The symbolic trace of the whole hand takes ~7 s (the fifth finger's oblique HMC axis makes
 long expressions); the generated source is cached on disk beside the compiled kernels
@@ -48,6 +49,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import os
 import pathlib
 from dataclasses import dataclass, field
 
@@ -268,8 +270,8 @@ def build_hand_kernels(model: DriveModel, links: LinkModel, *, jit: bool = True)
         if cache is not None:
             try:
                 cache.parent.mkdir(parents=True, exist_ok=True)
-                tmp = cache.with_suffix(".tmp")
-                tmp.write_text(source)
+                tmp = cache.with_suffix(f".{os.getpid()}.tmp")    # one per process: concurrent writers never
+                tmp.write_text(source)                              # share a half-written file
                 tmp.replace(cache)
             except OSError:
                 pass
@@ -334,13 +336,7 @@ def HandDynamics_(T):
             self._ext = self.DeclareVectorInputPort("external_torque", n)
             self._off = self.DeclareVectorInputPort("wrist_tendon_offset", m) if self._wrist else None
             state = self.all_state_ticket()
-            self.DeclareStateOutputPort("state", xc)
-            for name, sl in (("joint_angle", slice(0, n)), ("joint_velocity", slice(n, 2 * n)),
-                             ("motor_angle", slice(2 * n, 2 * n + m)),
-                             ("motor_velocity", slice(2 * n + m, 2 * n + 2 * m)),
-                             ("motor_state", slice(2 * n, 2 * n + 2 * m))):
-                self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
-                                             prerequisites_of_calc={state})
+            self.DeclareStateOutputPort("state", xc)      # copied in C++; the diagram slices it (Demultiplexer)
             deps = {state} | ({self._off.ticket()} if self._off is not None else set())
             for name, size in (("tendon_force", m), ("tendon_stiffness", m), ("elongation", m),
                                ("joint_torque", n)):
@@ -370,11 +366,6 @@ def HandDynamics_(T):
             if self._off is None:
                 return self._empty if self._float else np.zeros(0, dtype=object)
             return self._off.Eval(context)
-
-        def _slicer(self, sl):
-            def calc(context, out):
-                out.SetFromVector(context.get_continuous_state_vector().CopyToVector()[sl])
-            return calc
 
         def _law_output(self, name):
             n = self._n

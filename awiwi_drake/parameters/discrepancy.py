@@ -388,7 +388,10 @@ class FingerTruthParams(Parameters):
     kp: float = param(40.0, unit="Nm/rad", low=0.0, low_inclusive=False,
                       source="MotorPositionGains default (0.56 Nm Coulomb friction of Table 3.3 -> 0.014 rad)",
                       doc="motor position gain")
-    kd: float = param(0.4, unit="Nm s/rad", low=0.0, source="chosen: the MotorPositionGains default, overdamped with B = 2e-3",
+    kd: float = param(0.4, unit="Nm s/rad", low=0.0,
+                      source="chosen: the MotorPositionGains default; on the friction-free truth finger (motor "
+                             "friction off) the motor loop alone has damping ratio kd / (2 sqrt(kp B)) = 0.71 "
+                             "with B = 2e-3 kg m^2 (overdamped only with the rigs' linearised friction)",
                       doc="motor velocity gain")
     joint_excursion: float = param(0.35, unit="rad", low=0.0,
                                    source="chosen: +-20 deg about 0.2 rad of flexion, inside every joint range "
