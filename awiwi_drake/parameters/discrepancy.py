@@ -128,8 +128,8 @@ class DiscrepancySettings(Parameters):
         doc="finger diagnosis: standard deviation of the consistent filter")
     finger_decimation: float = param(
         3.3, unit="-", low=0.1, high=20.0,
-        source="the autocorrelation of white noise through the kernel's second derivative, (3 - 6u^2 + u^4) "
-               "exp(-u^2/2) with u = lag/(sigma sqrt 2), is zero at u^2 = 3 + sqrt 6 (lag 3.3 sigma): the decimated "
+        source="chosen: the lag where the autocorrelation of white noise through the kernel's second derivative, (3 - 6u^2 + u^4) "
+               "exp(-u^2/2) with u = lag/(sigma sqrt 2), vanishes, u^2 = 3 + sqrt 6 (lag 3.3 sigma): the decimated "
                "acceleration noise is white",
         doc="finger diagnosis: decimation step in kernel standard deviations")
     finger_block: float = param(
