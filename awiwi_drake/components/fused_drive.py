@@ -54,7 +54,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import asarray_like, is_float, positive_part
 from awiwi_drake.components.motor import motor_acceleration, saturate_torque
-from awiwi_drake.components.spring import hysteresis_rate
+from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
@@ -115,9 +115,7 @@ class DriveModel:
         m, n = int(self.coupling.num_tendons), int(self.coupling.num_joints)
         if len(self.springs) != m:
             raise ValueError(f"DriveModel: springs must hold one spring law per tendon ({m}), got {len(self.springs)}")
-        for i, s in enumerate(self.springs):
-            if not hasattr(s, "force") or not hasattr(s, "stiffness"):
-                raise ValueError(f"DriveModel: springs[{i}] is not a spring law (needs force(x), stiffness(x))")
+        object.__setattr__(self, "laws", TendonSprings(self.springs))    # the one per-tendon evaluation
         off = np.asarray(self.offsets, dtype=float)
         if off.shape != (m,) or not np.all(np.isfinite(off)):
             raise ValueError(f"DriveModel: offsets must be {m} finite numbers [m], got {self.offsets!r}")
@@ -140,10 +138,6 @@ class DriveModel:
             if li.shape != (n,) or ld.shape != (n,) or np.any(li <= 0) or np.any(ld < 0):
                 raise ValueError(f"DriveModel: link_inertia (> 0) and link_damping (>= 0) need {n} entries each")
         object.__setattr__(self, "_h0", np.asarray(self.coupling.h(np.zeros(n)), dtype=float))
-        groups = {}
-        for i, s in enumerate(self.springs):
-            groups.setdefault(id(s), (s, []))[1].append(i)
-        object.__setattr__(self, "_spring_groups", [(s, np.array(ix)) for s, ix in groups.values()])
         # content key of the kernels (taken now, before any lazily cached attribute of the coupling or
         # the springs changes the pickle): equal models built apart share one trace
         object.__setattr__(self, "_content_key", _content_digest(self))
@@ -180,14 +174,7 @@ class DriveModel:
 
     @property
     def supports_symbolic(self) -> bool:
-        return all(getattr(s, "supports_symbolic", False) for s in self.springs)
-
-    # laws on tendon groups -----------------------------------------------------------
-    def spring_apply(self, method: str, x):
-        out = np.empty(len(x), dtype=x.dtype)
-        for s, ix in self._spring_groups:
-            out[ix] = np.asarray(getattr(s, method)(x[ix]), dtype=x.dtype)
-        return out
+        return self.laws.supports_symbolic
 
     def split_state(self, state):
         """(q, qdot, theta, omega, z, g) views of a drive state (q, qdot None without a link; z None
@@ -229,11 +216,11 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     qd_all = _full_rates(model, qd)
     x = model.motor_pulley_radius * theta + np.asarray(model.coupling.h(q)) - model._h0 + model.offsets
     x = asarray_like(x, theta)
-    f_el = model.spring_apply("force", x)
+    f_el = model.laws.force(x)
     f = positive_part(f_el + z) if model.has_hysteresis else f_el
     out = dict(elongation=x, tendon_force=asarray_like(f, x))
     if "all" in want or "tendon_stiffness" in want:
-        out["tendon_stiffness"] = model.spring_apply("stiffness", x)
+        out["tendon_stiffness"] = model.laws.stiffness(x)
     need_P = any(w in want for w in ("all", "generalized_force", "derivatives"))
     if need_P:
         P = np.asarray(model.coupling.P(q))

@@ -219,19 +219,14 @@ class FingerResiduals:
         self.elong = rig.offsets[:, None] + r * self.theta + P @ self.q_hat
 
     # ------------------------------------------------------------------ energies
-    def motor_energy(self, i: int, mask=None) -> float:
-        z = self.tau[i] / self.sigma_tau[i]
-        return float((z if mask is None else z[mask]) @ (z if mask is None else z[mask]))
-
     def ratios(self) -> dict:
         """Residual energy over its noise floor (all samples: a fitted effect has 2-4 parameters against
         ~10 samples per second): per tendon, motor side and spring side."""
-        te = np.ones(self.tau.shape[1], dtype=bool)
-        mot = [float(np.mean((self.tau[i, te] / self.sigma_tau[i]) ** 2)) for i in range(self.m)]
+        mot = [float(np.mean((self.tau[i] / self.sigma_tau[i]) ** 2)) for i in range(self.m)]
         dof = self.m - self.n
-        spr = [float(np.mean(self.eps[i, te] ** 2) * self.m / dof) for i in range(self.m)]
+        spr = [float(np.mean(self.eps[i] ** 2) * self.m / dof) for i in range(self.m)]
         return {"motor": mot, "spring": spr,
-                "spring_total": float(np.mean(np.sum(self.eps[:, te] ** 2, axis=0)) / dof)}
+                "spring_total": float(np.mean(np.sum(self.eps ** 2, axis=0)) / dof)}
 
 
 # ---------------------------------------------------------------------------- candidates
