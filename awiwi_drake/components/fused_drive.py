@@ -209,7 +209,6 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     Without a link, ``q`` (n) and ``qd`` (``rate_joints``) are the joint inputs;
     with a link they come from ``state`` and ``tau_ext`` is the external torque.
     """
-    m = model.num_tendons
     qs, qds, theta, omega, z, g_state = model.split_state(state)
     if model.has_link:
         q, qd = qs, qds

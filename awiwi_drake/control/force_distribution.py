@@ -298,7 +298,6 @@ class _DistributionBase:
     def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None,
                  coupling, owner: str):
         self.params = params or ForceDistributionParams()
-        self._owner = owner
         if not callable(stiffness_map):
             raise ValueError(f"{owner}: stiffness_map must be callable f -> (k_t, dk_t/df)")
         self.stiffness_map = stiffness_map

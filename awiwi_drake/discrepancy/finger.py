@@ -54,7 +54,6 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 from . import laws
 from .data import Dataset, finger_parameters_from_json, is_finger_rig
 from .decide import separating_experiment
-from .localise import cpr_spectrum
 from .replay import noise_floor
 from .screen import gain_z
 
@@ -196,7 +195,7 @@ class FingerResiduals:
     def _spring_side(self, g0: float) -> None:
         """Joint angles from all tendons (weighted least squares on the elongations the spring laws give for
         the measured forces); residual in the redundant directions, whitened."""
-        rig, fp, m, n, r = self.rig, self.params, self.m, self.n, self.r
+        rig, m, r = self.rig, self.m, self.r
         laws_t = rig.spring_laws
         P = np.asarray(rig.coupling.P(), float)
         # elongations the spring laws give for the measured forces, at full rate, then filtered: the routing

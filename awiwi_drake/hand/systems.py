@@ -50,9 +50,8 @@ def CoriolisCancellation_(T):
         def _construct(self, plant, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._plant_float, self._plant, self._ctx = _plant_as(plant, T)
-            n, nv = plant.num_positions(), plant.num_velocities()
-            self._n, self._nv = n, nv
-            self._u = self.DeclareVectorInputPort("state", n + nv)
+            nv = plant.num_velocities()
+            self._u = self.DeclareVectorInputPort("state", plant.num_positions() + nv)
             self.DeclareVectorOutputPort("generalized_force", nv, self._calc,
                                          prerequisites_of_calc={self._u.ticket()})
 
