@@ -152,6 +152,24 @@ def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, pa
     return model
 
 
+def _new_plant(name: str, builder, visual: bool, scene_graph: SceneGraph | None) -> MultibodyPlant:
+    """A continuous plant: added to ``builder`` as ``name`` (wired to ``scene_graph``, or to a new SceneGraph,
+    when ``visual``), or standalone (its visual geometry registered with ``scene_graph`` when one is given:
+    the plant is then drawn through its positions)."""
+    if builder is None:
+        plant = MultibodyPlant(0.0)
+        if visual and scene_graph is not None:
+            plant.RegisterAsSourceForSceneGraph(scene_graph)
+        return plant
+    plant = builder.AddNamedSystem(name, MultibodyPlant(0.0))
+    if visual:
+        sg = scene_graph or builder.AddNamedSystem("scene_graph", SceneGraph())
+        plant.RegisterAsSourceForSceneGraph(sg)
+        builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
+        builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
+    return plant
+
+
 def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | None = None,
                       builder=None, visual: bool = False, gravity: bool = False):
     """A finalised continuous plant holding one finger (base frame = world).
@@ -162,17 +180,7 @@ def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | Non
     section 5.2.2 finds ~0.002 N m, negligible against the tendon torques.
     Returns ``(plant, FingerModel)``.
     """
-    if builder is not None:
-        plant = builder.AddNamedSystem(f"{finger}_plant", MultibodyPlant(0.0))
-        if visual:
-            sg = scene_graph or builder.AddNamedSystem("scene_graph", SceneGraph())
-            plant.RegisterAsSourceForSceneGraph(sg)
-            builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
-            builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
-    else:
-        plant = MultibodyPlant(0.0)
-        if visual and scene_graph is not None:      # standalone plant drawn through its positions
-            plant.RegisterAsSourceForSceneGraph(scene_graph)
+    plant = _new_plant(f"{finger}_plant", builder, visual, scene_graph)
     model = add_finger(plant, finger, params, visual=visual)
     if not gravity:
         plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
@@ -208,17 +216,7 @@ def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: b
     (the plant is then drawn from its positions, e.g. ``MultibodyPositionToGeometryPose``).
     """
     hp = params or HandParams()
-    if builder is not None:
-        plant = builder.AddNamedSystem("hand_plant", MultibodyPlant(0.0))
-        if visual:
-            sg = builder.AddNamedSystem("scene_graph", SceneGraph())
-            plant.RegisterAsSourceForSceneGraph(sg)
-            builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
-            builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
-    else:
-        plant = MultibodyPlant(0.0)
-        if visual and scene_graph is not None:
-            plant.RegisterAsSourceForSceneGraph(scene_graph)
+    plant = _new_plant("hand_plant", builder, visual, scene_graph)
     if visual and plant.geometry_source_is_registered():
         palm = plant.world_body()
         plant.RegisterVisualGeometry(
