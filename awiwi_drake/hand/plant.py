@@ -22,6 +22,7 @@ import numpy as np
 from pydrake.geometry import Cylinder, SceneGraph, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.primitives import Adder, MatrixGain
 from pydrake.multibody.tree import (FixedOffsetFrame, RevoluteJoint, RotationalInertia,
                                     SpatialInertia)
 
@@ -29,7 +30,7 @@ from ..parameters.hand import FINGERS, FingerParams, HandParams, ThumbParams, fi
 from .kinematics import M21, finger_joint_names
 
 __all__ = ["FingerModel", "add_finger", "make_finger_plant", "make_hand_plant",
-           "coupling_force_gain", "coupling_compliance", "finger_base_pose", "palm_centre"]
+           "coupling_force_gain", "add_applied_force_sum", "coupling_compliance", "finger_base_pose", "palm_centre"]
 
 _COLORS = {"thumb": (0.85, 0.55, 0.45, 1.0), "index": (0.55, 0.65, 0.85, 1.0),
            "middle": (0.55, 0.8, 0.6, 1.0), "ring": (0.85, 0.8, 0.5, 1.0),
@@ -257,6 +258,22 @@ def coupling_force_gain(plant: MultibodyPlant, models) -> np.ndarray | None:
         G[:, :n] += m.params.coupling_stiffness * np.outer(c, c)
         G[:, n:] += m.params.coupling_damping * np.outer(c, c)
     return G if any_coupled else None
+
+
+def add_applied_force_sum(b, plant: MultibodyPlant, sources: list, G: np.ndarray | None) -> None:
+    """Wire ``sources`` (generalised-force output ports, n each), the coupling element ``-G [q; v]``
+    (:func:`coupling_force_gain`; none when ``G`` is None) and an exported ``external_torque`` input
+    into the plant's applied generalised force (the ``generalized_force_sum`` Adder)."""
+    sources = list(sources)
+    if G is not None:
+        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
+        b.Connect(plant.get_state_output_port(), ce.get_input_port())
+        sources.append(ce.get_output_port())
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, plant.num_positions()))
+    for i, src in enumerate(sources):
+        b.Connect(src, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
+    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
 
 
 def coupling_compliance(joint_stiffness: np.ndarray, coupling_vector: np.ndarray,
