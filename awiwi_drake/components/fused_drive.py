@@ -176,6 +176,13 @@ class DriveModel:
     def supports_symbolic(self) -> bool:
         return self.laws.supports_symbolic
 
+    def require_symbolic(self, what: str, hint: str) -> None:
+        """Raise a ValueError naming the spring laws that cannot be evaluated symbolically (so neither
+        traced nor compiled); ``what`` names the caller, ``hint`` the way out."""
+        if not self.supports_symbolic:
+            bad = sorted({type(s).__name__ for s in self.springs if not getattr(s, "supports_symbolic", False)})
+            raise ValueError(f"{what}: spring law(s) {', '.join(bad)} cannot be evaluated symbolically; {hint}")
+
     def split_state(self, state):
         """(q, qdot, theta, omega, z, g) views of a drive state (q, qdot None without a link; z None
         without hysteresis, g None without guide friction)."""
@@ -268,10 +275,8 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
     ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
     """
-    if not model.supports_symbolic:
-        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
-        raise ValueError(f"compiled tendon drive: spring law(s) {', '.join(bad)} cannot be compiled; use their "
-                         "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
+    model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
+                           "(e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
     key = _model_key(model, jit)
     if key is not None and key in _KERNELS:
