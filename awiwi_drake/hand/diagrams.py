@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
 
 from ..components.drive import TendonDrive, build_tendon_drive
 from ..components.motor import motor_ripple_torque
@@ -58,7 +58,7 @@ from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
 from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
 from .coupling import HandCoupling, dof_selection, finger_coupling
-from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
+from .plant import add_applied_force_sum, coupling_force_gain, make_finger_plant, make_hand_plant
 from .systems import tendon_bending_angles
 
 __all__ = ["HandRig", "finger_diagram", "hand_diagram", "DEFAULT_BACKEND"]
@@ -270,16 +270,7 @@ def _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G,
     else:
         b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
         tendon_tau = d.GetOutputPort("generalized_force")
-    sources = [tendon_tau]
-    if G is not None:
-        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
-        b.Connect(plant.get_state_output_port(), ce.get_input_port())
-        sources.append(ce.get_output_port())
-    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
-    for i, src in enumerate(sources):
-        b.Connect(src, adder.get_input_port(i))
-    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
-    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    add_applied_force_sum(b, plant, [tendon_tau], G)
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
     state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
     b.Connect(plant.get_state_output_port(), state.get_input_port(0))

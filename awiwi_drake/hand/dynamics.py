@@ -59,7 +59,6 @@ import pydrake.symbolic as sym
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import is_float
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
 from awiwi_drake.components.motor import saturate_torque
 
@@ -249,10 +248,8 @@ def build_hand_kernels(model: DriveModel, links: LinkModel, *, jit: bool = True)
     (``off``: the wrist length offsets, empty without the wrist).
     """
     from awiwi_drake.components.codegen import compile_source, kernel_cache_dir
-    if not model.supports_symbolic:
-        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
-        raise ValueError(f"compiled hand dynamics: spring law(s) {', '.join(bad)} cannot be compiled; use their "
-                         "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial())")
+    model.require_symbolic("compiled hand dynamics",
+                           "use their calibration polynomial (e.g. LeverSpringMechanism.to_polynomial())")
     ckey = getattr(model, "_content_key", None)
     key = None if ckey is None else hashlib.sha1(
         f"{ckey}|{links.fingerprint()}|{_package_digest()}".encode()).hexdigest()[:20]

@@ -256,7 +256,6 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
         raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
                          f"{getattr(loop.rig, 'name', '?')!r} has none")
     applied = applied_port(loop)
-    out_y = np.full((0, k), np.nan)
     rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
     meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
     runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
