@@ -9,9 +9,8 @@ __all__ = ["figure_axes", "plot_traces", "plot_friction_curve", "plot_spring_cur
 
 
 def _plt():
-    import matplotlib
-    import matplotlib.pyplot as plt  # noqa: F401  (backend chosen by MPLBACKEND / notebook)
-    return matplotlib.pyplot
+    import matplotlib.pyplot as plt  # backend chosen by MPLBACKEND / notebook
+    return plt
 
 
 def figure_axes(ax=None, **subplots_kw):

@@ -442,9 +442,17 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=os.environ.get("AWIWI_OUT", "out/bench_discrepancy"))
     ap.add_argument("--rows", default=None, help="comma-separated rows to run (default: all)")
     args = ap.parse_args(argv)
+    if args.per_row < 1 or args.jobs < 1:
+        ap.error(f"--per-row {args.per_row} / --jobs {args.jobs}: both must be >= 1")
+    if not (np.isfinite(args.duration) and args.duration > 0):
+        ap.error(f"--duration {args.duration}: a positive number of seconds")
     todo = [c + (args.duration,) for c in cases(args.per_row, args.quick)]
     if args.rows:
-        keep = {x.strip() for x in args.rows.split(",")}
+        keep = {x.strip() for x in args.rows.split(",") if x.strip()}
+        known = {c[0] for c in cases(1, False)}
+        if not keep or keep - known:
+            ap.error(f"--rows {args.rows!r}: unknown row(s) {', '.join(sorted(keep - known)) or '(none given)'}; "
+                     f"known: {', '.join(sorted(known))}")
         todo = [c for c in todo if c[0] in keep]
     out = pathlib.Path(args.out)
     folder = out / "cases"

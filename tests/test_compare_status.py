@@ -109,3 +109,25 @@ def test_finger_disturbance_groups_are_independent():
     for i, text in enumerate(texts):
         assert ("lqr: infeasible_force at t = " in text) == (i in stopped), texts
     plt.close(fig)
+
+
+def test_a_load_step_that_keeps_drifting_is_flagged_not_settled():
+    """A loop without static stiffness ramps under a constant load: its end value is no steady state.
+
+    Ramp y = c (t - t0): the end slope is c, so drift = c (T - t0) is larger than the deflection itself and
+    far outside the 2 % band. A first-order settle with tau = T/20 has an end slope ~ dq/tau e^-18: settled.
+    """
+    from awiwi_drake.control.compare.metrics import Metrics, disturbance_metrics
+    from awiwi_drake.control.compare.standard_tests import compare_test_params, flag_run
+    p = compare_test_params("flexible-joint")
+    T, t0, c = 1.0, 0.1, 0.5
+    t = np.linspace(0.0, T, 3001)
+    ramp = np.where(t < t0, 0.0, -c * (t - t0))
+    m = Metrics("c", "disturbance", **disturbance_metrics(t, ramp, 0.0, t0, p.disturbance_torque))
+    assert m.drift == pytest.approx(c * (T - t0), rel=1e-9)
+    assert "not settled" in flag_run(m, p).flags and m.status == "flagged"
+    tau, dq = T / 20, -0.05
+    settle = np.where(t < t0, 0.0, dq * (1 - np.exp(-(t - t0) / tau)))
+    m = Metrics("c", "disturbance", **disturbance_metrics(t, settle, 0.0, t0, p.disturbance_torque))
+    assert m.stiffness == pytest.approx(p.disturbance_torque / dq, rel=1e-6)
+    assert m.drift < 1e-6 * abs(dq) and "not settled" not in flag_run(m, p).flags and math.isfinite(m.drift)

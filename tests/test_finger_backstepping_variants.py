@@ -178,3 +178,17 @@ def test_variant_controllers_convert_to_autodiff_and_match_finite_differences(va
                       motor_angle=rng.normal(0, 0.1, m), motor_velocity=rng.normal(0, 0.5, m))
         wrt = [k for k in inputs if finger == "index" or k != "joint_angle"]
         check_system_autodiff_matches_fd(StaticLawController(law), [], inputs, wrt=wrt, rtol=1e-4)
+
+
+@pytest.mark.parametrize("name", ["backstepping-position", "backstepping-nonlinear-spring", "optimal-backstepping", "pd"])
+def test_registered_laws_are_stable_through_the_estimator_with_the_default_physics(name):
+    """The registered loop as `closed_loop` samples it at 3 kHz (Drake's ZOH of the default plant: guide friction,
+    hysteresis, motor friction at rest), the tendon-length estimator in it (`sampled_loop_poles`): apart from the
+    neutral hysteresis/friction memory modes every pole is inside the unit circle, on the index (measured
+    0.989-0.998) and the thumb (P(q); 0.993-0.9997)."""
+    from awiwi_drake.control.joint_design import sampled_loop_poles
+    for finger in ("index", "thumb"):
+        rig = finger_diagram(finger=finger)
+        r = sampled_loop_poles(rig, make_controller(name, rig))
+        assert r.residual < 1e-5
+        assert r.spectral_radius < 1.0, (finger, r.spectral_radius)

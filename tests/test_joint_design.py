@@ -197,7 +197,7 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
 @pytest.mark.parametrize("design", ["lqr", "pole-placement"])
 def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
     """The whole index sampled at 3 kHz by the chain (``sampled_loop_poles``; the plant of the design model: python
-    backend, motor friction in motion, no ripple or hysteresis; true joint state) against the per-DoF sampled
+    backend, motor friction in motion, no ripple, hysteresis or guide friction; true joint state) against the per-DoF sampled
     design ``eig(Phi - Gamma K)``.  The abduction q20 is decoupled from the other DoF, so its designed poles are
     the loop's, up to the one approximation of the design model: it samples the *continuous* closed force loop,
     the chain samples the force law itself, which agree to second order in ``h w_force`` (= 0.1 at 300 rad/s):
@@ -205,7 +205,7 @@ def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
     position modes) lies within (h w_force)^2 = 1 % of its distance to z = 1 from a pole of the loop (the faster
     ones feel the force loop's own sampling: LQR's 217 rad/s pair is 1.9 % off)."""
     from awiwi_drake.control.joint_design import joint_stage_controller, sampled_loop_poles
-    p = FingerRigParams.for_finger("index").with_physics(hysteresis=False, ripple=False)
+    p = FingerRigParams.for_finger("index").with_physics(hysteresis=False, ripple=False, guide_friction=False)
     rig = finger_diagram(finger="index", backend="python", params=p.replace(motor=design_motor(p.motor)))
     ctrl = joint_stage_controller(rig, design)
     d = ctrl.design["joint_design"]

@@ -259,6 +259,8 @@ def test_sampled_rig_is_used_only_where_it_is_the_same_loop():
         simulate(loop.diagram, loop.create_context(op), 0.01, mode="fixed_step", step=H / 2)
     with pytest.raises(ValueError, match="integrator = 'runge_kutta2'.*sampled plant"):
         simulate(loop.diagram, loop.create_context(op), 0.01, integrator="runge_kutta2")
+    res = simulate(loop.diagram, loop.create_context(op), 0.05)      # 0.05 s: 150 periods up to round-off
+    assert res.t[-1] == 150 * H and res.info["t_final"] == 150 * H
 
 
 def test_sampled_batch_equals_the_continuous_batch_behind_a_hold_to_round_off():
@@ -308,3 +310,29 @@ def test_sampled_batch_equals_the_continuous_batch_behind_a_hold_to_round_off():
     moved = np.ptp(ends[False][:, [6 * i + 2 for i in range(N)]], axis=0)
     assert np.all(moved > 0.01), moved                                  # every copy's motor moved to its set point
     np.testing.assert_allclose(ends[True], ends[False], rtol=0, atol=1e-11 * np.max(np.abs(ends[False])))
+
+
+@pytest.mark.parametrize("name", ["pd", "pole-placement"])
+def test_registered_controllers_on_the_sampled_flexible_joint_equal_the_continuous_rig(name):
+    """The flexible joint (12.8) under registered joint controllers at 3 kHz: the sampled rig (the default) and the
+    continuous rig behind the hold give the same trajectory to round-off through a reference step."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.analysis.schedules import Step
+    from awiwi_drake.control import closed_loop
+    from awiwi_drake.control.registry import get_entry
+    out = {}
+    for sampled in (False, True):
+        rig = flexible_joint_rig()
+        entry = get_entry(name, rig)
+        loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": 1 / H}, sampled_rig=sampled)
+        assert loop.sampled_rig is sampled
+        ctx = loop.create_context(rig.operating_point())
+        # 150 periods: H * 150 is the sample instant itself (0.05 is 1 ulp past it: the continuous run would log
+        # the next period's held command after a 1e-17 s step there)
+        out[sampled] = simulate(loop.diagram, ctx, 150 * H, inputs={"joint_angle_reference": Step(0.01, 0.1)},
+                                log=("state", "motor_torque"))
+    x = out[False]["state"]
+    assert np.ptp(x[:, 0]) > 0.01                                      # the link followed the step
+    for sig in ("state", "motor_torque"):
+        ref = out[False][sig]
+        np.testing.assert_allclose(out[True][sig], ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)), err_msg=sig)

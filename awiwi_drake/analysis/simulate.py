@@ -21,7 +21,10 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   integrates itself with fixed-step RK3 at its period, so such a loop is
   simulated with one discrete update per period, and error control, another
   integrator or a shorter step are refused for it (build the loop with
-  ``sampled_rig=False`` for those);
+  ``sampled_rig=False`` for those); its state between two sample instants is
+  the next instant's (Drake's discrete-time semantics), so log it on its grid
+  (every step, or a ``log_period`` that is a multiple of the period); a
+  ``t_final`` within round-off of a sample instant is snapped onto it;
 * calls ``progress(t, duration)`` (simulated seconds since the start) after
   every chunk, for progress bars.
 
@@ -95,6 +98,7 @@ PHYSICAL_FAILURES = (SimulationDivergedError, SimulationEventError, InfeasibleFo
 
 _MAX_RATE_RATIO = 1000  # a common period this many times below the shortest one: rates not commensurate
 SAMPLED_PLANT_PREFIX = "DiscreteTimeApproximated_"   # Drake's name of a DiscreteTimeApproximation of <name>
+_GRID_TOLERANCE = 1e-6   # periods: a time this close to a sample instant is that instant (decimal inputs' round-off)
 
 
 def sampled_plants(system: System) -> list[System]:
@@ -266,6 +270,13 @@ def simulate(system, context: Context | None, t_final: float, *,
                          f"({sampled[0].get_name()!r}, fixed-step RK3 at the control period {period:g} s inside "
                          f"its discrete update); build the loop with closed_loop(..., sampled_rig=False) to "
                          f"integrate the rig otherwise")
+    if sampled:
+        # a sampled plant's state after the update at t_n is already x(t_n+1): an end time within round-off of a
+        # sample instant (0.05 s at 3 kHz) is that instant as Drake computes it (k * period), not one ulp past it
+        n = float(t_final) / period
+        if abs(n - round(n)) <= _GRID_TOLERANCE:
+            t_final = round(n) * period
+            duration = t_final - start
     if mode == "auto":
         mode = "fixed_step" if (period is not None or integrator in _FIXED_STEP_INTEGRATORS) else "error_controlled"
     if mode == "fixed_step":

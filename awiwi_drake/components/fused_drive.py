@@ -54,7 +54,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import asarray_like, is_float, positive_part
 from awiwi_drake.components.motor import motor_acceleration, saturate_torque
-from awiwi_drake.components.spring import hysteresis_rate
+from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
@@ -115,9 +115,7 @@ class DriveModel:
         m, n = int(self.coupling.num_tendons), int(self.coupling.num_joints)
         if len(self.springs) != m:
             raise ValueError(f"DriveModel: springs must hold one spring law per tendon ({m}), got {len(self.springs)}")
-        for i, s in enumerate(self.springs):
-            if not hasattr(s, "force") or not hasattr(s, "stiffness"):
-                raise ValueError(f"DriveModel: springs[{i}] is not a spring law (needs force(x), stiffness(x))")
+        object.__setattr__(self, "laws", TendonSprings(self.springs))    # the one per-tendon evaluation
         off = np.asarray(self.offsets, dtype=float)
         if off.shape != (m,) or not np.all(np.isfinite(off)):
             raise ValueError(f"DriveModel: offsets must be {m} finite numbers [m], got {self.offsets!r}")
@@ -140,10 +138,6 @@ class DriveModel:
             if li.shape != (n,) or ld.shape != (n,) or np.any(li <= 0) or np.any(ld < 0):
                 raise ValueError(f"DriveModel: link_inertia (> 0) and link_damping (>= 0) need {n} entries each")
         object.__setattr__(self, "_h0", np.asarray(self.coupling.h(np.zeros(n)), dtype=float))
-        groups = {}
-        for i, s in enumerate(self.springs):
-            groups.setdefault(id(s), (s, []))[1].append(i)
-        object.__setattr__(self, "_spring_groups", [(s, np.array(ix)) for s, ix in groups.values()])
         # content key of the kernels (taken now, before any lazily cached attribute of the coupling or
         # the springs changes the pickle): equal models built apart share one trace
         object.__setattr__(self, "_content_key", _content_digest(self))
@@ -180,14 +174,14 @@ class DriveModel:
 
     @property
     def supports_symbolic(self) -> bool:
-        return all(getattr(s, "supports_symbolic", False) for s in self.springs)
+        return self.laws.supports_symbolic
 
-    # laws on tendon groups -----------------------------------------------------------
-    def spring_apply(self, method: str, x):
-        out = np.empty(len(x), dtype=x.dtype)
-        for s, ix in self._spring_groups:
-            out[ix] = np.asarray(getattr(s, method)(x[ix]), dtype=x.dtype)
-        return out
+    def require_symbolic(self, what: str, hint: str) -> None:
+        """Raise a ValueError naming the spring laws that cannot be evaluated symbolically (so neither
+        traced nor compiled); ``what`` names the caller, ``hint`` the way out."""
+        if not self.supports_symbolic:
+            bad = sorted({type(s).__name__ for s in self.springs if not getattr(s, "supports_symbolic", False)})
+            raise ValueError(f"{what}: spring law(s) {', '.join(bad)} cannot be evaluated symbolically; {hint}")
 
     def split_state(self, state):
         """(q, qdot, theta, omega, z, g) views of a drive state (q, qdot None without a link; z None
@@ -222,18 +216,17 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     Without a link, ``q`` (n) and ``qd`` (``rate_joints``) are the joint inputs;
     with a link they come from ``state`` and ``tau_ext`` is the external torque.
     """
-    m = model.num_tendons
     qs, qds, theta, omega, z, g_state = model.split_state(state)
     if model.has_link:
         q, qd = qs, qds
     qd_all = _full_rates(model, qd)
     x = model.motor_pulley_radius * theta + np.asarray(model.coupling.h(q)) - model._h0 + model.offsets
     x = asarray_like(x, theta)
-    f_el = model.spring_apply("force", x)
+    f_el = model.laws.force(x)
     f = positive_part(f_el + z) if model.has_hysteresis else f_el
     out = dict(elongation=x, tendon_force=asarray_like(f, x))
     if "all" in want or "tendon_stiffness" in want:
-        out["tendon_stiffness"] = model.spring_apply("stiffness", x)
+        out["tendon_stiffness"] = model.laws.stiffness(x)
     need_P = any(w in want for w in ("all", "generalized_force", "derivatives"))
     if need_P:
         P = np.asarray(model.coupling.P(q))
@@ -282,10 +275,8 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
     ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
     """
-    if not model.supports_symbolic:
-        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
-        raise ValueError(f"compiled tendon drive: spring law(s) {', '.join(bad)} cannot be compiled; use their "
-                         "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
+    model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
+                           "(e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
     key = _model_key(model, jit)
     if key is not None and key in _KERNELS:

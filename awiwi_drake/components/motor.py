@@ -13,10 +13,10 @@ per output revolution) and of the output bearing (one period per revolution).
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector_, LeafSystem_
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import clip, is_float
+from awiwi_drake._math import clip
 from awiwi_drake.components.friction import atan_friction
 from awiwi_drake.parameters.components import MotorParams
 
@@ -161,12 +161,6 @@ def MotorBank_(T):
 
         def _calc_applied(self, context, out):
             out.SetFromVector(saturate_torque(self._u.Eval(context), self.params))
-
-        # Energy (for passivity tests): kinetic energy of the rotors.
-        def kinetic_energy(self, context):
-            omega = self._x(context)[self.num_motors:]
-            return 0.5 * self.params.inertia * float(np.dot(omega, omega)) if is_float(omega) \
-                else 0.5 * self.params.inertia * np.dot(omega, omega)
 
     return Impl
 

@@ -43,10 +43,7 @@ SAMPLED_INTEGRATOR = "runge_kutta3"
 def _check(model) -> None:
     if not isinstance(model, DriveModel) or not model.has_link:
         raise ValueError("rig_dynamics_system: model must be a DriveModel with link_inertia/link_damping")
-    if not model.supports_symbolic:
-        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
-        raise ValueError(f"rig_dynamics_system: spring law(s) {', '.join(bad)} cannot be evaluated symbolically; "
-                         "use their calibration polynomial or backend='python'")
+    model.require_symbolic("rig_dynamics_system", "use their calibration polynomial or backend='python'")
 
 
 def rig_dynamics_expressions(model: DriveModel):

@@ -64,7 +64,6 @@ class PolynomialSpring:
         self._k = self.coefficients * self._powers                     # f' coefficients (x^(k-1))
         self.max_force = float(xm * self._horner(xm, self.coefficients))
         self._k_end = float(self._horner(xm, self._k))
-        self._e_end = float(xm * xm * self._horner(xm, self.coefficients / (self._powers + 1)))
 
     def __repr__(self):
         return f"PolynomialSpring(coefficients={tuple(self.params.coefficients)}, max_elongation={self.max_elongation})"

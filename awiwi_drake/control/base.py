@@ -388,7 +388,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         raise ValueError(f"closed_loop: controller must be a Drake System, got {type(controller).__name__}")
     rig_name = getattr(rig, "name", "?")
     rig_in, rig_out = _input_names(rig_diagram), _output_names(rig_diagram)
-    ctrl_in, ctrl_out = _input_names(controller), _output_names(controller)
+    ctrl_out = _output_names(controller)
     if COMMAND_PORT not in rig_in:
         raise ValueError(f"closed_loop: rig {rig_name!r} has no input port {COMMAND_PORT!r}")
     if COMMAND_PORT not in ctrl_out:

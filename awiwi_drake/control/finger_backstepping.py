@@ -117,7 +117,6 @@ from typing import Any
 import numpy as np
 
 from awiwi_drake.rigs.base import Rig
-from awiwi_drake._math import is_float
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.control.chain import rig_springs

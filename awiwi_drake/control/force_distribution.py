@@ -257,13 +257,6 @@ class TendonStiffnessMap:
             dkdx = np.gradient(k, x)
         return cls(f, k, dkdx / k)
 
-    @classmethod
-    def from_function(cls, fn: Callable, f_low: float, f_high: float, n: int = 2001) -> "TendonStiffnessMap":
-        """Tabulate ``fn(f) -> k_t`` on ``[f_low, f_high]`` (slope by central differences)."""
-        f = np.linspace(float(f_low), float(f_high), int(n))
-        k = np.asarray(fn(f), dtype=float)
-        return cls(f, k, np.gradient(k, f))
-
     def __call__(self, f):
         f = np.asarray(f, dtype=float)
         if not self.per_tendon:
@@ -305,7 +298,6 @@ class _DistributionBase:
     def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None,
                  coupling, owner: str):
         self.params = params or ForceDistributionParams()
-        self._owner = owner
         if not callable(stiffness_map):
             raise ValueError(f"{owner}: stiffness_map must be callable f -> (k_t, dk_t/df)")
         self.stiffness_map = stiffness_map

@@ -56,8 +56,6 @@ from awiwi_drake.hand.coupling import dof_selection
 __all__ = ["joint_inertia", "joint_damping", "JointStateFeedbackLaw", "JointGainScheduleLaw", "JointStage_",
            "JointStage", "measured_joint_coordinates", "JointFrictionObserver_", "JointFrictionObserver"]
 
-Z_NAMES = ("joint_angle", "joint_velocity", "joint_torque", "joint_torque_rate")
-
 
 def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
     """Inertia of each independent DoF, ``diag(S^T M(q) S)`` [kg m^2] (``full``: the matrix), from the rig's plant."""

@@ -62,7 +62,7 @@ class RigJacobian:
                         if self.diagram.get_input_port(i).get_name() != COMMAND_PORT]
 
     def __call__(self, x, u, external: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        n, m = self.n, self.m
+        n = self.n
         xu = InitializeAutoDiff(np.concatenate([np.asarray(x, float).reshape(-1), np.asarray(u, float).reshape(-1)]))
         xu = xu.reshape(-1)
         self.context.SetContinuousState(xu[:n])

@@ -54,7 +54,6 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 from . import laws
 from .data import Dataset, finger_parameters_from_json, is_finger_rig
 from .decide import separating_experiment
-from .localise import cpr_spectrum
 from .replay import noise_floor
 from .screen import gain_z
 
@@ -196,7 +195,7 @@ class FingerResiduals:
     def _spring_side(self, g0: float) -> None:
         """Joint angles from all tendons (weighted least squares on the elongations the spring laws give for
         the measured forces); residual in the redundant directions, whitened."""
-        rig, fp, m, n, r = self.rig, self.params, self.m, self.n, self.r
+        rig, m, r = self.rig, self.m, self.r
         laws_t = rig.spring_laws
         P = np.asarray(rig.coupling.P(), float)
         # elongations the spring laws give for the measured forces, at full rate, then filtered: the routing
@@ -219,19 +218,14 @@ class FingerResiduals:
         self.elong = rig.offsets[:, None] + r * self.theta + P @ self.q_hat
 
     # ------------------------------------------------------------------ energies
-    def motor_energy(self, i: int, mask=None) -> float:
-        z = self.tau[i] / self.sigma_tau[i]
-        return float((z if mask is None else z[mask]) @ (z if mask is None else z[mask]))
-
     def ratios(self) -> dict:
         """Residual energy over its noise floor (all samples: a fitted effect has 2-4 parameters against
         ~10 samples per second): per tendon, motor side and spring side."""
-        te = np.ones(self.tau.shape[1], dtype=bool)
-        mot = [float(np.mean((self.tau[i, te] / self.sigma_tau[i]) ** 2)) for i in range(self.m)]
+        mot = [float(np.mean((self.tau[i] / self.sigma_tau[i]) ** 2)) for i in range(self.m)]
         dof = self.m - self.n
-        spr = [float(np.mean(self.eps[i, te] ** 2) * self.m / dof) for i in range(self.m)]
+        spr = [float(np.mean(self.eps[i] ** 2) * self.m / dof) for i in range(self.m)]
         return {"motor": mot, "spring": spr,
-                "spring_total": float(np.mean(np.sum(self.eps[:, te] ** 2, axis=0)) / dof)}
+                "spring_total": float(np.mean(np.sum(self.eps ** 2, axis=0)) / dof)}
 
 
 # ---------------------------------------------------------------------------- candidates

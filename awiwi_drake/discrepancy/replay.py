@@ -110,14 +110,12 @@ class ReplayEngine:
         ths = savgol_filter(th, win, 3, axis=1)
         om = savgol_filter(th, win, 3, deriv=1, delta=dt, axis=1)
         cols = [ths, om]
-        self.q_est = None
         if nom.has_link:
             q = self._link_angle_estimate(ths)
             self._q_raw = q
             qs = savgol_filter(q, win, 3)
             qd = savgol_filter(q, win, 3, deriv=1, delta=dt)
             cols += [qs[None], qd[None]]
-            self.q_est = qs
         self.xhat = np.vstack(cols)  # (ns - n, N), rows [theta, omega, (q, q')]
         self.xpos = xhat_positions(nom)  # model-state index of each xhat row
         x, xd = laws_kinematics(nom, self.xhat)

@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Adder, Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
 
 from ..components.drive import TendonDrive, build_tendon_drive
 from ..components.motor import motor_ripple_torque
@@ -58,7 +58,7 @@ from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
 from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
 from .coupling import HandCoupling, dof_selection, finger_coupling
-from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
+from .plant import add_applied_force_sum, coupling_force_gain, make_finger_plant, make_hand_plant
 from .systems import tendon_bending_angles
 
 __all__ = ["HandRig", "finger_diagram", "hand_diagram", "DEFAULT_BACKEND"]
@@ -227,14 +227,23 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
         b.Connect(_add_wrist_offsets(b, rows, m), dyn.GetInputPort("wrist_tendon_offset"))
     for nm in ("motor_torque", "external_torque"):
         b.ExportInput(dyn.GetInputPort(nm), nm)
-    for nm in ("state", "joint_angle", "joint_velocity", "joint_torque", "motor_angle", "motor_velocity",
-               "motor_state", "tendon_force", "tendon_stiffness", "elongation", "applied_torque"):
+    for nm in ("state", "joint_torque", "tendon_force", "tendon_stiffness", "elongation", "applied_torque"):
         b.ExportOutput(dyn.GetOutputPort(nm), nm)
+    # state slices in C++ (a Python slicer costs ~3-4 us per read)
+    rest = model.num_states - 2 * m
+    split = b.AddNamedSystem("state_split", Demultiplexer([n, n, 2 * m] + ([rest] if rest else [])))
+    b.Connect(dyn.GetOutputPort("state"), split.get_input_port())
+    motor = b.AddNamedSystem("motor_state_split", Demultiplexer([m, m]))
+    b.Connect(split.get_output_port(2), motor.get_input_port())
+    for port, nm in ((split.get_output_port(0), "joint_angle"), (split.get_output_port(1), "joint_velocity"),
+                     (split.get_output_port(2), "motor_state"), (motor.get_output_port(0), "motor_angle"),
+                     (motor.get_output_port(1), "motor_velocity")):
+        b.ExportOutput(port, nm)
     if sg is not None:
         from .systems import LinkGeometryPoses
         b.AddNamedSystem("scene_graph", sg)
         pose = b.AddNamedSystem("geometry_pose", LinkGeometryPoses(plant))
-        b.Connect(dyn.GetOutputPort("joint_angle"), pose.get_input_port())
+        b.Connect(split.get_output_port(0), pose.get_input_port())
         b.Connect(pose.get_output_port(), sg.get_source_pose_port(plant.get_source_id()))
         b.ExportOutput(sg.get_query_output_port(), "query_object")
     return model
@@ -261,16 +270,7 @@ def _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G,
     else:
         b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
         tendon_tau = d.GetOutputPort("generalized_force")
-    sources = [tendon_tau]
-    if G is not None:
-        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
-        b.Connect(plant.get_state_output_port(), ce.get_input_port())
-        sources.append(ce.get_output_port())
-    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
-    for i, src in enumerate(sources):
-        b.Connect(src, adder.get_input_port(i))
-    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
-    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    add_applied_force_sum(b, plant, [tendon_tau], G)
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
     state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
     b.Connect(plant.get_state_output_port(), state.get_input_port(0))

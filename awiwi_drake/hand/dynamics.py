@@ -33,9 +33,10 @@ State: ``[q (n), v (n), theta (m), omega (m), z (m, hysteresis), g (m, guide fri
 (the order of the MultibodyPlant + drive diagram: ``rigs.base.state_names``).
 Ports (each computes only its own quantity; prerequisites declared): inputs ``motor_torque``
 (m) [N m], ``external_torque`` (n) [N m] and, with the wrist, ``wrist_tendon_offset`` (m) [m];
-outputs ``state``, ``joint_angle``, ``joint_velocity``, ``motor_angle``, ``motor_velocity``,
-``motor_state``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m], ``elongation`` [m],
-``joint_torque`` (n, the tendon part ``-P^T (f + g)``) [N m], ``applied_torque`` (m) [N m].
+outputs ``state`` (copied in C++: the finger/hand diagram slices ``joint_angle``, ``motor_angle``, ...
+from it with Drake's ``Demultiplexer``), ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
+``elongation`` [m], ``joint_torque`` (n, the tendon part ``-P^T (f + g)``) [N m], ``applied_torque``
+(m) [N m].
 
 The symbolic trace of the whole hand takes ~7 s (the fifth finger's oblique HMC axis makes
 long expressions); the generated source is cached on disk beside the compiled kernels
@@ -48,6 +49,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import os
 import pathlib
 from dataclasses import dataclass, field
 
@@ -57,7 +59,6 @@ import pydrake.symbolic as sym
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import is_float
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
 from awiwi_drake.components.motor import saturate_torque
 
@@ -247,10 +248,8 @@ def build_hand_kernels(model: DriveModel, links: LinkModel, *, jit: bool = True)
     (``off``: the wrist length offsets, empty without the wrist).
     """
     from awiwi_drake.components.codegen import compile_source, kernel_cache_dir
-    if not model.supports_symbolic:
-        bad = sorted({type(s).__name__ for s in model.springs if not getattr(s, "supports_symbolic", False)})
-        raise ValueError(f"compiled hand dynamics: spring law(s) {', '.join(bad)} cannot be compiled; use their "
-                         "calibration polynomial (e.g. LeverSpringMechanism.to_polynomial())")
+    model.require_symbolic("compiled hand dynamics",
+                           "use their calibration polynomial (e.g. LeverSpringMechanism.to_polynomial())")
     ckey = getattr(model, "_content_key", None)
     key = None if ckey is None else hashlib.sha1(
         f"{ckey}|{links.fingerprint()}|{_package_digest()}".encode()).hexdigest()[:20]
@@ -268,8 +267,8 @@ def build_hand_kernels(model: DriveModel, links: LinkModel, *, jit: bool = True)
         if cache is not None:
             try:
                 cache.parent.mkdir(parents=True, exist_ok=True)
-                tmp = cache.with_suffix(".tmp")
-                tmp.write_text(source)
+                tmp = cache.with_suffix(f".{os.getpid()}.tmp")    # one per process: concurrent writers never
+                tmp.write_text(source)                              # share a half-written file
                 tmp.replace(cache)
             except OSError:
                 pass
@@ -334,13 +333,7 @@ def HandDynamics_(T):
             self._ext = self.DeclareVectorInputPort("external_torque", n)
             self._off = self.DeclareVectorInputPort("wrist_tendon_offset", m) if self._wrist else None
             state = self.all_state_ticket()
-            self.DeclareStateOutputPort("state", xc)
-            for name, sl in (("joint_angle", slice(0, n)), ("joint_velocity", slice(n, 2 * n)),
-                             ("motor_angle", slice(2 * n, 2 * n + m)),
-                             ("motor_velocity", slice(2 * n + m, 2 * n + 2 * m)),
-                             ("motor_state", slice(2 * n, 2 * n + 2 * m))):
-                self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
-                                             prerequisites_of_calc={state})
+            self.DeclareStateOutputPort("state", xc)      # copied in C++; the diagram slices it (Demultiplexer)
             deps = {state} | ({self._off.ticket()} if self._off is not None else set())
             for name, size in (("tendon_force", m), ("tendon_stiffness", m), ("elongation", m),
                                ("joint_torque", n)):
@@ -370,11 +363,6 @@ def HandDynamics_(T):
             if self._off is None:
                 return self._empty if self._float else np.zeros(0, dtype=object)
             return self._off.Eval(context)
-
-        def _slicer(self, sl):
-            def calc(context, out):
-                out.SetFromVector(context.get_continuous_state_vector().CopyToVector()[sl])
-            return calc
 
         def _law_output(self, name):
             n = self._n

@@ -22,6 +22,7 @@ import numpy as np
 from pydrake.geometry import Cylinder, SceneGraph, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.primitives import Adder, MatrixGain
 from pydrake.multibody.tree import (FixedOffsetFrame, RevoluteJoint, RotationalInertia,
                                     SpatialInertia)
 
@@ -29,7 +30,7 @@ from ..parameters.hand import FINGERS, FingerParams, HandParams, ThumbParams, fi
 from .kinematics import M21, finger_joint_names
 
 __all__ = ["FingerModel", "add_finger", "make_finger_plant", "make_hand_plant",
-           "coupling_force_gain", "coupling_compliance", "finger_base_pose", "palm_centre"]
+           "coupling_force_gain", "add_applied_force_sum", "coupling_compliance", "finger_base_pose", "palm_centre"]
 
 _COLORS = {"thumb": (0.85, 0.55, 0.45, 1.0), "index": (0.55, 0.65, 0.85, 1.0),
            "middle": (0.55, 0.8, 0.6, 1.0), "ring": (0.85, 0.8, 0.5, 1.0),
@@ -152,6 +153,24 @@ def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, pa
     return model
 
 
+def _new_plant(name: str, builder, visual: bool, scene_graph: SceneGraph | None) -> MultibodyPlant:
+    """A continuous plant: added to ``builder`` as ``name`` (wired to ``scene_graph``, or to a new SceneGraph,
+    when ``visual``), or standalone (its visual geometry registered with ``scene_graph`` when one is given:
+    the plant is then drawn through its positions)."""
+    if builder is None:
+        plant = MultibodyPlant(0.0)
+        if visual and scene_graph is not None:
+            plant.RegisterAsSourceForSceneGraph(scene_graph)
+        return plant
+    plant = builder.AddNamedSystem(name, MultibodyPlant(0.0))
+    if visual:
+        sg = scene_graph or builder.AddNamedSystem("scene_graph", SceneGraph())
+        plant.RegisterAsSourceForSceneGraph(sg)
+        builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
+        builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
+    return plant
+
+
 def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | None = None,
                       builder=None, visual: bool = False, gravity: bool = False):
     """A finalised continuous plant holding one finger (base frame = world).
@@ -162,17 +181,7 @@ def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | Non
     section 5.2.2 finds ~0.002 N m, negligible against the tendon torques.
     Returns ``(plant, FingerModel)``.
     """
-    if builder is not None:
-        plant = builder.AddNamedSystem(f"{finger}_plant", MultibodyPlant(0.0))
-        if visual:
-            sg = scene_graph or builder.AddNamedSystem("scene_graph", SceneGraph())
-            plant.RegisterAsSourceForSceneGraph(sg)
-            builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
-            builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
-    else:
-        plant = MultibodyPlant(0.0)
-        if visual and scene_graph is not None:      # standalone plant drawn through its positions
-            plant.RegisterAsSourceForSceneGraph(scene_graph)
+    plant = _new_plant(f"{finger}_plant", builder, visual, scene_graph)
     model = add_finger(plant, finger, params, visual=visual)
     if not gravity:
         plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
@@ -208,17 +217,7 @@ def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: b
     (the plant is then drawn from its positions, e.g. ``MultibodyPositionToGeometryPose``).
     """
     hp = params or HandParams()
-    if builder is not None:
-        plant = builder.AddNamedSystem("hand_plant", MultibodyPlant(0.0))
-        if visual:
-            sg = builder.AddNamedSystem("scene_graph", SceneGraph())
-            plant.RegisterAsSourceForSceneGraph(sg)
-            builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
-            builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
-    else:
-        plant = MultibodyPlant(0.0)
-        if visual and scene_graph is not None:
-            plant.RegisterAsSourceForSceneGraph(scene_graph)
+    plant = _new_plant("hand_plant", builder, visual, scene_graph)
     if visual and plant.geometry_source_is_registered():
         palm = plant.world_body()
         plant.RegisterVisualGeometry(
@@ -259,6 +258,22 @@ def coupling_force_gain(plant: MultibodyPlant, models) -> np.ndarray | None:
         G[:, :n] += m.params.coupling_stiffness * np.outer(c, c)
         G[:, n:] += m.params.coupling_damping * np.outer(c, c)
     return G if any_coupled else None
+
+
+def add_applied_force_sum(b, plant: MultibodyPlant, sources: list, G: np.ndarray | None) -> None:
+    """Wire ``sources`` (generalised-force output ports, n each), the coupling element ``-G [q; v]``
+    (:func:`coupling_force_gain`; none when ``G`` is None) and an exported ``external_torque`` input
+    into the plant's applied generalised force (the ``generalized_force_sum`` Adder)."""
+    sources = list(sources)
+    if G is not None:
+        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
+        b.Connect(plant.get_state_output_port(), ce.get_input_port())
+        sources.append(ce.get_output_port())
+    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, plant.num_positions()))
+    for i, src in enumerate(sources):
+        b.Connect(src, adder.get_input_port(i))
+    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
+    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
 
 
 def coupling_compliance(joint_stiffness: np.ndarray, coupling_vector: np.ndarray,

@@ -31,6 +31,12 @@ __all__ = ["CoriolisCancellation_", "CoriolisCancellation", "MotorAngleReference
            "LinkGeometryPoses_", "LinkGeometryPoses"]
 
 
+def _plant_as(plant, T):
+    """(float plant, the plant for scalar type ``T`` (converted with ``ToScalarType``), its default context)."""
+    plant_t = plant if T == float else plant.ToScalarType[T]()
+    return plant, plant_t, plant_t.CreateDefaultContext()
+
+
 @TemplateSystem.define("CoriolisCancellation_")
 def CoriolisCancellation_(T):
     """``generalized_force = C(q, v) v`` of ``plant`` for ``state = [q; v]``.
@@ -43,12 +49,9 @@ def CoriolisCancellation_(T):
     class Impl(LeafSystem_[T]):
         def _construct(self, plant, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._plant_float = plant
-            self._plant = plant if T == float else plant.ToScalarType[T]()
-            self._ctx = self._plant.CreateDefaultContext()
-            n, nv = plant.num_positions(), plant.num_velocities()
-            self._n, self._nv = n, nv
-            self._u = self.DeclareVectorInputPort("state", n + nv)
+            self._plant_float, self._plant, self._ctx = _plant_as(plant, T)
+            nv = plant.num_velocities()
+            self._u = self.DeclareVectorInputPort("state", plant.num_positions() + nv)
             self.DeclareVectorOutputPort("generalized_force", nv, self._calc,
                                          prerequisites_of_calc={self._u.ticket()})
 
@@ -250,9 +253,7 @@ def LinkGeometryPoses_(T):
     class Impl(LeafSystem_[T]):
         def _construct(self, plant, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._plant_float = plant
-            self._plant = plant if T == float else plant.ToScalarType[T]()
-            self._ctx = self._plant.CreateDefaultContext()
+            self._plant_float, self._plant, self._ctx = _plant_as(plant, T)
             world = plant.world_body().index()
             self._frames = []
             for i in range(plant.num_bodies()):

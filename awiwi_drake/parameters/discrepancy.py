@@ -128,8 +128,8 @@ class DiscrepancySettings(Parameters):
         doc="finger diagnosis: standard deviation of the consistent filter")
     finger_decimation: float = param(
         3.3, unit="-", low=0.1, high=20.0,
-        source="the autocorrelation of white noise through the kernel's second derivative, (3 - 6u^2 + u^4) "
-               "exp(-u^2/2) with u = lag/(sigma sqrt 2), is zero at u^2 = 3 + sqrt 6 (lag 3.3 sigma): the decimated "
+        source="chosen: the lag where the autocorrelation of white noise through the kernel's second derivative, (3 - 6u^2 + u^4) "
+               "exp(-u^2/2) with u = lag/(sigma sqrt 2), vanishes, u^2 = 3 + sqrt 6 (lag 3.3 sigma): the decimated "
                "acceleration noise is white",
         doc="finger diagnosis: decimation step in kernel standard deviations")
     finger_block: float = param(
@@ -388,7 +388,10 @@ class FingerTruthParams(Parameters):
     kp: float = param(40.0, unit="Nm/rad", low=0.0, low_inclusive=False,
                       source="MotorPositionGains default (0.56 Nm Coulomb friction of Table 3.3 -> 0.014 rad)",
                       doc="motor position gain")
-    kd: float = param(0.4, unit="Nm s/rad", low=0.0, source="chosen: the MotorPositionGains default, overdamped with B = 2e-3",
+    kd: float = param(0.4, unit="Nm s/rad", low=0.0,
+                      source="chosen: the MotorPositionGains default; on the friction-free truth finger (motor "
+                             "friction off) the motor loop alone has damping ratio kd / (2 sqrt(kp B)) = 0.71 "
+                             "with B = 2e-3 kg m^2 (overdamped only with the rigs' linearised friction)",
                       doc="motor velocity gain")
     joint_excursion: float = param(0.35, unit="rad", low=0.0,
                                    source="chosen: +-20 deg about 0.2 rad of flexion, inside every joint range "

@@ -44,9 +44,11 @@ class JointDesignParams(Parameters):
         source="chosen: Bryson's rule, the torque error above over ~50 ms. The LQR/SDRE stages measure the motors' "
                "rate sigma = tau_dot + K_jj qdot (joint_stage), weighted with the bound lqr_torque_rate + K_jj "
                "lqr_velocity (joint_design._lqr_weights). Measured at 3 kHz with the estimator and the default "
-               "physics (control.joint_design.sampled_loop_poles): index slowest pole -16 1/s, DIP link mode "
+               "physics without guide friction (control.joint_design.sampled_loop_poles): index slowest pole -16 1/s, DIP link mode "
                "(~3930 rad/s) damped at -30 1/s (5 Nm/s: -11 1/s); one bound sigma <= 5 Nm/s for every joint held "
-               "the thumb base (K_jj = 47 Nm/rad) to -0.66 1/s, with the sum -2.0 1/s")
+               "the thumb base (K_jj = 47 Nm/rad) to -0.66 1/s, with the sum -2.0 1/s. With the guide friction (on by "
+               "default) the index DIP link pair is at +1.1 +- 4382j 1/s (|z| = 1.00035, held by the friction in "
+               "simulation): open, docs/REPRODUCTIONS.md")
     lqr_input: float = param(
         0.1, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule on the desired joint torque (twice the torque error: the input may move more "

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Adder, ConstantVectorSource, Demultiplexer, MatrixGain
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer
 
 from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.analysis.simulate import simulate
@@ -29,7 +29,7 @@ from awiwi_drake.control.joint_pd import joint_pd_controller
 from awiwi_drake.hand.coupling import ThumbCoupling, finger_coupling
 from awiwi_drake.hand.estimation import noise_error_bound, thumb_base_gradient_search
 from awiwi_drake.hand.diagrams import HandRig, finger_diagram
-from awiwi_drake.hand.plant import coupling_force_gain, make_finger_plant
+from awiwi_drake.hand.plant import add_applied_force_sum, coupling_force_gain, make_finger_plant
 from awiwi_drake.hand.systems import CoriolisCancellation
 from awiwi_drake.parameters.hand import FingerRigParams, JointControllerParams
 from awiwi_drake.plotting import figure_axes, label_axes
@@ -69,21 +69,12 @@ def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = 
     b.Connect(routing.GetOutputPort("elongation"), springs.GetInputPort("elongation"))
     b.Connect(springs.GetOutputPort("tendon_force"), routing.GetInputPort("tendon_force"))
     sources = [routing.GetOutputPort("generalized_force")]
-    G = coupling_force_gain(plant, model)
-    if G is not None:
-        ce = b.AddNamedSystem("coupling_element", MatrixGain(-G))
-        b.Connect(plant.get_state_output_port(), ce.get_input_port())
-        sources.append(ce.get_output_port())
     if not coriolis:
         standalone, _ = make_finger_plant(finger, p.finger, gravity=p.gravity)
         cc = b.AddNamedSystem("coriolis_cancellation", CoriolisCancellation(standalone))
         b.Connect(plant.get_state_output_port(), cc.get_input_port(0))
         sources.append(cc.get_output_port(0))
-    adder = b.AddNamedSystem("generalized_force_sum", Adder(len(sources) + 1, n))
-    for i, s in enumerate(sources):
-        b.Connect(s, adder.get_input_port(i))
-    b.ExportInput(adder.get_input_port(len(sources)), "external_torque")
-    b.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    add_applied_force_sum(b, plant, sources, coupling_force_gain(plant, model))
     b.ExportOutput(plant.get_state_output_port(), "state")
     b.ExportOutput(springs.GetOutputPort("tendon_force"), "tendon_force")
     diagram = b.Build()

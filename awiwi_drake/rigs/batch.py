@@ -33,10 +33,6 @@ class BatchedRig:
     single: object
     num_copies: int
 
-    @property
-    def copy_states(self) -> int:
-        return self.single.num_states
-
     def stack(self, ops) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(state, motor_torque, external_torque) of the batch from one operating point per copy
         (or one for all)."""

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Metrics", "MetricsTable", "COLUMNS", "NUMERIC", "UNITS", "step_metrics", "sine_metrics", "gain_diagram",
-           "sweep_metrics", "response_bandwidth", "linear_bandwidth", "fit_second_order_step"]
+           "sweep_metrics", "disturbance_metrics", "response_bandwidth", "linear_bandwidth", "fit_second_order_step"]
 
 
 @dataclass
@@ -27,6 +27,7 @@ class Metrics:
     peak_input: float = math.nan         # max |torque applied to the motors| (after saturation) [Nm]
     peak_command: float = math.nan       # max |motor_torque_command| (before saturation) [Nm]
     stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
+    drift: float = math.nan              # disturbance test: end slope x time since the load step [unit of the output]
     damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
     gain: float = math.nan               # |Y/R| at the sine frequency
@@ -54,7 +55,7 @@ NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "bandw
 
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              peak_command="Nm",
-             stiffness="Nm/rad", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
+             stiffness="Nm/rad", drift="ref", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
              slack_fraction="-", estimation_error="rad", failed_at="s")
 
@@ -182,6 +183,24 @@ def step_metrics(t: np.ndarray, y: np.ndarray, r0: float, r1: float, t_step: flo
     else:
         out["settling_time"] = float(tt[outside[-1] + 1])
     return out
+
+
+def disturbance_metrics(t: np.ndarray, y: np.ndarray, r0: float, t_step: float, torque: float) -> dict[str, float]:
+    """Stiffness, end error and end drift of the response to a load step ``torque`` at ``t_step``.
+
+    The deflection is the mean over the last 10 % of the run minus the mean before the step; ``drift`` is
+    the least-squares slope over that last 10 % times the time since the step: how far the output would
+    still move at its end rate over the whole test. A loop without static stiffness (an integrator in the
+    joint's torque path) keeps drifting, and :func:`flag_run` flags it ``not settled`` instead of
+    reporting its end value as a steady-state error.
+    """
+    t, y = np.asarray(t, float), np.asarray(y, float)
+    pre, tail = t < t_step, t >= t[-1] - 0.1 * t[-1]
+    y_end = float(np.mean(y[tail]))
+    dq = y_end - float(np.mean(y[pre]))
+    slope = float(np.polyfit(t[tail], y[tail], 1)[0]) if np.count_nonzero(tail) > 1 else 0.0
+    return dict(stiffness=torque / dq if dq != 0 else math.inf, steady_state_error=float(r0 - y_end),
+                drift=abs(slope) * (t[-1] - t_step))
 
 
 def sine_metrics(t, r, y, freq_hz: float) -> dict[str, float]:

@@ -29,8 +29,8 @@ import numpy as np
 
 from awiwi_drake.analysis import PHYSICAL_FAILURES, Chirp, Constant, PerEntry, Sine, Step, simulate
 from awiwi_drake.control.base import ClosedLoop, closed_loop
-from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, gain_diagram, linear_bandwidth, sine_metrics,
-                                                 step_metrics, sweep_metrics)
+from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, disturbance_metrics, gain_diagram,
+                                                 linear_bandwidth, sine_metrics, step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
 from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
 from awiwi_drake.control.registry import get_entry, rig_kind
@@ -211,11 +211,9 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         for k_, v in sine_metrics(run.t[skip], run.reference[skip], run.output[skip], p.sine_frequency).items():
             setattr(m, k_, v)
     elif test == "disturbance":
-        pre = run.t < p.step_delay
-        tail = run.t >= run.t[-1] - 0.1 * run.t[-1]
-        dq = float(np.mean(run.output[tail]) - np.mean(run.output[pre]))
-        m.stiffness = p.disturbance_torque / dq if dq != 0 else math.inf
-        m.steady_state_error = float(r0 - np.mean(run.output[tail]))
+        for k_, v in disturbance_metrics(run.t, run.output.ravel(), r0, p.step_delay,
+                                         p.disturbance_torque).items():
+            setattr(m, k_, v)
     else:
         f, g = gain_diagram(run.t, run.reference, run.output, p.sweep_start, p.sweep_stop)
         run.meta.update(freq=f, gain=g)
@@ -258,7 +256,6 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
         raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
                          f"{getattr(loop.rig, 'name', '?')!r} has none")
     applied = applied_port(loop)
-    out_y = np.full((0, k), np.nan)
     rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
     meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
     runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
@@ -332,11 +329,8 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 for k_, v in sine_metrics(t[skip], r[skip, j], y[skip, j], p.sine_frequency).items():
                     setattr(row, k_, v)
             elif test == "disturbance":
-                pre = t < p.step_delay
-                tail = t >= t[-1] - 0.1 * t[-1]
-                dq = float(np.mean(y[tail, j]) - np.mean(y[pre, j]))
-                row.stiffness = p.disturbance_torque / dq if dq != 0 else math.inf
-                row.steady_state_error = float(r0 - np.mean(y[tail, j]))
+                for k_, v in disturbance_metrics(t, y[:, j], r0, p.step_delay, p.disturbance_torque).items():
+                    setattr(row, k_, v)
                 runs_w[:, j] = np.where(t >= p.step_delay, p.disturbance_torque, 0.0)
             else:
                 f, g = gain_diagram(t, r[:, j], y[:, j], p.sweep_start, p.sweep_stop)
@@ -364,7 +358,8 @@ def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
     """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
 
     Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``slack`` (slack
-    fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band),
+    fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band;
+    disturbance test still drifting at its end: ``drift`` > settling band x deflection),
     ``negative stiffness`` (disturbance test: the link moves *with* the load).
     """
     flags = []
@@ -373,6 +368,8 @@ def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
     if m.slack_fraction > params.max_slack_fraction:
         flags.append(f"slack {100 * m.slack_fraction:.0f} %")
     if m.test == "step" and not math.isfinite(m.settling_time):
+        flags.append("not settled")
+    if m.test == "disturbance" and m.drift > params.settling_band * abs(params.disturbance_torque / m.stiffness):
         flags.append("not settled")
     if m.test == "disturbance" and m.stiffness < 0:
         flags.append("negative stiffness")
