@@ -160,7 +160,8 @@ def test_variant_controllers_convert_to_autodiff_and_match_finite_differences(va
     """Each variant's controller system (and the 15.5 law with the ch. 16 per-tendon gains) converts with
     ToAutoDiffXd; its command's derivatives w.r.t. every input equal central differences (thumb: P(q) varies;
     the sharing W and the projector are frozen at the value of q, so the thumb is checked w.r.t. the other
-    inputs)."""
+    inputs). Independent of the law's code: on the index (constant P, model at the operating point) the command
+    depends on the joint angle only through the error, so d u / d q_ref = -d u / d q."""
     from _fd import check_system_autodiff_matches_fd
     rng = np.random.default_rng(11)
     for finger in ("index", "thumb"):
@@ -177,7 +178,14 @@ def test_variant_controllers_convert_to_autodiff_and_match_finite_differences(va
                       elongation=np.asarray(op.elongation) + rng.normal(0, 1e-4, m),
                       motor_angle=rng.normal(0, 0.1, m), motor_velocity=rng.normal(0, 0.5, m))
         wrt = [k for k in inputs if finger == "index" or k != "joint_angle"]
-        check_system_autodiff_matches_fd(StaticLawController(law), [], inputs, wrt=wrt, rtol=1e-4)
+        (J, _), = check_system_autodiff_matches_fd(StaticLawController(law), [], inputs, wrt=wrt, rtol=1e-4).values()
+        cols = np.cumsum([0] + [np.size(inputs[k]) for k in wrt])
+        blocks = {k: J[:, cols[i]:cols[i + 1]] for i, k in enumerate(wrt)}
+        for k, B in blocks.items():             # the law reads every measurement it is given
+            assert np.abs(B).max() > 1e-3, (variant, finger, k)
+        if finger == "index":   # constant P and the model at the operating point: q enters only as q_ref - q
+            np.testing.assert_allclose(blocks["joint_angle_reference"], -blocks["joint_angle"],
+                                       atol=1e-9 * np.abs(blocks["joint_angle"]).max())
 
 
 @pytest.mark.parametrize("name", ["backstepping-position", "backstepping-nonlinear-spring", "optimal-backstepping", "pd"])

@@ -108,7 +108,17 @@ def test_plant_system_autodiff_equals_finite_differences(ring_on):
     x[ring_on.num_joints:2 * ring_on.num_joints] *= 0.05     # slow links: the Dahl states stay smooth for FD
     inputs = dict(motor_torque=RNG.normal(scale=1.0, size=ring_on.num_tendons),
                   external_torque=RNG.normal(scale=0.02, size=ring_on.num_joints))
-    check_system_autodiff_matches_fd(sys_, x, inputs, rtol=1e-5)
+    jac = check_system_autodiff_matches_fd(sys_, x, inputs, rtol=1e-5)
+    # closed forms from MultibodyPlant, independent of the compiled kernel: dq/dt = v, and the external torque
+    # enters the links only through M(q) vdot = ... + tau_ext, so d vdot / d tau_ext = M(q)^-1
+    J = jac["xdot"][0]
+    n, m = ring_on.num_joints, ring_on.num_tendons
+    np.testing.assert_allclose(J[:n, :x.size], np.eye(n, x.size, n), atol=1e-12)
+    ctx = ring_on.plant.CreateDefaultContext()
+    ring_on.plant.SetPositions(ctx, x[:n])
+    M = ring_on.plant.CalcMassMatrix(ctx)
+    np.testing.assert_allclose(J[n:2 * n, x.size + m:], np.linalg.inv(M), rtol=1e-9,
+                               atol=1e-9 * np.abs(np.linalg.inv(M)).max())
 
 
 def test_plant_system_expression_equals_float_and_ports_are_lean(ring_on):
