@@ -51,7 +51,9 @@ def plot_joint_runs(comparison: Comparison, test: str, finger: str):
     if not cols:
         raise ValueError(f"plot_joint_runs: no joints of finger {finger!r} "
                          f"(fingers: {', '.join(dict.fromkeys(runs[0].meta['fingers']))})")
-    fig, axes = plt.subplots(len(cols), 1, figsize=(7, 1.9 * len(cols) + 0.8), sharex=True, squeeze=False)
+    outside = len(runs) > 3          # many controllers: the legend beside the panels, not over the traces
+    fig, axes = plt.subplots(len(cols), 1, figsize=(9.5 if outside else 7, 1.9 * len(cols) + 0.8), sharex=True,
+                             squeeze=False)
     for ax, j in zip(axes[:, 0], cols):
         for r in runs:
             ax.plot(r.t, r.output[:, j], label=r.controller)
@@ -60,7 +62,7 @@ def plot_joint_runs(comparison: Comparison, test: str, finger: str):
         ax.grid(True, alpha=0.3)
         _mark_stopped(ax, comparison, test, runs[0].meta["joints"][j])
     axes[0, 0].set_title(f"{comparison.rig}, {finger}: {test} (joint angle - operating point)")
-    axes[0, 0].legend(fontsize=8)
+    axes[0, 0].legend(fontsize=8, **({"loc": "upper left", "bbox_to_anchor": (1.01, 1.0)} if outside else {}))
     axes[-1, 0].set_xlabel("time [s]")
     fig.tight_layout()
     return fig, axes
