@@ -17,7 +17,7 @@ from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
 from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
@@ -43,11 +43,8 @@ class ImpedanceStep:
         return float(self.metrics["overshoot"])
 
     def plot(self, ax=None):
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        ax.plot(self.t, self.joint_angle, label=f"{self.label}: overshoot {self.overshoot:.1f} %")
-        ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
-        label_axes(ax, "joint angle [rad]", legend=dict(fontsize=8))
-        return fig, ax
+        return plot_traces(self.t, {f"{self.label}: overshoot {self.overshoot:.1f} %": self.joint_angle},
+                           reference=self.reference, ylabel="joint angle [rad]", ax=ax, legend=dict(fontsize=8))
 
 
 @dataclass
