@@ -85,7 +85,9 @@ def _integration_parts(model: DriveModel):
         raise ValueError(f"rig_integration_system: the routing must be a ConstantCoupling (constant P), got "
                          f"{type(model.coupling).__name__}")
     P = np.asarray(model.coupling.P(), dtype=float)
-    return P, np.asarray(model.link_inertia, float), float(model.motor.inertia), float(model.motor_pulley_radius)
+    motors = model.motor if isinstance(model.motor, tuple) else (model.motor,) * model.num_tendons
+    B = np.array([mp.inertia for mp in motors], dtype=float)
+    return P, np.asarray(model.link_inertia, float), B, float(model.motor_pulley_radius)
 
 
 def integration_state(model: DriveModel, state) -> np.ndarray:
