@@ -281,8 +281,8 @@ class ClosedLoop:
             n = rig_ctx.get_discrete_state(0).size() if self.sampled_rig else rig_ctx.num_continuous_states()
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} states")
-            if self.sampled_rig:     # the rig's state is the sampled dynamics' discrete state (same order)
-                rig_ctx.SetDiscreteState(0, x)
+            if self.sampled_rig:     # the sampled dynamics' discrete state: x in the rig's integration coordinates
+                rig_ctx.SetDiscreteState(0, self.rig.sampled_state(x))
             else:
                 rig_ctx.SetContinuousState(x)
             self.initialize_controller(context, self.rig.joint_angles_of(x) if self.estimator is not None else None,
