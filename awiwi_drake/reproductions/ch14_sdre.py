@@ -15,9 +15,8 @@ from awiwi_drake.analysis import Samples, Step, simulate
 from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controller
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
-from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, SdreJointParams, SdreTendonParams
 from awiwi_drake.plotting import figure_axes
-from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
 
 __all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
@@ -80,7 +79,7 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
     ref = Samples([0.0, *(t for t, _ in schedule)], [0.0, *(r for _, r in schedule)])   # piecewise constant
     log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": ref},
-                   log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=DT)
+                   log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=1 / RATE)
     u = log["motor_torque"][:, 0]
     limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
     return SdreRun("fixed gains" if fixed else "SDRE", "tendon_force", "N", log.t, log["tendon_force"][:, 0],
@@ -103,7 +102,7 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
                               disturbances={"external_torque": external_torque})
     log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": Step(0.1, target),
                                                "external_torque": external_torque},
-                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
+                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=1 / RATE)
     return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "joint_angle", "rad",
                    log.t, log["joint_angle"][:, 0], log["joint_angle_reference"][:, 0], log["controller_gain"],
                    log["motor_torque"][:, 0], rig.torque_limit)
