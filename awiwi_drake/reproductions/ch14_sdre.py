@@ -16,7 +16,7 @@ from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controll
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, SdreJointParams, SdreTendonParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
 
 __all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
@@ -47,19 +47,15 @@ class SdreRun:
     def plot(self, ax=None):
         """Output against its reference, and the command with the torque limit; returns ``(fig, axes)``."""
         fig, ax = figure_axes(ax, nrows=2, ncols=1, figsize=(7, 5.5), sharex=True)
-        ax[0].plot(self.t, self.output, label=f"{self.output_name} ({self.label})")
-        ax[0].plot(self.t, self.reference, "k--", lw=0.8, label="reference")
-        ax[0].set_ylabel(f"{self.output_name} [{self.unit}]")
-        ax[1].plot(self.t, self.torque, label=f"commanded torque ({self.label})")
+        plot_traces(self.t, {f"{self.output_name} ({self.label})": self.output}, reference=self.reference,
+                    ylabel=f"{self.output_name} [{self.unit}]", ax=ax[0], legend=dict(fontsize=8))
+        plot_traces(self.t, {f"commanded torque ({self.label})": self.torque}, ylabel="motor torque [Nm]", ax=ax[1],
+                    legend=None)
         if self.torque_limit is not None:
             for s in (1, -1):
                 ax[1].axhline(s * self.torque_limit, color="r", ls=":", lw=0.8,
                               label=f"torque limit +-{self.torque_limit:g} Nm" if s > 0 else None)
-        ax[1].set_ylabel("motor torque [Nm]")
-        ax[1].set_xlabel("time [s]")
-        for a in ax:
-            a.grid(True, alpha=0.3)
-            a.legend(fontsize=8)
+        ax[1].legend(fontsize=8)
         return fig, ax
 
 
