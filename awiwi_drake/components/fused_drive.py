@@ -100,7 +100,7 @@ class DriveModel:
     wrist length offsets) are taken as quasi-static.
     """
 
-    motor: MotorParams
+    motor: MotorParams | tuple     # one set for all motors, or one per tendon (motor.tendon_motor_params)
     springs: tuple
     coupling: object
     offsets: np.ndarray
@@ -113,6 +113,9 @@ class DriveModel:
 
     def __post_init__(self):
         m, n = int(self.coupling.num_tendons), int(self.coupling.num_joints)
+        if not isinstance(self.motor, MotorParams) and (
+                len(self.motor) != m or not all(isinstance(mp, MotorParams) for mp in self.motor)):
+            raise ValueError(f"DriveModel: motor must be one MotorParams or one per tendon ({m})")
         if len(self.springs) != m:
             raise ValueError(f"DriveModel: springs must hold one spring law per tendon ({m}), got {len(self.springs)}")
         object.__setattr__(self, "laws", TendonSprings(self.springs))    # the one per-tendon evaluation

@@ -126,17 +126,12 @@ class FingerCoupling(abc.ABC):
         """Coupling matrix dh/dq (m x n) [m/rad]."""
 
     def tension_hessian(self, q, f) -> np.ndarray:
-        """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
+        """``sum_i f_i d^2 h_i/dq^2 = d(P(q)^T f)/dq`` at fixed ``f`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
         return np.zeros((self.num_joints, self.num_joints))
 
     def tension_hessians(self, q) -> np.ndarray:
         """``d^2 h_i/dq^2`` of every tendon (m x n x n): ``tension_hessian(q, f) = sum_i f_i [i]``."""
         return np.stack([self.tension_hessian(q, e) for e in np.eye(self.num_tendons)], axis=0)
-
-    def dPT_f_dq(self, q, f) -> np.ndarray:
-        """``d(P(q)^T f)/dq`` at fixed ``f``: the same matrix as :meth:`tension_hessian`
-        (name used by ``components.routing.ConstantCoupling``)."""
-        return self.tension_hessian(q, f)
 
     def generalized_force(self, q, f) -> np.ndarray:
         """``tau = -P(q)^T f`` (ARCHITECTURE sign convention)."""
@@ -545,11 +540,11 @@ class WristCoupling:
         """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
         return wrist_jacobian(*self._split(q), self.params)
 
-    def dPT_f_dq(self, q, f) -> np.ndarray:
+    def tension_hessian(self, q, f) -> np.ndarray:
         """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
 
         The geometric stiffness of the wrist joints due to the tendon forces
-        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + dPT_f_dq``).  Exact:
+        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + tension_hessian``).  Exact:
         forward-mode tangents nested over the scalar type.
         """
         q71, q73 = self._split(q)

@@ -18,7 +18,7 @@ from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_
                                               tendon_pd_controller, tendon_scheduled_controller)
 from awiwi_drake.parameters import MotorParams, TendonRigParams
 from awiwi_drake.parameters.control import ForceSensorParams, TendonForceGains
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import tendon_rig
 
@@ -47,10 +47,9 @@ class FeedforwardRun:
 
     def plot(self, ax=None):
         """Both force traces, the reference and (10.3); returns ``(fig, ax)``."""
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        ax.plot(self.t, self.with_feedforward, label="with feed-forward (10.2)")
-        ax.plot(self.t, self.without_feedforward, label="without feed-forward")
-        ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
+        fig, ax = plot_traces(self.t, {"with feed-forward (10.2)": self.with_feedforward,
+                                       "without feed-forward": self.without_feedforward},
+                              reference=self.reference, ylabel="tendon force [N]", ax=ax)
         ax.axhline(self.expected_without, color="gray", ls=":", lw=1, label="(10.3): steady state without")
         label_axes(ax, "tendon force [N]", title="Fig 10.1", legend=dict(fontsize=8))
         return fig, ax
