@@ -45,19 +45,21 @@ model sampled with its one period of delay, :func:`sampled_model`)
   (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`), its reduced model built with that law;
 * ``pole-placement``: the double oscillator (12.13) by coefficient identification
   (:func:`~awiwi_drake.control.pole_placement.place_by_identification`) on ``[q, qdot, tau, tau_dot]``:
-  ``omega1 = position_bandwidth``, ``omega2`` from the modulus of the joint's own open-loop pair (the link on
-  its tendons through the force loop, 270-1070 rad/s on the index) up until the torque loop gain
-  ``1 + K_tau + K_prev`` (:func:`torque_loop_gain`) reaches ``JointDesignParams.torque_loop_gain_min``, both
-  pairs damped to ``damping_ratio``.  Measured on the default index (guide friction on, 3 kHz, estimator,
-  :func:`sampled_loop_poles`): with ``omega2`` the pair's modulus the DIP needs ``K_tau = -4.07`` (gain -2.8),
-  a positive torque feedback that a link held at rest (the guides' presliding stiffness, ~0.26 Nm/rad on the
-  DIP, or a contact) turns into a drift at +33 1/s; the DIP runs off until the guides slide.  Open: the
-  whole finger's fast PIP/DIP mode (3180 rad/s on the springs, 4240 with the presliding stiffness of the
-  hysteresis and the guides; the per-joint models, on ``M_jj``, put the DIP at 1030 rad/s) sees the torque
-  feedback about 1.5 periods late, where feedback removes damping; with the guides it is unstable under this
-  stage (+32 1/s at 4461 rad/s on the index); on ``sigma`` it is damped there but the loop has a real pole at
-  +266 1/s on the design model's plant (motor friction in motion).  Measured before: a fixed ``omega2`` of
-  300 or 1000 rad/s makes the finger unstable through the neglected MCP/PIP/DIP coupling (+408, +483 1/s);
+  ``omega1 = position_bandwidth`` damped to ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop
+  pair (the link on its tendons through the force loop, 345-1070 rad/s on the index) damped to the largest
+  ``xi2 <= damping_ratio`` that keeps the torque loop gain ``1 + K_tau + K_prev`` (:func:`torque_loop_gain`) at
+  least ``JointDesignParams.torque_loop_gain_min`` (on the index only the DIP needs less: xi2 = 0.30).
+  Measured on the default index (guide friction on, 3 kHz, estimator, :func:`sampled_loop_poles`): with xi2 =
+  0.7 the DIP needs ``K_tau = -4.07`` (gain -2.8), a positive torque feedback that a link held at rest (the
+  guides' presliding stiffness, ~0.26 Nm/rad on the DIP, or a contact) turns into a drift at +33 1/s; the DIP
+  ran off until the guides slid (2.5 rad).  Two other free choices were measured and rejected: raising
+  ``omega2`` until the gain is met (the gains grow; the whole finger's fast PIP/DIP mode, 3180 rad/s on the
+  springs and 4240 with the presliding stiffness of the hysteresis and the guides -- the per-joint models, on
+  ``M_jj``, put the DIP at 1030 rad/s -- sees the torque feedback ~1.5 periods late and goes unstable, +32 1/s
+  at 4461 rad/s), and measuring ``sigma`` in place of ``tau_dot`` (the fast mode is damped, but the placed
+  velocity gains turn negative and the design model's plant has a real pole at +266 1/s).  Measured before: a
+  fixed ``omega2`` of 300 or 1000 rad/s makes the finger unstable through the neglected MCP/PIP/DIP coupling
+  (+408 and +483 1/s); with the joint's own pair the slowest whole-finger pole is -31 1/s;
 * ``lqr``: Drake ``LinearQuadraticRegulator`` on ``(F, G)`` with Bryson weights
   (:class:`~awiwi_drake.parameters.joint_design.JointDesignParams`);
 * ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque
@@ -325,36 +327,34 @@ def _lqr_weights(p: JointDesignParams, model: JointReducedModel):
 
 
 def _pole_placement_gains(F, G, p: JointDesignParams, period: float | None) -> np.ndarray:
-    """(12.13) on one DoF (``pole-placement`` in the module docstring): ``omega1 = position_bandwidth``, ``omega2`` the
-    smallest frequency from the modulus of the joint's own open-loop pair up at which the placed gains keep the
-    torque loop gain ``1 + K_tau + K_prev >= JointDesignParams.torque_loop_gain_min`` (:func:`torque_loop_gain`);
-    the gain is continuous and rises with ``omega2``, so the first crossing is found by bisection in ``log omega2``."""
+    """(12.13) on one DoF (``pole-placement`` in the module docstring): ``omega1 = position_bandwidth`` damped to
+    ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop pair, damped to the largest ``xi2 <=
+    damping_ratio`` that keeps the torque loop gain ``1 + K_tau + K_prev >= JointDesignParams.torque_loop_gain_min``
+    (:func:`torque_loop_gain`; the gain falls as ``xi2`` rises, so the bound is met at the first crossing, found by
+    bisection)."""
     lam = np.linalg.eigvals(F)
     pair = abs(lam[np.argmax(np.abs(lam.imag))])        # the link on its tendons through the force loop
 
-    def gains(w2):
-        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, w2, p.damping_ratio)
+    def gains(xi2):
+        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, pair, xi2)
         if period is None:
             return np.append(place_by_identification(F, G, target).ravel(), 0.0)
         Phi, Gamma = sampled_model(F, G, period)      # poles mapped z = exp(h s), the delay's at 0
         zs = np.concatenate([np.exp(period * np.roots(target)), [0.0]])
         return place_by_identification(Phi, Gamma, np.real(np.poly(zs))).ravel()
 
-    def excess(log_w2):
-        return torque_loop_gain(gains(np.exp(log_w2))) - p.torque_loop_gain_min
+    def excess(xi2):
+        return torque_loop_gain(gains(xi2)) - p.torque_loop_gain_min
 
-    lo = np.log(pair)
-    if excess(lo) >= 0.0:
-        return gains(pair)
-    hi = lo + np.log(2.0)
-    while excess(hi) < 0.0:
-        if hi > lo + np.log(20.0):
-            raise ValueError(f"pole-placement design: no omega2 in [{pair:.4g}, {20 * pair:.4g}] rad/s keeps the torque "
-                             f"loop gain 1 + K_tau + K_prev >= {p.torque_loop_gain_min}; change "
-                             "JointDesignParams.torque_loop_gain_min or position_bandwidth")
-        lo, hi = hi, hi + np.log(2.0)
+    if excess(p.damping_ratio) >= 0.0:
+        return gains(p.damping_ratio)
+    low = p.pair_damping_min
+    if excess(low) < 0.0:
+        raise ValueError(f"pole-placement design: no damping xi2 in [{low}, {p.damping_ratio}] of the joint's pair "
+                         f"({pair:.4g} rad/s) keeps the torque loop gain 1 + K_tau + K_prev >= "
+                         f"{p.torque_loop_gain_min}; change JointDesignParams.torque_loop_gain_min or pair_damping_min")
     from scipy.optimize import brentq
-    return gains(np.exp(brentq(excess, lo, hi, xtol=1e-9)))
+    return gains(brentq(excess, low, p.damping_ratio, xtol=1e-12))
 
 
 def torque_loop_gain(K) -> float:
