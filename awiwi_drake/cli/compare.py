@@ -17,30 +17,11 @@ from __future__ import annotations
 
 import argparse
 
-from awiwi_drake.cli import add_parameter_options, finite_float, load_parameters, output_dir, positive_float
+from awiwi_drake.cli import add_parameter_options, limited_float, load_parameters, output_dir, positive_float
 
 __all__ = ["register", "run"]
 
 FINGER_RIGS = ("finger-thumb", "finger-index", "finger-middle", "finger-ring", "finger-fifth", "hand")
-
-
-def _rate(text: str) -> float:
-    from awiwi_drake.parameters.cli import CliLimits
-
-    value, lim = finite_float(text), CliLimits()
-    if value != 0 and not lim.min_rate <= value <= lim.max_rate:
-        raise argparse.ArgumentTypeError(f"{text!r} must be 0 (continuous) or in [{lim.min_rate:g}, "
-                                         f"{lim.max_rate:g}] Hz (CliLimits)")
-    return value
-
-
-def _delay(text: str) -> float:
-    from awiwi_drake.parameters.cli import CliLimits
-
-    value, top = finite_float(text), CliLimits().max_delay
-    if not 0.0 <= value <= top:
-        raise argparse.ArgumentTypeError(f"{text!r} must be in [0, {top:g}] s (CliLimits)")
-    return value
 
 
 def register(subparsers) -> None:
@@ -54,9 +35,9 @@ def register(subparsers) -> None:
     req.add_argument("--out", metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--list", action="store_true", help="list the controllers that fit --rig and exit")
     p.add_argument("--tests", default=None, help="comma-separated subset of step,sine,disturbance,sweep")
-    p.add_argument("--rate", type=_rate, default=None, metavar="HZ",
+    p.add_argument("--rate", type=limited_float("max_rate", "Hz", low="min_rate", zero=True), metavar="HZ",
                    help="control rate [Hz] (default: the controller's, 3000); 0 = continuous")
-    p.add_argument("--delay", type=_delay, default=None, metavar="S", help="round-trip delay [s], e.g. 333e-6")
+    p.add_argument("--delay", type=limited_float("max_delay", "s"), metavar="S", help="round-trip delay [s], e.g. 333e-6")
     p.add_argument("--saturation", type=positive_float, default=None, metavar="NM", help="torque limit [Nm]")
     p.add_argument("--short", action="store_true", help="shorter runs (as AWIWI_SHORT=1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")

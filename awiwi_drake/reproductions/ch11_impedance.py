@@ -16,9 +16,8 @@ from awiwi_drake.analysis import Chirp, Step, linearize, simulate
 from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
-from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, ImpedanceParams, ImpedanceSweepParams
 from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
-from awiwi_drake.reproductions._common import DT, RATE
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
@@ -86,7 +85,7 @@ def _run(mode, joint_stiffness, rig, stiffness, pretension, t_final, reference):
     op = r.operating_point()
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
     return simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference, "external_torque": 0.0},
-                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
+                    log=("joint_angle", "joint_angle_reference"), log_period=1 / RATE)
 
 
 def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
