@@ -281,8 +281,8 @@ class ClosedLoop:
             n = rig_ctx.get_discrete_state(0).size() if self.sampled_rig else rig_ctx.num_continuous_states()
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} states")
-            if self.sampled_rig:     # the rig's state is the sampled dynamics' discrete state (same order)
-                rig_ctx.SetDiscreteState(0, x)
+            if self.sampled_rig:     # the sampled dynamics' discrete state: x in the rig's integration coordinates
+                rig_ctx.SetDiscreteState(0, self.rig.sampled_state(x))
             else:
                 rig_ctx.SetContinuousState(x)
             self.initialize_controller(context, self.rig.joint_angles_of(x) if self.estimator is not None else None,
@@ -384,7 +384,9 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         trajectory equals the continuous rig's under ``simulate``'s default fixed-step RK3 at the
         control period to round-off (tests/test_rig_system.py). Its other inputs
         (``external_torque``) are held over each period too. ``Linearize`` takes the loop with the
-        period. The loop's ``motor_torque`` output is the held command as before. False: the
+        period; the rig's discrete state there is in its integration coordinates (momentum and
+        elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
+        its ``state`` output physical. The loop's ``motor_torque`` output is the held command as before. False: the
         continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
     fused : bool
         For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
