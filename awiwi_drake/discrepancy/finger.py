@@ -327,11 +327,17 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
     elif effect in SPRING_SIDE:
         e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]     # (K, m): a force error on tendon i
         if effect == "spring_hysteresis":
-            play = 3.0 * float(np.median(np.abs(np.diff(fr.elong[i])))) + 1e-7
+            # the package's loop (HysteresisParams, Fig 4.8b): half-width beta f + z0 times the Dahl state of the
+            # elongation.  Evaluated at the full rate on the elongation the measured force gives, then filtered
+            # (consistent): the finger's link modes move the tendons by up to ~1 mm within a few samples, which
+            # cycles the loop; a Dahl state of the filtered elongation would not see those cycles.
+            F = fr._force_raw[i]
+            xr = np.asarray(fr.rig.spring_laws[i].inverse_force(np.maximum(F, 1e-3)), float)
+            play = 3.0 * fr.sig_force[i] / float(np.median(fr.stiff[i]))    # the force noise as elongation
             for length in (5e-5, 2e-4, 8e-4):
-                w = _dahl(fr.elong[i], length, play)
-                out.append((f"length {length:g} m", (e_i * (w * np.tanh(f))[:, None]).T[None],
-                            ["hysteresis_width"], {"hysteresis_length": length}))
+                w = _dahl(xr, length, play) * np.tanh(F)
+                out.append((f"length {length:g} m", np.stack([(e_i * H(w * F)[:, None]).T, (e_i * H(w)[:, None]).T]),
+                            ["hysteresis_ratio", "hysteresis_width"], {"hysteresis_length": length}))
         elif effect == "nominal_spring":
             out.append(("", (e_i * f[:, None]).T[None], ["spring_scale_rel"], {}))
         else:
@@ -341,7 +347,8 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
 
 _BOUNDS = {"motor_coulomb": lambda b: (0.0, b.motor_coulomb_max), "motor_viscous": lambda b: (0.0, b.motor_viscous_max),
            "guide_c0": lambda b: (0.0, b.guide_c0_max), "guide_mu": lambda b: (0.0, b.guide_mu_max),
-           "hysteresis_width": lambda b: (0.0, b.hysteresis_width_max), "guide_capstan": lambda b: (0.0, np.inf)}
+           "hysteresis_width": lambda b: (0.0, b.hysteresis_width_max),
+           "hysteresis_ratio": lambda b: (0.0, b.hysteresis_ratio_max), "guide_capstan": lambda b: (0.0, np.inf)}
 """Physical ranges of the fitted amplitudes (``guide_capstan``: the scale of the capstan term at the grid's
 ``guide_mu``, 1 when the grid value is right)."""
 
@@ -395,9 +402,10 @@ def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settin
         if spring:
             fit = np.tensordot(beta, Xc, axes=1)                   # (m, K)
             # the effect's size in newtons on its own tendon (before projection and whitening)
-            cols = {"spring_hysteresis": lambda: np.tanh(fr.force[i]), "nominal_spring": lambda: fr.force[i],
-                    "force_sensor": lambda: np.ones(fr.force.shape[1])}
-            size = float(abs(beta[0]) * np.sqrt(np.mean(cols[effect]() ** 2)))
+            f_i = fr.force[i]
+            cols = {"spring_hysteresis": lambda: (beta[0] * f_i + beta[1]) * np.tanh(f_i),   # the half-width
+                    "nominal_spring": lambda: beta[0] * f_i, "force_sensor": lambda: beta[0] * np.ones_like(f_i)}
+            size = float(np.sqrt(np.mean(cols[effect]() ** 2)))
             floor = float(fr.sig_force[i])
         else:
             fit = np.zeros_like(base_motor)
