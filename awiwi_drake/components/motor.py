@@ -25,6 +25,7 @@ __all__ = [
     "motor_friction_torque",
     "motor_ripple_torque",
     "saturate_torque",
+    "motor_drive_torque",
     "motor_acceleration",
     "tendon_motor_params",
     "MotorBank_",
@@ -127,17 +128,25 @@ def saturate_torque(u, p: MotorParams):
     return clip(u, -p.torque_limit, p.torque_limit)
 
 
+def motor_drive_torque(theta, omega, u, p: MotorParams):
+    """The torque of (3.5) on the output shaft apart from the load: ``sat(u) + tau_fric + tau_ripple`` [Nm]
+    (``p``: one MotorParams, or a tuple of one per motor)."""
+    if isinstance(p, tuple):
+        return _per_motor(motor_drive_torque, p, theta, omega, u)
+    tau = saturate_torque(u, p)
+    if p.friction or p.damping:
+        tau = tau + motor_friction_torque(omega, p)
+    if p.ripple:
+        tau = tau + motor_ripple_torque(theta, p)
+    return tau
+
+
 def motor_acceleration(theta, omega, u, load_torque, p: MotorParams):
     """Output-shaft acceleration of (3.5): ``(sat(u) + tau_fric + tau_ripple - load) / B`` (``p``: one
     MotorParams, or a tuple of one per motor, e.g. :func:`tendon_motor_params`)."""
     if isinstance(p, tuple):
         return _per_motor(motor_acceleration, p, theta, omega, u, load_torque)
-    tau = saturate_torque(u, p) - load_torque
-    if p.friction or p.damping:
-        tau = tau + motor_friction_torque(omega, p)
-    if p.ripple:
-        tau = tau + motor_ripple_torque(theta, p)
-    return tau / p.inertia
+    return (motor_drive_torque(theta, omega, u, p) - load_torque) / p.inertia
 
 
 @TemplateSystem.define("MotorBank_")

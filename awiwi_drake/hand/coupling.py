@@ -55,7 +55,7 @@ import numpy as np
 from .._math import Tangent, is_float
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerParams, HandParams, ThumbParams,
                                check_finger_structure, finger_params)
-from .kinematics import finger_joint_names
+from .kinematics import finger_joint_names, rot_y, rot_z
 from ..parameters.wrist import WristParams
 from .wrist import wrist_jacobian, wrist_params, wrist_tendon_lengths
 
@@ -207,18 +207,6 @@ def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
                                 dof_selection=coupling_selection(p), finger=finger)
 
 
-def _rz(c, s, like):
-    R = np.zeros((3, 3), dtype=like)
-    R[0, 0], R[0, 1], R[1, 0], R[1, 1], R[2, 2] = c, -s, s, c, 1.0
-    return R
-
-
-def _ry(c, s, like):
-    R = np.zeros((3, 3), dtype=like)
-    R[0, 0], R[0, 2], R[2, 0], R[2, 2], R[1, 1] = c, s, -s, c, 1.0
-    return R
-
-
 _KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz
 _KY = np.array([[0.0, 0, 1], [0, 0, 0], [-1, 0, 0]])  # dRy/dq = Ry Ky
 
@@ -245,10 +233,7 @@ class ThumbCoupling(FingerCoupling):
         self.dof_selection = np.eye(4)
 
     def _base(self, q10, q11):
-        like = float if _is_float_array(np.array([q10, q11])) else object
-        Rz = _rz(np.cos(q10), np.sin(q10), like)
-        Ry = _ry(np.cos(q11), np.sin(q11), like)
-        return Rz, Ry
+        return rot_z(q10)[:3, :3], rot_y(q11)[:3, :3]
 
     @_quiet_fp
     def base_vectors(self, q):
