@@ -181,10 +181,10 @@ def test_joint_stage_controllers_run_on_other_fingers(finger):
     motor-position tendon level does not cancel; with the ripple off it is stable); over 0.1 s the bound holds."""
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.joint_design import sampled_loop_poles
-    # Run without the guide friction: with it, linearised at rest, its Dahl state is a presliding spring C/delta
-    # (~5 kN/m per tendon path) on the link, with which the thumb's pole-placement loop has a sampled pair at
-    # |z| = 1.005 (725 Hz) and the index's LQR one at |z| = 1.00035 (697 Hz; measured), so the at-rest linear bound
-    # is not the loop's (the guides slide instead of ringing)
+    # Run without the guide friction: with it the step stops in the guides' dead band (the friction torque over the
+    # stiffness, tests/test_hand_control.py) and the at-rest linear bound (the guides as presliding springs) is not
+    # that of the sliding loop; the stages' stability at rest with the guides:
+    # test_every_joint_stage_is_stable_at_rest_with_the_default_physics
     params = FingerRigParams.for_finger(finger).with_physics(guide_friction=False)
     for name in ("pd", "two-time-scale", "pole-placement", "lqr"):
         assert name in controller_names(f"finger-{finger}") and name in controller_names("hand")
@@ -394,11 +394,9 @@ def test_full_state_stages_at_3khz_and_the_cause_of_their_saturation():
       k_t) still leaves that mode unstable; on the motors' rate sigma = -(P S)^T k_t r_m omega it is damped;
     * as registered (3 kHz, estimator, physics: ripple, motor friction, hysteresis) every full-state stage is
       stable; the modes at z = 1 are the hysteresis memory (any Dahl force at rest is an equilibrium: one per
-      tendon). Run without the guide friction: with it (on by default), linearised at rest, its Dahl state is a
-      presliding spring on the link (C/delta ~5 kN/m per tendon path), with which the pole-placement stage has a
-      real pole at +33 1/s (|z| = 1.011) and the LQR/SDRE stages the DIP link pair at +1.06 +- 4382j 1/s
-      (|z| = 1.00035), measured with sampled_loop_poles on the default index: open findings of the guides'
-      default."""
+      tendon). Run without the guide friction, as measured then; with it (on by default):
+      test_every_joint_stage_is_stable_at_rest_with_the_default_physics and
+      test_cause_of_the_default_finger_instabilities_of_pole_placement_and_lqr."""
     from awiwi_drake.control.chain import TendonChainController, chain_design_point
     from awiwi_drake.control.joint_design import design_joint_gains, sampled_loop_poles
     from awiwi_drake.control.linear import reference_maps
