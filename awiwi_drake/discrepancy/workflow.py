@@ -174,12 +174,14 @@ class _Run:
             self.stop_reason = "no candidate passes the acceptance tests"
             return False
         win, status, conf, members, alts = choice
-        if self.accepted and status in ("ambiguous", "not separable") and win.kind == "physical" \
-                and any(EFFECTS[a].kind == "physical" for a in alts):
+        # an alternative whose fit rests on a bound is not an estimate (issue 12): it competes with nothing
+        rivals = [c.effect for c in fitted if c.effect in alts and EFFECTS[c.effect].kind == "physical"
+                  and not (c.rejected and c.at_bound)]
+        if self.accepted and status in ("ambiguous", "not separable") and win.kind == "physical" and rivals:
             # a leftover that several effects explain equally (e.g. the form mismatch of an
             # effect already added) names nothing
-            self.history[-1]["unresolved"] = [win.effect] + alts
-            self.stop_reason = f"unresolved: {', '.join([win.effect] + alts)} explain the rest about equally"
+            self.history[-1]["unresolved"] = [win.effect] + rivals
+            self.stop_reason = f"unresolved: {', '.join([win.effect] + rivals)} explain the rest about equally"
             return False
         self.accept(win, status, conf, members, alts, fitted + screen_results)
         return True
