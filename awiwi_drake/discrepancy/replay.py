@@ -461,6 +461,19 @@ class Projection:
         coef = np.einsum("wmk,wm->wk", self.U, R) * g
         return np.einsum("wmk,wk->wm", self.U, coef)
 
+    @staticmethod
+    def merge(parts: list) -> "Projection":
+        """One projection from per-window parts ``[(positions, Projection), ...]`` (positions index the
+        merged windows; together they cover each exactly once)."""
+        W = sum(len(pos) for pos, _ in parts)
+        first = parts[0][1]
+        out = Projection.__new__(Projection)
+        out.U = np.empty((W,) + first.U.shape[1:])
+        out.d, out.dof = np.empty((W,) + first.d.shape[1:]), np.empty(W)
+        for pos, part in parts:
+            out.U[pos], out.d[pos], out.dof[pos] = part.U, part.d, part.dof
+        return out
+
     def take(self, windows: np.ndarray) -> "Projection":
         out = Projection.__new__(Projection)
         out.U, out.d, out.dof = self.U[windows], self.d[windows], self.dof[windows]

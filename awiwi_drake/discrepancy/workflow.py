@@ -90,7 +90,7 @@ class _Run:
         cr = CandidateResult(eff.name, eff.kind, "fit", params, {n: fo.se.get(n, float("nan")) for n in params},
                              gain, gain / max(st.excess, 1e-12), paired_z(st.e[te], e_after[te]), dbic,
                              own_bound, e_after, gain_z(st.rp[te], rp[te]),
-                             materiality(eff.name, params, self.ne), vector=fo.p)
+                             materiality(eff.name, params, self.ne), vector=fo.p, profile=(fo.r0, fo.projection))
         cr.rejected = rejection_reason(cr, st, self.settings)
         self.say(f"  fit {eff.name:18s} held-out gain {100 * cr.relative_gain:6.1f}% of excess, "
                  f"z {cr.z:4.1f}/{cr.z_gain:6.1f}, dBIC {dbic:9.1f} ({fo.nfev} evals, {fo.rounds} rounds, "
@@ -133,8 +133,9 @@ class _Run:
         self.accepted.append(EFFECTS[win.effect])
         # polish the accepted parameters jointly (profile refreshed), keep the better on training windows
         names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
-        p_pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings).p
-        st_new, st_old = ResidualState(self.eng, p_pol), ResidualState(self.eng, win.vector)
+        pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings)
+        st_new = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
+        st_old = ResidualState(self.eng, win.vector, win.profile)
         self.st = st_new if st_new.E_train <= st_old.E_train else st_old
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         experiment = separating_experiment(members) if status == "not separable" else ""
@@ -205,7 +206,8 @@ class _Run:
         for i in (1, 2):
             p0 = self.st.base.copy()
             p0[PARAM_INDEX["place_1"]], p0[PARAM_INDEX["place_2"]] = float(i == 1), float(i == 2)
-            st = ResidualState(self.eng, fit_parameters(self.st, names, p0, self.bounds, self.settings).p)
+            fo = fit_parameters(self.st, names, p0, self.bounds, self.settings)
+            st = ResidualState(self.eng, fo.p, (fo.r0, fo.projection))
             if st.E_test < best_st.E_test:
                 best, best_st = f"tendon {i}", st
         z = gain_z(self.st.rp[te], best_st.rp[te])
