@@ -33,7 +33,7 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset, is_finger_rig
-from .decide import SEPARATING_EXPERIMENTS, materiality, noise_equivalent, rejection_reason, separating_experiment
+from .decide import EQUIVALENT_EFFECTS, materiality, noise_equivalent, rejection_reason, separating_experiment
 from .fit import fit_parameters
 from .localise import locate, residual_maps
 from .replay import ReplayEngine, project
@@ -178,9 +178,10 @@ class _Run:
         # an alternative whose fit rests on a bound is not an estimate (issue 12): it competes with nothing
         rivals = [c.effect for c in fitted if c.effect in alts and EFFECTS[c.effect].kind == "physical"
                   and not (c.rejected and c.at_bound)]
-        # effects these data cannot separate by physics (motor vs guide friction, ...) form one class
+        # effects that are the same physics on these data (guide friction's constant part is motor Coulomb
+        # friction's torque) form one class even after other effects were added
         known_class = status == "not separable" and all(
-            frozenset((win.effect, a)) in SEPARATING_EXPERIMENTS for a in rivals)
+            frozenset((win.effect, a)) in EQUIVALENT_EFFECTS for a in rivals)
         if self.accepted and status in ("ambiguous", "not separable") and win.kind == "physical" and rivals \
                 and not known_class:
             # a leftover that several effects explain equally (e.g. the form mismatch of an
