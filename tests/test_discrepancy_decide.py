@@ -99,6 +99,23 @@ def test_acceptance_requires_every_test():
     assert "null std" in rejection_reason(_candidate(z_gain=1.0), _St, s)
 
 
+def test_a_leftover_is_named_unless_an_identified_rival_explains_it_as_well():
+    """After an effect was added, a physical winner tied with another physical effect names nothing
+    ("unresolved"), unless the rival's fit rests on a bound (not an estimate) or the two are the
+    equivalent pair motor vs guide friction and both pass every test (one class, not separable)."""
+    from awiwi_drake.discrepancy.workflow import leftover_rivals
+    win = _candidate(effect="motor_friction")
+    at_bound = _candidate(at_bound=["guide_c0"], rejected="parameter at a bound: guide_c0")
+    assert leftover_rivals(win, "ambiguous", ["guide_friction"], [win, at_bound]) == []
+    hyst = _candidate(effect="spring_hysteresis")
+    assert leftover_rivals(win, "not separable", ["spring_hysteresis"], [win, hyst]) == ["spring_hysteresis"]
+    weak = _candidate(z=1.0, rejected="window rank z 1.0 < 2.5")   # rejected, but not at a bound: still a rival
+    assert leftover_rivals(win, "ambiguous", ["guide_friction"], [win, weak]) == ["guide_friction"]
+    guide = _candidate()
+    assert leftover_rivals(win, "not separable", ["guide_friction"], [win, guide]) == []
+    assert leftover_rivals(win, "confirmed", [], [win]) == []
+
+
 def test_hysteresis_window_state_cannot_absorb_a_force_offset(joint_engine):
     """With the loop width at its largest and the transition length at its 2 mm bound,
     a constant force offset keeps as much of its energy after the window-start profile

@@ -40,7 +40,7 @@ from .replay import ReplayEngine, project
 from .result import CandidateResult, Diagnosis, Step
 from .screen import STATEFUL_EFFECTS, ResidualState, free_params, gain_z, nrmse, paired_z, screen
 
-__all__ = ["diagnose", "gap_metrics", "DiagnosisInterrupted"]
+__all__ = ["diagnose", "gap_metrics", "DiagnosisInterrupted", "leftover_rivals"]
 
 
 class DiagnosisInterrupted(KeyboardInterrupt):
@@ -166,24 +166,24 @@ class _Run:
         screen_results = [CandidateResult(s["effect"].name, s["effect"].kind, "screen", s["params"], {},
                                           s["gain"], s["rel"], s["z"], s["dbic"]) for s in screened]
         best_gain = max([s["gain"] for s in screened] + [0.0])
-        top = [s for s in screened if s["gain"] > settings.confirm_fraction * best_gain][:settings.num_confirm]
+        # no simulation fit for a candidate whose screened gain is far below what acceptance needs
+        least = settings.screen_floor_fraction * settings.min_floor_gain * st.floor_test
+        top = [s for s in screened if s["gain"] > settings.confirm_fraction * best_gain
+               and s["gain"] >= least][:settings.num_confirm]
         fitted = sorted([self.fit_candidate(s) for s in top], key=lambda c: -c.gain)
         self.history.append({"ratio": st.ratio, "screen": [c.summary() for c in screen_results],
                              "fits": [c.summary() for c in fitted]})
+        if not top:
+            self.stop_reason = (f"no candidate screens a held-out gain of {100 * least / st.floor_test:.2g} % "
+                                f"of the noise floor")
+            return False
         choice = self.choose(fitted)
         if choice is None:
             self.stop_reason = "no candidate passes the acceptance tests"
             return False
         win, status, conf, members, alts = choice
-        # an alternative whose fit rests on a bound is not an estimate (issue 12): it competes with nothing
-        rivals = [c.effect for c in fitted if c.effect in alts and EFFECTS[c.effect].kind == "physical"
-                  and not (c.rejected and c.at_bound)]
-        # effects that are the same physics on these data (guide friction's constant part is motor Coulomb
-        # friction's torque) form one class even after other effects were added
-        known_class = status == "not separable" and all(
-            frozenset((win.effect, a)) in EQUIVALENT_EFFECTS for a in rivals)
-        if self.accepted and status in ("ambiguous", "not separable") and win.kind == "physical" and rivals \
-                and not known_class:
+        rivals = leftover_rivals(win, status, alts, fitted) if self.accepted else []
+        if rivals:
             # a leftover that several effects explain equally (e.g. the form mismatch of an
             # effect already added) names nothing
             self.history[-1]["unresolved"] = [win.effect] + rivals
@@ -244,6 +244,22 @@ class _Run:
             dict(zip(eng.out_names, eng.sigma.tolist())), st.base, time.perf_counter() - self.t_start,
             eng.simulations, time.process_time() - self.cpu_start, eng, list(self.history),
             unexplained, settings.unexplained_ratio, where, self.stop_reason, complete)
+
+
+def leftover_rivals(win: CandidateResult, status: str, alts: list, fitted: list) -> list:
+    """Physical effects that explain a leftover (after other effects were added) as well as the physical
+    winner ``win``, so that nothing is named ("unresolved"); [] when ``win`` may be accepted.
+
+    Not rivals: a tied alternative whose fit rests on a bound (a bound is not an estimate, issue 12),
+    and the members of a class of :data:`~awiwi_drake.discrepancy.decide.EQUIVALENT_EFFECTS` that all
+    pass every test (motor vs guide friction: one class "not separable")."""
+    if win.kind != "physical" or status not in ("ambiguous", "not separable"):
+        return []
+    rivals = [c.effect for c in fitted if c.effect in alts and EFFECTS[c.effect].kind == "physical"
+              and not (c.rejected and c.at_bound)]
+    if status == "not separable" and all(frozenset((win.effect, a)) in EQUIVALENT_EFFECTS for a in rivals):
+        return []
+    return rivals
 
 
 def place_of(effect: str, p: np.ndarray, num_motors: int) -> str:
