@@ -1,8 +1,8 @@
 """Named plants and diagram lists (top layer: it may use every plant package).
 
 * ``TARGETS`` maps the names the CLI accepts (``awiwi-drake linearize NAME``) to
-  ``dict(builder, params, description)``; ``builder(params=..., backend=...)``
-  returns a :class:`~awiwi_drake.rigs.Rig` (the rigs, each finger, the hand);
+  ``dict(builder, params, description)``; ``builder(params=..., backend=...)`` (fingers
+  and hand: any ``finger_diagram``/``hand_diagram`` keyword) returns a :class:`~awiwi_drake.rigs.Rig` (the rigs, each finger, the hand);
   :func:`build_target` builds one with ``NAME=VALUE`` overrides.
 * ``DIAGRAM_EXPORTS`` lists ``(file_stem, builder, max_depth)`` of the graphs
   committed under ``diagrams/`` (regenerate: ``awiwi-drake export-diagrams``);
@@ -53,11 +53,10 @@ def build_target(name: str, overrides: dict | None = None, *, params=None, **kwa
 
 # --- fingers and hand (thesis ch. 5-6), with lazy imports ----------------------------------------
 def _hand_target(finger: str | None):
-    def build(*, params=None, backend: str | None = None):
+    def build(*, params=None, **kw):
         from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
-        kw = {} if backend is None else {"backend": backend}
         if finger is None:
-            return hand_diagram(params=params, wrist=True, **kw)
+            return hand_diagram(params=params, **kw)
         return finger_diagram(finger=finger, params=params, **kw)
     build.__name__ = f"{finger or 'hand'}_target"
     return build
@@ -82,61 +81,39 @@ def _register_hand_targets() -> None:
 _register_hand_targets()
 
 
-
-
 # --- diagram graphs ---------------------------------------------------------------------------
-def _tendon():
-    return tendon_rig().diagram
+def _plant(name: str, **kw):
+    """Builder of the diagram of target ``name`` with its default parameters."""
+    return lambda: build_target(name, **kw).diagram
 
 
-def _flexible():
-    return flexible_joint_rig().diagram
+def _loop(name: str, controller: str, **kw):
+    """Builder of target ``name`` closed by the registered ``controller``."""
+    def build():
+        from awiwi_drake.control import closed_loop, make_controller
+        rig = build_target(name, **kw)
+        return closed_loop(rig, make_controller(controller, rig)).diagram
+    return build
 
 
-def _joint():
-    return joint_rig().diagram
-
-
-def _joint_loop():
+def _demo_loop():
     from awiwi_drake.control.motor_position import joint_rig_position_loop
     return joint_rig_position_loop(joint_rig()).diagram
 
 
-def _export_hand():
-    from awiwi_drake.hand.diagrams import hand_diagram
-    return hand_diagram().diagram
-
-
-def _export_hand_python():
-    from awiwi_drake.hand.diagrams import hand_diagram
-    return hand_diagram().diagram
-
-
-def _export_index_loop():
-    from awiwi_drake.control import closed_loop, make_controller
-    from awiwi_drake.hand.diagrams import finger_diagram
-    rig = finger_diagram(finger="index", wrist=True)
-    return closed_loop(rig, make_controller("joint-pd", rig)).diagram
-
-
-def _export_ring():
-    from awiwi_drake.hand.diagrams import finger_diagram
-    return finger_diagram(finger="ring").diagram
-
-
 HAND_DIAGRAM_EXPORTS = [
-    ("hand_top", _export_hand, 1),
-    ("hand_deep", _export_hand_python, None),
-    ("hand_finger_index_control_wrist", _export_index_loop, 1),
-    ("hand_finger_ring_deep", _export_ring, None),
+    ("hand_top", _plant("hand"), 1),
+    ("hand_deep", _plant("hand"), None),
+    ("hand_finger_index_control_wrist", _loop("finger-index", "joint-pd", wrist=True), 1),
+    ("hand_finger_ring_deep", _plant("finger-ring"), None),
 ]
 
 DIAGRAM_EXPORTS = [
-    ("tendon_rig", _tendon, None),
-    ("flexible_joint_rig", _flexible, None),
-    ("joint_rig", _joint, 1),
-    ("joint_rig_deep", _joint, None),
-    ("joint_rig_position_loop", _joint_loop, 1),
+    ("tendon_rig", _plant("tendon-rig"), None),
+    ("flexible_joint_rig", _plant("flexible-joint"), None),
+    ("joint_rig", _plant("joint-rig"), 1),
+    ("joint_rig_deep", _plant("joint-rig"), None),
+    ("joint_rig_position_loop", _demo_loop, 1),
 ] + HAND_DIAGRAM_EXPORTS
 
 

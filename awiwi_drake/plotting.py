@@ -35,12 +35,16 @@ def label_axes(ax, ylabel: str, *, xlabel: str | None = "time [s]", title: str |
         ax.legend(**(legend if isinstance(legend, dict) else {}))
 
 
-def plot_traces(t, traces: dict, *, ylabel: str, ax=None, styles: dict | None = None, title: str = ""):
-    """Several time series ``{label: y}`` over ``t`` [s]."""
+def plot_traces(t, traces: dict, *, ylabel: str, ax=None, styles: dict | None = None, title: str | None = None,
+                reference=None, legend: bool | dict = True):
+    """Several time series ``{label: y}`` over ``t`` [s] (``styles``: a format per label), and the
+    ``reference`` (values over ``t``) black dashed; ``legend`` as in :func:`label_axes`."""
     fig, ax = figure_axes(ax, figsize=(7, 4))
     for label, y in traces.items():
         ax.plot(t, y, (styles or {}).get(label, "-"), label=label)
-    label_axes(ax, ylabel, title=title)
+    if reference is not None:
+        ax.plot(t, reference, "k--", lw=0.8, label="reference")
+    label_axes(ax, ylabel, title=title, legend=legend)
     return fig, ax
 
 
@@ -80,60 +84,75 @@ def plot_spring_curve(lever, polynomial=None, max_force: float = 180.0, ax=None)
     return fig, ax
 
 
-_EVENT_COLOURS = {"actuator_saturation": "tab:red", "tendon_slack": "tab:purple"}
+_EVENT_COLOURS = {"actuator_saturation": "tab:red", "tendon_slack": "tab:purple", "spring_overrange": "tab:orange"}
 
 
-def plot_signals(result, names, ax=None, labels=None, reference=None, *, components=None, overlay=None,
-                 limits=None, xlim=None, legend: bool = True):
-    """One subplot per logged signal of a :class:`SimulationResult`, every trace in a legend.
+def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, channels=None, components=None,
+                 overlay=None, limits=None, xlim=None, legend: bool = True, events: bool = True):
+    """One subplot per logged signal of a :class:`SimulationResult` (per unit for mixed signals such as
+    ``state``), every trace in a legend, every axis with its unit; returns ``(fig, axes)``.
 
     Parameters
     ----------
     result : SimulationResult
-    names : sequence of str
-        Logged signals, one subplot each.
+    names : sequence of str, optional
+        Logged signals (default: all), one subplot each (one per unit where the channels differ).
     labels : dict, optional
-        y-axis label (with unit) per signal, e.g. ``{"motor_torque": "motor torque [Nm]"}``.
+        y-axis label (with unit) per signal, e.g. ``{"motor_torque": "motor torque [Nm]"}``
+        (default ``name [unit]``).
     reference : dict, optional
         ``name -> (t, values)`` drawn black dashed as "reference".
+    channels : dict, optional
+        ``name -> channel indices`` drawn (default all), e.g. ``{"state": [0, 2]}``.
     components : dict, optional
-        ``name -> [legend label per column]`` (default ``name[i]`` for vector signals).
+        ``name -> [legend label per column]`` (default the result's channel labels, e.g. the state names).
     overlay : dict, optional
         ``name -> (values (T, k), label)``: a second set of traces on the same time axis,
         dotted in the same colours (e.g. the commanded torque beside the applied one);
         ``label`` is a suffix ("commanded") or one legend label per column.
     limits : dict, optional
-        ``name -> limit`` (drawn at +-limit) or ``(low, high)``: dashed grey lines "limit".
+        ``name -> limit`` (drawn at +-limit) or ``(low, high)``: dashed grey lines "limit", instead of
+        the monitor thresholds below.
     xlim : (float, float), optional
         Time window shown (e.g. a zoom on a step).
 
-    Events of the result (actuator saturation, tendon slack) are shaded per kind and
-    named in the legend of each panel they fall into.
+    Monitor thresholds on a logged signal (torque limit, spring range, slack; recorded by
+    ``simulate``) are dashed black lines; events of the result (actuator saturation, tendon
+    slack) are shaded per kind and named in the legend of each panel (``events=False``: not drawn).
     """
     plt = _plt()
-    names = list(names)
+    names = list(result.signals) if names is None else list(names)
+    panels = []   # (name, channels, unit)
+    for name in names:
+        by_unit: dict = {}
+        for j in (channels or {}).get(name, range(result[name].shape[1])):
+            by_unit.setdefault(result.unit(name, j), []).append(j)
+        panels += [(name, js, u) for u, js in by_unit.items()]
     if ax is None:
-        fig, ax = plt.subplots(len(names), 1, figsize=(7, 2.2 * len(names)), sharex=True, squeeze=False)
+        fig, ax = plt.subplots(len(panels), 1, figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
         ax = ax[:, 0]
     else:
-        fig = np.ravel(ax)[0].figure
+        ax = np.ravel(ax)
+        fig = ax[0].figure
+        if len(ax) < len(panels):
+            raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
     components, overlay, limits = dict(components or {}), dict(overlay or {}), dict(limits or {})
-    for a, name in zip(ax, names):
+    for a, (name, js, unit) in zip(ax, panels):
         y = np.asarray(result[name], dtype=float).reshape(len(result.t), -1)
-        k = y.shape[1]
-        comp = components.get(name) or ([name] if k == 1 else [f"{name}[{i}]" for i in range(k)] if k <= 8
-                                        else [f"{name}[0..{k - 1}]"] + ["_nolegend_"] * (k - 1))
-        if len(comp) != k:
-            raise ValueError(f"plot_signals: components[{name!r}] has {len(comp)} labels for {k} columns")
-        lines = a.plot(result.t, y)
-        for line, lab in zip(lines, comp):
-            line.set_label(lab)
+        comp = components.get(name) or result.channel_labels(name)
+        if len(comp) != y.shape[1]:
+            raise ValueError(f"plot_signals: components[{name!r}] has {len(comp)} labels for {y.shape[1]} columns")
+        if len(js) > 8:
+            comp = {j: f"{name}[{js[0]}..{js[-1]}]" if i == 0 else "_nolegend_" for i, j in enumerate(js)}
+        lines = a.plot(result.t, y[:, js])
+        for line, j in zip(lines, js):
+            line.set_label(comp[j])
         if name in overlay:
             values, what = overlay[name]
             values = np.asarray(values, dtype=float).reshape(len(result.t), -1)
-            olabels = list(what) if not isinstance(what, str) else [f"{lab} ({what})" for lab in comp]
-            for line, col, lab in zip(lines, values.T, olabels):
-                a.plot(result.t, col, ":", color=line.get_color(), lw=1.2, label=lab)
+            olabels = list(what) if not isinstance(what, str) else [f"{comp[j]} ({what})" for j in js]
+            for line, j, lab in zip(lines, js, olabels):
+                a.plot(result.t, values[:, j], ":", color=line.get_color(), lw=1.2, label=lab)
         if reference is not None and name in reference:
             t_ref, v_ref = reference[name]
             a.plot(t_ref, v_ref, "k--", lw=1, label="reference")
@@ -142,21 +161,22 @@ def plot_signals(result, names, ax=None, labels=None, reference=None, *, compone
             lo, hi = (-float(lim), float(lim)) if np.isscalar(lim) else (float(lim[0]), float(lim[1]))
             a.axhline(hi, color="0.4", ls="--", lw=0.8, label=f"limit [{lo:g}, {hi:g}]")
             a.axhline(lo, color="0.4", ls="--", lw=0.8)
-        a.set_ylabel((labels or {}).get(name, name))
-        a.grid(True, alpha=0.3)
         shown = set()
-        for ev in result.events:
-            colour = _EVENT_COLOURS.get(ev.kind, "tab:orange")
-            lab = None
-            if ev.kind not in shown:
-                lab = ev.kind.replace("_", " ") + " (event)"
-                shown.add(ev.kind)
-            a.axvspan(ev.t_start, max(ev.t_end, ev.t_start + 1e-3), color=colour, alpha=0.12, label=lab)
+        for desc, val in result.info.get("limits", {}).get(name, []) if not limits else ():
+            a.axhline(val, color="k", ls="--", lw=0.8, label=None if desc in shown else desc)
+            shown.add(desc)
+        a.set_ylabel((labels or {}).get(name, f"{name} [{unit}]"))
+        a.grid(True, alpha=0.3)
+        for ev in result.events if events else ():
+            lab = None if ev.kind in shown else ev.kind.replace("_", " ") + " (event)"
+            shown.add(ev.kind)
+            a.axvspan(ev.t_start, max(ev.t_end, ev.t_start + 1e-3), color=_EVENT_COLOURS.get(ev.kind, "tab:gray"),
+                      alpha=0.12, label=lab)
         if xlim is not None:
             a.set_xlim(*xlim)
         if legend:
             a.legend(fontsize=7, loc="best", ncol=2 if len(a.get_legend_handles_labels()[0]) > 4 else 1)
-    ax[-1].set_xlabel("time [s]")
+    ax[len(panels) - 1].set_xlabel("time [s]")
     return fig, ax
 
 

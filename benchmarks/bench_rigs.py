@@ -18,8 +18,9 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
 * ``joint_rig_3khz``: the default ``joint_rig()`` under the demo's motor PD
   (``control.motor_position.joint_rig_position_loop``): the default loop, the rig sampled at the
   control period (Drake's ``DiscreteTimeApproximation``, fixed-step RK3 at 1/3000 s inside one
-  discrete update per period; the default of ``closed_loop`` for sampled loops on single-joint
-  rigs); beside it the continuous rig behind the hold with fixed-step RK3 at the control period in
+  discrete update per period, in the momentum/elongation coordinates of
+  ``components.rig_system.rig_integration_system``; the default of ``closed_loop`` for sampled loops
+  on single-joint rigs); beside it the continuous rig behind the hold with fixed-step RK3 at the control period in
   the outer ``Simulator`` (``..._continuous_rig_rtf``; the largest state difference between the two,
   ``..._sampled_vs_continuous_max_difference``, is round-off); also through ``analysis.simulate``
   itself (logging and monitors on) and the error against a tight error-controlled run of the

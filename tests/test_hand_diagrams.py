@@ -11,7 +11,8 @@ from awiwi_drake.components.friction import guide_friction_force
 from awiwi_drake.hand.coupling import finger_coupling
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.hand.systems import tendon_bending_angles
-from awiwi_drake.reproductions.ch05_fingers import coupling_hold_study, poles_vs_pretension
+from awiwi_drake.analysis import poles_vs_pretension
+from awiwi_drake.reproductions.ch05_fingers import coupling_hold_study
 from awiwi_drake.reproductions.ch06_wrist import wrist_compensation_study
 from awiwi_drake.parameters.hand import FINGERS, TENDON_SLICES, FingerRigParams
 

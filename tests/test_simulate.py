@@ -240,7 +240,7 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
         assert len(ax.get_legend().get_texts()) >= 1
     torque_ax = next(a for a in axes if a.get_ylabel() == "motor_torque [Nm]")
     texts = [t.get_text() for t in torque_ax.get_legend().get_texts()]
-    assert any("torque limit" in t for t in texts) and "actuator saturation" in texts
+    assert any("torque limit" in t for t in texts) and "actuator saturation (event)" in texts
     assert {round(ln.get_ydata()[0], 9) for ln in torque_ax.get_lines() if ln.get_linestyle() == "--"} == {limit, -limit}
     assert axes[-1].get_xlabel() == "time [s]"
     with pytest.raises(ValueError, match="must end in .npz or .csv"):

@@ -182,7 +182,7 @@ def test_coupling_object_is_generic_and_consistent():
     with pytest.raises(ValueError, match="q must have 2 entries"):
         cp.h(np.zeros(3))
     with pytest.raises(ValueError, match="tendon force f must have 38"):
-        cp.dPT_f_dq(q, np.ones(5))
+        cp.tension_hessian(q, np.ones(5))
 
 
 def test_scalar_types_agree():

@@ -11,7 +11,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, FirstOrderTaylorApproximation, VectorLogSink
 
 from _fd import fd_jacobian
-from awiwi_drake.hand.systems import WristCompensation, WristCompensation_, WristTendonOffsets, WristTendonOffsets_
+from awiwi_drake.hand.systems import WristTendonOffsets, WristTendonOffsets_
 from awiwi_drake.hand.wrist import wrist_jacobian, wrist_tendon_offsets
 from awiwi_drake.parameters.wrist import WristParams
 
@@ -27,7 +27,7 @@ def _output(system, q):
 
 def test_ports_and_values():
     off = WristTendonOffsets()
-    comp = WristCompensation(R_M)
+    comp = WristTendonOffsets(motor_pulley_radius=R_M)
     assert off.get_input_port(0).get_name() == "wrist_angle" and off.get_input_port(0).size() == 2
     assert off.GetOutputPort("wrist_tendon_offset").size() == 38
     assert comp.GetOutputPort("motor_angle_offset").size() == 38
@@ -39,7 +39,7 @@ def test_ports_and_values():
 
 def test_kept_float_result_follows_every_change_of_the_wrist_angle():
     """The float systems keep their last result for an unchanged angle; any change recomputes (6.9)."""
-    off, comp = WristTendonOffsets(), WristCompensation(R_M)
+    off, comp = WristTendonOffsets(), WristTendonOffsets(motor_pulley_radius=R_M)
     for system, law in ((off, lambda q: wrist_tendon_offsets(*q)), (comp, lambda q: -wrist_tendon_offsets(*q) / R_M)):
         ctx = system.CreateDefaultContext()
         for q in (Q, Q, Q + [1e-12, 0.0], np.array([-0.3, 0.2]), Q):
@@ -49,12 +49,12 @@ def test_kept_float_result_follows_every_change_of_the_wrist_angle():
 
 
 @pytest.mark.parametrize("make", [lambda: WristTendonOffsets(),
-                                  lambda: WristCompensation(np.linspace(0.004, 0.006, 38))],
+                                  lambda: WristTendonOffsets(motor_pulley_radius=np.linspace(0.004, 0.006, 38))],
                          ids=["offsets", "compensation"])
 def test_autodiff_matches_finite_differences(make):
     system = make()
     ad = system.ToAutoDiffXd()
-    assert isinstance(ad, (WristTendonOffsets_[AutoDiffXd], WristCompensation_[AutoDiffXd]))
+    assert isinstance(ad, WristTendonOffsets_[AutoDiffXd])
     ctx = ad.CreateDefaultContext()
     ad.get_input_port(0).FixValue(ctx, InitializeAutoDiff(Q).ravel())
     y = ad.get_output_port(0).Eval(ctx)
@@ -78,7 +78,7 @@ def test_symbolic_conversion():
 
 
 def test_drake_linearisation_gives_minus_jacobian_over_radius():
-    comp = WristCompensation(R_M)
+    comp = WristTendonOffsets(motor_pulley_radius=R_M)
     ctx = comp.CreateDefaultContext()
     comp.get_input_port(0).FixValue(ctx, Q)
     lin = FirstOrderTaylorApproximation(comp, ctx)
@@ -125,23 +125,23 @@ def test_wrist_coupling_in_the_generic_tendon_routing():
     x, tau = outputs(routing, Q)
     np.testing.assert_allclose(x, R_M * theta + wrist_tendon_offsets(*Q), atol=1e-17)
     np.testing.assert_allclose(tau, -wrist_jacobian(*Q).T @ f, atol=1e-14)
-    # d tau / dq from AutoDiff = -dPT_f_dq (the geometric stiffness of the wrist)
+    # d tau / dq from AutoDiff = -tension_hessian (the geometric stiffness of the wrist)
     ad = routing.ToAutoDiffXd()
     ctx = ad.CreateDefaultContext()
     ad.GetInputPort("motor_angle").FixValue(ctx, theta)
     ad.GetInputPort("joint_angle").FixValue(ctx, InitializeAutoDiff(Q).ravel())
     ad.GetInputPort("tendon_force").FixValue(ctx, f)
     dtau = np.array([e.derivatives() for e in ad.GetOutputPort("generalized_force").Eval(ctx)])
-    K = cp.dPT_f_dq(Q, f)
+    K = cp.tension_hessian(Q, f)
     np.testing.assert_allclose(dtau, -K, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(K, K.T, atol=1e-12)
 
 
 def test_bad_construction_and_input():
     with pytest.raises(ValueError, match="motor_pulley_radius"):
-        WristCompensation(0.0)
+        WristTendonOffsets(motor_pulley_radius=0.0)
     with pytest.raises(ValueError, match="motor_pulley_radius"):
-        WristCompensation(np.ones(3) * 0.005)
+        WristTendonOffsets(motor_pulley_radius=np.ones(3) * 0.005)
     with pytest.raises(ValueError, match="params"):
         WristTendonOffsets(params=0.05)
     with pytest.raises(ValueError, match="wrist_angle"):

@@ -1,6 +1,7 @@
 """Analysis from the framework: simulation (schedules, monitors, results), linearisation, LQR, sweeps."""
 
-from awiwi_drake.analysis.linear import LinearizationResult, LqrResult, linearize, lqr, poles_table
+from awiwi_drake.analysis.linear import (
+    LinearizationResult, LqrResult, PoleSweep, linearize, lqr, poles_table, poles_vs_pretension)
 from awiwi_drake.analysis.monitors import (
     Event, Monitor, OverrangeMonitor, PairSlackMonitor, SaturationMonitor, SlackMonitor, rig_monitors)
 from awiwi_drake.analysis.results import SimulationResult

@@ -33,7 +33,8 @@ from pydrake.systems.framework import Context, System
 from pydrake.systems.primitives import Linearize
 
 __all__ = ["LinearizationResult", "OutputMap", "DampRow", "DampTable", "FrequencyResponse", "LqrResult",
-           "linearize", "lqr", "lqr_gain", "closed_loop_poles", "clean_poles", "poles_table"]
+           "linearize", "lqr", "lqr_gain", "closed_loop_poles", "clean_poles", "poles_table", "PoleSweep",
+           "poles_vs_pretension"]
 
 _EPS = np.finfo(float).eps
 
@@ -570,6 +571,34 @@ def lqr(plant, Q, R, op=None, *, context: Context | None = None, input: str = "m
     K, S = lqr_gain(lin.A, lin.B, Q, R)
     Qm, Rm = _check_weights(Q, R, lin.A.shape[0], lin.B.shape[1])
     return LqrResult(K, S, Qm, Rm, lin)
+
+
+@dataclass
+class PoleSweep:
+    """Poles (rows, sorted as in :attr:`LinearizationResult.poles`) and joint stiffness of a rig's
+    linearisation at each pretension [N] (``joint_stiffness``: the operating points' [Nm/rad])."""
+
+    pretension: np.ndarray
+    poles: np.ndarray
+    joint_stiffness: np.ndarray
+
+    def max_frequency(self) -> np.ndarray:
+        """Largest |imag| [rad/s] per pretension (the stiffest link mode)."""
+        return np.max(np.abs(self.poles.imag), axis=1)
+
+    def plot(self, ax=None, **kw):
+        """Root locus over the pretension (:func:`awiwi_drake.plotting.plot_pole_sweep`; ``symlog=``)."""
+        from awiwi_drake.plotting import plot_pole_sweep
+        return plot_pole_sweep(self.pretension, self.poles, "pretension [N]", ax=ax, **kw)
+
+
+def poles_vs_pretension(rig, pretensions) -> PoleSweep:
+    """Linearise ``rig`` (any rig, a finger, the hand) at its operating point (joints at 0) for each
+    pretension [N]: stiffness tuning by co-contraction."""
+    pre = np.asarray(pretensions, dtype=float)
+    ops = [rig.operating_point(pretension=float(f)) for f in pre]
+    return PoleSweep(pre, np.array([linearize(rig, op).poles for op in ops]),
+                     np.array([op.joint_stiffness for op in ops]))
 
 
 def poles_table(result: LinearizationResult) -> str:

@@ -107,7 +107,9 @@ class SimulationResult:
     @property
     def final_state(self) -> np.ndarray | None:
         """State at the end (None if no context was kept): the continuous state, then the state of each
-        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``)."""
+        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``; the physical
+        state it outputs, while its discrete state in ``final_context`` may be in integration coordinates,
+        see :func:`~awiwi_drake.components.rig_system.rig_integration_system`)."""
         if self.final_context is None:
             return None
         x = self.final_context.get_continuous_state_vector().CopyToVector()
@@ -134,60 +136,11 @@ class SimulationResult:
         return SimulationResult(t, out, list(self.events), self.final_context, dict(self.units),
                                 dict(self.labels), dict(self.info))
 
-    # -- plot --------------------------------------------------------------
-    def plot(self, names: Sequence[str] | None = None, *, ax=None, channels: dict | None = None,
-             events: bool = True):
-        """One subplot per signal (per unit for mixed signals such as ``state``); returns ``(fig, axes)``.
-
-        Every trace has a legend entry (its channel name), every axis its unit,
-        monitor thresholds on a logged signal (torque limit, spring range, slack) are
-        dashed lines, and monitor events are shaded with one legend entry per kind.
-        ``channels`` optionally selects channels per signal (``{"state": [0, 2]}``).
-        """
-        import matplotlib.pyplot as plt
-
-        names = list(names) if names is not None else list(self.signals)
-        for n in names:
-            self[n]  # noqa: B018 - clear KeyError naming the logged signals
-        panels = []   # (title, [(name, channel)], unit)
-        for n in names:
-            chans = list((channels or {}).get(n, range(self[n].shape[1])))
-            by_unit: dict[str, list] = {}
-            for j in chans:
-                by_unit.setdefault(self.unit(n, j), []).append(j)
-            for u, js in by_unit.items():
-                panels.append((n, [(n, j) for j in js], u))
-        if ax is None:
-            fig, axes = plt.subplots(len(panels), 1, figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True,
-                                     squeeze=False)
-            axes = list(axes[:, 0])
-        else:
-            axes = list(np.ravel(ax))
-            fig = axes[0].figure
-            if len(axes) < len(panels):
-                raise ValueError(f"SimulationResult.plot: {len(panels)} panels need {len(panels)} axes, got {len(axes)}")
-        colors = {"tendon_slack": "tab:red", "actuator_saturation": "tab:orange", "spring_overrange": "tab:purple"}
-        for a, (title, chans, u) in zip(axes, panels):
-            labels = self.channel_labels(title)
-            for n, j in chans:
-                a.plot(self.t, self[n][:, j], label=labels[j])
-            seen_lim = set()
-            for desc, val in self.info.get("limits", {}).get(title, []):
-                a.axhline(val, color="k", ls="--", lw=0.8, label=None if desc in seen_lim else desc)
-                seen_lim.add(desc)
-            a.set_ylabel(f"{title} [{u}]")
-            a.grid(True, alpha=0.3)
-            if events:
-                seen = set()
-                for ev in self.events:
-                    lab = None if ev.kind in seen else ev.kind.replace("_", " ")
-                    seen.add(ev.kind)
-                    a.axvspan(ev.t_start, max(ev.t_end, ev.t_start + 1e-4 * max(self.t[-1] - self.t[0], 1e-9)
-                                              if len(self.t) else ev.t_end),
-                              color=colors.get(ev.kind, "tab:gray"), alpha=0.12, label=lab)
-            a.legend(fontsize=7, loc="best", ncol=1 + len(chans) // 6)
-        axes[len(panels) - 1].set_xlabel("time [s]")
-        return fig, axes
+    def plot(self, names: Sequence[str] | None = None, **kw):
+        """One subplot per signal (per unit for mixed signals such as ``state``): legends, units, monitor
+        thresholds and events (:func:`awiwi_drake.plotting.plot_signals`, ``kw`` as there); ``(fig, axes)``."""
+        from awiwi_drake.plotting import plot_signals
+        return plot_signals(self, names, **kw)
 
     # -- save / load -------------------------------------------------------
     def _meta(self) -> dict:

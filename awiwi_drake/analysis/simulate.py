@@ -110,6 +110,16 @@ def sampled_plants(system: System) -> list[System]:
     return [system] if system.get_name().startswith(SAMPLED_PLANT_PREFIX) else []
 
 
+def _sampled_plant_state(plant: System, context) -> np.ndarray:
+    """A sampled plant's state in the plant's own coordinates: its first output when that is as long as its
+    discrete state (the single-joint rigs integrate in other coordinates and output the physical state,
+    :func:`~awiwi_drake.components.rig_system.rig_integration_system`), else the discrete state itself."""
+    n = context.get_discrete_state(0).size()
+    if plant.num_output_ports() and plant.get_output_port(0).size() == n:
+        return np.array(plant.get_output_port(0).Eval(context), dtype=float).reshape(-1)
+    return context.get_discrete_state(0).CopyToVector()
+
+
 def _leaf_timings(system: System) -> list[tuple[float, float]]:
     """``(period, offset)`` of every leaf system's unique periodic discrete update under ``system``."""
     if isinstance(system, Diagram):
@@ -433,7 +443,7 @@ def simulate(system, context: Context | None, t_final: float, *,
                        "state")]
     for p in sampled_plants(clone):
         p_ctx = p.GetMyContextFromRoot(root)
-        watched_states.append((lambda c=p_ctx: c.get_discrete_state(0).CopyToVector(),
+        watched_states.append((lambda p=p, c=p_ctx: _sampled_plant_state(p, c),
                                p_ctx.get_discrete_state(0).size(), f"{p.get_name()} state"))
 
     def check_state(t_now: float):
@@ -489,7 +499,7 @@ def simulate(system, context: Context | None, t_final: float, *,
 
     # -- collect -----------------------------------------------------------
     user_ctx.SetTimeStateAndParametersFrom(sub_ctx)
-    sampled_state = [p.GetMyContextFromRoot(root).get_discrete_state(0).CopyToVector() for p in sampled_plants(clone)]
+    sampled_state = [_sampled_plant_state(p, p.GetMyContextFromRoot(root)) for p in sampled_plants(clone)]
     t = None
     signals, units, labels = {}, {}, {}
     for label, s in logged:

@@ -23,7 +23,7 @@ import pathlib
 import sys
 
 __all__ = ["main", "CliError", "parse_sets", "output_dir", "output_file", "finite_float", "positive_float",
-           "add_parameter_options", "load_parameters"]
+           "limited_float", "add_parameter_options", "load_parameters"]
 
 # One module per command group (see each module's register()).
 _COMMAND_MODULES = [
@@ -122,6 +122,21 @@ def positive_float(text: str) -> float:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"{text!r} must be > 0")
     return value
+
+
+def limited_float(high: str, unit: str, *, low: str | None = None, zero: bool = False, positive: bool = False):
+    """argparse type: a finite number in [``CliLimits.<low>`` (default 0), ``CliLimits.<high>``] (``zero``: 0
+    also allowed; ``positive``: > 0)."""
+    def parse(text: str) -> float:
+        from awiwi_drake.parameters.cli import CliLimits
+
+        lim, value = CliLimits(), (positive_float if positive else finite_float)(text)
+        lo, hi = (0.0 if low is None else getattr(lim, low)), getattr(lim, high)
+        if not (lo <= value <= hi or (zero and value == 0)):
+            raise argparse.ArgumentTypeError(f"{text!r} must be {'0 (continuous) or ' if zero else ''}in "
+                                             f"[{lo:g}, {hi:g}] {unit} (CliLimits)")
+        return value
+    return parse
 
 
 def _version() -> str:

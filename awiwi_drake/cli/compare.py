@@ -17,54 +17,27 @@ from __future__ import annotations
 
 import argparse
 
-from awiwi_drake.cli import add_parameter_options, finite_float, load_parameters, output_dir, positive_float
+from awiwi_drake.cli import add_parameter_options, limited_float, load_parameters, output_dir, positive_float
 
-__all__ = ["register", "run", "RIG_FACTORIES"]
+__all__ = ["register", "run"]
 
-# the rigs' default backend ("compiled", one system per rig) is the fast path and has no spurious feedthrough
-RIG_FACTORIES = {
-    "tendon-rig": ("awiwi_drake.rigs", "tendon_rig", {}),
-    "flexible-joint": ("awiwi_drake.rigs", "flexible_joint_rig", {}),
-    "joint-rig": ("awiwi_drake.rigs", "joint_rig", {}),
-    **{f"finger-{f}": ("awiwi_drake.hand.diagrams", "finger_diagram", {"finger": f})
-       for f in ("thumb", "index", "middle", "ring", "fifth")},
-    # the wrist held at neutral: without the wrist input (its tendon offsets are then zero), which is faster
-    "hand": ("awiwi_drake.hand.diagrams", "hand_diagram", {"wrist": False}),
-}
-FINGER_RIGS = tuple(k for k in RIG_FACTORIES if k.startswith("finger-")) + ("hand",)
-
-
-def _rate(text: str) -> float:
-    from awiwi_drake.parameters.cli import CliLimits
-
-    value, lim = finite_float(text), CliLimits()
-    if value != 0 and not lim.min_rate <= value <= lim.max_rate:
-        raise argparse.ArgumentTypeError(f"{text!r} must be 0 (continuous) or in [{lim.min_rate:g}, "
-                                         f"{lim.max_rate:g}] Hz (CliLimits)")
-    return value
-
-
-def _delay(text: str) -> float:
-    from awiwi_drake.parameters.cli import CliLimits
-
-    value, top = finite_float(text), CliLimits().max_delay
-    if not 0.0 <= value <= top:
-        raise argparse.ArgumentTypeError(f"{text!r} must be in [0, {top:g}] s (CliLimits)")
-    return value
+FINGER_RIGS = ("finger-thumb", "finger-index", "finger-middle", "finger-ring", "finger-fifth", "hand")
 
 
 def register(subparsers) -> None:
+    from awiwi_drake.diagrams import TARGETS
+
     p = subparsers.add_parser("compare", help="compare controllers on a rig (step, sine, disturbance, sweep)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     req = p.add_argument_group("required options (except with --list)")
-    req.add_argument("--rig", required=True, choices=sorted(RIG_FACTORIES), help="rig to control")
+    req.add_argument("--rig", required=True, choices=sorted(TARGETS), help="rig to control")
     req.add_argument("--controllers", help="comma-separated registered names, e.g. pd,lqr (see --list)")
     req.add_argument("--out", metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--list", action="store_true", help="list the controllers that fit --rig and exit")
     p.add_argument("--tests", default=None, help="comma-separated subset of step,sine,disturbance,sweep")
-    p.add_argument("--rate", type=_rate, default=None, metavar="HZ",
+    p.add_argument("--rate", type=limited_float("max_rate", "Hz", low="min_rate", zero=True), metavar="HZ",
                    help="control rate [Hz] (default: the controller's, 3000); 0 = continuous")
-    p.add_argument("--delay", type=_delay, default=None, metavar="S", help="round-trip delay [s], e.g. 333e-6")
+    p.add_argument("--delay", type=limited_float("max_delay", "s"), metavar="S", help="round-trip delay [s], e.g. 333e-6")
     p.add_argument("--saturation", type=positive_float, default=None, metavar="NM", help="torque limit [Nm]")
     p.add_argument("--short", action="store_true", help="shorter runs (as AWIWI_SHORT=1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
@@ -83,7 +56,6 @@ def _parse_list(text: str, what: str) -> list[str]:
 
 
 def run(args) -> int:
-    import importlib
     import math
     import sys
 
@@ -108,14 +80,13 @@ def run(args) -> int:
             raise ValueError(f"--tests: unknown test {t!r}; known: {', '.join(TESTS)}")
     if tests is not None and "disturbance" in tests and args.rig == "tendon-rig":
         raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
-    module, fn, kw = RIG_FACTORIES[args.rig]
-    rig_fn = getattr(importlib.import_module(module), fn)
-    if getattr(args, "config", None) or getattr(args, "set", None):    # the rig's parameters, --config then --set
-        from awiwi_drake.diagrams import TARGETS
-        kw = dict(kw, params=load_parameters(TARGETS[args.rig]["params"](), args))
+    from awiwi_drake.diagrams import TARGETS, build_target
+    rig_params = load_parameters(TARGETS[args.rig]["params"](), args)     # --config then --set
+    # the hand's wrist held at neutral: without the wrist input (its tendon offsets are then zero), which is faster
+    kw = {"wrist": False} if args.rig == "hand" else {}
 
     def make_rig():
-        return rig_fn(**kw)
+        return build_target(args.rig, params=rig_params, **kw)
 
     short = args.short or short_mode()
     params = compare_test_params(args.rig)

@@ -8,19 +8,11 @@ from __future__ import annotations
 
 import argparse
 
+from awiwi_drake.cli import limited_float
+
 __all__ = ["register"]
 
 _TARGETS = ("hand", "thumb", "index", "middle", "ring", "fifth")
-
-
-def _duration(text: str) -> float:
-    from awiwi_drake.cli import positive_float
-    from awiwi_drake.parameters.cli import CliLimits
-
-    value, top = positive_float(text), CliLimits().max_animation_duration
-    if value > top:
-        raise argparse.ArgumentTypeError(f"{text!r} must be <= {top:g} s (CliLimits)")
-    return value
 
 
 def register(sub) -> None:
@@ -33,7 +25,7 @@ def register(sub) -> None:
     p.add_argument("--out", default="hand.html", metavar="FILE.html", help="HTML file to write (default hand.html)")
     p.add_argument("--target", choices=_TARGETS, default="hand",
                    help="the whole hand (palm, forearm stub, five fingers) or one finger (default hand)")
-    p.add_argument("--duration", type=_duration, default=1.5, metavar="S",
+    p.add_argument("--duration", type=limited_float("max_animation_duration", "s", positive=True), default=1.5, metavar="S",
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
     p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
                    help="tendon drive backend (compiled: one fused system with a numba kernel, the fast default)")

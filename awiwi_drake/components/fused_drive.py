@@ -53,7 +53,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import asarray_like, is_float, positive_part
-from awiwi_drake.components.motor import motor_acceleration, saturate_torque
+from awiwi_drake.components.motor import motor_acceleration, motor_drive_torque, saturate_torque
 from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
@@ -100,7 +100,7 @@ class DriveModel:
     wrist length offsets) are taken as quasi-static.
     """
 
-    motor: MotorParams
+    motor: MotorParams | tuple     # one set for all motors, or one per tendon (motor.tendon_motor_params)
     springs: tuple
     coupling: object
     offsets: np.ndarray
@@ -113,6 +113,9 @@ class DriveModel:
 
     def __post_init__(self):
         m, n = int(self.coupling.num_tendons), int(self.coupling.num_joints)
+        if not isinstance(self.motor, MotorParams) and (
+                len(self.motor) != m or not all(isinstance(mp, MotorParams) for mp in self.motor)):
+            raise ValueError(f"DriveModel: motor must be one MotorParams or one per tendon ({m})")
         if len(self.springs) != m:
             raise ValueError(f"DriveModel: springs must hold one spring law per tendon ({m}), got {len(self.springs)}")
         object.__setattr__(self, "laws", TendonSprings(self.springs))    # the one per-tendon evaluation
@@ -208,19 +211,30 @@ def _full_rates(model: DriveModel, qd):
     return np.concatenate([qd, pad])
 
 
-def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, *, want=("all",)):
+def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, *, want=("all",),
+               elongation=None):
     """All quantities of the drive at a state, generic in the scalar type.
 
     Returns a dict with ``elongation``, ``tendon_force``, ``tendon_stiffness``,
     ``generalized_force`` and (with ``u``) ``derivatives``, ``applied_torque``.
     Without a link, ``q`` (n) and ``qd`` (``rate_joints``) are the joint inputs;
     with a link they come from ``state`` and ``tau_ext`` is the external torque.
+    ``elongation`` (m), when given, stands for the elongation law's value at ``state`` (the caller
+    guarantees they agree, e.g. a state in elongation coordinates,
+    :mod:`~awiwi_drake.components.rig_system`). With a link and ``u``, ``want=("momentum_rate",)``
+    adds the rate of the momentum ``p = I qdot - P^T B omega / r_m`` (link and motors together):
+    ``I qdd = -P^T (f + g) - d qdot + tau_ext`` and ``B omega' = tau_m - r_m f`` (3.5) give
+    ``p' = -P^T g - d qdot + tau_ext - P^T tau_m / r_m``, in which the spring forces cancel
+    (``tau_m``: :func:`~awiwi_drake.components.motor.motor_drive_torque`; ``P`` constant).
     """
     qs, qds, theta, omega, z, g_state = model.split_state(state)
     if model.has_link:
         q, qd = qs, qds
     qd_all = _full_rates(model, qd)
-    x = model.motor_pulley_radius * theta + np.asarray(model.coupling.h(q)) - model._h0 + model.offsets
+    if elongation is None:
+        x = model.motor_pulley_radius * theta + np.asarray(model.coupling.h(q)) - model._h0 + model.offsets
+    else:
+        x = elongation
     x = asarray_like(x, theta)
     f_el = model.laws.force(x)
     f = positive_part(f_el + z) if model.has_hysteresis else f_el
@@ -258,6 +272,16 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
                                              gm.smoothing_velocity))
         out["derivatives"] = np.concatenate([asarray_like(p_, x) for p_ in parts])
         out["applied_torque"] = saturate_torque(u, model.motor)
+    if "momentum_rate" in want:
+        if not (model.has_link and u is not None):
+            raise ValueError("drive_laws: momentum_rate needs a link-carrying model and u")
+        P = np.asarray(model.coupling.P(q))
+        ext = 0.0 if tau_ext is None else tau_ext
+        rate = -(P.T @ (motor_drive_torque(theta, omega, u, model.motor) / model.motor_pulley_radius)) \
+            - np.asarray(model.link_damping, float) * qd + ext
+        if model.has_guide_friction:
+            rate = rate - P.T @ g_state
+        out["momentum_rate"] = asarray_like(rate, x)
     return out
 
 

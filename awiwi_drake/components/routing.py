@@ -5,8 +5,8 @@ between motor pulley and insertion, ``P(q) = dh/dq`` (m x n),
 spring elongation ``x = r_m theta + h(q) - h(0) + x0`` and generalised joint
 force ``tau = -P(q)^T f``.
 
-A *coupling* is any object with ``num_tendons``, ``num_joints``, ``h(q)`` and
-``P(q)`` written generically in the scalar type (float, AutoDiffXd,
+A *coupling* is any object with ``num_tendons``, ``num_joints``, ``h(q)``, ``P(q)``
+and ``tension_hessian(q, f)`` written generically in the scalar type (float, AutoDiffXd,
 Expression); the finger couplings of :mod:`awiwi_drake.hand` follow it.
 """
 
@@ -38,8 +38,8 @@ class ConstantCoupling:
     def P(self, q=None):
         return self._P
 
-    def dPT_f_dq(self, q, f):
-        """``d(P(q)^T f)/dq`` (n x n): zero for a constant coupling."""
+    def tension_hessian(self, q, f):
+        """``d(P(q)^T f)/dq = sum_i f_i d^2 h_i/dq^2`` (n x n): zero for a constant coupling."""
         return np.zeros((self.num_joints, self.num_joints))
 
 

@@ -224,6 +224,7 @@ class ClosedLoop:
     estimator: Any = None
     estimated: tuple[str, ...] = ()
     sampled_rig: bool = False
+    fused: Any = None
     _holds: list = field(default_factory=list, repr=False)
     _delays: list = field(default_factory=list, repr=False)
 
@@ -280,18 +281,12 @@ class ClosedLoop:
             n = rig_ctx.get_discrete_state(0).size() if self.sampled_rig else rig_ctx.num_continuous_states()
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} states")
-            if self.sampled_rig:     # the rig's state is the sampled dynamics' discrete state (same order)
-                rig_ctx.SetDiscreteState(0, x)
+            if self.sampled_rig:     # the sampled dynamics' discrete state: x in the rig's integration coordinates
+                rig_ctx.SetDiscreteState(0, self.rig.sampled_state(x))
             else:
                 rig_ctx.SetContinuousState(x)
-            init = getattr(self.controller, "initialize_state", None)
-            if init is not None:   # controllers with internal state (e.g. the force distribution)
-                ctrl_sys = self.diagram.GetSubsystemByName("controller")
-                init(ctrl_sys.GetMyMutableContextFromRoot(context), x)
-            if self.estimator is not None and hasattr(self.estimator, "initialize"):
-                est_sys = self.diagram.GetSubsystemByName("estimator")
-                self.estimator.initialize(est_sys.GetMyMutableContextFromRoot(context),
-                                          self.rig.joint_angles_of(x))
+            self.initialize_controller(context, self.rig.joint_angles_of(x) if self.estimator is not None else None,
+                                       rig_state=x)
         if motor_torque is not None:
             u = _vector(motor_torque, self.num_inputs, "motor_torque")
             holds = list(self._holds)
@@ -304,6 +299,21 @@ class ClosedLoop:
                 dctx = d.GetMyMutableContextFromRoot(context)
                 nbuf = dctx.get_discrete_state_vector().size() // u.size
                 dctx.SetDiscreteState(np.tile(u, nbuf))
+
+
+    def initialize_controller(self, context: Context, joint_angles=None, *, rig_state=None) -> None:
+        """Start the controller's states (e.g. the force distribution at its design forces) and, given
+        ``joint_angles`` (a pose known after homing), the estimator's, in a (root) ``context``."""
+        ctrl_sys = self.diagram.GetSubsystemByName("controller")
+        if self.fused is not None:
+            self.fused.initialize_state(ctrl_sys.GetMyMutableContextFromRoot(context), joint_angles)
+            return
+        init = getattr(self.controller, "initialize_state", None)
+        if init is not None:   # controllers with internal state (e.g. the force distribution)
+            init(ctrl_sys.GetMyMutableContextFromRoot(context), rig_state)
+        if joint_angles is not None and self.estimator is not None and hasattr(self.estimator, "initialize"):
+            est_sys = self.diagram.GetSubsystemByName("estimator")
+            self.estimator.initialize(est_sys.GetMyMutableContextFromRoot(context), joint_angles)
 
 
 def _vector(value, size: int, name: str) -> np.ndarray:
@@ -321,7 +331,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                 delay: float | None = None, saturation: float | Sequence[float] | None = None,
                 sensors: Mapping[str, System] | str | None = None, estimator: Any = "auto",
                 sources: Mapping[str, System] | None = None, name: str | None = None,
-                sampled_rig: bool = True) -> ClosedLoop:
+                sampled_rig: bool = True, fused: bool = True) -> ClosedLoop:
     """Close the loop between a rig and a controller by port names.
 
     Parameters
@@ -374,8 +384,19 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         trajectory equals the continuous rig's under ``simulate``'s default fixed-step RK3 at the
         control period to round-off (tests/test_rig_system.py). Its other inputs
         (``external_torque``) are held over each period too. ``Linearize`` takes the loop with the
-        period. The loop's ``motor_torque`` output is the held command as before. False: the
+        period; the rig's discrete state there is in its integration coordinates (momentum and
+        elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
+        its ``state`` output physical. The loop's ``motor_torque`` output is the held command as before. False: the
         continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
+    fused : bool
+        For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
+        (``estimator="auto"``, no ``sensors``) and a controller that offers it (the chain of
+        :class:`~awiwi_drake.control.chain.TendonChainController` without the friction observer, or a
+        :class:`StaticLawController_` reading the estimated joint state, e.g. the 15.5 backstepping)
+        (default True): estimator, velocity filter and controller enter the loop as ONE discrete system
+        (:class:`~awiwi_drake.control.fused.FusedChain_`) that evaluates the same blocks' laws once per
+        period; the loop has the same ports and equals the composed one (tests/test_fused_chain.py).
+        False: the composed blocks (``"estimator"`` and ``"controller"`` subsystems).
 
     Returns
     -------
@@ -460,6 +481,16 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         if np.any(sat <= 0.0):
             raise ValueError(f"closed_loop: saturation = {sat} must be > 0 Nm")
 
+    spec = None
+    if fused and est is not None and not sensors and hasattr(est, "fused_spec"):
+        if hasattr(controller, "fused_spec"):
+            spec = controller.fused_spec(est)
+        elif isinstance(controller, StaticLawController) and estimated:
+            spec = dict(est.fused_spec(), law=controller.law, name=controller.get_name())
+    if spec is not None:
+        from awiwi_drake.control.fused import ESTIMATE_OUTPUTS, FusedChain
+        fused_sys = FusedChain(spec)
+        est_sys = None
     # the rig as a discrete-time system at the control period where that is the same loop: every reader
     # of the rig's outputs samples them at the control instants (no continuous state outside the rig)
     sample_rig = bool(sampled_rig and rate_hz is not None and getattr(rig, "sampled_diagram", None) is not None
@@ -468,12 +499,17 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     builder = DiagramBuilder()
     plant = builder.AddNamedSystem("rig", rig.sampled_diagram(1.0 / rate_hz, hold_applied_torque=True)
                                    if sample_rig else rig_diagram)
-    ctrl = builder.AddNamedSystem("controller", controller)
+    ctrl = builder.AddNamedSystem("controller", controller if spec is None else fused_sys)
     handles = ClosedLoop(diagram=None, rig=rig, controller=controller, rate_hz=rate_hz,
                          delay=(steps / rate_hz if steps else None), delay_steps=steps, saturation=sat,
                          references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked),
-                         estimator=est, estimated=estimated, sampled_rig=sample_rig)
+                         estimator=est, estimated=estimated, sampled_rig=sample_rig,
+                         fused=None if spec is None else fused_sys)
     estimate_ports = {}
+    if spec is not None:      # the estimates are the fused system's outputs; its inputs are rig outputs
+        estimate_ports = {q: ctrl.GetOutputPort(ESTIMATE_OUTPUTS[q]) for q in estimated}
+        for q, port in estimate_ports.items():
+            builder.ExportOutput(port, f"{q}_estimate")
     if est_sys is not None:
         e = builder.AddNamedSystem("estimator", est_sys)
         for m in _input_names(est_sys):
@@ -481,17 +517,21 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         for q in est_out:
             estimate_ports[q] = e.GetOutputPort(q)
             builder.ExportOutput(e.GetOutputPort(q), f"{q}_estimate")
-            if q in rig_out:  # estimation error = estimate - truth
-                nq = e.GetOutputPort(q).size()
-                mux = builder.AddNamedSystem(f"{q}_error_inputs", Multiplexer([nq, nq]))
-                diff = builder.AddNamedSystem(f"{q}_estimation_error",
-                                              MatrixGain(np.hstack([np.eye(nq), -np.eye(nq)])))
-                builder.Connect(e.GetOutputPort(q), mux.get_input_port(0))
-                builder.Connect(plant.GetOutputPort(q), mux.get_input_port(1))
-                builder.Connect(mux.get_output_port(), diff.get_input_port())
-                builder.ExportOutput(diff.get_output_port(), f"{q}_estimation_error")
-    # measurements (from the estimator, optionally through sensor models)
-    for m in measurement_ports(controller):
+    for q, port in estimate_ports.items():
+        if q in rig_out:  # estimation error = estimate - truth
+            nq = port.size()
+            mux = builder.AddNamedSystem(f"{q}_error_inputs", Multiplexer([nq, nq]))
+            diff = builder.AddNamedSystem(f"{q}_estimation_error",
+                                          MatrixGain(np.hstack([np.eye(nq), -np.eye(nq)])))
+            builder.Connect(port, mux.get_input_port(0))
+            builder.Connect(plant.GetOutputPort(q), mux.get_input_port(1))
+            builder.Connect(mux.get_output_port(), diff.get_input_port())
+            builder.ExportOutput(diff.get_output_port(), f"{q}_estimation_error")
+    # measurements (from the estimator, optionally through sensor models); the fused system reads rig outputs
+    for m in (measurement_ports(controller) if spec is None else measurement_ports(fused_sys)):
+        if spec is not None:
+            builder.Connect(plant.GetOutputPort(m), ctrl.GetInputPort(m))
+            continue
         src = estimate_ports.get(m, plant.GetOutputPort(m))
         if m in sensors:
             sensor = builder.AddNamedSystem(f"sensor_{m}", sensors[m])
@@ -552,7 +592,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         if n != COMMAND_PORT:
             builder.ExportOutput(plant.GetOutputPort(n), n)
     for n in ctrl_out:  # e.g. the SDRE gain, exported as controller_<name>
-        if n != COMMAND_PORT:
+        if n != COMMAND_PORT and not (spec is not None and n in ESTIMATE_OUTPUTS.values()):
             builder.ExportOutput(ctrl.GetOutputPort(n), f"controller_{n}")
     try:
         diagram = builder.Build()

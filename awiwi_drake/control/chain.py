@@ -253,6 +253,15 @@ class TendonForceStage(Diagram):
         self.set_name("tendon_force_stage")
         self._dist = dist if method != "sharing" else None
         self._f_op = np.asarray(point["tendon_force"], dtype=float)
+        # what the fused chain (control/fused.py) evaluates: the same law and distribution objects
+        self.fused_parts = dict(
+            law=law, path_coupling=coupling if force.HasInputPort("tendon_path_velocity") else None,
+            sharing=(dist.W, dist.f0, dist.tau0) if method == "sharing" else None,
+            distribution=None if method == "sharing" else dict(
+                fingers=point["fingers"], method=method, period=1.0 / rate_hz,
+                iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution_params,
+                drive=drive_params, springs=springs),
+            distribution_system=self._dist, initial_forces=None if method == "sharing" else self._f_op)
 
     def initialize_state(self, context, rig_state=None) -> None:
         """Start the distribution at the design point's tendon forces (``context``: this stage's)."""
@@ -348,6 +357,16 @@ class TendonChainController(Diagram):
         b.BuildInto(self)
         self.set_name(name)
         self._force, self._observer = force, observer
+        self._joint_law, self._stiffness = joint_law, K_mech
+
+    def fused_spec(self, estimator) -> dict | None:
+        """The :class:`~awiwi_drake.control.fused.FusedChain_` spec of this chain behind the rig's link estimator
+        ``estimator`` (a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator`), or None when the chain has
+        continuous state (the friction observer) and is closed as its blocks."""
+        if self._observer is not None:
+            return None
+        return dict(self._force.fused_parts, **estimator.fused_spec(), joint_law=self._joint_law,
+                    stiffness=self._stiffness, name=self.get_name())
 
     def initialize_state(self, context, rig_state=None) -> None:
         """Start the distribution at the design point's tendon forces and the friction observer at the

@@ -1126,13 +1126,31 @@ def TendonForceDistribution_(T):
             return np.diag(Kv) if self.stiffness_kind == "diagonal" else Kv.reshape(n_f, n_f)
 
         def _update(self, context, discrete_state):
-            tau_T = self._tau.Eval(context)
-            K_T = self._K.Eval(context)
-            f_prev = context.get_discrete_state(self._state).CopyToVector()
+            f_new, status = self.step(self._tau.Eval(context), self._K.Eval(context),
+                                      context.get_discrete_state(self._state).CopyToVector(),
+                                      None if self._q is None else self._q.Eval(context))
+            discrete_state.set_value(self._state, f_new)
+            discrete_state.set_value(self._status, status)
+
+        @property
+        def initial_forces(self) -> np.ndarray:
+            """The state's default: mid-range forces."""
+            p = self.solvers[0].params
+            return np.full(self.num_tendons, 0.5 * (p.f_min + p.f_max))
+
+        @property
+        def reads_joint_angle(self) -> bool:
+            """Whether the distribution needs the plant joint angles (the thumb's P(q))."""
+            return self._q is not None
+
+        def step(self, tau_T, K_T, f_prev, q_T):
+            """One period of the distribution, context-free: ``(forces (m), status (fingers))`` from the desired
+            torques, stiffness entries, the previous forces and (thumb) the plant joint angles (the update of this
+            system; :class:`~awiwi_drake.control.fused.FusedChain_` calls it too)."""
             as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
             tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
             f_prev_v = as_float(f_prev).ravel()
-            q = None if self._q is None else as_float(self._q.Eval(context)).ravel()
+            q = None if q_T is None else as_float(q_T).ravel()
             f_new = np.empty(self.num_tendons, dtype=object if T is not float else float)
             status = np.zeros(len(self.fingers))
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
@@ -1160,14 +1178,12 @@ def TendonForceDistribution_(T):
                     dK = (self._K_block(K_T[sk], n_f) - K_des).ravel()
                     f_new[st] = res.forces + J_tau @ dtau + J_K @ dK
                     if "q" in kw:      # thumb: P(q) moves the optimum; central differences of the optimum
-                        q_T = self._q.Eval(context)[sq]
                         f_new[st] = f_new[st] + self._posture_jacobian(s, tau[sd], K_des, kw["q"], res) @ (
-                            q_T - kw["q"])
+                            q_T[sq] - kw["q"])
                 else:
                     P, pinv_PT, *_ = s._coupling_at(None, None, kw.get("q"))
                     f_new[st] = res.forces - pinv_PT @ dtau
-            discrete_state.set_value(self._state, f_new)
-            discrete_state.set_value(self._status, status)
+            return f_new, status
 
     return Impl
 

@@ -632,7 +632,7 @@ class SampledLoopPoles:
 
 
 def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, estimator: Any = "auto",
-                       op: Any = None) -> SampledLoopPoles:
+                       op: Any = None, fused: bool = True) -> SampledLoopPoles:
     """Poles of ``rig`` closed by ``controller`` (a fresh system) sampled at ``rate_hz``, the linear analysis of
     what :func:`~awiwi_drake.control.base.closed_loop` ``(rig, controller, rate_hz=rate_hz)`` simulates.
 
@@ -645,6 +645,7 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     discrete system with one state group only, so the Jacobian of the one-period map
     (``EvalUniquePeriodicDiscreteUpdate``, every state group) is taken in ``AutoDiffXd``, what ``Linearize``
     does for a single group.  Every periodic update of the loop must have the period ``1 / rate_hz``.
+    ``fused``: as :func:`~awiwi_drake.control.base.closed_loop` (the fused chain by default; the same poles).
     """
     import dataclasses
 
@@ -681,14 +682,10 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     sampled = b.Build()
     sampled.set_name(rig.name)
     loop = closed_loop(dataclasses.replace(rig, diagram=sampled), controller, rate_hz=None, estimator=est,
-                       sensors="ideal" if ideal else None)
+                       sensors="ideal" if ideal else None, fused=fused)
     diagram = loop.diagram
     ctx = diagram.CreateDefaultContext()
-    init = getattr(controller, "initialize_state", None)
-    if init is not None:
-        init(controller.GetMyMutableContextFromRoot(ctx))
-    if est is not None:
-        est.initialize(diagram.GetSubsystemByName("estimator").GetMyMutableContextFromRoot(ctx), op.joint_angle)
+    loop.initialize_controller(ctx, None if est is None else op.joint_angle)
     diagram.GetInputPort("joint_angle_reference").FixValue(ctx, op.joint_angle)
     for nm in loop.disturbances:
         port = diagram.GetInputPort(nm)

@@ -27,7 +27,7 @@ from awiwi_drake.parameters.control import PolePlacementParams
 
 __all__ = ["double_oscillator_polynomial", "double_oscillator_poles", "identification_system",
            "place_by_identification", "PolePlacementDesign", "design_pole_placement",
-           "pole_placement_controller", "pole_sensitivity", "stable_stiffness_interval"]
+           "pole_placement_controller", "stable_stiffness_interval"]
 
 
 def double_oscillator_polynomial(omega1: float, xi1: float, omega2: float, xi2: float) -> np.ndarray:
@@ -114,11 +114,6 @@ def pole_placement_controller(rig: Any, params: PolePlacementParams | None = Non
     """Registered factory ``pole-placement``: state feedback tracking ``joint_angle_reference``."""
     d = design_pole_placement(rig, params, op)
     return state_feedback_controller(d.linearization, d.K, reference="joint_angle", name="pole_placement")
-
-
-def pole_sensitivity(A_of_k, B: np.ndarray, K: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
-    """Closed-loop poles (rows) for each stiffness value under the fixed gain ``K`` (Fig 12.4)."""
-    return np.array([closed_loop_poles(A_of_k(k), B, K) for k in np.asarray(stiffness, float)])
 
 
 def stable_stiffness_interval(A_of_k, B: np.ndarray, K: np.ndarray, k0: float, *, half_width: float = 1e-3,

@@ -1,4 +1,4 @@
-"""The diagnosis as parameters of the package's rig builders (issue 12, item 4, in part).
+"""The diagnosis as parameters of the package's rig and finger builders (issue 12, item 4).
 
 :func:`augmented_rig_parameters` writes the fitted catalog parameters into the
 parameter dataclasses the rest of the package builds from (``JointRigParams``,
@@ -23,6 +23,24 @@ the gear ratio, and their spring polynomial is derived from the lever geometry
 either: the catalog's Dahl form (fitted initial state, constant width) has not been
 cross-checked against the rig's hysteresis option, so writing it would be a claim
 without a test.
+
+Fingers (:func:`augmented_finger_parameters`): the accepted per-tendon effects are written into
+``FingerRigParams.tendon_motors`` (one :class:`~awiwi_drake.parameters.components.MotorParams` per
+tendon, ``finger_diagram(params=...)``), with the law the diagnosis fitted:
+
+========================= =========================================================
+finger catalog            that tendon's motor
+========================= =========================================================
+``motor_friction``        ``friction``, ``coulomb_torque``, ``friction_slope``, ``viscous_friction`` ((3.8))
+``motor_ripple``          ``ripple``, ``ripple_harmonics`` (the two fitted orders)
+``nominal_motor``         ``inertia + motor_inertia_abs``, ``damping + motor_damping_add``
+========================= =========================================================
+
+Not representable (listed with the reason): ``guide_friction`` as the finger diagnosis sees it, a
+tension-dependent torque on the motor side of the force sensor, while the package's guide friction
+((4.1), ch. 4: "the guidings from the fingers to the spring mechanisms") acts between the sensor and
+the joints; ``spring_hysteresis`` on one tendon (the finger diagram switches hysteresis for all tendons);
+the sensor calibrations ``nominal_spring`` and ``force_sensor`` (the measurement, not the plant).
 """
 
 from __future__ import annotations
@@ -33,7 +51,7 @@ import numpy as np
 
 from .catalog import PARAM_INDEX
 
-__all__ = ["AugmentedParameters", "augmented_rig_parameters", "TRANSFERRED"]
+__all__ = ["AugmentedParameters", "augmented_rig_parameters", "augmented_finger_parameters", "TRANSFERRED"]
 
 TRANSFERRED = ("motor_friction", "nominal_motor", "nominal_link")
 """Accepted effects written into the rig parameters (the others are listed as not representable)."""
@@ -88,4 +106,62 @@ def augmented_rig_parameters(dx, base) -> AugmentedParameters:
     if "nominal_link" in applied:
         out = out.replace(link_inertia=base.link_inertia * (1.0 + g("link_inertia_rel")),
                           link_damping=base.link_damping + g("link_damping_add"))
+    return AugmentedParameters(out, applied, missing)
+
+
+_FINGER_NOT_REPRESENTABLE = {
+    "guide_friction": ("a tension-dependent torque on the motor side of the force sensor; the package's guide "
+                       "friction acts between the sensor and the joints (ch. 4)"),
+    "spring_hysteresis": "the finger diagram switches spring hysteresis for all tendons at once",
+    "nominal_spring": "a force-sensor scale: a calibration of the measurement, not of the plant",
+    "force_sensor": "a force-sensor offset: a calibration of the measurement, not of the plant",
+}
+
+
+def augmented_finger_parameters(dx, base) -> AugmentedParameters:
+    """Write the accepted per-tendon effects of finger diagnosis ``dx``
+    (:class:`~awiwi_drake.discrepancy.finger.FingerDiagnosis`) into ``base`` (the dataset's
+    :class:`~awiwi_drake.parameters.hand.FingerRigParams`) as ``tendon_motors`` overrides (module
+    docstring); returns the validated copy, the effects written and those not representable (with why)."""
+    from awiwi_drake.components.motor import tendon_motor_params
+    from awiwi_drake.parameters.hand import FingerRigParams
+
+    if not isinstance(base, FingerRigParams):
+        raise ValueError(f"augmented_finger_parameters: a finger diagnosis needs FingerRigParams, "
+                         f"got {type(base).__name__}")
+    names = list(dx.tendon_names)
+    mp = tendon_motor_params(base, names)
+    motors = dict(zip(names, mp if isinstance(mp, tuple) else [mp] * len(names)))
+    changed, applied, missing = set(), [], []
+    for st in dx.steps:
+        tendon, g = names[st.tendon - 1], st.parameters
+        what = f"{st.effect} on {st.place}"
+        motor = motors[tendon]
+        if st.effect == "motor_friction":
+            if motor.friction:
+                missing.append(f"{what}: the motor already has (3.8) friction; two laws do not add into one")
+                continue
+            motor = motor.replace(friction=True, coulomb_torque=g["motor_coulomb"], friction_slope=g["motor_slope"],
+                                  viscous_friction=g["motor_viscous"])
+        elif st.effect == "motor_ripple":
+            extra = (g["ripple_order_1"], g["ripple_sin1"], g["ripple_cos1"],
+                     g["ripple_order_2"], g["ripple_sin2"], g["ripple_cos2"])
+            motor = (motor.replace(ripple_harmonics=motor.ripple_harmonics + extra) if motor.ripple else
+                     motor.replace(ripple=True, ripple_motor_amplitude=0.0, ripple_output_amplitude=0.0,
+                                   ripple_harmonics=extra))
+        elif st.effect == "nominal_motor":
+            inertia, damping = motor.inertia + g["motor_inertia_abs"], motor.damping + g["motor_damping_add"]
+            if not (inertia > 0 and damping >= 0):
+                missing.append(f"{what}: inertia {inertia:.3g} kg m^2 / damping {damping:.3g} N m s/rad is not "
+                               f"physical")
+                continue
+            motor = motor.replace(inertia=inertia, damping=damping)
+        else:
+            missing.append(f"{what}: {_FINGER_NOT_REPRESENTABLE.get(st.effect, 'no finger parameter holds it')}")
+            continue
+        motors[tendon] = motor
+        changed.add(tendon)
+        applied.append(what + (f" ({st.status})" if st.status != "confirmed" else ""))
+    keep = tuple((t, p) for t, p in base.tendon_motors if t not in changed)
+    out = base.replace(tendon_motors=keep + tuple((t, motors[t]) for t in names if t in changed))
     return AugmentedParameters(out, applied, missing)

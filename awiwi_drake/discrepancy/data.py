@@ -95,20 +95,23 @@ RIGS = _Rigs(RIGS)
 
 def finger_parameters_to_json(finger: str, params) -> dict:
     """The JSON ``parameters`` of a finger dataset: ``{"finger": name, "finger_rig": {...}}``, the
-    :class:`~awiwi_drake.parameters.hand.FingerRigParams` as nested values (its YAML form; the finger's
-    geometry is the package's default of that finger and is not written)."""
+    :class:`~awiwi_drake.parameters.hand.FingerRigParams` as nested values (its YAML form: per-tendon
+    overrides ``tendon_motors``/``tendon_springs`` as ``{tendon: {...}}``; the finger's geometry is the
+    package's default of that finger and is not written)."""
     import dataclasses
+    import typing
+
+    from awiwi_drake.parameters.yaml_io import named_overrides_class
 
     def plain(v):
         if dataclasses.is_dataclass(v):
-            return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+            hints = typing.get_type_hints(type(v))
+            return {f.name: ({k: plain(x) for k, x in getattr(v, f.name)} if named_overrides_class(hints[f.name])
+                             else plain(getattr(v, f.name))) for f in dataclasses.fields(v)}
         if isinstance(v, tuple):
             return [plain(x) for x in v]
         return v
-    if params.tendon_springs:
-        raise ValueError("a finger dataset's nominal parameters cannot hold per-tendon spring overrides "
-                         "(tendon_springs) yet")
-    d = {k: v for k, v in plain(params).items() if k not in ("finger", "finger_name", "tendon_springs")}
+    d = {k: v for k, v in plain(params).items() if k not in ("finger", "finger_name")}
     return {"finger": finger, "finger_rig": d}
 
 

@@ -47,12 +47,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import ndtr
 
-from awiwi_drake.components.motor import motor_acceleration
+from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.hand.diagrams import finger_diagram
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
 from . import laws
-from .data import Dataset, finger_parameters_from_json, is_finger_rig
+from .augment import AugmentedParameters, augmented_finger_parameters
+from .data import Dataset, finger_parameters_from_json, finger_parameters_to_json, is_finger_rig
 from .decide import separating_experiment
 from .replay import noise_floor
 from .screen import gain_z
@@ -128,14 +129,17 @@ class FingerResiduals:
         if not rig.coupling.is_constant:
             raise ValueError(f"{ds.name}: the {self.finger}'s routing depends on the joint angles; the finger "
                              f"diagnosis supports constant routings (index, middle, ring, fifth)")
-        if fp.spring.hysteresis.enabled or fp.guide_friction or fp.motor.ripple or fp.motor.friction:
-            raise ValueError(f"{ds.name}: parameters.finger_rig: the nominal finger must be the ideal finger "
-                             f"(motor.friction, motor.ripple, spring.hysteresis.enabled, guide_friction all false): "
-                             f"its effects are what the diagnosis looks for")
+        if fp.spring.hysteresis.enabled or fp.guide_friction:
+            raise ValueError(f"{ds.name}: parameters.finger_rig: spring.hysteresis.enabled and guide_friction must "
+                             f"be false (the nominal finger's motor laws may hold friction and ripple, per tendon "
+                             f"with tendon_motors; hysteresis and guide friction are what the diagnosis looks for)")
         self.rig = rig
         m, n, dt = rig.num_tendons, rig.num_joints, ds.dt
         self.m, self.n, self.dt = m, n, dt
-        r, B, d = fp.motor.pulley_radius, fp.motor.inertia, fp.motor.damping
+        mp = rig.drive.model.motor          # the motor laws the finger diagram integrates (tendon_motors included)
+        self.motors = motors = list(mp) if isinstance(mp, tuple) else [mp] * m
+        r = fp.motor.pulley_radius
+        B, d = np.array([p.inertia for p in motors]), np.array([p.damping for p in motors])
         self.r, self.B = r, B
         TH = np.stack([ds.outputs[f"motor_angle_{i + 1}"] for i in range(m)])
         F = np.stack([ds.outputs[f"tendon_force_{i + 1}"] for i in range(m)])
@@ -154,9 +158,16 @@ class FingerResiduals:
         th, om, al = _filter(TH, g0), _filter(TH, g1), _filter(TH, g2)
         f = _filter(F, g0)
         u = _filter_held(U, sigma, dt, half)
-        # motor law of the package; linear in (u, w, f) for the ideal motor, so the filtered law is exact
-        acc = np.stack([motor_acceleration(th[i], om[i], u[i], r * f[i], fp.motor) for i in range(m)])
-        tau = B * (al - acc)
+        # motor law of the package: its linear part (u, d w, r f) on the filtered signals (exact), its friction
+        # and ripple evaluated on the filtered angle and velocity and filtered once more (as the candidates)
+        lin = [p.replace(friction=False, ripple=False) for p in motors]
+        acc = np.stack([motor_acceleration(th[i], om[i], u[i], r * f[i], lin[i]) for i in range(m)])
+        tau = B[:, None] * (al - acc)
+        for i, p in enumerate(motors):
+            if p.friction or p.ripple:
+                nonlinear = motor_ripple_torque(th[i], p) + (
+                    motor_friction_torque(om[i], p.replace(damping=0.0)) if p.friction else 0.0)
+                tau[i] -= _filter(nonlinear, g0)
         # the inertia-error signature: the acceleration filtered 4x wider, nearly free of the angle noise
         # that the residual's own acceleration carries (no errors-in-variables fit of noise on itself)
         s4, _, _, g2w = _kernel(4 * sigma, dt)
@@ -459,6 +470,8 @@ class FingerDiagnosis:
     unexplained_ratio: float
     unused_columns: list = field(default_factory=list)   # recorded but not used (joint angles)
     complete: bool = True
+    augmented: AugmentedParameters | None = None   # the dataset's FingerRigParams with the named effects written
+    finger: str = ""
 
     @property
     def named_effects(self) -> list:
@@ -483,7 +496,10 @@ class FingerDiagnosis:
                 "floor_ratio_before": self.ratios_before, "floor_ratio_after": self.ratios_after,
                 "unexplained_residual": self.unexplained_residual, "unexplained": self.unexplained,
                 "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history,
-                "unused_columns": self.unused_columns}
+                "unused_columns": self.unused_columns,
+                "augmented": None if self.augmented is None else {
+                    "parameters": finger_parameters_to_json(self.finger, self.augmented.params),
+                    "applied": self.augmented.applied, "not_representable": self.augmented.not_representable}}
 
     def text(self) -> str:
         lines = [f"{self.dataset}: {self.verdict}"]
@@ -497,6 +513,10 @@ class FingerDiagnosis:
                              f"them: {s.experiment}")
         if self.unexplained_residual:
             lines.append(f"  unexplained: {self.unexplained['text']}")
+        if self.augmented is not None and self.augmented.applied:
+            lines.append(f"  written into the finger's parameters (tendon_motors): {', '.join(self.augmented.applied)}")
+        if self.augmented is not None and self.augmented.not_representable:
+            lines.append(f"  not representable in FingerRigParams: {'; '.join(self.augmented.not_representable)}")
         return "\n".join(lines)
 
 
@@ -609,6 +629,8 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     else:
         verdict = "no discrepancy above the noise floor"
     say(f"{stop}: {verdict}")
-    return FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
-                           time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
-                           settings.unexplained_ratio, unused)
+    dx = FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
+                         time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
+                         settings.unexplained_ratio, unused, finger=fr.finger)
+    dx.augmented = augmented_finger_parameters(dx, fr.params)
+    return dx

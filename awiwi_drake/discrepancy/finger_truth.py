@@ -70,9 +70,12 @@ def FingerHiddenTorque_(T):
         def _construct(self, num_tendons: int, pulley_radius: float, truth: dict, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._m, self._r, self._truth = int(num_tendons), float(pulley_radius), dict(truth)
-            self.DeclareVectorInputPort("motor_state", 2 * self._m)
-            self.DeclareVectorInputPort("tendon_force", self._m)
-            self.DeclareVectorOutputPort("torque", self._m, self._calc)
+            xs = self.DeclareVectorInputPort("motor_state", 2 * self._m)
+            f = self.DeclareVectorInputPort("tendon_force", self._m)
+            # declared, so Build()'s feedthrough check does not evaluate _calc on symbolic inputs (it did, and
+            # np.exp/tanh on the Expression objects left the FPU's invalid flag set: numpy's "invalid value")
+            self.DeclareVectorOutputPort("torque", self._m, self._calc,
+                                         prerequisites_of_calc={xs.ticket(), f.ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._m, other._r, other._truth, converter=converter)

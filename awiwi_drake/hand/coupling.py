@@ -55,7 +55,7 @@ import numpy as np
 from .._math import Tangent, is_float
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerParams, HandParams, ThumbParams,
                                check_finger_structure, finger_params)
-from .kinematics import finger_joint_names
+from .kinematics import finger_joint_names, rot_y, rot_z
 from ..parameters.wrist import WristParams
 from .wrist import wrist_jacobian, wrist_params, wrist_tendon_lengths
 
@@ -126,17 +126,12 @@ class FingerCoupling(abc.ABC):
         """Coupling matrix dh/dq (m x n) [m/rad]."""
 
     def tension_hessian(self, q, f) -> np.ndarray:
-        """``sum_i f_i d^2 h_i/dq^2`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
+        """``sum_i f_i d^2 h_i/dq^2 = d(P(q)^T f)/dq`` at fixed ``f`` (n x n): the ``dP^T/dq f`` term of (5.12)."""
         return np.zeros((self.num_joints, self.num_joints))
 
     def tension_hessians(self, q) -> np.ndarray:
         """``d^2 h_i/dq^2`` of every tendon (m x n x n): ``tension_hessian(q, f) = sum_i f_i [i]``."""
         return np.stack([self.tension_hessian(q, e) for e in np.eye(self.num_tendons)], axis=0)
-
-    def dPT_f_dq(self, q, f) -> np.ndarray:
-        """``d(P(q)^T f)/dq`` at fixed ``f``: the same matrix as :meth:`tension_hessian`
-        (name used by ``components.routing.ConstantCoupling``)."""
-        return self.tension_hessian(q, f)
 
     def generalized_force(self, q, f) -> np.ndarray:
         """``tau = -P(q)^T f`` (ARCHITECTURE sign convention)."""
@@ -212,18 +207,6 @@ def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
                                 dof_selection=coupling_selection(p), finger=finger)
 
 
-def _rz(c, s, like):
-    R = np.zeros((3, 3), dtype=like)
-    R[0, 0], R[0, 1], R[1, 0], R[1, 1], R[2, 2] = c, -s, s, c, 1.0
-    return R
-
-
-def _ry(c, s, like):
-    R = np.zeros((3, 3), dtype=like)
-    R[0, 0], R[0, 2], R[2, 0], R[2, 2], R[1, 1] = c, s, -s, c, 1.0
-    return R
-
-
 _KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz
 _KY = np.array([[0.0, 0, 1], [0, 0, 0], [-1, 0, 0]])  # dRy/dq = Ry Ky
 
@@ -250,10 +233,7 @@ class ThumbCoupling(FingerCoupling):
         self.dof_selection = np.eye(4)
 
     def _base(self, q10, q11):
-        like = float if _is_float_array(np.array([q10, q11])) else object
-        Rz = _rz(np.cos(q10), np.sin(q10), like)
-        Ry = _ry(np.cos(q11), np.sin(q11), like)
-        return Rz, Ry
+        return rot_z(q10)[:3, :3], rot_y(q11)[:3, :3]
 
     @_quiet_fp
     def base_vectors(self, q):
@@ -545,11 +525,11 @@ class WristCoupling:
         """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
         return wrist_jacobian(*self._split(q), self.params)
 
-    def dPT_f_dq(self, q, f) -> np.ndarray:
+    def tension_hessian(self, q, f) -> np.ndarray:
         """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
 
         The geometric stiffness of the wrist joints due to the tendon forces
-        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + dPT_f_dq``).  Exact:
+        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + tension_hessian``).  Exact:
         forward-mode tangents nested over the scalar type.
         """
         q71, q73 = self._split(q)

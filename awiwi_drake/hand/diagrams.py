@@ -51,7 +51,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
 
 from ..components.drive import TendonDrive, build_tendon_drive
-from ..components.motor import motor_ripple_torque
+from ..components.motor import motor_ripple_torque, tendon_motor_params
 from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
                                HandRigParams)
@@ -158,6 +158,9 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         raise ValueError(f"{name}: guide_friction=True needs backend='compiled' (the python and symbolic "
                          f"drives do not carry the guide friction state), got backend={backend!r}; "
                          "use params.with_physics(hysteresis=False, guide_friction=False) for them")
+    if p.tendon_motors and not compiled:
+        raise ValueError(f"{name}: tendon_motors (per-tendon motor parameters) needs backend='compiled', got "
+                         f"backend={backend!r}")
     b = DiagramBuilder()
     sg = SceneGraph() if compiled and visual else None
     plant, models = plant_factory(None, sg) if compiled else plant_factory(b, None)
@@ -220,8 +223,8 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
     n, m = coupling.num_joints, coupling.num_tendons
     gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
                             p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
-    model = DriveModel(p.motor, laws.laws, drive_coupling, offsets, p.motor.pulley_radius, p.spring.hysteresis,
-                       gf, n)
+    model = DriveModel(tendon_motor_params(p, coupling.tendon_names), laws.laws, drive_coupling, offsets,
+                       p.motor.pulley_radius, p.spring.hysteresis, gf, n)
     dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, LinkModel(plant, G)))
     if wrist:
         b.Connect(_add_wrist_offsets(b, rows, m), dyn.GetInputPort("wrist_tendon_offset"))
@@ -347,7 +350,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
         raise ValueError(f"{name}: wrist_angle given but the diagram has no wrist (wrist=False)")
     r_m = p.motor.pulley_radius
     theta = (x - offsets - (np.asarray(coupling.h(q), dtype=float) - h0) - w_off) / r_m
-    u = r_m * f - np.asarray(motor_ripple_torque(theta, p.motor), dtype=float)
+    u = r_m * f - np.asarray(motor_ripple_torque(theta, tendon_motor_params(p, coupling.tendon_names)), dtype=float)
     if p.motor.saturation and np.any(np.abs(u) > p.motor.torque_limit):
         raise ValueError(f"{name}: holding torques up to {np.abs(u).max():.3g} N m exceed "
                          f"motor.torque_limit = {p.motor.torque_limit} N m")

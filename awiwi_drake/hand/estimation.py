@@ -274,6 +274,11 @@ def LinkPositionEstimator_(T):
                     self._linear[js[name], ts[name]] = c.dof_selection @ c.dof_pseudo_inverse()
                 else:
                     self._thumbs.append((name, c, js[name], ts[name]))
+            # float: Algorithm 1's compiled search called directly (estimate_thumb's own call, without its checks)
+            self._search = ({name: _search_for(c._base_kernel()) for name, c, _, _ in self._thumbs}
+                            if T is float else None)
+            self._work = (np.empty(2), np.empty(28))
+            self._distal = {name: c.distal_pseudo_inverse() for name, c, _, _ in self._thumbs}
             self._theta = self.DeclareVectorInputPort("motor_angle", m)
             self._x = self.DeclareVectorInputPort("elongation", m)
             self._w = self.DeclareVectorInputPort("wrist_offset", m)
@@ -289,33 +294,53 @@ def LinkPositionEstimator_(T):
 
         def _update(self, context, discrete_state):
             q = self._out.Eval(context)
-            if self._thumbs and T is float:
-                for name, c, j, t in self._thumbs:
-                    limit = GradientSearchResult.limit
-                    if np.any(np.abs(q[j][:2]) >= limit):
-                        self.limit_hits += 1
-                        if self.limit_hits == 1:
-                            warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
-                                          f"{np.round(q[j][:2], 4)} rad sits on the search bound "
-                                          f"+-{limit:.4g} rad (the pose may lie beyond it); "
-                                          "further hits are counted in limit_hits", RuntimeWarning,
-                                          stacklevel=2)
+            self.note_limit(q)
             discrete_state.set_value(0, q)
 
+        def note_limit(self, q) -> None:
+            """Count (and warn once about) a thumb base estimate on the search's projection bound."""
+            if not (self._thumbs and T is float):
+                return
+            for name, c, j, t in self._thumbs:
+                limit = GradientSearchResult.limit
+                if np.any(np.abs(q[j][:2]) >= limit):
+                    self.limit_hits += 1
+                    if self.limit_hits == 1:
+                        warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
+                                      f"{np.round(q[j][:2], 4)} rad sits on the search bound "
+                                      f"+-{limit:.4g} rad (the pose may lie beyond it); "
+                                      "further hits are counted in limit_hits", RuntimeWarning,
+                                      stacklevel=3)
+
         def _calc(self, context, out):
-            theta = self._theta.Eval(context)
-            dh = self._x.Eval(context) - self.r_m * theta - self.offsets
-            if self._w.HasValue(context):
-                dh = dh - self._w.Eval(context)
-            q_prev = context.get_discrete_state(0).CopyToVector()
+            w = self._w.Eval(context) if self._w.HasValue(context) else None
+            out.SetFromVector(self.estimate(self._theta.Eval(context), self._x.Eval(context), w,
+                                            context.get_discrete_state(0).CopyToVector()))
+
+        def estimate(self, theta, elongation, wrist_offset, q_prev):
+            """The joint angles (n) from the measurements and the stored estimate ``q_prev`` (the warm start),
+            context-free (the output ``joint_angle_estimate``; :class:`~awiwi_drake.control.fused.FusedChain_`
+            calls it too).  ``wrist_offset`` None: no wrist."""
+            dh = elongation - self.r_m * theta - self.offsets
+            if wrist_offset is not None:
+                dh = dh - wrist_offset
             if T is float:
-                q_val, dh_val = q_prev, np.asarray(dh, dtype=float)
+                q_val, dh_val = np.asarray(q_prev, dtype=float), np.asarray(dh, dtype=float)
             else:
                 q_val = np.array([_value(v) for v in q_prev])
                 dh_val = np.array([_value(v) for v in dh])
             q_new = self._linear @ dh_val         # every constant-coupling finger (5.15) in one product
             for name, c, j, t in self._thumbs:    # thumb: Algorithm 1 warm-started at the previous estimate
-                q_new[j] = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations, step0=self.step0)
+                if self._search is not None:      # float: the compiled search itself (= estimate_thumb, tested)
+                    dt = dh_val[t]
+                    qa, qb, *_ = self._search[name](np.ascontiguousarray(dt[:4]), float(q_val[j.start]), float(q_val[j.start + 1]),
+                                              self.iterations, self.step0, 1e-7, GradientSearchResult.limit,
+                                              self._work[0], self._work[1])
+                    q_new[j.start], q_new[j.start + 1] = qa, qb
+                    q_new[j.start + 2:j.stop] = self._distal[name] @ dt[4:]
+                else:
+                    q_new[j] = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations,
+                                              step0=self.step0)
                 if T is float and self.refine:
                     # the Gauss-Newton step q + (P S)^+ r finger by finger (P S is block-diagonal; linear fingers
                     # are exact already).  The thumb's P is block-diagonal too: the PIP/DIP least-squares estimate
@@ -329,7 +354,7 @@ def LinkPositionEstimator_(T):
                 S = dof_selection(self.coupling)
                 PS = np.asarray(self.coupling.P(q_new), dtype=float) @ S
                 q_new = q_new + S @ (np.linalg.pinv(PS) @ r)
-            out.SetFromVector(q_new)
+            return q_new
 
     return Impl
 
@@ -360,6 +385,17 @@ class LinkStateEstimator:
     system: Diagram
     num_joints: int
     period: float
+    velocity_time_constant: float | None = None     # T of the velocity filter (None: the period)
+
+    def fused_spec(self) -> dict:
+        """The estimator's part of a :class:`~awiwi_drake.control.fused.FusedChain_` spec (its position
+        estimator's arguments and float instance, the velocity filter's time constant, the wrist input)."""
+        e = self.system.GetSubsystemByName("link_position_estimator")
+        return dict(estimator=dict(coupling=e.coupling, motor_pulley_radius=e.r_m, offsets=e.offsets, period=e.period,
+                                   iterations=e.iterations, step0=e.step0, refine=e.refine),
+                    estimator_system=e, wrist=self.system.HasInputPort("wrist_tendon_offset"),
+                    velocity_time_constant=self.period if self.velocity_time_constant is None
+                    else self.velocity_time_constant)
 
     def initialize(self, context, joint_angles) -> None:
         """Write the start pose into the estimator's (sub)context ``context``."""
@@ -399,4 +435,4 @@ def link_state_estimator(coupling, motor_pulley_radius: float, offsets, *, perio
     b.ExportOutput(der.get_output_port(), "joint_velocity")
     d = b.Build()
     d.set_name("link_state_estimator")
-    return LinkStateEstimator(d, n, float(period))
+    return LinkStateEstimator(d, n, float(period), T)

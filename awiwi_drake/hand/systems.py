@@ -7,8 +7,8 @@
   through the exact routing ``h(q)``.
 * :func:`tendon_bending_angles`: the bending angle of each tendon path, input of the guide
   friction (4.1) that the compiled tendon drive carries (``components.fused_drive``).
-* :class:`WristTendonOffsets_`: wrist angles -> tendon path offsets ``h_wrist(q) - h_wrist(0)`` (6.9).
-* :class:`WristCompensation_`: wrist angles -> motor angle feed-forward ``-offset / r_m``.
+* :class:`WristTendonOffsets_`: wrist angles -> tendon path offsets ``h_wrist(q) - h_wrist(0)`` (6.9),
+  or (with ``motor_pulley_radius``) the motor angle feed-forward ``-offset / r_m`` that cancels them.
 * :class:`LinkGeometryPoses_`: joint angles -> the poses of a plant's geometry frames (drawing a
   plant that is not itself in the diagram, e.g. the compiled hand's).
 (The joint-space motor PD that uses it is the ``joint-pd`` controller,
@@ -27,7 +27,7 @@ from awiwi_drake.parameters.wrist import WristParams
 
 __all__ = ["CoriolisCancellation_", "CoriolisCancellation", "MotorAngleReference_", "MotorAngleReference",
            "tendon_bending_angles",
-           "WristTendonOffsets_", "WristTendonOffsets", "WristCompensation_", "WristCompensation",
+           "WristTendonOffsets_", "WristTendonOffsets",
            "LinkGeometryPoses_", "LinkGeometryPoses"]
 
 
@@ -120,105 +120,61 @@ MotorAngleReference = MotorAngleReference_[None]
 
 @TemplateSystem.define("WristTendonOffsets_")
 def WristTendonOffsets_(T):
-    """Wrist tendon offsets as a system.
+    """Wrist tendon offsets (6.9) as a system, or the motor feed-forward that cancels them.
 
-    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output
-    ``wrist_tendon_offset`` (38) [m] = ``h_wrist(q) - h_wrist(0)``, Table 6.2
-    order (direct feedthrough).  Scalar types: float, AutoDiffXd, Expression.
+    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output ``wrist_tendon_offset``
+    (38) [m] = ``h_wrist(q) - h_wrist(0)``, Table 6.2 order (direct feedthrough).
+    With ``motor_pulley_radius`` r_m [m] (scalar or (38,), > 0) the output is instead
+    ``motor_angle_offset`` (38) [rad] = ``-(h_wrist(q) - h_wrist(0)) / r_m``
+    (:func:`~awiwi_drake.hand.wrist.wrist_compensation`): adding it to the motor angle
+    references keeps every elongation ``r_m theta + h(q) - h(0) + x0`` unchanged when the
+    wrist moves (ARCHITECTURE.md sign convention).  Scalar types: float, AutoDiffXd, Expression.
 
     Parameters
     ----------
     params : WristParams, optional
+    motor_pulley_radius : float or array (38,), optional
     """
 
     class Impl(LeafSystem_[T]):
-        def _construct(self, params: WristParams | None = None, converter=None):
+        def _construct(self, params: WristParams | None = None, motor_pulley_radius=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._params = wrist_params(params)
             self._last = None
             n = self._params.num_tendons
+            self._r = None if motor_pulley_radius is None else check_motor_pulley_radius(motor_pulley_radius, n)
             self._u = self.DeclareVectorInputPort("wrist_angle", 2)
-            self.DeclareVectorOutputPort("wrist_tendon_offset", n, self._calc,
-                                         prerequisites_of_calc={self._u.ticket()})
+            self.DeclareVectorOutputPort("wrist_tendon_offset" if self._r is None else "motor_angle_offset", n,
+                                         self._calc, prerequisites_of_calc={self._u.ticket()})
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other._params, converter=converter)
+            Impl._construct(self, other._params, other._r, converter=converter)
 
         @property
         def params(self) -> WristParams:
             return self._params
 
+        def _law(self, q):
+            off = wrist_tendon_offsets(q[0], q[1], self._params)
+            return off if self._r is None else -off / self._r
+
         def _calc(self, context, output):
             q = self._u.Eval(context)
             if T is not float:
-                output.SetFromVector(wrist_tendon_offsets(q[0], q[1], self._params))
+                output.SetFromVector(self._law(q))
                 return
             # (6.9) costs ~0.1 ms (an iterative solve per tendon), and Drake re-evaluates this port
             # whenever its source's cache entry is invalidated (a ConstantVectorSource's output
             # follows time): the last float result is kept while the wrist angle is unchanged
             key = (float(q[0]), float(q[1]))
             if self._last is None or self._last[0] != key:
-                self._last = (key, np.asarray(wrist_tendon_offsets(q[0], q[1], self._params), dtype=float))
-            output.SetFromVector(self._last[1])
-
-    return Impl
-
-
-@TemplateSystem.define("WristCompensation_")
-def WristCompensation_(T):
-    """Feedforward that cancels the wrist-induced tendon elongation.
-
-    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output ``motor_angle_offset``
-    (38) [rad] = ``-(h_wrist(q) - h_wrist(0)) / r_m``: adding it to the motor
-    angle references keeps every elongation ``r_m theta + h(q) - h(0) + x0``
-    unchanged when the wrist moves (ARCHITECTURE.md sign convention).
-
-    Parameters
-    ----------
-    motor_pulley_radius : float or array (38,)
-        r_m [m] (``MotorParams.pulley_radius``), > 0.
-    params : WristParams, optional
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, motor_pulley_radius, params: WristParams | None = None, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self._params = wrist_params(params)
-            self._last = None
-            n = self._params.num_tendons
-            self._r = check_motor_pulley_radius(motor_pulley_radius, n)
-            self._u = self.DeclareVectorInputPort("wrist_angle", 2)
-            self.DeclareVectorOutputPort("motor_angle_offset", n, self._calc,
-                                         prerequisites_of_calc={self._u.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other._r.copy(), other._params, converter=converter)
-
-        @property
-        def params(self) -> WristParams:
-            return self._params
-
-        @property
-        def motor_pulley_radius(self) -> np.ndarray:
-            return self._r.copy()
-
-        def _calc(self, context, output):
-            q = self._u.Eval(context)
-            if T is not float:
-                output.SetFromVector(-wrist_tendon_offsets(q[0], q[1], self._params) / self._r)
-                return
-            key = (float(q[0]), float(q[1]))       # the last result, as in WristTendonOffsets_
-            if self._last is None or self._last[0] != key:
-                self._last = (key, -np.asarray(wrist_tendon_offsets(q[0], q[1], self._params), dtype=float) / self._r)
+                self._last = (key, np.asarray(self._law(q), dtype=float))
             output.SetFromVector(self._last[1])
 
     return Impl
 
 
 WristTendonOffsets = WristTendonOffsets_[None]
-
-
-WristCompensation = WristCompensation_[None]
 
 
 def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:

@@ -3,8 +3,8 @@
 The wrist's coupling object (``h(q)``, ``P(q)`` for the routing) is
 :class:`awiwi_drake.hand.coupling.WristCoupling`.
 
-The wrist's systems (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`,
-:class:`~awiwi_drake.hand.systems.WristCompensation_`) are in :mod:`awiwi_drake.hand.systems`;
+The wrist's system (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`: offsets or their
+motor feed-forward) is in :mod:`awiwi_drake.hand.systems`;
 the Fig 6.9-6.10 study in :mod:`awiwi_drake.reproductions.ch06_wrist`.
 
 The wrist is a *double inverted parallelogram* (crossed four-bar linkages).

@@ -57,6 +57,9 @@ class MotorParams(Parameters):
         Amplitude [Nm] of the output-bearing ripple (period 2 pi).
     ripple_motor_phase, ripple_output_phase : float
         Phases [rad] of the two ripple components.
+    ripple_harmonics : tuple
+        Further ripple orders as flat ``(order, sin amplitude [Nm], cos amplitude [Nm])`` triples
+        (a fitted motor's, e.g. the discrepancy workflow's); empty by default.
     torque_constant : float
         Motor current to output torque [Nm/A] (output side); converts the thesis's currents
         (Fig 3.3b, 3.4b in A) to torques.
@@ -89,6 +92,9 @@ class MotorParams(Parameters):
         source="chosen from Fig 3.4b: 0.05 A peak-to-peak x 1.08 Nm/A (the slower, smaller component)")
     ripple_motor_phase: float = param(0.0, unit="rad", source="chosen: arbitrary reference")
     ripple_output_phase: float = param(0.0, unit="rad", source="chosen: arbitrary reference")
+    ripple_harmonics: tuple = param((), unit="(-, Nm, Nm)",
+                                    source="chosen: none; the thesis measures the two components above (Fig 3.4b); "
+                                           "further orders come from a fit (discrepancy write-back)")
     torque_constant: float = param(
         round(_TORQUE_PER_AMPERE, 4), unit="Nm/A", low=0.0, low_inclusive=False,
         source=("fitted: the thesis measured it at the output shaft (section 3.2) but prints no value; "
@@ -100,6 +106,16 @@ class MotorParams(Parameters):
                                 source="chosen: 180 N x r_m (0.9 Nm) + Table 3.3 friction at 15 rad/s (1.41 Nm), with margin")
     pulley_radius: float = param(0.005, unit="m", low=0.0, high=0.05, low_inclusive=False,
                                  source="chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 torques")
+
+    def _validate(self) -> None:
+        h = self.ripple_harmonics
+        if len(h) % 3:
+            raise ValueError(f"MotorParams.ripple_harmonics must hold (order, sin amplitude, cos amplitude) triples, "
+                             f"got {len(h)} numbers")
+        for k in range(0, len(h), 3):
+            if not h[k] > 0:
+                raise ValueError(f"MotorParams.ripple_harmonics[{k}] = {h[k]}: an order must be > 0 (periods per "
+                                 f"output revolution)")
 
 
 @dataclass(frozen=True)

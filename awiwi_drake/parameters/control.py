@@ -80,6 +80,21 @@ class PolePlacementParams(Parameters):
                                            "x [0.71, 1.90] around 0.0012")
     link_damping_high: float = param(0.0012 * 1.15 / 0.605, unit="Nm s/rad", low=0.0, low_inclusive=False,
                                      source="chosen: see link_damping_low")
+    robustness_target_scales: tuple = param((1.0, 3.0, 10.0, 20.0), unit="-", low=0.0, low_inclusive=False,
+                                            source="chosen: section 12.3/12.4 says the design is sensitive 'at "
+                                                   "least around the selected target dynamics'; (omega1, omega2) "
+                                                   "of Table 12.1 times these factors span from the thesis's "
+                                                   "targets to beyond the link mode sqrt(k/m) = 1230 rad/s")
+    robustness_reference_step: float = param(0.01, unit="rad", low=0.0, low_inclusive=False,
+                                   source="chosen: a small joint-angle reference step (the loop is linear, "
+                                          "the amplitude only scales the response)")
+    robustness_integration_step: float = param(1e-4, unit="s", low=0.0, low_inclusive=False,
+                                               source="chosen: fixed RK3 step with |h s| <= 0.07 for every "
+                                                      "closed-loop pole of the study (the fastest: (12.19)'s "
+                                                      "-622 1/s), local error (h s)^4/24 < 1e-6 per step")
+    robustness_window: float = param(0.25, unit="s", low=0.0, low_inclusive=False,
+                                     source="chosen: 5 time constants of the slowest target pole "
+                                            "(xi2 omega2 = 21 1/s) of Table 12.1")
 
 
 @dataclass(frozen=True)

@@ -326,7 +326,10 @@ class FingerDriveParams(Parameters):
     hysteresis (``spring.hysteresis.enabled``, Fig 4.8b), one spring law per tendon (``spring``
     for all, ``tendon_springs`` overrides tendons one by one) and the tendon's own elasticity
     ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``).
-    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs.
+    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs; ``tendon_motors``
+    likewise overrides ``motor`` tendon by tendon (``(tendon_name, MotorParams)``: friction, ripple,
+    inertia, damping of one motor, e.g. a diagnosis's write-back; pulley radius, torque limit and
+    saturation stay those of ``motor``; compiled backend).
     Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
     :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
     fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
@@ -338,7 +341,8 @@ class FingerDriveParams(Parameters):
     motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
     spring: SpringModelParams = field(
         default_factory=lambda: SpringModelParams(hysteresis=HysteresisParams(enabled=True)))
-    tendon_springs: tuple = ()
+    tendon_springs: tuple[tuple[str, SpringModelParams], ...] = ()
+    tendon_motors: tuple[tuple[str, MotorParams], ...] = ()
     pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
                               source="Fig 15.26: f_pre = 20 N (as the joint rig)",
                               doc="tendon force of every tendon at the default operating point")
@@ -390,14 +394,15 @@ class FingerDriveParams(Parameters):
 
     def _validate(self) -> None:
         super()._validate()
-        if not isinstance(self.tendon_springs, tuple):
-            raise ValueError(f"{type(self).__name__}.tendon_springs must be a tuple of (tendon_name, "
-                             f"SpringModelParams) pairs, got {type(self.tendon_springs).__name__}")
-        for i, entry in enumerate(self.tendon_springs):
-            if (not isinstance(entry, tuple) or len(entry) != 2 or not isinstance(entry[0], str)
-                    or not isinstance(entry[1], SpringModelParams)):
-                raise ValueError(f"{type(self).__name__}.tendon_springs[{i}] = {entry!r} must be a "
-                                 "(tendon_name, SpringModelParams) pair")
+        for name, cls in (("tendon_springs", SpringModelParams), ("tendon_motors", MotorParams)):
+            if not isinstance(getattr(self, name), tuple):
+                raise ValueError(f"{type(self).__name__}.{name} must be a tuple of (tendon_name, {cls.__name__}) "
+                                 f"pairs, got {type(getattr(self, name)).__name__}")
+            for i, entry in enumerate(getattr(self, name)):
+                if (not isinstance(entry, tuple) or len(entry) != 2 or not isinstance(entry[0], str)
+                        or not isinstance(entry[1], cls)):
+                    raise ValueError(f"{type(self).__name__}.{name}[{i}] = {entry!r} must be a "
+                                     f"(tendon_name, {cls.__name__}) pair")
 
 
 _FINGER_PARAM_TYPES = {"thumb": ThumbParams, "index": IndexFingerParams, "middle": MiddleFingerParams,

@@ -5,7 +5,9 @@ real types.  A :class:`~awiwi_drake.parameters.base.Parameters` class declares
 vectors as tuples and is frozen, so each class gets a mirror *schema*
 dataclass (same name, same fields; vectors as ``list[float]``; nested sets as
 their schemas; ``A | B`` unions as Drake's tagged unions, e.g.
-``finger: !ThumbParams {...}``).  Loading goes YAML -> schema (Drake: unknown
+``finger: !ThumbParams {...}``; named overrides ``tuple[tuple[str, P], ...]``, e.g.
+``tendon_motors``, as a mapping ``{name: P}`` whose entries are whole sets: keys they leave
+out take ``P``'s defaults).  Loading goes YAML -> schema (Drake: unknown
 keys and wrong types are rejected) -> the frozen parameter set (our
 validation: units, ranges, ceilings).  A YAML file may give only some fields;
 the others keep the values of ``defaults``.
@@ -26,7 +28,7 @@ from typing import Union
 
 from .base import Parameters
 
-__all__ = ["yaml_schema", "to_yaml", "from_yaml", "save_yaml", "load_yaml"]
+__all__ = ["yaml_schema", "to_yaml", "from_yaml", "save_yaml", "load_yaml", "named_overrides_class"]
 
 _SCHEMAS: dict[type, type] = {}
 _BACK: dict[type, type] = {}
@@ -46,6 +48,9 @@ def _schema_type(hint, where: str):
         return options[0] if len(options) == 1 else Union[tuple(options)]  # type: ignore[valid-type]
     if hint in (float, int, bool, str):
         return hint
+    pair = named_overrides_class(hint)
+    if pair is not None:        # tuple[tuple[str, P], ...]: per-name overrides, a mapping {name: P}
+        return dict[str, _schema_type(pair, where)]
     if hint is tuple or typing.get_origin(hint) is tuple:
         return list[float]
     args = typing.get_args(hint)
@@ -58,6 +63,16 @@ def _schema_type(hint, where: str):
                     options.append(o)
         return Union[tuple(options)]  # type: ignore[valid-type]
     raise TypeError(f"{where}: the field type {hint!r} has no YAML form")
+
+
+def named_overrides_class(hint):
+    """``P`` when ``hint`` is ``tuple[tuple[str, P], ...]`` (named overrides, e.g. ``tendon_springs``), else None."""
+    args = typing.get_args(hint) if typing.get_origin(hint) is tuple else ()
+    if len(args) == 2 and args[1] is Ellipsis and typing.get_origin(args[0]) is tuple:
+        inner = typing.get_args(args[0])
+        if len(inner) == 2 and inner[0] is str and isinstance(inner[1], type) and issubclass(inner[1], Parameters):
+            return inner[1]
+    return None
 
 
 def yaml_schema(cls: type) -> type:
@@ -79,24 +94,33 @@ def yaml_schema(cls: type) -> type:
 
 def _to_schema(params: Parameters):
     schema = yaml_schema(type(params))
+    hints = typing.get_type_hints(type(params))
     values = {}
     for f in dataclasses.fields(params):
         v = getattr(params, f.name)
         if isinstance(v, Parameters):
             v = _to_schema(v)
+        elif named_overrides_class(hints[f.name]) is not None:
+            v = {str(k): _to_schema(x) for k, x in v}      # named overrides
         elif isinstance(v, tuple):
             v = [float(x) for x in v]
         values[f.name] = v
     return schema(**values)
 
 
-def _from_schema(obj) -> Parameters:
+def _from_schema(obj, fill: bool = False) -> Parameters:
+    """The parameter set of a schema object; ``fill``: fields the YAML left out take the class defaults (a
+    named override entry, e.g. ``tendon_motors: {index_h5: {coulomb_torque: 0.1}}``, is a whole set)."""
     cls = _BACK[type(obj)]
     values = {}
     for f in dataclasses.fields(obj):
         v = getattr(obj, f.name)
+        if v is None and fill:
+            continue
         if type(v) in _BACK:
-            v = _from_schema(v)
+            v = _from_schema(v, fill)
+        elif isinstance(v, dict):
+            v = tuple((k, _from_schema(x, True)) for k, x in v.items())
         elif isinstance(v, list):
             v = tuple(v)
         values[f.name] = v

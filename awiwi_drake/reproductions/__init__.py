@@ -17,7 +17,7 @@ ch. 8 stiffness correction (Fig 8.3)           :mod:`.ch08_stiffness_correction`
 ch. 9 friction observer (Fig 9.3)              :mod:`.ch09_friction_observer`
 ch. 10 tendon force control (Fig 10.1-10.3)    :mod:`.ch10_tendon_force`
 ch. 11 impedance control (Fig 11.2-11.4)       :mod:`.ch11_impedance`
-ch. 12 pole placement (Fig 12.3-12.4)          :mod:`.ch12_pole_placement`
+ch. 12 pole placement (Fig 12.3-12.4, (12.19)) :mod:`.ch12_pole_placement`
 ch. 13 LQR (Fig 13.2-13.3)                     :mod:`.ch13_lqr`
 ch. 14 SDRE (Fig 14.3-14.5)                    :mod:`.ch14_sdre`
 ch. 15 backstepping (Fig 15.2-15.27)           :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`,

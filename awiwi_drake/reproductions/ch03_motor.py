@@ -30,7 +30,7 @@ from awiwi_drake.control.base import StaticLawController, closed_loop
 from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificationParams, RippleCompensationParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.rigs import motor_rig
 
 __all__ = ["ConstantVelocityRun", "constant_velocity_run", "FrictionData", "FrictionFit", "friction_identification_data", "fit_friction",
@@ -55,11 +55,8 @@ class ConstantVelocityRun:
 
     def plot(self, ax=None):
         """Applied torque and its PD part over time (Fig 3.5a)."""
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        ax.plot(self.t, self.command, label="applied torque")
-        ax.plot(self.t, self.feedback, label="PD part (feedback)")
-        label_axes(ax, "motor torque [Nm]")
-        return fig, ax
+        return plot_traces(self.t, {"applied torque": self.command, "PD part (feedback)": self.feedback},
+                           ylabel="motor torque [Nm]", ax=ax)
 
 
 def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,

@@ -3,7 +3,6 @@
 * :func:`coriolis_study` - Fig 5.7: release a 0.1 rad deflection of the second
   joint (MCP flexion, abduction at 0) with the motors fixed, with and without
   the Coriolis/centrifugal terms.
-* :func:`poles_vs_pretension` - poles of a finger/hand rig (``Linearize``) versus pretension.
 * :func:`coupling_hold_study` - the ring/fifth PIP/DIP coupling element holds
   ``q_DIP = (r_x3/r_x2) q_PIP`` during a controlled PIP motion.
 * :func:`thumb_estimation_study` - Fig 5.16-5.17: Algorithm 1 (thumb base estimation,
@@ -20,7 +19,6 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer
 
-from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.analysis.simulate import simulate
 from awiwi_drake.components.routing import TendonRouting_
 from awiwi_drake.components.spring import SpringBank_, tendon_spring
@@ -28,13 +26,13 @@ from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_pd import joint_pd_controller
 from awiwi_drake.hand.coupling import ThumbCoupling, finger_coupling
 from awiwi_drake.hand.estimation import noise_error_bound, thumb_base_gradient_search
-from awiwi_drake.hand.diagrams import HandRig, finger_diagram
+from awiwi_drake.hand.diagrams import finger_diagram
 from awiwi_drake.hand.plant import add_applied_force_sum, coupling_force_gain, make_finger_plant
 from awiwi_drake.hand.systems import CoriolisCancellation
 from awiwi_drake.parameters.hand import FingerRigParams, JointControllerParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 
-__all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram", "PoleSweep", "poles_vs_pretension",
+__all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram",
            "CouplingHoldStudy", "coupling_hold_study",
            "EstimationStudy", "thumb_estimation_study", "plot_estimation_grid", "plot_estimation_study",
            "plot_coriolis_study", "plot_coupling_hold"]
@@ -147,25 +145,6 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
         out[flag] = res.resample(np.linspace(0.0, t_final, num_samples))
     t = out[True].t
     return CoriolisStudy(t, out[True]["state"][:, : len(names)], out[False]["state"][:, : len(names)], names)
-
-
-@dataclass
-class PoleSweep:
-    """Poles (rows) of a rig's linearisation at each pretension [N]."""
-
-    pretension: np.ndarray
-    poles: np.ndarray        # (len(pretension), num_states) complex, sorted as in LinearizationResult
-
-    def max_frequency(self) -> np.ndarray:
-        """Largest |imag| [rad/s] per pretension (the stiffest link mode)."""
-        return np.max(np.abs(self.poles.imag), axis=1)
-
-
-def poles_vs_pretension(rig: HandRig, pretensions) -> PoleSweep:
-    """Linearise ``rig`` (Drake ``Linearize``) at ``q = 0`` for each pretension [N]."""
-    pre = np.asarray(pretensions, dtype=float)
-    poles = np.array([linearize(rig, rig.operating_point(pretension=f)).poles for f in pre])
-    return PoleSweep(pre, poles)
 
 
 @dataclass
@@ -301,18 +280,11 @@ def plot_estimation_study(study, start="cold"):
 
 def plot_coriolis_study(study, ax=None):
     """Fig 5.7: joint position difference full minus simplified (no Coriolis) model."""
-    fig, ax = figure_axes(ax, figsize=(6, 3.5))
-    for j, name in enumerate(study.joint_names):
-        ax.plot(study.t, study.difference[:, j], label=name)
-    label_axes(ax, "position error [rad]", legend=dict(fontsize=8))
-    return fig, ax
+    return plot_traces(study.t, dict(zip(study.joint_names, study.difference.T)), ylabel="position error [rad]",
+                       ax=ax, legend=dict(fontsize=8))
 
 
 def plot_coupling_hold(study, ax=None):
     """PIP, DIP and the coupling error q_DIP - c q_PIP during a PIP step."""
-    fig, ax = figure_axes(ax, figsize=(6, 3.5))
-    ax.plot(study.t, study.q_pip, label="q_PIP")
-    ax.plot(study.t, study.q_dip, label="q_DIP")
-    ax.plot(study.t, study.coupling_error, label="q_DIP - c q_PIP")
-    label_axes(ax, "[rad]", legend=dict(fontsize=8))
-    return fig, ax
+    return plot_traces(study.t, {"q_PIP": study.q_pip, "q_DIP": study.q_dip, "q_DIP - c q_PIP": study.coupling_error},
+                       ylabel="[rad]", ax=ax, legend=dict(fontsize=8))

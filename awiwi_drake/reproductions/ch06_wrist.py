@@ -158,34 +158,17 @@ FINGER_COLORS = {"thumb": "tab:red", "index": "tab:blue", "middle": "tab:green",
 
 def _start(result, ax):
     """Validate the data and return (fig, ax), creating them when ax is None."""
-    import matplotlib.pyplot as plt
-
     if not isinstance(result, WristMotionResult):
         raise ValueError(f"result must be a WristMotionResult, got {type(result).__name__}")
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(7.0, 4.0))
-    else:
-        fig = ax.figure
-    return fig, ax
+    return figure_axes(ax, figsize=(7.0, 4.0))
 
 
 def plot_wrist_displacements(result: WristMotionResult, ax=None):
-    """Tendon displacement through the wrist vs time (Fig 6.10).
+    """Tendon displacement through the wrist vs time (Fig 6.10); ``ax`` optional, returns ``(fig, ax)``.
 
     One line per tendon (Table 6.2 order), coloured by finger; the flexion
     and abduction phases are shaded and annotated with the proportionality
     fit of the abduction peak.
-
-    Parameters
-    ----------
-    result : WristMotionResult
-        From :func:`~awiwi_drake.hand.wrist.wrist_motion_study` (uses ``offsets``).
-    ax : matplotlib Axes, optional
-        Axes to draw into (default: a new figure).
-
-    Returns
-    -------
-    (fig, ax) : the figure and the axes holding one line per tendon.
     """
     fig, ax = _start(result, ax)
     seen = set()
@@ -205,7 +188,6 @@ def plot_wrist_displacements(result: WristMotionResult, ax=None):
             f"{result.flexion_to_abduction_ratio:.2f}",
             transform=ax.transAxes, ha="right", va="bottom", fontsize=8)
     ax.legend(loc="upper left", fontsize=8)
-    ax.grid(True, alpha=0.3)
     return fig, ax
 
 
@@ -216,7 +198,6 @@ def plot_wrist_constraint_errors(result: WristMotionResult, ax=None):
     label_axes(ax, "max constraint error [m]", xlabel="t [s]", legend=None,
                title="max(|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|) errors")
     ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
-    ax.grid(True, alpha=0.3)
     return fig, ax
 
 

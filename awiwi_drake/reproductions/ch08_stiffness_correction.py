@@ -14,7 +14,7 @@ from awiwi_drake.analysis import Samples, simulate
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.stiffness_correction import StiffnessCorrectedImpedance, pretension_elongation
 from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import plot_traces
 from awiwi_drake.rigs import joint_rig
 
 __all__ = ["StiffnessRun", "stiffness_correction_run", "plot_stiffness_run"]
@@ -67,10 +67,6 @@ def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segm
 
 def plot_stiffness_run(run, *, ax=None):
     """Fig 8.3: K_imp, K_mech and K_eff (8.1) over time, with the target."""
-    fig, ax = figure_axes(ax)
-    ax.plot(run.t, run.k_imp, label="K_imp (controller)")
-    ax.plot(run.t, run.k_mech, ":", label="K_mech (springs)")
-    ax.plot(run.t, run.k_eff, "-.", label="K_eff (8.1)")
-    ax.plot(run.t, run.k_target, "k--", lw=0.8, label="target")
-    label_axes(ax, "stiffness [Nm/rad]", legend=dict(fontsize="small"))
-    return fig, ax
+    return plot_traces(run.t, {"K_imp (controller)": run.k_imp, "K_mech (springs)": run.k_mech, "K_eff (8.1)": run.k_eff},
+                       styles={"K_mech (springs)": ":", "K_eff (8.1)": "-."}, reference=run.k_target,
+                       ylabel="stiffness [Nm/rad]", ax=ax, legend=dict(fontsize="small"))

@@ -17,9 +17,8 @@ from awiwi_drake.control.sensors import force_sensor
 from awiwi_drake.control.tendon_force import (ForceMap, force_map, steady_state_force_without_feedforward,
                                               tendon_pd_controller, tendon_scheduled_controller)
 from awiwi_drake.parameters import MotorParams, TendonRigParams
-from awiwi_drake.parameters.control import ForceSensorParams, TendonForceGains
-from awiwi_drake.plotting import figure_axes, label_axes
-from awiwi_drake.reproductions._common import DT, RATE
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, ForceSensorParams, TendonForceGains
+from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.rigs import tendon_rig
 
 __all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
@@ -47,10 +46,9 @@ class FeedforwardRun:
 
     def plot(self, ax=None):
         """Both force traces, the reference and (10.3); returns ``(fig, ax)``."""
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        ax.plot(self.t, self.with_feedforward, label="with feed-forward (10.2)")
-        ax.plot(self.t, self.without_feedforward, label="without feed-forward")
-        ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
+        fig, ax = plot_traces(self.t, {"with feed-forward (10.2)": self.with_feedforward,
+                                       "without feed-forward": self.without_feedforward},
+                              reference=self.reference, ylabel="tendon force [N]", ax=ax)
         ax.axhline(self.expected_without, color="gray", ls=":", lw=1, label="(10.3): steady state without")
         label_axes(ax, "tendon force [N]", title="Fig 10.1", legend=dict(fontsize=8))
         return fig, ax
@@ -69,7 +67,7 @@ def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: f
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
         log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(0.05, f1, f0)},
-                       log=("tendon_force", "tendon_force_reference"), log_period=DT)
+                       log=("tendon_force", "tendon_force_reference"), log_period=1 / RATE)
         out[label] = log
         if label == "without":
             kp = loop.controller.law.kp_fixed
@@ -108,7 +106,7 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
         ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
                                   references={"tendon_force_reference": f0})
         log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(t_step, f0 + step, f0)},
-                       log=("tendon_force", "motor_torque_command"), log_period=DT)
+                       log=("tendon_force", "motor_torque_command"), log_period=1 / RATE)
         f = log["tendon_force"][:, 0]
         m = step_metrics(log.t, f, f0, f0 + step, t_step, band=0.05)
         m.update({k: v for k, v in fit_second_order_step(log.t, f, f0, f0 + step, t_step).items()

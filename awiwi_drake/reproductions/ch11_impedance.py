@@ -16,9 +16,8 @@ from awiwi_drake.analysis import Chirp, Step, linearize, simulate
 from awiwi_drake.control.compare import gain_diagram, step_metrics
 from awiwi_drake.control.impedance import impedance_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams
-from awiwi_drake.parameters.control import ImpedanceParams, ImpedanceSweepParams
-from awiwi_drake.plotting import figure_axes, label_axes
-from awiwi_drake.reproductions._common import DT, RATE
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, ImpedanceParams, ImpedanceSweepParams
+from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
 __all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
@@ -43,11 +42,8 @@ class ImpedanceStep:
         return float(self.metrics["overshoot"])
 
     def plot(self, ax=None):
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        ax.plot(self.t, self.joint_angle, label=f"{self.label}: overshoot {self.overshoot:.1f} %")
-        ax.plot(self.t, self.reference, "k--", lw=0.8, label="reference")
-        label_axes(ax, "joint angle [rad]", legend=dict(fontsize=8))
-        return fig, ax
+        return plot_traces(self.t, {f"{self.label}: overshoot {self.overshoot:.1f} %": self.joint_angle},
+                           reference=self.reference, ylabel="joint angle [rad]", ax=ax, legend=dict(fontsize=8))
 
 
 @dataclass
@@ -72,12 +68,13 @@ class GainDiagram:
         return plot_gain_diagrams({self.label: (self.freq, self.gain)}, ax=ax)
 
 
-def _joint(kind: str, *, stiffness=None, pretension=None):
+def _joint(kind: str, *, stiffness=None, pretension=None, backend: str = "symbolic"):
+    """The flexible joint (mechanical ``stiffness``) or the joint rig (``pretension``); None: the defaults."""
     if kind == "flexible-joint":
         p = FlexibleJointParams() if stiffness is None else FlexibleJointParams(stiffness=stiffness)
-        return flexible_joint_rig(params=p, backend="symbolic")
+        return flexible_joint_rig(params=p, backend=backend)
     return joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
-                     backend="symbolic")
+                     backend=backend)
 
 
 def _run(mode, joint_stiffness, rig, stiffness, pretension, t_final, reference):
@@ -88,7 +85,7 @@ def _run(mode, joint_stiffness, rig, stiffness, pretension, t_final, reference):
     op = r.operating_point()
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"joint_angle_reference": 0.0})
     return simulate(loop, ctx, t_final, inputs={"joint_angle_reference": reference, "external_torque": 0.0},
-                    log=("joint_angle", "joint_angle_reference"), log_period=DT)
+                    log=("joint_angle", "joint_angle_reference"), log_period=1 / RATE)
 
 
 def impedance_step(mode: str = "two-time-scale", *, joint_stiffness: float = 0.3, rig: str = "flexible-joint",
@@ -129,12 +126,7 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     sp = ImpedanceSweepParams()
     joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
     freqs = np.linspace(0.5, 70.0, 700) if freqs is None else np.asarray(freqs, float)
-    if rig == "flexible-joint":
-        r = flexible_joint_rig(params=FlexibleJointParams() if stiffness is None else
-                               FlexibleJointParams(stiffness=stiffness), backend="python")
-    else:
-        r = joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
-                      backend="python")
+    r = _joint(rig, stiffness=stiffness, pretension=pretension, backend="python")
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=None)
     op = r.operating_point()

@@ -14,7 +14,7 @@ from awiwi_drake.analysis import simulate
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.lqr import design_lqr, lqr_controller
 from awiwi_drake.parameters.control import LqrParams
-from awiwi_drake.plotting import figure_axes
+from awiwi_drake.plotting import figure_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig
 
 __all__ = ["LqrRun", "lqr_trajectories"]
@@ -37,15 +37,10 @@ class LqrRun:
     def plot(self, ax=None):
         """Link and motor positions [rad] and the input [Nm]; returns ``(fig, (ax_pos, ax_u))``."""
         fig, ax = figure_axes(ax, nrows=1, ncols=2, figsize=(11, 3.8))
-        ax[0].plot(self.t, self.state[:, 0], label=f"link q, R = {self.r:g}")
-        ax[0].plot(self.t, self.state[:, 2], ":", label=f"motor theta, R = {self.r:g}")
-        ax[1].plot(self.t, self.u, label=f"u, R = {self.r:g}")
-        ax[0].set_ylabel("position [rad]")
-        ax[1].set_ylabel("input u [Nm]")
-        for a in ax:
-            a.set_xlabel("time [s]")
-            a.grid(True, alpha=0.3)
-            a.legend(fontsize=8)
+        motor = f"motor theta, R = {self.r:g}"
+        plot_traces(self.t, {f"link q, R = {self.r:g}": self.state[:, 0], motor: self.state[:, 2]}, styles={motor: ":"},
+                    ylabel="position [rad]", ax=ax[0], legend=dict(fontsize=8))
+        plot_traces(self.t, {f"u, R = {self.r:g}": self.u}, ylabel="input u [Nm]", ax=ax[1], legend=dict(fontsize=8))
         return fig, ax
 
 

@@ -15,9 +15,8 @@ from awiwi_drake.analysis import Samples, Step, simulate
 from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controller
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
-from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
-from awiwi_drake.plotting import figure_axes
-from awiwi_drake.reproductions._common import DT, RATE
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, SdreJointParams, SdreTendonParams
+from awiwi_drake.plotting import figure_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
 
 __all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
@@ -48,19 +47,15 @@ class SdreRun:
     def plot(self, ax=None):
         """Output against its reference, and the command with the torque limit; returns ``(fig, axes)``."""
         fig, ax = figure_axes(ax, nrows=2, ncols=1, figsize=(7, 5.5), sharex=True)
-        ax[0].plot(self.t, self.output, label=f"{self.output_name} ({self.label})")
-        ax[0].plot(self.t, self.reference, "k--", lw=0.8, label="reference")
-        ax[0].set_ylabel(f"{self.output_name} [{self.unit}]")
-        ax[1].plot(self.t, self.torque, label=f"commanded torque ({self.label})")
+        plot_traces(self.t, {f"{self.output_name} ({self.label})": self.output}, reference=self.reference,
+                    ylabel=f"{self.output_name} [{self.unit}]", ax=ax[0], legend=dict(fontsize=8))
+        plot_traces(self.t, {f"commanded torque ({self.label})": self.torque}, ylabel="motor torque [Nm]", ax=ax[1],
+                    legend=None)
         if self.torque_limit is not None:
             for s in (1, -1):
                 ax[1].axhline(s * self.torque_limit, color="r", ls=":", lw=0.8,
                               label=f"torque limit +-{self.torque_limit:g} Nm" if s > 0 else None)
-        ax[1].set_ylabel("motor torque [Nm]")
-        ax[1].set_xlabel("time [s]")
-        for a in ax:
-            a.grid(True, alpha=0.3)
-            a.legend(fontsize=8)
+        ax[1].legend(fontsize=8)
         return fig, ax
 
 
@@ -80,7 +75,7 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
     ref = Samples([0.0, *(t for t, _ in schedule)], [0.0, *(r for _, r in schedule)])   # piecewise constant
     log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": ref},
-                   log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=DT)
+                   log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=1 / RATE)
     u = log["motor_torque"][:, 0]
     limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
     return SdreRun("fixed gains" if fixed else "SDRE", "tendon_force", "N", log.t, log["tendon_force"][:, 0],
@@ -103,7 +98,7 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
                               disturbances={"external_torque": external_torque})
     log = simulate(loop, ctx, t_final, inputs={"joint_angle_reference": Step(0.1, target),
                                                "external_torque": external_torque},
-                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=DT)
+                   log=("joint_angle", "controller_gain", "motor_torque", "joint_angle_reference"), log_period=1 / RATE)
     return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "joint_angle", "rad",
                    log.t, log["joint_angle"][:, 0], log["joint_angle_reference"][:, 0], log["controller_gain"],
                    log["motor_torque"][:, 0], rig.torque_limit)

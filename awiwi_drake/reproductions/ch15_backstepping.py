@@ -213,16 +213,19 @@ def example_phase_portrait(gains: ScalarExampleGains, initial_states, *, t_final
     return runs
 
 
-# ---------------------------------------------------------------------------
-# 15.2: position control, linear flexible joint
-def _step_run(make_controller, *, step, t_final, label, dt=2e-3, saturation=None, delay=None, rate_hz=None,
-              max_step=2e-3, make_rig=None):
-    """A fresh rig (a Drake diagram joins one closed loop only) with ``make_controller(rig)``."""
+def _run(make_controller, *, make_rig=None, op=None, rate_hz=None, delay=None, saturation=None, **kw):
+    """:func:`run_loop` on a fresh rig (a Drake diagram joins one closed loop only; default
+    :func:`table_15_1_rig`) closed by ``make_controller(rig)``, from ``rig.operating_point(**op)``."""
     rig = (make_rig or table_15_1_rig)()
     loop = closed_loop(rig, make_controller(rig), rate_hz=rate_hz, delay=delay, saturation=saturation)
-    op = rig.operating_point()
-    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
-                    inputs=event_schedules((), {REFERENCE_PORT: step}), dt=dt, max_step=max_step, label=label)
+    x0 = rig.operating_point(**(op or {}))
+    return run_loop(loop, state0=x0.state, motor_torque0=x0.motor_torque, **kw)
+
+
+# ---------------------------------------------------------------------------
+# 15.2: position control, linear flexible joint
+def _step_run(make_controller, *, step, dt=2e-3, max_step=2e-3, **kw):
+    return _run(make_controller, inputs=event_schedules((), {REFERENCE_PORT: step}), dt=dt, max_step=max_step, **kw)
 
 
 def position_gain_study(which: str = "k1", study: PositionStudy | None = None, *, t_final: float | None = None,
@@ -259,29 +262,19 @@ def delay_study(study: PositionStudy | None = None, *, t_final: float | None = N
     """
     s = study or PositionStudy()
     g = PositionBacksteppingGains()
-    runs = []
-    for d in (delays if delays is not None else s.delays):
-        if d > 0:
-            rate = s.delay_steps / d
-            runs.append(_step_run(lambda rig: position_controller(rig, g), step=s.step,
-                                  t_final=t_final or s.delay_duration, label=f"delay {1e3 * d:g} ms", delay=d, rate_hz=rate, max_step=min(2e-3, d)))
-        else:
-            runs.append(_step_run(lambda rig: position_controller(rig, g), step=s.step,
-                                  t_final=t_final or s.delay_duration, label="delay 0 ms"))
-    return runs
+    return [_step_run(lambda rig: position_controller(rig, g), step=s.step, t_final=t_final or s.delay_duration,
+                      label=f"delay {1e3 * d:g} ms",
+                      **(dict(delay=d, rate_hz=s.delay_steps / d, max_step=min(2e-3, d)) if d > 0 else {}))
+            for d in (delays if delays is not None else s.delays)]
 
 
 # ---------------------------------------------------------------------------
 # 15.3: impedance control, linear flexible joint
-def _impedance_run(make_rig, make_controller, *, step, step_time, disturbance, disturbance_time, t_final, label,
-                   saturation=None, dt=2e-3, max_step=1e-3, extra_outputs=()):
-    rig = make_rig()
-    loop = closed_loop(rig, make_controller(rig), rate_hz=None, saturation=saturation)
-    op = rig.operating_point()
-    events = [(step_time, {REFERENCE_PORT: step}), (disturbance_time, {"external_torque": disturbance})]
-    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
-                    inputs=event_schedules(events), dt=dt, max_step=max_step, label=label,
-                    extra_outputs=extra_outputs, integrator=STIFF_INTEGRATOR)
+def _impedance_run(make_rig, make_controller, s, **kw):
+    """The step at ``s.step_time`` and the load step at ``s.disturbance_time`` of study ``s``."""
+    events = [(s.step_time, {REFERENCE_PORT: s.step}), (s.disturbance_time, {"external_torque": s.disturbance})]
+    return _run(make_controller, make_rig=make_rig, inputs=event_schedules(events), dt=2e-3, max_step=1e-3,
+                integrator=STIFF_INTEGRATOR, **kw)
 
 
 def impedance_study(which: str = "stiffness", study: ImpedanceStudy | None = None, *,
@@ -308,11 +301,8 @@ def impedance_study(which: str = "stiffness", study: ImpedanceStudy | None = Non
         raise ValueError(f"impedance_study: which = {which!r} must be 'stiffness' or 'damping'")
     make_rig = (lambda: with_external_torque_sensor(table_15_1_rig())) if external_torque == "input" \
         else table_15_1_rig
-    return [_impedance_run(make_rig, lambda rig, v=v: impedance_controller(rig, make(v),
-                                                                           external_torque=external_torque),
-                           step=s.step, step_time=s.step_time,
-                           disturbance=s.disturbance, disturbance_time=s.disturbance_time,
-                           t_final=t_final or s.duration, label=label.format(v)) for v in vals]
+    return [_impedance_run(make_rig, lambda rig, v=v: impedance_controller(rig, make(v), external_torque=external_torque),
+                           s, t_final=t_final or s.duration, label=label.format(v)) for v in vals]
 
 
 def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: float, **kw) -> float:
@@ -353,14 +343,12 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
     g = ImpedanceBacksteppingGains(stiffness=s.stiffness, damping=s.damping, k3=s.k3, k4=s.k4)
     k0 = float(np.ravel(make_rig().spring.stiffness(np.array([0.0])))[0])
     sat = s.torque_limit if saturation else None
-    runs = []
-    for label, law in (("nonlinear controller", None), ("linear controller", LinearSpring(k0, tension_only=False))):
-        runs.append(_impedance_run(make_rig, lambda rig, law=law: impedance_controller(rig, g, spring=law, external_torque=external_torque),
-                                   step=s.step, step_time=s.step_time,
-                                   disturbance=s.disturbance, disturbance_time=s.disturbance_time,
-                                   t_final=t_final or s.duration, label=label, saturation=sat,
-                                   extra_outputs=("tendon_stiffness",)))
-    return runs
+    return [_impedance_run(make_rig, lambda rig, law=law: impedance_controller(rig, g, spring=law,
+                                                                                external_torque=external_torque),
+                           s, t_final=t_final or s.duration, label=label, saturation=sat,
+                           extra_outputs=("tendon_stiffness",))
+            for label, law in (("nonlinear controller", None),
+                               ("linear controller", LinearSpring(k0, tension_only=False)))]
 
 
 def load_step_command_jump(study: NonlinearImpedanceStudy | None = None, *, spring=None) -> float:
@@ -391,14 +379,11 @@ def _sine_reference(amplitude, freq, offset=0.0) -> PerEntry:
 def antagonistic_step(gains: AntagonisticBacksteppingGains | None = None, *, step: float = math.radians(30.0),
                       t_final: float = 0.8, make_rig=None, dt: float = 1e-3) -> BacksteppingRun:
     """Step of the antagonistic joint (Fig 15.24: 30 deg PIP step), joint rig defaults."""
-    rig = (make_rig or joint_rig)()
     g = gains or AntagonisticBacksteppingGains()
-    op = rig.operating_point(pretension=g.pretension)
-    loop = closed_loop(rig, impedance_controller(rig, g), rate_hz=None)
-    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
-                    inputs=event_schedules([(0.05, {REFERENCE_PORT: step})]), dt=dt, max_step=1e-3,
-                    label="backstepping step", extra_outputs=("tendon_force", "joint_torque"),
-                    integrator=STIFF_INTEGRATOR)
+    return _run(lambda rig: impedance_controller(rig, g), make_rig=make_rig or joint_rig,
+                op=dict(pretension=g.pretension), t_final=t_final,
+                inputs=event_schedules([(0.05, {REFERENCE_PORT: step})]), dt=dt, max_step=1e-3,
+                label="backstepping step", extra_outputs=("tendon_force", "joint_torque"), integrator=STIFF_INTEGRATOR)
 
 
 def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amplitude: float = math.radians(25.0),
@@ -409,15 +394,12 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
     ``feedforward=True`` feeds the reference derivatives (``reference_derivatives=4``); otherwise
     the controller sees the reference value only (regulation design).
     """
-    rig = (make_rig or joint_rig)()
     g = gains or AntagonisticBacksteppingGains()
     ref = _sine_reference(amplitude, frequency, offset)
-    ctrl = impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0)
-    loop = closed_loop(rig, ctrl, rate_hz=None)
-    op = rig.operating_point(pretension=g.pretension, joint_angle=offset)
-    return run_loop(loop, t_final=t_final, state0=op.state, motor_torque0=op.motor_torque,
-                    inputs={REFERENCE_PORT: ref if feedforward else PerEntry(ref.entries[:1])}, dt=dt, max_step=dt,
-                    label="backstepping sine", extra_outputs=("tendon_force",))
+    return _run(lambda rig: impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0),
+                make_rig=make_rig or joint_rig, op=dict(pretension=g.pretension, joint_angle=offset), t_final=t_final,
+                inputs={REFERENCE_PORT: ref if feedforward else PerEntry(ref.entries[:1])}, dt=dt, max_step=dt,
+                label="backstepping sine", extra_outputs=("tendon_force",))
 
 
 def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflection: float = 0.3,

@@ -31,7 +31,7 @@ import numpy as np
 
 from awiwi_drake.parameters.backstepping import PipStudy
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import plot_traces
 
 __all__ = ["PipRun", "pip_parameters", "pip_experiment", "pip_metrics"]
 
@@ -54,11 +54,9 @@ class PipRun:
 
     def plot(self, ax=None):
         """Link angle and reference [deg] (Fig 15.24 / 15.25)."""
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        ax.plot(self.t, np.degrees(self.q), label=f"{self.controller} ({self.test})")
-        ax.plot(self.t, np.degrees(self.reference), "k--", lw=0.8, label="reference")
-        label_axes(ax, "PIP angle [deg]", legend=dict(fontsize="small"))
-        return fig, ax
+        return plot_traces(self.t, {f"{self.controller} ({self.test})": np.degrees(self.q)},
+                           reference=np.degrees(self.reference), ylabel="PIP angle [deg]", ax=ax,
+                           legend=dict(fontsize="small"))
 
 
 def pip_parameters(pretension: float):

@@ -6,26 +6,16 @@ import pathlib
 
 import numpy as np
 
-from awiwi_drake.analysis import linearize, rig_monitors, simulate
+from awiwi_drake.analysis import poles_vs_pretension, rig_monitors, simulate
 from awiwi_drake.components.spring import LeverSpringMechanism
 from awiwi_drake.config import short_mode
 from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 from awiwi_drake.parameters.rigs import DemoScenario
-from awiwi_drake.plotting import plot_pole_sweep, plot_signals, plot_spring_curve
+from awiwi_drake.plotting import plot_signals, plot_spring_curve
 from awiwi_drake.rigs.rigs import joint_rig
 
-__all__ = ["run_demo", "pole_sweep_pretension", "demo_figure"]
-
-
-def pole_sweep_pretension(rig, pretensions):
-    """Poles and joint stiffness of ``rig`` linearised at each pretension (link at 0)."""
-    poles, stiffness = [], []
-    for f0 in pretensions:
-        op = rig.operating_point(pretension=float(f0))
-        poles.append(linearize(rig, op).poles)
-        stiffness.append(op.joint_stiffness)
-    return np.array(poles), np.array(stiffness)
+__all__ = ["run_demo", "demo_figure"]
 
 
 def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
@@ -102,8 +92,9 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
     fig.savefig(out / "spring_curve.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     pre = np.linspace(5, 60, 8 if short_mode() else 23)
-    poles, stiff = pole_sweep_pretension(joint_rig(backend=backend), pre)
-    fig, ax = plot_pole_sweep(pre, poles, "pretension [N]", symlog=0.01)  # slow poles at -0.03..-0.1 1/s
+    sweep = poles_vs_pretension(joint_rig(backend=backend), pre)
+    stiff = sweep.joint_stiffness
+    fig, ax = sweep.plot(symlog=0.01)  # slow poles at -0.03..-0.1 1/s
     ax.set_title("joint-rig poles versus pretension (Linearize)")
     fig.savefig(out / "poles_vs_pretension.png", dpi=110, bbox_inches="tight")
     plt.close(fig)

@@ -30,6 +30,7 @@ construction (:mod:`awiwi_drake.hand.wrist`); they are varied by overriding the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Callable
@@ -204,22 +205,20 @@ def _nominal() -> _Inputs:
                    finger_params("fifth"))
 
 
+def _holder(x: _Inputs, group: str):
+    """The parameter set of ``x`` that holds the fields of ``group`` (None: the wrist's derived lengths)."""
+    return {"wrist": None, "spring": x.spring.geometry, "tendon": x.spring.tendon}.get(group, getattr(x, group, None))
+
+
 def _value(p: InventedParameter) -> float:
     group, field = p.name.split(".")
     x = _nominal()
-    if group == "wrist":
-        return float(getattr(x.wrist, field))
-    if group == "spring":
-        return float(getattr(x.spring.geometry, field))
-    if group == "tendon":
-        return float(getattr(x.spring.tendon, field))
-    return float(getattr(getattr(x, group), field))
+    return float(getattr(x.wrist if group == "wrist" else _holder(x, group), field))
 
 
 def _source(p: InventedParameter) -> str:
     group, field = p.name.split(".")
-    x = _nominal()
-    obj = {"wrist": None, "spring": x.spring.geometry, "tendon": x.spring.tendon}.get(group, getattr(x, group, None))
+    obj = _holder(_nominal(), group)
     if obj is None:
         return "derived from Table 6.1 by the box construction (hand/wrist.py module docstring)"
     return obj.info()[field].source
@@ -228,18 +227,12 @@ def _source(p: InventedParameter) -> str:
 def _scaled(p: InventedParameter, scale: float) -> _Inputs:
     group, field = p.name.split(".")
     x = _nominal()
-    v = _value(p) * scale
     if group == "wrist":
-        return _Inputs(x.index, x.ring, x.thumb, x.spring, _scaled_wrist(field, scale))
-    if group == "spring":
-        return _Inputs(x.index, x.ring, x.thumb, x.spring.replace(geometry=x.spring.geometry.replace(**{field: v})),
-                       x.wrist)
-    if group == "tendon":
-        return _Inputs(x.index, x.ring, x.thumb, x.spring.replace(tendon=x.spring.tendon.replace(**{field: v})),
-                       x.wrist)
-    parts = dict(index=x.index, ring=x.ring, thumb=x.thumb, fifth=x.fifth)
-    parts[group] = parts[group].replace(**{field: v})
-    return _Inputs(parts["index"], parts["ring"], parts["thumb"], x.spring, x.wrist, parts["fifth"])
+        return dataclasses.replace(x, wrist=_scaled_wrist(field, scale))
+    changed = _holder(x, group).replace(**{field: _value(p) * scale})
+    if group in ("spring", "tendon"):
+        return dataclasses.replace(x, spring=x.spring.replace(**{"geometry" if group == "spring" else "tendon": changed}))
+    return dataclasses.replace(x, **{group: changed})
 
 
 def headline_values(inputs: _Inputs | None = None, keys=None) -> dict[str, float]:

@@ -122,7 +122,12 @@ class Rig:
         ports and state order whose dynamics are Drake's ``DiscreteTimeApproximation`` at ``period`` [s]
         (fixed-step RK3, one step per period, input held; ``Linearize`` with the period);
         :func:`~awiwi_drake.control.closed_loop` puts it in sampled loops, with ``applied_torque`` held
-        over the period (the single-joint rigs; None: the rig has none).
+        over the period (the single-joint rigs; None: the rig has none). Its discrete state is in the
+        integration coordinates of :func:`~awiwi_drake.components.rig_system.rig_integration_system`
+        (``[q, p, x, omega, ...]``: link-and-motor momentum, elongations); its ``state`` output is physical.
+    sampled_state : callable or None
+        ``sampled_state(state) -> discrete state of sampled_diagram``: a physical state (``state_names``
+        order) in those integration coordinates (what :meth:`ClosedLoop.initialize` writes).
     """
 
     name: str
@@ -142,6 +147,7 @@ class Rig:
     spring_kind: str | None = None
     tendon_force_of_state: Callable | None = None
     sampled_diagram: Callable[[float], Diagram] | None = None
+    sampled_state: Callable | None = None
 
     @property
     def num_states(self) -> int:

@@ -27,6 +27,8 @@ Every block is named; ports are named after physical quantities.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
@@ -34,8 +36,8 @@ from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Mult
 
 from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
 from awiwi_drake.components.fused_drive import DriveModel
-from awiwi_drake.components.rig_system import (LinkRigOutputs_, rig_dynamics_system, sampled_dynamics,
-                                                tendon_force_of_states)
+from awiwi_drake.components.rig_system import (LinkRigOutputs_, integration_state, rig_dynamics_system,
+                                                rig_integration_system, sampled_dynamics, tendon_force_of_states)
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
@@ -118,18 +120,20 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
 
         def build(period=None, *, hold_applied_torque=False):
             """The rig's diagram: continuous (``period`` None), or sampled at ``period`` [s] (the dynamics
-            as Drake's DiscreteTimeApproximation, :func:`~awiwi_drake.components.rig_system.sampled_dynamics`);
-            the same ports and state order either way. A sampled rig's ``applied_torque`` is that of its
-            current input, or with ``hold_applied_torque`` that of the input it holds over the current period
+            as Drake's DiscreteTimeApproximation, :func:`~awiwi_drake.components.rig_system.sampled_dynamics`,
+            of :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.
+            The sampled rig's discrete state is in integration coordinates (``Rig.sampled_state`` maps a
+            physical state there); its ``state`` output is the physical state. A sampled rig's
+            ``applied_torque`` is that of its current input, or with ``hold_applied_torque`` that of the input it holds over the current period
             (a zero-order hold, a second discrete state, also exported as ``held_motor_torque``: what a loop
             logs; the rig alone stays a difference equation with one state group, which Drake's ``Linearize``
             needs)."""
             m, n = coupling.num_tendons, coupling.num_joints
             b = DiagramBuilder()
-            dynamics = rig_dynamics_system(model)
             if period is None:
-                dyn = b.AddNamedSystem("rig_dynamics", dynamics)
-            else:
+                dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
+            else:   # integrated in the coordinates of rig_integration_system; its output is the physical state
+                dynamics = rig_integration_system(model)
                 dynamics.set_name("rig_dynamics")     # Drake names the approximation DiscreteTimeApproximated_<name>
                 dyn = b.AddSystem(sampled_dynamics(dynamics, period))
             inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
@@ -160,7 +164,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
 
         drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled),
                             model)
-        return drive.diagram, None, drive, names, build
+        return drive.diagram, None, drive, names, (build, functools.partial(integration_state, model))
     b = DiagramBuilder()
     plant = b.AddNamedSystem("link", MultibodyPlant(0.0))
     add_revolute_link(plant, name="joint", inertia=inertia, damping=damping)
@@ -187,7 +191,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name(name)
-    return diagram, plant, drive, names, None
+    return diagram, plant, drive, names, (None, None)
 
 
 def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None,
@@ -244,7 +248,8 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
 
     return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
                spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
-               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None, sampled_diagram=sampled)
+               pair_slack=(law.x0, law.r) if spring == "nonlinear" else None, sampled_diagram=sampled[0],
+               sampled_state=sampled[1])
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -293,7 +298,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
                tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None,
-               sampled_diagram=sampled)
+               sampled_diagram=sampled[0], sampled_state=sampled[1])
 
 
 def motor_rig(motor: MotorParams | None = None) -> Rig:

@@ -51,18 +51,25 @@ def plot_joint_runs(comparison: Comparison, test: str, finger: str):
     if not cols:
         raise ValueError(f"plot_joint_runs: no joints of finger {finger!r} "
                          f"(fingers: {', '.join(dict.fromkeys(runs[0].meta['fingers']))})")
-    fig, axes = plt.subplots(len(cols), 1, figsize=(7, 1.9 * len(cols) + 0.8), sharex=True, squeeze=False)
+    outside = len(runs) > 3          # many controllers: the legend beside the panels, not over the traces
+    colours = plt.get_cmap("tab20").colors if len(runs) > 10 else [None] * len(runs)   # tab10 repeats after 10
+    fig, axes = plt.subplots(len(cols), 1, figsize=(9.5 if outside else 7, 1.9 * len(cols) + 0.8), sharex=True,
+                             squeeze=False)
     for ax, j in zip(axes[:, 0], cols):
-        for r in runs:
-            ax.plot(r.t, r.output[:, j], label=r.controller)
+        for r, colour in zip(runs, colours):
+            ax.plot(r.t, r.output[:, j], color=colour, label=r.controller)
         ax.plot(runs[0].t, runs[0].reference[:, j], "k--", lw=1, label="reference")
         ax.set_ylabel(f"{runs[0].meta['joints'][j]} [rad]")
         ax.grid(True, alpha=0.3)
         _mark_stopped(ax, comparison, test, runs[0].meta["joints"][j])
     axes[0, 0].set_title(f"{comparison.rig}, {finger}: {test} (joint angle - operating point)")
-    axes[0, 0].legend(fontsize=8)
     axes[-1, 0].set_xlabel("time [s]")
-    fig.tight_layout()
+    if outside:
+        fig.legend(*axes[0, 0].get_legend_handles_labels(), fontsize=8, loc="upper left", bbox_to_anchor=(0.755, 0.98))
+        fig.tight_layout(rect=(0.0, 0.0, 0.75, 1.0))
+    else:
+        axes[0, 0].legend(fontsize=8)
+        fig.tight_layout()
     return fig, axes
 
 

@@ -1,0 +1,190 @@
+"""The hand's sampled control chain as ONE discrete system (the fast path :func:`~awiwi_drake.control.closed_loop`
+builds for fingers and the hand).
+
+The blocks stay the reference (users compose them, the registry builds them):
+:class:`~awiwi_drake.hand.estimation.LinkPositionEstimator_` and the velocity filter (the rig's
+``link_estimator``, (5.15) / Algorithm 1), the joint stage (:class:`~awiwi_drake.control.joint_stage.JointStage_`),
+the (7.6) distribution (:class:`~awiwi_drake.control.force_distribution.TendonForceDistribution_`) or the
+sharing (15.88), the tendon path velocity ``P(q) qdot`` and the tendon force law (10.2) (or any static law that
+reads the estimated joint state, e.g. the 15.5 backstepping).  Each is evaluated by Drake in its own leaf
+system, ~15 of them around the hand, and the framework around them (events, cache invalidation, port
+evaluation through nested diagrams) cost as much as their work (README, "The hand under its control chain").
+
+:class:`FusedChain_` holds all their states and evaluates, per period, exactly what the composed loop
+evaluates, by calling the same objects' context-free methods:
+
+* at the sample ``t_k`` (one cache entry, evaluated once per period, read by every output and the update):
+  ``q_k = estimate(theta_k, x_k, w_k, q_{k-1})`` (:meth:`LinkPositionEstimator_.estimate`, warm-started at the
+  stored estimate), ``qdot_k = C z_k + D q_k`` (the filter ``s / (T s + 1)`` discretised, ``C = -I/T``,
+  ``D = I/T``), ``tau_k = joint_law(q_ref, q_k, qdot_k, measurements, f_ref,k)``, and the command
+  ``u_k = law(f_ref,k, measurements, P(q_k) qdot_k)`` with ``f_ref,k`` the distribution's state (its answer
+  of the previous period) or the sharing of ``tau_k``;
+* the periodic update stores ``q_k``, ``z_{k+1} = (1 - h/T) z_k + h/T q_k`` and
+  ``f_ref,k+1 = distribution.step(tau_k, K_mech, f_ref,k, q_k)``
+  (:meth:`TendonForceDistribution_.step`).
+
+So the fused loop equals the composed one (tests/test_fused_chain.py: 1e-12 over several periods at random
+states, every registered chain controller and the backstepping family, a finger and the hand; its sampled
+linearisation too).  Scalar types float and AutoDiffXd (the AutoDiffXd path calls the same methods in that
+type); not symbolic, as neither the estimator (Algorithm 1 branches on cost values) nor the distribution
+(its solver branches on values) is.  A chain with continuous state (the ch. 9 friction observer) or a
+user-given estimator or sensor model is closed as the composed blocks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from awiwi_drake.control.force_distribution import TendonForceDistribution_
+from awiwi_drake.hand.estimation import LinkPositionEstimator_
+
+__all__ = ["FusedChain_", "FusedChain", "ESTIMATE_OUTPUTS"]
+
+#: the fused system's estimate outputs, by the estimated measurement they replace
+ESTIMATE_OUTPUTS = {"joint_angle": "joint_angle_estimate", "joint_velocity": "joint_velocity_estimate"}
+_INTERNAL = ("joint_angle", "joint_velocity", "tendon_force_reference", "tendon_path_velocity")
+
+
+@TemplateSystem.define("FusedChain_", T_list=[float, AutoDiffXd])
+def FusedChain_(T):
+    """Estimator -> joint stage -> distribution -> tendon force law as one discrete system (module docstring).
+
+    ``spec`` (a dict, built by :meth:`~awiwi_drake.control.chain.TendonChainController.fused_spec` or by
+    :func:`~awiwi_drake.control.base.closed_loop` for a static law): ``estimator`` (the
+    :class:`~awiwi_drake.hand.estimation.LinkStateEstimator`'s position estimator arguments ``coupling,
+    motor_pulley_radius, offsets, period, iterations, step0, refine``), ``velocity_time_constant``, ``wrist``
+    (bool), ``law`` (the last stage, a static law giving ``motor_torque``), and for a chain ``joint_law``,
+    ``stiffness`` (the constant ``joint_stiffness_reference``), ``distribution`` (the
+    :class:`TendonForceDistribution_` keyword arguments) or ``sharing`` (``(W, f_op, tau_op)``), ``path_coupling``
+    (``P(q)`` for ``tendon_path_velocity``) and ``initial_forces``.
+
+    Inputs: ``joint_angle_reference`` and the rig outputs the stages read (``motor_angle``, ``elongation``,
+    [``wrist_tendon_offset``], ``tendon_force``, ...).  Outputs: ``motor_torque``, ``joint_angle_estimate``,
+    ``joint_velocity_estimate`` and for a chain ``tendon_force_reference``, ``joint_torque_reference``,
+    ``joint_stiffness_reference`` [, ``distribution_status``] (the composed chain's outputs).
+    """
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, spec: dict, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.spec = spec
+            est = spec["estimator"]
+            given = spec.get("estimator_system")      # the float blocks themselves, reused on the float path
+            self.estimator = given if (T is float and given is not None) else LinkPositionEstimator_[T](**est)
+            n, m = est["coupling"].num_joints, est["coupling"].num_tendons
+            self.period = float(est["period"])
+            Tv = float(spec["velocity_time_constant"])
+            a = self.period / Tv
+            # the velocity filter's matrices as Drake's LinearSystem holds them (same arithmetic, same rounding)
+            self._fa, self._fb, self._fc, self._fd = 1.0 - a, a, -1.0 / Tv, 1.0 / Tv
+            self.law, self.joint_law = spec["law"], spec.get("joint_law")
+            self.dist = None
+            if spec.get("distribution") is not None:
+                given = spec.get("distribution_system")
+                self.dist = given if (T is float and given is not None) else TendonForceDistribution_[T](
+                    **spec["distribution"])
+            self.sharing = spec.get("sharing")
+            self.path_coupling = spec.get("path_coupling")
+            names = {"joint_angle_reference": n, "motor_angle": m, "elongation": m}
+            if spec.get("wrist"):
+                names["wrist_tendon_offset"] = m
+            for stage in (self.joint_law, self.law):
+                if stage is not None:
+                    names.update({k: v for k, v in stage.inputs.items() if k not in _INTERNAL})
+            self._in = {nm: self.DeclareVectorInputPort(nm, int(sz)) for nm, sz in names.items()}
+            self._xq = self.DeclareDiscreteState(n)
+            self._xz = self.DeclareDiscreteState(n)
+            chain = self.joint_law is not None
+            K = np.asarray(spec["stiffness"], dtype=float) if chain else None
+            self._K = K if (T is float or K is None) else np.array([AutoDiffXd(k) for k in K], dtype=object)
+            if self.dist is not None:
+                self._xf = self.DeclareDiscreteState(self.dist.initial_forces)
+                self._xs = self.DeclareDiscreteState(len(self.dist.fingers))
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
+            tickets = {p.ticket() for p in self._in.values()} | {self.xd_ticket()}
+            self._cache = self.DeclareCacheEntry("fused chain at the sample", ValueProducer(
+                allocate=lambda: AbstractValue.Make(None), calc=self._calc_sample), tickets)
+            pre = {self._cache.ticket()}
+            self.DeclareVectorOutputPort("motor_torque", int(self.law.output_size),
+                                         lambda c, o: o.SetFromVector(self._sample(c)["u"]), prerequisites_of_calc=pre)
+            self.DeclareVectorOutputPort("joint_angle_estimate", n,
+                                         lambda c, o: o.SetFromVector(self._sample(c)["q"]), prerequisites_of_calc=pre)
+            self.DeclareVectorOutputPort("joint_velocity_estimate", n,
+                                         lambda c, o: o.SetFromVector(self._sample(c)["v"]), prerequisites_of_calc=pre)
+            if chain:
+                if self.dist is not None:
+                    self.DeclareStateOutputPort("tendon_force_reference", self._xf)
+                    self.DeclareStateOutputPort("distribution_status", self._xs)
+                else:
+                    self.DeclareVectorOutputPort("tendon_force_reference", m,
+                                                 lambda c, o: o.SetFromVector(self._sample(c)["f_ref"]),
+                                                 prerequisites_of_calc=pre)
+                self.DeclareVectorOutputPort("joint_torque_reference", int(self.joint_law.output_size),
+                                             lambda c, o: o.SetFromVector(self._sample(c)["tau"]),
+                                             prerequisites_of_calc=pre)
+                self.DeclareVectorOutputPort("joint_stiffness_reference", K.size,
+                                             lambda c, o: o.SetFromVector(self._K),
+                                             prerequisites_of_calc={self.nothing_ticket()})
+            self.set_name(spec.get("name", "fused_chain"))
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.spec, converter=converter)
+
+        def _sample(self, context) -> dict:
+            return self._cache.Eval(context)
+
+        def _calc_sample(self, context, value) -> None:
+            """Everything the composed loop evaluates at the sample (module docstring), once."""
+            meas = {nm: p.Eval(context) for nm, p in self._in.items()}
+            xd = context.get_discrete_state()
+            q = self.estimator.estimate(meas["motor_angle"], meas["elongation"], meas.get("wrist_tendon_offset"),
+                                        xd.get_vector(self._xq).CopyToVector())
+            z = xd.get_vector(self._xz).CopyToVector()
+            v = self._fc * z + self._fd * q
+            u = dict(meas, joint_angle=q, joint_velocity=v)
+            out = dict(q=q, v=v)
+            if self.joint_law is not None:
+                if self.dist is not None:
+                    u["tendon_force_reference"] = xd.get_vector(self._xf).CopyToVector()
+                tau = np.asarray(self.joint_law(u)).reshape(-1)
+                if self.sharing is not None:
+                    W, f0, tau0 = self.sharing
+                    u["tendon_force_reference"] = f0 + W @ (tau - tau0)
+                if self.path_coupling is not None:
+                    u["tendon_path_velocity"] = np.asarray(self.path_coupling.P(q)) @ v
+                out.update(tau=tau, f_ref=u["tendon_force_reference"])
+            out["u"] = np.asarray(self.law(u)).reshape(-1)
+            value.set_value(out)
+
+        def _update(self, context, discrete_state):
+            s = self._sample(context)
+            q = s["q"]
+            self.estimator.note_limit(q)
+            discrete_state.set_value(self._xq, q)
+            z = context.get_discrete_state(self._xz).CopyToVector()
+            discrete_state.set_value(self._xz, self._fa * z + self._fb * q)
+            if self.dist is not None:
+                f_new, status = self.dist.step(s["tau"], self._K,
+                                               context.get_discrete_state(self._xf).CopyToVector(),
+                                               q if self.dist.reads_joint_angle else None)
+                discrete_state.set_value(self._xf, f_new)
+                discrete_state.set_value(self._xs, status)
+
+        def initialize_state(self, context, joint_angles) -> None:
+            """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing) and the
+            distribution at the design point's forces (``context``: this system's)."""
+            q = np.asarray(joint_angles, dtype=float).reshape(-1)
+            context.SetDiscreteState(self._xq, q)
+            context.SetDiscreteState(self._xz, q)
+            f0 = self.spec.get("initial_forces")
+            if self.dist is not None and f0 is not None:
+                context.SetDiscreteState(self._xf, np.asarray(f0, dtype=float))
+
+    return Impl
+
+
+FusedChain = FusedChain_[None]

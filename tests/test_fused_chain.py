@@ -1,0 +1,170 @@
+"""The fused chain (control/fused.py): the hand's estimator -> joint stage -> distribution -> force law as one
+discrete system equals the composed blocks (closed_loop(fused=False)) to round-off, period by period, for every
+registered controller that reads the estimated joint state; it converts to AutoDiffXd and its sampled
+linearisation is the composed loop's."""
+
+import numpy as np
+import pytest
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+
+from awiwi_drake.analysis import simulate
+from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
+from awiwi_drake.control.fused import FusedChain_
+from awiwi_drake.control.joint_design import sampled_loop_poles
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+
+PERIOD = 1.0 / 3000.0
+#: every controller registered for fingers/the hand that reads the estimated joint state (joint-pd does not)
+ESTIMATED = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre", "backstepping",
+             "backstepping-position", "backstepping-nonlinear-spring", "optimal-backstepping")
+LOGS = ("motor_torque", "motor_torque_command", "joint_angle_estimate", "joint_velocity_estimate",
+        "joint_angle_estimation_error", "joint_angle", "tendon_force")
+
+
+def _rig(target):
+    return hand_diagram() if target == "hand" else finger_diagram(finger=target.removeprefix("finger-"))
+
+
+def _random_start(rig, seed):
+    """A random state near the operating point (joints, their velocities, motor angles) and a random reference."""
+    rng = np.random.default_rng(seed)
+    op = rig.operating_point()
+    x = np.array(op.state, dtype=float)
+    n, m = rig.num_joints, rig.num_tendons
+    x[:n] += rng.uniform(-0.05, 0.05, n)
+    x[n:2 * n] += rng.uniform(-0.3, 0.3, n)
+    x[2 * n:2 * n + m] += rng.uniform(-2e-3, 2e-3, m)
+    return op, x, op.joint_angle + rng.uniform(-0.1, 0.1, n)
+
+
+def _run(target, name, fused, seed, periods=8):
+    rig = _rig(target)
+    loop = closed_loop(rig, make_controller(name, rig), fused=fused, **get_entry(name, rig).loop_options)
+    op, x, ref = _random_start(rig, seed)
+    ctx = loop.create_context(op, state=x, references={"joint_angle_reference": ref})
+    logs = LOGS + tuple(p for p in ("controller_tendon_force_reference", "controller_joint_torque_reference",
+                                    "controller_distribution_status") if loop.diagram.HasOutputPort(p))
+    return loop, simulate(loop, ctx, periods / loop.rate_hz, log=logs)
+
+
+def _assert_same(a, b):
+    assert a.signals.keys() == b.signals.keys()
+    np.testing.assert_array_equal(a.t, b.t)
+    for k in a.signals:
+        scale = max(1.0, float(np.max(np.abs(a[k]))))
+        np.testing.assert_allclose(b[k], a[k], rtol=0, atol=1e-12 * scale, err_msg=k)
+
+
+@pytest.mark.parametrize("name", ESTIMATED)
+def test_fused_equals_composed_on_the_thumb(name):
+    """The thumb: P(q) and Algorithm 1 in every stage; every registered controller reading the estimates."""
+    assert name in controller_names("finger-thumb")
+    composed, a = _run("finger-thumb", name, False, seed=1)
+    fused, b = _run("finger-thumb", name, True, seed=1)
+    assert composed.fused is None and composed.diagram.HasSubsystemNamed("estimator")
+    assert isinstance(fused.fused, FusedChain_[float]) and not fused.diagram.HasSubsystemNamed("estimator")
+    assert fused.diagram.GetSubsystemByName("controller") is fused.fused
+    _assert_same(a, b)
+    # the loop moved: the comparison is not of two constant traces
+    assert np.ptp(a["motor_torque"], axis=0).max() > 1e-3
+
+
+@pytest.mark.parametrize("name", ["cascaded", "lqr", "backstepping"])
+def test_fused_equals_composed_on_the_hand(name):
+    """The hand (five fingers, one distribution batch, the thumb's kernels, the wrist offsets)."""
+    _, a = _run("hand", name, False, seed=2, periods=6)
+    loop, b = _run("hand", name, True, seed=2, periods=6)
+    assert loop.fused is not None
+    _assert_same(a, b)
+
+
+def test_fused_chain_on_a_ring_finger_with_coupled_dip():
+    """The ring: DoF selection S (the DIP follows the PIP, (5.16)) in the estimator, the stage and the distribution."""
+    _, a = _run("finger-ring", "cascaded", False, seed=3)
+    _, b = _run("finger-ring", "cascaded", True, seed=3)
+    _assert_same(a, b)
+
+
+def test_fused_is_not_used_where_the_blocks_must_stay():
+    """Ideal sensors, a sensor model or a continuous controller state (the ch. 9 observer) keep the blocks."""
+    from awiwi_drake.control.joint_design import joint_stage_controller
+    from awiwi_drake.parameters.hand_control import FrictionObserverParams
+    rig = _rig("finger-index")
+    assert closed_loop(rig, make_controller("cascaded", rig), sensors="ideal").fused is None
+    rig = _rig("finger-index")
+    obs = joint_stage_controller(rig, "cascaded", friction_observer=FrictionObserverParams())
+    assert closed_loop(rig, obs).fused is None
+    rig = _rig("finger-index")
+    assert closed_loop(rig, make_controller("joint-pd", rig)).fused is None      # no estimates read
+
+
+def _autodiff_output(loop, ctx, output, ref_port="joint_angle_reference"):
+    """An output of the loop in AutoDiffXd w.r.t. the reference: (value, gradient)."""
+    d = loop.diagram
+    ad = d.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    actx.SetTimeStateAndParametersFrom(ctx)
+    ref = np.asarray(d.GetInputPort(ref_port).Eval(ctx), dtype=float)
+    xa = InitializeAutoDiff(ref).ravel()
+    for i in range(d.num_input_ports()):
+        port = d.get_input_port(i)
+        if port.get_name() == ref_port:
+            ad.get_input_port(i).FixValue(actx, xa)
+        elif port.HasValue(ctx):
+            ad.get_input_port(i).FixValue(actx, np.array([AutoDiffXd(v) for v in port.Eval(ctx)], dtype=object))
+    u = ad.GetOutputPort(output).Eval(actx)
+    return ExtractValue(u).ravel(), ExtractGradient(u)
+
+
+@pytest.mark.parametrize("name, output", [("cascaded", "controller_joint_torque_reference"),
+                                          ("backstepping", "motor_torque_command")])
+def test_fused_converts_to_autodiff_and_its_derivative_is_the_composed_one(name, output):
+    """ToAutoDiffXd of the fused loop: an output's value equals the float one, and its derivative by the reference
+    equals the composed loop's AutoDiffXd derivative and central finite differences of the float loop (the chain's
+    command reads the distribution's previous answer, so its reference path is the joint stage's torque)."""
+    rig = _rig("finger-thumb")
+    fused = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
+    rig2 = _rig("finger-thumb")
+    composed = closed_loop(rig2, make_controller(name, rig2), fused=False, **get_entry(name, rig2).loop_options)
+    op, x, ref = _random_start(rig, 4)
+    cf = fused.create_context(op, state=x, references={"joint_angle_reference": ref})
+    cc = composed.create_context(op, state=x, references={"joint_angle_reference": ref})
+    assert FusedChain_[AutoDiffXd] is not None and fused.fused.ToAutoDiffXd() is not None
+    uf, Gf = _autodiff_output(fused, cf, output)
+    uc, Gc = _autodiff_output(composed, cc, output)
+    u0 = fused.diagram.GetOutputPort(output).Eval(cf)
+    np.testing.assert_allclose(uf, u0, rtol=0, atol=1e-12 * max(1, np.abs(u0).max()))
+    np.testing.assert_allclose(Gf, Gc, rtol=1e-10, atol=1e-10 * max(1.0, np.abs(Gc).max()))
+    port = fused.diagram.GetInputPort("joint_angle_reference")
+    h = 1e-6
+    fd = []
+    for j in range(ref.size):
+        e = np.zeros(ref.size)
+        e[j] = h
+        port.FixValue(cf, ref + e)
+        up = fused.diagram.GetOutputPort(output).Eval(cf).copy()
+        port.FixValue(cf, ref - e)
+        um = fused.diagram.GetOutputPort(output).Eval(cf).copy()
+        fd.append((up - um) / (2 * h))
+    fd = np.array(fd).T
+    assert np.abs(Gf).max() > 0        # the reference moves the command (the test can fail)
+    np.testing.assert_allclose(Gf, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("name", ["cascaded", "lqr"])
+def test_sampled_linearisation_of_the_fused_loop_is_the_composed_one(name):
+    """sampled_loop_poles (the one-period map's AutoDiffXd Jacobian, estimator and distribution states included)
+    through the fused system equals the composed blocks' (index, guide friction and hysteresis on)."""
+    rig = _rig("finger-index")
+    pf = sampled_loop_poles(rig, make_controller(name, rig))
+    rig = _rig("finger-index")
+    pc = sampled_loop_poles(rig, make_controller(name, rig), fused=False)
+    assert pf.jacobian.shape == pc.jacobian.shape
+    scale = np.abs(pc.jacobian).max()
+    # the state groups are ordered differently (rig, then the controller's states in its own order): compare the
+    # spectra and the reference-to-joint-angle response, which do not depend on the order
+    np.testing.assert_allclose(np.sort_complex(pf.z), np.sort_complex(pc.z), rtol=0, atol=1e-9 * max(1.0, scale))
+    _, yf = pf.step_response(np.full(rig.num_joints, 0.01), 0.01)
+    _, yc = pc.step_response(np.full(rig.num_joints, 0.01), 0.01)
+    np.testing.assert_allclose(yf, yc, rtol=0, atol=1e-12)
+    assert pf.spectral_radius == pytest.approx(pc.spectral_radius, rel=1e-9)
