@@ -207,6 +207,9 @@ class CatalogBounds(Parameters):
     hysteresis_width_max: float = param(
         40.0, unit="N", low=0.0, source="Fig 4.8b: 10-20 N wide at ~70 N; x2 margin",
         doc="bound on the hysteresis half-width")
+    hysteresis_ratio_max: float = param(
+        0.3, unit="-", low=0.0, source="Fig 4.8b: half-width 5-10 N at ~70 N (0.07-0.14 of the force); x2 margin",
+        doc="bound on the force-proportional hysteresis half-width (finger catalog, HysteresisParams.width_ratio)")
     hysteresis_length_range: tuple = param(
         (2e-5, 2e-3), unit="m", low=0.0,
         source="chosen: Dahl transition over 0.02-2 mm of elongation (spring travel "
@@ -441,3 +444,7 @@ class FingerTruthParams(Parameters):
     ripple_amplitude_range: tuple = param((0.02, 0.05), unit="Nm", low=0.0,
                                           source="chosen: 40-90 % of the motor ripple amplitude of Table 3.3 "
                                                  "(0.054 Nm)", doc="hidden ripple amplitude per harmonic")
+    hysteresis_ratio_range: tuple = param((0.07, 0.14), unit="-", low=0.0,
+                                          source="Fig 4.8b point A: a 10-20 N loop at about 70 N, half-width "
+                                                 "0.07-0.14 of the force (HysteresisParams.width_ratio)",
+                                          doc="hidden spring hysteresis on one tendon, loop half-width / force")
