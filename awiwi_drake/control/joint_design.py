@@ -44,12 +44,22 @@ model sampled with its one period of delay, :func:`sampled_model`)
 * ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon
   (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`), its reduced model built with that law;
 * ``pole-placement``: the double oscillator (12.13) by coefficient identification
-  (:func:`~awiwi_drake.control.pole_placement.place_by_identification`): ``omega1 = position_bandwidth``,
-  ``omega2`` the modulus of the joint's own open-loop pair (the link on its tendons through the force
-  loop, 270-1070 rad/s on the index), both damped to ``damping_ratio``.  Measured on the index (whole
-  finger, :func:`check_design_poles`): a fixed ``omega2`` of 300 or 1000 rad/s needs large torque
-  feedback and the neglected MCP/PIP/DIP coupling makes the finger unstable (+408 and +483 1/s);
-  with the joint's own pair the slowest whole-finger pole is -31 1/s;
+  (:func:`~awiwi_drake.control.pole_placement.place_by_identification`) on ``[q, qdot, tau, tau_dot]``:
+  ``omega1 = position_bandwidth`` damped to ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop
+  pair (the link on its tendons through the force loop, 345-1070 rad/s on the index) damped to the largest
+  ``xi2 <= damping_ratio`` that keeps the torque loop gain ``1 + K_tau + K_prev`` (:func:`torque_loop_gain`) at
+  least ``JointDesignParams.torque_loop_gain_min`` (on the index only the DIP needs less: xi2 = 0.30).
+  Measured on the default index (guide friction on, 3 kHz, estimator, :func:`sampled_loop_poles`): with xi2 =
+  0.7 the DIP needs ``K_tau = -4.07`` (gain -2.8), a positive torque feedback that a link held at rest (the
+  guides' presliding stiffness, ~0.26 Nm/rad on the DIP, or a contact) turns into a drift at +33 1/s; the DIP
+  ran off until the guides slid (2.5 rad).  Two other free choices were measured and rejected: raising
+  ``omega2`` until the gain is met (the gains grow; the whole finger's fast PIP/DIP mode, 3180 rad/s on the
+  springs and 4240 with the presliding stiffness of the hysteresis and the guides -- the per-joint models, on
+  ``M_jj``, put the DIP at 1030 rad/s -- sees the torque feedback ~1.5 periods late and goes unstable, +32 1/s
+  at 4461 rad/s), and measuring ``sigma`` in place of ``tau_dot`` (the fast mode is damped, but the placed
+  velocity gains turn negative and the design model's plant has a real pole at +266 1/s).  Measured before: a
+  fixed ``omega2`` of 300 or 1000 rad/s makes the finger unstable through the neglected MCP/PIP/DIP coupling
+  (+408 and +483 1/s); with the joint's own pair the slowest whole-finger pole is -31 1/s;
 * ``lqr``: Drake ``LinearQuadraticRegulator`` on ``(F, G)`` with Bryson weights
   (:class:`~awiwi_drake.parameters.joint_design.JointDesignParams`);
 * ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque
@@ -80,7 +90,7 @@ from awiwi_drake.rigs.base import OperatingPoint, Rig
 from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
-           "design_joint_gains", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS",
+           "design_joint_gains", "torque_loop_gain", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS",
            "SampledLoopPoles", "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
@@ -316,6 +326,47 @@ def _lqr_weights(p: JointDesignParams, model: JointReducedModel):
     return Q, np.array([[1.0 / p.lqr_input ** 2]])
 
 
+def _pole_placement_gains(F, G, p: JointDesignParams, period: float | None) -> np.ndarray:
+    """(12.13) on one DoF (``pole-placement`` in the module docstring): ``omega1 = position_bandwidth`` damped to
+    ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop pair, damped to the largest ``xi2 <=
+    damping_ratio`` that keeps the torque loop gain ``1 + K_tau + K_prev >= JointDesignParams.torque_loop_gain_min``
+    (:func:`torque_loop_gain`; the gain falls as ``xi2`` rises, so the bound is met at the first crossing, found by
+    bisection)."""
+    lam = np.linalg.eigvals(F)
+    pair = abs(lam[np.argmax(np.abs(lam.imag))])        # the link on its tendons through the force loop
+
+    def gains(xi2):
+        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, pair, xi2)
+        if period is None:
+            return np.append(place_by_identification(F, G, target).ravel(), 0.0)
+        Phi, Gamma = sampled_model(F, G, period)      # poles mapped z = exp(h s), the delay's at 0
+        zs = np.concatenate([np.exp(period * np.roots(target)), [0.0]])
+        return place_by_identification(Phi, Gamma, np.real(np.poly(zs))).ravel()
+
+    def excess(xi2):
+        return torque_loop_gain(gains(xi2)) - p.torque_loop_gain_min
+
+    if excess(p.damping_ratio) >= 0.0:
+        return gains(p.damping_ratio)
+    low = p.pair_damping_min
+    if excess(low) < 0.0:
+        raise ValueError(f"pole-placement design: no damping xi2 in [{low}, {p.damping_ratio}] of the joint's pair "
+                         f"({pair:.4g} rad/s) keeps the torque loop gain 1 + K_tau + K_prev >= "
+                         f"{p.torque_loop_gain_min}; change JointDesignParams.torque_loop_gain_min or pair_damping_min")
+    from scipy.optimize import brentq
+    return gains(brentq(excess, low, p.damping_ratio, xtol=1e-12))
+
+
+def torque_loop_gain(K) -> float:
+    """``1 + K_tau + K_prev`` of a gain row ``K`` (5,): the static gain of the torque loop the joint stage closes
+    around the force loop when the link is held (the force loop holds ``tau = tau_ref`` at rest and the previous
+    request equals the current one): the static stiffness under a link-side load is ``Kp`` divided by it
+    (:attr:`JointDesign.static_stiffness`).  Negative, the stage feeds the measured torque back positively: any
+    link-side stiffness (a contact, the guides' presliding at rest) then meets a negative joint stiffness."""
+    K = np.asarray(K, dtype=float)
+    return float(1.0 + K[2] + (K[4] if K.size > 4 else 0.0))
+
+
 def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDesignParams | None = None,
                        chain: HandChainParams | None = None, period: float | None = None) -> np.ndarray:
     """The gain row ``K_j`` (5,) of one DoF for ``design`` in :data:`DESIGNS` (module docstring): on ``z``
@@ -329,14 +380,7 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     if design == "pd":
         return _placed_pd_gains(model, p, period)
     if design == "pole-placement":
-        lam = np.linalg.eigvals(F)
-        pair = lam[np.argmax(np.abs(lam.imag))]          # the link on its tendons through the force loop
-        target = double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, abs(pair), p.damping_ratio)
-        if period is None:
-            return np.append(place_by_identification(F, G, target).ravel(), 0.0)
-        Phi, Gamma = sampled_model(F, G, period)   # poles mapped z = exp(h s), the delay's at 0
-        zs = np.concatenate([np.exp(period * np.roots(target)), [0.0]])
-        return place_by_identification(Phi, Gamma, np.real(np.poly(zs))).ravel()
+        return _pole_placement_gains(F, G, p, period)
     if design in ("lqr", "sdre"):
         Q, R = _lqr_weights(p, model)
         if period is None:

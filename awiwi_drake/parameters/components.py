@@ -269,7 +269,11 @@ class GuideFrictionParams(Parameters):
     routing friction of 10-50 % of the measured force).
     """
 
-    c0: float = param(2.2, unit="N", low=0.0, source="chosen: Fig 4.10 saturates near 2 N at 200 deg (6.5 mm Dyneema)")
+    c0: float = param(2.2, unit="N", low=0.0,
+                      source=("Fig 4.10: the 6.5 mm Dyneema curve (the hand's pulleys) saturates near 2 N at 200 deg; "
+                              "with c1, 1.96 / 2.12 N on the finger paths (bending 180 / 270 deg), 10 % of the 20 N "
+                              "pretension: the low end of ch. 9's routing friction, '10 % to 50 %. That is for a "
+                              "measured force of 20 N the effective pulling force is between 10 N and 30 N'"))
     c1: float = param(0.7, unit="1/rad", low=0.0,
                       source="chosen: with c0, 0.2 N at 8 deg and 2.0 N at 200 deg (Fig 4.10 range 0.2-2 N)")
     mu: float = param(0.1, unit="-", low=0.0, high=1.0,

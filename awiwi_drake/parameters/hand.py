@@ -348,7 +348,11 @@ class FingerDriveParams(Parameters):
                               doc="tendon force of every tendon at the default operating point")
     guide_friction: bool = param(
         True, unit="-",
-        source=("thesis (4.1), ch. 4 and 9: routing friction on every tendon path; on by default. The 15.5 finger "
+        source=("thesis (4.1), ch. 4 and 9: routing friction on every tendon path; on by default, at the level of Fig "
+                "4.10 (~2 N per path, GuideFrictionParams.c0; ch. 9 measured 10-50 % of the tendon force, so this is "
+                "the least the hand has). It leaves every impedance law a dead band, the guides' friction torque over "
+                "the joint stiffness, which ch. 9 names ('a deflection of the link is not corrected even without any "
+                "external disturbance') and its observer (9.2) removes (tests/test_hand_control.py). The 15.5 finger "
                 "backstepping is stable with it (without the link-acceleration feed-forward, see "
                 "HandChainParams.link_acceleration_feedforward); with_physics(guide_friction=False) switches it off"))
     capstan_friction: bool = param(False, unit="-",

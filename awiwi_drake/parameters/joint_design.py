@@ -28,13 +28,34 @@ class JointDesignParams(Parameters):
     damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
                                  source="chosen: as xi1 = xi2 = 0.7 of Table 12.1",
                                  doc="cascaded: of the slowest mode; pole placement: xi1 = xi2 of (12.13)")
+    torque_loop_gain_min: float = param(
+        0.5, unit="-", low=0.0, low_inclusive=False,
+        source=("chosen: pole placement damps the joint's own pair (omega2 of (12.13)) less than damping_ratio where "
+                "needed to keep the torque loop gain 1 + K_tau + K_prev (joint_design.torque_loop_gain) at least this, "
+                "so the static stiffness against a link-side hold, Kp / gain, stays positive. Cause (sampled loop at "
+                "rest, default index): at xi2 = 0.7 the DIP needs K_tau = -4.07 (gain -2.8), and the guides' "
+                "presliding stiffness holding the link made the loop drift at +33 1/s. The gain must stay low: the "
+                "fast PIP/DIP mode (4240 rad/s at rest, see lqr_velocity) sees the torque feedback ~1.5 periods late. "
+                "Measured with 0.5 (3 kHz, estimator): index / thumb slowest pole -12 / -6 1/s with the default "
+                "physics, -1 / -1 1/s without guide friction, -26 / -28 1/s on the design model's plant (true state)"),
+        doc="pole placement: lower bound of 1 + K_tau + K_prev (the static stiffness under a load is Kp / that)")
+    pair_damping_min: float = param(
+        0.05, unit="-", low=0.0, high=1.0, low_inclusive=False,
+        source="chosen: the least damping pole placement gives the joint's own pair when it lowers xi2 for "
+               "torque_loop_gain_min (the index DIP needs 0.30, the thumb's 0.39); below it the design is refused",
+        doc="pole placement: lower end of the xi2 search")
     lqr_angle_error: float = param(
         0.05, unit="rad", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule, an acceptable joint error of ~3 deg (the compare step is 0.2 rad)")
     lqr_velocity: float = param(
-        5.0, unit="rad/s", low=0.0, low_inclusive=False,
-        source="chosen: Bryson's rule, ~ the velocity of a 0.2 rad step at the 60 rad/s joint bandwidth (12 rad/s) "
-               "halved")
+        12.0, unit="rad/s", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule, the peak velocity of a 0.2 rad step at the 60 rad/s joint bandwidth (0.2 x 60). "
+               "Measured (sampled_loop_poles, 3 kHz, estimator, default physics with guide friction): the former "
+               "5 rad/s made the index DIP's torque gain K_tau = 21.5 and left the fast PIP/DIP mode at +1.06 +- 4382j "
+               "1/s (|z| = 1.00035); that mode (whole-finger M^-1 with the springs and the presliding of hysteresis "
+               "and guides; absent from the per-joint models) sees the torque feedback ~1.5 periods late, where a "
+               "positive gain removes damping (halving the DIP's K_tau alone: -47 1/s). 12 rad/s (with lqr_input "
+               "0.05 Nm) damps it on every finger and the hand (tests/test_joint_design.py)")
     lqr_torque_error: float = param(
         0.05, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: Bryson's rule, 0.05 Nm ~ 10 % of a finger joint's torque range (Fig 15.22: 0.5 Nm/rad x 0.2 rad "
@@ -44,15 +65,17 @@ class JointDesignParams(Parameters):
         source="chosen: Bryson's rule, the torque error above over ~50 ms. The LQR/SDRE stages measure the motors' "
                "rate sigma = tau_dot + K_jj qdot (joint_stage), weighted with the bound lqr_torque_rate + K_jj "
                "lqr_velocity (joint_design._lqr_weights). Measured at 3 kHz with the estimator and the default "
-               "physics without guide friction (control.joint_design.sampled_loop_poles): index slowest pole -16 1/s, DIP link mode "
-               "(~3930 rad/s) damped at -30 1/s (5 Nm/s: -11 1/s); one bound sigma <= 5 Nm/s for every joint held "
-               "the thumb base (K_jj = 47 Nm/rad) to -0.66 1/s, with the sum -2.0 1/s. With the guide friction (on by "
-               "default) the index DIP link pair is at +1.1 +- 4382j 1/s (|z| = 1.00035, held by the friction in "
-               "simulation): open, docs/REPRODUCTIONS.md")
+               "physics without guide friction, lqr_velocity 5 rad/s (control.joint_design.sampled_loop_poles): index "
+               "slowest pole -16 1/s, DIP link mode (~3930 rad/s) damped at -30 1/s (5 Nm/s: -11 1/s); one bound "
+               "sigma <= 5 Nm/s for every joint held the thumb base (K_jj = 47 Nm/rad) to -0.66 1/s, with the sum "
+               "-2.0 1/s (guide friction on: see lqr_velocity)")
     lqr_input: float = param(
-        0.1, unit="Nm", low=0.0, low_inclusive=False,
-        source="chosen: Bryson's rule on the desired joint torque (twice the torque error: the input may move more "
-               "than the state)")
+        0.05, unit="Nm", low=0.0, low_inclusive=False,
+        source="chosen: Bryson's rule on the desired joint torque, the torque error's bound (the input is a torque "
+               "request the force loop turns into that torque). Measured (sampled_loop_poles, index and thumb, 3 kHz): "
+               "with the former 0.1 Nm the fast PIP/DIP mode (see lqr_velocity) is unstable when the motors' "
+               "friction is off (index +32 1/s at 4388 rad/s); 0.05 Nm is stable with the default physics, without "
+               "guide friction, without motor friction and ripple, and on the design model's plant (true state)")
     sdre_torque_range: float = param(
         0.2, unit="Nm", low=0.0, low_inclusive=False,
         source="chosen: the SDRE table spans tau_op +- 0.2 Nm (a 0.2 rad step on 0.5-1 Nm/rad joints)")
