@@ -383,7 +383,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         (``external_torque``) are held over each period too. ``Linearize`` takes the loop with the
         period; the rig's discrete state there is in its integration coordinates (momentum and
         elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
-        its ``state`` output physical. The loop's ``motor_torque`` output is the held command as before. False: the
+        its ``state`` output physical. Its systems are added to the loop directly (``Rig.add_sampled``),
+        not as the sub-diagram ``"rig"`` that any other rig is. The loop's ``motor_torque`` output is the held command as before. False: the
         continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
     fused : bool
         For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
