@@ -18,7 +18,7 @@ exponential spring creep, exact delay, ...).  Rows (the issue-12 targets):
 * gap closed on held-out windows ``(E_nominal - E_augmented) / (E_nominal - E_truth)``
   (datasets with hidden physics; E_truth from the generator's clean outputs);
 * CPU seconds per 10 s joint diagnosis;
-* ``finger_single``: one effect (motor friction, guide friction, ripple) on one random tendon of the index
+* ``finger_single``: one effect (motor friction, guide friction, ripple, spring hysteresis) on one random tendon of the index
   finger (the package's finger diagram at 1 kHz, 30 dB): effect and place named (``finger_nothing``: nothing
   hidden: any name).  The baseline is not run on fingers (its library is the rigs' equations).
 
@@ -59,7 +59,7 @@ TRIPLES = [("motor_friction", "joint_friction", "delay"), ("motor_ripple", "spri
            ("guide_friction", "delay", "motor_ripple"), ("spring_drift", "motor_friction", "joint_friction")]
 OUT_OF_CATALOG = ["link_scale", "link_bias", "motor_bias"]
 TENDON = ["motor_friction", "guide_friction", "delay", "spring_hysteresis"]
-FINGER = ["motor_friction", "guide_friction", "motor_ripple"]
+FINGER = ["motor_friction", "guide_friction", "motor_ripple", "spring_hysteresis"]
 
 
 def cases(per_row: int, quick: bool) -> list:

@@ -192,3 +192,31 @@ def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
     assert before[2] > 20 * after[2]
     np.testing.assert_allclose(after, dx.ratios_after["motor"], rtol=1e-6)
     np.testing.assert_allclose(np.delete(after, 2), np.delete(before, 2), rtol=1e-12)
+
+
+def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
+    """``--hide spring_hysteresis --place 6``: the truth is the package's loop (Fig 4.8b, half-width proportional
+    to the force) on the spring mechanism of index_h6 only (a per-tendon ``tendon_springs`` entry).  The diagnosis
+    names it on index_h6; its loop size is the truth's within 35 %; the write-back switches the loop on that
+    tendon only (``finger_diagram(params=...)`` builds a drive whose other tendons have none), and with it as the
+    nominal the spring-side equation error drops to the diagnosis's after-ratio."""
+    import dataclasses
+    from awiwi_drake.discrepancy.data import finger_parameters_from_json
+    from awiwi_drake.hand.diagrams import finger_diagram
+    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0)
+    dx = diagnose(ds)
+    assert dx.places == {"spring_hysteresis": "index_h6 (PIP)"}
+    beta = ds.meta["truth"]["spring_hysteresis"]["width_ratio"]
+    step = dx.steps[0].parameters
+    F = ds.outputs["tendon_force_6"]
+    fitted, truth = step["hysteresis_ratio"] * F.mean() + step["hysteresis_width"], beta * F.mean()
+    assert abs(fitted - truth) < 0.35 * truth, (fitted, truth)
+    js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
+    aug = finger_parameters_from_json(js, "summary.json")
+    assert aug == dx.augmented.params and [t for t, _ in aug.tendon_springs] == ["index_h6"]
+    hyst = finger_diagram(finger="index", params=aug).drive.model.hysteresis
+    assert [h.enabled for h in hyst] == [i == 5 for i in range(8)]
+    s = DiscrepancySettings()
+    before = FingerResiduals(ds, s).ratios()["spring_total"]
+    after = FingerResiduals(dataclasses.replace(ds, parameters=js), s).ratios()["spring_total"]
+    assert after < 0.6 * before and abs(after - dx.ratios_after["spring_total"]) < 0.05 * after

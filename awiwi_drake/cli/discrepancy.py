@@ -181,7 +181,7 @@ def register(subparsers) -> None:
     m.add_argument("--rig", choices=["tendon-rig", "joint-rig", "finger-index", "finger-middle", "finger-ring",
                                      "finger-fifth"], default="joint-rig",
                    help="the rig of the truth experiment (default joint-rig); finger-*: the package's finger "
-                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple")
+                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple, spring_hysteresis")
     m.add_argument("--hide", action="append", metavar="EFFECT",
                    help="catalog effect hidden in the truth (repeat or comma-separate; 'none'): motor_friction, "
                         "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay, spring_drift, "

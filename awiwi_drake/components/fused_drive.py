@@ -105,7 +105,7 @@ class DriveModel:
     coupling: object
     offsets: np.ndarray
     motor_pulley_radius: float
-    hysteresis: HysteresisParams = field(default_factory=HysteresisParams)
+    hysteresis: HysteresisParams | tuple = field(default_factory=HysteresisParams)   # or one per tendon
     guide_friction: GuideFrictionModel | None = None
     rate_joints: int | None = None
     link_inertia: tuple | None = None
@@ -116,6 +116,9 @@ class DriveModel:
         if not isinstance(self.motor, MotorParams) and (
                 len(self.motor) != m or not all(isinstance(mp, MotorParams) for mp in self.motor)):
             raise ValueError(f"DriveModel: motor must be one MotorParams or one per tendon ({m})")
+        if isinstance(self.hysteresis, tuple) and (
+                len(self.hysteresis) != m or not all(isinstance(h, HysteresisParams) for h in self.hysteresis)):
+            raise ValueError(f"DriveModel: hysteresis must be one HysteresisParams or one per tendon ({m})")
         if len(self.springs) != m:
             raise ValueError(f"DriveModel: springs must hold one spring law per tendon ({m}), got {len(self.springs)}")
         object.__setattr__(self, "laws", TendonSprings(self.springs))    # the one per-tendon evaluation
@@ -160,7 +163,8 @@ class DriveModel:
 
     @property
     def has_hysteresis(self) -> bool:
-        return bool(self.hysteresis.enabled)
+        h = self.hysteresis
+        return any(x.enabled for x in h) if isinstance(h, tuple) else bool(h.enabled)
 
     @property
     def has_guide_friction(self) -> bool:

@@ -575,8 +575,14 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
     and the state's relaxation rate ``|xdot| / delta`` does not depend on the force, so the
     fixed-step integration bound (``|xdot| h / delta`` within the integrator's real-axis
     stability) holds at every load.  ``p`` needs ``width_ratio`` beta, ``width_offset`` z0,
-    ``presliding_length`` delta and ``smoothing_velocity`` v_s.
+    ``presliding_length`` delta and ``smoothing_velocity`` v_s; or ``p`` is a tuple of one
+    :class:`HysteresisParams` per tendon (a tendon with ``enabled`` false has no loop: ``w = 0``).
     """
+    if isinstance(p, tuple):
+        on = np.array([h.enabled for h in p], dtype=float)
+        return dahl_rate(z, xdot, on * np.array([h.width_ratio for h in p]) * f_elastic
+                         + on * np.array([h.width_offset for h in p]), np.array([h.presliding_length for h in p]),
+                         np.array([h.smoothing_velocity for h in p]))
     return dahl_rate(z, xdot, p.width_ratio * f_elastic + p.width_offset, p.presliding_length, p.smoothing_velocity)
 
 

@@ -128,7 +128,9 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.control.chain import rig_springs
+from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams
@@ -261,9 +263,7 @@ class FingerBacksteppingLaw(StaticLaw):
         P = np.asarray(self.coupling.P(q))
         P_val = _values(P)
         PS = P @ S
-        W = np.zeros((P_val.shape[0], S.shape[1]))             # m x k, frozen at the value of q
-        for ts, js, ds, W_f in self._blocks:
-            W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
+        W = self._sharing(P_val)                               # m x k, frozen at the value of q
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
         f = self.springs.force(x)                       # each tendon's own law phi_i
@@ -320,7 +320,59 @@ class FingerBacksteppingLaw(StaticLaw):
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
     def __call__(self, u):
+        if self.variant == "antagonistic" and not self.link_torque_estimate and float_inputs(u, self.inputs):
+            fast = self.__dict__.get("_fast")
+            if fast is None:
+                fast = self._fast = self._fast_path()
+            if fast:
+                return self._compiled_call(u, *fast)
         return self.terms(u)["command"]
+
+    def _fast_path(self):
+        """The compiled float path (:mod:`awiwi_drake.control.compiled`, ``backstepping``): polynomial springs
+        only (each tendon's coefficient rows); ``()`` when a law is not polynomial."""
+        laws = self.springs.laws
+        if not all(isinstance(law, PolynomialSpring) for law in laws):
+            return ()
+        deg = max(law.coefficients.size for law in laws)
+        rows = np.zeros((3, len(laws), deg))
+        for i, law in enumerate(laws):
+            c = law.coefficients
+            kk = np.arange(2, c.size + 1)
+            rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
+        xmax = np.array([law.max_elongation for law in laws], dtype=float)
+        kend = np.array([law._k_end for law in laws], dtype=float)
+        return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
+                np.empty(len(laws)))
+
+    def _compiled_call(self, u, fn, coef, dcoef, ddcoef, xmax, kend, out):
+        q = u["joint_angle"]
+        P = np.asarray(self.coupling.P(q), dtype=float)
+        W = self._sharing(P, fast=True)
+        return fn(q, u["joint_velocity"], u["joint_angle_reference"], u["elongation"], u["motor_angle"],
+                  u["motor_velocity"], P, self.S, self.Sp, W, self._Minv, self.Bq, self.Kp, self.Kd, self.K3, self.K4,
+                  self.f_op, self.r_m, self.B, self.friction_scale, coef, dcoef, ddcoef, xmax, kend,
+                  self.link_feedforward, out).copy()
+
+    def _sharing(self, P_val, fast: bool = False):
+        """``W = -((P S)^T)^+`` (m x k), block by finger, frozen at the value of ``P``.  ``fast``: a varying block of
+        full column rank as ``-(P S) ((P S)^T (P S))^-1`` (the same matrix; no SVD), else the pseudo-inverse."""
+        S = self.S
+        W = np.zeros((P_val.shape[0], S.shape[1]))
+        for ts, js, ds, W_f in self._blocks:
+            if W_f is None:
+                A = P_val[ts, js] @ S[js, ds]
+                G = A.T @ A
+                W_f = None
+                if fast:
+                    try:
+                        W_f = -np.linalg.solve(G, A.T).T
+                    except np.linalg.LinAlgError:      # rank lost: the pseudo-inverse
+                        pass
+                if W_f is None:
+                    W_f = -np.linalg.pinv(A.T)
+            W[ts, ds] = W_f
+        return W
 
 
 def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None,

@@ -34,13 +34,14 @@ finger catalog            that tendon's motor
 ``motor_friction``        ``friction``, ``coulomb_torque``, ``friction_slope``, ``viscous_friction`` ((3.8))
 ``motor_ripple``          ``ripple``, ``ripple_harmonics`` (the two fitted orders)
 ``nominal_motor``         ``inertia + motor_inertia_abs``, ``damping + motor_damping_add``
+``spring_hysteresis``     that tendon's ``tendon_springs`` entry: ``hysteresis`` on, ``width_ratio``,
+                          ``width_offset``, ``presliding_length`` (the package's loop, Fig 4.8b)
 ========================= =========================================================
 
 Not representable (listed with the reason): ``guide_friction`` as the finger diagnosis sees it, a
 tension-dependent torque on the motor side of the force sensor, while the package's guide friction
 ((4.1), ch. 4: "the guidings from the fingers to the spring mechanisms") acts between the sensor and
-the joints; ``spring_hysteresis`` on one tendon (the finger diagram switches hysteresis for all tendons);
-the sensor calibrations ``nominal_spring`` and ``force_sensor`` (the measurement, not the plant).
+the joints; the sensor calibrations ``nominal_spring`` and ``force_sensor`` (the measurement, not the plant).
 """
 
 from __future__ import annotations
@@ -112,7 +113,6 @@ def augmented_rig_parameters(dx, base) -> AugmentedParameters:
 _FINGER_NOT_REPRESENTABLE = {
     "guide_friction": ("a tension-dependent torque on the motor side of the force sensor; the package's guide "
                        "friction acts between the sensor and the joints (ch. 4)"),
-    "spring_hysteresis": "the finger diagram switches spring hysteresis for all tendons at once",
     "nominal_spring": "a force-sensor scale: a calibration of the measurement, not of the plant",
     "force_sensor": "a force-sensor offset: a calibration of the measurement, not of the plant",
 }
@@ -122,8 +122,10 @@ def augmented_finger_parameters(dx, base) -> AugmentedParameters:
     """Write the accepted per-tendon effects of finger diagnosis ``dx``
     (:class:`~awiwi_drake.discrepancy.finger.FingerDiagnosis`) into ``base`` (the dataset's
     :class:`~awiwi_drake.parameters.hand.FingerRigParams`) as ``tendon_motors`` overrides (module
-    docstring); returns the validated copy, the effects written and those not representable (with why)."""
+    docstring; ``spring_hysteresis`` into ``tendon_springs``); returns the validated copy, the effects written and
+    those not representable (with why)."""
     from awiwi_drake.components.motor import tendon_motor_params
+    from awiwi_drake.parameters.components import HysteresisParams
     from awiwi_drake.parameters.hand import FingerRigParams
 
     if not isinstance(base, FingerRigParams):
@@ -149,6 +151,8 @@ def augmented_finger_parameters(dx, base) -> AugmentedParameters:
             motor = (motor.replace(ripple_harmonics=motor.ripple_harmonics + extra) if motor.ripple else
                      motor.replace(ripple=True, ripple_motor_amplitude=0.0, ripple_output_amplitude=0.0,
                                    ripple_harmonics=extra))
+        elif st.effect == "spring_hysteresis":
+            continue                                    # a tendon_springs entry, below
         elif st.effect == "nominal_motor":
             inertia, damping = motor.inertia + g["motor_inertia_abs"], motor.damping + g["motor_damping_add"]
             if not (inertia > 0 and damping >= 0):
@@ -164,4 +168,18 @@ def augmented_finger_parameters(dx, base) -> AugmentedParameters:
         applied.append(what + (f" ({st.status})" if st.status != "confirmed" else ""))
     keep = tuple((t, p) for t, p in base.tendon_motors if t not in changed)
     out = base.replace(tendon_motors=keep + tuple((t, motors[t]) for t in names if t in changed))
+    springs = dict(out.tendon_springs)
+    for st in dx.steps:
+        if st.effect != "spring_hysteresis":
+            continue
+        tendon, g = names[st.tendon - 1], st.parameters
+        sp = springs.get(tendon, base.spring)
+        if sp.hysteresis.enabled:
+            missing.append(f"spring_hysteresis on {st.place}: the spring already has a loop; two do not add into one")
+            continue
+        springs[tendon] = sp.replace(hysteresis=HysteresisParams(
+            enabled=True, width_ratio=g["hysteresis_ratio"], width_offset=g["hysteresis_width"],
+            presliding_length=g["hysteresis_length"]))
+        applied.append(f"spring_hysteresis on {st.place}" + (f" ({st.status})" if st.status != "confirmed" else ""))
+    out = out.replace(tendon_springs=tuple(springs.items()))
     return AugmentedParameters(out, applied, missing)

@@ -49,6 +49,7 @@ from scipy.special import ndtr
 
 from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.components import HysteresisParams
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
 from . import laws
@@ -131,8 +132,8 @@ class FingerResiduals:
                              f"diagnosis supports constant routings (index, middle, ring, fifth)")
         if fp.spring.hysteresis.enabled or fp.guide_friction:
             raise ValueError(f"{ds.name}: parameters.finger_rig: spring.hysteresis.enabled and guide_friction must "
-                             f"be false (the nominal finger's motor laws may hold friction and ripple, per tendon "
-                             f"with tendon_motors; hysteresis and guide friction are what the diagnosis looks for)")
+                             f"be false (the nominal finger may hold motor friction and ripple per tendon "
+                             f"(tendon_motors) and a hysteresis loop on single tendons (tendon_springs))")
         self.rig = rig
         m, n, dt = rig.num_tendons, rig.num_joints, ds.dt
         self.m, self.n, self.dt = m, n, dt
@@ -212,6 +213,10 @@ class FingerResiduals:
         # elongations the spring laws give for the measured forces, at full rate, then filtered: the routing
         # is linear in them, so the filtered relation y = P q holds exactly (consistent filtering)
         raw = np.maximum(self._force_raw, 1e-3)
+        hyst = rig.drive.model.hysteresis      # a nominal loop on single tendons (tendon_springs): its force removed
+        for i, h in enumerate(hyst if isinstance(hyst, tuple) else ()):
+            if h.enabled:
+                raw[i] = np.maximum(raw[i] - hysteresis_loop(raw[i], laws_t[i], h, self.sig_force[i]), 1e-3)
         xm = self.consistent(np.stack([np.asarray(laws_t[i].inverse_force(raw[i]), float) for i in range(m)]))
         stiff = np.stack([np.asarray(laws_t[i].stiffness(xm[i]), float) for i in range(m)])
         y = xm - rig.offsets[:, None] - r * self.theta            # = P q (+ noise + what the laws miss)
@@ -275,6 +280,17 @@ def _dahl(x: np.ndarray, length: float, play: float) -> np.ndarray:
     return np.array(out)
 
 
+def hysteresis_loop(force: np.ndarray, law, h, force_noise: float) -> np.ndarray:
+    """The hysteresis force ``z`` [N] of one spring mechanism along a measured force record (full rate): the
+    package's loop (:class:`~awiwi_drake.parameters.components.HysteresisParams`: half-width ``beta f + z0``,
+    presliding length ``delta``) on the elongation the elastic law gives for the force, after a play operator
+    of three noise widths (force noise must not reverse the loop)."""
+    F = np.asarray(force, float)
+    x = np.asarray(law.inverse_force(np.maximum(F, 1e-3)), float)
+    play = 3.0 * force_noise / float(np.median(np.asarray(law.stiffness(x), float)))
+    return (h.width_ratio * F + h.width_offset) * _dahl(x, h.presliding_length, play) * np.tanh(F)
+
+
 def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
     """Ripple order pairs to fit on motor ``i``: every order 1..``ripple_order_max`` is regressed alone
     (its sine and cosine through the consistent filter) on the training folds' residual; the two best orders,
@@ -327,11 +343,17 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
     elif effect in SPRING_SIDE:
         e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]     # (K, m): a force error on tendon i
         if effect == "spring_hysteresis":
-            play = 3.0 * float(np.median(np.abs(np.diff(fr.elong[i])))) + 1e-7
+            # the package's loop (HysteresisParams, Fig 4.8b): half-width beta f + z0 times the Dahl state of the
+            # elongation.  Evaluated at the full rate on the elongation the measured force gives, then filtered
+            # (consistent): the finger's link modes move the tendons by up to ~1 mm within a few samples, which
+            # cycles the loop; a Dahl state of the filtered elongation would not see those cycles.
+            F = fr._force_raw[i]
             for length in (5e-5, 2e-4, 8e-4):
-                w = _dahl(fr.elong[i], length, play)
-                out.append((f"length {length:g} m", (e_i * (w * np.tanh(f))[:, None]).T[None],
-                            ["hysteresis_width"], {"hysteresis_length": length}))
+                cols = [hysteresis_loop(F, fr.rig.spring_laws[i], HysteresisParams(width_ratio=a, width_offset=b,
+                                                                                   presliding_length=length),
+                                        fr.sig_force[i]) for a, b in ((1.0, 0.0), (0.0, 1.0))]
+                out.append((f"length {length:g} m", np.stack([(e_i * H(c)[:, None]).T for c in cols]),
+                            ["hysteresis_ratio", "hysteresis_width"], {"hysteresis_length": length}))
         elif effect == "nominal_spring":
             out.append(("", (e_i * f[:, None]).T[None], ["spring_scale_rel"], {}))
         else:
@@ -341,7 +363,8 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
 
 _BOUNDS = {"motor_coulomb": lambda b: (0.0, b.motor_coulomb_max), "motor_viscous": lambda b: (0.0, b.motor_viscous_max),
            "guide_c0": lambda b: (0.0, b.guide_c0_max), "guide_mu": lambda b: (0.0, b.guide_mu_max),
-           "hysteresis_width": lambda b: (0.0, b.hysteresis_width_max), "guide_capstan": lambda b: (0.0, np.inf)}
+           "hysteresis_width": lambda b: (0.0, b.hysteresis_width_max),
+           "hysteresis_ratio": lambda b: (0.0, b.hysteresis_ratio_max), "guide_capstan": lambda b: (0.0, np.inf)}
 """Physical ranges of the fitted amplitudes (``guide_capstan``: the scale of the capstan term at the grid's
 ``guide_mu``, 1 when the grid value is right)."""
 
@@ -395,9 +418,10 @@ def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settin
         if spring:
             fit = np.tensordot(beta, Xc, axes=1)                   # (m, K)
             # the effect's size in newtons on its own tendon (before projection and whitening)
-            cols = {"spring_hysteresis": lambda: np.tanh(fr.force[i]), "nominal_spring": lambda: fr.force[i],
-                    "force_sensor": lambda: np.ones(fr.force.shape[1])}
-            size = float(abs(beta[0]) * np.sqrt(np.mean(cols[effect]() ** 2)))
+            f_i = fr.force[i]
+            cols = {"spring_hysteresis": lambda: (beta[0] * f_i + beta[1]) * np.tanh(f_i),   # the half-width
+                    "nominal_spring": lambda: beta[0] * f_i, "force_sensor": lambda: beta[0] * np.ones_like(f_i)}
+            size = float(np.sqrt(np.mean(cols[effect]() ** 2)))
             floor = float(fr.sig_force[i])
         else:
             fit = np.zeros_like(base_motor)
@@ -514,7 +538,7 @@ class FingerDiagnosis:
         if self.unexplained_residual:
             lines.append(f"  unexplained: {self.unexplained['text']}")
         if self.augmented is not None and self.augmented.applied:
-            lines.append(f"  written into the finger's parameters (tendon_motors): {', '.join(self.augmented.applied)}")
+            lines.append(f"  written into the finger's parameters (tendon_motors, tendon_springs): {', '.join(self.augmented.applied)}")
         if self.augmented is not None and self.augmented.not_representable:
             lines.append(f"  not representable in FingerRigParams: {'; '.join(self.augmented.not_representable)}")
         return "\n".join(lines)

@@ -14,13 +14,12 @@ The hidden effect acts at one place (tendon ``place``, 1-based in the finger's t
 ``guide_friction``    friction of that tendon's path, constant plus capstan part
                       (:func:`~awiwi_drake.components.friction.guide_friction`, tanh direction)
 ``motor_ripple``      two harmonics on that motor, orders drawn from 1..6 and 100 per revolution
+``spring_hysteresis`` that tendon's spring mechanism with the package's hysteresis (Fig 4.8b; a
+                      force-proportional loop, ``HysteresisParams.width_ratio``; the catalog's loop has a
+                      constant width): a ``tendon_springs`` entry of the truth finger
 ==================== =========================================================================
 
-Not here: spring hysteresis on one tendon. The finger diagram switches hysteresis for all tendons at once
-(``spring.hysteresis``; ``tendon_springs`` refuses a per-tendon setting), so a one-tendon truth would need a
-change of the diagram; the diagnosis still looks for it (spring side).
-
-The three are torques on the motor from a block in front of the drive's ``motor_torque`` input
+The first three are torques on the motor from a block in front of the drive's ``motor_torque`` input
 (:class:`FingerHiddenTorque_`): guide friction acts between motor and spring, so the motor feels
 ``r (f + g)`` while the force sensor at the spring reads ``f``; a torque ``-r g`` on the motor is that.
 """
@@ -40,6 +39,7 @@ from awiwi_drake.components.friction import guide_friction, stribeck_friction
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.parameters.components import HysteresisParams
 from awiwi_drake.parameters.discrepancy import FingerTruthParams, TruthGeneratorParams
 from awiwi_drake.parameters.hand import FINGERS, FingerRigParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
@@ -49,7 +49,7 @@ from .data import Dataset, finger_rig_name
 
 __all__ = ["FINGER_HIDDEN_EFFECTS", "FingerHiddenTorque_", "nominal_finger_params", "make_finger_dataset"]
 
-FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple")
+FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple", "spring_hysteresis")
 _TORQUE_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple")
 
 
@@ -127,12 +127,21 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
             amp, ph = k * u(*gen.ripple_amplitude_range), u(0, 2 * np.pi)
             harm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
         tr["motor_ripple"] = dict(harmonics=harm)
+    if "spring_hysteresis" in hidden:
+        tr["spring_hysteresis"] = dict(width_ratio=k * u(*gen.hysteresis_ratio_range))
     return tr
 
 
 def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
     p = nominal
+    if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
+        tendon = finger_diagram(finger=finger, params=p).tendon_names[truth["place"] - 1]
+        own = dict(p.tendon_springs)
+        sp = own.get(tendon, p.spring)
+        hyst = HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
+        own[tendon] = sp.replace(hysteresis=hyst)
+        p = p.replace(tendon_springs=tuple(own.items()))
     rig = finger_diagram(finger=finger, params=p)
     m = rig.num_tendons
     b = DiagramBuilder()

@@ -142,16 +142,27 @@ def tendon_spring_laws(p, tendon_names) -> TendonSprings:
         if tendon in seen:
             raise ValueError(f"tendon_springs: tendon {tendon!r} is given twice")
         seen.add(tendon)
-        if sp.hysteresis != p.spring.hysteresis:
-            raise ValueError(f"tendon_springs[{tendon!r}]: hysteresis is set for all tendons by spring.hysteresis")
         laws[names.index(tendon)] = tendon_spring(sp)
     return TendonSprings(laws)
+
+
+def tendon_hysteresis(p, tendon_names):
+    """The spring hysteresis of a drive: ``p.spring.hysteresis`` when every tendon has it, else one
+    :class:`~awiwi_drake.parameters.components.HysteresisParams` per tendon (``p.tendon_springs`` entries
+    set their own, e.g. a loop on one tendon only)."""
+    own = dict(p.tendon_springs)
+    per = tuple(own[t].hysteresis if t in own else p.spring.hysteresis for t in tendon_names)
+    return p.spring.hysteresis if all(h == p.spring.hysteresis for h in per) else per
+
+
+def _any_hysteresis(h) -> bool:
+    return any(x.enabled for x in h) if isinstance(h, tuple) else bool(h.enabled)
 
 
 def _build(name, p, plant_factory, parts, backend, wrist, visual):
     """Shared builder of finger and hand diagrams."""
     compiled = backend == "compiled"
-    if p.spring.hysteresis.enabled and not compiled:
+    if _any_hysteresis(tendon_hysteresis(p, [t for c in parts.values() for t in c.tendon_names])) and not compiled:
         raise ValueError(f"{name}: spring.hysteresis.enabled=True needs backend='compiled' (the python and "
                          f"symbolic drives do not carry the hysteresis state here), got backend={backend!r}")
     if p.guide_friction and not compiled:
@@ -186,7 +197,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     if compiled:        # the drive lives inside the one plant system: its handle points at the rig
-        drive = TendonDrive(diagram, m, drive_coupling.num_joints, backend, bool(p.spring.hysteresis.enabled), model)
+        drive = TendonDrive(diagram, m, drive_coupling.num_joints, backend, model.has_hysteresis, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
                                   guide_friction=drive.guide_friction)
@@ -224,7 +235,7 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
     gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
                             p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
     model = DriveModel(tendon_motor_params(p, coupling.tendon_names), laws.laws, drive_coupling, offsets,
-                       p.motor.pulley_radius, p.spring.hysteresis, gf, n)
+                       p.motor.pulley_radius, tendon_hysteresis(p, coupling.tendon_names), gf, n)
     dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, LinkModel(plant, G)))
     if wrist:
         b.Connect(_add_wrist_offsets(b, rows, m), dyn.GetInputPort("wrist_tendon_offset"))

@@ -84,7 +84,10 @@ def yaml_schema(cls: type) -> type:
         specs = []
         for f in dataclasses.fields(cls):
             t = _schema_type(hints[f.name], f"{cls.__name__}.{f.name}")
-            specs.append((f.name, t, dataclasses.field(default=None)))
+            # a nested set starts as its (empty) schema, so a new named-override entry can merge into it
+            nested = dataclasses.field(default_factory=t) if dataclasses.is_dataclass(t) else dataclasses.field(
+                default=None)
+            specs.append((f.name, t, nested))
         schema = dataclasses.make_dataclass(cls.__name__, specs)
         schema.__module__ = __name__
         _SCHEMAS[cls] = schema
