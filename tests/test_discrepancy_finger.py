@@ -105,6 +105,14 @@ def test_finger_diagnosis_names_effect_and_place(friction_noisy, tmp_path, capsy
     assert js["named_effects"] == ["motor_friction"] and js["places"] == {"motor_friction": "index_h5 (PIP)"}
     assert "motor_friction on index_h5 (PIP)" in capsys.readouterr().out
     assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "tendons.png").exists()
+    # the write-back as a YAML parameter set the finger builder loads
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters.hand import FingerRigParams
+    from awiwi_drake.parameters.yaml_io import load_yaml
+    aug = load_yaml(FingerRigParams.for_finger("index"), tmp_path / "rep" / "augmented_parameters.yaml")
+    assert dict(aug.tendon_motors)["index_h5"].friction
+    assert finger_diagram(finger="index", params=aug).drive.model.motor[4].coulomb_torque == pytest.approx(
+        js["steps"][0]["parameters"]["motor_coulomb"], rel=1e-12)
 
 
 def test_finger_diagnosis_nothing_hidden_names_nothing():
