@@ -228,3 +228,15 @@ def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
     before = FingerResiduals(ds, s).ratios()["spring_total"]
     after = FingerResiduals(dataclasses.replace(ds, parameters=js), s).ratios()["spring_total"]
     assert after < 0.6 * before and abs(after - dx.ratios_after["spring_total"]) < 0.05 * after
+
+
+def test_thumb_motor_side_names_effect_and_place():
+    """The thumb (routing h(q) depends on the joint angles, refused before): its motor side is exact as on the
+    other fingers, so a hidden motor friction is named on its tendon; the spring side is not judged (said in the
+    result and the text); hysteresis cannot be hidden on the thumb (one line)."""
+    ds = make_finger_dataset("thumb", ["motor_friction"], place=3, seed=2)   # 10 s: 3 s records saturate the thumb
+    dx = diagnose(ds)
+    assert dx.places == {"motor_friction": "thumb_h3 (abduction, MCP)"} and not dx.spring_checked
+    assert "spring side not judged" in dx.text() and dx.summary()["spring_side_checked"] is False
+    with pytest.raises(ValueError, match="spring_hysteresis: not on the thumb"):
+        make_finger_dataset("thumb", ["spring_hysteresis"], place=3, seed=2, gen=THREE)
