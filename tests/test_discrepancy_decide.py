@@ -99,6 +99,23 @@ def test_acceptance_requires_every_test():
     assert "null std" in rejection_reason(_candidate(z_gain=1.0), _St, s)
 
 
+def test_a_leftover_is_named_unless_an_identified_rival_explains_it_as_well():
+    """After an effect was added, a physical winner tied with another physical effect names nothing
+    ("unresolved"), unless the rival's fit rests on a bound (not an estimate) or the two are the
+    equivalent pair motor vs guide friction and both pass every test (one class, not separable)."""
+    from awiwi_drake.discrepancy.workflow import leftover_rivals
+    win = _candidate(effect="motor_friction")
+    at_bound = _candidate(at_bound=["guide_c0"], rejected="parameter at a bound: guide_c0")
+    assert leftover_rivals(win, "ambiguous", ["guide_friction"], [win, at_bound]) == []
+    hyst = _candidate(effect="spring_hysteresis")
+    assert leftover_rivals(win, "not separable", ["spring_hysteresis"], [win, hyst]) == ["spring_hysteresis"]
+    weak = _candidate(z=1.0, rejected="window rank z 1.0 < 2.5")   # rejected, but not at a bound: still a rival
+    assert leftover_rivals(win, "ambiguous", ["guide_friction"], [win, weak]) == ["guide_friction"]
+    guide = _candidate()
+    assert leftover_rivals(win, "not separable", ["guide_friction"], [win, guide]) == []
+    assert leftover_rivals(win, "confirmed", [], [win]) == []
+
+
 def test_hysteresis_window_state_cannot_absorb_a_force_offset(joint_engine):
     """With the loop width at its largest and the transition length at its 2 mm bound,
     a constant force offset keeps as much of its energy after the window-start profile
@@ -310,3 +327,34 @@ def test_findings_never_say_nothing_is_missing_while_a_discrepancy_remains():
     t = findings_text(_dx(1.3))
     assert "nothing is missing" not in t and "1.30x" in t
     assert "1.20x" in findings_text(_dx(1.2, ["delay"]))
+
+
+def test_replay_step_follows_each_copys_stiffness(joint_engine):
+    """A copy is replayed at dt/2 only while dt/2 times its fastest local rate is small: (3.8) at rest
+    has the slope g1 g2 over the motor inertia B (closed form), the Dahl law |x'|/delta. A copy's replay
+    does not depend on the batch it runs in (finite differences stay consistent), and at dt/2 the
+    nominal copy's integration error is far below the sensor noise (residuals in noise units)."""
+    eng = joint_engine
+    s = eng.settings
+    B = eng.ds.parameters["motor_inertia"]
+    p = default_vector()
+    stiff = p.copy()
+    stiff[PARAM_INDEX["motor_coulomb"]], stiff[PARAM_INDEX["motor_slope"]] = 1.0, 60.0
+    soft = p.copy()
+    soft[PARAM_INDEX["motor_coulomb"]], soft[PARAM_INDEX["motor_slope"]] = 0.01, 10.0
+    lam = eng.stiffness(np.stack([p, stiff, soft], axis=1))
+    assert lam[1] == pytest.approx(60.0 / B, rel=1e-12) and lam[2] == pytest.approx(0.1 / B, rel=1e-12)
+    hyst = p.copy()
+    hyst[PARAM_INDEX["hysteresis_width"]], hyst[PARAM_INDEX["hysteresis_length"]] = 2.0, 2e-5
+    assert eng.stiffness(hyst[:, None])[0] > 1.0 / eng.dt   # the Dahl law at a 20 um transition is fast
+    assert list(eng.step_divisors(np.stack([p, stiff, soft, hyst], axis=1))) == [s.coarse_step_divisor,
+                                                                                 s.step_divisor,
+                                                                                 s.coarse_step_divisor,
+                                                                                 s.step_divisor]
+    W = np.arange(3)
+    alone = eng.evaluate(np.stack([p, soft]), W)
+    mixed = eng.evaluate(np.stack([stiff, p, hyst, soft]), W)
+    np.testing.assert_array_equal(mixed[1], alone[0])
+    np.testing.assert_array_equal(mixed[3], alone[1])
+    fine = ReplayEngine(eng.ds, DiscrepancySettings(step_divisor=8, coarse_step_divisor=8))
+    assert np.max(np.abs(fine.evaluate(p[None], W)[0] - alone[0])) < 0.01

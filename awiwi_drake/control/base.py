@@ -226,6 +226,7 @@ class ClosedLoop:
     sampled_rig: bool = False
     fused: Any = None
     _holds: list = field(default_factory=list, repr=False)
+    _sampled: Any = field(default=None, repr=False)     # a sampled rig's RigPorts (its systems are in the loop)
     _delays: list = field(default_factory=list, repr=False)
 
     @property
@@ -275,7 +276,7 @@ class ClosedLoop:
         of ``state`` (a pose known after homing).
         """
         if state is not None:
-            rig_sys = self.diagram.GetSubsystemByName("rig")
+            rig_sys = self._sampled.dynamics if self.sampled_rig else self.diagram.GetSubsystemByName("rig")
             rig_ctx = rig_sys.GetMyMutableContextFromRoot(context)
             x = np.asarray(state, dtype=float).reshape(-1)
             n = rig_ctx.get_discrete_state(0).size() if self.sampled_rig else rig_ctx.num_continuous_states()
@@ -289,11 +290,7 @@ class ClosedLoop:
                                        rig_state=x)
         if motor_torque is not None:
             u = _vector(motor_torque, self.num_inputs, "motor_torque")
-            holds = list(self._holds)
-            rig_sys = self.diagram.GetSubsystemByName("rig")
-            if self.sampled_rig and isinstance(rig_sys, Diagram) and rig_sys.HasSubsystemNamed("motor_torque_hold"):
-                holds.append(rig_sys.GetSubsystemByName("motor_torque_hold"))   # the sampled rig's held input
-            for zoh in holds:
+            for zoh in self._holds:       # with a sampled rig, its hold of its input too
                 zoh.SetVectorState(zoh.GetMyMutableContextFromRoot(context), u)
             for d in self._delays:
                 dctx = d.GetMyMutableContextFromRoot(context)
@@ -386,7 +383,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         (``external_torque``) are held over each period too. ``Linearize`` takes the loop with the
         period; the rig's discrete state there is in its integration coordinates (momentum and
         elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
-        its ``state`` output physical. The loop's ``motor_torque`` output is the held command as before. False: the
+        its ``state`` output physical. Its systems are added to the loop directly (``Rig.add_sampled``),
+        not as the sub-diagram ``"rig"`` that any other rig is. The loop's ``motor_torque`` output is the held command as before. False: the
         continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
     fused : bool
         For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
@@ -497,14 +495,19 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                       and est_sys is None and controller.num_continuous_states() == 0
                       and all(s.num_continuous_states() == 0 for s in sensors.values()))
     builder = DiagramBuilder()
-    plant = builder.AddNamedSystem("rig", rig.sampled_diagram(1.0 / rate_hz, hold_applied_torque=True)
-                                   if sample_rig else rig_diagram)
+    # a sampled rig's systems go into the loop's builder directly (RigPorts: a sub-diagram costs the
+    # simulator ~1 us per period, README "Backends, and speed"); any other rig is the sub-diagram "rig"
+    plant = (rig.add_sampled(builder, 1.0 / rate_hz, hold_applied_torque=True) if sample_rig
+             else builder.AddNamedSystem("rig", rig_diagram))
     ctrl = builder.AddNamedSystem("controller", controller if spec is None else fused_sys)
     handles = ClosedLoop(diagram=None, rig=rig, controller=controller, rate_hz=rate_hz,
                          delay=(steps / rate_hz if steps else None), delay_steps=steps, saturation=sat,
                          references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked),
                          estimator=est, estimated=estimated, sampled_rig=sample_rig,
                          fused=None if spec is None else fused_sys)
+    if sample_rig:
+        handles._sampled = plant
+        handles._holds.append(plant.hold)
     estimate_ports = {}
     if spec is not None:      # the estimates are the fused system's outputs; its inputs are rig outputs
         estimate_ports = {q: ctrl.GetOutputPort(ESTIMATE_OUTPUTS[q]) for q in estimated}
@@ -563,7 +566,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         satsys = builder.AddNamedSystem("torque_saturation", Saturation(-sat, sat))
         builder.Connect(cmd, satsys.get_input_port(0))
         cmd = satsys.get_output_port(0)
-    builder.Connect(cmd, plant.GetInputPort(COMMAND_PORT))
+    _connect(builder, cmd, plant.GetInputPort(COMMAND_PORT))
     # the torque entering the rig over the current period: a sampled rig holds its input itself
     builder.ExportOutput(plant.GetOutputPort("held_motor_torque") if sample_rig else cmd, COMMAND_PORT)
     sources = dict(sources or {})
@@ -573,13 +576,17 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                          f"nor a rig input (inputs: {', '.join(refs + [n for n in rig_in if n != COMMAND_PORT])})")
 
     def _feed(name, port):
+        ports = port if isinstance(port, list) else [port]    # a flat sampled rig's input may feed several systems
         if name not in sources:
-            builder.ExportInput(port, name)
+            builder.ExportInput(ports[0], name)
+            for p in ports[1:]:
+                builder.ConnectInput(name, p)
             return True
         src = builder.AddNamedSystem(f"{name}_source", sources[name])
-        if src.num_output_ports() != 1 or src.get_output_port(0).size() != port.size():
-            raise ValueError(f"closed_loop: the source for {name!r} must have one output port of size {port.size()}")
-        builder.Connect(src.get_output_port(0), port)
+        size = ports[0].size()
+        if src.num_output_ports() != 1 or src.get_output_port(0).size() != size:
+            raise ValueError(f"closed_loop: the source for {name!r} must have one output port of size {size}")
+        _connect(builder, src.get_output_port(0), port)
         return False
 
     refs = [r for r in refs if _feed(r, ctrl.GetInputPort(r))]
@@ -613,6 +620,12 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     handles.diagram = diagram
     handles.disturbances = tuple(dist)
     return handles
+
+
+def _connect(builder, src, dst) -> None:
+    """Connect ``src`` to the input port ``dst`` or to each of a list of them (a flat sampled rig's input)."""
+    for port in (dst if isinstance(dst, list) else [dst]):
+        builder.Connect(src, port)
 
 
 def _resolve_estimator(rig: Any, estimator: Any, ideal: bool, rate_hz: float | None, measured: list[str]):

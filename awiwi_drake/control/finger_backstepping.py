@@ -51,6 +51,14 @@ dead band: at rest the law settles at ``Kp e = -(I + G) (P S)^T (z + g)`` (``z``
 the guides' friction forces, ``G`` from the model's phantom acceleration ``M_d^-1 (P S)^T (z + g)``, see
 ``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).
 
+**External load** (option ``load_observer`` of :func:`finger_backstepping_controller`): the link model has no
+external torque, so under a constant load ``tau_ext`` the law's rest equations give ``Kp e = (I + G) S^T tau_ext``
+(the dead band's ``G``): on the index PIP 11x the impedance's deflection (0.34 rad for 0.01 Nm against 0.031).
+15.3 "formally requires the measure of the external torque"; the option estimates it with the joint observer (9.2)
+per DoF (:class:`ObservedBacksteppingController`), ``M_d e'' = -(P S)^T f - B_q e' + d_hat`` in the link model (its
+derivative neglected, as 15.3 does), and the loop rests at the impedance's own ``Kp e = S^T tau_ext``
+(``tests/test_hand_control.py``).
+
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
 the force-error feedback ``(1 + K3 K4) / g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at
@@ -115,16 +123,20 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from pydrake.systems.framework import Diagram, DiagramBuilder
 
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
+from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.control.chain import rig_springs
-from awiwi_drake.control.joint_stage import joint_inertia
+from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
+from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
-from awiwi_drake.parameters.hand_control import HandChainParams
+from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams
 
-__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "check_backstepping_springs", "VARIANTS"]
+__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "ObservedBacksteppingController",
+           "check_backstepping_springs", "VARIANTS"]
 
 #: The law's variants (module docstring): 15.5 per tendon (registered ``backstepping``), 15.2 link steps
 #: (``backstepping-position``), 15.4 steps on the joint torques (``backstepping-nonlinear-spring``).
@@ -143,8 +155,10 @@ class FingerBacksteppingLaw(StaticLaw):
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None,
                  rate_hz: float | None = 3000.0, joint_gains: tuple | None = None, force_gains: tuple | None = None,
-                 variant: str = "antagonistic"):
-        """``variant`` in :data:`VARIANTS` (module docstring); ``joint_gains = (Kp, Kd)`` (k x k) replaces the mode
+                 variant: str = "antagonistic", link_torque_estimate: bool = False):
+        """``variant`` in :data:`VARIANTS` (module docstring); ``link_torque_estimate``: the link model takes the
+        estimated link-side torque from the input ``friction_compensation`` (``-d_hat`` of the (9.2) observer, module
+        docstring); ``joint_gains = (Kp, Kd)`` (k x k) replaces the mode
         design (``antagonistic``, ``nonlinear-spring``);
         ``force_gains = (K3, K4)`` (per tendon, (m,) or scalars; scalars for ``nonlinear-spring``, whose steps are
         on the joint torques) the ``force_bandwidth`` (e.g. the ch. 16 selection,
@@ -231,6 +245,9 @@ class FingerBacksteppingLaw(StaticLaw):
             t0, j0, d0 = t0 + m_f, j0 + n_f, d0 + k_f
         self.inputs = {"joint_angle_reference": n, "joint_angle": n, "joint_velocity": n, "elongation": m,
                        "motor_angle": m, "motor_velocity": m}
+        self.link_torque_estimate = bool(link_torque_estimate)
+        if self.link_torque_estimate:
+            self.inputs["friction_compensation"] = k
         self.output_size = m
         self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
                            tendon_force=self.f_op, torque_offset=self.tau_op)
@@ -246,9 +263,7 @@ class FingerBacksteppingLaw(StaticLaw):
         P = np.asarray(self.coupling.P(q))
         P_val = _values(P)
         PS = P @ S
-        W = np.zeros((P_val.shape[0], S.shape[1]))             # m x k, frozen at the value of q
-        for ts, js, ds, W_f in self._blocks:
-            W[ts, ds] = W_f if W_f is not None else -np.linalg.pinv((P_val[ts, js] @ S[js, ds]).T)
+        W = self._sharing(P_val)                               # m x k, frozen at the value of q
         e = Sp @ (q - u["joint_angle_reference"])
         ed = Sp @ v
         f = self.springs.force(x)                       # each tendon's own law phi_i
@@ -257,7 +272,9 @@ class FingerBacksteppingLaw(StaticLaw):
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
-        edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e'
+        if self.link_torque_estimate:                          # + d_hat = -friction_compensation ((9.2) observer)
+            tau = tau - u["friction_compensation"]
+        edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e' (+ d_hat)
         eddd = self._Minv @ (-(PS.T @ fd) - self.Bq @ edd)
         a0 = -self.Kp @ e - self.Kd @ ed
         a1 = -self.Kp @ ed - self.Kd @ edd
@@ -303,19 +320,122 @@ class FingerBacksteppingLaw(StaticLaw):
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
     def __call__(self, u):
+        if self.variant == "antagonistic" and not self.link_torque_estimate and float_inputs(u, self.inputs):
+            fast = self.__dict__.get("_fast")
+            if fast is None:
+                fast = self._fast = self._fast_path()
+            if fast:
+                return self._compiled_call(u, *fast)
         return self.terms(u)["command"]
+
+    def _fast_path(self):
+        """The compiled float path (:mod:`awiwi_drake.control.compiled`, ``backstepping``): polynomial springs
+        only (each tendon's coefficient rows); ``()`` when a law is not polynomial."""
+        laws = self.springs.laws
+        if not all(isinstance(law, PolynomialSpring) for law in laws):
+            return ()
+        deg = max(law.coefficients.size for law in laws)
+        rows = np.zeros((3, len(laws), deg))
+        for i, law in enumerate(laws):
+            c = law.coefficients
+            kk = np.arange(2, c.size + 1)
+            rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
+        xmax = np.array([law.max_elongation for law in laws], dtype=float)
+        kend = np.array([law._k_end for law in laws], dtype=float)
+        return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
+                np.empty(len(laws)))
+
+    def _compiled_call(self, u, fn, coef, dcoef, ddcoef, xmax, kend, out):
+        q = u["joint_angle"]
+        P = np.asarray(self.coupling.P(q), dtype=float)
+        W = self._sharing(P, fast=True)
+        return fn(q, u["joint_velocity"], u["joint_angle_reference"], u["elongation"], u["motor_angle"],
+                  u["motor_velocity"], P, self.S, self.Sp, W, self._Minv, self.Bq, self.Kp, self.Kd, self.K3, self.K4,
+                  self.f_op, self.r_m, self.B, self.friction_scale, coef, dcoef, ddcoef, xmax, kend,
+                  self.link_feedforward, out).copy()
+
+    def _sharing(self, P_val, fast: bool = False):
+        """``W = -((P S)^T)^+`` (m x k), block by finger, frozen at the value of ``P``.  ``fast``: a varying block of
+        full column rank as ``-(P S) ((P S)^T (P S))^-1`` (the same matrix; no SVD), else the pseudo-inverse."""
+        S = self.S
+        W = np.zeros((P_val.shape[0], S.shape[1]))
+        for ts, js, ds, W_f in self._blocks:
+            if W_f is None:
+                A = P_val[ts, js] @ S[js, ds]
+                G = A.T @ A
+                W_f = None
+                if fast:
+                    try:
+                        W_f = -np.linalg.solve(G, A.T).T
+                    except np.linalg.LinAlgError:      # rank lost: the pseudo-inverse
+                        pass
+                if W_f is None:
+                    W_f = -np.linalg.pinv(A.T)
+            W[ts, ds] = W_f
+        return W
 
 
 def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None,
-                                   rate_hz: float | None = 3000.0, variant: str = "antagonistic"):
+                                   rate_hz: float | None = 3000.0, variant: str = "antagonistic",
+                                   load_observer: FrictionObserverParams | None = None):
     """Registered factories ``backstepping`` (``variant="antagonistic"``), ``backstepping-position`` and
     ``backstepping-nonlinear-spring`` for fingers and the hand (see the module docstring); ``rate_hz`` is the control
-    rate the joint gains are designed for (the registry's 3 kHz)."""
+    rate the joint gains are designed for (the registry's 3 kHz).  ``load_observer``: add the (9.2) observer per DoF
+    (:class:`ObservedBacksteppingController`), whose estimate of the link-side torque enters the law's link model."""
     check_backstepping_springs(rig)
-    law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, variant=variant)
+    if load_observer is not None and not isinstance(load_observer, FrictionObserverParams):
+        raise TypeError(f"finger_backstepping_controller: load_observer = {load_observer!r} must be None or a "
+                        "FrictionObserverParams")
+    law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, variant=variant,
+                                link_torque_estimate=load_observer is not None)
     if variant != "antagonistic":
         law.name = f"finger_backstepping_{variant.replace('-', '_')}"
-    return StaticLawController(law)
+    if load_observer is None:
+        return StaticLawController(law)
+    return ObservedBacksteppingController(rig, law, load_observer)
+
+
+class ObservedBacksteppingController(Diagram):
+    """The finger backstepping law with the link-side torque of its link model estimated by the joint observer (9.2)
+    per DoF (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`, the one place of the observer):
+    ``M_d e'' = -(P S)^T f - B_q e' + d_hat``.  The 15.3 design "formally requires the measure of the external
+    torque"; the thesis estimates the joint torque from the spring deflection, here from the tendon forces, and the
+    observer adds what they do not explain (a load, the guides' friction).  At rest ``d_hat`` settles at the
+    link-side torque, the model's phantom acceleration vanishes and the law's rest equations give the impedance's
+    own static deflection ``Kp e = S^T tau_ext`` (``tests/test_hand_control.py``).  Inputs: the law's measurements
+    and the rig's ``tendon_force`` (the observer's joint torque); outputs ``motor_torque`` and
+    ``friction_compensation`` (``-d_hat``); continuous state: the observer's ``w_hat`` (so the loop is closed as
+    blocks, not fused)."""
+
+    def __init__(self, rig: Any, law: FingerBacksteppingLaw, observer: FrictionObserverParams):
+        super().__init__()
+        b = DiagramBuilder()
+        ctrl = b.AddNamedSystem("law", StaticLawController(law))
+        obs = b.AddNamedSystem("load_observer", JointFrictionObserver(
+            rig.coupling, law.S, np.diag(law.M), np.diag(law.Bq), observer.gain))
+        b.Connect(obs.GetOutputPort("friction_compensation"), ctrl.GetInputPort("friction_compensation"))
+        exported = {}
+        for sys_ in (ctrl, obs):
+            for i in range(sys_.num_input_ports()):
+                port = sys_.get_input_port(i)
+                nm = port.get_name()
+                if nm == "friction_compensation":
+                    continue
+                if nm in exported:
+                    b.ConnectInput(exported[nm], port)
+                else:
+                    exported[nm] = b.ExportInput(port, nm)
+        b.ExportOutput(ctrl.get_output_port(0), "motor_torque")
+        b.ExportOutput(obs.GetOutputPort("friction_compensation"), "friction_compensation")
+        b.BuildInto(self)
+        self.set_name(law.name + "_observed")
+        self.law, self.design, self._observer = law, law.design, obs
+
+    def initialize_state(self, context, rig_state=None) -> None:
+        """Start the observer at the joints' velocity in ``rig_state`` (0 at rest)."""
+        S = self._observer.S
+        v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
+        self.GetMutableSubsystemContext(self._observer, context).SetContinuousState(self._observer.Sp @ v)
 
 
 def check_backstepping_springs(rig: Any) -> None:

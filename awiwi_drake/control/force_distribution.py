@@ -782,26 +782,85 @@ def _interp_rows(f, gf, gv):
 
 
 @numba.njit(cache=True)
+def _mv(A, x):
+    """``A x`` by loops (small matrices: no BLAS call, no temporaries)."""
+    out = np.zeros(A.shape[0])
+    for i in range(A.shape[0]):
+        s = 0.0
+        for j in range(A.shape[1]):
+            s += A[i, j] * x[j]
+        out[i] = s
+    return out
+
+
+@numba.njit(cache=True)
+def _mtv(A, x):
+    """``A^T x`` by loops."""
+    out = np.zeros(A.shape[1])
+    for j in range(A.shape[0]):
+        xj = x[j]
+        for i in range(A.shape[1]):
+            out[i] += A[j, i] * xj
+    return out
+
+
+@numba.njit(cache=True)
+def _spd_solve(A, r):
+    """``A^-1 r`` for a small symmetric positive definite ``A`` (Cholesky, by loops)."""
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        s = A[j, j]
+        for k in range(j):
+            s -= L[j, k] * L[j, k]
+        L[j, j] = np.sqrt(s)
+        for i in range(j + 1, n):
+            t = A[i, j]
+            for k in range(j):
+                t -= L[i, k] * L[j, k]
+            L[i, j] = t / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        t = r[i]
+        for k in range(i):
+            t -= L[i, k] * y[k]
+        y[i] = t / L[i, i]
+    x = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        t = y[i]
+        for k in range(i + 1, n):
+            t -= L[k, i] * x[k]
+        x[i] = t / L[i, i]
+    return x
+
+
+@numba.njit(cache=True)
 def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallback, iterations, f_min, f_max,
                    levenberg, tolerance, grid_f, grid_k, grid_dk):
     """The warm-started Gauss-Newton iterations of :meth:`OptimalForceDistribution.solve` for padded fingers,
     compiled: the same start (torque-exact projection of the previous forces), QP ((:func:`_gauss_newton_qp`),
     closed form as :func:`_closed_form_step`), step cut at the bounds and cost test.  Sets ``fallback[k]``
-    wherever ``solve`` would take another branch (see :class:`_FingerBatch`); returns the forces."""
+    wherever ``solve`` would take another branch (see :class:`_FingerBatch`); returns the forces.  The small
+    products are loops and the reduced KKT matrix ``W^T Q W`` (symmetric positive definite: ``Q`` is, ``W`` has
+    orthonormal columns, padded columns get 1 on the diagonal) is solved by Cholesky: no BLAS call per step."""
     F, M, N = P.shape
     R = W.shape[2]
+    NN = N * N
     out = np.zeros((F, M))
+    Gt = np.empty((M, NN))
+    Hq = np.empty((M, M))
+    A = np.empty((R, R))
+    WQ = np.empty((R, M))
     for k in range(F):
         if fallback[k]:
             continue
         Pk, Wk, Kdk = P[k], W[k], Kd[k]
-        WkT = np.ascontiguousarray(Wk.T)
-        f_p = -(pinv[k] @ tau[k])
-        resid = np.ascontiguousarray(Pk.T) @ f_p + tau[k]
+        f_p = -_mv(pinv[k], tau[k])
+        resid = _mtv(Pk, f_p) + tau[k]
         if np.sqrt(np.sum(resid * resid)) > 1e-9 * max(1.0, np.sqrt(np.sum(tau[k] * tau[k]))):
             fallback[k] = True
             continue
-        f = f_p + Wk @ (WkT @ fp0[k])
+        f = f_p + _mv(Wk, _mtv(Wk, fp0[k]))
         inside = True
         for i in range(M):
             if real[k, i] and (f[i] < f_min or f[i] > f_max):
@@ -815,24 +874,53 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
         E = Kdk - K
         C = np.sum(E * E) / Kn
         for _ in range(iterations):
-            Gt = np.empty((M, N * N))
             for i in range(M):
-                Gt[i] = (dk[i] * outer[k, i] + H[k, i]).ravel()
-            Hq = Gt @ np.ascontiguousarray(Gt.T) / Kn
+                for a in range(N):
+                    for b_ in range(N):
+                        Gt[i, a * N + b_] = dk[i] * outer[k, i, a, b_] + H[k, i, a, b_]
             tr = 0.0
             for i in range(M):
+                for j in range(i, M):
+                    acc = 0.0
+                    for l in range(NN):
+                        acc += Gt[i, l] * Gt[j, l]
+                    Hq[i, j] = acc / Kn
+                    Hq[j, i] = Hq[i, j]
                 tr += Hq[i, i]
             mu = levenberg * max(tr, 1e-300) / m_real[k]
-            Q = 2.0 * Hq
+            # Q = 2 Hq + 2 mu I;  b = -2 (Gt (e + Gt^T f)) / Kn - 2 mu f;  r = -W^T (Q f + b)
+            g = np.zeros(NN)                       # e + Gt^T f
+            for a in range(N):
+                for b_ in range(N):
+                    g[a * N + b_] = Kdk[a, b_] - K[a, b_]
             for i in range(M):
-                Q[i, i] += 2.0 * mu
-            e = (Kdk - K).ravel()
-            b = -2.0 * (Gt @ (e + np.ascontiguousarray(Gt.T) @ f)) / Kn - 2.0 * mu * f
-            A = WkT @ Q @ Wk
-            for j in range(R):
-                A[j, j] += pad[k, j]
-            z = np.linalg.solve(A, -(WkT @ (Q @ f + b)))
-            f_star = f + Wk @ z
+                fi = f[i]
+                for l in range(NN):
+                    g[l] += Gt[i, l] * fi
+            qfb = np.empty(M)                      # Q f + b
+            for i in range(M):
+                acc = 0.0
+                for j in range(M):
+                    acc += Hq[i, j] * f[j]
+                acc2 = 0.0
+                for l in range(NN):
+                    acc2 += Gt[i, l] * g[l]
+                qfb[i] = 2.0 * acc + 2.0 * mu * f[i] + (-2.0 * acc2 / Kn - 2.0 * mu * f[i])
+            for r_ in range(R):                    # W^T Q
+                for j in range(M):
+                    acc = 0.0
+                    for i in range(M):
+                        acc += Wk[i, r_] * Hq[i, j]
+                    WQ[r_, j] = 2.0 * acc + 2.0 * mu * Wk[j, r_]
+            for r_ in range(R):                    # W^T Q W + pad
+                for c in range(R):
+                    acc = 0.0
+                    for j in range(M):
+                        acc += WQ[r_, j] * Wk[j, c]
+                    A[r_, c] = acc
+                A[r_, r_] += pad[k, r_]
+            z = _spd_solve(A, -_mtv(Wk, qfb))
+            f_star = f + _mv(Wk, z)
             bound = False
             for i in range(M):
                 if real[k, i] and (f_star[i] < f_min or f_star[i] > f_max):
@@ -840,7 +928,7 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
             if bound:                       # the MathematicalProgram's case
                 fallback[k] = True
                 break
-            d = Wk @ (WkT @ (f_star - f))
+            d = _mv(Wk, _mtv(Wk, f_star - f))
             if not np.sqrt(np.sum(d * d)) > 1e-12 * max(1.0, np.sqrt(np.sum(f * f))):
                 break
             t = 1.0

@@ -47,6 +47,7 @@ import numpy as np
 from awiwi_drake._math import clip, is_float
 from awiwi_drake.analysis.simulate import InfeasibleForceError
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains
+from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.parameters.control import TendonForceGains
 
 __all__ = ["ForceMap", "force_map", "interp", "TendonForceLaw", "tendon_pd_controller",
@@ -313,13 +314,60 @@ class TendonForceLaw(StaticLaw):
                                                f"tendon [0, {law.fmap.max_force:.4g}] N")
 
     def __call__(self, u):
+        if self.output_size > 1 and float_inputs(u, self.inputs):
+            return self._compiled_call(u)
+        return self.evaluate(u)
+
+    def _compiled_call(self, u):
+        """The float bank's fast path: one compiled call (:func:`_force_law_kernel`), equal to :meth:`evaluate`
+        (tests/test_control_tendon.py).  An infeasible reference raises as :meth:`evaluate` does."""
+        k = self.__dict__.get("_kernel") or self._build_kernel()
+        fn, tabs, flags, out = k
+        m = self.output_size
+        zeros = tabs[-1]
+        bad = fn(u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"],
+                 u["motor_angle"] if self.ripple_scale > 0 else zeros,
+                 u["tendon_path_velocity"] if self.path_velocity else zeros, *tabs[:-1], *flags, out)
+        if bad >= 0:
+            return self.evaluate(u)          # raises, naming the tendon
+        return out[:m].copy()
+
+    def _build_kernel(self):
+        ff = motor_law_kernels(self.motor)
+        laws = [law for _, law in self._groups] if self._groups is not None else [self]
+        group = np.zeros(self.output_size, dtype=np.int64)
+        if self._groups is not None:
+            for g, (ix, _) in enumerate(self._groups):
+                group[ix] = g
+        L = max(law.fmap.force.size for law in laws)
+
+        def table(get):
+            t = np.zeros((len(laws), L))
+            for g, law in enumerate(laws):
+                v = get(law)
+                t[g, :v.size], t[g, v.size:] = v, v[-1]
+            return t
+        tabs = (group, np.array([law.fmap.force.size for law in laws], dtype=np.int64),
+                table(lambda l: l.fmap.force), table(lambda l: l._kp_tab), table(lambda l: l._kd_tab),
+                table(lambda l: l.fmap.alpha), np.array([l.kp_fixed for l in laws]), np.array([l.kd_fixed for l in laws]),
+                np.array([max(float(self.gains.min_schedule_force), float(l.fmap.force[0])) for l in laws]),
+                np.array([l.fmap.max_force for l in laws]), np.zeros(self.output_size))
+        g = self.gains
+        flags = (self.scheduled, self.path_velocity, bool(g.force_feedforward), bool(g.friction_compensation),
+                 float(g.friction_scale), float(self.ripple_scale), float(self.r_m))
+        self._kernel = (ff["force_law"], tabs, flags, np.empty(self.output_size))
+        return self._kernel
+
+    def evaluate(self, u):
+        """(10.2) for every tendon: the law as written (float, AutoDiffXd); :meth:`__call__` takes a compiled
+        fast path for a float bank."""
         from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
         if self._groups is not None:                 # one map per tendon: each group's bank, scattered back
             self._check_bank(u["tendon_force_reference"], "tendon_force_reference")
             sample = np.asarray(u["tendon_force_reference"])
             out = np.empty(self.output_size, dtype=float if sample.dtype == float else object)
             for ix, law in self._groups:
-                out[ix] = law({k: np.asarray(v)[ix] for k, v in u.items()})
+                out[ix] = law.evaluate({k: np.asarray(v)[ix] for k, v in u.items()})
             return out
         one = self.output_size == 1
         fd = u["tendon_force_reference"][0] if one else u["tendon_force_reference"]

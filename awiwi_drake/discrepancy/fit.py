@@ -98,17 +98,25 @@ def _one_round(eng, W_train, names, p_start, bounds: CatalogBounds, settings: Di
 def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
                    settings: DiscrepancySettings) -> FitOutcome:
     """Fit ``names`` (catalog parameter names) from ``p_start`` on the training windows
-    of ``st`` (a :class:`~awiwi_drake.discrepancy.screen.ResidualState`)."""
+    of ``st`` (a :class:`~awiwi_drake.discrepancy.screen.ResidualState`).
+
+    The profile is refreshed on the training windows only while the fit runs; the held-out
+    windows' profile (each window is replayed on its own, so this is the same profile) is
+    computed once at the result."""
     eng = st.eng
-    W_train = st.W[eng.train]
-    r0, Q = eng.projector(p_start, st.W)
+    tr, te = st.W[eng.train], st.W[eng.test]
+    _, Qtr = eng.projector(p_start, tr)
     p, nfev_total = p_start, 0
     for rnd in range(1, settings.fit_rounds + 1):
-        p, se, at_bound, nfev, converged, cost = _one_round(eng, W_train, names, p, bounds, settings,
-                                                            Q.take(W_train))
+        p, se, at_bound, nfev, converged, cost = _one_round(eng, tr, names, p, bounds, settings, Qtr)
         nfev_total += nfev
-        r0, Q = eng.projector(p, st.W)
-        refreshed = float((project(r0[eng.train], Q.take(W_train)) ** 2).sum())
+        r_tr, Qtr = eng.projector(p, tr)
+        refreshed = float((project(r_tr, Qtr) ** 2).sum())
         if abs(refreshed - cost) <= settings.fit_tolerance_refresh * max(cost, 1.0):
             break
-    return FitOutcome(p, se, at_bound, nfev_total, converged, rnd, r0, Q)
+    r_te, Qte = eng.projector(p, te)
+    pos_tr, pos_te = np.flatnonzero(eng.train), np.flatnonzero(eng.test)
+    r0 = np.empty((len(st.W), r_tr.shape[1]))
+    r0[pos_tr], r0[pos_te] = r_tr, r_te
+    return FitOutcome(p, se, at_bound, nfev_total, converged, rnd, r0,
+                      Projection.merge([(pos_tr, Qtr), (pos_te, Qte)]))

@@ -3,7 +3,8 @@ the whole diagnosis (data only; :mod:`~awiwi_drake.discrepancy.report` draws the
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+import copy
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -39,9 +40,11 @@ class CandidateResult:
     materiality: dict = field(default_factory=dict)  # size vs floor (see decide.materiality)
     rejected: str = ""  # why it was not accepted ("" when it passed every test)
     vector: np.ndarray | None = field(default=None, repr=False)  # full fitted parameter vector
+    profile: tuple | None = field(default=None, repr=False)  # (residual, window-start profile) at ``vector``
 
     def summary(self) -> dict:
-        return {k: v for k, v in asdict(self).items() if k not in ("window_energy", "vector")}
+        return {f.name: copy.deepcopy(getattr(self, f.name)) for f in fields(self)
+                if f.name not in ("window_energy", "vector", "profile")}
 
 
 @dataclass

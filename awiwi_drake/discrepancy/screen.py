@@ -31,11 +31,13 @@ class ResidualState:
     ``rp`` per window, window energies ``e``, held-out energy ``E_test`` against its
     noise floor ``floor_test`` (degrees of freedom left by the profile), ``ratio``."""
 
-    def __init__(self, eng: ReplayEngine, base: np.ndarray):
+    def __init__(self, eng: ReplayEngine, base: np.ndarray, profile: tuple | None = None):
         self.eng = eng
         self.base = base.copy()
         self.W = np.arange(len(eng.starts))
-        r0, Q = eng.projector(base, self.W)
+        # ``profile``: the residual and window-start profile of ``base`` on all windows when already
+        # computed (a fit's result, :class:`~awiwi_drake.discrepancy.fit.FitOutcome`)
+        r0, Q = profile if profile is not None else eng.projector(base, self.W)
         self.Q = Q
         self.r0 = r0
         self.rp = project(r0, Q)

@@ -33,14 +33,14 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset, is_finger_rig
-from .decide import materiality, noise_equivalent, rejection_reason, separating_experiment
+from .decide import EQUIVALENT_EFFECTS, materiality, noise_equivalent, rejection_reason, separating_experiment
 from .fit import fit_parameters
 from .localise import locate, residual_maps
 from .replay import ReplayEngine, project
 from .result import CandidateResult, Diagnosis, Step
 from .screen import STATEFUL_EFFECTS, ResidualState, free_params, gain_z, nrmse, paired_z, screen
 
-__all__ = ["diagnose", "gap_metrics", "DiagnosisInterrupted"]
+__all__ = ["diagnose", "gap_metrics", "DiagnosisInterrupted", "leftover_rivals"]
 
 
 class DiagnosisInterrupted(KeyboardInterrupt):
@@ -90,7 +90,7 @@ class _Run:
         cr = CandidateResult(eff.name, eff.kind, "fit", params, {n: fo.se.get(n, float("nan")) for n in params},
                              gain, gain / max(st.excess, 1e-12), paired_z(st.e[te], e_after[te]), dbic,
                              own_bound, e_after, gain_z(st.rp[te], rp[te]),
-                             materiality(eff.name, params, self.ne), vector=fo.p)
+                             materiality(eff.name, params, self.ne), vector=fo.p, profile=(fo.r0, fo.projection))
         cr.rejected = rejection_reason(cr, st, self.settings)
         self.say(f"  fit {eff.name:18s} held-out gain {100 * cr.relative_gain:6.1f}% of excess, "
                  f"z {cr.z:4.1f}/{cr.z_gain:6.1f}, dBIC {dbic:9.1f} ({fo.nfev} evals, {fo.rounds} rounds, "
@@ -133,8 +133,9 @@ class _Run:
         self.accepted.append(EFFECTS[win.effect])
         # polish the accepted parameters jointly (profile refreshed), keep the better on training windows
         names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
-        p_pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings).p
-        st_new, st_old = ResidualState(self.eng, p_pol), ResidualState(self.eng, win.vector)
+        pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings)
+        st_new = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
+        st_old = ResidualState(self.eng, win.vector, win.profile)
         self.st = st_new if st_new.E_train <= st_old.E_train else st_old
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         experiment = separating_experiment(members) if status == "not separable" else ""
@@ -165,21 +166,28 @@ class _Run:
         screen_results = [CandidateResult(s["effect"].name, s["effect"].kind, "screen", s["params"], {},
                                           s["gain"], s["rel"], s["z"], s["dbic"]) for s in screened]
         best_gain = max([s["gain"] for s in screened] + [0.0])
-        top = [s for s in screened if s["gain"] > settings.confirm_fraction * best_gain][:settings.num_confirm]
+        # no simulation fit for a candidate whose screened gain is far below what acceptance needs
+        least = settings.screen_floor_fraction * settings.min_floor_gain * st.floor_test
+        top = [s for s in screened if s["gain"] > settings.confirm_fraction * best_gain
+               and s["gain"] >= least][:settings.num_confirm]
         fitted = sorted([self.fit_candidate(s) for s in top], key=lambda c: -c.gain)
         self.history.append({"ratio": st.ratio, "screen": [c.summary() for c in screen_results],
                              "fits": [c.summary() for c in fitted]})
+        if not top:
+            self.stop_reason = (f"no candidate screens a held-out gain of {100 * least / st.floor_test:.2g} % "
+                                f"of the noise floor")
+            return False
         choice = self.choose(fitted)
         if choice is None:
             self.stop_reason = "no candidate passes the acceptance tests"
             return False
         win, status, conf, members, alts = choice
-        if self.accepted and status in ("ambiguous", "not separable") and win.kind == "physical" \
-                and any(EFFECTS[a].kind == "physical" for a in alts):
+        rivals = leftover_rivals(win, status, alts, fitted) if self.accepted else []
+        if rivals:
             # a leftover that several effects explain equally (e.g. the form mismatch of an
             # effect already added) names nothing
-            self.history[-1]["unresolved"] = [win.effect] + alts
-            self.stop_reason = f"unresolved: {', '.join([win.effect] + alts)} explain the rest about equally"
+            self.history[-1]["unresolved"] = [win.effect] + rivals
+            self.stop_reason = f"unresolved: {', '.join([win.effect] + rivals)} explain the rest about equally"
             return False
         self.accept(win, status, conf, members, alts, fitted + screen_results)
         return True
@@ -199,7 +207,8 @@ class _Run:
         for i in (1, 2):
             p0 = self.st.base.copy()
             p0[PARAM_INDEX["place_1"]], p0[PARAM_INDEX["place_2"]] = float(i == 1), float(i == 2)
-            st = ResidualState(self.eng, fit_parameters(self.st, names, p0, self.bounds, self.settings).p)
+            fo = fit_parameters(self.st, names, p0, self.bounds, self.settings)
+            st = ResidualState(self.eng, fo.p, (fo.r0, fo.projection))
             if st.E_test < best_st.E_test:
                 best, best_st = f"tendon {i}", st
         z = gain_z(self.st.rp[te], best_st.rp[te])
@@ -235,6 +244,22 @@ class _Run:
             dict(zip(eng.out_names, eng.sigma.tolist())), st.base, time.perf_counter() - self.t_start,
             eng.simulations, time.process_time() - self.cpu_start, eng, list(self.history),
             unexplained, settings.unexplained_ratio, where, self.stop_reason, complete)
+
+
+def leftover_rivals(win: CandidateResult, status: str, alts: list, fitted: list) -> list:
+    """Physical effects that explain a leftover (after other effects were added) as well as the physical
+    winner ``win``, so that nothing is named ("unresolved"); [] when ``win`` may be accepted.
+
+    Not rivals: a tied alternative whose fit rests on a bound (a bound is not an estimate, issue 12),
+    and the members of a class of :data:`~awiwi_drake.discrepancy.decide.EQUIVALENT_EFFECTS` that all
+    pass every test (motor vs guide friction: one class "not separable")."""
+    if win.kind != "physical" or status not in ("ambiguous", "not separable"):
+        return []
+    rivals = [c.effect for c in fitted if c.effect in alts and EFFECTS[c.effect].kind == "physical"
+              and not (c.rejected and c.at_bound)]
+    if status == "not separable" and all(frozenset((win.effect, a)) in EQUIVALENT_EFFECTS for a in rivals):
+        return []
+    return rivals
 
 
 def place_of(effect: str, p: np.ndarray, num_motors: int) -> str:

@@ -11,7 +11,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import RevoluteJoint, SpatialInertia, UnitInertia
 from pydrake.systems.framework import Context, Diagram
 
-__all__ = ["OperatingPoint", "Rig", "add_revolute_link", "state_names"]
+__all__ = ["OperatingPoint", "Rig", "RigPorts", "add_revolute_link", "state_names"]
 
 
 def _labels(items) -> list[str]:
@@ -80,6 +80,34 @@ class OperatingPoint:
 
 
 @dataclass
+class RigPorts:
+    """A rig's systems added to a caller's ``DiagramBuilder`` without a sub-diagram of their own
+    (``Rig.add_sampled``): its input ports by name (a list each: one rig input may feed several systems),
+    its output ports by name (in the rig diagram's order), the system holding its dynamics and the
+    zero-order hold of its input (or None)."""
+
+    inputs: dict
+    outputs: dict
+    dynamics: Any
+    hold: Any = None
+
+    def GetInputPort(self, name: str) -> list:
+        return self.inputs[name]
+
+    def GetOutputPort(self, name: str):
+        return self.outputs[name]
+
+    def export(self, builder) -> None:
+        """Export every port of the rig from ``builder`` under its name."""
+        for name, targets in self.inputs.items():
+            builder.ExportInput(targets[0], name)
+            for port in targets[1:]:
+                builder.ConnectInput(name, port)
+        for name, port in self.outputs.items():
+            builder.ExportOutput(port, name)
+
+
+@dataclass
 class Rig:
     """A plant diagram with named ports, its parameters and its operating points.
 
@@ -128,6 +156,10 @@ class Rig:
     sampled_state : callable or None
         ``sampled_state(state) -> discrete state of sampled_diagram``: a physical state (``state_names``
         order) in those integration coordinates (what :meth:`ClosedLoop.initialize` writes).
+    add_sampled : callable or None
+        ``add_sampled(builder, period, hold_applied_torque=False) -> RigPorts``: the systems of
+        ``sampled_diagram`` added to ``builder`` directly (the same implementation; what
+        :func:`~awiwi_drake.control.closed_loop` does: a sub-diagram costs the simulator ~1 us per period).
     """
 
     name: str
@@ -148,6 +180,7 @@ class Rig:
     tendon_force_of_state: Callable | None = None
     sampled_diagram: Callable[[float], Diagram] | None = None
     sampled_state: Callable | None = None
+    add_sampled: Callable | None = None
 
     @property
     def num_states(self) -> int:

@@ -43,7 +43,7 @@ from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupli
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
-from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link, state_names
+from awiwi_drake.rigs.base import OperatingPoint, Rig, RigPorts, add_revolute_link, state_names
 
 __all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
 
@@ -118,18 +118,18 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         model = DriveModel(motor, (spring,) * coupling.num_tendons, coupling, np.zeros(coupling.num_tendons), r_m,
                            hysteresis, link_inertia=(float(inertia),), link_damping=(float(damping),))
 
-        def build(period=None, *, hold_applied_torque=False):
-            """The rig's diagram: continuous (``period`` None), or sampled at ``period`` [s] (the dynamics
-            as Drake's DiscreteTimeApproximation, :func:`~awiwi_drake.components.rig_system.sampled_dynamics`,
-            of :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.
+        def add(b, period=None, *, hold_applied_torque=False) -> RigPorts:
+            """The rig's systems added to the DiagramBuilder ``b`` (no sub-diagram), continuous (``period``
+            None) or sampled at ``period`` [s] (the dynamics as Drake's DiscreteTimeApproximation,
+            :func:`~awiwi_drake.components.rig_system.sampled_dynamics`, of
+            :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.
             The sampled rig's discrete state is in integration coordinates (``Rig.sampled_state`` maps a
             physical state there); its ``state`` output is the physical state. A sampled rig's
-            ``applied_torque`` is that of its current input, or with ``hold_applied_torque`` that of the input it holds over the current period
-            (a zero-order hold, a second discrete state, also exported as ``held_motor_torque``: what a loop
-            logs; the rig alone stays a difference equation with one state group, which Drake's ``Linearize``
-            needs)."""
+            ``applied_torque`` is that of its current input, or with ``hold_applied_torque`` that of the input
+            it holds over the current period (a zero-order hold, a second discrete state, also output as
+            ``held_motor_torque``: what a loop logs; the rig alone stays a difference equation with one state
+            group, which Drake's ``Linearize`` needs)."""
             m, n = coupling.num_tendons, coupling.num_joints
-            b = DiagramBuilder()
             if period is None:
                 dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
             else:   # integrated in the coordinates of rig_integration_system; its output is the physical state
@@ -138,33 +138,39 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
                 dyn = b.AddSystem(sampled_dynamics(dynamics, period))
             inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
             b.Connect(inputs.get_output_port(), dyn.get_input_port())
-            b.ExportInput(inputs.get_input_port(0), "motor_torque")
-            b.ExportInput(inputs.get_input_port(1), "external_torque")
-            b.ExportOutput(dyn.get_output_port(), "state")
+            ins = {"motor_torque": [inputs.get_input_port(0)], "external_torque": [inputs.get_input_port(1)]}
+            outs = {"state": dyn.get_output_port()}
             parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
             parts += [("hysteresis_force", m)] if model.has_hysteresis else []
             split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
             b.Connect(dyn.get_output_port(), split.get_input_port())
             for i, (nm, _) in enumerate(parts[:4]):
-                b.ExportOutput(split.get_output_port(i), nm)
-            outs = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
-            b.Connect(dyn.get_output_port(), outs.GetInputPort("state"))
+                outs[nm] = split.get_output_port(i)
+            laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
+            b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
+            held = None
             if not (period is not None and hold_applied_torque):
-                b.ConnectInput("motor_torque", outs.GetInputPort("motor_torque"))
+                ins["motor_torque"].append(laws.GetInputPort("motor_torque"))
             else:   # applied_torque: the torque the sampled dynamics hold over the current period
                 held = b.AddNamedSystem("motor_torque_hold", ZeroOrderHold(period, m))
-                b.ConnectInput("motor_torque", held.get_input_port())
-                b.Connect(held.get_output_port(), outs.GetInputPort("motor_torque"))
-                b.ExportOutput(held.get_output_port(), "held_motor_torque")   # for the loop's motor_torque
+                ins["motor_torque"].append(held.get_input_port())
+                b.Connect(held.get_output_port(), laws.GetInputPort("motor_torque"))
+                outs["held_motor_torque"] = held.get_output_port()   # for the loop's motor_torque
             for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
-                b.ExportOutput(outs.GetOutputPort(nm), nm)
+                outs[nm] = laws.GetOutputPort(nm)
+            return RigPorts(ins, outs, dyn, held)
+
+        def build(period=None, *, hold_applied_torque=False):
+            """The rig's diagram (:func:`add` into a new builder, every port exported)."""
+            b = DiagramBuilder()
+            add(b, period, hold_applied_torque=hold_applied_torque).export(b)
             diagram = b.Build()
             diagram.set_name(name)
             return diagram
 
         drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled),
                             model)
-        return drive.diagram, None, drive, names, (build, functools.partial(integration_state, model))
+        return drive.diagram, None, drive, names, (build, functools.partial(integration_state, model), add)
     b = DiagramBuilder()
     plant = b.AddNamedSystem("link", MultibodyPlant(0.0))
     add_revolute_link(plant, name="joint", inertia=inertia, damping=damping)
@@ -191,7 +197,7 @@ def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backen
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name(name)
-    return diagram, plant, drive, names, (None, None)
+    return diagram, plant, drive, names, (None, None, None)
 
 
 def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None,
@@ -249,7 +255,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
                spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
                pair_slack=(law.x0, law.r) if spring == "nonlinear" else None, sampled_diagram=sampled[0],
-               sampled_state=sampled[1])
+               sampled_state=sampled[1], add_sampled=sampled[2])
 
 
 def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
@@ -298,7 +304,7 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
                tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None,
-               sampled_diagram=sampled[0], sampled_state=sampled[1])
+               sampled_diagram=sampled[0], sampled_state=sampled[1], add_sampled=sampled[2])
 
 
 def motor_rig(motor: MotorParams | None = None) -> Rig:
