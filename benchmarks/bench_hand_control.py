@@ -20,7 +20,9 @@ Real-time factor (RTF) = simulated seconds per second of the process's CPU clock
 jobs on a shared machine) and of the wall clock (``wall_rtf``).  Where the time goes (unless
 ``--no-profile``): the CPU time of each system's work measured apart on a copy of its loop context
 (``isolated_us_per_call``: every continuous system's derivatives, MultibodyPlant included; every Python
-system's periodic update and vector outputs), and how often Drake calls each Python callback per control
+system's periodic update and vector outputs), the CPU time per period of each stage of the fused chain inside a
+short run (``stage_us_per_period``: ``closed_loop`` closes the hand through ONE discrete system,
+:class:`~awiwi_drake.control.fused.FusedChain_`, holding estimator, joint stage, distribution and force law), and how often Drake calls each Python callback per control
 period (``callbacks_per_period``, counted by cProfile in a 0.01 s run; cProfile's times are not used, it
 slows the many small Python calls several-fold).  Cost per period ~ sum of cost x calls; the C++ primitives
 (Mux, Demux, MatrixGain, Adder, ZeroOrderHold) and the integrator make the rest.  The machine's load
@@ -129,6 +131,57 @@ def isolated_costs(diagram, root) -> dict:
     return dict(sorted(out.items(), key=lambda kv: -kv[1]))
 
 
+def stage_costs(loop, op, inputs, sim_time: float = 0.03) -> dict:
+    """CPU time per control period [us] of each stage of the fused chain (``closed_loop``'s default for the hand,
+    :class:`~awiwi_drake.control.fused.FusedChain_`) and of the plant's derivatives, inside a ``sim_time`` run of the
+    loop (each call timed with the thread's CPU clock; the stages are nested: ``sample`` holds the estimator, the
+    joint stage, the path velocity and the last law, ``update`` holds ``sample`` (evaluated there first) and the
+    distribution)."""
+    fused = loop.fused
+    if fused is None:
+        return {}
+    acc: dict = {}
+    saved = []
+
+    def wrap(obj, name, key):
+        """Time ``obj.name`` (a class: every instance, e.g. the copies ``simulate`` makes; else this object)."""
+        fn = getattr(obj, name)
+
+        def timed(*a, **k):
+            t = time.thread_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                acc[key] = acc.get(key, 0.0) + time.thread_time() - t
+        saved.append((obj, name, obj.__dict__.get(name)))
+        setattr(obj, name, timed)
+
+    plant = next(s for s in _leaves(loop.diagram) if s.num_continuous_states())
+    wrap(type(fused), "_calc_sample", "sample (estimator, joint stage, path velocity, law)")
+    wrap(type(fused), "_update", "update (sample + distribution)")
+    wrap(fused.estimator, "estimate", "estimator (5.15, Algorithm 1)")     # shared by the copies (float)
+    if fused.joint_law is not None:
+        wrap(type(fused.joint_law), "__call__", "joint stage")
+    if fused.dist is not None:
+        wrap(fused.dist, "step", "distribution (7.6)")
+    wrap(type(fused.law), "__call__", "tendon force law (10.2)" if fused.joint_law is not None else "law")
+    wrap(type(plant), "DoCalcTimeDerivatives", "plant derivatives (3 per period)")
+    try:
+        c0 = time.process_time()
+        simulate(loop, loop.create_context(op), sim_time, inputs=inputs, log=("joint_angle",))
+        total = time.process_time() - c0
+    finally:
+        for obj, name, old in reversed(saved):
+            if old is None:
+                delattr(obj, name)
+            else:
+                setattr(obj, name, old)
+    periods = sim_time * loop.rate_hz
+    out = {k: v / periods * 1e6 for k, v in acc.items()}
+    out["whole loop"] = total / periods * 1e6
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+
 def _leaves(system):
     for s in system.GetSystems():
         if isinstance(s, Diagram):
@@ -172,6 +225,7 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
         ictx = loop.create_context(op)
         loop.diagram.GetInputPort("joint_angle_reference").FixValue(ictx, inputs["joint_angle_reference"])
         row["isolated_us_per_call"] = isolated_costs(loop.diagram, ictx)
+        row["stage_us_per_period"] = stage_costs(loop, op, inputs)
     return row
 
 
@@ -208,6 +262,10 @@ def main(argv=None) -> int:
             print("    CPU time per call, measured apart:")
             for where, us in r["isolated_us_per_call"].items():
                 print(f"    {us:9.1f} us  {where}")
+            if r.get("stage_us_per_period"):
+                print("    fused chain, CPU time per control period inside a 0.03 s run (stages nested):")
+                for where, us in r["stage_us_per_period"].items():
+                    print(f"    {us:9.1f} us  {where}")
             print("    calls per control period (Python callbacks):")
             for where, k in r["callbacks_per_period"].items():
                 print(f"    {k:9.1f}     {where}")

@@ -235,7 +235,7 @@ def case_scipy_reference(seconds, repeats):
 
     from awiwi_drake.components.motor import motor_acceleration
     from awiwi_drake.parameters.rigs import MotorPositionGains
-    from awiwi_drake.rigs.demo import motor_references
+    from awiwi_drake.control.motor_position import motor_references
 
     def run():
         rig, scen, _, _ = _joint_loop(seconds)
@@ -412,7 +412,7 @@ def _mujoco_case(seconds, repeats, linear: bool):
         return None
     from awiwi_drake.components.motor import motor_friction_torque
     from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
-    from awiwi_drake.rigs.demo import motor_references
+    from awiwi_drake.control.motor_position import motor_references
     from awiwi_drake.rigs import joint_rig
     rig = joint_rig()
     p, spring = rig.params, rig.spring

@@ -226,3 +226,19 @@ def test_compiled_backstepping_equals_the_law_as_written(target):
         ref, fast = law.terms(u)["command"], law(u)
         assert law._fast                                          # the compiled path ran
         np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_compiled_joint_feedback_equals_the_law_as_written():
+    """JointStateFeedbackLaw's float path for the PD / impedance form (one compiled call) equals its coordinates and
+    gains written out (the law for every scalar type) on the hand's cascaded design."""
+    rig = _rig("hand")
+    law = make_controller("cascaded", rig)._joint_law
+    assert not law.uses_forces and not law.uses_previous
+    rng = np.random.default_rng(9)
+    n = rig.num_joints
+    for _ in range(3):
+        u = dict(joint_angle=rng.normal(scale=0.3, size=n), joint_velocity=rng.normal(size=n),
+                 joint_angle_reference=rng.normal(scale=0.3, size=n))
+        z, dr = law.coordinates(u)
+        ref = law.tau0 + law.Nu * dr - np.sum(law.K * (z - np.hstack([law.Nx, law.Nu[:, None]]) * dr[:, None]), axis=1)
+        np.testing.assert_allclose(law(u), ref, rtol=0, atol=1e-13 * np.abs(ref).max())

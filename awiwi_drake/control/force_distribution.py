@@ -1059,7 +1059,9 @@ class _FingerBatch:
             self.H[k, :P.shape[0], :P.shape[1], :P.shape[1]] = H
             Pk = self.P[k]
             self.outer[k] = Pk[:, :, None] * Pk[:, None, :]
-        tauP, Kd, fp0 = np.zeros((F, N)), np.zeros((F, N, N)), np.zeros((F, M))
+        if getattr(self, "_gather", None) is None:      # padded work arrays: the padding stays 0, the rest is set
+            self._gather = (np.zeros((F, N)), np.zeros((F, N, N)), np.zeros((F, M)))
+        tauP, Kd, fp0 = self._gather
         tauP[self._d] = tau[self._d_src]
         Kd[self._k] = Kv[self._k_src]
         fp0[self._t] = f_prev[self._t_src]

@@ -348,7 +348,10 @@ def LinkPositionEstimator_(T):
                     # of the 4 x 2 base block at the kinematics evaluated once
                     h_b, P_b = c.base_lengths_and_jacobian(q_new[j][0], q_new[j][1])
                     r_b = dh_val[t][:4] - (h_b - self._h0[t][:4])
-                    q_new[j.start:j.start + 2] += np.linalg.solve(P_b.T @ P_b, P_b.T @ r_b)
+                    G, g = P_b.T @ P_b, P_b.T @ r_b           # the 2 x 2 normal equations, solved in closed form
+                    det = G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]
+                    q_new[j.start] += (G[1, 1] * g[0] - G[0, 1] * g[1]) / det
+                    q_new[j.start + 1] += (G[0, 0] * g[1] - G[1, 0] * g[0]) / det
             if T is not float:  # one Gauss-Newton step in the scalar type: carries the derivatives
                 r = dh - (self.coupling.h(q_new) - self._h0)
                 S = dof_selection(self.coupling)
