@@ -642,7 +642,13 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
             members = [win.effect] + [f"{c.effect}" + ("" if c.tendon == win.tendon else f" on {places[c.tendon]}")
                                       for c in tied]
             status = "not separable"
-            experiment = separating_experiment([win.effect] + [c.effect for c in tied])
+            others = sorted({c.effect for c in tied} - {win.effect})
+            experiment = separating_experiment([win.effect] + others) if others else ""
+            same = [fr.rig.tendon_names[c.tendon] for c in tied if c.effect == win.effect and c.tendon != win.tendon]
+            if same:    # one effect, two places: tell the tendons apart, not the effects
+                experiment = "; ".join(x for x in (experiment, (
+                    f"hold the joints and cycle one tendon's force at a time ({', '.join([fr.rig.tendon_names[win.tendon]] + same)}): "
+                    f"the effect follows its own tendon")) if x)
         if win.side == "motor":
             base_motor = base_motor - win.fitted
         else:
