@@ -303,7 +303,7 @@ def LinkPositionEstimator_(T):
                 return
             for name, c, j, t in self._thumbs:
                 limit = GradientSearchResult.limit
-                if np.any(np.abs(q[j][:2]) >= limit):
+                if abs(float(q[j.start])) >= limit or abs(float(q[j.start + 1])) >= limit:
                     self.limit_hits += 1
                     if self.limit_hits == 1:
                         warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
@@ -333,9 +333,9 @@ def LinkPositionEstimator_(T):
             for name, c, j, t in self._thumbs:    # thumb: Algorithm 1 warm-started at the previous estimate
                 if self._search is not None:      # float: the compiled search itself (= estimate_thumb, tested)
                     dt = dh_val[t]
-                    qa, qb, *_ = self._search[name](np.ascontiguousarray(dt[:4]), float(q_val[j.start]), float(q_val[j.start + 1]),
-                                              self.iterations, self.step0, 1e-7, GradientSearchResult.limit,
-                                              self._work[0], self._work[1])
+                    qa, qb, *_ = self._search[name](np.ascontiguousarray(dt[:4]), float(q_val[j.start]),
+                                                    float(q_val[j.start + 1]), self.iterations, self.step0, 1e-7,
+                                                    GradientSearchResult.limit, self._work[0], self._work[1])
                     q_new[j.start], q_new[j.start + 1] = qa, qb
                     q_new[j.start + 2:j.stop] = self._distal[name] @ dt[4:]
                 else:
