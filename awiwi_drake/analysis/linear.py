@@ -1,22 +1,11 @@
 """The one linearisation / LQR API: Drake's ``Linearize`` and ``LinearQuadraticRegulator`` on any plant.
 
-* :func:`linearize` -- ``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du``
-  from ``pydrake.systems.primitives.Linearize`` at a rig's operating point (its
-  context from :meth:`Rig.context`, the one way to get it), at any other state /
-  input, or of any Drake system at a given context.  The
-  :class:`LinearizationResult` names its states, inputs and outputs, keeps the
-  operating point ``(x0, u0)``, and offers :meth:`~LinearizationResult.damp`
-  (natural frequency, damping ratio, time constant per pole),
-  :meth:`~LinearizationResult.bode` (a :class:`FrequencyResponse` with
-  ``.plot()`` and gain/phase margins) and :meth:`~LinearizationResult.to_control`
-  (a python-control ``StateSpace``; optional extra ``control``).
-* :func:`lqr` -- ``u = u0 - K (x - x0)`` from Drake's ``LinearQuadraticRegulator``
-  on that linearisation; :class:`LqrResult` carries ``K``, the Riccati solution
-  ``S``, the weights and the closed loop as a :class:`LinearizationResult`.
-  :func:`lqr_gain` is the same on bare matrices (state-dependent Riccati, ch. 14).
-
-Poles within round-off of zero (``|Re|`` or ``|Im|`` below ``100 n eps ||A||``)
-are reported as exactly 0, so an integrator does not print as ``+1.42e-13``.
+:func:`linearize` (at a rig's operating point, its context from :meth:`Rig.context`, or any system at a
+given context) returns a :class:`LinearizationResult`: named states, inputs and outputs, the point
+``(x0, u0)``, ``damp()``, ``bode()`` (a :class:`FrequencyResponse`) and ``to_control()`` (python-control,
+optional extra).  :func:`lqr` returns an :class:`LqrResult` (``u = u0 - K (x - x0)``, the Riccati solution
+``S``, the closed loop); :func:`lqr_gain` is the same on bare matrices (state-dependent Riccati, ch. 14).
+Poles within round-off of zero are reported as exactly 0 (:func:`clean_poles`).
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@ __all__ = [
     "BacksteppingRun", "StiffnessCheck", "table_15_1_params", "table_15_1_rig", "event_schedules", "run_loop",
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
-    "antagonistic_sine", "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
+    "antagonistic_sine", "antagonistic_stiffness_check", "sine_reference", "is_monotone_nonincreasing", "count_oscillations",
     "plot_joint_angle", "plot_command", "plot_phase_portrait",
 ]
 
@@ -369,7 +369,7 @@ def load_step_command_jump(study: NonlinearImpedanceStudy | None = None, *, spri
 
 # ---------------------------------------------------------------------------
 # 15.5: antagonistic joint
-def _sine_reference(amplitude, freq, offset=0.0) -> PerEntry:
+def sine_reference(amplitude, freq, offset=0.0) -> PerEntry:
     """``offset + A sin(w t)`` and its four derivatives ``A w^k sin(w t + k pi / 2)`` (the reference port)."""
     w = 2 * math.pi * freq
     return PerEntry([Sine(amplitude * w ** k, freq, phase=k * math.pi / 2, offset=offset if k == 0 else 0.0)
@@ -395,7 +395,7 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
     the controller sees the reference value only (regulation design).
     """
     g = gains or AntagonisticBacksteppingGains()
-    ref = _sine_reference(amplitude, frequency, offset)
+    ref = sine_reference(amplitude, frequency, offset)
     return _run(lambda rig: impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0),
                 make_rig=make_rig or joint_rig, op=dict(pretension=g.pretension, joint_angle=offset), t_final=t_final,
                 inputs={REFERENCE_PORT: ref if feedforward else PerEntry(ref.entries[:1])}, dt=dt, max_step=dt,
