@@ -14,7 +14,7 @@ from pydrake.systems.controllers import LinearQuadraticRegulator
 
 from awiwi_drake.parameters.backstepping import OptimalGainsCase, OptimalGainsStudy
 from awiwi_drake.parameters.rigs import FlexibleJointParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig
 
 __all__ = ["table_16_1_rig", "printed_model_feedback", "plot_gain_fit", "GainSamples", "fig_16_3_gain_samples"]
@@ -70,12 +70,9 @@ class GainSamples:
     step: float
 
     def plot(self, ax=None):
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        for i, (q, d) in enumerate(zip(self.q, self.distance)):
-            ax.plot(self.t, q, lw=1, label=f"run {i}: distance {d:.2g}")
-        ax.axhline(self.step, color="k", ls="--", lw=0.8, label="reference")
-        label_axes(ax, "link angle [rad]", title=f"Fig 16.3: R = {self.r_weight:g}", legend=dict(fontsize="x-small"))
-        return fig, ax
+        return plot_traces(self.t, {f"run {i}: distance {d:.2g}": q for i, (q, d) in enumerate(zip(self.q, self.distance))},
+                           reference=np.full_like(self.t, self.step), ylabel="link angle [rad]", ax=ax,
+                           title=f"Fig 16.3: R = {self.r_weight:g}", legend=dict(fontsize="x-small"))
 
 
 def fig_16_3_gain_samples(study: OptimalGainsStudy | None = None, *, r_weight: float | None = None,
