@@ -34,7 +34,11 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
   approximation of a ``SymbolicVectorSystem`` of the same size (states, inputs, rows) whose rows are one
   variable each (the approximation's own machinery and the evaluator's environment, not the laws);
   ``discrete_floor_us`` that linear system as a discrete ``SymbolicVectorSystem`` updated once per period
-  (the ``Simulator``'s cost of one periodic update). Differences: ``controller_and_sources_us``,
+  (the ``Simulator``'s cost of one periodic update); ``lean_loop_us`` the floor of this representation, *not*
+  a structure of the package: the same rig dynamics and PD law with nothing a user addresses (no hold, no
+  state demultiplexer, no outputs system, the PD one gain on ``[references, state]`` fed by one source, no
+  controller sub-diagram), with its final state's largest difference to the default loop's
+  (``..._lean_loop_max_state_difference``, round-off: the same loop). Differences: ``controller_and_sources_us``,
   ``hold_us``, ``rig_plumbing_us`` (multiplexer, demultiplexer, outputs system), ``laws_us`` (the three
   RK3 stages' and the output's evaluation of the rig's nonlinear expressions), ``approximation_us``.
 * ``scipy_reference``: the same equations and controller in numpy with
@@ -212,7 +216,43 @@ def case_joint_rig_breakdown(seconds, repeats):
         rows = [-1e-3 * sym.Expression(v) for v in xs]
         return SymbolicVectorSystem(state=xs, input=us, dynamics=rows, output=xs, time_period=period)
 
-    cases = dict(loop=loop, rig_with_hold=lambda: rig_alone(True), rig=lambda: rig_alone(False),
+    def lean_loop():    # not a package structure: the floor of this rig representation (see the module doc)
+        from pydrake.systems.primitives import MatrixGain, Multiplexer, TrajectorySource
+        from pydrake.trajectories import PiecewisePolynomial
+
+        from awiwi_drake.control.motor_position import demo_references
+        from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+        scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
+        t, refs = demo_references(rig, scen)
+        g, m, nx = MotorPositionGains(), len(op.motor_torque), len(z0)
+        eye = np.eye(m)
+        b = DiagramBuilder()
+        dynamics = rig_integration_system(rig.drive.model)
+        dyn = b.AddSystem(sampled_dynamics(dynamics, h))
+        inputs = b.AddSystem(Multiplexer([m, len(op.external_torque)]))
+        ref = b.AddSystem(TrajectorySource(PiecewisePolynomial.FirstOrderHold(
+            t, np.vstack([refs["theta_reference"], refs["tendon_force_reference"]]))))
+        meas = b.AddSystem(Multiplexer([2 * m, nx]))
+        pd = b.AddSystem(MatrixGain(np.hstack([g.kp * eye, rig.params.motor.pulley_radius * eye,
+                                               np.zeros((m, nx - 2 * m)), -g.kp * eye, -g.kd * eye])))
+        b.Connect(ref.get_output_port(), meas.get_input_port(0))
+        b.Connect(dyn.get_output_port(), meas.get_input_port(1))
+        b.Connect(meas.get_output_port(), pd.get_input_port())
+        b.Connect(pd.get_output_port(), inputs.get_input_port(0))
+        b.Connect(inputs.get_output_port(), dyn.get_input_port())
+        b.ExportInput(inputs.get_input_port(1), "external_torque")
+        b.ExportOutput(dyn.get_output_port(), "state")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        d.GetInputPort("external_torque").FixValue(ctx, np.zeros(len(op.external_torque)))
+        dyn.GetMyMutableContextFromRoot(ctx).SetDiscreteState(0, rig.sampled_state(
+            rig.operating_point(pretension=scen.f_start).state))
+        us = _period_us(d, ctx, seconds)
+        lean_state[:] = d.GetOutputPort("state").Eval(ctx)
+        return us
+
+    lean_state = np.zeros(len(z0))
+    cases = dict(lean_loop=lean_loop, loop=loop, rig_with_hold=lambda: rig_alone(True), rig=lambda: rig_alone(False),
                  dynamics=lambda: alone(rig_integration_system(rig.drive.model)),
                  dynamics_linear=lambda: alone(linear()), discrete_floor=lambda: alone(linear(h), discrete=True))
     best = {k: np.inf for k in cases}
@@ -222,6 +262,10 @@ def case_joint_rig_breakdown(seconds, repeats):
         for k, fn in cases.items():
             best[k] = min(best[k], fn())
     out = {f"joint_rig_breakdown_{k}_us": v for k, v in best.items()}
+    _, _, d, ctx = _joint_loop(seconds)     # the lean loop is the same loop: its final state against the default's
+    _period_us(d, ctx, seconds)
+    out["joint_rig_breakdown_lean_loop_max_state_difference"] = float(np.max(np.abs(
+        d.GetOutputPort("state").Eval(ctx) - lean_state)))
     out.update(joint_rig_breakdown_controller_and_sources_us=best["loop"] - best["rig_with_hold"],
                joint_rig_breakdown_hold_us=best["rig_with_hold"] - best["rig"],
                joint_rig_breakdown_rig_plumbing_us=best["rig"] - best["dynamics"],

@@ -21,6 +21,8 @@ from pydrake.systems.controllers import LinearQuadraticRegulator
 from pydrake.systems.framework import Context, System
 from pydrake.systems.primitives import Linearize
 
+from awiwi_drake.analysis.results import checked_path
+
 __all__ = ["LinearizationResult", "OutputMap", "DampRow", "DampTable", "FrequencyResponse", "LqrResult",
            "linearize", "lqr", "lqr_gain", "closed_loop_poles", "clean_poles", "poles_table", "PoleSweep",
            "poles_vs_pretension"]
@@ -215,19 +217,13 @@ class _JsonFile:
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_json` to ``path`` (``.json``); read it back with :meth:`load`."""
-        path, name = Path(path), type(self).__name__
-        if path.suffix != ".json":
-            raise ValueError(f"{name}.save: {str(path)!r} must end in .json")
-        if not path.parent.is_dir():
-            raise ValueError(f"{name}.save: directory {str(path.parent)!r} does not exist")
+        path = checked_path(path, f"{type(self).__name__}.save", (".json",))
         path.write_text(json.dumps(self.to_json(), indent=1))
         return path
 
     @classmethod
     def load(cls, path: str | Path):
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{cls.__name__}.load: {str(path)!r} is not a file")
+        path = checked_path(path, f"{cls.__name__}.load", read=True)
         try:
             return cls.from_json(json.loads(path.read_text()))
         except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
