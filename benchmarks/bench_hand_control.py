@@ -10,7 +10,8 @@ force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-for
 tendon-length estimator; ``backstepping``: 15.5 for the hand at 3 kHz, joint angles estimated) the hand
 (``hand_diagram()``, wrist input at 0; ``--physics``: the plant's thesis effects as configured by default,
 all off, or all on, each row says which) is
-closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad, and simulated
+closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad (a fixed input value of
+the context, so no schedule source runs every period), and simulated
 with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period; with several rates
 at their common period), after a warm-up
 run of two control periods (kernel generation and JIT compilation are not timed).  All controllers run in
@@ -20,7 +21,9 @@ Real-time factor (RTF) = simulated seconds per second of the process's CPU clock
 jobs on a shared machine) and of the wall clock (``wall_rtf``).  Where the time goes (unless
 ``--no-profile``): the CPU time of each system's work measured apart on a copy of its loop context
 (``isolated_us_per_call``: every continuous system's derivatives, MultibodyPlant included; every Python
-system's periodic update and vector outputs), and how often Drake calls each Python callback per control
+system's periodic update and vector outputs), the CPU time per period of each stage of the fused chain inside a
+short run (``stage_us_per_period``: ``closed_loop`` closes the hand through ONE discrete system,
+:class:`~awiwi_drake.control.fused.FusedChain_`, holding estimator, joint stage, distribution and force law), and how often Drake calls each Python callback per control
 period (``callbacks_per_period``, counted by cProfile in a 0.01 s run; cProfile's times are not used, it
 slows the many small Python calls several-fold).  Cost per period ~ sum of cost x calls; the C++ primitives
 (Mux, Demux, MatrixGain, Adder, ZeroOrderHold) and the integrator make the rest.  The machine's load
@@ -129,6 +132,57 @@ def isolated_costs(diagram, root) -> dict:
     return dict(sorted(out.items(), key=lambda kv: -kv[1]))
 
 
+def stage_costs(loop, op, refs, sim_time: float = 0.03) -> dict:
+    """CPU time per control period [us] of each stage of the fused chain (``closed_loop``'s default for the hand,
+    :class:`~awiwi_drake.control.fused.FusedChain_`) and of the plant's derivatives, inside a ``sim_time`` run of the
+    loop (each call timed with the thread's CPU clock; the stages are nested: ``sample`` holds the estimator, the
+    joint stage, the path velocity and the last law, ``update`` holds ``sample`` (evaluated there first) and the
+    distribution)."""
+    fused = loop.fused
+    if fused is None:
+        return {}
+    acc: dict = {}
+    saved = []
+
+    def wrap(obj, name, key):
+        """Time ``obj.name`` (a class: every instance, e.g. the copies ``simulate`` makes; else this object)."""
+        fn = getattr(obj, name)
+
+        def timed(*a, **k):
+            t = time.thread_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                acc[key] = acc.get(key, 0.0) + time.thread_time() - t
+        saved.append((obj, name, obj.__dict__.get(name)))
+        setattr(obj, name, timed)
+
+    plant = next(s for s in _leaves(loop.diagram) if s.num_continuous_states())
+    wrap(type(fused), "_calc_sample", "sample (estimator, joint stage, path velocity, law)")
+    wrap(type(fused), "_update", "update (sample + distribution)")
+    wrap(fused.estimator, "estimate", "estimator (5.15, Algorithm 1)")     # shared by the copies (float)
+    if fused.joint_law is not None:
+        wrap(type(fused.joint_law), "__call__", "joint stage")
+    if fused.dist is not None:
+        wrap(fused.dist, "step", "distribution (7.6)")
+    wrap(type(fused.law), "__call__", "tendon force law (10.2)" if fused.joint_law is not None else "law")
+    wrap(type(plant), "DoCalcTimeDerivatives", "plant derivatives (3 per period)")
+    try:
+        c0 = time.process_time()
+        simulate(loop, loop.create_context(op, references=refs), sim_time, log=("joint_angle",))
+        total = time.process_time() - c0
+    finally:
+        for obj, name, old in reversed(saved):
+            if old is None:
+                delattr(obj, name)
+            else:
+                setattr(obj, name, old)
+    periods = sim_time * loop.rate_hz
+    out = {k: v / periods * 1e6 for k, v in acc.items()}
+    out["whole loop"] = total / periods * 1e6
+    return dict(sorted(out.items(), key=lambda kv: -kv[1]))
+
+
 def _leaves(system):
     for s in system.GetSystems():
         if isinstance(s, Diagram):
@@ -152,12 +206,13 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
     loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
-    inputs = {"joint_angle_reference": op.joint_angle + 0.05}
+    # the stepped reference is a fixed input value of the context (no schedule source evaluated every period)
+    refs = {"joint_angle_reference": op.joint_angle + 0.05}
     # warm-up: the first simulation generates/compiles the drive's kernels (numba) and fills caches
-    simulate(loop, loop.create_context(op), 2.0 / loop.rate_hz, inputs=inputs, log=("joint_angle",))
-    ctx = loop.create_context(op)
+    simulate(loop, loop.create_context(op, references=refs), 2.0 / loop.rate_hz, log=("joint_angle",))
+    ctx = loop.create_context(op, references=refs)
     c0, w0 = time.process_time(), time.perf_counter()
-    simulate(loop, ctx, sim_time, inputs=inputs, log=("joint_angle",))
+    simulate(loop, ctx, sim_time, log=("joint_angle",))
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     periods = sim_time * loop.rate_hz
     row = dict(controller=name, physics=physics, rate_hz=loop.rate_hz, estimator=bool(loop.estimated), build_s=build,
@@ -166,12 +221,13 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
     if profile:
         prof = cProfile.Profile()
         prof.enable()
-        simulate(loop, loop.create_context(op), 0.01, inputs=inputs, log=("joint_angle",))
+        simulate(loop, loop.create_context(op, references=refs), 0.01, log=("joint_angle",))
         prof.disable()
         row["callbacks_per_period"] = _calls(prof, 0.01 * loop.rate_hz)
         ictx = loop.create_context(op)
-        loop.diagram.GetInputPort("joint_angle_reference").FixValue(ictx, inputs["joint_angle_reference"])
+        loop.diagram.GetInputPort("joint_angle_reference").FixValue(ictx, refs["joint_angle_reference"])
         row["isolated_us_per_call"] = isolated_costs(loop.diagram, ictx)
+        row["stage_us_per_period"] = stage_costs(loop, op, refs)
     return row
 
 
@@ -208,6 +264,10 @@ def main(argv=None) -> int:
             print("    CPU time per call, measured apart:")
             for where, us in r["isolated_us_per_call"].items():
                 print(f"    {us:9.1f} us  {where}")
+            if r.get("stage_us_per_period"):
+                print("    fused chain, CPU time per control period inside a 0.03 s run (stages nested):")
+                for where, us in r["stage_us_per_period"].items():
+                    print(f"    {us:9.1f} us  {where}")
             print("    calls per control period (Python callbacks):")
             for where, k in r["callbacks_per_period"].items():
                 print(f"    {k:9.1f}     {where}")

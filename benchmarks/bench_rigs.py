@@ -25,6 +25,22 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
   ``..._sampled_vs_continuous_max_difference``, is round-off); also through ``analysis.simulate``
   itself (logging and monitors on) and the error against a tight error-controlled run of the
   continuous rig (RK3, accuracy 1e-9).
+* ``joint_rig_breakdown``: where one control period of the ``joint_rig_3khz`` loop goes, microseconds
+  of CPU per period (``joint_rig_breakdown_*_us``), each figure the difference of two nested diagrams timed
+  in the same process (best of ``--repeats``, interleaved): ``loop_us`` the default loop; ``rig_with_hold_us``
+  the sampled rig alone as ``closed_loop`` adds it (``Rig.add_sampled`` with its hold), inputs fixed;
+  ``rig_us`` the same without the hold; ``dynamics_us`` the ``DiscreteTimeApproximation`` alone (no input
+  multiplexer, no state demultiplexer, no ``LinkRigOutputs_``); ``dynamics_linear_us`` the same
+  approximation of a ``SymbolicVectorSystem`` of the same size (states, inputs, rows) whose rows are one
+  variable each (the approximation's own machinery and the evaluator's environment, not the laws);
+  ``discrete_floor_us`` that linear system as a discrete ``SymbolicVectorSystem`` updated once per period
+  (the ``Simulator``'s cost of one periodic update); ``lean_loop_us`` the floor of this representation, *not*
+  a structure of the package: the same rig dynamics and PD law with nothing a user addresses (no hold, no
+  state demultiplexer, no outputs system, the PD one gain on ``[references, state]`` fed by one source, no
+  controller sub-diagram), with its final state's largest difference to the default loop's
+  (``..._lean_loop_max_state_difference``, round-off: the same loop). Differences: ``controller_and_sources_us``,
+  ``hold_us``, ``rig_plumbing_us`` (multiplexer, demultiplexer, outputs system), ``laws_us`` (the three
+  RK3 stages' and the output's evaluation of the rig's nonlinear expressions), ``approximation_us``.
 * ``scipy_reference``: the same equations and controller in numpy with
   ``scipy.integrate.solve_ivp`` (RK23, rtol 1e-4) per control period.
 * ``finger_index_3khz``: the index finger under the joint-space motor PD.
@@ -60,7 +76,7 @@ import time
 import numpy as np
 
 RATE = 3000.0
-CASES = ("joint_rig_3khz", "scipy_reference", "finger_index_3khz", "hand_3khz", "batch_rigs",
+CASES = ("joint_rig_3khz", "joint_rig_breakdown", "scipy_reference", "finger_index_3khz", "hand_3khz", "batch_rigs",
          "mujoco_callback", "mujoco_linear")
 
 
@@ -146,12 +162,124 @@ def case_joint_rig_3khz(seconds, repeats):
                 joint_rig_3khz_sampled_vs_continuous_max_difference=float(np.max(np.abs(x_fixed - x_cont))))
 
 
+def _period_us(diagram, ctx, seconds):
+    from pydrake.systems.analysis import Simulator
+    sim = Simulator(diagram, ctx)
+    sim.Initialize()
+    t0 = time.process_time()
+    sim.AdvanceTo(seconds)
+    return (time.process_time() - t0) / (seconds * RATE) * 1e6
+
+
+def case_joint_rig_breakdown(seconds, repeats):
+    import pydrake.symbolic as sym
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import SymbolicVectorSystem
+
+    from awiwi_drake.components.rig_system import rig_integration_system, sampled_dynamics
+    from awiwi_drake.rigs import joint_rig
+
+    h = 1.0 / RATE
+    rig = joint_rig()
+    op = rig.operating_point()
+    u = np.concatenate([op.motor_torque, op.external_torque])
+    z0 = rig.sampled_state(op.state)
+
+    def loop():
+        _, _, d, ctx = _joint_loop(seconds)
+        return _period_us(d, ctx, seconds)
+
+    def rig_alone(hold):
+        b = DiagramBuilder()
+        ports = rig.add_sampled(b, h, hold_applied_torque=hold)
+        ports.export(b)
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        d.GetInputPort("motor_torque").FixValue(ctx, op.motor_torque)
+        d.GetInputPort("external_torque").FixValue(ctx, op.external_torque)
+        ports.dynamics.GetMyMutableContextFromRoot(ctx).SetDiscreteState(0, z0)
+        return _period_us(d, ctx, seconds)
+
+    def alone(system, discrete=False):
+        b = DiagramBuilder()
+        dyn = b.AddSystem(system if discrete else sampled_dynamics(system, h))
+        b.ExportInput(dyn.get_input_port(), "u")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        d.get_input_port().FixValue(ctx, u)
+        dyn.GetMyMutableContextFromRoot(ctx).SetDiscreteState(0, z0)
+        return _period_us(d, ctx, seconds)
+
+    def linear(period=0.0):     # the rig system's size (states, inputs, rows), one variable per row: no laws
+        xs = [sym.Variable(f"z{i}") for i in range(len(z0))]
+        us = [sym.Variable(f"u{i}") for i in range(len(u))]
+        rows = [-1e-3 * sym.Expression(v) for v in xs]
+        return SymbolicVectorSystem(state=xs, input=us, dynamics=rows, output=xs, time_period=period)
+
+    def lean_loop():    # not a package structure: the floor of this rig representation (see the module doc)
+        from pydrake.systems.primitives import MatrixGain, Multiplexer, TrajectorySource
+        from pydrake.trajectories import PiecewisePolynomial
+
+        from awiwi_drake.control.motor_position import demo_references
+        from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
+        scen = DemoScenario(t_final=seconds, ramp_time=min(0.5, seconds / 3), step_time=seconds / 2)
+        t, refs = demo_references(rig, scen)
+        g, m, nx = MotorPositionGains(), len(op.motor_torque), len(z0)
+        eye = np.eye(m)
+        b = DiagramBuilder()
+        dynamics = rig_integration_system(rig.drive.model)
+        dyn = b.AddSystem(sampled_dynamics(dynamics, h))
+        inputs = b.AddSystem(Multiplexer([m, len(op.external_torque)]))
+        ref = b.AddSystem(TrajectorySource(PiecewisePolynomial.FirstOrderHold(
+            t, np.vstack([refs["theta_reference"], refs["tendon_force_reference"]]))))
+        meas = b.AddSystem(Multiplexer([2 * m, nx]))
+        pd = b.AddSystem(MatrixGain(np.hstack([g.kp * eye, rig.params.motor.pulley_radius * eye,
+                                               np.zeros((m, nx - 2 * m)), -g.kp * eye, -g.kd * eye])))
+        b.Connect(ref.get_output_port(), meas.get_input_port(0))
+        b.Connect(dyn.get_output_port(), meas.get_input_port(1))
+        b.Connect(meas.get_output_port(), pd.get_input_port())
+        b.Connect(pd.get_output_port(), inputs.get_input_port(0))
+        b.Connect(inputs.get_output_port(), dyn.get_input_port())
+        b.ExportInput(inputs.get_input_port(1), "external_torque")
+        b.ExportOutput(dyn.get_output_port(), "state")
+        d = b.Build()
+        ctx = d.CreateDefaultContext()
+        d.GetInputPort("external_torque").FixValue(ctx, np.zeros(len(op.external_torque)))
+        dyn.GetMyMutableContextFromRoot(ctx).SetDiscreteState(0, rig.sampled_state(
+            rig.operating_point(pretension=scen.f_start).state))
+        us = _period_us(d, ctx, seconds)
+        lean_state[:] = d.GetOutputPort("state").Eval(ctx)
+        return us
+
+    lean_state = np.zeros(len(z0))
+    cases = dict(lean_loop=lean_loop, loop=loop, rig_with_hold=lambda: rig_alone(True), rig=lambda: rig_alone(False),
+                 dynamics=lambda: alone(rig_integration_system(rig.drive.model)),
+                 dynamics_linear=lambda: alone(linear()), discrete_floor=lambda: alone(linear(h), discrete=True))
+    best = {k: np.inf for k in cases}
+    for k, fn in cases.items():     # warm-up (kernels, caches)
+        fn()
+    for _ in range(repeats):        # interleaved, so a change of load hits every variant alike
+        for k, fn in cases.items():
+            best[k] = min(best[k], fn())
+    out = {f"joint_rig_breakdown_{k}_us": v for k, v in best.items()}
+    _, _, d, ctx = _joint_loop(seconds)     # the lean loop is the same loop: its final state against the default's
+    _period_us(d, ctx, seconds)
+    out["joint_rig_breakdown_lean_loop_max_state_difference"] = float(np.max(np.abs(
+        d.GetOutputPort("state").Eval(ctx) - lean_state)))
+    out.update(joint_rig_breakdown_controller_and_sources_us=best["loop"] - best["rig_with_hold"],
+               joint_rig_breakdown_hold_us=best["rig_with_hold"] - best["rig"],
+               joint_rig_breakdown_rig_plumbing_us=best["rig"] - best["dynamics"],
+               joint_rig_breakdown_laws_us=best["dynamics"] - best["dynamics_linear"],
+               joint_rig_breakdown_approximation_us=best["dynamics_linear"] - best["discrete_floor"])
+    return out
+
+
 def case_scipy_reference(seconds, repeats):
     from scipy.integrate import solve_ivp
 
     from awiwi_drake.components.motor import motor_acceleration
     from awiwi_drake.parameters.rigs import MotorPositionGains
-    from awiwi_drake.rigs.demo import motor_references
+    from awiwi_drake.control.motor_position import motor_references
 
     def run():
         rig, scen, _, _ = _joint_loop(seconds)
@@ -328,7 +456,7 @@ def _mujoco_case(seconds, repeats, linear: bool):
         return None
     from awiwi_drake.components.motor import motor_friction_torque
     from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
-    from awiwi_drake.rigs.demo import motor_references
+    from awiwi_drake.control.motor_position import motor_references
     from awiwi_drake.rigs import joint_rig
     rig = joint_rig()
     p, spring = rig.params, rig.spring

@@ -19,7 +19,7 @@ import pytest
 msgpack = pytest.importorskip("msgpack", reason="the dev extra installs msgpack to decode Meshcat recordings")
 
 from awiwi_drake.cli import main  # noqa: E402
-from awiwi_drake.parameters.display import AnimationParams  # noqa: E402
+from awiwi_drake.parameters.cli import AnimationParams  # noqa: E402
 from awiwi_drake.parameters.hand import FINGERS  # noqa: E402
 
 

@@ -114,7 +114,8 @@ def test_simulated_perturbed_step_grows_at_the_unstable_pole_of_12_10(study):
     n1, n2 = np.searchsorted(t, 0.02), np.searchsorted(t, 0.9 * t[-1])   # (the last sample ends a short step)
     rate = np.log(d[n2] / d[n1]) / (t[n2] - t[n1])
     assert rate == pytest.approx(ev[i].real, rel=1e-4)
-    assert study.diverged_at is not None and t[-1] < study.diverged_at
+    assert study.diverged_at["perturbed"] is not None and t[-1] < study.diverged_at["perturbed"]
+    assert study.diverged_at["nominal"] is None
     q_nom = study.state["nominal"][:, 0]
     assert abs(q_nom[-1] - study.step) < 0.01 * study.step          # the nominal loop settles (5 time constants)
 

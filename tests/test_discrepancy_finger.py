@@ -105,6 +105,14 @@ def test_finger_diagnosis_names_effect_and_place(friction_noisy, tmp_path, capsy
     assert js["named_effects"] == ["motor_friction"] and js["places"] == {"motor_friction": "index_h5 (PIP)"}
     assert "motor_friction on index_h5 (PIP)" in capsys.readouterr().out
     assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "tendons.png").exists()
+    # the write-back as a YAML parameter set the finger builder loads
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters.hand import FingerRigParams
+    from awiwi_drake.parameters.yaml_io import load_yaml
+    aug = load_yaml(FingerRigParams.for_finger("index"), tmp_path / "rep" / "augmented_parameters.yaml")
+    assert dict(aug.tendon_motors)["index_h5"].friction
+    assert finger_diagram(finger="index", params=aug).drive.model.motor[4].coulomb_torque == pytest.approx(
+        js["steps"][0]["parameters"]["motor_coulomb"], rel=1e-12)
 
 
 def test_finger_diagnosis_nothing_hidden_names_nothing():
@@ -220,3 +228,15 @@ def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
     before = FingerResiduals(ds, s).ratios()["spring_total"]
     after = FingerResiduals(dataclasses.replace(ds, parameters=js), s).ratios()["spring_total"]
     assert after < 0.6 * before and abs(after - dx.ratios_after["spring_total"]) < 0.05 * after
+
+
+def test_thumb_motor_side_names_effect_and_place():
+    """The thumb (routing h(q) depends on the joint angles, refused before): its motor side is exact as on the
+    other fingers, so a hidden motor friction is named on its tendon; the spring side is not judged (said in the
+    result and the text); hysteresis cannot be hidden on the thumb (one line)."""
+    ds = make_finger_dataset("thumb", ["motor_friction"], place=3, seed=2)   # 10 s: 3 s records saturate the thumb
+    dx = diagnose(ds)
+    assert dx.places == {"motor_friction": "thumb_h3 (abduction, MCP)"} and not dx.spring_checked
+    assert "spring side not judged" in dx.text() and dx.summary()["spring_side_checked"] is False
+    with pytest.raises(ValueError, match="spring_hysteresis: not on the thumb"):
+        make_finger_dataset("thumb", ["spring_hysteresis"], place=3, seed=2, gen=THREE)

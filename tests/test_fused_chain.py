@@ -76,14 +76,15 @@ def test_fused_equals_composed_on_the_hand(name):
     """The hand (five fingers, one distribution batch, the thumb's kernels, the wrist offsets)."""
     _, a = _run("hand", name, False, seed=2, periods=6)
     loop, b = _run("hand", name, True, seed=2, periods=6)
-    assert loop.fused is not None
+    assert loop.fused is not None and np.ptp(a["motor_torque"], axis=0).max() > 1e-3   # fused, and the loop moved
     _assert_same(a, b)
 
 
 def test_fused_chain_on_a_ring_finger_with_coupled_dip():
     """The ring: DoF selection S (the DIP follows the PIP, (5.16)) in the estimator, the stage and the distribution."""
     _, a = _run("finger-ring", "cascaded", False, seed=3)
-    _, b = _run("finger-ring", "cascaded", True, seed=3)
+    loop, b = _run("finger-ring", "cascaded", True, seed=3)
+    assert loop.fused is not None and np.ptp(a["motor_torque"], axis=0).max() > 1e-3   # fused, and the loop moved
     _assert_same(a, b)
 
 
@@ -226,3 +227,21 @@ def test_compiled_backstepping_equals_the_law_as_written(target):
         ref, fast = law.terms(u)["command"], law(u)
         assert law._fast                                          # the compiled path ran
         np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+
+
+def test_compiled_joint_feedback_equals_the_law_as_written():
+    """JointStateFeedbackLaw's float path for the PD / impedance form (one compiled call) equals the law as written
+    (the path every other scalar type takes: here the same call on AutoDiffXd inputs, whose values are compared) on
+    the hand's cascaded design."""
+    rig = _rig("hand")
+    law = make_controller("cascaded", rig)._joint_law
+    assert not law.uses_forces and not law.uses_previous
+    rng = np.random.default_rng(9)
+    n = rig.num_joints
+    for _ in range(3):
+        u = dict(joint_angle=rng.normal(scale=0.3, size=n), joint_velocity=rng.normal(size=n),
+                 joint_angle_reference=rng.normal(scale=0.3, size=n))
+        ua = {k: np.array([AutoDiffXd(x) for x in v], dtype=object) for k, v in u.items()}
+        ref = ExtractValue(law(ua)).ravel()                        # the law as written (not the compiled call)
+        assert np.abs(ref).max() > 0
+        np.testing.assert_allclose(law(u), ref, rtol=0, atol=1e-13 * np.abs(ref).max())

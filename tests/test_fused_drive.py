@@ -104,8 +104,9 @@ def test_drive_system_converts_and_autodiff_matches_finite_differences():
     s[8:16] *= 0.1   # moderate speeds keep the finite differences away from the tanh knees
     inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
                   joint_velocity=RNG.normal(scale=0.01, size=4))
-    check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
+    jac = check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
     assert_symbolic_matches_float(sys_, s, inputs, rtol=1e-9)     # symbolic (laws) = float (kernel)
+    assert all(np.abs(J_ad).max() > 0 for J_ad, _ in jac.values())    # every compared Jacobian is non-trivial
 
 
 def test_float_system_equals_its_autodiff_conversion_values():

@@ -1,22 +1,11 @@
 """The one linearisation / LQR API: Drake's ``Linearize`` and ``LinearQuadraticRegulator`` on any plant.
 
-* :func:`linearize` -- ``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du``
-  from ``pydrake.systems.primitives.Linearize`` at a rig's operating point (its
-  context from :meth:`Rig.context`, the one way to get it), at any other state /
-  input, or of any Drake system at a given context.  The
-  :class:`LinearizationResult` names its states, inputs and outputs, keeps the
-  operating point ``(x0, u0)``, and offers :meth:`~LinearizationResult.damp`
-  (natural frequency, damping ratio, time constant per pole),
-  :meth:`~LinearizationResult.bode` (a :class:`FrequencyResponse` with
-  ``.plot()`` and gain/phase margins) and :meth:`~LinearizationResult.to_control`
-  (a python-control ``StateSpace``; optional extra ``control``).
-* :func:`lqr` -- ``u = u0 - K (x - x0)`` from Drake's ``LinearQuadraticRegulator``
-  on that linearisation; :class:`LqrResult` carries ``K``, the Riccati solution
-  ``S``, the weights and the closed loop as a :class:`LinearizationResult`.
-  :func:`lqr_gain` is the same on bare matrices (state-dependent Riccati, ch. 14).
-
-Poles within round-off of zero (``|Re|`` or ``|Im|`` below ``100 n eps ||A||``)
-are reported as exactly 0, so an integrator does not print as ``+1.42e-13``.
+:func:`linearize` (at a rig's operating point, its context from :meth:`Rig.context`, or any system at a
+given context) returns a :class:`LinearizationResult`: named states, inputs and outputs, the point
+``(x0, u0)``, ``damp()``, ``bode()`` (a :class:`FrequencyResponse`) and ``to_control()`` (python-control,
+optional extra).  :func:`lqr` returns an :class:`LqrResult` (``u = u0 - K (x - x0)``, the Riccati solution
+``S``, the closed loop); :func:`lqr_gain` is the same on bare matrices (state-dependent Riccati, ch. 14).
+Poles within round-off of zero are reported as exactly 0 (:func:`clean_poles`).
 """
 
 from __future__ import annotations
@@ -31,6 +20,8 @@ import numpy as np
 from pydrake.systems.controllers import LinearQuadraticRegulator
 from pydrake.systems.framework import Context, System
 from pydrake.systems.primitives import Linearize
+
+from awiwi_drake.analysis.results import checked_path
 
 __all__ = ["LinearizationResult", "OutputMap", "DampRow", "DampTable", "FrequencyResponse", "LqrResult",
            "linearize", "lqr", "lqr_gain", "closed_loop_poles", "clean_poles", "poles_table", "PoleSweep",
@@ -226,19 +217,13 @@ class _JsonFile:
 
     def save(self, path: str | Path) -> Path:
         """Write :meth:`to_json` to ``path`` (``.json``); read it back with :meth:`load`."""
-        path, name = Path(path), type(self).__name__
-        if path.suffix != ".json":
-            raise ValueError(f"{name}.save: {str(path)!r} must end in .json")
-        if not path.parent.is_dir():
-            raise ValueError(f"{name}.save: directory {str(path.parent)!r} does not exist")
+        path = checked_path(path, f"{type(self).__name__}.save", (".json",))
         path.write_text(json.dumps(self.to_json(), indent=1))
         return path
 
     @classmethod
     def load(cls, path: str | Path):
-        path = Path(path)
-        if not path.is_file():
-            raise ValueError(f"{cls.__name__}.load: {str(path)!r} is not a file")
+        path = checked_path(path, f"{cls.__name__}.load", read=True)
         try:
             return cls.from_json(json.loads(path.read_text()))
         except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:

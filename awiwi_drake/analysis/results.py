@@ -12,7 +12,7 @@ import numpy as np
 
 from awiwi_drake.analysis.monitors import Event
 
-__all__ = ["SimulationResult", "PORT_UNITS", "port_unit", "state_unit"]
+__all__ = ["SimulationResult", "PORT_UNITS", "port_unit", "state_unit", "checked_path"]
 
 #: Units of the package's port names (ARCHITECTURE.md: ports are physical quantities, SI).
 PORT_UNITS = {
@@ -44,6 +44,23 @@ def port_unit(name: str) -> str:
     if base.startswith("controller_"):
         base = base[len("controller_"):]
     return PORT_UNITS.get(base, "-")
+
+
+def checked_path(path, owner: str, suffixes: Sequence[str] = (), *, read: bool = False) -> Path:
+    """``path`` as a Path, or a ValueError naming ``owner``: a file to read must exist; a file to write
+    must end in one of ``suffixes`` and sit in an existing directory."""
+    path = Path(path)
+    if read:
+        if not path.is_file():
+            raise ValueError(f"{owner}: {str(path)!r} is not a file")
+        return path
+    if suffixes and path.suffix not in suffixes:
+        raise ValueError(f"{owner}: {str(path)!r} must end in {' or '.join(suffixes)}")
+    if not path.parent.is_dir():
+        raise ValueError(f"{owner}: directory {str(path.parent)!r} does not exist")
+    if path.is_dir():
+        raise ValueError(f"{owner}: {str(path)!r} is a directory")
+    return path
 
 
 def _jsonable(v: Any):
@@ -153,13 +170,7 @@ class SimulationResult:
 
         Returns the data file's path.  The directory must exist.
         """
-        path = Path(path)
-        if path.suffix not in (".npz", ".csv"):
-            raise ValueError(f"SimulationResult.save: {str(path)!r} must end in .npz or .csv")
-        if not path.parent.is_dir():
-            raise ValueError(f"SimulationResult.save: directory {str(path.parent)!r} does not exist")
-        if path.is_dir():
-            raise ValueError(f"SimulationResult.save: {str(path)!r} is a directory")
+        path = checked_path(path, "SimulationResult.save", (".npz", ".csv"))
         meta = self._meta()
         if path.suffix == ".npz":
             np.savez(path, t=self.t, **{f"signal:{k}": v for k, v in self.signals.items()})
@@ -176,11 +187,7 @@ class SimulationResult:
     @classmethod
     def load(cls, path: str | Path) -> "SimulationResult":
         """Read a result written by :meth:`save` (``final_context`` is None)."""
-        path = Path(path)
-        side = Path(str(path) + ".json")
-        for p in (path, side):
-            if not p.is_file():
-                raise ValueError(f"SimulationResult.load: {str(p)!r} is not a file")
+        path, side = (checked_path(p, "SimulationResult.load", read=True) for p in (path, str(path) + ".json"))
         try:
             meta = json.loads(side.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:

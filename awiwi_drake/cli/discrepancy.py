@@ -179,7 +179,7 @@ def register(subparsers) -> None:
 
     m = subparsers.add_parser("make-dataset", help="generate a hidden-effect truth dataset")
     m.add_argument("--rig", choices=["tendon-rig", "joint-rig", "finger-index", "finger-middle", "finger-ring",
-                                     "finger-fifth"], default="joint-rig",
+                                     "finger-fifth", "finger-thumb"], default="joint-rig",
                    help="the rig of the truth experiment (default joint-rig); finger-*: the package's finger "
                         "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple, spring_hysteresis")
     m.add_argument("--hide", action="append", metavar="EFFECT",

@@ -12,19 +12,9 @@ from awiwi_drake.cli import CliError, add_parameter_options, load_parameters, ou
 __all__ = ["register"]
 
 
-def _targets_help() -> str:
-    from awiwi_drake.diagrams import TARGETS
-
-    return "\n".join(f"  {name}: {entry['description']}" for name, entry in TARGETS.items())
-
-
-def _target_names() -> list[str]:
-    from awiwi_drake.diagrams import TARGETS
-
-    return list(TARGETS)
-
-
 def register(sub) -> None:
+    from awiwi_drake.diagrams import TARGETS
+
     fmt = argparse.RawDescriptionHelpFormatter
     p = sub.add_parser("demo", help="simulate joint-rig (pretension ramp + position step), write plots and diagrams",
                        formatter_class=fmt)
@@ -40,13 +30,13 @@ def register(sub) -> None:
     p.add_argument("--out", default="diagrams", help="output folder (default diagrams/)")
     p.set_defaults(func=_export)
 
-    epilog = "targets:\n" + _targets_help() + (
+    epilog = "targets:\n" + "\n".join(f"  {name}: {e['description']}" for name, e in TARGETS.items()) + (
         "\n\nParameters: --config FILE.yaml, then --set NAME=VALUE (field names as listed by"
         "\n'awiwi-drake params RIG'; nested sets are searched, dotted paths like motor.inertia also work).")
-    rig_help = "target rig: " + ", ".join(_target_names())
+    rig_help = "target rig: " + ", ".join(TARGETS)
     p = sub.add_parser("linearize", help="print A, B and the poles at a rig's default operating point",
                        epilog=epilog, formatter_class=fmt)
-    p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
+    p.add_argument("rig", metavar="RIG", choices=list(TARGETS), help=rig_help)
     add_parameter_options(p)
     p.add_argument("--json", action="store_true",
                    help="print one JSON object {A, B, C, D, poles, damp, state_names, input_names, x0, u0, ...}")
@@ -65,7 +55,7 @@ def register(sub) -> None:
 
     p = sub.add_parser("lqr", help="LQR gain and closed-loop poles at a rig's default operating point",
                        epilog=epilog + "\n\n--q gives the diagonal of Q in the rig's state order.", formatter_class=fmt)
-    p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
+    p.add_argument("rig", metavar="RIG", choices=list(TARGETS), help=rig_help)
     req = p.add_argument_group("required options")
     req.add_argument("--q", required=True, help="comma-separated diagonal of Q (state order)")
     req.add_argument("--r", required=True, help="comma-separated diagonal of R (one per motor)")
@@ -78,7 +68,7 @@ def register(sub) -> None:
     p = sub.add_parser("params", help="list a rig's parameters with units, ranges and sources (or print them as YAML)",
                        epilog=epilog + "\n\n'params RIG --yaml > my.yaml' writes a file that --config reads back.",
                        formatter_class=fmt)
-    p.add_argument("rig", metavar="RIG", choices=_target_names(), help=rig_help)
+    p.add_argument("rig", metavar="RIG", choices=list(TARGETS), help=rig_help)
     add_parameter_options(p)
     p.add_argument("--yaml", action="store_true",
                    help="print the parameter set as YAML (Drake's yaml_dump_typed) instead of the table")

@@ -76,11 +76,6 @@ class TendonDrive:
         return (3 if self.hysteresis else 2) * self.num_tendons
 
 
-def _check_backend(backend: str) -> None:
-    if backend not in BACKENDS:
-        raise ValueError(f"backend = {backend!r} is unknown; use one of {', '.join(BACKENDS)}")
-
-
 def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, backend: str = "compiled",
                        hysteresis: HysteresisParams = HysteresisParams(),
                        motor_pulley_radius: float | None = None, name: str = "tendon_drive",
@@ -115,7 +110,8 @@ def build_tendon_drive(*, motor: MotorParams, spring, coupling, offsets=None, ba
         Number of leading coupling joints with a ``joint_velocity`` input (default
         all); the rest (the hand's wrist length offsets) are quasi-static.
     """
-    _check_backend(backend)
+    if backend not in BACKENDS:
+        raise ValueError(f"backend = {backend!r} is unknown; use one of {', '.join(BACKENDS)}")
     if not isinstance(motor, MotorParams):
         raise ValueError(f"build_tendon_drive: motor must be MotorParams, got {type(motor).__name__}")
     m, n = int(coupling.num_tendons), int(coupling.num_joints)

@@ -17,13 +17,14 @@ equal to it (tests/test_control_tendon.py, tests/test_fused_chain.py):
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pydrake.symbolic as sym
 
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.codegen import compile_kernels
 
-__all__ = ["motor_law_kernels", "float_inputs"]
+__all__ = ["motor_law_kernels", "float_inputs", "joint_feedback"]
 
 _SOURCE = '''
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
@@ -145,3 +146,27 @@ def float_inputs(u, names) -> bool:
         if not (isinstance(v, np.ndarray) and v.dtype == np.float64):
             return False
     return True
+
+
+@numba.njit(cache=True, fastmath=False, error_model="numpy")
+def joint_feedback(Sp, q, v, q_ref, q0, K, Nx, Nu, tau0):
+    """:class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw` without torque feedback (``K[:, 2:] = 0``:
+    PD / impedance), float: ``tau0 + Nu dr - sum_c K_c (z_c - ref_c dr)`` with the law's terms in its order."""
+    k, n = Sp.shape
+    out = np.empty(k)
+    for j in range(k):
+        qd = 0.0
+        vd = 0.0
+        rd = 0.0
+        for i in range(n):
+            qd += Sp[j, i] * q[i]
+            vd += Sp[j, i] * v[i]
+            rd += Sp[j, i] * q_ref[i]
+        dr = rd - q0[j]
+        s = K[j, 0] * ((qd - q0[j]) - Nx[j, 0] * dr)
+        s += K[j, 1] * (vd - Nx[j, 1] * dr)
+        s += K[j, 2] * (0.0 * vd - Nx[j, 2] * dr)
+        s += K[j, 3] * (0.0 * vd - Nx[j, 3] * dr)
+        s += K[j, 4] * (0.0 * vd - Nu[j] * dr)
+        out[j] = tau0[j] + Nu[j] * dr - s
+    return out

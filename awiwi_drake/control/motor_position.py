@@ -13,7 +13,7 @@ stateless ``AffineSystem``), so it is linear and scalar-convertible.
 :func:`joint_rig_position_loop` is the package's main demo (``awiwi-drake
 demo``): the joint rig, the pretension ramping from ``f_start`` to ``f_end``
 with the link at rest, then a link step; the references come from
-:func:`awiwi_drake.rigs.demo.motor_references` (the rig's own spring law) as
+:func:`motor_references` (the rig's own spring law: ``x_i = f^-1(f_pre)``, ``theta_i* = (x_i +- r_q q*) / r_m``) as
 ``TrajectorySource`` s wired into the :class:`~awiwi_drake.control.base.ClosedLoop`.
 """
 
@@ -28,9 +28,8 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.parameters.rigs import DemoScenario, MotorPositionGains
-from awiwi_drake.rigs.demo import motor_references
 
-__all__ = ["motor_position_controller", "demo_references", "joint_rig_position_loop"]
+__all__ = ["motor_position_controller", "motor_references", "demo_references", "joint_rig_position_loop"]
 
 
 def motor_position_controller(rig: Any, gains: MotorPositionGains | None = None, *,
@@ -56,6 +55,19 @@ def motor_position_controller(rig: Any, gains: MotorPositionGains | None = None,
     d = b.Build()
     d.set_name("motor_position_pd")
     return d
+
+
+def motor_references(rig: Any, t: np.ndarray, pretension: np.ndarray, joint_angle: np.ndarray):
+    """Motor-angle set points and feedforward torques realising pretension and link angle.
+
+    Returns ``(theta_ref (2, T), torque_ff (2, T))`` for the joint rig.
+    """
+    p = rig.params
+    r, rq = p.motor.pulley_radius, p.link_pulley_radius
+    x = np.asarray(rig.spring.inverse_force(np.asarray(pretension, dtype=float)), dtype=float)
+    theta = np.stack([(x + rq * joint_angle) / r, (x - rq * joint_angle) / r])
+    ff = np.stack([r * np.asarray(pretension), r * np.asarray(pretension)])
+    return theta, ff
 
 
 def demo_references(rig: Any, scenario: DemoScenario | None = None) -> tuple[np.ndarray, dict]:

@@ -127,9 +127,6 @@ class FingerResiduals:
         self.params = fp = finger_parameters_from_json(ds.parameters, ds.name)
         self.finger = ds.parameters["finger"]
         rig = finger_diagram(finger=self.finger, params=fp)
-        if not rig.coupling.is_constant:
-            raise ValueError(f"{ds.name}: the {self.finger}'s routing depends on the joint angles; the finger "
-                             f"diagnosis supports constant routings (index, middle, ring, fifth)")
         if fp.spring.hysteresis.enabled or fp.guide_friction:
             raise ValueError(f"{ds.name}: parameters.finger_rig: spring.hysteresis.enabled and guide_friction must "
                              f"be false (the nominal finger may hold motor friction and ripple per tendon "
@@ -209,9 +206,10 @@ class FingerResiduals:
         the measured forces); residual in the redundant directions, whitened."""
         rig, m, r = self.rig, self.m, self.r
         laws_t = rig.spring_laws
-        P = np.asarray(rig.coupling.P(), float)
+        P = np.asarray(rig.coupling.P(), float) if rig.coupling.is_constant else None
         # elongations the spring laws give for the measured forces, at full rate, then filtered: the routing
-        # is linear in them, so the filtered relation y = P q holds exactly (consistent filtering)
+        # is linear in them, so the filtered relation y = P q holds exactly (consistent filtering; the thumb's
+        # h(q) is not linear: there it holds to the curvature of h over the kernel's width)
         raw = np.maximum(self._force_raw, 1e-3)
         hyst = rig.drive.model.hysteresis      # a nominal loop on single tendons (tendon_springs): its force removed
         for i, h in enumerate(hyst if isinstance(hyst, tuple) else ()):
@@ -224,14 +222,33 @@ class FingerResiduals:
         var = (g0 * self.sig_force[:, None] / stiff) ** 2 + (g0 * r * self.sig_theta[:, None]) ** 2
         wsq = 1.0 / np.sqrt(var)                                    # (m, K)
         K = y.shape[1]
-        A = wsq.T[:, :, None] * P[None]                             # (K, m, n) whitened routing
+        yw = (wsq * y).T                                            # (K, m)
+        if P is not None:
+            A = wsq.T[:, :, None] * P[None]                         # (K, m, n) whitened routing
+            self.q_hat = np.stack([np.linalg.lstsq(A[k], yw[k], rcond=None)[0] for k in range(0, K)], axis=1)
+            hq = P @ self.q_hat
+        else:       # the thumb: y = h(q) - h(0), weighted Gauss-Newton per sample, the routing linearised at q_hat
+            c, n = rig.coupling, self.n
+            h0 = np.asarray(c.h(np.zeros(n)), float)
+            Q, A = np.zeros((K, n)), np.empty((K, m, n))
+            for k in range(K):
+                q = Q[k - 1] if k else np.zeros(n)
+                for _ in range(20):
+                    A[k] = wsq[:, k, None] * np.asarray(c.P(q), float)
+                    dq = np.linalg.lstsq(A[k], yw[k] - wsq[:, k] * (np.asarray(c.h(q), float) - h0), rcond=None)[0]
+                    q = q + dq
+                    if np.max(np.abs(dq)) < 1e-12:
+                        break
+                Q[k] = q
+                A[k] = wsq[:, k, None] * np.asarray(c.P(q), float)
+            self.q_hat = Q.T
+            hq = np.stack([np.asarray(c.h(q), float) - h0 for q in Q], axis=1)
         Qm, _ = np.linalg.qr(A)                                     # (K, m, n)
         proj = np.eye(m)[None] - Qm @ np.transpose(Qm, (0, 2, 1))   # whitened residual projector
-        yw = (wsq * y).T                                            # (K, m)
-        self.eps = np.einsum("kij,kj->ik", proj, yw)
+        # the whitened residual of the fit, in the redundant directions (= proj @ yw for a constant routing)
+        self.eps = np.einsum("kij,kj->ik", proj, yw - (wsq * hq).T)
         self.proj, self.wsq, self.stiff = proj, wsq, stiff
-        self.q_hat = np.stack([np.linalg.lstsq(A[k], yw[k], rcond=None)[0] for k in range(0, K)], axis=1)
-        self.elong = rig.offsets[:, None] + r * self.theta + P @ self.q_hat
+        self.elong = rig.offsets[:, None] + r * self.theta + hq
 
     # ------------------------------------------------------------------ energies
     def ratios(self) -> dict:
@@ -496,6 +513,7 @@ class FingerDiagnosis:
     complete: bool = True
     augmented: AugmentedParameters | None = None   # the dataset's FingerRigParams with the named effects written
     finger: str = ""
+    spring_checked: bool = True     # False on the thumb: its spring side is not judged (diagnose_finger)
 
     @property
     def named_effects(self) -> list:
@@ -520,13 +538,16 @@ class FingerDiagnosis:
                 "floor_ratio_before": self.ratios_before, "floor_ratio_after": self.ratios_after,
                 "unexplained_residual": self.unexplained_residual, "unexplained": self.unexplained,
                 "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history,
-                "unused_columns": self.unused_columns,
+                "unused_columns": self.unused_columns, "spring_side_checked": self.spring_checked,
                 "augmented": None if self.augmented is None else {
                     "parameters": finger_parameters_to_json(self.finger, self.augmented.params),
                     "applied": self.augmented.applied, "not_representable": self.augmented.not_representable}}
 
     def text(self) -> str:
         lines = [f"{self.dataset}: {self.verdict}"]
+        if not self.spring_checked:
+            lines.append(f"  spring side not judged: the {self.finger}'s routing depends on the joint angles "
+                         f"(motor side only: hysteresis and force-sensor errors are not looked for)")
         if self.unused_columns:
             lines.append(f"  not used: {', '.join(self.unused_columns)} (joint angles are estimated from the tendons)")
         for s in self.steps:
@@ -566,10 +587,16 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     base_motor, base_spring = fr.tau.copy(), fr.eps.copy()
     steps, history, used = [], [], set()
     floor = settings.floor_ratio
+    # the thumb (routing h(q) nonlinear): its spring side is not judged. Measured on nothing-hidden thumb datasets
+    # (10 s, 30 dB): the filtered routing misses by 1.2-1.6x the floor on thumb_h1-h3 and the search names
+    # spring_hysteresis there (with a 20 ms and a 10 ms kernel alike); the motor side is exact as on the others
+    spring_checked = bool(fr.rig.coupling.is_constant)
+    if not spring_checked:
+        say(f"spring side not judged: the {fr.finger}'s routing depends on the joint angles (motor side only)")
 
     def current():
         mot = [float(np.mean((base_motor[i] / fr.sigma_tau[i]) ** 2)) for i in range(fr.m)]
-        spr = float(np.mean(np.sum(base_spring ** 2, axis=0)) / (fr.m - fr.n))
+        spr = float(np.mean(np.sum(base_spring ** 2, axis=0)) / (fr.m - fr.n)) if spring_checked else 0.0
         return mot, spr
 
     n_phys = n_nuis = 0
@@ -615,7 +642,13 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
             members = [win.effect] + [f"{c.effect}" + ("" if c.tendon == win.tendon else f" on {places[c.tendon]}")
                                       for c in tied]
             status = "not separable"
-            experiment = separating_experiment([win.effect] + [c.effect for c in tied])
+            others = sorted({c.effect for c in tied} - {win.effect})
+            experiment = separating_experiment([win.effect] + others) if others else ""
+            same = [fr.rig.tendon_names[c.tendon] for c in tied if c.effect == win.effect and c.tendon != win.tendon]
+            if same:    # one effect, two places: tell the tendons apart, not the effects
+                experiment = "; ".join(x for x in (experiment, (
+                    f"hold the joints and cycle one tendon's force at a time ({', '.join([fr.rig.tendon_names[win.tendon]] + same)}): "
+                    f"the effect follows its own tendon")) if x)
         if win.side == "motor":
             base_motor = base_motor - win.fitted
         else:
@@ -628,7 +661,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
         say(f"added {win.effect} on {places[win.tendon]} ({win.kind}, {status}, z {win.z:.1f}, "
             f"dBIC {win.delta_bic:.1f}): " + ", ".join(f"{k} = {v:.4g}" for k, v in win.params.items()))
     mot, spr = current()
-    after = {"motor": mot, "spring_total": spr}
+    after = {"motor": mot, "spring_total": spr if spring_checked else float("nan")}
     # unexplained: above the threshold and beyond chance for the largest of m + 1 chi-square means over K
     # samples (family-wise 0.1 %)
     from scipy.stats import chi2
@@ -655,6 +688,6 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     say(f"{stop}: {verdict}")
     dx = FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
                          time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
-                         settings.unexplained_ratio, unused, finger=fr.finger)
+                         settings.unexplained_ratio, unused, finger=fr.finger, spring_checked=spring_checked)
     dx.augmented = augmented_finger_parameters(dx, fr.params)
     return dx

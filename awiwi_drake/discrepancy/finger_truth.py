@@ -189,6 +189,9 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {', '.join(FINGERS)}, got {finger!r}")
+    if finger == "thumb" and "spring_hysteresis" in hidden:
+        raise ValueError("--hide spring_hysteresis: not on the thumb (its truth simulation diverged, seed 3 at "
+                         "t = 0.25 s, and the diagnosis does not judge the thumb's spring side)")
     gen = gen or FingerTruthParams()
     nominal = params if params is not None else nominal_finger_params(finger)
     rng = np.random.default_rng(seed)

@@ -162,6 +162,9 @@ def _write_finger_report(dx, directory, figures: bool) -> pathlib.Path:
         fig.savefig(d / "tendons.png", dpi=110)
         plt.close(fig)
     (d / "summary.json").write_text(json.dumps(dx.summary(), indent=1, default=float))
+    if dx.augmented is not None:    # the write-back: FingerRigParams for finger_diagram(params=...) / --config
+        from awiwi_drake.parameters.yaml_io import save_yaml
+        save_yaml(dx.augmented.params, d / "augmented_parameters.yaml")
     L = [f"# Model-discrepancy diagnosis: {dx.dataset}", "", f"Rig `{dx.rig}`; verdict: **{dx.verdict}**.", "",
          "Motor side (motor law with the measured tendon force) and spring side (spring laws, joint angles "
          "estimated from all tendons), consistent filtering, blocked 3-fold cross-validation "
@@ -172,7 +175,13 @@ def _write_finger_report(dx, directory, figures: bool) -> pathlib.Path:
                  f"{dx.ratios_before['spring'][i]:.2f} |")
     L += ["", f"Spring side, all tendons: {dx.ratios_before['spring_total']:.2f} before, "
           f"{dx.ratios_after['spring_total']:.2f} after (1 = the noise floor).", "",
-          "![tendons](tendons.png)" if figures else "", "", "## Findings", "", findings_text(dx), "", "## Steps", ""]
+          "![tendons](tendons.png)" if figures else "", "", "## Findings", "", findings_text(dx), "",
+          "## Augmented parameters", "",
+          "`augmented_parameters.yaml`: the dataset's `FingerRigParams` with the named effects written "
+          "(`load_yaml(FingerRigParams.for_finger(...), path)` -> `finger_diagram(params=...)`). Written: "
+          + (", ".join(dx.augmented.applied) or "nothing") + "."
+          + ("" if not dx.augmented.not_representable else
+             " Not representable: " + "; ".join(dx.augmented.not_representable) + "."), "", "## Steps", ""]
     for k, st in enumerate(dx.steps, 1):
         L.append(f"{k}. `{st.effect}` on {st.place} ({st.kind}, {st.status}; held-out gain {st.z:.1f} null std, "
                  f"dBIC {st.delta_bic:.0f}): " + ", ".join(f"`{p}` = {v:.4g} {PARAM_UNITS.get(p, '')}".rstrip()

@@ -5,7 +5,7 @@ finger (``plant.add_finger(visual=True)``, link lengths and radii from the
 kinematic tables), the palm box and a forearm stub; the motion is a joint-space
 grasp (open -> closed -> open) tracked by the 3 kHz joint controller through
 the full tendon model.  The camera frames the moving links (see
-:class:`~awiwi_drake.parameters.display.AnimationParams`); the Meshcat server
+:class:`~awiwi_drake.parameters.cli.AnimationParams`); the Meshcat server
 that Drake needs to build the scene is started without log output.
 """
 
@@ -25,7 +25,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from awiwi_drake.analysis.simulate import simulate
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
-from awiwi_drake.parameters.display import AnimationParams
+from awiwi_drake.parameters.cli import AnimationParams
 from awiwi_drake.parameters.hand import FINGERS
 
 __all__ = ["GRASP_POSE", "grasp_pose", "AnimationResult", "record_animation", "quiet_meshcat", "DISPLAY_ROTATION",

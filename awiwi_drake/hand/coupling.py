@@ -64,10 +64,6 @@ __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupl
            "coupling_selection", "dof_selection", "index_coupling_matrix", "WristCoupling"]
 
 
-def _is_float_array(q) -> bool:
-    return np.asarray(q).dtype != object
-
-
 def _quiet_fp(method):
     """numpy reports stale floating-point flags (set inside pydrake.symbolic) as
     'invalid value' warnings on object arrays; they carry no information here."""
@@ -111,7 +107,7 @@ class FingerCoupling(abc.ABC):
         return {self.finger: slice(0, self.num_tendons)}
 
     def _check_q(self, q):
-        q = np.asarray(q) if _is_float_array(q) else np.asarray(q, dtype=object)
+        q = np.asarray(q) if is_float(np.asarray(q)) else np.asarray(q, dtype=object)
         if q.shape != (self.num_joints,):
             raise ValueError(f"{type(self).__name__}: q must have shape ({self.num_joints},) "
                              f"(joints {', '.join(self.joint_names)}), got {q.shape}")
@@ -296,7 +292,7 @@ class ThumbCoupling(FingerCoupling):
         d = self.base_vectors(q)
         norm = np.sqrt(np.sum(d * d, axis=1))
         _, _, _, dA0, dA1 = self._base_jacobians(q)
-        like = float if _is_float_array(q) else object
+        like = float if is_float(np.asarray(q)) else object
         P = np.zeros((8, 4), dtype=like)
         for i in range(4):
             P[i, 0] = np.dot(d[i], dA0[:, i]) / norm[i]
@@ -332,7 +328,7 @@ class ThumbCoupling(FingerCoupling):
         d00 = Rz @ _KZ @ _KZ @ Ry @ b
         d01 = Rz @ _KZ @ Ry @ _KY @ b
         d11 = Rz @ Ry @ _KY @ _KY @ b
-        like = float if (_is_float_array(q) and _is_float_array(f)) else object
+        like = float if (is_float(np.asarray(q)) and is_float(np.asarray(f))) else object
         H = np.zeros((4, 4), dtype=like)
         for i in range(4):
             u = d[i] / norm[i]
@@ -424,7 +420,7 @@ class HandCoupling(FingerCoupling):
 
     def tension_hessian(self, q, f):
         q = self._check_q(q)
-        like = float if (_is_float_array(q) and _is_float_array(f)) else object
+        like = float if (is_float(np.asarray(q)) and is_float(np.asarray(f))) else object
         H = np.zeros((self.num_joints, self.num_joints), dtype=like)
         for n, c in self.parts.items():
             js = self.joint_slices[n]

@@ -24,5 +24,4 @@ from awiwi_drake.parameters.hand_control import (
     ForceDistributionParams, FrictionObserverParams, LinkFrictionParams, StiffnessCorrectionParams)
 from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings, TruthGeneratorParams
-from awiwi_drake.parameters.display import AnimationParams
-from awiwi_drake.parameters.cli import CliLimits, CompareShortMode
+from awiwi_drake.parameters.cli import AnimationParams, CliLimits, CompareShortMode

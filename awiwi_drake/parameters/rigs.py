@@ -108,7 +108,7 @@ class JointRigParams(Parameters):
 
 @dataclass(frozen=True)
 class MotorPositionGains(Parameters):
-    """Per-motor PD gains of the joint-rig demo loop (:mod:`awiwi_drake.rigs.demo`, output shaft)."""
+    """Per-motor PD gains of the joint-rig demo loop (:mod:`awiwi_drake.control.motor_position`, output shaft)."""
 
     kp: float = param(40.0, unit="Nm/rad", low=0.0, low_inclusive=False,
                       source="chosen: 0.56 Nm Coulomb friction (Table 3.3) leaves a 0.014 rad motor error")

@@ -185,12 +185,9 @@ def identify_ripple(run: ConstantVelocityRun, motor: MotorParams) -> RippleEstim
     the measured angle) plus a constant and a linear term in ``theta`` (they
     absorb the slow output-bearing component over a fraction of a revolution).
     """
-    th = run.theta
     resid = motor.inertia * run.acceleration - run.command - motor_friction_torque(run.omega, motor)
-    N = motor.gear_ratio
-    A = np.column_stack([np.sin(N * th), np.cos(N * th), np.ones_like(th), th])
-    c = np.linalg.lstsq(A, resid, rcond=None)[0]
-    return RippleEstimate(float(math.hypot(c[0], c[1])), float(math.atan2(c[1], c[0])), gear_ratio=N)
+    c = harmonic(run.theta, resid, motor.gear_ratio / (2 * math.pi))    # the angle as "time": sin/cos(N theta)
+    return RippleEstimate(float(abs(c)), float(math.atan2(c.imag, c.real)), gear_ratio=motor.gear_ratio)
 
 
 @dataclass

@@ -16,8 +16,7 @@ from awiwi_drake.control.friction_observer import with_link_friction
 from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 from awiwi_drake.parameters.rigs import JointRigParams
-from awiwi_drake.plotting import figure_axes, label_axes
-from awiwi_drake.reproductions.ch15_backstepping import BacksteppingRun
+from awiwi_drake.reproductions.ch15_backstepping import BacksteppingRun, plot_run_traces
 from awiwi_drake.rigs import joint_rig
 
 __all__ = ["friction_tracking_run", "chattering", "plot_friction_runs"]
@@ -66,8 +65,4 @@ def chattering(run, *, after: float = 0.0) -> float:
 
 def plot_friction_runs(runs, *, ax=None):
     """Fig 9.3: tracking error with/without friction compensation."""
-    fig, ax = figure_axes(ax)
-    for r in runs:
-        ax.plot(r.t, r.q - r.reference, label=r.label)
-    label_axes(ax, "tracking error [rad]", legend=dict(fontsize="small"))
-    return fig, ax
+    return plot_run_traces(runs, lambda r: r.q - r.reference, "tracking error [rad]", ax=ax)

@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from awiwi_drake.analysis import PerEntry, Samples, Sine, simulate
+from awiwi_drake.analysis import PerEntry, Samples, Sine, linearize, simulate
 from awiwi_drake.components.spring import LinearSpring
 from awiwi_drake.control.backstepping import (
     REFERENCE_PORT, REFERENCE_SIZE, impedance_backstepping, impedance_controller, joint_model, position_controller)
@@ -40,8 +40,8 @@ __all__ = [
     "BacksteppingRun", "StiffnessCheck", "table_15_1_params", "table_15_1_rig", "event_schedules", "run_loop",
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
-    "antagonistic_sine", "antagonistic_stiffness_check", "is_monotone_nonincreasing", "count_oscillations",
-    "plot_joint_angle", "plot_command", "plot_phase_portrait",
+    "antagonistic_sine", "antagonistic_stiffness_check", "sine_reference", "is_monotone_nonincreasing", "count_oscillations",
+    "plot_run_traces", "plot_joint_angle", "plot_command", "plot_phase_portrait",
 ]
 
 
@@ -311,14 +311,10 @@ def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: 
     Drake's ``Linearize`` of the (linear) closed loop gives ``x' = A x + B w``; the
     steady state is ``-A^-1 B w``. ``kw`` go to :func:`impedance_controller`.
     """
-    from pydrake.systems.primitives import Linearize
     loop = closed_loop(rig, impedance_controller(rig, gains, **kw), rate_hz=None)
-    ctx = loop.create_context(state=rig.operating_point().state)
-    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
-                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index(),
-                    equilibrium_check_tolerance=1e-6)
-    x_ss = -np.linalg.solve(lin.A(), lin.B() @ [disturbance])
-    return float((lin.C() @ x_ss)[0])
+    lin = linearize(loop.diagram, context=loop.create_context(state=rig.operating_point().state),
+                    input="external_torque", outputs=("joint_angle",))
+    return float((lin.C @ -np.linalg.solve(lin.A, lin.B @ [disturbance]))[0])
 
 
 # ---------------------------------------------------------------------------
@@ -369,7 +365,7 @@ def load_step_command_jump(study: NonlinearImpedanceStudy | None = None, *, spri
 
 # ---------------------------------------------------------------------------
 # 15.5: antagonistic joint
-def _sine_reference(amplitude, freq, offset=0.0) -> PerEntry:
+def sine_reference(amplitude, freq, offset=0.0) -> PerEntry:
     """``offset + A sin(w t)`` and its four derivatives ``A w^k sin(w t + k pi / 2)`` (the reference port)."""
     w = 2 * math.pi * freq
     return PerEntry([Sine(amplitude * w ** k, freq, phase=k * math.pi / 2, offset=offset if k == 0 else 0.0)
@@ -395,7 +391,7 @@ def antagonistic_sine(gains: AntagonisticBacksteppingGains | None = None, *, amp
     the controller sees the reference value only (regulation design).
     """
     g = gains or AntagonisticBacksteppingGains()
-    ref = _sine_reference(amplitude, frequency, offset)
+    ref = sine_reference(amplitude, frequency, offset)
     return _run(lambda rig: impedance_controller(rig, g, reference_derivatives=REFERENCE_SIZE - 1 if feedforward else 0),
                 make_rig=make_rig or joint_rig, op=dict(pretension=g.pretension, joint_angle=offset), t_final=t_final,
                 inputs={REFERENCE_PORT: ref if feedforward else PerEntry(ref.entries[:1])}, dt=dt, max_step=dt,
@@ -429,7 +425,8 @@ def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflectio
 
 # ---------------------------------------------------------------------------
 # plots: runs in, ``(fig, ax)`` out
-def _time_series(runs, signal, ylabel, *, ax, title, reference=False):
+def plot_run_traces(runs, signal, ylabel, *, ax=None, title: str = "", reference: bool = False):
+    """``signal(run)`` of each :class:`BacksteppingRun` over its time, labelled; the first run's reference dashed."""
     fig, ax = figure_axes(ax)
     for r in runs:
         ax.plot(r.t, signal(r), label=r.label)
@@ -441,12 +438,12 @@ def _time_series(runs, signal, ylabel, *, ax, title, reference=False):
 
 def plot_joint_angle(runs, *, ax=None, reference: bool = True, title: str = ""):
     """Link angle of each run (Fig 15.7, 15.8, 15.10, 15.13, 15.16, 15.17, 15.19)."""
-    return _time_series(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
+    return plot_run_traces(runs, lambda r: r.q, "link angle [rad]", ax=ax, title=title, reference=reference)
 
 
 def plot_command(runs, *, ax=None, title: str = ""):
     """Motor torque entering the plant (Fig 15.11)."""
-    return _time_series(runs, lambda r: r.command[:, 0], "motor torque [Nm]", ax=ax, title=title)
+    return plot_run_traces(runs, lambda r: r.command[:, 0], "motor torque [Nm]", ax=ax, title=title)
 
 
 def plot_phase_portrait(runs, *, ax=None, title: str = ""):

@@ -91,15 +91,13 @@ def _controller(name: str, rig):
 
 def _reference(test: str):
     """(schedule of the reference port: angle and four derivatives, duration [s], pretension [N])."""
-    from awiwi_drake.analysis import PerEntry, Sine, Step
+    from awiwi_drake.analysis import PerEntry, Step
     s = PipStudy()
     if test == "step":
         return PerEntry([Step(s.step_time, s.step), 0.0, 0.0, 0.0, 0.0]), s.step_duration, s.step_pretension
     if test == "sine":
-        a, c, f = s.sine_amplitude, s.sine_offset, s.sine_frequency
-        w = 2 * math.pi * f
-        return PerEntry([Sine(a * w ** k, f, phase=k * math.pi / 2, offset=c if k == 0 else 0.0)
-                         for k in range(5)]), s.sine_duration, s.sine_pretension
+        from awiwi_drake.reproductions.ch15_backstepping import sine_reference
+        return sine_reference(s.sine_amplitude, s.sine_frequency, s.sine_offset), s.sine_duration, s.sine_pretension
     raise ValueError(f"pip_experiment: test must be 'step' or 'sine', got {test!r}")
 
 

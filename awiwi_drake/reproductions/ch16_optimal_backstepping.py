@@ -10,11 +10,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.controllers import LinearQuadraticRegulator
 
+from awiwi_drake.analysis.linear import lqr_gain
 from awiwi_drake.parameters.backstepping import OptimalGainsCase, OptimalGainsStudy
 from awiwi_drake.parameters.rigs import FlexibleJointParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig
 
 __all__ = ["table_16_1_rig", "printed_model_feedback", "plot_gain_fit", "GainSamples", "fig_16_3_gain_samples"]
@@ -29,14 +29,14 @@ def table_16_1_rig(case: OptimalGainsCase | None = None, **kw):
 
 
 def printed_model_feedback(case: OptimalGainsCase | None = None) -> np.ndarray:
-    """ARE gain for the A, B printed in Table 16.1 (Drake ``LinearQuadraticRegulator(A, B, Q, R)``).
+    """ARE gain for the A, B printed in Table 16.1 (:func:`~awiwi_drake.analysis.linear.lqr_gain`: Drake's LQR).
 
     Returned as ``u = K x`` (the sign of the printed Kdes) for direct comparison.
     """
     c = case or OptimalGainsCase()
     A = np.array([[0, 1, 0, 0], [0, 0, 1 / c.link_inertia, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
     B = np.array([[0], [0], [0], [c.stiffness / c.motor_inertia]])
-    K, _ = LinearQuadraticRegulator(A, B, np.diag(c.q_weights), np.array([[c.r_weight]]))
+    K, _ = lqr_gain(A, B, np.diag(c.q_weights), [[c.r_weight]])
     return -np.asarray(K).ravel()
 
 
@@ -70,12 +70,9 @@ class GainSamples:
     step: float
 
     def plot(self, ax=None):
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        for i, (q, d) in enumerate(zip(self.q, self.distance)):
-            ax.plot(self.t, q, lw=1, label=f"run {i}: distance {d:.2g}")
-        ax.axhline(self.step, color="k", ls="--", lw=0.8, label="reference")
-        label_axes(ax, "link angle [rad]", title=f"Fig 16.3: R = {self.r_weight:g}", legend=dict(fontsize="x-small"))
-        return fig, ax
+        return plot_traces(self.t, {f"run {i}: distance {d:.2g}": q for i, (q, d) in enumerate(zip(self.q, self.distance))},
+                           reference=np.full_like(self.t, self.step), ylabel="link angle [rad]", ax=ax,
+                           title=f"Fig 16.3: R = {self.r_weight:g}", legend=dict(fontsize="x-small"))
 
 
 def fig_16_3_gain_samples(study: OptimalGainsStudy | None = None, *, r_weight: float | None = None,
