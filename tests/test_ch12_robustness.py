@@ -127,3 +127,11 @@ def test_plot_has_the_five_panels(study):
     assert len(axes[0, 2].get_lines()) >= 3
     import matplotlib.pyplot as plt
     plt.close(fig)
+
+
+@pytest.mark.parametrize("kw, match", [(dict(num=1), "num = 1 must be an integer >= 2"),
+                                       (dict(num=9.5), "num = 9.5 must be an integer"),
+                                       (dict(window=0.0), "window = 0.0 s must be finite and > 0")])
+def test_bad_arguments_are_refused_with_one_line_naming_them(kw, match):
+    with pytest.raises(ValueError, match=match):
+        stiffness_robustness(**kw)

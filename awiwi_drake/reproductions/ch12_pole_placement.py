@@ -220,6 +220,10 @@ def stiffness_robustness(params: PolePlacementParams | None = None, *, num: int 
     targets and for the targets scaled by ``params.robustness_target_scales`` (section 12.4: the sensitivity
     depends on the target dynamics).  A ``params.robustness_reference_step`` reference step is simulated (``simulate``) on
     the nominal and the perturbed plant over ``window`` (default ``params.robustness_window``)."""
+    if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 2:
+        raise ValueError(f"stiffness_robustness: num = {num!r} must be an integer >= 2 (points of Fig 12.4's k range)")
+    if window is not None and not (np.isfinite(window) and window > 0):
+        raise ValueError(f"stiffness_robustness: window = {window!r} s must be finite and > 0")
     p = params or PolePlacementParams()
     base = base or FlexibleJointParams()
     k0, k1 = float(base.stiffness), float(p.perturbed_stiffness)
