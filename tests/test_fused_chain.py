@@ -245,3 +245,17 @@ def test_compiled_joint_feedback_equals_the_law_as_written():
         ref = ExtractValue(law(ua)).ravel()                        # the law as written (not the compiled call)
         assert np.abs(ref).max() > 0
         np.testing.assert_allclose(law(u), ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+
+
+def test_compiled_table_lookup_of_the_distribution_equals_numpy_interp():
+    """The (7.6) batch's per-tendon stiffness look-up (bisection written out) equals numpy.interp bit for bit: inside,
+    on grid points, at and beyond both ends."""
+    from awiwi_drake.control.force_distribution import _interp_rows
+    rng = np.random.default_rng(10)
+    gf = np.sort(rng.uniform(0.0, 200.0, (8, 500)), axis=1)
+    gv = rng.normal(size=(8, 500))
+    for trial in range(50):
+        f = rng.uniform(-10.0, 210.0, 8)
+        if trial == 0:
+            f[:4] = gf[0, 0], gf[1, -1], gf[2, 17], gf[3, 0] - 1.0
+        np.testing.assert_array_equal(_interp_rows(f, gf, gv), [np.interp(f[i], gf[i], gv[i]) for i in range(8)])
