@@ -1286,6 +1286,11 @@ def TendonForceDistribution_(T):
             """One period of the distribution, context-free: ``(forces (m), status (fingers))`` from the desired
             torques, stiffness entries, the previous forces and (thumb) the plant joint angles (the update of this
             system; :class:`~awiwi_drake.control.fused.FusedChain_` calls it too)."""
+            batch = None
+            if T is float and self._batch is not None:      # the hot path: every finger in the batch
+                batch = self._batch.update(tau_T, K_T, f_prev, q_T, self.iterations_per_period)
+                if not batch[1].any():
+                    return batch[0], np.zeros(len(self.fingers))
             as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
             tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
             f_prev_v = as_float(f_prev).ravel()
@@ -1295,7 +1300,8 @@ def TendonForceDistribution_(T):
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
             todo = range(len(self._parts))
             if self._batch is not None:       # all fingers at once; the rest by their own solver
-                f_new, fallback = self._batch.update(tau, Kv, f_prev_v, q, self.iterations_per_period)
+                f_new, fallback = batch if batch is not None else self._batch.update(
+                    tau, Kv, f_prev_v, q, self.iterations_per_period)
                 todo = np.flatnonzero(fallback)
             for k in todo:
                 s, sd, st, sk, sq = self._parts[k]
