@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 
+from _fd import fd_jacobian
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLawController
@@ -139,17 +140,11 @@ def test_fused_converts_to_autodiff_and_its_derivative_is_the_composed_one(name,
     np.testing.assert_allclose(uf, u0, rtol=0, atol=1e-12 * max(1, np.abs(u0).max()))
     np.testing.assert_allclose(Gf, Gc, rtol=1e-10, atol=1e-10 * max(1.0, np.abs(Gc).max()))
     port = fused.diagram.GetInputPort("joint_angle_reference")
-    h = 1e-6
-    fd = []
-    for j in range(ref.size):
-        e = np.zeros(ref.size)
-        e[j] = h
-        port.FixValue(cf, ref + e)
-        up = fused.diagram.GetOutputPort(output).Eval(cf).copy()
-        port.FixValue(cf, ref - e)
-        um = fused.diagram.GetOutputPort(output).Eval(cf).copy()
-        fd.append((up - um) / (2 * h))
-    fd = np.array(fd).T
+
+    def output_at(r):
+        port.FixValue(cf, r)
+        return fused.diagram.GetOutputPort(output).Eval(cf).copy()
+    fd = fd_jacobian(output_at, ref, h=1e-6)
     assert np.abs(Gf).max() > 0        # the reference moves the command (the test can fail)
     np.testing.assert_allclose(Gf, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
 
