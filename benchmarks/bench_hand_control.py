@@ -10,7 +10,8 @@ force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-for
 tendon-length estimator; ``backstepping``: 15.5 for the hand at 3 kHz, joint angles estimated) the hand
 (``hand_diagram()``, wrist input at 0; ``--physics``: the plant's thesis effects as configured by default,
 all off, or all on, each row says which) is
-closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad, and simulated
+closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad (a fixed input value of
+the context, so no schedule source runs every period), and simulated
 with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period; with several rates
 at their common period), after a warm-up
 run of two control periods (kernel generation and JIT compilation are not timed).  All controllers run in
@@ -131,7 +132,7 @@ def isolated_costs(diagram, root) -> dict:
     return dict(sorted(out.items(), key=lambda kv: -kv[1]))
 
 
-def stage_costs(loop, op, inputs, sim_time: float = 0.03) -> dict:
+def stage_costs(loop, op, refs, sim_time: float = 0.03) -> dict:
     """CPU time per control period [us] of each stage of the fused chain (``closed_loop``'s default for the hand,
     :class:`~awiwi_drake.control.fused.FusedChain_`) and of the plant's derivatives, inside a ``sim_time`` run of the
     loop (each call timed with the thread's CPU clock; the stages are nested: ``sample`` holds the estimator, the
@@ -168,7 +169,7 @@ def stage_costs(loop, op, inputs, sim_time: float = 0.03) -> dict:
     wrap(type(plant), "DoCalcTimeDerivatives", "plant derivatives (3 per period)")
     try:
         c0 = time.process_time()
-        simulate(loop, loop.create_context(op), sim_time, inputs=inputs, log=("joint_angle",))
+        simulate(loop, loop.create_context(op, references=refs), sim_time, log=("joint_angle",))
         total = time.process_time() - c0
     finally:
         for obj, name, old in reversed(saved):
@@ -205,12 +206,13 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
     loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
-    inputs = {"joint_angle_reference": op.joint_angle + 0.05}
+    # the stepped reference is a fixed input value of the context (no schedule source evaluated every period)
+    refs = {"joint_angle_reference": op.joint_angle + 0.05}
     # warm-up: the first simulation generates/compiles the drive's kernels (numba) and fills caches
-    simulate(loop, loop.create_context(op), 2.0 / loop.rate_hz, inputs=inputs, log=("joint_angle",))
-    ctx = loop.create_context(op)
+    simulate(loop, loop.create_context(op, references=refs), 2.0 / loop.rate_hz, log=("joint_angle",))
+    ctx = loop.create_context(op, references=refs)
     c0, w0 = time.process_time(), time.perf_counter()
-    simulate(loop, ctx, sim_time, inputs=inputs, log=("joint_angle",))
+    simulate(loop, ctx, sim_time, log=("joint_angle",))
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     periods = sim_time * loop.rate_hz
     row = dict(controller=name, physics=physics, rate_hz=loop.rate_hz, estimator=bool(loop.estimated), build_s=build,
@@ -219,13 +221,13 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
     if profile:
         prof = cProfile.Profile()
         prof.enable()
-        simulate(loop, loop.create_context(op), 0.01, inputs=inputs, log=("joint_angle",))
+        simulate(loop, loop.create_context(op, references=refs), 0.01, log=("joint_angle",))
         prof.disable()
         row["callbacks_per_period"] = _calls(prof, 0.01 * loop.rate_hz)
         ictx = loop.create_context(op)
-        loop.diagram.GetInputPort("joint_angle_reference").FixValue(ictx, inputs["joint_angle_reference"])
+        loop.diagram.GetInputPort("joint_angle_reference").FixValue(ictx, refs["joint_angle_reference"])
         row["isolated_us_per_call"] = isolated_costs(loop.diagram, ictx)
-        row["stage_us_per_period"] = stage_costs(loop, op, inputs)
+        row["stage_us_per_period"] = stage_costs(loop, op, refs)
     return row
 
 

@@ -114,7 +114,8 @@ def test_simulated_perturbed_step_grows_at_the_unstable_pole_of_12_10(study):
     n1, n2 = np.searchsorted(t, 0.02), np.searchsorted(t, 0.9 * t[-1])   # (the last sample ends a short step)
     rate = np.log(d[n2] / d[n1]) / (t[n2] - t[n1])
     assert rate == pytest.approx(ev[i].real, rel=1e-4)
-    assert study.diverged_at is not None and t[-1] < study.diverged_at
+    assert study.diverged_at["perturbed"] is not None and t[-1] < study.diverged_at["perturbed"]
+    assert study.diverged_at["nominal"] is None
     q_nom = study.state["nominal"][:, 0]
     assert abs(q_nom[-1] - study.step) < 0.01 * study.step          # the nominal loop settles (5 time constants)
 
@@ -126,3 +127,11 @@ def test_plot_has_the_five_panels(study):
     assert len(axes[0, 2].get_lines()) >= 3
     import matplotlib.pyplot as plt
     plt.close(fig)
+
+
+@pytest.mark.parametrize("kw, match", [(dict(num=1), "num = 1 must be an integer >= 2"),
+                                       (dict(num=9.5), "num = 9.5 must be an integer"),
+                                       (dict(window=0.0), "window = 0.0 s must be finite and > 0")])
+def test_bad_arguments_are_refused_with_one_line_naming_them(kw, match):
+    with pytest.raises(ValueError, match=match):
+        stiffness_robustness(**kw)

@@ -78,8 +78,8 @@ def test_cli_writes_every_row_names_the_failed_one_and_exits_nonzero(tmp_path, m
 
 def test_finger_disturbance_groups_are_independent():
     """On a finger the external-torque step is one simulation per joint: a case that asks the distribution
-    for a negative force (the LQR stage under a 0.2 Nm load, 20x the standard one: the light PIP/DIP cannot
-    hold it with tension only) stops only its own joint's row, after the load starts."""
+    for a negative force (the LQR stage under a 0.4 Nm load, 40x the standard one: the light DIP cannot
+    hold it with tension only; 0.2 Nm stopped the PIP/DIP with the former, stiffer LQR weights) stops only its own joint's row, after the load starts."""
     from awiwi_drake.control.base import closed_loop
     from awiwi_drake.control.compare import run_standard_tests
     from awiwi_drake.control.joint_design import joint_stage_controller
@@ -89,7 +89,7 @@ def test_finger_disturbance_groups_are_independent():
     rig = finger_diagram(finger="index")
     ctrl = joint_stage_controller(rig, "lqr")
     loop = closed_loop(rig, ctrl, **get_entry("lqr", rig).loop_options)
-    p = compare_test_params(rig, step_duration=0.15, settle_time=0.05, disturbance_torque=0.2)
+    p = compare_test_params(rig, step_duration=0.15, settle_time=0.05, disturbance_torque=0.4)
     runs, rows = run_standard_tests(loop, controller="lqr", tests=["disturbance"], params=p)
     stopped = [i for i, r in enumerate(rows) if r.status not in ("ok", "flagged")]
     ran = [i for i in range(len(rows)) if i not in stopped]

@@ -77,6 +77,11 @@ def test_yaml_rejects_unknown_keys_wrong_types_and_bad_values():
                           ("motor: 5", "does not fit"), ("[1, 2", "while parsing")]:
         with pytest.raises(ValueError, match=message):
             from_yaml(JointRigParams, text, where="x.yaml")
+    # a named override entry (one set per tendon) names the entry it came from
+    from awiwi_drake.parameters.hand import FingerRigParams
+    with pytest.raises(ValueError, match=r"^x.yaml: tendon_motors\['index_h3'\]: MotorParams.coulomb_torque = -0.05"):
+        from_yaml(FingerRigParams.for_finger("index"), "tendon_motors:\n  index_h3: {coulomb_torque: -0.05}\n",
+                  where="x.yaml")
 
 
 def test_progress_is_quiet_unless_asked(monkeypatch, capsys):

@@ -240,3 +240,22 @@ def test_thumb_motor_side_names_effect_and_place():
     assert "spring side not judged" in dx.text() and dx.summary()["spring_side_checked"] is False
     with pytest.raises(ValueError, match="spring_hysteresis: not on the thumb"):
         make_finger_dataset("thumb", ["spring_hysteresis"], place=3, seed=2, gen=THREE)
+
+
+def test_hidden_torque_block_converts_and_its_derivatives_are_the_effects():
+    """The finger truth's hidden motor-side torque (FingerHiddenTorque_) converts to AutoDiffXd and symbolic; its Jacobian equals
+    central differences of the float block, and it acts on the effect's tendon only (the other rows are zero)."""
+    from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
+    from awiwi_drake.discrepancy.finger_truth import FingerHiddenTorque_, draw_finger_truth
+    m = 8
+    truth = draw_finger_truth(["motor_friction", "guide_friction", "motor_ripple"], 3, m, np.random.default_rng(4),
+                              FingerTruthParams())
+    block = FingerHiddenTorque_[float](m, 0.005, truth)
+    rng = np.random.default_rng(5)
+    xs = np.concatenate([rng.uniform(-2, 2, m), rng.uniform(0.5, 3.0, m)])   # sliding: away from the friction knee
+    inputs = dict(motor_state=xs, tendon_force=rng.uniform(5, 40, m))
+    jac = check_system_autodiff_matches_fd(block, [], inputs, rtol=1e-5)
+    assert_symbolic_matches_float(block, np.zeros(0), inputs, rtol=1e-12)
+    J = jac["torque"][0]
+    assert np.all(J[np.arange(m) != 2] == 0.0)                       # no torque on the other motors
+    assert J[2, 2] != 0.0 and J[2, m + 2] != 0.0 and J[2, 2 * m + 2] != 0.0   # ripple (theta), friction (omega), guides (f)

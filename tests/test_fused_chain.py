@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 
+from _fd import fd_jacobian
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.base import StaticLawController
@@ -76,14 +77,15 @@ def test_fused_equals_composed_on_the_hand(name):
     """The hand (five fingers, one distribution batch, the thumb's kernels, the wrist offsets)."""
     _, a = _run("hand", name, False, seed=2, periods=6)
     loop, b = _run("hand", name, True, seed=2, periods=6)
-    assert loop.fused is not None
+    assert loop.fused is not None and np.ptp(a["motor_torque"], axis=0).max() > 1e-3   # fused, and the loop moved
     _assert_same(a, b)
 
 
 def test_fused_chain_on_a_ring_finger_with_coupled_dip():
     """The ring: DoF selection S (the DIP follows the PIP, (5.16)) in the estimator, the stage and the distribution."""
     _, a = _run("finger-ring", "cascaded", False, seed=3)
-    _, b = _run("finger-ring", "cascaded", True, seed=3)
+    loop, b = _run("finger-ring", "cascaded", True, seed=3)
+    assert loop.fused is not None and np.ptp(a["motor_torque"], axis=0).max() > 1e-3   # fused, and the loop moved
     _assert_same(a, b)
 
 
@@ -138,17 +140,11 @@ def test_fused_converts_to_autodiff_and_its_derivative_is_the_composed_one(name,
     np.testing.assert_allclose(uf, u0, rtol=0, atol=1e-12 * max(1, np.abs(u0).max()))
     np.testing.assert_allclose(Gf, Gc, rtol=1e-10, atol=1e-10 * max(1.0, np.abs(Gc).max()))
     port = fused.diagram.GetInputPort("joint_angle_reference")
-    h = 1e-6
-    fd = []
-    for j in range(ref.size):
-        e = np.zeros(ref.size)
-        e[j] = h
-        port.FixValue(cf, ref + e)
-        up = fused.diagram.GetOutputPort(output).Eval(cf).copy()
-        port.FixValue(cf, ref - e)
-        um = fused.diagram.GetOutputPort(output).Eval(cf).copy()
-        fd.append((up - um) / (2 * h))
-    fd = np.array(fd).T
+
+    def output_at(r):
+        port.FixValue(cf, r)
+        return fused.diagram.GetOutputPort(output).Eval(cf).copy()
+    fd = fd_jacobian(output_at, ref, h=1e-6)
     assert np.abs(Gf).max() > 0        # the reference moves the command (the test can fail)
     np.testing.assert_allclose(Gf, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
 
@@ -229,8 +225,9 @@ def test_compiled_backstepping_equals_the_law_as_written(target):
 
 
 def test_compiled_joint_feedback_equals_the_law_as_written():
-    """JointStateFeedbackLaw's float path for the PD / impedance form (one compiled call) equals its coordinates and
-    gains written out (the law for every scalar type) on the hand's cascaded design."""
+    """JointStateFeedbackLaw's float path for the PD / impedance form (one compiled call) equals the law as written
+    (the path every other scalar type takes: here the same call on AutoDiffXd inputs, whose values are compared) on
+    the hand's cascaded design."""
     rig = _rig("hand")
     law = make_controller("cascaded", rig)._joint_law
     assert not law.uses_forces and not law.uses_previous
@@ -239,6 +236,21 @@ def test_compiled_joint_feedback_equals_the_law_as_written():
     for _ in range(3):
         u = dict(joint_angle=rng.normal(scale=0.3, size=n), joint_velocity=rng.normal(size=n),
                  joint_angle_reference=rng.normal(scale=0.3, size=n))
-        z, dr = law.coordinates(u)
-        ref = law.tau0 + law.Nu * dr - np.sum(law.K * (z - np.hstack([law.Nx, law.Nu[:, None]]) * dr[:, None]), axis=1)
+        ua = {k: np.array([AutoDiffXd(x) for x in v], dtype=object) for k, v in u.items()}
+        ref = ExtractValue(law(ua)).ravel()                        # the law as written (not the compiled call)
+        assert np.abs(ref).max() > 0
         np.testing.assert_allclose(law(u), ref, rtol=0, atol=1e-13 * np.abs(ref).max())
+
+
+def test_compiled_table_lookup_of_the_distribution_equals_numpy_interp():
+    """The (7.6) batch's per-tendon stiffness look-up (bisection written out) equals numpy.interp bit for bit: inside,
+    on grid points, at and beyond both ends."""
+    from awiwi_drake.control.force_distribution import _interp_rows
+    rng = np.random.default_rng(10)
+    gf = np.sort(rng.uniform(0.0, 200.0, (8, 500)), axis=1)
+    gv = rng.normal(size=(8, 500))
+    for trial in range(50):
+        f = rng.uniform(-10.0, 210.0, 8)
+        if trial == 0:
+            f[:4] = gf[0, 0], gf[1, -1], gf[2, 17], gf[3, 0] - 1.0
+        np.testing.assert_array_equal(_interp_rows(f, gf, gv), [np.interp(f[i], gf[i], gv[i]) for i in range(8)])

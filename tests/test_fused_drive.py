@@ -70,6 +70,35 @@ def test_kernel_equals_laws_at_random_states_thumb(friction, ripple, hysteresis,
                                        err_msg=name)
 
 
+def test_kernel_equals_laws_with_a_motor_and_a_hysteresis_loop_per_tendon():
+    """The per-tendon forms a diagnosis writes back (FingerRigParams.tendon_motors / tendon_springs): one MotorParams
+    and one HysteresisParams per tendon, loops off on some tendons and of other sizes on others; the generated
+    kernel equals the law functions at random states, and a tendon without its loop keeps a zero loop force."""
+    base = _thumb_model(friction=True, ripple=True, hysteresis=True, guide=True, capstan=True, per_tendon=True)
+    m = base.num_tendons
+    motors = tuple(MotorParams(friction=i % 2 == 0, ripple=i % 3 != 0, coulomb_torque=0.02 + 0.01 * i,
+                               ripple_harmonics=(3.0, 0.01, -0.02) if i == 1 else ()) for i in range(m))
+    loops = tuple(HysteresisParams(enabled=i not in (2, 5), width_ratio=0.05 + 0.02 * i, width_offset=0.1 * i,
+                                   presliding_length=(1 + i) * 1e-4) for i in range(m))
+    model = DriveModel(motors, base.springs, base.coupling, base.offsets, base.motor_pulley_radius, loops,
+                       base.guide_friction)
+    k = build_kernels(model, jit=False)               # the generated source (numba compiles the same source)
+    n = model.num_joints
+    for _ in range(4):
+        s = _random_state(model)
+        model.split_state(s)[4][[2, 5]] = 0.0          # the tendons without a loop start without loop force
+        u = RNG.normal(scale=4.0, size=m)
+        q, qd = RNG.normal(scale=0.5, size=n), RNG.normal(scale=2.0, size=n)
+        ref = drive_laws(model, s, u, q, qd)
+        got = k["derivatives"](s, u, q, qd, np.empty(model.num_states))
+        np.testing.assert_allclose(got, ref["derivatives"], rtol=1e-12,
+                                   atol=1e-12 * np.max(np.abs(ref["derivatives"])))
+        np.testing.assert_allclose(k["tendon_force"](s, q, np.empty(m)), ref["tendon_force"], rtol=1e-12,
+                                   atol=1e-12 * np.max(np.abs(ref["tendon_force"])))
+        zdot = model.split_state(got)[4]
+        assert np.all(zdot[[2, 5]] == 0.0) and np.all(zdot[[0, 1, 3, 4, 6, 7]] != 0.0)   # loops off / on
+
+
 @pytest.mark.parametrize("hysteresis,guide", [(False, False), (True, True)])
 def test_kernel_equals_laws_with_a_link_and_partial_rates(hysteresis, guide):
     rq = 0.008
@@ -104,8 +133,9 @@ def test_drive_system_converts_and_autodiff_matches_finite_differences():
     s[8:16] *= 0.1   # moderate speeds keep the finite differences away from the tanh knees
     inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
                   joint_velocity=RNG.normal(scale=0.01, size=4))
-    check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
+    jac = check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
     assert_symbolic_matches_float(sys_, s, inputs, rtol=1e-9)     # symbolic (laws) = float (kernel)
+    assert all(np.abs(J_ad).max() > 0 for J_ad, _ in jac.values())    # every compared Jacobian is non-trivial
 
 
 def test_float_system_equals_its_autodiff_conversion_values():

@@ -384,7 +384,7 @@ def test_backstepping_load_observer_gives_the_impedance_deflection_under_a_const
     from awiwi_drake.parameters.hand_control import FrictionObserverParams
     p = FingerRigParams.for_finger("index").with_physics(guide_friction=False, hysteresis=False)
     tau = np.array([0.0, 0.0, 0.01, 0.0])                     # q20 (abduction), q21, q22 (PIP), q23
-    ends = {}
+    ends, paths = {}, {}
     for obs, duration in ((None, 0.4), (FrictionObserverParams(), 1.2)):
         rig = finger_diagram(finger="index", params=p)
         ctrl = finger_backstepping_controller(rig, load_observer=obs)
@@ -395,6 +395,7 @@ def test_backstepping_load_observer_gives_the_impedance_deflection_under_a_const
                                   disturbances={"external_torque": tau})
         res = simulate(loop.diagram, ctx, duration, log=("joint_angle", "motor_torque_command", "tendon_force"))
         ends[obs is not None] = law.Sp @ (res["joint_angle"][-1] - op.joint_angle)
+        paths[obs is not None] = (law.Sp @ (res["joint_angle"] - op.joint_angle).T).T   # (samples, DoF)
         assert np.all(res["tendon_force"] > 0.0)
     assert np.mean(np.abs(res["motor_torque_command"]) > rig.params.motor.torque_limit) < 0.01   # the load's onset
     K3, K4 = float(law.K3[0]), float(law.K4[0])
@@ -405,6 +406,11 @@ def test_backstepping_load_observer_gives_the_impedance_deflection_under_a_const
     np.testing.assert_allclose(ends[False], np.linalg.solve(law.Kp, (np.eye(4) + G) @ (law.S.T @ tau)), rtol=0.01, atol=1e-4)
     assert abs(ends[False][2]) > 5 * abs(impedance[2])
     np.testing.assert_allclose(ends[True], impedance, atol=1e-3)
+    # and it is still converging there (the rest point is the impedance's, not an offset within 1e-3 of it): the
+    # distance to it shrinks over each third of the run
+    gap = np.linalg.norm(paths[True] - impedance, axis=1)
+    thirds = [gap[int(f * (gap.size - 1))] for f in (1 / 3, 2 / 3, 1.0)]
+    assert thirds[2] < thirds[1] < thirds[0], thirds
     ctrl.ToAutoDiffXd()
 
 

@@ -36,8 +36,10 @@ def test_motor_bank_converts_and_autodiff_matches_fd():
     sys = MotorBank_[float](p, 3)
     x = np.array([0.1, 0.5, -0.3, 1.0, -2.0, 0.01])
     inputs = {"motor_torque": np.array([0.3, -0.2, 0.1]), "tendon_force": np.array([20.0, 35.0, 5.0])}
-    check_system_autodiff_matches_fd(sys, x, inputs)
+    jac = check_system_autodiff_matches_fd(sys, x, inputs)
     assert_symbolic_matches_float(sys, x, inputs)   # symbolic conversion too (atan, sin, min/max)
+    # the derivatives compared are not all zero: the accelerations depend on the motor torque (1 / B)
+    assert np.abs(jac["xdot"][0]).max() > 0
 
 
 def test_motor_bank_load_torque_variant_and_bad_arguments():
@@ -59,8 +61,9 @@ def test_spring_bank_converts_and_autodiff_matches_fd(hysteresis):
     if hysteresis:
         inputs["elongation_rate"] = np.array([0.01, -0.02])
         x = np.array([1.0, -2.0])
-    check_system_autodiff_matches_fd(sys, x, inputs, rtol=2e-5)
+    jac = check_system_autodiff_matches_fd(sys, x, inputs, rtol=2e-5)
     assert_symbolic_matches_float(sys, x, inputs)
+    assert all(np.abs(J_ad).max() > 0 for J_ad, _ in jac.values())    # every compared Jacobian is non-trivial
 
 
 def test_lever_spring_bank_autodiff_matches_fd_and_refuses_symbolic():

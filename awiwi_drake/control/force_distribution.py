@@ -774,10 +774,28 @@ def _stiffness_of(P, kt, f, H):
 
 @numba.njit(cache=True)
 def _interp_rows(f, gf, gv):
-    """``np.interp(f[i], gf[i], gv[i])`` per tendon (each tendon's own table row)."""
+    """``np.interp(f[i], gf[i], gv[i])`` per tendon (each tendon's own table row): numpy's rule written out (ends
+    held, a grid point exact, else ``slope (x - x_j) + y_j`` on the bracketing segment found by bisection)."""
     out = np.empty(f.shape[0])
+    n = gf.shape[1]
     for i in range(f.shape[0]):
-        out[i] = np.interp(f[i], gf[i], gv[i])
+        x, xp, fp = f[i], gf[i], gv[i]
+        if not x > xp[0]:
+            out[i] = fp[0] if x <= xp[0] else np.interp(x, xp, fp)     # NaN: numpy's own
+        elif x >= xp[n - 1]:
+            out[i] = fp[n - 1]
+        else:
+            lo, hi = 0, n - 1                  # xp[lo] <= x < xp[hi]
+            while hi - lo > 1:
+                mid = (lo + hi) >> 1
+                if xp[mid] <= x:
+                    lo = mid
+                else:
+                    hi = mid
+            if xp[lo] == x:
+                out[i] = fp[lo]
+            else:
+                out[i] = (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo]) * (x - xp[lo]) + fp[lo]
     return out
 
 
@@ -955,6 +973,50 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
     return out
 
 
+@numba.njit(cache=True)
+def _batch_step(dyn, P_dyn, H_dyn, P, pinv, W, pad, H, outer, real, m_real, tau, Kv, f_prev, d_k, d_i, d_src,
+                k_k, k_a, k_b, k_src, t_k, t_i, t_src, tauP, Kd, fp0, iterations, f_min, f_max, levenberg, tolerance,
+                grid_f, grid_k, grid_dk):
+    """:meth:`_FingerBatch.update` after the thumb's kinematics, compiled: the varying finger ``dyn`` (-1: none) filled
+    from its ``P_dyn``, ``H_dyn`` (null space by :data:`_nullspace_jit`, its outer products), the stacked request
+    gathered into the padded arrays, :func:`_batch_iterate`, the forces scattered back.  Returns (forces, fallback)."""
+    F = P.shape[0]
+    fallback = np.zeros(F, dtype=np.bool_)
+    if dyn >= 0:
+        m, n = P_dyn.shape
+        if not np.all(np.isfinite(P_dyn)):
+            fallback[dyn] = True
+        else:
+            pinv_PT, Wn, rank = _nullspace_jit(P_dyn, 1e-10)
+            if rank != n:
+                fallback[dyn] = True
+            else:
+                r = Wn.shape[1]
+                P[dyn], pinv[dyn], W[dyn] = 0.0, 0.0, 0.0
+                P[dyn, :m, :n] = P_dyn
+                pinv[dyn, :m, :n] = pinv_PT
+                W[dyn, :m, :r] = Wn
+                pad[dyn] = 1.0
+                pad[dyn, :r] = 0.0
+                H[dyn, :m, :n, :n] = H_dyn
+                for i in range(P.shape[1]):
+                    for a in range(P.shape[2]):
+                        for b in range(P.shape[2]):
+                            outer[dyn, i, a, b] = P[dyn, i, a] * P[dyn, i, b]
+    for j in range(d_src.shape[0]):
+        tauP[d_k[j], d_i[j]] = tau[d_src[j]]
+    for j in range(k_src.shape[0]):
+        Kd[k_k[j], k_a[j], k_b[j]] = Kv[k_src[j]]
+    for j in range(t_src.shape[0]):
+        fp0[t_k[j], t_i[j]] = f_prev[t_src[j]]
+    f = _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tauP, Kd, fp0, fallback, iterations, f_min, f_max,
+                       levenberg, tolerance, grid_f, grid_k, grid_dk)
+    f_all = np.empty(t_src.shape[0])
+    for j in range(t_src.shape[0]):
+        f_all[t_src[j]] = f[t_k[j], t_i[j]]
+    return f_all, fallback
+
+
 class _FingerBatch:
     """Warm-started (7.6) iterations of several fingers at once (the float path of the loop system).
 
@@ -1041,36 +1103,23 @@ class _FingerBatch:
 
     def update(self, tau, Kv, f_prev, q, iterations):
         """New forces (all tendons, stacked as the loop system's) and the fingers left to their own solver
-        (bool F), from the stacked torque, stiffness entries and previous forces."""
+        (bool F), from the stacked torque, stiffness entries and previous forces: the thumb's P(q) and tension
+        Hessians from one kernel call, the rest one compiled call (:func:`_batch_step`)."""
         F, M, N = len(self.parts), self.M, self.N
         p = self.params
-        fallback = np.zeros(F, dtype=bool)
-        for k in self.dynamic:      # the thumb: P(q) and its Hessians from one kernel call, the SVD compiled
-            c = self.couplings[k]
-            P, H = c.coupling_and_hessians(q[self.parts[k][4]])
-            if not np.isfinite(P).all():
-                fallback[k] = True
-                continue
-            pinv_PT, W, rank = _nullspace_jit(P, 1e-10)
-            if rank != P.shape[1]:
-                fallback[k] = True
-                continue
-            self._fill(k, P, pinv_PT, W)
-            self.H[k, :P.shape[0], :P.shape[1], :P.shape[1]] = H
-            Pk = self.P[k]
-            self.outer[k] = Pk[:, :, None] * Pk[:, None, :]
+        if len(self.dynamic) > 1:
+            raise ValueError("TendonForceDistribution: the batch takes one finger with a varying P(q)")
         if getattr(self, "_gather", None) is None:      # padded work arrays: the padding stays 0, the rest is set
             self._gather = (np.zeros((F, N)), np.zeros((F, N, N)), np.zeros((F, M)))
-        tauP, Kd, fp0 = self._gather
-        tauP[self._d] = tau[self._d_src]
-        Kd[self._k] = Kv[self._k_src]
-        fp0[self._t] = f_prev[self._t_src]
-        f = _batch_iterate(self.P, self.pinv, self.W, self.pad, self.H, self.outer, self.real, self.m, tauP, Kd,
-                           fp0, fallback, int(iterations), float(p.f_min), float(p.f_max), float(self.levenberg),
-                           float(self.tolerance), self.grid_f, self.grid_k, self.grid_dk)
-        f_all = np.empty(len(self._t_src))
-        f_all[self._t_src] = f[self._t]
-        return f_all, fallback
+            self._none = (np.zeros((1, 1)), np.zeros((1, 1, 1)))
+        dyn, (P_dyn, H_dyn) = -1, self._none
+        if self.dynamic:
+            dyn = self.dynamic[0]
+            P_dyn, H_dyn = self.couplings[dyn].coupling_and_hessians(q[self.parts[dyn][4]])
+        return _batch_step(dyn, P_dyn, H_dyn, self.P, self.pinv, self.W, self.pad, self.H, self.outer, self.real,
+                           self.m, tau, Kv, f_prev, *self._d, self._d_src, *self._k, self._k_src, *self._t,
+                           self._t_src, *self._gather, int(iterations), float(p.f_min), float(p.f_max),
+                           float(self.levenberg), float(self.tolerance), self.grid_f, self.grid_k, self.grid_dk)
 
 
 # ----------------------------------------------------------------------------
@@ -1237,6 +1286,11 @@ def TendonForceDistribution_(T):
             """One period of the distribution, context-free: ``(forces (m), status (fingers))`` from the desired
             torques, stiffness entries, the previous forces and (thumb) the plant joint angles (the update of this
             system; :class:`~awiwi_drake.control.fused.FusedChain_` calls it too)."""
+            batch = None
+            if T is float and self._batch is not None:      # the hot path: every finger in the batch
+                batch = self._batch.update(tau_T, K_T, f_prev, q_T, self.iterations_per_period)
+                if not batch[1].any():
+                    return batch[0], np.zeros(len(self.fingers))
             as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
             tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
             f_prev_v = as_float(f_prev).ravel()
@@ -1246,7 +1300,8 @@ def TendonForceDistribution_(T):
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
             todo = range(len(self._parts))
             if self._batch is not None:       # all fingers at once; the rest by their own solver
-                f_new, fallback = self._batch.update(tau, Kv, f_prev_v, q, self.iterations_per_period)
+                f_new, fallback = batch if batch is not None else self._batch.update(
+                    tau, Kv, f_prev_v, q, self.iterations_per_period)
                 todo = np.flatnonzero(fallback)
             for k in todo:
                 s, sd, st, sk, sq = self._parts[k]

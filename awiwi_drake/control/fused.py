@@ -146,10 +146,10 @@ def FusedChain_(T):
             z = xd.get_vector(self._xz).CopyToVector()
             v = self._fc * z + self._fd * q
             u = dict(meas, joint_angle=q, joint_velocity=v)
-            out = dict(q=q, v=v)
+            out = dict(q=q, v=v, z=z)
             if self.joint_law is not None:
                 if self.dist is not None:
-                    u["tendon_force_reference"] = xd.get_vector(self._xf).CopyToVector()
+                    u["tendon_force_reference"] = out["f_prev"] = xd.get_vector(self._xf).CopyToVector()
                 tau = np.asarray(self.joint_law(u)).reshape(-1)
                 if self.sharing is not None:
                     W, f0, tau0 = self.sharing
@@ -165,11 +165,9 @@ def FusedChain_(T):
             q = s["q"]
             self.estimator.note_limit(q)
             discrete_state.set_value(self._xq, q)
-            z = context.get_discrete_state(self._xz).CopyToVector()
-            discrete_state.set_value(self._xz, self._fa * z + self._fb * q)
+            discrete_state.set_value(self._xz, self._fa * s["z"] + self._fb * q)     # the states read at the sample
             if self.dist is not None:
-                f_new, status = self.dist.step(s["tau"], self._K,
-                                               context.get_discrete_state(self._xf).CopyToVector(),
+                f_new, status = self.dist.step(s["tau"], self._K, s["f_prev"],
                                                q if self.dist.reads_joint_angle else None)
                 discrete_state.set_value(self._xf, f_new)
                 discrete_state.set_value(self._xs, status)

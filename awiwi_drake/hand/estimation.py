@@ -139,6 +139,47 @@ def _search_for(base):
     return hit[1]
 
 
+_THUMB_ESTIMATES: dict = {}   # the estimator's float step per compiled kinematics (id of the kernel -> (kernel, fn))
+
+
+def _thumb_estimate_for(base):
+    """The estimator's whole thumb step, compiled with ``base`` bound (as :func:`_search_for`): Algorithm 1
+    (:func:`_search`) warm-started at ``(qa, qb)``, optionally one Gauss-Newton step on the base block (its 2 x 2
+    normal equations in closed form), and the PIP/DIP by the pseudo-inverse ``distal`` (2 x 4); writes the four
+    joint angles into ``out``."""
+    hit = _THUMB_ESTIMATES.get(id(base))
+    if hit is None or hit[0] is not base:
+        @numba.njit(cache=False)
+        def step(dt, qa, qb, iterations, step0, min_step, limit, x, buf, distal, h0b, refine, out):
+            qa, qb, _, _, _, _ = _search(base, dt[:4], qa, qb, iterations, step0, min_step, limit, x, buf)
+            if refine:
+                x[0] = qa
+                x[1] = qb
+                base(x, buf)
+                G00 = G01 = G11 = g0 = g1 = 0.0
+                for i in range(4):
+                    r = dt[i] - (buf[i] - h0b[i])
+                    p0, p1 = buf[4 + 2 * i], buf[5 + 2 * i]
+                    G00 += p0 * p0
+                    G01 += p0 * p1
+                    G11 += p1 * p1
+                    g0 += p0 * r
+                    g1 += p1 * r
+                det = G00 * G11 - G01 * G01
+                qa += (G11 * g0 - G01 * g1) / det
+                qb += (G00 * g1 - G01 * g0) / det
+            out[0] = qa
+            out[1] = qb
+            for a in range(distal.shape[0]):
+                acc = 0.0
+                for b in range(distal.shape[1]):
+                    acc += distal[a, b] * dt[4 + b]
+                out[2 + a] = acc
+            return out
+        hit = _THUMB_ESTIMATES[id(base)] = (base, step)
+    return hit[1]
+
+
 def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0.0), *,
                                iterations: int = 30, step0: float = 0.1,
                                min_step: float = 1e-7,
@@ -275,9 +316,9 @@ def LinkPositionEstimator_(T):
                 else:
                     self._thumbs.append((name, c, js[name], ts[name]))
             # float: Algorithm 1's compiled search called directly (estimate_thumb's own call, without its checks)
-            self._search = ({name: _search_for(c._base_kernel()) for name, c, _, _ in self._thumbs}
+            self._search = ({name: _thumb_estimate_for(c._base_kernel()) for name, c, _, _ in self._thumbs}
                             if T is float else None)
-            self._work = (np.empty(2), np.empty(28))
+            self._work = (np.empty(2), np.empty(28), np.empty(4))
             self._distal = {name: c.distal_pseudo_inverse() for name, c, _, _ in self._thumbs}
             self._theta = self.DeclareVectorInputPort("motor_angle", m)
             self._x = self.DeclareVectorInputPort("elongation", m)
@@ -303,7 +344,7 @@ def LinkPositionEstimator_(T):
                 return
             for name, c, j, t in self._thumbs:
                 limit = GradientSearchResult.limit
-                if np.any(np.abs(q[j][:2]) >= limit):
+                if abs(float(q[j.start])) >= limit or abs(float(q[j.start + 1])) >= limit:
                     self.limit_hits += 1
                     if self.limit_hits == 1:
                         warnings.warn(f"LinkPositionEstimator: the {name} base estimate "
@@ -331,27 +372,13 @@ def LinkPositionEstimator_(T):
                 dh_val = np.array([_value(v) for v in dh])
             q_new = self._linear @ dh_val         # every constant-coupling finger (5.15) in one product
             for name, c, j, t in self._thumbs:    # thumb: Algorithm 1 warm-started at the previous estimate
-                if self._search is not None:      # float: the compiled search itself (= estimate_thumb, tested)
-                    dt = dh_val[t]
-                    qa, qb, *_ = self._search[name](np.ascontiguousarray(dt[:4]), float(q_val[j.start]), float(q_val[j.start + 1]),
-                                              self.iterations, self.step0, 1e-7, GradientSearchResult.limit,
-                                              self._work[0], self._work[1])
-                    q_new[j.start], q_new[j.start + 1] = qa, qb
-                    q_new[j.start + 2:j.stop] = self._distal[name] @ dt[4:]
-                else:
-                    q_new[j] = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations,
-                                              step0=self.step0)
-                if T is float and self.refine:
-                    # the Gauss-Newton step q + (P S)^+ r finger by finger (P S is block-diagonal; linear fingers
-                    # are exact already).  The thumb's P is block-diagonal too: the PIP/DIP least-squares estimate
-                    # is a fixed point of the step (P_d^+ P_d = I), the base step is the 2 x 2 normal equations
-                    # of the 4 x 2 base block at the kinematics evaluated once
-                    h_b, P_b = c.base_lengths_and_jacobian(q_new[j][0], q_new[j][1])
-                    r_b = dh_val[t][:4] - (h_b - self._h0[t][:4])
-                    G, g = P_b.T @ P_b, P_b.T @ r_b           # the 2 x 2 normal equations, solved in closed form
-                    det = G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]
-                    q_new[j.start] += (G[1, 1] * g[0] - G[0, 1] * g[1]) / det
-                    q_new[j.start + 1] += (G[0, 0] * g[1] - G[1, 0] * g[0]) / det
+                if self._search is not None:      # float: Algorithm 1, the Gauss-Newton step and PIP/DIP compiled
+                    self._search[name](dh_val[t], float(q_val[j.start]), float(q_val[j.start + 1]), self.iterations,
+                                       self.step0, 1e-7, GradientSearchResult.limit, self._work[0], self._work[1],
+                                       self._distal[name], self._h0[t][:4], self.refine, self._work[2])
+                    q_new[j] = self._work[2]
+                    continue
+                q_new[j] = estimate_thumb(c, dh_val[t], q_val[j][:2], iterations=self.iterations, step0=self.step0)
             if T is not float:  # one Gauss-Newton step in the scalar type: carries the derivatives
                 r = dh - (self.coupling.h(q_new) - self._h0)
                 S = dof_selection(self.coupling)

@@ -99,8 +99,13 @@ class HandChainParams(Parameters):
                                           "behind it can reach a useful stiffness (measured: 100/30 rad/s leaves "
                                           "25 % step error after 0.4 s against motor friction, 300/60 rad/s 0.5 %)")
     joint_stiffness: float = param(0.5, unit="Nm/rad", low=0.0, low_inclusive=False,
-                                   source="Fig 15.22: impedance gain 0.5 Nm/rad on the finger (5 Nm/rad the stiff "
-                                          "setting)", doc="impedance K per DoF (backstepping: every DoF)")
+                                   source="chosen: Fig 15.22's soft setting, 0.5 Nm/rad (5 Nm/rad the stiff one); "
+                                          "that figure is the single flexible-joint testbed with nonlinear springs "
+                                          "(section 15.4.4), not a finger: on the finger's PIP the thesis's "
+                                          "impedance test (Fig 15.27, section 15.5.3) spans Kp,imp 0-0.1 Nm/rad. "
+                                          "An upper bound per DoF here: the cascade caps it at M_jj "
+                                          "joint_bandwidth^2, the finger backstepping by its sampled modes",
+                                   doc="impedance K per DoF (backstepping: every DoF)")
     joint_bandwidth: float = param(60.0, unit="rad/s", low=0.0, low_inclusive=False,
                                    source="chosen: a fifth of force_bandwidth (the cascade's joint loop acts through "
                                           "the force loop and must be slower): cascaded K = min(joint_stiffness, "

@@ -123,11 +123,19 @@ def _from_schema(obj, fill: bool = False) -> Parameters:
         if type(v) in _BACK:
             v = _from_schema(v, fill)
         elif isinstance(v, dict):
-            v = tuple((k, _from_schema(x, True)) for k, x in v.items())
+            v = tuple((k, _named_entry(f.name, k, x)) for k, x in v.items())
         elif isinstance(v, list):
             v = tuple(v)
         values[f.name] = v
     return cls(**values)
+
+
+def _named_entry(field: str, key: str, obj) -> Parameters:
+    """One named override entry; an invalid value names its entry (``tendon_motors['index_h3']: ...``)."""
+    try:
+        return _from_schema(obj, True)
+    except ValueError as exc:
+        raise ValueError(f"{field}[{key!r}]: {exc}") from None
 
 
 def to_yaml(params: Parameters) -> str:

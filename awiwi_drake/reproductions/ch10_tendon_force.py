@@ -23,11 +23,17 @@ from awiwi_drake.rigs import tendon_rig
 
 __all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
 
-def _tendon_loop(factory, *, realistic: bool, gains=None, fmap=None, **kw):
+def _tendon_step(factory, f0, f1, t_step, t_final, log, *, realistic: bool, gains=None, fmap=None):
+    """A fresh tendon rig under ``factory``'s controller at 3 kHz (``realistic``: ripple, the force sensor,
+    333 us delay) at rest at ``f0`` [N], its reference stepping to ``f1`` at ``t_step``: ``(rig, loop, log)``."""
     rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=realistic)), backend="symbolic")
     ctrl = factory(rig, gains, fmap=fmap) if gains is not None or fmap is not None else factory(rig)
     sensors = {"tendon_force": force_sensor(ForceSensorParams())} if realistic else None
-    return rig, closed_loop(rig, ctrl, rate_hz=RATE, delay=333e-6 if realistic else None, sensors=sensors, **kw)
+    loop = closed_loop(rig, ctrl, rate_hz=RATE, delay=333e-6 if realistic else None, sensors=sensors)
+    op = rig.operating_point(tendon_force=f0)
+    ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": f0})
+    return rig, loop, simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(t_step, f1, f0)}, log=log,
+                               log_period=1 / RATE)
 
 
 @dataclass
@@ -62,12 +68,8 @@ def tendon_feedforward_experiment(f0: float = 60.0, f1: float = 70.0, t_final: f
     out = {}
     for label, g in (("with", TendonForceGains()),
                      ("without", TendonForceGains(force_feedforward=False, friction_compensation=False))):
-        rig, loop = _tendon_loop(tendon_pd_controller, realistic=False, gains=g, fmap=fmap)
-        op = rig.operating_point(tendon_force=f0)
-        ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                                  references={"tendon_force_reference": f0})
-        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(0.05, f1, f0)},
-                       log=("tendon_force", "tendon_force_reference"), log_period=1 / RATE)
+        rig, loop, log = _tendon_step(tendon_pd_controller, f0, f1, 0.05, t_final,
+                                      ("tendon_force", "tendon_force_reference"), realistic=False, gains=g, fmap=fmap)
         out[label] = log
         if label == "without":
             kp = loop.controller.law.kp_fixed
@@ -101,12 +103,8 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
     t_step = 0.02
     res = TendonSteps("scheduled" if scheduled else "fixed", np.array([]), t_step, step)
     for f0 in initial_forces:
-        rig, loop = _tendon_loop(factory, realistic=realistic, gains=gains or TendonForceGains(), fmap=fmap)
-        op = rig.operating_point(tendon_force=f0)
-        ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,
-                                  references={"tendon_force_reference": f0})
-        log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": Step(t_step, f0 + step, f0)},
-                       log=("tendon_force", "motor_torque_command"), log_period=1 / RATE)
+        _, _, log = _tendon_step(factory, f0, f0 + step, t_step, t_final, ("tendon_force", "motor_torque_command"),
+                                 realistic=realistic, gains=gains or TendonForceGains(), fmap=fmap)
         f = log["tendon_force"][:, 0]
         m = step_metrics(log.t, f, f0, f0 + step, t_step, band=0.05)
         m.update({k: v for k, v in fit_second_order_step(log.t, f, f0, f0 + step, t_step).items()

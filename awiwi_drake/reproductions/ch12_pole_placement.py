@@ -99,7 +99,7 @@ class StiffnessRobustness:
     whose targets are Table 12.1's (omega1, omega2) times ``target_scales`` (rows ``[low, high]``; an end equal to
     the searched range's end, ``search_range``, means "at least").  ``t``/``state`` (keys ``nominal``, ``perturbed``;
     columns ``[q, qdot, theta, thetadot]``) are the simulated responses to a ``step`` [rad] of the joint-angle reference from rest, on the nominal and on the perturbed
-    plant; ``diverged_at`` is when ``simulate`` stopped the perturbed run as diverged (None: it did not), its
+    plant; ``diverged_at`` (same keys) is when ``simulate`` stopped that run as diverged (None: it did not), its
     trajectory is then the run up to 95 % of that time.  ``printed_gain_poles_vs_stiffness`` is the same locus as
     ``poles_vs_stiffness`` under the printed gains (12.18) applied as ``u = -alpha x`` (the printed Fig 12.4)."""
 
@@ -118,7 +118,7 @@ class StiffnessRobustness:
     step: float
     t: dict
     state: dict
-    diverged_at: float | None
+    diverged_at: dict
     printed_gain_poles_vs_stiffness: np.ndarray
     printed_perturbed_poles: np.ndarray = None
     printed_gain: np.ndarray = None
@@ -139,8 +139,8 @@ class StiffnessRobustness:
                  f"(12.19) k = {self.perturbed_stiffness}: ours {fmt(self.perturbed_poles)}; "
                  f"printed {fmt(self.printed_perturbed_poles)}",
                  f"stable for k in [{lo:.6f}, {hi:.6f}] Nm/rad",
-                 "perturbed step: " + (f"diverged at {self.diverged_at:.4f} s" if self.diverged_at is not None
-                                       else "did not diverge")]
+                 *(f"{name} step: " + (f"diverged at {t:.4f} s" if t is not None else "did not diverge")
+                   for name, t in self.diverged_at.items())]
         for s, (w1, w2), (a, b) in zip(self.target_scales, self.targets, self.target_intervals):
             ends = ("<= " if a <= self.search_range[0] else "") + f"{a:.4g}", \
                 ("at least " if b >= self.search_range[1] else "") + f"{b:.4g}"
@@ -179,8 +179,9 @@ class StiffnessRobustness:
         late = tt >= tt[0] + 0.8 * (tt[-1] - tt[0])
         anchor = int(np.flatnonzero(late)[np.argmax(err[late])])
         ax.semilogy(tt, err[anchor] * np.exp(sigma * (tt - tt[anchor])), "k:", label=f"e^({sigma:.1f} t) envelope")
-        if self.diverged_at is not None:
-            ax.axvline(self.diverged_at, color="r", lw=0.8, label=f"diverged at {self.diverged_at * 1e3:.1f} ms")
+        for name, when in self.diverged_at.items():
+            if when is not None:
+                ax.axvline(when, color="r", lw=0.8, label=f"{name} diverged at {when * 1e3:.1f} ms")
         ax.set_ylim(1e-7, None)
         label_axes(ax, "|q - q_ref| [rad]", title=f"simulated {self.step:g} rad step of the reference")
         ax = axes[1, 1]
@@ -219,6 +220,10 @@ def stiffness_robustness(params: PolePlacementParams | None = None, *, num: int 
     targets and for the targets scaled by ``params.robustness_target_scales`` (section 12.4: the sensitivity
     depends on the target dynamics).  A ``params.robustness_reference_step`` reference step is simulated (``simulate``) on
     the nominal and the perturbed plant over ``window`` (default ``params.robustness_window``)."""
+    if isinstance(num, bool) or not isinstance(num, (int, np.integer)) or num < 2:
+        raise ValueError(f"stiffness_robustness: num = {num!r} must be an integer >= 2 (points of Fig 12.4's k range)")
+    if window is not None and not (np.isfinite(window) and window > 0):
+        raise ValueError(f"stiffness_robustness: window = {window!r} s must be finite and > 0")
     p = params or PolePlacementParams()
     base = base or FlexibleJointParams()
     k0, k1 = float(base.stiffness), float(p.perturbed_stiffness)
@@ -250,18 +255,18 @@ def stiffness_robustness(params: PolePlacementParams | None = None, *, num: int 
         d = design_pole_placement(rig0, p.replace(omega1=float(w1), omega2=float(w2)))
         intervals.append(stable_stiffness_interval(A_of_k, d.linearization.B, d.K, k0, half_width=half))
     window = float(p.robustness_window if window is None else window)
-    t, q, diverged_at = {}, {}, None
+    t, q, diverged_at = {}, {}, {}
     for name, loop in loops.items():
-        end = window
-        for _attempt in range(2):
+        diverged_at[name] = None
+
+        def run(end):
             ctx = loop.create_context(references={"joint_angle_reference": p.robustness_reference_step})
-            try:
-                res = simulate(loop, ctx, end, log=("state",), mode="fixed_step",
-                               step=p.robustness_integration_step)
-                break
-            except PHYSICAL_FAILURES as exc:      # the unstable loop: reported, and its run kept up to 95 %
-                diverged_at = float(exc.t)
-                end = 0.95 * diverged_at
+            return simulate(loop, ctx, end, log=("state",), mode="fixed_step", step=p.robustness_integration_step)
+        try:
+            res = run(window)
+        except PHYSICAL_FAILURES as exc:      # an unstable loop: reported, and its run kept up to 95 % of that time
+            diverged_at[name] = float(exc.t)
+            res = run(0.95 * diverged_at[name])
         t[name], q[name] = res.t, res["state"]
     return StiffnessRobustness(k0, k1, design.K, nominal, perturbed, ks, table, interval, scales, targets,
                                np.array(intervals), search, float(p.robustness_reference_step), t, q, diverged_at,

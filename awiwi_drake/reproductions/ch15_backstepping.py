@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from awiwi_drake.analysis import PerEntry, Samples, Sine, simulate
+from awiwi_drake.analysis import PerEntry, Samples, Sine, linearize, simulate
 from awiwi_drake.components.spring import LinearSpring
 from awiwi_drake.control.backstepping import (
     REFERENCE_PORT, REFERENCE_SIZE, impedance_backstepping, impedance_controller, joint_model, position_controller)
@@ -311,14 +311,10 @@ def impedance_steady_state(rig, gains: ImpedanceBacksteppingGains, disturbance: 
     Drake's ``Linearize`` of the (linear) closed loop gives ``x' = A x + B w``; the
     steady state is ``-A^-1 B w``. ``kw`` go to :func:`impedance_controller`.
     """
-    from pydrake.systems.primitives import Linearize
     loop = closed_loop(rig, impedance_controller(rig, gains, **kw), rate_hz=None)
-    ctx = loop.create_context(state=rig.operating_point().state)
-    lin = Linearize(loop.diagram, ctx, input_port_index=loop.diagram.GetInputPort("external_torque").get_index(),
-                    output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index(),
-                    equilibrium_check_tolerance=1e-6)
-    x_ss = -np.linalg.solve(lin.A(), lin.B() @ [disturbance])
-    return float((lin.C() @ x_ss)[0])
+    lin = linearize(loop.diagram, context=loop.create_context(state=rig.operating_point().state),
+                    input="external_torque", outputs=("joint_angle",))
+    return float((lin.C @ -np.linalg.solve(lin.A, lin.B @ [disturbance]))[0])
 
 
 # ---------------------------------------------------------------------------

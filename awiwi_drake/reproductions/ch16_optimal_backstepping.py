@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.controllers import LinearQuadraticRegulator
 
+from awiwi_drake.analysis.linear import lqr_gain
 from awiwi_drake.parameters.backstepping import OptimalGainsCase, OptimalGainsStudy
 from awiwi_drake.parameters.rigs import FlexibleJointParams
 from awiwi_drake.plotting import figure_axes, plot_traces
@@ -29,14 +29,14 @@ def table_16_1_rig(case: OptimalGainsCase | None = None, **kw):
 
 
 def printed_model_feedback(case: OptimalGainsCase | None = None) -> np.ndarray:
-    """ARE gain for the A, B printed in Table 16.1 (Drake ``LinearQuadraticRegulator(A, B, Q, R)``).
+    """ARE gain for the A, B printed in Table 16.1 (:func:`~awiwi_drake.analysis.linear.lqr_gain`: Drake's LQR).
 
     Returned as ``u = K x`` (the sign of the printed Kdes) for direct comparison.
     """
     c = case or OptimalGainsCase()
     A = np.array([[0, 1, 0, 0], [0, 0, 1 / c.link_inertia, 0], [0, 0, 0, 1], [0, 0, 0, 0]])
     B = np.array([[0], [0], [0], [c.stiffness / c.motor_inertia]])
-    K, _ = LinearQuadraticRegulator(A, B, np.diag(c.q_weights), np.array([[c.r_weight]]))
+    K, _ = lqr_gain(A, B, np.diag(c.q_weights), [[c.r_weight]])
     return -np.asarray(K).ravel()
 
 
