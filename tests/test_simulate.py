@@ -10,7 +10,7 @@ from pydrake.systems.primitives import AffineSystem, Integrator, ZeroOrderHold
 
 from awiwi_drake.analysis import (
     rig_monitors, Chirp, PerEntry, Ramp, Samples, SimulationDivergedError, SimulationError, SimulationResult, Sine, Step, simulate)
-from awiwi_drake.analysis.schedules import InputSchedule_
+from awiwi_drake.analysis.schedules import Constant, InputSchedule_, as_schedule
 from awiwi_drake.analysis.simulate import control_period
 from awiwi_drake.rigs import joint_rig
 
@@ -37,6 +37,22 @@ def test_step_response_of_a_first_order_system_matches_the_closed_form():
     exact = np.where(t >= t0, b * u1 / a * (1 - np.exp(-a * (t - t0))), 0.0)
     np.testing.assert_allclose(res["x"][:, 0], exact, atol=2e-6)
     assert res.info["mode"] == "error_controlled"
+
+
+def test_constant_inputs_integrate_to_the_closed_form_and_are_constant_schedules():
+    """A number, a vector or a PerEntry of Constants is constant in time (Drake's C++ ConstantVectorSource feeds
+    it: no Python callback per step); anything with a step or a slope is not.  x = b u / a (1 - e^(-a t))."""
+    a, b, u = 5.0, 2.0, 3.0
+    sys = _first_order(a, b)
+    for given in (u, [u], PerEntry([Constant(u)])):
+        res = simulate(sys, None, 1.0, inputs={"u0": given}, log={"x": sys.get_output_port()},
+                       accuracy=1e-9, max_step=1e-3)
+        np.testing.assert_allclose(res["x"][:, 0], b * u / a * (1 - np.exp(-a * res.t)), atol=2e-6)
+    assert as_schedule([1.0, 2.0]).constant().tolist() == [1.0, 2.0] and Constant(2.5).constant() == 2.5
+    assert Step(0.1, 1.0).constant() is None and PerEntry([Constant(1.0), Step(0.1, 1.0)]).constant() is None
+    assert (Constant(1.0) + Constant(2.0)).constant() is None   # a sum is evaluated, not folded
+    with pytest.raises(ValueError, match="input 'u0'"):
+        simulate(sys, None, 0.1, inputs={"u0": [1.0, 2.0]})
 
 
 def test_ramp_sine_and_chirp_integrate_to_their_closed_forms():

@@ -57,6 +57,10 @@ class Schedule(abc.ABC):
         """Times of discontinuities (steps) or kinks, for information and plotting."""
         return ()
 
+    def constant(self):
+        """The value if the schedule is constant in time (a float, or a vector for :class:`PerEntry`), else None."""
+        return None
+
 
 @dataclass(frozen=True)
 class _Sum(Schedule):
@@ -86,6 +90,9 @@ class Constant(Schedule):
 
     def value(self, t):
         return 0.0 * t + self.value_
+
+    def constant(self):
+        return self.value_
 
 
 @dataclass(frozen=True)
@@ -256,6 +263,10 @@ class PerEntry(Schedule):
 
     def breakpoints(self):
         return tuple(sorted({b for e in self.entries for b in e.breakpoints()}))
+
+    def constant(self):
+        values = [e.constant() for e in self.entries]
+        return None if any(v is None or np.ndim(v) for v in values) else np.array(values, float)
 
 
 def as_schedule(s) -> Schedule:

@@ -330,9 +330,14 @@ def simulate(system, context: Context | None, t_final: float, *,
             continue
         if name in inputs:
             try:
-                src = b.AddNamedSystem(f"input_{name}", InputSchedule(as_schedule(inputs[name]), port.size(), start))
+                schedule = as_schedule(inputs[name])
+                src = InputSchedule(schedule, port.size(), start)   # checks the size
             except ValueError as exc:
                 raise ValueError(f"simulate: input {name!r}: {exc}") from None
+            value = schedule.constant()
+            if value is not None:   # constant in time: Drake's C++ source, no Python callback per step
+                src = ConstantVectorSource(np.broadcast_to(np.asarray(value, float), (port.size(),)).copy())
+            src = b.AddNamedSystem(f"input_{name}", src)
         elif port.HasValue(user_ctx) and name not in read_ports:
             b.ExportInput(sub.get_input_port(i), name)
             fixed_inputs[name] = np.asarray(port.Eval(user_ctx), float)
