@@ -67,7 +67,8 @@ modes of the DoF inertia matrix ``M_d = V diag(mu) V^T``: mode i gets the stiffn
 ``k_i = min(joint_stiffness, mu_i w_max^2)`` and the damping ``2 zeta sqrt(k_i mu_i)``, so
 ``Kp = V diag(k) V^T``, ``Kd = V diag(d) V^T`` and every mode of ``M_d e'' + Kd e' + Kp e = 0`` has
 ``|lambda| = sqrt(k_i / mu_i) <= w_max = sampled_pole_limit * rate_hz`` (|h lambda| <= 1/4 at the
-control period h = 1/rate_hz): the impedance gain of Fig 15.22 on every mode slow enough to be
+control period h = 1/rate_hz): the chosen impedance gain (``HandChainParams.joint_stiffness``, Fig 15.22's
+soft setting on the single-joint testbed) on every mode slow enough to be
 sampled, less on the light distal modes (index at 3 kHz: the lightest mode 0.5 -> 0.092 Nm/rad). Why: the
 former per-DoF design (``Kd = 2 zeta sqrt(Kp M_jj)`` with the diagonal of ``M_d``) put a pole at
 -6838 1/s on the index (h lambda = -2.3 at 3 kHz; sampled spectral radius 1.18: the chatter that had it

@@ -58,7 +58,8 @@ class JointDesignParams(Parameters):
                "0.05 Nm) damps it on every finger and the hand (tests/test_joint_design.py)")
     lqr_torque_error: float = param(
         0.05, unit="Nm", low=0.0, low_inclusive=False,
-        source="chosen: Bryson's rule, 0.05 Nm ~ 10 % of a finger joint's torque range (Fig 15.22: 0.5 Nm/rad x 0.2 rad "
+        source="chosen: Bryson's rule, 0.05 Nm ~ 10 % of a finger joint's torque range (the chosen 0.5 Nm/rad "
+               "impedance, Fig 15.22's single-joint testbed, x 0.2 rad "
                "is 0.1 Nm)")
     lqr_torque_rate: float = param(
         1.0, unit="Nm/s", low=0.0, low_inclusive=False,

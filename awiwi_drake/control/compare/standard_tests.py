@@ -57,7 +57,8 @@ def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
                                  sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
     elif kind in ("finger", "hand"):
         # per DoF, relative to the operating point [rad]; chosen: a 0.2 rad (11 deg) step (Fig 15.24 steps the
-        # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the 0.5 Nm/rad impedance of Fig 15.22), 0.3 s covers the
+        # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the chosen 0.5 Nm/rad impedance, Fig 15.22's soft setting on
+        # the single-joint testbed), 0.3 s covers the
         # cascade's settling (joint loop at 60 rad/s); no sweep by default (Fig 15.26 is the joint rig's)
         base = CompareTestParams(step_size=0.2, step_duration=0.3, sine_amplitude=0.1, sine_frequency=2.0,
                                  sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01)
