@@ -387,7 +387,10 @@ def test_backstepping_load_observer_gives_the_impedance_deflection_under_a_const
     ends, paths = {}, {}
     for obs, duration in ((None, 0.4), (FrictionObserverParams(), 1.2)):
         rig = finger_diagram(finger="index", params=p)
-        ctrl = finger_backstepping_controller(rig, load_observer=obs)
+        # the observed law as registered (compare --controllers backstepping-load-observer), the plain one as built
+        ctrl = (make_controller("backstepping-load-observer", rig) if obs is not None
+                else finger_backstepping_controller(rig))
+        assert (type(ctrl).__name__ == "ObservedBacksteppingController") == (obs is not None)
         law = ctrl.law
         loop = closed_loop(rig, ctrl, **get_entry("backstepping", rig).loop_options)
         op = rig.operating_point()
