@@ -306,6 +306,24 @@ def test_library_rejects_nonsense_with_value_errors():
             fn()
 
 
+def test_a_non_finite_initial_state_is_one_named_line():
+    """A NaN in the state a closed loop starts from is refused, naming the entry, in the sampled rig (whose
+    discrete state is in integration coordinates) and the continuous one alike."""
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.rigs import joint_rig
+    rig = joint_rig()
+    op = rig.operating_point(pretension=30.0)
+    for sampled in (True, False):
+        loop = closed_loop(rig, make_controller("pd", rig), rate_hz=3000.0, sampled_rig=sampled)
+        x = np.array(op.state, float)
+        x[2] = np.nan
+        with pytest.raises(ValueError) as info:
+            loop.create_context(op, state=x)
+        message = str(info.value)
+        assert message.startswith(f"closed_loop: state[2] ({rig.state_names[2]}) = nan must be finite"), message
+        assert "\n" not in message
+
+
 def _finger_stage_controller(**kw):
     from awiwi_drake.control.joint_design import joint_stage_controller
     from awiwi_drake.hand.diagrams import finger_diagram

@@ -282,6 +282,11 @@ class ClosedLoop:
             n = rig_ctx.get_discrete_state(0).size() if self.sampled_rig else rig_ctx.num_continuous_states()
             if x.size != n:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} states")
+            if not np.all(np.isfinite(x)):
+                bad = int(np.flatnonzero(~np.isfinite(x))[0])
+                names = getattr(self.rig, "state_names", None) or ()
+                label = f" ({names[bad]})" if bad < len(names) else ""
+                raise ValueError(f"closed_loop: state[{bad}]{label} = {x[bad]} must be finite")
             if self.sampled_rig:     # the sampled dynamics' discrete state: x in the rig's integration coordinates
                 rig_ctx.SetDiscreteState(0, self.rig.sampled_state(x))
             else:
