@@ -284,9 +284,7 @@ class ClosedLoop:
                 raise ValueError(f"closed_loop: state has {x.size} entries, the rig has {n} states")
             if not np.all(np.isfinite(x)):
                 bad = int(np.flatnonzero(~np.isfinite(x))[0])
-                names = getattr(self.rig, "state_names", None) or ()
-                label = f" ({names[bad]})" if bad < len(names) else ""
-                raise ValueError(f"closed_loop: state[{bad}]{label} = {x[bad]} must be finite")
+                raise ValueError(f"closed_loop: state[{bad}] ({self.rig.state_names[bad]}) = {x[bad]} must be finite")
             if self.sampled_rig:     # the sampled dynamics' discrete state: x in the rig's integration coordinates
                 rig_ctx.SetDiscreteState(0, self.rig.sampled_state(x))
             else:
