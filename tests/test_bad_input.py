@@ -186,7 +186,6 @@ CLI_CASES = [
     ("demo-out-file", lambda t, d: ["demo", "--out", str(_file(t))], 2, "exists and is not a directory"),
     ("demo-out-unwritable", lambda t, d: ["demo", "--out", str(_file(t) / "sub")], 2, "cannot create the folder"),
     ("export-out-file", lambda t, d: ["export-diagrams", "--out", str(_file(t))], 2, "--out"),
-    ("hand-export-out-file", lambda t, d: ["export-hand-diagrams", "--out", str(_file(t))], 2, "--out"),
     ("compare-out-file", lambda t, d: ["compare", "--rig", "joint-rig", "--controllers", "pd", "--out",
                                        str(_file(t))], 2, "exists and is not a directory"),
     ("compare-delay-huge", lambda t, d: ["compare", "--rig", "joint-rig", "--controllers", "pd", "--out", str(t),

@@ -1,4 +1,4 @@
-"""Hand commands: ``animate`` (Meshcat recording to HTML) and ``export-hand-diagrams``.
+"""Hand command: ``animate`` (Meshcat recording to HTML); ``export-diagrams`` writes the hand graphs too.
 
 ``awiwi-drake linearize finger-index|finger-middle|finger-ring|finger-fifth|finger-thumb|hand``
 comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.diagrams.TARGETS``).
@@ -32,11 +32,6 @@ def register(sub) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=_animate)
 
-    p = sub.add_parser("export-hand-diagrams",
-                       help="write the hand/finger diagram graphs (diagrams/hand_*.dot, .svg/.png with Graphviz)")
-    p.add_argument("--out", default="diagrams", help="output folder (default diagrams/)")
-    p.set_defaults(func=_export)
-
 
 def _animate(args) -> int:
     from awiwi_drake.cli import output_file
@@ -52,12 +47,3 @@ def _animate(args) -> int:
           f"max joint tracking error {res.max_tracking_error:.3g} rad)")
     return 0
 
-
-def _export(args) -> int:
-    from awiwi_drake.diagrams import export_hand_diagrams
-
-    from awiwi_drake.cli import output_dir
-
-    for line in export_hand_diagrams(output_dir(args.out)):
-        print(line)
-    return 0
