@@ -329,13 +329,11 @@ class FingerDriveParams(Parameters):
     ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs; ``tendon_motors``
     likewise overrides ``motor`` tendon by tendon (``(tendon_name, MotorParams)``: friction, ripple,
     inertia, damping of one motor, e.g. a diagnosis's write-back; pulley radius, torque limit and
-    saturation stay those of ``motor``; compiled backend).
+    saturation stay those of ``motor``).
     Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
     :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
     fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
-    (docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz"). They need ``backend="compiled"``;
-    ``with_physics(hysteresis=False, guide_friction=False)`` gives the plant the python and
-    symbolic backends can build.
+    (docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz").
     """
 
     motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
@@ -379,9 +377,8 @@ class FingerDriveParams(Parameters):
                      guide_friction: bool | None = None, motor_friction: bool | None = None):
         """A copy with the named thesis effects switched (None leaves one as it is).
 
-        E.g. ``p.with_physics(hysteresis=False, guide_friction=False)`` for the python/symbolic
-        drive backends, which do not carry these two states in the finger/hand diagrams;
-        ``p.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)``
+        E.g. ``p.with_physics(hysteresis=False, guide_friction=False)`` for the per-joint design models,
+        which have neither Dahl state; ``p.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)``
         is the ideal plant (frictionless motors, elastic springs).
         """
         p = self
