@@ -27,8 +27,6 @@ def register(sub) -> None:
                    help="the whole hand (palm, forearm stub, five fingers) or one finger (default hand)")
     p.add_argument("--duration", type=limited_float("max_animation_duration", "s", positive=True), default=1.5, metavar="S",
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
-    p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
-                   help="tendon drive backend (compiled: one fused system with a numba kernel, the fast default)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=_animate)
 
@@ -41,8 +39,7 @@ def _animate(args) -> int:
     from awiwi_drake.config import SimulationProgress
 
     with SimulationProgress("animate", quiet=args.quiet) as progress:
-        res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend,
-                               progress=progress)
+        res = record_animation(out, target=args.target, duration=args.duration, progress=progress)
     print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
           f"max joint tracking error {res.max_tracking_error:.3g} rad)")
     return 0
