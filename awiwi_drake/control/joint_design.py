@@ -626,7 +626,7 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     (15.88), the true joint state) and compare its poles with the designs (:class:`PoleCheck`).
 
     Use a rig built with the design's motor model (``params.replace(motor=design_motor(params.motor))``)
-    and ``backend="python"`` for the comparison the per-joint models make."""
+    without hysteresis and guide friction for the comparison the per-joint models make."""
     c = chain or HandChainParams()
     ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing")
     d = ctrl.design["joint_design"]
