@@ -246,7 +246,7 @@ CLI_CASES = [
      "no.yaml: no such file"),
     ("linearize-config-unknown-key", lambda t, d: ["linearize", "joint-rig", "--config",
                                                    str((t / "c.yaml").write_text("nope: 1") and t / "c.yaml")], 2,
-     "c.yaml: The fields ['nope'] were unknown"),
+     "c.yaml: unknown key 'nope'"),
     ("linearize-config-bad-value", lambda t, d: ["linearize", "joint-rig", "--config",
                                                  str((t / "c.yaml").write_text("pretension: -5") and t / "c.yaml")],
      2, "JointRigParams.pretension = -5.0 is out of range"),

@@ -410,6 +410,11 @@ def test_motor_pd_with_its_reference_is_the_loop_with_reference_sources():
     rig = joint_rig()
     loop = joint_rig_position_loop(rig, scen)
     assert loop.references == () and loop.sampled_rig
+    # a plain diagram controller of a sampled rig enters the loop as its leaves (no sub-diagram): one leaf is
+    # "controller", several "controller.<leaf>"
+    assert type(loop.diagram.GetSubsystemByName("controller")).__name__ == "TrajectoryAffineSystem"
+    assert {"controller.motor_position_inputs", "controller.motor_position_law"} <= {
+        s.get_name() for s in loop_src.diagram.GetSystems()}
     runs = [simulate(lp.diagram, lp.create_context(op), scen.t_final, log=("state", "motor_torque", "applied_torque"))
             for lp in (loop_src, loop)]
     x = runs[0]["state"]
