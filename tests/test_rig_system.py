@@ -100,7 +100,7 @@ def test_outputs_system_equals_the_laws_and_converts_with_autodiff_equal_to_fini
 @pytest.mark.parametrize("build", [joint_rig, flexible_joint_rig])
 def test_default_single_joint_rig_is_scalar_convertible_and_autodiff_matches_fd(build):
     rig = build()
-    assert rig.backend == "compiled" and rig.plant is None
+    assert rig.plant is None
     d = rig.diagram
     op = rig.operating_point()
     x = op.state + RNG.normal(scale=0.01, size=op.state.size)
