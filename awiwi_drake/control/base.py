@@ -625,8 +625,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         raise ValueError(
             f"closed_loop: continuous loop (rate_hz=None) of rig {getattr(rig, 'name', '?')!r} and controller "
             f"{controller.get_name()!r} has an algebraic loop: the rig reports direct feedthrough from "
-            f"motor_torque to its outputs (the fused backend='symbolic' drive does); use backend='python' "
-            f"or a sampled controller (rate_hz)") from None
+            f"motor_torque to its outputs; use a sampled controller (rate_hz)") from None
     diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")
     handles.diagram = diagram
     handles.disturbances = tuple(dist)

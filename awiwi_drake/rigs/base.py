@@ -120,8 +120,6 @@ class Rig:
     params : Parameters
     state_names : tuple of str
         Names of the continuous state in diagram order.
-    backend : str
-        ``"python"`` or ``"symbolic"`` (see :mod:`awiwi_drake.components.drive`).
     plant : MultibodyPlant or None
     equilibrium : callable
         ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
@@ -166,7 +164,6 @@ class Rig:
     diagram: Diagram
     params: Any
     state_names: tuple
-    backend: str
     equilibrium: Callable[..., OperatingPoint]
     plant: MultibodyPlant | None = None
     spring: Any = None
