@@ -1,7 +1,7 @@
 """Named plants and diagram lists (top layer: it may use every plant package).
 
 * ``TARGETS`` maps the names the CLI accepts (``awiwi-drake linearize NAME``) to
-  ``dict(builder, params, description)``; ``builder(params=..., backend=...)`` (fingers
+  ``dict(builder, params, description)``; ``builder(params=...)`` (fingers
   and hand: any ``finger_diagram``/``hand_diagram`` keyword) returns a :class:`~awiwi_drake.rigs.Rig` (the rigs, each finger, the hand);
   :func:`build_target` builds one with ``NAME=VALUE`` overrides.
 * ``DIAGRAM_EXPORTS`` lists ``(file_stem, builder, max_depth)`` of the graphs

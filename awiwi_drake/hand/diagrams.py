@@ -173,7 +173,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     # the drive lives inside the one plant system: its handle points at the rig
-    drive = TendonDrive(diagram, m, drive_coupling.num_joints, "compiled", model.has_hysteresis, model)
+    drive = TendonDrive(diagram, m, drive_coupling.num_joints, model.has_hysteresis, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
                                   guide_friction=drive.guide_friction)
@@ -183,7 +183,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle, drive.num_states - 2 * m)
 
-    return HandRig(name, diagram, p, state_names, "compiled", equilibrium, plant, spring, drive=drive, coupling=coupling,
+    return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                    drive_coupling=drive_coupling, models=models, joint_names=joint_names,
                    tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring,
@@ -356,8 +356,7 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
 def hand_diagram(*, params: HandRigParams | None = None, wrist: bool = True, visual: bool = False) -> HandRig:
     """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
 
-    The default backend is ``"compiled"`` (one fused drive, numba kernel; see
-    ``benchmarks/bench_rigs.py``), with the thesis's physics on (see
+    The links and the drive are one compiled system, with the thesis's physics on (see
     :class:`~awiwi_drake.parameters.hand.FingerDriveParams`).
 
     Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
