@@ -475,6 +475,12 @@ class Projection:
             out.S[pos], out.K[pos], out._G[pos], out.dof[pos] = part.S, part.K, part._G, part.dof
         return out
 
+    def take(self, windows: np.ndarray) -> "Projection":
+        """The profile of the windows ``windows`` (positions in this projection)."""
+        out = Projection.__new__(Projection)
+        out.S, out.K, out._G, out.dof = self.S[windows], self.K[windows], self._G[windows], self.dof[windows]
+        return out
+
 
 def project(R: np.ndarray, proj: Projection) -> np.ndarray:
     """Apply the window-start profile ``C`` to residuals ``R`` of shape (..., W, m)."""
