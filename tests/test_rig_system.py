@@ -100,7 +100,7 @@ def test_outputs_system_equals_the_laws_and_converts_with_autodiff_equal_to_fini
 @pytest.mark.parametrize("build", [joint_rig, flexible_joint_rig])
 def test_default_single_joint_rig_is_scalar_convertible_and_autodiff_matches_fd(build):
     rig = build()
-    assert rig.backend == "compiled" and rig.plant is None
+    assert rig.plant is None
     d = rig.diagram
     op = rig.operating_point()
     x = op.state + RNG.normal(scale=0.01, size=op.state.size)
@@ -377,3 +377,102 @@ def test_registered_controllers_on_the_sampled_flexible_joint_equal_the_continuo
     for sig in ("state", "motor_torque"):
         ref = out[False][sig]
         np.testing.assert_allclose(out[True][sig], ref, rtol=0, atol=1e-8 * np.max(np.abs(ref)), err_msg=sig)
+
+
+def test_motor_pd_with_its_reference_is_the_loop_with_reference_sources():
+    """The demo loop's PD given its reference (one TrajectoryAffineSystem, u = y0(t) + D x) against the same PD
+    with reference ports fed by TrajectorySources: the law at random times and states is the closed form
+    r_m f_ref(t) + kp (theta_ref(t) - theta) - kd omega (references linear between knots); the two loops
+    simulate the same trajectory (the feed-forward kp theta_ref + r_m f_ref is combined at the knots instead
+    of after interpolation: round-off, bounded here by the sampled-vs-continuous test's 1e-11 of each channel's
+    scale); the loop and the law convert to AutoDiffXd, the law's gradient being the PD gains."""
+    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop, motor_position_controller
+    from awiwi_drake.parameters.rigs import MotorPositionGains
+    rig = joint_rig()
+    loop_src, op, scen = _demo_loop(rig, True)
+    t, refs = demo_references(rig, scen)
+    g, r_m = MotorPositionGains(), rig.params.motor.pulley_radius
+    law = motor_position_controller(joint_rig(), reference=(t, refs["theta_reference"], refs["tendon_force_reference"]))
+    assert [law.get_input_port(i).get_name() for i in range(law.num_input_ports())] == ["state"]
+    ctx = law.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        tk, xk = rng.uniform(0, scen.t_final), op.state + rng.normal(0, 0.1, 6)
+        ctx.SetTime(tk)
+        law.GetInputPort("state").FixValue(ctx, xk)
+        th = np.array([np.interp(tk, t, row) for row in refs["theta_reference"]])
+        f = np.array([np.interp(tk, t, row) for row in refs["tendon_force_reference"]])
+        np.testing.assert_allclose(law.GetOutputPort("motor_torque").Eval(ctx),
+                                   r_m * f + g.kp * (th - xk[2:4]) - g.kd * xk[4:6], rtol=1e-12, atol=1e-12)
+    rig = joint_rig()
+    loop = joint_rig_position_loop(rig, scen)
+    assert loop.references == () and loop.sampled_rig
+    # a plain diagram controller of a sampled rig enters the loop as its leaves (no sub-diagram): one leaf is
+    # "controller", several "controller.<leaf>"
+    assert type(loop.diagram.GetSubsystemByName("controller")).__name__ == "TrajectoryAffineSystem"
+    assert {"controller.motor_position_inputs", "controller.motor_position_law"} <= {
+        s.get_name() for s in loop_src.diagram.GetSystems()}
+    runs = [simulate(lp.diagram, lp.create_context(op), scen.t_final, log=("state", "motor_torque", "applied_torque"))
+            for lp in (loop_src, loop)]
+    x = runs[0]["state"]
+    assert np.ptp(x[:, 0]) > 0.05
+    for name in ("state", "motor_torque", "applied_torque"):
+        ref = runs[0][name]
+        err = np.max(np.abs(runs[1][name] - ref), axis=0) / np.max(np.abs(ref), axis=0)   # per channel's scale
+        assert runs[1][name].shape == ref.shape and np.all(err < 1e-11), (name, err)
+    assert loop.diagram.ToAutoDiffXd() is not None
+    ad = law.ToAutoDiffXd()             # the law in AutoDiffXd: same value, gradient -D on the state
+    ad_ctx = ad.CreateDefaultContext()
+    ad_ctx.SetTime(tk)
+    ad.GetInputPort("state").FixValue(ad_ctx, InitializeAutoDiff(xk))
+    u_ad = ad.GetOutputPort("motor_torque").Eval(ad_ctx)
+    np.testing.assert_allclose(ExtractValue(u_ad).ravel(), law.GetOutputPort("motor_torque").Eval(ctx), rtol=1e-14)
+    D = np.zeros((2, 6))
+    D[:, 2:4], D[:, 4:6] = -g.kp * np.eye(2), -g.kd * np.eye(2)
+    np.testing.assert_array_equal(ExtractGradient(u_ad), D)
+    with pytest.raises(ValueError, match="reference motor_angle has shape"):
+        motor_position_controller(joint_rig(), reference=(t, refs["theta_reference"][:1], refs["tendon_force_reference"]))
+
+
+@pytest.mark.parametrize("hysteresis", [False, True])
+def test_tendon_force_of_states_is_the_law_at_every_logged_sample(hysteresis):
+    """The monitors' batch evaluation (the generated kernel in numpy's elementwise forms, all samples at once)
+    equals drive_laws' tendon force sample by sample (slack, inside and beyond the calibrated range), to 1e-12 of
+    the largest force; the tendon rig (no joints) too."""
+    from awiwi_drake.components.rig_system import tendon_force_of_states
+    from awiwi_drake.rigs import tendon_rig
+    model = _model(hysteresis)
+    X = np.array([_random_state(model) for _ in range(200)])
+    ref = np.array([drive_laws(model, x, want=("tendon_force",))["tendon_force"] for x in X])
+    assert np.any(ref == 0.0) and np.any(ref > 0.0)             # slack samples among them
+    got = tendon_force_of_states(model)(X)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.max(np.abs(ref)))
+    rig = tendon_rig()
+    Xt = rig.operating_point().state + RNG.normal(0, 0.05, (50, rig.num_states))
+    ref = np.array([drive_laws(rig.drive.model, x, np.zeros(1), np.zeros(0), want=("tendon_force",))["tendon_force"]
+                    for x in Xt])
+    np.testing.assert_allclose(rig.tendon_force_of_state(Xt), ref, rtol=0, atol=1e-12 * np.max(np.abs(ref)))
+
+
+def test_vectorized_kernels_equal_the_scalar_source_on_every_construct():
+    """codegen's numpy forms (np.where for if-then-else, np.logical_* for and/or/not, np.arctan2, the unary
+    functions, min/max) evaluate arrays of samples to the plain scalar source's values at each sample (to a
+    few ulp: numpy's and libm's transcendental functions may differ in the last bit)."""
+    import pydrake.symbolic as sym
+
+    from awiwi_drake.components.codegen import compile_kernels
+    a, b = sym.Variable("a"), sym.Variable("b")
+    outs = [sym.if_then_else(sym.logical_and(a > 0, sym.logical_not(b > 1)), sym.atan2(a, b), sym.tanh(b) * a),
+            sym.if_then_else(sym.logical_or(a > 1, b < -1), sym.sqrt(a * a + 1), sym.cos(a) - sym.exp(-b * b)),
+            sym.min(a, b) + sym.max(a, 0) + abs(b) ** 3 + sym.atan(a)]
+    fns = {"f": ([[a, b]], outs)}
+    vec = compile_kernels(fns, tag="test_vectorized", vectorized=True)["f"]
+    scalar = compile_kernels(fns, tag="test_vectorized", jit=False)["f"]
+    S = RNG.uniform(-3, 3, size=(2, 300))
+    got = vec(S, np.empty((3, 300)))
+    ref = np.array([scalar(S[:, k], np.empty(3)) for k in range(300)]).T
+    # numpy's vectorised cos/exp/tanh and libm's may differ in the last bit; cos(a) - exp(-b^2) cancels
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-14 * np.max(np.abs(ref)))

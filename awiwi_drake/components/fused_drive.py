@@ -1,6 +1,7 @@
 """One system per tendon drive: motors + springs + routing + guide friction + hysteresis.
 
-:class:`TendonDrive_` is the fast path of every rig, finger and the hand. Its
+:class:`TendonDrive_` is the drive of the tendon rig; the link rigs and the fingers/hand evaluate
+its model (:class:`DriveModel`) in their own systems. Its
 physics is one function, :func:`drive_laws`, that calls the law functions of
 this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
 tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
@@ -79,6 +80,17 @@ class GuideFrictionModel:
     capstan: bool = False
     smoothing_velocity: float = 1e-3
     presliding_length: float = 4e-4
+    overrides: tuple = ()       # ((tendon index, constant C [N], capstan exponent mu alpha), ...): own guides
+
+    def levels(self):
+        """``(C, mu alpha)`` per tendon (m,): (4.1) at each bending angle, or the capstan exponent, then the
+        tendons of :attr:`overrides` with their own two numbers."""
+        alpha = np.asarray(self.bending_angles, dtype=float)
+        constant = np.zeros_like(alpha) if self.capstan else np.asarray(guide_friction_force(alpha, self.params))
+        exponent = self.params.mu * alpha if self.capstan else np.zeros_like(alpha)
+        for i, c, e in self.overrides:
+            constant[i], exponent[i] = c, e
+        return constant, exponent
 
     def __post_init__(self):
         a = np.asarray(self.bending_angles, dtype=float)
@@ -268,9 +280,7 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
             parts.append(hysteresis_rate(z, x, xdot, f_el, model.hysteresis))
         if model.has_guide_friction:
             gm = model.guide_friction
-            alpha = np.asarray(gm.bending_angles, dtype=float)
-            constant = np.zeros_like(alpha) if gm.capstan else guide_friction_force(alpha, gm.params)
-            exponent = gm.params.mu * alpha if gm.capstan else np.zeros_like(alpha)
+            constant, exponent = gm.levels()
             v = slide if slide is not None else 0.0 * omega
             parts.append(guide_friction_rate(g_state, v, f, constant, exponent, gm.presliding_length,
                                              gm.smoothing_velocity))
@@ -294,7 +304,7 @@ def _variables(prefix: str, size: int):
     return v, np.array([sym.Expression(x) for x in v], dtype=object)
 
 
-def build_kernels(model: DriveModel, *, jit: bool = True):
+def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = False):
     """numba kernels of :func:`drive_laws` (float path), one per output group.
 
     Returns ``{name: fn}`` with signatures (all float64 1-D arrays, ``out`` last):
@@ -302,15 +312,17 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
     ``tendon_force``, ``tendon_stiffness``, ``elongation`` ``(state, q, out)`` / ``(state, out)``;
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
     ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
+    ``vectorized``: the same functions in numpy's elementwise forms (no numba, no ``_batch`` twins):
+    ``fn(states.T, out.T)`` evaluates many states at once (:func:`~awiwi_drake.components.codegen.emit_source`).
     """
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
-                           "(e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
+                           "(e.g. LeverSpringMechanism.to_polynomial())")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
-    key = _model_key(model, jit)
+    key = _model_key(model, "vectorized" if vectorized else jit)
     if key is not None and key in _KERNELS:
         return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
-        kernels = _build_kernels(model, m, n, nr, jit)
+        kernels = _build_kernels(model, m, n, nr, jit, vectorized)
     if key is not None:
         _KERNELS[key] = kernels
     return kernels
@@ -323,10 +335,10 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
 _KERNELS: dict = {}
 
 
-def _model_key(model: DriveModel, jit: bool):
-    """The content key of ``model`` (taken at its construction), or None (no caching)."""
+def _model_key(model: DriveModel, mode):
+    """The content key of ``model`` (taken at its construction) with the kernels' ``mode``, or None (no caching)."""
     key = getattr(model, "_content_key", None)
-    return None if key is None else (key, bool(jit))
+    return None if key is None else (key, mode)
 
 
 def _content_digest(model) -> str | None:
@@ -339,7 +351,7 @@ def _content_digest(model) -> str | None:
         return None
 
 
-def _build_kernels(model, m, n, nr, jit):
+def _build_kernels(model, m, n, nr, jit, vectorized=False):
     sv, s = _variables("s", model.num_states)
     uv, u = _variables("u", m)
     if model.has_link:
@@ -355,7 +367,7 @@ def _build_kernels(model, m, n, nr, jit):
                    elongation=[sv, qv], generalized_force=[sv, qv, dv])
     functions = {name: (ins[name], list(res[name])) for name in ins}
     from awiwi_drake.components.codegen import compile_kernels
-    return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit)
+    return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit, vectorized=vectorized)
 
 
 @TemplateSystem.define("TendonDrive_")
