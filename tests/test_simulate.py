@@ -345,7 +345,7 @@ def test_simulate_runs_a_flat_copy_of_nested_diagrams_bit_for_bit():
         assert state(ctx).size > 6
         np.testing.assert_array_equal(state(ctx), state(ref_ctx))
         np.testing.assert_array_equal(res["state"][-1], loop.diagram.GetOutputPort("state").Eval(ref_ctx))
-        assert (loop.diagram.GetSubsystemByName("rig") is not None) is not sampled   # nested rig when continuous
+        assert loop.diagram.HasSubsystemNamed("rig") is not sampled      # a nested rig when continuous
     b = DiagramBuilder()          # an exported input feeding two leaves inside a sub-diagram
     inner = DiagramBuilder()
     i1, i2 = inner.AddSystem(_integrator()), inner.AddSystem(_first_order())
