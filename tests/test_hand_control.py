@@ -335,8 +335,8 @@ def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffn
     produce the desired behavior", ch. 9).  With the ch. 9 observer block (9.2) the stage adds the estimated
     disturbance: at rest the observer's state settles where d_hat = -tau (the measured torque accelerates
     nothing), its compensation tau makes the request tau_op - Kp e + tau, and the force loop's tau = request gives
-    e = tau_op / Kp = 0: an integral action.  After 0.3 s the error is a fifth of the dead band's and still
-    shrinking (the guides slide on)."""
+    e = tau_op / Kp = 0: an integral action.  So once the plain loop rests in its dead band the observed error is
+    below it and still shrinking (the guides slide on)."""
     from awiwi_drake.components.friction import guide_friction_force
     from awiwi_drake.hand.systems import tendon_bending_angles
     from awiwi_drake.parameters.hand_control import FrictionObserverParams
@@ -364,9 +364,15 @@ def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffn
             assert np.all(np.abs(e[:, -1]) <= np.abs(PS.T) @ C / Kp)
             assert abs(e[1, -1]) > 0.1                                     # the dead band is real: 0.17 of 0.2 rad
         assert np.all(res["tendon_force"] > 0.0)
-    band, observed = abs(errors[False][1, -1]), np.abs(errors[True][1])
-    assert observed[-1] < 0.2 * band
+    # The observer's rest point is e = 0, the plain loop's the dead band: over the last 40 % of the run (the plain
+    # loop at rest) the observed error is below the plain one at every sample and still decreasing.  (No decay rate is
+    # asserted: none was derived; measured on the MCP: 8 1/s over 0.1-0.2 s, 2.7 1/s over 0.3-0.6 s.  The former
+    # bound, a fifth of the band, was the observed 0.13 rounded up.)
+    plain, observed = np.abs(errors[False][1]), np.abs(errors[True][1])
     n = observed.size
+    late = slice(int(0.6 * n), n)
+    assert np.ptp(plain[late]) < 0.01 * plain[-1]                                  # the plain loop is at rest
+    assert np.all(observed[late] < plain[late])
     assert observed[-1] < observed[int(0.8 * n)] < observed[int(0.6 * n)]         # still approaching e = 0
 
 
@@ -462,6 +468,52 @@ def test_backstepping_load_observer_static_stiffness_with_guide_friction_on():
                                       outputs=("joint_angle",), equilibrium_tolerance=None).A)
     neutral = np.abs(lam) <= 1e-6                                 # [1/s]; the Dahl memories: 1e-12
     assert neutral.sum() == 2 * rig.num_tendons and np.all(lam[~neutral].real < 0.0), np.sort(lam.real)[-4:]
+
+
+def test_cause_of_the_load_observer_instability_with_the_frictions_on():
+    """Why ``backstepping-load-observer`` lost its stiffness with guide friction on: its (9.2) observer read the drive's
+    ``tendon_force`` ``phi(x) + z`` (with the lever's hysteresis force z, which the hand does not measure) while the
+    law's link model uses the sensed ``phi(x)``.  Rebuilt so (the law and the observer of the registered controller,
+    the observer's force input from the rig), the continuous index loop at rest (Drake Linearize, ideal sensors) has a
+    real pole in the right half plane, mostly the observers' states, with hysteresis and guide friction on; with the
+    hysteresis off (z = 0: both read the same force) it is stable, as is the registered controller (which feeds the
+    observer ``phi(x)``: test_backstepping_load_observer_static_stiffness_with_guide_friction_on)."""
+    from pydrake.systems.framework import DiagramBuilder
+    from awiwi_drake.analysis.linear import linearize
+    from awiwi_drake.control.joint_stage import JointFrictionObserver
+    from awiwi_drake.parameters.hand_control import FrictionObserverParams
+
+    def former(rig):
+        law = make_controller("backstepping-load-observer", rig).law
+        b = DiagramBuilder()
+        ctrl = b.AddNamedSystem("law", StaticLawController(law))
+        obs = b.AddNamedSystem("observer", JointFrictionObserver(rig.coupling, law.S, np.diag(law.M), np.diag(law.Bq),
+                                                                 FrictionObserverParams().gain))
+        b.Connect(obs.GetOutputPort("friction_compensation"), ctrl.GetInputPort("friction_compensation"))
+        exported = {}
+        for sys_ in (ctrl, obs):
+            for i in range(sys_.num_input_ports()):
+                port = sys_.get_input_port(i)
+                if port.get_name() == "friction_compensation":
+                    continue
+                if port.get_name() in exported:
+                    b.ConnectInput(exported[port.get_name()], port)
+                else:
+                    exported[port.get_name()] = b.ExportInput(port, port.get_name())
+        b.ExportOutput(ctrl.get_output_port(0), "motor_torque")
+        return b.Build()
+
+    for hysteresis, unstable in ((True, True), (False, False)):
+        rig = finger_diagram(finger="index", params=FingerRigParams.for_finger("index").with_physics(
+            hysteresis=hysteresis))
+        loop = closed_loop(rig, former(rig), rate_hz=None, sensors="ideal")
+        op = rig.operating_point()
+        ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
+        lam = np.linalg.eigvals(linearize(loop.diagram, context=ctx, input="joint_angle_reference",
+                                          outputs=("joint_angle",), equilibrium_tolerance=None).A)
+        lam = lam[np.abs(lam) > 1e-6]                        # [1/s]; the Dahl memories are neutral
+        worst = lam[np.argmax(lam.real)]
+        assert (worst.real > 0.0) == unstable and (not unstable or abs(worst.imag) < 1e-9), (hysteresis, worst)
 
 
 @pytest.mark.parametrize("controller", ["lqr", "backstepping"])
