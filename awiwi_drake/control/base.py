@@ -306,7 +306,9 @@ class ClosedLoop:
         ``joint_angles`` (a pose known after homing), the estimator's, in a (root) ``context``."""
         ctrl_sys = self.diagram.GetSubsystemByName("controller")
         if self.fused is not None:
-            self.fused.initialize_state(ctrl_sys.GetMyMutableContextFromRoot(context), joint_angles)
+            n = len(joint_angles)
+            self.fused.initialize_state(ctrl_sys.GetMyMutableContextFromRoot(context), joint_angles,
+                                        None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
             return
         init = getattr(self.controller, "initialize_state", None)
         if init is not None:   # controllers with internal state (e.g. the force distribution)
