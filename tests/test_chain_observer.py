@@ -80,7 +80,7 @@ def test_sampled_observer_estimates_a_constant_disturbance_without_bias():
     tau = -(PS.T @ f)
     d = np.array([0.01, -0.02, 0.005, 0.001])
     w_hat, w = np.zeros(4), np.zeros(4)
-    L = obs.gain
+    L = float(obs.gain[0])                              # one L for every DoF here
     for k in range(40):
         d_hat = -obs.compensation(w_hat, S @ w)
         np.testing.assert_allclose(d_hat, d * (1.0 - (1.0 - L * H) ** k), rtol=1e-9, atol=1e-15)

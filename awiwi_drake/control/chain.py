@@ -330,7 +330,7 @@ class TendonChainController(Diagram):
             g = getattr(joint_law, "torque_loop_gains", np.ones(S.shape[1]))
             observer = b.AddNamedSystem("friction_observer", JointFrictionObserver(
                 rig.coupling, S, joint_inertia(rig, point["joint_angle"]), np.diag(joint_damping(rig)),
-                friction_observer.gain, 1.0 / rate_hz if sampled else None,
+                friction_observer.gain / np.asarray(g, dtype=float), 1.0 / rate_hz if sampled else None,
                 (friction_observer.compensation_scale_motor_position if tendon_law == "motor-position"
                  else friction_observer.compensation_scale) * np.asarray(g, dtype=float)))
             add = b.AddNamedSystem("friction_compensated_torque", Adder(2, S.shape[1]))
@@ -375,9 +375,7 @@ class TendonChainController(Diagram):
         spec = dict(self._force.fused_parts, **estimator.fused_spec(), joint_law=self._joint_law,
                     stiffness=self._stiffness, name=self.get_name())
         if self._observer is not None:
-            o = self._observer
-            spec.update(observer=dict(coupling=o.coupling, selection=o.S, inertia=o.M, damping=o.b, gain=o.gain,
-                                      period=o.period, scale=o.scale), observer_system=o)
+            spec["observer_system"] = self._observer
         return spec
 
     def initialize_state(self, context, rig_state=None) -> None:

@@ -40,7 +40,6 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.control.force_distribution import TendonForceDistribution_
-from awiwi_drake.control.joint_stage import JointFrictionObserver_
 from awiwi_drake.hand.estimation import LinkPositionEstimator_
 
 __all__ = ["FusedChain_", "FusedChain", "ESTIMATE_OUTPUTS"]
@@ -91,10 +90,9 @@ def FusedChain_(T):
             self.sharing = spec.get("sharing")
             self.path_coupling = spec.get("path_coupling")
             self.obs = None
-            if spec.get("observer") is not None:        # the sampled (9.2) observer's own methods
-                given = spec.get("observer_system")
-                self.obs = given if (T is float and given is not None) else JointFrictionObserver_[T](
-                    **spec["observer"])
+            given = spec.get("observer_system")       # the sampled (9.2) observer block, its own methods
+            if given is not None:
+                self.obs = given if T is float else given.ToAutoDiffXd()
             names = {"joint_angle_reference": n, "motor_angle": m, "elongation": m}
             if spec.get("wrist"):
                 names["wrist_tendon_offset"] = m

@@ -615,7 +615,8 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     Use a rig built with the design's motor model (``params.replace(motor=design_motor(params.motor))``)
     and ``backend="python"`` for the comparison the per-joint models make."""
     c = chain or HandChainParams()
-    ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing")
+    ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing",
+                                  friction_observer=None)      # the designs: the stage itself, no ch. 9 observer
     d = ctrl.design["joint_design"]
     loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
     op = ctrl.operating_point

@@ -286,7 +286,8 @@ def JointFrictionObserver_(T):
             self.Sp = np.linalg.pinv(self.S)
             self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
             self.b = check_gains("damping", damping, shape=(k,), owner="JointFrictionObserver")
-            self.gain = float(check_gains("gain", [gain], owner="JointFrictionObserver", positive=True)[0])
+            self.gain = check_gains("gain", np.broadcast_to(np.asarray(gain, dtype=float), (k,)).copy(),
+                                    shape=(k,), owner="JointFrictionObserver", positive=True)
             self.scale = (np.ones(k) if scale is None else
                           check_gains("scale", scale, shape=(k,), owner="JointFrictionObserver", positive=True))
             self.period = None if period is None else float(check_gains("period", [period],
