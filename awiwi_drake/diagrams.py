@@ -1,13 +1,12 @@
 """Named plants and diagram lists (top layer: it may use every plant package).
 
 * ``TARGETS`` maps the names the CLI accepts (``awiwi-drake linearize NAME``) to
-  ``dict(builder, params, description)``; ``builder(params=..., backend=...)`` (fingers
+  ``dict(builder, params, description)``; ``builder(params=...)`` (fingers
   and hand: any ``finger_diagram``/``hand_diagram`` keyword) returns a :class:`~awiwi_drake.rigs.Rig` (the rigs, each finger, the hand);
   :func:`build_target` builds one with ``NAME=VALUE`` overrides.
 * ``DIAGRAM_EXPORTS`` lists ``(file_stem, builder, max_depth)`` of the graphs
   committed under ``diagrams/`` (regenerate: ``awiwi-drake export-diagrams``);
-  ``builder()`` returns a Diagram. ``HAND_DIAGRAM_EXPORTS`` are the hand's
-  (``awiwi-drake export-hand-diagrams``).
+  ``builder()`` returns a Diagram.
 """
 
 from __future__ import annotations
@@ -19,8 +18,7 @@ from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
 from awiwi_drake.rigs import Rig, flexible_joint_rig, joint_rig, tendon_rig
 
-__all__ = ["TARGETS", "build_target", "DIAGRAM_EXPORTS", "HAND_DIAGRAM_EXPORTS", "export_all", "export_entries",
-           "export_hand_diagrams"]
+__all__ = ["TARGETS", "build_target", "DIAGRAM_EXPORTS", "export_all"]
 
 TARGETS = {
     "tendon-rig": dict(
@@ -101,31 +99,23 @@ def _demo_loop():
     return joint_rig_position_loop(joint_rig()).diagram
 
 
-HAND_DIAGRAM_EXPORTS = [
-    ("hand_top", _plant("hand"), 1),
-    ("hand_deep", _plant("hand"), None),
-    ("hand_finger_index_control_wrist", _loop("finger-index", "joint-pd", wrist=True), 1),
-    ("hand_finger_ring_deep", _plant("finger-ring"), None),
-]
-
 DIAGRAM_EXPORTS = [
     ("tendon_rig", _plant("tendon-rig"), None),
     ("flexible_joint_rig", _plant("flexible-joint"), None),
     ("joint_rig", _plant("joint-rig"), 1),
     ("joint_rig_deep", _plant("joint-rig"), None),
     ("joint_rig_position_loop", _demo_loop, 1),
-] + HAND_DIAGRAM_EXPORTS
+    ("hand_top", _plant("hand"), 1),
+    ("hand_deep", _plant("hand"), None),
+    ("hand_finger_index_control_wrist", _loop("finger-index", "joint-pd", wrist=True), 1),
+    ("hand_finger_ring_deep", _plant("finger-ring"), None),
+]
 
 
 def export_all(out_dir="diagrams") -> list[str]:
     """Export every entry of ``DIAGRAM_EXPORTS``; returns one line per file written or skipped."""
-    return export_entries(DIAGRAM_EXPORTS, out_dir)
-
-
-def export_entries(entries, out_dir="diagrams") -> list[str]:
-    """Export ``(stem, builder, max_depth)`` entries; one line per file written or skipped."""
     lines = []
-    for stem, builder, depth in entries:
+    for stem, builder, depth in DIAGRAM_EXPORTS:
         res = export_diagram(builder(), out_dir, stem, max_depth=depth, quiet=True)
         lines.append(f"wrote {res.dot}" + "".join(f", {p.name}" for p in res.images))
         if graphviz_available():
@@ -134,8 +124,3 @@ def export_entries(entries, out_dir="diagrams") -> list[str]:
         lines.append("note: Graphviz 'dot' not found: only .dot files were written "
                      "(install the Debian package 'graphviz' for .svg/.png)")
     return lines
-
-
-def export_hand_diagrams(out_dir="diagrams") -> list[str]:
-    """Write the hand/finger diagram graphs (``hand_*.dot``, and .svg/.png with Graphviz)."""
-    return export_entries(HAND_DIAGRAM_EXPORTS, out_dir)

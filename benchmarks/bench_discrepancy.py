@@ -271,7 +271,7 @@ def run_finger_case(case) -> dict:
     return {"row": row, "rig": rig, "hidden": list(hidden), "snr_db": snr, "seed": seed, "strength": strength,
             "code": _code_version(), "duration": duration, "transform": None, "applied": {},
             "place": place, "tendon": tendon, "named": dx.named_effects, "places": dx.places,
-            "place_named": bool(hidden) and all(str(dx.places.get(h, "")).split(" ")[0] == tendon for h in hidden),
+            "place_named": bool(hidden) and all(dx.tendons_named.get(h) == [tendon] for h in hidden),
             "nuisance_named": dx.nuisance_corrections, "verdict": dx.verdict,
             "unexplained": dx.unexplained_residual, "floor_ratio_after": max(dx.ratios_after["motor"]),
             "gap_closed": float("nan"), "status": [s.status for s in dx.steps], "members": [s.members for s in dx.steps],

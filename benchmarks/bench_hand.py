@@ -4,7 +4,7 @@ Usage::
 
     PYTHONPATH=. python benchmarks/bench_hand.py [--sim-time 0.2] [--repeat 3] [--json out.json]
 
-For one finger (index) and the whole hand (wrist input at 0), each backend:
+For one finger (index) and the whole hand (wrist input at 0):
 
 * open loop: motors held by their operating-point torques, error-controlled
   RK3 (accuracy 1e-4, max step 1 ms);
@@ -49,15 +49,14 @@ def _run(diagram, context, t_final, *, fixed_step=None, accuracy=1e-4, max_step=
     return t_final / wall, integ.get_num_steps_taken()
 
 
-def _build(target, backend):
-    return (hand_diagram(backend=backend, wrist=True) if target == "hand"
-            else finger_diagram(finger=target, backend=backend))
+def _build(target):
+    return hand_diagram(wrist=True) if target == "hand" else finger_diagram(finger=target)
 
 
-def bench(target: str, backend: str, sim_time: float, repeat: int) -> dict:
-    out = dict(target=target, backend=backend)
+def bench(target: str, sim_time: float, repeat: int) -> dict:
+    out = dict(target=target)
     t0 = time.perf_counter()
-    rig = _build(target, backend)
+    rig = _build(target)
     out["build_s"] = time.perf_counter() - t0
     lin_times = []
     for _ in range(repeat):
@@ -76,7 +75,7 @@ def bench(target: str, backend: str, sim_time: float, repeat: int) -> dict:
     for mode, kw in (("closed_loop_rtf", {}), ("closed_loop_fixed_step_rtf", {"fixed_step": 1.0 / 3000})):
         best = 0.0
         for _ in range(repeat):
-            r = _build(target, backend)
+            r = _build(target)
             cl = closed_loop(r, make_controller("joint-pd", r))
             ctx = cl.create_context(r.operating_point(), references={"joint_angle_reference": q_ref})
             rtf, steps = _run(cl.diagram, ctx, sim_time, **kw)
@@ -90,19 +89,17 @@ def main(argv=None) -> int:
     ap.add_argument("--sim-time", type=float, default=0.2, help="simulated seconds per run")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--targets", default="index,hand")
-    ap.add_argument("--backends", default="compiled,python,symbolic")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
     rows = []
-    print(f"{'target':8s} {'backend':9s} {'build s':>8s} {'lin s':>7s} {'open RTF':>9s} "
+    print(f"{'target':8s} {'build s':>8s} {'lin s':>7s} {'open RTF':>9s} "
           f"{'ctrl RTF':>9s} {'ctrl fixed RTF':>15s}")
     for target in args.targets.split(","):
-        for backend in args.backends.split(","):
-            r = bench(target, backend, args.sim_time, args.repeat)
-            rows.append(r)
-            print(f"{target:8s} {backend:9s} {r['build_s']:8.2f} {r['linearize_s']:7.3f} "
-                  f"{r['open_loop_rtf']:9.3f} {r['closed_loop_rtf']:9.3f} {r['closed_loop_fixed_step_rtf']:15.3f}",
-                  flush=True)
+        r = bench(target, args.sim_time, args.repeat)
+        rows.append(r)
+        print(f"{target:8s} {r['build_s']:8.2f} {r['linearize_s']:7.3f} "
+              f"{r['open_loop_rtf']:9.3f} {r['closed_loop_rtf']:9.3f} {r['closed_loop_fixed_step_rtf']:15.3f}",
+              flush=True)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=1)

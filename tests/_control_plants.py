@@ -47,10 +47,13 @@ class SimpleRig:
         return ctx
 
 
-def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible-joint"):
+def linear_flexible_joint_rig(k=K_S, m=M_L, name="flexible-joint", feedthrough=0.0):
+    """``feedthrough``: a direct term from ``motor_torque`` to every output (a rig with one)."""
     A, B, E = flexible_joint_matrices(k=k, m=m)
     builder = DiagramBuilder()
-    sys = builder.AddNamedSystem("plant", LinearSystem(A, np.hstack([B, E]), np.eye(4), np.zeros((4, 2))))
+    D = np.zeros((4, 2))
+    D[:, 0] = feedthrough
+    sys = builder.AddNamedSystem("plant", LinearSystem(A, np.hstack([B, E]), np.eye(4), D))
     mux = builder.AddNamedSystem("mux", Multiplexer([1, 1]))
     builder.Connect(mux.get_output_port(0), sys.get_input_port())
     builder.ExportInput(mux.get_input_port(0), "motor_torque")

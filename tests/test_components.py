@@ -205,6 +205,42 @@ def test_hysteresis_loop_width_and_dissipation():
     assert work > 0                        # the loop dissipates energy
 
 
+def test_dahl_path_is_the_exact_solution_of_the_rate_form():
+    """:func:`dahl_path` (the Dahl law solved per sample on a piecewise-linear path) against (a) its closed form on
+    a monotone path at constant level in the sign limit, ``F = W (1 - exp(-x/delta))``, and (b) a tight-tolerance
+    integration of the rate form :func:`dahl_rate` along a random path with reversals, rests, segments slower than
+    the smoothing velocity (where ``tanh(v/v_s)`` is far from +-1) and a level that varies along it (linear in
+    time on each segment, as the exact form assumes)."""
+    from scipy.integrate import solve_ivp
+    from awiwi_drake.components.friction import dahl_path, dahl_rate
+    delta, W = 1e-4, 3.0
+    x = np.linspace(0.0, 5e-4, 11)
+    np.testing.assert_allclose(dahl_path(x, W, delta), W * (1 - np.exp(-x / delta)), rtol=1e-13, atol=1e-15)
+    rng = np.random.default_rng(7)
+    dt, N, v_s = 1e-3, 80, 1e-4
+    steps = rng.choice([-1.0, 1.0], N) * 10.0 ** rng.uniform(-8.5, -3.7, N)     # 3 um/s ... 0.2 m/s
+    steps[rng.choice(N, 6, replace=False)] = 0.0                                 # rests
+    xs = np.concatenate([[0.0], np.cumsum(steps)])
+    Ws = rng.uniform(1.0, 5.0, N + 1)
+    for smoothing in (v_s, 0.0):
+        exact = dahl_path(xs, Ws, delta, smoothing, dt, initial_state=-0.5)
+        F, ref = -0.5, [-0.5]
+        for k in range(N):
+            v, dW = (xs[k + 1] - xs[k]) / dt, (Ws[k + 1] - Ws[k]) / dt
+            rate = (lambda t, y: [dahl_rate(y[0], v, Ws[k] + dW * t, delta, smoothing)]) if smoothing else (
+                lambda t, y: [(v / delta) * (Ws[k] + dW * t - np.sign(v) * y[0])])
+            F = solve_ivp(rate, (0.0, dt), [F], method="DOP853", rtol=1e-12, atol=1e-14).y[0, -1]
+            ref.append(F)
+        np.testing.assert_allclose(exact, ref, rtol=1e-9, atol=1e-11)
+        assert np.ptp(exact) > 4.0   # the path reverses the state across most of its loop (not a trivial check)
+    slow = np.abs(steps / dt) < v_s
+    assert 10 < slow.sum() < N - 10  # both regimes of tanh(v/v_s) are exercised
+    with pytest.raises(ValueError, match="presliding_length"):
+        dahl_path(xs, 1.0, 0.0)
+    with pytest.raises(ValueError, match="needs a sample period dt"):
+        dahl_path(xs, 1.0, delta, v_s)
+
+
 # ---------------------------------------------------------------- tendon and guide friction
 def test_tendon_elasticity_scales_and_stays_in_dyneema_range():
     p = TendonParams()

@@ -72,7 +72,7 @@ def test_linearize_with_config_equals_set(tmp_path, capsys):
 def test_yaml_rejects_unknown_keys_wrong_types_and_bad_values():
     from awiwi_drake.parameters import JointRigParams
 
-    for text, message in [("nope: 1", "unknown to the schema"), ("pretension: true", "pretension"),
+    for text, message in [("nope: 1", "^x.yaml: unknown key 'nope' "), ("motor: {inertai: 1}", "unknown key 'motor.inertai'"), ("pretension: true", "pretension"),
                           ("pretension: -5", "out of range"), ("motor: {inertia: 1e30}", "implausible"),
                           ("motor: 5", "does not fit"), ("[1, 2", "while parsing")]:
         with pytest.raises(ValueError, match=message):
@@ -82,6 +82,23 @@ def test_yaml_rejects_unknown_keys_wrong_types_and_bad_values():
     with pytest.raises(ValueError, match=r"^x.yaml: tendon_motors\['index_h3'\]: MotorParams.coulomb_torque = -0.05"):
         from_yaml(FingerRigParams.for_finger("index"), "tendon_motors:\n  index_h3: {coulomb_torque: -0.05}\n",
                   where="x.yaml")
+    # an unknown key inside a nested set or a named entry is named with its path (Drake names only the key)
+    for text, path in [("tendon_motors: {index_h5: {coulomb_torq: 0.1}}", "tendon_motors.index_h5.coulomb_torq"),
+                       ("spring: {hysteresis: {widht_ratio: 0.1}}", "spring.hysteresis.widht_ratio"),
+                       ("finger: !IndexFingerParams {mcp_radiu: 0.01}", "finger.mcp_radiu")]:
+        with pytest.raises(ValueError, match=rf"^x.yaml: unknown key '{path}' \(known there: .*\)$"):
+            from_yaml(FingerRigParams.for_finger("index"), text, where="x.yaml")
+    # an unknown tendon is refused at load (not first at build), naming the file and the key; the names are the
+    # finger's coupling rows (FingerRigParams.tendon_names = finger_coupling(...).tendon_names for every finger)
+    for text in ("tendon_motors: {index_h9: {coulomb_torque: 0.1}}", "tendon_springs: {thumb_h1: {}}"):
+        with pytest.raises(ValueError, match=r"^x.yaml: FingerRigParams.tendon_(motors|springs): unknown tendon "
+                                             r"'(index_h9|thumb_h1)'; tendons are index_h1 ... index_h8$"):
+            from_yaml(FingerRigParams.for_finger("index"), text, where="x.yaml")
+    from awiwi_drake.hand.coupling import finger_coupling, hand_coupling
+    from awiwi_drake.parameters.hand import FINGERS, HandRigParams
+    for f in FINGERS:
+        assert FingerRigParams.for_finger(f).tendon_names == list(finger_coupling(f).tendon_names)
+    assert sorted(HandRigParams().tendon_names) == sorted(hand_coupling().tendon_names)
 
 
 def test_progress_is_quiet_unless_asked(monkeypatch, capsys):

@@ -227,17 +227,16 @@ def test_each_rig_has_one_name_in_api_cli_and_registry():
         assert rig.name == name and rig_kind(rig) == ("finger" if name.startswith("finger") else name)
 
 
-def test_continuous_loop_on_fused_backend_gives_clear_error():
-    from awiwi_drake.rigs import flexible_joint_rig
-    with pytest.raises(ValueError, match="algebraic loop.*backend='python'"):
-        closed_loop(flexible_joint_rig(backend="symbolic"), StaticLawController(_Pd()), rate_hz=None)
+def test_continuous_loop_on_a_rig_with_direct_feedthrough_gives_clear_error():
+    with pytest.raises(ValueError, match="algebraic loop.*direct feedthrough.*sampled controller"):
+        closed_loop(linear_flexible_joint_rig(feedthrough=1e-3), StaticLawController(_Pd()), rate_hz=None)
 
 
 def test_saturation_and_slack_are_reported():
     """Joint rig (3 Nm amplifier limit, tension-only tendons, 20 N pretension)."""
     from awiwi_drake.control.impedance import impedance_controller
     from awiwi_drake.rigs import joint_rig
-    rig = joint_rig(backend="symbolic")
+    rig = joint_rig()
     loop = closed_loop(rig, impedance_controller(rig, mode="pd"), rate_hz=3000.0)
     _, m = run_test(loop, "step", params=compare_test_params(rig, step_size=1.0, step_duration=0.1, settle_time=0.0))
     # the command exceeds the amplifier limit; the torque applied to the motors is clipped at it
@@ -245,7 +244,7 @@ def test_saturation_and_slack_are_reported():
     assert m.peak_input == pytest.approx(rig.torque_limit, rel=1e-9)
     assert m.slack_fraction == 0.0  # antagonistic motors keep the pretension
     # 0.5 Nm on the link needs 31 N of force difference: one tendon (20 N pretension) goes slack
-    loop = closed_loop(joint_rig(backend="symbolic"), impedance_controller(joint_rig(), mode="two-time-scale"),
+    loop = closed_loop(joint_rig(), impedance_controller(joint_rig(), mode="two-time-scale"),
                        rate_hz=3000.0)
     _, m = run_test(loop, "disturbance", params=compare_test_params(rig, disturbance_torque=0.5, step_duration=0.1,
                                                                       settle_time=0.0))
@@ -262,7 +261,7 @@ def test_failed_runs_are_flagged_in_csv_and_markdown(tmp_path):
     p = compare_test_params("joint-rig", step_duration=0.15, settle_time=0.05)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the place_poles convergence warning is handled, not leaked
-        res = compare_controllers(lambda: joint_rig(backend="symbolic"), ["pole-placement"],
+        res = compare_controllers(joint_rig, ["pole-placement"],
                                   tests=["step", "disturbance"], params=p)
     step, dist = res.table.get("pole-placement", "step"), res.table.get("pole-placement", "disturbance")
     assert step.saturated_fraction > 0.5 and step.slack_fraction > 0.1 and math.isnan(step.settling_time)

@@ -22,14 +22,14 @@ def _loop(rig, mode, kp=0.3):
 @pytest.mark.parametrize("mode", ["two-time-scale", "cascaded"])
 def test_impedance_stiffness_is_achieved(mode):
     """At rest the link torque equals tau_des: joint stiffness = Kp_imp exactly (11.4), whatever the spring."""
-    rig = flexible_joint_rig(backend="symbolic")
+    rig = flexible_joint_rig()
     p = compare_test_params(rig, step_duration=0.3, settle_time=0.0)
     _, m = run_test(_loop(rig, mode, kp=0.45), "disturbance", params=p)
     assert m.stiffness == pytest.approx(0.45, rel=0.01)
 
 
 def test_motor_pd_stiffness_is_series_of_spring_and_position_loop():
-    rig = flexible_joint_rig(backend="symbolic")
+    rig = flexible_joint_rig()
     p = compare_test_params(rig, step_duration=0.3, settle_time=0.0)
     _, m = run_test(_loop(rig, "pd"), "disturbance", params=p)
     ip = ImpedanceParams()
@@ -41,7 +41,7 @@ def test_motor_pd_stiffness_is_series_of_spring_and_position_loop():
 def test_fig_11_2_and_11_3_oscillation_grows_with_impedance_and_shrinks_with_mechanical_stiffness():
     """Two-time-scale impedance on the flexible joint, 0.3 rad step (Fig 11.2, 11.3)."""
     def overshoot(kp, k):
-        rig = flexible_joint_rig(params=FlexibleJointParams(stiffness=k), backend="symbolic")
+        rig = flexible_joint_rig(params=FlexibleJointParams(stiffness=k))
         p = compare_test_params(rig, step_duration=0.2, settle_time=0.0)
         return run_test(_loop(rig, "two-time-scale", kp), "step", params=p)[1].overshoot
     low_imp, high_imp = overshoot(0.3, 0.605), overshoot(1.2, 0.605)
@@ -77,7 +77,7 @@ def test_cascaded_law_linearises_the_force_loop_11_16():
     for make, n in ((flexible_joint_rig, 1), (joint_rig, 2)):
         for ip in (ImpedanceParams(), ImpedanceParams(force_bandwidth=220.0, force_damping_ratio=0.4,
                                                       joint_stiffness=1.5, observer_bandwidth=60.0)):
-            rig = make(backend="python")
+            rig = make()
             loop = closed_loop(rig, impedance_controller(rig, ip, mode="cascaded"), rate_hz=None)
             d = loop.diagram
             ctx = loop.create_context(state=rig.operating_point().state, references={"joint_angle_reference": 0.0})

@@ -48,7 +48,7 @@ def test_identification_matrix_is_thesis_12_16():
 
 
 def test_pole_placement_places_poles_on_the_nominal_closed_loop():
-    rig = flexible_joint_rig(backend="python")
+    rig = flexible_joint_rig()
     design = design_pole_placement(rig)
     p = PolePlacementParams()
     target = _sorted(np.roots(np.polymul([1, 2 * p.xi1 * p.omega1, p.omega1 ** 2],

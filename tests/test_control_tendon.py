@@ -27,7 +27,7 @@ def fmap():
 
 
 def _step(controller_factory, fmap, f0, f1, *, t_final, ripple=False, noise=0.0, gains=None, delay=None):
-    rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=ripple)), backend="symbolic")
+    rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=ripple)))
     ctrl = controller_factory(rig, gains, fmap=fmap)
     sensors = {"tendon_force": force_sensor(ForceSensorParams(noise_std=noise))} if noise else None
     loop = closed_loop(rig, ctrl, rate_hz=3000.0, delay=delay, sensors=sensors)
@@ -165,7 +165,7 @@ def test_tendon_force_bank_equals_the_one_tendon_law_per_tendon_and_names_a_bad_
 
 
 def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fmap):
-    rig = tendon_rig(backend="symbolic")
+    rig = tendon_rig()
     p = SdreTendonParams()
     ctrl = tendon_sdre_controller(rig, p, design_force=30.0, fmap=fmap)
     op = rig.operating_point(tendon_force=30.0)
@@ -176,7 +176,7 @@ def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fma
     limit = rig.params.motor.torque_limit
     period = int(round(3000.0 / p.update_rate))  # 15 control periods per gain refresh
     for fixed in (False, True):
-        r = tendon_rig(backend="symbolic")
+        r = tendon_rig()
         loop = closed_loop(r, tendon_sdre_controller(r, p, fixed=fixed, fmap=fmap), rate_hz=3000.0)
         o = r.operating_point(tendon_force=0.0)
         ctx = loop.create_context(state=o.state, motor_torque=o.motor_torque,

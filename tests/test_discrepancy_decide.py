@@ -281,7 +281,7 @@ def test_augmented_parameters_build_a_rig_with_the_same_dynamics():
     aug = augmented_rig_parameters(dx, base)
     assert aug.applied == ["motor_friction", "nominal_link"] and aug.not_representable == ["delay"]
     params = aug.params
-    rig = joint_rig(params=params, backend="python")
+    rig = joint_rig(params=params)
     nominal = NominalParameters("joint", motor.inertia, motor.damping, motor.pulley_radius,
                                 tuple(rig.spring.coefficients), base.link_inertia, base.link_damping,
                                 base.link_pulley_radius)

@@ -225,19 +225,37 @@ def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
     hyst = finger_diagram(finger="index", params=aug).drive.model.hysteresis
     assert [h.enabled for h in hyst] == [i == 5 for i in range(8)]
     s = DiscrepancySettings()
-    before = FingerResiduals(ds, s).ratios()["spring_total"]
-    after = FingerResiduals(dataclasses.replace(ds, parameters=js), s).ratios()["spring_total"]
-    assert after < 0.6 * before and abs(after - dx.ratios_after["spring_total"]) < 0.05 * after
+    fb, fa = FingerResiduals(ds, s), FingerResiduals(dataclasses.replace(ds, parameters=js), s)
+    before, after = fb.ratios()["spring_total"], fa.ratios()["spring_total"]
+    assert after < 0.6 * before
+    # the diagnosis removes the accepted loop as the reloaded nominal does (its force taken off the measured force
+    # before the inverse spring law, FingerResiduals.loop_removed); what differs is only the whitening weight of
+    # index_h6, whose stiffness is now evaluated at the loop-corrected elongation. A weight scaled by at most
+    # (1 +- d) scales the weighted least-squares residual's energy by at most (1 +- d)^2: that is the bound
+    # (wave 5's linearised removal left a 4-5 % gap here: the force error over the stiffness, filtered once)
+    d = float(np.max(np.abs(fa.wsq[5] / fb.wsq[5] - 1.0)))
+    assert np.allclose(np.delete(fa.wsq, 5, axis=0), np.delete(fb.wsq, 5, axis=0), rtol=1e-12)
+    assert (1 - d) ** 2 * (1 - 1e-9) <= after / dx.ratios_after["spring_total"] <= (1 + d) ** 2 * (1 + 1e-9), (after, d)
 
 
 def test_thumb_motor_side_names_effect_and_place():
     """The thumb (routing h(q) depends on the joint angles, refused before): its motor side is exact as on the
     other fingers, so a hidden motor friction is named on its tendon; the spring side is not judged (said in the
-    result and the text); hysteresis cannot be hidden on the thumb (one line)."""
+    result and the text); hysteresis cannot be hidden on the thumb (one line). The joint angles from the tendons
+    (Gauss-Newton per sample) converge on it; limited to one step they do not, and the result says where (a
+    warning naming the time windows, in the text and the JSON), never silently."""
     ds = make_finger_dataset("thumb", ["motor_friction"], place=3, seed=2)   # 10 s: 3 s records saturate the thumb
     dx = diagnose(ds)
     assert dx.places == {"motor_friction": "thumb_h3 (abduction, MCP)"} and not dx.spring_checked
     assert "spring side not judged" in dx.text() and dx.summary()["spring_side_checked"] is False
+    assert dx.warnings == [] and dx.summary()["warnings"] == []
+    lines = []
+    one = diagnose(ds, settings=DiscrepancySettings(finger_gauss_newton_iterations=1), progress=lines.append)
+    assert len(one.warnings) == 1 and one.summary()["warnings"] == one.warnings
+    assert "did not converge in 1 Gauss-Newton steps" in one.warnings[0] and "finger_gauss_newton_iterations" in \
+        one.warnings[0]
+    assert f"t = {FingerResiduals(ds, DiscrepancySettings()).time[0]:.3f}-" in one.warnings[0]
+    assert "warning: joint angles" in one.text() and any(ln.startswith("warning: joint angles") for ln in lines)
     with pytest.raises(ValueError, match="spring_hysteresis: not on the thumb"):
         make_finger_dataset("thumb", ["spring_hysteresis"], place=3, seed=2, gen=THREE)
 
@@ -259,3 +277,39 @@ def test_hidden_torque_block_converts_and_its_derivatives_are_the_effects():
     J = jac["torque"][0]
     assert np.all(J[np.arange(m) != 2] == 0.0)                       # no torque on the other motors
     assert J[2, 2] != 0.0 and J[2, m + 2] != 0.0 and J[2, 2 * m + 2] != 0.0   # ripple (theta), friction (omega), guides (f)
+
+
+def test_places_keep_every_tendon_an_effect_is_named_on():
+    """One effect named on two tendons: ``places`` keeps both (wave 5 kept only the last), ``tendons_named`` lists
+    them, and the text and JSON carry both steps."""
+    from awiwi_drake.discrepancy.finger import FingerDiagnosis, FingerStep
+    steps = [FingerStep("motor_friction", "physical", "index_h2 (abduction, MCP)", 2, "confirmed", {}, [], "", 9.0,
+                        -50.0),
+             FingerStep("force_sensor", "nuisance", "index_h4 (MCP)", 4, "confirmed", {}, [], "", 5.0, -9.0),
+             FingerStep("motor_friction", "physical", "index_h5 (PIP)", 5, "confirmed", {}, [], "", 7.0, -30.0)]
+    dx = FingerDiagnosis("d", "finger-index", steps, {}, {}, False, {}, "found", 0.0, 0.0, [],
+                         [f"index_h{k}" for k in range(1, 9)], 1.5)
+    assert dx.places == {"motor_friction": "index_h2 (abduction, MCP) and index_h5 (PIP)"}
+    assert dx.tendons_named == {"motor_friction": ["index_h2", "index_h5"]}
+    assert [s["tendon"] for s in dx.summary()["steps"]] == [2, 4, 5]
+
+
+def test_truth_shapes_and_hysteresis_play_come_from_the_parameters():
+    """The Stribeck shape of the hidden motor friction (rigs and fingers) and the finger truth's viscous part are
+    drawn from the parameter sets (TruthGeneratorParams.stribeck_*, FingerTruthParams.motor_viscous_range); the
+    hysteresis candidate's play is DiscrepancySettings.finger_hysteresis_play (a wider play delays every reversal
+    by two play widths: the loop of a triangle path moves later)."""
+    from awiwi_drake.discrepancy.finger import _play
+    from awiwi_drake.discrepancy.finger_truth import draw_finger_truth
+    from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+    g = TruthGeneratorParams()
+    for seed in range(20):
+        p = draw_finger_truth(["motor_friction"], 3, 8, np.random.default_rng(seed),
+                              FingerTruthParams(motor_viscous_range=(0.004, 0.004)), strength=0.5)["motor_friction"]
+        assert p["viscous"] == pytest.approx(0.5 * 0.004, rel=1e-12)
+        assert g.stribeck_static_ratio_range[0] <= p["fs"] / p["fc"] <= g.stribeck_static_ratio_range[1]
+        assert g.stribeck_velocity_range[0] <= p["vs"] <= g.stribeck_velocity_range[1]
+        assert g.stribeck_smoothing_range[0] <= p["eps"] <= g.stribeck_smoothing_range[1]
+    x = np.concatenate([np.linspace(0, 1, 11), np.linspace(0.9, 0, 10)])
+    y = _play(x, 0.1)
+    assert y[10] == pytest.approx(0.9) and np.argmax(y) == 10 and y[11] == pytest.approx(0.9)   # 2 x 0.1 late

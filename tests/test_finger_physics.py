@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from awiwi_drake.analysis import linearize
+from _finger_laws import ideal_drive_derivatives
 from awiwi_drake.components.friction import dahl_rate, guide_friction_force, guide_friction_rate
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.hand.systems import tendon_bending_angles
@@ -48,8 +49,6 @@ def test_the_finger_plant_has_the_thesis_physics_on_by_default():
     assert rig.state_names[-1] == f"guide_friction_force[{rig.tendon_names[-1]}]"
     hand = HandRigParams()
     assert hand.motor.ripple and hand.spring.hysteresis.enabled and hand.guide_friction
-    with pytest.raises(ValueError, match="guide_friction=True needs backend='compiled'"):
-        finger_diagram(finger="index", params=p.with_physics(hysteresis=False), backend="python")
 
 
 def _mass_matrix(rig, q):
@@ -62,12 +61,12 @@ def _mass_matrix(rig, q):
 def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger):
     """At random states: (on) - (ideal) derivatives = motor friction (3.8) + ripple (3.5) on the
     rotor, the hysteresis force z on spring and rotor, the guide friction g on the joints only, and
-    the two Dahl rates in closed form. The ideal compiled plant equals the python backend's (separate
-    MotorBank_/SpringBank_/TendonRouting_ systems) to 1e-9."""
+    the two Dahl rates in closed form. The ideal plant equals the laws evaluated apart to 1e-9: the standalone
+    MultibodyPlant (``rig.plant``) under ``-P(q)^T f(x)``, ``x = r_m theta + h(q) - h(0) + x0``, the motors'
+    (3.5) with load ``r_m f``."""
     p_on = FingerRigParams.for_finger(finger).with_physics(guide_friction=True)
     on, off = finger_diagram(finger=finger, params=p_on), finger_diagram(finger=finger,
                                                                           params=p_on.with_physics(**IDEAL))
-    ref = finger_diagram(finger=finger, params=p_on.with_physics(**IDEAL), backend="python")
     n, m = on.num_joints, on.num_tendons
     mp, hp, gp = p_on.motor, p_on.spring.hysteresis, p_on
     alpha = tendon_bending_angles(on.coupling, p_on)
@@ -84,15 +83,15 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
         u = op.motor_torque + RNG.normal(scale=0.05, size=m)
         x_off = np.concatenate([q, v, theta, omega])
         derivs = []
-        for rig, x in ((on, np.concatenate([x_off, z, g])), (off, x_off), (ref, x_off)):
+        for rig, x in ((on, np.concatenate([x_off, z, g])), (off, x_off)):
             ctx = rig.context(rig.operating_point())
             ctx.SetContinuousState(x)
             rig.diagram.GetInputPort("motor_torque").FixValue(ctx, u)
             derivs.append(rig.diagram.EvalTimeDerivatives(ctx).CopyToVector())
             if rig is off:
                 f_el = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)      # the elastic force
-        d_on, d_off, d_ref = derivs
-        np.testing.assert_allclose(d_off, d_ref, rtol=1e-9, atol=1e-9)
+        d_on, d_off = derivs
+        np.testing.assert_allclose(d_off, ideal_drive_derivatives(off, q, v, theta, omega, u), rtol=1e-9, atol=1e-9)
         assert np.all(f_el + z > 0)                                               # no slack in this check
         P = np.asarray(on.coupling.P(q))
         dv = np.linalg.solve(_mass_matrix(on, q), -P.T @ (z + g))

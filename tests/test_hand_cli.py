@@ -1,4 +1,4 @@
-"""CLI: linearize finger/hand targets, animate, export-hand-diagrams."""
+"""CLI: linearize finger/hand targets, animate; the exported hand graph."""
 
 from __future__ import annotations
 
@@ -60,11 +60,12 @@ def _dot_graph(text):
     return nodes, edges
 
 
-def test_export_hand_diagrams(tmp_path):
-    """The exported top-level hand graph shows every block of the hand diagram under its name and every
-    internal connection between the right ports."""
-    assert main(["export-hand-diagrams", "--out", str(tmp_path)]) == 0
-    nodes, edges = _dot_graph((tmp_path / "hand_top.dot").read_text())
+def test_exported_hand_graph_shows_every_block_and_connection():
+    """The top-level hand graph of ``awiwi-drake export-diagrams`` (committed as diagrams/hand_top.dot, kept
+    current by test_simulate_cli_export::test_committed_diagrams_are_current) shows every block of the hand
+    diagram under its name and every internal connection between the right ports."""
+    import pathlib
+    nodes, edges = _dot_graph((pathlib.Path(__file__).parent.parent / "diagrams" / "hand_top.dot").read_text())
     diagram = hand_diagram().diagram
     names = [s.get_name() for s in diagram.GetSystems()]
     assert sorted(nodes) == sorted(names)

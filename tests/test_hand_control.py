@@ -551,9 +551,8 @@ def test_force_sharing_stage_gives_the_exact_joint_torque_and_converts(finger):
     torques come out of the rig's own coupling exactly, -(P S)^T f_ref = tau_ref at the design posture (ring: the
     coupled DIP, thumb: P(q_op)), the design point maps to its tendon forces, and the system converts to
     AutoDiffXd with derivatives equal to central differences of the float system."""
-    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(  # python: no Dahl states
-                             hysteresis=False, guide_friction=False),
-                         backend="python")
+    rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(  # no Dahl states
+                             hysteresis=False, guide_friction=False))
     ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing")
     sharing = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_sharing")
     op = rig.operating_point()

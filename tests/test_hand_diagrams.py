@@ -38,16 +38,10 @@ def test_operating_point_is_an_equilibrium_and_linearization_gives_the_stiffness
     np.testing.assert_allclose(K_from_drake, op.joint_stiffness, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(op.tendon_force.mean(), 25.0, rtol=1e-12)
     assert np.all(op.tendon_force > 0)
-    # the three backends give the same linearisation (python/symbolic: without the hysteresis and
-    # guide friction states, which they cannot carry in a finger; at z = g = 0 and rest those states
-    # enter the plant and motor rows only through their own columns)
+    # without the hysteresis and guide friction states the linearisation is the leading block (at z = g = 0 and
+    # rest those states enter the plant and motor rows only through their own columns)
     p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False, guide_friction=False)
-    op_without_z = _drop_z(rig, op)
-    ref = linearize(finger_diagram(finger=finger, params=p), op_without_z)
-    for backend in ("python", "symbolic"):
-        lin_b = linearize(finger_diagram(finger=finger, params=p, backend=backend), op_without_z)
-        np.testing.assert_allclose(lin_b.A, ref.A, rtol=1e-7, atol=1e-6 * np.abs(ref.A).max(), err_msg=backend)
-        np.testing.assert_allclose(lin_b.B, ref.B, rtol=1e-7, atol=1e-12, err_msg=backend)
+    ref = linearize(finger_diagram(finger=finger, params=p), _drop_z(rig, op))
     k = ref.A.shape[0]
     np.testing.assert_allclose(lin.A[:k, :k], ref.A, rtol=1e-7, atol=1e-6 * np.abs(ref.A).max())
 

@@ -23,18 +23,17 @@ DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr")
 TENDON_LAW = {"two-time-scale": "motor-position"}
 
 
-def _python_rig(finger="index"):
-    """The finger on the python backend (every state-only output declared so, for the continuous linearisations
-    of these design checks), without the spring hysteresis and the guide friction: that backend does not carry
-    their Dahl states, and the per-joint design models have none."""
-    return finger_diagram(finger=finger, backend="python", params=FingerRigParams.for_finger(finger).with_physics(
+def _ideal_rig(finger="index"):
+    """The finger without the spring hysteresis and the guide friction: the per-joint design models have none
+    of their Dahl states."""
+    return finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(
         hysteresis=False, guide_friction=False))
 
 
 def _design_rig(finger="index"):
-    """The finger with the design model's motor ((3.8) linearised in motion), python backend (as `_python_rig`)."""
+    """The finger with the design model's motor ((3.8) linearised in motion), ideal drive (as `_ideal_rig`)."""
     p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False, guide_friction=False)
-    return finger_diagram(finger=finger, backend="python", params=p.replace(motor=design_motor(p.motor)))
+    return finger_diagram(finger=finger, params=p.replace(motor=design_motor(p.motor)))
 
 
 def test_reduced_model_is_the_link_on_its_closed_force_loop():
@@ -43,7 +42,7 @@ def test_reduced_model_is_the_link_on_its_closed_force_loop():
     row is the force loop's: with (10.11) every tendon's force obeys f'' = w^2 (f_ref - f) - 2 xi w f' +
     k_t P_j qdd, so tau'' = w^2 tau_ref - (w^2 + K_jj / M_jj) tau + ... (qdd = tau / M_jj - ...; the joint's
     own tendon stiffness K_jj = P_j^T K_t P_j (5.12) stiffens the torque loop)."""
-    rig = _python_rig("index")
+    rig = _ideal_rig("index")
     w = HandChainParams().force_bandwidth
     for m in reduced_joint_models(rig):
         assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
@@ -70,7 +69,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     """Where the reduced model is exact -- the one-DoF subsystem of the index MCP built from the finger's
     parts, closed by the whole chain (joint stage reading tau from the measured forces, sharing, force law)
     -- Drake's Linearize has the designed poles (plus the force modes the joint does not see)."""
-    rig = _python_rig("index")
+    rig = _ideal_rig("index")
     d = design_joint_stage(rig, design)
     j = 1
     sub, op, point = joint_subsystem(rig, j, point=None)
@@ -117,7 +116,7 @@ def test_pole_placement_places_the_double_oscillator_on_each_joint():
     torque_loop_gain_min (then exactly at the bound); continuous and sampled at 3 kHz (poles z = exp(h s) and the
     delay's at 0).  The poles fix xi2: it is read back from the fast pair (|Re s| / |s|)."""
     from awiwi_drake.control.joint_design import torque_loop_gain
-    rig = _python_rig("index")
+    rig = _ideal_rig("index")
     p = JointDesignParams()
     for period in (None, 1.0 / 3000.0):
         d = design_joint_stage(rig, "pole-placement", params=p, period=period)
@@ -145,7 +144,7 @@ def test_joint_stage_with_torque_feedback_converts_to_autodiff():
     """The LQR stage reads tau = -(PS)^T f and tau_dot = -(PS)^T k_t (r_m omega + P qdot) from the
     measurements; its derivatives equal finite differences (thumb: P(q) varies), and d tau_ref / d f is
     the closed form K_tau * (-(PS)^T) per DoF."""
-    rig = _python_rig("thumb")
+    rig = _ideal_rig("thumb")
     d = design_joint_stage(rig, "lqr")
     S = d.law.S
     n, k = S.shape
@@ -326,8 +325,8 @@ def test_cause_of_the_default_finger_instabilities_of_pole_placement_and_lqr():
 
 @pytest.mark.parametrize("design", ["lqr", "pole-placement"])
 def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
-    """The whole index sampled at 3 kHz by the chain (``sampled_loop_poles``; the plant of the design model: python
-    backend, motor friction in motion, no ripple, hysteresis or guide friction; true joint state) against the per-DoF sampled
+    """The whole index sampled at 3 kHz by the chain (``sampled_loop_poles``; the plant of the design model:
+    motor friction in motion, no ripple, hysteresis or guide friction; true joint state) against the per-DoF sampled
     design ``eig(Phi - Gamma K)``.  The abduction q20 is decoupled from the other DoF, so its designed poles are
     the loop's, up to the one approximation of the design model: it samples the *continuous* closed force loop,
     the chain samples the force law itself, which agree to second order in ``h w_force`` (= 0.1 at 300 rad/s):
@@ -336,7 +335,7 @@ def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
     ones feel the force loop's own sampling: LQR's 376 rad/s pair is 5 % off)."""
     from awiwi_drake.control.joint_design import joint_stage_controller, sampled_loop_poles
     p = FingerRigParams.for_finger("index").with_physics(hysteresis=False, ripple=False, guide_friction=False)
-    rig = finger_diagram(finger="index", backend="python", params=p.replace(motor=design_motor(p.motor)))
+    rig = finger_diagram(finger="index", params=p.replace(motor=design_motor(p.motor)))
     ctrl = joint_stage_controller(rig, design, friction_observer=None)      # the design's own poles
     d = ctrl.design["joint_design"]
     loop = sampled_loop_poles(rig, ctrl, estimator=None)
@@ -431,7 +430,7 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     the LQR gain; away from it the tendon forces f_op + W dtau move the spring slopes (Fig 4.8b stiffens with
     force) and the torque-row gain changes, symmetrically in +-dtau (the joint's tendons are antagonistic pairs
     at equal pretension)."""
-    rig = _python_rig("index")
+    rig = _ideal_rig("index")
     h = 1.0 / 6000.0
     sdre = design_joint_stage(rig, "sdre", period=h)
     lqr = design_joint_stage(rig, "lqr", period=h)
@@ -480,7 +479,7 @@ def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
         errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
     assert errors[False] == pytest.approx(load / kp, rel=0.02)
     assert abs(errors[True]) < 0.02 * load / kp
-    rig = _python_rig("thumb")
+    rig = _ideal_rig("thumb")
     rng = np.random.default_rng(2)
     obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)
     op = rig.operating_point()

@@ -133,13 +133,13 @@ def test_dominant_time_constant_of_pole_placement_is_its_slowest_pole():
     from awiwi_drake.parameters.control import PolePlacementParams
     from awiwi_drake.rigs import flexible_joint_rig
 
-    rig = flexible_joint_rig(backend="python")
+    rig = flexible_joint_rig()
     entry = get_entry("pole-placement", rig)
     loop = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": None})
     p = PolePlacementParams()
     tau = dominant_time_constant(loop)
     assert tau == pytest.approx(1.0 / min(p.xi1 * p.omega1, p.xi2 * p.omega2), rel=1e-6)
-    rig = flexible_joint_rig(backend="python")
+    rig = flexible_joint_rig()
     sampled = closed_loop(rig, entry.factory(rig), **{**entry.loop_options, "rate_hz": 3000.0})
     assert dominant_time_constant(sampled) is None    # mixed discrete/continuous: no Linearize, no guess
 

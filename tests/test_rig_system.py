@@ -100,7 +100,7 @@ def test_outputs_system_equals_the_laws_and_converts_with_autodiff_equal_to_fini
 @pytest.mark.parametrize("build", [joint_rig, flexible_joint_rig])
 def test_default_single_joint_rig_is_scalar_convertible_and_autodiff_matches_fd(build):
     rig = build()
-    assert rig.backend == "compiled" and rig.plant is None
+    assert rig.plant is None
     d = rig.diagram
     op = rig.operating_point()
     x = op.state + RNG.normal(scale=0.01, size=op.state.size)
@@ -377,3 +377,61 @@ def test_registered_controllers_on_the_sampled_flexible_joint_equal_the_continuo
     for sig in ("state", "motor_torque"):
         ref = out[False][sig]
         np.testing.assert_allclose(out[True][sig], ref, rtol=0, atol=1e-8 * np.max(np.abs(ref)), err_msg=sig)
+
+
+def test_motor_pd_with_its_reference_is_the_loop_with_reference_sources():
+    """The demo loop's PD given its reference (one TrajectoryAffineSystem, u = y0(t) + D x) against the same PD
+    with reference ports fed by TrajectorySources: the law at random times and states is the closed form
+    r_m f_ref(t) + kp (theta_ref(t) - theta) - kd omega (references linear between knots); the two loops
+    simulate the same trajectory (the feed-forward kp theta_ref + r_m f_ref is combined at the knots instead
+    of after interpolation: round-off, bounded here by the sampled-vs-continuous test's 1e-11 of each channel's
+    scale); the loop and the law convert to AutoDiffXd, the law's gradient being the PD gains."""
+    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
+
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.motor_position import demo_references, joint_rig_position_loop, motor_position_controller
+    from awiwi_drake.parameters.rigs import MotorPositionGains
+    rig = joint_rig()
+    loop_src, op, scen = _demo_loop(rig, True)
+    t, refs = demo_references(rig, scen)
+    g, r_m = MotorPositionGains(), rig.params.motor.pulley_radius
+    law = motor_position_controller(joint_rig(), reference=(t, refs["theta_reference"], refs["tendon_force_reference"]))
+    assert [law.get_input_port(i).get_name() for i in range(law.num_input_ports())] == ["state"]
+    ctx = law.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        tk, xk = rng.uniform(0, scen.t_final), op.state + rng.normal(0, 0.1, 6)
+        ctx.SetTime(tk)
+        law.GetInputPort("state").FixValue(ctx, xk)
+        th = np.array([np.interp(tk, t, row) for row in refs["theta_reference"]])
+        f = np.array([np.interp(tk, t, row) for row in refs["tendon_force_reference"]])
+        np.testing.assert_allclose(law.GetOutputPort("motor_torque").Eval(ctx),
+                                   r_m * f + g.kp * (th - xk[2:4]) - g.kd * xk[4:6], rtol=1e-12, atol=1e-12)
+    rig = joint_rig()
+    loop = joint_rig_position_loop(rig, scen)
+    assert loop.references == () and loop.sampled_rig
+    # a plain diagram controller of a sampled rig enters the loop as its leaves (no sub-diagram): one leaf is
+    # "controller", several "controller.<leaf>"
+    assert type(loop.diagram.GetSubsystemByName("controller")).__name__ == "TrajectoryAffineSystem"
+    assert {"controller.motor_position_inputs", "controller.motor_position_law"} <= {
+        s.get_name() for s in loop_src.diagram.GetSystems()}
+    runs = [simulate(lp.diagram, lp.create_context(op), scen.t_final, log=("state", "motor_torque", "applied_torque"))
+            for lp in (loop_src, loop)]
+    x = runs[0]["state"]
+    assert np.ptp(x[:, 0]) > 0.05
+    for name in ("state", "motor_torque", "applied_torque"):
+        ref = runs[0][name]
+        err = np.max(np.abs(runs[1][name] - ref), axis=0) / np.max(np.abs(ref), axis=0)   # per channel's scale
+        assert runs[1][name].shape == ref.shape and np.all(err < 1e-11), (name, err)
+    assert loop.diagram.ToAutoDiffXd() is not None
+    ad = law.ToAutoDiffXd()             # the law in AutoDiffXd: same value, gradient -D on the state
+    ad_ctx = ad.CreateDefaultContext()
+    ad_ctx.SetTime(tk)
+    ad.GetInputPort("state").FixValue(ad_ctx, InitializeAutoDiff(xk))
+    u_ad = ad.GetOutputPort("motor_torque").Eval(ad_ctx)
+    np.testing.assert_allclose(ExtractValue(u_ad).ravel(), law.GetOutputPort("motor_torque").Eval(ctx), rtol=1e-14)
+    D = np.zeros((2, 6))
+    D[:, 2:4], D[:, 4:6] = -g.kp * np.eye(2), -g.kd * np.eye(2)
+    np.testing.assert_array_equal(ExtractGradient(u_ad), D)
+    with pytest.raises(ValueError, match="reference motor_angle has shape"):
+        motor_position_controller(joint_rig(), reference=(t, refs["theta_reference"][:1], refs["tendon_force_reference"]))

@@ -3,12 +3,11 @@ derivatives equal finite differences of its float dynamics/outputs."""
 
 import numpy as np
 import pytest
-from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
 from pydrake.symbolic import Expression
 
 from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
 from awiwi_drake.components import (
-    ConstantCoupling, MotorBank_, SpringBank_, TendonRouting_, build_tendon_drive, tendon_spring)
+    ConstantCoupling, MotorBank_, SpringBank_, TendonRouting_, tendon_spring)
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
 
 RNG = np.random.default_rng(0)
@@ -100,26 +99,3 @@ def test_routing_virtual_work_is_consistent():
                                            "tendon_force": f, "motor_velocity": np.zeros(4),
                                            "joint_velocity": qd})
     assert outs["generalized_force"] @ qd == pytest.approx(-f @ outs["elongation_rate"], rel=1e-12)
-
-
-@pytest.mark.parametrize("hysteresis", [False, True])
-def test_both_drive_backends_give_identical_dynamics(hysteresis):
-    spring = tendon_spring(SpringModelParams())
-    coupling = ConstantCoupling([[-0.008], [0.008]])
-    results = []
-    for backend in ("python", "symbolic"):
-        drive = build_tendon_drive(motor=MotorParams(ripple=True), spring=spring, coupling=coupling,
-                                   offsets=[0.002, 0.003], backend=backend,
-                                   hysteresis=HysteresisParams(enabled=hysteresis))
-        x = RNG.uniform(-0.5, 0.5, drive.num_states) if not results else results[0][0]
-        inputs = {"motor_torque": np.array([0.4, -0.2]), "joint_angle": np.array([0.1])}
-        if hysteresis:
-            inputs["joint_velocity"] = np.array([0.3])
-        xdot, outs = _evaluate(drive.diagram, x, inputs)
-        results.append((x, xdot, outs))
-        assert drive.diagram.ToAutoDiffXd() is not None
-    (_, d0, o0), (_, d1, o1) = results
-    np.testing.assert_allclose(d0, d1, rtol=1e-12, atol=1e-9)
-    assert set(o0) == set(o1)
-    for k in o0:
-        np.testing.assert_allclose(o0[k], o1[k], rtol=1e-12, atol=1e-12, err_msg=k)

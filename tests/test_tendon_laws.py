@@ -12,6 +12,7 @@ from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff, ExtractGradien
 from pydrake.systems.primitives import Linearize
 from scipy.optimize import brentq
 
+from _finger_laws import ideal_drive_derivatives
 from awiwi_drake.components.spring import TendonSprings, tendon_spring
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.chain import TendonChainController, TendonForceStage, rig_springs
@@ -37,13 +38,12 @@ def _k_of_force(law, f):
     return float(np.ravel(law.stiffness(np.ravel(law.inverse_force(np.array([f])))))[0])
 
 
-def _mixed_rig(finger="index", tendon="index_h3", backend="python"):
-    """The finger with ``tendon``'s law overridden (python backend: continuous linearisations; the ideal
-    drive without hysteresis and guide friction, whose Dahl states that backend does not carry; the design model's
-    motor)."""
+def _mixed_rig(finger="index", tendon="index_h3"):
+    """The finger with ``tendon``'s law overridden (the ideal drive without hysteresis and guide friction, as the
+    per-joint design models; the design model's motor)."""
     p = FingerRigParams.for_finger(finger).with_physics(hysteresis=False, guide_friction=False)
     p = p.replace(motor=design_motor(p.motor), tendon_springs=((tendon, p.spring.replace(tendon=STIFF)),))
-    return finger_diagram(finger=finger, backend=backend, params=p)
+    return finger_diagram(finger=finger, params=p)
 
 
 def test_tendon_springs_evaluate_each_tendon_with_its_own_law_for_float_and_autodiff():
@@ -103,7 +103,7 @@ def test_chain_force_stage_uses_each_tendons_slope_and_names_a_bad_tendon():
     """The (10.2) bank built by the chain: tendon i's scheduled gains are (10.11) with its own slope
     alpha_i = r_m k_t,i(f); the bank equals the one-tendon law of each tendon's own map to 1e-12; an
     infeasible reference is named by its index in the bank."""
-    rig = _mixed_rig(backend="compiled")
+    rig = _mixed_rig()
     springs = rig_springs(rig)
     i3 = rig.tendon_names.index("index_h3")
     assert not springs.uniform and springs[i3] is not springs[0]
@@ -256,26 +256,22 @@ def test_hand_chain_gives_every_finger_its_own_tendons_laws():
     assert abs(k_law[over[0]] / _k_of_force(springs[0], f[over[0]]) - 1.0) > 0.02   # the overrides differ
 
 
-def test_every_drive_backend_evaluates_each_tendons_law():
-    """The finger with one law overridden (ideal drive: the python and symbolic backends carry no Dahl states) on
-    the three drive backends: the same state derivatives off the operating point (1e-12 relative)."""
+def test_the_drive_evaluates_each_tendons_law():
+    """The finger with one law overridden (ideal drive) has the state derivatives of the laws evaluated apart
+    (each tendon's own spring law, the routing, the MultibodyPlant, (3.5)) off the operating point, and they differ
+    from the finger with one law for all."""
     base = FingerRigParams.for_finger("index").with_physics(hysteresis=False, guide_friction=False)
     p = base.replace(tendon_springs=(("index_h3", base.spring.replace(tendon=STIFF)),))
-    derivs = {}
-    for backend in ("compiled", "python", "symbolic"):
-        rig = finger_diagram(finger="index", params=p, backend=backend)
+    derivs = []
+    for params in (p, base):
+        rig = finger_diagram(finger="index", params=params)
         op = rig.operating_point(pretension=30.0)
         ctx = rig.context(op)
         x = np.array(op.state, dtype=float)
         x[:4] += 0.05                                            # joints off the equilibrium: the springs work
         ctx.SetContinuousState(x)
-        derivs[backend] = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()
-    scale = np.abs(derivs["compiled"]).max()
-    for backend in ("python", "symbolic"):
-        np.testing.assert_allclose(derivs[backend], derivs["compiled"], rtol=0, atol=1e-12 * scale, err_msg=backend)
-    one_law = finger_diagram(finger="index", params=base)        # the override changes the dynamics
-    ctx = one_law.context(one_law.operating_point(pretension=30.0))
-    x = np.array(one_law.operating_point(pretension=30.0).state, dtype=float)
-    x[:4] += 0.05
-    ctx.SetContinuousState(x)
-    assert np.abs(one_law.diagram.EvalTimeDerivatives(ctx).CopyToVector() - derivs["compiled"]).max() > 1e-6 * scale
+        derivs.append(rig.diagram.EvalTimeDerivatives(ctx).CopyToVector())
+        n, m = rig.num_joints, rig.num_tendons
+        ref = ideal_drive_derivatives(rig, x[:n], x[n:2 * n], x[2 * n:2 * n + m], x[2 * n + m:], op.motor_torque)
+        np.testing.assert_allclose(derivs[-1], ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+    assert np.abs(derivs[1] - derivs[0]).max() > 1e-6 * np.abs(derivs[0]).max()

@@ -20,7 +20,6 @@ from awiwi_drake.hand.wrist import (
     wrist_tendon_offsets,
 )
 from awiwi_drake.reproductions.ch06_wrist import wrist_motion_study
-from awiwi_drake.hand.coupling import WristCoupling
 from awiwi_drake.parameters.wrist import TABLE_6_2_FOREARM, TABLE_6_2_PALM, WristParams
 
 P = WristParams()
@@ -160,29 +159,23 @@ def test_jacobian_matches_finite_differences(q):
     np.testing.assert_allclose(J, fd, rtol=1e-6, atol=1e-9)
 
 
-def test_coupling_object_is_generic_and_consistent():
-    """P(q) is exact for every scalar type: AutoDiff of P = Hessian of h (symmetric, = FD of P)."""
-    cp = WristCoupling()
+def test_jacobian_is_generic_and_exact():
+    """P(q) = dh/dq is exact for every scalar type: it equals AutoDiffXd of the lengths h, its own AutoDiffXd
+    (the Hessian of h) is symmetric and equals finite differences of P, and the symbolic P evaluates to it."""
     q = np.array([0.12, -0.3])
-    assert (cp.num_tendons, cp.num_joints) == (38, 2)
-    np.testing.assert_allclose(cp.h(q), wrist_tendon_lengths(*q), atol=0.0)
-    # P from the forward-mode tangents equals AutoDiffXd of h
+    P = wrist_jacobian(*q)
     h_ad = wrist_tendon_lengths(AutoDiffXd(q[0], [1.0, 0.0]), AutoDiffXd(q[1], [0.0, 1.0]))
-    np.testing.assert_allclose(cp.P(q), np.array([e.derivatives() for e in h_ad]), atol=1e-15)
-    P_ad = cp.P(np.array([AutoDiffXd(q[0], [1.0, 0.0]), AutoDiffXd(q[1], [0.0, 1.0])]))
+    np.testing.assert_allclose(P, np.array([e.derivatives() for e in h_ad]), atol=1e-15)
+    P_ad = wrist_jacobian(AutoDiffXd(q[0], [1.0, 0.0]), AutoDiffXd(q[1], [0.0, 1.0]))
     H = np.array([[e.derivatives() for e in row] for row in P_ad])           # (38, 2, 2)
     np.testing.assert_allclose(H[:, 0, 1], H[:, 1, 0], atol=1e-14)
-    H_fd = fd_jacobian(lambda qq: cp.P(qq), q, h=1e-6).reshape(38, 2, 2)
+    H_fd = fd_jacobian(lambda qq: wrist_jacobian(*qq), q, h=1e-6).reshape(38, 2, 2)
     np.testing.assert_allclose(H, H_fd, rtol=1e-5, atol=1e-8)
     x = [Variable("a"), Variable("b")]
-    P_sym = cp.P(np.array([Expression(v) for v in x]))
+    P_sym = wrist_jacobian(Expression(x[0]), Expression(x[1]))
     env = {x[0]: q[0], x[1]: q[1]}
-    np.testing.assert_allclose([P_sym[i, j].Evaluate(env) for i, j in ((0, 0), (37, 1))],
-                               cp.P(q)[[0, 37], [0, 1]], atol=1e-15)
-    with pytest.raises(ValueError, match="q must have 2 entries"):
-        cp.h(np.zeros(3))
-    with pytest.raises(ValueError, match="tendon force f must have 38"):
-        cp.tension_hessian(q, np.ones(5))
+    np.testing.assert_allclose([P_sym[i, j].Evaluate(env) for i, j in ((0, 0), (37, 1))], P[[0, 37], [0, 1]],
+                               atol=1e-15)
 
 
 def test_scalar_types_agree():

@@ -104,39 +104,6 @@ def test_in_a_diagram_with_custom_params():
     assert diagram.ToAutoDiffXd() is not None
 
 
-def test_wrist_coupling_in_the_generic_tendon_routing():
-    """WristCoupling plugs into TendonRouting_: tau = -P^T f, converts to AutoDiffXd."""
-    from awiwi_drake.components.routing import TendonRouting
-    from awiwi_drake.hand.coupling import WristCoupling
-
-    cp = WristCoupling()
-    routing = TendonRouting(cp, motor_pulley_radius=R_M)
-    f = np.linspace(5.0, 40.0, 38)
-    theta = np.full(38, 0.01)
-
-    def outputs(system, q):
-        ctx = system.CreateDefaultContext()
-        system.GetInputPort("motor_angle").FixValue(ctx, theta)
-        system.GetInputPort("joint_angle").FixValue(ctx, q)
-        system.GetInputPort("tendon_force").FixValue(ctx, f)
-        return (system.GetOutputPort("elongation").Eval(ctx),
-                system.GetOutputPort("generalized_force").Eval(ctx))
-
-    x, tau = outputs(routing, Q)
-    np.testing.assert_allclose(x, R_M * theta + wrist_tendon_offsets(*Q), atol=1e-17)
-    np.testing.assert_allclose(tau, -wrist_jacobian(*Q).T @ f, atol=1e-14)
-    # d tau / dq from AutoDiff = -tension_hessian (the geometric stiffness of the wrist)
-    ad = routing.ToAutoDiffXd()
-    ctx = ad.CreateDefaultContext()
-    ad.GetInputPort("motor_angle").FixValue(ctx, theta)
-    ad.GetInputPort("joint_angle").FixValue(ctx, InitializeAutoDiff(Q).ravel())
-    ad.GetInputPort("tendon_force").FixValue(ctx, f)
-    dtau = np.array([e.derivatives() for e in ad.GetOutputPort("generalized_force").Eval(ctx)])
-    K = cp.tension_hessian(Q, f)
-    np.testing.assert_allclose(dtau, -K, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(K, K.T, atol=1e-12)
-
-
 def test_bad_construction_and_input():
     with pytest.raises(ValueError, match="motor_pulley_radius"):
         WristTendonOffsets(motor_pulley_radius=0.0)

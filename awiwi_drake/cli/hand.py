@@ -1,4 +1,4 @@
-"""Hand commands: ``animate`` (Meshcat recording to HTML) and ``export-hand-diagrams``.
+"""Hand command: ``animate`` (Meshcat recording to HTML); ``export-diagrams`` writes the hand graphs too.
 
 ``awiwi-drake linearize finger-index|finger-middle|finger-ring|finger-fifth|finger-thumb|hand``
 comes from the shared ``linearize`` command (targets registered in ``awiwi_drake.diagrams.TARGETS``).
@@ -27,15 +27,8 @@ def register(sub) -> None:
                    help="the whole hand (palm, forearm stub, five fingers) or one finger (default hand)")
     p.add_argument("--duration", type=limited_float("max_animation_duration", "s", positive=True), default=1.5, metavar="S",
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
-    p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
-                   help="tendon drive backend (compiled: one fused system with a numba kernel, the fast default)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     p.set_defaults(func=_animate)
-
-    p = sub.add_parser("export-hand-diagrams",
-                       help="write the hand/finger diagram graphs (diagrams/hand_*.dot, .svg/.png with Graphviz)")
-    p.add_argument("--out", default="diagrams", help="output folder (default diagrams/)")
-    p.set_defaults(func=_export)
 
 
 def _animate(args) -> int:
@@ -46,18 +39,8 @@ def _animate(args) -> int:
     from awiwi_drake.config import SimulationProgress
 
     with SimulationProgress("animate", quiet=args.quiet) as progress:
-        res = record_animation(out, target=args.target, duration=args.duration, backend=args.backend,
-                               progress=progress)
+        res = record_animation(out, target=args.target, duration=args.duration, progress=progress)
     print(f"wrote {res.path} ({res.duration:g} s, {res.num_frames} frames; "
           f"max joint tracking error {res.max_tracking_error:.3g} rad)")
     return 0
 
-
-def _export(args) -> int:
-    from awiwi_drake.diagrams import export_hand_diagrams
-
-    from awiwi_drake.cli import output_dir
-
-    for line in export_hand_diagrams(output_dir(args.out)):
-        print(line)
-    return 0

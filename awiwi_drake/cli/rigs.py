@@ -19,9 +19,6 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="simulate joint-rig (pretension ramp + position step), write plots and diagrams",
                        formatter_class=fmt)
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--backend", choices=["compiled", "python", "symbolic"], default="compiled",
-                   help="tendon-drive backend: compiled (default: one system with a numba kernel generated from "
-                        "the laws), python (separate TemplateSystems) or symbolic (one C++ SymbolicVectorSystem)")
     add_parameter_options(p, what="the DemoScenario (pretension ramp f_start -> f_end over ramp_time, link_step at "
                                   "step_time, t_final)", example="e.g. 'link_step: 0.2'")
     p.set_defaults(func=_demo)
@@ -201,7 +198,7 @@ def _demo(args) -> int:
     out = output_dir(args.out)
     default = DemoScenario(t_final=1.0) if short_mode() else DemoScenario()
     scenario = load_parameters(default, args)
-    report, graphs = run_demo(out, backend=args.backend, scenario=scenario)
+    report, graphs = run_demo(out, scenario=scenario)
     for stem, diagram in graphs.items():
         export_diagram(diagram, out, stem, max_depth=1, quiet=True)
     print(report)

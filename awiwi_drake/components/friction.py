@@ -18,6 +18,7 @@ caller passes the fields of its own parameter dataclass.
 :func:`capstan_friction_force`  capstan loss ``f (1 - exp(-mu alpha))`` (Fig 4.11)
 :func:`guide_friction`    directional guide friction on a sliding tendon (regularised sign)
 :func:`dahl_rate`         rate-independent Dahl friction state ``dF/dt = (v/delta)(W - s F)``
+:func:`dahl_path`         the same law solved exactly along a sampled (piecewise-linear) path
 :func:`guide_friction_rate`     guide friction as a Dahl state (the finger and hand drive)
 ========================  ====================================================
 """
@@ -30,7 +31,7 @@ from awiwi_drake._math import clip
 from awiwi_drake.parameters.components import GuideFrictionParams
 
 __all__ = ["regularized_sign", "atan_friction", "stribeck_friction", "guide_friction_force",
-           "capstan_friction_force", "guide_friction", "dahl_rate", "guide_friction_level", "guide_friction_rate"]
+           "capstan_friction_force", "guide_friction", "dahl_rate", "dahl_path", "guide_friction_level", "guide_friction_rate"]
 
 
 def regularized_sign(v, smoothing_velocity):
@@ -124,6 +125,50 @@ def dahl_rate(state, velocity, level, presliding_length, smoothing_velocity):
     """
     s = np.tanh(clip(velocity / smoothing_velocity, -40.0, 40.0))
     return (velocity / presliding_length) * (level - s * state)
+
+
+def dahl_path(position, level, presliding_length, smoothing_velocity=0.0, dt=None, initial_state=0.0):
+    """:func:`dahl_rate` solved exactly along a sampled path (float arrays).
+
+    Between samples ``k`` and ``k + 1`` (``dt`` [s] apart) the sliding coordinate ``position`` x [m] moves at the
+    constant speed ``v = dx / dt`` and the ``level`` W [N] (one value per sample, or a scalar) is linear in time.
+    With ``s = tanh(v / v_s)`` (``smoothing_velocity`` v_s [m/s]; ``sign(v)`` when it is 0, as ``v_s -> 0``) the
+    rate law ``dF/dt = (v/delta)(W - s F)`` is linear in F on the segment, and with ``c = dx / delta``,
+    ``lambda = c s >= 0``::
+
+        F_{k+1} = F_k e^{-lambda} + c (W_k phi1(lambda) + (W_{k+1} - W_k) phi2(lambda)),
+        phi1 = (1 - e^{-lambda}) / lambda,   phi2 = (lambda - 1 + e^{-lambda}) / lambda^2
+
+    (``phi1(0) = 1``, ``phi2(0) = 1/2``): exact for any step, with no step-size bound as an explicit integration of
+    the rate form has; a segment without travel leaves ``F`` unchanged. Returns ``F`` at every sample [N],
+    ``F_0 = initial_state``. For a fixed path ``F - F_0 e^{...}`` is linear in ``level``: a loop ``W = beta f + z0``
+    from rest is ``beta`` times the path's response to ``f`` plus ``z0`` times its response to 1.
+    """
+    x = np.asarray(position, dtype=float)
+    if x.ndim != 1 or x.size == 0:
+        raise ValueError(f"dahl_path: position must be a non-empty 1-D array, got shape {x.shape}")
+    if not presliding_length > 0:
+        raise ValueError(f"dahl_path: presliding_length = {presliding_length} must be > 0 [m]")
+    if smoothing_velocity < 0 or (smoothing_velocity > 0 and not (dt is not None and dt > 0)):
+        raise ValueError(f"dahl_path: smoothing_velocity = {smoothing_velocity} needs a sample period dt > 0 "
+                         f"(got {dt}); 0 is the sign limit")
+    W = np.broadcast_to(np.asarray(level, dtype=float), x.shape)
+    dx = np.diff(x)
+    c = dx / presliding_length
+    s = np.sign(dx) if smoothing_velocity == 0 else np.tanh(np.clip(dx / (dt * smoothing_velocity), -40.0, 40.0))
+    lam = c * s
+    e = np.exp(-lam)
+    small = lam < 1e-4
+    safe = np.where(small, 1.0, lam)
+    phi1 = np.where(small, 1.0 - lam / 2 + lam ** 2 / 6, -np.expm1(-lam) / safe)
+    phi2 = np.where(small, 0.5 - lam / 6 + lam ** 2 / 24, (lam + np.expm1(-lam)) / safe ** 2)
+    drive = c * (W[:-1] * phi1 + (W[1:] - W[:-1]) * phi2)
+    out = np.empty(x.shape)
+    F = out[0] = float(initial_state)
+    for k, (ek, dk) in enumerate(zip(e.tolist(), drive.tolist())):
+        F = F * ek + dk
+        out[k + 1] = F
+    return out
 
 
 def guide_friction_level(tension, constant, capstan_exponent, direction):

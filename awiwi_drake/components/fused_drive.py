@@ -1,6 +1,7 @@
 """One system per tendon drive: motors + springs + routing + guide friction + hysteresis.
 
-:class:`TendonDrive_` is the fast path of every rig, finger and the hand. Its
+:class:`TendonDrive_` is the drive of the tendon rig; the link rigs and the fingers/hand evaluate
+its model (:class:`DriveModel`) in their own systems. Its
 physics is one function, :func:`drive_laws`, that calls the law functions of
 this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
 tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
@@ -304,7 +305,7 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
     ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
     """
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
-                           "(e.g. LeverSpringMechanism.to_polynomial()) or backend='python'")
+                           "(e.g. LeverSpringMechanism.to_polynomial())")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
     key = _model_key(model, jit)
     if key is not None and key in _KERNELS:

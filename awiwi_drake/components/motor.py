@@ -185,8 +185,7 @@ def MotorBank_(T):
             n = int(num_motors)
             self.params, self.num_motors, self.load_input = params, n, load_input
             self._load_gain = params.pulley_radius if load_input == "tendon_force" else 1.0
-            # All misc (z) state, like the SymbolicVectorSystem backend, so a diagram orders its
-            # state [plant q, plant v, theta, omega] for both backends.
+            # All misc (z) state, so a diagram orders its state [plant q, plant v, theta, omega].
             self.DeclareContinuousState(2 * n)
             self._u = self.DeclareVectorInputPort("motor_torque", n)
             self._f = self.DeclareVectorInputPort(load_input, n)

@@ -45,7 +45,7 @@ SAMPLED_INTEGRATOR = "runge_kutta3"
 def _check(model) -> None:
     if not isinstance(model, DriveModel) or not model.has_link:
         raise ValueError("rig_dynamics_system: model must be a DriveModel with link_inertia/link_damping")
-    model.require_symbolic("rig_dynamics_system", "use their calibration polynomial or backend='python'")
+    model.require_symbolic("rig_dynamics_system", "use their calibration polynomial")
 
 
 def rig_dynamics_expressions(model: DriveModel):

@@ -474,8 +474,8 @@ class TendonSprings:
     evaluated together, one call per distinct law).  ``force``, ``stiffness``, ``stiffness_derivative``,
     ``energy`` take an elongation vector ``x`` of one entry per tendon and ``inverse_force`` a force
     vector; entry ``i`` is ``laws[i]`` evaluated at ``x[i]``.  Float, AutoDiffXd and (when every law
-    supports it) Expression arrays pass through, so a :class:`SpringBank_` (python and symbolic drive
-    backends) takes a bank in place of one law.  This is the one place a vector of tendons meets its
+    supports it) Expression arrays pass through, so a :class:`SpringBank_` takes a bank in place of one
+    law.  This is the one place a vector of tendons meets its
     laws: the drive, the operating points, the chain's force maps and distribution tables, the
     per-joint reduced models and the finger backstepping all evaluate it.
 

@@ -23,8 +23,7 @@ saturated 48 % of the time and did not settle (a one-period-delay model of the
 sampled linear loop has spectral radius 1.018); with Kd,imp = m f_s / 4 = 5.4e-4
 the 3 kHz step settles in 0.22 s without saturation (docs/REPRODUCTIONS.md,
 ch. 15).  The limit is conservative at higher rates (``--rate 30000``).
-``--rate 0`` runs it continuously on a rig without direct feedthrough (python
-backend; the CLI's symbolic rigs have one).
+``--rate 0`` runs it continuously.
 """
 
 from __future__ import annotations

@@ -73,6 +73,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator, LinearQuadraticRegulator
 
 from awiwi_drake.analysis.linear import LinearizationResult, linearize
@@ -86,7 +87,7 @@ from awiwi_drake.hand.coupling import LinearFingerCoupling
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams, StiffnessCorrectionParams
 from awiwi_drake.parameters.joint_design import JointDesignParams
-from awiwi_drake.rigs.base import OperatingPoint, Rig
+from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
 from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
@@ -141,7 +142,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
                     torque: float | None = None, friction: str = "motion"):
     """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
-    Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (python backend), its
+    Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (``sub.plant`` its link alone), its
     operating point and its chain design point (:func:`~awiwi_drake.control.chain.chain_design_point`
     layout; close it with :func:`force_loop` or a :class:`~awiwi_drake.control.chain.TendonChainController`
     with ``distribution="sharing"``).
@@ -166,9 +167,11 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     b = float(joint_damping(rig)[dof, dof])
     design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
     springs = rig_springs(rig).subset(active)          # each of the DoF's tendons with its own law
-    diagram, plant, drive, names, _ = _link_rig(
-        name=f"{rig.name}-{name}", params=design_params, motor=design_params.motor, spring=springs,
-        coupling=coupling, inertia=M, damping=b, backend="python", hysteresis=HysteresisParams())
+    diagram, drive, names, _ = _link_rig(name=f"{rig.name}-{name}", motor=design_params.motor, spring=springs,
+                                         coupling=coupling, inertia=M, damping=b, hysteresis=HysteresisParams())
+    plant = MultibodyPlant(0.0)                        # the link alone (joint_inertia, joint_damping read it)
+    add_revolute_link(plant, name="joint", inertia=M, damping=b)
+    plant.Finalize()
     tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
     tau = tau0 if torque is None else float(torque)
     W = -np.linalg.pinv(P_j.T)
@@ -184,7 +187,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     op = OperatingPoint(np.concatenate([[0.0, 0.0], theta, np.zeros(active.size)]), u, np.array([-tau]),
                         joint_angle=np.zeros(1), tendon_force=f, elongation=x, tendon_stiffness=kt,
                         joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
-    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, "python", lambda: op, plant, springs,
+    sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, lambda: op, plant, springs,
               drive=drive, coupling=coupling, tension_only=True)
     sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
                      torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])
@@ -613,7 +616,7 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     (15.88), the true joint state) and compare its poles with the designs (:class:`PoleCheck`).
 
     Use a rig built with the design's motor model (``params.replace(motor=design_motor(params.motor))``)
-    and ``backend="python"`` for the comparison the per-joint models make."""
+    without hysteresis and guide friction for the comparison the per-joint models make."""
     c = chain or HandChainParams()
     ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing",
                                   friction_observer=None)      # the designs: the stage itself, no ch. 9 observer

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import ndtr
 
+from awiwi_drake.components.friction import dahl_path
 from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.hand.diagrams import finger_diagram
 from awiwi_drake.parameters.components import HysteresisParams
@@ -104,6 +105,12 @@ def _filter_held(u: np.ndarray, sigma: float, dt: float, half: int) -> np.ndarra
     k = np.arange(-half, half + 1) * dt     # t_i - t_j for the kernel's span
     w = ndtr(k / sigma) - ndtr((k - dt) / sigma)   # integral of H over [t_j, t_j + dt) seen from t_i
     return _filter(u, w)
+
+
+def _windows(t: np.ndarray, mask: np.ndarray) -> list:
+    """``[(t_start, t_end), ...]`` [s] of the runs of ``mask`` (consecutive decimated samples)."""
+    k = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(np.int8), [0]])))
+    return [(float(t[a]), float(t[b - 1])) for a, b in zip(k[::2], k[1::2])]
 
 
 # ---------------------------------------------------------------------------- residuals
@@ -214,8 +221,10 @@ class FingerResiduals:
         hyst = rig.drive.model.hysteresis      # a nominal loop on single tendons (tendon_springs): its force removed
         for i, h in enumerate(hyst if isinstance(hyst, tuple) else ()):
             if h.enabled:
-                raw[i] = np.maximum(raw[i] - hysteresis_loop(raw[i], laws_t[i], h, self.sig_force[i]), 1e-3)
-        xm = self.consistent(np.stack([np.asarray(laws_t[i].inverse_force(raw[i]), float) for i in range(m)]))
+                raw[i] = np.maximum(raw[i] - hysteresis_loop(raw[i], laws_t[i], h, self.sig_force[i],
+                                                              self.settings.finger_hysteresis_play, self.dt), 1e-3)
+        self._x_full = np.stack([np.asarray(laws_t[i].inverse_force(raw[i]), float) for i in range(m)])
+        xm = self.consistent(self._x_full)
         stiff = np.stack([np.asarray(laws_t[i].stiffness(xm[i]), float) for i in range(m)])
         y = xm - rig.offsets[:, None] - r * self.theta            # = P q (+ noise + what the laws miss)
         # noise of y_i: the force noise through the spring, the angle noise through the pulley (filtered)
@@ -223,6 +232,7 @@ class FingerResiduals:
         wsq = 1.0 / np.sqrt(var)                                    # (m, K)
         K = y.shape[1]
         yw = (wsq * y).T                                            # (K, m)
+        self.not_converged = []      # time windows [s] where the thumb's Gauss-Newton did not converge
         if P is not None:
             A = wsq.T[:, :, None] * P[None]                         # (K, m, n) whitened routing
             self.q_hat = np.stack([np.linalg.lstsq(A[k], yw[k], rcond=None)[0] for k in range(0, K)], axis=1)
@@ -231,16 +241,21 @@ class FingerResiduals:
             c, n = rig.coupling, self.n
             h0 = np.asarray(c.h(np.zeros(n)), float)
             Q, A = np.zeros((K, n)), np.empty((K, m, n))
+            iters, tol = self.settings.finger_gauss_newton_iterations, self.settings.finger_gauss_newton_tolerance
+            stuck = np.zeros(K, dtype=bool)
             for k in range(K):
                 q = Q[k - 1] if k else np.zeros(n)
-                for _ in range(20):
+                for _ in range(iters):
                     A[k] = wsq[:, k, None] * np.asarray(c.P(q), float)
                     dq = np.linalg.lstsq(A[k], yw[k] - wsq[:, k] * (np.asarray(c.h(q), float) - h0), rcond=None)[0]
                     q = q + dq
-                    if np.max(np.abs(dq)) < 1e-12:
+                    if np.max(np.abs(dq)) < tol:
                         break
+                else:
+                    stuck[k] = True
                 Q[k] = q
                 A[k] = wsq[:, k, None] * np.asarray(c.P(q), float)
+            self.not_converged = _windows(self.time, stuck)
             self.q_hat = Q.T
             hq = np.stack([np.asarray(c.h(q), float) - h0 for q in Q], axis=1)
         Qm, _ = np.linalg.qr(A)                                     # (K, m, n)
@@ -249,6 +264,17 @@ class FingerResiduals:
         self.eps = np.einsum("kij,kj->ik", proj, yw - (wsq * hq).T)
         self.proj, self.wsq, self.stiff = proj, wsq, stiff
         self.elong = rig.offsets[:, None] + r * self.theta + hq
+
+    def loop_removed(self, i: int, h) -> np.ndarray:
+        """The spring-side residual's change (m, K) when tendon ``i``'s spring carries the loop ``h``
+        (:class:`~awiwi_drake.parameters.components.HysteresisParams`): its force removed from the measured one
+        before the inverse spring law, as a nominal finger with that loop does (:meth:`_spring_side`), not
+        linearised; the weights and the projection stay this residual's (they move by the loop's share of the
+        stiffness only)."""
+        law, F = self.rig.spring_laws[i], np.maximum(self._force_raw[i], 1e-3)
+        z = hysteresis_loop(F, law, h, self.sig_force[i], self.settings.finger_hysteresis_play, self.dt)
+        shift = self.consistent(self._x_full[i] - np.asarray(law.inverse_force(np.maximum(F - z, 1e-3)), float))
+        return (self.proj[:, :, i] * (self.wsq[i] * shift)[:, None]).T
 
     # ------------------------------------------------------------------ energies
     def ratios(self) -> dict:
@@ -281,31 +307,29 @@ class Candidate:
     capstan_rms: float = 0.0    # guide friction: RMS torque of its tension-proportional part [N m]
 
 
-def _dahl(x: np.ndarray, length: float, play: float) -> np.ndarray:
-    """Normalised Dahl state (catalog ``spring_hysteresis``: ``w' = (x' - |x'| w)/delta``) on the elongation
-    ``x`` after a play operator of half-width ``play`` (noise must not flip the direction)."""
-    y, xs = float(x[0]), np.empty_like(x)
+def _play(x: np.ndarray, half_width: float) -> np.ndarray:
+    """Play operator of half-width ``half_width``: the output follows ``x`` only once it leaves ``[y - h, y + h]``
+    (noise smaller than the play does not reverse a loop's direction)."""
+    y, out = float(x[0]), np.empty_like(x)
     for k, v in enumerate(x.tolist()):
-        y = min(max(y, v - play), v + play)
-        xs[k] = y
-    dx = np.diff(xs)
-    w, out = 0.0, [0.0]
-    for a, sg in zip(np.exp(-np.abs(dx) / length).tolist(), np.sign(dx).tolist()):
-        if sg != 0.0:
-            w = sg + (w - sg) * a
-        out.append(w)
-    return np.array(out)
+        y = min(max(y, v - half_width), v + half_width)
+        out[k] = y
+    return out
 
 
-def hysteresis_loop(force: np.ndarray, law, h, force_noise: float) -> np.ndarray:
+def hysteresis_loop(force: np.ndarray, law, h, force_noise: float, play: float, dt: float) -> np.ndarray:
     """The hysteresis force ``z`` [N] of one spring mechanism along a measured force record (full rate): the
-    package's loop (:class:`~awiwi_drake.parameters.components.HysteresisParams`: half-width ``beta f + z0``,
-    presliding length ``delta``) on the elongation the elastic law gives for the force, after a play operator
-    of three noise widths (force noise must not reverse the loop)."""
-    F = np.asarray(force, float)
-    x = np.asarray(law.inverse_force(np.maximum(F, 1e-3)), float)
-    play = 3.0 * force_noise / float(np.median(np.asarray(law.stiffness(x), float)))
-    return (h.width_ratio * F + h.width_offset) * _dahl(x, h.presliding_length, play) * np.tanh(F)
+    package's loop (:class:`~awiwi_drake.parameters.components.HysteresisParams`, the rate law
+    :func:`~awiwi_drake.components.spring.hysteresis_rate`, level ``beta f + z0``, presliding length ``delta``)
+    solved exactly per sample ``dt`` (:func:`~awiwi_drake.components.friction.dahl_path`) on the elongation the elastic
+    law gives for the force, after a play operator of ``play`` force-noise widths (force noise must not reverse
+    the loop: ``DiscrepancySettings.finger_hysteresis_play``). The level is taken at the measured force, which
+    holds the loop itself: a relative level error of at most ``beta`` (the loop's half-width over the force)."""
+    F = np.maximum(np.asarray(force, float), 1e-3)
+    x = np.asarray(law.inverse_force(F), float)
+    half = play * force_noise / float(np.median(np.asarray(law.stiffness(x), float)))
+    return dahl_path(_play(x, half), h.width_ratio * F + h.width_offset, h.presliding_length, h.smoothing_velocity,
+                     dt)
 
 
 def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
@@ -360,15 +384,16 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
     elif effect in SPRING_SIDE:
         e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]     # (K, m): a force error on tendon i
         if effect == "spring_hysteresis":
-            # the package's loop (HysteresisParams, Fig 4.8b): half-width beta f + z0 times the Dahl state of the
-            # elongation.  Evaluated at the full rate on the elongation the measured force gives, then filtered
+            # the package's loop (HysteresisParams, Fig 4.8b): the Dahl law with level beta f + z0 on the elongation
+            # (hysteresis_loop), linear in (beta, z0).  Evaluated at the full rate on the elongation the measured force gives, then filtered
             # (consistent): the finger's link modes move the tendons by up to ~1 mm within a few samples, which
             # cycles the loop; a Dahl state of the filtered elongation would not see those cycles.
             F = fr._force_raw[i]
-            for length in (5e-5, 2e-4, 8e-4):
+            for length in fr.settings.finger_hysteresis_lengths:
                 cols = [hysteresis_loop(F, fr.rig.spring_laws[i], HysteresisParams(width_ratio=a, width_offset=b,
                                                                                    presliding_length=length),
-                                        fr.sig_force[i]) for a, b in ((1.0, 0.0), (0.0, 1.0))]
+                                        fr.sig_force[i], fr.settings.finger_hysteresis_play, fr.dt)
+                        for a, b in ((1.0, 0.0), (0.0, 1.0))]
                 out.append((f"length {length:g} m", np.stack([(e_i * H(c)[:, None]).T for c in cols]),
                             ["hysteresis_ratio", "hysteresis_width"], {"hysteresis_length": length}))
         elif effect == "nominal_spring":
@@ -514,6 +539,7 @@ class FingerDiagnosis:
     augmented: AugmentedParameters | None = None   # the dataset's FingerRigParams with the named effects written
     finger: str = ""
     spring_checked: bool = True     # False on the thumb: its spring side is not judged (diagnose_finger)
+    warnings: list = field(default_factory=list)   # e.g. windows where the thumb's joint angles did not converge
 
     @property
     def named_effects(self) -> list:
@@ -525,7 +551,19 @@ class FingerDiagnosis:
 
     @property
     def places(self) -> dict:
-        return {s.effect: s.place for s in self.steps if s.kind == "physical"}
+        """``{effect: place}`` of the named physical effects; an effect named on several tendons keeps every
+        place, in the order named, joined by ``" and "`` (:attr:`tendons_named` has them as lists)."""
+        return {e: " and ".join(s.place for s in self.steps if s.kind == "physical" and s.effect == e)
+                for e in self.named_effects}
+
+    @property
+    def tendons_named(self) -> dict:
+        """``{effect: [tendon names]}`` of the named physical effects (every tendon each was named on)."""
+        out: dict = {}
+        for s in self.steps:
+            if s.kind == "physical":
+                out.setdefault(s.effect, []).append(self.tendon_names[s.tendon - 1])
+        return out
 
     def summary(self) -> dict:
         """The JSON summary (``diagnose --json``)."""
@@ -539,6 +577,7 @@ class FingerDiagnosis:
                 "unexplained_residual": self.unexplained_residual, "unexplained": self.unexplained,
                 "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history,
                 "unused_columns": self.unused_columns, "spring_side_checked": self.spring_checked,
+                "warnings": self.warnings,
                 "augmented": None if self.augmented is None else {
                     "parameters": finger_parameters_to_json(self.finger, self.augmented.params),
                     "applied": self.augmented.applied, "not_representable": self.augmented.not_representable}}
@@ -548,6 +587,7 @@ class FingerDiagnosis:
         if not self.spring_checked:
             lines.append(f"  spring side not judged: the {self.finger}'s routing depends on the joint angles "
                          f"(motor side only: hysteresis and force-sensor errors are not looked for)")
+        lines += [f"  warning: {w}" for w in self.warnings]
         if self.unused_columns:
             lines.append(f"  not used: {', '.join(self.unused_columns)} (joint angles are estimated from the tendons)")
         for s in self.steps:
@@ -593,6 +633,15 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     spring_checked = bool(fr.rig.coupling.is_constant)
     if not spring_checked:
         say(f"spring side not judged: the {fr.finger}'s routing depends on the joint angles (motor side only)")
+    warnings = []
+    if fr.not_converged:
+        warnings.append(
+            f"joint angles from the tendons did not converge in {settings.finger_gauss_newton_iterations} "
+            f"Gauss-Newton steps (DiscrepancySettings.finger_gauss_newton_iterations) in "
+            + ", ".join(f"t = {a:.3f}-{b:.3f} s" for a, b in fr.not_converged[:5])
+            + (f" and {len(fr.not_converged) - 5} more windows" if len(fr.not_converged) > 5 else "")
+            + ": the spring-side residual there is not the routing's")
+        say("warning: " + warnings[-1])
 
     def current():
         mot = [float(np.mean((base_motor[i] / fr.sigma_tau[i]) ** 2)) for i in range(fr.m)]
@@ -651,6 +700,11 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                     f"the effect follows its own tendon")) if x)
         if win.side == "motor":
             base_motor = base_motor - win.fitted
+        elif win.effect == "spring_hysteresis":   # removed as the written-back loop removes it (not linearised)
+            g = win.params
+            base_spring = base_spring - fr.loop_removed(win.tendon, HysteresisParams(
+                enabled=True, width_ratio=g["hysteresis_ratio"], width_offset=g["hysteresis_width"],
+                presliding_length=g["hysteresis_length"]))
         else:
             base_spring = base_spring - win.fitted
         used.add((win.effect, win.tendon))
@@ -688,6 +742,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     say(f"{stop}: {verdict}")
     dx = FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
                          time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
-                         settings.unexplained_ratio, unused, finger=fr.finger, spring_checked=spring_checked)
+                         settings.unexplained_ratio, unused, finger=fr.finger, spring_checked=spring_checked,
+                         warnings=warnings)
     dx.augmented = augmented_finger_parameters(dx, fr.params)
     return dx

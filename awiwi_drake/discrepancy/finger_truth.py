@@ -46,6 +46,7 @@ from awiwi_drake.parameters.rigs import MotorPositionGains
 
 from . import laws
 from .data import Dataset, finger_rig_name
+from .truth import stribeck_draw
 
 __all__ = ["FINGER_HIDDEN_EFFECTS", "FingerHiddenTorque_", "nominal_finger_params", "make_finger_dataset"]
 
@@ -115,9 +116,7 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
     u, k = rng.uniform, float(strength)
     tr: dict = {"hidden": list(hidden), "place": int(place) if hidden else None, "strength": k}
     if "motor_friction" in hidden:
-        fc = k * u(*gen.motor_coulomb_range)
-        tr["motor_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.8), vs=u(0.1, 0.5), eps=u(0.02, 0.05),
-                                    viscous=k * u(0.0, 0.002))   # the rig truth's Stribeck shape (truth.draw_truth)
+        tr["motor_friction"] = stribeck_draw(k * u(*gen.motor_coulomb_range), gen.motor_viscous_range, rng, k)
     if "guide_friction" in hidden:
         tr["guide_friction"] = dict(c0=k * u(*gen.guide_c0_range), mu_angle=k * u(*gen.guide_mu_range), v0=2e-4)
     if "motor_ripple" in hidden:

@@ -188,6 +188,16 @@ def _here(tr: dict, i: int) -> bool:
     return tr.get("place") in (None, i + 1)
 
 
+def stribeck_draw(coulomb: float, viscous_range, rng: np.random.Generator, viscous_scale: float = 1.0) -> dict:
+    """A hidden Stribeck friction (:func:`~awiwi_drake.components.friction.stribeck_friction`) with Coulomb level
+    ``coulomb``: its shape drawn from the ``stribeck_*`` ranges of
+    :class:`~awiwi_drake.parameters.discrepancy.TruthGeneratorParams`, the viscous part from ``viscous_range`` times
+    ``viscous_scale`` (the rigs' and the fingers' truths)."""
+    g, u = TruthGeneratorParams(), rng.uniform
+    return dict(fc=coulomb, fs=coulomb * u(*g.stribeck_static_ratio_range), vs=u(*g.stribeck_velocity_range),
+                eps=u(*g.stribeck_smoothing_range), viscous=viscous_scale * u(*viscous_range))
+
+
 def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0,
                place: int | None = None) -> dict:
     """Random truth parameters for the hidden effects (and optional miscalibrations);
@@ -211,9 +221,8 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
     tr: dict = {}
     u = rng.uniform
     if "motor_friction" in hidden:
-        fc = u(0.06, 0.2)
-        tr["motor_friction"] = dict(fc=fc, fs=fc * u(1.2, 1.8), vs=u(0.1, 0.5), eps=u(0.02, 0.05),
-                                    viscous=u(0.0, 0.02))
+        g = TruthGeneratorParams()
+        tr["motor_friction"] = stribeck_draw(u(0.06, 0.2), g.motor_viscous_range, rng)
     if "motor_ripple" in hidden:
         orders = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False)
         harm = []

@@ -119,15 +119,12 @@ def frame_camera(points: np.ndarray, params: AnimationParams | None = None) -> t
     return target + distance * direction, target
 
 
-def record_animation(out, *, target: str = "hand", duration: float = 1.5, backend: str = "compiled",
-                     meshcat: Meshcat | None = None, params: AnimationParams | None = None,
+def record_animation(out, *, target: str = "hand", duration: float = 1.5, meshcat: Meshcat | None = None, params: AnimationParams | None = None,
                      progress=None) -> AnimationResult:
     """Simulate a grasp of ``target`` ("hand" or a finger name) and write ``out`` (HTML).
 
     The HTML is self-contained (opens offline) and holds the geometry, the
-    motion and the camera framed on the moving links.  ``backend="compiled"`` (the
-    default) is the fast drive (see benchmarks/bench_rigs.py).
-    ``progress(t, duration)`` is passed to :func:`simulate` (e.g.
+    motion and the camera framed on the moving links.  ``progress(t, duration)`` is passed to :func:`simulate` (e.g.
     :class:`awiwi_drake.config.SimulationProgress`).  Returns an :class:`AnimationResult`.
     """
     if target != "hand" and target not in FINGERS:
@@ -138,8 +135,7 @@ def record_animation(out, *, target: str = "hand", duration: float = 1.5, backen
     out = pathlib.Path(out)
     if out.suffix.lower() not in (".html", ".htm"):
         raise ValueError(f"out = {str(out)!r}: the recording is written as HTML (use a .html file name)")
-    rig = (hand_diagram(backend=backend, visual=True) if target == "hand"
-           else finger_diagram(finger=target, backend=backend, visual=True))
+    rig = hand_diagram(visual=True) if target == "hand" else finger_diagram(finger=target, visual=True)
     from awiwi_drake.control import closed_loop, make_controller
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     op = rig.operating_point()

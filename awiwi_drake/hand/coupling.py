@@ -1,7 +1,7 @@
 """Tendon routing of the fingers and the wrist: lengths ``h(q)``, coupling ``P(q)``, stiffness map.
 
-The wrist's coupling object :class:`WristCoupling` uses the closed-form kinematics of
-:mod:`awiwi_drake.hand.wrist` ((6.1)-(6.9)).
+The wrist's length offsets come from the closed-form kinematics of :mod:`awiwi_drake.hand.wrist`
+((6.1)-(6.9)).
 
 Sign convention (docs/ARCHITECTURE.md): ``h_i(q)`` is the length of tendon
 path ``i``; ``P(q) = dh/dq`` (m x n); spring elongation
@@ -52,16 +52,14 @@ from typing import Sequence
 
 import numpy as np
 
-from .._math import Tangent, is_float
+from .._math import is_float
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerParams, HandParams, ThumbParams,
                                check_finger_structure, finger_params)
 from .kinematics import finger_joint_names, rot_y, rot_z
-from ..parameters.wrist import WristParams
-from .wrist import wrist_jacobian, wrist_params, wrist_tendon_lengths
 
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
            "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
-           "coupling_selection", "dof_selection", "index_coupling_matrix", "WristCoupling"]
+           "coupling_selection", "dof_selection", "index_coupling_matrix"]
 
 
 def _quiet_fp(method):
@@ -486,56 +484,4 @@ def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:
         raise ValueError(f"k_t must have shape ({coupling.num_tendons},), got {k_t.shape}")
     P = coupling.P(q)
     return P.T @ (k_t[:, None] * P) + coupling.tension_hessian(q, f)
-
-
-class WristCoupling:
-    """The wrist as a routing coupling object: ``h(q)`` (38,) and ``P(q)`` (38 x 2).
-
-    ``q = [q71, q73]`` [rad]; ``h`` are the absolute tendon path lengths
-    through the wrist (6.9) and ``P = dh/dq``, both generic in the scalar type
-    so :class:`TendonRouting_` (``-P^T f`` on the wrist joints) converts to
-    AutoDiffXd.  Rows follow Table 6.2 (tendon 1..38).
-
-    Parameters
-    ----------
-    params : WristParams, optional
-    """
-
-    num_joints = 2
-
-    def __init__(self, params: WristParams | None = None):
-        self.params = wrist_params(params)
-        self.num_tendons = self.params.num_tendons
-
-    def _split(self, q):
-        q = np.asarray(q) if not isinstance(q, np.ndarray) else q
-        if q.shape != (2,):
-            raise ValueError(f"wrist joint vector q must have 2 entries [q71, q73], got shape {q.shape}")
-        return q[0], q[1]
-
-    def h(self, q) -> np.ndarray:
-        """Tendon path lengths through the wrist [m]."""
-        return wrist_tendon_lengths(*self._split(q), self.params)
-
-    def P(self, q) -> np.ndarray:
-        """Coupling matrix dh/dq (num_tendons x 2) [m/rad]."""
-        return wrist_jacobian(*self._split(q), self.params)
-
-    def tension_hessian(self, q, f) -> np.ndarray:
-        """``d(P(q)^T f)/dq = sum_i f_i Hess h_i`` (2 x 2, symmetric) [N m/rad].
-
-        The geometric stiffness of the wrist joints due to the tendon forces
-        ``f`` (with tau = -P^T f the joint stiffness map -dtau/dq is ``P^T K_t P + tension_hessian``).  Exact:
-        forward-mode tangents nested over the scalar type.
-        """
-        q71, q73 = self._split(q)
-        f = np.asarray(f)
-        if f.shape != (self.num_tendons,):
-            raise ValueError(f"tendon force f must have {self.num_tendons} entries, got shape {f.shape}")
-        unit = (np.array([1.0, 0.0]), np.array([0.0, 1.0]))
-        P = wrist_jacobian(Tangent(q71, unit[0]), Tangent(q73, unit[1]), self.params)
-        scalar = is_float(q71) and is_float(q73) and is_float(f)
-        dP = np.array([[e.d for e in row] for row in P], dtype=float if scalar else object)  # (m, 2, 2)
-        return np.tensordot(f, dP, axes=(0, 0))
-
 

@@ -1,24 +1,17 @@
-"""Finger and hand diagrams: motors + springs + routing (one tendon drive) + MultibodyPlant.
+"""Finger and hand diagrams: links (a MultibodyPlant's dynamics) + motors, springs and routing in one system.
 
 ``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig`
 (a :class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` /
 ``analysis.simulate`` work on them.
 
-Diagram (names as in the exported graph), default ``backend="compiled"``::
+Diagram (names as in the exported graph)::
 
     motor_torque, external_torque ──> hand_dynamics (links + tendon drive in one system,
     wrist_angle ──> wrist_tendon_offsets ──> ...    :class:`~awiwi_drake.hand.dynamics.HandDynamics_`)
 
 ``hand_dynamics`` evaluates the MultibodyPlant's dynamics (mass matrix, bias, damping) and the
 drive's laws in one compiled call (float) or through the plant and the laws (AutoDiffXd,
-Expression); ``rig.plant`` is that (standalone) MultibodyPlant.  With ``backend="python"`` or
-``"symbolic"`` the MultibodyPlant is in the diagram::
-
-    motor_torque ──> tendon_drive (MotorBank + SpringBank + TendonRouting, or one C++ SVS)
-                        ^ joint_angle            │ generalized_force (-P^T f)
-    <finger>_plant ─────┘  (q [, wrist offsets]) v
-        ^ applied_generalized_force <── generalized_force_sum <── coupling_element (-G [q; v])
-                                                              <── external_torque (input)
+Expression); ``rig.plant`` is that (standalone) MultibodyPlant.
 
 Exported inputs: ``motor_torque`` (m) [N m], ``external_torque`` (n) [N m],
 and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad].
@@ -31,8 +24,7 @@ part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the w
 State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
 then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces, then with
 guide friction (on by default) ``g (m)``, the guide friction forces of the tendon paths
-(both Dahl states of the default ``backend="compiled"`` drive, which adds ``-P^T g`` to its
-``generalized_force``; the python and symbolic backends carry neither).
+(both Dahl states; the guide friction adds ``-P^T g`` to the joint torque).
 
 The wrist enters the routing like extra joints: the drive's coupling is the
 finger coupling plus ``m`` length-offset "joints" (identity columns of
@@ -48,9 +40,9 @@ from typing import Any
 import numpy as np
 from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.primitives import Demultiplexer, MatrixGain
 
-from ..components.drive import TendonDrive, build_tendon_drive
+from ..components.drive import TendonDrive
 from ..components.motor import motor_ripple_torque, tendon_motor_params
 from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
@@ -58,12 +50,10 @@ from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
 from ..rigs.base import OperatingPoint, Rig
 from ..rigs.base import state_names as rig_state_names
 from .coupling import HandCoupling, dof_selection, finger_coupling
-from .plant import add_applied_force_sum, coupling_force_gain, make_finger_plant, make_hand_plant
+from .plant import coupling_force_gain, make_finger_plant, make_hand_plant
 from .systems import tendon_bending_angles
 
-__all__ = ["HandRig", "finger_diagram", "hand_diagram", "DEFAULT_BACKEND"]
-
-DEFAULT_BACKEND = "compiled"
+__all__ = ["HandRig", "finger_diagram", "hand_diagram"]
 
 
 @dataclass
@@ -159,22 +149,11 @@ def _any_hysteresis(h) -> bool:
     return any(x.enabled for x in h) if isinstance(h, tuple) else bool(h.enabled)
 
 
-def _build(name, p, plant_factory, parts, backend, wrist, visual):
+def _build(name, p, plant_factory, parts, wrist, visual):
     """Shared builder of finger and hand diagrams."""
-    compiled = backend == "compiled"
-    if _any_hysteresis(tendon_hysteresis(p, [t for c in parts.values() for t in c.tendon_names])) and not compiled:
-        raise ValueError(f"{name}: spring.hysteresis.enabled=True needs backend='compiled' (the python and "
-                         f"symbolic drives do not carry the hysteresis state here), got backend={backend!r}")
-    if p.guide_friction and not compiled:
-        raise ValueError(f"{name}: guide_friction=True needs backend='compiled' (the python and symbolic "
-                         f"drives do not carry the guide friction state), got backend={backend!r}; "
-                         "use params.with_physics(hysteresis=False, guide_friction=False) for them")
-    if p.tendon_motors and not compiled:
-        raise ValueError(f"{name}: tendon_motors (per-tendon motor parameters) needs backend='compiled', got "
-                         f"backend={backend!r}")
     b = DiagramBuilder()
-    sg = SceneGraph() if compiled and visual else None
-    plant, models = plant_factory(None, sg) if compiled else plant_factory(b, None)
+    sg = SceneGraph() if visual else None
+    plant, models = plant_factory(sg)
     n = plant.num_positions()
     coupling = HandCoupling(parts) if len(parts) > 1 else next(iter(parts.values()))
     m = coupling.num_tendons
@@ -190,14 +169,11 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
                          f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
     G = coupling_force_gain(plant, models)
-    if compiled:
-        model = _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg)
-    else:
-        drive = _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G, rows, wrist, visual)
+    model = _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg)
     diagram = b.Build()
     diagram.set_name(name)
-    if compiled:        # the drive lives inside the one plant system: its handle points at the rig
-        drive = TendonDrive(diagram, m, drive_coupling.num_joints, backend, model.has_hysteresis, model)
+    # the drive lives inside the one plant system: its handle points at the rig
+    drive = TendonDrive(diagram, m, drive_coupling.num_joints, model.has_hysteresis, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
                                   guide_friction=drive.guide_friction)
@@ -207,7 +183,7 @@ def _build(name, p, plant_factory, parts, backend, wrist, visual):
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle, drive.num_states - 2 * m)
 
-    return HandRig(name, diagram, p, state_names, backend, equilibrium, plant, spring, drive=drive, coupling=coupling,
+    return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                    drive_coupling=drive_coupling, models=models, joint_names=joint_names,
                    tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring,
@@ -227,8 +203,8 @@ def _add_wrist_offsets(b, rows, m):
     return sel.get_output_port()
 
 
-def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg):
-    """The default plant: links and drive in one :class:`~.dynamics.HandDynamics_` (compiled float path)."""
+def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg):
+    """The plant: links and drive in one :class:`~.dynamics.HandDynamics_` (compiled float path)."""
     from ..components.fused_drive import DriveModel, GuideFrictionModel
     from .dynamics import HandDynamics_, LinkModel
     n, m = coupling.num_joints, coupling.num_tendons
@@ -261,44 +237,6 @@ def _add_compiled_plant(b, name, p, plant, coupling, drive_coupling, laws, offse
         b.Connect(pose.get_output_port(), sg.get_source_pose_port(plant.get_source_id()))
         b.ExportOutput(sg.get_query_output_port(), "query_object")
     return model
-
-
-def _add_multibody_plant(b, p, plant, laws, drive_coupling, offsets, backend, G, rows, wrist, visual):
-    """The python / symbolic backends: MultibodyPlant + the drive sub-diagram, wired through the plant's ports."""
-    n, m = plant.num_positions(), drive_coupling.num_tendons
-    drive = build_tendon_drive(motor=p.motor, spring=laws, coupling=drive_coupling, offsets=offsets,
-                               backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
-    d = b.AddSystem(drive.diagram)
-    split = b.AddNamedSystem("plant_state_split", Demultiplexer([n, n]))
-    b.Connect(plant.get_state_output_port(), split.get_input_port())
-    if d.HasInputPort("joint_velocity"):
-        b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
-    if wrist:
-        jmux = b.AddNamedSystem("joint_and_wrist", Multiplexer([n, m]))
-        b.Connect(split.get_output_port(0), jmux.get_input_port(0))
-        b.Connect(_add_wrist_offsets(b, rows, m), jmux.get_input_port(1))
-        b.Connect(jmux.get_output_port(), d.GetInputPort("joint_angle"))
-        gf_split = b.AddNamedSystem("generalized_force_split", Demultiplexer([n, m]))
-        b.Connect(d.GetOutputPort("generalized_force"), gf_split.get_input_port())
-        tendon_tau = gf_split.get_output_port(0)
-    else:
-        b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
-        tendon_tau = d.GetOutputPort("generalized_force")
-    add_applied_force_sum(b, plant, [tendon_tau], G)
-    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    state = b.AddNamedSystem("state_mux", Multiplexer([2 * n, drive.num_states]))
-    b.Connect(plant.get_state_output_port(), state.get_input_port(0))
-    b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
-    b.ExportOutput(state.get_output_port(), "state")
-    b.ExportOutput(split.get_output_port(0), "joint_angle")
-    b.ExportOutput(split.get_output_port(1), "joint_velocity")
-    b.ExportOutput(tendon_tau, "joint_torque")
-    for nm in ("motor_angle", "motor_velocity", "motor_state", "tendon_force", "tendon_stiffness",
-               "elongation", "applied_torque"):
-        b.ExportOutput(d.GetOutputPort(nm), nm)
-    if visual:
-        b.ExportOutput(b.GetSubsystemByName("scene_graph").get_query_output_port(), "query_object")
-    return drive
 
 
 def _wrist_rows(parts) -> np.ndarray:
@@ -375,7 +313,7 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
 
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,
-                   backend: str = DEFAULT_BACKEND, wrist: bool = False, visual: bool = False) -> HandRig:
+                   wrist: bool = False, visual: bool = False) -> HandRig:
     """One finger with its motors, springs and routing (see module docstring).
 
     Parameters
@@ -383,10 +321,6 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
     finger : {"thumb", "index", "middle", "ring", "fifth"}
     params : FingerRigParams, optional
         Default ``FingerRigParams.for_finger(finger)``.
-    backend : {"compiled", "symbolic", "python"}
-        The tendon drive's backend (``awiwi_drake.components.drive``); the thesis's
-        physics (hysteresis, guide friction in the drive) needs "compiled":
-        pass ``params.with_physics(hysteresis=False, guide_friction=False)`` for the others.
     wrist : bool
         Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
         finger's tendons enter the routing.
@@ -406,19 +340,16 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
                          f"(use FingerRigParams.for_finger({finger!r}))")
     fp = p.finger
 
-    def plant_factory(b, scene_graph):
-        return make_finger_plant(finger, fp, builder=b, visual=visual, gravity=p.gravity, scene_graph=scene_graph)
+    def plant_factory(scene_graph):
+        return make_finger_plant(finger, fp, visual=visual, gravity=p.gravity, scene_graph=scene_graph)
 
-    return _build(f"finger-{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, backend,
-                  wrist, visual)
+    return _build(f"finger-{finger}", p, plant_factory, {finger: finger_coupling(finger, fp)}, wrist, visual)
 
 
-def hand_diagram(*, params: HandRigParams | None = None, backend: str = DEFAULT_BACKEND, wrist: bool = True,
-                 visual: bool = False) -> HandRig:
+def hand_diagram(*, params: HandRigParams | None = None, wrist: bool = True, visual: bool = False) -> HandRig:
     """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
 
-    The default backend is ``"compiled"`` (one fused drive, numba kernel; see
-    ``benchmarks/bench_rigs.py``), with the thesis's physics on (see
+    The links and the drive are one compiled system, with the thesis's physics on (see
     :class:`~awiwi_drake.parameters.hand.FingerDriveParams`).
 
     Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
@@ -429,10 +360,10 @@ def hand_diagram(*, params: HandRigParams | None = None, backend: str = DEFAULT_
     if not isinstance(p, HandRigParams):
         raise ValueError(f"hand_diagram: params must be HandRigParams, got {type(p).__name__}")
 
-    def plant_factory(b, scene_graph):
-        return make_hand_plant(p.hand, builder=b, visual=visual, gravity=p.gravity, scene_graph=scene_graph)
+    def plant_factory(scene_graph):
+        return make_hand_plant(p.hand, visual=visual, gravity=p.gravity, scene_graph=scene_graph)
 
     parts = {f: finger_coupling(f, p.hand.finger(f)) for f in FINGERS}
-    return _build("hand", p, plant_factory, parts, backend, wrist, visual)
+    return _build("hand", p, plant_factory, parts, wrist, visual)
 
 

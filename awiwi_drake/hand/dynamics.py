@@ -1,7 +1,6 @@
 """The finger / hand plant as one system: the links' rigid-body dynamics and the tendon drive.
 
-:class:`HandDynamics_` is the plant of the default (``backend="compiled"``) finger and hand
-diagrams.  Its physics is two truths, each evaluated where it lives:
+:class:`HandDynamics_` is the plant of the finger and hand diagrams.  Its physics is two truths, each evaluated where it lives:
 
 * the links: the continuous ``MultibodyPlant`` of :mod:`.plant` (mass matrix ``M(q)``, bias
   ``C(q, v) v``, gravity ``tau_g(q)``, joint damping ``d``) plus the PIP/DIP coupling element

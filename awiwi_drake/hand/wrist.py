@@ -1,8 +1,5 @@
 """Wrist of the Awiwi hand (thesis ch. 6): kinematics and tendon lengths, generic in the scalar type.
 
-The wrist's coupling object (``h(q)``, ``P(q)`` for the routing) is
-:class:`awiwi_drake.hand.coupling.WristCoupling`.
-
 The wrist's system (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`: offsets or their
 motor feed-forward) is in :mod:`awiwi_drake.hand.systems`;
 the Fig 6.9-6.10 study in :mod:`awiwi_drake.reproductions.ch06_wrist`.

@@ -160,6 +160,30 @@ class DiscrepancySettings(Parameters):
         source="chosen: a named finger effect must be at least half the per-sample noise-equivalent torque (r x the "
                "force-sensor noise) or force; smaller ones are significant only by averaging",
         doc="finger diagnosis: materiality floor in noise-equivalent units")
+    finger_hysteresis_play: float = param(
+        1.0, unit="-", low=0.0, high=100.0,
+        source="chosen, measured: the play trades reversals by noise (none: the loop follows every noise wiggle) "
+               "against a delay of 2 play widths at every true reversal. Correlation of the loop on the noisy force "
+               "with the loop on the noise-free force (index datasets, seeds 2 and 5, delta 0.1 / 0.4 mm): 0.95-0.98 "
+               "without play, 0.96-0.99 at 0.5-1 noise widths, 0.76-0.93 at 3 (the wave-5 value)",
+        doc="finger diagnosis: play operator before the hysteresis candidate, in force-noise widths")
+    finger_hysteresis_lengths: tuple = param(
+        (5e-5, 1e-4, 2e-4, 4e-4, 8e-4), unit="m", low=0.0,
+        source="chosen: presliding lengths on a factor-2 grid from 50 um (a few play widths) to 0.8 mm (the loop "
+               "closes within ~3 delta, 2.4 mm: about the travel of one excitation cycle); it holds the package's "
+               "HysteresisParams.presliding_length 0.4 mm",
+        doc="finger diagnosis: presliding lengths of the hysteresis candidate")
+    finger_gauss_newton_iterations: int = param(
+        20, unit="-", low=1, high=1000,
+        source="chosen: the thumb's joint angles from its tendons (routing h(q) nonlinear), warm-started at the previous "
+               "sample 1 ms away, converge quadratically in 2-4 steps; 20 leaves room, and a sample that has not "
+               "converged is reported by window (never silent)",
+        doc="finger diagnosis: Gauss-Newton steps per sample for the thumb's joint angles")
+    finger_gauss_newton_tolerance: float = param(
+        1e-10, unit="rad", low=0.0, low_inclusive=False,
+        source="chosen: a step below 1e-10 rad (1e-6 of the angle-noise level) has converged; 1e-12 was below the "
+               "round-off of h(q) at some samples",
+        doc="finger diagnosis: Gauss-Newton step size counted as converged")
     unexplained_ratio: float = param(
         1.5, unit="-", low=1.0, high=100.0,
         source="chosen: an independent evaluation judged held-out residuals above 1.5x the noise "
@@ -342,6 +366,22 @@ class TruthGeneratorParams(Parameters):
         source="chosen: +-0.6-1.7 deg of play at the joint, 2-6x the link-encoder noise at 30 dB on the "
                "+-0.3 rad excursion (a worn pin joint; the thesis prints none)",
         doc="half-width of hidden joint backlash (truth: exact massless pulley, hard stops)")
+    stribeck_static_ratio_range: tuple = param(
+        (1.2, 1.8), unit="-", low=1.0,
+        source="chosen: breakaway 20-80 % above the Coulomb level, a stick-slip shape the catalog's (3.8) arctangent "
+               "(Table 3.3) does not have", doc="hidden Stribeck friction (rigs and fingers): static / Coulomb level")
+    stribeck_velocity_range: tuple = param(
+        (0.1, 0.5), unit="rad/s", low=0.0, low_inclusive=False,
+        source="chosen: the Stribeck dip lies below the 1-15 rad/s motor speeds of Fig 3.3b, inside the speeds the "
+               "excitation reaches, so it shows in the data", doc="hidden Stribeck friction: Stribeck velocity")
+    stribeck_smoothing_range: tuple = param(
+        (0.02, 0.05), unit="rad/s", low=0.0, low_inclusive=False,
+        source="chosen: sign smoothing 2-25x sharper than (3.8)'s 1/gamma1 = 0.1 rad/s (Table 3.3): a reversal "
+               "unlike the catalog's", doc="hidden Stribeck friction: sign-smoothing velocity")
+    motor_viscous_range: tuple = param(
+        (0.0, 0.02), unit="Nm s/rad", low=0.0,
+        source="chosen: up to 56 % of Table 3.3's gamma3 = 0.0356 Nm s/rad on the rigs' motor",
+        doc="hidden Stribeck friction on a rig motor: viscous part")
     force_range: float = param(250.0, unit="N", low=0.0, low_inclusive=False,
                                source="chosen: 12-bit Hall sensor over 0-250 N (Ch. 4; Fig 4.8 tops at 180 N)",
                                doc="force sensor full scale")
@@ -435,6 +475,11 @@ class FingerTruthParams(Parameters):
                                        source="chosen: 5-18 % of the Coulomb torque of Table 3.3 (0.56 Nm): a worn "
                                               "or badly lubricated gear on one motor",
                                        doc="hidden Stribeck friction, Coulomb level")
+    motor_viscous_range: tuple = param((0.0, 0.002), unit="Nm s/rad", low=0.0,
+                                       source="chosen: up to 6 % of Table 3.3's gamma3 (0.0356 Nm s/rad), as small "
+                                              "beside it as the Coulomb range is beside Table 3.3's gamma2",
+                                       doc="hidden Stribeck friction, viscous part (shape: TruthGeneratorParams' "
+                                           "stribeck_* ranges)")
     guide_c0_range: tuple = param((0.5, 1.5), unit="N", low=0.0,
                                   source="chosen: 25-70 % of C0 of (4.1) (2.2 N) on one tendon path",
                                   doc="hidden guide friction, constant part")

@@ -329,13 +329,11 @@ class FingerDriveParams(Parameters):
     ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs; ``tendon_motors``
     likewise overrides ``motor`` tendon by tendon (``(tendon_name, MotorParams)``: friction, ripple,
     inertia, damping of one motor, e.g. a diagnosis's write-back; pulley radius, torque limit and
-    saturation stay those of ``motor``; compiled backend).
+    saturation stay those of ``motor``).
     Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
     :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
     fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
-    (docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz"). They need ``backend="compiled"``;
-    ``with_physics(hysteresis=False, guide_friction=False)`` gives the plant the python and
-    symbolic backends can build.
+    (docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz").
     """
 
     motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
@@ -379,9 +377,8 @@ class FingerDriveParams(Parameters):
                      guide_friction: bool | None = None, motor_friction: bool | None = None):
         """A copy with the named thesis effects switched (None leaves one as it is).
 
-        E.g. ``p.with_physics(hysteresis=False, guide_friction=False)`` for the python/symbolic
-        drive backends, which do not carry these two states in the finger/hand diagrams;
-        ``p.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)``
+        E.g. ``p.with_physics(hysteresis=False, guide_friction=False)`` for the per-joint design models,
+        which have neither Dahl state; ``p.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)``
         is the ideal plant (frictionless motors, elastic springs).
         """
         p = self
@@ -407,6 +404,16 @@ class FingerDriveParams(Parameters):
                         or not isinstance(entry[1], cls)):
                     raise ValueError(f"{type(self).__name__}.{name}[{i}] = {entry!r} must be a "
                                      f"(tendon_name, {cls.__name__}) pair")
+            names = self.tendon_names
+            for tendon, _ in getattr(self, name):
+                if names is not None and tendon not in names:
+                    raise ValueError(f"{type(self).__name__}.{name}: unknown tendon {tendon!r}; tendons are "
+                                     f"{names[0]} ... {names[-1]}")
+
+    @property
+    def tendon_names(self):
+        """The tendon names the per-tendon overrides may use (None: not known at this level)."""
+        return None
 
 
 _FINGER_PARAM_TYPES = {"thumb": ThumbParams, "index": IndexFingerParams, "middle": MiddleFingerParams,
@@ -431,10 +438,16 @@ class FingerRigParams(FingerDriveParams):
             raise ValueError(f"FingerRigParams.finger_name must be one of {FINGERS}, got {name!r}")
         return cls(finger=_FINGER_PARAM_TYPES[name](), finger_name=name, **overrides)
 
+    @property
+    def tendon_names(self):
+        """``<finger>_h1 ... <finger>_h2n``: two antagonistic tendons per independent DoF (section 5.1; the
+        order of the finger's coupling matrix rows, hand/coupling.py)."""
+        return [f"{self.finger_name}_h{k + 1}" for k in range(2 * self.finger.num_dof)]
+
     def _validate(self) -> None:
-        super()._validate()
         if self.finger_name not in FINGERS:
             raise ValueError(f"FingerRigParams.finger_name must be one of {FINGERS}, got {self.finger_name!r}")
+        super()._validate()
         expected = _FINGER_PARAM_TYPES[self.finger_name]
         if not isinstance(self.finger, expected):
             raise ValueError(f"FingerRigParams.finger must be {expected.__name__} for finger_name "
@@ -446,6 +459,11 @@ class HandRigParams(FingerDriveParams):
     """The whole hand: 5 fingers, 38 motors and springs."""
 
     hand: HandParams = field(default_factory=HandParams)
+
+    @property
+    def tendon_names(self):
+        """Every finger's tendon names (:attr:`FingerRigParams.tendon_names`), fingers in FINGERS order."""
+        return [f"{f}_h{k + 1}" for f in FINGERS for k in range(2 * self.hand.finger(f).num_dof)]
 
 
 @dataclass(frozen=True)

@@ -168,6 +168,9 @@ def from_yaml(cls_or_defaults, text: str, *, where: str = "YAML") -> Parameters:
         obj = yaml_load_typed(schema=type(_to_schema(defaults)), data=text, defaults=_to_schema(defaults))
     except Exception as exc:  # noqa: BLE001 - yaml.YAMLError, Drake's errors: name the source
         msg = " ".join(str(exc).split())
+        found = _unknown_key_message(text, type(defaults)) if "unknown to the schema" in msg else None
+        if found:      # Drake names the key, not where it is: its path
+            raise ValueError(f"{where}: {found}") from None
         if "field" not in msg and not msg.startswith(("while ", "mapping ", "expected ")):
             msg = f"a value does not fit {type(defaults).__name__} ({type(exc).__name__}: {msg})"
         raise ValueError(f"{where}: {msg}") from None
@@ -175,6 +178,47 @@ def from_yaml(cls_or_defaults, text: str, *, where: str = "YAML") -> Parameters:
         return _from_schema(obj)
     except ValueError as exc:
         raise ValueError(f"{where}: {exc}") from None
+
+
+def _unknown_key_message(text: str, cls: type):
+    """``unknown key 'a.b.c' (known there: ...)`` for the first key of ``text`` that ``cls`` has no field for (its
+    dotted path through nested sets, named-override entries and tagged unions), or None."""
+    import yaml
+
+    class _Loader(yaml.SafeLoader):
+        pass
+    _Loader.add_multi_constructor("!", lambda loader, tag, node: (
+        {"__tag__": tag, **loader.construct_mapping(node, deep=True)} if isinstance(node, yaml.MappingNode) else None))
+    try:
+        data = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader that reads tags as plain mappings
+    except yaml.YAMLError:
+        return None
+
+    def walk(obj, c, path):
+        if not isinstance(obj, dict):
+            return None
+        options = [a for a in (typing.get_args(c) or (c,)) if isinstance(a, type) and issubclass(a, Parameters)]
+        if not options:
+            return None
+        tag = obj.pop("__tag__", None)
+        c = next((k for o in options for k in _with_subclasses(o) if k.__name__ == tag), options[0])
+        hints = typing.get_type_hints(c)
+        names = [f.name for f in dataclasses.fields(c)]
+        for key, val in obj.items():
+            if key not in names:
+                return f"unknown key '{path}{key}' (known there: {', '.join(names)})"
+            pair = named_overrides_class(hints[key])
+            if pair is not None and isinstance(val, dict):
+                for name, entry in val.items():
+                    found = walk(entry, pair, f"{path}{key}.{name}.")
+                    if found:
+                        return found
+            else:
+                found = walk(val, hints[key], f"{path}{key}.")
+                if found:
+                    return found
+        return None
+    return walk(data, cls, "")
 
 
 def save_yaml(params: Parameters, path) -> pathlib.Path:

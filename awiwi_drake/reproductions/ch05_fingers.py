@@ -166,10 +166,9 @@ class CouplingHoldStudy:
 
 
 def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final: float = 0.3,
-                        backend: str = "compiled", controller: JointControllerParams | None = None
-                        ) -> CouplingHoldStudy:
+                        controller: JointControllerParams | None = None) -> CouplingHoldStudy:
     """Step the PIP reference of a coupled finger by ``pip_step`` [rad] and log PIP/DIP."""
-    rig = finger_diagram(finger=finger, backend=backend)
+    rig = finger_diagram(finger=finger)
     fp = rig.params.finger
     if not getattr(fp, "pip_dip_coupled", False):
         raise ValueError(f"coupling_hold_study: finger {finger!r} has no PIP/DIP coupling")

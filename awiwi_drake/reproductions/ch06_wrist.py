@@ -219,7 +219,7 @@ class WristCompensationStudy:
                 "compensated": float(np.max(np.abs(self.drift_compensated)))}
 
 
-def wrist_compensation_study(target: str = "index", *, backend: str = "compiled", amplitude: float = np.radians(5.0), frequency: float = 2.0,
+def wrist_compensation_study(target: str = "index", *, amplitude: float = np.radians(5.0), frequency: float = 2.0,
                              t_final: float = 0.5, controller: JointControllerParams | None = None,
                              accuracy: float = 1e-3, params=None) -> WristCompensationStudy:
     """Sweep the wrist abduction ``q71 = amplitude sin(2 pi frequency t)`` [rad] under joint control.
@@ -233,8 +233,8 @@ def wrist_compensation_study(target: str = "index", *, backend: str = "compiled"
     drift, fmin, events = {}, {}, {}
     t_grid = np.linspace(0.0, t_final, 201)
     for comp in (False, True):
-        rig = (hand_diagram(backend=backend, wrist=True, params=params) if target == "hand"
-               else finger_diagram(finger=target, backend=backend, wrist=True, params=params))
+        rig = (hand_diagram(wrist=True, params=params) if target == "hand"
+               else finger_diagram(finger=target, wrist=True, params=params))
         cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
         d = cl.diagram
         ctx = d.CreateDefaultContext()

@@ -26,7 +26,7 @@ __all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "te
 def _tendon_step(factory, f0, f1, t_step, t_final, log, *, realistic: bool, gains=None, fmap=None):
     """A fresh tendon rig under ``factory``'s controller at 3 kHz (``realistic``: ripple, the force sensor,
     333 us delay) at rest at ``f0`` [N], its reference stepping to ``f1`` at ``t_step``: ``(rig, loop, log)``."""
-    rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=realistic)), backend="symbolic")
+    rig = tendon_rig(params=TendonRigParams(motor=MotorParams(ripple=realistic)))
     ctrl = factory(rig, gains, fmap=fmap) if gains is not None or fmap is not None else factory(rig)
     sensors = {"tendon_force": force_sensor(ForceSensorParams())} if realistic else None
     loop = closed_loop(rig, ctrl, rate_hz=RATE, delay=333e-6 if realistic else None, sensors=sensors)

@@ -68,13 +68,12 @@ class GainDiagram:
         return plot_gain_diagrams({self.label: (self.freq, self.gain)}, ax=ax)
 
 
-def _joint(kind: str, *, stiffness=None, pretension=None, backend: str = "symbolic"):
+def _joint(kind: str, *, stiffness=None, pretension=None):
     """The flexible joint (mechanical ``stiffness``) or the joint rig (``pretension``); None: the defaults."""
     if kind == "flexible-joint":
         p = FlexibleJointParams() if stiffness is None else FlexibleJointParams(stiffness=stiffness)
-        return flexible_joint_rig(params=p, backend=backend)
-    return joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension),
-                     backend=backend)
+        return flexible_joint_rig(params=p)
+    return joint_rig(params=JointRigParams() if pretension is None else JointRigParams(pretension=pretension))
 
 
 def _run(mode, joint_stiffness, rig, stiffness, pretension, t_final, reference):
@@ -118,7 +117,7 @@ def impedance_sweep(mode: str = "two-time-scale", *, joint_stiffness: float | No
 def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffness: float | None = None,
                                  rig: str = "joint-rig", stiffness: float | None = None,
                                  pretension: float | None = None, freqs: Sequence[float] | None = None) -> GainDiagram:
-    """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize`` (python backend).
+    """|q / q_des|(f) of the *continuous* impedance loop linearised by Drake's ``Linearize``.
 
     The exact small-signal counterpart of :func:`impedance_sweep` (no 3 kHz hold); also returns the
     closed-loop eigenvalues.  Default frequencies: 0.5-70 Hz (Fig 11.4).
@@ -126,7 +125,7 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     sp = ImpedanceSweepParams()
     joint_stiffness = sp.joint_stiffness if joint_stiffness is None else joint_stiffness
     freqs = np.linspace(0.5, 70.0, 700) if freqs is None else np.asarray(freqs, float)
-    r = _joint(rig, stiffness=stiffness, pretension=pretension, backend="python")
+    r = _joint(rig, stiffness=stiffness, pretension=pretension)
     loop = closed_loop(r, impedance_controller(r, ImpedanceParams(joint_stiffness=joint_stiffness), mode=mode),
                        rate_hz=None)
     op = r.operating_point()

@@ -49,7 +49,7 @@ def lqr_trajectories(r_values: Sequence[float] = (1e-4, 1e-2, 1.0), *, x0=(0.3, 
     """Fig 13.2-13.3: regulation of the flexible joint (Table 13.1) from ``x0`` for each R (continuous loop)."""
     out = {}
     for r in r_values:
-        rig = flexible_joint_rig(backend="python")
+        rig = flexible_joint_rig()
         design = design_lqr(rig, params, r=r)
         loop = closed_loop(rig, lqr_controller(rig, params, r=r), rate_hz=None)
         ctx = loop.create_context(state=np.asarray(x0, float), references={"joint_angle_reference": 0.0})

@@ -69,7 +69,7 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     the 0 -> 40 N transient.
     """
     fmap = fmap or force_map(tendon_rig())
-    rig = tendon_rig(backend="symbolic")
+    rig = tendon_rig()
     loop = closed_loop(rig, tendon_sdre_controller(rig, params, fixed=fixed, fmap=fmap), rate_hz=RATE)
     op = rig.operating_point(tendon_force=0.0)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
@@ -89,8 +89,7 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     The load is applied from t = 0 while the reference steps at 0.1 s.
     """
     p = params or SdreJointParams()
-    rig = flexible_joint_rig(params=FlexibleJointParams(link_inertia=p.link_inertia), spring="nonlinear",
-                             backend="symbolic")
+    rig = flexible_joint_rig(params=FlexibleJointParams(link_inertia=p.link_inertia), spring="nonlinear")
     loop = closed_loop(rig, joint_sdre_controller(rig, p, fixed=fixed), rate_hz=RATE)
     op = rig.operating_point(external_torque=external_torque)
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque,

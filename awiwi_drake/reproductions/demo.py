@@ -58,7 +58,7 @@ def demo_figure(result, t_ref, refs, scenario, *, torque_limit=None):
     return fig
 
 
-def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScenario | None = None):
+def run_demo(out: pathlib.Path, *, scenario: DemoScenario | None = None):
     """Run the demo and write ``out/*.png``; return ``(summary text, {graph stem: diagram})``.
 
     ``scenario`` (default: :class:`DemoScenario`, 1 s long in short mode) sets the
@@ -74,7 +74,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
 
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    rig = joint_rig(backend=backend)
+    rig = joint_rig()
     if scenario is None:
         scenario = DemoScenario(t_final=1.0 if short_mode() else DemoScenario().t_final)
     loop = joint_rig_position_loop(rig, scenario)
@@ -92,7 +92,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
     fig.savefig(out / "spring_curve.png", dpi=110, bbox_inches="tight")
     plt.close(fig)
     pre = np.linspace(5, 60, 8 if short_mode() else 23)
-    sweep = poles_vs_pretension(joint_rig(backend=backend), pre)
+    sweep = poles_vs_pretension(joint_rig(), pre)
     stiff = sweep.joint_stiffness
     fig, ax = sweep.plot(symlog=0.01)  # slow poles at -0.03..-0.1 1/s
     ax.set_title("joint-rig poles versus pretension (Linearize)")
@@ -101,7 +101,7 @@ def run_demo(out: pathlib.Path, *, backend: str = "compiled", scenario: DemoScen
     q_end = float(result["joint_angle"][-1, 0])
     f_end = result["tendon_force"][-1]
     lines = [
-        f"demo: joint-rig ({backend} backend) simulated {scenario.t_final} s; outputs in {out}/",
+        f"demo: joint-rig simulated {scenario.t_final} s; outputs in {out}/",
         f"  link angle at the end: {q_end:.4f} rad (reference {scenario.link_step} rad)",
         f"  tendon forces at the end: {f_end[0]:.2f} N, {f_end[1]:.2f} N (pretension {scenario.f_end} N)",
         f"  joint stiffness from {pre[0]:.0f} N to {pre[-1]:.0f} N pretension: {stiff[0]:.3f} -> {stiff[-1]:.3f} Nm/rad",

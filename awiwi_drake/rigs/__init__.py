@@ -6,6 +6,6 @@ this package and may use it, never the reverse).
 """
 
 from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
-from awiwi_drake.rigs.rigs import DEFAULT_BACKEND, flexible_joint_rig, joint_rig, motor_rig, tendon_rig
+from awiwi_drake.rigs.rigs import flexible_joint_rig, joint_rig, motor_rig, tendon_rig
 
 __all__ = ["OperatingPoint", "Rig", "motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig"]

@@ -82,9 +82,9 @@ class OperatingPoint:
 @dataclass
 class RigPorts:
     """A rig's systems added to a caller's ``DiagramBuilder`` without a sub-diagram of their own
-    (``Rig.add_sampled``): its input ports by name (a list each: one rig input may feed several systems),
-    its output ports by name (in the rig diagram's order), the system holding its dynamics and the
-    zero-order hold of its input (or None)."""
+    (``Rig.add_sampled``; :func:`~awiwi_drake.control.closed_loop` adds a controller's likewise): its input
+    ports by name (a list each: one input may feed several systems), its output ports by name (in the
+    diagram's order), the system holding its dynamics and the zero-order hold of its input (or None)."""
 
     inputs: dict
     outputs: dict
@@ -120,8 +120,6 @@ class Rig:
     params : Parameters
     state_names : tuple of str
         Names of the continuous state in diagram order.
-    backend : str
-        ``"python"`` or ``"symbolic"`` (see :mod:`awiwi_drake.components.drive`).
     plant : MultibodyPlant or None
     equilibrium : callable
         ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
@@ -166,7 +164,6 @@ class Rig:
     diagram: Diagram
     params: Any
     state_names: tuple
-    backend: str
     equilibrium: Callable[..., OperatingPoint]
     plant: MultibodyPlant | None = None
     spring: Any = None

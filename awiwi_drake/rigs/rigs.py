@@ -10,17 +10,14 @@
   nonlinear springs with pretension (Fig 5.9, ch. 15.5).
   State ``[q, qdot, theta1, theta2, omega1, omega2]``.
 
-The link rigs have two structures with the same ports and state order:
-``backend="compiled"`` (default) is the rig's dynamics as *one* C++
-``SymbolicVectorSystem`` generated from the law functions
+The tendon rig is one :class:`~awiwi_drake.components.fused_drive.TendonDrive_`. A link rig's
+dynamics are *one* C++ ``SymbolicVectorSystem`` generated from the law functions
 (:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive with the
 link inside, ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
 MultibodyPlant; output the state) plus the stateless
 :class:`~awiwi_drake.components.rig_system.LinkRigOutputs_` for the tendon forces,
 stiffnesses, joint torque and applied torque (evaluated only when read);
-``Rig.plant`` is None. ``"python"``/``"symbolic"`` put the link in a
-MultibodyPlant revolute joint receiving the tendon torque as a generalised force,
-as the fingers do. A test checks both at random states to 1e-9.
+``Rig.plant`` is None. Tests check both against the laws evaluated apart at random states.
 
 Every block is named; ports are named after physical quantities.
 """
@@ -30,7 +27,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer, ZeroOrderHold
 
@@ -40,14 +36,12 @@ from awiwi_drake.components.rig_system import (LinkRigOutputs_, integration_stat
                                                 rig_integration_system, sampled_dynamics, tendon_force_of_states)
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
-from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, tendon_spring
+from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, TendonSprings, tendon_spring
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams, TendonRigParams
-from awiwi_drake.rigs.base import OperatingPoint, Rig, RigPorts, add_revolute_link, state_names
+from awiwi_drake.rigs.base import OperatingPoint, Rig, RigPorts, state_names
 
-__all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig", "DEFAULT_BACKEND"]
-
-DEFAULT_BACKEND = "compiled"
+__all__ = ["motor_rig", "tendon_rig", "flexible_joint_rig", "joint_rig"]
 
 
 def _limit(motor: MotorParams):
@@ -68,7 +62,7 @@ def _check_params(params, cls, rig):
     return params
 
 
-def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
+def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     """One motor, one spring mechanism, tendon fixed at the far end (ch. 10, 14.2.1).
 
     Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega],
@@ -80,11 +74,11 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
     drive = build_tendon_drive(motor=p.motor, spring=spring, coupling=ConstantCoupling(np.zeros((1, 0))),
-                               backend=backend, hysteresis=p.spring.hysteresis, name="tendon_drive")
+                               hysteresis=p.spring.hysteresis, name="tendon_drive")
     b = DiagramBuilder()
     d = b.AddSystem(drive.diagram)
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    b.ExportOutput(d.GetOutputPort("state" if drive.backend == "compiled" else "motor_state"), "state")
+    b.ExportOutput(d.GetOutputPort("state"), "state")
     for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
@@ -104,104 +98,75 @@ def tendon_rig(*, params: TendonRigParams | None = None, backend: str = DEFAULT_
         return OperatingPoint(np.array(state), np.array([u]), None, tendon_force=np.array([tendon_force]),
                               elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
-    return Rig("tendon-rig", diagram, p, names, backend, equilibrium, None, spring, drive=drive,
+    return Rig("tendon-rig", diagram, p, names, equilibrium, None, spring, drive=drive,
                tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
-               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None)
+               tendon_force_of_state=tendon_force_of_states(drive.model))
 
 
-def _link_rig(*, name, params, motor, spring, coupling, inertia, damping, backend, hysteresis,
-              motor_pulley_radius=None):
-    """Shared builder: MultibodyPlant link(s) + tendon drive (or one fused system), exported ports."""
+def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, motor_pulley_radius=None):
+    """A one-link rig's parts (module docstring): ``(diagram, drive, state_names, (build, sampled_state, add))``.
+    ``spring``: one law for every tendon, or a :class:`~awiwi_drake.components.spring.TendonSprings`."""
     names = state_names(joints=coupling.num_joints, motors=coupling.num_tendons, hysteresis=hysteresis.enabled)
-    if backend == "compiled":
-        r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
-        model = DriveModel(motor, (spring,) * coupling.num_tendons, coupling, np.zeros(coupling.num_tendons), r_m,
-                           hysteresis, link_inertia=(float(inertia),), link_damping=(float(damping),))
+    r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
+    laws = spring.laws if isinstance(spring, TendonSprings) else (spring,) * coupling.num_tendons
+    model = DriveModel(motor, laws, coupling, np.zeros(coupling.num_tendons), r_m, hysteresis,
+                       link_inertia=(float(inertia),), link_damping=(float(damping),))
 
-        def add(b, period=None, *, hold_applied_torque=False) -> RigPorts:
-            """The rig's systems added to the DiagramBuilder ``b`` (no sub-diagram), continuous (``period``
-            None) or sampled at ``period`` [s] (the dynamics as Drake's DiscreteTimeApproximation,
-            :func:`~awiwi_drake.components.rig_system.sampled_dynamics`, of
-            :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.
-            The sampled rig's discrete state is in integration coordinates (``Rig.sampled_state`` maps a
-            physical state there); its ``state`` output is the physical state. A sampled rig's
-            ``applied_torque`` is that of its current input, or with ``hold_applied_torque`` that of the input
-            it holds over the current period (a zero-order hold, a second discrete state, also output as
-            ``held_motor_torque``: what a loop logs; the rig alone stays a difference equation with one state
-            group, which Drake's ``Linearize`` needs)."""
-            m, n = coupling.num_tendons, coupling.num_joints
-            if period is None:
-                dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
-            else:   # integrated in the coordinates of rig_integration_system; its output is the physical state
-                dynamics = rig_integration_system(model)
-                dynamics.set_name("rig_dynamics")     # Drake names the approximation DiscreteTimeApproximated_<name>
-                dyn = b.AddSystem(sampled_dynamics(dynamics, period))
-            inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
-            b.Connect(inputs.get_output_port(), dyn.get_input_port())
-            ins = {"motor_torque": [inputs.get_input_port(0)], "external_torque": [inputs.get_input_port(1)]}
-            outs = {"state": dyn.get_output_port()}
-            parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
-            parts += [("hysteresis_force", m)] if model.has_hysteresis else []
-            split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
-            b.Connect(dyn.get_output_port(), split.get_input_port())
-            for i, (nm, _) in enumerate(parts[:4]):
-                outs[nm] = split.get_output_port(i)
-            laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
-            b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
-            held = None
-            if not (period is not None and hold_applied_torque):
-                ins["motor_torque"].append(laws.GetInputPort("motor_torque"))
-            else:   # applied_torque: the torque the sampled dynamics hold over the current period
-                held = b.AddNamedSystem("motor_torque_hold", ZeroOrderHold(period, m))
-                ins["motor_torque"].append(held.get_input_port())
-                b.Connect(held.get_output_port(), laws.GetInputPort("motor_torque"))
-                outs["held_motor_torque"] = held.get_output_port()   # for the loop's motor_torque
-            for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
-                outs[nm] = laws.GetOutputPort(nm)
-            return RigPorts(ins, outs, dyn, held)
+    def add(b, period=None, *, hold_applied_torque=False) -> RigPorts:
+        """The rig's systems added to the DiagramBuilder ``b`` (no sub-diagram), continuous (``period``
+        None) or sampled at ``period`` [s] (the dynamics as Drake's DiscreteTimeApproximation,
+        :func:`~awiwi_drake.components.rig_system.sampled_dynamics`, of
+        :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.
+        The sampled rig's discrete state is in integration coordinates (``Rig.sampled_state`` maps a
+        physical state there); its ``state`` output is the physical state. A sampled rig's
+        ``applied_torque`` is that of its current input, or with ``hold_applied_torque`` that of the input
+        it holds over the current period (a zero-order hold, a second discrete state, also output as
+        ``held_motor_torque``: what a loop logs; the rig alone stays a difference equation with one state
+        group, which Drake's ``Linearize`` needs)."""
+        m, n = coupling.num_tendons, coupling.num_joints
+        if period is None:
+            dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
+        else:   # integrated in the coordinates of rig_integration_system; its output is the physical state
+            dynamics = rig_integration_system(model)
+            dynamics.set_name("rig_dynamics")     # Drake names the approximation DiscreteTimeApproximated_<name>
+            dyn = b.AddSystem(sampled_dynamics(dynamics, period))
+        inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
+        b.Connect(inputs.get_output_port(), dyn.get_input_port())
+        ins = {"motor_torque": [inputs.get_input_port(0)], "external_torque": [inputs.get_input_port(1)]}
+        outs = {"state": dyn.get_output_port()}
+        parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
+        parts += [("hysteresis_force", m)] if model.has_hysteresis else []
+        split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
+        b.Connect(dyn.get_output_port(), split.get_input_port())
+        for i, (nm, _) in enumerate(parts[:4]):
+            outs[nm] = split.get_output_port(i)
+        laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
+        b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
+        held = None
+        if not (period is not None and hold_applied_torque):
+            ins["motor_torque"].append(laws.GetInputPort("motor_torque"))
+        else:   # applied_torque: the torque the sampled dynamics hold over the current period
+            held = b.AddNamedSystem("motor_torque_hold", ZeroOrderHold(period, m))
+            ins["motor_torque"].append(held.get_input_port())
+            b.Connect(held.get_output_port(), laws.GetInputPort("motor_torque"))
+            outs["held_motor_torque"] = held.get_output_port()   # for the loop's motor_torque
+        for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
+            outs[nm] = laws.GetOutputPort(nm)
+        return RigPorts(ins, outs, dyn, held)
 
-        def build(period=None, *, hold_applied_torque=False):
-            """The rig's diagram (:func:`add` into a new builder, every port exported)."""
-            b = DiagramBuilder()
-            add(b, period, hold_applied_torque=hold_applied_torque).export(b)
-            diagram = b.Build()
-            diagram.set_name(name)
-            return diagram
+    def build(period=None, *, hold_applied_torque=False):
+        """The rig's diagram (:func:`add` into a new builder, every port exported)."""
+        b = DiagramBuilder()
+        add(b, period, hold_applied_torque=hold_applied_torque).export(b)
+        diagram = b.Build()
+        diagram.set_name(name)
+        return diagram
 
-        drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, backend, bool(hysteresis.enabled),
-                            model)
-        return drive.diagram, None, drive, names, (build, functools.partial(integration_state, model), add)
-    b = DiagramBuilder()
-    plant = b.AddNamedSystem("link", MultibodyPlant(0.0))
-    add_revolute_link(plant, name="joint", inertia=inertia, damping=damping)
-    plant.Finalize()
-    drive = build_tendon_drive(motor=motor, spring=spring, coupling=coupling, backend=backend,
-                               hysteresis=hysteresis, motor_pulley_radius=motor_pulley_radius, name="tendon_drive")
-    d = b.AddSystem(drive.diagram)
-    split = b.AddNamedSystem("link_state_split", Demultiplexer([1, 1]))
-    b.Connect(plant.get_state_output_port(), split.get_input_port())
-    b.Connect(split.get_output_port(0), d.GetInputPort("joint_angle"))
-    if drive.hysteresis:
-        b.Connect(split.get_output_port(1), d.GetInputPort("joint_velocity"))
-    b.Connect(d.GetOutputPort("generalized_force"), plant.get_actuation_input_port())
-    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    b.ExportInput(plant.get_applied_generalized_force_input_port(), "external_torque")
-    state = b.AddNamedSystem("state_mux", Multiplexer([2, 2 * coupling.num_tendons]))
-    b.Connect(plant.get_state_output_port(), state.get_input_port(0))
-    b.Connect(d.GetOutputPort("motor_state"), state.get_input_port(1))
-    b.ExportOutput(state.get_output_port(), "state")
-    b.ExportOutput(split.get_output_port(0), "joint_angle")
-    b.ExportOutput(split.get_output_port(1), "joint_velocity")
-    b.ExportOutput(d.GetOutputPort("generalized_force"), "joint_torque")
-    for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
-        b.ExportOutput(d.GetOutputPort(nm), nm)
-    diagram = b.Build()
-    diagram.set_name(name)
-    return diagram, plant, drive, names, (None, None, None)
+    drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, bool(hysteresis.enabled), model)
+    return drive.diagram, drive, names, (build, functools.partial(integration_state, model), add)
 
 
-def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None,
-                       backend: str = DEFAULT_BACKEND) -> Rig:
+def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None) -> Rig:
     """Fourth-order flexible joint (12.8): motor, spring, link.
 
     ``m qdd = -d_q qd + tau_s + tau_ext``, ``b thdd = -d_th thd - tau_s + u``, with
@@ -235,9 +200,9 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     finite_limit = bool(np.isfinite(p.torque_limit))
     motor = MotorParams(inertia=p.motor_inertia, friction=False, damping=p.motor_damping, ripple=False,
                         saturation=finite_limit, torque_limit=p.torque_limit if finite_limit else 1.0)
-    diagram, plant, drive, names, sampled = _link_rig(
-        name="flexible-joint", params=p, motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
-        inertia=p.link_inertia, damping=p.link_damping, backend=backend,
+    diagram, drive, names, sampled = _link_rig(
+        name="flexible-joint", motor=motor, spring=law, coupling=ConstantCoupling([[-1.0]]),
+        inertia=p.link_inertia, damping=p.link_damping,
         hysteresis=HysteresisParams(),  # (12.8) and ch. 15.4 have no hysteresis
         motor_pulley_radius=1.0)
 
@@ -252,13 +217,13 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
                               joint_angle=np.array([joint_angle]), spring_torque=tau_s,
                               joint_stiffness=float(np.ravel(law.stiffness(np.array([delta])))[0]))
 
-    return Rig("flexible-joint", diagram, p, names, backend, equilibrium, plant, law, drive=drive,
+    return Rig("flexible-joint", diagram, p, names, equilibrium, None, law, drive=drive,
                spring_kind=spring, tension_only=False, torque_limit=p.torque_limit if finite_limit else None,
                pair_slack=(law.x0, law.r) if spring == "nonlinear" else None, sampled_diagram=sampled[0],
                sampled_state=sampled[1], add_sampled=sampled[2])
 
 
-def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BACKEND) -> Rig:
+def joint_rig(*, params: JointRigParams | None = None) -> Rig:
     """One link, two antagonistic motors and nonlinear springs with pretension (Fig 5.9, ch. 15.5).
 
     ``x1 = r_m th1 - r_q q``, ``x2 = r_m th2 + r_q q``, ``f_i = f(x_i)``,
@@ -276,9 +241,9 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
     p = _check_params(params, JointRigParams, "joint_rig")
     spring = tendon_spring(p.spring)
     coupling = antagonistic_coupling(p.link_pulley_radius)
-    diagram, plant, drive, names, sampled = _link_rig(
-        name="joint-rig", params=p, motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
-        damping=p.link_damping, backend=backend, hysteresis=p.spring.hysteresis)
+    diagram, drive, names, sampled = _link_rig(
+        name="joint-rig", motor=p.motor, spring=spring, coupling=coupling, inertia=p.link_inertia,
+        damping=p.link_damping, hysteresis=p.spring.hysteresis)
     r, rq = p.motor.pulley_radius, p.link_pulley_radius
 
     def equilibrium(pretension: float | None = None, joint_angle: float = 0.0,
@@ -301,9 +266,9 @@ def joint_rig(*, params: JointRigParams | None = None, backend: str = DEFAULT_BA
                               joint_angle=np.array([joint_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
                               joint_stiffness=float(rq ** 2 * k.sum()))
 
-    return Rig("joint-rig", diagram, p, names, backend, equilibrium, plant, spring, drive=drive,
+    return Rig("joint-rig", diagram, p, names, equilibrium, None, spring, drive=drive,
                coupling=coupling, tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
-               tendon_force_of_state=tendon_force_of_states(drive.model) if drive.model is not None else None,
+               tendon_force_of_state=tendon_force_of_states(drive.model),
                sampled_diagram=sampled[0], sampled_state=sampled[1], add_sampled=sampled[2])
 
 
@@ -324,4 +289,4 @@ def motor_rig(motor: MotorParams | None = None) -> Rig:
         w = float(motor_velocity)
         return OperatingPoint(np.array([0.0, w]), -np.atleast_1d(motor_friction_torque(np.array([w]), p)))
 
-    return Rig("motor-rig", d, p, state_names(motors=1), "python", equilibrium)
+    return Rig("motor-rig", d, p, state_names(motors=1), equilibrium)
