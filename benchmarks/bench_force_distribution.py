@@ -14,7 +14,8 @@ import time
 
 import numpy as np
 
-from awiwi_drake.control.force_distribution import finger_force_distribution, joint_stiffness
+from awiwi_drake.components.tendon import joint_stiffness
+from awiwi_drake.control.force_distribution import finger_force_distribution
 from awiwi_drake.hand.coupling import finger_coupling
 
 

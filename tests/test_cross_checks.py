@@ -1,11 +1,11 @@
-"""Hand-written models against the framework at random states (as Drake's examples check a
+"""Hand-written models against the laws written out apart at random states (as Drake's examples check a
 hand-written pendulum against MultibodyPlant to 1e-8).
 
 The model-discrepancy workflow integrates batched copies of the joint rig (``DiscrepancyModel_``, generated
 from the rig's drive law with the catalog effects as switches, and compiled) and the truth generator's
 hand-written ``HiddenEffectPlant_``; with the same parameters and the catalog effects that the rig also
-has, their time derivatives must equal those of the rig's Drake diagram (MultibodyPlant link, motor bank,
-spring bank, routing).
+has, their time derivatives must equal the joint rig's laws written out (spring law, (3.5), the link's
+``I qdd = tau - d qd + tau_ext``: ``_joint_rig_check.rig_law_derivatives``), and so must the rig's diagram.
 """
 
 import numpy as np

@@ -13,7 +13,8 @@ from awiwi_drake.control.force_distribution import (
     OptimalForceDistribution, TendonForceDistribution, TendonForceDistributionSystem, _max_margin_alpha,
     coupling_nullspace,
     finger_force_distribution,
-    hand_stiffness_map, joint_stiffness, stiffness_cost)
+    hand_stiffness_map, stiffness_cost)
+from awiwi_drake.components.tendon import joint_stiffness
 from awiwi_drake.hand.coupling import finger_coupling, index_coupling_matrix
 from awiwi_drake.parameters.hand import FingerDriveParams, IndexFingerParams
 from awiwi_drake.parameters.hand_control import ForceDistributionParams

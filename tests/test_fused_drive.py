@@ -1,5 +1,5 @@
 """The fused tendon drive: compiled float kernel = the law functions, scalar conversion,
-lean ports, and the one-system single-joint rigs against their MultibodyPlant versions."""
+lean ports, and the one-system single-joint rigs against their laws written out apart."""
 
 import itertools
 

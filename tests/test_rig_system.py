@@ -435,3 +435,44 @@ def test_motor_pd_with_its_reference_is_the_loop_with_reference_sources():
     np.testing.assert_array_equal(ExtractGradient(u_ad), D)
     with pytest.raises(ValueError, match="reference motor_angle has shape"):
         motor_position_controller(joint_rig(), reference=(t, refs["theta_reference"][:1], refs["tendon_force_reference"]))
+
+
+@pytest.mark.parametrize("hysteresis", [False, True])
+def test_tendon_force_of_states_is_the_law_at_every_logged_sample(hysteresis):
+    """The monitors' batch evaluation (the generated kernel in numpy's elementwise forms, all samples at once)
+    equals drive_laws' tendon force sample by sample (slack, inside and beyond the calibrated range), to 1e-12 of
+    the largest force; the tendon rig (no joints) too."""
+    from awiwi_drake.components.rig_system import tendon_force_of_states
+    from awiwi_drake.rigs import tendon_rig
+    model = _model(hysteresis)
+    X = np.array([_random_state(model) for _ in range(200)])
+    ref = np.array([drive_laws(model, x, want=("tendon_force",))["tendon_force"] for x in X])
+    assert np.any(ref == 0.0) and np.any(ref > 0.0)             # slack samples among them
+    got = tendon_force_of_states(model)(X)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.max(np.abs(ref)))
+    rig = tendon_rig()
+    Xt = rig.operating_point().state + RNG.normal(0, 0.05, (50, rig.num_states))
+    ref = np.array([drive_laws(rig.drive.model, x, np.zeros(1), np.zeros(0), want=("tendon_force",))["tendon_force"]
+                    for x in Xt])
+    np.testing.assert_allclose(rig.tendon_force_of_state(Xt), ref, rtol=0, atol=1e-12 * np.max(np.abs(ref)))
+
+
+def test_vectorized_kernels_equal_the_scalar_source_on_every_construct():
+    """codegen's numpy forms (np.where for if-then-else, np.logical_* for and/or/not, np.arctan2, the unary
+    functions, min/max) evaluate arrays of samples to the plain scalar source's values at each sample (to a
+    few ulp: numpy's and libm's transcendental functions may differ in the last bit)."""
+    import pydrake.symbolic as sym
+
+    from awiwi_drake.components.codegen import compile_kernels
+    a, b = sym.Variable("a"), sym.Variable("b")
+    outs = [sym.if_then_else(sym.logical_and(a > 0, sym.logical_not(b > 1)), sym.atan2(a, b), sym.tanh(b) * a),
+            sym.if_then_else(sym.logical_or(a > 1, b < -1), sym.sqrt(a * a + 1), sym.cos(a) - sym.exp(-b * b)),
+            sym.min(a, b) + sym.max(a, 0) + abs(b) ** 3 + sym.atan(a)]
+    fns = {"f": ([[a, b]], outs)}
+    vec = compile_kernels(fns, tag="test_vectorized", vectorized=True)["f"]
+    scalar = compile_kernels(fns, tag="test_vectorized", jit=False)["f"]
+    S = RNG.uniform(-3, 3, size=(2, 300))
+    got = vec(S, np.empty((3, 300)))
+    ref = np.array([scalar(S[:, k], np.empty(3)) for k in range(300)]).T
+    # numpy's vectorised cos/exp/tanh and libm's may differ in the last bit; cos(a) - exp(-b^2) cancels
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-14 * np.max(np.abs(ref)))

@@ -295,7 +295,7 @@ def _variables(prefix: str, size: int):
     return v, np.array([sym.Expression(x) for x in v], dtype=object)
 
 
-def build_kernels(model: DriveModel, *, jit: bool = True):
+def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = False):
     """numba kernels of :func:`drive_laws` (float path), one per output group.
 
     Returns ``{name: fn}`` with signatures (all float64 1-D arrays, ``out`` last):
@@ -303,15 +303,17 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
     ``tendon_force``, ``tendon_stiffness``, ``elongation`` ``(state, q, out)`` / ``(state, out)``;
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
     ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
+    ``vectorized``: the same functions in numpy's elementwise forms (no numba, no ``_batch`` twins):
+    ``fn(states.T, out.T)`` evaluates many states at once (:func:`~awiwi_drake.components.codegen.emit_source`).
     """
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
                            "(e.g. LeverSpringMechanism.to_polynomial())")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
-    key = _model_key(model, jit)
+    key = _model_key(model, "vectorized" if vectorized else jit)
     if key is not None and key in _KERNELS:
         return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
-        kernels = _build_kernels(model, m, n, nr, jit)
+        kernels = _build_kernels(model, m, n, nr, jit, vectorized)
     if key is not None:
         _KERNELS[key] = kernels
     return kernels
@@ -324,10 +326,10 @@ def build_kernels(model: DriveModel, *, jit: bool = True):
 _KERNELS: dict = {}
 
 
-def _model_key(model: DriveModel, jit: bool):
-    """The content key of ``model`` (taken at its construction), or None (no caching)."""
+def _model_key(model: DriveModel, mode):
+    """The content key of ``model`` (taken at its construction) with the kernels' ``mode``, or None (no caching)."""
     key = getattr(model, "_content_key", None)
-    return None if key is None else (key, bool(jit))
+    return None if key is None else (key, mode)
 
 
 def _content_digest(model) -> str | None:
@@ -340,7 +342,7 @@ def _content_digest(model) -> str | None:
         return None
 
 
-def _build_kernels(model, m, n, nr, jit):
+def _build_kernels(model, m, n, nr, jit, vectorized=False):
     sv, s = _variables("s", model.num_states)
     uv, u = _variables("u", m)
     if model.has_link:
@@ -356,7 +358,7 @@ def _build_kernels(model, m, n, nr, jit):
                    elongation=[sv, qv], generalized_force=[sv, qv, dv])
     functions = {name: (ins[name], list(res[name])) for name in ins}
     from awiwi_drake.components.codegen import compile_kernels
-    return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit)
+    return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit, vectorized=vectorized)
 
 
 @TemplateSystem.define("TendonDrive_")

@@ -169,8 +169,11 @@ def sampled_dynamics(system: System, period: float) -> System:
 
 
 class tendon_force_of_states:
-    """``states (T, num_states) -> tendon forces (T, m)``: the compiled ``tendon_force`` kernel of
-    ``model`` (= :func:`drive_laws`) over many samples at once (monitors on logged states).
+    """``states (T, num_states) -> tendon forces (T, m)``: the generated ``tendon_force`` kernel of
+    ``model`` (= :func:`drive_laws`) over many samples at once (monitors on logged states), in numpy's
+    elementwise forms (``build_kernels(vectorized=True)``): all samples in one pass, no numba (measured: the
+    first monitored ``simulate`` of a joint rig in a process took ~0.65 s more with the numba kernel, all of it
+    numba's import and first load; 3000 samples take ~0.1 ms either way).
     A class, not a closure, so a rig holding it pickles (process pools)."""
 
     def __init__(self, model: DriveModel):
@@ -188,12 +191,15 @@ class tendon_force_of_states:
     def __call__(self, states):
         model = self.model
         if self._kernel is None:
-            self._kernel = build_kernels(model)["tendon_force_batch"]
-        X = np.ascontiguousarray(np.asarray(states, dtype=float).reshape(-1, model.num_states))
-        out = np.empty((len(X), model.num_tendons))
-        if model.has_link:
-            return self._kernel(X, out)
-        return self._kernel(X, np.zeros((len(X), 0)), out)     # no joints: the kernel's empty q input
+            self._kernel = build_kernels(model, vectorized=True)["tendon_force"]
+        X = np.asarray(states, dtype=float).reshape(-1, model.num_states).T      # one row per state entry
+        out = np.empty((model.num_tendons, X.shape[1]))
+        with np.errstate(all="ignore"):     # numpy's forms evaluate both branches of a law's if-then-else
+            if model.has_link:
+                self._kernel(X, out)
+            else:
+                self._kernel(X, np.zeros((0, X.shape[1])), out)     # no joints: the kernel's empty q input
+        return out.T
 
 
 @TemplateSystem.define("LinkRigOutputs_")

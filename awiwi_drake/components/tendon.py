@@ -1,4 +1,5 @@
-"""Tendon elasticity and springs in series (thesis ch. 4, section 5.1, (8.1)).
+"""Tendon elasticity, springs in series and the joint stiffness of a tendon drive (thesis ch. 4, section 5.1,
+(5.12), (8.1)).
 
 The guide friction laws (4.1) are in :mod:`awiwi_drake.components.friction`.
 """
@@ -10,12 +11,24 @@ import numpy as np
 from awiwi_drake._math import is_float
 from awiwi_drake.parameters.components import TendonParams
 
-__all__ = ["tendon_stiffness", "series_stiffness"]
+__all__ = ["tendon_stiffness", "series_stiffness", "joint_stiffness"]
 
 
 def tendon_stiffness(p: TendonParams) -> float:
     """Axial stiffness of the tendon ``k_t = E S / l0`` [N/m] (section 5.1)."""
     return p.youngs_modulus * p.cross_section / p.rest_length
+
+
+def joint_stiffness(P: np.ndarray, k_t: np.ndarray, f: np.ndarray, hessian: np.ndarray | None = None) -> np.ndarray:
+    """Joint stiffness ``K_q = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2`` (5.12), (7.1).
+
+    ``hessian[i, j, k] = d P_ij / d q_k`` (m x n x n), omitted for a constant coupling.  Leading axes
+    (several fingers at once) broadcast.
+    """
+    K = np.swapaxes(P, -1, -2) @ (k_t[..., :, None] * P)
+    if hessian is not None:
+        K = K + np.einsum("...i,...ijk->...jk", f, hessian)
+    return K
 
 
 def series_stiffness(k_a, k_b):

@@ -94,15 +94,16 @@ for _variant, _doc in (("position", "position backstepping per DoF (15.2 steps o
                         rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0}, description=_doc)
 
 # 15.5 with the (9.2) observer per DoF feeding the law's link model the external/link-side torque (15.3 "formally
-# requires the measure of the external torque"): under a constant load it rests at the impedance's deflection
+# requires the measure of the external torque"): under a constant load it rests at the impedance's deflection (less
+# the frictions' hold: Kp e = S^T tau_ext - (P S)^T (z + g), finger_backstepping)
 register_controller("backstepping-load-observer",
                     _lazy("finger_backstepping", "finger_backstepping_controller",
                           load_observer=FrictionObserverParams()),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="15.5 backstepping with a (9.2) load observer per DoF (its link model gets the "
-                                "estimated external torque); 3 kHz, joint angles estimated (5.15). Made for "
-                                "external loads: with guide friction on (the default) the observer integrates the "
-                                "guides' friction too and the index PIP/DIP lose their stiffness under load")
+                                "link-side torque the sensed spring forces do not explain: the load and the "
+                                "frictions); 3 kHz, joint angles estimated (5.15). Under a constant load it rests at "
+                                "the impedance's deflection less what the guides' and the lever's friction hold")
 
 # Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
 # against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).

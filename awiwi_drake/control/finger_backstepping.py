@@ -57,7 +57,18 @@ external torque, so under a constant load ``tau_ext`` the law's rest equations g
 15.3 "formally requires the measure of the external torque"; the option estimates it with the joint observer (9.2)
 per DoF (:class:`ObservedBacksteppingController`), ``M_d e'' = -(P S)^T f - B_q e' + d_hat`` in the link model (its
 derivative neglected, as 15.3 does), and the loop rests at the impedance's own ``Kp e = S^T tau_ext``
-(``tests/test_hand_control.py``).
+(``tests/test_hand_control.py``).  The observer's joint torque is the law's own, ``-(P S)^T phi(x)`` of the spring
+sensors, so ``d_hat`` is every link-side torque the law's model lacks (the load, the lever's hysteresis ``z`` and the
+guides' friction ``g``: (9.2) "identifies the missing part to the friction") and at rest the model's acceleration
+vanishes: ``Kp e = S^T tau_ext - (P S)^T (z + g)``, the impedance's deflection less what the frictions hold, as for the
+impedance stage's dead band.  Measured (Drake ``Linearize`` of the continuous index loop at rest, default physics):
+with the observer fed the drive's ``tendon_force`` ``phi(x) + z`` (the lever's friction, which the hand does not
+measure) the loop had a real pole at +20.5 1/s, mostly the DIP observer's state, and ``compare`` flagged the PIP/DIP
+"negative stiffness" under load; with the hysteresis off or the guide friction off it was stable (-8.3 / -3.3 1/s).
+A quasi-static sketch: the guides' presliding holds the link, the law turns ``d_hat`` into a sensed torque ``-(I +
+G)^-1 G d_hat`` (``G`` of the dead band, diagonal 8.3 / 12.0 on the PIP / DIP), and the observer sees it ``1 + rho``
+times larger (``rho`` = the hysteresis's presliding stiffness over the spring slope, 0.38), a loop gain above one
+where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
@@ -129,7 +140,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
-from awiwi_drake.components.spring import PolynomialSpring
+from awiwi_drake.components.spring import PolynomialSpring, SpringBank
 from awiwi_drake.control.chain import rig_springs
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
@@ -400,11 +411,13 @@ class ObservedBacksteppingController(Diagram):
     """The finger backstepping law with the link-side torque of its link model estimated by the joint observer (9.2)
     per DoF (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`, the one place of the observer):
     ``M_d e'' = -(P S)^T f - B_q e' + d_hat``.  The 15.3 design "formally requires the measure of the external
-    torque"; the thesis estimates the joint torque from the spring deflection, here from the tendon forces, and the
-    observer adds what they do not explain (a load, the guides' friction).  At rest ``d_hat`` settles at the
-    link-side torque, the model's phantom acceleration vanishes and the law's rest equations give the impedance's
-    own static deflection ``Kp e = S^T tau_ext`` (``tests/test_hand_control.py``).  Inputs: the law's measurements
-    and the rig's ``tendon_force`` (the observer's joint torque); outputs ``motor_torque`` and
+    torque"; the thesis estimates the joint torque from the spring deflection, here from the spring sensors' tendon
+    forces ``phi_i(x_i)`` (the law's own ``f``, a :class:`~awiwi_drake.components.spring.SpringBank_` on the
+    ``elongation``), and the observer adds what they do not explain (a load, the lever's hysteresis, the guides'
+    friction).  At rest ``d_hat`` settles at that link-side torque, the model's phantom acceleration vanishes and the
+    law's rest equations give ``Kp e = S^T tau_ext - (P S)^T (z + g)``: without friction the impedance's own static
+    deflection (module docstring; ``tests/test_hand_control.py``).  Inputs: the law's measurements; outputs
+    ``motor_torque`` and
     ``friction_compensation`` (``-d_hat``); continuous state: the observer's ``w_hat`` (so the loop is closed as
     blocks, not fused)."""
 
@@ -414,13 +427,16 @@ class ObservedBacksteppingController(Diagram):
         ctrl = b.AddNamedSystem("law", StaticLawController(law))
         obs = b.AddNamedSystem("load_observer", JointFrictionObserver(
             rig.coupling, law.S, np.diag(law.M), np.diag(law.Bq), observer.gain))
+        # the observer's joint torque from the law's own tendon forces phi_i(x_i) (the spring sensors; class docstring)
+        sensed = b.AddNamedSystem("sensed_tendon_force", SpringBank(law.springs, len(law.springs)))
+        b.Connect(sensed.GetOutputPort("tendon_force"), obs.GetInputPort("tendon_force"))
         b.Connect(obs.GetOutputPort("friction_compensation"), ctrl.GetInputPort("friction_compensation"))
         exported = {}
-        for sys_ in (ctrl, obs):
+        for sys_ in (ctrl, obs, sensed):
             for i in range(sys_.num_input_ports()):
                 port = sys_.get_input_port(i)
                 nm = port.get_name()
-                if nm == "friction_compensation":
+                if nm == "friction_compensation" or (sys_ is obs and nm == "tendon_force"):
                     continue
                 if nm in exported:
                     b.ConnectInput(exported[nm], port)

@@ -65,12 +65,13 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from scipy.optimize import linprog
 
 from awiwi_drake.components.spring import tendon_spring
+from awiwi_drake.components.tendon import joint_stiffness
 from awiwi_drake.hand.coupling import FingerCoupling, finger_coupling, reduced_coupling_matrix
 from awiwi_drake.parameters.hand import FINGERS, FingerDriveParams
 from awiwi_drake.parameters.hand_control import ForceDistributionParams
 
 __all__ = ["DistributionResult", "TendonStiffnessMap", "TendonForceDistribution", "OptimalForceDistribution",
-           "coupling_nullspace", "joint_stiffness", "stiffness_cost", "hand_stiffness_map", "law_stiffness_map",
+           "coupling_nullspace", "stiffness_cost", "hand_stiffness_map", "law_stiffness_map",
            "finger_force_distribution", "optimum_sensitivity", "TendonForceDistribution_",
            "TendonForceDistributionSystem"]
 
@@ -91,18 +92,6 @@ _nullspace_jit = numba.njit(cache=True)(_nullspace)
 def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
     """``(pinv(P^T), W, rank)`` with ``W`` an orthonormal basis of ``ker(P^T)`` (SVD)."""
     return _nullspace(np.asarray(P, dtype=float), float(rtol))
-
-
-def joint_stiffness(P: np.ndarray, k_t: np.ndarray, f: np.ndarray, hessian: np.ndarray | None = None) -> np.ndarray:
-    """Joint stiffness ``K_q = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2`` (5.12), (7.1).
-
-    ``hessian[i, j, k] = d P_ij / d q_k`` (m x n x n), omitted for a constant coupling.  Leading axes
-    (several fingers at once) broadcast.
-    """
-    K = np.swapaxes(P, -1, -2) @ (k_t[..., :, None] * P)
-    if hessian is not None:
-        K = K + np.einsum("...i,...ijk->...jk", f, hessian)
-    return K
 
 
 def _gauss_newton_qp(outer, dk, hessian, E, f, K_norm2, m, levenberg):

@@ -47,19 +47,26 @@ model sampled with its one period of delay, :func:`sampled_model`)
   (:func:`~awiwi_drake.control.pole_placement.place_by_identification`) on ``[q, qdot, tau, tau_dot]``:
   ``omega1 = position_bandwidth`` damped to ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop
   pair (the link on its tendons through the force loop, 345-1070 rad/s on the index) damped to the largest
-  ``xi2 <= damping_ratio`` that keeps the torque loop gain ``1 + K_tau + K_prev`` (:func:`torque_loop_gain`) at
-  least ``JointDesignParams.torque_loop_gain_min`` (on the index only the DIP needs less: xi2 = 0.30).
-  Measured on the default index (guide friction on, 3 kHz, estimator, :func:`sampled_loop_poles`): with xi2 =
-  0.7 the DIP needs ``K_tau = -4.07`` (gain -2.8), a positive torque feedback that a link held at rest (the
-  guides' presliding stiffness, ~0.26 Nm/rad on the DIP, or a contact) turns into a drift at +33 1/s; the DIP
-  ran off until the guides slid (2.5 rad).  Two other free choices were measured and rejected: raising
-  ``omega2`` until the gain is met (the gains grow; the whole finger's fast PIP/DIP mode, 3180 rad/s on the
-  springs and 4240 with the presliding stiffness of the hysteresis and the guides -- the per-joint models, on
-  ``M_jj``, put the DIP at 1030 rad/s -- sees the torque feedback ~1.5 periods late and goes unstable, +32 1/s
-  at 4461 rad/s), and measuring ``sigma`` in place of ``tau_dot`` (the fast mode is damped, but the placed
-  velocity gains turn negative and the design model's plant has a real pole at +266 1/s).  Measured before: a
-  fixed ``omega2`` of 300 or 1000 rad/s makes the finger unstable through the neglected MCP/PIP/DIP coupling
-  (+408 and +483 1/s); with the joint's own pair the slowest whole-finger pole is -31 1/s;
+  ``xi2 <= damping_ratio`` whose gains keep the *motor-held damping* ``Kd - K_taud K_jj`` (:func:`motor_held_damping`)
+  non-negative (on the index the PIP needs xi2 = 0.37, the DIP 0.21).  Derived from the whole loop sampled at rest
+  (:func:`sampled_loop_poles`, 3 kHz, estimator): the finger has a fast mode the per-joint models cannot hold, the
+  PIP/DIP links in antiphase on their tendons' spring and presliding stiffnesses (the hysteresis's and the guides'
+  Dahl states linearised at rest), at ``sqrt(eig(M^-1 K))`` with the whole mass matrix (4240-4420 rad/s on the
+  index; the per-joint models, on ``M_jj`` and the springs alone, put the DIP at 1075 rad/s).  In that mode the
+  motors barely move (measured: their tendon travel ``r_m theta`` is ~10 % of ``P q``), so the stage measures
+  ``tau_dot = -K_jj qdot`` (the springs' ``k_t``) and its request is ``-(Kd - K_taud K_jj) qdot``: a negative value is
+  an active negative damping of the link against the held motors.  At xi2 = 0.7 the PIP/DIP have ``Kd - K_taud K_jj``
+  = -0.0084 / -0.0045 Nm s/rad; with the motors' friction (3.8) at rest (its slope 5.6 Nm s/rad) the mode is still
+  damped, without it (friction and ripple off) it grew at +34 1/s at 4419 rad/s (thumb +60 1/s at 4561 rad/s), and
+  lowering only the PIP/DIP's ``K_taud`` by 10 % lowered the spectral radius (sensitivity of the sampled loop).  With
+  the rule every registered stage is stable at rest on every finger and the hand with the plant's physics off, with
+  motor friction and ripple off, and on (tests/test_joint_design.py).  It also keeps the torque loop gain
+  ``1 + K_tau + K_prev`` (:func:`torque_loop_gain`) at 1.37-1.49 on every finger (at xi2 = 0.7 the DIP needed
+  ``K_tau = -4.07``, gain -2.8: a positive torque feedback that a link held at rest turns into a drift at +33 1/s);
+  a design with a gain <= 0 (no positive static stiffness ``Kp / gain``) is refused.  Rejected before: raising
+  ``omega2`` (the gains grow; +32 1/s at 4461 rad/s), measuring ``sigma`` in place of ``tau_dot`` (the placed
+  velocity gain turns negative: the same motor-held damping), a fixed ``omega2`` of 300 or 1000 rad/s (+408 and
+  +483 1/s through the neglected MCP/PIP/DIP coupling);
 * ``lqr``: Drake ``LinearQuadraticRegulator`` on ``(F, G)`` with Bryson weights
   (:class:`~awiwi_drake.parameters.joint_design.JointDesignParams`);
 * ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque
@@ -90,9 +97,10 @@ from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
 from awiwi_drake.rigs.rigs import _link_rig
 
-__all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles", "reduced_joint_models",
-           "design_joint_gains", "torque_loop_gain", "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS",
-           "SampledLoopPoles", "sampled_loop_poles"]
+__all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
+           "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
+           "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles",
+           "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
@@ -329,12 +337,13 @@ def _lqr_weights(p: JointDesignParams, model: JointReducedModel):
     return Q, np.array([[1.0 / p.lqr_input ** 2]])
 
 
-def _pole_placement_gains(F, G, p: JointDesignParams, period: float | None) -> np.ndarray:
+def _pole_placement_gains(model: JointReducedModel, p: JointDesignParams, period: float | None) -> np.ndarray:
     """(12.13) on one DoF (``pole-placement`` in the module docstring): ``omega1 = position_bandwidth`` damped to
     ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop pair, damped to the largest ``xi2 <=
-    damping_ratio`` that keeps the torque loop gain ``1 + K_tau + K_prev >= JointDesignParams.torque_loop_gain_min``
-    (:func:`torque_loop_gain`; the gain falls as ``xi2`` rises, so the bound is met at the first crossing, found by
-    bisection)."""
+    damping_ratio`` whose gains have a non-negative :func:`motor_held_damping` (it falls as ``xi2`` rises, measured
+    on every finger, so the bound is met at the first crossing, found by bisection); refused when no ``xi2`` in
+    ``[pair_damping_min, damping_ratio]`` meets it or the torque loop gain is not positive."""
+    F, G = model.A, model.B
     lam = np.linalg.eigvals(F)
     pair = abs(lam[np.argmax(np.abs(lam.imag))])        # the link on its tendons through the force loop
 
@@ -347,17 +356,33 @@ def _pole_placement_gains(F, G, p: JointDesignParams, period: float | None) -> n
         return place_by_identification(Phi, Gamma, np.real(np.poly(zs))).ravel()
 
     def excess(xi2):
-        return torque_loop_gain(gains(xi2)) - p.torque_loop_gain_min
+        return motor_held_damping(gains(xi2), model)
 
-    if excess(p.damping_ratio) >= 0.0:
-        return gains(p.damping_ratio)
     low = p.pair_damping_min
-    if excess(low) < 0.0:
-        raise ValueError(f"pole-placement design: no damping xi2 in [{low}, {p.damping_ratio}] of the joint's pair "
-                         f"({pair:.4g} rad/s) keeps the torque loop gain 1 + K_tau + K_prev >= "
-                         f"{p.torque_loop_gain_min}; change JointDesignParams.torque_loop_gain_min or pair_damping_min")
-    from scipy.optimize import brentq
-    return gains(brentq(excess, low, p.damping_ratio, xtol=1e-12))
+    if excess(p.damping_ratio) >= 0.0:
+        K = gains(p.damping_ratio)
+    elif excess(low) < 0.0:
+        raise ValueError(f"pole-placement design of {model.name}: no damping xi2 in [{low}, {p.damping_ratio}] of the "
+                         f"joint's pair ({pair:.4g} rad/s) keeps the motor-held damping Kd - K_taud K_jj >= 0; change "
+                         f"JointDesignParams.pair_damping_min or position_bandwidth")
+    else:
+        from scipy.optimize import brentq
+        K = gains(brentq(excess, low, p.damping_ratio, xtol=1e-12))
+    if torque_loop_gain(K) <= 0.0:
+        raise ValueError(f"pole-placement design of {model.name}: torque loop gain 1 + K_tau + K_prev = "
+                         f"{torque_loop_gain(K):.4g} <= 0 (a positive torque feedback: no positive static stiffness); "
+                         f"change JointDesignParams.position_bandwidth")
+    return K
+
+
+def motor_held_damping(K, model: JointReducedModel) -> float:
+    """The link damping [Nm s/rad] a gain row ``K`` (5,) of one DoF feeds back while the motors are held:
+    ``Kd - K_taud K_jj`` on ``tau_dot`` (with ``omega = 0`` the stage measures ``tau_dot = -K_jj qdot``, ``K_jj`` the
+    joint's tendon stiffness (5.12), :attr:`JointReducedModel.stiffness`), ``Kd`` on ``sigma`` (``sigma = 0``).
+    Negative, the stage drives any mode in which the link moves against its tendons faster than the motors follow
+    (the whole finger's fast PIP/DIP mode, module docstring) with a negative damping."""
+    K = np.asarray(K, dtype=float)
+    return float(K[1] - (K[3] * model.stiffness if model.torque_rate == "joint" else 0.0))
 
 
 def torque_loop_gain(K) -> float:
@@ -390,7 +415,7 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     if design == "pd":
         return _placed_pd_gains(model, p, period)
     if design == "pole-placement":
-        return _pole_placement_gains(F, G, p, period)
+        return _pole_placement_gains(model, p, period)
     if design in ("lqr", "sdre"):
         Q, R = _lqr_weights(p, model)
         if period is None:

@@ -53,6 +53,7 @@ from typing import Sequence
 import numpy as np
 
 from .._math import is_float
+from ..components.tendon import joint_stiffness as tendon_joint_stiffness
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerParams, HandParams, ThumbParams,
                                check_finger_structure, finger_params)
 from .kinematics import finger_joint_names, rot_y, rot_z
@@ -470,7 +471,8 @@ def dof_selection(coupling) -> np.ndarray:
 
 
 def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:
-    """Joint stiffness (5.12): ``K_q = -d tau/dq = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2``.
+    """Joint stiffness (5.12) of ``coupling`` at ``q``: ``K_q = -d tau/dq = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2``
+    (the law: :func:`awiwi_drake.components.tendon.joint_stiffness`; the Hessian term: ``coupling.tension_hessian``).
 
     ``f`` are the tendon forces [N] (tension positive), ``k_t`` the tendon
     (spring) stiffnesses [N/m].  With ``tau = -P^T f`` and ``f = f(x)``,
@@ -482,6 +484,5 @@ def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:
         raise ValueError(f"f must have shape ({coupling.num_tendons},), got {f.shape}")
     if k_t.shape != (coupling.num_tendons,):
         raise ValueError(f"k_t must have shape ({coupling.num_tendons},), got {k_t.shape}")
-    P = coupling.P(q)
-    return P.T @ (k_t[:, None] * P) + coupling.tension_hessian(q, f)
+    return tendon_joint_stiffness(np.asarray(coupling.P(q)), k_t, f) + coupling.tension_hessian(q, f)
 

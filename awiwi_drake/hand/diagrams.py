@@ -145,10 +145,6 @@ def tendon_hysteresis(p, tendon_names):
     return p.spring.hysteresis if all(h == p.spring.hysteresis for h in per) else per
 
 
-def _any_hysteresis(h) -> bool:
-    return any(x.enabled for x in h) if isinstance(h, tuple) else bool(h.enabled)
-
-
 def _build(name, p, plant_factory, parts, wrist, visual):
     """Shared builder of finger and hand diagrams."""
     b = DiagramBuilder()

@@ -28,21 +28,11 @@ class JointDesignParams(Parameters):
     damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
                                  source="chosen: as xi1 = xi2 = 0.7 of Table 12.1",
                                  doc="cascaded: of the slowest mode; pole placement: xi1 = xi2 of (12.13)")
-    torque_loop_gain_min: float = param(
-        0.5, unit="-", low=0.0, low_inclusive=False,
-        source=("chosen: pole placement damps the joint's own pair (omega2 of (12.13)) less than damping_ratio where "
-                "needed to keep the torque loop gain 1 + K_tau + K_prev (joint_design.torque_loop_gain) at least this, "
-                "so the static stiffness against a link-side hold, Kp / gain, stays positive. Cause (sampled loop at "
-                "rest, default index): at xi2 = 0.7 the DIP needs K_tau = -4.07 (gain -2.8), and the guides' "
-                "presliding stiffness holding the link made the loop drift at +33 1/s. The gain must stay low: the "
-                "fast PIP/DIP mode (4240 rad/s at rest, see lqr_velocity) sees the torque feedback ~1.5 periods late. "
-                "Measured with 0.5 (3 kHz, estimator): index / thumb slowest pole -12 / -6 1/s with the default "
-                "physics, -1 / -1 1/s without guide friction, -26 / -28 1/s on the design model's plant (true state)"),
-        doc="pole placement: lower bound of 1 + K_tau + K_prev (the static stiffness under a load is Kp / that)")
     pair_damping_min: float = param(
         0.05, unit="-", low=0.0, high=1.0, low_inclusive=False,
-        source="chosen: the least damping pole placement gives the joint's own pair when it lowers xi2 for "
-               "torque_loop_gain_min (the index DIP needs 0.30, the thumb's 0.39); below it the design is refused",
+        source="chosen: the least damping pole placement gives the joint's own pair when it lowers xi2 to keep the "
+               "motor-held damping Kd - K_taud K_jj >= 0 (joint_design.motor_held_damping; measured: the index "
+               "PIP / DIP need 0.37 / 0.21, the thumb's DoF 0.24-0.41); below it the design is refused",
         doc="pole placement: lower end of the xi2 search")
     lqr_angle_error: float = param(
         0.05, unit="rad", low=0.0, low_inclusive=False,
