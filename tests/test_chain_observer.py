@@ -19,7 +19,7 @@ from awiwi_drake.parameters.control import RippleCompensationParams
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams
 
 H = 1.0 / 3000.0
-T_END = 0.6        # s: the MCP step of test_default_cascaded_step_leaves_only_the_motor_friction_residual
+T_END = 1.0        # s: the MCP step of test_default_cascaded_step_leaves_only_the_motor_friction_residual
 
 
 def _observers(rig, L=200.0, damping=None):
@@ -140,9 +140,10 @@ def test_default_cascaded_step_leaves_only_the_motor_friction_residual():
     (3.8) times 1 - friction_scale and the ripple (3.5) times 1 - amplitude_scale over the force loop's gain Kp_f
     (10.2), plus its damping term: per tendon |f_ref - f| <= ((1 - s)|tau_f(w)| + (1 - r)|tau_r(th)|
     + Kd alpha |w_el|) / Kp_f at the logged motor state (the motors' acceleration term B w' is what is left of the
-    transient: the bounds hold by 1.7 % on the MCP after 0.6 s, not yet after 0.3 s), so
-    |e_j| <= sum_i |(P S)_ij| r_i / Kp_j: 2.4e-4 rad on the MCP, against the dead band's 0.107 rad without the
-    observer (at the same Kp) and its closed-form bound 0.136."""
+    transient), so |e_j| <= sum_i |(P S)_ij| r_i / Kp_j, with the residual as it was up to ten observer time
+    constants 1/L before (the observer follows it that much later; the motors are still slowing down after 1 s):
+    5e-5 rad on the MCP, against the dead band's 0.107 rad without the observer (at the same Kp) and its
+    closed-form bound 0.136."""
     errors, bounds = {}, {}
     for obs in (None, "default"):
         rig = finger_diagram(finger="index")
@@ -167,19 +168,25 @@ def test_default_cascaded_step_leaves_only_the_motor_friction_residual():
             bounds[obs] = np.abs(PS.T) @ C / Kp
             continue
         n, m = rig.num_joints, rig.num_tendons
-        th, w = x[2 * n:2 * n + m], x[2 * n + m:2 * n + 2 * m]
-        v = x[n:2 * n]
         law = ctrl._force.fused_parts["law"]
-        f, f_ref = res["tendon_force"][-1], res["controller_tendon_force_reference"][-1]
-        kp, kd = law.gains_at(f_ref)
-        alpha = np.array([fm.alpha_of_force(fi, floor=law.gains.min_schedule_force) for fm, fi in zip(law.fmaps, f)])
-        w_el = w + np.asarray(rig.coupling.P(res["joint_angle"][-1])) @ v / law.r_m
         motor = rig.params.motor
-        resid = ((1 - law.gains.friction_scale) * np.abs(motor_friction_torque(w, motor))
-                 + (1 - RippleCompensationParams().amplitude_scale) * np.abs(motor_ripple_torque(th, motor))
-                 + kd * alpha * np.abs(w_el)) / kp
-        assert np.all(np.abs(f_ref - f) <= resid)
-        bounds[obs] = np.abs(PS.T) @ resid / Kp
+        lag = res.t >= res.t[-1] - 10.0 / FrictionObserverParams().gain       # ten observer time constants
+        window = []
+        for k in np.flatnonzero(lag):
+            x = res["state"][k]
+            th, w, v = x[2 * n:2 * n + m], x[2 * n + m:2 * n + 2 * m], x[n:2 * n]
+            f, f_ref = res["tendon_force"][k], res["controller_tendon_force_reference"][k]
+            kp, kd = law.gains_at(f_ref)
+            alpha = np.array([fm.alpha_of_force(fi, floor=law.gains.min_schedule_force)
+                              for fm, fi in zip(law.fmaps, f)])
+            w_el = w + np.asarray(rig.coupling.P(res["joint_angle"][k])) @ v / law.r_m
+            resid = ((1 - law.gains.friction_scale) * np.abs(motor_friction_torque(w, motor))
+                     + (1 - RippleCompensationParams().amplitude_scale) * np.abs(motor_ripple_torque(th, motor))
+                     + kd * alpha * np.abs(w_el)) / kp
+            window.append(np.abs(PS.T) @ resid / Kp)
+        if k == lag.size - 1:
+            assert np.all(np.abs(f_ref - f) <= resid)
+        bounds[obs] = np.max(window, axis=0)
     assert np.all(np.abs(errors["default"]) <= bounds["default"]), (errors["default"], bounds["default"])
     assert abs(errors[None][1]) > 0.1 and abs(errors["default"][1]) < 0.02 * 0.2      # settled: inside 2 % of the step
     assert np.all(bounds["default"] < bounds[None])

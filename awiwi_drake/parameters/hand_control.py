@@ -56,14 +56,17 @@ class StiffnessCorrectionParams(Parameters):
 class FrictionObserverParams(Parameters):
     """Joint friction observer (9.2)."""
 
-    gain: float = param(200.0, unit="1/s", low=0.0, low_inclusive=False,
-                        source="chosen: L of (9.2); observer bandwidth 200 rad/s, above the 1 Hz test motion (on "
-                               "the index chain 600 / 1500 rad/s made the motors chatter: 55 / 75 % of a step's "
-                               "0.5 s saturated, the 'violent reaction of motors' of 9.4). In the chain, per DoF "
-                               "L / g with g = 1 + K_tau + K_prev the stage's torque loop gain (1 for the impedance): "
-                               "the compensation is multiplied by g (compensation_scale), which raises the observer "
-                               "loop's gain above the force loop's bandwidth by g; measured on the fifth's LQR "
-                               "stage (g = 2.1-2.7): L +19.5 1/s at 1107 rad/s, L / g -7.0 1/s (sampled loop at rest)")
+    gain: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False,
+                        source="chosen: L of (9.2), observer bandwidth 100 rad/s, above the 1 Hz test motion and "
+                               "below the 300 rad/s force loop. In the chain per DoF L / g, g = 1 + K_tau + K_prev the "
+                               "stage's torque loop gain (1 for the impedance): its compensation is multiplied by g "
+                               "(compensation_scale), which multiplies the observer loop's gain by g. Measured, "
+                               "sampled loops at rest: with L = 200 the fifth's LQR stage (g = 2.1-2.7) was unstable "
+                               "at ~1110 rad/s (+19.5 1/s with L, +4.8 1/s with L / g and the motor friction and "
+                               "ripple off); 100 is stable for all six stages on index, thumb, ring and fifth with the "
+                               "physics on, with motor friction and ripple off and with all off. 600 / 1500 rad/s made "
+                               "the index's motors chatter (55 / 75 % of a step's 0.5 s saturated, the 'violent "
+                               "reaction of motors' of 9.4)")
     compensation_scale: float = param(
         1.0, unit="-", low=0.0, high=1.0, low_inclusive=False,
         source=("9.1: u = u_c + tau_fric_hat, the whole estimate. At rest the compensation c obeys "
@@ -78,7 +81,7 @@ class FrictionObserverParams(Parameters):
         0.9, unit="-", low=0.0, high=1.0, low_inclusive=False,
         source=("chosen: kappa behind the motor-position tendon loop (11.3) (two-time-scale). Measured (sampled "
                 "loop at rest, index, L = 200 1/s): kappa = 1 / 0.99 leave the DIP's observer state unstable "
-                "(+1.24 / +1.07 1/s), 0.9 is stable (-0.43 1/s), 0.5 -7.5 1/s"),
+                "(+1.24 / +1.07 1/s), 0.9 is stable (-0.43 1/s); with L = 100 and 0.9: -0.40 1/s"),
         doc="kappa of the two-time-scale chain (motor-position tendon loop)")
 
 
