@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pydrake.math as _pm
 
-__all__ = ["is_float", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like", "where_positive",
-           "Tangent"]
+__all__ = ["is_float", "scalar_value", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like",
+           "where_positive", "Tangent"]
 
 
 def is_float(x) -> bool:
@@ -22,6 +22,20 @@ def is_float(x) -> bool:
     if isinstance(x, np.ndarray):
         return x.dtype != object
     return isinstance(x, (float, int, np.floating, np.integer))
+
+
+def scalar_value(x):
+    """The float value of a number, a one-entry array, an ``AutoDiffXd`` or a :class:`Tangent`, for branch
+    decisions and range checks; None for a symbolic ``Expression`` (it has no value)."""
+    if isinstance(x, (float, int)):
+        return float(x)
+    if isinstance(x, Tangent):
+        return scalar_value(x.v)
+    if isinstance(x, np.ndarray):
+        x = x.reshape(-1)[0]
+    if is_float(x):
+        return float(x)
+    return float(x.value()) if hasattr(x, "value") else None
 
 
 def _binary(fn_float, fn_obj, a, b):

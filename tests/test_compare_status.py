@@ -78,22 +78,36 @@ def test_cli_writes_every_row_names_the_failed_one_and_exits_nonzero(tmp_path, m
 
 def test_finger_disturbance_groups_are_independent():
     """On a finger the external-torque step is one simulation per joint: a case that asks the distribution
-    for a negative force (the LQR stage under a 0.4 Nm load, 40x the standard one: the light DIP cannot
-    hold it with tension only; 0.2 Nm stopped the PIP/DIP with the former, stiffer LQR weights) stops only its own joint's row, after the load starts."""
+    for a negative force stops only its own joint's row, after the load starts.
+
+    The load is derived from the pretension and ``P S``: the sharing (15.88) ``f = f_op + W dtau``, ``W =
+    -((P S)^T)^+``, slackens a tendon of DoF j at the load ``h_j = min_i f_op,i / |W_ij|`` (20 N pretension on the
+    index: 0.48 / 0.64 / 0.28 / 0.20 Nm on the abduction / MCP / PIP / DIP).  Half-way between the PIP's and the
+    abduction's (0.38 Nm, 38x the standard load) the pretension cannot hold the light PIP/DIP but holds the
+    abduction and MCP: every stopped row is a DoF with ``h_j`` below the load (the LQR stage asks the distribution
+    for a negative force there), and every DoF with ``h_j`` above it runs."""
     from awiwi_drake.control.base import closed_loop
+    from awiwi_drake.control.chain import chain_design_point
     from awiwi_drake.control.compare import run_standard_tests
     from awiwi_drake.control.joint_design import joint_stage_controller
     from awiwi_drake.control.registry import get_entry
     from awiwi_drake.hand.diagrams import finger_diagram
 
     rig = finger_diagram(finger="index")
+    point = chain_design_point(rig)
+    W = -np.linalg.pinv(point["coupling_matrix"].T)
+    hold = np.array([np.min(point["tendon_force"][W[:, j] != 0] / np.abs(W[W[:, j] != 0, j])) for j in range(W.shape[1])])
+    np.testing.assert_allclose(hold, [0.48, 0.64, 0.28, 0.20], rtol=1e-9)     # 20 N over |W| (P S: 6/8/7/5 mm)
+    order = np.sort(hold)
+    load = 0.5 * (order[1] + order[2])
     ctrl = joint_stage_controller(rig, "lqr")
     loop = closed_loop(rig, ctrl, **get_entry("lqr", rig).loop_options)
-    p = compare_test_params(rig, step_duration=0.15, settle_time=0.05, disturbance_torque=0.4)
+    p = compare_test_params(rig, step_duration=0.15, settle_time=0.05, disturbance_torque=load)
     runs, rows = run_standard_tests(loop, controller="lqr", tests=["disturbance"], params=p)
     stopped = [i for i, r in enumerate(rows) if r.status not in ("ok", "flagged")]
     ran = [i for i in range(len(rows)) if i not in stopped]
-    assert stopped and ran, [r.status for r in rows]
+    assert stopped and all(hold[i] < load for i in stopped), [r.status for r in rows]
+    assert all(i in ran for i in np.flatnonzero(hold > load)), [r.status for r in rows]
     assert all(rows[i].status == "infeasible_force" and rows[i].failed_at >= p.step_delay for i in stopped)
     assert all(math.isnan(rows[i].stiffness) for i in stopped) and all(np.isfinite(rows[i].stiffness) for i in ran)
     (run,) = runs

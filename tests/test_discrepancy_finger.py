@@ -173,9 +173,12 @@ def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
     augmented FingerRigParams (also in the JSON, the dataset's ``parameters`` form); loaded, built with
     ``finger_diagram(params=...)`` and used as the dataset's nominal, its motor-side equation error on index_h3
     drops by more than 20x and equals the diagnosis's own after-ratio (the written MotorParams reproduce the fitted
-    law through the package's motor law); the written Coulomb torque is the truth's within 25 %.  What stays is
-    the consistent filter's approximation of a nonlinear law (the friction evaluated on the filtered velocity),
-    flagged as unexplained: docs/REPRODUCTIONS.md."""
+    law through the package's motor law).  The written Coulomb torque is checked against an oracle, not a band: the
+    same columns (the slope the diagnosis chose) fitted to the truth's own friction torque on the noise-free motion
+    through the same filter; the two agree within 4 standard errors of the fit (the sensor noise propagated).
+    The oracle's distance from the truth's 0.06 N m (-9 % at slope 30) is the consistent filter's approximation of
+    a nonlinear law (the friction evaluated on the filtered velocity), which is also what stays flagged as
+    unexplained: docs/REPRODUCTIONS.md."""
     import dataclasses
     from awiwi_drake.discrepancy.data import finger_parameters_from_json, finger_parameters_to_json
     from awiwi_drake.discrepancy.finger_truth import nominal_finger_params
@@ -191,7 +194,18 @@ def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
     aug = finger_parameters_from_json(js, "summary.json")
     assert aug == dx.augmented.params and [t for t, _ in aug.tendon_motors] == ["index_h3"]
     written = dict(aug.tendon_motors)["index_h3"]
-    assert written.friction and abs(written.coulomb_torque - 0.06) < 0.25 * 0.06
+    from awiwi_drake.components.motor import motor_friction_torque
+    from awiwi_drake.discrepancy.finger import _signatures
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    fr = FingerResiduals(ds, DiscrepancySettings())
+    X = next(X for _, X, _, shape in _signatures(fr, "motor_friction", 2, CatalogBounds())
+             if shape["motor_slope"] == written.friction_slope).T                  # (K, 2): Coulomb, viscous
+    omega = np.gradient(ds.meta["clean_outputs"]["motor_angle_3"], ds.dt)        # the truth's motion, noise-free
+    oracle = np.linalg.lstsq(X, fr.consistent(motor_friction_torque(omega, truth_motor.replace(damping=0.0))),
+                             rcond=None)[0]
+    se = fr.sigma_tau[2] * np.sqrt(np.linalg.inv(X.T @ X)[0, 0])    # the sensor noise through the fit
+    assert written.friction and abs(written.coulomb_torque - oracle[0]) < 4 * se, (written.coulomb_torque, oracle, se)
+    assert se < 0.05 * 0.06            # the check has teeth: 4 standard errors are < 20 % of the friction
     motors = finger_diagram(finger="index", params=aug).drive.model.motor
     assert motors[2] == written and all(mp == nom.motor for i, mp in enumerate(motors) if i != 2)
     s = DiscrepancySettings()
@@ -205,20 +219,38 @@ def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
 def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
     """``--hide spring_hysteresis --place 6``: the truth is the package's loop (Fig 4.8b, half-width proportional
     to the force) on the spring mechanism of index_h6 only (a per-tendon ``tendon_springs`` entry).  The diagnosis
-    names it on index_h6; its loop size is the truth's within 35 %; the write-back switches the loop on that
-    tendon only (``finger_diagram(params=...)`` builds a drive whose other tendons have none), and with it as the
-    nominal the spring-side equation error drops to the diagnosis's after-ratio."""
+    names it on index_h6; the write-back switches the loop on that tendon only (``finger_diagram(params=...)``
+    builds a drive whose other tendons have none), and with it as the nominal the spring-side equation error drops
+    to the diagnosis's after-ratio.  The loop's level at the mean force is checked against an oracle: the same
+    columns (the presliding length chosen) fitted to the truth's own loop force (measured force minus the elastic
+    law at the true elongation, from the noise-free record) through the same filter and projection, within 4
+    standard errors.  The oracle is not the truth's level: the loop runs on the elongation the measured force gives,
+    which holds the loop itself (x + z/k; at a reversal the loop's presliding stiffness w/delta is about k, so that
+    path reverses about twice as fast and the best column is a longer, larger loop): docs/REPRODUCTIONS.md."""
     import dataclasses
     from awiwi_drake.discrepancy.data import finger_parameters_from_json
     from awiwi_drake.hand.diagrams import finger_diagram
-    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0)
+    from awiwi_drake.discrepancy.finger import _signatures
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0,
+                             joint_angles=True)
     dx = diagnose(ds)
     assert dx.places == {"spring_hysteresis": "index_h6 (PIP)"}
-    beta = ds.meta["truth"]["spring_hysteresis"]["width_ratio"]
     step = dx.steps[0].parameters
-    F = ds.outputs["tendon_force_6"]
-    fitted, truth = step["hysteresis_ratio"] * F.mean() + step["hysteresis_width"], beta * F.mean()
-    assert abs(fitted - truth) < 0.35 * truth, (fitted, truth)
+    fr = FingerResiduals(ds, DiscrepancySettings())
+    X = next(X for _, X, _, shape in _signatures(fr, "spring_hysteresis", 5, CatalogBounds())
+             if shape["hysteresis_length"] == step["hysteresis_length"])
+    X = X.reshape(2, -1).T                                             # ratio, width columns (whitened, projected)
+    clean, rig = ds.meta["clean_outputs"], fr.rig
+    q = np.stack([clean[f"joint_angle_{j + 1}"] for j in range(rig.num_joints)])
+    x = rig.offsets[5] + fr.r * clean["motor_angle_6"] + np.asarray(rig.coupling.P(), float)[5] @ q
+    z = clean["tendon_force_6"] - np.asarray(rig.spring_laws[5].force(x), float)        # the truth's loop force
+    e6 = fr.proj[:, :, 5] * (fr.wsq[5] / fr.stiff[5])[:, None]
+    oracle = np.linalg.lstsq(X, (e6 * fr.consistent(z)[:, None]).T.ravel(), rcond=None)[0]
+    g = np.array([ds.outputs["tendon_force_6"].mean(), 1.0])           # the level at the mean force
+    se = np.sqrt(g @ np.linalg.inv(X.T @ X) @ g)     # unit noise: whitened, and the columns lie in the projection
+    fitted = g @ [step["hysteresis_ratio"], step["hysteresis_width"]]
+    assert abs(fitted - g @ oracle) < 4 * se and se < 0.1 * g @ oracle, (fitted, g @ oracle, se)
     js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
     aug = finger_parameters_from_json(js, "summary.json")
     assert aug == dx.augmented.params and [t for t, _ in aug.tendon_springs] == ["index_h6"]
@@ -266,17 +298,50 @@ def test_hidden_torque_block_converts_and_its_derivatives_are_the_effects():
     from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
     from awiwi_drake.discrepancy.finger_truth import FingerHiddenTorque_, draw_finger_truth
     m = 8
-    truth = draw_finger_truth(["motor_friction", "guide_friction", "motor_ripple"], 3, m, np.random.default_rng(4),
-                              FingerTruthParams())
-    block = FingerHiddenTorque_[float](m, 0.005, truth)
+    truth = draw_finger_truth(["motor_friction", "motor_ripple"], 3, m, np.random.default_rng(4), FingerTruthParams())
+    block = FingerHiddenTorque_[float](m, truth)
     rng = np.random.default_rng(5)
     xs = np.concatenate([rng.uniform(-2, 2, m), rng.uniform(0.5, 3.0, m)])   # sliding: away from the friction knee
-    inputs = dict(motor_state=xs, tendon_force=rng.uniform(5, 40, m))
+    inputs = dict(motor_state=xs)
     jac = check_system_autodiff_matches_fd(block, [], inputs, rtol=1e-5)
     assert_symbolic_matches_float(block, np.zeros(0), inputs, rtol=1e-12)
     J = jac["torque"][0]
     assert np.all(J[np.arange(m) != 2] == 0.0)                       # no torque on the other motors
-    assert J[2, 2] != 0.0 and J[2, m + 2] != 0.0 and J[2, 2 * m + 2] != 0.0   # ripple (theta), friction (omega), guides (f)
+    assert J[2, 2] != 0.0 and J[2, m + 2] != 0.0                     # ripple (theta), friction (omega)
+
+
+def test_guide_friction_acts_between_sensor_and_joints_is_named_there_and_written_back():
+    """Guide friction where the thesis has it ("the tendon force measurements are performed into the forearm":
+    the guidings from the fingers to the spring mechanisms, ch. 4): the truth is the package's guides (Dahl state,
+    a ``tendon_guides`` entry) on index_h5's path only. The motor side does not see it (every motor at the floor:
+    the sensor reads the spring's force), the links' equation does, and the diagnosis names guide friction on the
+    PIP pair, with index_h6 as the not-separable antagonist (its constant part is the same generalised force).
+    Written back as a ``tendon_guides`` entry (the fitted constant; the capstan exponent from the fitted rise), the
+    reloaded nominal's joint-side error falls by more than 20x; it differs from the diagnosis's after-ratio only by
+    the release branch of the capstan law (the written exponent reproduces the fitted rise exactly, not the fitted
+    loss), bounded by the triangle inequality with that branch's whitened energy."""
+    import dataclasses
+    ds = make_finger_dataset("index", ["guide_friction"], place=5, seed=3, gen=THREE)
+    dx = diagnose(ds)
+    assert dx.tendons_named == {"guide_friction": ["index_h5"]} or dx.tendons_named == {"guide_friction": ["index_h6"]}
+    step = dx.steps[0]
+    assert step.status == "not separable" and any(m.startswith("guide_friction on index_h") for m in step.members)
+    s = DiscrepancySettings()
+    fb = FingerResiduals(ds, s)
+    assert max(fb.ratios()["motor"]) < s.unexplained_ratio and fb.ratios()["joint"] > 20
+    js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
+    fa = FingerResiduals(dataclasses.replace(ds, parameters=js), s)
+    before, after = fb.ratios()["joint"], fa.ratios()["joint"]
+    assert before > 20 * after
+    i, g = step.tendon - 1, step.parameters
+    written = dict(fa.params.tendon_guides)[fa.rig.tendon_names[i]]
+    assert written.constant == pytest.approx(g["guide_c0"], rel=1e-12)
+    assert np.expm1(written.capstan_exponent) == pytest.approx(g["guide_capstan"] * np.expm1(g["guide_mu"]), rel=1e-9)
+    diff = fb.guide_path(i, written.constant, written.capstan_exponent) - (
+        g["guide_c0"] * fb.guide_path(i, 1.0, 0.0) + g["guide_capstan"] * fb.guide_path(i, 0.0, g["guide_mu"]))
+    wd = np.linalg.solve(fb._joint_whiten, np.outer(fb._P[i], fb.consistent(diff)))
+    bound = np.sqrt(np.mean(np.sum(wd ** 2, axis=0)) / fb.n)
+    assert abs(np.sqrt(after) - np.sqrt(dx.ratios_after["joint"])) <= bound * (1 + 1e-9) + 1e-12, (after, bound)
 
 
 def test_places_keep_every_tendon_an_effect_is_named_on():
@@ -313,3 +378,39 @@ def test_truth_shapes_and_hysteresis_play_come_from_the_parameters():
     x = np.concatenate([np.linspace(0, 1, 11), np.linspace(0.9, 0, 10)])
     y = _play(x, 0.1)
     assert y[10] == pytest.approx(0.9) and np.argmax(y) == 10 and y[11] == pytest.approx(0.9)   # 2 x 0.1 late
+
+
+def test_tendon_guides_give_one_path_its_own_guide_friction():
+    """``FingerRigParams.tendon_guides``: the compiled finger integrates that path's guide friction as the Dahl law
+    :func:`guide_friction_rate` with the entry's constant and capstan exponent, and nothing on the other paths
+    (guide_friction off); the YAML form round-trips; ``with_physics(guide_friction=False)`` clears it; an unknown
+    tendon is refused when the parameters are made (so at load)."""
+    from awiwi_drake.components.friction import guide_friction_rate
+    from awiwi_drake.discrepancy.finger_truth import nominal_finger_params
+    from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters import TendonGuideParams
+    from awiwi_drake.parameters.hand import FingerRigParams
+    from awiwi_drake.parameters.yaml_io import from_yaml, to_yaml
+    entry = TendonGuideParams(constant=1.2, capstan_exponent=0.08)
+    p = nominal_finger_params("index").replace(tendon_guides=(("index_h5", entry),))
+    assert from_yaml(FingerRigParams.for_finger("index"), to_yaml(p)) == p
+    assert p.with_physics(guide_friction=False).tendon_guides == ()
+    rig = finger_diagram(finger="index", params=p)
+    n, m = rig.num_joints, rig.num_tendons
+    op = rig.operating_point(joint_angles=np.full(n, 0.2))
+    ctx = rig.context(op)
+    x = np.array(op.state, float)
+    rng = np.random.default_rng(3)
+    x[n:2 * n] = rng.normal(0, 0.3, n)                 # joint velocities: every path slides
+    x[-m:] = 0.0
+    x[-m + 4] = 0.3                                    # index_h5's guide state (the drive's last m states)
+    ctx.SetContinuousState(x)
+    d = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()[-m:]
+    f = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
+    v = np.asarray(rig.coupling.P(), float) @ x[n:2 * n]
+    gm = p.friction_smoothing_velocity, p.guide_presliding_length
+    want = guide_friction_rate(x[-m:][4], v[4], f[4], 1.2, 0.08, gm[1], gm[0])
+    assert d[4] == pytest.approx(want, rel=1e-10) and abs(want) > 1.0
+    assert np.all(np.delete(d, 4) == 0.0)
+    with pytest.raises(ValueError, match="tendon_guides: unknown tendon 'index_h9'"):
+        p.replace(tendon_guides=(("index_h9", entry),))

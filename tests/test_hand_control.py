@@ -336,8 +336,8 @@ def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffn
     produce the desired behavior", ch. 9).  With the ch. 9 observer block (9.2) the stage adds the estimated
     disturbance: at rest the observer's state settles where d_hat = -tau (the measured torque accelerates
     nothing), its compensation tau makes the request tau_op - Kp e + tau, and the force loop's tau = request gives
-    e = tau_op / Kp = 0: an integral action.  After 0.3 s the error is a fifth of the dead band's and still
-    shrinking (the guides slide on)."""
+    e = tau_op / Kp = 0: an integral action.  So once the plain loop rests in its dead band the observed error is
+    below it and still shrinking (the guides slide on)."""
     from awiwi_drake.components.friction import guide_friction_force
     from awiwi_drake.hand.systems import tendon_bending_angles
     from awiwi_drake.parameters.hand_control import FrictionObserverParams
@@ -365,9 +365,15 @@ def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffn
             assert np.all(np.abs(e[:, -1]) <= np.abs(PS.T) @ C / Kp)
             assert abs(e[1, -1]) > 0.1                                     # the dead band is real: 0.17 of 0.2 rad
         assert np.all(res["tendon_force"] > 0.0)
-    band, observed = abs(errors[False][1, -1]), np.abs(errors[True][1])
-    assert observed[-1] < 0.2 * band
+    # The observer's rest point is e = 0, the plain loop's the dead band: over the last 40 % of the run (the plain
+    # loop at rest) the observed error is below the plain one at every sample and still decreasing.  (No decay rate is
+    # asserted: none was derived; measured on the MCP: 8 1/s over 0.1-0.2 s, 2.7 1/s over 0.3-0.6 s.  The former
+    # bound, a fifth of the band, was the observed 0.13 rounded up.)
+    plain, observed = np.abs(errors[False][1]), np.abs(errors[True][1])
     n = observed.size
+    late = slice(int(0.6 * n), n)
+    assert np.ptp(plain[late]) < 0.01 * plain[-1]                                  # the plain loop is at rest
+    assert np.all(observed[late] < plain[late])
     assert observed[-1] < observed[int(0.8 * n)] < observed[int(0.6 * n)]         # still approaching e = 0
 
 

@@ -24,13 +24,10 @@ import numpy as np
 from pydrake.systems.framework import BasicVector_, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake._math import scalar_value
+
 __all__ = ["Schedule", "Constant", "Step", "Ramp", "Sine", "Chirp", "Samples", "PerEntry", "as_schedule",
            "InputSchedule_", "InputSchedule"]
-
-
-def _value(t) -> float:
-    """Float value of a time (float or AutoDiffXd) for branch decisions of piecewise signals."""
-    return float(t) if isinstance(t, (float, int, np.floating)) else float(t.value())
 
 
 def _finite(owner: str, **values) -> None:
@@ -107,7 +104,7 @@ class Step(Schedule):
         _finite("Step", time=self.time, after=self.after, before=self.before)
 
     def value(self, t):  # a time within round-off (1e-12 s) of the step is after it
-        return 0.0 * t + (self.after if _value(t) >= self.time - 1e-12 * max(1.0, abs(self.time)) else self.before)
+        return 0.0 * t + (self.after if scalar_value(t) >= self.time - 1e-12 * max(1.0, abs(self.time)) else self.before)
 
     def breakpoints(self):
         return (self.time,)
@@ -128,7 +125,7 @@ class Ramp(Schedule):
             raise ValueError(f"Ramp: t1 = {self.t1} must be after t0 = {self.t0} [s]")
 
     def value(self, t):
-        tv = _value(t)
+        tv = scalar_value(t)
         if tv <= self.t0:
             return 0.0 * t + self.start
         if tv >= self.t1:
@@ -156,7 +153,7 @@ class Sine(Schedule):
             raise ValueError(f"Sine: frequency_hz = {self.frequency_hz} must be > 0 [Hz]")
 
     def value(self, t):
-        if _value(t) < self.start:
+        if scalar_value(t) < self.start:
             return 0.0 * t + self.offset
         return self.offset + self.amplitude * np.sin(2.0 * math.pi * self.frequency_hz * (t - self.start) + self.phase)
 
@@ -184,7 +181,7 @@ class Chirp(Schedule):
                              f"f0 = {self.f0}, f1 = {self.f1}, duration = {self.duration}")
 
     def value(self, t):
-        tau = _value(t) - self.start
+        tau = scalar_value(t) - self.start
         if tau < 0 or tau > self.duration:
             return 0.0 * t + self.offset
         tt = t - self.start
@@ -231,7 +228,7 @@ class Samples(Schedule):
         return id(self)
 
     def value(self, t):
-        tv = _value(t)
+        tv = scalar_value(t)
         tol = 1e-9 * (self.times[1] - self.times[0]) if len(self.times) > 1 else 1e-12  # round-off of a sample time
         i = int(np.searchsorted(self.times, tv + tol, side="right")) - 1
         if i < 0:

@@ -80,6 +80,17 @@ class GuideFrictionModel:
     capstan: bool = False
     smoothing_velocity: float = 1e-3
     presliding_length: float = 4e-4
+    overrides: tuple = ()       # ((tendon index, constant C [N], capstan exponent mu alpha), ...): own guides
+
+    def levels(self):
+        """``(C, mu alpha)`` per tendon (m,): (4.1) at each bending angle, or the capstan exponent, then the
+        tendons of :attr:`overrides` with their own two numbers."""
+        alpha = np.asarray(self.bending_angles, dtype=float)
+        constant = np.zeros_like(alpha) if self.capstan else np.asarray(guide_friction_force(alpha, self.params))
+        exponent = self.params.mu * alpha if self.capstan else np.zeros_like(alpha)
+        for i, c, e in self.overrides:
+            constant[i], exponent[i] = c, e
+        return constant, exponent
 
     def __post_init__(self):
         a = np.asarray(self.bending_angles, dtype=float)
@@ -269,9 +280,7 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
             parts.append(hysteresis_rate(z, x, xdot, f_el, model.hysteresis))
         if model.has_guide_friction:
             gm = model.guide_friction
-            alpha = np.asarray(gm.bending_angles, dtype=float)
-            constant = np.zeros_like(alpha) if gm.capstan else guide_friction_force(alpha, gm.params)
-            exponent = gm.params.mu * alpha if gm.capstan else np.zeros_like(alpha)
+            constant, exponent = gm.levels()
             v = slide if slide is not None else 0.0 * omega
             parts.append(guide_friction_rate(g_state, v, f, constant, exponent, gm.presliding_length,
                                              gm.smoothing_velocity))

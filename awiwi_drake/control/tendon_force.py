@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from awiwi_drake._math import clip, is_float
+from awiwi_drake._math import clip, is_float, scalar_value
 from awiwi_drake.analysis.simulate import InfeasibleForceError
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gain, check_gains
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
@@ -83,12 +83,6 @@ def interp(x, xp: np.ndarray, fp: np.ndarray):
     return fp[i] + slope * (x - xp[i])
 
 
-def _value(x) -> float:
-    """Float value of a float / 1-element array / AutoDiffXd scalar."""
-    v = np.asarray(x, dtype=object).reshape(-1)[0] if np.ndim(x) else x
-    return float(v) if is_float(v) else float(v.value())
-
-
 @dataclass
 class ForceMap:
     """Tabulated static tendon force ``f(theta)`` of a rig and its slope ``alpha(theta)``.
@@ -113,7 +107,7 @@ class ForceMap:
             vals = f.reshape(-1)
             if np.all(np.isfinite(vals) & (vals >= 0.0) & (vals <= self.max_force)):
                 return vals.copy()
-        vals = [_value(x) for x in np.asarray(f, dtype=object).reshape(-1)] if np.size(f) > 1 else [_value(f)]
+        vals = [scalar_value(x) for x in np.asarray(f, dtype=object).reshape(-1)]
         for i, v in enumerate(vals):
             if not (math.isfinite(v) and 0.0 <= v <= self.max_force):
                 where = f"[{i}]" if len(vals) > 1 else ""
@@ -308,7 +302,7 @@ class TendonForceLaw(StaticLaw):
         vals = np.asarray(f)
         for ix, law in self._groups:
             for i in ix:
-                v = _value(vals[i])
+                v = scalar_value(vals[i])
                 if not (math.isfinite(v) and 0.0 <= v <= law.fmap.max_force):
                     raise InfeasibleForceError(f"{name}[{i}] = {v!r} N is outside the tendon force table of that "
                                                f"tendon [0, {law.fmap.max_force:.4g}] N")

@@ -36,12 +36,15 @@ finger catalog            that tendon's motor
 ``nominal_motor``         ``inertia + motor_inertia_abs``, ``damping + motor_damping_add``
 ``spring_hysteresis``     that tendon's ``tendon_springs`` entry: ``hysteresis`` on, ``width_ratio``,
                           ``width_offset``, ``presliding_length`` (the package's loop, Fig 4.8b)
+``guide_friction``        that tendon's ``tendon_guides`` entry (``TendonGuideParams``: constant C and capstan
+                          exponent; added to the path's own guides, the Dahl law being linear in its level);
+                          the finger diagnosis sees it in the links' equation, between the force sensor and the
+                          joints, where the package's guides act (ch. 4: "the guidings from the fingers to the
+                          spring mechanisms")
 ========================= =========================================================
 
-Not representable (listed with the reason): ``guide_friction`` as the finger diagnosis sees it, a
-tension-dependent torque on the motor side of the force sensor, while the package's guide friction
-((4.1), ch. 4: "the guidings from the fingers to the spring mechanisms") acts between the sensor and
-the joints; the sensor calibrations ``nominal_spring`` and ``force_sensor`` (the measurement, not the plant).
+Not representable (listed with the reason): the sensor calibrations ``nominal_spring`` and ``force_sensor``
+(the measurement, not the plant).
 """
 
 from __future__ import annotations
@@ -111,8 +114,6 @@ def augmented_rig_parameters(dx, base) -> AugmentedParameters:
 
 
 _FINGER_NOT_REPRESENTABLE = {
-    "guide_friction": ("a tension-dependent torque on the motor side of the force sensor; the package's guide "
-                       "friction acts between the sensor and the joints (ch. 4)"),
     "nominal_spring": "a force-sensor scale: a calibration of the measurement, not of the plant",
     "force_sensor": "a force-sensor offset: a calibration of the measurement, not of the plant",
 }
@@ -125,7 +126,7 @@ def augmented_finger_parameters(dx, base) -> AugmentedParameters:
     docstring; ``spring_hysteresis`` into ``tendon_springs``); returns the validated copy, the effects written and
     those not representable (with why)."""
     from awiwi_drake.components.motor import tendon_motor_params
-    from awiwi_drake.parameters.components import HysteresisParams
+    from awiwi_drake.parameters.components import HysteresisParams, TendonGuideParams
     from awiwi_drake.parameters.hand import FingerRigParams
 
     if not isinstance(base, FingerRigParams):
@@ -151,8 +152,8 @@ def augmented_finger_parameters(dx, base) -> AugmentedParameters:
             motor = (motor.replace(ripple_harmonics=motor.ripple_harmonics + extra) if motor.ripple else
                      motor.replace(ripple=True, ripple_motor_amplitude=0.0, ripple_output_amplitude=0.0,
                                    ripple_harmonics=extra))
-        elif st.effect == "spring_hysteresis":
-            continue                                    # a tendon_springs entry, below
+        elif st.effect in ("spring_hysteresis", "guide_friction"):
+            continue                                    # a tendon_springs / tendon_guides entry, below
         elif st.effect == "nominal_motor":
             inertia, damping = motor.inertia + g["motor_inertia_abs"], motor.damping + g["motor_damping_add"]
             if not (inertia > 0 and damping >= 0):
@@ -182,4 +183,17 @@ def augmented_finger_parameters(dx, base) -> AugmentedParameters:
             presliding_length=g["hysteresis_length"]))
         applied.append(f"spring_hysteresis on {st.place}" + (f" ({st.status})" if st.status != "confirmed" else ""))
     out = out.replace(tendon_springs=tuple(springs.items()))
+    guides = dict(out.tendon_guides)
+    from awiwi_drake.hand.diagrams import finger_diagram
+    gm = finger_diagram(finger=base.finger_name, params=base).drive.model.guide_friction
+    C0, E0 = gm.levels() if gm is not None else (np.zeros(len(names)), np.zeros(len(names)))
+    for st in dx.steps:
+        if st.effect != "guide_friction":
+            continue
+        i, g = st.tendon - 1, st.parameters
+        # rise when pulled: e^{E} - 1 = (e^{E0} - 1) + capstan (e^{mu} - 1); the constants add
+        rise = np.expm1(E0[i]) + g["guide_capstan"] * np.expm1(g["guide_mu"])
+        guides[names[i]] = TendonGuideParams(constant=float(C0[i] + g["guide_c0"]), capstan_exponent=float(np.log1p(rise)))
+        applied.append(f"guide_friction on {st.place}" + (f" ({st.status})" if st.status != "confirmed" else ""))
+    out = out.replace(tendon_guides=tuple(guides.items()))
     return AugmentedParameters(out, applied, missing)

@@ -12,7 +12,13 @@ of the dataset's :class:`~awiwi_drake.parameters.hand.FingerRigParams`):
 * **spring side**: the spring laws ``f_i = F_i(x_i)`` with the routing ``x = x0 + r theta + h(q) - h(0)``;
   the joint angles are estimated from all tendons at once (weighted least squares, ``m > n``), so the
   ``m - n`` redundant tendon directions carry what one spring mechanism does differently (hysteresis, a
-  force-sensor offset, a scale error).
+  force-sensor offset, a scale error);
+* **joint side**: the links' equation ``M(q) q'' + C(q, q') q' + d q' + G [q; q'] = -P^T (f + g)`` with the
+  measured forces and the joint angles estimated from the tendons: its residual holds the guide friction ``g`` of
+  the tendon paths, which acts between the force sensor and the joints ("the tendon force measurements are
+  performed into the forearm", ch. 4) and so shows in neither the motor nor the spring law. The constant part of
+  a path's guide friction is the same generalised force as its antagonist's (opposite rows of ``P``): such a pair
+  is one class "not separable" with these data.
 
 Both are equation errors, made exact by **consistent filtering**: one Gaussian kernel ``H`` is applied to
 both sides (``H''`` to the angle for the acceleration, ``H'`` for the velocity, ``H`` to the force and the
@@ -66,8 +72,9 @@ __all__ = ["FingerResiduals", "FingerStep", "FingerDiagnosis", "diagnose_finger"
 JOINT_LABELS = {"0": "abduction", "1": "MCP", "2": "PIP", "3": "DIP", "h": "HMC"}
 """Plant joint ``q<digit><j>`` -> anatomical name (section 5.1: abduction, MCP, PIP, DIP; the fifth's HMC)."""
 
-MOTOR_SIDE = ("motor_friction", "guide_friction", "motor_ripple", "nominal_motor")
+MOTOR_SIDE = ("motor_friction", "motor_ripple", "nominal_motor")
 SPRING_SIDE = ("spring_hysteresis", "nominal_spring", "force_sensor")
+JOINT_SIDE = ("guide_friction",)
 NUISANCE = ("nominal_motor", "nominal_spring", "force_sensor")
 
 
@@ -134,10 +141,11 @@ class FingerResiduals:
         self.params = fp = finger_parameters_from_json(ds.parameters, ds.name)
         self.finger = ds.parameters["finger"]
         rig = finger_diagram(finger=self.finger, params=fp)
-        if fp.spring.hysteresis.enabled or fp.guide_friction:
-            raise ValueError(f"{ds.name}: parameters.finger_rig: spring.hysteresis.enabled and guide_friction must "
-                             f"be false (the nominal finger may hold motor friction and ripple per tendon "
-                             f"(tendon_motors) and a hysteresis loop on single tendons (tendon_springs))")
+        if fp.spring.hysteresis.enabled:
+            raise ValueError(f"{ds.name}: parameters.finger_rig: spring.hysteresis.enabled must be false (the nominal "
+                             f"finger may hold motor friction and ripple per tendon (tendon_motors), a hysteresis "
+                             f"loop on single tendons (tendon_springs) and guide friction (guide_friction, "
+                             f"tendon_guides))")
         self.rig = rig
         m, n, dt = rig.num_tendons, rig.num_joints, ds.dt
         self.m, self.n, self.dt = m, n, dt
@@ -193,6 +201,7 @@ class FingerResiduals:
                                  + (d * np.linalg.norm(g1)) ** 2 * self.sig_theta ** 2
                                  + (r * np.linalg.norm(g0)) ** 2 * self.sig_force ** 2)
         self._spring_side(np.linalg.norm(g0))
+        self._joint_side(TH, g0, g1, g2)
         K = self.tau.shape[1]
         nb = max(int(round(settings.finger_block / (step * dt))), 1)
         self.folds = (np.arange(K) // nb) % 3      # blocked 3-fold cross-validation
@@ -276,6 +285,68 @@ class FingerResiduals:
         shift = self.consistent(self._x_full[i] - np.asarray(law.inverse_force(np.maximum(F - z, 1e-3)), float))
         return (self.proj[:, :, i] * (self.wsq[i] * shift)[:, None]).T
 
+    def _joint_side(self, TH: np.ndarray, g0, g1, g2) -> None:
+        """The links' equation residual ``rho = M q'' + C q' + d q' + G [q; q'] + P^T (f + g_nominal)`` (n, K),
+        whitened by the force noise through ``P^T``; the joint angles from the tendons at the full rate (the
+        spring side's weighted least squares with each tendon's mean weight), filtered consistently. Only where
+        the routing is constant (the thumb's is not: ``joint_checked`` False)."""
+        rig, m, n = self.rig, self.m, self.n
+        self.joint_checked = bool(rig.coupling.is_constant)
+        if not self.joint_checked:
+            self.rho = np.zeros((n, self.tau.shape[1]))
+            return
+        from awiwi_drake.hand.dynamics import LinkModel
+        P = np.asarray(rig.coupling.P(), float)
+        w = np.mean(self.wsq, axis=1)                                      # (m,) mean whitening weight
+        A = np.linalg.pinv(w[:, None] * P)
+        y = self._x_full - rig.offsets[:, None] - self.r * TH               # (m, N) = P q + noise
+        q_full = A @ (w[:, None] * y)                                      # (n, N)
+        self.path = P @ q_full                                             # tendon travel at the guides [m]
+        # the links' terms at the full rate, then filtered: M(q) q'' and C(q, q') q' are not linear in q, and the
+        # ideal finger's link modes (~500 Hz) move q within the kernel's width; evaluated on the filtered angles
+        # they leave 2-4x the noise floor on a nothing-hidden index record (rectified fast-mode terms), at the full
+        # rate 1e-5 N m with the noise-free angles (3 s, 1 kHz). Central differences: the angle noise enters the
+        # filtered acceleration as the consistent filter's H'' does
+        v_full = np.gradient(q_full, self.dt, axis=1)
+        a_full = np.gradient(v_full, self.dt, axis=1)
+        links = LinkModel(rig.plant, rig.coupling_gain)
+        plant, ctx = rig.plant, rig.plant.CreateDefaultContext()
+        lhs = np.empty_like(q_full)
+        for k in range(q_full.shape[1]):
+            plant.SetPositions(ctx, q_full[:, k])
+            plant.SetVelocities(ctx, v_full[:, k])
+            lhs[:, k] = plant.CalcMassMatrix(ctx) @ a_full[:, k] + plant.CalcBiasTerm(ctx)
+        lhs += links.damping[:, None] * v_full
+        if links.coupling_gain is not None:
+            lhs += links.coupling_gain @ np.vstack([q_full, v_full])
+        rho = self.consistent(lhs) + P.T @ self.force
+        gm = rig.drive.model.guide_friction
+        if gm is not None:                                  # the nominal finger's own guides, along the path
+            C, E = gm.levels()
+            g_nom = np.stack([self.guide_path(i, C[i], E[i], gm) if (C[i] or E[i]) else np.zeros(len(TH[0]))
+                              for i in range(m)])
+            rho = rho + P.T @ self.consistent(g_nom)
+        cov = (np.linalg.norm(g0) ** 2) * (P.T * self.sig_force ** 2) @ P
+        self._joint_whiten = np.linalg.cholesky(cov)
+        self.rho = np.linalg.solve(self._joint_whiten, rho)
+        self._P = P
+
+    def guide_path(self, i: int, constant: float, exponent: float, gm=None) -> np.ndarray:
+        """Guide friction force [N] of tendon ``i``'s path at the full rate: the package's Dahl law
+        (:func:`~awiwi_drake.components.friction.guide_friction_rate`, level
+        :func:`~awiwi_drake.components.friction.guide_friction_level`) solved per sample
+        (:func:`~awiwi_drake.components.friction.dahl_path`) along the estimated travel at the guides, after the
+        play operator of the hysteresis candidate (the travel's noise must not reverse it)."""
+        from awiwi_drake.components.friction import guide_friction_level
+        delta = gm.presliding_length if gm is not None else self.params.guide_presliding_length
+        v_s = gm.smoothing_velocity if gm is not None else self.params.friction_smoothing_velocity
+        s = self.path[i]
+        k = float(np.median(np.asarray(self.rig.spring_laws[i].stiffness(self._x_full[i]), float)))
+        path = _play(s, self.settings.finger_hysteresis_play * self.sig_force[i] / k)
+        direction = np.tanh(np.clip(np.gradient(path) / (self.dt * v_s), -40.0, 40.0))
+        level = guide_friction_level(np.maximum(self._force_raw[i], 0.0), constant, exponent, direction)
+        return dahl_path(path, level, delta, v_s, self.dt)
+
     # ------------------------------------------------------------------ energies
     def ratios(self) -> dict:
         """Residual energy over its noise floor (all samples: a fitted effect has 2-4 parameters against
@@ -284,7 +355,9 @@ class FingerResiduals:
         dof = self.m - self.n
         spr = [float(np.mean(self.eps[i] ** 2) * self.m / dof) for i in range(self.m)]
         return {"motor": mot, "spring": spr,
-                "spring_total": float(np.mean(np.sum(self.eps ** 2, axis=0)) / dof)}
+                "spring_total": float(np.mean(np.sum(self.eps ** 2, axis=0)) / dof),
+                "joint": float(np.mean(np.sum(self.rho ** 2, axis=0)) / self.n) if self.joint_checked else
+                float("nan")}
 
 
 # ---------------------------------------------------------------------------- candidates
@@ -304,7 +377,6 @@ class Candidate:
     floor: float                # the noise-equivalent size it is compared with
     rejected: str = ""
     fitted: np.ndarray = field(default=None, repr=False)   # the effect's contribution to the residual
-    capstan_rms: float = 0.0    # guide friction: RMS torque of its tension-proportional part [N m]
 
 
 def _play(x: np.ndarray, half_width: float) -> np.ndarray:
@@ -364,12 +436,12 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
             out.append((f"slope {slope:g}", np.stack([H(laws.motor_friction(omf, 1.0, slope, 0.0)),
                                                       H(laws.motor_friction(omf, 0.0, slope, 1.0))]),
                         ["motor_coulomb", "motor_viscous"], {"motor_slope": slope}))
-    elif effect == "guide_friction":  # the motor feels -r g(v, f) = -r (C0 s + f (exp(mu s) - 1)): mu on a grid
-        s = np.tanh(r * omf / laws.GUIDE_VELOCITY)
-        c0 = H(-r * s)
-        fp = np.maximum(ff, 0.0)
+    elif effect == "guide_friction":  # the joints feel -P_i^T g_i: the package's Dahl guides on path i, mu on a grid
+        white = np.linalg.solve(fr._joint_whiten, -fr._P[i])[:, None]          # (n, 1)
+        unit = white[None] * H(fr.guide_path(i, 1.0, 0.0))[None, None]        # (1, n, K): C = 1 N
         for mu in np.linspace(0.0, bounds.guide_mu_max, 9)[1:]:
-            out.append((f"mu {mu:.3g}", np.stack([c0, H(-r * fp * (np.exp(mu * s) - 1.0))]),
+            cap = white[None] * H(fr.guide_path(i, 0.0, float(mu)))[None, None]
+            out.append((f"mu {mu:.3g}", np.concatenate([unit, cap]).reshape(2, -1),
                         ["guide_c0", "guide_capstan"], {"guide_mu": float(mu)}))
     elif effect == "motor_ripple":
         for o1, o2 in _ripple_orders(fr, i, bounds):
@@ -423,16 +495,17 @@ def _lsq(A: np.ndarray, b: np.ndarray, names: list, bounds: CatalogBounds) -> np
     return res.x / scale
 
 
-def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settings, base_motor, base_spring):
+def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settings, base_motor, base_spring,
+         base_joint):
     """Best variant of ``effect`` at tendon ``i``: blocked cross-validation (each fold held out once, fitted
     on the others): held-out gain, its null spread, and BIC of the fit on all data."""
     folds = fr.folds
     best = None
     for label, X, names, shape in _signatures(fr, effect, i, bounds):
-        spring = effect in SPRING_SIDE
+        spring = effect in SPRING_SIDE or effect in JOINT_SIDE
         if spring:
-            R = base_spring                                        # (m, K) whitened
-            Xc = X.reshape(X.shape[0], fr.m, -1)                   # (c, m, K)
+            R = base_spring if effect in SPRING_SIDE else base_joint       # (m or n, K) whitened
+            Xc = X.reshape(X.shape[0], R.shape[0], -1)                     # (c, m or n, K)
             design = lambda sel: Xc[:, :, sel].reshape(len(names), -1).T   # noqa: E731
             target = lambda sel: R[:, sel].ravel()                          # noqa: E731
             s = 1.0
@@ -458,11 +531,12 @@ def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settin
         n_obs = b.size
         dbic = n_obs * math.log(max(e1, 1e-300) / max(e0, 1e-300)) + len(names) * math.log(max(n_obs, 2))
         if spring:
-            fit = np.tensordot(beta, Xc, axes=1)                   # (m, K)
+            fit = np.tensordot(beta, Xc, axes=1)                   # (m or n, K)
             # the effect's size in newtons on its own tendon (before projection and whitening)
             f_i = fr.force[i]
             cols = {"spring_hysteresis": lambda: (beta[0] * f_i + beta[1]) * np.tanh(f_i),   # the half-width
-                    "nominal_spring": lambda: beta[0] * f_i, "force_sensor": lambda: beta[0] * np.ones_like(f_i)}
+                    "nominal_spring": lambda: beta[0] * f_i, "force_sensor": lambda: beta[0] * np.ones_like(f_i),
+                    "guide_friction": lambda: beta[0] + beta[1] * (np.exp(shape.get("guide_mu", 0.0)) - 1) * f_i}
             size = float(np.sqrt(np.mean(cols[effect]() ** 2)))
             floor = float(fr.sig_force[i])
         else:
@@ -472,10 +546,9 @@ def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settin
             floor = float(fr.r * fr.sig_force[i])          # the torque the force-sensor noise exerts
         params = dict(zip(names, (float(v) for v in beta)))
         params.update(shape)
-        c = Candidate(effect, "nuisance" if effect in NUISANCE else "physical", "spring" if spring else "motor", i,
+        side = "spring" if effect in SPRING_SIDE else "joint" if effect in JOINT_SIDE else "motor"
+        c = Candidate(effect, "nuisance" if effect in NUISANCE else "physical", side, i,
                       label, params, gain, z, dbic, _at_bound(effect, params, bounds), size, floor, fitted=fit)
-        if effect == "guide_friction":
-            c.capstan_rms = float(np.sqrt(np.mean((beta[1] * X[1]) ** 2)))
         if best is None or c.gain > best.gain:
             best = c
     return best
@@ -488,10 +561,6 @@ def _at_bound(effect: str, p: dict, bounds: CatalogBounds) -> list:
 
 
 def _reject(c: Candidate, settings: DiscrepancySettings) -> str:
-    if c.effect == "guide_friction" and c.capstan_rms < settings.finger_material * c.floor:
-        # without its tension-proportional part, guide friction on the finger is a torque of the motor's
-        # direction only: motor Coulomb friction's law (3.8) with a sharper sign; the data show no guide
-        return "no tension-proportional part: the same law as motor Coulomb friction"
     if c.z < settings.min_z:
         return f"held-out gain {c.z:.1f} null std < min_z {settings.min_z:g}"
     if c.delta_bic >= 0:
@@ -599,7 +668,7 @@ class FingerDiagnosis:
         if self.unexplained_residual:
             lines.append(f"  unexplained: {self.unexplained['text']}")
         if self.augmented is not None and self.augmented.applied:
-            lines.append(f"  written into the finger's parameters (tendon_motors, tendon_springs): {', '.join(self.augmented.applied)}")
+            lines.append(f"  written into the finger's parameters (tendon_motors, tendon_springs, tendon_guides): {', '.join(self.augmented.applied)}")
         if self.augmented is not None and self.augmented.not_representable:
             lines.append(f"  not representable in FingerRigParams: {'; '.join(self.augmented.not_representable)}")
         return "\n".join(lines)
@@ -624,7 +693,9 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     say("motor side, residual/floor per tendon: " + ", ".join(f"{v:.2f}" for v in before["motor"]))
     say("spring side, residual/floor per tendon: " + ", ".join(f"{v:.2f}" for v in before["spring"])
         + f" (all: {before['spring_total']:.2f})")
-    base_motor, base_spring = fr.tau.copy(), fr.eps.copy()
+    base_motor, base_spring, base_joint = fr.tau.copy(), fr.eps.copy(), fr.rho.copy()
+    if fr.joint_checked:
+        say(f"joint side (links' equation, guide friction), residual/floor: {before['joint']:.2f}")
     steps, history, used = [], [], set()
     floor = settings.floor_ratio
     # the thumb (routing h(q) nonlinear): its spring side is not judged. Measured on nothing-hidden thumb datasets
@@ -646,16 +717,17 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     def current():
         mot = [float(np.mean((base_motor[i] / fr.sigma_tau[i]) ** 2)) for i in range(fr.m)]
         spr = float(np.mean(np.sum(base_spring ** 2, axis=0)) / (fr.m - fr.n)) if spring_checked else 0.0
-        return mot, spr
+        jnt = float(np.mean(np.sum(base_joint ** 2, axis=0)) / fr.n) if fr.joint_checked else 0.0
+        return mot, spr, jnt
 
     n_phys = n_nuis = 0
     while True:
-        mot, spr = current()
-        if max(mot) < floor and spr < floor:
+        mot, spr, jnt = current()
+        if max(mot) < floor and spr < floor and jnt < floor:
             stop = "residual at the noise floor"
             break
         cands = []
-        for eff in MOTOR_SIDE + SPRING_SIDE:
+        for eff in MOTOR_SIDE + SPRING_SIDE + JOINT_SIDE:
             kind = "nuisance" if eff in NUISANCE else "physical"
             if (kind == "physical" and n_phys >= settings.max_effects) or \
                     (kind == "nuisance" and n_nuis >= settings.max_nuisance):
@@ -667,7 +739,9 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                     continue
                 if eff in SPRING_SIDE and spr < floor:
                     continue
-                c = _fit(fr, eff, i, bounds, settings, base_motor, base_spring)
+                if eff in JOINT_SIDE and jnt < floor:
+                    continue
+                c = _fit(fr, eff, i, bounds, settings, base_motor, base_spring, base_joint)
                 c.rejected = _reject(c, settings)
                 cands.append(c)
         cands.sort(key=lambda c: -c.gain)
@@ -695,9 +769,12 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
             experiment = separating_experiment([win.effect] + others) if others else ""
             same = [fr.rig.tendon_names[c.tendon] for c in tied if c.effect == win.effect and c.tendon != win.tendon]
             if same:    # one effect, two places: tell the tendons apart, not the effects
-                experiment = "; ".join(x for x in (experiment, (
-                    f"hold the joints and cycle one tendon's force at a time ({', '.join([fr.rig.tendon_names[win.tendon]] + same)}): "
-                    f"the effect follows its own tendon")) if x)
+                pair = ", ".join([fr.rig.tendon_names[win.tendon]] + same)
+                how = (f"slide the joint with one tendon of the pair tensioned at a time ({pair}): the capstan part "
+                       f"follows the loaded tendon" if win.effect == "guide_friction" else
+                       f"hold the joints and cycle one tendon's force at a time ({pair}): the effect follows its "
+                       f"own tendon")
+                experiment = "; ".join(x for x in (experiment, how) if x)
         if win.side == "motor":
             base_motor = base_motor - win.fitted
         elif win.effect == "spring_hysteresis":   # removed as the written-back loop removes it (not linearised)
@@ -705,6 +782,8 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
             base_spring = base_spring - fr.loop_removed(win.tendon, HysteresisParams(
                 enabled=True, width_ratio=g["hysteresis_ratio"], width_offset=g["hysteresis_width"],
                 presliding_length=g["hysteresis_length"]))
+        elif win.side == "joint":
+            base_joint = base_joint - win.fitted
         else:
             base_spring = base_spring - win.fitted
         used.add((win.effect, win.tendon))
@@ -714,22 +793,24 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                                 members, experiment, win.z, win.delta_bic))
         say(f"added {win.effect} on {places[win.tendon]} ({win.kind}, {status}, z {win.z:.1f}, "
             f"dBIC {win.delta_bic:.1f}): " + ", ".join(f"{k} = {v:.4g}" for k, v in win.params.items()))
-    mot, spr = current()
-    after = {"motor": mot, "spring_total": spr if spring_checked else float("nan")}
+    mot, spr, jnt = current()
+    after = {"motor": mot, "spring_total": spr if spring_checked else float("nan"),
+             "joint": jnt if fr.joint_checked else float("nan")}
     # unexplained: above the threshold and beyond chance for the largest of m + 1 chi-square means over K
     # samples (family-wise 0.1 %)
     from scipy.stats import chi2
     K = fr.tau.shape[1]
-    limit = max(settings.unexplained_ratio, float(chi2.ppf(1.0 - 1e-3 / (fr.m + 1), K)) / K)
-    worst = max(max(mot), spr)
+    limit = max(settings.unexplained_ratio, float(chi2.ppf(1.0 - 1e-3 / (fr.m + 2), K)) / K)
+    worst = max(max(mot), spr, jnt)
     unexplained = worst > limit
     where = {}
     if unexplained:
         tendons = [places[i] for i in range(fr.m) if mot[i] > limit]
-        where = {"motor_side": tendons, "spring_side": spr > limit,
+        where = {"motor_side": tendons, "spring_side": spr > limit, "joint_side": jnt > limit,
                  "text": (f"held-out residual up to {worst:.2f}x the noise floor"
                           + (f" on the motor side of {', '.join(tendons)}" if tendons else "")
-                          + (f"; spring side {spr:.2f}x" if spr > limit else ""))}
+                          + (f"; spring side {spr:.2f}x" if spr > limit else "")
+                          + (f"; joint side (links' equation) {jnt:.2f}x" if jnt > limit else ""))}
     named = [f"{s.effect} on {s.place}" for s in steps if s.kind == "physical"]
     if unexplained:
         verdict = "unexplained discrepancy remains" + (f" after {', '.join(named)}" if named else "")

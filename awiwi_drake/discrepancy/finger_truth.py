@@ -11,17 +11,20 @@ The hidden effect acts at one place (tendon ``place``, 1-based in the finger's t
 ==================== =========================================================================
 ``motor_friction``    Stribeck friction on that motor (:func:`~awiwi_drake.components.friction.stribeck_friction`;
                       the catalog's form is (3.8), an arctangent)
-``guide_friction``    friction of that tendon's path, constant plus capstan part
-                      (:func:`~awiwi_drake.components.friction.guide_friction`, tanh direction)
+``guide_friction``    friction of that tendon's path between the force sensor and the joints, constant plus
+                      capstan part: the package's guides (a Dahl state, ``FingerDriveParams.tendon_guides``
+                      entry of the truth finger) on that path only
 ``motor_ripple``      two harmonics on that motor, orders drawn from 1..6 and 100 per revolution
 ``spring_hysteresis`` that tendon's spring mechanism with the package's hysteresis (Fig 4.8b; a
                       force-proportional loop, ``HysteresisParams.width_ratio``; the catalog's loop has a
                       constant width): a ``tendon_springs`` entry of the truth finger
 ==================== =========================================================================
 
-The first three are torques on the motor from a block in front of the drive's ``motor_torque`` input
-(:class:`FingerHiddenTorque_`): guide friction acts between motor and spring, so the motor feels
-``r (f + g)`` while the force sensor at the spring reads ``f``; a torque ``-r g`` on the motor is that.
+Motor friction and ripple are torques on the motor from a block in front of the drive's ``motor_torque`` input
+(:class:`FingerHiddenTorque_`). Guide friction is where the thesis has it: "the tendon force measurements are
+performed into the forearm", so "the friction introduced by the guidings from the fingers to the spring
+mechanisms" (ch. 4, introduction) acts between the force sensor and the joints: the joints feel ``-P^T (f + g)``
+while the sensor reads ``f`` (waves 4-5 put it on the motor side of the sensor, where the hand has none).
 """
 
 from __future__ import annotations
@@ -33,13 +36,12 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import Adder, ConstantVectorSource
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import positive_part
 from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
-from awiwi_drake.components.friction import guide_friction, stribeck_friction
+from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.hand.diagrams import finger_diagram
-from awiwi_drake.parameters.components import HysteresisParams
+from awiwi_drake.parameters.components import HysteresisParams, TendonGuideParams
 from awiwi_drake.parameters.discrepancy import FingerTruthParams, TruthGeneratorParams
 from awiwi_drake.parameters.hand import FINGERS, FingerRigParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
@@ -51,7 +53,7 @@ from .truth import stribeck_draw
 __all__ = ["FINGER_HIDDEN_EFFECTS", "FingerHiddenTorque_", "nominal_finger_params", "make_finger_dataset"]
 
 FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple", "spring_hysteresis")
-_TORQUE_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple")
+_TORQUE_EFFECTS = ("motor_friction", "motor_ripple")
 
 
 def nominal_finger_params(finger: str) -> FingerRigParams:
@@ -65,35 +67,28 @@ def nominal_finger_params(finger: str) -> FingerRigParams:
 def FingerHiddenTorque_(T):
 
     class Impl(LeafSystem_[T]):
-        """Torque of a hidden motor-side effect on one motor: inputs ``motor_state`` (2m: theta, omega)
-        and ``tendon_force`` (m) [N]; output ``torque`` (m) [N m], zero except at the effect's place."""
+        """Torque of a hidden motor-side effect on one motor: input ``motor_state`` (2m: theta, omega);
+        output ``torque`` (m) [N m], zero except at the effect's place."""
 
-        def _construct(self, num_tendons: int, pulley_radius: float, truth: dict, converter=None):
+        def _construct(self, num_tendons: int, truth: dict, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._m, self._r, self._truth = int(num_tendons), float(pulley_radius), dict(truth)
+            self._m, self._truth = int(num_tendons), dict(truth)
             xs = self.DeclareVectorInputPort("motor_state", 2 * self._m)
-            f = self.DeclareVectorInputPort("tendon_force", self._m)
             # declared, so Build()'s feedthrough check does not evaluate _calc on symbolic inputs (it did, and
             # np.exp/tanh on the Expression objects left the FPU's invalid flag set: numpy's "invalid value")
-            self.DeclareVectorOutputPort("torque", self._m, self._calc,
-                                         prerequisites_of_calc={xs.ticket(), f.ticket()})
+            self.DeclareVectorOutputPort("torque", self._m, self._calc, prerequisites_of_calc={xs.ticket()})
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other._m, other._r, other._truth, converter=converter)
+            Impl._construct(self, other._m, other._truth, converter=converter)
 
         def _calc(self, context, output):
             xs = self.get_input_port(0).Eval(context)
-            f = self.get_input_port(1).Eval(context)
             tr, m, k = self._truth, self._m, self._truth["place"] - 1
             theta, omega = xs[k], xs[m + k]
             tau = 0.0 * omega
             if "motor_friction" in tr:
                 p = tr["motor_friction"]
                 tau = tau + stribeck_friction(omega, p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
-            if "guide_friction" in tr:
-                p = tr["guide_friction"]
-                tau = tau - self._r * guide_friction(self._r * omega, positive_part(f[k]), p["c0"], p["mu_angle"],
-                                                     p["v0"])
             if "motor_ripple" in tr:
                 tau = tau + laws.ripple(theta, tr["motor_ripple"]["harmonics"])
             out = [0.0 * omega] * m
@@ -118,7 +113,7 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
     if "motor_friction" in hidden:
         tr["motor_friction"] = stribeck_draw(k * u(*gen.motor_coulomb_range), gen.motor_viscous_range, rng, k)
     if "guide_friction" in hidden:
-        tr["guide_friction"] = dict(c0=k * u(*gen.guide_c0_range), mu_angle=k * u(*gen.guide_mu_range), v0=2e-4)
+        tr["guide_friction"] = dict(c0=k * u(*gen.guide_c0_range), mu_angle=k * u(*gen.guide_mu_range))
     if "motor_ripple" in hidden:
         orders = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False)
         harm = []
@@ -141,6 +136,11 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
         hyst = HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
         own[tendon] = sp.replace(hysteresis=hyst)
         p = p.replace(tendon_springs=tuple(own.items()))
+    if "guide_friction" in truth:         # the package's guides (between sensor and joints) on that path only
+        tendon = finger_diagram(finger=finger, params=p).tendon_names[truth["place"] - 1]
+        g = truth["guide_friction"]
+        p = p.replace(tendon_guides=tuple(dict(p.tendon_guides, **{tendon: TendonGuideParams(
+            constant=g["c0"], capstan_exponent=g["mu_angle"])}).items()))
     rig = finger_diagram(finger=finger, params=p)
     m = rig.num_tendons
     b = DiagramBuilder()
@@ -148,10 +148,9 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     zero = b.AddNamedSystem("no_external_torque", ConstantVectorSource(np.zeros(rig.num_joints)))
     b.Connect(zero.get_output_port(0), fd.GetInputPort("external_torque"))
     if any(e in truth for e in _TORQUE_EFFECTS):
-        hid = b.AddNamedSystem("hidden_effect", FingerHiddenTorque_[float](m, p.motor.pulley_radius, truth))
+        hid = b.AddNamedSystem("hidden_effect", FingerHiddenTorque_[float](m, truth))
         add = b.AddNamedSystem("motor_torque_sum", Adder(2, m))
         b.Connect(fd.GetOutputPort("motor_state"), hid.get_input_port(0))
-        b.Connect(fd.GetOutputPort("tendon_force"), hid.get_input_port(1))
         b.Connect(hid.get_output_port(0), add.get_input_port(1))
         b.Connect(add.get_output_port(0), fd.GetInputPort("motor_torque"))
         b.ExportInput(add.get_input_port(0), "motor_torque")

@@ -204,8 +204,15 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
     from ..components.fused_drive import DriveModel, GuideFrictionModel
     from .dynamics import HandDynamics_, LinkModel
     n, m = coupling.num_joints, coupling.num_tendons
-    gf = GuideFrictionModel(tuple(tendon_bending_angles(coupling, p)), p.friction, p.capstan_friction,
-                            p.friction_smoothing_velocity, p.guide_presliding_length) if p.guide_friction else None
+    own = dict(p.tendon_guides)
+    for tendon in own:
+        if tendon not in coupling.tendon_names:
+            raise ValueError(f"tendon_guides: unknown tendon {tendon!r}; tendons are {', '.join(coupling.tendon_names)}")
+    angles = tendon_bending_angles(coupling, p) if p.guide_friction else np.zeros(m)   # 0 rad: no friction
+    gf = GuideFrictionModel(tuple(angles), p.friction, p.capstan_friction, p.friction_smoothing_velocity,
+                            p.guide_presliding_length,
+                            tuple((list(coupling.tendon_names).index(t), g.constant, g.capstan_exponent)
+                                  for t, g in own.items())) if p.guide_friction or own else None
     model = DriveModel(tendon_motor_params(p, coupling.tendon_names), laws.laws, drive_coupling, offsets,
                        p.motor.pulley_radius, tendon_hysteresis(p, coupling.tendon_names), gf, n)
     dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, LinkModel(plant, G)))

@@ -47,6 +47,7 @@ from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import LinearSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from .._math import scalar_value
 from .coupling import LinearFingerCoupling, ThumbCoupling, dof_selection
 
 __all__ = ["estimate_linear", "GradientSearchResult", "thumb_base_gradient_search",
@@ -368,8 +369,8 @@ def LinkPositionEstimator_(T):
             if T is float:
                 q_val, dh_val = np.asarray(q_prev, dtype=float), np.asarray(dh, dtype=float)
             else:
-                q_val = np.array([_value(v) for v in q_prev])
-                dh_val = np.array([_value(v) for v in dh])
+                q_val = np.array([scalar_value(v) for v in q_prev])
+                dh_val = np.array([scalar_value(v) for v in dh])
             q_new = self._linear @ dh_val         # every constant-coupling finger (5.15) in one product
             for name, c, j, t in self._thumbs:    # thumb: Algorithm 1 warm-started at the previous estimate
                 if self._search is not None:      # float: Algorithm 1, the Gauss-Newton step and PIP/DIP compiled
@@ -390,11 +391,6 @@ def LinkPositionEstimator_(T):
 
 
 LinkPositionEstimator = LinkPositionEstimator_[None]
-
-
-def _value(v) -> float:
-    return float(v) if isinstance(v, (float, int, np.floating)) else float(v.value()) \
-        if hasattr(v, "value") else float(v.Evaluate())
 
 
 @dataclass

@@ -89,9 +89,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.autodiffutils import AutoDiffXd
 
-from awiwi_drake._math import Tangent, is_float
+from awiwi_drake._math import Tangent, is_float, scalar_value
 from awiwi_drake.parameters.wrist import WristParams
 
 __all__ = [
@@ -127,28 +126,11 @@ def _norm(u):
     return np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
 
 
-def _value(x) -> float:
-    """Float value of a float or AutoDiffXd scalar (None for symbolic)."""
-    if isinstance(x, Tangent):
-        return _value(x.v)
-    if isinstance(x, AutoDiffXd):
-        return x.value()
-    if is_float(x):
-        return float(x)
-    return None
-
-
-def _is_symbolic(x) -> bool:
-    if isinstance(x, Tangent):
-        return _is_symbolic(x.v)
-    return not is_float(x) and not isinstance(x, AutoDiffXd)
-
-
 def _symbolic_errstate(*args):
     """numpy reports spurious 'invalid value' FP flags after object loops over
     symbolic Expressions (set inside Drake's symbolic constructors); silence
     them for symbolic input only (float input keeps numpy's warnings)."""
-    if any(_is_symbolic(a) for a in args):
+    if any(scalar_value(a) is None for a in args):
         return np.errstate(invalid="ignore")
     return contextlib.nullcontext()
 
@@ -239,7 +221,7 @@ def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool
 def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     if check:
         for name, q in (("q71", q71), ("q73", q73)):
-            v = _value(q)
+            v = scalar_value(q)
             if v is not None and not math.isfinite(v):
                 raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
     a, b, c = p.length, p.width, p.thickness
@@ -301,9 +283,9 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
 
 
 def _check_positive(value, what: str, q71, q73) -> None:
-    v = _value(value)
+    v = scalar_value(value)
     if v is not None and not (v > 0.0):
-        raise ValueError(f"wrist_angle [q71, q73] = [{_value(q71)}, {_value(q73)}] rad is outside "
+        raise ValueError(f"wrist_angle [q71, q73] = [{scalar_value(q71)}, {scalar_value(q73)}] rad is outside "
                          f"the reachable range of the wrist: {what}")
 
 

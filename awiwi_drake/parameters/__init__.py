@@ -6,7 +6,7 @@ Defaults are the Awiwi hand's; every value cites the thesis or says why it was c
 from awiwi_drake.parameters.base import ParameterInfo, Parameters, param, provenance_table
 from awiwi_drake.parameters.components import (
     GuideFrictionParams, HysteresisParams, LinearSpringParams, MotorParams, PolynomialSpringParams,
-    SpringMechanismGeometry, TendonParams)
+    SpringMechanismGeometry, TendonGuideParams, TendonParams)
 from awiwi_drake.parameters.rigs import (
     DemoScenario, FlexibleJointParams, JointRigParams, MotorPositionGains, SpringModelParams, TendonRigParams)
 from awiwi_drake.parameters.control import (

@@ -20,6 +20,7 @@ __all__ = [
     "HysteresisParams",
     "TendonParams",
     "GuideFrictionParams",
+    "TendonGuideParams",
 ]
 
 # Torque constant, roughly: the friction law (3.8) with Table 3.3 gives 1.41 Nm at
@@ -278,3 +279,21 @@ class GuideFrictionParams(Parameters):
                       source="chosen: with c0, 0.2 N at 8 deg and 2.0 N at 200 deg (Fig 4.10 range 0.2-2 N)")
     mu: float = param(0.1, unit="-", low=0.0, high=1.0,
                       source="Fig 4.11: sliding friction coefficients 0.05-0.2; 0.1 gives 30 % loss at 200 deg (ch. 9: 10-50 %)")
+
+
+@dataclass(frozen=True)
+class TendonGuideParams(Parameters):
+    """The guide friction of one tendon path, given directly (``FingerDriveParams.tendon_guides``).
+
+    The two numbers :func:`~awiwi_drake.components.friction.guide_friction` takes: the tension-independent part C
+    (the (4.1) level at the path's bending angle) and the capstan exponent ``mu alpha``. Both at once: a sliding
+    tendon carries ``C + f (e^{mu alpha} - 1)`` when pulled and ``C + f (1 - e^{-mu alpha})`` when released. Used
+    for one tendon whose guides differ from the rest, e.g. a discrepancy diagnosis's write-back.
+    """
+
+    constant: float = param(0.0, unit="N", low=0.0, high=100.0,
+                            source="(4.1): C0 (1 - exp(-C1 alpha)); Fig 4.10 tops at ~2 N for the hand's pulleys",
+                            doc="tension-independent sliding friction of the path")
+    capstan_exponent: float = param(0.0, unit="-", low=0.0, high=3.0,
+                                    source="Fig 4.11: mu 0.05-0.2 over 1-4 rad of bending; ch. 9: 10-50 % loss",
+                                    doc="mu alpha of the capstan law on the path")

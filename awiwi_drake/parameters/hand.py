@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from .base import Parameters, param
-from .components import GuideFrictionParams, HysteresisParams, MotorParams
+from .components import GuideFrictionParams, HysteresisParams, MotorParams, TendonGuideParams
 from .rigs import SpringModelParams
 
 __all__ = [
@@ -329,7 +329,9 @@ class FingerDriveParams(Parameters):
     ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs; ``tendon_motors``
     likewise overrides ``motor`` tendon by tendon (``(tendon_name, MotorParams)``: friction, ripple,
     inertia, damping of one motor, e.g. a diagnosis's write-back; pulley radius, torque limit and
-    saturation stay those of ``motor``).
+    saturation stay those of ``motor``); ``tendon_guides`` gives one tendon path its own guide friction
+    (``(tendon_name, TendonGuideParams)``: constant and capstan exponent), whether ``guide_friction`` is on or
+    off for the others (``with_physics(guide_friction=False)`` clears it).
     Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
     :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
     fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
@@ -341,6 +343,7 @@ class FingerDriveParams(Parameters):
         default_factory=lambda: SpringModelParams(hysteresis=HysteresisParams(enabled=True)))
     tendon_springs: tuple[tuple[str, SpringModelParams], ...] = ()
     tendon_motors: tuple[tuple[str, MotorParams], ...] = ()
+    tendon_guides: tuple[tuple[str, TendonGuideParams], ...] = ()
     pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
                               source="Fig 15.26: f_pre = 20 N (as the joint rig)",
                               doc="tendon force of every tendon at the default operating point")
@@ -390,12 +393,13 @@ class FingerDriveParams(Parameters):
                           tendon_springs=tuple((t, s.replace(hysteresis=s.hysteresis.replace(enabled=bool(hysteresis))))
                                                for t, s in p.tendon_springs))
         if guide_friction is not None:
-            p = p.replace(guide_friction=bool(guide_friction))
+            p = p.replace(guide_friction=bool(guide_friction), **({} if guide_friction else {"tendon_guides": ()}))
         return p
 
     def _validate(self) -> None:
         super()._validate()
-        for name, cls in (("tendon_springs", SpringModelParams), ("tendon_motors", MotorParams)):
+        for name, cls in (("tendon_springs", SpringModelParams), ("tendon_motors", MotorParams),
+                          ("tendon_guides", TendonGuideParams)):
             if not isinstance(getattr(self, name), tuple):
                 raise ValueError(f"{type(self).__name__}.{name} must be a tuple of (tendon_name, {cls.__name__}) "
                                  f"pairs, got {type(getattr(self, name)).__name__}")
