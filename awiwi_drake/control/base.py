@@ -505,7 +505,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                       and all(s.num_continuous_states() == 0 for s in sensors.values()))
     builder = DiagramBuilder()
     # a sampled rig's systems go into the loop's builder directly (RigPorts: a sub-diagram costs the
-    # simulator ~1 us per period, README "Backends, and speed"); any other rig is the sub-diagram "rig"
+    # simulator ~1 us per period, README "How the plants are built, and speed"); any other rig is the
+    # sub-diagram "rig"
     plant = (rig.add_sampled(builder, 1.0 / rate_hz, hold_applied_torque=True) if sample_rig
              else builder.AddNamedSystem("rig", rig_diagram))
     # a plain diagram of leaf systems controlling a sampled rig goes into the loop's builder as its leaves

@@ -8,6 +8,14 @@ point, refresh the profile at the optimum, and repeat until the refreshed cost
 agrees with the optimised one (``DiscrepancySettings.fit_rounds``,
 ``fit_tolerance``).  The candidate is then scored with the same refreshed
 profile it was last optimised against, never with one it has not seen.
+
+A candidate is fitted with the parameters of the effects already accepted free to
+move to first order (:class:`HeldLinear`): their output sensitivities at the
+current model are computed once per step, and each candidate's residual is
+profiled over them in closed form (variable projection), the way the window
+starts are profiled.  Only the candidate's own parameters are simulated, so a
+candidate costs the same after three accepted effects as after none; the
+accepted candidate is then refitted jointly by simulation.
 """
 
 from __future__ import annotations
@@ -22,7 +30,7 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 from .catalog import PARAM_INDEX, param_specs
 from .replay import Projection, project
 
-__all__ = ["FitOutcome", "fit_parameters"]
+__all__ = ["FitOutcome", "HeldLinear", "fit_parameters"]
 
 
 @dataclass
@@ -41,7 +49,76 @@ class FitOutcome:
     projection: Projection
 
 
-def _one_round(eng, W_train, names, p_start, bounds: CatalogBounds, settings: DiscrepancySettings, Qtr):
+class HeldLinear:
+    """The accepted effects' parameters ``names`` around the current model ``p`` (catalog vector), to first
+    order: forward-difference output sensitivities ``J`` (len(names), W, m) of the unprojected residual on
+    all windows (steps of 1e-3 of each span, towards the inside). A fit given a ``HeldLinear`` profiles its
+    residual ``r + J delta`` over ``delta`` on the training windows (free, shared by all windows) and
+    scores the held-out windows with the training ``delta``."""
+
+    def __init__(self, st, names: list, bounds: CatalogBounds):
+        specs = {s.name: s for s in param_specs(bounds)}
+        self.names, self.p = list(names), st.base.copy()
+        self.idx = np.array([PARAM_INDEX[n] for n in names], dtype=int)
+        lo = np.array([specs[n].low for n in names])
+        self.lo, self.hi = lo, np.array([specs[n].high for n in names])
+        step = 1e-3 * (self.hi - lo)
+        x = self.p[self.idx]
+        self.h = np.where(x + step <= self.hi, step, -step)
+        P = np.repeat(self.p[None], len(names), axis=0)
+        P[np.arange(len(names)), self.idx] += self.h
+        self.J = (st.eng.evaluate(P, st.W) - st.r0[None]) / self.h[:, None, None]
+
+    def basis(self, windows: np.ndarray, proj) -> np.ndarray:
+        """Orthonormal basis (len(windows) * m, k) of the profiled sensitivities on ``windows``."""
+        B = project(self.J[:, windows], proj).reshape(len(self.names), -1).T
+        q, rr = np.linalg.qr(B)
+        keep = np.abs(np.diag(rr)) > 1e-10 * max(float(np.abs(np.diag(rr)).max()), 1e-300)
+        return q[:, keep]
+
+    def delta(self, windows: np.ndarray, proj, r: np.ndarray) -> np.ndarray:
+        """The parameter change ``delta`` minimising the profiled ``r + J delta`` on ``windows`` (``r``:
+        unprojected residual, (len(windows), m))."""
+        B = project(self.J[:, windows], proj).reshape(len(self.names), -1).T
+        return -np.linalg.lstsq(B, project(r, proj).ravel(), rcond=None)[0]
+
+
+class _Replays:
+    """Unprojected training residuals of one fit, by full parameter vector: the residual at a point
+    and the forward-difference residuals of its Jacobian. A profile refresh changes only the
+    projection, so the next round reuses the replays of the point it starts from (the few newest
+    points are kept)."""
+
+    KEEP = 4
+
+    def __init__(self, eng, windows):
+        self.eng, self.windows, self.r, self.J = eng, windows, {}, {}
+
+    @staticmethod
+    def _keep(cache: dict, key, value):
+        cache[key] = value
+        while len(cache) > _Replays.KEEP:
+            cache.pop(next(iter(cache)))
+        return value
+
+    def residual(self, p: np.ndarray) -> np.ndarray:
+        key = p.tobytes()
+        hit = self.r.get(key)
+        return hit if hit is not None else self._keep(self.r, key, self.eng.evaluate(p[None], self.windows)[0])
+
+    def jacobian(self, p: np.ndarray, idx: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """(len(idx), W, m): residuals with parameter ``idx[j]`` stepped by ``h[j]``."""
+        key = p.tobytes() + idx.tobytes() + h.tobytes()
+        hit = self.J.get(key)
+        if hit is not None:
+            return hit
+        P = np.repeat(p[None], len(idx), axis=0)
+        P[np.arange(len(idx)), idx] += h
+        return self._keep(self.J, key, self.eng.evaluate(P, self.windows))
+
+
+def _one_round(replays: _Replays, names, p_start, bounds: CatalogBounds, settings: DiscrepancySettings, Qtr,
+               held_basis=None):
     specs = {s.name: s for s in param_specs(bounds)}
     idx = np.array([PARAM_INDEX[n] for n in names])
     lo = np.array([specs[n].low for n in names])
@@ -49,33 +126,25 @@ def _one_round(eng, W_train, names, p_start, bounds: CatalogBounds, settings: Di
     span = hi - lo
     x0 = np.clip(p_start[idx], lo + 1e-6 * span, hi - 1e-6 * span)
     steps = 1e-3 * span
-    res_cache, jac_cache = {}, {}
 
     def vec(x):
-        P = p_start[None].copy()
-        P[:, idx] = x
-        return P
+        p = p_start.copy()
+        p[idx] = x
+        return p
+
+    def profile(R):   # window starts, then the held parameters' linear change (both in closed form)
+        R = project(R, Qtr).reshape(R.shape[:-2] + (-1,))
+        return R if held_basis is None else R - (R @ held_basis) @ held_basis.T
 
     def fun(x):
-        key = x.tobytes()
-        if key not in res_cache:
-            res_cache.clear()
-            res_cache[key] = project(eng.evaluate(vec(x), W_train)[0], Qtr).ravel()
-        return res_cache[key]
+        return profile(replays.residual(vec(x)))
 
     def jac(x):
         """Forward differences of all parameters in one batched simulation (d r / d x)."""
-        key = x.tobytes()
-        if key not in jac_cache:
-            r = fun(x)
-            h = np.where(x + steps <= hi, steps, -steps)
-            P = np.repeat(vec(x), len(x), axis=0)
-            for j in range(len(x)):
-                P[j, idx[j]] += h[j]
-            R = eng.evaluate(P, W_train)
-            jac_cache.clear()
-            jac_cache[key] = np.stack([(project(R[j], Qtr).ravel() - r) / h[j] for j in range(len(x))], axis=1)
-        return jac_cache[key]
+        r = fun(x)
+        h = np.where(x + steps <= hi, steps, -steps)
+        R = profile(replays.jacobian(vec(x), idx, h))
+        return ((R - r) / h[:, None]).T
 
     sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=np.maximum(span, 1e-12) * 0.01,
                         max_nfev=settings.max_nfev, ftol=settings.fit_tolerance, xtol=1e-8, method="trf")
@@ -96,25 +165,42 @@ def _one_round(eng, W_train, names, p_start, bounds: CatalogBounds, settings: Di
 
 
 def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
-                   settings: DiscrepancySettings) -> FitOutcome:
+                   settings: DiscrepancySettings, held: HeldLinear | None = None) -> FitOutcome:
     """Fit ``names`` (catalog parameter names) from ``p_start`` on the training windows
     of ``st`` (a :class:`~awiwi_drake.discrepancy.screen.ResidualState`).
 
     The profile is refreshed on the training windows only while the fit runs; the held-out
     windows' profile (each window is replayed on its own, so this is the same profile) is
-    computed once at the result."""
+    computed once at the result.
+
+    With ``held`` (:class:`HeldLinear`, parameters not in ``names``), those parameters move to first
+    order: the training residual is profiled over their sensitivities, the result's ``p`` carries their
+    least-squares change (clipped to the bounds) and its residual ``r0`` is the linearised one
+    ``r + J delta`` on all windows."""
     eng = st.eng
     tr, te = st.W[eng.train], st.W[eng.test]
     _, Qtr = eng.projector(p_start, tr)
     p, nfev_total = p_start, 0
+    replays = _Replays(eng, tr)
     for rnd in range(1, settings.fit_rounds + 1):
-        p, se, at_bound, nfev, converged, cost = _one_round(eng, tr, names, p, bounds, settings, Qtr)
+        basis = held.basis(tr, Qtr) if held is not None else None
+        p, se, at_bound, nfev, converged, cost = _one_round(replays, names, p, bounds, settings, Qtr, basis)
         nfev_total += nfev
         r_tr, Qtr = eng.projector(p, tr)
-        refreshed = float((project(r_tr, Qtr) ** 2).sum())
+        rp_tr = project(r_tr, Qtr).ravel()
+        if held is not None:
+            basis = held.basis(tr, Qtr)
+            rp_tr = rp_tr - basis @ (basis.T @ rp_tr)
+        refreshed = float(rp_tr @ rp_tr)
         if abs(refreshed - cost) <= settings.fit_tolerance_refresh * max(cost, 1.0):
             break
     r_te, Qte = eng.projector(p, te)
+    if held is not None:
+        delta = held.delta(tr, Qtr, r_tr)
+        r_tr = r_tr + np.einsum("k,kwm->wm", delta, held.J[:, tr])
+        r_te = r_te + np.einsum("k,kwm->wm", delta, held.J[:, te])
+        p = p.copy()
+        p[held.idx] = np.clip(p[held.idx] + delta, held.lo, held.hi)
     pos_tr, pos_te = np.flatnonzero(eng.train), np.flatnonzero(eng.test)
     r0 = np.empty((len(st.W), r_tr.shape[1]))
     r0[pos_tr], r0[pos_te] = r_tr, r_te

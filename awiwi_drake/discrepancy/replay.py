@@ -437,29 +437,29 @@ class Projection:
 
     With ``S`` the prior-scaled initial-state sensitivities of a window, the
     residual energy minimised over the initial-state correction ``d`` with prior
-    ``|d|^2`` is ``r^T (I + S S^T)^-1 r = |C r|^2``, ``C = I - U diag(1 - 1/sqrt(1 +
-    s^2)) U^T`` from the SVD ``S = U diag(s) V^T``.  :func:`project` applies ``C``,
+    ``|d|^2`` is ``r^T (I + S S^T)^-1 r = |C r|^2``, ``C = (I + S S^T)^-1/2 = I - S K S^T``,
+    ``K = f(S^T S)`` with ``f(l) = (1 - 1/sqrt(1 + l))/l = 1/((1 + sqrt(1 + l)) sqrt(1 + l))``
+    (from ``S = U diag(s) V^T``: ``C = I - U diag(1 - 1/sqrt(1 + s^2)) U^T``).  Only the small
+    Gram matrix ``S^T S`` is decomposed (batched over windows; ``f`` has no pole at
+    ``l = 0``), so no per-window SVD of the tall ``S``.  :func:`project` applies ``C``,
     so least squares on projected residuals is exact generalised least squares.
     """
 
     def __init__(self, S: np.ndarray):
-        W, m, ns = S.shape
-        U = np.zeros((W, m, ns))
-        d = np.zeros((W, ns))
-        dof = np.empty(W)
-        for w in range(W):
-            u, sv, _ = np.linalg.svd(S[w], full_matrices=False)
-            U[w, :, :len(sv)] = u
-            d[w, :len(sv)] = 1.0 - 1.0 / np.sqrt(1.0 + sv ** 2)
-            dof[w] = m - np.sum(sv ** 2 / (1.0 + sv ** 2))
-        self.U, self.d, self.dof = U, d, dof
+        S = np.asarray(S, float)
+        lam, V = np.linalg.eigh(np.einsum("wmk,wml->wkl", S, S))
+        lam = np.maximum(lam, 0.0)
+        root = np.sqrt(1.0 + lam)
+        self.S = S
+        self.K = np.einsum("wkj,wj,wlj->wkl", V, 1.0 / ((1.0 + root) * root), V)
+        self._G = np.einsum("wkj,wj,wlj->wkl", V, 1.0 / (1.0 + lam), V)   # (I + S^T S)^-1
+        self.dof = S.shape[1] - np.sum(lam / (1.0 + lam), axis=1)
 
     def correction(self, R: np.ndarray) -> np.ndarray:
         """Prediction change of the MAP window-start correction (linearised), in residual
-        units: ``S d* = U diag(s^2 / (1 + s^2)) U^T r``; R is (W, m)."""
-        g = 1.0 - (1.0 - self.d) ** 2
-        coef = np.einsum("wmk,wm->wk", self.U, R) * g
-        return np.einsum("wmk,wk->wm", self.U, coef)
+        units: ``S d* = S (I + S^T S)^-1 S^T r``; R is (W, m)."""
+        coef = np.einsum("wkl,wl->wk", self._G, np.einsum("wmk,wm->wk", self.S, R))
+        return np.einsum("wmk,wk->wm", self.S, coef)
 
     @staticmethod
     def merge(parts: list) -> "Projection":
@@ -468,22 +468,24 @@ class Projection:
         W = sum(len(pos) for pos, _ in parts)
         first = parts[0][1]
         out = Projection.__new__(Projection)
-        out.U = np.empty((W,) + first.U.shape[1:])
-        out.d, out.dof = np.empty((W,) + first.d.shape[1:]), np.empty(W)
+        out.S = np.empty((W,) + first.S.shape[1:])
+        out.K, out._G = np.empty((W,) + first.K.shape[1:]), np.empty((W,) + first.K.shape[1:])
+        out.dof = np.empty(W)
         for pos, part in parts:
-            out.U[pos], out.d[pos], out.dof[pos] = part.U, part.d, part.dof
+            out.S[pos], out.K[pos], out._G[pos], out.dof[pos] = part.S, part.K, part._G, part.dof
         return out
 
     def take(self, windows: np.ndarray) -> "Projection":
+        """The profile of the windows ``windows`` (positions in this projection)."""
         out = Projection.__new__(Projection)
-        out.U, out.d, out.dof = self.U[windows], self.d[windows], self.dof[windows]
+        out.S, out.K, out._G, out.dof = self.S[windows], self.K[windows], self._G[windows], self.dof[windows]
         return out
 
 
 def project(R: np.ndarray, proj: Projection) -> np.ndarray:
     """Apply the window-start profile ``C`` to residuals ``R`` of shape (..., W, m)."""
-    coef = np.einsum("wmk,...wm->...wk", proj.U, R) * proj.d
-    return R - np.einsum("wmk,...wk->...wm", proj.U, coef)
+    coef = np.einsum("wkl,...wl->...wk", proj.K, np.einsum("wmk,...wm->...wk", proj.S, R))
+    return R - np.einsum("wmk,...wk->...wm", proj.S, coef)
 
 
 def xhat_positions(nom: NominalParameters) -> np.ndarray:

@@ -160,54 +160,71 @@ def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) ->
                 shape_idx = len(Psets)
                 Psets.append(p0)  # shape change alone (Dahl state init etc.): reference
             variants.append((eff, label, shape, cols, order, idx, shape_idx))
-    R = eng.evaluate(np.array(Psets), st.W)
-    results = {}
+    # every variant is replayed on the training windows, where the choices are made; only the chosen
+    # variants are replayed on the held-out windows that score them
     tr, te = eng.train, eng.test
-    G = {}
+    Q_tr, Q_te = st.Q.take(st.W[tr]), st.Q.take(st.W[te])
+    R_tr = eng.evaluate(np.array(Psets), st.W[tr])
+
+    def signature(R, r0, Q, idx, shape_idx, cols):
+        """Profiled sensitivities (W, m, k) and profiled reference residual of one variant."""
+        ref = r0 if shape_idx is None else R[shape_idx]
+        g = np.stack([(ref - R[i]) / d for i, (_, d) in zip(idx, cols)], axis=0)
+        return np.moveaxis(project(g, Q), 0, -1), project(ref, Q)
+
+    results = {}
+    rp_tr = st.rp[tr]
     for eff, label, shape, cols, order, idx, shape_idx in variants:
-        ref = st.r0 if shape_idx is None else R[shape_idx]
-        g = np.stack([(ref - R[i]) / d for i, (_, d) in zip(idx, cols)], axis=-1)  # (W, m, k)
-        g = np.stack([project(g[..., j], st.Q) for j in range(g.shape[-1])], axis=-1)
-        rp = st.rp if shape_idx is None else project(ref, st.Q)
-        G[(eff.name, label)] = (g, rp)
-        A = g[tr].reshape(-1, g.shape[-1])
-        b = rp[tr].ravel()
+        g, rp = signature(R_tr, st.r0[tr], Q_tr, idx, shape_idx, cols)
+        A = g.reshape(-1, g.shape[-1])
+        b = rp.ravel()
         beta, *_ = np.linalg.lstsq(A, b, rcond=None)
         res_tr = b - A @ beta
-        train_gain = float((st.rp[tr] ** 2).sum() - (res_tr ** 2).sum())
-        key = eff.name
+        train_gain = float((rp_tr ** 2).sum() - (res_tr ** 2).sum())
         entry = dict(effect=eff, label=label, shape=shape, cols=cols, order=order, beta=beta,
-                     train_gain=train_gain, g=g, rp=rp)
-        results.setdefault(key, []).append(entry)
-    out = []
+                     train_gain=train_gain, g=g, rp=rp, sets=(idx, shape_idx))
+        results.setdefault(eff.name, []).append(entry)
+    chosen = []   # (effect, [entries], label, shape, cols)
     for name, entries in results.items():
         eff = entries[0]["effect"]
         if name == "motor_ripple":
             # sequential greedy: the best order, then the order that adds most to it
             # (low orders alias each other over a limited angle range)
             first = max(entries, key=lambda e: e["train_gain"])
-            b = st.rp[tr].ravel()
+            b = rp_tr.ravel()
 
             def joint_gain(e):
-                A = np.concatenate([first["g"], e["g"]], axis=-1)[tr].reshape(-1, 2 * first["g"].shape[-1])
+                A = np.concatenate([first["g"], e["g"]], axis=-1).reshape(-1, 2 * first["g"].shape[-1])
                 coef, *_ = np.linalg.lstsq(A, b, rcond=None)
                 return float(b @ b - np.sum((b - A @ coef) ** 2))
 
             rest = [e for e in entries if e is not first]
             ranked = [first] + ([max(rest, key=joint_gain)] if rest else [])
-            g = np.concatenate([e["g"] for e in ranked], axis=-1)
-            rp = st.rp
             cols = []
             params = {}
             for slot, e in enumerate(ranked, start=1):
                 params[f"ripple_order_{slot}"] = e["order"]
                 for cname, d in e["cols"]:
                     cols.append((cname.replace("1_m", f"{slot}_m"), d))
-            label = "orders " + ", ".join(f"{e['order']:g}" for e in ranked)
-            shape = params
+            chosen.append((eff, ranked, "orders " + ", ".join(f"{e['order']:g}" for e in ranked), params, cols))
         else:
             best = max(entries, key=lambda e: e["train_gain"])
-            g, rp, cols, label, shape = best["g"], best["rp"], best["cols"], best["label"], best["shape"]
+            chosen.append((eff, [best], best["label"], best["shape"], best["cols"]))
+    need = sorted({i for _, ents, *_ in chosen for e in ents
+                   for i in e["sets"][0] + ([e["sets"][1]] if e["sets"][1] is not None else [])})
+    R_te = dict(zip(need, eng.evaluate(np.array(Psets)[need], st.W[te]))) if need else {}
+    out = []
+    for eff, ents, label, shape, cols in chosen:
+        gs, rps = [], []
+        for e in ents:
+            g_te, rp_te = signature(R_te, st.r0[te], Q_te, *e["sets"], e["cols"])
+            g = np.empty((len(st.W),) + g_te.shape[1:])
+            g[tr], g[te] = e["g"], g_te
+            rp = np.empty((len(st.W),) + rp_te.shape[1:])
+            rp[tr], rp[te] = e["rp"], rp_te
+            gs.append(g)
+            rps.append(rp)
+        g, rp = np.concatenate(gs, axis=-1), rps[0]
         A = g[tr].reshape(-1, g.shape[-1])
         beta, *_ = np.linalg.lstsq(A, rp[tr].ravel(), rcond=None)
         fit = np.einsum("wmk,k->wm", g, beta)
@@ -283,35 +300,50 @@ def probe(st: ResidualState, screened: list, bounds: CatalogBounds, rig: str) ->
                     p[PARAM_INDEX[amp]] = base[PARAM_INDEX[amp]] + frac * specs[amp].high
                     sets.append(p)
                     owners.append(entry)
-    E = []
-    if sets:
-        R = eng.evaluate(np.array(sets), st.W)
-        E.append((project(R, st.Q) ** 2).sum(axis=2))  # (S, W)
-    if own_sets:
-        E.append(np.array([(project(r, Q) ** 2).sum(axis=1) for r, Q in eng.profiled(np.array(own_sets), st.W)]))
-    if not E:
+    if not sets and not own_sets:
         return
-    E = np.concatenate(E, axis=0)
-    sets, owners = sets + own_sets, owners + own_owners
     tr, te = eng.train, eng.test
+
+    def energies(windows, picked, picked_own):
+        """Window energies (len(picked) + len(picked_own), len(windows)) of probe sets on ``windows``."""
+        E = []
+        if picked:
+            R = eng.evaluate(np.array([sets[i] for i in picked]), st.W[windows])
+            E.append((project(R, st.Q.take(st.W[windows])) ** 2).sum(axis=2))
+        if picked_own:
+            E.append(np.array([(project(r, Q) ** 2).sum(axis=1) for r, Q in
+                               eng.profiled(np.array([own_sets[i] for i in picked_own]), st.W[windows])]))
+        return np.concatenate(E, axis=0)
+
+    # the best probe of each candidate is chosen on the training windows; only it is replayed on the
+    # held-out windows
+    n_plain = len(sets)
+    E_tr = energies(tr, list(range(n_plain)), list(range(len(own_sets))))
+    sets, owners = sets + own_sets, owners + own_owners
     best = {}
     for i, entry in enumerate(owners):
         key = id(entry)
-        if key not in best or E[i, tr].sum() < E[best[key], tr].sum():
+        if key not in best or E_tr[i].sum() < E_tr[best[key]].sum():
             best[key] = i
+    plain = sorted(i for i in set(best.values()) if i < n_plain)
+    own = sorted(i for i in set(best.values()) if i >= n_plain)
+    E = {}
+    for i, row in zip(plain + own, energies(te, plain, [i - n_plain for i in own])):
+        E[i] = np.empty(len(st.W))
+        E[i][tr], E[i][te] = E_tr[i], row
     for entry in screened:
         i = best.get(id(entry))
         if i is None:
             continue
         lin_train = float((entry["e_after"][tr]).sum())
-        if E[i, tr].sum() >= lin_train:
+        if E[i][tr].sum() >= lin_train:
             continue
-        gain = float(st.e[te].sum() - E[i, te].sum())
+        gain = float(st.e[te].sum() - E[i][te].sum())
         eff = entry["effect"]
         entry["params"] = {n: float(sets[i][PARAM_INDEX[n]]) for n in free_params([eff], rig)}
         entry["gain"] = gain
         entry["rel"] = gain / max(st.excess, 1e-12)
-        entry["z"] = paired_z(st.e[te], E[i, te])
+        entry["z"] = paired_z(st.e[te], E[i][te])
         entry["e_after"] = E[i]
         entry["label"] += " (probe)"
 

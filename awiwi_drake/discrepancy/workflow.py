@@ -9,13 +9,15 @@ Loop (issues 6, 12):
 3. Screen every catalog candidate by linear regression of the residual on its
    signature (:mod:`~awiwi_drake.discrepancy.screen`), on training windows,
    scored on held-out windows (blocked split).
-4. Fit the best ``num_confirm`` candidates by simulation, jointly with the effects
-   already added (:mod:`~awiwi_drake.discrepancy.fit`), and score them on held-out
-   windows: energy gain, paired statistics over windows, BIC on training data,
-   parameters at a bound, materiality (:mod:`~awiwi_drake.discrepancy.decide`).
+4. Fit the best ``num_confirm`` candidates by simulation, the parameters of the
+   effects already added free to first order (:mod:`~awiwi_drake.discrepancy.fit`),
+   and score them on held-out windows: energy gain, paired statistics over windows,
+   BIC on training data, parameters at a bound, materiality
+   (:mod:`~awiwi_drake.discrepancy.decide`).
 5. Accept the best candidate that passes every test (calibration nuisances win
-   ties: the simpler explanation); candidates it cannot be told from form one
-   class "not separable" with a suggested experiment.  Repeat.
+   ties: the simpler explanation) and refit it jointly with the effects already
+   added, by simulation; candidates it cannot be told from form one class "not
+   separable" with a suggested experiment.  Repeat.
 6. If the held-out residual after the last step is above ``unexplained_ratio``
    times the noise floor, the verdict is "unexplained discrepancy remains", with
    where the residual is (:func:`~awiwi_drake.discrepancy.localise.locate`).
@@ -34,7 +36,7 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset, is_finger_rig
 from .decide import EQUIVALENT_EFFECTS, materiality, noise_equivalent, rejection_reason, separating_experiment
-from .fit import fit_parameters
+from .fit import HeldLinear, fit_parameters
 from .localise import locate, residual_maps
 from .replay import ReplayEngine, project
 from .result import CandidateResult, Diagnosis, Step
@@ -68,15 +70,17 @@ class _Run:
         self.stop_reason = ""
 
     # ---------------------------------------------------------------- one candidate
-    def fit_candidate(self, s: dict) -> CandidateResult:
-        """Simulation fit of one screened candidate jointly with the accepted effects."""
+    def fit_candidate(self, s: dict, held: HeldLinear | None) -> CandidateResult:
+        """Simulation fit of one screened candidate's own parameters, the accepted effects' parameters free
+        to first order (``held``, :class:`~awiwi_drake.discrepancy.fit.HeldLinear`); the winner is refitted
+        jointly with them by simulation in :meth:`accept`."""
         eng, st, rig, eff = self.eng, self.st, self.rig, s["effect"]
-        names = [n for n in free_params(self.accepted + [eff], rig) if not n.startswith("ripple_order")]
+        names = [n for n in free_params([eff], rig) if not n.startswith("ripple_order")]
         p_start = st.base.copy()
         for k, v in s["params"].items():
             p_start[PARAM_INDEX[k]] = v
         t0 = time.perf_counter()
-        fo = fit_parameters(st, names, p_start, self.bounds, self.settings)
+        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held)
         rp = project(fo.r0, fo.projection)
         e_after = (rp ** 2).sum(axis=1)
         te, tr = eng.test, eng.train
@@ -130,13 +134,14 @@ class _Run:
         return win, ("ambiguous" if alts else "confirmed"), conf, [], alts
 
     def accept(self, win: CandidateResult, status: str, conf: float, members: list, alts: list, cands: list):
+        first = not self.accepted
         self.accepted.append(EFFECTS[win.effect])
-        # polish the accepted parameters jointly (profile refreshed), keep the better on training windows
-        names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
-        pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings)
-        st_new = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
-        st_old = ResidualState(self.eng, win.vector, win.profile)
-        self.st = st_new if st_new.E_train <= st_old.E_train else st_old
+        if first:   # its fit was the joint fit
+            self.st = ResidualState(self.eng, win.vector, win.profile)
+        else:       # refit jointly with the accepted effects by simulation (its fit moved them to first order)
+            names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
+            pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings)
+            self.st = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         experiment = separating_experiment(members) if status == "not separable" else ""
         self.steps.append(Step(win.effect, win.kind, status, conf, win.parameters, win.uncertainties,
@@ -170,7 +175,11 @@ class _Run:
         least = settings.screen_floor_fraction * settings.min_floor_gain * st.floor_test
         top = [s for s in screened if s["gain"] > settings.confirm_fraction * best_gain
                and s["gain"] >= least][:settings.num_confirm]
-        fitted = sorted([self.fit_candidate(s) for s in top], key=lambda c: -c.gain)
+        held = None
+        if top and self.accepted:   # the accepted parameters' sensitivities, shared by every candidate's fit
+            names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
+            held = HeldLinear(st, names, self.bounds)
+        fitted = sorted([self.fit_candidate(s, held) for s in top], key=lambda c: -c.gain)
         self.history.append({"ratio": st.ratio, "screen": [c.summary() for c in screen_results],
                              "fits": [c.summary() for c in fitted]})
         if not top:
