@@ -565,8 +565,8 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     design's :attr:`JointDesign.static_stiffness` (the (8.1) impedance correction is the identity here: the
     chain acts on the estimated joint angle through force control, so no spring is in series with it).
     ``friction_observer``: the ch. 9 joint friction observer (9.2) per DoF, on by default (the guides' friction
-    otherwise leaves the impedance its dead band, friction torque / Kp; README "The thesis's control"); None
-    removes it (``make_controller(name, rig, friction_observer=None)``).
+    otherwise leaves the impedance its dead band, friction torque / Kp; README "The thesis's control on fingers and
+    the hand (ch. 7-15)"); None removes it (``make_controller(name, rig, friction_observer=None)``).
     ``kw``: ``mechanical_stiffness`` (:func:`~awiwi_drake.control.chain.chain_design_point`), ``gains``,
     ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
     c = chain or HandChainParams()
