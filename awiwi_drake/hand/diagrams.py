@@ -42,7 +42,7 @@ from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer, MatrixGain
 
-from ..components.drive import TendonDrive
+from ..components.fused_drive import TendonDrive
 from ..components.motor import motor_ripple_torque, tendon_motor_params
 from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
