@@ -307,7 +307,9 @@ class ClosedLoop:
         """Start the controller's states (e.g. the force distribution at its design forces) and, given
         ``joint_angles`` (a pose known after homing), the estimator's, in a (root) ``context``."""
         if self.fused is not None:
-            self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles)
+            n = len(joint_angles)
+            self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles,
+                                        None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
             return
         init = getattr(self.controller, "initialize_state", None)
         if init is not None:   # controllers with internal state (e.g. the force distribution)
