@@ -90,14 +90,15 @@ def test_fused_chain_on_a_ring_finger_with_coupled_dip():
 
 
 def test_fused_is_not_used_where_the_blocks_must_stay():
-    """Ideal sensors, a sensor model or a continuous controller state (the ch. 9 observer) keep the blocks."""
+    """Ideal sensors, a sensor model or a continuous controller state (the ch. 9 observer of a continuous chain,
+    ``distribution="sharing"``) keep the blocks; the sampled observer (the default) is fused."""
     from awiwi_drake.control.joint_design import joint_stage_controller
-    from awiwi_drake.parameters.hand_control import FrictionObserverParams
     rig = _rig("finger-index")
     assert closed_loop(rig, make_controller("cascaded", rig), sensors="ideal").fused is None
     rig = _rig("finger-index")
-    obs = joint_stage_controller(rig, "cascaded", friction_observer=FrictionObserverParams())
-    assert closed_loop(rig, obs).fused is None
+    assert closed_loop(rig, joint_stage_controller(rig, "cascaded", distribution="sharing")).fused is None
+    rig = _rig("finger-index")
+    assert closed_loop(rig, joint_stage_controller(rig, "cascaded")).fused is not None
     rig = _rig("finger-index")
     assert closed_loop(rig, make_controller("joint-pd", rig)).fused is None      # no estimates read
 

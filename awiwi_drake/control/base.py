@@ -307,7 +307,9 @@ class ClosedLoop:
         """Start the controller's states (e.g. the force distribution at its design forces) and, given
         ``joint_angles`` (a pose known after homing), the estimator's, in a (root) ``context``."""
         if self.fused is not None:
-            self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles)
+            n = len(joint_angles)
+            self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles,
+                                        None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
             return
         init = getattr(self.controller, "initialize_state", None)
         if init is not None:   # controllers with internal state (e.g. the force distribution)
@@ -389,8 +391,9 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
         its ``state`` output physical. Its systems are added to the loop directly (``Rig.add_sampled``),
         not as the sub-diagram ``"rig"`` that any other rig is, and so is a controller that is a plain
-        ``Diagram`` of leaf systems (copies of its leaves: one leaf is named ``"controller"``, several
-        ``"controller.<leaf>"``). The loop's ``motor_torque`` output is the held command as before. False: the
+        ``Diagram`` whose leaves support scalar conversion (copies of its leaves: one leaf is named
+        ``"controller"``, several ``"controller.<path>"``; otherwise it is the sub-diagram ``"controller"``).
+        The loop's ``motor_torque`` output is the held command as before. False: the
         continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
     fused : bool
         For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
@@ -637,8 +640,16 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
 
 
 def _flattenable(controller: System) -> bool:
-    """A plain ``Diagram`` (not a Python subclass with methods of its own, e.g. ``initialize_state``)."""
-    return type(controller) is Diagram and not hasattr(controller, "initialize_state")
+    """A plain ``Diagram`` (not a Python subclass with methods of its own, e.g. ``initialize_state``) whose leaves
+    can be copied (scalar conversion; a user's Python ``LeafSystem`` without it stays inside the sub-diagram
+    ``"controller"``, as before the flat copy)."""
+    if type(controller) is not Diagram or hasattr(controller, "initialize_state"):
+        return False
+    try:
+        controller.Clone()
+    except RuntimeError:
+        return False
+    return True
 
 
 def _connect(builder, src, dst) -> None:
