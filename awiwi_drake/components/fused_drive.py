@@ -218,13 +218,15 @@ class DriveModel:
 
 @dataclass(frozen=True)
 class TendonDrive:
-    """Handle of a rig's drive: the diagram holding it, its sizes and its :class:`DriveModel`."""
+    """Handle of a rig's drive: the diagram holding it and its :class:`DriveModel`."""
 
     diagram: Diagram
-    num_tendons: int
-    num_joints: int
-    hysteresis: bool
     model: DriveModel
+
+    @property
+    def hysteresis(self) -> bool:
+        """Whether the drive carries the spring hysteresis state."""
+        return self.model.has_hysteresis
 
     @property
     def guide_friction(self) -> bool:
@@ -234,7 +236,7 @@ class TendonDrive:
     @property
     def num_states(self) -> int:
         """The drive's states (without a link's)."""
-        return self.model.num_states - (2 * self.num_joints if self.model.has_link else 0)
+        return self.model.num_states - (2 * self.model.num_joints if self.model.has_link else 0)
 
 
 def _full_rates(model: DriveModel, qd):

@@ -27,8 +27,11 @@ So the fused loop equals the composed one (tests/test_fused_chain.py: 1e-12 over
 states, every registered chain controller and the backstepping family, a finger and the hand; its sampled
 linearisation too).  Scalar types float and AutoDiffXd (the AutoDiffXd path calls the same methods in that
 type); not symbolic, as neither the estimator (Algorithm 1 branches on cost values) nor the distribution
-(its solver branches on values) is.  A chain with continuous state (the ch. 9 friction observer) or a
-user-given estimator or sensor model is closed as the composed blocks.
+(its solver branches on values) is.  The chain's ch. 9 friction observer (9.2), sampled at the period (the
+default), is fused too: the stage's torques get its ``compensation`` and the update steps its ``next_state``
+(:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`'s own methods).  A chain with continuous state
+(the observer of a continuous chain, ``distribution="sharing"``) or a user-given estimator or sensor model is closed
+as the composed blocks.
 """
 
 from __future__ import annotations

@@ -37,8 +37,8 @@ model sampled with its one period of delay, :func:`sampled_model`)
   two real equations ``1 + K (s* I - F)^-1 G = 0`` that put one closed-loop pair exactly at
   ``s* = position_bandwidth (-zeta +- i sqrt(1 - zeta^2))`` of the joint's reduced model (sampled chain: at
   ``exp(h s*)`` of :func:`sampled_model`); refused with one line when that needs ``Kd < 0`` or leaves another pole
-  unstable.  Unlike ``cascaded`` (``Kp = M_jj w^2``, the rigid link) the placement counts the torque chain and
-  the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
+  unstable.  Unlike the rigid link's ``Kp = M_jj w^2`` (the cascaded stage's former cap) the placement counts the
+  torque chain and the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
   0.032 / 0.0022 (with ``Kd = 0`` that pair would sit at -3.1 +- 29i / -4.7 +- 16i 1/s).  (An earlier
   reduced model, the motor friction linearised at rest, needed ``Kd < 0`` for the same placement.)
 * ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon

@@ -208,6 +208,7 @@ class FingerResiduals:
         self.test = self.folds == 2                 # the fold the reported ratios are held out on
         self.train = ~self.test
         self.step = step
+        self._signature_cache: dict = {}     # candidate columns per (effect, tendon): data only (_signatures)
 
     def consistent(self, signal: np.ndarray) -> np.ndarray:
         """A full-rate signal (a law evaluated on the filtered signals :attr:`full`, or on raw ones) filtered by
@@ -425,6 +426,15 @@ def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
 
 
 def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds):
+    """Cached per dataset (:func:`_signature_variants`: the columns depend on the data only, not on the residual
+    left by earlier steps)."""
+    key = (effect, i)
+    if key not in fr._signature_cache:
+        fr._signature_cache[key] = _signature_variants(fr, effect, i, bounds)
+    return fr._signature_cache[key]
+
+
+def _signature_variants(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds):
     """Variants ``(label, columns (c, K), names, scale_to_params)`` of ``effect`` at tendon ``i`` (0-based):
     the residual model is ``columns.T @ beta``; motor side in N m, spring side whitened elongation."""
     r, om, f = fr.r, fr.omega[i], fr.force[i]

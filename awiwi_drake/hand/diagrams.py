@@ -169,7 +169,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     # the drive lives inside the one plant system: its handle points at the rig
-    drive = TendonDrive(diagram, m, drive_coupling.num_joints, model.has_hysteresis, model)
+    drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
                                   guide_friction=drive.guide_friction)

@@ -69,7 +69,7 @@ class FrictionObserverParams(Parameters):
                                "reaction of motors' of 9.4)")
     compensation_scale: float = param(
         1.0, unit="-", low=0.0, high=1.0, low_inclusive=False,
-        source=("9.1: u = u_c + tau_fric_hat, the whole estimate. At rest the compensation c obeys "
+        source=("(9.1): u = u_c + tau_fric_hat, the whole estimate. At rest the compensation c obeys "
                 "c' = L ((G kappa - 1) c + G tau_c), G the static gain from the request to the measured joint torque "
                 "(the impedance's tau_c integrates the rest away), so G kappa must stay below 1: a stage with torque "
                 "feedback divides what is added to its request by its torque loop gain g = 1 + K_tau + K_prev "

@@ -81,7 +81,7 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name("tendon-rig")
-    drive = TendonDrive(diagram, 1, 0, bool(p.spring.hysteresis.enabled), model)
+    drive = TendonDrive(diagram, model)
     names = state_names(motors=1, hysteresis=drive.hysteresis)
 
     def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
@@ -161,7 +161,7 @@ def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, mo
         diagram.set_name(name)
         return diagram
 
-    drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, bool(hysteresis.enabled), model)
+    drive = TendonDrive(build(), model)
     return drive.diagram, drive, names, (build, functools.partial(integration_state, model), add)
 
 
