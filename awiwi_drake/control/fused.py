@@ -173,8 +173,9 @@ def FusedChain_(T):
                 if self.sharing is not None:
                     W, f0, tau0 = self.sharing
                     u["tendon_force_reference"] = f0 + W @ (tau - tau0)
-                if self.path_coupling is not None:
-                    u["tendon_path_velocity"] = np.asarray(self.path_coupling.P(q)) @ v
+                if self.path_coupling is not None:     # P(q_k), once per period: the observer's update reuses it
+                    out["P"] = np.asarray(self.path_coupling.P(q))
+                    u["tendon_path_velocity"] = out["P"] @ v
                 out.update(tau=tau, f_ref=u["tendon_force_reference"])
             out["u"] = np.asarray(self.law(u)).reshape(-1)
             value.set_value(out)
@@ -191,7 +192,7 @@ def FusedChain_(T):
                 discrete_state.set_value(self._xf, f_new)
                 discrete_state.set_value(self._xs, status)
             if self.obs is not None:
-                discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"]))
+                discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"], s.get("P")))
 
         def initialize_state(self, context, joint_angles, joint_velocities=None) -> None:
             """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing; None
