@@ -213,3 +213,20 @@ def test_the_couplings_keep_their_last_pose_and_return_copies():
         Pt[:] = np.nan
         assert np.all(np.isfinite(hand.P(q))) and np.all(np.isfinite(thumb.P(qt)))
     assert not np.array_equal(hand.P(poses[0]), hand.P(poses[1]))
+
+
+def test_the_no_observer_variant_from_the_registry_and_the_cli(tmp_path):
+    """``NAME:no-observer`` builds the registered chain controller without its observer (make_controller, compare);
+    an unknown variant, or the variant on a controller without the option, is one line naming it."""
+    import subprocess
+    import sys
+    r = finger_diagram(finger="index")
+    assert make_controller("cascaded:no-observer", r)._observer is None
+    assert get_entry("cascaded:no-observer", r) is get_entry("cascaded", r)
+    with pytest.raises(ValueError, match="controller 'cascaded:open': unknown variant 'open'; variants: no-observer"):
+        make_controller("cascaded:open", r)
+    with pytest.raises(ValueError, match="controller 'backstepping:no-observer' on 'finger' has no option 'friction_observer'"):
+        make_controller("backstepping:no-observer", r)
+    res = subprocess.run([sys.executable, "-m", "awiwi_drake", "compare", "--rig", "finger-index", "--controllers",
+                          "cascaded:nope", "--out", str(tmp_path), "--short"], capture_output=True, text=True)
+    assert res.returncode != 0 and "unknown variant 'nope'" in res.stderr + res.stdout
