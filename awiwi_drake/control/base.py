@@ -307,7 +307,7 @@ class ClosedLoop:
         """Start the controller's states (e.g. the force distribution at its design forces) and, given
         ``joint_angles`` (a pose known after homing), the estimator's, in a (root) ``context``."""
         if self.fused is not None:
-            n = len(joint_angles)
+            n = self.rig.num_joints
             self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles,
                                         None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
             return

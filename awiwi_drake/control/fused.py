@@ -173,8 +173,9 @@ def FusedChain_(T):
                 if self.sharing is not None:
                     W, f0, tau0 = self.sharing
                     u["tendon_force_reference"] = f0 + W @ (tau - tau0)
-                if self.path_coupling is not None:
-                    u["tendon_path_velocity"] = np.asarray(self.path_coupling.P(q)) @ v
+                if self.path_coupling is not None:     # P(q_k), once per period: the observer's update reuses it
+                    out["P"] = np.asarray(self.path_coupling.P(q))
+                    u["tendon_path_velocity"] = out["P"] @ v
                 out.update(tau=tau, f_ref=u["tendon_force_reference"])
             out["u"] = np.asarray(self.law(u)).reshape(-1)
             value.set_value(out)
@@ -191,17 +192,20 @@ def FusedChain_(T):
                 discrete_state.set_value(self._xf, f_new)
                 discrete_state.set_value(self._xs, status)
             if self.obs is not None:
-                discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"]))
+                discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"], s.get("P")))
 
         def initialize_state(self, context, joint_angles, joint_velocities=None) -> None:
-            """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing), the
-            distribution at the design point's forces and the friction observer at ``joint_velocities`` (0 at
-            rest) (``context``: this system's)."""
-            q = np.asarray(joint_angles, dtype=float).reshape(-1)
-            context.SetDiscreteState(self._xq, q)
-            context.SetDiscreteState(self._xz, q)
+            """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing; None
+            keeps them as they are, as the composed loop keeps its estimator's), the distribution at the design
+            point's forces and the friction observer at ``joint_velocities`` (0 at rest) (``context``: this
+            system's)."""
+            if joint_angles is not None:
+                q = np.asarray(joint_angles, dtype=float).reshape(-1)
+                context.SetDiscreteState(self._xq, q)
+                context.SetDiscreteState(self._xz, q)
             if self.obs is not None:
-                v = np.zeros(q.size) if joint_velocities is None else np.asarray(joint_velocities, float)
+                v = (np.zeros(self.obs.S.shape[0]) if joint_velocities is None
+                     else np.asarray(joint_velocities, float))
                 context.SetDiscreteState(self._xw, self.obs.Sp @ v)
             f0 = self.spec.get("initial_forces")
             if self.dist is not None and f0 is not None:

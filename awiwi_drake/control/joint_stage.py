@@ -317,15 +317,17 @@ def JointFrictionObserver_(T):
             """``-scale d_hat`` (k) [Nm] at the observer state ``w_hat`` (k) and joint velocities ``v`` (n)."""
             return -self.scale * observer_rate(w_hat, self.Sp @ v, 0.0 * w_hat, self.M, self.gain)[1]
 
-        def _known_torque(self, q, v, f, P=None):
-            """``tau_a = -(P(q) S)^T f - b S^+ v`` per DoF (``P``: ``P(q)`` when the caller has it)."""
-            PS = np.asarray(self.coupling.P(q) if P is None else P) @ self.S
-            return -(PS.T @ f) - self.b * (self.Sp @ v)
+        def _known_torque(self, q, w, f, P=None):
+            """``tau_a = -S^T P(q)^T f - b w`` per DoF at the DoF velocities ``w`` (``P``: ``P(q)`` when the caller
+            has it)."""
+            P = np.asarray(self.coupling.P(q) if P is None else P)
+            return -(self.S.T @ (P.T @ f)) - self.b * w
 
         def next_state(self, w_hat, q, v, f, P=None):
-            """``w_hat`` one period later (sampled form) from the sample ``(q, v, f)``."""
-            return observer_step(w_hat, self.Sp @ v, self._known_torque(q, v, f, P), self.M, self.gain,
-                                 self.period)[0]
+            """``w_hat`` one period later (sampled form) from the sample ``(q, v, f)`` (``P``: ``P(q)``, computed once
+            per period by the caller, or here)."""
+            w = self.Sp @ v
+            return observer_step(w_hat, w, self._known_torque(q, w, f, P), self.M, self.gain, self.period)[0]
 
         def _calc(self, context, out):
             out.SetFromVector(self.compensation(self._state(context), self._v.Eval(context)))
@@ -337,9 +339,9 @@ def JointFrictionObserver_(T):
         def DoCalcTimeDerivatives(self, context, derivatives):
             if self.period is not None:                 # the sampled form has no continuous state
                 return
-            v = self._v.Eval(context)
-            tau = self._known_torque(self._q.Eval(context), v, self._f.Eval(context))
-            rate, _ = observer_rate(self._state(context), self.Sp @ v, tau, self.M, self.gain)
+            w = self.Sp @ self._v.Eval(context)
+            tau = self._known_torque(self._q.Eval(context), w, self._f.Eval(context))
+            rate, _ = observer_rate(self._state(context), w, tau, self.M, self.gain)
             derivatives.get_mutable_vector().SetFromVector(rate)
 
         def initialize(self, context, joint_velocity=None) -> None:
