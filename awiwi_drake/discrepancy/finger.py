@@ -7,8 +7,8 @@ of the dataset's :class:`~awiwi_drake.parameters.hand.FingerRigParams`):
 
 * **motor side** (tendon ``i``): the motor law :func:`~awiwi_drake.components.motor.motor_acceleration`
   ``B w' = u - d w - r f`` with the measured force as the load; its torque residual holds whatever acts on that
-  motor or on that tendon's path between motor and sensor (motor friction, guide friction, ripple, inertia and
-  damping errors) and nothing from the rest of the finger;
+  motor or between motor and sensor (motor friction, ripple, inertia and damping errors) and nothing from the
+  rest of the finger;
 * **spring side**: the spring laws ``f_i = F_i(x_i)`` with the routing ``x = x0 + r theta + h(q) - h(0)``;
   the joint angles are estimated from all tendons at once (weighted least squares, ``m > n``), so the
   ``m - n`` redundant tendon directions carry what one spring mechanism does differently (hysteresis, a
@@ -442,9 +442,9 @@ def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds)
 
 def _signature_variants(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds):
     """Variants ``(label, columns (c, K), names, scale_to_params)`` of ``effect`` at tendon ``i`` (0-based):
-    the residual model is ``columns.T @ beta``; motor side in N m, spring side whitened elongation."""
-    r, om, f = fr.r, fr.omega[i], fr.force[i]
-    omf, thf, ff = fr.full["omega"][i], fr.full["theta"][i], fr.full["force"][i]
+    the residual model is ``columns.T @ beta``; motor side in N m, spring and joint sides whitened."""
+    om, f = fr.omega[i], fr.force[i]
+    omf, thf = fr.full["omega"][i], fr.full["theta"][i]
     H = fr.consistent
     out = []
     if effect == "motor_friction":   # (3.8): tau = -(g2 atan(g1 w) + g3 w): the missing torque adds to u
