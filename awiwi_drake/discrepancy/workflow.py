@@ -80,7 +80,9 @@ class _Run:
         for k, v in s["params"].items():
             p_start[PARAM_INDEX[k]] = v
         t0 = time.perf_counter()
-        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held)
+        # the current model's window-start profile to start from, unless the effect adds states
+        start = None if eff.name in STATEFUL_EFFECTS else st.Q.take(st.W[eng.train])
+        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held, start)
         rp = project(fo.r0, fo.projection)
         e_after = (rp ** 2).sum(axis=1)
         te, tr = eng.test, eng.train
@@ -140,7 +142,8 @@ class _Run:
             self.st = ResidualState(self.eng, win.vector, win.profile)
         else:       # refit jointly with the accepted effects by simulation (its fit moved them to first order)
             names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
-            pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings)
+            pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings,
+                                 start_profile=win.profile[1].take(self.st.W[self.eng.train]))
             self.st = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         experiment = separating_experiment(members) if status == "not separable" else ""
