@@ -2,7 +2,8 @@
 
 Usage::
 
-    PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.1] [--controllers joint-pd,cascaded,backstepping]
+    PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.1]
+                                                         [--controllers joint-pd,cascaded,cascaded:no-observer,backstepping]
                                                          [--physics default,off,on] [--json out.json] [--no-profile]
 
 For each registered hand controller (``joint-pd``: the 3 kHz motor PD; ``cascaded``: joint impedance ->
@@ -166,6 +167,9 @@ def stage_costs(loop, op, refs, sim_time: float = 0.03) -> dict:
     if fused.dist is not None:
         wrap(fused.dist, "step", "distribution (7.6)")
     wrap(type(fused.law), "__call__", "tendon force law (10.2)" if fused.joint_law is not None else "law")
+    if fused.obs is not None:
+        wrap(fused.obs, "compensation", "friction observer (9.2): compensation")
+        wrap(fused.obs, "next_state", "friction observer (9.2): update")
     wrap(type(plant), "DoCalcTimeDerivatives", "plant derivatives (3 per period)")
     try:
         c0 = time.process_time()
@@ -199,11 +203,17 @@ PHYSICS = {  # the hand plant's thesis effects, each case stated explicitly (the
 
 
 def run(name: str, sim_time: float, profile: bool = True, physics: str = "default") -> dict:
+    """One row; ``name`` a registered controller, or ``<chain controller>:no-observer`` for the chain without its
+    default ch. 9 friction observer (``make_controller(..., friction_observer=None)``)."""
     from awiwi_drake.parameters.hand import HandRigParams
     switches = PHYSICS[physics]
     rig = hand_diagram(params=None if switches is None else HandRigParams().with_physics(**switches))
+    base, _, variant = name.partition(":")
+    if variant not in ("", "no-observer"):
+        raise ValueError(f"controller {name!r}: the only variant is ':no-observer'")
+    options = {"friction_observer": None} if variant else {}
     t0 = time.perf_counter()
-    loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
+    loop = closed_loop(rig, make_controller(base, rig, **options), **get_entry(base, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
     # the stepped reference is a fixed input value of the context (no schedule source evaluated every period)
@@ -234,7 +244,8 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sim-time", type=float, default=0.1, help="simulated seconds per controller")
-    ap.add_argument("--controllers", default="joint-pd,cascaded,backstepping")
+    ap.add_argument("--controllers", default="joint-pd,cascaded,cascaded:no-observer,backstepping",
+                    help="registered hand controllers; '<chain controller>:no-observer' without the ch. 9 observer")
     ap.add_argument("--no-profile", action="store_true", help="skip where the time goes (isolated costs, call counts)")
     ap.add_argument("--physics", default="default",
                     help="comma list of the hand plant's physics: default (HandRigParams()), off (no ripple, "

@@ -38,8 +38,8 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
   a structure of the package: the same rig dynamics and PD law with nothing a user addresses (no hold, no
   state demultiplexer, no outputs system, the PD one gain on ``[references, state]`` fed by one source, no
   controller sub-diagram), with its final state's largest difference to the default loop's
-  (``..._lean_loop_max_state_difference``, round-off: the same loop). Differences: ``controller_and_sources_us``,
-  ``hold_us``, ``rig_plumbing_us`` (multiplexer, demultiplexer, outputs system), ``laws_us`` (the three
+  (``..._lean_loop_max_state_difference``, round-off: the same loop). Differences: ``controller_and_sources_us``
+  (the PD with its reference, one ``TrajectoryAffineSystem``, and its reading of the rig's state), ``hold_us``, ``rig_plumbing_us`` (multiplexer, demultiplexer, outputs system), ``laws_us`` (the three
   RK3 stages' and the output's evaluation of the rig's nonlinear expressions), ``approximation_us``.
 * ``scipy_reference``: the same equations and controller in numpy with
   ``scipy.integrate.solve_ivp`` (RK23, rtol 1e-4) per control period.

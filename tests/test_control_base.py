@@ -270,3 +270,44 @@ def test_failed_runs_are_flagged_in_csv_and_markdown(tmp_path):
     rows = list(csv.DictReader(res.table.to_csv(tmp_path / "m.csv").open()))
     assert [r["status"] for r in rows] == ["flagged", "flagged"] and "not settled" in rows[0]["flags"]
     assert "| flagged: saturated" in res.table.to_markdown()
+
+
+def test_plain_diagram_controller_of_a_sampled_rig_is_copied_flat_unless_its_leaves_cannot_be():
+    """``closed_loop`` copies a plain-``Diagram`` controller of a sampled rig into the loop as its leaves (Clone, so
+    scalar conversion); a user's diagram holding a Python ``LeafSystem`` without scalar conversion is kept whole as
+    the sub-diagram ``"controller"`` (it used to raise ``System::Clone(): ... does not support Cloning``), and both
+    loops give the same trajectory: the joint rig's motor PD u = -kd omega, as Drake's Simulator runs it."""
+    import dataclasses
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder, LeafSystem
+    from pydrake.systems.primitives import MatrixGain
+    from awiwi_drake.rigs import joint_rig
+    kd = 0.02
+
+    class _Damper(LeafSystem):       # a user's leaf: no TemplateSystem, no scalar conversion
+        def __init__(self):
+            super().__init__()
+            w = self.DeclareVectorInputPort("motor_velocity", 2)
+            self.DeclareVectorOutputPort("motor_torque", 2, lambda c, o: o.SetFromVector(-kd * w.Eval(c)))
+
+    finals = {}
+    for leaf in (_Damper(), MatrixGain(-kd * np.eye(2))):
+        b = DiagramBuilder()
+        s = b.AddSystem(leaf)
+        b.ExportInput(s.get_input_port(0), "motor_velocity")
+        b.ExportOutput(s.get_output_port(0), "motor_torque")
+        rig = joint_rig()
+        loop = closed_loop(rig, b.Build(), rate_hz=3000.0)
+        assert loop.sampled_rig
+        ctrl = loop.diagram.GetSubsystemByName("controller")
+        assert (type(ctrl).__name__ == "Diagram") == isinstance(leaf, _Damper), type(ctrl).__name__
+        op = rig.operating_point()
+        x0 = np.array(op.state, float)
+        w = [i for i, nm in enumerate(rig.state_names) if nm.startswith("motor_velocity")]
+        x0[w] = [3.0, -2.0]                                     # motor velocities [rad/s]: the damper acts
+        sim = Simulator(loop.diagram, loop.create_context(dataclasses.replace(op, state=x0)))
+        sim.AdvanceTo(0.01)
+        finals[type(leaf).__name__] = loop.diagram.GetOutputPort("state").Eval(sim.get_context()).copy()
+    user, flat = finals.values()
+    np.testing.assert_allclose(user, flat, rtol=1e-12, atol=1e-12)
+    assert np.all(np.abs(user[w]) < [3.0, 2.0])                 # damped

@@ -90,14 +90,15 @@ def test_fused_chain_on_a_ring_finger_with_coupled_dip():
 
 
 def test_fused_is_not_used_where_the_blocks_must_stay():
-    """Ideal sensors, a sensor model or a continuous controller state (the ch. 9 observer) keep the blocks."""
+    """Ideal sensors, a sensor model or a continuous controller state (the ch. 9 observer of a continuous chain,
+    ``distribution="sharing"``) keep the blocks; the sampled observer (the default) is fused."""
     from awiwi_drake.control.joint_design import joint_stage_controller
-    from awiwi_drake.parameters.hand_control import FrictionObserverParams
     rig = _rig("finger-index")
     assert closed_loop(rig, make_controller("cascaded", rig), sensors="ideal").fused is None
     rig = _rig("finger-index")
-    obs = joint_stage_controller(rig, "cascaded", friction_observer=FrictionObserverParams())
-    assert closed_loop(rig, obs).fused is None
+    assert closed_loop(rig, joint_stage_controller(rig, "cascaded", distribution="sharing")).fused is None
+    rig = _rig("finger-index")
+    assert closed_loop(rig, joint_stage_controller(rig, "cascaded")).fused is not None
     rig = _rig("finger-index")
     assert closed_loop(rig, make_controller("joint-pd", rig)).fused is None      # no estimates read
 
@@ -254,3 +255,23 @@ def test_compiled_table_lookup_of_the_distribution_equals_numpy_interp():
         if trial == 0:
             f[:4] = gf[0, 0], gf[1, -1], gf[2, 17], gf[3, 0] - 1.0
         np.testing.assert_array_equal(_interp_rows(f, gf, gv), [np.interp(f[i], gf[i], gv[i]) for i in range(8)])
+
+
+def test_initialize_controller_without_joint_angles_keeps_the_estimate_as_the_composed_loop_does():
+    """``ClosedLoop.initialize_controller(context)`` with no pose (its default) restarts the distribution and the
+    friction observer and keeps the estimator's state, fused or composed (it raised ``TypeError: object of type
+    'NoneType' has no len()`` on a fused loop): after it both loops run the same periods to round-off."""
+    runs = []
+    for fused in (False, True):
+        rig = _rig("finger-index")
+        loop = closed_loop(rig, make_controller("cascaded", rig), fused=fused, **get_entry("cascaded", rig).loop_options)
+        op, x, ref = _random_start(rig, seed=4)
+        ctx = loop.create_context(op, state=x, references={"joint_angle_reference": ref})
+        loop.initialize_controller(ctx)
+        assert (loop.fused is not None) == fused
+        if fused:      # the estimate and its velocity filter are kept (create_context started them at the pose)
+            own = loop.fused.GetMyContextFromRoot(ctx)
+            for group in (loop.fused._xq, loop.fused._xz):
+                np.testing.assert_array_equal(own.get_discrete_state(group).CopyToVector(), rig.joint_angles_of(x))
+        runs.append(simulate(loop, ctx, 6 / loop.rate_hz, log=LOGS))
+    _assert_same(*runs)

@@ -318,15 +318,13 @@ def test_hysteresis_loop_width_equals_the_dahl_closed_form():
     branch carries z = w - (w + Z) exp(-A / delta): the width is twice that."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Sine
-    from awiwi_drake.components.drive import build_tendon_drive
     hyst = HysteresisParams(enabled=True, width_ratio=0.0, width_offset=4.5)
     motor = MotorParams(inertia=1.0, friction=False, saturation=False)
     x0 = float(np.ravel(SPRING.inverse_force(np.array([40.0])))[0])
     r_m = 1e-4          # a heavy motor on a tiny pulley holding ~40 N: it barely moves (x is logged anyway)
-    drive = build_tendon_drive(motor=motor, spring=SPRING, coupling=ConstantCoupling([[1.0]]), offsets=[x0],
-                               hysteresis=hyst, motor_pulley_radius=r_m)
     b = DiagramBuilder()
-    d = b.AddSystem(drive.diagram)
+    d = b.AddSystem(TendonDrive_[float](DriveModel(motor, (SPRING,), ConstantCoupling([[1.0]]), np.array([x0]), r_m,
+                                                   hyst)))
     amp, freq = 1e-3, 4.0
     sine = b.AddSystem(Sine(amp, 2 * np.pi * freq, 0.0, 1))
     b.Connect(sine.get_output_port(0), d.GetInputPort("joint_angle"))

@@ -356,7 +356,7 @@ def test_registered_controllers_on_the_sampled_flexible_joint_equal_the_continuo
     map's conditioning (the link velocity is recovered from the momentum I qdot + B thetadot, B/I = 5000: ~3.7 digits)
     and accumulated by the loop, which amplifies round-off (measured: a 1e-15 rad/s change of the initial motor
     velocity alone moves the continuous loop by 3e-11 of the range over these 150 periods); 1e-8 is over 100x below
-    the step's RK3 error against a tight reference (README "Backends, and speed")."""
+    the step's RK3 error against a tight reference (README "How the plants are built, and speed")."""
     from awiwi_drake.analysis import simulate
     from awiwi_drake.analysis.schedules import Step
     from awiwi_drake.control import closed_loop

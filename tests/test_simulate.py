@@ -312,3 +312,57 @@ def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find(whi
         [(e["kind"], e["channel"], e["t_start"], e["t_end"]) for e in ev_b]
     np.testing.assert_allclose([e["extreme"] for e in ev_a], [e["extreme"] for e in ev_b], rtol=1e-12, atol=1e-12)
     assert res_a.info["limits"]["tendon_force"] == res_b.info["limits"]["tendon_force"]
+
+
+def test_simulate_runs_a_flat_copy_of_nested_diagrams_bit_for_bit():
+    """simulate copies the leaves of a nested diagram flat (analysis.add_flat): a continuous loop (the rig and the
+    controller as sub-diagrams, an input fanning out to two leaves) and a sampled loop give the same samples and
+    end state as Drake's Simulator on the original diagram with the same integrator, bit for bit, and the user's
+    context (every leaf's state, nested ones included) is advanced to that end."""
+    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    from pydrake.systems.framework import InputPort
+
+    from awiwi_drake.analysis import add_flat
+    from awiwi_drake.control import closed_loop
+    from awiwi_drake.control.motor_position import motor_position_controller
+    for sampled in (False, True):
+        rig = joint_rig()
+        op = rig.operating_point(pretension=20.0)
+        loop = closed_loop(rig, motor_position_controller(rig), sampled_rig=sampled)
+        refs = {"motor_angle_reference": op.state[2:4] + [0.05, -0.05], "tendon_force_reference": op.tendon_force}
+        ctx = loop.create_context(op, references=refs)
+        ref_ctx = ctx.Clone()
+        res = simulate(loop.diagram, ctx, 0.02, log=("state", "motor_torque"))
+        sim = Simulator(loop.diagram, ref_ctx)
+        ResetIntegratorFromFlags(sim, "runge_kutta3", 1 / 3000)
+        sim.get_mutable_integrator().set_fixed_step_mode(True)
+        sim.Initialize()
+        sim.AdvanceTo(res.t[-1])
+        assert ctx.get_time() == ref_ctx.get_time()
+        def state(c):
+            return np.concatenate([c.get_continuous_state_vector().CopyToVector()]
+                                  + [c.get_discrete_state(i).CopyToVector() for i in range(c.num_discrete_state_groups())])
+        assert state(ctx).size > 6
+        np.testing.assert_array_equal(state(ctx), state(ref_ctx))
+        np.testing.assert_array_equal(res["state"][-1], loop.diagram.GetOutputPort("state").Eval(ref_ctx))
+        assert loop.diagram.HasSubsystemNamed("rig") is not sampled      # a nested rig when continuous
+    b = DiagramBuilder()          # an exported input feeding two leaves inside a sub-diagram
+    inner = DiagramBuilder()
+    i1, i2 = inner.AddSystem(_integrator()), inner.AddSystem(_first_order())
+    i2.set_name("f")
+    inner.ExportInput(i1.get_input_port(), "u")
+    inner.ConnectInput("u", i2.get_input_port())
+    inner.ExportOutput(i1.get_output_port(), "x")
+    inner.ExportOutput(i2.get_output_port(), "y")
+    sub = b.AddSystem(inner.Build())
+    b.ExportInput(sub.get_input_port(0), "u")
+    b.ExportOutput(sub.get_output_port(0), "x")
+    b.ExportOutput(sub.get_output_port(1), "y")
+    d = b.Build()
+    flat = add_flat(DiagramBuilder(), d, "copy")
+    assert [len(p) for p in flat.inputs] == [2] and len(flat.leaves) == 2
+    assert isinstance(flat.inputs[0][0], InputPort)
+    res = simulate(d, d.CreateDefaultContext(), 1.0, inputs={"u": 1.0}, log=("x", "y"), mode="error_controlled",
+                   accuracy=1e-10)
+    np.testing.assert_allclose(res["x"][-1], [1.0], atol=1e-9)                     # x' = 1
+    np.testing.assert_allclose(res["y"][-1], [0.4 * (1 - math.exp(-5.0))], atol=1e-8)   # y' = -5 y + 2

@@ -7,6 +7,6 @@ from awiwi_drake.analysis.monitors import (
 from awiwi_drake.analysis.results import SimulationResult
 from awiwi_drake.analysis.schedules import Chirp, Constant, PerEntry, Ramp, Samples, Sine, Step
 from awiwi_drake.analysis.simulate import (
-    PHYSICAL_FAILURES, InfeasibleForceError, SimulationDivergedError, SimulationError, SimulationEventError,
-    control_period, simulate)
+    PHYSICAL_FAILURES, FlatSystem, InfeasibleForceError, SimulationDivergedError, SimulationError,
+    SimulationEventError, add_flat, control_period, simulate)
 from awiwi_drake.analysis.sweep import run_sweep

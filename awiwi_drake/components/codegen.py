@@ -10,7 +10,7 @@ compile it with numba (``njit(cache=True)``). The kernel is therefore not a
 second, hand-written copy of the physics: change a law and the kernel follows
 (the source hash changes, so the disk cache does too).
 
-Cost (measured on this project's machine, see README "Backends, and speed"): numba +
+Cost (measured on this project's machine, see README "How the plants are built, and speed"): numba +
 llvmlite add about 210 MB and 15 s to ``pip install``; the first call of a new
 kernel compiles it (joint rig ~1 s, the hand's drive ~10-40 s); the compiled code
 is cached on disk (``$AWIWI_KERNEL_CACHE``, default ``~/.cache/awiwi_drake/kernels``)

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pydrake.symbolic as sym
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import Diagram, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import asarray_like, is_float, positive_part
@@ -59,8 +59,8 @@ from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
-__all__ = ["GuideFrictionModel", "DriveModel", "drive_laws", "build_kernels", "TendonDrive_", "TendonDrive_System",
-           "TendonDriveBatch_"]
+__all__ = ["GuideFrictionModel", "DriveModel", "TendonDrive", "drive_laws", "build_kernels", "TendonDrive_",
+           "TendonDrive_System", "TendonDriveBatch_"]
 
 
 @dataclass(frozen=True)
@@ -214,6 +214,29 @@ class DriveModel:
         k += m if self.has_hysteresis else 0
         g = state[k:k + m] if self.has_guide_friction else None
         return q, qd, theta, omega, z, g
+
+
+@dataclass(frozen=True)
+class TendonDrive:
+    """Handle of a rig's drive: the diagram holding it and its :class:`DriveModel`."""
+
+    diagram: Diagram
+    model: DriveModel
+
+    @property
+    def hysteresis(self) -> bool:
+        """Whether the drive carries the spring hysteresis state."""
+        return self.model.has_hysteresis
+
+    @property
+    def guide_friction(self) -> bool:
+        """Whether the drive carries the guide friction state."""
+        return self.model.has_guide_friction
+
+    @property
+    def num_states(self) -> int:
+        """The drive's states (without a link's)."""
+        return self.model.num_states - (2 * self.model.num_joints if self.model.has_link else 0)
 
 
 def _full_rates(model: DriveModel, qd):

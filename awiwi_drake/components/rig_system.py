@@ -11,7 +11,7 @@ derivative path. Drake differentiates the same expressions for ``AutoDiffXd``
 Why this structure (measured on this project's machine, joint rig under the 3 kHz
 motor PD, fixed-step RK3): a Python ``DoCalcTimeDerivatives`` costs about 6 us per
 call even around a compiled kernel (10x real time); the C++ expression evaluation
-about 3 us (13-14x); see README "Backends, and speed" for the framework's own share.
+about 3 us (13-14x); see README "How the plants are built, and speed" for the framework's own share.
 
 The quantities that are not state slices (``tendon_force``, ``tendon_stiffness``,
 ``joint_torque``, ``applied_torque``) come from :class:`LinkRigOutputs_`, a

@@ -42,12 +42,11 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from pydrake.systems.framework import (Context, Diagram, DiagramBuilder, InputPortIndex, LeafSystem, LeafSystem_,
-                                       OutputPortIndex, System)
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, LeafSystem_, System
 from pydrake.systems.primitives import DiscreteTimeDelay, MatrixGain, Multiplexer, Saturation, ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake.rigs.base import RigPorts
+from awiwi_drake.analysis.simulate import add_flat
 
 __all__ = [
     "COMMAND_PORT",
@@ -308,7 +307,9 @@ class ClosedLoop:
         """Start the controller's states (e.g. the force distribution at its design forces) and, given
         ``joint_angles`` (a pose known after homing), the estimator's, in a (root) ``context``."""
         if self.fused is not None:
-            self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles)
+            n = self.rig.num_joints
+            self.fused.initialize_state(self.fused.GetMyMutableContextFromRoot(context), joint_angles,
+                                        None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
             return
         init = getattr(self.controller, "initialize_state", None)
         if init is not None:   # controllers with internal state (e.g. the force distribution)
@@ -390,8 +391,9 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
         its ``state`` output physical. Its systems are added to the loop directly (``Rig.add_sampled``),
         not as the sub-diagram ``"rig"`` that any other rig is, and so is a controller that is a plain
-        ``Diagram`` of leaf systems (copies of its leaves: one leaf is named ``"controller"``, several
-        ``"controller.<leaf>"``). The loop's ``motor_torque`` output is the held command as before. False: the
+        ``Diagram`` whose leaves support scalar conversion (copies of its leaves: one leaf is named
+        ``"controller"``, several ``"controller.<path>"``; otherwise it is the sub-diagram ``"controller"``).
+        The loop's ``motor_torque`` output is the held command as before. False: the
         continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
     fused : bool
         For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
@@ -503,14 +505,19 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                       and all(s.num_continuous_states() == 0 for s in sensors.values()))
     builder = DiagramBuilder()
     # a sampled rig's systems go into the loop's builder directly (RigPorts: a sub-diagram costs the
-    # simulator ~1 us per period, README "Backends, and speed"); any other rig is the sub-diagram "rig"
+    # simulator ~1 us per period, README "How the plants are built, and speed"); any other rig is the
+    # sub-diagram "rig"
     plant = (rig.add_sampled(builder, 1.0 / rate_hz, hold_applied_torque=True) if sample_rig
              else builder.AddNamedSystem("rig", rig_diagram))
     # a plain diagram of leaf systems controlling a sampled rig goes into the loop's builder as its leaves
     # (a sub-diagram costs the simulator ~0.3 us per period: measured on the joint-rig demo loop, benchmarks/
     # bench_rigs.py joint_rig_breakdown); any other controller is the subsystem "controller"
-    ctrl = (_add_flat(builder, controller, "controller") if sample_rig and spec is None and _flattenable(controller)
-            else builder.AddNamedSystem("controller", controller if spec is None else fused_sys))
+    if sample_rig and spec is None and _flattenable(controller):
+        ctrl = add_flat(builder, controller, "controller")
+        if len(ctrl.leaves) == 1:
+            ctrl.leaves[0][1].set_name("controller")
+    else:
+        ctrl = builder.AddNamedSystem("controller", controller if spec is None else fused_sys)
     handles = ClosedLoop(diagram=None, rig=rig, controller=controller, rate_hz=rate_hz,
                          delay=(steps / rate_hz if steps else None), delay_steps=steps, saturation=sat,
                          references=tuple(refs), disturbances=(), tracked_outputs=tuple(tracked),
@@ -633,31 +640,16 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
 
 
 def _flattenable(controller: System) -> bool:
-    """A plain ``Diagram`` (not a Python subclass with methods of its own, e.g. ``initialize_state``) of
-    leaf systems."""
-    return (type(controller) is Diagram and not hasattr(controller, "initialize_state")
-            and all(isinstance(s, LeafSystem) for s in controller.GetSystems()))
-
-
-def _add_flat(builder, diagram: Diagram, name: str) -> RigPorts:
-    """Copies (``Clone``, scalar conversion) of ``diagram``'s leaf systems added to ``builder`` and connected as
-    in ``diagram``; its ports by name. One leaf is named ``name``, several ``name.<leaf>``."""
-    systems = diagram.GetSystems()
-    copies = {}
-    for s in systems:
-        c = s.Clone()
-        c.set_name(name if len(systems) == 1 else f"{name}.{s.get_name()}")
-        copies[id(s)] = builder.AddSystem(c)
-    for (dst, i), (src, j) in diagram.connection_map().items():
-        builder.Connect(copies[id(src)].get_output_port(j), copies[id(dst)].get_input_port(i))
-    inputs = {diagram.get_input_port(k).get_name(): [copies[id(s)].get_input_port(i) for s, i in
-                                                    diagram.GetInputPortLocators(InputPortIndex(k))]
-              for k in range(diagram.num_input_ports())}
-    outputs = {}
-    for k in range(diagram.num_output_ports()):
-        s, j = diagram.get_output_port_locator(OutputPortIndex(k))
-        outputs[diagram.get_output_port(k).get_name()] = copies[id(s)].get_output_port(j)
-    return RigPorts(inputs, outputs, None)
+    """A plain ``Diagram`` (not a Python subclass with methods of its own, e.g. ``initialize_state``) whose leaves
+    can be copied (scalar conversion; a user's Python ``LeafSystem`` without it stays inside the sub-diagram
+    ``"controller"``, as before the flat copy)."""
+    if type(controller) is not Diagram or hasattr(controller, "initialize_state"):
+        return False
+    try:
+        controller.Clone()
+    except RuntimeError:
+        return False
+    return True
 
 
 def _connect(builder, src, dst) -> None:

@@ -16,8 +16,9 @@ _SAMPLED = {"rate_hz": 3000.0}
 
 def _lazy(module: str, function: str, **kwargs):
     """``factory(rig)`` calling ``module.function(rig, **kwargs)`` (imported on first call)."""
-    def factory(rig):
-        return getattr(importlib.import_module(f"awiwi_drake.control.{module}"), function)(rig, **kwargs)
+    def factory(rig, **options):
+        return getattr(importlib.import_module(f"awiwi_drake.control.{module}"), function)(rig, **{**kwargs,
+                                                                                              **options})
     factory.__name__ = f"{function}_factory"
     return factory
 

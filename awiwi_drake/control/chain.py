@@ -290,7 +290,8 @@ class TendonChainController(Diagram):
     friction_observer : FrictionObserverParams, optional
         Add the joint friction observer (9.2) per DoF
         (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat`` is added to the joint
-        stage's torques (ch. 9); output ``friction_compensation``.
+        stage's torques (ch. 9); output ``friction_compensation``.  Sampled at ``1/rate_hz`` in a sampled chain
+        (and then fused), continuous with ``distribution="sharing"``.
     """
 
     def __init__(self, rig: Any, joint_law: StaticLaw, params: HandChainParams | None = None, *,
@@ -323,9 +324,15 @@ class TendonChainController(Diagram):
             from pydrake.systems.primitives import Adder
             from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_damping, joint_inertia
             S = point["selection"]
+            sampled = (distribution or p.distribution_method) != "sharing"
+            # kappa times the stage's torque loop gain: at rest its torque feedback divides what is added to the
+            # request by that gain (FrictionObserverParams.compensation_scale)
+            g = getattr(joint_law, "torque_loop_gains", np.ones(S.shape[1]))
             observer = b.AddNamedSystem("friction_observer", JointFrictionObserver(
                 rig.coupling, S, joint_inertia(rig, point["joint_angle"]), np.diag(joint_damping(rig)),
-                friction_observer.gain))
+                friction_observer.gain / np.asarray(g, dtype=float), 1.0 / rate_hz if sampled else None,
+                (friction_observer.compensation_scale_motor_position if tendon_law == "motor-position"
+                 else friction_observer.compensation_scale) * np.asarray(g, dtype=float)))
             add = b.AddNamedSystem("friction_compensated_torque", Adder(2, S.shape[1]))
             b.Connect(tau_ref, add.get_input_port(0))
             b.Connect(observer.GetOutputPort("friction_compensation"), add.get_input_port(1))
@@ -361,19 +368,21 @@ class TendonChainController(Diagram):
 
     def fused_spec(self, estimator) -> dict | None:
         """The :class:`~awiwi_drake.control.fused.FusedChain_` spec of this chain behind the rig's link estimator
-        ``estimator`` (a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator`), or None when the chain has
-        continuous state (the friction observer) and is closed as its blocks."""
-        if self._observer is not None:
+        ``estimator`` (a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator`), or None when the chain is
+        continuous (its friction observer has continuous state) and is closed as its blocks."""
+        if self._observer is not None and self._observer.period is None:
             return None
-        return dict(self._force.fused_parts, **estimator.fused_spec(), joint_law=self._joint_law,
+        spec = dict(self._force.fused_parts, **estimator.fused_spec(), joint_law=self._joint_law,
                     stiffness=self._stiffness, name=self.get_name())
+        if self._observer is not None:
+            spec["observer_system"] = self._observer
+        return spec
 
     def initialize_state(self, context, rig_state=None) -> None:
         """Start the distribution at the design point's tendon forces and the friction observer at the
         joints' velocity in ``rig_state`` (``context``: this controller's)."""
         self._force.initialize_state(self.GetMutableSubsystemContext(self._force, context))
         if self._observer is not None:
-            obs = self.GetMutableSubsystemContext(self._observer, context)
-            S = self._observer.S
-            v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
-            obs.SetContinuousState(self._observer.Sp @ v)
+            n = self._observer.S.shape[0]
+            self._observer.initialize(self.GetMutableSubsystemContext(self._observer, context),
+                                      None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])

@@ -10,6 +10,18 @@ unknown torque ``d`` (friction, contact):
 
 so that ``d_hat' = L (d - d_hat)``: the estimate is ``d`` low-pass filtered at
 ``L`` [rad/s] (the "filtered version of the real friction" of section 9.1).
+
+Sampled at the control period ``h`` (the hand's chain, :func:`observer_step`): the model copy integrated
+exactly over the period with its torque ``tau_a,k + d_hat_k`` held (the chain holds everything it computes at
+a sample, as the plant's zero-order hold holds the motor torques),
+
+    w_hat_k+1 = w_hat_k + h (tau_a,k + d_hat_k) / J,      d_hat_k = L J (w_k - w_hat_k),
+
+so the estimation error ``e = w - w_hat`` of a link driven by the same held torques plus a constant ``d``
+obeys ``e_k+1 = (1 - L h) e_k + h d / J``: pole ``1 - L h`` (0.9333 at 200 rad/s and 3 kHz; the continuous
+pole mapped, ``exp(-L h)``, is 0.9355), stable for ``L h < 2``, and ``d_hat_k = d (1 - (1 - L h)^k)``, no bias
+(holding ``w`` instead, the exact solution with ``w`` constant over the period, would be biased by
+``L h / (1 - exp(-L h))``, 3.4 %, whenever the link accelerates).
 The thesis writes the friction torque with the opposite sign
 (``tau_fric = -d``); compensation adds ``-d_hat`` to the desired joint torque
 (``u = u_c + tau_fric_hat``).
@@ -30,7 +42,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 
-__all__ = ["observer_rate", "DisturbanceObserver_", "DisturbanceObserver", "LinkFriction_", "LinkFriction",
+__all__ = ["observer_rate", "observer_step", "DisturbanceObserver_", "DisturbanceObserver", "LinkFriction_", "LinkFriction",
            "with_link_friction"]
 
 
@@ -38,6 +50,13 @@ def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
     """``(w_hat', d_hat)`` of the observer (9.2) for velocity ``w`` and known torque ``tau_a``."""
     d_hat = gain * inertia * (w - w_hat)
     return (known_torque + d_hat) / inertia, d_hat
+
+
+def observer_step(w_hat, w, known_torque, inertia, gain: float, period: float):
+    """``(w_hat_k+1, d_hat_k)``: the observer (9.2) over one period ``h``, its model copy integrated with the torque
+    ``tau_a,k + d_hat_k`` held (module docstring): ``w_hat + h w_hat'`` with :func:`observer_rate`'s rate."""
+    rate, d_hat = observer_rate(w_hat, w, known_torque, inertia, gain)
+    return w_hat + period * rate, d_hat
 
 
 @TemplateSystem.define("DisturbanceObserver_")

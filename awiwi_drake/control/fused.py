@@ -27,8 +27,11 @@ So the fused loop equals the composed one (tests/test_fused_chain.py: 1e-12 over
 states, every registered chain controller and the backstepping family, a finger and the hand; its sampled
 linearisation too).  Scalar types float and AutoDiffXd (the AutoDiffXd path calls the same methods in that
 type); not symbolic, as neither the estimator (Algorithm 1 branches on cost values) nor the distribution
-(its solver branches on values) is.  A chain with continuous state (the ch. 9 friction observer) or a
-user-given estimator or sensor model is closed as the composed blocks.
+(its solver branches on values) is.  The chain's ch. 9 friction observer (9.2), sampled at the period (the
+default), is fused too: the stage's torques get its ``compensation`` and the update steps its ``next_state``
+(:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`'s own methods).  A chain with continuous state
+(the observer of a continuous chain, ``distribution="sharing"``) or a user-given estimator or sensor model is closed
+as the composed blocks.
 """
 
 from __future__ import annotations
@@ -89,9 +92,15 @@ def FusedChain_(T):
                     **spec["distribution"])
             self.sharing = spec.get("sharing")
             self.path_coupling = spec.get("path_coupling")
+            self.obs = None
+            given = spec.get("observer_system")       # the sampled (9.2) observer block, its own methods
+            if given is not None:
+                self.obs = given if T is float else given.ToAutoDiffXd()
             names = {"joint_angle_reference": n, "motor_angle": m, "elongation": m}
             if spec.get("wrist"):
                 names["wrist_tendon_offset"] = m
+            if self.obs is not None:
+                names["tendon_force"] = m
             for stage in (self.joint_law, self.law):
                 if stage is not None:
                     names.update({k: v for k, v in stage.inputs.items() if k not in _INTERNAL})
@@ -104,6 +113,8 @@ def FusedChain_(T):
             if self.dist is not None:
                 self._xf = self.DeclareDiscreteState(self.dist.initial_forces)
                 self._xs = self.DeclareDiscreteState(len(self.dist.fingers))
+            if self.obs is not None:
+                self._xw = self.DeclareDiscreteState(self.obs.S.shape[1])
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             tickets = {p.ticket() for p in self._in.values()} | {self.xd_ticket()}
             self._cache = self.DeclareCacheEntry("fused chain at the sample", ValueProducer(
@@ -126,6 +137,10 @@ def FusedChain_(T):
                 self.DeclareVectorOutputPort("joint_torque_reference", int(self.joint_law.output_size),
                                              lambda c, o: o.SetFromVector(self._sample(c)["tau"]),
                                              prerequisites_of_calc=pre)
+                if self.obs is not None:
+                    self.DeclareVectorOutputPort("friction_compensation", self.obs.S.shape[1],
+                                                 lambda c, o: o.SetFromVector(self._sample(c)["comp"]),
+                                                 prerequisites_of_calc=pre)
                 self.DeclareVectorOutputPort("joint_stiffness_reference", K.size,
                                              lambda c, o: o.SetFromVector(self._K),
                                              prerequisites_of_calc={self.nothing_ticket()})
@@ -146,16 +161,21 @@ def FusedChain_(T):
             z = xd.get_vector(self._xz).CopyToVector()
             v = self._fc * z + self._fd * q
             u = dict(meas, joint_angle=q, joint_velocity=v)
-            out = dict(q=q, v=v, z=z)
+            out = dict(q=q, v=v, z=z, f=meas.get("tendon_force"))
             if self.joint_law is not None:
                 if self.dist is not None:
                     u["tendon_force_reference"] = out["f_prev"] = xd.get_vector(self._xf).CopyToVector()
                 tau = np.asarray(self.joint_law(u)).reshape(-1)
+                if self.obs is not None:            # ch. 9: the stage's torques plus -d_hat
+                    out["w_hat"] = xd.get_vector(self._xw).CopyToVector()
+                    out["comp"] = self.obs.compensation(out["w_hat"], v)
+                    tau = tau + out["comp"]
                 if self.sharing is not None:
                     W, f0, tau0 = self.sharing
                     u["tendon_force_reference"] = f0 + W @ (tau - tau0)
-                if self.path_coupling is not None:
-                    u["tendon_path_velocity"] = np.asarray(self.path_coupling.P(q)) @ v
+                if self.path_coupling is not None:     # P(q_k), once per period: the observer's update reuses it
+                    out["P"] = np.asarray(self.path_coupling.P(q))
+                    u["tendon_path_velocity"] = out["P"] @ v
                 out.update(tau=tau, f_ref=u["tendon_force_reference"])
             out["u"] = np.asarray(self.law(u)).reshape(-1)
             value.set_value(out)
@@ -171,13 +191,22 @@ def FusedChain_(T):
                                                q if self.dist.reads_joint_angle else None)
                 discrete_state.set_value(self._xf, f_new)
                 discrete_state.set_value(self._xs, status)
+            if self.obs is not None:
+                discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"], s.get("P")))
 
-        def initialize_state(self, context, joint_angles) -> None:
-            """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing) and the
-            distribution at the design point's forces (``context``: this system's)."""
-            q = np.asarray(joint_angles, dtype=float).reshape(-1)
-            context.SetDiscreteState(self._xq, q)
-            context.SetDiscreteState(self._xz, q)
+        def initialize_state(self, context, joint_angles, joint_velocities=None) -> None:
+            """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing; None
+            keeps them as they are, as the composed loop keeps its estimator's), the distribution at the design
+            point's forces and the friction observer at ``joint_velocities`` (0 at rest) (``context``: this
+            system's)."""
+            if joint_angles is not None:
+                q = np.asarray(joint_angles, dtype=float).reshape(-1)
+                context.SetDiscreteState(self._xq, q)
+                context.SetDiscreteState(self._xz, q)
+            if self.obs is not None:
+                v = (np.zeros(self.obs.S.shape[0]) if joint_velocities is None
+                     else np.asarray(joint_velocities, float))
+                context.SetDiscreteState(self._xw, self.obs.Sp @ v)
             f0 = self.spec.get("initial_forces")
             if self.dist is not None and f0 is not None:
                 context.SetDiscreteState(self._xf, np.asarray(f0, dtype=float))

@@ -28,8 +28,8 @@ Designs on ``(F, G)`` (gains ``K_j`` of :class:`~awiwi_drake.control.joint_stage
 reference maps from :func:`~awiwi_drake.control.linear.reference_maps`; for the sampled chain on the
 model sampled with its one period of delay, :func:`sampled_model`)
 
-* ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, M_jj
-  joint_bandwidth^2)`` (Fig 15.22, limited as 15.5.3 says for the cascade; measured: 0.5 Nm/rad on the
+* ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, cascade_margin M_jj
+  force_bandwidth^2 / 4)`` (:func:`cascade_stiffness`: half the stability bound of (11.16); measured: 0.5 Nm/rad on the
   index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
   +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
   mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
@@ -37,8 +37,8 @@ model sampled with its one period of delay, :func:`sampled_model`)
   two real equations ``1 + K (s* I - F)^-1 G = 0`` that put one closed-loop pair exactly at
   ``s* = position_bandwidth (-zeta +- i sqrt(1 - zeta^2))`` of the joint's reduced model (sampled chain: at
   ``exp(h s*)`` of :func:`sampled_model`); refused with one line when that needs ``Kd < 0`` or leaves another pole
-  unstable.  Unlike ``cascaded`` (``Kp = M_jj w^2``, the rigid link) the placement counts the torque chain and
-  the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
+  unstable.  Unlike the rigid link's ``Kp = M_jj w^2`` (the cascaded stage's former cap) the placement counts the
+  torque chain and the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
   0.032 / 0.0022 (with ``Kd = 0`` that pair would sit at -3.1 +- 29i / -4.7 +- 16i 1/s).  (An earlier
   reduced model, the motor friction linearised at rest, needed ``Kd < 0`` for the same placement.)
 * ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon
@@ -92,14 +92,14 @@ from awiwi_drake.control.linear import reference_maps
 from awiwi_drake.control.pole_placement import double_oscillator_polynomial, place_by_identification
 from awiwi_drake.hand.coupling import LinearFingerCoupling
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
-from awiwi_drake.parameters.hand_control import HandChainParams, StiffnessCorrectionParams
+from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams, StiffnessCorrectionParams
 from awiwi_drake.parameters.joint_design import JointDesignParams
 from awiwi_drake.rigs.base import OperatingPoint, Rig, add_revolute_link
 from awiwi_drake.rigs.rigs import _link_rig
 
-__all__ = ["JointReducedModel", "joint_subsystem", "force_loop", "design_motor", "PoleCheck", "check_design_poles",
-           "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping", "sampled_model",
-           "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles",
+__all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
+           "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
+           "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles",
            "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
@@ -395,6 +395,13 @@ def torque_loop_gain(K) -> float:
     return float(1.0 + K[2] + (K[4] if K.size > 4 else 0.0))
 
 
+def cascade_stiffness(inertia: float, chain: HandChainParams) -> float:
+    """The cascaded stage's impedance ``Kp`` of a DoF of inertia ``M_jj``: ``min(joint_stiffness, cascade_margin
+    M_jj force_bandwidth^2 / 4)``, ``M w^2 / 4`` the stability bound of (11.16) behind a second-order force loop
+    (:class:`~awiwi_drake.parameters.hand_control.HandChainParams` ``cascade_margin``)."""
+    return min(chain.joint_stiffness, chain.cascade_margin * inertia * chain.force_bandwidth ** 2 / 4.0)
+
+
 def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDesignParams | None = None,
                        chain: HandChainParams | None = None, period: float | None = None) -> np.ndarray:
     """The gain row ``K_j`` (5,) of one DoF for ``design`` in :data:`DESIGNS` (module docstring): on ``z``
@@ -403,7 +410,7 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
     c = chain or HandChainParams()
     F, G = model.A, model.B
     if design in ("cascaded", "two-time-scale"):
-        K = _impedance_gains(model, min(c.joint_stiffness, model.inertia * c.joint_bandwidth ** 2), p.damping_ratio)
+        K = _impedance_gains(model, cascade_stiffness(model.inertia, c), p.damping_ratio)
         return np.append(K, 0.0)
     if design == "pd":
         return _placed_pd_gains(model, p, period)
@@ -547,7 +554,9 @@ def _sdre_law(rig, point, c, p, kw, period):
 
 def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None,
                            params: JointDesignParams | None = None, chain: HandChainParams | None = None,
-                           distribution: str | None = None, rate_hz: float = 3000.0, **kw) -> TendonChainController:
+                           distribution: str | None = None, rate_hz: float = 3000.0,
+                           friction_observer: FrictionObserverParams | None = FrictionObserverParams(),
+                           **kw) -> TendonChainController:
     """Registered factories ``cascaded``, ``lqr`` (...) for fingers and the hand: the chain with the joint
     stage ``design`` (:func:`design_joint_stage`) designed at ``op`` (default: the rig's operating point).
 
@@ -555,8 +564,11 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     the distribution is asked for the mechanical stiffness ``K_mech = eps K_eff`` (8.2) per DoF, ``K_eff`` the
     design's :attr:`JointDesign.static_stiffness` (the (8.1) impedance correction is the identity here: the
     chain acts on the estimated joint angle through force control, so no spring is in series with it).
+    ``friction_observer``: the ch. 9 joint friction observer (9.2) per DoF, on by default (the guides' friction
+    otherwise leaves the impedance its dead band, friction torque / Kp; README "The thesis's control on fingers and
+    the hand (ch. 7-15)"); None removes it (``make_controller(name, rig, friction_observer=None)``).
     ``kw``: ``mechanical_stiffness`` (:func:`~awiwi_drake.control.chain.chain_design_point`), ``gains``,
-    ``distribution_params``, ``friction_observer`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
     c = chain or HandChainParams()
     correction = kw.pop("stiffness_correction", None)
     if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
@@ -575,7 +587,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
             np.diag(K_mech[a:b]) for a, b in zip(starts[:-1], starts[1:])])
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
                                  tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
-                                 **kw)
+                                 friction_observer=friction_observer, **kw)
     ctrl.design["joint_design"] = d
     ctrl.design["time_constant"] = d.tracking_time_constant()
     return ctrl
@@ -631,7 +643,8 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     Use a rig built with the design's motor model (``params.replace(motor=design_motor(params.motor))``)
     without hysteresis and guide friction for the comparison the per-joint models make."""
     c = chain or HandChainParams()
-    ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing")
+    ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing",
+                                  friction_observer=None)      # the designs: the stage itself, no ch. 9 observer
     d = ctrl.design["joint_design"]
     loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
     op = ctrl.operating_point

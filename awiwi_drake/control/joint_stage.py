@@ -51,6 +51,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import clip
 from awiwi_drake.control.base import StaticLaw, check_gains
 from awiwi_drake.control.compiled import float_inputs, joint_feedback
+from awiwi_drake.control.friction_observer import observer_rate, observer_step
 from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.hand.coupling import dof_selection
 
@@ -132,6 +133,12 @@ class JointStateFeedbackLaw(StaticLaw):
         if self.uses_previous:
             self.inputs.update(tendon_force_reference=m)
         self.output_size = k
+
+    @property
+    def torque_loop_gains(self) -> np.ndarray:
+        """``1 + K_tau + K_prev`` per DoF: the factor by which the stage's torque feedback divides a torque added to
+        its request, at rest (the force loop holding ``tau = tau_ref``); 1 for PD / impedance."""
+        return 1.0 + self.K[:, 2] + self.K[:, 4]
 
     def coordinates(self, u):
         """``z`` (k x 5: ``[q - q_op, qdot, tau - tau_op, tau_dot, tau_ref(t - h) - tau_op]``) and ``dr`` (k,)."""
@@ -260,20 +267,37 @@ def JointFrictionObserver_(T):
     ``d_hat_j = L M_jj (qdot_j - w_hat_j)`` (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the
     one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces.
     Inputs ``joint_angle``, ``joint_velocity`` (n, the estimates on the hand), ``tendon_force`` (m); output
-    ``friction_compensation`` (k) ``= -d_hat`` [Nm], added to the joint stage's desired torques; state ``w_hat``
-    (k), to be started at the measured velocity (0 at rest).
+    ``friction_compensation`` (k) ``= -scale d_hat`` [Nm] (``scale`` per DoF, default 1), added to the joint stage's
+    desired torques; state ``w_hat`` (k), to be started at the measured velocity (0 at rest).
+
+    ``period`` None: continuous state (a continuous chain, linear analysis).  ``period`` h: the sampled
+    chain's form, a discrete state updated every ``h`` from the sample by
+    :func:`~awiwi_drake.control.friction_observer.observer_step` (the same law, its model copy integrated with its
+    torque held over the period: pole ``1 - L h``); :class:`~awiwi_drake.control.fused.FusedChain_` calls :meth:`compensation` and
+    :meth:`next_state` of this object, the same methods the block's output and update call.
     """
 
     class Impl(LeafSystem_[T]):
-        def _construct(self, coupling, selection, inertia, damping, gain: float, converter=None):
+        def _construct(self, coupling, selection, inertia, damping, gain: float, period: float | None = None,
+                       scale=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.coupling, self.S = coupling, np.asarray(selection, dtype=float)
             n, k = self.S.shape
             self.Sp = np.linalg.pinv(self.S)
             self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
             self.b = check_gains("damping", damping, shape=(k,), owner="JointFrictionObserver")
-            self.gain = float(check_gains("gain", [gain], owner="JointFrictionObserver", positive=True)[0])
-            self.DeclareContinuousState(k)
+            self.gain = check_gains("gain", np.broadcast_to(np.asarray(gain, dtype=float), (k,)).copy(),
+                                    shape=(k,), owner="JointFrictionObserver", positive=True)
+            self.scale = (np.ones(k) if scale is None else
+                          check_gains("scale", scale, shape=(k,), owner="JointFrictionObserver", positive=True))
+            self.period = None if period is None else float(check_gains("period", [period],
+                                                                        owner="JointFrictionObserver",
+                                                                        positive=True)[0])
+            if self.period is None:
+                self.DeclareContinuousState(k)
+            else:
+                self._w = self.DeclareDiscreteState(k)
+                self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             self._q = self.DeclareVectorInputPort("joint_angle", n)
             self._v = self.DeclareVectorInputPort("joint_velocity", n)
             self._f = self.DeclareVectorInputPort("tendon_force", coupling.num_tendons)
@@ -281,24 +305,52 @@ def JointFrictionObserver_(T):
                                          prerequisites_of_calc={self.all_state_ticket(), self._v.ticket()})
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.coupling, other.S, other.M, other.b, other.gain, converter=converter)
+            Impl._construct(self, other.coupling, other.S, other.M, other.b, other.gain, other.period,
+                            other.scale, converter=converter)
 
-        def _terms(self, context):
-            from awiwi_drake.control.friction_observer import observer_rate
-            w_hat = context.get_continuous_state_vector().CopyToVector()
-            v = self.Sp @ self._v.Eval(context)
-            return w_hat, v, observer_rate
+        def _state(self, context):
+            if self.period is None:
+                return context.get_continuous_state_vector().CopyToVector()
+            return context.get_discrete_state(self._w).CopyToVector()
+
+        def compensation(self, w_hat, v):
+            """``-scale d_hat`` (k) [Nm] at the observer state ``w_hat`` (k) and joint velocities ``v`` (n)."""
+            return -self.scale * observer_rate(w_hat, self.Sp @ v, 0.0 * w_hat, self.M, self.gain)[1]
+
+        def _known_torque(self, q, w, f, P=None):
+            """``tau_a = -S^T P(q)^T f - b w`` per DoF at the DoF velocities ``w`` (``P``: ``P(q)`` when the caller
+            has it)."""
+            P = np.asarray(self.coupling.P(q) if P is None else P)
+            return -(self.S.T @ (P.T @ f)) - self.b * w
+
+        def next_state(self, w_hat, q, v, f, P=None):
+            """``w_hat`` one period later (sampled form) from the sample ``(q, v, f)`` (``P``: ``P(q)``, computed once
+            per period by the caller, or here)."""
+            w = self.Sp @ v
+            return observer_step(w_hat, w, self._known_torque(q, w, f, P), self.M, self.gain, self.period)[0]
 
         def _calc(self, context, out):
-            w_hat, v, _ = self._terms(context)
-            out.SetFromVector(-self.gain * self.M * (v - w_hat))
+            out.SetFromVector(self.compensation(self._state(context), self._v.Eval(context)))
+
+        def _update(self, context, discrete_state):
+            discrete_state.set_value(self._w, self.next_state(self._state(context), self._q.Eval(context),
+                                                              self._v.Eval(context), self._f.Eval(context)))
 
         def DoCalcTimeDerivatives(self, context, derivatives):
-            w_hat, v, observer_rate = self._terms(context)
-            PS = np.asarray(self.coupling.P(self._q.Eval(context))) @ self.S
-            tau = -(PS.T @ self._f.Eval(context)) - self.b * v
-            rate, _ = observer_rate(w_hat, v, tau, self.M, self.gain)
+            if self.period is not None:                 # the sampled form has no continuous state
+                return
+            w = self.Sp @ self._v.Eval(context)
+            tau = self._known_torque(self._q.Eval(context), w, self._f.Eval(context))
+            rate, _ = observer_rate(self._state(context), w, tau, self.M, self.gain)
             derivatives.get_mutable_vector().SetFromVector(rate)
+
+        def initialize(self, context, joint_velocity=None) -> None:
+            """Start ``w_hat`` at ``S^+ joint_velocity`` (0 at rest) in this system's ``context``."""
+            w = np.zeros(self.S.shape[1]) if joint_velocity is None else self.Sp @ np.asarray(joint_velocity, float)
+            if self.period is None:
+                context.SetContinuousState(w)
+            else:
+                context.SetDiscreteState(self._w, w)
 
     return Impl
 

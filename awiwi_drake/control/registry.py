@@ -128,6 +128,16 @@ def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
                      f"{', '.join(_kinds(name))}); controllers for {kind!r}: {', '.join(fits)}")
 
 
-def make_controller(name: str, rig: Any):
-    """Build controller ``name`` for ``rig`` (ValueError when unknown or unfit)."""
-    return get_entry(name, rig).factory(rig)
+def make_controller(name: str, rig: Any, **options: Any):
+    """Build controller ``name`` for ``rig`` (ValueError when unknown or unfit); ``options`` go to its factory
+    (e.g. ``friction_observer=None`` turns the chain controllers' ch. 9 observer off on a finger/the hand)."""
+    entry = get_entry(name, rig)
+    if not options:
+        return entry.factory(rig)
+    try:
+        return entry.factory(rig, **options)
+    except TypeError as exc:
+        if "unexpected keyword argument" not in str(exc):
+            raise
+        raise ValueError(f"controller {name!r} on {rig_kind(rig)!r} has no option {str(exc).split()[-1]} "
+                         f"(given: {', '.join(sorted(options))})") from None

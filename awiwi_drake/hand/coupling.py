@@ -300,15 +300,24 @@ class ThumbCoupling(FingerCoupling):
         return P
 
     def coupling_and_hessians(self, q):
-        """Float fast path: ``(P(q), tension_hessians(q))`` from one call of the compiled base kinematics."""
+        """Float fast path: ``(P(q), tension_hessians(q))`` from one call of the compiled base kinematics.
+
+        The last base pose's result is kept (one entry, keyed by the two base angles' bytes): the sampled chain asks
+        for ``P`` at one estimate several times a period (path velocity, friction observer, distribution), and this
+        computes it once; copies are returned."""
         q = self._check_q(q)
-        out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
-        P = np.zeros((8, 4))
-        P[:4, :2] = out[4:12].reshape(4, 2)
-        P[4:, 2:] = self._P_distal
-        H = np.zeros((8, 4, 4))
-        H[:4, :2, :2] = out[12:].reshape(4, 2, 2)
-        return P, H
+        qb = np.asarray(q[:2], dtype=float)
+        key = qb.tobytes()                # float64 (converted above)
+        memo = self.__dict__.get("_memo")
+        if memo is None or memo[0] != key:
+            out = self._base_kernel()(qb, np.empty(28))
+            P = np.zeros((8, 4))
+            P[:4, :2] = out[4:12].reshape(4, 2)
+            P[4:, 2:] = self._P_distal
+            H = np.zeros((8, 4, 4))
+            H[:4, :2, :2] = out[12:].reshape(4, 2, 2)
+            memo = self._memo = (key, P, H)
+        return memo[1].copy(), memo[2].copy()
 
     def tension_hessians(self, q) -> np.ndarray:
         """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the compiled base kinematics (``base_lengths_and_jacobian``)."""
@@ -403,11 +412,15 @@ class HandCoupling(FingerCoupling):
     @_quiet_fp
     def P(self, q):
         q = self._check_q(q)
-        if q.dtype != object:
-            P = self._float_constant_part().copy()
-            for n in self._nonlinear:
-                P[self.tendon_slices[n], self.joint_slices[n]] = self.parts[n].P(q[self.joint_slices[n]])
-            return P
+        if q.dtype != object:           # the last pose's P kept, keyed by its bytes (as ThumbCoupling's base)
+            key = (q.dtype.str, q.tobytes())
+            memo = self.__dict__.get("_memo")
+            if memo is None or memo[0] != key:
+                P = self._float_constant_part().copy()
+                for n in self._nonlinear:
+                    P[self.tendon_slices[n], self.joint_slices[n]] = self.parts[n].P(q[self.joint_slices[n]])
+                memo = self._memo = (key, P)
+            return memo[1].copy()
         blocks = {n: c.P(q[self.joint_slices[n]]) for n, c in self.parts.items()}
         like = float if all(b.dtype != object for b in blocks.values()) else object
         P = np.zeros((self.num_tendons, self.num_joints), dtype=like)

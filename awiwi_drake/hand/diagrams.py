@@ -42,7 +42,7 @@ from pydrake.geometry import SceneGraph
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import Demultiplexer, MatrixGain
 
-from ..components.drive import TendonDrive
+from ..components.fused_drive import TendonDrive
 from ..components.motor import motor_ripple_torque, tendon_motor_params
 from ..components.spring import TendonSprings, tendon_spring
 from ..parameters.hand import (FINGERS, TENDON_SLICES, FingerRigParams,
@@ -169,7 +169,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     diagram = b.Build()
     diagram.set_name(name)
     # the drive lives inside the one plant system: its handle points at the rig
-    drive = TendonDrive(diagram, m, drive_coupling.num_joints, model.has_hysteresis, model)
+    drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
                                   guide_friction=drive.guide_friction)

@@ -26,7 +26,7 @@ conversion at random states to 1e-12.
 Why one system: the MultibodyPlant's forward dynamics of the 21-DoF hand costs ~24 us per
 evaluation, the separate drive two Python callbacks, and the plumbing between them (state
 split, Mux, Adder, MatrixGain) Drake's cache invalidation; the compiled terms of the whole hand
-cost a few us (see README "Backends, and speed").
+cost a few us (see README "How the plants are built, and speed").
 
 State: ``[q (n), v (n), theta (m), omega (m), z (m, hysteresis), g (m, guide friction)]``
 (the order of the MultibodyPlant + drive diagram: ``rigs.base.state_names``).

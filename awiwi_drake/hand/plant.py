@@ -154,20 +154,11 @@ def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, pa
 
 
 def _new_plant(name: str, builder, visual: bool, scene_graph: SceneGraph | None) -> MultibodyPlant:
-    """A continuous plant: added to ``builder`` as ``name`` (wired to ``scene_graph``, or to a new SceneGraph,
-    when ``visual``), or standalone (its visual geometry registered with ``scene_graph`` when one is given:
-    the plant is then drawn through its positions)."""
-    if builder is None:
-        plant = MultibodyPlant(0.0)
-        if visual and scene_graph is not None:
-            plant.RegisterAsSourceForSceneGraph(scene_graph)
-        return plant
-    plant = builder.AddNamedSystem(name, MultibodyPlant(0.0))
-    if visual:
-        sg = scene_graph or builder.AddNamedSystem("scene_graph", SceneGraph())
-        plant.RegisterAsSourceForSceneGraph(sg)
-        builder.Connect(plant.get_geometry_pose_output_port(), sg.get_source_pose_port(plant.get_source_id()))
-        builder.Connect(sg.get_query_output_port(), plant.get_geometry_query_input_port())
+    """A continuous plant, added to ``builder`` as ``name`` or standalone; with ``visual`` its geometry is
+    registered with ``scene_graph`` when one is given (the plant is then drawn through its positions)."""
+    plant = MultibodyPlant(0.0) if builder is None else builder.AddNamedSystem(name, MultibodyPlant(0.0))
+    if visual and scene_graph is not None:
+        plant.RegisterAsSourceForSceneGraph(scene_graph)
     return plant
 
 
@@ -175,9 +166,8 @@ def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | Non
                       builder=None, visual: bool = False, gravity: bool = False):
     """A finalised continuous plant holding one finger (base frame = world).
 
-    With ``builder`` the plant (and a SceneGraph when ``visual``) is added to
-    it; otherwise a standalone plant is returned (its visual geometry registered with
-    ``scene_graph`` when one is given).  Gravity is off by default:
+    With ``builder`` the plant is added to it, otherwise a standalone plant is returned; its visual
+    geometry is registered with ``scene_graph`` when one is given.  Gravity is off by default:
     section 5.2.2 finds ~0.002 N m, negligible against the tendon torques.
     Returns ``(plant, FingerModel)``.
     """
@@ -206,18 +196,18 @@ def palm_centre(hp: HandParams) -> np.ndarray:
     return np.array([hp.palm_length / 2, 0.25 * hp.finger_spacing, 0.0])
 
 
-def make_hand_plant(params: HandParams | None = None, *, builder=None, visual: bool = False,
-                    gravity: bool = False, scene_graph: SceneGraph | None = None):
+def make_hand_plant(params: HandParams | None = None, *, visual: bool = False, gravity: bool = False,
+                    scene_graph: SceneGraph | None = None):
     """A finalised continuous plant with all five fingers on a fixed palm.
 
     Joint (position) order: thumb q10..q13, index q20..q23, middle q30..q33,
     ring q40..q43, fifth q5h, q50..q53 (21 joints, 19 DoF with the two
     PIP/DIP couplings).  Returns ``(plant, {finger: FingerModel})``.
-    Without ``builder``, ``visual`` geometry is registered with ``scene_graph`` when one is given
-    (the plant is then drawn from its positions, e.g. ``MultibodyPositionToGeometryPose``).
+    ``visual`` geometry is registered with ``scene_graph`` when one is given (the plant is then drawn from
+    its positions, e.g. ``MultibodyPositionToGeometryPose``).
     """
     hp = params or HandParams()
-    plant = _new_plant("hand_plant", builder, visual, scene_graph)
+    plant = _new_plant("hand_plant", None, visual, scene_graph)
     if visual and plant.geometry_source_is_registered():
         palm = plant.world_body()
         plant.RegisterVisualGeometry(

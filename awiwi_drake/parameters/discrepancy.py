@@ -162,7 +162,7 @@ class DiscrepancySettings(Parameters):
         doc="finger diagnosis: materiality floor in noise-equivalent units")
     finger_hysteresis_play: float = param(
         1.0, unit="-", low=0.0, high=100.0,
-        source="chosen, measured: the play trades reversals by noise (none: the loop follows every noise wiggle) "
+        source="chosen: the play trades reversals by noise (none: the loop follows every noise wiggle) "
                "against a delay of 2 play widths at every true reversal. Correlation of the loop on the noisy force "
                "with the loop on the noise-free force (index datasets, seeds 2 and 5, delta 0.1 / 0.4 mm): 0.95-0.98 "
                "without play, 0.96-0.99 at 0.5-1 noise widths, 0.76-0.93 at 3 (the wave-5 value)",

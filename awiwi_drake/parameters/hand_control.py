@@ -56,8 +56,33 @@ class StiffnessCorrectionParams(Parameters):
 class FrictionObserverParams(Parameters):
     """Joint friction observer (9.2)."""
 
-    gain: float = param(200.0, unit="1/s", low=0.0, low_inclusive=False,
-                        source="chosen: L of (9.2); observer bandwidth 200 rad/s, above the 1 Hz test motion")
+    gain: float = param(100.0, unit="1/s", low=0.0, low_inclusive=False,
+                        source="chosen: L of (9.2), observer bandwidth 100 rad/s, above the 1 Hz test motion and "
+                               "below the 300 rad/s force loop. In the chain per DoF L / g, g = 1 + K_tau + K_prev the "
+                               "stage's torque loop gain (1 for the impedance): its compensation is multiplied by g "
+                               "(compensation_scale), which multiplies the observer loop's gain by g. Measured, "
+                               "sampled loops at rest: with L = 200 the fifth's LQR stage (g = 2.1-2.7) was unstable "
+                               "at ~1110 rad/s (+19.5 1/s with L, +4.8 1/s with L / g and the motor friction and "
+                               "ripple off); 100 is stable for all six stages on index, thumb, ring and fifth with the "
+                               "physics on, with motor friction and ripple off and with all off. 600 / 1500 rad/s made "
+                               "the index's motors chatter (55 / 75 % of a step's 0.5 s saturated, the 'violent "
+                               "reaction of motors' of 9.4)")
+    compensation_scale: float = param(
+        1.0, unit="-", low=0.0, high=1.0, low_inclusive=False,
+        source=("(9.1): u = u_c + tau_fric_hat, the whole estimate. At rest the compensation c obeys "
+                "c' = L ((G kappa - 1) c + G tau_c), G the static gain from the request to the measured joint torque "
+                "(the impedance's tau_c integrates the rest away), so G kappa must stay below 1: a stage with torque "
+                "feedback divides what is added to its request by its torque loop gain g = 1 + K_tau + K_prev "
+                "(G = 1/g), hence kappa times g per DoF (pole placement, g = 0.5 on the index DIP: +5.1 1/s without "
+                "the factor, -0.76 1/s with it; sampled loop at rest)"),
+        doc="kappa: fraction of the estimate fed back with the force loop (10.2), per DoF times the stage's torque "
+            "loop gain")
+    compensation_scale_motor_position: float = param(
+        0.9, unit="-", low=0.0, high=1.0, low_inclusive=False,
+        source=("chosen: kappa behind the motor-position tendon loop (11.3) (two-time-scale). Measured (sampled "
+                "loop at rest, index, L = 200 1/s): kappa = 1 / 0.99 leave the DIP's observer state unstable "
+                "(+1.24 / +1.07 1/s), 0.9 is stable (-0.43 1/s); with L = 100 and 0.9: -0.40 1/s"),
+        doc="kappa of the two-time-scale chain (motor-position tendon loop)")
 
 
 @dataclass(frozen=True)
@@ -87,7 +112,8 @@ class HandChainParams(Parameters):
 
     Per independent DoF the joint law is ``tau = tau_op + K (q_ref - q) - D qdot``, designed from
     the joint's own inertia ``M_jj`` (mass matrix at the operating point): ``D = 2 zeta sqrt(K M_jj)``;
-    the cascade limits ``K <= M_jj joint_bandwidth^2`` (its joint loop must stay behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
+    the cascade limits ``K <= cascade_margin M_jj force_bandwidth^2 / 4`` (the stability bound of (11.16), its joint
+    loop behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
     is ``stiffness_scale`` times the operating point's own (5.12) unless given per DoF.  The force
     loop is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) and the ripple
     feed-forward ``RippleCompensationParams.amplitude_scale``.
@@ -103,13 +129,20 @@ class HandChainParams(Parameters):
                                           "that figure is the single flexible-joint testbed with nonlinear springs "
                                           "(section 15.4.4), not a finger: on the finger's PIP the thesis's "
                                           "impedance test (Fig 15.27, section 15.5.3) spans Kp,imp 0-0.1 Nm/rad. "
-                                          "An upper bound per DoF here: the cascade caps it at M_jj "
-                                          "joint_bandwidth^2, the finger backstepping by its sampled modes",
+                                          "An upper bound per DoF here: the cascade caps it at cascade_margin "
+                                          "M_jj force_bandwidth^2 / 4, the finger backstepping by its sampled modes",
                                    doc="impedance K per DoF (backstepping: every DoF)")
-    joint_bandwidth: float = param(60.0, unit="rad/s", low=0.0, low_inclusive=False,
-                                   source="chosen: a fifth of force_bandwidth (the cascade's joint loop acts through "
-                                          "the force loop and must be slower): cascaded K = min(joint_stiffness, "
-                                          "M_jj w^2), the limit 15.5.3 names for the cascaded controller")
+    cascade_margin: float = param(
+        0.5, unit="-", low=0.0, high=1.0, low_inclusive=False,
+        source=("chosen: the cascade's stiffness cap is this fraction of the stability bound of (11.16) (section "
+                "11.5): the link M q'' + D q' + K q = P^T e_f behind a force loop e_f'' + 2 xi w e_f' + w^2 e_f = 0 "
+                "(bandwidth w = force_bandwidth) has the closed loop s^4 + 2 xi w s^3 + w^2 s^2 + w^2 (D s + K) / M, "
+                "Hurwitz (Routh) only for K < M (2 xi w d - d^2) / (4 xi^2) with d = D / M, at most M w^2 / 4 "
+                "(at D = xi w M) whatever the damping. 0.5 (gain margin 2): cascaded K = min(joint_stiffness, "
+                "0.5 M_jj w^2 / 4); on the index PIP (M_jj = 8.8e-6 kg m^2) 0.099 Nm/rad, the top of Fig 15.27's "
+                "0-0.1 Nm/rad on the finger's PIP; the DIP (6.2e-7 kg m^2) 0.007 Nm/rad. (The former M_jj (w/5)^2 "
+                "was 0.16 of the bound: 0.032 / 0.0022 Nm/rad on the PIP / DIP.)"),
+        doc="cascaded K = min(joint_stiffness, cascade_margin M_jj force_bandwidth^2 / 4) per DoF")
     damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,
                                  source="chosen: well damped joint response (as (10.10) for the force loop)")
     stiffness_scale: float = param(1.0, unit="-", low=0.0, low_inclusive=False,

@@ -22,7 +22,7 @@ class JointDesignParams(Parameters):
 
     position_bandwidth: float = param(
         60.0, unit="rad/s", low=0.0, low_inclusive=False,
-        source="chosen: the chain's joint_bandwidth (HandChainParams): a fifth of the 300 rad/s force loop, so "
+        source="chosen: a fifth of the chain's 300 rad/s force loop (HandChainParams.force_bandwidth), so "
                "the joint pair stays behind the force loop it acts through (15.5.3)",
         doc="pole placement: omega1 of (12.13) (omega2: the joint's own tendon-link pair, see joint_design)")
     damping_ratio: float = param(0.7, unit="-", low=0.0, low_inclusive=False,

@@ -82,9 +82,9 @@ class OperatingPoint:
 @dataclass
 class RigPorts:
     """A rig's systems added to a caller's ``DiagramBuilder`` without a sub-diagram of their own
-    (``Rig.add_sampled``; :func:`~awiwi_drake.control.closed_loop` adds a controller's likewise): its input
-    ports by name (a list each: one input may feed several systems), its output ports by name (in the
-    diagram's order), the system holding its dynamics and the zero-order hold of its input (or None)."""
+    (``Rig.add_sampled``): its input ports by name (a list each: one rig input may feed several systems),
+    its output ports by name (in the rig diagram's order), the system holding its dynamics and the
+    zero-order hold of its input (or None)."""
 
     inputs: dict
     outputs: dict

@@ -30,8 +30,7 @@ import numpy as np
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer, ZeroOrderHold
 
-from awiwi_drake.components.drive import TendonDrive, build_tendon_drive
-from awiwi_drake.components.fused_drive import DriveModel
+from awiwi_drake.components.fused_drive import DriveModel, TendonDrive, TendonDrive_
 from awiwi_drake.components.rig_system import (LinkRigOutputs_, integration_state, rig_dynamics_system,
                                                 rig_integration_system, sampled_dynamics, tendon_force_of_states)
 from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
@@ -73,16 +72,16 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     """
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
-    drive = build_tendon_drive(motor=p.motor, spring=spring, coupling=ConstantCoupling(np.zeros((1, 0))),
-                               hysteresis=p.spring.hysteresis, name="tendon_drive")
+    model = DriveModel(p.motor, (spring,), ConstantCoupling(np.zeros((1, 0))), np.zeros(1), p.motor.pulley_radius,
+                       p.spring.hysteresis)
     b = DiagramBuilder()
-    d = b.AddSystem(drive.diagram)
+    d = b.AddNamedSystem("tendon_drive", TendonDrive_[float](model))
     b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    b.ExportOutput(d.GetOutputPort("state"), "state")
-    for nm in ("motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
+    for nm in ("state", "motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
         b.ExportOutput(d.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name("tendon-rig")
+    drive = TendonDrive(diagram, model)
     names = state_names(motors=1, hysteresis=drive.hysteresis)
 
     def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
@@ -162,7 +161,7 @@ def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, mo
         diagram.set_name(name)
         return diagram
 
-    drive = TendonDrive(build(), coupling.num_tendons, coupling.num_joints, bool(hysteresis.enabled), model)
+    drive = TendonDrive(build(), model)
     return drive.diagram, drive, names, (build, functools.partial(integration_state, model), add)
 
 

@@ -1,0 +1,192 @@
+"""The ch. 9 joint friction observer (9.2) inside the hand's sampled chain (issue 10): its sampled form against the
+continuous one (Drake ``Linearize`` of both blocks) and against the closed form of a constant disturbance, on by
+default in every chain controller (the registry switches it off), and what it leaves of the guides' dead band."""
+
+import numpy as np
+import pytest
+from pydrake.systems.primitives import Linearize
+
+from _fd import check_system_autodiff_matches_fd
+from awiwi_drake.analysis import simulate
+from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
+from awiwi_drake.components.friction import guide_friction_force
+from awiwi_drake.control import closed_loop, get_entry, make_controller
+from awiwi_drake.control.joint_design import DESIGNS, cascade_stiffness
+from awiwi_drake.control.joint_stage import JointFrictionObserver, JointFrictionObserver_, joint_inertia
+from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.hand.systems import tendon_bending_angles
+from awiwi_drake.parameters.control import RippleCompensationParams
+from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams
+
+H = 1.0 / 3000.0
+T_END = 1.0        # s: the MCP step of test_default_cascaded_step_leaves_only_the_motor_friction_residual
+
+
+def _observers(rig, L=200.0, damping=None):
+    """The continuous and the sampled observer of the index's DoF (inertia M_jj at the operating point)."""
+    from awiwi_drake.hand.coupling import dof_selection
+    S = dof_selection(rig.coupling)
+    M = joint_inertia(rig, rig.operating_point().joint_angle)
+    b = np.zeros(S.shape[1]) if damping is None else damping
+    return (JointFrictionObserver(rig.coupling, S, M, b, L), JointFrictionObserver(rig.coupling, S, M, b, L, H), S, M)
+
+
+def test_sampled_observer_is_the_continuous_one_held_over_a_period():
+    """Drake's Linearize of the continuous block (A_c = -L I) and of the sampled one (period h): the sampled model copy
+    integrates the continuous rate with its torque held, A_d = I + h A_c, B_d = h B_c, same outputs; so its pole is
+    1 - L h (0.9333), beside the continuous pole mapped exp(-L h) (0.9355), within (L h)^2 / 2.  Both convert to
+    AutoDiffXd, whose update and output Jacobians equal central differences."""
+    rig = finger_diagram(finger="index")
+    cont, samp, S, M = _observers(rig, damping=np.full(4, 2e-5))
+    op = rig.operating_point()
+    rng = np.random.default_rng(3)
+    u = dict(joint_angle=op.joint_angle + rng.normal(0, 0.05, 4), joint_velocity=rng.normal(0, 0.5, 4),
+             tendon_force=op.tendon_force + rng.normal(0, 1, 8))
+    lins = []
+    for sys_ in (cont, samp):
+        ctx = sys_.CreateDefaultContext()
+        x0 = rng.normal(0, 0.3, 4)
+        if sys_ is cont:
+            ctx.SetContinuousState(x0)
+        else:
+            ctx.SetDiscreteState(x0)
+        for nm, v in u.items():
+            sys_.GetInputPort(nm).FixValue(ctx, v)
+        lins.append(Linearize(sys_, ctx, equilibrium_check_tolerance=1e30))
+    c, d = lins
+    L = 200.0
+    np.testing.assert_allclose(c.A(), -L * np.eye(4), rtol=1e-12)
+    np.testing.assert_allclose(d.A(), np.eye(4) + H * c.A(), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(d.B(), H * c.B(), rtol=1e-12, atol=1e-15 * np.abs(c.B()).max())
+    np.testing.assert_allclose(d.C(), c.C(), rtol=1e-12)
+    np.testing.assert_allclose(d.D(), c.D(), rtol=1e-12, atol=1e-18)
+    assert d.time_period() == pytest.approx(H, rel=1e-15)
+    z = np.linalg.eigvals(d.A())
+    np.testing.assert_allclose(z, 1.0 - L * H, rtol=1e-12)
+    assert np.all(np.abs(z - np.exp(-L * H)) <= (L * H) ** 2 / 2)
+    check_system_autodiff_matches_fd(cont, rng.normal(0, 0.3, 4), u, rtol=1e-5)
+    check_system_autodiff_matches_fd(samp, [], u, rtol=1e-5, discrete_state=rng.normal(0, 0.3, 4))
+
+
+def test_sampled_observer_estimates_a_constant_disturbance_without_bias():
+    """A link J w' = tau_a + d driven by held torques (the sampled chain's picture) from rest: the estimation error
+    obeys e_k+1 = (1 - L h) e_k + h d / J, so d_hat_k = d (1 - (1 - L h)^k) exactly (per DoF, the block's own
+    methods as the fused chain calls them); with the link held still (tau_a = -d) the estimate is -tau_a."""
+    rig = finger_diagram(finger="index")
+    _, obs, S, M = _observers(rig)
+    op = rig.operating_point()
+    q, f = op.joint_angle, op.tendon_force + np.linspace(-2.0, 2.0, 8)
+    PS = np.asarray(rig.coupling.P(q)) @ S
+    tau = -(PS.T @ f)
+    d = np.array([0.01, -0.02, 0.005, 0.001])
+    w_hat, w = np.zeros(4), np.zeros(4)
+    L = float(obs.gain[0])                              # one L for every DoF here
+    for k in range(40):
+        d_hat = -obs.compensation(w_hat, S @ w)
+        np.testing.assert_allclose(d_hat, d * (1.0 - (1.0 - L * H) ** k), rtol=1e-9, atol=1e-15)
+        w_hat = obs.next_state(w_hat, q, S @ w, f)
+        w = w + H * (tau + d) / M                       # the link under the held torques, integrated exactly
+    w_hat = np.zeros(4)
+    for _ in range(400):                                # at rest: tau_a + d = 0
+        w_hat = obs.next_state(w_hat, q, np.zeros(S.shape[0]), f)
+    np.testing.assert_allclose(-obs.compensation(w_hat, np.zeros(S.shape[0])), -tau,
+                               rtol=(1 - L * H) ** 400 * 10)
+
+
+def test_every_chain_controller_has_the_observer_by_default_and_the_registry_removes_it():
+    """Default on in every registered chain controller on a finger (sampled at the chain's 3 kHz, fused with the
+    estimator; output ``controller_friction_compensation``); ``make_controller(..., friction_observer=None)``
+    removes it; an option a factory does not have is one line naming it."""
+    rig = finger_diagram(finger="ring")
+    for name in DESIGNS:
+        ctrl = make_controller(name, rig)
+        assert ctrl._observer is not None and ctrl._observer.period == pytest.approx(H), name
+        assert make_controller(name, finger_diagram(finger="ring"), friction_observer=None)._observer is None
+    r = finger_diagram(finger="ring")
+    loop = closed_loop(r, make_controller("cascaded", r), **get_entry("cascaded", r).loop_options)
+    assert loop.fused is not None and loop.diagram.HasOutputPort("controller_friction_compensation")
+    with pytest.raises(ValueError, match="controller 'joint-pd' on 'finger' has no option 'friction_observer'"):
+        make_controller("joint-pd", r, friction_observer=None)
+
+
+def test_cascade_stiffness_is_half_the_11_16_bound_and_that_bound_is_the_routh_limit():
+    """The cap of the cascaded stage: K = min(joint_stiffness, cascade_margin M w^2 / 4).  The bound M w^2 / 4 of the
+    link M q'' + D q' + K q = P^T e_f behind a second-order force loop (11.16): the quartic
+    s^4 + 2 xi w s^3 + w^2 s^2 + w^2 (D s + K) / M is Hurwitz for K just below M (2 xi w d - d^2) / (4 xi^2),
+    d = D / M, and not just above it (Routh); at d = xi w that is M w^2 / 4, the largest over d.  On the index PIP the cap
+    is 0.099 Nm/rad, the top of Fig 15.27's 0-0.1 Nm/rad."""
+    c = HandChainParams()
+    w, xi, M = c.force_bandwidth, 0.7, 8.84e-6
+    for d in (0.3 * xi * w, xi * w, 1.5 * xi * w):
+        K_max = M * (2 * xi * w * d - d * d) / (4 * xi ** 2)
+        for K, stable in ((0.999 * K_max, True), (1.001 * K_max, False)):
+            roots = np.roots([1.0, 2 * xi * w, w ** 2, w ** 2 * d, w ** 2 * K / M])
+            assert (roots.real.max() < 0) == stable, (d, K)
+    rig = finger_diagram(finger="index")
+    Mjj = joint_inertia(rig, rig.operating_point().joint_angle)
+    K = np.array([cascade_stiffness(m, c) for m in Mjj])
+    np.testing.assert_allclose(K, np.minimum(c.joint_stiffness, c.cascade_margin * Mjj * w ** 2 / 4), rtol=1e-15)
+    assert 0.09 < K[2] <= 0.1                                  # the PIP: Fig 15.27's range
+    ctrl = make_controller("cascaded", rig)
+    np.testing.assert_allclose(ctrl.design["joint_design"].gains[:, 0], K, rtol=1e-12)
+
+
+def test_default_cascaded_step_leaves_only_the_motor_friction_residual():
+    """Index MCP step of 0.2 rad (3 kHz, estimator, default physics), 0.6 s.  Without the observer the impedance rests
+    in the guides' dead band, e = (tau_op - (P S)^T g) / Kp with the logged guide forces g (ch. 9: "even an ideal
+    control scheme cannot produce the desired behavior").  With the default observer, at rest its state makes the
+    compensation the measured torque, so the impedance's own torque Kp e is what the force loop fails to deliver:
+    (P S)^T (f_ref - f).  That is the friction left after the observer and the feed-forwards, the motor friction
+    (3.8) times 1 - friction_scale and the ripple (3.5) times 1 - amplitude_scale over the force loop's gain Kp_f
+    (10.2), plus its damping term: per tendon |f_ref - f| <= ((1 - s)|tau_f(w)| + (1 - r)|tau_r(th)|
+    + Kd alpha |w_el|) / Kp_f at the logged motor state (the motors' acceleration term B w' is what is left of the
+    transient), so |e_j| <= sum_i |(P S)_ij| r_i / Kp_j, with the residual as it was up to ten observer time
+    constants 1/L before (the observer follows it that much later; the motors are still slowing down after 1 s):
+    5e-5 rad on the MCP, against the dead band's 0.107 rad without the observer (at the same Kp) and its
+    closed-form bound 0.136."""
+    errors, bounds = {}, {}
+    for obs in (None, "default"):
+        rig = finger_diagram(finger="index")
+        ctrl = (make_controller("cascaded", rig) if obs else make_controller("cascaded", rig, friction_observer=None))
+        Kp = ctrl.design["joint_design"].gains[:, 0]
+        loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
+        op = rig.operating_point()
+        q_ref = op.joint_angle.copy()
+        q_ref[1] += 0.2
+        ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
+        res = simulate(loop, ctx, T_END, log=("joint_angle", "state", "tendon_force",
+                                            "controller_tendon_force_reference"))
+        S = ctrl.design["selection"]
+        e = np.linalg.pinv(S) @ (res["joint_angle"][-1] - q_ref)
+        errors[obs] = e
+        PS = np.asarray(rig.coupling.P(res["joint_angle"][-1])) @ S
+        x = res["state"][-1]
+        if obs is None:
+            g = x[[i for i, nm in enumerate(rig.state_names) if nm.startswith("guide_friction_force")]]
+            np.testing.assert_allclose(e, (ctrl.design["torque_offset"] - PS.T @ g) / Kp, rtol=0, atol=1e-3)
+            C = guide_friction_force(tendon_bending_angles(rig.coupling, rig.params), rig.params.friction)
+            bounds[obs] = np.abs(PS.T) @ C / Kp
+            continue
+        n, m = rig.num_joints, rig.num_tendons
+        law = ctrl._force.fused_parts["law"]
+        motor = rig.params.motor
+        lag = res.t >= res.t[-1] - 10.0 / FrictionObserverParams().gain       # ten observer time constants
+        window = []
+        for k in np.flatnonzero(lag):
+            x = res["state"][k]
+            th, w, v = x[2 * n:2 * n + m], x[2 * n + m:2 * n + 2 * m], x[n:2 * n]
+            f, f_ref = res["tendon_force"][k], res["controller_tendon_force_reference"][k]
+            kp, kd = law.gains_at(f_ref)
+            alpha = np.array([fm.alpha_of_force(fi, floor=law.gains.min_schedule_force)
+                              for fm, fi in zip(law.fmaps, f)])
+            w_el = w + np.asarray(rig.coupling.P(res["joint_angle"][k])) @ v / law.r_m
+            resid = ((1 - law.gains.friction_scale) * np.abs(motor_friction_torque(w, motor))
+                     + (1 - RippleCompensationParams().amplitude_scale) * np.abs(motor_ripple_torque(th, motor))
+                     + kd * alpha * np.abs(w_el)) / kp
+            window.append(np.abs(PS.T) @ resid / Kp)
+        if k == lag.size - 1:
+            assert np.all(np.abs(f_ref - f) <= resid)
+        bounds[obs] = np.max(window, axis=0)
+    assert np.all(np.abs(errors["default"]) <= bounds["default"]), (errors["default"], bounds["default"])
+    assert abs(errors[None][1]) > 0.1 and abs(errors["default"][1]) < 0.02 * 0.2      # settled: inside 2 % of the step
+    assert np.all(bounds["default"] < bounds[None])
