@@ -203,17 +203,13 @@ PHYSICS = {  # the hand plant's thesis effects, each case stated explicitly (the
 
 
 def run(name: str, sim_time: float, profile: bool = True, physics: str = "default") -> dict:
-    """One row; ``name`` a registered controller, or ``<chain controller>:no-observer`` for the chain without its
-    default ch. 9 friction observer (``make_controller(..., friction_observer=None)``)."""
+    """One row; ``name`` a registered controller, or ``<chain controller>:no-observer`` (a registry variant) for the
+    chain without its default ch. 9 friction observer."""
     from awiwi_drake.parameters.hand import HandRigParams
     switches = PHYSICS[physics]
     rig = hand_diagram(params=None if switches is None else HandRigParams().with_physics(**switches))
-    base, _, variant = name.partition(":")
-    if variant not in ("", "no-observer"):
-        raise ValueError(f"controller {name!r}: the only variant is ':no-observer'")
-    options = {"friction_observer": None} if variant else {}
     t0 = time.perf_counter()
-    loop = closed_loop(rig, make_controller(base, rig, **options), **get_entry(base, rig).loop_options)
+    loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
     # the stepped reference is a fixed input value of the context (no schedule source evaluated every period)

@@ -190,3 +190,43 @@ def test_default_cascaded_step_leaves_only_the_motor_friction_residual():
     assert np.all(np.abs(errors["default"]) <= bounds["default"]), (errors["default"], bounds["default"])
     assert abs(errors[None][1]) > 0.1 and abs(errors["default"][1]) < 0.02 * 0.2      # settled: inside 2 % of the step
     assert np.all(bounds["default"] < bounds[None])
+
+
+def test_the_couplings_keep_their_last_pose_and_return_copies():
+    """P(q) once per period: the hand's and the thumb's couplings keep the last pose's P (and the thumb's Hessians),
+    keyed by the pose's value: the same pose returns the same numbers as a fresh coupling, another pose its own, and
+    a caller that writes into a returned P does not change the next answer."""
+    from awiwi_drake.hand.diagrams import hand_diagram
+    hand, fresh = hand_diagram(wrist=False).coupling, hand_diagram(wrist=False).coupling
+    thumb = hand.parts["thumb"]
+    rng = np.random.default_rng(5)
+    q0 = hand_diagram(wrist=False).operating_point().joint_angle
+    poses = [q0, q0 + rng.normal(0, 0.05, q0.size), q0]
+    for q in poses:
+        P = hand.P(q)
+        np.testing.assert_array_equal(P, fresh.P(q.copy()))
+        qt = q[hand.joint_slices["thumb"]]
+        Pt, Ht = thumb.coupling_and_hessians(qt)
+        np.testing.assert_array_equal(Pt, fresh.parts["thumb"].coupling_and_hessians(qt.copy())[0])
+        np.testing.assert_array_equal(Ht, fresh.parts["thumb"].tension_hessians(qt.copy()))
+        P[:] = np.nan
+        Pt[:] = np.nan
+        assert np.all(np.isfinite(hand.P(q))) and np.all(np.isfinite(thumb.P(qt)))
+    assert not np.array_equal(hand.P(poses[0]), hand.P(poses[1]))
+
+
+def test_the_no_observer_variant_from_the_registry_and_the_cli(tmp_path):
+    """``NAME:no-observer`` builds the registered chain controller without its observer (make_controller, compare);
+    an unknown variant, or the variant on a controller without the option, is one line naming it."""
+    import subprocess
+    import sys
+    r = finger_diagram(finger="index")
+    assert make_controller("cascaded:no-observer", r)._observer is None
+    assert get_entry("cascaded:no-observer", r) is get_entry("cascaded", r)
+    with pytest.raises(ValueError, match="controller 'cascaded:open': unknown variant 'open'; variants: no-observer"):
+        make_controller("cascaded:open", r)
+    with pytest.raises(ValueError, match="controller 'backstepping:no-observer' on 'finger' has no option 'friction_observer'"):
+        make_controller("backstepping:no-observer", r)
+    res = subprocess.run([sys.executable, "-m", "awiwi_drake", "compare", "--rig", "finger-index", "--controllers",
+                          "cascaded:nope", "--out", str(tmp_path), "--short"], capture_output=True, text=True)
+    assert res.returncode != 0 and "unknown variant 'nope'" in res.stderr + res.stdout

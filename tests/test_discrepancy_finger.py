@@ -422,3 +422,13 @@ def test_tendon_guides_give_one_path_its_own_guide_friction():
     assert np.all(np.delete(d, 4) == 0.0)
     with pytest.raises(ValueError, match="tendon_guides: unknown tendon 'index_h9'"):
         p.replace(tendon_guides=(("index_h9", entry),))
+
+
+def test_links_equation_is_judged_only_where_the_tendons_fix_every_joint_angle():
+    """The ring's coupled PIP/DIP enter its routing as one combination (P has rank n - 1), so the joint angles from
+    the tendons are not the plant's and its links' equation is not judged (said, with the reason); the index's is."""
+    import numpy.linalg as la
+    ds = make_finger_dataset("ring", [], seed=1, gen=SHORT, snr_db=30.0)   # 1 s: a narrower kernel leaves samples
+    fr = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008))
+    assert la.matrix_rank(np.asarray(fr.rig.coupling.P(), float)) == fr.n - 1
+    assert not fr.joint_checked and "PIP/DIP" in fr.joint_reason and np.isnan(fr.ratios()["joint"])

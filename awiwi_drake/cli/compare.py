@@ -31,7 +31,8 @@ def register(subparsers) -> None:
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     req = p.add_argument_group("required options (except with --list)")
     req.add_argument("--rig", required=True, choices=sorted(TARGETS), help="rig to control")
-    req.add_argument("--controllers", help="comma-separated registered names, e.g. pd,lqr (see --list)")
+    req.add_argument("--controllers", help="comma-separated registered names, e.g. pd,lqr (see --list); "
+                     "NAME:no-observer: a chain controller without its default ch. 9 friction observer")
     req.add_argument("--out", metavar="DIR", help="output folder (created if missing)")
     p.add_argument("--list", action="store_true", help="list the controllers that fit --rig and exit")
     p.add_argument("--tests", default=None, help="comma-separated subset of step,sine,disturbance,sweep")

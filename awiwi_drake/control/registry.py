@@ -20,7 +20,11 @@ from typing import Any, Callable, Mapping
 from awiwi_drake.parameters.hand import FINGERS
 
 __all__ = ["ControllerEntry", "register_controller", "make_controller", "controller_names",
-           "get_entry", "rig_kind", "RIG_KINDS", "RIG_NAMES", "PROVIDER_MODULES"]
+           "get_entry", "rig_kind", "split_name", "VARIANTS", "RIG_KINDS", "RIG_NAMES", "PROVIDER_MODULES"]
+
+#: ``<name>:<variant>`` builds the registered ``name`` with these factory options (e.g. on the CLI,
+#: ``compare --controllers cascaded,cascaded:no-observer``: the chain without its default ch. 9 observer)
+VARIANTS = {"no-observer": {"friction_observer": None}}
 
 RIG_KINDS = ("tendon-rig", "flexible-joint", "joint-rig", "finger", "hand")
 RIG_NAMES = ("tendon-rig", "flexible-joint", "joint-rig", *(f"finger-{f}" for f in FINGERS), "hand")
@@ -108,12 +112,24 @@ def controller_names(rig: Any | None = None) -> list[str]:
     return sorted(n for n in _REGISTRY if kind in _kinds(n))
 
 
+def split_name(name: str) -> tuple[str, dict]:
+    """``(registered name, factory options)`` of ``name`` or ``name:variant`` (:data:`VARIANTS`)."""
+    base, sep, variant = name.partition(":")
+    if not sep:
+        return name, {}
+    if variant not in VARIANTS:
+        raise ValueError(f"controller {name!r}: unknown variant {variant!r}; variants: {', '.join(VARIANTS)}")
+    return base, dict(VARIANTS[variant])
+
+
 def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
-    """The entry of ``name`` (for ``rig``'s kind when given); ValueError when unknown or not fitting ``rig``.
+    """The entry of ``name`` (for ``rig``'s kind when given; a ``name:variant`` gives its name's entry); ValueError
+    when unknown or not fitting ``rig``.
 
     Without ``rig`` the first registration is returned.
     """
     _ensure_loaded()
+    name = split_name(name)[0]
     if name not in _REGISTRY:
         raise ValueError(f"unknown controller {name!r}; known: {', '.join(sorted(_REGISTRY))}")
     entries = _REGISTRY[name]
@@ -129,9 +145,12 @@ def get_entry(name: str, rig: Any | None = None) -> ControllerEntry:
 
 
 def make_controller(name: str, rig: Any, **options: Any):
-    """Build controller ``name`` for ``rig`` (ValueError when unknown or unfit); ``options`` go to its factory
-    (e.g. ``friction_observer=None`` turns the chain controllers' ch. 9 observer off on a finger/the hand)."""
-    entry = get_entry(name, rig)
+    """Build controller ``name`` (or ``name:variant``, :data:`VARIANTS`) for ``rig`` (ValueError when unknown or
+    unfit); ``options`` go to its factory (e.g. ``friction_observer=None`` turns the chain controllers' ch. 9
+    observer off on a finger/the hand, as ``name:no-observer`` does)."""
+    base, implied = split_name(name)
+    entry = get_entry(base, rig)
+    options = {**implied, **options}
     if not options:
         return entry.factory(rig)
     try:

@@ -292,7 +292,13 @@ class FingerResiduals:
         spring side's weighted least squares with each tendon's mean weight), filtered consistently. Only where
         the routing is constant (the thumb's is not: ``joint_checked`` False)."""
         rig, m, n = self.rig, self.m, self.n
-        self.joint_checked = bool(rig.coupling.is_constant)
+        # only where the tendons fix every joint angle: the thumb's routing depends on q, and the ring's and fifth's
+        # coupled PIP/DIP enter P as one combination (rank n - 1), so their estimated angles are not the plant's
+        self.joint_checked = bool(rig.coupling.is_constant) and int(
+            np.linalg.matrix_rank(np.asarray(rig.coupling.P(), float))) == n
+        self.joint_reason = "" if self.joint_checked else (
+            "its routing depends on the joint angles" if not rig.coupling.is_constant else
+            "its coupled PIP/DIP enter the routing as one combination (the tendons do not fix every joint angle)")
         if not self.joint_checked:
             self.rho = np.zeros((n, self.tau.shape[1]))
             return
@@ -617,7 +623,8 @@ class FingerDiagnosis:
     complete: bool = True
     augmented: AugmentedParameters | None = None   # the dataset's FingerRigParams with the named effects written
     finger: str = ""
-    joint_checked: bool = True      # False on the thumb: its links' equation (guide friction) is not judged
+    joint_checked: bool = True      # False on thumb, ring, fifth: the links' equation (guide friction) is not judged
+    joint_reason: str = ""
     warnings: list = field(default_factory=list)   # e.g. windows where the thumb's joint angles did not converge
 
     @property
@@ -664,8 +671,8 @@ class FingerDiagnosis:
     def text(self) -> str:
         lines = [f"{self.dataset}: {self.verdict}"]
         if not self.joint_checked:
-            lines.append(f"  joint side not judged: the {self.finger}'s routing depends on the joint angles "
-                         f"(guide friction is not looked for)")
+            lines.append(f"  joint side not judged on the {self.finger} (guide friction is not looked for): "
+                         f"{self.joint_reason}")
         lines += [f"  warning: {w}" for w in self.warnings]
         if self.unused_columns:
             lines.append(f"  not used: {', '.join(self.unused_columns)} (joint angles are estimated from the tendons)")
@@ -712,7 +719,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     # nothing-hidden thumb data: the truth started with the joints away from the first reference, a transient of
     # 0-109 N; from a consistent start 0.67-1.16x, seeds 2 and 5, 10 s); its links' equation is not (joint side)
     if not fr.joint_checked:
-        say(f"joint side not judged: the {fr.finger}'s routing depends on the joint angles (no guide friction)")
+        say(f"joint side not judged on the {fr.finger} (no guide friction): {fr.joint_reason}")
     warnings = []
     if fr.not_converged:
         warnings.append(
@@ -833,6 +840,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     dx = FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
                          time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),
                          settings.unexplained_ratio, unused, finger=fr.finger, joint_checked=fr.joint_checked,
+                         joint_reason=fr.joint_reason,
                          warnings=warnings)
     dx.augmented = augmented_finger_parameters(dx, fr.params)
     return dx

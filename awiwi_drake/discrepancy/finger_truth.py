@@ -201,7 +201,6 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     from .truth import _excitation
     q_op = np.full(n, gen.flexion)
     q_op[0] = 0.0  # abduction (or the thumb's first joint) centred
-    op = probe.operating_point(joint_angles=q_op)
     amp = np.full(n, gen.joint_excursion)
     amp[0] *= 0.5
     alpha = dt / (gen.reference_time_constant + dt)   # two first-order reference filters
@@ -212,6 +211,12 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
             for k in range(1, N):
                 a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
         Q[:, j] = q_op[j] + amp[j] * a
+    fp = nominal.finger
+    if getattr(fp, "pip_dip_coupled", False):   # ring, fifth: (5.16) q_DIP = (r_x3 / r_x2) q_PIP, no DIP of its own
+        pip, dip = (probe.joint_names.index(j) for j in probe.joint_names if j[-1] in "23")
+        q_op[dip] = fp.dip_pip_ratio * q_op[pip]
+        Q[:, dip] = fp.dip_pip_ratio * Q[:, pip]
+    op = probe.operating_point(joint_angles=q_op)
     r_m = nominal.motor.pulley_radius
     laws_t = probe.spring_laws
     f_cc = nominal.pretension + gen.force_modulation * np.sin(2 * np.pi * gen.modulation_hz * t

@@ -33,7 +33,7 @@ from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, disturba
                                                  linear_bandwidth, sine_metrics, step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
 from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
-from awiwi_drake.control.registry import get_entry, rig_kind
+from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
@@ -472,7 +472,7 @@ def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
         entry = get_entry(n, probe)
         rig = make_rig()
         opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
-        taus.append(dominant_time_constant(closed_loop(rig, entry.factory(rig), **opts), p))
+        taus.append(dominant_time_constant(closed_loop(rig, make_controller(n, rig), **opts), p))
     if any(t is None for t in taus):     # a loop with no time constant (unstable, or nothing known): full window
         step = p.step_duration
     else:
@@ -500,7 +500,7 @@ def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, te
     for n, entry in zip(names, entries):
         rig = make_rig()
         opts = {**entry.loop_options, **loop_options}
-        loops[n] = closed_loop(rig, entry.factory(rig), **opts)
+        loops[n] = closed_loop(rig, make_controller(n, rig), **opts)
     return compare(loops, tests=tests, params=params or compare_test_params(probe), progress=progress)
 
 
