@@ -165,7 +165,8 @@ def _one_round(replays: _Replays, names, p_start, bounds: CatalogBounds, setting
 
 
 def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
-                   settings: DiscrepancySettings, held: HeldLinear | None = None) -> FitOutcome:
+                   settings: DiscrepancySettings, held: HeldLinear | None = None,
+                   start_profile: Projection | None = None) -> FitOutcome:
     """Fit ``names`` (catalog parameter names) from ``p_start`` on the training windows
     of ``st`` (a :class:`~awiwi_drake.discrepancy.screen.ResidualState`).
 
@@ -176,10 +177,15 @@ def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
     With ``held`` (:class:`HeldLinear`, parameters not in ``names``), those parameters move to first
     order: the training residual is profiled over their sensitivities, the result's ``p`` carries their
     least-squares change (clipped to the bounds) and its residual ``r0`` is the linearised one
-    ``r + J delta`` on all windows."""
+    ``r + J delta`` on all windows.
+
+    ``start_profile`` (the training windows' profile of a nearby point, e.g. the current model's for
+    a candidate whose parameters do not change the window-start sensitivities much) saves computing
+    it at ``p_start``; the rounds refresh it as usual. A fit whose refreshed training cost is no
+    lower than the current model's (``st.E_train``) is not refined further: it explains nothing."""
     eng = st.eng
     tr, te = st.W[eng.train], st.W[eng.test]
-    _, Qtr = eng.projector(p_start, tr)
+    Qtr = start_profile if start_profile is not None else eng.projector(p_start, tr)[1]
     p, nfev_total = p_start, 0
     replays = _Replays(eng, tr)
     for rnd in range(1, settings.fit_rounds + 1):
@@ -192,7 +198,7 @@ def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
             basis = held.basis(tr, Qtr)
             rp_tr = rp_tr - basis @ (basis.T @ rp_tr)
         refreshed = float(rp_tr @ rp_tr)
-        if abs(refreshed - cost) <= settings.fit_tolerance_refresh * max(cost, 1.0):
+        if abs(refreshed - cost) <= settings.fit_tolerance_refresh * max(cost, 1.0) or refreshed >= st.E_train:
             break
     r_te, Qte = eng.projector(p, te)
     if held is not None:

@@ -322,6 +322,7 @@ def DiscrepancyModel_(T):
             self._np = len(PARAM_NAMES)
             self._float = T is float
             self._kernels = None
+            self._hot = None
             self._dbuf = np.empty((self._copies, self._ns))
             self._ybuf = np.empty((self._copies, nominal.num_measurements))
             self.DeclareContinuousState(self._ns * M)
@@ -365,10 +366,12 @@ def DiscrepancyModel_(T):
 
         def DoCalcTimeDerivatives(self, context, derivatives):
             if self._float:   # hot path: the kernel generated from replay_laws, all copies in one call
+                if self._hot is None:   # looked up once: the per-call overhead is most of a small batch's cost
+                    self._hot = (self._kernel("derivatives"), self.get_input_port(0), self._nom.num_motors)
+                kernel, port, n = self._hot
                 X = context.get_continuous_state_vector().CopyToVector().reshape(self._ns, self._copies)
-                U = self.get_input_port(0).Eval(context).reshape(self._nom.num_motors, self._copies)
-                P = self._p_rows.Eval(context)
-                derivatives.SetFromVector(self._kernel("derivatives")(X.T, U.T, P, self._dbuf).T.ravel())
+                U = port.Eval(context).reshape(n, self._copies)
+                derivatives.SetFromVector(kernel(X.T, U.T, self._p_rows.Eval(context), self._dbuf).T.ravel())
                 return
             X, P = self._arrays(context)
             U = self.get_input_port(0).Eval(context).reshape(self._nom.num_motors, self._copies)

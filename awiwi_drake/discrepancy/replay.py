@@ -309,12 +309,15 @@ class ReplayEngine:
         out = sys.get_output_port(0)
         ny = self.nom.num_measurements
         Ym = np.empty((M, self.L, ny))
+        # the delayed, interpolated commands of every sample at once: (L, n * M) in the port's order
+        k = np.arange(self.L)[:, None]
+        i0 = np.clip(starts[None] + k - nd[None], 0, self.N - 1)
+        i1 = np.clip(starts[None] + k - nd[None] - 1, 0, self.N - 1)
+        u = (1 - a)[None, :, None] * self.U[i0] + a[None, :, None] * self.U[i1]  # (L, M, n)
+        u = np.ascontiguousarray(np.transpose(u, (0, 2, 1)).reshape(self.L, -1))
         sim.Initialize()
         for k in range(self.L):
-            i0 = np.clip(starts + k - nd, 0, self.N - 1)
-            i1 = np.clip(starts + k - nd - 1, 0, self.N - 1)
-            u = (1 - a)[:, None] * self.U[i0] + a[:, None] * self.U[i1]  # (M, n)
-            port.FixValue(ctx, u.T.ravel())
+            port.FixValue(ctx, u[k])
             sim.AdvanceTo((k + 1) * self.dt)
             Ym[:, k, :] = out.Eval(ctx).reshape(ny, M).T
         return Ym

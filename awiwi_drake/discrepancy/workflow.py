@@ -80,7 +80,9 @@ class _Run:
         for k, v in s["params"].items():
             p_start[PARAM_INDEX[k]] = v
         t0 = time.perf_counter()
-        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held)
+        # the current model's window-start profile to start from, unless the effect adds states
+        start = None if eff.name in STATEFUL_EFFECTS else st.Q.take(st.W[eng.train])
+        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held, start)
         rp = project(fo.r0, fo.projection)
         e_after = (rp ** 2).sum(axis=1)
         te, tr = eng.test, eng.train
@@ -136,12 +138,17 @@ class _Run:
     def accept(self, win: CandidateResult, status: str, conf: float, members: list, alts: list, cands: list):
         first = not self.accepted
         self.accepted.append(EFFECTS[win.effect])
+        refit = ""
         if first:   # its fit was the joint fit
             self.st = ResidualState(self.eng, win.vector, win.profile)
         else:       # refit jointly with the accepted effects by simulation (its fit moved them to first order)
             names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
-            pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings)
+            t0 = time.perf_counter()
+            pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings,
+                                 start_profile=win.profile[1].take(self.st.W[self.eng.train]))
             self.st = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
+            refit = (f" (joint refit of {len(names)} parameters: {pol.nfev} evals, {pol.rounds} rounds, "
+                     f"{time.perf_counter() - t0:.1f} s)")
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         experiment = separating_experiment(members) if status == "not separable" else ""
         self.steps.append(Step(win.effect, win.kind, status, conf, win.parameters, win.uncertainties,
@@ -150,7 +157,8 @@ class _Run:
         where = self.steps[-1].place
         self.say(f"added {win.effect}{' on ' + where if where else ''} ({win.kind}, {status}, confidence {conf:.2f}); "
                  f"NRMSE {np.mean(list(nr.values())):.4f}, residual/floor {self.st.ratio:.3f}"
-                 + (f"; not separable from {', '.join(alts)} with these data: {experiment}" if experiment else ""))
+                 + (f"; not separable from {', '.join(alts)} with these data: {experiment}" if experiment else "")
+                 + refit)
 
     def step(self, all_effects: list) -> bool:
         """One screen-fit-decide round; returns False when the loop stops."""
