@@ -103,7 +103,7 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
         w = hp.width_ratio * f_el + hp.width_offset
         dz = xdot / hp.presliding_length * (w - np.tanh(xdot / hp.smoothing_velocity) * z)
         slide = P @ v
-        dg = slide / gp.guide_presliding_length * (C - np.tanh(slide / gp.friction_smoothing_velocity) * g)
+        dg = (slide * C - np.abs(slide) * g) / gp.guide_presliding_length       # Dahl's law, |v| exactly
         expected = np.concatenate([np.zeros(n), dv, np.zeros(m), domega])
         np.testing.assert_allclose(d_on[:2 * n + 2 * m] - d_off, expected, rtol=1e-7, atol=1e-7)
         np.testing.assert_allclose(d_on[2 * n + 2 * m:2 * n + 3 * m], dz, rtol=1e-9, atol=1e-9)

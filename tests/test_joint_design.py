@@ -558,12 +558,13 @@ def test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slo
     np.testing.assert_array_equal(law.outside_count, [1, 2] + [0] * (k - 2))
 
 
-def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
-    """Ch. 9 in the chain: the observer (9.2) per DoF estimates a constant external torque on the index MCP
-    (d_hat -> tau_ext, its steady state), and its compensation cancels it: without the observer the impedance
-    yields the static error tau_ext / Kp (closed form: the force loop's feed-forward holds f = f_ref at rest),
-    with it the error vanishes.  Continuous chain (sharing), true joint state; the observer converts to
-    AutoDiffXd and matches finite differences."""
+def test_friction_observer_block_leaves_a_load_to_the_impedance_where_the_guides_have_no_friction():
+    """Ch. 9 in the chain: the observer (9.2) per DoF sees a constant external torque on the index MCP as link-side
+    torque (d_hat -> tau_ext), but its compensation is bounded by what the guides' friction can be, 0 on this rig
+    (guide friction off), so with and without the observer the impedance yields the static error tau_ext / Kp
+    (closed form: the force loop's feed-forward holds f = f_ref at rest); the load is not cancelled.  Continuous
+    chain (sharing), true joint state; the unbounded observer block converts to AutoDiffXd and matches finite
+    differences."""
     from awiwi_drake.analysis import simulate
     from awiwi_drake.control.joint_design import joint_stage_controller
     from awiwi_drake.control.joint_stage import JointFrictionObserver
@@ -583,7 +584,7 @@ def test_friction_observer_block_removes_the_static_error_of_a_constant_load():
         res = simulate(loop.diagram, ctx, 0.25, log=("joint_angle",), max_step=2e-3, accuracy=1e-5)
         errors[obs is not None] = res["joint_angle"][-1][1] - op.joint_angle[1]
     assert errors[False] == pytest.approx(load / kp, rel=0.02)
-    assert abs(errors[True]) < 0.02 * load / kp
+    assert errors[True] == pytest.approx(load / kp, rel=0.02)
     rig = _ideal_rig("thumb")
     rng = np.random.default_rng(2)
     obs = JointFrictionObserver(rig.coupling, np.eye(4), [1e-5, 2e-5, 3e-6, 1e-6], [1e-5] * 4, 200.0)

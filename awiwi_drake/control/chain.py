@@ -54,7 +54,8 @@ from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
 __all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceSharing_", "TendonForceSharing",
-           "TendonForceStage", "TendonChainController", "chain_design_point", "rig_springs"]
+           "TendonForceStage", "TendonChainController", "chain_design_point", "rig_springs",
+           "guide_friction_levels"]
 
 
 def rig_springs(rig: Any) -> TendonSprings:
@@ -66,6 +67,15 @@ def rig_springs(rig: Any) -> TendonSprings:
     if isinstance(rig.spring, TendonSprings):          # e.g. a per-joint subsystem (joint_design.joint_subsystem)
         return rig.spring
     return TendonSprings([rig.spring] * rig.coupling.num_tendons)
+
+
+def guide_friction_levels(rig: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``(C, mu alpha)`` per tendon (m each) of the rig's own guide friction, the parameters its plant uses
+    (:meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`); zeros when its guides have no friction."""
+    drive = getattr(rig, "drive", None)
+    gm = None if drive is None else drive.model.guide_friction
+    m = rig.coupling.num_tendons
+    return gm.levels() if gm is not None else (np.zeros(m), np.zeros(m))
 
 
 @TemplateSystem.define("TendonPathVelocity_")
@@ -289,8 +299,9 @@ class TendonChainController(Diagram):
         Rate of the distribution (the thesis's 3 kHz).
     friction_observer : FrictionObserverParams, optional
         Add the joint friction observer (9.2) per DoF
-        (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat`` is added to the joint
-        stage's torques (ch. 9); output ``friction_compensation``.  Sampled at ``1/rate_hz`` in a sampled chain
+        (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat``, bounded by what the rig's guide
+        friction can be (:func:`guide_friction_levels`), is added to the joint stage's torques (ch. 9); outputs
+        ``friction_compensation`` and its bound ``friction_compensation_bound``.  Sampled at ``1/rate_hz`` in a sampled chain
         (and then fused), continuous with ``distribution="sharing"``.
     """
 
@@ -332,7 +343,8 @@ class TendonChainController(Diagram):
                 rig.coupling, S, joint_inertia(rig, point["joint_angle"]), np.diag(joint_damping(rig)),
                 friction_observer.gain / np.asarray(g, dtype=float), 1.0 / rate_hz if sampled else None,
                 (friction_observer.compensation_scale_motor_position if tendon_law == "motor-position"
-                 else friction_observer.compensation_scale) * np.asarray(g, dtype=float)))
+                 else friction_observer.compensation_scale) * np.asarray(g, dtype=float),
+                guide_friction_levels(rig)))
             add = b.AddNamedSystem("friction_compensated_torque", Adder(2, S.shape[1]))
             b.Connect(tau_ref, add.get_input_port(0))
             b.Connect(observer.GetOutputPort("friction_compensation"), add.get_input_port(1))
@@ -359,7 +371,8 @@ class TendonChainController(Diagram):
             b.ExportOutput(force.GetOutputPort("distribution_status"), "distribution_status")
         b.ExportOutput(tau_ref, "joint_torque_reference")
         if observer is not None:
-            b.ExportOutput(observer.GetOutputPort("friction_compensation"), "friction_compensation")
+            for nm in ("friction_compensation", "friction_compensation_bound"):
+                b.ExportOutput(observer.GetOutputPort(nm), nm)
         b.ExportOutput(joint.GetOutputPort("joint_stiffness_reference"), "joint_stiffness_reference")
         b.BuildInto(self)
         self.set_name(name)

@@ -141,6 +141,10 @@ def FusedChain_(T):
                     self.DeclareVectorOutputPort("friction_compensation", self.obs.S.shape[1],
                                                  lambda c, o: o.SetFromVector(self._sample(c)["comp"]),
                                                  prerequisites_of_calc=pre)
+                    if self.obs.levels is not None:
+                        self.DeclareVectorOutputPort("friction_compensation_bound", self.obs.S.shape[1],
+                                                     lambda c, o: o.SetFromVector(self._sample(c)["bound"]),
+                                                     prerequisites_of_calc=pre)
                 self.DeclareVectorOutputPort("joint_stiffness_reference", K.size,
                                              lambda c, o: o.SetFromVector(self._K),
                                              prerequisites_of_calc={self.nothing_ticket()})
@@ -166,16 +170,19 @@ def FusedChain_(T):
                 if self.dist is not None:
                     u["tendon_force_reference"] = out["f_prev"] = xd.get_vector(self._xf).CopyToVector()
                 tau = np.asarray(self.joint_law(u)).reshape(-1)
-                if self.obs is not None:            # ch. 9: the stage's torques plus -d_hat
+                if self.path_coupling is not None:     # P(q_k), once per period: the observer reuses it
+                    out["P"] = np.asarray(self.path_coupling.P(q))
+                    u["tendon_path_velocity"] = out["P"] @ v
+                if self.obs is not None:            # ch. 9: the stage's torques plus -d_hat, bounded
                     out["w_hat"] = xd.get_vector(self._xw).CopyToVector()
-                    out["comp"] = self.obs.compensation(out["w_hat"], v)
+                    B = self.obs.friction_bound(q, out["f"], out.get("P"))
+                    out["comp"] = self.obs.compensation(out["w_hat"], v, B)
+                    if B is not None:
+                        out["bound"] = self.obs.scale * B
                     tau = tau + out["comp"]
                 if self.sharing is not None:
                     W, f0, tau0 = self.sharing
                     u["tendon_force_reference"] = f0 + W @ (tau - tau0)
-                if self.path_coupling is not None:     # P(q_k), once per period: the observer's update reuses it
-                    out["P"] = np.asarray(self.path_coupling.P(q))
-                    u["tendon_path_velocity"] = out["P"] @ v
                 out.update(tau=tau, f_ref=u["tendon_force_reference"])
             out["u"] = np.asarray(self.law(u)).reshape(-1)
             value.set_value(out)

@@ -48,7 +48,8 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import clip
+from awiwi_drake._math import clip, positive_part
+from awiwi_drake.components.friction import guide_friction_level
 from awiwi_drake.control.base import StaticLaw, check_gains
 from awiwi_drake.control.compiled import float_inputs, joint_feedback
 from awiwi_drake.control.friction_observer import observer_rate, observer_step
@@ -270,6 +271,19 @@ def JointFrictionObserver_(T):
     ``friction_compensation`` (k) ``= -scale d_hat`` [Nm] (``scale`` per DoF, default 1), added to the joint stage's
     desired torques; state ``w_hat`` (k), to be started at the measured velocity (0 at rest).
 
+    ``friction_levels`` ``(C, mu alpha)`` (m each, the plant's own guide friction parameters,
+    :meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`; zeros when the guides have no friction)
+    bound the estimate by what the guides' friction can be (:meth:`friction_bound`): per DoF
+    ``B_j = sum_i |(P(q) S)_ij| W_i(f_i)``, ``W_i`` the sliding level of tendon i's guide friction at its measured force
+    (:func:`~awiwi_drake.components.friction.guide_friction_level`, pulled: its largest), and the output becomes
+    ``scale clip(-d_hat, -B, B)``.  The observer is link-side, driven by the measured tendon forces' torque, so its
+    ``d_hat`` holds the guides' friction AND any external load; in the thesis (9.1)-(9.2) it sits on the actuator side
+    with the strain gauges' joint torque, which contains the load, so a load is not cancelled and the joint stays an
+    impedance (stiffness set by co-contraction).  The bound keeps that: a load beyond ``B`` is compensated only up to
+    ``B`` (output ``friction_compensation_bound`` ``= scale B``; compare flags a DoF whose compensation ends at it).
+    The state stays the (9.2) law.  ``friction_levels`` None: unbounded (the load observer of
+    :class:`~awiwi_drake.control.finger_backstepping.ObservedBacksteppingController`, which estimates the load on purpose).
+
     ``period`` None: continuous state (a continuous chain, linear analysis).  ``period`` h: the sampled
     chain's form, a discrete state updated every ``h`` from the sample by
     :func:`~awiwi_drake.control.friction_observer.observer_step` (the same law, its model copy integrated with its
@@ -279,7 +293,7 @@ def JointFrictionObserver_(T):
 
     class Impl(LeafSystem_[T]):
         def _construct(self, coupling, selection, inertia, damping, gain: float, period: float | None = None,
-                       scale=None, converter=None):
+                       scale=None, friction_levels=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self.coupling, self.S = coupling, np.asarray(selection, dtype=float)
             n, k = self.S.shape
@@ -293,6 +307,13 @@ def JointFrictionObserver_(T):
             self.period = None if period is None else float(check_gains("period", [period],
                                                                         owner="JointFrictionObserver",
                                                                         positive=True)[0])
+            m = coupling.num_tendons
+            self.levels = None if friction_levels is None else tuple(
+                check_gains(nm, lv, shape=(m,), owner="JointFrictionObserver")
+                for nm, lv in zip(("friction_levels[0] (constant C)", "friction_levels[1] (capstan exponent)"),
+                                  friction_levels))
+            if self.levels is not None and (np.any(self.levels[0] < 0) or np.any(self.levels[1] < 0)):
+                raise ValueError(f"JointFrictionObserver: friction_levels must be >= 0, got {friction_levels}")
             if self.period is None:
                 self.DeclareContinuousState(k)
             else:
@@ -301,21 +322,38 @@ def JointFrictionObserver_(T):
             self._q = self.DeclareVectorInputPort("joint_angle", n)
             self._v = self.DeclareVectorInputPort("joint_velocity", n)
             self._f = self.DeclareVectorInputPort("tendon_force", coupling.num_tendons)
+            bounded = () if self.levels is None else (self._q.ticket(), self._f.ticket())
             self.DeclareVectorOutputPort("friction_compensation", k, self._calc,
-                                         prerequisites_of_calc={self.all_state_ticket(), self._v.ticket()})
+                                         prerequisites_of_calc={self.all_state_ticket(), self._v.ticket(), *bounded})
+            if self.levels is not None:
+                self.DeclareVectorOutputPort(
+                    "friction_compensation_bound", k,
+                    lambda c, o: o.SetFromVector(self.scale * self.friction_bound(self._q.Eval(c), self._f.Eval(c))),
+                    prerequisites_of_calc=set(bounded))
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.coupling, other.S, other.M, other.b, other.gain, other.period,
-                            other.scale, converter=converter)
+                            other.scale, other.levels, converter=converter)
 
         def _state(self, context):
             if self.period is None:
                 return context.get_continuous_state_vector().CopyToVector()
             return context.get_discrete_state(self._w).CopyToVector()
 
-        def compensation(self, w_hat, v):
-            """``-scale d_hat`` (k) [Nm] at the observer state ``w_hat`` (k) and joint velocities ``v`` (n)."""
-            return -self.scale * observer_rate(w_hat, self.Sp @ v, 0.0 * w_hat, self.M, self.gain)[1]
+        def friction_bound(self, q, f, P=None):
+            """``B_j = sum_i |(P(q) S)_ij| W_i(f_i)`` (k) [Nm]: the largest torque the guides' friction can put on each
+            DoF at the measured tendon forces ``f`` (m) (``P``: ``P(q)`` when the caller has it); None when unbounded."""
+            if self.levels is None:
+                return None
+            P = np.asarray(self.coupling.P(q) if P is None else P)
+            W = guide_friction_level(positive_part(f), self.levels[0], self.levels[1], 1.0)
+            return np.abs(P @ self.S).T @ W
+
+        def compensation(self, w_hat, v, bound=None):
+            """``scale clip(-d_hat, -bound, bound)`` (k) [Nm] at the observer state ``w_hat`` (k), joint velocities
+            ``v`` (n) and the :meth:`friction_bound` ``bound`` (None: unclipped)."""
+            minus_d = -observer_rate(w_hat, self.Sp @ v, 0.0 * w_hat, self.M, self.gain)[1]
+            return self.scale * (minus_d if bound is None else clip(minus_d, -bound, bound))
 
         def _known_torque(self, q, w, f, P=None):
             """``tau_a = -S^T P(q)^T f - b w`` per DoF at the DoF velocities ``w`` (``P``: ``P(q)`` when the caller
@@ -330,7 +368,8 @@ def JointFrictionObserver_(T):
             return observer_step(w_hat, w, self._known_torque(q, w, f, P), self.M, self.gain, self.period)[0]
 
         def _calc(self, context, out):
-            out.SetFromVector(self.compensation(self._state(context), self._v.Eval(context)))
+            bound = None if self.levels is None else self.friction_bound(self._q.Eval(context), self._f.Eval(context))
+            out.SetFromVector(self.compensation(self._state(context), self._v.Eval(context), bound))
 
         def _update(self, context, discrete_state):
             discrete_state.set_value(self._w, self.next_state(self._state(context), self._q.Eval(context),

@@ -352,7 +352,7 @@ class FingerResiduals:
         path = _play(s, self.settings.finger_hysteresis_play * self.sig_force[i] / k)
         direction = np.tanh(np.clip(np.gradient(path) / (self.dt * v_s), -40.0, 40.0))
         level = guide_friction_level(np.maximum(self._force_raw[i], 0.0), constant, exponent, direction)
-        return dahl_path(path, level, delta, v_s, self.dt)
+        return dahl_path(path, level, delta, 0.0, self.dt)      # |v| exactly, as guide_friction_rate
 
     # ------------------------------------------------------------------ energies
     def ratios(self) -> dict:

@@ -39,7 +39,7 @@ from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
            "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant", "short_test_params",
-           "compare_controllers"]
+           "compare_controllers", "observer_at_bound"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
 
@@ -47,6 +47,17 @@ TESTS = ("step", "sine", "disturbance", "sweep")
 # output of a loop whose controller contains the force distribution (ch. 7): 0 ok, 1 infeasible, 2 bounds
 DISTRIBUTION_STATUS = "controller_distribution_status"
 ESTIMATION_ERROR = "joint_angle_estimation_error"
+# the ch. 9 observer's compensation and its friction bound (per DoF) in a chain controller
+OBSERVER_COMPENSATION = "controller_friction_compensation"
+OBSERVER_BOUND = "controller_friction_compensation_bound"
+
+
+def observer_at_bound(compensation, bound) -> bool:
+    """True when the observer's compensation sits at its (non-zero) friction bound on every sample given (the end of
+    a run): the link-side torque it estimates exceeds what the guides' friction can be, i.e. a load it leaves to the
+    impedance (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`)."""
+    c, b = np.abs(np.asarray(compensation, float)), np.asarray(bound, float)
+    return bool(c.size) and bool(np.all((b > 0.0) & (c >= b * (1.0 - 1e-9))))
 
 def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
     """Default standard tests for a rig kind (tendon force in N, link angle in rad)."""
@@ -290,6 +301,8 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             log.append(DISTRIBUTION_STATUS)
         if loop.diagram.HasOutputPort(ESTIMATION_ERROR):   # no joint sensors: the estimator's error
             log.append(ESTIMATION_ERROR)
+        if loop.diagram.HasOutputPort(OBSERVER_BOUND):
+            log += [OBSERVER_COMPENSATION, OBSERVER_BOUND]
         try:
             res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                            max_step=p.max_step, accuracy=1e-6)
@@ -341,6 +354,11 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                     setattr(row, k_, v)
                 row.bandwidth_source = "chirp"
             flag_run(row, p)
+            tail = t >= 0.9 * t[-1]                # the run's last 10 %, as the load test's end values
+            if OBSERVER_BOUND in res and observer_at_bound(res[OBSERVER_COMPENSATION][tail, j],
+                                                           res[OBSERVER_BOUND][tail, j]):
+                row.flags = "; ".join(f for f in (row.flags, "observer at friction bound") if f)
+                row.status = "flagged" if row.status == "ok" else row.status
             if DISTRIBUTION_STATUS in res:       # the chain's force distribution, one status per finger
                 finger = list(dict.fromkeys(ch.fingers)).index(ch.fingers[j])
                 bad = float(np.mean(res[DISTRIBUTION_STATUS][:, finger] != 0.0))
