@@ -469,3 +469,26 @@ def test_candidate_fit_with_accepted_parameters_free_to_first_order_reaches_the_
     assert np.abs(fo.r0).max() < 1e-5
     fixed = fit_parameters(st, ["joint_coulomb", "joint_velocity"], start, bounds, settings)
     assert np.abs(fixed.p - truth).max() > 1e-3
+
+
+def test_held_parameter_taken_past_its_bound_is_reported_at_the_bound():
+    """A first-order step of an accepted parameter past its physical bound is held at the bound AND named in
+    ``at_bound`` (the decision's at-bound rule then sees it), never clipped silently."""
+    from awiwi_drake.discrepancy.catalog import param_specs
+    from awiwi_drake.discrepancy.fit import HeldLinear, fit_parameters
+    from awiwi_drake.discrepancy.screen import ResidualState
+    from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
+
+    bounds, settings = CatalogBounds(), DiscrepancySettings()
+    high = {s.name: s.high for s in param_specs(bounds)}["link_damping_add"]
+    truth = default_vector()
+    truth[PARAM_INDEX["link_damping_add"]] = 2.0 * high          # the data ask for twice the bound
+    truth[PARAM_INDEX["joint_coulomb"]], truth[PARAM_INDEX["joint_velocity"]] = 0.03, 0.08
+    eng = _LinearInAEngine(truth, np.random.default_rng(12))
+    start = default_vector()
+    start[PARAM_INDEX["joint_coulomb"]], start[PARAM_INDEX["joint_velocity"]] = 0.01, 0.05
+    st = ResidualState(eng, default_vector())
+    held = HeldLinear(st, ["link_inertia_rel", "link_damping_add"], bounds)
+    fo = fit_parameters(st, ["joint_coulomb", "joint_velocity"], start, bounds, settings, held)
+    assert fo.p[PARAM_INDEX["link_damping_add"]] == high
+    assert "link_damping_add" in fo.at_bound

@@ -206,7 +206,12 @@ def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
         r_tr = r_tr + np.einsum("k,kwm->wm", delta, held.J[:, tr])
         r_te = r_te + np.einsum("k,kwm->wm", delta, held.J[:, te])
         p = p.copy()
-        p[held.idx] = np.clip(p[held.idx] + delta, held.lo, held.hi)
+        moved = p[held.idx] + delta
+        # a held parameter the first-order step takes past its bound is held at the bound and reported there (the
+        # candidate is then judged by the at-bound rule, decide.py), not silently clipped
+        at_bound = list(at_bound) + [n for n, x, lo, hi in zip(held.names, moved, held.lo, held.hi)
+                                     if (x < lo or x > hi) and n not in at_bound]
+        p[held.idx] = np.clip(moved, held.lo, held.hi)
     pos_tr, pos_te = np.flatnonzero(eng.train), np.flatnonzero(eng.test)
     r0 = np.empty((len(st.W), r_tr.shape[1]))
     r0[pos_tr], r0[pos_te] = r_tr, r_te
