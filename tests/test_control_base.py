@@ -311,3 +311,25 @@ def test_plain_diagram_controller_of_a_sampled_rig_is_copied_flat_unless_its_lea
     user, flat = finals.values()
     np.testing.assert_allclose(user, flat, rtol=1e-12, atol=1e-12)
     assert np.all(np.abs(user[w]) < [3.0, 2.0])                 # damped
+
+
+def test_a_factory_error_inside_is_not_reported_as_a_missing_option():
+    """``make_controller`` turns only a keyword the user gave into "has no option"; a TypeError raised inside the
+    factory (here a bad keyword of an inner call) reaches the user as itself."""
+    from awiwi_drake.control import registry
+    from awiwi_drake.control.registry import make_controller, register_controller
+
+    def inner(**_):
+        raise TypeError("inner() got an unexpected keyword argument 'colour'")
+
+    def factory(rig, size=1.0):
+        return inner(colour=size)
+
+    register_controller("test-inner-typeerror", factory, rigs=("tendon-rig",), description="test only")
+    try:
+        with pytest.raises(TypeError, match="unexpected keyword argument 'colour'"):
+            make_controller("test-inner-typeerror", "tendon-rig", size=2.0)
+        with pytest.raises(ValueError, match="has no option 'shade'"):
+            make_controller("test-inner-typeerror", "tendon-rig", shade=2.0)
+    finally:
+        registry._REGISTRY.pop("test-inner-typeerror", None)

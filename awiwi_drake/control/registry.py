@@ -156,7 +156,9 @@ def make_controller(name: str, rig: Any, **options: Any):
     try:
         return entry.factory(rig, **options)
     except TypeError as exc:
-        if "unexpected keyword argument" not in str(exc):
+        # only a keyword the user gave is "no option"; any other TypeError (one inside the factory) is re-raised
+        bad = str(exc).split()[-1].strip("'\"") if "unexpected keyword argument" in str(exc) else None
+        if bad not in options:
             raise
-        raise ValueError(f"controller {name!r} on {rig_kind(rig)!r} has no option {str(exc).split()[-1]} "
+        raise ValueError(f"controller {name!r} on {rig_kind(rig)!r} has no option {bad!r} "
                          f"(given: {', '.join(sorted(options))})") from None
