@@ -282,3 +282,19 @@ def test_capstan_friction_is_proportional_to_tension():
     T_after_2 = T_after_1 - capstan_friction_force(T_after_1, a2)
     assert T - T_after_2 == pytest.approx(capstan_friction_force(T, a1 + a2), rel=1e-12)
     assert 0.1 <= f1 / 10.0 <= 0.5        # ch. 9: routing friction 10-50 % of the force
+
+
+def test_scalar_value_reads_every_scalar_type_and_refuses_none():
+    """``_math.scalar_value``: the float value of a float, an int, a one-entry array, an AutoDiffXd (its value, not
+    its derivatives), a Tangent (its value's value); None for a symbolic Expression, which has no value."""
+    from pydrake.autodiffutils import AutoDiffXd
+    from pydrake.symbolic import Expression, Variable
+
+    from awiwi_drake._math import Tangent, scalar_value
+    assert scalar_value(2) == 2.0 and isinstance(scalar_value(2), float)
+    assert scalar_value(-1.5) == -1.5
+    assert scalar_value(np.array([[0.25]])) == 0.25
+    assert scalar_value(AutoDiffXd(0.7, np.array([3.0, 4.0]))) == 0.7
+    assert scalar_value(Tangent(AutoDiffXd(-0.3, np.array([1.0])), 5.0)) == -0.3
+    assert scalar_value(Expression(Variable("x"))) is None
+    assert scalar_value(Expression(1.25)) is None          # even a constant Expression: the type decides, not the value

@@ -410,14 +410,16 @@ def test_tendon_guides_give_one_path_its_own_guide_friction():
     x = np.array(op.state, float)
     rng = np.random.default_rng(3)
     x[n:2 * n] = rng.normal(0, 0.3, n)                 # joint velocities: every path slides
-    x[-m:] = 0.0
-    x[-m + 4] = 0.3                                    # index_h5's guide state (the drive's last m states)
+    names = list(rig.state_names)
+    g = [names.index(f"guide_friction_force[index_h{i}]") for i in range(1, m + 1)]   # the guide states, by name
+    x[g] = 0.0
+    x[g[4]] = 0.3                                      # index_h5's guide state
     ctx.SetContinuousState(x)
-    d = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()[-m:]
+    d = rig.diagram.EvalTimeDerivatives(ctx).CopyToVector()[g]
     f = rig.diagram.GetOutputPort("tendon_force").Eval(ctx)
     v = np.asarray(rig.coupling.P(), float) @ x[n:2 * n]
     gm = p.friction_smoothing_velocity, p.guide_presliding_length
-    want = guide_friction_rate(x[-m:][4], v[4], f[4], 1.2, 0.08, gm[1], gm[0])
+    want = guide_friction_rate(x[g[4]], v[4], f[4], 1.2, 0.08, gm[1], gm[0])
     assert d[4] == pytest.approx(want, rel=1e-10) and abs(want) > 1.0
     assert np.all(np.delete(d, 4) == 0.0)
     with pytest.raises(ValueError, match="tendon_guides: unknown tendon 'index_h9'"):
