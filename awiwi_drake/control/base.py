@@ -645,8 +645,19 @@ def _flattenable(controller: System) -> bool:
     ``"controller"``, as before the flat copy)."""
     if type(controller) is not Diagram or hasattr(controller, "initialize_state"):
         return False
+    return _copyable(controller)
+
+
+def _copyable(system: System) -> bool:
+    """Whether :func:`~awiwi_drake.analysis.add_flat` can copy every leaf of ``system``: a ``TemplateSystem`` copies
+    itself (its ``_construct_copy``), any other leaf needs scalar conversion (``Clone``), checked per leaf so the
+    TemplateSystem leaves are not cloned through AutoDiffXd only to be copied again."""
+    if isinstance(system, Diagram):
+        return all(_copyable(s) for s in system.GetSystems())
+    if getattr(type(system), "_construct_copy", None) is not None:
+        return True
     try:
-        controller.Clone()
+        system.Clone()
     except RuntimeError:
         return False
     return True
