@@ -321,6 +321,21 @@ def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
     assert np.all(np.abs(e) <= bound), (e, bound)
     assert np.all(res["tendon_force"] > 0.0)
     assert np.mean(np.abs(res["motor_torque_command"]) > rig.params.motor.torque_limit) < 0.02
+    # the law's own closed form (rest_error: any K3, K4 per tendon, and the motors' r_m z, which the scalar form
+    # above leaves out) gives the same rest from the logged frictions; the torque the frictions hold there,
+    # (P S)^T (z + g), is what friction_hold reads back from e alone ((I + G)^-1 (tau_op - Kp e)), within the
+    # motor-side hysteresis it neglects (0.2 % of z), and it is inside every DoF's bound B (compare's flag)
+    np.testing.assert_allclose(e, law.rest_error(g, z), rtol=0, atol=1e-3)
+    B = law.friction_bound(res["tendon_force"][-1] - z)
+    held = PS.T @ (z + g)
+    np.testing.assert_allclose(law.friction_hold(e) * law.friction_bound(law.f_op), np.abs(held),
+                               rtol=0, atol=0.01 * np.max(B))
+    assert np.all(np.abs(held) <= B) and np.all(law.friction_hold(e) <= 1.0)
+    # the dead band's half-width per DoF is the largest error of that DoF alone that the frictions can hold: at it
+    # the rest needs exactly its bound on one DoF, beyond it more than the bound
+    for j in range(len(e)):
+        ej = np.eye(len(e))[j] * law.design["dead_band"][j]
+        assert 0.99 < np.max(law.friction_hold(0.999 * ej)) <= 1.0 < np.max(law.friction_hold(1.01 * ej))
 
 
 def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffness_and_the_observer_shrinks_it():
