@@ -49,7 +49,11 @@ through the estimator is stable on every finger and the hand with guide friction
 with it (1.1e-3 rad left after 0.25 s, 0.9e-3 with it).  The friction then leaves the steady offset of a
 dead band: at rest the law settles at ``Kp e = -(I + G) (P S)^T (z + g)`` (``z``, ``g`` the lever's and
 the guides' friction forces, ``G`` from the model's phantom acceleration ``M_d^-1 (P S)^T (z + g)``, see
-``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).
+``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).  :meth:`FingerBacksteppingLaw.rest_error`
+is that closed form (any ``K3``, ``K4`` per tendon, and the motors' ``r_m z`` of the lever, 0.2 % of ``z``),
+:meth:`~FingerBacksteppingLaw.dead_band` its half-width per DoF on the default plant (index: 0.38 / 0.58 / 1.58 /
+3.0 rad: the frictions' bound ``B`` of 0.10 / 0.13 / 0.11 / 0.04 Nm over ``(I + G)^-1 Kp``, ``I + G`` with
+eigenvalues 1.9-13.5), and ``compare`` flags a step row that stops in it (:meth:`~FingerBacksteppingLaw.friction_hold`).
 
 **External load** (option ``load_observer`` of :func:`finger_backstepping_controller`): the link model has no
 external torque, so under a constant load ``tau_ext`` the law's rest equations give ``Kp e = (I + G) S^T tau_ext``
@@ -69,6 +73,13 @@ A quasi-static sketch: the guides' presliding holds the link, the law turns ``d_
 G)^-1 G d_hat`` (``G`` of the dead band, diagonal 8.3 / 12.0 on the PIP / DIP), and the observer sees it ``1 + rho``
 times larger (``rho`` = the hysteresis's presliding stiffness over the spring slope, 0.38), a loop gain above one
 where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
+
+**Friction compensation** (option ``friction_compensation`` with the load observer, registered
+``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
++-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`: the guides (4.1) and the lever's
+hysteresis at the sensed forces), the bound of the chain's observer (ch. 9) with the hysteresis added, as the law's
+sensors miss both.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
+index); a load beyond ``B`` deflects the impedance, one below it is cancelled, as in the chain.
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
