@@ -237,48 +237,28 @@ def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
     np.testing.assert_allclose(np.delete(after, 2), np.delete(before, 2), rtol=1e-12)
 
 
-def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
+@pytest.fixture(scope="module")
+def hysteresis_on_6():
+    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0,
+                             joint_angles=True)
+    return ds, diagnose(ds)
+
+
+def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back(hysteresis_on_6):
     """``--hide spring_hysteresis --place 6``: the truth is the package's loop (Fig 4.8b, half-width proportional
     to the force) on the spring mechanism of index_h6 only (a per-tendon ``tendon_springs`` entry).  The diagnosis
-    names it on index_h6 or on its antagonist index_h5 with index_h6 in the not-separable class (opposite rows of
-    P); the write-back switches the loop on the written tendon only (``finger_diagram(params=...)``
-    builds a drive whose other tendons have none), and with it as the nominal the spring-side equation error drops
-    to the diagnosis's after-ratio.  The loop's level at the mean force is checked against an oracle: the same
-    columns (the presliding length chosen) fitted to the truth's own loop force (measured force minus the elastic
-    law at the true elongation, from the noise-free record) through the same filter and projection, within 4
-    standard errors.  The oracle is not the truth's level: the loop runs on the elongation the measured force gives,
-    which holds the loop itself (x + z/k; at a reversal the loop's presliding stiffness w/delta is about k, so that
-    path reverses about twice as fast and the best column is a longer, larger loop): docs/REPRODUCTIONS.md."""
+    names it in index_h6's class (:func:`_named_tendons`: index_h6, or its antagonist index_h5 with index_h6 in the
+    not-separable class, opposite rows of P); the write-back switches the loop on the written tendon only
+    (``finger_diagram(params=...)`` builds a drive whose other tendons have none), and with it as the nominal the
+    spring-side equation error equals the diagnosis's after-ratio within the change of one whitening weight. How
+    far the written loop is from the truth's: the next test (it is not)."""
     import dataclasses
     from awiwi_drake.discrepancy.data import finger_parameters_from_json
     from awiwi_drake.hand.diagrams import finger_diagram
-    from awiwi_drake.discrepancy.finger import _lsq, _signatures
-    from awiwi_drake.parameters.discrepancy import CatalogBounds
-    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0,
-                             joint_angles=True)
-    dx = diagnose(ds)
+    ds, dx = hysteresis_on_6
     st = dx.steps[0]
-    assert dx.named_effects == ["spring_hysteresis"] and (st.tendon == 6 or (
-        st.status == "not separable" and "spring_hysteresis on index_h6 (PIP)" in st.members))
-    i, step = st.tendon - 1, st.parameters     # the tendon written (index_h6, or its antagonist index_h5 in a class)
-    fr = FingerResiduals(ds, DiscrepancySettings())
-    X = next(X for _, X, _, shape in _signatures(fr, "spring_hysteresis", i, CatalogBounds())
-             if shape["hysteresis_length"] == step["hysteresis_length"])
-    X = X.reshape(2, -1).T                                             # ratio, width columns (whitened, projected)
-    clean, rig = ds.meta["clean_outputs"], fr.rig
-    q = np.stack([clean[f"joint_angle_{j + 1}"] for j in range(rig.num_joints)])
-    x = rig.offsets[5] + fr.r * clean["motor_angle_6"] + np.asarray(rig.coupling.P(), float)[5] @ q
-    z = clean["tendon_force_6"] - np.asarray(rig.spring_laws[5].force(x), float)        # the truth's loop force
-    # what that loop does to the spring-side residual: the elongation the measured force gives, minus the one it
-    # gives without the loop force (exact, not linearised: the loop is ~1/4 of the force here), filtered, projected
-    F6, law6 = np.maximum(fr._force_raw[5], 1e-3), rig.spring_laws[5]
-    shift = fr.consistent(fr._x_full[5] - np.asarray(law6.inverse_force(np.maximum(F6 - z, 1e-3)), float))
-    effect = (fr.proj[:, :, 5] * (fr.wsq[5] * shift)[:, None]).T
-    oracle = _lsq(X, effect.ravel(), ["hysteresis_ratio", "hysteresis_width"], CatalogBounds())   # the same fit
-    g = np.array([ds.outputs["tendon_force_6"].mean(), 1.0])           # the level at the mean force
-    se = np.sqrt(g @ np.linalg.inv(X.T @ X) @ g)     # unit noise: whitened, and the columns lie in the projection
-    fitted = g @ [step["hysteresis_ratio"], step["hysteresis_width"]]
-    assert abs(fitted - g @ oracle) < 4 * se and se < 0.1 * g @ oracle, (fitted, g @ oracle, se)
+    assert dx.named_effects == ["spring_hysteresis"] and "index_h6" in _named_tendons(dx, st)
+    i = st.tendon - 1
     js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
     aug = finger_parameters_from_json(js, "summary.json")
     assert aug == dx.augmented.params and [t for t, _ in aug.tendon_springs] == [f"index_h{i + 1}"]
@@ -286,16 +266,66 @@ def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
     assert [h.enabled for h in hyst] == [k == i for k in range(8)]
     s = DiscrepancySettings()
     fb, fa = FingerResiduals(ds, s), FingerResiduals(dataclasses.replace(ds, parameters=js), s)
-    before, after = fb.ratios()["spring_total"], fa.ratios()["spring_total"]
-    assert after < before
+    after = fa.ratios()["spring_total"]
     # the diagnosis removes the accepted loop as the reloaded nominal does (its force taken off the measured force
     # before the inverse spring law, FingerResiduals.loop_removed); what differs is only the whitening weight of
-    # index_h6, whose stiffness is now evaluated at the loop-corrected elongation. A weight scaled by at most
-    # (1 +- d) scales the weighted least-squares residual's energy by at most (1 +- d)^2: that is the bound
-    # (wave 5's linearised removal left a 4-5 % gap here: the force error over the stiffness, filtered once)
+    # the written tendon, whose stiffness is now evaluated at the loop-corrected elongation. A weight scaled by at
+    # most (1 +- d) scales the weighted least-squares residual's energy by at most (1 +- d)^2: that is the bound
     d = float(np.max(np.abs(fa.wsq[i] / fb.wsq[i] - 1.0)))
     assert np.allclose(np.delete(fa.wsq, i, axis=0), np.delete(fb.wsq, i, axis=0), rtol=1e-12)
     assert (1 - d) ** 2 * (1 - 1e-9) <= after / dx.ratios_after["spring_total"] <= (1 + d) ** 2 * (1 + 1e-9), (after, d)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured (docs/REPRODUCTIONS.md, wave 7): the loop runs on the elongation the measured force gives, which holds "
+    "the loop itself, and a Dahl state on any estimate of the elongation at 30 dB (force-derived 17 um, motor angles "
+    "and estimated joints 77 um of noise per sample, presliding length 0.4 mm) is relaxed by the noise; with the "
+    "truth's own parameters the spring side is left at 27x (force-derived), 19x (the model's elongation, best "
+    "smoothing) and 12x (the self-consistent elongation f_el(x) + z(x) = F, smoothed), 1.0x on the noise-free "
+    "elongation; the diagnosis writes a longer, larger loop on the antagonist and leaves 13.5x"))
+def test_spring_hysteresis_write_back_reaches_the_floor_and_the_truths_loop(hysteresis_on_6):
+    """What a write-back should do and the hysteresis's does not (xfail, strict: passing is news). Oracle,
+    independent of the diagnosis's columns: the truth generator's own law (``components.friction.dahl_path`` with
+    the level ``beta f_el(x) + z0`` and the package's presliding length and smoothing velocity, as
+    ``spring.hysteresis_rate``) on the noise-free elongation, fitted to the measured spring-side residual; it
+    recovers the truth's loop level at the mean force within 4 of its standard errors (measured: 3.53 +- 0.04 N
+    against 3.65 N). Then the written loop's level must agree with it within 4 times the sum of both fits'
+    standard errors (measured: 5.19 N), and the reloaded nominal must leave the spring side below the
+    unexplained limit (noise only, chi-square; measured 13.5x against 2.8x)."""
+    import dataclasses
+    from awiwi_drake.components.friction import dahl_path
+    from awiwi_drake.discrepancy.finger import _signatures
+    from awiwi_drake.parameters.components import HysteresisParams
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds, dx = hysteresis_on_6
+    s = DiscrepancySettings()
+    fr = FingerResiduals(ds, s)
+    t, clean, h = 5, ds.meta["clean_outputs"], HysteresisParams()
+    law = fr.rig.spring_laws[t]
+    q = np.stack([clean[f"joint_angle_{j + 1}"] for j in range(fr.n)])
+    x = fr.rig.offsets[t] + fr.r * clean["motor_angle_6"] + np.asarray(fr.rig.coupling.P(), float)[t] @ q
+    fel = np.asarray(law.force(x), float)
+
+    def whitened(i, z):                  # a loop force on spring i as it shows in the spring-side residual
+        return ((fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]) * fr.consistent(z)[:, None]).T.ravel()
+
+    Xo = np.stack([whitened(t, dahl_path(x, lv, h.presliding_length, h.smoothing_velocity, ds.dt))
+                   for lv in (fel, np.ones_like(fel))]).T
+    oracle = np.linalg.lstsq(Xo, fr.eps.ravel(), rcond=None)[0]
+    go = np.array([np.mean(fr._force_raw[t]), 1.0])
+    level_o, se_o = go @ oracle, np.sqrt(go @ np.linalg.inv(Xo.T @ Xo) @ go)      # whitened: unit noise
+    truth = ds.meta["truth"]["spring_hysteresis"]["width_ratio"] * go[0]
+    assert abs(level_o - truth) < 4 * se_o, (level_o, truth, se_o)
+    st = dx.steps[0]
+    i, p = st.tendon - 1, st.parameters
+    Xd = next(X for _, X, _, shape in _signatures(fr, "spring_hysteresis", i, CatalogBounds())
+              if shape == {k: p[k] for k in shape}).reshape(2, -1).T
+    gd = np.array([np.mean(fr._force_raw[i]), 1.0])
+    level_d, se_d = gd @ [p["hysteresis_ratio"], p["hysteresis_width"]], np.sqrt(gd @ np.linalg.inv(Xd.T @ Xd) @ gd)
+    js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
+    fa = FingerResiduals(dataclasses.replace(ds, parameters=js), s)
+    assert abs(level_d - level_o) < 4 * (se_o + se_d) and fa.ratios()["spring_total"] < fa.unexplained_limit(), (
+        level_d, level_o, fa.ratios()["spring_total"])
 
 
 def test_thumb_names_motor_and_spring_effects_and_reports_gauss_newton_limits():
