@@ -177,10 +177,8 @@ class FingerResiduals:
         acc = np.stack([motor_acceleration(th[i], om[i], u[i], r * f[i], lin[i]) for i in range(m)])
         tau = B[:, None] * (al - acc)
         for i, p in enumerate(motors):
-            if p.friction or p.ripple:
-                nonlinear = motor_ripple_torque(th[i], p) + (
-                    motor_friction_torque(om[i], p.replace(damping=0.0)) if p.friction else 0.0)
-                tau[i] -= _filter(nonlinear, g0)
+            if p.ripple:
+                tau[i] -= _filter(motor_ripple_torque(th[i], p), g0)
         # the inertia-error signature: the acceleration filtered 4x wider, nearly free of the angle noise
         # that the residual's own acceleration carries (no errors-in-variables fit of noise on itself)
         s4, _, _, g2w = _kernel(4 * sigma, dt)
@@ -196,6 +194,15 @@ class FingerResiduals:
         self.time = ds.time[sl]
         self.theta, self.omega, self.alpha, self.force, self.torque = th[:, sl], om[:, sl], al[:, sl], f[:, sl], u[:, sl]
         self.tau = tau[:, sl]
+        self._theta_raw, self._velocities = TH, {}
+        self.motor_filters = {}       # tendon -> velocity filter [s] of the nominal's own friction (as a candidate's)
+        for i, p in enumerate(motors):
+            if p.friction:       # the width the data fit best (motor_velocity), as a candidate's shape is chosen
+                fric = {w: self.consistent(motor_friction_torque(self.motor_velocity(i, w), p.replace(damping=0.0)))
+                        for w in settings.finger_motion_filters}
+                w = min(fric, key=lambda w: float(np.sum((self.tau[i] - fric[w]) ** 2)))
+                self.motor_filters[i] = w
+                self.tau[i] -= fric[w]
         # noise of the torque residual: B H'' theta-noise and r H f-noise (and d H' theta-noise)
         self.sigma_tau = np.sqrt((B * np.linalg.norm(g2)) ** 2 * self.sig_theta ** 2
                                  + (d * np.linalg.norm(g1)) ** 2 * self.sig_theta ** 2
@@ -209,6 +216,18 @@ class FingerResiduals:
         self.train = ~self.test
         self.step = step
         self._signature_cache: dict = {}     # candidate columns per (effect, tendon): data only (_signatures)
+
+    def motor_velocity(self, i: int, width: float) -> np.ndarray:
+        """Motor ``i``'s velocity [rad/s] at the full rate, the angle smoothed by a Gaussian of ``width`` [s]: what
+        a nonlinear velocity law (friction (3.8)) is evaluated on before the consistent filter. On the filter's own
+        20 ms the finger's fast link modes are gone from the velocity, and (3.8) of the smoothed velocity is not
+        the filtered friction: a (3.8) friction with the truth's own slope left 14x the floor where the noise-free
+        velocity leaves 0.94x (index_h3, 3 s, 30 dB); a narrow width passes the angle noise instead (1 ms: 83x).
+        The data choose from ``finger_motion_filters``, as for the guides' travel (:meth:`guide_path`)."""
+        key = (i, width)
+        if key not in self._velocities:
+            self._velocities[key] = _filter(self._theta_raw[i], _kernel(width, self.dt)[2])
+        return self._velocities[key]
 
     def consistent(self, signal: np.ndarray) -> np.ndarray:
         """A full-rate signal (a law evaluated on the filtered signals :attr:`full`, or on raw ones) filtered by
@@ -338,7 +357,7 @@ class FingerResiduals:
             for i in range(m):
                 if C[i] or E[i]:        # the path filter the data fit best, as a candidate's shape is chosen
                     paths = {w: np.outer(P[i], self.consistent(self.guide_path(i, C[i], E[i], w, gm)))
-                             for w in self.settings.finger_path_filters}
+                             for w in self.settings.finger_motion_filters}
                     w = min(paths, key=lambda w: float(np.sum(np.linalg.solve(self._joint_whiten, rho + paths[w]) ** 2)))
                     self.path_filters[i] = w
                     rho = rho + paths[w]
@@ -353,7 +372,7 @@ class FingerResiduals:
         per sample on the index at 30 dB, against a presliding length of 0.4 mm): every noise step relaxes the Dahl
         state by ``|dx| / delta``, which on the raw estimate left 99x the floor where the truth's own law on the
         true travel leaves 1.2x; a play operator instead delays every true reversal (a 10 um play on the true
-        travel: 12x). The width that balances the two depends on the record (``finger_path_filters``: a grid,
+        travel: 12x). The width that balances the two depends on the record (``finger_motion_filters``: a grid,
         chosen by the data as the candidates' shapes are). The Dahl path is linear in its level
         ``C + f (rise (1 + s) / 2 + loss (1 - s) / 2)``, so it is ``C U + rise D+ + loss D-``
         (:meth:`guide_columns`)."""
@@ -479,17 +498,20 @@ def _signature_variants(fr: FingerResiduals, effect: str, i: int, bounds: Catalo
     """Variants ``(label, columns (c, K), names, scale_to_params)`` of ``effect`` at tendon ``i`` (0-based):
     the residual model is ``columns.T @ beta``; motor side in N m, spring and joint sides whitened."""
     om, f = fr.omega[i], fr.force[i]
-    omf, thf = fr.full["omega"][i], fr.full["theta"][i]
+    thf = fr.full["theta"][i]
     H = fr.consistent
     out = []
     if effect == "motor_friction":   # (3.8): tau = -(g2 atan(g1 w) + g3 w): the missing torque adds to u
-        for slope in (3.0, 10.0, 30.0):
-            out.append((f"slope {slope:g}", np.stack([H(laws.motor_friction(omf, 1.0, slope, 0.0)),
-                                                      H(laws.motor_friction(omf, 0.0, slope, 1.0))]),
-                        ["motor_coulomb", "motor_viscous"], {"motor_slope": slope}))
+        for w in fr.settings.finger_motion_filters:
+            omw = fr.motor_velocity(i, w)
+            for slope in (3.0, 10.0, 30.0):
+                out.append((f"slope {slope:g}, velocity filter {w * 1e3:g} ms",
+                            np.stack([H(laws.motor_friction(omw, 1.0, slope, 0.0)),
+                                      H(laws.motor_friction(omw, 0.0, slope, 1.0))]),
+                            ["motor_coulomb", "motor_viscous"], {"motor_slope": slope, "motor_velocity_filter": w}))
     elif effect == "guide_friction":  # the joints feel -P_i^T g_i: the package's Dahl guides on path i, mu on a grid
         white = np.linalg.solve(fr._joint_whiten, -fr._P[i])[:, None]          # (n, 1)
-        for w in fr.settings.finger_path_filters:       # the travel's smoothing (FingerResiduals.guide_path)
+        for w in fr.settings.finger_motion_filters:       # the travel's smoothing (FingerResiduals.guide_path)
             unit = white[None] * H(fr.guide_path(i, 1.0, 0.0, w))[None, None]        # (1, n, K): C = 1 N
             _, Dp, Dm = (H(c) for c in fr.guide_columns(i, w))
             for mu in np.linspace(0.0, bounds.guide_mu_max, 9)[1:]:
