@@ -110,7 +110,7 @@ register_controller("backstepping-load-observer",
 # (finger_backstepping, FingerBacksteppingLaw.dead_band), where the plain law stops in its friction dead band
 register_controller("backstepping-friction-observer",
                     _lazy("finger_backstepping", "finger_backstepping_controller",
-                          load_observer=FrictionObserverParams(), friction_compensation=True),
+                          friction_observer=FrictionObserverParams()),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="15.5 backstepping with the (9.2) observer per DoF in its link model and its "
                                 "estimate, bounded by the guides' and the lever's friction, added to the desired "

@@ -74,8 +74,8 @@ G)^-1 G d_hat`` (``G`` of the dead band, diagonal 8.3 / 12.0 on the PIP / DIP), 
 times larger (``rho`` = the hysteresis's presliding stiffness over the spring slope, 0.38), a loop gain above one
 where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
 
-**Friction compensation** (option ``friction_compensation`` with the load observer, registered
-``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
+**Friction compensation** (option ``friction_observer`` of :func:`finger_backstepping_controller`, the law's
+``friction_compensation``, registered ``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
 +-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`: the guides (4.1) and the lever's
 hysteresis at the sensed forces), the bound of the chain's observer (ch. 9) with the hysteresis added, as the law's
 sensors miss both.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
@@ -512,23 +512,31 @@ class FingerBacksteppingLaw(StaticLaw):
 def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None,
                                    rate_hz: float | None = 3000.0, variant: str = "antagonistic",
                                    load_observer: FrictionObserverParams | None = None,
-                                   friction_compensation: bool = False):
+                                   friction_observer: FrictionObserverParams | None = None):
     """Registered factories ``backstepping`` (``variant="antagonistic"``), ``backstepping-position`` and
     ``backstepping-nonlinear-spring`` for fingers and the hand (see the module docstring); ``rate_hz`` is the control
     rate the joint gains are designed for (the registry's 3 kHz).  ``load_observer``: add the (9.2) observer per DoF
-    (:class:`ObservedBacksteppingController`), whose estimate of the link-side torque enters the law's link model."""
+    (:class:`ObservedBacksteppingController`), whose estimate of the link-side torque enters the law's link model.
+    ``friction_observer`` (registered ``backstepping-friction-observer``; ``NAME:no-observer`` sets it to None, as for
+    the chain controllers): the same observer, and its estimate, bounded by the frictions, also added to the desired
+    joint torque ((9.1), ``FingerBacksteppingLaw(friction_compensation=True)``)."""
     check_backstepping_springs(rig)
-    if load_observer is not None and not isinstance(load_observer, FrictionObserverParams):
-        raise TypeError(f"finger_backstepping_controller: load_observer = {load_observer!r} must be None or a "
-                        "FrictionObserverParams")
+    for name, obs in (("load_observer", load_observer), ("friction_observer", friction_observer)):
+        if obs is not None and not isinstance(obs, FrictionObserverParams):
+            raise TypeError(f"finger_backstepping_controller: {name} = {obs!r} must be None or a "
+                            "FrictionObserverParams")
+    if load_observer is not None and friction_observer is not None:
+        raise ValueError("finger_backstepping_controller: give load_observer (the estimate in the link model) or "
+                         "friction_observer (also compensated), not both")
+    observer = load_observer if load_observer is not None else friction_observer
     law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, variant=variant,
-                                link_torque_estimate=load_observer is not None,
-                                friction_compensation=friction_compensation)
+                                link_torque_estimate=observer is not None,
+                                friction_compensation=friction_observer is not None)
     if variant != "antagonistic":
         law.name = f"finger_backstepping_{variant.replace('-', '_')}"
-    if load_observer is None:
+    if observer is None:
         return StaticLawController(law)
-    return ObservedBacksteppingController(rig, law, load_observer)
+    return ObservedBacksteppingController(rig, law, observer)
 
 
 class ObservedBacksteppingController(Diagram):
