@@ -10,13 +10,13 @@
   nonlinear springs with pretension (Fig 5.9, ch. 15.5).
   State ``[q, qdot, theta1, theta2, omega1, omega2]``.
 
-The tendon rig is one :class:`~awiwi_drake.components.fused_drive.TendonDrive_`. A link rig's
-dynamics are *one* C++ ``SymbolicVectorSystem`` generated from the law functions
-(:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive with the
-link inside, ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
+A rig's dynamics are *one* C++ ``SymbolicVectorSystem`` generated from the law functions
+(:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive, with a
+link inside ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
 MultibodyPlant; output the state) plus the stateless
 :class:`~awiwi_drake.components.rig_system.LinkRigOutputs_` for the tendon forces,
-stiffnesses, joint torque and applied torque (evaluated only when read);
+stiffnesses, joint torque and applied torque (evaluated only when read); the motor rig's
+is the motor law alone;
 ``Rig.plant`` is None. Tests check both against the laws evaluated apart at random states.
 
 Every block is named; ports are named after physical quantities.
@@ -32,7 +32,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import (Demultiplexer, Multiplexer, PassThrough, Saturation, SymbolicVectorSystem,
                                         ZeroOrderHold)
 
-from awiwi_drake.components.fused_drive import DriveModel, TendonDrive, TendonDrive_
+from awiwi_drake.components.fused_drive import DriveModel, TendonDrive
 from awiwi_drake.components.rig_system import (LinkRigOutputs_, integration_state, rig_dynamics_system,
                                                 rig_integration_system, sampled_dynamics, tendon_force_of_states)
 from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
@@ -77,10 +77,18 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     model = DriveModel(p.motor, (spring,), ConstantCoupling(np.zeros((1, 0))), np.zeros(1), p.motor.pulley_radius,
                        p.spring.hysteresis)
     b = DiagramBuilder()
-    d = b.AddNamedSystem("tendon_drive", TendonDrive_[float](model))
-    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    for nm in ("state", "motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
-        b.ExportOutput(d.GetOutputPort(nm), nm)
+    dyn = b.AddNamedSystem("tendon_drive", rig_dynamics_system(model))
+    split = b.AddNamedSystem("state_split", Demultiplexer([1] * model.num_states))
+    laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
+    b.Connect(dyn.get_output_port(), split.get_input_port())
+    b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
+    b.ExportInput(dyn.get_input_port(), "motor_torque")
+    b.ConnectInput("motor_torque", laws.GetInputPort("motor_torque"))
+    b.ExportOutput(dyn.get_output_port(), "state")
+    b.ExportOutput(split.get_output_port(0), "motor_angle")
+    b.ExportOutput(split.get_output_port(1), "motor_velocity")
+    for nm in ("tendon_force", "tendon_stiffness", "applied_torque"):
+        b.ExportOutput(laws.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name("tendon-rig")
     drive = TendonDrive(diagram, model)
