@@ -669,24 +669,9 @@ def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnes
     ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``).
 
     Tabulated once per spring parameter set (the fit of the lever mechanism takes ~30 ms): equal
-    parameters return the same map object.
+    parameters give the same law object (:func:`~awiwi_drake.components.spring.tendon_spring`), so the same map.
     """
-    drive = drive or FingerDriveParams()
-    try:
-        return _STIFFNESS_MAPS[drive.spring]
-    except TypeError:                       # unhashable parameters: no reuse
-        pass
-    except KeyError:
-        pass
-    table = law_stiffness_map(tendon_spring(drive.spring))
-    try:
-        _STIFFNESS_MAPS[drive.spring] = table
-    except TypeError:
-        pass
-    return table
-
-
-_STIFFNESS_MAPS: dict = {}
+    return law_stiffness_map(tendon_spring((drive or FingerDriveParams()).spring))
 
 
 def law_stiffness_map(spring) -> TendonStiffnessMap:
