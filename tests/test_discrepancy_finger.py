@@ -536,3 +536,33 @@ def test_signature_cache_key_holds_the_bounds():
     assert mus(CatalogBounds())[-1] == pytest.approx(0.6)
     assert mus(CatalogBounds(guide_mu_max=0.3))[-1] == pytest.approx(0.3)
     assert mus(CatalogBounds())[-1] == pytest.approx(0.6)
+
+
+def test_box_least_squares_is_the_constrained_optimum():
+    """``_lsq`` (the amplitudes' fit within their physical ranges, by enumerating which bounds are active) reaches
+    the optimum of scipy's bounded least squares (``lsq_linear``) on random problems where bounds bind, and its
+    answer satisfies the box's KKT conditions: zero gradient on free amplitudes, a gradient pushing outwards on
+    those held at a bound."""
+    from scipy.optimize import lsq_linear
+    from awiwi_drake.discrepancy.finger import _BOUNDS, _lsq
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    b = CatalogBounds()
+    names = ["motor_coulomb", "motor_viscous", "guide_capstan"]
+    lo = np.array([_BOUNDS[k](b)[0] for k in names])
+    hi = np.array([_BOUNDS[k](b)[1] for k in names])
+    rng = np.random.default_rng(0)
+    held = 0
+    for _ in range(30):
+        A = rng.normal(size=(40, 3))
+        y = A @ rng.normal(0, 2.0, 3) + rng.normal(0, 0.1, 40)
+        x = _lsq(A, y, names, b)
+        ref = lsq_linear(A, y, bounds=(lo, hi), tol=1e-12).x
+        cost = lambda v: float(np.sum((y - A @ v) ** 2))  # noqa: E731
+        assert np.all(x >= lo) and np.all(x <= hi)
+        assert cost(x) <= cost(ref) * (1 + 1e-9) + 1e-12
+        grad = A.T @ (A @ x - y)
+        free = (x > lo) & (x < hi)
+        assert np.all(np.abs(grad[free]) < 1e-8 * (1 + np.abs(A.T @ y)[free]))
+        assert np.all(grad[x <= lo] >= -1e-8) and np.all(grad[x >= hi] <= 1e-8)
+        held += int(np.sum(~free))
+    assert held > 10        # the bounds bind in these problems

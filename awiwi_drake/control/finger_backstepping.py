@@ -454,7 +454,7 @@ class FingerBacksteppingLaw(StaticLaw):
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
     def __call__(self, u):
-        if self.variant == "antagonistic" and not self.link_torque_estimate and float_inputs(u, self.inputs):
+        if self.variant == "antagonistic" and float_inputs(u, self.inputs):
             fast = self.__dict__.get("_fast")
             if fast is None:
                 fast = self._fast = self._fast_path()
@@ -476,17 +476,21 @@ class FingerBacksteppingLaw(StaticLaw):
             rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
         xmax = np.array([law.max_elongation for law in laws], dtype=float)
         kend = np.array([law._k_end for law in laws], dtype=float)
+        (C, mu_alpha), (beta, z0) = self.friction_levels
+        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0))
         return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
-                np.empty(len(laws)))
+                np.empty(len(laws)), levels, np.zeros(self.S.shape[1]))
 
-    def _compiled_call(self, u, fn, coef, dcoef, ddcoef, xmax, kend, out):
+    def _compiled_call(self, u, fn, coef, dcoef, ddcoef, xmax, kend, out, levels, no_estimate):
         q = u["joint_angle"]
         P = np.asarray(self.coupling.P(q), dtype=float)
         W = self._sharing(P, fast=True)
+        fc = u["friction_compensation"] if self.link_torque_estimate else no_estimate
         return fn(q, u["joint_velocity"], u["joint_angle_reference"], u["elongation"], u["motor_angle"],
                   u["motor_velocity"], P, self.S, self.Sp, W, self._Minv, self.Bq, self.Kp, self.Kd, self.K3, self.K4,
                   self.f_op, self.r_m, self.B, self.friction_scale, coef, dcoef, ddcoef, xmax, kend,
-                  self.link_feedforward, out).copy()
+                  self.link_feedforward, fc, self.link_torque_estimate, self.friction_compensation, *levels,
+                  out).copy()
 
     def _sharing(self, P_val, fast: bool = False):
         """``W = -((P S)^T)^+`` (m x k), block by finger, frozen at the value of ``P``.  ``fast``: a varying block of
