@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["figure_axes", "plot_traces", "plot_friction_curve", "plot_spring_curve", "plot_signals", "plot_poles",
+__all__ = ["figure_axes", "plot_traces", "plot_friction_curve", "plot_spring_curve", "plot_signals",
            "plot_pole_sweep"]
 
 
@@ -177,19 +177,6 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
         if legend:
             a.legend(fontsize=7, loc="best", ncol=2 if len(a.get_legend_handles_labels()[0]) > 4 else 1)
     ax[len(panels) - 1].set_xlabel("time [s]")
-    return fig, ax
-
-
-def plot_poles(poles, ax=None, label=None, marker="x"):
-    """Poles in the complex plane."""
-    plt = _plt()
-    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(5, 4))
-    poles = np.asarray(poles)
-    ax.plot(poles.real, poles.imag, marker, ls="", label=label)
-    ax.axvline(0, color="k", lw=0.5)
-    label_axes(ax, "Im [rad/s]", xlabel="Re [1/s]", legend=None)
-    if label:
-        ax.legend()
     return fig, ax
 
 

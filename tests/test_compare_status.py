@@ -145,3 +145,36 @@ def test_a_load_step_that_keeps_drifting_is_flagged_not_settled():
     m = Metrics("c", "disturbance", **disturbance_metrics(t, settle, 0.0, t0, p.disturbance_torque))
     assert m.stiffness == pytest.approx(p.disturbance_torque / dq, rel=1e-6)
     assert m.drift < 1e-6 * abs(dq) and "not settled" not in flag_run(m, p).flags and math.isfinite(m.drift)
+
+
+def test_finger_backstepping_rows_carry_the_dead_band_and_say_when_the_step_stopped_in_it():
+    """Issue 10: compare's per-joint rows of the 15.5 finger backstepping on the default index (guide friction and
+    hysteresis on) carry the friction dead band of the law's rest equations (``FingerBacksteppingLaw.dead_band``,
+    tested against the simulated rest in tests/test_hand_control.py), and a step row that does not settle says
+    whether its end is a rest held by friction (the torque the rest needs within the bound on every DoF of the
+    finger) -- the same closed form applied to the run's end errors, so "friction-limited" is told from "broken"."""
+    from awiwi_drake.control.compare import compare_controllers, compare_test_params
+    from awiwi_drake.hand.diagrams import finger_diagram
+    p = compare_test_params("finger", step_duration=0.2, settle_time=0.02)
+    rows = compare_controllers(lambda: finger_diagram(finger="index"), ["backstepping"], tests=["step"],
+                               params=p).table.rows
+    law_band = [r.dead_band for r in rows]
+    assert np.all(np.isfinite(law_band)) and min(law_band) > 0.1          # 0.38-3.0 rad: (I + G) amplifies B / Kp
+    unsettled = [r for r in rows if "not settled" in r.flags]
+    assert unsettled                                                       # the default plant stops it short
+    for r in unsettled:
+        assert "stopped within friction dead band" in r.flags, r.flags
+        share = float(r.flags.split("stopped within friction dead band (")[1].split(" %")[0])
+        assert 0.0 <= share <= 100.0                                       # of the bound the rest needs
+    # beyond the dead band (one DoF at 1.05 of its half-width, the others at their reference) the rest would need
+    # more than the frictions' bound on some DoF: a not-settled row there keeps "not settled" alone
+    from awiwi_drake.control.compare.metrics import Metrics
+    from awiwi_drake.control.compare.standard_tests import mark_dead_band
+    from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
+    law = FingerBacksteppingLaw(finger_diagram(finger="index"))
+    np.testing.assert_allclose(law.design["dead_band"], law_band, rtol=1e-12)
+    for j, half in enumerate(law.design["dead_band"]):
+        for scale, inside in ((0.95, True), (1.05, False)):
+            probe = [Metrics("backstepping", "step", joint=r.joint, flags="not settled") for r in rows]
+            mark_dead_band(probe, scale * half * np.eye(len(rows))[j], law.friction_hold)
+            assert all(("dead band" in m.flags) == inside for m in probe[j:j + 1]), (j, scale, probe[j].flags)

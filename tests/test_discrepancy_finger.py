@@ -11,6 +11,16 @@ from awiwi_drake.discrepancy.finger_truth import make_finger_dataset
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings, FingerTruthParams
 
 SHORT = FingerTruthParams(duration=1.0)
+
+
+def _named_tendons(dx, step) -> list:
+    """The rule for a named place, stated once: the tendon a step names, and, when the step is "not separable",
+    every tendon its class members name (``"<effect> on <tendon> (<joints>)"``): the data cannot tell them apart,
+    so the true tendon must be one of them."""
+    import re
+    own = [dx.tendon_names[step.tendon - 1]]
+    return own + ([t for mem in step.members[1:] for t in re.findall(r" on (\w+_h\d+)", mem)]
+                  if step.status == "not separable" else [])
 THREE = FingerTruthParams(duration=3.0)   # the shortest record with enough filtered samples (3-fold CV)
 
 
@@ -169,20 +179,26 @@ def test_tendon_motors_override_one_motor_law_in_the_finger_diagram():
 
 def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
     """Write-back (issue 12 item 4): a finger whose tendon index_h3 has (3.8) motor friction (the package's own
-    form, slope on the catalog's grid) against the ideal nominal finger.  The diagnosis names it and returns the
-    augmented FingerRigParams (also in the JSON, the dataset's ``parameters`` form); loaded, built with
+    form, Coulomb 0.06 N m, slope 10 s/rad) against the ideal nominal finger.  The diagnosis names it and returns
+    the augmented FingerRigParams (also in the JSON, the dataset's ``parameters`` form); loaded, built with
     ``finger_diagram(params=...)`` and used as the dataset's nominal, its motor-side equation error on index_h3
     drops by more than 20x and equals the diagnosis's own after-ratio (the written MotorParams reproduce the fitted
-    law through the package's motor law).  The written Coulomb torque is checked against an oracle, not a band: the
-    same columns (the slope the diagnosis chose) fitted to the truth's own friction torque on the noise-free motion
-    through the same filter; the two agree within 4 standard errors of the fit (the sensor noise propagated).
-    The oracle's distance from the truth's 0.06 N m (-9 % at slope 30) is the consistent filter's approximation of
-    a nonlinear law (the friction evaluated on the filtered velocity), which is also what stays flagged as
-    unexplained: docs/REPRODUCTIONS.md."""
+    law through the package's motor law, on the velocity filter the fit chose).
+
+    The written Coulomb torque is checked against an oracle built independently of the diagnosis: the truth
+    generator's own law (``components.motor.motor_friction_torque`` with the truth's slope) on the truth's
+    noise-free motion, its Coulomb and viscous parts as columns, fitted to the measured residual.  The oracle
+    recovers the truth's 0.06 N m within 4 of its standard errors (the sensor noise propagated: the residual
+    and the law agree), and the written value agrees with it within 4 times the sum of both fits' standard
+    errors (two estimates from one noise record: the standard deviation of their difference is at most the
+    sum). 4 standard errors: a two-sided 6e-5 chance for noise alone."""
     import dataclasses
+    from awiwi_drake.components.motor import motor_friction_torque
     from awiwi_drake.discrepancy.data import finger_parameters_from_json, finger_parameters_to_json
+    from awiwi_drake.discrepancy.finger import _signatures
     from awiwi_drake.discrepancy.finger_truth import nominal_finger_params
     from awiwi_drake.hand.diagrams import finger_diagram
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
     nom = nominal_finger_params("index")
     truth_motor = nom.motor.replace(friction=True, coulomb_torque=0.06, friction_slope=10.0, viscous_friction=0.002)
     ds = make_finger_dataset("index", [], seed=21, gen=THREE, params=nom.replace(tendon_motors=(("index_h3", truth_motor),)))
@@ -194,70 +210,55 @@ def test_finger_diagnosis_writes_back_into_the_finger_parameters(tmp_path):
     aug = finger_parameters_from_json(js, "summary.json")
     assert aug == dx.augmented.params and [t for t, _ in aug.tendon_motors] == ["index_h3"]
     written = dict(aug.tendon_motors)["index_h3"]
-    from awiwi_drake.components.motor import motor_friction_torque
-    from awiwi_drake.discrepancy.finger import _lsq, _signatures
-    from awiwi_drake.parameters.discrepancy import CatalogBounds
     fr = FingerResiduals(ds, DiscrepancySettings())
-    X = next(X for _, X, _, shape in _signatures(fr, "motor_friction", 2, CatalogBounds())
-             if shape["motor_slope"] == written.friction_slope).T                  # (K, 2): Coulomb, viscous
-    omega = np.gradient(ds.meta["clean_outputs"]["motor_angle_3"], ds.dt)        # the truth's motion, noise-free
-    oracle = _lsq(X, fr.consistent(motor_friction_torque(omega, truth_motor.replace(damping=0.0))),
-                  ["motor_coulomb", "motor_viscous"], CatalogBounds())                 # the diagnosis's own fit
-    se = fr.sigma_tau[2] * np.sqrt(np.linalg.inv(X.T @ X)[0, 0])    # the sensor noise through the fit
-    assert written.friction and abs(written.coulomb_torque - oracle[0]) < 4 * se, (written.coulomb_torque, oracle, se)
-    assert se < 0.05 * 0.06            # the check has teeth: 4 standard errors are < 20 % of the friction
+    # the oracle: the truth's own law on the truth's noise-free motion, fitted to the measured residual
+    omega = np.gradient(ds.meta["clean_outputs"]["motor_angle_3"], ds.dt)
+    law = lambda c, v: fr.consistent(motor_friction_torque(omega, truth_motor.replace(  # noqa: E731
+        coulomb_torque=c, viscous_friction=v, damping=0.0)))
+    Xo = np.stack([law(1.0, 0.0), law(0.0, 1.0)]).T
+    oracle = np.linalg.lstsq(Xo, fr.tau[2], rcond=None)[0]
+    se_o = fr.sigma_tau[2] * np.sqrt(np.linalg.inv(Xo.T @ Xo)[0, 0])
+    assert abs(oracle[0] - 0.06) < 4 * se_o and se_o < 0.05 * 0.06, (oracle, se_o)
+    step = dx.steps[0].parameters
+    Xd = next(X for _, X, _, shape in _signatures(fr, "motor_friction", 2, CatalogBounds())
+              if shape == {k: step[k] for k in shape}).T                 # the columns the diagnosis chose
+    se_d = fr.sigma_tau[2] * np.sqrt(np.linalg.inv(Xd.T @ Xd)[0, 0])
+    assert written.friction and abs(written.coulomb_torque - oracle[0]) < 4 * (se_o + se_d), (
+        written.coulomb_torque, oracle, se_o, se_d)
     motors = finger_diagram(finger="index", params=aug).drive.model.motor
     assert motors[2] == written and all(mp == nom.motor for i, mp in enumerate(motors) if i != 2)
     s = DiscrepancySettings()
     before = FingerResiduals(ds, s).ratios()["motor"]
-    after = FingerResiduals(dataclasses.replace(ds, parameters=js), s).ratios()["motor"]
+    fa = FingerResiduals(dataclasses.replace(ds, parameters=js), s)
+    after = fa.ratios()["motor"]
+    assert fa.motor_filters == {2: step["motor_velocity_filter"]}
     assert before[2] > 20 * after[2]
     np.testing.assert_allclose(after, dx.ratios_after["motor"], rtol=1e-6)
     np.testing.assert_allclose(np.delete(after, 2), np.delete(before, 2), rtol=1e-12)
 
 
-def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
+@pytest.fixture(scope="module")
+def hysteresis_on_6():
+    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0,
+                             joint_angles=True)
+    return ds, diagnose(ds)
+
+
+def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back(hysteresis_on_6):
     """``--hide spring_hysteresis --place 6``: the truth is the package's loop (Fig 4.8b, half-width proportional
     to the force) on the spring mechanism of index_h6 only (a per-tendon ``tendon_springs`` entry).  The diagnosis
-    names it on index_h6 or on its antagonist index_h5 with index_h6 in the not-separable class (opposite rows of
-    P); the write-back switches the loop on the written tendon only (``finger_diagram(params=...)``
-    builds a drive whose other tendons have none), and with it as the nominal the spring-side equation error drops
-    to the diagnosis's after-ratio.  The loop's level at the mean force is checked against an oracle: the same
-    columns (the presliding length chosen) fitted to the truth's own loop force (measured force minus the elastic
-    law at the true elongation, from the noise-free record) through the same filter and projection, within 4
-    standard errors.  The oracle is not the truth's level: the loop runs on the elongation the measured force gives,
-    which holds the loop itself (x + z/k; at a reversal the loop's presliding stiffness w/delta is about k, so that
-    path reverses about twice as fast and the best column is a longer, larger loop): docs/REPRODUCTIONS.md."""
+    names it in index_h6's class (:func:`_named_tendons`: index_h6, or its antagonist index_h5 with index_h6 in the
+    not-separable class, opposite rows of P); the write-back switches the loop on the written tendon only
+    (``finger_diagram(params=...)`` builds a drive whose other tendons have none), and with it as the nominal the
+    spring-side equation error equals the diagnosis's after-ratio within the change of one whitening weight. How
+    far the written loop is from the truth's: the next test (it is not)."""
     import dataclasses
     from awiwi_drake.discrepancy.data import finger_parameters_from_json
     from awiwi_drake.hand.diagrams import finger_diagram
-    from awiwi_drake.discrepancy.finger import _lsq, _signatures
-    from awiwi_drake.parameters.discrepancy import CatalogBounds
-    ds = make_finger_dataset("index", ["spring_hysteresis"], place=6, seed=2, gen=THREE, strength=2.0,
-                             joint_angles=True)
-    dx = diagnose(ds)
+    ds, dx = hysteresis_on_6
     st = dx.steps[0]
-    assert dx.named_effects == ["spring_hysteresis"] and (st.tendon == 6 or (
-        st.status == "not separable" and "spring_hysteresis on index_h6 (PIP)" in st.members))
-    i, step = st.tendon - 1, st.parameters     # the tendon written (index_h6, or its antagonist index_h5 in a class)
-    fr = FingerResiduals(ds, DiscrepancySettings())
-    X = next(X for _, X, _, shape in _signatures(fr, "spring_hysteresis", i, CatalogBounds())
-             if shape["hysteresis_length"] == step["hysteresis_length"])
-    X = X.reshape(2, -1).T                                             # ratio, width columns (whitened, projected)
-    clean, rig = ds.meta["clean_outputs"], fr.rig
-    q = np.stack([clean[f"joint_angle_{j + 1}"] for j in range(rig.num_joints)])
-    x = rig.offsets[5] + fr.r * clean["motor_angle_6"] + np.asarray(rig.coupling.P(), float)[5] @ q
-    z = clean["tendon_force_6"] - np.asarray(rig.spring_laws[5].force(x), float)        # the truth's loop force
-    # what that loop does to the spring-side residual: the elongation the measured force gives, minus the one it
-    # gives without the loop force (exact, not linearised: the loop is ~1/4 of the force here), filtered, projected
-    F6, law6 = np.maximum(fr._force_raw[5], 1e-3), rig.spring_laws[5]
-    shift = fr.consistent(fr._x_full[5] - np.asarray(law6.inverse_force(np.maximum(F6 - z, 1e-3)), float))
-    effect = (fr.proj[:, :, 5] * (fr.wsq[5] * shift)[:, None]).T
-    oracle = _lsq(X, effect.ravel(), ["hysteresis_ratio", "hysteresis_width"], CatalogBounds())   # the same fit
-    g = np.array([ds.outputs["tendon_force_6"].mean(), 1.0])           # the level at the mean force
-    se = np.sqrt(g @ np.linalg.inv(X.T @ X) @ g)     # unit noise: whitened, and the columns lie in the projection
-    fitted = g @ [step["hysteresis_ratio"], step["hysteresis_width"]]
-    assert abs(fitted - g @ oracle) < 4 * se and se < 0.1 * g @ oracle, (fitted, g @ oracle, se)
+    assert dx.named_effects == ["spring_hysteresis"] and "index_h6" in _named_tendons(dx, st)
+    i = st.tendon - 1
     js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
     aug = finger_parameters_from_json(js, "summary.json")
     assert aug == dx.augmented.params and [t for t, _ in aug.tendon_springs] == [f"index_h{i + 1}"]
@@ -265,16 +266,66 @@ def test_spring_hysteresis_on_one_tendon_is_hidden_named_and_written_back():
     assert [h.enabled for h in hyst] == [k == i for k in range(8)]
     s = DiscrepancySettings()
     fb, fa = FingerResiduals(ds, s), FingerResiduals(dataclasses.replace(ds, parameters=js), s)
-    before, after = fb.ratios()["spring_total"], fa.ratios()["spring_total"]
-    assert after < before
+    after = fa.ratios()["spring_total"]
     # the diagnosis removes the accepted loop as the reloaded nominal does (its force taken off the measured force
     # before the inverse spring law, FingerResiduals.loop_removed); what differs is only the whitening weight of
-    # index_h6, whose stiffness is now evaluated at the loop-corrected elongation. A weight scaled by at most
-    # (1 +- d) scales the weighted least-squares residual's energy by at most (1 +- d)^2: that is the bound
-    # (wave 5's linearised removal left a 4-5 % gap here: the force error over the stiffness, filtered once)
+    # the written tendon, whose stiffness is now evaluated at the loop-corrected elongation. A weight scaled by at
+    # most (1 +- d) scales the weighted least-squares residual's energy by at most (1 +- d)^2: that is the bound
     d = float(np.max(np.abs(fa.wsq[i] / fb.wsq[i] - 1.0)))
     assert np.allclose(np.delete(fa.wsq, i, axis=0), np.delete(fb.wsq, i, axis=0), rtol=1e-12)
     assert (1 - d) ** 2 * (1 - 1e-9) <= after / dx.ratios_after["spring_total"] <= (1 + d) ** 2 * (1 + 1e-9), (after, d)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "measured (docs/REPRODUCTIONS.md, wave 7): the loop runs on the elongation the measured force gives, which holds "
+    "the loop itself, and a Dahl state on any estimate of the elongation at 30 dB (force-derived 17 um, motor angles "
+    "and estimated joints 77 um of noise per sample, presliding length 0.4 mm) is relaxed by the noise; with the "
+    "truth's own parameters the spring side is left at 27x (force-derived), 19x (the model's elongation, best "
+    "smoothing) and 12x (the self-consistent elongation f_el(x) + z(x) = F, smoothed), 1.0x on the noise-free "
+    "elongation; the diagnosis writes a longer, larger loop on the antagonist and leaves 13.5x"))
+def test_spring_hysteresis_write_back_reaches_the_floor_and_the_truths_loop(hysteresis_on_6):
+    """What a write-back should do and the hysteresis's does not (xfail, strict: passing is news). Oracle,
+    independent of the diagnosis's columns: the truth generator's own law (``components.friction.dahl_path`` with
+    the level ``beta f_el(x) + z0`` and the package's presliding length and smoothing velocity, as
+    ``spring.hysteresis_rate``) on the noise-free elongation, fitted to the measured spring-side residual; it
+    recovers the truth's loop level at the mean force within 4 of its standard errors (measured: 3.53 +- 0.04 N
+    against 3.65 N). Then the written loop's level must agree with it within 4 times the sum of both fits'
+    standard errors (measured: 5.19 N), and the reloaded nominal must leave the spring side below the
+    unexplained limit (noise only, chi-square; measured 13.5x against 2.8x)."""
+    import dataclasses
+    from awiwi_drake.components.friction import dahl_path
+    from awiwi_drake.discrepancy.finger import _signatures
+    from awiwi_drake.parameters.components import HysteresisParams
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds, dx = hysteresis_on_6
+    s = DiscrepancySettings()
+    fr = FingerResiduals(ds, s)
+    t, clean, h = 5, ds.meta["clean_outputs"], HysteresisParams()
+    law = fr.rig.spring_laws[t]
+    q = np.stack([clean[f"joint_angle_{j + 1}"] for j in range(fr.n)])
+    x = fr.rig.offsets[t] + fr.r * clean["motor_angle_6"] + np.asarray(fr.rig.coupling.P(), float)[t] @ q
+    fel = np.asarray(law.force(x), float)
+
+    def whitened(i, z):                  # a loop force on spring i as it shows in the spring-side residual
+        return ((fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]) * fr.consistent(z)[:, None]).T.ravel()
+
+    Xo = np.stack([whitened(t, dahl_path(x, lv, h.presliding_length, h.smoothing_velocity, ds.dt))
+                   for lv in (fel, np.ones_like(fel))]).T
+    oracle = np.linalg.lstsq(Xo, fr.eps.ravel(), rcond=None)[0]
+    go = np.array([np.mean(fr._force_raw[t]), 1.0])
+    level_o, se_o = go @ oracle, np.sqrt(go @ np.linalg.inv(Xo.T @ Xo) @ go)      # whitened: unit noise
+    truth = ds.meta["truth"]["spring_hysteresis"]["width_ratio"] * go[0]
+    assert abs(level_o - truth) < 4 * se_o, (level_o, truth, se_o)
+    st = dx.steps[0]
+    i, p = st.tendon - 1, st.parameters
+    Xd = next(X for _, X, _, shape in _signatures(fr, "spring_hysteresis", i, CatalogBounds())
+              if shape == {k: p[k] for k in shape}).reshape(2, -1).T
+    gd = np.array([np.mean(fr._force_raw[i]), 1.0])
+    level_d, se_d = gd @ [p["hysteresis_ratio"], p["hysteresis_width"]], np.sqrt(gd @ np.linalg.inv(Xd.T @ Xd) @ gd)
+    js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
+    fa = FingerResiduals(dataclasses.replace(ds, parameters=js), s)
+    assert abs(level_d - level_o) < 4 * (se_o + se_d) and fa.ratios()["spring_total"] < fa.unexplained_limit(), (
+        level_d, level_o, fa.ratios()["spring_total"])
 
 
 def test_thumb_names_motor_and_spring_effects_and_reports_gauss_newton_limits():
@@ -322,34 +373,71 @@ def test_guide_friction_acts_between_sensor_and_joints_is_named_there_and_writte
     """Guide friction where the thesis has it ("the tendon force measurements are performed into the forearm":
     the guidings from the fingers to the spring mechanisms, ch. 4): the truth is the package's guides (Dahl state,
     a ``tendon_guides`` entry) on index_h5's path only. The motor side does not see it (every motor at the floor:
-    the sensor reads the spring's force), the links' equation does, and the diagnosis names guide friction on the
-    PIP pair, with index_h6 as the not-separable antagonist (its constant part is the same generalised force).
-    Written back as a ``tendon_guides`` entry (the fitted constant; the capstan exponent from the fitted rise), the
-    reloaded nominal's joint-side error falls; it differs from the diagnosis's after-ratio only by
-    the release branch of the capstan law (the written exponent reproduces the fitted rise exactly, not the fitted
-    loss), bounded by the triangle inequality with that branch's whitened energy."""
+    the sensor reads the spring's force), the links' equation does, and the diagnosis names guide friction in
+    index_h5's class (:func:`_named_tendons`; index_h6 is the not-separable antagonist: its constant part is the
+    same generalised force). Written back as a ``tendon_guides`` entry (the fitted constant; the capstan exponent
+    from the fitted rise), the reloaded nominal's joint-side error is below the unexplained limit (the noise-only
+    chi-square bound, :meth:`FingerResiduals.unexplained_limit`; wave 6's write-back left 71x the floor there: the
+    Dahl law ran on the raw estimated travel, whose noise relaxes its state), and it differs from the diagnosis's
+    after-ratio only by the release branch of the capstan law (the written exponent reproduces the fitted rise
+    exactly, not the fitted loss), bounded by the triangle inequality with that branch's whitened energy.
+
+    Oracle, independent of the diagnosis's columns: the truth generator's own law (``components.friction``:
+    ``guide_friction_level`` with the truth's capstan exponent, ``dahl_path`` with the truth's presliding length,
+    on the noise-free travel ``P_5 q`` and tension) as columns (constant part, capstan part) fitted to the measured
+    residual. It recovers the truth's sliding level at the mean force within 4 of its standard errors; the written
+    law's level at its own tendon's mean force (the pair's tendons carry the same mean force within 0.2 %, and the
+    data fix the pair's generalised force) agrees with the oracle's within 4 times the sum of both fits' standard
+    errors. The level, not C and mu alpha apart: with the force near its mean they trade (standard error of C
+    10 %, of the level 1.5 %)."""
     import dataclasses
-    ds = make_finger_dataset("index", ["guide_friction"], place=5, seed=3, gen=THREE)
+    from awiwi_drake.components.friction import dahl_path, guide_friction_level
+    ds = make_finger_dataset("index", ["guide_friction"], place=5, seed=3, gen=THREE, joint_angles=True)
     dx = diagnose(ds)
-    assert dx.tendons_named == {"guide_friction": ["index_h5"]} or dx.tendons_named == {"guide_friction": ["index_h6"]}
     step = dx.steps[0]
-    assert step.status == "not separable" and any(m.startswith("guide_friction on index_h") for m in step.members)
+    assert dx.named_effects == ["guide_friction"] and "index_h5" in _named_tendons(dx, step)
+    assert step.status == "not separable" and set(_named_tendons(dx, step)) == {"index_h5", "index_h6"}
     s = DiscrepancySettings()
     fb = FingerResiduals(ds, s)
     assert max(fb.ratios()["motor"]) < s.unexplained_ratio and fb.ratios()["joint"] > 10 * s.unexplained_ratio
     js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
     fa = FingerResiduals(dataclasses.replace(ds, parameters=js), s)
-    before, after = fb.ratios()["joint"], fa.ratios()["joint"]
-    assert after < before
+    after = fa.ratios()["joint"]
+    assert after < fa.unexplained_limit() < fb.ratios()["joint"], (after, fa.unexplained_limit())
     i, g = step.tendon - 1, step.parameters
+    w = g["guide_path_filter"]
+    assert fa.path_filters == {i: w}            # the reload smooths the travel as the fit chose
     written = dict(fa.params.tendon_guides)[fa.rig.tendon_names[i]]
     assert written.constant == pytest.approx(g["guide_c0"], rel=1e-12)
     assert np.expm1(written.capstan_exponent) == pytest.approx(g["guide_capstan"] * np.expm1(g["guide_mu"]), rel=1e-9)
-    diff = fb.guide_path(i, written.constant, written.capstan_exponent) - (
-        g["guide_c0"] * fb.guide_path(i, 1.0, 0.0) + g["guide_capstan"] * fb.guide_path(i, 0.0, g["guide_mu"]))
+    diff = fb.guide_path(i, written.constant, written.capstan_exponent, w) - (
+        g["guide_c0"] * fb.guide_path(i, 1.0, 0.0, w) + g["guide_capstan"] * fb.guide_path(i, 0.0, g["guide_mu"], w))
     wd = np.linalg.solve(fb._joint_whiten, np.outer(fb._P[i], fb.consistent(diff)))
     bound = np.sqrt(np.mean(np.sum(wd ** 2, axis=0)) / fb.n)
     assert abs(np.sqrt(after) - np.sqrt(dx.ratios_after["joint"])) <= bound * (1 + 1e-9) + 1e-12, (after, bound)
+    # the oracle: the truth's own law on the noise-free travel, fitted to the measured links' residual
+    truth, t = ds.meta["truth"]["guide_friction"], ds.meta["truth"]["place"] - 1
+    clean = ds.meta["clean_outputs"]
+    travel = fb._P[t] @ np.stack([clean[f"joint_angle_{j + 1}"] for j in range(fb.n)])
+    tension = clean[f"tendon_force_{t + 1}"]
+    direction = np.tanh(np.clip(np.gradient(travel, ds.dt) / fb.params.friction_smoothing_velocity, -40.0, 40.0))
+
+    def whitened(tendon, force):        # a guide force on one path as it shows in the whitened residual
+        return (np.linalg.solve(fb._joint_whiten, -fb._P[tendon])[:, None] * fb.consistent(force)[None]).ravel()
+
+    law = lambda c, e: dahl_path(travel, guide_friction_level(tension, c, e, direction),  # noqa: E731
+                                 fb.params.guide_presliding_length, 0.0, ds.dt)
+    Xo = np.stack([whitened(t, law(1.0, 0.0)), whitened(t, law(0.0, truth["mu_angle"]))]).T
+    oracle = np.linalg.lstsq(Xo, fb.rho.ravel(), rcond=None)[0]
+    go = np.array([1.0, np.expm1(truth["mu_angle"]) * np.mean(fb._force_raw[t])])
+    level_o, se_o = go @ oracle, np.sqrt(go @ np.linalg.inv(Xo.T @ Xo) @ go)   # unit noise: whitened
+    assert abs(level_o - go @ [truth["c0"], 1.0]) < 4 * se_o, (level_o, go @ [truth["c0"], 1.0], se_o)
+    U, Dp, Dm = fb.guide_columns(i, w)
+    E = g["guide_mu"]
+    Xd = np.stack([whitened(i, U), whitened(i, np.expm1(E) * Dp - np.expm1(-E) * Dm)]).T
+    gd = np.array([1.0, np.expm1(E) * np.mean(fb._force_raw[i])])
+    level_d, se_d = gd @ [g["guide_c0"], 1.0], np.sqrt(gd @ np.linalg.inv(Xd.T @ Xd) @ gd)
+    assert abs(level_d - level_o) < 4 * (se_o + se_d) < 0.25 * level_o, (level_d, level_o, se_o, se_d)
 
 
 def test_places_keep_every_tendon_an_effect_is_named_on():
@@ -434,3 +522,47 @@ def test_links_equation_is_judged_only_where_the_tendons_fix_every_joint_angle()
     fr = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008))
     assert la.matrix_rank(np.asarray(fr.rig.coupling.P(), float)) == fr.n - 1
     assert not fr.joint_checked and "PIP/DIP" in fr.joint_reason and np.isnan(fr.ratios()["joint"])
+
+
+def test_signature_cache_key_holds_the_bounds():
+    """The candidate columns are cached per dataset; the key holds the catalog's bounds, on which the columns
+    depend (the guide's capstan grid ends at ``guide_mu_max``): asked with other bounds, the cache does not answer
+    with the first ones' columns."""
+    from awiwi_drake.discrepancy.finger import _signatures
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds = make_finger_dataset("index", [], seed=1, gen=SHORT)
+    fr = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008))
+    mus = lambda b: sorted({shape["guide_mu"] for *_, shape in _signatures(fr, "guide_friction", 4, b)})  # noqa: E731
+    assert mus(CatalogBounds())[-1] == pytest.approx(0.6)
+    assert mus(CatalogBounds(guide_mu_max=0.3))[-1] == pytest.approx(0.3)
+    assert mus(CatalogBounds())[-1] == pytest.approx(0.6)
+
+
+def test_box_least_squares_is_the_constrained_optimum():
+    """``_lsq`` (the amplitudes' fit within their physical ranges, by enumerating which bounds are active) reaches
+    the optimum of scipy's bounded least squares (``lsq_linear``) on random problems where bounds bind, and its
+    answer satisfies the box's KKT conditions: zero gradient on free amplitudes, a gradient pushing outwards on
+    those held at a bound."""
+    from scipy.optimize import lsq_linear
+    from awiwi_drake.discrepancy.finger import _BOUNDS, _lsq
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    b = CatalogBounds()
+    names = ["motor_coulomb", "motor_viscous", "guide_capstan"]
+    lo = np.array([_BOUNDS[k](b)[0] for k in names])
+    hi = np.array([_BOUNDS[k](b)[1] for k in names])
+    rng = np.random.default_rng(0)
+    held = 0
+    for _ in range(30):
+        A = rng.normal(size=(40, 3))
+        y = A @ rng.normal(0, 2.0, 3) + rng.normal(0, 0.1, 40)
+        x = _lsq(A, y, names, b)
+        ref = lsq_linear(A, y, bounds=(lo, hi), tol=1e-12).x
+        cost = lambda v: float(np.sum((y - A @ v) ** 2))  # noqa: E731
+        assert np.all(x >= lo) and np.all(x <= hi)
+        assert cost(x) <= cost(ref) * (1 + 1e-9) + 1e-12
+        grad = A.T @ (A @ x - y)
+        free = (x > lo) & (x < hi)
+        assert np.all(np.abs(grad[free]) < 1e-8 * (1 + np.abs(A.T @ y)[free]))
+        assert np.all(grad[x <= lo] >= -1e-8) and np.all(grad[x >= hi] <= 1e-8)
+        held += int(np.sum(~free))
+    assert held > 10        # the bounds bind in these problems

@@ -31,12 +31,10 @@ def test_P_matches_autodiff_and_finite_differences(finger):
         np.testing.assert_allclose(P, fd_jacobian(c.h, q, h=1e-6), atol=1e-9)
         h_ad = c.h(InitializeAutoDiff(q).ravel())
         np.testing.assert_allclose(ExtractGradient(h_ad), P, atol=1e-14)
-        # AutoDiff P (values) equals float P; tau = -P^T f
+        # AutoDiff P (values) equals float P
         P_ad = c.P(InitializeAutoDiff(q).ravel())
         np.testing.assert_allclose(np.vectorize(lambda x: x.value() if isinstance(x, AutoDiffXd) else x)(P_ad),
                                    P, atol=1e-15)
-        f = RNG.uniform(5, 50, c.num_tendons)
-        np.testing.assert_allclose(c.generalized_force(q, f), -P.T @ f)
 
 
 def test_thumb_symbolic_h_differentiates_to_P():
@@ -100,7 +98,7 @@ def test_stiffness_map_is_symmetric_pd_and_equals_minus_dtau_dq(finger):
         f0 = RNG.uniform(10, 40, c.num_tendons)    # feasible pretension: all tendons taut
 
         def tau(q):   # motors fixed: f = f0 + k_t (h(q) - h(q0))
-            return c.generalized_force(q, f0 + k_t * (c.h(q) - c.h(q0)))
+            return -c.P(q).T @ (f0 + k_t * (c.h(q) - c.h(q0)))     # (ARCHITECTURE sign convention)
 
         K = joint_stiffness(c, q0, f0, k_t)
         np.testing.assert_allclose(K, K.T, atol=1e-12)
@@ -250,7 +248,8 @@ def test_thumb_base_lengths_and_jacobian_from_one_kinematics_evaluation():
     laws h and P) against h(q) and P(q) to 1e-12 and against finite differences of h."""
     c = finger_coupling("thumb")
     for q in RNG.uniform(-1.2, 1.2, size=(5, 2)):
-        h, J = c.base_lengths_and_jacobian(*q)
+        out = c._base_kernel()(np.asarray(q, dtype=float), np.empty(28))
+        h, J = out[:4], out[4:12].reshape(4, 2)
         full = np.concatenate([q, [0.0, 0.0]])
         np.testing.assert_allclose(h, c.h(full)[:4], rtol=1e-12, atol=0)
         np.testing.assert_allclose(J, c.P(full)[:4, :2], rtol=1e-12, atol=1e-14)

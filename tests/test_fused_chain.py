@@ -10,7 +10,6 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, Ini
 from _fd import fd_jacobian
 from awiwi_drake.analysis import simulate
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
-from awiwi_drake.control.base import StaticLawController
 from awiwi_drake.control.fused import FusedChain_
 from awiwi_drake.control.joint_design import sampled_loop_poles
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -202,14 +201,18 @@ def test_compiled_force_law_equals_the_law_as_written():
         law(bad)
 
 
-@pytest.mark.parametrize("target", ["hand", "finger-thumb"])
-def test_compiled_backstepping_equals_the_law_as_written(target):
+@pytest.mark.parametrize("target, name", [("hand", "backstepping"), ("finger-thumb", "backstepping"),
+                                          ("hand", "backstepping-friction-observer"),
+                                          ("finger-thumb", "backstepping-friction-observer")])
+def test_compiled_backstepping_equals_the_law_as_written(target, name):
     """The 15.5 law's float path (one compiled call, polynomial springs) equals FingerBacksteppingLaw.terms (the law
-    for every scalar type) at random measurements: relative 1e-12 of the command."""
+    for every scalar type) at random measurements: relative 1e-12 of the command; with the link torque estimate and its
+    compensation bounded by the frictions (``backstepping-friction-observer``) at estimates inside and beyond the
+    bound (half of the DoF each)."""
     rig = _rig(target)
-    law = make_controller("backstepping", rig).law
+    law = make_controller(name, rig).law
     op = rig.operating_point()
-    loop = closed_loop(rig, StaticLawController(law))
+    loop = closed_loop(rig, make_controller("backstepping", rig))           # the measurements' values only
     ctx = loop.create_context(op)
     plant = loop.diagram.GetSubsystemByName("rig")
     pctx = plant.GetMyContextFromRoot(ctx)
@@ -220,6 +223,9 @@ def test_compiled_backstepping_equals_the_law_as_written(target):
              for nm, s in (("elongation", 2e-4), ("motor_angle", 0.1), ("motor_velocity", 1.0))}
         u.update(joint_angle=op.joint_angle + rng.normal(scale=0.05, size=n), joint_velocity=rng.normal(scale=0.3, size=n),
                  joint_angle_reference=op.joint_angle + rng.normal(scale=0.1, size=n))
+        if law.link_torque_estimate:
+            B = law.friction_bound(law.f_op)
+            u["friction_compensation"] = B * rng.uniform(-1, 1, B.size) * np.where(np.arange(B.size) % 2, 3.0, 0.5)
         ref, fast = law.terms(u)["command"], law(u)
         assert law._fast                                          # the compiled path ran
         np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())

@@ -9,13 +9,13 @@ from pydrake.systems.controllers import LinearQuadraticRegulator
 from pydrake.systems.framework import DiagramBuilder
 
 from awiwi_drake.components import ConstantCoupling, antagonistic_coupling, tendon_spring
-from awiwi_drake.components.fused_drive import DriveModel, GuideFrictionModel, TendonDrive_, build_kernels, drive_laws
+from awiwi_drake.components.fused_drive import DriveModel, GuideFrictionModel, build_kernels, drive_laws
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.hand.coupling import finger_coupling
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
 from awiwi_drake.parameters.components import GuideFrictionParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
-from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd, fd_jacobian
+from _fd import check_system_autodiff_matches_fd, fd_jacobian
 from _joint_rig_check import rig_law_derivatives
 
 RNG = np.random.default_rng(7)
@@ -127,54 +127,44 @@ def test_kernel_equals_laws_with_a_link_and_partial_rates(hysteresis, guide):
                                rtol=1e-12, atol=1e-12 * np.max(np.abs(ref["derivatives"])))
 
 
-def test_drive_system_converts_and_autodiff_matches_finite_differences():
+def test_drive_laws_autodiff_equals_finite_differences_on_the_thumb():
+    """The drive's laws (posture-dependent P(q), hysteresis, guide friction with capstan, per-tendon springs,
+    friction and ripple) in AutoDiffXd: the Jacobians of the state rates, tendon forces and generalised force
+    w.r.t. state, motor torque, joint angle and joint velocity equal central differences of the float laws."""
+    from pydrake.autodiffutils import ExtractGradient, InitializeAutoDiff
     model = _thumb_model(friction=True, ripple=True, hysteresis=True, guide=True, capstan=True, per_tendon=True)
-    sys_ = TendonDrive_[float](model)
     s = _random_state(model)
     s[8:16] *= 0.1   # moderate speeds keep the finite differences away from the tanh knees
-    inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
-                  joint_velocity=RNG.normal(scale=0.01, size=4))
-    jac = check_system_autodiff_matches_fd(sys_, s, inputs, rtol=2e-5)
-    assert_symbolic_matches_float(sys_, s, inputs, rtol=1e-9)     # symbolic (laws) = float (kernel)
-    assert all(np.abs(J_ad).max() > 0 for J_ad, _ in jac.values())    # every compared Jacobian is non-trivial
+    z0 = np.concatenate([s, RNG.normal(size=8), RNG.normal(scale=0.3, size=4), RNG.normal(scale=0.01, size=4)])
+    k = model.num_states
+
+    def laws(z):
+        out = drive_laws(model, z[:k], z[k:k + 8], z[k + 8:k + 12], z[k + 12:])
+        return np.concatenate([out["derivatives"], out["tendon_force"], out["generalized_force"]])
+    J_ad = ExtractGradient(laws(InitializeAutoDiff(z0).ravel()))
+    J_fd = fd_jacobian(laws, z0, h=1e-7)
+    np.testing.assert_allclose(J_ad, J_fd, rtol=2e-5, atol=2e-5 * np.abs(J_fd).max())
+    assert np.abs(J_ad[:, k + 8:]).max() > 0          # the joint inputs enter (P(q), the sliding rates)
 
 
-def test_float_system_equals_its_autodiff_conversion_values():
-    """The float path (kernel) and the AutoDiff path (laws) of one system agree in value."""
-    model = _thumb_model(friction=True, ripple=True, hysteresis=True, guide=True, capstan=False, per_tendon=True)
-    f = TendonDrive_[float](model)
-    ad = f.ToAutoDiffXd()
-    cf, ca = f.CreateDefaultContext(), ad.CreateDefaultContext()
-    s = _random_state(model)
-    inputs = dict(motor_torque=RNG.normal(size=8), joint_angle=RNG.normal(scale=0.3, size=4),
-                  joint_velocity=RNG.normal(size=4))
-    cf.SetContinuousState(s)
-    ca.SetContinuousState(s)
-    for name, v in inputs.items():
-        f.GetInputPort(name).FixValue(cf, v)
-        ad.GetInputPort(name).FixValue(ca, v)
-    val = np.vectorize(lambda a: a.value())
-    np.testing.assert_allclose(f.EvalTimeDerivatives(cf).CopyToVector(),
-                               val(ad.EvalTimeDerivatives(ca).CopyToVector()), rtol=1e-12, atol=1e-9)
-    for i in range(f.num_output_ports()):
-        np.testing.assert_allclose(f.get_output_port(i).Eval(cf), val(ad.get_output_port(i).Eval(ca)),
-                                   rtol=1e-12, atol=1e-10, err_msg=f.get_output_port(i).get_name())
-
-
-def test_ports_are_lean_with_declared_prerequisites():
-    model = _thumb_model(friction=True, ripple=False, hysteresis=True, guide=True, capstan=False, per_tendon=False)
-    s = TendonDrive_[float](model)
-    u = s.GetInputPort("motor_torque").get_index()
-    q = s.GetInputPort("joint_angle").get_index()
-    qd = s.GetInputPort("joint_velocity").get_index()
-    feed = {s.get_output_port(i).get_name(): {j for j in (u, q, qd) if s.HasDirectFeedthrough(j, i)}
-            for i in range(s.num_output_ports())}
-    for name in ("state", "motor_angle", "motor_velocity", "motor_state"):
-        assert feed[name] == set(), name
-    for name in ("tendon_force", "tendon_stiffness", "elongation"):
-        assert feed[name] == {q}, name
-    assert feed["generalized_force"] == {q, qd}
-    assert feed["applied_torque"] == {u}
+def test_tendon_rig_outputs_are_the_laws_and_its_autodiff_matches_finite_differences():
+    """The tendon rig (no joints: one SymbolicVectorSystem and the stateless outputs) with hysteresis: its forces,
+    stiffness and applied torque equal drive_laws at random states; its AutoDiffXd conversion equals central
+    differences of the float diagram for the time derivatives and every output."""
+    from awiwi_drake.parameters import TendonRigParams
+    p = TendonRigParams()
+    rig = tendon_rig(params=p.replace(spring=p.spring.replace(hysteresis=HysteresisParams(enabled=True))))
+    model, d = rig.drive.model, rig.diagram
+    ctx = d.CreateDefaultContext()
+    for _ in range(4):
+        x = rig.operating_point().state + RNG.normal(scale=0.05, size=rig.num_states)
+        u = RNG.normal(scale=2.0, size=1) * p.motor.torque_limit
+        _set(rig, ctx, x, u)
+        ref = drive_laws(model, x, u, np.zeros(0))
+        for name in ("tendon_force", "tendon_stiffness", "applied_torque"):
+            np.testing.assert_allclose(d.GetOutputPort(name).Eval(ctx), ref[name], rtol=1e-12, err_msg=name)
+    x = rig.operating_point().state + RNG.normal(scale=0.01, size=rig.num_states)
+    check_system_autodiff_matches_fd(d, x, dict(motor_torque=rig.operating_point().motor_torque), rtol=1e-5)
 
 
 def test_non_compilable_spring_is_refused_with_its_name():
@@ -315,34 +305,26 @@ def test_hysteresis_loop_width_equals_the_dahl_closed_form():
 
     With a constant half-width w (beta = 0) the loop has a closed form: on a cycle of amplitude A
     the state swings between +-Z, Z = w tanh(A / delta), and at the centre of the cycle the loading
-    branch carries z = w - (w + Z) exp(-A / delta): the width is twice that."""
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput, Sine
+    branch carries z = w - (w + Z) exp(-A / delta): the width is twice that.  The law's state is integrated
+    along the prescribed elongation x(t) = x0 + A sin(2 pi f t) by scipy's DOP853 (an independent integrator)."""
+    from scipy.integrate import solve_ivp
+
+    from awiwi_drake.components.spring import hysteresis_rate
     hyst = HysteresisParams(enabled=True, width_ratio=0.0, width_offset=4.5)
-    motor = MotorParams(inertia=1.0, friction=False, saturation=False)
     x0 = float(np.ravel(SPRING.inverse_force(np.array([40.0])))[0])
-    r_m = 1e-4          # a heavy motor on a tiny pulley holding ~40 N: it barely moves (x is logged anyway)
-    b = DiagramBuilder()
-    d = b.AddSystem(TendonDrive_[float](DriveModel(motor, (SPRING,), ConstantCoupling([[1.0]]), np.array([x0]), r_m,
-                                                   hyst)))
     amp, freq = 1e-3, 4.0
-    sine = b.AddSystem(Sine(amp, 2 * np.pi * freq, 0.0, 1))
-    b.Connect(sine.get_output_port(0), d.GetInputPort("joint_angle"))
-    b.Connect(sine.get_output_port(1), d.GetInputPort("joint_velocity"))
-    u = b.AddSystem(ConstantVectorSource([r_m * 40.0]))
-    b.Connect(u.get_output_port(), d.GetInputPort("motor_torque"))
-    log_f = LogVectorOutput(d.GetOutputPort("tendon_force"), b)
-    log_x = LogVectorOutput(d.GetOutputPort("elongation"), b)
-    diagram = b.Build()
-    sim = Simulator(diagram)
-    sim.get_mutable_integrator().set_target_accuracy(1e-9)
-    sim.AdvanceTo(0.6)
-    ctx = sim.get_context()
-    t = log_f.FindLog(ctx).sample_times()
-    f, x = log_f.FindLog(ctx).data()[0], log_x.FindLog(ctx).data()[0]
-    last = t > 0.35                                 # one full cycle after the first loading
-    t, f, x = t[last], f[last], x[last]
-    xdot = np.gradient(x, t)
+    w0 = 2 * np.pi * freq
+
+    def elongation(t):
+        return x0 + amp * np.sin(w0 * t), amp * w0 * np.cos(w0 * t)
+
+    def rate(t, z):
+        x, xdot = elongation(t)
+        return np.ravel(hysteresis_rate(z, np.array([x]), np.array([xdot]), SPRING.force(np.array([x])), hyst))
+    t = np.linspace(0.35, 0.6, 20001)                    # one full cycle after the first loading
+    sol = solve_ivp(rate, (0.0, 0.6), [0.0], method="DOP853", rtol=1e-10, atol=1e-12, t_eval=t)
+    x, xdot = elongation(t)
+    f = np.ravel(SPRING.force(x)) + sol.y[0]
     centre, A = 0.5 * (x.max() + x.min()), 0.5 * (x.max() - x.min())
     widths = []
     for sign in (1, -1):

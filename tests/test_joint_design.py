@@ -110,6 +110,22 @@ def test_whole_finger_poles_against_the_per_joint_designs(design):
     assert c.stable, c.poles[c.poles.real >= 0]
 
 
+def _motor_held_link_damping(rig, d):
+    """``-d tau_ref_j / d qdot_j`` of the designed stage at the operating point with the motors held (``omega = 0``):
+    Drake's ``Linearize`` of the stage system from ``joint_velocity`` to ``joint_torque_reference``, per DoF name."""
+    from awiwi_drake.analysis import linearize
+    op = rig.operating_point()
+    stage = JointStage(d.law, np.ones(len(d.models)))
+    ctx = stage.CreateDefaultContext()
+    values = dict(joint_angle_reference=op.joint_angle, joint_angle=op.joint_angle, tendon_force=op.tendon_force,
+                  tendon_stiffness=op.tendon_stiffness)
+    for i in range(stage.num_input_ports()):
+        port = stage.get_input_port(i)
+        port.FixValue(ctx, values.get(port.get_name(), np.zeros(port.size())))
+    D = linearize(stage, context=ctx, input="joint_velocity", outputs=("joint_torque_reference",)).D
+    return {m.name: -D[j, j] for j, m in enumerate(d.models)}
+
+
 def test_pole_placement_places_the_double_oscillator_on_each_joint():
     """(12.13) per DoF: omega1 = position_bandwidth damped to damping_ratio, omega2 = |the joint's own open-loop pair|
     damped to xi2 = damping_ratio, or less where that keeps the motor-held damping Kd - K_taud K_jj non-negative
@@ -121,6 +137,7 @@ def test_pole_placement_places_the_double_oscillator_on_each_joint():
     p = JointDesignParams()
     for period in (None, 1.0 / 3000.0):
         d = design_joint_stage(rig, "pole-placement", params=p, period=period)
+        held = _motor_held_link_damping(rig, d)
         lowered = []
         for m, poles, K in zip(d.models, d.design_poles, d.gains):
             lam = m.poles
@@ -132,7 +149,7 @@ def test_pole_placement_places_the_double_oscillator_on_each_joint():
             want = np.roots(double_oscillator_polynomial(p.position_bandwidth, p.damping_ratio, pair, xi2))
             np.testing.assert_allclose(np.sort_complex(s), np.sort_complex(want), rtol=1e-6)
             c = motor_held_damping(K, m)
-            assert c == pytest.approx(K[1] - K[3] * m.stiffness, rel=1e-12) and torque_loop_gain(K) > 0.0
+            assert c == pytest.approx(held[m.name], rel=1e-9, abs=1e-12 * K[1]) and torque_loop_gain(K) > 0.0
             if xi2 < p.damping_ratio - 1e-6:           # lowered: exactly at the bound
                 lowered.append(m.name)
                 assert abs(c) <= 1e-9 * K[1]
@@ -339,7 +356,9 @@ def test_cause_of_the_default_finger_instabilities_of_pole_placement_and_lqr():
     assert torque_loop_gain(old[3]) < 0.0                                  # the DIP: positive torque feedback
     r = sampled_loop_poles(rig, law_of(models, np.array(old), "joint"))
     bad = r.s[(np.abs(r.z) > 1.0) & ~r.neutral]
-    assert bad.size and np.all(np.abs(bad.imag) < 1e-6) and np.all(bad.real > 1.0), bad      # a real drift
+    drift = bad[np.abs(bad.imag) < 1e-6]
+    assert drift.size and np.all(drift.real > 1.0), bad      # a real drift (with the motor friction (3.8) fed forward
+    # in full by the force loop the fast link mode below, which the friction at rest used to damp, grows too)
     ctrl = joint_stage_controller(rig, "pole-placement")
     d = ctrl.design["joint_design"]
     assert all(torque_loop_gain(K) > 0.0 and motor_held_damping(K, m) >= -1e-9 * K[1] for K, m in zip(d.gains, d.models))
@@ -452,6 +471,51 @@ def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
         assert np.min(np.abs(loop.z - z)) <= hs / 2 * abs(1.0 - z), (z, hs, loop.z[np.argmin(np.abs(loop.z - z))])
 
 
+def test_cascaded_design_poles_are_the_exact_zero_order_hold_of_its_continuous_force_loop():
+    """The sampled design of each DoF (``design_poles``: ``eig(Phi - Gamma K)`` on the reduced model ``z = [q, qdot, tau,
+    tau_dot]``, :func:`sampled_model`) against an independent discrete loop on the same joint: Drake's
+    ``DiscreteTimeApproximation`` (exact zero-order hold) of the *whole* linearised continuous force loop of the DoF
+    (``JointReducedModel.linearization``: the link, every tendon's motor, spring and (10.2) law, 6-10 states), its
+    input delayed one period (the distribution answers the previous request), closed by the stage's gains through
+    ``z = T x``, and linearised by Drake's ``Linearize`` (one discrete state group).  Sampling commutes with the
+    restriction ``F = T A T^+`` exactly when the row space of ``T`` is ``A``-invariant (``e^{A h}`` maps it as
+    ``e^{F h}``), which ``invariance_residual`` measures, so every designed pole is a pole of that loop to round-off
+    (1e-9 relative), and the loop's other modes (the tendons' force-combination modes outside ``z``) are stable.
+    What the design neglects is the force law's own sampling (the chain holds the motor torques, not the closed force
+    loop's torque): the first-order bound of test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction does
+    not hold at the cascade's cap (1.41 / 1.16 of it on q20); the sampled chain itself is checked stable at rest
+    (test_every_joint_stage_is_stable_at_rest)."""
+    from pydrake.systems.analysis import DiscreteTimeApproximation
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import LinearSystem, MatrixGain
+    rig = finger_diagram(finger="index")
+    h = 1.0 / 3000.0
+    d = design_joint_stage(rig, "cascaded", period=h)
+    assert d.period == h
+    for m, K, designed in zip(d.models, d.gains, d.design_poles):
+        assert m.invariance_residual < 1e-12, (m.name, m.invariance_residual)
+        A, B = m.linearization.A, m.linearization.B
+        Cq, Ct = m.linearization.output("joint_angle").C, m.linearization.output("joint_torque").C
+        T = np.vstack([Cq, Cq @ A, Ct, Ct @ A])
+        n = A.shape[0]
+        zoh = DiscreteTimeApproximation(LinearSystem(A, B, np.zeros((0, n)), np.zeros((0, 1))), h)
+        b = DiagramBuilder()                         # state [x_k, tau_ref,k-1], output [z_k, tau_ref,k-1]
+        plant = b.AddSystem(LinearSystem(np.block([[zoh.A(), zoh.B()], [np.zeros((1, n + 1))]]),
+                                         np.vstack([np.zeros((n, 1)), [[1.0]]]),
+                                         np.block([[T, np.zeros((4, 1))], [np.zeros((1, n)), np.ones((1, 1))]]),
+                                         np.zeros((5, 1)), h))
+        stage = b.AddSystem(MatrixGain(-K[None, :]))
+        b.Connect(plant.get_output_port(), stage.get_input_port())
+        b.Connect(stage.get_output_port(), plant.get_input_port())
+        loop = b.Build()
+        lin = Linearize(loop, loop.CreateDefaultContext())
+        assert lin.time_period() == pytest.approx(h, rel=1e-15)
+        z = np.linalg.eigvals(lin.A())
+        assert z.size == n + 1 and np.abs(z).max() < 1.0, (m.name, np.abs(z).max())
+        for p in designed:
+            assert np.min(np.abs(z - p)) <= 1e-9 * max(abs(p), h), (m.name, p, z)
+
+
 def _late_estimator(rig, period):
     """The tendon-length estimator with its estimate read one period late (as a state output read by
     simultaneous discrete updates is): the joint angles through a one-period delay, their backward difference
@@ -515,7 +579,7 @@ def test_full_state_stages_at_3khz_and_the_cause_of_their_saturation():
     late = sampled_loop_poles(rig, make_controller("lqr", rig, friction_observer=None),      # as it was measured
                               estimator=_late_estimator(rig, h))
     bad = late.s[np.abs(late.z) > 1.0 + 1e-9]
-    assert late.spectral_radius > 1.05 and bad.size and np.all((np.abs(bad.imag) > 3000) & (np.abs(bad.imag) < 5000))
+    assert late.spectral_radius > 1.0 and bad.size and np.all((np.abs(bad.imag) > 3000) & (np.abs(bad.imag) < 5000))
     point = chain_design_point(rig)
     models = reduced_joint_models(rig, point=point)                          # on tau_dot
     assert all(m.torque_rate == "joint" for m in models)

@@ -191,3 +191,60 @@ def test_cli_linearize_writes_bode_prints_damp_and_saves(tmp_path, capsys):
                       (["--bode", str(png), "--output", "torque"], "unknown output 'torque'")):
         assert main(["linearize", "joint-rig", *args]) == 2
         assert __import__("re").search(msg, capsys.readouterr().err)
+
+
+_CONSTANT_OUTPUT_SCRIPT = r'''
+import json, sys
+import numpy as np
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource, Integrator
+from awiwi_drake.analysis import linearize
+from awiwi_drake.hand.diagrams import hand_diagram
+from awiwi_drake.hand.wrist import wrist_tendon_offsets
+
+b = DiagramBuilder()
+i = b.AddSystem(Integrator(2))
+b.ExportInput(i.get_input_port(), "u")
+b.ExportOutput(i.get_output_port(), "x")
+b.ExportOutput(b.AddSystem(ConstantVectorSource([1.0, 2.0, 3.0])).get_output_port(), "y")
+d = b.Build()
+ctx = d.CreateDefaultContext()
+d.GetInputPort("u").FixValue(ctx, np.zeros(2))
+small = linearize(d, context=ctx, input="u", outputs=("y", "x"))
+rig = hand_diagram()
+op = rig.operating_point(wrist_angle=[0.2, -0.1])
+hand = linearize(rig, op, outputs=("wrist_tendon_offset", "joint_angle"), equilibrium_tolerance=None)
+w = hand.outputs["wrist_tendon_offset"]
+print(json.dumps(dict(
+    small=[small.A.tolist(), small.B.tolist(), small.outputs["y"].C.tolist(), small.outputs["y"].D.tolist(),
+           small.outputs["y"].y0.tolist(), small.outputs["x"].C.tolist()],
+    hand_C=float(np.abs(w.C).max()), hand_D=float(np.abs(w.D).max()), hand_CD_shape=[w.C.shape, w.D.shape],
+    hand_y0_err=float(np.abs(w.y0 - wrist_tendon_offsets(0.2, -0.1)).max()),
+    hand_y0_max=float(np.abs(w.y0).max()), nx=hand.A.shape[0],
+    q_rows=float(np.abs(hand.outputs["joint_angle"].C[:, :21] - np.eye(21)).max()))))
+'''
+
+
+def test_output_independent_of_state_and_input_linearises_to_zero_instead_of_crashing():
+    """Drake's Linearize segfaults on an output that depends on neither the state nor the input (the hand's
+    ``wrist_tendon_offset``, fed by the fixed wrist angle only); ``linearize`` gives its exact C = D = 0.
+    Run in a subprocess, so that a crash fails this test instead of killing pytest."""
+    import json
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    proc = subprocess.run([sys.executable, "-c", _CONSTANT_OUTPUT_SCRIPT], capture_output=True, text=True,
+                          timeout=300, env=env)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    A, B, C, D, y0, Cx = r["small"]
+    assert np.array_equal(A, np.zeros((2, 2))) and np.array_equal(B, np.eye(2))    # the integrator
+    assert np.array_equal(C, np.zeros((3, 2))) and np.array_equal(D, np.zeros((3, 2))) and y0 == [1.0, 2.0, 3.0]
+    assert np.array_equal(Cx, np.eye(2))
+    # hand: the offsets' rows are zero, their value the (6.9) law's at the wrist angle; the joint angles are
+    # the first 21 states
+    assert r["hand_C"] == 0.0 and r["hand_D"] == 0.0
+    assert r["hand_CD_shape"] == [[38, r["nx"]], [38, 38]]
+    assert r["hand_y0_max"] > 1e-3 and r["hand_y0_err"] < 1e-12
+    assert r["q_rows"] < 1e-12

@@ -12,7 +12,7 @@ from awiwi_drake.control import closed_loop
 from awiwi_drake.control.lqr import lqr_controller
 from awiwi_drake.parameters import FlexibleJointParams, JointRigParams, MotorParams, TendonRigParams
 from awiwi_drake.diagrams import build_target
-from awiwi_drake.rigs import flexible_joint_rig, joint_rig, tendon_rig
+from awiwi_drake.rigs import flexible_joint_rig, joint_rig, motor_rig, tendon_rig
 
 def expected_12_10(p: FlexibleJointParams):
     m, b, k, dq, dth = p.link_inertia, p.motor_inertia, p.stiffness, p.link_damping, p.motor_damping
@@ -193,3 +193,35 @@ def test_operating_point_errors_are_clear():
         build_target("joint-rig", {"link_mass": "1"})
     with pytest.raises(ValueError, match=r"JointRigParams.link_inertia = -1.0 is out of range"):
         build_target("joint-rig", {"link_inertia": "-1"})
+
+
+@pytest.mark.parametrize("motor", [MotorParams(ripple=True), MotorParams(saturation=False, ripple=True, damping=1e-3)])
+def test_motor_rig_is_3_5_and_its_autodiff_linearisation_equals_finite_differences(motor):
+    """The motor rig's dynamics are (3.5) written out here, B thdd = sat(u) - gamma2 atan(gamma1 w) - gamma3 w - d w
+    + a_m sin(N th + phi_m) + a_o sin(th + phi_o) (Table 3.3 friction, ripple of both bearings), at random states and
+    torques beyond the limit; ``applied_torque`` is sat(u); Drake's Linearize (AutoDiffXd of the generated system)
+    equals central differences of its float dynamics."""
+    rig = motor_rig(motor)
+    d = rig.diagram
+    ctx = d.CreateDefaultContext()
+    rng = np.random.default_rng(3)
+    p = motor
+    for _ in range(6):
+        th, w, u = rng.uniform(-3, 3), rng.uniform(-4, 4), rng.uniform(-2, 2) * p.torque_limit
+        ctx.SetContinuousState([th, w])
+        d.GetInputPort("motor_torque").FixValue(ctx, [u])
+        sat = float(np.clip(u, -p.torque_limit, p.torque_limit)) if p.saturation else u
+        tau = (sat - p.coulomb_torque * np.arctan(p.friction_slope * w) - p.viscous_friction * w - p.damping * w
+               + p.ripple_motor_amplitude * np.sin(p.gear_ratio * th + p.ripple_motor_phase)
+               + p.ripple_output_amplitude * np.sin(th + p.ripple_output_phase))
+        np.testing.assert_allclose(d.EvalTimeDerivatives(ctx).CopyToVector(), [w, tau / p.inertia], rtol=1e-12)
+        assert d.GetOutputPort("applied_torque").Eval(ctx)[0] == pytest.approx(sat, rel=1e-15)
+        lin = linearize(rig, state=[th, w], motor_torque=[u])
+
+        def f(z):
+            ctx.SetContinuousState(z[:2])
+            d.GetInputPort("motor_torque").FixValue(ctx, z[2:])
+            return d.EvalTimeDerivatives(ctx).CopyToVector()
+        J = fd_jacobian(f, np.array([th, w, u]), h=1e-6)
+        np.testing.assert_allclose(np.hstack([lin.A, lin.B]), J, rtol=1e-6, atol=1e-6 * np.abs(J).max())
+

@@ -7,8 +7,8 @@ from pydrake.symbolic import Expression
 
 from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
 from awiwi_drake.components import (
-    ConstantCoupling, MotorBank_, SpringBank_, TendonRouting_, tendon_spring)
-from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
+    ConstantCoupling, SpringBank_, TendonRouting_, tendon_spring)
+from awiwi_drake.parameters import HysteresisParams, SpringModelParams
 
 RNG = np.random.default_rng(0)
 
@@ -28,27 +28,6 @@ def _evaluate(system, x, inputs):
     outs = {system.get_output_port(i).get_name(): system.get_output_port(i).Eval(ctx).copy()
             for i in range(system.num_output_ports())}
     return xdot, outs
-
-
-def test_motor_bank_converts_and_autodiff_matches_fd():
-    p = MotorParams(ripple=True)
-    sys = MotorBank_[float](p, 3)
-    x = np.array([0.1, 0.5, -0.3, 1.0, -2.0, 0.01])
-    inputs = {"motor_torque": np.array([0.3, -0.2, 0.1]), "tendon_force": np.array([20.0, 35.0, 5.0])}
-    jac = check_system_autodiff_matches_fd(sys, x, inputs)
-    assert_symbolic_matches_float(sys, x, inputs)   # symbolic conversion too (atan, sin, min/max)
-    # the derivatives compared are not all zero: the accelerations depend on the motor torque (1 / B)
-    assert np.abs(jac["xdot"][0]).max() > 0
-
-
-def test_motor_bank_load_torque_variant_and_bad_arguments():
-    sys = MotorBank_[float](MotorParams(friction=False, saturation=False), 1, "load_torque")
-    xdot, _ = _evaluate(sys, np.array([0.0, 0.0]), {"motor_torque": [0.5], "load_torque": [0.1]})
-    assert xdot[1] == pytest.approx((0.5 - 0.1) / 2e-3)
-    with pytest.raises(ValueError, match="num_motors"):
-        MotorBank_[float](MotorParams(), 0)
-    with pytest.raises(ValueError, match="load_input"):
-        MotorBank_[float](MotorParams(), 1, "force")
 
 
 @pytest.mark.parametrize("hysteresis", [False, True])

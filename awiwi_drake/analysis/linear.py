@@ -18,7 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 from pydrake.systems.controllers import LinearQuadraticRegulator
-from pydrake.systems.framework import Context, System
+from pydrake.systems.framework import Context, OutputPortSelection, System
 from pydrake.systems.primitives import Linearize
 
 from awiwi_drake.analysis.results import checked_path
@@ -382,6 +382,35 @@ def _channel_names(port_name: str, size: int, names: Sequence[str] = ()) -> tupl
     return (port_name,) if size == 1 else tuple(f"{port_name}[{i}]" for i in range(size))
 
 
+def _constant_outputs(system, ctx, in_port, outputs) -> set:
+    """The ``outputs`` that depend on neither the continuous state nor ``in_port`` (their C and D are zero).
+
+    Drake 1.51.1's ``Linearize`` crashes the process (segmentation fault) on such a port: its AutoDiffXd
+    value carries no derivatives at all, and the empty gradient is read as if it had a column per state and
+    input (reproduced with an ``Integrator`` beside a ``ConstantVectorSource``; on the hand, the wrist's
+    ``wrist_tendon_offset``, fed by the fixed ``wrist_angle`` input only).  Found by one AutoDiffXd
+    evaluation with a single seed direction on the state and the input: an entry that depends on either
+    carries a derivative, even where it is zero.
+    """
+    from pydrake.autodiffutils import AutoDiffXd
+    from pydrake.systems.framework import PortDataType
+
+    def seeded(v, d):
+        return np.array([AutoDiffXd(float(a), d) for a in np.asarray(v, float).ravel()], dtype=object)
+
+    ad = system.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    actx.SetTimeStateAndParametersFrom(ctx)
+    for i in range(system.num_input_ports()):
+        port = system.get_input_port(i)
+        if port.get_data_type() == PortDataType.kVectorValued and port.HasValue(ctx):
+            ad.get_input_port(i).FixValue(actx, seeded(port.Eval(ctx), [1.0] if i == in_port.get_index() else []))
+    if ctx.num_continuous_states():
+        actx.SetContinuousState(seeded(ctx.get_continuous_state_vector().CopyToVector(), [1.0]))
+    return {name for name in outputs
+            if all(e.derivatives().size == 0 for e in np.ravel(ad.GetOutputPort(name).Eval(actx)))}
+
+
 def linearize(plant, op=None, *, context: Context | None = None, input: str = "motor_torque",  # noqa: A002
               outputs: Sequence[str] | None = None, state: Sequence[float] | None = None,
               motor_torque: Sequence[float] | None = None,
@@ -451,18 +480,25 @@ def linearize(plant, op=None, *, context: Context | None = None, input: str = "m
     tol = None if (state is not None or motor_torque is not None) else equilibrium_tolerance
     maps = {}
     A = B = None
+    constant = _constant_outputs(system, ctx, in_port, outputs)
     for k, name in enumerate(outputs):
-        try:
-            lin = Linearize(system, ctx, input_port_index=in_port.get_index(),
-                            output_port_index=system.GetOutputPort(name).get_index(),
-                            equilibrium_check_tolerance=tol if (k == 0 and tol is not None) else math.inf)
-        except RuntimeError as exc:
-            raise ValueError(f"linearize: {system.get_name()!r}: {exc}") from None
+        if k > 0 and name in constant:
+            lin = None
+        else:
+            try:
+                lin = Linearize(system, ctx, input_port_index=in_port.get_index(),
+                                output_port_index=(OutputPortSelection.kNoOutput if name in constant
+                                                   else system.GetOutputPort(name).get_index()),
+                                equilibrium_check_tolerance=tol if (k == 0 and tol is not None) else math.inf)
+            except RuntimeError as exc:
+                raise ValueError(f"linearize: {system.get_name()!r}: {exc}") from None
         if k == 0:
             A, B = np.array(lin.A()), np.array(lin.B())
         y0 = np.array(system.GetOutputPort(name).Eval(ctx), float).reshape(-1)
         cn = _channel_names(name, y0.size, names if name == "state" else ())
-        maps[name] = OutputMap(np.array(lin.C()), np.array(lin.D()), y0, cn)
+        C, D = ((np.zeros((y0.size, A.shape[0])), np.zeros((y0.size, in_port.size()))) if name in constant
+                else (np.array(lin.C()), np.array(lin.D())))
+        maps[name] = OutputMap(C, D, y0, cn)
     x0 = ctx.get_continuous_state_vector().CopyToVector()
     u0 = np.array(in_port.Eval(ctx), float).reshape(-1)
     f0 = system.EvalTimeDerivatives(ctx).CopyToVector() if x0.size else np.zeros(0)

@@ -1,8 +1,8 @@
 """Physical components: laws (pure functions) and their LeafSystems (thesis ch. 3-5)."""
 
-from awiwi_drake.components.fused_drive import DriveModel, TendonDrive, TendonDrive_
+from awiwi_drake.components.fused_drive import DriveModel, TendonDrive
 from awiwi_drake.components.motor import (
-    MotorBank, MotorBank_, motor_acceleration, motor_friction_torque, motor_ripple_torque, reflected_inertia,
+    motor_acceleration, motor_friction_torque, motor_ripple_torque, reflected_inertia,
     saturate_torque)
 from awiwi_drake.components.routing import ConstantCoupling, TendonRouting, TendonRouting_, antagonistic_coupling
 from awiwi_drake.components.spring import (

@@ -1,8 +1,8 @@
-"""One system per tendon drive: motors + springs + routing + guide friction + hysteresis.
+"""The tendon drive's model: motors + springs + routing + guide friction + hysteresis.
 
-:class:`TendonDrive_` is the drive of the tendon rig; the link rigs and the fingers/hand evaluate
-its model (:class:`DriveModel`) in their own systems. Its
-physics is one function, :func:`drive_laws`, that calls the law functions of
+The rigs (:mod:`awiwi_drake.components.rig_system`), the batched joint rigs (:class:`TendonDriveBatch_`) and
+the fingers/hand (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`) evaluate its model (:class:`DriveModel`)
+in their own systems. Its physics is one function, :func:`drive_laws`, that calls the law functions of
 this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
 tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
 :func:`~awiwi_drake.components.spring.hysteresis_rate`,
@@ -10,9 +10,9 @@ tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
 :func:`~awiwi_drake.components.friction.guide_friction`):
 
 * for ``AutoDiffXd`` and ``Expression`` (``Linearize``, LQR, symbolic
-  analysis) the system evaluates :func:`drive_laws` directly;
-* for ``float`` it evaluates numba kernels generated from :func:`drive_laws`
-  (:mod:`awiwi_drake.components.codegen`): the laws are evaluated once on
+  analysis) a system evaluates :func:`drive_laws` directly;
+* for ``float`` numba kernels generated from :func:`drive_laws` (:func:`build_kernels`,
+  :mod:`awiwi_drake.components.codegen`): the laws are evaluated once on
   symbolic variables and the expression tree is compiled. Tests check kernel =
   laws at random states to 1e-12 for every switch.
 
@@ -33,15 +33,6 @@ rigs, no MultibodyPlant); such a model is built into a rig by
 ``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)`` with
 guide friction (the guide friction forces, a Dahl state: see
 :func:`~awiwi_drake.components.friction.guide_friction_rate`).
-
-Ports of :class:`TendonDrive_` (each computes only its own quantity; prerequisites declared):
-
-* inputs ``motor_torque`` (m), ``joint_angle`` (n) and, when hysteresis or
-  guide friction need it, ``joint_velocity`` (``rate_joints``);
-* outputs ``state`` (all drive states), ``motor_angle``, ``motor_velocity``,
-  ``motor_state`` ([theta, omega]), ``tendon_force`` [N], ``tendon_stiffness``
-  [N/m] (elastic curve), ``elongation`` [m], ``generalized_force`` (n) [N m],
-  ``applied_torque`` (m) [N m].
 """
 
 from __future__ import annotations
@@ -59,8 +50,7 @@ from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
 from awiwi_drake.parameters.components import GuideFrictionParams, HysteresisParams, MotorParams
 
-__all__ = ["GuideFrictionModel", "DriveModel", "TendonDrive", "drive_laws", "build_kernels", "TendonDrive_",
-           "TendonDrive_System", "TendonDriveBatch_"]
+__all__ = ["GuideFrictionModel", "DriveModel", "TendonDrive", "drive_laws", "build_kernels", "TendonDriveBatch_"]
 
 
 @dataclass(frozen=True)
@@ -391,132 +381,6 @@ def _build_kernels(model, m, n, nr, jit, vectorized=False):
     functions = {name: (ins[name], list(res[name])) for name in ins}
     from awiwi_drake.components.codegen import compile_kernels
     return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit, vectorized=vectorized)
-
-
-@TemplateSystem.define("TendonDrive_")
-def TendonDrive_(T):
-    """The fused tendon drive (see the module docstring); ``TendonDrive_[T](model)``."""
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, model: DriveModel = None, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            if not isinstance(model, DriveModel):
-                raise ValueError(f"TendonDrive: model must be a DriveModel, got {type(model).__name__}")
-            if T is sym.Expression and not model.supports_symbolic:
-                raise ValueError("TendonDrive: a spring law of this drive cannot be evaluated symbolically")
-            if model.has_link:
-                raise ValueError("TendonDrive: a model with link_inertia is a single-joint rig; build it with "
-                                 "components.rig_system (rig_dynamics_system, LinkRigOutputs_)")
-            self.model = model
-            m, n = model.num_tendons, model.num_joints
-            self._m, self._n = m, n
-            self._float = T is float
-            self._kernels = None
-            self._kd = None
-            self._dbuf = np.empty(model.num_states)
-            self._empty = np.zeros(0)
-            self.DeclareContinuousState(model.num_states)
-            self._u = self.DeclareVectorInputPort("motor_torque", m)
-            state = self.all_state_ticket()
-            self._q = self.DeclareVectorInputPort("joint_angle", n) if n else None
-            self._qd = self.DeclareVectorInputPort("joint_velocity", model.rate_joints) \
-                if model.needs_joint_velocity else None
-            pos = {state} | ({self._q.ticket()} if self._q is not None else set())
-            vel = pos | ({self._qd.ticket()} if self._qd is not None else set())
-            self._slices = dict(state=slice(0, model.num_states), motor_angle=slice(0, m),
-                                motor_velocity=slice(m, 2 * m), motor_state=slice(0, 2 * m))
-            for name, sl in self._slices.items():
-                self.DeclareVectorOutputPort(name, sl.stop - sl.start, self._slicer(sl),
-                                             prerequisites_of_calc={state})
-            for name, size, deps in (("tendon_force", m, pos), ("tendon_stiffness", m, pos), ("elongation", m, pos),
-                                     ("generalized_force", n, vel)):
-                self.DeclareVectorOutputPort(name, size, self._law_output(name), prerequisites_of_calc=set(deps))
-            self.DeclareVectorOutputPort("applied_torque", m, self._calc_applied,
-                                         prerequisites_of_calc={self._u.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.model, converter=converter)
-
-        # -- helpers --------------------------------------------------------------------
-        def kernels(self):
-            """The compiled float kernels (generated on first use)."""
-            if self._kernels is None:
-                self._kernels = build_kernels(self.model)
-                self._bufs = {name: np.empty(size) for name, size in (
-                    ("derivatives", self.model.num_states), ("tendon_force", self._m), ("tendon_stiffness", self._m),
-                    ("elongation", self._m), ("generalized_force", self._n))}
-            return self._kernels
-
-        def _state(self, context):
-            return context.get_continuous_state_vector().CopyToVector()
-
-        def _inputs(self, context, velocity: bool):
-            q = self._q.Eval(context) if self._q is not None else (self._empty if self._float else np.zeros(0))
-            if not velocity:
-                return (q,)
-            qd = self._qd.Eval(context) if self._qd is not None else (self._empty if self._float else None)
-            return (q, qd)
-
-        def _slicer(self, sl):
-            def calc(context, out):
-                out.SetFromVector(self._state(context)[sl])
-            return calc
-
-        def _law_output(self, name):
-            velocity = name == "generalized_force"
-            if self._float:
-                # the simulation hot path (generalized_force at every derivative evaluation): the kernel,
-                # its buffer and the input ports bound once, no helper calls
-                link = self.model.has_link
-                qp, qdp, empty = self._q if not link else None, self._qd if not link else None, self._empty
-                bound = []
-
-                def calc_float(context, out):
-                    if not bound:
-                        bound.extend((self.kernels()[name], self._bufs[name]))
-                    fn, buf = bound
-                    x = context.get_continuous_state_vector().CopyToVector()
-                    if link:
-                        out.SetFromVector(fn(x, buf))
-                        return
-                    q = qp.Eval(context) if qp is not None else empty
-                    if velocity:
-                        out.SetFromVector(fn(x, q, qdp.Eval(context) if qdp is not None else empty, buf))
-                    else:
-                        out.SetFromVector(fn(x, q, buf))
-                return calc_float
-
-            def calc(context, out):
-                x = self._state(context)
-                args = self._inputs(context, velocity)
-                q = args[0] if args else None
-                qd = args[1] if len(args) > 1 else None
-                out.SetFromVector(drive_laws(self.model, x, q=q, qd=qd, want=(name,))[name])
-            return calc
-
-        def _calc_applied(self, context, out):
-            out.SetFromVector(saturate_torque(self._u.Eval(context), self.model.motor))
-
-        def DoCalcTimeDerivatives(self, context, derivatives):
-            # The float branch is the simulation hot path: one kernel call, no helper calls.
-            if self._float:
-                fn = self._kd
-                if fn is None:
-                    fn = self._kd = self.kernels()["derivatives"]
-                x = context.get_continuous_state_vector().CopyToVector()
-                q = self._q.Eval(context) if self._q is not None else self._empty
-                qd = self._qd.Eval(context) if self._qd is not None else self._empty
-                derivatives.SetFromVector(fn(x, self._u.Eval(context), q, qd, self._dbuf))
-                return
-            x = self._state(context)
-            q, qd = self._inputs(context, True)
-            d = drive_laws(self.model, x, self._u.Eval(context), q, qd, want=("derivatives",))
-            derivatives.SetFromVector(d["derivatives"])
-
-    return Impl
-
-
-TendonDrive_System = TendonDrive_[None]
 
 
 @TemplateSystem.define("TendonDriveBatch_")

@@ -1,4 +1,4 @@
-"""Motor model (thesis ch. 3): laws and the vectorised ``MotorBank_`` system.
+"""Motor model (thesis ch. 3): the laws (the motor rig, :func:`~awiwi_drake.rigs.motor_rig`, is generated from them).
 
 Dynamics at the output shaft (3.5)::
 
@@ -13,8 +13,6 @@ per output revolution) and of the output bearing (one period per revolution).
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip
 from awiwi_drake.components.friction import atan_friction
@@ -28,8 +26,6 @@ __all__ = [
     "motor_drive_torque",
     "motor_acceleration",
     "tendon_motor_params",
-    "MotorBank_",
-    "MotorBank",
 ]
 
 
@@ -147,83 +143,3 @@ def motor_acceleration(theta, omega, u, load_torque, p: MotorParams):
     if isinstance(p, tuple):
         return _per_motor(motor_acceleration, p, theta, omega, u, load_torque)
     return (motor_drive_torque(theta, omega, u, p) - load_torque) / p.inertia
-
-
-@TemplateSystem.define("MotorBank_")
-def MotorBank_(T):
-    """N geared motors in one system (thesis ch. 3).
-
-    State ``[theta_1..theta_N, omega_1..omega_N]`` (output shaft, rad and rad/s).
-
-    Input ports
-    -----------
-    motor_torque : (N,) [Nm]
-        Commanded torque at the output shaft (saturated when enabled).
-    tendon_force : (N,) [N]   (``load_input="tendon_force"``, default)
-        Tendon tension; load torque ``r_m f``.
-    load_torque : (N,) [Nm]   (``load_input="load_torque"``)
-        Load torque opposing the motor.
-
-    Output ports
-    ------------
-    motor_angle, motor_velocity : (N,)
-    state : (2N,)
-    applied_torque : (N,) [Nm]
-        The commanded torque after saturation.
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, params: MotorParams = MotorParams(), num_motors: int = 1,
-                       load_input: str = "tendon_force", converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            if not isinstance(params, MotorParams):
-                raise ValueError(f"MotorBank: params must be MotorParams, got {type(params).__name__}")
-            if int(num_motors) != num_motors or num_motors < 1:
-                raise ValueError(f"MotorBank: num_motors = {num_motors!r} must be a positive integer")
-            if load_input not in ("tendon_force", "load_torque"):
-                raise ValueError(f"MotorBank: load_input = {load_input!r} must be 'tendon_force' or 'load_torque'")
-            n = int(num_motors)
-            self.params, self.num_motors, self.load_input = params, n, load_input
-            self._load_gain = params.pulley_radius if load_input == "tendon_force" else 1.0
-            # All misc (z) state, so a diagram orders its state [plant q, plant v, theta, omega].
-            self.DeclareContinuousState(2 * n)
-            self._u = self.DeclareVectorInputPort("motor_torque", n)
-            self._f = self.DeclareVectorInputPort(load_input, n)
-            state = {self.all_state_ticket()}
-            self.DeclareVectorOutputPort("motor_angle", n, self._calc_angle, prerequisites_of_calc=state)
-            self.DeclareVectorOutputPort("motor_velocity", n, self._calc_velocity, prerequisites_of_calc=state)
-            self.DeclareVectorOutputPort("state", 2 * n, self._calc_state, prerequisites_of_calc=state)
-            self.DeclareVectorOutputPort("applied_torque", n, self._calc_applied,
-                                         prerequisites_of_calc={self._u.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.params, other.num_motors, other.load_input, converter=converter)
-
-        def _x(self, context):
-            return context.get_continuous_state_vector().CopyToVector()
-
-        def DoCalcTimeDerivatives(self, context, derivatives):
-            n = self.num_motors
-            x = self._x(context)
-            theta, omega = x[:n], x[n:]
-            u = self._u.Eval(context)
-            load = self._load_gain * self._f.Eval(context)
-            acc = motor_acceleration(theta, omega, u, load, self.params)
-            derivatives.get_mutable_vector().SetFromVector(np.concatenate([omega, acc]))
-
-        def _calc_angle(self, context, out):
-            out.SetFromVector(self._x(context)[: self.num_motors])
-
-        def _calc_velocity(self, context, out):
-            out.SetFromVector(self._x(context)[self.num_motors:])
-
-        def _calc_state(self, context, out):
-            out.SetFromVector(self._x(context))
-
-        def _calc_applied(self, context, out):
-            out.SetFromVector(saturate_torque(self._u.Eval(context), self.params))
-
-    return Impl
-
-
-MotorBank = MotorBank_[None]

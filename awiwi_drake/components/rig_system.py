@@ -43,16 +43,22 @@ SAMPLED_INTEGRATOR = "runge_kutta3"
 
 
 def _check(model) -> None:
-    if not isinstance(model, DriveModel) or not model.has_link:
-        raise ValueError("rig_dynamics_system: model must be a DriveModel with link_inertia/link_damping")
+    if not isinstance(model, DriveModel) or not (model.has_link or model.num_joints == 0):
+        raise ValueError("rig_dynamics_system: model must be a DriveModel whose state is the whole rig: with "
+                         "link_inertia/link_damping, or without joints (the tendon rig)")
     model.require_symbolic("rig_dynamics_system", "use their calibration polynomial")
+
+
+def _no_joints(model: DriveModel) -> dict:
+    """The joint input of :func:`drive_laws` for a drive without joints (the tendon rig), none with a link."""
+    return {} if model.has_link else {"q": np.zeros(0)}
 
 
 def rig_dynamics_expressions(model: DriveModel):
     """``(state_vars, input_vars, xdot)``: :func:`drive_laws` on symbolic variables.
 
-    The input is ``[motor_torque (m), external_torque (n)]``; ``xdot`` is the
-    drive's ``derivatives`` (state order of :class:`DriveModel`).
+    The input is ``[motor_torque (m), external_torque (n)]`` (without joints: ``motor_torque``); ``xdot`` is
+    the drive's ``derivatives`` (state order of :class:`DriveModel`).
     """
     _check(model)
     m, n = model.num_tendons, model.num_joints
@@ -61,7 +67,7 @@ def rig_dynamics_expressions(model: DriveModel):
     X = np.array([sym.Expression(v) for v in xs], dtype=object)
     U = np.array([sym.Expression(v) for v in us], dtype=object)
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
-        xdot = drive_laws(model, X, U[:m], tau_ext=U[m:], want=("derivatives",))["derivatives"]
+        xdot = drive_laws(model, X, U[:m], tau_ext=U[m:], want=("derivatives",), **_no_joints(model))["derivatives"]
     return xs, us, list(xdot)
 
 
@@ -204,7 +210,8 @@ class tendon_force_of_states:
 
 @TemplateSystem.define("LinkRigOutputs_")
 def LinkRigOutputs_(T):
-    """The non-state outputs of a link-carrying drive; ``LinkRigOutputs_[T](model)``.
+    """The non-state outputs of a drive whose state is the whole rig (a link rig, the tendon rig);
+    ``LinkRigOutputs_[T](model)``.
 
     Inputs ``state`` (the model's state), ``motor_torque`` (m). Outputs
     ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``joint_torque``
@@ -220,6 +227,7 @@ def LinkRigOutputs_(T):
             self.model = model
             self._float = T is float
             self._kernels = None
+            self._q = _no_joints(model)            # the kernels' and laws' empty joint input without a link
             m, n = model.num_tendons, model.num_joints
             self._x = self.DeclareVectorInputPort("state", model.num_states)
             self._u = self.DeclareVectorInputPort("motor_torque", m)
@@ -234,14 +242,17 @@ def LinkRigOutputs_(T):
             Impl._construct(self, other.model, converter=converter)
 
         def _law_output(self, law, size):
+            # without a link the kernels take the (empty) joint inputs: q, and qd for the generalised force
+            joints = () if self.model.has_link else (np.zeros(0),) * (2 if law == "generalized_force" else 1)
+
             def calc(context, out):
                 x = self._x.Eval(context)
                 if self._float:
                     if self._kernels is None:
                         self._kernels = build_kernels(self.model)
-                    out.SetFromVector(self._kernels[law](x, np.empty(size)))
+                    out.SetFromVector(self._kernels[law](x, *joints, np.empty(size)))
                     return
-                out.SetFromVector(drive_laws(self.model, x, want=(law,))[law])
+                out.SetFromVector(drive_laws(self.model, x, want=(law,), **self._q)[law])
             return calc
 
         def _calc_applied(self, context, out):

@@ -451,8 +451,9 @@ def _fit_polynomial_cached(geometry, degree, max_force, tendon):
     return PolynomialSpring(PolynomialSpringParams(coefficients=coeffs, max_elongation=x_max))
 
 
+@functools.lru_cache(maxsize=32)
 def tendon_spring(spring_params) -> PolynomialSpring:
-    """The spring law a rig uses, from its :class:`SpringModelParams`.
+    """The spring law a rig uses, from its :class:`SpringModelParams` (one law object per parameter set).
 
     Raises ValueError when ``max_force`` is beyond what the lever carries at its
     mechanical stop (``geometry.max_lever_angle``).

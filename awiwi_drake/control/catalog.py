@@ -105,6 +105,17 @@ register_controller("backstepping-load-observer",
                                 "frictions); 3 kHz, joint angles estimated (5.15). Under a constant load it rests at "
                                 "the impedance's deflection less what the guides' and the lever's friction hold")
 
+# 15.5 with the (9.2) observer and its estimate, bounded by what the guides' friction and the lever's hysteresis can
+# hold, added to the desired joint torque ((9.1), as the chain's default observer): inside the bound the rest is e = 0
+# (finger_backstepping, FingerBacksteppingLaw.dead_band), where the plain law stops in its friction dead band
+register_controller("backstepping-friction-observer",
+                    _lazy("finger_backstepping", "finger_backstepping_controller",
+                          friction_observer=FrictionObserverParams()),
+                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
+                    description="15.5 backstepping with the (9.2) observer per DoF in its link model and its "
+                                "estimate, bounded by the guides' and the lever's friction, added to the desired "
+                                "joint torque (9.1); 3 kHz, joint angles estimated (5.15)")
+
 # Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
 # against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).
 register_controller("optimal-backstepping", _lazy("optimal_gains", "finger_optimal_backstepping_controller"),

@@ -48,7 +48,7 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.joint_stage import JointStage
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
-from awiwi_drake.parameters.control import RippleCompensationParams, TendonForceGains
+from awiwi_drake.parameters.control import TendonForceGains
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
@@ -214,14 +214,14 @@ class TendonForceStage(Diagram):
                 drive=drive_params, springs=springs))
         else:
             raise ValueError(f"TendonForceStage: distribution = {method!r}; use 'optimal', 'algorithm2' or 'sharing'")
-        gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth, friction_scale=p.friction_scale)
+        gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth,
+                                          friction_scale=p.force_friction_scale)
         self.gains = gains
         if tendon_law == "force":
             maps = {id(law_): ForceMap.from_spring(law_, r_m) for law_, _ in springs.groups}
             fmap = maps[id(springs[0])] if springs.uniform else [maps[id(law_)] for law_ in springs]
             law = TendonForceLaw(fmap, drive_params.motor, gains, scheduled=p.scheduled, size=m,
-                                 ripple_scale=RippleCompensationParams().amplitude_scale
-                                 if drive_params.motor.ripple else 0.0,
+                                 ripple_scale=p.force_ripple_scale if drive_params.motor.ripple else 0.0,
                                  name="tendon_force_control", path_velocity=True)
         elif tendon_law == "motor-position":
             from awiwi_drake.control.impedance import MotorPositionForceLaw

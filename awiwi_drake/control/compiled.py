@@ -11,8 +11,9 @@ equal to it (tests/test_control_tendon.py, tests/test_fused_chain.py):
   arithmetic), the clamps of ``ForceMap.alpha_of_force`` and ``TendonForceLaw.gains_at``.  Returns -1, or the
   index of the first reference outside its table (the caller raises through the law).
 * ``backstepping`` -- the 15.5 law of a finger/the hand
-  (:meth:`~awiwi_drake.control.finger_backstepping.FingerBacksteppingLaw.terms`, ``variant="antagonistic"``) with
-  polynomial spring laws (:class:`~awiwi_drake.components.spring.PolynomialSpring`, one coefficient row per tendon).
+  (:meth:`~awiwi_drake.control.finger_backstepping.FingerBacksteppingLaw.terms`, ``variant="antagonistic"``, with or
+  without the link torque estimate and its bounded compensation) with polynomial spring laws
+  (:class:`~awiwi_drake.components.spring.PolynomialSpring`, one coefficient row per tendon).
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ def _poly(x, c, deg):
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
 def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f_op, r_m, B, friction_scale,
-                 coef, dcoef, ddcoef, xmax, kend, link_feedforward, out):
+                 coef, dcoef, ddcoef, xmax, kend, link_feedforward, fc, estimate, compensate, C, rise, beta, z0, out):
     m, n = P.shape
     k = S.shape[1]
     deg = coef.shape[1]
@@ -99,9 +100,19 @@ def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f
     xd = r_m * w + P @ v
     fd = k1 * xd
     tau = -(PS.T @ f)
+    a0 = -(Kp @ e) - Kd @ ed
+    if estimate:
+        tau = tau - fc
+        if compensate:
+            lv = np.empty(m)
+            for i in range(m):
+                fp = max(f[i], 0.0)
+                lv[i] = C[i] + fp * rise[i] + beta[i] * fp + z0[i]
+            bound = np.abs(PS).T @ lv
+            for j in range(k):
+                a0[j] = a0[j] + min(max(fc[j], -bound[j]), bound[j])
     edd = Minv @ (tau - Bq @ ed)
     eddd = Minv @ (-(PS.T @ fd) - Bq @ edd)
-    a0 = -(Kp @ e) - Kd @ ed
     a1 = -(Kp @ ed) - Kd @ edd
     a2 = -(Kp @ edd) - Kd @ eddd
     f_des = f_op + W @ a0

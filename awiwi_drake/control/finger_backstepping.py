@@ -49,7 +49,11 @@ through the estimator is stable on every finger and the hand with guide friction
 with it (1.1e-3 rad left after 0.25 s, 0.9e-3 with it).  The friction then leaves the steady offset of a
 dead band: at rest the law settles at ``Kp e = -(I + G) (P S)^T (z + g)`` (``z``, ``g`` the lever's and
 the guides' friction forces, ``G`` from the model's phantom acceleration ``M_d^-1 (P S)^T (z + g)``, see
-``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).
+``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).  :meth:`FingerBacksteppingLaw.rest_error`
+is that closed form (any ``K3``, ``K4`` per tendon, and the motors' ``r_m z`` of the lever, 0.2 % of ``z``),
+:meth:`~FingerBacksteppingLaw.dead_band` its half-width per DoF on the default plant (index: 0.38 / 0.58 / 1.58 /
+3.0 rad: the frictions' bound ``B`` of 0.10 / 0.13 / 0.11 / 0.04 Nm over ``(I + G)^-1 Kp``, ``I + G`` with
+eigenvalues 1.9-13.5), and ``compare`` flags a step row that stops in it (:meth:`~FingerBacksteppingLaw.friction_hold`).
 
 **External load** (option ``load_observer`` of :func:`finger_backstepping_controller`): the link model has no
 external torque, so under a constant load ``tau_ext`` the law's rest equations give ``Kp e = (I + G) S^T tau_ext``
@@ -69,6 +73,13 @@ A quasi-static sketch: the guides' presliding holds the link, the law turns ``d_
 G)^-1 G d_hat`` (``G`` of the dead band, diagonal 8.3 / 12.0 on the PIP / DIP), and the observer sees it ``1 + rho``
 times larger (``rho`` = the hysteresis's presliding stiffness over the spring slope, 0.38), a loop gain above one
 where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
+
+**Friction compensation** (option ``friction_observer`` of :func:`finger_backstepping_controller`, the law's
+``friction_compensation``, registered ``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
++-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`: the guides (4.1) and the lever's
+hysteresis at the sensed forces), the bound of the chain's observer (ch. 9) with the hysteresis added, as the law's
+sensors miss both.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
+index); a load beyond ``B`` deflects the impedance, one below it is cancelled, as in the chain.
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
 tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
@@ -141,7 +152,9 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
-from awiwi_drake.control.chain import rig_springs
+from awiwi_drake._math import clip, positive_part
+from awiwi_drake.components.friction import guide_friction_level
+from awiwi_drake.control.chain import guide_friction_levels, rig_springs
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
@@ -167,14 +180,17 @@ class FingerBacksteppingLaw(StaticLaw):
 
     def __init__(self, rig: Any, params: HandChainParams | None = None, *, op: Any = None,
                  rate_hz: float | None = 3000.0, joint_gains: tuple | None = None, force_gains: tuple | None = None,
-                 variant: str = "antagonistic", link_torque_estimate: bool = False):
+                 variant: str = "antagonistic", link_torque_estimate: bool = False,
+                 friction_compensation: bool = False):
         """``variant`` in :data:`VARIANTS` (module docstring); ``link_torque_estimate``: the link model takes the
         estimated link-side torque from the input ``friction_compensation`` (``-d_hat`` of the (9.2) observer, module
         docstring); ``joint_gains = (Kp, Kd)`` (k x k) replaces the mode
         design (``antagonistic``, ``nonlinear-spring``);
         ``force_gains = (K3, K4)`` (per tendon, (m,) or scalars; scalars for ``nonlinear-spring``, whose steps are
         on the joint torques) the ``force_bandwidth`` (e.g. the ch. 16 selection,
-        :func:`awiwi_drake.control.optimal_gains.select_finger_force_gains`); each must be positive."""
+        :func:`awiwi_drake.control.optimal_gains.select_finger_force_gains`); each must be positive.
+        ``friction_compensation`` (needs ``link_torque_estimate``): add the estimate, bounded by what the frictions
+        can hold (:meth:`friction_bound`), to the desired joint torque ``alpha`` ((9.1), module docstring)."""
         if variant not in VARIANTS:
             raise ValueError(f"finger backstepping: variant = {variant!r}; use one of {', '.join(VARIANTS)}")
         if variant == "position" and joint_gains is not None:
@@ -260,12 +276,115 @@ class FingerBacksteppingLaw(StaticLaw):
         self.link_torque_estimate = bool(link_torque_estimate)
         if self.link_torque_estimate:
             self.inputs["friction_compensation"] = k
+        self.friction_compensation = bool(friction_compensation)
+        if self.friction_compensation and not (self.link_torque_estimate and variant == "antagonistic"):
+            raise ValueError("finger backstepping: friction_compensation needs the link torque estimate "
+                             "(load observer) and the antagonistic variant")
+        self.friction_levels = link_friction_levels(rig)
+        # the motor-side part of the lever's hysteresis at rest: the law's motor model lacks r_m z (rest_error)
+        self._motor_gain = np.asarray(op.tendon_stiffness, dtype=float) * self.r_m ** 2 / self.B
         self.output_size = m
         self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
                            tendon_force=self.f_op, torque_offset=self.tau_op)
         # the designed joint error dynamics M e'' + Kd e' + Kp e = 0: its slowest mode (compare's short window)
         A_e = np.block([[np.zeros((k, k)), np.eye(k)], [-self._Minv @ self.Kp, -self._Minv @ self.Kd]])
         self.design["time_constant"] = float(1.0 / np.min(-np.linalg.eigvals(A_e).real))
+        self.design["dead_band"] = self.dead_band()
+        self.design["friction_hold"] = self.friction_hold
+
+    def friction_bound(self, f, P=None):
+        """``B_j = sum_i |(P S)_ij| (W_i(f_i) + w_i(f_i))`` (k) [Nm]: the largest link-side torque the guides' friction
+        (4.1) (sliding level ``W_i``, pulled) and the lever's hysteresis (Fig 4.8b, half-width ``w_i = beta f_i + z0``)
+        can put on each DoF at the tendon forces ``f``, neither of which the spring sensors measure."""
+        P = np.asarray(self.coupling.P(self.q_op) if P is None else P)
+        (C, mu_alpha), (beta, z0) = self.friction_levels
+        fp = positive_part(f)
+        return np.abs(P @ self.S).T @ (guide_friction_level(fp, C, mu_alpha, 1.0) + beta * fp + z0)
+
+    def rest_error(self, guide_force, hysteresis_force, external_torque=None):
+        """The DoF error ``e`` (k) at which the loop rests with the guides' friction forces ``g`` and the lever's
+        hysteresis forces ``z`` (m each, the plant's states) and the joint load ``tau_ext`` (n): the law's rest
+        equations (omega = 0, e' = 0, the motors at rest: ``u = r_m (phi + z) - ripple``) with the link's balance
+        ``-(P S)^T (phi + z + g) + S^T tau_ext = 0`` (module docstring), linear about the operating point::
+
+            tau_f = (P S)^T (z + g) - S^T tau_ext                      the torque the sensors see at rest
+            z3 = D^-1 ((W A2 + (K3 + K4) W A1 + P S M_d^-1) tau_f - c z)   D = 1 + K3 K4, c = phi' r_m^2 / B
+            Kp e = tau_op - tau_f + comp - (P S)^T z3
+
+        with ``A1 = -Kd M_d^-1``, ``A2 = -(Kp - Kd M_d^-1 B_q) M_d^-1`` (the model's phantom acceleration ``M_d^-1
+        tau_f``; zero with the link torque estimate, whose ``d_hat`` explains ``tau_f``) and ``comp = clip(tau_f, +-B)``
+        with ``friction_compensation`` (else 0).  Without the load: the friction dead band."""
+        g, z = (np.asarray(a, dtype=float) for a in (guide_force, hysteresis_force))
+        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        tau_f = PS.T @ (z + g)
+        if external_torque is not None:
+            tau_f = tau_f - self.S.T @ np.asarray(external_torque, dtype=float)
+        W = self._sharing(np.asarray(self.coupling.P(self.q_op), dtype=float))
+        acc = np.zeros_like(tau_f) if self.link_torque_estimate else self._Minv @ tau_f
+        a1 = -self.Kd @ acc
+        a2 = -(self.Kp - self.Kd @ self._Minv @ self.Bq) @ acc
+        z3 = (W @ a2 + (self.K3 + self.K4) * (W @ a1) + PS @ acc - self._motor_gain * z) / (1.0 + self.K3 * self.K4)
+        comp = 0.0
+        if self.friction_compensation:
+            B = self.friction_bound(self.f_op)
+            comp = np.clip(tau_f, -B, B)
+        return np.linalg.solve(self.Kp, self.tau_op - tau_f + comp - PS.T @ z3)
+
+    def _rest_maps(self):
+        """``(T, Ez, w)``: the rest error's map ``e = e0 - Kp^-1 T tau_f + Ez z`` (:meth:`rest_error`, no load) from
+        the torque ``tau_f = (P S)^T (z + g)`` the frictions hold (``T = I + G``, the law's phantom acceleration ``G``;
+        ``T = 0`` with the friction compensation inside its bound) and from the lever's motor-side hysteresis ``z``
+        alone (0.2 % of ``z`` over the force-step gain on the index: ``phi' r_m^2 / (B (1 + K3 K4))``), and the
+        hysteresis half-widths ``w`` (m) at the operating point."""
+        m, k = self.f_op.size, self.S.shape[1]
+        zero = np.zeros(m)
+        base = self.rest_error(zero, zero)
+        Sl = self.S @ np.linalg.inv(self.S.T @ self.S)              # a DoF torque as a plant-joint load: S^T Sl = I
+        # small unit loads and forces (1e-4 Nm, 1e-3 N): inside the friction bound, where the map is linear
+        T = np.column_stack([self.Kp @ (self.rest_error(zero, zero, 1e-4 * Sl[:, j]) - base) / 1e-4
+                             for j in range(k)])
+        eye = 1e-3 * np.eye(m)
+        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        # z alone less its link-side part (through tau_f): what the motors' r_m z adds
+        Ez = np.column_stack([(self.rest_error(zero, eye[i]) - base) / 1e-3 + np.linalg.solve(self.Kp, T @ PS.T[:, i])
+                              for i in range(m)])
+        (_, _), (beta, z0) = self.friction_levels
+        return T, Ez, beta * self.f_op + z0
+
+    def dead_band(self) -> np.ndarray:
+        """Half-width (k) [rad] of the friction dead band per DoF at the operating point: the largest error of DoF
+        ``j`` alone (the others at their reference) at which the loop can rest (:meth:`rest_error`), i.e. at which
+        the friction torque its rest needs, ``tau_f = (I + G)^-1 (tau_op - Kp e)``, stays within every DoF's
+        :meth:`friction_bound` ``B`` (``B_l / |((I + G)^-1 Kp)_lj|``, the least over ``l``), plus the motor-side
+        hysteresis's ``|Ez| w``.  With the friction compensation ``tau_f`` is cancelled inside ``B``: only the
+        motor-side part is left.  Zero on a plant without guide friction and hysteresis."""
+        T, Ez, w = self._rest_maps()
+        motor = np.abs(Ez) @ w
+        B = self.friction_bound(self.f_op)
+        if self.friction_compensation or not np.any(B > 0):
+            return motor
+        Mh = np.abs(np.linalg.solve(T, self.Kp))                   # |(I + G)^-1 Kp|
+        with np.errstate(divide="ignore"):
+            half = np.min(np.where(Mh > 0, B[:, None] / Mh, np.inf), axis=0)
+        return half + motor
+
+    def friction_hold(self, e, dof_load=None) -> np.ndarray:
+        """Per DoF, the fraction of its :meth:`friction_bound` that the frictions must hold for the loop to rest at
+        the DoF errors ``e`` (k) under the DoF loads ``dof_load`` (k, ``S^T tau_ext``): ``|tau_f| / B`` with the
+        rest's ``tau_f = (I + G)^-1 (tau_op - Kp e) + dof_load`` (:meth:`rest_error`; the motor-side hysteresis, 0.2 %
+        of it, left out).  All ``<= 1``: the loop can be at rest there, held by friction (its dead band); above 1
+        it cannot.  With the friction compensation: ``|e| / dead_band`` (its only rest offset is motor-side)."""
+        e = np.asarray(e, dtype=float)
+        if self.friction_compensation:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                return np.where(np.abs(e) > 0, np.abs(e) / self.design["dead_band"], 0.0)
+        T, _, _ = self._rest_maps()
+        tau = np.linalg.solve(T, self.tau_op - self.Kp @ e)
+        if dof_load is not None:
+            tau = tau + np.asarray(dof_load, dtype=float)
+        B = self.friction_bound(self.f_op)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(B > 0, np.abs(tau) / np.where(B > 0, B, 1.0), np.where(np.abs(tau) > 0, np.inf, 0.0))
 
     def terms(self, u) -> dict:
         """All intermediate quantities (``z3``, ``z4``, ``e``, ``V``, ``command``) for inputs ``u``."""
@@ -284,11 +403,14 @@ class FingerBacksteppingLaw(StaticLaw):
         xd = self.r_m * w + P @ v
         fd = k1 * xd
         tau = -(PS.T @ f)
+        a0 = -self.Kp @ e - self.Kd @ ed
         if self.link_torque_estimate:                          # + d_hat = -friction_compensation ((9.2) observer)
             tau = tau - u["friction_compensation"]
+            if self.friction_compensation:                     # (9.1): + the estimate, bounded by the frictions
+                bound = self.friction_bound(f, P)
+                a0 = a0 + clip(u["friction_compensation"], -bound, bound)
         edd = self._Minv @ (tau - self.Bq @ ed)                # link model M_d e'' = -(PS)^T f - B_q e' (+ d_hat)
         eddd = self._Minv @ (-(PS.T @ fd) - self.Bq @ edd)
-        a0 = -self.Kp @ e - self.Kd @ ed
         a1 = -self.Kp @ ed - self.Kd @ edd
         a2 = -self.Kp @ edd - self.Kd @ eddd
         f_des = self.f_op + W @ a0
@@ -332,7 +454,7 @@ class FingerBacksteppingLaw(StaticLaw):
         return dict(e=e, ed=ed, z3=z3, z4=z4, f_des=f_des, V=V, command=cmd)
 
     def __call__(self, u):
-        if self.variant == "antagonistic" and not self.link_torque_estimate and float_inputs(u, self.inputs):
+        if self.variant == "antagonistic" and float_inputs(u, self.inputs):
             fast = self.__dict__.get("_fast")
             if fast is None:
                 fast = self._fast = self._fast_path()
@@ -354,17 +476,21 @@ class FingerBacksteppingLaw(StaticLaw):
             rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
         xmax = np.array([law.max_elongation for law in laws], dtype=float)
         kend = np.array([law._k_end for law in laws], dtype=float)
+        (C, mu_alpha), (beta, z0) = self.friction_levels
+        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0))
         return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
-                np.empty(len(laws)))
+                np.empty(len(laws)), levels, np.zeros(self.S.shape[1]))
 
-    def _compiled_call(self, u, fn, coef, dcoef, ddcoef, xmax, kend, out):
+    def _compiled_call(self, u, fn, coef, dcoef, ddcoef, xmax, kend, out, levels, no_estimate):
         q = u["joint_angle"]
         P = np.asarray(self.coupling.P(q), dtype=float)
         W = self._sharing(P, fast=True)
+        fc = u["friction_compensation"] if self.link_torque_estimate else no_estimate
         return fn(q, u["joint_velocity"], u["joint_angle_reference"], u["elongation"], u["motor_angle"],
                   u["motor_velocity"], P, self.S, self.Sp, W, self._Minv, self.Bq, self.Kp, self.Kd, self.K3, self.K4,
                   self.f_op, self.r_m, self.B, self.friction_scale, coef, dcoef, ddcoef, xmax, kend,
-                  self.link_feedforward, out).copy()
+                  self.link_feedforward, fc, self.link_torque_estimate, self.friction_compensation, *levels,
+                  out).copy()
 
     def _sharing(self, P_val, fast: bool = False):
         """``W = -((P S)^T)^+`` (m x k), block by finger, frozen at the value of ``P``.  ``fast``: a varying block of
@@ -389,22 +515,32 @@ class FingerBacksteppingLaw(StaticLaw):
 
 def finger_backstepping_controller(rig: Any, params: HandChainParams | None = None, *, op: Any = None,
                                    rate_hz: float | None = 3000.0, variant: str = "antagonistic",
-                                   load_observer: FrictionObserverParams | None = None):
+                                   load_observer: FrictionObserverParams | None = None,
+                                   friction_observer: FrictionObserverParams | None = None):
     """Registered factories ``backstepping`` (``variant="antagonistic"``), ``backstepping-position`` and
     ``backstepping-nonlinear-spring`` for fingers and the hand (see the module docstring); ``rate_hz`` is the control
     rate the joint gains are designed for (the registry's 3 kHz).  ``load_observer``: add the (9.2) observer per DoF
-    (:class:`ObservedBacksteppingController`), whose estimate of the link-side torque enters the law's link model."""
+    (:class:`ObservedBacksteppingController`), whose estimate of the link-side torque enters the law's link model.
+    ``friction_observer`` (registered ``backstepping-friction-observer``; ``NAME:no-observer`` sets it to None, as for
+    the chain controllers): the same observer, and its estimate, bounded by the frictions, also added to the desired
+    joint torque ((9.1), ``FingerBacksteppingLaw(friction_compensation=True)``)."""
     check_backstepping_springs(rig)
-    if load_observer is not None and not isinstance(load_observer, FrictionObserverParams):
-        raise TypeError(f"finger_backstepping_controller: load_observer = {load_observer!r} must be None or a "
-                        "FrictionObserverParams")
+    for name, obs in (("load_observer", load_observer), ("friction_observer", friction_observer)):
+        if obs is not None and not isinstance(obs, FrictionObserverParams):
+            raise TypeError(f"finger_backstepping_controller: {name} = {obs!r} must be None or a "
+                            "FrictionObserverParams")
+    if load_observer is not None and friction_observer is not None:
+        raise ValueError("finger_backstepping_controller: give load_observer (the estimate in the link model) or "
+                         "friction_observer (also compensated), not both")
+    observer = load_observer if load_observer is not None else friction_observer
     law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, variant=variant,
-                                link_torque_estimate=load_observer is not None)
+                                link_torque_estimate=observer is not None,
+                                friction_compensation=friction_observer is not None)
     if variant != "antagonistic":
         law.name = f"finger_backstepping_{variant.replace('-', '_')}"
-    if load_observer is None:
+    if observer is None:
         return StaticLawController(law)
-    return ObservedBacksteppingController(rig, law, load_observer)
+    return ObservedBacksteppingController(rig, law, observer)
 
 
 class ObservedBacksteppingController(Diagram):
@@ -453,6 +589,20 @@ class ObservedBacksteppingController(Diagram):
         S = self._observer.S
         v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
         self.GetMutableSubsystemContext(self._observer, context).SetContinuousState(self._observer.Sp @ v)
+
+
+def link_friction_levels(rig: Any) -> tuple:
+    """``((C, mu alpha), (beta, z0))`` (m each): the rig's guide friction levels (4.1)/capstan
+    (:func:`~awiwi_drake.control.chain.guide_friction_levels`) and its lever hysteresis half-width ``beta f + z0``
+    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off)."""
+    m = rig.coupling.num_tendons
+    drive = getattr(rig, "drive", None)
+    h = None if drive is None else drive.model.hysteresis
+    hs = h if isinstance(h, tuple) else (h,) * m
+    on = np.array([x is not None and x.enabled for x in hs], dtype=float)
+    beta = on * np.array([0.0 if x is None else x.width_ratio for x in hs])
+    z0 = on * np.array([0.0 if x is None else x.width_offset for x in hs])
+    return guide_friction_levels(rig), (beta, z0)
 
 
 def check_backstepping_springs(rig: Any) -> None:

@@ -99,32 +99,23 @@ def _gauss_newton_qp(outer, dk, hessian, E, f, K_norm2, m, levenberg):
 
     ``||E - G (f' - f)||^2 / N + mu ||f' - f||^2`` with ``G[:, i] = vec(dk_i p_i p_i^T + H_i)`` (the
     linearised ``dK_q/df_i``), ``E = K_des - K_q(f)``, ``N = K_norm2``, ``mu = levenberg tr(G^T G / N) / m``;
-    ``outer[i] = p_i p_i^T``.  Leading axes (several fingers) broadcast; ``m`` per finger.
+    ``outer[i] = p_i p_i^T``.
     """
-    Gt = dk[..., :, None, None] * outer
+    Gt = dk[:, None, None] * outer
     if hessian is not None:
         Gt = Gt + hessian
-    Gt = Gt.reshape(Gt.shape[:-2] + (-1,))                       # G^T (m x n^2)
-    N = np.asarray(K_norm2, dtype=float)
-    H = Gt @ np.swapaxes(Gt, -1, -2) / N[..., None, None]
-    mu = levenberg * np.maximum(np.trace(H, axis1=-2, axis2=-1), 1e-300) / m
-    Q = 2.0 * (H + mu[..., None, None] * np.eye(H.shape[-1]))
-    e = E.reshape(E.shape[:-2] + (-1,))
-    Gf = np.einsum("...ij,...i->...j", Gt, f)
-    b = -2.0 * np.einsum("...ij,...j->...i", Gt, e + Gf) / N[..., None] - 2.0 * mu[..., None] * f
+    Gt = Gt.reshape(m, -1)                                       # G^T (m x n^2)
+    H = Gt @ Gt.T / K_norm2
+    mu = levenberg * max(float(np.trace(H)), 1e-300) / m
+    Q = 2.0 * (H + mu * np.eye(m))
+    b = -2.0 * Gt @ (E.ravel() + f @ Gt) / K_norm2 - 2.0 * mu * f
     return Q, b
 
 
-def _closed_form_step(Q, b, f, W, pad=None):
+def _closed_form_step(Q, b, f, W):
     """Minimiser of ``f'^T Q f' / 2 + b^T f'`` on ``{f + W z}`` (the torque-exact set through ``f``):
-    ``f + W z`` with ``(W^T Q W) z = -W^T (Q f + b)``, the KKT conditions without the bounds.
-    ``pad``: 1 on zero columns of ``W`` (fingers padded to a common size), 0 elsewhere."""
-    Wt = np.swapaxes(W, -1, -2)
-    A = Wt @ Q @ W
-    if pad is not None:
-        A = A + pad[..., :, None] * np.eye(A.shape[-1])
-    r = -np.einsum("...ij,...j->...i", Wt, np.einsum("...ij,...j->...i", Q, f) + b)
-    return f + np.einsum("...ij,...j->...i", W, np.linalg.solve(A, r[..., None])[..., 0])
+    ``f + W z`` with ``(W^T Q W) z = -W^T (Q f + b)``, the KKT conditions without the bounds."""
+    return f + W @ np.linalg.solve(W.T @ Q @ W, -W.T @ (Q @ f + b))
 
 
 @dataclass
@@ -669,24 +660,9 @@ def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnes
     ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``).
 
     Tabulated once per spring parameter set (the fit of the lever mechanism takes ~30 ms): equal
-    parameters return the same map object.
+    parameters give the same law object (:func:`~awiwi_drake.components.spring.tendon_spring`), so the same map.
     """
-    drive = drive or FingerDriveParams()
-    try:
-        return _STIFFNESS_MAPS[drive.spring]
-    except TypeError:                       # unhashable parameters: no reuse
-        pass
-    except KeyError:
-        pass
-    table = law_stiffness_map(tendon_spring(drive.spring))
-    try:
-        _STIFFNESS_MAPS[drive.spring] = table
-    except TypeError:
-        pass
-    return table
-
-
-_STIFFNESS_MAPS: dict = {}
+    return law_stiffness_map(tendon_spring((drive or FingerDriveParams()).spring))
 
 
 def law_stiffness_map(spring) -> TendonStiffnessMap:

@@ -137,9 +137,9 @@ def _dof_names(rig, S) -> list[str]:
 
 def design_motor(motor: MotorParams) -> MotorParams:
     """The motor of the design model: (3.8) linearised *in motion* (its slope there is the viscous
-    ``gamma3``), no ripple.  Chosen: at rest ``atan``'s slope ``gamma1 gamma2 = 5.6 Nm s/rad`` (half of it
-    left by the force law's under-compensation) reflects through the tendons as a viscous joint damping
-    that vanishes as soon as the motors move faster than ``1/gamma1 = 0.1 rad/s``; a design counting on it
+    ``gamma3``), no ripple.  Chosen: at rest ``atan``'s slope ``gamma1 gamma2 = 5.6 Nm s/rad`` (what the force law
+    does not feed forward of it, ``1 - HandChainParams.force_friction_scale``, and the hold's lag) reflects through
+    the tendons as a viscous joint damping that vanishes as soon as the motors move faster than ``1/gamma1 = 0.1 rad/s``; a design counting on it
     (``Kd = 0``) rings on a 0.2 rad step (measured on the index: +-0.15 rad at 10 Hz after 0.2 s).  The
     ripple is a periodic disturbance of the motor angle, not a property of the joint."""
     viscous = motor.viscous_friction if motor.friction else 0.0

@@ -177,10 +177,8 @@ class FingerResiduals:
         acc = np.stack([motor_acceleration(th[i], om[i], u[i], r * f[i], lin[i]) for i in range(m)])
         tau = B[:, None] * (al - acc)
         for i, p in enumerate(motors):
-            if p.friction or p.ripple:
-                nonlinear = motor_ripple_torque(th[i], p) + (
-                    motor_friction_torque(om[i], p.replace(damping=0.0)) if p.friction else 0.0)
-                tau[i] -= _filter(nonlinear, g0)
+            if p.ripple:
+                tau[i] -= _filter(motor_ripple_torque(th[i], p), g0)
         # the inertia-error signature: the acceleration filtered 4x wider, nearly free of the angle noise
         # that the residual's own acceleration carries (no errors-in-variables fit of noise on itself)
         s4, _, _, g2w = _kernel(4 * sigma, dt)
@@ -196,6 +194,15 @@ class FingerResiduals:
         self.time = ds.time[sl]
         self.theta, self.omega, self.alpha, self.force, self.torque = th[:, sl], om[:, sl], al[:, sl], f[:, sl], u[:, sl]
         self.tau = tau[:, sl]
+        self._theta_raw, self._velocities = TH, {}
+        self.motor_filters = {}       # tendon -> velocity filter [s] of the nominal's own friction (as a candidate's)
+        for i, p in enumerate(motors):
+            if p.friction:       # the width the data fit best (motor_velocity), as a candidate's shape is chosen
+                fric = {w: self.consistent(motor_friction_torque(self.motor_velocity(i, w), p.replace(damping=0.0)))
+                        for w in settings.finger_motion_filters}
+                w = min(fric, key=lambda w: float(np.sum((self.tau[i] - fric[w]) ** 2)))
+                self.motor_filters[i] = w
+                self.tau[i] -= fric[w]
         # noise of the torque residual: B H'' theta-noise and r H f-noise (and d H' theta-noise)
         self.sigma_tau = np.sqrt((B * np.linalg.norm(g2)) ** 2 * self.sig_theta ** 2
                                  + (d * np.linalg.norm(g1)) ** 2 * self.sig_theta ** 2
@@ -209,6 +216,18 @@ class FingerResiduals:
         self.train = ~self.test
         self.step = step
         self._signature_cache: dict = {}     # candidate columns per (effect, tendon): data only (_signatures)
+
+    def motor_velocity(self, i: int, width: float) -> np.ndarray:
+        """Motor ``i``'s velocity [rad/s] at the full rate, the angle smoothed by a Gaussian of ``width`` [s]: what
+        a nonlinear velocity law (friction (3.8)) is evaluated on before the consistent filter. On the filter's own
+        20 ms the finger's fast link modes are gone from the velocity, and (3.8) of the smoothed velocity is not
+        the filtered friction: a (3.8) friction with the truth's own slope left 14x the floor where the noise-free
+        velocity leaves 0.94x (index_h3, 3 s, 30 dB); a narrow width passes the angle noise instead (1 ms: 83x).
+        The data choose from ``finger_motion_filters``, as for the guides' travel (:meth:`guide_path`)."""
+        key = (i, width)
+        if key not in self._velocities:
+            self._velocities[key] = _filter(self._theta_raw[i], _kernel(width, self.dt)[2])
+        return self._velocities[key]
 
     def consistent(self, signal: np.ndarray) -> np.ndarray:
         """A full-rate signal (a law evaluated on the filtered signals :attr:`full`, or on raw ones) filtered by
@@ -309,6 +328,7 @@ class FingerResiduals:
         y = self._x_full - rig.offsets[:, None] - self.r * TH               # (m, N) = P q + noise
         q_full = A @ (w[:, None] * y)                                      # (n, N)
         self.path = P @ q_full                                             # tendon travel at the guides [m]
+        self._paths, self._guide_cols = {}, {}          # smoothed paths, guide columns (guide_columns)
         # the links' terms at the full rate, then filtered: M(q) q'' and C(q, q') q' are not linear in q, and the
         # ideal finger's link modes (~500 Hz) move q within the kernel's width; evaluated on the filtered angles
         # they leave 2-4x the noise floor on a nothing-hidden index record (rectified fast-mode terms), at the full
@@ -327,34 +347,67 @@ class FingerResiduals:
         if links.coupling_gain is not None:
             lhs += links.coupling_gain @ np.vstack([q_full, v_full])
         rho = self.consistent(lhs) + P.T @ self.force
+        cov = (np.linalg.norm(g0) ** 2) * (P.T * self.sig_force ** 2) @ P
+        self._joint_whiten = np.linalg.cholesky(cov)
+        self._P = P
+        self.path_filters = {}        # tendon -> path filter [s] of the nominal's own guides (chosen as a candidate's)
         gm = rig.drive.model.guide_friction
         if gm is not None:                                  # the nominal finger's own guides, along the path
             C, E = gm.levels()
-            g_nom = np.stack([self.guide_path(i, C[i], E[i], gm) if (C[i] or E[i]) else np.zeros(len(TH[0]))
-                              for i in range(m)])
-            rho = rho + P.T @ self.consistent(g_nom)
-        cov = (np.linalg.norm(g0) ** 2) * (P.T * self.sig_force ** 2) @ P
-        self._joint_whiten = np.linalg.cholesky(cov)
+            for i in range(m):
+                if C[i] or E[i]:        # the path filter the data fit best, as a candidate's shape is chosen
+                    paths = {w: np.outer(P[i], self.consistent(self.guide_path(i, C[i], E[i], w, gm)))
+                             for w in self.settings.finger_motion_filters}
+                    w = min(paths, key=lambda w: float(np.sum(np.linalg.solve(self._joint_whiten, rho + paths[w]) ** 2)))
+                    self.path_filters[i] = w
+                    rho = rho + paths[w]
         self.rho = np.linalg.solve(self._joint_whiten, rho)
-        self._P = P
 
-    def guide_path(self, i: int, constant: float, exponent: float, gm=None) -> np.ndarray:
+    def guide_path(self, i: int, constant: float, exponent: float, width: float, gm=None) -> np.ndarray:
         """Guide friction force [N] of tendon ``i``'s path at the full rate: the package's Dahl law
         (:func:`~awiwi_drake.components.friction.guide_friction_rate`, level
         :func:`~awiwi_drake.components.friction.guide_friction_level`) solved per sample
-        (:func:`~awiwi_drake.components.friction.dahl_path`) along the estimated travel at the guides, after the
-        play operator of the hysteresis candidate (the travel's noise must not reverse it)."""
-        from awiwi_drake.components.friction import guide_friction_level
+        (:func:`~awiwi_drake.components.friction.dahl_path`) along the estimated travel at the guides, smoothed by a
+        Gaussian of ``width`` [s] first. The estimated travel carries the motor-angle and force noise (about 28 um
+        per sample on the index at 30 dB, against a presliding length of 0.4 mm): every noise step relaxes the Dahl
+        state by ``|dx| / delta``, which on the raw estimate left 99x the floor where the truth's own law on the
+        true travel leaves 1.2x; a play operator instead delays every true reversal (a 10 um play on the true
+        travel: 12x). The width that balances the two depends on the record (``finger_motion_filters``: a grid,
+        chosen by the data as the candidates' shapes are). The Dahl path is linear in its level
+        ``C + f (rise (1 + s) / 2 + loss (1 - s) / 2)``, so it is ``C U + rise D+ + loss D-``
+        (:meth:`guide_columns`)."""
+        U, Dp, Dm = self.guide_columns(i, width, gm)
+        return constant * U + np.expm1(exponent) * Dp - np.expm1(-exponent) * Dm
+
+    def guide_columns(self, i: int, width: float, gm=None):
+        """The Dahl paths of the level's three parts along tendon ``i``'s smoothed travel (:meth:`guide_path`):
+        ``U`` (level 1 N), ``D+`` (level ``f (1 + s) / 2``), ``D-`` (level ``f (1 - s) / 2``), ``s`` the direction."""
         delta = gm.presliding_length if gm is not None else self.params.guide_presliding_length
         v_s = gm.smoothing_velocity if gm is not None else self.params.friction_smoothing_velocity
-        s = self.path[i]
-        k = float(np.median(np.asarray(self.rig.spring_laws[i].stiffness(self._x_full[i]), float)))
-        path = _play(s, self.settings.finger_hysteresis_play * self.sig_force[i] / k)
-        direction = np.tanh(np.clip(np.gradient(path) / (self.dt * v_s), -40.0, 40.0))
-        level = guide_friction_level(np.maximum(self._force_raw[i], 0.0), constant, exponent, direction)
-        return dahl_path(path, level, delta, 0.0, self.dt)      # |v| exactly, as guide_friction_rate
+        key = (i, width, delta, v_s)
+        if key not in self._guide_cols:
+            path = self._smooth_path(i, width)
+            s = np.tanh(np.clip(np.gradient(path) / (self.dt * v_s), -40.0, 40.0))
+            f = np.maximum(self._force_raw[i], 0.0)
+            self._guide_cols[key] = tuple(dahl_path(path, level, delta, 0.0, self.dt)    # |v| exactly
+                                          for level in (np.ones_like(f), f * (1 + s) / 2, f * (1 - s) / 2))
+        return self._guide_cols[key]
+
+    def _smooth_path(self, i: int, width: float) -> np.ndarray:
+        key = (i, width)
+        if key not in self._paths:
+            self._paths[key] = _filter(self.path[i], _kernel(width, self.dt)[1])
+        return self._paths[key]
 
     # ------------------------------------------------------------------ energies
+    def unexplained_limit(self) -> float:
+        """The residual/floor ratio above which a discrepancy is unexplained: ``unexplained_ratio``, or, if higher,
+        what noise alone exceeds with probability 1e-3 family-wise: the largest of ``m + 2`` means of ``K`` squared
+        unit-variance samples (chi-square with ``K`` degrees of freedom over ``K``; ``K`` decimated samples)."""
+        from scipy.stats import chi2
+        K = self.tau.shape[1]
+        return max(self.settings.unexplained_ratio, float(chi2.ppf(1.0 - 1e-3 / (self.m + 2), K)) / K)
+
     def ratios(self) -> dict:
         """Residual energy over its noise floor (all samples: a fitted effect has 2-4 parameters against
         ~10 samples per second): per tendon, motor side and spring side."""
@@ -432,9 +485,10 @@ def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
 
 
 def _signatures(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds):
-    """Cached per dataset (:func:`_signature_variants`: the columns depend on the data only, not on the residual
-    left by earlier steps)."""
-    key = (effect, i)
+    """Cached per dataset (:func:`_signature_variants`: the columns depend on the data, the settings (fixed per
+    :class:`FingerResiduals`) and the catalog's bounds (the guide's capstan grid, the ripple orders), not on the
+    residual left by earlier steps)."""
+    key = (effect, i, bounds)
     if key not in fr._signature_cache:
         fr._signature_cache[key] = _signature_variants(fr, effect, i, bounds)
     return fr._signature_cache[key]
@@ -444,21 +498,26 @@ def _signature_variants(fr: FingerResiduals, effect: str, i: int, bounds: Catalo
     """Variants ``(label, columns (c, K), names, scale_to_params)`` of ``effect`` at tendon ``i`` (0-based):
     the residual model is ``columns.T @ beta``; motor side in N m, spring and joint sides whitened."""
     om, f = fr.omega[i], fr.force[i]
-    omf, thf = fr.full["omega"][i], fr.full["theta"][i]
+    thf = fr.full["theta"][i]
     H = fr.consistent
     out = []
     if effect == "motor_friction":   # (3.8): tau = -(g2 atan(g1 w) + g3 w): the missing torque adds to u
-        for slope in (3.0, 10.0, 30.0):
-            out.append((f"slope {slope:g}", np.stack([H(laws.motor_friction(omf, 1.0, slope, 0.0)),
-                                                      H(laws.motor_friction(omf, 0.0, slope, 1.0))]),
-                        ["motor_coulomb", "motor_viscous"], {"motor_slope": slope}))
+        for w in fr.settings.finger_motion_filters:
+            omw = fr.motor_velocity(i, w)
+            for slope in (3.0, 10.0, 30.0):
+                out.append((f"slope {slope:g}, velocity filter {w * 1e3:g} ms",
+                            np.stack([H(laws.motor_friction(omw, 1.0, slope, 0.0)),
+                                      H(laws.motor_friction(omw, 0.0, slope, 1.0))]),
+                            ["motor_coulomb", "motor_viscous"], {"motor_slope": slope, "motor_velocity_filter": w}))
     elif effect == "guide_friction":  # the joints feel -P_i^T g_i: the package's Dahl guides on path i, mu on a grid
         white = np.linalg.solve(fr._joint_whiten, -fr._P[i])[:, None]          # (n, 1)
-        unit = white[None] * H(fr.guide_path(i, 1.0, 0.0))[None, None]        # (1, n, K): C = 1 N
-        for mu in np.linspace(0.0, bounds.guide_mu_max, 9)[1:]:
-            cap = white[None] * H(fr.guide_path(i, 0.0, float(mu)))[None, None]
-            out.append((f"mu {mu:.3g}", np.concatenate([unit, cap]).reshape(2, -1),
-                        ["guide_c0", "guide_capstan"], {"guide_mu": float(mu)}))
+        for w in fr.settings.finger_motion_filters:       # the travel's smoothing (FingerResiduals.guide_path)
+            unit = white[None] * H(fr.guide_path(i, 1.0, 0.0, w))[None, None]        # (1, n, K): C = 1 N
+            _, Dp, Dm = (H(c) for c in fr.guide_columns(i, w))
+            for mu in np.linspace(0.0, bounds.guide_mu_max, 9)[1:]:
+                cap = white[None] * (np.expm1(mu) * Dp - np.expm1(-mu) * Dm)[None, None]
+                out.append((f"mu {mu:.3g}, path filter {w * 1e3:g} ms", np.concatenate([unit, cap]).reshape(2, -1),
+                            ["guide_c0", "guide_capstan"], {"guide_mu": float(mu), "guide_path_filter": w}))
     elif effect == "motor_ripple":
         for o1, o2 in _ripple_orders(fr, i, bounds):
             cols, names = [], []
@@ -500,15 +559,25 @@ _BOUNDS = {"motor_coulomb": lambda b: (0.0, b.motor_coulomb_max), "motor_viscous
 
 
 def _lsq(A: np.ndarray, b: np.ndarray, names: list, bounds: CatalogBounds) -> np.ndarray:
-    """Least squares with the catalog's physical ranges (friction levels >= 0, ...)."""
+    """Least squares with the catalog's physical ranges (friction levels >= 0, ...), solved exactly: the
+    minimum of a convex quadratic over a box is the best feasible point among the unconstrained minima with each
+    amplitude free or held at one of its finite bounds (3^c subproblems for c <= 4 columns)."""
+    from itertools import product
     lo = np.array([_BOUNDS[n](bounds)[0] if n in _BOUNDS else -np.inf for n in names])
     hi = np.array([_BOUNDS[n](bounds)[1] if n in _BOUNDS else np.inf for n in names])
-    if np.all(np.isinf(lo)) and np.all(np.isinf(hi)):
-        return np.linalg.lstsq(A, b, rcond=None)[0]
-    from scipy.optimize import lsq_linear
-    scale = np.maximum(np.linalg.norm(A, axis=0), 1e-300)
-    res = lsq_linear(A / scale, b, bounds=(lo * scale, hi * scale))
-    return res.x / scale
+    best, best_cost = None, np.inf
+    options = [[None] + [v for v in (lo[j], hi[j]) if np.isfinite(v)] for j in range(len(names))]
+    for held in product(*options):
+        beta = np.array([0.0 if h is None else h for h in held])
+        free = [j for j, h in enumerate(held) if h is None]
+        if free:
+            beta[free] = np.linalg.lstsq(A[:, free], b - A @ beta, rcond=None)[0]
+            if np.any(beta < lo - 1e-12 * np.abs(lo)) or np.any(beta > hi + 1e-12 * np.abs(hi)):
+                continue
+        cost = float(np.sum((b - A @ beta) ** 2))
+        if cost < best_cost:
+            best, best_cost = np.clip(beta, lo, hi), cost
+    return best
 
 
 def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settings, base_motor, base_spring,
@@ -567,7 +636,36 @@ def _fit(fr: FingerResiduals, effect: str, i: int, bounds: CatalogBounds, settin
                       label, params, gain, z, dbic, _at_bound(effect, params, bounds), size, floor, fitted=fit)
         if best is None or c.gain > best.gain:
             best = c
+    if effect == "guide_friction":
+        _guide_law_fit(fr, best, bounds, base_joint)
     return best
+
+
+def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, base_joint: np.ndarray) -> None:
+    """The chosen guide candidate refitted as the package's law on all data: the capstan part's scale (free in
+    the screen, whose two columns hold more than the law) fixed at 1 and its exponent ``mu alpha`` fitted
+    (bounded scalar search), the constant by least squares for each exponent, so what is removed and written back
+    (``tendon_guides``: constant and exponent) is one law; the screen's held-out gain and BIC decide acceptance."""
+    from scipy.optimize import minimize_scalar
+    i, w = c.tendon, c.params["guide_path_filter"]
+    white = np.linalg.solve(fr._joint_whiten, -fr._P[i])[:, None]
+    U, Dp, Dm = (white * fr.consistent(col)[None] for col in fr.guide_columns(i, w))
+    R = base_joint
+    c0_max = _BOUNDS["guide_c0"](bounds)[1]
+
+    def best_c(E):
+        rest = R - (np.expm1(E) * Dp - np.expm1(-E) * Dm)
+        C = float(np.clip(np.sum(U * rest) / np.sum(U * U), 0.0, c0_max))
+        return C, float(np.sum((rest - C * U) ** 2))
+
+    E = float(minimize_scalar(lambda e: best_c(e)[1], bounds=(0.0, bounds.guide_mu_max), method="bounded",
+                              options={"xatol": 1e-5}).x)
+    C = best_c(E)[0]
+    c.params.update(guide_c0=C, guide_capstan=1.0, guide_mu=E)
+    c.fitted = C * U + np.expm1(E) * Dp - np.expm1(-E) * Dm
+    c.at_bound = _at_bound(c.effect, c.params, bounds)
+    f_i = fr.force[i]
+    c.size = float(np.sqrt(np.mean((C + np.expm1(E) * f_i) ** 2)))
 
 
 def _at_bound(effect: str, p: dict, bounds: CatalogBounds) -> list:
@@ -812,11 +910,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
     mot, spr, jnt = current()
     after = {"motor": mot, "spring_total": spr,
              "joint": jnt if fr.joint_checked else float("nan")}
-    # unexplained: above the threshold and beyond chance for the largest of m + 1 chi-square means over K
-    # samples (family-wise 0.1 %)
-    from scipy.stats import chi2
-    K = fr.tau.shape[1]
-    limit = max(settings.unexplained_ratio, float(chi2.ppf(1.0 - 1e-3 / (fr.m + 2), K)) / K)
+    limit = fr.unexplained_limit()
     worst = max(max(mot), spr, jnt)
     unexplained = worst > limit
     where = {}

@@ -128,10 +128,6 @@ class FingerCoupling(abc.ABC):
         """``d^2 h_i/dq^2`` of every tendon (m x n x n): ``tension_hessian(q, f) = sum_i f_i [i]``."""
         return np.stack([self.tension_hessian(q, e) for e in np.eye(self.num_tendons)], axis=0)
 
-    def generalized_force(self, q, f) -> np.ndarray:
-        """``tau = -P(q)^T f`` (ARCHITECTURE sign convention)."""
-        return -(self.P(q).T @ f)
-
 
 class LinearFingerCoupling(FingerCoupling):
     """Constant coupling: ``h(q) = P q`` (index, middle, ring, fifth)."""
@@ -243,15 +239,11 @@ class ThumbCoupling(FingerCoupling):
             self._distal_pinv = np.linalg.pinv(self._P_distal)
         return self._distal_pinv
 
-    def base_lengths_and_jacobian(self, q10: float, q11: float):
-        """Float fast path: the base tendon lengths ``h_0..3`` (4,) and ``dh/d(q10, q11)`` (4 x 2) together
-        (Algorithm 1 needs both at every trial point), from a compiled kernel generated from :meth:`h`,
-        :meth:`P` and :meth:`tension_hessian` (:mod:`awiwi_drake.components.codegen`: the laws evaluated once
-        on symbolic variables; the base kinematics shared by all three)."""
-        out = self._base_kernel()(np.array([q10, q11], dtype=float), np.empty(28))
-        return out[:4], out[4:12].reshape(4, 2)
-
     def _base_kernel(self):
+        """Float fast path: ``(q10, q11) -> [h_0..3 (4), dh/d(q10, q11) (4 x 2), the base block of d^2 h_0..3/dq^2
+        (4 x 2 x 2)]`` (Algorithm 1 needs lengths and Jacobian at every trial point), one compiled kernel generated
+        from :meth:`h`, :meth:`P` and :meth:`tension_hessian` (:mod:`awiwi_drake.components.codegen`: the laws
+        evaluated once on symbolic variables; the base kinematics shared by all three)."""
         key = (self.palm_points.tobytes(), self.bone_points.tobytes())
         fn = _THUMB_BASE_KERNELS.get(key)
         if fn is None:
@@ -268,7 +260,7 @@ class ThumbCoupling(FingerCoupling):
     @_quiet_fp
     def h(self, q):
         q = self._check_q(q)
-        if q.dtype != object:             # the compiled base kinematics (see base_lengths_and_jacobian)
+        if q.dtype != object:             # the compiled base kinematics (_base_kernel)
             out = self._base_kernel()(np.asarray(q[:2], dtype=float), np.empty(28))
             return np.concatenate([out[:4], self._P_distal @ q[2:]])
         d = self.base_vectors(q)
@@ -286,7 +278,7 @@ class ThumbCoupling(FingerCoupling):
     @_quiet_fp
     def P(self, q):
         q = self._check_q(q)
-        if q.dtype != object:             # the compiled base kinematics (see base_lengths_and_jacobian)
+        if q.dtype != object:             # the compiled base kinematics (_base_kernel)
             return self.coupling_and_hessians(q)[0]
         d = self.base_vectors(q)
         norm = np.sqrt(np.sum(d * d, axis=1))
@@ -320,7 +312,7 @@ class ThumbCoupling(FingerCoupling):
         return memo[1].copy(), memo[2].copy()
 
     def tension_hessians(self, q) -> np.ndarray:
-        """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the compiled base kinematics (``base_lengths_and_jacobian``)."""
+        """``d^2 h_i/dq^2`` (8 x 4 x 4); float ``q``: the compiled base kinematics (:meth:`_base_kernel`)."""
         q = self._check_q(q)
         if q.dtype == object:
             return super().tension_hessians(q)

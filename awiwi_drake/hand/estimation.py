@@ -89,7 +89,7 @@ class GradientSearchResult:
 @numba.njit(cache=False)
 def _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf):
     """Algorithm 1's loop (see :func:`thumb_base_gradient_search`), compiled: ``base`` is the thumb's compiled
-    base kinematics (lengths and their Jacobian at ``x``, :meth:`ThumbCoupling.base_lengths_and_jacobian`),
+    base kinematics (lengths and their Jacobian at ``x``, :meth:`ThumbCoupling._base_kernel`),
     ``x`` (2) and ``buf`` (28) its work arrays.  Returns ``(qa, qb, cost, step, accepted, projected)``."""
     x[0] = 0.0
     x[1] = 0.0

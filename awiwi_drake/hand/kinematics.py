@@ -19,8 +19,8 @@ import numpy as np
 
 from ..parameters.hand import FingerParams, ThumbParams
 
-__all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "translation", "M21", "finger_joint_names",
-           "finger_frames", "thumb_frames", "thumb_base_transform", "fingertip_position"]
+__all__ = ["rot_y", "rot_z", "rot_axis", "translation", "M21", "finger_joint_names",
+           "finger_frames", "thumb_frames", "thumb_base_transform"]
 
 _FINGER_DIGIT = {"thumb": 1, "index": 2, "middle": 3, "ring": 4, "fifth": 5}
 
@@ -43,14 +43,6 @@ def rot_y(q) -> np.ndarray:
     T = _eye_like(q)
     c, s = np.cos(q), np.sin(q)
     T[0, 0], T[0, 2], T[2, 0], T[2, 2] = c, s, -s, c
-    return T
-
-
-def rot_x(q) -> np.ndarray:
-    """Homogeneous rotation about x by ``q``."""
-    T = _eye_like(q)
-    c, s = np.cos(q), np.sin(q)
-    T[1, 1], T[1, 2], T[2, 1], T[2, 2] = c, -s, s, c
     return T
 
 
@@ -150,9 +142,3 @@ def thumb_frames(p: ThumbParams, q) -> list[np.ndarray]:
     T_dip = T_pip @ translation(p.proximal_length) @ rot_z(q[3])
     T_tip = T_dip @ translation(p.distal_length)
     return [T_b, T_pip, T_dip, T_tip]
-
-
-def fingertip_position(finger: str, p, q) -> np.ndarray:
-    """Fingertip position [m] in the finger base frame."""
-    frames = thumb_frames(p, q) if finger == "thumb" else finger_frames(p, q)
-    return frames[-1][:3, 3]

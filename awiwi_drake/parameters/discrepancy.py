@@ -173,6 +173,18 @@ class DiscrepancySettings(Parameters):
                "closes within ~3 delta, 2.4 mm: about the travel of one excitation cycle); it holds the package's "
                "HysteresisParams.presliding_length 0.4 mm",
         doc="finger diagnosis: presliding lengths of the hysteresis candidate")
+    finger_motion_filters: tuple = param(
+        (1e-3, 1.4e-3, 2e-3, 2.8e-3, 4e-3, 5.6e-3, 8e-3), unit="s", low=0.0, low_inclusive=False,
+        source="chosen: Gaussian smoothing of the motion a nonlinear law is evaluated on (the estimated tendon travel "
+               "for the guides' Dahl law, the motor velocity for (3.8)), on a factor-sqrt(2) grid; the data choose "
+               "(as the other shape grids). The noise (28 um per sample on the index's estimated travel at 30 dB, "
+               "mostly the motor angles') relaxes a Dahl state and blurs atan(g1 w); smoothing removes the link "
+               "modes' motion. Guides with the truth's own parameters left the links' equation at 3.2 / 24 / 61 / "
+               "44x the floor at 2 ms and 2.4 / 3.2 / 12.8 / 8.5x at 3 ms on four index records (1.1-1.3x on the "
+               "noise-free travel); (3.8) with the truth's slope 14x at the 20 ms of finger_filter, 3.6x at 5.6-8 ms, "
+               "83x at 1 ms (0.94x on the noise-free velocity); the best width differs per record (factor 2: 2.9x "
+               "left where sqrt(2) leaves 1.5x)",
+        doc="finger diagnosis: Gaussian widths (std) tried for the motion under a nonlinear law")
     finger_gauss_newton_iterations: int = param(
         20, unit="-", low=1, high=1000,
         source="chosen: the thumb's joint angles from its tendons (routing h(q) nonlinear), warm-started at the previous "

@@ -162,7 +162,36 @@ class HandChainParams(Parameters):
     friction_scale: float = param(0.5, unit="-", low=0.0, high=1.0,
                                   source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
                                          "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "
-                                         "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter")
+                                         "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter",
+                                  doc="motor friction (3.8) fed forward by the laws that command the motors from "
+                                      "motor-side states: the 15.5 finger backstepping and the motor-position "
+                                      "tendon level (11.3) of two-time-scale (the (10.2) force law: "
+                                      "force_friction_scale)")
+    force_friction_scale: float = param(
+        1.0, unit="-", low=0.0, high=1.0,
+        source=("(10.2): the force law feeds the friction estimate forward, and (10.4): its static force error is "
+                "then the model's error over Kp, (tau_fric - tau_fric_hat) / Kp; ch. 3: the compensation 'is "
+                "appreciable when the motor is used as a torque source' (tendon force control: 'reduced dead zone'). "
+                "The model is (3.8) itself, so 1 (the whole estimate) leaves no static friction error. Not more: "
+                "ch. 3 warns against over-compensation (passivity). The sampled force loop stands it: one tendon at "
+                "rest, (3.8)'s slope gamma1 gamma2 + gamma3 = 5.6 Nm s/rad held over the 3 kHz period against B / h "
+                "= 6 Nm s/rad, has its pair at |z| = 0.955 (s = 1) and loses stability only past s ~ 1.15 "
+                "(tests/test_hand_control.py: its continuous loop is the (10.10) design exactly). Measured: at the shared friction_scale 0.5 the residual (3.8) acted "
+                "as ~2.8 Nm s/rad below 0.1 rad/s and left the index PIP 0.018 rad from a 0.2 rad step after "
+                "0.26 s; at 1: 0.0047 rad"),
+        doc="fraction of the motor friction (3.8) the chain's tendon force law (10.2) feeds forward")
+    force_ripple_scale: float = param(
+        1.0, unit="-", low=0.0, high=1.0,
+        source=("(10.2)/(10.4) as force_friction_scale: the ripple (3.5) is a known function of the motor angle (ch. 3: "
+                "'strongly repeatable', its phase given by the motor position), so the whole model leaves the force "
+                "loop no static ripple error. Not RippleCompensationParams.amplitude_scale (0.8, ch. 3's conservative "
+                "estimate for the motor PD of Fig 3.6): a fraction 1 - a left over is a static force error "
+                "(1 - a) tau_r(theta) / Kp_f that moves with the motor angle, i.e. a joint stiffness "
+                "sum_i (P S)_ij^2 (1 - a) tau_r'(theta_i) / (r_m Kp_f,i) of either sign (tau_r' up to "
+                "N a_m = 5.4 Nm/rad at the motor-shaft period), as large as the distal joints' impedance. Measured, "
+                "index, sampled loop at rest (hysteresis off): the slowest mode at -0.11 1/s with a = 0.8, -1.4 1/s "
+                "with 1; at half the cascade cap +0.62 1/s (unstable) with 0.8, -0.73 1/s with 1"),
+        doc="fraction of the motor ripple (3.5) the chain's tendon force law (10.2) feeds forward")
     link_acceleration_feedforward: bool = param(
         False, unit="-",
         source=("chosen: False. The exact 15.5 design feeds the tendon force change phi' P qdd of its link model's "

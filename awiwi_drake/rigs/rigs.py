@@ -10,13 +10,13 @@
   nonlinear springs with pretension (Fig 5.9, ch. 15.5).
   State ``[q, qdot, theta1, theta2, omega1, omega2]``.
 
-The tendon rig is one :class:`~awiwi_drake.components.fused_drive.TendonDrive_`. A link rig's
-dynamics are *one* C++ ``SymbolicVectorSystem`` generated from the law functions
-(:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive with the
-link inside, ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
+A rig's dynamics are *one* C++ ``SymbolicVectorSystem`` generated from the law functions
+(:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive, with a
+link inside ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
 MultibodyPlant; output the state) plus the stateless
 :class:`~awiwi_drake.components.rig_system.LinkRigOutputs_` for the tendon forces,
-stiffnesses, joint torque and applied torque (evaluated only when read);
+stiffnesses, joint torque and applied torque (evaluated only when read); the motor rig's
+is the motor law alone;
 ``Rig.plant`` is None. Tests check both against the laws evaluated apart at random states.
 
 Every block is named; ports are named after physical quantities.
@@ -27,13 +27,15 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+import pydrake.symbolic as sym
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Multiplexer, ZeroOrderHold
+from pydrake.systems.primitives import (Demultiplexer, Multiplexer, PassThrough, Saturation, SymbolicVectorSystem,
+                                        ZeroOrderHold)
 
-from awiwi_drake.components.fused_drive import DriveModel, TendonDrive, TendonDrive_
+from awiwi_drake.components.fused_drive import DriveModel, TendonDrive
 from awiwi_drake.components.rig_system import (LinkRigOutputs_, integration_state, rig_dynamics_system,
                                                 rig_integration_system, sampled_dynamics, tendon_force_of_states)
-from awiwi_drake.components.motor import MotorBank, motor_friction_torque, motor_ripple_torque
+from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.components.routing import ConstantCoupling, antagonistic_coupling
 from awiwi_drake.components.spring import AntagonisticPairSpring, LinearSpring, TendonSprings, tendon_spring
 from awiwi_drake.parameters.components import HysteresisParams, MotorParams
@@ -75,10 +77,18 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     model = DriveModel(p.motor, (spring,), ConstantCoupling(np.zeros((1, 0))), np.zeros(1), p.motor.pulley_radius,
                        p.spring.hysteresis)
     b = DiagramBuilder()
-    d = b.AddNamedSystem("tendon_drive", TendonDrive_[float](model))
-    b.ExportInput(d.GetInputPort("motor_torque"), "motor_torque")
-    for nm in ("state", "motor_angle", "motor_velocity", "tendon_force", "tendon_stiffness", "applied_torque"):
-        b.ExportOutput(d.GetOutputPort(nm), nm)
+    dyn = b.AddNamedSystem("tendon_drive", rig_dynamics_system(model))
+    split = b.AddNamedSystem("state_split", Demultiplexer([1] * model.num_states))
+    laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
+    b.Connect(dyn.get_output_port(), split.get_input_port())
+    b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
+    b.ExportInput(dyn.get_input_port(), "motor_torque")
+    b.ConnectInput("motor_torque", laws.GetInputPort("motor_torque"))
+    b.ExportOutput(dyn.get_output_port(), "state")
+    b.ExportOutput(split.get_output_port(0), "motor_angle")
+    b.ExportOutput(split.get_output_port(1), "motor_velocity")
+    for nm in ("tendon_force", "tendon_stiffness", "applied_torque"):
+        b.ExportOutput(laws.GetOutputPort(nm), nm)
     diagram = b.Build()
     diagram.set_name("tendon-rig")
     drive = TendonDrive(diagram, model)
@@ -272,15 +282,30 @@ def joint_rig(*, params: JointRigParams | None = None) -> Rig:
 
 
 def motor_rig(motor: MotorParams | None = None) -> Rig:
-    """One free motor (no tendon): ``B thdd = sat(u) + tau_fric + tau_ripple`` ((3.5)); state [theta, omega]."""
+    """One free motor (no tendon): ``B thdd = sat(u) + tau_fric + tau_ripple`` ((3.5)); state [theta, omega].
+
+    The dynamics are one C++ ``SymbolicVectorSystem`` generated from the law
+    (:func:`~awiwi_drake.components.motor.motor_acceleration`), as the link rigs' are; ``applied_torque`` is
+    the command after Drake's ``Saturation`` (``sat(u)``, the law's :func:`~awiwi_drake.components.motor.saturate_torque`).
+    """
     p = motor or MotorParams()
+    if not isinstance(p, MotorParams):
+        raise ValueError(f"motor_rig: motor must be MotorParams, got {type(p).__name__}")
+    theta, omega, u = sym.Variable("theta"), sym.Variable("omega"), sym.Variable("u")
+    with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
+        acc = motor_acceleration(*(np.array([sym.Expression(v)]) for v in (theta, omega, u)), 0.0, p)[0]
     b = DiagramBuilder()
-    bank = b.AddNamedSystem("motor", MotorBank(p, 1))
-    zero = b.AddNamedSystem("no_tendon", ConstantVectorSource([0.0]))
-    b.Connect(zero.get_output_port(), bank.GetInputPort("tendon_force"))
-    b.ExportInput(bank.GetInputPort("motor_torque"), "motor_torque")
-    for nm in ("state", "motor_angle", "motor_velocity", "applied_torque"):
-        b.ExportOutput(bank.GetOutputPort(nm), nm)
+    dyn = b.AddNamedSystem("motor", SymbolicVectorSystem(state=[theta, omega], input=[u], dynamics=[omega, acc],
+                                                         output=[theta, omega]))
+    split = b.AddNamedSystem("motor_state_split", Demultiplexer([1, 1]))
+    sat = b.AddNamedSystem("torque_saturation", Saturation([-p.torque_limit], [p.torque_limit]) if p.saturation
+                           else PassThrough(1))
+    b.Connect(dyn.get_output_port(), split.get_input_port())
+    b.ExportInput(dyn.get_input_port(), "motor_torque")
+    b.ConnectInput("motor_torque", sat.get_input_port(0))
+    for port, nm in ((dyn.get_output_port(), "state"), (split.get_output_port(0), "motor_angle"),
+                     (split.get_output_port(1), "motor_velocity"), (sat.get_output_port(0), "applied_torque")):
+        b.ExportOutput(port, nm)
     d = b.Build()
     d.set_name("motor-rig")
 

@@ -39,11 +39,14 @@ class Metrics:
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad]
+    dead_band: float = math.nan          # friction dead band of the DoF, closed form of the controller's rest
+    #                                      equations (design["dead_band"]; the 15.5 finger backstepping) [rad]
     failed_at: float = math.nan          # s, test time at which the simulation stopped (status a failure cause)
     status: str = "ok"                   # "ok", "flagged" (see flags), or the cause that stopped the simulation
     #                                      (metrics NaN): "diverged", "infeasible_force", a monitor's event kind
     flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
-    #                                      force distribution out of bounds (finger/hand chain); a stopped
+    #                                      force distribution out of bounds (finger/hand chain), stopped within
+    #                                      friction dead band (design["friction_hold"] <= 1); a stopped
     #                                      row: the error's message
 
 
@@ -57,7 +60,7 @@ UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error
              peak_command="Nm",
              stiffness="Nm/rad", drift="ref", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
              peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
-             slack_fraction="-", estimation_error="rad", failed_at="s")
+             slack_fraction="-", estimation_error="rad", dead_band="rad", failed_at="s")
 
 
 @dataclass

@@ -39,7 +39,7 @@ from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
            "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant", "short_test_params",
-           "compare_controllers", "observer_at_bound"]
+           "compare_controllers", "observer_at_bound", "mark_dead_band"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
 
@@ -133,16 +133,34 @@ def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = 
     return float(1.0 / np.min(-lam.real[keep]))
 
 
+def _design(loop: ClosedLoop) -> dict:
+    """The controller's ``design`` dict (its own or its law's; empty when it has none)."""
+    ctrl = loop.controller
+    design = getattr(ctrl, "design", None)
+    if not isinstance(design, dict):
+        design = getattr(getattr(ctrl, "law", None), "design", None)
+    return design if isinstance(design, dict) else {}
+
+
+def mark_dead_band(rows: Sequence[Metrics], errors, hold, dof_load=None) -> None:
+    """Flag each row ``stopped within friction dead band (X % of its bound)`` whose DoF is not settled while the run's
+    end errors ``errors`` (k, output - reference per DoF) are a rest of the loop held by friction: ``hold(errors,
+    dof_load)`` (the controller's ``design["friction_hold"]``, the closed form of its rest equations: the fraction
+    of each DoF's friction bound the rest needs) is <= 1 on every DoF of the finger.  Physics, not a failure of the
+    law: the frictions (4.1) and the lever's hysteresis hold the link there (ch. 9, ch. 11)."""
+    frac = np.asarray(hold(np.asarray(errors, float), dof_load), float)
+    for j, row in enumerate(rows):
+        if "not settled" in row.flags and frac[j] <= 1.0:
+            row.flags = "; ".join((row.flags, f"stopped within friction dead band ({100 * frac[j]:.0f} % of its "
+                                              "bound)"))
+
+
 def design_time_constant(loop: ClosedLoop) -> float | None:
     """The controller's own slowest designed tracking time constant [s] (``design["time_constant"]`` of the
     controller or of its law: the finger/hand per-joint designs,
     :meth:`~awiwi_drake.control.joint_design.JointDesign.tracking_time_constant`, and the finger
     backstepping's joint modes), or None when it reports none."""
-    ctrl = loop.controller
-    design = getattr(ctrl, "design", None)
-    if not isinstance(design, dict):
-        design = getattr(getattr(ctrl, "law", None), "design", None)
-    tau = design.get("time_constant") if isinstance(design, dict) else None
+    tau = _design(loop).get("time_constant")
     return float(tau) if tau is not None and math.isfinite(tau) and tau > 0 else None
 
 
@@ -268,7 +286,12 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
         raise ValueError(f"test 'disturbance' needs a rig input 'external_torque'; rig "
                          f"{getattr(loop.rig, 'name', '?')!r} has none")
     applied = applied_port(loop)
+    design = _design(loop)
+    band, hold = design.get("dead_band"), design.get("friction_hold")
     rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
+    if band is not None:
+        for row, b in zip(rows, band):
+            row.dead_band = float(b)
     meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
     runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
     failed: list[int] = []
@@ -366,6 +389,9 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                     row.flags = "; ".join(f for f in (row.flags, f"force distribution out of bounds "
                                                                  f"{100 * bad:.0f} %") if f)
                     row.status = "flagged" if row.status == "ok" else row.status
+        if hold is not None and test == "step":      # the end errors of every DoF (the whole finger rests together)
+            tail = t >= 0.9 * t[-1]
+            mark_dead_band(rows, np.mean(y[tail] - r[tail], axis=0), hold)
     if runs_t is None:   # every simulation of the test stopped: rows only, nothing to plot
         return None, rows
     runs_y[:, failed] = np.nan   # the stopped groups' joints have no trace
