@@ -387,6 +387,51 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     assert np.linalg.norm(J[:, -k:]) > 0.0
 
 
+def test_backstepping_friction_observer_under_a_load_beyond_the_friction_bound_deflects_by_the_excess():
+    """``backstepping-friction-observer`` on the default index under a constant load of 1.5 times the MCP's friction
+    bound B (the guides' and the lever's, at the operating forces).  The estimate settles at the link-side torque the
+    sensors miss, beyond B, so its compensation stays clipped at B and the impedance takes the excess: the rest is the
+    law's closed form ``rest_error(g, z, tau_ext, B)`` with the logged friction states and B at the sensed rest forces
+    (MCP 0.104 rad, the closed form's to 0.4 %), and compare's ``observer_at_bound`` reads the controller's ``friction_compensation`` and
+    ``friction_compensation_bound`` ports as beyond it on the MCP only.  The bound block converts to AutoDiffXd with
+    the law's value."""
+    from awiwi_drake.control.compare.standard_tests import observer_at_bound
+    from awiwi_drake.control.finger_backstepping import FrictionBound
+    rig = _rig()
+    ctrl = make_controller("backstepping-friction-observer", rig)
+    law = ctrl.law
+    op = rig.operating_point()
+    tau = np.zeros(rig.num_joints)
+    tau[1] = 1.5 * law.friction_bound(law.f_op)[1]                         # q21, the MCP (DoF 1)
+    loop = closed_loop(rig, ctrl, **get_entry("backstepping-friction-observer", rig).loop_options)
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                              disturbances={"external_torque": tau})
+    ports = ("joint_angle", "state", "elongation", "controller_friction_compensation",
+             "controller_friction_compensation_bound")
+    res = simulate(loop.diagram, ctx, 0.6, log=ports, log_period=PERIOD)
+    x = res["state"][-1]
+    z, g = (x[[i for i, nm in enumerate(rig.state_names) if nm.startswith(k)]]
+            for k in ("hysteresis_force", "guide_friction_force"))
+    e = law.Sp @ (res["joint_angle"][-1] - op.joint_angle)
+    B = law.friction_bound(law.springs.force(res["elongation"][-1]))
+    np.testing.assert_allclose(res["controller_friction_compensation_bound"][-1], B, rtol=1e-9)
+    rest = law.rest_error(g, z, tau, B)
+    np.testing.assert_allclose(e[1], rest[1], rtol=0.01)                    # measured 0.4 %
+    np.testing.assert_allclose(e, rest, rtol=0, atol=0.05 * rest[1])          # PIP/DIP still creeping (slow mode)
+    # the clip matters: the impedance alone would take the whole load (Kp e = S^T tau): 0.40 rad on the MCP
+    assert rest[1] < 0.7 * np.linalg.solve(law.Kp, law.S.T @ tau)[1]
+    tail = res.t >= 0.9 * res.t[-1]
+    at = [observer_at_bound(res["controller_friction_compensation"][tail, j],
+                            res["controller_friction_compensation_bound"][tail, j]) for j in range(4)]
+    assert at == [False, True, False, False], at
+    sys_ = FrictionBound(law).ToAutoDiffXd()
+    c = sys_.CreateDefaultContext()
+    sys_.GetInputPort("joint_angle").FixValue(c, op.joint_angle)
+    sys_.GetInputPort("tendon_force").FixValue(c, law.f_op)
+    from pydrake.autodiffutils import ExtractValue
+    np.testing.assert_allclose(ExtractValue(sys_.get_output_port(0).Eval(c)).ravel(), law.friction_bound(law.f_op))
+
+
 def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffness_and_the_observer_shrinks_it():
     """Issue 10 item 2, ch. 4 (4.1) and ch. 9: the registered cascaded impedance on the default index (guide friction,
     hysteresis, motor friction and ripple on; 3 kHz, estimated joint angles), a 0.2 rad MCP step.  At rest the link
