@@ -166,3 +166,15 @@ def test_finger_backstepping_rows_carry_the_dead_band_and_say_when_the_step_stop
         assert "stopped within friction dead band" in r.flags, r.flags
         share = float(r.flags.split("stopped within friction dead band (")[1].split(" %")[0])
         assert 0.0 <= share <= 100.0                                       # of the bound the rest needs
+    # beyond the dead band (one DoF at 1.05 of its half-width, the others at their reference) the rest would need
+    # more than the frictions' bound on some DoF: a not-settled row there keeps "not settled" alone
+    from awiwi_drake.control.compare.metrics import Metrics
+    from awiwi_drake.control.compare.standard_tests import mark_dead_band
+    from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw
+    law = FingerBacksteppingLaw(finger_diagram(finger="index"))
+    np.testing.assert_allclose(law.design["dead_band"], law_band, rtol=1e-12)
+    for j, half in enumerate(law.design["dead_band"]):
+        for scale, inside in ((0.95, True), (1.05, False)):
+            probe = [Metrics("backstepping", "step", joint=r.joint, flags="not settled") for r in rows]
+            mark_dead_band(probe, scale * half * np.eye(len(rows))[j], law.friction_hold)
+            assert all(("dead band" in m.flags) == inside for m in probe[j:j + 1]), (j, scale, probe[j].flags)

@@ -566,3 +566,42 @@ def test_box_least_squares_is_the_constrained_optimum():
         assert np.all(grad[x <= lo] >= -1e-8) and np.all(grad[x >= hi] <= 1e-8)
         held += int(np.sum(~free))
     assert held > 10        # the bounds bind in these problems
+
+
+def test_hand_dataset_is_diagnosed_as_its_five_fingers_and_written_back(tmp_path, capsys):
+    """The hand (``make-dataset --rig hand``: the hand diagram, wrist still, the motor PD at 1 kHz; a Stribeck
+    friction hidden on tendon 20 = middle_h4). Its routing is block-diagonal by finger (every tendon's row of P is
+    zero outside its own finger's joints), so its equations are the five fingers' and the diagnosis is theirs:
+    the friction is named on middle_h4 and nothing on the other 37 tendons; the write-back is one HandRigParams
+    that ``hand_diagram(params=...)`` builds with that tendon's motor law only, and as the dataset's nominal it
+    leaves the diagnosis's own after-ratio on that finger's tendons (the same laws, evaluated again). The dataset
+    round-trips through its files; the CLI asks for the place."""
+    import dataclasses
+    from awiwi_drake.cli import main
+    from awiwi_drake.discrepancy.finger import hand_fingers
+    from awiwi_drake.hand.coupling import hand_coupling
+    from awiwi_drake.hand.diagrams import hand_diagram
+    from awiwi_drake.parameters.hand import FINGERS, TENDON_SLICES
+    c = hand_coupling()
+    P = np.asarray(c.P(np.zeros(c.num_joints)), float)
+    digits = np.array([int(j[1]) for j in hand_diagram(wrist=False).joint_names])
+    for k, f in enumerate(FINGERS):
+        assert not np.any(P[TENDON_SLICES[f]][:, digits != k + 1])
+    ds = make_finger_dataset("hand", ["motor_friction"], place=20, seed=3, gen=THREE)
+    assert ds.rig == "hand" and ds.meta["truth"]["tendon"] == "middle_h4" and ds.spec.num_motors == 38
+    back = load_dataset(save_dataset(ds, tmp_path))
+    np.testing.assert_allclose(back.outputs["tendon_force_38"], ds.outputs["tendon_force_38"], rtol=1e-9, atol=1e-12)
+    dx = diagnose(back)
+    assert dx.tendons_named == {"motor_friction": ["middle_h4"]} and [s.tendon for s in dx.steps] == [20]
+    assert len(dx.ratios_after["motor"]) == 38 and "thumb:" in dx.joint_reason and "ring:" in dx.joint_reason
+    aug = dx.augmented.params
+    motors = hand_diagram(params=aug, wrist=False).drive.model.motor
+    assert [i for i, mp in enumerate(motors) if mp.friction] == [19]
+    assert motors[19].coulomb_torque == pytest.approx(dx.steps[0].parameters["motor_coulomb"], rel=1e-12)
+    js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
+    f, sl, _, middle = hand_fingers(dataclasses.replace(back, parameters=js))[2]
+    assert f == "middle"
+    np.testing.assert_allclose(FingerResiduals(middle, DiscrepancySettings()).ratios()["motor"],
+                               dx.ratios_after["motor"][sl], rtol=1e-6)
+    assert main(["make-dataset", "--rig", "hand", "--hide", "motor_friction", "--out", str(tmp_path)]) == 2
+    assert "--place" in capsys.readouterr().err

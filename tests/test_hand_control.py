@@ -387,6 +387,51 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     assert np.linalg.norm(J[:, -k:]) > 0.0
 
 
+def test_backstepping_friction_observer_under_a_load_beyond_the_friction_bound_deflects_by_the_excess():
+    """``backstepping-friction-observer`` on the default index under a constant load of 1.5 times the MCP's friction
+    bound B (the guides' and the lever's, at the operating forces).  The estimate settles at the link-side torque the
+    sensors miss, beyond B, so its compensation stays clipped at B and the impedance takes the excess: the rest is the
+    law's closed form ``rest_error(g, z, tau_ext, B)`` with the logged friction states and B at the sensed rest forces
+    (MCP 0.104 rad, the closed form's to 0.4 %), and compare's ``observer_at_bound`` reads the controller's ``friction_compensation`` and
+    ``friction_compensation_bound`` ports as beyond it on the MCP only.  The bound block converts to AutoDiffXd with
+    the law's value."""
+    from awiwi_drake.control.compare.standard_tests import observer_at_bound
+    from awiwi_drake.control.finger_backstepping import FrictionBound
+    rig = _rig()
+    ctrl = make_controller("backstepping-friction-observer", rig)
+    law = ctrl.law
+    op = rig.operating_point()
+    tau = np.zeros(rig.num_joints)
+    tau[1] = 1.5 * law.friction_bound(law.f_op)[1]                         # q21, the MCP (DoF 1)
+    loop = closed_loop(rig, ctrl, **get_entry("backstepping-friction-observer", rig).loop_options)
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
+                              disturbances={"external_torque": tau})
+    ports = ("joint_angle", "state", "elongation", "controller_friction_compensation",
+             "controller_friction_compensation_bound")
+    res = simulate(loop.diagram, ctx, 0.6, log=ports, log_period=PERIOD)
+    x = res["state"][-1]
+    z, g = (x[[i for i, nm in enumerate(rig.state_names) if nm.startswith(k)]]
+            for k in ("hysteresis_force", "guide_friction_force"))
+    e = law.Sp @ (res["joint_angle"][-1] - op.joint_angle)
+    B = law.friction_bound(law.springs.force(res["elongation"][-1]))
+    np.testing.assert_allclose(res["controller_friction_compensation_bound"][-1], B, rtol=1e-9)
+    rest = law.rest_error(g, z, tau, B)
+    np.testing.assert_allclose(e[1], rest[1], rtol=0.01)                    # measured 0.4 %
+    np.testing.assert_allclose(e, rest, rtol=0, atol=0.05 * rest[1])          # PIP/DIP still creeping (slow mode)
+    # the clip matters: the impedance alone would take the whole load (Kp e = S^T tau): 0.40 rad on the MCP
+    assert rest[1] < 0.7 * np.linalg.solve(law.Kp, law.S.T @ tau)[1]
+    tail = res.t >= 0.9 * res.t[-1]
+    at = [observer_at_bound(res["controller_friction_compensation"][tail, j],
+                            res["controller_friction_compensation_bound"][tail, j]) for j in range(4)]
+    assert at == [False, True, False, False], at
+    sys_ = FrictionBound(law).ToAutoDiffXd()
+    c = sys_.CreateDefaultContext()
+    sys_.GetInputPort("joint_angle").FixValue(c, op.joint_angle)
+    sys_.GetInputPort("tendon_force").FixValue(c, law.f_op)
+    from pydrake.autodiffutils import ExtractValue
+    np.testing.assert_allclose(ExtractValue(sys_.get_output_port(0).Eval(c)).ravel(), law.friction_bound(law.f_op))
+
+
 def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffness_and_the_observer_shrinks_it():
     """Issue 10 item 2, ch. 4 (4.1) and ch. 9: the registered cascaded impedance on the default index (guide friction,
     hysteresis, motor friction and ripple on; 3 kHz, estimated joint angles), a 0.2 rad MCP step.  At rest the link
@@ -781,3 +826,59 @@ def test_chain_force_loop_cancels_the_motor_friction_and_ripple_at_rest_and_its_
             Ks = K + np.array([[0.0, (1.0 - s) * fric]])
             return np.abs(np.linalg.eigvals(zoh.A() + zoh.B() @ Ks)).max()
         assert radius(1.0) < 1.0 and radius(2.0) > 1.0, (i, radius(1.0), radius(2.0))
+
+
+def test_distal_joints_rest_within_the_force_loops_residual_over_their_impedance():
+    """The thesis's low-friction finger (15.5.3, "bearings and steel cables": no guide friction, no lever hysteresis;
+    motor friction (3.8) and ripple (3.5) on), index, default cascaded chain (its observer then compensates nothing:
+    its bound is 0), 0.2 rad on every DoF, 0.5 s.  The link carries only the tendons' torque, the distribution gives
+    the request exactly, so Kp e = (P S)^T (f - f_ref) - (D + b) qdot - M qdd per DoF (D the stage's damping, b the
+    bearings'), and by (10.1)/(10.2) each tendon's force error is at most r_i = ((1 - s)|tau_f(w)| + (1 - a)|tau_r(th)|
+    + Kd alpha |w_el| + B |w'| + H) / Kp_f with s, a the chain's feed-forward fractions of (3.8), (3.5) and H the
+    change of the plant's friction, ripple and r_m f over the last period (the command is held over it): the closed-form
+    bound |e_j| <= (sum_i |(P S)_ij| r_i + (D + b)|qdot| + M |qdd|) / Kp_j at the end, with the chain's s = a = 1
+    below the 2 % band of the step on the PIP and DIP.  The static part of the former fractions (a = 0.8: the ripple
+    left over, 0.2 |tau_r|, which does not vanish at rest) alone puts the DIP's bound outside that band: the distal
+    joints' tiny impedance (Kp = 0.007 Nm/rad, the cascade's cap on M_jj) needs the whole feed-forward."""
+    from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
+    from awiwi_drake.control.joint_stage import joint_damping, joint_inertia
+    p = FingerRigParams.for_finger("index").with_physics(guide_friction=False, hysteresis=False)
+    rig = finger_diagram(finger="index", params=p)
+    ctrl = make_controller("cascaded", rig)
+    gains = ctrl.design["joint_design"].gains
+    Kp, D = gains[:, 0], gains[:, 1]
+    law = ctrl._force.fused_parts["law"]
+    s, a = law.gains.friction_scale, law.ripple_scale
+    loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
+    op = rig.operating_point()
+    q_ref = op.joint_angle + 0.2
+    ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
+    res = simulate(loop, ctx, 0.5, log=("joint_angle", "state", "tendon_force", "controller_tendon_force_reference"))
+    n, m, motor = rig.num_joints, rig.num_tendons, rig.params.motor
+    S = ctrl.design["selection"]
+    x0, x1 = res["state"][-2], res["state"][-1]
+    q, v, th, w = x1[:n], x1[n:2 * n], x1[2 * n:2 * n + m], x1[2 * n + m:2 * n + 2 * m]
+    h = res.t[-1] - res.t[-2]
+    qdd, wdot = (v - x0[n:2 * n]) / h, (w - x0[2 * n + m:2 * n + 2 * m]) / h
+    f, f_ref = res["tendon_force"][-1], res["controller_tendon_force_reference"][-1]
+    kp, kd = law.gains_at(f_ref)
+    alpha = np.array([float(fm.alpha_of_force(fi, floor=law.gains.min_schedule_force)) for fm, fi in zip(law.fmaps, f)])
+    PS = np.asarray(rig.coupling.P(q)) @ S
+    w_el = w + np.asarray(rig.coupling.P(q)) @ v / law.r_m
+    tau_f, tau_r = np.abs(motor_friction_torque(w, motor)), np.abs(motor_ripple_torque(th, motor))
+    # the command is held over the period while the plant's friction, ripple and spring move: their change over the
+    # last period is the hold's share of the error
+    th0, w0 = x0[2 * n:2 * n + m], x0[2 * n + m:2 * n + 2 * m]
+    hold = (np.abs(motor_friction_torque(w, motor) - motor_friction_torque(w0, motor))
+            + np.abs(motor_ripple_torque(th, motor) - motor_ripple_torque(th0, motor))
+            + law.r_m * np.abs(f - res["tendon_force"][-2]))
+    r = ((1 - s) * tau_f + (1 - a) * tau_r + kd * alpha * np.abs(w_el) + motor.inertia * np.abs(wdot) + hold) / kp
+    assert np.all(np.abs(f_ref - f) <= r)                                   # (10.1) + (10.2) at the last sample
+    M, b = joint_inertia(rig, q), np.diag(joint_damping(rig))
+    Sp = np.linalg.pinv(S)
+    bound = (np.abs(PS.T) @ r + (D + b) * np.abs(Sp @ v) + M * np.abs(Sp @ qdd)) / Kp
+    e = Sp @ (q - q_ref)
+    assert np.all(np.abs(e) <= bound), (e, bound)
+    assert np.all(bound[2:] < 0.02 * 0.2), bound                            # PIP, DIP inside the 2 % band
+    former = np.abs(PS.T) @ ((1 - 0.8) * tau_r / kp) / Kp                  # the ripple left over at a = 0.8
+    assert former[3] > 0.02 * 0.2, former

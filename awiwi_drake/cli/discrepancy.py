@@ -93,7 +93,7 @@ def _seed(text: str) -> int:
 
 def _make_dataset(args) -> int:
     from awiwi_drake.discrepancy import make_truth_dataset, save_dataset
-    from awiwi_drake.discrepancy.data import CLI_RIG_NAMES
+    from awiwi_drake.discrepancy.data import CLI_RIG_NAMES, is_finger_rig
     from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 
     from . import output_dir
@@ -113,7 +113,7 @@ def _make_dataset(args) -> int:
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
     rig = CLI_RIG_NAMES[args.rig]
-    if rig.startswith("finger-"):
+    if is_finger_rig(rig):
         return _make_finger_dataset(args, out, hidden)
     if args.joint_angles:
         raise ValueError(f"--joint-angles: only for finger datasets (the {args.rig} records its link angle anyway)")
@@ -140,6 +140,7 @@ def _make_dataset(args) -> int:
 def _make_finger_dataset(args, out, hidden) -> int:
     from awiwi_drake.config import SimulationProgress
     from awiwi_drake.discrepancy import save_dataset
+    from awiwi_drake.discrepancy.data import rig_finger
     from awiwi_drake.discrepancy.finger_truth import make_finger_dataset
     from awiwi_drake.parameters.discrepancy import FingerTruthParams
 
@@ -151,7 +152,7 @@ def _make_finger_dataset(args, out, hidden) -> int:
         raise ValueError(f"--place: {args.rig} needs the tendon the hidden effect acts on (1-based)")
     gen = FingerTruthParams() if args.duration is None else FingerTruthParams(duration=args.duration)
     with SimulationProgress("make-dataset", quiet=args.quiet) as progress:
-        ds = make_finger_dataset(args.rig[len("finger-"):], hidden, place=args.place, snr_db=args.snr,
+        ds = make_finger_dataset(rig_finger(args.rig), hidden, place=args.place, snr_db=args.snr,
                                  seed=args.seed, gen=gen, joint_angles=args.joint_angles, name=args.name,
                                  keep_clean=False, progress=progress)
     path = save_dataset(ds, out)
@@ -179,9 +180,10 @@ def register(subparsers) -> None:
 
     m = subparsers.add_parser("make-dataset", help="generate a hidden-effect truth dataset")
     m.add_argument("--rig", choices=["tendon-rig", "joint-rig", "finger-index", "finger-middle", "finger-ring",
-                                     "finger-fifth", "finger-thumb"], default="joint-rig",
+                                     "finger-fifth", "finger-thumb", "hand"], default="joint-rig",
                    help="the rig of the truth experiment (default joint-rig); finger-*: the package's finger "
-                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple, spring_hysteresis")
+                        "diagram at 1 kHz, effects motor_friction, guide_friction, motor_ripple, spring_hysteresis; "
+                        "hand: the hand diagram (wrist still), the same effects on one of its 38 tendons")
     m.add_argument("--hide", action="append", metavar="EFFECT",
                    help="catalog effect hidden in the truth (repeat or comma-separate; 'none'): motor_friction, "
                         "motor_ripple, spring_hysteresis, joint_friction, guide_friction, delay, spring_drift, "

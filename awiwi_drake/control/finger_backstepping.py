@@ -146,7 +146,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
@@ -160,7 +161,7 @@ from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams
 
-__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "ObservedBacksteppingController",
+__all__ = ["FingerBacksteppingLaw", "finger_backstepping_controller", "ObservedBacksteppingController", "FrictionBound_",
            "check_backstepping_springs", "VARIANTS"]
 
 #: The law's variants (module docstring): 15.5 per tendon (registered ``backstepping``), 15.2 link steps
@@ -301,7 +302,7 @@ class FingerBacksteppingLaw(StaticLaw):
         fp = positive_part(f)
         return np.abs(P @ self.S).T @ (guide_friction_level(fp, C, mu_alpha, 1.0) + beta * fp + z0)
 
-    def rest_error(self, guide_force, hysteresis_force, external_torque=None):
+    def rest_error(self, guide_force, hysteresis_force, external_torque=None, bound=None):
         """The DoF error ``e`` (k) at which the loop rests with the guides' friction forces ``g`` and the lever's
         hysteresis forces ``z`` (m each, the plant's states) and the joint load ``tau_ext`` (n): the law's rest
         equations (omega = 0, e' = 0, the motors at rest: ``u = r_m (phi + z) - ripple``) with the link's balance
@@ -313,7 +314,8 @@ class FingerBacksteppingLaw(StaticLaw):
 
         with ``A1 = -Kd M_d^-1``, ``A2 = -(Kp - Kd M_d^-1 B_q) M_d^-1`` (the model's phantom acceleration ``M_d^-1
         tau_f``; zero with the link torque estimate, whose ``d_hat`` explains ``tau_f``) and ``comp = clip(tau_f, +-B)``
-        with ``friction_compensation`` (else 0).  Without the load: the friction dead band."""
+        with ``friction_compensation`` (else 0; ``bound`` (k): ``B`` at the rest's forces, default at the operating
+        point's).  Without the load: the friction dead band."""
         g, z = (np.asarray(a, dtype=float) for a in (guide_force, hysteresis_force))
         PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
         tau_f = PS.T @ (z + g)
@@ -326,7 +328,7 @@ class FingerBacksteppingLaw(StaticLaw):
         z3 = (W @ a2 + (self.K3 + self.K4) * (W @ a1) + PS @ acc - self._motor_gain * z) / (1.0 + self.K3 * self.K4)
         comp = 0.0
         if self.friction_compensation:
-            B = self.friction_bound(self.f_op)
+            B = self.friction_bound(self.f_op) if bound is None else np.asarray(bound, dtype=float)
             comp = np.clip(tau_f, -B, B)
         return np.linalg.solve(self.Kp, self.tau_op - tau_f + comp - PS.T @ z3)
 
@@ -554,8 +556,9 @@ class ObservedBacksteppingController(Diagram):
     law's rest equations give ``Kp e = S^T tau_ext - (P S)^T (z + g)``: without friction the impedance's own static
     deflection (module docstring; ``tests/test_hand_control.py``).  Inputs: the law's measurements; outputs
     ``motor_torque`` and
-    ``friction_compensation`` (``-d_hat``); continuous state: the observer's ``w_hat`` (so the loop is closed as
-    blocks, not fused)."""
+    ``friction_compensation`` (``-d_hat``, unclipped) and, with the law's ``friction_compensation``, its bound
+    ``friction_compensation_bound`` (:class:`FrictionBound_`); continuous state: the observer's ``w_hat`` (so the loop
+    is closed as blocks, not fused)."""
 
     def __init__(self, rig: Any, law: FingerBacksteppingLaw, observer: FrictionObserverParams):
         super().__init__()
@@ -578,6 +581,11 @@ class ObservedBacksteppingController(Diagram):
                     b.ConnectInput(exported[nm], port)
                 else:
                     exported[nm] = b.ExportInput(port, nm)
+        if law.friction_compensation:          # compare's "observer at friction bound": the estimate beyond B
+            bound = b.AddNamedSystem("friction_bound", FrictionBound(law))
+            b.Connect(sensed.GetOutputPort("tendon_force"), bound.GetInputPort("tendon_force"))
+            b.ConnectInput(exported["joint_angle"], bound.GetInputPort("joint_angle"))
+            b.ExportOutput(bound.get_output_port(0), "friction_compensation_bound")
         b.ExportOutput(ctrl.get_output_port(0), "motor_torque")
         b.ExportOutput(obs.GetOutputPort("friction_compensation"), "friction_compensation")
         b.BuildInto(self)
@@ -589,6 +597,36 @@ class ObservedBacksteppingController(Diagram):
         S = self._observer.S
         v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
         self.GetMutableSubsystemContext(self._observer, context).SetContinuousState(self._observer.Sp @ v)
+
+
+@TemplateSystem.define("FrictionBound_")
+def FrictionBound_(T):
+    """``friction_compensation_bound`` (k) [Nm]: :meth:`FingerBacksteppingLaw.friction_bound` of ``law`` at the sensed
+    ``tendon_force`` (m) and ``P(joint_angle)`` (n), the torque the guides' friction and the lever's hysteresis can
+    hold per DoF (compare flags a DoF whose observer estimate ends beyond it: a load the compensation leaves to the
+    impedance)."""
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, law, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.law = law
+            n, k = law.S.shape
+            self._q = self.DeclareVectorInputPort("joint_angle", n)
+            self._f = self.DeclareVectorInputPort("tendon_force", law.f_op.size)
+            self.DeclareVectorOutputPort("friction_compensation_bound", k, self._calc,
+                                         prerequisites_of_calc={self._q.ticket(), self._f.ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.law, converter=converter)
+
+        def _calc(self, context, out):
+            q = self._q.Eval(context)
+            out.SetFromVector(self.law.friction_bound(self._f.Eval(context), self.law.coupling.P(q)))
+
+    return Impl
+
+
+FrictionBound = FrictionBound_[None]
 
 
 def link_friction_levels(rig: Any) -> tuple:

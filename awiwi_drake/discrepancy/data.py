@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths", "check_plausibility",
            "CLI_RIG_NAMES", "finger_rig_name", "finger_parameters_to_json", "finger_parameters_from_json",
-           "is_finger_rig"]
+           "is_finger_rig", "rig_finger"]
 
 
 @dataclass(frozen=True)
@@ -53,20 +53,26 @@ RIGS = {
 
 
 def finger_rig_name(finger: str) -> str:
-    """The dataset rig of one finger: ``finger-<finger>`` (e.g. ``finger-index``)."""
-    return f"finger-{finger}"
+    """The dataset rig of one finger: ``finger-<finger>`` (e.g. ``finger-index``); the hand's is ``hand``."""
+    return "hand" if finger == "hand" else f"finger-{finger}"
 
 
 def is_finger_rig(rig: str) -> bool:
-    return isinstance(rig, str) and rig.startswith("finger-")
+    """A finger's or the hand's dataset (motor torques in, motor angles and tendon forces out)."""
+    return isinstance(rig, str) and (rig.startswith("finger-") or rig == "hand")
+
+
+def rig_finger(rig: str) -> str:
+    """``finger-index`` -> ``index``; ``hand`` -> ``hand``."""
+    return "hand" if rig == "hand" else rig[len("finger-"):]
 
 
 def _finger_spec(finger: str) -> RigSpec:
     """Columns of a finger dataset: the commanded torques of its ``m`` motors (inputs), their angles and
     the tendon forces (outputs, required), the ``n`` plant joint angles (optional: the hand has no joint
     sensors); numbered in the finger's tendon/joint order (``<finger>_h1...``, ``q..``)."""
-    from awiwi_drake.hand.coupling import finger_coupling
-    c = finger_coupling(finger)
+    from awiwi_drake.hand.coupling import finger_coupling, hand_coupling
+    c = hand_coupling() if finger == "hand" else finger_coupling(finger)
     m, n = c.num_tendons, c.num_joints
     angles = tuple(f"motor_angle_{i + 1}" for i in range(m))
     forces = tuple(f"tendon_force_{i + 1}" for i in range(m))
@@ -81,13 +87,13 @@ class _Rigs(dict):
     FINGERS = ("index", "middle", "ring", "fifth", "thumb")
 
     def __missing__(self, key):
-        if is_finger_rig(key) and key[len("finger-"):] in self.FINGERS:
-            self[key] = _finger_spec(key[len("finger-"):])
+        if is_finger_rig(key) and rig_finger(key) in self.FINGERS + ("hand",):
+            self[key] = _finger_spec(rig_finger(key))
             return self[key]
         raise KeyError(key)
 
     def __contains__(self, key):
-        return dict.__contains__(self, key) or (is_finger_rig(key) and key[len("finger-"):] in self.FINGERS)
+        return dict.__contains__(self, key) or (is_finger_rig(key) and rig_finger(key) in self.FINGERS + ("hand",))
 
 
 RIGS = _Rigs(RIGS)
@@ -97,7 +103,8 @@ def finger_parameters_to_json(finger: str, params) -> dict:
     """The JSON ``parameters`` of a finger dataset: ``{"finger": name, "finger_rig": {...}}``, the
     :class:`~awiwi_drake.parameters.hand.FingerRigParams` as nested values (its YAML form: per-tendon
     overrides ``tendon_motors``/``tendon_springs`` as ``{tendon: {...}}``; the finger's geometry is the
-    package's default of that finger and is not written)."""
+    package's default of that finger and is not written). The hand (``finger`` ``"hand"``): its
+    :class:`~awiwi_drake.parameters.hand.HandRigParams`, the same way (its geometry ``hand`` not written)."""
     import dataclasses
     import typing
 
@@ -111,14 +118,14 @@ def finger_parameters_to_json(finger: str, params) -> dict:
         if isinstance(v, tuple):
             return [plain(x) for x in v]
         return v
-    d = {k: v for k, v in plain(params).items() if k not in ("finger", "finger_name")}
+    d = {k: v for k, v in plain(params).items() if k not in ("finger", "finger_name", "hand")}
     return {"finger": finger, "finger_rig": d}
 
 
 def finger_parameters_from_json(params: dict, where: str):
     """The :class:`~awiwi_drake.parameters.hand.FingerRigParams` of a finger dataset's ``parameters``
     (errors name the file and the key)."""
-    from awiwi_drake.parameters.hand import FINGERS, FingerRigParams
+    from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
     from awiwi_drake.parameters.yaml_io import from_yaml
     if not isinstance(params, dict):
         raise ValueError(f"{where}: 'parameters' must be an object, got {type(params).__name__}")
@@ -128,22 +135,23 @@ def finger_parameters_from_json(params: dict, where: str):
     unknown = sorted(set(params) - {"finger", "finger_rig"})
     if unknown:
         raise ValueError(f"{where}: unknown parameter {unknown[0]!r} (a finger dataset has 'finger', 'finger_rig')")
-    if params["finger"] not in FINGERS:
-        raise ValueError(f"{where}: parameter 'finger' = {params['finger']!r} is not one of {', '.join(FINGERS)}")
+    if params["finger"] not in FINGERS + ("hand",):
+        raise ValueError(f"{where}: parameter 'finger' = {params['finger']!r} is not one of {', '.join(FINGERS)}, "
+                         f"hand")
     if not isinstance(params["finger_rig"], dict):
         raise ValueError(f"{where}: parameter 'finger_rig' must be an object (FingerRigParams fields)")
     rig = dict(params["finger_rig"])
-    for bad in ("finger", "finger_name"):
+    for bad in ("finger", "finger_name", "hand"):
         if bad in rig:
             raise ValueError(f"{where}: parameters.finger_rig.{bad}: not allowed (the finger is 'finger'; its "
                              f"geometry is the package's default)")
-    return from_yaml(FingerRigParams.for_finger(params["finger"]), json.dumps(rig),
-                     where=f"{where}: parameters.finger_rig")
+    base = HandRigParams() if params["finger"] == "hand" else FingerRigParams.for_finger(params["finger"])
+    return from_yaml(base, json.dumps(rig), where=f"{where}: parameters.finger_rig")
 
 
 # the command line's spelling of the dataset rigs (awiwi-drake make-dataset --rig joint-rig)
 CLI_RIG_NAMES = {"tendon-rig": "tendon", "joint-rig": "joint",
-                 **{f"finger-{f}": f"finger-{f}" for f in _Rigs.FINGERS}}
+                 **{f"finger-{f}": f"finger-{f}" for f in _Rigs.FINGERS}, "hand": "hand"}
 _RIG_CLI_NAME = {v: k for k, v in CLI_RIG_NAMES.items()}      # messages and written files use the CLI spelling
 
 
@@ -372,7 +380,7 @@ def load_dataset(path, *, checks=None) -> Dataset:
     spec = RIGS[rig]
     if is_finger_rig(rig):
         fp = finger_parameters_from_json(meta["parameters"], str(json_path))
-        if f"finger-{meta['parameters']['finger']}" != rig:
+        if finger_rig_name(meta["parameters"]["finger"]) != rig:
             raise ValueError(f"{json_path}: parameter 'finger' = {meta['parameters']['finger']!r} but rig is {rig!r}")
         params = finger_parameters_to_json(meta["parameters"]["finger"], fp)
     else:

@@ -473,13 +473,14 @@ def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
     orders = np.arange(1, int(bounds.ripple_order_max) + 1, dtype=float)
     S = np.concatenate([np.sin(orders[:, None] * th[None]), np.cos(orders[:, None] * th[None])])
     cols = oaconvolve(S, fr._g0[None], mode="same", axes=1)[:, fr._sl]
-    tr = fr.train
-    y = fr.tau[i, tr] / fr.sigma_tau[i]
-    gains = np.empty(len(orders))
-    for k in range(len(orders)):
-        A = np.stack([cols[k, tr], cols[len(orders) + k, tr]], axis=1) / fr.sigma_tau[i]
-        beta = np.linalg.lstsq(A, y, rcond=None)[0]
-        gains[k] = y @ y - np.sum((y - A @ beta) ** 2)
+    tr, O = fr.train, len(orders)
+    y = fr.tau[i, tr]
+    S, C = cols[:O, tr], cols[O:, tr]        # every order's sine and cosine column at once: the 2x2 normal
+    G = np.stack([np.stack([np.sum(S * S, 1), np.sum(S * C, 1)], -1),            # equations per order
+                  np.stack([np.sum(S * C, 1), np.sum(C * C, 1)], -1)], -2)      # (O, 2, 2)
+    r = np.stack([S @ y, C @ y], -1)                                              # (O, 2)
+    beta = np.einsum("kij,kj->ki", np.linalg.pinv(G), r)
+    gains = np.einsum("ki,ki->k", beta, r) / fr.sigma_tau[i] ** 2      # explained energy b^T A (A^T A)^-1 A^T b
     rank = [float(orders[k]) for k in np.argsort(-gains)[:5]]
     return [(rank[0], rank[1])] + [(rank[0], o) for o in rank[2:]]
 
@@ -768,9 +769,9 @@ class FingerDiagnosis:
 
     def text(self) -> str:
         lines = [f"{self.dataset}: {self.verdict}"]
-        if not self.joint_checked:
-            lines.append(f"  joint side not judged on the {self.finger} (guide friction is not looked for): "
-                         f"{self.joint_reason}")
+        if self.joint_reason:       # a finger whose links' equation is not judged; the hand: those fingers
+            where = "these fingers of the hand" if self.finger == "hand" else f"the {self.finger}"
+            lines.append(f"  joint side not judged on {where} (guide friction is not looked for): {self.joint_reason}")
         lines += [f"  warning: {w}" for w in self.warnings]
         if self.unused_columns:
             lines.append(f"  not used: {', '.join(self.unused_columns)} (joint angles are estimated from the tendons)")
@@ -789,12 +790,101 @@ class FingerDiagnosis:
         return "\n".join(lines)
 
 
+def _verdict(steps: list, unexplained: bool) -> str:
+    named = [f"{s.effect} on {s.place}" for s in steps if s.kind == "physical"]
+    if unexplained:
+        return "unexplained discrepancy remains" + (f" after {', '.join(named)}" if named else "")
+    if named:
+        return "found " + ", ".join(named)
+    if steps:
+        return "calibration only: " + ", ".join(f"{s.effect} on {s.place}" for s in steps)
+    return "no discrepancy above the noise floor"
+
+
+def hand_fingers(dataset: Dataset):
+    """``[(finger, tendon slice, FingerCoupling, finger Dataset)]``: a hand dataset as its five fingers' (columns
+    renumbered in each finger's order, the finger's ``FingerRigParams`` from the hand's with its own tendons'
+    entries)."""
+    import dataclasses as dc
+
+    from awiwi_drake.hand.coupling import finger_coupling
+    from awiwi_drake.parameters.hand import FINGERS, TENDON_SLICES, FingerDriveParams, FingerRigParams
+
+    from .data import finger_rig_name
+    hp = finger_parameters_from_json(dataset.parameters, dataset.name)
+    drive = {f.name: getattr(hp, f.name) for f in dc.fields(FingerDriveParams)}
+    out, j0 = [], 0
+    for f in FINGERS:
+        sl, c = TENDON_SLICES[f], finger_coupling(f, hp.hand.finger(f))
+        own = set(hp.tendon_names[sl])
+        fp = FingerRigParams(finger=hp.hand.finger(f), finger_name=f, **dict(
+            drive, **{k: tuple((t, v) for t, v in drive[k] if t in own)
+                      for k in ("tendon_motors", "tendon_springs", "tendon_guides")}))
+        cols = lambda src, kind, first, count: {f"{kind}_{k + 1}": src[f"{kind}_{first + k + 1}"]  # noqa: E731
+                                                for k in range(count) if f"{kind}_{first + k + 1}" in src}
+        outputs = {**cols(dataset.outputs, "motor_angle", sl.start, c.num_tendons),
+                   **cols(dataset.outputs, "tendon_force", sl.start, c.num_tendons),
+                   **cols(dataset.outputs, "joint_angle", j0, c.num_joints)}
+        out.append((f, sl, c, Dataset(f"{dataset.name}[{f}]", finger_rig_name(f), dataset.time,
+                                      cols(dataset.inputs, "motor_torque", sl.start, c.num_tendons), outputs,
+                                      finger_parameters_to_json(f, fp), {}, {})))
+        j0 += c.num_joints
+    return out
+
+
+def _diagnose_hand(dataset: Dataset, settings, bounds, say) -> FingerDiagnosis:
+    """The hand (rig ``hand``): its routing is block-diagonal by finger (each tendon moves its own finger's joints
+    only; the hand's fingers are independent chains on the palm, the wrist still), so the hand's motor, spring and
+    links' equations are the five fingers' and the diagnosis is the five finger diagnoses, joined: steps and
+    ratios per tendon in the hand's order (thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38), the
+    spring and links' ratios pooled over the fingers' degrees of freedom, the write-back one ``HandRigParams``."""
+    import dataclasses as dc
+
+    hp = finger_parameters_from_json(dataset.parameters, dataset.name)
+    parts = {f: (sl, c, diagnose_finger(sub, settings=settings, bounds=bounds,
+                                        progress=lambda msg, f=f: say(f"{f}: {msg}")))
+             for f, sl, c, sub in hand_fingers(dataset)}
+    steps = [dc.replace(st, tendon=sl.start + st.tendon) for sl, _, d in parts.values() for st in d.steps]
+
+    def pooled(ratios, key, weight):
+        w = {f: weight(c) for f, (_, c, d) in parts.items() if np.isfinite(getattr(d, ratios)[key])}
+        return float(sum(getattr(parts[f][2], ratios)[key] * w[f] for f in w) / sum(w.values())) if w else \
+            float("nan")
+
+    def ratios(which):
+        return {"motor": [v for _, _, d in parts.values() for v in getattr(d, which)["motor"]],
+                **({"spring": [v for _, _, d in parts.values() for v in d.ratios_before["spring"]]}
+                   if which == "ratios_before" else {}),
+                "spring_total": pooled(which, "spring_total", lambda c: c.num_tendons - c.num_joints),
+                "joint": pooled(which, "joint", lambda c: c.num_joints)}
+
+    worse = {f: d.unexplained for f, (_, _, d) in parts.items() if d.unexplained_residual}
+    unexplained = {"fingers": worse, "text": "; ".join(f"{f}: {u['text']}" for f, u in worse.items())} if worse else {}
+    fingers = [d for _, _, d in parts.values()]
+    augmented = AugmentedParameters(
+        hp.replace(**{k: tuple(t for d in fingers for t in getattr(d.augmented.params, k))
+                      for k in ("tendon_motors", "tendon_springs", "tendon_guides")}),
+        [a for d in fingers for a in d.augmented.applied],
+        [a for d in fingers for a in d.augmented.not_representable])
+    return FingerDiagnosis(
+        dataset.name, dataset.rig, steps, ratios("ratios_before"), ratios("ratios_after"), bool(worse), unexplained,
+        _verdict(steps, bool(worse)), sum(d.seconds for d in fingers), sum(d.cpu_seconds for d in fingers),
+        [dict(h, finger=f) for f, (_, _, d) in parts.items() for h in d.history], list(hp.tendon_names),
+        settings.unexplained_ratio, [k for k in dataset.output_names if k.startswith("joint_angle")],
+        all(d.complete for d in fingers), augmented, "hand", any(d.joint_checked for d in fingers),
+        "; ".join(f"{f}: {d.joint_reason}" for f, (_, _, d) in parts.items() if not d.joint_checked),
+        [f"{f}: {w}" for f, (_, _, d) in parts.items() for w in d.warnings])
+
+
 def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
                     bounds: CatalogBounds | None = None, progress=None) -> FingerDiagnosis:
-    """Localise the discrepancy of a finger dataset to tendons and name effect and place (module docstring)."""
+    """Localise the discrepancy of a finger dataset to tendons and name effect and place (module docstring);
+    the hand's dataset as its five fingers' (:func:`_diagnose_hand`)."""
     settings = settings or DiscrepancySettings()
     bounds = bounds or CatalogBounds()
     say = progress or (lambda msg: None)
+    if dataset.rig == "hand":
+        return _diagnose_hand(dataset, settings, bounds, say)
     t0, c0 = time.perf_counter(), time.process_time()
     fr = FingerResiduals(dataset, settings)
     places = [tendon_place(fr.rig, i) for i in range(fr.m)]
@@ -921,15 +1011,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                           + (f" on the motor side of {', '.join(tendons)}" if tendons else "")
                           + (f"; spring side {spr:.2f}x" if spr > limit else "")
                           + (f"; joint side (links' equation) {jnt:.2f}x" if jnt > limit else ""))}
-    named = [f"{s.effect} on {s.place}" for s in steps if s.kind == "physical"]
-    if unexplained:
-        verdict = "unexplained discrepancy remains" + (f" after {', '.join(named)}" if named else "")
-    elif named:
-        verdict = "found " + ", ".join(named)
-    elif steps:
-        verdict = "calibration only: " + ", ".join(f"{s.effect} on {s.place}" for s in steps)
-    else:
-        verdict = "no discrepancy above the noise floor"
+    verdict = _verdict(steps, unexplained)
     say(f"{stop}: {verdict}")
     dx = FingerDiagnosis(dataset.name, dataset.rig, steps, before, after, unexplained, where, verdict,
                          time.perf_counter() - t0, time.process_time() - c0, history, list(fr.rig.tendon_names),

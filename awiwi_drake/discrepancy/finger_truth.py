@@ -40,10 +40,10 @@ from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
 from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
-from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.parameters.components import HysteresisParams, TendonGuideParams
 from awiwi_drake.parameters.discrepancy import FingerTruthParams, TruthGeneratorParams
-from awiwi_drake.parameters.hand import FINGERS, FingerRigParams
+from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
 
 from . import laws
@@ -56,11 +56,29 @@ FINGER_HIDDEN_EFFECTS = ("motor_friction", "guide_friction", "motor_ripple", "sp
 _TORQUE_EFFECTS = ("motor_friction", "motor_ripple")
 
 
-def nominal_finger_params(finger: str) -> FingerRigParams:
+def nominal_finger_params(finger: str):
     """The nominal finger of a dataset: the package's defaults with the thesis's physics off (the
-    ideal finger; a user's JSON may give any other set)."""
-    return FingerRigParams.for_finger(finger).with_physics(ripple=False, hysteresis=False, guide_friction=False,
-                                                           motor_friction=False)
+    ideal finger; a user's JSON may give any other set); ``"hand"``: the hand's (:class:`HandRigParams`)."""
+    base = HandRigParams() if finger == "hand" else FingerRigParams.for_finger(finger)
+    return base.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)
+
+
+def _diagram(finger: str, params):
+    """The package's finger diagram, or for ``"hand"`` the hand's with the wrist still (no wrist input: its (6.9)
+    offsets are constant and in the rest lengths)."""
+    return hand_diagram(params=params, wrist=False) if finger == "hand" else finger_diagram(finger=finger,
+                                                                                           params=params)
+
+
+def _finger_joints(finger: str, params, joint_names) -> list:
+    """``[(name, FingerParams, [joint indices])]`` of the fingers in the diagram (one, or the hand's five)."""
+    names = FINGERS if finger == "hand" else (finger,)
+    out = []
+    for f in names:
+        fp = params.hand.finger(f) if finger == "hand" else params.finger
+        digit = "12345"[FINGERS.index(f)]
+        out.append((f, fp, [k for k, j in enumerate(joint_names) if j[1] == digit]))
+    return out
 
 
 @TemplateSystem.define("FingerHiddenTorque_")
@@ -130,18 +148,18 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
     p = nominal
     if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
-        tendon = finger_diagram(finger=finger, params=p).tendon_names[truth["place"] - 1]
+        tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
         own = dict(p.tendon_springs)
         sp = own.get(tendon, p.spring)
         hyst = HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
         own[tendon] = sp.replace(hysteresis=hyst)
         p = p.replace(tendon_springs=tuple(own.items()))
     if "guide_friction" in truth:         # the package's guides (between sensor and joints) on that path only
-        tendon = finger_diagram(finger=finger, params=p).tendon_names[truth["place"] - 1]
+        tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
         g = truth["guide_friction"]
         p = p.replace(tendon_guides=tuple(dict(p.tendon_guides, **{tendon: TendonGuideParams(
             constant=g["c0"], capstan_exponent=g["mu_angle"])}).items()))
-    rig = finger_diagram(finger=finger, params=p)
+    rig = _diagram(finger, p)
     m = rig.num_tendons
     b = DiagramBuilder()
     fd = b.AddNamedSystem(f"finger_{finger}", rig.diagram)
@@ -185,12 +203,12 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     -------
     Dataset (rig ``finger-<finger>``) whose ``meta["truth"]`` holds the hidden effects and place.
     """
-    if finger not in FINGERS:
-        raise ValueError(f"finger must be one of {', '.join(FINGERS)}, got {finger!r}")
+    if finger not in FINGERS + ("hand",):
+        raise ValueError(f"finger must be one of {', '.join(FINGERS)} or hand, got {finger!r}")
     gen = gen or FingerTruthParams()
     nominal = params if params is not None else nominal_finger_params(finger)
     rng = np.random.default_rng(seed)
-    probe = finger_diagram(finger=finger, params=nominal)
+    probe = _diagram(finger, nominal)
     m, n = probe.num_tendons, probe.num_joints
     truth = draw_finger_truth(list(hidden), place, m, rng, gen, strength)
     rig, truth_rig = _truth_rig(finger, nominal, truth)
@@ -200,9 +218,11 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     # references: each joint its own lab excitation, plus a common co-contraction of every tendon
     from .truth import _excitation
     q_op = np.full(n, gen.flexion)
-    q_op[0] = 0.0  # abduction (or the thumb's first joint) centred
     amp = np.full(n, gen.joint_excursion)
-    amp[0] *= 0.5
+    parts = _finger_joints(finger, nominal, probe.joint_names)
+    for _, _, joints in parts:
+        q_op[joints[0]] = 0.0  # abduction (or the thumb's first joint) centred
+        amp[joints[0]] *= 0.5
     alpha = dt / (gen.reference_time_constant + dt)   # two first-order reference filters
     Q = np.empty((N, n))
     for j in range(n):
@@ -211,11 +231,11 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
             for k in range(1, N):
                 a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
         Q[:, j] = q_op[j] + amp[j] * a
-    fp = nominal.finger
-    if getattr(fp, "pip_dip_coupled", False):   # ring, fifth: (5.16) q_DIP = (r_x3 / r_x2) q_PIP, no DIP of its own
-        pip, dip = (probe.joint_names.index(j) for j in probe.joint_names if j[-1] in "23")
-        q_op[dip] = fp.dip_pip_ratio * q_op[pip]
-        Q[:, dip] = fp.dip_pip_ratio * Q[:, pip]
+    for _, fp, joints in parts:
+        if getattr(fp, "pip_dip_coupled", False):   # ring, fifth: (5.16) q_DIP = (r_x3 / r_x2) q_PIP, no DIP of its own
+            pip, dip = (k for k in joints if probe.joint_names[k][-1] in "23")
+            q_op[dip] = fp.dip_pip_ratio * q_op[pip]
+            Q[:, dip] = fp.dip_pip_ratio * Q[:, pip]
     op = probe.operating_point(joint_angles=q_op)
     r_m = nominal.motor.pulley_radius
     laws_t = probe.spring_laws
@@ -273,11 +293,12 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     inputs = {f"motor_torque_{i + 1}": U[:, i].copy() for i in range(m)}
     tag = "-".join(hidden) if hidden else "none"
     where = f"_t{place}" if hidden else ""
-    name = name or f"finger-{finger}_{tag}{where}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
+    rig_name = "hand" if finger == "hand" else finger_rig_name(finger)
+    name = name or f"{rig_name}_{tag}{where}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
     meta = {"truth": dict(truth, tendon=rig.tendon_names[place - 1] if hidden else None),
             "generator": {"snr_db": snr_db, "seed": seed, "sample_rate": gen.sample_rate, "duration": gen.duration}}
     from .data import finger_parameters_to_json
-    ds = Dataset(name, finger_rig_name(finger), t, inputs, meas, finger_parameters_to_json(finger, nominal), {}, meta)
+    ds = Dataset(name, rig_name, t, inputs, meas, finger_parameters_to_json(finger, nominal), {}, meta)
     if keep_clean:
         ds.meta["clean_outputs"] = clean
     return ds
