@@ -605,3 +605,22 @@ def test_hand_dataset_is_diagnosed_as_its_five_fingers_and_written_back(tmp_path
                                dx.ratios_after["motor"][sl], rtol=1e-6)
     assert main(["make-dataset", "--rig", "hand", "--hide", "motor_friction", "--out", str(tmp_path)]) == 2
     assert "--place" in capsys.readouterr().err
+
+
+def test_unexplained_limit_is_the_noise_only_family_wise_quantile():
+    """``FingerResiduals.unexplained_limit``: noise alone (every ratio a mean of ``K`` squared unit normals, one per
+    motor plus the spring and links' sides) exceeds it with the family-wise probability ``unexplained_false_alarm``
+    (Bonferroni over the m + 2 independent ratios: ``1 - (1 - a / (m + 2))^(m + 2)``), counted on 20000 noise-only
+    draws within 4 binomial standard errors; and it is never below ``unexplained_ratio``."""
+    ds = make_finger_dataset("index", [], seed=1, gen=SHORT)
+    a = 0.05
+    fr = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008, unexplained_false_alarm=a, unexplained_ratio=1.0))
+    K, groups = fr.tau.shape[1], fr.m + 2
+    limit = fr.unexplained_limit()
+    rng = np.random.default_rng(5)
+    worst = np.max(np.mean(rng.standard_normal((20000, groups, K)) ** 2, axis=2), axis=1)
+    p = 1.0 - (1.0 - a / groups) ** groups
+    hits = np.mean(worst > limit)
+    assert abs(hits - p) < 4 * np.sqrt(p * (1 - p) / worst.size), (hits, p, limit, K)
+    high = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008, unexplained_ratio=50.0))
+    assert high.unexplained_limit() == 50.0
