@@ -478,6 +478,43 @@ def test_candidate_fit_with_accepted_parameters_free_to_first_order_reaches_the_
     assert np.abs(fixed.p - truth).max() > 1e-3
 
 
+def test_fit_stops_at_the_resolution_of_the_data():
+    """``fit_parameters(..., resolution=)`` (a candidate's fit, ``DiscrepancySettings.fit_resolution``): the
+    optimiser stops at the first trial step whose Gauss-Newton predicted reduction of the training cost is below
+    the resolution (squared noise units). With unit noise on the closed-form stand-in (residual in noise units),
+    the training cost it ends at is within the resolution of the optimum the optimiser's own tolerances reach
+    (xtol 1e-8), in fewer evaluations, and each parameter within sqrt(resolution) standard errors of it."""
+    from awiwi_drake.discrepancy.fit import fit_parameters
+    from awiwi_drake.discrepancy.screen import ResidualState
+    from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
+
+    truth = default_vector()
+    for name, v in (("link_inertia_rel", 0.1), ("link_damping_add", 0.01), ("joint_coulomb", 0.03),
+                    ("joint_velocity", 0.08)):
+        truth[PARAM_INDEX[name]] = v
+    rng = np.random.default_rng(13)
+    eng = _LinearInAEngine(truth, rng)
+    eng.y = eng.y + rng.normal(size=eng.y.shape)
+    start = default_vector()
+    start[PARAM_INDEX["joint_coulomb"]], start[PARAM_INDEX["joint_velocity"]] = 0.01, 0.05
+    st = ResidualState(eng, default_vector())
+    names = ["link_inertia_rel", "link_damping_add", "joint_coulomb", "joint_velocity"]
+    bounds, settings = CatalogBounds(), DiscrepancySettings()
+    assert settings.fit_resolution > 0
+    full = fit_parameters(st, names, start, bounds, settings)
+    stop = fit_parameters(st, names, start, bounds, settings, resolution=settings.fit_resolution)
+    cost = {k: float((project(fo.r0, fo.projection)[eng.train] ** 2).sum()) for k, fo in (("full", full),
+                                                                                          ("stop", stop))}
+    assert 0.0 <= cost["stop"] - cost["full"] <= settings.fit_resolution, cost
+    assert stop.nfev < full.nfev
+    # near a quadratic optimum dp^T J^T J dp <= (cost difference) <= resolution, so by Cauchy-Schwarz each
+    # parameter is within sqrt(resolution) standard errors (se >= sqrt([(J^T J)^-1]_ii), its s^2 >= 1)
+    idx = [PARAM_INDEX[n] for n in names]
+    se = np.array([full.se[n] for n in names])
+    assert np.all(np.abs(stop.p[idx] - full.p[idx]) <= np.sqrt(settings.fit_resolution) * se), \
+        (stop.p[idx] - full.p[idx]) / se
+
+
 def test_held_parameter_taken_past_its_bound_is_reported_at_the_bound():
     """A first-order step of an accepted parameter past its physical bound is held at the bound AND named in
     ``at_bound`` (the decision's at-bound rule then sees it), never clipped silently."""

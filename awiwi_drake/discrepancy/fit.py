@@ -117,8 +117,14 @@ class _Replays:
         return self._keep(self.J, key, self.eng.evaluate(P, self.windows))
 
 
+class _Resolved(Exception):
+    """A trial step of the optimiser whose predicted reduction of the training cost (Gauss-Newton model
+    at the last accepted point, in squared noise units) is below the fit's ``resolution``: the fit has
+    converged to what the data resolve."""
+
+
 def _one_round(replays: _Replays, names, p_start, bounds: CatalogBounds, settings: DiscrepancySettings, Qtr,
-               held_basis=None):
+               held_basis=None, resolution: float = 0.0):
     specs = {s.name: s for s in param_specs(bounds)}
     idx = np.array([PARAM_INDEX[n] for n in names])
     lo = np.array([specs[n].low for n in names])
@@ -136,21 +142,35 @@ def _one_round(replays: _Replays, names, p_start, bounds: CatalogBounds, setting
         R = project(R, Qtr).reshape(R.shape[:-2] + (-1,))
         return R if held_basis is None else R - (R @ held_basis) @ held_basis.T
 
+    last = {}   # the last accepted point and its Jacobian (the optimiser asks for it at every accepted point)
+    nfev = [0]
+
     def fun(x):
+        if "J" in last:   # the Gauss-Newton model's cost reduction |r|^2 - |r + J dx|^2 of this trial step
+            moved = last["J"] @ (x - last["x"])
+            if -float(moved @ (2.0 * last["r"] + moved)) < resolution:
+                raise _Resolved   # a step the data cannot resolve: the last accepted point is the optimum
+        nfev[0] += 1
         return profile(replays.residual(vec(x)))
 
     def jac(x):
         """Forward differences of all parameters in one batched simulation (d r / d x)."""
-        r = fun(x)
+        r = profile(replays.residual(vec(x)))
         h = np.where(x + steps <= hi, steps, -steps)
         R = profile(replays.jacobian(vec(x), idx, h))
-        return ((R - r) / h[:, None]).T
+        last["x"], last["r"], last["J"] = x.copy(), r, ((R - r) / h[:, None]).T
+        return last["J"]
 
-    sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=np.maximum(span, 1e-12) * 0.01,
-                        max_nfev=settings.max_nfev, ftol=settings.fit_tolerance, xtol=1e-8, method="trf")
+    try:
+        sol = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale=np.maximum(span, 1e-12) * 0.01,
+                            max_nfev=settings.max_nfev, ftol=settings.fit_tolerance, xtol=1e-8, method="trf")
+        x_end, converged = sol.x, sol.status > 0
+    except _Resolved:
+        x_end, converged = last["x"], True
+    last.clear()
     p = p_start.copy()
-    p[idx] = sol.x
-    r, J = fun(sol.x), jac(sol.x)
+    p[idx] = x_end
+    r, J = fun(x_end), jac(x_end)
     dof = max(r.size - len(names), 1)
     s2 = max(float(r @ r) / dof, 1.0)
     try:
@@ -159,14 +179,14 @@ def _one_round(replays: _Replays, names, p_start, bounds: CatalogBounds, setting
         se = np.full(len(names), np.nan)
     # a parameter "at a bound" sits within 0.1 % of the span of a bound that is not its
     # off value (an amplitude resting at zero is simply off) nor a numerical sharpness limit
-    at_bound = [n for n, x, l, hgh, sp in zip(names, sol.x, lo, hi, span) if not specs[n].regularisation
+    at_bound = [n for n, x, l, hgh, sp in zip(names, x_end, lo, hi, span) if not specs[n].regularisation
                 and ((x - l < 1e-3 * sp and l != specs[n].off) or (hgh - x < 1e-3 * sp and hgh != specs[n].off))]
-    return p, dict(zip(names, se.tolist())), at_bound, sol.nfev, sol.status > 0, float(r @ r)
+    return p, dict(zip(names, se.tolist())), at_bound, nfev[0] - 1, converged, float(r @ r)
 
 
 def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
                    settings: DiscrepancySettings, held: HeldLinear | None = None,
-                   start_profile: Projection | None = None) -> FitOutcome:
+                   start_profile: Projection | None = None, resolution: float = 0.0) -> FitOutcome:
     """Fit ``names`` (catalog parameter names) from ``p_start`` on the training windows
     of ``st`` (a :class:`~awiwi_drake.discrepancy.screen.ResidualState`).
 
@@ -182,7 +202,13 @@ def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
     ``start_profile`` (the training windows' profile of a nearby point, e.g. the current model's for
     a candidate whose parameters do not change the window-start sensitivities much) saves computing
     it at ``p_start``; the rounds refresh it as usual. A fit whose refreshed training cost is no
-    lower than the current model's (``st.E_train``) is not refined further: it explains nothing."""
+    lower than the current model's (``st.E_train``) is not refined further: it explains nothing.
+
+    ``resolution`` (squared noise units; the workflow passes ``DiscrepancySettings.fit_resolution`` for the
+    candidates' fits): the optimiser stops at the first trial step whose Gauss-Newton predicted reduction of
+    the training cost is below it, instead of shrinking its trust region to ``xtol`` through rejected replays.
+    0 runs to the optimiser's own tolerances (the accepted effect's joint refit, on which every later step
+    builds)."""
     eng = st.eng
     tr, te = st.W[eng.train], st.W[eng.test]
     Qtr = start_profile if start_profile is not None else eng.projector(p_start, tr)[1]
@@ -190,7 +216,8 @@ def fit_parameters(st, names: list, p_start: np.ndarray, bounds: CatalogBounds,
     replays = _Replays(eng, tr)
     for rnd in range(1, settings.fit_rounds + 1):
         basis = held.basis(tr, Qtr) if held is not None else None
-        p, se, at_bound, nfev, converged, cost = _one_round(replays, names, p, bounds, settings, Qtr, basis)
+        p, se, at_bound, nfev, converged, cost = _one_round(replays, names, p, bounds, settings, Qtr, basis,
+                                                            resolution)
         nfev_total += nfev
         r_tr, Qtr = eng.projector(p, tr)
         rp_tr = project(r_tr, Qtr).ravel()

@@ -83,7 +83,8 @@ class _Run:
         t0 = time.perf_counter()
         # the current model's window-start profile to start from, unless the effect adds states
         start = None if eff.name in STATEFUL_EFFECTS else st.Q.take(st.W[eng.train])
-        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held, start)
+        fo = fit_parameters(st, names, p_start, self.bounds, self.settings, held, start,
+                            resolution=self.settings.fit_resolution)
         rp = project(fo.r0, fo.projection)
         e_after = (rp ** 2).sum(axis=1)
         te, tr = eng.test, eng.train

@@ -129,6 +129,14 @@ class DiscrepancySettings(Parameters):
         1e-4, unit="-", low=0.0, high=1.0,
         source="chosen: a relative cost change of 1e-4 at ~10^4 training residuals is < 1 BIC "
                "unit per parameter", doc="relative cost tolerance of the fit (ftol)")
+    fit_resolution: float = param(
+        1.0, unit="-", low=0.0, high=1e3,
+        source="chosen: a candidate's fit stops at the first trial step whose Gauss-Newton predicted reduction of "
+               "the training cost |r|^2 - |r + J dx|^2 is below 1 (squared noise units, one chi-square unit; a BIC "
+               "unit per parameter is ~9) instead of shrinking the trust region to xtol through 10-15 rejected "
+               "replays (seed 1083's last step). Candidates only: applied to the accepted effect's joint refit too "
+               "it lost seed 1047's spring_drift (the refit sets the model every later step builds on)",
+        doc="smallest predicted cost reduction worth a trial step of a candidate's fit [squared noise units]")
     fit_rounds: int = param(
         3, unit="-", low=1, high=20,
         source="chosen: optimise with the window-start profile of the current point, refresh it, "
