@@ -212,8 +212,8 @@ def test_the_no_observer_variant_from_the_registry_and_the_cli(tmp_path):
     assert get_entry("cascaded:no-observer", r) is get_entry("cascaded", r)
     with pytest.raises(ValueError, match="controller 'cascaded:open': unknown variant 'open'; variants: no-observer"):
         make_controller("cascaded:open", r)
-    with pytest.raises(ValueError, match="controller 'backstepping:no-observer' on 'finger' has no option 'friction_observer'"):
-        make_controller("backstepping:no-observer", r)
+    with pytest.raises(ValueError, match="controller 'joint-pd:no-observer' on 'finger' has no option 'friction_observer'"):
+        make_controller("joint-pd:no-observer", r)                   # the motor PD has no observer to remove
     res = subprocess.run([sys.executable, "-m", "awiwi_drake", "compare", "--rig", "finger-index", "--controllers",
                           "cascaded:nope", "--out", str(tmp_path), "--short"], capture_output=True, text=True)
     assert res.returncode != 0 and "unknown variant 'nope'" in res.stderr + res.stdout

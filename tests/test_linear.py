@@ -248,3 +248,18 @@ def test_output_independent_of_state_and_input_linearises_to_zero_instead_of_cra
     assert r["hand_CD_shape"] == [[38, r["nx"]], [38, 38]]
     assert r["hand_y0_max"] > 1e-3 and r["hand_y0_err"] < 1e-12
     assert r["q_rows"] < 1e-12
+
+
+def test_a_sampled_systems_output_keeps_its_state_dependence():
+    """The constant-output check seeds the discrete state too: ``x[k+1] = a x + b u``, ``y = c x`` (period h, no
+    feedthrough) linearises to its own (a, b, c, 0), not to C = 0 (an output that depends only on a discrete state
+    was taken for a constant)."""
+    a, b, c, h = 0.5, 1.0, 2.0, 0.01
+    sys_ = LinearSystem(np.array([[a]]), np.array([[b]]), np.array([[c], [3.0]]), np.zeros((2, 1)), h)
+    ctx = sys_.CreateDefaultContext()
+    sys_.get_input_port().FixValue(ctx, [0.0])
+    res = linearize(sys_, context=ctx, input=sys_.get_input_port().get_name(),
+                    outputs=(sys_.get_output_port().get_name(),))
+    y = res.outputs[sys_.get_output_port().get_name()]
+    assert res.A.tolist() == [[a]] and res.B.tolist() == [[b]]
+    assert y.C.tolist() == [[c], [3.0]] and y.D.tolist() == [[0.0], [0.0]]

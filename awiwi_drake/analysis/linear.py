@@ -389,8 +389,8 @@ def _constant_outputs(system, ctx, in_port, outputs) -> set:
     value carries no derivatives at all, and the empty gradient is read as if it had a column per state and
     input (reproduced with an ``Integrator`` beside a ``ConstantVectorSource``; on the hand, the wrist's
     ``wrist_tendon_offset``, fed by the fixed ``wrist_angle`` input only).  Found by one AutoDiffXd
-    evaluation with a single seed direction on the state and the input: an entry that depends on either
-    carries a derivative, even where it is zero.
+    evaluation with a single seed direction on the state (continuous or discrete) and the input: an entry that
+    depends on either carries a derivative, even where it is zero.
     """
     from pydrake.autodiffutils import AutoDiffXd
     from pydrake.systems.framework import PortDataType
@@ -407,6 +407,8 @@ def _constant_outputs(system, ctx, in_port, outputs) -> set:
             ad.get_input_port(i).FixValue(actx, seeded(port.Eval(ctx), [1.0] if i == in_port.get_index() else []))
     if ctx.num_continuous_states():
         actx.SetContinuousState(seeded(ctx.get_continuous_state_vector().CopyToVector(), [1.0]))
+    for g in range(ctx.num_discrete_state_groups()):         # a sampled system's state (Linearize's discrete case)
+        actx.SetDiscreteState(g, seeded(ctx.get_discrete_state(g).CopyToVector(), [1.0]))
     return {name for name in outputs
             if all(e.derivatives().size == 0 for e in np.ravel(ad.GetOutputPort(name).Eval(actx)))}
 

@@ -225,8 +225,9 @@ class TendonForceLaw(StaticLaw):
     motor).  ``fmap`` is one :class:`ForceMap` for every tendon, or a sequence of ``size`` maps, one
     per tendon (each tendon's own spring curve: the gains (10.11) and the force rate use its slope;
     tendons sharing a map object are evaluated together).  ``ripple_scale`` > 0 adds the ripple feed-forward of section 3.2,
-    ``-ripple_scale * tau_ripple(theta)`` (input ``motor_angle``; ch. 3: a conservative
-    amplitude, e.g. ``RippleCompensationParams.amplitude_scale``).  ``path_velocity=True`` adds the
+    ``-ripple_scale * tau_ripple(theta)`` (input ``motor_angle``; ch. 3: a conservative amplitude, e.g.
+    ``RippleCompensationParams.amplitude_scale``; the hand's chain: ``HandChainParams.force_ripple_scale``, the whole
+    model).  ``path_velocity=True`` adds the
     input ``tendon_path_velocity`` [m/s] (``P(q) qdot``, a finger's joints moving the tendon path):
     the force rate estimate becomes ``alpha (omega + v_path / r_m)``, the derivative of
     ``f(r_m theta + h(q))``; on the tendon rig (far end fixed) ``v_path = 0``.

@@ -98,6 +98,14 @@ class _Run:
                              own_bound, e_after, gain_z(st.rp[te], rp[te]),
                              materiality(eff.name, params, self.ne), vector=fo.p, profile=(fo.r0, fo.projection))
         cr.rejected = rejection_reason(cr, st, self.settings)
+        if cr.at_bound and s.get("fallback"):
+            # low ripple orders aliasing each other (a smooth function of the motor angle, large cancelling
+            # amplitudes): the pair with the smallest amplitudes the screen cannot tell from the best
+            self.say(f"  fit {eff.name:18s} rests on a bound ({', '.join(cr.at_bound)}): orders "
+                     + ", ".join(f"{v:g}" for v in s["fallback"].values()) + " instead")
+            alt = self.fit_candidate({**s, "params": dict(s["fallback"]), "fallback": None}, held)
+            if not alt.at_bound:
+                return alt
         self.say(f"  fit {eff.name:18s} held-out gain {100 * cr.relative_gain:6.1f}% of excess, "
                  f"z {cr.z:4.1f}/{cr.z_gain:6.1f}, dBIC {dbic:9.1f} ({fo.nfev} evals, {fo.rounds} rounds, "
                  f"{time.perf_counter() - t0:.1f} s)" + (f": rejected, {cr.rejected}" if cr.rejected else ""))
@@ -174,7 +182,7 @@ class _Run:
         if not pool:
             self.stop_reason = "catalog exhausted (max_effects / max_nuisance reached)"
             return False
-        screened = screen(st, pool, self.bounds, self.rig)
+        screened = screen(st, pool, self.bounds, self.rig, settings.min_gain)
         self.say("screen: " + ", ".join(f"{s['effect'].name} {100 * s['rel']:.0f}%" for s in screened[:5]))
         screen_results = [CandidateResult(s["effect"].name, s["effect"].kind, "screen", s["params"], {},
                                           s["gain"], s["rel"], s["z"], s["dbic"]) for s in screened]

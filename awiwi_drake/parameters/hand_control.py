@@ -183,9 +183,13 @@ class HandChainParams(Parameters):
     force_ripple_scale: float = param(
         1.0, unit="-", low=0.0, high=1.0,
         source=("(10.2)/(10.4) as force_friction_scale: the ripple (3.5) is a known function of the motor angle (ch. 3: "
-                "'strongly repeatable', its phase given by the motor position), so the whole model leaves the force "
-                "loop no static ripple error. Not RippleCompensationParams.amplitude_scale (0.8, ch. 3's conservative "
-                "estimate for the motor PD of Fig 3.6): a fraction 1 - a left over is a static force error "
+                "'the repeatability of the disturbance is excellent and its phase only depends on the motor "
+                "position'), so the whole model leaves the force "
+                "loop no static ripple error. Not RippleCompensationParams.amplitude_scale (0.8): ch. 3 asks that "
+                "'the amplitude estimation must be conservative to avoid introducing potentially destabilizing "
+                "energy', as the amplitude of a real motor is not known; here the plant's ripple is (3.5) itself, "
+                "so 1 departs from that advice only where the plant departs from the model. A fraction 1 - a "
+                "left over is a static force error "
                 "(1 - a) tau_r(theta) / Kp_f that moves with the motor angle, i.e. a joint stiffness "
                 "sum_i (P S)_ij^2 (1 - a) tau_r'(theta_i) / (r_m Kp_f,i) of either sign (tau_r' up to "
                 "N a_m = 5.4 Nm/rad at the motor-shaft period), as large as the distal joints' impedance. Measured, "
