@@ -624,3 +624,20 @@ def test_unexplained_limit_is_the_noise_only_family_wise_quantile():
     assert abs(hits - p) < 4 * np.sqrt(p * (1 - p) / worst.size), (hits, p, limit, K)
     high = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008, unexplained_ratio=50.0))
     assert high.unexplained_limit() == 50.0
+
+
+def test_guide_exponent_resting_on_its_bound_is_reported_at_bound():
+    """The guide candidate's law refit searches the capstan exponent ``mu alpha`` in ``[0, guide_mu_max]``; with the
+    bound below the truth's (0.074; 0.03 here) the best exponent is the bound itself, and the candidate says so in
+    ``at_bound`` (which refuses it) instead of resting a hair inside it (the bounded scalar search stops ~1e-5 short
+    of its ends). With the catalog's bound the exponent is interior and nothing is at a bound."""
+    from awiwi_drake.discrepancy.finger import _fit
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds = make_finger_dataset("index", ["guide_friction"], place=5, seed=3, gen=THREE)
+    s = DiscrepancySettings()
+    fr = FingerResiduals(ds, s)
+    fit = lambda b: _fit(fr, "guide_friction", 4, b, s, fr.tau.copy(), fr.eps.copy(), fr.rho.copy())  # noqa: E731
+    low = fit(CatalogBounds(guide_mu_max=0.03))
+    assert low.params["guide_mu"] == 0.03 and "guide_mu" in low.at_bound, (low.params, low.at_bound)
+    free = fit(CatalogBounds())
+    assert 0.03 < free.params["guide_mu"] < CatalogBounds().guide_mu_max and not free.at_bound, free.params

@@ -663,6 +663,9 @@ def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, bas
 
     E = float(minimize_scalar(lambda e: best_c(e)[1], bounds=(0.0, bounds.guide_mu_max), method="bounded",
                               options={"xatol": 1e-5}).x)
+    # the bounded search never evaluates its ends (it stops ~xatol inside): an optimum at an end is that end, so
+    # that at_bound sees an exponent resting on guide_mu_max
+    E = min((E, 0.0, bounds.guide_mu_max), key=lambda e: best_c(e)[1])
     C = best_c(E)[0]
     c.params.update(guide_c0=C, guide_capstan=1.0, guide_mu=E)
     c.fitted = C * U + np.expm1(E) * Dp - np.expm1(-E) * Dm
