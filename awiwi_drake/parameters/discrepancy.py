@@ -186,6 +186,14 @@ class DiscrepancySettings(Parameters):
                "alone: 3.6x at 5.6-8 ms, 83x at 1 ms; 0.94x on the noise-free velocity); the best width differs per "
                "record (factor 2: 2.9x left where sqrt(2) leaves 1.5x)",
         doc="finger diagnosis: Gaussian widths (std) tried for the motion under a nonlinear law")
+    finger_motor_rest_filter: float = param(
+        8e-3, unit="s", low=0.0, low_inclusive=False,
+        source="chosen: the motor angles entering the tendon travel at the guides are the motion the motor's known "
+               "law explains plus the rest smoothed by a Gaussian of this width; an unknown motor torque tau (e.g. a "
+               "hidden friction) curves the rest by tau / B, which the smoothing shifts by sigma^2 tau / (2 B): 5 um "
+               "of tendon for 0.06 N m at 8 ms, under the 11 um of noise left (index, 30 dB: 28 um with the raw "
+               "angles; the truth's own guides then leave 1.35x the floor against 2.1x)",
+        doc="finger diagnosis: smoothing of the motor angles' unexplained rest in the joints' estimate")
     finger_gauss_newton_iterations: int = param(
         20, unit="-", low=1, high=1000,
         source="chosen: the thumb's joint angles from its tendons (routing h(q) nonlinear), warm-started at the previous "
