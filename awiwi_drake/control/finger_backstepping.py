@@ -260,7 +260,9 @@ class FingerBacksteppingLaw(StaticLaw):
                     raise ValueError(f"finger backstepping (nonlinear-spring): force_gains {name} must be one value "
                                      "(its steps act on the joint torques, not per tendon)")
                 setattr(self, name, g)
-        self.friction_scale = float(p.backstepping_friction_scale)
+        # the 15.5 law's own fraction; the 15.2 / 15.4 variants keep friction_scale (HandChainParams: at 0.8 the
+        # nonlinear-spring variant's sampled loop through the estimator is unstable on the index)
+        self.friction_scale = float(p.backstepping_friction_scale if variant == "antagonistic" else p.friction_scale)
         self.link_feedforward = bool(p.link_acceleration_feedforward)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
         parts = coupling.parts
