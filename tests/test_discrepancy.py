@@ -383,16 +383,23 @@ def test_benchmark_scores_follow_their_definitions():
             dict(row, row="out_of_catalog", hidden=[], named=[], transform="motor_bias",
                  nuisance_named=["motor_sensor"]),
             dict(row, row="three", hidden=["delay", "motor_ripple", "joint_friction"],
-                 named=["motor_ripple", "joint_friction", "delay"])]
+                 named=["motor_ripple", "joint_friction", "delay"]),
+            # a "not separable" class (first member = the step's name) names the hidden member, in every row alike
+            dict(row, row="three", hidden=["guide_friction", "delay", "motor_ripple"],
+                 named=["motor_ripple", "motor_friction", "delay"], status=["confirmed", "not separable", "confirmed"],
+                 members=[[], ["motor_friction", "guide_friction"], []]),
+            dict(row, row="single_full", hidden=["delay"], named=["delay", "motor_friction"],
+                 status=["confirmed", "not separable"], members=[[], ["motor_friction", "guide_friction"]])]
     s = bench.summarise(rows)["workflow"]
-    assert s["exact_single_full"] == (0.5, 2)
-    assert s["spurious"] == (pytest.approx(1 / 3), 3)
+    assert s["exact_single_full"] == (pytest.approx(1 / 3), 3)   # a class without a hidden member is a name
+    assert s["spurious"] == (pytest.approx(2 / 5), 5)
+    assert s["exact_by_class"] == (pytest.approx(1 / 5), 5)
     assert s["nothing_any_name"] == (0.5, 2) and s["nothing_physical_name"] == (0.0, 2)
     assert s["out_of_catalog_wrong_name"] == (pytest.approx(1 / 3), 3)
     assert s["out_of_catalog_flagged"] == (pytest.approx(2 / 3), 3)
-    assert s["exact_three"] == (1.0, 1)
+    assert s["exact_three"] == (1.0, 2)
     b = bench.summarise(rows)["baseline"]
-    assert b["exact_single_full"] == (0.5, 2) and b["nothing_any_name"] == (0.0, 2)
+    assert b["exact_single_full"] == (pytest.approx(1 / 3), 3) and b["nothing_any_name"] == (0.0, 2)
 
 
 def test_benchmark_is_resumable_and_claims_each_case_once(tmp_path, monkeypatch):

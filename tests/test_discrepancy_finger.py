@@ -605,3 +605,39 @@ def test_hand_dataset_is_diagnosed_as_its_five_fingers_and_written_back(tmp_path
                                dx.ratios_after["motor"][sl], rtol=1e-6)
     assert main(["make-dataset", "--rig", "hand", "--hide", "motor_friction", "--out", str(tmp_path)]) == 2
     assert "--place" in capsys.readouterr().err
+
+
+def test_unexplained_limit_is_the_noise_only_family_wise_quantile():
+    """``FingerResiduals.unexplained_limit``: noise alone (every ratio a mean of ``K`` squared unit normals, one per
+    motor plus the spring and links' sides) exceeds it with the family-wise probability ``unexplained_false_alarm``
+    (Bonferroni over the m + 2 independent ratios: ``1 - (1 - a / (m + 2))^(m + 2)``), counted on 20000 noise-only
+    draws within 4 binomial standard errors; and it is never below ``unexplained_ratio``."""
+    ds = make_finger_dataset("index", [], seed=1, gen=SHORT)
+    a = 0.05
+    fr = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008, unexplained_false_alarm=a, unexplained_ratio=1.0))
+    K, groups = fr.tau.shape[1], fr.m + 2
+    limit = fr.unexplained_limit()
+    rng = np.random.default_rng(5)
+    worst = np.max(np.mean(rng.standard_normal((20000, groups, K)) ** 2, axis=2), axis=1)
+    p = 1.0 - (1.0 - a / groups) ** groups
+    hits = np.mean(worst > limit)
+    assert abs(hits - p) < 4 * np.sqrt(p * (1 - p) / worst.size), (hits, p, limit, K)
+    high = FingerResiduals(ds, DiscrepancySettings(finger_filter=0.008, unexplained_ratio=50.0))
+    assert high.unexplained_limit() == 50.0
+
+
+def test_guide_exponent_resting_on_its_bound_is_reported_at_bound():
+    """The guide candidate's law refit searches the capstan exponent ``mu alpha`` in ``[0, guide_mu_max]``; with the
+    bound below the truth's (0.074; 0.03 here) the best exponent is the bound itself, and the candidate says so in
+    ``at_bound`` (which refuses it) instead of resting a hair inside it (the bounded scalar search stops ~1e-5 short
+    of its ends). With the catalog's bound the exponent is interior and nothing is at a bound."""
+    from awiwi_drake.discrepancy.finger import _fit
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds = make_finger_dataset("index", ["guide_friction"], place=5, seed=3, gen=THREE)
+    s = DiscrepancySettings()
+    fr = FingerResiduals(ds, s)
+    fit = lambda b: _fit(fr, "guide_friction", 4, b, s, fr.tau.copy(), fr.eps.copy(), fr.rho.copy())  # noqa: E731
+    low = fit(CatalogBounds(guide_mu_max=0.03))
+    assert low.params["guide_mu"] == 0.03 and "guide_mu" in low.at_bound, (low.params, low.at_bound)
+    free = fit(CatalogBounds())
+    assert 0.03 < free.params["guide_mu"] < CatalogBounds().guide_mu_max and not free.at_bound, free.params

@@ -129,3 +129,42 @@ def test_effect_on_one_tendon_is_named_with_its_place(effect, seed):
     p = dx.final_parameters
     from awiwi_drake.discrepancy.catalog import PARAM_INDEX
     assert p[PARAM_INDEX["place_1"]] == 0.0 and p[PARAM_INDEX["place_2"]] == 1.0
+
+
+def test_batched_fits_get_exactly_the_numbers_they_get_alone():
+    """``ReplayEngine.run_batched`` (the candidates' simulation fits side by side): every job gets bit for bit
+    what it gets alone (a copy's replay depends only on its own parameters and window), in fewer engine passes
+    than one by one; a job's exception reaches the caller and the other jobs still finish."""
+    from awiwi_drake.discrepancy.catalog import PARAM_INDEX, default_vector
+    from awiwi_drake.discrepancy.fit import fit_parameters
+    from awiwi_drake.discrepancy.replay import ReplayEngine
+    from awiwi_drake.discrepancy.screen import ResidualState
+    from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
+    eng = ReplayEngine(make_truth_dataset("joint", ["joint_friction"], snr_db=30, seed=11,
+                                          gen=TruthGeneratorParams(duration=1.0)))
+    st = ResidualState(eng, default_vector())
+    bounds, settings = CatalogBounds(), DiscrepancySettings(fit_rounds=1, max_nfev=6)
+
+    def fit(values):
+        p = default_vector()
+        for k, v in values.items():
+            p[PARAM_INDEX[k]] = v
+        return lambda: fit_parameters(st, list(values), p, bounds, settings)
+    jobs = [fit({"joint_coulomb": 0.01, "joint_velocity": 0.05}), fit({"motor_coulomb": 0.005}),
+            fit({"link_inertia_rel": 0.05, "link_damping_add": 0.001})]
+    n0 = eng.simulations
+    alone = [job() for job in jobs]
+    n_alone = eng.simulations - n0
+    together = eng.run_batched(jobs)
+    n_together = eng.simulations - n0 - n_alone
+    for a, b in zip(alone, together):
+        assert np.array_equal(a.p, b.p) and np.array_equal(a.r0, b.r0) and a.nfev == b.nfev
+    assert n_together < n_alone
+    done = []
+
+    def failing():
+        eng.evaluate(default_vector()[None], st.W[:2])
+        raise ValueError("job failed after one replay")
+    with pytest.raises(ValueError, match="job failed"):
+        eng.run_batched([lambda: done.append(jobs[1]()), failing])
+    assert np.array_equal(done[0].p, alone[1].p)

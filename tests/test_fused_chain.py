@@ -203,12 +203,13 @@ def test_compiled_force_law_equals_the_law_as_written():
 
 @pytest.mark.parametrize("target, name", [("hand", "backstepping"), ("finger-thumb", "backstepping"),
                                           ("hand", "backstepping-friction-observer"),
-                                          ("finger-thumb", "backstepping-friction-observer")])
+                                          ("finger-thumb", "backstepping-friction-observer"),
+                                          ("finger-thumb", "backstepping-load-observer")])
 def test_compiled_backstepping_equals_the_law_as_written(target, name):
     """The 15.5 law's float path (one compiled call, polynomial springs) equals FingerBacksteppingLaw.terms (the law
     for every scalar type) at random measurements: relative 1e-12 of the command; with the link torque estimate and its
     compensation bounded by the frictions (``backstepping-friction-observer``) at estimates inside and beyond the
-    bound (half of the DoF each)."""
+    bound (half of the DoF each); with the estimate in the link model alone (``backstepping-load-observer``)."""
     rig = _rig(target)
     law = make_controller(name, rig).law
     op = rig.operating_point()
@@ -228,6 +229,8 @@ def test_compiled_backstepping_equals_the_law_as_written(target, name):
             u["friction_compensation"] = B * rng.uniform(-1, 1, B.size) * np.where(np.arange(B.size) % 2, 3.0, 0.5)
         ref, fast = law.terms(u)["command"], law(u)
         assert law._fast                                          # the compiled path ran
+        if law.link_torque_estimate:                              # the estimate enters both paths
+            assert np.abs(law({**u, "friction_compensation": 0 * u["friction_compensation"]}) - fast).max() > 0
         np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 

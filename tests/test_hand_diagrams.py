@@ -280,7 +280,7 @@ def test_thumb_base_reaches_a_large_reference_through_the_exact_routing():
     from awiwi_drake.control import closed_loop, make_controller
     from awiwi_drake.parameters.hand import JointControllerParams
     rig = finger_diagram(finger="thumb")
-    op, c, law = rig.operating_point(), rig.coupling, rig.spring_law
+    op, c, law = rig.operating_point(), rig.coupling, rig.spring
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     q_ref = np.array([0.5, 0.35, 0.0, 0.0])
     res = simulate(cl.diagram, cl.create_context(op, references={"joint_angle_reference": q_ref}),

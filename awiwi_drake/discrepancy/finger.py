@@ -402,11 +402,13 @@ class FingerResiduals:
     # ------------------------------------------------------------------ energies
     def unexplained_limit(self) -> float:
         """The residual/floor ratio above which a discrepancy is unexplained: ``unexplained_ratio``, or, if higher,
-        what noise alone exceeds with probability 1e-3 family-wise: the largest of ``m + 2`` means of ``K`` squared
-        unit-variance samples (chi-square with ``K`` degrees of freedom over ``K``; ``K`` decimated samples)."""
+        what noise alone exceeds with probability ``unexplained_false_alarm`` family-wise: the largest of ``m + 2``
+        means of ``K`` squared unit-variance samples (chi-square with ``K`` degrees of freedom over ``K``; ``K``
+        decimated samples)."""
         from scipy.stats import chi2
         K = self.tau.shape[1]
-        return max(self.settings.unexplained_ratio, float(chi2.ppf(1.0 - 1e-3 / (self.m + 2), K)) / K)
+        alarm = self.settings.unexplained_false_alarm / (self.m + 2)
+        return max(self.settings.unexplained_ratio, float(chi2.ppf(1.0 - alarm, K)) / K)
 
     def ratios(self) -> dict:
         """Residual energy over its noise floor (all samples: a fitted effect has 2-4 parameters against
@@ -661,6 +663,9 @@ def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, bas
 
     E = float(minimize_scalar(lambda e: best_c(e)[1], bounds=(0.0, bounds.guide_mu_max), method="bounded",
                               options={"xatol": 1e-5}).x)
+    # the bounded search never evaluates its ends (it stops ~xatol inside): an optimum at an end is that end, so
+    # that at_bound sees an exponent resting on guide_mu_max
+    E = min((E, 0.0, bounds.guide_mu_max), key=lambda e: best_c(e)[1])
     C = best_c(E)[0]
     c.params.update(guide_c0=C, guide_capstan=1.0, guide_mu=E)
     c.fitted = C * U + np.expm1(E) * Dp - np.expm1(-E) * Dm

@@ -13,9 +13,14 @@ with free shooting nodes).
 All windows and all perturbed parameter sets of one evaluation are copies of
 one :class:`~awiwi_drake.discrepancy.model.DiscrepancyModel_`, integrated by
 one Drake ``Simulator`` (fixed-step RK3, built once per batch size and reset).
+Independent jobs (the simulation fits of one step's candidates) run side by side with
+their replays merged into one pass (:meth:`ReplayEngine.run_batched`).
 """
 
 from __future__ import annotations
+
+import threading
+import time
 
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
@@ -88,6 +93,7 @@ class ReplayEngine:
         self.spread = np.maximum(spread, 1e-12)
         self._estimate_states()
         self._sims = {}
+        self._local = threading.local()   # the merged replays of :meth:`run_batched`, per job thread
         self._dahl_cache = {}
         self._played = None
         self.simulations = 0
@@ -276,21 +282,61 @@ class ReplayEngine:
         P : (num_params, M) catalog parameters of each copy
         X0 : (num_states, M) initial state of each copy
         """
-        import time as _time
-        t0 = _time.perf_counter()
-        P = np.array(P, float)
-        X0 = np.asarray(X0, float)
+        batch = getattr(self._local, "batch", None)
+        Ym = batch.simulate(starts, P, X0) if batch is not None else self._simulate_all([(starts, P, X0)])[0]
+        if not np.all(np.isfinite(Ym)):
+            bad = np.unique(np.nonzero(~np.isfinite(Ym))[0])
+            raise FloatingPointError(f"replay of {self.ds.name} diverged in {len(bad)} of {len(starts)} copies")
+        return Ym
+
+    def _simulate_all(self, requests: list) -> list:
+        """Several :meth:`simulate` requests ``[(starts, P, X0), ...]`` as one engine pass (their copies side by
+        side); returns their measurements in order. A copy's replay depends only on its own parameters and
+        start, so each request gets exactly what it would get alone."""
+        t0 = time.perf_counter()
+        sizes = [len(st) for st, _, _ in requests]
+        starts = np.concatenate([np.asarray(st) for st, _, _ in requests])
+        P = np.concatenate([np.array(Pr, float) for _, Pr, _ in requests], axis=1)
+        X0 = np.concatenate([np.asarray(X, float) for _, _, X in requests], axis=1)
         div = self.step_divisors(P)
         Ym = np.empty((len(starts), self.L, self.nom.num_measurements))
         for d in np.unique(div):
             sel = div == d
             Ym[sel] = self._simulate_group(starts[sel], P[:, sel], X0[:, sel], int(d))
-        if not np.all(np.isfinite(Ym)):
-            bad = np.unique(np.nonzero(~np.isfinite(Ym))[0])
-            raise FloatingPointError(f"replay of {self.ds.name} diverged in {len(bad)} of {len(starts)} copies")
         self.simulations += 1
-        self.sim_time += _time.perf_counter() - t0
-        return Ym
+        self.sim_time += time.perf_counter() - t0
+        return np.split(Ym, np.cumsum(sizes)[:-1])
+
+    def run_batched(self, jobs: list) -> list:
+        """Run the callables ``jobs`` (e.g. one simulation fit each) side by side, their replays merged: each
+        job runs in its own thread, and its :meth:`simulate` calls wait until every unfinished job has asked for
+        one, then all are simulated in one pass (:meth:`_simulate_all`). The per-pass cost of the integrator
+        (most of a small replay's cost) is paid once for all jobs; every job gets exactly the numbers it would
+        get alone. Returns the jobs' results in order; re-raises the first job's exception."""
+        if len(jobs) <= 1:
+            return [job() for job in jobs]
+        batch = _Batch(self, len(jobs))
+        results, errors = [None] * len(jobs), [None] * len(jobs)
+
+        def work(i):
+            self._local.batch = batch
+            try:
+                results[i] = jobs[i]()
+            except BaseException as exc:   # noqa: BLE001 - re-raised in the caller's thread
+                errors[i] = exc
+            finally:
+                self._local.batch = None
+                batch.finished()
+
+        threads = [threading.Thread(target=work, args=(i,), daemon=True) for i in range(len(jobs))]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        for exc in errors:
+            if exc is not None:
+                raise exc
+        return results
 
     def _simulate_group(self, starts: np.ndarray, P: np.ndarray, X0: np.ndarray, divisor: int) -> np.ndarray:
         M = len(starts)
@@ -433,6 +479,43 @@ class ReplayEngine:
         proj : :class:`Projection` (apply with :func:`project`)
         """
         return self.profiled(np.asarray(Pbase)[None], windows)[0]
+
+
+class _Batch:
+    """The pending :meth:`ReplayEngine.simulate` requests of the jobs of one :meth:`ReplayEngine.run_batched`:
+    when every unfinished job waits on one, the last to arrive runs them all in one pass."""
+
+    def __init__(self, eng: ReplayEngine, jobs: int):
+        self.eng, self.live, self.pending = eng, jobs, []
+        self.cv = threading.Condition()
+
+    def simulate(self, starts, P, X0):
+        req = {"args": (starts, P, X0)}
+        with self.cv:
+            self.pending.append(req)
+            self._run_if_all_wait()
+            while "out" not in req:
+                self.cv.wait()
+        if isinstance(req["out"], BaseException):
+            raise req["out"]
+        return req["out"]
+
+    def finished(self):
+        with self.cv:
+            self.live -= 1
+            self._run_if_all_wait()
+
+    def _run_if_all_wait(self):
+        if not self.pending or len(self.pending) < self.live:
+            return
+        reqs, self.pending = self.pending, []
+        try:
+            outs = self.eng._simulate_all([r["args"] for r in reqs])
+        except BaseException as exc:   # noqa: BLE001 - handed to every waiting job
+            outs = [exc] * len(reqs)
+        for r, out in zip(reqs, outs):
+            r["out"] = out
+        self.cv.notify_all()
 
 
 class Projection:

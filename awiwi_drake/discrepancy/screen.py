@@ -110,6 +110,34 @@ def ripple_orders_from_spectrum(st: "ResidualState", bounds: CatalogBounds) -> l
     return expected + [float(orders[i]) for i in picked]
 
 
+def ripple_pair(entries: list, b: np.ndarray, tie: float) -> list:
+    """The ripple orders a fit falls back to when the screened pair's fit rests on the amplitude bound:
+    of the pairs whose joint least-squares gain on the training residual ``b`` is within ``tie`` of the
+    best pair's, the one with the smallest largest amplitude.
+
+    Over an angle range shorter than a period, low orders alias each other: many pairs fit the same
+    smooth function of the motor angle, some with large cancelling amplitudes that the simulation fit
+    drives onto the amplitude bound (a rejected fit, and the step names nothing). The true pair fits
+    with the true amplitudes, an aliasing pair needs larger ones, so the smallest amplitudes among the
+    pairs the data cannot tell apart is the choice (``tie``: the workflow passes ``min_gain`` of the
+    training excess, the least gain it accepts as an effect)."""
+    if len(entries) < 2:
+        return list(entries)
+    A = np.concatenate([e["g"] for e in entries], axis=-1)
+    A = A.reshape(-1, A.shape[-1])
+    G, Ab = A.T @ A, A.T @ b     # normal equations of every pair from one Gram matrix
+    k = entries[0]["g"].shape[-1]
+    fits = []
+    for i in range(len(entries)):
+        for j in range(i + 1, len(entries)):
+            cols = np.r_[i * k:(i + 1) * k, j * k:(j + 1) * k]
+            coef = np.linalg.lstsq(G[np.ix_(cols, cols)], Ab[cols], rcond=None)[0]
+            fits.append((float(coef @ Ab[cols]), float(np.abs(coef).max()), [entries[i], entries[j]]))
+    best = max(f[0] for f in fits)
+    pair = min((f for f in fits if f[0] >= best - tie), key=lambda f: f[1])[2]
+    return sorted(pair, key=lambda e: -e["train_gain"])
+
+
 def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBounds, ripple_orders=()):
     """Screening variants ``(label, shape_values, [(param, delta)...], ripple_order)``
     (``ripple_orders``: the orders screened for ``motor_ripple``)."""
@@ -138,8 +166,10 @@ def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBo
     return out
 
 
-def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) -> list:
-    """Linear-regression screening of every candidate; returns dicts sorted by held-out gain."""
+def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str, min_gain: float = 0.0) -> list:
+    """Linear-regression screening of every candidate; returns dicts sorted by held-out gain
+    (``min_gain``: the fraction of the excess an accepted effect must remove, the tie of
+    :func:`ripple_pair`)."""
     eng, base = st.eng, st.base
     variants = []  # (effect, label, shape, cols, order)
     Psets = []
@@ -185,6 +215,7 @@ def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) ->
                      train_gain=train_gain, g=g, rp=rp, sets=(idx, shape_idx))
         results.setdefault(eff.name, []).append(entry)
     chosen = []   # (effect, [entries], label, shape, cols)
+    fallback = {}  # effect: parameters a fit resting on a bound starts again from
     for name, entries in results.items():
         eff = entries[0]["effect"]
         if name == "motor_ripple":
@@ -200,6 +231,10 @@ def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) ->
 
             rest = [e for e in entries if e is not first]
             ranked = [first] + ([max(rest, key=joint_gain)] if rest else [])
+            # the pair a fit resting on the amplitude bound falls back to (see ripple_pair)
+            small = ripple_pair(entries, b, min_gain * max(st.E_train - st.dof[tr].sum(), 0.0))
+            if {e["order"] for e in small} != {e["order"] for e in ranked}:
+                fallback[name] = {f"ripple_order_{i}": e["order"] for i, e in enumerate(small, start=1)}
             cols = []
             params = {}
             for slot, e in enumerate(ranked, start=1):
@@ -239,7 +274,7 @@ def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str) ->
         for (cname, d), b in zip(cols, beta):
             params[cname] = float(st.base[PARAM_INDEX[cname]] + b * d)
         out.append(dict(effect=eff, label=label, params=params, gain=gain, z=z, dbic=dbic,
-                        rel=gain / max(st.excess, 1e-12), e_after=e_after))
+                        rel=gain / max(st.excess, 1e-12), e_after=e_after, fallback=fallback.get(eff.name)))
     probe(st, out, bounds, rig)
     out.sort(key=lambda d: -d["gain"])
     return out

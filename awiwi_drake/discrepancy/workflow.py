@@ -70,10 +70,11 @@ class _Run:
         self.stop_reason = ""
 
     # ---------------------------------------------------------------- one candidate
-    def fit_candidate(self, s: dict, held: HeldLinear | None) -> CandidateResult:
+    def fit_candidate(self, s: dict, held: HeldLinear | None) -> tuple:
         """Simulation fit of one screened candidate's own parameters, the accepted effects' parameters free
         to first order (``held``, :class:`~awiwi_drake.discrepancy.fit.HeldLinear`); the winner is refitted
-        jointly with them by simulation in :meth:`accept`."""
+        jointly with them by simulation in :meth:`accept`. Returns the :class:`CandidateResult` and its
+        progress lines."""
         eng, st, rig, eff = self.eng, self.st, self.rig, s["effect"]
         names = [n for n in free_params([eff], rig) if not n.startswith("ripple_order")]
         p_start = st.base.copy()
@@ -98,10 +99,20 @@ class _Run:
                              own_bound, e_after, gain_z(st.rp[te], rp[te]),
                              materiality(eff.name, params, self.ne), vector=fo.p, profile=(fo.r0, fo.projection))
         cr.rejected = rejection_reason(cr, st, self.settings)
-        self.say(f"  fit {eff.name:18s} held-out gain {100 * cr.relative_gain:6.1f}% of excess, "
-                 f"z {cr.z:4.1f}/{cr.z_gain:6.1f}, dBIC {dbic:9.1f} ({fo.nfev} evals, {fo.rounds} rounds, "
-                 f"{time.perf_counter() - t0:.1f} s)" + (f": rejected, {cr.rejected}" if cr.rejected else ""))
-        return cr
+        lines = []
+        if cr.at_bound and s.get("fallback"):
+            # low ripple orders aliasing each other (a smooth function of the motor angle, large cancelling
+            # amplitudes): the pair with the smallest amplitudes the screen cannot tell from the best
+            lines.append(f"  fit {eff.name:18s} rests on a bound ({', '.join(cr.at_bound)}): orders "
+                         + ", ".join(f"{v:g}" for v in s["fallback"].values()) + " instead")
+            alt, alt_lines = self.fit_candidate({**s, "params": dict(s["fallback"]), "fallback": None}, held)
+            lines += alt_lines
+            if not alt.at_bound:
+                return alt, lines
+        return cr, lines + [
+            f"  fit {eff.name:18s} held-out gain {100 * cr.relative_gain:6.1f}% of excess, "
+            f"z {cr.z:4.1f}/{cr.z_gain:6.1f}, dBIC {dbic:9.1f} ({fo.nfev} evals, {fo.rounds} rounds, "
+            f"{time.perf_counter() - t0:.1f} s)" + (f": rejected, {cr.rejected}" if cr.rejected else "")]
 
     # ---------------------------------------------------------------- one step
     def choose(self, fitted: list):
@@ -174,7 +185,7 @@ class _Run:
         if not pool:
             self.stop_reason = "catalog exhausted (max_effects / max_nuisance reached)"
             return False
-        screened = screen(st, pool, self.bounds, self.rig)
+        screened = screen(st, pool, self.bounds, self.rig, settings.min_gain)
         self.say("screen: " + ", ".join(f"{s['effect'].name} {100 * s['rel']:.0f}%" for s in screened[:5]))
         screen_results = [CandidateResult(s["effect"].name, s["effect"].kind, "screen", s["params"], {},
                                           s["gain"], s["rel"], s["z"], s["dbic"]) for s in screened]
@@ -187,7 +198,13 @@ class _Run:
         if top and self.accepted:   # the accepted parameters' sensitivities, shared by every candidate's fit
             names = [n for n in free_params(self.accepted, self.rig) if not n.startswith("ripple_order")]
             held = HeldLinear(st, names, self.bounds)
-        fitted = sorted([self.fit_candidate(s, held) for s in top], key=lambda c: -c.gain)
+        # the candidates' fits side by side, their replays merged (same numbers as one by one)
+        fitted = []
+        for c, lines in self.eng.run_batched([lambda s=s: self.fit_candidate(s, held) for s in top]):
+            for line in lines:
+                self.say(line)
+            fitted.append(c)
+        fitted.sort(key=lambda c: -c.gain)
         self.history.append({"ratio": st.ratio, "screen": [c.summary() for c in screen_results],
                              "fits": [c.summary() for c in fitted]})
         if not top:
@@ -221,10 +238,12 @@ class _Run:
         step, te = placed[0], self.eng.test
         names = [n for n in free_params([EFFECTS[step.effect]], self.rig) if not n.startswith("ripple_order")]
         best, best_st = "both tendons", self.st
-        for i in (1, 2):
+
+        def fit_on(i):
             p0 = self.st.base.copy()
             p0[PARAM_INDEX["place_1"]], p0[PARAM_INDEX["place_2"]] = float(i == 1), float(i == 2)
-            fo = fit_parameters(self.st, names, p0, self.bounds, self.settings)
+            return fit_parameters(self.st, names, p0, self.bounds, self.settings)
+        for i, fo in zip((1, 2), self.eng.run_batched([lambda i=i: fit_on(i) for i in (1, 2)])):
             st = ResidualState(self.eng, fo.p, (fo.r0, fo.projection))
             if st.E_test < best_st.E_test:
                 best, best_st = f"tendon {i}", st

@@ -64,9 +64,9 @@ class HandRig(Rig):
     offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
     spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
-    rows of the tendons, ``spring_law`` the default spring law, ``spring_laws`` the
+    rows of the tendons, ``spring_laws`` the
     :class:`~awiwi_drake.components.spring.TendonSprings` of the tendons (one law per tendon,
-    ``params.tendon_springs`` overrides).
+    ``params.tendon_springs`` overrides; :attr:`Rig.spring` is the default law).
     """
 
     drive_coupling: Any = None
@@ -76,7 +76,6 @@ class HandRig(Rig):
     offsets: Any = None
     coupling_gain: Any = None
     wrist_rows: Any = None
-    spring_law: Any = None
     spring_laws: Any = None
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
@@ -182,8 +181,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                    drive_coupling=drive_coupling, models=models, joint_names=joint_names,
-                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_law=spring,
-                   spring_laws=laws)
+                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_laws=laws)
 
 
 def _add_wrist_offsets(b, rows, m):

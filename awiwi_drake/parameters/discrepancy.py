@@ -202,6 +202,14 @@ class DiscrepancySettings(Parameters):
                "floor unexplained; null datasets reach 0.99-1.05 and correctly named effects with a form mismatch "
                "(Stribeck truth vs catalog Coulomb) stay below 1.5 (benchmark)",
         doc="held-out residual / noise floor above which a discrepancy is 'unexplained'")
+    unexplained_false_alarm: float = param(
+        1e-3, unit="-", low=0.0, high=1.0, low_inclusive=False,
+        source="chosen: the finger diagnosis's ratios are means of K squared whitened samples (chi-square with K "
+               "degrees of freedom over K, K decimated samples), one per motor plus the spring and links' sides; "
+               "on a short record noise alone exceeds 1.5x (e.g. K = 17 on 3 s), so the limit is also the ratio "
+               "noise exceeds with this probability over the m + 2 ratios (family-wise): 1e-3, one false "
+               "'unexplained' in a thousand noise-only records (2.8x at K = 17)",
+        doc="finger diagnosis: family-wise probability that noise alone is called unexplained")
 
 
 @dataclass(frozen=True)
