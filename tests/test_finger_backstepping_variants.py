@@ -90,7 +90,7 @@ def test_closed_loop_is_the_designed_error_system(variant):
     cancelled as designed) is similar to the designed error system: with T = d(error)/d(state) (AutoDiffXd of
     the law), T A_cl = A_err T and T is invertible (a similarity, stronger than comparing eigenvalues)."""
     rig = _ideal_index()
-    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, **_EXACT), variant=variant)
+    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, backstepping_friction_scale=1.0, **_EXACT), variant=variant)
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})

@@ -204,7 +204,7 @@ def test_finger_backstepping_with_guide_friction_drops_the_link_acceleration_fee
                       output_port_index=loop.diagram.GetOutputPort("joint_angle").get_index()).A()
         return np.linalg.eigvals(A).real.max()
 
-    assert max_real(HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True)) > 500.0
+    assert max_real(HandChainParams(backstepping_friction_scale=1.0, link_acceleration_feedforward=True)) > 500.0
     assert max_real(HandChainParams()) <= 1e-6
 
 

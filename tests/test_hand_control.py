@@ -171,11 +171,11 @@ def test_finger_backstepping_closed_loop_poles_equal_the_design(finger, per_tend
         base = rig.params
         stiff = base.spring.replace(tendon=TendonParams(diameter=2.0e-3))
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
-        wrong = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True))
+        wrong = FingerBacksteppingLaw(rig, HandChainParams(backstepping_friction_scale=1.0, link_acceleration_feedforward=True))
         wrong.springs = TendonSprings([rig.spring] * rig.num_tendons)          # the common law for every tendon
         wrong_loop = closed_loop(rig, StaticLawController(wrong), rate_hz=None, sensors="ideal")
         rig = finger_diagram(finger=finger, params=base.replace(tendon_springs=((f"{finger}_h3", stiff),)))
-    law = FingerBacksteppingLaw(rig, HandChainParams(friction_scale=1.0, link_acceleration_feedforward=True))   # the continuous design: exact cancellation
+    law = FingerBacksteppingLaw(rig, HandChainParams(backstepping_friction_scale=1.0, link_acceleration_feedforward=True))   # the continuous design: exact cancellation
     loop = closed_loop(rig, StaticLawController(law), rate_hz=None, sensors="ideal")
     op = rig.operating_point()
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})

@@ -18,7 +18,7 @@ with the tendon force ``f = phi_i(x_i)`` (what the hand measures: the lever's an
 by the calibration; the lever's friction ``z`` and the guides' ``g`` are not measured) of each tendon's own spring law (``rig.spring_laws``: the
 lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
 spring elongation ``x_i``, the motor friction
-(3.8) compensated by ``HandChainParams.friction_scale`` (ch. 3: under-compensate; 1 = the exact
+(3.8) compensated by ``HandChainParams.backstepping_friction_scale`` (ch. 3: under-compensate; 1 = the exact
 cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
 ``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
 phi' r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B``.  The joint accelerations
@@ -260,7 +260,9 @@ class FingerBacksteppingLaw(StaticLaw):
                     raise ValueError(f"finger backstepping (nonlinear-spring): force_gains {name} must be one value "
                                      "(its steps act on the joint torques, not per tendon)")
                 setattr(self, name, g)
-        self.friction_scale = float(p.friction_scale)
+        # the 15.5 law's own fraction; the 15.2 / 15.4 variants keep friction_scale (HandChainParams: at 0.8 the
+        # nonlinear-spring variant's sampled loop through the estimator is unstable on the index)
+        self.friction_scale = float(p.backstepping_friction_scale if variant == "antagonistic" else p.friction_scale)
         self.link_feedforward = bool(p.link_acceleration_feedforward)
         # the sharing W = -((P S)^T)^+ is block-diagonal by finger: constant fingers once, the thumb per call
         parts = coupling.parts

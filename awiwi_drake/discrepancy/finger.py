@@ -194,6 +194,12 @@ class FingerResiduals:
         self.time = ds.time[sl]
         self.theta, self.omega, self.alpha, self.force, self.torque = th[:, sl], om[:, sl], al[:, sl], f[:, sl], u[:, sl]
         self.tau = tau[:, sl]
+        # the motor's known acceleration (its linear law with the measured force and the held command) integrated
+        # twice: the motion the motor law explains, exact at the sample rate (motor_velocity)
+        known = np.stack([motor_acceleration(TH[i], om[i], U[i], r * F[i], lin[i]) for i in range(m)])
+        self._omega_known = np.concatenate([np.zeros((m, 1)), np.cumsum(known[:, :-1], axis=1) * dt], axis=1)
+        self._theta_known = np.concatenate([np.zeros((m, 1)), np.cumsum(
+            self._omega_known[:, :-1] + self._omega_known[:, 1:], axis=1) * dt / 2], axis=1)
         self._theta_raw, self._velocities = TH, {}
         self.motor_filters = {}       # tendon -> velocity filter [s] of the nominal's own friction (as a candidate's)
         for i, p in enumerate(motors):
@@ -218,15 +224,21 @@ class FingerResiduals:
         self._signature_cache: dict = {}     # candidate columns per (effect, tendon): data only (_signatures)
 
     def motor_velocity(self, i: int, width: float) -> np.ndarray:
-        """Motor ``i``'s velocity [rad/s] at the full rate, the angle smoothed by a Gaussian of ``width`` [s]: what
-        a nonlinear velocity law (friction (3.8)) is evaluated on before the consistent filter. On the filter's own
-        20 ms the finger's fast link modes are gone from the velocity, and (3.8) of the smoothed velocity is not
-        the filtered friction: a (3.8) friction with the truth's own slope left 14x the floor where the noise-free
-        velocity leaves 0.94x (index_h3, 3 s, 30 dB); a narrow width passes the angle noise instead (1 ms: 83x).
-        The data choose from ``finger_motion_filters``, as for the guides' travel (:meth:`guide_path`)."""
+        """Motor ``i``'s velocity [rad/s] at the full rate: what a nonlinear velocity law (friction (3.8)) is
+        evaluated on before the consistent filter. The motion the motor's known law explains (its linear law with
+        the measured force and the held command, integrated twice: ``omega_k``, ``theta_k``) plus the derivative of
+        the rest ``theta - theta_k`` smoothed by a Gaussian of ``width`` [s]: only the unknown torques' motion is
+        smoothed, the command's and the tendon's pass at the sample rate. On the consistent filter's own 20 ms the
+        finger's fast motion is gone, and (3.8) of a smoothed velocity is not the filtered friction: a (3.8)
+        friction with the truth's own slope left 14x the floor where the noise-free velocity leaves 0.94x
+        (index_h3, 3 s, 30 dB); the Gaussian-smoothed angle alone 3.6x at its best width (5.6-8 ms), a narrow width
+        passing the angle noise (1 ms: 83x); this form 1.6x at 8 ms (velocity error 0.17 against 0.19 rad/s, and
+        0.18 against 0.44 at 16 ms). The data choose the width from ``finger_motion_filters``, as for the guides'
+        travel (:meth:`guide_path`)."""
         key = (i, width)
         if key not in self._velocities:
-            self._velocities[key] = _filter(self._theta_raw[i], _kernel(width, self.dt)[2])
+            self._velocities[key] = self._omega_known[i] + _filter(self._theta_raw[i] - self._theta_known[i],
+                                                                   _kernel(width, self.dt)[2])
         return self._velocities[key]
 
     def consistent(self, signal: np.ndarray) -> np.ndarray:
@@ -325,7 +337,11 @@ class FingerResiduals:
         P = np.asarray(rig.coupling.P(), float)
         w = np.mean(self.wsq, axis=1)                                      # (m,) mean whitening weight
         A = np.linalg.pinv(w[:, None] * P)
-        y = self._x_full - rig.offsets[:, None] - self.r * TH               # (m, N) = P q + noise
+        # the motor angles as the motor law's motion plus the smoothed rest (motor_velocity): the raw angles' noise
+        # (37-50 um of tendon on the index at 30 dB) dominated the travel's (28 um per sample, now 11 um)
+        w_rest = _kernel(self.settings.finger_motor_rest_filter, self.dt)[1]
+        theta = self._theta_known + _filter(TH - self._theta_known, w_rest)
+        y = self._x_full - rig.offsets[:, None] - self.r * theta            # (m, N) = P q + noise
         q_full = A @ (w[:, None] * y)                                      # (n, N)
         self.path = P @ q_full                                             # tendon travel at the guides [m]
         self._paths, self._guide_cols = {}, {}          # smoothed paths, guide columns (guide_columns)
@@ -663,6 +679,9 @@ def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, bas
 
     E = float(minimize_scalar(lambda e: best_c(e)[1], bounds=(0.0, bounds.guide_mu_max), method="bounded",
                               options={"xatol": 1e-5}).x)
+    # the bounded search never evaluates its ends (it stops ~xatol inside): an optimum at an end is that end, so
+    # that at_bound sees an exponent resting on guide_mu_max
+    E = min((E, 0.0, bounds.guide_mu_max), key=lambda e: best_c(e)[1])
     C = best_c(E)[0]
     c.params.update(guide_c0=C, guide_capstan=1.0, guide_mu=E)
     c.fitted = C * U + np.expm1(E) * Dp - np.expm1(-E) * Dm

@@ -61,21 +61,18 @@ class HandRig(Rig):
     """A :class:`Rig` for fingers and the hand; fixes the ``wrist_angle`` input too.
 
     Beyond :class:`Rig`: ``coupling`` is the finger/hand coupling without wrist
-    offsets, ``drive_coupling`` what the drive uses, ``models`` the FingerModel
+    offsets (the drive's, with them, is ``drive.model.coupling``), ``models`` the FingerModel
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
-    spring pre-elongations x0 [m], ``coupling_gain`` G, ``wrist_rows`` the Table 6.2
-    rows of the tendons, ``spring_laws`` the
+    spring pre-elongations x0 [m], ``coupling_gain`` G, ``spring_laws`` the
     :class:`~awiwi_drake.components.spring.TendonSprings` of the tendons (one law per tendon,
     ``params.tendon_springs`` overrides; :attr:`Rig.spring` is the default law).
     """
 
-    drive_coupling: Any = None
     models: Any = None
     joint_names: list = field(default_factory=list)
     tendon_names: list = field(default_factory=list)
     offsets: Any = None
     coupling_gain: Any = None
-    wrist_rows: Any = None
     spring_laws: Any = None
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
@@ -179,8 +176,8 @@ def _build(name, p, plant_factory, parts, wrist, visual):
                             joint_angles, external_torque, wrist_angle, drive.num_states - 2 * m)
 
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
-                   wrist_rows=rows, tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
-                   drive_coupling=drive_coupling, models=models, joint_names=joint_names,
+                   tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
+                   models=models, joint_names=joint_names,
                    tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_laws=laws)
 
 

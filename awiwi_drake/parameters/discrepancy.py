@@ -189,10 +189,19 @@ class DiscrepancySettings(Parameters):
                "mostly the motor angles') relaxes a Dahl state and blurs atan(g1 w); smoothing removes the link "
                "modes' motion. Guides with the truth's own parameters left the links' equation at 3.2 / 24 / 61 / "
                "44x the floor at 2 ms and 2.4 / 3.2 / 12.8 / 8.5x at 3 ms on four index records (1.1-1.3x on the "
-               "noise-free travel); (3.8) with the truth's slope 14x at the 20 ms of finger_filter, 3.6x at 5.6-8 ms, "
-               "83x at 1 ms (0.94x on the noise-free velocity); the best width differs per record (factor 2: 2.9x "
-               "left where sqrt(2) leaves 1.5x)",
+               "noise-free travel); (3.8) with the truth's slope 14x on the 20 ms filter's velocity, 1.6x on the "
+               "motor law's motion plus the rest smoothed at 8 ms (FingerResiduals.motor_velocity; the smoothed angle "
+               "alone: 3.6x at 5.6-8 ms, 83x at 1 ms; 0.94x on the noise-free velocity); the best width differs per "
+               "record (factor 2: 2.9x left where sqrt(2) leaves 1.5x)",
         doc="finger diagnosis: Gaussian widths (std) tried for the motion under a nonlinear law")
+    finger_motor_rest_filter: float = param(
+        8e-3, unit="s", low=0.0, low_inclusive=False,
+        source="chosen: the motor angles entering the tendon travel at the guides are the motion the motor's known "
+               "law explains plus the rest smoothed by a Gaussian of this width; an unknown motor torque tau (e.g. a "
+               "hidden friction) curves the rest by tau / B, which the smoothing shifts by sigma^2 tau / (2 B): 5 um "
+               "of tendon for 0.06 N m at 8 ms, under the 11 um of noise left (index, 30 dB: 28 um with the raw "
+               "angles; the truth's own guides then leave 1.35x the floor against 2.1x)",
+        doc="finger diagnosis: smoothing of the motor angles' unexplained rest in the joints' estimate")
     finger_gauss_newton_iterations: int = param(
         20, unit="-", low=1, high=1000,
         source="chosen: the thumb's joint angles from its tendons (routing h(q) nonlinear), warm-started at the previous "

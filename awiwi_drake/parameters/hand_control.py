@@ -163,10 +163,24 @@ class HandChainParams(Parameters):
                                   source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
                                          "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "
                                          "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter",
-                                  doc="motor friction (3.8) fed forward by the laws that command the motors from "
-                                      "motor-side states: the 15.5 finger backstepping and the motor-position "
-                                      "tendon level (11.3) of two-time-scale (the (10.2) force law: "
-                                      "force_friction_scale)")
+                                  doc="motor friction (3.8) fed forward by the motor-position tendon level (11.3) of "
+                                      "two-time-scale and the 15.2 / 15.4 finger backstepping variants (the (10.2) "
+                                      "force law: force_friction_scale; the 15.5 finger backstepping: "
+                                      "backstepping_friction_scale)")
+    backstepping_friction_scale: float = param(
+        0.8, unit="-", low=0.0, high=1.0,
+        source=("chosen: the fraction of the motor friction (3.8) the 15.5 finger backstepping feeds forward (ch. 3: "
+                "under-compensate). Its plain law's rest does not depend on it (the friction dead band is the guides' "
+                "and the lever's: index MCP 0.100 / 0.098 / 0.096 rad short at 0 / 0.5 / 0.95), but with the (9.2) "
+                "observer's compensation (backstepping-friction-observer) the motors' residual friction slows the "
+                "observer's mode at rest (thumb, continuous loop: -0.52 1/s at 0.5, -1.14 at 1): compare --rig hand "
+                "--short settled 8 / 11 / 10 of 19 steps at 0.5 / 0.8 / 0.95 (median end error 0.0069 / 0.0038 / "
+                "0.0031 rad, 3.4 % saturated). The sampled plain loop through the estimator at rest (spectral radius "
+                "on the thumb / index) is 0.994 / 0.990 at 0.5, 0.986 / 0.982 at 0.8, 0.988 / 0.979 at 1 "
+                "(the former 'full compensation chatters' predates the modal gain design); 0.8 keeps ch. 3's "
+                "under-compensation. The 15.2 / 15.4 variants keep friction_scale: at 0.8 the nonlinear-spring "
+                "variant's sampled loop through the estimator has spectral radius 1.018 on the index"),
+        doc="motor friction (3.8) fed forward by the 15.5 finger backstepping (variant antagonistic)")
     force_friction_scale: float = param(
         1.0, unit="-", low=0.0, high=1.0,
         source=("(10.2): the force law feeds the friction estimate forward, and (10.4): its static force error is "
