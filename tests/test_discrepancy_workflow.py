@@ -168,3 +168,35 @@ def test_batched_fits_get_exactly_the_numbers_they_get_alone():
     with pytest.raises(ValueError, match="job failed"):
         eng.run_batched([lambda: done.append(jobs[1]()), failing])
     assert np.array_equal(done[0].p, alone[1].p)
+
+
+def test_a_step_whose_joint_refit_loses_the_gain_is_not_added(monkeypatch):
+    """A candidate is judged with the accepted parameters moved to first order; the step adds it only if the
+    joint refit by simulation keeps a significant held-out gain over the model before the step. A refit that
+    loses it (here: forced to a point worse than before) leaves the model as it was and stops the loop with
+    the reason; a refit that keeps it adds the effect."""
+    from awiwi_drake.discrepancy import workflow
+    from awiwi_drake.discrepancy.catalog import EFFECTS, PARAM_INDEX
+    from awiwi_drake.discrepancy.fit import FitOutcome
+    from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
+
+    ds = make_truth_dataset("joint", ["joint_friction"], snr_db=30, seed=11, gen=TruthGeneratorParams(duration=1.5))
+    run = workflow._Run(ds, DiscrepancySettings(), CatalogBounds(), lambda msg: None)
+    link, _ = run.fit_candidate({"effect": EFFECTS["nominal_link"], "params": {}}, None)
+    assert run.accept(link, "confirmed", 1.0, [], [], []) == ""
+    before = run.st
+    friction, _ = run.fit_candidate({"effect": EFFECTS["joint_friction"],
+                                     "params": {"joint_coulomb": 0.01, "joint_velocity": 0.1}}, None)
+    real = workflow.fit_parameters
+
+    def worse(st, names, p, *args, **kwargs):
+        bad = before.base.copy()
+        bad[PARAM_INDEX["motor_coulomb"]] = 0.2
+        return FitOutcome(bad, {}, [], 1, True, 1, *run.eng.projector(bad, st.W))
+    monkeypatch.setattr(workflow, "fit_parameters", worse)
+    reason = run.accept(friction, "confirmed", 1.0, [], [], [])
+    assert reason.startswith("joint_friction not added") and run.st is before
+    assert [e.name for e in run.accepted] == ["nominal_link"] and len(run.steps) == 1
+    monkeypatch.setattr(workflow, "fit_parameters", real)
+    assert run.accept(friction, "confirmed", 1.0, [], [], []) == ""
+    assert [s.effect for s in run.steps] == ["nominal_link", "joint_friction"] and run.st.ratio < before.ratio

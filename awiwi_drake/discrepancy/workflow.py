@@ -147,7 +147,11 @@ class _Run:
         alts = [c.effect for c in tied]
         return win, ("ambiguous" if alts else "confirmed"), conf, [], alts
 
-    def accept(self, win: CandidateResult, status: str, conf: float, members: list, alts: list, cands: list):
+    def accept(self, win: CandidateResult, status: str, conf: float, members: list, alts: list, cands: list) -> str:
+        """Add ``win`` (refitted jointly with the accepted effects by simulation); returns ``""``, or why it
+        is not added: the candidate was judged with the accepted parameters moved to first order, so the
+        joint refit must keep a held-out gain that passes the same tests (``min_z`` null standard
+        deviations and ``min_floor_gain`` of the noise floor) over the model before the step."""
         first = not self.accepted
         self.accepted.append(EFFECTS[win.effect])
         refit = ""
@@ -158,7 +162,15 @@ class _Run:
             t0 = time.perf_counter()
             pol = fit_parameters(self.st, names, win.vector, self.bounds, self.settings,
                                  start_profile=win.profile[1].take(self.st.W[self.eng.train]))
-            self.st = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
+            prev, te = self.st, self.eng.test
+            new = ResidualState(self.eng, pol.p, (pol.r0, pol.projection))
+            gain, z = prev.E_test - new.E_test, gain_z(prev.rp[te], new.rp[te])
+            if gain < self.settings.min_floor_gain * prev.floor_test or z < self.settings.min_z:
+                self.accepted.pop()
+                return (f"{win.effect} not added: its joint refit by simulation leaves the held-out "
+                        f"residual/floor at {new.ratio:.3f} (before the step {prev.ratio:.3f}; gain "
+                        f"{z:.1f} null std, {100 * gain / max(prev.floor_test, 1.0):.1f} % of the floor)")
+            self.st = new
             refit = (f" (joint refit of {len(names)} parameters: {pol.nfev} evals, {pol.rounds} rounds, "
                      f"{time.perf_counter() - t0:.1f} s)")
         nr = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
@@ -171,6 +183,7 @@ class _Run:
                  f"NRMSE {np.mean(list(nr.values())):.4f}, residual/floor {self.st.ratio:.3f}"
                  + (f"; not separable from {', '.join(alts)} with these data: {experiment}" if experiment else "")
                  + refit)
+        return ""
 
     def step(self, all_effects: list) -> bool:
         """One screen-fit-decide round; returns False when the loop stops."""
@@ -224,7 +237,11 @@ class _Run:
             self.history[-1]["unresolved"] = [win.effect] + rivals
             self.stop_reason = f"unresolved: {', '.join([win.effect] + rivals)} explain the rest about equally"
             return False
-        self.accept(win, status, conf, members, alts, fitted + screen_results)
+        lost = self.accept(win, status, conf, members, alts, fitted + screen_results)
+        if lost:
+            self.history[-1]["refit_lost"] = win.effect
+            self.stop_reason = lost
+            return False
         return True
 
     def refine_place(self) -> None:
