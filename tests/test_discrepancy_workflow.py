@@ -10,7 +10,7 @@ import pytest
 
 from awiwi_drake.discrepancy import diagnose, load_dataset, make_truth_dataset
 from awiwi_drake.discrepancy.workflow import gap_metrics
-from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+from awiwi_drake.parameters.discrepancy import DiscrepancySettings, TruthGeneratorParams
 
 SHORT = TruthGeneratorParams(duration=4.0)
 
@@ -36,8 +36,18 @@ def test_hidden_joint_friction_is_named_and_gap_closes(joint_friction_case):
 
 
 def test_nothing_hidden_reports_no_effect():
+    """Also: diagnose runs with DiscrepancySettings.blas_threads BLAS threads and gives the caller's back."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    def blas_threads():
+        return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
+
+    seen = []
     ds = make_truth_dataset("joint", [], snr_db=30, seed=12, gen=SHORT)
-    dx = diagnose(ds)
+    with threadpool_limits(limits=2, user_api="blas"):
+        dx = diagnose(ds, progress=lambda msg: seen.append(blas_threads()))
+        assert blas_threads() <= {2}   # restored (a machine with one core caps BLAS at 1)
+    assert seen and all(t <= {DiscrepancySettings().blas_threads} for t in seen)
     assert dx.named_effects == [] and dx.verdict == "no effect"
     assert dx.floor_ratio_before < 1.25  # the nominal replay is at the noise floor
     assert dx.nrmse_after == dx.nrmse_before

@@ -30,6 +30,7 @@ import time
 
 import numpy as np
 from scipy.stats import norm
+from threadpoolctl import threadpool_limits
 
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
@@ -351,6 +352,12 @@ def diagnose(dataset: Dataset, *, settings: DiscrepancySettings | None = None,
         On Ctrl-C; its ``diagnosis`` attribute holds the partial result.
     """
     settings = settings or DiscrepancySettings()
+    with threadpool_limits(limits=settings.blas_threads, user_api="blas"):
+        return _diagnose(dataset, settings, bounds, progress, checkpoint)
+
+
+def _diagnose(dataset, settings, bounds, progress, checkpoint):
+    """:func:`diagnose` under its BLAS thread limit."""
     if is_finger_rig(dataset.rig):   # motor and spring laws per tendon (awiwi_drake.discrepancy.finger)
         from .finger import diagnose_finger
         return diagnose_finger(dataset, settings=settings, bounds=bounds, progress=progress)

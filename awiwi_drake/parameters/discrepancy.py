@@ -137,6 +137,14 @@ class DiscrepancySettings(Parameters):
                "replays (seed 1083's last step). Candidates only: applied to the accepted effect's joint refit too "
                "it lost seed 1047's spring_drift (the refit sets the model every later step builds on)",
         doc="smallest predicted cost reduction worth a trial step of a candidate's fit [squared noise units]")
+    blas_threads: int = param(
+        1, unit="-", low=1, high=64,
+        source="chosen: measured, seed 1047 (a three-effect joint dataset of bench_discrepancy), quiet 2-core "
+               "machine, same names: 27.9 CPU s with one BLAS thread against 44.2 with OpenBLAS's default two, in "
+               "the same 39-40 s of wall time (the diagnosis's linear algebra is many small lstsq/QR calls that "
+               "gain nothing from threads; the idle threads spin). Applied for the duration of diagnose only "
+               "(threadpoolctl)",
+        doc="BLAS threads while diagnose runs (the caller's setting is restored after)")
     fit_rounds: int = param(
         3, unit="-", low=1, high=20,
         source="chosen: optimise with the window-start profile of the current point, refresh it, "
