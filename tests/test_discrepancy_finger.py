@@ -598,6 +598,9 @@ def test_hand_dataset_is_diagnosed_as_its_five_fingers_and_written_back(tmp_path
     aug = dx.augmented.params
     motors = hand_diagram(params=aug, wrist=False).drive.model.motor
     assert [i for i, mp in enumerate(motors) if mp.friction] == [19]
+    from awiwi_drake.discrepancy.report import write_report
+    text = write_report(dx, tmp_path / "rep", figures=False).read_text()
+    assert "`HandRigParams`" in text and "hand_diagram(params=...)" in text and "FingerRigParams" not in text
     assert motors[19].coulomb_torque == pytest.approx(dx.steps[0].parameters["motor_coulomb"], rel=1e-12)
     js = json.loads(json.dumps(dx.summary(), default=float))["augmented"]["parameters"]
     f, sl, _, middle = hand_fingers(dataclasses.replace(back, parameters=js))[2]

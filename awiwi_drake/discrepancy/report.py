@@ -177,8 +177,10 @@ def _write_finger_report(dx, directory, figures: bool) -> pathlib.Path:
           f"{dx.ratios_after['spring_total']:.2f} after (1 = the noise floor).", "",
           "![tendons](tendons.png)" if figures else "", "", "## Findings", "", findings_text(dx), "",
           "## Augmented parameters", "",
-          "`augmented_parameters.yaml`: the dataset's `FingerRigParams` with the named effects written "
-          "(`load_yaml(FingerRigParams.for_finger(...), path)` -> `finger_diagram(params=...)`). Written: "
+          ("`augmented_parameters.yaml`: the dataset's `HandRigParams` with the named effects written "
+           "(`load_yaml(HandRigParams(), path)` -> `hand_diagram(params=...)`). Written: " if dx.rig == "hand" else
+           "`augmented_parameters.yaml`: the dataset's `FingerRigParams` with the named effects written "
+           "(`load_yaml(FingerRigParams.for_finger(...), path)` -> `finger_diagram(params=...)`). Written: ")
           + (", ".join(dx.augmented.applied) or "nothing") + "."
           + ("" if not dx.augmented.not_representable else
              " Not representable: " + "; ".join(dx.augmented.not_representable) + "."), "", "## Steps", ""]
