@@ -215,12 +215,11 @@ def stribeck_draw(coulomb: float, viscous_range, rng: np.random.Generator, visco
 
 
 def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0,
-               place: int | None = None, unknown=()) -> dict:
+               place: int | None = None, unknown=(), unknown_rng: np.random.Generator | None = None) -> dict:
     """Random truth parameters for the hidden effects (and optional miscalibrations);
     ``strength`` scales each effect's size; ``place`` (1 or 2, joint rig) puts the per-tendon
     effects (motor friction, guide friction, spring hysteresis) on that tendon only; ``unknown``:
-    effects outside the catalog (:data:`UNKNOWN_EFFECTS`, drawn after everything else, so the other
-    draws of a seed do not change)."""
+    effects outside the catalog (:data:`UNKNOWN_EFFECTS`), drawn from ``unknown_rng`` (default ``rng``)."""
     hidden, unknown = list(hidden), list(unknown)
     for h in unknown:
         if h not in UNKNOWN_EFFECTS:
@@ -276,18 +275,18 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         tr["force_offset"] = float(u(1.0, 3.0) * rng.choice([-1, 1]))
     if "nominal_motor" in nuisance:
         tr["inertia_scale"] = float(1.0 + u(0.15, 0.3) * rng.choice([-1, 1]))
-    g = TruthGeneratorParams()
-    sign = lambda: float(rng.choice([-1.0, 1.0]))   # noqa: E731
+    g, ur = TruthGeneratorParams(), unknown_rng or rng
+    sign = lambda: float(ur.choice([-1.0, 1.0]))   # noqa: E731
     if "link_spring" in unknown:
-        tr["link_spring"] = float(u(*g.unknown_link_spring_range))
+        tr["link_spring"] = float(ur.uniform(*g.unknown_link_spring_range))
     if "torque_constant" in unknown:
-        tr["torque_constant"] = sign() * float(u(*g.unknown_torque_constant_range))
+        tr["torque_constant"] = sign() * float(ur.uniform(*g.unknown_torque_constant_range))
     if "force_nonlinearity" in unknown:
-        tr["force_nonlinearity"] = sign() * float(u(*g.unknown_force_quadratic_range))
+        tr["force_nonlinearity"] = sign() * float(ur.uniform(*g.unknown_force_quadratic_range))
     if "force_pickup" in unknown:
-        tr["force_pickup"] = dict(amplitude=float(u(*g.unknown_pickup_amplitude_range)),
-                                  frequency=g.unknown_pickup_frequency, phase=float(u(0.0, 2 * np.pi)),
-                                  channel=int(rng.integers(1, n + 1)))
+        tr["force_pickup"] = dict(amplitude=float(ur.uniform(*g.unknown_pickup_amplitude_range)),
+                                  frequency=g.unknown_pickup_frequency, phase=float(ur.uniform(0.0, 2 * np.pi)),
+                                  channel=int(ur.integers(1, n + 1)))
     tr["hidden"] = hidden
     tr["unknown"] = unknown
     tr["nuisance"] = list(nuisance)
@@ -394,7 +393,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         that tendon (its motor, guide path and spring) only; None: on both.
     unknown : sequence of :data:`UNKNOWN_EFFECTS`
         Effects outside the catalog (a link spring, a torque-constant error, a force-sensor
-        quadratic gain, 50 Hz pickup on one force signal), recorded in ``meta["truth"]``.
+        quadratic gain, 50 Hz pickup on one force signal), recorded in ``meta["truth"]``; drawn from
+        their own random stream, so a seed's other draws (parameters, excitation, noise) do not change.
 
     Returns
     -------
@@ -418,7 +418,9 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         else:
             params[k] = float(v * rng.uniform(1 - spread, 1 + spread))
     nom = NominalParameters.from_dataset(rig, params)
-    truth = draw_truth(rig, hidden, rng, nuisance, strength, place, unknown)
+    # the out-of-catalog effects from their own stream: the seed's parameters, excitation and noise stay the
+    # same with and without them
+    truth = draw_truth(rig, hidden, rng, nuisance, strength, place, unknown, np.random.default_rng([seed, 1]))
     plant_sys = HiddenEffectPlant_[float](nom, truth)
     dt = 1.0 / gen.sample_rate
     N = int(round(gen.duration / dt))
