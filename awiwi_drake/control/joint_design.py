@@ -776,6 +776,9 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
         port = diagram.GetInputPort(nm)
         port.FixValue(ctx, op.external_torque if nm == "external_torque" and op.external_torque is not None
                       else np.zeros(port.size()))
+    if ctx.num_continuous_states():        # the one-period map would hold them fixed: poles silently missing
+        raise ValueError(f"sampled_loop_poles: the loop has {ctx.num_continuous_states()} continuous state(s) "
+                         f"besides the sampled rig (a continuous controller or estimator); give a sampled one")
     groups = ctx.get_discrete_state()
     sizes = [groups.get_vector(i).size() for i in range(groups.num_groups())]
     x0 = np.concatenate([groups.get_vector(i).CopyToVector() for i in range(groups.num_groups())])
