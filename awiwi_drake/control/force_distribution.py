@@ -241,14 +241,10 @@ class TendonStiffnessMap:
         f = np.asarray(f, dtype=float)
         if not self.per_tendon:
             return np.interp(f, self.forces, self.k), np.interp(f, self.forces, self.dk)
-        m = self.forces.shape[0]
-        if f.shape != (m,):
-            raise ValueError(f"TendonStiffnessMap: one force per tendon ({m}) expected, got shape {f.shape}")
-        k, dk = np.empty(m), np.empty(m)
-        for i in range(m):
-            k[i] = np.interp(f[i], self.forces[i], self.k[i])
-            dk[i] = np.interp(f[i], self.forces[i], self.dk[i])
-        return k, dk
+        if f.shape != (self.forces.shape[0],):
+            raise ValueError(f"TendonStiffnessMap: one force per tendon ({self.forces.shape[0]}) expected, "
+                             f"got shape {f.shape}")
+        return _interp_rows(f, self.forces, self.k), _interp_rows(f, self.forces, self.dk)
 
 
 
@@ -282,14 +278,10 @@ class _DistributionBase:
             raise ValueError(f"{owner}: stiffness_map must be callable f -> (k_t, dk_t/df)")
         self.stiffness_map = stiffness_map
         self.coupling_object = coupling if isinstance(coupling, FingerCoupling) else None
-        self._offline = None
-        if self.coupling_object is not None:
-            if coupling.is_constant:
-                P = self._check_P(coupling.P(np.zeros(coupling.num_joints)))
-                self._offline = (P,) + coupling_nullspace(P)
-        elif coupling is not None:
-            P = self._check_P(coupling)
-            self._offline = (P,) + coupling_nullspace(P)
+        if self.coupling_object is not None:     # constant: P at any posture; else evaluated per call
+            coupling = coupling.P(np.zeros(coupling.num_joints)) if coupling.is_constant else None
+        P = None if coupling is None else self._check_P(coupling)
+        self._offline = None if P is None else (P,) + coupling_nullspace(P)
 
     @staticmethod
     def _check_P(P) -> np.ndarray:
@@ -324,6 +316,18 @@ class _DistributionBase:
             if hessian.shape != (m, n, n):
                 raise ValueError(f"solve: hessian has shape {hessian.shape}; expected ({m}, {n}, {n})")
         return P, pinv_PT, W, rank, hessian
+
+    @staticmethod
+    def _warm_start(warm_start, m):
+        f0 = np.asarray(warm_start, dtype=float).ravel()
+        if f0.shape != (m,):
+            raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
+        return f0
+
+    @staticmethod
+    def _out_of_range(P, f_p, tau_des) -> bool:
+        """``tau_des`` is outside the range of ``P^T``: no force produces it (``f_p = -(P^T)^+ tau_des``)."""
+        return np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des))
 
     @staticmethod
     def _check_request(tau_des, K_des, n):
@@ -448,15 +452,12 @@ class TendonForceDistribution(_DistributionBase):
             # antagonistic coupling contains the all-positive co-contraction direction)
             alpha = W.T @ (np.full(m, 0.5 * (p.f_min + p.f_max)) - f_p) if r else np.zeros(0)
         else:
-            f0 = np.asarray(warm_start, dtype=float).ravel()
-            if f0.shape != (m,):
-                raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
-            alpha = W.T @ (f0 - f_p)
+            alpha = W.T @ (self._warm_start(warm_start, m) - f_p)
         f_start = f_p + W @ alpha
         inside = np.all(f_start > p.f_min) and np.all(f_start < p.f_max)
         status, iters, C = "ok", 0, np.inf
-        if np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des)):
-            status = "infeasible"         # tau_des is outside the range of P^T: no force produces it
+        if self._out_of_range(P, f_p, tau_des):
+            status = "infeasible"
         elif not inside:
             start = _max_margin_alpha(f_p, W, p.f_min, p.f_max)
             if start is None or not np.all((f_p + W @ start > p.f_min) & (f_p + W @ start < p.f_max)):
@@ -599,14 +600,11 @@ class OptimalForceDistribution(_DistributionBase):
         if iters_max < 0:
             raise ValueError(f"solve: max_iterations = {max_iterations} must be >= 0")
         f_p = -pinv_PT @ tau_des
-        if np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des)):
+        if self._out_of_range(P, f_p, tau_des):
             return self._result(f_p, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
         f = None
-        if warm_start is not None:
-            f0 = np.asarray(warm_start, dtype=float).ravel()
-            if f0.shape != (m,):
-                raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
-            f0 = f_p + W @ (W.T @ f0)                     # the same internal forces, exact torque
+        if warm_start is not None:                        # the same internal forces, exact torque
+            f0 = f_p + W @ (W.T @ self._warm_start(warm_start, m))
             if np.all(f0 >= p.f_min) and np.all(f0 <= p.f_max):
                 f = f0
         if f is None:
@@ -1018,10 +1016,7 @@ class _FingerBatch:
         s0 = solvers[0]
         self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
         F = len(parts)
-        dims = []
-        for (s, sd, st, _, _), c in zip(parts, coupling_objects):
-            m, n = st.stop - st.start, sd.stop - sd.start
-            dims.append((m, n))
+        dims = [(st.stop - st.start, sd.stop - sd.start) for _, sd, st, _, _ in parts]
         self.M, self.N = max(d[0] for d in dims), max(d[1] for d in dims)
         self.R = max(m - n for m, n in dims)
         M, N, R = self.M, self.N, self.R
@@ -1251,23 +1246,20 @@ def TendonForceDistribution_(T):
             """One period of the distribution, context-free: ``(forces (m), status (fingers))`` from the desired
             torques, stiffness entries, the previous forces and (thumb) the plant joint angles (the update of this
             system; :class:`~awiwi_drake.control.fused.FusedChain_` calls it too)."""
-            batch = None
-            if T is float and self._batch is not None:      # the hot path: every finger in the batch
-                batch = self._batch.update(tau_T, K_T, f_prev, q_T, self.iterations_per_period)
-                if not batch[1].any():
-                    return batch[0], np.zeros(len(self.fingers))
+            status = np.zeros(len(self.fingers))
+            todo = range(len(self._parts))
+            if self._batch is not None:       # float, the hot path: all fingers at once; the rest by their own solver
+                f_batch, fallback = self._batch.update(tau_T, K_T, f_prev, q_T, self.iterations_per_period)
+                if not fallback.any():
+                    return f_batch, status
+                todo = np.flatnonzero(fallback)
             as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
             tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
             f_prev_v = as_float(f_prev).ravel()
             q = None if q_T is None else as_float(q_T).ravel()
-            f_new = np.empty(self.num_tendons, dtype=object if T is not float else float)
-            status = np.zeros(len(self.fingers))
+            f_new = f_batch if self._batch is not None else np.empty(self.num_tendons, dtype=object if T is not float
+                                                                      else float)
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
-            todo = range(len(self._parts))
-            if self._batch is not None:       # all fingers at once; the rest by their own solver
-                f_new, fallback = batch if batch is not None else self._batch.update(
-                    tau, Kv, f_prev_v, q, self.iterations_per_period)
-                todo = np.flatnonzero(fallback)
             for k in todo:
                 s, sd, st, sk, sq = self._parts[k]
                 n_f = sd.stop - sd.start
