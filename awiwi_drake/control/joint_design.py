@@ -76,6 +76,7 @@ model sampled with its one period of delay, :func:`sampled_model`)
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -255,19 +256,29 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
     models = []
     for j in range(S.shape[1]):
         col = point["coupling_matrix"][:, j]
-        tendons = tuple(int(i) for i in np.flatnonzero(np.abs(col) > 0))
-        sub, _, sub_point = joint_subsystem(rig, j, point=point, params=p, friction=friction)
-        loop, ctx = force_loop(sub, sub_point, p, tendon_law)
-        lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
-                        outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-        stiffness = sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0
-        F, G, res = _restrict(lin, stiffness)
-        # a link-side torque (the guides' friction, a load): the same loop linearised from its external_torque input
+        models.append(_reduced_model(rig, j, point, p, tendon_law, friction, torque_rate, None, names[j], float(M[j]),
+                                     float(b[j]), float(col ** 2 @ kt), tuple(int(i) for i in np.flatnonzero(col))))
+    return models
+
+
+def _reduced_model(rig, j, point, chain, tendon_law, friction, torque_rate, torque, name, inertia, damping, stiffness,
+                   tendons, link_torque: bool = True) -> JointReducedModel:
+    """DoF ``j``'s :class:`JointReducedModel`: :func:`joint_subsystem` (at the DoF torque ``torque``) closed by
+    :func:`force_loop`, linearised by Drake and restricted to ``z`` (:func:`_restrict`); ``link_torque``: also its
+    :attr:`~JointReducedModel.link_torque_map` (the loop linearised from its ``external_torque`` input)."""
+    sub, _, sub_point = joint_subsystem(rig, j, point=point, params=chain, torque=torque, friction=friction)
+    loop, ctx = force_loop(sub, sub_point, chain, tendon_law)
+    lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
+                    outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
+    rate = sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0
+    F, G, res = _restrict(lin, rate)
+    E = None
+    if link_torque:     # a link-side torque (the guides' friction, a load): the loop from its external_torque input
         ext = linearize(loop.diagram, context=ctx, input="external_torque", outputs=("joint_angle", "joint_torque"),
                         equilibrium_tolerance=None)
-        models.append(JointReducedModel(names[j], j, F, G, float(M[j]), float(b[j]), float(col ** 2 @ kt), tendons,
-                                        res, lin, torque_rate, _coordinates(lin, stiffness) @ ext.B))
-    return models
+        E = _coordinates(lin, rate) @ ext.B
+    stiffness = float(sub_point["op"].joint_stiffness) if stiffness is None else stiffness
+    return JointReducedModel(name, j, F, G, inertia, damping, stiffness, tendons, res, lin, torque_rate, E)
 
 
 def _slowest_damping(F, G, K) -> float:
@@ -315,6 +326,15 @@ def sampled_model(F: np.ndarray, G: np.ndarray, period: float) -> tuple[np.ndarr
     Gamma = np.zeros((n + 1, 1))
     Gamma[n, 0] = 1.0
     return Phi, Gamma
+
+
+def _closed_loop_matrix(model: JointReducedModel, K, period: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(A_cl, Gamma)``: a DoF's designed loop ``F - G K`` (``period`` None) or the sampled chain's
+    ``Phi - Gamma K`` (:func:`sampled_model`), with its input matrix."""
+    if period is None:
+        return model.A - model.B @ np.asarray(K)[None, :4], model.B
+    Phi, Gamma = sampled_model(model.A, model.B, period)
+    return Phi - Gamma @ np.asarray(K)[None, :], Gamma
 
 
 def _placed_pd_gains(model: JointReducedModel, p: JointDesignParams, period: float | None) -> np.ndarray:
@@ -482,16 +502,11 @@ class JointDesign:
         torque): where the presliding stiffness dwarfs the impedance (index DIP: ``K_g`` = 38 ``Kp``) it is the
         slowest mode of the joint."""
         m, K, nx, nu = self.models[dof], self.gains[dof], self.law.Nx[dof], self.law.Nu[dof]
-        F, G = m.A, m.B
         obs = self.observer
         if obs is not None:
-            F = F - obs["presliding_stiffness"][dof] * m.link_torque_map @ np.eye(1, F.shape[0])
-        if self.period is None:
-            A, B, ref = F - G @ K[None, :4], G, nu + K[:4] @ nx
-        else:
-            Phi, B = sampled_model(F, G, self.period)
-            A, ref = Phi - B @ K[None, :], nu + K[:4] @ nx + K[4] * nu
-        b = B[:, 0] * ref
+            m = dataclasses.replace(m, A=m.A - obs["presliding_stiffness"][dof] * m.link_torque_map @ np.eye(1, 4))
+        A, B = _closed_loop_matrix(m, K, self.period)
+        b = B[:, 0] * (nu + K[:4] @ nx + (0.0 if self.period is None else K[4] * nu))
         if obs is None:
             return A, b
         L, M, damping = obs["gain"][dof], m.inertia, m.damping
@@ -576,13 +591,7 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
         law = _sdre_law(rig, point, c, p, kw, period)
     else:
         law = JointStateFeedbackLaw(rig.coupling, S, rig.params.motor.pulley_radius, gains, **kw)
-    if period is None:
-        poles = [np.linalg.eigvals(m.A - m.B @ K[None, :4]) for m, K in zip(models, gains)]
-    else:
-        poles = []
-        for m, K in zip(models, gains):
-            Phi, Gamma = sampled_model(m.A, m.B, period)
-            poles.append(np.linalg.eigvals(Phi - Gamma @ K[None, :]))
+    poles = [np.linalg.eigvals(_closed_loop_matrix(m, K, period)[0]) for m, K in zip(models, gains)]
     return JointDesign(design, law, models, gains, poles, period)
 
 
@@ -594,13 +603,8 @@ def _sdre_law(rig, point, c, p, kw, period):
     table = np.empty((k, grid.size, 5))
     for j in range(k):
         for i, dt in enumerate(grid):
-            sub, _, sub_point = joint_subsystem(rig, j, point=point, params=c, torque=point["torque_offset"][j] + dt)
-            loop, ctx = force_loop(sub, sub_point, c)
-            lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
-                            outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-            F, G, _ = _restrict(lin, sub_point["op"].joint_stiffness if kw["torque_rate"] == "motor" else 0.0)
-            model = JointReducedModel("", j, F, G, 0.0, 0.0, float(sub_point["op"].joint_stiffness), (), 0.0, lin,
-                                      kw["torque_rate"])
+            model = _reduced_model(rig, j, point, c, "force", "motion", kw["torque_rate"],
+                                   point["torque_offset"][j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 
@@ -797,8 +801,6 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     ``fused``: as :func:`~awiwi_drake.control.base.closed_loop` (the fused chain by default; the same poles).
     """
 
-    import dataclasses
-
     from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
     from pydrake.systems.analysis import DiscreteTimeApproximation
     from pydrake.systems.framework import DiagramBuilder
@@ -841,6 +843,9 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
         port = diagram.GetInputPort(nm)
         port.FixValue(ctx, op.external_torque if nm == "external_torque" and op.external_torque is not None
                       else np.zeros(port.size()))
+    if ctx.num_continuous_states():        # the one-period map would hold them fixed: poles silently missing
+        raise ValueError(f"sampled_loop_poles: the loop has {ctx.num_continuous_states()} continuous state(s) "
+                         f"besides the sampled rig (a continuous controller or estimator); give a sampled one")
     groups = ctx.get_discrete_state()
     sizes = [groups.get_vector(i).size() for i in range(groups.num_groups())]
     x0 = np.concatenate([groups.get_vector(i).CopyToVector() for i in range(groups.num_groups())])
