@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["figure_axes", "plot_traces", "plot_friction_curve", "plot_spring_curve", "plot_signals",
-           "plot_pole_sweep"]
+           "plot_poles"]
 
 
 def _plt():
@@ -180,27 +180,37 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
     return fig, ax
 
 
-def plot_pole_sweep(values, poles, name: str, ax=None, *, symlog: float | None = None):
-    """Root locus of a parameter sweep: ``poles[i]`` at ``values[i]``, coloured by value.
+def plot_poles(poles, ax=None, *, values=None, name: str | None = None, label: str | None = None, marker: str = "x",
+               symlog: float | None = None, damping=(0.1, 0.3, 0.5, 0.7, 0.9), **style):
+    """Pole map in the s-plane (Re [1/s], Im [rad/s]), the imaginary axis drawn; returns ``(fig, ax)``.
 
-    ``symlog`` (a linear threshold in 1/s) draws both axes symmetric-logarithmic, so that
-    slow poles near the origin stay visible beside fast ones.
+    ``poles``: one set (markers ``marker``, legend ``label``, ``style`` passed to ``ax.plot``), or, with
+    ``values``, a sweep: set ``poles[i]`` at ``values[i]``, coloured by value with a colour bar named ``name``
+    (a root locus over a parameter).  ``damping``: rays of constant damping ratio ``zeta`` through the origin
+    (``Im = +-Re sqrt(1 - zeta^2) / zeta``, left half plane; None or () for none).  ``symlog`` (a linear
+    threshold in 1/s) draws both axes symmetric-logarithmic, so that slow poles near the origin stay visible
+    beside fast ones (no damping rays then: they are not straight on those axes).
     """
-    plt = _plt()
-    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(5.5, 4))
-    values = np.asarray(values)
-    for v, p in zip(values, poles):
-        p = np.asarray(p)
-        sc = ax.scatter(p.real, p.imag, c=np.full(p.shape, v), vmin=values.min(), vmax=values.max(), s=12,
-                        cmap="viridis")
-    fig.colorbar(sc, ax=ax, label=name)
+    fig, ax = figure_axes(ax, figsize=(5.5, 4))
+    sets = [np.ravel(np.asarray(p, dtype=complex)) for p in (poles if values is not None else [poles])]
+    allp = np.concatenate(sets) if sets else np.zeros(0, complex)
+    if values is not None:
+        values = np.asarray(values, dtype=float)
+        if len(values) != len(sets):
+            raise ValueError(f"plot_poles: {len(values)} values for {len(sets)} pole sets")
+        for v, p in zip(values, sets):
+            sc = ax.scatter(p.real, p.imag, c=np.full(p.shape, v), vmin=values.min(), vmax=values.max(), s=12,
+                            cmap="viridis", label=label if v == values[0] else None)
+        fig.colorbar(sc, ax=ax, label=name)
+    else:
+        ax.plot(allp.real, allp.imag, marker, ls="none", ms=style.pop("ms", 8), label=label, **style)
     ax.axvline(0, color="k", lw=0.5)
+    ax.axhline(0, color="k", lw=0.3)
     if symlog is not None:
         ax.set_xscale("symlog", linthresh=symlog, linscale=2.0)
         ax.set_yscale("symlog", linthresh=symlog, linscale=2.0)
-        allp = np.concatenate([np.ravel(p) for p in poles])
-        re_max = max(float(np.max(np.abs(allp.real))), symlog)
-        im_max = max(float(np.max(np.abs(allp.imag))), symlog)
+        re_max = max(float(np.max(np.abs(allp.real), initial=0.0)), symlog)
+        im_max = max(float(np.max(np.abs(allp.imag), initial=0.0)), symlog)
         ax.set_xlim(-3 * re_max, 3 * re_max)
         ax.set_ylim(-3 * im_max, 3 * im_max)
         from matplotlib.ticker import SymmetricalLogLocator
@@ -208,7 +218,18 @@ def plot_pole_sweep(values, poles, name: str, ax=None, *, symlog: float | None =
         for axis in (ax.xaxis, ax.yaxis):
             axis.set_major_locator(SymmetricalLogLocator(base=100.0, linthresh=symlog))
         ax.axvspan(-symlog, symlog, color="0.9", zorder=0, label=f"|Re| < {symlog:g} 1/s (linear scale)")
-        ax.legend(fontsize=7, loc="center right")
+    elif damping:
+        from matplotlib.patches import Rectangle
+
+        r = 1e3 * max(float(np.max(np.abs(allp), initial=0.0)), 1.0)
+        lhp = Rectangle((-r, -r), r, 2 * r, transform=ax.transData)   # the rays end at the imaginary axis
+        for k, z in enumerate(damping):
+            for y in (1.0, -1.0):           # axline: drawn across the view, not part of its autoscaling
+                ax.axline((0.0, 0.0), (-z, y * np.sqrt(1.0 - z * z)), color="0.8", lw=0.6, zorder=0,
+                          clip_path=lhp, label=f"damping ratio {', '.join(f'{d:g}' for d in damping)}"
+                          if k == 0 and y > 0 else None)
     tag = " (symlog)" if symlog is not None else ""
-    label_axes(ax, "Im [rad/s]" + tag, xlabel="Re [1/s]" + tag, legend=None)
+    has_labels = bool(ax.get_legend_handles_labels()[0])
+    label_axes(ax, "Im [rad/s]" + tag, xlabel="Re [1/s]" + tag,
+               legend=dict(fontsize=7, loc="best") if has_labels else None)
     return fig, ax

@@ -8,7 +8,7 @@ import pytest
 from _fd import autodiff_vs_fd, fd_jacobian
 from awiwi_drake.components import atan_friction
 from awiwi_drake.control.base import StaticLawController
-from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
+from awiwi_drake.control.motor_compensation import MotorPdLaw
 from awiwi_drake.reproductions.ch03_motor import (fit_friction, friction_identification_data, harmonic,
                                                   ripple_compensation_experiment)
 from awiwi_drake.parameters import MotorParams
@@ -58,8 +58,8 @@ def test_ripple_compensation_attenuates_first_harmonic_by_the_conservative_facto
     p = RippleCompensationParams(amplitude_scale=0.8, duration=0.6)
     res = ripple_compensation_experiment(motor, p)
     # identification at the known period: amplitude and phase of the motor-shaft bearing ripple
-    assert res.estimate.motor_amplitude == pytest.approx(motor.ripple_motor_amplitude, rel=0.02)
-    assert abs(np.angle(np.exp(1j * (res.estimate.motor_phase - motor.ripple_motor_phase)))) < 0.02
+    assert res.estimate.ripple_motor_amplitude == pytest.approx(motor.ripple_motor_amplitude, rel=0.02)
+    assert abs(np.angle(np.exp(1j * (res.estimate.ripple_motor_phase - motor.ripple_motor_phase)))) < 0.02
     w = motor.gear_ratio * p.speed
     assert res.first_harmonic_hz == pytest.approx(w / (2 * np.pi))
     tol = w / 3000.0
@@ -68,8 +68,8 @@ def test_ripple_compensation_attenuates_first_harmonic_by_the_conservative_facto
                                                       + p.velocity_gain * s)
     assert res.amplitude_without == pytest.approx(motor.ripple_motor_amplitude * abs(loop), rel=tol)
     e = res.estimate
-    left = abs(1.0 - p.amplitude_scale * e.motor_amplitude / motor.ripple_motor_amplitude
-               * np.exp(1j * (e.motor_phase - motor.ripple_motor_phase)))
+    left = abs(1.0 - p.amplitude_scale * e.ripple_motor_amplitude / motor.ripple_motor_amplitude
+               * np.exp(1j * (e.ripple_motor_phase - motor.ripple_motor_phase)))
     assert res.attenuation == pytest.approx(left, rel=tol)
     # the spectrum peak at the motor rotation frequency drops accordingly
     k = np.argmin(np.abs(res.frequency - res.first_harmonic_hz))
@@ -83,7 +83,8 @@ def test_harmonic_extracts_complex_amplitude():
 
 
 def test_motor_pd_law_autodiff_and_bad_gains():
-    law = MotorPdLaw(MotorParams(ripple=True), 5.0, 0.2, friction_scale=1.0, ripple=RippleEstimate(0.05, 0.3))
+    law = MotorPdLaw(MotorParams(ripple=True), 5.0, 0.2, friction_scale=1.0, ripple=MotorParams(
+        ripple=True, ripple_motor_amplitude=0.05, ripple_motor_phase=0.3, ripple_output_amplitude=0.0))
     J_ad, J_fd = autodiff_vs_fd(StaticLawController(law), {"motor_angle_reference": [0.4], "motor_velocity_reference": [1.0],
                                                            "motor_angle": [0.39], "motor_velocity": [0.9]})
     np.testing.assert_allclose(J_ad, J_fd, rtol=1e-6, atol=1e-7)

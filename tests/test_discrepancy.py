@@ -411,7 +411,8 @@ def test_benchmark_is_resumable_and_claims_each_case_once(tmp_path, monkeypatch)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     calls = []
-    monkeypatch.setattr(bench, "run_case", lambda case: calls.append(case) or {"row": case[0], "seed": case[4]})
+    monkeypatch.setattr(bench, "run_case",
+                        lambda case, cache=None: calls.append(case) or {"row": case[0], "seed": case[4]})
     a = ("nothing", "joint", [], 30, 5, 1.0, None, 10.0)
     b = ("single_full", "joint", ["delay"], 30, 6, 1.0, None, 10.0)
     assert bench.run_and_store(a, str(tmp_path))["seed"] == 5
@@ -553,3 +554,111 @@ def test_held_parameter_taken_past_its_bound_is_reported_at_the_bound():
     fo = fit_parameters(st, ["joint_coulomb", "joint_velocity"], start, bounds, settings, held)
     assert fo.p[PARAM_INDEX["link_damping_add"]] == high
     assert "link_damping_add" in fo.at_bound
+
+
+# ---------------------------------------------------------------- out-of-catalog truth effects (issue 12)
+def test_out_of_catalog_truth_physics_is_its_closed_form():
+    """The link spring adds ``-k_j q / m`` to the link acceleration and the torque-constant error ``e u / B``
+    to each motor's, nothing else (derivatives of the truth plant at a random state)."""
+    nom = NominalParameters.from_dataset("joint", JOINT)
+    X = _random_state(nom, np.random.default_rng(6))
+    u = np.array([0.3, -0.2])
+
+    def xdot(truth):
+        sys = HiddenEffectPlant_[float](nom, truth)
+        ctx = sys.CreateDefaultContext()
+        ctx.SetContinuousState(X)
+        sys.get_input_port(0).FixValue(ctx, u)
+        return sys.EvalTimeDerivatives(ctx).CopyToVector()
+
+    base = xdot({})
+    d_spring = xdot({"link_spring": 0.2}) - base
+    expect = np.zeros_like(base)
+    expect[1] = -0.2 * X[0] / JOINT["link_inertia"]
+    np.testing.assert_allclose(d_spring, expect, rtol=1e-12, atol=1e-12 * np.abs(base).max())
+    d_kt = xdot({"torque_constant": -0.1}) - base
+    expect = np.zeros_like(base)
+    expect[4:6] = -0.1 * u / JOINT["motor_inertia"]
+    np.testing.assert_allclose(d_kt, expect, rtol=1e-12, atol=1e-12 * np.abs(base).max())
+
+
+def test_out_of_catalog_sensor_effects_are_their_closed_form_on_the_same_physics():
+    """Noise-free, the same seed: the force-sensor quadratic gain reads ``f (1 + c f)`` of the clean force
+    and the pickup adds ``A sigma sin(2 pi 50 t + phi)`` to one force signal only; the out-of-catalog draws
+    leave every other signal bit for bit (their own random stream)."""
+    from awiwi_drake.discrepancy import make_truth_dataset
+    from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+    gen = TruthGeneratorParams(duration=0.3)
+    base = make_truth_dataset("joint", [], snr_db=None, seed=9004, gen=gen)
+    nl = make_truth_dataset("joint", [], snr_db=None, seed=9004, gen=gen, unknown=["force_nonlinearity"])
+    c = nl.meta["truth"]["force_nonlinearity"]
+    assert 3e-3 <= abs(c) <= 6e-3
+    for k, f in base.outputs.items():
+        np.testing.assert_array_equal(nl.outputs[k], f * (1 + c * f) if k.startswith("tendon_force") else f)
+    pk = make_truth_dataset("joint", [], snr_db=None, seed=9004, gen=gen, unknown=["force_pickup"])
+    p = pk.meta["truth"]["force_pickup"]
+    ch = f"tendon_force_{p['channel']}"
+    sigma = base.outputs[ch].std() * 10 ** (-30 / 20)   # noise-free: sized on the 30 dB noise
+    for k, f in base.outputs.items():
+        if k == ch:
+            np.testing.assert_allclose(pk.outputs[k] - f, p["amplitude"] * sigma * np.sin(
+                2 * np.pi * 50.0 * base.time + p["phase"]), rtol=0, atol=1e-12 * np.abs(f).max())
+        else:
+            np.testing.assert_array_equal(pk.outputs[k], f)
+    with pytest.raises(ValueError, match="link_spring"):
+        make_truth_dataset("tendon", [], seed=1, gen=gen, unknown=["link_spring"])
+    with pytest.raises(ValueError, match="unknown= 'gravity'"):
+        make_truth_dataset("joint", [], seed=1, gen=gen, unknown=["gravity"])
+
+
+def _bench():
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).parent.parent / "benchmarks" / "bench_discrepancy.py"
+    spec = importlib.util.spec_from_file_location("bench_discrepancy", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    return bench
+
+
+def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_changed_generator_misses(tmp_path,
+                                                                                                    monkeypatch):
+    from awiwi_drake.discrepancy import make_truth_dataset
+    from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
+    bench = _bench()
+    files = [f.as_posix() for f in bench.generator_files()]
+    assert any(f.endswith("discrepancy/truth.py") for f in files)
+    assert any(f.endswith("discrepancy/finger_truth.py") for f in files)
+    assert any(f.endswith("discrepancy/defaults.py") for f in files)         # imported inside a function
+    assert not any(f.endswith(("discrepancy/workflow.py", "discrepancy/fit.py", "discrepancy/screen.py"))
+                   for f in files)                                             # the workflow is not the generator
+    case = ("single_full", "joint", ["delay"], 30, 1001, 1.0, None, 0.2)
+    gen = lambda: make_truth_dataset("joint", ["delay"], snr_db=30, seed=1001,  # noqa: E731
+                                     gen=TruthGeneratorParams(duration=0.2))
+    fresh, hit = bench.cached_dataset(case, gen, tmp_path)
+    assert not hit and len(list(tmp_path.glob("*.npz"))) == 1
+    cached, hit = bench.cached_dataset(case, gen, tmp_path)
+    assert hit
+    assert (cached.name, cached.rig) == (fresh.name, fresh.rig)
+    for a, b in ((cached.inputs, fresh.inputs), (cached.outputs, fresh.outputs),
+                 (cached.meta["clean_outputs"], fresh.meta["clean_outputs"]), ({"t": cached.time}, {"t": fresh.time})):
+        assert a.keys() == b.keys()
+        for k in a:
+            assert a[k].dtype == b[k].dtype and np.array_equal(a[k], b[k])
+    assert cached.parameters == fresh.parameters and cached.initial_state == fresh.initial_state
+    assert json.dumps(cached.meta["truth"]) == json.dumps(fresh.meta["truth"])
+    # another case misses; a changed generator source misses (what is generated does not matter for the key)
+    gen = lambda: fresh   # noqa: E731
+    assert not bench.cached_dataset(case[:4] + (1002,) + case[5:], gen, tmp_path)[1]
+    src = tmp_path / "generator_part.py"
+    src.write_text("K = 1\n")
+    monkeypatch.setattr(bench, "generator_files", lambda: [*files, src])
+    monkeypatch.setattr(bench, "_FINGERPRINT", {})
+    assert not bench.cached_dataset(case, gen, tmp_path)[1]
+    monkeypatch.setattr(bench, "_FINGERPRINT", {})
+    assert bench.cached_dataset(case, gen, tmp_path)[1]                 # same source: a hit
+    src.write_text("K = 2\n")
+    monkeypatch.setattr(bench, "_FINGERPRINT", {})
+    assert not bench.cached_dataset(case, gen, tmp_path)[1]             # changed source: a miss
+    n = len(list(tmp_path.glob("*.npz")))
+    assert not bench.cached_dataset(case, gen, None)[1] and len(list(tmp_path.glob("*.npz"))) == n  # no cache

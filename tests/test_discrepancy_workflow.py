@@ -210,3 +210,25 @@ def test_a_step_whose_joint_refit_loses_the_gain_is_not_added(monkeypatch):
     monkeypatch.setattr(workflow, "fit_parameters", real)
     assert run.accept(friction, "confirmed", 1.0, [], [], []) == ""
     assert [s.effect for s in run.steps] == ["nominal_link", "joint_friction"] and run.st.ratio < before.ratio
+
+
+def test_unexplained_pickup_is_located_at_its_frequency_on_its_signal(tmp_path):
+    """An effect outside the catalog, 50 Hz mains pickup on one force signal (``truth.UNKNOWN_EFFECTS``):
+    nothing is named, the verdict is "unexplained discrepancy remains", and "where" is right about it: the
+    picked-up signal alone above the threshold, its band around 50 Hz with the peak there, no periodicity in
+    motor angle and no operating region (the pickup is periodic in time, zero-mean everywhere)."""
+    from awiwi_drake.discrepancy.report import write_report
+    ds = make_truth_dataset("joint", [], snr_db=30, seed=9004, gen=TruthGeneratorParams(duration=3.0),
+                            unknown=["force_pickup"])
+    p = ds.meta["truth"]["force_pickup"]
+    dx = diagnose(ds)
+    assert dx.named_effects == [] and dx.verdict == "unexplained discrepancy remains"
+    where = dx.unexplained
+    assert where["signals_above"] == [f"tendon_force_{p['channel']}"]
+    lo, hi = where["frequency_band_hz"]
+    assert lo <= 50.0 <= hi and hi - lo <= 10.0
+    assert abs(where["peak_frequency_hz"] - 50.0) <= 2.0      # Welch resolution 1000 Hz / 1024 ... 2 Hz
+    assert where["cycles_per_revolution"] == {} and where["operating_region"] == {}
+    assert f"tendon_force_{p['channel']}" in where["text"] and "(peak " in where["text"]
+    md = write_report(dx, tmp_path / "rep", figures=False).read_text()
+    assert f"tendon_force_{p['channel']}" in md and "Unexplained discrepancy remains" in md

@@ -263,3 +263,40 @@ def test_a_sampled_systems_output_keeps_its_state_dependence():
     y = res.outputs[sys_.get_output_port().get_name()]
     assert res.A.tolist() == [[a]] and res.B.tolist() == [[b]]
     assert y.C.tolist() == [[c], [3.0]] and y.D.tolist() == [[0.0], [0.0]]
+
+
+def test_a_system_with_an_abstract_input_linearises():
+    """Every fixed input of the point reaches the constant-output check, abstract ones too (``FixInputPortsFrom``):
+    ``xdot = u``, ``y = g x`` with the gain ``g`` on an abstract input port linearises to ``A = 0, B = 1, C = g``
+    (the check used to fix vector ports only, so evaluating ``y`` failed on the unset abstract port)."""
+    from pydrake.autodiffutils import AutoDiffXd
+    from pydrake.common.value import Value
+    from pydrake.systems.framework import LeafSystem_
+    from pydrake.systems.scalar_conversion import TemplateSystem
+
+    @TemplateSystem.define("AbstractGain_", T_list=[float, AutoDiffXd])
+    def AbstractGain_(T):
+        class Impl(LeafSystem_[T]):
+            def _construct(self, converter=None):
+                LeafSystem_[T].__init__(self, converter)
+                self.DeclareVectorInputPort("u", 1)
+                self.DeclareAbstractInputPort("gain", Value[object](1.0))
+                self.DeclareContinuousState(1)
+                self.DeclareVectorOutputPort("y", 1, lambda c, out: out.SetAtIndex(
+                    0, float(self.get_input_port(1).Eval(c)) * c.get_continuous_state_vector()[0]))
+
+            def _construct_copy(self, other, converter=None):
+                Impl._construct(self, converter=converter)
+
+            def DoCalcTimeDerivatives(self, context, derivatives):
+                derivatives.get_mutable_vector().SetAtIndex(0, self.get_input_port(0).Eval(context)[0])
+        return Impl
+
+    sys_ = AbstractGain_[None]()
+    ctx = sys_.CreateDefaultContext()
+    sys_.get_input_port(0).FixValue(ctx, [0.0])
+    sys_.get_input_port(1).FixValue(ctx, Value[object](2.5))
+    ctx.SetContinuousState([0.3])
+    res = linearize(sys_, context=ctx, input="u", outputs=("y",))
+    assert res.A.tolist() == [[0.0]] and res.B.tolist() == [[1.0]]
+    assert res.C.tolist() == [[2.5]] and res.D.tolist() == [[0.0]] and res.outputs["y"].y0.tolist() == [0.75]

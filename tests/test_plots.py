@@ -83,10 +83,10 @@ def test_demo_figure_has_legends_units_limit_and_applied_torque(demo_run):
 def test_pole_sweep_symlog_keeps_slow_poles_visible():
     import matplotlib.pyplot as plt
 
-    from awiwi_drake.plotting import plot_pole_sweep
+    from awiwi_drake.plotting import plot_poles
 
     poles = [np.array([-2800.0, -700 + 1500j, -700 - 1500j, -0.05, 1e-13]) * s for s in (1.0, 1.1)]
-    fig, ax = plot_pole_sweep([10.0, 20.0], poles, "pretension [N]", symlog=0.01)
+    fig, ax = plot_poles(poles, values=[10.0, 20.0], name="pretension [N]", symlog=0.01)
     assert ax.get_xscale() == "symlog"
     # -0.05 1/s lies a visible distance from the origin on the transformed axis (> 5 % of the axis width)
     tr = ax.transData.transform
@@ -95,6 +95,47 @@ def test_pole_sweep_symlog_keeps_slow_poles_visible():
     assert abs(x1 - x0) > 0.05 * width
     lo, hi = ax.get_xlim()
     assert lo < -2800 and hi > 0
+    plt.close(fig)
+    with pytest.raises(ValueError, match="3 values for 2 pole sets"):
+        plot_poles(poles, values=[1.0, 2.0, 3.0])
+
+
+def test_linearisation_pole_map_shows_the_poles_on_their_damping_rays():
+    """``LinearizationResult.plot()``: the s-plane map of the poles of A; a second-order system with
+    wn = 40 rad/s, zeta = 0.5 puts its poles ``-20 +- 34.64j`` on the zeta = 0.5 ray
+    (``Im / Re = -sqrt(1 - zeta^2) / zeta``). ``LqrResult.plot()`` adds the closed loop on the same axes."""
+    import matplotlib.pyplot as plt
+
+    from pydrake.systems.primitives import LinearSystem
+
+    from awiwi_drake.analysis import linearize, lqr
+    from awiwi_drake.rigs import flexible_joint_rig
+
+    wn, zeta = 40.0, 0.5
+    sys_ = LinearSystem(np.array([[0.0, 1.0], [-wn ** 2, -2 * zeta * wn]]), np.array([[0.0], [wn ** 2]]),
+                        np.eye(2), np.zeros((2, 1)))
+    ctx = sys_.CreateDefaultContext()
+    sys_.get_input_port().FixValue(ctx, [0.0])
+    lin = linearize(sys_, context=ctx, input=sys_.get_input_port().get_name())
+    fig, ax = lin.plot()
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    pts = lines["poles"].get_xydata()
+    np.testing.assert_allclose(sorted(pts[:, 1]), [-wn * np.sqrt(1 - zeta ** 2), wn * np.sqrt(1 - zeta ** 2)])
+    np.testing.assert_allclose(pts[:, 0], -zeta * wn)
+    ray = next(ln for lab, ln in lines.items() if lab.startswith("damping ratio"))
+    assert "0.5" in ray.get_label()
+    rays = [ln.get_xy2() for ln in ax.get_lines() if ln.get_color() == ray.get_color()]   # lines through 0
+    assert len(rays) == 10 and all(x < 0 for x, _ in rays)
+    assert any(abs(y / x + np.sqrt(1 - zeta ** 2) / zeta) < 1e-12 for x, y in rays)
+    assert ax.get_ylim()[1] < 2 * wn       # the rays do not stretch the view beyond the poles
+    plt.close(fig)
+    design = lqr(flexible_joint_rig(), np.diag([10, 0.01, 1, 0.01]), [[1e-2]])
+    fig, ax = design.plot()
+    lines = {ln.get_label(): ln.get_xydata() for ln in ax.get_lines()}
+    got = np.sort_complex(lines["closed loop (LQR)"] @ [1, 1j])
+    np.testing.assert_allclose(got, np.sort_complex(design.closed_loop_poles), rtol=1e-12)
+    np.testing.assert_allclose(np.sort_complex(lines["open loop"] @ [1, 1j]),
+                               np.sort_complex(design.linearization.poles), rtol=1e-12)
     plt.close(fig)
 
 

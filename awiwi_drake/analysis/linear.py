@@ -273,6 +273,12 @@ class LinearizationResult(_JsonFile):
     def num_states(self) -> int:
         return self.A.shape[0]
 
+    def plot(self, ax=None, *, label: str = "poles", **kw):
+        """Pole map in the s-plane with rays of constant damping ratio (:func:`awiwi_drake.plotting.plot_poles`;
+        ``symlog=``, ``damping=``, marker style); the numbers are :meth:`damp`; returns ``(fig, ax)``."""
+        from awiwi_drake.plotting import plot_poles
+        return plot_poles(self.poles, ax, label=label, **kw)
+
     def output(self, name: str) -> OutputMap:
         """The rows of output port ``name`` (clear error naming the linearised outputs)."""
         if name not in self.outputs:
@@ -393,7 +399,6 @@ def _constant_outputs(system, ctx, in_port, outputs) -> set:
     depends on either carries a derivative, even where it is zero.
     """
     from pydrake.autodiffutils import AutoDiffXd
-    from pydrake.systems.framework import PortDataType
 
     def seeded(v, d):
         return np.array([AutoDiffXd(float(a), d) for a in np.asarray(v, float).ravel()], dtype=object)
@@ -401,10 +406,8 @@ def _constant_outputs(system, ctx, in_port, outputs) -> set:
     ad = system.ToAutoDiffXd()
     actx = ad.CreateDefaultContext()
     actx.SetTimeStateAndParametersFrom(ctx)
-    for i in range(system.num_input_ports()):
-        port = system.get_input_port(i)
-        if port.get_data_type() == PortDataType.kVectorValued and port.HasValue(ctx):
-            ad.get_input_port(i).FixValue(actx, seeded(port.Eval(ctx), [1.0] if i == in_port.get_index() else []))
+    ad.FixInputPortsFrom(system, ctx, actx)                  # every fixed input, vector or abstract, no derivatives
+    ad.get_input_port(in_port.get_index()).FixValue(actx, seeded(in_port.Eval(ctx), [1.0]))
     if ctx.num_continuous_states():
         actx.SetContinuousState(seeded(ctx.get_continuous_state_vector().CopyToVector(), [1.0]))
     for g in range(ctx.num_discrete_state_groups()):         # a sampled system's state (Linearize's discrete case)
@@ -570,6 +573,11 @@ class LqrResult(_JsonFile):
     def closed_loop_poles(self) -> np.ndarray:
         return closed_loop_poles(self.linearization.A, self.linearization.B, self.K)
 
+    def plot(self, ax=None, **kw):
+        """Open-loop (o) and closed-loop (x) poles on one s-plane map (:meth:`LinearizationResult.plot`)."""
+        fig, ax = self.linearization.plot(ax, label="open loop", marker="o", mfc="none", **kw)
+        return self.closed_loop.plot(ax, label="closed loop (LQR)", **{**kw, "damping": ()})
+
     def to_json(self) -> dict:
         return dict(K=self.K.tolist(), S=self.S.tolist(), Q=self.Q.tolist(), R=self.R.tolist(),
                     closed_loop_poles=[[float(p.real), float(p.imag)] for p in self.closed_loop_poles],
@@ -610,9 +618,9 @@ class PoleSweep:
         return np.max(np.abs(self.poles.imag), axis=1)
 
     def plot(self, ax=None, **kw):
-        """Root locus over the pretension (:func:`awiwi_drake.plotting.plot_pole_sweep`; ``symlog=``)."""
-        from awiwi_drake.plotting import plot_pole_sweep
-        return plot_pole_sweep(self.pretension, self.poles, "pretension [N]", ax=ax, **kw)
+        """Root locus over the pretension (:func:`awiwi_drake.plotting.plot_poles`; ``symlog=``)."""
+        from awiwi_drake.plotting import plot_poles
+        return plot_poles(self.poles, ax, values=self.pretension, name="pretension [N]", **kw)
 
 
 def poles_vs_pretension(rig, pretensions) -> PoleSweep:

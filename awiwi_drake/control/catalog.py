@@ -46,26 +46,21 @@ _BUILTIN = [
 
 _BUILTIN.append(("joint-pd", _lazy("joint_pd", "joint_pd_controller"), ("finger", "hand"),
                  "motor PD towards the motor angles of the joint reference (exact routing), pretension held"))
-_BUILTIN.append(("cascaded", _lazy("joint_design", "joint_stage_controller", design="cascaded"), ("finger", "hand"),
-                 "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with "
-                 "friction/ripple feed-forward, joint angles estimated from tendon lengths (5.15); damping per "
-                 "joint from its reduced model"))
-_BUILTIN.append(("pd", _lazy("joint_design", "joint_stage_controller", design="pd"), ("finger", "hand"),
-                 "PD on the estimated joint angle per joint, (Kp, Kd) placing one pair at 60 rad/s, damping 0.7, on the "
-                 "joint's reduced model (torque chain, own tendons) -> force distribution (ch. 7) -> force PD (10.2)"))
-_BUILTIN.append(("two-time-scale", _lazy("joint_design", "joint_stage_controller", design="two-time-scale"),
-                 ("finger", "hand"), "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per "
-                 "tendon towards the force (11.3); damping per joint from its reduced model"))
-_BUILTIN.append(("pole-placement", _lazy("joint_design", "joint_stage_controller", design="pole-placement"),
-                 ("finger", "hand"),
-                 "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, tau_dot] "
-                 "(link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2)"))
-_BUILTIN.append(("lqr", _lazy("joint_design", "joint_stage_controller", design="lqr"),
-                 ("finger", "hand"), "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson "
-                 "weights, the motors' torque rate measured) -> force distribution (ch. 7) -> force PD (10.2)"))
-_BUILTIN.append(("sdre", _lazy("joint_design", "joint_stage_controller", design="sdre"),
-                 ("finger", "hand"), "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in "
-                 "the joint torque (ch. 14), gains interpolated at the measured torque -> the chain"))
+for _design, _doc in (
+        ("cascaded", "joint impedance (11.4) -> force distribution (ch. 7) -> tendon force PD (10.2) with friction/ripple "
+                     "feed-forward, joint angles estimated from tendon lengths (5.15); damping per joint from its reduced "
+                     "model"),
+        ("pd", "PD on the estimated joint angle per joint, (Kp, Kd) placing one pair at 60 rad/s, damping 0.7, on the "
+               "joint's reduced model (torque chain, own tendons) -> force distribution (ch. 7) -> force PD (10.2)"),
+        ("two-time-scale", "joint impedance (11.4) -> force distribution (ch. 7) -> motor-position loop per tendon "
+                           "towards the force (11.3); damping per joint from its reduced model"),
+        ("pole-placement", "per joint: double oscillator (12.13) placed on the joint's reduced model [q, qdot, tau, "
+                           "tau_dot] (link through its closed force loop) -> force distribution (ch. 7) -> force PD (10.2)"),
+        ("lqr", "per joint: LQR on the joint's reduced model [q, qdot, tau, tau_dot] (Bryson weights, the motors' torque "
+                "rate measured) -> force distribution (ch. 7) -> force PD (10.2)"),
+        ("sdre", "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in the joint torque (ch. "
+                 "14), gains interpolated at the measured torque -> the chain")):
+    _BUILTIN.append((_design, _lazy("joint_design", "joint_stage_controller", design=_design), ("finger", "hand"), _doc))
 
 # Every stage runs at the thesis's 3 kHz with the estimator at the same rate.  The full-state stages (lqr,
 # pole-placement, sdre) used to need 9 kHz (at 3 kHz they saturated 82-99 % of a step): the estimate was one period

@@ -94,28 +94,86 @@ def coupling_nullspace(P: np.ndarray, *, rtol: float = 1e-10):
     return _nullspace(np.asarray(P, dtype=float), float(rtol))
 
 
-def _gauss_newton_qp(outer, dk, hessian, E, f, K_norm2, m, levenberg):
-    """``(Q, b)`` of the optimal solver's QP ``min f'^T Q f' / 2 + b^T f'`` at the iterate ``f``.
+@numba.njit(cache=True)
+def _gauss_newton_qp(outer, dk, H, E, f, K_norm2, m, levenberg, Gt, Q, b):
+    """``Q``, ``b`` (written in place) of the optimal solver's QP ``min f'^T Q f' / 2 + b^T f'`` at the iterate ``f``.
 
     ``||E - G (f' - f)||^2 / N + mu ||f' - f||^2`` with ``G[:, i] = vec(dk_i p_i p_i^T + H_i)`` (the
-    linearised ``dK_q/df_i``), ``E = K_des - K_q(f)``, ``N = K_norm2``, ``mu = levenberg tr(G^T G / N) / m``;
-    ``outer[i] = p_i p_i^T``.
+    linearised ``dK_q/df_i``), ``E = K_des - K_q(f)``, ``N = K_norm2``, ``mu = levenberg tr(G^T G / N) / m``
+    (``m``: the tendons, not counting a batch's padding); ``outer[i] = p_i p_i^T``, ``Gt`` work space (m x n^2).
+    Loops: small matrices, no BLAS call (the per-finger solver and the batch of :class:`_FingerBatch` call it).
     """
-    Gt = dk[:, None, None] * outer
-    if hessian is not None:
-        Gt = Gt + hessian
-    Gt = Gt.reshape(m, -1)                                       # G^T (m x n^2)
-    H = Gt @ Gt.T / K_norm2
-    mu = levenberg * max(float(np.trace(H)), 1e-300) / m
-    Q = 2.0 * (H + mu * np.eye(m))
-    b = -2.0 * Gt @ (E.ravel() + f @ Gt) / K_norm2 - 2.0 * mu * f
-    return Q, b
+    M, N = outer.shape[0], outer.shape[1]
+    NN = N * N
+    for i in range(M):
+        for a in range(N):
+            for c in range(N):
+                Gt[i, a * N + c] = dk[i] * outer[i, a, c] + H[i, a, c]
+    tr = 0.0
+    for i in range(M):
+        for j in range(i, M):
+            acc = 0.0
+            for k in range(NN):
+                acc += Gt[i, k] * Gt[j, k]
+            Q[i, j] = acc / K_norm2
+            Q[j, i] = Q[i, j]
+        tr += Q[i, i]
+    mu = levenberg * max(tr, 1e-300) / m
+    g = np.empty(NN)                                # E + G f (vec)
+    for a in range(N):
+        for c in range(N):
+            g[a * N + c] = E[a, c]
+    for i in range(M):
+        for k in range(NN):
+            g[k] += Gt[i, k] * f[i]
+    for i in range(M):
+        acc = 0.0
+        for k in range(NN):
+            acc += Gt[i, k] * g[k]
+        b[i] = -2.0 * acc / K_norm2 - 2.0 * mu * f[i]
+        for j in range(M):
+            Q[i, j] *= 2.0
+        Q[i, i] += 2.0 * mu
 
 
-def _closed_form_step(Q, b, f, W):
-    """Minimiser of ``f'^T Q f' / 2 + b^T f'`` on ``{f + W z}`` (the torque-exact set through ``f``):
-    ``f + W z`` with ``(W^T Q W) z = -W^T (Q f + b)``, the KKT conditions without the bounds."""
-    return f + W @ np.linalg.solve(W.T @ Q @ W, -W.T @ (Q @ f + b))
+@numba.njit(cache=True)
+def _closed_form_step(Q, b, f, W, pad):
+    """Minimiser of ``f'^T Q f' / 2 + b^T f'`` on ``{f + W z}`` (the torque-exact set through ``f``): ``f + W z`` with
+    ``(W^T Q W + diag(pad)) z = -W^T (Q f + b)``, the KKT conditions without the bounds (``pad``: 1 on a batch's
+    padded columns of ``W``, else 0).  ``W^T Q W`` is symmetric positive definite (``Q`` is, ``W`` has orthonormal
+    columns): Cholesky (:func:`_spd_solve`)."""
+    M, R = W.shape
+    WQ = np.empty((R, M))
+    A = np.empty((R, R))
+    for r in range(R):
+        for j in range(M):
+            acc = 0.0
+            for i in range(M):
+                acc += W[i, r] * Q[i, j]
+            WQ[r, j] = acc
+        for c in range(R):
+            acc = 0.0
+            for j in range(M):
+                acc += WQ[r, j] * W[j, c]
+            A[r, c] = acc
+        A[r, r] += pad[r]
+    return f + _mv(W, _spd_solve(A, -_mtv(W, _mv(Q, f) + b)))
+
+
+@numba.njit(cache=True)
+def _null_step(W, f, f_target, f_min, f_max):
+    """``(d, t)``: the step ``d = W W^T (f_target - f)`` (in the null space: the torque stays exact) and the
+    largest ``t <= 1`` keeping ``f + t d`` in the bounds; ``t = 0`` when ``d`` is negligible."""
+    d = _mv(W, _mtv(W, f_target - f))
+    if not np.sqrt(np.sum(d * d)) > 1e-12 * max(1.0, np.sqrt(np.sum(f * f))):
+        return d, 0.0
+    t = 1.0
+    for i in range(f.shape[0]):
+        if d[i] > 0:
+            t = min(t, (f_max - f[i]) / d[i])
+        elif d[i] < 0:
+            t = min(t, (f_min - f[i]) / d[i])
+    return d, t
 
 
 @dataclass
@@ -241,14 +299,10 @@ class TendonStiffnessMap:
         f = np.asarray(f, dtype=float)
         if not self.per_tendon:
             return np.interp(f, self.forces, self.k), np.interp(f, self.forces, self.dk)
-        m = self.forces.shape[0]
-        if f.shape != (m,):
-            raise ValueError(f"TendonStiffnessMap: one force per tendon ({m}) expected, got shape {f.shape}")
-        k, dk = np.empty(m), np.empty(m)
-        for i in range(m):
-            k[i] = np.interp(f[i], self.forces[i], self.k[i])
-            dk[i] = np.interp(f[i], self.forces[i], self.dk[i])
-        return k, dk
+        if f.shape != (self.forces.shape[0],):
+            raise ValueError(f"TendonStiffnessMap: one force per tendon ({self.forces.shape[0]}) expected, "
+                             f"got shape {f.shape}")
+        return _interp_rows(f, self.forces, self.k), _interp_rows(f, self.forces, self.dk)
 
 
 
@@ -282,14 +336,10 @@ class _DistributionBase:
             raise ValueError(f"{owner}: stiffness_map must be callable f -> (k_t, dk_t/df)")
         self.stiffness_map = stiffness_map
         self.coupling_object = coupling if isinstance(coupling, FingerCoupling) else None
-        self._offline = None
-        if self.coupling_object is not None:
-            if coupling.is_constant:
-                P = self._check_P(coupling.P(np.zeros(coupling.num_joints)))
-                self._offline = (P,) + coupling_nullspace(P)
-        elif coupling is not None:
-            P = self._check_P(coupling)
-            self._offline = (P,) + coupling_nullspace(P)
+        if self.coupling_object is not None:     # constant: P at any posture; else evaluated per call
+            coupling = coupling.P(np.zeros(coupling.num_joints)) if coupling.is_constant else None
+        P = None if coupling is None else self._check_P(coupling)
+        self._offline = None if P is None else (P,) + coupling_nullspace(P)
 
     @staticmethod
     def _check_P(P) -> np.ndarray:
@@ -324,6 +374,18 @@ class _DistributionBase:
             if hessian.shape != (m, n, n):
                 raise ValueError(f"solve: hessian has shape {hessian.shape}; expected ({m}, {n}, {n})")
         return P, pinv_PT, W, rank, hessian
+
+    @staticmethod
+    def _warm_start(warm_start, m):
+        f0 = np.asarray(warm_start, dtype=float).ravel()
+        if f0.shape != (m,):
+            raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
+        return f0
+
+    @staticmethod
+    def _out_of_range(P, f_p, tau_des) -> bool:
+        """``tau_des`` is outside the range of ``P^T``: no force produces it (``f_p = -(P^T)^+ tau_des``)."""
+        return np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des))
 
     @staticmethod
     def _check_request(tau_des, K_des, n):
@@ -448,15 +510,12 @@ class TendonForceDistribution(_DistributionBase):
             # antagonistic coupling contains the all-positive co-contraction direction)
             alpha = W.T @ (np.full(m, 0.5 * (p.f_min + p.f_max)) - f_p) if r else np.zeros(0)
         else:
-            f0 = np.asarray(warm_start, dtype=float).ravel()
-            if f0.shape != (m,):
-                raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
-            alpha = W.T @ (f0 - f_p)
+            alpha = W.T @ (self._warm_start(warm_start, m) - f_p)
         f_start = f_p + W @ alpha
         inside = np.all(f_start > p.f_min) and np.all(f_start < p.f_max)
         status, iters, C = "ok", 0, np.inf
-        if np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des)):
-            status = "infeasible"         # tau_des is outside the range of P^T: no force produces it
+        if self._out_of_range(P, f_p, tau_des):
+            status = "infeasible"
         elif not inside:
             start = _max_margin_alpha(f_p, W, p.f_min, p.f_max)
             if start is None or not np.all((f_p + W @ start > p.f_min) & (f_p + W @ start < p.f_max)):
@@ -552,7 +611,7 @@ class OptimalForceDistribution(_DistributionBase):
         if self.fast_path:
             if r == 0:
                 return f, False                           # the torque alone fixes the forces
-            f_star = _closed_form_step(Q, b, f, W)
+            f_star = _closed_form_step(Q, b, f, W, np.zeros(r))
             if np.all(f_star >= p.f_min) and np.all(f_star <= p.f_max):
                 return f_star, False
         m = f.size
@@ -568,7 +627,7 @@ class OptimalForceDistribution(_DistributionBase):
 
     def _stiffness(self, f, P, hessian):
         k, dk = self.stiffness_map(f)
-        return joint_stiffness(P, k, f, hessian), dk
+        return joint_stiffness(P, k, f, hessian), np.asarray(dk, dtype=float)
 
     def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, warm_start=None,
               max_iterations: int | None = None) -> DistributionResult:
@@ -599,14 +658,11 @@ class OptimalForceDistribution(_DistributionBase):
         if iters_max < 0:
             raise ValueError(f"solve: max_iterations = {max_iterations} must be >= 0")
         f_p = -pinv_PT @ tau_des
-        if np.linalg.norm(-P.T @ f_p - tau_des) > 1e-9 * max(1.0, np.linalg.norm(tau_des)):
+        if self._out_of_range(P, f_p, tau_des):
             return self._result(f_p, "infeasible", P, hessian, tau_des, K_des, 0, np.inf)
         f = None
-        if warm_start is not None:
-            f0 = np.asarray(warm_start, dtype=float).ravel()
-            if f0.shape != (m,):
-                raise ValueError(f"solve: warm_start has shape {f0.shape}; the coupling has {m} tendons")
-            f0 = f_p + W @ (W.T @ f0)                     # the same internal forces, exact torque
+        if warm_start is not None:                        # the same internal forces, exact torque
+            f0 = f_p + W @ (W.T @ self._warm_start(warm_start, m))
             if np.all(f0 >= p.f_min) and np.all(f0 <= p.f_max):
                 f = f0
         if f is None:
@@ -623,20 +679,16 @@ class OptimalForceDistribution(_DistributionBase):
         K, dk = self._stiffness(f, P, hessian)
         C = float(np.sum((K_des - K) ** 2) / K_norm2)
         outer = np.einsum("ij,ik->ijk", P, P)             # p_i p_i^T
+        H = np.zeros((m, n, n)) if hessian is None else np.ascontiguousarray(hessian)
+        Gt, Q, b = np.empty((m, n * n)), np.empty((m, m)), np.empty(m)
         it = 0
         for it in range(1, iters_max + 1):
-            Q, b = _gauss_newton_qp(outer, dk, hessian, K_des - K, f, K_norm2, m, self.levenberg)
+            _gauss_newton_qp(outer, dk, H, K_des - K, f, K_norm2, float(m), self.levenberg, Gt, Q, b)
             f_qp, used_program = self._qp(Q, b, f, W, P, tau_des, rank, equality)
             program_qps += used_program
             if f_qp is None:
                 break
-            d = W @ (W.T @ (f_qp - f))                   # null-space step: the torque stays exact
-            if not np.linalg.norm(d) > 1e-12 * max(1.0, np.linalg.norm(f)):
-                break
-            with np.errstate(divide="ignore", invalid="ignore"):
-                t_hi = np.where(d > 0, (p.f_max - f) / d, np.inf)
-                t_lo = np.where(d < 0, (p.f_min - f) / d, np.inf)
-            t = min(1.0, float(np.min(t_hi)), float(np.min(t_lo)))
+            d, t = _null_step(W, f, np.asarray(f_qp, dtype=float), p.f_min, p.f_max)
             accepted = False
             while t > 1e-8:
                 f_new = f + t * d
@@ -821,19 +873,13 @@ def _spd_solve(A, r):
 def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallback, iterations, f_min, f_max,
                    levenberg, tolerance, grid_f, grid_k, grid_dk):
     """The warm-started Gauss-Newton iterations of :meth:`OptimalForceDistribution.solve` for padded fingers,
-    compiled: the same start (torque-exact projection of the previous forces), QP ((:func:`_gauss_newton_qp`),
-    closed form as :func:`_closed_form_step`), step cut at the bounds and cost test.  Sets ``fallback[k]``
-    wherever ``solve`` would take another branch (see :class:`_FingerBatch`); returns the forces.  The small
-    products are loops and the reduced KKT matrix ``W^T Q W`` (symmetric positive definite: ``Q`` is, ``W`` has
-    orthonormal columns, padded columns get 1 on the diagonal) is solved by Cholesky: no BLAS call per step."""
+    compiled: the same start (torque-exact projection of the previous forces), QP (:func:`_gauss_newton_qp`),
+    closed form (:func:`_closed_form_step`), step cut at the bounds (:func:`_null_step`) and cost test.  Sets
+    ``fallback[k]`` wherever ``solve`` would take another branch (see :class:`_FingerBatch`); returns the forces.
+    The small products are loops: no BLAS call per step."""
     F, M, N = P.shape
-    R = W.shape[2]
-    NN = N * N
     out = np.zeros((F, M))
-    Gt = np.empty((M, NN))
-    Hq = np.empty((M, M))
-    A = np.empty((R, R))
-    WQ = np.empty((R, M))
+    Gt, Q, b = np.empty((M, N * N)), np.empty((M, M)), np.empty(M)
     for k in range(F):
         if fallback[k]:
             continue
@@ -857,53 +903,8 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
         E = Kdk - K
         C = np.sum(E * E) / Kn
         for _ in range(iterations):
-            for i in range(M):
-                for a in range(N):
-                    for b_ in range(N):
-                        Gt[i, a * N + b_] = dk[i] * outer[k, i, a, b_] + H[k, i, a, b_]
-            tr = 0.0
-            for i in range(M):
-                for j in range(i, M):
-                    acc = 0.0
-                    for l in range(NN):
-                        acc += Gt[i, l] * Gt[j, l]
-                    Hq[i, j] = acc / Kn
-                    Hq[j, i] = Hq[i, j]
-                tr += Hq[i, i]
-            mu = levenberg * max(tr, 1e-300) / m_real[k]
-            # Q = 2 Hq + 2 mu I;  b = -2 (Gt (e + Gt^T f)) / Kn - 2 mu f;  r = -W^T (Q f + b)
-            g = np.zeros(NN)                       # e + Gt^T f
-            for a in range(N):
-                for b_ in range(N):
-                    g[a * N + b_] = Kdk[a, b_] - K[a, b_]
-            for i in range(M):
-                fi = f[i]
-                for l in range(NN):
-                    g[l] += Gt[i, l] * fi
-            qfb = np.empty(M)                      # Q f + b
-            for i in range(M):
-                acc = 0.0
-                for j in range(M):
-                    acc += Hq[i, j] * f[j]
-                acc2 = 0.0
-                for l in range(NN):
-                    acc2 += Gt[i, l] * g[l]
-                qfb[i] = 2.0 * acc + 2.0 * mu * f[i] + (-2.0 * acc2 / Kn - 2.0 * mu * f[i])
-            for r_ in range(R):                    # W^T Q
-                for j in range(M):
-                    acc = 0.0
-                    for i in range(M):
-                        acc += Wk[i, r_] * Hq[i, j]
-                    WQ[r_, j] = 2.0 * acc + 2.0 * mu * Wk[j, r_]
-            for r_ in range(R):                    # W^T Q W + pad
-                for c in range(R):
-                    acc = 0.0
-                    for j in range(M):
-                        acc += WQ[r_, j] * Wk[j, c]
-                    A[r_, c] = acc
-                A[r_, r_] += pad[k, r_]
-            z = _spd_solve(A, -_mtv(Wk, qfb))
-            f_star = f + _mv(Wk, z)
+            _gauss_newton_qp(outer[k], dk, H[k], E, f, Kn, m_real[k], levenberg, Gt, Q, b)
+            f_star = _closed_form_step(Q, b, f, Wk, pad[k])
             bound = False
             for i in range(M):
                 if real[k, i] and (f_star[i] < f_min or f_star[i] > f_max):
@@ -911,15 +912,7 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
             if bound:                       # the MathematicalProgram's case
                 fallback[k] = True
                 break
-            d = _mv(Wk, _mtv(Wk, f_star - f))
-            if not np.sqrt(np.sum(d * d)) > 1e-12 * max(1.0, np.sqrt(np.sum(f * f))):
-                break
-            t = 1.0
-            for i in range(M):
-                if d[i] > 0:
-                    t = min(t, (f_max - f[i]) / d[i])
-                elif d[i] < 0:
-                    t = min(t, (f_min - f[i]) / d[i])
+            d, t = _null_step(Wk, f, f_star, f_min, f_max)
             if not t > 1e-8:
                 break
             f_new = f + t * d
@@ -1018,10 +1011,7 @@ class _FingerBatch:
         s0 = solvers[0]
         self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
         F = len(parts)
-        dims = []
-        for (s, sd, st, _, _), c in zip(parts, coupling_objects):
-            m, n = st.stop - st.start, sd.stop - sd.start
-            dims.append((m, n))
+        dims = [(st.stop - st.start, sd.stop - sd.start) for _, sd, st, _, _ in parts]
         self.M, self.N = max(d[0] for d in dims), max(d[1] for d in dims)
         self.R = max(m - n for m, n in dims)
         M, N, R = self.M, self.N, self.R
@@ -1251,23 +1241,20 @@ def TendonForceDistribution_(T):
             """One period of the distribution, context-free: ``(forces (m), status (fingers))`` from the desired
             torques, stiffness entries, the previous forces and (thumb) the plant joint angles (the update of this
             system; :class:`~awiwi_drake.control.fused.FusedChain_` calls it too)."""
-            batch = None
-            if T is float and self._batch is not None:      # the hot path: every finger in the batch
-                batch = self._batch.update(tau_T, K_T, f_prev, q_T, self.iterations_per_period)
-                if not batch[1].any():
-                    return batch[0], np.zeros(len(self.fingers))
+            status = np.zeros(len(self.fingers))
+            todo = range(len(self._parts))
+            if self._batch is not None:       # float, the hot path: all fingers at once; the rest by their own solver
+                f_batch, fallback = self._batch.update(tau_T, K_T, f_prev, q_T, self.iterations_per_period)
+                if not fallback.any():
+                    return f_batch, status
+                todo = np.flatnonzero(fallback)
             as_float = (lambda v: np.asarray(v, dtype=float)) if T is float else ExtractValue
             tau, Kv = as_float(tau_T).ravel(), as_float(K_T).ravel()
             f_prev_v = as_float(f_prev).ravel()
             q = None if q_T is None else as_float(q_T).ravel()
-            f_new = np.empty(self.num_tendons, dtype=object if T is not float else float)
-            status = np.zeros(len(self.fingers))
+            f_new = f_batch if self._batch is not None else np.empty(self.num_tendons, dtype=object if T is not float
+                                                                      else float)
             codes = {"ok": 0.0, "infeasible": 1.0, "bound_violation": 2.0}
-            todo = range(len(self._parts))
-            if self._batch is not None:       # all fingers at once; the rest by their own solver
-                f_new, fallback = batch if batch is not None else self._batch.update(
-                    tau, Kv, f_prev_v, q, self.iterations_per_period)
-                todo = np.flatnonzero(fallback)
             for k in todo:
                 s, sd, st, sk, sq = self._parts[k]
                 n_f = sd.stop - sd.start

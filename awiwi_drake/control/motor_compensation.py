@@ -8,40 +8,21 @@ over-compensation injects energy). The identification experiments (Fig 3.3,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from awiwi_drake.components import motor_friction_torque
+from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, check_gain
 from awiwi_drake.parameters.components import MotorParams
 
-__all__ = ["RippleEstimate", "MotorPdLaw"]
-
-
-@dataclass(frozen=True)
-class RippleEstimate:
-    """``tau_r(th) = a_m sin(N th + phi_m) + a_o sin(th + phi_o)`` (torque acting on the motor)."""
-
-    motor_amplitude: float
-    motor_phase: float
-    output_amplitude: float = 0.0
-    output_phase: float = 0.0
-    gear_ratio: float = 100.0
-
-    def torque(self, theta):
-        return (self.motor_amplitude * np.sin(self.gear_ratio * theta + self.motor_phase)
-                + self.output_amplitude * np.sin(theta + self.output_phase))
-
-    def scaled(self, scale: float) -> "RippleEstimate":
-        return RippleEstimate(scale * self.motor_amplitude, self.motor_phase, scale * self.output_amplitude,
-                              self.output_phase, self.gear_ratio)
+__all__ = ["MotorPdLaw"]
 
 
 class MotorPdLaw(StaticLaw):
     """PD on a motor position/velocity reference with optional friction and ripple feed-forward.
 
-    ``u = Kp (th_r - th) + Kd (w_r - w) - s_f tau_fric(w) - tau_r_hat(th)``.
+    ``u = Kp (th_r - th) + Kd (w_r - w) - s_f tau_fric(w) - tau_r_hat(th)``; ``ripple``: the estimated motor
+    (a :class:`~awiwi_drake.parameters.components.MotorParams` whose ripple fields hold the estimate, e.g. from
+    :func:`~awiwi_drake.reproductions.ch03_motor.identify_ripple`), ``tau_r_hat`` its (3.5).
     """
 
     name = "motor_pd"
@@ -49,7 +30,7 @@ class MotorPdLaw(StaticLaw):
     output_size = 1
 
     def __init__(self, motor: MotorParams, kp: float, kd: float, *, friction_scale: float = 0.0,
-                 ripple: RippleEstimate | None = None):
+                 ripple: MotorParams | None = None):
         self.motor = motor
         self.kp = check_gain("position_gain", kp, owner=self.name)
         self.kd = check_gain("velocity_gain", kd, owner=self.name)
@@ -59,7 +40,7 @@ class MotorPdLaw(StaticLaw):
     def feedforward(self, theta, omega):
         ff = -self.friction_scale * motor_friction_torque(omega, self.motor)
         if self.ripple is not None:
-            ff = ff - self.ripple.torque(theta)
+            ff = ff - motor_ripple_torque(theta, self.ripple)
         return ff
 
     def __call__(self, u):

@@ -66,6 +66,8 @@ class ResidualMaps:
     position_profile: dict  # signal -> mean residual per motor-angle bin
     force_bins: np.ndarray | None
     force_profile: dict  # signal -> mean residual per tendon-force bin
+    link_bins: np.ndarray | None  # joint rig: link-angle bins (None without a link)
+    link_profile: dict  # signal -> mean residual per link-angle bin
     direction_asymmetry: dict  # force signal -> mean(res | x' > 0) - mean(res | x' < 0) (noise units)
     lags: np.ndarray
     xcorr: dict  # signal -> normalised cross-correlation with the first input's rate
@@ -115,6 +117,7 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
     pos_centers, pprof = profile(theta)
     fkey = next((o for o in eng.out_names if o.startswith("tendon_force")), None)
     force_centers, fprof = profile(eng.ds.outputs[fkey][ok]) if fkey else (None, {})
+    link_centers, lprof = profile(eng.xhat[2 * nmot][ok]) if eng.nom.has_link else (None, {})
     # direction of elongation
     xd = np.array([eng.elong[i] for i in range(nmot)])
     xdd = np.gradient(xd, axis=1)[:, ok]
@@ -151,11 +154,12 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
         "velocity_sign_asymmetry": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in vprof.items()},
         "position_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in pprof.items()},
         "force_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in fprof.items()},
+        "link_angle_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in lprof.items()},
         "direction_asymmetry": asym,
         "xcorr_peak_lag_s": {n: float(lags[np.argmax(np.abs(c))] * eng.dt) for n, c in xc.items()},
     }
     return ResidualMaps(eng.ds.time, res, freq, psd_ratio, coh, orders, cpr, cpr_noise, centers, vprof,
-                        pos_centers, pprof, force_centers, fprof,
+                        pos_centers, pprof, force_centers, fprof, link_centers, lprof,
                         asym, lags * eng.dt, xc, summary)
 
 
@@ -175,7 +179,8 @@ def _band(freq: np.ndarray, ratio: np.ndarray, level: float = 2.0) -> list:
 
 def locate(maps: ResidualMaps, threshold: float) -> dict:
     """Where an unexplained residual is: signals above ``threshold`` times the noise
-    floor, frequency band, operating region, cycles per revolution, and one line of text.
+    floor, frequency band and peak, operating region (motor velocity, motor angle, tendon force, link
+    angle), cycles per revolution, and one line of text.
 
     Energies are mean squared residuals in noise units (1 = the noise floor)."""
     s = maps.summary
@@ -186,29 +191,38 @@ def locate(maps: ResidualMaps, threshold: float) -> dict:
     regions = []
     for quantity, bins, prof in (("motor velocity [rad/s]", maps.velocity_bins, maps.velocity_profile),
                                  ("motor angle [rad]", maps.position_bins, maps.position_profile),
-                                 ("tendon force [N]", maps.force_bins, maps.force_profile)):
+                                 ("tendon force [N]", maps.force_bins, maps.force_profile),
+                                 ("link angle [rad]", maps.link_bins, maps.link_profile)):
         if bins is None or worst not in prof or not np.any(np.isfinite(prof[worst])):
             continue
         b = int(np.nanargmax(np.abs(prof[worst])))
         regions.append({"quantity": quantity, "bin_centre": float(bins[b]), "mean_residual": float(prof[worst][b])})
-    region = max(regions, key=lambda r: abs(r["mean_residual"])) if regions else {}
     # orders with at least two periods over the angle range covered (lower orders are a
     # generic function of the angle there, not a periodicity)
     span = float(maps.position_bins[-1] - maps.position_bins[0]) if len(maps.position_bins) > 1 else 0.0
     amp = np.where(maps.cpr_orders * span / (2 * np.pi) >= 2.0, maps.cpr_amplitude[worst], 0.0)
     k = int(np.argmax(amp))
-    # a periodic component stands out of the other orders (a coloured residual fits every low order
-    # over a limited angle range) and of white noise of the residual's own size
     rms = float(np.sqrt(np.nanmean(maps.residual[worst] ** 2)))
     n_ok = int(np.sum(np.isfinite(maps.residual[worst])))
+    # an operating region is reported where a bin's mean residual stands out of what a zero-mean residual of
+    # this size gives a bin (10 quantile bins: 3 standard errors, rms / sqrt(n / 10)); a residual periodic in
+    # time (e.g. mains pickup) has none
+    region = max(regions, key=lambda r: abs(r["mean_residual"])) if regions else {}
+    if region and abs(region["mean_residual"]) < 3.0 * rms / np.sqrt(max(n_ok, 10) / 10.0):
+        region = {}
+    # a periodic component stands out of the other orders (a coloured residual fits every low order
+    # over a limited angle range) and of white noise of the residual's own size
     line_noise = max(maps.cpr_noise, 2.0 * rms / np.sqrt(max(n_ok, 1)), 3.0 * float(np.median(amp)))
     cpr = ({"order": int(maps.cpr_orders[k]), "amplitude": float(amp[k]), "noise_amplitude": line_noise}
            if amp[k] > 3.0 * line_noise else {})
+    peak = float(maps.freq[int(np.argmax(maps.psd_ratio[worst]))])
     text = (f"{', '.join(f'{n} ({energy[n]:.2f}x floor)' for n in above)}; "
-            + (f"band {band[0]:.2g}-{band[1]:.2g} Hz" if band else "broadband (no band 2x above the floor)")
+            + (f"band {band[0]:.2g}-{band[1]:.2g} Hz (peak {peak:.3g} Hz)" if band
+               else "broadband (no band 2x above the floor)")
             + (f"; largest mean residual {region['mean_residual']:+.2f} (noise units) at {region['quantity']} "
-               f"~ {region['bin_centre']:.3g}" if region else "")
+               f"~ {region['bin_centre']:.3g}" if region else "; no operating region stands out")
             + (f"; periodic at {cpr['order']} cycles/rev ({cpr['amplitude']:.2g} vs noise "
                f"{cpr['noise_amplitude']:.2g})" if cpr else ""))
-    return {"signals": energy, "signals_above": above, "frequency_band_hz": band, "operating_region": region,
+    return {"signals": energy, "signals_above": above, "frequency_band_hz": band, "peak_frequency_hz": peak,
+            "operating_region": region,
             "cycles_per_revolution": cpr, "text": text}

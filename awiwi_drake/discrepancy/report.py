@@ -97,6 +97,10 @@ def plot_residual_maps(maps: ResidualMaps, title: str = ""):
                                                          "tendon force bin centre [N]"))):
         for n, v in prof.items():
             a.plot(bins, v, "o-", ms=3, lw=0.8, label=n)
+        if a is ax[6] and maps.link_bins is not None:   # the link angle on the same radian axis (joint rig)
+            for n, v in maps.link_profile.items():
+                a.plot(maps.link_bins, v, "s--", ms=3, lw=0.8, label=f"{n} (by link angle)")
+            label = "motor / link angle bin centre [rad]"
         a.axhline(0, color="k", lw=0.5)
         a.set(xlabel=label, ylabel="mean residual [noise units]", title="by " + label.split(" bin")[0])
     names = list(maps.direction_asymmetry)

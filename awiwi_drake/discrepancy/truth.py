@@ -17,6 +17,19 @@ physics allows, so that identifying them is not circular:
 ``backlash``         play at the joint, massless pulley solved exactly, hard stops (catalog: one Newton step, rounded)
 ================== ================================================================
 
+Effects **outside the catalog** (``UNKNOWN_EFFECTS``, the benchmark's ``unknown`` row; no catalog
+entry models them, sizes in :class:`~awiwi_drake.parameters.discrepancy.TruthGeneratorParams`):
+
+====================== ============================================================================
+``link_spring``          link-side spring (a cable or skin) ``-k_j q`` on the joint (joint rig)
+``torque_constant``      applied torque ``(1 + e) u``: dividing the motor equation by ``1 + e`` shows it is
+                         exactly ``nominal_motor`` + ``nominal_spring`` + ``nominal_link`` + a ``force_sensor``
+                         gain (all calibrations), never one physical effect
+``force_nonlinearity``   force sensors read ``f (1 + c f)`` (quadratic gain)
+``force_pickup``         mains pickup ``A sin(2 pi 50 t + phi)`` on one force signal (periodic in time,
+                         not in motor angle)
+====================== ============================================================================
+
 ``strength`` scales every hidden effect's size (friction levels, ripple and
 hysteresis amplitudes, guide friction, delay, creep) for half-strength studies.
 
@@ -48,11 +61,13 @@ from .catalog import EFFECTS
 from .data import Dataset
 from .model import NominalParameters, rig_kinematics, split_state
 
-__all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
+__all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "UNKNOWN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
 
 HIDDEN_EFFECTS = ("motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
                   "guide_friction", "delay", "spring_drift", "backlash")
 NUISANCES = ("force_sensor", "nominal_motor")
+UNKNOWN_EFFECTS = ("link_spring", "torque_constant", "force_nonlinearity", "force_pickup")
+"""Truth effects no catalog entry models (see the module docstring); ``unknown=`` of :func:`make_truth_dataset`."""
 
 
 def default_nominal(rig: str) -> dict:
@@ -137,8 +152,9 @@ def HiddenEffectPlant_(T):
             B = nom.motor_inertia * tr.get("inertia_scale", 1.0)
             r = nom.motor_pulley_radius
             acc, zd = [], []
+            gain = 1.0 + tr.get("torque_constant", 0.0)
             for i in range(n):
-                tau = U[i] - nom.motor_damping * omega[i]
+                tau = gain * U[i] - nom.motor_damping * omega[i]
                 if "motor_friction" in tr and _here(tr, i):
                     p = tr["motor_friction"]
                     tau = tau + stribeck_friction(omega[i], p["fc"], p["fs"], p["vs"], p["eps"], p["viscous"])
@@ -162,7 +178,7 @@ def HiddenEffectPlant_(T):
                     zd.append(0.0 * z[i])
             out = []
             if nom.has_link:
-                tq = nom.link_pulley_radius * (f[0] - f[1]) - nom.link_damping * qd
+                tq = nom.link_pulley_radius * (f[0] - f[1]) - nom.link_damping * qd - tr.get("link_spring", 0.0) * q
                 if "joint_friction" in tr:
                     p = tr["joint_friction"]
                     tq = tq + stribeck_friction(qd, p["fc"], p["fs"], p["vs"], p["eps"])
@@ -199,11 +215,17 @@ def stribeck_draw(coulomb: float, viscous_range, rng: np.random.Generator, visco
 
 
 def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0,
-               place: int | None = None) -> dict:
+               place: int | None = None, unknown=(), unknown_rng: np.random.Generator | None = None) -> dict:
     """Random truth parameters for the hidden effects (and optional miscalibrations);
     ``strength`` scales each effect's size; ``place`` (1 or 2, joint rig) puts the per-tendon
-    effects (motor friction, guide friction, spring hysteresis) on that tendon only."""
-    hidden = list(hidden)
+    effects (motor friction, guide friction, spring hysteresis) on that tendon only; ``unknown``:
+    effects outside the catalog (:data:`UNKNOWN_EFFECTS`), drawn from ``unknown_rng`` (default ``rng``)."""
+    hidden, unknown = list(hidden), list(unknown)
+    for h in unknown:
+        if h not in UNKNOWN_EFFECTS:
+            raise ValueError(f"unknown= {h!r}: not an out-of-catalog truth effect (known: {', '.join(UNKNOWN_EFFECTS)})")
+        if h == "link_spring" and rig != "joint":
+            raise ValueError(f"unknown= 'link_spring' needs a link: rig {rig!r} has none (use rig 'joint')")
     if place is not None and (rig != "joint" or place not in (1, 2)):
         raise ValueError(f"place = {place!r}: a per-tendon place is 1 or 2 on the joint rig")
     if place is not None and not set(hidden) & set(PLACED_EFFECTS):
@@ -253,7 +275,20 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         tr["force_offset"] = float(u(1.0, 3.0) * rng.choice([-1, 1]))
     if "nominal_motor" in nuisance:
         tr["inertia_scale"] = float(1.0 + u(0.15, 0.3) * rng.choice([-1, 1]))
+    g, ur = TruthGeneratorParams(), unknown_rng or rng
+    sign = lambda: float(ur.choice([-1.0, 1.0]))   # noqa: E731
+    if "link_spring" in unknown:
+        tr["link_spring"] = float(ur.uniform(*g.unknown_link_spring_range))
+    if "torque_constant" in unknown:
+        tr["torque_constant"] = sign() * float(ur.uniform(*g.unknown_torque_constant_range))
+    if "force_nonlinearity" in unknown:
+        tr["force_nonlinearity"] = sign() * float(ur.uniform(*g.unknown_force_quadratic_range))
+    if "force_pickup" in unknown:
+        tr["force_pickup"] = dict(amplitude=float(ur.uniform(*g.unknown_pickup_amplitude_range)),
+                                  frequency=g.unknown_pickup_frequency, phase=float(ur.uniform(0.0, 2 * np.pi)),
+                                  channel=int(ur.integers(1, n + 1)))
     tr["hidden"] = hidden
+    tr["unknown"] = unknown
     tr["nuisance"] = list(nuisance)
     if place is not None:
         tr["place"] = int(place)
@@ -335,7 +370,7 @@ def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, de
 def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
                        keep_clean: bool = True, progress=None, strength: float = 1.0,
-                       place: int | None = None) -> Dataset:
+                       place: int | None = None, unknown=()) -> Dataset:
     """Simulate one closed-loop experiment on a truth rig with hidden effects.
 
     ``progress(t, duration)`` (optional) is called every ~2 % of the run, e.g.
@@ -356,6 +391,10 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     place : 1, 2 or None
         Joint rig: the per-tendon effects (motor friction, guide friction, spring hysteresis) act on
         that tendon (its motor, guide path and spring) only; None: on both.
+    unknown : sequence of :data:`UNKNOWN_EFFECTS`
+        Effects outside the catalog (a link spring, a torque-constant error, a force-sensor
+        quadratic gain, 50 Hz pickup on one force signal), recorded in ``meta["truth"]``; drawn from
+        their own random stream, so a seed's other draws (parameters, excitation, noise) do not change.
 
     Returns
     -------
@@ -379,7 +418,9 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         else:
             params[k] = float(v * rng.uniform(1 - spread, 1 + spread))
     nom = NominalParameters.from_dataset(rig, params)
-    truth = draw_truth(rig, hidden, rng, nuisance, strength, place)
+    # the out-of-catalog effects from their own stream: the seed's parameters, excitation and noise stay the
+    # same with and without them
+    truth = draw_truth(rig, hidden, rng, nuisance, strength, place, unknown, np.random.default_rng([seed, 1]))
     plant_sys = HiddenEffectPlant_[float](nom, truth)
     dt = 1.0 / gen.sample_rate
     N = int(round(gen.duration / dt))
@@ -424,13 +465,20 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         raise RuntimeError(f"truth simulation logged {Y.shape[0]} samples, expected {N}")
     names = nom.measurement_names()
     clean = {nm: Y[:, j].copy() for j, nm in enumerate(names)}
+    names_force = [nm for nm in names if nm.startswith("tendon_force")]
     meas = {}
     for j, nm in enumerate(names):
         y = Y[:, j].copy()
         if nm.startswith("tendon_force") and "force_gain" in truth:
             y = truth["force_gain"] * y + truth["force_offset"]
+        sigma = Y[:, j].std() * 10 ** (-(30.0 if snr_db is None else snr_db) / 20.0)
+        if nm.startswith("tendon_force") and "force_nonlinearity" in truth:
+            y = y * (1.0 + truth["force_nonlinearity"] * y)
+        if "force_pickup" in truth and nm == names_force[truth["force_pickup"]["channel"] - 1]:
+            p = truth["force_pickup"]   # amplitude in noise std (of 30 dB when noise-free)
+            y = y + p["amplitude"] * sigma * np.sin(2 * np.pi * p["frequency"] * t + p["phase"])
         if snr_db is not None:
-            y = y + rng.normal(0.0, Y[:, j].std() * 10 ** (-snr_db / 20.0), N)
+            y = y + rng.normal(0.0, sigma, N)
             if nm.startswith("tendon_force"):
                 lsb = gen.force_range / 2 ** gen.force_bits
                 y = np.round(y / lsb) * lsb
@@ -441,7 +489,7 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     sn = nom.state_names()
     for i, nm in enumerate(sn[:-n]):
         init[nm] = float(X0[i])
-    tag = "-".join(hidden) if hidden else "none"
+    tag = "-".join(list(hidden) + list(unknown)) or "none"
     name = name or f"{rig}_{tag}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
     truth_json = {k: v for k, v in truth.items()}
     meta = {"truth": truth_json, "generator": {"snr_db": snr_db, "seed": seed,

@@ -27,7 +27,7 @@ import numpy as np
 from awiwi_drake.analysis import Ramp, simulate
 from awiwi_drake.components import atan_friction, motor_friction_torque
 from awiwi_drake.control.base import StaticLawController, closed_loop
-from awiwi_drake.control.motor_compensation import MotorPdLaw, RippleEstimate
+from awiwi_drake.control.motor_compensation import MotorPdLaw
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FrictionIdentificationParams, RippleCompensationParams
 from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
@@ -60,7 +60,7 @@ class ConstantVelocityRun:
 
 
 def constant_velocity_run(motor: MotorParams, speed: float, duration: float, *, kp: float, kd: float,
-                          theta0: float = 0.0, friction_scale: float = 0.0, ripple: RippleEstimate | None = None,
+                          theta0: float = 0.0, friction_scale: float = 0.0, ripple: MotorParams | None = None,
                           rate_hz: float = CONTROL_RATE_HZ, start_at_rest: bool = False) -> ConstantVelocityRun:
     """The motor following ``theta0 + speed t`` under a sampled PD (one row per control period).
 
@@ -177,8 +177,9 @@ def amplitude_spectrum(t, y) -> tuple[np.ndarray, np.ndarray]:
     return np.fft.rfftfreq(len(y), float(np.median(np.diff(t)))), np.abs(Y)
 
 
-def identify_ripple(run: ConstantVelocityRun, motor: MotorParams) -> RippleEstimate:
-    """Ripple from a constant-speed run by the torque balance of (3.5).
+def identify_ripple(run: ConstantVelocityRun, motor: MotorParams) -> MotorParams:
+    """Ripple from a constant-speed run by the torque balance of (3.5): ``motor`` with the identified
+    motor-shaft ripple (``ripple_motor_amplitude``, ``ripple_motor_phase``) as its only ripple.
 
     ``tau_r(theta) = B thdd - u - tau_fric(thd)`` per control period, regressed on
     ``sin(N theta), cos(N theta)`` at the known period (the phase follows from
@@ -187,7 +188,9 @@ def identify_ripple(run: ConstantVelocityRun, motor: MotorParams) -> RippleEstim
     """
     resid = motor.inertia * run.acceleration - run.command - motor_friction_torque(run.omega, motor)
     c = harmonic(run.theta, resid, motor.gear_ratio / (2 * math.pi))    # the angle as "time": sin/cos(N theta)
-    return RippleEstimate(float(abs(c)), float(math.atan2(c.imag, c.real)), gear_ratio=motor.gear_ratio)
+    return motor.replace(ripple=True, ripple_motor_amplitude=float(abs(c)),
+                         ripple_motor_phase=float(math.atan2(c.imag, c.real)), ripple_output_amplitude=0.0,
+                         ripple_harmonics=())
 
 
 @dataclass
@@ -200,7 +203,7 @@ class RippleCompensationResult:
     first_harmonic_hz: float
     amplitude_without: float
     amplitude_with: float
-    estimate: RippleEstimate
+    estimate: MotorParams
     run_without: ConstantVelocityRun | None = None
     run_with: ConstantVelocityRun | None = None
 
@@ -224,7 +227,9 @@ def ripple_compensation_experiment(motor: MotorParams | None = None,
     common = dict(kp=p.position_gain, kd=p.velocity_gain, friction_scale=1.0)
     before = constant_velocity_run(m, p.speed, p.duration, **common)
     estimate = identify_ripple(before, m)
-    after = constant_velocity_run(m, p.speed, p.duration, ripple=estimate.scaled(p.amplitude_scale), **common)
+    after = constant_velocity_run(m, p.speed, p.duration, **common,
+                                  ripple=estimate.replace(ripple_motor_amplitude=p.amplitude_scale
+                                                          * estimate.ripple_motor_amplitude))
     f1 = m.gear_ratio * p.speed / (2 * math.pi)  # motor rotation frequency [Hz]
     f, s0 = amplitude_spectrum(before.t, before.feedback)
     _, s1 = amplitude_spectrum(after.t, after.feedback)

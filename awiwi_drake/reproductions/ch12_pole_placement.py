@@ -17,10 +17,10 @@ from awiwi_drake.control.linear import state_feedback_controller
 from awiwi_drake.control.pole_placement import design_pole_placement, stable_stiffness_interval
 from awiwi_drake.parameters import FlexibleJointParams
 from awiwi_drake.parameters.control import PolePlacementParams
-from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.plotting import figure_axes, label_axes, plot_poles
 from awiwi_drake.rigs import flexible_joint_rig
 
-__all__ = ["OpenLoopPoleSweep", "open_loop_pole_sweep", "plot_root_locus", "StiffnessRobustness",
+__all__ = ["OpenLoopPoleSweep", "open_loop_pole_sweep", "StiffnessRobustness",
            "stiffness_robustness"]
 
 #: (12.19) as printed: the poles of the Table 12.1 design on the plant with k = 0.600 Nm/rad [1/s].
@@ -39,19 +39,14 @@ class OpenLoopPoleSweep:
     poles_vs_damping: np.ndarray
 
     def plot(self, axes=None):
-        """Both root loci side by side (:func:`plot_root_locus`); returns ``(fig, axes)``."""
+        """Both root loci side by side (:func:`~awiwi_drake.plotting.plot_poles`); returns ``(fig, axes)``."""
         if axes is None:
             fig, axes = figure_axes(None, ncols=2, figsize=(12, 5))
-        plot_root_locus(self.stiffness, self.poles_vs_stiffness, ax=axes[0])
-        plot_root_locus(self.link_damping, self.poles_vs_damping, ax=axes[1], label="d_q [Nm s/rad]")
+        plot_poles(self.poles_vs_stiffness, axes[0], values=self.stiffness, name="k [Nm/rad]")
+        plot_poles(self.poles_vs_damping, axes[1], values=self.link_damping, name="d_q [Nm s/rad]")
         axes[0].set_title("Fig 12.3: open-loop poles vs k")
         axes[1].set_title("Fig 12.3: open-loop poles vs d_q")
         return axes[0].figure, axes
-
-
-def _sorted_poles(A: np.ndarray) -> np.ndarray:
-    ev = np.linalg.eigvals(A)
-    return ev[np.lexsort((ev.imag, ev.real))]
 
 
 def open_loop_pole_sweep(params: PolePlacementParams | None = None, *, num: int = 25,
@@ -63,29 +58,9 @@ def open_loop_pole_sweep(params: PolePlacementParams | None = None, *, num: int 
     base = base or FlexibleJointParams()
     ks = np.linspace(p.stiffness_low, p.stiffness_high, int(num))
     ds = np.linspace(p.link_damping_low, p.link_damping_high, int(num))
-    pk = np.array([_sorted_poles(linearize(flexible_joint_rig(params=base.replace(stiffness=k))).A) for k in ks])
-    pd = np.array([_sorted_poles(linearize(flexible_joint_rig(params=base.replace(link_damping=d))).A) for d in ds])
+    pk = np.array([linearize(flexible_joint_rig(params=base.replace(stiffness=k))).poles for k in ks])
+    pd = np.array([linearize(flexible_joint_rig(params=base.replace(link_damping=d))).poles for d in ds])
     return OpenLoopPoleSweep(ks, pk, ds, pd)
-
-
-def plot_root_locus(values, poles, *, nominal=None, ax=None, label: str = "k [Nm/rad]"):
-    """Poles (rows of ``poles``) for each parameter value, coloured by value; squares at ``nominal``."""
-    fig, ax = figure_axes(ax, figsize=(6, 5))
-    values = np.asarray(values, float)
-    poles = np.asarray(poles)
-    sc = None
-    for j in range(poles.shape[1]):
-        sc = ax.scatter(poles[:, j].real, poles[:, j].imag, c=values, s=10, cmap="viridis")
-    if nominal is not None:
-        nominal = np.asarray(nominal)
-        ax.plot(nominal.real, nominal.imag, "rs", mfc="none", ms=9, label="nominal")
-        ax.legend()
-    ax.axvline(0.0, color="k", lw=0.8)
-    ax.set_xlabel("Re(s) [1/s]")
-    ax.set_ylabel("Im(s) [rad/s]")
-    fig.colorbar(sc, ax=ax, label=label)
-    ax.grid(True, alpha=0.3)
-    return fig, ax
 
 
 @dataclass
@@ -156,20 +131,18 @@ class StiffnessRobustness:
             fig, axes = figure_axes(None, nrows=2, ncols=3, figsize=(18, 9))
         axes = np.asarray(axes).reshape(2, 3)
         krange = f"k in [{self.stiffness[0]:g}, {self.stiffness[-1]:g}] Nm/rad"
-        plot_root_locus(self.stiffness, self.poles_vs_stiffness, nominal=self.nominal_poles, ax=axes[0, 0])
+        plot_poles(self.poles_vs_stiffness, axes[0, 0], values=self.stiffness, name="k [Nm/rad]")
+        plot_poles(self.nominal_poles, axes[0, 0], marker="s", color="r", mfc="none", ms=9, label="nominal", damping=())
         axes[0, 0].set_title(f"Fig 12.4, gains placing (12.13): {krange}", fontsize=10)
-        plot_root_locus(self.stiffness, self.printed_gain_poles_vs_stiffness, ax=axes[0, 1])
+        plot_poles(self.printed_gain_poles_vs_stiffness, axes[0, 1], values=self.stiffness, name="k [Nm/rad]")
         axes[0, 1].set_title(f"Fig 12.4, printed gains (12.18) as u = -alpha x: {krange}", fontsize=10)
         axes[0, 1].ticklabel_format(axis="x", style="sci", scilimits=(0, 0))
         ax = axes[0, 2]
-        ax.plot(self.nominal_poles.real, self.nominal_poles.imag, "s", mfc="none", ms=9,
-                label=f"design, k = {self.design_stiffness}")
-        ax.plot(self.perturbed_poles.real, self.perturbed_poles.imag, "x", ms=9,
-                label=f"ours, k = {self.perturbed_stiffness}")
-        ax.plot(self.printed_perturbed_poles.real, self.printed_perturbed_poles.imag, "+", ms=11,
-                label=f"printed (12.19), k = {self.perturbed_stiffness}")
-        ax.axvline(0.0, color="k", lw=0.8)
-        label_axes(ax, "Im(s) [rad/s]", xlabel="Re(s) [1/s]", title="(12.19): the design under a 0.8 % stiffness error")
+        plot_poles(self.nominal_poles, ax, marker="s", mfc="none", ms=9, label=f"design, k = {self.design_stiffness}")
+        plot_poles(self.perturbed_poles, ax, ms=9, label=f"ours, k = {self.perturbed_stiffness}", damping=())
+        plot_poles(self.printed_perturbed_poles, ax, marker="+", ms=11, damping=(),
+                   label=f"printed (12.19), k = {self.perturbed_stiffness}")
+        ax.set_title("(12.19): the design under a 0.8 % stiffness error")
         ax = axes[1, 0]
         for name in ("nominal", "perturbed"):
             k = self.design_stiffness if name == "nominal" else self.perturbed_stiffness
@@ -204,8 +177,7 @@ def _robustness_loop(base: FlexibleJointParams, stiffness: float, controller_of)
 
 def _closed_loop_poles(loop) -> np.ndarray:
     ctx = loop.create_context(references={"joint_angle_reference": 0.0})
-    lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
-    return _sorted_poles(lin.A)
+    return linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",)).poles
 
 
 def stiffness_robustness(params: PolePlacementParams | None = None, *, num: int = 60,
