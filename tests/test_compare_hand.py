@@ -66,3 +66,34 @@ def test_short_window_on_a_finger_is_five_design_time_constants():
     tau = 1.0 / np.min(-np.linalg.eigvals(A_e).real)
     sm = CompareShortMode()
     assert p.step_duration == pytest.approx(max(sm.min_step_duration, full.step_delay + 5 * tau), rel=1e-12)
+
+
+def test_full_compare_window_is_at_least_what_the_compared_designs_need(tmp_path, monkeypatch):
+    """``awiwi-drake compare`` without ``--short`` on a finger: the step window is the chosen 0.3 s or, where the
+    compared designs need more, ``design_step_duration`` (``step_delay + 5 tau``): the cascaded chain's design counts
+    its observer's rest mode on the guides' presliding stiffness (index DIP, ~0.6 s), so its full window is that, not
+    0.3 s; the short mode has the same window (its floor only lower)."""
+    import awiwi_drake.control.compare as cmp
+    from awiwi_drake.cli import main
+    from awiwi_drake.control.compare import design_step_duration, short_test_params
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def capture(make_rig, names, *, params=None, **kw):
+        seen["params"] = params
+        raise Stop
+
+    monkeypatch.setattr(cmp, "compare_controllers", capture)       # the CLI's params, then stop before simulating
+    monkeypatch.setenv("AWIWI_SHORT", "0")                         # the full tests, also under CI's short mode
+    main(["compare", "--rig", "finger-index", "--controllers", "cascaded", "--quiet", "--out", str(tmp_path)])
+    full = compare_test_params("finger-index")
+    rig = finger_diagram(finger="index")
+    tau = make_controller("cascaded", rig).design["time_constant"]
+    window = design_step_duration(lambda: finger_diagram(finger="index"), ["cascaded"], full)
+    assert window == pytest.approx(full.step_delay + CompareShortMode().step_time_constants * tau, rel=1e-12)
+    assert window > full.step_duration
+    assert seen["params"].step_duration == window
+    assert short_test_params(lambda: finger_diagram(finger="index"), ["cascaded"], full).step_duration == window

@@ -311,26 +311,21 @@ CascadedImpedanceController = CascadedImpedanceController_[None]
 
 
 class LinkReferenceMotorPdLaw(StaticLaw):
-    """``u = u_ref(r) + Kp_m (theta_ref(r) - theta) - Kd_m thetadot`` on the motor coordinates of ``state``."""
+    """``u = u_ref(r) + Kp_m (theta_ref(r) - theta) - Kd_m thetadot`` on the motor coordinates of ``state``
+    (``x_ref``, ``u_ref``: the linearisation's equilibrium family, :class:`~awiwi_drake.control.linear.LinearReferenceModel`)."""
 
     def __init__(self, lin, motor_index, inertia: float, params: ImpedanceParams | None = None):
-        from awiwi_drake.control.linear import reference_maps
-        p = params or ImpedanceParams()
+        from awiwi_drake.control.linear import LinearReferenceModel
         self.name = "pd"
-        self.kp_m, self.kd_m = motor_position_gains(p, inertia, self.name)
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("joint_angle").C)
-        self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(lin.output("joint_angle").y0[0])
+        self.kp_m, self.kd_m = motor_position_gains(params or ImpedanceParams(), inertia, self.name)
+        self.model = LinearReferenceModel(lin)
         self.ith, self.iw = list(motor_index[0]), list(motor_index[1])
-        self.inputs = {"joint_angle_reference": 1, "state": lin.A.shape[0]}
-        self.output_size = lin.B.shape[1]
+        self.inputs, self.output_size = dict(self.model.inputs), lin.B.shape[1]
 
     def __call__(self, u):
         x = u["state"]
-        dr = u["joint_angle_reference"][0] - self.r0
-        x_ref = self.x0 + self.Nx * dr
-        return (self.u0 + self.Nu * dr + self.kp_m * (x_ref[self.ith] - x[self.ith])
-                - self.kd_m * (x[self.iw] - x_ref[self.iw]))
+        x_ref, u_ref = self.model.equilibrium(u["joint_angle_reference"][0])
+        return u_ref + self.kp_m * (x_ref[self.ith] - x[self.ith]) - self.kd_m * (x[self.iw] - x_ref[self.iw])
 
 
 def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mode: str = "two-time-scale"):

@@ -38,7 +38,7 @@ from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
-           "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant", "short_test_params",
+           "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
            "compare_controllers", "observer_at_bound", "mark_dead_band", "mark_load_held"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -69,8 +69,8 @@ def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
     elif kind in ("finger", "hand"):
         # per DoF, relative to the operating point [rad]; chosen: a 0.2 rad (11 deg) step (Fig 15.24 steps the
         # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the chosen 0.5 Nm/rad impedance, Fig 15.22's soft setting on
-        # the single-joint testbed), 0.3 s covers the
-        # cascade's settling (joint loop at 60 rad/s); no sweep by default (Fig 15.26 is the joint rig's)
+        # the single-joint testbed), 0.3 s chosen (the CLI lengthens it where the compared designs need more:
+        # design_step_duration); no sweep by default (Fig 15.26 is the joint rig's)
         base = CompareTestParams(step_size=0.2, step_duration=0.3, sine_amplitude=0.1, sine_frequency=2.0,
                                  sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01)
     else:
@@ -519,16 +519,16 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
     return Comparison(runs, MetricsTable(rows), rig)
 
 
-def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
-                      params: CompareTestParams | None = None) -> CompareTestParams:
-    """The standard tests shortened (``compare --short``, ``AWIWI_SHORT=1``) so that the compared loops still
-    settle (:class:`~awiwi_drake.parameters.cli.CompareShortMode`): the step window is ``step_delay +
-    step_time_constants x`` the slowest tracking time constant of the registered controllers ``names`` on
-    ``make_rig()``, at least ``min_step_duration`` (the full window is kept when a loop has no known time
-    constant); shorter sweep, settling and sine (fingers/hand: two periods at >= 4 Hz).  The window is not capped
-    at the full one: a design whose slowest mode needs longer gets it (the finger/hand chain's (9.2) observer on the
-    guides' presliding stiffness, :meth:`~awiwi_drake.control.joint_design.JointDesign.loop`: ~0.6 s on the
-    index DIP, 3.15 s against the full 0.3 s), so that a loop that performs as designed settles.
+def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
+                         params: CompareTestParams | None = None) -> float | None:
+    """The step window [s] the compared loops' own designs need: ``step_delay + step_time_constants x`` the slowest
+    tracking time constant of the registered controllers ``names`` on ``make_rig()``
+    (:class:`~awiwi_drake.parameters.cli.CompareShortMode`), or None when a loop has no known time constant
+    (unstable, or nothing known).  ``compare --short`` steps for it (at least ``min_step_duration``), the full tests
+    for at least it (``awiwi-drake compare`` without ``--short``), so that a loop that performs as designed settles:
+    on fingers and the hand the chain's designs count the (9.2) observer on the guides' presliding stiffness
+    (:meth:`~awiwi_drake.control.joint_design.JointDesign.loop`: ~0.6 s on the index DIP, 3.15 s against the chosen
+    0.3 s).
 
     The time constant is :func:`dominant_time_constant`: single-joint rigs as continuous loops (Drake
     ``Linearize``); fingers and the hand as their registered sampled loops, whose controllers report their
@@ -536,10 +536,8 @@ def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
     eigenvalues in a linearisation)."""
     from awiwi_drake.parameters.cli import CompareShortMode
 
-    names = list(names)
     probe = make_rig()
     p = params or compare_test_params(probe)
-    sm = CompareShortMode()
     finger = rig_kind(probe) in ("finger", "hand")
     taus = []
     for n in names:
@@ -547,13 +545,28 @@ def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
         rig = make_rig()
         opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
         taus.append(dominant_time_constant(closed_loop(rig, make_controller(n, rig), **opts), p))
-    if any(t is None for t in taus):     # a loop with no time constant (unstable, or nothing known): full window
-        step = p.step_duration
-    else:
-        step = max(sm.min_step_duration, p.step_delay + sm.step_time_constants * max(taus))
+    if not taus or any(t is None for t in taus):
+        return None
+    return p.step_delay + CompareShortMode().step_time_constants * max(taus)
+
+
+def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
+                      params: CompareTestParams | None = None) -> CompareTestParams:
+    """The standard tests shortened (``compare --short``, ``AWIWI_SHORT=1``) so that the compared loops still
+    settle (:class:`~awiwi_drake.parameters.cli.CompareShortMode`): the step window is
+    :func:`design_step_duration`, at least ``min_step_duration`` and not capped at the full one (the full window is
+    kept when a loop has no known time constant); shorter sweep, settling and sine (fingers/hand: two periods at
+    >= 4 Hz)."""
+    from awiwi_drake.parameters.cli import CompareShortMode
+
+    probe = make_rig()
+    p = params or compare_test_params(probe)
+    sm = CompareShortMode()
+    window = design_step_duration(make_rig, list(names), p)
+    step = p.step_duration if window is None else max(sm.min_step_duration, window)
     short = p.replace(step_duration=step, sweep_duration=min(p.sweep_duration, sm.sweep_duration),
                       settle_time=min(p.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
-    return short.replace(sine_frequency=max(p.sine_frequency, 4.0)) if finger else short
+    return short.replace(sine_frequency=max(p.sine_frequency, 4.0)) if rig_kind(probe) in ("finger", "hand") else short
 
 
 def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
