@@ -10,10 +10,11 @@ A candidate is accepted only if all of these hold:
 * **identifiable**: no fitted parameter rests on a bound (a bound is not an estimate);
 * **periodic** (``motor_ripple``): a ripple whose largest harmonic completes fewer than
   :data:`RIPPLE_MIN_PERIODS` periods over the motor-angle range the data cover is a generic smooth
-  function of the angle there (the rule of :func:`~awiwi_drake.discrepancy.localise.locate`); it is named
-  only if it explains significantly more than a recalibration of the nominal model, all calibration
-  candidates fitted jointly (:func:`recalibration_effect`): a torque-constant error, for one, is exactly
-  such a recalibration and a low-order "ripple" fits it (issue 12, the benchmark's ``unknown`` row);
+  function of the angle there (the rule of :func:`~awiwi_drake.discrepancy.localise.locate`); when a
+  recalibration of the nominal model (all calibration candidates fitted jointly, :func:`recalibration_effect`)
+  explains about as much, it is named only if, refitted on top of that recalibration, it passes every test
+  again (it beats the simpler model): a torque-constant error is exactly such a recalibration and a
+  low-order "ripple" fits it (issue 12, the benchmark's ``unknown`` row);
 * **material**: the fitted effect is larger than what the sensor noise can show
   (:func:`materiality`: a delay of at least one sample; a hysteresis half-width,
   guide friction, force-sensor error above the noise-equivalent force; a friction
