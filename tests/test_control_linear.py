@@ -9,7 +9,7 @@ from scipy.linalg import solve_continuous_are
 
 from _control_plants import flexible_joint_matrices, linear_flexible_joint_rig
 from _fd import autodiff_vs_fd
-from awiwi_drake.analysis import simulate
+from awiwi_drake.analysis import linearize, simulate
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.linear import StateFeedbackLaw
 from awiwi_drake.control.lqr import design_lqr, lqr_controller, quadratic_cost
@@ -212,8 +212,12 @@ def test_pole_placement_rejects_bad_targets(field, value):
 
 
 def test_state_feedback_rejects_bad_gains():
-    with pytest.raises(ValueError, match="gain 'K'"):
-        StateFeedbackLaw([[1.0, np.nan, 0, 0]], x0=np.zeros(4), u0=[0.0], Nx=np.zeros(4), Nu=[0.0])
+    from awiwi_drake.control.linear import LinearReferenceModel
+    model = LinearReferenceModel(linearize(flexible_joint_rig(), outputs=("state", "joint_angle")))
+    with pytest.raises(ValueError, match="gain 'K'.*non-finite"):
+        StateFeedbackLaw([[1.0, np.nan, 0, 0]], model)
+    with pytest.raises(ValueError, match=r"gain 'K' has shape \(1, 3\), expected \(1, 4\)"):
+        StateFeedbackLaw([[1.0, 2.0, 0]], model)
     with pytest.raises(ValueError, match="'R'"):
         design_lqr(flexible_joint_rig(), r=0.0)
     with pytest.raises(ValueError, match="Q diagonal"):

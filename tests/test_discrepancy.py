@@ -452,6 +452,23 @@ class _LinearInAEngine:
         return self.evaluate(p, windows)[0], Projection(self.S[windows])
 
 
+def test_screen_estimate_is_the_parameter_change_where_the_residual_is_linear():
+    """The screen regresses the residual on sensitivities per unit parameter (finite differences divided
+    by their step), so its coefficient is the parameter change itself: where the residual is linear in an
+    effect's parameters (the nominal_link pair of the closed-form stand-in), the screen's estimate is the
+    generating value, whatever the screening step (a coefficient scaled by the step again would put it at
+    step x value: 0.05 x 0.1 and 2e-4 x 0.01 here)."""
+    from awiwi_drake.discrepancy.catalog import EFFECTS
+    from awiwi_drake.discrepancy.screen import ResidualState, screen
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+
+    truth = default_vector()
+    truth[PARAM_INDEX["link_inertia_rel"]], truth[PARAM_INDEX["link_damping_add"]] = 0.1, 0.01
+    eng = _LinearInAEngine(truth, np.random.default_rng(11))
+    out = screen(ResidualState(eng, default_vector()), [EFFECTS["nominal_link"]], CatalogBounds(), "joint")
+    assert out[0]["params"] == pytest.approx({"link_inertia_rel": 0.1, "link_damping_add": 0.01}, rel=1e-9)
+
+
 def test_candidate_fit_with_accepted_parameters_free_to_first_order_reaches_the_joint_optimum():
     """Variable projection over the accepted effects' sensitivities (fit.HeldLinear): where the
     residual is linear in the accepted parameters, the candidate-only simulation fit reaches the joint

@@ -128,3 +128,44 @@ def test_identified_gains_10_11_place_the_force_loop_poles():
     assert identified_gains(400.0, B, w, xi) == pytest.approx((kp[1], kd[1]), rel=1e-15)
     with pytest.raises(ValueError, match="alpha"):
         identified_gains(np.array([1.0, 0.0]), B, w, xi)
+
+
+def test_joint_friction_bound_is_the_largest_torque_of_the_unmeasured_frictions():
+    """``joint_friction_bound`` (ch. 9's bound of the observer's estimate, one law for the chain and the 15.5
+    backstepping): per joint ``B_j = sum_i |A_ij| (W_i(f_i + w_i) + w_i)`` against its closed form, at random
+    couplings ``A`` (signs mixed, as P S), forces and levels.  The unmeasured frictions are the guides' Dahl force
+    ``|g_i| <= W_i`` at the tension it passes (pulled: ``C + t (e^{mu alpha} - 1)``, released: ``C + t (1 -
+    e^{-mu alpha})``) and the lever's hysteresis ``|z_i| <= w_i``, the tension being ``f_i + z_i``.  Over every
+    corner of that set (each tendon's z and g at +-, g at its own tension and direction) the joint torque
+    ``|A^T (z + g)|`` never exceeds B; for the constant (4.1) law the bound is attained (the corner z, g = +-w, +-C
+    with the signs of A's column), with the capstan law at the corner of a one-signed column pulled everywhere.
+    Slack (negative) forces count as 0; w = 0 (the measured force holds the hysteresis: the chain) leaves the guides
+    alone; AutoDiffXd passes through."""
+    from itertools import product
+    from awiwi_drake.components.friction import joint_friction_bound
+    rng = np.random.default_rng(3)
+    m, k = 6, 3
+    A = rng.normal(0.0, 5e-3, (m, k))
+    A[:, 2] = np.abs(A[:, 2])                                     # one one-signed column
+    f = rng.uniform(5.0, 40.0, m)
+    C, mu, w = rng.uniform(0.5, 2.0, m), rng.uniform(0.1, 0.6, m), rng.uniform(0.5, 4.0, m)
+    for capstan in (False, True):
+        mu_a = mu if capstan else np.zeros(m)
+        B = joint_friction_bound(A, f, C, mu_a, w)
+        np.testing.assert_allclose(B, np.abs(A).T @ (C + (f + w) * np.expm1(mu_a) + w), rtol=1e-14)
+        worst = np.zeros(k)
+        for sz, sg in product(product((-1.0, 1.0), repeat=m), repeat=2):
+            sz, sg = np.array(sz), np.array(sg)
+            t = f + sz * w
+            level = C + t * np.where(sg > 0, np.expm1(mu_a), -np.expm1(-mu_a))
+            worst = np.maximum(worst, np.abs(A.T @ (sz * w + sg * level)))
+        assert np.all(worst <= B * (1 + 1e-12)), (capstan, worst / B)
+        tight = [0, 1, 2] if not capstan else [2]
+        np.testing.assert_allclose(worst[tight], B[tight], rtol=1e-12)
+    np.testing.assert_allclose(joint_friction_bound(A, -f, C, mu, 0.0), np.abs(A).T @ C, rtol=1e-14)
+    np.testing.assert_allclose(joint_friction_bound(A, f, C, mu), np.abs(A).T @ (C + f * np.expm1(mu)), rtol=1e-14)
+    fa = np.array([AutoDiffXd(x, np.eye(m)[i]) for i, x in enumerate(f)], dtype=object)
+    Ba = joint_friction_bound(A, fa, C, mu, w)
+    np.testing.assert_allclose([b.value() for b in Ba], joint_friction_bound(A, f, C, mu, w), rtol=1e-14)
+    np.testing.assert_allclose(np.array([b.derivatives() for b in Ba]), (np.abs(A) * np.expm1(mu)[:, None]).T,
+                               rtol=1e-12)

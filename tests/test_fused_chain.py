@@ -13,6 +13,7 @@ from awiwi_drake.control import closed_loop, controller_names, get_entry, make_c
 from awiwi_drake.control.fused import FusedChain_
 from awiwi_drake.control.joint_design import sampled_loop_poles
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
+from awiwi_drake.parameters.hand import FingerRigParams
 
 PERIOD = 1.0 / 3000.0
 #: every controller registered for fingers/the hand that reads the estimated joint state (joint-pd does not)
@@ -23,6 +24,8 @@ LOGS = ("motor_torque", "motor_torque_command", "joint_angle_estimate", "joint_v
 
 
 def _rig(target):
+    if target == "finger-thumb-capstan":           # tension-proportional guide friction: W depends on the force
+        return finger_diagram(finger="thumb", params=FingerRigParams.for_finger("thumb").replace(capstan_friction=True))
     return hand_diagram() if target == "hand" else finger_diagram(finger=target.removeprefix("finger-"))
 
 
@@ -204,12 +207,15 @@ def test_compiled_force_law_equals_the_law_as_written():
 @pytest.mark.parametrize("target, name", [("hand", "backstepping"), ("finger-thumb", "backstepping"),
                                           ("hand", "backstepping-friction-observer"),
                                           ("finger-thumb", "backstepping-friction-observer"),
+                                          ("finger-thumb-capstan", "backstepping-friction-observer"),
                                           ("finger-thumb", "backstepping-load-observer")])
 def test_compiled_backstepping_equals_the_law_as_written(target, name):
     """The 15.5 law's float path (one compiled call, polynomial springs) equals FingerBacksteppingLaw.terms (the law
     for every scalar type) at random measurements: relative 1e-12 of the command; with the link torque estimate and its
     compensation bounded by the frictions (``backstepping-friction-observer``) at estimates inside and beyond the
-    bound (half of the DoF each); with the estimate in the link model alone (``backstepping-load-observer``)."""
+    bound (half of the DoF each; with the capstan guide law the bound's levels depend on the forces,
+    :func:`~awiwi_drake.components.friction.joint_friction_bound`); with the estimate in the link model alone
+    (``backstepping-load-observer``)."""
     rig = _rig(target)
     law = make_controller(name, rig).law
     op = rig.operating_point()

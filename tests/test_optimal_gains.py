@@ -8,9 +8,15 @@ import pytest
 from awiwi_drake.control.backstepping import ImpedanceBackstepping, joint_model
 from awiwi_drake.control.optimal_gains import (
     backstepping_feedback, backstepping_feedback_batch, evaluate_samples, monte_carlo_gains, optimal_feedback,
-    optimize_gains, system_feedback, torque_coordinates)
+    optimize_gains, system_feedback)
 from awiwi_drake.reproductions.ch16_optimal_backstepping import printed_model_feedback, table_16_1_rig
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
+
+
+def _torque_coordinates(k: float) -> np.ndarray:
+    """``T`` with ``[q, qd, tau, taud] = T [q, qd, theta, thetad]``, ``tau = k (theta - q)`` (Table 16.1's
+    coordinates of the flexible joint, written out)."""
+    return np.array([[1, 0, 0, 0], [0, 1, 0, 0], [-k, 0, k, 0], [0, -k, 0, k]], dtype=float)
 
 
 def _k_bs_closed_form(M, Bm, k, Kp, Kd, K3, K4):
@@ -37,7 +43,7 @@ def test_state_feedback_equals_an_independent_derivation_of_16_3():
     rig = table_16_1_rig()
     c = OptimalGainsCase()
     model = joint_model(rig)
-    Tinv = np.linalg.inv(torque_coordinates(c.stiffness))
+    Tinv = np.linalg.inv(_torque_coordinates(c.stiffness))
     rng = np.random.default_rng(5)
     for i in range(5):
         Kp, Kd, K3, K4 = np.exp(rng.uniform(np.log([1e-2, 1e-4, 1.0, 1.0]), np.log([2.0, 0.1, 200.0, 500.0])))
@@ -67,7 +73,7 @@ def test_batched_feedback_equals_the_closed_form_and_the_controller_system_sampl
     omegas = np.exp(rng.uniform(np.log([1e-2, 1e-4, 1.0, 1.0]), np.log([2.0, 0.1, 200.0, 500.0]), size=(64, 4)))
     K = backstepping_feedback_batch(model, omegas)
     assert K.shape == (64, 1, 4)
-    Tinv = np.linalg.inv(torque_coordinates(c.stiffness))
+    Tinv = np.linalg.inv(_torque_coordinates(c.stiffness))
     for s_, om in enumerate(omegas):
         expected = _k_bs_closed_form(c.link_inertia, c.motor_inertia, c.stiffness, *om)
         np.testing.assert_allclose(K[s_, 0] @ Tinv, expected, rtol=1e-9)
@@ -117,7 +123,7 @@ def test_table_16_1_target_is_below_the_structural_floor():
     c = OptimalGainsCase()
     model = joint_model(rig)
     target, _ = optimal_feedback(rig, c)
-    Tinv = np.linalg.inv(torque_coordinates(c.stiffness))
+    Tinv = np.linalg.inv(_torque_coordinates(c.stiffness))
     rng = np.random.default_rng(0)
     for _ in range(20):
         om = np.exp(rng.uniform(np.log(c.gain_low), np.log(c.gain_high)))
@@ -165,12 +171,12 @@ def test_reachable_case_optimizer_recovers_the_are_gain_and_its_poles():
 
 def test_torque_state_map_is_the_tendon_torque_jacobian_of_the_joint_rig():
     """N motors: T = d[q, qd, tau_i, taud_i]/dx at rest; tau_i = -P_i f_i from the rig's own tendon_force
-    output (central differences), and for one torsion spring it is torque_coordinates(k)."""
+    output (central differences), and for one torsion spring it is _torque_coordinates(k)."""
     from awiwi_drake.control.optimal_gains import torque_state_map
     from awiwi_drake.rigs import joint_rig
     rig = table_16_1_rig()
     np.testing.assert_allclose(torque_state_map(joint_model(rig), np.zeros(4)),
-                               torque_coordinates(OptimalGainsCase().stiffness), rtol=1e-12)
+                               _torque_coordinates(OptimalGainsCase().stiffness), rtol=1e-12)
     rig = joint_rig()
     op = rig.operating_point()
     T = torque_state_map(joint_model(rig), op.state)

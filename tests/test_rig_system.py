@@ -476,3 +476,46 @@ def test_vectorized_kernels_equal_the_scalar_source_on_every_construct():
     ref = np.array([scalar(S[:, k], np.empty(3)) for k in range(300)]).T
     # numpy's vectorised cos/exp/tanh and libm's may differ in the last bit; cos(a) - exp(-b^2) cancels
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-14 * np.max(np.abs(ref)))
+
+
+def test_tendon_rig_sampled_loop_equals_its_continuous_loop():
+    """The tendon rig (no link) has the sampled path too: in integration coordinates ``[x, omega]``
+    (``x = r_m theta``; the motor's ripple on) its 3 kHz loop under the (10.2) force PD follows the continuous
+    rig integrated by fixed-step RK3 at the period to round-off through a 20 -> 40 N step; the mapping
+    ``sampled_state`` is the elongation law."""
+    from awiwi_drake.analysis import Step, simulate
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.parameters import MotorParams, TendonRigParams
+    from awiwi_drake.rigs import tendon_rig
+    p = TendonRigParams(motor=MotorParams(ripple=True))
+    out = {}
+    for sampled in (True, False):
+        rig = tendon_rig(params=p)
+        loop = closed_loop(rig, make_controller("tendon-pd", rig), sampled_rig=sampled)
+        assert loop.sampled_rig == sampled
+        op = rig.operating_point(tendon_force=20.0)
+        ctx = loop.create_context(op, references={"tendon_force_reference": 20.0})
+        out[sampled] = simulate(loop, ctx, 0.1, inputs={"tendon_force_reference": Step(0.02, 40.0, 20.0)},
+                                log=("state", "tendon_force", "motor_torque"), log_period=H)
+    a, b = out[True], out[False]
+    assert a["state"].shape == b["state"].shape == (301, 2)
+    assert abs(a["tendon_force"][-1, 0] - 40.0) < 0.5 and np.ptp(a["state"][:, 1]) > 1.0   # stepped, motor moved
+    rel = np.abs(a["state"] - b["state"]) / np.abs(b["state"]).max(axis=0)     # per state, of its range
+    assert rel.max() < 1e-12, rel.max(axis=0)
+    np.testing.assert_allclose(a["motor_torque"], b["motor_torque"], rtol=0, atol=1e-9 * np.abs(b["motor_torque"]).max())
+    x = rig.sampled_state(op.state)
+    assert x[0] == pytest.approx(float(op.elongation[0]), rel=1e-14) and x[1:].tolist() == op.state[1:].tolist()
+
+
+def test_a_controller_at_another_rate_keeps_the_continuous_rig():
+    """The SDRE refreshes its gain at 200 Hz in a 3 kHz loop: that update can fall an ulp after the sampled rig's
+    (Drake times each rate by its own period) and would read the next period's state, so such a loop keeps the
+    continuous rig (tests/test_control_tendon.py's refresh test compares the gain with the state at its
+    instant); the force PD at the loop's own rate gets the sampled rig."""
+    from awiwi_drake.control import closed_loop, make_controller
+    from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
+    for name, rig_of in (("tendon-sdre", tendon_rig), ("sdre", flexible_joint_rig)):
+        rig = rig_of()
+        assert not closed_loop(rig, make_controller(name, rig), rate_hz=3000.0).sampled_rig
+    rig = tendon_rig()
+    assert closed_loop(rig, make_controller("tendon-pd", rig), rate_hz=3000.0).sampled_rig

@@ -63,7 +63,7 @@ def run(args) -> int:
     from awiwi_drake.config import short_mode
     from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
     from awiwi_drake.control.registry import controller_names, get_entry
-    from awiwi_drake.control.compare import compare_test_params, short_test_params
+    from awiwi_drake.control.compare import compare_test_params, design_step_duration, short_test_params
 
     if args.list:
         for n in controller_names(args.rig):
@@ -93,6 +93,10 @@ def run(args) -> int:
     params = compare_test_params(args.rig)
     if short:
         params = short_test_params(make_rig, names, params)
+    else:       # the chosen window, or longer where the compared designs need it
+        window = design_step_duration(make_rig, names, params)
+        if window is not None and window > params.step_duration:
+            params = params.replace(step_duration=window)
     opts = {}
     if args.rate is not None:
         opts["rate_hz"] = None if args.rate == 0 else args.rate

@@ -20,6 +20,7 @@ caller passes the fields of its own parameter dataclass.
 :func:`dahl_rate`         rate-independent Dahl friction state ``dF/dt = (v/delta)(W - s F)``
 :func:`dahl_path`         the same law solved exactly along a sampled (piecewise-linear) path
 :func:`guide_friction_rate`     guide friction as a Dahl state (the finger and hand drive)
+:func:`joint_friction_bound`    the most the guides (and the lever's hysteresis) can hold per joint (ch. 9's bound)
 ========================  ====================================================
 """
 
@@ -27,11 +28,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from awiwi_drake._math import clip
+from awiwi_drake._math import clip, positive_part
 from awiwi_drake.parameters.components import GuideFrictionParams
 
 __all__ = ["regularized_sign", "atan_friction", "stribeck_friction", "guide_friction_force",
-           "capstan_friction_force", "guide_friction", "dahl_rate", "dahl_path", "guide_friction_level", "guide_friction_rate"]
+           "capstan_friction_force", "guide_friction", "dahl_rate", "dahl_path", "guide_friction_level", "guide_friction_rate",
+           "joint_friction_bound"]
 
 
 def regularized_sign(v, smoothing_velocity):
@@ -204,3 +206,24 @@ def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_expo
     s = np.tanh(clip(sliding_velocity / smoothing_velocity, -40.0, 40.0))
     level = guide_friction_level(tension, constant, capstan_exponent, s)
     return (sliding_velocity * level - np.abs(sliding_velocity) * force) / presliding_length
+
+
+def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0):
+    """``B_j = sum_i |A_ij| (W_i(f_i + w_i) + w_i)`` (k) [Nm]: the largest joint torque the tendons' unmeasured
+    friction can put on each joint (or DoF) ``j``, the bound of the ch. 9 observer's estimate.
+
+    ``coupling`` ``A`` (m x k): ``P(q)`` or ``P(q) S`` (a joint torque is ``-A^T`` of the tendon forces);
+    ``tension`` ``f`` (m) [N]: the measured tendon forces (negative parts count as 0); ``constant``,
+    ``capstan_exponent``: each path's guide friction (:func:`guide_friction_level`, pulled end, the larger
+    direction); ``hysteresis_width`` ``w`` (m) [N]: the half-width of the lever's hysteresis loop (Fig 4.8b) when the
+    measurement misses it, else 0.
+
+    Which friction a measurement misses follows from where it sits (ch. 4): the spring sensor (the lever's angle,
+    calibrated to a force polynomial ``phi``) is in the forearm, so the guides of the wrist, palm and finger (4.1) are
+    always between it and the joints; the lever's friction (the hysteresis ``z``, ``|z| <= w``) is inside the
+    mechanism, so the calibration ``phi(x)`` misses it while the lever's tension ``phi(x) + z`` holds it.  The guides
+    carry at most their sliding level at the tension they pass (:func:`guide_friction_rate`: ``|g| <= W``), which is
+    ``phi + z <= f + w``: hence ``W(f + w)``."""
+    f, w = positive_part(tension), hysteresis_width
+    return np.abs(np.asarray(coupling)).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w)
+

@@ -93,14 +93,14 @@ def _integration_parts(model: DriveModel):
     P = np.asarray(model.coupling.P(), dtype=float)
     motors = model.motor if isinstance(model.motor, tuple) else (model.motor,) * model.num_tendons
     B = np.array([mp.inertia for mp in motors], dtype=float)
-    return P, np.asarray(model.link_inertia, float), B, float(model.motor_pulley_radius)
+    return P, np.asarray(model.link_inertia or (), float), B, float(model.motor_pulley_radius)
 
 
 def integration_state(model: DriveModel, state) -> np.ndarray:
     """The physical rig state ``[q, qdot, theta, omega, (z), (g)]`` (float) in the integration coordinates
     of :func:`rig_integration_system`: ``[q, p, x, omega, (z), (g)]`` with the momentum
     ``p = I qdot - P^T B omega / r_m`` and the elongations ``x`` of the elongation law
-    (:func:`drive_laws`); the other entries are unchanged."""
+    (:func:`drive_laws`); the other entries are unchanged (no joints, the tendon rig: ``[x, omega, (z)]``)."""
     _check(model)
     P, I, B, r = _integration_parts(model)
     x = np.asarray(state, dtype=float).reshape(-1)
@@ -109,7 +109,7 @@ def integration_state(model: DriveModel, state) -> np.ndarray:
     n, m = model.num_joints, model.num_tendons
     z = x.copy()
     z[n:2 * n] = I * x[n:2 * n] - P.T @ (B * x[2 * n + m:2 * n + 2 * m]) / r
-    z[2 * n:2 * n + m] = drive_laws(model, x, want=("elongation",))["elongation"]
+    z[2 * n:2 * n + m] = drive_laws(model, x, want=("elongation",), **_no_joints(model))["elongation"]
     return z
 
 
@@ -121,7 +121,7 @@ def rig_integration_system(model: DriveModel) -> SymbolicVectorSystem:
     input ``[motor_torque, external_torque]``; output the physical state ``[q, qdot, theta, omega, ...]``
     (``qdot = (p + P^T B omega / r_m) / I``, ``theta = (x - h(q) + h(0) - x0) / r_m``). The dynamics are
     :func:`drive_laws` on these variables (``elongation`` given, ``momentum_rate``), with
-    ``x' = r_m omega + P qdot``. The coordinates are a constant linear map of the physical ones, so any
+    ``x' = r_m omega + P qdot`` (without joints, the tendon rig: state ``[x, omega, (z)]``). The coordinates are a constant linear map of the physical ones, so any
     Runge-Kutta step commutes with it: the sampled rig integrated in them is the physical rig's
     trajectory to round-off (tests/test_rig_system.py). Why: Drake's expression evaluator shares no
     sub-expressions, and in physical coordinates each spring law is evaluated twice (link and motor
@@ -140,9 +140,10 @@ def rig_integration_system(model: DriveModel) -> SymbolicVectorSystem:
         qd = (p + P.T @ (B * omega) / r) / I
         theta = (e - (np.asarray(model.coupling.h(q)) - model._h0 + model.offsets)) / r
         x = np.concatenate([q, qd, theta, Z[2 * n + m:]])
-        laws = drive_laws(model, x, U[:m], tau_ext=U[m:], want=("derivatives", "momentum_rate"), elongation=e)
+        laws = drive_laws(model, x, U[:m], tau_ext=U[m:], elongation=e,
+                          want=("derivatives",) + (("momentum_rate",) if model.has_link else ()), **_no_joints(model))
         d = laws["derivatives"]
-        zdot = np.concatenate([d[:n], laws["momentum_rate"], r * omega + P @ qd, d[2 * n + m:]])
+        zdot = np.concatenate([d[:n], laws.get("momentum_rate", d[:0]), r * omega + P @ qd, d[2 * n + m:]])
     return SymbolicVectorSystem(state=zs, input=us, dynamics=[_expression(v).Expand() for v in zdot],
                                 output=[_expression(v).Expand() for v in x])
 

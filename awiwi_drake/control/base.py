@@ -378,7 +378,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         Diagram name (default ``"<rig>_<controller>"``).
     sampled_rig : bool
         For a sampled loop (``rate_hz``) on a rig that offers ``rig.sampled_diagram`` (the
-        single-joint rigs) whose controller and sensors have no continuous state (default True):
+        single-joint rigs and the tendon rig) whose controller and sensors have no continuous state and update, if at
+        all, at the control period (default True):
         the rig enters the loop as Drake's ``DiscreteTimeApproximation`` at the control period
         (:func:`~awiwi_drake.components.rig_system.sampled_dynamics`: fixed-step RK3, one step per
         period, its inputs held over the period), so the loop is a discrete-time system and the
@@ -501,8 +502,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     # the rig as a discrete-time system at the control period where that is the same loop: every reader
     # of the rig's outputs samples them at the control instants (no continuous state outside the rig)
     sample_rig = bool(sampled_rig and rate_hz is not None and getattr(rig, "sampled_diagram", None) is not None
-                      and est_sys is None and controller.num_continuous_states() == 0
-                      and all(s.num_continuous_states() == 0 for s in sensors.values()))
+                      and est_sys is None and all(_updates_with_the_rig(s, 1.0 / rate_hz)
+                                                  for s in (controller, *sensors.values())))
     builder = DiagramBuilder()
     # a sampled rig's systems go into the loop's builder directly (RigPorts: a sub-diagram costs the
     # simulator ~1 us per period, README "How the plants are built, and speed"); any other rig is the
@@ -637,6 +638,21 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     handles.diagram = diagram
     handles.disturbances = tuple(dist)
     return handles
+
+
+def _updates_with_the_rig(system: System, period: float) -> bool:
+    """Whether ``system`` can run beside a rig sampled at ``period``: no continuous state, and its discrete
+    updates (if any) all at ``period`` with offset 0.  An update at another rate, e.g. the SDRE's 200 Hz gain
+    refresh (ch. 14) in a 3 kHz loop, can fall an ulp after the rig's update at the same nominal instant (Drake
+    times each rate as a multiple of its own period): it would read the next period's state of the sampled rig,
+    where the continuous rig is still at that instant (measured: the tendon SDRE's refresh at 0.05 s, the
+    reference step, got K_omega 9.85 instead of 6.02)."""
+    if system.num_continuous_states():
+        return False
+    attr = system.GetUniquePeriodicDiscreteUpdateAttribute()     # None: no periodic update, or several timings
+    if attr is None:
+        return system.num_discrete_state_groups() == 0
+    return attr.period_sec() == period and attr.offset_sec() == 0.0
 
 
 def _flattenable(controller: System) -> bool:

@@ -105,9 +105,10 @@ def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f
         tau = tau - fc
         if compensate:
             lv = np.empty(m)
-            for i in range(m):
+            for i in range(m):                 # joint_friction_bound: W(f + w) + w, w = beta f + z0
                 fp = max(f[i], 0.0)
-                lv[i] = C[i] + fp * rise[i] + beta[i] * fp + z0[i]
+                wi = beta[i] * fp + z0[i]
+                lv[i] = C[i] + (fp + wi) * rise[i] + wi
             bound = np.abs(PS).T @ lv
             for j in range(k):
                 a0[j] = a0[j] + min(max(fc[j], -bound[j]), bound[j])

@@ -76,9 +76,11 @@ where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
 
 **Friction compensation** (option ``friction_observer`` of :func:`finger_backstepping_controller`, the law's
 ``friction_compensation``, registered ``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
-+-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`: the guides (4.1) and the lever's
-hysteresis at the sensed forces), the bound of the chain's observer (ch. 9) with the hysteresis added, as the law's
-sensors miss both.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
++-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`, the one law
+:func:`~awiwi_drake.components.friction.joint_friction_bound`: the guides (4.1) at the tension ``phi + w`` and the
+lever's hysteresis half-width ``w``), the bound of the chain's observer (ch. 9) with the hysteresis added: the law's
+sensor is the lever's angle calibrated to ``phi(x)`` (ch. 4), which misses both, where the chain reads the lever's
+tension ``phi(x) + z``.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
 index); a load beyond ``B`` deflects the impedance, one below it is cancelled, as in the chain.
 
 Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
@@ -154,7 +156,7 @@ from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
 from awiwi_drake._math import clip, positive_part
-from awiwi_drake.components.friction import guide_friction_level
+from awiwi_drake.components.friction import joint_friction_bound
 from awiwi_drake.control.chain import guide_friction_levels, rig_springs
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
@@ -296,13 +298,13 @@ class FingerBacksteppingLaw(StaticLaw):
         self.design["friction_hold"] = self.friction_hold
 
     def friction_bound(self, f, P=None):
-        """``B_j = sum_i |(P S)_ij| (W_i(f_i) + w_i(f_i))`` (k) [Nm]: the largest link-side torque the guides' friction
-        (4.1) (sliding level ``W_i``, pulled) and the lever's hysteresis (Fig 4.8b, half-width ``w_i = beta f_i + z0``)
-        can put on each DoF at the tendon forces ``f``, neither of which the spring sensors measure."""
+        """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i)`` (k) [Nm]: the largest link-side torque the guides' friction
+        (4.1) (sliding level ``W_i``, pulled, at the tension ``phi + z <= f + w``) and the lever's hysteresis (Fig 4.8b,
+        half-width ``w_i = beta f_i + z0``) can put on each DoF at the sensed forces ``f = phi(x)``, neither of which
+        the spring sensors measure (:func:`~awiwi_drake.components.friction.joint_friction_bound`)."""
         P = np.asarray(self.coupling.P(self.q_op) if P is None else P)
         (C, mu_alpha), (beta, z0) = self.friction_levels
-        fp = positive_part(f)
-        return np.abs(P @ self.S).T @ (guide_friction_level(fp, C, mu_alpha, 1.0) + beta * fp + z0)
+        return joint_friction_bound(P @ self.S, f, C, mu_alpha, beta * positive_part(f) + z0)
 
     def rest_error(self, guide_force, hysteresis_force, external_torque=None, bound=None):
         """The DoF error ``e`` (k) at which the loop rests with the guides' friction forces ``g`` and the lever's
@@ -559,15 +561,20 @@ class ObservedBacksteppingController(Diagram):
     deflection (module docstring; ``tests/test_hand_control.py``).  Inputs: the law's measurements; outputs
     ``motor_torque`` and
     ``friction_compensation`` (``-d_hat``, unclipped) and, with the law's ``friction_compensation``, its bound
-    ``friction_compensation_bound`` (:class:`FrictionBound_`); continuous state: the observer's ``w_hat`` (so the loop
-    is closed as blocks, not fused)."""
+    ``friction_compensation_bound`` (:class:`FrictionBound_`); state: the observer's ``w_hat``, sampled at the law's
+    ``rate_hz`` (continuous for a continuous design; the loop is closed as blocks, not fused).  The observer's model is
+    the law's link model with the whole DoF inertia matrix ``M_d`` (a diagonal one would count the off-diagonal inertial
+    torques into ``d_hat``: on the ideal index the observed loop's poles are then the plain loop's and ``1 - L h``
+    (``tests/test_hand_control.py``))."""
 
     def __init__(self, rig: Any, law: FingerBacksteppingLaw, observer: FrictionObserverParams):
         super().__init__()
         b = DiagramBuilder()
         ctrl = b.AddNamedSystem("law", StaticLawController(law))
+        # sampled at the law's design rate, as the chain's (pole 1 - L h); continuous with a continuous design
         obs = b.AddNamedSystem("load_observer", JointFrictionObserver(
-            rig.coupling, law.S, np.diag(law.M), np.diag(law.Bq), observer.gain))
+            rig.coupling, law.S, law.M, np.diag(law.Bq), observer.gain,
+            None if law.rate_hz is None else 1.0 / law.rate_hz))
         # the observer's joint torque from the law's own tendon forces phi_i(x_i) (the spring sensors; class docstring)
         sensed = b.AddNamedSystem("sensed_tendon_force", SpringBank(law.springs, len(law.springs)))
         b.Connect(sensed.GetOutputPort("tendon_force"), obs.GetInputPort("tendon_force"))
@@ -596,9 +603,9 @@ class ObservedBacksteppingController(Diagram):
 
     def initialize_state(self, context, rig_state=None) -> None:
         """Start the observer at the joints' velocity in ``rig_state`` (0 at rest)."""
-        S = self._observer.S
-        v = np.zeros(S.shape[0]) if rig_state is None else np.asarray(rig_state, float)[S.shape[0]:2 * S.shape[0]]
-        self.GetMutableSubsystemContext(self._observer, context).SetContinuousState(self._observer.Sp @ v)
+        n = self._observer.S.shape[0]
+        self._observer.initialize(self.GetMutableSubsystemContext(self._observer, context),
+                                  None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
 
 
 @TemplateSystem.define("FrictionBound_")

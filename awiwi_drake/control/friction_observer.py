@@ -36,6 +36,7 @@ The Fig 9.3 run is :mod:`awiwi_drake.reproductions.ch09_friction_observer`.
 
 from __future__ import annotations
 
+import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -46,8 +47,14 @@ __all__ = ["observer_rate", "observer_step", "DisturbanceObserver_", "Disturbanc
            "with_link_friction"]
 
 
-def observer_rate(w_hat, w, known_torque, inertia: float, gain: float):
-    """``(w_hat', d_hat)`` of the observer (9.2) for velocity ``w`` and known torque ``tau_a``."""
+def observer_rate(w_hat, w, known_torque, inertia, gain):
+    """``(w_hat', d_hat)`` of the observer (9.2) for velocity ``w`` and known torque ``tau_a``.  ``inertia``: a
+    number or one per DoF (decoupled links), or a ``k x k`` inertia matrix ``J`` (coupled links, e.g. a finger's DoF:
+    ``d_hat = L J (w - w_hat)``, ``w_hat' = J^-1 (tau_a + d_hat)``; the error still obeys ``d_hat' = L (d - d_hat)``,
+    where a diagonal model would count the off-diagonal inertial torques ``J_off w'`` into ``d``)."""
+    if np.ndim(inertia) == 2:
+        d_hat = gain * (inertia @ (w - w_hat))
+        return np.linalg.inv(inertia) @ (known_torque + d_hat), d_hat
     d_hat = gain * inertia * (w - w_hat)
     return (known_torque + d_hat) / inertia, d_hat
 

@@ -81,6 +81,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import smax
 from awiwi_drake.control.base import COMMAND_PORT, StaticLaw, StaticLawController, check_gain, check_gains
 from awiwi_drake.control.registry import rig_kind
+from awiwi_drake.control.tendon_force import identified_gains
 from awiwi_drake.parameters.components import MotorParams
 from awiwi_drake.parameters.control import ImpedanceParams
 
@@ -142,10 +143,7 @@ class ImpedanceLaw(StaticLaw):
         self.mode, self.tr, self.params = mode, tr, p
         self.kp_imp = check_gain("joint_stiffness", p.joint_stiffness, owner=self.name)
         self.kd_imp = check_gain("joint_damping", p.joint_damping, owner=self.name, allow_zero=True)
-        B = tr.motor.inertia
-        wm = check_gain("motor_bandwidth", p.motor_bandwidth, owner=self.name)
-        xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=self.name)
-        self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
+        self.kp_m, self.kd_m = motor_position_gains(p, tr.motor.inertia, self.name)
         wf = check_gain("force_bandwidth", p.force_bandwidth, owner=self.name)
         xf = check_gain("force_damping_ratio", p.force_damping_ratio, owner=self.name)
         self.kf, self.kfd = wf ** 2, 2 * xf * wf
@@ -198,6 +196,14 @@ class ImpedanceLaw(StaticLaw):
                                              + self.kf * (f_des - f))
 
 
+def motor_position_gains(p: ImpedanceParams, inertia: float, owner: str) -> tuple[float, float]:
+    """``(Kp_m, Kd_m) = (B w_m^2, 2 xi_m w_m B)`` of a motor-position loop at ``p``'s motor bandwidth and damping:
+    (10.11) with a unit slope (:func:`~awiwi_drake.control.tendon_force.identified_gains`)."""
+    return identified_gains(1.0, check_gain("inertia", inertia, owner=owner),
+                            check_gain("motor_bandwidth", p.motor_bandwidth, owner=owner),
+                            check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=owner))
+
+
 def motor_position_command(f_des, f, omega, alpha, pulley_radius, kp_m, kd_m):
     """The tendon level of (11.3): a motor-position loop towards the motor angle that generates ``f_des``,
     ``u = r_m f + Kp_m (theta_des - theta) - Kd_m thetadot`` with ``theta_des - theta = (f_des - f) / alpha``
@@ -227,10 +233,7 @@ class MotorPositionForceLaw(StaticLaw):
                  path_velocity: bool = False):
         p = params or ImpedanceParams()
         self.name, self.motor = name, motor
-        B = check_gain("inertia", motor.inertia, owner=name)
-        wm = check_gain("motor_bandwidth", p.motor_bandwidth, owner=name)
-        xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=name)
-        self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
+        self.kp_m, self.kd_m = motor_position_gains(p, motor.inertia, name)
         size = int(size)
         self.min_alpha = (check_gains("min_alpha", min_alpha, shape=(size,), owner=name, positive=True)
                           if np.ndim(min_alpha) else check_gain("min_alpha", min_alpha, owner=name))
@@ -308,29 +311,21 @@ CascadedImpedanceController = CascadedImpedanceController_[None]
 
 
 class LinkReferenceMotorPdLaw(StaticLaw):
-    """``u = u_ref(r) + Kp_m (theta_ref(r) - theta) - Kd_m thetadot`` on the motor coordinates of ``state``."""
+    """``u = u_ref(r) + Kp_m (theta_ref(r) - theta) - Kd_m thetadot`` on the motor coordinates of ``state``
+    (``x_ref``, ``u_ref``: the linearisation's equilibrium family, :class:`~awiwi_drake.control.linear.LinearReferenceModel`)."""
 
     def __init__(self, lin, motor_index, inertia: float, params: ImpedanceParams | None = None):
-        from awiwi_drake.control.linear import reference_maps
-        p = params or ImpedanceParams()
+        from awiwi_drake.control.linear import LinearReferenceModel
         self.name = "pd"
-        wm = check_gain("motor_bandwidth", p.motor_bandwidth, owner=self.name)
-        xm = check_gain("motor_damping_ratio", p.motor_damping_ratio, owner=self.name)
-        B = check_gain("inertia", inertia, owner=self.name)
-        self.kp_m, self.kd_m = B * wm ** 2, 2 * xm * wm * B
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("joint_angle").C)
-        self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(lin.output("joint_angle").y0[0])
+        self.kp_m, self.kd_m = motor_position_gains(params or ImpedanceParams(), inertia, self.name)
+        self.model = LinearReferenceModel(lin)
         self.ith, self.iw = list(motor_index[0]), list(motor_index[1])
-        self.inputs = {"joint_angle_reference": 1, "state": lin.A.shape[0]}
-        self.output_size = lin.B.shape[1]
+        self.inputs, self.output_size = dict(self.model.inputs), lin.B.shape[1]
 
     def __call__(self, u):
         x = u["state"]
-        dr = u["joint_angle_reference"][0] - self.r0
-        x_ref = self.x0 + self.Nx * dr
-        return (self.u0 + self.Nu * dr + self.kp_m * (x_ref[self.ith] - x[self.ith])
-                - self.kd_m * (x[self.iw] - x_ref[self.iw]))
+        x_ref, u_ref = self.model.equilibrium(u["joint_angle_reference"][0])
+        return u_ref + self.kp_m * (x_ref[self.ith] - x[self.ith]) - self.kd_m * (x[self.iw] - x_ref[self.iw])
 
 
 def impedance_controller(rig: Any, params: ImpedanceParams | None = None, *, mode: str = "two-time-scale"):

@@ -76,6 +76,7 @@ model sampled with its one period of delay, :func:`sampled_model`)
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -85,7 +86,8 @@ from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator, Li
 
 from awiwi_drake.analysis.linear import LinearizationResult, linearize
 from awiwi_drake.control.base import check_rate, closed_loop
-from awiwi_drake.control.chain import TendonChainController, TendonForceStage, chain_design_point, rig_springs
+from awiwi_drake.control.chain import (TendonChainController, TendonForceStage, chain_design_point,
+                                      guide_presliding_stiffness, rig_springs)
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
 from awiwi_drake.control.linear import reference_maps
@@ -100,7 +102,7 @@ from awiwi_drake.rigs.rigs import _link_rig
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
            "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles",
-           "sampled_loop_poles"]
+           "sampled_loop_poles", "observe_design"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
@@ -124,6 +126,7 @@ class JointReducedModel:
     invariance_residual: float        # |T A - F T| / |T A| (0: the restriction is exact)
     linearization: LinearizationResult
     torque_rate: str = "joint"        # the fourth coordinate: tau_dot ("joint") or sigma ("motor")
+    link_torque_map: np.ndarray | None = None   # E (4 x 1): z' = F z + G tau_ref + E d, d a link-side torque [Nm]
 
     @property
     def poles(self) -> np.ndarray:
@@ -213,14 +216,19 @@ def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, ten
     return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
 
 
+def _coordinates(lin: LinearizationResult, stiffness: float = 0.0) -> np.ndarray:
+    """``T``: the loop's state to ``z = [q, qdot, tau, tau_dot + stiffness qdot]`` (:func:`_restrict`)."""
+    A, Cq, Ct = lin.A, lin.output("joint_angle").C, lin.output("joint_torque").C
+    return np.vstack([Cq, Cq @ A, Ct, Ct @ A + stiffness * (Cq @ A)])
+
+
 def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndarray, np.ndarray, float]:
     """``(F, G, residual)`` on ``[q, qdot, tau, tau_dot + stiffness qdot]`` (``stiffness`` 0: ``tau_dot``;
     ``K_jj``: the motors' rate ``sigma``)."""
     A, B = lin.A, lin.B
-    Cq, Ct = lin.output("joint_angle").C, lin.output("joint_torque").C
-    T = np.vstack([Cq, Cq @ A, Ct, Ct @ A + stiffness * (Cq @ A)])
+    T = _coordinates(lin, stiffness)
     scale = np.abs(T @ B).max() if np.abs(T @ B).max() > 0 else 1.0
-    for row, nm in ((Cq, "q"), (Cq @ A, "qdot"), (Ct, "tau")):
+    for row, nm in ((T[0], "q"), (T[1], "qdot"), (T[2], "tau")):
         if np.abs(row @ B).max() > 1e-9 * scale:          # only tau_dot' may see the input directly
             raise ValueError(f"reduced joint model: {nm} depends on tau_ref directly (|{nm}' B| > 0)")
     TA = T @ A
@@ -254,16 +262,23 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
 
 
 def _reduced_model(rig, j, point, chain, tendon_law, friction, torque_rate, torque, name, inertia, damping, stiffness,
-                   tendons) -> JointReducedModel:
+                   tendons, link_torque: bool = True) -> JointReducedModel:
     """DoF ``j``'s :class:`JointReducedModel`: :func:`joint_subsystem` (at the DoF torque ``torque``) closed by
-    :func:`force_loop`, linearised by Drake and restricted to ``z`` (:func:`_restrict`)."""
+    :func:`force_loop`, linearised by Drake and restricted to ``z`` (:func:`_restrict`); ``link_torque``: also its
+    :attr:`~JointReducedModel.link_torque_map` (the loop linearised from its ``external_torque`` input)."""
     sub, _, sub_point = joint_subsystem(rig, j, point=point, params=chain, torque=torque, friction=friction)
     loop, ctx = force_loop(sub, sub_point, chain, tendon_law)
     lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                     outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-    F, G, res = _restrict(lin, sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0)
+    rate = sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0
+    F, G, res = _restrict(lin, rate)
+    E = None
+    if link_torque:     # a link-side torque (the guides' friction, a load): the loop from its external_torque input
+        ext = linearize(loop.diagram, context=ctx, input="external_torque", outputs=("joint_angle", "joint_torque"),
+                        equilibrium_tolerance=None)
+        E = _coordinates(lin, rate) @ ext.B
     stiffness = float(sub_point["op"].joint_stiffness) if stiffness is None else stiffness
-    return JointReducedModel(name, j, F, G, inertia, damping, stiffness, tendons, res, lin, torque_rate)
+    return JointReducedModel(name, j, F, G, inertia, damping, stiffness, tendons, res, lin, torque_rate, E)
 
 
 def _slowest_damping(F, G, K) -> float:
@@ -461,6 +476,8 @@ class JointDesign:
     gains: np.ndarray                 # (k, 5)
     design_poles: list                # per DoF
     period: float | None = None
+    # the chain's (9.2) observer per DoF (k each): gain L, scale kappa, the guides' presliding stiffness K_g [Nm/rad]
+    observer: dict | None = None
 
     @property
     def static_stiffness(self) -> np.ndarray:
@@ -471,17 +488,57 @@ class JointDesign:
         K = self.gains
         return K[:, 0] / (1.0 + K[:, 2] + K[:, 4])
 
+    def loop(self, dof: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(A, b)``: DoF ``dof``'s designed closed loop from its reference step ``dr``, ``x' = A x + b dr``
+        (continuous) or ``x_k+1 = A x_k + b dr`` (sampled), ``q - q_op = x[0]``.
+
+        State ``z`` (the stage's own loop ``F - G K``), then the sampled chain's previous request (:func:`sampled_model`)
+        and, with :attr:`observer`, the (9.2) observer's ``w_hat``: its compensation ``-kappa d_hat``,
+        ``d_hat = L M (qdot - w_hat)``, joins the request, and the joint carries the guides' friction linearised at
+        rest, their presliding stiffness ``K_g`` (:func:`~awiwi_drake.control.chain.guide_presliding_stiffness`) in
+        parallel with the link: ``F - K_g E e_q^T`` (``E`` the model's :attr:`JointReducedModel.link_torque_map`).
+        The observer reads that spring's torque as a disturbance and cancels it through the chain's lag, so its
+        mode at rest is about ``-Kp / ((Kp + K_g) (1 / L + T))`` (``T`` the lag from the request to the joint
+        torque): where the presliding stiffness dwarfs the impedance (index DIP: ``K_g`` = 38 ``Kp``) it is the
+        slowest mode of the joint."""
+        m, K, nx, nu = self.models[dof], self.gains[dof], self.law.Nx[dof], self.law.Nu[dof]
+        obs = self.observer
+        if obs is not None:
+            m = dataclasses.replace(m, A=m.A - obs["presliding_stiffness"][dof] * m.link_torque_map @ np.eye(1, 4))
+        A, B = _closed_loop_matrix(m, K, self.period)
+        b = B[:, 0] * (nu + K[:4] @ nx + (0.0 if self.period is None else K[4] * nu))
+        if obs is None:
+            return A, b
+        L, M, damping = obs["gain"][dof], m.inertia, m.damping
+        c = obs["scale"][dof] * L * M                   # the compensation -kappa d_hat = c (w_hat - qdot)
+        n = A.shape[0]
+        Ao = np.zeros((n + 1, n + 1))
+        Ao[:n, :n] = A
+        Ao[:n, 1] -= B[:, 0] * c
+        Ao[:n, n] = B[:, 0] * c
+        # w_hat' = (tau - b qdot + d_hat) / M on the deviations (tau - tau_op = z[2]); sampled: its Euler step
+        rate = np.zeros(n + 1)
+        rate[1], rate[2], rate[n] = L - damping / M, 1.0 / M, -L
+        Ao[n] = rate if self.period is None else np.eye(n + 1)[n] + self.period * rate
+        return Ao, np.append(b, 0.0)
+
+    @property
+    def loop_poles(self) -> list:
+        """Per DoF the poles of :meth:`loop` (the stage, and with :attr:`observer` the observer on the guides'
+        presliding stiffness); s-plane (continuous) or z-plane (sampled)."""
+        return [np.linalg.eigvals(self.loop(j)[0]) for j in range(len(self.models))]
+
     def tracking_time_constant(self, min_share: float = 0.01) -> float:
         """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
-        shows, over all DoF: each DoF's designed loop (continuous ``F - G K``, or the sampled chain's
-        ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``) with its reference maps as input; a pole's share
+        shows, over all DoF: each DoF's designed loop (:meth:`loop`: continuous ``F - G K``, or the sampled chain's
+        ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``; with the observer and the guides' presliding stiffness
+        when :attr:`observer` is set) with its reference maps as input; a pole's share
         of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
         ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
         does for a linearised loop).  The compare's short mode sizes its step window with it."""
         taus = []
-        for m, K, nx, nu in zip(self.models, self.gains, self.law.Nx, self.law.Nu):
-            A, B = _closed_loop_matrix(m, K, self.period)
-            b = B[:, 0] * (nu + K[:4] @ nx + (0.0 if self.period is None else K[4] * nu))
+        for j in range(len(self.models)):
+            A, b = self.loop(j)
             lam, V = np.linalg.eig(A)
             cv = V[0]
             wb = np.linalg.solve(V, b)
@@ -547,7 +604,7 @@ def _sdre_law(rig, point, c, p, kw, period):
     for j in range(k):
         for i, dt in enumerate(grid):
             model = _reduced_model(rig, j, point, c, "force", "motion", kw["torque_rate"],
-                                   point["torque_offset"][j] + dt, "", 0.0, 0.0, None, ())
+                                   point["torque_offset"][j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 
@@ -588,9 +645,20 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
                                  tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
                                  friction_observer=friction_observer, **kw)
-    ctrl.design["joint_design"] = d
-    ctrl.design["time_constant"] = d.tracking_time_constant()
+    observe_design(d, ctrl, rig, point)
     return ctrl
+
+
+def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, point: dict) -> None:
+    """Give ``design`` the (9.2) observer of the chain ``ctrl`` (its per-DoF gain and scale) and the guides' presliding
+    stiffness of ``rig`` at ``point`` (:attr:`JointDesign.observer`, :meth:`JointDesign.loop`), and record it and its
+    tracking time constant in ``ctrl.design`` (``joint_design``, ``time_constant``)."""
+    obs = ctrl._observer
+    if obs is not None:
+        design.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
+                               presliding_stiffness=guide_presliding_stiffness(rig, point))
+    ctrl.design["joint_design"] = design
+    ctrl.design["time_constant"] = design.tracking_time_constant()
 
 
 @dataclass
@@ -732,7 +800,6 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     does for a single group.  Every periodic update of the loop must have the period ``1 / rate_hz``.
     ``fused``: as :func:`~awiwi_drake.control.base.closed_loop` (the fused chain by default; the same poles).
     """
-    import dataclasses
 
     from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
     from pydrake.systems.analysis import DiscreteTimeApproximation
@@ -776,6 +843,9 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
         port = diagram.GetInputPort(nm)
         port.FixValue(ctx, op.external_torque if nm == "external_torque" and op.external_torque is not None
                       else np.zeros(port.size()))
+    if ctx.num_continuous_states():        # the one-period map would hold them fixed: poles silently missing
+        raise ValueError(f"sampled_loop_poles: the loop has {ctx.num_continuous_states()} continuous state(s) "
+                         f"besides the sampled rig (a continuous controller or estimator); give a sampled one")
     groups = ctx.get_discrete_state()
     sizes = [groups.get_vector(i).size() for i in range(groups.num_groups())]
     x0 = np.concatenate([groups.get_vector(i).CopyToVector() for i in range(groups.num_groups())])

@@ -48,8 +48,8 @@ import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import clip, positive_part
-from awiwi_drake.components.friction import guide_friction_level
+from awiwi_drake._math import clip
+from awiwi_drake.components.friction import joint_friction_bound
 from awiwi_drake.control.base import StaticLaw, check_gains
 from awiwi_drake.control.compiled import float_inputs, joint_feedback
 from awiwi_drake.control.friction_observer import observer_rate, observer_step
@@ -266,7 +266,9 @@ def JointFrictionObserver_(T):
 
     Per DoF ``j`` (inertia ``M_jj``, bearing damping ``b_jj``): ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``,
     ``d_hat_j = L M_jj (qdot_j - w_hat_j)`` (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the
-    one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces.
+    one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces; ``inertia``
+    (k, k) the DoF inertia matrix ``M`` instead (``M w_hat' = tau - b qdot + d_hat``, ``d_hat = L M (qdot - w_hat)``:
+    the 15.5 backstepping's link model, whose off-diagonal inertial torques are then not counted as friction).
     Inputs ``joint_angle``, ``joint_velocity`` (n, the estimates on the hand), ``tendon_force`` (m); output
     ``friction_compensation`` (k) ``= -scale d_hat`` [Nm] (``scale`` per DoF, default 1), added to the joint stage's
     desired torques; state ``w_hat`` (k), to be started at the measured velocity (0 at rest).
@@ -275,7 +277,8 @@ def JointFrictionObserver_(T):
     :meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`; zeros when the guides have no friction)
     bound the estimate by what the guides' friction can be (:meth:`friction_bound`): per DoF
     ``B_j = sum_i |(P(q) S)_ij| W_i(f_i)``, ``W_i`` the sliding level of tendon i's guide friction at its measured force
-    (:func:`~awiwi_drake.components.friction.guide_friction_level`, pulled: its largest), and the output becomes
+    (:func:`~awiwi_drake.components.friction.joint_friction_bound`: the chain's ``tendon_force`` is the lever's
+    tension, hysteresis inside, so the guides are all it misses), and the output becomes
     ``scale clip(-d_hat, -B, B)``.  The observer is link-side, driven by the measured tendon forces' torque, so its
     ``d_hat`` holds the guides' friction AND any external load; in the thesis (9.1)-(9.2) it sits on the actuator side
     with the strain gauges' joint torque, which contains the load, so a load is not cancelled and the joint stays an
@@ -298,7 +301,14 @@ def JointFrictionObserver_(T):
             self.coupling, self.S = coupling, np.asarray(selection, dtype=float)
             n, k = self.S.shape
             self.Sp = np.linalg.pinv(self.S)
-            self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
+            inertia = np.asarray(inertia, dtype=float)
+            if inertia.ndim == 2:              # the DoF inertia matrix (coupled links): symmetric positive definite
+                self.M = check_gains("inertia", inertia, shape=(k, k), owner="JointFrictionObserver")
+                if not (np.allclose(self.M, self.M.T) and np.linalg.eigvalsh(self.M).min() > 0):
+                    raise ValueError(f"JointFrictionObserver: inertia matrix must be symmetric positive definite, "
+                                     f"got {self.M!r}")
+            else:
+                self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
             self.b = check_gains("damping", damping, shape=(k,), owner="JointFrictionObserver")
             self.gain = check_gains("gain", np.broadcast_to(np.asarray(gain, dtype=float), (k,)).copy(),
                                     shape=(k,), owner="JointFrictionObserver", positive=True)
@@ -346,8 +356,8 @@ def JointFrictionObserver_(T):
             if self.levels is None:
                 return None
             P = np.asarray(self.coupling.P(q) if P is None else P)
-            W = guide_friction_level(positive_part(f), self.levels[0], self.levels[1], 1.0)
-            return np.abs(P @ self.S).T @ W
+            # the measured f is the lever's tension (the rig's tendon_force, hysteresis inside): the guides only
+            return joint_friction_bound(P @ self.S, f, self.levels[0], self.levels[1])
 
         def compensation(self, w_hat, v, bound=None):
             """``scale clip(-d_hat, -bound, bound)`` (k) [Nm] at the observer state ``w_hat`` (k), joint velocities

@@ -4,6 +4,7 @@ The linear model is :func:`awiwi_drake.analysis.linearize` (Drake's ``Linearize`
 
 * :func:`reference_maps` -- ``x_ref = x0 + Nx (r - r0)``, ``u_ref = u0 + Nu (r - r0)``
   from ``[A B; C 0] [Nx; Nu] = [0; 1]`` (equilibrium family of the linear model);
+* :class:`LinearReferenceModel` -- that family around a linearisation;
 * :class:`StateFeedbackLaw` -- ``u = u_ref - K (x - x_ref)``, used by the
   pole-placement and LQR controllers (and SDRE with state-dependent K).
 """
@@ -15,7 +16,7 @@ import numpy as np
 from awiwi_drake.analysis.linear import LinearizationResult
 from awiwi_drake.control.base import REFERENCE_SUFFIX, StaticLaw, StaticLawController, check_gains
 
-__all__ = ["reference_maps", "StateFeedbackLaw", "state_feedback_controller"]
+__all__ = ["reference_maps", "LinearReferenceModel", "StateFeedbackLaw", "state_feedback_controller"]
 
 
 def reference_maps(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -31,30 +32,39 @@ def reference_maps(A: np.ndarray, B: np.ndarray, c: np.ndarray) -> tuple[np.ndar
     return sol[:n], sol[n:]
 
 
-class StateFeedbackLaw(StaticLaw):
-    """``u = u0 + Nu (r - r0) - K (x - x0 - Nx (r - r0))`` (float and AutoDiffXd)."""
+class LinearReferenceModel:
+    """The equilibrium family of a linearisation that holds its output ``reference`` at ``r``:
+    ``x_ref = x0 + Nx (r - r0)``, ``u_ref = u0 + Nu (r - r0)`` (:func:`reference_maps`; ``r0``: the output at
+    the point). Inputs of a law on it: ``<reference>_reference`` (1) and ``state`` (n)."""
 
-    def __init__(self, K, *, x0, u0, Nx, Nu, r0: float = 0.0, reference: str = "joint_angle",
-                 state_port: str = "state", name: str = "state_feedback"):
-        K = np.atleast_2d(check_gains("K", K, owner=name))
-        m, n = K.shape
-        self.K = K
-        self.x0 = check_gains("x0", np.reshape(x0, -1), shape=(n,), owner=name)
-        self.u0 = check_gains("u0", np.reshape(u0, -1), shape=(m,), owner=name)
-        self.Nx = check_gains("Nx", np.reshape(Nx, -1), shape=(n,), owner=name)
-        self.Nu = check_gains("Nu", np.reshape(Nu, -1), shape=(m,), owner=name)
-        self.r0 = float(r0)
+    def __init__(self, lin: LinearizationResult, reference: str = "joint_angle"):
+        out = lin.output(reference)
+        self.Nx, self.Nu = reference_maps(lin.A, lin.B, out.C)
+        self.x0, self.u0, self.r0 = np.asarray(lin.x0, float), np.asarray(lin.u0, float), float(out.y0[0])
         self.reference = reference
-        self.state_port = state_port
-        self.name = name
-        self.inputs = {reference + REFERENCE_SUFFIX: 1, state_port: n}
-        self.output_size = m
+        self.inputs = {reference + REFERENCE_SUFFIX: 1, "state": lin.A.shape[0]}
+
+    def state(self, values):
+        return values["state"]
+
+    def equilibrium(self, r):
+        """``(x_ref, u_ref)`` at the reference ``r`` (float or AutoDiffXd)."""
+        dr = r - self.r0
+        return self.x0 + self.Nx * dr, self.u0 + self.Nu * dr
+
+
+class StateFeedbackLaw(StaticLaw):
+    """``u = u_ref(r) - K (x - x_ref(r))`` around the equilibrium family ``model`` (a :class:`LinearReferenceModel`;
+    float and AutoDiffXd)."""
+
+    def __init__(self, K, model: LinearReferenceModel, *, name: str = "state_feedback"):
+        self.K = np.atleast_2d(check_gains("K", K, shape=(model.Nu.size, model.Nx.size), owner=name))
+        self.model, self.name = model, name
+        self.inputs, self.output_size = dict(model.inputs), self.K.shape[0]
 
     def __call__(self, u):
-        x = u[self.state_port]
-        dr = u[self.reference + REFERENCE_SUFFIX][0] - self.r0
-        err = x - self.x0 - self.Nx * dr
-        return self.u0 + self.Nu * dr - self.K @ err
+        x_ref, u_ref = self.model.equilibrium(u[self.model.reference + REFERENCE_SUFFIX][0])
+        return u_ref - self.K @ (u["state"] - x_ref)
 
 
 def state_feedback_controller(lin: LinearizationResult, K, *, reference: str = "joint_angle",
@@ -63,7 +73,4 @@ def state_feedback_controller(lin: LinearizationResult, K, *, reference: str = "
 
     ``lin`` must include the output ``reference`` (``linearize(rig, op, outputs=("state", reference))``).
     """
-    out = lin.output(reference)
-    Nx, Nu = reference_maps(lin.A, lin.B, out.C)
-    law = StateFeedbackLaw(K, x0=lin.x0, u0=lin.u0, Nx=Nx, Nu=Nu, r0=float(out.y0[0]), reference=reference, name=name)
-    return StaticLawController(law)
+    return StaticLawController(StateFeedbackLaw(np.atleast_2d(K), LinearReferenceModel(lin, reference), name=name))

@@ -50,14 +50,8 @@ def design_lqr(rig: Any, params: LqrParams | None = None, *, r: float | None = N
     p = params or LqrParams()
     lin = lin or linearize(rig, op, outputs=("state", "joint_angle"))
     n, m = lin.B.shape
-    if Q is None:
-        Q = expand_q(p.q_diag, n)
-    else:
-        Q = check_gains("Q", Q, shape=(n, n), owner="lqr")
-    if R is None:
-        R = check_gain("R", p.r if r is None else r, owner="lqr") * np.eye(m)
-    else:
-        R = check_gains("R", np.atleast_2d(R), shape=(m, m), owner="lqr")
+    Q = expand_q(p.q_diag, n) if Q is None else Q                  # lqr checks both (shape, symmetry, definiteness)
+    R = check_gain("R", p.r if r is None else r, owner="lqr") * np.eye(m) if R is None else R
     return lqr(None, Q, R, linearization=lin)
 
 

@@ -54,7 +54,7 @@ from awiwi_drake.control.backstepping import JointModel, impedance_backstepping,
 from awiwi_drake.parameters.backstepping import ImpedanceBacksteppingGains, OptimalGainsCase
 
 __all__ = ["GainFit", "rate_limited_case", "JointForceGainFit", "FingerForceGains", "select_finger_force_gains",
-           "finger_optimal_backstepping_controller", "torque_coordinates", "torque_state_map", "backstepping_feedback",
+           "finger_optimal_backstepping_controller", "torque_state_map", "backstepping_feedback",
            "system_feedback", "optimal_feedback", "gain_distance", "monte_carlo_gains",
            "backstepping_feedback_batch", "gain_distances", "evaluate_samples", "optimize_gains", "OMEGA_NAMES"]
 
@@ -91,18 +91,12 @@ class GainFit:
     method: str
 
 
-def torque_coordinates(stiffness: float) -> np.ndarray:
-    """``T`` with ``[q, qd, tau, taud] = T [q, qd, theta, thetad]``, ``tau = k (theta - q)``."""
-    k = float(stiffness)
-    return np.array([[1, 0, 0, 0], [0, 1, 0, 0], [-k, 0, k, 0], [0, -k, 0, k]], dtype=float)
-
-
 def torque_state_map(model: JointModel, state0) -> np.ndarray:
     """``T`` with ``[q, qd, tau_1..N, taud_1..N] ~= T [q, qd, theta_1..N, omega_1..N]`` at rest at ``state0``.
 
     ``tau_i = -P_i f(x_i)``, ``x_i = r_m theta_i + P_i q + x0_i``: ``dtau_i/dq = -P_i^2 k_i``,
     ``dtau_i/dtheta_i = -P_i k_i r_m`` (and the same for the rates). One torsion spring (P = -1,
-    r_m = 1) gives :func:`torque_coordinates` with ``k = phi'``.
+    r_m = 1) gives ``tau = k (theta - q)`` with ``k = phi'``.
     """
     n_m = model.num_motors
     x = np.asarray(state0, dtype=float)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from awiwi_drake.control.base import check_gain
-from awiwi_drake.analysis.linear import LinearizationResult, closed_loop_poles, linearize
+from awiwi_drake.analysis.linear import LinearizationResult, clean_poles, closed_loop_poles, linearize
 from awiwi_drake.control.linear import state_feedback_controller
 from awiwi_drake.parameters.control import PolePlacementParams
 
@@ -38,8 +38,8 @@ def double_oscillator_polynomial(omega1: float, xi1: float, omega2: float, xi2: 
 
 
 def double_oscillator_poles(p: PolePlacementParams) -> np.ndarray:
-    poles = np.roots(double_oscillator_polynomial(p.omega1, p.xi1, p.omega2, p.xi2))
-    return poles[np.lexsort((poles.imag, poles.real))]
+    """The four poles of (12.13), sorted (:func:`~awiwi_drake.analysis.linear.clean_poles`)."""
+    return clean_poles(np.roots(double_oscillator_polynomial(p.omega1, p.xi1, p.omega2, p.xi2)))
 
 
 def identification_system(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +104,7 @@ def design_pole_placement(rig: Any, params: PolePlacementParams | None = None, o
             warnings.filterwarnings("ignore", message="Convergence was not reached", category=UserWarning)
             K = place_poles(lin.A, lin.B, poles).gain_matrix
         got = closed_loop_poles(lin.A, lin.B, K)
-        want = poles[np.lexsort((poles.imag, poles.real))]
+        want = clean_poles(poles)
         if np.max(np.abs(got - want)) > 1e-6 * np.max(np.abs(want)):
             raise ValueError(f"design_pole_placement: place_poles did not place the poles {want} (got {got})")
     return PolePlacementDesign(K, poles, closed_loop_poles(lin.A, lin.B, K), lin, p)

@@ -41,11 +41,11 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from awiwi_drake._math import is_float
 from awiwi_drake.control.base import COMMAND_PORT, REFERENCE_SUFFIX, check_gain, check_gains
 from awiwi_drake.analysis.linear import linearize, lqr_gain
-from awiwi_drake.control.linear import reference_maps
+from awiwi_drake.control.linear import LinearReferenceModel
 from awiwi_drake.control.lqr import expand_q
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
-__all__ = ["RigJacobian", "PrintedTendonFactorisation", "PrintedJointFactorisation", "TendonSdreModel", "LinearReferenceModel", "SdreController_", "SdreController",
+__all__ = ["RigJacobian", "PrintedTendonFactorisation", "PrintedJointFactorisation", "TendonSdreModel", "SdreController_", "SdreController",
            "tendon_sdre_controller", "joint_sdre_controller"]
 
 
@@ -145,25 +145,6 @@ class TendonSdreModel:
         th = self.fmap.theta_of_force(r)
         zero = th * 0.0
         return np.array([th, zero]), np.array([self.r_m * r])
-
-
-class LinearReferenceModel:
-    """Joint rigs: equilibrium family ``x0 + Nx (r - r0)``, ``u0 + Nu (r - r0)`` of the linearisation."""
-
-    reference = "joint_angle"
-
-    def __init__(self, lin):
-        self.Nx, self.Nu = reference_maps(lin.A, lin.B, lin.output("joint_angle").C)
-        self.x0, self.u0 = lin.x0, lin.u0
-        self.r0 = float(lin.output("joint_angle").y0[0])
-        self.inputs = {"joint_angle_reference": 1, "state": lin.A.shape[0]}
-
-    def state(self, values):
-        return values["state"]
-
-    def equilibrium(self, r):
-        dr = r - self.r0
-        return self.x0 + self.Nx * dr, self.u0 + self.Nu * dr
 
 
 @TemplateSystem.define("SdreController_", T_list=[float, AutoDiffXd])

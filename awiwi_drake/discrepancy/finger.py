@@ -41,7 +41,9 @@ Why not a replay of the finger diagram (multiple shooting, as on the rigs): meas
 multiple-shooting pass of the finger diagram over a 10 s dataset costs about as much as the dataset
 generation (the finger runs at ~0.5-4x real time), and a catalog screen needs tens to hundreds of passes; with
 motor angles and tendon forces measured, the motor and spring laws localise the effect exactly without
-integrating the links (docs/REPRODUCTIONS.md, issue 12).
+integrating the links (docs/REPRODUCTIONS.md, issue 12). The one replay: a named hysteresis loop's write-back
+(a few passes, once the effects are named): a Dahl state on the noisy measured elongation is relaxed by the
+noise, on the replayed finger's it is not (:meth:`FingerResiduals.replay`, :func:`_hysteresis_law_fit`).
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.special import ndtr
@@ -259,11 +262,12 @@ class FingerResiduals:
         # is linear in them, so the filtered relation y = P q holds exactly (consistent filtering; the thumb's
         # h(q) is not linear: there it holds to the curvature of h over the kernel's width)
         raw = np.maximum(self._force_raw, 1e-3)
-        hyst = rig.drive.model.hysteresis      # a nominal loop on single tendons (tendon_springs): its force removed
-        for i, h in enumerate(hyst if isinstance(hyst, tuple) else ()):
-            if h.enabled:
-                raw[i] = np.maximum(raw[i] - hysteresis_loop(raw[i], laws_t[i], h, self.sig_force[i],
-                                                              self.settings.finger_hysteresis_play, self.dt), 1e-3)
+        hyst = rig.drive.model.hysteresis      # a nominal loop on single tendons (tendon_springs): its force removed,
+        if isinstance(hyst, tuple) and any(h.enabled for h in hyst):   # the loop of the finger replayed (replay)
+            z = self.replay(self.params)["loop"]
+            for i, h in enumerate(hyst):
+                if h.enabled:
+                    raw[i] = np.maximum(raw[i] - z[i], 1e-3)
         self._x_full = np.stack([np.asarray(laws_t[i].inverse_force(raw[i]), float) for i in range(m)])
         xm = self.consistent(self._x_full)
         stiff = np.stack([np.asarray(laws_t[i].stiffness(xm[i]), float) for i in range(m)])
@@ -306,16 +310,87 @@ class FingerResiduals:
         self.proj, self.wsq, self.stiff = proj, wsq, stiff
         self.elong = rig.offsets[:, None] + r * self.theta + hq
 
-    def loop_removed(self, i: int, h) -> np.ndarray:
-        """The spring-side residual's change (m, K) when tendon ``i``'s spring carries the loop ``h``
-        (:class:`~awiwi_drake.parameters.components.HysteresisParams`): its force removed from the measured one
-        before the inverse spring law, as a nominal finger with that loop does (:meth:`_spring_side`), not
-        linearised; the weights and the projection stay this residual's (they move by the loop's share of the
-        stiffness only)."""
+    def loop_removed(self, i: int, z: np.ndarray) -> np.ndarray:
+        """The spring-side residual's change (m, K) when tendon ``i``'s spring carries the loop force ``z`` [N]
+        (full rate): removed from the measured force before the inverse spring law, as a nominal finger with that
+        loop does (:meth:`_spring_side`), not linearised; the weights and the projection stay this residual's (they
+        move by the loop's share of the stiffness only)."""
         law, F = self.rig.spring_laws[i], np.maximum(self._force_raw[i], 1e-3)
-        z = hysteresis_loop(F, law, h, self.sig_force[i], self.settings.finger_hysteresis_play, self.dt)
         shift = self.consistent(self._x_full[i] - np.asarray(law.inverse_force(np.maximum(F - z, 1e-3)), float))
         return (self.proj[:, :, i] * (self.wsq[i] * shift)[:, None]).T
+
+    def replay(self, params) -> dict:
+        """The package's finger (:func:`~awiwi_drake.hand.diagrams.finger_diagram` of ``params``, a
+        :class:`~awiwi_drake.parameters.hand.FingerRigParams`) replayed on the recorded motor torques, with a weak
+        spring ``finger_replay_stiffness`` (critically damped with the motor inertia) pulling each motor towards its
+        measured angle smoothed by ``finger_motor_rest_filter``: open loop the motion that stretches no tendon
+        drifts (motors and joints together, no motor damping), the tendons' own dynamics are 17x stiffer than the
+        pull. Start: the smoothed angles and the joints from the smoothed elongations (least squares), loop forces
+        0. Returns ``elongation`` (m, N) [m] and ``loop`` (m, N) [N] (the hysteresis forces, 0 without a loop):
+        noise-free where the measured force's elongation carries 17 um per sample, against a presliding length of
+        0.4 mm whose Dahl state each noise step relaxes (docs/REPRODUCTIONS.md). Cached per ``params``."""
+        cache = self.__dict__.setdefault("_replays", {})
+        if params in cache:
+            return cache[params]
+        from pydrake.systems.framework import DiagramBuilder
+        from pydrake.systems.primitives import Adder, MatrixGain, TrajectorySource
+        from pydrake.trajectories import PiecewisePolynomial
+        from scipy.ndimage import gaussian_filter1d
+
+        from awiwi_drake.analysis import SimulationDivergedError, simulate
+        rig = finger_diagram(finger=self.finger, params=params)
+        m, n, dt, t = self.m, self.n, self.dt, self.ds.time
+        width = self.settings.finger_motor_rest_filter / dt
+        th = gaussian_filter1d(self._theta_raw, width, axis=1, mode="nearest")
+        om = gaussian_filter1d(self._theta_raw, width, axis=1, order=1, mode="nearest") / dt
+        x = gaussian_filter1d(np.stack([np.asarray(law.inverse_force(np.maximum(f, 1e-3)), float)
+                                        for law, f in zip(rig.spring_laws, self._force_raw)]), width, axis=1,
+                              mode="nearest")
+        c, y = rig.coupling, x[:, :2] - rig.offsets[:, None] - self.r * th[:, :2]
+        h0 = np.asarray(c.h(np.zeros(n)), float)
+        q = np.zeros((n, 2))
+        for _ in range(self.settings.finger_gauss_newton_iterations):   # h(q) - h(0) = y at the first two samples
+            for k in range(2):
+                q[:, k] += np.linalg.lstsq(np.asarray(c.P(q[:, k]), float),
+                                           y[:, k] - (np.asarray(c.h(q[:, k]), float) - h0), rcond=None)[0]
+        K = self.settings.finger_replay_stiffness
+        D = 2.0 * np.sqrt(K * self.B)
+        b = DiagramBuilder()
+        fd = b.AddNamedSystem("finger", rig.diagram)
+        pull = b.AddNamedSystem("pull_to_measured", MatrixGain(-np.hstack([np.diag(np.full(m, K)), np.diag(D)])))
+        add = b.AddNamedSystem("torque", Adder(2, m))
+        b.Connect(fd.GetOutputPort("motor_state"), pull.get_input_port())
+        b.Connect(pull.get_output_port(), add.get_input_port(1))
+        b.Connect(add.get_output_port(), fd.GetInputPort("motor_torque"))
+        U = np.stack([self.ds.inputs[f"motor_torque_{i + 1}"] for i in range(m)])     # held per sample, as logged
+        w = b.AddNamedSystem("recorded_torque", TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
+            t, U + K * th + D[:, None] * om)))
+        b.Connect(w.get_output_port(), add.get_input_port(0))
+        b.ExportInput(fd.GetInputPort("external_torque"), "external_torque")
+        b.ExportOutput(fd.GetOutputPort("state"), "state")
+        diagram = b.Build()
+        ctx = diagram.CreateDefaultContext()
+        diagram.GetInputPort("external_torque").FixValue(ctx, np.zeros(n))
+        x0 = np.zeros(diagram.num_continuous_states())
+        x0[:n], x0[n:2 * n] = q[:, 0], (q[:, 1] - q[:, 0]) / dt
+        x0[2 * n:2 * n + m], x0[2 * n + m:2 * n + 2 * m] = th[:, 0], om[:, 0]
+        ctx.SetContinuousState(x0)
+        try:
+            res = simulate(diagram, ctx, t[-1], log=("state",), log_period=dt, mode="fixed_step",
+                           step=min(dt, 1.0 / 3000.0))
+        except SimulationDivergedError as exc:
+            raise FloatingPointError(f"{self.ds.name}: the finger replay diverged: {exc}") from None
+        S = np.asarray(res["state"], float).T
+        if S.shape[1] != len(t):
+            raise RuntimeError(f"{self.ds.name}: the finger replay logged {S.shape[1]} samples, expected {len(t)}")
+        qs, ths = S[:n], S[2 * n:2 * n + m]
+        elong = rig.offsets[:, None] + self.r * ths + np.stack([np.asarray(c.h(qk), float) - h0 for qk in qs.T], 1)
+        loop = np.zeros((m, len(t)))
+        for k, name in enumerate(rig.state_names):
+            if name.startswith("hysteresis_force["):
+                loop[rig.tendon_names.index(name[len("hysteresis_force["):-1])] = S[k]
+        cache[params] = out = {"elongation": elong, "loop": loop}
+        return out
 
     def _joint_side(self, TH: np.ndarray, g0, g1, g2) -> None:
         """The links' equation residual ``rho = M q'' + C q' + d q' + G [q; q'] + P^T (f + g_nominal)`` (n, K),
@@ -455,6 +530,7 @@ class Candidate:
     floor: float                # the noise-equivalent size it is compared with
     rejected: str = ""
     fitted: np.ndarray = field(default=None, repr=False)   # the effect's contribution to the residual
+    loop: np.ndarray = field(default=None, repr=False)     # spring_hysteresis: the loop force [N] at the full rate
 
 
 def _play(x: np.ndarray, half_width: float) -> np.ndarray:
@@ -688,6 +764,77 @@ def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, bas
     c.at_bound = _at_bound(c.effect, c.params, bounds)
     f_i = fr.force[i]
     c.size = float(np.sqrt(np.mean((C + np.expm1(E) * f_i) ** 2)))
+
+
+def _with_loop(params, tendon: str, h: HysteresisParams):
+    """``params`` (FingerRigParams) with the hysteresis loop ``h`` on ``tendon``'s ``tendon_springs`` entry."""
+    own = dict(params.tendon_springs)
+    own[tendon] = own.get(tendon, params.spring).replace(hysteresis=h)
+    return params.replace(tendon_springs=tuple(own.items()))
+
+
+def _hysteresis_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, base_spring: np.ndarray,
+                        named, rounds: int) -> float:
+    """The accepted hysteresis candidate refitted as the package's loop on the finger's own motion, what is
+    written back: the screen's columns run the Dahl law on the elongation the measured force gives, whose noise
+    (17 um per sample at 30 dB against a presliding length of 0.4 mm) relaxes the loop at every step, so its fit
+    is biased (a longer, larger loop; reloaded, 13.5x the floor on index_h6). Here the elongation is the finger
+    replayed on the recorded commands (:meth:`FingerResiduals.replay` of ``named``, the dataset's parameters with
+    the effects named so far written in, and this loop):
+    the loop ``beta f_el(x) + z0`` (``spring.hysteresis_rate``, solved per sample by
+    :func:`~awiwi_drake.components.friction.dahl_path`) is linear in ``(beta, z0)`` along it, fitted by bounded
+    least squares to the spring-side residual for each presliding length (the grid, then a bounded search on
+    ``log delta`` around the best), and the replay repeats with the new loop (the motion moves with it) until the
+    parameters settle (1 %), ``rounds`` replays at most. Kept: the loop that, judged on its own replay's motion,
+    leaves the least (a refit is judged on the motion of the loop before it; on index_h6 the first refit left 0.95x
+    the floor on the screen's motion and 1.5x on its own). ``c`` is updated (parameters, the loop force along its
+    replay's elongation, size, ``at_bound``); returns the energy the last refit leaves on its replay's motion (how
+    the tendons of a class compare after one replay)."""
+    from scipy.optimize import minimize_scalar
+    i, s = c.tendon, fr.settings
+    law, grid = fr.rig.spring_laws[i], np.asarray(s.finger_hysteresis_lengths, float)
+    e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]
+    names, R = ["hysteresis_ratio", "hysteresis_width"], base_spring.ravel()
+    h = HysteresisParams(enabled=True, width_ratio=max(c.params["hysteresis_ratio"], 0.0),
+                         width_offset=max(c.params["hysteresis_width"], 0.0),
+                         presliding_length=c.params["hysteresis_length"])
+    best = None
+    for _ in range(rounds):
+        x = fr.replay(_with_loop(named, fr.rig.tendon_names[i], h))["elongation"][i]
+        fel = np.asarray(law.force(x), float)
+
+        def columns(length):
+            return np.stack([(e_i * fr.consistent(dahl_path(x, lv, length, h.smoothing_velocity, fr.dt))[:, None]).T.ravel()
+                             for lv in (fel, np.ones_like(fel))]).T
+
+        def fit(length):
+            X = columns(length)
+            beta = _lsq(X, R, names, bounds)
+            return float(np.sum((R - X @ beta) ** 2)), beta
+
+        # the loop this replay ran with, judged on its own motion: what a reload of it leaves
+        left = float(np.sum((R - columns(h.presliding_length) @ [h.width_ratio, h.width_offset]) ** 2))
+        if best is None or left < best[0]:
+            best = (left, h, x, fel)
+        k = int(np.argmin([fit(d)[0] for d in grid]))
+        lo, hi = np.log(grid[max(k - 1, 0)]), np.log(grid[min(k + 1, len(grid) - 1)])
+        length = float(np.exp(minimize_scalar(lambda u: fit(np.exp(u))[0], bounds=(lo, hi), method="bounded",
+                                              options={"xatol": 0.01}).x)) if hi > lo else float(grid[k])
+        refit, beta = fit(length)
+        new = h.replace(width_ratio=float(beta[0]), width_offset=float(beta[1]), presliding_length=length)
+        settled = np.allclose([new.presliding_length, new.width_ratio * np.mean(fel) + new.width_offset],
+                              [h.presliding_length, h.width_ratio * np.mean(fel) + h.width_offset], rtol=0.01)
+        h = new
+        if settled:
+            break
+    _, h, x, fel = best
+    c.loop = dahl_path(x, h.width_ratio * fel + h.width_offset, h.presliding_length, h.smoothing_velocity, fr.dt)
+    c.params.update(hysteresis_ratio=h.width_ratio, hysteresis_width=h.width_offset,
+                    hysteresis_length=h.presliding_length)
+    c.at_bound = _at_bound(c.effect, c.params, bounds)
+    f_i = fr.force[i]
+    c.size = float(np.sqrt(np.mean(((h.width_ratio * f_i + h.width_offset) * np.tanh(f_i)) ** 2)))
+    return refit
 
 
 def _at_bound(effect: str, p: dict, bounds: CatalogBounds) -> list:
@@ -946,6 +1093,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
         return mot, spr, jnt
 
     n_phys = n_nuis = 0
+    loops: dict = {}        # step index -> [the accepted hysteresis candidate (loop removed), its equals]
     while True:
         mot, spr, jnt = current()
         if max(mot) < floor and spr < floor and jnt < floor:
@@ -1002,11 +1150,14 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                 experiment = "; ".join(x for x in (experiment, how) if x)
         if win.side == "motor":
             base_motor = base_motor - win.fitted
-        elif win.effect == "spring_hysteresis":   # removed as the written-back loop removes it (not linearised)
-            g = win.params
-            base_spring = base_spring - fr.loop_removed(win.tendon, HysteresisParams(
+        elif win.effect == "spring_hysteresis":   # the screen's loop, removed as a nominal loop is (not linearised);
+            g = win.params                        # refitted on the replayed finger once every effect is named (below)
+            win.loop = hysteresis_loop(fr._force_raw[win.tendon], fr.rig.spring_laws[win.tendon], HysteresisParams(
                 enabled=True, width_ratio=g["hysteresis_ratio"], width_offset=g["hysteresis_width"],
-                presliding_length=g["hysteresis_length"]))
+                presliding_length=g["hysteresis_length"]), fr.sig_force[win.tendon], settings.finger_hysteresis_play,
+                fr.dt)
+            base_spring = base_spring - fr.loop_removed(win.tendon, win.loop)
+            loops[len(steps)] = [win] + [c for c in tied if c.effect == win.effect]
         elif win.side == "joint":
             base_joint = base_joint - win.fitted
         else:
@@ -1018,6 +1169,32 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                                 members, experiment, win.z, win.delta_bic))
         say(f"added {win.effect} on {places[win.tendon]} ({win.kind}, {status}, z {win.z:.1f}, "
             f"dBIC {win.delta_bic:.1f}): " + ", ".join(f"{k} = {v:.4g}" for k, v in win.params.items()))
+    # the write-back's loops: refitted on the finger replayed with every other named effect (_hysteresis_law_fit; a
+    # motor friction left out moves the replay's motor: thumb_h3 with its friction named after the loop, 480 um of
+    # elongation error), on the tendon of the screen's equals where the refit leaves the least (the screen's columns
+    # cannot tell antagonists apart)
+    for k, same in loops.items():
+        others = augmented_finger_parameters(SimpleNamespace(steps=steps[:k] + steps[k + 1:],
+                                                             tendon_names=fr.rig.tendon_names), fr.params).params
+        without = base_spring + fr.loop_removed(same[0].tendon, same[0].loop)
+        try:
+            left = {id(c): _hysteresis_law_fit(fr, c, bounds, without, others, 1) for c in same}
+        except FloatingPointError as exc:     # said, and the screen's loop kept
+            warnings.append(f"{exc}: spring_hysteresis on {steps[k].place} is written as the screen fitted it (on "
+                            f"the measured force's elongation, whose noise biases it)")
+            say("warning: " + warnings[-1])
+            continue
+        c = min(same, key=lambda c: left[id(c)])
+        _hysteresis_law_fit(fr, c, bounds, without, others, settings.finger_hysteresis_refits)
+        base_spring = without - fr.loop_removed(c.tendon, c.loop)
+        st = steps[k]
+        if c.tendon != st.tendon - 1:     # the class's member the replay prefers: named first, the other a member
+            swap = {f"{c.effect} on {places[c.tendon]}": f"{c.effect} on {st.place}"}
+            st.members = [st.members[0]] + [swap.get(mb, mb) for mb in st.members[1:]]
+            st.tendon, st.place = c.tendon + 1, places[c.tendon]
+        st.parameters = c.params
+        say(f"spring_hysteresis on {st.place} refitted on the replayed finger: "
+            + ", ".join(f"{key} = {v:.4g}" for key, v in c.params.items()))
     mot, spr, jnt = current()
     after = {"motor": mot, "spring_total": spr,
              "joint": jnt if fr.joint_checked else float("nan")}

@@ -270,9 +270,11 @@ def screen(st: ResidualState, effects: list, bounds: CatalogBounds, rig: str, mi
         rss0 = float(st.e[tr].sum())
         rss1 = float(e_after[tr].sum())
         dbic = st.n_train * math.log(max(rss1, 1e-300) / max(rss0, 1e-300)) + k * math.log(st.n_train)
+        # the columns of g are sensitivities per unit parameter ((ref - R) / d above), so beta is the
+        # parameter change itself: r(p + beta) ~ r(p) - g beta, minimised over beta
         params = dict(shape)
-        for (cname, d), b in zip(cols, beta):
-            params[cname] = float(st.base[PARAM_INDEX[cname]] + b * d)
+        for (cname, _), b in zip(cols, beta):
+            params[cname] = float(st.base[PARAM_INDEX[cname]] + b)
         out.append(dict(effect=eff, label=label, params=params, gain=gain, z=z, dbic=dbic,
                         rel=gain / max(st.excess, 1e-12), e_after=e_after, fallback=fallback.get(eff.name)))
     probe(st, out, bounds, rig)

@@ -41,8 +41,8 @@ class CompareShortMode(Parameters):
     The step window comes from the closed loops themselves: ``step_time_constants``
     times the slowest tracking time constant of the compared loops
     (:func:`awiwi_drake.control.compare.dominant_time_constant`), so that a
-    well-tuned loop settles; never shorter than ``min_step_duration`` and never
-    longer than the full test.
+    well-tuned loop settles; never shorter than ``min_step_duration`` (longer than the
+    full test when a design's slowest mode needs it).
     """
 
     step_time_constants: float = param(5.0, unit="-", low=1.0, high=20.0,

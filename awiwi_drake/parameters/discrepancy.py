@@ -189,6 +189,21 @@ class DiscrepancySettings(Parameters):
                "closes within ~3 delta, 2.4 mm: about the travel of one excitation cycle); it holds the package's "
                "HysteresisParams.presliding_length 0.4 mm",
         doc="finger diagnosis: presliding lengths of the hysteresis candidate")
+    finger_replay_stiffness: float = param(
+        0.02, unit="N m/rad", low=0.0,
+        source="chosen: the finger diagram replayed open loop on the recorded commands drifts along the motion that "
+               "stretches no tendon (motors and joints together; no motor damping): from an initial state estimated "
+               "from the first samples the index's elongations were off by 13-43 um (truth's own parameters, "
+               "hysteresis on index_h6, 3 s, 30 dB); a spring of this stiffness pulling each motor towards its "
+               "smoothed measured angle (6 % of a tendon's k r^2 = 0.35 N m/rad, critically damped with the motor "
+               "inertia) leaves 1-6.5 um",
+        doc="finger diagnosis: stiffness holding the replayed motors to the measured angles (hysteresis write-back)")
+    finger_hysteresis_refits: int = param(
+        3, unit="-", low=1, high=100,
+        source="chosen: the write-back's loop is refitted on the replayed elongation, which moves with the loop, and "
+               "the loop that leaves the least on its own replay is kept: on index_h6 (3 s) the third replay's "
+               "(1.02x the floor; the fourth 1.03x), on thumb_h3 (10 s) 1.04x after three; each replay 0.3-1.1 CPU s",
+        doc="finger diagnosis: replays of the hysteresis write-back at most")
     finger_motion_filters: tuple = param(
         (1e-3, 1.4e-3, 2e-3, 2.8e-3, 4e-3, 5.6e-3, 8e-3), unit="s", low=0.0, low_inclusive=False,
         source="chosen: Gaussian smoothing of the motion a nonlinear law is evaluated on (the estimated tendon travel "

@@ -159,27 +159,42 @@ class HandChainParams(Parameters):
                 "period h (the rule that fixed the joint-rig backstepping at 3 kHz, control/backstepping_registry.py); "
                 "measured on the index: unclamped the 15.5 joint design has a pole at -6838 1/s (h lambda = -2.3 "
                 "at 3 kHz) and the sampled loop's spectral radius is 1.18"))
-    friction_scale: float = param(0.5, unit="-", low=0.0, high=1.0,
-                                  source="chosen: ch. 3 asks to under-compensate; measured: the slope of (3.8) at "
-                                         "rest (gamma1 gamma2 = 5.6 Nm s/rad) cancelled in full behind the 3 kHz "
-                                         "hold (B / h = 6 Nm s/rad) makes the sampled backstepping chatter",
-                                  doc="motor friction (3.8) fed forward by the motor-position tendon level (11.3) of "
-                                      "two-time-scale and the 15.2 / 15.4 finger backstepping variants (the (10.2) "
-                                      "force law: force_friction_scale; the 15.5 finger backstepping: "
-                                      "backstepping_friction_scale)")
+    friction_scale: float = param(
+        0.5, unit="-", low=0.0, high=1.0,
+        source=("under-compensation (ch. 3) with a stability margin as backstepping_friction_scale: the sampled loops "
+                "at rest (3 kHz, estimator, default physics) of the laws that use it stay stable while the real (3.8) "
+                "slope is 14 % below the model's (s <= s_crit / 1.15, the force loop's own margin, "
+                "force_friction_scale). The 15.4 (nonlinear-spring) variant is stable up to "
+                "s_crit = 0.58 on the index and middle (a 776 Hz link mode, +90 1/s at s = 1), 0.985 on the thumb, "
+                "1.14-1.15 on the ring and fifth; the 15.2 (position) variant up to 1.05 (thumb) - 1.16 (index); "
+                "two-time-scale is stable at 1 (radius 0.9994 / 0.9998 index / thumb): 0.58 / 1.15 = 0.50. Measured "
+                "on a step (0.2 rad on every DoF of the index and the thumb, 3 kHz, estimator, 0.4 s): at 1 none of "
+                "the 15.2, 15.4 and two-time-scale loops chatters (no reversal of the motor commands' increments "
+                "over the last 0.1 s, rms increment <= 2e-4 Nm per period); the 15.4 index loop's instability at "
+                "rest does not show in the step (its guides end at their sliding level, not in presliding). This "
+                "source formerly said full compensation 'makes the sampled backstepping chatter': no step shows it"),
+        doc="motor friction (3.8) fed forward by the motor-position tendon level (11.3) of "
+            "two-time-scale and the 15.2 / 15.4 finger backstepping variants (the (10.2) "
+            "force law: force_friction_scale; the 15.5 finger backstepping: "
+            "backstepping_friction_scale)")
     backstepping_friction_scale: float = param(
         0.8, unit="-", low=0.0, high=1.0,
-        source=("chosen: the fraction of the motor friction (3.8) the 15.5 finger backstepping feeds forward (ch. 3: "
-                "under-compensate). Its plain law's rest does not depend on it (the friction dead band is the guides' "
-                "and the lever's: index MCP 0.100 / 0.098 / 0.096 rad short at 0 / 0.5 / 0.95), but with the (9.2) "
-                "observer's compensation (backstepping-friction-observer) the motors' residual friction slows the "
-                "observer's mode at rest (thumb, continuous loop: -0.52 1/s at 0.5, -1.14 at 1): compare --rig hand "
-                "--short settled 8 / 11 / 10 of 19 steps at 0.5 / 0.8 / 0.95 (median end error 0.0069 / 0.0038 / "
-                "0.0031 rad, 3.4 % saturated). The sampled plain loop through the estimator at rest (spectral radius "
-                "on the thumb / index) is 0.994 / 0.990 at 0.5, 0.986 / 0.982 at 0.8, 0.988 / 0.979 at 1 "
-                "(the former 'full compensation chatters' predates the modal gain design); 0.8 keeps ch. 3's "
-                "under-compensation. The 15.2 / 15.4 variants keep friction_scale: at 0.8 the nonlinear-spring "
-                "variant's sampled loop through the estimator has spectral radius 1.018 on the index"),
+        source=("under-compensation (ch. 3: conservative) fixed by two measurements apart from the hand compare that "
+                "judges it. (1) Stability margin: at rest only the real (3.8) slope less the fed-forward one enters "
+                "the loop, so a plant whose (3.8) is c times the model's sees the fraction s / c. The 15.5 law's "
+                "sampled loops at rest (3 kHz, estimator, default physics) are stable up to s_crit = 1.045 on the "
+                "thumb and 1.11-1.14 on the index, middle, ring and fifth (with the (9.2) observer, "
+                "backstepping-friction-observer: 1.11 / 1.20), so at 0.8 the thumb stays stable while its real slope "
+                "is above 77 % of the model's, Table 3.3 being one motor's fit (tests/test_hand_control.py: radius "
+                "0.987 at 80 %, 1.001 at 75 %). (2) Motion: 0.9, which gives the fastest decay at rest (thumb / index "
+                "radius 0.969 / 0.974 against 0.986 / 0.982 at 0.8), loses the light PIP/DIP mode of the "
+                "friction-free index in optimal-backstepping's 4 Hz sine (DIP gain 0.94 -> 0.38, PIP 0.95 -> 1.29; "
+                "tests/test_finger_optimal_backstepping.py): the motors' residual friction damps that mode in motion. "
+                "No step chatters even at 1 (0.2 rad on every DoF of the index and the thumb, 0.4 s: no reversal of "
+                "the command increments over the last 0.1 s; at 1.5 the loop is unstable, rms increment 0.1 Nm per "
+                "period). The plain law's rest does not depend on it (the guides' and the lever's friction dead band: "
+                "index MCP 0.100 / 0.098 / 0.096 rad short at 0 / 0.5 / 0.95); with the observer its slowest mode at "
+                "rest is -0.82 / -1.14 1/s on the thumb at 0.8 / 1. The 15.2 / 15.4 variants keep friction_scale"),
         doc="motor friction (3.8) fed forward by the 15.5 finger backstepping (variant antagonistic)")
     force_friction_scale: float = param(
         1.0, unit="-", low=0.0, high=1.0,

@@ -74,25 +74,9 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     """
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
-    model = DriveModel(p.motor, (spring,), ConstantCoupling(np.zeros((1, 0))), np.zeros(1), p.motor.pulley_radius,
-                       p.spring.hysteresis)
-    b = DiagramBuilder()
-    dyn = b.AddNamedSystem("tendon_drive", rig_dynamics_system(model))
-    split = b.AddNamedSystem("state_split", Demultiplexer([1] * model.num_states))
-    laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
-    b.Connect(dyn.get_output_port(), split.get_input_port())
-    b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
-    b.ExportInput(dyn.get_input_port(), "motor_torque")
-    b.ConnectInput("motor_torque", laws.GetInputPort("motor_torque"))
-    b.ExportOutput(dyn.get_output_port(), "state")
-    b.ExportOutput(split.get_output_port(0), "motor_angle")
-    b.ExportOutput(split.get_output_port(1), "motor_velocity")
-    for nm in ("tendon_force", "tendon_stiffness", "applied_torque"):
-        b.ExportOutput(laws.GetOutputPort(nm), nm)
-    diagram = b.Build()
-    diagram.set_name("tendon-rig")
-    drive = TendonDrive(diagram, model)
-    names = state_names(motors=1, hysteresis=drive.hysteresis)
+    diagram, drive, names, sampled = _link_rig(
+        name="tendon-rig", motor=p.motor, spring=spring, coupling=ConstantCoupling(np.zeros((1, 0))), inertia=None,
+        damping=None, hysteresis=p.spring.hysteresis)
 
     def equilibrium(tendon_force: float | None = None) -> OperatingPoint:
         tendon_force = p.operating_force if tendon_force is None else float(tendon_force)
@@ -109,17 +93,19 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
 
     return Rig("tendon-rig", diagram, p, names, equilibrium, None, spring, drive=drive,
                tension_only=True, torque_limit=_limit(p.motor), max_force=spring.max_force,
-               tendon_force_of_state=tendon_force_of_states(drive.model))
+               tendon_force_of_state=tendon_force_of_states(drive.model), sampled_diagram=sampled[0],
+               sampled_state=sampled[1], add_sampled=sampled[2])
 
 
 def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, motor_pulley_radius=None):
     """A one-link rig's parts (module docstring): ``(diagram, drive, state_names, (build, sampled_state, add))``.
-    ``spring``: one law for every tendon, or a :class:`~awiwi_drake.components.spring.TendonSprings`."""
+    ``spring``: one law for every tendon, or a :class:`~awiwi_drake.components.spring.TendonSprings`; no joint
+    in ``coupling`` (``inertia`` None): the tendon rig, without the link's ports."""
     names = state_names(joints=coupling.num_joints, motors=coupling.num_tendons, hysteresis=hysteresis.enabled)
     r_m = motor.pulley_radius if motor_pulley_radius is None else float(motor_pulley_radius)
     laws = spring.laws if isinstance(spring, TendonSprings) else (spring,) * coupling.num_tendons
-    model = DriveModel(motor, laws, coupling, np.zeros(coupling.num_tendons), r_m, hysteresis,
-                       link_inertia=(float(inertia),), link_damping=(float(damping),))
+    link = {} if inertia is None else dict(link_inertia=(float(inertia),), link_damping=(float(damping),))
+    model = DriveModel(motor, laws, coupling, np.zeros(coupling.num_tendons), r_m, hysteresis, **link)
 
     def add(b, period=None, *, hold_applied_torque=False) -> RigPorts:
         """The rig's systems added to the DiagramBuilder ``b`` (no sub-diagram), continuous (``period``
@@ -139,16 +125,19 @@ def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, mo
             dynamics = rig_integration_system(model)
             dynamics.set_name("rig_dynamics")     # Drake names the approximation DiscreteTimeApproximated_<name>
             dyn = b.AddSystem(sampled_dynamics(dynamics, period))
-        inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
-        b.Connect(inputs.get_output_port(), dyn.get_input_port())
-        ins = {"motor_torque": [inputs.get_input_port(0)], "external_torque": [inputs.get_input_port(1)]}
+        ins = {"motor_torque": [dyn.get_input_port()]}
+        if n:
+            inputs = b.AddNamedSystem("rig_inputs", Multiplexer([m, n]))
+            b.Connect(inputs.get_output_port(), dyn.get_input_port())
+            ins = {"motor_torque": [inputs.get_input_port(0)], "external_torque": [inputs.get_input_port(1)]}
         outs = {"state": dyn.get_output_port()}
-        parts = [("joint_angle", n), ("joint_velocity", n), ("motor_angle", m), ("motor_velocity", m)]
-        parts += [("hysteresis_force", m)] if model.has_hysteresis else []
+        parts = [("joint_angle", n), ("joint_velocity", n)] if n else []
+        parts += [("motor_angle", m), ("motor_velocity", m)] + ([("hysteresis_force", m)] if model.has_hysteresis else [])
         split = b.AddNamedSystem("state_split", Demultiplexer([size for _, size in parts]))
         b.Connect(dyn.get_output_port(), split.get_input_port())
-        for i, (nm, _) in enumerate(parts[:4]):
-            outs[nm] = split.get_output_port(i)
+        for i, (nm, _) in enumerate(parts):
+            if nm != "hysteresis_force":
+                outs[nm] = split.get_output_port(i)
         laws = b.AddNamedSystem("rig_outputs", LinkRigOutputs_[float](model))
         b.Connect(dyn.get_output_port(), laws.GetInputPort("state"))
         held = None
@@ -159,7 +148,7 @@ def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, mo
             ins["motor_torque"].append(held.get_input_port())
             b.Connect(held.get_output_port(), laws.GetInputPort("motor_torque"))
             outs["held_motor_torque"] = held.get_output_port()   # for the loop's motor_torque
-        for nm in ("joint_torque", "tendon_force", "tendon_stiffness", "applied_torque"):
+        for nm in ("joint_torque",) * bool(n) + ("tendon_force", "tendon_stiffness", "applied_torque"):
             outs[nm] = laws.GetOutputPort(nm)
         return RigPorts(ins, outs, dyn, held)
 
