@@ -8,13 +8,6 @@ A candidate is accepted only if all of these hold:
   excess and ``min_floor_gain`` of the noise floor;
 * **better than the simpler model** on training data by BIC (``delta_bic < 0``);
 * **identifiable**: no fitted parameter rests on a bound (a bound is not an estimate);
-* **periodic** (``motor_ripple``): a ripple whose largest harmonic completes fewer than
-  :data:`RIPPLE_MIN_PERIODS` periods over the motor-angle range the data cover is a generic smooth
-  function of the angle there (the rule of :func:`~awiwi_drake.discrepancy.localise.locate`); when a
-  recalibration of the nominal model (all calibration candidates fitted jointly, :func:`recalibration_effect`)
-  explains about as much, it is named only if, refitted on top of that recalibration, it passes every test
-  again (it beats the simpler model): a torque-constant error is exactly such a recalibration and a
-  low-order "ripple" fits it (issue 12, the benchmark's ``unknown`` row);
 * **material**: the fitted effect is larger than what the sensor noise can show
   (:func:`materiality`: a delay of at least one sample; a hysteresis half-width,
   guide friction, force-sensor error above the noise-equivalent force; a friction
@@ -33,12 +26,11 @@ import numpy as np
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
 from . import laws
-from .catalog import EFFECTS, Effect
+from .catalog import EFFECTS
 from .replay import ReplayEngine
 
 __all__ = ["NoiseEquivalent", "noise_equivalent", "materiality", "rejection_reason", "separating_experiment",
-           "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS", "ripple_periods", "recalibration_effect",
-           "RIPPLE_MIN_PERIODS"]
+           "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS"]
 
 
 class NoiseEquivalent:
@@ -179,37 +171,6 @@ def rejection_reason(c, st, settings: DiscrepancySettings) -> str:
     if m and not m["material"]:
         return f"not material: {m['measure']} ({m['size']:.3g} < {m['floor']:.3g} {m['unit']})"
     return ""
-
-
-RIPPLE_MIN_PERIODS = 2.0
-"""Periods over the covered motor-angle range below which a ripple order is a generic function of the angle
-(chosen: the same two periods as the residual maps' cycles-per-revolution line, ``localise.locate``, and the
-sparse-regression baseline's library)."""
-
-
-def ripple_periods(params: dict, angle_span: float) -> float:
-    """Periods the fitted ripple's largest harmonic (largest amplitude on either motor) completes over
-    ``angle_span`` [rad] of motor angle: a small high-order harmonic beside a large low-order one does not
-    make the fit periodic."""
-    amp = {k: max(np.hypot(params.get(f"ripple_sin{k}_m{m}", 0.0), params.get(f"ripple_cos{k}_m{m}", 0.0))
-                  for m in (1, 2)) for k in (1, 2)}
-    k = max(amp, key=amp.get)
-    return float(params.get(f"ripple_order_{k}", 0.0) * angle_span / (2 * np.pi))
-
-
-def recalibration_effect(rig: str, outputs: list, accepted=()) -> Effect:
-    """All calibration candidates of ``rig`` not yet ``accepted``, as one candidate fitted jointly: the
-    simpler model a low-order ripple must beat (dividing the motor equation by ``1 + e`` shows that a
-    torque-constant error ``(1 + e) u`` is exactly ``nominal_motor`` + ``nominal_spring`` + ``nominal_link``
-    + a ``force_sensor`` gain).  Not a catalog entry: it is compared, never named."""
-    from .catalog import effects_for_rig
-    names = [e.name for e in accepted]
-    amps = []
-    for e in effects_for_rig(rig, outputs):
-        if e.kind == "nuisance" and e.name not in names:
-            amps += [a for a in e.amplitude_for(rig) if a not in amps]
-    return Effect("recalibration", "nuisance", tuple(amps), {}, (rig,),
-                  "every calibration (sensors, nominal motor, spring and link) at once")
 
 
 EQUIVALENT_EFFECTS = {frozenset(("motor_friction", "guide_friction"))}

@@ -36,8 +36,7 @@ from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySetting
 
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset, is_finger_rig
-from .decide import (EQUIVALENT_EFFECTS, RIPPLE_MIN_PERIODS, materiality, noise_equivalent, recalibration_effect,
-                     rejection_reason, ripple_periods, separating_experiment)
+from .decide import EQUIVALENT_EFFECTS, materiality, noise_equivalent, rejection_reason, separating_experiment
 from .fit import HeldLinear, fit_parameters
 from .localise import locate, residual_maps
 from .replay import ReplayEngine, project
@@ -228,8 +227,6 @@ class _Run:
                                 f"of the noise floor")
             return False
         choice = self.choose(fitted)
-        if choice is not None and choice[0].effect == "motor_ripple" and self.ripple_is_recalibration(choice[0], held):
-            choice = self.choose(fitted)   # the ripple now carries its rejection
         if choice is None:
             self.stop_reason = "no candidate passes the acceptance tests"
             return False
@@ -246,46 +243,6 @@ class _Run:
             self.history[-1]["refit_lost"] = win.effect
             self.stop_reason = lost
             return False
-        return True
-
-    def ripple_is_recalibration(self, win: CandidateResult, held) -> bool:
-        """A ripple whose largest harmonic has fewer than ``RIPPLE_MIN_PERIODS`` periods over the covered
-        motor-angle range (a generic function of the angle there) must beat the simpler model, the nominal
-        model recalibrated (every calibration candidate fitted jointly): refitted on top of that
-        recalibration it must pass every acceptance test again, else it is rejected (``win.rejected`` set,
-        True returned).  The recalibration is compared, never named (logged in the step's history)."""
-        n = self.eng.nom.num_motors
-        span = float(min(np.ptp(self.eng.xhat[i]) for i in range(n)))
-        periods = ripple_periods(win.parameters, span)
-        if periods >= RIPPLE_MIN_PERIODS:
-            return False
-        bundle = recalibration_effect(self.rig, self.eng.out_names, self.accepted)
-        if not bundle.amplitude:
-            return False
-        rc, lines = self.fit_candidate({"effect": bundle, "params": {}}, held)
-        for line in lines:
-            self.say(line)
-        self.history[-1]["recalibration"] = rc.summary()
-        if rc.rejected or rc.gain < self.settings.ambiguous_ratio * win.gain:
-            return False   # the recalibration is no explanation, or explains clearly less than the ripple
-        # the ripple on top of the recalibrated model (its parameters free to first order)
-        saved, self.st = self.st, ResidualState(self.eng, rc.vector, rc.profile)
-        try:
-            names = [k for k in free_params(self.accepted + [bundle], self.rig) if not k.startswith("ripple_order")]
-            rr, lines = self.fit_candidate({"effect": EFFECTS["motor_ripple"], "params": dict(win.parameters)},
-                                           HeldLinear(self.st, names, self.bounds))
-        finally:
-            self.st = saved
-        for line in lines:
-            self.say("  on top of the recalibration:" + line)
-        self.history[-1]["ripple_after_recalibration"] = rr.summary()
-        if not rr.rejected:
-            return False
-        win.rejected = (f"not identifiable as ripple: its largest harmonic completes {periods:.2f} periods over the "
-                        f"{span:.2f} rad of motor angle covered (< {RIPPLE_MIN_PERIODS:g}), and on top of a "
-                        f"recalibration of the nominal model ({100 * rc.relative_gain:.1f} % of the excess) it "
-                        f"adds nothing that passes: {rr.rejected}")
-        self.say(f"  {win.effect} rejected: {win.rejected}")
         return True
 
     def refine_place(self) -> None:
