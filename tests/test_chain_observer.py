@@ -69,6 +69,39 @@ def test_sampled_observer_is_the_continuous_one_held_over_a_period():
     check_system_autodiff_matches_fd(samp, [], u, rtol=1e-5, discrete_state=rng.normal(0, 0.3, 4))
 
 
+def test_sampled_observer_with_the_dof_inertia_matrix_decouples_its_error_per_dof():
+    """The (9.2) observer on coupled links (``inertia`` the k x k DoF matrix J, as the 15.5 backstepping's observer
+    uses it): ``d_hat = diag(L) J (w - w_hat)``, ``w_hat' = J^-1 (tau_a + d_hat)``, so ``dw_hat'/dw_hat = -J^-1 diag(L)
+    J`` (poles -L_j whatever J's off-diagonal terms) and ``d friction_compensation / d joint_velocity = -diag(L) J
+    S^+``.  Sampled (period h): Drake's Linearize gives ``A_d = I - h J^-1 diag(L) J`` (eigenvalues ``1 - h L_j``) and
+    that D; its AutoDiffXd update and output Jacobians equal central differences; an inertia matrix that is not
+    symmetric positive definite is refused by name."""
+    from awiwi_drake.hand.coupling import dof_selection
+    rig = finger_diagram(finger="index")
+    S = dof_selection(rig.coupling)
+    k = S.shape[1]
+    rng = np.random.default_rng(7)
+    R = rng.normal(0.0, 1.0, (k, k))
+    J = 1e-6 * (R @ R.T + k * np.eye(k))                       # SPD, strongly coupled
+    L = np.array([100.0, 150.0, 200.0, 250.0])
+    obs = JointFrictionObserver(rig.coupling, S, J, np.full(k, 2e-5), L, H)
+    op = rig.operating_point()
+    u = dict(joint_angle=op.joint_angle + rng.normal(0, 0.05, 4), joint_velocity=rng.normal(0, 0.5, 4),
+             tendon_force=op.tendon_force + rng.normal(0, 1, 8))
+    ctx = obs.CreateDefaultContext()
+    ctx.SetDiscreteState(rng.normal(0, 0.3, k))
+    for nm, v in u.items():
+        obs.GetInputPort(nm).FixValue(ctx, v)
+    lin = Linearize(obs, ctx, input_port_index=obs.GetInputPort("joint_velocity").get_index(),
+                    equilibrium_check_tolerance=1e30)
+    JLJ = np.linalg.solve(J, np.diag(L) @ J)
+    np.testing.assert_allclose(lin.A(), np.eye(k) - H * JLJ, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(np.sort(np.linalg.eigvals(lin.A()).real), np.sort(1.0 - H * L), rtol=1e-10)
+    np.testing.assert_allclose(lin.D(), -np.diag(L) @ J @ np.linalg.pinv(S), rtol=1e-10, atol=1e-15)
+    check_system_autodiff_matches_fd(obs, [], u, rtol=1e-5, discrete_state=rng.normal(0, 0.3, k))
+    with pytest.raises(ValueError, match="inertia matrix must be symmetric positive definite"):
+        JointFrictionObserver(rig.coupling, S, J - 2 * np.linalg.eigvalsh(J).max() * np.eye(k), np.zeros(k), L, H)
+
 def test_sampled_observer_estimates_a_constant_disturbance_without_bias():
     """A link J w' = tau_a + d driven by held torques (the sampled chain's picture) from rest: the estimation error
     obeys e_k+1 = (1 - L h) e_k + h d / J, so d_hat_k = d (1 - (1 - L h)^k) exactly (per DoF, the block's own

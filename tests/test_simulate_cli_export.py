@@ -145,6 +145,8 @@ _THESIS_CITATION = re.compile(
 # Or a choice with its reason: "chosen: <why>" (at least two words of reason).
 _CHOSEN = re.compile(r"^chosen:\s*\S+\s+\S+", re.IGNORECASE)
 _FILE = re.compile(r"\b[\w./-]+\.(?:md|py|txt|csv|json|yaml|yml|ipynb|npz)\b", re.IGNORECASE)
+# The project's chapter map outside the repository (with or without its extension): sources cite the thesis itself.
+_NOTES = re.compile(r"\bMODEL_NOTES\b")
 
 
 def test_every_parameter_has_unit_source_and_valid_default():
@@ -165,6 +167,8 @@ def test_every_parameter_has_unit_source_and_valid_default():
                 bad.append(f"{where}: source {src!r} neither cites the thesis nor says 'chosen: why'")
             bad += [f"{where}: source cites {f!r}, not a file of the repository"
                     for f in _FILE.findall(src) if Path(f).name not in tracked]
+            if _NOTES.search(src):
+                bad.append(f"{where}: source cites MODEL_NOTES (a chapter map outside the repository), not the thesis")
         assert provenance_table(inst).count("\n") >= 2
     assert not bad, "\n".join(bad)
 
@@ -176,6 +180,7 @@ def test_the_provenance_rule_rejects_what_it_should():
                "Algorithm 2"):
         assert _THESIS_CITATION.search(ok), ok
     assert _FILE.findall("see MODEL_NOTES.md") == ["MODEL_NOTES.md"]
+    assert _NOTES.search("MODEL_NOTES ch. 5: radii") and not _NOTES.search("Table 5.1 M98")
 
 
 @pytest.mark.parametrize("cls, field, value, message", [

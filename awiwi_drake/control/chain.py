@@ -135,6 +135,14 @@ def TendonForceSharing_(T):
     ``tendon_force_reference = f_op + W (joint_torque_reference - tau_op)`` with ``W = -((P S)^T)^+``
     at the design point, so that ``-(P S)^T f_ref = tau_ref`` exactly (constant coupling).  No
     stiffness tracking and no bounds (the sampled distribution of ch. 7 has both): for linear analysis.
+
+    The "invalid value encountered in subtract" RuntimeWarning this map (and ``drive_laws``' ``r_m theta``) sometimes
+    shows under Drake's ``Linearize`` has no NaN behind it: its AutoDiffXd operands are finite (logged).  Drake
+    1.51.1's symbolic code sets the processor's invalid-operation flag on finite arithmetic and on freeing an
+    ``Expression`` (``-0.1 * pydrake.symbolic.Variable("w")`` alone sets it); when the garbage collector frees such
+    objects (the rigs' ``SymbolicVectorSystem`` copies) inside a numpy object-array operation, numpy reports the flag
+    against that line (measured on six tests of tests/test_joint_design.py: 33 of 802 generation-0 collections set it;
+    they freed 49 ``Diagram_[AutoDiffXd]`` copies, the other 769 collections 4).
     """
 
     class Impl(LeafSystem_[T]):

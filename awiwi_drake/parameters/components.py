@@ -247,7 +247,7 @@ class TendonParams(Parameters):
     """
 
     youngs_modulus: float = param(100e9, unit="Pa", low=0.0, low_inclusive=False,
-                                  source="chosen: typical Dyneema (UHMWPE) modulus (MODEL_NOTES ch. 4)")
+                                  source="chosen: the tendons are Dyneema (ch. 4, Fig 4.3; k_t = E S / l0, section 5.1, prints no E): a typical UHMWPE fibre modulus")
     diameter: float = param(1.0e-3, unit="m", low=0.0, low_inclusive=False,
                             source="chosen: 1 mm braided tendon")
     rest_length: float = param(0.4, unit="m", low=0.0, low_inclusive=False,

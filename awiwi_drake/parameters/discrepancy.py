@@ -407,7 +407,7 @@ class TruthGeneratorParams(Parameters):
                                 doc="link viscous damping d_q")
     link_pulley_radius: float = param(
         0.008, unit="m", low=0.0, low_inclusive=False,
-        source="MODEL_NOTES ch. 5: finger pulley radii 5-10 mm (not printed)",
+        source="chosen: a finger joint pulley, the index MCP radius (FingerParams.mcp_radius; the thesis prints no radii, Fig 5.8 names r20..r23)",
         doc="joint-rig link pulley radius")
     pretension: float = param(
         30.0, unit="N", low=0.0, source="chosen: mid-range of the 0-180 N spring (Fig 4.8b)",

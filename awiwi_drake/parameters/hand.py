@@ -1,6 +1,6 @@
 """Finger and hand parameters (thesis ch. 5), with sources.
 
-Index/middle bone geometry comes from Table 5.1 (read as in MODEL_NOTES:
+Index/middle bone geometry comes from Table 5.1 (read with two corrections:
 M32 last row ``0 0 0 1``, M98 translation 0.0201 m rather than the printed
 0.00201 m, which would make the distal phalanx 2 mm long).  The thesis prints
 no pulley radii, masses or inertias per link; the values below are chosen and
@@ -50,7 +50,7 @@ __all__ = [
 
 _T51 = "Table 5.1"
 _RADIUS_SRC = ("chosen: the thesis prints no pulley radii (Fig 5.8 names r20..r23); "
-               "5-10 mm fits the finger width (MODEL_NOTES ch. 5)")
+               "5-10 mm, of the order of the finger's link radius (link_radius, 7 mm)")
 _MASS_SRC = ("chosen: finger mass 0.02 kg (section 5.2.2) less the 1 g abduction link, split in proportion "
              "to the Table 5.1 link lengths (uniform cylinders of equal radius): 0.019 kg x L_i / 90.28 mm")
 
@@ -78,7 +78,7 @@ class FingerParams(Parameters):
     middle_lateral: float = param(-0.005, unit="m", low=-0.02, high=0.02, source=_T51 + " M76 (z)",
                                   doc="offset of the DIP frame along the flexion axis")
     distal_length: float = param(0.0201, unit="m", low=0.005, high=0.1,
-                                 source=_T51 + " M98 (printed 0.00201; read 0.0201, MODEL_NOTES)")
+                                 source=_T51 + " M98 (printed 0.00201; read 0.0201: a 2 mm distal phalanx)")
     distal_lateral: float = param(-0.0007, unit="m", low=-0.02, high=0.02, source=_T51 + " M98 (z)")
     link_radius: float = param(0.007, unit="m", low=0.001, high=0.02,
                                source="chosen: half the finger width (~14 mm, Fig 5.5)",

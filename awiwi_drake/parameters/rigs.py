@@ -96,7 +96,7 @@ class JointRigParams(Parameters):
                                 source="Tables 14.2, 15.1, 16.1 (finger link)")
     link_damping: float = param(1e-3, unit="Nm s/rad", low=0.0, source="Table 15.1, b_q")
     link_pulley_radius: float = param(0.008, unit="m", low=0.0, high=0.05, low_inclusive=False,
-                                      source="chosen: r_q; MODEL_NOTES: joint pulleys 5-10 mm")
+                                      source="chosen: r_q, the index MCP pulley radius (FingerParams.mcp_radius; the thesis prints no radii)")
     pretension: float = param(20.0, unit="N", low=0.0, low_inclusive=False,
                               source="Fig 15.26: f_pre = 20 N (default operating point)")
 
