@@ -398,3 +398,28 @@ def test_ripple_pair_prefers_small_amplitudes_among_aliasing_orders():
     ents = entries(theta, b)
     for t in (0.0, 0.03 * float(b @ b)):
         assert sorted(e["order"] for e in ripple_pair(ents, b, t)) == [3, 100]
+
+
+def test_stateful_probe_ranking_keeps_the_best_probe_for_its_own_profile():
+    """The screen ranks the hysteresis probes (loop width x transition length) with the current model's
+    window-start profile and profiles only the best ``CatalogBounds.stateful_probe_refine`` at their own
+    parameters. On a dataset with hidden hysteresis, the probe that is best with its own profile (the full
+    search over all nine) is among them, so the cut chooses the same probe."""
+    from awiwi_drake.discrepancy.catalog import param_specs
+    from awiwi_drake.discrepancy.screen import STATEFUL_EFFECTS, ResidualState
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+    ds = make_truth_dataset("joint", ["spring_hysteresis"], snr_db=30, seed=32, gen=TruthGeneratorParams(duration=2.0))
+    eng = ReplayEngine(ds)
+    st = ResidualState(eng, default_vector())
+    high = {s.name: s.high for s in param_specs()}["hysteresis_width"]
+    sets = []
+    for frac in STATEFUL_EFFECTS["spring_hysteresis"]["hysteresis_width"]:
+        for length in STATEFUL_EFFECTS["spring_hysteresis"]["hysteresis_length"]:
+            p = default_vector()
+            p[PARAM_INDEX["hysteresis_width"]], p[PARAM_INDEX["hysteresis_length"]] = frac * high, length
+            sets.append(p)
+    tr = st.W[eng.train]
+    own = [float((project(r, Q) ** 2).sum()) for r, Q in eng.profiled(np.array(sets), tr)]
+    ranked = (project(eng.evaluate(np.array(sets), tr), st.Q.take(tr)) ** 2).sum(axis=(1, 2))
+    assert int(np.argmin(own)) in np.argsort(ranked)[:CatalogBounds().stateful_probe_refine], (own, ranked)
+    assert min(own) < 0.5 * st.E_train    # the probes see the hidden loop

@@ -341,22 +341,34 @@ def probe(st: ResidualState, screened: list, bounds: CatalogBounds, rig: str) ->
         return
     tr, te = eng.train, eng.test
 
+    n_plain = len(sets)
+    sets = sets + own_sets
+
     def energies(windows, picked, picked_own):
-        """Window energies (len(picked) + len(picked_own), len(windows)) of probe sets on ``windows``."""
+        """Window energies (len(picked) + len(picked_own), len(windows)) of probe sets on ``windows``:
+        ``picked`` with the current model's window-start profile, ``picked_own`` with their own."""
         E = []
         if picked:
             R = eng.evaluate(np.array([sets[i] for i in picked]), st.W[windows])
             E.append((project(R, st.Q.take(st.W[windows])) ** 2).sum(axis=2))
         if picked_own:
             E.append(np.array([(project(r, Q) ** 2).sum(axis=1) for r, Q in
-                               eng.profiled(np.array([own_sets[i] for i in picked_own]), st.W[windows])]))
+                               eng.profiled(np.array([sets[i] for i in picked_own]), st.W[windows])]))
         return np.concatenate(E, axis=0)
 
     # the best probe of each candidate is chosen on the training windows; only it is replayed on the
-    # held-out windows
-    n_plain = len(sets)
-    E_tr = energies(tr, list(range(n_plain)), list(range(len(own_sets))))
-    sets, owners = sets + own_sets, owners + own_owners
+    # held-out windows. The stateful probes (their own window-start profile costs 1 + num_profiled_states
+    # copies per window) are ranked with the current model's profile in the plain probes' pass, and only the
+    # best ``bounds.stateful_probe_refine`` of each candidate are profiled at their own parameters
+    E_tr = energies(tr, list(range(len(sets))), [])
+    refine = []
+    for entry in {id(o): o for o in own_owners}.values():
+        mine = [n_plain + j for j, o in enumerate(own_owners) if o is entry]
+        refine += sorted(mine, key=lambda i: E_tr[i].sum())[:bounds.stateful_probe_refine]
+    E_tr[n_plain:] = np.inf
+    if refine:
+        E_tr[refine] = energies(tr, [], refine)
+    owners = owners + own_owners
     best = {}
     for i, entry in enumerate(owners):
         key = id(entry)
@@ -365,7 +377,7 @@ def probe(st: ResidualState, screened: list, bounds: CatalogBounds, rig: str) ->
     plain = sorted(i for i in set(best.values()) if i < n_plain)
     own = sorted(i for i in set(best.values()) if i >= n_plain)
     E = {}
-    for i, row in zip(plain + own, energies(te, plain, [i - n_plain for i in own])):
+    for i, row in zip(plain + own, energies(te, plain, own)):
         E[i] = np.empty(len(st.W))
         E[i][tr], E[i][te] = E_tr[i], row
     for entry in screened:

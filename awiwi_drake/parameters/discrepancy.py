@@ -355,6 +355,13 @@ class CatalogBounds(Parameters):
                "but has a valley about +-30 % wide around the true value (benchmark dataset seed 3: residual/floor "
                "17.5 nominal, 1.64 at the truth, 2.7 / 2.3 at -14 % / +7 %); a geometric grid with ratio 1.25 "
                "lands within +-12 % of any play", doc="ratio of successive backlash values of the screening grid")
+    stateful_probe_refine: int = param(
+        3, unit="-", low=1, high=100,
+        source="chosen: the screen's stateful probes (spring_hysteresis: 3 widths x 3 transition lengths) are ranked "
+               "with the current model's window-start profile (one copy per window) and the best 3 of the 9 "
+               "profiled at their own parameters (7 copies per window on the joint rig): 30 instead of 63 copies per "
+               "window and screening step; the chosen probe is still scored with its own profile",
+        doc="stateful probes per candidate profiled at their own parameters")
     encoder_bias_max: float = param(
         0.5, unit="rad", low=0.0,
         source="chosen: a mis-set encoder zero of up to ~30 deg", doc="bound on encoder biases")
