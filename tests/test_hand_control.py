@@ -524,6 +524,39 @@ def test_cause_of_the_friction_observers_slow_mode_is_the_guides_presliding():
     assert a > 20.0 and 0.1 < b < 0.5, (a, b)                                         # K_g >> Kp; capped at -1/b
 
 
+def test_thumb_base_sharing_gives_the_desired_torque_at_every_pose_and_the_observer_variant_settles():
+    """(15.88) on the thumb base, whose coupling P(q) depends on the pose: the law's tendon force request gives exactly
+    the desired DoF torque, ``-(P(q) S)^T f_des = tau_op + a0`` (``a0 = -Kp e - Kd e'``), at random poses 0.3 rad
+    from the operating point (before wave 8 ``f_op + W a0`` left the pretension's own torque change ``-(P(q) S)^T f_op
+    - tau_op`` in it, here up to ~0.03 Nm, which the law took for a load).  Then ``backstepping-friction-observer`` on the
+    default thumb (3 kHz, estimated angles), a 0.2 rad step on every DoF: after 1 s the base (q10, q11) is within
+    0.01 rad (measured 3.5 / 3.1 mrad, still decaying; 0.060 / 0.059 rad, at rest, before)."""
+    rig = finger_diagram(finger="thumb")
+    ctrl = make_controller("backstepping-friction-observer", rig)
+    law = ctrl.law
+    op = rig.operating_point()
+    rng = np.random.default_rng(5)
+    n, m, k = rig.num_joints, rig.num_tendons, law.S.shape[1]
+    worst = 0.0
+    for _ in range(4):
+        q = op.joint_angle + rng.uniform(-0.3, 0.3, n)
+        u = dict(joint_angle_reference=op.joint_angle + rng.normal(0, 0.1, n), joint_angle=q,
+                 joint_velocity=rng.normal(0, 0.3, n), elongation=np.asarray(op.elongation) + rng.normal(0, 1e-4, m),
+                 motor_angle=rng.normal(0, 0.3, m), motor_velocity=rng.normal(0, 0.3, m), friction_compensation=np.zeros(k))
+        t = law.terms(u)
+        PS = np.asarray(rig.coupling.P(q)) @ law.S
+        a0 = -law.Kp @ t["e"] - law.Kd @ t["ed"]
+        np.testing.assert_allclose(-PS.T @ t["f_des"], law.tau_op + a0, rtol=0, atol=1e-12 * np.abs(a0).max())
+        worst = max(worst, np.abs(-PS.T @ law.f_op - law.tau_op).max())
+    assert worst > 1e-3                                  # the pretension's torque does move with the pose [Nm]
+    loop = closed_loop(rig, ctrl, **get_entry("backstepping-friction-observer", rig).loop_options)
+    q_ref = op.joint_angle + law.S @ np.full(k, 0.2)
+    res = simulate(loop.diagram, loop.create_context(op, references={"joint_angle_reference": q_ref}), 1.0,
+                   log=("joint_angle",), log_period=PERIOD)
+    e = law.Sp @ (res["joint_angle"][-1] - q_ref)
+    assert np.all(np.abs(e[:2]) < 0.01), e
+
+
 def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffness_and_the_observer_shrinks_it():
     """Issue 10 item 2, ch. 4 (4.1) and ch. 9: the registered cascaded impedance on the default index (guide friction,
     hysteresis, motor friction and ripple on; 3 kHz, estimated joint angles), a 0.2 rad MCP step.  At rest the link

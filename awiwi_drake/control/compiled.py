@@ -81,7 +81,7 @@ def _poly(x, c, deg):
 
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
-def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f_op, r_m, B, friction_scale,
+def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f_op, tau_op, r_m, B, friction_scale,
                  coef, dcoef, ddcoef, xmax, kend, link_feedforward, fc, estimate, compensate, C, rise, beta, z0, out):
     m, n = P.shape
     k = S.shape[1]
@@ -116,7 +116,7 @@ def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f
     eddd = Minv @ (-(PS.T @ fd) - Bq @ edd)
     a1 = -(Kp @ ed) - Kd @ edd
     a2 = -(Kp @ edd) - Kd @ eddd
-    f_des = f_op + W @ a0
+    f_des = f_op + W @ (a0 + tau_op + PS.T @ f_op)
     arg = np.empty(2)
     res = np.empty(2)
     wd0 = np.empty(m)

@@ -10,7 +10,7 @@ selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
 
     e = S^+ (q - q_ref),  e' = S^+ qdot                            DoF errors (references held)
     alpha = tau_op - Kp e - Kd e'                                   (15.54), Kp and Kd k x k
-    f_d = f_op + W (alpha - tau_op),  W = -((P S)^T)^+              sharing (15.88): -(PS)^T f_d = alpha
+    f_d = f_op + W (alpha + (P S)^T f_op),  W = -((P S)^T)^+        sharing (15.88): -(PS)^T f_d = alpha
     z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
     u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
 
@@ -140,7 +140,11 @@ Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator o
 ``elongation`` (the spring sensors), ``motor_angle``, ``motor_velocity``; reference
 ``joint_angle_reference`` (n plant joints, derivatives taken as zero: a set-point law).
 Scalar types float and AutoDiffXd (``W`` is evaluated at the value of ``q``: exact for the
-constant-coupling fingers, the thumb base's ``dW/dq`` is not differentiated).
+constant-coupling fingers, the thumb base's ``dW/dq`` is not differentiated).  On the thumb base the pretension's
+own torque ``-(P(q) S)^T f_op`` changes with the pose (the (5.12) term ``dP^T/dq f``), so the sharing adds ``(P S)^T
+f_op + tau_op`` to keep (15.88) exact at every pose (its rate, like ``dW/dq``, is not fed forward); with ``f_op + W
+(alpha - tau_op)`` (before wave 8) the law took that torque for a load and the thumb base rested 0.06 rad short of a
+0.2 rad step with the friction observer's compensation well inside its bound (``compare --rig hand``).
 """
 
 from __future__ import annotations
@@ -419,7 +423,9 @@ class FingerBacksteppingLaw(StaticLaw):
         eddd = self._Minv @ (-(PS.T @ fd) - self.Bq @ edd)
         a1 = -self.Kp @ ed - self.Kd @ edd
         a2 = -self.Kp @ edd - self.Kd @ eddd
-        f_des = self.f_op + W @ a0
+        # (15.88) at the current pose: -(P S)^T f_des = tau_op + a0 (the pretension's own torque -(P S)^T f_op moves
+        # with q where P does, the thumb base; zero change on the constant-coupling fingers)
+        f_des = self.f_op + W @ (a0 + self.tau_op + PS.T @ self.f_op)
         wd0 = (self.friction_scale * motor_friction_torque(w, self.motor) + motor_ripple_torque(th, self.motor)
                - self.r_m * f) / self.B
         f0 = k2 * xd * xd + k1 * self.r_m * wd0
@@ -494,7 +500,7 @@ class FingerBacksteppingLaw(StaticLaw):
         fc = u["friction_compensation"] if self.link_torque_estimate else no_estimate
         return fn(q, u["joint_velocity"], u["joint_angle_reference"], u["elongation"], u["motor_angle"],
                   u["motor_velocity"], P, self.S, self.Sp, W, self._Minv, self.Bq, self.Kp, self.Kd, self.K3, self.K4,
-                  self.f_op, self.r_m, self.B, self.friction_scale, coef, dcoef, ddcoef, xmax, kend,
+                  self.f_op, self.tau_op, self.r_m, self.B, self.friction_scale, coef, dcoef, ddcoef, xmax, kend,
                   self.link_feedforward, fc, self.link_torque_estimate, self.friction_compensation, *levels,
                   out).copy()
 

@@ -553,12 +553,26 @@ class JointDesign:
         return max(taus)
 
     def table(self) -> str:
+        """Per DoF: ``M_jj``, ``K_jj``, the gains and the slowest designed pole [1/s] (sampled: ``ln(z) / h``) of the
+        stage's own loop and, with :attr:`observer`, of :meth:`loop` (the observer on the guides' presliding)."""
+        def slowest(lam):
+            if self.period is not None:
+                with np.errstate(divide="ignore"):           # the delay state's z = 0
+                    lam = np.log(np.asarray(lam, dtype=complex)) / self.period
+            return lam[np.argmax(lam.real)]
+
+        head = "  slowest pole [1/s]" + ("  with the observer" if self.observer is not None else "")
         rows = [f"{'DoF':>10} {'M_jj':>10} {'K_jj':>9} {'Kp':>10} {'Kd':>10} {'K_tau':>9} {'K_taud':>9} "
-                f"{'K_prev':>8}  slowest pole"]
-        for m, K, lam in zip(self.models, self.gains, self.design_poles):
-            s = lam[np.argmin(np.abs(lam))] if self.period is None else lam[np.argmax(np.abs(lam))]
-            rows.append(f"{m.name:>10} {m.inertia:10.3g} {m.stiffness:9.3g} {K[0]:10.4g} {K[1]:10.4g} {K[2]:9.4g} "
-                        f"{K[3]:9.4g} {K[4]:8.3g}  {s.real:.4g}{s.imag:+.4g}j")
+                f"{'K_prev':>8}{head}"]
+        observed = self.loop_poles if self.observer is not None else [None] * len(self.models)
+        for m, K, lam, lo in zip(self.models, self.gains, self.design_poles, observed):
+            s = slowest(lam)
+            row = (f"{m.name:>10} {m.inertia:10.3g} {m.stiffness:9.3g} {K[0]:10.4g} {K[1]:10.4g} {K[2]:9.4g} "
+                   f"{K[3]:9.4g} {K[4]:8.3g}  {s.real:.4g}{s.imag:+.4g}j")
+            if lo is not None:
+                o = slowest(lo)
+                row += f"  {o.real:.4g}{o.imag:+.4g}j"
+            rows.append(row)
         return "\n".join(rows)
 
 
