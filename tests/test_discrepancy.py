@@ -664,6 +664,19 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     assert not bench.cached_dataset(case, gen, None)[1] and len(list(tmp_path.glob("*.npz"))) == n  # no cache
 
 
+def test_benchmark_cache_options_are_refused_together_or_on_a_file(tmp_path, capsys):
+    """``--cache DIR`` with ``--no-cache`` (which used to win silently) and ``--cache`` naming a file (np.savez
+    failed later, inside a worker) stop before any case runs: exit 2, one line naming the option."""
+    bench = _bench()
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--out", str(tmp_path), "--cache", str(tmp_path / "c"), "--no-cache"])
+    assert exc.value.code == 2 and "--no-cache: not allowed with argument --cache" in capsys.readouterr().err
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--out", str(tmp_path), "--cache", str(tmp_path / "f")])
+    assert exc.value.code == 2 and f"--cache {tmp_path / 'f'}: exists and is not a folder" in capsys.readouterr().err
+    assert not (tmp_path / "cases").exists()                            # nothing ran
+
 def test_torque_constant_error_is_exactly_a_recalibration():
     """The benchmark's ``unknown`` row counts a calibration as the right answer for a torque-constant error
     (``bench_discrepancy.UNKNOWN_EXPECTED``): dividing the motor equation by ``1 + e`` makes the truth with
