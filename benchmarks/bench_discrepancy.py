@@ -675,14 +675,17 @@ def main(argv=None) -> int:
     ap.add_argument("--reclaim", action="store_true", help="delete claims left by stopped runs before starting")
     ap.add_argument("--out", default=os.environ.get("AWIWI_OUT", "out/bench_discrepancy"))
     ap.add_argument("--rows", default=None, help="comma-separated rows to run (default: all)")
-    ap.add_argument("--cache", default=None,
-                    help="folder of generated datasets, keyed by case and generator source (default: OUT/datasets)")
-    ap.add_argument("--no-cache", action="store_true", help="generate every dataset afresh, store nothing")
+    store = ap.add_mutually_exclusive_group()
+    store.add_argument("--cache", default=None,
+                       help="folder of generated datasets, keyed by case and generator source (default: OUT/datasets)")
+    store.add_argument("--no-cache", action="store_true", help="generate every dataset afresh, store nothing")
     args = ap.parse_args(argv)
     if args.per_row < 1 or args.jobs < 1:
         ap.error(f"--per-row {args.per_row} / --jobs {args.jobs}: both must be >= 1")
     if not (np.isfinite(args.duration) and args.duration > 0):
         ap.error(f"--duration {args.duration}: a positive number of seconds")
+    if args.cache and pathlib.Path(args.cache).exists() and not pathlib.Path(args.cache).is_dir():
+        ap.error(f"--cache {args.cache}: exists and is not a folder")
     todo = [c + (args.duration,) for c in cases(args.per_row, args.quick)]
     if args.rows:
         keep = {x.strip() for x in args.rows.split(",") if x.strip()}

@@ -662,3 +662,46 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     assert not bench.cached_dataset(case, gen, tmp_path)[1]             # changed source: a miss
     n = len(list(tmp_path.glob("*.npz")))
     assert not bench.cached_dataset(case, gen, None)[1] and len(list(tmp_path.glob("*.npz"))) == n  # no cache
+
+
+def test_benchmark_cache_options_are_refused_together_or_on_a_file(tmp_path, capsys):
+    """``--cache DIR`` with ``--no-cache`` (which used to win silently) and ``--cache`` naming a file (np.savez
+    failed later, inside a worker) stop before any case runs: exit 2, one line naming the option."""
+    bench = _bench()
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--out", str(tmp_path), "--cache", str(tmp_path / "c"), "--no-cache"])
+    assert exc.value.code == 2 and "--no-cache: not allowed with argument --cache" in capsys.readouterr().err
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--quick", "--out", str(tmp_path), "--cache", str(tmp_path / "f")])
+    assert exc.value.code == 2 and f"--cache {tmp_path / 'f'}: exists and is not a folder" in capsys.readouterr().err
+    assert not (tmp_path / "cases").exists()                            # nothing ran
+
+def test_torque_constant_error_is_exactly_a_recalibration():
+    """The benchmark's ``unknown`` row counts a calibration as the right answer for a torque-constant error
+    (``bench_discrepancy.UNKNOWN_EXPECTED``): dividing the motor equation by ``1 + e`` makes the truth with
+    applied torque ``(1 + e) u`` the catalog model with every mass, damping and the spring force scaled by
+    ``1 / (1 + e)`` and a force-sensor gain ``e``, in scaled time-derivatives and measurements alike."""
+    nom = NominalParameters.from_dataset("joint", JOINT)
+    e = -0.09
+    s = 1.0 / (1.0 + e) - 1.0
+    P = default_vector()
+    for name, v in (("motor_inertia_rel", s), ("link_inertia_rel", s), ("spring_scale_rel", s), ("force_gain", e),
+                    ("motor_damping_add", s * JOINT["motor_damping"]), ("link_damping_add", s * JOINT["link_damping"])):
+        P[PARAM_INDEX[name]] = v
+    truth = HiddenEffectPlant_[float](nom, {"torque_constant": e})
+    ctx = truth.CreateDefaultContext()
+    rng = np.random.default_rng(8)
+    for _ in range(3):
+        X = _random_state(nom, rng)
+        X[-2:] = 0.0
+        u = rng.uniform(-0.5, 0.5, 2)
+        ctx.SetContinuousState(X)
+        truth.get_input_port(0).FixValue(ctx, u)
+        ref = truth.EvalTimeDerivatives(ctx).CopyToVector()
+        ours = model_derivatives(nom, X[:, None], u[:, None], P[:, None])[:, 0]
+        np.testing.assert_allclose(ours[:6], ref[:6], rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+        y_ref = truth.GetOutputPort("measurement").Eval(ctx)
+        y = model_measurements(nom, X[:, None], P[:, None])[:, 0]
+        np.testing.assert_allclose(y, y_ref, rtol=1e-12, atol=1e-12)
+
