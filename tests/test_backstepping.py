@@ -302,3 +302,62 @@ def test_antagonistic_step_and_impedance_check():
     kp = np.array([0.01, 0.02, 0.05, 0.1])
     d = antagonistic_stiffness_check(kp, deflection=0.3)
     np.testing.assert_allclose(d.torque, kp * 0.3, rtol=1e-6)
+
+
+def _sampled_period_map_radius(controller_factory, rate_hz=3000.0):
+    """Spectral radius of the one-period map of ``closed_loop(joint_rig(), controller, rate_hz)`` at rest: the
+    Jacobian of x(t_k) -> x(t_k+1) (zero-order-held command, the rig and the controller's continuous observer
+    integrated by Drake's Simulator in AutoDiffXd, fixed RK3 steps of h/16; h/8 and h/32 give the same
+    |z| to 1e-4).  ``sampled_loop_poles`` needs a fully sampled controller; this one's observer (9.2) is continuous."""
+    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+    from pydrake.systems.analysis import Simulator_
+    rig = joint_rig()
+    loop = closed_loop(rig, controller_factory(rig), rate_hz=rate_hz)
+    op = rig.operating_point()
+    ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
+    groups = range(ctx.num_discrete_state_groups())
+
+    def flat(c):
+        return np.concatenate([c.get_continuous_state_vector().CopyToVector()]
+                              + [c.get_discrete_state(i).CopyToVector() for i in groups])
+    x0 = flat(ctx)
+    diagram = loop.diagram.ToAutoDiffXd()
+    c_ad = diagram.CreateDefaultContext()
+    c_ad.SetTimeStateAndParametersFrom(ctx)
+    for i in range(loop.diagram.num_input_ports()):
+        diagram.get_input_port(i).FixValue(c_ad, loop.diagram.get_input_port(i).Eval(ctx))
+    xa = InitializeAutoDiff(x0)[:, 0]
+    nc = ctx.num_continuous_states()
+    c_ad.SetContinuousState(xa[:nc])
+    k = nc
+    for i in groups:
+        m = ctx.get_discrete_state(i).size()
+        c_ad.SetDiscreteState(i, xa[k:k + m])
+        k += m
+    h = 1.0 / rate_hz
+    sim = Simulator_[AutoDiffXd](diagram, c_ad)
+    integrator = sim.get_mutable_integrator()
+    integrator.set_maximum_step_size(h / 16)
+    integrator.request_initial_step_size_target(h / 16)
+    integrator.set_fixed_step_mode(True)
+    sim.Initialize()
+    sim.AdvanceTo(h)
+    x1 = flat(sim.get_context())
+    assert np.max(np.abs(ExtractValue(x1).ravel() - x0)) < 1e-12      # the operating point is a fixed point
+    return float(np.max(np.abs(np.linalg.eigvals(ExtractGradient(x1)))))
+
+
+def test_registered_joint_rig_backstepping_is_stable_at_3khz_and_unstable_without_the_damping_limit():
+    """Issue 10 item 6 ("saturates and does not move" at 3 kHz): the cause was the impedance damping's link pole
+    -Kd,imp/m outside what a 3 kHz zero-order hold can follow (control/backstepping_registry.py, Kd,imp <= m f_s/4).
+    The registered controller's sampled loop at the thesis's 3 kHz has all poles inside the unit circle (measured
+    0.993); with the limit removed (the parameter default Kd,imp = 0.01 Nm s/rad, h Kd/m = 4.6) the same loop
+    has a pole outside (measured 1.81): the test fails if the cause comes back."""
+    from awiwi_drake.control.backstepping import impedance_controller
+    from awiwi_drake.control.registry import get_entry, make_controller
+    from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains
+    assert get_entry("backstepping", joint_rig()).loop_options["rate_hz"] == 3000.0
+    assert _sampled_period_map_radius(lambda rig: make_controller("backstepping", rig)) < 1.0
+    g = AntagonisticBacksteppingGains()
+    assert g.damping > joint_rig().params.link_inertia * 3000.0 / 4.0        # the limit is active
+    assert _sampled_period_map_radius(lambda rig: impedance_controller(rig, g)) > 1.0

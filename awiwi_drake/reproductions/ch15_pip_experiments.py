@@ -81,8 +81,9 @@ def _controller(name: str, rig):
     from awiwi_drake.control.impedance import impedance_controller as linear_impedance
     from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains
     if name == "backstepping":
+        from awiwi_drake.control.backstepping_registry import _sampled_damping
         g = AntagonisticBacksteppingGains()
-        g = g.replace(damping=min(g.damping, rig.params.link_inertia * RATE_HZ / 4.0))
+        g = g.replace(damping=_sampled_damping(rig, g.damping))     # the registry's 3 kHz limit (one place)
         return impedance_controller(rig, g, pretension=rig.params.pretension, reference_derivatives=4)
     if name == "cascaded":
         return linear_impedance(rig, mode="cascaded")
