@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 
+import numpy as np
 import pytest
 
 from awiwi_drake.cli import main
@@ -66,12 +67,14 @@ def test_metrics_markdown_tables_have_one_cell_per_column_also_when_every_row_di
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["--controller-set", "bogus=1"], "--controller-set: unknown parameter 'bogus' for HandChainParams"),
+    (["--controller-set", "bogus=1"], "--controller-set: unknown parameter 'bogus' for CompareControllerParams"),
     (["--controller-set", "distribution_method=nope"], "--controller-set: HandChainParams.distribution_method = 'nope'"),
     (["--controller-set", "joint_stiffness=soft"], "--controller-set: HandChainParams.joint_stiffness: cannot parse"),
     (["--controller-set", "joint_stiffness"], "--controller-set expects NAME=VALUE"),
     (["--controller-set", "joint_stiffness=1", "--controllers", "joint-pd"],
-     "--controller-set: controller 'joint-pd' takes no HandChainParams"),
+     "--controller-set: controller 'joint-pd' on 'finger-index' takes no chain_params"),
+    (["--controller-set", "stiffness_correction=true", "--controllers", "backstepping"],
+     "--controller-set: controller 'backstepping' on 'finger-index' takes no stiffness_correction"),
     (["--sensors", "perfect"], "--sensors: invalid choice: 'perfect'"),
     (["--rig", "joint-rig", "--sensors", "ideal"], "--sensors: only for fingers and the hand, not rig 'joint-rig'"),
     (["--rig", "joint-rig", "--controller-set", "joint_stiffness=1"], "--controller-set: only for fingers"),
@@ -87,7 +90,8 @@ def test_compare_controller_options_bad_input_exit_2(tmp_path, capsys, args, nee
 
 def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monkeypatch):
     """--controller-set and --sensors reach the loops the CLI simulates (the simulation itself is stubbed: the
-    loops are recorded): the chain's force distribution is Algorithm 2 (ch. 7) and its joint stiffness the one set;
+    loops are recorded): the chain's force distribution is Algorithm 2 (ch. 7), its joint stiffness the one set and
+    its distribution asked for K_mech = eps K_eff (8.2) with the set eps;
     with --sensors ideal the loop has no tendon-length estimator (the controller reads the plant's joint state),
     without it the loop estimates (5.15)."""
     from awiwi_drake.control.compare import standard_tests
@@ -100,7 +104,8 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
 
     monkeypatch.setattr(standard_tests, "compare", record)
     for tag, extra in (("alg2", ["--controller-set", "distribution_method=algorithm2",
-                                 "--controller-set", "joint_stiffness=0.25", "--sensors", "ideal"]),
+                                 "--controller-set", "joint_stiffness=0.25", "--controller-set",
+                                 "stiffness_correction=true", "--controller-set", "epsilon=2", "--sensors", "ideal"]),
                        ("default", [])):
         rc = main(["compare", "--rig", "finger-index", "--controllers", "cascaded", "--tests", "step", "--short",
                    "--quiet", "--out", str(tmp_path / tag), *extra])
@@ -110,6 +115,8 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
         if tag == "alg2":
             assert design["distribution_method"] == "algorithm2"
             assert design["joint_design"].static_stiffness.max() <= 0.25 + 1e-12   # the set joint_stiffness caps K
+            K_mech = np.concatenate([np.diag(B) for B in design["mechanical_stiffness"]])     # (8.2), eps = 2
+            np.testing.assert_allclose(K_mech, 2.0 * design["joint_design"].static_stiffness, rtol=1e-12)
             assert loop.estimator is None and loop.fused is None
             assert not loop.diagram.HasOutputPort("joint_angle_estimation_error")
             assert "distribution_method=algorithm2" in (tmp_path / tag / "metrics.md").read_text()

@@ -45,8 +45,10 @@ def register(subparsers) -> None:
     add_parameter_options(p, "the rig's parameter set", "e.g. --set guide_friction=false for a finger without the "
                           "guides' friction")
     p.add_argument("--controller-set", action="append", default=[], metavar="NAME=VALUE",
-                   help="override one field of the controllers' HandChainParams (fingers and the hand; chain and "
-                        "backstepping controllers), e.g. distribution_method=algorithm2; repeatable")
+                   help="fingers and the hand: override one field of the controllers' parameters "
+                        "(CompareControllerParams: their HandChainParams, e.g. distribution_method=algorithm2, for the "
+                        "chain and backstepping controllers; stiffness_correction=true and epsilon=... for ch. 8's "
+                        "correction of the chain designs); repeatable")
     p.add_argument("--sensors", choices=("estimated", "ideal"), default=None,
                    help="fingers and the hand: joint angles from the tendon-length estimator (5.15) (default) or "
                         "the plant's true joint state (an ideal-sensor comparison)")
@@ -89,17 +91,16 @@ def run(args) -> int:
         raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
     from awiwi_drake.diagrams import TARGETS, build_target
     rig_params = load_parameters(TARGETS[args.rig]["params"](), args)     # --config then --set
-    chain_params = None
     for flag, given in (("--controller-set", args.controller_set), ("--sensors", args.sensors)):
         if given and args.rig not in FINGER_RIGS:
             raise ValueError(f"{flag}: only for fingers and the hand, not rig {args.rig!r}")
-    if args.controller_set:
-        from awiwi_drake.parameters.hand_control import HandChainParams
-        chain_params = load_parameters(HandChainParams(), args, option="controller_set")
-        for n in names:
-            if not getattr(get_entry(n, args.rig).factory, "takes_chain_params", False):
-                raise ValueError(f"--controller-set: controller {n!r} takes no HandChainParams (the finger/hand "
-                                 f"chain and backstepping controllers do)")
+    from awiwi_drake.control.compare import factory_options
+    from awiwi_drake.parameters.cli import CompareControllerParams
+    ctrl_opts = load_parameters(CompareControllerParams(), args, option="controller_set").factory_options()
+    try:
+        factory_options(names, args.rig, ctrl_opts)
+    except ValueError as exc:
+        raise ValueError(f"--controller-set: {exc}") from None
     # the hand's wrist held at neutral: without the wrist input (its tendon offsets are then zero), which is faster
     kw = {"wrist": False} if args.rig == "hand" else {}
 
@@ -109,9 +110,9 @@ def run(args) -> int:
     short = args.short or short_mode()
     params = compare_test_params(args.rig)
     if short:
-        params = short_test_params(make_rig, names, params, chain_params)
+        params = short_test_params(make_rig, names, params, ctrl_opts)
     else:       # the chosen window, or longer where the compared designs need it
-        window = design_step_duration(make_rig, names, params, chain_params)
+        window = design_step_duration(make_rig, names, params, ctrl_opts)
         if window is not None and window > params.step_duration:
             params = params.replace(step_duration=window)
     opts = {}
@@ -133,7 +134,7 @@ def run(args) -> int:
             bar.update(1)
 
         result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance,
-                                     chain_params=chain_params, **opts)
+                                     controller_options=ctrl_opts, **opts)
     result.table.to_csv(out / "metrics.csv")
     ref_unit = "N" if args.rig == "tendon-rig" else "rad"
     failed, n = result.table.failed(), len(result.table.rows)

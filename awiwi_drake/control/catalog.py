@@ -19,14 +19,16 @@ def _lazy(module: str, function: str, *, chain_keyword: str | None = None, **kwa
 
     ``chain_keyword``: the function's keyword for its :class:`~awiwi_drake.parameters.hand_control.HandChainParams`;
     the factory then takes them as ``chain_params`` (the one name for every finger/hand controller, e.g.
-    ``compare --controller-set``) and has ``takes_chain_params = True``."""
+    ``compare --controller-set``); ``factory.takes`` names the options ``compare --controller-set`` may give it
+    (``chain_params``; the chain designs also ``stiffness_correction``)."""
     def factory(rig, **options):
         if "chain_params" in options and chain_keyword is not None:
             options[chain_keyword] = options.pop("chain_params")
         return getattr(importlib.import_module(f"awiwi_drake.control.{module}"), function)(rig, **{**kwargs,
                                                                                               **options})
     factory.__name__ = f"{function}_factory"
-    factory.takes_chain_params = chain_keyword is not None
+    factory.takes = frozenset(() if chain_keyword is None else ("chain_params",) + (
+        ("stiffness_correction",) if function == "joint_stage_controller" else ()))
     return factory
 
 

@@ -9,11 +9,12 @@ about 0.2 m long.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .base import Parameters, param
+from .hand_control import HandChainParams, StiffnessCorrectionParams
 
-__all__ = ["CliLimits", "CompareShortMode", "AnimationParams"]
+__all__ = ["CliLimits", "CompareShortMode", "AnimationParams", "CompareControllerParams"]
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,24 @@ class CliLimits(Parameters):
     max_animation_duration: float = param(60.0, unit="s", low=0.1, high=3600.0,
                                           source="chosen: a minute of the 3 kHz hand loop already takes "
                                                  "minutes of CPU")
+
+
+@dataclass(frozen=True)
+class CompareControllerParams(Parameters):
+    """``compare --controller-set NAME=VALUE`` on fingers and the hand: the controllers' ``chain``
+    (:class:`HandChainParams`, e.g. ``distribution_method=algorithm2``) and the ch. 8 stiffness correction of the
+    chain designs (``stiffness_correction=true``, its ``epsilon`` ... in ``correction``)."""
+
+    chain: HandChainParams = field(default_factory=HandChainParams)
+    stiffness_correction: bool = param(False, unit="-", source="chosen: off, as the registered chain controllers "
+                                                               "(ch. 8's correction is an option of the chain)")
+    correction: StiffnessCorrectionParams = field(default_factory=StiffnessCorrectionParams)
+
+    def factory_options(self) -> dict:
+        """The controller factories' options these set (:func:`~awiwi_drake.control.registry.make_controller`);
+        the defaults set none."""
+        opts = {} if self.chain == HandChainParams() else {"chain_params": self.chain}
+        return {**opts, "stiffness_correction": self.correction} if self.stiffness_correction else opts
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from awiwi_drake.control.compare.metrics import (COLUMNS, NUMERIC, UNITS, Metric
 from awiwi_drake.control.compare.channels import JointChannels, joint_channels
 from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_metric, plot_runs
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
-from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compare, compare_controllers,
+from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compare, compare_controllers, factory_options,
                                                         compare_test_params, design_step_duration,
                                                         design_time_constant,
                                                         dominant_time_constant, flag_run,
@@ -25,6 +25,7 @@ from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compa
 
 __all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable", "Comparison", "COLUMNS", "NUMERIC",
            "UNITS", "settle", "run_test", "flag_run", "stopped_row", "run_standard_tests", "compare", "compare_controllers",
+           "factory_options",
            "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
            "response_bandwidth", "linear_bandwidth",
            "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric",
