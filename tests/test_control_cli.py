@@ -63,3 +63,57 @@ def test_metrics_markdown_tables_have_one_cell_per_column_also_when_every_row_di
         assert len(set(cells)) == 1, (block, cells)
     assert "| pd | link | diverged: state[1] = 6e6 |" in md
     assert "| controller | joint | rise_time [s] | gain [rad/rad] | status |" in md
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--controller-set", "bogus=1"], "--controller-set: unknown parameter 'bogus' for HandChainParams"),
+    (["--controller-set", "distribution_method=nope"], "--controller-set: HandChainParams.distribution_method = 'nope'"),
+    (["--controller-set", "joint_stiffness=soft"], "--controller-set: HandChainParams.joint_stiffness: cannot parse"),
+    (["--controller-set", "joint_stiffness"], "--controller-set expects NAME=VALUE"),
+    (["--controller-set", "joint_stiffness=1", "--controllers", "joint-pd"],
+     "--controller-set: controller 'joint-pd' takes no HandChainParams"),
+    (["--sensors", "perfect"], "--sensors: invalid choice: 'perfect'"),
+    (["--rig", "joint-rig", "--sensors", "ideal"], "--sensors: only for fingers and the hand, not rig 'joint-rig'"),
+    (["--rig", "joint-rig", "--controller-set", "joint_stiffness=1"], "--controller-set: only for fingers"),
+])
+def test_compare_controller_options_bad_input_exit_2(tmp_path, capsys, args, needle):
+    """Bad --controller-set / --sensors: one line naming the option (and key), exit 2, before any simulation."""
+    rig = [] if "--rig" in args else ["--rig", "finger-index"]
+    ctrl = [] if "--controllers" in args else ["--controllers", "cascaded" if rig else "pd"]
+    rc = main(["compare", *rig, *ctrl, *args, "--out", str(tmp_path / "x"), "--short", "--tests", "step"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and needle in err and len(err.splitlines()) == 1, err
+
+
+def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monkeypatch):
+    """--controller-set and --sensors reach the loops the CLI simulates (the simulation itself is stubbed: the
+    loops are recorded): the chain's force distribution is Algorithm 2 (ch. 7) and its joint stiffness the one set;
+    with --sensors ideal the loop has no tendon-length estimator (the controller reads the plant's joint state),
+    without it the loop estimates (5.15)."""
+    from awiwi_drake.control.compare import standard_tests
+
+    seen = {}
+
+    def record(loops, **kw):
+        seen.update(loops)
+        return standard_tests.Comparison([], standard_tests.MetricsTable([]), "finger-index")
+
+    monkeypatch.setattr(standard_tests, "compare", record)
+    for tag, extra in (("alg2", ["--controller-set", "distribution_method=algorithm2",
+                                 "--controller-set", "joint_stiffness=0.25", "--sensors", "ideal"]),
+                       ("default", [])):
+        rc = main(["compare", "--rig", "finger-index", "--controllers", "cascaded", "--tests", "step", "--short",
+                   "--quiet", "--out", str(tmp_path / tag), *extra])
+        assert rc == 0
+        loop = seen.pop("cascaded")
+        design = loop.controller.design
+        if tag == "alg2":
+            assert design["distribution_method"] == "algorithm2"
+            assert design["joint_design"].static_stiffness.max() <= 0.25 + 1e-12   # the set joint_stiffness caps K
+            assert loop.estimator is None and loop.fused is None
+            assert not loop.diagram.HasOutputPort("joint_angle_estimation_error")
+            assert "distribution_method=algorithm2" in (tmp_path / tag / "metrics.md").read_text()
+        else:
+            assert design["distribution_method"] == "optimal"
+            assert design["joint_design"].static_stiffness.max() == pytest.approx(0.5)   # HandChainParams' default
+            assert loop.estimator is not None or loop.fused is not None

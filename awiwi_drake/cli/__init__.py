@@ -38,16 +38,16 @@ class CliError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
-def parse_sets(items: list[str] | None) -> dict[str, str]:
-    """Parse repeated ``--set NAME=VALUE`` arguments into a dict."""
+def parse_sets(items: list[str] | None, option: str = "--set") -> dict[str, str]:
+    """Parse repeated ``--set NAME=VALUE`` arguments (of ``option``) into a dict."""
     out: dict[str, str] = {}
     for item in items or []:
         if "=" not in item:
-            raise CliError(f"--set expects NAME=VALUE, got {item!r}")
+            raise CliError(f"{option} expects NAME=VALUE, got {item!r}")
         name, value = item.split("=", 1)
         name = name.strip()
         if not name:
-            raise CliError(f"--set expects NAME=VALUE, got {item!r}")
+            raise CliError(f"{option} expects NAME=VALUE, got {item!r}")
         out[name] = value
     return out
 
@@ -63,15 +63,20 @@ def add_parameter_options(p: argparse.ArgumentParser, what: str = "the rig's par
                         "motor.inertia work); repeatable; applied after --config")
 
 
-def load_parameters(defaults, args):
-    """``defaults`` with ``args.config`` (YAML) and then ``args.set`` applied."""
+def load_parameters(defaults, args, option: str = "set"):
+    """``defaults`` with ``args.config`` (YAML) and then ``args.set`` applied (``option="controller_set"``: only
+    ``args.controller_set``, e.g. ``--controller-set``).  An unknown name or bad value names the option."""
     from awiwi_drake.parameters.yaml_io import load_yaml
 
     params = defaults
-    if getattr(args, "config", None):
+    if option == "set" and getattr(args, "config", None):
         params = load_yaml(params, args.config)
-    sets = parse_sets(getattr(args, "set", None))
-    return params.with_overrides(sets) if sets else params
+    flag = "--" + option.replace("_", "-")
+    sets = parse_sets(getattr(args, option, None), flag)
+    try:
+        return params.with_overrides(sets) if sets else params
+    except ValueError as exc:
+        raise CliError(f"{flag}: {exc}") from None
 
 
 def output_dir(path, option: str = "--out") -> pathlib.Path:

@@ -44,6 +44,12 @@ def register(subparsers) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     add_parameter_options(p, "the rig's parameter set", "e.g. --set guide_friction=false for a finger without the "
                           "guides' friction")
+    p.add_argument("--controller-set", action="append", default=[], metavar="NAME=VALUE",
+                   help="override one field of the controllers' HandChainParams (fingers and the hand; chain and "
+                        "backstepping controllers), e.g. distribution_method=algorithm2; repeatable")
+    p.add_argument("--sensors", choices=("estimated", "ideal"), default=None,
+                   help="fingers and the hand: joint angles from the tendon-length estimator (5.15) (default) or "
+                        "the plant's true joint state (an ideal-sensor comparison)")
     p.set_defaults(func=run)
 
 
@@ -83,6 +89,17 @@ def run(args) -> int:
         raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
     from awiwi_drake.diagrams import TARGETS, build_target
     rig_params = load_parameters(TARGETS[args.rig]["params"](), args)     # --config then --set
+    chain_params = None
+    for flag, given in (("--controller-set", args.controller_set), ("--sensors", args.sensors)):
+        if given and args.rig not in FINGER_RIGS:
+            raise ValueError(f"{flag}: only for fingers and the hand, not rig {args.rig!r}")
+    if args.controller_set:
+        from awiwi_drake.parameters.hand_control import HandChainParams
+        chain_params = load_parameters(HandChainParams(), args, option="controller_set")
+        for n in names:
+            if not getattr(get_entry(n, args.rig).factory, "takes_chain_params", False):
+                raise ValueError(f"--controller-set: controller {n!r} takes no HandChainParams (the finger/hand "
+                                 f"chain and backstepping controllers do)")
     # the hand's wrist held at neutral: without the wrist input (its tendon offsets are then zero), which is faster
     kw = {"wrist": False} if args.rig == "hand" else {}
 
@@ -92,9 +109,9 @@ def run(args) -> int:
     short = args.short or short_mode()
     params = compare_test_params(args.rig)
     if short:
-        params = short_test_params(make_rig, names, params)
+        params = short_test_params(make_rig, names, params, chain_params)
     else:       # the chosen window, or longer where the compared designs need it
-        window = design_step_duration(make_rig, names, params)
+        window = design_step_duration(make_rig, names, params, chain_params)
         if window is not None and window > params.step_duration:
             params = params.replace(step_duration=window)
     opts = {}
@@ -104,6 +121,8 @@ def run(args) -> int:
         opts["delay"] = args.delay
     if args.saturation is not None:
         opts["saturation"] = args.saturation
+    if args.sensors == "ideal":
+        opts["sensors"] = "ideal"
     from awiwi_drake.config import progress_bar
 
     n_tests = len(tests) if tests is not None else len([t for t in TESTS if (t != "disturbance"
@@ -113,13 +132,17 @@ def run(args) -> int:
             bar.set_postfix_str(label, refresh=False)
             bar.update(1)
 
-        result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance, **opts)
+        result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance,
+                                     chain_params=chain_params, **opts)
     result.table.to_csv(out / "metrics.csv")
     ref_unit = "N" if args.rig == "tendon-rig" else "rad"
     failed, n = result.table.failed(), len(result.table.rows)
     summary = (f"**{len(failed)} of {n} rows FAILED**: their simulation stopped (status = the cause, failed_at = "
                f"when; metrics NaN).\n\n" if failed else "")
-    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n{summary}"
+    setup = "".join(f"- {k}: {v}\n" for k, v in (("controller parameters (--controller-set)",
+                                                   ", ".join(args.controller_set)),
+                                                  ("joint sensors (--sensors)", args.sensors)) if v)
+    (out / "metrics.md").write_text(f"# Controller comparison on {args.rig}\n\n{setup and setup + chr(10)}{summary}"
                                     + result.table.to_markdown(ref_unit=ref_unit))
     import matplotlib
     matplotlib.use("Agg")

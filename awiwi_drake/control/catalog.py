@@ -14,12 +14,19 @@ _JOINTS = ("flexible-joint", "joint-rig")
 _SAMPLED = {"rate_hz": 3000.0}
 
 
-def _lazy(module: str, function: str, **kwargs):
-    """``factory(rig)`` calling ``module.function(rig, **kwargs)`` (imported on first call)."""
+def _lazy(module: str, function: str, *, chain_keyword: str | None = None, **kwargs):
+    """``factory(rig)`` calling ``module.function(rig, **kwargs)`` (imported on first call).
+
+    ``chain_keyword``: the function's keyword for its :class:`~awiwi_drake.parameters.hand_control.HandChainParams`;
+    the factory then takes them as ``chain_params`` (the one name for every finger/hand controller, e.g.
+    ``compare --controller-set``) and has ``takes_chain_params = True``."""
     def factory(rig, **options):
+        if "chain_params" in options and chain_keyword is not None:
+            options[chain_keyword] = options.pop("chain_params")
         return getattr(importlib.import_module(f"awiwi_drake.control.{module}"), function)(rig, **{**kwargs,
                                                                                               **options})
     factory.__name__ = f"{function}_factory"
+    factory.takes_chain_params = chain_keyword is not None
     return factory
 
 
@@ -60,7 +67,8 @@ for _design, _doc in (
                 "rate measured) -> force distribution (ch. 7) -> force PD (10.2)"),
         ("sdre", "per joint: LQR re-solved on the pointwise-linear reduced models tabulated in the joint torque (ch. "
                  "14), gains interpolated at the measured torque -> the chain")):
-    _BUILTIN.append((_design, _lazy("joint_design", "joint_stage_controller", design=_design), ("finger", "hand"), _doc))
+    _BUILTIN.append((_design, _lazy("joint_design", "joint_stage_controller", chain_keyword="chain", design=_design),
+                     ("finger", "hand"), _doc))
 
 # Every stage runs at the thesis's 3 kHz with the estimator at the same rate.  The full-state stages (lqr,
 # pole-placement, sdre) used to need 9 kHz (at 3 kHz they saturated 82-99 % of a step): the estimate was one period
@@ -74,7 +82,8 @@ for _name, _factory, _rigs, _doc in _BUILTIN:
 # |h lambda| <= 1/4, HandChainParams.sampled_pole_limit). It used to run at 6 kHz: the per-DoF design put a
 # pole at -6838 1/s on the index (h lambda = -2.3 at 3 kHz, sampled spectral radius 1.18, the command
 # chattered between the torque limits); see control/finger_backstepping.py and issue 10 item 6.
-register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller"),
+register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller",
+                                          chain_keyword="params"),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
                                 "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")
@@ -85,14 +94,14 @@ for _variant, _doc in (("position", "position backstepping per DoF (15.2 steps o
                                              "(15.81), tau = -(P S)^T phi(x) with each tendon's spring law, the "
                                              "tendon forces' null space held at the pretension; 3 kHz")):
     register_controller(f"backstepping-{_variant}", _lazy("finger_backstepping", "finger_backstepping_controller",
-                                                          variant=_variant),
+                                                          chain_keyword="params", variant=_variant),
                         rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0}, description=_doc)
 
 # 15.5 with the (9.2) observer per DoF feeding the law's link model the external/link-side torque (15.3 "formally
 # requires the measure of the external torque"): under a constant load it rests at the impedance's deflection (less
 # the frictions' hold: Kp e = S^T tau_ext - (P S)^T (z + g), finger_backstepping)
 register_controller("backstepping-load-observer",
-                    _lazy("finger_backstepping", "finger_backstepping_controller",
+                    _lazy("finger_backstepping", "finger_backstepping_controller", chain_keyword="params",
                           load_observer=FrictionObserverParams()),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="15.5 backstepping with a (9.2) load observer per DoF (its link model gets the "
@@ -104,7 +113,7 @@ register_controller("backstepping-load-observer",
 # hold, added to the desired joint torque ((9.1), as the chain's default observer): inside the bound the rest is e = 0
 # (finger_backstepping, FingerBacksteppingLaw.dead_band), where the plain law stops in its friction dead band
 register_controller("backstepping-friction-observer",
-                    _lazy("finger_backstepping", "finger_backstepping_controller",
+                    _lazy("finger_backstepping", "finger_backstepping_controller", chain_keyword="params",
                           friction_observer=FrictionObserverParams()),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="15.5 backstepping with the (9.2) observer per DoF in its link model and its "
@@ -113,7 +122,8 @@ register_controller("backstepping-friction-observer",
 
 # Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
 # against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).
-register_controller("optimal-backstepping", _lazy("optimal_gains", "finger_optimal_backstepping_controller"),
+register_controller("optimal-backstepping", _lazy("optimal_gains", "finger_optimal_backstepping_controller",
+                                                  chain_keyword="params"),
                     rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
                     description="15.5 backstepping with K3, K4 per DoF selected by ch. 16 (least squares to the "
                                 "DoF's LQR, Table 16.1 weights, R the most aggressive the 3 kHz loop follows); "

@@ -352,7 +352,8 @@ class TendonChainController(Diagram):
         force = b.AddNamedSystem("force_stage", TendonForceStage(
             rig.coupling, rig_springs(rig), rig.params, p, point=point, distribution=distribution, gains=gains,
             distribution_params=distribution_params, rate_hz=rate_hz, tendon_law=tendon_law))
-        self.design = dict(point, joint_law=joint_law, force_gains=force.gains)
+        self.design = dict(point, joint_law=joint_law, force_gains=force.gains,
+                           distribution_method=distribution or p.distribution_method)
         tau_ref = joint.GetOutputPort("joint_torque_reference")
         observer = None
         if friction_observer is not None and not isinstance(friction_observer, FrictionObserverParams):

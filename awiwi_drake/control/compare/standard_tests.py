@@ -519,8 +519,19 @@ def compare(loops: Mapping[str, ClosedLoop], *, tests: Sequence[str] | None = No
     return Comparison(runs, MetricsTable(rows), rig)
 
 
+def _factory_options(names: Sequence[str], rig: Any, chain_params: Any) -> dict:
+    """The factory options for ``chain_params`` (None: none); ValueError naming a controller that takes none."""
+    if chain_params is None:
+        return {}
+    for n in names:
+        if not getattr(get_entry(n, rig).factory, "takes_chain_params", False):
+            raise ValueError(f"controller {n!r} on {rig.name!r} takes no chain parameters (HandChainParams; the "
+                             f"finger/hand chain and backstepping controllers do)")
+    return {"chain_params": chain_params}
+
+
 def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
-                         params: CompareTestParams | None = None) -> float | None:
+                         params: CompareTestParams | None = None, chain_params: Any = None) -> float | None:
     """The step window [s] the compared loops' own designs need: ``step_delay + step_time_constants x`` the slowest
     tracking time constant of the registered controllers ``names`` on ``make_rig()``
     (:class:`~awiwi_drake.parameters.cli.CompareShortMode`), or None when a loop has no known time constant
@@ -528,7 +539,7 @@ def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
     for at least it (``awiwi-drake compare`` without ``--short``), so that a loop that performs as designed settles:
     on fingers and the hand the chain's designs count the (9.2) observer on the guides' presliding stiffness
     (:meth:`~awiwi_drake.control.joint_design.JointDesign.loop`: ~0.6 s on the index DIP, 3.15 s against the chosen
-    0.3 s).
+    0.3 s).  ``chain_params``: as :func:`compare_controllers`.
 
     The time constant is :func:`dominant_time_constant`: single-joint rigs as continuous loops (Drake
     ``Linearize``); fingers and the hand as their registered sampled loops, whose controllers report their
@@ -539,30 +550,30 @@ def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
     probe = make_rig()
     p = params or compare_test_params(probe)
     finger = rig_kind(probe) in ("finger", "hand")
-    taus = []
+    taus, extra = [], _factory_options(names, probe, chain_params)
     for n in names:
         entry = get_entry(n, probe)
         rig = make_rig()
         opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
-        taus.append(dominant_time_constant(closed_loop(rig, make_controller(n, rig), **opts), p))
+        taus.append(dominant_time_constant(closed_loop(rig, make_controller(n, rig, **extra), **opts), p))
     if not taus or any(t is None for t in taus):
         return None
     return p.step_delay + CompareShortMode().step_time_constants * max(taus)
 
 
 def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
-                      params: CompareTestParams | None = None) -> CompareTestParams:
+                      params: CompareTestParams | None = None, chain_params: Any = None) -> CompareTestParams:
     """The standard tests shortened (``compare --short``, ``AWIWI_SHORT=1``) so that the compared loops still
     settle (:class:`~awiwi_drake.parameters.cli.CompareShortMode`): the step window is
     :func:`design_step_duration`, at least ``min_step_duration`` and not capped at the full one (the full window is
     kept when a loop has no known time constant); shorter sweep, settling and sine (fingers/hand: two periods at
-    >= 4 Hz)."""
+    >= 4 Hz).  ``chain_params``: as :func:`compare_controllers`."""
     from awiwi_drake.parameters.cli import CompareShortMode
 
     probe = make_rig()
     p = params or compare_test_params(probe)
     sm = CompareShortMode()
-    window = design_step_duration(make_rig, list(names), p)
+    window = design_step_duration(make_rig, list(names), p, chain_params)
     step = p.step_duration if window is None else max(sm.min_step_duration, window)
     short = p.replace(step_duration=step, sweep_duration=min(p.sweep_duration, sm.sweep_duration),
                       settle_time=min(p.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
@@ -571,23 +582,26 @@ def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
 
 def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
                         params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None,
-                        **loop_options: Any) -> Comparison:
+                        chain_params: Any = None, **loop_options: Any) -> Comparison:
     """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
 
     ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
-    registry's defaults for :func:`awiwi_drake.control.base.closed_loop`.  Names are
-    validated (unknown / not fitting the rig: ValueError) before any simulation.
+    registry's defaults for :func:`awiwi_drake.control.base.closed_loop`.  ``chain_params``
+    (:class:`~awiwi_drake.parameters.hand_control.HandChainParams`, e.g. ``distribution_method="algorithm2"``)
+    go to every controller's factory; each must take them (the finger/hand chain and backstepping controllers).
+    Names are validated (unknown / not fitting the rig / no ``chain_params``: ValueError) before any simulation.
     """
     names = list(names)
     if not names:
         raise ValueError("compare_controllers: give at least one controller name")
     probe = make_rig()
     entries = [get_entry(n, probe) for n in names]
+    extra = _factory_options(names, probe, chain_params)
     loops = {}
     for n, entry in zip(names, entries):
         rig = make_rig()
         opts = {**entry.loop_options, **loop_options}
-        loops[n] = closed_loop(rig, make_controller(n, rig), **opts)
+        loops[n] = closed_loop(rig, make_controller(n, rig, **extra), **opts)
     return compare(loops, tests=tests, params=params or compare_test_params(probe), progress=progress)
 
 
