@@ -92,20 +92,26 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     assert (lin.D() - lin.C() @ np.linalg.solve(lin.A(), lin.B()))[0, 0] == pytest.approx(1.0, rel=1e-8)
 
 
+@pytest.mark.parametrize("finger", ["index", "thumb"])
 @pytest.mark.parametrize("design", DESIGNS)
-def test_whole_finger_poles_against_the_per_joint_designs(design):
-    """Linearize of the whole index closed by the chain (continuous): the DoF coordinates z span an invariant
-    subspace (its poles are poles of the loop); the abduction, decoupled from the others by the routing's
-    symmetry, has exactly its designed poles; every other z pole lies in a Gershgorin disc of the coupling
-    E = A_z - D the per-joint models neglect (mass matrix, shared PIP/DIP tendons); the loop is stable."""
-    c = check_design_poles(_design_rig(), design)
+def test_whole_finger_poles_against_the_per_joint_designs(design, finger):
+    """Linearize of the whole finger closed by the chain (continuous): the DoF coordinates z span an invariant
+    subspace (its poles are poles of the loop); on the index the abduction, decoupled from the others by the
+    routing's symmetry, has exactly its designed poles; every other z pole lies in a Gershgorin disc of the
+    coupling E = A_z - D the per-joint models neglect (mass matrix, shared PIP/DIP tendons; on the thumb also
+    the base's P(q) at the operating point, which couples q10/q11, so no joint of it is decoupled); the loop is
+    stable.  The discs are wide where the design's eigenvectors are ill-conditioned (radius up to ~170 |lambda|
+    on both fingers for cascaded and pd, measured): the sharp parts are the invariance and the index's abduction."""
+    c = check_design_poles(_design_rig(finger), design)
     assert c.invariance_residual < 1e-10
     for z in c.z_poles:
         assert np.min(np.abs(c.poles - z)) < 1e-8 * max(1.0, abs(z)), z
-    E = c.coupling
-    assert np.abs(E[:4]).max() < 1e-9 * np.abs(c.design).max() and np.abs(E[:, :4]).max() < 1e-9 * np.abs(c.design).max()
-    for lam in np.linalg.eigvals(c.design[:4, :4]):     # the abduction q20
-        assert np.min(np.abs(c.z_poles - lam)) < 1e-8 * abs(lam)
+    if finger == "index":
+        E = c.coupling
+        scale = np.abs(c.design).max()
+        assert np.abs(E[:4]).max() < 1e-9 * scale and np.abs(E[:, :4]).max() < 1e-9 * scale
+        for lam in np.linalg.eigvals(c.design[:4, :4]):     # the abduction q20
+            assert np.min(np.abs(c.z_poles - lam)) < 1e-8 * abs(lam)
     assert c.outside_discs().size == 0
     assert c.stable, c.poles[c.poles.real >= 0]
 
