@@ -60,6 +60,7 @@ from awiwi_drake.components.friction import dahl_path
 from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.hand.diagrams import finger_diagram
 from awiwi_drake.parameters.components import HysteresisParams
+from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
 from . import laws
@@ -377,7 +378,7 @@ class FingerResiduals:
         ctx.SetContinuousState(x0)
         try:
             res = simulate(diagram, ctx, t[-1], log=("state",), log_period=dt, mode="fixed_step",
-                           step=min(dt, 1.0 / 3000.0))
+                           step=min(dt, 1.0 / CONTROL_RATE_HZ))   # the control period (as the finger truth steps)
         except SimulationDivergedError as exc:
             raise FloatingPointError(f"{self.ds.name}: the finger replay diverged: {exc}") from None
         S = np.asarray(res["state"], float).T
