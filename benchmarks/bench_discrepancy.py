@@ -47,7 +47,10 @@ and names the effects whose terms survive.  Both are scored alike.
 
 Usage::
 
-    PYTHONPATH=. python benchmarks/bench_discrepancy.py [--quick] [--per-row N] [--jobs J] [--out DIR]
+    PYTHONPATH=. python benchmarks/bench_discrepancy.py [--quick] [--per-row N] [--jobs J | --scheduler ADDR] [--out DIR]
+
+The cases run through the package's one sweep runner, :func:`awiwi_drake.analysis.run_sweep` (a process
+pool of ``--jobs`` workers, or a Dask cluster with ``--scheduler``), as the ch. 16 Monte-Carlo search does.
 
 Cases are interleaved over the rows. Every dataset's result is one JSON file
 (``--out``/cases/ID.json); a rerun skips the finished ones and several runs may share
@@ -70,7 +73,6 @@ import json
 import os
 import pathlib
 import time
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -634,12 +636,13 @@ def case_id(case) -> str:
     return f"{row}_{rig}_{what}_x{strength:g}_{snr:g}dB_s{seed}_{duration:g}s"
 
 
-def run_and_store(case, folder: str, cache: str | None = None):
+def run_and_store(case, folder: str, cache: str | None = None, report: bool = False):
     """Run one case unless its JSON exists or another process has claimed it; returns its row or None.
 
     Parallel-safe and resumable: a case is claimed by creating ``cases/ID.claim`` exclusively
     (a stopped run leaves the claim of the case it was running: delete stale ``.claim`` files, or
-    pass ``--reclaim``), and its result is written atomically to ``cases/ID.json``."""
+    pass ``--reclaim``), and its result is written atomically to ``cases/ID.json``.  ``report``: print a
+    progress line and re-score the rows so far (the benchmark's own runs)."""
     d = pathlib.Path(folder)
     cid = case_id(case)
     done, claim = d / f"{cid}.json", d / f"{cid}.claim"
@@ -657,7 +660,25 @@ def run_and_store(case, folder: str, cache: str | None = None):
     tmp.write_text(json.dumps(r, indent=1, default=float))
     os.replace(tmp, done)
     claim.unlink(missing_ok=True)
+    if report:
+        _score_so_far(r, d)
     return r
+
+
+def _score_so_far(r: dict, folder: pathlib.Path) -> None:
+    """One progress line for a finished case, and the rows scored on every case finished so far
+    (``discrepancy_benchmark_rows.json`` / ``.md`` beside ``cases/``; written atomically, so workers on
+    several processes or machines can each write them)."""
+    rows = collect(folder)
+    print(f"[{len(rows)} done] {r['row']}: {r['rig']} {r['hidden'] or r['transform']} -> {r['named']} "
+          f"{r['nuisance_named']} {r['verdict']} | baseline {r['baseline_named']} ({r['cpu_seconds']:.0f} CPU s)",
+          flush=True)
+    out = folder.parent
+    for name, text in (("discrepancy_benchmark_rows.json", json.dumps(rows, indent=1, default=float)),
+                       ("discrepancy_benchmark.md", markdown(summarise(rows), rows))):
+        tmp = out / f"{name}.{os.getpid()}.tmp"
+        tmp.write_text(text)
+        os.replace(tmp, out / name)
 
 
 def collect(folder) -> list:
@@ -675,6 +696,9 @@ def main(argv=None) -> int:
     ap.add_argument("--reclaim", action="store_true", help="delete claims left by stopped runs before starting")
     ap.add_argument("--out", default=os.environ.get("AWIWI_OUT", "out/bench_discrepancy"))
     ap.add_argument("--rows", default=None, help="comma-separated rows to run (default: all)")
+    ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="run the cases on a Dask cluster (e.g. tcp://HEAD:8786) through analysis.run_sweep "
+                         "(the dask extra; the workers need this checkout importable and write into --out)")
     store = ap.add_mutually_exclusive_group()
     store.add_argument("--cache", default=None,
                        help="folder of generated datasets, keyed by case and generator source (default: OUT/datasets)")
@@ -702,24 +726,27 @@ def main(argv=None) -> int:
         for f in folder.glob("*.claim"):
             f.unlink(missing_ok=True)
     t0 = time.perf_counter()
-
-    def record(i, r):
-        if r is None:
-            return
-        print(f"[{i + 1}/{len(todo)}] {r['row']}: {r['rig']} {r['hidden'] or r['transform']} -> {r['named']} "
-              f"{r['nuisance_named']} {r['verdict']} | baseline {r['baseline_named']} ({r['cpu_seconds']:.0f} CPU s)",
-              flush=True)
-        rows = collect(folder)
-        (out / "discrepancy_benchmark_rows.json").write_text(json.dumps(rows, indent=1, default=float))
-        (out / "discrepancy_benchmark.md").write_text(markdown(summarise(rows), rows))
-
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as ex:
-            for i, r in enumerate(ex.map(run_and_store, todo, [str(folder)] * len(todo), [cache] * len(todo))):
-                record(i, r)
+    # One runner for every sweep of the package (issue 11 item 8): analysis.run_sweep, one case per task,
+    # on a process pool of --jobs workers, in this process (--jobs 1), or on a Dask cluster (--scheduler).
+    from awiwi_drake.analysis.sweep import run_sweep
+    client = None
+    if args.scheduler:
+        try:
+            from dask.distributed import Client
+        except ImportError:
+            ap.error(f"--scheduler {args.scheduler}: needs the dask extra (pip install 'awiwi_drake[dask]')")
+        client = Client(args.scheduler)
+        executor = client.get_executor()
     else:
-        for i, c in enumerate(todo):
-            record(i, run_and_store(c, str(folder), cache))
+        executor = "serial" if args.jobs == 1 else None
+    try:
+        if todo:
+            run_sweep(run_and_store, [{"case": c} for c in todo], executor=executor, max_workers=args.jobs,
+                      chunksize=None if executor == "serial" else 1, quiet=True,
+                      fixed={"folder": str(folder), "cache": cache, "report": True})
+    finally:
+        if client is not None:
+            client.close()
     rows = collect(folder)
     summ = summarise(rows)
     summ["wall_seconds"] = time.perf_counter() - t0

@@ -424,6 +424,30 @@ def test_benchmark_is_resumable_and_claims_each_case_once(tmp_path, monkeypatch)
     assert not list(tmp_path.glob("*.claim"))[1:] and not list(tmp_path.glob("*.tmp"))
 
 
+def test_benchmark_runs_its_cases_through_run_sweep_and_scores_each(tmp_path, monkeypatch, capsys):
+    """Issue 11 item 8: the discrepancy benchmark goes through the package's one sweep runner; every case is
+    stored and scored once, and a bad ``--jobs`` is one line."""
+    import awiwi_drake.analysis.sweep as sweep
+    bench = _bench()
+    seen = []
+    real = sweep.run_sweep
+    monkeypatch.setattr(sweep, "run_sweep", lambda fn, points, **kw: seen.append(len(points)) or real(fn, points, **kw))
+    row = dict(rig="joint", snr_db=30, strength=1.0, nuisance_named=[], unexplained=False, named=[], seconds=1.0,
+               cpu_seconds=1.0, baseline_named=[], baseline_calibration=[], verdict="no effect",
+               floor_ratio_after=1.0, generate_seconds=0.0, gap_closed=float("nan"), applied={})
+    monkeypatch.setattr(bench, "run_case", lambda case, cache=None: dict(
+        row, row=case[0], rig=case[1], hidden=list(case[2]), seed=case[4], transform=case[6]))
+    assert bench.main(["--quick", "--jobs", "1", "--no-cache", "--out", str(tmp_path)]) == 0
+    n = len(bench.cases(1, True))
+    assert seen == [n] and len(list((tmp_path / "cases").glob("*.json"))) == n
+    assert capsys.readouterr().out.count(" done] ") == n
+    summ = json.loads((tmp_path / "discrepancy_benchmark.json").read_text())
+    assert len(summ["rows"]) == n
+    with pytest.raises(SystemExit) as e:
+        bench.main(["--quick", "--jobs", "0", "--out", str(tmp_path)])
+    assert e.value.code == 2 and "--jobs" in capsys.readouterr().err
+
+
 class _LinearInAEngine:
     """A closed-form stand-in for the replay engine: window residual
     ``y - a1 phi1 - a2 phi2 - F_c tanh(v / v_s)`` (linear in the nominal_link pair ``a``, nonlinear in the
