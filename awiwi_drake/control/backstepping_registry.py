@@ -19,8 +19,11 @@ Loop option: sampled at the thesis's 3 kHz, with Kd,imp limited to ``m f_s / 4``
 (the impedance damping puts a link pole at ``-Kd,imp / m``; the limit keeps
 ``h lambda >= -1/4``).  Why: with the limit computed for 30 kHz (Kd,imp = 5.4e-3 on
 the joint rig's 7.2e-7 kg m^2 link, ``h lambda = -2.5`` at 3 kHz) the 3 kHz step
-saturated 48 % of the time and did not settle (a one-period-delay model of the
-sampled linear loop has spectral radius 1.018); with Kd,imp = m f_s / 4 = 5.4e-4
+saturated 48 % of the time and did not settle; at rest that loop is still stable (the exact
+one-period map of the sampled loop, AutoDiff through the Simulator, has spectral radius 0.9943; a
+one-period-delay model had said 1.018) and turns unstable from Kd,imp ~ 6.65e-3, so the failure is the
+step's saturation, not a linear instability at rest (tests/test_backstepping.py, docs/REPRODUCTIONS.md);
+with Kd,imp = m f_s / 4 = 5.4e-4
 the 3 kHz step settles in 0.22 s without saturation (docs/REPRODUCTIONS.md,
 ch. 15).  The limit is conservative at higher rates (``--rate 30000``).
 ``--rate 0`` runs it continuously.
