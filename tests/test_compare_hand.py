@@ -97,3 +97,9 @@ def test_full_compare_window_is_at_least_what_the_compared_designs_need(tmp_path
     assert window > full.step_duration
     assert seen["params"].step_duration == window
     assert short_test_params(lambda: finger_diagram(finger="index"), ["cascaded"], full).step_duration == window
+    # a loop without a known time constant (the motor PD: its link modes are not designed) beside it keeps the
+    # chosen window for itself and does not shorten the chain's (the hand's 13-controller run had fallen back to 0.3 s)
+    pd_rig = finger_diagram(finger="index")
+    assert dominant_time_constant(closed_loop(pd_rig, make_controller("joint-pd", pd_rig),
+                                              **get_entry("joint-pd", pd_rig).loop_options), full) is None
+    assert design_step_duration(lambda: finger_diagram(finger="index"), ["cascaded", "joint-pd"], full) == window

@@ -538,8 +538,9 @@ def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
                          controller_options: Mapping[str, Any] | None = None) -> float | None:
     """The step window [s] the compared loops' own designs need: ``step_delay + step_time_constants x`` the slowest
     tracking time constant of the registered controllers ``names`` on ``make_rig()``
-    (:class:`~awiwi_drake.parameters.cli.CompareShortMode`), or None when a loop has no known time constant
-    (unstable, or nothing known).  ``compare --short`` steps for it (at least ``min_step_duration``), the full tests
+    (:class:`~awiwi_drake.parameters.cli.CompareShortMode`) that have one; when some loop has none (unstable, or
+    nothing known) at least the chosen ``params.step_duration`` (so adding such a loop to a run never shortens the
+    others' window); None when no loop has one.  ``compare --short`` steps for it (at least ``min_step_duration``), the full tests
     for at least it (``awiwi-drake compare`` without ``--short``), so that a loop that performs as designed settles:
     on fingers and the hand the chain's designs count the (9.2) observer on the guides' presliding stiffness
     (:meth:`~awiwi_drake.control.joint_design.JointDesign.loop`: ~0.6 s on the index DIP, 3.15 s against the chosen
@@ -560,9 +561,12 @@ def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
         rig = make_rig()
         opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
         taus.append(dominant_time_constant(closed_loop(rig, make_controller(n, rig, **extra), **opts), p))
-    if not taus or any(t is None for t in taus):
+    known = [t for t in taus if t is not None]
+    if not known:
         return None
-    return p.step_delay + CompareShortMode().step_time_constants * max(taus)
+    window = p.step_delay + CompareShortMode().step_time_constants * max(known)
+    # a loop without a known time constant keeps at least the chosen window, and does not shorten the others'
+    return window if len(known) == len(taus) else max(window, p.step_duration)
 
 
 def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
