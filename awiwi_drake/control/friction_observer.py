@@ -47,22 +47,24 @@ __all__ = ["observer_rate", "observer_step", "DisturbanceObserver_", "Disturbanc
            "with_link_friction"]
 
 
-def observer_rate(w_hat, w, known_torque, inertia, gain):
+def observer_rate(w_hat, w, known_torque, inertia, gain, inertia_inverse=None):
     """``(w_hat', d_hat)`` of the observer (9.2) for velocity ``w`` and known torque ``tau_a``.  ``inertia``: a
     number or one per DoF (decoupled links), or a ``k x k`` inertia matrix ``J`` (coupled links, e.g. a finger's DoF:
     ``d_hat = L J (w - w_hat)``, ``w_hat' = J^-1 (tau_a + d_hat)``; the error still obeys ``d_hat' = L (d - d_hat)``,
-    where a diagonal model would count the off-diagonal inertial torques ``J_off w'`` into ``d``)."""
+    where a diagonal model would count the off-diagonal inertial torques ``J_off w'`` into ``d``).
+    ``inertia_inverse``: ``J^-1`` when the caller holds a constant ``J`` (computed here otherwise)."""
     if np.ndim(inertia) == 2:
         d_hat = gain * (inertia @ (w - w_hat))
-        return np.linalg.inv(inertia) @ (known_torque + d_hat), d_hat
+        Jinv = np.linalg.inv(inertia) if inertia_inverse is None else inertia_inverse
+        return Jinv @ (known_torque + d_hat), d_hat
     d_hat = gain * inertia * (w - w_hat)
     return (known_torque + d_hat) / inertia, d_hat
 
 
-def observer_step(w_hat, w, known_torque, inertia, gain: float, period: float):
+def observer_step(w_hat, w, known_torque, inertia, gain: float, period: float, inertia_inverse=None):
     """``(w_hat_k+1, d_hat_k)``: the observer (9.2) over one period ``h``, its model copy integrated with the torque
     ``tau_a,k + d_hat_k`` held (module docstring): ``w_hat + h w_hat'`` with :func:`observer_rate`'s rate."""
-    rate, d_hat = observer_rate(w_hat, w, known_torque, inertia, gain)
+    rate, d_hat = observer_rate(w_hat, w, known_torque, inertia, gain, inertia_inverse)
     return w_hat + period * rate, d_hat
 
 

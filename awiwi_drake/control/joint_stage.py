@@ -307,8 +307,10 @@ def JointFrictionObserver_(T):
                 if not (np.allclose(self.M, self.M.T) and np.linalg.eigvalsh(self.M).min() > 0):
                     raise ValueError(f"JointFrictionObserver: inertia matrix must be symmetric positive definite, "
                                      f"got {self.M!r}")
+                self.Minv = np.linalg.inv(self.M)      # constant: inverted once, not at every sample
             else:
                 self.M = check_gains("inertia", inertia, shape=(k,), owner="JointFrictionObserver", positive=True)
+                self.Minv = None
             self.b = check_gains("damping", damping, shape=(k,), owner="JointFrictionObserver")
             self.gain = check_gains("gain", np.broadcast_to(np.asarray(gain, dtype=float), (k,)).copy(),
                                     shape=(k,), owner="JointFrictionObserver", positive=True)
@@ -362,7 +364,7 @@ def JointFrictionObserver_(T):
         def compensation(self, w_hat, v, bound=None):
             """``scale clip(-d_hat, -bound, bound)`` (k) [Nm] at the observer state ``w_hat`` (k), joint velocities
             ``v`` (n) and the :meth:`friction_bound` ``bound`` (None: unclipped)."""
-            minus_d = -observer_rate(w_hat, self.Sp @ v, 0.0 * w_hat, self.M, self.gain)[1]
+            minus_d = -observer_rate(w_hat, self.Sp @ v, 0.0 * w_hat, self.M, self.gain, self.Minv)[1]
             return self.scale * (minus_d if bound is None else clip(minus_d, -bound, bound))
 
         def _known_torque(self, q, w, f, P=None):
@@ -375,7 +377,8 @@ def JointFrictionObserver_(T):
             """``w_hat`` one period later (sampled form) from the sample ``(q, v, f)`` (``P``: ``P(q)``, computed once
             per period by the caller, or here)."""
             w = self.Sp @ v
-            return observer_step(w_hat, w, self._known_torque(q, w, f, P), self.M, self.gain, self.period)[0]
+            return observer_step(w_hat, w, self._known_torque(q, w, f, P), self.M, self.gain, self.period,
+                                self.Minv)[0]
 
         def _calc(self, context, out):
             bound = None if self.levels is None else self.friction_bound(self._q.Eval(context), self._f.Eval(context))
@@ -390,7 +393,7 @@ def JointFrictionObserver_(T):
                 return
             w = self.Sp @ self._v.Eval(context)
             tau = self._known_torque(self._q.Eval(context), w, self._f.Eval(context))
-            rate, _ = observer_rate(self._state(context), w, tau, self.M, self.gain)
+            rate, _ = observer_rate(self._state(context), w, tau, self.M, self.gain, self.Minv)
             derivatives.get_mutable_vector().SetFromVector(rate)
 
         def initialize(self, context, joint_velocity=None) -> None:
