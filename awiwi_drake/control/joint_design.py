@@ -539,13 +539,18 @@ class JointDesign:
         return [np.linalg.eigvals(self.loop(j)[0]) for j in range(len(self.models))]
 
     def tracking_time_constant(self, min_share: float = 0.01) -> float:
+        """The slowest of :meth:`tracking_time_constants` [s], over all DoF.  The compare's short mode sizes its step
+        window with it."""
+        return max(self.tracking_time_constants(min_share))
+
+    def tracking_time_constants(self, min_share: float = 0.01) -> list[float]:
         """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
-        shows, over all DoF: each DoF's designed loop (:meth:`loop`: continuous ``F - G K``, or the sampled chain's
+        shows, per DoF: each DoF's designed loop (:meth:`loop`: continuous ``F - G K``, or the sampled chain's
         ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``; with the observer and the guides' presliding stiffness
         when :attr:`observer` is set) with its reference maps as input; a pole's share
         of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
         ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
-        does for a linearised loop).  The compare's short mode sizes its step window with it."""
+        does for a linearised loop)."""
         taus = []
         for j in range(len(self.models)):
             A, b = self.loop(j)
@@ -560,7 +565,7 @@ class JointDesign:
                     s = np.log(lam.astype(complex)) / self.period
             keep = (share / share.sum() > min_share) & np.isfinite(s)
             taus.append(float(1.0 / np.min(-s.real[keep])))
-        return max(taus)
+        return taus
 
     def table(self) -> str:
         """Per DoF: ``M_jj``, ``K_jj``, the gains and the slowest designed pole [1/s] (sampled: ``ln(z) / h``) of the
