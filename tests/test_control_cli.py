@@ -97,6 +97,7 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
     its distribution asked for K_mech = eps K_eff (8.2) with the set eps;
     with --sensors ideal the loop has no tendon-length estimator (the controller reads the plant's joint state),
     without it the loop estimates (5.15)."""
+    import awiwi_drake.control.compare as cmp
     from awiwi_drake.control.compare import standard_tests
 
     seen = {}
@@ -105,7 +106,7 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
         seen.update(loops)
         return standard_tests.Comparison([], standard_tests.MetricsTable([]), "finger-index")
 
-    monkeypatch.setattr(standard_tests, "compare", record)
+    monkeypatch.setattr(cmp, "compare", record)
     for tag, extra in (("alg2", ["--controller-set", "distribution_method=algorithm2",
                                  "--controller-set", "joint_stiffness=0.25", "--controller-set",
                                  "stiffness_correction=true", "--controller-set", "epsilon=2", "--sensors", "ideal"]),

@@ -807,10 +807,10 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
     # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
     # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
-    from awiwi_drake.control.compare import short_test_params
+    from awiwi_drake.control.compare import build_loops, short_test_params
     from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.hand.coupling import dof_selection
-    p = short_test_params(lambda: _rig("ring"), ["joint-pd", "cascaded"])      # the window the CLI ran
+    p = short_test_params(lambda: _rig("ring"), build_loops(lambda: _rig("ring"), ["joint-pd", "cascaded"]))  # the CLI's
     for name in ("joint-pd", "cascaded"):
         rig = _rig("ring")
         S = dof_selection(rig.coupling)
