@@ -46,7 +46,6 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import scalar_value
 from awiwi_drake.control.force_distribution import TendonForceDistribution_
-from awiwi_drake.control.sdre import SDRE_GAIN
 from awiwi_drake.hand.estimation import LinkPositionEstimator_
 
 __all__ = ["FusedChain_", "FusedChain", "ESTIMATE_OUTPUTS"]
@@ -136,7 +135,7 @@ def FusedChain_(T):
             self.DeclareVectorOutputPort("joint_velocity_estimate", n,
                                          lambda c, o: o.SetFromVector(self._sample(c)["v"]), prerequisites_of_calc=pre)
             if self._xg is not None:
-                self.DeclareStateOutputPort(SDRE_GAIN, self._xg)
+                self.DeclareStateOutputPort(self.law.gain_name, self._xg)
             if chain:
                 if self.dist is not None:
                     self.DeclareStateOutputPort("tendon_force_reference", self._xf)
@@ -196,7 +195,7 @@ def FusedChain_(T):
                     u["tendon_force_reference"] = f0 + W @ (tau - tau0)
                 out.update(tau=tau, f_ref=u["tendon_force_reference"])
             if self._xg is not None:
-                u[SDRE_GAIN] = xd.get_vector(self._xg).CopyToVector()
+                u[self.law.gain_name] = xd.get_vector(self._xg).CopyToVector()
             out["u"] = np.asarray(self.law(u)).reshape(-1)
             value.set_value(out)
 

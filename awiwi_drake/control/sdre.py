@@ -325,6 +325,7 @@ class TendonSdreLaw(StaticLaw):
         if update_period is not None:
             check_gain("update_period", update_period, owner=name)
         self.update_period = update_period
+        self.gain_name = SDRE_GAIN
         self.path_velocity = bool(path_velocity)
         self.inputs = {"tendon_force_reference": m, "tendon_force": m, "motor_velocity": m}
         if self.ripple_scale > 0:
