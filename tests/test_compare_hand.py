@@ -113,3 +113,31 @@ def test_full_compare_window_is_at_least_what_the_compared_designs_need(tmp_path
     pd_loop = build_loops(make_index, ["joint-pd"])["joint-pd"]
     assert dominant_time_constant(pd_loop, full) is None
     assert design_step_duration(make_index, {**seen["loops"], "joint-pd": pd_loop}, full) == window
+
+
+def test_ideal_sensor_compare_reports_the_estimators_error_without_feeding_it_back():
+    """``compare --sensors ideal``: the controller reads the plant's joint state and the tendon-length estimator
+    (5.15) runs beside it on the same samples, so every row still has the estimator's error (it was NaN).  Not fed
+    back: the joint trajectory equals the loop's without the estimator (``estimator=None``) to round-off.  Its error
+    is the estimator's own: at most one control period of the joint's motion (the estimate is from the current
+    sample, the error output compares it with the held truth), as in notebook 09 with estimated sensors."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.compare import build_loops, run_joint_test
+    from awiwi_drake.hand.coupling import dof_selection
+
+    make = lambda: finger_diagram(finger="index")                                              # noqa: E731
+    loop = build_loops(make, ["backstepping"], sensors="ideal")["backstepping"]
+    rig = make()
+    bare = closed_loop(rig, make_controller("backstepping", rig), **get_entry("backstepping", rig).loop_options,
+                       sensors="ideal", estimator=None)
+    op, S = rig.operating_point(), dof_selection(rig.coupling)
+    ref = {"joint_angle_reference": op.joint_angle + S @ np.full(S.shape[1], 0.2)}
+    res = [simulate(lp, lp.create_context(op), 0.05, inputs=ref, log=("joint_angle", "joint_velocity")
+                    + (("joint_angle_estimation_error",) if lp is loop else ())) for lp in (loop, bare)]
+    np.testing.assert_allclose(res[0]["joint_angle"], res[1]["joint_angle"], rtol=0, atol=1e-12)
+    err = np.abs(res[0]["joint_angle_estimation_error"]).max(axis=0)
+    assert np.all(err <= np.abs(res[0]["joint_velocity"]).max(axis=0) / 3000.0 * 1.05 + 1e-12), err
+    assert np.ptp(res[0]["joint_angle"], axis=0).max() > 0.05           # the joints did move
+    p = compare_test_params("finger-index", step_duration=0.05, settle_time=0.01)
+    _, rows = run_joint_test(loop, "step", controller="backstepping", params=p)
+    assert all(np.isfinite(r.estimation_error) for r in rows), [r.estimation_error for r in rows]

@@ -95,7 +95,7 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
     """--controller-set and --sensors reach the loops the CLI simulates (the simulation itself is stubbed: the
     loops are recorded): the chain's force distribution is Algorithm 2 (ch. 7), its joint stiffness the one set and
     its distribution asked for K_mech = eps K_eff (8.2) with the set eps;
-    with --sensors ideal the loop has no tendon-length estimator (the controller reads the plant's joint state),
+    with --sensors ideal the controller reads the plant's joint state (the tendon-length estimator runs beside it),
     without it the loop estimates (5.15)."""
     import awiwi_drake.control.compare as cmp
     from awiwi_drake.control.compare import standard_tests
@@ -121,8 +121,8 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
             assert design["joint_design"].static_stiffness.max() <= 0.25 + 1e-12   # the set joint_stiffness caps K
             K_mech = np.concatenate([np.diag(B) for B in design["mechanical_stiffness"]])     # (8.2), eps = 2
             np.testing.assert_allclose(K_mech, 2.0 * design["joint_design"].static_stiffness, rtol=1e-12)
-            assert loop.estimator is None and loop.fused is None
-            assert not loop.diagram.HasOutputPort("joint_angle_estimation_error")
+            assert loop.estimated == () and loop.fused is None            # the controller reads the true state
+            assert loop.diagram.HasOutputPort("joint_angle_estimation_error")  # the estimator runs beside it
             assert "distribution_method=algorithm2" in (tmp_path / tag / "metrics.md").read_text()
         else:
             assert design["distribution_method"] == "optimal"

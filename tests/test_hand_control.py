@@ -47,8 +47,10 @@ def test_registry_and_port_contract_on_a_finger():
     assert loop.estimated == ("joint_angle", "joint_velocity")
     for port in ("joint_angle_estimate", "joint_angle_estimation_error", "joint_velocity_estimate"):
         assert loop.diagram.HasOutputPort(port)
-    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")
-    assert ideal.estimated == () and not ideal.diagram.HasOutputPort("joint_angle_estimate")
+    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")   # the estimator beside, not fed back
+    assert ideal.estimated == () and ideal.diagram.HasOutputPort("joint_angle_estimation_error")
+    assert not closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal",
+                           estimator=None).diagram.HasOutputPort("joint_angle_estimate")
     # a motor-side controller needs no estimator
     assert closed_loop(_rig(), make_controller("joint-pd", rig)).estimated == ()
 
