@@ -91,7 +91,7 @@ def test_the_gain_follows_the_state_through_the_springs_slope():
 
 
 def test_tendon_sdre_system_converts_holds_and_refreshes_its_gain_and_names_a_bad_reference():
-    """``TendonSdreController_``: AutoDiffXd conversion (values equal, the derivative by the measured forces equals
+    """``TendonSdreController_``: the compiled float path equals the law as written, AutoDiffXd conversion (values equal, the derivative by the measured forces equals
     finite differences of the float system), the periodic update re-solves the gain at the measured forces, and a
     reference outside a tendon's table names that tendon.  A bank of 8 tendons on two spring laws (the hand's lever
     mechanism with and without the tendon's elasticity in series), alternating."""
@@ -110,6 +110,11 @@ def test_tendon_sdre_system_converts_holds_and_refreshes_its_gain_and_names_a_ba
     vals = {"tendon_force_reference": rng.uniform(5, 40, m), "tendon_force": rng.uniform(5, 40, m),
             "motor_velocity": rng.uniform(-2, 2, m), "motor_angle": rng.uniform(-1, 1, m),
             "tendon_path_velocity": rng.uniform(-0.01, 0.01, m)}
+    # the float bank's compiled path equals the law as written (at the initial and at re-solved gains)
+    for k in (law.initial_gain, law.gains(vals["tendon_force"])):
+        u = dict(vals, **{SDRE_GAIN: k})
+        np.testing.assert_allclose(law(u), law.evaluate(u), rtol=0, atol=1e-12 * np.abs(law.evaluate(u)).max())
+    assert law.__dict__.get("_kernel") is not None
     ctx = sys_.CreateDefaultContext()
     for nm, v in vals.items():
         sys_.GetInputPort(nm).FixValue(ctx, v)
