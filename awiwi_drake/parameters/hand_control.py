@@ -241,11 +241,13 @@ class HandChainParams(Parameters):
                 "a = r_m alpha / B (control.sdre.tendon_sdre_gains): q_theta = R (B w_f^2)^2 with w_f = "
                 "force_bandwidth (300 rad/s), B = 2e-3 kg m^2 (Table 14.1's B_theta, the hand's motor) and R = "
                 "sdre_input_weight gives w_n^4 = w_f^4 + a^2, i.e. w_n = 300.0 rad/s at the op's 20 N "
-                "(a = 86 1/s^2), the bandwidth of the (10.2) law it replaces (the cascade's stiffness cap and the "
+                "(a = 165 1/s^2), the bandwidth of the (10.2) law it replaces (the cascade's stiffness cap and the "
                 "joint designs assume it); q_omega = 0 leaves LQR's own damping sqrt(2 (w_n^2 - a)) / (2 w_n) = "
                 "0.707, the (10.10) design's 0.7. Table 14.1's Q = diag(1, 1e-4) (the tendon rig, "
-                "reproductions.ch14_sdre) puts the loop at 98 rad/s and -5000 1/s: 3x slower than the chain's "
-                "force loop and |h lambda| = 1.7 at the 3 kHz period"),
+                "reproductions.ch14_sdre) puts the loop at -100 and -5000 1/s, 3x slower than the force loop the "
+                "joint designs assume; measured on the index (cascaded, 0.2 rad MCP step, 3 kHz): it settles too "
+                "(sampled loop at rest 0.99958 against 0.99949), but its 1000 Nm/rad position gain commands up to "
+                "103 Nm against the 3 Nm motors (these weights: 9 Nm, as the (10.2) law)"),
         doc="Q = diag(q_theta, q_omega) of the chain's tendon SDRE (tendon_law='sdre')")
     sdre_input_weight: float = param(1e-6, unit="1/(Nm)^2", low=0.0, low_inclusive=False,
                                      source="Table 14.1 (R of the tendon SDRE; only Q / R matters)",
