@@ -23,7 +23,10 @@
   - :class:`~awiwi_drake.control.tendon_force.TendonForceLaw` with ``size = m`` -- (10.2) per tendon,
     gains (10.11) scheduled on the reference (10.12), slope ``alpha = r_m k_t(f)`` of the tendon's
     own spring curve (:meth:`ForceMap.from_spring` of each tendon's law, :func:`rig_springs`: the rig's
-    ``params.tendon_springs`` overrides are honoured), friction (3.8) and ripple (3.5) fed forward.
+    ``params.tendon_springs`` overrides are honoured), friction (3.8) and ripple (3.5) fed forward; or
+    (``HandChainParams.tendon_law = "sdre"``) the tendon SDRE of ch. 14 per tendon
+    (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`, gains re-solved at 200 Hz from each tendon's (14.9) at its
+    measured force, held in discrete state), with the same feed-forward.
 
 :class:`TendonChainController` wires a joint stage and the force stage into one controller with
 the port contract of :mod:`awiwi_drake.control.base` (inputs ``joint_angle_reference``,
