@@ -47,8 +47,10 @@ def test_registry_and_port_contract_on_a_finger():
     assert loop.estimated == ("joint_angle", "joint_velocity")
     for port in ("joint_angle_estimate", "joint_angle_estimation_error", "joint_velocity_estimate"):
         assert loop.diagram.HasOutputPort(port)
-    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")
-    assert ideal.estimated == () and not ideal.diagram.HasOutputPort("joint_angle_estimate")
+    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")   # the estimator beside, not fed back
+    assert ideal.estimated == () and ideal.diagram.HasOutputPort("joint_angle_estimation_error")
+    assert not closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal",
+                           estimator=None).diagram.HasOutputPort("joint_angle_estimate")
     # a motor-side controller needs no estimator
     assert closed_loop(_rig(), make_controller("joint-pd", rig)).estimated == ()
 
@@ -829,10 +831,10 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
     # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
     # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
-    from awiwi_drake.control.compare import short_test_params
+    from awiwi_drake.control.compare import build_loops, short_test_params
     from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.hand.coupling import dof_selection
-    p = short_test_params(lambda: _rig("ring"), ["joint-pd", "cascaded"])      # the window the CLI ran
+    p = short_test_params(lambda: _rig("ring"), build_loops(lambda: _rig("ring"), ["joint-pd", "cascaded"]))  # the CLI's
     for name in ("joint-pd", "cascaded"):
         rig = _rig("ring")
         S = dof_selection(rig.coupling)
