@@ -115,8 +115,9 @@ class HandChainParams(Parameters):
     the cascade limits ``K <= cascade_margin M_jj force_bandwidth^2 / 4`` (the stability bound of (11.16), its joint
     loop behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
     is ``stiffness_scale`` times the operating point's own (5.12) unless given per DoF.  The force
-    loop is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) and the ripple
-    feed-forward ``RippleCompensationParams.amplitude_scale``.
+    loop (``tendon_law``) is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) or the ch. 14
+    tendon SDRE (``sdre_*``), with the friction and ripple feed-forward ``force_friction_scale`` /
+    ``force_ripple_scale``.
     """
 
     force_bandwidth: float = param(300.0, unit="rad/s", low=0.0, low_inclusive=False,
