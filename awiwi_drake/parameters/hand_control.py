@@ -267,6 +267,12 @@ class HandChainParams(Parameters):
                 "finger and the hand with guide friction (tests/test_hand_control.py); True gives the exact design "
                 "(poles equal to the designed error system on the ideal plant)"))
 
+    def _validate(self) -> None:
+        super()._validate()
+        if len(self.sdre_weights) != 2 or self.sdre_weights[0] <= 0.0:
+            raise ValueError(f"HandChainParams.sdre_weights = {self.sdre_weights!r} must be (q_theta > 0, "
+                             f"q_omega >= 0): the tendon SDRE's Q = diag(q_theta, q_omega)")
+
 
 @dataclass(frozen=True)
 class LinkEstimatorParams(Parameters):
