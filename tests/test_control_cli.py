@@ -75,6 +75,7 @@ def test_metrics_markdown_tables_have_one_cell_per_column_also_when_every_row_di
      "--controller-set: controller 'joint-pd' on 'finger-index' takes no chain_params"),
     (["--controller-set", "stiffness_correction=true", "--controllers", "backstepping"],
      "--controller-set: controller 'backstepping' on 'finger-index' takes no stiffness_correction"),
+    (["--controller-set", "sdre_weights=0,0"], "HandChainParams.sdre_weights = (0.0, 0.0) must be (q_theta > 0"),
     (["--controller-set", "tendon_law=pid"], "--controller-set: HandChainParams.tendon_law = 'pid' must be one of"),
     (["--controller-set", "tendon_law=sdre", "--controllers", "backstepping"],
      "tendon_law = 'sdre': the 15.5 finger backstepping computes the motor torques itself"),
