@@ -187,7 +187,7 @@ class PipStudy(Parameters):
                 "joints' presliding stiffness scaled by 4^2 (JointFrictionParams.presliding_angle / 16: sigma0 = 4.8 "
                 "Nm/rad). RK3's bound on the plant's fastest mode scales with 1/h^2 (docs/REPRODUCTIONS.md, 'Joint "
                 "stick-slip friction at 3 kHz'); at the hand's own step a stuck joint is held by at most 0.37 Nm/rad, "
-                "softer than the loop's impedance, so it creeps instead of sticking"))
+                "softer than the backstepping's designed PIP stiffness (0.46 Nm/rad), so it creeps instead of sticking"))
 
 
 @dataclass(frozen=True)

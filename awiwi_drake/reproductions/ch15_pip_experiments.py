@@ -121,8 +121,8 @@ def stuck_intervals(run: PipRun, speed: float) -> list[tuple[float, float]]:
 
 def pip_metrics(run: PipRun, study: PipStudy | None = None) -> dict:
     """Step: final error [rad] (mean over the last 0.1 s), rise time 10-90 % [s], overshoot [%]; sine: RMS error after
-    the first period [rad]; both: the time the PIP stands still (slower than a tenth of the Stribeck velocity, where
-    the friction is within 1 % of its breakaway level) while the reference moves [s] and the longest such interval [s],
+    the first period [rad]; both: the time the PIP stands (slower than the Stribeck velocity, the friction's static
+    regime) while the reference moves [s] and the longest such interval [s],
     peak |torque| [Nm],
     minimum tendon force [N]; the PIP's velocity reversals per second (``reversals_per_s``, counted where it turns
     faster than that) beside the reference's own (``reference_reversals_per_s``: 0 for the step, 2 f for the sine):
@@ -146,7 +146,7 @@ def pip_metrics(run: PipRun, study: PipStudy | None = None) -> dict:
         after = run.t >= 1.0 / s.sine_frequency
         out["rms_error"] = float(np.sqrt(np.mean(e[after] ** 2))) if np.any(after) else math.nan
         moving = np.abs(dr) > 1e-9
-    slow = 0.1 * JointFrictionParams().stribeck_velocity
+    slow = JointFrictionParams().stribeck_velocity
     still = (np.abs(run.velocity) < slow) & moving
     out["still_time"] = float(np.sum(still) * dt)
     out["longest_still"] = max((d for t0, d in stuck_intervals(run, slow)), default=0.0)
