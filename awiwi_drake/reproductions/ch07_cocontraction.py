@@ -84,7 +84,8 @@ class StiffnessMeasurement:
     linearity: float
     ends: np.ndarray = field(repr=False, default=None)      # the windows' ends [s] (before the first load, then each)
     window: float = 0.0
-    torque_error: np.ndarray = field(repr=False, default=None)   # per window, (P S)^T (f - f_ref) [Nm] (chain)
+    torque_error: np.ndarray = field(repr=False, default=None)   # per window, -(P S)^T f - tau_ref [Nm] (chain)
+    estimation_error: np.ndarray = field(repr=False, default=None)   # per window, mean estimate - true [rad]
     t: np.ndarray = field(repr=False, default=None)
     q: np.ndarray = field(repr=False, default=None)
 
@@ -125,7 +126,8 @@ def _presliding(rig, f, PS):
 
 def _smooth_staircase(n: int, load: np.ndarray, ramp: float, hold: float, settle: float, size: int, S: np.ndarray):
     """External torque samples: the load ramps (raised cosine over ``ramp`` s, quasi-static against the finger's
-    link modes) onto DoF 0, then DoF 1, ...; returns the schedule, the segment end times and the window starts."""
+    link modes) onto DoF 0, then DoF 1, ...; returns the schedule and the windows' end times (before the first load, then
+    after each)."""
     seg = ramp + hold
     u = np.linspace(0.0, 1.0, 41)
     shape = 0.5 - 0.5 * np.cos(np.pi * u)
@@ -133,12 +135,12 @@ def _smooth_staircase(n: int, load: np.ndarray, ramp: float, hold: float, settle
     level = np.zeros(size)
     for k in range(n):
         t0 = settle + k * seg
+        times.append(t0)                      # held until the ramp starts (linear interpolation between samples)
+        values.append(level.copy())
         for s_, a in zip(u[1:], shape[1:]):
             times.append(t0 + s_ * ramp)
             values.append(level + a * load[k] * S[:, k])
         level = level + load[k] * S[:, k]
-        times.append(t0 + seg)
-        values.append(level.copy())
     ends = settle + seg * np.arange(n + 1)
     return Samples(times, np.array(values), hold="linear"), ends
 
@@ -184,10 +186,10 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     loop = closed_loop(rig, ctrl)
     sched, ends = _smooth_staircase(n, L, ramp, hold, hold if settle is None else settle, rig.num_joints, S)
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
-    ref_port = "controller_tendon_force_reference"
+    ref_port, est_port = "controller_joint_torque_reference", "joint_angle_estimation_error"
     res = simulate(loop, ctx, float(ends[-1]), inputs={"external_torque": sched},
                    log=("joint_angle", "tendon_force", "elongation")
-                   + ((ref_port,) if loop.diagram.HasOutputPort(ref_port) else ()))
+                   + tuple(p_ for p_ in (ref_port, est_port) if loop.diagram.HasOutputPort(p_)))
     t, q = res.t, res["joint_angle"] @ np.linalg.pinv(S).T
     win = [(t > e - window) & (t <= e + 1e-12) for e in ends]
     means = np.array([q[w].mean(axis=0) for w in win])
@@ -222,15 +224,19 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
         lin = max(lin, float(np.max(dx / delta)))
     if model.guide_friction is not None:
         lin = max(lin, float(np.max(dh / model.guide_friction.presliding_length)))
-    # the force loops' static error as joint torque, -(P S)^T (f - f_ref) per window (the chain only): the part of the
-    # commanded torque the tendons did not deliver
+    # the chain's static torque error per window, -(P S)^T f - tau_ref: what the distribution and the force loops did
+    # not deliver of the joint law's request
     torque_error = np.zeros((len(ends), n))
     if ref_port in res:
-        e_f = res["tendon_force"] - res[ref_port]
-        torque_error = np.array([-PS.T @ e_f[w].mean(axis=0) for w in win])
+        e_tau = -res["tendon_force"] @ PS - res[ref_port]
+        torque_error = np.array([e_tau[w].mean(axis=0) for w in win])
+    # the tendon-length estimator's (5.15) mean error per window (the chain acts on the estimate, not on q)
+    estimation_error = np.zeros((len(ends), n))
+    if est_port in res:
+        estimation_error = np.array([np.linalg.pinv(S) @ res[est_port][w].mean(axis=0) for w in win])
     names = [rig.joint_names[int(np.flatnonzero(S[:, j])[0])] for j in range(n)]
     return StiffnessMeasurement(finger, controller, level, names, L, measured, mechanical, predicted, presliding,
-                                commanded, f, D, lin, ends, window, torque_error, t, q)
+                                commanded, f, D, lin, ends, window, torque_error, estimation_error, t, q)
 
 
 def stiffness_bound(m: StiffnessMeasurement) -> np.ndarray:
@@ -242,14 +248,19 @@ def stiffness_bound(m: StiffnessMeasurement) -> np.ndarray:
       static value (the finger's light link modes ring for seconds at a damping ratio ~1e-3; the raised-cosine ramp
       keeps that small), so ``D`` is known within ``dD`` (the two windows' deviations added), and ``K = L D^-1``
       within ``|K| dD |D^-1|`` entry by entry (first order of ``dK = -K dD D^-1``);
-    * the force chain's static force error: the tendons deliver the commanded torque but for ``(P S)^T (f - f_ref)``
-      (the force loop against the motors' residual friction and ripple); its change over load step ``j`` changes the
-      torque behind column ``j`` of ``D``: ``|d tau_err,j| / |D_jj|``."""
+    * the force chain's static torque error: the tendons deliver the joint law's request ``tau_ref`` but for
+      ``-(P S)^T f - tau_ref`` (the warm-started distribution's and the force loops' residuals, the motors' friction
+      and ripple); its change over load step ``j`` changes the torque behind column ``j`` of ``D``:
+      ``|d tau_err,j| / |D_jj|``;
+    * the tendon-length estimator (5.15): a loop that acts on the estimated joint angles holds the estimate's
+      deflection ``D + dE`` (``dE`` the change of the windows' mean estimation error), so ``K`` within
+      ``|K| |dE| |D^-1|`` entry by entry."""
     t, q = m.t, m.q
     dev = np.array([np.max(np.abs(q[w] - q[w].mean(axis=0)), axis=0)
                     for w in ((t > e - m.window) & (t <= e + 1e-12) for e in m.ends)])
     dD = (dev[:-1] + dev[1:]).T                       # column j: the windows before and after the load on DoF j
-    ring = np.diag(np.abs(m.measured) @ dD @ np.abs(np.linalg.inv(m.deflection)))
+    dE = np.abs(np.diff(m.estimation_error, axis=0)).T
+    ring = np.diag(np.abs(m.measured) @ (dD + dE) @ np.abs(np.linalg.inv(m.deflection)))
     force = np.abs(np.diag(np.diff(m.torque_error, axis=0))) / np.abs(np.diag(m.deflection))
     return np.abs(np.diag(m.presliding)) * m.linearity / 2.0 + ring + force
 
