@@ -260,7 +260,7 @@ class TendonForceStage(Diagram):
         elif tendon_law == "sdre":                   # ch. 14, one bank; gains held over 1 / sdre_update_rate
             from awiwi_drake.control.sdre import TendonSdreLaw
             maps = {id(law_): ForceMap.from_spring(law_, r_m) for law_, _ in springs.groups}
-            law = TendonSdreLaw([maps[id(law_)] for law_ in springs], drive_params.motor, q_diag=p.sdre_weights,
+            law = TendonSdreLaw([maps[id(law_)] for law_ in springs], drive_params.motor, q_diag=p.tendon_sdre_weights(drive_params.motor.inertia),
                                 r=p.sdre_input_weight, design_forces=point["tendon_force"],
                                 update_period=None if method == "sharing" else 1.0 / p.sdre_update_rate,
                                 friction_scale=p.force_friction_scale,

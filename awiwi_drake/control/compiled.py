@@ -40,13 +40,33 @@ def _interp1(x, xp, fp, n):
 
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
-def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, lo, fmax,
-              scheduled, path, feedforward, friction, friction_scale, ripple_scale, r_m, out):
-    m = fd.shape[0]
-    for i in range(m):
+def _first_outside(fd, group, fmax):
+    for i in range(fd.shape[0]):
         g = group[i]
         if not (np.isfinite(fd[i]) and fd[i] >= 0.0 and fd[i] <= fmax[g]):
             return i
+    return -1
+
+
+@numba.njit(cache=True, fastmath=False, error_model='numpy')
+def _minus_motor_feedforward(tau, w, th, friction_scale, ripple_scale, arg, res):
+    arg[0] = w
+    arg[1] = th
+    motor_feedforward(arg, res)
+    if friction_scale > 0:
+        tau = tau - friction_scale * res[0]
+    if ripple_scale > 0:
+        tau = tau - ripple_scale * res[1]
+    return tau
+
+
+@numba.njit(cache=True, fastmath=False, error_model='numpy')
+def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, lo, fmax,
+              scheduled, path, feedforward, friction, friction_scale, ripple_scale, r_m, out):
+    m = fd.shape[0]
+    bad = _first_outside(fd, group, fmax)
+    if bad >= 0:
+        return bad
     arg = np.empty(2)
     res = np.empty(2)
     for i in range(m):
@@ -63,24 +83,16 @@ def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, 
         tau = kp * (fd[i] - f[i]) - kd * (alpha * w_el)
         if feedforward:
             tau = tau + r_m * f[i]
-        arg[0] = w[i]
-        arg[1] = th[i]
-        motor_feedforward(arg, res)
-        if friction:
-            tau = tau - friction_scale * res[0]
-        if ripple_scale > 0:
-            tau = tau - ripple_scale * res[1]
-        out[i] = tau
+        out[i] = _minus_motor_feedforward(tau, w[i], th[i], friction_scale if friction else 0.0, ripple_scale, arg, res)
     return -1
 
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
 def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale, ripple_scale, r_m, out):
     m = fd.shape[0]
-    for i in range(m):
-        k = group[i]
-        if not (np.isfinite(fd[i]) and fd[i] >= 0.0 and fd[i] <= fmax[k]):
-            return i
+    bad = _first_outside(fd, group, fmax)
+    if bad >= 0:
+        return bad
     arg = np.empty(2)
     res = np.empty(2)
     for i in range(m):
@@ -89,14 +101,7 @@ def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale,
         err = _interp1(fm, tf[k], tth[k], n[k]) - _interp1(fd[i], tf[k], tth[k], n[k])
         w_el = w[i] + vp[i] / r_m if path else w[i]
         tau = r_m * fd[i] - g[i] * err - g[m + i] * w_el
-        arg[0] = w[i]
-        arg[1] = th[i]
-        motor_feedforward(arg, res)
-        if friction_scale > 0:
-            tau = tau - friction_scale * res[0]
-        if ripple_scale > 0:
-            tau = tau - ripple_scale * res[1]
-        out[i] = tau
+        out[i] = _minus_motor_feedforward(tau, w[i], th[i], friction_scale, ripple_scale, arg, res)
     return -1
 
 
