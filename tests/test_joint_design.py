@@ -304,7 +304,7 @@ def test_full_state_stages_on_the_hand_are_stable_at_rest(physics):
     """The hand (19 DoF) under the pole-placement and LQR stages, sampled at 3 kHz through the estimator, with the
     plant's physics off, with the motors' friction and ripple off, and on: spectral radius < 1 (neutral modes: the
     Dahl memories, 2 x 38 where on).  (The SDRE stage is the LQR at the operating point,
-    test_sdre_stage_is_the_lqr_at_the_operating_point_and_follows_the_spring_slope; the impedance and PD stages have
+    test_sdre_stage_is_the_lqr_at_the_operating_point_and_away_from_it; the impedance and PD stages have
     no torque feedback; all six were measured stable on the hand in all three configurations.)  Short mode (CI)
     skips the plant with the physics off (11 s; its fingers: test_every_joint_stage_is_stable_at_rest)."""
     from awiwi_drake.config import short_mode
