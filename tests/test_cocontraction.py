@@ -32,5 +32,10 @@ def test_force_chain_shows_its_impedance_not_the_co_contracted_springs():
     m = measure_joint_stiffness("index", "cascaded:no-observer", stiffness_scale=2.0, params=p, settle=0.3,
                                 load=None, deflection=0.005, ramp=0.05, hold=0.1, window=0.05)
     assert m.tendon_force.mean() > 2.5 * 20.0
-    assert np.all(np.abs(m.diagonal() - m.commanded) <= stiffness_bound(m)), (m.diagonal(), m.commanded)
-    assert np.all(np.abs(m.diagonal("mechanical") - m.diagonal()) > stiffness_bound(m))   # (5.12) is excluded
+    b = stiffness_bound(m)
+    assert np.all(np.abs(m.diagonal() - m.commanded) <= b), (m.diagonal(), m.commanded)
+    assert np.all(np.abs(m.diagonal("mechanical") - m.diagonal()) > b)   # (5.12) is excluded
+    # the comparison resolves a DoF's stiffness only where its bound is below half the commanded value (it then tells
+    # the commanded from zero and from twice it): abduction, MCP and PIP in this short run; the DIP (0.007 Nm/rad)
+    # still rings and its bound is several times its stiffness, so this run says nothing about it
+    assert np.all(b[:3] < 0.5 * m.commanded[:3]), (b, m.commanded)
