@@ -512,11 +512,12 @@ def test_cause_of_the_friction_observers_slow_mode_is_the_guides_presliding():
     * the cause: with the guides' friction off the loop at L = 100 is faster than that cap, so the guides, not the
       observer gain, set it.
 
-    The reduction with the link's impedance against the guides' presliding spring alone, ``a = (Kp + K_g) / Kp`` with
+    The reduction with the link's impedance alone against the guides' presliding spring, ``a = (Kp + K_g) / Kp`` with
     the law's ``Kp``, ``Kd`` and ``K_g = (P S)^T diag(W / delta) (P S)`` (index DIP 0.26 Nm/rad), gives a = 8.6, not
-    the measured 72: the law's phantom acceleration makes the guides hold ``I + G`` times harder, ``a = (Kp + (I + G)
-    K_g) / Kp`` = 100 (``FingerBacksteppingLaw.observer_rest_modes``), the loop's slope with the lever's hysteresis off
-    (next test); the hysteresis lowers it to 72."""
+    the measured 72 (motors' friction off: a stays 72, b 0.26 -> 0.10 s; hysteresis off: a = 100): the law's phantom
+    acceleration makes the guides hold ``I + G`` times harder, ``a = (Kp + (I + G) K_g) / Kp`` = 100
+    (``FingerBacksteppingLaw.observer_rest_modes``), the loop's slope with the lever's hysteresis off (next test); the
+    hysteresis lowers it to 72."""
     from awiwi_drake.control.finger_backstepping import finger_backstepping_controller
     from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.parameters.hand_control import FrictionObserverParams

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from awiwi_drake.parameters.base import Parameters, param
+from awiwi_drake.parameters.components import JointFrictionParams
 
 __all__ = ["ForceDistributionParams", "StiffnessCorrectionParams", "FrictionObserverParams", "LinkFrictionParams",
            "HandChainParams", "LinkEstimatorParams"]
@@ -92,11 +93,12 @@ class LinkFrictionParams(Parameters):
     ``tau_f = -(Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/v_eps) - d v``.
     """
 
-    coulomb: float = param(0.01, unit="Nm", low=0.0,
-                           source="chosen: 10-50 % routing friction (ch. 9) of a ~0.05 Nm joint torque")
-    static: float = param(0.015, unit="Nm", low=0.0, source="chosen: breakaway 1.5x Coulomb (stick-slip)")
-    stribeck_velocity: float = param(0.05, unit="rad/s", low=0.0, low_inclusive=False,
-                                     source="chosen: Stribeck drop over 0.05 rad/s")
+    coulomb: float = param(JointFrictionParams.coulomb, unit="Nm", low=0.0,
+                           source="chosen: the finger joints' Coulomb level, JointFrictionParams.coulomb (its reason there)")
+    static: float = param(JointFrictionParams.static, unit="Nm", low=0.0,
+                          source="chosen: the finger joints' breakaway level, JointFrictionParams.static (its reason there)")
+    stribeck_velocity: float = param(JointFrictionParams.stribeck_velocity, unit="rad/s", low=0.0, low_inclusive=False,
+                                     source="chosen: the finger joints' Stribeck velocity, JointFrictionParams.stribeck_velocity")
     smoothing_velocity: float = param(0.01, unit="rad/s", low=0.0, low_inclusive=False,
                                       source="chosen: tanh regularisation of sign(v); slope Fc/v_eps = 1 Nm s/rad "
                                              "keeps the explicit integrator's steps near 0.1 ms at test_joint_inertia")
