@@ -48,6 +48,7 @@ from awiwi_drake.control.base import COMMAND_PORT, REFERENCE_SUFFIX, StaticLaw, 
 from awiwi_drake.analysis.linear import linearize, lqr_gain
 from awiwi_drake.control.linear import LinearReferenceModel
 from awiwi_drake.control.lqr import expand_q
+from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
@@ -375,6 +376,40 @@ class TendonSdreLaw(StaticLaw):
         return self._by_group(one, f)
 
     def __call__(self, u):
+        if self.output_size > 1 and float_inputs(u, self.inputs) and float_inputs(u, (SDRE_GAIN,)):
+            k = self.__dict__.get("_kernel") or self._build_kernel()
+            fn, tabs, out = k
+            zeros = tabs[-1]
+            bad = fn(u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"],
+                     u["motor_angle"] if self.ripple_scale > 0 else zeros,
+                     u["tendon_path_velocity"] if self.path_velocity else zeros, u[SDRE_GAIN], *tabs[:-1],
+                     self.path_velocity, self.friction_scale, self.ripple_scale, self.r_m, out)
+            if bad < 0:
+                return out.copy()
+        return self.evaluate(u)       # AutoDiffXd, or raises naming the tendon
+
+    def _build_kernel(self):
+        """The float bank's fast path: ``sdre_law`` of :func:`~awiwi_drake.control.compiled.motor_law_kernels`, one
+        compiled call equal to :meth:`evaluate` (tests/test_chain_sdre.py)."""
+        group = np.zeros(self.output_size, dtype=np.int64)
+        for k, (_, ix) in enumerate(self._groups):
+            group[ix] = k
+        rows = [(np.concatenate([[0.0], fm.force]), np.concatenate([[fm.slack_angle], fm.theta]))
+                for fm, _ in self._groups]
+        L = max(r[0].size for r in rows)
+
+        def table(j):
+            t = np.zeros((len(rows), L))
+            for k, r in enumerate(rows):
+                t[k, :r[j].size], t[k, r[j].size:] = r[j], r[j][-1]
+            return t
+        tabs = (group, np.array([r[0].size for r in rows], dtype=np.int64), table(0), table(1),
+                np.array([fm.max_force for fm, _ in self._groups]), np.zeros(self.output_size))
+        self._kernel = (motor_law_kernels(self.motor)["sdre_law"], tabs, np.empty(self.output_size))
+        return self._kernel
+
+    def evaluate(self, u):
+        """The law as written (float, AutoDiffXd); :meth:`__call__` takes a compiled fast path for a float bank."""
         from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
         m = self.output_size
         fd, f, w = u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"]
