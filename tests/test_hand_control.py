@@ -249,7 +249,7 @@ def test_finger_backstepping_sampled_at_3khz_is_stable_on_every_finger(finger):
             law.Kp = np.diag(np.full(law.S.shape[1], HandChainParams().joint_stiffness))
             law.Kd = np.diag(2 * HandChainParams().damping_ratio * np.sqrt(np.diag(law.Kp) * np.diag(law.M)))
         old, _ = _sampled_backstepping_radius(finger_diagram(finger=finger), 3000.0, None, per_dof)
-        assert old > 1.1, old                       # measured 1.18
+        assert old > 1.0, old                       # unstable (measured 1.18)
 
 
 def test_hand_backstepping_sampled_at_3khz_is_stable():
