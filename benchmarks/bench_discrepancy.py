@@ -61,7 +61,8 @@ every row on what it has.  Writes ``discrepancy_benchmark.json`` and ``.md`` int
 ``--out`` (default ``$AWIWI_OUT`` or ``out/bench_discrepancy``).
 
 Generated datasets are cached (``--cache``, default ``OUT/datasets``; ``--no-cache`` to skip) as one npz
-per case, keyed by the case and a hash of the truth generators' sources and the drake/numpy/scipy versions
+per case, keyed by the case and a hash of the truth generators' code (docstrings and comments do not count)
+and the drake/numpy/scipy versions
 (:func:`generator_fingerprint`): a re-run after a change of the workflow skips generating (about two
 thirds of a full run's CPU), a change of the generators regenerates.
 """
@@ -333,9 +334,30 @@ def generator_files() -> list:
     return sorted(seen.values())
 
 
+def code_text(source: str) -> str:
+    """What a module executes, as text: its syntax tree without docstrings (every statement that is only a string,
+    which Python evaluates and drops), comments, formatting or line numbers, so an edit of a docstring or a comment
+    keeps the text and any change of code, constant or default changes it."""
+    import ast
+
+    class Strip(ast.NodeTransformer):
+        def visit_Expr(self, node):
+            return None if isinstance(node.value, ast.Constant) and isinstance(node.value.value, str) else node
+
+    tree = Strip().visit(ast.parse(source))
+    for node in ast.walk(tree):   # a body that was only a docstring keeps a statement
+        if not isinstance(node, ast.Module) and getattr(node, "body", None) == []:
+            node.body = [ast.Pass()]
+    return ast.dump(tree, annotate_fields=False, include_attributes=False)
+
+
+_CODE_TEXT: dict = {}   # source bytes -> code_text (parsing the ~40 generator modules takes ~0.6 s)
+
+
 def generator_fingerprint(files=None) -> str:
-    """SHA-256 over the generators' sources (:func:`generator_files`, by path relative to the package) and the
-    versions of the libraries that integrate and draw them (drake, numpy, scipy)."""
+    """SHA-256 over the code the generators execute (:func:`generator_files`, by path relative to the package,
+    each as :func:`code_text`: docstrings and comments do not count) and the versions of the libraries that
+    integrate and draw them (drake, numpy, scipy)."""
     import hashlib
     from importlib.metadata import version
     h = hashlib.sha256()
@@ -345,7 +367,9 @@ def generator_fingerprint(files=None) -> str:
     for f in files if files is not None else generator_files():
         f = pathlib.Path(f).resolve()
         h.update(str(f.relative_to(root) if f.is_relative_to(root) else f.name).encode() + b"\0")
-        h.update(f.read_bytes() + b"\0")
+        src = f.read_bytes()
+        text = _CODE_TEXT.get(src) or _CODE_TEXT.setdefault(src, code_text(src.decode()).encode())
+        h.update(text + b"\0")
     return h.hexdigest()
 
 

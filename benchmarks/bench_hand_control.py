@@ -3,12 +3,13 @@
 Usage::
 
     PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.1]
-                                                         [--controllers joint-pd,cascaded,cascaded:no-observer,backstepping]
+                                                         [--controllers joint-pd,cascaded,cascaded@sdre,cascaded:no-observer,backstepping]
                                                          [--physics default,off,on] [--json out.json] [--no-profile]
 
 For each registered hand controller (``joint-pd``: the 3 kHz motor PD; ``cascaded``: joint impedance ->
 force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-forward, joint angles from the
-tendon-length estimator; ``backstepping``: 15.5 for the hand at 3 kHz, joint angles estimated) the hand
+tendon-length estimator; ``cascaded@sdre``: the same chain with the ch. 14 tendon SDRE as the force law
+(``HandChainParams(tendon_law="sdre")``, gains re-solved at 200 Hz); ``backstepping``: 15.5 for the hand at 3 kHz, joint angles estimated) the hand
 (``hand_diagram()``, wrist input at 0; ``--physics``: the plant's thesis effects as configured by default,
 all off, or all on, each row says which) is
 closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad (a fixed input value of
@@ -166,7 +167,11 @@ def stage_costs(loop, op, refs, sim_time: float = 0.03) -> dict:
         wrap(type(fused.joint_law), "__call__", "joint stage")
     if fused.dist is not None:
         wrap(fused.dist, "step", "distribution (7.6)")
-    wrap(type(fused.law), "__call__", "tendon force law (10.2)" if fused.joint_law is not None else "law")
+    sdre = getattr(fused.law, "initial_gain", None) is not None
+    wrap(type(fused.law), "__call__", ("tendon force law (SDRE ch. 14)" if sdre else "tendon force law (10.2)")
+         if fused.joint_law is not None else "law")
+    if sdre:
+        wrap(type(fused.law), "gains", "tendon SDRE gain re-solve (every 1/sdre_update_rate)")
     if fused.obs is not None:
         wrap(fused.obs, "compensation", "friction observer (9.2): compensation")
         wrap(fused.obs, "next_state", "friction observer (9.2): update")
@@ -204,12 +209,16 @@ PHYSICS = {  # the hand plant's thesis effects, each case stated explicitly (the
 
 def run(name: str, sim_time: float, profile: bool = True, physics: str = "default") -> dict:
     """One row; ``name`` a registered controller, or ``<chain controller>:no-observer`` (a registry variant) for the
-    chain without its default ch. 9 friction observer."""
+    chain without its default ch. 9 friction observer, or ``<chain controller>@<tendon law>`` for the chain with
+    ``HandChainParams(tendon_law=...)`` (e.g. ``cascaded@sdre``: the ch. 14 tendon SDRE as the force law)."""
     from awiwi_drake.parameters.hand import HandRigParams
+    from awiwi_drake.parameters.hand_control import HandChainParams
     switches = PHYSICS[physics]
     rig = hand_diagram(params=None if switches is None else HandRigParams().with_physics(**switches))
+    base, _, law = name.partition("@")
+    opts = {"chain_params": HandChainParams(tendon_law=law)} if law else {}
     t0 = time.perf_counter()
-    loop = closed_loop(rig, make_controller(name, rig), **get_entry(name, rig).loop_options)
+    loop = closed_loop(rig, make_controller(base, rig, **opts), **get_entry(base, rig).loop_options)
     build = time.perf_counter() - t0
     op = rig.operating_point()
     # the stepped reference is a fixed input value of the context (no schedule source evaluated every period)
@@ -240,8 +249,9 @@ def run(name: str, sim_time: float, profile: bool = True, physics: str = "defaul
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sim-time", type=float, default=0.1, help="simulated seconds per controller")
-    ap.add_argument("--controllers", default="joint-pd,cascaded,cascaded:no-observer,backstepping",
-                    help="registered hand controllers; '<chain controller>:no-observer' without the ch. 9 observer")
+    ap.add_argument("--controllers", default="joint-pd,cascaded,cascaded@sdre,cascaded:no-observer,backstepping",
+                    help="registered hand controllers; '<chain controller>:no-observer' without the ch. 9 observer; "
+                         "'<chain controller>@sdre' with the ch. 14 tendon SDRE as the chain's force law")
     ap.add_argument("--no-profile", action="store_true", help="skip where the time goes (isolated costs, call counts)")
     ap.add_argument("--physics", default="default",
                     help="comma list of the hand plant's physics: default (HandRigParams()), off (no ripple, "

@@ -57,10 +57,12 @@ def test_short_window_lets_each_designed_joint_loop_settle(name):
 def test_short_window_on_a_finger_is_five_design_time_constants():
     """``compare --short`` (``short_test_params``) on a finger: the step window is delay + 5 tau (not capped at the full window) with tau the slowest of the
     compared controllers' designs (backstepping: its joint modes M e'' + Kd e' + Kp e = 0)."""
-    from awiwi_drake.control.compare import short_test_params
+    from awiwi_drake.control.compare import build_loops, short_test_params
     full = compare_test_params("finger-index")
-    p = short_test_params(lambda: finger_diagram(finger="index"), ["backstepping"], full)
-    law = make_controller("backstepping", finger_diagram(finger="index")).law
+    make = lambda: finger_diagram(finger="index")                                              # noqa: E731
+    loops = build_loops(make, ["backstepping"])
+    p = short_test_params(make, loops, full)
+    law = loops["backstepping"].controller.law
     A_e = np.block([[np.zeros_like(law.M), np.eye(len(law.M))],
                     [-np.linalg.solve(law.M, law.Kp), -np.linalg.solve(law.M, law.Kd)]])
     tau = 1.0 / np.min(-np.linalg.eigvals(A_e).real)
@@ -74,32 +76,68 @@ def test_full_compare_window_is_at_least_what_the_compared_designs_need(tmp_path
     its observer's rest mode on the guides' presliding stiffness (index DIP, ~0.6 s), so its full window is that, not
     0.3 s; the short mode has the same window (its floor only lower)."""
     import awiwi_drake.control.compare as cmp
+    import awiwi_drake.control.compare.standard_tests as st
     from awiwi_drake.cli import main
-    from awiwi_drake.control.compare import design_step_duration, short_test_params
+    from awiwi_drake.control.compare import build_loops, design_step_duration, short_test_params
 
-    seen = {}
+    seen, built = {}, []
 
     class Stop(Exception):
         pass
 
-    def capture(make_rig, names, *, params=None, **kw):
-        seen["params"] = params
+    def capture(loops, *, params=None, **kw):
+        seen["params"], seen["loops"] = params, loops
         raise Stop
 
-    monkeypatch.setattr(cmp, "compare_controllers", capture)       # the CLI's params, then stop before simulating
+    def counting(name, rig, **kw):
+        built.append(name)
+        return make(name, rig, **kw)
+
+    make = st.make_controller
+    monkeypatch.setattr(cmp, "compare", capture)       # the CLI's params, then stop before simulating
+    monkeypatch.setattr(st, "make_controller", counting)
     monkeypatch.setenv("AWIWI_SHORT", "0")                         # the full tests, also under CI's short mode
     main(["compare", "--rig", "finger-index", "--controllers", "cascaded", "--quiet", "--out", str(tmp_path)])
+    # each controller designed once: the window is read from the loop the run gets (it was designed twice)
+    assert built == ["cascaded"]
     full = compare_test_params("finger-index")
-    rig = finger_diagram(finger="index")
-    tau = make_controller("cascaded", rig).design["time_constant"]
-    window = design_step_duration(lambda: finger_diagram(finger="index"), ["cascaded"], full)
+    tau = seen["loops"]["cascaded"].controller.design["time_constant"]
+    make_index = lambda: finger_diagram(finger="index")                                       # noqa: E731
+    window = design_step_duration(make_index, seen["loops"], full)
     assert window == pytest.approx(full.step_delay + CompareShortMode().step_time_constants * tau, rel=1e-12)
     assert window > full.step_duration
     assert seen["params"].step_duration == window
-    assert short_test_params(lambda: finger_diagram(finger="index"), ["cascaded"], full).step_duration == window
+    assert short_test_params(make_index, seen["loops"], full).step_duration == window
     # a loop without a known time constant (the motor PD: its link modes are not designed) beside it keeps the
     # chosen window for itself and does not shorten the chain's (the hand's 13-controller run had fallen back to 0.3 s)
-    pd_rig = finger_diagram(finger="index")
-    assert dominant_time_constant(closed_loop(pd_rig, make_controller("joint-pd", pd_rig),
-                                              **get_entry("joint-pd", pd_rig).loop_options), full) is None
-    assert design_step_duration(lambda: finger_diagram(finger="index"), ["cascaded", "joint-pd"], full) == window
+    pd_loop = build_loops(make_index, ["joint-pd"])["joint-pd"]
+    assert dominant_time_constant(pd_loop, full) is None
+    assert design_step_duration(make_index, {**seen["loops"], "joint-pd": pd_loop}, full) == window
+
+
+def test_ideal_sensor_compare_reports_the_estimators_error_without_feeding_it_back():
+    """``compare --sensors ideal``: the controller reads the plant's joint state and the tendon-length estimator
+    (5.15) runs beside it on the same samples, so every row still has the estimator's error (it was NaN).  Not fed
+    back: the joint trajectory equals the loop's without the estimator (``estimator=None``) to round-off.  Its error
+    is the estimator's own: at most one control period of the joint's motion (the estimate is from the current
+    sample, the error output compares it with the held truth), as in notebook 09 with estimated sensors."""
+    from awiwi_drake.analysis import simulate
+    from awiwi_drake.control.compare import build_loops, run_joint_test
+    from awiwi_drake.hand.coupling import dof_selection
+
+    make = lambda: finger_diagram(finger="index")                                              # noqa: E731
+    loop = build_loops(make, ["backstepping"], sensors="ideal")["backstepping"]
+    rig = make()
+    bare = closed_loop(rig, make_controller("backstepping", rig), **get_entry("backstepping", rig).loop_options,
+                       sensors="ideal", estimator=None)
+    op, S = rig.operating_point(), dof_selection(rig.coupling)
+    ref = {"joint_angle_reference": op.joint_angle + S @ np.full(S.shape[1], 0.2)}
+    res = [simulate(lp, lp.create_context(op), 0.05, inputs=ref, log=("joint_angle", "joint_velocity")
+                    + (("joint_angle_estimation_error",) if lp is loop else ())) for lp in (loop, bare)]
+    np.testing.assert_allclose(res[0]["joint_angle"], res[1]["joint_angle"], rtol=0, atol=1e-12)
+    err = np.abs(res[0]["joint_angle_estimation_error"]).max(axis=0)
+    assert np.all(err <= np.abs(res[0]["joint_velocity"]).max(axis=0) / 3000.0 * 1.05 + 1e-12), err
+    assert np.ptp(res[0]["joint_angle"], axis=0).max() > 0.05           # the joints did move
+    p = compare_test_params("finger-index", step_duration=0.05, settle_time=0.01)
+    _, rows = run_joint_test(loop, "step", controller="backstepping", params=p)
+    assert all(np.isfinite(r.estimation_error) for r in rows), [r.estimation_error for r in rows]

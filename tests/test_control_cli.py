@@ -75,6 +75,10 @@ def test_metrics_markdown_tables_have_one_cell_per_column_also_when_every_row_di
      "--controller-set: controller 'joint-pd' on 'finger-index' takes no chain_params"),
     (["--controller-set", "stiffness_correction=true", "--controllers", "backstepping"],
      "--controller-set: controller 'backstepping' on 'finger-index' takes no stiffness_correction"),
+    (["--controller-set", "sdre_weights=0,0"], "HandChainParams.sdre_weights = (0.0, 0.0) must be (q_theta > 0"),
+    (["--controller-set", "tendon_law=pid"], "--controller-set: HandChainParams.tendon_law = 'pid' must be one of"),
+    (["--controller-set", "tendon_law=sdre", "--controllers", "backstepping"],
+     "tendon_law = 'sdre': the 15.5 finger backstepping computes the motor torques itself"),
     (["--sensors", "perfect"], "--sensors: invalid choice: 'perfect'"),
     (["--rig", "joint-rig", "--sensors", "ideal"], "--sensors: only for fingers and the hand, not rig 'joint-rig'"),
     (["--rig", "joint-rig", "--controller-set", "joint_stiffness=1"], "--controller-set: only for fingers"),
@@ -91,9 +95,10 @@ def test_compare_controller_options_bad_input_exit_2(tmp_path, capsys, args, nee
 def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monkeypatch):
     """--controller-set and --sensors reach the loops the CLI simulates (the simulation itself is stubbed: the
     loops are recorded): the chain's force distribution is Algorithm 2 (ch. 7), its joint stiffness the one set and
-    its distribution asked for K_mech = eps K_eff (8.2) with the set eps;
-    with --sensors ideal the loop has no tendon-length estimator (the controller reads the plant's joint state),
+    its distribution asked for K_mech = eps K_eff (8.2) with the set eps, its tendon force law the ch. 14 SDRE;
+    with --sensors ideal the controller reads the plant's joint state (the tendon-length estimator runs beside it),
     without it the loop estimates (5.15)."""
+    import awiwi_drake.control.compare as cmp
     from awiwi_drake.control.compare import standard_tests
 
     seen = {}
@@ -102,10 +107,11 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
         seen.update(loops)
         return standard_tests.Comparison([], standard_tests.MetricsTable([]), "finger-index")
 
-    monkeypatch.setattr(standard_tests, "compare", record)
+    monkeypatch.setattr(cmp, "compare", record)
     for tag, extra in (("alg2", ["--controller-set", "distribution_method=algorithm2",
                                  "--controller-set", "joint_stiffness=0.25", "--controller-set",
-                                 "stiffness_correction=true", "--controller-set", "epsilon=2", "--sensors", "ideal"]),
+                                 "stiffness_correction=true", "--controller-set", "epsilon=2", "--controller-set",
+                                 "tendon_law=sdre", "--sensors", "ideal"]),
                        ("default", [])):
         rc = main(["compare", "--rig", "finger-index", "--controllers", "cascaded", "--tests", "step", "--short",
                    "--quiet", "--out", str(tmp_path / tag), *extra])
@@ -117,10 +123,12 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
             assert design["joint_design"].static_stiffness.max() <= 0.25 + 1e-12   # the set joint_stiffness caps K
             K_mech = np.concatenate([np.diag(B) for B in design["mechanical_stiffness"]])     # (8.2), eps = 2
             np.testing.assert_allclose(K_mech, 2.0 * design["joint_design"].static_stiffness, rtol=1e-12)
-            assert loop.estimator is None and loop.fused is None
-            assert not loop.diagram.HasOutputPort("joint_angle_estimation_error")
+            assert loop.estimated == () and loop.fused is None            # the controller reads the true state
+            assert loop.diagram.HasOutputPort("joint_angle_estimation_error")  # the estimator runs beside it
             assert "distribution_method=algorithm2" in (tmp_path / tag / "metrics.md").read_text()
+            assert loop.controller.HasOutputPort("tendon_sdre_gain")      # the ch. 14 tendon SDRE is the force law
         else:
+            assert not loop.controller.HasOutputPort("tendon_sdre_gain")
             assert design["distribution_method"] == "optimal"
             assert design["joint_design"].static_stiffness.max() == pytest.approx(0.5)   # HandChainParams' default
             assert loop.estimator is not None or loop.fused is not None

@@ -684,6 +684,9 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     src.write_text("K = 2\n")
     monkeypatch.setattr(bench, "_FINGERPRINT", {})
     assert not bench.cached_dataset(case, gen, tmp_path)[1]             # changed source: a miss
+    src.write_text('"""A docstring."""\n\nK = 2  # a comment\n')
+    monkeypatch.setattr(bench, "_FINGERPRINT", {})
+    assert bench.cached_dataset(case, gen, tmp_path)[1]                 # docstring and comment only: a hit
     n = len(list(tmp_path.glob("*.npz")))
     assert not bench.cached_dataset(case, gen, None)[1] and len(list(tmp_path.glob("*.npz"))) == n  # no cache
 

@@ -214,6 +214,48 @@ def test_cpr_spectrum_finds_any_order_up_to_300():
         assert a[4] == pytest.approx(np.hypot(c[0], c[1]), rel=1e-8)
 
 
+def _region_maps(res: np.ndarray, angle: np.ndarray):
+    """Residual maps with one signal and one operating quantity (the motor angle), as :func:`locate` reads them."""
+    from awiwi_drake.discrepancy.localise import ResidualMaps, region_profile
+
+    centres, prof = region_profile(angle, {"f": res})
+    orders = np.arange(1, 4)
+    summary = {"energy_per_signal": {"f": float(np.mean(res ** 2))}, "band_above_floor_hz": {"f": []}}
+    return ResidualMaps(np.arange(res.size) * 1e-3, {"f": res}, np.array([0.0, 1.0]), {"f": np.ones(2)}, {},
+                        orders, {"f": np.zeros(3)}, 1.0, None, {}, centres, prof, None, {}, None, {}, {},
+                        np.zeros(1), {}, summary)
+
+
+def test_locate_judges_a_region_by_the_residuals_effective_sample_size():
+    """A coloured residual (AR(1), pole 0.98: ~1/100 of its samples independent) with no region has no operating
+    region that stands out by 3 standard errors of its *effective* sample size in more than the false-alarm
+    rate of 10 bins at 3 sigma (2.7 %, so at most 2 of 20 records), where the white-noise standard error
+    flags most records; a bump of 8 of those standard errors on one angle bin's range is flagged there on
+    every record. The effective size of white noise is its length, of AR(1) ``n (1 - a) / (1 + a)``."""
+    from scipy.signal import lfilter
+
+    from awiwi_drake.discrepancy.localise import effective_sample_size, locate
+
+    n, a = 10000, 0.98
+    rng = np.random.default_rng(12)
+    angle = np.sin(2 * np.pi * 0.2 * np.arange(n) * 1e-3)      # two periods of the operating quantity
+    n_eff_true = n * (1 - a) / (1 + a)
+    assert effective_sample_size(rng.standard_normal(n)) == pytest.approx(n, rel=0.1)
+    white_flags = eff_flags = 0
+    for _ in range(20):
+        res = lfilter([1.0], [1.0, -a], rng.standard_normal(n)) * np.sqrt(1 - a * a)   # unit variance
+        assert effective_sample_size(res) == pytest.approx(n_eff_true, rel=0.7)
+        maps = _region_maps(res, angle)
+        eff_flags += bool(locate(maps, threshold=1.5)["operating_region"])
+        white_se = np.sqrt(np.mean(res ** 2)) / np.sqrt(n / 10)            # the white-noise rule
+        white_flags += bool(np.max(np.abs(maps.position_profile["f"])) > 3.0 * white_se)
+        bump_bin = angle > np.quantile(angle, 0.9)
+        bumped = res + 8.0 * np.sqrt(10.0 / n_eff_true) * bump_bin
+        found = locate(_region_maps(bumped, angle), threshold=1.5)["operating_region"]
+        assert found and found["bin_centre"] > np.quantile(angle, 0.9)
+    assert eff_flags <= 2 and white_flags >= 10
+
+
 def test_calibration_parameters_act_on_the_measurements(joint_engine):
     """Encoder calibrations are measurement maps: a motor-encoder bias adds to the
     measured motor angle, the link encoder reads (1 + s) q + b, and the window-start

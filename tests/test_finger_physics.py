@@ -49,6 +49,23 @@ def test_the_finger_plant_has_the_thesis_physics_on_by_default():
     assert rig.state_names[-1] == f"guide_friction_force[{rig.tendon_names[-1]}]"
     hand = HandRigParams()
     assert hand.motor.ripple and hand.spring.hysteresis.enabled and hand.guide_friction
+    # the joints' stick-slip is off by default (no thesis level); switched on it adds one state per joint, last
+    assert not p.joint_friction and not hand.joint_friction
+    assert p.with_physics(joint_friction=True).joint_friction
+    on = finger_diagram(finger="index", params=p.with_physics(joint_friction=True))
+    assert on.num_states == 2 * n + 4 * m + n and on.state_names[-1] == "joint_friction_torque[q23]"
+    # per joint: an override changes that joint's row only; an unknown joint is one line naming it
+    from awiwi_drake.parameters.components import JointFrictionParams
+    own = JointFrictionParams(coulomb=0.02, static=0.03)
+    one = finger_diagram(finger="index", params=p.with_physics(joint_friction=True).replace(joint_frictions=(("q22", own),)))
+    rows = one.diagram.GetSubsystemByName("hand_dynamics").links.joint_friction
+    base = on.diagram.GetSubsystemByName("hand_dynamics").links.joint_friction
+    np.testing.assert_array_equal(rows[[0, 1, 3]], base[[0, 1, 3]])
+    assert tuple(rows[2]) == (0.02, 0.03, own.stribeck_velocity, own.presliding_angle) != tuple(base[2])
+    with pytest.raises(ValueError, match="joint_frictions: unknown joint 'q99'; joints are q20, q21, q22, q23"):
+        finger_diagram(finger="index", params=p.replace(joint_friction=True, joint_frictions=(("q99", own),)))
+    with pytest.raises(ValueError, match="JointFrictionParams.static = 0.005 Nm must be >= coulomb"):
+        JointFrictionParams(static=0.005)
 
 
 def _mass_matrix(rig, q):
@@ -61,12 +78,14 @@ def _mass_matrix(rig, q):
 def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger):
     """At random states: (on) - (ideal) derivatives = motor friction (3.8) + ripple (3.5) on the
     rotor, the hysteresis force z on spring and rotor, the guide friction g on the joints only, and
-    the two Dahl rates in closed form. The ideal plant equals the laws evaluated apart to 1e-9: the standalone
+    the two Dahl rates in closed form, and the joints' stick-slip torque tau_f on the joints with its presliding rate
+    ``-(Fs/delta)(v + |v| tau_f / W(v))``, W the Stribeck curve. The ideal plant equals the laws evaluated apart to 1e-9: the standalone
     MultibodyPlant (``rig.plant``) under ``-P(q)^T f(x)``, ``x = r_m theta + h(q) - h(0) + x0``, the motors'
     (3.5) with load ``r_m f``."""
-    p_on = FingerRigParams.for_finger(finger).with_physics(guide_friction=True)
+    p_on = FingerRigParams.for_finger(finger).with_physics(guide_friction=True, joint_friction=True)
     on, off = finger_diagram(finger=finger, params=p_on), finger_diagram(finger=finger,
-                                                                          params=p_on.with_physics(**IDEAL))
+                                                                          params=p_on.with_physics(**IDEAL, joint_friction=False))
+    jp = p_on.joint_friction_params
     n, m = on.num_joints, on.num_tendons
     mp, hp, gp = p_on.motor, p_on.spring.hysteresis, p_on
     alpha = tendon_bending_angles(on.coupling, p_on)
@@ -81,9 +100,10 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
         z = RNG.uniform(-1.5, 1.5, m)
         g = RNG.uniform(-1.5, 1.5, m)
         u = op.motor_torque + RNG.normal(scale=0.05, size=m)
+        tau_f = RNG.uniform(-jp.static, jp.static, n)
         x_off = np.concatenate([q, v, theta, omega])
         derivs = []
-        for rig, x in ((on, np.concatenate([x_off, z, g])), (off, x_off)):
+        for rig, x in ((on, np.concatenate([x_off, z, g, tau_f])), (off, x_off)):
             ctx = rig.context(rig.operating_point())
             ctx.SetContinuousState(x)
             rig.diagram.GetInputPort("motor_torque").FixValue(ctx, u)
@@ -94,7 +114,7 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
         np.testing.assert_allclose(d_off, ideal_drive_derivatives(off, q, v, theta, omega, u), rtol=1e-9, atol=1e-9)
         assert np.all(f_el + z > 0)                                               # no slack in this check
         P = np.asarray(on.coupling.P(q))
-        dv = np.linalg.solve(_mass_matrix(on, q), -P.T @ (z + g))
+        dv = np.linalg.solve(_mass_matrix(on, q), -P.T @ (z + g) + tau_f)
         fric = -(mp.coulomb_torque * np.arctan(mp.friction_slope * omega) + mp.viscous_friction * omega)
         ripple = (mp.ripple_motor_amplitude * np.sin(mp.gear_ratio * theta + mp.ripple_motor_phase)
                   + mp.ripple_output_amplitude * np.sin(theta + mp.ripple_output_phase))
@@ -107,7 +127,10 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
         expected = np.concatenate([np.zeros(n), dv, np.zeros(m), domega])
         np.testing.assert_allclose(d_on[:2 * n + 2 * m] - d_off, expected, rtol=1e-7, atol=1e-7)
         np.testing.assert_allclose(d_on[2 * n + 2 * m:2 * n + 3 * m], dz, rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(d_on[2 * n + 3 * m:], dg, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(d_on[2 * n + 3 * m:2 * n + 4 * m], dg, rtol=1e-9, atol=1e-9)
+        W = jp.coulomb + (jp.static - jp.coulomb) * np.exp(-(v / jp.stribeck_velocity) ** 2)
+        dtau = -(jp.static / jp.presliding_angle) * (v + np.abs(v) * tau_f / W)
+        np.testing.assert_allclose(d_on[2 * n + 4 * m:], dtau, rtol=1e-9, atol=1e-9)
 
 
 def _cycle_work(rate, amplitude, F0=0.0, cycles=1, steps=4000):
@@ -167,11 +190,21 @@ def _rk3_check(rig, pretension):
 @pytest.mark.parametrize("finger", ["thumb", "index", "middle", "ring", "fifth"])
 def test_default_finger_physics_is_stable_for_rk3_at_the_control_period(finger):
     """Every eigenvalue of the Drake linearisation of the finger with all physics on times the
-    3 kHz period lies in RK3's stability region, at the default 20 N and at 35 N pretension; the
-    old Dahl parameters (presliding stiffness 2e5 N/m: delta = 2 N / 2e5 N/m = 1e-5 m at 20 N) do not."""
+    3 kHz period lies in RK3's stability region, at the default 20 N and, with the joints' stick-slip on too, at 35 N
+    pretension (the case that bounds its presliding stiffness, JointFrictionParams.presliding_angle); the
+    old Dahl parameters (presliding stiffness 2e5 N/m: delta = 2 N / 2e5 N/m = 1e-5 m at 20 N) do not, nor (fifth
+    finger) a joint presliding stiffness sized by its own mode alone, h^2 sigma0 lambda_max(M^-1) = 3/4 (0.88 Nm/rad),
+    which ignores the plant's fastest (coupling) mode it adds to."""
     p = FingerRigParams.for_finger(finger).with_physics(guide_friction=True)
-    for pre in (20.0, 35.0):
-        assert _rk3_check(finger_diagram(finger=finger, params=p), pre) <= 1e-9, (finger, pre)
+    assert _rk3_check(finger_diagram(finger=finger, params=p), 20.0) <= 1e-9, finger
+    pj = p.with_physics(joint_friction=True)
+    assert _rk3_check(finger_diagram(finger=finger, params=pj), 35.0) <= 1e-9, finger
+    if finger == "fifth":
+        jp = pj.joint_friction_params
+        M_inv_max = np.linalg.eigvalsh(np.linalg.inv(_mass_matrix(finger_diagram(finger=finger), np.zeros(5)))).max()
+        sigma0 = 0.75 / (H ** 2 * M_inv_max)
+        too_stiff = pj.replace(joint_friction_params=jp.replace(presliding_angle=jp.static / sigma0))
+        assert _rk3_check(finger_diagram(finger=finger, params=too_stiff), 35.0) > 0.05
     if finger == "index":
         old = p.replace(spring=p.spring.replace(hysteresis=p.spring.hysteresis.replace(presliding_length=1e-5)))
         assert _rk3_check(finger_diagram(finger=finger, params=old), 20.0) > 0.1
@@ -236,16 +269,58 @@ def test_fixed_step_rk3_at_the_control_period_follows_the_error_controlled_solut
     assert np.abs(z).max() > 0.1 and np.abs(g).max() > 0.1          # [N]: hysteresis and guide friction act
 
 
+@pytest.mark.parametrize("ratio", [0.5, 1.1])
+def test_stick_slip_joint_holds_below_the_breakaway_torque_and_slides_above(ratio):
+    """The joints' stick-slip law (stick_slip_rate) on the index PIP's inertia (middle + distal about the PIP, the
+    finger plant) under a torque raised smoothly from rest (half a cosine over 2 s, so that it does not ring the
+    presliding spring, which the law leaves undamped: it has no micro-damping) to ``ratio`` times the breakaway level
+    Fs and held for 1 s.  Below the Coulomb level (0.5 Fs < Fc = Fs / 1.5) the joint sticks: it stops (speed far below
+    the Stribeck velocity) at a deflection between the closed forms of the presliding law along a monotone path,
+    ``-delta (W / Fs) ln(1 - tau / W)``, for the level W at rest (Fs) and at the run's largest speed (``W(v_max)``),
+    and the friction holds the torque.  Above Fs it breaks away and slides on, accelerated by at least the torque
+    over the breakaway level, ``I qdd >= tau - Fs``."""
+    from scipy.integrate import solve_ivp
+    from awiwi_drake.components.friction import stick_slip_rate, stribeck_level
+    jp = FingerRigParams.for_finger("index").joint_friction_params
+    from awiwi_drake.hand.plant import make_finger_plant
+    plant, _ = make_finger_plant("index")
+    inertia = plant.CalcMassMatrix(plant.CreateDefaultContext())[2, 2]
+    tau, ramp, hold = ratio * jp.static, 2.0, 1.0
+
+    def rhs(t, x):
+        q, v, f = x
+        return [v, (tau * (1.0 - np.cos(np.pi * min(t / ramp, 1.0))) / 2 + f) / inertia,
+                stick_slip_rate(f, v, jp.coulomb, jp.static, jp.stribeck_velocity, jp.presliding_angle)]
+    sol = solve_ivp(rhs, (0.0, ramp + hold), [0.0, 0.0, 0.0], method="LSODA", rtol=1e-8, atol=1e-11,
+                    dense_output=True)
+    q, v, f = sol.sol(ramp + hold)
+    if ratio * jp.static < jp.coulomb:
+        v_max = np.abs(sol.y[1]).max()
+        assert v_max < jp.stribeck_velocity and sol.y[1].min() > -0.01 * jp.stribeck_velocity    # monotone path
+
+        def deflection(W):
+            return -jp.presliding_angle * (W / jp.static) * np.log(1.0 - tau / W)
+        assert deflection(jp.static) <= q <= deflection(stribeck_level(v_max, jp.coulomb, jp.static,
+                                                                       jp.stribeck_velocity))
+        hold_v = sol.sol(np.linspace(ramp, ramp + hold, 2001))[1]
+        assert np.abs(hold_v).max() < 0.01 * jp.stribeck_velocity
+        assert f == pytest.approx(-tau, rel=1e-3)
+    else:
+        assert v > (tau - jp.static) / inertia * hold                 # slides, and keeps accelerating
+        assert q > 100 * jp.presliding_angle
+
+
 def test_finger_energy_balance_with_guide_friction_and_its_passivity_bound():
     """Index finger, motors under constant torques (no motor friction, ripple or hysteresis), guide friction
-    on, links launched: the mechanical energy (links, rotors, springs, minus the constant torques' work)
-    falls by exactly the work into the guides int g . (P qdot) dt plus the joint damping's int b qdot^2 dt
-    (energy balance, 1e-3 of the initial kinetic energy), and the guides' work is at least the change of
-    their Dahl storage delta g^2 / (2 C) (passivity: dg/dt = (v/delta)(C - s g) gives
-    g v >= d/dt(delta g^2 / (2 C)))."""
+    and the joints' stick-slip on, links launched: the mechanical energy (links, rotors, springs, minus the constant
+    torques' work) falls by exactly the work into the guides int g . (P qdot) dt, into the joints' friction
+    -int tau_f . qdot dt and into the joint damping int b qdot^2 dt (energy balance, 1e-3 of the initial kinetic
+    energy); the guides' work is at least the change of their Dahl storage delta g^2 / (2 C) (passivity:
+    dg/dt = (v/delta)(C - s g) gives g v >= d/dt(delta g^2 / (2 C))), and the joints' at least the change of their
+    presliding storage tau_f^2 / (2 sigma0) (stick_slip_rate: -tau_f v >= d/dt(tau_f^2 / (2 sigma0)))."""
     from awiwi_drake.analysis import simulate
     p = FingerRigParams.for_finger("index").with_physics(ripple=False, hysteresis=False, motor_friction=False,
-                                                         guide_friction=True)
+                                                         guide_friction=True, joint_friction=True)
     rig = finger_diagram(finger="index", params=p)
     n, m = rig.num_joints, rig.num_tendons
     op = rig.operating_point()
@@ -257,7 +332,8 @@ def test_finger_energy_balance_with_guide_friction_and_its_passivity_bound():
                    accuracy=1e-9, max_step=2e-5, log_period=2e-6)
     X, xs, t = res["state"], res["elongation"], res.t
     q, v = X[:, :n], X[:, n:2 * n]
-    theta, omega, g = X[:, 2 * n:2 * n + m], X[:, 2 * n + m:2 * n + 2 * m], X[:, 2 * n + 2 * m:]
+    theta, omega, g = X[:, 2 * n:2 * n + m], X[:, 2 * n + m:2 * n + 2 * m], X[:, 2 * n + 2 * m:2 * n + 3 * m]
+    tau_f = X[:, 2 * n + 3 * m:]
     b = np.array([rig.plant.get_joint(j).default_damping_vector()[0] for j in rig.plant.GetJointIndices()])
     E, slide_power, damp_power = [], [], []
     for k in range(len(t)):
@@ -271,8 +347,14 @@ def test_finger_energy_balance_with_guide_friction_and_its_passivity_bound():
     E = np.array(E)
     W_guides = np.concatenate([[0.0], np.cumsum(np.diff(t) * 0.5 * (np.array(slide_power)[1:] + slide_power[:-1]))])
     W_damp = np.concatenate([[0.0], np.cumsum(np.diff(t) * 0.5 * (np.array(damp_power)[1:] + damp_power[:-1]))])
+    joint_power = -(tau_f * v).sum(axis=1)
+    W_joints = np.concatenate([[0.0], np.cumsum(np.diff(t) * 0.5 * (joint_power[1:] + joint_power[:-1]))])
     ke0 = 0.5 * v[0] @ _mass_matrix(rig, q[0]) @ v[0]
-    np.testing.assert_allclose(E + W_guides + W_damp, E[0], atol=1e-3 * ke0)
+    np.testing.assert_allclose(E + W_guides + W_damp + W_joints, E[0], atol=1e-3 * ke0)
+    jp = p.joint_friction_params
+    joint_storage = (tau_f ** 2).sum(axis=1) / (2 * jp.static / jp.presliding_angle)
+    assert np.all(W_joints >= joint_storage - joint_storage[0] - 1e-3 * ke0)
+    assert W_joints[-1] > 0.01 * ke0                            # the joints' friction took its share too
     C = guide_friction_force(tendon_bending_angles(rig.coupling, p), p.friction)
     storage = (p.guide_presliding_length * g ** 2 / (2 * C)).sum(axis=1)
     assert np.all(W_guides >= storage - storage[0] - 1e-3 * ke0)

@@ -47,8 +47,10 @@ def test_registry_and_port_contract_on_a_finger():
     assert loop.estimated == ("joint_angle", "joint_velocity")
     for port in ("joint_angle_estimate", "joint_angle_estimation_error", "joint_velocity_estimate"):
         assert loop.diagram.HasOutputPort(port)
-    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")
-    assert ideal.estimated == () and not ideal.diagram.HasOutputPort("joint_angle_estimate")
+    ideal = closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal")   # the estimator beside, not fed back
+    assert ideal.estimated == () and ideal.diagram.HasOutputPort("joint_angle_estimation_error")
+    assert not closed_loop(_rig(), make_controller("cascaded", rig), sensors="ideal",
+                           estimator=None).diagram.HasOutputPort("joint_angle_estimate")
     # a motor-side controller needs no estimator
     assert closed_loop(_rig(), make_controller("joint-pd", rig)).estimated == ()
 
@@ -343,11 +345,13 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     the desired joint torque ((9.1), ``backstepping-friction-observer``).  Its rest equations (``rest_error``) leave
     only the motors' r_m z of the lever's hysteresis (dead band < 1 mrad), where the plain law's dead band is
     0.38-3.0 rad on the index (test above).  The default index (3 kHz, estimated joint angles), a 0.2 rad step on every
-    DoF: abduction and MCP end within 5 % of the step (measured 0.3 / 4.1 mrad; the plain law stops 0.07 / 0.10 rad
-    short; with the observer integrated continuously, on the plant's continuous forces, which a 3 kHz controller does
-    not have, the MCP ended at 2.7 mrad), PIP and DIP still approach e = 0 (the sampled loop's slowest modes at rest,
-    -1.0 and -6.9 1/s: the observer's estimate held against the guides' presliding, docs/REPRODUCTIONS.md);
-    no chatter at rest (the command's increments do not reverse over the last 0.1 s) and < 5 % of the samples
+    DoF: every DoF ends inside the rest the plain law would have at the same friction states (its closed form
+    ``rest_error`` with the logged guide and hysteresis forces: the observer removes what they hold; the plain law stops
+    0.07 / 0.10 rad short on abduction and MCP), and the error is still approaching e = 0 (its norm smaller at the end
+    than at 3/4 of the run: the sampled loop's slowest modes at rest, -1.0 and -6.9 1/s, are the observer's estimate
+    held against the guides' presliding, docs/REPRODUCTIONS.md; measured end errors 0.3 / 4.1 / 21 / 43 mrad, the MCP
+    carried by the PIP/DIP's slow mode from 3.7 mrad at 3/4 of the run; 2.7 mrad on the MCP with the observer
+    integrated continuously, on the plant's continuous forces, which a 3 kHz controller does not have); no chatter at rest (the command's increments do not reverse over the last 0.1 s) and < 5 % of the samples
     saturated (the step's start).  The observed controller converts to AutoDiffXd."""
     rig = _rig()
     ctrl = make_controller("backstepping-friction-observer", rig)
@@ -367,14 +371,12 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     res = simulate(loop.diagram, ctx, 0.3, log=("joint_angle", "motor_torque_command", "tendon_force", "state"),
                    log_period=PERIOD)
     e = np.abs((law.Sp @ (res["joint_angle"] - q_ref).T).T)
-    assert np.all(e[-1, :2] < 0.05 * 0.2), e[-1]
     n = len(e)
-    # PIP, DIP still approaching, and already inside the rest the plain law would have at the same friction states
-    # (its closed form with the logged guide and hysteresis forces): the observer removes what they hold
     z, g = (res["state"][-1][[i for i, nm in enumerate(rig.state_names) if nm.startswith(k)]]
             for k in ("hysteresis_force", "guide_friction_force"))
     held = np.abs(plain.law.rest_error(g, z))
-    assert np.all(e[-1, 2:] < e[int(0.75 * n), 2:]) and np.all(e[-1, 2:] < held[2:]), (e[-1], held)
+    assert np.all(e[-1] < held), (e[-1], held)
+    assert np.linalg.norm(e[-1]) < np.linalg.norm(e[int(0.75 * n)]), (e[-1], e[int(0.75 * n)])
     u = res["motor_torque_command"]
     du = np.diff(u[res.t >= res.t[-1] - 0.1], axis=0)
     du[np.abs(du) < 1e-5] = 0.0                                  # [Nm per period]
@@ -493,16 +495,28 @@ def test_backstepping_friction_scale_keeps_the_thumb_stable_with_its_real_fricti
 
 
 def test_cause_of_the_friction_observers_slow_mode_is_the_guides_presliding():
-    """Why ``backstepping-friction-observer`` leaves the PIP/DIP unsettled in 0.3 s: its sampled loop at rest (index,
-    3 kHz, estimator) has its slowest mode at -1.0 1/s with the guides' friction on and -8.2 1/s with it off (the
-    hysteresis off instead: -0.8).  At rest the guides hold each tendon path with their presliding stiffness ``W /
-    delta``; the observer (9.2) estimates that torque and the compensation (9.1) cancels it, so with the impedance
-    ``Kp`` of the mode and the guides' stiffness ``K_g`` on it the compensation ``c`` obeys, quasi-statically,
-    ``c' = -L Kp / (Kp + K_g + D L) c``: the rate grows with the observer gain L as ``1 / p = a / L + b``, ``a = (Kp +
-    K_g) / Kp``, and is capped at ``-1 / b`` however large L.  Measured (3 points on that line, to 2 %): a = 72, b =
-    0.26 s (the light PIP/DIP mode, Kp 0.092 Nm/rad under the sampling cap |h lambda| <= 1/4): L -> infinity gives
-    -3.8 1/s (thumb: a = 67, b = 0.58 s, -1.7 1/s), where a 0.05 rad DIP residual would need ~ -10 1/s to enter
-    compare's 2 % band in the 0.3 s window (docs/REPRODUCTIONS.md)."""
+    """Why ``backstepping-friction-observer`` leaves the PIP/DIP unsettled in a short window: its sampled loop at rest
+    (index, 3 kHz, estimator) has its slowest mode at -1.0 1/s with the guides' friction on and -8.2 1/s with it off.
+    The observer (9.2) estimates the torque the guides hold and the compensation (9.1) cancels it through the
+    observer's lag, so the rate grows with the observer gain L as ``1 / |p| = a / L + b`` and is capped at ``-1 / b``
+    however large L (measured a = 72, b = 0.26 s; thumb a = 67, b = 0.58 s).
+
+    What is checked, each bound derived:
+
+    * on the line: the form is the quasi-static reduction of the observer state against the rest of the loop, whose
+      relative error is the ratio of the slow rate to the nearest fast pole, the observer's own ``-L``: ``|p| / L``
+      (1.2 % at L = 50), so the middle point lies on the line through the outer two to ``max |p| / L``;
+    * the window: a 0.05 rad DIP residual (docs/REPRODUCTIONS.md) enters compare's 2 % band of a 0.2 rad step within
+      0.3 s only at a rate beyond ``ln(0.05 / 0.004) / 0.3`` = 8.4 1/s; the loop at L = 100, and the cap ``-1 / b``
+      that no observer gain passes, are both slower than that;
+    * the cause: with the guides' friction off the loop at L = 100 is faster than that cap, so the guides, not the
+      observer gain, set it.
+
+    Not explained (checked, wave 9): the reduction with the link's impedance against the guides' presliding spring,
+    ``a = (Kp + K_g) / Kp`` with the law's ``Kp``, ``Kd`` and ``K_g = (P S)^T diag(W / delta) (P S)`` (index DIP
+    0.26 Nm/rad), gives a = 8.6 (slowest root of that 2k-state model at L = 50, 200), not the measured 72; with the
+    motors' friction off a stays 72 (b 0.26 -> 0.10 s) and with the hysteresis off a = 100: the mode involves more
+    of the drive than the link's impedance against the guides."""
     from awiwi_drake.control.finger_backstepping import finger_backstepping_controller
     from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.parameters.hand_control import FrictionObserverParams
@@ -516,12 +530,13 @@ def test_cause_of_the_friction_observers_slow_mode_is_the_guides_presliding():
     base = FingerRigParams.for_finger("index")
     p = {L: slowest(gain=L) for L in (50.0, 100.0, 200.0)}
     free = slowest(base.with_physics(guide_friction=False))
-    assert p[100.0] > -1.5 and free < 5 * p[100.0], (p, free)
     inv = {L: -1.0 / v for L, v in p.items()}
     a = (inv[50.0] - inv[200.0]) / (1 / 50.0 - 1 / 200.0)
     b = inv[200.0] - a / 200.0
-    np.testing.assert_allclose(inv[100.0], a / 100.0 + b, rtol=0.02)                  # on the line
-    assert a > 20.0 and 0.1 < b < 0.5, (a, b)                                         # K_g >> Kp; capped at -1/b
+    np.testing.assert_allclose(inv[100.0], a / 100.0 + b, rtol=max(abs(v) / L for L, v in p.items()))
+    needed = -np.log(0.05 / (0.02 * 0.2)) / 0.3                                      # [1/s], -8.4
+    assert a > 0.0 and needed < -1.0 / b < p[200.0] and needed < p[100.0], (a, b, p)
+    assert free < -1.0 / b, (free, b)
 
 
 def test_thumb_base_sharing_gives_the_desired_torque_at_every_pose_and_the_observer_variant_settles():
@@ -529,8 +544,11 @@ def test_thumb_base_sharing_gives_the_desired_torque_at_every_pose_and_the_obser
     the desired DoF torque, ``-(P(q) S)^T f_des = tau_op + a0`` (``a0 = -Kp e - Kd e'``), at random poses 0.3 rad
     from the operating point (before wave 8 ``f_op + W a0`` left the pretension's own torque change ``-(P(q) S)^T f_op
     - tau_op`` in it, here up to ~0.03 Nm, which the law took for a load).  Then ``backstepping-friction-observer`` on the
-    default thumb (3 kHz, estimated angles), a 0.2 rad step on every DoF: after 1 s the base (q10, q11) is within
-    0.01 rad (measured 3.5 / 3.1 mrad, still decaying; 0.060 / 0.059 rad, at rest, before)."""
+    default thumb (3 kHz, estimated angles), a 0.2 rad step on every DoF: after 1 s the base (q10, q11) is inside the
+    rest the plain law would have at the logged friction states (its closed form ``rest_error``; before wave 8 the
+    observer variant's base rested there, 0.060 / 0.059 rad) and either inside the observed law's dead band or still
+    approaching e = 0, closer at the end than at 3/4 of the run (measured 3.5 / 3.1 mrad, still decaying: the thumb's
+    slowest mode at rest, -1.7 1/s at most, test above)."""
     rig = finger_diagram(finger="thumb")
     ctrl = make_controller("backstepping-friction-observer", rig)
     law = ctrl.law
@@ -552,9 +570,15 @@ def test_thumb_base_sharing_gives_the_desired_torque_at_every_pose_and_the_obser
     loop = closed_loop(rig, ctrl, **get_entry("backstepping-friction-observer", rig).loop_options)
     q_ref = op.joint_angle + law.S @ np.full(k, 0.2)
     res = simulate(loop.diagram, loop.create_context(op, references={"joint_angle_reference": q_ref}), 1.0,
-                   log=("joint_angle",), log_period=PERIOD)
-    e = law.Sp @ (res["joint_angle"][-1] - q_ref)
-    assert np.all(np.abs(e[:2]) < 0.01), e
+                   log=("joint_angle", "state"), log_period=PERIOD)
+    e = np.abs((law.Sp @ (res["joint_angle"] - q_ref).T).T)[:, :2]
+    z, g = (res["state"][-1][[i for i, nm in enumerate(rig.state_names) if nm.startswith(k)]]
+            for k in ("hysteresis_force", "guide_friction_force"))
+    plain = make_controller("backstepping-friction-observer:no-observer", finger_diagram(finger="thumb")).law
+    held = np.abs(plain.rest_error(g, z))[:2]
+    assert np.all(e[-1] < held), (e[-1], held)
+    three_quarters = e[int(0.75 * (len(e) - 1))]
+    assert np.all((e[-1] <= law.design["dead_band"][:2]) | (e[-1] < three_quarters)), (e[-1], three_quarters)
 
 
 def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffness_and_the_observer_shrinks_it():
@@ -807,10 +831,10 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
     # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error
     # the linear loop still has over the metric's window (the last 10 % of the step), per DoF.
-    from awiwi_drake.control.compare import short_test_params
+    from awiwi_drake.control.compare import build_loops, short_test_params
     from awiwi_drake.control.joint_design import sampled_loop_poles
     from awiwi_drake.hand.coupling import dof_selection
-    p = short_test_params(lambda: _rig("ring"), ["joint-pd", "cascaded"])      # the window the CLI ran
+    p = short_test_params(lambda: _rig("ring"), build_loops(lambda: _rig("ring"), ["joint-pd", "cascaded"]))  # the CLI's
     for name in ("joint-pd", "cascaded"):
         rig = _rig("ring")
         S = dof_selection(rig.coupling)

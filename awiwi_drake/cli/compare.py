@@ -69,9 +69,9 @@ def run(args) -> int:
     import sys
 
     from awiwi_drake.config import short_mode
-    from awiwi_drake.control.compare import TESTS, compare_controllers, plot_gain_diagram, plot_joint_runs, plot_runs
+    from awiwi_drake.control.compare import (TESTS, build_loops, compare, compare_test_params, design_step_duration,
+                                             plot_gain_diagram, plot_joint_runs, plot_runs, short_test_params)
     from awiwi_drake.control.registry import controller_names, get_entry
-    from awiwi_drake.control.compare import compare_test_params, design_step_duration, short_test_params
 
     if args.list:
         for n in controller_names(args.rig):
@@ -107,14 +107,6 @@ def run(args) -> int:
     def make_rig():
         return build_target(args.rig, params=rig_params, **kw)
 
-    short = args.short or short_mode()
-    params = compare_test_params(args.rig)
-    if short:
-        params = short_test_params(make_rig, names, params, ctrl_opts)
-    else:       # the chosen window, or longer where the compared designs need it
-        window = design_step_duration(make_rig, names, params, ctrl_opts)
-        if window is not None and window > params.step_duration:
-            params = params.replace(step_duration=window)
     opts = {}
     if args.rate is not None:
         opts["rate_hz"] = None if args.rate == 0 else args.rate
@@ -124,6 +116,14 @@ def run(args) -> int:
         opts["saturation"] = args.saturation
     if args.sensors == "ideal":
         opts["sensors"] = "ideal"
+    loops = build_loops(make_rig, names, ctrl_opts, **opts)      # each controller designed once
+    params = compare_test_params(args.rig)
+    if args.short or short_mode():
+        params = short_test_params(make_rig, loops, params)
+    else:       # the chosen window, or longer where the compared designs need it
+        window = design_step_duration(make_rig, loops, params)
+        if window is not None and window > params.step_duration:
+            params = params.replace(step_duration=window)
     from awiwi_drake.config import progress_bar
 
     n_tests = len(tests) if tests is not None else len([t for t in TESTS if (t != "disturbance"
@@ -133,8 +133,7 @@ def run(args) -> int:
             bar.set_postfix_str(label, refresh=False)
             bar.update(1)
 
-        result = compare_controllers(make_rig, names, tests=tests, params=params, progress=advance,
-                                     controller_options=ctrl_opts, **opts)
+        result = compare(loops, tests=tests, params=params, progress=advance)
     result.table.to_csv(out / "metrics.csv")
     ref_unit = "N" if args.rig == "tendon-rig" else "rad"
     failed, n = result.table.failed(), len(result.table.rows)

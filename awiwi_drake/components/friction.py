@@ -13,7 +13,9 @@ caller passes the fields of its own parameter dataclass.
 ========================  ====================================================
 :func:`regularized_sign`  ``tanh(v / v_s)``: smooth ``sign(v)`` below ``v_s``
 :func:`atan_friction`     (3.8), Table 3.3: ``-(g2 atan(g1 w) + g3 w)``
+:func:`stribeck_level`   Stribeck curve ``Fc + (Fs - Fc) exp(-(v/v_s)^2)`` (the sliding level)
 :func:`stribeck_friction` smooth Stribeck (stick-slip) law
+:func:`stick_slip_rate`   the Stribeck level as a presliding (LuGre) state: joint stick-slip in the finger plant
 :func:`guide_friction_force`    (4.1), Fig 4.10: ``C0 (1 - exp(-C1 alpha))``
 :func:`capstan_friction_force`  capstan loss ``f (1 - exp(-mu alpha))`` (Fig 4.11)
 :func:`guide_friction`    directional guide friction on a sliding tendon (regularised sign)
@@ -31,7 +33,7 @@ import numpy as np
 from awiwi_drake._math import clip, positive_part
 from awiwi_drake.parameters.components import GuideFrictionParams
 
-__all__ = ["regularized_sign", "atan_friction", "stribeck_friction", "guide_friction_force",
+__all__ = ["regularized_sign", "atan_friction", "stribeck_level", "stribeck_friction", "stick_slip_rate", "guide_friction_force",
            "capstan_friction_force", "guide_friction", "dahl_rate", "dahl_path", "guide_friction_level", "guide_friction_rate",
            "joint_friction_bound"]
 
@@ -63,8 +65,35 @@ def stribeck_friction(v, coulomb, static, stribeck_velocity, smoothing_velocity,
     sign-smoothing velocity ``v_eps`` and viscous coefficient ``viscous`` d.
     With ``static == coulomb`` it is regularised Coulomb friction.
     """
-    level = coulomb + (static - coulomb) * np.exp(-(v / stribeck_velocity) ** 2)
-    return -level * regularized_sign(v, smoothing_velocity) - viscous * v
+    return -stribeck_level(v, coulomb, static, stribeck_velocity) * regularized_sign(v, smoothing_velocity) - viscous * v
+
+
+def stribeck_level(v, coulomb, static, stribeck_velocity):
+    """The Stribeck curve ``W(v) = Fc + (Fs - Fc) exp(-(v / v_s)^2)``: the friction level of a contact sliding
+    at ``v`` (``static`` Fs at rest, falling to ``coulomb`` Fc over the Stribeck velocity ``v_s``)."""
+    return coulomb + (static - coulomb) * np.exp(-(v / stribeck_velocity) ** 2)
+
+
+def stick_slip_rate(torque, v, coulomb, static, stribeck_velocity, presliding_angle):
+    """``d tau_f / dt`` of the stick-slip friction torque ``tau_f`` acting on a joint turning at ``v`` [rad/s].
+
+    The Stribeck curve :func:`stribeck_level` ``W(v)`` as the level of a presliding (bristle) state, the LuGre
+    model without its micro-damping (Canudas de Wit et al. 1995)::
+
+        d tau_f / dt = -sigma0 (v + |v| tau_f / W(v)),   sigma0 = Fs / delta
+
+    (``presliding_angle`` delta [rad]).  At rest the joint is held by a spring of stiffness ``sigma0``: it sticks
+    (a torque ``tau`` applied slowly from rest, ``0 <= tau < Fs``, deflects it by ``-delta ln(1 - tau / Fs)`` while
+    ``v << v_s``, and no further) until the torque passes the breakaway level ``Fs``; sliding steadily it carries
+    ``-W(v) sign(v)``, which falls from ``Fs`` to ``Fc`` as the speed rises (the negative slope that makes it
+    stick and slip).  Unlike the memoryless :func:`stribeck_friction` it needs no sign smoothing: its stiffness is
+    ``sigma0``, not ``Fs / v_eps``.  It is passive with the storage ``S = tau_f^2 / (2 sigma0)``:
+    ``dS/dt = -tau_f v - |v| tau_f^2 / W <= -tau_f v``, so the work the friction does on the joint,
+    ``int tau_f v dt``, never exceeds ``S(0) - S(t)`` (the instantaneous power ``tau_f v`` may be positive while the
+    presliding spring gives back what it stored, never more).
+    """
+    sigma0 = static / presliding_angle
+    return -sigma0 * (v + np.abs(v) * torque / stribeck_level(v, coulomb, static, stribeck_velocity))
 
 
 def _bending_angle(bending_angle, who):

@@ -359,13 +359,16 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     sensors : mapping, "ideal" or None
         ``{rig_output_name: system}``: a sensor model with one input and one
         output inserted between that rig output and the controller input.
-        ``"ideal"``: every measurement is the rig's true output (no estimator,
-        e.g. the true joint state of a finger for an "ideal sensor" comparison).
+        ``"ideal"``: every measurement is the rig's true output (e.g. the true joint state of a finger for an
+        "ideal sensor" comparison); in a sampled loop (``rate_hz``) the rig's own estimator (``estimator="auto"``)
+        still runs beside it on the same samples, its output not fed back, so that the loop reports
+        ``<q>_estimate`` and ``<q>_estimation_error`` (what the estimator would have given the controller) as
+        with estimated sensors; ``estimator=None`` leaves it out.
     estimator : "auto", None or object
         ``"auto"`` (default): the rig's own state estimator when it has one
         (fingers and the hand: ``rig.link_estimator(period)``, joint angles
         from tendon lengths, at the control rate but never faster than the
-        sensors' 3 kHz) and ``sensors`` is not ``"ideal"``.  ``None``: no
+        sensors' 3 kHz); with ``sensors="ideal"`` only beside the loop (above), and not in a continuous loop.  ``None``: no
         estimator.  Or an object with ``system`` (a Drake System whose inputs
         are named after rig outputs and whose outputs replace the rig outputs of
         the same name as controller measurements) and optionally
@@ -456,7 +459,8 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     est = _resolve_estimator(rig, estimator, ideal, rate_hz, measurement_ports(controller))
     est_sys = None if est is None else getattr(est, "system", est)
     est_out = [] if est_sys is None else _output_names(est_sys)
-    estimated = tuple(m for m in measurement_ports(controller) if m in est_out)
+    # with ideal sensors the rig's estimator runs beside the loop (its error reported, its output not fed back)
+    estimated = () if ideal else tuple(m for m in measurement_ports(controller) if m in est_out)
     if est_sys is not None:
         if not isinstance(est_sys, System):
             raise ValueError(f"closed_loop: estimator must be a Drake System or have one in .system, got "
@@ -490,7 +494,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
             raise ValueError(f"closed_loop: saturation = {sat} must be > 0 Nm")
 
     spec = None
-    if fused and est is not None and not sensors and hasattr(est, "fused_spec"):
+    if fused and est is not None and not ideal and not sensors and hasattr(est, "fused_spec"):
         if hasattr(controller, "fused_spec"):
             spec = controller.fused_spec(est)
         elif isinstance(controller, StaticLawController) and estimated:
@@ -554,7 +558,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
         if spec is not None:
             builder.Connect(plant.GetOutputPort(m), ctrl.GetInputPort(m))
             continue
-        src = estimate_ports.get(m, plant.GetOutputPort(m))
+        src = estimate_ports[m] if m in estimated else plant.GetOutputPort(m)
         if m in sensors:
             sensor = builder.AddNamedSystem(f"sensor_{m}", sensors[m])
             if sensor.num_input_ports() != 1 or sensor.num_output_ports() != 1:
@@ -697,7 +701,7 @@ def _resolve_estimator(rig: Any, estimator: Any, ideal: bool, rate_hz: float | N
         if estimator != "auto":
             raise ValueError(f"closed_loop: estimator = {estimator!r}; give 'auto', None or an estimator")
         make = getattr(rig, "link_estimator", None)
-        if ideal or make is None:
+        if make is None or (ideal and rate_hz is None):
             return None
         est = make(None if rate_hz is None else 1.0 / rate_hz)
         used = [m for m in measured if m in _output_names(est.system)]

@@ -23,7 +23,10 @@
   - :class:`~awiwi_drake.control.tendon_force.TendonForceLaw` with ``size = m`` -- (10.2) per tendon,
     gains (10.11) scheduled on the reference (10.12), slope ``alpha = r_m k_t(f)`` of the tendon's
     own spring curve (:meth:`ForceMap.from_spring` of each tendon's law, :func:`rig_springs`: the rig's
-    ``params.tendon_springs`` overrides are honoured), friction (3.8) and ripple (3.5) fed forward.
+    ``params.tendon_springs`` overrides are honoured), friction (3.8) and ripple (3.5) fed forward; or
+    (``HandChainParams.tendon_law = "sdre"``) the tendon SDRE of ch. 14 per tendon
+    (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`, gains re-solved at 200 Hz from each tendon's (14.9) at its
+    measured force, held in discrete state), with the same feed-forward.
 
 :class:`TendonChainController` wires a joint stage and the force stage into one controller with
 the port contract of :mod:`awiwi_drake.control.base` (inputs ``joint_angle_reference``,
@@ -207,8 +210,11 @@ class TendonForceStage(Diagram):
     (distribution) ``distribution_status``.
 
     ``distribution``: ``"optimal"`` / ``"algorithm2"`` (ch. 7, sampled every ``1/rate_hz``, needs
-    ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).  ``tendon_law``: ``"force"``
-    (10.2) or ``"motor-position"`` (the tendon level of the two-time-scale (11.3),
+    ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).  ``tendon_law`` (default
+    ``params.tendon_law``): ``"force"`` (10.2), ``"sdre"`` (ch. 14, :class:`~awiwi_drake.control.sdre.TendonSdreLaw`
+    in a :class:`~awiwi_drake.control.sdre.TendonSdreController_`: its gains re-solved at ``params.sdre_update_rate``
+    from the measured forces and held, output ``tendon_sdre_gain``; a continuous (``"sharing"``) stage holds them at
+    ``point``'s forces: the SDRE's linearisation there) or ``"motor-position"`` (the tendon level of the two-time-scale (11.3),
     :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``, its motor
     damping relative to the tendon path).
     ``spring``: one spring law for every tendon, or a
@@ -220,9 +226,10 @@ class TendonForceStage(Diagram):
     def __init__(self, coupling, spring, drive_params, params: HandChainParams | None = None, *,
                  point: dict, distribution: str | None = None, gains: TendonForceGains | None = None,
                  distribution_params: ForceDistributionParams | None = None, rate_hz: float = 3000.0,
-                 tendon_law: str = "force"):
+                 tendon_law: str | None = None):
         super().__init__()
         p = params or HandChainParams()
+        tendon_law = tendon_law or p.tendon_law
         method = distribution or p.distribution_method
         m = coupling.num_tendons
         springs = spring if isinstance(spring, TendonSprings) else TendonSprings([spring] * m)
@@ -250,6 +257,15 @@ class TendonForceStage(Diagram):
             law = TendonForceLaw(fmap, drive_params.motor, gains, scheduled=p.scheduled, size=m,
                                  ripple_scale=p.force_ripple_scale if drive_params.motor.ripple else 0.0,
                                  name="tendon_force_control", path_velocity=True)
+        elif tendon_law == "sdre":                   # ch. 14, one bank; gains held over 1 / sdre_update_rate
+            from awiwi_drake.control.sdre import TendonSdreLaw
+            maps = {id(law_): ForceMap.from_spring(law_, r_m) for law_, _ in springs.groups}
+            law = TendonSdreLaw([maps[id(law_)] for law_ in springs], drive_params.motor, q_diag=p.sdre_weights,
+                                r=p.sdre_input_weight, design_forces=point["tendon_force"],
+                                update_period=None if method == "sharing" else 1.0 / p.sdre_update_rate,
+                                friction_scale=p.force_friction_scale,
+                                ripple_scale=p.force_ripple_scale if drive_params.motor.ripple else 0.0,
+                                path_velocity=True, name="tendon_force_control")
         elif tendon_law == "motor-position":
             from awiwi_drake.control.impedance import MotorPositionForceLaw
             from awiwi_drake.parameters.control import ImpedanceParams
@@ -263,8 +279,12 @@ class TendonForceStage(Diagram):
             law = MotorPositionForceLaw(drive_params.motor, motor_loop, size=m, friction_scale=p.friction_scale,
                                         min_alpha=r_m * (k_min[0] if springs.uniform else k_min), path_velocity=True)
         else:
-            raise ValueError(f"TendonForceStage: tendon_law = {tendon_law!r}; use 'force' or 'motor-position'")
-        force = b.AddNamedSystem("tendon_force_control", StaticLawController(law))
+            raise ValueError(f"TendonForceStage: tendon_law = {tendon_law!r}; use 'force', 'sdre' or 'motor-position'")
+        if tendon_law == "sdre":
+            from awiwi_drake.control.sdre import TendonSdreController
+            force = b.AddNamedSystem("tendon_force_control", TendonSdreController(law))
+        else:
+            force = b.AddNamedSystem("tendon_force_control", StaticLawController(law))
         if force.HasInputPort("tendon_path_velocity"):
             path = b.AddNamedSystem("tendon_path_velocity", TendonPathVelocity(coupling))
             b.Connect(path.get_output_port(0), force.GetInputPort("tendon_path_velocity"))
@@ -283,6 +303,8 @@ class TendonForceStage(Diagram):
             if nm not in ("tendon_force_reference", "tendon_path_velocity"):
                 b.ExportInput(force.GetInputPort(nm), nm)
         b.ExportOutput(force.GetOutputPort("motor_torque"), "motor_torque")
+        if force.HasOutputPort("tendon_sdre_gain"):
+            b.ExportOutput(force.GetOutputPort("tendon_sdre_gain"), "tendon_sdre_gain")
         b.ExportOutput(dist.GetOutputPort("tendon_force_reference"), "tendon_force_reference")
         if dist.HasOutputPort("distribution_status"):
             b.ExportOutput(dist.GetOutputPort("distribution_status"), "distribution_status")
@@ -335,10 +357,11 @@ class TendonChainController(Diagram):
     def __init__(self, rig: Any, joint_law: StaticLaw, params: HandChainParams | None = None, *,
                  point: dict | None = None, gains: TendonForceGains | None = None,
                  distribution: str | None = None, distribution_params: ForceDistributionParams | None = None,
-                 rate_hz: float = 3000.0, tendon_law: str = "force", friction_observer=None,
+                 rate_hz: float = 3000.0, tendon_law: str | None = None, friction_observer=None,
                  name: str = "cascaded_chain"):
         super().__init__()
         p = params or HandChainParams()
+        tendon_law = tendon_law or p.tendon_law
         rate_hz = check_rate("TendonChainController", rate_hz)
         point = point or chain_design_point(rig, params=p)
         self.operating_point = point["op"]
@@ -395,8 +418,9 @@ class TendonChainController(Diagram):
                     exported[nm] = b.ExportInput(port, nm)
         b.ExportOutput(force.GetOutputPort("motor_torque"), "motor_torque")
         b.ExportOutput(force.GetOutputPort("tendon_force_reference"), "tendon_force_reference")
-        if force.HasOutputPort("distribution_status"):
-            b.ExportOutput(force.GetOutputPort("distribution_status"), "distribution_status")
+        for nm in ("distribution_status", "tendon_sdre_gain"):
+            if force.HasOutputPort(nm):
+                b.ExportOutput(force.GetOutputPort(nm), nm)
         b.ExportOutput(tau_ref, "joint_torque_reference")
         if observer is not None:
             for nm in ("friction_compensation", "friction_compensation_bound"):

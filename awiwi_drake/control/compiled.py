@@ -10,6 +10,8 @@ equal to it (tests/test_control_tendon.py, tests/test_fused_chain.py):
   the interpolation of :func:`~awiwi_drake.control.tendon_force.interp`'s float bank path (the same index and
   arithmetic), the clamps of ``ForceMap.alpha_of_force`` and ``TendonForceLaw.gains_at``.  Returns -1, or the
   index of the first reference outside its table (the caller raises through the law).
+* ``sdre_law`` -- the tendon SDRE bank with held gains (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`, as written
+  there): the same interpolation as ``force_law``, the measured force clamped to its table; returns as ``force_law``.
 * ``backstepping`` -- the 15.5 law of a finger/the hand
   (:meth:`~awiwi_drake.control.finger_backstepping.FingerBacksteppingLaw.terms`, ``variant="antagonistic"``, with or
   without the link torque estimate and its bounded compensation) with polynomial spring laws
@@ -38,13 +40,33 @@ def _interp1(x, xp, fp, n):
 
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
-def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, lo, fmax,
-              scheduled, path, feedforward, friction, friction_scale, ripple_scale, r_m, out):
-    m = fd.shape[0]
-    for i in range(m):
+def _first_outside(fd, group, fmax):
+    for i in range(fd.shape[0]):
         g = group[i]
         if not (np.isfinite(fd[i]) and fd[i] >= 0.0 and fd[i] <= fmax[g]):
             return i
+    return -1
+
+
+@numba.njit(cache=True, fastmath=False, error_model='numpy')
+def _minus_motor_feedforward(tau, w, th, friction_scale, ripple_scale, arg, res):
+    arg[0] = w
+    arg[1] = th
+    motor_feedforward(arg, res)
+    if friction_scale > 0:
+        tau = tau - friction_scale * res[0]
+    if ripple_scale > 0:
+        tau = tau - ripple_scale * res[1]
+    return tau
+
+
+@numba.njit(cache=True, fastmath=False, error_model='numpy')
+def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, lo, fmax,
+              scheduled, path, feedforward, friction, friction_scale, ripple_scale, r_m, out):
+    m = fd.shape[0]
+    bad = _first_outside(fd, group, fmax)
+    if bad >= 0:
+        return bad
     arg = np.empty(2)
     res = np.empty(2)
     for i in range(m):
@@ -61,14 +83,25 @@ def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, 
         tau = kp * (fd[i] - f[i]) - kd * (alpha * w_el)
         if feedforward:
             tau = tau + r_m * f[i]
-        arg[0] = w[i]
-        arg[1] = th[i]
-        motor_feedforward(arg, res)
-        if friction:
-            tau = tau - friction_scale * res[0]
-        if ripple_scale > 0:
-            tau = tau - ripple_scale * res[1]
-        out[i] = tau
+        out[i] = _minus_motor_feedforward(tau, w[i], th[i], friction_scale if friction else 0.0, ripple_scale, arg, res)
+    return -1
+
+
+@numba.njit(cache=True, fastmath=False, error_model='numpy')
+def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale, ripple_scale, r_m, out):
+    m = fd.shape[0]
+    bad = _first_outside(fd, group, fmax)
+    if bad >= 0:
+        return bad
+    arg = np.empty(2)
+    res = np.empty(2)
+    for i in range(m):
+        k = group[i]
+        fm = min(max(f[i], 0.0), fmax[k])
+        err = _interp1(fm, tf[k], tth[k], n[k]) - _interp1(fd[i], tf[k], tth[k], n[k])
+        w_el = w[i] + vp[i] / r_m if path else w[i]
+        tau = r_m * fd[i] - g[i] * err - g[m + i] * w_el
+        out[i] = _minus_motor_feedforward(tau, w[i], th[i], friction_scale, ripple_scale, arg, res)
     return -1
 
 
@@ -141,14 +174,14 @@ def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f
 
 
 def motor_law_kernels(motor) -> dict:
-    """``{"motor_feedforward", "force_law", "backstepping"}`` compiled for ``motor`` (a
+    """``{"motor_feedforward", "force_law", "sdre_law", "backstepping"}`` compiled for ``motor`` (a
     :class:`~awiwi_drake.parameters.components.MotorParams`; cached on disk by the generated source)."""
     w, th = sym.Variable("omega"), sym.Variable("theta")
     with np.errstate(invalid="ignore"):      # numpy's ufunc on an Expression object reports a spurious FP flag
         laws = (motor_friction_torque(w, motor), motor_ripple_torque(th, motor))
     exprs = [e if isinstance(e, sym.Expression) else sym.Expression(float(e)) for e in laws]
     return compile_kernels({"motor_feedforward": ([[w, th]], exprs)}, tag="control_laws", extra=_SOURCE,
-                           extra_names=["force_law", "backstepping"])
+                           extra_names=["force_law", "sdre_law", "backstepping"])
 
 
 def float_inputs(u, names) -> bool:

@@ -205,6 +205,9 @@ class FingerBacksteppingLaw(StaticLaw):
                              "of M (module docstring), not from joint_gains")
         self.variant = variant
         p = params or HandChainParams()
+        if p.tendon_law != "force":
+            raise ValueError(f"tendon_law = {p.tendon_law!r}: the 15.5 finger backstepping computes the motor torques "
+                             f"itself (no tendon force law); tendon_law applies to the force-controlled chains")
         coupling = rig.coupling if isinstance(rig, Rig) else None
         if coupling is None:
             raise ValueError(f"finger backstepping: rig {getattr(rig, 'name', '?')!r} is not a finger or hand rig")

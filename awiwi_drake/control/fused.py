@@ -18,7 +18,9 @@ evaluates, by calling the same objects' context-free methods:
   stored estimate), ``qdot_k = C z_k + D q_k`` (the filter ``s / (T s + 1)`` discretised, ``C = -I/T``,
   ``D = I/T``), ``tau_k = joint_law(q_ref, q_k, qdot_k, measurements, f_ref,k)``, and the command
   ``u_k = law(f_ref,k, measurements, P(q_k) qdot_k)`` with ``f_ref,k`` the distribution's state (its answer
-  of the previous period) or the sharing of ``tau_k``;
+  of the previous period) or the sharing of ``tau_k`` (a law with held gains, the tendon SDRE
+  :class:`~awiwi_drake.control.sdre.TendonSdreLaw`, reads them from this system's state, re-solved by its own
+  periodic event as :class:`~awiwi_drake.control.sdre.TendonSdreController_` does);
 * the periodic update stores ``q_k``, ``z_{k+1} = (1 - h/T) z_k + h/T q_k`` and
   ``f_ref,k+1 = distribution.step(tau_k, K_mech, f_ref,k, q_k)``
   (:meth:`TendonForceDistribution_.step`).
@@ -42,6 +44,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake._math import scalar_value
 from awiwi_drake.control.force_distribution import TendonForceDistribution_
 from awiwi_drake.hand.estimation import LinkPositionEstimator_
 
@@ -115,6 +118,11 @@ def FusedChain_(T):
                 self._xs = self.DeclareDiscreteState(len(self.dist.fingers))
             if self.obs is not None:
                 self._xw = self.DeclareDiscreteState(self.obs.S.shape[1])
+            self._xg = None
+            if getattr(self.law, "initial_gain", None) is not None:   # held gains (the tendon SDRE, ch. 14)
+                self._xg = self.DeclareDiscreteState(self.law.initial_gain)
+                if self.law.update_period is not None:
+                    self.DeclarePeriodicDiscreteUpdateEvent(self.law.update_period, 0.0, self._update_gain)
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             tickets = {p.ticket() for p in self._in.values()} | {self.xd_ticket()}
             self._cache = self.DeclareCacheEntry("fused chain at the sample", ValueProducer(
@@ -126,6 +134,8 @@ def FusedChain_(T):
                                          lambda c, o: o.SetFromVector(self._sample(c)["q"]), prerequisites_of_calc=pre)
             self.DeclareVectorOutputPort("joint_velocity_estimate", n,
                                          lambda c, o: o.SetFromVector(self._sample(c)["v"]), prerequisites_of_calc=pre)
+            if self._xg is not None:
+                self.DeclareStateOutputPort(self.law.gain_name, self._xg)
             if chain:
                 if self.dist is not None:
                     self.DeclareStateOutputPort("tendon_force_reference", self._xf)
@@ -184,6 +194,8 @@ def FusedChain_(T):
                     W, f0, tau0 = self.sharing
                     u["tendon_force_reference"] = f0 + W @ (tau - tau0)
                 out.update(tau=tau, f_ref=u["tendon_force_reference"])
+            if self._xg is not None:
+                u[self.law.gain_name] = xd.get_vector(self._xg).CopyToVector()
             out["u"] = np.asarray(self.law(u)).reshape(-1)
             value.set_value(out)
 
@@ -200,6 +212,11 @@ def FusedChain_(T):
                 discrete_state.set_value(self._xs, status)
             if self.obs is not None:
                 discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"], s.get("P")))
+
+        def _update_gain(self, context, discrete_state):
+            """The tendon SDRE's re-solve at the measured forces (:meth:`TendonSdreLaw.gains`), as its own system."""
+            k = self.law.gains(np.array([scalar_value(v) for v in self._in["tendon_force"].Eval(context)]))
+            discrete_state.set_value(self._xg, k if T is float else np.array([AutoDiffXd(v) for v in k], dtype=object))
 
         def initialize_state(self, context, joint_angles, joint_velocities=None) -> None:
             """Start the estimate and the velocity filter at ``joint_angles`` (a pose known after homing; None

@@ -105,7 +105,17 @@ __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_l
            "sampled_loop_poles", "observe_design"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
-_TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else (10.2))
+_TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else params.tendon_law)
+
+
+def _tendon_law(design: str, chain: HandChainParams) -> str:
+    """The chain's tendon level for ``design``: its own (two-time-scale's motor-position loop (11.3)), else
+    ``chain.tendon_law``; a design with its own level refuses another (one line naming the option)."""
+    own = _TENDON_LAW.get(design)
+    if own is not None and chain.tendon_law != "force":
+        raise ValueError(f"tendon_law = {chain.tendon_law!r}: the {design} chain's tendon level is its own "
+                         f"{own} loop (11.3); tendon_law applies to the force-controlled chains")
+    return own or chain.tendon_law
 _TORQUE_RATE = {"lqr": "motor", "sdre": "motor"}       # the stage's 4th coordinate per design (else "joint", joint_stage)
 _TENDON_TOL = 1e-12
 
@@ -205,7 +215,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     return sub, op, sub_point
 
 
-def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, tendon_law: str = "force"):
+def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, tendon_law: str | None = None):
     """A subsystem of :func:`joint_subsystem` closed by the chain's force stage (sharing, continuous):
     the :class:`~awiwi_drake.control.base.ClosedLoop` with input ``joint_torque_reference``, and a context
     at its operating point."""
@@ -238,7 +248,7 @@ def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndar
 
 
 def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
-                         tendon_law: str = "force", friction: str = "motion",
+                         tendon_law: str | None = None, friction: str = "motion",
                          torque_rate: str = "joint") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
     ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`);
@@ -529,13 +539,18 @@ class JointDesign:
         return [np.linalg.eigvals(self.loop(j)[0]) for j in range(len(self.models))]
 
     def tracking_time_constant(self, min_share: float = 0.01) -> float:
+        """The slowest of :meth:`tracking_time_constants` [s], over all DoF.  The compare's short mode sizes its step
+        window with it."""
+        return max(self.tracking_time_constants(min_share))
+
+    def tracking_time_constants(self, min_share: float = 0.01) -> list[float]:
         """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
-        shows, over all DoF: each DoF's designed loop (:meth:`loop`: continuous ``F - G K``, or the sampled chain's
+        shows, per DoF: each DoF's designed loop (:meth:`loop`: continuous ``F - G K``, or the sampled chain's
         ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``; with the observer and the guides' presliding stiffness
         when :attr:`observer` is set) with its reference maps as input; a pole's share
         of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
         ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
-        does for a linearised loop).  The compare's short mode sizes its step window with it."""
+        does for a linearised loop)."""
         taus = []
         for j in range(len(self.models)):
             A, b = self.loop(j)
@@ -550,7 +565,7 @@ class JointDesign:
                     s = np.log(lam.astype(complex)) / self.period
             keep = (share / share.sum() > min_share) & np.isfinite(s)
             taus.append(float(1.0 / np.min(-s.real[keep])))
-        return max(taus)
+        return taus
 
     def table(self) -> str:
         """Per DoF: ``M_jj``, ``K_jj``, the gains and the slowest designed pole [1/s] (sampled: ``ln(z) / h``) of the
@@ -587,7 +602,7 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
     p = params or JointDesignParams()
     point = point or chain_design_point(rig, params=c)
     rate = _TORQUE_RATE.get(design, "joint")
-    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_TENDON_LAW.get(design, "force"),
+    models = models or reduced_joint_models(rig, point=point, params=c, tendon_law=_tendon_law(design, c),
                                             torque_rate=rate)
     if any(m.torque_rate != rate for m in models):
         raise ValueError(f"design_joint_stage: the {design} stage measures torque_rate={rate!r}; the models given "
@@ -617,7 +632,7 @@ def _sdre_law(rig, point, c, p, kw, period):
     table = np.empty((k, grid.size, 5))
     for j in range(k):
         for i, dt in enumerate(grid):
-            model = _reduced_model(rig, j, point, c, "force", "motion", kw["torque_rate"],
+            model = _reduced_model(rig, j, point, c, c.tendon_law, "motion", kw["torque_rate"],
                                    point["torque_offset"][j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
@@ -657,7 +672,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
         point = chain_design_point(rig, op, params=c, mechanical_stiffness=[
             np.diag(K_mech[a:b]) for a, b in zip(starts[:-1], starts[1:])])
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
-                                 tendon_law=_TENDON_LAW.get(design, "force"), name=f"{design.replace('-', '_')}_chain",
+                                 tendon_law=_tendon_law(design, c), name=f"{design.replace('-', '_')}_chain",
                                  friction_observer=friction_observer, **kw)
     observe_design(d, ctrl, rig, point)
     return ctrl

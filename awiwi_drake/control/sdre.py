@@ -27,6 +27,11 @@ Two pointwise-linear forms (``params.factorisation``):
   ``k(x1 - x3) = tau_s(x3 - x1) / (x3 - x1)`` (so that ``A(x) x`` is the spring torque
   exactly), link/motor damping as in (12.8).  (:class:`PrintedTendonFactorisation`,
   :class:`PrintedJointFactorisation`.)
+
+For the hand's chain (ch. 7-11 with "SDRE ch. 14" as the per-tendon force law) the tendon SDRE is one bank for
+all m tendons (:class:`TendonSdreLaw`, held gains in :class:`TendonSdreController_` or the fused chain): each
+tendon's 2-state pointwise-linear model (14.9) has the closed-form Riccati solution :func:`tendon_sdre_gains`
+(tested equal to Drake's ``LinearQuadraticRegulator``), so the 200 Hz re-solve is a few numpy operations.
 """
 
 from __future__ import annotations
@@ -38,15 +43,21 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDif
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import is_float
-from awiwi_drake.control.base import COMMAND_PORT, REFERENCE_SUFFIX, check_gain, check_gains
+from awiwi_drake._math import clip, is_float, scalar_value
+from awiwi_drake.control.base import COMMAND_PORT, REFERENCE_SUFFIX, StaticLaw, check_gain, check_gains
 from awiwi_drake.analysis.linear import linearize, lqr_gain
 from awiwi_drake.control.linear import LinearReferenceModel
 from awiwi_drake.control.lqr import expand_q
+from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
+from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
 __all__ = ["RigJacobian", "PrintedTendonFactorisation", "PrintedJointFactorisation", "TendonSdreModel", "SdreController_", "SdreController",
-           "tendon_sdre_controller", "joint_sdre_controller"]
+           "tendon_sdre_controller", "joint_sdre_controller", "tendon_sdre_gains", "TendonSdreLaw",
+           "TendonSdreController_", "TendonSdreController", "SDRE_GAIN"]
+
+#: the held gains of the tendon SDRE bank: ``[K_theta (m), K_omega (m)]`` (a state, not a measurement)
+SDRE_GAIN = "tendon_sdre_gain"
 
 
 class RigJacobian:
@@ -239,3 +250,221 @@ def joint_sdre_controller(rig: Any, params: SdreJointParams | None = None, *, op
     K0 = lqr_gain(*(jac(lin.x0, lin.u0) if p.factorisation == "printed" else (lin.A, lin.B)), Q, R)[0]
     return SdreController(model, jac, Q, R, None if fixed else 1.0 / p.update_rate, K0,
                           "joint_lqr_fixed" if fixed else "sdre")
+
+
+def tendon_sdre_gains(stiffness, inertia, q_diag, r, damping=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The LQR gains ``(K_theta, K_omega)`` of each tendon's pointwise-linear model, in closed form (vectorised).
+
+    Model (14.9) with an optional viscous slope: ``x = [theta - theta_0, omega]``,
+    ``A = [[0, 1], [-s / B, -d / B]]``, ``B_u = [0, 1 / B]``, with ``s = r_m alpha`` [Nm/rad] the load torque's slope
+    (``alpha = df/dtheta`` of the tendon at its state), ``d`` [Nm s/rad] the friction's slope (0: (14.9) as
+    printed), ``B`` the motor inertia; cost ``Q = diag(q_theta, q_omega)``, ``R = r``.  With ``a = s / B``,
+    ``c = 1 / (B^2 r)`` the Riccati equation (14.5) ``A^T P + P A - P B_u R^-1 B_u^T P + Q = 0`` reads, entry by
+    entry (``P = [[p1, p2], [p2, p3]]``): ``c p2^2 + 2 a p2 - q_theta = 0`` and
+    ``c p3^2 + 2 (d / B) p3 - (2 p2 + q_omega) = 0``, whose positive roots give the stabilising ``P`` and
+    ``K = R^-1 B_u^T P = [p2, p3] / (B r)``::
+
+        K_theta = B (sqrt(a^2 + c q_theta) - a),   K_omega = B (sqrt((d/B)^2 + c (2 p2 + q_omega)) - d/B).
+
+    The closed loop is ``s^2 + sqrt((d/B)^2 + c (2 p2 + q_omega)) s + sqrt(a^2 + c q_theta)``.  Arrays broadcast
+    (one entry per tendon); float only (the gains are held as constants).
+    """
+    b = float(inertia)
+    q_t, q_w = (float(v) for v in q_diag)
+    if not (b > 0 and r > 0 and q_t > 0 and q_w >= 0):
+        raise ValueError(f"tendon_sdre_gains: needs inertia > 0, r > 0, q_theta > 0, q_omega >= 0 "
+                         f"(got {b}, {r}, {q_t}, {q_w})")
+    a = np.asarray(stiffness, dtype=float) / b
+    dd = np.asarray(damping, dtype=float) / b
+    c = 1.0 / (b * b * float(r))
+    p2 = (np.sqrt(a * a + c * q_t) - a) / c
+    return b * c * p2, b * (np.sqrt(dd * dd + c * (2.0 * p2 + q_w)) - dd)
+
+
+class TendonSdreLaw(StaticLaw):
+    """The SDRE tendon force law (ch. 14, (14.7)-(14.9)) for a bank of ``size`` tendons, with held gains.
+
+    Per tendon ``i`` (its own spring curve through its :class:`~awiwi_drake.control.tendon_force.ForceMap`, the
+    motor's inertia ``B`` and pulley radius ``r_m``)::
+
+        u_i = r_m f_ref,i - K_theta,i (theta_i(f_i) - theta_i(f_ref,i)) - K_omega,i omega_el,i
+              - s_f tau_fric(omega_i) - s_r tau_ripple(theta_motor,i)
+
+    ``r_m f_ref`` is (14.8)'s feed-forward ``u = f_t(theta_0) + v`` at the reference's equilibrium; the state error is
+    (14.9)'s ``xi = theta - theta_0`` "linearised w.r.t. the tendon forces" (section 14.2.1): ``theta_i(f)`` the
+    map's motor angle holding ``f`` with the far end fixed (a measured force below 0 is the slack point, above the
+    table its top), so that on a finger the joints' share of the elongation is in it; ``omega_el = omega +
+    v_path / r_m`` (``path_velocity``: the rate of ``r_m theta + h(q)``, as :class:`TendonForceLaw`).  Friction (3.8)
+    and ripple (3.5) are fed forward with the fractions ``friction_scale``, ``ripple_scale``.
+
+    The gains ``[K_theta, K_omega]`` are an input (``SDRE_GAIN``, 2 ``size``), held by the system that owns the law
+    (:class:`TendonSdreController_`, or the fused chain); :meth:`gains` re-solves them at a measured state: the
+    pointwise-linear model (14.9) of each tendon at its measured force, ``alpha_i(f_i)``, no friction (the law feeds
+    the friction model forward, so the compensated plant is (14.9) up to the fraction ``1 - friction_scale``), in
+    closed form (:func:`tendon_sdre_gains`).  ``update_period``: the re-solve period (section 14.4: ~200 Hz), None
+    for gains fixed at ``design_forces`` (the SDRE's own linearisation at that equilibrium: the LQR).
+    """
+
+    def __init__(self, fmaps, motor: Any, *, q_diag, r: float, design_forces, update_period: float | None,
+                 friction_scale: float = 1.0, ripple_scale: float = 0.0, path_velocity: bool = False,
+                 name: str = "tendon_sdre"):
+        from awiwi_drake.control.tendon_force import ForceMap
+        self.name = name
+        self.fmaps = tuple(fmaps)
+        m = len(self.fmaps)
+        if m < 1 or not all(isinstance(fm, ForceMap) for fm in self.fmaps):
+            raise ValueError(f"{name}: fmaps must be one ForceMap per tendon")
+        groups: dict = {}
+        for i, fm in enumerate(self.fmaps):
+            groups.setdefault(id(fm), (fm, []))[1].append(i)
+        self._groups = [(fm, np.array(ix)) for fm, ix in groups.values()]
+        self.motor, self.q_diag, self.r = motor, tuple(float(v) for v in q_diag), float(r)
+        self.inertia = check_gain("inertia", motor.inertia, owner=name)
+        self.r_m = check_gain("pulley_radius", motor.pulley_radius, owner=name)
+        self.friction_scale = check_gain("friction_scale", friction_scale, allow_zero=True, owner=name)
+        self.ripple_scale = check_gain("ripple_scale", ripple_scale, allow_zero=True, owner=name)
+        if update_period is not None:
+            check_gain("update_period", update_period, owner=name)
+        self.update_period = update_period
+        self.gain_name = SDRE_GAIN
+        self.path_velocity = bool(path_velocity)
+        self.inputs = {"tendon_force_reference": m, "tendon_force": m, "motor_velocity": m}
+        if self.ripple_scale > 0:
+            self.inputs["motor_angle"] = m
+        if self.path_velocity:
+            self.inputs["tendon_path_velocity"] = m
+        self.output_size = m
+        f0 = check_gains("design_forces", design_forces, shape=(m,), owner=name)
+        self.initial_gain = self.gains(f0)
+
+    def _by_group(self, fn, f):
+        """``fn(fmap, f[ix])`` scattered back by tendon (one call per distinct map)."""
+        if len(self._groups) == 1:
+            return fn(self._groups[0][0], f)
+        out = np.empty(len(f), dtype=float if is_float(f) else object)
+        for fm, ix in self._groups:
+            out[ix] = fn(fm, f[ix])
+        return out
+
+    def slopes(self, f) -> np.ndarray:
+        """``alpha_i = df/dtheta`` [N/rad] of each tendon at the measured forces ``f`` (float)."""
+        return self._by_group(lambda fm, x: np.asarray(fm.alpha_of_force(x), dtype=float).reshape(-1),
+                              np.asarray(f, dtype=float).reshape(-1))
+
+    def gains(self, f) -> np.ndarray:
+        """``[K_theta, K_omega]`` (2 m) of the pointwise-linear models (14.9) at the measured forces ``f``."""
+        k_t, k_w = tendon_sdre_gains(self.r_m * self.slopes(f), self.inertia, self.q_diag, self.r)
+        return np.concatenate([k_t, k_w])
+
+    def angle_of_force(self, f, *, reference: bool):
+        """Each tendon's motor angle holding ``f`` (far end fixed); ``reference``: ``f`` must lie in its table
+        (else :class:`~awiwi_drake.analysis.InfeasibleForceError` naming the tendon), a measurement is clamped to it."""
+        f = np.asarray(f) if isinstance(f, np.ndarray) else np.asarray(f, dtype=object)
+        if reference:
+            for fm, ix in self._groups:
+                vals = f[ix]
+                try:
+                    fm.check_force(vals if vals.size > 1 else vals.reshape(-1), "tendon_force_reference")
+                except ValueError:
+                    for i in ix:
+                        fm.check_force(np.asarray([f[i]]), f"tendon_force_reference[{int(i)}]")
+
+        def one(fm, x):
+            if not reference:
+                x = clip(x, 0.0, fm.max_force)
+            return interp(x, np.concatenate([[0.0], fm.force]), np.concatenate([[fm.slack_angle], fm.theta]))
+        return self._by_group(one, f)
+
+    def __call__(self, u):
+        if self.output_size > 1 and float_inputs(u, self.inputs) and float_inputs(u, (SDRE_GAIN,)):
+            k = self.__dict__.get("_kernel") or self._build_kernel()
+            fn, tabs, out = k
+            zeros = tabs[-1]
+            bad = fn(u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"],
+                     u["motor_angle"] if self.ripple_scale > 0 else zeros,
+                     u["tendon_path_velocity"] if self.path_velocity else zeros, u[SDRE_GAIN], *tabs[:-1],
+                     self.path_velocity, self.friction_scale, self.ripple_scale, self.r_m, out)
+            if bad < 0:
+                return out.copy()
+        return self.evaluate(u)       # AutoDiffXd, or raises naming the tendon
+
+    def _build_kernel(self):
+        """The float bank's fast path: ``sdre_law`` of :func:`~awiwi_drake.control.compiled.motor_law_kernels`, one
+        compiled call equal to :meth:`evaluate` (tests/test_chain_sdre.py)."""
+        group = np.zeros(self.output_size, dtype=np.int64)
+        for k, (_, ix) in enumerate(self._groups):
+            group[ix] = k
+        rows = [(np.concatenate([[0.0], fm.force]), np.concatenate([[fm.slack_angle], fm.theta]))
+                for fm, _ in self._groups]
+        L = max(r[0].size for r in rows)
+
+        def table(j):
+            t = np.zeros((len(rows), L))
+            for k, r in enumerate(rows):
+                t[k, :r[j].size], t[k, r[j].size:] = r[j], r[j][-1]
+            return t
+        tabs = (group, np.array([r[0].size for r in rows], dtype=np.int64), table(0), table(1),
+                np.array([fm.max_force for fm, _ in self._groups]), np.zeros(self.output_size))
+        self._kernel = (motor_law_kernels(self.motor)["sdre_law"], tabs, np.empty(self.output_size))
+        return self._kernel
+
+    def evaluate(self, u):
+        """The law as written (float, AutoDiffXd); :meth:`__call__` takes a compiled fast path for a float bank."""
+        from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
+        m = self.output_size
+        fd, f, w = u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"]
+        g = u[SDRE_GAIN]
+        err = self.angle_of_force(f, reference=False) - self.angle_of_force(fd, reference=True)
+        w_el = w + u["tendon_path_velocity"] / self.r_m if self.path_velocity else w
+        tau = self.r_m * fd - g[:m] * err - g[m:] * w_el
+        if self.friction_scale > 0:
+            tau = tau - self.friction_scale * motor_friction_torque(w, self.motor)
+        if self.ripple_scale > 0:
+            tau = tau - self.ripple_scale * motor_ripple_torque(u["motor_angle"], self.motor)
+        return np.asarray(tau).reshape(-1)
+
+
+@TemplateSystem.define("TendonSdreController_", T_list=[float, AutoDiffXd])
+def TendonSdreController_(T):
+    """A :class:`TendonSdreLaw` bank with its gains held in discrete state, re-solved every ``law.update_period``
+    from the measured forces (``update_period=None``: constant gains, no state, so that a continuous loop stays
+    continuous for ``Linearize``).  Output ``motor_torque``, and the held gains
+    ``tendon_sdre_gain`` ``[K_theta (m), K_omega (m)]``."""
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, law: TendonSdreLaw, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.law = law
+            self._ports = {nm: self.DeclareVectorInputPort(nm, int(sz)) for nm, sz in law.inputs.items()}
+            tickets = {p.ticket() for p in self._ports.values()}
+            if law.update_period is not None:      # held and re-solved; else constant (no state: a continuous loop)
+                self._xg = self.DeclareDiscreteState(law.initial_gain)
+                tickets.add(self.discrete_state_ticket(self._xg))
+                self.DeclareStateOutputPort(SDRE_GAIN, self._xg)
+                self.DeclarePeriodicDiscreteUpdateEvent(law.update_period, 0.0, self._update)
+            else:
+                self._xg = None
+                self._k = law.initial_gain if T is float else np.array([AutoDiffXd(v) for v in law.initial_gain])
+                self.DeclareVectorOutputPort(SDRE_GAIN, self._k.size, lambda c, o: o.SetFromVector(self._k),
+                                             prerequisites_of_calc={self.nothing_ticket()})
+            self.DeclareVectorOutputPort(COMMAND_PORT, law.output_size, self._calc, prerequisites_of_calc=tickets)
+            self.set_name(law.name)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.law, converter=converter)
+
+        def _update(self, context, discrete_state):
+            f = self._ports["tendon_force"].Eval(context)
+            k = self.law.gains(np.array([scalar_value(v) for v in f]))
+            discrete_state.set_value(self._xg, k if T is float else np.array([AutoDiffXd(v) for v in k], dtype=object))
+
+        def _calc(self, context, output):
+            vals = {nm: p.Eval(context) for nm, p in self._ports.items()}
+            vals[SDRE_GAIN] = (self._k if self._xg is None
+                               else context.get_discrete_state(self._xg).CopyToVector())
+            output.SetFromVector(self.law(vals))
+
+    return Impl
+
+
+TendonSdreController = TendonSdreController_[None]

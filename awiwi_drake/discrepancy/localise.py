@@ -13,7 +13,7 @@ from scipy.signal import coherence, welch
 
 from .replay import ReplayEngine, project
 
-__all__ = ["ResidualMaps", "residual_maps", "cpr_spectrum", "locate", "CPR_MAX_ORDER"]
+__all__ = ["ResidualMaps", "residual_maps", "cpr_spectrum", "locate", "effective_sample_size", "CPR_MAX_ORDER"]
 
 CPR_MAX_ORDER = 300
 """Highest ripple order scanned (cycles per motor revolution).  Chosen: issue 12 asks
@@ -74,6 +74,16 @@ class ResidualMaps:
     summary: dict
 
 
+def region_profile(values: np.ndarray, residuals: dict) -> tuple:
+    """Mean of each residual (name -> (N,)) over 10 quantile bins of an operating quantity ``values`` (N,);
+    returns the bin centres (10,) and name -> bin means (10,) (NaN where a bin is empty)."""
+    edges = np.quantile(values, np.linspace(0, 1, 11))
+    bins = np.clip(np.searchsorted(edges, values) - 1, 0, 9)
+    prof = {n: np.array([np.mean(r[bins == b]) if np.any(bins == b) else np.nan for b in range(10)])
+            for n, r in residuals.items()}
+    return 0.5 * (edges[1:] + edges[:-1]), prof
+
+
 def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
     """Compute the maps of the model with catalog parameters ``params``."""
     W = np.arange(len(eng.starts))
@@ -107,11 +117,7 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
     cpr_noise = float(2.0 / np.sqrt(max(ok.sum(), 1)))
     # operating regions: quantile bins of motor velocity, motor angle and tendon force
     def profile(v):
-        edges = np.quantile(v, np.linspace(0, 1, 11))
-        bins = np.clip(np.searchsorted(edges, v) - 1, 0, 9)
-        prof = {n: np.array([np.mean(full[ok, j][bins == b]) if np.any(bins == b) else np.nan
-                             for b in range(10)]) for j, n in enumerate(eng.out_names)}
-        return 0.5 * (edges[1:] + edges[:-1]), prof
+        return region_profile(v, {n: full[ok, j] for j, n in enumerate(eng.out_names)})
 
     centers, vprof = profile(eng.xhat[nmot][ok])
     pos_centers, pprof = profile(theta)
@@ -163,6 +169,29 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
                         asym, lags * eng.dt, xc, summary)
 
 
+def effective_sample_size(x: np.ndarray) -> float:
+    """Number of independent samples the mean of ``x`` is worth: ``n / (1 + 2 sum_k w_k rho_k)``, the sample
+    autocorrelation ``rho_k`` summed with Bartlett weights ``w_k = 1 - k / (m + 1)`` (the Newey-West long-run
+    variance). Bandwidth, chosen: ``m`` = twice the first lag where ``rho_k <= 0`` (the correlation time of the
+    series itself; a fixed rule such as ``4 (n/100)^(2/9)`` is ~11 samples here and misses a residual correlated
+    over hundreds), at most ``n / 2``. White noise gives ~``n``; never more than ``n`` or less than 1."""
+    x = np.asarray(x, float)
+    n = len(x)
+    if n < 3:
+        return float(max(n, 1))
+    x = x - x.mean()
+    f = np.fft.rfft(x, 2 * n)
+    acov = np.fft.irfft(f * np.conj(f))[:n] / n
+    if acov[0] <= 0.0:
+        return float(n)
+    rho = acov / acov[0]
+    neg = np.nonzero(rho[1:] <= 0.0)[0]
+    m = int(min(2 * (neg[0] + 1) if len(neg) else n, n // 2))
+    k = np.arange(1, m + 1)
+    tau = 1.0 + 2.0 * float(np.sum((1.0 - k / (m + 1.0)) * rho[1:m + 1]))
+    return float(min(n, max(1.0, n / max(tau, 1e-12))))
+
+
 def _band(freq: np.ndarray, ratio: np.ndarray, level: float = 2.0) -> list:
     """Contiguous frequency band around the PSD peak where the residual PSD is above
     ``level`` times the noise floor's ([f_lo, f_hi] in Hz; empty when nowhere)."""
@@ -205,10 +234,12 @@ def locate(maps: ResidualMaps, threshold: float) -> dict:
     rms = float(np.sqrt(np.nanmean(maps.residual[worst] ** 2)))
     n_ok = int(np.sum(np.isfinite(maps.residual[worst])))
     # an operating region is reported where a bin's mean residual stands out of what a zero-mean residual of
-    # this size gives a bin (10 quantile bins: 3 standard errors, rms / sqrt(n / 10)); a residual periodic in
+    # this size and colour gives a bin (10 quantile bins: 3 standard errors, rms / sqrt(n_eff / 10), n_eff the
+    # residual's effective sample size: a slow residual has few independent samples); a residual periodic in
     # time (e.g. mains pickup) has none
     region = max(regions, key=lambda r: abs(r["mean_residual"])) if regions else {}
-    if region and abs(region["mean_residual"]) < 3.0 * rms / np.sqrt(max(n_ok, 10) / 10.0):
+    n_eff = effective_sample_size(maps.residual[worst][np.isfinite(maps.residual[worst])])
+    if region and abs(region["mean_residual"]) < 3.0 * rms / np.sqrt(max(n_eff, 10.0) / 10.0):
         region = {}
     # a periodic component stands out of the other orders (a coloured residual fits every low order
     # over a limited angle range) and of white noise of the residual's own size

@@ -24,7 +24,9 @@ part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the w
 State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
 then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces, then with
 guide friction (on by default) ``g (m)``, the guide friction forces of the tendon paths
-(both Dahl states; the guide friction adds ``-P^T g`` to the joint torque).
+(both Dahl states; the guide friction adds ``-P^T g`` to the joint torque), then with the joints'
+stick-slip friction (``params.joint_friction``, off by default) ``tau_f (n)``, the friction torque on each
+joint (exported as ``joint_friction_torque``).
 
 The wrist enters the routing like extra joints: the drive's coupling is the
 finger coupling plus ``m`` length-offset "joints" (identity columns of
@@ -168,12 +170,13 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
     state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
-                                  guide_friction=drive.guide_friction)
+                                  guide_friction=drive.guide_friction, joint_friction=p.joint_friction)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
-                            joint_angles, external_torque, wrist_angle, drive.num_states - 2 * m)
+                            joint_angles, external_torque, wrist_angle,
+                            drive.num_states - 2 * m + (n if p.joint_friction else 0))
 
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
@@ -210,7 +213,8 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
                                   for t, g in own.items())) if p.guide_friction or own else None
     model = DriveModel(tendon_motor_params(p, coupling.tendon_names), laws.laws, drive_coupling, offsets,
                        p.motor.pulley_radius, tendon_hysteresis(p, coupling.tendon_names), gf, n)
-    dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, LinkModel(plant, G)))
+    links = LinkModel(plant, G, _joint_friction(p, plant) if p.joint_friction else None)
+    dyn = b.AddNamedSystem("hand_dynamics", HandDynamics_[float](model, links))
     if wrist:
         b.Connect(_add_wrist_offsets(b, rows, m), dyn.GetInputPort("wrist_tendon_offset"))
     for nm in ("motor_torque", "external_torque"):
@@ -219,7 +223,10 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
         b.ExportOutput(dyn.GetOutputPort(nm), nm)
     # state slices in C++ (a Python slicer costs ~3-4 us per read)
     rest = model.num_states - 2 * m
-    split = b.AddNamedSystem("state_split", Demultiplexer([n, n, 2 * m] + ([rest] if rest else [])))
+    nf = links.num_friction_states
+    split = b.AddNamedSystem("state_split", Demultiplexer([n, n, 2 * m] + ([rest] if rest else []) + ([nf] if nf else [])))
+    if nf:
+        b.ExportOutput(split.get_output_port(4 if rest else 3), "joint_friction_torque")
     b.Connect(dyn.GetOutputPort("state"), split.get_input_port())
     motor = b.AddNamedSystem("motor_state_split", Demultiplexer([m, m]))
     b.Connect(split.get_output_port(2), motor.get_input_port())
@@ -235,6 +242,25 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
         b.Connect(pose.get_output_port(), sg.get_source_pose_port(plant.get_source_id()))
         b.ExportOutput(sg.get_query_output_port(), "query_object")
     return model
+
+
+def _joint_friction(p, plant) -> np.ndarray:
+    """Per plant joint (position order) ``[coulomb, static, stribeck_velocity, presliding_angle]`` of the joints'
+    stick-slip friction: ``p.joint_friction_params``, ``p.joint_frictions`` overriding joints by name."""
+    names = [plant.get_joint(j).name() for j in plant.GetJointIndices() if plant.get_joint(j).num_positions()]
+    starts = [plant.get_joint(j).position_start() for j in plant.GetJointIndices() if plant.get_joint(j).num_positions()]
+    own = {}
+    for joint, jp in p.joint_frictions:
+        if joint not in names:
+            raise ValueError(f"joint_frictions: unknown joint {joint!r}; joints are {', '.join(names)}")
+        if joint in own:
+            raise ValueError(f"joint_frictions: joint {joint!r} is given twice")
+        own[joint] = jp
+    out = np.empty((plant.num_positions(), 4))
+    for name, k in zip(names, starts):
+        jp = own.get(name, p.joint_friction_params)
+        out[k] = (jp.coulomb, jp.static, jp.stribeck_velocity, jp.presliding_angle)
+    return out
 
 
 def _wrist_rows(parts) -> np.ndarray:

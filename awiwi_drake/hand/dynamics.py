@@ -6,7 +6,10 @@
   ``C(q, v) v``, gravity ``tau_g(q)``, joint damping ``d``) plus the PIP/DIP coupling element
   ``-G [q; v]`` ((5.16)-(5.17), :func:`.plant.coupling_force_gain`)::
 
-      M(q) qdd = -P(q)^T (f + g) - G [q; v] - d v + tau_g(q) - C(q, v) v + tau_ext
+      M(q) qdd = -P(q)^T (f + g) - G [q; v] - d v + tau_f + tau_g(q) - C(q, v) v + tau_ext
+
+  with, when the joints' stick-slip friction is on (``LinkModel.joint_friction``), one presliding state per
+  joint, its friction torque ``tau_f`` (:func:`awiwi_drake.components.friction.stick_slip_rate`);
 
 * the tendon drive: :func:`awiwi_drake.components.fused_drive.drive_laws` (motors, springs,
   routing, hysteresis, guide friction) with ``q`` and ``qdot = v`` of the links (and the wrist
@@ -28,7 +31,7 @@ evaluation, the separate drive two Python callbacks, and the plumbing between th
 split, Mux, Adder, MatrixGain) Drake's cache invalidation; the compiled terms of the whole hand
 cost a few us (see README "How the plants are built, and speed").
 
-State: ``[q (n), v (n), theta (m), omega (m), z (m, hysteresis), g (m, guide friction)]``
+State: ``[q (n), v (n), theta (m), omega (m), z (m, hysteresis), g (m, guide friction), tau_f (n, joint friction)]``
 (the order of the MultibodyPlant + drive diagram: ``rigs.base.state_names``).
 Ports (each computes only its own quantity; prerequisites declared): inputs ``motor_torque``
 (m) [N m], ``external_torque`` (n) [N m] and, with the wrist, ``wrist_tendon_offset`` (m) [m];
@@ -97,12 +100,16 @@ class LinkModel:
     """The links of a finger or the hand: a finalised continuous float ``MultibodyPlant`` (standalone,
     not in a diagram) and the PIP/DIP coupling gain ``G`` (n x 2n, or None).
 
+    ``joint_friction`` (n x 4, or None: off): per joint (position order) the stick-slip friction's Coulomb and
+    breakaway levels [N m], Stribeck velocity [rad/s] and presliding angle [rad]
+    (:func:`awiwi_drake.components.friction.stick_slip_rate`; one state per joint).
     Derived: ``damping`` (n) [N m s/rad] (each revolute joint's damping, position order) and
     ``blocks``, the index sets of the diagonal blocks of ``M(q)`` (one per finger).
     """
 
     plant: object
     coupling_gain: np.ndarray | None = None
+    joint_friction: np.ndarray | None = None
     damping: np.ndarray = field(init=False)
     blocks: tuple = field(init=False)
 
@@ -130,6 +137,13 @@ class LinkModel:
                 raise ValueError(f"LinkModel: coupling_gain must be {n} x {2 * n}, got {G.shape}")
             G.setflags(write=False)
             object.__setattr__(self, "coupling_gain", G)
+        if self.joint_friction is not None:
+            jf = np.array(self.joint_friction, dtype=float)
+            if jf.shape != (n, 4) or not np.all(jf[:, 2:] > 0) or not np.all(jf[:, 1] >= jf[:, 0]) or np.any(jf < 0):
+                raise ValueError(f"LinkModel: joint_friction must be {n} x 4 (coulomb <= static, stribeck_velocity > 0, "
+                                 f"presliding_angle > 0 per joint), got {jf.tolist()}")
+            jf.setflags(write=False)
+            object.__setattr__(self, "joint_friction", jf)
         # blocks of M: connected components of its sparsity at a generic configuration
         ctx = plant.CreateDefaultContext()
         plant.SetPositions(ctx, np.random.default_rng(7).uniform(-1.0, 1.0, n))
@@ -143,6 +157,17 @@ class LinkModel:
     def num_joints(self) -> int:
         return int(self.plant.num_positions())
 
+    @property
+    def num_friction_states(self) -> int:
+        """The joint friction states (one per joint when on, else 0)."""
+        return 0 if self.joint_friction is None else self.num_joints
+
+    def friction_rate(self, v, tau_f):
+        """``d tau_f / dt`` of the joints' stick-slip friction (:func:`~awiwi_drake.components.friction.stick_slip_rate`)."""
+        from awiwi_drake.components.friction import stick_slip_rate
+        c = self.joint_friction
+        return stick_slip_rate(tau_f, v, c[:, 0], c[:, 1], c[:, 2], c[:, 3])
+
     def fingerprint(self) -> str:
         """Digest of the plant's dynamics (M, bias, gravity at fixed sample states), G and d."""
         plant, n = self.plant, self.num_joints
@@ -155,14 +180,17 @@ class LinkModel:
                 h.update(np.ascontiguousarray(a, dtype=float).tobytes())
         h.update(self.damping.tobytes())
         h.update(b"none" if self.coupling_gain is None else self.coupling_gain.tobytes())
+        h.update(b"no joint friction" if self.joint_friction is None else self.joint_friction.tobytes())
         return h.hexdigest()
 
 
 def _split(model: DriveModel, links: LinkModel, x, off):
+    """``(q, v, drive states, q with the wrist offsets, joint friction torques)`` of the state ``x``."""
     n = links.num_joints
-    q, v, xd = x[:n], x[n:2 * n], x[2 * n:]
+    end = 2 * n + model.num_states
+    q, v, xd, tau_f = x[:n], x[n:2 * n], x[2 * n:end], x[end:]
     q_all = q if model.num_joints == n else np.concatenate([q, off])
-    return q, v, xd, q_all
+    return q, v, xd, q_all, tau_f
 
 
 def hand_dynamics_terms(model: DriveModel, links: LinkModel, plant, context, x, u, tau_ext, off):
@@ -172,15 +200,19 @@ def hand_dynamics_terms(model: DriveModel, links: LinkModel, plant, context, x, 
     ``M qdd = rhs`` gives the joint accelerations; ``drive_derivatives`` are the drive's state rates.
     """
     n = links.num_joints
-    q, v, xd, q_all = _split(model, links, x, off)
+    q, v, xd, q_all, tau_f = _split(model, links, x, off)
     d = drive_laws(model, xd, u, q_all, v, want=("derivatives", "generalized_force"))
     plant.SetPositionsAndVelocities(context, np.concatenate([q, v]))
     M = plant.CalcMassMatrix(context)
     tau = d["generalized_force"][:n] + tau_ext - links.damping * v
     if links.coupling_gain is not None:
         tau = tau - links.coupling_gain @ np.concatenate([q, v])
+    rates = d["derivatives"]
+    if links.joint_friction is not None:
+        tau = tau + tau_f
+        rates = np.concatenate([rates, links.friction_rate(v, tau_f)])
     rhs = tau + plant.CalcGravityGeneralizedForces(context) - plant.CalcBiasTerm(context)
-    return M, rhs, d["derivatives"]
+    return M, rhs, rates
 
 
 def hand_dynamics(model: DriveModel, links: LinkModel, plant, context, x, u, tau_ext, off):
@@ -281,7 +313,7 @@ def _trace_source(model: DriveModel, links: LinkModel) -> str:
     from awiwi_drake.components.codegen import emit_source
     n, m = links.num_joints, model.num_tendons
     no = model.num_joints - n
-    xs, x = _vars("x", 2 * n + model.num_states)
+    xs, x = _vars("x", 2 * n + model.num_states + links.num_friction_states)
     us, u = _vars("u", m)
     es, e = _vars("e", n)
     os_, off = _vars("o", no)
@@ -292,7 +324,7 @@ def _trace_source(model: DriveModel, links: LinkModel) -> str:
     functions = {"terms": ([xs, us, es, os_], list(dd) + list(rhs))}
     for b, blk in enumerate(links.blocks):
         functions[f"mass{b}"] = ([xs], [M[i, j] for i in blk for j in blk])
-    q, v, xd, q_all = _split(model, links, x, off)
+    q, v, xd, q_all, _ = _split(model, links, x, off)
     out = drive_laws(model, xd, None, q_all, v, want=("tendon_stiffness", "generalized_force"))
     for name in ("tendon_force", "tendon_stiffness", "elongation"):
         functions[name] = ([xs, os_], list(out[name]))
@@ -323,7 +355,7 @@ def HandDynamics_(T):
             self._float = T is float
             self._kernels = None
             self._plant_T = None
-            kd = model.num_states
+            kd = model.num_states + links.num_friction_states
             self._size = 2 * n + kd
             self._buf = np.empty(self._size)
             self._empty = np.zeros(0)
@@ -378,7 +410,7 @@ def HandDynamics_(T):
 
             def calc(context, out):
                 x = context.get_continuous_state_vector().CopyToVector()
-                q, v, xd, q_all = _split(self.model, self.links, x, self._offsets(context))
+                q, v, xd, q_all, _ = _split(self.model, self.links, x, self._offsets(context))
                 key = "generalized_force" if name == "joint_torque" else name
                 res = drive_laws(self.model, xd, None, q_all, v, want=(key,))[key]
                 out.SetFromVector(res[:n] if name == "joint_torque" else res)

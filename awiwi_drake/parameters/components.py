@@ -21,6 +21,7 @@ __all__ = [
     "TendonParams",
     "GuideFrictionParams",
     "TendonGuideParams",
+    "JointFrictionParams",
 ]
 
 # Torque constant, roughly: the friction law (3.8) with Table 3.3 gives 1.41 Nm at
@@ -297,3 +298,43 @@ class TendonGuideParams(Parameters):
     capstan_exponent: float = param(0.0, unit="-", low=0.0, high=3.0,
                                     source="Fig 4.11: mu 0.05-0.2 over 1-4 rad of bending; ch. 9: 10-50 % loss",
                                     doc="mu alpha of the capstan law on the path")
+
+
+@dataclass(frozen=True)
+class JointFrictionParams(Parameters):
+    """Stick-slip friction of a finger joint (its bearing), :func:`~awiwi_drake.components.friction.stick_slip_rate`.
+
+    The Stribeck curve ``W(v) = Fc + (Fs - Fc) exp(-(v/v_s)^2)`` as the level of a presliding state of stiffness
+    ``Fs / delta``.  The thesis names the joints' stick-slip (Fig 15.25: the cascaded loop's "vibrations ... caused by
+    the stick-slip effect"; ch. 9, ch. 11 "stick-slip effects in the joint are preventing the link to reach the
+    desired joint position") but prints no level, so the levels are chosen.
+    """
+
+    coulomb: float = param(0.01, unit="Nm", low=0.0, high=1.0,
+                           source=("chosen: 10 mNm, 14 % of the 0.07 Nm one tendon at 10 N puts on the PIP "
+                                   "(r22 = 7 mm): ch. 9's 'tendon friction reaches 10 % to 50 %' taken at its low "
+                                   "end for a joint with bearings (15.5.3)"))
+    static: float = param(0.015, unit="Nm", low=0.0, high=1.0,
+                          source="chosen: breakaway 1.5x the Coulomb level, the drop that makes the joint stick and slip")
+    stribeck_velocity: float = param(0.05, unit="rad/s", low=0.0, high=10.0, low_inclusive=False,
+                                     source=("chosen: the level falls from static to Coulomb over 0.05 rad/s, a tenth "
+                                             "of Fig 15.25's slowest tracking speed near its turning points"))
+    presliding_angle: float = param(
+        0.05, unit="rad", low=0.0, high=0.5, low_inclusive=False,
+        source=("chosen by the fixed-step stability of the hand's integrator (RK3 at the 3 kHz control period h): at "
+                "rest the joint is held by the presliding spring sigma0 = Fs / delta, which raises the square of the "
+                "plant's fastest mode |h lambda_0|^2 by at most h^2 sigma0 lambda_max(M^-1); it stays inside RK3's "
+                "region along that mode's ray (|h lambda| < |z_b|) for sigma0 <= (|z_b|^2 - |h lambda_0|^2) / (h^2 "
+                "lambda_max(M^-1)), least on the fifth finger at 35 N: 0.37 Nm/rad (its damped PIP/DIP coupling mode, "
+                "|h lambda_0| = 2.27, |z_b| = 2.33, lambda_max(M^-1) = 7.65e6 1/(kg m^2); index 0.61, thumb 0.60; "
+                "pretension 10-35 N). sigma0 = 0.3 Nm/rad, delta = Fs / sigma0 = 0.05 rad. The memoryless law "
+                "stribeck_friction cannot stick at this step: its slope Fs / v_eps needs h Fs M^-1_jj / v_eps <= 2.51 "
+                "(RK3's real-axis bound), v_eps >= 2.5 rad/s on the index PIP and 10.7 rad/s on its DIP, above the "
+                "2.2 rad/s peak of Fig 15.25's sine (docs/REPRODUCTIONS.md)"),
+        doc="delta: the deflection over which the friction builds up to its breakaway level")
+
+    def _validate(self) -> None:
+        super()._validate()
+        if self.static < self.coulomb:
+            raise ValueError(f"JointFrictionParams.static = {self.static} Nm must be >= coulomb = {self.coulomb} Nm "
+                             "(the Stribeck level falls from the breakaway to the Coulomb level)")

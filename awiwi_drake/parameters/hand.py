@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import ClassVar
 
 from .base import Parameters, param
-from .components import GuideFrictionParams, HysteresisParams, MotorParams, TendonGuideParams
+from .components import GuideFrictionParams, HysteresisParams, JointFrictionParams, MotorParams, TendonGuideParams
 from .rigs import SpringModelParams
 
 __all__ = [
@@ -332,6 +332,9 @@ class FingerDriveParams(Parameters):
     saturation stay those of ``motor``); ``tendon_guides`` gives one tendon path its own guide friction
     (``(tendon_name, TendonGuideParams)``: constant and capstan exponent), whether ``guide_friction`` is on or
     off for the others (``with_physics(guide_friction=False)`` clears it).
+    Stick-slip joint friction (``joint_friction``, off by default; ``joint_friction_params`` for every joint,
+    ``joint_frictions`` overriding joints by name, ``(joint_name, JointFrictionParams)``) is a presliding state per
+    joint with the Stribeck level (:func:`~awiwi_drake.components.friction.stick_slip_rate`).
     Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
     :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
     fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
@@ -375,14 +378,23 @@ class FingerDriveParams(Parameters):
                 "few 0.4 mm of tendon travel, the shortest length for which fixed-step RK3 at 3 kHz is stable on "
                 "every finger and the hand with hysteresis on (docs/REPRODUCTIONS.md, 'Thesis physics at 3 kHz')"))
     gravity: bool = param(False, unit="-", source="section 5.2.2: ~0.002 N m, negligible")
+    joint_friction: bool = param(
+        False, unit="-",
+        source=("chosen off by default: the thesis prints no joint friction level (JointFrictionParams) while the "
+                "routing friction it measured (ch. 4, ch. 9's 10-50 %) is on (guide_friction); with_physics("
+                "joint_friction=True) adds the joints' stick-slip of Fig 15.25 (reproductions.ch15_pip_experiments)"))
+    joint_friction_params: JointFrictionParams = field(default_factory=JointFrictionParams)
+    joint_frictions: tuple[tuple[str, JointFrictionParams], ...] = ()
 
     def with_physics(self, *, ripple: bool | None = None, hysteresis: bool | None = None,
-                     guide_friction: bool | None = None, motor_friction: bool | None = None):
+                     guide_friction: bool | None = None, motor_friction: bool | None = None,
+                     joint_friction: bool | None = None):
         """A copy with the named thesis effects switched (None leaves one as it is).
 
         E.g. ``p.with_physics(hysteresis=False, guide_friction=False)`` for the per-joint design models,
         which have neither Dahl state; ``p.with_physics(ripple=False, hysteresis=False, guide_friction=False, motor_friction=False)``
-        is the ideal plant (frictionless motors, elastic springs).
+        is the ideal plant (frictionless motors, elastic springs); ``joint_friction=True`` adds the joints'
+        stick-slip (off by default).
         """
         p = self
         if ripple is not None or motor_friction is not None:
@@ -394,12 +406,14 @@ class FingerDriveParams(Parameters):
                                                for t, s in p.tendon_springs))
         if guide_friction is not None:
             p = p.replace(guide_friction=bool(guide_friction), **({} if guide_friction else {"tendon_guides": ()}))
+        if joint_friction is not None:
+            p = p.replace(joint_friction=bool(joint_friction))
         return p
 
     def _validate(self) -> None:
         super()._validate()
         for name, cls in (("tendon_springs", SpringModelParams), ("tendon_motors", MotorParams),
-                          ("tendon_guides", TendonGuideParams)):
+                          ("tendon_guides", TendonGuideParams), ("joint_frictions", JointFrictionParams)):
             if not isinstance(getattr(self, name), tuple):
                 raise ValueError(f"{type(self).__name__}.{name} must be a tuple of (tendon_name, {cls.__name__}) "
                                  f"pairs, got {type(getattr(self, name)).__name__}")
@@ -407,7 +421,9 @@ class FingerDriveParams(Parameters):
                 if (not isinstance(entry, tuple) or len(entry) != 2 or not isinstance(entry[0], str)
                         or not isinstance(entry[1], cls)):
                     raise ValueError(f"{type(self).__name__}.{name}[{i}] = {entry!r} must be a "
-                                     f"(tendon_name, {cls.__name__}) pair")
+                                     f"({name.split('_')[0].rstrip('s')}_name, {cls.__name__}) pair")
+            if name == "joint_frictions":       # joint names are checked where the plant is built
+                continue
             names = self.tendon_names
             for tendon, _ in getattr(self, name):
                 if names is not None and tendon not in names:

@@ -115,8 +115,9 @@ class HandChainParams(Parameters):
     the cascade limits ``K <= cascade_margin M_jj force_bandwidth^2 / 4`` (the stability bound of (11.16), its joint
     loop behind the force loop).  The mechanical stiffness commanded to the distribution (co-contraction)
     is ``stiffness_scale`` times the operating point's own (5.12) unless given per DoF.  The force
-    loop is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) and the ripple
-    feed-forward ``RippleCompensationParams.amplitude_scale``.
+    loop (``tendon_law``) is (10.2) with ``TendonForceGains`` (natural frequency ``force_bandwidth``) or the ch. 14
+    tendon SDRE (``sdre_*``), with the friction and ripple feed-forward ``force_friction_scale`` /
+    ``force_ripple_scale``.
     """
 
     force_bandwidth: float = param(300.0, unit="rad/s", low=0.0, low_inclusive=False,
@@ -225,6 +226,37 @@ class HandChainParams(Parameters):
                 "index, sampled loop at rest (hysteresis off): the slowest mode at -0.11 1/s with a = 0.8, -1.4 1/s "
                 "with 1; at half the cascade cap +0.62 1/s (unstable) with 0.8, -0.73 1/s with 1"),
         doc="fraction of the motor ripple (3.5) the chain's tendon force law (10.2) feeds forward")
+    tendon_law: str = param(
+        "force", unit="-", choices=("force", "sdre"),
+        source=("the per-tendon force controller of the chain (ch. 10: 'PD with feed-forward, gain-scheduled', or "
+                "SDRE ch. 14): 'force' is (10.2) with the gains (10.11) scheduled per scheduled; 'sdre' the tendon "
+                "SDRE (14.7)-(14.9) per tendon (control.sdre.TendonSdreLaw), weights sdre_weights / "
+                "sdre_input_weight, re-solved at sdre_update_rate. The designs whose tendon level is their own "
+                "(two-time-scale: the motor-position loop (11.3); the 15.5 backstepping: motor torques directly) "
+                "refuse 'sdre'"),
+        doc="the chain's per-tendon force law: (10.2) 'force' or the ch. 14 SDRE 'sdre'")
+    sdre_weights: tuple = param(
+        (0.0324, 0.0), unit="(1/rad^2, s^2/rad^2)", low=0.0,
+        source=("chosen, derived: Q = diag(q_theta, q_omega) of the tendon SDRE on the state [theta - theta_0, omega] "
+                "(14.9). Its closed loop s^2 + sqrt(c (2 p2 + q_omega)) s + sqrt(a^2 + c q_theta), c = 1 / (B^2 R), "
+                "a = r_m alpha / B (control.sdre.tendon_sdre_gains): q_theta = R (B w_f^2)^2 with w_f = "
+                "force_bandwidth (300 rad/s), B = 2e-3 kg m^2 (Table 14.1's B_theta, the hand's motor) and R = "
+                "sdre_input_weight gives w_n^4 = w_f^4 + a^2, i.e. w_n = 300.0 rad/s at the op's 20 N "
+                "(a = 165 1/s^2), the bandwidth of the (10.2) law it replaces (the cascade's stiffness cap and the "
+                "joint designs assume it); q_omega = 0 leaves LQR's own damping sqrt(2 (w_n^2 - a)) / (2 w_n) = "
+                "0.707, the (10.10) design's 0.7. Table 14.1's Q = diag(1, 1e-4) (the tendon rig, "
+                "reproductions.ch14_sdre) puts the loop at -100 and -5000 1/s, 3x slower than the force loop the "
+                "joint designs assume; measured on the index (cascaded, 0.2 rad MCP step, 3 kHz): it settles too "
+                "(sampled loop at rest 0.99958 against 0.99949), but its 1000 Nm/rad position gain commands up to "
+                "103 Nm against the 3 Nm motors (these weights: 9 Nm, as the (10.2) law)"),
+        doc="Q = diag(q_theta, q_omega) of the chain's tendon SDRE (tendon_law='sdre')")
+    sdre_input_weight: float = param(1e-6, unit="1/(Nm)^2", low=0.0, low_inclusive=False,
+                                     source="Table 14.1 (R of the tendon SDRE; only Q / R matters)",
+                                     doc="R of the chain's tendon SDRE (tendon_law='sdre')")
+    sdre_update_rate: float = param(200.0, unit="Hz", low=0.0, low_inclusive=False,
+                                    source="section 14.4: 'a rate of about 200 Hz is sufficient' (the gains "
+                                           "re-solved and held between; a continuous chain holds them at the op)",
+                                    doc="rate at which the chain's tendon SDRE re-solves its gains")
     link_acceleration_feedforward: bool = param(
         False, unit="-",
         source=("chosen: False. The exact 15.5 design feeds the tendon force change phi' P qdd of its link model's "
@@ -234,6 +266,12 @@ class HandChainParams(Parameters):
                 "3 kHz through the estimator: spectral radius 1.26). Without it the sampled loop is stable on every "
                 "finger and the hand with guide friction (tests/test_hand_control.py); True gives the exact design "
                 "(poles equal to the designed error system on the ideal plant)"))
+
+    def _validate(self) -> None:
+        super()._validate()
+        if len(self.sdre_weights) != 2 or self.sdre_weights[0] <= 0.0:
+            raise ValueError(f"HandChainParams.sdre_weights = {self.sdre_weights!r} must be (q_theta > 0, "
+                             f"q_omega >= 0): the tendon SDRE's Q = diag(q_theta, q_omega)")
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, SdreJointPar
 from awiwi_drake.plotting import figure_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig, tendon_rig
 
-__all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment"]
+__all__ = ["SdreRun", "tendon_sdre_experiment", "joint_sdre_experiment", "hand_tendon_sdre_gains"]
 
 
 @dataclass
@@ -101,3 +101,24 @@ def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: 
     return SdreRun(("fixed gains" if fixed else "SDRE") + f", load {external_torque:g} Nm", "joint_angle", "rad",
                    log.t, log["joint_angle"][:, 0], log["joint_angle_reference"][:, 0], log["controller_gain"],
                    log["motor_torque"][:, 0], rig.torque_limit)
+
+
+def hand_tendon_sdre_gains(forces: Sequence[float] = (2.0, 5.0, 20.0, 40.0, 80.0, 150.0), *, finger: str = "index",
+                           chain=None) -> dict:
+    """Section 14.4's finding on the hand: the chain's tendon SDRE gains (``tendon_law="sdre"``,
+    :class:`~awiwi_drake.control.sdre.TendonSdreLaw`) of one tendon of ``finger`` (its spring law and motor) at the
+    measured ``forces`` [N]: ``{"force", "alpha" [N/rad], "k_theta" [Nm/rad], "k_omega" [Nm s/rad]}``.  The thesis:
+    "for the tendon control problem, the method only marginally contributes ... because the optimal gains do not
+    change significantly"."""
+    from awiwi_drake.components.spring import tendon_spring
+    from awiwi_drake.parameters.hand import FingerRigParams
+    from awiwi_drake.parameters.hand_control import HandChainParams
+    from awiwi_drake.control.sdre import TendonSdreLaw
+    c = chain or HandChainParams()
+    p = FingerRigParams.for_finger(finger)
+    fmap = ForceMap.from_spring(tendon_spring(p.spring), p.motor.pulley_radius)
+    f = np.asarray(forces, dtype=float)
+    law = TendonSdreLaw([fmap] * f.size, p.motor, q_diag=c.sdre_weights, r=c.sdre_input_weight, design_forces=f,
+                        update_period=1.0 / c.sdre_update_rate)
+    k = law.initial_gain
+    return {"force": f, "alpha": law.slopes(f), "k_theta": k[:f.size], "k_omega": k[f.size:]}

@@ -18,13 +18,15 @@ def _labels(items) -> list[str]:
     return [str(i) for i in range(items)] if isinstance(items, int) else [str(s) for s in items]
 
 
-def state_names(*, joints=0, motors=0, hysteresis: bool = False, guide_friction: bool = False) -> tuple[str, ...]:
+def state_names(*, joints=0, motors=0, hysteresis: bool = False, guide_friction: bool = False,
+                joint_friction: bool = False) -> tuple[str, ...]:
     """The one state-naming scheme of every rig, finger and the hand (diagram state order).
 
     ``joint_angle[j]``, ``joint_velocity[j]`` (the MultibodyPlant's ``[q, v]``), then
     ``motor_angle[i]``, ``motor_velocity[i]`` (the drive's ``[theta, omega]``, output shaft), then
     ``hysteresis_force[i]`` when the springs carry a hysteresis state, then
-    ``guide_friction_force[i]`` when the tendon paths carry a guide friction state. ``joints`` and ``motors``
+    ``guide_friction_force[i]`` when the tendon paths carry a guide friction state, then
+    ``joint_friction_torque[j]`` when the joints carry a stick-slip friction state. ``joints`` and ``motors``
     are counts (labels ``0, 1, ...``) or sequences of labels (joint names such as ``q21``,
     tendon names).
     """
@@ -32,7 +34,8 @@ def state_names(*, joints=0, motors=0, hysteresis: bool = False, guide_friction:
     return tuple([f"joint_angle[{a}]" for a in j] + [f"joint_velocity[{a}]" for a in j]
                  + [f"motor_angle[{a}]" for a in m] + [f"motor_velocity[{a}]" for a in m]
                  + ([f"hysteresis_force[{a}]" for a in m] if hysteresis else [])
-                 + ([f"guide_friction_force[{a}]" for a in m] if guide_friction else []))
+                 + ([f"guide_friction_force[{a}]" for a in m] if guide_friction else [])
+                 + ([f"joint_friction_torque[{a}]" for a in j] if joint_friction else []))
 
 
 @dataclass(frozen=True)

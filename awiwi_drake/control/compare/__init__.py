@@ -16,7 +16,7 @@ from awiwi_drake.control.compare.metrics import (COLUMNS, NUMERIC, UNITS, Metric
 from awiwi_drake.control.compare.channels import JointChannels, joint_channels
 from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_metric, plot_runs
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
-from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compare, compare_controllers, factory_options,
+from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, build_loops, compare, compare_controllers, factory_options,
                                                         compare_test_params, design_step_duration,
                                                         design_time_constant,
                                                         dominant_time_constant, flag_run,
@@ -24,7 +24,7 @@ from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, compa
                                                         short_test_params, stopped_row)
 
 __all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable", "Comparison", "COLUMNS", "NUMERIC",
-           "UNITS", "settle", "run_test", "flag_run", "stopped_row", "run_standard_tests", "compare", "compare_controllers",
+           "UNITS", "settle", "run_test", "flag_run", "stopped_row", "run_standard_tests", "compare", "build_loops", "compare_controllers",
            "factory_options",
            "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
            "response_bandwidth", "linear_bandwidth",

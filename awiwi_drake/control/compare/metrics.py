@@ -38,7 +38,9 @@ class Metrics:
     bandwidth_source: str = ""           # "linearization" (continuous loops) or "chirp" (log-spaced estimate)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
-    estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad]
+    estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad];
+    #                                      with ideal sensors the estimator's beside the loop (not fed back); NaN:
+    #                                      no estimator (a controller that reads no joint angle, e.g. joint-pd)
     dead_band: float = math.nan          # friction dead band of the DoF, closed form of the controller's rest
     #                                      equations (design["dead_band"]; the 15.5 finger backstepping) [rad]
     failed_at: float = math.nan          # s, test time at which the simulation stopped (status a failure cause)

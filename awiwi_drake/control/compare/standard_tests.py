@@ -38,7 +38,7 @@ from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
-           "run_standard_tests", "compare", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
+           "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
            "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load_held"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
@@ -533,34 +533,64 @@ def factory_options(names: Sequence[str], rig: Any, options: Mapping[str, Any] |
     return options
 
 
-def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
-                         params: CompareTestParams | None = None,
-                         controller_options: Mapping[str, Any] | None = None) -> float | None:
+def build_loops(make_rig: Callable[[], Any], names: Sequence[str], controller_options: Mapping[str, Any] | None = None,
+                **loop_options: Any) -> dict[str, ClosedLoop]:
+    """The compared closed loops ``{name: loop}``, each registered controller built ONCE on a fresh rig from
+    ``make_rig()`` (a hand design costs ~0.5-1.6 s): what :func:`design_step_duration` / :func:`short_test_params`
+    read the designs' time constants from and :func:`compare` runs.  ``loop_options`` (``rate_hz``, ``delay``,
+    ``saturation``, ``sensors``) override the registry's defaults for :func:`awiwi_drake.control.base.closed_loop`;
+    ``controller_options`` go to every controller's factory (:func:`factory_options`).  Names are validated (unknown /
+    not fitting the rig / not taking an option: ValueError) before anything is built."""
+    names = list(names)
+    if not names:
+        raise ValueError("compare: give at least one controller name")
+    probe = make_rig()
+    entries = [get_entry(n, probe) for n in names]
+    extra = factory_options(names, probe, controller_options)
+    loops = {}
+    for n, entry in zip(names, entries):
+        rig = make_rig()
+        loops[n] = closed_loop(rig, make_controller(n, rig, **extra), **{**entry.loop_options, **loop_options})
+    return loops
+
+
+def _loops(loops: Any) -> Mapping[str, ClosedLoop]:
+    if not isinstance(loops, Mapping) or not all(isinstance(v, ClosedLoop) for v in loops.values()) or not loops:
+        raise ValueError(f"give the compared loops {{name: ClosedLoop}} (build_loops), not {type(loops).__name__}")
+    return loops
+
+
+def design_step_duration(make_rig: Callable[[], Any], loops: Mapping[str, ClosedLoop],
+                         params: CompareTestParams | None = None) -> float | None:
     """The step window [s] the compared loops' own designs need: ``step_delay + step_time_constants x`` the slowest
-    tracking time constant of the registered controllers ``names`` on ``make_rig()``
+    tracking time constant of the loops ``{name: loop}`` (:func:`build_loops`)
     (:class:`~awiwi_drake.parameters.cli.CompareShortMode`) that have one; when some loop has none (unstable, or
     nothing known) at least the chosen ``params.step_duration`` (so adding such a loop to a run never shortens the
     others' window); None when no loop has one.  ``compare --short`` steps for it (at least ``min_step_duration``), the full tests
     for at least it (``awiwi-drake compare`` without ``--short``), so that a loop that performs as designed settles:
     on fingers and the hand the chain's designs count the (9.2) observer on the guides' presliding stiffness
     (:meth:`~awiwi_drake.control.joint_design.JointDesign.loop`: ~0.6 s on the index DIP, 3.15 s against the chosen
-    0.3 s).  ``controller_options``: as :func:`compare_controllers`.
+    0.3 s).
 
-    The time constant is :func:`dominant_time_constant`: single-joint rigs as continuous loops (Drake
-    ``Linearize``); fingers and the hand as their registered sampled loops, whose controllers report their
-    design's (:func:`design_time_constant`; the Dahl hysteresis states of their plant would put zero
-    eigenvalues in a linearisation)."""
+    The time constant: fingers and the hand from the compared loops themselves, whose controllers report their
+    design's (:func:`design_time_constant`; the Dahl hysteresis states of their plant would put zero eigenvalues in a
+    linearisation), so no controller is designed twice; single-joint rigs :func:`dominant_time_constant` of the
+    continuous twin of each loop (the registered controller on a fresh ``make_rig()`` without rate
+    and delay, for Drake ``Linearize``; a 1-DoF design costs milliseconds)."""
     from awiwi_drake.parameters.cli import CompareShortMode
 
-    probe = make_rig()
+    loops = _loops(loops)
+    probe = next(iter(loops.values())).rig
     p = params or compare_test_params(probe)
-    finger = rig_kind(probe) in ("finger", "hand")
-    taus, extra = [], factory_options(names, probe, controller_options)
-    for n in names:
-        entry = get_entry(n, probe)
+    taus = []
+    for n, loop in loops.items():
+        if rig_kind(probe) in ("finger", "hand"):
+            taus.append(design_time_constant(loop))
+            continue
         rig = make_rig()
-        opts = entry.loop_options if finger else {**entry.loop_options, "rate_hz": None, "delay": None}
-        taus.append(dominant_time_constant(closed_loop(rig, make_controller(n, rig, **extra), **opts), p))
+        twin = closed_loop(rig, make_controller(n, rig), **{**get_entry(n, rig).loop_options, "rate_hz": None,
+                                                            "delay": None})
+        taus.append(dominant_time_constant(twin, p))
     known = [t for t in taus if t is not None]
     if not known:
         return None
@@ -569,20 +599,19 @@ def design_step_duration(make_rig: Callable[[], Any], names: Sequence[str],
     return window if len(known) == len(taus) else max(window, p.step_duration)
 
 
-def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
-                      params: CompareTestParams | None = None,
-                      controller_options: Mapping[str, Any] | None = None) -> CompareTestParams:
-    """The standard tests shortened (``compare --short``, ``AWIWI_SHORT=1``) so that the compared loops still
-    settle (:class:`~awiwi_drake.parameters.cli.CompareShortMode`): the step window is
-    :func:`design_step_duration`, at least ``min_step_duration`` and not capped at the full one (the full window is
-    kept when a loop has no known time constant); shorter sweep, settling and sine (fingers/hand: two periods at
-    >= 4 Hz).  ``controller_options``: as :func:`compare_controllers`."""
+def short_test_params(make_rig: Callable[[], Any], loops: Mapping[str, ClosedLoop],
+                      params: CompareTestParams | None = None) -> CompareTestParams:
+    """The standard tests shortened (``compare --short``, ``AWIWI_SHORT=1``) for the loops ``{name: loop}``
+    (:func:`build_loops`) so that they still settle (:class:`~awiwi_drake.parameters.cli.CompareShortMode`): the
+    step window is :func:`design_step_duration`, at least ``min_step_duration`` and not capped at the full one (the
+    full window is kept when a loop has no known time constant); shorter sweep, settling and sine (fingers/hand: two
+    periods at >= 4 Hz)."""
     from awiwi_drake.parameters.cli import CompareShortMode
 
-    probe = make_rig()
+    probe = next(iter(_loops(loops).values())).rig
     p = params or compare_test_params(probe)
     sm = CompareShortMode()
-    window = design_step_duration(make_rig, list(names), p, controller_options)
+    window = design_step_duration(make_rig, loops, p)
     step = p.step_duration if window is None else max(sm.min_step_duration, window)
     short = p.replace(step_duration=step, sweep_duration=min(p.sweep_duration, sm.sweep_duration),
                       settle_time=min(p.settle_time, sm.settle_time), sine_periods=sm.sine_periods)
@@ -592,27 +621,12 @@ def short_test_params(make_rig: Callable[[], Any], names: Sequence[str],
 def compare_controllers(make_rig: Callable[[], Any], names: Sequence[str], *, tests: Sequence[str] | None = None,
                         params: CompareTestParams | None = None, progress: Callable[[str], Any] | None = None,
                         controller_options: Mapping[str, Any] | None = None, **loop_options: Any) -> Comparison:
-    """Build each registered controller on a fresh rig from ``make_rig()`` and :func:`compare` them.
-
-    ``loop_options`` (``rate_hz``, ``delay``, ``saturation``, ``sensors``) override the
-    registry's defaults for :func:`awiwi_drake.control.base.closed_loop`.  ``controller_options`` go to every
-    controller's factory (:func:`factory_options`: ``chain_params``, a
-    :class:`~awiwi_drake.parameters.hand_control.HandChainParams`, e.g. ``distribution_method="algorithm2"``;
-    ``stiffness_correction``, ch. 8).  Names are validated (unknown / not fitting the rig / not taking an option:
-    ValueError) before any simulation.
-    """
-    names = list(names)
-    if not names:
-        raise ValueError("compare_controllers: give at least one controller name")
-    probe = make_rig()
-    entries = [get_entry(n, probe) for n in names]
-    extra = factory_options(names, probe, controller_options)
-    loops = {}
-    for n, entry in zip(names, entries):
-        rig = make_rig()
-        opts = {**entry.loop_options, **loop_options}
-        loops[n] = closed_loop(rig, make_controller(n, rig, **extra), **opts)
-    return compare(loops, tests=tests, params=params or compare_test_params(probe), progress=progress)
+    """:func:`build_loops` then :func:`compare` (the standard tests of ``make_rig()``'s kind unless ``params``).
+    A derived window (:func:`short_test_params`, :func:`design_step_duration`) reads the same built loops:
+    ``loops = build_loops(...)``, ``compare(loops, params=short_test_params(make_rig, loops))``."""
+    loops = build_loops(make_rig, names, controller_options, **loop_options)
+    rig = next(iter(loops.values())).rig
+    return compare(loops, tests=tests, params=params or compare_test_params(rig), progress=progress)
 
 
 # plotting (data in, (fig, ax) out)
