@@ -250,7 +250,9 @@ def test_torque_constant_error_is_not_named_ripple():
     (``test_torque_constant_error_is_exactly_a_recalibration``); over the 0.8 rad of motor angle a 2 s
     dataset covers, a low-order ripple fits its spring-force part too and screens first.  The ripple is not
     named: the recalibration passes every test and the ripple's correction adds nothing significant on top
-    of it (below ``min_z``, where a real ripple adds tens of null std, next test); a calibration leads."""
+    of it (below ``min_z``, where a real ripple adds tens of null std, next test).  The recalibration leads
+    their class: a calibration step ``drive_gain``, "not separable" from the ripple, with the experiment that
+    would separate them; its fitted force gain and spring scale are the error's."""
     ds = make_truth_dataset("joint", [], snr_db=30, seed=9002, gen=TruthGeneratorParams(duration=2.0),
                             unknown=["torque_constant"])
     run = _first_step(ds)
@@ -259,9 +261,17 @@ def test_torque_constant_error_is_not_named_ripple():
     assert rc["ripple_on_top_z"] < DiscrepancySettings().min_z
     ripple = [c for c in run.history[0]["fits"] if c["effect"] == "motor_ripple"]
     assert ripple and ripple[0]["rejected"] == "" and ripple[0]["relative_gain"] > 0.5   # it passed every test
-    assert [s.kind for s in run.steps] == ["nuisance"]
+    step = run.steps[0]
+    assert (step.effect, step.kind, step.status, step.members) == \
+        ("drive_gain", "nuisance", "not separable", ["drive_gain", "motor_ripple"])
+    assert "commanded torque" in step.experiment and run.st.ratio < 1.5        # explained: not "unexplained"
+    # and it is the torque-constant error: force gain e and spring scale 1/(1 + e) - 1 (the derivation above),
+    # within three standard errors of the fit
+    e, p, se = ds.meta["truth"]["torque_constant"], step.parameters, step.uncertainties
+    assert abs(p["force_gain"] - e) < 3 * se["force_gain"]
+    assert abs(p["spring_scale_rel"] - (1 / (1 + e) - 1)) < 3 * se["spring_scale_rel"]
     assert any(c.effect == "motor_ripple" and c.rejected.startswith("not separable from a recalibration of the drive")
-               for c in run.steps[0].candidates)
+               for c in step.candidates)
 
 
 def test_low_order_ripple_that_adds_to_the_recalibration_is_named():

@@ -15,7 +15,10 @@ A candidate is accepted only if all of these hold:
   by ``1 + e``: :data:`DRIVE_GAIN_RECALIBRATION`).  When that recalibration passes every test and the
   ripple's correction, added on top of it, removes nothing significant on held-out windows, the two are
   not separable with these data and the simpler explanation, the calibration, leads: the ripple is not
-  named (the step goes to the next candidate; the suggested experiment is in the rejection);
+  named, and the recalibration is added as one calibration step ``drive_gain`` ("not separable" from
+  ``motor_ripple``, with the experiment that would separate them) unless another candidate explains more.
+  Likewise when a calibration candidate of the same step explains as much as such a ripple, even one that
+  fails a test itself (then the step decides among the other candidates);
 * **material**: the fitted effect is larger than what the sensor noise can show
   (:func:`materiality`: a delay of at least one sample; a hysteresis half-width,
   guide friction, force-sensor error above the noise-equivalent force; a friction
@@ -208,13 +211,15 @@ the model with every mass, damping and the spring force scaled by ``1 / (1 + e)`
 
 def recalibration_effect(rig: str, accepted=()) -> Effect:
     """The :data:`DRIVE_GAIN_RECALIBRATION` parameters that exist on ``rig`` and are not already free in the
-    ``accepted`` effects, as one candidate fitted jointly: the simpler model a low-order ripple must add to.
-    Not a catalog entry: it is compared, never named."""
+    ``accepted`` effects, as one calibration candidate ``drive_gain`` fitted jointly: the simpler model a
+    low-order ripple must add to.  Not a catalog entry: it is fitted only against such a ripple, and added
+    as a calibration when it leads their class (``workflow``)."""
     taken = {a for e in accepted for a in e.amplitude_for(rig)}
     have = {a for e in EFFECTS.values() if e.kind == "nuisance" and rig in e.rigs for a in e.amplitude_for(rig)}
     amps = tuple(a for a in DRIVE_GAIN_RECALIBRATION if a in have and a not in taken)
-    return Effect("recalibration", "nuisance", amps, {}, (rig,),
-                  "a gain error of the motor drive (masses, dampings, spring and force gain at once)")
+    return Effect("drive_gain", "nuisance", amps, {}, (rig,),
+                  "a gain error of the motor drive (torque constant): masses, dampings, spring and force gain "
+                  "recalibrated at once")
 
 
 def ripple_adds_to_recalibration(rp_before: np.ndarray, rp_ripple: np.ndarray, rp_recal: np.ndarray,
@@ -264,7 +269,7 @@ SEPARATING_EXPERIMENTS = {
     frozenset(("force_sensor", "nominal_spring")):
         "load the tendon with known weights: a force-sensor gain error scales the reading, a "
         "stiffness error the elongation at a given force",
-    frozenset(("motor_ripple", "recalibration")):
+    frozenset(("motor_ripple", "drive_gain")):
         "move the motor over at least two periods of the ripple's order at constant speed, and hold it at a "
         "few fixed angles while stepping the commanded torque: a ripple repeats with the motor angle, a "
         "drive-gain error scales with the commanded torque",
