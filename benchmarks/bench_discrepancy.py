@@ -61,8 +61,8 @@ every row on what it has.  Writes ``discrepancy_benchmark.json`` and ``.md`` int
 ``--out`` (default ``$AWIWI_OUT`` or ``out/bench_discrepancy``).
 
 Generated datasets are cached (``--cache``, default ``OUT/datasets``; ``--no-cache`` to skip) as one npz
-per case, keyed by the case and a hash of the truth generators' code (docstrings and comments do not count)
-and the drake/numpy/scipy versions
+per case, keyed by the case and a hash of its truth generator's code (the rigs' or the finger's, with the modules
+each uses; docstrings and comments do not count) and the drake/numpy/scipy versions
 (:func:`generator_fingerprint`): a re-run after a change of the workflow skips generating (about two
 thirds of a full run's CPU), a change of the generators regenerates.
 """
@@ -316,14 +316,20 @@ def _imported_modules(module) -> list:
     return [d for d in deps if isinstance(d, str) and (d == "awiwi_drake" or d.startswith("awiwi_drake."))]
 
 
-def generator_files() -> list:
-    """Source files of the truth generators (:data:`GENERATORS`) and of every package module they use,
+def generator_of(rig: str) -> str:
+    """The truth generator (one of :data:`GENERATORS`) of a rig's datasets: ``finger-*`` the finger's, else the
+    rigs'."""
+    return GENERATORS[1] if rig.startswith("finger") else GENERATORS[0]
+
+
+def generator_files(generators: tuple = GENERATORS) -> list:
+    """Source files of the truth generators ``generators`` and of every package module they use,
     transitively (:func:`_imported_modules`): a change in any of them changes what they generate.
     Conservative: a module is hashed whole (e.g. ``parameters/discrepancy.py`` also holds the workflow's
     settings), never a workflow module (``workflow``, ``fit``, ``screen``, ``decide``, ...) the generators do
     not use."""
     import importlib
-    seen, todo = {}, list(GENERATORS)
+    seen, todo = {}, list(generators)
     while todo:
         name = todo.pop()
         if name in seen:
@@ -354,17 +360,17 @@ def code_text(source: str) -> str:
 _CODE_TEXT: dict = {}   # source bytes -> code_text (parsing the ~40 generator modules takes ~0.6 s)
 
 
-def generator_fingerprint(files=None) -> str:
-    """SHA-256 over the code the generators execute (:func:`generator_files`, by path relative to the package,
-    each as :func:`code_text`: docstrings and comments do not count) and the versions of the libraries that
-    integrate and draw them (drake, numpy, scipy)."""
+def generator_fingerprint(files=None, generators: tuple = GENERATORS) -> str:
+    """SHA-256 over the code the generators ``generators`` execute (:func:`generator_files`, by path relative to
+    the package, each as :func:`code_text`: docstrings and comments do not count) and the versions of the
+    libraries that integrate and draw them (drake, numpy, scipy)."""
     import hashlib
     from importlib.metadata import version
     h = hashlib.sha256()
     for lib in ("drake", "numpy", "scipy"):
         h.update(f"{lib}={version(lib)};".encode())
     root = pathlib.Path(__file__).resolve().parent.parent
-    for f in files if files is not None else generator_files():
+    for f in files if files is not None else generator_files(generators):
         f = pathlib.Path(f).resolve()
         h.update(str(f.relative_to(root) if f.is_relative_to(root) else f.name).encode() + b"\0")
         src = f.read_bytes()
@@ -409,18 +415,22 @@ def load_dataset_npz(path):
                    head["initial_state"], meta)
 
 
-_FINGERPRINT: dict = {}   # this process's generator fingerprint (the sources do not change under a run)
+_FINGERPRINT: dict = {}   # this process's fingerprint per generator (the sources do not change under a run)
 
 
 def cached_dataset(case, generate, cache, fingerprint: str | None = None):
     """``generate()`` for ``case``, or its copy from ``cache`` (a folder; None: no cache) keyed by the case
-    (rig, hidden effects, SNR, seed, strength, transform or unknown effect, duration) and
-    :func:`generator_fingerprint`.  Returns ``(dataset, hit)``."""
+    (rig, hidden effects, SNR, seed, strength, transform or unknown effect, duration) and the
+    :func:`generator_fingerprint` of the rig's own generator (:func:`generator_of`: an edit of the hand's modules
+    does not regenerate the joint and tendon rigs' datasets).  Returns ``(dataset, hit)``."""
     if cache is None:
         return generate(), False
     import hashlib
     row, rig, hidden, snr, seed, strength, transform, duration = case
-    fp = fingerprint or _FINGERPRINT.setdefault("fp", generator_fingerprint())
+    gen = generator_of(rig)
+    if fingerprint is None and gen not in _FINGERPRINT:
+        _FINGERPRINT[gen] = generator_fingerprint(generators=(gen,))
+    fp = fingerprint or _FINGERPRINT[gen]
     key = hashlib.sha256(json.dumps([rig, list(hidden), snr, seed, strength, transform, duration, fp]).encode())
     path = pathlib.Path(cache) / f"{rig}_s{seed}_{key.hexdigest()[:20]}.npz"
     if path.exists():

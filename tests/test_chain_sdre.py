@@ -72,21 +72,29 @@ def test_bank_gain_at_the_operating_point_equals_the_tendon_rigs_sdre():
 def test_the_gain_follows_the_state_through_the_springs_slope():
     """Two tendons of a bank at two forces on the spring curve (5 N and 80 N, table rows: no interpolation) get the
     LQR gains of the rig's linearisations there (Drake autodiff of the frictionless tendon rig at the motor angle
-    holding each force); the two differ (the spring's slope differs 3.6x), by far more than the agreement."""
+    holding each force); the two differ (the spring's slope differs 3.6x), by far more than the agreement.  The
+    chain's derived weights give each closed loop the (10.2) law's bandwidth and LQR's own damping."""
     rig = tendon_rig(params=TendonRigParams(motor=MotorParams(friction=False, ripple=False, damping=0.0)))
     fmap = force_map(rig)
     rows = [int(np.searchsorted(fmap.force, f)) for f in (5.0, 80.0)]
     forces = fmap.force[rows]
     assert fmap.alpha[rows[1]] > 3 * fmap.alpha[rows[0]]
     motor, hc = rig.params.motor, HandChainParams()
-    law = TendonSdreLaw([fmap, fmap], motor, q_diag=hc.sdre_weights, r=hc.sdre_input_weight, design_forces=forces,
+    q = hc.tendon_sdre_weights(motor.inertia)
+    law = TendonSdreLaw([fmap, fmap], motor, q_diag=q, r=hc.sdre_input_weight, design_forces=forces,
                         update_period=1.0 / hc.sdre_update_rate)
     k = law.gains(forces).reshape(2, 2).T                             # rows: tendons, columns: K_theta, K_omega
     jac = RigJacobian(rig)
     for i, row in enumerate(rows):
         A, B = jac(np.array([fmap.theta[row], 0.0]), np.array([motor.pulley_radius * forces[i]]))
-        K, _ = LinearQuadraticRegulator(A, B, np.diag(hc.sdre_weights), np.array([[hc.sdre_input_weight]]))
+        K, _ = LinearQuadraticRegulator(A, B, np.diag(q), np.array([[hc.sdre_input_weight]]))
         np.testing.assert_allclose(k[i], K[0], rtol=1e-9)
+        # the derived weights give the (10.2) loop's bandwidth w_f: w_n^4 = w_f^4 + a^2, so 0 <= w_n / w_f - 1 <=
+        # a^2 / (4 w_f^4) (a = -A[1, 0], the spring's share), and LQR's damping with q_omega = 0
+        wf, a = hc.force_bandwidth, -A[1, 0]
+        wn = np.sqrt(abs(np.prod(np.linalg.eigvals(A - B @ K))))
+        assert 0.0 <= wn / wf - 1.0 <= a * a / (4 * wf ** 4) + 1e-12
+        assert -np.trace(A - B @ K) / (2 * wn) == pytest.approx(np.sqrt(2 * (wn * wn - a)) / (2 * wn), rel=1e-9)
     assert np.all(np.abs(k[1] - k[0]) > 1e-4 * np.abs(k[0]))          # 1e5 x the agreement's 1e-9
 
 
@@ -101,7 +109,7 @@ def test_tendon_sdre_system_converts_holds_and_refreshes_its_gain_and_names_a_ba
     m = 8
     maps = [two[i % 2] for i in range(m)]
     hc = HandChainParams()
-    law = TendonSdreLaw(maps, p.motor, q_diag=hc.sdre_weights, r=hc.sdre_input_weight,
+    law = TendonSdreLaw(maps, p.motor, q_diag=hc.tendon_sdre_weights(p.motor.inertia), r=hc.sdre_input_weight,
                         design_forces=np.full(m, 20.0), update_period=1.0 / hc.sdre_update_rate,
                         ripple_scale=1.0, path_velocity=True)
     sys_ = TendonSdreController(law)

@@ -656,6 +656,9 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     assert any(f.endswith("discrepancy/defaults.py") for f in files)         # imported inside a function
     assert not any(f.endswith(("discrepancy/workflow.py", "discrepancy/fit.py", "discrepancy/screen.py"))
                    for f in files)                                             # the workflow is not the generator
+    rig_files = [f.as_posix() for f in bench.generator_files((bench.generator_of("joint"),))]
+    assert any(f.endswith("hand/plant.py") for f in files) and not any(f.endswith("hand/plant.py") for f in rig_files)
+    assert bench.generator_of("finger-index") == "awiwi_drake.discrepancy.finger_truth"   # the hand is the finger's
     case = ("single_full", "joint", ["delay"], 30, 1001, 1.0, None, 0.2)
     gen = lambda: make_truth_dataset("joint", ["delay"], snr_db=30, seed=1001,  # noqa: E731
                                      gen=TruthGeneratorParams(duration=0.2))
@@ -676,7 +679,7 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     assert not bench.cached_dataset(case[:4] + (1002,) + case[5:], gen, tmp_path)[1]
     src = tmp_path / "generator_part.py"
     src.write_text("K = 1\n")
-    monkeypatch.setattr(bench, "generator_files", lambda: [*files, src])
+    monkeypatch.setattr(bench, "generator_files", lambda *generators: [*files, src])
     monkeypatch.setattr(bench, "_FINGERPRINT", {})
     assert not bench.cached_dataset(case, gen, tmp_path)[1]
     monkeypatch.setattr(bench, "_FINGERPRINT", {})

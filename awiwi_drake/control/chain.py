@@ -82,22 +82,22 @@ def guide_friction_levels(rig: Any) -> tuple[np.ndarray, np.ndarray]:
     return gm.levels() if gm is not None else (np.zeros(m), np.zeros(m))
 
 
-def guide_presliding_stiffness(rig: Any, point: dict) -> np.ndarray:
+def guide_presliding_stiffness(rig: Any, point: dict, *, full: bool = False) -> np.ndarray:
     """``K_g`` per independent DoF [Nm/rad]: the rig's guide friction linearised at rest, ``sum_i (P S)_ij^2 W_i /
     delta`` at the design ``point``'s tendon forces (:func:`chain_design_point`).  Each guide's Dahl rate (4.1)
     (:func:`~awiwi_drake.components.friction.guide_friction_rate`) at zero friction force and zero sliding speed
     has the slope ``W / delta`` in the speed (``W`` the sliding level
     :func:`~awiwi_drake.components.friction.guide_friction_level` at direction 0, ``delta`` the presliding length):
     a spring on each tendon path, and through ``h = P q`` the spring ``(P S)^T diag(W / delta) (P S)`` on the joints
-    (its diagonal here).  Zeros when the rig's guides have no friction."""
+    (its diagonal; ``full``: the k x k matrix).  Zeros when the rig's guides have no friction."""
     PS = np.asarray(point["coupling_matrix"], dtype=float)
     drive = getattr(rig, "drive", None)
     gm = None if drive is None else drive.model.guide_friction
     if gm is None:
-        return np.zeros(PS.shape[1])
+        return np.zeros((PS.shape[1],) * (2 if full else 1))
     C, exponent = gm.levels()
     W = guide_friction_level(np.asarray(point["tendon_force"], dtype=float), C, exponent, 0.0)
-    return (PS ** 2).T @ (W / gm.presliding_length)
+    return PS.T @ (PS * (W / gm.presliding_length)[:, None]) if full else (PS ** 2).T @ (W / gm.presliding_length)
 
 
 @TemplateSystem.define("TendonPathVelocity_")
@@ -260,7 +260,7 @@ class TendonForceStage(Diagram):
         elif tendon_law == "sdre":                   # ch. 14, one bank; gains held over 1 / sdre_update_rate
             from awiwi_drake.control.sdre import TendonSdreLaw
             maps = {id(law_): ForceMap.from_spring(law_, r_m) for law_, _ in springs.groups}
-            law = TendonSdreLaw([maps[id(law_)] for law_ in springs], drive_params.motor, q_diag=p.sdre_weights,
+            law = TendonSdreLaw([maps[id(law_)] for law_ in springs], drive_params.motor, q_diag=p.tendon_sdre_weights(drive_params.motor.inertia),
                                 r=p.sdre_input_weight, design_forces=point["tendon_force"],
                                 update_period=None if method == "sharing" else 1.0 / p.sdre_update_rate,
                                 friction_scale=p.force_friction_scale,

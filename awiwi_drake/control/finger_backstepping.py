@@ -161,7 +161,7 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
 from awiwi_drake._math import clip, positive_part
 from awiwi_drake.components.friction import joint_friction_bound
-from awiwi_drake.control.chain import guide_friction_levels, rig_springs
+from awiwi_drake.control.chain import guide_friction_levels, guide_presliding_stiffness, rig_springs
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
@@ -332,16 +332,38 @@ class FingerBacksteppingLaw(StaticLaw):
         tau_f = PS.T @ (z + g)
         if external_torque is not None:
             tau_f = tau_f - self.S.T @ np.asarray(external_torque, dtype=float)
-        W = self._sharing(np.asarray(self.coupling.P(self.q_op), dtype=float))
-        acc = np.zeros_like(tau_f) if self.link_torque_estimate else self._Minv @ tau_f
-        a1 = -self.Kd @ acc
-        a2 = -(self.Kp - self.Kd @ self._Minv @ self.Bq) @ acc
-        z3 = (W @ a2 + (self.K3 + self.K4) * (W @ a1) + PS @ acc - self._motor_gain * z) / (1.0 + self.K3 * self.K4)
+        phantom = 0.0 if self.link_torque_estimate else self._phantom_map() @ tau_f
+        z3 = phantom - self._motor_gain * z / (1.0 + self.K3 * self.K4)
         comp = 0.0
         if self.friction_compensation:
             B = self.friction_bound(self.f_op) if bound is None else np.asarray(bound, dtype=float)
             comp = np.clip(tau_f, -B, B)
         return np.linalg.solve(self.Kp, self.tau_op - tau_f + comp - PS.T @ z3)
+
+    def _phantom_map(self) -> np.ndarray:
+        """``Z`` (m x k): the force error ``z3 = Z tau`` at rest of a link-side torque ``tau`` the law's link model
+        lacks, through its phantom acceleration ``M_d^-1 tau`` (:meth:`rest_error`); ``G = (P S)^T Z``."""
+        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        W = self._sharing(np.asarray(self.coupling.P(self.q_op), dtype=float))
+        a1, a2 = -self.Kd, -(self.Kp - self.Kd @ self._Minv @ self.Bq)
+        return (W @ a2 + (self.K3 + self.K4)[:, None] * (W @ a1) + PS) @ self._Minv / (1.0 + self.K3 * self.K4)[:, None]
+
+    def observer_rest_modes(self, gain: float, guide_stiffness: np.ndarray) -> np.ndarray:
+        """The rest modes [1/s] (k) of the (9.2) observer (gain ``L``) on a link held by the guides' presliding
+        stiffness ``K_g`` (k x k, :func:`~awiwi_drake.control.chain.guide_presliding_stiffness` ``full=True``),
+        quasi-static (the joint and force steps at rest).  The frictions' torque ``tau_f = K_g e`` is what the
+        sensors see; the observer's estimate ``delta`` of it obeys ``delta' = L (tau_f - delta)`` and, with the
+        friction compensation, joins the request; the law's model sees the phantom ``tau_f - delta`` (``G``,
+        :meth:`_phantom_map`), so at rest (:meth:`rest_error`) ``Kp e = -tau_f + c delta - G (tau_f - delta)`` (``c`` 1
+        with the compensation, else 0) and ``delta' = L (K_g (Kp + (I + G) K_g)^-1 (c I + G) - I) delta``.  One DoF:
+        ``-L Kp / (Kp + (1 + G) K_g)``; where the phantom amplifies the guides' hold (``1 + G`` up to 13.5 on the
+        index) this is the loop's slowest mode (index -1.0 1/s at L = 100; tests/test_hand_control.py)."""
+        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        G = PS.T @ self._phantom_map()
+        k = G.shape[0]
+        Kg = np.asarray(guide_stiffness, dtype=float)
+        c = np.eye(k) if self.friction_compensation else np.zeros((k, k))
+        return np.linalg.eigvals(gain * (Kg @ np.linalg.solve(self.Kp + (np.eye(k) + G) @ Kg, c + G) - np.eye(k)))
 
     def _rest_maps(self):
         """``(T, Ez, w)``: the rest error's map ``e = e0 - Kp^-1 T tau_f + Ez z`` (:meth:`rest_error`, no load) from
@@ -555,6 +577,13 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
         law.name = f"finger_backstepping_{variant.replace('-', '_')}"
     if observer is None:
         return StaticLawController(law)
+    # the design's slowest mode counts the observer's rest mode on the guides' presliding (the chain's designs do
+    # the same, JointDesign.loop): compare's derived step window
+    PS = np.asarray(rig.coupling.P(law.q_op), dtype=float) @ law.S
+    Kg = guide_presliding_stiffness(rig, dict(coupling_matrix=PS, tendon_force=law.f_op), full=True)
+    rest = law.observer_rest_modes(observer.gain, Kg)
+    law.design["observer_rest_modes"] = rest
+    law.design["time_constant"] = max(law.design["time_constant"], float(1.0 / np.min(-rest.real)))
     return ObservedBacksteppingController(rig, law, observer)
 
 

@@ -101,7 +101,7 @@ from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
-           "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles",
+           "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
            "sampled_loop_poles", "observe_design"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
@@ -691,45 +691,170 @@ def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, p
 
 
 @dataclass
+class PoleMatch:
+    """One designed pole of a DoF and the whole loop's pole it becomes (:meth:`PoleCheck.matches`), in 1/s.
+
+    ``loop``: followed continuously along ``D + s E``, ``s`` from 0 (the designs) to 1 (the whole loop), so the
+    matching is one to one; ``radius``: the certified bound ``|loop - centre| <= radius`` of the isolated
+    Gershgorin disc around ``centre = design + (V^-1 E V)_ii`` (the first-order coupling), ``inf`` where the
+    neglected coupling is too large for any disc of it to be isolated (then the pole is *not found*: the
+    per-joint design does not predict it); ``inertia`` / ``stiffness``: where the pole goes with only the mass
+    matrix's coupling / only the shared tendons' stiffness turned on (the cause of the move)."""
+
+    dof: str
+    design: complex
+    loop: complex
+    centre: complex
+    radius: float
+    inertia: complex
+    tendons: complex
+
+    @property
+    def found(self) -> bool:
+        return bool(np.isfinite(self.radius))
+
+    @property
+    def move(self) -> float:
+        """``|loop - design| / |design|``."""
+        return float(abs(self.loop - self.design) / abs(self.design))
+
+    @property
+    def cause(self) -> str:
+        """The neglected coupling that alone moves the pole more: ``"inertia"`` or ``"tendons"``."""
+        return "inertia" if abs(self.inertia - self.design) >= abs(self.tendons - self.design) else "tendons"
+
+
+def _follow_poles(D: np.ndarray, E: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """The eigenvalues of ``D + E`` that ``lam`` (those of ``D``) become along ``D + s E``, ``s`` 0 -> 1: each step
+    pairs the eigenvalues one to one (least total distance) and is halved until no pole moves more than a quarter of
+    its distance to the nearest other pole (so no two can swap; equal poles, e.g. the ``pd`` designs' one placed pair
+    on every DoF, are interchangeable, and which of them a DoF keeps is arbitrary)."""
+    from scipy.optimize import linear_sum_assignment
+    cur, s, ds = np.asarray(lam, dtype=complex), 0.0, 1.0 / 16
+    while s < 1.0:
+        step = min(ds, 1.0 - s)
+        new = np.linalg.eigvals(D + (s + step) * E)
+        row, col = linear_sum_assignment(np.abs(cur[:, None] - new[None, :]))
+        moved = new[col[np.argsort(row)]]
+        dist = np.abs(cur[:, None] - cur[None, :])
+        gap = np.where(dist > 1e-9 * np.abs(cur).max(), dist, np.inf).min(axis=1)   # equal poles: interchangeable
+        if np.any(np.abs(moved - cur) > 0.25 * gap) and step > 1e-9:
+            ds = step / 2
+            continue
+        cur, s, ds = moved, s + step, min(2 * step, 1.0 / 16)
+    return cur
+
+
+def _isolated_radius(F: np.ndarray, i: int) -> float:
+    """Radius of the smallest Gershgorin disc of ``F`` (``Lambda + V^-1 E V``) around ``F_ii`` isolated from the other
+    discs by a diagonal similarity (row ``i``'s off-diagonal scaled by ``t``, column ``i`` by ``1/t``): isolated,
+    it holds exactly one eigenvalue (Gershgorin); ``inf`` when no ``t`` isolates it."""
+    c = np.diag(F)                                          # the centres: F is Lambda + V^-1 E V
+    off = np.abs(F) - np.diag(np.abs(c))
+    R = off[i].sum()
+    if R == 0.0:
+        return 0.0 if np.all(off[:, i] == 0.0) else np.inf
+    lo, hi = 0.0, np.inf
+    for l in range(F.shape[0]):
+        if l == i:
+            continue
+        g = abs(c[i] - c[l]) - (off[l].sum() - off[l, i])  # room left between the centres
+        a = off[l, i]
+        if g <= 0.0 or g * g < 4.0 * R * a:                # t R + a / t <= g has no t > 0
+            return np.inf
+        root = np.sqrt(g * g - 4.0 * R * a)
+        lo, hi = max(lo, (g - root) / (2.0 * R)), min(hi, (g + root) / (2.0 * R))
+    return float(lo * R) if lo <= hi else np.inf
+
+
+@dataclass
 class PoleCheck:
     """The per-DoF designs against the whole loop's linearisation (:func:`check_design_poles`).
 
     ``poles``: eigenvalues of the whole continuous loop (Drake ``Linearize``); ``z_poles``: those of its
-    restriction ``A_z = T A T^+`` to the DoF coordinates ``z`` (a subset of ``poles`` when
-    ``invariance_residual`` ~ 0); ``design``: the per-DoF closed loops ``F_j - G_j K_j`` (block
-    diagonal ``D``).  ``A_z = D + E`` with ``E`` the coupling the per-joint models neglect (the mass
-    matrix, tendons shared by joints, the joints' inertia seen through ``M^-1``).  In the design's
-    eigenvector basis ``V^-1 A_z V = Lambda + V^-1 E V``; by Gershgorin's theorem every z pole lies in a
-    disc around ``lambda_i + (V^-1 E V)_ii`` of radius ``sum_{l != i} |(V^-1 E V)_il|`` (:meth:`discs`):
-    the tolerance that the neglected coupling allows, zero for a decoupled joint.
-    """
+    restriction ``A_z = T A T^+`` to the DoF coordinates ``z = [q_j, qdot_j, tau_j, tau_dot_j]`` (a subset of
+    ``poles`` when ``invariance_residual`` ~ 0); ``design``: the per-DoF closed loops ``F_j - G_j K_j`` (block
+    diagonal ``D``, in these coordinates also for the stages on the motors' rate ``sigma``).  ``A_z = D + E``
+    with ``E`` the coupling the per-joint models neglect, written in closed form from the physics
+    (``inertia_coupling + tendon_coupling``; :attr:`coupling_residual` is how far Drake's ``E`` is from it):
+    a DoF's model has the link ``qdd_j = (tau_j - b_j qdot_j) / M_jj`` and its own tendons' stiffness
+    ``K_jj`` (5.12) in the torque loop ``tau_dd_j = ... - K_jj qdd_j``, the whole finger ``qdd = M^-1 (tau - B
+    qdot)`` (the inertia matrix, ``E_M``; ``inertia_ratio`` ``(M^-1)_jj M_jj`` says how much lighter a DoF is in the
+    finger than its model) and ``- sum_l K_jl qdd_l`` (the tendons shared by joints, ``E_K``; with ``sigma`` also the
+    stage's ``sigma_j = tau_dot_j + sum_l K_jl qdot_l``; on the thumb base also the lever arms' change with the pose,
+    ``J = d tau / d q`` at constant forces, through the force loop and in the measured ``tau_dot``).  :meth:`matches` pairs each designed
+    pole with the loop pole it becomes and certifies the pair where the coupling allows (:class:`PoleMatch`)."""
 
     poles: np.ndarray
     z_poles: np.ndarray
     design: np.ndarray                # D (4k x 4k)
-    coupling: np.ndarray              # E (4k x 4k)
+    coupling: np.ndarray              # E = A_z - D (4k x 4k)
     invariance_residual: float
     dof_names: list
+    inertia_coupling: np.ndarray      # E_M
+    tendon_coupling: np.ndarray       # E_K (with the thumb base's lever arms)
+    inertia_ratio: np.ndarray         # (M^-1)_jj M_jj per DoF: 1 for a DoF the others' inertia does not reach
 
     @property
     def design_poles(self) -> np.ndarray:
         return np.linalg.eigvals(self.design)
 
-    def discs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(design poles, disc centres, radii)`` of the Gershgorin discs (class docstring)."""
+    @property
+    def coupling_residual(self) -> float:
+        """``|E - E_M - E_K| / |A_z|`` (0: the neglected coupling is exactly the inertia matrix and the shared
+        tendons' stiffness)."""
+        Az = self.design + self.coupling
+        return float(np.abs(self.coupling - self.inertia_coupling - self.tendon_coupling).max() / np.abs(Az).max())
+
+    def matches(self) -> list[PoleMatch]:
+        """Every designed pole with the loop pole it becomes (:class:`PoleMatch`), ordered by DoF and modulus."""
         lam, V = np.linalg.eig(self.design)
         F = np.linalg.solve(V, self.coupling @ V)
-        return lam, lam + np.diag(F), np.abs(F).sum(axis=1) - np.abs(np.diag(F))
+        G = np.diag(lam) + F
+        loop = _follow_poles(self.design, self.coupling, lam)
+        alone = [_follow_poles(self.design, E, lam) for E in (self.inertia_coupling, self.tendon_coupling)]
+        dof = np.argmax(np.abs(V).reshape(len(self.dof_names), 4, -1).sum(axis=1), axis=0)
+        # a DoF the coupling does not reach (its rows and columns of E vanish to round-off): A_z is block diagonal
+        # there, so its designed poles are poles of A_z to that round-off
+        E, tol = np.abs(self.coupling), 1e-12 * np.abs(self.design + self.coupling).max()
+        free = [max(E[4 * j:4 * j + 4].max(), E[:, 4 * j:4 * j + 4].max()) <= tol for j in range(len(self.dof_names))]
+        # only where z is invariant are the z poles poles of the loop (ring/fifth: the stiff PIP/DIP coupling element
+        # of (5.16) is a plant DoF of its own, outside z): nothing is certified otherwise
+        exact = self.invariance_residual <= 1e-9
+        out = [PoleMatch(self.dof_names[dof[i]], complex(lam[i]), complex(loop[i]), complex(G[i, i]),
+                         np.inf if not exact else 1e-9 * abs(lam[i]) if free[dof[i]] else _isolated_radius(G, i),
+                         complex(alone[0][i]), complex(alone[1][i])) for i in range(lam.size)]
+        return sorted(out, key=lambda m: (self.dof_names.index(m.dof), abs(m.design), m.design.imag))
 
-    def outside_discs(self, rtol: float = 1e-9) -> np.ndarray:
-        """The z poles outside every disc (empty: the coupling bound holds)."""
-        _, c, r = self.discs()
-        return np.array([z for z in self.z_poles
-                         if not np.any(np.abs(z - c) <= r + rtol * max(1.0, abs(z)))])
+    def table(self) -> str:
+        """One row per designed pole: the DoF, the design's pole, the loop's, the certified radius or why it is not
+        found."""
+        rows = [f"{'DoF':>6} {'designed [1/s]':>22} {'loop [1/s]':>22} {'move':>7}  verdict"]
+        if self.invariance_residual > 1e-9:
+            rows.insert(0, f"z is not invariant (residual {self.invariance_residual:.2g}): the z poles are not poles of "
+                           f"the loop, nothing is certified")
+        for m in self.matches():
+            ratio = self.inertia_ratio[self.dof_names.index(m.dof)]
+            verdict = (f"found (within {m.radius:.3g} of the first-order {m.centre.real:.4g}{m.centre.imag:+.4g}j)"
+                       if m.found else f"not found: moved by the {m.cause} coupling ((M^-1)_jj M_jj = {ratio:.3g})")
+            rows.append(f"{m.dof:>6} {m.design.real:10.4g}{m.design.imag:+11.4g}j {m.loop.real:10.4g}"
+                        f"{m.loop.imag:+11.4g}j {m.move:7.2%}  {verdict}")
+        return "\n".join(rows)
 
     @property
     def stable(self) -> bool:
         return bool(np.all(self.poles.real < 0))
+
+
+def _lever_arm_stiffness(rig: Any, S: np.ndarray, op: Any) -> np.ndarray:
+    """``J = d tau / d q`` (k x k) [Nm/rad] at constant tendon forces, ``tau = -(P(q) S)^T f_op``: the lever arms'
+    change with the pose (AutoDiff; zero where the routing's ``P`` is constant, e.g. every finger but the thumb
+    base)."""
+    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, InitializeAutoDiff
+    q = S @ InitializeAutoDiff(np.linalg.pinv(S) @ np.asarray(op.joint_angle, dtype=float)).ravel()
+    tau = -(np.asarray(rig.coupling.P(q)) @ S).T @ np.asarray(op.tendon_force, dtype=float)
+    J = ExtractGradient(np.array([t if isinstance(t, AutoDiffXd) else AutoDiffXd(float(t)) for t in tau]))
+    return J if J.shape == (S.shape[1], S.shape[1]) else np.zeros((S.shape[1], S.shape[1]))   # constant P: none
 
 
 def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainParams | None = None,
@@ -752,16 +877,42 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
     Ct = S.T @ lin.output("joint_torque").C
     k = S.shape[1]
-    K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S      # sigma = tau_dot + K_dof qdot (all DoF)
-    Sg = Ct @ A + (K_dof @ (Cq @ A) if d.law.torque_rate == "motor" else 0.0)
-    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Sg[j]]) for j in range(k)])
+    T = np.vstack([np.stack([Cq[j], Cq[j] @ A, Ct[j], Ct[j] @ A]) for j in range(k)])
     TA = T @ A
     Az = TA @ np.linalg.pinv(T)
     res = float(np.linalg.norm(TA - Az @ T) / np.linalg.norm(TA))
-    D = np.zeros_like(Az)
+    # the neglected coupling in closed form (class docstring): M, B, K of the DoF at the operating point
+    Mi = np.linalg.inv(joint_inertia(rig, op.joint_angle, full=True))
+    b = np.diag(joint_damping(rig))
+    K_dof = S.T @ np.asarray(op.joint_stiffness, dtype=float) @ S
+    J = _lever_arm_stiffness(rig, S, op)
+    w, xi = ctrl._force.gains.natural_frequency, ctrl._force.gains.damping_ratio
+    link = np.zeros((k, 4 * k))                        # qdd = M^-1 (tau - B qdot) on z
+    link[:, 1::4], link[:, 2::4] = -Mi * b[None, :], Mi
+    D, E_M, E_K = np.zeros_like(Az), np.zeros_like(Az), np.zeros_like(Az)
+    motor = d.law.torque_rate == "motor"
     for j, (m, K) in enumerate(zip(d.models, d.gains)):
-        D[4 * j:4 * j + 4, 4 * j:4 * j + 4] = m.A - m.B @ K[None, :4]
-    return PoleCheck(np.linalg.eigvals(A), np.linalg.eigvals(Az), D, Az - D, res, [m.name for m in d.models])
+        Tj = np.eye(4)
+        if motor:                                      # sigma_j = tau_dot_j + K_jj qdot_j in the DoF's design
+            Tj[3, 1] = m.stiffness
+        blk = slice(4 * j, 4 * j + 4)
+        D[blk, blk] = np.linalg.solve(Tj, (m.A - m.B @ K[None, :4]) @ Tj)
+        own = np.zeros(4 * k)                          # the design's qdd_j
+        own[4 * j + 1], own[4 * j + 2] = -b[j] / m.inertia, 1.0 / m.inertia
+        E_M[4 * j + 1] = link[j] - own
+        E_M[4 * j + 3] = -m.stiffness * (link[j] - own)
+        others = np.delete(np.arange(k), j)
+        # the lever arms' torque J q of the force loop's (10.11) stiffness and damping (the sharing's forces are
+        # those of the operating point's P) and J qdd
+        E_K[4 * j + 3] = -K_dof[j, others] @ link[others] + J[j] @ link
+        E_K[4 * j + 3, 0::4] += w ** 2 * J[j]
+        E_K[4 * j + 3, 1::4] += 2.0 * xi * w * J[j]
+        # the stage measures tau_dot without the lever arms' change (J qdot) and sigma with every shared tendon
+        E_K[4 * j + 3, 1::4] += m.B[3, 0] * K[3] * J[j]
+        if motor:
+            E_K[4 * j + 3, 4 * others + 1] -= m.B[3, 0] * K[3] * K_dof[j, others]
+    return PoleCheck(np.linalg.eigvals(A), np.linalg.eigvals(Az), D, Az - D, res, [m.name for m in d.models], E_M, E_K,
+                     np.diag(Mi) * np.array([m.inertia for m in d.models]))
 
 
 @dataclass

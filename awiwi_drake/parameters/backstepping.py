@@ -176,14 +176,18 @@ class PipStudy(Parameters):
                                  source="Fig 15.25 time axis ends at 2.6 s")
     sine_pretension: float = param(15.0, unit="N", low=0.0, low_inclusive=False,
                                    source="Fig 15.25 caption: f_pre = 15 N")
-    friction_smoothing_velocity: float = param(
-        0.05, unit="rad/s", low=0.0, low_inclusive=False,
-        source="chosen: smoothing of the Stribeck friction's sign (LinkFrictionParams) that keeps the "
-               "error-controlled integrator's steps near 0.1 ms at the PIP inertia")
-    max_step: float = param(1e-4, unit="s", low=0.0, low_inclusive=False,
-                            source="chosen: the stick-slip friction is too stiff for a fixed 3 kHz step")
-    accuracy: float = param(1e-6, unit="-", low=0.0, low_inclusive=False,
-                            source="chosen: error-control accuracy of the stick-slip runs")
+    guide_friction: bool = param(
+        False, unit="-",
+        source=("15.5.3: 'a finger with bearings and steel cables' (not the hand's Dyneema tendons in their guides, Fig "
+                "4.10): the finger plant without guide friction (with_physics(guide_friction=False)); its joints' "
+                "stick-slip (JointFrictionParams) on"))
+    plant_substeps: int = param(
+        4, unit="-", low=1, high=100,
+        source=("chosen: the finger plant integrated at 4 x 3 kHz (fixed-step RK3) under the 3 kHz loop, with the "
+                "joints' presliding stiffness scaled by 4^2 (JointFrictionParams.presliding_angle / 16: sigma0 = 4.8 "
+                "Nm/rad). RK3's bound on the plant's fastest mode scales with 1/h^2 (docs/REPRODUCTIONS.md, 'Joint "
+                "stick-slip friction at 3 kHz'); at the hand's own step a stuck joint is held by at most 0.37 Nm/rad, "
+                "softer than the backstepping's designed PIP stiffness (0.46 Nm/rad), so it creeps instead of sticking"))
 
 
 @dataclass(frozen=True)

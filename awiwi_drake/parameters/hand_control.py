@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from awiwi_drake.parameters.base import Parameters, param
+from awiwi_drake.parameters.components import JointFrictionParams
 
 __all__ = ["ForceDistributionParams", "StiffnessCorrectionParams", "FrictionObserverParams", "LinkFrictionParams",
            "HandChainParams", "LinkEstimatorParams"]
@@ -92,11 +93,12 @@ class LinkFrictionParams(Parameters):
     ``tau_f = -(Fc + (Fs - Fc) exp(-(v/vs)^2)) tanh(v/v_eps) - d v``.
     """
 
-    coulomb: float = param(0.01, unit="Nm", low=0.0,
-                           source="chosen: 10-50 % routing friction (ch. 9) of a ~0.05 Nm joint torque")
-    static: float = param(0.015, unit="Nm", low=0.0, source="chosen: breakaway 1.5x Coulomb (stick-slip)")
-    stribeck_velocity: float = param(0.05, unit="rad/s", low=0.0, low_inclusive=False,
-                                     source="chosen: Stribeck drop over 0.05 rad/s")
+    coulomb: float = param(JointFrictionParams.coulomb, unit="Nm", low=0.0,
+                           source="chosen: the finger joints' Coulomb level, JointFrictionParams.coulomb (its reason there)")
+    static: float = param(JointFrictionParams.static, unit="Nm", low=0.0,
+                          source="chosen: the finger joints' breakaway level, JointFrictionParams.static (its reason there)")
+    stribeck_velocity: float = param(JointFrictionParams.stribeck_velocity, unit="rad/s", low=0.0, low_inclusive=False,
+                                     source="chosen: the finger joints' Stribeck velocity, JointFrictionParams.stribeck_velocity")
     smoothing_velocity: float = param(0.01, unit="rad/s", low=0.0, low_inclusive=False,
                                       source="chosen: tanh regularisation of sign(v); slope Fc/v_eps = 1 Nm s/rad "
                                              "keeps the explicit integrator's steps near 0.1 ms at test_joint_inertia")
@@ -236,20 +238,22 @@ class HandChainParams(Parameters):
                 "refuse 'sdre'"),
         doc="the chain's per-tendon force law: (10.2) 'force' or the ch. 14 SDRE 'sdre'")
     sdre_weights: tuple = param(
-        (0.0324, 0.0), unit="(1/rad^2, s^2/rad^2)", low=0.0,
-        source=("chosen, derived: Q = diag(q_theta, q_omega) of the tendon SDRE on the state [theta - theta_0, omega] "
-                "(14.9). Its closed loop s^2 + sqrt(c (2 p2 + q_omega)) s + sqrt(a^2 + c q_theta), c = 1 / (B^2 R), "
-                "a = r_m alpha / B (control.sdre.tendon_sdre_gains): q_theta = R (B w_f^2)^2 with w_f = "
-                "force_bandwidth (300 rad/s), B = 2e-3 kg m^2 (Table 14.1's B_theta, the hand's motor) and R = "
-                "sdre_input_weight gives w_n^4 = w_f^4 + a^2, i.e. w_n = 300.0 rad/s at the op's 20 N "
-                "(a = 165 1/s^2), the bandwidth of the (10.2) law it replaces (the cascade's stiffness cap and the "
-                "joint designs assume it); q_omega = 0 leaves LQR's own damping sqrt(2 (w_n^2 - a)) / (2 w_n) = "
-                "0.707, the (10.10) design's 0.7. Table 14.1's Q = diag(1, 1e-4) (the tendon rig, "
-                "reproductions.ch14_sdre) puts the loop at -100 and -5000 1/s, 3x slower than the force loop the "
-                "joint designs assume; measured on the index (cascaded, 0.2 rad MCP step, 3 kHz): it settles too "
-                "(sampled loop at rest 0.99958 against 0.99949), but its 1000 Nm/rad position gain commands up to "
-                "103 Nm against the 3 Nm motors (these weights: 9 Nm, as the (10.2) law)"),
-        doc="Q = diag(q_theta, q_omega) of the chain's tendon SDRE (tendon_law='sdre')")
+        (), unit="(1/rad^2, s^2/rad^2)", low=0.0,
+        source=("derived when empty (the default, tendon_sdre_weights): Q = diag(q_theta, q_omega) of the tendon SDRE "
+                "on the state [theta - theta_0, omega] (14.9). Its closed loop s^2 + sqrt(c (2 p2 + q_omega)) s + "
+                "sqrt(a^2 + c q_theta), c = 1 / (B^2 R), a = r_m alpha / B (control.sdre.tendon_sdre_gains): "
+                "q_theta = R (B w_f^2)^2 with w_f = force_bandwidth and B the motor inertia gives "
+                "w_n^4 = w_f^4 + a^2, i.e. w_n = 300.0 rad/s at the op's 20 N on the hand (B = 2e-3 kg m^2, Table "
+                "14.1's B_theta; a = 165 1/s^2; q_theta = 0.0324 with R = 1e-6), the bandwidth of the (10.2) law it "
+                "replaces, which the cascade's stiffness cap and the joint designs assume; q_omega = 0 leaves LQR's "
+                "own damping sqrt(2 (w_n^2 - a)) / (2 w_n) = 0.707, the (10.10) design's 0.7. Table 14.1's "
+                "Q = diag(1, 1e-4) (the tendon rig, reproductions.ch14_sdre) puts the loop at -100 and -5000 1/s, "
+                "3x slower than the force loop the joint designs assume; measured on the index (cascaded, 0.2 rad "
+                "MCP step, 3 kHz): it settles too (sampled loop at rest 0.99958 against 0.99949), but its "
+                "1000 Nm/rad position gain commands up to 103 Nm against the 3 Nm motors (the derived weights: "
+                "9 Nm, as the (10.2) law)"),
+        doc="Q = diag(q_theta, q_omega) of the chain's tendon SDRE (tendon_law='sdre'); empty: derived from "
+            "force_bandwidth (tendon_sdre_weights)")
     sdre_input_weight: float = param(1e-6, unit="1/(Nm)^2", low=0.0, low_inclusive=False,
                                      source="Table 14.1 (R of the tendon SDRE; only Q / R matters)",
                                      doc="R of the chain's tendon SDRE (tendon_law='sdre')")
@@ -269,9 +273,16 @@ class HandChainParams(Parameters):
 
     def _validate(self) -> None:
         super()._validate()
-        if len(self.sdre_weights) != 2 or self.sdre_weights[0] <= 0.0:
+        if self.sdre_weights and (len(self.sdre_weights) != 2 or self.sdre_weights[0] <= 0.0):
             raise ValueError(f"HandChainParams.sdre_weights = {self.sdre_weights!r} must be (q_theta > 0, "
-                             f"q_omega >= 0): the tendon SDRE's Q = diag(q_theta, q_omega)")
+                             f"q_omega >= 0): the tendon SDRE's Q = diag(q_theta, q_omega), or empty (derived)")
+
+    def tendon_sdre_weights(self, motor_inertia: float) -> tuple[float, float]:
+        """``(q_theta, q_omega)`` of the chain's tendon SDRE: ``sdre_weights``, or when empty the derived
+        ``(R (B force_bandwidth^2)^2, 0)`` (``B = motor_inertia`` [kg m^2]; ``sdre_weights``' source)."""
+        if self.sdre_weights:
+            return tuple(self.sdre_weights)
+        return (self.sdre_input_weight * (motor_inertia * self.force_bandwidth ** 2) ** 2, 0.0)
 
 
 @dataclass(frozen=True)

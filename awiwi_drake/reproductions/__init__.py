@@ -13,6 +13,7 @@ ch. 3 motor: friction (Fig 3.3), ripple        :mod:`.ch03_motor`
 ch. 5 fingers: Coriolis (Fig 5.7), poles       :mod:`.ch05_fingers`
 ch. 5.5 fifth finger HMC four-bar vs revolute  :mod:`.ch05_fifth_hmc`
 ch. 6 wrist: finger drift under wrist motion   :mod:`.ch06_wrist`
+ch. 5/7/8 stiffness by co-contraction, closed  :mod:`.ch07_cocontraction`
 ch. 8 stiffness correction (Fig 8.3)           :mod:`.ch08_stiffness_correction`
 ch. 9 friction observer (Fig 9.3)              :mod:`.ch09_friction_observer`
 ch. 10 tendon force control (Fig 10.1-10.3)    :mod:`.ch10_tendon_force`

@@ -118,7 +118,7 @@ def hand_tendon_sdre_gains(forces: Sequence[float] = (2.0, 5.0, 20.0, 40.0, 80.0
     p = FingerRigParams.for_finger(finger)
     fmap = ForceMap.from_spring(tendon_spring(p.spring), p.motor.pulley_radius)
     f = np.asarray(forces, dtype=float)
-    law = TendonSdreLaw([fmap] * f.size, p.motor, q_diag=c.sdre_weights, r=c.sdre_input_weight, design_forces=f,
+    law = TendonSdreLaw([fmap] * f.size, p.motor, q_diag=c.tendon_sdre_weights(p.motor.inertia), r=c.sdre_input_weight, design_forces=f,
                         update_period=1.0 / c.sdre_update_rate)
     k = law.initial_gain
     return {"force": f, "alpha": law.slopes(f), "k_theta": k[:f.size], "k_omega": k[f.size:]}
