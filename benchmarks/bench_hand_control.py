@@ -4,14 +4,14 @@ Usage::
 
     PYTHONPATH=. python benchmarks/bench_hand_control.py [--sim-time 0.1]
                                                          [--controllers joint-pd,cascaded,cascaded@sdre,cascaded:no-observer,backstepping]
-                                                         [--physics default,off,on] [--json out.json] [--no-profile]
+                                                         [--physics default,off,on,stick-slip] [--json out.json] [--no-profile]
 
 For each registered hand controller (``joint-pd``: the 3 kHz motor PD; ``cascaded``: joint impedance ->
 force distribution (7.6) -> tendon force PD (10.2) with friction/ripple feed-forward, joint angles from the
 tendon-length estimator; ``cascaded@sdre``: the same chain with the ch. 14 tendon SDRE as the force law
 (``HandChainParams(tendon_law="sdre")``, gains re-solved at 200 Hz); ``backstepping``: 15.5 for the hand at 3 kHz, joint angles estimated) the hand
 (``hand_diagram()``, wrist input at 0; ``--physics``: the plant's thesis effects as configured by default,
-all off, or all on, each row says which) is
+all off, all on, or all on with the joints' stick-slip friction too, each row says which) is
 closed with ``closed_loop`` at the registered rate, every joint reference stepped by 0.05 rad (a fixed input value of
 the context, so no schedule source runs every period), and simulated
 with the default mode of ``analysis.simulate`` (fixed-step RK3 at the control period; with several rates
@@ -204,6 +204,7 @@ PHYSICS = {  # the hand plant's thesis effects, each case stated explicitly (the
     "default": None,
     "off": dict(ripple=False, hysteresis=False, guide_friction=False),
     "on": dict(ripple=True, hysteresis=True, guide_friction=True),
+    "stick-slip": dict(ripple=True, hysteresis=True, guide_friction=True, joint_friction=True),
 }
 
 
@@ -255,7 +256,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-profile", action="store_true", help="skip where the time goes (isolated costs, call counts)")
     ap.add_argument("--physics", default="default",
                     help="comma list of the hand plant's physics: default (HandRigParams()), off (no ripple, "
-                         "hysteresis, guide friction), on (all three)")
+                         "hysteresis, guide friction), on (all three), stick-slip (all three and the joints' "
+                         "stick-slip friction, off by default)")
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
     physics = [p.strip() for p in args.physics.split(",") if p.strip()]

@@ -317,8 +317,9 @@ class JointFrictionParams(Parameters):
     static: float = param(0.015, unit="Nm", low=0.0, high=1.0,
                           source="chosen: breakaway 1.5x the Coulomb level, the drop that makes the joint stick and slip")
     stribeck_velocity: float = param(0.05, unit="rad/s", low=0.0, high=10.0, low_inclusive=False,
-                                     source=("chosen: the level falls from static to Coulomb over 0.05 rad/s, a tenth "
-                                             "of Fig 15.25's slowest tracking speed near its turning points"))
+                                     source=("chosen: the level falls from breakaway to Coulomb over 0.05 rad/s, 2 % of the "
+                                             "2.2 rad/s peak speed of Fig 15.25's sine (20 deg at 1 Hz), so a sliding "
+                                             "joint carries the Coulomb level for most of each stroke"))
     presliding_angle: float = param(
         0.05, unit="rad", low=0.0, high=0.5, low_inclusive=False,
         source=("chosen by the fixed-step stability of the hand's integrator (RK3 at the 3 kHz control period h): at "

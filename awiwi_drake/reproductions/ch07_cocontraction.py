@@ -10,7 +10,8 @@ deflections give the measured stiffness matrix ``K = L D^-1`` (column ``j`` of `
 deflection under the load ``L`` on DoF ``j``).  Which stiffness that is depends on the loop:
 
 * ``joint-pd`` holds the **motor positions** (3 kHz motor PD, ``kp = 100 Nm/rad``): the load
-  stretches the springs, so the finger shows the mechanism's (5.12) at the tendon forces it holds,
+  stretches the springs, so the finger shows the mechanism's (5.12) at the tendon forces it holds (on the ring and
+  fifth with the PIP/DIP coupler (5.16)-(5.17) between the DoF's two plant joints),
   each tendon's spring in series with its motor servo ``kp / r_m^2`` (4e6 N/m: 0.3 %).  The two
   Dahl states of the thesis physics add their presliding stiffness in parallel for a load this
   small (their state moves far less than a presliding length): the spring hysteresis (Fig 4.8b)
@@ -42,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from awiwi_drake.analysis import Samples, simulate
-from awiwi_drake.components.friction import guide_friction_level
+from awiwi_drake.components.friction import guide_friction_rate
 from awiwi_drake.components.spring import hysteresis_rate
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_design import joint_stage_controller
@@ -64,8 +65,8 @@ class StiffnessMeasurement:
 
     Matrices are over the finger's independent DoF (``dof_names``) [Nm/rad].  ``measured = L D^-1``;
     ``mechanical``: (5.12) of the springs at the ``tendon_force`` held before the load;
-    ``predicted``: what the loop should show (module docstring), ``presliding`` the part of it from the
-    hysteresis and guide Dahl states; ``commanded``: the chain's static stiffness per DoF (None for
+    ``predicted``: what the loop should show (module docstring), column ``j`` from the Dahl states held before load
+    ``j`` and the directions it moves them; ``presliding`` the part of it from the hysteresis and guide Dahl states; ``commanded``: the chain's static stiffness per DoF (None for
     ``joint-pd``).  ``linearity``: the largest ``|delta x| / delta`` of a Dahl state over the loads (the
     presliding slope's secant is within ``linearity / 2`` of the tangent)."""
 
@@ -104,23 +105,26 @@ class StiffnessMeasurement:
         return "\n".join(rows)
 
 
-def _presliding(rig, f, PS):
-    """Presliding stiffness of the rig's two Dahl laws at rest (state 0) at the tendon forces ``f``: per
-    tendon the spring hysteresis' ``dz/dx`` (added to each spring's stiffness, (N/m)) and the guides'
-    ``(P S)^T diag(W / delta_g) (P S)`` on the DoF (Nm/rad), from the laws themselves."""
+def _presliding(rig, f, x, P, z, g, s_x, s_h):
+    """Presliding stiffness of the rig's two Dahl laws at their states ``z`` (spring hysteresis) and ``g`` (guides),
+    for a small motion in the directions ``s_x`` of the elongations and ``s_h`` of the tendon paths (+-1 per
+    tendon), at the measured forces ``f`` and elongations ``x``: per tendon the hysteresis' ``dz/dx = (w - s z) /
+    delta_h`` (added to each spring's stiffness, N/m) and the guides' ``P^T diag((W - s g) / delta_g) P`` on the
+    plant's joints (Nm/rad), each the law's own rate at unit speed (:func:`~awiwi_drake.components.spring.
+    hysteresis_rate`, :func:`~awiwi_drake.components.friction.guide_friction_rate`).  A state at its level in the
+    motion's direction gives 0 (it slides), at rest (0) the slope ``w / delta``."""
     model = rig.drive.model
     m = len(f)
     hyst = np.zeros(m)
     if model.has_hysteresis:
-        f_el = np.asarray(f, float)                     # z = 0 at rest: the measured force is the elastic one
-        x = np.asarray(model.laws.inverse_force(f_el), float)
-        hyst = np.asarray(hysteresis_rate(np.zeros(m), x, np.ones(m), f_el, model.hysteresis), float)
-    K_g = np.zeros((PS.shape[1], PS.shape[1]))
+        hyst = np.asarray(hysteresis_rate(z, x, s_x, f - z, model.hysteresis), float) / s_x
+    K_g = np.zeros((P.shape[1], P.shape[1]))
     gm = model.guide_friction
     if gm is not None:
         C, exponent = gm.levels()
-        W = guide_friction_level(np.asarray(f, float), C, exponent, 0.0)
-        K_g = PS.T @ np.diag(W / gm.presliding_length) @ PS
+        slope = np.asarray(guide_friction_rate(g, s_h, f, C, exponent, gm.presliding_length, gm.smoothing_velocity),
+                           float) / s_h
+        K_g = P.T @ np.diag(slope) @ P
     return hyst, K_g
 
 
@@ -149,7 +153,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
                             stiffness_scale: float = 1.0, load: float | None = 0.01, deflection: float | None = None,
                             ramp: float = 0.1,
                             hold: float = 0.2, window: float = 0.1, settle: float | None = None,
-                            params=None) -> StiffnessMeasurement:
+                            params=None, **simulate_options) -> StiffnessMeasurement:
     """Measure the static joint stiffness of ``finger`` closed by ``controller`` (``joint-pd`` or
     ``cascaded:no-observer``, see the module docstring) at 3 kHz: the load ``load`` [Nm] (or, with ``deflection``
     [rad], per DoF that deflection times the loop's own stiffness of the design: the chain's commanded, joint-pd's
@@ -158,14 +162,15 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     angles' mean over the last ``window`` s of each hold (the first load after ``settle`` s, default ``hold``).  Co-contraction: ``pretension`` [N] (the operating point,
     both loops) and, for the chain, ``stiffness_scale`` (the distribution asked for that multiple of the operating
     point's (5.12)).  ``params``: a :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's,
-    thesis physics on)."""
-    from awiwi_drake.hand import finger_diagram
+    thesis physics on); ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
+    :func:`~awiwi_drake.analysis.simulate` (default: fixed-step RK3 at the control period)."""
+    from awiwi_drake.hand import finger_diagram, hand_diagram
 
     if controller not in CONTROLLERS:
         raise ValueError(f"measure_joint_stiffness: controller = {controller!r}; give one of {', '.join(CONTROLLERS)}")
     if not (window < hold):
         raise ValueError(f"measure_joint_stiffness: window = {window!r} s must be shorter than hold = {hold!r} s")
-    rig = finger_diagram(finger=finger, params=params)
+    rig = hand_diagram(wrist=False, params=params) if finger == "hand" else finger_diagram(finger=finger, params=params)
     op = rig.operating_point(pretension=pretension)
     S = dof_selection(rig.coupling)
     n = S.shape[1]
@@ -179,6 +184,8 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
         level = f"pretension {pretension:g} N, stiffness_scale {stiffness_scale:g}"
     if deflection is not None:
         L = deflection * (commanded if commanded is not None else np.diag(S.T @ op.joint_stiffness @ S))
+    elif load is None:
+        raise ValueError("measure_joint_stiffness: give load [Nm] or deflection [rad]")
     else:
         L = np.full(n, float(load))
     if not (np.all(np.isfinite(L)) and np.all(L != 0.0)):
@@ -187,8 +194,8 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     sched, ends = _smooth_staircase(n, L, ramp, hold, hold if settle is None else settle, rig.num_joints, S)
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
     ref_port, est_port = "controller_joint_torque_reference", "joint_angle_estimation_error"
-    res = simulate(loop, ctx, float(ends[-1]), inputs={"external_torque": sched},
-                   log=("joint_angle", "tendon_force", "elongation")
+    res = simulate(loop, ctx, float(ends[-1]), inputs={"external_torque": sched}, **simulate_options,
+                   log=("joint_angle", "tendon_force", "elongation", "state")
                    + tuple(p_ for p_ in (ref_port, est_port) if loop.diagram.HasOutputPort(p_)))
     t, q = res.t, res["joint_angle"] @ np.linalg.pinv(S).T
     win = [(t > e - window) & (t <= e + 1e-12) for e in ends]
@@ -200,19 +207,46 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     k_t = np.asarray(rig.spring_laws.stiffness(x), float)
     q0 = res["joint_angle"][win[0]].mean(axis=0)
     P = np.asarray(rig.coupling.P(q0))
-    PS = P @ S
-    mechanical = S.T @ joint_stiffness(rig.coupling, q0, f, k_t) @ S
-    hyst, K_g = _presliding(rig, f, PS)
-    if controller == "joint-pd":
-        c = JointControllerParams()
-        r_m = rig.params.motor.pulley_radius
-        def series(k):          # each tendon's spring (and hysteresis) in series with its motor servo kp / r_m^2
-            return S.T @ joint_stiffness(rig.coupling, q0, f, 1.0 / (1.0 / k + r_m ** 2 / c.kp)) @ S
-        predicted = series(k_t + hyst) + K_g
-        presliding = predicted - series(k_t)
-    else:
-        presliding = K_g
-        predicted = np.diag(commanded) + K_g
+    # the ring's and fifth's PIP/DIP coupler (5.16)-(5.17), a stiff spring between the two plant joints of one DoF
+    K_c = np.zeros((rig.num_joints, rig.num_joints)) if rig.coupling_gain is None else \
+        np.asarray(rig.coupling_gain, float)[:, :rig.num_joints]
+    S_pinv = np.linalg.pinv(S)
+
+    def on_dof(K_joints):       # the DoF stiffness the staircase measures: loads S L, deflections S^+ q
+        return np.linalg.inv(S_pinv @ np.linalg.solve(K_joints, S))
+    mechanical = on_dof(joint_stiffness(rig.coupling, q0, f, k_t) + K_c)
+    # the Dahl states (mean per window) and each load's direction of motion, per tendon
+    model, m = rig.drive.model, len(f)
+    k0 = 2 * rig.num_joints + 2 * m
+    zs = res["state"][:, k0:k0 + m] if model.has_hysteresis else np.zeros((len(t), m))
+    gs = res["state"][:, k0 + m * model.has_hysteresis:][:, :m] if model.guide_friction is not None \
+        else np.zeros((len(t), m))
+
+    def mean(a):
+        return np.array([a[w].mean(axis=0) for w in win])
+    fw, xw, zw, gw = mean(res["tendon_force"]), mean(res["elongation"]), mean(zs), mean(gs)
+    hw = mean(res["joint_angle"] @ P.T)
+    c = JointControllerParams()
+    r_m = rig.params.motor.pulley_radius
+
+    def series(k, fj):          # each tendon's spring (and hysteresis) in series with its motor servo kp / r_m^2
+        return joint_stiffness(rig.coupling, q0, fj, 1.0 / (1.0 / k + r_m ** 2 / c.kp)) + K_c
+    D_pred, D_plain = np.zeros((n, n)), np.zeros((n, n))
+    for j in range(n):          # column j from the states before load j and the directions it moves them
+        s_x = np.where(xw[j + 1] >= xw[j], 1.0, -1.0)
+        s_h = np.where(hw[j + 1] >= hw[j], 1.0, -1.0)
+        kt_j = np.asarray(rig.spring_laws.stiffness(xw[j]), float)
+        hyst, K_g = _presliding(rig, fw[j], xw[j], P, zw[j], gw[j], s_x, s_h)
+        if controller == "joint-pd":
+            K_j, K_0 = series(kt_j + hyst, fw[j]) + K_g, series(kt_j, fw[j])
+            D_pred[:, j] = S_pinv @ np.linalg.solve(K_j, S[:, j] * L[j])
+            D_plain[:, j] = S_pinv @ np.linalg.solve(K_0, S[:, j] * L[j])
+        else:                   # the chain: its law on the DoF, the guides in parallel
+            K_law = S_pinv.T @ np.diag(commanded) @ S_pinv
+            D_pred[:, j] = S_pinv @ np.linalg.lstsq(K_law + K_g, S[:, j] * L[j], rcond=None)[0]
+            D_plain[:, j] = S_pinv @ np.linalg.lstsq(K_law, S[:, j] * L[j], rcond=None)[0]
+    predicted = np.diag(L) @ np.linalg.inv(D_pred)
+    presliding = predicted - np.diag(L) @ np.linalg.inv(D_plain)
     # how far the Dahl states moved: the elongations' and the tendon paths' largest change over the run
     dx = np.ptp(res["elongation"], axis=0)
     dh = np.ptp(res["joint_angle"] @ P.T, axis=0)
@@ -228,7 +262,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     # not deliver of the joint law's request
     torque_error = np.zeros((len(ends), n))
     if ref_port in res:
-        e_tau = -res["tendon_force"] @ PS - res[ref_port]
+        e_tau = -res["tendon_force"] @ (P @ S) - res[ref_port]
         torque_error = np.array([e_tau[w].mean(axis=0) for w in win])
     # the tendon-length estimator's (5.15) mean error per window (the chain acts on the estimate, not on q)
     estimation_error = np.zeros((len(ends), n))
