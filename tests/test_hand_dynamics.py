@@ -57,8 +57,12 @@ def _multibody_reference(rig, x, u, tau_ext, off):
     lambda: finger_diagram(finger="ring", params=FingerRigParams.for_finger("ring").with_physics(**ON)),
 ], ids=["hand", "ring-physics-on"])
 def test_compiled_plant_equals_multibody_plant_and_the_laws_at_random_states(build):
+    """The compiled kernels (forced: a float system takes the generic path for its first
+    ``COMPILE_AFTER_CALLS`` evaluations, then the kernels) = the MultibodyPlant + drive laws; then the generic
+    float path of a fresh system = the kernels at the same states."""
     rig = build()
     n, m = rig.num_joints, rig.num_tendons
+    _dynamics(rig).kernels()
     ctx = rig.diagram.CreateDefaultContext()
     wrist = rig.diagram.HasInputPort("wrist_angle")
     for _ in range(4):
@@ -83,6 +87,18 @@ def test_compiled_plant_equals_multibody_plant_and_the_laws_at_random_states(bui
         np.testing.assert_allclose(rig.diagram.GetOutputPort("joint_torque").Eval(ctx),
                                    laws["generalized_force"][:n], rtol=1e-12, atol=1e-14)
         np.testing.assert_array_equal(rig.diagram.GetOutputPort("state").Eval(ctx), x)
+        fresh = build()                                   # a fresh system: its first calls take the generic path
+        fctx = fresh.diagram.CreateDefaultContext()
+        fctx.SetTimeStateAndParametersFrom(ctx)
+        for i in range(rig.diagram.num_input_ports()):
+            if rig.diagram.get_input_port(i).HasValue(ctx):
+                fresh.diagram.get_input_port(i).FixValue(fctx, rig.diagram.get_input_port(i).Eval(ctx))
+        np.testing.assert_array_less(np.abs(fresh.diagram.EvalTimeDerivatives(fctx).CopyToVector() - got) / scale,
+                                     1e-12)
+        np.testing.assert_allclose(fresh.diagram.GetOutputPort("tendon_force").Eval(fctx),
+                                   rig.diagram.GetOutputPort("tendon_force").Eval(ctx), rtol=1e-12, atol=1e-12)
+        assert _dynamics(fresh)._kernels is None
+    assert _dynamics(rig)._kernels is not None
 
 
 def test_ldl_solve_solves_spd_systems_for_floats_and_autodiff():

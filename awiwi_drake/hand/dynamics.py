@@ -22,7 +22,10 @@ block of ``M`` (the fingers are independent: ``M`` is block diagonal).  For ``fl
 function, :func:`hand_dynamics_terms`, is evaluated once on ``pydrake.symbolic`` variables (the
 plant converted to ``Expression``) and compiled (:mod:`awiwi_drake.components.codegen`); the
 compiled ``dynamics`` kernel calls the generated terms and the same :func:`ldl_solve` (its
-source, compiled by numba).  Tests: the float system equals the MultibodyPlant + drive diagram
+source, compiled by numba).  A float system takes the generic path for its first
+:data:`~awiwi_drake.parameters.hand.COMPILE_AFTER_CALLS` evaluations (an operating point or a linearisation
+never pays the trace and the compile; a simulation switches to the kernels), or from the first call once
+:meth:`HandDynamics_.kernels` has been called.  Tests: the float system equals the MultibodyPlant + drive diagram
 (``MultibodyPlant.CalcTimeDerivatives``, articulated-body algorithm) and its own AutoDiffXd
 conversion at random states to 1e-12.
 
@@ -63,6 +66,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
 from awiwi_drake.components.motor import saturate_torque
+from awiwi_drake.parameters.hand import COMPILE_AFTER_CALLS
 
 __all__ = ["LinkModel", "ldl_solve", "hand_dynamics_terms", "build_hand_kernels", "HandDynamics_",
            "HandDynamics"]
@@ -354,6 +358,7 @@ def HandDynamics_(T):
             self._wrist = model.num_joints == n + m
             self._float = T is float
             self._kernels = None
+            self._generic_calls = 0           # float evaluations by the generic path so far
             self._plant_T = None
             kd = model.num_states + links.num_friction_states
             self._size = 2 * n + kd
@@ -384,11 +389,21 @@ def HandDynamics_(T):
             return self._kernels
 
         def _plant(self):
-            """The links' plant in this system's scalar type and a context of it (non-float paths)."""
+            """The links' plant in this system's scalar type and a context of it (the generic path)."""
             if self._plant_T is None:
-                plant = self.links.plant.ToScalarType[T]()
+                plant = self.links.plant if self._float else self.links.plant.ToScalarType[T]()
                 self._plant_T = (plant, plant.CreateDefaultContext())
             return self._plant_T
+
+        def _compiled(self):
+            """Whether this float evaluation takes the compiled kernels (else the generic path, counted)."""
+            if self._kernels is not None:
+                return True
+            if self._generic_calls < COMPILE_AFTER_CALLS:
+                self._generic_calls += 1
+                return False
+            self.kernels()
+            return True
 
         def _offsets(self, context):
             if self._off is None:
@@ -402,11 +417,12 @@ def HandDynamics_(T):
 
                 def calc_float(context, out):
                     if not bound:
+                        if not self._compiled():
+                            return calc(context, out)
                         bound.extend((self.kernels()[name], self._bufs[name]))
                     fn, buf = bound
                     out.SetFromVector(fn(context.get_continuous_state_vector().CopyToVector(),
                                          self._offsets(context), buf))
-                return calc_float
 
             def calc(context, out):
                 x = context.get_continuous_state_vector().CopyToVector()
@@ -414,14 +430,14 @@ def HandDynamics_(T):
                 key = "generalized_force" if name == "joint_torque" else name
                 res = drive_laws(self.model, xd, None, q_all, v, want=(key,))[key]
                 out.SetFromVector(res[:n] if name == "joint_torque" else res)
-            return calc
+            return calc_float if self._float else calc
 
         def _calc_applied(self, context, out):
             out.SetFromVector(saturate_torque(self._u.Eval(context), self.model.motor))
 
         def DoCalcTimeDerivatives(self, context, derivatives):
-            if self._float:     # the simulation hot path: one compiled call
-                fn = self._kernels["dynamics"] if self._kernels is not None else self.kernels()["dynamics"]
+            if self._float and self._compiled():     # the simulation hot path: one compiled call
+                fn = self._kernels["dynamics"]
                 off = self._off.Eval(context) if self._off is not None else self._empty
                 derivatives.SetFromVector(fn(context.get_continuous_state_vector().CopyToVector(),
                                              self._u.Eval(context), self._ext.Eval(context), off, self._buf))

@@ -46,6 +46,7 @@ __all__ = [
     "FingerParams", "IndexFingerParams", "MiddleFingerParams", "RingFingerParams",
     "FifthFingerParams", "ThumbParams", "HandParams", "FINGERS", "TENDON_SLICES",
     "finger_params", "FINGER_STRUCTURE", "check_finger_structure", "FingerDriveParams", "FingerRigParams", "HandRigParams", "JointControllerParams",
+    "COMPILE_AFTER_CALLS",
 ]
 
 _T51 = "Table 5.1"
@@ -243,6 +244,15 @@ class ThumbParams(Parameters):
 
 
 FINGERS = ("thumb", "index", "middle", "ring", "fifth")
+
+#: Float evaluations of one finger / hand plant system made by the generic path (the plant's own
+#: ``CalcMassMatrix``... and the drive laws, the path ``AutoDiffXd`` takes) before its compiled kernels are built
+#: (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`).  Chosen: an operating point and a linearisation evaluate
+#: the plant in float once (measured on the fifth finger's tests), a simulation thousands of times and its first two
+#: control periods 6-10 times (the benchmarks' warm-up, which must compile); the generic path costs 0.17 / 0.30 ms a
+#: call on the fifth finger / the hand, the kernels a symbolic trace and a numba compile when not cached (the fifth
+#: finger 12 CPU s on an empty cache).
+COMPILE_AFTER_CALLS = 4
 
 # (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
 FINGER_STRUCTURE = {"index": (False, False), "middle": (False, False), "ring": (True, False),
