@@ -81,11 +81,14 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
     the two Dahl rates in closed form, and the joints' stick-slip torque tau_f on the joints with its presliding rate
     ``-(Fs/delta)(v + |v| tau_f / W(v))``, W the Stribeck curve. The ideal plant equals the laws evaluated apart to 1e-9: the standalone
     MultibodyPlant (``rig.plant``) under ``-P(q)^T f(x)``, ``x = r_m theta + h(q) - h(0) + x0``, the motors'
-    (3.5) with load ``r_m f``."""
+    (3.5) with load ``r_m f``.  On the index the plant with every effect runs on its compiled kernels (the thumb on
+    the generic path), so the closed forms check both."""
     p_on = FingerRigParams.for_finger(finger).with_physics(guide_friction=True, joint_friction=True)
     on, off = finger_diagram(finger=finger, params=p_on), finger_diagram(finger=finger,
                                                                           params=p_on.with_physics(**IDEAL, joint_friction=False))
     jp = p_on.joint_friction_params
+    if finger == "index":   # on the compiled kernels (a fresh system's first calls take the generic path), so that
+        on.diagram.GetSubsystemByName("hand_dynamics").kernels()    # their joint-friction terms are checked too
     n, m = on.num_joints, on.num_tendons
     mp, hp, gp = p_on.motor, p_on.spring.hysteresis, p_on
     alpha = tendon_bending_angles(on.coupling, p_on)

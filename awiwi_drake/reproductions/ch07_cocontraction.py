@@ -153,7 +153,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
                             stiffness_scale: float = 1.0, load: float | None = 0.01, deflection: float | None = None,
                             ramp: float = 0.1,
                             hold: float = 0.2, window: float = 0.1, settle: float | None = None,
-                            params=None) -> StiffnessMeasurement:
+                            params=None, **simulate_options) -> StiffnessMeasurement:
     """Measure the static joint stiffness of ``finger`` closed by ``controller`` (``joint-pd`` or
     ``cascaded:no-observer``, see the module docstring) at 3 kHz: the load ``load`` [Nm] (or, with ``deflection``
     [rad], per DoF that deflection times the loop's own stiffness of the design: the chain's commanded, joint-pd's
@@ -162,14 +162,15 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     angles' mean over the last ``window`` s of each hold (the first load after ``settle`` s, default ``hold``).  Co-contraction: ``pretension`` [N] (the operating point,
     both loops) and, for the chain, ``stiffness_scale`` (the distribution asked for that multiple of the operating
     point's (5.12)).  ``params``: a :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's,
-    thesis physics on)."""
-    from awiwi_drake.hand import finger_diagram
+    thesis physics on); ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
+    :func:`~awiwi_drake.analysis.simulate` (default: fixed-step RK3 at the control period)."""
+    from awiwi_drake.hand import finger_diagram, hand_diagram
 
     if controller not in CONTROLLERS:
         raise ValueError(f"measure_joint_stiffness: controller = {controller!r}; give one of {', '.join(CONTROLLERS)}")
     if not (window < hold):
         raise ValueError(f"measure_joint_stiffness: window = {window!r} s must be shorter than hold = {hold!r} s")
-    rig = finger_diagram(finger=finger, params=params)
+    rig = hand_diagram(wrist=False, params=params) if finger == "hand" else finger_diagram(finger=finger, params=params)
     op = rig.operating_point(pretension=pretension)
     S = dof_selection(rig.coupling)
     n = S.shape[1]
@@ -191,7 +192,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     sched, ends = _smooth_staircase(n, L, ramp, hold, hold if settle is None else settle, rig.num_joints, S)
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
     ref_port, est_port = "controller_joint_torque_reference", "joint_angle_estimation_error"
-    res = simulate(loop, ctx, float(ends[-1]), inputs={"external_torque": sched},
+    res = simulate(loop, ctx, float(ends[-1]), inputs={"external_torque": sched}, **simulate_options,
                    log=("joint_angle", "tendon_force", "elongation", "state")
                    + tuple(p_ for p_ in (ref_port, est_port) if loop.diagram.HasOutputPort(p_)))
     t, q = res.t, res["joint_angle"] @ np.linalg.pinv(S).T
