@@ -39,3 +39,11 @@ def test_force_chain_shows_its_impedance_not_the_co_contracted_springs():
     # the commanded from zero and from twice it): abduction, MCP and PIP in this short run; the DIP (0.007 Nm/rad)
     # still rings and its bound is several times its stiffness, so this run says nothing about it
     assert np.all(b[:3] < 0.5 * m.commanded[:3]), (b, m.commanded)
+
+
+def test_bad_options_name_the_option():
+    import pytest
+    with pytest.raises(ValueError, match="controller = 'lqr'; give one of joint-pd, cascaded:no-observer"):
+        measure_joint_stiffness("index", "lqr")
+    with pytest.raises(ValueError, match="window = 0.3 s must be shorter than hold = 0.2 s"):
+        measure_joint_stiffness("index", window=0.3)

@@ -184,6 +184,8 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
         level = f"pretension {pretension:g} N, stiffness_scale {stiffness_scale:g}"
     if deflection is not None:
         L = deflection * (commanded if commanded is not None else np.diag(S.T @ op.joint_stiffness @ S))
+    elif load is None:
+        raise ValueError("measure_joint_stiffness: give load [Nm] or deflection [rad]")
     else:
         L = np.full(n, float(load))
     if not (np.all(np.isfinite(L)) and np.all(L != 0.0)):
