@@ -235,12 +235,13 @@ def test_unexplained_pickup_is_located_at_its_frequency_on_its_signal(tmp_path):
 
 
 def _first_step(ds):
-    """One screen-fit-decide round of the workflow on ``ds``: the run (its steps and history)."""
+    """One screen-fit-decide round of the workflow on ``ds``: the run (its steps and history).  Only the best
+    screened candidate is fitted by simulation (``num_confirm=1``, speed): here the low-order ripple."""
     from awiwi_drake.discrepancy import workflow
     from awiwi_drake.discrepancy.catalog import effects_for_rig
     from awiwi_drake.parameters.discrepancy import CatalogBounds
 
-    run = workflow._Run(ds, DiscrepancySettings(), CatalogBounds(), lambda msg: None)
+    run = workflow._Run(ds, DiscrepancySettings(num_confirm=1), CatalogBounds(), lambda msg: None)
     run.step(effects_for_rig(ds.rig, run.eng.out_names))
     return run
 
