@@ -61,7 +61,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pydrake
 import pydrake.symbolic as sym
-from pydrake.systems.framework import LeafSystem_
+from scipy.sparse.csgraph import connected_components
+from pydrake.systems.framework import InputPortSelection, LeafSystem_, OutputPortSelection
+from pydrake.systems.primitives import Linearize
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
@@ -434,6 +436,24 @@ def HandDynamics_(T):
 
         def _calc_applied(self, context, out):
             out.SetFromVector(saturate_torque(self._u.Eval(context), self.model.motor))
+
+        def integration_modes(self, context) -> np.ndarray:
+            """Eigenvalues [1/s] of this plant's dynamics linearised (Drake's ``Linearize``, AutoDiffXd) at
+            ``context``'s state with its inputs held at their values there: the modes a fixed-step integrator
+            meets between two samples of a loop (:func:`~awiwi_drake.analysis.simulate` calls this hook on any
+            leaf that has it).  The state need not be an equilibrium.  Measured: 0.05 s on the hand (194 states)."""
+            ctx = self.CreateDefaultContext()
+            ctx.SetStateAndParametersFrom(context)
+            for port in (self._u, self._ext, self._off):
+                if port is not None:
+                    port.FixValue(ctx, port.Eval(context))
+            A = Linearize(self, ctx, InputPortSelection.kNoInput, OutputPortSelection.kNoOutput,
+                          equilibrium_check_tolerance=np.inf).A()
+            # the eigenvalues of A are those of its strongly connected blocks (block-triangular after a permutation):
+            # the hand's five fingers apart, 1.5 ms against 13 ms for the whole 194 x 194 (and seconds when
+            # OpenBLAS threads compete on a loaded machine)
+            n, label = connected_components(A != 0, directed=True, connection="strong")
+            return np.concatenate([np.linalg.eigvals(A[np.ix_(label == k, label == k)]) for k in range(n)])
 
         def DoCalcTimeDerivatives(self, context, derivatives):
             if self._float and self._compiled():     # the simulation hot path: one compiled call
