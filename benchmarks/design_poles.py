@@ -65,7 +65,7 @@ def main(argv=None) -> int:
                        poles=[dict(dof=m.dof, design=str(m.design), loop=str(m.loop), found=m.found, radius=m.radius,
                                    cause=m.cause) for m in ms])
             rows.append(row)
-            move = "-" if worst is None else f"{100 * worst.move:.0f} % ({row['cause']})"
+            move = "-" if worst is None or c.invariance_residual > 1e-9 else f"{100 * worst.move:.0f} % ({row['cause']})"
             ratios = ", ".join(f"{k} {v:.2g}" for k, v in row["inertia_ratio"].items())
             found = (f"{row['found']} / {row['designed']} ({', '.join(row['found_dofs']) or 'none'})"
                      if c.invariance_residual <= 1e-9 else "not comparable: z not invariant")

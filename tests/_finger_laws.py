@@ -19,3 +19,11 @@ def ideal_drive_derivatives(rig, q, v, theta, omega, u):
     rig.plant.get_applied_generalized_force_input_port().FixValue(ctx, -np.asarray(rig.coupling.P(q)).T @ f)
     plant_dot = rig.plant.EvalTimeDerivatives(ctx).CopyToVector()
     return np.concatenate([plant_dot, omega, motor_acceleration(theta, omega, u, mp.pulley_radius * f, mp)])
+
+
+def compiled(rig):
+    """``rig`` with its plant on the compiled kernels from the first call (a fresh finger / hand system takes the
+    generic path for its first ``parameters.hand.COMPILE_AFTER_CALLS`` float calls): for the tests that check the
+    kernels against the laws."""
+    rig.diagram.GetSubsystemByName("hand_dynamics").kernels()
+    return rig

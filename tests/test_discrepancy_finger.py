@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from awiwi_drake.discrepancy import diagnose, load_dataset, save_dataset
+from _finger_laws import compiled
 from awiwi_drake.discrepancy.finger import FingerResiduals, _kernel
 from awiwi_drake.discrepancy.finger_truth import make_finger_dataset
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings, FingerTruthParams
@@ -150,7 +151,7 @@ def test_tendon_motors_override_one_motor_law_in_the_finger_diagram():
                           ripple_harmonics=(3.0, 0.01, -0.02))
     p = p0.replace(tendon_motors=(("index_h5", mp),))
     assert from_yaml(FingerRigParams.for_finger("index"), to_yaml(p)) == p
-    rig = finger_diagram(finger="index", params=p)
+    rig = compiled(finger_diagram(finger="index", params=p))
     m, n = rig.num_tendons, rig.num_joints
     op = rig.operating_point(joint_angles=np.full(n, 0.2))
     ctx = rig.context(op)
@@ -501,7 +502,7 @@ def test_tendon_guides_give_one_path_its_own_guide_friction():
     p = nominal_finger_params("index").replace(tendon_guides=(("index_h5", entry),))
     assert from_yaml(FingerRigParams.for_finger("index"), to_yaml(p)) == p
     assert p.with_physics(guide_friction=False).tendon_guides == ()
-    rig = finger_diagram(finger="index", params=p)
+    rig = compiled(finger_diagram(finger="index", params=p))
     n, m = rig.num_joints, rig.num_tendons
     op = rig.operating_point(joint_angles=np.full(n, 0.2))
     ctx = rig.context(op)

@@ -232,3 +232,57 @@ def test_unexplained_pickup_is_located_at_its_frequency_on_its_signal(tmp_path):
     assert f"tendon_force_{p['channel']}" in where["text"] and "(peak " in where["text"]
     md = write_report(dx, tmp_path / "rep", figures=False).read_text()
     assert f"tendon_force_{p['channel']}" in md and "Unexplained discrepancy remains" in md
+
+
+def _first_step(ds):
+    """One screen-fit-decide round of the workflow on ``ds``: the run (its steps and history).  Only the best
+    screened candidate is fitted by simulation (``num_confirm=1``, speed): here the low-order ripple."""
+    from awiwi_drake.discrepancy import workflow
+    from awiwi_drake.discrepancy.catalog import effects_for_rig
+    from awiwi_drake.parameters.discrepancy import CatalogBounds
+
+    run = workflow._Run(ds, DiscrepancySettings(num_confirm=1), CatalogBounds(), lambda msg: None)
+    run.step(effects_for_rig(ds.rig, run.eng.out_names))
+    return run
+
+
+def test_torque_constant_error_is_not_named_ripple():
+    """A torque-constant error ``(1 + e) u`` (outside the catalog) is exactly a recalibration of the drive gain
+    (``test_torque_constant_error_is_exactly_a_recalibration``); over the 0.8 rad of motor angle a 2 s
+    dataset covers, a low-order ripple fits its spring-force part too and screens first.  The ripple is not
+    named: the recalibration passes every test and the ripple's correction adds nothing significant on top
+    of it (below ``min_z``, where a real ripple adds tens of null std, next test).  The recalibration leads
+    their class: a calibration step ``drive_gain``, "not separable" from the ripple, with the experiment that
+    would separate them; its fitted force gain and spring scale are the error's."""
+    ds = make_truth_dataset("joint", [], snr_db=30, seed=9002, gen=TruthGeneratorParams(duration=2.0),
+                            unknown=["torque_constant"])
+    run = _first_step(ds)
+    rc = run.history[0]["recalibration"]
+    assert rc["rejected"] == "" and rc["ripple_periods"] < 2.0
+    assert rc["ripple_on_top_z"] < DiscrepancySettings().min_z
+    ripple = [c for c in run.history[0]["fits"] if c["effect"] == "motor_ripple"]
+    assert ripple and ripple[0]["rejected"] == "" and ripple[0]["relative_gain"] > 0.5   # it passed every test
+    step = run.steps[0]
+    assert (step.effect, step.kind, step.status, step.members) == \
+        ("drive_gain", "nuisance", "not separable", ["drive_gain", "motor_ripple"])
+    assert "commanded torque" in step.experiment and run.st.ratio < 1.5        # explained: not "unexplained"
+    # and it is the torque-constant error: force gain e and spring scale 1/(1 + e) - 1 (the derivation above),
+    # within three standard errors of the fit
+    e, p, se = ds.meta["truth"]["torque_constant"], step.parameters, step.uncertainties
+    assert abs(p["force_gain"] - e) < 3 * se["force_gain"]
+    assert abs(p["spring_scale_rel"] - (1 / (1 + e) - 1)) < 3 * se["spring_scale_rel"]
+    assert any(c.effect == "motor_ripple" and c.rejected.startswith("not separable from a recalibration of the drive")
+               for c in step.candidates)
+
+
+def test_low_order_ripple_that_adds_to_the_recalibration_is_named():
+    """A hidden ripple of orders 1 and 3 (0.24 periods over the motor angle covered: as generic a function of
+    the angle as the torque-constant case above) is still named: the drive-gain recalibration is fitted and
+    compared, and the ripple's correction on top of it removes a significant held-out gain (>= ``min_z``)."""
+    ds = make_truth_dataset("joint", ["motor_ripple"], snr_db=30, seed=1104, strength=0.5,
+                            gen=TruthGeneratorParams(duration=2.0))
+    assert sorted(o for o, _, _ in ds.meta["truth"]["motor_ripple"]["harmonics"][0]) == [1.0, 3.0]
+    run = _first_step(ds)
+    rc = run.history[0]["recalibration"]
+    assert rc["ripple_periods"] < 2.0 and rc["ripple_on_top_z"] >= DiscrepancySettings().min_z
+    assert [(s.effect, s.kind) for s in run.steps] == [("motor_ripple", "physical")]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from awiwi_drake.analysis import linearize
-from _finger_laws import ideal_drive_derivatives
+from _finger_laws import compiled, ideal_drive_derivatives
 from awiwi_drake.components.friction import dahl_rate, guide_friction_force, guide_friction_rate
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.hand.systems import tendon_bending_angles
@@ -87,8 +87,8 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
     on, off = finger_diagram(finger=finger, params=p_on), finger_diagram(finger=finger,
                                                                           params=p_on.with_physics(**IDEAL, joint_friction=False))
     jp = p_on.joint_friction_params
-    if finger == "index":   # on the compiled kernels (a fresh system's first calls take the generic path), so that
-        on.diagram.GetSubsystemByName("hand_dynamics").kernels()    # their joint-friction terms are checked too
+    if finger == "index":   # on the compiled kernels, so that their joint-friction terms are checked too
+        compiled(on)
     n, m = on.num_joints, on.num_tendons
     mp, hp, gp = p_on.motor, p_on.spring.hysteresis, p_on
     alpha = tendon_bending_angles(on.coupling, p_on)
@@ -270,6 +270,33 @@ def test_fixed_step_rk3_at_the_control_period_follows_the_error_controlled_solut
     z = a["state"][:, 2 * n_j + 2 * m:2 * n_j + 3 * m]
     g = a["state"][:, 2 * n_j + 3 * m:]
     assert np.abs(z).max() > 0.1 and np.abs(g).max() > 0.1          # [N]: hysteresis and guide friction act
+
+
+def test_the_memoryless_stribeck_law_needs_a_sign_smoothing_above_the_rk3_bound_at_the_control_period():
+    """Why the plant's joint friction is a presliding state: the memoryless :func:`stribeck_friction` linearises at
+    rest to the damping Fs / v_eps, so fixed-step RK3 at the 3 kHz period on a joint of effective inertia
+    1 / (M^-1)_jj is stable only for v_eps >= h Fs (M^-1)_jj / 2.51 (RK3's real-axis bound): 2.5 rad/s on the index PIP,
+    10.7 on its DIP, above Fig 15.25's peak speed.  10 % below that smoothing a small speed grows under RK3; 10 %
+    above it decays."""
+    from awiwi_drake.components.friction import stribeck_friction
+    jp = FingerRigParams.for_finger("index").joint_friction_params
+    from awiwi_drake.hand.plant import make_finger_plant
+    plant, _ = make_finger_plant("index")
+    M_inv = np.diag(np.linalg.inv(plant.CalcMassMatrix(plant.CreateDefaultContext())))
+    bound = np.max(np.abs(np.roots([1 / 6, 1 / 2, 1, 2])))          # |R(z)| = 1 at z = -2.5127 on the real axis
+    for joint, limit in ((2, 2.53), (3, 10.7)):
+        v_eps = H * jp.static * M_inv[joint] / bound
+        assert v_eps == pytest.approx(limit, rel=0.01)
+        for factor, grows in ((0.9, True), (1.1, False)):
+            def acc(v):
+                return stribeck_friction(v, jp.coulomb, jp.static, jp.stribeck_velocity, factor * v_eps) * M_inv[joint]
+            v = 1e-6
+            for _ in range(200):
+                k1 = acc(v)
+                k2 = acc(v + H / 2 * k1)
+                k3 = acc(v - H * k1 + 2 * H * k2)
+                v += H / 6 * (k1 + 4 * k2 + k3)
+            assert (abs(v) > 1e-3) == grows, (joint, factor, v)
 
 
 @pytest.mark.parametrize("ratio", [0.5, 1.1])

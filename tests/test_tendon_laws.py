@@ -12,7 +12,7 @@ from pydrake.autodiffutils import AutoDiffXd, InitializeAutoDiff, ExtractGradien
 from pydrake.systems.primitives import Linearize
 from scipy.optimize import brentq
 
-from _finger_laws import ideal_drive_derivatives
+from _finger_laws import compiled, ideal_drive_derivatives
 from awiwi_drake.components.spring import TendonSprings, tendon_spring
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.chain import TendonChainController, TendonForceStage, rig_springs
@@ -264,7 +264,7 @@ def test_the_drive_evaluates_each_tendons_law():
     p = base.replace(tendon_springs=(("index_h3", base.spring.replace(tendon=STIFF)),))
     derivs = []
     for params in (p, base):
-        rig = finger_diagram(finger="index", params=params)
+        rig = compiled(finger_diagram(finger="index", params=params))
         op = rig.operating_point(pretension=30.0)
         ctx = rig.context(op)
         x = np.array(op.state, dtype=float)

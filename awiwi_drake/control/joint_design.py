@@ -727,17 +727,21 @@ class PoleMatch:
 def _follow_poles(D: np.ndarray, E: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """The eigenvalues of ``D + E`` that ``lam`` (those of ``D``) become along ``D + s E``, ``s`` 0 -> 1: each step
     pairs the eigenvalues one to one (least total distance) and is halved until no pole moves more than a quarter of
-    its distance to the nearest other pole (so no two can swap; equal poles, e.g. the ``pd`` designs' one placed pair
-    on every DoF, are interchangeable, and which of them a DoF keeps is arbitrary)."""
+    its distance to the nearest other pole (so no two can swap; poles equal to 1e-6 of the largest, e.g. the ``pd``
+    designs' one placed pair on every DoF, are interchangeable, and which of them a DoF keeps is arbitrary)."""
     from scipy.optimize import linear_sum_assignment
-    cur, s, ds = np.asarray(lam, dtype=complex), 0.0, 1.0 / 16
+    cur, s, ds, steps = np.asarray(lam, dtype=complex), 0.0, 1.0 / 16, 0
     while s < 1.0:
+        steps += 1
+        if steps > 20000:
+            raise RuntimeError(f"pole continuation: stuck at s = {s:.6g} after 20000 steps (poles closer than the "
+                               f"steps resolve); the poles there: {np.sort_complex(cur)}")
         step = min(ds, 1.0 - s)
         new = np.linalg.eigvals(D + (s + step) * E)
         row, col = linear_sum_assignment(np.abs(cur[:, None] - new[None, :]))
         moved = new[col[np.argsort(row)]]
         dist = np.abs(cur[:, None] - cur[None, :])
-        gap = np.where(dist > 1e-9 * np.abs(cur).max(), dist, np.inf).min(axis=1)   # equal poles: interchangeable
+        gap = np.where(dist > 1e-6 * np.abs(cur).max(), dist, np.inf).min(axis=1)   # equal poles: interchangeable
         if np.any(np.abs(moved - cur) > 0.25 * gap) and step > 1e-9:
             ds = step / 2
             continue

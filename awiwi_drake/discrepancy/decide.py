@@ -8,6 +8,17 @@ A candidate is accepted only if all of these hold:
   excess and ``min_floor_gain`` of the noise floor;
 * **better than the simpler model** on training data by BIC (``delta_bic < 0``);
 * **identifiable**: no fitted parameter rests on a bound (a bound is not an estimate);
+* **separable from a recalibration** (``motor_ripple`` only, :func:`ripple_adds_to_recalibration`): a
+  ripple whose largest harmonic completes fewer than :data:`RIPPLE_MIN_PERIODS` periods over the motor
+  angle the data cover is a generic smooth function of the angle there, and so is the spring-force part
+  of a drive-gain (torque-constant) error, which is exactly a recalibration (dividing the motor equation
+  by ``1 + e``: :data:`DRIVE_GAIN_RECALIBRATION`).  When that recalibration passes every test and the
+  ripple's correction, added on top of it, removes nothing significant on held-out windows, the two are
+  not separable with these data and the simpler explanation, the calibration, leads: the ripple is not
+  named, and the recalibration is added as one calibration step ``drive_gain`` ("not separable" from
+  ``motor_ripple``, with the experiment that would separate them) unless another candidate explains more.
+  Likewise when a calibration candidate of the same step explains as much as such a ripple, even one that
+  fails a test itself (then the step decides among the other candidates);
 * **material**: the fitted effect is larger than what the sensor noise can show
   (:func:`materiality`: a delay of at least one sample; a hysteresis half-width,
   guide friction, force-sensor error above the noise-equivalent force; a friction
@@ -26,11 +37,13 @@ import numpy as np
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
 from . import laws
-from .catalog import EFFECTS
+from .catalog import EFFECTS, Effect
 from .replay import ReplayEngine
+from .screen import gain_z
 
 __all__ = ["NoiseEquivalent", "noise_equivalent", "materiality", "rejection_reason", "separating_experiment",
-           "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS"]
+           "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS", "RIPPLE_MIN_PERIODS", "ripple_periods",
+           "DRIVE_GAIN_RECALIBRATION", "recalibration_effect", "ripple_adds_to_recalibration"]
 
 
 class NoiseEquivalent:
@@ -173,6 +186,60 @@ def rejection_reason(c, st, settings: DiscrepancySettings) -> str:
     return ""
 
 
+RIPPLE_MIN_PERIODS = 2.0
+"""Periods over the covered motor-angle range below which a ripple order is a generic function of the angle
+(chosen: the same two periods as the residual maps' cycles-per-revolution line, ``localise.locate``, and the
+sparse-regression baseline's library)."""
+
+
+def ripple_periods(params: dict, angle_span: float) -> float:
+    """Periods the fitted ripple's largest harmonic (largest amplitude on either motor) completes over
+    ``angle_span`` [rad] of motor angle: a small high-order harmonic beside a large low-order one does not
+    make the fit periodic."""
+    amp = {k: max(np.hypot(params.get(f"ripple_sin{k}_m{m}", 0.0), params.get(f"ripple_cos{k}_m{m}", 0.0))
+                  for m in (1, 2)) for k in (1, 2)}
+    k = max(amp, key=amp.get)
+    return float(params.get(f"ripple_order_{k}", 0.0) * angle_span / (2 * np.pi))
+
+
+DRIVE_GAIN_RECALIBRATION = ("motor_inertia_rel", "motor_damping_add", "spring_scale_rel", "link_inertia_rel",
+                            "link_damping_add", "force_gain")
+"""The calibration parameters a drive-gain error ``(1 + e) u`` is exactly: divided through by ``1 + e`` it is
+the model with every mass, damping and the spring force scaled by ``1 / (1 + e)`` and a force-sensor gain ``e``
+(tests/test_discrepancy.py::test_torque_constant_error_is_exactly_a_recalibration, 1e-9)."""
+
+
+def recalibration_effect(rig: str, accepted=()) -> Effect:
+    """The :data:`DRIVE_GAIN_RECALIBRATION` parameters that exist on ``rig`` and are not already free in the
+    ``accepted`` effects, as one calibration candidate ``drive_gain`` fitted jointly: the simpler model a
+    low-order ripple must add to.  Not a catalog entry: it is fitted only against such a ripple, and added
+    as a calibration when it leads their class (``workflow``)."""
+    taken = {a for e in accepted for a in e.amplitude_for(rig)}
+    have = {a for e in EFFECTS.values() if e.kind == "nuisance" and rig in e.rigs for a in e.amplitude_for(rig)}
+    amps = tuple(a for a in DRIVE_GAIN_RECALIBRATION if a in have and a not in taken)
+    return Effect("drive_gain", "nuisance", amps, {}, (rig,),
+                  "a gain error of the motor drive (torque constant): masses, dampings, spring and force gain "
+                  "recalibrated at once")
+
+
+def ripple_adds_to_recalibration(rp_before: np.ndarray, rp_ripple: np.ndarray, rp_recal: np.ndarray,
+                                 train: np.ndarray, test: np.ndarray) -> float:
+    """Held-out gain, in null standard deviations (:func:`~awiwi_drake.discrepancy.screen.gain_z`), of the
+    ripple's correction added on top of the recalibrated model.
+
+    ``rp_*`` are the projected window residuals (windows x samples) before the step, with the ripple, and
+    with the recalibration.  The ripple's correction ``d = rp_before - rp_ripple`` is scaled by least squares
+    to the recalibrated residual on the training windows and scored on the held-out windows: a ripple that
+    explains something the recalibration does not passes ``min_z`` again; one that explains the same
+    residual adds nothing (about 0: its correction is then white against what is left)."""
+    d = rp_before - rp_ripple
+    dd = float((d[train] ** 2).sum())
+    if dd <= 0.0:
+        return 0.0
+    alpha = float((rp_recal[train] * d[train]).sum()) / dd
+    return gain_z(rp_recal[test], rp_recal[test] - alpha * d[test])
+
+
 EQUIVALENT_EFFECTS = {frozenset(("motor_friction", "guide_friction"))}
 """Pairs that act as the same torque on one motor (the constant part of guide friction is motor Coulomb
 friction, issue 12): when both pass every test they are one class "not separable", also as a leftover
@@ -202,6 +269,10 @@ SEPARATING_EXPERIMENTS = {
     frozenset(("force_sensor", "nominal_spring")):
         "load the tendon with known weights: a force-sensor gain error scales the reading, a "
         "stiffness error the elongation at a given force",
+    frozenset(("motor_ripple", "drive_gain")):
+        "move the motor over at least two periods of the ripple's order at constant speed, and hold it at a "
+        "few fixed angles while stepping the commanded torque: a ripple repeats with the motor angle, a "
+        "drive-gain error scales with the commanded torque",
     frozenset(("motor_ripple", "motor_friction")):
         "slow constant-speed runs over several motor revolutions in both directions: ripple is "
         "periodic in the motor angle, friction depends on the direction only",

@@ -30,7 +30,7 @@ from awiwi_drake.parameters.backstepping import PipStudy
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ
 from awiwi_drake.plotting import plot_traces
 
-__all__ = ["PipRun", "pip_rig", "pip_experiment", "pip_metrics", "PIP"]
+__all__ = ["PipRun", "pip_rig", "pip_experiment", "pip_metrics", "stuck_intervals", "PIP"]
 
 RATE_HZ = CONTROL_RATE_HZ
 PIP = 2                     # the index PIP, q22, in the finger's joint order
@@ -122,7 +122,7 @@ def stuck_intervals(run: PipRun, speed: float) -> list[tuple[float, float]]:
 def pip_metrics(run: PipRun, study: PipStudy | None = None) -> dict:
     """Step: final error [rad] (mean over the last 0.1 s), rise time 10-90 % [s], overshoot [%]; sine: RMS error after
     the first period [rad]; both: the time the PIP stands (slower than the Stribeck velocity, the friction's static
-    regime) while the reference moves [s] and the longest such interval [s],
+    regime) while the reference moves (the sine) or after the step [s] and the longest such interval [s],
     peak |torque| [Nm],
     minimum tendon force [N]; the PIP's velocity reversals per second (``reversals_per_s``, counted where it turns
     faster than that) beside the reference's own (``reference_reversals_per_s``: 0 for the step, 2 f for the sine):
