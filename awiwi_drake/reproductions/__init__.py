@@ -150,6 +150,63 @@ def _fig6_10(short: bool) -> Reproduction:
         abduction_peak=_v(w.abduction_peak, "m"), abduction_r2=_v(w.abduction_r2, "-")))
 
 
+def _run_series(runs, signal: str = "link angle [rad]") -> dict:
+    """Each :class:`~.ch15_backstepping.BacksteppingRun`'s own time and link angle (grids may differ)."""
+    out = {}
+    for r in runs:
+        out[f"{r.label}: t [s]"], out[f"{r.label}: {signal}"] = r.t, r.q
+    return out
+
+
+def _fig15_7(short: bool) -> Reproduction:
+    import matplotlib.pyplot as plt
+    from awiwi_drake.reproductions.ch15_backstepping import plot_joint_angle, position_gain_study
+    kw = dict(t_final=5.0, values=(1.0, 5.0)) if short else {}
+    runs = {w: position_gain_study(w, **kw) for w in ("k1", "k2")}
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.5))
+    plot_joint_angle(runs["k1"], ax=axes[0], title="K1 (K2 = 1), Fig 15.7")
+    plot_joint_angle(runs["k2"], ax=axes[1], title="K2 (K1 = 5), Fig 15.8")
+    every = runs["k1"] + runs["k2"]
+    return Reproduction(fig, _run_series(every), {r.label: dict(
+        final_angle=_v(float(r.q[-1]), "rad"), overshoot=_v(float(100 * max(0.0, r.q.max() / r.reference[-1] - 1)), "%"))
+        for r in every})
+
+
+def _fig15_27(short: bool) -> Reproduction:
+    from awiwi_drake.reproductions.ch15_backstepping import antagonistic_stiffness_check
+    chk = antagonistic_stiffness_check(np.array([0.01, 0.02, 0.05, 0.1]), deflection=0.3)
+    fig, _ = chk.plot()
+    return Reproduction(fig, {"Kp_imp [Nm/rad]": chk.stiffness, "effective stiffness [Nm/rad]": chk.effective_stiffness,
+                              "torque [Nm]": chk.torque}, dict(deflection=_v(chk.deflection, "rad")))
+
+
+def _fig13_2(short: bool) -> Reproduction:
+    import matplotlib.pyplot as plt
+    from awiwi_drake.reproductions.ch13_lqr import lqr_trajectories
+    runs = lqr_trajectories(t_final=0.1 if short else 0.2)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    series = {}
+    for r, d in runs.items():
+        d.plot(ax=axes)
+        series.update({f"R={r:g}: t [s]": d.t, f"R={r:g}: link q [rad]": d.state[:, 0],
+                       f"R={r:g}: motor theta [rad]": d.state[:, 2], f"R={r:g}: u [Nm]": d.u})
+    return Reproduction(fig, series, {f"R={r:g}": dict(K=_v(np.ravel(d.K).tolist(), "Nm/rad, Nm s/rad (u = -K x)"),
+                                                      peak_u=_v(float(np.max(np.abs(d.u))), "Nm")) for r, d in runs.items()})
+
+
+def _fig12_3(short: bool) -> Reproduction:
+    from awiwi_drake.reproductions.ch12_pole_placement import open_loop_pole_sweep
+    sw = open_loop_pole_sweep(num=15 if short else 40)
+    fig, _ = sw.plot()
+    series = {"k [Nm/rad]": sw.stiffness, "d_q [Nm s/rad]": sw.link_damping}
+    for i in range(sw.poles_vs_stiffness.shape[1]):
+        series.update({f"pole {i} vs k: real [1/s]": sw.poles_vs_stiffness[:, i].real,
+                       f"pole {i} vs k: imag [1/s]": sw.poles_vs_stiffness[:, i].imag,
+                       f"pole {i} vs d_q: real [1/s]": sw.poles_vs_damping[:, i].real,
+                       f"pole {i} vs d_q: imag [1/s]": sw.poles_vs_damping[:, i].imag})
+    return Reproduction(fig, series, {})
+
+
 def _fig9_3(short: bool) -> Reproduction:
     from awiwi_drake.reproductions.ch09_friction_observer import chattering, friction_tracking_run, plot_friction_runs
     runs = [friction_tracking_run(compensate=c, t_final=1.2 if short else 4.0) for c in (False, True)]
@@ -172,24 +229,33 @@ FIGURES: dict[str, FigureEntry] = {e.id: e for e in (
                 _cocontraction),
     FigureEntry("fig9.3", "Fig 9.3", "slow sine on the joint rig with link stick-slip friction, "
                 "with and without the observer's compensation", "ch09_friction_observer", _fig9_3),
+    FigureEntry("fig12.3", "Fig 12.3", "open-loop poles of the flexible joint (Table 12.1) against its stiffness and "
+                "link damping (Drake Linearize)", "ch12_pole_placement", _fig12_3),
+    FigureEntry("fig13.2", "Fig 13.2-13.3", "LQR regulation of the flexible joint (Table 13.1) for R = 1e-4, 1e-2, 1: "
+                "positions and input", "ch13_lqr", _fig13_2),
+    FigureEntry("fig15.7", "Fig 15.7-15.8", "position backstepping 0.8 rad steps on the Table 15.1 joint for several "
+                "K1 and K2", "ch15_backstepping", _fig15_7),
     FigureEntry("fig15.24", "Fig 15.24 (section 15.5.3)", "index PIP 30 deg step at 10 N, backstepping vs cascaded, "
                 "joints' stick-slip on", "ch15_pip_experiments", lambda short: _pip("step", short)),
     FigureEntry("fig15.25", "Fig 15.25 (section 15.5.3)", "index PIP 10-50 deg sine at 15 N, backstepping vs "
                 "cascaded, joints' stick-slip on", "ch15_pip_experiments", lambda short: _pip("sine", short)),
+    FigureEntry("fig15.27", "Fig 15.27", "antagonistic backstepping under an imposed 0.3 rad deflection: joint torque "
+                "against Kp,imp", "ch15_backstepping", _fig15_27),
     FigureEntry("fig15.26", "Fig 15.26 (section 15.5.3)", "gain diagrams of backstepping and two-time-scale on the "
                 "joint rig at 20 N (Drake Linearize), -3 dB bandwidths", "ch15_backstepping", _fig15_26),
 )}
 
 
 def _write_csv(path: pathlib.Path, series: dict) -> None:
-    lengths = {k: np.asarray(v).shape for k, v in series.items()}
-    if len({s for s in lengths.values()}) > 1 or any(len(s) != 1 for s in lengths.values()):
-        raise ValueError(f"{path.name}: series must be 1-D and of one length, got {lengths}")
+    """One column per series (shorter ones end in empty cells: runs on their own time grids)."""
     cols = [np.asarray(v, dtype=float) for v in series.values()]
+    bad = [k for k, c in zip(series, cols) if c.ndim != 1]
+    if bad:
+        raise ValueError(f"{path.name}: series {bad[0]!r} is not 1-D")
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(list(series))
-        w.writerows(zip(*(c.tolist() for c in cols)))
+        w.writerows([repr(float(c[i])) if i < c.size else "" for c in cols] for i in range(max(c.size for c in cols)))
 
 
 def reproduce(ids, out, *, short: bool = False, progress: Callable[[str], None] | None = None) -> dict[str, list]:
