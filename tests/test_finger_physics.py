@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from awiwi_drake.analysis import linearize
-from _finger_laws import ideal_drive_derivatives
+from _finger_laws import compiled, ideal_drive_derivatives
 from awiwi_drake.components.friction import dahl_rate, guide_friction_force, guide_friction_rate
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.hand.systems import tendon_bending_angles
@@ -87,8 +87,8 @@ def test_each_effect_adds_its_closed_form_and_all_off_is_the_ideal_plant(finger)
     on, off = finger_diagram(finger=finger, params=p_on), finger_diagram(finger=finger,
                                                                           params=p_on.with_physics(**IDEAL, joint_friction=False))
     jp = p_on.joint_friction_params
-    if finger == "index":   # on the compiled kernels (a fresh system's first calls take the generic path), so that
-        on.diagram.GetSubsystemByName("hand_dynamics").kernels()    # their joint-friction terms are checked too
+    if finger == "index":   # on the compiled kernels, so that their joint-friction terms are checked too
+        compiled(on)
     n, m = on.num_joints, on.num_tendons
     mp, hp, gp = p_on.motor, p_on.spring.hysteresis, p_on
     alpha = tendon_bending_angles(on.coupling, p_on)

@@ -832,3 +832,24 @@ def test_whole_thumb_poles_keep_the_dof_coordinates_invariant_and_the_loop_stabl
     Az = np.abs(c.design + c.coupling).max()
     assert c.coupling_residual < 1e-6 * np.abs(c.tendon_coupling).max() / Az     # a millionth of the tendons' share
     assert c.stable, c.poles[c.poles.real >= 0]
+
+
+def test_isolated_gershgorin_disc_holds_the_eigenvalue_to_second_order():
+    """The certificate of ``PoleCheck.matches`` (``_isolated_radius``): on a 2 x 2 ``[[a, e], [f, b]]`` the eigenvalue
+    near ``a`` (the characteristic quadratic's root, ``a + e f / (a - b)`` to first order) lies in the isolated disc
+    around ``a``, whose radius is second order in the coupling (the off-diagonal scaled by 1/10: more than 50x smaller;
+    100x for a pure second-order bound), and a coupling as large as the gap isolates nothing (inf)."""
+    from awiwi_drake.control.joint_design import _isolated_radius
+    a, b = -10.0 + 5.0j, -40.0 - 3.0j
+    radii = []
+    for eps in (1.0, 0.1):
+        e, f = 2.0 * eps, -1.5j * eps
+        G = np.array([[a, e], [f, b]])
+        tr, det = a + b, a * b - e * f
+        root = np.sqrt(tr * tr - 4 * det)
+        mu = min(((tr + root) / 2, (tr - root) / 2), key=lambda z: abs(z - a))
+        r = _isolated_radius(G, 0)
+        assert abs(mu - a) <= r and np.isfinite(r)
+        radii.append(r)
+    assert radii[1] < radii[0] / 50
+    assert _isolated_radius(np.array([[a, 30.0], [30.0, b]]), 0) == np.inf

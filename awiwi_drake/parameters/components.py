@@ -233,8 +233,9 @@ class HysteresisParams(Parameters):
     presliding_length: float = param(
         4e-4, unit="m", low=0.0, low_inclusive=False,
         source=("chosen: the thesis prints no reversal shape; delta is the smallest presliding length for "
-                "which fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand "
-                "(docs/REPRODUCTIONS.md, 'Thesis physics at 3 kHz'): the state's relaxation rate |xdot|/delta "
+                "which fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand at the "
+                "operating point's 20 N (not at every pretension: the thumb under joint-pd at 40 N grows a numerical "
+                "oscillation, README; docs/REPRODUCTIONS.md, 'Thesis physics at 3 kHz'): the state's relaxation rate |xdot|/delta "
                 "and the presliding stiffness w/delta in parallel with the spring both enter |h lambda|"))
     smoothing_velocity: float = param(1e-4, unit="m/s", low=0.0, low_inclusive=False,
                                       source="chosen: v_s, smooth sign(xdot) for integration")

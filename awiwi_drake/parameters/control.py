@@ -240,6 +240,29 @@ class CompareTestParams(Parameters):
                                   source="chosen: well inside the joint loops' bandwidth (tendon rig: 5 Hz)")
     sine_periods: float = param(3.0, unit="-", low=1.0, source="chosen: first period dropped as transient")
     disturbance_torque: float = param(0.02, unit="Nm", source="chosen: ~0.03 rad deflection at 0.6 Nm/rad")
+    load_bound_factor: float = param(0.0, unit="-", low=0.0,
+                                     source="chosen: fingers/hand 3 (control.compare.compare_test_params): a loop "
+                                            "with the ch. 9 observer compensates up to its friction bound B "
+                                            "(components.friction.joint_friction_bound) and the frictions it "
+                                            "bounds hold up to another B at rest, so a load L > 2 B is needed "
+                                            "before any of it reaches the impedance; at 3 B at least B does, and "
+                                            "the measured stiffness L / e lies in [K, 3 K] (K the design's, "
+                                            "control.compare.load_stiffness_range). 0: no sizing, every joint "
+                                            "gets disturbance_torque (the user's override; the 1-DoF rigs)",
+                                     doc="load step = this x the DoF's friction bound (loops with a bounded "
+                                         "friction observer)")
+    load_linear_fraction: float = param(1.0, unit="-", low=0.0, low_inclusive=False,
+                                        source="chosen: the sized load may deflect the joint at its designed "
+                                               "stiffness by at most the step test's own step size, the amplitude "
+                                               "at which compare already runs the loop as designed; a load that "
+                                               "cannot be both is kept at this limit and flagged",
+                                        doc="largest load's design deflection L / K, as a fraction of |step_size|")
+    max_command_ratio: float = param(2.0, unit="-", low=1.0,
+                                     source="chosen: beyond twice the torque limit the motors apply less than "
+                                            "half of what the loop commands, so even a short peak is not the "
+                                            "designed loop (flagged with its size and duration; the saturated "
+                                            "fraction alone misses a 12x peak on 0.5 % of the samples)",
+                                     doc="flag a command peak above this x the torque limit")
     sweep_amplitude: float = param(0.05, unit="ref",
                                    source="chosen: small-signal chirp (0.05 rad; tendon rig 1 N) so the gain "
                                           "diagram is the linear one")

@@ -347,8 +347,8 @@ class FingerDriveParams(Parameters):
     joint with the Stribeck level (:func:`~awiwi_drake.components.friction.stick_slip_rate`).
     Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
     :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
-    fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand
-    (docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz").
+    fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand at the operating point's
+    20 N (not at every pretension: README, docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz").
     """
 
     motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
@@ -386,7 +386,8 @@ class FingerDriveParams(Parameters):
         4e-4, unit="m", low=0.0, low_inclusive=False,
         source=("chosen: the thesis prints no presliding; the guide friction reaches its sliding level within a "
                 "few 0.4 mm of tendon travel, the shortest length for which fixed-step RK3 at 3 kHz is stable on "
-                "every finger and the hand with hysteresis on (docs/REPRODUCTIONS.md, 'Thesis physics at 3 kHz')"))
+                "every finger and the hand with hysteresis on at the operating point's 20 N (not at every pretension: "
+                "the thumb under joint-pd at 40 N, README; docs/REPRODUCTIONS.md, 'Thesis physics at 3 kHz')"))
     gravity: bool = param(False, unit="-", source="section 5.2.2: ~0.002 N m, negligible")
     joint_friction: bool = param(
         False, unit="-",

@@ -18,8 +18,9 @@ from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
 from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, build_loops, compare, compare_controllers, factory_options,
                                                         compare_test_params, design_step_duration,
-                                                        design_time_constant,
-                                                        dominant_time_constant, flag_run,
+                                                        design_stiffness, design_time_constant,
+                                                        dominant_time_constant, flag_run, load_stiffness_range,
+                                                        size_loads,
                                                         run_joint_test, run_standard_tests, run_test,
                                                         short_test_params, stopped_row)
 
@@ -29,4 +30,5 @@ __all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable",
            "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
            "response_bandwidth", "linear_bandwidth",
            "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric",
-           "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params", "run_joint_test", "joint_channels", "JointChannels"]
+           "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params", "run_joint_test", "joint_channels", "JointChannels",
+           "design_stiffness", "size_loads", "load_stiffness_range"]

@@ -26,7 +26,10 @@ class Metrics:
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
     peak_input: float = math.nan         # max |torque applied to the motors| (after saturation) [Nm]
     peak_command: float = math.nan       # max |motor_torque_command| (before saturation) [Nm]
-    stiffness: float = math.nan          # d external torque / d link angle [Nm/rad]
+    stiffness: float = math.nan          # measured: load / deflection (d external torque / d link angle) [Nm/rad]
+    design_stiffness: float = math.nan   # load test: the design's static stiffness of the DoF, 1 / (K^-1)_jj [Nm/rad]
+    load_torque: float = math.nan        # load test: the external torque step on the DoF [Nm]
+    friction_bound: float = math.nan     # load test: the friction observer's bound B of the DoF at the end [Nm]
     drift: float = math.nan              # disturbance test: end slope x time since the load step [unit of the output]
     damping_ratio: float = math.nan      # of a 2nd-order model fitted to the step response
     tracking_rms: float = math.nan       # RMS tracking error (sine)
@@ -37,6 +40,7 @@ class Metrics:
     bandwidth_hz: float = math.nan       # -3 dB of |Y/R| below its DC / low-frequency value (see bandwidth_source)
     bandwidth_source: str = ""           # "linearization" (continuous loops) or "chirp" (log-spaced estimate)
     saturated_fraction: float = math.nan  # fraction of samples with the command beyond the torque limit
+    saturated_time: float = math.nan     # time the command is beyond the torque limit (samples x period) [s]
     slack_fraction: float = math.nan     # fraction of samples with a slack tendon (tension-only rigs)
     estimation_error: float = math.nan   # max |joint angle estimate - true| of the DoF's joint (fingers/hand) [rad];
     #                                      with ideal sensors the estimator's beside the loop (not fed back); NaN:
@@ -46,7 +50,8 @@ class Metrics:
     failed_at: float = math.nan          # s, test time at which the simulation stopped (status a failure cause)
     status: str = "ok"                   # "ok", "flagged" (see flags), or the cause that stopped the simulation
     #                                      (metrics NaN): "diverged", "infeasible_force", a monitor's event kind
-    flags: str = ""                      # "; "-separated: saturated, slack, not settled, negative stiffness,
+    flags: str = ""                      # "; "-separated: saturated, command peak, slack, not settled, negative
+    #                                      stiffness, stiffness off its design, load kept linear, load held,
     #                                      force distribution out of bounds (finger/hand chain), stopped within
     #                                      friction dead band (design["friction_hold"] <= 1); a stopped
     #                                      row: the error's message
@@ -60,8 +65,8 @@ NUMERIC = [c for c in COLUMNS if c not in ("controller", "test", "joint", "bandw
 
 UNITS = dict(rise_time="s", overshoot="%", settling_time="s", steady_state_error="ref", peak_input="Nm",
              peak_command="Nm",
-             stiffness="Nm/rad", drift="ref", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
-             peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-",
+             stiffness="Nm/rad", design_stiffness="Nm/rad", load_torque="Nm", friction_bound="Nm", drift="ref", damping_ratio="-", tracking_rms="ref", gain="-", phase_deg="deg",
+             peak_gain="-", resonance_hz="Hz", bandwidth_hz="Hz", saturated_fraction="-", saturated_time="s",
              slack_fraction="-", estimation_error="rad", dead_band="rad", failed_at="s")
 
 

@@ -7,7 +7,9 @@
   error, damping ratio of a fitted 2nd-order model);
 * ``sine``: sinusoidal tracking (RMS error, gain and phase at the frequency);
 * ``disturbance``: an ``external_torque`` step at constant reference
-  (achieved stiffness ``dtau / dq``; link rigs only);
+  (achieved stiffness ``dtau / dq``; link rigs only; on fingers and the hand sized per DoF above the friction
+  observer's bound and inside the design's linear range, :func:`size_loads`, the measured stiffness checked against
+  the design's, :func:`load_stiffness_range`);
 * ``sweep``: a linear chirp of the reference, gain diagram ``|Y/R|(f)`` on log-spaced
   frequencies (as in Fig 11.4); the -3 dB bandwidth comes from the loop's linearisation
   where Drake can linearise it (continuous loops), else from the chirp
@@ -35,11 +37,11 @@ from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
 from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
 from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
-from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
            "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
-           "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load_held"]
+           "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load",
+           "design_stiffness", "size_loads", "load_stiffness_range"]
 
 TESTS = ("step", "sine", "disturbance", "sweep")
 
@@ -68,11 +70,13 @@ def compare_test_params(rig: Any, **overrides: Any) -> CompareTestParams:
                                  sweep_duration=2.0, settle_time=0.2, settling_band=0.05)
     elif kind in ("finger", "hand"):
         # per DoF, relative to the operating point [rad]; chosen: a 0.2 rad (11 deg) step (Fig 15.24 steps the
-        # PIP by ~25 deg), 0.01 Nm load (0.02 rad at the chosen 0.5 Nm/rad impedance, Fig 15.22's soft setting on
-        # the single-joint testbed), 0.3 s chosen (the CLI lengthens it where the compared designs need more:
-        # design_step_duration); no sweep by default (Fig 15.26 is the joint rig's)
+        # PIP by ~25 deg); the load of a loop with a bounded friction observer sized per DoF (load_bound_factor 3 x
+        # its bound, at most a step's deflection at its designed stiffness: size_loads), of the others 0.01 Nm
+        # (0.02 rad at the chosen 0.5 Nm/rad impedance, Fig 15.22's soft setting on the single-joint testbed);
+        # 0.3 s chosen (the CLI lengthens it where the compared designs need more: design_step_duration); no sweep
+        # by default (Fig 15.26 is the joint rig's)
         base = CompareTestParams(step_size=0.2, step_duration=0.3, sine_amplitude=0.1, sine_frequency=2.0,
-                                 sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01)
+                                 sine_periods=2.0, settle_time=0.05, disturbance_torque=0.01, load_bound_factor=3.0)
     else:
         base = CompareTestParams()
     return base.replace(**overrides) if overrides else base
@@ -155,27 +159,99 @@ def mark_dead_band(rows: Sequence[Metrics], errors, hold, dof_load=None) -> None
                                               "bound)"))
 
 
-def mark_load_held(row: Metrics, params: CompareTestParams, bound: float, impedance: float | None = None) -> None:
-    """A load row of a chain whose (9.2) observer ends inside its friction bound ``bound`` [Nm] (the DoF's
-    ``B_j = sum_i |(P S)_ij| W_i``, :class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): when the load
-    ``|params.disturbance_torque| < bound``, the row's ``not settled`` / ``negative stiffness`` (a deflection that goes
-    back to ~0, measured against itself) become ``load held by the friction observer (X Nm within its bound Y Nm)``.
-    Physics, not a failure of the loop: the observer is link-side, driven by the measured tendon forces' torque, so it
-    attributes every torque they do not explain to the link (9.1) and cannot tell a load below what the guides'
-    friction can be from that friction: it cancels it, and the joint does not show its impedance (in the thesis's
-    (9.1)-(9.2) the strain gauges' joint torque contains the load, which is then not estimated: sensors this hand does
-    not have, ch. 9).  The row stays flagged: the test asks for the impedance's stiffness, which this loop shows
-    only to the part of a load beyond ``bound`` (then ``observer at friction bound``), or without the observer
-    (``cascaded:no-observer``).  ``impedance`` (the design's static stiffness of the DoF, Nm/rad): ``not settled``
-    stays when the end drift exceeds the settling band of the impedance's own deflection ``load / impedance``."""
-    load = params.disturbance_torque
-    if not abs(load) < bound:
-        return
-    still = impedance is not None and row.drift > params.settling_band * abs(load / impedance)
-    flags = [f for f in row.flags.split("; ") if f and f != "negative stiffness" and (f != "not settled" or still)]
-    flags.append(f"load held by the friction observer ({abs(load):.3g} Nm within its bound {bound:.3g} Nm)")
+def design_stiffness(loop: ClosedLoop) -> np.ndarray | None:
+    """The static stiffness [Nm/rad] per DoF that the loop's design promises to a constant load on that DoF alone:
+    ``1 / (K^-1)_jj`` of the design's stiffness matrix ``K`` (the other DoF held at their references by their own
+    laws): the chain designs' decoupled :attr:`~awiwi_drake.control.joint_design.JointDesign.static_stiffness`, the
+    15.5 finger backstepping's ``Kp`` (``design["Kp"]``; with the load observed its rest is ``Kp e = S^T tau_ext``,
+    :class:`~awiwi_drake.control.finger_backstepping.ObservedBacksteppingController`); None when it reports none."""
+    design = _design(loop)
+    jd = design.get("joint_design")
+    if jd is not None:
+        return np.asarray(jd.static_stiffness, dtype=float)
+    Kp = design.get("Kp")
+    if Kp is None:
+        return None
+    Kp = np.atleast_2d(np.asarray(Kp, dtype=float))
+    return 1.0 / np.diag(np.linalg.inv(Kp))
+
+
+def size_loads(params: CompareTestParams, stiffness, bound) -> tuple[np.ndarray, list[str]]:
+    """The load step [Nm] per DoF of a loop with a bounded (9.2) friction observer, and per DoF a note ("" or why the
+    load is not above its bound).
+
+    Above the bound: the observer compensates a link-side torque up to its bound ``B`` (``bound``, per DoF, the
+    :func:`~awiwi_drake.components.friction.joint_friction_bound` it clips with) and the frictions it bounds hold up
+    to another ``B`` at rest, so ``L_lo = load_bound_factor x B``.  Linear: the design's deflection ``L / K``
+    (``stiffness`` ``K``, :func:`design_stiffness`) at most ``load_linear_fraction x |step_size|``, so
+    ``L_hi = load_linear_fraction |step_size| K``.  The load is ``L_lo`` when ``0 < L_lo <= L_hi``, else ``L_hi``:
+    a DoF without friction (``B = 0``) takes the largest linear load, and a DoF whose impedance is too soft for
+    its friction (``L_lo > L_hi``) keeps the linear one and its note says so (the row is flagged with it)."""
+    K, B = np.asarray(stiffness, dtype=float), np.asarray(bound, dtype=float)
+    lo = params.load_bound_factor * B
+    hi = params.load_linear_fraction * abs(params.step_size) * K
+    load = np.where((lo > 0) & (lo <= hi), lo, hi)
+    notes = ["" if lo[j] <= hi[j] else
+             f"load {hi[j]:.3g} Nm kept linear ({params.load_linear_fraction:g} x the {abs(params.step_size):g} rad "
+             f"step at the designed {K[j]:.3g} Nm/rad): {params.load_bound_factor:g} x its friction bound "
+             f"{B[j]:.3g} Nm would deflect it {lo[j] / K[j]:.3g} rad" for j in range(K.size)]
+    return load, notes
+
+
+def load_stiffness_range(load: float, bound: float, stiffness: float,
+                         estimation_error: float = 0.0) -> tuple[float, float]:
+    """``(low, high)`` [Nm/rad]: the measured stiffness ``L / e`` of a DoF (design stiffness ``K``) under the load
+    ``L`` with a friction observer bounded by ``B`` (``bound``, at the rest's tendon forces) and an estimator error
+    of at most ``estimation_error`` ``eps`` [rad] (0 with ideal sensors).
+
+    At rest the loop balances on its estimate ``e_hat``: ``K e_hat = L - h - c``, ``h`` the torque the bounded
+    frictions hold (``|h| <= B``: the observer's bound is the most they can carry) and ``c = clip(L - h, -B, B)``
+    the observer's compensation of what the tendons' torque does not explain, so ``K e_hat = max(L - h - B, 0)``,
+    between ``max(L - 2B, 0)`` and ``L``; the true deflection differs from ``e_hat`` by the estimator's error before
+    and after the load, ``|de| <= 2 eps``.  Hence ``e`` in ``[max(L - 2B, 0) / K - 2 eps, L / K + 2 eps]`` and
+    ``L / e`` in ``[L / (L / K + 2 eps), L / (max(L - 2B, 0) / K - 2 eps)]`` (``high`` infinite when the lower
+    deflection is not positive: a load within ``2B`` can be held whole)."""
+    eps = 0.0 if not math.isfinite(estimation_error) else abs(float(estimation_error))
+    L, B, K = abs(float(load)), float(bound), float(stiffness)
+    e_lo = max(L - 2.0 * B, 0.0) / K - 2.0 * eps
+    return L / (L / K + 2.0 * eps), (L / e_lo if e_lo > 0 else math.inf)
+
+
+def mark_load(row: Metrics, params: CompareTestParams, bound: float, impedance: float | None = None,
+              note: str = "") -> None:
+    """A load row (``row.load_torque`` ``L``) of a chain whose (9.2) observer clips at its friction bound ``bound``
+    [Nm] (the DoF's ``B_j = sum_i |(P S)_ij| W_i``, :class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`,
+    at the end of the run), ``impedance`` the design's static stiffness ``K`` of the DoF [Nm/rad]
+    (:func:`design_stiffness`), ``note`` :func:`size_loads`'s (a load kept linear below its bound: flagged with it).
+
+    ``|L| < B``: the row's ``not settled`` / ``negative stiffness`` (a deflection that goes back to ~0, measured
+    against itself) become ``load held by the friction observer (X Nm within its bound Y Nm)``.  Physics, not a
+    failure of the loop: the observer is link-side, driven by the measured tendon forces' torque, so it attributes
+    every torque they do not explain to the link (9.1) and cannot tell a load below what the guides' friction can
+    be from that friction: it cancels it, and the joint does not show its impedance (in the thesis's (9.1)-(9.2)
+    the strain gauges' joint torque contains the load, which is then not estimated: sensors this hand does not
+    have, ch. 9).  ``not settled`` stays when the end drift exceeds the settling band of the impedance's own
+    deflection ``L / K``.  ``|L| >= B`` (the sized load): the measured stiffness must lie in
+    :func:`load_stiffness_range` (from ``B`` and the row's estimation error), else ``stiffness off its design``."""
+    load = row.load_torque if math.isfinite(row.load_torque) else params.disturbance_torque
+    row.friction_bound = float(bound)
+    if impedance is not None:
+        row.design_stiffness = float(impedance)
+    flags = [f for f in row.flags.split("; ") if f]
+    if abs(load) < bound:
+        still = impedance is not None and row.drift > params.settling_band * abs(load / impedance)
+        flags = [f for f in flags if f != "negative stiffness" and (f != "not settled" or still)]
+        flags.append(f"load held by the friction observer ({abs(load):.3g} Nm within its bound {bound:.3g} Nm)")
+    elif impedance is not None:
+        lo, hi = load_stiffness_range(load, bound, impedance, row.estimation_error)
+        if not lo <= row.stiffness <= hi:
+            flags.append(f"stiffness off its design ({row.stiffness:.3g} Nm/rad against {impedance:.3g}: expected "
+                         f"{lo:.3g}-{hi:.3g} from its friction bound {bound:.3g} Nm and the estimator's error)")
+    if note:
+        flags.append(note)
     row.flags = "; ".join(flags)
-    row.status = "flagged" if row.status == "ok" else row.status
+    if flags and row.status == "ok":
+        row.status = "flagged"
 
 
 def design_time_constant(loop: ClosedLoop) -> float | None:
@@ -248,11 +324,8 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     u = np.abs(run.command)
     m.peak_command = float(np.max(u))
     m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
-    limit = loop.saturation
-    if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
-        limit = np.full(u.shape[1], float(loop.rig.torque_limit))  # the rig's own amplifier limit
-    if limit is not None:
-        m.saturated_fraction = float(np.mean(np.any(u > limit[None, :] * (1 + 1e-9), axis=1)))
+    limit = torque_limit(loop, u.shape[1])
+    ratio = _saturation(m, u, limit, dt)
     if "tendon_force" in run.meta:
         m.slack_fraction = float(np.mean(np.any(run.meta["tendon_force"] <= 0.0, axis=1)))
     if test == "step":
@@ -264,6 +337,7 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         for k_, v in sine_metrics(run.t[skip], run.reference[skip], run.output[skip], p.sine_frequency).items():
             setattr(m, k_, v)
     elif test == "disturbance":
+        m.load_torque = p.disturbance_torque
         for k_, v in disturbance_metrics(run.t, run.output.ravel(), r0, p.step_delay,
                                          p.disturbance_torque).items():
             setattr(m, k_, v)
@@ -275,8 +349,21 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
         m.bandwidth_source = "chirp"
         if lin_bw is not None:
             m.bandwidth_hz, m.bandwidth_source = lin_bw, "linearization"
-    flag_run(m, p)
+    flag_run(m, p, ratio)
     return run, m
+
+
+def _saturation(row: Metrics, u, limit, dt: float) -> float | None:
+    """Set ``row.saturated_fraction`` and ``saturated_time`` from the commands' magnitudes ``u`` (samples x motors,
+    logged every ``dt``) against the per-motor ``limit`` (None: no limit); return the command's peak as a multiple
+    of its motor's limit (None without a limit)."""
+    if limit is None:
+        return None
+    limit = np.asarray(limit, dtype=float)
+    over = np.any(u > limit[None, :] * (1 + 1e-9), axis=1)
+    row.saturated_fraction = float(np.mean(over))
+    row.saturated_time = float(np.count_nonzero(over) * dt)
+    return float(np.max(u / limit[None, :]))
 
 
 def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
@@ -311,8 +398,12 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
     applied = applied_port(loop)
     design = _design(loop)
     band, hold = design.get("dead_band"), design.get("friction_hold")
-    impedance = getattr(design.get("joint_design"), "static_stiffness", None)    # the chain's designed K per DoF
+    impedance = design_stiffness(loop)                     # the designed static stiffness per DoF
     rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
+    loads, notes = np.full(k, p.disturbance_torque), [""] * k
+    if (test == "disturbance" and p.load_bound_factor > 0 and impedance is not None
+            and loop.diagram.HasOutputPort(OBSERVER_BOUND)):           # sized above the observer's bound (size_loads)
+        loads, notes = size_loads(p, impedance, loop.diagram.GetOutputPort(OBSERVER_BOUND).Eval(base))
     if band is not None:
         for row, b in zip(rows, band):
             row.dead_band = float(b)
@@ -337,7 +428,7 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             ext = [Constant(0.0)] * n_ext
             if test == "disturbance":
                 for j in group:
-                    ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, p.disturbance_torque)
+                    ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, float(loads[j]))
             inputs["external_torque"] = PerEntry(ext)
         log = ["joint_angle", ref_port, "motor_torque_command", "state"]
         if applied != "motor_torque_command":
@@ -374,8 +465,7 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             row.peak_command = float(np.max(u))
             row.peak_input = float(np.max(np.abs(res[applied][:, sl])))
             limit = torque_limit(loop, res["motor_torque_command"].shape[1])
-            if limit is not None:
-                row.saturated_fraction = float(np.mean(np.any(u > limit[None, sl] * (1 + 1e-9), axis=1)))
+            ratio = _saturation(row, u, None if limit is None else limit[sl], dt)
             if "tendon_force" in res:
                 row.slack_fraction = float(np.mean(np.any(res["tendon_force"][:, sl] <= 0.0, axis=1)))
             if ESTIMATION_ERROR in res:
@@ -390,9 +480,10 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 for k_, v in sine_metrics(t[skip], r[skip, j], y[skip, j], p.sine_frequency).items():
                     setattr(row, k_, v)
             elif test == "disturbance":
-                for k_, v in disturbance_metrics(t, y[:, j], r0, p.step_delay, p.disturbance_torque).items():
+                row.load_torque = float(loads[j])
+                for k_, v in disturbance_metrics(t, y[:, j], r0, p.step_delay, row.load_torque).items():
                     setattr(row, k_, v)
-                runs_w[:, j] = np.where(t >= p.step_delay, p.disturbance_torque, 0.0)
+                runs_w[:, j] = np.where(t >= p.step_delay, row.load_torque, 0.0)
             else:
                 f, g = gain_diagram(t, r[:, j], y[:, j], p.sweep_start, p.sweep_stop)
                 meta.setdefault("freq", f)
@@ -400,15 +491,15 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 for k_, v in sweep_metrics(f, g).items():
                     setattr(row, k_, v)
                 row.bandwidth_source = "chirp"
-            flag_run(row, p)
+            flag_run(row, p, ratio)
             tail = t >= 0.9 * t[-1]                # the run's last 10 %, as the load test's end values
-            if OBSERVER_BOUND in res and observer_at_bound(res[OBSERVER_COMPENSATION][tail, j],
-                                                           res[OBSERVER_BOUND][tail, j]):
+            if OBSERVER_BOUND in res and test == "disturbance":   # at its bound under a sized load: as designed
+                mark_load(row, p, float(np.mean(res[OBSERVER_BOUND][tail, j])),
+                          None if impedance is None else float(impedance[j]), notes[j])
+            elif OBSERVER_BOUND in res and observer_at_bound(res[OBSERVER_COMPENSATION][tail, j],
+                                                             res[OBSERVER_BOUND][tail, j]):
                 row.flags = "; ".join(f for f in (row.flags, "observer at friction bound") if f)
                 row.status = "flagged" if row.status == "ok" else row.status
-            elif OBSERVER_BOUND in res and test == "disturbance":
-                mark_load_held(row, p, float(np.mean(res[OBSERVER_BOUND][tail, j])),
-                               None if impedance is None else float(impedance[j]))
             if DISTRIBUTION_STATUS in res:       # the chain's force distribution, one status per finger
                 finger = list(dict.fromkeys(ch.fingers)).index(ch.fingers[j])
                 bad = float(np.mean(res[DISTRIBUTION_STATUS][:, finger] != 0.0))
@@ -426,10 +517,12 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
     return TestRun(controller, test, runs_t, runs_r, runs_y, runs_u, runs_w, runs_x, meta), rows
 
 
-def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
+def flag_run(m: Metrics, params: CompareTestParams, command_ratio: float | None = None) -> Metrics:
     """Set ``m.flags`` / ``m.status`` from the metrics: a run that finished is not necessarily a success.
 
-    Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``slack`` (slack
+    Flags: ``saturated`` (saturated fraction > ``params.max_saturated_fraction``), ``command peak N x the torque
+    limit for T ms`` (``command_ratio``, the command's peak over its motor's limit, > ``params.max_command_ratio``,
+    however short: ``peak_input`` stays the applied, saturated torque), ``slack`` (slack
     fraction > ``params.max_slack_fraction``), ``not settled`` (step test never enters the settling band;
     disturbance test still drifting at its end: ``drift`` > settling band x deflection),
     ``negative stiffness`` (disturbance test: the link moves *with* the load).
@@ -437,11 +530,14 @@ def flag_run(m: Metrics, params: CompareTestParams) -> Metrics:
     flags = []
     if m.saturated_fraction > params.max_saturated_fraction:
         flags.append(f"saturated {100 * m.saturated_fraction:.0f} %")
+    if command_ratio is not None and command_ratio > params.max_command_ratio:
+        flags.append(f"command peak {command_ratio:.3g} x the torque limit for {1e3 * m.saturated_time:.3g} ms")
     if m.slack_fraction > params.max_slack_fraction:
         flags.append(f"slack {100 * m.slack_fraction:.0f} %")
     if m.test == "step" and not math.isfinite(m.settling_time):
         flags.append("not settled")
-    if m.test == "disturbance" and m.drift > params.settling_band * abs(params.disturbance_torque / m.stiffness):
+    load = m.load_torque if math.isfinite(m.load_torque) else params.disturbance_torque
+    if m.test == "disturbance" and m.drift > params.settling_band * abs(load / m.stiffness):
         flags.append("not settled")
     if m.test == "disturbance" and m.stiffness < 0:
         flags.append("negative stiffness")
