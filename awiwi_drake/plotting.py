@@ -14,10 +14,12 @@ def _plt():
 
 
 def figure_axes(ax=None, **subplots_kw):
-    """``(fig, ax)``: a new figure (``plt.subplots(**subplots_kw)``) when ``ax`` is None, else ``ax``'s figure."""
+    """``(fig, ax)``: a new figure (``plt.subplots(**subplots_kw)``) when ``ax`` is None, else ``ax``'s figure (``ax``
+    may be several axes, a list or an array, as ``subplots`` returns them)."""
     if ax is None:
         return _plt().subplots(**subplots_kw)
-    return ax.figure, ax
+    first = ax.flat[0] if hasattr(ax, "flat") else (ax[0] if isinstance(ax, (list, tuple)) else ax)
+    return first.figure, ax
 
 
 def label_axes(ax, ylabel: str, *, xlabel: str | None = "time [s]", title: str | None = None, grid: bool = True,

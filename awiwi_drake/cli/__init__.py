@@ -31,6 +31,7 @@ _COMMAND_MODULES = [
     "awiwi_drake.cli.compare",
     "awiwi_drake.cli.hand",
     "awiwi_drake.cli.discrepancy",
+    "awiwi_drake.cli.reproduce",
 ]
 
 

@@ -22,7 +22,7 @@ Here (numbers and sources in :class:`awiwi_drake.parameters.PipStudy`):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,7 +39,9 @@ PIP = 2                     # the index PIP, q22, in the finger's joint order
 @dataclass
 class PipRun:
     """One Fig 15.24/15.25 run on the index finger: time [s], PIP angle, reference and estimate [rad], PIP velocity
-    [rad/s], the joints' friction torque on the PIP [Nm] (0 without it), applied motor torques [Nm], tendon forces [N]."""
+    [rad/s], the joints' friction torque on the PIP [Nm] (0 without it), applied motor torques [Nm], tendon forces [N];
+    ``finger``: every joint's ``joint_angle``, ``joint_angle_estimate`` [rad], ``joint_friction_torque`` [Nm] and the
+    plant's ``state`` (``pip_rig().state_names``) per sample (the rest's closed form needs them)."""
 
     controller: str
     test: str
@@ -52,6 +54,7 @@ class PipRun:
     friction: np.ndarray
     torque: np.ndarray
     tendon_force: np.ndarray
+    finger: dict = field(default_factory=dict, repr=False)
 
     def plot(self, ax=None):
         """PIP angle and reference [deg] (Fig 15.24 / 15.25)."""
@@ -101,14 +104,16 @@ def pip_experiment(controller: str, test: str, *, joint_friction: bool = True, t
     loop = closed_loop(rig, make_controller(controller, rig, op=op), **get_entry(controller, rig).loop_options)
     ref = PerEntry([pip if j == PIP else Constant(0.0) for j in range(rig.num_joints)])
     log = ["joint_angle", "joint_velocity", "joint_angle_reference", "joint_angle_estimate", "applied_torque",
-           "tendon_force"] + (["joint_friction_torque"] if joint_friction else [])
+           "tendon_force", "state"] + (["joint_friction_torque"] if joint_friction else [])
     period = 1.0 / RATE_HZ
     res = simulate(loop, loop.create_context(op), t_end, inputs={"joint_angle_reference": ref}, log=log,
                    log_period=period, step=period / s.plant_substeps)
     friction = res["joint_friction_torque"][:, PIP] if joint_friction else np.zeros(res.t.size)
     return PipRun(controller, test, joint_friction, res.t, res["joint_angle"][:, PIP],
                   res["joint_angle_reference"][:, PIP], res["joint_angle_estimate"][:, PIP],
-                  res["joint_velocity"][:, PIP], friction, res["applied_torque"], res["tendon_force"])
+                  res["joint_velocity"][:, PIP], friction, res["applied_torque"], res["tendon_force"],
+                  {k: res[k] for k in ("joint_angle", "joint_angle_estimate", "joint_friction_torque", "state")
+                   if k in log})
 
 
 def stuck_intervals(run: PipRun, speed: float) -> list[tuple[float, float]]:
