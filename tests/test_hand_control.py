@@ -359,7 +359,7 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     assert law.friction_compensation and np.all(law.design["dead_band"] < 1e-3)
     plain = make_controller("backstepping-friction-observer:no-observer", _rig())      # the chain's convention
     assert isinstance(plain, StaticLawController) and not plain.law.friction_compensation
-    (C, _), (beta, _) = law.friction_levels
+    (C, _), (beta, _), _ = law.friction_levels
     rng = np.random.default_rng(0)
     for _ in range(3):                     # any friction state within the bounds rests inside the dead band
         g, z = (rng.uniform(-1, 1, C.size) * lv for lv in (C, beta * law.f_op))
