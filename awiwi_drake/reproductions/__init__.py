@@ -74,9 +74,17 @@ class FigureEntry:
     run: Callable[[bool], Reproduction]
 
 
+def _finite(value):
+    """``value`` with every non-finite float (NaN: not defined for that run, e.g. no rise) as None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
 def _v(value, unit: str) -> dict:
-    return {"value": None if value is None or (isinstance(value, float) and not math.isfinite(value)) else value,
-            "unit": unit}
+    return {"value": _finite(value), "unit": unit}
 
 
 _PIP_UNITS = dict(peak_torque="Nm", min_tendon_force="N", final_error="rad", rise_time="s", overshoot="%",
@@ -93,6 +101,8 @@ def _pip(test: str, short: bool) -> Reproduction:
     fig, ax = figure_axes(None, figsize=(8, 4))
     for r in runs:
         r.plot(ax=ax)
+    for line in [ln for ln in ax.get_lines() if ln.get_label() == "reference"][1:]:   # each run draws it: once
+        line.set_label("_reference")
     label_axes(ax, "PIP angle [deg]", title=f"Fig 15.{24 if test == 'step' else 25}: index PIP {test}, joints' "
                "stick-slip on, 3 kHz", legend=dict(fontsize="small"))
     series = {"t [s]": runs[0].t, "reference [rad]": runs[0].reference}
