@@ -292,7 +292,8 @@ def test_the_observer_estimates_the_joints_stick_slip_within_its_breakaway_bound
     sampled observer is the first-order filter ``d_k+1 = d_k + L h (S^T tau_f,k - d_k)`` (pole ``1 - L h``) of the
     missing torque, clipped at +-B.  On the PIP at quasi-rest (the last 0.1 s) the compensation equals that filter of
     the logged friction state within the friction's largest change over one period (the observer holds its sample for
-    a period); it is never beyond the bound, and it is not clamped at 0."""
+    a period); it is never beyond the bound, and it is not clamped at 0.  The 15.5 law's observer bound on this plant
+    is the lever's hysteresis half-width ``|P S|^T (beta f + z0)`` plus the same ``|S|^T Fs``."""
     from awiwi_drake.reproductions.ch15_pip_experiments import PIP, RATE_HZ, pip_rig
     from awiwi_drake.parameters.backstepping import PipStudy
     rig = pip_rig()
@@ -321,6 +322,13 @@ def test_the_observer_estimates_the_joints_stick_slip_within_its_breakaway_bound
     step_change = np.abs(np.diff(tau[:, PIP]))[tail[1:]].max()
     assert err.max() <= step_change, (err.max(), step_change)
     assert np.abs(est[tail, PIP]).max() > 10 * step_change           # the match is not that of a zero estimate
+    # the 15.5 law's bound on the same plant: the lever's hysteresis half-width w = beta f + z0 (its sensors miss it;
+    # no guides) plus the same joints' breakaway
+    law = make_controller("backstepping-friction-observer", rig).law
+    hp = rig.params.spring.hysteresis
+    w = hp.width_ratio * law.f_op + hp.width_offset
+    PS = np.asarray(rig.coupling.P(law.q_op)) @ S
+    np.testing.assert_allclose(law.friction_bound(law.f_op), np.abs(PS).T @ w + np.abs(S).T @ Fs, rtol=1e-13)
 
 
 def test_a_load_beyond_the_guides_friction_is_not_cancelled_and_compare_measures_the_designed_stiffness():

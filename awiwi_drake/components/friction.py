@@ -237,7 +237,7 @@ def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_expo
     return (sliding_velocity * level - np.abs(sliding_velocity) * force) / presliding_length
 
 
-def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_level=0.0,
+def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_level=None,
                          selection=None):
     """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i) + sum_l |S_lj| F_l`` (k) [Nm]: the largest torque the unmeasured
     friction can put on each DoF ``j`` (the tendons' guides and lever, and the joints' own), the bound of the ch. 9
@@ -249,7 +249,8 @@ def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteres
     ``capstan_exponent``: each path's guide friction (:func:`guide_friction_level`, pulled end, the larger
     direction); ``hysteresis_width`` ``w`` (m) [N]: the half-width of the lever's hysteresis loop (Fig 4.8b) when the
     measurement misses it, else 0; ``joint_level`` ``F`` (n) [Nm]: the most each joint's own friction can hold, the
-    breakaway level ``Fs`` of its stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``), 0 where it has none.
+    breakaway level ``Fs`` of its stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``), 0 where it has none
+    (None: no joint friction).
 
     Which friction a measurement misses follows from where it sits (ch. 4): the spring sensor (the lever's angle,
     calibrated to a force polynomial ``phi``) is in the forearm, so the guides of the wrist, palm and finger (4.1) are
@@ -261,7 +262,7 @@ def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteres
     ``S^T``."""
     f, w = positive_part(tension), hysteresis_width
     A = np.asarray(coupling) if selection is None else np.asarray(coupling) @ selection
-    if selection is not None:
-        S = np.abs(np.asarray(selection, dtype=float))
-        joint_level = S.T @ np.broadcast_to(np.asarray(joint_level, dtype=float), S.shape[:1])
-    return np.abs(A).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w) + joint_level
+    B = np.abs(A).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w)
+    if joint_level is None:
+        return B
+    return B + (joint_level if selection is None else np.abs(selection).T @ joint_level)

@@ -95,7 +95,8 @@ _PIP_UNITS = dict(peak_torque="Nm", min_tendon_force="N", final_error="rad", ris
 def _pip(test: str, short: bool) -> Reproduction:
     from awiwi_drake.plotting import figure_axes, label_axes
     from awiwi_drake.reproductions.ch15_pip_experiments import pip_experiment, pip_metrics
-    names = ("backstepping", "cascaded") if short else ("backstepping", "backstepping-friction-observer", "cascaded")
+    names = (("backstepping", "cascaded") if short else
+             ("backstepping", "backstepping-friction-observer", "cascaded", "cascaded:no-observer"))
     runs = [pip_experiment(n, test, t_final=0.3 if short else None) for n in names]
     fig, ax = figure_axes(None, figsize=(8, 4))
     for r in runs:
