@@ -94,6 +94,11 @@ def run(args) -> int:
         raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
     if args.load is not None and args.rig == "tendon-rig":
         raise ValueError("--load: the tendon rig has no external torque input (no load test)")
+    load = {} if args.load is None else dict(disturbance_torque=args.load, load_bound_factor=0.0)   # not sized
+    try:
+        compare_test_params(args.rig, **load)        # checked before anything is built
+    except ValueError as exc:
+        raise ValueError(f"--load: {exc}") from None
     from awiwi_drake.diagrams import TARGETS, build_target
     rig_params = load_parameters(TARGETS[args.rig]["params"](), args)     # --config then --set
     for flag, given in (("--controller-set", args.controller_set), ("--sensors", args.sensors)):
@@ -122,12 +127,7 @@ def run(args) -> int:
     if args.sensors == "ideal":
         opts["sensors"] = "ideal"
     loops = build_loops(make_rig, names, ctrl_opts, **opts)      # each controller designed once
-    params = compare_test_params(args.rig)
-    if args.load is not None:      # the user's load on every joint, not sized (load_bound_factor 0)
-        try:
-            params = params.replace(disturbance_torque=args.load, load_bound_factor=0.0)
-        except ValueError as exc:
-            raise ValueError(f"--load: {exc}") from None
+    params = compare_test_params(args.rig, **load)
     if args.short or short_mode():
         params = short_test_params(make_rig, loops, params)
     else:       # the chosen window, or longer where the compared designs need it
