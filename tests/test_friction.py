@@ -140,7 +140,9 @@ def test_joint_friction_bound_is_the_largest_torque_of_the_unmeasured_frictions(
     ``|A^T (z + g)|`` never exceeds B; for the constant (4.1) law the bound is attained (the corner z, g = +-w, +-C
     with the signs of A's column), with the capstan law at the corner of a one-signed column pulled everywhere.
     Slack (negative) forces count as 0; w = 0 (the measured force holds the hysteresis: the chain) leaves the guides
-    alone; AutoDiffXd passes through."""
+    alone; AutoDiffXd passes through.  The joints' own stick-slip (``|tau_l| <= Fs_l``, :func:`stick_slip_rate`)
+    adds ``|S|^T Fs`` on the DoF ``q = S w`` (a joint torque ``tau`` is ``S^T tau`` there, as the tendons' ``-(P S)^T
+    f``), attained at ``tau_l = Fs_l`` with the signs of S's column; Fs = 0 leaves the bound bit-identical."""
     from itertools import product
     from awiwi_drake.components.friction import joint_friction_bound
     rng = np.random.default_rng(3)
@@ -169,3 +171,12 @@ def test_joint_friction_bound_is_the_largest_torque_of_the_unmeasured_frictions(
     np.testing.assert_allclose([b.value() for b in Ba], joint_friction_bound(A, f, C, mu, w), rtol=1e-14)
     np.testing.assert_allclose(np.array([b.derivatives() for b in Ba]), (np.abs(A) * np.expm1(mu)[:, None]).T,
                                rtol=1e-12)
+    # the joints' friction on the DoF: P (m x n) and S (n x k), a coupled joint (row 3: two DoF, mixed signs)
+    P = rng.normal(0.0, 5e-3, (m, 4))
+    S = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -0.4, 0.8]])
+    Fs = rng.uniform(0.005, 0.03, 4)
+    Bj = joint_friction_bound(P, f, C, mu, w, Fs, S)
+    worst = np.max([np.abs(S.T @ (Fs * np.array(sj))) for sj in product((-1.0, 1.0), repeat=4)], axis=0)
+    np.testing.assert_allclose(Bj - joint_friction_bound(P @ S, f, C, mu, w), worst, rtol=1e-12)
+    np.testing.assert_allclose(worst, [Fs[0], Fs[1] + 0.4 * Fs[3], Fs[2] + 0.8 * Fs[3]], rtol=1e-14)
+    assert np.array_equal(joint_friction_bound(P, f, C, mu, w, np.zeros(4), S), joint_friction_bound(P @ S, f, C, mu, w))

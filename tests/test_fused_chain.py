@@ -214,16 +214,19 @@ def test_compiled_backstepping_equals_the_law_as_written(target, name):
     for every scalar type) at random measurements: relative 1e-12 of the command; with the link torque estimate and its
     compensation bounded by the frictions (``backstepping-friction-observer``) at estimates inside and beyond the
     bound (half of the DoF each; with the capstan guide law the bound's levels depend on the forces,
-    :func:`~awiwi_drake.components.friction.joint_friction_bound`); with the estimate in the link model alone
+    :func:`~awiwi_drake.components.friction.joint_friction_bound`, and there the joints' breakaway levels, random per
+    joint, join the bound through ``|S|^T Fs``); with the estimate in the link model alone
     (``backstepping-load-observer``)."""
     rig = _rig(target)
     law = make_controller(name, rig).law
     op = rig.operating_point()
+    rng = np.random.default_rng(8)
+    if target == "finger-thumb-capstan":           # joint levels as a plant with stick-slip joints gives them
+        law.friction_levels = (*law.friction_levels[:2], rng.uniform(0.005, 0.03, op.joint_angle.size))
     loop = closed_loop(rig, make_controller("backstepping", rig))           # the measurements' values only
     ctx = loop.create_context(op)
     plant = loop.diagram.GetSubsystemByName("rig")
     pctx = plant.GetMyContextFromRoot(ctx)
-    rng = np.random.default_rng(8)
     n = op.joint_angle.size
     for _ in range(4):
         u = {nm: plant.GetOutputPort(nm).Eval(pctx) + rng.normal(scale=s, size=plant.GetOutputPort(nm).size())

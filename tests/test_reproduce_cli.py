@@ -6,9 +6,11 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from awiwi_drake.cli import main
-from awiwi_drake.reproductions import FIGURES
+from awiwi_drake.config import short_mode
+from awiwi_drake.reproductions import FIGURES, reproduce
 
 
 def test_reproduce_list_names_every_figure_with_its_thesis_reference(capsys):
@@ -53,3 +55,23 @@ def test_reproduce_bad_id_or_unwritable_folder_is_one_line_and_exit_2(tmp_path, 
     assert main(["reproduce", "fig6.10"]) == 2
     assert "--out" in capsys.readouterr().err
     assert not list(tmp_path.glob("*.png"))
+
+
+def _leaves_have_units(values) -> bool:
+    if set(values) == {"value", "unit"}:
+        return bool(values["unit"])
+    return all(isinstance(v, dict) and _leaves_have_units(v) for v in values.values())
+
+
+@pytest.mark.skipif(short_mode(), reason="runs every figure id (~1 CPU min); the suite runs in short mode")
+def test_every_figure_id_writes_its_files_in_short_mode(tmp_path):
+    """Every registered id still runs against its chapter module (the registry only calls them) and writes its PNG
+    and a JSON whose numbers all carry a unit; its CSV, when written, names a unit in every column."""
+    written = reproduce(list(FIGURES), tmp_path, short=True)
+    for i, paths in written.items():
+        assert {p.suffix for p in paths} >= {".png", ".json"} and all(p.stat().st_size > 0 for p in paths), i
+        assert _leaves_have_units(json.loads((tmp_path / f"{i}.json").read_text())["values"]), i
+        csv_path = tmp_path / f"{i}.csv"
+        if csv_path.exists():
+            with open(csv_path) as fh:
+                assert all(h.endswith("]") for h in next(csv.reader(fh))), i

@@ -22,7 +22,7 @@ caller passes the fields of its own parameter dataclass.
 :func:`dahl_rate`         rate-independent Dahl friction state ``dF/dt = (v/delta)(W - s F)``
 :func:`dahl_path`         the same law solved exactly along a sampled (piecewise-linear) path
 :func:`guide_friction_rate`     guide friction as a Dahl state (the finger and hand drive)
-:func:`joint_friction_bound`    the most the guides (and the lever's hysteresis) can hold per joint (ch. 9's bound)
+:func:`joint_friction_bound`    the most the guides, the lever's hysteresis and the joints can hold per DoF (ch. 9's bound)
 ========================  ====================================================
 """
 
@@ -237,22 +237,32 @@ def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_expo
     return (sliding_velocity * level - np.abs(sliding_velocity) * force) / presliding_length
 
 
-def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0):
-    """``B_j = sum_i |A_ij| (W_i(f_i + w_i) + w_i)`` (k) [Nm]: the largest joint torque the tendons' unmeasured
-    friction can put on each joint (or DoF) ``j``, the bound of the ch. 9 observer's estimate.
+def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_level=None,
+                         selection=None):
+    """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i) + sum_l |S_lj| F_l`` (k) [Nm]: the largest torque the unmeasured
+    friction can put on each DoF ``j`` (the tendons' guides and lever, and the joints' own), the bound of the ch. 9
+    observer's estimate.
 
-    ``coupling`` ``A`` (m x k): ``P(q)`` or ``P(q) S`` (a joint torque is ``-A^T`` of the tendon forces);
-    ``tension`` ``f`` (m) [N]: the measured tendon forces (negative parts count as 0); ``constant``,
+    ``coupling`` ``P`` (m x n): ``P(q)`` (a joint torque is ``-P^T`` of the tendon forces); ``selection`` ``S``
+    (n x k): the DoF map ``q = S w`` (a joint torque ``tau`` is the DoF torque ``S^T tau``; None: the identity, k =
+    n); ``tension`` ``f`` (m) [N]: the measured tendon forces (negative parts count as 0); ``constant``,
     ``capstan_exponent``: each path's guide friction (:func:`guide_friction_level`, pulled end, the larger
     direction); ``hysteresis_width`` ``w`` (m) [N]: the half-width of the lever's hysteresis loop (Fig 4.8b) when the
-    measurement misses it, else 0.
+    measurement misses it, else 0; ``joint_level`` ``F`` (n) [Nm]: the most each joint's own friction can hold, the
+    breakaway level ``Fs`` of its stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``), 0 where it has none
+    (None: no joint friction).
 
     Which friction a measurement misses follows from where it sits (ch. 4): the spring sensor (the lever's angle,
     calibrated to a force polynomial ``phi``) is in the forearm, so the guides of the wrist, palm and finger (4.1) are
     always between it and the joints; the lever's friction (the hysteresis ``z``, ``|z| <= w``) is inside the
     mechanism, so the calibration ``phi(x)`` misses it while the lever's tension ``phi(x) + z`` holds it.  The guides
     carry at most their sliding level at the tension they pass (:func:`guide_friction_rate`: ``|g| <= W``), which is
-    ``phi + z <= f + w``: hence ``W(f + w)``."""
+    ``phi + z <= f + w``: hence ``W(f + w)``.  The joints' friction (their bearings, ch. 9's "joint friction" that the
+    observer (9.2) "identifies") is beyond every tendon sensor, mapped to the DoF as the tendons' torque is, by
+    ``S^T``."""
     f, w = positive_part(tension), hysteresis_width
-    return np.abs(np.asarray(coupling)).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w)
-
+    A = np.asarray(coupling) if selection is None else np.asarray(coupling) @ selection
+    B = np.abs(A).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w)
+    if joint_level is None:
+        return B
+    return B + (joint_level if selection is None else np.abs(selection).T @ joint_level)

@@ -59,7 +59,7 @@ from awiwi_drake.parameters.hand_control import ForceDistributionParams, Frictio
 
 __all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceSharing_", "TendonForceSharing",
            "TendonForceStage", "TendonChainController", "chain_design_point", "rig_springs",
-           "guide_friction_levels"]
+           "guide_friction_levels", "joint_friction_levels"]
 
 
 def rig_springs(rig: Any) -> TendonSprings:
@@ -80,6 +80,13 @@ def guide_friction_levels(rig: Any) -> tuple[np.ndarray, np.ndarray]:
     gm = None if drive is None else drive.model.guide_friction
     m = rig.coupling.num_tendons
     return gm.levels() if gm is not None else (np.zeros(m), np.zeros(m))
+
+
+def joint_friction_levels(rig: Any) -> np.ndarray:
+    """The breakaway level ``Fs`` [Nm] per plant joint (n) of the rig's own stick-slip joint friction (the most it can
+    hold, :func:`~awiwi_drake.components.friction.stick_slip_rate`; ``HandRig.joint_friction``); zeros when off."""
+    jf = getattr(rig, "joint_friction", None)
+    return np.zeros(rig.coupling.num_joints) if jf is None else np.array(jf[:, 1], dtype=float)
 
 
 def guide_presliding_stiffness(rig: Any, point: dict, *, full: bool = False) -> np.ndarray:
@@ -349,7 +356,8 @@ class TendonChainController(Diagram):
     friction_observer : FrictionObserverParams, optional
         Add the joint friction observer (9.2) per DoF
         (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat``, bounded by what the rig's guide
-        friction can be (:func:`guide_friction_levels`), is added to the joint stage's torques (ch. 9); outputs
+        friction and the joints' can be (:func:`guide_friction_levels`, :func:`joint_friction_levels`), is added to
+        the joint stage's torques (ch. 9); outputs
         ``friction_compensation`` and its bound ``friction_compensation_bound``.  Sampled at ``1/rate_hz`` in a sampled chain
         (and then fused), continuous with ``distribution="sharing"``.
     """
@@ -395,7 +403,7 @@ class TendonChainController(Diagram):
                 friction_observer.gain / np.asarray(g, dtype=float), 1.0 / rate_hz if sampled else None,
                 (friction_observer.compensation_scale_motor_position if tendon_law == "motor-position"
                  else friction_observer.compensation_scale) * np.asarray(g, dtype=float),
-                guide_friction_levels(rig)))
+                (*guide_friction_levels(rig), joint_friction_levels(rig))))
             add = b.AddNamedSystem("friction_compensated_torque", Adder(2, S.shape[1]))
             b.Connect(tau_ref, add.get_input_port(0))
             b.Connect(observer.GetOutputPort("friction_compensation"), add.get_input_port(1))

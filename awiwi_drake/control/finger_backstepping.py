@@ -77,8 +77,9 @@ where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
 **Friction compensation** (option ``friction_observer`` of :func:`finger_backstepping_controller`, the law's
 ``friction_compensation``, registered ``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
 +-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`, the one law
-:func:`~awiwi_drake.components.friction.joint_friction_bound`: the guides (4.1) at the tension ``phi + w`` and the
-lever's hysteresis half-width ``w``), the bound of the chain's observer (ch. 9) with the hysteresis added: the law's
+:func:`~awiwi_drake.components.friction.joint_friction_bound`: the guides (4.1) at the tension ``phi + w``, the
+lever's hysteresis half-width ``w`` and, where the plant has it, the joints' stick-slip breakaway ``Fs``), the bound of
+the chain's observer (ch. 9) with the hysteresis added: the law's
 sensor is the lever's angle calibrated to ``phi(x)`` (ch. 4), which misses both, where the chain reads the lever's
 tension ``phi(x) + z``.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
 index); a load beyond ``B`` deflects the impedance, one below it is cancelled, as in the chain.
@@ -161,7 +162,8 @@ from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
 from awiwi_drake._math import clip, positive_part
 from awiwi_drake.components.friction import joint_friction_bound
-from awiwi_drake.control.chain import guide_friction_levels, guide_presliding_stiffness, rig_springs
+from awiwi_drake.control.chain import (guide_friction_levels, guide_presliding_stiffness, joint_friction_levels,
+                                       rig_springs)
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
@@ -305,13 +307,14 @@ class FingerBacksteppingLaw(StaticLaw):
         self.design["friction_hold"] = self.friction_hold
 
     def friction_bound(self, f, P=None):
-        """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i)`` (k) [Nm]: the largest link-side torque the guides' friction
-        (4.1) (sliding level ``W_i``, pulled, at the tension ``phi + z <= f + w``) and the lever's hysteresis (Fig 4.8b,
-        half-width ``w_i = beta f_i + z0``) can put on each DoF at the sensed forces ``f = phi(x)``, neither of which
-        the spring sensors measure (:func:`~awiwi_drake.components.friction.joint_friction_bound`)."""
+        """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i) + sum_l |S_lj| Fs_l`` (k) [Nm]: the largest link-side torque
+        the guides' friction (4.1) (sliding level ``W_i``, pulled, at the tension ``phi + z <= f + w``), the lever's
+        hysteresis (Fig 4.8b, half-width ``w_i = beta f_i + z0``) and the joints' stick-slip (breakaway ``Fs_l``) can
+        put on each DoF at the sensed forces ``f = phi(x)``, none of which the spring sensors measure
+        (:func:`~awiwi_drake.components.friction.joint_friction_bound`)."""
         P = np.asarray(self.coupling.P(self.q_op) if P is None else P)
-        (C, mu_alpha), (beta, z0) = self.friction_levels
-        return joint_friction_bound(P @ self.S, f, C, mu_alpha, beta * positive_part(f) + z0)
+        (C, mu_alpha), (beta, z0), Fs = self.friction_levels
+        return joint_friction_bound(P, f, C, mu_alpha, beta * positive_part(f) + z0, Fs, self.S)
 
     def rest_error(self, guide_force, hysteresis_force, external_torque=None, bound=None):
         """The DoF error ``e`` (k) at which the loop rests with the guides' friction forces ``g`` and the lever's
@@ -383,7 +386,7 @@ class FingerBacksteppingLaw(StaticLaw):
         # z alone less its link-side part (through tau_f): what the motors' r_m z adds
         Ez = np.column_stack([(self.rest_error(zero, eye[i]) - base) / 1e-3 + np.linalg.solve(self.Kp, T @ PS.T[:, i])
                               for i in range(m)])
-        (_, _), (beta, z0) = self.friction_levels
+        (_, _), (beta, z0), _ = self.friction_levels
         return T, Ez, beta * self.f_op + z0
 
     def dead_band(self) -> np.ndarray:
@@ -513,8 +516,8 @@ class FingerBacksteppingLaw(StaticLaw):
             rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
         xmax = np.array([law.max_elongation for law in laws], dtype=float)
         kend = np.array([law._k_end for law in laws], dtype=float)
-        (C, mu_alpha), (beta, z0) = self.friction_levels
-        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0))
+        (C, mu_alpha), (beta, z0), Fs = self.friction_levels
+        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0, Fs))
         return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
                 np.empty(len(laws)), levels, np.zeros(self.S.shape[1]))
 
@@ -677,9 +680,10 @@ FrictionBound = FrictionBound_[None]
 
 
 def link_friction_levels(rig: Any) -> tuple:
-    """``((C, mu alpha), (beta, z0))`` (m each): the rig's guide friction levels (4.1)/capstan
-    (:func:`~awiwi_drake.control.chain.guide_friction_levels`) and its lever hysteresis half-width ``beta f + z0``
-    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off)."""
+    """``((C, mu alpha), (beta, z0), Fs)``: the rig's guide friction levels (4.1)/capstan (m each,
+    :func:`~awiwi_drake.control.chain.guide_friction_levels`), its lever hysteresis half-width ``beta f + z0``
+    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off) and its
+    joints' breakaway levels (n, :func:`~awiwi_drake.control.chain.joint_friction_levels`; zeros when off)."""
     m = rig.coupling.num_tendons
     drive = getattr(rig, "drive", None)
     h = None if drive is None else drive.model.hysteresis
@@ -687,7 +691,7 @@ def link_friction_levels(rig: Any) -> tuple:
     on = np.array([x is not None and x.enabled for x in hs], dtype=float)
     beta = on * np.array([0.0 if x is None else x.width_ratio for x in hs])
     z0 = on * np.array([0.0 if x is None else x.width_offset for x in hs])
-    return guide_friction_levels(rig), (beta, z0)
+    return guide_friction_levels(rig), (beta, z0), joint_friction_levels(rig)
 
 
 def check_backstepping_springs(rig: Any) -> None:

@@ -273,12 +273,14 @@ def JointFrictionObserver_(T):
     ``friction_compensation`` (k) ``= -scale d_hat`` [Nm] (``scale`` per DoF, default 1), added to the joint stage's
     desired torques; state ``w_hat`` (k), to be started at the measured velocity (0 at rest).
 
-    ``friction_levels`` ``(C, mu alpha)`` (m each, the plant's own guide friction parameters,
-    :meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`; zeros when the guides have no friction)
-    bound the estimate by what the guides' friction can be (:meth:`friction_bound`): per DoF
-    ``B_j = sum_i |(P(q) S)_ij| W_i(f_i)``, ``W_i`` the sliding level of tendon i's guide friction at its measured force
-    (:func:`~awiwi_drake.components.friction.joint_friction_bound`: the chain's ``tendon_force`` is the lever's
-    tension, hysteresis inside, so the guides are all it misses), and the output becomes
+    ``friction_levels`` ``(C, mu alpha, Fs)`` (the plant's own guide friction parameters, m each,
+    :meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`, zeros when the guides have no friction; and
+    its joints' breakaway levels, n, :func:`~awiwi_drake.control.chain.joint_friction_levels`, zeros when off)
+    bound the estimate by what the guides' and the joints' friction can be (:meth:`friction_bound`): per DoF
+    ``B_j = sum_i |(P(q) S)_ij| W_i(f_i) + sum_l |S_lj| Fs_l``, ``W_i`` the sliding level of tendon i's guide friction
+    at its measured force (:func:`~awiwi_drake.components.friction.joint_friction_bound`: the chain's
+    ``tendon_force`` is the lever's tension, hysteresis inside, so the guides and the joints are all it misses), and
+    the output becomes
     ``scale clip(-d_hat, -B, B)``.  The observer is link-side, driven by the measured tendon forces' torque, so its
     ``d_hat`` holds the guides' friction AND any external load; in the thesis (9.1)-(9.2) it sits on the actuator side
     with the strain gauges' joint torque, which contains the load, so a load is not cancelled and the joint stays an
@@ -320,11 +322,14 @@ def JointFrictionObserver_(T):
                                                                         owner="JointFrictionObserver",
                                                                         positive=True)[0])
             m = coupling.num_tendons
+            if friction_levels is not None and len(friction_levels) != 3:
+                raise ValueError(f"JointFrictionObserver: friction_levels must be (C, mu alpha, Fs), got "
+                                 f"{len(friction_levels)} arrays")
             self.levels = None if friction_levels is None else tuple(
-                check_gains(nm, lv, shape=(m,), owner="JointFrictionObserver")
-                for nm, lv in zip(("friction_levels[0] (constant C)", "friction_levels[1] (capstan exponent)"),
-                                  friction_levels))
-            if self.levels is not None and (np.any(self.levels[0] < 0) or np.any(self.levels[1] < 0)):
+                check_gains(nm, lv, shape=(size,), owner="JointFrictionObserver")
+                for nm, lv, size in zip(("friction_levels[0] (constant C)", "friction_levels[1] (capstan exponent)",
+                                         "friction_levels[2] (joint breakaway Fs)"), friction_levels, (m, m, n)))
+            if self.levels is not None and any(np.any(lv < 0) for lv in self.levels):
                 raise ValueError(f"JointFrictionObserver: friction_levels must be >= 0, got {friction_levels}")
             if self.period is None:
                 self.DeclareContinuousState(k)
@@ -353,13 +358,15 @@ def JointFrictionObserver_(T):
             return context.get_discrete_state(self._w).CopyToVector()
 
         def friction_bound(self, q, f, P=None):
-            """``B_j = sum_i |(P(q) S)_ij| W_i(f_i)`` (k) [Nm]: the largest torque the guides' friction can put on each
-            DoF at the measured tendon forces ``f`` (m) (``P``: ``P(q)`` when the caller has it); None when unbounded."""
+            """``B_j = sum_i |(P(q) S)_ij| W_i(f_i) + sum_l |S_lj| Fs_l`` (k) [Nm]: the largest torque the guides' and
+            the joints' friction can put on each DoF at the measured tendon forces ``f`` (m) (``P``: ``P(q)`` when the
+            caller has it); None when unbounded."""
             if self.levels is None:
                 return None
             P = np.asarray(self.coupling.P(q) if P is None else P)
-            # the measured f is the lever's tension (the rig's tendon_force, hysteresis inside): the guides only
-            return joint_friction_bound(P @ self.S, f, self.levels[0], self.levels[1])
+            # the measured f is the lever's tension (the rig's tendon_force, hysteresis inside): guides and joints
+            C, mu_alpha, Fs = self.levels
+            return joint_friction_bound(P, f, C, mu_alpha, joint_level=Fs, selection=self.S)
 
         def compensation(self, w_hat, v, bound=None):
             """``scale clip(-d_hat, -bound, bound)`` (k) [Nm] at the observer state ``w_hat`` (k), joint velocities

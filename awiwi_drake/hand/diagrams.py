@@ -67,7 +67,9 @@ class HandRig(Rig):
     handles, ``joint_names`` and ``tendon_names`` in state order, ``offsets`` the
     spring pre-elongations x0 [m], ``coupling_gain`` G, ``spring_laws`` the
     :class:`~awiwi_drake.components.spring.TendonSprings` of the tendons (one law per tendon,
-    ``params.tendon_springs`` overrides; :attr:`Rig.spring` is the default law).
+    ``params.tendon_springs`` overrides; :attr:`Rig.spring` is the default law), ``joint_friction`` the joints'
+    stick-slip friction the plant integrates (:attr:`~awiwi_drake.hand.dynamics.LinkModel.joint_friction`: n x 4,
+    Coulomb, breakaway, Stribeck velocity, presliding angle per joint; None when off).
     """
 
     models: Any = None
@@ -76,6 +78,7 @@ class HandRig(Rig):
     offsets: Any = None
     coupling_gain: Any = None
     spring_laws: Any = None
+    joint_friction: Any = None
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
         super().set_operating_point(context, op, fix_inputs=fix_inputs)
@@ -163,7 +166,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
                          f"(parameters.hand.TENDON_SLICES) assigns {rows.size} Table 6.2 rows to them")
     G = coupling_force_gain(plant, models)
-    model = _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg)
+    model, links = _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg)
     diagram = b.Build()
     diagram.set_name(name)
     # the drive lives inside the one plant system: its handle points at the rig
@@ -181,7 +184,8 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
                    models=models, joint_names=joint_names,
-                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_laws=laws)
+                   tendon_names=list(coupling.tendon_names), offsets=offsets, coupling_gain=G, spring_laws=laws,
+                   joint_friction=links.joint_friction)
 
 
 def _add_wrist_offsets(b, rows, m):
@@ -198,7 +202,8 @@ def _add_wrist_offsets(b, rows, m):
 
 
 def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, rows, wrist, sg):
-    """The plant: links and drive in one :class:`~.dynamics.HandDynamics_` (compiled float path)."""
+    """The plant: links and drive in one :class:`~.dynamics.HandDynamics_` (compiled float path); returns its
+    ``(DriveModel, LinkModel)``."""
     from ..components.fused_drive import DriveModel, GuideFrictionModel
     from .dynamics import HandDynamics_, LinkModel
     n, m = coupling.num_joints, coupling.num_tendons
@@ -241,7 +246,7 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
         b.Connect(split.get_output_port(0), pose.get_input_port())
         b.Connect(pose.get_output_port(), sg.get_source_pose_port(plant.get_source_id()))
         b.ExportOutput(sg.get_query_output_port(), "query_object")
-    return model
+    return model, links
 
 
 def _joint_friction(p, plant) -> np.ndarray:

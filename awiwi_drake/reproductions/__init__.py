@@ -74,9 +74,17 @@ class FigureEntry:
     run: Callable[[bool], Reproduction]
 
 
+def _finite(value):
+    """``value`` with every non-finite float (NaN: not defined for that run, e.g. no rise) as None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
 def _v(value, unit: str) -> dict:
-    return {"value": None if value is None or (isinstance(value, float) and not math.isfinite(value)) else value,
-            "unit": unit}
+    return {"value": _finite(value), "unit": unit}
 
 
 _PIP_UNITS = dict(peak_torque="Nm", min_tendon_force="N", final_error="rad", rise_time="s", overshoot="%",
@@ -87,11 +95,14 @@ _PIP_UNITS = dict(peak_torque="Nm", min_tendon_force="N", final_error="rad", ris
 def _pip(test: str, short: bool) -> Reproduction:
     from awiwi_drake.plotting import figure_axes, label_axes
     from awiwi_drake.reproductions.ch15_pip_experiments import pip_experiment, pip_metrics
-    names = ("backstepping", "cascaded") if short else ("backstepping", "backstepping-friction-observer", "cascaded")
+    names = (("backstepping", "cascaded") if short else
+             ("backstepping", "backstepping-friction-observer", "cascaded", "cascaded:no-observer"))
     runs = [pip_experiment(n, test, t_final=0.3 if short else None) for n in names]
     fig, ax = figure_axes(None, figsize=(8, 4))
     for r in runs:
         r.plot(ax=ax)
+    for line in [ln for ln in ax.get_lines() if ln.get_label() == "reference"][1:]:   # each run draws it: once
+        line.set_label("_reference")
     label_axes(ax, "PIP angle [deg]", title=f"Fig 15.{24 if test == 'step' else 25}: index PIP {test}, joints' "
                "stick-slip on, 3 kHz", legend=dict(fontsize="small"))
     series = {"t [s]": runs[0].t, "reference [rad]": runs[0].reference}
@@ -207,6 +218,51 @@ def _fig12_3(short: bool) -> Reproduction:
     return Reproduction(fig, series, {})
 
 
+def _fig8_3(short: bool) -> Reproduction:
+    import matplotlib.pyplot as plt
+    from awiwi_drake.reproductions.ch08_stiffness_correction import plot_stiffness_run, stiffness_correction_run
+    kw = dict(loads=(0.0, 0.15), segment=0.2) if short else dict(loads=(0.0, 0.075, 0.15, 0.0), segment=0.3)
+    runs = [stiffness_correction_run(corrected=c, **kw) for c in (True, False)]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 3.5))
+    plot_stiffness_run(runs[0], ax=axes[0])
+    for r in runs:
+        axes[1].plot(r.t, r.q, label="corrected" if r.corrected else "fixed K_imp")
+    axes[1].set_ylabel("link angle [rad]")
+    axes[1].set_xlabel("time [s]")
+    axes[1].legend()
+    r = runs[0]
+    series = {"t [s]": r.t, "external torque [Nm]": r.tau_ext, "K target [Nm/rad]": r.k_target,
+              "K_imp [Nm/rad]": r.k_imp, "K_mech [Nm/rad]": r.k_mech, "K_eff (8.1) [Nm/rad]": r.k_eff,
+              "link angle, corrected [rad]": r.q, "link angle, fixed K_imp [rad]": runs[1].q}
+    return Reproduction(fig, series, {})
+
+
+def _fig10_2(short: bool) -> Reproduction:
+    import matplotlib.pyplot as plt
+    from awiwi_drake.reproductions.ch10_tendon_force import plot_tendon_steps, tendon_step_experiment
+    runs = [tendon_step_experiment(sched, t_final=0.15 if short else 0.25) for sched in (False, True)]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+    series = {"t [s]": runs[0].t}
+    for r, ax in zip(runs, axes):
+        plot_tendon_steps(r, ax=ax)
+        series.update({f"{r.controller}, from {f0:g} N: tendon force [N]": f for f0, f in r.forces.items()})
+    units = dict(overshoot="%", settling_time="s", damping_ratio="-", rise_time="s", steady_state_error="N",
+                 natural_frequency="rad/s", final="N", dead_time="s")      # step_metrics' keys: a new one fails here
+    values = {r.controller: {f"from {f0:g} N": {k: _v(float(v), units[k]) for k, v in m.items()}
+                             for f0, m in r.metrics.items()} for r in runs}
+    return Reproduction(fig, series, values)
+
+
+def _fig11_4(short: bool) -> Reproduction:
+    from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response, plot_gain_diagrams
+    d = impedance_frequency_response("two-time-scale")
+    fig, _ = plot_gain_diagrams({d.label: (d.freq, d.gain)})
+    return Reproduction(fig, {"frequency [Hz]": d.freq, "gain |q/q_des| [-]": d.gain}, dict(
+        resonance=_v(d.resonance_hz, "Hz"), peak_gain=_v(float(np.max(d.gain)), "-"),
+        eigenvalues_real=_v(np.real(d.eigenvalues).tolist(), "1/s"),
+        eigenvalues_imag=_v(np.imag(d.eigenvalues).tolist(), "1/s")))
+
+
 def _fig9_3(short: bool) -> Reproduction:
     from awiwi_drake.reproductions.ch09_friction_observer import chattering, friction_tracking_run, plot_friction_runs
     runs = [friction_tracking_run(compensate=c, t_final=1.2 if short else 4.0) for c in (False, True)]
@@ -227,8 +283,14 @@ FIGURES: dict[str, FigureEntry] = {e.id: e for e in (
     FigureEntry("cocontraction", "(5.12), ch. 7, (8.1)", "index joint stiffness measured on the closed loop at two "
                 "co-contraction levels (joint-pd at 20/40 N; full: the force chain too)", "ch07_cocontraction",
                 _cocontraction),
+    FigureEntry("fig8.3", "Fig 8.3", "stiffness correction (8.1) on the joint rig: K_eff held at its targets under "
+                "load steps, beside a fixed K_imp", "ch08_stiffness_correction", _fig8_3),
     FigureEntry("fig9.3", "Fig 9.3", "slow sine on the joint rig with link stick-slip friction, "
                 "with and without the observer's compensation", "ch09_friction_observer", _fig9_3),
+    FigureEntry("fig10.2", "Fig 10.2-10.3", "tendon force steps of 5 N from 10-40 N, fixed vs scheduled gains "
+                "(friction, ripple, quantised delayed sensor)", "ch10_tendon_force", _fig10_2),
+    FigureEntry("fig11.4", "Fig 11.4", "gain diagram of the two-time-scale impedance on the joint rig (Kp,imp = 4 Nm/rad), "
+                "Drake Linearize", "ch11_impedance", _fig11_4),
     FigureEntry("fig12.3", "Fig 12.3", "open-loop poles of the flexible joint (Table 12.1) against its stiffness and "
                 "link damping (Drake Linearize)", "ch12_pole_placement", _fig12_3),
     FigureEntry("fig13.2", "Fig 13.2-13.3", "LQR regulation of the flexible joint (Table 13.1) for R = 1e-4, 1e-2, 1: "

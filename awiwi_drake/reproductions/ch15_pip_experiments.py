@@ -14,7 +14,9 @@ Here (numbers and sources in :class:`awiwi_drake.parameters.PipStudy`):
   (the RK3 bound that sets it at the hand's own step scales with ``1/h^2``);
 * any registered finger controller closed at its registered 3 kHz with the joint angles estimated from the tendon
   lengths (5.15), designed at the figure's pretension: the 15.5 backstepping variants (``backstepping``,
-  ``backstepping-friction-observer``, ...) and the cascaded chain (``cascaded``, with its ch. 9 observer);
+  ``backstepping-friction-observer``, ...) and the cascaded chain (``cascaded``, with its ch. 9 observer, whose bound
+  holds the joints' breakaway level, :func:`awiwi_drake.components.friction.joint_friction_bound`;
+  ``cascaded:no-observer`` is the thesis's cascaded controller, which had none);
 * the PIP steps from 0 to 30 deg at 0.05 s (10 N), or tracks 30 + 20 sin(2 pi t) deg from 30 deg (15 N); the other
   joints hold 0.
 """
