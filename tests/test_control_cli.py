@@ -13,11 +13,12 @@ from awiwi_drake.cli import main
 def test_compare_writes_metrics_and_plots(tmp_path):
     out = tmp_path / "cmp"
     rc = main(["compare", "--rig", "flexible-joint", "--controllers", "two-time-scale,lqr", "--out", str(out),
-               "--short", "--tests", "step,disturbance"])
+               "--short", "--tests", "step,disturbance", "--load", "0.03"])
     assert rc == 0
     rows = list(csv.DictReader((out / "metrics.csv").open()))
     assert [(r["controller"], r["test"]) for r in rows] == [
         ("two-time-scale", "step"), ("two-time-scale", "disturbance"), ("lqr", "step"), ("lqr", "disturbance")]
+    assert [float(r["load_torque"]) for r in rows if r["test"] == "disturbance"] == [0.03, 0.03]   # --load
     # the impedance controller holds its stiffness (0.3 Nm/rad, ImpedanceParams) under the torque step
     stiff = float(next(r for r in rows if r["controller"] == "two-time-scale" and r["test"] == "disturbance")["stiffness"])
     assert stiff == pytest.approx(0.3, rel=0.02)

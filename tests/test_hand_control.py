@@ -873,6 +873,15 @@ def test_compare_cli_on_a_finger_writes_one_row_per_joint(tmp_path):
     assert (out / "step_ring.png").exists() and (out / "disturbance_ring.png").exists()
     step = {(r["controller"], r["joint"]): r for r in rows if r["test"] == "step"}
     assert all(r["status"] in ("ok", "flagged") for r in rows), [r["status"] for r in rows]   # none stopped
+    # the load rows: the chain's (with the bounded observer) sized per DoF (size_loads) beside its design's stiffness
+    # and bound, a load kept linear at 1 x the 0.2 rad step's deflection; joint-pd's the fixed 0.01 Nm
+    for r in (r for r in rows if r["test"] == "disturbance"):
+        L, K, B = (float(r[c]) for c in ("load_torque", "design_stiffness", "friction_bound"))
+        if r["controller"] == "joint-pd":
+            assert L == 0.01 and np.isnan(K) and np.isnan(B), r
+        else:
+            assert K > 0 and B > 0 and L <= 0.2 * K * (1 + 1e-5), r        # the CSV keeps 6 digits
+            assert ("kept linear" in r["flags"]) == (L == pytest.approx(0.2 * K, rel=1e-5)), r
     # The step's remaining error is bounded by the loop's own sampled linearisation at rest (sampled_loop_poles:
     # motor friction (3.8) at its steepest slope, at rest; the designs count on it in motion and predict a faster
     # tail than the loop has, see test_joint_design.test_joint_stage_controllers_run_on_other_fingers): the error

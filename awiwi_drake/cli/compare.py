@@ -40,6 +40,9 @@ def register(subparsers) -> None:
                    help="control rate [Hz] (default: the controller's, 3000); 0 = continuous")
     p.add_argument("--delay", type=limited_float("max_delay", "s"), metavar="S", help="round-trip delay [s], e.g. 333e-6")
     p.add_argument("--saturation", type=positive_float, default=None, metavar="NM", help="torque limit [Nm]")
+    p.add_argument("--load", type=positive_float, default=None, metavar="NM",
+                   help="external-torque step of the load test on every joint [Nm] (default: fingers/hand sized per "
+                        "joint above its friction observer's bound, control.compare.size_loads; link rigs 0.02)")
     p.add_argument("--short", action="store_true", help="shorter runs (as AWIWI_SHORT=1)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")
     add_parameter_options(p, "the rig's parameter set", "e.g. --set guide_friction=false for a finger without the "
@@ -89,6 +92,13 @@ def run(args) -> int:
             raise ValueError(f"--tests: unknown test {t!r}; known: {', '.join(TESTS)}")
     if tests is not None and "disturbance" in tests and args.rig == "tendon-rig":
         raise ValueError("--tests: 'disturbance' needs an external torque input; the tendon rig has none")
+    if args.load is not None and args.rig == "tendon-rig":
+        raise ValueError("--load: the tendon rig has no external torque input (no load test)")
+    load = {} if args.load is None else dict(disturbance_torque=args.load, load_bound_factor=0.0)   # not sized
+    try:
+        compare_test_params(args.rig, **load)        # checked before anything is built
+    except ValueError as exc:
+        raise ValueError(f"--load: {exc}") from None
     from awiwi_drake.diagrams import TARGETS, build_target
     rig_params = load_parameters(TARGETS[args.rig]["params"](), args)     # --config then --set
     for flag, given in (("--controller-set", args.controller_set), ("--sensors", args.sensors)):
@@ -117,7 +127,7 @@ def run(args) -> int:
     if args.sensors == "ideal":
         opts["sensors"] = "ideal"
     loops = build_loops(make_rig, names, ctrl_opts, **opts)      # each controller designed once
-    params = compare_test_params(args.rig)
+    params = compare_test_params(args.rig, **load)
     if args.short or short_mode():
         params = short_test_params(make_rig, loops, params)
     else:       # the chosen window, or longer where the compared designs need it
