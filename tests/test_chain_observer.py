@@ -439,6 +439,7 @@ def test_a_load_within_the_guides_friction_is_held_and_compare_names_it():
     mark_load(row, p, B, float(Kp[1]))
     assert row.flags == f"load held by the friction observer (0.01 Nm within its bound {B:.3g} Nm)", row.flags
     assert row.status == "flagged"
+    assert np.isnan(row.stiffness)  # no deflection to measure: not load / ~0
 
 
 def test_fused_equals_composed_with_the_bound_active():

@@ -26,7 +26,7 @@ class Metrics:
     steady_state_error: float = math.nan  # reference - output at the end [unit of the output]
     peak_input: float = math.nan         # max |torque applied to the motors| (after saturation) [Nm]
     peak_command: float = math.nan       # max |motor_torque_command| (before saturation) [Nm]
-    stiffness: float = math.nan          # measured: load / deflection (d external torque / d link angle) [Nm/rad]
+    stiffness: float = math.nan          # measured: load / deflection [Nm/rad]; NaN when the observer held the load
     design_stiffness: float = math.nan   # load test: the design's static stiffness of the DoF, 1 / (K^-1)_jj [Nm/rad]
     load_torque: float = math.nan        # load test: the external torque step on the DoF [Nm]
     friction_bound: float = math.nan     # load test: the friction observer's bound B of the DoF at the end [Nm]

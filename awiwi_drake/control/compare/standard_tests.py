@@ -224,8 +224,8 @@ def mark_load(row: Metrics, params: CompareTestParams, bound: float, impedance: 
     at the end of the run), ``impedance`` the design's static stiffness ``K`` of the DoF [Nm/rad]
     (:func:`design_stiffness`), ``note`` :func:`size_loads`'s (a load kept linear below its bound: flagged with it).
 
-    ``|L| < B``: the row's ``not settled`` / ``negative stiffness`` (a deflection that goes back to ~0, measured
-    against itself) become ``load held by the friction observer (X Nm within its bound Y Nm)``.  Physics, not a
+    ``|L| < B``: the row's ``stiffness`` is NaN (the load over a deflection that went back to ~0, a meaningless
+    number of any size and sign) and its ``not settled`` / ``negative stiffness`` (measured against that ~0) become ``load held by the friction observer (X Nm within its bound Y Nm)``.  Physics, not a
     failure of the loop: the observer is link-side, driven by the measured tendon forces' torque, so it attributes
     every torque they do not explain to the link (9.1) and cannot tell a load below what the guides' friction can
     be from that friction: it cancels it, and the joint does not show its impedance (in the thesis's (9.1)-(9.2)
@@ -242,6 +242,7 @@ def mark_load(row: Metrics, params: CompareTestParams, bound: float, impedance: 
         still = impedance is not None and row.drift > params.settling_band * abs(load / impedance)
         flags = [f for f in flags if f != "negative stiffness" and (f != "not settled" or still)]
         flags.append(f"load held by the friction observer ({abs(load):.3g} Nm within its bound {bound:.3g} Nm)")
+        row.stiffness = math.nan  # load / ~0: no deflection to measure (e.g. -1.4e14 Nm/rad), the flag says why
     elif impedance is not None:
         lo, hi = load_stiffness_range(load, bound, impedance, row.estimation_error)
         if not lo <= row.stiffness <= hi:
