@@ -8,5 +8,5 @@ from awiwi_drake.analysis.results import SimulationResult
 from awiwi_drake.analysis.schedules import Chirp, Constant, PerEntry, Ramp, Samples, Sine, Step
 from awiwi_drake.analysis.simulate import (
     PHYSICAL_FAILURES, FlatSystem, InfeasibleForceError, SimulationDivergedError, SimulationError,
-    SimulationEventError, add_flat, control_period, simulate)
+    SimulationEventError, add_flat, control_period, fixed_step_substeps, simulate, stability_function)
 from awiwi_drake.analysis.sweep import run_sweep

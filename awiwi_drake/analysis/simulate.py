@@ -25,6 +25,15 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   the next instant's (Drake's discrete-time semantics), so log it on its grid
   (every step, or a ``log_period`` that is a multiple of the period); a
   ``t_final`` within round-off of a sample instant is snapped onto it;
+* checks a fixed-step run's stability before it starts: every leaf with an ``integration_modes(context)`` hook
+  (the finger/hand plant: the eigenvalues of Drake's ``Linearize`` of it with its inputs held) has each mode
+  ``lambda`` tested against the integrator's stability function ``R`` (RK3: ``1 + z + z^2/2 + z^3/6``) at
+  ``z = h lambda``; a mode the integrator amplifies beyond the continuous system (``|R| > max(1, |exp(z)|)``)
+  makes the run integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
+  ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
+  unchanged), with a one-line warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``substeps=1`` refuses
+  (a ``ValueError`` naming the mode and ``|R|``), ``substeps=k`` imposes ``k``.  The check is repeated at the
+  end state: a mode that left the region during the run is an ``integrator_instability`` event;
 * calls ``progress(t, duration)`` (simulated seconds since the start) after
   every chunk, for progress bars.
 
@@ -39,6 +48,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from fractions import Fraction
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
@@ -52,9 +62,12 @@ from awiwi_drake.analysis.monitors import Monitor
 from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCHEME
 from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
+from awiwi_drake.analysis.monitors import Event
+from awiwi_drake.parameters.control import FIXED_STEP_STABILITY_MARGIN
 
 __all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
-           "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants", "FlatSystem", "add_flat"]
+           "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants", "FlatSystem", "add_flat",
+           "stability_function", "fixed_step_substeps"]
 
 MODES = ("auto", "fixed_step", "error_controlled")
 _FIXED_STEP_INTEGRATORS = ("explicit_euler", "semi_explicit_euler", "runge_kutta2")
@@ -101,6 +114,62 @@ PHYSICAL_FAILURES = (SimulationDivergedError, SimulationEventError, InfeasibleFo
 _MAX_RATE_RATIO = 1000  # a common period this many times below the shortest one: rates not commensurate
 SAMPLED_PLANT_PREFIX = "DiscreteTimeApproximated_"   # Drake's name of a DiscreteTimeApproximation of <name>
 _GRID_TOLERANCE = 1e-6   # periods: a time this close to a sample instant is that instant (decimal inputs' round-off)
+
+
+#: order p of the fixed-step integrators whose stability function is the degree-p Taylor polynomial of exp
+#: (explicit p-stage methods of order p <= 4: R(z) = sum_{k<=p} z^k / k!; Drake's RK2 is Heun's method, RK3 a
+#: 3-stage 3rd-order method)
+_TAYLOR_ORDER = {"explicit_euler": 1, "runge_kutta2": 2, "runge_kutta3": 3}
+_MAX_SUBSTEPS = 64
+
+
+def stability_function(integrator: str, z) -> np.ndarray:
+    """``|R(z)|``, the fixed-step ``integrator``'s amplification of the mode ``exp(lambda t)`` over one step
+    (``z = h lambda``); R is the Taylor polynomial of ``exp`` of the method's order (:data:`_TAYLOR_ORDER`)."""
+    z = np.asarray(z, dtype=complex)
+    terms, r = np.ones_like(z), np.ones_like(z)
+    for k in range(1, _TAYLOR_ORDER[integrator] + 1):
+        terms = terms * z / k
+        r = r + terms
+    return np.abs(r)
+
+
+def _excess(integrator: str, z) -> np.ndarray:
+    """``|R(z)| - max(1, |exp(z)|)`` per mode: > 0 where the integrator amplifies a mode that the continuous
+    system does not (numerical instability); modes the system itself grows are judged against their growth."""
+    z = np.asarray(z, dtype=complex)
+    return stability_function(integrator, z) - np.maximum(1.0, np.abs(np.exp(z)))
+
+
+def fixed_step_substeps(modes, h: float, integrator: str = "runge_kutta3",
+                        margin: float = FIXED_STEP_STABILITY_MARGIN) -> tuple[int, complex, float]:
+    """``(k, worst mode, |R(h lambda)|)``: ``k = 1`` when every mode ``lambda`` [1/s] lies in ``integrator``'s
+    stability region at the step ``h`` [s], else the smallest ``k`` for which every ``margin h lambda / k`` does
+    (0 when none up to 64 does); the mode reported is the one furthest outside at ``h`` (all inside: the fastest)."""
+    modes = np.asarray(modes, dtype=complex).reshape(-1)
+    if modes.size == 0:
+        return 1, complex("nan"), float("nan")
+    excess = _excess(integrator, h * modes)
+    i = int(np.argmax(excess))
+    if excess[i] <= 1e-9:                 # all inside: report the fastest mode
+        i = int(np.argmax(np.abs(modes)))
+        return 1, complex(modes[i]), float(stability_function(integrator, h * modes[i]))
+    growth = float(stability_function(integrator, h * modes[i]))
+    for k in range(2, _MAX_SUBSTEPS + 1):
+        if np.all(_excess(integrator, margin * h * modes / k) <= 1e-9):
+            return k, complex(modes[i]), growth
+    return 0, complex(modes[i]), growth
+
+
+def _plant_modes(sub: "FlatSystem", root) -> list[tuple[str, np.ndarray]]:
+    """``(leaf name, modes)`` of every leaf copy in ``sub`` that reports its modes (``integration_modes``)."""
+    return [(leaf.get_name(), np.asarray(copy.integration_modes(copy.GetMyContextFromRoot(root))))
+            for leaf, copy in sub.leaves
+            if callable(getattr(copy, "integration_modes", None)) and copy.num_continuous_states()]
+
+
+def _mode_text(lam: complex) -> str:
+    return f"{lam.real:.4g} {'+' if lam.imag >= 0 else '-'} {abs(lam.imag):.4g}j 1/s"
 
 
 def sampled_plants(system: System) -> list[System]:
@@ -264,7 +333,7 @@ def simulate(system, context: Context | None, t_final: float, *,
              integrator: str = "runge_kutta3", max_step: float = 1e-3, accuracy: float = 1e-5,
              divergence_bound: float = 1e6, t_start: float | None = None, log_period: float | None = None,
              progress: Callable[[float, float], Any] | None = None,
-             state_names: Sequence[str] | None = None) -> SimulationResult:
+             state_names: Sequence[str] | None = None, substeps: int | None = None) -> SimulationResult:
     """Simulate ``system`` from ``context`` to the time ``t_final`` [s] with Drake's ``Simulator``.
 
     Parameters
@@ -308,6 +377,10 @@ def simulate(system, context: Context | None, t_final: float, *,
         about 40 times per run (and at the end).
     state_names : sequence of str, optional
         Channel names of the ``state`` output (default: the handle's ``state_names``).
+    substeps : int, optional
+        Fixed step only: integrate at ``step / substeps``.  None (default): 1 unless a plant mode lies outside the
+        integrator's stability region at ``step`` (see the module docstring), then the smallest count that puts
+        every mode inside with a margin, reported in ``info`` and by a warning; ``1`` refuses such a run.
 
     Returns
     -------
@@ -334,6 +407,9 @@ def simulate(system, context: Context | None, t_final: float, *,
             raise ValueError(f"simulate: {label} = {v!r} must be a finite number")
         if lo is not None and v <= lo:
             raise ValueError(f"simulate: {label} = {v!r} must be > {lo}")
+    if substeps is not None and (isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer))
+                                 or substeps < 1):
+        raise ValueError(f"simulate: substeps = {substeps!r} must be a positive integer")
     for label, v in (("step", step), ("log_period", log_period), ("t_start", t_start)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.floating))
                               or not math.isfinite(v) or (label != "t_start" and v <= 0)):
@@ -490,6 +566,35 @@ def simulate(system, context: Context | None, t_final: float, *,
             wrapper.GetInputPort(name).FixValue(root, fixed_inputs[name])
     root.SetTime(start)
 
+    # -- fixed-step stability of the plants' modes at the initial state --------
+    if substeps is not None and (mode != "fixed_step" or sampled):
+        raise ValueError(f"simulate: substeps = {substeps} needs a fixed-step run of a continuous plant (the run is "
+                         + (f"{mode})" if mode != "fixed_step" else f"a sampled plant's, {sampled[0].get_name()!r})"))
+    n_sub, worst = 1, None
+    modes = _plant_modes(sub, root) if integrator in _TAYLOR_ORDER and mode == "fixed_step" else []
+    for leaf_name, lam in modes:     # the plant needing the most substeps (0: none suffices), then the largest |R|
+        k, mode_k, growth = fixed_step_substeps(lam, h, integrator)
+        if worst is None or ((k or math.inf), growth) > ((worst[1] or math.inf), worst[3]):
+            worst = (leaf_name, k, mode_k, growth)
+    if worst is not None and worst[1] != 1:
+        leaf_name, k, lam, growth = worst
+        what = (f"simulate: {leaf_name!r} has the mode {_mode_text(lam)} with |R(h lambda)| = {growth:.5g} for "
+                f"{integrator} at the step h = {h:.6g} s (outside its stability region: the fixed-step run would grow a "
+                f"numerical oscillation)")
+        if k == 0:
+            raise ValueError(f"{what}; no substep count up to {_MAX_SUBSTEPS} brings it inside: use "
+                             f"mode='error_controlled'")
+        if substeps is None:
+            warnings.warn(f"{what}; integrating at h/{k} = {h / k:.6g} s (substeps={k}; substeps=1 refuses)",
+                          stacklevel=2)
+            n_sub = k
+        elif substeps < k:
+            raise ValueError(f"{what}; substeps = {substeps} is too few: {k} put every mode inside "
+                             f"(margin {FIXED_STEP_STABILITY_MARGIN:g})")
+    if substeps is not None:
+        n_sub = int(substeps)
+    h_outer, h = h, h / n_sub
+
     sim = Simulator(wrapper, root)
     try:
         ResetIntegratorFromFlags(sim, integrator, h)
@@ -598,6 +703,15 @@ def simulate(system, context: Context | None, t_final: float, *,
     events = []
     for m, s in watched:
         events.extend(m.events(*read(s)))
+    for leaf_name, lam in (_plant_modes(sub, root) if modes else []):   # the same check at the end state
+        excess = _excess(integrator, h * lam)
+        i = int(np.argmax(excess))
+        if excess[i] > 1e-9:
+            growth = float(stability_function(integrator, h * lam[i]))
+            events.append(Event("integrator_instability", leaf_name, float(t_final), float(t_final), growth))
+            warnings.warn(f"simulate: at t = {float(t_final):.6g} s {leaf_name!r} has the mode {_mode_text(complex(lam[i]))} "
+                          f"outside {integrator}'s stability region at h = {h:.6g} s (|R| = {growth:.5g}): the run's "
+                          f"end is not trustworthy; give more substeps or mode='error_controlled'", stacklevel=2)
     events.sort(key=lambda e: (e.t_start, e.kind, e.channel))
     limits = {}   # thresholds of monitors watching a logged signal, drawn by SimulationResult.plot
     for m, s in watched:
@@ -605,6 +719,9 @@ def simulate(system, context: Context | None, t_final: float, *,
             if (ls is s if m.limits_on is None else label == m.limits_on) and m.limits():
                 limits.setdefault(label, []).extend([list(x) for x in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
+                substeps=n_sub if mode == "fixed_step" else None,
+                fastest_mode=None if worst is None else dict(system=worst[0], mode=worst[2], growth=worst[3],
+                                                             step=h_outer),
                 max_step=h if mode == "error_controlled" else None,
                 accuracy=float(accuracy) if mode == "error_controlled" else None,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,

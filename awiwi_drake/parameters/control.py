@@ -8,10 +8,17 @@ from awiwi_drake.parameters.base import Parameters, param
 
 __all__ = ["TendonForceGains", "ForceSensorParams", "PolePlacementParams", "LqrParams", "SdreTendonParams",
            "SdreJointParams", "ImpedanceParams", "ImpedanceSweepParams", "RippleCompensationParams", "FrictionIdentificationParams",
-           "CompareTestParams", "LQR_R_VALUES", "CONTROL_RATE_HZ"]
+           "CompareTestParams", "LQR_R_VALUES", "CONTROL_RATE_HZ", "FIXED_STEP_STABILITY_MARGIN"]
 
 #: The hand's control rate [Hz] (ch. 1: 3 kHz, 333 us round trip; the rate of the thesis's experiments).
 CONTROL_RATE_HZ = 3000.0
+
+#: Fixed-step stability margin of :func:`~awiwi_drake.analysis.simulate`: when a plant mode lies outside the
+#: integrator's stability region at the step ``h``, the plant is integrated at ``h / k`` with the smallest ``k`` that
+#: puts every mode, its frequency scaled by this factor, inside (chosen: room for the mode's stiffness to grow by
+#: 1.25^2 = 56 % along the run before it leaves the region again; a plant whose modes are inside at ``h`` itself keeps
+#: ``k = 1``: at 20 N and 3 kHz the fingers' fastest modes are 3-25 % inside, the hand's 3 %, measured 2026-12-01).
+FIXED_STEP_STABILITY_MARGIN = 1.25
 
 #: Table 13.1: the three input costs of Fig 13.2-13.3.
 LQR_R_VALUES = (1e-4, 1e-2, 1.0)
