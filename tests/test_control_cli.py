@@ -19,9 +19,13 @@ def test_compare_writes_metrics_and_plots(tmp_path):
     assert [(r["controller"], r["test"]) for r in rows] == [
         ("two-time-scale", "step"), ("two-time-scale", "disturbance"), ("lqr", "step"), ("lqr", "disturbance")]
     assert [float(r["load_torque"]) for r in rows if r["test"] == "disturbance"] == [0.03, 0.03]   # --load
-    # the impedance controller holds its stiffness (0.3 Nm/rad, ImpedanceParams) under the torque step
-    stiff = float(next(r for r in rows if r["controller"] == "two-time-scale" and r["test"] == "disturbance")["stiffness"])
-    assert stiff == pytest.approx(0.3, rel=0.02)
+    # the impedance controller holds its stiffness (0.3 Nm/rad, ImpedanceParams) under the torque step. Bound: the
+    # deflection is measured on the last 10 % of the run; what it still lacks of its steady value is the decaying
+    # mode's rate times its time constant, at most the row's ``drift`` (end rate times the time since the step)
+    # while that constant is shorter than the test: rel. error <= drift / deflection (measured 1.3e-5 <= 1.6e-4)
+    row = next(r for r in rows if r["controller"] == "two-time-scale" and r["test"] == "disturbance")
+    stiff, drift = float(row["stiffness"]), float(row["drift"])
+    assert stiff == pytest.approx(0.3, rel=drift / (float(row["load_torque"]) / stiff))
     assert all(r["status"] == "ok" for r in rows if r["controller"] == "two-time-scale")
     for r in rows:  # status flags are consistent with the metrics in the CSV
         assert r["status"] == ("flagged" if r["flags"] else "ok")
