@@ -73,9 +73,9 @@ def test_substeps_are_the_smallest_count_that_puts_every_mode_inside_with_the_ma
     assert fixed_step_substeps([-1e9], H)[0] == 0          # no k up to 64 brings -3e5 h inside
 
 
-def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at_20_n_at_it():
-    """The plant's modes (the hook on ``hand_dynamics``: central differences of its compiled dynamics) equal the
-    eigenvalues of the whole finger's Drake linearisation (AutoDiffXd); on the thumb at 40 N the link mode -24.5 + 5351j 1/s has ``|R| = 1.0105`` at 3 kHz, so
+def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at_20_n_at_it(monkeypatch):
+    """The plant's modes (the hook on ``hand_dynamics``: central differences of its compiled dynamics, or Drake's
+    ``Linearize`` of it without kernels) equal the eigenvalues of the whole finger's Drake linearisation; on the thumb at 40 N the link mode -24.5 + 5351j 1/s has ``|R| = 1.0105`` at 3 kHz, so
     ``simulate`` warns, integrates at h/2 (where every mode is inside with the margin) and refuses ``substeps=1``
     with one line naming the mode; on the index at the default pretension every mode is inside at h."""
     thumb = finger_diagram(finger="thumb")
@@ -87,6 +87,11 @@ def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at
     gap = np.abs(modes[:, None] - full[None, :])       # each mode has its twin in the other set, to 1e-6 relative
     scale = 1e-6 * max(1.0, np.abs(full).max())
     assert modes.size == full.size and gap.min(axis=0).max() <= scale and gap.min(axis=1).max() <= scale
+    with monkeypatch.context() as m:     # a drive without compiled kernels: Drake's Linearize of the plant alone
+        m.setattr(type(leaf.model), "supports_symbolic", property(lambda self: False))
+        exact = leaf.integration_modes(leaf.GetMyContextFromRoot(ctx))
+    gap = np.abs(exact[:, None] - full[None, :])
+    assert exact.size == full.size and gap.min(axis=0).max() <= 1e-3 * scale and gap.min(axis=1).max() <= 1e-3 * scale
     k, mode, growth = fixed_step_substeps(modes, H)
     assert k == 2 and mode.real == pytest.approx(-24.46, abs=0.01) and abs(mode.imag) == pytest.approx(5350.6, abs=0.1)
     assert growth == pytest.approx(1.0105, abs=1e-4)
