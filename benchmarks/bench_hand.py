@@ -11,7 +11,9 @@ For one finger (index) and the whole hand (wrist input at 0):
 * closed loop: the 3 kHz joint-space PD (ZeroOrderHold) with a small step
   reference, (a) error-controlled RK3 (accuracy 1e-4) and (b) fixed-step RK3
   at the control period (one integrator step per controller sample);
-* time of ``analysis.linearize`` (Drake ``Linearize``).
+* time of ``analysis.linearize`` (Drake ``Linearize``);
+* time of the plant's ``integration_modes`` (the fixed-step stability check ``analysis.simulate`` runs at the
+  start and at the end of every fixed-step run).
 
 Real-time factor = simulated time / wall time (best of ``--repeat``).  The
 figures depend on the machine load; run on an idle core for comparable numbers.
@@ -64,6 +66,15 @@ def bench(target: str, sim_time: float, repeat: int) -> dict:
         linearize(rig)
         lin_times.append(time.perf_counter() - t0)
     out["linearize_s"] = min(lin_times)
+    leaf = rig.diagram.GetSubsystemByName("hand_dynamics")
+    leaf_ctx = leaf.GetMyContextFromRoot(rig.context())
+    leaf.integration_modes(leaf_ctx)                 # the kernels' first compile is not the check's cost
+    mode_times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        leaf.integration_modes(leaf_ctx)
+        mode_times.append(time.perf_counter() - t0)
+    out["modes_s"] = min(mode_times)
     best = 0.0
     for _ in range(repeat):
         rtf, steps = _run(rig.diagram, rig.context(), sim_time)
@@ -92,12 +103,12 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="also write the rows to this JSON file")
     args = ap.parse_args(argv)
     rows = []
-    print(f"{'target':8s} {'build s':>8s} {'lin s':>7s} {'open RTF':>9s} "
+    print(f"{'target':8s} {'build s':>8s} {'lin s':>7s} {'modes s':>8s} {'open RTF':>9s} "
           f"{'ctrl RTF':>9s} {'ctrl fixed RTF':>15s}")
     for target in args.targets.split(","):
         r = bench(target, args.sim_time, args.repeat)
         rows.append(r)
-        print(f"{target:8s} {r['build_s']:8.2f} {r['linearize_s']:7.3f} "
+        print(f"{target:8s} {r['build_s']:8.2f} {r['linearize_s']:7.3f} {r['modes_s']:8.4f} "
               f"{r['open_loop_rtf']:9.3f} {r['closed_loop_rtf']:9.3f} {r['closed_loop_fixed_step_rtf']:15.3f}",
               flush=True)
     if args.json:
