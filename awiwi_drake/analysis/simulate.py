@@ -362,8 +362,9 @@ def simulate(system, context: Context | None, t_final: float, *,
         Fixed step [s]; default the control period (or ``max_step`` for a
         continuous diagram).  For a sampled loop it must divide the control period.
     integrator : str
-        Drake integrator name (``runge_kutta3`` default: for the hand the cheapest
-        stable fixed-step choice at 3 kHz; ``runge_kutta2`` diverges there).
+        Drake integrator name (``runge_kutta3`` default: for the hand at its operating point the cheapest
+        stable fixed-step choice at 3 kHz; ``runge_kutta2`` diverges there).  Fixed-step ``explicit_euler``,
+        ``runge_kutta2`` and ``runge_kutta3`` runs are checked against the plant's modes (``substeps``).
     max_step, accuracy : float
         Error-controlled mode: maximum step [s] and target accuracy.
     divergence_bound : float
