@@ -14,7 +14,9 @@ import warnings
 
 import numpy as np
 import pytest
+from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.primitives import LinearSystem
+from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.analysis import fixed_step_substeps, linearize, simulate, stability_function
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -141,3 +143,46 @@ def test_substeps_is_validated():
         simulate(sys, ctx, 0.01, substeps=2)
     res = simulate(sys, ctx, 0.01, mode="fixed_step", step=1e-3, substeps=4)
     assert res.info["step"] == pytest.approx(2.5e-4) and res.info["substeps"] == 4
+
+
+@TemplateSystem.define("StiffeningOscillator_")
+def StiffeningOscillator_(T):
+    """``x'' = -w^2 x`` with ``w = w0 + s`` and ``s' = rate`` (state ``[x, v, s]``): a mode ``+-i w`` that moves
+    along the imaginary axis as the run goes; ``integration_modes`` is its Jacobian's eigenvalues in closed form."""
+
+    class Impl(LeafSystem_[T]):
+        def _construct(self, w0=1.0, rate=0.0, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self.w0, self.rate = float(w0), float(rate)
+            self.DeclareContinuousState(3)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.w0, other.rate, converter=converter)
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            x, v, s = context.get_continuous_state_vector().CopyToVector()
+            w = self.w0 + s
+            derivatives.SetFromVector(np.array([v, -w * w * x, self.rate]))
+
+        def integration_modes(self, context):
+            w = self.w0 + context.get_continuous_state_vector().GetAtIndex(2)
+            return np.array([1j * w, -1j * w, 0.0])
+
+    return Impl
+
+
+def test_a_mode_that_leaves_the_region_during_the_run_is_an_event_at_its_end():
+    """Inside at the start (``h w = 1.5 < sqrt(3)``: no substeps), outside at the end (``h w = 2.0``): the end-state check
+    reports an ``integrator_instability`` event with ``|R(2i)| = sqrt(1 - 16/12 + 64/36)`` and warns."""
+    t_final = 0.05
+    osc = StiffeningOscillator_[float](w0=1.5 / H, rate=0.5 / H / t_final)
+    ctx = osc.CreateDefaultContext()
+    ctx.SetContinuousState([1e-3, 0.0, 0.0])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = simulate(osc, ctx, t_final, mode="fixed_step", step=H, log=())
+    assert res.info["substeps"] == 1
+    (event,) = res.events
+    assert event.kind == "integrator_instability" and event.t_start == pytest.approx(t_final)
+    assert event.extreme == pytest.approx(np.sqrt(1 - 16 / 12 + 64 / 36), rel=1e-6)
+    assert any("outside runge_kutta3's stability region" in str(w.message) for w in caught)
