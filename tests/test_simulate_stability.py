@@ -17,7 +17,7 @@ import pytest
 from pydrake.systems.primitives import LinearSystem
 
 from awiwi_drake.analysis import fixed_step_substeps, linearize, simulate, stability_function
-from awiwi_drake.hand.diagrams import finger_diagram
+from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ, FIXED_STEP_STABILITY_MARGIN
 
 H = 1.0 / CONTROL_RATE_HZ
@@ -73,9 +73,15 @@ def test_substeps_are_the_smallest_count_that_puts_every_mode_inside_with_the_ma
     assert fixed_step_substeps([-1e9], H)[0] == 0          # no k up to 64 brings -3e5 h inside
 
 
-def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at_20_n_at_it():
-    """The plant's modes (the hook on ``hand_dynamics``: central differences of its compiled dynamics) equal the
-    eigenvalues of the whole finger's Drake linearisation (AutoDiffXd); on the thumb at 40 N the link mode -24.5 + 5351j 1/s has ``|R| = 1.0105`` at 3 kHz, so
+def _same_modes(a, b, rel):
+    gap = np.abs(a[:, None] - b[None, :])      # each mode has its twin in the other set
+    scale = rel * max(1.0, np.abs(b).max())
+    return a.size == b.size and gap.min(axis=0).max() <= scale and gap.min(axis=1).max() <= scale
+
+
+def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at_20_n_at_it(monkeypatch):
+    """The plant's modes (the hook on ``hand_dynamics``: central differences of its compiled dynamics, or Drake's
+    ``Linearize`` of it without kernels) equal the eigenvalues of the whole finger's Drake linearisation; on the thumb at 40 N the link mode -24.5 + 5351j 1/s has ``|R| = 1.0105`` at 3 kHz, so
     ``simulate`` warns, integrates at h/2 (where every mode is inside with the margin) and refuses ``substeps=1``
     with one line naming the mode; on the index at the default pretension every mode is inside at h."""
     thumb = finger_diagram(finger="thumb")
@@ -84,9 +90,11 @@ def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at
     leaf = thumb.diagram.GetSubsystemByName("hand_dynamics")
     modes = leaf.integration_modes(leaf.GetMyContextFromRoot(ctx))
     full = np.linalg.eigvals(linearize(thumb, op).A)
-    gap = np.abs(modes[:, None] - full[None, :])       # each mode has its twin in the other set, to 1e-6 relative
-    scale = 1e-6 * max(1.0, np.abs(full).max())
-    assert modes.size == full.size and gap.min(axis=0).max() <= scale and gap.min(axis=1).max() <= scale
+    assert _same_modes(modes, full, 1e-6)
+    with monkeypatch.context() as m:     # a drive without compiled kernels: Drake's Linearize of the plant alone
+        m.setattr(type(leaf.model), "supports_symbolic", property(lambda self: False))
+        exact = leaf.integration_modes(leaf.GetMyContextFromRoot(ctx))
+    assert _same_modes(exact, full, 1e-9)
     k, mode, growth = fixed_step_substeps(modes, H)
     assert k == 2 and mode.real == pytest.approx(-24.46, abs=0.01) and abs(mode.imag) == pytest.approx(5350.6, abs=0.1)
     assert growth == pytest.approx(1.0105, abs=1e-4)
@@ -105,6 +113,21 @@ def test_thumb_at_40_n_is_integrated_at_half_the_control_period_and_the_index_at
     res = simulate(index, index.context(), 0.002, mode="fixed_step", step=H, log=("joint_angle",))
     assert res.info["substeps"] == 1 and res.info["step"] == H
     assert res.info["fastest_mode"]["growth"] <= 1.0
+
+
+def test_the_hand_plant_perturbs_one_state_of_every_finger_at_once_and_keeps_its_modes():
+    """The hand's fingers are independent (the wrist is an input), so the hook's differences perturb one state of every
+    finger per evaluation; its modes equal those of Drake's ``Linearize`` of the whole hand plant (one finger's
+    groups would be wrong if a finger's state moved another's derivative)."""
+    hand = hand_diagram()
+    ctx = hand.context(hand.operating_point(pretension=40.0))
+    leaf = hand.diagram.GetSubsystemByName("hand_dynamics")
+    groups = leaf._finger_states()
+    assert len(groups) == 5 and np.array_equal(np.sort(np.concatenate(groups)), np.arange(hand.num_states))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")      # the thumb at 40 N: substeps (tested above)
+        full = np.linalg.eigvals(linearize(hand, hand.operating_point(pretension=40.0)).A)
+    assert _same_modes(leaf.integration_modes(leaf.GetMyContextFromRoot(ctx)), full, 1e-6)
 
 
 def test_substeps_is_validated():
