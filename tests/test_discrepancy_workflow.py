@@ -270,7 +270,7 @@ def test_torque_constant_error_is_not_named_ripple():
     step = run.steps[0]
     assert (step.effect, step.kind, step.status, step.members) == \
         ("drive_gain", "nuisance", "not separable", ["drive_gain", "motor_ripple"])
-    assert "commanded torque" in step.experiment and run.st.ratio < 1.5        # explained: not "unexplained"
+    assert "commanded torque" in step.experiment and run.st.ratio < DiscrepancySettings().unexplained_ratio  # explained
     # and it is the torque-constant error: force gain e and spring scale 1/(1 + e) - 1 (the derivation above),
     # within three standard errors of the fit
     e, p, se = ds.meta["truth"]["torque_constant"], step.parameters, step.uncertainties
