@@ -209,6 +209,7 @@ def sindy_baseline(ds, threshold: float = 0.1) -> dict:
     from scipy.signal import savgol_filter
 
     from awiwi_drake.discrepancy import laws
+    from awiwi_drake.parameters.discrepancy import RIPPLE_MIN_PERIODS
 
     p, dt = ds.parameters, ds.dt
     win = max(5, int(round(0.031 / dt)) | 1)
@@ -237,7 +238,7 @@ def sindy_baseline(ds, threshold: float = 0.1) -> dict:
         add(w, "motor_friction")
         span = float(np.ptp(th))
         for k in (1, 2, 3, 4, 5, 6, 100, 200, 300):
-            if k * span / (2 * np.pi) >= 2.0:  # two periods in range, else a generic function of the angle
+            if k * span / (2 * np.pi) >= RIPPLE_MIN_PERIODS:  # else a generic function of the angle
                 add(np.sin(k * th), "motor_ripple")
                 add(np.cos(k * th), "motor_ripple")
         add(f * np.tanh(r * w / 2e-4), "guide_friction")

@@ -9,7 +9,7 @@ A candidate is accepted only if all of these hold:
 * **better than the simpler model** on training data by BIC (``delta_bic < 0``);
 * **identifiable**: no fitted parameter rests on a bound (a bound is not an estimate);
 * **separable from a recalibration** (``motor_ripple`` only, :func:`ripple_adds_to_recalibration`): a
-  ripple whose largest harmonic completes fewer than :data:`RIPPLE_MIN_PERIODS` periods over the motor
+  ripple whose largest harmonic completes fewer than ``parameters.discrepancy.RIPPLE_MIN_PERIODS`` periods over the motor
   angle the data cover is a generic smooth function of the angle there, and so is the spring-force part
   of a drive-gain (torque-constant) error, which is exactly a recalibration (dividing the motor equation
   by ``1 + e``: :data:`DRIVE_GAIN_RECALIBRATION`).  When that recalibration passes every test and the
@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from awiwi_drake.parameters.discrepancy import DiscrepancySettings
+from awiwi_drake.parameters.discrepancy import RIPPLE_MIN_PERIODS, DiscrepancySettings
 
 from . import laws
 from .catalog import EFFECTS, Effect
@@ -42,7 +42,7 @@ from .replay import ReplayEngine
 from .screen import gain_z
 
 __all__ = ["NoiseEquivalent", "noise_equivalent", "materiality", "rejection_reason", "separating_experiment",
-           "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS", "RIPPLE_MIN_PERIODS", "ripple_periods",
+           "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS", "ripple_periods",
            "DRIVE_GAIN_RECALIBRATION", "recalibration_effect", "ripple_adds_to_recalibration"]
 
 
@@ -184,12 +184,6 @@ def rejection_reason(c, st, settings: DiscrepancySettings) -> str:
     if m and not m["material"]:
         return f"not material: {m['measure']} ({m['size']:.3g} < {m['floor']:.3g} {m['unit']})"
     return ""
-
-
-RIPPLE_MIN_PERIODS = 2.0
-"""Periods over the covered motor-angle range below which a ripple order is a generic function of the angle
-(chosen: the same two periods as the residual maps' cycles-per-revolution line, ``localise.locate``, and the
-sparse-regression baseline's library)."""
 
 
 def ripple_periods(params: dict, angle_span: float) -> float:

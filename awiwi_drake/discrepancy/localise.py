@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import coherence, welch
 
+from awiwi_drake.parameters.discrepancy import RIPPLE_MIN_PERIODS
+
 from .replay import ReplayEngine, project
 
 __all__ = ["ResidualMaps", "residual_maps", "cpr_spectrum", "locate", "effective_sample_size", "CPR_MAX_ORDER"]
@@ -226,10 +228,10 @@ def locate(maps: ResidualMaps, threshold: float) -> dict:
             continue
         b = int(np.nanargmax(np.abs(prof[worst])))
         regions.append({"quantity": quantity, "bin_centre": float(bins[b]), "mean_residual": float(prof[worst][b])})
-    # orders with at least two periods over the angle range covered (lower orders are a
+    # orders with at least RIPPLE_MIN_PERIODS (two) periods over the angle range covered (lower orders are a
     # generic function of the angle there, not a periodicity)
     span = float(maps.position_bins[-1] - maps.position_bins[0]) if len(maps.position_bins) > 1 else 0.0
-    amp = np.where(maps.cpr_orders * span / (2 * np.pi) >= 2.0, maps.cpr_amplitude[worst], 0.0)
+    amp = np.where(maps.cpr_orders * span / (2 * np.pi) >= RIPPLE_MIN_PERIODS, maps.cpr_amplitude[worst], 0.0)
     k = int(np.argmax(amp))
     rms = float(np.sqrt(np.nanmean(maps.residual[worst] ** 2)))
     n_ok = int(np.sum(np.isfinite(maps.residual[worst])))

@@ -32,11 +32,11 @@ import numpy as np
 from scipy.stats import norm
 from threadpoolctl import threadpool_limits
 
-from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
+from awiwi_drake.parameters.discrepancy import RIPPLE_MIN_PERIODS, CatalogBounds, DiscrepancySettings
 
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset, is_finger_rig
-from .decide import (EQUIVALENT_EFFECTS, RIPPLE_MIN_PERIODS, materiality, noise_equivalent, recalibration_effect,
+from .decide import (EQUIVALENT_EFFECTS, materiality, noise_equivalent, recalibration_effect,
                      rejection_reason, ripple_adds_to_recalibration, ripple_periods, separating_experiment)
 from .fit import HeldLinear, fit_parameters
 from .localise import locate, residual_maps

@@ -20,7 +20,15 @@ from dataclasses import dataclass
 
 from .base import Parameters, param
 
-__all__ = ["DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams", "DatasetChecks", "FingerTruthParams"]
+__all__ = ["RIPPLE_MIN_PERIODS", "DiscrepancySettings", "CatalogBounds", "TruthGeneratorParams", "DatasetChecks", "FingerTruthParams"]
+
+
+#: Periods over the covered motor-angle range below which a ripple order is a generic function of the angle, not a
+#: periodicity.  Chosen: two periods, the least over which a sine cannot be mistaken for a smooth trend (one period
+#: of sin(k theta) is fitted by a cubic in theta to a few %); one number for the acceptance of a low-order ripple
+#: (``discrepancy.decide``/``workflow``), the residual maps' cycles-per-revolution line (``localise.locate``) and
+#: the sparse-regression baseline's library (``benchmarks/bench_discrepancy.py``).
+RIPPLE_MIN_PERIODS = 2.0
 
 
 @dataclass(frozen=True)
