@@ -26,7 +26,8 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   (every step, or a ``log_period`` that is a multiple of the period); a
   ``t_final`` within round-off of a sample instant is snapped onto it;
 * checks a fixed-step run's stability before it starts: every leaf with an ``integration_modes(context)`` hook
-  (the finger/hand plant: the eigenvalues of Drake's ``Linearize`` of it with its inputs held) has each mode
+  (the finger/hand plant: the eigenvalues of its dynamics' Jacobian with its inputs held, central differences of
+  its compiled laws checked against Drake's ``Linearize``, or ``Linearize`` itself without kernels) has each mode
   ``lambda`` tested against the integrator's stability function ``R`` (RK3: ``1 + z + z^2/2 + z^3/6``) at
   ``z = h lambda``; a mode the integrator amplifies beyond the continuous system (``|R| > max(1, |exp(z)|)``)
   makes the run integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
