@@ -40,7 +40,6 @@ import math
 import warnings
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
@@ -84,12 +83,9 @@ class GradientSearchResult:
     limit: float = np.pi / 2
 
 
-# not cached on disk: numba keys a function taking a compiled function by that function's identity, which
-# changes from process to process (the cache would grow by one entry per process); ~1.4 s JIT at first use
-@numba.njit(cache=False)
 def _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf):
-    """Algorithm 1's loop (see :func:`thumb_base_gradient_search`), compiled: ``base`` is the thumb's compiled
-    base kinematics (lengths and their Jacobian at ``x``, :meth:`ThumbCoupling._base_kernel`),
+    """Algorithm 1's loop (see :func:`thumb_base_gradient_search`), compiled by :func:`_thumb_kernels`: ``base`` is
+    the thumb's compiled base kinematics (lengths and their Jacobian at ``x``, :meth:`ThumbCoupling._base_kernel`),
     ``x`` (2) and ``buf`` (28) its work arrays.  Returns ``(qa, qb, cost, step, accepted, projected)``."""
     x[0] = 0.0
     x[1] = 0.0
@@ -125,60 +121,57 @@ def _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf):
     return qa, qb, c_best, step, accepted, projected
 
 
-_SEARCHES: dict = {}   # Algorithm 1 specialised per compiled kinematics (id of the kernel -> (kernel, search))
+def _thumb_step(base, dt, qa, qb, iterations, step0, min_step, limit, x, buf, distal, h0b, refine, out):
+    """The estimator's whole thumb step (see :func:`_thumb_kernels`): Algorithm 1 (:func:`_search`) warm-started at
+    ``(qa, qb)``, optionally one Gauss-Newton step on the base block (its 2 x 2 normal equations in closed form), and
+    the PIP/DIP by the pseudo-inverse ``distal`` (2 x 4); writes the four joint angles into ``out``."""
+    qa, qb, _, _, _, _ = _search(base, dt[:4], qa, qb, iterations, step0, min_step, limit, x, buf)
+    if refine:
+        x[0] = qa
+        x[1] = qb
+        base(x, buf)
+        G00 = G01 = G11 = g0 = g1 = 0.0
+        for i in range(4):
+            r = dt[i] - (buf[i] - h0b[i])
+            p0, p1 = buf[4 + 2 * i], buf[5 + 2 * i]
+            G00 += p0 * p0
+            G01 += p0 * p1
+            G11 += p1 * p1
+            g0 += p0 * r
+            g1 += p1 * r
+        det = G00 * G11 - G01 * G01
+        qa += (G11 * g0 - G01 * g1) / det
+        qb += (G00 * g1 - G01 * g0) / det
+    out[0] = qa
+    out[1] = qb
+    for a in range(distal.shape[0]):
+        acc = 0.0
+        for b in range(distal.shape[1]):
+            acc += distal[a, b] * dt[4 + b]
+        out[2 + a] = acc
+    return out
 
 
-def _search_for(base):
-    """:func:`_search` with ``base`` bound at compile time: numba types a compiled-function argument anew at
-    every call from Python (~5 us); the bound version takes plain numbers and arrays."""
-    hit = _SEARCHES.get(id(base))
-    if hit is None or hit[0] is not base:
-        @numba.njit(cache=False)
-        def bound(dh, qa, qb, iterations, step0, min_step, limit, x, buf):
-            return _search(base, dh, qa, qb, iterations, step0, min_step, limit, x, buf)
-        hit = _SEARCHES[id(base)] = (base, bound)
-    return hit[1]
+def _thumb_kernels(base):
+    """:func:`_search` and :func:`_thumb_step` compiled with the thumb's compiled base kinematics ``base``
+    (:meth:`ThumbCoupling._base_kernel`) as a global of one generated module (their ``base`` parameter dropped):
+    ``{"search": fn, "step": fn}``, taking plain numbers and arrays.  A global callee is a static call, so numba
+    caches both on disk with the module (:func:`~awiwi_drake.components.codegen.compile_source`, keyed by the
+    source, which names ``base``'s own cached module): a new process loads the machine code instead of compiling
+    it (measured: ~1.4-3.4 s per process before, paid by every notebook kernel and test worker).  Passed as an
+    argument instead, ``base`` is a first-class function: typed anew at every call from Python (~5 us) and not
+    cacheable (a dynamic global)."""
+    import inspect
 
+    from ..components.codegen import compile_source
 
-_THUMB_ESTIMATES: dict = {}   # the estimator's float step per compiled kinematics (id of the kernel -> (kernel, fn))
-
-
-def _thumb_estimate_for(base):
-    """The estimator's whole thumb step, compiled with ``base`` bound (as :func:`_search_for`): Algorithm 1
-    (:func:`_search`) warm-started at ``(qa, qb)``, optionally one Gauss-Newton step on the base block (its 2 x 2
-    normal equations in closed form), and the PIP/DIP by the pseudo-inverse ``distal`` (2 x 4); writes the four
-    joint angles into ``out``."""
-    hit = _THUMB_ESTIMATES.get(id(base))
-    if hit is None or hit[0] is not base:
-        @numba.njit(cache=False)
-        def step(dt, qa, qb, iterations, step0, min_step, limit, x, buf, distal, h0b, refine, out):
-            qa, qb, _, _, _, _ = _search(base, dt[:4], qa, qb, iterations, step0, min_step, limit, x, buf)
-            if refine:
-                x[0] = qa
-                x[1] = qb
-                base(x, buf)
-                G00 = G01 = G11 = g0 = g1 = 0.0
-                for i in range(4):
-                    r = dt[i] - (buf[i] - h0b[i])
-                    p0, p1 = buf[4 + 2 * i], buf[5 + 2 * i]
-                    G00 += p0 * p0
-                    G01 += p0 * p1
-                    G11 += p1 * p1
-                    g0 += p0 * r
-                    g1 += p1 * r
-                det = G00 * G11 - G01 * G01
-                qa += (G11 * g0 - G01 * g1) / det
-                qb += (G00 * g1 - G01 * g0) / det
-            out[0] = qa
-            out[1] = qb
-            for a in range(distal.shape[0]):
-                acc = 0.0
-                for b in range(distal.shape[1]):
-                    acc += distal[a, b] * dt[4 + b]
-                out[2 + a] = acc
-            return out
-        hit = _THUMB_ESTIMATES[id(base)] = (base, step)
-    return hit[1]
+    def unbound(fn):
+        return inspect.getsource(fn).replace("(base, ", "(")
+    source = "\n".join([
+        "import math", "import numba", "import numpy as np", f"from {base.__module__} import {base.__name__} as base",
+        "", "", "@numba.njit(cache=True)", unbound(_search), "", "@numba.njit(cache=True)", unbound(_thumb_step)])
+    fns = compile_source(source, ["_search", "_thumb_step"], tag="thumb_search")
+    return {"search": fns["_search"], "step": fns["_thumb_step"]}
 
 
 def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0.0), *,
@@ -218,7 +211,7 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
         raise ValueError(f"iterations must be >= 1, got {iterations}")
     if not limit > 0:
         raise ValueError(f"limit must be > 0 [rad], got {limit}")
-    qa, qb, c_best, step, accepted, projected = _search_for(coupling._base_kernel())(
+    qa, qb, c_best, step, accepted, projected = _thumb_kernels(coupling._base_kernel())["search"](
         dh_base, float(q_start[0]), float(q_start[1]), int(iterations), float(step0),
         float(min_step), float(limit), np.empty(2), np.empty(28))
     q = np.array([qa, qb])
@@ -317,7 +310,7 @@ def LinkPositionEstimator_(T):
                 else:
                     self._thumbs.append((name, c, js[name], ts[name]))
             # float: Algorithm 1's compiled search called directly (estimate_thumb's own call, without its checks)
-            self._search = ({name: _thumb_estimate_for(c._base_kernel()) for name, c, _, _ in self._thumbs}
+            self._search = ({name: _thumb_kernels(c._base_kernel())["step"] for name, c, _, _ in self._thumbs}
                             if T is float else None)
             self._work = (np.empty(2), np.empty(28), np.empty(4))
             self._distal = {name: c.distal_pseudo_inverse() for name, c, _, _ in self._thumbs}
