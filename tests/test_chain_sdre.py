@@ -1,6 +1,6 @@
 """The ch. 14 tendon SDRE as the chain's per-tendon force law (``HandChainParams.tendon_law = "sdre"``): the closed-form
 per-tendon Riccati gains against Drake's LQR, the bank against the tendon rig's own SDRE, the gain following the
-spring's slope, the system's scalar conversion and the index finger closed through it at 3 kHz."""
+spring's slope, the tendon rig's printed (14.9) SDRE as the same law, the system's scalar conversion and the index finger closed through it at 3 kHz."""
 
 from __future__ import annotations
 
@@ -47,24 +47,37 @@ def test_closed_form_tendon_riccati_equals_drakes_lqr_at_random_tendon_states():
         tendon_sdre_gains(1.0, 2e-3, (0.0, 0.0), 1e-6)
 
 
-def test_bank_gain_at_the_operating_point_equals_the_tendon_rigs_sdre():
-    """The same spring (the tendon rig's force map), Q, R (Table 14.1): the bank's gain at 30 N equals the registered
-    ``tendon-sdre``'s design gain, (a) the printed (14.9) form (its factorisation + Drake LQR), (b) the rig's full
-    Jacobian (Drake autodiff of the rig: the (3.8) friction slope at rest enters ``A``), given to the closed form as
-    ``damping`` = that slope computed from the friction law itself."""
+def test_printed_tendon_sdre_is_one_law_equal_to_drakes_lqr_on_14_9_and_the_jacobian_form_adds_the_friction_slope():
+    """One (14.9) law for the bank and the tendon rig: the bank's gain at 30 N and the registered ``tendon-sdre``'s
+    printed form (its design gain and its re-solve at the measured motor angle: 5, 40, 100 N on the spring and slack,
+    where the force is 0) each equal Drake's ``LinearQuadraticRegulator`` on (14.9) built here,
+    ``A = [[0, 1], [-r_m alpha / B, 0]]``, ``B_u = [0, 1/B]``, ``alpha`` the rig's force map's slope at that force
+    (Table 14.1's Q, R).  The rig's default form (Drake autodiff of the rig: the (3.8) friction slope at rest enters
+    ``A``) equals the closed form given that slope as ``damping``, computed from the friction law itself."""
     rig = tendon_rig()
     fmap = force_map(rig)
     p = SdreTendonParams()
     motor = rig.params.motor
+    B, r_m = motor.inertia, motor.pulley_radius
+
+    def drake_lqr(f):
+        A = np.array([[0.0, 1.0], [-r_m * float(fmap.alpha_of_force(f)) / B, 0.0]])
+        return LinearQuadraticRegulator(A, np.array([[0.0], [1.0 / B]]), np.diag(p.q_diag), np.array([[p.r]]))[0][0]
     law = TendonSdreLaw([fmap], motor, q_diag=p.q_diag, r=p.r, design_forces=[30.0], update_period=None)
+    np.testing.assert_allclose(law.initial_gain, drake_lqr(30.0), rtol=1e-9)
     printed = tendon_sdre_controller(rig, p.replace(factorisation="printed"), design_force=30.0, fmap=fmap)
-    np.testing.assert_allclose(law.initial_gain, printed.K0[0], rtol=1e-9)
+    np.testing.assert_allclose(printed.K0[0], drake_lqr(30.0), rtol=1e-9)
+    for f in (5.0, 40.0, 100.0):
+        th = float(fmap.theta_of_force(f))
+        np.testing.assert_allclose(printed.gain_at(np.array([th, 0.0]), np.array([r_m * f]))[0], drake_lqr(f),
+                                   rtol=1e-9)
+    slack = printed.gain_at(np.array([fmap.slack_angle - 0.1, 0.0]), np.zeros(1))[0]
+    np.testing.assert_allclose(slack, drake_lqr(0.0), rtol=1e-9)
     w = InitializeAutoDiff(np.zeros(1))[0, 0]
     slope = -motor_friction_torque(w, motor).derivatives()[0]       # d(friction)/d(omega) at rest [Nm s/rad]
     assert slope > 1.0                                              # (3.8) at rest: ~5.6 Nm s/rad
     jac = tendon_sdre_controller(rig, p, design_force=30.0, fmap=fmap)
-    kt, kw = tendon_sdre_gains(motor.pulley_radius * fmap.alpha_of_force(30.0), motor.inertia, p.q_diag, p.r,
-                               damping=slope)
+    kt, kw = tendon_sdre_gains(r_m * fmap.alpha_of_force(30.0), B, p.q_diag, p.r, damping=slope)
     np.testing.assert_allclose([kt, kw], jac.K0[0], rtol=1e-9)
     assert abs(jac.K0[0, 1] - printed.K0[0, 1]) > 1.0                # the friction slope moves K_omega (6.0 vs 10.2)
 

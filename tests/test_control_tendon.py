@@ -241,13 +241,13 @@ def test_sdre_printed_14_9_gains_do_not_depend_on_the_spring_and_friction_moves_
 
     from awiwi_drake.components.spring import tendon_spring
     from awiwi_drake.analysis.linear import lqr_gain
-    from awiwi_drake.control.sdre import PrintedTendonFactorisation, RigJacobian
+    from awiwi_drake.control.sdre import RigJacobian, tendon_sdre_controller
     p = SdreTendonParams()
     rig = tendon_rig()
     mp = rig.params.motor
     B, r_m = mp.inertia, mp.pulley_radius
     Q, R = np.diag(p.q_diag), np.array([[p.r]])
-    printed = PrintedTendonFactorisation(fmap, B, r_m)
+    printed = tendon_sdre_controller(rig, p.replace(factorisation="printed"), fmap=fmap)
     jac = RigJacobian(rig)
     jac_nofric = RigJacobian(tendon_rig(params=TendonRigParams(motor=MotorParams(friction=False))))
     spring = tendon_spring(rig.params.spring)
@@ -259,7 +259,7 @@ def test_sdre_printed_14_9_gains_do_not_depend_on_the_spring_and_friction_moves_
         Bv = np.array([[0.0], [1.0 / B]])
         S = solve_continuous_are(A, Bv, Q, R)
         K_indep = (Bv.T @ S / p.r).ravel()
-        K_printed = lqr_gain(*printed([th, 0.0], [r_m * f]), Q, R)[0].ravel()
+        K_printed = printed.gain_at(np.array([th, 0.0]), np.array([r_m * f])).ravel()
         np.testing.assert_allclose(K_printed, K_indep, rtol=1e-3)
         gains.append(K_printed)
         K_rest = lqr_gain(*jac([th, 0.0], [r_m * f]), Q, R)[0].ravel()

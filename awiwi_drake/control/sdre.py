@@ -25,8 +25,9 @@ Two pointwise-linear forms (``params.factorisation``):
   ``B = [0, 1/B]``, alpha = df/dtheta of the spring at the measured motor angle, no
   friction) and (14.10) for the flexible joint with the *secant* stiffness
   ``k(x1 - x3) = tau_s(x3 - x1) / (x3 - x1)`` (so that ``A(x) x`` is the spring torque
-  exactly), link/motor damping as in (12.8).  (:class:`PrintedTendonFactorisation`,
-  :class:`PrintedJointFactorisation`.)
+  exactly), link/motor damping as in (12.8).  The printed tendon form is the hand bank's law for one tendon
+  (:class:`PrintedTendonGain` -> :meth:`TendonSdreLaw.gains`, closed form :func:`tendon_sdre_gains`): one place for
+  (14.9); the joint's is :class:`PrintedJointFactorisation` with Drake's LQR (:class:`LqrGain`).
 
 For the hand's chain (ch. 7-11 with "SDRE ch. 14" as the per-tendon force law) the tendon SDRE is one bank for
 all m tendons (:class:`TendonSdreLaw`, held gains in :class:`TendonSdreController_` or the fused chain): each
@@ -52,7 +53,8 @@ from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
-__all__ = ["RigJacobian", "PrintedTendonFactorisation", "PrintedJointFactorisation", "TendonSdreModel", "SdreController_", "SdreController",
+__all__ = ["RigJacobian", "LqrGain", "PrintedTendonGain", "PrintedJointFactorisation", "TendonSdreModel",
+           "SdreController_", "SdreController",
            "tendon_sdre_controller", "joint_sdre_controller", "tendon_sdre_gains", "TendonSdreLaw",
            "TendonSdreController_", "TendonSdreController", "SDRE_GAIN"]
 
@@ -83,27 +85,6 @@ class RigJacobian:
         xdot = self.diagram.EvalTimeDerivatives(self.context).CopyToVector()
         J = ExtractGradient(xdot)
         return J[:, :n], J[:, n:]
-
-
-class PrintedTendonFactorisation:
-    """(14.9): ``A(x) = [[0, 1], [-r_m alpha(theta) / B, 0]]``, ``B = [0, 1/B]`` (no friction, no damping).
-
-    ``alpha(theta) = df/dtheta`` [N/rad] from the rig's force map at the measured motor angle
-    (the load torque of (14.7) is ``r_m f``).  Same call signature as :class:`RigJacobian`.
-    """
-
-    def __init__(self, fmap, motor_inertia: float, pulley_radius: float):
-        self.fmap = fmap
-        self.b = check_gain("motor_inertia", motor_inertia, owner="tendon sdre (14.9)")
-        self.r_m = check_gain("pulley_radius", pulley_radius, owner="tendon sdre (14.9)")
-        self.n, self.m = 2, 1
-
-    def __call__(self, x, u, external: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        theta = float(np.asarray(x, float).reshape(-1)[0])
-        f = float(self.fmap.force_at(theta)) if theta > self.fmap.slack_angle else 0.0
-        alpha = float(self.fmap.alpha_of_force(f))
-        A = np.array([[0.0, 1.0], [-self.r_m * alpha / self.b, 0.0]])
-        return A, np.array([[0.0], [1.0 / self.b]])
 
 
 class PrintedJointFactorisation:
@@ -138,6 +119,35 @@ class PrintedJointFactorisation:
         return A, np.array([[0.0], [0.0], [0.0], [1.0 / b]])
 
 
+class LqrGain:
+    """The SDRE gain ``K(x, u)`` from a pointwise-linear form ``(A, B) = form(x, u)`` (:class:`RigJacobian`,
+    :class:`PrintedJointFactorisation`) by Drake's ``LinearQuadraticRegulator`` ((14.4)-(14.5))."""
+
+    def __init__(self, form: Any, Q, R, owner: str):
+        self.form = form
+        self.Q = check_gains("Q", Q, owner=owner)
+        self.R = np.atleast_2d(check_gains("R", R, owner=owner))
+
+    def __call__(self, x, u) -> np.ndarray:
+        return lqr_gain(*self.form(x, u), self.Q, self.R)[0]
+
+
+class PrintedTendonGain:
+    """The tendon rig's SDRE gain on (14.9) as printed: the hand bank's law for one tendon
+    (:meth:`TendonSdreLaw.gains`, closed form :func:`tendon_sdre_gains`, no friction slope) at the force the rig's map
+    gives the measured motor angle (0 when slack)."""
+
+    def __init__(self, fmap, motor: Any, q_diag, r: float):
+        self.fmap = fmap
+        self.law = TendonSdreLaw([fmap], motor, q_diag=q_diag, r=r, design_forces=[0.0], update_period=None,
+                                 friction_scale=0.0, name="tendon sdre (14.9)")
+
+    def __call__(self, x, u) -> np.ndarray:
+        theta = float(np.asarray(x, float).reshape(-1)[0])
+        f = float(self.fmap.force_at(theta)) if theta > self.fmap.slack_angle else 0.0
+        return self.law.gains(np.array([f])).reshape(1, 2)
+
+
 class TendonSdreModel:
     """Tendon rig ``x = [theta, omega]``; equilibrium ``theta_ref = f^-1(f_ref)``, ``u_ref = r_m f_ref``."""
 
@@ -163,12 +173,9 @@ def SdreController_(T):
     """SDRE state feedback with the gain held in discrete state, refreshed periodically."""
 
     class Impl(LeafSystem_[T]):
-        def _construct(self, model, jacobian: RigJacobian, Q, R, update_period: float | None, K0,
-                       name: str = "sdre", converter=None):
+        def _construct(self, model, gain, update_period: float | None, K0, name: str = "sdre", converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.model, self.jacobian, self.name_ = model, jacobian, name
-            self.Q = check_gains("Q", Q, owner=name)
-            self.R = np.atleast_2d(check_gains("R", R, owner=name))
+            self.model, self.gain, self.name_ = model, gain, name
             if update_period is not None:
                 check_gain("update_period", update_period, owner=name)
             self.update_period = update_period
@@ -185,16 +192,15 @@ def SdreController_(T):
             self.set_name(name)
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.model, other.jacobian, other.Q, other.R, other.update_period, other.K0,
-                            other.name_, converter=converter)
+            Impl._construct(self, other.model, other.gain, other.update_period, other.K0, other.name_,
+                            converter=converter)
 
         def _values(self, context):
             return {nm: p.Eval(context) for nm, p in self._ports.items()}
 
         def gain_at(self, x, u) -> np.ndarray:
             """The SDRE gain at state ``x`` with input ``u`` (float)."""
-            A, B = self.jacobian(x, u)
-            return lqr_gain(A, B, self.Q, self.R)[0]
+            return np.atleast_2d(self.gain(x, u))
 
         def _update(self, context, discrete_state):
             vals = self._values(context)
@@ -230,12 +236,10 @@ def tendon_sdre_controller(rig: Any, params: SdreTendonParams | None = None, *, 
     p = params or SdreTendonParams()
     fmap = fmap or force_map(rig)
     model = TendonSdreModel(fmap, _motor(rig).pulley_radius)
-    jac = (RigJacobian(rig) if p.factorisation == "jacobian"
-           else PrintedTendonFactorisation(fmap, _motor(rig).inertia, _motor(rig).pulley_radius))
-    Q, R = np.diag(p.q_diag), np.array([[p.r]])
-    x0, u0 = model.equilibrium(design_force)
-    K0 = lqr_gain(*jac(x0, u0), Q, R)[0]
-    return SdreController(model, jac, Q, R, None if fixed else 1.0 / p.update_rate, K0,
+    gain = (LqrGain(RigJacobian(rig), np.diag(p.q_diag), np.array([[p.r]]), "tendon sdre")
+            if p.factorisation == "jacobian" else PrintedTendonGain(fmap, _motor(rig), p.q_diag, p.r))
+    K0 = gain(*model.equilibrium(design_force))
+    return SdreController(model, gain, None if fixed else 1.0 / p.update_rate, K0,
                           "tendon_lqr_fixed" if fixed else "tendon_sdre")
 
 
@@ -244,11 +248,11 @@ def joint_sdre_controller(rig: Any, params: SdreJointParams | None = None, *, op
     p = params or SdreJointParams()
     lin = linearize(rig, op, outputs=("state", "joint_angle"))
     model = LinearReferenceModel(lin)
-    jac = RigJacobian(rig) if p.factorisation == "jacobian" else PrintedJointFactorisation(rig)
     n, m = lin.B.shape
-    Q, R = expand_q(p.q_diag, n), p.r * np.eye(m)
-    K0 = lqr_gain(*(jac(lin.x0, lin.u0) if p.factorisation == "printed" else (lin.A, lin.B)), Q, R)[0]
-    return SdreController(model, jac, Q, R, None if fixed else 1.0 / p.update_rate, K0,
+    gain = LqrGain(RigJacobian(rig) if p.factorisation == "jacobian" else PrintedJointFactorisation(rig),
+                   expand_q(p.q_diag, n), p.r * np.eye(m), "sdre")
+    K0 = gain(lin.x0, lin.u0) if p.factorisation == "printed" else lqr_gain(lin.A, lin.B, gain.Q, gain.R)[0]
+    return SdreController(model, gain, None if fixed else 1.0 / p.update_rate, K0,
                           "joint_lqr_fixed" if fixed else "sdre")
 
 

@@ -123,7 +123,8 @@ class SdreTendonParams(Parameters):
     factorisation: str = param("jacobian", unit="-", choices=("jacobian", "printed"),
                                source=("chosen default: A(x) = tangent of the whole rig (Drake autodiff Jacobian, "
                                        "the (3.8) friction slope included); 'printed' = (14.9) as printed "
-                                       "(spring slope only, no friction, no damping)"))
+                                       "(spring slope only, no friction, no damping; the gains of "
+                                       "control.sdre.TendonSdreLaw for one tendon)"))
 
 
 @dataclass(frozen=True)
