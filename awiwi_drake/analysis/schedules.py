@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import abc
 import math
+import sys
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -281,7 +282,7 @@ def as_schedule(s) -> Schedule:
     return PerEntry([Constant(float(v)) for v in arr])
 
 
-@TemplateSystem.define("InputSchedule_")
+@TemplateSystem.define("InputSchedule_", scope=sys.modules[__name__])
 def InputSchedule_(T):
     """A source whose output ``value`` (size ``size``) is ``schedule.value(t - t0)``.
 

@@ -37,6 +37,7 @@ guide friction (the guide friction forces, a Dahl state: see
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -383,7 +384,7 @@ def _build_kernels(model, m, n, nr, jit, vectorized=False):
     return compile_kernels(functions, tag=f"drive_m{m}_n{n}", jit=jit, vectorized=vectorized)
 
 
-@TemplateSystem.define("TendonDriveBatch_")
+@TemplateSystem.define("TendonDriveBatch_", scope=sys.modules[__name__])
 def TendonDriveBatch_(T):
     """N copies of one link-carrying drive (a single-joint rig) in one system.
 

@@ -22,6 +22,8 @@ for float, :func:`~awiwi_drake.components.fused_drive.drive_laws` for AutoDiffXd
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pydrake.symbolic as sym
 from pydrake.systems.analysis import DiscreteTimeApproximation, SimulatorConfig
@@ -209,7 +211,7 @@ class tendon_force_of_states:
         return out.T
 
 
-@TemplateSystem.define("LinkRigOutputs_")
+@TemplateSystem.define("LinkRigOutputs_", scope=sys.modules[__name__])
 def LinkRigOutputs_(T):
     """The non-state outputs of a drive whose state is the whole rig (a link rig, the tendon rig);
     ``LinkRigOutputs_[T](model)``.

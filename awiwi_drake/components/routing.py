@@ -12,6 +12,8 @@ Expression); the finger couplings of :mod:`awiwi_drake.hand` follow it.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -78,7 +80,7 @@ def _check_coupling(coupling):
             raise ValueError(f"TendonRouting: coupling lacks {attr!r} (needs num_tendons, num_joints, h(q), P(q))")
 
 
-@TemplateSystem.define("TendonRouting_")
+@TemplateSystem.define("TendonRouting_", scope=sys.modules[__name__])
 def TendonRouting_(T):
     """Maps motor and joint angles to spring elongations and tendon forces to joint torques.
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
@@ -587,7 +588,7 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
     return dahl_rate(z, xdot, p.width_ratio * f_elastic + p.width_offset, p.presliding_length, p.smoothing_velocity)
 
 
-@TemplateSystem.define("SpringBank_")
+@TemplateSystem.define("SpringBank_", scope=sys.modules[__name__])
 def SpringBank_(T):
     """N tendon spring mechanisms in one system (thesis ch. 4).
 

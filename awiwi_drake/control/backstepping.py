@@ -42,6 +42,7 @@ of section 15.4).
 from __future__ import annotations
 
 import functools
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -318,7 +319,7 @@ def impedance_backstepping(state, reference, model: JointModel, gains: Impedance
 # ---------------------------------------------------------------------------
 # Systems
 # ---------------------------------------------------------------------------
-@TemplateSystem.define("PositionBackstepping_")
+@TemplateSystem.define("PositionBackstepping_", scope=sys.modules[__name__])
 def PositionBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Position backstepping controller of a linear flexible joint (15.11)-(15.50).
@@ -361,7 +362,7 @@ def PositionBackstepping_(T):
 PositionBackstepping = PositionBackstepping_[None]
 
 
-@TemplateSystem.define("ImpedanceBackstepping_")
+@TemplateSystem.define("ImpedanceBackstepping_", scope=sys.modules[__name__])
 def ImpedanceBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Impedance backstepping controller of a joint driven by N motors (15.51)-(15.106).

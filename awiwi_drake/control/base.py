@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import abc
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -146,7 +147,7 @@ class StaticLaw(abc.ABC):
         """The command for the given named inputs."""
 
 
-@TemplateSystem.define("StaticLawController_")
+@TemplateSystem.define("StaticLawController_", scope=sys.modules[__name__])
 def StaticLawController_(T):
     """A feedthrough controller evaluating a :class:`StaticLaw` (float, AutoDiffXd)."""
 

@@ -39,6 +39,7 @@ or the hand :func:`~awiwi_drake.control.base.closed_loop` feeds ``joint_angle`` 
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -107,7 +108,7 @@ def guide_presliding_stiffness(rig: Any, point: dict, *, full: bool = False) -> 
     return PS.T @ (PS * (W / gm.presliding_length)[:, None]) if full else (PS ** 2).T @ (W / gm.presliding_length)
 
 
-@TemplateSystem.define("TendonPathVelocity_")
+@TemplateSystem.define("TendonPathVelocity_", scope=sys.modules[__name__])
 def TendonPathVelocity_(T):
     """``tendon_path_velocity = P(q) qdot`` (m) [m/s]: the rate of the tendon path lengths ``h(q)``.
 
@@ -138,7 +139,7 @@ TendonPathVelocity = TendonPathVelocity_[None]
 
 
 
-@TemplateSystem.define("TendonForceSharing_")
+@TemplateSystem.define("TendonForceSharing_", scope=sys.modules[__name__])
 def TendonForceSharing_(T):
     """The sharing (15.88) of desired DoF torques among the tendons, a static map (continuous loops).
 

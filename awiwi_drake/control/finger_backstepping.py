@@ -150,6 +150,7 @@ f_op + tau_op`` to keep (15.88) exact at every pose (its rate, like ``dW/dq``, i
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -649,7 +650,7 @@ class ObservedBacksteppingController(Diagram):
                                   None if rig_state is None else np.asarray(rig_state, float)[n:2 * n])
 
 
-@TemplateSystem.define("FrictionBound_")
+@TemplateSystem.define("FrictionBound_", scope=sys.modules[__name__])
 def FrictionBound_(T):
     """``friction_compensation_bound`` (k) [Nm]: :meth:`FingerBacksteppingLaw.friction_bound` of ``law`` at the sensed
     ``tendon_force`` (m) and ``P(joint_angle)`` (n), the torque the guides' friction and the lever's hysteresis can

@@ -52,6 +52,7 @@ for one finger of the hand with its own coupling, radii and calibrated spring cu
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
 from typing import Callable
@@ -1120,7 +1121,7 @@ def optimum_sensitivity(solver: OptimalForceDistribution, result: DistributionRe
     return dtau, dK
 
 
-@TemplateSystem.define("TendonForceDistribution_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("TendonForceDistribution_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def TendonForceDistribution_(T):
     """Tendon force distribution (ch. 7) for one or several fingers, sampled (the thesis's 3 kHz).
 

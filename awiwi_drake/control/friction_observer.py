@@ -36,6 +36,8 @@ The Fig 9.3 run is :mod:`awiwi_drake.reproductions.ch09_friction_observer`.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -68,7 +70,7 @@ def observer_step(w_hat, w, known_torque, inertia, gain: float, period: float, i
     return w_hat + period * rate, d_hat
 
 
-@TemplateSystem.define("DisturbanceObserver_")
+@TemplateSystem.define("DisturbanceObserver_", scope=sys.modules[__name__])
 def DisturbanceObserver_(T):
     class Impl(LeafSystem_[T]):
         """Observer (9.2). Inputs ``joint_velocity`` (1) [rad/s], ``joint_torque`` (1) [Nm] (known
@@ -111,7 +113,7 @@ def DisturbanceObserver_(T):
 DisturbanceObserver = DisturbanceObserver_[None]
 
 
-@TemplateSystem.define("LinkFriction_")
+@TemplateSystem.define("LinkFriction_", scope=sys.modules[__name__])
 def LinkFriction_(T):
     class Impl(LeafSystem_[T]):
         """Link-side stick-slip friction: input ``joint_velocity`` (1), output ``friction_torque`` (1) [Nm]."""

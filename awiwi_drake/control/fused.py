@@ -38,6 +38,8 @@ as the composed blocks.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
@@ -55,7 +57,7 @@ ESTIMATE_OUTPUTS = {"joint_angle": "joint_angle_estimate", "joint_velocity": "jo
 _INTERNAL = ("joint_angle", "joint_velocity", "tendon_force_reference", "tendon_path_velocity")
 
 
-@TemplateSystem.define("FusedChain_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("FusedChain_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def FusedChain_(T):
     """Estimator -> joint stage -> distribution -> tendon force law as one discrete system (module docstring).
 

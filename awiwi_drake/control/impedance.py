@@ -71,6 +71,7 @@ spring torque) and the antagonistic joint rig (``c = [r_q, -r_q]``).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -256,7 +257,7 @@ class MotorPositionForceLaw(StaticLaw):
                 - self.friction_scale * motor_friction_torque(w, self.motor))
 
 
-@TemplateSystem.define("CascadedImpedanceController_")
+@TemplateSystem.define("CascadedImpedanceController_", scope=sys.modules[__name__])
 def CascadedImpedanceController_(T):
     """The cascaded law (11.16) with a momentum observer of the external link torque (one continuous state).
 

@@ -41,6 +41,7 @@ use :class:`JointGainScheduleLaw`, gains interpolated in the joint torque.
 
 from __future__ import annotations
 
+import sys
 import warnings
 from typing import Any
 
@@ -221,7 +222,7 @@ class JointGainScheduleLaw(JointStateFeedbackLaw):
         self.outside_count += out
 
 
-@TemplateSystem.define("JointStage_")
+@TemplateSystem.define("JointStage_", scope=sys.modules[__name__])
 def JointStage_(T):
     """The chain's joint-level stage: a joint law for all DoF (module docstring).
 
@@ -260,7 +261,7 @@ def JointStage_(T):
 JointStage = JointStage_[None]
 
 
-@TemplateSystem.define("JointFrictionObserver_")
+@TemplateSystem.define("JointFrictionObserver_", scope=sys.modules[__name__])
 def JointFrictionObserver_(T):
     """The joint friction observer (9.2) on every DoF of a finger/the hand, as a compensating torque (ch. 9).
 

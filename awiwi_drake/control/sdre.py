@@ -37,6 +37,7 @@ tendon's 2-state pointwise-linear model (14.9) has the closed-form Riccati solut
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -168,7 +169,7 @@ class TendonSdreModel:
         return np.array([th, zero]), np.array([self.r_m * r])
 
 
-@TemplateSystem.define("SdreController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("SdreController_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def SdreController_(T):
     """SDRE state feedback with the gain held in discrete state, refreshed periodically."""
 
@@ -428,7 +429,7 @@ class TendonSdreLaw(StaticLaw):
         return np.asarray(tau).reshape(-1)
 
 
-@TemplateSystem.define("TendonSdreController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("TendonSdreController_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def TendonSdreController_(T):
     """A :class:`TendonSdreLaw` bank with its gains held in discrete state, re-solved every ``law.update_period``
     from the measured forces (``update_period=None``: constant gains, no state, so that a continuous loop stays

@@ -10,6 +10,7 @@ sensor (the measurement the backstepping design (15.62) formally requires).
 from __future__ import annotations
 
 import dataclasses
+import sys
 
 import numpy as np
 from pydrake.common import RandomDistribution
@@ -44,7 +45,7 @@ def quantize(x, resolution: float):
     return out
 
 
-@TemplateSystem.define("Quantizer_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("Quantizer_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def Quantizer_(T):
     """``measured_value = quantize(true_value + noise_std * noise, resolution)``."""
 

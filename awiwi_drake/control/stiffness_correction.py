@@ -24,6 +24,8 @@ The Fig 8.3 run is :mod:`awiwi_drake.reproductions.ch08_stiffness_correction`.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -78,7 +80,7 @@ def pretension_elongation(spring, joint_stiffness: float, link_pulley_radius: fl
     return 0.5 * (lo + hi)
 
 
-@TemplateSystem.define("StiffnessCorrectedImpedance_")
+@TemplateSystem.define("StiffnessCorrectedImpedance_", scope=sys.modules[__name__])
 def StiffnessCorrectedImpedance_(T):
     class Impl(LeafSystem_[T]):
         """Motor-side joint impedance with online stiffness correction on the antagonistic joint rig.

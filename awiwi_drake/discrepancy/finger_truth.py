@@ -29,6 +29,7 @@ while the sensor reads ``f`` (waves 4-5 put it on the motor side of the sensor, 
 
 from __future__ import annotations
 
+import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -81,7 +82,7 @@ def _finger_joints(finger: str, params, joint_names) -> list:
     return out
 
 
-@TemplateSystem.define("FingerHiddenTorque_")
+@TemplateSystem.define("FingerHiddenTorque_", scope=sys.modules[__name__])
 def FingerHiddenTorque_(T):
 
     class Impl(LeafSystem_[T]):

@@ -33,6 +33,7 @@ equals the ``joint_rig`` diagram at random states to 1e-9.
 from __future__ import annotations
 
 import functools
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -304,7 +305,7 @@ def replay_kernels(nom: NominalParameters, jit: bool = True) -> dict:
                            tag=f"replay_{rig}", jit=jit)
 
 
-@TemplateSystem.define("DiscrepancyModel_")
+@TemplateSystem.define("DiscrepancyModel_", scope=sys.modules[__name__])
 def DiscrepancyModel_(T):
 
     class Impl(LeafSystem_[T]):

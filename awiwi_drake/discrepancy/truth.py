@@ -39,6 +39,7 @@ deviation); forces are quantised to 12 bit over the sensor range.
 
 from __future__ import annotations
 
+import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -77,7 +78,7 @@ def default_nominal(rig: str) -> dict:
     return nominal_defaults(rig)
 
 
-@TemplateSystem.define("HiddenEffectPlant_")
+@TemplateSystem.define("HiddenEffectPlant_", scope=sys.modules[__name__])
 def HiddenEffectPlant_(T):
 
     class Impl(LeafSystem_[T]):

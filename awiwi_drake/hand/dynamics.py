@@ -56,6 +56,7 @@ import hashlib
 import inspect
 import os
 import pathlib
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -338,7 +339,7 @@ def _trace_source(model: DriveModel, links: LinkModel) -> str:
     return emit_source(functions, _glue_source(n, kd, links.blocks))
 
 
-@TemplateSystem.define("HandDynamics_")
+@TemplateSystem.define("HandDynamics_", scope=sys.modules[__name__])
 def HandDynamics_(T):
     """The finger / hand plant in one system (see the module docstring); ``HandDynamics_[T](model, links)``."""
 

@@ -37,6 +37,7 @@ The Fig 5.16-5.17 study is :func:`awiwi_drake.reproductions.ch05_fingers.thumb_e
 from __future__ import annotations
 
 import math
+import sys
 import warnings
 from dataclasses import dataclass
 
@@ -247,7 +248,7 @@ def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> floa
 # ---------------------------------------------------------------------------------------------
 # The estimator as a system (3 kHz, warm-started Algorithm 1 for the thumb base)
 
-@TemplateSystem.define("LinkPositionEstimator_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("LinkPositionEstimator_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def LinkPositionEstimator_(T):
     """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
 

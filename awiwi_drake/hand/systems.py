@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -37,7 +39,7 @@ def _plant_as(plant, T):
     return plant, plant_t, plant_t.CreateDefaultContext()
 
 
-@TemplateSystem.define("CoriolisCancellation_")
+@TemplateSystem.define("CoriolisCancellation_", scope=sys.modules[__name__])
 def CoriolisCancellation_(T):
     """``generalized_force = C(q, v) v`` of ``plant`` for ``state = [q; v]``.
 
@@ -69,7 +71,7 @@ def CoriolisCancellation_(T):
 CoriolisCancellation = CoriolisCancellation_[None]
 
 
-@TemplateSystem.define("MotorAngleReference_")
+@TemplateSystem.define("MotorAngleReference_", scope=sys.modules[__name__])
 def MotorAngleReference_(T):
     """Joint-space reference to motor angles through the exact routing.
 
@@ -118,7 +120,7 @@ def MotorAngleReference_(T):
 MotorAngleReference = MotorAngleReference_[None]
 
 
-@TemplateSystem.define("WristTendonOffsets_")
+@TemplateSystem.define("WristTendonOffsets_", scope=sys.modules[__name__])
 def WristTendonOffsets_(T):
     """Wrist tendon offsets (6.9) as a system, or the motor feed-forward that cancels them.
 
@@ -193,7 +195,7 @@ def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
     return p.palm_bending_angle + p.joint_wrap_angle * crossed
 
 
-@TemplateSystem.define("LinkGeometryPoses_")
+@TemplateSystem.define("LinkGeometryPoses_", scope=sys.modules[__name__])
 def LinkGeometryPoses_(T):
     """``geometry_pose`` (a ``FramePoseVector`` for SceneGraph) of ``plant``'s bodies at ``joint_angle`` (n).
 

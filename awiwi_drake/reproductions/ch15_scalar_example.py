@@ -17,6 +17,8 @@ Two versions of the final law:
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -53,7 +55,7 @@ def example_control(x, gains: ScalarExampleGains, variant: str = "textbook"):
     return u, 0.5 * (x1 * x1 + z2 * z2)
 
 
-@TemplateSystem.define("ScalarExamplePlant_")
+@TemplateSystem.define("ScalarExamplePlant_", scope=sys.modules[__name__])
 def ScalarExamplePlant_(T):
     class Impl(LeafSystem_[T]):
         """Plant (15.1). Input ``motor_torque`` (1) = ``u``; output ``state`` (2) = ``[x1, x2]``."""
@@ -78,7 +80,7 @@ def ScalarExamplePlant_(T):
 ScalarExamplePlant = ScalarExamplePlant_[None]
 
 
-@TemplateSystem.define("ScalarBackstepping_")
+@TemplateSystem.define("ScalarBackstepping_", scope=sys.modules[__name__])
 def ScalarBackstepping_(T):
     class Impl(LeafSystem_[T]):
         """Controller (15.10). Input ``state`` (2); outputs ``motor_torque`` (1) = ``u``, ``lyapunov`` (1)."""
