@@ -341,32 +341,17 @@ def generator_files(generators: tuple = GENERATORS) -> list:
     return sorted(seen.values())
 
 
-def code_text(source: str) -> str:
-    """What a module executes, as text: its syntax tree without docstrings (every statement that is only a string,
-    which Python evaluates and drops), comments, formatting or line numbers, so an edit of a docstring or a comment
-    keeps the text and any change of code, constant or default changes it."""
-    import ast
-
-    class Strip(ast.NodeTransformer):
-        def visit_Expr(self, node):
-            return None if isinstance(node.value, ast.Constant) and isinstance(node.value.value, str) else node
-
-    tree = Strip().visit(ast.parse(source))
-    for node in ast.walk(tree):   # a body that was only a docstring keeps a statement
-        if not isinstance(node, ast.Module) and getattr(node, "body", None) == []:
-            node.body = [ast.Pass()]
-    return ast.dump(tree, annotate_fields=False, include_attributes=False)
-
-
 _CODE_TEXT: dict = {}   # source bytes -> code_text (parsing the ~40 generator modules takes ~0.6 s)
 
 
 def generator_fingerprint(files=None, generators: tuple = GENERATORS) -> str:
     """SHA-256 over the code the generators ``generators`` execute (:func:`generator_files`, by path relative to
-    the package, each as :func:`code_text`: docstrings and comments do not count) and the versions of the
+    the package, each as :func:`~awiwi_drake.components.codegen.code_text`: docstrings and comments do not count) and the versions of the
     libraries that integrate and draw them (drake, numpy, scipy)."""
     import hashlib
     from importlib.metadata import version
+
+    from awiwi_drake.components.codegen import code_text
     h = hashlib.sha256()
     for lib in ("drake", "numpy", "scipy"):
         h.update(f"{lib}={version(lib)};".encode())

@@ -519,3 +519,17 @@ def test_a_controller_at_another_rate_keeps_the_continuous_rig():
         assert not closed_loop(rig, make_controller(name, rig), rate_hz=3000.0).sampled_rig
     rig = tendon_rig()
     assert closed_loop(rig, make_controller("tendon-pd", rig), rate_hz=3000.0).sampled_rig
+
+
+def test_kernel_cache_key_ignores_docstrings_and_comments_but_not_code():
+    """The compiled kernels are keyed by :func:`code_text` of the package's laws: a docstring or comment edit keeps
+    the key (no recompile), a changed constant, default or statement changes it."""
+    from awiwi_drake.components.codegen import code_text
+
+    base = 'def f(x, k=2.0):\n    """Spring (5.1)."""\n    return k * x\n'
+    assert code_text(base) == code_text('def f(x, k=2.0):\n    """Another text."""\n    # note\n    return k * x\n')
+    assert code_text(base) == code_text('def f(x, k=2.0):\n\n    return k * x  # no docstring\n')
+    for changed in ('def f(x, k=2.5):\n    return k * x\n', 'def f(x, k=2.0):\n    return k * x * x\n',
+                    'def f(x, k=2.0):\n    "Spring."\n    return k + x\n'):
+        assert code_text(base) != code_text(changed), changed
+    assert code_text('class A:\n    """Only a docstring."""\n') == code_text('class A:\n    pass\n')

@@ -59,6 +59,23 @@ def kernel_cache_dir() -> pathlib.Path:
     return pathlib.Path(root)
 
 
+def code_text(source: str) -> str:
+    """What a module executes, as text: its syntax tree without docstrings (every statement that is only a string,
+    which Python evaluates and drops), comments, formatting or line numbers. An edit of a docstring or a comment
+    keeps the text; any change of code, constant or default changes it. Cache keys hash this, not the bytes."""
+    import ast
+
+    class Strip(ast.NodeTransformer):
+        def visit_Expr(self, node):
+            return None if isinstance(node.value, ast.Constant) and isinstance(node.value.value, str) else node
+
+    tree = Strip().visit(ast.parse(source))
+    for node in ast.walk(tree):   # a body that was only a docstring keeps a statement
+        if not isinstance(node, ast.Module) and getattr(node, "body", None) == []:
+            node.body = [ast.Pass()]
+    return ast.dump(tree, annotate_fields=False, include_attributes=False)
+
+
 def _const(v: float) -> str:
     if math.isnan(v):
         return "math.nan"

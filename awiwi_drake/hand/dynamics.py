@@ -67,6 +67,7 @@ from pydrake.systems.framework import InputPortSelection, LeafSystem_, OutputPor
 from pydrake.systems.primitives import Linearize
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake.components.codegen import code_text
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
 from awiwi_drake.components.motor import saturate_torque
 from awiwi_drake.parameters.hand import COMPILE_AFTER_CALLS
@@ -239,15 +240,16 @@ _SOURCE_DIGEST: list = []
 
 
 def _package_digest() -> str:
-    """Digest of the package source the trace depends on (laws, hand, codegen) and of Drake's version."""
+    """Digest of the package code the trace depends on (laws, hand, codegen; each file as
+    :func:`~awiwi_drake.components.codegen.code_text`, so docstring and comment edits keep the cached kernels) and of
+    Drake's version."""
     if not _SOURCE_DIGEST:
         root = pathlib.Path(__file__).resolve().parents[1]
         h = hashlib.sha1(str(getattr(pydrake, "__version__", "")).encode())
-        for folder in ("components", "hand", "parameters"):
-            for path in sorted((root / folder).glob("*.py")):
-                h.update(path.name.encode())
-                h.update(path.read_bytes())
-        h.update((root / "_math.py").read_bytes())
+        paths = [p for folder in ("components", "hand", "parameters") for p in sorted((root / folder).glob("*.py"))]
+        for path in paths + [root / "_math.py"]:
+            h.update(path.name.encode() + b"\0")
+            h.update(code_text(path.read_text()).encode() + b"\0")
         _SOURCE_DIGEST.append(h.hexdigest())
     return _SOURCE_DIGEST[0]
 
