@@ -1,36 +1,19 @@
 """Link-position estimation from tendon lengths (thesis (5.14)-(5.15), (5.24), Algorithm 1).
 
-The fingers have no joint sensors; the tendon length change at the finger
-base ``dh = h(q) - h(0)`` is measured (motor angle and spring sensor).
+The fingers have no joint sensors; the tendon length change at the finger base ``dh = h(q) - h(0)`` is
+measured (motor angle and spring sensor).
 
-* Constant coupling: least squares (5.14) is solved by the pseudo-inverse
-  (5.15), ``q = (P S)^+ dh`` on the independent DoF (``S`` maps them to the
-  plant joints; identity except for the ring/fifth PIP/DIP coupling).
-* Thumb base: ``P(q)`` depends on ``q``; Algorithm 1 is a fixed-step
-  gradient search with step halving on the cost ``C(q) = |dh_meas - dh(q)|^2``
-  over the base angles (q10, q11).  The step moves along the *normalised*
-  gradient (a fixed step in radians), is accepted when the cost decreases
-  and halved otherwise.  The PIP/DIP of the thumb use the pseudo-inverse.
+* Constant coupling: least squares (5.14) by the pseudo-inverse (5.15), ``q = (P S)^+ dh`` on the
+  independent DoF (``S`` maps them to the plant joints; identity except for the ring/fifth PIP/DIP).
+* Thumb base: ``P(q)`` depends on ``q``; Algorithm 1 is a fixed-step gradient search with step halving
+  on ``C(q) = |dh_meas - dh(q)|^2`` over (q10, q11) and the four base tendons: a step along the
+  *normalised* gradient (in radians) is accepted when the cost decreases and halved otherwise.  Trial
+  points are projected onto ``[-limit, limit]^2``, and the result reports when that acted
+  (``GradientSearchResult.projected``, ``at_limit``).  The thumb's PIP/DIP use the pseudo-inverse.
 
-Deviations from the printed method (docs/REPRODUCTIONS.md, hand section):
-(5.15) prints ``P+ = P (P P^T)^-1`` with ``P in R^{n x m}``, which is not
-dimensionally consistent; for our tall ``P`` (m x n, full column rank) the
-pseudo-inverse is ``(P^T P)^-1 P^T`` (``numpy.linalg.pinv``).  (5.24) sums
-``i = 1..7`` while the thumb has eight tendons ``h10..h17``; the base search
-uses the four base tendons ``h10..h13`` (the only ones that depend on
-(q10, q11)).  Algorithm 1 parametrises the search over ``ker P``
-(``B <= ker P``, variable ``alpha``) and steps by the raw gradient
-``alpha - grad * step``; we search directly on (q10, q11) (the base block is
-4 x 2 with full column rank, so its kernel is trivial) and step along the
-normalised gradient (a step in radians, independent of the tendon-length
-scale).  Trial points are projected onto ``[-limit, limit]^2``; the result
-reports when that projection acted (``GradientSearchResult.projected``,
-``at_limit``), nothing is clipped silently.
-
-Error bound (used by the tests and docs/REPRODUCTIONS.md): at a converged
-least-squares solution a measurement error ``e`` moves the estimate by
-``dq ~ P^+ e`` to first order, so ``|dq| <= |e| / sigma_min(P)``; with
-``|e_i| <= a`` on each of the four base tendons, ``|e| <= 2 a``.
+Where this departs from the printed (5.15), (5.24) and Algorithm 1 (its search over ``ker P``, the raw
+gradient step) and why: docs/REPRODUCTIONS.md, fingers.  Error bound: a measurement error ``e`` moves a
+converged estimate by ``dq ~ P^+ e``, so ``|dq| <= |e| / sigma_min(P)`` (:func:`noise_error_bound`).
 The Fig 5.16-5.17 study is :func:`awiwi_drake.reproductions.ch05_fingers.thumb_estimation_study`.
 """
 
@@ -156,12 +139,8 @@ def _thumb_step(base, dt, qa, qb, iterations, step0, min_step, limit, x, buf, di
 def _thumb_kernels(base):
     """:func:`_search` and :func:`_thumb_step` compiled with the thumb's compiled base kinematics ``base``
     (:meth:`ThumbCoupling._base_kernel`) as a global of one generated module (their ``base`` parameter dropped):
-    ``{"search": fn, "step": fn}``, taking plain numbers and arrays.  A global callee is a static call, so numba
-    caches both on disk with the module (:func:`~awiwi_drake.components.codegen.compile_source`, keyed by the
-    source, which names ``base``'s own cached module): a new process loads the machine code instead of compiling
-    it (measured: ~1.4-3.4 s per process before, paid by every notebook kernel and test worker).  Passed as an
-    argument instead, ``base`` is a first-class function: typed anew at every call from Python (~5 us) and not
-    cacheable (a dynamic global)."""
+    ``{"search": fn, "step": fn}``.  A global callee is a static call, so numba caches both on disk; passed as an
+    argument, ``base`` would be a first-class function, typed anew at every call and not cacheable."""
     import inspect
 
     from ..components.codegen import compile_source
@@ -260,15 +239,12 @@ def LinkPositionEstimator_(T):
     from the *current* measurements: constant-P fingers by the pseudo-inverse
     (5.15), the thumb base by Algorithm 1 warm-started from the stored estimate
     (the thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Every
-    ``period`` the discrete state stores it (the next warm start).  The estimate
-    comes from the same sensor sample as the forces a controller reads with it
-    (a sampled controller evaluates both at its sample): a state output would
-    be one period older than those forces (simultaneous discrete updates read
-    the pre-update state), and that lag, differentiated into the joint velocity,
-    destabilised the DIP's link mode on its tendons (~600 Hz on the index) in
-    every chain design at 3 kHz (``control/joint_design.py``,
-    :func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  A computation
-    delay is the loop's (``closed_loop(delay=...)``), for every measurement alike.
+    ``period`` the discrete state stores it (the next warm start).  Not a state
+    output: that would be one period older than the forces a controller reads
+    with it, and the lag, differentiated into the joint velocity, destabilised the
+    DIP's link mode in every chain design at 3 kHz
+    (:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  A computation
+    delay is the loop's (``closed_loop(delay=...)``).
 
     Scalar types: float and AutoDiffXd only.  For AutoDiffXd the search runs
     on values and one Gauss-Newton step ``q + P(q)^+ (dh - dh(q))`` in the

@@ -27,24 +27,16 @@ origin at a corner of the a x b x c wrist box):
   z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
   about the median axis y = b/2, as the thesis describes for Fig 6.10.
 
-Why this construction: it is the reading of Fig 6.2-6.7 in which (i) all
-four unprinted lengths follow from a, b, c alone, (ii) both views are
-inverted (crossed) parallelograms in the neutral wrist, (iii) A0 and B0C0 are
-apart in the top view (Fig 6.3) and the BC plane turns about B0C0 (Fig 6.4),
-(iv) |AB| = |AC| (6.5), and (v) the Table 6.2 points are consistent with it:
-with the palm frame centred on the palm face, all 38 neutral tendons have
-nearly the same length (46.6 +- 0.1 mm) and both layers pass through the
-flexion crossing point.  Two alternatives were tried and rejected: the BC
-plane along the wrist side (y = 0, A0A parallel to it) makes abduction a pure
-*translation* of the palm (all tendons move alike, contrary to Fig 6.10), and
-B0C0 on the median plane needs A0 on that axis (contrary to Fig 6.3).
-
-Consequence, reported in docs/REPRODUCTIONS.md: the BC plane is diagonal in
-the top view, so the flexion turns the palm about an axis tilted by
-atan(b/a) = 40 deg from y.  Flexion therefore moves the tendons less than
-abduction (peak ratio 0.49 for the thesis motion; 0.13 vs 0.29 mm per degree
-of palm rotation) but not negligibly, whereas the thesis calls the flexion
-coupling minimal; its figure prints no per-tendon numbers to settle this.
+Why this construction: it is the reading of Fig 6.2-6.7 in which all four
+unprinted lengths follow from a, b, c alone, both views are inverted (crossed)
+parallelograms in the neutral wrist, A0 and B0C0 are apart in the top view
+(Fig 6.3), the BC plane turns about B0C0 (Fig 6.4), |AB| = |AC| (6.5), and the
+Table 6.2 points agree (all 38 neutral tendons ~46.6 mm long, both layers
+through the flexion crossing point).  Two alternatives were rejected: the BC
+plane along the wrist side makes abduction a pure translation of the palm
+(contrary to Fig 6.10), and B0C0 on the median plane needs A0 on that axis
+(contrary to Fig 6.3).  A consequence (flexion moves the tendons about half as
+much as abduction, not "minimally") is reported in docs/REPRODUCTIONS.md.
 
 Angles
 ------
