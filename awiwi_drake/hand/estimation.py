@@ -49,13 +49,9 @@ def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
 
 @dataclass
 class GradientSearchResult:
-    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps.
-
-    ``projected`` counts the trial points that the projection onto
-    ``[-limit, limit]^2`` moved; ``at_limit`` is True when the returned
-    estimate lies on that bound (the true pose may lie beyond it: the
-    estimate is then the projection, not the least-squares solution).
-    """
+    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps; ``projected`` counts the trial points
+    the projection onto ``[-limit, limit]^2`` moved, ``at_limit`` says the estimate lies on that bound (the pose
+    may lie beyond it)."""
 
     q: np.ndarray
     cost: float
@@ -160,29 +156,13 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
                                limit: float = np.pi / 2) -> GradientSearchResult:
     """Algorithm 1: fixed-step gradient search with step halving on (q10, q11).
 
-    Parameters
-    ----------
-    coupling : ThumbCoupling
-    dh_base : array (4,)
-        Measured base tendon length changes ``h_i(q) - h_i(0)`` [m], i = 0..3.
-    q_start : (q10, q11)
-        Start (``(0, 0)``: cold start as in Fig 5.16-5.17; the previous
-        estimate: warm start, as the real-time code does).
-    iterations : int
-        Number of iterations (15, 30, 50 in Fig 5.17).
-    step0 : float
-        Initial step [rad] along the normalised gradient (chosen: 0.1 rad, so
-        that 15 iterations cannot reach the grid corners from the origin, as
-        the thesis observes).
-    min_step : float
-        The search stops halving below this step [rad].
-    limit : float
-        Trial points are projected onto ``[-limit, limit]^2`` (the
-        "projected gradient" of section 5.6).  Default pi/2: beyond it the
-        metacarpal would cross the plane of the palm points A0..D0, where each
-        configuration has a mirror image with the same four tendon lengths
-        (the palm points are coplanar), so the projection keeps the search on
-        the physical branch.
+    ``dh_base`` (4): the measured base tendon length changes ``h_i(q) - h_i(0)`` [m]; ``q_start``: ``(0, 0)``
+    is the cold start of Fig 5.16-5.17, the previous estimate the real-time warm start; ``iterations``: 15,
+    30, 50 in Fig 5.17; ``step0`` [rad] along the normalised gradient (chosen: 0.1 rad, so that 15
+    iterations cannot reach the grid corners from the origin, as the thesis observes), halved down to
+    ``min_step``.  Trial points are projected onto ``[-limit, limit]^2`` (the "projected gradient" of
+    section 5.6); default pi/2: beyond it the metacarpal crosses the plane of the (coplanar) palm points
+    A0..D0, where each pose has a mirror image with the same four tendon lengths.
     """
     dh_base = np.asarray(dh_base, dtype=float)
     if dh_base.shape != (4,):
@@ -201,11 +181,8 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
 
 
 def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_search: bool = False, **kw):
-    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP.
-
-    With ``return_search`` returns ``(q, GradientSearchResult)`` (e.g. to see
-    whether the base estimate sits on the projection bound).
-    """
+    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP (with ``return_search``:
+    ``(q, GradientSearchResult)``)."""
     dh = np.asarray(dh, dtype=float)
     if dh.shape != (8,):
         raise ValueError(f"dh must have shape (8,), got {dh.shape}")
@@ -216,10 +193,8 @@ def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_se
 
 
 def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> float:
-    """First-order bound on the base estimate error [rad] for per-tendon noise ``|e_i| <= amplitude``.
-
-    ``|dq| <= |P^+| |e| <= 2 amplitude / sigma_min(P_base(q))``.
-    """
+    """First-order bound on the base estimate error [rad] for per-tendon noise ``|e_i| <= amplitude``:
+    ``|dq| <= |P^+| |e| <= 2 amplitude / sigma_min(P_base(q))``."""
     P = coupling.P(np.array([q_base[0], q_base[1], 0.0, 0.0]))[:4, :2]
     return 2.0 * amplitude / np.linalg.svd(P, compute_uv=False)[-1]
 
@@ -367,15 +342,11 @@ LinkPositionEstimator = LinkPositionEstimator_[None]
 class LinkStateEstimator:
     """The hand's joint-state "sensor": :class:`LinkPositionEstimator_` + a discrete derivative.
 
-    ``system`` is a Diagram with inputs named after the rig outputs it reads
-    (``motor_angle``, ``elongation`` and, with the wrist, ``wrist_tendon_offset``)
-    and outputs ``joint_angle`` (n) [rad] (the estimate of (5.15) / Algorithm 1
-    from the current sample) and ``joint_velocity`` (n) [rad/s], the "dirty
-    derivative" ``s / (T s + 1)`` of that estimate (the hand has no joint encoders
-    or tachometers), discretised at the period ``h``: ``z+ = z + h/T (q - z)``,
-    ``v = (q - z) / T`` (``T = h``: the backward difference over the last period).
-    Their discrete states (the stored estimate, ``z``) are updated every
-    ``period``.  :meth:`initialize` starts both at a known pose (after homing).
+    ``system`` is a Diagram with inputs named after the rig outputs it reads (``motor_angle``,
+    ``elongation`` and, with the wrist, ``wrist_tendon_offset``) and outputs ``joint_angle`` (n) [rad] and
+    ``joint_velocity`` (n) [rad/s], the "dirty derivative" ``s / (T s + 1)`` of the estimate discretised at
+    the period ``h``: ``z+ = z + h/T (q - z)``, ``v = (q - z) / T`` (``T = h``: the backward difference).
+    :meth:`initialize` starts both discrete states at a known pose (after homing).
     """
 
     system: Diagram
