@@ -1,11 +1,8 @@
 """Scalar-type-generic math for the law functions.
 
-The constitutive laws of awiwi_drake are written once and evaluated with
-``float`` (numpy float arrays), ``AutoDiffXd`` and, where the law allows,
-``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).
-numpy ufuncs (``np.sin``, ``np.arctan``, ``np.tanh``, ``np.sqrt``, ``np.abs``)
-already dispatch element-wise on object arrays; ``max``/``min``/``where``
-do not, so they live here.
+The laws are written once and evaluated with ``float``, ``AutoDiffXd`` and, where the law allows,
+``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).  numpy ufuncs dispatch
+element-wise on object arrays; ``max``/``min``/``where`` do not, so they live here.
 """
 
 from __future__ import annotations

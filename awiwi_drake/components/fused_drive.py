@@ -307,9 +307,7 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     ``derivatives(state, u, q, qd, out)`` / with a link ``derivatives(state, u, tau_ext, out)``;
     ``tendon_force``, ``tendon_stiffness``, ``elongation`` ``(state, q, out)`` / ``(state, out)``;
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
-    ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
-    ``vectorized``: the same functions in numpy's elementwise forms (no numba, no ``_batch`` twins):
-    ``fn(states.T, out.T)`` evaluates many states at once (:func:`~awiwi_drake.components.codegen.emit_source`).
+    ``jit`` and ``vectorized``: as :func:`~awiwi_drake.components.codegen.compile_kernels`.
     """
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
                            "(e.g. LeverSpringMechanism.to_polynomial())")
@@ -324,10 +322,8 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     return kernels
 
 
-# Kernels of drive models already traced in this process, by the model's content. Tracing the
-# laws symbolically costs ~0.4-0.6 s for the hand; every new diagram (and every scalar-converted
-# or cloned copy, e.g. inside ``analysis.simulate``) would otherwise pay it again at its first
-# evaluation, inside the simulation.
+# Kernels of drive models already traced in this process, by the model's content: every new diagram (and every
+# scalar-converted or cloned copy) would otherwise trace the laws again.
 _KERNELS: dict = {}
 
 
@@ -368,16 +364,11 @@ def _build_kernels(model, m, n, nr, jit, vectorized=False):
 
 @TemplateSystem.define("TendonDriveBatch_", scope=sys.modules[__name__])
 def TendonDriveBatch_(T):
-    """N copies of one link-carrying drive (a single-joint rig) in one system.
+    """N copies of one link-carrying drive (a single-joint rig) in one system: ``TendonDriveBatch_[T](model, N)``.
 
-    ``TendonDriveBatch_[T](model, num_copies)``; ``model`` must carry its links
-    (``DriveModel.link_inertia``). State: the copies' states one after the other
-    (copy ``i`` at ``[i k, (i + 1) k)`` with ``k = model.num_states``, each in the
-    single rig's order). Inputs ``motor_torque`` (N m) and ``external_torque``
-    (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
-    (N m). The float path runs the generated kernel's ``_batch`` twin (one
-    compiled loop over the copies); AutoDiffXd/Expression call :func:`drive_laws`
-    per copy.
+    State: the copies' states one after the other, each in the single rig's order.  Inputs ``motor_torque``
+    (N m) and ``external_torque`` (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
+    (N m).  Float runs the generated kernel's ``_batch`` twin (one compiled loop over the copies).
     """
 
     class Impl(LeafSystem_[T]):

@@ -576,17 +576,9 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
 def SpringBank_(T):
     """N tendon spring mechanisms in one system (thesis ch. 4).
 
-    Input ports
-    -----------
-    elongation : (N,) [m]
-    elongation_rate : (N,) [m/s]   (only with hysteresis)
-
-    Output ports
-    ------------
-    tendon_force : (N,) [N]      elastic force (+ hysteresis force), 0 when slack
-    tendon_stiffness : (N,) [N/m]  df/dx of the elastic curve
-
-    With hysteresis the system has N continuous states (the hysteresis forces z).
+    Inputs ``elongation`` (N) [m] and, with hysteresis, ``elongation_rate`` (N) [m/s]; outputs
+    ``tendon_force`` (N) [N] (elastic + hysteresis force, 0 when slack) and ``tendon_stiffness`` (N) [N/m]
+    (df/dx of the elastic curve).  With hysteresis the system has N states, the hysteresis forces z.
     """
 
     class Impl(LeafSystem_[T]):

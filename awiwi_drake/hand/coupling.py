@@ -26,6 +26,7 @@ import abc
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from .._math import is_float
 from ..components.tendon import joint_stiffness as tendon_joint_stiffness
@@ -441,13 +442,7 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
 def dof_selection(coupling) -> np.ndarray:
     """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
     coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
-    blocks = [c.dof_selection for c in coupling.parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
+    return block_diag(*(np.asarray(c.dof_selection, dtype=float) for c in coupling.parts.values()))
 
 
 def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:

@@ -322,21 +322,12 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,
                    wrist: bool = False, visual: bool = False) -> HandRig:
-    """One finger with its motors, springs and routing (see module docstring).
+    """One finger (one of FINGERS) with its motors, springs and routing (see module docstring).
 
-    Parameters
-    ----------
-    finger : {"thumb", "index", "middle", "ring", "fifth"}
-    params : FingerRigParams, optional
-        Default ``FingerRigParams.for_finger(finger)``.
-    wrist : bool
-        Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
-        finger's tendons enter the routing.
-    visual : bool
-        Register cylinder geometry with a SceneGraph (for Meshcat).
-
-    Operating point keys: ``pretension`` [N], ``joint_angles`` (plant joints or
-    independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
+    ``params`` default ``FingerRigParams.for_finger(finger)``; ``wrist`` adds the ``wrist_angle`` input
+    (the wrist's offsets of this finger's tendons enter the routing); ``visual`` registers cylinder
+    geometry with a SceneGraph (for Meshcat).  Operating point keys: ``pretension`` [N], ``joint_angles``
+    (plant joints or independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
