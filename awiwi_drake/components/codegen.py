@@ -292,7 +292,7 @@ def compile_kernels(functions: Mapping[str, tuple[Sequence[Sequence], Sequence]]
     """
     with np.errstate(invalid="ignore"):
         source = emit_source(functions, extra, vectorized=vectorized)
-    names = list(functions) if vectorized else _with_batch(functions)
+    names = [n for name in functions for n in ((name,) if vectorized else (name, f"{name}_batch"))]
     return compile_source(source, names + list(extra_names), tag=tag, jit=jit and not vectorized)
 
 
@@ -335,6 +335,3 @@ def _write_module(folder: pathlib.Path, modname: str, source: str) -> pathlib.Pa
         os.replace(tmp, path)       # atomic: concurrent processes never see a half-written module
     return path
 
-
-def _with_batch(functions):
-    return [n for name in functions for n in (name, f"{name}_batch")]

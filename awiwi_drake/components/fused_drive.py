@@ -312,7 +312,7 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
                            "(e.g. LeverSpringMechanism.to_polynomial())")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
-    key = _model_key(model, "vectorized" if vectorized else jit)
+    key = None if model._content_key is None else (model._content_key, "vectorized" if vectorized else jit)
     if key is not None and key in _KERNELS:
         return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
@@ -325,12 +325,6 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
 # Kernels of drive models already traced in this process, by the model's content: every new diagram (and every
 # scalar-converted or cloned copy) would otherwise trace the laws again.
 _KERNELS: dict = {}
-
-
-def _model_key(model: DriveModel, mode):
-    """The content key of ``model`` (taken at its construction) with the kernels' ``mode``, or None (no caching)."""
-    key = getattr(model, "_content_key", None)
-    return None if key is None else (key, mode)
 
 
 def _content_digest(model) -> str | None:

@@ -139,7 +139,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
     offsets = laws.inverse_force(np.full(m, p.pretension))
-    rows = _wrist_rows(parts)
+    rows = np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])      # Table 6.2 rows, routing order
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
@@ -245,11 +245,6 @@ def _joint_friction(p, plant) -> np.ndarray:
         jp = own.get(name, p.joint_friction_params)
         out[k] = (jp.coulomb, jp.static, jp.stribeck_velocity, jp.presliding_angle)
     return out
-
-
-def _wrist_rows(parts) -> np.ndarray:
-    """Rows of Table 6.2 (0-based) served by the tendons of ``parts``, in routing order."""
-    return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
 
 
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,

@@ -239,26 +239,18 @@ COMPILE_AFTER_CALLS = 4
 # (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
 FINGER_STRUCTURE = {"index": (False, False), "middle": (False, False), "ring": (True, False),
                     "fifth": (True, True)}
-_TENDONS = {"index": 8, "middle": 8, "ring": 6, "fifth": 8}
-
-
-def structure_text(finger: str) -> str:
-    """Human-readable structure of ``finger`` (for error messages)."""
-    if finger not in FINGER_STRUCTURE:
-        return "generic finger"
-    coupled, hmc = FINGER_STRUCTURE[finger]
-    dof = 4 - int(coupled) + int(hmc)
-    return (f"pip_dip_coupled={coupled}, has_hmc={hmc}: {dof} DoF, {_TENDONS[finger]} tendons")
 
 
 def check_finger_structure(finger: str, p) -> None:
     """ValueError naming ``finger`` and the field when ``p``'s structure flags are not the thesis's."""
     if finger not in FINGER_STRUCTURE:
         return
+    coupled, hmc = FINGER_STRUCTURE[finger]
+    dof = 4 - int(coupled) + int(hmc)
     for name, value in zip(("pip_dip_coupled", "has_hmc"), FINGER_STRUCTURE[finger]):
         if getattr(p, name) != value:
-            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} "
-                             f"({structure_text(finger)}; sections 5.2-5.5), got {getattr(p, name)}")
+            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} (pip_dip_coupled={coupled}, "
+                             f"has_hmc={hmc}: {dof} DoF, {2 * dof} tendons; sections 5.2-5.5), got {getattr(p, name)}")
 
 # Global tendon numbering (0-based slices of the 38 tendons, Table 6.2 order): chosen, see module doc.
 TENDON_SLICES = {"thumb": slice(0, 8), "index": slice(8, 16), "middle": slice(16, 24),
@@ -286,11 +278,9 @@ class HandParams(Parameters):
 
     def _validate(self) -> None:
         super()._validate()
-        for name, typ in _FINGER_PARAM_TYPES.items():
+        for name, typ in _FINGER_PARAM_TYPES.items():   # each finger class checks its structure (FINGER_STRUCTURE)
             if not isinstance(getattr(self, name), typ):
                 raise ValueError(f"HandParams.{name} must be {typ.__name__}, got {type(getattr(self, name)).__name__}")
-            if name != "thumb":
-                check_finger_structure(name, getattr(self, name))
 
     def finger(self, name: str):
         """The parameter set of finger ``name`` (one of FINGERS)."""
