@@ -1,20 +1,12 @@
 """The tendon drive's model: motors + springs + routing + guide friction + hysteresis.
 
-The rigs (:mod:`awiwi_drake.components.rig_system`), the batched joint rigs (:class:`TendonDriveBatch_`) and
-the fingers/hand (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`) evaluate its model (:class:`DriveModel`)
-in their own systems. Its physics is one function, :func:`drive_laws`, that calls the law functions of
-this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
-tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
-:func:`~awiwi_drake.components.spring.hysteresis_rate`,
-:func:`~awiwi_drake.components.friction.guide_friction_force` (4.1) and
-:func:`~awiwi_drake.components.friction.guide_friction`):
-
-* for ``AutoDiffXd`` and ``Expression`` (``Linearize``, LQR, symbolic
-  analysis) a system evaluates :func:`drive_laws` directly;
-* for ``float`` numba kernels generated from :func:`drive_laws` (:func:`build_kernels`,
-  :mod:`awiwi_drake.components.codegen`): the laws are evaluated once on
-  symbolic variables and the expression tree is compiled. Tests check kernel =
-  laws at random states to 1e-12 for every switch.
+Its physics is one function, :func:`drive_laws`, calling the law functions of this package (motor,
+each tendon's spring, ``coupling.h``/``P``, hysteresis, guide friction), generic in the scalar type.
+The rigs (:mod:`awiwi_drake.components.rig_system`), the batched joint rigs (:class:`TendonDriveBatch_`)
+and the fingers/hand (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`) evaluate its
+:class:`DriveModel`: directly for ``AutoDiffXd`` and ``Expression``, and for ``float`` through numba
+kernels traced once from :func:`drive_laws` on symbolic variables (:func:`build_kernels`,
+:mod:`awiwi_drake.components.codegen`; tests: kernel = laws at random states to 1e-12).
 
 Model (docs/ARCHITECTURE.md sign convention), per tendon i::
 
@@ -25,14 +17,10 @@ Model (docs/ARCHITECTURE.md sign convention), per tendon i::
     B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
     tau   = -P(q)^T (f + g)                                   generalised force on the joints
 
-With ``link_inertia``/``link_damping`` the model also carries the joints as
-decoupled links ``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint
-rigs, no MultibodyPlant); such a model is built into a rig by
-:mod:`awiwi_drake.components.rig_system` (C++ dynamics) or batched by
-:class:`TendonDriveBatch_`. State order: ``[q, qdot]`` (with a link), then
-``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)`` with
-guide friction (the guide friction forces, a Dahl state: see
-:func:`~awiwi_drake.components.friction.guide_friction_rate`).
+With ``link_inertia``/``link_damping`` the model also carries the joints as decoupled links
+``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint rigs, no MultibodyPlant).  State order:
+``[q, qdot]`` (with a link), ``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)``
+with guide friction.
 """
 
 from __future__ import annotations
@@ -41,11 +29,10 @@ import sys
 from dataclasses import dataclass, field
 
 import numpy as np
-import pydrake.symbolic as sym
 from pydrake.systems.framework import Diagram, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import asarray_like, is_float, positive_part
+from awiwi_drake._math import asarray_like, is_float, positive_part, symbolic_vector
 from awiwi_drake.components.motor import motor_acceleration, motor_drive_torque, saturate_torque
 from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
@@ -313,11 +300,6 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     return out
 
 
-def _variables(prefix: str, size: int):
-    v = [sym.Variable(f"{prefix}{i}") for i in range(size)]
-    return v, np.array([sym.Expression(x) for x in v], dtype=object)
-
-
 def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = False):
     """numba kernels of :func:`drive_laws` (float path), one per output group.
 
@@ -366,16 +348,16 @@ def _content_digest(model) -> str | None:
 
 
 def _build_kernels(model, m, n, nr, jit, vectorized=False):
-    sv, s = _variables("s", model.num_states)
-    uv, u = _variables("u", m)
+    sv, s = symbolic_vector("s", model.num_states)
+    uv, u = symbolic_vector("u", m)
     if model.has_link:
-        ev, e = _variables("e", n)
+        ev, e = symbolic_vector("e", n)
         res = drive_laws(model, s, u, tau_ext=e)
         ins = dict(derivatives=[sv, uv, ev], tendon_force=[sv], tendon_stiffness=[sv], elongation=[sv],
                    generalized_force=[sv])
     else:
-        qv, q = _variables("q", n)
-        dv, d = _variables("qd", nr)
+        qv, q = symbolic_vector("q", n)
+        dv, d = symbolic_vector("qd", nr)
         res = drive_laws(model, s, u, q, d if model.needs_joint_velocity else None)
         ins = dict(derivatives=[sv, uv, qv, dv], tendon_force=[sv, qv], tendon_stiffness=[sv, qv],
                    elongation=[sv, qv], generalized_force=[sv, qv, dv])

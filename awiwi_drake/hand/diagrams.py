@@ -1,37 +1,18 @@
 """Finger and hand diagrams: links (a MultibodyPlant's dynamics) + motors, springs and routing in one system.
 
-``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig`
-(a :class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` /
-``analysis.simulate`` work on them.
+``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig` (a
+:class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` / ``analysis.simulate`` work on them.  The
+plant is one system, ``hand_dynamics`` (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`: its ports and
+state order); ``rig.plant`` is its (standalone) MultibodyPlant.  The diagram exports its inputs
+``motor_torque``, ``external_torque`` and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad]; its
+outputs, and the slices ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` / ``motor_velocity`` /
+``motor_state``, ``wrist_tendon_offset`` (with the wrist) and ``joint_friction_torque`` (with the joints'
+stick-slip friction, ``params.joint_friction``).
 
-Diagram (names as in the exported graph)::
-
-    motor_torque, external_torque ──> hand_dynamics (links + tendon drive in one system,
-    wrist_angle ──> wrist_tendon_offsets ──> ...    :class:`~awiwi_drake.hand.dynamics.HandDynamics_`)
-
-``hand_dynamics`` evaluates the MultibodyPlant's dynamics (mass matrix, bias, damping) and the
-drive's laws in one compiled call (float) or through the plant and the laws (AutoDiffXd,
-Expression); ``rig.plant`` is that (standalone) MultibodyPlant.
-
-Exported inputs: ``motor_torque`` (m) [N m], ``external_torque`` (n) [N m],
-and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad].
-Exported outputs: ``state`` (the full continuous state, ``state_names``
-order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
-``motor_velocity`` / ``motor_state``, ``tendon_force`` [N],
-``tendon_stiffness`` [N/m], ``elongation`` [m], ``joint_torque`` (n, tendon
-part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
-
-State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
-then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces, then with
-guide friction (on by default) ``g (m)``, the guide friction forces of the tendon paths
-(both Dahl states; the guide friction adds ``-P^T g`` to the joint torque), then with the joints'
-stick-slip friction (``params.joint_friction``, off by default) ``tau_f (n)``, the friction torque on each
-joint (exported as ``joint_friction_torque``).
-
-The wrist enters the routing like extra joints: the drive's coupling is the
-finger coupling plus ``m`` length-offset "joints" (identity columns of
-``P``) fed by :class:`~awiwi_drake.hand.systems.WristTendonOffsets_`
-(Table 6.2 order = our global tendon order, ``parameters.hand.TENDON_SLICES``).
+The wrist enters the routing like extra joints: the drive's coupling is the finger coupling plus ``m``
+length-offset "joints" (identity columns of ``P``) fed by
+:class:`~awiwi_drake.hand.systems.WristTendonOffsets_` (Table 6.2 order = our global tendon order,
+``parameters.hand.TENDON_SLICES``).
 """
 
 from __future__ import annotations
@@ -115,8 +96,6 @@ class HandRig(Rig):
     @property
     def num_tendons(self) -> int:
         return len(self.tendon_names)
-
-
 
 
 def tendon_spring_laws(p, tendon_names) -> TendonSprings:

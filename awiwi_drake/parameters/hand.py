@@ -1,34 +1,16 @@
 """Finger and hand parameters (thesis ch. 5), with sources.
 
-Index/middle bone geometry comes from Table 5.1 (read with two corrections:
-M32 last row ``0 0 0 1``, M98 translation 0.0201 m rather than the printed
-0.00201 m, which would make the distal phalanx 2 mm long).  The thesis prints
-no pulley radii, masses or inertias per link; the values below are chosen and
-say why.
+Index/middle bone geometry comes from Table 5.1 (read with two corrections: M32 last row ``0 0 0 1``,
+M98 translation 0.0201 m rather than the printed 0.00201 m, which would make the distal phalanx 2 mm
+long).  The thesis prints no pulley radii, masses or inertias per link; the values below are chosen and
+say why.  The finger's links are uniform cylinders whose masses split the finger mass of section 5.2.2
+(0.02 kg) in proportion to the Table 5.1 link lengths.  The link inertia 7.2e-7 kg m^2 of Tables 14.2 and
+15.1 belongs to the single-joint test rig (Fig 15.14), not to a phalanx: the rigs keep it
+(``parameters.rigs``).
 
-Masses and inertias
--------------------
-The thesis gives a finger mass of about 0.02 kg (section 5.2.2, a gravity
-estimate for the whole finger: 0.02 kg at ~0.01 m) and a link inertia of
-7.2e-7 kg m^2 (Tables 14.2, 15.1).  The latter is the link of the single-joint
-test rig (Fig 15.14), not a phalanx of the finger, so the two are not in
-conflict: the rigs keep 7.2e-7 kg m^2 (``parameters.rigs``).  The finger's
-links are uniform cylinders of radius ``link_radius`` whose masses split the
-finger mass in proportion to the Table 5.1 link lengths (equal cross-section):
-0.019 kg (0.02 kg less the 1 g abduction link) over 40.38 / 29.8 / 20.1 mm gives
-8.50 / 6.27 / 4.23 g.  The distal inertia about the DIP axis is then
-m (L^2/3 + R^2/4) = 6.2e-7 kg m^2, close to the test rig's value by coincidence
-of scale.  The whole finger's centre of mass lies ~4 cm from the MCP (the
-0.01 m of section 5.2.2 only served the thesis's gravity estimate, negligible
-either way: 0.02 kg x 9.81 x 0.04 m = 0.008 N m).
-
-Global tendon order
--------------------
-The thesis (Table 6.2) numbers 38 tendons but does not say which rows belong
-to which finger.  We choose, and use everywhere (hand diagram, wrist offsets):
-thumb tendons 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
-(1-based, Table 6.2 numbering); within a finger the order of its tendon
-equations ((5.22) thumb, (5.5) index/middle, (5.18) ring, see
+Global tendon order (chosen: Table 6.2 numbers 38 tendons but does not say which rows belong to which
+finger), used everywhere: thumb tendons 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38; within a
+finger the order of its tendon equations ((5.22) thumb, (5.5) index/middle, (5.18) ring, see
 :mod:`awiwi_drake.hand.coupling` for the fifth).
 """
 
@@ -320,10 +302,6 @@ class HandParams(Parameters):
 def finger_params(name: str):
     """Default parameter set of finger ``name``."""
     return HandParams().finger(name)
-
-
-
-
 
 
 @dataclass(frozen=True)
