@@ -1,11 +1,8 @@
 """Scalar-type-generic math for the law functions.
 
-The constitutive laws of awiwi_drake are written once and evaluated with
-``float`` (numpy float arrays), ``AutoDiffXd`` and, where the law allows,
-``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).
-numpy ufuncs (``np.sin``, ``np.arctan``, ``np.tanh``, ``np.sqrt``, ``np.abs``)
-already dispatch element-wise on object arrays; ``max``/``min``/``where``
-do not, so they live here.
+The laws are written once and evaluated with ``float``, ``AutoDiffXd`` and, where the law allows,
+``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).  numpy ufuncs dispatch
+element-wise on object arrays; ``max``/``min``/``where`` do not, so they live here.
 """
 
 from __future__ import annotations
@@ -14,7 +11,7 @@ import numpy as np
 import pydrake.math as _pm
 
 __all__ = ["is_float", "scalar_value", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like",
-           "where_positive", "Tangent"]
+           "where_positive", "symbolic_vector", "Tangent"]
 
 
 def is_float(x) -> bool:
@@ -112,6 +109,14 @@ def where_positive(x, a):
             xv = xi.value() if hasattr(xi, "value") else float(xi)
             out[idx] = ai if xv > 0.0 else 0.0 * ai
     return out[()] if out.shape == () else out
+
+
+def symbolic_vector(prefix: str, size: int):
+    """``(variables, expressions)``: ``size`` new symbolic variables ``<prefix>0, <prefix>1, ...`` and the object
+    array of their ``Expression`` s (the inputs of a law traced on symbolic variables)."""
+    import pydrake.symbolic as _sym
+    v = [_sym.Variable(f"{prefix}{i}") for i in range(size)]
+    return v, np.array([_sym.Expression(a) for a in v], dtype=object)
 
 
 class Tangent:

@@ -1,23 +1,13 @@
 """Compiled float kernels generated from the law functions.
 
-The laws of :mod:`awiwi_drake.components` are written once, generic in the
-scalar type. For the float hot path we evaluate them *once* on
-``pydrake.symbolic`` variables, walk the resulting expression DAG
-(``Expression.get_kind()`` / ``Unapply()``), emit straight-line Python source
-with one temporary per distinct sub-expression (hash-consing on the emitted code:
-common sub-expressions are shared, e.g. the thumb kinematics used by both ``h(q)`` and ``P(q)``) and
-compile it with numba (``njit(cache=True)``). The kernel is therefore not a
-second, hand-written copy of the physics: change a law and the kernel follows
-(the source hash changes, so the disk cache does too).
-
-Cost (measured on this project's machine, see README "How the plants are built, and speed"): numba +
-llvmlite add about 210 MB and 15 s to ``pip install``; the first call of a new
-kernel compiles it (joint rig ~1 s, the hand's drive ~10-40 s); the compiled code
-is cached on disk (``$AWIWI_KERNEL_CACHE``, default ``~/.cache/awiwi_drake/kernels``)
-and reloads in milliseconds in later processes.
-
-``compile_kernels`` returns one function per requested output group so a
-system evaluates only what a port needs (lean outputs).
+The laws of :mod:`awiwi_drake.components` are written once, generic in the scalar type.  For the float
+hot path they are evaluated *once* on ``pydrake.symbolic`` variables; the expression DAG
+(``get_kind()`` / ``Unapply()``) is emitted as straight-line Python with one temporary per distinct
+sub-expression (hash-consing on the emitted code) and compiled with numba (``njit(cache=True)``).  The
+kernel is not a second copy of the physics: change a law and the kernel follows (the source hash changes,
+so does the disk cache, ``$AWIWI_KERNEL_CACHE``, default ``~/.cache/awiwi_drake/kernels``; compile and
+load times: README, "How the plants are built, and speed").  :func:`compile_kernels` returns one function
+per requested output group, so a system evaluates only what a port needs.
 """
 
 from __future__ import annotations
@@ -102,11 +92,8 @@ class _Emitter:
         return name
 
     def body(self, results: Sequence[str]) -> tuple[list[str], list[str]]:
-        """(statement lines, result expressions) with single-use temporaries inlined.
-
-        Fewer statements make numba's compile time (type inference is per statement)
-        several times shorter for the hand's drive; nesting is capped for the parser.
-        """
+        """(statement lines, result expressions) with single-use temporaries inlined (fewer statements: numba
+        infers types per statement); nesting is capped for the parser."""
         uses: dict[str, int] = {}
         for _, code in self.lines:
             for ref in _TEMP.findall(code):
@@ -305,7 +292,7 @@ def compile_kernels(functions: Mapping[str, tuple[Sequence[Sequence], Sequence]]
     """
     with np.errstate(invalid="ignore"):
         source = emit_source(functions, extra, vectorized=vectorized)
-    names = list(functions) if vectorized else _with_batch(functions)
+    names = [n for name in functions for n in ((name,) if vectorized else (name, f"{name}_batch"))]
     return compile_source(source, names + list(extra_names), tag=tag, jit=jit and not vectorized)
 
 
@@ -348,6 +335,3 @@ def _write_module(folder: pathlib.Path, modname: str, source: str) -> pathlib.Pa
         os.replace(tmp, path)       # atomic: concurrent processes never see a half-written module
     return path
 
-
-def _with_batch(functions):
-    return [n for name in functions for n in (name, f"{name}_batch")]

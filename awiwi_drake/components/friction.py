@@ -1,14 +1,8 @@
 """Friction laws (thesis ch. 3, 4 and 9): the one place each friction law is written.
 
-Every law returns the force or torque *acting on* the moving body (it opposes
-the motion, so its power is never positive), except the two magnitudes of the
-guide friction, (4.1) and the capstan loss, which are the non-negative size of
-the force lost along a tendon path. The laws are generic in the scalar type:
-float (numpy), AutoDiffXd and ``pydrake.symbolic.Expression`` (numpy object
-arrays) pass through, so the LeafSystems, the controllers, the
-model-discrepancy catalog, its truth plant, tests and plots evaluate the same
-function. Parameters are plain numbers (or arrays, one value per copy), so a
-caller passes the fields of its own parameter dataclass.
+Every law returns the force or torque *acting on* the moving body (its power is never positive), except
+the two magnitudes of the guide friction, (4.1) and the capstan loss.  The laws are generic in the scalar
+type (float, AutoDiffXd, Expression), and their parameters are plain numbers (or arrays, one per copy).
 
 ========================  ====================================================
 :func:`regularized_sign`  ``tanh(v / v_s)``: smooth ``sign(v)`` below ``v_s``
@@ -39,11 +33,7 @@ __all__ = ["regularized_sign", "atan_friction", "stribeck_level", "stribeck_fric
 
 
 def regularized_sign(v, smoothing_velocity):
-    """``tanh(v / v_s)``: ``sign(v)`` smoothed below ``smoothing_velocity`` ``v_s`` (> 0).
-
-    The argument is used as is (no clipping): ``tanh`` saturates to +-1 in
-    float, AutoDiffXd and symbolic arithmetic alike.
-    """
+    """``tanh(v / v_s)``: ``sign(v)`` smoothed below ``smoothing_velocity`` ``v_s`` (> 0)."""
     return np.tanh(v / smoothing_velocity)
 
 
@@ -88,9 +78,7 @@ def stick_slip_rate(torque, v, coulomb, static, stribeck_velocity, presliding_an
     ``-W(v) sign(v)``, which falls from ``Fs`` to ``Fc`` as the speed rises (the negative slope that makes it
     stick and slip).  Unlike the memoryless :func:`stribeck_friction` it needs no sign smoothing: its stiffness is
     ``sigma0``, not ``Fs / v_eps``.  It is passive with the storage ``S = tau_f^2 / (2 sigma0)``:
-    ``dS/dt = -tau_f v - |v| tau_f^2 / W <= -tau_f v``, so the work the friction does on the joint,
-    ``int tau_f v dt``, never exceeds ``S(0) - S(t)`` (the instantaneous power ``tau_f v`` may be positive while the
-    presliding spring gives back what it stored, never more).
+    ``dS/dt = -tau_f v - |v| tau_f^2 / W <= -tau_f v``.
     """
     sigma0 = static / presliding_angle
     return -sigma0 * (v + np.abs(v) * torque / stribeck_level(v, coulomb, static, stribeck_velocity))
@@ -147,12 +135,9 @@ def dahl_rate(state, velocity, level, presliding_length, smoothing_velocity):
     ``F`` [N] is the friction force carried by a contact sliding at ``velocity`` v [m/s]; it
     moves with the sliding distance, not with time: after a reversal it crosses from ``-W`` to
     ``+W`` (``level`` W >= 0 [N], the sliding friction) within a few ``presliding_length``
-    delta [m]. At rest it is a spring of stiffness ``W / delta`` (presliding, no damping), and
-    while sliding its relaxation rate is ``|v| / delta`` (independent of W), so explicit fixed-step
-    integration at step h is stable for ``|v| h / delta`` inside the method's real-axis bound.
-    The power ``F v`` taken from the motion is non-negative over every closed sliding cycle
-    (Dahl's model is passive for ``|F| <= W``). The argument of tanh is clipped at +-40 only
-    to keep its AutoDiff derivative finite (tanh is +-1 there).
+    delta [m]. At rest it is a spring of stiffness ``W / delta``; sliding, its relaxation rate is
+    ``|v| / delta`` (independent of W).  Passive for ``|F| <= W``.  The argument of tanh is clipped at +-40
+    only to keep its AutoDiff derivative finite.
     """
     s = np.tanh(clip(velocity / smoothing_velocity, -40.0, 40.0))
     return (velocity / presliding_length) * (level - s * state)
@@ -225,12 +210,8 @@ def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_expo
     gives ``+-W`` (the (4.1) constant and/or the capstan law), and at rest the guides hold the
     tendon with the presliding stiffness ``W / delta`` instead of the damping ``C / v_s`` of a
     regularised sign (which makes the light finger links stiff for explicit integration).  The
-    relaxation takes ``|v|`` exactly, not :func:`dahl_rate`'s ``v tanh(v / v_s)``: then
-    ``|F| <= W`` holds at every speed (at ``F = +-W`` the rate points inwards), so the guides never
-    carry more than their sliding level, which the ch. 9 observer's bound uses
-    (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`).  With the smoothed form a
-    tendon that stops slowly ended up to ``W / tanh(|v| / v_s)``: measured 3.8 % above ``W`` on
-    the index after a 0.2 rad MCP step.
+    relaxation takes ``|v|`` exactly, not :func:`dahl_rate`'s ``v tanh(v / v_s)``: then ``|F| <= W`` holds
+    at every speed, the bound the ch. 9 observer uses (:func:`joint_friction_bound`).
     """
     s = np.tanh(clip(sliding_velocity / smoothing_velocity, -40.0, 40.0))
     level = guide_friction_level(tension, constant, capstan_exponent, s)

@@ -1,13 +1,8 @@
 """Motor model (thesis ch. 3): the laws (the motor rig, :func:`~awiwi_drake.rigs.motor_rig`, is generated from them).
 
-Dynamics at the output shaft (3.5)::
-
-    B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - tau_load
-
-with the reflected inertia (3.1), the friction law (3.8) (Table 3.3) and the
-position-dependent ripple of the motor-shaft bearing (``gear_ratio`` periods
-per output revolution) and of the output bearing (one period per revolution).
-``tau_load = r_m f`` when the load is a tendon force.
+Dynamics at the output shaft (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - tau_load`` with the
+reflected inertia (3.1), the friction law (3.8) and the ripple (:class:`MotorParams`); ``tau_load = r_m f`` for a
+tendon.
 """
 
 from __future__ import annotations

@@ -1,48 +1,23 @@
 """Tendon routing of the fingers and the wrist: lengths ``h(q)``, coupling ``P(q)``, stiffness map.
 
-The wrist's length offsets come from the closed-form kinematics of :mod:`awiwi_drake.hand.wrist`
-((6.1)-(6.9)).
+Sign convention (docs/ARCHITECTURE.md): ``h_i(q)`` is the length of tendon path ``i``; ``P(q) = dh/dq``
+(m x n); spring elongation ``x = r_m theta + h(q) - h(0) + x0``; joint torque ``tau = -P(q)^T f``.
+The lengths are the single truth and ``P`` is derived from them; where the thesis prints other rows
+((5.9), (5.18), (5.21)) docs/REPRODUCTIONS.md reports both readings.
 
-Sign convention (docs/ARCHITECTURE.md): ``h_i(q)`` is the length of tendon
-path ``i``; ``P(q) = dh/dq`` (m x n); spring elongation
-``x = r_m theta + h(q) - h(0) + x0``; joint torque ``tau = -P(q)^T f``.
+* Index / middle, (5.5): the eight lengths as printed.
+* Ring / fifth, (5.16)-(5.18): the plant keeps PIP and DIP as two joints (the coupling is a stiff
+  element, :mod:`.plant`); the six ring tendons are the four base rows of (5.5) and one PIP/DIP pair
+  ``h = +-(r42 q42 + r43 q43)`` (reduced 3-DoF row ``+-(r42 + r43^2/r42) q42``,
+  :func:`reduced_coupling_matrix`).
+* Fifth: no equations in the thesis.  Chosen: the ring routing plus an antagonistic pair on the
+  hematometacarpal (HMC) joint, ``h = +-r_h q_5h`` (rows 1-2): 8 tendons, 4 DoF (section 5.5).
+* Thumb, (5.20)-(5.22): the four base tendons run straight from the palm points A0..D0 (frame 10) to
+  the bone points A..D (frame 12), ``h_i = |T^12_10(q10, q11) p_i - p0_i|``; the PIP/DIP rows are (5.22).
+  ``P`` and the tension Hessian ``sum_i f_i d^2 h_i/dq^2`` are analytic.
 
-Thesis equations and how we read them
--------------------------------------
-* Index / middle, (5.5): the eight lengths are used as printed and ``P`` is
-  *derived* from them.  (5.9) prints rows 1-4 with other signs (row 1 of
-  (5.9) is ``[r20, -r21]``, while d/dq of (5.5) row 1 is ``[r20, r21]``);
-  with ``h`` as the single truth the rows of (5.9) are a permutation/sign
-  flip of ours and the spanned torques are the same.
-* Ring / fifth, (5.16)-(5.18): the plant keeps PIP and DIP as two joints
-  (the coupling is a stiff element, :mod:`.plant`), so the routing acts on
-  both.  The six ring tendons are the four base tendons (rows 1-4 of (5.5))
-  and one PIP/DIP pair that rolls over the PIP pulley ``r42`` and the DIP
-  pulley ``r43``: ``h = +-(r42 q42 + r43 q43)``.  With the coupling (5.16)
-  ``q43 = (r43/r42) q42`` the reduced 3-DoF row is ``+-(r42 + r43^2/r42) q42``;
-  (5.18) prints ``+-(r42 + r43) q42``, which is the same only for
-  ``r42 = r43`` (1:1 coupling).  (5.18) also lists a second pair
-  ``+-r42 q42`` (h44, h45), which the stated count of six tendons
-  (``P4`` in R^{6x3}, Table 6.2) leaves no room for: we read it as the
-  PIP-only part of the same path and do not add motors for it.
-  Alternative reading (reported in docs/REPRODUCTIONS.md): Fig 5.11 labels
-  the two motors theta44/theta45, i.e. the pair ``+-r42 q42`` is motor-driven
-  (reduced moment arm 7 mm instead of our 10.6 mm, 12 mm as printed) and
-  h46/h47 are passive coupling tendons (our coupling element).
-  :func:`reduced_coupling_matrix` gives the 3-DoF matrix.
-* Fifth: no equations in the thesis.  Chosen: the ring routing plus an
-  antagonistic pair on the hematometacarpal (HMC) joint,
-  ``h = +-r_h q_5h`` (rows 1-2), then the four base rows, then the PIP/DIP
-  pair: 8 tendons, 4 DoF (section 5.5 gives the counts).
-* Thumb, (5.20)-(5.22): the four base tendons run straight from the palm
-  points A0..D0 (frame 10) to the bone points A..D (frame 12):
-  ``h_i = |T^12_10(q10, q11) p_i - p0_i|``; the PIP/DIP rows are (5.22) as
-  printed (again (5.21) prints other signs; ``h`` wins).  ``P`` and the
-  tension Hessian ``sum_i f_i d^2 h_i/dq^2`` are analytic.
-
-Stiffness (5.12) under our convention: ``K_q = -d tau/dq =
-P^T K_t P + sum_i f_i d^2 h_i / dq^2`` (the ``dP^T/dq f`` term; zero for
-constant ``P``), see :func:`joint_stiffness`.
+Stiffness (5.12) under our convention: ``K_q = -d tau/dq = P^T K_t P + sum_i f_i d^2 h_i / dq^2``
+(:func:`joint_stiffness`).
 """
 
 from __future__ import annotations
@@ -51,6 +26,7 @@ import abc
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from .._math import is_float
 from ..components.tendon import joint_stiffness as tendon_joint_stiffness
@@ -466,13 +442,7 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
 def dof_selection(coupling) -> np.ndarray:
     """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
     coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
-    blocks = [c.dof_selection for c in coupling.parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
+    return block_diag(*(np.asarray(c.dof_selection, dtype=float) for c in coupling.parts.values()))
 
 
 def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:

@@ -1,37 +1,18 @@
 """Finger and hand diagrams: links (a MultibodyPlant's dynamics) + motors, springs and routing in one system.
 
-``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig`
-(a :class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` /
-``analysis.simulate`` work on them.
+``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig` (a
+:class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` / ``analysis.simulate`` work on them.  The
+plant is one system, ``hand_dynamics`` (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`: its ports and
+state order); ``rig.plant`` is its (standalone) MultibodyPlant.  The diagram exports its inputs
+``motor_torque``, ``external_torque`` and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad]; its
+outputs, and the slices ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` / ``motor_velocity`` /
+``motor_state``, ``wrist_tendon_offset`` (with the wrist) and ``joint_friction_torque`` (with the joints'
+stick-slip friction, ``params.joint_friction``).
 
-Diagram (names as in the exported graph)::
-
-    motor_torque, external_torque ──> hand_dynamics (links + tendon drive in one system,
-    wrist_angle ──> wrist_tendon_offsets ──> ...    :class:`~awiwi_drake.hand.dynamics.HandDynamics_`)
-
-``hand_dynamics`` evaluates the MultibodyPlant's dynamics (mass matrix, bias, damping) and the
-drive's laws in one compiled call (float) or through the plant and the laws (AutoDiffXd,
-Expression); ``rig.plant`` is that (standalone) MultibodyPlant.
-
-Exported inputs: ``motor_torque`` (m) [N m], ``external_torque`` (n) [N m],
-and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad].
-Exported outputs: ``state`` (the full continuous state, ``state_names``
-order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
-``motor_velocity`` / ``motor_state``, ``tendon_force`` [N],
-``tendon_stiffness`` [N/m], ``elongation`` [m], ``joint_torque`` (n, tendon
-part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
-
-State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
-then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces, then with
-guide friction (on by default) ``g (m)``, the guide friction forces of the tendon paths
-(both Dahl states; the guide friction adds ``-P^T g`` to the joint torque), then with the joints'
-stick-slip friction (``params.joint_friction``, off by default) ``tau_f (n)``, the friction torque on each
-joint (exported as ``joint_friction_torque``).
-
-The wrist enters the routing like extra joints: the drive's coupling is the
-finger coupling plus ``m`` length-offset "joints" (identity columns of
-``P``) fed by :class:`~awiwi_drake.hand.systems.WristTendonOffsets_`
-(Table 6.2 order = our global tendon order, ``parameters.hand.TENDON_SLICES``).
+The wrist enters the routing like extra joints: the drive's coupling is the finger coupling plus ``m``
+length-offset "joints" (identity columns of ``P``) fed by
+:class:`~awiwi_drake.hand.systems.WristTendonOffsets_` (Table 6.2 order = our global tendon order,
+``parameters.hand.TENDON_SLICES``).
 """
 
 from __future__ import annotations
@@ -117,8 +98,6 @@ class HandRig(Rig):
         return len(self.tendon_names)
 
 
-
-
 def tendon_spring_laws(p, tendon_names) -> TendonSprings:
     """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
 
@@ -160,7 +139,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
     offsets = laws.inverse_force(np.full(m, p.pretension))
-    rows = _wrist_rows(parts)
+    rows = np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])      # Table 6.2 rows, routing order
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
@@ -268,11 +247,6 @@ def _joint_friction(p, plant) -> np.ndarray:
     return out
 
 
-def _wrist_rows(parts) -> np.ndarray:
-    """Rows of Table 6.2 (0-based) served by the tendons of ``parts``, in routing order."""
-    return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
-
-
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
                  external_torque, wrist_angle, num_friction_states=0):
     """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
@@ -343,21 +317,12 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,
                    wrist: bool = False, visual: bool = False) -> HandRig:
-    """One finger with its motors, springs and routing (see module docstring).
+    """One finger (one of FINGERS) with its motors, springs and routing (see module docstring).
 
-    Parameters
-    ----------
-    finger : {"thumb", "index", "middle", "ring", "fifth"}
-    params : FingerRigParams, optional
-        Default ``FingerRigParams.for_finger(finger)``.
-    wrist : bool
-        Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
-        finger's tendons enter the routing.
-    visual : bool
-        Register cylinder geometry with a SceneGraph (for Meshcat).
-
-    Operating point keys: ``pretension`` [N], ``joint_angles`` (plant joints or
-    independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
+    ``params`` default ``FingerRigParams.for_finger(finger)``; ``wrist`` adds the ``wrist_angle`` input
+    (the wrist's offsets of this finger's tendons enter the routing); ``visual`` registers cylinder
+    geometry with a SceneGraph (for Meshcat).  Operating point keys: ``pretension`` [N], ``joint_angles``
+    (plant joints or independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")

@@ -120,11 +120,6 @@ UNIT_CEILINGS: dict[str, float] = {
 }
 
 
-def _ceiling(m: Mapping[str, Any]) -> float | None:
-    """The upper bound that applies to a field: its own ``high`` or its unit's ceiling."""
-    return m["high"] if m["high"] is not None else UNIT_CEILINGS.get(m["unit"])
-
-
 def _kind(f) -> str:
     """'bool', 'int', 'str' or 'float' from a dataclass field's annotation."""
     t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
@@ -158,8 +153,8 @@ def _check_scalar(cls_name: str, name: str, v: Any, m: Mapping[str, Any], where:
     if hi is not None and (v > hi or (v == hi and not m["high_inclusive"])):
         op = "<=" if m["high_inclusive"] else "<"
         raise ValueError(f"{label} = {v!r} is out of range: must be {op} {hi} [{m['unit']}]")
-    ceiling = _ceiling(m)
-    if hi is None and ceiling is not None and math.isfinite(v) and abs(v) > ceiling:
+    ceiling = UNIT_CEILINGS.get(m["unit"]) if hi is None else None
+    if ceiling is not None and math.isfinite(v) and abs(v) > ceiling:
         raise ValueError(f"{label} = {v!r} is implausible: |value| must be <= {ceiling:g} [{m['unit']}] "
                          f"(physical ceiling of the unit; check the unit)")
 

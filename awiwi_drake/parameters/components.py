@@ -34,45 +34,10 @@ _TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
 class MotorParams(Parameters):
     """Geared PMSM + harmonic drive, seen at the output shaft (ch. 3).
 
-    Dynamics (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - r_m f``.
-
-    Attributes
-    ----------
-    inertia : float
-        B [kg m^2], total reflected inertia at the output shaft (3.1); domain (0, inf).
-    friction : bool
-        Include the velocity-dependent friction (3.8).
-    friction_slope : float
-        gamma1 [s/rad] of (3.8), Table 3.3; domain (0, inf).
-    coulomb_torque : float
-        gamma2 [Nm] of (3.8), Table 3.3; domain [0, inf).
-    viscous_friction : float
-        gamma3 [Nm s/rad] of (3.8), Table 3.3; domain [0, inf).
-    damping : float
-        Extra linear damping d_theta [Nm s/rad] (used by the flexible-joint model (12.8));
-        domain [0, inf).
-    ripple : bool
-        Include the position-dependent ripple torques (3.5).
-    ripple_motor_amplitude : float
-        Amplitude [Nm] of the motor-shaft bearing ripple (period 2 pi / gear_ratio at the output).
-    ripple_output_amplitude : float
-        Amplitude [Nm] of the output-bearing ripple (period 2 pi).
-    ripple_motor_phase, ripple_output_phase : float
-        Phases [rad] of the two ripple components.
-    ripple_harmonics : tuple
-        Further ripple orders as flat ``(order, sin amplitude [Nm], cos amplitude [Nm])`` triples
-        (a fitted motor's, e.g. the discrepancy workflow's); empty by default.
-    torque_constant : float
-        Motor current to output torque [Nm/A] (output side); converts the thesis's currents
-        (Fig 3.3b, 3.4b in A) to torques.
-    gear_ratio : float
-        Input/output speed ratio of the harmonic drive (1/alpha_gear); domain [1, inf).
-    saturation : bool
-        Clip the commanded torque to +-torque_limit (reported by the simulation monitors).
-    torque_limit : float
-        Maximum output torque [Nm]; domain (0, inf).
-    pulley_radius : float
-        r_m [m], radius of the motor pulley winding the tendon; domain (0, 0.05].
+    Dynamics (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - r_m f``; friction (3.8)
+    ``-(gamma2 atan(gamma1 thd) + gamma3 thd)``; ripple: a motor-shaft bearing component (period
+    ``2 pi / gear_ratio`` at the output) and an output-bearing one (period ``2 pi``), plus optional
+    further orders ``ripple_harmonics``, flat ``(order, sin amplitude, cos amplitude)`` triples.
     """
 
     inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False,
@@ -126,13 +91,6 @@ class PolynomialSpringParams(Parameters):
 
     The thesis's real-time form (ch. 4, "Calibration"). Must be increasing on
     ``[0, max_elongation]`` (checked on a fine grid).
-
-    Attributes
-    ----------
-    coefficients : tuple of float
-        (c1, c2, ...) in SI (N/m, N/m^2, ...); c1 >= 0.
-    max_elongation : float
-        Upper end [m] of the calibrated range; domain (0, 0.1].
     """
 
     coefficients: tuple = param((2.0e4,), unit="N/m^k", vector=True,
@@ -158,13 +116,7 @@ class PolynomialSpringParams(Parameters):
 
 @dataclass(frozen=True)
 class LinearSpringParams(Parameters):
-    """Linear torsional/translational spring (flexible joint (12.8), ch. 15 test rig).
-
-    Attributes
-    ----------
-    stiffness : float
-        k [N/m or Nm/rad]; domain (0, inf).
-    """
+    """Linear torsional/translational spring (flexible joint (12.8), ch. 15 test rig)."""
 
     stiffness: float = param(0.605, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 12.1, k")
 
