@@ -11,7 +11,8 @@ equal to it (tests/test_control_tendon.py, tests/test_fused_chain.py):
   arithmetic), the clamps of ``ForceMap.alpha_of_force`` and ``TendonForceLaw.gains_at``.  Returns -1, or the
   index of the first reference outside its table (the caller raises through the law).
 * ``sdre_law`` -- the tendon SDRE bank with held gains (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`, as written
-  there): the same interpolation as ``force_law``, the measured force clamped to its table; returns as ``force_law``.
+  there): the same interpolation as ``force_law``, the measured force clamped to its table (or the motor angle as the
+  state, ``by_angle``); returns as ``force_law``.
 * ``backstepping`` -- the 15.5 law of a finger/the hand
   (:meth:`~awiwi_drake.control.finger_backstepping.FingerBacksteppingLaw.terms`, ``variant="antagonistic"``, with or
   without the link torque estimate and its bounded compensation) with polynomial spring laws
@@ -88,7 +89,7 @@ def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, 
 
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
-def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale, ripple_scale, r_m, out):
+def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, by_angle, friction_scale, ripple_scale, r_m, out):
     m = fd.shape[0]
     bad = _first_outside(fd, group, fmax)
     if bad >= 0:
@@ -97,8 +98,8 @@ def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale,
     res = np.empty(2)
     for i in range(m):
         k = group[i]
-        fm = min(max(f[i], 0.0), fmax[k])
-        err = _interp1(fm, tf[k], tth[k], n[k]) - _interp1(fd[i], tf[k], tth[k], n[k])
+        theta = th[i] if by_angle else _interp1(min(max(f[i], 0.0), fmax[k]), tf[k], tth[k], n[k])
+        err = theta - _interp1(fd[i], tf[k], tth[k], n[k])
         w_el = w[i] + vp[i] / r_m if path else w[i]
         tau = r_m * fd[i] - g[i] * err - g[m + i] * w_el
         out[i] = _minus_motor_feedforward(tau, w[i], th[i], friction_scale, ripple_scale, arg, res)
