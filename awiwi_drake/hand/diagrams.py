@@ -151,14 +151,14 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     # the drive lives inside the one plant system: its handle points at the rig
     drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
-                                  guide_friction=drive.guide_friction, joint_friction=p.joint_friction)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=model.has_hysteresis,
+                                  guide_friction=model.has_guide_friction, joint_friction=p.joint_friction)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle,
-                            drive.num_states - 2 * m + (n if p.joint_friction else 0))
+                            model.num_states - 2 * m + (n if p.joint_friction else 0))
 
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
