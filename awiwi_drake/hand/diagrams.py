@@ -74,11 +74,9 @@ class HandRig(Rig):
     def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
-        Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
-        ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
-        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
-        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
+        A :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's outputs (what
+        :func:`awiwi_drake.control.closed_loop` uses unless ``sensors="ideal"``), sampling every ``period`` s but
+        never faster than ``params.rate_hz`` (:class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`).
         """
         from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator

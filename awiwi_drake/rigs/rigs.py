@@ -58,11 +58,9 @@ def _check_params(params, cls, rig):
 def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     """One motor, one spring mechanism, tendon fixed at the far end (ch. 10, 14.2.1).
 
-    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega],
-    ``motor_angle``, ``motor_velocity``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
-    ``applied_torque`` [Nm].
-
-    Operating point keys: ``tendon_force`` [N] (default ``params.operating_force``).
+    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega], ``motor_angle``, ``motor_velocity``,
+    ``tendon_force`` [N], ``tendon_stiffness`` [N/m], ``applied_torque`` [Nm].  Operating point key:
+    ``tendon_force`` [N] (default ``params.operating_force``).
     """
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
