@@ -122,12 +122,9 @@ def symbolic_vector(prefix: str, size: int):
 class Tangent:
     """Forward-mode pair ``(v, d)``: a value of any scalar type T and its derivative(s) ``d``.
 
-    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and
-    Expression alike. Drake's AutoDiffXd cannot nest, so a Jacobian that must itself
-    be AutoDiffXd-generic (the wrist coupling matrix ``P(q) = dh/dq`` inside a
-    routing system converted with ``ToAutoDiffXd()``, and its Hessian) needs this
-    second, outer derivative layer. numpy ufuncs on object arrays call the methods
-    ``sin``, ``cos``, ``sqrt``, ``arctan2``. Supports ``+ - * /`` and those four.
+    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and Expression alike (Drake's
+    AutoDiffXd cannot nest, so an AutoDiffXd-generic Jacobian such as the wrist's ``P(q) = dh/dq`` needs this
+    outer layer).  Supports ``+ - * /`` and ``sin``, ``cos``, ``sqrt``, ``arctan2`` (numpy ufuncs call them).
     """
 
     __slots__ = ("v", "d")

@@ -45,12 +45,9 @@ __all__ = ["GuideFrictionModel", "DriveModel", "TendonDrive", "drive_laws", "bui
 class GuideFrictionModel:
     """Guide friction on every tendon path (:func:`~awiwi_drake.components.friction.guide_friction`).
 
-    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides. With
-    ``capstan=False`` the tension-independent (4.1) ``C0 (1 - exp(-C1 alpha))``, with
-    ``capstan=True`` the capstan form (``f (e^{mu alpha} - 1)`` pulled, ``f (1 - e^{-mu alpha})``
-    released). Each tendon's friction force is a Dahl state driven by its sliding speed
-    ``v = (P(q) qdot)_i`` at the finger: it reaches the sliding level within a few
-    ``presliding_length`` of travel; ``s = tanh(v / v_s)`` smooths the direction.
+    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides; (4.1) or, with ``capstan``, the
+    capstan form.  Each tendon's friction force is a Dahl state driven by its sliding speed
+    ``v = (P(q) qdot)_i`` (:func:`~awiwi_drake.components.friction.guide_friction_rate`).
     """
 
     bending_angles: tuple

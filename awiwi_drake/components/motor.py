@@ -53,12 +53,9 @@ def motor_friction_torque(omega, p: MotorParams):
 def motor_ripple_torque(theta, p: MotorParams):
     """Position-dependent ripple torque (3.5), zero when ``p.ripple`` is off.
 
-    ``a_m sin(N th + phi_m) + a_o sin(th + phi_o)`` with ``N = gear_ratio``:
-    the motor-shaft bearing repeats ``N`` times per output revolution, the output
-    bearing once; plus ``sum_k a_k sin(n_k th) + b_k cos(n_k th)`` over
-    ``p.ripple_harmonics`` (flat ``(n_k, a_k, b_k)`` triples: further orders, e.g. a
-    fitted motor's from :func:`~awiwi_drake.discrepancy.augment.augmented_finger_parameters`).
-    ``p``: one MotorParams, or a tuple of one per motor.
+    ``a_m sin(N th + phi_m) + a_o sin(th + phi_o)`` with ``N = gear_ratio`` (motor-shaft and output bearing),
+    plus ``sum_k a_k sin(n_k th) + b_k cos(n_k th)`` over ``p.ripple_harmonics`` (flat ``(n_k, a_k, b_k)``
+    triples, e.g. a fitted motor's).  ``p``: one MotorParams, or a tuple of one per motor.
     """
     if isinstance(p, tuple):
         return _per_motor(motor_ripple_torque, p, theta)

@@ -187,11 +187,9 @@ def LinkRigOutputs_(T):
     """The non-state outputs of a drive whose state is the whole rig (a link rig, the tendon rig);
     ``LinkRigOutputs_[T](model)``.
 
-    Inputs ``state`` (the model's state), ``motor_torque`` (m). Outputs
-    ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``joint_torque``
-    (n) [N m] (the tendons' generalised force ``-P^T f``), each depending on
-    ``state`` only, and ``applied_torque`` (m) [N m] (``motor_torque`` after the
-    motors' saturation), depending on ``motor_torque`` only.
+    Inputs ``state``, ``motor_torque`` (m); outputs ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m],
+    ``joint_torque`` (n) [N m] (``-P^T f``) from the state, and ``applied_torque`` (m) [N m] (the saturated
+    ``motor_torque``).
     """
 
     class Impl(LeafSystem_[T]):

@@ -54,12 +54,9 @@ def _quiet_fp(method):
 class FingerCoupling(abc.ABC):
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
-    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
-    ``joint_names``, ``finger`` (its name); ``is_constant`` when ``P`` does not depend on ``q``.
-    ``parts``, ``joint_slices``, ``tendon_slices`` map each finger the routing spans to its coupling,
-    joints and tendons (one finger: itself; :class:`HandCoupling`: the five).
-    All methods accept float arrays and numpy object arrays of AutoDiffXd or
-    symbolic Expression.
+    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``, ``joint_names``, ``finger``;
+    ``is_constant`` when ``P`` does not depend on ``q``; ``parts``, ``joint_slices``, ``tendon_slices`` map each
+    finger the routing spans to its coupling, joints and tendons.  Methods are generic in the scalar type.
     """
 
     num_tendons: int
@@ -319,12 +316,9 @@ class ThumbCoupling(FingerCoupling):
 class HandCoupling(FingerCoupling):
     """Block-diagonal routing of several fingers, optionally with length-offset inputs.
 
-    Joints: the fingers' plant joints in ``fingers`` order, then
-    ``num_offsets`` extra "joints" that add one-to-one to the tendon lengths
-    (``h += d``; P gets an identity block).  The hand uses them for the 38
-    wrist tendon-length offsets (Table 6.2 order = our global tendon order),
-    so that a wrist motion enters the drive like any joint motion.  Their
-    generalised force ``-f`` is the tendon force itself.
+    Joints: the fingers' plant joints, then ``num_offsets`` extra "joints" that add one-to-one to the
+    tendon lengths (``h += d``; an identity block of P): the hand's 38 wrist offsets, so that a wrist motion
+    enters the drive like any joint motion.
     """
 
     parts = joint_slices = tendon_slices = finger = None   # per instance (not the one-finger properties)

@@ -341,15 +341,9 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
 
 
 def hand_diagram(*, params: HandRigParams | None = None, wrist: bool = True, visual: bool = False) -> HandRig:
-    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
-
-    The links and the drive are one compiled system, with the thesis's physics on (see
-    :class:`~awiwi_drake.parameters.hand.FingerDriveParams`).
-
-    Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
-    (Table 6.2 numbering, chosen: see ``parameters.hand``).  Same ports and
-    operating-point keys as :func:`finger_diagram`.
-    """
+    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input, with the thesis's
+    physics (:class:`~awiwi_drake.parameters.hand.FingerDriveParams`); tendons in the global order of
+    ``parameters.hand``.  Same ports and operating-point keys as :func:`finger_diagram`."""
     p = params if params is not None else HandRigParams()
     if not isinstance(p, HandRigParams):
         raise ValueError(f"hand_diagram: params must be HandRigParams, got {type(p).__name__}")

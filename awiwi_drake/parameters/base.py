@@ -71,31 +71,13 @@ def param(
 ):
     """Declare a validated dataclass field.
 
-    Parameters
-    ----------
-    default : float, int, bool, tuple
-        Default value.  Sequences are stored as tuples (hashable, immutable).
-    unit : str
-        SI unit, e.g. ``"kg m^2"``; ``"-"`` for dimensionless.
-    source : str
-        Where the default comes from: ``"Table 12.1"``, ``"(3.8), Table 3.3"``
-        or ``"chosen: <reason>"``.
-    low, high : float, optional
-        Allowed range of the value (each element for sequences).
-    low_inclusive, high_inclusive : bool
-        Whether the bounds themselves are allowed.
-    doc : str
-        One-line description.
-    vector : bool
-        The field holds a sequence of numbers.
-    finite : bool
-        Reject NaN and infinity (default).
-    choices : tuple of str, optional
-        For a text field: the allowed values.
-
-    The field's annotation sets its type: a ``bool`` field takes only
-    True/False, an ``int`` field only whole numbers, a ``str`` field text (from
-    ``choices`` if given), any other field a real number (not a bool).
+    ``default`` (sequences are stored as tuples); ``unit``: SI unit, e.g. ``"kg m^2"``, ``"-"`` for
+    dimensionless; ``source``: where the default comes from (``"Table 12.1"``, ``"(3.8), Table 3.3"`` or
+    ``"chosen: <reason>"``); ``low``/``high``: the allowed range (each element of a sequence), bounds
+    allowed unless ``low_inclusive``/``high_inclusive`` is False; ``doc``: one-line description; ``vector``:
+    a sequence of numbers; ``finite``: reject NaN and infinity; ``choices``: the allowed values of a text
+    field.  The field's annotation sets its type: ``bool`` takes only True/False, ``int`` only whole
+    numbers, ``str`` text, any other a real number (not a bool).
     """
     if not source:
         raise ValueError("param(): every parameter needs a source")

@@ -81,12 +81,9 @@ class CompareShortMode(Parameters):
 class AnimationParams(Parameters):
     """Camera, forearm stub and frame rate of a hand/finger recording.
 
-    The recording is shown in a *display frame*: the palm frame (x towards the
-    fingers, y towards the thumb, z the palmar normal) turned so that the
-    fingers point up (display z) and the palm faces the display x axis.  The
-    camera looks at the centre of the box that holds the moving links, from
-    ``camera_azimuth`` / ``camera_elevation``, far enough that the box fills
-    ``fill_fraction`` of the vertical field of view.
+    The recording shows the palm frame turned so that the fingers point up and the palm faces the display
+    x axis; the camera looks at the centre of the moving links' box from ``camera_azimuth`` /
+    ``camera_elevation``, far enough that the box fills ``fill_fraction`` of the vertical field of view.
     """
 
     frame_rate: float = param(30.0, unit="Hz", low=1.0, high=240.0,
