@@ -116,7 +116,8 @@ def _poly(x, c, deg):
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
 def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f_op, tau_op, r_m, B, friction_scale,
-                 coef, dcoef, ddcoef, xmax, kend, link_feedforward, fc, estimate, compensate, C, rise, beta, z0, Fs, out):
+                 coef, dcoef, ddcoef, xmax, kend, link_feedforward, fc, estimate, compensate, C, rise, beta, z0, hold,
+                 out):
     m, n = P.shape
     k = S.shape[1]
     deg = coef.shape[1]
@@ -139,11 +140,11 @@ def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f
         tau = tau - fc
         if compensate:
             lv = np.empty(m)
-            for i in range(m):                 # joint_friction_bound: W(f + w) + w, w = beta f + z0; + |S|^T Fs
+            for i in range(m):                 # joint_friction_bound: W(f + w) + w, w = beta f + z0; + hold
                 fp = max(f[i], 0.0)
                 wi = beta[i] * fp + z0[i]
                 lv[i] = C[i] + (fp + wi) * rise[i] + wi
-            bound = np.abs(PS).T @ lv + np.abs(S).T @ Fs
+            bound = np.abs(PS).T @ lv + hold
             for j in range(k):
                 a0[j] = a0[j] + min(max(fc[j], -bound[j]), bound[j])
     edd = Minv @ (tau - Bq @ ed)
