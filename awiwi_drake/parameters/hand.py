@@ -391,6 +391,10 @@ class FingerDriveParams(Parameters):
                         or not isinstance(entry[1], cls)):
                     raise ValueError(f"{type(self).__name__}.{name}[{i}] = {entry!r} must be a "
                                      f"({name.split('_')[0].rstrip('s')}_name, {cls.__name__}) pair")
+            keys = [k for k, _ in getattr(self, name)]
+            if len(set(keys)) < len(keys):
+                raise ValueError(f"{type(self).__name__}.{name}: {next(k for k in keys if keys.count(k) > 1)!r} is "
+                                 "given twice")
             if name == "joint_frictions":       # joint names are checked where the plant is built
                 continue
             names = self.tendon_names
