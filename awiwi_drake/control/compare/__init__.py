@@ -5,7 +5,7 @@
 * :mod:`.metrics` -- step / sine / chirp metrics, :class:`Metrics`, :class:`MetricsTable` (CSV, Markdown).
 * :mod:`.runner` -- the closed-loop simulation behind the tests (:func:`simulate_test`, :func:`settle`).
 * :mod:`.channels` -- the independent DoF of a finger/hand loop (one metrics row per joint).
-* :mod:`.plots` -- :func:`plot_runs`, :func:`plot_joint_runs` (per finger), :func:`plot_gain_diagram`, :func:`plot_metric`.
+* :mod:`.plots` -- :func:`plot_runs`, :func:`plot_joint_runs` (per finger), :func:`plot_gain_diagram`.
 
 CLI: ``awiwi-drake compare``.
 """
@@ -14,7 +14,7 @@ from awiwi_drake.control.compare.metrics import (COLUMNS, NUMERIC, UNITS, Metric
                                                  gain_diagram, linear_bandwidth, response_bandwidth, sine_metrics,
                                                  step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import JointChannels, joint_channels
-from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_metric, plot_runs
+from awiwi_drake.control.compare.plots import plot_gain_diagram, plot_joint_runs, plot_runs
 from awiwi_drake.control.compare.runner import TestRun, settle, simulate_test
 from awiwi_drake.control.compare.standard_tests import (TESTS, Comparison, build_loops, compare, compare_controllers, factory_options,
                                                         compare_test_params, design_step_duration,
@@ -29,6 +29,6 @@ __all__ = ["TESTS", "compare_test_params", "TestRun", "Metrics", "MetricsTable",
            "factory_options",
            "simulate_test", "step_metrics", "sine_metrics", "gain_diagram", "sweep_metrics",
            "response_bandwidth", "linear_bandwidth",
-           "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric",
+           "fit_second_order_step", "plot_runs", "plot_joint_runs", "plot_gain_diagram",
            "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params", "run_joint_test", "joint_channels", "JointChannels",
            "design_stiffness", "size_loads", "load_stiffness_range"]
