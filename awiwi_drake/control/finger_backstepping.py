@@ -28,9 +28,10 @@ second order at rest, left out).  With ``HandChainParams.link_acceleration_feedf
 exactly the designed error-system poles (tested); ``terms(u)["V"]`` gives ``V``.  One DoF with ``P = [-r_q, r_q]^T``
 is the antagonistic joint of 15.5.  The feed-forward is off by default: on the light finger links it turns every
 link-side force the model lacks (the guides' friction (4.1)) into motor torque and an unstable pole (README, "The
-thesis's control on fingers and the hand").  The frictions then leave a dead band: :meth:`FingerBacksteppingLaw.rest_error`
-is the law's rest in closed form, :meth:`~FingerBacksteppingLaw.dead_band` its half-width per DoF, and ``compare``
-flags a step row that stops in it (:meth:`~FingerBacksteppingLaw.friction_hold`).
+thesis's control on fingers and the hand").  The frictions then leave a dead band:
+:meth:`FingerBacksteppingLaw.rest_error` is the law's rest in closed form, :meth:`~FingerBacksteppingLaw.dead_band`
+its half-width per DoF, and ``compare`` flags a step row that stops in it
+(:meth:`~FingerBacksteppingLaw.friction_hold`).
 
 **External load** (``load_observer`` of :func:`finger_backstepping_controller`): the link model has no external
 torque, so a load ``tau_ext`` rests at ``Kp e = (I + G) S^T tau_ext`` (``G`` of the dead band); 15.3 "formally

@@ -38,7 +38,7 @@ from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, si
 from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
 
-__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
+__all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
            "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
            "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load",
            "design_stiffness", "size_loads", "load_stiffness_range"]
@@ -539,6 +539,13 @@ def stopped_row(controller: str, test: str, joint: str, exc: Exception, *, settl
                    flags=("while settling at the initial reference: " if settling else "") + str(exc))
 
 
+def default_tests(loop: ClosedLoop) -> list[str]:
+    """The standard tests that apply to ``loop``: ``disturbance`` only with ``external_torque``, ``sweep`` not on
+    fingers/hand (their tests: step, sine, external-torque step)."""
+    return [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
+            and (t != "sweep" or joint_channels(loop) is None)]
+
+
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
                        params: CompareTestParams | None = None,
                        progress: Callable[[str], Any] | None = None) -> tuple[list[TestRun], list[Metrics]]:
@@ -553,9 +560,7 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     """
     p = params or compare_test_params(loop.rig)
     channels = joint_channels(loop)
-    if tests is None:
-        tests = [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
-                 and (t != "sweep" or channels is None)]  # fingers/hand: step, sine, external-torque step
+    tests = default_tests(loop) if tests is None else tests
     names = channels.names if channels is not None else ["tendon" if loop.tracked_outputs[0] == "tendon_force"
                                                           else "link"]
     runs, rows = [], []
