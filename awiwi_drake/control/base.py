@@ -64,8 +64,7 @@ _ROUND_TRIP_TOLERANCE = 0.01  # delay must be a whole number of periods within 1
 
 # ----------------------------------------------------------------------------
 # gain validation
-def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negative: bool = False,
-               owner: str = "controller") -> float:
+def check_gain(name: str, value: Any, *, allow_zero: bool = False, owner: str = "controller") -> float:
     """Validate one scalar gain; return it as float.
 
     Raises
@@ -81,8 +80,6 @@ def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negativ
         raise ValueError(f"{label} = {value!r} is not a number") from None
     if not math.isfinite(v):
         raise ValueError(f"{label} = {v!r} is not finite")
-    if allow_negative:
-        return v
     if v < 0.0 or (v == 0.0 and not allow_zero):
         need = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{label} = {v!r} must be {need}")
