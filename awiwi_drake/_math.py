@@ -1,11 +1,8 @@
 """Scalar-type-generic math for the law functions.
 
-The constitutive laws of awiwi_drake are written once and evaluated with
-``float`` (numpy float arrays), ``AutoDiffXd`` and, where the law allows,
-``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).
-numpy ufuncs (``np.sin``, ``np.arctan``, ``np.tanh``, ``np.sqrt``, ``np.abs``)
-already dispatch element-wise on object arrays; ``max``/``min``/``where``
-do not, so they live here.
+The laws are written once and evaluated with ``float``, ``AutoDiffXd`` and, where the law allows,
+``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).  numpy ufuncs dispatch
+element-wise on object arrays; ``max``/``min``/``where`` do not, so they live here.
 """
 
 from __future__ import annotations
@@ -125,12 +122,9 @@ def symbolic_vector(prefix: str, size: int):
 class Tangent:
     """Forward-mode pair ``(v, d)``: a value of any scalar type T and its derivative(s) ``d``.
 
-    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and
-    Expression alike. Drake's AutoDiffXd cannot nest, so a Jacobian that must itself
-    be AutoDiffXd-generic (the wrist coupling matrix ``P(q) = dh/dq`` inside a
-    routing system converted with ``ToAutoDiffXd()``, and its Hessian) needs this
-    second, outer derivative layer. numpy ufuncs on object arrays call the methods
-    ``sin``, ``cos``, ``sqrt``, ``arctan2``. Supports ``+ - * /`` and those four.
+    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and Expression alike (Drake's
+    AutoDiffXd cannot nest, so an AutoDiffXd-generic Jacobian such as the wrist's ``P(q) = dh/dq`` needs this
+    outer layer).  Supports ``+ - * /`` and ``sin``, ``cos``, ``sqrt``, ``arctan2`` (numpy ufuncs call them).
     """
 
     __slots__ = ("v", "d")

@@ -281,18 +281,14 @@ def compile_kernels(functions: Mapping[str, tuple[Sequence[Sequence], Sequence]]
                     jit: bool = True, extra: str = "", extra_names: Sequence[str] = (), vectorized: bool = False):
     """Generate, cache and import numba kernels; returns ``{name: function}``.
 
-    Each function takes its input vectors (float64 1-D arrays) and an output
-    array, fills and returns it. Compilation happens on the first call of each
-    function (numba) and is cached on disk next to the generated module.
-    ``jit=False`` runs the same generated source as plain Python (no compile
-    time; used by tests that sweep many model switches).  ``extra`` /
-    ``extra_names``: hand-written functions appended to the module (see
-    :func:`emit_source`) and returned too. ``vectorized``: the numpy forms of :func:`emit_source`, run as
-    plain Python (no numba import, no compile: what many samples at once need, e.g. monitors on a log).
+    Each function takes its input vectors (float64 1-D arrays) and an output array, fills and returns it;
+    numba compiles it at its first call and caches it on disk.  ``jit=False`` runs the same source as plain
+    Python; ``extra`` / ``extra_names``: hand-written functions appended to the module and returned too;
+    ``vectorized``: the numpy forms of :func:`emit_source`, as plain Python (many samples at once).
     """
     with np.errstate(invalid="ignore"):
         source = emit_source(functions, extra, vectorized=vectorized)
-    names = list(functions) if vectorized else _with_batch(functions)
+    names = [n for name in functions for n in ((name,) if vectorized else (name, f"{name}_batch"))]
     return compile_source(source, names + list(extra_names), tag=tag, jit=jit and not vectorized)
 
 
@@ -335,6 +331,3 @@ def _write_module(folder: pathlib.Path, modname: str, source: str) -> pathlib.Pa
         os.replace(tmp, path)       # atomic: concurrent processes never see a half-written module
     return path
 
-
-def _with_batch(functions):
-    return [n for name in functions for n in (name, f"{name}_batch")]

@@ -29,7 +29,7 @@ from awiwi_drake.parameters.components import GuideFrictionParams
 
 __all__ = ["regularized_sign", "atan_friction", "stribeck_level", "stribeck_friction", "stick_slip_rate", "guide_friction_force",
            "capstan_friction_force", "guide_friction", "dahl_rate", "dahl_path", "guide_friction_level", "guide_friction_rate",
-           "joint_friction_bound"]
+           "joint_breakaway_bound", "joint_friction_bound"]
 
 
 def regularized_sign(v, smoothing_velocity):
@@ -190,11 +190,9 @@ def dahl_path(position, level, presliding_length, smoothing_velocity=0.0, dt=Non
 def guide_friction_level(tension, constant, capstan_exponent, direction):
     """Sliding level W [N] of the guide friction of a tendon moving in ``direction`` s in [-1, 1].
 
-    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the constant
-    (4.1) part C, plus the capstan rise ``f (e^{mu alpha} - 1)`` at the pulling end when the
-    tendon is pulled (s = +1) and the loss ``f (1 - e^{-mu alpha})`` when it is released
-    (s = -1), so that the Dahl state's steady sliding force ``s W`` equals
-    :func:`guide_friction` at ``s = +-1``.
+    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the (4.1) part C plus the
+    capstan rise when pulled (s = +1) or the loss when released (s = -1), so that the Dahl state's steady
+    sliding force ``s W`` equals :func:`guide_friction` at ``s = +-1``.
     """
     rise = np.exp(capstan_exponent) - 1.0
     loss = 1.0 - np.exp(-capstan_exponent)
@@ -218,7 +216,18 @@ def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_expo
     return (sliding_velocity * level - np.abs(sliding_velocity) * force) / presliding_length
 
 
-def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_level=None,
+def joint_breakaway_bound(joint_level, selection=None):
+    """``sum_l |S_lj| F_l`` (k) [Nm]: the most the joints' own friction can put on each DoF ``j``, the constant part of
+    :func:`joint_friction_bound` (computed once per rig, not per call): ``joint_level`` ``F`` (n) [Nm] the breakaway
+    level ``Fs`` of each joint's stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``, 0 where it has none),
+    ``selection`` ``S`` (n x k) the DoF map ``q = S w`` (None: the identity).  None when no joint has friction."""
+    if joint_level is None or not np.any(np.asarray(joint_level, dtype=float) > 0):
+        return None
+    level = np.asarray(joint_level, dtype=float)
+    return level.copy() if selection is None else np.abs(np.asarray(selection, dtype=float)).T @ level
+
+
+def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_hold=None,
                          selection=None):
     """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i) + sum_l |S_lj| F_l`` (k) [Nm]: the largest torque the unmeasured
     friction can put on each DoF ``j`` (the tendons' guides and lever, and the joints' own), the bound of the ch. 9
@@ -229,9 +238,9 @@ def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteres
     n); ``tension`` ``f`` (m) [N]: the measured tendon forces (negative parts count as 0); ``constant``,
     ``capstan_exponent``: each path's guide friction (:func:`guide_friction_level`, pulled end, the larger
     direction); ``hysteresis_width`` ``w`` (m) [N]: the half-width of the lever's hysteresis loop (Fig 4.8b) when the
-    measurement misses it, else 0; ``joint_level`` ``F`` (n) [Nm]: the most each joint's own friction can hold, the
-    breakaway level ``Fs`` of its stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``), 0 where it has none
-    (None: no joint friction).
+    measurement misses it, else 0; ``joint_hold`` (k) [Nm]: ``sum_l |S_lj| F_l``, the most the joints' own friction
+    can hold on each DoF (:func:`joint_breakaway_bound` of their breakaway levels, a constant; None: no joint
+    friction).
 
     Which friction a measurement misses follows from where it sits (ch. 4): the spring sensor (the lever's angle,
     calibrated to a force polynomial ``phi``) is in the forearm, so the guides of the wrist, palm and finger (4.1) are
@@ -244,6 +253,4 @@ def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteres
     f, w = positive_part(tension), hysteresis_width
     A = np.asarray(coupling) if selection is None else np.asarray(coupling) @ selection
     B = np.abs(A).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w)
-    if joint_level is None:
-        return B
-    return B + (joint_level if selection is None else np.abs(selection).T @ joint_level)
+    return B if joint_hold is None else B + joint_hold

@@ -45,12 +45,9 @@ __all__ = ["GuideFrictionModel", "DriveModel", "TendonDrive", "drive_laws", "bui
 class GuideFrictionModel:
     """Guide friction on every tendon path (:func:`~awiwi_drake.components.friction.guide_friction`).
 
-    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides. With
-    ``capstan=False`` the tension-independent (4.1) ``C0 (1 - exp(-C1 alpha))``, with
-    ``capstan=True`` the capstan form (``f (e^{mu alpha} - 1)`` pulled, ``f (1 - e^{-mu alpha})``
-    released). Each tendon's friction force is a Dahl state driven by its sliding speed
-    ``v = (P(q) qdot)_i`` at the finger: it reaches the sliding level within a few
-    ``presliding_length`` of travel; ``s = tanh(v / v_s)`` smooths the direction.
+    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides; (4.1) or, with ``capstan``, the
+    capstan form.  Each tendon's friction force is a Dahl state driven by its sliding speed
+    ``v = (P(q) qdot)_i`` (:func:`~awiwi_drake.components.friction.guide_friction_rate`).
     """
 
     bending_angles: tuple
@@ -201,21 +198,6 @@ class TendonDrive:
     diagram: Diagram
     model: DriveModel
 
-    @property
-    def hysteresis(self) -> bool:
-        """Whether the drive carries the spring hysteresis state."""
-        return self.model.has_hysteresis
-
-    @property
-    def guide_friction(self) -> bool:
-        """Whether the drive carries the guide friction state."""
-        return self.model.has_guide_friction
-
-    @property
-    def num_states(self) -> int:
-        """The drive's states (without a link's)."""
-        return self.model.num_states - (2 * self.model.num_joints if self.model.has_link else 0)
-
 
 def _full_rates(model: DriveModel, qd):
     """Velocities of all coupling joints (zeros beyond ``rate_joints``)."""
@@ -307,14 +289,12 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     ``derivatives(state, u, q, qd, out)`` / with a link ``derivatives(state, u, tau_ext, out)``;
     ``tendon_force``, ``tendon_stiffness``, ``elongation`` ``(state, q, out)`` / ``(state, out)``;
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
-    ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
-    ``vectorized``: the same functions in numpy's elementwise forms (no numba, no ``_batch`` twins):
-    ``fn(states.T, out.T)`` evaluates many states at once (:func:`~awiwi_drake.components.codegen.emit_source`).
+    ``jit`` and ``vectorized``: as :func:`~awiwi_drake.components.codegen.compile_kernels`.
     """
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
                            "(e.g. LeverSpringMechanism.to_polynomial())")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
-    key = _model_key(model, "vectorized" if vectorized else jit)
+    key = None if model._content_key is None else (model._content_key, "vectorized" if vectorized else jit)
     if key is not None and key in _KERNELS:
         return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
@@ -324,17 +304,9 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     return kernels
 
 
-# Kernels of drive models already traced in this process, by the model's content. Tracing the
-# laws symbolically costs ~0.4-0.6 s for the hand; every new diagram (and every scalar-converted
-# or cloned copy, e.g. inside ``analysis.simulate``) would otherwise pay it again at its first
-# evaluation, inside the simulation.
+# Kernels of drive models already traced in this process, by the model's content: every new diagram (and every
+# scalar-converted or cloned copy) would otherwise trace the laws again.
 _KERNELS: dict = {}
-
-
-def _model_key(model: DriveModel, mode):
-    """The content key of ``model`` (taken at its construction) with the kernels' ``mode``, or None (no caching)."""
-    key = getattr(model, "_content_key", None)
-    return None if key is None else (key, mode)
 
 
 def _content_digest(model) -> str | None:
@@ -368,16 +340,11 @@ def _build_kernels(model, m, n, nr, jit, vectorized=False):
 
 @TemplateSystem.define("TendonDriveBatch_", scope=sys.modules[__name__])
 def TendonDriveBatch_(T):
-    """N copies of one link-carrying drive (a single-joint rig) in one system.
+    """N copies of one link-carrying drive (a single-joint rig) in one system: ``TendonDriveBatch_[T](model, N)``.
 
-    ``TendonDriveBatch_[T](model, num_copies)``; ``model`` must carry its links
-    (``DriveModel.link_inertia``). State: the copies' states one after the other
-    (copy ``i`` at ``[i k, (i + 1) k)`` with ``k = model.num_states``, each in the
-    single rig's order). Inputs ``motor_torque`` (N m) and ``external_torque``
-    (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
-    (N m). The float path runs the generated kernel's ``_batch`` twin (one
-    compiled loop over the copies); AutoDiffXd/Expression call :func:`drive_laws`
-    per copy.
+    State: the copies' states one after the other, each in the single rig's order.  Inputs ``motor_torque``
+    (N m) and ``external_torque`` (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
+    (N m).  Float runs the generated kernel's ``_batch`` twin (one compiled loop over the copies).
     """
 
     class Impl(LeafSystem_[T]):

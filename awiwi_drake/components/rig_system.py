@@ -25,7 +25,7 @@ from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_
 from awiwi_drake.components.motor import saturate_torque
 from awiwi_drake.components.routing import ConstantCoupling
 
-__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "rig_integration_system", "integration_state",
+__all__ = ["rig_dynamics_system", "rig_integration_system", "integration_state",
            "sampled_dynamics", "SAMPLED_INTEGRATOR",
            "LinkRigOutputs_", "tendon_force_of_states"]
 
@@ -52,11 +52,12 @@ def _input_vector(m: int, n: int):
     return uv + ev, np.concatenate([u, e])
 
 
-def rig_dynamics_expressions(model: DriveModel):
-    """``(state_vars, input_vars, xdot)``: :func:`drive_laws` on symbolic variables.
+def rig_dynamics_system(model: DriveModel) -> SymbolicVectorSystem:
+    """One C++ ``SymbolicVectorSystem``: state of ``model``, input ``[motor_torque, external_torque]`` (without
+    joints: ``motor_torque``), dynamics :func:`drive_laws`, output the state (no direct feedthrough).
 
-    The input is ``[motor_torque (m), external_torque (n)]`` (without joints: ``motor_torque``); ``xdot`` is
-    the drive's ``derivatives`` (state order of :class:`DriveModel`).
+    The expressions are handed over ``Expand()``-ed (the springs' Horner products in power form): Drake's
+    evaluator calls ``pow`` for every factor of every product node, so fewer product nodes are cheaper.
     """
     _check(model)
     m, n = model.num_tendons, model.num_joints
@@ -64,17 +65,6 @@ def rig_dynamics_expressions(model: DriveModel):
     us, U = _input_vector(m, n)
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
         xdot = drive_laws(model, X, U[:m], tau_ext=U[m:], want=("derivatives",), **_no_joints(model))["derivatives"]
-    return xs, us, list(xdot)
-
-
-def rig_dynamics_system(model: DriveModel) -> SymbolicVectorSystem:
-    """One C++ ``SymbolicVectorSystem``: state of ``model``, input ``[motor_torque, external_torque]``,
-    dynamics :func:`drive_laws`, output the state (no direct feedthrough).
-
-    The expressions are handed over ``Expand()``-ed (the springs' Horner products in power form): Drake's
-    evaluator calls ``pow`` for every factor of every product node, so fewer product nodes are cheaper.
-    """
-    xs, us, xdot = rig_dynamics_expressions(model)
     return SymbolicVectorSystem(state=xs, input=us, dynamics=[e.Expand() for e in xdot], output=xs)
 
 
@@ -197,11 +187,9 @@ def LinkRigOutputs_(T):
     """The non-state outputs of a drive whose state is the whole rig (a link rig, the tendon rig);
     ``LinkRigOutputs_[T](model)``.
 
-    Inputs ``state`` (the model's state), ``motor_torque`` (m). Outputs
-    ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``joint_torque``
-    (n) [N m] (the tendons' generalised force ``-P^T f``), each depending on
-    ``state`` only, and ``applied_torque`` (m) [N m] (``motor_torque`` after the
-    motors' saturation), depending on ``motor_torque`` only.
+    Inputs ``state``, ``motor_torque`` (m); outputs ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m],
+    ``joint_torque`` (n) [N m] (``-P^T f``) from the state, and ``applied_torque`` (m) [N m] (the saturated
+    ``motor_torque``).
     """
 
     class Impl(LeafSystem_[T]):

@@ -94,7 +94,7 @@ from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
 from awiwi_drake._math import clip, positive_part
-from awiwi_drake.components.friction import joint_friction_bound
+from awiwi_drake.components.friction import joint_breakaway_bound, joint_friction_bound
 from awiwi_drake.control.chain import (guide_friction_levels, guide_presliding_stiffness, joint_friction_levels,
                                        rig_springs)
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
@@ -229,7 +229,7 @@ class FingerBacksteppingLaw(StaticLaw):
         if self.friction_compensation and not (self.link_torque_estimate and variant == "antagonistic"):
             raise ValueError("finger backstepping: friction_compensation needs the link torque estimate "
                              "(load observer) and the antagonistic variant")
-        self.friction_levels = link_friction_levels(rig)
+        self.friction_levels = link_friction_levels(rig, self.S)
         # the motor-side part of the lever's hysteresis at rest: the law's motor model lacks r_m z (rest_error)
         self._motor_gain = np.asarray(op.tendon_stiffness, dtype=float) * self.r_m ** 2 / self.B
         self.output_size = m
@@ -248,8 +248,8 @@ class FingerBacksteppingLaw(StaticLaw):
         put on each DoF at the sensed forces ``f = phi(x)``, none of which the spring sensors measure
         (:func:`~awiwi_drake.components.friction.joint_friction_bound`)."""
         P = np.asarray(self.P_op if P is None else P)
-        (C, mu_alpha), (beta, z0), Fs = self.friction_levels
-        return joint_friction_bound(P, f, C, mu_alpha, beta * positive_part(f) + z0, Fs, self.S)
+        (C, mu_alpha), (beta, z0), hold = self.friction_levels
+        return joint_friction_bound(P, f, C, mu_alpha, beta * positive_part(f) + z0, hold, self.S)
 
     def rest_error(self, guide_force, hysteresis_force, external_torque=None, bound=None):
         """The DoF error ``e`` (k) at which the loop rests with the guides' friction forces ``g`` and the lever's
@@ -450,8 +450,9 @@ class FingerBacksteppingLaw(StaticLaw):
             rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
         xmax = np.array([law.max_elongation for law in laws], dtype=float)
         kend = np.array([law._k_end for law in laws], dtype=float)
-        (C, mu_alpha), (beta, z0), Fs = self.friction_levels
-        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0, Fs))
+        (C, mu_alpha), (beta, z0), hold = self.friction_levels
+        hold = np.zeros(self.S.shape[1]) if hold is None else hold
+        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0, hold))
         return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
                 np.empty(len(laws)), levels, np.zeros(self.S.shape[1]))
 
@@ -604,11 +605,12 @@ def FrictionBound_(T):
 FrictionBound = FrictionBound_[None]
 
 
-def link_friction_levels(rig: Any) -> tuple:
-    """``((C, mu alpha), (beta, z0), Fs)``: the rig's guide friction levels (4.1)/capstan (m each,
+def link_friction_levels(rig: Any, selection) -> tuple:
+    """``((C, mu alpha), (beta, z0), hold)``: the rig's guide friction levels (4.1)/capstan (m each,
     :func:`~awiwi_drake.control.chain.guide_friction_levels`), its lever hysteresis half-width ``beta f + z0``
-    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off) and its
-    joints' breakaway levels (n, :func:`~awiwi_drake.control.chain.joint_friction_levels`; zeros when off)."""
+    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off) and what its
+    joints' breakaway levels (:func:`~awiwi_drake.control.chain.joint_friction_levels`) hold on the DoF of
+    ``selection`` (k, :func:`~awiwi_drake.components.friction.joint_breakaway_bound`, once; None when off)."""
     m = rig.coupling.num_tendons
     drive = getattr(rig, "drive", None)
     h = None if drive is None else drive.model.hysteresis
@@ -616,7 +618,7 @@ def link_friction_levels(rig: Any) -> tuple:
     on = np.array([x is not None and x.enabled for x in hs], dtype=float)
     beta = on * np.array([0.0 if x is None else x.width_ratio for x in hs])
     z0 = on * np.array([0.0 if x is None else x.width_offset for x in hs])
-    return guide_friction_levels(rig), (beta, z0), joint_friction_levels(rig)
+    return guide_friction_levels(rig), (beta, z0), joint_breakaway_bound(joint_friction_levels(rig), selection)
 
 
 def check_backstepping_springs(rig: Any) -> None:

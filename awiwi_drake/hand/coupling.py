@@ -26,6 +26,7 @@ import abc
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from .._math import is_float
 from ..components.tendon import joint_stiffness as tendon_joint_stiffness
@@ -53,12 +54,9 @@ def _quiet_fp(method):
 class FingerCoupling(abc.ABC):
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
-    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
-    ``joint_names``, ``finger`` (its name); ``is_constant`` when ``P`` does not depend on ``q``.
-    ``parts``, ``joint_slices``, ``tendon_slices`` map each finger the routing spans to its coupling,
-    joints and tendons (one finger: itself; :class:`HandCoupling`: the five).
-    All methods accept float arrays and numpy object arrays of AutoDiffXd or
-    symbolic Expression.
+    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``, ``joint_names``, ``finger``;
+    ``is_constant`` when ``P`` does not depend on ``q``; ``parts``, ``joint_slices``, ``tendon_slices`` map each
+    finger the routing spans to its coupling, joints and tendons.  Methods are generic in the scalar type.
     """
 
     num_tendons: int
@@ -318,12 +316,9 @@ class ThumbCoupling(FingerCoupling):
 class HandCoupling(FingerCoupling):
     """Block-diagonal routing of several fingers, optionally with length-offset inputs.
 
-    Joints: the fingers' plant joints in ``fingers`` order, then
-    ``num_offsets`` extra "joints" that add one-to-one to the tendon lengths
-    (``h += d``; P gets an identity block).  The hand uses them for the 38
-    wrist tendon-length offsets (Table 6.2 order = our global tendon order),
-    so that a wrist motion enters the drive like any joint motion.  Their
-    generalised force ``-f`` is the tendon force itself.
+    Joints: the fingers' plant joints, then ``num_offsets`` extra "joints" that add one-to-one to the
+    tendon lengths (``h += d``; an identity block of P): the hand's 38 wrist offsets, so that a wrist motion
+    enters the drive like any joint motion.
     """
 
     parts = joint_slices = tendon_slices = finger = None   # per instance (not the one-finger properties)
@@ -366,10 +361,9 @@ class HandCoupling(FingerCoupling):
         if q.dtype != object:   # fast path (simulation): one matmul + the nonlinear parts
             h = self._float_constant_part() @ q
             for n in self._nonlinear:
-                h[self.tendon_slices[n]] = self.parts[n].h(q[self.joint_slices[n]])
-            if self.num_offsets:
-                for n in self._nonlinear:
-                    h[self.tendon_slices[n]] += q[self.num_finger_joints:][self.tendon_slices[n]]
+                ts = self.tendon_slices[n]
+                off = q[self.num_finger_joints:][ts] if self.num_offsets else 0.0
+                h[ts] = self.parts[n].h(q[self.joint_slices[n]]) + off
             return h
         h = np.concatenate([c.h(q[self.joint_slices[n]]) for n, c in self.parts.items()])
         if self.num_offsets:
@@ -441,13 +435,7 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
 def dof_selection(coupling) -> np.ndarray:
     """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
     coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
-    blocks = [c.dof_selection for c in coupling.parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
+    return block_diag(*(np.asarray(c.dof_selection, dtype=float) for c in coupling.parts.values()))
 
 
 def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:

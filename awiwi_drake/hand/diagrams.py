@@ -74,11 +74,9 @@ class HandRig(Rig):
     def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
-        Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
-        ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
-        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
-        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
+        A :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's outputs (what
+        :func:`awiwi_drake.control.closed_loop` uses unless ``sensors="ideal"``), sampling every ``period`` s but
+        never faster than ``params.rate_hz`` (:class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`).
         """
         from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator
@@ -139,7 +137,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
     offsets = laws.inverse_force(np.full(m, p.pretension))
-    rows = _wrist_rows(parts)
+    rows = np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])      # Table 6.2 rows, routing order
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
@@ -151,14 +149,14 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     # the drive lives inside the one plant system: its handle points at the rig
     drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
-                                  guide_friction=drive.guide_friction, joint_friction=p.joint_friction)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=model.has_hysteresis,
+                                  guide_friction=model.has_guide_friction, joint_friction=p.joint_friction)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle,
-                            drive.num_states - 2 * m + (n if p.joint_friction else 0))
+                            model.num_states - 2 * m + (n if p.joint_friction else 0))
 
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
@@ -247,11 +245,6 @@ def _joint_friction(p, plant) -> np.ndarray:
     return out
 
 
-def _wrist_rows(parts) -> np.ndarray:
-    """Rows of Table 6.2 (0-based) served by the tendons of ``parts``, in routing order."""
-    return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
-
-
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
                  external_torque, wrist_angle, num_friction_states=0):
     """Static equilibrium ``-P(q)^T f + tau_c(q) + tau_g(q) + tau_ext = 0``, ``f`` closest to the pretension."""
@@ -322,21 +315,12 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,
                    wrist: bool = False, visual: bool = False) -> HandRig:
-    """One finger with its motors, springs and routing (see module docstring).
+    """One finger (one of FINGERS) with its motors, springs and routing (see module docstring).
 
-    Parameters
-    ----------
-    finger : {"thumb", "index", "middle", "ring", "fifth"}
-    params : FingerRigParams, optional
-        Default ``FingerRigParams.for_finger(finger)``.
-    wrist : bool
-        Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
-        finger's tendons enter the routing.
-    visual : bool
-        Register cylinder geometry with a SceneGraph (for Meshcat).
-
-    Operating point keys: ``pretension`` [N], ``joint_angles`` (plant joints or
-    independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
+    ``params`` default ``FingerRigParams.for_finger(finger)``; ``wrist`` adds the ``wrist_angle`` input
+    (the wrist's offsets of this finger's tendons enter the routing); ``visual`` registers cylinder
+    geometry with a SceneGraph (for Meshcat).  Operating point keys: ``pretension`` [N], ``joint_angles``
+    (plant joints or independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
@@ -355,15 +339,9 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
 
 
 def hand_diagram(*, params: HandRigParams | None = None, wrist: bool = True, visual: bool = False) -> HandRig:
-    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
-
-    The links and the drive are one compiled system, with the thesis's physics on (see
-    :class:`~awiwi_drake.parameters.hand.FingerDriveParams`).
-
-    Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
-    (Table 6.2 numbering, chosen: see ``parameters.hand``).  Same ports and
-    operating-point keys as :func:`finger_diagram`.
-    """
+    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input, with the thesis's
+    physics (:class:`~awiwi_drake.parameters.hand.FingerDriveParams`); tendons in the global order of
+    ``parameters.hand``.  Same ports and operating-point keys as :func:`finger_diagram`."""
     p = params if params is not None else HandRigParams()
     if not isinstance(p, HandRigParams):
         raise ValueError(f"hand_diagram: params must be HandRigParams, got {type(p).__name__}")

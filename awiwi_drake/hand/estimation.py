@@ -221,19 +221,10 @@ def LinkPositionEstimator_(T):
     (:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  A computation
     delay is the loop's (``closed_loop(delay=...)``).
 
-    Scalar types: float and AutoDiffXd only.  For AutoDiffXd the search runs
-    on values and one Gauss-Newton step ``q + P(q)^+ (dh - dh(q))`` in the
-    scalar type carries the derivatives (at convergence ``dq/d dh = P^+``,
-    implicit-function theorem).  Not symbolic: Algorithm 1 branches on cost
-    values (accept / halve), which a symbolic Expression cannot evaluate, so
-    ``ToSymbolic()`` of a diagram holding this estimator fails (Drake names
-    the system).
-
-    Projection bound: when the thumb base estimate sits on (or, after the
-    Gauss-Newton refinement, beyond) the search's ``+-pi/2`` bound (the pose may
-    lie beyond it) the update still stores it, counts it in ``limit_hits`` (a
-    diagnostic attribute of the system, summed over all contexts) and warns once
-    per system (RuntimeWarning).
+    Scalar types: float and AutoDiffXd (the search runs on values, then one Gauss-Newton step
+    ``q + P(q)^+ (dh - dh(q))`` in the scalar type carries the derivatives, ``dq/d dh = P^+`` at
+    convergence).  Not symbolic: Algorithm 1 branches on cost values.  A thumb base estimate on (or
+    beyond) the search's ``+-pi/2`` bound is stored, counted in ``limit_hits`` and warned about once.
     """
 
     class Impl(LeafSystem_[T]):

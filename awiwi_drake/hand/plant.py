@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.geometry import Cylinder, SceneGraph, Sphere
+from pydrake.geometry import Box, Cylinder, SceneGraph, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.primitives import Adder, MatrixGain
@@ -204,18 +204,13 @@ def make_hand_plant(params: HandParams | None = None, *, visual: bool = False, g
         palm = plant.world_body()
         plant.RegisterVisualGeometry(
             palm, RigidTransform(palm_centre(hp) - [0.0, 0.0, 0.008]),
-            _Box(hp.palm_length, 4.5 * hp.finger_spacing, 0.016), "palm_visual", np.array([0.7, 0.7, 0.7, 1.0]))
+            Box(hp.palm_length, 4.5 * hp.finger_spacing, 0.016), "palm_visual", np.array([0.7, 0.7, 0.7, 1.0]))
     models = {f: add_finger(plant, f, hp.finger(f), X_PF=finger_base_pose(f, hp), visual=visual)
               for f in FINGERS}
     if not gravity:
         plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
     plant.Finalize()
     return plant, models
-
-
-def _Box(x, y, z):
-    from pydrake.geometry import Box
-    return Box(x, y, z)
 
 
 def coupling_force_gain(plant: MultibodyPlant, models) -> np.ndarray | None:

@@ -239,26 +239,18 @@ COMPILE_AFTER_CALLS = 4
 # (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
 FINGER_STRUCTURE = {"index": (False, False), "middle": (False, False), "ring": (True, False),
                     "fifth": (True, True)}
-_TENDONS = {"index": 8, "middle": 8, "ring": 6, "fifth": 8}
-
-
-def structure_text(finger: str) -> str:
-    """Human-readable structure of ``finger`` (for error messages)."""
-    if finger not in FINGER_STRUCTURE:
-        return "generic finger"
-    coupled, hmc = FINGER_STRUCTURE[finger]
-    dof = 4 - int(coupled) + int(hmc)
-    return (f"pip_dip_coupled={coupled}, has_hmc={hmc}: {dof} DoF, {_TENDONS[finger]} tendons")
 
 
 def check_finger_structure(finger: str, p) -> None:
     """ValueError naming ``finger`` and the field when ``p``'s structure flags are not the thesis's."""
     if finger not in FINGER_STRUCTURE:
         return
+    coupled, hmc = FINGER_STRUCTURE[finger]
+    dof = 4 - int(coupled) + int(hmc)
     for name, value in zip(("pip_dip_coupled", "has_hmc"), FINGER_STRUCTURE[finger]):
         if getattr(p, name) != value:
-            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} "
-                             f"({structure_text(finger)}; sections 5.2-5.5), got {getattr(p, name)}")
+            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} (pip_dip_coupled={coupled}, "
+                             f"has_hmc={hmc}: {dof} DoF, {2 * dof} tendons; sections 5.2-5.5), got {getattr(p, name)}")
 
 # Global tendon numbering (0-based slices of the 38 tendons, Table 6.2 order): chosen, see module doc.
 TENDON_SLICES = {"thumb": slice(0, 8), "index": slice(8, 16), "middle": slice(16, 24),
@@ -286,11 +278,9 @@ class HandParams(Parameters):
 
     def _validate(self) -> None:
         super()._validate()
-        for name, typ in _FINGER_PARAM_TYPES.items():
+        for name, typ in _FINGER_PARAM_TYPES.items():   # each finger class checks its structure (FINGER_STRUCTURE)
             if not isinstance(getattr(self, name), typ):
                 raise ValueError(f"HandParams.{name} must be {typ.__name__}, got {type(getattr(self, name)).__name__}")
-            if name != "thumb":
-                check_finger_structure(name, getattr(self, name))
 
     def finger(self, name: str):
         """The parameter set of finger ``name`` (one of FINGERS)."""
@@ -308,25 +298,15 @@ def finger_params(name: str):
 class FingerDriveParams(Parameters):
     """Motors, springs, pretension and routing friction shared by finger and hand diagrams.
 
-    The thesis's physics, each switchable (``with_physics``; all on by default): motor friction
-    (3.8) and ripple (``motor.friction``, ``motor.ripple``), guide friction on every tendon path
-    (``guide_friction``; (4.1) at each tendon's bending angle, or the capstan form), spring
-    hysteresis (``spring.hysteresis.enabled``, Fig 4.8b), one spring law per tendon (``spring``
-    for all, ``tendon_springs`` overrides tendons one by one) and the tendon's own elasticity
-    ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``).
-    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs; ``tendon_motors``
-    likewise overrides ``motor`` tendon by tendon (``(tendon_name, MotorParams)``: friction, ripple,
-    inertia, damping of one motor, e.g. a diagnosis's write-back; pulley radius, torque limit and
-    saturation stay those of ``motor``); ``tendon_guides`` gives one tendon path its own guide friction
-    (``(tendon_name, TendonGuideParams)``: constant and capstan exponent), whether ``guide_friction`` is on or
-    off for the others (``with_physics(guide_friction=False)`` clears it).
-    Stick-slip joint friction (``joint_friction``, off by default; ``joint_friction_params`` for every joint,
-    ``joint_frictions`` overriding joints by name, ``(joint_name, JointFrictionParams)``) is a presliding state per
-    joint with the Stribeck level (:func:`~awiwi_drake.components.friction.stick_slip_rate`).
-    Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
-    :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
-    fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand at the operating point's
-    20 N (not at every pretension: README, docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz").
+    The thesis's physics, each switchable (``with_physics``): motor friction (3.8) and ripple, guide
+    friction on every tendon path ((4.1) at each tendon's bending angle, or the capstan form), spring
+    hysteresis (Fig 4.8b; hysteresis and guide friction are Dahl states), the tendon's own elasticity in
+    series with each mechanism (``spring.include_tendon``), and the joints' stick-slip friction (off by
+    default).  Per-name overrides, tuples of ``(name, params)`` pairs: ``tendon_springs``
+    (``SpringModelParams``), ``tendon_motors`` (``MotorParams``: friction, ripple, inertia, damping of one
+    motor; pulley radius, torque limit and saturation stay those of ``motor``), ``tendon_guides``
+    (``TendonGuideParams``, whether ``guide_friction`` is on or off for the others) and ``joint_frictions``
+    (``JointFrictionParams`` by joint name).
     """
 
     motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
