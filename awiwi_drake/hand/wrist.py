@@ -169,24 +169,22 @@ class WristPose:
         return T
 
 
-def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool = True) -> WristPose:
+def wrist_kinematics(q71, q73, params: WristParams | None = None) -> WristPose:
     """Solve the double inverted parallelogram, thesis (6.1)-(6.8): the :class:`WristPose` at abduction ``q71``
-    and flexion ``q73`` [rad] (float, AutoDiffXd or Expression; angles as in the module docstring).
-
-    ``params``: the geometry (default: Table 6.1, 6.2).  ``check``: for float/AutoDiff input, raise
-    ``ValueError`` naming ``q71``/``q73`` when the linkage cannot be assembled (instead of returning NaN).
+    and flexion ``q73`` [rad] (float, AutoDiffXd or Expression; angles as in the module docstring) with the
+    geometry ``params`` (default: Table 6.1, 6.2).  For float/AutoDiff input a linkage that cannot be
+    assembled raises ``ValueError`` naming ``q71``/``q73``.
     """
     p = wrist_params(params)
     with _symbolic_errstate(q71, q73):
-        return _solve(q71, q73, p, check)
+        return _solve(q71, q73, p)
 
 
-def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
-    if check:
-        for name, q in (("q71", q71), ("q73", q73)):
-            v = scalar_value(q)
-            if v is not None and not math.isfinite(v):
-                raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
+def _solve(q71, q73, p: WristParams) -> WristPose:
+    for name, q in (("q71", q71), ("q73", q73)):
+        v = scalar_value(q)
+        if v is not None and not math.isfinite(v):
+            raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
     a, b, c = p.length, p.width, p.thickness
     L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
     gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
@@ -203,8 +201,7 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     tB = tB0 - q73
     ctB, stB = np.cos(tB), np.sin(tB)
     den = L * L + d * d - 2.0 * L * d * stB
-    if check:
-        _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
+    _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
     Bu, Bv = L * ctB, L * stB
     Cu = L * (L * L - d * d) * ctB / den
     Cv = (L * L - d * d) * (L * stB - d) / den
@@ -226,8 +223,7 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     k = (a0x * a0x + a0y * a0y + a0z * a0z + R * R - dA * dA) / (2.0 * R)
     rho2 = a0y * a0y + a0z * a0z
     disc = rho2 - k * k
-    if check:
-        _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
+    _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
     tA = np.arctan2(a0z, a0y) - np.arctan2(np.sqrt(disc), k)
     # (6.5), (6.8): A in frame 0.
     A = M + R * np.cos(tA) * y + R * np.sin(tA) * n
