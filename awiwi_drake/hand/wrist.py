@@ -4,28 +4,20 @@ The wrist's system (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`: offs
 motor feed-forward) is in :mod:`awiwi_drake.hand.systems`;
 the Fig 6.9-6.10 study in :mod:`awiwi_drake.reproductions.ch06_wrist`.
 
-The wrist is a *double inverted parallelogram* (crossed four-bar linkages).
-The thesis (6.1)-(6.9) gives the method but not the link lengths; this module
-reconstructs them from Table 6.1 (a = length, b = width, c = thickness) with
-the following box construction, in the forearm frame 0 of Table 6.2 (x along
-the forearm towards the hand, y across the width, z across the thickness,
-origin at a corner of the a x b x c wrist box):
+The wrist is a *double inverted parallelogram* (crossed four-bar linkages).  The thesis (6.1)-(6.9)
+gives the method but not the link lengths; this module reconstructs them from Table 6.1 (a = length,
+b = width, c = thickness) by a box construction in the forearm frame 0 of Table 6.2 (x along the forearm
+towards the hand, y across the width, z across the thickness, origin at a corner of the a x b x c box):
 
-* Forearm points: ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the
-  abduction axis, along z) and ``A0 = (0, b, c/2)`` on the other side.
-* Palm points in the neutral wrist: ``B = (a, b, c)``, ``C = (a, b, 0)``,
-  ``A = (a, 0, c/2)``.  So the links B0B and C0C are crossed space diagonals
-  of the box: R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm edge BC equals
-  the forearm edge B0C0: D_BC = c (side view: an inverted parallelogram, the
-  flexion linkage); A is equidistant from B and C (|AB| = |AC|, as (6.5)
-  requires) at R_AA0 = |AM| = b from the midpoint M of BC; the link A0A,
-  |AA0| = sqrt(a^2 + b^2), crosses the projection of B0..M in the top view:
-  ground M0A0 = coupler MA = b (top view: the second inverted parallelogram,
-  the abduction linkage).
-* Thus both crossing points lie on the wrist centre (a/2, b/2, c/2): the
-  two tendon layers of Table 6.2 cross there in the side view (forearm
-  z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
-  about the median axis y = b/2, as the thesis describes for Fig 6.10.
+* forearm points ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the abduction axis) and
+  ``A0 = (0, b, c/2)``; palm points in the neutral wrist ``B = (a, b, c)``, ``C = (a, b, 0)``,
+  ``A = (a, 0, c/2)``;
+* so the links B0B and C0C are crossed space diagonals, R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm
+  edge BC equals the forearm edge B0C0, D_BC = c (side view: the flexion linkage, an inverted
+  parallelogram); A is equidistant from B and C (|AB| = |AC|, (6.5)) at R_AA0 = |AM| = b from the midpoint
+  M of BC; the link A0A, |AA0| = sqrt(a^2 + b^2), crosses B0..M in the top view (the abduction linkage);
+* both crossing points lie on the wrist centre (a/2, b/2, c/2): the two tendon layers of Table 6.2 cross
+  there in the side view, and the abduction rotates the palm about the median axis y = b/2 (Fig 6.10).
 
 Why this construction: it is the reading of Fig 6.2-6.7 in which all four
 unprinted lengths follow from a, b, c alone, both views are inverted (crossed)
