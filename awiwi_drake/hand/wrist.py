@@ -32,18 +32,13 @@ much as abduction, not "minimally") is reported in docs/REPRODUCTIONS.md.
 
 Angles
 ------
-``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis
-B0C0 (Fig 6.4).  ``q73`` (flexion) is the crank angle of that linkage.  The
-thesis writes t_B = pi/2 - q73 with q73 the potentiometer reading; with
-B0 at the origin and C0 at (0, D_BC) in the plane, t_B = pi/2 is the flat,
-singular linkage, so the neutral wrist has t_B0 = atan2(c, sqrt(a^2 + b^2))
-(28.9 deg).  We therefore measure ``q73`` from the neutral wrist:
-``t_B = t_B0 - q73`` (thesis q73 = ours + 61.1 deg).  Both angles are crank
-angles: near neutral the palm turns about twice as far (crossed four-bars).
-At q71 = 0 the linkage assembles for q73 in about (-56 deg, +105 deg) (at
-q73 = 30 deg, q71 in about (-78 deg, +178 deg)); the thesis's motion
-(30 deg, 20 deg) is well inside.  Outside the reachable set the functions
-raise ``ValueError`` naming ``wrist_angle``.
+``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis B0C0 (Fig 6.4); ``q73``
+(flexion) is the crank angle of that linkage.  The thesis's t_B = pi/2 - q73 puts q73 = 0 at the flat,
+singular linkage, so we measure ``q73`` from the neutral wrist, ``t_B = t_B0 - q73`` with
+t_B0 = atan2(c, sqrt(a^2 + b^2)) = 28.9 deg (thesis q73 = ours + 61.1 deg).  Near neutral the palm turns
+about twice as far as these crank angles.  At q71 = 0 the linkage assembles for q73 in about
+(-56 deg, +105 deg) (at q73 = 30 deg, q71 in about (-78 deg, +178 deg)); outside the reachable set the
+functions raise ``ValueError`` naming ``wrist_angle``.
 
 Method (thesis numbering)
 -------------------------
