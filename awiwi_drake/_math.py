@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pydrake.math as _pm
 
-__all__ = ["is_float", "scalar_value", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like",
+__all__ = ["is_float", "scalar_value", "smax", "smin", "clip", "positive_part", "asarray_like",
            "where_positive", "symbolic_vector", "Tangent"]
 
 
@@ -78,14 +78,6 @@ def positive_part(x):
 def asarray_like(values, like):
     """numpy array of ``values`` with the dtype of ``like`` (object for AutoDiff/Expression)."""
     return np.asarray(values, dtype=float if is_float(like) else object)
-
-
-def zeros_like(n: int, like):
-    """Length-``n`` zeros of the scalar type of ``like``."""
-    if is_float(like):
-        return np.zeros(n)
-    sample = np.ravel(np.asarray(like, dtype=object))[0]
-    return np.array([type(sample)(0.0) for _ in range(n)], dtype=object)
 
 
 def where_positive(x, a):

@@ -190,11 +190,9 @@ def dahl_path(position, level, presliding_length, smoothing_velocity=0.0, dt=Non
 def guide_friction_level(tension, constant, capstan_exponent, direction):
     """Sliding level W [N] of the guide friction of a tendon moving in ``direction`` s in [-1, 1].
 
-    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the constant
-    (4.1) part C, plus the capstan rise ``f (e^{mu alpha} - 1)`` at the pulling end when the
-    tendon is pulled (s = +1) and the loss ``f (1 - e^{-mu alpha})`` when it is released
-    (s = -1), so that the Dahl state's steady sliding force ``s W`` equals
-    :func:`guide_friction` at ``s = +-1``.
+    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the (4.1) part C plus the
+    capstan rise when pulled (s = +1) or the loss when released (s = -1), so that the Dahl state's steady
+    sliding force ``s W`` equals :func:`guide_friction` at ``s = +-1``.
     """
     rise = np.exp(capstan_exponent) - 1.0
     loss = 1.0 - np.exp(-capstan_exponent)

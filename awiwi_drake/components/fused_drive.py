@@ -198,21 +198,6 @@ class TendonDrive:
     diagram: Diagram
     model: DriveModel
 
-    @property
-    def hysteresis(self) -> bool:
-        """Whether the drive carries the spring hysteresis state."""
-        return self.model.has_hysteresis
-
-    @property
-    def guide_friction(self) -> bool:
-        """Whether the drive carries the guide friction state."""
-        return self.model.has_guide_friction
-
-    @property
-    def num_states(self) -> int:
-        """The drive's states (without a link's)."""
-        return self.model.num_states - (2 * self.model.num_joints if self.model.has_link else 0)
-
 
 def _full_rates(model: DriveModel, qd):
     """Velocities of all coupling joints (zeros beyond ``rate_joints``)."""

@@ -311,10 +311,7 @@ class LeverSpringMechanism:
     def force_at_angle(self, th):
         """Tendon force [N] in equilibrium at lever angle ``th`` [rad] (float, vectorised)."""
         th = np.asarray(th, dtype=float)
-        flat = th.ravel()
-        out = np.empty_like(flat)
-        for i, t in enumerate(flat):
-            out[i] = self._force_and_slope_at_angle(t)[0]
+        out = np.array([self._f_exact(t) if t > 0 else 0.0 for t in th.ravel()], dtype=float)
         return out.reshape(th.shape) if th.shape else out[0]
 
     def _force_and_slope_at_angle(self, t: float):
@@ -343,19 +340,11 @@ class LeverSpringMechanism:
         """Lever angle [rad] at elongation ``x`` [m] (float, vectorised; x >= 0)."""
         x = np.asarray(x, dtype=float)
         th_hi = self.geometry.lever_straight_angle * (1 - 1e-9)
-
-        def xfun(t):
-            return self.elongation_at_angle(t)
-
-        def dxfun(t):
-            h = 1e-7
-            return (xfun(t + h) - xfun(t - h)) / (2 * h)
-
+        xfun, h = self.elongation_at_angle, 1e-7
         xs = np.atleast_1d(x)
         if np.any(xs < 0) or np.any(xs >= float(xfun(th_hi))):
             raise ValueError(f"LeverSpringMechanism: elongation {x} outside [0, {float(xfun(th_hi)):.6g}) m")
-        out = _monotone_inverse(xfun, dxfun, xs, x_hi=th_hi)
-        return out
+        return _monotone_inverse(xfun, lambda t: (xfun(t + h) - xfun(t - h)) / (2 * h), xs, x_hi=th_hi)
 
     # -- spring-law interface -----------------------------------------------------
     def force(self, x):

@@ -15,18 +15,11 @@ Conventions (binding for every controller in :mod:`awiwi_drake.control`)
     output port (``state``, ``tendon_force``, ``motor_velocity``, ...);
   - one output port ``motor_torque`` [Nm] is the command (size = rig input).
 
-* :func:`closed_loop` wires a rig (tendon rig, flexible joint, joint rig, a
-  finger or the hand) and a controller by these names, optionally sampled at
-  ``rate_hz`` (zero-order hold on the command, 3 kHz in the hand), with a
-  round-trip ``delay`` (a :class:`DiscreteTimeDelay` of whole control
-  periods), a torque ``saturation``, sensor models and a state
-  ``estimator``, and returns a :class:`ClosedLoop` handle.
-* Fingers and the hand have no joint sensors (section 5.2.3): their
-  controllers' ``joint_angle`` / ``joint_velocity`` measurements come from the
-  rig's tendon-length estimator ((5.15), Algorithm 1 for the thumb base;
-  ``rig.link_estimator``) unless ``sensors="ideal"`` asks for the true joint
-  state.  A controller that reads the full ``state`` (which holds the true
-  joint angles) is refused there without ``sensors="ideal"``.
+* :func:`closed_loop` wires a rig and a controller by these names (sampling, delay, saturation, sensor models,
+  state estimator: its parameters) and returns a :class:`ClosedLoop` handle.
+* Fingers and the hand have no joint sensors (section 5.2.3): their controllers' ``joint_angle`` /
+  ``joint_velocity`` come from the rig's tendon-length estimator ((5.15), Algorithm 1 for the thumb base) unless
+  ``sensors="ideal"``; a controller reading the full ``state`` (the true joint angles) is refused there.
 
 Most controllers of the thesis are static laws ``u = law(inputs)``; they are
 built with :class:`StaticLawController_`, which evaluates a pure, scalar-generic
@@ -71,8 +64,7 @@ _ROUND_TRIP_TOLERANCE = 0.01  # delay must be a whole number of periods within 1
 
 # ----------------------------------------------------------------------------
 # gain validation
-def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negative: bool = False,
-               owner: str = "controller") -> float:
+def check_gain(name: str, value: Any, *, allow_zero: bool = False, owner: str = "controller") -> float:
     """Validate one scalar gain; return it as float.
 
     Raises
@@ -88,8 +80,6 @@ def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negativ
         raise ValueError(f"{label} = {value!r} is not a number") from None
     if not math.isfinite(v):
         raise ValueError(f"{label} = {v!r} is not finite")
-    if allow_negative:
-        return v
     if v < 0.0 or (v == 0.0 and not allow_zero):
         need = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{label} = {v!r} must be {need}")

@@ -28,9 +28,10 @@ second order at rest, left out).  With ``HandChainParams.link_acceleration_feedf
 exactly the designed error-system poles (tested); ``terms(u)["V"]`` gives ``V``.  One DoF with ``P = [-r_q, r_q]^T``
 is the antagonistic joint of 15.5.  The feed-forward is off by default: on the light finger links it turns every
 link-side force the model lacks (the guides' friction (4.1)) into motor torque and an unstable pole (README, "The
-thesis's control on fingers and the hand").  The frictions then leave a dead band: :meth:`FingerBacksteppingLaw.rest_error`
-is the law's rest in closed form, :meth:`~FingerBacksteppingLaw.dead_band` its half-width per DoF, and ``compare``
-flags a step row that stops in it (:meth:`~FingerBacksteppingLaw.friction_hold`).
+thesis's control on fingers and the hand").  The frictions then leave a dead band:
+:meth:`FingerBacksteppingLaw.rest_error` is the law's rest in closed form, :meth:`~FingerBacksteppingLaw.dead_band`
+its half-width per DoF, and ``compare`` flags a step row that stops in it
+(:meth:`~FingerBacksteppingLaw.friction_hold`).
 
 **External load** (``load_observer`` of :func:`finger_backstepping_controller`): the link model has no external
 torque, so a load ``tau_ext`` rests at ``Kp e = (I + G) S^T tau_ext`` (``G`` of the dead band); 15.3 "formally
@@ -156,7 +157,9 @@ class FingerBacksteppingLaw(StaticLaw):
         self.r_m, self.B = float(self.motor.pulley_radius), float(self.motor.inertia)
         self.q_op = np.asarray(op.joint_angle, dtype=float)
         self.f_op = np.asarray(op.tendon_force, dtype=float)
-        self.tau_op = -(np.asarray(coupling.P(self.q_op), dtype=float) @ self.S).T @ self.f_op
+        self.P_op = np.asarray(coupling.P(self.q_op), dtype=float)
+        self.PS_op = self.P_op @ self.S
+        self.tau_op = -self.PS_op.T @ self.f_op
         self.M = joint_inertia(rig, self.q_op, full=True)          # S^T M(q_op) S (DoF inertia matrix)
         self._Minv = np.linalg.inv(self.M)
         plant = rig.plant
@@ -244,7 +247,7 @@ class FingerBacksteppingLaw(StaticLaw):
         hysteresis (Fig 4.8b, half-width ``w_i = beta f_i + z0``) and the joints' stick-slip (breakaway ``Fs_l``) can
         put on each DoF at the sensed forces ``f = phi(x)``, none of which the spring sensors measure
         (:func:`~awiwi_drake.components.friction.joint_friction_bound`)."""
-        P = np.asarray(self.coupling.P(self.q_op) if P is None else P)
+        P = np.asarray(self.P_op if P is None else P)
         (C, mu_alpha), (beta, z0), hold = self.friction_levels
         return joint_friction_bound(P, f, C, mu_alpha, beta * positive_part(f) + z0, hold, self.S)
 
@@ -263,7 +266,7 @@ class FingerBacksteppingLaw(StaticLaw):
         with ``friction_compensation`` (else 0; ``bound`` (k): ``B`` at the rest's forces, default at the operating
         point's).  Without the load: the friction dead band."""
         g, z = (np.asarray(a, dtype=float) for a in (guide_force, hysteresis_force))
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        PS = self.PS_op
         tau_f = PS.T @ (z + g)
         if external_torque is not None:
             tau_f = tau_f - self.S.T @ np.asarray(external_torque, dtype=float)
@@ -278,8 +281,7 @@ class FingerBacksteppingLaw(StaticLaw):
     def _phantom_map(self) -> np.ndarray:
         """``Z`` (m x k): the force error ``z3 = Z tau`` at rest of a link-side torque ``tau`` the law's link model
         lacks, through its phantom acceleration ``M_d^-1 tau`` (:meth:`rest_error`); ``G = (P S)^T Z``."""
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
-        W = self._sharing(np.asarray(self.coupling.P(self.q_op), dtype=float))
+        PS, W = self.PS_op, self._sharing(self.P_op)
         a1, a2 = -self.Kd, -(self.Kp - self.Kd @ self._Minv @ self.Bq)
         return (W @ a2 + (self.K3 + self.K4)[:, None] * (W @ a1) + PS) @ self._Minv / (1.0 + self.K3 * self.K4)[:, None]
 
@@ -293,7 +295,7 @@ class FingerBacksteppingLaw(StaticLaw):
         with the compensation, else 0) and ``delta' = L (K_g (Kp + (I + G) K_g)^-1 (c I + G) - I) delta``.  One DoF:
         ``-L Kp / (Kp + (1 + G) K_g)``; where the phantom amplifies the guides' hold (``1 + G`` up to 13.5 on the
         index) this is the loop's slowest mode (index -1.0 1/s at L = 100; tests/test_hand_control.py)."""
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        PS = self.PS_op
         G = PS.T @ self._phantom_map()
         k = G.shape[0]
         Kg = np.asarray(guide_stiffness, dtype=float)
@@ -314,7 +316,7 @@ class FingerBacksteppingLaw(StaticLaw):
         T = np.column_stack([self.Kp @ (self.rest_error(zero, zero, 1e-4 * Sl[:, j]) - base) / 1e-4
                              for j in range(k)])
         eye = 1e-3 * np.eye(m)
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        PS = self.PS_op
         # z alone less its link-side part (through tau_f): what the motors' r_m z adds
         Ez = np.column_stack([(self.rest_error(zero, eye[i]) - base) / 1e-3 + np.linalg.solve(self.Kp, T @ PS.T[:, i])
                               for i in range(m)])
@@ -515,8 +517,7 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
         return StaticLawController(law)
     # the design's slowest mode counts the observer's rest mode on the guides' presliding (the chain's designs do
     # the same, JointDesign.loop): compare's derived step window
-    PS = np.asarray(rig.coupling.P(law.q_op), dtype=float) @ law.S
-    Kg = guide_presliding_stiffness(rig, dict(coupling_matrix=PS, tendon_force=law.f_op), full=True)
+    Kg = guide_presliding_stiffness(rig, dict(coupling_matrix=law.PS_op, tendon_force=law.f_op), full=True)
     rest = law.observer_rest_modes(observer.gain, Kg)
     law.design["observer_rest_modes"] = rest
     law.design["time_constant"] = max(law.design["time_constant"], float(1.0 / np.min(-rest.real)))

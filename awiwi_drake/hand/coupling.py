@@ -361,10 +361,9 @@ class HandCoupling(FingerCoupling):
         if q.dtype != object:   # fast path (simulation): one matmul + the nonlinear parts
             h = self._float_constant_part() @ q
             for n in self._nonlinear:
-                h[self.tendon_slices[n]] = self.parts[n].h(q[self.joint_slices[n]])
-            if self.num_offsets:
-                for n in self._nonlinear:
-                    h[self.tendon_slices[n]] += q[self.num_finger_joints:][self.tendon_slices[n]]
+                ts = self.tendon_slices[n]
+                off = q[self.num_finger_joints:][ts] if self.num_offsets else 0.0
+                h[ts] = self.parts[n].h(q[self.joint_slices[n]]) + off
             return h
         h = np.concatenate([c.h(q[self.joint_slices[n]]) for n, c in self.parts.items()])
         if self.num_offsets:

@@ -74,11 +74,9 @@ class HandRig(Rig):
     def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
-        Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
-        ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
-        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
-        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
+        A :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's outputs (what
+        :func:`awiwi_drake.control.closed_loop` uses unless ``sensors="ideal"``), sampling every ``period`` s but
+        never faster than ``params.rate_hz`` (:class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`).
         """
         from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator
@@ -151,14 +149,14 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     # the drive lives inside the one plant system: its handle points at the rig
     drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
-                                  guide_friction=drive.guide_friction, joint_friction=p.joint_friction)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=model.has_hysteresis,
+                                  guide_friction=model.has_guide_friction, joint_friction=p.joint_friction)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle,
-                            drive.num_states - 2 * m + (n if p.joint_friction else 0))
+                            model.num_states - 2 * m + (n if p.joint_friction else 0))
 
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,

@@ -77,27 +77,21 @@ def _add_revolute(plant, name, parent_frame, X_PJ, child, axis, damping):
     return plant.AddJoint(RevoluteJoint(name, F, child.body_frame(), np.asarray(axis, float), damping))
 
 
-def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, parent_frame=None,
-               visual: bool = True, prefix: str = "") -> FingerModel:
-    """Add one finger (bodies + revolute joints, Table 5.1 / (5.19)) to ``plant``.
-
-    ``X_PF`` places the finger base frame in ``parent_frame`` (default: world).
-    Joints are named as in the thesis (``q20``..``q23``, ``q5h``, ``q10``..``q13``)
-    with ``prefix`` prepended.
-    """
+def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, visual: bool = True) -> FingerModel:
+    """Add one finger (bodies + revolute joints, Table 5.1 / (5.19)) to ``plant``, its base frame at ``X_PF`` in
+    the world; joints named as in the thesis (``q20``..``q23``, ``q5h``, ``q10``..``q13``)."""
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
     p = params if params is not None else finger_params(finger)
-    parent_frame = parent_frame if parent_frame is not None else plant.world_frame()
+    parent_frame = plant.world_frame()
     X_PF = np.eye(4) if X_PF is None else (X_PF.GetAsMatrix4() if isinstance(X_PF, RigidTransform) else X_PF)
-    instance = plant.AddModelInstance(prefix + finger)
-    names = finger_joint_names(finger)
-    model = FingerModel(finger, p, [prefix + n for n in names])
+    instance = plant.AddModelInstance(finger)
+    model = FingerModel(finger, p, finger_joint_names(finger))
     color = _COLORS[finger]
     R = p.link_radius
 
     def link(name, mass, length):
-        b = _add_link(plant, prefix + f"{finger}_{name}", mass, length, R, color, visual, instance)
+        b = _add_link(plant, f"{finger}_{name}", mass, length, R, color, visual, instance)
         model.bodies.append(b)
         return b
 

@@ -22,13 +22,9 @@ def state_names(*, joints=0, motors=0, hysteresis: bool = False, guide_friction:
                 joint_friction: bool = False) -> tuple[str, ...]:
     """The one state-naming scheme of every rig, finger and the hand (diagram state order).
 
-    ``joint_angle[j]``, ``joint_velocity[j]`` (the MultibodyPlant's ``[q, v]``), then
-    ``motor_angle[i]``, ``motor_velocity[i]`` (the drive's ``[theta, omega]``, output shaft), then
-    ``hysteresis_force[i]`` when the springs carry a hysteresis state, then
-    ``guide_friction_force[i]`` when the tendon paths carry a guide friction state, then
-    ``joint_friction_torque[j]`` when the joints carry a stick-slip friction state. ``joints`` and ``motors``
-    are counts (labels ``0, 1, ...``) or sequences of labels (joint names such as ``q21``,
-    tendon names).
+    ``joint_angle[j]``, ``joint_velocity[j]``, ``motor_angle[i]``, ``motor_velocity[i]`` (output shaft), then
+    when present ``hysteresis_force[i]``, ``guide_friction_force[i]``, ``joint_friction_torque[j]``.  ``joints``
+    and ``motors`` are counts (labels ``0, 1, ...``) or sequences of labels (joint names, tendon names).
     """
     j, m = _labels(joints), _labels(motors)
     return tuple([f"joint_angle[{a}]" for a in j] + [f"joint_velocity[{a}]" for a in j]

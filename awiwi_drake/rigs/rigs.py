@@ -58,11 +58,9 @@ def _check_params(params, cls, rig):
 def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     """One motor, one spring mechanism, tendon fixed at the far end (ch. 10, 14.2.1).
 
-    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega],
-    ``motor_angle``, ``motor_velocity``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
-    ``applied_torque`` [Nm].
-
-    Operating point keys: ``tendon_force`` [N] (default ``params.operating_force``).
+    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega], ``motor_angle``, ``motor_velocity``,
+    ``tendon_force`` [N], ``tendon_stiffness`` [N/m], ``applied_torque`` [Nm].  Operating point key:
+    ``tendon_force`` [N] (default ``params.operating_force``).
     """
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
@@ -79,7 +77,7 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
         theta = x / p.motor.pulley_radius
         u = p.motor.pulley_radius * tendon_force - float(motor_ripple_torque(np.array([theta]), p.motor)[0])
         _check_torque("tendon_rig", np.array([u]), p.motor, f"tendon_force = {tendon_force} N")
-        state = [theta, 0.0] + ([0.0] if drive.hysteresis else [])
+        state = [theta, 0.0] + ([0.0] if drive.model.has_hysteresis else [])
         return OperatingPoint(np.array(state), np.array([u]), None, tendon_force=np.array([tendon_force]),
                               elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
@@ -187,7 +185,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     def equilibrium(joint_angle: float = 0.0, external_torque: float = 0.0) -> OperatingPoint:
         tau_s = -float(external_torque)
         delta = float(np.ravel(law.inverse_force(np.array([tau_s])))[0]) if spring == "nonlinear" else tau_s / p.stiffness
-        state = np.array([joint_angle, 0.0, joint_angle + delta, 0.0] + ([0.0] if drive.hysteresis else []))
+        state = np.array([joint_angle, 0.0, joint_angle + delta, 0.0] + ([0.0] if drive.model.has_hysteresis else []))
         if finite_limit and abs(tau_s) > p.torque_limit:
             raise ValueError(f"flexible_joint_rig: external_torque = {external_torque} Nm needs a motor torque "
                              f"beyond torque_limit = {p.torque_limit} Nm")
@@ -235,7 +233,7 @@ def joint_rig(*, params: JointRigParams | None = None) -> Rig:
         theta = np.array([(x[0] + rq * joint_angle) / r, (x[1] - rq * joint_angle) / r])
         u = r * f - motor_ripple_torque(theta, p.motor)
         _check_torque("joint_rig", u, p.motor, f"pretension = {f0} N")
-        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
+        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.model.has_hysteresis else []])
         k = np.asarray(spring.stiffness(x), dtype=float)
         return OperatingPoint(state, u, np.array([float(external_torque)]), pretension=f0,
                               joint_angle=np.array([joint_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,
