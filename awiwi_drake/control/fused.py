@@ -216,8 +216,9 @@ def FusedChain_(T):
                 discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"], s.get("P")))
 
         def _update_gain(self, context, discrete_state):
-            """The tendon SDRE's re-solve at the measured forces (:meth:`TendonSdreLaw.gains`), as its own system."""
-            k = self.law.gains(np.array([scalar_value(v) for v in self._in["tendon_force"].Eval(context)]))
+            """The tendon SDRE's re-solve at the measured inputs (:meth:`TendonSdreLaw.gains_at`), as its own system."""
+            k = self.law.gains_at({nm: np.array([scalar_value(v) for v in self._in[nm].Eval(context)])
+                                   for nm in self.law.gain_inputs})
             discrete_state.set_value(self._xg, k if T is float else np.array([AutoDiffXd(v) for v in k], dtype=object))
 
         def initialize_state(self, context, joint_angles, joint_velocities=None) -> None:

@@ -50,7 +50,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip
-from awiwi_drake.components.friction import joint_friction_bound
+from awiwi_drake.components.friction import joint_breakaway_bound, joint_friction_bound
 from awiwi_drake.control.base import StaticLaw, check_gains
 from awiwi_drake.control.compiled import float_inputs, joint_feedback
 from awiwi_drake.control.friction_observer import observer_rate, observer_step
@@ -332,6 +332,7 @@ def JointFrictionObserver_(T):
                                          "friction_levels[2] (joint breakaway Fs)"), friction_levels, (m, m, n)))
             if self.levels is not None and any(np.any(lv < 0) for lv in self.levels):
                 raise ValueError(f"JointFrictionObserver: friction_levels must be >= 0, got {friction_levels}")
+            self.joint_hold = None if self.levels is None else joint_breakaway_bound(self.levels[2], self.S)
             if self.period is None:
                 self.DeclareContinuousState(k)
             else:
@@ -366,8 +367,8 @@ def JointFrictionObserver_(T):
                 return None
             P = np.asarray(self.coupling.P(q) if P is None else P)
             # the measured f is the lever's tension (the rig's tendon_force, hysteresis inside): guides and joints
-            C, mu_alpha, Fs = self.levels
-            return joint_friction_bound(P, f, C, mu_alpha, joint_level=Fs, selection=self.S)
+            C, mu_alpha, _ = self.levels
+            return joint_friction_bound(P, f, C, mu_alpha, joint_hold=self.joint_hold, selection=self.S)
 
         def compensation(self, w_hat, v, bound=None):
             """``scale clip(-d_hat, -bound, bound)`` (k) [Nm] at the observer state ``w_hat`` (k), joint velocities

@@ -1,12 +1,8 @@
 """N copies of a single-joint rig in one system (Monte-Carlo runs, sweeps over inputs).
 
 :func:`batched_joint_rig` builds ``num_copies`` joint rigs (Fig 5.9) as one
-:class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_`: one compiled
-loop over the copies per derivative evaluation instead of one diagram and one
-Python callback per copy. The copies share the rig's parameters; inputs and
-initial states differ per copy. State: copy ``i`` occupies
-``[6 i, 6 i + 6)`` in the joint rig's order ``[q, qdot, theta1, theta2, omega1,
-omega2]``; inputs are copy-major (``motor_torque[2 i : 2 i + 2]``).
+:class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_` (one compiled loop over the copies).  The
+copies share the rig's parameters; inputs and initial states differ per copy, copy-major.
 """
 
 from __future__ import annotations
