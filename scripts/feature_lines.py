@@ -7,8 +7,10 @@ two checkouts: the filing commit (checked out read-only with ``git worktree add 
 1. **The same invocations on both.** ``INVOCATIONS`` below lists the filing commit's features as things a user ran:
    every CLI command of its README with its options, its README's Python blocks, and every code cell of its eight
    notebooks. Each is run on both checkouts; where the current API differs, the entry gives the current equivalent
-   call beside the filing one (``main=``), with the reason in ``why``. Bad-input invocations (one per command
-   family) are in the list too, so error paths count on both sides alike.
+   call beside the filing one (``main=``), with the reason in ``why``. On this checkout the notebooks are its own
+   01-08 (the filing notebooks carried through every API change), with the cells and lines that show later
+   features edited out (``drop``/``replace``). Bad-input invocations (one per command family) are in the list
+   too, so error paths count on both sides alike.
 2. **Under coverage.** Each invocation runs in its own process under ``coverage run`` (``AWIWI_SHORT=1``, an empty
    kernel cache per checkout so the law functions the compiled kernels are generated from run in Python on both).
    A numba function counts as run when its dispatcher holds a compiled signature at exit; a function whose source
@@ -56,7 +58,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 @dataclasses.dataclass(frozen=True)
 class Invocation:
     id: str
-    kind: str                      # "cli": argv list | "code": Python source | "notebook": filing notebook stem
+    kind: str                      # "cli": argv list | "code": Python source | "notebook": notebooks/NN* stem
     filing: object
     main: object = None            # the current equivalent; None = the same as filing
     why: str = ""                  # why main's form is the same feature
@@ -360,8 +362,7 @@ def _payload(inv: Invocation, era: str, tree: pathlib.Path):
 # Running every invocation on one checkout
 # --------------------------------------------------------------------------------------------------------------
 
-def run_era(era: str, tree: pathlib.Path, filing_tree: pathlib.Path, work: pathlib.Path, jobs: int,
-            only: set | None) -> None:
+def run_era(era: str, tree: pathlib.Path, work: pathlib.Path, jobs: int, only: set | None) -> None:
     era_dir = work / era
     cov_dir = era_dir / "coverage"
     for sub in ("coverage", "extras", "kernels", "run"):   # a full run starts empty (kernel cache included)
@@ -492,7 +493,7 @@ def count_era(era: str, tree: pathlib.Path, work: pathlib.Path) -> dict:
         run = executed.get(str(path), set())
         hits = extra.get(str(path), set())
         in_unit = set()
-        reached_all, reached_code, defs = 0, 0, []
+        defs = []
         for u in units:
             span = set(range(u.start, u.end + 1))
             in_unit |= span
@@ -574,9 +575,9 @@ def report(counts: dict[str, dict]) -> str:
         else:
             vals = [s["total"][key] for s in sums.values()]
         out.append(f"| {label} | " + " | ".join(f"{v:,}" for v in vals) + " |")
-    out.append(f"| modules imported / all | " + " | ".join(
+    out.append("| modules imported / all | " + " | ".join(
         f"{s['total']['modules_imported']} / {s['total']['modules']}" for s in sums.values()) + " |")
-    out.append(f"| `benchmarks/*.py` (not counted above) | " + " | ".join(
+    out.append("| `benchmarks/*.py` (not counted above) | " + " | ".join(
         f"{c['benchmark_lines']:,}" for c in counts.values()) + " |")
     out.append("")
     if len(eras) == 2:
@@ -712,10 +713,10 @@ def main(argv=None) -> int:
         unknown = only - {i.id for i in INVOCATIONS}
         if unknown:
             ap.error(f"--invocations: unknown id(s) {', '.join(sorted(unknown))}")
-    made = None
+    made = filing_tree = None
     if args.filing_tree:
         filing_tree = pathlib.Path(args.filing_tree).resolve()
-    else:
+    elif args.only != "main":
         made = filing_tree = pathlib.Path(tempfile.mkdtemp(prefix="feature_lines_")) / "filing"
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(filing_tree), FILING_COMMIT],
                        check=True, capture_output=True)
@@ -725,7 +726,7 @@ def main(argv=None) -> int:
             if args.only and args.only != era:
                 continue
             if not args.reuse:
-                run_era(era, tree, filing_tree, work, args.jobs, only)
+                run_era(era, tree, work, args.jobs, only)
             counts[era] = count_era(era, tree, work)
             (work / f"{era}.json").write_text(json.dumps(counts[era], indent=1))
     finally:
