@@ -1041,12 +1041,11 @@ def TendonForceDistribution_(T):
                                     slice(pj, pj + c.num_joints)))
                 dof, ten, kk, pj = dof + n_f, ten + m_f, kk + nk, pj + c.num_joints
             self.num_dof, self.num_tendons = dof, ten
-            p = self.solvers[0].params
             self._tau = self.DeclareVectorInputPort("joint_torque_reference", dof)
             self._K = self.DeclareVectorInputPort("joint_stiffness_reference", kk)
             self._q = (self.DeclareVectorInputPort("joint_angle", pj)
                        if any(s._offline is None for s in self.solvers) else None)
-            self._state = self.DeclareDiscreteState(np.full(ten, 0.5 * (p.f_min + p.f_max)))
+            self._state = self.DeclareDiscreteState(self.initial_forces)
             self._status = self.DeclareDiscreteState(np.zeros(len(fingers)))
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             self.DeclareStateOutputPort("tendon_force_reference", self._state)
