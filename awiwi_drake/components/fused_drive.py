@@ -214,17 +214,13 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
                elongation=None):
     """All quantities of the drive at a state, generic in the scalar type.
 
-    Returns a dict with ``elongation``, ``tendon_force``, ``tendon_stiffness``,
-    ``generalized_force`` and (with ``u``) ``derivatives``, ``applied_torque``.
-    Without a link, ``q`` (n) and ``qd`` (``rate_joints``) are the joint inputs;
-    with a link they come from ``state`` and ``tau_ext`` is the external torque.
-    ``elongation`` (m), when given, stands for the elongation law's value at ``state`` (the caller
-    guarantees they agree, e.g. a state in elongation coordinates,
-    :mod:`~awiwi_drake.components.rig_system`). With a link and ``u``, ``want=("momentum_rate",)``
-    adds the rate of the momentum ``p = I qdot - P^T B omega / r_m`` (link and motors together):
-    ``I qdd = -P^T (f + g) - d qdot + tau_ext`` and ``B omega' = tau_m - r_m f`` (3.5) give
-    ``p' = -P^T g - d qdot + tau_ext - P^T tau_m / r_m``, in which the spring forces cancel
-    (``tau_m``: :func:`~awiwi_drake.components.motor.motor_drive_torque`; ``P`` constant).
+    Returns a dict with ``elongation``, ``tendon_force``, ``tendon_stiffness``, ``generalized_force`` and
+    (with ``u``) ``derivatives``, ``applied_torque``.  Without a link, ``q`` (n) and ``qd`` (``rate_joints``)
+    are the joint inputs; with a link they come from ``state`` and ``tau_ext`` is the external torque.
+    ``elongation`` (m), when given, stands for the elongation law's value at ``state`` (the caller guarantees
+    they agree).  With a link and ``u``, ``want=("momentum_rate",)`` adds the rate of the momentum
+    ``p = I qdot - P^T B omega / r_m``: ``p' = -P^T g - d qdot + tau_ext - P^T tau_m / r_m`` (the spring forces
+    cancel; ``tau_m``: :func:`~awiwi_drake.components.motor.motor_drive_torque`; ``P`` constant).
     """
     qs, qds, theta, omega, z, g_state = model.split_state(state)
     if model.has_link:

@@ -36,7 +36,7 @@ from .kinematics import finger_joint_names, rot_y, rot_z
 
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
            "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
-           "coupling_selection", "dof_selection", "index_coupling_matrix"]
+           "dof_selection", "index_coupling_matrix"]
 
 
 def _quiet_fp(method):
@@ -140,35 +140,26 @@ def index_coupling_matrix(r0: float, r1: float, r2: float, r3: float) -> np.ndar
         [0, 0, r2, 0], [0, 0, -r2, 0], [0, 0, r2, -r3], [0, 0, -r2, r3]], dtype=float)
 
 
-def coupling_selection(p: FingerParams) -> np.ndarray:
-    """``S`` with ``q_plant = S q_dof``: DIP = (r_x3/r_x2) PIP (5.16) for coupled fingers."""
-    n = 4 + int(p.has_hmc)
-    if not p.pip_dip_coupled:
-        return np.eye(n)
-    S = np.zeros((n, n - 1))
-    S[: n - 1, : n - 1] = np.eye(n - 1)
-    S[n - 1, n - 2] = p.dip_pip_ratio
-    return S
-
-
 def reduced_coupling_matrix(coupling: LinearFingerCoupling) -> np.ndarray:
     """Coupling matrix on the independent DoF, ``P S`` (ring: the 6 x 3 ``P4`` of section 5.3.3)."""
     return coupling.P() @ coupling.dof_selection
 
 
 def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
+    """The routing of a serial finger (module docstring) and its ``S`` (``q_plant = S q_dof``: for coupled fingers
+    DIP = (r_x3/r_x2) PIP, (5.16))."""
     r0, r1, r2, r3 = p.abduction_radius, p.mcp_radius, p.pip_radius, p.dip_radius
-    if not p.pip_dip_coupled:
-        P = index_coupling_matrix(r0, r1, r2, r3)
-    else:
-        base = index_coupling_matrix(r0, r1, r2, r3)[:4]
-        P = np.vstack([base, [[0, 0, r2, r3], [0, 0, -r2, -r3]]])
+    P = index_coupling_matrix(r0, r1, r2, r3)
+    S = np.eye(4 + int(p.has_hmc), 4 + int(p.has_hmc) - int(p.pip_dip_coupled))
+    if p.pip_dip_coupled:
+        P = np.vstack([P[:4], [[0, 0, r2, r3], [0, 0, -r2, -r3]]])
+        S[-1, -1] = p.dip_pip_ratio
     if p.has_hmc:
         rh = p.hmc_radius
         P = np.vstack([np.hstack([[[rh], [-rh]], np.zeros((2, 4))]), np.hstack([np.zeros((len(P), 1)), P])])
     names = [f"{finger}_h{k + 1}" for k in range(P.shape[0])]
     return LinearFingerCoupling(P, joint_names=finger_joint_names(finger), tendon_names=names,
-                                dof_selection=coupling_selection(p), finger=finger)
+                                dof_selection=S, finger=finger)
 
 
 _KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz

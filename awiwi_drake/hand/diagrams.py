@@ -97,21 +97,10 @@ class HandRig(Rig):
 
 
 def tendon_spring_laws(p, tendon_names) -> TendonSprings:
-    """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
-
-    Equal parameter sets share one law object (one fit, one kernel branch).
-    """
-    names = list(tendon_names)
-    laws = [tendon_spring(p.spring)] * len(names)
-    seen = set()
-    for tendon, sp in p.tendon_springs:
-        if tendon not in names:
-            raise ValueError(f"tendon_springs: unknown tendon {tendon!r}; tendons are {', '.join(names)}")
-        if tendon in seen:
-            raise ValueError(f"tendon_springs: tendon {tendon!r} is given twice")
-        seen.add(tendon)
-        laws[names.index(tendon)] = tendon_spring(sp)
-    return TendonSprings(laws)
+    """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name (names
+    checked by the parameter set).  Equal parameter sets share one law object (one fit, one kernel branch)."""
+    own = dict(p.tendon_springs)
+    return TendonSprings([tendon_spring(own.get(t, p.spring)) for t in tendon_names])
 
 
 def tendon_hysteresis(p, tendon_names):
@@ -184,10 +173,7 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
     from ..components.fused_drive import DriveModel, GuideFrictionModel
     from .dynamics import HandDynamics_, LinkModel
     n, m = coupling.num_joints, coupling.num_tendons
-    own = dict(p.tendon_guides)
-    for tendon in own:
-        if tendon not in coupling.tendon_names:
-            raise ValueError(f"tendon_guides: unknown tendon {tendon!r}; tendons are {', '.join(coupling.tendon_names)}")
+    own = dict(p.tendon_guides)         # tendon names checked by the parameter set
     angles = tendon_bending_angles(coupling, p) if p.guide_friction else np.zeros(m)   # 0 rad: no friction
     gf = GuideFrictionModel(tuple(angles), p.friction, p.capstan_friction, p.friction_smoothing_velocity,
                             p.guide_presliding_length,
@@ -231,13 +217,10 @@ def _joint_friction(p, plant) -> np.ndarray:
     stick-slip friction: ``p.joint_friction_params``, ``p.joint_frictions`` overriding joints by name."""
     names = [plant.get_joint(j).name() for j in plant.GetJointIndices() if plant.get_joint(j).num_positions()]
     starts = [plant.get_joint(j).position_start() for j in plant.GetJointIndices() if plant.get_joint(j).num_positions()]
-    own = {}
-    for joint, jp in p.joint_frictions:
+    own = dict(p.joint_frictions)
+    for joint in own:
         if joint not in names:
             raise ValueError(f"joint_frictions: unknown joint {joint!r}; joints are {', '.join(names)}")
-        if joint in own:
-            raise ValueError(f"joint_frictions: joint {joint!r} is given twice")
-        own[joint] = jp
     out = np.empty((plant.num_positions(), 4))
     for name, k in zip(names, starts):
         jp = own.get(name, p.joint_friction_params)

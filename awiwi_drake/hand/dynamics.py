@@ -460,10 +460,8 @@ def HandDynamics_(T):
             return np.concatenate([np.linalg.eigvals(A[np.ix_(label == k, label == k)]) for k in range(n)])
 
         def _finger_states(self) -> list:
-            """The state indices of each finger (its joints' q, v and friction torque, its tendons' drive states): the
-            fingers' dynamics are independent (block-diagonal mass matrix, each tendon routed over one finger; the
-            wrist enters as an input), so one evaluation perturbs one state of every finger.  One group for a finger
-            (or a coupling without per-finger slices)."""
+            """The state indices of each finger (its joints' and its tendons' states): the fingers' dynamics are
+            independent, so one evaluation perturbs one state of every finger.  One group for a finger."""
             coupling, n, m = self.model.coupling, self._n, self._m
             slices = getattr(coupling, "joint_slices", None)
             if not slices:

@@ -180,16 +180,14 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
                                 at_limit=bool(np.any(np.abs(q[:2]) >= limit)), limit=float(limit))
 
 
-def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_search: bool = False, **kw):
-    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP (with ``return_search``:
-    ``(q, GradientSearchResult)``)."""
+def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), **kw):
+    """All four thumb joints: Algorithm 1 for the base (``kw``: :func:`thumb_base_gradient_search`'s),
+    pseudo-inverse for PIP/DIP."""
     dh = np.asarray(dh, dtype=float)
     if dh.shape != (8,):
         raise ValueError(f"dh must have shape (8,), got {dh.shape}")
     search = thumb_base_gradient_search(coupling, dh[:4], q_start, **kw)
-    distal = coupling.distal_pseudo_inverse() @ dh[4:]
-    q = np.concatenate([search.q, distal])
-    return (q, search) if return_search else q
+    return np.concatenate([search.q, coupling.distal_pseudo_inverse() @ dh[4:]])
 
 
 def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> float:

@@ -4,28 +4,20 @@ The wrist's system (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`: offs
 motor feed-forward) is in :mod:`awiwi_drake.hand.systems`;
 the Fig 6.9-6.10 study in :mod:`awiwi_drake.reproductions.ch06_wrist`.
 
-The wrist is a *double inverted parallelogram* (crossed four-bar linkages).
-The thesis (6.1)-(6.9) gives the method but not the link lengths; this module
-reconstructs them from Table 6.1 (a = length, b = width, c = thickness) with
-the following box construction, in the forearm frame 0 of Table 6.2 (x along
-the forearm towards the hand, y across the width, z across the thickness,
-origin at a corner of the a x b x c wrist box):
+The wrist is a *double inverted parallelogram* (crossed four-bar linkages).  The thesis (6.1)-(6.9)
+gives the method but not the link lengths; this module reconstructs them from Table 6.1 (a = length,
+b = width, c = thickness) by a box construction in the forearm frame 0 of Table 6.2 (x along the forearm
+towards the hand, y across the width, z across the thickness, origin at a corner of the a x b x c box):
 
-* Forearm points: ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the
-  abduction axis, along z) and ``A0 = (0, b, c/2)`` on the other side.
-* Palm points in the neutral wrist: ``B = (a, b, c)``, ``C = (a, b, 0)``,
-  ``A = (a, 0, c/2)``.  So the links B0B and C0C are crossed space diagonals
-  of the box: R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm edge BC equals
-  the forearm edge B0C0: D_BC = c (side view: an inverted parallelogram, the
-  flexion linkage); A is equidistant from B and C (|AB| = |AC|, as (6.5)
-  requires) at R_AA0 = |AM| = b from the midpoint M of BC; the link A0A,
-  |AA0| = sqrt(a^2 + b^2), crosses the projection of B0..M in the top view:
-  ground M0A0 = coupler MA = b (top view: the second inverted parallelogram,
-  the abduction linkage).
-* Thus both crossing points lie on the wrist centre (a/2, b/2, c/2): the
-  two tendon layers of Table 6.2 cross there in the side view (forearm
-  z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
-  about the median axis y = b/2, as the thesis describes for Fig 6.10.
+* forearm points ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the abduction axis) and
+  ``A0 = (0, b, c/2)``; palm points in the neutral wrist ``B = (a, b, c)``, ``C = (a, b, 0)``,
+  ``A = (a, 0, c/2)``;
+* so the links B0B and C0C are crossed space diagonals, R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm
+  edge BC equals the forearm edge B0C0, D_BC = c (side view: the flexion linkage, an inverted
+  parallelogram); A is equidistant from B and C (|AB| = |AC|, (6.5)) at R_AA0 = |AM| = b from the midpoint
+  M of BC; the link A0A, |AA0| = sqrt(a^2 + b^2), crosses B0..M in the top view (the abduction linkage);
+* both crossing points lie on the wrist centre (a/2, b/2, c/2): the two tendon layers of Table 6.2 cross
+  there in the side view, and the abduction rotates the palm about the median axis y = b/2 (Fig 6.10).
 
 Why this construction: it is the reading of Fig 6.2-6.7 in which all four
 unprinted lengths follow from a, b, c alone, both views are inverted (crossed)
@@ -40,18 +32,13 @@ much as abduction, not "minimally") is reported in docs/REPRODUCTIONS.md.
 
 Angles
 ------
-``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis
-B0C0 (Fig 6.4).  ``q73`` (flexion) is the crank angle of that linkage.  The
-thesis writes t_B = pi/2 - q73 with q73 the potentiometer reading; with
-B0 at the origin and C0 at (0, D_BC) in the plane, t_B = pi/2 is the flat,
-singular linkage, so the neutral wrist has t_B0 = atan2(c, sqrt(a^2 + b^2))
-(28.9 deg).  We therefore measure ``q73`` from the neutral wrist:
-``t_B = t_B0 - q73`` (thesis q73 = ours + 61.1 deg).  Both angles are crank
-angles: near neutral the palm turns about twice as far (crossed four-bars).
-At q71 = 0 the linkage assembles for q73 in about (-56 deg, +105 deg) (at
-q73 = 30 deg, q71 in about (-78 deg, +178 deg)); the thesis's motion
-(30 deg, 20 deg) is well inside.  Outside the reachable set the functions
-raise ``ValueError`` naming ``wrist_angle``.
+``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis B0C0 (Fig 6.4); ``q73``
+(flexion) is the crank angle of that linkage.  The thesis's t_B = pi/2 - q73 puts q73 = 0 at the flat,
+singular linkage, so we measure ``q73`` from the neutral wrist, ``t_B = t_B0 - q73`` with
+t_B0 = atan2(c, sqrt(a^2 + b^2)) = 28.9 deg (thesis q73 = ours + 61.1 deg).  Near neutral the palm turns
+about twice as far as these crank angles.  At q71 = 0 the linkage assembles for q73 in about
+(-56 deg, +105 deg) (at q73 = 30 deg, q71 in about (-78 deg, +178 deg)); outside the reachable set the
+functions raise ``ValueError`` naming ``wrist_angle``.
 
 Method (thesis numbering)
 -------------------------
@@ -169,24 +156,22 @@ class WristPose:
         return T
 
 
-def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool = True) -> WristPose:
+def wrist_kinematics(q71, q73, params: WristParams | None = None) -> WristPose:
     """Solve the double inverted parallelogram, thesis (6.1)-(6.8): the :class:`WristPose` at abduction ``q71``
-    and flexion ``q73`` [rad] (float, AutoDiffXd or Expression; angles as in the module docstring).
-
-    ``params``: the geometry (default: Table 6.1, 6.2).  ``check``: for float/AutoDiff input, raise
-    ``ValueError`` naming ``q71``/``q73`` when the linkage cannot be assembled (instead of returning NaN).
+    and flexion ``q73`` [rad] (float, AutoDiffXd or Expression; angles as in the module docstring) with the
+    geometry ``params`` (default: Table 6.1, 6.2).  For float/AutoDiff input a linkage that cannot be
+    assembled raises ``ValueError`` naming ``q71``/``q73``.
     """
     p = wrist_params(params)
     with _symbolic_errstate(q71, q73):
-        return _solve(q71, q73, p, check)
+        return _solve(q71, q73, p)
 
 
-def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
-    if check:
-        for name, q in (("q71", q71), ("q73", q73)):
-            v = scalar_value(q)
-            if v is not None and not math.isfinite(v):
-                raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
+def _solve(q71, q73, p: WristParams) -> WristPose:
+    for name, q in (("q71", q71), ("q73", q73)):
+        v = scalar_value(q)
+        if v is not None and not math.isfinite(v):
+            raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
     a, b, c = p.length, p.width, p.thickness
     L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
     gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
@@ -203,8 +188,7 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     tB = tB0 - q73
     ctB, stB = np.cos(tB), np.sin(tB)
     den = L * L + d * d - 2.0 * L * d * stB
-    if check:
-        _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
+    _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
     Bu, Bv = L * ctB, L * stB
     Cu = L * (L * L - d * d) * ctB / den
     Cv = (L * L - d * d) * (L * stB - d) / den
@@ -226,8 +210,7 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     k = (a0x * a0x + a0y * a0y + a0z * a0z + R * R - dA * dA) / (2.0 * R)
     rho2 = a0y * a0y + a0z * a0z
     disc = rho2 - k * k
-    if check:
-        _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
+    _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
     tA = np.arctan2(a0z, a0y) - np.arctan2(np.sqrt(disc), k)
     # (6.5), (6.8): A in frame 0.
     A = M + R * np.cos(tA) * y + R * np.sin(tA) * n

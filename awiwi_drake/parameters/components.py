@@ -125,18 +125,11 @@ class LinearSpringParams(Parameters):
 class SpringMechanismGeometry(Parameters):
     """Lever + linear spring ("tangent alpha") mechanism of Fig 4.6 / Table 4.1.
 
-    Planar geometry, all points in one frame [m]. The tendon runs from the
-    motor-side pulley M over the lever pulley P to the fixed pulley F; the
-    lever turns about the pivot C; a linear spring joins the lever point Q to
-    the anchor S. Pulleys are modelled by their centres (a documented
-    simplification: Table 4.1 lists radii but the thesis gives no numbers).
-    Tension pushes P towards the line MF; at ``lever_straight_angle`` the
-    tendon is straight and the stiffness is unbounded (the tangent-alpha
-    property: stiffness rises with force).
-
-    The thesis prints no numbers for Table 4.1: these were chosen so that the
-    force-angle curve matches Fig 4.8b (0 N at 0 deg, 175 N at 48 deg, convex,
-    dL of about 6 mm, Fig 4.7).
+    Planar geometry [m]: the tendon runs from the motor-side pulley M over the lever pulley P to the fixed
+    pulley F; the lever turns about the pivot C; a linear spring joins the lever point Q to the anchor S.
+    Pulleys are modelled by their centres.  At ``lever_straight_angle`` the tendon is straight and the
+    stiffness unbounded (the tangent-alpha property).  The thesis prints no numbers for Table 4.1: these
+    were chosen so that the force-angle curve matches Fig 4.8b (175 N at 48 deg, convex, dL ~6 mm, Fig 4.7).
     """
 
     pulley_spacing: float = param(0.060, unit="m", low=0.0, low_inclusive=False,

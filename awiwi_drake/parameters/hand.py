@@ -227,13 +227,11 @@ class ThumbParams(Parameters):
 
 FINGERS = ("thumb", "index", "middle", "ring", "fifth")
 
-#: Float evaluations of one finger / hand plant system made by the generic path (the plant's own
-#: ``CalcMassMatrix``... and the drive laws, the path ``AutoDiffXd`` takes) before its compiled kernels are built
-#: (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`).  Chosen: an operating point and a linearisation evaluate
-#: the plant in float once (measured on the fifth finger's tests), a simulation thousands of times and its first two
-#: control periods 6-10 times (the benchmarks' warm-up, which must compile); the generic path costs 0.17 / 0.30 ms a
-#: call on the fifth finger / the hand, the kernels a symbolic trace and a numba compile when not cached (the fifth
-#: finger 12 CPU s on an empty cache).
+#: Float evaluations of one finger / hand plant system by the generic path (the plant's own ``CalcMassMatrix``...
+#: and the drive laws) before its compiled kernels are built (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`).
+#: Chosen: an operating point and a linearisation evaluate the plant in float once, a simulation thousands of times
+#: and its first two control periods 6-10 times; the generic path costs 0.17 / 0.30 ms a call on the fifth finger /
+#: the hand, the kernels a trace and a compile when not cached (the fifth finger 12 CPU s).
 COMPILE_AFTER_CALLS = 4
 
 # (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
@@ -391,6 +389,10 @@ class FingerDriveParams(Parameters):
                         or not isinstance(entry[1], cls)):
                     raise ValueError(f"{type(self).__name__}.{name}[{i}] = {entry!r} must be a "
                                      f"({name.split('_')[0].rstrip('s')}_name, {cls.__name__}) pair")
+            keys = [k for k, _ in getattr(self, name)]
+            if len(set(keys)) < len(keys):
+                raise ValueError(f"{type(self).__name__}.{name}: {next(k for k in keys if keys.count(k) > 1)!r} is "
+                                 "given twice")
             if name == "joint_frictions":       # joint names are checked where the plant is built
                 continue
             names = self.tendon_names
