@@ -212,9 +212,8 @@ class TendonParams(Parameters):
 class GuideFrictionParams(Parameters):
     """Tendon guide friction: bending-angle law (4.1) and a capstan variant.
 
-    (4.1): ``F = C0 (1 - exp(-C1 alpha))`` (independent of tension and speed).
-    Capstan: ``F = f (1 - exp(-mu alpha))`` (proportional to tension; ch. 9 reports
-    routing friction of 10-50 % of the measured force).
+    (4.1): ``F = C0 (1 - exp(-C1 alpha))`` (independent of tension and speed); capstan:
+    ``F = f (1 - exp(-mu alpha))`` (ch. 9 reports routing friction of 10-50 % of the measured force).
     """
 
     c0: float = param(2.2, unit="N", low=0.0,
@@ -232,10 +231,9 @@ class GuideFrictionParams(Parameters):
 class TendonGuideParams(Parameters):
     """The guide friction of one tendon path, given directly (``FingerDriveParams.tendon_guides``).
 
-    The two numbers :func:`~awiwi_drake.components.friction.guide_friction` takes: the tension-independent part C
-    (the (4.1) level at the path's bending angle) and the capstan exponent ``mu alpha``. Both at once: a sliding
-    tendon carries ``C + f (e^{mu alpha} - 1)`` when pulled and ``C + f (1 - e^{-mu alpha})`` when released. Used
-    for one tendon whose guides differ from the rest, e.g. a discrepancy diagnosis's write-back.
+    The two numbers of :func:`~awiwi_drake.components.friction.guide_friction`, the tension-independent part C
+    and the capstan exponent ``mu alpha``, for one tendon whose guides differ from the rest (e.g. a discrepancy
+    diagnosis's write-back).
     """
 
     constant: float = param(0.0, unit="N", low=0.0, high=100.0,
