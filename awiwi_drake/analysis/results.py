@@ -76,6 +76,8 @@ def _jsonable(v: Any):
         return [_jsonable(x) for x in v]
     if v is None or isinstance(v, (bool, int, str)):
         return v
+    if isinstance(v, (complex, np.complexfloating)):     # e.g. info["fastest_mode"]["mode"]: [real, imag]
+        return [_jsonable(float(v.real)), _jsonable(float(v.imag))]
     return str(v)
 
 
@@ -153,7 +155,8 @@ class SimulationResult:
     def save(self, path: str | Path) -> Path:
         """Write ``path`` (``.npz``: arrays; ``.csv``: one column per channel) and ``path + '.json'`` (units, labels, events, info).
 
-        Returns the data file's path.  The directory must exist.
+        Returns the data file's path.  The directory must exist.  A complex number in ``info`` (the fastest mode) is
+        written as ``[real, imag]``.
         """
         path = checked_path(path, "SimulationResult.save", (".npz", ".csv"))
         meta = self._meta()

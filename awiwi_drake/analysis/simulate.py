@@ -35,7 +35,7 @@ from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCH
 from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 from awiwi_drake.analysis.monitors import Event
-from awiwi_drake.parameters.control import FIXED_STEP_STABILITY_MARGIN
+from awiwi_drake.parameters.control import FIXED_STEP_CHECK_BUDGET, FIXED_STEP_STABILITY_MARGIN
 
 __all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
            "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants", "FlatSystem", "add_flat",
@@ -359,8 +359,16 @@ def simulate(system, context: Context | None, t_final: float, *,
         (default) integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
         ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
         unchanged), with a warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``1`` refuses such a run
-        (a ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The check is repeated at the end
-        state: a mode that left the region during the run is an ``integrator_instability`` event.
+        (a ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The modes come from central
+        differences of the plant's compiled laws checked against Drake's ``Linearize`` (``Linearize`` itself without
+        kernels).  The check is repeated during the run at the progress-chunk boundaries whenever the checks' wall
+        time (predicted by the last one's) stays within ``parameters.control.FIXED_STEP_CHECK_BUDGET`` of the run's
+        so far (about every 0.25 s of a cascaded hand run, a third of the chunks for a small Python plant; the first
+        run of a plant in a process pays the loading of its compiled kernels in its start check and is checked
+        less), and at the end state: a mode outside the region at the step taken is an ``integrator_instability``
+        event from the first to the last check that found it outside (``extreme`` the largest ``|R|``), with a
+        warning; ``info["stability_checks"]`` lists the checked times (they follow the machine's speed: the
+        trajectory does not depend on them, an excursion between two checks is missed).
 
     Returns
     -------
@@ -546,7 +554,9 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: substeps = {substeps} needs a fixed-step run of a continuous plant (the run is "
                          + (f"{mode})" if mode != "fixed_step" else f"a sampled plant's, {sampled[0].get_name()!r})"))
     n_sub, worst = 1, None
+    check_cost = time.perf_counter()
     modes = _plant_modes(sub, root) if integrator in _TAYLOR_ORDER and mode == "fixed_step" else []
+    check_cost = time.perf_counter() - check_cost
     for leaf_name, lam in modes:     # the plant needing the most substeps (0: none suffices), then the largest |R|
         k, mode_k, growth = fixed_step_substeps(lam, h, integrator)
         if worst is None or ((k or math.inf), growth) > ((worst[1] or math.inf), worst[3]):
@@ -637,13 +647,39 @@ def simulate(system, context: Context | None, t_final: float, *,
                 raise SimulationEventError(f"{e.kind} on {e.channel} at t = {e.t_start:.6g} s (value {e.extreme:.6g})",
                                            kind=e.kind, t=e.t_start)
 
-    wall = time.perf_counter()
+    outside, excursions, checked = {}, [], []   # leaf -> [t first, t last, |R| max, mode]; closed ones; check times
+
+    def check_modes(t_now: float):
+        """The plants' modes at the current state against the region at the step taken (the end check's rule)."""
+        now = {}
+        for leaf_name, lam in _plant_modes(sub, root):
+            excess = _excess(integrator, h * lam)
+            i = int(np.argmax(excess))
+            if excess[i] > 1e-9:
+                now[leaf_name] = (float(stability_function(integrator, h * lam[i])), complex(lam[i]))
+        for leaf_name in [nm for nm in outside if nm not in now]:
+            excursions.append((leaf_name, *outside.pop(leaf_name)))
+        for leaf_name, (growth, lam) in now.items():
+            e = outside.setdefault(leaf_name, [t_now, t_now, growth, lam])
+            e[1] = t_now
+            if growth > e[2]:
+                e[2:] = [growth, lam]
+        checked.append(t_now)
+
+    # checks during the run while their wall time, predicted by the last check's, stays within the budget
+    wall, spent = time.perf_counter(), 0.0
     try:
         sim.Initialize()
         for tb in bounds:
             sim.AdvanceTo(tb)
             check_state(tb)
             check_events()
+            if (modes and tb < bounds[-1]
+                    and spent + check_cost <= FIXED_STEP_CHECK_BUDGET * (time.perf_counter() - wall)):
+                check_cost = time.perf_counter()
+                check_modes(tb)
+                check_cost = time.perf_counter() - check_cost
+                spent += check_cost
             if progress is not None:
                 progress(tb - start, duration)
     except (SimulationDivergedError, SimulationEventError):
@@ -678,15 +714,15 @@ def simulate(system, context: Context | None, t_final: float, *,
     events = []
     for m, s in watched:
         events.extend(m.events(*read(s)))
-    for leaf_name, lam in (_plant_modes(sub, root) if modes else []):   # the same check at the end state
-        excess = _excess(integrator, h * lam)
-        i = int(np.argmax(excess))
-        if excess[i] > 1e-9:
-            growth = float(stability_function(integrator, h * lam[i]))
-            events.append(Event("integrator_instability", leaf_name, float(t_final), float(t_final), growth))
-            warnings.warn(f"simulate: at t = {float(t_final):.6g} s {leaf_name!r} has the mode {_mode_text(complex(lam[i]))} "
-                          f"outside {integrator}'s stability region at h = {h:.6g} s (|R| = {growth:.5g}): the run's "
-                          f"end is not trustworthy; give more substeps or mode='error_controlled'", stacklevel=2)
+    if modes:                                   # the same check at the end state closes every excursion
+        check_modes(float(t_final))
+        excursions.extend((nm, *e) for nm, e in outside.items())
+    for leaf_name, t0, t1, growth, lam in excursions:
+        events.append(Event("integrator_instability", leaf_name, t0, t1, growth))
+        warnings.warn(f"simulate: from t = {t0:.6g} to {t1:.6g} s (checked at {len(checked)} instants) {leaf_name!r} "
+                      f"had the mode {_mode_text(lam)} outside {integrator}'s stability region at h = {h:.6g} s "
+                      f"(|R| up to {growth:.5g}): the run is not trustworthy from there; give more substeps or "
+                      f"mode='error_controlled'", stacklevel=2)
     events.sort(key=lambda e: (e.t_start, e.kind, e.channel))
     limits = {}   # thresholds of monitors watching a logged signal, drawn by SimulationResult.plot
     for m, s in watched:
@@ -697,6 +733,7 @@ def simulate(system, context: Context | None, t_final: float, *,
                 substeps=n_sub if mode == "fixed_step" else None,
                 fastest_mode=None if worst is None else dict(system=worst[0], mode=worst[2], growth=worst[3],
                                                              step=h_outer),
+                stability_checks=checked if modes else None,
                 max_step=h if mode == "error_controlled" else None,
                 accuracy=float(accuracy) if mode == "error_controlled" else None,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
