@@ -18,17 +18,13 @@ tendon-length estimate of ``q``, ``qdot`` and the spring sensors' tendon forces)
     tau_dot = -(P(q) S)^T k_t(f) (r_m omega + P(q) qdot)     its rate (f = phi(x), x = r_m theta + h(q) + x0),
     sigma = -(P(q) S)^T k_t(f) r_m omega    the rate the motors drive (tau_dot = sigma - K qdot, K (5.12)).
 
-``sigma`` needs no joint velocity: motor encoders and spring sensors only.  ``tau_dot`` multiplies the
-differentiated tendon-length estimate ``qdot`` (a backward difference, half a period late at the
-sample) by the joints' tendon stiffness (and the spring hysteresis adds its presliding stiffness,
-which ``k_t`` does not hold); on the index that error, fed back through the LQR's torque-rate gain,
-drives the DIP's link mode on its tendons (~4450 rad/s, ~700 Hz) unstable at 3 kHz (sampled loop,
-:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  The LQR/SDRE stages therefore measure
-``sigma`` (and weight it in their cost); pole placement keeps ``tau_dot`` (its placed gains rely on the
-joint's own tendon stiffness through ``tau_dot``; written on ``sigma`` the same poles need a negative
-velocity gain, and the whole finger's neglected coupling makes that unstable).
+``sigma`` needs no joint velocity (motor encoders and spring sensors only).  ``tau_dot`` multiplies the
+late, differentiated tendon-length estimate by the tendon stiffness, which drives the DIP's link mode on its
+tendons unstable under the LQR's torque-rate gain at 3 kHz, so the LQR/SDRE stages measure ``sigma``; pole
+placement keeps ``tau_dot`` (on ``sigma`` its poles need a negative velocity gain).  The measurements:
+docs/REPRODUCTIONS.md ("every joint-level law per joint").
 
-with the per-DoF linear law of :class:`JointStateFeedbackLaw`::
+The per-DoF linear law of :class:`JointStateFeedbackLaw` is::
 
     tau_ref_j = tau_op_j + Nu_j dr_j - K_j . (z_j - Nx_j dr_j),     dr_j = (S^+ q_ref)_j - q_op_j,
 
@@ -178,12 +174,9 @@ class JointStateFeedbackLaw(StaticLaw):
 class JointGainScheduleLaw(JointStateFeedbackLaw):
     """:class:`JointStateFeedbackLaw` with gains interpolated in the measured joint torque deviation.
 
-    ``schedule`` (p,) torque deviations ``tau - tau_op`` [Nm] (increasing) and ``table`` (k, p, 5)
-    the gains designed there (the SDRE's pointwise-linear models, ch. 14, tabulated per DoF).
-    Outside the table the end gains are held (clamped, not extrapolated), and not silently: the first
-    double-valued evaluation outside it warns (``RuntimeWarning`` naming the DoF, the deviation and the
-    table's range) and :attr:`outside_count` counts every such evaluation (per DoF; Drake may evaluate the
-    output more than once per step, so it counts evaluations, not samples).
+    ``schedule`` (p,) increasing deviations ``tau - tau_op`` [Nm], ``table`` (k, p, 5) the gains designed there
+    (ch. 14).  Outside the table the end gains are held, not silently: the first float evaluation outside warns
+    (``RuntimeWarning``) and :attr:`outside_count` counts such evaluations per DoF.
     """
 
     def __init__(self, coupling, selection, pulley_radius, schedule, table, **kw):
@@ -265,11 +258,10 @@ JointStage = JointStage_[None]
 def JointFrictionObserver_(T):
     """The joint friction observer (9.2) on every DoF of a finger/the hand, as a compensating torque (ch. 9).
 
-    Per DoF ``j`` (inertia ``M_jj``, bearing damping ``b_jj``): ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``,
-    ``d_hat_j = L M_jj (qdot_j - w_hat_j)`` (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the
-    one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces; ``inertia``
-    (k, k) the DoF inertia matrix ``M`` instead (``M w_hat' = tau - b qdot + d_hat``, ``d_hat = L M (qdot - w_hat)``:
-    the 15.5 backstepping's link model, whose off-diagonal inertial torques are then not counted as friction).
+    Per DoF ``j``: ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``, ``d_hat_j = L M_jj (qdot_j - w_hat_j)``
+    (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the one place of the law), ``tau = -(P(q) S)^T f``
+    of the measured tendon forces; an ``inertia`` matrix (k, k) ``M`` couples the DoF (the 15.5 backstepping's link
+    model, whose off-diagonal inertial torques are then not counted as friction).
     Inputs ``joint_angle``, ``joint_velocity`` (n, the estimates on the hand), ``tendon_force`` (m); output
     ``friction_compensation`` (k) ``= -scale d_hat`` [Nm] (``scale`` per DoF, default 1), added to the joint stage's
     desired torques; state ``w_hat`` (k), to be started at the measured velocity (0 at rest).
@@ -277,24 +269,16 @@ def JointFrictionObserver_(T):
     ``friction_levels`` ``(C, mu alpha, Fs)`` (the plant's own guide friction parameters, m each,
     :meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`, zeros when the guides have no friction; and
     its joints' breakaway levels, n, :func:`~awiwi_drake.control.chain.joint_friction_levels`, zeros when off)
-    bound the estimate by what the guides' and the joints' friction can be (:meth:`friction_bound`): per DoF
-    ``B_j = sum_i |(P(q) S)_ij| W_i(f_i) + sum_l |S_lj| Fs_l``, ``W_i`` the sliding level of tendon i's guide friction
-    at its measured force (:func:`~awiwi_drake.components.friction.joint_friction_bound`: the chain's
-    ``tendon_force`` is the lever's tension, hysteresis inside, so the guides and the joints are all it misses), and
-    the output becomes
-    ``scale clip(-d_hat, -B, B)``.  The observer is link-side, driven by the measured tendon forces' torque, so its
-    ``d_hat`` holds the guides' friction AND any external load; in the thesis (9.1)-(9.2) it sits on the actuator side
-    with the strain gauges' joint torque, which contains the load, so a load is not cancelled and the joint stays an
-    impedance (stiffness set by co-contraction).  The bound keeps that: a load beyond ``B`` is compensated only up to
-    ``B`` (output ``friction_compensation_bound`` ``= scale B``; compare flags a DoF whose compensation ends at it).
-    The state stays the (9.2) law.  ``friction_levels`` None: unbounded (the load observer of
+    bound the estimate by what the guides' and the joints' friction can be (:meth:`friction_bound`): the output
+    becomes ``scale clip(-d_hat, -B, B)``.  Chosen: the observer is link-side, so its ``d_hat`` holds the friction AND
+    any external load; the thesis's (9.1)-(9.2) sits on the actuator side, where a load is not cancelled and the joint
+    stays an impedance.  The bound keeps that: a load beyond ``B`` is compensated only up to ``B`` (output
+    ``friction_compensation_bound`` ``= scale B``).  ``friction_levels`` None: unbounded (the load observer of
     :class:`~awiwi_drake.control.finger_backstepping.ObservedBacksteppingController`, which estimates the load on purpose).
 
-    ``period`` None: continuous state (a continuous chain, linear analysis).  ``period`` h: the sampled
-    chain's form, a discrete state updated every ``h`` from the sample by
-    :func:`~awiwi_drake.control.friction_observer.observer_step` (the same law, its model copy integrated with its
-    torque held over the period: pole ``1 - L h``); :class:`~awiwi_drake.control.fused.FusedChain_` calls :meth:`compensation` and
-    :meth:`next_state` of this object, the same methods the block's output and update call.
+    ``period`` None: continuous state (linear analysis); ``h``: a discrete state stepped by
+    :func:`~awiwi_drake.control.friction_observer.observer_step` (pole ``1 - L h``).
+    :class:`~awiwi_drake.control.fused.FusedChain_` calls the same :meth:`compensation` and :meth:`next_state`.
     """
 
     class Impl(LeafSystem_[T]):

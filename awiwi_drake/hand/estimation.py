@@ -204,20 +204,13 @@ def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> floa
 def LinkPositionEstimator_(T):
     """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
 
-    Inputs ``motor_angle`` (m) [rad] and ``elongation`` (m) [m] (the spring
-    sensors); the length change at the finger base is
-    ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (+ wrist offsets, which
-    ``wrist_offset`` (m) removes when connected; leave it unconnected or 0
-    otherwise).  Output ``joint_angle_estimate`` (n plant joints) is the estimate
-    from the *current* measurements: constant-P fingers by the pseudo-inverse
-    (5.15), the thumb base by Algorithm 1 warm-started from the stored estimate
-    (the thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Every
-    ``period`` the discrete state stores it (the next warm start).  Not a state
-    output: that would be one period older than the forces a controller reads
-    with it, and the lag, differentiated into the joint velocity, destabilised the
-    DIP's link mode in every chain design at 3 kHz
-    (:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  A computation
-    delay is the loop's (``closed_loop(delay=...)``).
+    Inputs ``motor_angle`` (m) [rad] and ``elongation`` (m) [m] (the spring sensors) give the length change
+    at the finger base ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (the optional input ``wrist_offset``
+    (m) removes the wrist's).  Output ``joint_angle_estimate`` (n plant joints): the estimate from the
+    *current* measurements (module docstring), the thumb base warm-started from the stored estimate, which
+    the discrete state updates every ``period``.  Not a state output: one period older than the forces a
+    controller reads with it, that lag destabilised the DIP's link mode in every chain design at 3 kHz
+    (:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`); a computation delay is the loop's.
 
     Scalar types: float and AutoDiffXd (the search runs on values, then one Gauss-Newton step
     ``q + P(q)^+ (dh - dh(q))`` in the scalar type carries the derivatives, ``dq/d dh = P^+`` at
