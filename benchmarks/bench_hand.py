@@ -30,7 +30,7 @@ import time
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
-from awiwi_drake.analysis import simulate
+from awiwi_drake.analysis import SimulationDivergedError, simulate
 from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.control import closed_loop, make_controller
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -50,7 +50,7 @@ def _run(diagram, context, t_final, *, fixed_step=None, accuracy=1e-4, max_step=
     wall = time.perf_counter() - t0
     x = context.get_continuous_state_vector().CopyToVector()
     if not np.all(np.isfinite(x)):
-        raise RuntimeError("benchmark simulation diverged")
+        raise SimulationDivergedError(f"benchmark simulation diverged by t = {t_final:g} s", t=t_final)
     return t_final / wall, integ.get_num_steps_taken()
 
 

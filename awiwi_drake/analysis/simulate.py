@@ -67,7 +67,7 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from awiwi_drake.analysis.monitors import Monitor
 from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCHEME
-from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
+from awiwi_drake.analysis.results import SimulationResult, unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 from awiwi_drake.analysis.monitors import Event
 from awiwi_drake.parameters.control import FIXED_STEP_CHECK_BUDGET, FIXED_STEP_STABILITY_MARGIN
@@ -729,10 +729,10 @@ def simulate(system, context: Context | None, t_final: float, *,
         signals[label] = v
         port_name = label if isinstance(label, str) else str(label)
         if port_name == "state" and len(state_names) == v.shape[1]:
-            units[label] = [state_unit(n) for n in state_names]
+            units[label] = [unit(n) for n in state_names]
             labels[label] = list(state_names)
         else:
-            units[label] = port_unit(port_name)
+            units[label] = unit(port_name)
             labels[label] = [f"{port_name}[{j}]" for j in range(v.shape[1])] if v.shape[1] > 1 else [port_name]
     if t is None:
         t = read(watched[0][1])[0] if watched else np.array([start, float(t_final)])

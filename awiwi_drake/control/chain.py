@@ -228,10 +228,10 @@ class TendonForceStage(Diagram):
             dist = b.AddNamedSystem("force_sharing", TendonForceSharing(W, point["tendon_force"],
                                                                        point["torque_offset"]))
         elif method in ("optimal", "algorithm2"):
-            dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(
-                point["fingers"], method=method, period=1.0 / rate_hz,
-                iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution_params,
-                drive=drive_params, springs=springs))
+            dist_kw = dict(fingers=point["fingers"], method=method, period=1.0 / rate_hz, stiffness="full",
+                           iterations_per_period=p.distribution_iterations, params=distribution_params,
+                           drive=drive_params, springs=springs)
+            dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(**dist_kw))
         else:
             raise ValueError(f"TendonForceStage: distribution = {method!r}; use 'optimal', 'algorithm2' or 'sharing'")
         gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth,
@@ -300,10 +300,7 @@ class TendonForceStage(Diagram):
         self.fused_parts = dict(
             law=law, path_coupling=coupling if force.HasInputPort("tendon_path_velocity") else None,
             sharing=(dist.W, dist.f0, dist.tau0) if method == "sharing" else None,
-            distribution=None if method == "sharing" else dict(
-                fingers=point["fingers"], method=method, period=1.0 / rate_hz,
-                iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution_params,
-                drive=drive_params, springs=springs),
+            distribution=None if method == "sharing" else dist_kw,
             distribution_system=self._dist, initial_forces=None if method == "sharing" else self._f_op)
 
     def initialize_state(self, context, rig_state=None) -> None:

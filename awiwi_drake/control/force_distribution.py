@@ -76,8 +76,7 @@ def _gauss_newton_qp(outer, dk, H, E, f, K_norm2, m, levenberg, Gt, Q, b):
     ``||E - G (f' - f)||^2 / N + mu ||f' - f||^2`` with ``G[:, i] = vec(dk_i p_i p_i^T + H_i)`` (the
     linearised ``dK_q/df_i``), ``E = K_des - K_q(f)``, ``N = K_norm2``, ``mu = levenberg tr(G^T G / N) / m``
     (``m``: the tendons, not counting a batch's padding); ``outer[i] = p_i p_i^T``, ``Gt`` work space (m x n^2).
-    Loops: small matrices, no BLAS call (the per-finger solver and the batch of :class:`_FingerBatch` call it).
-    """
+    Loops: small matrices, no BLAS call."""
     M, N = outer.shape[0], outer.shape[1]
     NN = N * N
     for i in range(M):
@@ -180,19 +179,12 @@ def _barrier_slope(d):
 
 
 class TendonStiffnessMap:
-    """Tendon stiffness as a function of tendon force, ``f -> (k_t(f), dk_t/df)``, by table lookup.
+    """Tendon stiffness as a function of tendon force, ``f -> (k_t(f), dk_t/df)``, by linear interpolation in a
+    table, as the thesis tabulates the calibrated spring curve (ch. 4, 15.4.3).
 
-    The thesis tabulates the calibrated spring curve (ch. 4, 15.4.3); so does this map:
-    ``k_t`` and ``dk_t/df`` are sampled on a force grid and interpolated linearly.  One table
-    serves every tendon (1-D arrays), or each tendon has its own row (2-D arrays, ``m`` rows:
-    the calibration table of a hand whose tendons have their own spring laws,
-    :meth:`from_springs`); then the map is called with one force per tendon.
-
-    Parameters
-    ----------
-    forces, stiffness, stiffness_slope : array (G,) or (m, G)
-        Increasing force grid [N], k_t [N/m] and dk_t/df [1/m] at those forces (per row).
-    """
+    ``forces`` (an increasing grid [N]), ``stiffness`` (k_t [N/m]) and ``stiffness_slope`` (dk_t/df [1/m]): (G,), one
+    table for every tendon, or (m, G), each tendon its own row (:meth:`from_springs`; called with one force per
+    tendon)."""
 
     def __init__(self, forces, stiffness, stiffness_slope):
         self.forces = np.array(forces, dtype=float)
@@ -604,12 +596,8 @@ class OptimalForceDistribution(_DistributionBase):
 
 
 def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnessMap:
-    """``k_t(f)`` of the hand's calibrated tendon spring (lever mechanism in series with the tendon,
-    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``).
-
-    Tabulated once per spring parameter set (the fit of the lever mechanism takes ~30 ms): equal
-    parameters give the same law object (:func:`~awiwi_drake.components.spring.tendon_spring`), so the same map.
-    """
+    """``k_t(f)`` of the hand's calibrated tendon spring (ch. 4, ``tendon_spring(drive.spring)``), tabulated once per
+    spring parameter set (equal parameters give the same law object, so the same map)."""
     return law_stiffness_map(tendon_spring((drive or FingerDriveParams()).spring))
 
 
@@ -1053,12 +1041,11 @@ def TendonForceDistribution_(T):
                                     slice(pj, pj + c.num_joints)))
                 dof, ten, kk, pj = dof + n_f, ten + m_f, kk + nk, pj + c.num_joints
             self.num_dof, self.num_tendons = dof, ten
-            p = self.solvers[0].params
             self._tau = self.DeclareVectorInputPort("joint_torque_reference", dof)
             self._K = self.DeclareVectorInputPort("joint_stiffness_reference", kk)
             self._q = (self.DeclareVectorInputPort("joint_angle", pj)
                        if any(s._offline is None for s in self.solvers) else None)
-            self._state = self.DeclareDiscreteState(np.full(ten, 0.5 * (p.f_min + p.f_max)))
+            self._state = self.DeclareDiscreteState(self.initial_forces)
             self._status = self.DeclareDiscreteState(np.zeros(len(fingers)))
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             self.DeclareStateOutputPort("tendon_force_reference", self._state)

@@ -114,13 +114,9 @@ def FusedChain_(T):
             tickets = {p.ticket() for p in self._in.values()} | {self.xd_ticket()}
             self._cache = self.DeclareCacheEntry("fused chain at the sample", ValueProducer(
                 allocate=lambda: AbstractValue.Make(None), calc=self._calc_sample), tickets)
-            pre = {self._cache.ticket()}
-            self.DeclareVectorOutputPort("motor_torque", int(self.law.output_size),
-                                         lambda c, o: o.SetFromVector(self._sample(c)["u"]), prerequisites_of_calc=pre)
-            self.DeclareVectorOutputPort("joint_angle_estimate", n,
-                                         lambda c, o: o.SetFromVector(self._sample(c)["q"]), prerequisites_of_calc=pre)
-            self.DeclareVectorOutputPort("joint_velocity_estimate", n,
-                                         lambda c, o: o.SetFromVector(self._sample(c)["v"]), prerequisites_of_calc=pre)
+            self._sample_output("motor_torque", self.law.output_size, "u")
+            self._sample_output("joint_angle_estimate", n, "q")
+            self._sample_output("joint_velocity_estimate", n, "v")
             if self._xg is not None:
                 self.DeclareStateOutputPort(self.law.gain_name, self._xg)
             if chain:
@@ -128,20 +124,12 @@ def FusedChain_(T):
                     self.DeclareStateOutputPort("tendon_force_reference", self._xf)
                     self.DeclareStateOutputPort("distribution_status", self._xs)
                 else:
-                    self.DeclareVectorOutputPort("tendon_force_reference", m,
-                                                 lambda c, o: o.SetFromVector(self._sample(c)["f_ref"]),
-                                                 prerequisites_of_calc=pre)
-                self.DeclareVectorOutputPort("joint_torque_reference", int(self.joint_law.output_size),
-                                             lambda c, o: o.SetFromVector(self._sample(c)["tau"]),
-                                             prerequisites_of_calc=pre)
+                    self._sample_output("tendon_force_reference", m, "f_ref")
+                self._sample_output("joint_torque_reference", self.joint_law.output_size, "tau")
                 if self.obs is not None:
-                    self.DeclareVectorOutputPort("friction_compensation", self.obs.S.shape[1],
-                                                 lambda c, o: o.SetFromVector(self._sample(c)["comp"]),
-                                                 prerequisites_of_calc=pre)
+                    self._sample_output("friction_compensation", self.obs.S.shape[1], "comp")
                     if self.obs.levels is not None:
-                        self.DeclareVectorOutputPort("friction_compensation_bound", self.obs.S.shape[1],
-                                                     lambda c, o: o.SetFromVector(self._sample(c)["bound"]),
-                                                     prerequisites_of_calc=pre)
+                        self._sample_output("friction_compensation_bound", self.obs.S.shape[1], "bound")
                 self.DeclareVectorOutputPort("joint_stiffness_reference", K.size,
                                              lambda c, o: o.SetFromVector(self._K),
                                              prerequisites_of_calc={self.nothing_ticket()})
@@ -149,6 +137,11 @@ def FusedChain_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.spec, converter=converter)
+
+        def _sample_output(self, name, size, key):
+            """An output port reading ``key`` of the sample (:meth:`_calc_sample`)."""
+            self.DeclareVectorOutputPort(name, int(size), lambda c, o: o.SetFromVector(self._sample(c)[key]),
+                                         prerequisites_of_calc={self._cache.ticket()})
 
         def _sample(self, context) -> dict:
             return self._cache.Eval(context)

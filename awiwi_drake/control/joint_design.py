@@ -122,12 +122,9 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
     Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (``sub.plant`` its link alone), its
-    operating point and its chain design point (:func:`~awiwi_drake.control.chain.chain_design_point`
-    layout; close it with :func:`force_loop` or a :class:`~awiwi_drake.control.chain.TendonChainController`
-    with ``distribution="sharing"``).
-    ``torque``: the DoF torque at the point (default ``tau_op``); the tendon forces are
-    ``f_op + W_j (torque - tau_op)`` and an external torque ``-torque`` holds the link.
-    ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor, (3.8) at rest).
+    operating point and its :func:`~awiwi_drake.control.chain.chain_design_point` (close it with :func:`force_loop`).
+    ``torque``: the DoF torque (default ``tau_op``; forces ``f_op + W_j (torque - tau_op)``, held by an external
+    torque ``-torque``).  ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor).
     """
     if friction not in ("motion", "rest"):
         raise ValueError(f"joint_subsystem: friction = {friction!r}; use 'motion' or 'rest'")
@@ -583,15 +580,11 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     """Registered factories ``cascaded``, ``lqr`` (...) for fingers and the hand: the chain with the joint
     stage ``design`` (:func:`design_joint_stage`) designed at ``op`` (default: the rig's operating point).
 
-    ``stiffness_correction`` (ch. 8, :class:`~awiwi_drake.parameters.hand_control.StiffnessCorrectionParams`):
-    the distribution is asked for the mechanical stiffness ``K_mech = eps K_eff`` (8.2) per DoF, ``K_eff`` the
-    design's :attr:`JointDesign.static_stiffness` (the (8.1) impedance correction is the identity here: the
-    chain acts on the estimated joint angle through force control, so no spring is in series with it).
-    ``friction_observer``: the ch. 9 joint friction observer (9.2) per DoF, on by default (the guides' friction
-    otherwise leaves the impedance its dead band, friction torque / Kp; README "The thesis's control on fingers and
-    the hand (ch. 7-15)"); None removes it (``make_controller(name, rig, friction_observer=None)``).
-    ``kw``: ``mechanical_stiffness`` (:func:`~awiwi_drake.control.chain.chain_design_point`), ``gains``,
-    ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    ``stiffness_correction`` (ch. 8, ``StiffnessCorrectionParams``): the distribution is asked for ``K_mech = eps
+    K_eff`` (8.2) per DoF, ``K_eff`` the design's :attr:`JointDesign.static_stiffness` ((8.1) is the identity here: no
+    spring is in series with the chain's force control).  ``friction_observer``: the (9.2) observer per DoF, on by
+    default (the guides' friction otherwise leaves the impedance a dead band); None removes it.  ``kw``:
+    ``mechanical_stiffness``, ``gains``, ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
     c = chain or HandChainParams()
     correction = kw.pop("stiffness_correction", None)
     if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
@@ -902,16 +895,13 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     """Poles of ``rig`` closed by ``controller`` (a fresh system) sampled at ``rate_hz``, the linear analysis of
     what :func:`~awiwi_drake.control.base.closed_loop` ``(rig, controller, rate_hz=rate_hz)`` simulates.
 
-    The rig is linearised at ``op`` by Drake (:func:`~awiwi_drake.analysis.linear.linearize`, its own laws: motor
-    friction (3.8) at rest, hysteresis as the presliding spring) and sampled exactly with Drake's
-    ``DiscreteTimeApproximation`` (zero-order hold); it replaces the rig in the same ``closed_loop`` wiring
-    (the command of sample ``k`` acts over ``[t_k, t_k+1)``, as the hold does) with the controller's own
-    discrete states (the force distribution) and the tendon-length estimator (``estimator``: ``"auto"``, the
-    rig's, at the same rate; ``None``/``"ideal"``: the true joint state).  Drake's ``Linearize`` takes a
-    discrete system with one state group only, so the Jacobian of the one-period map
-    (``EvalUniquePeriodicDiscreteUpdate``, every state group) is taken in ``AutoDiffXd``, what ``Linearize``
-    does for a single group.  Every periodic update of the loop must have the period ``1 / rate_hz``.
-    ``fused``: as :func:`~awiwi_drake.control.base.closed_loop` (the fused chain by default; the same poles).
+    The rig is linearised at ``op`` by Drake (motor friction (3.8) at rest, hysteresis as the presliding spring),
+    sampled exactly with Drake's ``DiscreteTimeApproximation`` (zero-order hold) and closed in the same
+    ``closed_loop`` wiring with the controller's discrete states and the tendon-length estimator (``estimator``:
+    ``"auto"``, the rig's at the same rate; ``None``/``"ideal"``: the true joint state).  Drake's ``Linearize``
+    takes one discrete state group only, so the Jacobian of the one-period map (``EvalUniquePeriodicDiscreteUpdate``)
+    is taken in ``AutoDiffXd``; every periodic update must have the period ``1 / rate_hz``.  ``fused``: as
+    :func:`~awiwi_drake.control.base.closed_loop` (the same poles).
     """
 
     from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff

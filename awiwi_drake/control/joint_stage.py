@@ -1,13 +1,8 @@
 """The joint-level stage of the hand's control chain (ch. 11-14 laws per joint): one vectorised system.
 
-The chain (:mod:`awiwi_drake.control.chain`) turns desired joint torques into motor torques
-(force distribution, ch. 7, and the tendon force loop, ch. 10).  Its first stage is a plug-in:
-:class:`JointStage_` evaluates a *joint law* for all independent DoF ``q_d = S^+ q`` of a finger
-or the hand at once and outputs
-
-* ``joint_torque_reference`` (n_dof) [Nm] -- the desired DoF torques ``tau_ref``;
-* ``joint_stiffness_reference`` [Nm/rad] -- the desired mechanical stiffness (co-contraction) for
-  the distribution, constant (per DoF, or each finger's row-major block).
+The first stage of the chain (:mod:`awiwi_drake.control.chain`) is a plug-in: :class:`JointStage_` evaluates a
+*joint law* for all independent DoF ``q_d = S^+ q`` at once, giving ``joint_torque_reference`` (n_dof) [Nm] and the
+constant desired mechanical stiffness ``joint_stiffness_reference`` [Nm/rad] for the distribution.
 
 Each DoF ``j`` is controlled on its own *measurable* coordinates (what the real hand has: the
 tendon-length estimate of ``q``, ``qdot`` and the spring sensors' tendon forces)::
@@ -28,11 +23,10 @@ The per-DoF linear law of :class:`JointStateFeedbackLaw` is::
 
     tau_ref_j = tau_op_j + Nu_j dr_j - K_j . (z_j - Nx_j dr_j),     dr_j = (S^+ q_ref)_j - q_op_j,
 
-(``(Nx, Nu)`` the equilibrium family of :func:`awiwi_drake.control.linear.reference_maps`).
-PD / impedance (11.4) is the case ``K_j = [K, D, 0, 0]`` (then no force input is read); pole
-placement (ch. 12) and LQR (ch. 13) use the full ``K_j``; the gains come from each joint's own
-reduced model (:mod:`awiwi_drake.control.joint_design`).  ``state_dependent`` laws (SDRE, ch. 14)
-use :class:`JointGainScheduleLaw`, gains interpolated in the joint torque.
+(``(Nx, Nu)``: :func:`awiwi_drake.control.linear.reference_maps`).  PD / impedance (11.4) is ``K_j = [K, D, 0, 0]``
+(no force input read); pole placement (ch. 12) and LQR (ch. 13) use the full ``K_j``
+(:mod:`awiwi_drake.control.joint_design`); the SDRE (ch. 14) interpolates them in the joint torque
+(:class:`JointGainScheduleLaw`).
 """
 
 from __future__ import annotations
@@ -90,16 +84,10 @@ def measured_joint_coordinates(coupling, S, Sp, r_m: float, u, torque_rate: str 
 class JointStateFeedbackLaw(StaticLaw):
     """Per-DoF linear state feedback on ``z_j`` (module docstring); one call for all DoF.
 
-    Parameters
-    ----------
-    coupling : the finger/hand coupling (``P(q)``), ``selection`` ``S`` (n x k)
-    pulley_radius : r_m [m] (the tendon force rate)
-    gains : (k, 4) ``K_j``, or (k, 5) with the gain on the previous request ``tau_ref(t - h)`` of a
-        sampled chain (its distribution answers one period late; the law reads it back from the
-        distribution's ``tendon_force_reference``: ``-(P S)^T f_ref``, exact torque)
-    state_map : (k, 4) ``Nx_j``; ``input_map`` (k,) ``Nu_j``
-    joint_angle_op, torque_op : (k,) ``q_op`` on the DoF and ``tau_op``
-    torque_rate : ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``): the fourth coordinate (module docstring)
+    ``coupling`` (``P(q)``), ``selection`` ``S`` (n x k), ``pulley_radius`` r_m [m]; ``gains`` (k, 4) ``K_j`` or
+    (k, 5) with the gain on a sampled chain's previous request ``tau_ref(t - h) = -(P S)^T f_ref`` (read back from the
+    distribution); ``state_map`` (k, 4) ``Nx``, ``input_map`` (k,) ``Nu``; ``joint_angle_op``, ``torque_op`` (k,);
+    ``torque_rate``: the fourth coordinate, ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``).
     """
 
     def __init__(self, coupling, selection, pulley_radius: float, gains, *, state_map, input_map,

@@ -41,14 +41,15 @@ class MotorParams(Parameters):
     """
 
     inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False,
-                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))")
+                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))", doc="B at the output shaft")
     friction: bool = param(True, unit="-", source="chosen: the thesis's motor model includes (3.8)")
     friction_slope: float = param(10.0, unit="s/rad", low=0.0, low_inclusive=False,
                                   source="Table 3.3, gamma1")
     coulomb_torque: float = param(0.5586, unit="Nm", low=0.0, source="Table 3.3, gamma2")
     viscous_friction: float = param(0.0356, unit="Nm s/rad", low=0.0, source="Table 3.3, gamma3")
     damping: float = param(0.0, unit="Nm s/rad", low=0.0,
-                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta")
+                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta",
+                           doc="extra linear damping d_theta")
     ripple: bool = param(False, unit="-",
                          source="chosen: off by default; switch on to study compensation (Fig 3.4-3.6)")
     ripple_motor_amplitude: float = param(
@@ -67,12 +68,14 @@ class MotorParams(Parameters):
         source=("fitted: the thesis measured it at the output shaft (section 3.2) but prints no value; "
                 "(3.8) with Table 3.3 gives 1.408 Nm at 15 rad/s where Fig 3.3b reads ~1.3 A: "
                 "1.083 Nm/A (output side)"))
-    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100")
+    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100",
+                              doc="input/output speed ratio (1/alpha_gear)")
     saturation: bool = param(True, unit="-", source="chosen: real amplifiers saturate")
     torque_limit: float = param(3.0, unit="Nm", low=0.0, low_inclusive=False,
                                 source="chosen: 180 N x r_m (0.9 Nm) + Table 3.3 friction at 15 rad/s (1.41 Nm), with margin")
     pulley_radius: float = param(0.005, unit="m", low=0.0, high=0.05, low_inclusive=False,
-                                 source="chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 torques")
+                                 source=("chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 "
+                                         "torques"), doc="r_m, the motor pulley winding the tendon")
 
     def _validate(self) -> None:
         h = self.ripple_harmonics
