@@ -34,9 +34,9 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
   unchanged), with a one-line warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``substeps=1`` refuses
   (a ``ValueError`` naming the mode and ``|R|``), ``substeps=k`` imposes ``k``.  The check is repeated during the
-  run at the progress-chunk boundaries whenever the checks' wall time (predicted by the last one's) stays within
-  ``parameters.control.FIXED_STEP_CHECK_BUDGET`` of the run's so far (about every 0.25 s of a cascaded hand run,
-  a third of the chunks for a small Python plant; the first run of a plant in a process pays the loading of its
+  run at the progress-chunk boundaries whenever the checks' CPU time (the next predicted by the cheapest so far)
+  stays within ``parameters.control.FIXED_STEP_CHECK_BUDGET`` of the run's so far (about every 0.25 s of a cascaded
+  hand run, most chunks of a small Python plant; the first run of a plant in a process pays the loading of its
   compiled kernels in its start check and is checked less), and at the end state: a mode outside the region at the
   step taken is an ``integrator_instability`` event from the first to the last check that found it outside
   (``extreme`` the largest ``|R|``), with a warning; ``info["stability_checks"]`` lists the checked times (they
@@ -579,9 +579,9 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: substeps = {substeps} needs a fixed-step run of a continuous plant (the run is "
                          + (f"{mode})" if mode != "fixed_step" else f"a sampled plant's, {sampled[0].get_name()!r})"))
     n_sub, worst = 1, None
-    check_cost = time.perf_counter()
+    check_cost = time.process_time()
     modes = _plant_modes(sub, root) if integrator in _TAYLOR_ORDER and mode == "fixed_step" else []
-    check_cost = time.perf_counter() - check_cost
+    check_cost = time.process_time() - check_cost
     for leaf_name, lam in modes:     # the plant needing the most substeps (0: none suffices), then the largest |R|
         k, mode_k, growth = fixed_step_substeps(lam, h, integrator)
         if worst is None or ((k or math.inf), growth) > ((worst[1] or math.inf), worst[3]):
@@ -691,8 +691,9 @@ def simulate(system, context: Context | None, t_final: float, *,
                 e[2:] = [growth, lam]
         checked.append(t_now)
 
-    # checks during the run while their wall time, predicted by the last check's, stays within the budget
-    wall, spent = time.perf_counter(), 0.0
+    # checks during the run while their CPU time (the next predicted by the cheapest so far: a machine's load does not
+    # stretch it as it does wall time) stays within the budget of the run's
+    wall, cpu, spent = time.perf_counter(), time.process_time(), 0.0
     try:
         sim.Initialize()
         for tb in bounds:
@@ -700,11 +701,11 @@ def simulate(system, context: Context | None, t_final: float, *,
             check_state(tb)
             check_events()
             if (modes and tb < bounds[-1]
-                    and spent + check_cost <= FIXED_STEP_CHECK_BUDGET * (time.perf_counter() - wall)):
-                check_cost = time.perf_counter()
+                    and spent + check_cost <= FIXED_STEP_CHECK_BUDGET * (time.process_time() - cpu)):
+                c0 = time.process_time()
                 check_modes(tb)
-                check_cost = time.perf_counter() - check_cost
-                spent += check_cost
+                spent += time.process_time() - c0
+                check_cost = min(check_cost, time.process_time() - c0)
             if progress is not None:
                 progress(tb - start, duration)
     except (SimulationDivergedError, SimulationEventError):

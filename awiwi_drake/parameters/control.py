@@ -21,10 +21,10 @@ CONTROL_RATE_HZ = 3000.0
 #: ``k = 1``: at 20 N and 3 kHz the fingers' fastest modes are 3-25 % inside, the hand's 3 %, measured 2026-12-01).
 FIXED_STEP_STABILITY_MARGIN = 1.25
 
-#: Share of a fixed-step run's wall time that :func:`~awiwi_drake.analysis.simulate` spends re-checking the plants'
+#: Share of a fixed-step run's CPU time that :func:`~awiwi_drake.analysis.simulate` spends re-checking the plants'
 #: modes at its progress-chunk boundaries during the run (chosen: 1 %, so that the check costs the hand at most 1 %
-#: of its run; one check of the hand's modes takes 2.4 ms, measured 2026-12-01, so a cascaded hand run at ~1 s of wall
-#: time per simulated second is checked about every 0.25 s, a fast rig at every chunk).
+#: of its run; one check of the hand's modes takes 2.4 ms, measured 2026-12-01, so a cascaded hand run at ~1 s of CPU
+#: time per simulated second is checked about every 0.25 s).
 FIXED_STEP_CHECK_BUDGET = 0.01
 
 #: Table 13.1: the three input costs of Fig 13.2-13.3.
