@@ -754,7 +754,7 @@ def simulate(system, context: Context | None, t_final: float, *,
     for m, s in watched:
         for label, ls in logged:
             if (ls is s if m.limits_on is None else label == m.limits_on) and m.limits():
-                limits.setdefault(label, []).extend([list(x) for x in m.limits()])
+                limits.setdefault(label, []).extend([(str(d), float(v)) for d, v in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
                 substeps=n_sub if mode == "fixed_step" else None,
                 fastest_mode=None if worst is None else dict(system=worst[0], mode=worst[2], growth=worst[3],
@@ -765,6 +765,6 @@ def simulate(system, context: Context | None, t_final: float, *,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
                 realtime_factor=duration / wall if wall > 0 else math.inf,
                 steps=int(integ.get_num_steps_taken() if diagram.num_continuous_states() else sim.get_num_discrete_updates()),
-                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name(), limits=limits,
-                final_sampled_state=np.concatenate(sampled_state) if sampled_state else None)
-    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)
+                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name())
+    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info, limits,
+                            np.concatenate(sampled_state) if sampled_state else None)
