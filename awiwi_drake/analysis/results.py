@@ -77,28 +77,13 @@ def _jsonable(v: Any):
 
 @dataclass
 class SimulationResult:
-    """Logged signals and detected events of one run.
-
-    Attributes
-    ----------
-    t : ndarray (T,)
-        Log times [s] (every integrator step, or every ``log_period``).
-    signals : dict name -> ndarray (T, k)
-        One array per logged port (or input schedule).
-    units : dict name -> str or list of str
-        Unit of each signal (one per channel where they differ, e.g. ``state``).
-    labels : dict name -> list of str
-        Channel names (``state_names`` for ``state``; ``port[i]`` otherwise).
-    events : list of Event
-        Monitor events (slack, saturation, over-range) in time order.
-    info : dict
-        How the run was made: ``mode`` (``fixed_step``/``error_controlled``),
-        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``,
-        ``steps`` (integrator steps; discrete updates when the diagram has no continuous state),
-        ``sampled_plants`` (names of the plants integrated inside their discrete update).
-    final_context : Context or None
-        Context of the simulated diagram at the end (not saved by :meth:`save`).
-    """
+    """Logged signals and detected events of one run: ``t`` [s] (every integrator step, or every ``log_period``);
+    ``signals`` (name -> (T, k) array per logged port or input schedule), their ``units`` (one per channel where they
+    differ, e.g. ``state``) and channel ``labels`` (``state_names`` for ``state``, else ``port[i]``); the monitors'
+    ``events`` in time order; ``info``, how the run was made (``mode``, ``integrator``, ``step`` [s], ``accuracy``,
+    ``wall_time`` [s], ``realtime_factor``, ``steps``: integrator steps, or discrete updates without continuous
+    state, ``sampled_plants``: the plants integrated inside their discrete update, ...); ``final_context``, the
+    simulated diagram's context at the end (not saved by :meth:`save`)."""
 
     t: np.ndarray
     signals: dict

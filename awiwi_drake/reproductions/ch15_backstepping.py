@@ -48,27 +48,10 @@ __all__ = [
 
 @dataclass
 class BacksteppingRun:
-    """Sampled time series of one closed-loop simulation.
-
-    Attributes
-    ----------
-    label : str
-        What was varied (e.g. ``"K1 = 5"``).
-    t : ndarray (N,)
-        Sample times [s].
-    state : ndarray (N, n)
-        Rig state (``[q, qd, theta..., omega...]``).
-    command : ndarray (N, m)
-        Torque entering the rig [Nm] (after hold, delay, saturation).
-    lyapunov : ndarray (N,)
-        The controller's Lyapunov function.
-    reference : ndarray (N,)
-        Link-angle reference [rad].
-    disturbance : ndarray (N,)
-        External torque [Nm].
-    extra : dict
-        Further logged outputs (``tendon_force``, ``joint_torque``, ``tendon_stiffness``, ...).
-    """
+    """Sampled time series of one closed-loop simulation: ``label`` (what was varied, e.g. ``"K1 = 5"``), ``t`` [s],
+    the rig ``state`` (N, n) (``[q, qd, theta..., omega...]``), the ``command`` (N, m) entering the rig [Nm] (after
+    hold, delay, saturation), the controller's ``lyapunov`` function, the link-angle ``reference`` [rad], the
+    external torque ``disturbance`` [Nm] and ``extra`` logged outputs (``tendon_force``, ``joint_torque``, ...)."""
 
     label: str
     t: np.ndarray
@@ -147,12 +130,9 @@ def event_schedules(events: Sequence[tuple[float, Mapping[str, object]]], initia
     return out
 
 
-#: Integrator of the impedance and antagonistic backstepping runs (continuous loops). Their closed loops
-#: have fast poles (K3, K4 and Kd,imp / m with the small link inertias of Table 15.1 and the joint rig), so
-#: error-controlled explicit RK3 is stability-limited: accuracy 1e-4 and 1e-6 took the same 7.4-8.2 s for
-#: the Fig 15.19 pair. The L-stable Radau IIA (3rd order) at the same accuracy took 2.8 s and agreed to
-#: 6e-9 rad; Fig 15.16's run 4.3 s -> 1.0 s (2e-11 rad). Not for the position/saturation studies (linear,
-#: not stiff: RK3 is 4-10x faster there).
+#: Integrator of the impedance and antagonistic backstepping runs (continuous loops): their fast poles (K3, K4 and
+#: Kd,imp / m with Table 15.1's small link inertia) make error-controlled explicit RK3 stability-limited; the L-stable
+#: Radau IIA (3rd order) at the same accuracy is 3-4x faster.  Not for the position/saturation studies (not stiff).
 STIFF_INTEGRATOR = "radau3"
 
 
@@ -328,11 +308,8 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
     "nonlinear controller" uses the real spring curve and its first two derivatives.
     ``saturation=True`` limits the motor torque (Fig 15.21).
 
-    The load is an ideal step, measured by an ideal sensor: it enters the design's
-    ``qdd``/``qddd`` and the command jumps by :func:`load_step_command_jump` (4.9e3 Nm for
-    the defaults, Table 15.1's tiny link inertia). Unsaturated, that kick throws the link
-    tens of rad away (peak 37.6 rad) before the nonlinear controller returns it to
-    ``step + load / Kp,imp``; the linear controller does not return (docs/REPRODUCTIONS.md).
+    The load is an ideal step, measured by an ideal sensor: it enters the design's ``qdd``/``qddd`` and the
+    command jumps by :func:`load_step_command_jump` (what that does: docs/REPRODUCTIONS.md).
     """
     s = study or NonlinearImpedanceStudy()
     base = functools.partial(table_15_1_rig, spring="nonlinear")
