@@ -91,6 +91,11 @@ def _seed(text: str) -> int:
     return value
 
 
+def _names(values) -> list[str]:
+    """The names of a repeatable, comma-separated option (``--hide a,b --hide c``)."""
+    return [x.strip() for v in values or [] for x in v.split(",") if x.strip()]
+
+
 def _make_dataset(args) -> int:
     from awiwi_drake.discrepancy import make_truth_dataset, save_dataset
     from awiwi_drake.discrepancy.data import CLI_RIG_NAMES, is_finger_rig
@@ -103,12 +108,8 @@ def _make_dataset(args) -> int:
         raise ValueError(f"--name {args.name!r}: a plain file stem is expected (no folders: the files go "
                          f"into --out)")
     out = output_dir(args.out)
-    hidden = []
-    for h in args.hide or []:
-        hidden += [x.strip() for x in h.split(",") if x.strip() and x.strip() != "none"]
-    nuisance = []
-    for h in args.nuisance or []:
-        nuisance += [x.strip() for x in h.split(",") if x.strip()]
+    hidden = [x for x in _names(args.hide) if x != "none"]
+    nuisance = _names(args.nuisance)
     gen = TruthGeneratorParams()
     if args.duration is not None:
         gen = gen.replace(duration=args.duration)
