@@ -62,7 +62,7 @@ from awiwi_drake.rigs.rigs import _link_rig
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
            "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
-           "sampled_loop_poles", "observe_design"]
+           "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else params.tendon_law)
@@ -579,7 +579,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     K_eff`` (8.2) per DoF, ``K_eff`` the design's :attr:`JointDesign.static_stiffness` ((8.1) is the identity here: no
     spring is in series with the chain's force control).  ``friction_observer``: the (9.2) observer per DoF, on by
     default (the guides' friction otherwise leaves the impedance a dead band); None removes it.  ``kw``:
-    ``mechanical_stiffness``, ``gains``, ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    ``mechanical_stiffness``, ``gains``, ``distribution_params`` (:class:`~.chain.TendonChainController`)."""
     c = chain or HandChainParams()
     correction = kw.pop("stiffness_correction", None)
     if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
@@ -599,20 +599,13 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
                                  tendon_law=_tendon_law(design, c), name=f"{design.replace('-', '_')}_chain",
                                  friction_observer=friction_observer, **kw)
-    observe_design(d, ctrl, rig, point)
-    return ctrl
-
-
-def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, point: dict) -> None:
-    """Give ``design`` the (9.2) observer of the chain ``ctrl`` (its per-DoF gain and scale) and the guides' presliding
-    stiffness of ``rig`` at ``point`` (:attr:`JointDesign.observer`, :meth:`JointDesign.loop`), and record it and its
-    tracking time constant in ``ctrl.design`` (``joint_design``, ``time_constant``)."""
-    obs = ctrl._observer
+    obs = ctrl._observer                               # the design's loop with the chain's (9.2) observer
     if obs is not None:
-        design.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
-                               presliding_stiffness=guide_presliding_stiffness(rig, point))
-    ctrl.design["joint_design"] = design
-    ctrl.design["time_constant"] = design.tracking_time_constant()
+        d.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
+                          presliding_stiffness=guide_presliding_stiffness(rig, point))
+    ctrl.design["joint_design"] = d
+    ctrl.design["time_constant"] = d.tracking_time_constant()
+    return ctrl
 
 
 @dataclass
