@@ -13,7 +13,7 @@ For one finger (index) and the whole hand (wrist input at 0):
   at the control period (one integrator step per controller sample);
 * time of ``analysis.linearize`` (Drake ``Linearize``);
 * time of the plant's ``integration_modes`` (the fixed-step stability check ``analysis.simulate`` runs at the
-  start and at the end of every fixed-step run, and during it within ``FIXED_STEP_CHECK_BUDGET`` of its CPU time),
+  start and at the end of every fixed-step run, and during it every ``FIXED_STEP_CHECK_INTERVAL`` simulated seconds),
   and its share of the fixed-step closed loop run through ``simulate``: (checks during the run) x (time of one
   check) / (the run's wall time).
 

@@ -277,8 +277,10 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
         for k in res.signals:
             np.testing.assert_allclose(back[k], res[k], rtol=1e-15 if ext == "npz" else 1e-12)
         assert back.units == res.units and back.info["mode"] == res.info["mode"]
+        assert back.limits == res.limits and back.final_sampled_state is None
     assert res.units["tendon_force"] == "N" and res.units["motor_torque"] == "Nm"
-    fig, axes = res.plot()
+    assert sorted(v for _, v in res.limits["motor_torque"]) == [-limit, limit]
+    fig, axes = back.plot()             # the loaded result draws the monitors' limits and the events
     for ax in axes:
         assert "[" in ax.get_ylabel() and ax.get_legend() is not None
         assert len(ax.get_legend().get_texts()) >= 1
@@ -401,7 +403,7 @@ def test_force_monitors_on_the_logged_state_find_what_the_port_monitors_find(whi
     assert [(e["kind"], e["channel"], e["t_start"], e["t_end"]) for e in ev_a] == \
         [(e["kind"], e["channel"], e["t_start"], e["t_end"]) for e in ev_b]
     np.testing.assert_allclose([e["extreme"] for e in ev_a], [e["extreme"] for e in ev_b], rtol=1e-12, atol=1e-12)
-    assert res_a.info["limits"]["tendon_force"] == res_b.info["limits"]["tendon_force"]
+    assert res_a.limits["tendon_force"] == res_b.limits["tendon_force"]
 
 
 def test_simulate_runs_a_flat_copy_of_nested_diagrams_bit_for_bit():

@@ -246,13 +246,6 @@ def _reduced_model(rig, j, point, chain, tendon_law, friction, torque_rate, torq
     return JointReducedModel(name, j, F, G, inertia, damping, stiffness, tendons, res, lin, torque_rate, E)
 
 
-def _slowest_damping(F, G, K) -> float:
-    """Damping ratio of the slowest closed-loop mode (1 for a real pole)."""
-    lam = np.linalg.eigvals(F - G @ K)
-    s = lam[np.argmin(np.abs(lam))]
-    return float(-s.real / abs(s)) if abs(s) > 0 else 1.0
-
-
 def _impedance_gains(model: JointReducedModel, kp: float, zeta: float) -> np.ndarray:
     """``[Kp, Kd, 0, 0]`` with ``Kp`` given and ``Kd >= 0`` giving the slowest closed-loop mode of the reduced
     model (friction in motion) the damping ratio ``zeta`` (the smallest such ``Kd`` on ``[0, 20 sqrt(Kp M_jj)]``;
@@ -260,8 +253,10 @@ def _impedance_gains(model: JointReducedModel, kp: float, zeta: float) -> np.nda
     from scipy.optimize import brentq
     F, G = model.A, model.B
 
-    def excess(kd):
-        return _slowest_damping(F, G, np.array([[kp, kd, 0.0, 0.0]])) - zeta
+    def excess(kd):                                    # the slowest mode's damping ratio (1: a real pole) - zeta
+        lam = np.linalg.eigvals(F - G @ np.array([[kp, kd, 0.0, 0.0]]))
+        s = lam[np.argmin(np.abs(lam))]
+        return (float(-s.real / abs(s)) if abs(s) > 0 else 1.0) - zeta
 
     grid = np.linspace(0.0, 20.0 * np.sqrt(kp * model.inertia), 81)
     ex = np.array([excess(k) for k in grid])

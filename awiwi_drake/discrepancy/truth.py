@@ -140,7 +140,7 @@ def HiddenEffectPlant_(T):
             for i in range(nom.num_motors):
                 f0 = laws.spring_force(x[i], nom.spring_poly) * scale
                 if "spring_hysteresis" in tr and _here(tr, i):
-                    f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
+                    f0 = f0 + laws.hysteresis_force(tr["spring_hysteresis"]["width"] * z[i], f0)
                 f.append(f0)
             return f, x, xd
 
@@ -313,6 +313,15 @@ def _scale_truth(tr: dict, k: float) -> None:
     tr["strength"] = k
 
 
+def _reference_filter(a: np.ndarray, dt: float, time_constant: float, passes: int = 1) -> np.ndarray:
+    """``a`` (in place) through ``passes`` first-order filters of ``time_constant`` [s] sampled every ``dt`` [s]."""
+    alpha = dt / (time_constant + dt)
+    for _ in range(passes):
+        for k in range(1, a.size):
+            a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
+    return a
+
+
 def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Normalised lab excitation in [-1, 1]: multisine, chirp, steps, slow reversals."""
     T = t[-1] - t[0] + (t[1] - t[0])
@@ -439,12 +448,7 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     xs = np.linspace(0, 0.05, 20001)
     x0 = float(np.interp(gen.pretension, laws.spring_force(xs, nom.spring_poly), xs))
     th0 = x0 / r
-    a = _excitation(t, rng)
-    # first-order reference filter (10 ms): steps stay steps for the plant, without
-    # commanding torque impulses beyond the motor's range
-    alpha = dt / (0.01 + dt)
-    for k in range(1, N):
-        a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
+    a = _reference_filter(_excitation(t, rng), dt, gen.reference_time_constant)
     if rig == "joint":
         rq = nom.link_pulley_radius
         qref = gen.link_excursion * a
