@@ -6,6 +6,7 @@ The design and ``stable_stiffness_interval`` are :mod:`awiwi_drake.control.pole_
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -201,18 +202,14 @@ def stiffness_robustness(params: PolePlacementParams | None = None, *, num: int 
     k0, k1 = float(base.stiffness), float(p.perturbed_stiffness)
     rig0 = flexible_joint_rig(params=base)
     design = design_pole_placement(rig0, p)
-
-    def controller():
-        return state_feedback_controller(design.linearization, design.K, reference="joint_angle",
-                                         name="pole_placement")
+    controller = functools.partial(state_feedback_controller, design.linearization, design.K,
+                                   reference="joint_angle", name="pole_placement")
     loops = {"nominal": _robustness_loop(base, k0, controller), "perturbed": _robustness_loop(base, k1, controller)}
     nominal, perturbed = (_closed_loop_poles(loops[n]) for n in ("nominal", "perturbed"))
     ks = np.linspace(p.stiffness_low, p.stiffness_high, int(num))
     table = np.array([_closed_loop_poles(_robustness_loop(base, k, controller)) for k in ks])
-
-    def printed_controller():
-        return state_feedback_controller(design.linearization, PRINTED_12_18, reference="joint_angle",
-                                         name="pole_placement_12_18")
+    printed_controller = functools.partial(state_feedback_controller, design.linearization, PRINTED_12_18,
+                                           reference="joint_angle", name="pole_placement_12_18")
     printed_table = np.array([_closed_loop_poles(_robustness_loop(base, k, printed_controller)) for k in ks])
 
     def A_of_k(k):
