@@ -7,7 +7,7 @@ The design and ``stable_stiffness_interval`` are :mod:`awiwi_drake.control.pole_
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -96,14 +96,8 @@ class StiffnessRobustness:
     state: dict
     diverged_at: dict
     printed_gain_poles_vs_stiffness: np.ndarray
-    printed_perturbed_poles: np.ndarray = None
-    printed_gain: np.ndarray = None
-
-    def __post_init__(self):
-        if self.printed_perturbed_poles is None:
-            self.printed_perturbed_poles = PRINTED_12_19.copy()
-        if self.printed_gain is None:
-            self.printed_gain = PRINTED_12_18.copy()
+    printed_perturbed_poles: np.ndarray = field(default_factory=PRINTED_12_19.copy)
+    printed_gain: np.ndarray = field(default_factory=PRINTED_12_18.copy)
 
     def summary(self) -> str:
         """Ours beside the printed values, one line each."""
