@@ -136,9 +136,8 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
         diagram.GetInputPort("external_torque").FixValue(ctx, np.zeros(n))
         x0 = np.zeros(2 * n)
         x0[j] = deflection
-        if p.finger.pip_dip_coupled if hasattr(p.finger, "pip_dip_coupled") else False:
-            if j == n - 2:  # coupled: deflect the DIP consistently (no coupling-element transient)
-                x0[n - 1] = deflection * p.finger.dip_pip_ratio
+        if getattr(p.finger, "pip_dip_coupled", False) and j == n - 2:   # coupled: deflect the DIP consistently
+            x0[n - 1] = deflection * p.finger.dip_pip_ratio                # (no coupling-element transient)
         ctx.SetContinuousState(x0)
         res = simulate(diagram, ctx, t_final, log=("state",), integrator="runge_kutta5", max_step=1e-3,
                        accuracy=accuracy)
