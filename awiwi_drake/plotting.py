@@ -94,7 +94,6 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
     (torque limit, spring range, slack; recorded by ``simulate``) are dashed black lines; the result's events are
     shaded per kind and named in each panel's legend (``events=False``: not drawn).  ``xlim``: the time window shown.
     """
-    plt = _plt()
     names = list(result.signals) if names is None else list(names)
     panels = []   # (name, channels, unit)
     for name in names:
@@ -102,14 +101,10 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
         for j in (channels or {}).get(name, range(result[name].shape[1])):
             by_unit.setdefault(result.unit(name, j), []).append(j)
         panels += [(name, js, u) for u, js in by_unit.items()]
-    if ax is None:
-        fig, ax = plt.subplots(len(panels), 1, figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
-        ax = ax[:, 0]
-    else:
-        ax = np.ravel(ax)
-        fig = ax[0].figure
-        if len(ax) < len(panels):
-            raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
+    fig, ax = figure_axes(ax, nrows=len(panels), figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
+    ax = np.ravel(ax)
+    if len(ax) < len(panels):
+        raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
     components, overlay, limits = dict(components or {}), dict(overlay or {}), dict(limits or {})
     for a, (name, js, unit) in zip(ax, panels):
         y = np.asarray(result[name], dtype=float).reshape(len(result.t), -1)

@@ -164,11 +164,8 @@ class FrequencyResponse:
 
     def plot(self, *, ax=None, hz: bool = True, label: str | None = None, margins: bool = True):
         """Bode diagram: magnitude [dB] and phase [deg] on a log frequency axis; returns ``(fig, (ax_mag, ax_phase))``."""
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            fig, ax = plt.subplots(2, 1, figsize=(6.5, 5.0), sharex=True)
-        fig = ax[0].figure
+        from awiwi_drake.plotting import figure_axes
+        fig, ax = figure_axes(ax, nrows=2, figsize=(6.5, 5.0), sharex=True)
         x = self.frequency_hz if hz else self.omega
         lab = label or f"{self.output_name} / {self.input_name}"
         ax[0].semilogx(x, self.magnitude_db, label=lab)

@@ -265,10 +265,10 @@ def plot_estimation_grid(study, key, ax=None):
 
 def plot_estimation_study(study, start="cold"):
     """Fig 5.17: 3 x 3 panels (rows 50/30/15 iterations, columns 0/0.5/1 mm noise)."""
-    import matplotlib.pyplot as plt
     its = sorted({k[0] for k in study.estimates}, reverse=True)
     noises = sorted({k[1] for k in study.estimates})
-    fig, axes = plt.subplots(len(its), len(noises), figsize=(3 * len(noises), 3 * len(its)), squeeze=False)
+    fig, axes = figure_axes(None, nrows=len(its), ncols=len(noises), figsize=(3 * len(noises), 3 * len(its)),
+                            squeeze=False)
     for i, it in enumerate(its):
         for j, a in enumerate(noises):
             plot_estimation_grid(study, (it, a, start), ax=axes[i, j])

@@ -215,10 +215,7 @@ def wrist_compensation_study(target: str = "index", *, amplitude: float = np.rad
 
 def plot_wrist_compensation(study, ax=None):
     """Finger joint drift during a wrist abduction sweep, without and with compensation."""
-    if ax is None:
-        fig, ax = figure_axes(None, ncols=2, figsize=(10, 3.5), sharey=True)
-    else:
-        fig = np.ravel(ax)[0].figure
+    fig, ax = figure_axes(ax, ncols=2, figsize=(10, 3.5), sharey=True)
     for a, drift, title in ((ax[0], study.drift_uncompensated, "uncompensated"),
                             (ax[1], study.drift_compensated, "with wrist feedforward")):
         for j, name in enumerate(study.joint_names):

@@ -41,13 +41,12 @@ class OpenLoopPoleSweep:
 
     def plot(self, axes=None):
         """Both root loci side by side (:func:`~awiwi_drake.plotting.plot_poles`); returns ``(fig, axes)``."""
-        if axes is None:
-            fig, axes = figure_axes(None, ncols=2, figsize=(12, 5))
+        fig, axes = figure_axes(axes, ncols=2, figsize=(12, 5))
         plot_poles(self.poles_vs_stiffness, axes[0], values=self.stiffness, name="k [Nm/rad]")
         plot_poles(self.poles_vs_damping, axes[1], values=self.link_damping, name="d_q [Nm s/rad]")
         axes[0].set_title("Fig 12.3: open-loop poles vs k")
         axes[1].set_title("Fig 12.3: open-loop poles vs d_q")
-        return axes[0].figure, axes
+        return fig, axes
 
 
 def open_loop_pole_sweep(params: PolePlacementParams | None = None, *, num: int = 25,
@@ -122,8 +121,7 @@ class StiffnessRobustness:
         (12.19) ours vs printed, the simulated steps (|q - q_ref|, log scale, with the envelope e^(max Re s t) of
         the perturbed loop) and the tolerated stiffness error per target scale; returns ``(fig, axes)`` (2 x 3,
         the last panel unused)."""
-        if axes is None:
-            fig, axes = figure_axes(None, nrows=2, ncols=3, figsize=(18, 9))
+        fig, axes = figure_axes(axes, nrows=2, ncols=3, figsize=(18, 9))
         axes = np.asarray(axes).reshape(2, 3)
         krange = f"k in [{self.stiffness[0]:g}, {self.stiffness[-1]:g}] Nm/rad"
         plot_poles(self.poles_vs_stiffness, axes[0, 0], values=self.stiffness, name="k [Nm/rad]")
@@ -160,7 +158,6 @@ class StiffnessRobustness:
         label_axes(ax, "tolerated relative stiffness error [-]", xlabel="target omega1 [rad/s] (omega2 = 0.3 omega1)",
                    title="stable stiffness interval vs the target dynamics")
         axes[1, 2].set_axis_off()
-        fig = axes[0, 0].figure
         fig.tight_layout()
         return fig, axes
 
