@@ -131,7 +131,7 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
             a.axhline(hi, color="0.4", ls="--", lw=0.8, label=f"limit [{lo:g}, {hi:g}]")
             a.axhline(lo, color="0.4", ls="--", lw=0.8)
         shown = set()
-        for desc, val in result.info.get("limits", {}).get(name, []) if not limits else ():
+        for desc, val in result.limits.get(name, []) if not limits else ():
             a.axhline(val, color="k", ls="--", lw=0.8, label=None if desc in shown else desc)
             shown.add(desc)
         a.set_ylabel((labels or {}).get(name, f"{name} [{unit}]"))

@@ -35,7 +35,7 @@ from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCH
 from awiwi_drake.analysis.results import SimulationResult, unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 from awiwi_drake.analysis.monitors import Event
-from awiwi_drake.parameters.control import FIXED_STEP_CHECK_BUDGET, FIXED_STEP_STABILITY_MARGIN
+from awiwi_drake.parameters.control import FIXED_STEP_CHECK_INTERVAL, FIXED_STEP_STABILITY_MARGIN
 
 __all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
            "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants", "FlatSystem", "add_flat",
@@ -337,14 +337,12 @@ def simulate(system, context: Context | None, t_final: float, *,
     integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
     ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
     unchanged), with a warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``1`` refuses such a run (a
-    ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The check is repeated during the run at the
-    progress-chunk boundaries whenever the checks' CPU time (the next predicted by the cheapest so far) stays within
-    ``parameters.control.FIXED_STEP_CHECK_BUDGET`` of the run's so far (about every 0.25 s of a cascaded hand run,
-    most chunks of a small Python plant; the first run of a plant in a process pays the loading of its compiled
-    kernels in its start check and is checked less), and at the end state: a mode outside the region at the step
-    taken is an ``integrator_instability`` event from the first to the last check that found it outside
-    (``extreme`` the largest ``|R|``), with a warning; ``info["stability_checks"]`` lists the checked times (they
-    follow the machine's speed: the trajectory does not depend on them, an excursion between two checks is missed).
+    ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The check is repeated during the run, at the
+    first progress-chunk boundary at least ``parameters.control.FIXED_STEP_CHECK_INTERVAL`` simulated seconds after
+    the last one, and at the end state: a mode outside the region at the step taken is an ``integrator_instability``
+    event from the first to the last check that found it outside (``extreme`` the largest ``|R|``), with a warning;
+    ``info["stability_checks"]`` lists the checked times (the same on every machine; an excursion between two checks
+    is missed).
 
     Raises ``ValueError`` for a bad argument (naming the argument, port or value), ``SimulationDivergedError`` for a
     non-finite or exploding state (naming the time and the state entry), ``SimulationEventError`` when a monitor with
@@ -520,9 +518,7 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: substeps = {substeps} needs a fixed-step run of a continuous plant (the run is "
                          + (f"{mode})" if mode != "fixed_step" else f"a sampled plant's, {sampled[0].get_name()!r})"))
     n_sub, worst = 1, None
-    check_cost = time.process_time()
     modes = _plant_modes(sub, root) if integrator in _TAYLOR_ORDER and mode == "fixed_step" else []
-    check_cost = time.process_time() - check_cost
     for leaf_name, lam in modes:     # the plant needing the most substeps (0: none suffices), then the largest |R|
         k, mode_k, growth = fixed_step_substeps(lam, h, integrator)
         if worst is None or ((k or math.inf), growth) > ((worst[1] or math.inf), worst[3]):
@@ -632,21 +628,18 @@ def simulate(system, context: Context | None, t_final: float, *,
                 e[2:] = [growth, lam]
         checked.append(t_now)
 
-    # checks during the run while their CPU time (the next predicted by the cheapest so far: a machine's load does not
-    # stretch it as it does wall time) stays within the budget of the run's
-    wall, cpu, spent = time.perf_counter(), time.process_time(), 0.0
+    # checks during the run at the first chunk boundary at least FIXED_STEP_CHECK_INTERVAL simulated seconds after the
+    # last check: the instants depend on the run only, never on the machine's speed
+    wall, last_check = time.perf_counter(), start
     try:
         sim.Initialize()
         for tb in bounds:
             sim.AdvanceTo(tb)
             check_state(tb)
             check_events()
-            if (modes and tb < bounds[-1]
-                    and spent + check_cost <= FIXED_STEP_CHECK_BUDGET * (time.process_time() - cpu)):
-                c0 = time.process_time()
+            if modes and tb < bounds[-1] and tb - last_check >= FIXED_STEP_CHECK_INTERVAL - 1e-9 * h:
                 check_modes(tb)
-                spent += time.process_time() - c0
-                check_cost = min(check_cost, time.process_time() - c0)
+                last_check = tb
             if progress is not None:
                 progress(tb - start, duration)
     except (SimulationDivergedError, SimulationEventError):
@@ -695,7 +688,7 @@ def simulate(system, context: Context | None, t_final: float, *,
     for m, s in watched:
         for label, ls in logged:
             if (ls is s if m.limits_on is None else label == m.limits_on) and m.limits():
-                limits.setdefault(label, []).extend([list(x) for x in m.limits()])
+                limits.setdefault(label, []).extend([(str(d), float(v)) for d, v in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
                 substeps=n_sub if mode == "fixed_step" else None,
                 fastest_mode=None if worst is None else dict(system=worst[0], mode=worst[2], growth=worst[3],
@@ -706,6 +699,6 @@ def simulate(system, context: Context | None, t_final: float, *,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
                 realtime_factor=duration / wall if wall > 0 else math.inf,
                 steps=int(integ.get_num_steps_taken() if diagram.num_continuous_states() else sim.get_num_discrete_updates()),
-                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name(), limits=limits,
-                final_sampled_state=np.concatenate(sampled_state) if sampled_state else None)
-    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)
+                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name())
+    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info, limits,
+                            np.concatenate(sampled_state) if sampled_state else None)

@@ -29,7 +29,7 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     ``external_torque`` input; the antagonistic backstepping impedance controller estimates the
     disturbance with the observer (9.2) and, with ``compensate=True``, cancels it (``u = u_c +
     tau_fric_hat``). Returns a :class:`~awiwi_drake.reproductions.ch15_backstepping.BacksteppingRun`
-    with ``extra["friction"]`` (true) and ``extra["friction_estimate"]``.
+    with the true friction as its ``disturbance`` and the observer's estimate as ``friction_estimate``.
     """
     fp = friction or LinkFrictionParams()
     rig = joint_rig(params=JointRigParams().replace(link_inertia=fp.test_joint_inertia))
@@ -48,7 +48,7 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     F = res["link_friction"][:, 0]
     return BacksteppingRun("with compensation" if compensate else "without compensation", res.t, res["state"],
                            res["motor_torque"], res["controller_lyapunov"][:, 0], res["joint_angle_reference"][:, 0],
-                           F, dict(friction=F, friction_estimate=res["controller_external_torque_estimate"][:, 0]))
+                           F, friction_estimate=res["controller_external_torque_estimate"][:, 0])
 
 
 def chattering(run, *, after: float = 0.0) -> float:

@@ -52,7 +52,9 @@ class BacksteppingRun:
     """Sampled time series of one closed-loop simulation: ``label`` (what was varied, e.g. ``"K1 = 5"``), ``t`` [s],
     the rig ``state`` (N, n) (``[q, qd, theta..., omega...]``), the ``command`` (N, m) entering the rig [Nm] (after
     hold, delay, saturation), the controller's ``lyapunov`` function, the link-angle ``reference`` [rad], the
-    external torque ``disturbance`` [Nm] and ``extra`` logged outputs (``tendon_force``, ``joint_torque``, ...)."""
+    external torque ``disturbance`` [Nm]; where the run logged them (``run_loop``'s ``extra_outputs``) the loop's
+    ``tendon_force`` [N], ``joint_torque`` [Nm] and ``tendon_stiffness`` [N/m], and for Fig 9.3 the (9.2) observer's
+    ``friction_estimate`` [Nm] (the true friction is ``disturbance``)."""
 
     label: str
     t: np.ndarray
@@ -61,7 +63,10 @@ class BacksteppingRun:
     lyapunov: np.ndarray
     reference: np.ndarray
     disturbance: np.ndarray
-    extra: dict = field(default_factory=dict)
+    tendon_force: np.ndarray | None = None
+    joint_torque: np.ndarray | None = None
+    tendon_stiffness: np.ndarray | None = None
+    friction_estimate: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -143,9 +148,14 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     """One closed-loop run through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` as a :class:`BacksteppingRun`.
 
     ``inputs`` maps exported inputs (``joint_angle_reference``, ``external_torque``) to schedules
-    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``integrator``: the
-    error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
+    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``extra_outputs``: outputs also
+    logged into the run's fields of the same name (``tendon_force``, ``joint_torque``, ``tendon_stiffness``).
+    ``integrator``: the error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
     """
+    unknown = [k for k in extra_outputs if k not in _EXTRA_OUTPUTS]
+    if unknown:
+        raise ValueError(f"run_loop: extra_outputs {unknown} are not BacksteppingRun fields; "
+                         f"known: {', '.join(_EXTRA_OUTPUTS)}")
     d = loop.diagram
     ctx = loop.create_context(state=state0, motor_torque=motor_torque0)
     log = ["state", "motor_torque", *extra_outputs]
@@ -159,7 +169,10 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     return BacksteppingRun(label, res.t, res["state"], res["motor_torque"],
                            res["controller_lyapunov"][:, 0] if has_v else np.full(n, math.nan),
                            res[ref][:, 0] if ref else np.full(n, math.nan),
-                           res[ext][:, 0] if ext else np.zeros(n), {k: res[k] for k in extra_outputs})
+                           res[ext][:, 0] if ext else np.zeros(n), **{k: res[k] for k in extra_outputs})
+
+
+_EXTRA_OUTPUTS = ("tendon_force", "joint_torque", "tendon_stiffness")
 
 
 def is_monotone_nonincreasing(v, *, rtol: float = 1e-6, atol: float = 1e-12) -> bool:
