@@ -123,7 +123,7 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
     rng = np.random.default_rng(seed)
     speeds = np.geomspace(p.min_speed, p.max_speed, p.num_speeds)
     period = 2 * math.pi / motor.gear_ratio  # motor-shaft ripple period at the output [rad]
-    out_v, out_m, out_lo, out_hi = [], [], [], []
+    rows = []      # (speed, mean, min, max torque) per plateau
     for v in speeds:
         travel = v * p.plateau_time
         for sign, th0 in ((1.0, 0.0), (-1.0, travel)):  # forward, then back over the same angles
@@ -135,12 +135,9 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
             n_per = math.floor(v * (p.plateau_time - t_steady) / period)
             if n_per >= 1:  # whole ripple periods only
                 steady &= run.t < t_steady + n_per * period / v
-            out_v.append(sign * v)
-            out_m.append(float(np.mean(tau[steady])))
-            out_lo.append(float(np.min(tau[steady])))
-            out_hi.append(float(np.max(tau[steady])))
-    order = np.argsort(out_v)
-    return FrictionData(*(np.array(a)[order] for a in (out_v, out_m, out_lo, out_hi)))
+            rows.append((sign * v, np.mean(tau[steady]), np.min(tau[steady]), np.max(tau[steady])))
+    rows = np.array(rows, dtype=float)
+    return FrictionData(*rows[np.argsort(rows[:, 0])].T)
 
 
 def fit_friction(speed, torque) -> FrictionFit:
