@@ -1,20 +1,15 @@
 """Thesis ch. 3: motor friction identification (Fig 3.3) and ripple compensation (Fig 3.5-3.6).
 
-* Friction identification (Fig 3.3): the motor follows piecewise-constant
-  velocities (a PD on a position ramp); the mean commanded torque per plateau,
-  averaged over whole periods of the motor-shaft ripple and over forward and
-  backward passes over the same angles, balances the velocity-dependent
-  friction; (3.8) ``tau(w) = gamma2 atan(gamma1 w) + gamma3 w`` is fitted to it.
-* Ripple compensation (Fig 3.5-3.6): at constant speed the position-dependent
-  ripple shows in the controller torque at the motor rotation frequency.  The
-  ripple is identified from that torque (regression on the measured angle at
-  the known period, i.e. known phase), and fed forward with a conservative
-  amplitude (``amplitude_scale`` < 1, ch. 3: over-compensation injects energy).
-  Success metric: attenuation of the first harmonic of the controller's
-  feedback torque.
+* Friction (Fig 3.3): the motor follows piecewise-constant velocities (:func:`friction_identification_data`) and
+  (3.8) ``tau(w) = gamma2 atan(gamma1 w) + gamma3 w`` is fitted to the mean commanded torques (:func:`fit_friction`)
+  that balance the friction.
+* Ripple (Fig 3.5-3.6): at constant speed the position-dependent ripple shows in the controller torque at the motor
+  rotation frequency; it is identified from that torque (:func:`identify_ripple`) and fed forward with a
+  conservative amplitude (``amplitude_scale`` < 1, ch. 3: over-compensation injects energy); the success metric is
+  the attenuation of the first harmonic of the feedback torque (:func:`ripple_compensation_experiment`).
 
-The controller is :class:`awiwi_drake.control.motor_compensation.MotorPdLaw`; the
-plant :func:`awiwi_drake.rigs.motor_rig`.
+The controller is :class:`awiwi_drake.control.motor_compensation.MotorPdLaw`; the plant
+:func:`awiwi_drake.rigs.motor_rig`.
 """
 
 from __future__ import annotations
@@ -116,8 +111,9 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
                                  seed: int = 0) -> FrictionData:
     """Simulated Fig 3.3 protocol: forward and backward plateaus at log-spaced speeds, noisy torque readings.
 
-    Each plateau starts with the motor at rest and zero torque (nothing about the friction is assumed);
-    the start transient is discarded (``settle_fraction``).
+    Each plateau starts with the motor at rest and zero torque (nothing about the friction is assumed); the start
+    transient is discarded (``settle_fraction``); the mean is over whole periods of the motor-shaft ripple, and the
+    backward pass covers the forward pass's angles.
     """
     p = params or FrictionIdentificationParams()
     rng = np.random.default_rng(seed)

@@ -5,18 +5,14 @@ The controllers and their rig factories are :mod:`awiwi_drake.control.backsteppi
 15.1 is :mod:`.ch15_scalar_example`. The study functions here run the simulations
 behind Fig 15.2-15.4, 15.7-15.13, 15.16-15.21 and 15.23-15.27 and return data
 (:class:`BacksteppingRun`); the ``plot_*`` functions at the end draw them.
-
-All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`):
-inputs that change at given times (reference steps, disturbance steps) are
-piecewise-constant schedules (:func:`event_schedules`), the sine references
-(with their derivatives) ``Sine`` schedules, all wired in as Drake sources.
+All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`, :func:`event_schedules`).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Mapping, Sequence
 
