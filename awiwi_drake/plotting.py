@@ -54,8 +54,7 @@ def plot_friction_curve(params, omega_max: float = 15.0, ax=None, measured=None)
     """Friction torque (3.8) versus velocity (Fig 3.3b); ``measured`` = (omega, torque) points."""
     from awiwi_drake.components.motor import motor_friction_torque
 
-    plt = _plt()
-    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(5, 3.5))
+    fig, ax = figure_axes(ax, figsize=(5, 3.5))
     w = np.linspace(-omega_max, omega_max, 401)
     ax.plot(w, -motor_friction_torque(w, params), label="(3.8), Table 3.3")
     if measured is not None:
@@ -66,23 +65,15 @@ def plot_friction_curve(params, omega_max: float = 15.0, ax=None, measured=None)
 
 def plot_spring_curve(lever, polynomial=None, max_force: float = 180.0, ax=None):
     """Force versus lever angle (Fig 4.8b) and versus elongation, with the calibration polynomial."""
-    plt = _plt()
-    if ax is None:
-        fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
-    else:
-        fig = np.ravel(ax)[0].figure
+    fig, ax = figure_axes(ax, ncols=2, figsize=(9, 3.5))
     th, x, f, k = lever.sample_curve(max_force=max_force)
     ax[0].plot(np.degrees(th), f, label="lever model")
-    ax[0].set_xlabel("lever angle [deg]")
-    ax[0].set_ylabel("tendon force [N]")
     ax[1].plot(1e3 * x, f, label="lever model")
     if polynomial is not None:
         xs = np.linspace(0, polynomial.max_elongation, 300)
         ax[1].plot(1e3 * xs, polynomial.force(xs), "--", label="calibration polynomial (with tendon)")
-    ax[1].set_xlabel("elongation [mm]")
-    for a in ax:
-        a.grid(True, alpha=0.3)
-        a.legend()
+    label_axes(ax[0], "tendon force [N]", xlabel="lever angle [deg]")
+    label_axes(ax[1], "", xlabel="elongation [mm]")
     return fig, ax
 
 
@@ -94,35 +85,15 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
     """One subplot per logged signal of a :class:`SimulationResult` (per unit for mixed signals such as
     ``state``), every trace in a legend, every axis with its unit; returns ``(fig, axes)``.
 
-    Parameters
-    ----------
-    result : SimulationResult
-    names : sequence of str, optional
-        Logged signals (default: all), one subplot each (one per unit where the channels differ).
-    labels : dict, optional
-        y-axis label (with unit) per signal, e.g. ``{"motor_torque": "motor torque [Nm]"}``
-        (default ``name [unit]``).
-    reference : dict, optional
-        ``name -> (t, values)`` drawn black dashed as "reference".
-    channels : dict, optional
-        ``name -> channel indices`` drawn (default all), e.g. ``{"state": [0, 2]}``.
-    components : dict, optional
-        ``name -> [legend label per column]`` (default the result's channel labels, e.g. the state names).
-    overlay : dict, optional
-        ``name -> (values (T, k), label)``: a second set of traces on the same time axis,
-        dotted in the same colours (e.g. the commanded torque beside the applied one);
-        ``label`` is a suffix ("commanded") or one legend label per column.
-    limits : dict, optional
-        ``name -> limit`` (drawn at +-limit) or ``(low, high)``: dashed grey lines "limit", instead of
-        the monitor thresholds below.
-    xlim : (float, float), optional
-        Time window shown (e.g. a zoom on a step).
-
-    Monitor thresholds on a logged signal (torque limit, spring range, slack; recorded by
-    ``simulate``) are dashed black lines; events of the result (actuator saturation, tendon
-    slack) are shaded per kind and named in the legend of each panel (``events=False``: not drawn).
+    ``names``: the logged signals drawn (default: all).  Per signal name: ``labels`` the y-axis label with unit
+    (default ``name [unit]``), ``reference`` ``(t, values)`` drawn black dashed, ``channels`` the channel indices
+    drawn (default all), ``components`` one legend label per column (default the result's channel labels),
+    ``overlay`` ``(values (T, k), label)``: a second set of traces dotted in the same colours (e.g. the commanded
+    torque beside the applied one; ``label`` a suffix or one label per column), ``limits`` a limit (drawn at +-limit)
+    or ``(low, high)`` as dashed grey lines instead of the monitor thresholds.  Monitor thresholds on a logged signal
+    (torque limit, spring range, slack; recorded by ``simulate``) are dashed black lines; the result's events are
+    shaded per kind and named in each panel's legend (``events=False``: not drawn).  ``xlim``: the time window shown.
     """
-    plt = _plt()
     names = list(result.signals) if names is None else list(names)
     panels = []   # (name, channels, unit)
     for name in names:
@@ -130,14 +101,10 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
         for j in (channels or {}).get(name, range(result[name].shape[1])):
             by_unit.setdefault(result.unit(name, j), []).append(j)
         panels += [(name, js, u) for u, js in by_unit.items()]
-    if ax is None:
-        fig, ax = plt.subplots(len(panels), 1, figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
-        ax = ax[:, 0]
-    else:
-        ax = np.ravel(ax)
-        fig = ax[0].figure
-        if len(ax) < len(panels):
-            raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
+    fig, ax = figure_axes(ax, nrows=len(panels), figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
+    ax = np.ravel(ax)
+    if len(ax) < len(panels):
+        raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
     components, overlay, limits = dict(components or {}), dict(overlay or {}), dict(limits or {})
     for a, (name, js, unit) in zip(ax, panels):
         y = np.asarray(result[name], dtype=float).reshape(len(result.t), -1)
@@ -164,7 +131,7 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
             a.axhline(hi, color="0.4", ls="--", lw=0.8, label=f"limit [{lo:g}, {hi:g}]")
             a.axhline(lo, color="0.4", ls="--", lw=0.8)
         shown = set()
-        for desc, val in result.info.get("limits", {}).get(name, []) if not limits else ():
+        for desc, val in result.limits.get(name, []) if not limits else ():
             a.axhline(val, color="k", ls="--", lw=0.8, label=None if desc in shown else desc)
             shown.add(desc)
         a.set_ylabel((labels or {}).get(name, f"{name} [{unit}]"))

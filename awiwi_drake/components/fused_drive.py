@@ -81,10 +81,8 @@ class GuideFrictionModel:
 class DriveModel:
     """Everything :func:`drive_laws` needs (see the module docstring).
 
-    ``springs`` holds one spring law per tendon (the same object may repeat).
-    ``rate_joints`` is the number of leading coupling joints whose velocity
-    enters (``joint_velocity`` input); further coupling "joints" (the hand's
-    wrist length offsets) are taken as quasi-static.
+    ``springs`` holds one spring law per tendon (the same object may repeat); ``rate_joints`` leading
+    coupling joints have a velocity, further coupling "joints" (the wrist's length offsets) are quasi-static.
     """
 
     motor: MotorParams | tuple     # one set for all motors, or one per tendon (motor.tendon_motor_params)

@@ -591,10 +591,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
 
     refs = [r for r in refs if _feed(r, ctrl.GetInputPort(r))]
     handles.references = tuple(refs)
-    dist = []
-    for n in rig_in:
-        if n != COMMAND_PORT and _feed(n, plant.GetInputPort(n)):
-            dist.append(n)
+    dist = [n for n in rig_in if n != COMMAND_PORT and _feed(n, plant.GetInputPort(n))]
     for n in rig_out:
         if n != COMMAND_PORT:
             builder.ExportOutput(plant.GetOutputPort(n), n)
@@ -606,13 +603,13 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     except RuntimeError as exc:
         if "already been built into" in str(exc):
             raise ValueError(
-                f"closed_loop: rig {getattr(rig, 'name', '?')!r} or controller {controller.get_name()!r} is already "
+                f"closed_loop: rig {rig_name!r} or controller {controller.get_name()!r} is already "
                 f"part of another closed loop (a Drake system belongs to one diagram): build a fresh rig and "
                 f"controller for each closed_loop call (e.g. rig = tendon_rig(); ctrl = factory(rig))") from None
         if "algebraic loop" not in str(exc):
             raise
         raise ValueError(
-            f"closed_loop: continuous loop (rate_hz=None) of rig {getattr(rig, 'name', '?')!r} and controller "
+            f"closed_loop: continuous loop (rate_hz=None) of rig {rig_name!r} and controller "
             f"{controller.get_name()!r} has an algebraic loop: the rig reports direct feedthrough from "
             f"motor_torque to its outputs; use a sampled controller (rate_hz)") from None
     diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")

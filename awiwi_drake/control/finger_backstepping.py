@@ -93,7 +93,7 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
-from awiwi_drake._math import clip, positive_part
+from awiwi_drake._math import clip, positive_part, scalar_value
 from awiwi_drake.components.friction import joint_breakaway_bound, joint_friction_bound
 from awiwi_drake.control.chain import (guide_friction_levels, guide_presliding_stiffness, joint_friction_levels,
                                        rig_springs)
@@ -112,9 +112,7 @@ VARIANTS = ("antagonistic", "position", "nonlinear-spring")
 
 def _values(a) -> np.ndarray:
     a = np.asarray(a)
-    if a.dtype != object:
-        return a.astype(float)
-    return np.array([float(v.value()) if hasattr(v, "value") else float(v) for v in a.reshape(-1)]).reshape(a.shape)
+    return a.astype(float) if a.dtype != object else np.vectorize(scalar_value, otypes=[float])(a)
 
 
 class FingerBacksteppingLaw(StaticLaw):

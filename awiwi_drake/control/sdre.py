@@ -321,7 +321,11 @@ class TendonSdreLaw(StaticLaw):
         self.gain_inputs = (("tendon_force_reference", "motor_angle", "motor_velocity") if jacobian is not None
                             else (state,))
         f0 = check_gains("design_forces", design_forces, shape=(m,), owner=name)
-        th0 = self._by_group(lambda fm, x: np.asarray(fm.theta_of_force(x), dtype=float).reshape(-1), f0)
+        th0 = np.zeros(m)
+        if state == "motor_angle":                  # the design equilibrium's motor angles
+            for fm, ix in self._groups:
+                fm.check_force(f0[ix], f"{name}: design_forces")
+            th0 = self.angle_of_force(f0, reference=False)
         self.initial_gain = self.gains_at({"tendon_force_reference": f0, "tendon_force": f0, "motor_angle": th0,
                                            "motor_velocity": np.zeros(m)})
 

@@ -29,15 +29,15 @@ while the sensor reads ``f`` (waves 4-5 put it on the motor side of the sensor, 
 
 from __future__ import annotations
 
+import dataclasses
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import Adder, ConstantVectorSource
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
+from awiwi_drake.analysis import Samples, SimulationEventError, simulate
 from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
@@ -146,7 +146,9 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
 
 
 def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
-    """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
+    """The finger rig with the hidden guides/loop in its parameters, and that rig with the hidden motor torques
+    added in front of its ``motor_torque`` (the same states and handles; its operating points are the finger's
+    without those torques)."""
     p = nominal
     if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
         tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
@@ -177,7 +179,7 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
         b.ExportInput(fd.GetInputPort("motor_torque"), "motor_torque")
     for name in ("motor_angle", "motor_velocity", "tendon_force", "joint_angle", "state"):
         b.ExportOutput(fd.GetOutputPort(name), name)
-    return rig, SimpleNamespace(name=f"truth-finger-{finger}", diagram=b.Build(), params=p)
+    return rig, dataclasses.replace(rig, name=f"truth-finger-{finger}", diagram=b.Build())
 
 
 def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None = None, snr_db: float | None = 30.0,
@@ -217,21 +219,17 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     N = int(round(gen.duration / dt))
     t = np.arange(N) * dt
     # references: each joint its own lab excitation, plus a common co-contraction of every tendon
-    from .truth import _excitation
+    from .truth import _excitation, _reference_filter
     q_op = np.full(n, gen.flexion)
     amp = np.full(n, gen.joint_excursion)
     parts = _finger_joints(finger, nominal, probe.joint_names)
     for _, _, joints in parts:
         q_op[joints[0]] = 0.0  # abduction (or the thumb's first joint) centred
         amp[joints[0]] *= 0.5
-    alpha = dt / (gen.reference_time_constant + dt)   # two first-order reference filters
     Q = np.empty((N, n))
-    for j in range(n):
-        a = _excitation(t + rng.uniform(0, 3.0), rng)
-        for _ in range(2):
-            for k in range(1, N):
-                a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
-        Q[:, j] = q_op[j] + amp[j] * a
+    for j in range(n):      # two first-order reference filters
+        Q[:, j] = q_op[j] + amp[j] * _reference_filter(_excitation(t + rng.uniform(0, 3.0), rng), dt,
+                                                       gen.reference_time_constant, 2)
     for _, fp, joints in parts:
         if getattr(fp, "pip_dip_coupled", False):   # ring, fifth: (5.16) q_DIP = (r_x3 / r_x2) q_PIP, no DIP of its own
             pip, dip = (k for k in joints if probe.joint_names[k][-1] in "23")
@@ -261,13 +259,10 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     full[:len(X0)] = X0          # the Dahl states (hysteresis of the hidden tendon) start at rest
     u0 = r_m * nominal.pretension   # the PD holds the pretension: u = r f_pre at the reference
     ctx = loop.create_context(state=full, motor_torque=np.full(m, u0))
-    try:
-        res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
-                                                 "tendon_force_reference": np.full(m, nominal.pretension)},
-                       log=("motor_angle", "tendon_force", "joint_angle", "motor_torque_command"), log_period=dt,
-                       mode="fixed_step", step=1.0 / 3000.0 if gen.sample_rate <= 3000 else dt, progress=progress)
-    except SimulationDivergedError as exc:
-        raise FloatingPointError(f"finger truth simulation diverged: {exc}") from None
+    res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
+                                             "tendon_force_reference": np.full(m, nominal.pretension)},
+                   log=("motor_angle", "tendon_force", "joint_angle", "motor_torque_command"), log_period=dt,
+                   mode="fixed_step", step=1.0 / 3000.0 if gen.sample_rate <= 3000 else dt, progress=progress)
     U = res["motor_torque_command"]
     if U.shape[0] != N:
         raise RuntimeError(f"finger truth simulation logged {U.shape[0]} samples, expected {N}")
@@ -289,8 +284,10 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
                 y = np.round(y / lsb) * lsb
         meas[key] = y
     if np.any(np.abs(U) >= nominal.motor.torque_limit) and nominal.motor.saturation:
-        raise FloatingPointError(f"finger truth: the commanded torque reaches the motor limit "
-                                 f"{nominal.motor.torque_limit} N m; the logged command would not be the applied one")
+        t_sat = float(t[np.nonzero(np.any(np.abs(U) >= nominal.motor.torque_limit, axis=1))[0][0]])
+        raise SimulationEventError(f"finger truth: the commanded torque reaches the motor limit "
+                                   f"{nominal.motor.torque_limit} N m at t = {t_sat:.6g} s; the logged command would "
+                                   f"not be the applied one", kind="actuator_saturation", t=t_sat)
     inputs = {f"motor_torque_{i + 1}": U[:, i].copy() for i in range(m)}
     tag = "-".join(hidden) if hidden else "none"
     where = f"_t{place}" if hidden else ""

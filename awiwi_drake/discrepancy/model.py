@@ -72,7 +72,7 @@ class NominalParameters:
     @classmethod
     def from_dataset(cls, rig: str, p: dict) -> "NominalParameters":
         extra = {}
-        if rig == "joint":
+        if rig == "joint-rig":
             extra = dict(link_inertia=p["link_inertia"], link_damping=p["link_damping"],
                          link_pulley_radius=p["link_pulley_radius"])
         return cls(rig, float(p["motor_inertia"]), float(p["motor_damping"]),
@@ -80,11 +80,11 @@ class NominalParameters:
 
     @property
     def num_motors(self) -> int:
-        return 2 if self.rig == "joint" else 1
+        return 2 if self.rig == "joint-rig" else 1
 
     @property
     def has_link(self) -> bool:
-        return self.rig == "joint"
+        return self.rig == "joint-rig"
 
     @property
     def num_states(self) -> int:
@@ -98,7 +98,7 @@ class NominalParameters:
         """The rigs' state order ``[(q, q'), theta, omega, z]`` with the dataset's column names."""
         n = self.num_motors
         sfx = [f"_{i + 1}" for i in range(n)] if n > 1 else [""]
-        names = ["link_angle", "link_velocity"] if self.has_link else []
+        names = ["joint_angle", "joint_velocity"] if self.has_link else []
         names += [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
         return names + [f"hysteresis_force{s}" for s in sfx]
 
@@ -106,7 +106,7 @@ class NominalParameters:
         n = self.num_motors
         sfx = [f"_{i + 1}" for i in range(n)] if n > 1 else [""]
         names = [f"motor_angle{s}" for s in sfx] + [f"tendon_force{s}" for s in sfx]
-        return names + (["link_angle"] if self.has_link else [])
+        return names + (["joint_angle"] if self.has_link else [])
 
 
 def _p(P, name):
@@ -300,9 +300,8 @@ def replay_kernels(nom: NominalParameters, jit: bool = True) -> dict:
     with np.errstate(invalid="ignore"):
         xdot, _ = replay_laws(nom, E(xv), E(uv), E(pv))
         _, y = replay_laws(nom, E(xv), E(uv) * 0.0, E(pv))
-    rig = "joint" if nom.has_link else "tendon"
     return compile_kernels({"derivatives": ([xv, uv, pv], list(xdot)), "measurements": ([xv, pv], list(y))},
-                           tag=f"replay_{rig}", jit=jit)
+                           tag="replay_joint" if nom.has_link else "replay_tendon", jit=jit)
 
 
 @TemplateSystem.define("DiscrepancyModel_", scope=sys.modules[__name__])

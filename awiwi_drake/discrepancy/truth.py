@@ -40,7 +40,6 @@ deviation); forces are quantised to 12 bit over the sensor range.
 from __future__ import annotations
 
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
@@ -48,7 +47,7 @@ from pydrake.systems.primitives import ZeroOrderHold
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip, positive_part
-from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
+from awiwi_drake.analysis import Samples, simulate
 from awiwi_drake.components.friction import guide_friction, stribeck_friction
 from awiwi_drake.components.spring import PolynomialSpring
 from awiwi_drake.control import closed_loop
@@ -56,6 +55,7 @@ from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.discrepancy.catalog import PLACED_EFFECTS
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
+from awiwi_drake.rigs.base import OperatingPoint, Rig, state_names
 
 from . import laws
 from .catalog import EFFECTS
@@ -140,7 +140,7 @@ def HiddenEffectPlant_(T):
             for i in range(nom.num_motors):
                 f0 = laws.spring_force(x[i], nom.spring_poly) * scale
                 if "spring_hysteresis" in tr and _here(tr, i):
-                    f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
+                    f0 = f0 + laws.hysteresis_force(tr["spring_hysteresis"]["width"] * z[i], f0)
                 f.append(f0)
             return f, x, xd
 
@@ -225,9 +225,9 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
     for h in unknown:
         if h not in UNKNOWN_EFFECTS:
             raise ValueError(f"unknown= {h!r}: not an out-of-catalog truth effect (known: {', '.join(UNKNOWN_EFFECTS)})")
-        if h == "link_spring" and rig != "joint":
-            raise ValueError(f"unknown= 'link_spring' needs a link: rig {rig!r} has none (use rig 'joint')")
-    if place is not None and (rig != "joint" or place not in (1, 2)):
+        if h == "link_spring" and rig != "joint-rig":
+            raise ValueError(f"unknown= 'link_spring' needs a link: rig {rig!r} has none (use rig 'joint-rig')")
+    if place is not None and (rig != "joint-rig" or place not in (1, 2)):
         raise ValueError(f"place = {place!r}: a per-tendon place is 1 or 2 on the joint rig")
     if place is not None and not set(hidden) & set(PLACED_EFFECTS):
         raise ValueError(f"--place {place}: only a hidden per-tendon effect ({', '.join(PLACED_EFFECTS)}) takes a "
@@ -236,11 +236,11 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         if h not in HIDDEN_EFFECTS:
             raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")
         if rig not in EFFECTS[h].rigs:
-            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r}")
+            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r} (it needs {' or '.join(EFFECTS[h].rigs)})")
     for h in nuisance:
         if h not in NUISANCES:
             raise ValueError(f"unknown nuisance {h!r} (known: {', '.join(NUISANCES)})")
-    n = 2 if rig == "joint" else 1
+    n = 2 if rig == "joint-rig" else 1
     tr: dict = {}
     u = rng.uniform
     if "motor_friction" in hidden:
@@ -313,6 +313,15 @@ def _scale_truth(tr: dict, k: float) -> None:
     tr["strength"] = k
 
 
+def _reference_filter(a: np.ndarray, dt: float, time_constant: float, passes: int = 1) -> np.ndarray:
+    """``a`` (in place) through ``passes`` first-order filters of ``time_constant`` [s] sampled every ``dt`` [s]."""
+    alpha = dt / (time_constant + dt)
+    for _ in range(passes):
+        for k in range(1, a.size):
+            a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
+    return a
+
+
 def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Normalised lab excitation in [-1, 1]: multisine, chirp, steps, slow reversals."""
     T = t[-1] - t[0] + (t[1] - t[0])
@@ -344,8 +353,10 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return a
 
 
-def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float):
-    """The truth rig under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
+def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float, th0: float):
+    """The truth rig (a :class:`~awiwi_drake.rigs.Rig` in the rigs' state order; its operating point is the nominal
+    rest, link at 0 and every motor at the pretension angle ``th0`` [rad] held by ``r_m f_pre``: an equilibrium of
+    the plant without its hidden effects) under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
     ``u_k = r_m f_pre + kp (theta_ref,k - theta_k) - kd omega_k``), closed by :func:`~awiwi_drake.control.closed_loop`
     at the logging rate: the command reaches the plant ``delay`` [s] later, whole periods through the loop's
     ``DiscreteTimeDelay``, the fraction through a hold in front of the plant sampling at ``k dt + frac dt``
@@ -362,13 +373,19 @@ def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, de
     b.ExportInput((split or plant).get_input_port(0), "motor_torque")
     for name in ("measurement", "motor_angle", "motor_velocity", "tendon_force"):
         b.ExportOutput(plant.GetOutputPort(name), name)
-    rig = SimpleNamespace(name=f"truth-{nom.rig}", diagram=b.Build())
+    n, off = nom.num_motors, 2 if nom.has_link else 0
+
+    def rest() -> OperatingPoint:
+        x = np.zeros(nom.num_states)
+        x[off:off + n] = th0
+        return OperatingPoint(x, np.full(n, nom.motor_pulley_radius * gen.pretension), pretension=gen.pretension)
+    rig = Rig(f"truth-{nom.rig}", b.Build(), nom, state_names(joints=off // 2, motors=n, hysteresis=True), rest)
     gains = MotorPositionGains(kp=gen.kp, kd=gen.kd, rate_hz=gen.sample_rate)
     ctrl = motor_position_controller(rig, gains, pulley_radius=nom.motor_pulley_radius)
     return closed_loop(rig, ctrl, rate_hz=gen.sample_rate, delay=nd * dt if nd else None), split
 
 
-def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
+def make_truth_dataset(rig: str = "joint-rig", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
                        keep_clean: bool = True, progress=None, strength: float = 1.0,
                        place: int | None = None, unknown=()) -> Dataset:
@@ -379,7 +396,7 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
 
     Parameters
     ----------
-    rig : "tendon" | "joint"
+    rig : "tendon-rig" | "joint-rig"
     hidden : sequence of catalog names hidden in the truth plant
     snr_db : float or None
         Sensor SNR [dB] per output (None: noise-free, no quantisation).
@@ -403,8 +420,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     ``meta["clean_outputs"]`` (in memory only, when ``keep_clean``) holds the
     noise-free outputs.
     """
-    if rig not in ("tendon", "joint"):
-        raise ValueError(f"unknown rig {rig!r} (known: tendon, joint)")
+    if rig not in ("tendon-rig", "joint-rig"):
+        raise ValueError(f"unknown rig {rig!r} (known: tendon-rig, joint-rig)")
     gen = gen or TruthGeneratorParams()
     rng = np.random.default_rng(seed)
     base = default_nominal(rig)
@@ -431,36 +448,25 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     xs = np.linspace(0, 0.05, 20001)
     x0 = float(np.interp(gen.pretension, laws.spring_force(xs, nom.spring_poly), xs))
     th0 = x0 / r
-    a = _excitation(t, rng)
-    # first-order reference filter (10 ms): steps stay steps for the plant, without
-    # commanding torque impulses beyond the motor's range
-    alpha = dt / (0.01 + dt)
-    for k in range(1, N):
-        a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
-    if rig == "joint":
+    a = _reference_filter(_excitation(t, rng), dt, gen.reference_time_constant)
+    if rig == "joint-rig":
         rq = nom.link_pulley_radius
         qref = gen.link_excursion * a
         cc = 0.2 * th0 * np.sin(2 * np.pi * 0.13 * t + rng.uniform(0, 2 * np.pi))
         ref = np.stack([th0 + rq / r * qref + cc, th0 - rq / r * qref + cc], axis=1)
-        X0 = np.zeros(nom.num_states)
-        X0[2:4] = th0       # [q, q', theta_1, theta_2, ...]: link at 0, both motors at the pretension angle
     else:
         ref = (th0 + 0.6 * th0 * a)[:, None]
-        X0 = np.zeros(nom.num_states)
-        X0[0] = th0
-    loop, split = _truth_loop(plant_sys, nom, gen, float(truth.get("delay", 0.0)))
+    loop, split = _truth_loop(plant_sys, nom, gen, float(truth.get("delay", 0.0)), th0)
+    X0 = loop.rig.operating_point().state
     th_0, om_0 = split_state(nom, X0)[:2]
     u0 = r * gen.pretension + gen.kp * (ref[0] - th_0) - gen.kd * om_0   # the bench starts at rest at u_0
     ctx = loop.create_context(state=X0, motor_torque=u0)
     if split is not None:
         split.SetVectorState(split.GetMyMutableContextFromRoot(ctx), u0)
-    try:
-        res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
-                                                 "tendon_force_reference": gen.pretension},
-                       log=("measurement", "motor_torque_command"), log_period=dt, mode="error_controlled",
-                       max_step=dt, accuracy=1e-6, progress=progress)
-    except SimulationDivergedError as exc:
-        raise FloatingPointError(f"truth simulation diverged: {exc}") from None
+    res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
+                                             "tendon_force_reference": gen.pretension},
+                   log=("measurement", "motor_torque_command"), log_period=dt, mode="error_controlled",
+                   max_step=dt, accuracy=1e-6, progress=progress)
     Y, Ucmd = res["measurement"], res["motor_torque_command"]
     if Y.shape[0] != N:
         raise RuntimeError(f"truth simulation logged {Y.shape[0]} samples, expected {N}")

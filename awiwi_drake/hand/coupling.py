@@ -433,9 +433,8 @@ def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:
     """Joint stiffness (5.12) of ``coupling`` at ``q``: ``K_q = -d tau/dq = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2``
     (the law: :func:`awiwi_drake.components.tendon.joint_stiffness`; the Hessian term: ``coupling.tension_hessian``).
 
-    ``f`` are the tendon forces [N] (tension positive), ``k_t`` the tendon
-    (spring) stiffnesses [N/m].  With ``tau = -P^T f`` and ``f = f(x)``,
-    ``x = r_m theta + h(q) - h(0) + x0``, the motors held fixed.
+    ``f``: the tendon forces [N] (tension positive), ``k_t``: the tendon (spring) stiffnesses [N/m]; the motors
+    held fixed.
     """
     f = np.asarray(f)
     k_t = np.asarray(k_t)

@@ -152,13 +152,9 @@ def _new_plant(name: str, builder, visual: bool, scene_graph: SceneGraph | None)
 
 def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | None = None,
                       builder=None, visual: bool = False, gravity: bool = False):
-    """A finalised continuous plant holding one finger (base frame = world).
-
-    With ``builder`` the plant is added to it, otherwise a standalone plant is returned; its visual
-    geometry is registered with ``scene_graph`` when one is given.  Gravity is off by default:
-    section 5.2.2 finds ~0.002 N m, negligible against the tendon torques.
-    Returns ``(plant, FingerModel)``.
-    """
+    """``(plant, FingerModel)``: a finalised continuous plant holding one finger (base frame = world), added to
+    ``builder`` or standalone, its visual geometry registered with ``scene_graph`` when one is given.  Gravity
+    is off by default (section 5.2.2: ~0.002 N m, negligible)."""
     plant = _new_plant(f"{finger}_plant", builder, visual, scene_graph)
     model = add_finger(plant, finger, params, visual=visual)
     if not gravity:

@@ -27,8 +27,9 @@ Table 6.2 points agree (all 38 neutral tendons ~46.6 mm long, both layers
 through the flexion crossing point).  Two alternatives were rejected: the BC
 plane along the wrist side makes abduction a pure translation of the palm
 (contrary to Fig 6.10), and B0C0 on the median plane needs A0 on that axis
-(contrary to Fig 6.3).  A consequence (flexion moves the tendons about half as
-much as abduction, not "minimally") is reported in docs/REPRODUCTIONS.md.
+(contrary to Fig 6.3).  A consequence: the BC plane is diagonal in the top view, so flexion turns the
+palm about an axis tilted by atan(b/a) = 40 deg from y and moves the tendons about half as much as
+abduction, not "minimally" (docs/REPRODUCTIONS.md).
 
 Angles
 ------

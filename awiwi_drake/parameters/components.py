@@ -24,10 +24,12 @@ __all__ = [
     "JointFrictionParams",
 ]
 
-# Torque constant, roughly: the friction law (3.8) with Table 3.3 gives 1.41 Nm at
-# 15 rad/s where Fig 3.3b reads about 1.3 A, i.e. about 1.1 Nm/A (reading accuracy
-# of the figure: +-10 %). MotorParams.torque_constant; also turns the ripple currents of Fig 3.4b into torques.
-_TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
+#: Fig 3.3b read at full speed: (speed [rad/s], current [A]) (reading accuracy of the figure: +-10 %).
+FIG_3_3B_FULL_SPEED_CURRENT = (15.0, 1.3)
+# Torque constant [Nm/A]: the friction law (3.8) with MotorParams' Table 3.3 values needs 1.408 Nm at that speed,
+# over that current (recomputed with the one (3.8) law by tests/test_control_motor.py). MotorParams.torque_constant;
+# also turns the ripple currents of Fig 3.4b into torques.
+_TORQUE_PER_AMPERE = 1.0829
 
 
 @dataclass(frozen=True)
@@ -41,14 +43,15 @@ class MotorParams(Parameters):
     """
 
     inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False,
-                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))")
+                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))", doc="B at the output shaft")
     friction: bool = param(True, unit="-", source="chosen: the thesis's motor model includes (3.8)")
     friction_slope: float = param(10.0, unit="s/rad", low=0.0, low_inclusive=False,
                                   source="Table 3.3, gamma1")
     coulomb_torque: float = param(0.5586, unit="Nm", low=0.0, source="Table 3.3, gamma2")
     viscous_friction: float = param(0.0356, unit="Nm s/rad", low=0.0, source="Table 3.3, gamma3")
     damping: float = param(0.0, unit="Nm s/rad", low=0.0,
-                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta")
+                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta",
+                           doc="extra linear damping d_theta")
     ripple: bool = param(False, unit="-",
                          source="chosen: off by default; switch on to study compensation (Fig 3.4-3.6)")
     ripple_motor_amplitude: float = param(
@@ -67,12 +70,14 @@ class MotorParams(Parameters):
         source=("fitted: the thesis measured it at the output shaft (section 3.2) but prints no value; "
                 "(3.8) with Table 3.3 gives 1.408 Nm at 15 rad/s where Fig 3.3b reads ~1.3 A: "
                 "1.083 Nm/A (output side)"))
-    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100")
+    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100",
+                              doc="input/output speed ratio (1/alpha_gear)")
     saturation: bool = param(True, unit="-", source="chosen: real amplifiers saturate")
     torque_limit: float = param(3.0, unit="Nm", low=0.0, low_inclusive=False,
                                 source="chosen: 180 N x r_m (0.9 Nm) + Table 3.3 friction at 15 rad/s (1.41 Nm), with margin")
     pulley_radius: float = param(0.005, unit="m", low=0.0, high=0.05, low_inclusive=False,
-                                 source="chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 torques")
+                                 source=("chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 "
+                                         "torques"), doc="r_m, the motor pulley winding the tendon")
 
     def _validate(self) -> None:
         h = self.ripple_harmonics

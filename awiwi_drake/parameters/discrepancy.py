@@ -436,6 +436,10 @@ class TruthGeneratorParams(Parameters):
     link_excursion: float = param(0.3, unit="rad", low=0.0,
                                   source="chosen: +-17 deg, inside a finger joint's range; keeps both tendons taut at 30 N pretension",
                                   doc="link reference amplitude")
+    reference_time_constant: float = param(
+        0.01, unit="s", low=0.0, source="chosen: 10 ms: the excitation's steps stay steps for the plant without "
+                                        "commanding torque impulses beyond the motor's range",
+        doc="time constant of the first-order reference filter")
     backlash_range: tuple = param(
         (0.01, 0.03), unit="rad", low=0.0,
         source="chosen: +-0.6-1.7 deg of play at the joint, 2-6x the link-encoder noise at 30 dB on the "
@@ -524,7 +528,7 @@ class DatasetChecks(Parameters):
     max_angle_excursion: float = param(
         3.1416, unit="rad", low=0.0, low_inclusive=False,
         source="chosen: a finger joint moves less than half a turn (joint ranges of Table 5.1 are < 2 rad); "
-               "angles in degrees are 57x larger", doc="largest plausible max - min of link_angle")
+               "angles in degrees are 57x larger", doc="largest plausible max - min of joint_angle")
     max_elongation: float = param(
         0.05, unit="m", low=0.0, low_inclusive=False,
         source="chosen: 10x the ~5 mm travel of the lever spring mechanism (Fig 4.8b); motor angles in degrees "

@@ -5,18 +5,14 @@ The controllers and their rig factories are :mod:`awiwi_drake.control.backsteppi
 15.1 is :mod:`.ch15_scalar_example`. The study functions here run the simulations
 behind Fig 15.2-15.4, 15.7-15.13, 15.16-15.21 and 15.23-15.27 and return data
 (:class:`BacksteppingRun`); the ``plot_*`` functions at the end draw them.
-
-All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`):
-inputs that change at given times (reference steps, disturbance steps) are
-piecewise-constant schedules (:func:`event_schedules`), the sine references
-(with their derivatives) ``Sine`` schedules, all wired in as Drake sources.
+All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`, :func:`event_schedules`).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Mapping, Sequence
 
@@ -33,6 +29,7 @@ from awiwi_drake.parameters.backstepping import (
     NonlinearImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams
 from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.reproductions.ch11_impedance import GainDiagram
 from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, ScalarExamplePlant, example_dynamics
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
@@ -41,34 +38,19 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
     "antagonistic_sine", "antagonistic_stiffness_check", "sine_reference", "is_monotone_nonincreasing", "count_oscillations",
-    "GainDiagram1526", "gain_diagram_study", "plot_gain_diagram_study", "plot_run_traces", "plot_joint_angle",
+    "gain_diagram_study", "plot_gain_diagram_study", "plot_run_traces", "plot_joint_angle",
     "plot_command", "plot_phase_portrait",
 ]
 
 
 @dataclass
 class BacksteppingRun:
-    """Sampled time series of one closed-loop simulation.
-
-    Attributes
-    ----------
-    label : str
-        What was varied (e.g. ``"K1 = 5"``).
-    t : ndarray (N,)
-        Sample times [s].
-    state : ndarray (N, n)
-        Rig state (``[q, qd, theta..., omega...]``).
-    command : ndarray (N, m)
-        Torque entering the rig [Nm] (after hold, delay, saturation).
-    lyapunov : ndarray (N,)
-        The controller's Lyapunov function.
-    reference : ndarray (N,)
-        Link-angle reference [rad].
-    disturbance : ndarray (N,)
-        External torque [Nm].
-    extra : dict
-        Further logged outputs (``tendon_force``, ``joint_torque``, ``tendon_stiffness``, ...).
-    """
+    """Sampled time series of one closed-loop simulation: ``label`` (what was varied, e.g. ``"K1 = 5"``), ``t`` [s],
+    the rig ``state`` (N, n) (``[q, qd, theta..., omega...]``), the ``command`` (N, m) entering the rig [Nm] (after
+    hold, delay, saturation), the controller's ``lyapunov`` function, the link-angle ``reference`` [rad], the
+    external torque ``disturbance`` [Nm]; where the run logged them (``run_loop``'s ``extra_outputs``) the loop's
+    ``tendon_force`` [N], ``joint_torque`` [Nm] and ``tendon_stiffness`` [N/m], and for Fig 9.3 the (9.2) observer's
+    ``friction_estimate`` [Nm] (the true friction is ``disturbance``)."""
 
     label: str
     t: np.ndarray
@@ -77,7 +59,10 @@ class BacksteppingRun:
     lyapunov: np.ndarray
     reference: np.ndarray
     disturbance: np.ndarray
-    extra: dict = field(default_factory=dict)
+    tendon_force: np.ndarray | None = None
+    joint_torque: np.ndarray | None = None
+    tendon_stiffness: np.ndarray | None = None
+    friction_estimate: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -147,12 +132,9 @@ def event_schedules(events: Sequence[tuple[float, Mapping[str, object]]], initia
     return out
 
 
-#: Integrator of the impedance and antagonistic backstepping runs (continuous loops). Their closed loops
-#: have fast poles (K3, K4 and Kd,imp / m with the small link inertias of Table 15.1 and the joint rig), so
-#: error-controlled explicit RK3 is stability-limited: accuracy 1e-4 and 1e-6 took the same 7.4-8.2 s for
-#: the Fig 15.19 pair. The L-stable Radau IIA (3rd order) at the same accuracy took 2.8 s and agreed to
-#: 6e-9 rad; Fig 15.16's run 4.3 s -> 1.0 s (2e-11 rad). Not for the position/saturation studies (linear,
-#: not stiff: RK3 is 4-10x faster there).
+#: Integrator of the impedance and antagonistic backstepping runs (continuous loops): their fast poles (K3, K4 and
+#: Kd,imp / m with Table 15.1's small link inertia) make error-controlled explicit RK3 stability-limited; the L-stable
+#: Radau IIA (3rd order) at the same accuracy is 3-4x faster.  Not for the position/saturation studies (not stiff).
 STIFF_INTEGRATOR = "radau3"
 
 
@@ -162,9 +144,14 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     """One closed-loop run through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` as a :class:`BacksteppingRun`.
 
     ``inputs`` maps exported inputs (``joint_angle_reference``, ``external_torque``) to schedules
-    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``integrator``: the
-    error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
+    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``extra_outputs``: outputs also
+    logged into the run's fields of the same name (``tendon_force``, ``joint_torque``, ``tendon_stiffness``).
+    ``integrator``: the error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
     """
+    unknown = [k for k in extra_outputs if k not in _EXTRA_OUTPUTS]
+    if unknown:
+        raise ValueError(f"run_loop: extra_outputs {unknown} are not BacksteppingRun fields; "
+                         f"known: {', '.join(_EXTRA_OUTPUTS)}")
     d = loop.diagram
     ctx = loop.create_context(state=state0, motor_torque=motor_torque0)
     log = ["state", "motor_torque", *extra_outputs]
@@ -178,7 +165,10 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     return BacksteppingRun(label, res.t, res["state"], res["motor_torque"],
                            res["controller_lyapunov"][:, 0] if has_v else np.full(n, math.nan),
                            res[ref][:, 0] if ref else np.full(n, math.nan),
-                           res[ext][:, 0] if ext else np.zeros(n), {k: res[k] for k in extra_outputs})
+                           res[ext][:, 0] if ext else np.zeros(n), **{k: res[k] for k in extra_outputs})
+
+
+_EXTRA_OUTPUTS = ("tendon_force", "joint_torque", "tendon_stiffness")
 
 
 def is_monotone_nonincreasing(v, *, rtol: float = 1e-6, atol: float = 1e-12) -> bool:
@@ -328,11 +318,8 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
     "nonlinear controller" uses the real spring curve and its first two derivatives.
     ``saturation=True`` limits the motor torque (Fig 15.21).
 
-    The load is an ideal step, measured by an ideal sensor: it enters the design's
-    ``qdd``/``qddd`` and the command jumps by :func:`load_step_command_jump` (4.9e3 Nm for
-    the defaults, Table 15.1's tiny link inertia). Unsaturated, that kick throws the link
-    tens of rad away (peak 37.6 rad) before the nonlinear controller returns it to
-    ``step + load / Kp,imp``; the linear controller does not return (docs/REPRODUCTIONS.md).
+    The load is an ideal step, measured by an ideal sensor: it enters the design's ``qdd``/``qddd`` and the
+    command jumps by :func:`load_step_command_jump` (what that does: docs/REPRODUCTIONS.md).
     """
     s = study or NonlinearImpedanceStudy()
     base = functools.partial(table_15_1_rig, spring="nonlinear")
@@ -426,30 +413,8 @@ def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflectio
 
 # ---------------------------------------------------------------------------
 # plots: runs in, ``(fig, ax)`` out
-@dataclass
-class GainDiagram1526:
-    """Fig 15.26 for one registered joint-rig controller: the continuous loop linearised (Drake ``Linearize``) from
-    the link reference to the link angle at its settled rest; ``freq`` [Hz], ``gain`` |q / q_des| [-], ``bandwidth``
-    the -3 dB point below the DC gain [Hz] (:func:`~awiwi_drake.control.compare.metrics.linear_bandwidth`, the
-    number compare's ``bandwidth_source`` ``linearization`` reports), ``linearization`` the
-    :class:`~awiwi_drake.analysis.LinearizationResult` itself, ``loop`` the continuous closed loop (to simulate)."""
-
-    controller: str
-    freq: np.ndarray
-    gain: np.ndarray
-    bandwidth: float
-    linearization: object
-    loop: ClosedLoop = field(repr=False, default=None)
-
-    @property
-    def dc_gain(self) -> float:
-        """|H(0)| = |D - C A^-1 B| of the linearisation [-]."""
-        lin = self.linearization
-        return float(abs((lin.D - lin.C @ np.linalg.solve(lin.A, lin.B))[0, 0]))
-
-
 def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-scale"), *,
-                       freqs: Sequence[float] | None = None) -> list[GainDiagram1526]:
+                       freqs: Sequence[float] | None = None) -> list[GainDiagram]:
     """Fig 15.26: gain diagrams of the registered ``controllers`` on the antagonistic joint rig at its default
     operating point (20 N, the figure's pretension), each continuous loop settled as compare settles it
     (:func:`~awiwi_drake.control.compare.runner.settle`, ``compare_test_params``) and linearised there; default
@@ -467,15 +432,15 @@ def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-s
         lin = linearize(loop.diagram, context=ctx, input=loop.references[0], outputs=(loop.tracked_outputs[0],),
                         equilibrium_tolerance=None)
         gain = np.abs(lin.bode(0, omega=2 * np.pi * f).response)
-        out.append(GainDiagram1526(name, f, gain, linear_bandwidth(lin), lin, loop))
+        out.append(GainDiagram(name, f, gain, lin.poles, linear_bandwidth(lin), lin, loop))
     return out
 
 
-def plot_gain_diagram_study(diagrams: Sequence[GainDiagram1526], *, ax=None):
+def plot_gain_diagram_study(diagrams: Sequence[GainDiagram], *, ax=None):
     """Fig 15.26: |q / q_des| against frequency (log axis), each loop's -3 dB bandwidth marked."""
     fig, ax = figure_axes(ax, figsize=(7, 4))
     for d in diagrams:
-        line, = ax.semilogx(d.freq, d.gain, label=f"{d.controller} (-3 dB at {d.bandwidth:.2f} Hz)")
+        line, = ax.semilogx(d.freq, d.gain, label=f"{d.label} (-3 dB at {d.bandwidth:.2f} Hz)")
         ax.axvline(d.bandwidth, color=line.get_color(), ls=":", lw=1)
     label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]", title="Fig 15.26: joint rig at 20 N, linearised")
     return fig, ax

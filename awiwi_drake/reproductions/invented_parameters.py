@@ -6,23 +6,9 @@ the ring, fifth and thumb, the thumb metacarpal, the wrist's linkage lengths, th
 mechanism's geometry or the tendon's modulus and section.  The package chooses them
 (``awiwi_drake/parameters/``, each with its reason).  :func:`invented_parameter_sensitivity`
 varies each of them by -20 % and +20 %, one at a time, and recomputes the headline number of every
-reproduced figure that uses it:
-
-* ``fig4_8b_force_45deg``: lever mechanism force at 45 deg [N] (Fig 4.8b; the spring constant is
-  fitted to 175 N at 48 deg and held, so a geometry change shows as a shape change);
-* ``tendon_stiffness_20N``: stiffness of lever mechanism + tendon in series at 20 N [N/m] (ch. 4
-  calibration; what every tendon-force and joint-stiffness number scales with);
-* ``index_link_mode_20N``: stiffest link mode of the index finger at 20 N pretension [rad/s]
-  (poles vs pretension; sets the time scale of Fig 5.7 and of every finger loop);
-* ``fig5_7_dip_difference``: DIP trajectory difference with/without C(q, v) v after a 0.1 rad MCP
-  release [rad] (Fig 5.7, over 0.05 s instead of 0.2 s to keep the study cheap; ``fig57=False``
-  skips it);
-* ``ring_pip_moment_arm``: reduced PIP moment arm of the ring's motor pair [m] ((5.16)-(5.18));
-* ``fig6_10_abduction_peak``: largest tendon displacement at 20 deg wrist abduction [m] (Fig 6.10);
-* ``thumb_base_stiffness``: smallest eigenvalue of the thumb base stiffness (5.12) at
-  q = (0.5, 0.3), 20 N [N m/rad];
-* ``fig5_17_cold_error``: largest thumb-base estimation error, cold start, 30 iterations, no noise
-  [rad] (Fig 5.17).
+reproduced figure that uses it (:data:`HEADLINES`: name, unit, function).  The lever force of Fig 4.8b
+holds the spring constant fitted to 175 N at 48 deg, so a geometry change shows as a shape change; Fig 5.7's
+difference is taken over 0.05 s instead of 0.2 s to keep the study cheap (``fig57=False`` skips it).
 
 The wrist's linkage lengths are not parameters but are derived from Table 6.1 by the box
 construction (:mod:`awiwi_drake.hand.wrist`); they are varied by overriding the derived property.
@@ -55,44 +41,26 @@ class InventedParameter:
     headlines: tuple        # headline keys that depend on it
 
 
-# group -> how a scaled value is written into the inputs of the headline functions
-INVENTED = (
-    InventedParameter("index.abduction_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.mcp_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.pip_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.dip_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.proximal_mass", "kg", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.middle_mass", "kg", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.distal_mass", "kg", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.link_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("ring.pip_radius", "m", ("ring_pip_moment_arm",)),
-    InventedParameter("ring.dip_radius", "m", ("ring_pip_moment_arm",)),
-    InventedParameter("ring.coupling_stiffness", "N m/rad", ("ring_coupling_compliance",)),
-    InventedParameter("thumb.metacarpal_length", "m", ("thumb_base_stiffness", "fig5_17_cold_error")),
-    InventedParameter("thumb.pip_radius", "m", ()),
-    InventedParameter("thumb.dip_radius", "m", ()),
-    InventedParameter("thumb.proximal_length", "m", ()),
-    InventedParameter("thumb.distal_length", "m", ()),
-    InventedParameter("ring.proximal_length", "m", ()),
-    InventedParameter("fifth.proximal_length", "m", ()),
-    InventedParameter("fifth.middle_length", "m", ()),
-    InventedParameter("fifth.hmc_radius", "m", ()),
-    InventedParameter("fifth.hmc_offset", "m", ()),
-    InventedParameter("fifth.hmc_axis_tilt", "rad", ()),
-    InventedParameter("spring.pulley_spacing", "m", ("fig4_8b_force_45deg", "tendon_stiffness_20N",
-                                                      "index_link_mode_20N")),
-    InventedParameter("spring.lever_length", "m", ("fig4_8b_force_45deg", "tendon_stiffness_20N",
-                                                    "index_link_mode_20N")),
-    InventedParameter("spring.spring_arm", "m", ("fig4_8b_force_45deg", "tendon_stiffness_20N",
-                                                  "index_link_mode_20N")),
-    InventedParameter("tendon.youngs_modulus", "Pa", ("tendon_stiffness_20N", "index_link_mode_20N")),
-    InventedParameter("tendon.diameter", "m", ("tendon_stiffness_20N", "index_link_mode_20N")),
-    InventedParameter("tendon.rest_length", "m", ("tendon_stiffness_20N", "index_link_mode_20N")),
-    InventedParameter("wrist.crank_length", "m", ("fig6_10_abduction_peak",)),
-    InventedParameter("wrist.coupler_length", "m", ("fig6_10_abduction_peak",)),
-    InventedParameter("wrist.palm_radius", "m", ("fig6_10_abduction_peak",)),
-    InventedParameter("wrist.link_length", "m", ("fig6_10_abduction_peak",)),
-)
+_INDEX = ("index_link_mode_20N", "fig5_7_dip_difference")
+_TENDON = ("tendon_stiffness_20N", "index_link_mode_20N")
+
+#: The chosen parameters, in the order of the docs/REPRODUCTIONS.md table: (group, fields, unit, headlines) rows.
+INVENTED = tuple(InventedParameter(f"{group}.{name}", unit, headlines) for group, names, unit, headlines in (
+    ("index", ("abduction_radius", "mcp_radius", "pip_radius", "dip_radius"), "m", _INDEX),
+    ("index", ("proximal_mass", "middle_mass", "distal_mass"), "kg", _INDEX),
+    ("index", ("link_radius",), "m", _INDEX),
+    ("ring", ("pip_radius", "dip_radius"), "m", ("ring_pip_moment_arm",)),
+    ("ring", ("coupling_stiffness",), "N m/rad", ("ring_coupling_compliance",)),
+    ("thumb", ("metacarpal_length",), "m", ("thumb_base_stiffness", "fig5_17_cold_error")),
+    ("thumb", ("pip_radius", "dip_radius", "proximal_length", "distal_length"), "m", ()),
+    ("ring", ("proximal_length",), "m", ()),
+    ("fifth", ("proximal_length", "middle_length", "hmc_radius", "hmc_offset"), "m", ()),
+    ("fifth", ("hmc_axis_tilt",), "rad", ()),
+    ("spring", ("pulley_spacing", "lever_length", "spring_arm"), "m", ("fig4_8b_force_45deg", *_TENDON)),
+    ("tendon", ("youngs_modulus",), "Pa", _TENDON),
+    ("tendon", ("diameter", "rest_length"), "m", _TENDON),
+    ("wrist", ("crank_length", "coupler_length", "palm_radius", "link_length"), "m", ("fig6_10_abduction_peak",)),
+) for name in names)
 
 
 def _scaled_wrist(prop: str, scale: float) -> WristParams:

@@ -60,13 +60,9 @@ class BatchedRig:
 
 
 def batched_joint_rig(num_copies: int, *, params: JointRigParams | None = None) -> BatchedRig:
-    """``num_copies`` joint rigs with ``params`` in one system (see the module docstring).
-
-    ``BatchedRig.diagram`` is the :class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_`
-    itself (ports ``motor_torque``, ``external_torque``, ``state``, ``joint_angle``,
-    ``tendon_force``), not wrapped in a Diagram: a diagram that adds controllers then holds the
-    copies' state in one contiguous block (no nested sub-vectors for the integrator to walk).
-    """
+    """``num_copies`` joint rigs with ``params`` in one system; ``BatchedRig.diagram`` is the
+    :class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_` itself, not wrapped in a Diagram, so a loop
+    around it holds the copies' state in one contiguous block."""
     single = joint_rig(params=params)
     system = TendonDriveBatch_[float](single.drive.model, num_copies)
     system.set_name(f"joint_rig_x{num_copies}")

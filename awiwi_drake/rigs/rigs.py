@@ -233,7 +233,8 @@ def joint_rig(*, params: JointRigParams | None = None) -> Rig:
         theta = np.array([(x[0] + rq * joint_angle) / r, (x[1] - rq * joint_angle) / r])
         u = r * f - motor_ripple_torque(theta, p.motor)
         _check_torque("joint_rig", u, p.motor, f"pretension = {f0} N")
-        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.model.has_hysteresis else []])
+        hysteresis = np.zeros(2) if drive.model.has_hysteresis else []
+        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], hysteresis])
         k = np.asarray(spring.stiffness(x), dtype=float)
         return OperatingPoint(state, u, np.array([float(external_torque)]), pretension=f0,
                               joint_angle=np.array([joint_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,

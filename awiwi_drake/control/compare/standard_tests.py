@@ -34,9 +34,10 @@ from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, disturbance_metrics, gain_diagram,
                                                  linear_bandwidth, sine_metrics, step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
-from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
+from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, torque_limit
 from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
+from awiwi_drake.rigs.base import Rig
 
 __all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
            "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
@@ -330,12 +331,27 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     ctx.SetTime(0.0)
     meta: dict[str, Any] = {}
     ref, t_final = _schedule(test, p, r0)
-    dist = Step(p.step_delay, p.disturbance_torque) if test == "disturbance" else None
     if test == "sweep":
         meta.update(f_low=p.sweep_start, f_high=p.sweep_stop)
         lin_bw = _linearized_bandwidth(loop, ctx)
-    run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
-    m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
+    inputs = {r: ref for r in loop.references}
+    if "external_torque" in loop.disturbances:
+        inputs["external_torque"] = Step(p.step_delay, p.disturbance_torque) if test == "disturbance" else 0.0
+    y = loop.tracked_outputs[0]
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
+    extra = {"external_torque": "external_torque" in inputs, "tendon_force": slack and y != "tendon_force",
+             "applied_torque": loop.diagram.HasOutputPort("applied_torque")}   # the motors' torque after saturation
+    log = [y, "motor_torque_command", "state", loop.references[0]] + [n for n, on in extra.items() if on]
+    res = simulate(loop, ctx, t_final, inputs=inputs, log=log, log_period=dt, max_step=p.max_step, accuracy=1e-6)
+    if slack:
+        meta["tendon_force"] = res["tendon_force"]
+    if extra["applied_torque"]:
+        meta["applied_torque"] = res["applied_torque"]
+    t = res.t - res.t[0]
+    w = res["external_torque"][:, 0] if "external_torque" in res else np.zeros(len(t))
+    run = TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0], res["motor_torque_command"], w,
+                  res["state"], meta)
+    m = Metrics(controller, test, joint="tendon" if y == "tendon_force" else "link")
     ratio = _command_metrics(m, run.command, run.meta.get("applied_torque", run.command),
                              torque_limit(loop, run.command.shape[1]), dt, run.meta.get("tendon_force"))
     if test == "disturbance":
@@ -415,6 +431,11 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
         for row, b in zip(rows, band):
             row.dead_band = float(b)
     meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
+    # ESTIMATION_ERROR: no joint sensors, the estimator's error
+    log = ["joint_angle", ref_port, "motor_torque_command", "state", applied]
+    log += [n for n in ("tendon_force", DISTRIBUTION_STATUS, ESTIMATION_ERROR) if loop.diagram.HasOutputPort(n)]
+    log += [OBSERVER_COMPENSATION, OBSERVER_BOUND] if loop.diagram.HasOutputPort(OBSERVER_BOUND) else []
+    Sp = np.linalg.pinv(ch.S)
     runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
     failed: list[int] = []
     for group in groups:
@@ -430,17 +451,6 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 for j in group:
                     ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, float(loads[j]))
             inputs["external_torque"] = PerEntry(ext)
-        log = ["joint_angle", ref_port, "motor_torque_command", "state"]
-        if applied != "motor_torque_command":
-            log.append(applied)
-        if loop.diagram.HasOutputPort("tendon_force"):
-            log.append("tendon_force")
-        if loop.diagram.HasOutputPort(DISTRIBUTION_STATUS):
-            log.append(DISTRIBUTION_STATUS)
-        if loop.diagram.HasOutputPort(ESTIMATION_ERROR):   # no joint sensors: the estimator's error
-            log.append(ESTIMATION_ERROR)
-        if loop.diagram.HasOutputPort(OBSERVER_BOUND):
-            log += [OBSERVER_COMPENSATION, OBSERVER_BOUND]
         try:
             res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                            max_step=p.max_step, accuracy=1e-6)
@@ -450,7 +460,6 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             failed += group
             continue
         t = res.t - res.t[0]
-        Sp = np.linalg.pinv(ch.S)
         y = res["joint_angle"] @ Sp.T - ch.q0
         r = res[ref_port] @ Sp.T - ch.q0
         if runs_t is None:
