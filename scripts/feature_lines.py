@@ -229,7 +229,7 @@ NOTEBOOKS = [
                          '    anim = record_animation(OUT / "hand.html", target="finger-index" if SHORT else "hand", duration=0.3 if SHORT else 1.5,\n'
                          '                            progress=progress)',
                          'from awiwi_drake.export.animation import record_animation\n'
-                         'anim = record_animation(OUT / "hand.html", target="index" if SHORT else "hand", '
+                         'anim = record_animation(OUT / "hand.html", target="finger-index" if SHORT else "hand", '
                          'duration=0.3 if SHORT else 1.5)'),)),
     Invocation("notebook-04", "notebook", "04", why="API moves only; the hand tendon SDRE gains cell (issue 10) skipped",
                drop=("hand_tendon_sdre_gains",)),
