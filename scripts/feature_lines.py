@@ -515,8 +515,12 @@ def count_era(era: str, tree: pathlib.Path, work: pathlib.Path) -> dict:
 
 
 def _commit(tree: pathlib.Path) -> str:
-    out = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    return out.stdout.strip()
+    """HEAD, and the git tree of awiwi_drake/ (equal trees = the same package, whichever commit holds it)."""
+    out = [subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", rev], capture_output=True,
+                          text=True).stdout.strip() for rev in ("HEAD", "HEAD:awiwi_drake")]
+    dirty = subprocess.run(["git", "-C", str(tree), "status", "--porcelain", "--", "awiwi_drake"],
+                           capture_output=True, text=True).stdout.strip()
+    return f"{out[0]}, package tree {out[1]}" + (" + uncommitted edits" if dirty else "")
 
 
 def summarise(count: dict) -> dict:
