@@ -663,7 +663,7 @@ def _stiffness_of(P, kt, f, H):
 @numba.njit(cache=True)
 def _interp_rows(f, gf, gv):
     """``np.interp(f[i], gf[i], gv[i])`` per tendon (each tendon's own table row): numpy's rule written out (ends
-    held, a grid point exact, else ``slope (x - x_j) + y_j`` on the bracketing segment found by bisection)."""
+    held, a grid point exact, else ``slope (x - x_j) + y_j`` on the bracketing segment)."""
     out = np.empty(f.shape[0])
     n = gf.shape[1]
     for i in range(f.shape[0]):
@@ -673,13 +673,7 @@ def _interp_rows(f, gf, gv):
         elif x >= xp[n - 1]:
             out[i] = fp[n - 1]
         else:
-            lo, hi = 0, n - 1                  # xp[lo] <= x < xp[hi]
-            while hi - lo > 1:
-                mid = (lo + hi) >> 1
-                if xp[mid] <= x:
-                    lo = mid
-                else:
-                    hi = mid
+            lo = np.searchsorted(xp, x, side="right") - 1      # xp[lo] <= x < xp[lo + 1]
             if xp[lo] == x:
                 out[i] = fp[lo]
             else:
