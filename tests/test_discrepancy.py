@@ -28,9 +28,9 @@ def _tiny_dataset(rig="joint-rig") -> Dataset:
     if rig == "joint-rig":
         ins = {"motor_torque_1": 0.2 + 0.05 * w, "motor_torque_2": 0.2 - 0.05 * w}
         outs = {"motor_angle_1": 0.3 + 0.01 * w, "motor_angle_2": 0.3 - 0.01 * w, "tendon_force_1": 30 + w,
-                "tendon_force_2": 30 - w, "link_angle": 0.01 * w}
+                "tendon_force_2": 30 - w, "joint_angle": 0.01 * w}
         init = {k: 0.0 for k in ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
-                                 "link_angle", "link_velocity")}
+                                 "joint_angle", "joint_velocity")}
         params = dict(JOINT)
     else:
         ins = {"motor_torque": 0.2 + 0.05 * w}
@@ -71,16 +71,16 @@ def _set_cell(lines, row, col, value):
 
 
 @pytest.mark.parametrize("csv_edit,json_edit,message", [
-    (lambda L: [L[0].replace("link_angle", "link_angel")] + L[1:], None, "unknown column 'link_angel'"),
+    (lambda L: [L[0].replace("joint_angle", "link_angel")] + L[1:], None, "unknown column 'link_angel'"),
     (lambda L: [",".join(L[0].split(",")[:-1])] + [",".join(r.split(",")[:-1]) for r in L[1:]], None,
-     "missing column 'link_angle'"),
+     "missing column 'joint_angle'"),
     (lambda L: _set_cell(L, 5, 0, "0.0035"), None, "row 6: time step"),
     (lambda L: _set_cell(L, 6, 0, "0.0"), None, "row 7: time is not increasing"),
     (lambda L: _set_cell(L, 8, 3, "nan"), None, "row 9, column 'motor_angle_1'"),
     (None, lambda m: m["parameters"].pop("link_inertia"), "missing parameter 'link_inertia'"),
     (None, lambda m: m.update(rig="finger"), "unknown rig 'finger'"),
     (None, lambda m: m["parameters"].update(motor_inertia=-1.0), "'motor_inertia' = -1.0 must be > 0"),
-    (None, lambda m: m["initial_state"].pop("link_velocity"), "initial_state misses 'link_velocity'"),
+    (None, lambda m: m["initial_state"].pop("joint_velocity"), "initial_state misses 'joint_velocity'"),
 ])
 def test_load_rejects_malformed_data_naming_the_place(tmp_path, csv_edit, json_edit, message):
     path = _corrupt(tmp_path, csv_edit, json_edit)
