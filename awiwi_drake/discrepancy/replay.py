@@ -26,6 +26,7 @@ import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from scipy.signal import savgol_coeffs, savgol_filter
 
+from awiwi_drake.components.friction import dahl_path
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
 from . import laws
@@ -33,7 +34,7 @@ from .catalog import PARAM_INDEX
 from .data import Dataset
 from .model import DiscrepancyModel_, NominalParameters
 
-__all__ = ["ReplayEngine", "Projection", "project", "noise_floor"]
+__all__ = ["ReplayEngine", "Projection", "project", "noise_floor", "play"]
 
 
 def noise_floor(y: np.ndarray) -> float:
@@ -48,6 +49,16 @@ def noise_floor(y: np.ndarray) -> float:
         return 0.0
     mad = np.median(np.abs(d3 - np.median(d3))) * 1.4826
     return float(mad / np.sqrt(20.0))
+
+
+def play(x: np.ndarray, half_width: float) -> np.ndarray:
+    """Play operator (Prandtl-Ishlinskii stop) of half-width ``half_width``: the output follows ``x`` only once it
+    leaves ``[y - h, y + h]`` (noise smaller than the play does not reverse a loop's direction)."""
+    y, out = float(x[0]), np.empty_like(x)
+    for k, v in enumerate(x.tolist()):
+        y = min(max(y, v - half_width), v + half_width)
+        out[k] = y
+    return out
 
 
 class ReplayEngine:
@@ -159,37 +170,18 @@ class ReplayEngine:
             sig = [nom.motor_pulley_radius * self.sigma[self.out_names.index(f"motor_angle{s}")] for s in sfx]
             if nom.has_link:
                 sig = [float(np.hypot(v, nom.link_pulley_radius * noise_floor(self._q_raw))) for v in sig]
-            out = np.empty_like(self.elong)
-            for i in range(n):
-                b = 3.0 * g0 * sig[i]
-                y, row = float(self.elong[i, 0]), []
-                for x in self.elong[i].tolist():
-                    y = min(max(y, x - b), x + b)
-                    row.append(y)
-                out[i] = row
-            self._played = out
+            self._played = np.stack([play(self.elong[i], 3.0 * g0 * sig[i]) for i in range(n)])
         return self._played
 
     def _dahl_history(self, length: float, initial: float = 0.0) -> np.ndarray:
         """Normalised Dahl state ``w/h`` (num_motors, N) at every sample, run on the
-        (play-filtered, smoothed) elongation from ``w = initial`` at the dataset start."""
+        (play-filtered, smoothed) elongation from ``w = initial`` at the dataset start
+        (:func:`~awiwi_drake.components.friction.dahl_path` of level 1)."""
         key = (float(length), float(initial))
         hit = self._dahl_cache.get(key)
         if hit is not None:
             return hit
-        dx = np.diff(self._played_elongation(), axis=1)
-        n, N = self.elong.shape
-        w = np.zeros((n, N))
-        for i in range(n):
-            a = np.exp(-np.abs(dx[i]) / key[0]).tolist()
-            sg = np.sign(dx[i]).tolist()
-            wi = key[1]
-            out = [wi]
-            for ak, sk in zip(a, sg):
-                if sk != 0.0:
-                    wi = sk + (wi - sk) * ak
-                out.append(wi)
-            w[i] = out
+        w = np.stack([dahl_path(x, 1.0, key[0], initial_state=key[1]) for x in self._played_elongation()])
         if len(self._dahl_cache) > 64:
             self._dahl_cache.clear()
         self._dahl_cache[key] = w
