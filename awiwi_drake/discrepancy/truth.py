@@ -59,7 +59,7 @@ from awiwi_drake.parameters.rigs import MotorPositionGains
 
 from . import laws
 from .catalog import EFFECTS
-from .data import Dataset
+from .data import RIGS, Dataset
 from .model import NominalParameters, rig_kinematics, split_state
 
 __all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "UNKNOWN_EFFECTS", "draw_truth", "make_truth_dataset",
@@ -500,16 +500,11 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
             p = truth["force_pickup"]   # amplitude in noise std (of 30 dB when noise-free)
             y = y + p["amplitude"] * sigma * np.sin(2 * np.pi * p["frequency"] * t + p["phase"])
         meas[nm] = y if snr_db is None else sensor_reading(nm, y, sigma, rng, gen)
-    inputs = {nm: Ucmd[:, i] for i, nm in enumerate(
-        ["motor_torque_1", "motor_torque_2"] if n == 2 else ["motor_torque"])}
-    init = {}
-    sn = nom.state_names()
-    for i, nm in enumerate(sn[:-n]):
-        init[nm] = float(X0[i])
+    inputs = {nm: Ucmd[:, i] for i, nm in enumerate(RIGS[rig].inputs)}
+    init = {nm: float(X0[i]) for i, nm in enumerate(nom.state_names()[:-n])}
     tag = "-".join(list(hidden) + list(unknown)) or "none"
     name = name or f"{rig}_{tag}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
-    truth_json = {k: v for k, v in truth.items()}
-    meta = {"truth": truth_json, "generator": {"snr_db": snr_db, "seed": seed,
+    meta = {"truth": dict(truth), "generator": {"snr_db": snr_db, "seed": seed,
                                                "sample_rate": gen.sample_rate, "duration": gen.duration}}
     ds = Dataset(name, rig, t, inputs, meas, params, init, meta)
     if keep_clean:
