@@ -65,7 +65,8 @@ from . import laws
 from .augment import AugmentedParameters, augmented_finger_parameters
 from .data import Dataset, finger_parameters_from_json, finger_parameters_to_json, is_finger_rig
 from .decide import separating_experiment
-from .replay import noise_floor, play
+from .finger_truth import with_loop
+from .replay import noise_floor, play_operator
 from .screen import gain_z
 
 __all__ = ["FingerResiduals", "FingerStep", "FingerDiagnosis", "diagnose_finger", "JOINT_LABELS",
@@ -529,8 +530,8 @@ def hysteresis_loop(force: np.ndarray, law, h, force_noise: float, play: float, 
     F = np.maximum(np.asarray(force, float), 1e-3)
     x = np.asarray(law.inverse_force(F), float)
     half = play * force_noise / float(np.median(np.asarray(law.stiffness(x), float)))
-    return dahl_path(play(x, half), h.width_ratio * F + h.width_offset, h.presliding_length, h.smoothing_velocity,
-                     dt)
+    return dahl_path(play_operator(x, half), h.width_ratio * F + h.width_offset, h.presliding_length,
+                     h.smoothing_velocity, dt)
 
 
 def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
@@ -740,13 +741,6 @@ def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, bas
     c.size = float(np.sqrt(np.mean((C + np.expm1(E) * f_i) ** 2)))
 
 
-def _with_loop(params, tendon: str, h: HysteresisParams):
-    """``params`` (FingerRigParams) with the hysteresis loop ``h`` on ``tendon``'s ``tendon_springs`` entry."""
-    own = dict(params.tendon_springs)
-    own[tendon] = own.get(tendon, params.spring).replace(hysteresis=h)
-    return params.replace(tendon_springs=tuple(own.items()))
-
-
 def _hysteresis_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, base_spring: np.ndarray,
                         named, rounds: int) -> float:
     """The accepted hysteresis candidate refitted as the package's loop on the finger's own motion, what is
@@ -771,7 +765,7 @@ def _hysteresis_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds
                          presliding_length=c.params["hysteresis_length"])
     best = None
     for _ in range(rounds):
-        x = fr.replay(_with_loop(named, fr.rig.tendon_names[i], h))["elongation"][i]
+        x = fr.replay(with_loop(named, fr.rig.tendon_names[i], h))["elongation"][i]
         fel = np.asarray(law.force(x), float)
 
         def columns(length):

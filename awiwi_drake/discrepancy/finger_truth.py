@@ -140,18 +140,20 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
     return tr
 
 
+def with_loop(params, tendon: str, h: HysteresisParams):
+    """``params`` (FingerRigParams) with the hysteresis loop ``h`` on ``tendon``'s ``tendon_springs`` entry."""
+    own = dict(params.tendon_springs)
+    own[tendon] = own.get(tendon, params.spring).replace(hysteresis=h)
+    return params.replace(tendon_springs=tuple(own.items()))
+
+
 def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
     p = nominal
+    tendon = _diagram(finger, p).tendon_names[truth["place"] - 1] if truth.get("place") else None
     if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
-        tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
-        own = dict(p.tendon_springs)
-        sp = own.get(tendon, p.spring)
-        hyst = HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
-        own[tendon] = sp.replace(hysteresis=hyst)
-        p = p.replace(tendon_springs=tuple(own.items()))
+        p = with_loop(p, tendon, HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"]))
     if "guide_friction" in truth:         # the package's guides (between sensor and joints) on that path only
-        tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
         g = truth["guide_friction"]
         p = p.replace(tendon_guides=tuple(dict(p.tendon_guides, **{tendon: TendonGuideParams(
             constant=g["c0"], capstan_exponent=g["mu_angle"])}).items()))

@@ -34,7 +34,7 @@ from .catalog import PARAM_INDEX
 from .data import Dataset
 from .model import DiscrepancyModel_, NominalParameters
 
-__all__ = ["ReplayEngine", "Projection", "project", "noise_floor", "play"]
+__all__ = ["ReplayEngine", "Projection", "project", "noise_floor", "play_operator"]
 
 
 def noise_floor(y: np.ndarray) -> float:
@@ -51,7 +51,7 @@ def noise_floor(y: np.ndarray) -> float:
     return float(mad / np.sqrt(20.0))
 
 
-def play(x: np.ndarray, half_width: float) -> np.ndarray:
+def play_operator(x: np.ndarray, half_width: float) -> np.ndarray:
     """Play operator (Prandtl-Ishlinskii stop) of half-width ``half_width``: the output follows ``x`` only once it
     leaves ``[y - h, y + h]`` (noise smaller than the play does not reverse a loop's direction)."""
     y, out = float(x[0]), np.empty_like(x)
@@ -170,7 +170,7 @@ class ReplayEngine:
             sig = [nom.motor_pulley_radius * self.sigma[self.out_names.index(f"motor_angle{s}")] for s in sfx]
             if nom.has_link:
                 sig = [float(np.hypot(v, nom.link_pulley_radius * noise_floor(self._q_raw))) for v in sig]
-            self._played = np.stack([play(self.elong[i], 3.0 * g0 * sig[i]) for i in range(n)])
+            self._played = np.stack([play_operator(self.elong[i], 3.0 * g0 * sig[i]) for i in range(n)])
         return self._played
 
     def _dahl_history(self, length: float, initial: float = 0.0) -> np.ndarray:
