@@ -387,11 +387,7 @@ class ReplayEngine:
         starts_w = self.starts[windows]
         K = 0 if state_perturbations is None else len(state_perturbations)
         starts = np.tile(starts_w, S + K)
-        P = np.empty((Psets.shape[1], (S + K) * W))
-        for s in range(S):
-            P[:, s * W:(s + 1) * W] = Psets[s][:, None]
-        for k in range(K):
-            P[:, (S + k) * W:(S + k + 1) * W] = Psets[0][:, None]
+        P = np.repeat(np.vstack([Psets, np.repeat(Psets[:1], K, axis=0)]).T.astype(float), W, axis=1)
         X0 = self.initial_states(starts, P)
         for k in range(K):
             X0[:, (S + k) * W:(S + k + 1) * W] += state_perturbations[k][:, None]

@@ -347,10 +347,9 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     a[m] = ms[m] / np.max(np.abs(ms[m]))
     # chirp 0.2 -> 6 Hz
     m2 = (s >= 0.3) & (s < 0.55)
-    tc = t[m2] - t[m2][0] if m2.any() else t[m2]
     if m2.any():
-        dur = tc[-1] + 1e-9
-        a[m2] = np.sin(2 * np.pi * (0.2 * tc + (6.0 - 0.2) * tc ** 2 / (2 * dur)))
+        tc = t[m2] - t[m2][0]
+        a[m2] = np.sin(2 * np.pi * (0.2 * tc + (6.0 - 0.2) * tc ** 2 / (2 * (tc[-1] + 1e-9))))
     # steps every 0.3 s
     m3 = (s >= 0.55) & (s < 0.8)
     if m3.any():
