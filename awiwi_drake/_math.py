@@ -1,11 +1,8 @@
 """Scalar-type-generic math for the law functions.
 
-The constitutive laws of awiwi_drake are written once and evaluated with
-``float`` (numpy float arrays), ``AutoDiffXd`` and, where the law allows,
-``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).
-numpy ufuncs (``np.sin``, ``np.arctan``, ``np.tanh``, ``np.sqrt``, ``np.abs``)
-already dispatch element-wise on object arrays; ``max``/``min``/``where``
-do not, so they live here.
+The laws are written once and evaluated with ``float``, ``AutoDiffXd`` and, where the law allows,
+``pydrake.symbolic.Expression`` (numpy object arrays for the latter two).  numpy ufuncs dispatch
+element-wise on object arrays; ``max``/``min``/``where`` do not, so they live here.
 """
 
 from __future__ import annotations
@@ -13,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pydrake.math as _pm
 
-__all__ = ["is_float", "scalar_value", "smax", "smin", "clip", "positive_part", "asarray_like", "zeros_like",
-           "where_positive", "Tangent"]
+__all__ = ["is_float", "scalar_value", "smax", "smin", "clip", "positive_part", "asarray_like",
+           "where_positive", "symbolic_vector", "Tangent"]
 
 
 def is_float(x) -> bool:
@@ -83,14 +80,6 @@ def asarray_like(values, like):
     return np.asarray(values, dtype=float if is_float(like) else object)
 
 
-def zeros_like(n: int, like):
-    """Length-``n`` zeros of the scalar type of ``like``."""
-    if is_float(like):
-        return np.zeros(n)
-    sample = np.ravel(np.asarray(like, dtype=object))[0]
-    return np.array([type(sample)(0.0) for _ in range(n)], dtype=object)
-
-
 def where_positive(x, a):
     """Element-wise ``a if x > 0 else 0`` for float, AutoDiffXd and Expression.
 
@@ -114,15 +103,20 @@ def where_positive(x, a):
     return out[()] if out.shape == () else out
 
 
+def symbolic_vector(prefix: str, size: int):
+    """``(variables, expressions)``: ``size`` new symbolic variables ``<prefix>0, <prefix>1, ...`` and the object
+    array of their ``Expression`` s (the inputs of a law traced on symbolic variables)."""
+    import pydrake.symbolic as _sym
+    v = [_sym.Variable(f"{prefix}{i}") for i in range(size)]
+    return v, np.array([_sym.Expression(a) for a in v], dtype=object)
+
+
 class Tangent:
     """Forward-mode pair ``(v, d)``: a value of any scalar type T and its derivative(s) ``d``.
 
-    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and
-    Expression alike. Drake's AutoDiffXd cannot nest, so a Jacobian that must itself
-    be AutoDiffXd-generic (the wrist coupling matrix ``P(q) = dh/dq`` inside a
-    routing system converted with ``ToAutoDiffXd()``, and its Hessian) needs this
-    second, outer derivative layer. numpy ufuncs on object arrays call the methods
-    ``sin``, ``cos``, ``sqrt``, ``arctan2``. Supports ``+ - * /`` and those four.
+    Differentiates a closed-form function once, exactly, for float, AutoDiffXd and Expression alike (Drake's
+    AutoDiffXd cannot nest, so an AutoDiffXd-generic Jacobian such as the wrist's ``P(q) = dh/dq`` needs this
+    outer layer).  Supports ``+ - * /`` and ``sin``, ``cos``, ``sqrt``, ``arctan2`` (numpy ufuncs call them).
     """
 
     __slots__ = ("v", "d")

@@ -13,7 +13,9 @@ For one finger (index) and the whole hand (wrist input at 0):
   at the control period (one integrator step per controller sample);
 * time of ``analysis.linearize`` (Drake ``Linearize``);
 * time of the plant's ``integration_modes`` (the fixed-step stability check ``analysis.simulate`` runs at the
-  start and at the end of every fixed-step run).
+  start and at the end of every fixed-step run, and during it within ``FIXED_STEP_CHECK_BUDGET`` of its CPU time),
+  and its share of the fixed-step closed loop run through ``simulate``: (checks during the run) x (time of one
+  check) / (the run's wall time).
 
 Real-time factor = simulated time / wall time (best of ``--repeat``).  The
 figures depend on the machine load; run on an idle core for comparable numbers.
@@ -28,6 +30,7 @@ import time
 import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 
+from awiwi_drake.analysis import SimulationDivergedError, simulate
 from awiwi_drake.analysis.linear import linearize
 from awiwi_drake.control import closed_loop, make_controller
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -47,7 +50,7 @@ def _run(diagram, context, t_final, *, fixed_step=None, accuracy=1e-4, max_step=
     wall = time.perf_counter() - t0
     x = context.get_continuous_state_vector().CopyToVector()
     if not np.all(np.isfinite(x)):
-        raise RuntimeError("benchmark simulation diverged")
+        raise SimulationDivergedError(f"benchmark simulation diverged by t = {t_final:g} s", t=t_final)
     return t_final / wall, integ.get_num_steps_taken()
 
 
@@ -92,6 +95,9 @@ def bench(target: str, sim_time: float, repeat: int) -> dict:
             rtf, steps = _run(cl.diagram, ctx, sim_time, **kw)
             best = max(best, rtf)
         out[mode], out[mode.replace("rtf", "steps")] = best, steps
+    ctx = cl.create_context(r.operating_point(), references={"joint_angle_reference": q_ref})
+    res = simulate(cl, ctx, sim_time, mode="fixed_step", step=1.0 / 3000, log=())
+    out["check_share"] = (len(res.info["stability_checks"]) - 1) * out["modes_s"] / res.info["wall_time"]
     return out
 
 
@@ -104,12 +110,13 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     rows = []
     print(f"{'target':8s} {'build s':>8s} {'lin s':>7s} {'modes s':>8s} {'open RTF':>9s} "
-          f"{'ctrl RTF':>9s} {'ctrl fixed RTF':>15s}")
+          f"{'ctrl RTF':>9s} {'ctrl fixed RTF':>15s} {'check share':>12s}")
     for target in args.targets.split(","):
         r = bench(target, args.sim_time, args.repeat)
         rows.append(r)
         print(f"{target:8s} {r['build_s']:8.2f} {r['linearize_s']:7.3f} {r['modes_s']:8.4f} "
-              f"{r['open_loop_rtf']:9.3f} {r['closed_loop_rtf']:9.3f} {r['closed_loop_fixed_step_rtf']:15.3f}",
+              f"{r['open_loop_rtf']:9.3f} {r['closed_loop_rtf']:9.3f} {r['closed_loop_fixed_step_rtf']:15.3f} "
+              f"{r['check_share']:12.2%}",
               flush=True)
     if args.json:
         with open(args.json, "w") as fh:

@@ -315,6 +315,7 @@ def case_scipy_reference(seconds, repeats):
 
 
 def _hand_like(target, seconds, repeats, params=None):
+    from awiwi_drake.analysis import SimulationDivergedError
     from awiwi_drake.control import closed_loop
     from awiwi_drake.control.joint_pd import joint_pd_controller
     from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -327,7 +328,7 @@ def _hand_like(target, seconds, repeats, params=None):
         ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
         out = _fixed_rk3(cl.diagram, ctx, seconds)
         if not np.all(np.isfinite(out[2])) or np.max(np.abs(out[2])) > 1e6:
-            raise FloatingPointError("diverged")
+            raise SimulationDivergedError(f"{target} under the joint PD diverged by t = {seconds:g} s", t=seconds)
         return out
     return _best(run, repeats)
 
@@ -352,7 +353,7 @@ def case_hand_3khz(seconds, repeats):
         try:
             cpu, wall, _ = _hand_like("hand", seconds, repeats, params=params)
             out.update({f"{key}_rtf": cpu, f"{key}_wall_rtf": wall})
-        except (FloatingPointError, RuntimeError) as exc:   # divergence of fixed-step RK3 at 3 kHz
+        except RuntimeError as exc:   # e.g. SimulationDivergedError: fixed-step RK3 at 3 kHz diverged
             out.update({f"{key}_rtf": None, f"{key}_wall_rtf": None, f"{key}_note": str(exc)})
     return out
 
@@ -362,6 +363,7 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import Adder, ConstantVectorSource, SparseMatrixGain, ZeroOrderHold
 
+    from awiwi_drake.analysis import SimulationDivergedError
     from awiwi_drake.rigs.batch import batched_joint_rig
     from awiwi_drake.parameters.rigs import MotorPositionGains
 
@@ -418,7 +420,7 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
         return out[:2] + (x_end,)
     cpu, wall, x = _best(run, max(1, repeats - 1))
     if not np.all(np.isfinite(x)):
-        raise FloatingPointError("batched run diverged")
+        raise SimulationDivergedError(f"the batched run diverged by t = {seconds:g} s", t=seconds)
     c_cpu, c_wall, x_c = _best(lambda: run(sampled=False), max(1, repeats - 1))
     return dict(batch_rig_seconds_per_cpu_second=cpu * num_copies,
                 batch_rig_seconds_per_wall_second=wall * num_copies, batch_num_copies=num_copies,

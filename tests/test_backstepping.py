@@ -384,7 +384,7 @@ def _sampled_period_map_radius(controller_factory, rate_hz=3000.0):
 
 def test_registered_joint_rig_backstepping_is_stable_at_3khz_and_unstable_without_the_damping_limit():
     """Issue 10 item 6 ("saturates and does not move" at 3 kHz): the cause was the impedance damping's link pole
-    -Kd,imp/m outside what a 3 kHz zero-order hold can follow (control/backstepping_registry.py, Kd,imp <= m f_s/4).
+    -Kd,imp/m outside what a 3 kHz zero-order hold can follow (control/catalog.py, Kd,imp <= m f_s/4).
     The registered controller's sampled loop at the thesis's 3 kHz has all poles inside the unit circle (measured
     0.993); with the limit removed (the parameter default Kd,imp = 0.01 Nm s/rad, h Kd/m = 4.6) the same loop
     has a pole outside (measured 1.81): the test fails if the cause comes back."""

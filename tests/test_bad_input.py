@@ -292,7 +292,8 @@ def test_version_and_help_exit_zero(capsys):
 
 # -------------------------------------------------------------------------------------------------------- library
 def test_library_rejects_nonsense_with_value_errors():
-    from awiwi_drake.parameters import JointRigParams, MotorParams
+    from awiwi_drake.parameters import FingerRigParams, JointRigParams, MotorParams, TendonGuideParams
+    from awiwi_drake.parameters.components import JointFrictionParams
     from awiwi_drake.rigs import joint_rig
 
     cases = [
@@ -305,6 +306,11 @@ def test_library_rejects_nonsense_with_value_errors():
         # not a TypeError from the rig's internal equilibrium function
         (lambda: joint_rig().operating_point(link_angle=0.1),
          "joint-rig.operating_point: unknown key 'link_angle'; known: pretension, joint_angle, external_torque"),
+        # a per-name override given twice would silently keep one entry: refused, naming the field and the name
+        (lambda: FingerRigParams().replace(tendon_guides=(("index_h2", TendonGuideParams()),) * 2),
+         "FingerRigParams.tendon_guides: 'index_h2' is given twice"),
+        (lambda: FingerRigParams().replace(joint_frictions=(("q21", JointFrictionParams()),) * 2),
+         "FingerRigParams.joint_frictions: 'q21' is given twice"),
     ]
     for fn, message in cases:
         with pytest.raises(ValueError, match=message.replace("(", r"\(").replace("+", r"\+")):

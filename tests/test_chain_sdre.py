@@ -66,20 +66,19 @@ def test_printed_tendon_sdre_is_one_law_equal_to_drakes_lqr_on_14_9_and_the_jaco
     law = TendonSdreLaw([fmap], motor, q_diag=p.q_diag, r=p.r, design_forces=[30.0], update_period=None)
     np.testing.assert_allclose(law.initial_gain, drake_lqr(30.0), rtol=1e-9)
     printed = tendon_sdre_controller(rig, p.replace(factorisation="printed"), design_force=30.0, fmap=fmap)
-    np.testing.assert_allclose(printed.K0[0], drake_lqr(30.0), rtol=1e-9)
+    np.testing.assert_allclose(printed.law.initial_gain, drake_lqr(30.0), rtol=1e-9)
     for f in (5.0, 40.0, 100.0):
         th = float(fmap.theta_of_force(f))
-        np.testing.assert_allclose(printed.gain_at(np.array([th, 0.0]), np.array([r_m * f]))[0], drake_lqr(f),
-                                   rtol=1e-9)
-    slack = printed.gain_at(np.array([fmap.slack_angle - 0.1, 0.0]), np.zeros(1))[0]
+        np.testing.assert_allclose(printed.law.gains_at({"motor_angle": np.array([th])}), drake_lqr(f), rtol=1e-9)
+    slack = printed.law.gains_at({"motor_angle": np.array([fmap.slack_angle - 0.1])})
     np.testing.assert_allclose(slack, drake_lqr(0.0), rtol=1e-9)
     w = InitializeAutoDiff(np.zeros(1))[0, 0]
     slope = -motor_friction_torque(w, motor).derivatives()[0]       # d(friction)/d(omega) at rest [Nm s/rad]
     assert slope > 1.0                                              # (3.8) at rest: ~5.6 Nm s/rad
     jac = tendon_sdre_controller(rig, p, design_force=30.0, fmap=fmap)
     kt, kw = tendon_sdre_gains(r_m * fmap.alpha_of_force(30.0), B, p.q_diag, p.r, damping=slope)
-    np.testing.assert_allclose([kt, kw], jac.K0[0], rtol=1e-9)
-    assert abs(jac.K0[0, 1] - printed.K0[0, 1]) > 1.0                # the friction slope moves K_omega (6.0 vs 10.2)
+    np.testing.assert_allclose([kt, kw], jac.law.initial_gain, rtol=1e-9)
+    assert abs(jac.law.initial_gain[1] - printed.law.initial_gain[1]) > 1.0                # the friction slope moves K_omega (6.0 vs 10.2)
 
 
 def test_the_gain_follows_the_state_through_the_springs_slope():
@@ -112,7 +111,8 @@ def test_the_gain_follows_the_state_through_the_springs_slope():
 
 
 def test_tendon_sdre_system_converts_holds_and_refreshes_its_gain_and_names_a_bad_reference():
-    """``TendonSdreController_``: the compiled float path equals the law as written, AutoDiffXd conversion (values equal, the derivative by the measured forces equals
+    """``TendonSdreController_``: the compiled float path equals the law as written (the measured force or the motor
+    angle as the state), AutoDiffXd conversion (values equal, the derivative by the measured forces equals
     finite differences of the float system), the periodic update re-solves the gain at the measured forces, and a
     reference outside a tendon's table names that tendon.  A bank of 8 tendons on two spring laws (the hand's lever
     mechanism with and without the tendon's elasticity in series), alternating."""
@@ -136,6 +136,14 @@ def test_tendon_sdre_system_converts_holds_and_refreshes_its_gain_and_names_a_ba
         u = dict(vals, **{SDRE_GAIN: k})
         np.testing.assert_allclose(law(u), law.evaluate(u), rtol=0, atol=1e-12 * np.abs(law.evaluate(u)).max())
     assert law.__dict__.get("_kernel") is not None
+    # the same bank with the motor angle as each tendon's state (the tendon rig's form): compiled = as written too
+    by_angle = TendonSdreLaw(maps, p.motor, q_diag=law.q_diag, r=law.r, design_forces=np.full(m, 20.0),
+                             update_period=None, ripple_scale=1.0, path_velocity=True, state="motor_angle")
+    u = {nm: v for nm, v in vals.items() if nm != "tendon_force"}
+    u[SDRE_GAIN] = by_angle.initial_gain
+    np.testing.assert_allclose(by_angle(u), by_angle.evaluate(u), rtol=0,
+                               atol=1e-12 * np.abs(by_angle.evaluate(u)).max())
+    assert by_angle.__dict__.get("_kernel") is not None and "tendon_force" not in by_angle.inputs
     ctx = sys_.CreateDefaultContext()
     for nm, v in vals.items():
         sys_.GetInputPort(nm).FixValue(ctx, v)

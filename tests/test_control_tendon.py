@@ -11,7 +11,7 @@ from awiwi_drake.control.base import closed_loop
 from awiwi_drake.analysis import Samples, Step, simulate
 from awiwi_drake.control.compare import fit_second_order_step
 from awiwi_drake.control.sensors import force_sensor
-from awiwi_drake.control.sdre import tendon_sdre_controller
+from awiwi_drake.control.sdre import SDRE_GAIN, tendon_sdre_controller
 from awiwi_drake.control.tendon_force import (TendonForceLaw, force_map, steady_state_force_without_feedforward,
                                               tendon_pd_controller, tendon_scheduled_controller)
 from awiwi_drake.parameters import MotorParams, TendonRigParams
@@ -136,9 +136,10 @@ def test_tendon_force_references_outside_the_table_are_rejected(fmap):
     with pytest.raises(ValueError, match="design_force"):
         TendonForceLaw(fmap, tendon_rig().params.motor, TendonForceGains(design_force=1e4))
     assert fmap.theta_of_force(0.0) == pytest.approx(fmap.slack_angle)
-    sdre = tendon_sdre_controller(tendon_rig(), fmap=fmap)
+    law = tendon_sdre_controller(tendon_rig(), fmap=fmap).law
     with pytest.raises(ValueError, match="tendon_force_reference"):
-        sdre.model.equilibrium(-2.0)
+        law({"tendon_force_reference": np.array([-2.0]), "motor_angle": np.array([0.5]),
+             "motor_velocity": np.zeros(1), SDRE_GAIN: law.initial_gain})
 
 
 def test_tendon_force_bank_equals_the_one_tendon_law_per_tendon_and_names_a_bad_entry(fmap):
@@ -170,8 +171,9 @@ def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fma
     ctrl = tendon_sdre_controller(rig, p, design_force=30.0, fmap=fmap)
     op = rig.operating_point(tendon_force=30.0)
     ref = lqr(tendon_rig(), np.diag(p.q_diag), [[p.r]], op)  # the framework's LQR at the same point
-    np.testing.assert_allclose(ctrl.K0, ref.K, rtol=1e-6)
-    np.testing.assert_allclose(ctrl.gain_at(op.state, op.motor_torque), ref.K, rtol=1e-6)
+    np.testing.assert_allclose(ctrl.law.initial_gain, ref.K[0], rtol=1e-6)
+    at_op = {"tendon_force_reference": [30.0], "motor_angle": op.state[:1], "motor_velocity": op.state[1:2]}
+    np.testing.assert_allclose(ctrl.law.gains_at(at_op), ref.K[0], rtol=1e-6)
     # Fig 14.3: 0 -> 40 -> 45 N with SDRE and with the frozen gains
     limit = rig.params.motor.torque_limit
     period = int(round(3000.0 / p.update_rate))  # 15 control periods per gain refresh
@@ -183,8 +185,8 @@ def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fma
                                   references={"tendon_force_reference": 0.0})
         ref = Samples([0.0, 0.05, 0.3], [0.0, 40.0, 45.0])
         log = simulate(loop, ctx, 0.6, inputs={"tendon_force_reference": ref}, log_period=DT,
-                       log=("tendon_force", "controller_gain", "motor_torque_command", "state"))
-        f, K, u = log["tendon_force"][:, 0], log["controller_gain"], log["motor_torque_command"][:, 0]
+                       log=("tendon_force", f"controller_{SDRE_GAIN}", "motor_torque_command", "state"))
+        f, K, u = log["tendon_force"][:, 0], log[f"controller_{SDRE_GAIN}"], log["motor_torque_command"][:, 0]
         # both settle at the targets: within 0.5 N from 0.2 s after each step, to 0.01 N at the end
         t = log.t
         assert np.max(np.abs(f[(t > 0.25) & (t < 0.3)] - 40.0)) < 0.5
@@ -201,8 +203,8 @@ def test_tendon_sdre_gain_equals_lqr_refreshes_at_200_hz_and_settles_0_40_45(fma
         assert len(changes) > 10 and np.all((changes - 1) % period == 0), changes
         for i in changes[:: max(1, len(changes) // 12)]:
             x = log["state"][i - 1, :2]  # state at the refresh instant (continuous across it)
-            _, u_ref = loop.controller.model.equilibrium(ref.value(t[i - 1]))
-            np.testing.assert_allclose(K[i], loop.controller.gain_at(x, u_ref).ravel(), rtol=1e-9)
+            sample = {"tendon_force_reference": [ref.value(t[i - 1])], "motor_angle": x[:1], "motor_velocity": x[1:]}
+            np.testing.assert_allclose(K[i], loop.controller.law.gains_at(sample), rtol=1e-9)
 
 
 def test_tendon_controllers_convert_to_autodiff(fmap):
@@ -259,7 +261,7 @@ def test_sdre_printed_14_9_gains_do_not_depend_on_the_spring_and_friction_moves_
         Bv = np.array([[0.0], [1.0 / B]])
         S = solve_continuous_are(A, Bv, Q, R)
         K_indep = (Bv.T @ S / p.r).ravel()
-        K_printed = printed.gain_at(np.array([th, 0.0]), np.array([r_m * f])).ravel()
+        K_printed = printed.law.gains_at({"motor_angle": np.array([th])})
         np.testing.assert_allclose(K_printed, K_indep, rtol=1e-3)
         gains.append(K_printed)
         K_rest = lqr_gain(*jac([th, 0.0], [r_m * f]), Q, R)[0].ravel()

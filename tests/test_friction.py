@@ -142,9 +142,10 @@ def test_joint_friction_bound_is_the_largest_torque_of_the_unmeasured_frictions(
     Slack (negative) forces count as 0; w = 0 (the measured force holds the hysteresis: the chain) leaves the guides
     alone; AutoDiffXd passes through.  The joints' own stick-slip (``|tau_l| <= Fs_l``, :func:`stick_slip_rate`)
     adds ``|S|^T Fs`` on the DoF ``q = S w`` (a joint torque ``tau`` is ``S^T tau`` there, as the tendons' ``-(P S)^T
-    f``), attained at ``tau_l = Fs_l`` with the signs of S's column; Fs = 0 leaves the bound bit-identical."""
+    f``; :func:`joint_breakaway_bound`, computed once), attained at ``tau_l = Fs_l`` with the signs of S's column;
+    Fs = 0 is no joint term (None), the bound bit-identical."""
     from itertools import product
-    from awiwi_drake.components.friction import joint_friction_bound
+    from awiwi_drake.components.friction import joint_breakaway_bound, joint_friction_bound
     rng = np.random.default_rng(3)
     m, k = 6, 3
     A = rng.normal(0.0, 5e-3, (m, k))
@@ -175,8 +176,9 @@ def test_joint_friction_bound_is_the_largest_torque_of_the_unmeasured_frictions(
     P = rng.normal(0.0, 5e-3, (m, 4))
     S = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, -0.4, 0.8]])
     Fs = rng.uniform(0.005, 0.03, 4)
-    Bj = joint_friction_bound(P, f, C, mu, w, Fs, S)
+    Bj = joint_friction_bound(P, f, C, mu, w, joint_breakaway_bound(Fs, S), S)
     worst = np.max([np.abs(S.T @ (Fs * np.array(sj))) for sj in product((-1.0, 1.0), repeat=4)], axis=0)
     np.testing.assert_allclose(Bj - joint_friction_bound(P @ S, f, C, mu, w), worst, rtol=1e-12)
     np.testing.assert_allclose(worst, [Fs[0], Fs[1] + 0.4 * Fs[3], Fs[2] + 0.8 * Fs[3]], rtol=1e-14)
-    assert np.array_equal(joint_friction_bound(P, f, C, mu, w, np.zeros(4), S), joint_friction_bound(P @ S, f, C, mu, w))
+    assert joint_breakaway_bound(np.zeros(4), S) is None and joint_breakaway_bound(None, S) is None
+    assert np.array_equal(joint_friction_bound(P, f, C, mu, w, None, S), joint_friction_bound(P @ S, f, C, mu, w))

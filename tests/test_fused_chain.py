@@ -9,6 +9,7 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, Ini
 
 from _fd import fd_jacobian
 from awiwi_drake.analysis import simulate
+from awiwi_drake.components.friction import joint_breakaway_bound
 from awiwi_drake.control import closed_loop, controller_names, get_entry, make_controller
 from awiwi_drake.control.fused import FusedChain_
 from awiwi_drake.control.joint_design import sampled_loop_poles
@@ -222,7 +223,8 @@ def test_compiled_backstepping_equals_the_law_as_written(target, name):
     op = rig.operating_point()
     rng = np.random.default_rng(8)
     if target == "finger-thumb-capstan":           # joint levels as a plant with stick-slip joints gives them
-        law.friction_levels = (*law.friction_levels[:2], rng.uniform(0.005, 0.03, op.joint_angle.size))
+        law.friction_levels = (*law.friction_levels[:2],
+                               joint_breakaway_bound(rng.uniform(0.005, 0.03, op.joint_angle.size), law.S))
     loop = closed_loop(rig, make_controller("backstepping", rig))           # the measurements' values only
     ctx = loop.create_context(op)
     plant = loop.diagram.GetSubsystemByName("rig")

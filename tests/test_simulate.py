@@ -231,6 +231,34 @@ def test_the_context_is_advanced_and_the_diagram_can_be_simulated_again():
     assert r1.units["state"][1] == "rad/s"
 
 
+def test_every_state_of_every_rig_and_the_hand_has_its_unit():
+    """The one state-naming scheme (rigs.base.state_names) has one unit table: every state entry of every rig and of
+    the hand with all of the thesis's physics on (every finger's joints and tendons, Dahl, guide-friction and joint
+    stick-slip states) has a unit, the unit of its quantity, and simulate labels a logged state with them."""
+    from awiwi_drake import rigs
+    from awiwi_drake.analysis.results import unit
+    from awiwi_drake.hand.diagrams import hand_diagram
+    from awiwi_drake.parameters.components import HysteresisParams
+    from awiwi_drake.parameters.hand import HandRigParams
+    from awiwi_drake.parameters.rigs import JointRigParams
+    hand = hand_diagram(params=HandRigParams().with_physics(hysteresis=True, guide_friction=True, joint_friction=True))
+    link = [getattr(rigs, f)() for f in rigs.__all__ if f.endswith("_rig")]
+    p = JointRigParams()
+    link.append(rigs.joint_rig(params=p.replace(spring=p.spring.replace(hysteresis=HysteresisParams(enabled=True)))))
+    names = [n for r in link + [hand] for n in r.state_names]
+    assert {n.split("[")[0] for n in hand.state_names} == {
+        "joint_angle", "joint_velocity", "motor_angle", "motor_velocity", "hysteresis_force", "guide_friction_force",
+        "joint_friction_torque"}                         # the hand carries every kind of state the scheme names
+    assert [n for n in names if unit(n) == "-"] == []
+    by_kind = {n.split("[")[0]: unit(n) for n in names}
+    assert by_kind == {"joint_angle": "rad", "joint_velocity": "rad/s", "motor_angle": "rad", "motor_velocity": "rad/s",
+                       "hysteresis_force": "N", "guide_friction_force": "N", "joint_friction_torque": "Nm"}
+    rig = link[-1]
+    res = simulate(rig, rig.context(rig.operating_point(pretension=20.0)), 1e-3)
+    assert res.labels["state"] == list(rig.state_names) and res.units["state"] == [unit(n) for n in rig.state_names]
+    assert res.units["state"][-1] == "N"                 # hysteresis_force[1]
+
+
 def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
     rig = joint_rig()
     op = rig.operating_point(pretension=20.0)
@@ -265,9 +293,59 @@ def test_results_save_load_and_plot_with_units_and_legends(tmp_path):
         SimulationResult.load(tmp_path / "missing.npz")
 
 
-def test_one_simulation_loop_and_one_divergence_error():
+def _divergence_error_misuses(folders) -> list:
+    """``file:line: what`` for every place under ``folders`` that raises ``FloatingPointError``, raises a bare
+    ``RuntimeError`` whose message speaks of divergence, or re-wraps a divergence: an ``except`` that catches
+    ``SimulationDivergedError``/``SimulationError``/``PHYSICAL_FAILURES`` (or ``RuntimeError``/``Exception`` around a
+    ``simulate``/``AdvanceTo`` call) and raises anything but that exception or a ``SimulationDivergedError``."""
+    import ast
+    import pathlib
+
+    def names(node):
+        return {n.id if isinstance(n, ast.Name) else n.attr for n in ast.walk(node) if isinstance(n, (ast.Name, ast.Attribute))}
+
+    def raised(node):      # the raised class's name, or None for a bare raise / a raised variable
+        exc = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+        return None if exc is None else (exc.id if isinstance(exc, ast.Name) else getattr(exc, "attr", None))
+
+    def text(node):
+        return " ".join(str(c.value) for c in ast.walk(node) if isinstance(c, ast.Constant))
+
+    found = []
+    for path in sorted(p for folder in folders for p in pathlib.Path(folder).rglob("*.py")):
+        src = path.read_text()
+        if not any(k in src for k in ("FloatingPointError", "iverg", "Simulation", "PHYSICAL_FAILURES", "AdvanceTo",
+                                      "simulate")):
+            continue        # none of what the scan looks for: not parsed
+        tree = ast.parse(src)
+        where = f"{path.parent.name}/{path.name}"
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                kind = raised(node)
+                if kind == "FloatingPointError" or (kind == "RuntimeError" and "diverg" in text(node.exc).lower()):
+                    found.append(f"{where}:{node.lineno}: raise {kind}")
+            if not isinstance(node, ast.Try):
+                continue
+            runs = {"simulate", "AdvanceTo"} & names(ast.Module(body=node.body, type_ignores=[]))
+            passed_on = False       # an earlier handler of this try already took the divergence
+            for h in node.handlers:
+                caught = names(h.type) if h.type is not None else {"BaseException"}
+                ours = caught & {"SimulationDivergedError", "SimulationError", "PHYSICAL_FAILURES"}
+                if not (ours or (runs and not passed_on and caught & {"RuntimeError", "Exception", "BaseException"})):
+                    continue
+                passed_on = passed_on or bool(ours)
+                for r in (n for stmt in h.body for n in ast.walk(stmt) if isinstance(n, ast.Raise)):
+                    kind = raised(r)
+                    if kind is not None and kind != "SimulationDivergedError" and not (
+                            isinstance(r.exc, ast.Name) and r.exc.id == h.name):
+                        found.append(f"{where}:{r.lineno}: a caught divergence re-raised as {kind}")
+    return found
+
+
+def test_one_simulation_loop_and_one_divergence_error(tmp_path):
     """Architecture (issue 9): the package drives Drake's Simulator in one place (plus the batched
-    discrepancy replay) and defines one SimulationDivergedError."""
+    discrepancy replay) and defines one SimulationDivergedError, which nothing re-wraps (the scan is shown to
+    find each misuse in a planted file first)."""
     import pathlib
 
     import awiwi_drake
@@ -280,6 +358,18 @@ def test_one_simulation_loop_and_one_divergence_error():
     errors = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
                     if "class SimulationDivergedError" in p.read_text())
     assert errors == ["analysis/simulate.py"]
+    # ... and that one error in practice: divergence is never re-wrapped (caught and raised as another type) nor
+    # raised as FloatingPointError or a bare RuntimeError, in the package or the benchmarks
+    (tmp_path / "planted.py").write_text(
+        "try:\n    simulate(d, c, 1.0)\nexcept SimulationDivergedError as exc:\n    raise FloatingPointError(str(exc))\n"
+        "try:\n    sim.AdvanceTo(1.0)\nexcept RuntimeError as exc:\n    raise ValueError(str(exc))\n"
+        "try:\n    simulate(d, c, 1.0)\nexcept SimulationDivergedError:\n    raise\nexcept RuntimeError as exc:\n"
+        "    raise SimulationError(str(exc))\n"
+        "raise RuntimeError('the run diverged')\nraise RuntimeError('no port')\n")
+    assert sorted(_divergence_error_misuses([tmp_path])) == sorted(f"{tmp_path.name}/planted.py:{what}" for what in (
+        "4: a caught divergence re-raised as FloatingPointError", "4: raise FloatingPointError",
+        "8: a caught divergence re-raised as ValueError", "15: raise RuntimeError"))
+    assert _divergence_error_misuses([pkg, pkg.parent / "benchmarks"]) == []
     # one closed-loop builder: ClosedLoop handles come from control.closed_loop only
     handles = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
                      if "ClosedLoop(" in p.read_text().replace("class ClosedLoop(", ""))

@@ -147,42 +147,90 @@ def test_substeps_is_validated():
 
 @TemplateSystem.define("StiffeningOscillator_")
 def StiffeningOscillator_(T):
-    """``x'' = -w^2 x`` with ``w = w0 + s`` and ``s' = rate`` (state ``[x, v, s]``): a mode ``+-i w`` that moves
-    along the imaginary axis as the run goes; ``integration_modes`` is its Jacobian's eigenvalues in closed form."""
+    """``x'' = -w^2 x`` with ``w = w0 + s``, ``s' = rate + p``, ``p' = -swing^2 s`` (state ``[x, v, s, p]``): a mode
+    ``+-i w`` that moves along the imaginary axis as the run goes (drifting, or swinging ``s = (p0 / swing)
+    sin(swing t)``); ``integration_modes`` is its Jacobian's eigenvalues in closed form (block triangular:
+    ``+-i w``, ``+-i swing``)."""
 
     class Impl(LeafSystem_[T]):
-        def _construct(self, w0=1.0, rate=0.0, converter=None):
+        def _construct(self, w0=1.0, rate=0.0, swing=0.0, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self.w0, self.rate = float(w0), float(rate)
-            self.DeclareContinuousState(3)
+            self.w0, self.rate, self.swing = float(w0), float(rate), float(swing)
+            self.DeclareContinuousState(4)
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.w0, other.rate, converter=converter)
+            Impl._construct(self, other.w0, other.rate, other.swing, converter=converter)
 
         def DoCalcTimeDerivatives(self, context, derivatives):
-            x, v, s = context.get_continuous_state_vector().CopyToVector()
+            x, v, s, p = context.get_continuous_state_vector().CopyToVector()
             w = self.w0 + s
-            derivatives.SetFromVector(np.array([v, -w * w * x, self.rate]))
+            derivatives.SetFromVector(np.array([v, -w * w * x, self.rate + p, -self.swing ** 2 * s]))
 
         def integration_modes(self, context):
             w = self.w0 + context.get_continuous_state_vector().GetAtIndex(2)
-            return np.array([1j * w, -1j * w, 0.0])
+            return np.array([1j * w, -1j * w, 1j * self.swing, -1j * self.swing])
 
     return Impl
 
 
-def test_a_mode_that_leaves_the_region_during_the_run_is_an_event_at_its_end():
-    """Inside at the start (``h w = 1.5 < sqrt(3)``: no substeps), outside at the end (``h w = 2.0``): the end-state check
-    reports an ``integrator_instability`` event with ``|R(2i)| = sqrt(1 - 16/12 + 64/36)`` and warns."""
+def test_a_mode_that_leaves_the_region_during_the_run_is_an_event_to_its_end():
+    """Inside at the start (``h w = 1.5 < sqrt(3)``: no substeps), outside at the end (``h w = 2.0``): an
+    ``integrator_instability`` event from a check after the crossing ``h w = sqrt(3)`` to the end, with
+    ``|R(2i)| = sqrt(1 - 16/12 + 64/36)`` there, and a warning."""
     t_final = 0.05
     osc = StiffeningOscillator_[float](w0=1.5 / H, rate=0.5 / H / t_final)
     ctx = osc.CreateDefaultContext()
-    ctx.SetContinuousState([1e-3, 0.0, 0.0])
+    ctx.SetContinuousState([1e-3, 0.0, 0.0, 0.0])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         res = simulate(osc, ctx, t_final, mode="fixed_step", step=H, log=())
     assert res.info["substeps"] == 1
     (event,) = res.events
-    assert event.kind == "integrator_instability" and event.t_start == pytest.approx(t_final)
+    t_cross = (np.sqrt(3) - 1.5) / 0.5 * t_final
+    assert event.kind == "integrator_instability" and t_cross <= event.t_start <= event.t_end == pytest.approx(t_final)
     assert event.extreme == pytest.approx(np.sqrt(1 - 16 / 12 + 64 / 36), rel=1e-6)
     assert any("outside runge_kutta3's stability region" in str(w.message) for w in caught)
+
+
+def test_a_mode_that_leaves_the_region_and_comes_back_during_the_run_is_an_event_between_the_checks(monkeypatch,
+                                                                                                    tmp_path):
+    """``h w = 1.5 + 0.25 sin(swing t)`` over half a swing: inside at the start and at the end, outside (``h w >
+    sqrt(3)``) for ``sin(swing t) > (sqrt(3) - 1.5) / 0.25``.  Checked at every chunk boundary (unlimited budget): one
+    event from the first to the last checked instant in that window, ``|R|`` the largest at those instants (closed
+    form on the imaginary axis); within the default budget (1 % of the wall time) the event lies in the window.  The
+    fastest mode is saved to JSON as numbers ``[real, imag]``."""
+    import importlib
+    import json
+    sim_module = importlib.import_module("awiwi_drake.analysis.simulate")   # the attribute is the function
+
+    swing, t_final, a = np.pi / 2, 2.0, 0.25          # half a swing: s = 0 at both ends
+    window = np.array([np.arcsin((np.sqrt(3) - 1.5) / a), np.pi - np.arcsin((np.sqrt(3) - 1.5) / a)]) / swing
+
+    def run():
+        osc = StiffeningOscillator_[float](w0=1.5 / H, swing=swing)
+        ctx = osc.CreateDefaultContext()
+        ctx.SetContinuousState([1e-3, 0.0, 0.0, a / H * swing])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = simulate(osc, ctx, t_final, mode="fixed_step", step=H, log=())
+        assert res.info["substeps"] == 1 and any("from t = " in str(w.message) for w in caught)
+        return res
+
+    def growth(t):
+        return stability_function("runge_kutta3", 1j * (1.5 + a * np.sin(swing * np.asarray(t))))
+
+    with monkeypatch.context() as m:
+        m.setattr(sim_module, "FIXED_STEP_CHECK_BUDGET", np.inf)
+        res = run()
+    checked = np.array(res.info["stability_checks"])
+    assert checked.size >= 40 and checked[-1] == t_final
+    out = checked[(checked > window[0]) & (checked < window[1])]
+    (event,) = res.events
+    assert (event.t_start, event.t_end) == (out[0], out[-1])
+    assert event.extreme == pytest.approx(growth(out).max(), rel=1e-9) and 1.0 < event.extreme <= growth(t_final / 2)
+    res = run()                       # the default budget: fewer checks, the same event inside the window
+    (event,) = res.events
+    assert window[0] < event.t_start <= event.t_end < window[1] and event.extreme > 1.0
+    res.save(tmp_path / "run.npz")
+    mode = json.loads((tmp_path / "run.npz.json").read_text())["info"]["fastest_mode"]["mode"]
+    assert mode == [0.0, pytest.approx(1.5 / H)]

@@ -12,38 +12,32 @@ import numpy as np
 
 from awiwi_drake.analysis.monitors import Event
 
-__all__ = ["SimulationResult", "PORT_UNITS", "port_unit", "state_unit", "checked_path"]
+__all__ = ["SimulationResult", "UNITS", "unit", "checked_path"]
 
-#: Units of the package's port names (ARCHITECTURE.md: ports are physical quantities, SI).
-PORT_UNITS = {
+#: Units of the package's quantities by name: its ports (ARCHITECTURE.md: ports are physical quantities, SI) and the
+#: base names of the one state-naming scheme (``rigs.base.state_names``: ``name[label]``).
+UNITS = {
     "motor_torque": "Nm", "motor_torque_command": "Nm", "applied_torque": "Nm", "external_torque": "Nm",
-    "joint_torque": "Nm", "generalized_force": "Nm", "load_torque": "Nm",
-    "tendon_force": "N", "tendon_stiffness": "N/m", "elongation": "m", "tendon_velocity": "m/s",
+    "joint_torque": "Nm", "generalized_force": "Nm", "load_torque": "Nm", "joint_friction_torque": "Nm",
+    "tendon_force": "N", "hysteresis_force": "N", "guide_friction_force": "N",
+    "tendon_stiffness": "N/m", "elongation": "m", "tendon_velocity": "m/s",
     "joint_angle": "rad", "motor_angle": "rad",
     "joint_velocity": "rad/s", "motor_velocity": "rad/s",
     "joint_stiffness": "Nm/rad", "wrist_angle": "rad", "wrist_velocity": "rad/s",
 }
 
 
-def state_unit(name: str) -> str:
-    """Unit of a state entry from its name (angles [rad], velocities [rad/s])."""
-    n = name.lower()
-    if any(k in n for k in ("dot", "omega", "velocity", "_v", "speed")):
-        return "rad/s"
-    if any(k in n for k in ("q", "theta", "angle", "phi")):
-        return "rad"
-    return "-"
-
-
-def port_unit(name: str) -> str:
-    """Unit of a port by name (``*_reference`` and ``controller_*`` take the quantity's unit); ``-`` if unknown."""
-    base = name
+def unit(name: str) -> str:
+    """Unit of a port or state entry by name (``UNITS``): a state entry ``name[label]`` by its base name,
+    ``*_reference``/``*_command``/``*_measured``/``*_estimate`` and ``controller_*`` by the quantity's; ``-`` if
+    the name is none of the package's."""
+    base = name.split("[", 1)[0]
     for suffix in ("_reference", "_command", "_measured", "_estimate"):
-        if base.endswith(suffix) and base[: -len(suffix)] in PORT_UNITS:
+        if base.endswith(suffix) and base[: -len(suffix)] in UNITS:
             base = base[: -len(suffix)]
     if base.startswith("controller_"):
         base = base[len("controller_"):]
-    return PORT_UNITS.get(base, "-")
+    return UNITS.get(base, "-")
 
 
 def checked_path(path, owner: str, suffixes: Sequence[str] = (), *, read: bool = False) -> Path:
@@ -76,6 +70,8 @@ def _jsonable(v: Any):
         return [_jsonable(x) for x in v]
     if v is None or isinstance(v, (bool, int, str)):
         return v
+    if isinstance(v, (complex, np.complexfloating)):     # e.g. info["fastest_mode"]["mode"]: [real, imag]
+        return [_jsonable(float(v.real)), _jsonable(float(v.imag))]
     return str(v)
 
 
@@ -168,7 +164,8 @@ class SimulationResult:
     def save(self, path: str | Path) -> Path:
         """Write ``path`` (``.npz``: arrays; ``.csv``: one column per channel) and ``path + '.json'`` (units, labels, events, info).
 
-        Returns the data file's path.  The directory must exist.
+        Returns the data file's path.  The directory must exist.  A complex number in ``info`` (the fastest mode) is
+        written as ``[real, imag]``.
         """
         path = checked_path(path, "SimulationResult.save", (".npz", ".csv"))
         meta = self._meta()

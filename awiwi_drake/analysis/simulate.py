@@ -33,8 +33,14 @@ a closed loop: anything with a ``diagram`` attribute works too), and
   makes the run integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
   ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
   unchanged), with a one-line warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``substeps=1`` refuses
-  (a ``ValueError`` naming the mode and ``|R|``), ``substeps=k`` imposes ``k``.  The check is repeated at the
-  end state: a mode that left the region during the run is an ``integrator_instability`` event;
+  (a ``ValueError`` naming the mode and ``|R|``), ``substeps=k`` imposes ``k``.  The check is repeated during the
+  run at the progress-chunk boundaries whenever the checks' CPU time (the next predicted by the cheapest so far)
+  stays within ``parameters.control.FIXED_STEP_CHECK_BUDGET`` of the run's so far (about every 0.25 s of a cascaded
+  hand run, most chunks of a small Python plant; the first run of a plant in a process pays the loading of its
+  compiled kernels in its start check and is checked less), and at the end state: a mode outside the region at the
+  step taken is an ``integrator_instability`` event from the first to the last check that found it outside
+  (``extreme`` the largest ``|R|``), with a warning; ``info["stability_checks"]`` lists the checked times (they
+  follow the machine's speed: the trajectory does not depend on them, an excursion between two checks is missed);
 * calls ``progress(t, duration)`` (simulated seconds since the start) after
   every chunk, for progress bars.
 
@@ -61,10 +67,10 @@ from pydrake.systems.primitives import ConstantVectorSource, LogVectorOutput
 
 from awiwi_drake.analysis.monitors import Monitor
 from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCHEME
-from awiwi_drake.analysis.results import SimulationResult, port_unit, state_unit
+from awiwi_drake.analysis.results import SimulationResult, unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 from awiwi_drake.analysis.monitors import Event
-from awiwi_drake.parameters.control import FIXED_STEP_STABILITY_MARGIN
+from awiwi_drake.parameters.control import FIXED_STEP_CHECK_BUDGET, FIXED_STEP_STABILITY_MARGIN
 
 __all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
            "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants", "FlatSystem", "add_flat",
@@ -573,7 +579,9 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: substeps = {substeps} needs a fixed-step run of a continuous plant (the run is "
                          + (f"{mode})" if mode != "fixed_step" else f"a sampled plant's, {sampled[0].get_name()!r})"))
     n_sub, worst = 1, None
+    check_cost = time.process_time()
     modes = _plant_modes(sub, root) if integrator in _TAYLOR_ORDER and mode == "fixed_step" else []
+    check_cost = time.process_time() - check_cost
     for leaf_name, lam in modes:     # the plant needing the most substeps (0: none suffices), then the largest |R|
         k, mode_k, growth = fixed_step_substeps(lam, h, integrator)
         if worst is None or ((k or math.inf), growth) > ((worst[1] or math.inf), worst[3]):
@@ -664,13 +672,40 @@ def simulate(system, context: Context | None, t_final: float, *,
                 raise SimulationEventError(f"{e.kind} on {e.channel} at t = {e.t_start:.6g} s (value {e.extreme:.6g})",
                                            kind=e.kind, t=e.t_start)
 
-    wall = time.perf_counter()
+    outside, excursions, checked = {}, [], []   # leaf -> [t first, t last, |R| max, mode]; closed ones; check times
+
+    def check_modes(t_now: float):
+        """The plants' modes at the current state against the region at the step taken (the end check's rule)."""
+        now = {}
+        for leaf_name, lam in _plant_modes(sub, root):
+            excess = _excess(integrator, h * lam)
+            i = int(np.argmax(excess))
+            if excess[i] > 1e-9:
+                now[leaf_name] = (float(stability_function(integrator, h * lam[i])), complex(lam[i]))
+        for leaf_name in [nm for nm in outside if nm not in now]:
+            excursions.append((leaf_name, *outside.pop(leaf_name)))
+        for leaf_name, (growth, lam) in now.items():
+            e = outside.setdefault(leaf_name, [t_now, t_now, growth, lam])
+            e[1] = t_now
+            if growth > e[2]:
+                e[2:] = [growth, lam]
+        checked.append(t_now)
+
+    # checks during the run while their CPU time (the next predicted by the cheapest so far: a machine's load does not
+    # stretch it as it does wall time) stays within the budget of the run's
+    wall, cpu, spent = time.perf_counter(), time.process_time(), 0.0
     try:
         sim.Initialize()
         for tb in bounds:
             sim.AdvanceTo(tb)
             check_state(tb)
             check_events()
+            if (modes and tb < bounds[-1]
+                    and spent + check_cost <= FIXED_STEP_CHECK_BUDGET * (time.process_time() - cpu)):
+                c0 = time.process_time()
+                check_modes(tb)
+                spent += time.process_time() - c0
+                check_cost = min(check_cost, time.process_time() - c0)
             if progress is not None:
                 progress(tb - start, duration)
     except (SimulationDivergedError, SimulationEventError):
@@ -695,25 +730,25 @@ def simulate(system, context: Context | None, t_final: float, *,
         signals[label] = v
         port_name = label if isinstance(label, str) else str(label)
         if port_name == "state" and len(state_names) == v.shape[1]:
-            units[label] = [state_unit(n) for n in state_names]
+            units[label] = [unit(n) for n in state_names]
             labels[label] = list(state_names)
         else:
-            units[label] = port_unit(port_name)
+            units[label] = unit(port_name)
             labels[label] = [f"{port_name}[{j}]" for j in range(v.shape[1])] if v.shape[1] > 1 else [port_name]
     if t is None:
         t = read(watched[0][1])[0] if watched else np.array([start, float(t_final)])
     events = []
     for m, s in watched:
         events.extend(m.events(*read(s)))
-    for leaf_name, lam in (_plant_modes(sub, root) if modes else []):   # the same check at the end state
-        excess = _excess(integrator, h * lam)
-        i = int(np.argmax(excess))
-        if excess[i] > 1e-9:
-            growth = float(stability_function(integrator, h * lam[i]))
-            events.append(Event("integrator_instability", leaf_name, float(t_final), float(t_final), growth))
-            warnings.warn(f"simulate: at t = {float(t_final):.6g} s {leaf_name!r} has the mode {_mode_text(complex(lam[i]))} "
-                          f"outside {integrator}'s stability region at h = {h:.6g} s (|R| = {growth:.5g}): the run's "
-                          f"end is not trustworthy; give more substeps or mode='error_controlled'", stacklevel=2)
+    if modes:                                   # the same check at the end state closes every excursion
+        check_modes(float(t_final))
+        excursions.extend((nm, *e) for nm, e in outside.items())
+    for leaf_name, t0, t1, growth, lam in excursions:
+        events.append(Event("integrator_instability", leaf_name, t0, t1, growth))
+        warnings.warn(f"simulate: from t = {t0:.6g} to {t1:.6g} s (checked at {len(checked)} instants) {leaf_name!r} "
+                      f"had the mode {_mode_text(lam)} outside {integrator}'s stability region at h = {h:.6g} s "
+                      f"(|R| up to {growth:.5g}): the run is not trustworthy from there; give more substeps or "
+                      f"mode='error_controlled'", stacklevel=2)
     events.sort(key=lambda e: (e.t_start, e.kind, e.channel))
     limits = {}   # thresholds of monitors watching a logged signal, drawn by SimulationResult.plot
     for m, s in watched:
@@ -724,6 +759,7 @@ def simulate(system, context: Context | None, t_final: float, *,
                 substeps=n_sub if mode == "fixed_step" else None,
                 fastest_mode=None if worst is None else dict(system=worst[0], mode=worst[2], growth=worst[3],
                                                              step=h_outer),
+                stability_checks=checked if modes else None,
                 max_step=h if mode == "error_controlled" else None,
                 accuracy=float(accuracy) if mode == "error_controlled" else None,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,

@@ -6,7 +6,7 @@ does the work.  To add a group, create the module and list it in
 ``_COMMAND_MODULES``.  User errors (``ValueError``, ``FileNotFoundError``,
 ``KeyError``, ``OSError`` on a named path, ``CliError``, argparse errors) print
 one line on stderr and exit 2; failures of the computation itself
-(``RuntimeError``, ``FloatingPointError``, e.g. a diverged simulation) print one
+(``RuntimeError``, e.g. ``analysis.SimulationDivergedError``; ``ArithmeticError``) print one
 line and exit 1.  No traceback either way; an unexpected exception also prints
 one line (exit 1) naming its type, and ``AWIWI_DEBUG=1`` shows the traceback.
 Output paths are checked (:func:`output_dir`, :func:`output_file`) before any
@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"{cmd}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
-    except (RuntimeError, FloatingPointError, ArithmeticError) as exc:  # e.g. a diverged simulation
+    except (RuntimeError, ArithmeticError) as exc:  # e.g. SimulationDivergedError: a diverged simulation
         print(f"{cmd}: error: {_one_line(str(exc)) or type(exc).__name__}", file=sys.stderr)
         return 1
     except Exception as exc:  # noqa: BLE001 - never a traceback for the user; AWIWI_DEBUG=1 shows it

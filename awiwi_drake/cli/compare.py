@@ -72,8 +72,9 @@ def run(args) -> int:
     import sys
 
     from awiwi_drake.config import short_mode
-    from awiwi_drake.control.compare import (TESTS, build_loops, compare, compare_test_params, design_step_duration,
-                                             plot_gain_diagram, plot_joint_runs, plot_runs, short_test_params)
+    from awiwi_drake.control.compare import (TESTS, build_loops, compare, compare_test_params, default_tests,
+                                             design_step_duration, plot_gain_diagram, plot_joint_runs, plot_runs,
+                                             short_test_params)
     from awiwi_drake.control.registry import controller_names, get_entry
 
     if args.list:
@@ -136,8 +137,7 @@ def run(args) -> int:
             params = params.replace(step_duration=window)
     from awiwi_drake.config import progress_bar
 
-    n_tests = len(tests) if tests is not None else len([t for t in TESTS if (t != "disturbance"
-                                                        or args.rig != "tendon-rig") and (t != "sweep" or args.rig not in FINGER_RIGS)])
+    n_tests = len(tests if tests is not None else default_tests(next(iter(loops.values()))))
     with progress_bar(total=len(names) * n_tests, desc="compare", unit="test", quiet=args.quiet) as bar:
         def advance(label: str) -> None:
             bar.set_postfix_str(label, refresh=False)

@@ -1,14 +1,8 @@
 """Friction laws (thesis ch. 3, 4 and 9): the one place each friction law is written.
 
-Every law returns the force or torque *acting on* the moving body (it opposes
-the motion, so its power is never positive), except the two magnitudes of the
-guide friction, (4.1) and the capstan loss, which are the non-negative size of
-the force lost along a tendon path. The laws are generic in the scalar type:
-float (numpy), AutoDiffXd and ``pydrake.symbolic.Expression`` (numpy object
-arrays) pass through, so the LeafSystems, the controllers, the
-model-discrepancy catalog, its truth plant, tests and plots evaluate the same
-function. Parameters are plain numbers (or arrays, one value per copy), so a
-caller passes the fields of its own parameter dataclass.
+Every law returns the force or torque *acting on* the moving body (its power is never positive), except
+the two magnitudes of the guide friction, (4.1) and the capstan loss.  The laws are generic in the scalar
+type (float, AutoDiffXd, Expression), and their parameters are plain numbers (or arrays, one per copy).
 
 ========================  ====================================================
 :func:`regularized_sign`  ``tanh(v / v_s)``: smooth ``sign(v)`` below ``v_s``
@@ -35,15 +29,11 @@ from awiwi_drake.parameters.components import GuideFrictionParams
 
 __all__ = ["regularized_sign", "atan_friction", "stribeck_level", "stribeck_friction", "stick_slip_rate", "guide_friction_force",
            "capstan_friction_force", "guide_friction", "dahl_rate", "dahl_path", "guide_friction_level", "guide_friction_rate",
-           "joint_friction_bound"]
+           "joint_breakaway_bound", "joint_friction_bound"]
 
 
 def regularized_sign(v, smoothing_velocity):
-    """``tanh(v / v_s)``: ``sign(v)`` smoothed below ``smoothing_velocity`` ``v_s`` (> 0).
-
-    The argument is used as is (no clipping): ``tanh`` saturates to +-1 in
-    float, AutoDiffXd and symbolic arithmetic alike.
-    """
+    """``tanh(v / v_s)``: ``sign(v)`` smoothed below ``smoothing_velocity`` ``v_s`` (> 0)."""
     return np.tanh(v / smoothing_velocity)
 
 
@@ -88,9 +78,7 @@ def stick_slip_rate(torque, v, coulomb, static, stribeck_velocity, presliding_an
     ``-W(v) sign(v)``, which falls from ``Fs`` to ``Fc`` as the speed rises (the negative slope that makes it
     stick and slip).  Unlike the memoryless :func:`stribeck_friction` it needs no sign smoothing: its stiffness is
     ``sigma0``, not ``Fs / v_eps``.  It is passive with the storage ``S = tau_f^2 / (2 sigma0)``:
-    ``dS/dt = -tau_f v - |v| tau_f^2 / W <= -tau_f v``, so the work the friction does on the joint,
-    ``int tau_f v dt``, never exceeds ``S(0) - S(t)`` (the instantaneous power ``tau_f v`` may be positive while the
-    presliding spring gives back what it stored, never more).
+    ``dS/dt = -tau_f v - |v| tau_f^2 / W <= -tau_f v``.
     """
     sigma0 = static / presliding_angle
     return -sigma0 * (v + np.abs(v) * torque / stribeck_level(v, coulomb, static, stribeck_velocity))
@@ -147,12 +135,9 @@ def dahl_rate(state, velocity, level, presliding_length, smoothing_velocity):
     ``F`` [N] is the friction force carried by a contact sliding at ``velocity`` v [m/s]; it
     moves with the sliding distance, not with time: after a reversal it crosses from ``-W`` to
     ``+W`` (``level`` W >= 0 [N], the sliding friction) within a few ``presliding_length``
-    delta [m]. At rest it is a spring of stiffness ``W / delta`` (presliding, no damping), and
-    while sliding its relaxation rate is ``|v| / delta`` (independent of W), so explicit fixed-step
-    integration at step h is stable for ``|v| h / delta`` inside the method's real-axis bound.
-    The power ``F v`` taken from the motion is non-negative over every closed sliding cycle
-    (Dahl's model is passive for ``|F| <= W``). The argument of tanh is clipped at +-40 only
-    to keep its AutoDiff derivative finite (tanh is +-1 there).
+    delta [m]. At rest it is a spring of stiffness ``W / delta``; sliding, its relaxation rate is
+    ``|v| / delta`` (independent of W).  Passive for ``|F| <= W``.  The argument of tanh is clipped at +-40
+    only to keep its AutoDiff derivative finite.
     """
     s = np.tanh(clip(velocity / smoothing_velocity, -40.0, 40.0))
     return (velocity / presliding_length) * (level - s * state)
@@ -205,11 +190,9 @@ def dahl_path(position, level, presliding_length, smoothing_velocity=0.0, dt=Non
 def guide_friction_level(tension, constant, capstan_exponent, direction):
     """Sliding level W [N] of the guide friction of a tendon moving in ``direction`` s in [-1, 1].
 
-    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the constant
-    (4.1) part C, plus the capstan rise ``f (e^{mu alpha} - 1)`` at the pulling end when the
-    tendon is pulled (s = +1) and the loss ``f (1 - e^{-mu alpha})`` when it is released
-    (s = -1), so that the Dahl state's steady sliding force ``s W`` equals
-    :func:`guide_friction` at ``s = +-1``.
+    ``W = C + f ((e^{mu alpha} - 1)(1 + s) / 2 + (1 - e^{-mu alpha})(1 - s) / 2)``: the (4.1) part C plus the
+    capstan rise when pulled (s = +1) or the loss when released (s = -1), so that the Dahl state's steady
+    sliding force ``s W`` equals :func:`guide_friction` at ``s = +-1``.
     """
     rise = np.exp(capstan_exponent) - 1.0
     loss = 1.0 - np.exp(-capstan_exponent)
@@ -225,19 +208,26 @@ def guide_friction_rate(force, sliding_velocity, tension, constant, capstan_expo
     gives ``+-W`` (the (4.1) constant and/or the capstan law), and at rest the guides hold the
     tendon with the presliding stiffness ``W / delta`` instead of the damping ``C / v_s`` of a
     regularised sign (which makes the light finger links stiff for explicit integration).  The
-    relaxation takes ``|v|`` exactly, not :func:`dahl_rate`'s ``v tanh(v / v_s)``: then
-    ``|F| <= W`` holds at every speed (at ``F = +-W`` the rate points inwards), so the guides never
-    carry more than their sliding level, which the ch. 9 observer's bound uses
-    (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`).  With the smoothed form a
-    tendon that stops slowly ended up to ``W / tanh(|v| / v_s)``: measured 3.8 % above ``W`` on
-    the index after a 0.2 rad MCP step.
+    relaxation takes ``|v|`` exactly, not :func:`dahl_rate`'s ``v tanh(v / v_s)``: then ``|F| <= W`` holds
+    at every speed, the bound the ch. 9 observer uses (:func:`joint_friction_bound`).
     """
     s = np.tanh(clip(sliding_velocity / smoothing_velocity, -40.0, 40.0))
     level = guide_friction_level(tension, constant, capstan_exponent, s)
     return (sliding_velocity * level - np.abs(sliding_velocity) * force) / presliding_length
 
 
-def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_level=None,
+def joint_breakaway_bound(joint_level, selection=None):
+    """``sum_l |S_lj| F_l`` (k) [Nm]: the most the joints' own friction can put on each DoF ``j``, the constant part of
+    :func:`joint_friction_bound` (computed once per rig, not per call): ``joint_level`` ``F`` (n) [Nm] the breakaway
+    level ``Fs`` of each joint's stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``, 0 where it has none),
+    ``selection`` ``S`` (n x k) the DoF map ``q = S w`` (None: the identity).  None when no joint has friction."""
+    if joint_level is None or not np.any(np.asarray(joint_level, dtype=float) > 0):
+        return None
+    level = np.asarray(joint_level, dtype=float)
+    return level.copy() if selection is None else np.abs(np.asarray(selection, dtype=float)).T @ level
+
+
+def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteresis_width=0.0, joint_hold=None,
                          selection=None):
     """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i) + sum_l |S_lj| F_l`` (k) [Nm]: the largest torque the unmeasured
     friction can put on each DoF ``j`` (the tendons' guides and lever, and the joints' own), the bound of the ch. 9
@@ -248,9 +238,9 @@ def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteres
     n); ``tension`` ``f`` (m) [N]: the measured tendon forces (negative parts count as 0); ``constant``,
     ``capstan_exponent``: each path's guide friction (:func:`guide_friction_level`, pulled end, the larger
     direction); ``hysteresis_width`` ``w`` (m) [N]: the half-width of the lever's hysteresis loop (Fig 4.8b) when the
-    measurement misses it, else 0; ``joint_level`` ``F`` (n) [Nm]: the most each joint's own friction can hold, the
-    breakaway level ``Fs`` of its stick-slip (:func:`stick_slip_rate` keeps ``|tau_f| <= Fs``), 0 where it has none
-    (None: no joint friction).
+    measurement misses it, else 0; ``joint_hold`` (k) [Nm]: ``sum_l |S_lj| F_l``, the most the joints' own friction
+    can hold on each DoF (:func:`joint_breakaway_bound` of their breakaway levels, a constant; None: no joint
+    friction).
 
     Which friction a measurement misses follows from where it sits (ch. 4): the spring sensor (the lever's angle,
     calibrated to a force polynomial ``phi``) is in the forearm, so the guides of the wrist, palm and finger (4.1) are
@@ -263,6 +253,4 @@ def joint_friction_bound(coupling, tension, constant, capstan_exponent, hysteres
     f, w = positive_part(tension), hysteresis_width
     A = np.asarray(coupling) if selection is None else np.asarray(coupling) @ selection
     B = np.abs(A).T @ (guide_friction_level(f + w, constant, capstan_exponent, 1.0) + w)
-    if joint_level is None:
-        return B
-    return B + (joint_level if selection is None else np.abs(selection).T @ joint_level)
+    return B if joint_hold is None else B + joint_hold

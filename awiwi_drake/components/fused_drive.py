@@ -1,20 +1,12 @@
 """The tendon drive's model: motors + springs + routing + guide friction + hysteresis.
 
-The rigs (:mod:`awiwi_drake.components.rig_system`), the batched joint rigs (:class:`TendonDriveBatch_`) and
-the fingers/hand (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`) evaluate its model (:class:`DriveModel`)
-in their own systems. Its physics is one function, :func:`drive_laws`, that calls the law functions of
-this package (:func:`~awiwi_drake.components.motor.motor_acceleration`, each
-tendon's ``spring.force``/``stiffness``, ``coupling.h``/``P``,
-:func:`~awiwi_drake.components.spring.hysteresis_rate`,
-:func:`~awiwi_drake.components.friction.guide_friction_force` (4.1) and
-:func:`~awiwi_drake.components.friction.guide_friction`):
-
-* for ``AutoDiffXd`` and ``Expression`` (``Linearize``, LQR, symbolic
-  analysis) a system evaluates :func:`drive_laws` directly;
-* for ``float`` numba kernels generated from :func:`drive_laws` (:func:`build_kernels`,
-  :mod:`awiwi_drake.components.codegen`): the laws are evaluated once on
-  symbolic variables and the expression tree is compiled. Tests check kernel =
-  laws at random states to 1e-12 for every switch.
+Its physics is one function, :func:`drive_laws`, calling the law functions of this package (motor,
+each tendon's spring, ``coupling.h``/``P``, hysteresis, guide friction), generic in the scalar type.
+The rigs (:mod:`awiwi_drake.components.rig_system`), the batched joint rigs (:class:`TendonDriveBatch_`)
+and the fingers/hand (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`) evaluate its
+:class:`DriveModel`: directly for ``AutoDiffXd`` and ``Expression``, and for ``float`` through numba
+kernels traced once from :func:`drive_laws` on symbolic variables (:func:`build_kernels`,
+:mod:`awiwi_drake.components.codegen`; tests: kernel = laws at random states to 1e-12).
 
 Model (docs/ARCHITECTURE.md sign convention), per tendon i::
 
@@ -25,14 +17,10 @@ Model (docs/ARCHITECTURE.md sign convention), per tendon i::
     B thdd_i = sat(u_i) + tau_fric(omega_i) + tau_ripple(theta_i) - r_m f_i      (3.5), (3.8)
     tau   = -P(q)^T (f + g)                                   generalised force on the joints
 
-With ``link_inertia``/``link_damping`` the model also carries the joints as
-decoupled links ``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint
-rigs, no MultibodyPlant); such a model is built into a rig by
-:mod:`awiwi_drake.components.rig_system` (C++ dynamics) or batched by
-:class:`TendonDriveBatch_`. State order: ``[q, qdot]`` (with a link), then
-``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)`` with
-guide friction (the guide friction forces, a Dahl state: see
-:func:`~awiwi_drake.components.friction.guide_friction_rate`).
+With ``link_inertia``/``link_damping`` the model also carries the joints as decoupled links
+``I_j qdd_j = tau_j - d_j qdot_j + tau_ext,j`` (the single-joint rigs, no MultibodyPlant).  State order:
+``[q, qdot]`` (with a link), ``[theta (m), omega (m)]``, then ``z (m)`` with hysteresis, then ``g (m)``
+with guide friction.
 """
 
 from __future__ import annotations
@@ -41,11 +29,10 @@ import sys
 from dataclasses import dataclass, field
 
 import numpy as np
-import pydrake.symbolic as sym
 from pydrake.systems.framework import Diagram, LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake._math import asarray_like, is_float, positive_part
+from awiwi_drake._math import asarray_like, is_float, positive_part, symbolic_vector
 from awiwi_drake.components.motor import motor_acceleration, motor_drive_torque, saturate_torque
 from awiwi_drake.components.spring import TendonSprings, hysteresis_rate
 from awiwi_drake.components.friction import guide_friction_force, guide_friction_rate
@@ -58,12 +45,9 @@ __all__ = ["GuideFrictionModel", "DriveModel", "TendonDrive", "drive_laws", "bui
 class GuideFrictionModel:
     """Guide friction on every tendon path (:func:`~awiwi_drake.components.friction.guide_friction`).
 
-    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides. With
-    ``capstan=False`` the tension-independent (4.1) ``C0 (1 - exp(-C1 alpha))``, with
-    ``capstan=True`` the capstan form (``f (e^{mu alpha} - 1)`` pulled, ``f (1 - e^{-mu alpha})``
-    released). Each tendon's friction force is a Dahl state driven by its sliding speed
-    ``v = (P(q) qdot)_i`` at the finger: it reaches the sliding level within a few
-    ``presliding_length`` of travel; ``s = tanh(v / v_s)`` smooths the direction.
+    ``bending_angles`` (m,) [rad]: total wrap of each tendon on its guides; (4.1) or, with ``capstan``, the
+    capstan form.  Each tendon's friction force is a Dahl state driven by its sliding speed
+    ``v = (P(q) qdot)_i`` (:func:`~awiwi_drake.components.friction.guide_friction_rate`).
     """
 
     bending_angles: tuple
@@ -97,10 +81,8 @@ class GuideFrictionModel:
 class DriveModel:
     """Everything :func:`drive_laws` needs (see the module docstring).
 
-    ``springs`` holds one spring law per tendon (the same object may repeat).
-    ``rate_joints`` is the number of leading coupling joints whose velocity
-    enters (``joint_velocity`` input); further coupling "joints" (the hand's
-    wrist length offsets) are taken as quasi-static.
+    ``springs`` holds one spring law per tendon (the same object may repeat); ``rate_joints`` leading
+    coupling joints have a velocity, further coupling "joints" (the wrist's length offsets) are quasi-static.
     """
 
     motor: MotorParams | tuple     # one set for all motors, or one per tendon (motor.tendon_motor_params)
@@ -214,21 +196,6 @@ class TendonDrive:
     diagram: Diagram
     model: DriveModel
 
-    @property
-    def hysteresis(self) -> bool:
-        """Whether the drive carries the spring hysteresis state."""
-        return self.model.has_hysteresis
-
-    @property
-    def guide_friction(self) -> bool:
-        """Whether the drive carries the guide friction state."""
-        return self.model.has_guide_friction
-
-    @property
-    def num_states(self) -> int:
-        """The drive's states (without a link's)."""
-        return self.model.num_states - (2 * self.model.num_joints if self.model.has_link else 0)
-
 
 def _full_rates(model: DriveModel, qd):
     """Velocities of all coupling joints (zeros beyond ``rate_joints``)."""
@@ -245,17 +212,13 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
                elongation=None):
     """All quantities of the drive at a state, generic in the scalar type.
 
-    Returns a dict with ``elongation``, ``tendon_force``, ``tendon_stiffness``,
-    ``generalized_force`` and (with ``u``) ``derivatives``, ``applied_torque``.
-    Without a link, ``q`` (n) and ``qd`` (``rate_joints``) are the joint inputs;
-    with a link they come from ``state`` and ``tau_ext`` is the external torque.
-    ``elongation`` (m), when given, stands for the elongation law's value at ``state`` (the caller
-    guarantees they agree, e.g. a state in elongation coordinates,
-    :mod:`~awiwi_drake.components.rig_system`). With a link and ``u``, ``want=("momentum_rate",)``
-    adds the rate of the momentum ``p = I qdot - P^T B omega / r_m`` (link and motors together):
-    ``I qdd = -P^T (f + g) - d qdot + tau_ext`` and ``B omega' = tau_m - r_m f`` (3.5) give
-    ``p' = -P^T g - d qdot + tau_ext - P^T tau_m / r_m``, in which the spring forces cancel
-    (``tau_m``: :func:`~awiwi_drake.components.motor.motor_drive_torque`; ``P`` constant).
+    Returns a dict with ``elongation``, ``tendon_force``, ``tendon_stiffness``, ``generalized_force`` and
+    (with ``u``) ``derivatives``, ``applied_torque``.  Without a link, ``q`` (n) and ``qd`` (``rate_joints``)
+    are the joint inputs; with a link they come from ``state`` and ``tau_ext`` is the external torque.
+    ``elongation`` (m), when given, stands for the elongation law's value at ``state`` (the caller guarantees
+    they agree).  With a link and ``u``, ``want=("momentum_rate",)`` adds the rate of the momentum
+    ``p = I qdot - P^T B omega / r_m``: ``p' = -P^T g - d qdot + tau_ext - P^T tau_m / r_m`` (the spring forces
+    cancel; ``tau_m``: :func:`~awiwi_drake.components.motor.motor_drive_torque`; ``P`` constant).
     """
     qs, qds, theta, omega, z, g_state = model.split_state(state)
     if model.has_link:
@@ -313,11 +276,6 @@ def drive_laws(model: DriveModel, state, u=None, q=None, qd=None, tau_ext=None, 
     return out
 
 
-def _variables(prefix: str, size: int):
-    v = [sym.Variable(f"{prefix}{i}") for i in range(size)]
-    return v, np.array([sym.Expression(x) for x in v], dtype=object)
-
-
 def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = False):
     """numba kernels of :func:`drive_laws` (float path), one per output group.
 
@@ -325,14 +283,12 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     ``derivatives(state, u, q, qd, out)`` / with a link ``derivatives(state, u, tau_ext, out)``;
     ``tendon_force``, ``tendon_stiffness``, ``elongation`` ``(state, q, out)`` / ``(state, out)``;
     ``generalized_force(state, q, qd, out)`` / ``(state, out)``.
-    ``jit=False``: the same generated source, not compiled (see :func:`compile_kernels`).
-    ``vectorized``: the same functions in numpy's elementwise forms (no numba, no ``_batch`` twins):
-    ``fn(states.T, out.T)`` evaluates many states at once (:func:`~awiwi_drake.components.codegen.emit_source`).
+    ``jit`` and ``vectorized``: as :func:`~awiwi_drake.components.codegen.compile_kernels`.
     """
     model.require_symbolic("compiled tendon drive", "use their calibration polynomial "
                            "(e.g. LeverSpringMechanism.to_polynomial())")
     m, n, nr = model.num_tendons, model.num_joints, model.rate_joints
-    key = _model_key(model, "vectorized" if vectorized else jit)
+    key = None if model._content_key is None else (model._content_key, "vectorized" if vectorized else jit)
     if key is not None and key in _KERNELS:
         return _KERNELS[key]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
@@ -342,17 +298,9 @@ def build_kernels(model: DriveModel, *, jit: bool = True, vectorized: bool = Fal
     return kernels
 
 
-# Kernels of drive models already traced in this process, by the model's content. Tracing the
-# laws symbolically costs ~0.4-0.6 s for the hand; every new diagram (and every scalar-converted
-# or cloned copy, e.g. inside ``analysis.simulate``) would otherwise pay it again at its first
-# evaluation, inside the simulation.
+# Kernels of drive models already traced in this process, by the model's content: every new diagram (and every
+# scalar-converted or cloned copy) would otherwise trace the laws again.
 _KERNELS: dict = {}
-
-
-def _model_key(model: DriveModel, mode):
-    """The content key of ``model`` (taken at its construction) with the kernels' ``mode``, or None (no caching)."""
-    key = getattr(model, "_content_key", None)
-    return None if key is None else (key, mode)
 
 
 def _content_digest(model) -> str | None:
@@ -366,16 +314,16 @@ def _content_digest(model) -> str | None:
 
 
 def _build_kernels(model, m, n, nr, jit, vectorized=False):
-    sv, s = _variables("s", model.num_states)
-    uv, u = _variables("u", m)
+    sv, s = symbolic_vector("s", model.num_states)
+    uv, u = symbolic_vector("u", m)
     if model.has_link:
-        ev, e = _variables("e", n)
+        ev, e = symbolic_vector("e", n)
         res = drive_laws(model, s, u, tau_ext=e)
         ins = dict(derivatives=[sv, uv, ev], tendon_force=[sv], tendon_stiffness=[sv], elongation=[sv],
                    generalized_force=[sv])
     else:
-        qv, q = _variables("q", n)
-        dv, d = _variables("qd", nr)
+        qv, q = symbolic_vector("q", n)
+        dv, d = symbolic_vector("qd", nr)
         res = drive_laws(model, s, u, q, d if model.needs_joint_velocity else None)
         ins = dict(derivatives=[sv, uv, qv, dv], tendon_force=[sv, qv], tendon_stiffness=[sv, qv],
                    elongation=[sv, qv], generalized_force=[sv, qv, dv])
@@ -386,16 +334,11 @@ def _build_kernels(model, m, n, nr, jit, vectorized=False):
 
 @TemplateSystem.define("TendonDriveBatch_", scope=sys.modules[__name__])
 def TendonDriveBatch_(T):
-    """N copies of one link-carrying drive (a single-joint rig) in one system.
+    """N copies of one link-carrying drive (a single-joint rig) in one system: ``TendonDriveBatch_[T](model, N)``.
 
-    ``TendonDriveBatch_[T](model, num_copies)``; ``model`` must carry its links
-    (``DriveModel.link_inertia``). State: the copies' states one after the other
-    (copy ``i`` at ``[i k, (i + 1) k)`` with ``k = model.num_states``, each in the
-    single rig's order). Inputs ``motor_torque`` (N m) and ``external_torque``
-    (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
-    (N m). The float path runs the generated kernel's ``_batch`` twin (one
-    compiled loop over the copies); AutoDiffXd/Expression call :func:`drive_laws`
-    per copy.
+    State: the copies' states one after the other, each in the single rig's order.  Inputs ``motor_torque``
+    (N m) and ``external_torque`` (N n), copy-major; outputs ``state``, ``joint_angle`` (N n), ``tendon_force``
+    (N m).  Float runs the generated kernel's ``_batch`` twin (one compiled loop over the copies).
     """
 
     class Impl(LeafSystem_[T]):

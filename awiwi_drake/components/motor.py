@@ -1,13 +1,8 @@
 """Motor model (thesis ch. 3): the laws (the motor rig, :func:`~awiwi_drake.rigs.motor_rig`, is generated from them).
 
-Dynamics at the output shaft (3.5)::
-
-    B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - tau_load
-
-with the reflected inertia (3.1), the friction law (3.8) (Table 3.3) and the
-position-dependent ripple of the motor-shaft bearing (``gear_ratio`` periods
-per output revolution) and of the output bearing (one period per revolution).
-``tau_load = r_m f`` when the load is a tendon force.
+Dynamics at the output shaft (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - tau_load`` with the
+reflected inertia (3.1), the friction law (3.8) and the ripple (:class:`MotorParams`); ``tau_load = r_m f`` for a
+tendon.
 """
 
 from __future__ import annotations
@@ -58,12 +53,9 @@ def motor_friction_torque(omega, p: MotorParams):
 def motor_ripple_torque(theta, p: MotorParams):
     """Position-dependent ripple torque (3.5), zero when ``p.ripple`` is off.
 
-    ``a_m sin(N th + phi_m) + a_o sin(th + phi_o)`` with ``N = gear_ratio``:
-    the motor-shaft bearing repeats ``N`` times per output revolution, the output
-    bearing once; plus ``sum_k a_k sin(n_k th) + b_k cos(n_k th)`` over
-    ``p.ripple_harmonics`` (flat ``(n_k, a_k, b_k)`` triples: further orders, e.g. a
-    fitted motor's from :func:`~awiwi_drake.discrepancy.augment.augmented_finger_parameters`).
-    ``p``: one MotorParams, or a tuple of one per motor.
+    ``a_m sin(N th + phi_m) + a_o sin(th + phi_o)`` with ``N = gear_ratio`` (motor-shaft and output bearing),
+    plus ``sum_k a_k sin(n_k th) + b_k cos(n_k th)`` over ``p.ripple_harmonics`` (flat ``(n_k, a_k, b_k)``
+    triples, e.g. a fitted motor's).  ``p``: one MotorParams, or a tuple of one per motor.
     """
     if isinstance(p, tuple):
         return _per_motor(motor_ripple_torque, p, theta)

@@ -1,23 +1,12 @@
 """A single-joint rig as C++ systems generated from the law functions.
 
 The continuous dynamics of a link-carrying drive (:class:`~awiwi_drake.components.fused_drive.DriveModel`
-with ``link_inertia``: the joint rig, the flexible joint) are :func:`~awiwi_drake.components.fused_drive.drive_laws`
-evaluated *once* on ``pydrake.symbolic`` variables and handed to Drake's C++
-``SymbolicVectorSystem`` (:func:`rig_dynamics_system`). Its only output is the
-state, so it has no direct feedthrough and no Python runs in the integrator's
-derivative path. Drake differentiates the same expressions for ``AutoDiffXd``
-(``Linearize``, LQR) and converts them to ``Expression``.
-
-Why this structure (measured on this project's machine, joint rig under the 3 kHz
-motor PD, fixed-step RK3): a Python ``DoCalcTimeDerivatives`` costs about 6 us per
-call even around a compiled kernel (10x real time); the C++ expression evaluation
-about 3 us (13-14x); see README "How the plants are built, and speed" for the framework's own share.
-
-The quantities that are not state slices (``tendon_force``, ``tendon_stiffness``,
-``joint_torque``, ``applied_torque``) come from :class:`LinkRigOutputs_`, a
-stateless system evaluated only when a port is read (logging, monitors), never in
-the derivative path: the numba kernels of :func:`~awiwi_drake.components.fused_drive.build_kernels`
-for float, :func:`~awiwi_drake.components.fused_drive.drive_laws` for AutoDiffXd and Expression.
+with ``link_inertia``: the joint rig, the flexible joint; or without joints: the tendon rig) are
+:func:`~awiwi_drake.components.fused_drive.drive_laws` evaluated *once* on ``pydrake.symbolic`` variables
+and handed to Drake's C++ ``SymbolicVectorSystem`` (:func:`rig_dynamics_system`): its only output is the
+state, so no Python runs in the integrator's derivative path (README, "How the plants are built, and
+speed"), and Drake differentiates the same expressions for ``AutoDiffXd``.  The quantities that are not
+state slices come from the stateless :class:`LinkRigOutputs_`, evaluated only when a port is read.
 """
 
 from __future__ import annotations
@@ -31,11 +20,12 @@ from pydrake.systems.framework import LeafSystem_, System
 from pydrake.systems.primitives import SymbolicVectorSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake._math import symbolic_vector
 from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_laws
 from awiwi_drake.components.motor import saturate_torque
 from awiwi_drake.components.routing import ConstantCoupling
 
-__all__ = ["rig_dynamics_expressions", "rig_dynamics_system", "rig_integration_system", "integration_state",
+__all__ = ["rig_dynamics_system", "rig_integration_system", "integration_state",
            "sampled_dynamics", "SAMPLED_INTEGRATOR",
            "LinkRigOutputs_", "tendon_force_of_states"]
 
@@ -56,34 +46,25 @@ def _no_joints(model: DriveModel) -> dict:
     return {} if model.has_link else {"q": np.zeros(0)}
 
 
-def rig_dynamics_expressions(model: DriveModel):
-    """``(state_vars, input_vars, xdot)``: :func:`drive_laws` on symbolic variables.
-
-    The input is ``[motor_torque (m), external_torque (n)]`` (without joints: ``motor_torque``); ``xdot`` is
-    the drive's ``derivatives`` (state order of :class:`DriveModel`).
-    """
-    _check(model)
-    m, n = model.num_tendons, model.num_joints
-    xs = [sym.Variable(f"x{i}") for i in range(model.num_states)]
-    us = [sym.Variable(f"u{i}") for i in range(m)] + [sym.Variable(f"tau_ext{j}") for j in range(n)]
-    X = np.array([sym.Expression(v) for v in xs], dtype=object)
-    U = np.array([sym.Expression(v) for v in us], dtype=object)
-    with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
-        xdot = drive_laws(model, X, U[:m], tau_ext=U[m:], want=("derivatives",), **_no_joints(model))["derivatives"]
-    return xs, us, list(xdot)
+def _input_vector(m: int, n: int):
+    """The symbolic input ``[motor_torque (m), external_torque (n)]`` of a rig: ``(variables, expressions)``."""
+    (uv, u), (ev, e) = symbolic_vector("u", m), symbolic_vector("tau_ext", n)
+    return uv + ev, np.concatenate([u, e])
 
 
 def rig_dynamics_system(model: DriveModel) -> SymbolicVectorSystem:
-    """One C++ ``SymbolicVectorSystem``: state of ``model``, input ``[motor_torque, external_torque]``,
-    dynamics :func:`drive_laws`, output the state (no direct feedthrough).
+    """One C++ ``SymbolicVectorSystem``: state of ``model``, input ``[motor_torque, external_torque]`` (without
+    joints: ``motor_torque``), dynamics :func:`drive_laws`, output the state (no direct feedthrough).
 
-    The expressions are handed over ``Expand()``-ed: the same functions with the constant factors
-    distributed and the springs' Horner products in power form. ``Expression::Evaluate`` calls
-    ``pow`` for every factor of every product node, so fewer product nodes are cheaper: measured
-    +15 % for the joint-rig demo loop (12.8x -> 14.7x real time, same process). Equal to the laws
-    at random states to 1e-12 (tests/test_rig_system.py).
+    The expressions are handed over ``Expand()``-ed (the springs' Horner products in power form): Drake's
+    evaluator calls ``pow`` for every factor of every product node, so fewer product nodes are cheaper.
     """
-    xs, us, xdot = rig_dynamics_expressions(model)
+    _check(model)
+    m, n = model.num_tendons, model.num_joints
+    xs, X = symbolic_vector("x", model.num_states)
+    us, U = _input_vector(m, n)
+    with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
+        xdot = drive_laws(model, X, U[:m], tau_ext=U[m:], want=("derivatives",), **_no_joints(model))["derivatives"]
     return SymbolicVectorSystem(state=xs, input=us, dynamics=[e.Expand() for e in xdot], output=xs)
 
 
@@ -126,17 +107,13 @@ def rig_integration_system(model: DriveModel) -> SymbolicVectorSystem:
     ``x' = r_m omega + P qdot`` (without joints, the tendon rig: state ``[x, omega, (z)]``). The coordinates are a constant linear map of the physical ones, so any
     Runge-Kutta step commutes with it: the sampled rig integrated in them is the physical rig's
     trajectory to round-off (tests/test_rig_system.py). Why: Drake's expression evaluator shares no
-    sub-expressions, and in physical coordinates each spring law is evaluated twice (link and motor
-    rows) on an elongation rebuilt from two states at every use; here each law appears once per
-    tendon, on one variable (measured: the rig's sampled step ~35 % cheaper).
+    sub-expressions; here each spring law appears once per tendon, on one variable.
     """
     _check(model)
     P, I, B, r = _integration_parts(model)
     n, m = model.num_joints, model.num_tendons
-    zs = [sym.Variable(f"z{i}") for i in range(model.num_states)]
-    us = [sym.Variable(f"u{i}") for i in range(m)] + [sym.Variable(f"tau_ext{j}") for j in range(n)]
-    Z = np.array([sym.Expression(v) for v in zs], dtype=object)
-    U = np.array([sym.Expression(v) for v in us], dtype=object)
+    zs, Z = symbolic_vector("z", model.num_states)
+    us, U = _input_vector(m, n)
     q, p, e, omega = Z[:n], Z[n:2 * n], Z[2 * n:2 * n + m], Z[2 * n + m:2 * n + 2 * m]
     with np.errstate(invalid="ignore"):     # symbolic object arrays leave meaningless FPU flags
         qd = (p + P.T @ (B * omega) / r) / I
@@ -160,13 +137,9 @@ def sampled_dynamics(system: System, period: float) -> System:
     over one period with the input held (zero-order hold), integrated by Drake's
     :data:`SAMPLED_INTEGRATOR` with one fixed step per period.
 
-    In a sampled loop (a controller read at the sample instants, its command held over the
-    period) this is the same trajectory as the continuous ``system`` integrated with fixed-step
-    RK3 at the period, to round-off (tests/test_rig_system.py), while the outer ``Simulator``
-    only performs one discrete update per period: no continuous state, no integrator stages over
-    the rest of the loop. The state is the discrete state, in ``system``'s order; outputs relay
-    ``system``'s outputs at the held state. Scalar types: float and AutoDiffXd (``Linearize`` with
-    the period, ``DiscreteTimeLinearQuadraticRegulator``); Drake's approximation has no symbolic form.
+    In a sampled loop this is the continuous ``system`` integrated with fixed-step RK3 at the period, to
+    round-off (tests/test_rig_system.py), with one discrete update per period for the outer ``Simulator``.
+    Scalar types: float and AutoDiffXd (Drake's approximation has no symbolic form).
     """
     period = float(period)
     if not period > 0.0:
@@ -180,9 +153,7 @@ def sampled_dynamics(system: System, period: float) -> System:
 class tendon_force_of_states:
     """``states (T, num_states) -> tendon forces (T, m)``: the generated ``tendon_force`` kernel of
     ``model`` (= :func:`drive_laws`) over many samples at once (monitors on logged states), in numpy's
-    elementwise forms (``build_kernels(vectorized=True)``): all samples in one pass, no numba (measured: the
-    first monitored ``simulate`` of a joint rig in a process took ~0.65 s more with the numba kernel, all of it
-    numba's import and first load; 3000 samples take ~0.1 ms either way).
+    elementwise forms (``build_kernels(vectorized=True)``): all samples in one pass, without numba's import.
     A class, not a closure, so a rig holding it pickles (process pools)."""
 
     def __init__(self, model: DriveModel):
@@ -216,11 +187,9 @@ def LinkRigOutputs_(T):
     """The non-state outputs of a drive whose state is the whole rig (a link rig, the tendon rig);
     ``LinkRigOutputs_[T](model)``.
 
-    Inputs ``state`` (the model's state), ``motor_torque`` (m). Outputs
-    ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m], ``joint_torque``
-    (n) [N m] (the tendons' generalised force ``-P^T f``), each depending on
-    ``state`` only, and ``applied_torque`` (m) [N m] (``motor_torque`` after the
-    motors' saturation), depending on ``motor_torque`` only.
+    Inputs ``state``, ``motor_torque`` (m); outputs ``tendon_force`` (m) [N], ``tendon_stiffness`` (m) [N/m],
+    ``joint_torque`` (n) [N m] (``-P^T f``) from the state, and ``applied_torque`` (m) [N m] (the saturated
+    ``motor_torque``).
     """
 
     class Impl(LeafSystem_[T]):

@@ -1,13 +1,9 @@
 """Tendon routing: the map between motors, springs and joints (thesis (5.5)-(5.9)).
 
-Sign convention (docs/ARCHITECTURE.md): ``h(q)`` is the tendon path length
-between motor pulley and insertion, ``P(q) = dh/dq`` (m x n),
-spring elongation ``x = r_m theta + h(q) - h(0) + x0`` and generalised joint
-force ``tau = -P(q)^T f``.
-
-A *coupling* is any object with ``num_tendons``, ``num_joints``, ``h(q)``, ``P(q)``
-and ``tension_hessian(q, f)`` written generically in the scalar type (float, AutoDiffXd,
-Expression); the finger couplings of :mod:`awiwi_drake.hand` follow it.
+Sign convention (docs/ARCHITECTURE.md): ``P(q) = dh/dq``, elongation ``x = r_m theta + h(q) - h(0) + x0``,
+joint torque ``tau = -P(q)^T f``.  A *coupling* is any object with ``num_tendons``, ``num_joints``, ``h(q)``,
+``P(q)`` and ``tension_hessian(q, f)`` generic in the scalar type (the finger couplings of
+:mod:`awiwi_drake.hand` too).
 """
 
 from __future__ import annotations
@@ -84,18 +80,10 @@ def _check_coupling(coupling):
 def TendonRouting_(T):
     """Maps motor and joint angles to spring elongations and tendon forces to joint torques.
 
-    Input ports
-    -----------
-    motor_angle : (m,) [rad]
-    joint_angle : (n,) [rad]
-    tendon_force : (m,) [N]
-    motor_velocity : (m,) [rad/s], joint_velocity : (n,) [rad/s]  (only with ``rates=True``)
-
-    Output ports
-    ------------
-    elongation : (m,) [m]       ``r_m theta + h(q) - h(0) + x0``
-    generalized_force : (n,) [Nm]  ``-P(q)^T f``
-    elongation_rate : (m,) [m/s]  ``r_m omega + P(q) qdot``  (only with ``rates=True``)
+    Inputs ``motor_angle`` (m) [rad], ``joint_angle`` (n) [rad], ``tendon_force`` (m) [N]; outputs
+    ``elongation`` (m) [m] = ``r_m theta + h(q) - h(0) + x0`` and ``generalized_force`` (n) [Nm] =
+    ``-P(q)^T f``; with ``rates=True`` also the inputs ``motor_velocity`` (m), ``joint_velocity`` (n) and the
+    output ``elongation_rate`` (m) [m/s] = ``r_m omega + P(q) qdot``.
     """
 
     class Impl(LeafSystem_[T]):

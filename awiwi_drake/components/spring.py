@@ -250,8 +250,7 @@ class LeverSpringMechanism:
     * spring length ``s(th) = |Q - S|``, free at ``th = 0``
     * virtual work: ``f x'(th) = K (s - s(0)) s'(th)``.
 
-    ``force(x)`` inverts ``x(th)``; AutoDiffXd inputs get the exact derivative
-    ``df/dx = f'(th) / x'(th)`` by the implicit-function theorem.
+    ``force(x)`` inverts ``x(th)``; AutoDiffXd inputs get ``df/dx = f'(th) / x'(th)``.
     """
 
     supports_symbolic = False
@@ -312,10 +311,7 @@ class LeverSpringMechanism:
     def force_at_angle(self, th):
         """Tendon force [N] in equilibrium at lever angle ``th`` [rad] (float, vectorised)."""
         th = np.asarray(th, dtype=float)
-        flat = th.ravel()
-        out = np.empty_like(flat)
-        for i, t in enumerate(flat):
-            out[i] = self._force_and_slope_at_angle(t)[0]
+        out = np.array([self._f_exact(t) if t > 0 else 0.0 for t in th.ravel()], dtype=float)
         return out.reshape(th.shape) if th.shape else out[0]
 
     def _force_and_slope_at_angle(self, t: float):
@@ -344,19 +340,11 @@ class LeverSpringMechanism:
         """Lever angle [rad] at elongation ``x`` [m] (float, vectorised; x >= 0)."""
         x = np.asarray(x, dtype=float)
         th_hi = self.geometry.lever_straight_angle * (1 - 1e-9)
-
-        def xfun(t):
-            return self.elongation_at_angle(t)
-
-        def dxfun(t):
-            h = 1e-7
-            return (xfun(t + h) - xfun(t - h)) / (2 * h)
-
+        xfun, h = self.elongation_at_angle, 1e-7
         xs = np.atleast_1d(x)
         if np.any(xs < 0) or np.any(xs >= float(xfun(th_hi))):
             raise ValueError(f"LeverSpringMechanism: elongation {x} outside [0, {float(xfun(th_hi)):.6g}) m")
-        out = _monotone_inverse(xfun, dxfun, xs, x_hi=th_hi)
-        return out
+        return _monotone_inverse(xfun, lambda t: (xfun(t + h) - xfun(t - h)) / (2 * h), xs, x_hi=th_hi)
 
     # -- spring-law interface -----------------------------------------------------
     def force(self, x):
@@ -472,20 +460,11 @@ def tendon_spring(spring_params) -> PolynomialSpring:
 class TendonSprings:
     """One spring law per tendon of a drive (the hand's calibration table, ch. 4), evaluated element-wise.
 
-    ``laws[i]`` is the law of tendon ``i`` (the same object may repeat: tendons that share a law are
-    evaluated together, one call per distinct law).  ``force``, ``stiffness``, ``stiffness_derivative``,
-    ``energy`` take an elongation vector ``x`` of one entry per tendon and ``inverse_force`` a force
-    vector; entry ``i`` is ``laws[i]`` evaluated at ``x[i]``.  Float, AutoDiffXd and (when every law
-    supports it) Expression arrays pass through, so a :class:`SpringBank_` takes a bank in place of one
-    law.  This is the one place a vector of tendons meets its
-    laws: the drive, the operating points, the chain's force maps and distribution tables, the
-    per-joint reduced models and the finger backstepping all evaluate it.
-
-    Parameters
-    ----------
-    laws : sequence of spring laws
-        Objects with ``force(x)``, ``stiffness(x)`` and ``inverse_force(f)`` (:class:`PolynomialSpring`,
-        :class:`LinearSpring`, :class:`LeverSpringMechanism`).
+    ``laws[i]`` is the law of tendon ``i`` (objects with ``force(x)``, ``stiffness(x)``,
+    ``inverse_force(f)``); tendons that share a law object are evaluated together.  The methods take one
+    value per tendon; float, AutoDiffXd and (when every law supports it) Expression arrays pass through,
+    so a :class:`SpringBank_` takes a bank in place of one law.  This is the one place a vector of tendons
+    meets its laws.
     """
 
     def __init__(self, laws):
@@ -570,15 +549,9 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
     """Rate-independent Dahl hysteresis force rate ``dz/dt`` (see :class:`HysteresisParams`).
 
     ``dz/dt = (xdot / delta) (w - tanh(xdot / v_s) z)``, ``w = beta f_el + z0``
-    (:func:`~awiwi_drake.components.friction.dahl_rate`, the friction in the lever):
-    ``z`` tends to ``+-w`` on loading/unloading, a loop of full width ``2 w`` around the
-    elastic curve, reached within a few presliding lengths ``delta`` of elongation after a
-    reversal.  The presliding stiffness ``w / delta`` (slope at a reversal) scales with the loop,
-    and the state's relaxation rate ``|xdot| / delta`` does not depend on the force, so the
-    fixed-step integration bound (``|xdot| h / delta`` within the integrator's real-axis
-    stability) holds at every load.  ``p`` needs ``width_ratio`` beta, ``width_offset`` z0,
-    ``presliding_length`` delta and ``smoothing_velocity`` v_s; or ``p`` is a tuple of one
-    :class:`HysteresisParams` per tendon (a tendon with ``enabled`` false has no loop: ``w = 0``).
+    (:func:`~awiwi_drake.components.friction.dahl_rate`, the friction in the lever): ``z`` tends to
+    ``+-w`` on loading/unloading, a loop of full width ``2 w`` around the elastic curve.  ``p`` is one
+    :class:`HysteresisParams` or a tuple of one per tendon (``enabled`` false: no loop, ``w = 0``).
     """
     if isinstance(p, tuple):
         on = np.array([h.enabled for h in p], dtype=float)
@@ -592,17 +565,9 @@ def hysteresis_rate(z, x, xdot, f_elastic, p: HysteresisParams):
 def SpringBank_(T):
     """N tendon spring mechanisms in one system (thesis ch. 4).
 
-    Input ports
-    -----------
-    elongation : (N,) [m]
-    elongation_rate : (N,) [m/s]   (only with hysteresis)
-
-    Output ports
-    ------------
-    tendon_force : (N,) [N]      elastic force (+ hysteresis force), 0 when slack
-    tendon_stiffness : (N,) [N/m]  df/dx of the elastic curve
-
-    With hysteresis the system has N continuous states (the hysteresis forces z).
+    Inputs ``elongation`` (N) [m] and, with hysteresis, ``elongation_rate`` (N) [m/s]; outputs
+    ``tendon_force`` (N) [N] (elastic + hysteresis force, 0 when slack) and ``tendon_stiffness`` (N) [N/m]
+    (df/dx of the elastic curve).  With hysteresis the system has N states, the hysteresis forces z.
     """
 
     class Impl(LeafSystem_[T]):

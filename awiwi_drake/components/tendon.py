@@ -34,12 +34,9 @@ def joint_stiffness(P: np.ndarray, k_t: np.ndarray, f: np.ndarray, hessian: np.n
 def series_stiffness(k_a, k_b):
     """Two stiffnesses in series (8.1): ``(k_a^-1 + k_b^-1)^-1``.
 
-    Scalars and arrays combine element-wise as ``k_a k_b / (k_a + k_b)``, generic in the
-    scalar type (float, AutoDiffXd, Expression): a slack element (``k = 0``) gives 0.
-    Two square matrices (2-D arrays, e.g. a controller impedance and the mechanical
-    joint stiffness of (8.1)) combine as ``K_a (K_a + K_b)^-1 K_b``, which equals
-    ``(K_a^-1 + K_b^-1)^-1`` for invertible ``K_a``, ``K_b``.
-    Float inputs must be >= 0 (element-wise) with a positive sum.
+    Scalars and arrays combine element-wise as ``k_a k_b / (k_a + k_b)`` (generic in the scalar type; a slack
+    element, ``k = 0``, gives 0; float inputs must be >= 0 with a positive sum).  Two square matrices (e.g. a
+    controller impedance and the mechanical joint stiffness of (8.1)) combine as ``K_a (K_a + K_b)^-1 K_b``.
     """
     a, b = np.asarray(k_a), np.asarray(k_b)
     if a.ndim == 2 or b.ndim == 2:

@@ -337,9 +337,7 @@ def PositionBackstepping_(T):
             self._coeffs = position_feedback_coefficients(self.gains)
             self.DeclareVectorInputPort("state", 4)
             self.DeclareVectorInputPort(REFERENCE_PORT, _reference_port_size(reference_derivatives))
-            tickets = {self.all_input_ports_ticket()}
-            self.DeclareVectorOutputPort("motor_torque", 1, self._calc_u, prerequisites_of_calc=tickets)
-            self.DeclareVectorOutputPort("lyapunov", 1, self._calc_v, prerequisites_of_calc=tickets)
+            _declare_outputs(self, (("motor_torque", 1), ("lyapunov", 1)), {self.all_input_ports_ticket()})
             self.set_name("backstepping_position")
 
         def _construct_copy(self, other, converter=None):
@@ -349,12 +347,6 @@ def PositionBackstepping_(T):
             x = self.get_input_port(0).Eval(context)
             r = _full_reference(self.get_input_port(1).Eval(context))
             return position_backstepping(x, r, self.plant, self.gains, self._coeffs)
-
-        def _calc_u(self, context, output):
-            output.SetAtIndex(0, self._eval(context)[0])
-
-        def _calc_v(self, context, output):
-            output.SetAtIndex(0, self._eval(context)[1])
 
     return Impl
 
@@ -407,10 +399,7 @@ def ImpedanceBackstepping_(T):
             if external_torque == "observer":
                 self.DeclareContinuousState(1)
                 tickets.add(self.all_state_ticket())
-            self.DeclareVectorOutputPort("motor_torque", n, self._calc_u, prerequisites_of_calc=tickets)
-            self.DeclareVectorOutputPort("lyapunov", 1, self._calc_v, prerequisites_of_calc=tickets)
-            self.DeclareVectorOutputPort("joint_torque_desired", 1, self._calc_alpha,
-                                         prerequisites_of_calc=tickets)
+            _declare_outputs(self, (("motor_torque", n), ("lyapunov", 1), ("joint_torque_desired", 1)), tickets)
             self.DeclareVectorOutputPort("external_torque_estimate", 1, self._calc_text,
                                          prerequisites_of_calc=tickets)
             self.set_name("backstepping_impedance" if n == 1 else "backstepping_antagonistic")
@@ -450,19 +439,17 @@ def ImpedanceBackstepping_(T):
                 x = self.get_input_port(0).Eval(context)
                 derivatives.get_mutable_vector().SetAtIndex(0, self._observer(context, x)[0])
 
-        def _calc_u(self, context, output):
-            output.SetFromVector(self._eval(context)[0])
-
-        def _calc_v(self, context, output):
-            output.SetAtIndex(0, self._eval(context)[1])
-
-        def _calc_alpha(self, context, output):
-            output.SetAtIndex(0, self._eval(context)[2])
-
     return Impl
 
 
 ImpedanceBackstepping = ImpedanceBackstepping_[None]
+
+
+def _declare_outputs(system, outputs, tickets) -> None:
+    """Output ports ``(name, size)`` of ``system``, the i-th the i-th value of ``system._eval(context)``."""
+    for i, (name, size) in enumerate(outputs):
+        system.DeclareVectorOutputPort(name, size, lambda context, output, i=i: output.SetFromVector(
+            np.reshape(system._eval(context)[i], -1)), prerequisites_of_calc=tickets)
 
 
 # ---------------------------------------------------------------------------

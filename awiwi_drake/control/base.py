@@ -15,18 +15,11 @@ Conventions (binding for every controller in :mod:`awiwi_drake.control`)
     output port (``state``, ``tendon_force``, ``motor_velocity``, ...);
   - one output port ``motor_torque`` [Nm] is the command (size = rig input).
 
-* :func:`closed_loop` wires a rig (tendon rig, flexible joint, joint rig, a
-  finger or the hand) and a controller by these names, optionally sampled at
-  ``rate_hz`` (zero-order hold on the command, 3 kHz in the hand), with a
-  round-trip ``delay`` (a :class:`DiscreteTimeDelay` of whole control
-  periods), a torque ``saturation``, sensor models and a state
-  ``estimator``, and returns a :class:`ClosedLoop` handle.
-* Fingers and the hand have no joint sensors (section 5.2.3): their
-  controllers' ``joint_angle`` / ``joint_velocity`` measurements come from the
-  rig's tendon-length estimator ((5.15), Algorithm 1 for the thumb base;
-  ``rig.link_estimator``) unless ``sensors="ideal"`` asks for the true joint
-  state.  A controller that reads the full ``state`` (which holds the true
-  joint angles) is refused there without ``sensors="ideal"``.
+* :func:`closed_loop` wires a rig and a controller by these names (sampling, delay, saturation, sensor models,
+  state estimator: its parameters) and returns a :class:`ClosedLoop` handle.
+* Fingers and the hand have no joint sensors (section 5.2.3): their controllers' ``joint_angle`` /
+  ``joint_velocity`` come from the rig's tendon-length estimator ((5.15), Algorithm 1 for the thumb base) unless
+  ``sensors="ideal"``; a controller reading the full ``state`` (the true joint angles) is refused there.
 
 Most controllers of the thesis are static laws ``u = law(inputs)``; they are
 built with :class:`StaticLawController_`, which evaluates a pure, scalar-generic
@@ -71,8 +64,7 @@ _ROUND_TRIP_TOLERANCE = 0.01  # delay must be a whole number of periods within 1
 
 # ----------------------------------------------------------------------------
 # gain validation
-def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negative: bool = False,
-               owner: str = "controller") -> float:
+def check_gain(name: str, value: Any, *, allow_zero: bool = False, owner: str = "controller") -> float:
     """Validate one scalar gain; return it as float.
 
     Raises
@@ -88,8 +80,6 @@ def check_gain(name: str, value: Any, *, allow_zero: bool = False, allow_negativ
         raise ValueError(f"{label} = {value!r} is not a number") from None
     if not math.isfinite(v):
         raise ValueError(f"{label} = {v!r} is not finite")
-    if allow_negative:
-        return v
     if v < 0.0 or (v == 0.0 and not allow_zero):
         need = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{label} = {v!r} must be {need}")
@@ -381,34 +371,24 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     name : str, optional
         Diagram name (default ``"<rig>_<controller>"``).
     sampled_rig : bool
-        For a sampled loop (``rate_hz``) on a rig that offers ``rig.sampled_diagram`` (the
-        single-joint rigs and the tendon rig) whose controller and sensors have no continuous state and update, if at
-        all, at the control period (default True):
-        the rig enters the loop as Drake's ``DiscreteTimeApproximation`` at the control period
-        (:func:`~awiwi_drake.components.rig_system.sampled_dynamics`: fixed-step RK3, one step per
-        period, its inputs held over the period), so the loop is a discrete-time system and the
-        ``Simulator`` does one update per period. It reads the command at the sample instant, so
-        it replaces the command's sample-and-hold (a round-trip delay keeps its length); the
-        trajectory equals the continuous rig's under ``simulate``'s default fixed-step RK3 at the
-        control period to round-off (tests/test_rig_system.py). Its other inputs
-        (``external_torque``) are held over each period too. ``Linearize`` takes the loop with the
-        period; the rig's discrete state there is in its integration coordinates (momentum and
-        elongations, ``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state in),
-        its ``state`` output physical. Its systems are added to the loop directly (``Rig.add_sampled``),
-        not as the sub-diagram ``"rig"`` that any other rig is, and so is a controller that is a plain
-        ``Diagram`` whose leaves support scalar conversion (copies of its leaves: one leaf is named
-        ``"controller"``, several ``"controller.<path>"``; otherwise it is the sub-diagram ``"controller"``).
-        The loop's ``motor_torque`` output is the held command as before. False: the
-        continuous rig behind a zero-order hold (e.g. for an error-controlled reference run).
+        For a sampled loop on a rig that offers ``rig.sampled_diagram`` (the single-joint rigs and the tendon rig)
+        whose controller and sensors have no continuous state and update, if at all, at the control period (default
+        True): the rig enters the loop as Drake's ``DiscreteTimeApproximation`` at the control period
+        (:func:`~awiwi_drake.components.rig_system.sampled_dynamics`: fixed-step RK3, one step per period, its inputs
+        held), so the ``Simulator`` does one update per period.  It reads the command at the sample instant, so it
+        replaces the command's hold (a round-trip delay keeps its length); the trajectory equals the continuous rig's
+        under ``simulate``'s default fixed-step RK3 to round-off (tests/test_rig_system.py).  Its discrete state is in
+        its integration coordinates (``Rig.sampled_state``; :meth:`ClosedLoop.create_context` maps a physical state
+        in).  Its systems, and the leaves of a plain controller ``Diagram`` that support scalar conversion, are added
+        to the loop directly (one leaf is named ``"controller"``, several ``"controller.<path>"``).  False: the
+        continuous rig behind a zero-order hold.
     fused : bool
-        For a finger or the hand whose joint state comes from the rig's own tendon-length estimator
-        (``estimator="auto"``, no ``sensors``) and a controller that offers it (the chain of
-        :class:`~awiwi_drake.control.chain.TendonChainController` without the friction observer, or a
-        :class:`StaticLawController_` reading the estimated joint state, e.g. the 15.5 backstepping)
-        (default True): estimator, velocity filter and controller enter the loop as ONE discrete system
-        (:class:`~awiwi_drake.control.fused.FusedChain_`) that evaluates the same blocks' laws once per
-        period; the loop has the same ports and equals the composed one (tests/test_fused_chain.py).
-        False: the composed blocks (``"estimator"`` and ``"controller"`` subsystems).
+        For a finger or the hand whose joint state comes from the rig's own estimator (``estimator="auto"``, no
+        ``sensors``) and a controller that offers it (the chain without the friction observer, or a
+        :class:`StaticLawController_` reading the estimated joint state, e.g. the 15.5 backstepping) (default True):
+        estimator, velocity filter and controller are ONE discrete system
+        (:class:`~awiwi_drake.control.fused.FusedChain_`) with the same ports, equal to the composed loop
+        (tests/test_fused_chain.py).  False: the ``"estimator"`` and ``"controller"`` subsystems.
 
     Returns
     -------
@@ -510,14 +490,10 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
                       and est_sys is None and all(_updates_with_the_rig(s, 1.0 / rate_hz)
                                                   for s in (controller, *sensors.values())))
     builder = DiagramBuilder()
-    # a sampled rig's systems go into the loop's builder directly (RigPorts: a sub-diagram costs the
-    # simulator ~1 us per period, README "How the plants are built, and speed"); any other rig is the
-    # sub-diagram "rig"
+    # a sampled rig's systems and a plain controller diagram's leaves go into the loop's builder directly (a
+    # sub-diagram costs the simulator ~0.3-1 us per period, README "How the plants are built, and speed")
     plant = (rig.add_sampled(builder, 1.0 / rate_hz, hold_applied_torque=True) if sample_rig
              else builder.AddNamedSystem("rig", rig_diagram))
-    # a plain diagram of leaf systems controlling a sampled rig goes into the loop's builder as its leaves
-    # (a sub-diagram costs the simulator ~0.3 us per period: measured on the joint-rig demo loop, benchmarks/
-    # bench_rigs.py joint_rig_breakdown); any other controller is the subsystem "controller"
     if sample_rig and spec is None and _flattenable(controller):
         ctrl = add_flat(builder, controller, "controller")
         if len(ctrl.leaves) == 1:
@@ -615,10 +591,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
 
     refs = [r for r in refs if _feed(r, ctrl.GetInputPort(r))]
     handles.references = tuple(refs)
-    dist = []
-    for n in rig_in:
-        if n != COMMAND_PORT and _feed(n, plant.GetInputPort(n)):
-            dist.append(n)
+    dist = [n for n in rig_in if n != COMMAND_PORT and _feed(n, plant.GetInputPort(n))]
     for n in rig_out:
         if n != COMMAND_PORT:
             builder.ExportOutput(plant.GetOutputPort(n), n)
@@ -630,13 +603,13 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
     except RuntimeError as exc:
         if "already been built into" in str(exc):
             raise ValueError(
-                f"closed_loop: rig {getattr(rig, 'name', '?')!r} or controller {controller.get_name()!r} is already "
+                f"closed_loop: rig {rig_name!r} or controller {controller.get_name()!r} is already "
                 f"part of another closed loop (a Drake system belongs to one diagram): build a fresh rig and "
                 f"controller for each closed_loop call (e.g. rig = tendon_rig(); ctrl = factory(rig))") from None
         if "algebraic loop" not in str(exc):
             raise
         raise ValueError(
-            f"closed_loop: continuous loop (rate_hz=None) of rig {getattr(rig, 'name', '?')!r} and controller "
+            f"closed_loop: continuous loop (rate_hz=None) of rig {rig_name!r} and controller "
             f"{controller.get_name()!r} has an algebraic loop: the rig reports direct feedthrough from "
             f"motor_torque to its outputs; use a sampled controller (rate_hz)") from None
     diagram.set_name(name or f"{getattr(rig, 'name', 'rig')}_{controller.get_name()}")
@@ -647,11 +620,9 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
 
 def _updates_with_the_rig(system: System, period: float) -> bool:
     """Whether ``system`` can run beside a rig sampled at ``period``: no continuous state, and its discrete
-    updates (if any) all at ``period`` with offset 0.  An update at another rate, e.g. the SDRE's 200 Hz gain
-    refresh (ch. 14) in a 3 kHz loop, can fall an ulp after the rig's update at the same nominal instant (Drake
-    times each rate as a multiple of its own period): it would read the next period's state of the sampled rig,
-    where the continuous rig is still at that instant (measured: the tendon SDRE's refresh at 0.05 s, the
-    reference step, got K_omega 9.85 instead of 6.02)."""
+    updates (if any) all at ``period`` with offset 0.  An update at another rate (the SDRE's 200 Hz gain refresh,
+    ch. 14) can fall an ulp after the rig's update at the same nominal instant (Drake times each rate as a multiple of
+    its own period) and would read the sampled rig's next state."""
     if system.num_continuous_states():
         return False
     attr = system.GetUniquePeriodicDiscreteUpdateAttribute()     # None: no periodic update, or several timings
@@ -662,8 +633,7 @@ def _updates_with_the_rig(system: System, period: float) -> bool:
 
 def _flattenable(controller: System) -> bool:
     """A plain ``Diagram`` (not a Python subclass with methods of its own, e.g. ``initialize_state``) whose leaves
-    can be copied (scalar conversion; a user's Python ``LeafSystem`` without it stays inside the sub-diagram
-    ``"controller"``, as before the flat copy)."""
+    can be copied (:func:`_copyable`)."""
     if type(controller) is not Diagram or hasattr(controller, "initialize_state"):
         return False
     return _copyable(controller)

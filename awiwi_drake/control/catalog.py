@@ -1,4 +1,4 @@
-"""Built-in controller registrations (imported lazily by :mod:`.registry`).
+"""Built-in controller registrations (imported lazily by :mod:`.registry`), ch. 10-16.
 
 Factories import their modules on call so that listing names stays cheap.
 """
@@ -72,61 +72,73 @@ for _design, _doc in (
     _BUILTIN.append((_design, _lazy("joint_design", "joint_stage_controller", chain_keyword="chain", design=_design),
                      ("finger", "hand"), _doc))
 
-# Every stage runs at the thesis's 3 kHz with the estimator at the same rate.  The full-state stages (lqr,
-# pole-placement, sdre) used to need 9 kHz (at 3 kHz they saturated 82-99 % of a step): the estimate was one period
-# older than the forces read with it, and its derivative, 1.5 periods late, destabilised the DIP's link mode
-# (sampled loop |z| = 1.09-1.14 at ~3600-4050 rad/s on the index, control.joint_design.sampled_loop_poles); the
-# estimate now comes from the current sample (hand.estimation) and the LQR/SDRE measure the motors' torque rate.
+# Every stage runs at the thesis's 3 kHz with the estimator at the same rate (the full-state stages need the
+# estimate of the current sample, hand.estimation, and the motors' torque rate: control.joint_design).
 for _name, _factory, _rigs, _doc in _BUILTIN:
     register_controller(_name, _factory, rigs=_rigs, description=_doc, loop_options=_SAMPLED)
 
-# The law at the thesis's 3 kHz: its joint gains are designed for that rate (every designed joint mode
-# |h lambda| <= 1/4, HandChainParams.sampled_pole_limit). It used to run at 6 kHz: the per-DoF design put a
-# pole at -6838 1/s on the index (h lambda = -2.3 at 3 kHz, sampled spectral radius 1.18, the command
-# chattered between the torque limits); see control/finger_backstepping.py and issue 10 item 6.
-register_controller("backstepping", _lazy("finger_backstepping", "finger_backstepping_controller",
-                                          chain_keyword="params"),
-                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
-                    description="antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor "
-                                "torques directly; joint modes designed for 3 kHz, joint angles estimated (5.15)")
-for _variant, _doc in (("position", "position backstepping per DoF (15.2 steps on the link: z2 = e' + k1 e, "
-                                     "V = |e|^2/2 + |z2|^2/2 + ...) through the 15.5 tendon steps, motor torques "
-                                     "directly; 3 kHz"),
-                        ("nonlinear-spring", "impedance backstepping with the steps on the joint torques (15.71)-"
-                                             "(15.81), tau = -(P S)^T phi(x) with each tendon's spring law, the "
-                                             "tendon forces' null space held at the pretension; 3 kHz")):
-    register_controller(f"backstepping-{_variant}", _lazy("finger_backstepping", "finger_backstepping_controller",
-                                                          chain_keyword="params", variant=_variant),
-                        rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0}, description=_doc)
+# Ch. 15 on fingers and the hand (control/finger_backstepping.py): the 15.5 law, its variants and its (9.2) observer
+# options, at the thesis's 3 kHz its joint gains are designed for (HandChainParams.sampled_pole_limit); ch. 16's
+# force gains per DoF (control/optimal_gains.py, select_finger_force_gains).
+_FINGER_BACKSTEPPING = [
+    ("backstepping", "finger_backstepping", {},
+     "antagonistic backstepping (15.5) per tendon, torque shared by (P S)^T+, motor torques directly; joint modes "
+     "designed for 3 kHz, joint angles estimated (5.15)"),
+    ("backstepping-position", "finger_backstepping", {"variant": "position"},
+     "position backstepping per DoF (15.2 steps on the link: z2 = e' + k1 e, V = |e|^2/2 + |z2|^2/2 + ...) through "
+     "the 15.5 tendon steps, motor torques directly; 3 kHz"),
+    ("backstepping-nonlinear-spring", "finger_backstepping", {"variant": "nonlinear-spring"},
+     "impedance backstepping with the steps on the joint torques (15.71)-(15.81), tau = -(P S)^T phi(x) with each "
+     "tendon's spring law, the tendon forces' null space held at the pretension; 3 kHz"),
+    ("backstepping-load-observer", "finger_backstepping", {"load_observer": FrictionObserverParams()},
+     "15.5 backstepping with a (9.2) load observer per DoF (its link model gets the link-side torque the sensed "
+     "spring forces do not explain: the load and the frictions); 3 kHz, joint angles estimated (5.15). Under a "
+     "constant load it rests at the impedance's deflection less what the guides' and the lever's friction hold"),
+    ("backstepping-friction-observer", "finger_backstepping", {"friction_observer": FrictionObserverParams()},
+     "15.5 backstepping with the (9.2) observer per DoF in its link model and its estimate, bounded by the guides' "
+     "and the lever's friction, added to the desired joint torque (9.1); 3 kHz, joint angles estimated (5.15)"),
+    ("optimal-backstepping", "optimal_gains", {},
+     "15.5 backstepping with K3, K4 per DoF selected by ch. 16 (least squares to the DoF's LQR, Table 16.1 weights, "
+     "R the most aggressive the 3 kHz loop follows); impedance as backstepping"),
+]
+for _name, _module, _options, _doc in _FINGER_BACKSTEPPING:
+    _function = "finger_backstepping_controller" if _module == "finger_backstepping" else \
+        "finger_optimal_backstepping_controller"
+    register_controller(_name, _lazy(_module, _function, chain_keyword="params", **_options), rigs=("finger", "hand"),
+                        loop_options=_SAMPLED, description=_doc)
 
-# 15.5 with the (9.2) observer per DoF feeding the law's link model the external/link-side torque (15.3 "formally
-# requires the measure of the external torque"): under a constant load it rests at the impedance's deflection (less
-# the frictions' hold: Kp e = S^T tau_ext - (P S)^T (z + g), finger_backstepping)
-register_controller("backstepping-load-observer",
-                    _lazy("finger_backstepping", "finger_backstepping_controller", chain_keyword="params",
-                          load_observer=FrictionObserverParams()),
-                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
-                    description="15.5 backstepping with a (9.2) load observer per DoF (its link model gets the "
-                                "link-side torque the sensed spring forces do not explain: the load and the "
-                                "frictions); 3 kHz, joint angles estimated (5.15). Under a constant load it rests at "
-                                "the impedance's deflection less what the guides' and the lever's friction hold")
 
-# 15.5 with the (9.2) observer and its estimate, bounded by what the guides' friction and the lever's hysteresis can
-# hold, added to the desired joint torque ((9.1), as the chain's default observer): inside the bound the rest is e = 0
-# (finger_backstepping, FingerBacksteppingLaw.dead_band), where the plain law stops in its friction dead band
-register_controller("backstepping-friction-observer",
-                    _lazy("finger_backstepping", "finger_backstepping_controller", chain_keyword="params",
-                          friction_observer=FrictionObserverParams()),
-                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
-                    description="15.5 backstepping with the (9.2) observer per DoF in its link model and its "
-                                "estimate, bounded by the guides' and the lever's friction, added to the desired "
-                                "joint torque (9.1); 3 kHz, joint angles estimated (5.15)")
+# Ch. 15/16 on the single-joint rigs, at the thesis's 3 kHz (section 15.5 experiments) with Kd,imp limited to
+# m f_s / 4: the impedance damping puts a link pole at -Kd,imp / m, and the limit keeps h lambda >= -1/4 (with a
+# 30 kHz limit the 3 kHz step saturated and did not settle: docs/REPRODUCTIONS.md, ch. 15; tests/test_backstepping.py).
+# The limit is conservative at higher rates (--rate 30000); --rate 0 runs it continuously.
+def _rig_backstepping(rig, optimal: bool = False):
+    """``backstepping`` (the rig's impedance law: flexible joint (15.51)-(15.81) with its own spring law, joint rig
+    (15.82)-(15.106), external-torque observer (9.2)) or ``optimal-backstepping`` (its gains fitted, ch. 16, to the
+    LQR of the rig with Table 16.1's weights in torque coordinates, ``R = 1e-3``: with Table 16.1's ``R = 0.1`` the
+    LQR gain is below the structural floor of the backstepping feedback, docs/REPRODUCTIONS.md; on the joint rig
+    the antagonistic law fitted at its operating point inside a gain box bounded by the loop rate)."""
+    from awiwi_drake.control.backstepping import impedance_controller
+    from awiwi_drake.control.optimal_gains import optimize_gains, rate_limited_case
+    from awiwi_drake.parameters.backstepping import (AntagonisticBacksteppingGains, ImpedanceBacksteppingGains,
+                                                     JointRigOptimalGainsCase, OptimalGainsCase)
+    from awiwi_drake.parameters.rigs import JointRigParams
 
-# Ch. 16 on every DoF of a finger/the hand: the 15.5 law above with its force-level gains (K3, K4) selected per DoF
-# against a rate-limited LQR of the DoF's own one-link model (control/optimal_gains.py, select_finger_force_gains).
-register_controller("optimal-backstepping", _lazy("optimal_gains", "finger_optimal_backstepping_controller",
-                                                  chain_keyword="params"),
-                    rigs=("finger", "hand"), loop_options={"rate_hz": 3000.0},
-                    description="15.5 backstepping with K3, K4 per DoF selected by ch. 16 (least squares to the "
-                                "DoF's LQR, Table 16.1 weights, R the most aggressive the 3 kHz loop follows); "
-                                "impedance as backstepping")
+    joint_rig = isinstance(rig.params, JointRigParams)
+    if optimal and joint_rig:
+        case = rate_limited_case(JointRigOptimalGainsCase(), rig.params.link_inertia, _SAMPLED["rate_hz"])
+        return impedance_controller(rig, optimize_gains(rig, case, starts=16).gains)
+    if optimal:
+        return impedance_controller(rig, optimize_gains(rig, OptimalGainsCase(r_weight=1e-3)).gains)
+    g = AntagonisticBacksteppingGains() if joint_rig else ImpedanceBacksteppingGains()
+    damping = min(g.damping, rig.params.link_inertia * _SAMPLED["rate_hz"] / 4.0)
+    return impedance_controller(rig, g.replace(damping=damping))
+
+
+register_controller("backstepping", _rig_backstepping, rigs=_JOINTS, loop_options=_SAMPLED,
+                    description="impedance backstepping (ch. 15.3-15.5), rig's spring law, external-torque observer")
+register_controller("backstepping-position", _lazy("backstepping", "position_controller"), rigs=("flexible-joint",),
+                    loop_options=_SAMPLED,
+                    description="position backstepping of the linear flexible joint (15.11)-(15.50)")
+register_controller("optimal-backstepping", lambda rig: _rig_backstepping(rig, optimal=True), rigs=_JOINTS,
+                    loop_options=_SAMPLED, description="impedance backstepping with gains fitted to the LQR (ch. 16)")

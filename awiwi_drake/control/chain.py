@@ -7,34 +7,22 @@
     (tendon_force, tendon_stiffness, motor_velocity: torque feedback laws)          v
     tendon_force, motor_velocity, motor_angle ──────────────> TendonForceLaw bank (ch. 10 (10.2), ch. 3) ─> motor_torque
 
-* :class:`~awiwi_drake.control.joint_stage.JointStage_` -- the joint-level stage, a plug-in: one
-  law for all independent DoF ``q_dof = S^+ q`` (ring/fifth: the DIP follows the PIP, (5.16)) giving
-  the desired DoF torques and the desired *mechanical* joint stiffness (co-contraction, the thesis's
-  central claim) for the distribution.  Impedance (11.4), PD, pole placement (ch. 12), LQR (ch. 13)
-  and SDRE (ch. 14) stages are designed per DoF from that joint's own reduced model (its link
-  driven through the closed tendon force loop, Drake ``Linearize``):
-  :mod:`awiwi_drake.control.joint_design`, which also holds the registered factories.
-* :class:`TendonForceStage` -- the rest of the chain: desired DoF torques -> tendon forces -> motor torques:
+* :class:`~awiwi_drake.control.joint_stage.JointStage_` -- the joint-level stage, a plug-in: one law for all
+  independent DoF ``q_dof = S^+ q`` (ring/fifth: the DIP follows the PIP, (5.16)) giving the desired DoF torques
+  and the desired *mechanical* joint stiffness (co-contraction) for the distribution; the stages are designed per
+  DoF in :mod:`awiwi_drake.control.joint_design`, which also holds the registered factories.
+* :class:`TendonForceStage` -- desired DoF torques -> tendon forces -> motor torques: the ch. 7 distribution
+  (:class:`~awiwi_drake.control.force_distribution.TendonForceDistributionSystem`, sampled and warm-started) or,
+  for a continuous loop (linear analysis), the sharing (15.88) ``f_ref = f_op + W (tau_ref - tau_op)``,
+  ``W = -((P S)^T)^+``; then per tendon (10.2) (:class:`~awiwi_drake.control.tendon_force.TendonForceLaw`, gains
+  (10.11) scheduled on the reference (10.12) with each tendon's own spring curve, :func:`rig_springs`) or the
+  ch. 14 tendon SDRE (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`), friction (3.8) and ripple (3.5) fed forward.
 
-  - :class:`~awiwi_drake.control.force_distribution.TendonForceDistributionSystem` -- exact torque,
-    closest stiffness, forces in bounds (the optimal (7.6) program or Algorithm 2), sampled at the
-    control rate and warm-started; or, for a continuous loop (linear analysis), the sharing
-    (15.88) ``f_ref = f_op + W (tau_ref - tau_op)``, ``W = -((P S)^T)^+`` (:class:`TendonForceSharing_`);
-  - :class:`~awiwi_drake.control.tendon_force.TendonForceLaw` with ``size = m`` -- (10.2) per tendon,
-    gains (10.11) scheduled on the reference (10.12), slope ``alpha = r_m k_t(f)`` of the tendon's
-    own spring curve (:meth:`ForceMap.from_spring` of each tendon's law, :func:`rig_springs`: the rig's
-    ``params.tendon_springs`` overrides are honoured), friction (3.8) and ripple (3.5) fed forward; or
-    (``HandChainParams.tendon_law = "sdre"``) the tendon SDRE of ch. 14 per tendon
-    (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`, gains re-solved at 200 Hz from each tendon's (14.9) at its
-    measured force, held in discrete state), with the same feed-forward.
-
-:class:`TendonChainController` wires a joint stage and the force stage into one controller with
-the port contract of :mod:`awiwi_drake.control.base` (inputs ``joint_angle_reference``,
-``joint_angle``, ``joint_velocity``, ``tendon_force``, ``motor_velocity``, ``motor_angle``
-[, ``tendon_stiffness``]; output ``motor_torque``; extra outputs ``tendon_force_reference``,
-``joint_torque_reference``, ``joint_stiffness_reference``, ``distribution_status``).  On a finger
-or the hand :func:`~awiwi_drake.control.base.closed_loop` feeds ``joint_angle`` /
-``joint_velocity`` from the tendon-length estimator (no joint sensors).
+:class:`TendonChainController` wires both into one controller with the port contract of
+:mod:`awiwi_drake.control.base` (extra outputs ``tendon_force_reference``, ``joint_torque_reference``,
+``joint_stiffness_reference``, ``distribution_status``); on a finger or the hand
+:func:`~awiwi_drake.control.base.closed_loop` feeds ``joint_angle`` / ``joint_velocity`` from the tendon-length
+estimator (no joint sensors).
 """
 
 from __future__ import annotations
@@ -147,13 +135,9 @@ def TendonForceSharing_(T):
     at the design point, so that ``-(P S)^T f_ref = tau_ref`` exactly (constant coupling).  No
     stiffness tracking and no bounds (the sampled distribution of ch. 7 has both): for linear analysis.
 
-    The "invalid value encountered in subtract" RuntimeWarning this map (and ``drive_laws``' ``r_m theta``) sometimes
-    shows under Drake's ``Linearize`` has no NaN behind it: its AutoDiffXd operands are finite (logged).  Drake
-    1.51.1's symbolic code sets the processor's invalid-operation flag on finite arithmetic and on freeing an
-    ``Expression`` (``-0.1 * pydrake.symbolic.Variable("w")`` alone sets it); when the garbage collector frees such
-    objects (the rigs' ``SymbolicVectorSystem`` copies) inside a numpy object-array operation, numpy reports the flag
-    against that line (measured on six tests of tests/test_joint_design.py: 33 of 802 generation-0 collections set it;
-    they freed 49 ``Diagram_[AutoDiffXd]`` copies, the other 769 collections 4).
+    An "invalid value encountered in subtract" RuntimeWarning here under Drake's ``Linearize`` has no NaN behind it
+    (the operands are finite): Drake 1.51.1's symbolic code sets the invalid-operation flag when the garbage collector
+    frees an ``Expression`` inside a numpy object-array operation, and numpy reports it against this line.
     """
 
     class Impl(LeafSystem_[T]):
@@ -217,18 +201,12 @@ class TendonForceStage(Diagram):
     ripple feed-forward ``motor_angle`` (m); outputs ``motor_torque``, ``tendon_force_reference`` and
     (distribution) ``distribution_status``.
 
-    ``distribution``: ``"optimal"`` / ``"algorithm2"`` (ch. 7, sampled every ``1/rate_hz``, needs
-    ``fingers``) or ``"sharing"`` (15.88, continuous: ``W`` at ``point``).  ``tendon_law`` (default
-    ``params.tendon_law``): ``"force"`` (10.2), ``"sdre"`` (ch. 14, :class:`~awiwi_drake.control.sdre.TendonSdreLaw`
-    in a :class:`~awiwi_drake.control.sdre.TendonSdreController_`: its gains re-solved at ``params.sdre_update_rate``
-    from the measured forces and held, output ``tendon_sdre_gain``; a continuous (``"sharing"``) stage holds them at
-    ``point``'s forces: the SDRE's linearisation there) or ``"motor-position"`` (the tendon level of the two-time-scale (11.3),
-    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``, its motor
-    damping relative to the tendon path).
-    ``spring``: one spring law for every tendon, or a
-    :class:`~awiwi_drake.components.spring.TendonSprings` (:func:`rig_springs`): each tendon's force map
-    (slope ``alpha_i = r_m k_t,i``, gains (10.11)), slope floor and distribution stiffness table
-    ``k_t,i(f)`` are then its own law's.
+    ``distribution``: ``"optimal"`` / ``"algorithm2"`` (ch. 7, sampled every ``1/rate_hz``) or ``"sharing"``
+    (15.88, continuous, ``W`` at ``point``).  ``tendon_law`` (default ``params.tendon_law``): ``"force"`` (10.2),
+    ``"sdre"`` (ch. 14, gains re-solved at ``params.sdre_update_rate`` and held, output ``tendon_sdre_gain``; held at
+    ``point``'s forces in a continuous stage) or ``"motor-position"`` (the tendon level of (11.3),
+    :class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`, input ``tendon_stiffness``).  ``spring``: one law
+    for every tendon or a ``TendonSprings`` (each tendon's force map, gains and stiffness table its own law's).
     """
 
     def __init__(self, coupling, spring, drive_params, params: HandChainParams | None = None, *,
@@ -250,10 +228,10 @@ class TendonForceStage(Diagram):
             dist = b.AddNamedSystem("force_sharing", TendonForceSharing(W, point["tendon_force"],
                                                                        point["torque_offset"]))
         elif method in ("optimal", "algorithm2"):
-            dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(
-                point["fingers"], method=method, period=1.0 / rate_hz,
-                iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution_params,
-                drive=drive_params, springs=springs))
+            dist_kw = dict(fingers=point["fingers"], method=method, period=1.0 / rate_hz, stiffness="full",
+                           iterations_per_period=p.distribution_iterations, params=distribution_params,
+                           drive=drive_params, springs=springs)
+            dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(**dist_kw))
         else:
             raise ValueError(f"TendonForceStage: distribution = {method!r}; use 'optimal', 'algorithm2' or 'sharing'")
         gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth,
@@ -278,10 +256,8 @@ class TendonForceStage(Diagram):
             from awiwi_drake.control.impedance import MotorPositionForceLaw
             from awiwi_drake.parameters.control import ImpedanceParams
             k_min = springs.stiffness(springs.inverse_force(np.full(m, gains.min_schedule_force)))
-            # the motor loop as fast as the force loop of (10.2) (as ImpedanceParams does on the joint rig: the
-            # same speed for a fair comparison); at ImpedanceParams' 150 rad/s its 4x lower gain leaves a 4x wider
-            # friction dead band, 0.2-0.4 N on the index, which the finger's small joint stiffness turns into
-            # 0.16 rad of PIP error on a 0.2 rad step (measured)
+            # chosen: the motor loop as fast as the force loop of (10.2) (a fair comparison); at ImpedanceParams'
+            # 150 rad/s its friction dead band is 4x wider (0.16 rad of PIP error on a 0.2 rad step, measured)
             motor_loop = ImpedanceParams(motor_bandwidth=gains.natural_frequency,
                                          motor_damping_ratio=gains.damping_ratio)
             law = MotorPositionForceLaw(drive_params.motor, motor_loop, size=m, friction_scale=p.friction_scale,
@@ -324,10 +300,7 @@ class TendonForceStage(Diagram):
         self.fused_parts = dict(
             law=law, path_coupling=coupling if force.HasInputPort("tendon_path_velocity") else None,
             sharing=(dist.W, dist.f0, dist.tau0) if method == "sharing" else None,
-            distribution=None if method == "sharing" else dict(
-                fingers=point["fingers"], method=method, period=1.0 / rate_hz,
-                iterations_per_period=p.distribution_iterations, stiffness="full", params=distribution_params,
-                drive=drive_params, springs=springs),
+            distribution=None if method == "sharing" else dist_kw,
             distribution_system=self._dist, initial_forces=None if method == "sharing" else self._f_op)
 
     def initialize_state(self, context, rig_state=None) -> None:
@@ -337,30 +310,16 @@ class TendonForceStage(Diagram):
 
 
 class TendonChainController(Diagram):
-    """A joint stage -> force distribution -> tendon force PD, as one controller (module docstring).
+    """A joint stage -> force distribution -> tendon force law, as one controller (module docstring).
 
-    Parameters
-    ----------
-    rig : HandRig
-        A finger or the hand (``finger_diagram`` / ``hand_diagram``).
-    joint_law : StaticLaw
-        The joint-level law for all DoF (output ``n_dof`` torques), e.g. a
-        :class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw` designed by
-        :mod:`awiwi_drake.control.joint_design` (the registered factories).
-    params : HandChainParams, optional
-    point : dict, optional
-        :func:`chain_design_point` (default: at the rig's operating point).
-    distribution : {"optimal", "algorithm2", "sharing"}, optional
-        Default ``params.distribution_method``; ``"sharing"`` gives a continuous chain (linear analysis).
-    rate_hz : float
-        Rate of the distribution (the thesis's 3 kHz).
-    friction_observer : FrictionObserverParams, optional
-        Add the joint friction observer (9.2) per DoF
-        (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`): ``-d_hat``, bounded by what the rig's guide
-        friction and the joints' can be (:func:`guide_friction_levels`, :func:`joint_friction_levels`), is added to
-        the joint stage's torques (ch. 9); outputs
-        ``friction_compensation`` and its bound ``friction_compensation_bound``.  Sampled at ``1/rate_hz`` in a sampled chain
-        (and then fused), continuous with ``distribution="sharing"``.
+    ``rig``: a finger or the hand; ``joint_law``: a ``StaticLaw`` with ``n_dof`` outputs (e.g. a
+    :class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw` of :mod:`awiwi_drake.control.joint_design`);
+    ``point``: :func:`chain_design_point` (default at the rig's operating point); ``distribution``: ``"optimal"``,
+    ``"algorithm2"`` or ``"sharing"`` (continuous, for linear analysis), default ``params.distribution_method``;
+    ``rate_hz``: the distribution's rate (the thesis's 3 kHz).  ``friction_observer`` (FrictionObserverParams) adds
+    the (9.2) observer per DoF (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`, bounded by the rig's
+    own guide and joint friction levels) to the stage's torques, with outputs ``friction_compensation`` and
+    ``friction_compensation_bound``; sampled (and fused) in a sampled chain, continuous with ``"sharing"``.
     """
 
     def __init__(self, rig: Any, joint_law: StaticLaw, params: HandChainParams | None = None, *,

@@ -11,7 +11,8 @@ equal to it (tests/test_control_tendon.py, tests/test_fused_chain.py):
   arithmetic), the clamps of ``ForceMap.alpha_of_force`` and ``TendonForceLaw.gains_at``.  Returns -1, or the
   index of the first reference outside its table (the caller raises through the law).
 * ``sdre_law`` -- the tendon SDRE bank with held gains (:class:`~awiwi_drake.control.sdre.TendonSdreLaw`, as written
-  there): the same interpolation as ``force_law``, the measured force clamped to its table; returns as ``force_law``.
+  there): the same interpolation as ``force_law``, the measured force clamped to its table (or the motor angle as the
+  state, ``by_angle``); returns as ``force_law``.
 * ``backstepping`` -- the 15.5 law of a finger/the hand
   (:meth:`~awiwi_drake.control.finger_backstepping.FingerBacksteppingLaw.terms`, ``variant="antagonistic"``, with or
   without the link torque estimate and its bounded compensation) with polynomial spring laws
@@ -88,7 +89,7 @@ def force_law(fd, f, w, th, vp, group, n, tf, tkp, tkd, ta, kp_fixed, kd_fixed, 
 
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
-def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale, ripple_scale, r_m, out):
+def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, by_angle, friction_scale, ripple_scale, r_m, out):
     m = fd.shape[0]
     bad = _first_outside(fd, group, fmax)
     if bad >= 0:
@@ -97,8 +98,8 @@ def sdre_law(fd, f, w, th, vp, g, group, n, tf, tth, fmax, path, friction_scale,
     res = np.empty(2)
     for i in range(m):
         k = group[i]
-        fm = min(max(f[i], 0.0), fmax[k])
-        err = _interp1(fm, tf[k], tth[k], n[k]) - _interp1(fd[i], tf[k], tth[k], n[k])
+        theta = th[i] if by_angle else _interp1(min(max(f[i], 0.0), fmax[k]), tf[k], tth[k], n[k])
+        err = theta - _interp1(fd[i], tf[k], tth[k], n[k])
         w_el = w[i] + vp[i] / r_m if path else w[i]
         tau = r_m * fd[i] - g[i] * err - g[m + i] * w_el
         out[i] = _minus_motor_feedforward(tau, w[i], th[i], friction_scale, ripple_scale, arg, res)
@@ -115,7 +116,8 @@ def _poly(x, c, deg):
 
 @numba.njit(cache=True, fastmath=False, error_model='numpy')
 def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f_op, tau_op, r_m, B, friction_scale,
-                 coef, dcoef, ddcoef, xmax, kend, link_feedforward, fc, estimate, compensate, C, rise, beta, z0, Fs, out):
+                 coef, dcoef, ddcoef, xmax, kend, link_feedforward, fc, estimate, compensate, C, rise, beta, z0, hold,
+                 out):
     m, n = P.shape
     k = S.shape[1]
     deg = coef.shape[1]
@@ -138,11 +140,11 @@ def backstepping(q, v, q_ref, x, th, w, P, S, Sp, W, Minv, Bq, Kp, Kd, K3, K4, f
         tau = tau - fc
         if compensate:
             lv = np.empty(m)
-            for i in range(m):                 # joint_friction_bound: W(f + w) + w, w = beta f + z0; + |S|^T Fs
+            for i in range(m):                 # joint_friction_bound: W(f + w) + w, w = beta f + z0; + hold
                 fp = max(f[i], 0.0)
                 wi = beta[i] * fp + z0[i]
                 lv[i] = C[i] + (fp + wi) * rise[i] + wi
-            bound = np.abs(PS).T @ lv + np.abs(S).T @ Fs
+            bound = np.abs(PS).T @ lv + hold
             for j in range(k):
                 a0[j] = a0[j] + min(max(fc[j], -bound[j]), bound[j])
     edd = Minv @ (tau - Bq @ ed)

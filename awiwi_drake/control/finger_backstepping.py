@@ -1,12 +1,10 @@
 """Antagonistic backstepping (thesis 15.5, (15.82)-(15.106)) for a finger or the whole hand, and its position
 (15.2) and nonlinear-spring (15.4) variants.
 
-Section 15.5 keeps the symmetry of the antagonistic joint by letting "the motors not be aware of
-one another": the desired link torque is *shared* among the tendons, a pretension is added, and
-the backstepping steps on the tendon force are done per tendon; the motor torques come out of the
-law directly (no force distribution, no force loop).  Here that construction is written for ``n``
-independent DoF and ``m`` tendons with the coupling ``P(q)`` (m x n plant joints) and the DoF
-selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
+Section 15.5 lets "the motors not be aware of one another": the desired link torque is *shared* among the
+tendons, a pretension is added, and the backstepping steps on the tendon force are done per tendon; the motor
+torques come out of the law directly (no force distribution, no force loop).  Here for ``n`` plant joints, ``k``
+independent DoF (``q = S q_d``; ring/fifth: the DIP follows the PIP) and ``m`` tendons with the coupling ``P(q)``::
 
     e = S^+ (q - q_ref),  e' = S^+ qdot                            DoF errors (references held)
     alpha = tau_op - Kp e - Kd e'                                   (15.54), Kp and Kd k x k
@@ -14,138 +12,72 @@ selection ``S`` (``q = S q_d``; ring/fifth: the DIP follows the PIP)::
     z3 = f - f_d,  beta = f_d' - K3 z3 + (P S) e',  z4 = f' - beta  (15.90), (15.57)
     u = (beta' - f0 - z3 - K4 z4) / g                               (15.63)
 
-with the tendon force ``f = phi_i(x_i)`` (what the hand measures: the lever's angle, ch. 4, mapped to force
-by the calibration; the lever's friction ``z`` and the guides' ``g`` are not measured) of each tendon's own spring law (``rig.spring_laws``: the
-lever mechanism for all, ``params.tendon_springs`` overriding tendons one by one) at its measured
-spring elongation ``x_i``, the motor friction
-(3.8) compensated by ``HandChainParams.backstepping_friction_scale`` (ch. 3: under-compensate; 1 = the exact
-cancellation of the continuous design), the ripple (3.5) in full, ``f' = phi'(x) x'``,
-``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B`` and ``f0 = phi'' x'^2 +
-phi' r_m (tau_fric(omega) + tau_ripple(theta) - r_m f) / B``.  The joint accelerations
-come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``, the DoF
-inertia matrix at the operating point, ``B_q`` the joint damping; Coriolis terms, second order at
-rest, are left out) and their derivative from ``f'``.
-
-With ``HandChainParams.link_acceleration_feedforward=True`` ``f0`` also holds ``phi' P qddot``, the tendon
-force change of the link model's acceleration: the exact design.  For that model
+``f = phi_i(x_i)`` is each tendon's own spring law (``rig.spring_laws``) at its measured elongation (the lever's
+angle calibrated to force, ch. 4: its friction ``z`` and the guides' ``g`` are not measured); ``f' = phi'(x) x'``,
+``x' = r_m omega + P qdot``, ``f'' = f0 + g u``, ``g = phi'(x) r_m / B``, ``f0 = phi'' x'^2 + phi' r_m (tau_fric(omega)
++ tau_ripple(theta) - r_m f) / B`` with the motor friction (3.8) scaled by
+``HandChainParams.backstepping_friction_scale`` (ch. 3: under-compensate) and the ripple (3.5) in full.  The joint
+accelerations come from the link model ``M_d e'' = -(P S)^T f - B_q e'`` (``M_d = S^T M(q_op) S``; Coriolis terms,
+second order at rest, left out).  With ``HandChainParams.link_acceleration_feedforward=True`` ``f0`` also holds
+``phi' P qddot`` (the exact design), for which::
 
     V = e'^T M_d e' / 2 + e^T Kp e / 2 + |z3|^2 / 2 + |z4|^2 / 2,   (Kp symmetric positive definite)
     V' = -e'^T (Kd + B_q) e' - z3^T K3 z3 - z4^T K4 z4 <= 0      (K3, K4 diagonal, one gain per tendon)
 
-(the cross term ``e'^T (PS)^T z3`` of the link equation is cancelled by the ``(PS) e'`` in
-``beta``), and the linearised loop on the ideal plant has exactly the designed error-system poles
-(tested).  ``terms(u)["V"]`` gives ``V``.  With one DoF and ``P = [-r_q, r_q]^T`` it is the
-antagonistic joint of 15.5.
+(the ``(P S) e'`` in ``beta`` cancels the link equation's cross term) and the linearised loop on the ideal plant has
+exactly the designed error-system poles (tested); ``terms(u)["V"]`` gives ``V``.  One DoF with ``P = [-r_q, r_q]^T``
+is the antagonistic joint of 15.5.  The feed-forward is off by default: on the light finger links it turns every
+link-side force the model lacks (the guides' friction (4.1)) into motor torque and an unstable pole (README, "The
+thesis's control on fingers and the hand").  The frictions then leave a dead band:
+:meth:`FingerBacksteppingLaw.rest_error` is the law's rest in closed form, :meth:`~FingerBacksteppingLaw.dead_band`
+its half-width per DoF, and ``compare`` flags a step row that stops in it
+(:meth:`~FingerBacksteppingLaw.friction_hold`).
 
-**The feed-forward is off by default**: the finger links are light (index DIP ~1e-6 kg m^2), so the
-model's ``e''`` reacts to every link-side force the model lacks with ``M_d^-1 (P S)^T dF``, and
-``phi' P S e''`` turns it into motor torque (~8 Nm per N on the index DIP).  The guides' friction (4.1),
-on by default, is such a force: at rest it holds each tendon path with its presliding stiffness ``C/delta``
-(~5 kN/m), and with the feed-forward the loop has a real pole at +833 1/s (index, continuous, true joint
-state; sampled at 3 kHz through the estimator: spectral radius 1.26; Drake's ``Linearize``).  Without it
-the link's acceleration is a disturbance of the force steps, rejected by ``K3``, ``K4``: the sampled loop
-through the estimator is stable on every finger and the hand with guide friction and hysteresis on
-(``tests/test_hand_control.py``), and a 0.2 rad MCP step on the friction-free index settles as fast as
-with it (1.1e-3 rad left after 0.25 s, 0.9e-3 with it).  The friction then leaves the steady offset of a
-dead band: at rest the law settles at ``Kp e = -(I + G) (P S)^T (z + g)`` (``z``, ``g`` the lever's and
-the guides' friction forces, ``G`` from the model's phantom acceleration ``M_d^-1 (P S)^T (z + g)``, see
-``test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band``).  :meth:`FingerBacksteppingLaw.rest_error`
-is that closed form (any ``K3``, ``K4`` per tendon, and the motors' ``r_m z`` of the lever, 0.2 % of ``z``),
-:meth:`~FingerBacksteppingLaw.dead_band` its half-width per DoF on the default plant (index: 0.38 / 0.58 / 1.58 /
-3.0 rad: the frictions' bound ``B`` of 0.10 / 0.13 / 0.11 / 0.04 Nm over ``(I + G)^-1 Kp``, ``I + G`` with
-eigenvalues 1.9-13.5), and ``compare`` flags a step row that stops in it (:meth:`~FingerBacksteppingLaw.friction_hold`).
+**External load** (``load_observer`` of :func:`finger_backstepping_controller`): the link model has no external
+torque, so a load ``tau_ext`` rests at ``Kp e = (I + G) S^T tau_ext`` (``G`` of the dead band); 15.3 "formally
+requires the measure of the external torque".  The option estimates it with the joint observer (9.2) per DoF
+(:class:`ObservedBacksteppingController`) on the law's own sensed torque ``-(P S)^T phi(x)``, adds ``d_hat`` to the
+link model, and the loop rests at ``Kp e = S^T tau_ext - (P S)^T (z + g)``.  **Friction compensation**
+(``friction_observer``, registered ``backstepping-friction-observer``): (9.1) on the joint level, ``alpha +=
+clip(-d_hat, +-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`, the one law
+:func:`~awiwi_drake.components.friction.joint_friction_bound`, with the lever's hysteresis added because the law's
+sensor misses it).
 
-**External load** (option ``load_observer`` of :func:`finger_backstepping_controller`): the link model has no
-external torque, so under a constant load ``tau_ext`` the law's rest equations give ``Kp e = (I + G) S^T tau_ext``
-(the dead band's ``G``): on the index PIP 11x the impedance's deflection (0.34 rad for 0.01 Nm against 0.031).
-15.3 "formally requires the measure of the external torque"; the option estimates it with the joint observer (9.2)
-per DoF (:class:`ObservedBacksteppingController`), ``M_d e'' = -(P S)^T f - B_q e' + d_hat`` in the link model (its
-derivative neglected, as 15.3 does), and the loop rests at the impedance's own ``Kp e = S^T tau_ext``
-(``tests/test_hand_control.py``).  The observer's joint torque is the law's own, ``-(P S)^T phi(x)`` of the spring
-sensors, so ``d_hat`` is every link-side torque the law's model lacks (the load, the lever's hysteresis ``z`` and the
-guides' friction ``g``: (9.2) "identifies the missing part to the friction") and at rest the model's acceleration
-vanishes: ``Kp e = S^T tau_ext - (P S)^T (z + g)``, the impedance's deflection less what the frictions hold, as for the
-impedance stage's dead band.  Measured (Drake ``Linearize`` of the continuous index loop at rest, default physics):
-with the observer fed the drive's ``tendon_force`` ``phi(x) + z`` (the lever's friction, which the hand does not
-measure) the loop had a real pole at +20.5 1/s, mostly the DIP observer's state, and ``compare`` flagged the PIP/DIP
-"negative stiffness" under load; with the hysteresis off or the guide friction off it was stable (-8.3 / -3.3 1/s).
-A quasi-static sketch: the guides' presliding holds the link, the law turns ``d_hat`` into a sensed torque ``-(I +
-G)^-1 G d_hat`` (``G`` of the dead band, diagonal 8.3 / 12.0 on the PIP / DIP), and the observer sees it ``1 + rho``
-times larger (``rho`` = the hysteresis's presliding stiffness over the spring slope, 0.38), a loop gain above one
-where ``rho G > 1``.  Fed ``phi(x)`` the slowest pole is -7.8 1/s.
+Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the tendon force error
+that is close to the cascaded case"): per tendon ``K3 = K4 = w_f`` (then ``(1 + K3 K4) / g ~ w_f^2 B / alpha``
+equals the cascaded (10.11) gain at the same bandwidth, ``alpha = r_m phi'``).  The joint gains are designed on the
+modes of ``M_d = V diag(mu) V^T``: mode i gets ``k_i = min(joint_stiffness, mu_i w_max^2)`` and the damping ``2 zeta
+sqrt(k_i mu_i)``, so every mode has ``|lambda| <= w_max = sampled_pole_limit * rate_hz`` (the law acts through the
+whole ``M_d^-1``: per-DoF gains on its diagonal put a pole far beyond the 3 kHz rate, docs/REPRODUCTIONS.md);
+``rate_hz=None`` designs for continuous time.  ``w_f``, ``zeta``, ``joint_stiffness`` from :class:`HandChainParams`.
 
-**Friction compensation** (option ``friction_observer`` of :func:`finger_backstepping_controller`, the law's
-``friction_compensation``, registered ``backstepping-friction-observer``): (9.1)'s ``u = u_c + tau_fric_hat`` on the joint level, ``alpha += clip(-d_hat,
-+-B)`` with ``B`` the frictions' bound (:meth:`~FingerBacksteppingLaw.friction_bound`, the one law
-:func:`~awiwi_drake.components.friction.joint_friction_bound`: the guides (4.1) at the tension ``phi + w``, the
-lever's hysteresis half-width ``w`` and, where the plant has it, the joints' stick-slip breakaway ``Fs``), the bound of
-the chain's observer (ch. 9) with the hysteresis added: the law's
-sensor is the lever's angle calibrated to ``phi(x)`` (ch. 4), which misses both, where the chain reads the lever's
-tension ``phi(x) + z``.  Inside the bound the rest is ``e = 0`` up to the motors' ``r_m z`` (dead band 0.2-0.7 mrad on the
-index); a load beyond ``B`` deflects the impedance, one below it is cancelled, as in the chain.
+Variants (``variant``, registered ``backstepping-position`` and ``backstepping-nonlinear-spring``):
 
-Gains (chosen, 15.5: "the gains have been initially selected to lead to feedback gains for the
-tendon force error that is close to the cascaded case"): per tendon ``K3 = K4 = w_f``, so that
-the force-error feedback ``(1 + K3 K4) / g ~ w_f^2 B / alpha`` equals the cascaded (10.11) gain at
-the same bandwidth (``alpha = r_m phi'``; critically damped). The joint gains are designed on the
-modes of the DoF inertia matrix ``M_d = V diag(mu) V^T``: mode i gets the stiffness
-``k_i = min(joint_stiffness, mu_i w_max^2)`` and the damping ``2 zeta sqrt(k_i mu_i)``, so
-``Kp = V diag(k) V^T``, ``Kd = V diag(d) V^T`` and every mode of ``M_d e'' + Kd e' + Kp e = 0`` has
-``|lambda| = sqrt(k_i / mu_i) <= w_max = sampled_pole_limit * rate_hz`` (|h lambda| <= 1/4 at the
-control period h = 1/rate_hz): the chosen impedance gain (``HandChainParams.joint_stiffness``, Fig 15.22's
-soft setting on the single-joint testbed) on every mode slow enough to be
-sampled, less on the light distal modes (index at 3 kHz: the lightest mode 0.5 -> 0.092 Nm/rad). Why: the
-former per-DoF design (``Kd = 2 zeta sqrt(Kp M_jj)`` with the diagonal of ``M_d``) put a pole at
--6838 1/s on the index (h lambda = -2.3 at 3 kHz; sampled spectral radius 1.18: the chatter that had it
-registered at 6 kHz). ``rate_hz=None`` designs for continuous time (no limit). ``w_f``, ``zeta`` of
-:class:`HandChainParams`.  Unlike the cascade (15.5.3) the joint gain is not limited by the force
-loop's bandwidth.
-
-Variants (``variant``, registered ``backstepping-position`` and ``backstepping-nonlinear-spring`` on
-``finger-*``/``hand``; the same force steps and motor-torque output):
-
-* ``"position"``: the link steps of the position law (15.27), (15.31) on every DoF, in the metric of ``M_d``,
-  with the rates ``K1 = K2 = V diag(k) V^T`` on the modes of ``M_d``: ``z2 = e' + K1 e``,
-  ``alpha = tau_op - M_d (I + K2 K1) e - (M_d (K1 + K2) - B_q) e'``, so that
-  ``M_d z2' = -M_d e - M_d K2 z2 - (P S)^T z3``, and ``beta = f_d' - K3 z3 + (P S) z2``::
+* ``"position"``: the link steps of the position law (15.27), (15.31) on every DoF in the metric of ``M_d``, rates
+  ``K1 = K2 = V diag(k) V^T``: ``z2 = e' + K1 e``, ``alpha = tau_op - M_d (I + K2 K1) e - (M_d (K1 + K2) - B_q) e'``,
+  ``beta = f_d' - K3 z3 + (P S) z2``::
 
       V = e^T M_d e / 2 + z2^T M_d z2 / 2 + |z3|^2 / 2 + |z4|^2 / 2
       V' = -e^T M_d K1 e - z2^T M_d K2 z2 - z3^T K3 z3 - z4^T K4 z4
 
-  Mode i gets ``eta'' + 2 k_i eta' + (1 + k_i^2) eta = 0`` (poles ``-k_i +- i``) and the stiffness
-  ``mu_i (1 + k_i^2)``; the same rules as the impedance design: ``k_i`` the largest with ``mu_i (1 + k_i^2) <=
-  joint_stiffness`` and ``sqrt(1 + k_i^2) <= sampled_pole_limit * rate_hz`` (index at 3 kHz: k = 89 / 92 / 568 /
-  750 1/s, the heavy modes at 0.5 Nm/rad, the lightest at 0.092 like the impedance design).  With one rate for
-  every mode (k = 60) the distal modes' stiffness ``mu (1 + k^2)`` is 6e-4-7e-3 Nm/rad, below what the lever's
-  hysteresis friction lets move: an all-joint 0.2 rad step left the index DIP and the ring PIP/DIP near their
-  start and drove the fifth 2 rad away (measured).  The unweighted form (``V = |e|^2/2 + |z2|^2/2 + ...``, as (15.44) for
-  one link) needs ``beta = ... + (P S) M_d^-1 z2``: ``M_d^-1`` (1.6e6 at the index DIP) in the force step puts
-  the 3 kHz sampled loop's spectral radius at 164 (measured on the index), so the metric is ``M_d``'s.
-* ``"nonlinear-spring"``: the steps of (15.71)-(15.81) on the joint torques ``tau = -(P S)^T phi(x)`` (each
-  tendon's own law; ``tau' = -(P S)^T phi'(x) x'``), ``z3 = tau - alpha``, ``beta = alpha' - K3 z3 - e'``,
-  ``z4 = tau' - beta`` (as (15.57)); the motor torques realise ``tau'' = beta' - z3 - K4 z4`` through ``W`` and
-  hold the tendon forces' null space (``Pi = I + W (P S)^T``) at the pretension by the same two steps::
+  Mode i has poles ``-k_i +- i`` and stiffness ``mu_i (1 + k_i^2)``; ``k_i`` the largest with ``mu_i (1 + k_i^2) <=
+  joint_stiffness`` and ``sqrt(1 + k_i^2) <= w_max``.  (One rate for every mode leaves the distal modes below what
+  the hysteresis lets move; the unweighted (15.44) form needs ``M_d^-1`` in the force step, unstable when sampled.)
+* ``"nonlinear-spring"``: the steps of (15.71)-(15.81) on the joint torques ``tau = -(P S)^T phi(x)``, ``z3 = tau -
+  alpha``, ``beta = alpha' - K3 z3 - e'``, ``z4 = tau' - beta``; the motor torques realise ``tau'' = beta' - z3 - K4
+  z4`` through ``W`` and hold the forces' null space (``Pi = I + W (P S)^T``) at the pretension by the same steps::
 
       V = e'^T M_d e'/2 + e^T Kp e/2 + |z3|^2/2 + |z4|^2/2 + |Pi (f - f_op)|^2/2 + |Pi (f' + K3 (f - f_op))|^2/2
 
-  Its ``- e'`` cross term is in N m where 15.5's ``(P S) e'`` is in N: relative to 15.5 it multiplies the
-  joint-velocity error by ``1/|P S|^2`` (~3e4 on the index): with the estimate one period old (until this wave's
-  estimator change) its command saturated 63-77 % of compare --short's step and sine on the index; with the
-  estimate of the current sample, 7 % (26 % without the link-acceleration feed-forward; 15.5: 9 / 14 %).
-  Weighting ``z3``, ``z4`` by
-  ``((P S)^T P S)^-1`` (the forces that realise them) turns it into the 15.5 law itself for a constant
-  coupling: 15.5 is the 15.4 construction in the metric of the tendon forces (checked numerically on the index at
-  a random state: the commands agree to 3e-14 of 139 Nm).
+  Weighting ``z3``, ``z4`` by ``((P S)^T P S)^-1`` turns it into the 15.5 law for a constant coupling (15.5 is the
+  15.4 construction in the metric of the tendon forces).
 
-Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand),
-``elongation`` (the spring sensors), ``motor_angle``, ``motor_velocity``; reference
-``joint_angle_reference`` (n plant joints, derivatives taken as zero: a set-point law).
-Scalar types float and AutoDiffXd (``W`` is evaluated at the value of ``q``: exact for the
-constant-coupling fingers, the thumb base's ``dW/dq`` is not differentiated).  On the thumb base the pretension's
-own torque ``-(P(q) S)^T f_op`` changes with the pose (the (5.12) term ``dP^T/dq f``), so the sharing adds ``(P S)^T
-f_op + tau_op`` to keep (15.88) exact at every pose (its rate, like ``dW/dq``, is not fed forward); with ``f_op + W
-(alpha - tau_op)`` (before wave 8) the law took that torque for a load and the thumb base rested 0.06 rad short of a
-0.2 rad step with the friction observer's compensation well inside its bound (``compare --rig hand``).
+Measurements: ``joint_angle``, ``joint_velocity`` (the tendon-length estimator on the hand), ``elongation`` (the
+spring sensors), ``motor_angle``, ``motor_velocity``; reference ``joint_angle_reference`` (n plant joints,
+derivatives taken as zero: a set-point law).  Scalar types float and AutoDiffXd (``W`` is evaluated at the value of
+``q``: exact for the constant-coupling fingers; the thumb base's ``dW/dq`` is not differentiated).  On the thumb
+base the pretension's own torque ``-(P(q) S)^T f_op`` moves with the pose ((5.12)), so the sharing adds ``(P S)^T
+f_op + tau_op`` to keep (15.88) exact at every pose.
 """
 
 from __future__ import annotations
@@ -161,8 +93,8 @@ from awiwi_drake.rigs.base import Rig
 from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
 from awiwi_drake.control.base import StaticLaw, StaticLawController
 from awiwi_drake.components.spring import PolynomialSpring, SpringBank
-from awiwi_drake._math import clip, positive_part
-from awiwi_drake.components.friction import joint_friction_bound
+from awiwi_drake._math import clip, positive_part, scalar_value
+from awiwi_drake.components.friction import joint_breakaway_bound, joint_friction_bound
 from awiwi_drake.control.chain import (guide_friction_levels, guide_presliding_stiffness, joint_friction_levels,
                                        rig_springs)
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
@@ -180,9 +112,7 @@ VARIANTS = ("antagonistic", "position", "nonlinear-spring")
 
 def _values(a) -> np.ndarray:
     a = np.asarray(a)
-    if a.dtype != object:
-        return a.astype(float)
-    return np.array([float(v.value()) if hasattr(v, "value") else float(v) for v in a.reshape(-1)]).reshape(a.shape)
+    return a.astype(float) if a.dtype != object else np.vectorize(scalar_value, otypes=[float])(a)
 
 
 class FingerBacksteppingLaw(StaticLaw):
@@ -225,7 +155,9 @@ class FingerBacksteppingLaw(StaticLaw):
         self.r_m, self.B = float(self.motor.pulley_radius), float(self.motor.inertia)
         self.q_op = np.asarray(op.joint_angle, dtype=float)
         self.f_op = np.asarray(op.tendon_force, dtype=float)
-        self.tau_op = -(np.asarray(coupling.P(self.q_op), dtype=float) @ self.S).T @ self.f_op
+        self.P_op = np.asarray(coupling.P(self.q_op), dtype=float)
+        self.PS_op = self.P_op @ self.S
+        self.tau_op = -self.PS_op.T @ self.f_op
         self.M = joint_inertia(rig, self.q_op, full=True)          # S^T M(q_op) S (DoF inertia matrix)
         self._Minv = np.linalg.inv(self.M)
         plant = rig.plant
@@ -295,7 +227,7 @@ class FingerBacksteppingLaw(StaticLaw):
         if self.friction_compensation and not (self.link_torque_estimate and variant == "antagonistic"):
             raise ValueError("finger backstepping: friction_compensation needs the link torque estimate "
                              "(load observer) and the antagonistic variant")
-        self.friction_levels = link_friction_levels(rig)
+        self.friction_levels = link_friction_levels(rig, self.S)
         # the motor-side part of the lever's hysteresis at rest: the law's motor model lacks r_m z (rest_error)
         self._motor_gain = np.asarray(op.tendon_stiffness, dtype=float) * self.r_m ** 2 / self.B
         self.output_size = m
@@ -313,9 +245,9 @@ class FingerBacksteppingLaw(StaticLaw):
         hysteresis (Fig 4.8b, half-width ``w_i = beta f_i + z0``) and the joints' stick-slip (breakaway ``Fs_l``) can
         put on each DoF at the sensed forces ``f = phi(x)``, none of which the spring sensors measure
         (:func:`~awiwi_drake.components.friction.joint_friction_bound`)."""
-        P = np.asarray(self.coupling.P(self.q_op) if P is None else P)
-        (C, mu_alpha), (beta, z0), Fs = self.friction_levels
-        return joint_friction_bound(P, f, C, mu_alpha, beta * positive_part(f) + z0, Fs, self.S)
+        P = np.asarray(self.P_op if P is None else P)
+        (C, mu_alpha), (beta, z0), hold = self.friction_levels
+        return joint_friction_bound(P, f, C, mu_alpha, beta * positive_part(f) + z0, hold, self.S)
 
     def rest_error(self, guide_force, hysteresis_force, external_torque=None, bound=None):
         """The DoF error ``e`` (k) at which the loop rests with the guides' friction forces ``g`` and the lever's
@@ -332,7 +264,7 @@ class FingerBacksteppingLaw(StaticLaw):
         with ``friction_compensation`` (else 0; ``bound`` (k): ``B`` at the rest's forces, default at the operating
         point's).  Without the load: the friction dead band."""
         g, z = (np.asarray(a, dtype=float) for a in (guide_force, hysteresis_force))
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        PS = self.PS_op
         tau_f = PS.T @ (z + g)
         if external_torque is not None:
             tau_f = tau_f - self.S.T @ np.asarray(external_torque, dtype=float)
@@ -347,8 +279,7 @@ class FingerBacksteppingLaw(StaticLaw):
     def _phantom_map(self) -> np.ndarray:
         """``Z`` (m x k): the force error ``z3 = Z tau`` at rest of a link-side torque ``tau`` the law's link model
         lacks, through its phantom acceleration ``M_d^-1 tau`` (:meth:`rest_error`); ``G = (P S)^T Z``."""
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
-        W = self._sharing(np.asarray(self.coupling.P(self.q_op), dtype=float))
+        PS, W = self.PS_op, self._sharing(self.P_op)
         a1, a2 = -self.Kd, -(self.Kp - self.Kd @ self._Minv @ self.Bq)
         return (W @ a2 + (self.K3 + self.K4)[:, None] * (W @ a1) + PS) @ self._Minv / (1.0 + self.K3 * self.K4)[:, None]
 
@@ -362,7 +293,7 @@ class FingerBacksteppingLaw(StaticLaw):
         with the compensation, else 0) and ``delta' = L (K_g (Kp + (I + G) K_g)^-1 (c I + G) - I) delta``.  One DoF:
         ``-L Kp / (Kp + (1 + G) K_g)``; where the phantom amplifies the guides' hold (``1 + G`` up to 13.5 on the
         index) this is the loop's slowest mode (index -1.0 1/s at L = 100; tests/test_hand_control.py)."""
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        PS = self.PS_op
         G = PS.T @ self._phantom_map()
         k = G.shape[0]
         Kg = np.asarray(guide_stiffness, dtype=float)
@@ -383,7 +314,7 @@ class FingerBacksteppingLaw(StaticLaw):
         T = np.column_stack([self.Kp @ (self.rest_error(zero, zero, 1e-4 * Sl[:, j]) - base) / 1e-4
                              for j in range(k)])
         eye = 1e-3 * np.eye(m)
-        PS = np.asarray(self.coupling.P(self.q_op), dtype=float) @ self.S
+        PS = self.PS_op
         # z alone less its link-side part (through tau_f): what the motors' r_m z adds
         Ez = np.column_stack([(self.rest_error(zero, eye[i]) - base) / 1e-3 + np.linalg.solve(self.Kp, T @ PS.T[:, i])
                               for i in range(m)])
@@ -517,8 +448,9 @@ class FingerBacksteppingLaw(StaticLaw):
             rows[0, i, :c.size], rows[1, i, :c.size], rows[2, i, :c.size - 1] = c, law._k, c[1:] * kk * (kk - 1)
         xmax = np.array([law.max_elongation for law in laws], dtype=float)
         kend = np.array([law._k_end for law in laws], dtype=float)
-        (C, mu_alpha), (beta, z0), Fs = self.friction_levels
-        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0, Fs))
+        (C, mu_alpha), (beta, z0), hold = self.friction_levels
+        hold = np.zeros(self.S.shape[1]) if hold is None else hold
+        levels = tuple(np.ascontiguousarray(a, dtype=float) for a in (C, np.exp(mu_alpha) - 1.0, beta, z0, hold))
         return (motor_law_kernels(self.motor)["backstepping"], rows[0], rows[1], rows[2], xmax, kend,
                 np.empty(len(laws)), levels, np.zeros(self.S.shape[1]))
 
@@ -583,8 +515,7 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
         return StaticLawController(law)
     # the design's slowest mode counts the observer's rest mode on the guides' presliding (the chain's designs do
     # the same, JointDesign.loop): compare's derived step window
-    PS = np.asarray(rig.coupling.P(law.q_op), dtype=float) @ law.S
-    Kg = guide_presliding_stiffness(rig, dict(coupling_matrix=PS, tendon_force=law.f_op), full=True)
+    Kg = guide_presliding_stiffness(rig, dict(coupling_matrix=law.PS_op, tendon_force=law.f_op), full=True)
     rest = law.observer_rest_modes(observer.gain, Kg)
     law.design["observer_rest_modes"] = rest
     law.design["time_constant"] = max(law.design["time_constant"], float(1.0 / np.min(-rest.real)))
@@ -594,20 +525,12 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
 class ObservedBacksteppingController(Diagram):
     """The finger backstepping law with the link-side torque of its link model estimated by the joint observer (9.2)
     per DoF (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`, the one place of the observer):
-    ``M_d e'' = -(P S)^T f - B_q e' + d_hat``.  The 15.3 design "formally requires the measure of the external
-    torque"; the thesis estimates the joint torque from the spring deflection, here from the spring sensors' tendon
-    forces ``phi_i(x_i)`` (the law's own ``f``, a :class:`~awiwi_drake.components.spring.SpringBank_` on the
-    ``elongation``), and the observer adds what they do not explain (a load, the lever's hysteresis, the guides'
-    friction).  At rest ``d_hat`` settles at that link-side torque, the model's phantom acceleration vanishes and the
-    law's rest equations give ``Kp e = S^T tau_ext - (P S)^T (z + g)``: without friction the impedance's own static
-    deflection (module docstring; ``tests/test_hand_control.py``).  Inputs: the law's measurements; outputs
-    ``motor_torque`` and
-    ``friction_compensation`` (``-d_hat``, unclipped) and, with the law's ``friction_compensation``, its bound
-    ``friction_compensation_bound`` (:class:`FrictionBound_`); state: the observer's ``w_hat``, sampled at the law's
-    ``rate_hz`` (continuous for a continuous design; the loop is closed as blocks, not fused).  The observer's model is
-    the law's link model with the whole DoF inertia matrix ``M_d`` (a diagonal one would count the off-diagonal inertial
-    torques into ``d_hat``: on the ideal index the observed loop's poles are then the plain loop's and ``1 - L h``
-    (``tests/test_hand_control.py``))."""
+    ``M_d e'' = -(P S)^T f - B_q e' + d_hat`` (module docstring).  The observer reads the spring sensors' tendon forces
+    ``phi_i(x_i)`` (the law's own ``f``, a :class:`~awiwi_drake.components.spring.SpringBank_` on ``elongation``) and
+    uses the whole ``M_d`` (a diagonal one would count the off-diagonal inertial torques into ``d_hat``).  Inputs: the
+    law's measurements; outputs ``motor_torque``, ``friction_compensation`` (``-d_hat``, unclipped) and, with the law's
+    ``friction_compensation``, ``friction_compensation_bound`` (:class:`FrictionBound_`); state: the observer's
+    ``w_hat``, sampled at the law's ``rate_hz`` (continuous for a continuous design; closed as blocks, not fused)."""
 
     def __init__(self, rig: Any, law: FingerBacksteppingLaw, observer: FrictionObserverParams):
         super().__init__()
@@ -680,11 +603,12 @@ def FrictionBound_(T):
 FrictionBound = FrictionBound_[None]
 
 
-def link_friction_levels(rig: Any) -> tuple:
-    """``((C, mu alpha), (beta, z0), Fs)``: the rig's guide friction levels (4.1)/capstan (m each,
+def link_friction_levels(rig: Any, selection) -> tuple:
+    """``((C, mu alpha), (beta, z0), hold)``: the rig's guide friction levels (4.1)/capstan (m each,
     :func:`~awiwi_drake.control.chain.guide_friction_levels`), its lever hysteresis half-width ``beta f + z0``
-    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off) and its
-    joints' breakaway levels (n, :func:`~awiwi_drake.control.chain.joint_friction_levels`; zeros when off)."""
+    per tendon (Fig 4.8b, :class:`~awiwi_drake.parameters.components.HysteresisParams`; zeros when off) and what its
+    joints' breakaway levels (:func:`~awiwi_drake.control.chain.joint_friction_levels`) hold on the DoF of
+    ``selection`` (k, :func:`~awiwi_drake.components.friction.joint_breakaway_bound`, once; None when off)."""
     m = rig.coupling.num_tendons
     drive = getattr(rig, "drive", None)
     h = None if drive is None else drive.model.hysteresis
@@ -692,7 +616,7 @@ def link_friction_levels(rig: Any) -> tuple:
     on = np.array([x is not None and x.enabled for x in hs], dtype=float)
     beta = on * np.array([0.0 if x is None else x.width_ratio for x in hs])
     z0 = on * np.array([0.0 if x is None else x.width_offset for x in hs])
-    return guide_friction_levels(rig), (beta, z0), joint_friction_levels(rig)
+    return guide_friction_levels(rig), (beta, z0), joint_breakaway_bound(joint_friction_levels(rig), selection)
 
 
 def check_backstepping_springs(rig: Any) -> None:

@@ -1,53 +1,27 @@
-"""Tendon force distribution (thesis ch. 7, Algorithm 2).
+"""Tendon force distribution (thesis ch. 7, Algorithm 2, and (7.6) solved).
 
-Given a desired joint torque ``tau_des`` (n) and a desired joint stiffness
-``K_des`` (n x n), choose tendon forces ``f`` (m) in ``[f_min, f_max]`` that
-produce the torque *exactly* and the stiffness as closely as possible.
+Given a desired joint torque ``tau_des`` (n) and a desired joint stiffness ``K_des`` (n x n), choose tendon
+forces ``f`` (m) in ``[f_min, f_max]`` that produce the torque *exactly* and the stiffness as closely as possible.
+With the project's sign convention ``tau = -P^T f`` (docs/ARCHITECTURE.md; the thesis writes ``tau = P^T f``)
+every ``f = f_p + W alpha``, ``f_p = -(P^T)^+ tau_des``, ``W = ker(P^T)``, produces ``tau_des``; the joint
+stiffness is (5.12)/(7.1) ``K_q(f) = P^T diag(k_t(f)) P + sum_i f_i d^2 h_i / dq^2``.
 
-With the project's sign convention ``tau = -P^T f`` (docs/ARCHITECTURE.md;
-the thesis writes ``tau = P^T f``), every force of the form
+* :class:`TendonForceDistribution` is Algorithm 2: projected gradient descent on ``alpha`` with step halving on
 
-    f = f_p + W alpha,   f_p = -(P^T)^+ tau_des,   W = ker(P^T)  (m x (m - rank P))
+      C(alpha) = gamma1 ||K_des - K_q(f)||_F^2 / ||K_des||_F^2
+               + gamma2 sum psi((f - f_min)/delta) + gamma3 sum psi((f_max - f)/delta)
 
-produces ``tau_des``; Algorithm 2 searches ``alpha`` by projected gradient
-descent with step halving on
+  (the repulsive potential ``psi`` (7.7) acts within ``delta`` of a bound).
+* :class:`OptimalForceDistribution` solves (7.6), which the thesis states and drops as too slow: the stiffness
+  error under the exact torque (a linear equality) and the bounds, by Gauss-Newton QPs (Drake
+  ``MathematicalProgram``, Clarabel) with a line search on the true cost; every iterate is feasible.  Its
+  stiffness error against Algorithm 2's: docs/REPRODUCTIONS.md, ch. 7.
 
-    C(alpha) = gamma1 ||K_des - K_q(f)||_F^2 / ||K_des||_F^2
-             + gamma2 sum psi((f - f_min)/delta) + gamma3 sum psi((f_max - f)/delta),
-
-where ``psi(d) = max(0, 1 - d)^2`` is a repulsive potential acting within
-``delta`` of a bound (7.7) and the joint stiffness is (5.12)/(7.1)
-
-    K_q(f) = P^T diag(k_t(f)) P + sum_i f_i d^2 h_i / dq^2.
-
-The search direction is the normalised gradient, the step ``s`` [N] is halved
-whenever the cost does not decrease (Algorithm 2). For a constant coupling
-``W`` and ``(P^T)^+`` are computed once (offline); for a position-dependent
-coupling (the thumb) they are recomputed by an SVD at every call (online).
-
-The search starts at the mid-range co-contraction or, when that is not
-inside the bounds, at the max-margin feasible point of a linear program.
-Requests that no force in the bounds can satisfy are detected by that program and returned with
-``status="infeasible"``: forces are never clipped silently.
-
-Optimal solver ((7.6) solved, not approximated)
------------------------------------------------
-The thesis states the problem it wants, (7.6): minimise the stiffness error subject to the
-*exact* torque ``P^T f = tau_des`` and the force bounds, and drops it as too slow for the
-real-time machine.  :class:`OptimalForceDistribution` solves it with Drake's
-``MathematicalProgram``: a sequence of convex QPs (Gauss-Newton on the stiffness residual,
-``K_q(f)`` linearised through ``dk_t/df``), each with the torque as a linear *equality* and the
-bounds as a bounding box, solved by Clarabel, followed by a line search on the true nonlinear
-cost inside the (convex) feasible set.  Every accepted iterate is feasible and lowers the cost;
-the iteration stops at a first-order (KKT) point.  Warm-started with the previous forces it needs
-1-3 QPs per control period.  On the index finger with the hand's spring curve it reaches a
-stiffness error several times below Algorithm 2's (``docs/REPRODUCTIONS.md``, ch. 7), whose step
-halving never recovers once the barrier has shrunk the step.
-
-Both solvers take either a constant matrix or a finger coupling object of
-:mod:`awiwi_drake.hand.coupling` (then ``solve(..., q=...)`` evaluates ``P(q)`` and the
-tension Hessian, e.g. for the thumb base); :func:`finger_force_distribution` builds either solver
-for one finger of the hand with its own coupling, radii and calibrated spring curve.
+``W`` and ``(P^T)^+`` are computed once for a constant coupling and by an SVD per call for the thumb's ``P(q)``.
+A start outside the bounds is replaced by the max-margin point of a linear program; a request no force in the
+bounds can satisfy returns ``status="infeasible"``: forces are never clipped silently.  Both solvers take a
+matrix or a finger coupling of :mod:`awiwi_drake.hand.coupling` (then ``solve(..., q=...)``);
+:func:`finger_force_distribution` builds either for one finger of the hand.
 """
 
 from __future__ import annotations
@@ -102,8 +76,7 @@ def _gauss_newton_qp(outer, dk, H, E, f, K_norm2, m, levenberg, Gt, Q, b):
     ``||E - G (f' - f)||^2 / N + mu ||f' - f||^2`` with ``G[:, i] = vec(dk_i p_i p_i^T + H_i)`` (the
     linearised ``dK_q/df_i``), ``E = K_des - K_q(f)``, ``N = K_norm2``, ``mu = levenberg tr(G^T G / N) / m``
     (``m``: the tendons, not counting a batch's padding); ``outer[i] = p_i p_i^T``, ``Gt`` work space (m x n^2).
-    Loops: small matrices, no BLAS call (the per-finger solver and the batch of :class:`_FingerBatch` call it).
-    """
+    Loops: small matrices, no BLAS call."""
     M, N = outer.shape[0], outer.shape[1]
     NN = N * N
     for i in range(M):
@@ -179,42 +152,19 @@ def _null_step(W, f, f_target, f_min, f_max):
 
 @dataclass
 class DistributionResult:
-    """Outcome of one force-distribution call.
+    """Outcome of one force-distribution call.  ``status``: ``"ok"`` (torque exact, forces in bounds),
+    ``"infeasible"`` (no force in the bounds produces the torque: the forces returned produce it and violate the
+    bounds) or ``"bound_violation"`` (feasible request, the search ended outside the bounds)."""
 
-    Attributes
-    ----------
-    forces : ndarray (m,)
-        Tendon forces [N] (never clipped: check ``status`` and ``bound_violation``).
-    status : str
-        ``"ok"`` (torque exact, forces in bounds), ``"infeasible"`` (no force in the bounds
-        produces the torque: the returned forces produce it but violate the bounds), or
-        ``"bound_violation"`` (feasible request, but the search ended outside the bounds).
-    torque_error : float
-        ``||-P^T f - tau_des||`` [Nm].
-    bound_violation : float
-        Largest excursion beyond ``[f_min, f_max]`` [N] (0 when inside).
-    stiffness : ndarray (n, n)
-        Achieved joint stiffness [Nm/rad].
-    stiffness_error : float
-        ``||K_des - K_q||_F / ||K_des||_F`` (relative).
-    iterations : int
-        Gradient iterations performed.
-    cost : float
-        Final cost C(alpha).
-    program_qps : int
-        Optimal solver: QPs solved by the ``MathematicalProgram`` (a force bound would have been
-        violated by the equality-constrained optimum); the other iterations took the closed form.
-    """
-
-    forces: np.ndarray
+    forces: np.ndarray                # (m,) [N], never clipped
     status: str
-    torque_error: float
-    bound_violation: float
-    stiffness: np.ndarray
-    stiffness_error: float
+    torque_error: float               # ||-P^T f - tau_des|| [Nm]
+    bound_violation: float            # largest excursion beyond [f_min, f_max] [N]
+    stiffness: np.ndarray             # achieved K_q (n x n) [Nm/rad]
+    stiffness_error: float            # ||K_des - K_q||_F / ||K_des||_F
     iterations: int
-    cost: float
-    program_qps: int = 0
+    cost: float                       # the final cost (Algorithm 2: C(alpha); optimal: the relative stiffness cost)
+    program_qps: int = 0              # optimal: QPs the MathematicalProgram solved (a bound active), not the closed form
 
 
 def _barrier(d):
@@ -229,19 +179,12 @@ def _barrier_slope(d):
 
 
 class TendonStiffnessMap:
-    """Tendon stiffness as a function of tendon force, ``f -> (k_t(f), dk_t/df)``, by table lookup.
+    """Tendon stiffness as a function of tendon force, ``f -> (k_t(f), dk_t/df)``, by linear interpolation in a
+    table, as the thesis tabulates the calibrated spring curve (ch. 4, 15.4.3).
 
-    The thesis tabulates the calibrated spring curve (ch. 4, 15.4.3); so does this map:
-    ``k_t`` and ``dk_t/df`` are sampled on a force grid and interpolated linearly.  One table
-    serves every tendon (1-D arrays), or each tendon has its own row (2-D arrays, ``m`` rows:
-    the calibration table of a hand whose tendons have their own spring laws,
-    :meth:`from_springs`); then the map is called with one force per tendon.
-
-    Parameters
-    ----------
-    forces, stiffness, stiffness_slope : array (G,) or (m, G)
-        Increasing force grid [N], k_t [N/m] and dk_t/df [1/m] at those forces (per row).
-    """
+    ``forces`` (an increasing grid [N]), ``stiffness`` (k_t [N/m]) and ``stiffness_slope`` (dk_t/df [1/m]): (G,), one
+    table for every tendon, or (m, G), each tendon its own row (:meth:`from_springs`; called with one force per
+    tendon)."""
 
     def __init__(self, forces, stiffness, stiffness_slope):
         self.forces = np.array(forces, dtype=float)
@@ -425,16 +368,10 @@ class _DistributionBase:
 class TendonForceDistribution(_DistributionBase):
     """Algorithm 2 of the thesis: exact torque, closest stiffness, forces kept off the bounds.
 
-    Parameters
-    ----------
-    stiffness_map : callable
-        ``f -> (k_t(f), dk_t/df)`` (arrays of shape (m,)), e.g. :class:`TendonStiffnessMap`.
-    params : ForceDistributionParams
-        Bounds, weights, barrier width, iteration count, initial step.
-    coupling : array (m, n) or FingerCoupling, optional
-        Constant coupling: ``W`` and ``(P^T)^+`` are computed once here (offline).  A
-        position-dependent coupling object (thumb) is evaluated at ``solve(..., q=...)`` (online
-        SVD); without any coupling pass ``P`` (and ``hessian``) to :meth:`solve`.
+    ``stiffness_map``: ``f -> (k_t(f), dk_t/df)`` (arrays (m,)), e.g. :class:`TendonStiffnessMap`; ``params``:
+    bounds, weights, barrier width, iterations, initial step; ``coupling``: a constant (m, n) matrix or
+    coupling (``W``, ``(P^T)^+`` computed once), a position-dependent coupling (evaluated at ``solve(..., q=...)``)
+    or None (pass ``P`` and ``hessian`` to :meth:`solve`).
     """
 
     def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
@@ -481,23 +418,11 @@ class TendonForceDistribution(_DistributionBase):
         return alpha, C, K, it
 
     def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, warm_start=None) -> DistributionResult:
-        """Distribute ``tau_des`` (n) with target stiffness ``K_des`` (n x n).
+        """Distribute ``tau_des`` (n) [Nm] with the symmetric target stiffness ``K_des`` (n x n) [Nm/rad].
 
-        Parameters
-        ----------
-        tau_des : array (n,)
-            Desired joint torque [Nm].
-        K_des : array (n, n)
-            Desired joint stiffness [Nm/rad] (symmetric).
-        P : array (m, n), optional
-            Coupling at the current posture (online SVD).
-        hessian : array (m, n, n), optional
-            ``dP_ij/dq_k`` for a position-dependent coupling (geometric stiffness term).
-        q : array (n,), optional
-            Posture, for a position-dependent coupling object given to the constructor.
-        warm_start : array (m,), optional
-            Previous tendon forces [N]: the search starts from their internal (null-space) part
-            (inside a control loop: the previous period's result), as for the optimal solver.
+        ``P`` (m, n): the coupling at the current posture (online SVD), ``hessian`` (m, n, n) ``dP_ij/dq_k`` (the
+        geometric stiffness term); ``q``: the posture of a position-dependent coupling given to the constructor;
+        ``warm_start`` (m,): the previous forces [N], whose null-space part starts the search.
         """
         P, pinv_PT, W, _, hessian = self._coupling_at(P, hessian, q)
         m, n = P.shape
@@ -529,41 +454,19 @@ class TendonForceDistribution(_DistributionBase):
 
 
 class OptimalForceDistribution(_DistributionBase):
-    """(7.6) solved with Drake's ``MathematicalProgram``: exact torque, bounds, stiffness tracking.
+    """(7.6) solved with Drake's ``MathematicalProgram``: ``min_f ||K_des - K_q(f)||_F^2 / ||K_des||_F^2``
+    subject to ``-P^T f = tau_des`` and ``f_min <= f <= f_max``.
 
-    ``min_f ||K_des - K_q(f)||_F^2 / ||K_des||_F^2`` subject to ``-P^T f = tau_des`` (linear
-    equality) and ``f_min <= f <= f_max`` (bounding box), ``K_q(f) = P^T diag(k_t(f)) P +
-    sum_i f_i H_i`` (5.12) with the tendon stiffness ``k_t(f)`` of the spring curve.
+    Each iteration linearises ``K_q`` at the feasible ``f_k`` (``dK_q/df_i = dk_t,i p_i p_i^T + H_i``), solves the
+    convex QP ``min ||E_k - G (f - f_k)||^2 + mu ||f - f_k||^2`` (``mu = levenberg tr(G^T G) / m`` keeps it strictly
+    convex, e.g. on the 4 x 2 thumb base), projects the step onto ``ker P^T``, cuts it at the bounds and halves it
+    until the *true* cost decreases; it stops when the relative decrease falls below ``tolerance`` or after
+    ``max_iterations`` QPs.  The QP's equality-constrained optimum (closed form on ``ker P^T``) is its optimum
+    when it lies in the bounds; only otherwise is the program solved (``fast_path=False``: always).
 
-    Each iteration linearises ``K_q`` at the current feasible ``f_k`` (``dK_q/df_i = dk_t,i p_i
-    p_i^T + H_i``) and solves the convex QP ``min ||E_k - G (f - f_k)||^2 + mu ||f - f_k||^2``
-    over the feasible set; the step to the QP solution is then
-    projected onto ``ker P^T`` (the torque stays exact to rounding), cut at the bounds and
-    halved until the *true* cost decreases.  Stops when the relative cost decrease falls below
-    ``tolerance`` or after ``max_iterations`` QPs.  ``mu = levenberg x trace(G^T G) / m``
-    keeps the QP strictly convex when ``G`` has a null space (e.g. the 4 x 2 thumb base).
-
-    The QP: when its equality-constrained optimum (closed form on ``ker P^T``: ``f_k + W z`` with
-    ``(W^T Q W) z = -W^T (Q f_k + b)``, the KKT conditions without the bounds) lies inside the
-    bounds, it is the QP's optimum (the problem is convex) and is taken as is; otherwise the QP is
-    solved with its bounds as a Drake ``MathematicalProgram`` (Clarabel, interior point).  So the
-    program is only solved where a bound is active; ``fast_path=False`` always solves it.
-
-    Parameters
-    ----------
-    stiffness_map, params, coupling
-        As for :class:`TendonForceDistribution` (the barrier settings are not used: the bounds
-        are hard constraints).
-    max_iterations : int
-        QPs per call without a warm start (chosen: 30; converged in the tests).
-    tolerance : float
-        Relative cost decrease that ends the iteration.
-    levenberg : float
-        Relative Levenberg damping (chosen: 1e-6, negligible against the Gauss-Newton term).
-    fast_path : bool
-        Take the closed-form QP optimum when no bound is active (default); False: always the program.
-    solver_options : pydrake.solvers.SolverOptions, optional
-        Options of the program's solver (Clarabel), e.g. tighter tolerances.
+    ``stiffness_map``, ``params``, ``coupling``: as :class:`TendonForceDistribution` (no barrier: the bounds are
+    hard).  Chosen: ``max_iterations`` 30 (converged in the tests), ``levenberg`` 1e-6 (negligible against the
+    Gauss-Newton term).  ``solver_options``: a ``pydrake.solvers.SolverOptions`` for Clarabel.
     """
 
     def __init__(self, stiffness_map: Callable, params: ForceDistributionParams | None = None,
@@ -632,25 +535,9 @@ class OptimalForceDistribution(_DistributionBase):
 
     def solve(self, tau_des, K_des, *, P=None, hessian=None, q=None, warm_start=None,
               max_iterations: int | None = None) -> DistributionResult:
-        """Distribute ``tau_des`` (n) with target stiffness ``K_des`` (n x n).
-
-        Parameters
-        ----------
-        tau_des, K_des, P, hessian, q
-            As :meth:`TendonForceDistribution.solve`.
-        warm_start : array (m,), optional
-            Previous tendon forces [N]; used when, moved onto the exact torque, they are inside
-            the bounds (inside a control loop: the previous period's result).
-        max_iterations : int, optional
-            QPs for this call (e.g. 1-3 inside a 3 kHz loop with a warm start).
-
-        Returns
-        -------
-        DistributionResult
-            ``status`` ``"ok"`` or ``"infeasible"`` (no force in the bounds produces ``tau_des``;
-            the returned forces produce it and violate the bounds, reported, never clipped);
-            ``cost`` is the relative stiffness cost ``||K_des - K_q||_F^2 / ||K_des||_F^2``.
-        """
+        """As :meth:`TendonForceDistribution.solve`; ``warm_start`` is used when, moved onto the exact torque, it
+        is inside the bounds; ``max_iterations``: QPs for this call (e.g. 1-3 in a 3 kHz loop).  ``status`` is
+        ``"ok"`` or ``"infeasible"``; ``cost`` the relative stiffness cost."""
         P, pinv_PT, W, rank, hessian = self._coupling_at(P, hessian, q)
         m, n = P.shape
         tau_des, K_des = self._check_request(tau_des, K_des, n)
@@ -709,12 +596,8 @@ class OptimalForceDistribution(_DistributionBase):
 
 
 def hand_stiffness_map(drive: FingerDriveParams | None = None) -> TendonStiffnessMap:
-    """``k_t(f)`` of the hand's calibrated tendon spring (lever mechanism in series with the tendon,
-    ch. 4), the law every finger and hand diagram uses (``tendon_spring(drive.spring)``).
-
-    Tabulated once per spring parameter set (the fit of the lever mechanism takes ~30 ms): equal
-    parameters give the same law object (:func:`~awiwi_drake.components.spring.tendon_spring`), so the same map.
-    """
+    """``k_t(f)`` of the hand's calibrated tendon spring (ch. 4, ``tendon_spring(drive.spring)``), tabulated once per
+    spring parameter set (equal parameters give the same law object, so the same map)."""
     return law_stiffness_map(tendon_spring((drive or FingerDriveParams()).spring))
 
 
@@ -734,30 +617,17 @@ _LAW_MAPS: dict = {}     # law object (hashed by identity, kept alive here) -> i
 def finger_force_distribution(finger: str, *, method: str = "optimal", params: ForceDistributionParams | None = None,
                               drive: FingerDriveParams | None = None, finger_params=None, springs=None,
                               **solver_options):
-    """Force distribution of one finger of the hand with its own coupling, radii and spring curve.
+    """Force distribution of one finger (``thumb``, ``index``, ``middle``, ``ring``, ``fifth``) of the hand with its
+    own coupling, radii (``finger_params``, default the finger's in ``parameters.hand``) and spring curve.
 
-    Parameters
-    ----------
-    finger : str
-        ``thumb``, ``index``, ``middle``, ``ring`` or ``fifth``.
-    method : str
-        ``"optimal"`` (:class:`OptimalForceDistribution`, (7.6) as a Drake program) or
-        ``"algorithm2"`` (:class:`TendonForceDistribution`, the thesis's projected gradient).
-    params : ForceDistributionParams, optional
-        Bounds and search settings.
-    drive : FingerDriveParams, optional
-        Supplies the spring law (``drive.spring``); default: the hand's.
-    springs : TendonSprings, optional
-        The spring law of each of the finger's tendons (routing order; e.g. ``rig_springs(rig)`` of a finger,
-        or the finger's slice of the hand's): the stiffness table ``k_t,i(f)`` of every tendon is its own
-        law's (:meth:`TendonStiffnessMap.from_springs`).  Default: ``drive.spring`` for all.
-    finger_params : FingerParams or ThumbParams, optional
-        Radii and geometry; default: the finger's defaults (``parameters.hand``).
+    ``method``: ``"optimal"`` (:class:`OptimalForceDistribution`) or ``"algorithm2"``
+    (:class:`TendonForceDistribution`); ``params``: bounds and search settings; ``drive``: supplies the spring law
+    (``drive.spring``, default the hand's) of every tendon, unless ``springs`` (a ``TendonSprings`` of the finger's
+    tendons in routing order) gives each tendon its own table (:meth:`TendonStiffnessMap.from_springs`).
 
-    The joints are the finger's *independent* DoF: for the ring and fifth fingers the coupled
-    DIP follows the PIP (5.16), so ``tau_des``/``K_des`` are on (abd, MCP, PIP) (plus HMC first
-    for the fifth) and the coupling is ``P S`` (``reduced_coupling_matrix``).  The thumb's
-    coupling depends on the posture: call ``solve(tau_des, K_des, q=q)``.
+    The joints are the finger's *independent* DoF: on the ring and fifth the DIP follows the PIP (5.16), so
+    ``tau_des``/``K_des`` are on (abd, MCP, PIP) (the fifth: HMC first) and the coupling is ``P S``.  The thumb's
+    coupling depends on the posture: ``solve(tau_des, K_des, q=q)``.
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
@@ -977,18 +847,11 @@ def _batch_step(dyn, P_dyn, H_dyn, P, pinv, W, pad, H, outer, real, m_real, tau,
 
 
 class _FingerBatch:
-    """Warm-started (7.6) iterations of several fingers at once (the float path of the loop system).
-
-    The fingers are padded to common sizes (zero rows of ``P`` for missing tendons, zero columns of
-    ``W``) and iterated by one compiled call (:func:`_batch_iterate`, numba, cached on disk; its first
-    compile takes ~10-15 s) with the formulas of :meth:`OptimalForceDistribution.solve`
-    (:func:`_gauss_newton_qp`, :func:`_closed_form_step`, the same step cut and cost test).  A finger
-    leaves the batch and is solved by its own :meth:`~OptimalForceDistribution.solve` (same inputs,
-    from the start) whenever that would do anything else: a warm start outside the bounds (the LP
-    start), an infeasible request, a bound the closed-form QP optimum would violate (the
-    MathematicalProgram), a step that does not lower the cost at once (step halving), or the
-    thumb's P(q) losing rank.  So the result is always the per-finger solver's.
-    """
+    """Warm-started (7.6) iterations of several fingers at once (the float path of the loop system), padded to
+    common sizes and iterated by one compiled call (:func:`_batch_iterate`) with the formulas of
+    :meth:`OptimalForceDistribution.solve`.  A finger is solved by its own ``solve`` instead whenever that would
+    take another branch (LP start, infeasible request, an active bound, step halving, the thumb's P(q) losing
+    rank), so the result is always the per-finger solver's."""
 
     def __init__(self, parts, coupling_objects, diagonal: bool = False):
         self.parts = parts
@@ -1125,28 +988,18 @@ def optimum_sensitivity(solver: OptimalForceDistribution, result: DistributionRe
 def TendonForceDistribution_(T):
     """Tendon force distribution (ch. 7) for one or several fingers, sampled (the thesis's 3 kHz).
 
-    Inputs ``joint_torque_reference`` (n) [Nm] and ``joint_stiffness_reference`` [Nm/rad] on the
-    fingers' *independent* DoF (ring/fifth: DIP follows PIP, see :func:`finger_force_distribution`),
-    fingers in the order given; the stiffness is either per joint (``stiffness="diagonal"``, n
-    entries) or the row-major n_f x n_f block of each finger, concatenated (``"full"``).  With the
-    thumb, input ``joint_angle`` carries the *plant* joint angles of the fingers given (P(q) of the
-    thumb base).  Output ``tendon_force_reference`` (m) [N] = the discrete state, updated every
-    ``period`` by the finger solvers warm-started at the previous forces (both methods;
-    ``iterations_per_period`` QPs for the optimal one, Algorithm 2's N iterations from there), initialised
-    at the mid-range forces.  ``springs`` (a :class:`~awiwi_drake.components.spring.TendonSprings` of the
-    fingers' tendons, in order): each tendon's stiffness table is its own law's; default ``drive.spring``
-    for all.
-    Output ``distribution_status`` (number of fingers) is 0 (ok), 1 (infeasible request: the
-    forces produce the torque and violate the bounds, reported, never clipped) or 2 (bound
-    violation), sampled with the state.
+    Inputs ``joint_torque_reference`` (n) [Nm] and ``joint_stiffness_reference`` [Nm/rad] on the fingers'
+    independent DoF (:func:`finger_force_distribution`), fingers in the order given; the stiffness per DoF
+    (``stiffness="diagonal"``) or each finger's row-major block, concatenated (``"full"``); with the thumb,
+    ``joint_angle`` (the fingers' plant joint angles, for P(q)).  Output ``tendon_force_reference`` (m) [N] is the
+    discrete state (initially mid-range), updated every ``period`` by the finger solvers warm-started at the
+    previous forces (``iterations_per_period`` QPs for the optimal one); ``distribution_status`` (one per finger)
+    is 0 (ok), 1 (infeasible: reported, never clipped) or 2 (bound violation).  ``springs``: a ``TendonSprings``
+    of the fingers' tendons (each tendon's own table; default ``drive.spring`` for all).
 
-    Scalar types float and AutoDiffXd.  For AutoDiffXd the solver runs on values; with
-    ``method="optimal"`` the update adds ``J_tau dtau + J_K dK`` in the scalar type, the exact
-    derivatives of the optimum (:func:`optimum_sensitivity`; for the thumb's posture ``q``, which
-    moves P(q) in both the constraint and the cost, central differences of the converged optimum);
-    with ``"algorithm2"`` only the
-    torque-producing part ``-(P^T)^+ tau`` carries derivatives (its step-halving search is not a
-    smooth function of the inputs).  Not symbolic: the solvers branch on values.
+    Scalar types float and AutoDiffXd: the solver runs on values; ``"optimal"`` adds the exact derivatives of
+    the optimum (:func:`optimum_sensitivity`; the thumb's posture by central differences of the converged
+    optimum), ``"algorithm2"`` those of ``-(P^T)^+ tau`` only (its step halving is not smooth in the inputs).
     """
 
     class Impl(LeafSystem_[T]):
@@ -1188,12 +1041,11 @@ def TendonForceDistribution_(T):
                                     slice(pj, pj + c.num_joints)))
                 dof, ten, kk, pj = dof + n_f, ten + m_f, kk + nk, pj + c.num_joints
             self.num_dof, self.num_tendons = dof, ten
-            p = self.solvers[0].params
             self._tau = self.DeclareVectorInputPort("joint_torque_reference", dof)
             self._K = self.DeclareVectorInputPort("joint_stiffness_reference", kk)
             self._q = (self.DeclareVectorInputPort("joint_angle", pj)
                        if any(s._offline is None for s in self.solvers) else None)
-            self._state = self.DeclareDiscreteState(np.full(ten, 0.5 * (p.f_min + p.f_max)))
+            self._state = self.DeclareDiscreteState(self.initial_forces)
             self._status = self.DeclareDiscreteState(np.zeros(len(fingers)))
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
             self.DeclareStateOutputPort("tendon_force_reference", self._state)

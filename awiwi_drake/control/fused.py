@@ -1,39 +1,24 @@
 """The hand's sampled control chain as ONE discrete system (the fast path :func:`~awiwi_drake.control.closed_loop`
 builds for fingers and the hand).
 
-The blocks stay the reference (users compose them, the registry builds them):
-:class:`~awiwi_drake.hand.estimation.LinkPositionEstimator_` and the velocity filter (the rig's
-``link_estimator``, (5.15) / Algorithm 1), the joint stage (:class:`~awiwi_drake.control.joint_stage.JointStage_`),
-the (7.6) distribution (:class:`~awiwi_drake.control.force_distribution.TendonForceDistribution_`) or the
-sharing (15.88), the tendon path velocity ``P(q) qdot`` and the tendon force law (10.2) (or any static law that
-reads the estimated joint state, e.g. the 15.5 backstepping).  Each is evaluated by Drake in its own leaf
-system, ~15 of them around the hand, and the framework around them (events, cache invalidation, port
-evaluation through nested diagrams) cost as much as their work (README, "The hand under its control chain").
+The blocks stay the reference (users compose them, the registry builds them): the rig's link estimator
+(:class:`~awiwi_drake.hand.estimation.LinkPositionEstimator_` and its velocity filter), the joint stage
+(:class:`~awiwi_drake.control.joint_stage.JointStage_`), the (7.6) distribution
+(:class:`~awiwi_drake.control.force_distribution.TendonForceDistribution_`) or the sharing (15.88), the tendon path
+velocity and the tendon force law (10.2) (or any static law on the estimated joint state, e.g. the 15.5
+backstepping).  As ~15 leaf systems the framework around them costs as much as their work (README, "The hand under
+its control chain"); :class:`FusedChain_` holds all their states and evaluates per period exactly what the composed
+loop evaluates, by calling the same objects' context-free methods:
 
-:class:`FusedChain_` holds all their states and evaluates, per period, exactly what the composed loop
-evaluates, by calling the same objects' context-free methods:
+* at the sample (one cache entry): the estimate ``q_k`` (:meth:`LinkPositionEstimator_.estimate`), the filtered
+  velocity ``qdot_k = C z_k + D q_k``, the stage's ``tau_k`` (plus the sampled (9.2) observer's compensation) and
+  the command ``u_k`` from the distribution's state ``f_ref,k`` (or the sharing of ``tau_k``; a law with held
+  gains, the tendon SDRE, reads them from this system's state, re-solved by its own periodic event);
+* the periodic update stores ``q_k``, the filter state and ``f_ref,k+1`` (:meth:`TendonForceDistribution_.step`).
 
-* at the sample ``t_k`` (one cache entry, evaluated once per period, read by every output and the update):
-  ``q_k = estimate(theta_k, x_k, w_k, q_{k-1})`` (:meth:`LinkPositionEstimator_.estimate`, warm-started at the
-  stored estimate), ``qdot_k = C z_k + D q_k`` (the filter ``s / (T s + 1)`` discretised, ``C = -I/T``,
-  ``D = I/T``), ``tau_k = joint_law(q_ref, q_k, qdot_k, measurements, f_ref,k)``, and the command
-  ``u_k = law(f_ref,k, measurements, P(q_k) qdot_k)`` with ``f_ref,k`` the distribution's state (its answer
-  of the previous period) or the sharing of ``tau_k`` (a law with held gains, the tendon SDRE
-  :class:`~awiwi_drake.control.sdre.TendonSdreLaw`, reads them from this system's state, re-solved by its own
-  periodic event as :class:`~awiwi_drake.control.sdre.TendonSdreController_` does);
-* the periodic update stores ``q_k``, ``z_{k+1} = (1 - h/T) z_k + h/T q_k`` and
-  ``f_ref,k+1 = distribution.step(tau_k, K_mech, f_ref,k, q_k)``
-  (:meth:`TendonForceDistribution_.step`).
-
-So the fused loop equals the composed one (tests/test_fused_chain.py: 1e-12 over several periods at random
-states, every registered chain controller and the backstepping family, a finger and the hand; its sampled
-linearisation too).  Scalar types float and AutoDiffXd (the AutoDiffXd path calls the same methods in that
-type); not symbolic, as neither the estimator (Algorithm 1 branches on cost values) nor the distribution
-(its solver branches on values) is.  The chain's ch. 9 friction observer (9.2), sampled at the period (the
-default), is fused too: the stage's torques get its ``compensation`` and the update steps its ``next_state``
-(:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`'s own methods).  A chain with continuous state
-(the observer of a continuous chain, ``distribution="sharing"``) or a user-given estimator or sensor model is closed
-as the composed blocks.
+So it equals the composed loop (tests/test_fused_chain.py, 1e-12).  Scalar types float and AutoDiffXd; not
+symbolic (the estimator and the distribution branch on values).  A chain with continuous state or a user-given
+estimator or sensor model is closed as the composed blocks.
 """
 
 from __future__ import annotations
@@ -129,13 +114,9 @@ def FusedChain_(T):
             tickets = {p.ticket() for p in self._in.values()} | {self.xd_ticket()}
             self._cache = self.DeclareCacheEntry("fused chain at the sample", ValueProducer(
                 allocate=lambda: AbstractValue.Make(None), calc=self._calc_sample), tickets)
-            pre = {self._cache.ticket()}
-            self.DeclareVectorOutputPort("motor_torque", int(self.law.output_size),
-                                         lambda c, o: o.SetFromVector(self._sample(c)["u"]), prerequisites_of_calc=pre)
-            self.DeclareVectorOutputPort("joint_angle_estimate", n,
-                                         lambda c, o: o.SetFromVector(self._sample(c)["q"]), prerequisites_of_calc=pre)
-            self.DeclareVectorOutputPort("joint_velocity_estimate", n,
-                                         lambda c, o: o.SetFromVector(self._sample(c)["v"]), prerequisites_of_calc=pre)
+            self._sample_output("motor_torque", self.law.output_size, "u")
+            self._sample_output("joint_angle_estimate", n, "q")
+            self._sample_output("joint_velocity_estimate", n, "v")
             if self._xg is not None:
                 self.DeclareStateOutputPort(self.law.gain_name, self._xg)
             if chain:
@@ -143,20 +124,12 @@ def FusedChain_(T):
                     self.DeclareStateOutputPort("tendon_force_reference", self._xf)
                     self.DeclareStateOutputPort("distribution_status", self._xs)
                 else:
-                    self.DeclareVectorOutputPort("tendon_force_reference", m,
-                                                 lambda c, o: o.SetFromVector(self._sample(c)["f_ref"]),
-                                                 prerequisites_of_calc=pre)
-                self.DeclareVectorOutputPort("joint_torque_reference", int(self.joint_law.output_size),
-                                             lambda c, o: o.SetFromVector(self._sample(c)["tau"]),
-                                             prerequisites_of_calc=pre)
+                    self._sample_output("tendon_force_reference", m, "f_ref")
+                self._sample_output("joint_torque_reference", self.joint_law.output_size, "tau")
                 if self.obs is not None:
-                    self.DeclareVectorOutputPort("friction_compensation", self.obs.S.shape[1],
-                                                 lambda c, o: o.SetFromVector(self._sample(c)["comp"]),
-                                                 prerequisites_of_calc=pre)
+                    self._sample_output("friction_compensation", self.obs.S.shape[1], "comp")
                     if self.obs.levels is not None:
-                        self.DeclareVectorOutputPort("friction_compensation_bound", self.obs.S.shape[1],
-                                                     lambda c, o: o.SetFromVector(self._sample(c)["bound"]),
-                                                     prerequisites_of_calc=pre)
+                        self._sample_output("friction_compensation_bound", self.obs.S.shape[1], "bound")
                 self.DeclareVectorOutputPort("joint_stiffness_reference", K.size,
                                              lambda c, o: o.SetFromVector(self._K),
                                              prerequisites_of_calc={self.nothing_ticket()})
@@ -164,6 +137,11 @@ def FusedChain_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.spec, converter=converter)
+
+        def _sample_output(self, name, size, key):
+            """An output port reading ``key`` of the sample (:meth:`_calc_sample`)."""
+            self.DeclareVectorOutputPort(name, int(size), lambda c, o: o.SetFromVector(self._sample(c)[key]),
+                                         prerequisites_of_calc={self._cache.ticket()})
 
         def _sample(self, context) -> dict:
             return self._cache.Eval(context)
@@ -216,8 +194,9 @@ def FusedChain_(T):
                 discrete_state.set_value(self._xw, self.obs.next_state(s["w_hat"], q, s["v"], s["f"], s.get("P")))
 
         def _update_gain(self, context, discrete_state):
-            """The tendon SDRE's re-solve at the measured forces (:meth:`TendonSdreLaw.gains`), as its own system."""
-            k = self.law.gains(np.array([scalar_value(v) for v in self._in["tendon_force"].Eval(context)]))
+            """The tendon SDRE's re-solve at the measured inputs (:meth:`TendonSdreLaw.gains_at`), as its own system."""
+            k = self.law.gains_at({nm: np.array([scalar_value(v) for v in self._in[nm].Eval(context)])
+                                   for nm in self.law.gain_inputs})
             discrete_state.set_value(self._xg, k if T is float else np.array([AutoDiffXd(v) for v in k], dtype=object))
 
         def initialize_state(self, context, joint_angles, joint_velocities=None) -> None:

@@ -57,7 +57,7 @@ tendon ``i`` on a pulley of radius ``r_m``):
     so ``tau_hat' = K_O (tau_ext - tau_hat)``.  Without it a constant external
     torque enters ``qdd_hat`` as ``tau_ext / M`` (M = 4e-7 kg m^2 on the flexible
     joint) and biases the force loop so much that the static joint stiffness
-    becomes *negative* (-0.003 Nm/rad measured instead of Kp_imp = 0.45).  With it
+    becomes *negative*.  With it
     the loop is a triangular cascade (observer error -> force errors -> link):
     eigenvalues = force pair(s) + link pair + ``-K_O``, and at rest under a
     load ``f = f_des`` (stiffness = Kp_imp).
@@ -224,9 +224,8 @@ class MotorPositionForceLaw(StaticLaw):
     spring's elongation rate over ``r_m``, as (10.2)'s force rate estimate): the motor velocity that keeps the
     force constant while the joints move is ``-v / r_m``, not 0.  Damping the absolute motor velocity instead
     acts on the joints as a viscous damping ``sum_i P_ij^2 Kd_m / r_m^2`` (about 4 Nm s/rad on an index joint,
-    against stiffnesses of 0.002-0.2 Nm/rad): measured on the index, the per-joint designs then had real
-    poles at -13.7, -5.9, -1.3 and -0.35 1/s (abduction .. DIP), and on the hand a 2 Hz sine reached 3 % of
-    its amplitude.  On the joint rig (ch. 11) the link is far heavier and this term is the thesis's.
+    against stiffnesses of 0.002-0.2 Nm/rad: slow real poles).  On the joint rig (ch. 11) the link is far heavier
+    and this term is the thesis's.
     """
 
     def __init__(self, motor: MotorParams, params: ImpedanceParams | None = None, *, size: int,

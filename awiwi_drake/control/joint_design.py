@@ -1,77 +1,37 @@
-"""Per-joint design of the chain's joint-level stage for every finger and the hand (issue 10 item 2).
+"""Per-joint design of the chain's joint-level stage for every finger and the hand.
 
-The thesis designs its joint laws (impedance ch. 11, pole placement ch. 12, LQR ch. 13, SDRE
-ch. 14) on one joint and "applies them systematically to the 19 joints of the hand".  Here each
-independent DoF ``j`` of a finger/the hand gets its own *reduced model*: the link driven through
-its closed tendon force loop, built from the same components as the finger and linearised by
-Drake (:func:`joint_subsystem`, :func:`reduced_joint_models`):
+The thesis designs its joint laws (impedance ch. 11, pole placement ch. 12, LQR ch. 13, SDRE ch. 14) on one
+joint and "applies them systematically to the 19 joints of the hand".  Here each independent DoF ``j`` gets its
+own *reduced model* (:func:`joint_subsystem`, :func:`reduced_joint_models`): a one-DoF link of inertia
+``M_jj = (S^T M(q_op) S)_jj`` with its bearing damping, driven by its own tendons (column ``j`` of ``P S``, each
+with its own spring law, :func:`~awiwi_drake.control.chain.rig_springs`) and motors (friction linearised in
+motion, :func:`design_motor`), closed by the chain's own force stage
+(:class:`~awiwi_drake.control.chain.TendonForceStage`) with ``tau_ref`` as input.  Drake ``Linearize`` of that
+loop, restricted to the measurable ``z = [q, qdot, tau, tau_dot]`` (``T = [C_q; C_q A; C_tau; C_tau A]``,
+``F = T A T^+``, ``G = T B``), is the design model; :attr:`JointReducedModel.invariance_residual` reports
+``|T A - F T| / |T A|`` (0 when every tendon's force loop has the same dynamics).
 
-* a one-DoF link with the DoF's inertia ``M_jj = (S^T M(q_op) S)_jj`` and bearing damping;
-* the tendons acting on it (column ``j`` of ``P(q_op) S``, ``h = P_j q``) with the finger's motors,
-  each tendon's own spring law (:func:`~awiwi_drake.control.chain.rig_springs`: ``params.tendon_springs``
-  overrides) and operating-point forces (``components`` drive, the rig builder of ``rigs``);
-* the motor friction linearised in motion (:func:`design_motor`);
-* closed by the chain's own force stage (:class:`~awiwi_drake.control.chain.TendonForceStage`:
-  sharing (15.88), the (10.2) force law bank with the chain's gains, friction and ripple
-  compensation) with the desired joint torque ``tau_ref`` as input.
+Designs on ``(F, G)`` (gains of :class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw`, reference maps
+:func:`~awiwi_drake.control.linear.reference_maps`; a sampled chain designs on :func:`sampled_model`, its one
+period of delay included):
 
-Drake ``Linearize`` of that loop gives ``(A, B)`` on its full state; the model used for the
-design is its restriction to the measurable coordinates ``z = [q, qdot, tau, tau_dot]``
-(``T = [C_q; C_q A; C_tau; C_tau A]``, ``F = T A T^+``, ``G = T B``).  The restriction is exact
-when the row space of ``T`` is invariant under ``A`` (every tendon's force loop has the same
-dynamics: the other force combinations are neither excited by ``tau_ref`` nor seen in ``tau``);
-:attr:`JointReducedModel.invariance_residual` reports ``|T A - F T| / |T A|``.  Physically
-``M_jj qdd = tau - b qdot`` and ``tau`` follows ``tau_ref`` through the force loop, disturbed by
-the joint's own tendon stiffness ``K_jj = P_j^T K_t P_j`` (5.12) times ``qdd``.
-
-Designs on ``(F, G)`` (gains ``K_j`` of :class:`~awiwi_drake.control.joint_stage.JointStateFeedbackLaw`,
-reference maps from :func:`~awiwi_drake.control.linear.reference_maps`; for the sampled chain on the
-model sampled with its one period of delay, :func:`sampled_model`)
-
-* ``cascaded`` (the impedance (11.4), the chain's default): ``Kp = min(joint_stiffness, cascade_margin M_jj
-  force_bandwidth^2 / 4)`` (:func:`cascade_stiffness`: half the stability bound of (11.16); measured: 0.5 Nm/rad on the
-  index DIP, M_jj = 6.2e-7 kg m^2, makes the coupled PIP/DIP pair of the whole finger unstable at rest,
-  +5 1/s at 725 rad/s, which the per-joint model cannot see), ``Kd >= 0`` giving the slowest closed-loop
-  mode the damping ratio ``damping_ratio`` (:func:`_impedance_gains`);
-* ``pd``: PD on the (estimated) joint angle, ``tau_ref = tau_op + Kp (q_ref - q) - Kd qdot``, with ``(Kp, Kd)`` the
-  two real equations ``1 + K (s* I - F)^-1 G = 0`` that put one closed-loop pair exactly at
-  ``s* = position_bandwidth (-zeta +- i sqrt(1 - zeta^2))`` of the joint's reduced model (sampled chain: at
-  ``exp(h s*)`` of :func:`sampled_model`); refused with one line when that needs ``Kd < 0`` or leaves another pole
-  unstable.  Unlike the rigid link's ``Kp = M_jj w^2`` (the cascaded stage's former cap) the placement counts the
-  torque chain and the joint's own tendon stiffness: index PIP / DIP ``Kp = 0.124 / 0.028`` Nm/rad where ``M_jj w^2`` gives
-  0.032 / 0.0022 (with ``Kd = 0`` that pair would sit at -3.1 +- 29i / -4.7 +- 16i 1/s).  (An earlier
-  reduced model, the motor friction linearised at rest, needed ``Kd < 0`` for the same placement.)
+* ``cascaded`` (the impedance (11.4), the default): ``Kp`` = :func:`cascade_stiffness` (half the (11.16) bound
+  behind a second-order force loop), ``Kd >= 0`` giving the slowest mode the damping ratio ``damping_ratio``;
+* ``pd``: PD on the estimated angle with ``(Kp, Kd)`` placing one pair exactly at ``position_bandwidth``, damped
+  to ``damping_ratio`` (it counts the torque chain and the joint's own tendon stiffness, which ``M_jj w^2`` does
+  not); refused with one line when that needs ``Kd < 0`` or leaves another pole unstable;
 * ``two-time-scale``: the same impedance over the tendon level of (11.3), a motor-position loop per tendon
-  (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`), its reduced model built with that law;
-* ``pole-placement``: the double oscillator (12.13) by coefficient identification
-  (:func:`~awiwi_drake.control.pole_placement.place_by_identification`) on ``[q, qdot, tau, tau_dot]``:
-  ``omega1 = position_bandwidth`` damped to ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop
-  pair (the link on its tendons through the force loop, 345-1070 rad/s on the index) damped to the largest
-  ``xi2 <= damping_ratio`` whose gains keep the *motor-held damping* ``Kd - K_taud K_jj`` (:func:`motor_held_damping`)
-  non-negative (on the index the PIP needs xi2 = 0.37, the DIP 0.21).  Derived from the whole loop sampled at rest
-  (:func:`sampled_loop_poles`, 3 kHz, estimator): the finger has a fast mode the per-joint models cannot hold, the
-  PIP/DIP links in antiphase on their tendons' spring and presliding stiffnesses (the hysteresis's and the guides'
-  Dahl states linearised at rest), at ``sqrt(eig(M^-1 K))`` with the whole mass matrix (4240-4420 rad/s on the
-  index; the per-joint models, on ``M_jj`` and the springs alone, put the DIP at 1075 rad/s).  In that mode the
-  motors barely move (measured: their tendon travel ``r_m theta`` is ~10 % of ``P q``), so the stage measures
-  ``tau_dot = -K_jj qdot`` (the springs' ``k_t``) and its request is ``-(Kd - K_taud K_jj) qdot``: a negative value is
-  an active negative damping of the link against the held motors.  At xi2 = 0.7 the PIP/DIP have ``Kd - K_taud K_jj``
-  = -0.0084 / -0.0045 Nm s/rad; with the motors' friction (3.8) at rest (its slope 5.6 Nm s/rad) the mode is still
-  damped, without it (friction and ripple off) it grew at +34 1/s at 4419 rad/s (thumb +60 1/s at 4561 rad/s), and
-  lowering only the PIP/DIP's ``K_taud`` by 10 % lowered the spectral radius (sensitivity of the sampled loop).  With
-  the rule every registered stage is stable at rest on every finger and the hand with the plant's physics off, with
-  motor friction and ripple off, and on (tests/test_joint_design.py).  It also keeps the torque loop gain
-  ``1 + K_tau + K_prev`` (:func:`torque_loop_gain`) at 1.37-1.49 on every finger (at xi2 = 0.7 the DIP needed
-  ``K_tau = -4.07``, gain -2.8: a positive torque feedback that a link held at rest turns into a drift at +33 1/s);
-  a design with a gain <= 0 (no positive static stiffness ``Kp / gain``) is refused.  Rejected before: raising
-  ``omega2`` (the gains grow; +32 1/s at 4461 rad/s), measuring ``sigma`` in place of ``tau_dot`` (the placed
-  velocity gain turns negative: the same motor-held damping), a fixed ``omega2`` of 300 or 1000 rad/s (+408 and
-  +483 1/s through the neglected MCP/PIP/DIP coupling);
+  (:class:`~awiwi_drake.control.impedance.MotorPositionForceLaw`);
+* ``pole-placement``: the double oscillator (12.13) by coefficient identification, ``omega1 = position_bandwidth``
+  and ``omega2`` the modulus of the joint's own open-loop pair, damped to the largest ``xi2 <= damping_ratio``
+  that keeps the motor-held damping ``Kd - K_taud K_jj`` (:func:`motor_held_damping`) non-negative, and refused
+  when the torque loop gain (:func:`torque_loop_gain`) is not positive.  Both rules are derived from the whole
+  finger's fast PIP/DIP mode, which the per-joint models cannot hold (:func:`sampled_loop_poles`; the
+  measurements and the rejected alternatives: docs/REPRODUCTIONS.md, the guide-friction row of ch. 11-15);
 * ``lqr``: Drake ``LinearQuadraticRegulator`` on ``(F, G)`` with Bryson weights
   (:class:`~awiwi_drake.parameters.joint_design.JointDesignParams`);
-* ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque
-  (each at its own equilibrium: the tendon forces, spring slopes and scheduled force gains move
-  with ``tau``), gains interpolated at the measured torque.
+* ``sdre``: the LQR re-solved on the pointwise-linear models of ch. 14 tabulated in the joint torque, gains
+  interpolated at the measured torque.
 """
 
 from __future__ import annotations
@@ -149,12 +109,10 @@ def _dof_names(rig, S) -> list[str]:
 
 
 def design_motor(motor: MotorParams) -> MotorParams:
-    """The motor of the design model: (3.8) linearised *in motion* (its slope there is the viscous
-    ``gamma3``), no ripple.  Chosen: at rest ``atan``'s slope ``gamma1 gamma2 = 5.6 Nm s/rad`` (what the force law
-    does not feed forward of it, ``1 - HandChainParams.force_friction_scale``, and the hold's lag) reflects through
-    the tendons as a viscous joint damping that vanishes as soon as the motors move faster than ``1/gamma1 = 0.1 rad/s``; a design counting on it
-    (``Kd = 0``) rings on a 0.2 rad step (measured on the index: +-0.15 rad at 10 Hz after 0.2 s).  The
-    ripple is a periodic disturbance of the motor angle, not a property of the joint."""
+    """The motor of the design model: (3.8) linearised *in motion* (slope: the viscous ``gamma3``), no ripple.
+    Chosen: the slope at rest (5.6 Nm s/rad) is a joint damping that vanishes once the motors move faster than
+    ``1/gamma1``; a design counting on it rings (docs/REPRODUCTIONS.md, "cascaded impedance damping").  The ripple
+    is a disturbance of the motor angle, not a property of the joint."""
     viscous = motor.viscous_friction if motor.friction else 0.0
     return motor.replace(friction=False, ripple=False, damping=motor.damping + viscous)
 
@@ -164,12 +122,9 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
     Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (``sub.plant`` its link alone), its
-    operating point and its chain design point (:func:`~awiwi_drake.control.chain.chain_design_point`
-    layout; close it with :func:`force_loop` or a :class:`~awiwi_drake.control.chain.TendonChainController`
-    with ``distribution="sharing"``).
-    ``torque``: the DoF torque at the point (default ``tau_op``); the tendon forces are
-    ``f_op + W_j (torque - tau_op)`` and an external torque ``-torque`` holds the link.
-    ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor, (3.8) at rest).
+    operating point and its :func:`~awiwi_drake.control.chain.chain_design_point` (close it with :func:`force_loop`).
+    ``torque``: the DoF torque (default ``tau_op``; forces ``f_op + W_j (torque - tau_op)``, held by an external
+    torque ``-torque``).  ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor).
     """
     if friction not in ("motion", "rest"):
         raise ValueError(f"joint_subsystem: friction = {friction!r}; use 'motion' or 'rest'")
@@ -320,13 +275,9 @@ def _impedance_gains(model: JointReducedModel, kp: float, zeta: float) -> np.nda
 
 
 def sampled_model(F: np.ndarray, G: np.ndarray, period: float) -> tuple[np.ndarray, np.ndarray]:
-    """The reduced model sampled with a zero-order hold at ``period`` and the sampled chain's one period of
-    delay (the distribution's forces answer the request of the previous sample: simultaneous discrete
-    updates read the pre-update forces): state ``[z_k, tau_ref,k-1]``, ``x_k+1 = Phi x_k + Gamma tau_ref,k``.
-    (Checked: sampling the force law itself instead of its continuous closed loop moves the open-loop
-    eigenvalue moduli by < 0.3 % on the index at 3 kHz.)  The hold is Drake's ``DiscreteTimeApproximation``
-    (measured against the former hand-built ``expm`` block: the index's sampled LQR and pole-placement gains
-    at 3 kHz agree to 5e-10 relative)."""
+    """The reduced model sampled with a zero-order hold (Drake's ``DiscreteTimeApproximation``) at ``period``
+    and the sampled chain's one period of delay (the distribution answers the previous sample's request): state
+    ``[z_k, tau_ref,k-1]``, ``x_k+1 = Phi x_k + Gamma tau_ref,k``."""
     from pydrake.systems.analysis import DiscreteTimeApproximation
     from pydrake.systems.primitives import LinearSystem
     n = F.shape[0]
@@ -379,11 +330,8 @@ def _lqr_weights(p: JointDesignParams, model: JointReducedModel):
 
 
 def _pole_placement_gains(model: JointReducedModel, p: JointDesignParams, period: float | None) -> np.ndarray:
-    """(12.13) on one DoF (``pole-placement`` in the module docstring): ``omega1 = position_bandwidth`` damped to
-    ``damping_ratio``, ``omega2`` the modulus of the joint's own open-loop pair, damped to the largest ``xi2 <=
-    damping_ratio`` whose gains have a non-negative :func:`motor_held_damping` (it falls as ``xi2`` rises, measured
-    on every finger, so the bound is met at the first crossing, found by bisection); refused when no ``xi2`` in
-    ``[pair_damping_min, damping_ratio]`` meets it or the torque loop gain is not positive."""
+    """(12.13) on one DoF (``pole-placement`` in the module docstring); the largest admissible ``xi2`` in
+    ``[pair_damping_min, damping_ratio]`` by bisection (the motor-held damping falls as ``xi2`` rises)."""
     F, G = model.A, model.B
     lam = np.linalg.eigvals(F)
     pair = abs(lam[np.argmax(np.abs(lam.imag))])        # the link on its tendons through the force loop
@@ -418,20 +366,17 @@ def _pole_placement_gains(model: JointReducedModel, p: JointDesignParams, period
 
 def motor_held_damping(K, model: JointReducedModel) -> float:
     """The link damping [Nm s/rad] a gain row ``K`` (5,) of one DoF feeds back while the motors are held:
-    ``Kd - K_taud K_jj`` on ``tau_dot`` (with ``omega = 0`` the stage measures ``tau_dot = -K_jj qdot``, ``K_jj`` the
-    joint's tendon stiffness (5.12), :attr:`JointReducedModel.stiffness`), ``Kd`` on ``sigma`` (``sigma = 0``).
-    Negative, the stage drives any mode in which the link moves against its tendons faster than the motors follow
-    (the whole finger's fast PIP/DIP mode, module docstring) with a negative damping."""
+    ``Kd - K_taud K_jj`` on ``tau_dot`` (``omega = 0``: ``tau_dot = -K_jj qdot``, ``K_jj`` (5.12)), ``Kd`` on
+    ``sigma``.  Negative, it is an active negative damping of any mode where the link moves against its tendons
+    faster than the motors follow."""
     K = np.asarray(K, dtype=float)
     return float(K[1] - (K[3] * model.stiffness if model.torque_rate == "joint" else 0.0))
 
 
 def torque_loop_gain(K) -> float:
-    """``1 + K_tau + K_prev`` of a gain row ``K`` (5,): the static gain of the torque loop the joint stage closes
-    around the force loop when the link is held (the force loop holds ``tau = tau_ref`` at rest and the previous
-    request equals the current one): the static stiffness under a link-side load is ``Kp`` divided by it
-    (:attr:`JointDesign.static_stiffness`).  Negative, the stage feeds the measured torque back positively: any
-    link-side stiffness (a contact, the guides' presliding at rest) then meets a negative joint stiffness."""
+    """``1 + K_tau + K_prev`` of a gain row ``K`` (5,): the static gain of the torque loop the stage closes around
+    the force loop with the link held (:attr:`JointDesign.static_stiffness` is ``Kp`` over it).  Negative, the
+    measured torque is fed back positively and any link-side stiffness meets a negative joint stiffness."""
     K = np.asarray(K, dtype=float)
     return float(1.0 + K[2] + (K[4] if K.size > 4 else 0.0))
 
@@ -462,11 +407,8 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
         if period is None:
             K, _ = LinearQuadraticRegulator(F, G, Q, R)
             return np.append(np.asarray(K).ravel(), 0.0)
-        # Chosen cost: sum_k z_k' Q z_k + u_k' R u_k on the sampled model, the continuous weights sampled by
-        # the rectangle rule (Q h, R h; the common factor h does not change the gain).  Not the exact sampled
-        # cost (Van Loan's integral of the continuous cost over each hold, with its z-u cross term): the
-        # rectangle rule keeps the weights those of the continuous design (same tuning parameters) and the
-        # delay state's weight at zero (the delay is the chain's, not a quantity the design penalises).
+        # chosen: the continuous weights by the rectangle rule (not Van Loan's exact sampled cost), so the tuning
+        # parameters stay the continuous design's and the delay state is not penalised
         Phi, Gamma = sampled_model(F, G, period)
         Qd = np.zeros((5, 5))
         Qd[:4, :4] = Q
@@ -491,10 +433,9 @@ class JointDesign:
 
     @property
     def static_stiffness(self) -> np.ndarray:
-        """The joint stiffness the designed loop shows to a constant load, per DoF [Nm/rad]: at rest the force
-        loop holds ``tau = tau_ref`` (its feed-forward) and ``tau_ref(t - h) = tau_ref``, so
-        ``tau (1 + K_tau + K_prev) = -Kp e``: ``K_eff = Kp / (1 + K_tau + K_prev)`` (the springs' own stiffness
-        does not appear: the series law (8.1) of a motor-side impedance is not the chain's)."""
+        """The joint stiffness the designed loop shows to a constant load, per DoF [Nm/rad]:
+        ``Kp / (1 + K_tau + K_prev)`` (at rest ``tau = tau_ref = tau_ref(t - h)``; the springs do not appear: the
+        series law (8.1) of a motor-side impedance is not the chain's)."""
         K = self.gains
         return K[:, 0] / (1.0 + K[:, 2] + K[:, 4])
 
@@ -502,15 +443,12 @@ class JointDesign:
         """``(A, b)``: DoF ``dof``'s designed closed loop from its reference step ``dr``, ``x' = A x + b dr``
         (continuous) or ``x_k+1 = A x_k + b dr`` (sampled), ``q - q_op = x[0]``.
 
-        State ``z`` (the stage's own loop ``F - G K``), then the sampled chain's previous request (:func:`sampled_model`)
-        and, with :attr:`observer`, the (9.2) observer's ``w_hat``: its compensation ``-kappa d_hat``,
-        ``d_hat = L M (qdot - w_hat)``, joins the request, and the joint carries the guides' friction linearised at
-        rest, their presliding stiffness ``K_g`` (:func:`~awiwi_drake.control.chain.guide_presliding_stiffness`) in
-        parallel with the link: ``F - K_g E e_q^T`` (``E`` the model's :attr:`JointReducedModel.link_torque_map`).
-        The observer reads that spring's torque as a disturbance and cancels it through the chain's lag, so its
-        mode at rest is about ``-Kp / ((Kp + K_g) (1 / L + T))`` (``T`` the lag from the request to the joint
-        torque): where the presliding stiffness dwarfs the impedance (index DIP: ``K_g`` = 38 ``Kp``) it is the
-        slowest mode of the joint."""
+        State ``z`` (the stage's loop ``F - G K``), the sampled chain's previous request (:func:`sampled_model`)
+        and, with :attr:`observer`, the (9.2) observer's ``w_hat`` (its compensation ``-kappa d_hat``,
+        ``d_hat = L M (qdot - w_hat)``, joins the request) with the guides' presliding stiffness ``K_g``
+        (:func:`~awiwi_drake.control.chain.guide_presliding_stiffness`) on the link: ``F - K_g E e_q^T`` (``E``:
+        :attr:`JointReducedModel.link_torque_map`).  The observer cancels that spring's torque through the chain's
+        lag ``T``: a rest mode near ``-Kp / ((Kp + K_g) (1 / L + T))``, the slowest where ``K_g >> Kp``."""
         m, K, nx, nu = self.models[dof], self.gains[dof], self.law.Nx[dof], self.law.Nu[dof]
         obs = self.observer
         if obs is not None:
@@ -544,13 +482,9 @@ class JointDesign:
         return max(self.tracking_time_constants(min_share))
 
     def tracking_time_constants(self, min_share: float = 0.01) -> list[float]:
-        """``1 / sigma`` [s] of the slowest designed closed-loop pole that the joint angle's step response
-        shows, per DoF: each DoF's designed loop (:meth:`loop`: continuous ``F - G K``, or the sampled chain's
-        ``Phi - Gamma K``, poles mapped ``s = ln(z) / h``; with the observer and the guides' presliding stiffness
-        when :attr:`observer` is set) with its reference maps as input; a pole's share
-        of the DC gain is ``|c v_i w_i b / lambda_i|`` (``|... / (1 - z_i)|`` sampled) and poles under
-        ``min_share`` of the total are ignored (as :func:`~awiwi_drake.control.compare.dominant_time_constant`
-        does for a linearised loop)."""
+        """``1 / sigma`` [s] per DoF of the slowest pole of :meth:`loop` (sampled: ``s = ln(z) / h``) that the
+        joint angle's step response shows: a pole's share of the DC gain is ``|c v_i w_i b / lambda_i|``
+        (sampled ``|... / (1 - z_i)|``); poles under ``min_share`` of the total are ignored."""
         taus = []
         for j in range(len(self.models)):
             A, b = self.loop(j)
@@ -646,15 +580,11 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     """Registered factories ``cascaded``, ``lqr`` (...) for fingers and the hand: the chain with the joint
     stage ``design`` (:func:`design_joint_stage`) designed at ``op`` (default: the rig's operating point).
 
-    ``stiffness_correction`` (ch. 8, :class:`~awiwi_drake.parameters.hand_control.StiffnessCorrectionParams`):
-    the distribution is asked for the mechanical stiffness ``K_mech = eps K_eff`` (8.2) per DoF, ``K_eff`` the
-    design's :attr:`JointDesign.static_stiffness` (the (8.1) impedance correction is the identity here: the
-    chain acts on the estimated joint angle through force control, so no spring is in series with it).
-    ``friction_observer``: the ch. 9 joint friction observer (9.2) per DoF, on by default (the guides' friction
-    otherwise leaves the impedance its dead band, friction torque / Kp; README "The thesis's control on fingers and
-    the hand (ch. 7-15)"); None removes it (``make_controller(name, rig, friction_observer=None)``).
-    ``kw``: ``mechanical_stiffness`` (:func:`~awiwi_drake.control.chain.chain_design_point`), ``gains``,
-    ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    ``stiffness_correction`` (ch. 8, ``StiffnessCorrectionParams``): the distribution is asked for ``K_mech = eps
+    K_eff`` (8.2) per DoF, ``K_eff`` the design's :attr:`JointDesign.static_stiffness` ((8.1) is the identity here: no
+    spring is in series with the chain's force control).  ``friction_observer``: the (9.2) observer per DoF, on by
+    default (the guides' friction otherwise leaves the impedance a dead band); None removes it.  ``kw``:
+    ``mechanical_stiffness``, ``gains``, ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
     c = chain or HandChainParams()
     correction = kw.pop("stiffness_correction", None)
     if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
@@ -694,12 +624,10 @@ def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, p
 class PoleMatch:
     """One designed pole of a DoF and the whole loop's pole it becomes (:meth:`PoleCheck.matches`), in 1/s.
 
-    ``loop``: followed continuously along ``D + s E``, ``s`` from 0 (the designs) to 1 (the whole loop), so the
-    matching is one to one; ``radius``: the certified bound ``|loop - centre| <= radius`` of the isolated
-    Gershgorin disc around ``centre = design + (V^-1 E V)_ii`` (the first-order coupling), ``inf`` where the
-    neglected coupling is too large for any disc of it to be isolated (then the pole is *not found*: the
-    per-joint design does not predict it); ``inertia`` / ``stiffness``: where the pole goes with only the mass
-    matrix's coupling / only the shared tendons' stiffness turned on (the cause of the move)."""
+    ``loop``: followed continuously along ``D + s E``, ``s`` 0 -> 1 (one to one); ``radius``: the certified
+    ``|loop - centre| <= radius`` of the isolated Gershgorin disc around ``centre = design + (V^-1 E V)_ii``, ``inf``
+    where no disc is isolated (the pole is *not found*); ``inertia`` / ``tendons``: the pole with only that
+    coupling turned on (the cause of the move)."""
 
     dof: str
     design: complex
@@ -775,19 +703,13 @@ def _isolated_radius(F: np.ndarray, i: int) -> float:
 class PoleCheck:
     """The per-DoF designs against the whole loop's linearisation (:func:`check_design_poles`).
 
-    ``poles``: eigenvalues of the whole continuous loop (Drake ``Linearize``); ``z_poles``: those of its
-    restriction ``A_z = T A T^+`` to the DoF coordinates ``z = [q_j, qdot_j, tau_j, tau_dot_j]`` (a subset of
-    ``poles`` when ``invariance_residual`` ~ 0); ``design``: the per-DoF closed loops ``F_j - G_j K_j`` (block
-    diagonal ``D``, in these coordinates also for the stages on the motors' rate ``sigma``).  ``A_z = D + E``
-    with ``E`` the coupling the per-joint models neglect, written in closed form from the physics
-    (``inertia_coupling + tendon_coupling``; :attr:`coupling_residual` is how far Drake's ``E`` is from it):
-    a DoF's model has the link ``qdd_j = (tau_j - b_j qdot_j) / M_jj`` and its own tendons' stiffness
-    ``K_jj`` (5.12) in the torque loop ``tau_dd_j = ... - K_jj qdd_j``, the whole finger ``qdd = M^-1 (tau - B
-    qdot)`` (the inertia matrix, ``E_M``; ``inertia_ratio`` ``(M^-1)_jj M_jj`` says how much lighter a DoF is in the
-    finger than its model) and ``- sum_l K_jl qdd_l`` (the tendons shared by joints, ``E_K``; with ``sigma`` also the
-    stage's ``sigma_j = tau_dot_j + sum_l K_jl qdot_l``; on the thumb base also the lever arms' change with the pose,
-    ``J = d tau / d q`` at constant forces, through the force loop and in the measured ``tau_dot``).  :meth:`matches` pairs each designed
-    pole with the loop pole it becomes and certifies the pair where the coupling allows (:class:`PoleMatch`)."""
+    ``poles``: the whole continuous loop's (Drake ``Linearize``); ``z_poles``: those of its restriction ``A_z``
+    to ``z = [q_j, qdot_j, tau_j, tau_dot_j]`` of every DoF (a subset of ``poles`` when ``invariance_residual``
+    ~ 0); ``design``: the per-DoF loops ``F_j - G_j K_j`` (block diagonal ``D``).  ``A_z = D + E``, ``E`` the
+    coupling the per-joint models neglect, in closed form (:attr:`coupling_residual`: Drake's ``E`` against it):
+    the inertia matrix ``qdd = M^-1 (tau - B qdot)`` in place of each model's ``M_jj`` (``E_M``; ``inertia_ratio``
+    ``(M^-1)_jj M_jj``) and the tendons shared by joints, ``- sum_l K_jl qdd_l`` (``E_K``, with the thumb base's
+    lever arms ``J = d tau / d q``).  :meth:`matches` pairs each designed pole with the loop pole it becomes."""
 
     poles: np.ndarray
     z_poles: np.ndarray
@@ -973,16 +895,13 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     """Poles of ``rig`` closed by ``controller`` (a fresh system) sampled at ``rate_hz``, the linear analysis of
     what :func:`~awiwi_drake.control.base.closed_loop` ``(rig, controller, rate_hz=rate_hz)`` simulates.
 
-    The rig is linearised at ``op`` by Drake (:func:`~awiwi_drake.analysis.linear.linearize`, its own laws: motor
-    friction (3.8) at rest, hysteresis as the presliding spring) and sampled exactly with Drake's
-    ``DiscreteTimeApproximation`` (zero-order hold); it replaces the rig in the same ``closed_loop`` wiring
-    (the command of sample ``k`` acts over ``[t_k, t_k+1)``, as the hold does) with the controller's own
-    discrete states (the force distribution) and the tendon-length estimator (``estimator``: ``"auto"``, the
-    rig's, at the same rate; ``None``/``"ideal"``: the true joint state).  Drake's ``Linearize`` takes a
-    discrete system with one state group only, so the Jacobian of the one-period map
-    (``EvalUniquePeriodicDiscreteUpdate``, every state group) is taken in ``AutoDiffXd``, what ``Linearize``
-    does for a single group.  Every periodic update of the loop must have the period ``1 / rate_hz``.
-    ``fused``: as :func:`~awiwi_drake.control.base.closed_loop` (the fused chain by default; the same poles).
+    The rig is linearised at ``op`` by Drake (motor friction (3.8) at rest, hysteresis as the presliding spring),
+    sampled exactly with Drake's ``DiscreteTimeApproximation`` (zero-order hold) and closed in the same
+    ``closed_loop`` wiring with the controller's discrete states and the tendon-length estimator (``estimator``:
+    ``"auto"``, the rig's at the same rate; ``None``/``"ideal"``: the true joint state).  Drake's ``Linearize``
+    takes one discrete state group only, so the Jacobian of the one-period map (``EvalUniquePeriodicDiscreteUpdate``)
+    is taken in ``AutoDiffXd``; every periodic update must have the period ``1 / rate_hz``.  ``fused``: as
+    :func:`~awiwi_drake.control.base.closed_loop` (the same poles).
     """
 
     from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff

@@ -1,13 +1,8 @@
 """The joint-level stage of the hand's control chain (ch. 11-14 laws per joint): one vectorised system.
 
-The chain (:mod:`awiwi_drake.control.chain`) turns desired joint torques into motor torques
-(force distribution, ch. 7, and the tendon force loop, ch. 10).  Its first stage is a plug-in:
-:class:`JointStage_` evaluates a *joint law* for all independent DoF ``q_d = S^+ q`` of a finger
-or the hand at once and outputs
-
-* ``joint_torque_reference`` (n_dof) [Nm] -- the desired DoF torques ``tau_ref``;
-* ``joint_stiffness_reference`` [Nm/rad] -- the desired mechanical stiffness (co-contraction) for
-  the distribution, constant (per DoF, or each finger's row-major block).
+The first stage of the chain (:mod:`awiwi_drake.control.chain`) is a plug-in: :class:`JointStage_` evaluates a
+*joint law* for all independent DoF ``q_d = S^+ q`` at once, giving ``joint_torque_reference`` (n_dof) [Nm] and the
+constant desired mechanical stiffness ``joint_stiffness_reference`` [Nm/rad] for the distribution.
 
 Each DoF ``j`` is controlled on its own *measurable* coordinates (what the real hand has: the
 tendon-length estimate of ``q``, ``qdot`` and the spring sensors' tendon forces)::
@@ -18,25 +13,20 @@ tendon-length estimate of ``q``, ``qdot`` and the spring sensors' tendon forces)
     tau_dot = -(P(q) S)^T k_t(f) (r_m omega + P(q) qdot)     its rate (f = phi(x), x = r_m theta + h(q) + x0),
     sigma = -(P(q) S)^T k_t(f) r_m omega    the rate the motors drive (tau_dot = sigma - K qdot, K (5.12)).
 
-``sigma`` needs no joint velocity: motor encoders and spring sensors only.  ``tau_dot`` multiplies the
-differentiated tendon-length estimate ``qdot`` (a backward difference, half a period late at the
-sample) by the joints' tendon stiffness (and the spring hysteresis adds its presliding stiffness,
-which ``k_t`` does not hold); on the index that error, fed back through the LQR's torque-rate gain,
-drives the DIP's link mode on its tendons (~4450 rad/s, ~700 Hz) unstable at 3 kHz (sampled loop,
-:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  The LQR/SDRE stages therefore measure
-``sigma`` (and weight it in their cost); pole placement keeps ``tau_dot`` (its placed gains rely on the
-joint's own tendon stiffness through ``tau_dot``; written on ``sigma`` the same poles need a negative
-velocity gain, and the whole finger's neglected coupling makes that unstable).
+``sigma`` needs no joint velocity (motor encoders and spring sensors only).  ``tau_dot`` multiplies the
+late, differentiated tendon-length estimate by the tendon stiffness, which drives the DIP's link mode on its
+tendons unstable under the LQR's torque-rate gain at 3 kHz, so the LQR/SDRE stages measure ``sigma``; pole
+placement keeps ``tau_dot`` (on ``sigma`` its poles need a negative velocity gain).  The measurements:
+docs/REPRODUCTIONS.md ("every joint-level law per joint").
 
-with the per-DoF linear law of :class:`JointStateFeedbackLaw`::
+The per-DoF linear law of :class:`JointStateFeedbackLaw` is::
 
     tau_ref_j = tau_op_j + Nu_j dr_j - K_j . (z_j - Nx_j dr_j),     dr_j = (S^+ q_ref)_j - q_op_j,
 
-(``(Nx, Nu)`` the equilibrium family of :func:`awiwi_drake.control.linear.reference_maps`).
-PD / impedance (11.4) is the case ``K_j = [K, D, 0, 0]`` (then no force input is read); pole
-placement (ch. 12) and LQR (ch. 13) use the full ``K_j``; the gains come from each joint's own
-reduced model (:mod:`awiwi_drake.control.joint_design`).  ``state_dependent`` laws (SDRE, ch. 14)
-use :class:`JointGainScheduleLaw`, gains interpolated in the joint torque.
+(``(Nx, Nu)``: :func:`awiwi_drake.control.linear.reference_maps`).  PD / impedance (11.4) is ``K_j = [K, D, 0, 0]``
+(no force input read); pole placement (ch. 12) and LQR (ch. 13) use the full ``K_j``
+(:mod:`awiwi_drake.control.joint_design`); the SDRE (ch. 14) interpolates them in the joint torque
+(:class:`JointGainScheduleLaw`).
 """
 
 from __future__ import annotations
@@ -50,7 +40,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake._math import clip
-from awiwi_drake.components.friction import joint_friction_bound
+from awiwi_drake.components.friction import joint_breakaway_bound, joint_friction_bound
 from awiwi_drake.control.base import StaticLaw, check_gains
 from awiwi_drake.control.compiled import float_inputs, joint_feedback
 from awiwi_drake.control.friction_observer import observer_rate, observer_step
@@ -94,16 +84,10 @@ def measured_joint_coordinates(coupling, S, Sp, r_m: float, u, torque_rate: str 
 class JointStateFeedbackLaw(StaticLaw):
     """Per-DoF linear state feedback on ``z_j`` (module docstring); one call for all DoF.
 
-    Parameters
-    ----------
-    coupling : the finger/hand coupling (``P(q)``), ``selection`` ``S`` (n x k)
-    pulley_radius : r_m [m] (the tendon force rate)
-    gains : (k, 4) ``K_j``, or (k, 5) with the gain on the previous request ``tau_ref(t - h)`` of a
-        sampled chain (its distribution answers one period late; the law reads it back from the
-        distribution's ``tendon_force_reference``: ``-(P S)^T f_ref``, exact torque)
-    state_map : (k, 4) ``Nx_j``; ``input_map`` (k,) ``Nu_j``
-    joint_angle_op, torque_op : (k,) ``q_op`` on the DoF and ``tau_op``
-    torque_rate : ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``): the fourth coordinate (module docstring)
+    ``coupling`` (``P(q)``), ``selection`` ``S`` (n x k), ``pulley_radius`` r_m [m]; ``gains`` (k, 4) ``K_j`` or
+    (k, 5) with the gain on a sampled chain's previous request ``tau_ref(t - h) = -(P S)^T f_ref`` (read back from the
+    distribution); ``state_map`` (k, 4) ``Nx``, ``input_map`` (k,) ``Nu``; ``joint_angle_op``, ``torque_op`` (k,);
+    ``torque_rate``: the fourth coordinate, ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``).
     """
 
     def __init__(self, coupling, selection, pulley_radius: float, gains, *, state_map, input_map,
@@ -178,12 +162,9 @@ class JointStateFeedbackLaw(StaticLaw):
 class JointGainScheduleLaw(JointStateFeedbackLaw):
     """:class:`JointStateFeedbackLaw` with gains interpolated in the measured joint torque deviation.
 
-    ``schedule`` (p,) torque deviations ``tau - tau_op`` [Nm] (increasing) and ``table`` (k, p, 5)
-    the gains designed there (the SDRE's pointwise-linear models, ch. 14, tabulated per DoF).
-    Outside the table the end gains are held (clamped, not extrapolated), and not silently: the first
-    double-valued evaluation outside it warns (``RuntimeWarning`` naming the DoF, the deviation and the
-    table's range) and :attr:`outside_count` counts every such evaluation (per DoF; Drake may evaluate the
-    output more than once per step, so it counts evaluations, not samples).
+    ``schedule`` (p,) increasing deviations ``tau - tau_op`` [Nm], ``table`` (k, p, 5) the gains designed there
+    (ch. 14).  Outside the table the end gains are held, not silently: the first float evaluation outside warns
+    (``RuntimeWarning``) and :attr:`outside_count` counts such evaluations per DoF.
     """
 
     def __init__(self, coupling, selection, pulley_radius, schedule, table, **kw):
@@ -265,11 +246,10 @@ JointStage = JointStage_[None]
 def JointFrictionObserver_(T):
     """The joint friction observer (9.2) on every DoF of a finger/the hand, as a compensating torque (ch. 9).
 
-    Per DoF ``j`` (inertia ``M_jj``, bearing damping ``b_jj``): ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``,
-    ``d_hat_j = L M_jj (qdot_j - w_hat_j)`` (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the
-    one place of the law), with the joint torque ``tau = -(P(q) S)^T f`` of the measured tendon forces; ``inertia``
-    (k, k) the DoF inertia matrix ``M`` instead (``M w_hat' = tau - b qdot + d_hat``, ``d_hat = L M (qdot - w_hat)``:
-    the 15.5 backstepping's link model, whose off-diagonal inertial torques are then not counted as friction).
+    Per DoF ``j``: ``M_jj w_hat' = tau_j - b_jj qdot_j + d_hat_j``, ``d_hat_j = L M_jj (qdot_j - w_hat_j)``
+    (:func:`~awiwi_drake.control.friction_observer.observer_rate`, the one place of the law), ``tau = -(P(q) S)^T f``
+    of the measured tendon forces; an ``inertia`` matrix (k, k) ``M`` couples the DoF (the 15.5 backstepping's link
+    model, whose off-diagonal inertial torques are then not counted as friction).
     Inputs ``joint_angle``, ``joint_velocity`` (n, the estimates on the hand), ``tendon_force`` (m); output
     ``friction_compensation`` (k) ``= -scale d_hat`` [Nm] (``scale`` per DoF, default 1), added to the joint stage's
     desired torques; state ``w_hat`` (k), to be started at the measured velocity (0 at rest).
@@ -277,24 +257,16 @@ def JointFrictionObserver_(T):
     ``friction_levels`` ``(C, mu alpha, Fs)`` (the plant's own guide friction parameters, m each,
     :meth:`~awiwi_drake.components.fused_drive.GuideFrictionModel.levels`, zeros when the guides have no friction; and
     its joints' breakaway levels, n, :func:`~awiwi_drake.control.chain.joint_friction_levels`, zeros when off)
-    bound the estimate by what the guides' and the joints' friction can be (:meth:`friction_bound`): per DoF
-    ``B_j = sum_i |(P(q) S)_ij| W_i(f_i) + sum_l |S_lj| Fs_l``, ``W_i`` the sliding level of tendon i's guide friction
-    at its measured force (:func:`~awiwi_drake.components.friction.joint_friction_bound`: the chain's
-    ``tendon_force`` is the lever's tension, hysteresis inside, so the guides and the joints are all it misses), and
-    the output becomes
-    ``scale clip(-d_hat, -B, B)``.  The observer is link-side, driven by the measured tendon forces' torque, so its
-    ``d_hat`` holds the guides' friction AND any external load; in the thesis (9.1)-(9.2) it sits on the actuator side
-    with the strain gauges' joint torque, which contains the load, so a load is not cancelled and the joint stays an
-    impedance (stiffness set by co-contraction).  The bound keeps that: a load beyond ``B`` is compensated only up to
-    ``B`` (output ``friction_compensation_bound`` ``= scale B``; compare flags a DoF whose compensation ends at it).
-    The state stays the (9.2) law.  ``friction_levels`` None: unbounded (the load observer of
+    bound the estimate by what the guides' and the joints' friction can be (:meth:`friction_bound`): the output
+    becomes ``scale clip(-d_hat, -B, B)``.  Chosen: the observer is link-side, so its ``d_hat`` holds the friction AND
+    any external load; the thesis's (9.1)-(9.2) sits on the actuator side, where a load is not cancelled and the joint
+    stays an impedance.  The bound keeps that: a load beyond ``B`` is compensated only up to ``B`` (output
+    ``friction_compensation_bound`` ``= scale B``).  ``friction_levels`` None: unbounded (the load observer of
     :class:`~awiwi_drake.control.finger_backstepping.ObservedBacksteppingController`, which estimates the load on purpose).
 
-    ``period`` None: continuous state (a continuous chain, linear analysis).  ``period`` h: the sampled
-    chain's form, a discrete state updated every ``h`` from the sample by
-    :func:`~awiwi_drake.control.friction_observer.observer_step` (the same law, its model copy integrated with its
-    torque held over the period: pole ``1 - L h``); :class:`~awiwi_drake.control.fused.FusedChain_` calls :meth:`compensation` and
-    :meth:`next_state` of this object, the same methods the block's output and update call.
+    ``period`` None: continuous state (linear analysis); ``h``: a discrete state stepped by
+    :func:`~awiwi_drake.control.friction_observer.observer_step` (pole ``1 - L h``).
+    :class:`~awiwi_drake.control.fused.FusedChain_` calls the same :meth:`compensation` and :meth:`next_state`.
     """
 
     class Impl(LeafSystem_[T]):
@@ -332,6 +304,7 @@ def JointFrictionObserver_(T):
                                          "friction_levels[2] (joint breakaway Fs)"), friction_levels, (m, m, n)))
             if self.levels is not None and any(np.any(lv < 0) for lv in self.levels):
                 raise ValueError(f"JointFrictionObserver: friction_levels must be >= 0, got {friction_levels}")
+            self.joint_hold = None if self.levels is None else joint_breakaway_bound(self.levels[2], self.S)
             if self.period is None:
                 self.DeclareContinuousState(k)
             else:
@@ -366,8 +339,8 @@ def JointFrictionObserver_(T):
                 return None
             P = np.asarray(self.coupling.P(q) if P is None else P)
             # the measured f is the lever's tension (the rig's tendon_force, hysteresis inside): guides and joints
-            C, mu_alpha, Fs = self.levels
-            return joint_friction_bound(P, f, C, mu_alpha, joint_level=Fs, selection=self.S)
+            C, mu_alpha, _ = self.levels
+            return joint_friction_bound(P, f, C, mu_alpha, joint_hold=self.joint_hold, selection=self.S)
 
         def compensation(self, w_hat, v, bound=None):
             """``scale clip(-d_hat, -bound, bound)`` (k) [Nm] at the observer state ``w_hat`` (k), joint velocities

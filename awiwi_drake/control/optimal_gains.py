@@ -1,42 +1,22 @@
 """Optimal backstepping gains (thesis ch. 16).
 
-The impedance backstepping law of section 15.3 is linear in the state for a
-linear spring, ``u = -K_bs(Omega) x`` (16.1)-(16.3), with
-``Omega = (Kp,imp, Kd,imp, K3, K4) > 0``. Chapter 16 picks ``Omega`` so that
+The impedance backstepping law of section 15.3 is linear in the state for a linear spring,
+``u = -K_bs(Omega) x`` (16.1)-(16.3), ``Omega = (Kp,imp, Kd,imp, K3, K4) > 0``; ch. 16 picks ``Omega`` so that
 ``K_bs(Omega)`` is close to an LQR gain ``K_opt`` (16.4).
 
-* ``K_bs(Omega)`` is *derived*, not copied: :func:`backstepping_feedback`
-  differentiates the controller's law (the function the
-  :class:`~awiwi_drake.control.backstepping.ImpedanceBackstepping` system
-  evaluates) with AutoDiffXd at the operating point;
-  :func:`system_feedback` does the same through the TemplateSystem
-  (``ToAutoDiffXd``) and a test checks both agree.
-* ``K_opt`` comes from the framework: :func:`awiwi_drake.analysis.linear.lqr`
-  (Drake ``LinearQuadraticRegulator`` on the linearised rig). Table 16.1
-  weights the state ``[q, qd, tau, taud]`` (``tau = k (theta - q)``); the
-  weights are mapped to the rig state ``[q, qd, theta, thetad]`` by the
-  similarity ``x_tau = T x``: ``Q_rig = T^T Q T``.
-* The distance is measured on the gains in Table 16.1's coordinates,
-  column-wise relative to ``K_opt`` (the columns differ by orders of
-  magnitude and in unit): ``d = ||(K_bs - K_opt) / s||_F``, ``s_j = max_i |K_opt,ij|``
-  (one motor: the element-wise ``|K_opt|``).
+* ``K_bs(Omega)`` is *derived*: :func:`backstepping_feedback` differentiates the controller's own law with
+  AutoDiffXd at the operating point (:func:`system_feedback` the same through ``ToAutoDiffXd``).
+* ``K_opt`` is Drake's LQR on the linearised rig (:func:`awiwi_drake.analysis.linear.lqr`); Table 16.1 weights the
+  state ``[q, qd, tau, taud]``, mapped to the rig state by ``x_tau = T x``: ``Q_rig = T^T Q T``.
+* The distance is column-wise relative to ``K_opt`` in Table 16.1's coordinates (the columns differ by orders of
+  magnitude and in unit): ``d = ||(K_bs - K_opt) / s||_F``, ``s_j = max_i |K_opt,ij|``.
 
-Beyond the flexible joint (ch. 16 applies the method to "the 38 tendons"):
-the antagonistic joint rig (N = 2 motors, state ``[q, qd, theta1, theta2,
-omega1, omega2]``) uses the same steps at its operating point (pretension):
-the torque coordinates become ``[q, qd, tau_1..N, taud_1..N]`` with
-``tau_i = -P_i f_i`` the joint torque of tendon ``i`` (:func:`torque_state_map`),
-Table 16.1's weights are repeated per tendon (``tau``, ``taud`` entries) and
-``R = r I_N``; ``K_bs`` (N x 2 + 2N) comes from AutoDiff of the same law at the
-operating point.
-Each DoF of a finger or the hand (:func:`select_finger_force_gains`, registered ``optimal-backstepping`` on
-``finger-*``/``hand``): as ch. 16 states, only "the two lower levels" ``(K3, K4)`` of the 15.5 finger law are
-selected, the impedance is the user's; ``K_bs`` is AutoDiffXd of that law on the DoF's one-link subsystem, the
-target Drake's LQR of the subsystem with Table 16.1's ``Q`` and the most aggressive ``R`` the gain box can follow.
-* :func:`monte_carlo_gains` is Algorithm 3 (best of N random draws, log-uniform
-  in a box; through the sweep runner); :func:`optimize_gains` is a
-  least-squares search on ``log Omega`` (scipy ``least_squares``, positivity by
-  construction) started from the best of a few draws.
+Beyond the flexible joint (ch. 16 applies the method to "the 38 tendons"): on the antagonistic joint rig the torque
+coordinates are ``[q, qd, tau_1..N, taud_1..N]`` (``tau_i = -P_i f_i``, :func:`torque_state_map`), Table 16.1's
+weights repeated per tendon, ``R = r I_N``.  On a finger or the hand (:func:`select_finger_force_gains`, registered
+``optimal-backstepping``) only "the two lower levels" ``(K3, K4)`` of the 15.5 law are selected per DoF.
+:func:`monte_carlo_gains` is Algorithm 3 (best of N log-uniform draws in a box, through the sweep runner);
+:func:`optimize_gains` a least-squares search on ``log Omega`` from the best of a few draws.
 """
 
 from __future__ import annotations
@@ -63,31 +43,14 @@ OMEGA_NAMES = ("stiffness", "damping", "k3", "k4")
 
 @dataclass
 class GainFit:
-    """Result of a gain search.
+    """Result of a gain search."""
 
-    Attributes
-    ----------
-    gains : ImpedanceBacksteppingGains
-        The selected Omega.
-    feedback : ndarray (4,)
-        ``K_bs(Omega)`` in Table 16.1 coordinates ``[q, qd, tau, taud]`` (``u = -K x``).
-    target : ndarray (4,)
-        ``K_opt`` in the same coordinates.
-    distance : float
-        Relative distance ``||(K_bs - K_opt)/|K_opt| ||``.
-    evaluations : int
-        Number of ``K_bs`` evaluations.
-    wall_time : float
-        Search time [s].
-    method : str
-    """
-
-    gains: ImpedanceBacksteppingGains
-    feedback: np.ndarray
-    target: np.ndarray
-    distance: float
-    evaluations: int
-    wall_time: float
+    gains: ImpedanceBacksteppingGains  # the selected Omega
+    feedback: np.ndarray              # K_bs(Omega) in Table 16.1 coordinates [q, qd, tau, taud] (u = -K x)
+    target: np.ndarray                # K_opt in the same coordinates
+    distance: float                   # (16.4), gain_distance
+    evaluations: int                  # K_bs evaluations
+    wall_time: float                  # [s]
     method: str
 
 
@@ -225,10 +188,9 @@ def _setup(rig, case, op=None):
 def rate_limited_case(case: OptimalGainsCase, link_inertia: float, rate_hz: float) -> OptimalGainsCase:
     """``case`` with the gain box's upper corner bounded by a sampled loop at ``rate_hz``.
 
-    The design places poles at ``-K3``, ``-K4`` (the z3, z4 error dynamics) and ``-Kd,imp / m`` (the
-    impedance damping): each is kept at ``|h lambda| <= 1/4`` (``K3, K4 <= f_s / 4``,
-    ``Kd,imp <= m f_s / 4``).  Unbounded, the joint rig's fit asks for K3 = 2.6e4 1/s, which the
-    3 kHz loop cannot realise (the command saturates 97 % of a step).
+    The poles ``-K3``, ``-K4`` (the z3, z4 error dynamics) and ``-Kd,imp / m`` are kept at ``|h lambda| <= 1/4``
+    (``K3, K4 <= f_s / 4``, ``Kd,imp <= m f_s / 4``); unbounded, the joint rig's fit asks for gains the 3 kHz loop
+    cannot realise.
     """
     if not rate_hz > 0:
         raise ValueError(f"rate_limited_case: rate_hz = {rate_hz} must be > 0")
@@ -403,27 +365,20 @@ def select_finger_force_gains(rig, case=None, *, params=None, rate_hz: float | N
     """Ch. 16 on every independent DoF of a finger or the hand, for the 15.5 law
     (:mod:`awiwi_drake.control.finger_backstepping`); the thesis's steps per DoF ``j``:
 
-    1. *The model*: the DoF's one-link subsystem (:func:`~awiwi_drake.control.joint_design.joint_subsystem`: its
-       inertia ``M_jj``, its own tendons (column ``j`` of ``P S``), spring slopes at the operating point, the
-       motors with (3.8) linearised in motion), linearised by Drake.
+    1. *The model*: the DoF's one-link subsystem (:func:`~awiwi_drake.control.joint_design.joint_subsystem`),
+       linearised by Drake.
     2. *State feedback* (16.1)-(16.3): ``K_bs(Omega)`` is AutoDiffXd of the registered law on that subsystem
-       (``Kp,imp``, ``Kd,imp`` given: the diagonal of the finger law's mode design), in Table 16.1's torque
-       coordinates (:func:`torque_state_map`).
-    3. *The target* ``K_opt``: Drake's LQR of the subsystem with Table 16.1's ``Q`` per tendon and
-       ``R = r I``, where ``r`` is the *smallest* weight (the most aggressive LQR) whose closed loop the
-       sampled law can follow: its fastest pole at most ``max(sampled_pole_limit * rate_hz,
-       target_margin * fastest open-loop mode)``, the gain box's corner (bisection on ``log r``).  This scales Table 16.1 to the
-       joint as the thesis scaled it to its flexible joint: Table 16.1's ``R = 0.1`` is far below what the
-       structure produces on any finger joint (last wave: distance 118-304), and a free ``R`` ends in gains
-       the 3 kHz loop cannot realise.
-    4. *The selection* (16.4): least squares on ``log (K3, K4)`` in the box ``[gain_low,
-       sampled_pole_limit * rate_hz]`` (the (15.63) error poles ``-K3``, ``-K4`` at ``|h lambda| <= 1/4``), from
-       the best of the box corners and ``starts`` draws.
+       (``Kp,imp``, ``Kd,imp`` given: the diagonal of the law's mode design), in Table 16.1's torque coordinates.
+    3. *The target* ``K_opt``: Drake's LQR with Table 16.1's ``Q`` per tendon and ``R = r I``, ``r`` the smallest
+       weight whose fastest closed-loop pole is at most ``max(sampled_pole_limit * rate_hz, target_margin *
+       fastest open-loop mode)`` (bisection on ``log r``).  Chosen: Table 16.1's ``R = 0.1`` is far below what the
+       structure produces on a finger joint, and a free ``R`` ends in gains the 3 kHz loop cannot realise.
+    4. *The selection* (16.4): least squares on ``log (K3, K4)`` in ``[gain_low, sampled_pole_limit * rate_hz]``,
+       from the best of the box corners and ``starts`` draws.
 
-    Each tendon gets the smallest ``K3`` and ``K4`` of the DoF it acts on (chosen: the conservative choice
-    for a tendon shared by two DoF, e.g. the index's DIP tendons on the PIP; the Lyapunov decrease of the
-    module holds for any positive per-tendon gains).  ``rate_hz=None``: a continuous design (no rate limit;
-    then the box's corner is 1e4 1/s).
+    Each tendon gets the smallest ``K3`` and ``K4`` of the DoF it acts on (chosen: conservative for a shared
+    tendon; the Lyapunov decrease holds for any positive gains).  ``rate_hz=None``: a continuous design (the box's
+    corner 1e4 1/s).
     """
     from scipy.optimize import least_squares
     from awiwi_drake.control.chain import chain_design_point

@@ -29,7 +29,7 @@ VARIANTS = {"no-observer": {"friction_observer": None}}
 RIG_KINDS = ("tendon-rig", "flexible-joint", "joint-rig", "finger", "hand")
 RIG_NAMES = ("tendon-rig", "flexible-joint", "joint-rig", *(f"finger-{f}" for f in FINGERS), "hand")
 # Modules whose import registers controllers (append yours).
-PROVIDER_MODULES = ["awiwi_drake.control.catalog", "awiwi_drake.control.backstepping_registry"]
+PROVIDER_MODULES = ["awiwi_drake.control.catalog"]
 
 
 @dataclass(frozen=True)

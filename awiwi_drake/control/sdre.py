@@ -25,9 +25,12 @@ Two pointwise-linear forms (``params.factorisation``):
   ``B = [0, 1/B]``, alpha = df/dtheta of the spring at the measured motor angle, no
   friction) and (14.10) for the flexible joint with the *secant* stiffness
   ``k(x1 - x3) = tau_s(x3 - x1) / (x3 - x1)`` (so that ``A(x) x`` is the spring torque
-  exactly), link/motor damping as in (12.8).  The printed tendon form is the hand bank's law for one tendon
-  (:class:`PrintedTendonGain` -> :meth:`TendonSdreLaw.gains`, closed form :func:`tendon_sdre_gains`): one place for
-  (14.9); the joint's is :class:`PrintedJointFactorisation` with Drake's LQR (:class:`LqrGain`).
+  exactly), link/motor damping as in (12.8): :class:`PrintedJointFactorisation` with Drake's LQR (:class:`LqrGain`).
+
+The tendon SDRE is one law, :class:`TendonSdreLaw` (and its compiled float twin ``sdre_law``), for the tendon rig
+and the hand: the rig's ``tendon-sdre`` is that law for one tendon whose state is its motor angle, with the
+printed gains in closed form or the Jacobian form's gain source; the joints' SDRE is :class:`SdreController` on the
+linearised reference model.
 
 For the hand's chain (ch. 7-11 with "SDRE ch. 14" as the per-tendon force law) the tendon SDRE is one bank for
 all m tendons (:class:`TendonSdreLaw`, held gains in :class:`TendonSdreController_` or the fused chain): each
@@ -54,8 +57,7 @@ from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
 from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.parameters.control import SdreJointParams, SdreTendonParams
 
-__all__ = ["RigJacobian", "LqrGain", "PrintedTendonGain", "PrintedJointFactorisation", "TendonSdreModel",
-           "SdreController_", "SdreController",
+__all__ = ["RigJacobian", "LqrGain", "PrintedJointFactorisation", "SdreController_", "SdreController",
            "tendon_sdre_controller", "joint_sdre_controller", "tendon_sdre_gains", "TendonSdreLaw",
            "TendonSdreController_", "TendonSdreController", "SDRE_GAIN"]
 
@@ -133,42 +135,6 @@ class LqrGain:
         return lqr_gain(*self.form(x, u), self.Q, self.R)[0]
 
 
-class PrintedTendonGain:
-    """The tendon rig's SDRE gain on (14.9) as printed: the hand bank's law for one tendon
-    (:meth:`TendonSdreLaw.gains`, closed form :func:`tendon_sdre_gains`, no friction slope) at the force the rig's map
-    gives the measured motor angle (0 when slack)."""
-
-    def __init__(self, fmap, motor: Any, q_diag, r: float):
-        self.fmap = fmap
-        self.law = TendonSdreLaw([fmap], motor, q_diag=q_diag, r=r, design_forces=[0.0], update_period=None,
-                                 friction_scale=0.0, name="tendon sdre (14.9)")
-
-    def __call__(self, x, u) -> np.ndarray:
-        theta = float(np.asarray(x, float).reshape(-1)[0])
-        f = float(self.fmap.force_at(theta)) if theta > self.fmap.slack_angle else 0.0
-        return self.law.gains(np.array([f])).reshape(1, 2)
-
-
-class TendonSdreModel:
-    """Tendon rig ``x = [theta, omega]``; equilibrium ``theta_ref = f^-1(f_ref)``, ``u_ref = r_m f_ref``."""
-
-    reference = "tendon_force"
-
-    def __init__(self, fmap, pulley_radius: float):
-        self.fmap = fmap
-        self.r_m = check_gain("pulley_radius", pulley_radius, owner="tendon sdre")
-        self.inputs = {"tendon_force_reference": 1, "motor_angle": 1, "motor_velocity": 1}
-
-    def state(self, values):
-        return np.array([values["motor_angle"][0], values["motor_velocity"][0]])
-
-    def equilibrium(self, r):
-        self.fmap.check_force(r, "tendon_force_reference")  # ValueError outside the force table [0, f_max]
-        th = self.fmap.theta_of_force(r)
-        zero = th * 0.0
-        return np.array([th, zero]), np.array([self.r_m * r])
-
-
 @TemplateSystem.define("SdreController_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def SdreController_(T):
     """SDRE state feedback with the gain held in discrete state, refreshed periodically."""
@@ -232,16 +198,19 @@ SdreController = SdreController_[None]
 
 def tendon_sdre_controller(rig: Any, params: SdreTendonParams | None = None, *, design_force: float = 30.0,
                            fixed: bool = False, fmap=None):
-    """Registered factory ``tendon-sdre`` (Table 14.1); ``fixed=True``: LQR gains frozen at ``design_force``."""
+    """Registered factory ``tendon-sdre`` (Table 14.1): the bank's law (:class:`TendonSdreLaw`) for the rig's one
+    tendon, whose state is its motor angle (the far end is fixed, (14.9)), no feed-forward; gains of
+    ``params.factorisation`` ("printed": (14.9) in closed form at the map's force at the measured angle; "jacobian":
+    Drake's LQR of the rig's autodiff Jacobian at ``[theta, omega]``, its friction slope included); ``fixed=True``:
+    the gains frozen at ``design_force`` (the LQR)."""
     from awiwi_drake.control.tendon_force import _motor, force_map
     p = params or SdreTendonParams()
-    fmap = fmap or force_map(rig)
-    model = TendonSdreModel(fmap, _motor(rig).pulley_radius)
-    gain = (LqrGain(RigJacobian(rig), np.diag(p.q_diag), np.array([[p.r]]), "tendon sdre")
-            if p.factorisation == "jacobian" else PrintedTendonGain(fmap, _motor(rig), p.q_diag, p.r))
-    K0 = gain(*model.equilibrium(design_force))
-    return SdreController(model, gain, None if fixed else 1.0 / p.update_rate, K0,
-                          "tendon_lqr_fixed" if fixed else "tendon_sdre")
+    jacobian = (LqrGain(RigJacobian(rig), np.diag(p.q_diag), np.array([[p.r]]), "tendon sdre")
+                if p.factorisation == "jacobian" else None)
+    law = TendonSdreLaw([fmap or force_map(rig)], _motor(rig), q_diag=p.q_diag, r=p.r, design_forces=[design_force],
+                        update_period=None if fixed else 1.0 / p.update_rate, friction_scale=0.0,
+                        state="motor_angle", jacobian=jacobian, name="tendon_lqr_fixed" if fixed else "tendon_sdre")
+    return TendonSdreController(law)
 
 
 def joint_sdre_controller(rig: Any, params: SdreJointParams | None = None, *, op: Any = None, fixed: bool = False):
@@ -298,21 +267,26 @@ class TendonSdreLaw(StaticLaw):
     ``r_m f_ref`` is (14.8)'s feed-forward ``u = f_t(theta_0) + v`` at the reference's equilibrium; the state error is
     (14.9)'s ``xi = theta - theta_0`` "linearised w.r.t. the tendon forces" (section 14.2.1): ``theta_i(f)`` the
     map's motor angle holding ``f`` with the far end fixed (a measured force below 0 is the slack point, above the
-    table its top), so that on a finger the joints' share of the elongation is in it; ``omega_el = omega +
+    table its top), so that on a finger the joints' share of the elongation is in it (``state="tendon_force"``);
+    on a tendon whose far end is fixed (the tendon rig, ``state="motor_angle"``) the state angle is the measured
+    motor angle itself (also when slack or beyond the table); ``omega_el = omega +
     v_path / r_m`` (``path_velocity``: the rate of ``r_m theta + h(q)``, as :class:`TendonForceLaw`).  Friction (3.8)
     and ripple (3.5) are fed forward with the fractions ``friction_scale``, ``ripple_scale``.
 
     The gains ``[K_theta, K_omega]`` are an input (``SDRE_GAIN``, 2 ``size``), held by the system that owns the law
-    (:class:`TendonSdreController_`, or the fused chain); :meth:`gains` re-solves them at a measured state: the
-    pointwise-linear model (14.9) of each tendon at its measured force, ``alpha_i(f_i)``, no friction (the law feeds
-    the friction model forward, so the compensated plant is (14.9) up to the fraction ``1 - friction_scale``), in
-    closed form (:func:`tendon_sdre_gains`).  ``update_period``: the re-solve period (section 14.4: ~200 Hz), None
+    (:class:`TendonSdreController_`, or the fused chain); :meth:`gains_at` re-solves them at the measured inputs
+    ``gain_inputs``: the pointwise-linear model (14.9) of each tendon at its state's force (the measured force, or
+    the map's force at the measured motor angle, 0 when slack), ``alpha_i(f_i)``, no friction (the law feeds the
+    friction model forward, so the compensated plant is (14.9) up to the fraction ``1 - friction_scale``), in closed
+    form (:meth:`gains`, :func:`tendon_sdre_gains`); or, given ``jacobian`` (one tendon, ``state="motor_angle"``), that
+    gain source ``K(x, u_ref)`` (1 x 2) at ``x = [theta, omega]``, ``u_ref = r_m f_ref`` (the rig's Jacobian form,
+    :class:`LqrGain` of :class:`RigJacobian`).  ``update_period``: the re-solve period (section 14.4: ~200 Hz), None
     for gains fixed at ``design_forces`` (the SDRE's own linearisation at that equilibrium: the LQR).
     """
 
     def __init__(self, fmaps, motor: Any, *, q_diag, r: float, design_forces, update_period: float | None,
                  friction_scale: float = 1.0, ripple_scale: float = 0.0, path_velocity: bool = False,
-                 name: str = "tendon_sdre"):
+                 state: str = "tendon_force", jacobian=None, name: str = "tendon_sdre"):
         from awiwi_drake.control.tendon_force import ForceMap
         self.name = name
         self.fmaps = tuple(fmaps)
@@ -333,14 +307,27 @@ class TendonSdreLaw(StaticLaw):
         self.update_period = update_period
         self.gain_name = SDRE_GAIN
         self.path_velocity = bool(path_velocity)
-        self.inputs = {"tendon_force_reference": m, "tendon_force": m, "motor_velocity": m}
+        if state not in ("tendon_force", "motor_angle"):
+            raise ValueError(f"{name}: state must be 'tendon_force' or 'motor_angle', got {state!r}")
+        if jacobian is not None and (state != "motor_angle" or m != 1):
+            raise ValueError(f"{name}: a jacobian gain source needs one tendon with state='motor_angle'")
+        self.state, self.jacobian = state, jacobian
+        self.inputs = {"tendon_force_reference": m, state: m, "motor_velocity": m}
         if self.ripple_scale > 0:
             self.inputs["motor_angle"] = m
         if self.path_velocity:
             self.inputs["tendon_path_velocity"] = m
         self.output_size = m
+        self.gain_inputs = (("tendon_force_reference", "motor_angle", "motor_velocity") if jacobian is not None
+                            else (state,))
         f0 = check_gains("design_forces", design_forces, shape=(m,), owner=name)
-        self.initial_gain = self.gains(f0)
+        th0 = np.zeros(m)
+        if state == "motor_angle":                  # the design equilibrium's motor angles
+            for fm, ix in self._groups:
+                fm.check_force(f0[ix], f"{name}: design_forces")
+            th0 = self.angle_of_force(f0, reference=False)
+        self.initial_gain = self.gains_at({"tendon_force_reference": f0, "tendon_force": f0, "motor_angle": th0,
+                                           "motor_velocity": np.zeros(m)})
 
     def _by_group(self, fn, f):
         """``fn(fmap, f[ix])`` scattered back by tendon (one call per distinct map)."""
@@ -360,6 +347,16 @@ class TendonSdreLaw(StaticLaw):
         """``[K_theta, K_omega]`` (2 m) of the pointwise-linear models (14.9) at the measured forces ``f``."""
         k_t, k_w = tendon_sdre_gains(self.r_m * self.slopes(f), self.inertia, self.q_diag, self.r)
         return np.concatenate([k_t, k_w])
+
+    def gains_at(self, u) -> np.ndarray:
+        """``[K_theta, K_omega]`` (2 m) re-solved at the measured float inputs ``u`` (those in ``gain_inputs``)."""
+        if self.jacobian is not None:
+            x = np.array([u["motor_angle"][0], u["motor_velocity"][0]], dtype=float)
+            return np.ravel(self.jacobian(x, self.r_m * np.asarray(u["tendon_force_reference"], dtype=float)))
+        if self.state == "tendon_force":
+            return self.gains(u["tendon_force"])
+        return self.gains(self._by_group(lambda fm, x: np.where(x > fm.slack_angle, fm.force_at(x), 0.0),
+                                         np.asarray(u["motor_angle"], dtype=float).reshape(-1)))
 
     def angle_of_force(self, f, *, reference: bool):
         """Each tendon's motor angle holding ``f`` (far end fixed); ``reference``: ``f`` must lie in its table
@@ -385,10 +382,10 @@ class TendonSdreLaw(StaticLaw):
             k = self.__dict__.get("_kernel") or self._build_kernel()
             fn, tabs, out = k
             zeros = tabs[-1]
-            bad = fn(u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"],
-                     u["motor_angle"] if self.ripple_scale > 0 else zeros,
-                     u["tendon_path_velocity"] if self.path_velocity else zeros, u[SDRE_GAIN], *tabs[:-1],
-                     self.path_velocity, self.friction_scale, self.ripple_scale, self.r_m, out)
+            bad = fn(u["tendon_force_reference"], u.get("tendon_force", zeros), u["motor_velocity"],
+                     u.get("motor_angle", zeros), u["tendon_path_velocity"] if self.path_velocity else zeros,
+                     u[SDRE_GAIN], *tabs[:-1], self.path_velocity, self.state == "motor_angle", self.friction_scale,
+                     self.ripple_scale, self.r_m, out)
             if bad < 0:
                 return out.copy()
         return self.evaluate(u)       # AutoDiffXd, or raises naming the tendon
@@ -417,9 +414,11 @@ class TendonSdreLaw(StaticLaw):
         """The law as written (float, AutoDiffXd); :meth:`__call__` takes a compiled fast path for a float bank."""
         from awiwi_drake.components import motor_friction_torque, motor_ripple_torque
         m = self.output_size
-        fd, f, w = u["tendon_force_reference"], u["tendon_force"], u["motor_velocity"]
+        fd, w = u["tendon_force_reference"], u["motor_velocity"]
         g = u[SDRE_GAIN]
-        err = self.angle_of_force(f, reference=False) - self.angle_of_force(fd, reference=True)
+        theta = (u["motor_angle"] if self.state == "motor_angle"
+                 else self.angle_of_force(u["tendon_force"], reference=False))
+        err = theta - self.angle_of_force(fd, reference=True)
         w_el = w + u["tendon_path_velocity"] / self.r_m if self.path_velocity else w
         tau = self.r_m * fd - g[:m] * err - g[m:] * w_el
         if self.friction_scale > 0:
@@ -432,8 +431,8 @@ class TendonSdreLaw(StaticLaw):
 @TemplateSystem.define("TendonSdreController_", scope=sys.modules[__name__], T_list=[float, AutoDiffXd])
 def TendonSdreController_(T):
     """A :class:`TendonSdreLaw` bank with its gains held in discrete state, re-solved every ``law.update_period``
-    from the measured forces (``update_period=None``: constant gains, no state, so that a continuous loop stays
-    continuous for ``Linearize``).  Output ``motor_torque``, and the held gains
+    from the measured inputs (:meth:`TendonSdreLaw.gains_at`; ``update_period=None``: constant gains, no state, so
+    that a continuous loop stays continuous for ``Linearize``).  Output ``motor_torque``, and the held gains
     ``tendon_sdre_gain`` ``[K_theta (m), K_omega (m)]``."""
 
     class Impl(LeafSystem_[T]):
@@ -459,8 +458,8 @@ def TendonSdreController_(T):
             Impl._construct(self, other.law, converter=converter)
 
         def _update(self, context, discrete_state):
-            f = self._ports["tendon_force"].Eval(context)
-            k = self.law.gains(np.array([scalar_value(v) for v in f]))
+            k = self.law.gains_at({nm: np.array([scalar_value(v) for v in self._ports[nm].Eval(context)])
+                                   for nm in self.law.gain_inputs})
             discrete_state.set_value(self._xg, k if T is float else np.array([AutoDiffXd(v) for v in k], dtype=object))
 
         def _calc(self, context, output):

@@ -13,27 +13,15 @@ map) and gains by identification to a damped second-order error dynamics
 
     Kp = w^2 B / alpha,   Kd = 2 xi w B / alpha.
 
-*Fixed gains* evaluate ``alpha`` at the design force (30 N, Fig 10.2);
-*scheduled gains* evaluate it at the reference force (10.12), by linear
-interpolation in a table (section 10.3: "a simple linear interpolation").
-The thesis writes ``Kp = w^2 B / beta`` and ``Kd = 2 xi w B / alpha`` with
-alpha, beta the derivatives of ``f_t`` and of ``fdot`` w.r.t. ``theta_dot``
-and ``theta``; for a force that depends on ``theta`` only both equal
-``d f_t / d theta``, which is what is used here.
+*Fixed gains* evaluate ``alpha`` at the design force (30 N, Fig 10.2); *scheduled gains* at the reference force
+(10.12), by linear interpolation in a table (section 10.3).  The thesis's ``beta`` in ``Kp = w^2 B / beta`` equals
+``alpha`` for a force that depends on ``theta`` only.
 
-Near slack.  The force map is tabulated over the *taut* range only (the
-slack point ``f = 0``, where ``alpha = 0``, is not a row of the slope
-table), and the slope used in the derivative term is ``alpha(clip(f,
-f_floor, f_max))`` with ``f_floor = min_schedule_force`` (2 N): a noisy or
-negative force reading (the sensor noise reaches below 0 N near slack)
-therefore never extrapolates the slope below the table, which would make
-``alpha < 0`` and turn the ``-Kd fdot_hat`` damping into positive feedback.
-References outside ``[0, f_max]`` of the table raise
-:class:`~awiwi_drake.analysis.InfeasibleForceError` (a ``ValueError``; in a simulation it carries the time).
-
-Steady state (all derivatives zero, friction (3.8) vanishes at rest):
-without the force feed-forward ``Kp (f_des - f) = r_m f`` (10.3), i.e.
-``f = f_des Kp / (Kp + r_m)``; with it the error vanishes (10.4).
+Near slack the slope is ``alpha(clip(f, min_schedule_force, f_max))`` on the *taut* table (the slack row, where
+``alpha = 0``, is not kept): a noisy reading near or below 0 N never extrapolates ``alpha < 0``, which would turn the
+``-Kd fdot_hat`` damping into positive feedback.  References outside ``[0, f_max]`` raise
+:class:`~awiwi_drake.analysis.InfeasibleForceError`.  At rest without the force feed-forward the force settles at
+``f_des Kp / (Kp + r_m)`` (10.3); with it the error vanishes (10.4).
 """
 
 from __future__ import annotations
@@ -62,15 +50,12 @@ def interp(x, xp: np.ndarray, fp: np.ndarray):
     """
     xp = np.asarray(xp, float)
     fp = np.asarray(fp, float)
-    if isinstance(x, np.ndarray) and x.dtype == float and x.size > 1:   # a float bank: the lean path
+    if isinstance(x, np.ndarray) and x.dtype != object and x.size > 1:   # a float bank: the lean path
+        x = np.asarray(x, dtype=float)
         i = np.minimum(np.maximum(np.searchsorted(xp, x) - 1, 0), len(xp) - 2)
         x0, f0 = xp[i], fp[i]
         return f0 + (fp[i + 1] - f0) / (xp[i + 1] - x0) * (x - x0)
-    if np.ndim(x) > 0 and np.size(x) > 1:  # element-wise (a bank of tendons)
-        if is_float(x):
-            xa = np.asarray(x, dtype=float)
-            i = np.clip(np.searchsorted(xp, xa) - 1, 0, len(xp) - 2)
-            return fp[i] + (fp[i + 1] - fp[i]) / (xp[i + 1] - xp[i]) * (xa - xp[i])
+    if np.ndim(x) > 0 and np.size(x) > 1:  # element-wise (a bank of tendons), any scalar type
         return np.array([interp(xi, xp, fp) for xi in np.asarray(x, dtype=object).reshape(-1)], dtype=object)
     if is_float(x):
         xv = float(np.asarray(x).reshape(-1)[0]) if np.ndim(x) else float(x)
@@ -219,18 +204,13 @@ def _motor(rig):
 
 
 class TendonForceLaw(StaticLaw):
-    """(10.2) with fixed (design force) or scheduled (reference force) gains.
+    """(10.2) with fixed (design force) or scheduled (reference force) gains, for a bank of ``size`` tendons.
 
-    ``size`` tendons (a bank: every port has ``size`` entries, one law per tendon, the same
-    motor).  ``fmap`` is one :class:`ForceMap` for every tendon, or a sequence of ``size`` maps, one
-    per tendon (each tendon's own spring curve: the gains (10.11) and the force rate use its slope;
-    tendons sharing a map object are evaluated together).  ``ripple_scale`` > 0 adds the ripple feed-forward of section 3.2,
-    ``-ripple_scale * tau_ripple(theta)`` (input ``motor_angle``; ch. 3: a conservative amplitude, e.g.
-    ``RippleCompensationParams.amplitude_scale``; the hand's chain: ``HandChainParams.force_ripple_scale``, the whole
-    model).  ``path_velocity=True`` adds the
-    input ``tendon_path_velocity`` [m/s] (``P(q) qdot``, a finger's joints moving the tendon path):
-    the force rate estimate becomes ``alpha (omega + v_path / r_m)``, the derivative of
-    ``f(r_m theta + h(q))``; on the tendon rig (far end fixed) ``v_path = 0``.
+    ``fmap``: one :class:`ForceMap` for every tendon or ``size`` maps (each tendon's own spring curve; tendons
+    sharing a map object are evaluated together).  ``ripple_scale`` > 0 adds the ripple feed-forward of section 3.2,
+    ``-ripple_scale tau_ripple(theta)`` (input ``motor_angle``).  ``path_velocity=True`` adds the input
+    ``tendon_path_velocity`` ``P(q) qdot`` [m/s]: the force rate becomes ``alpha (omega + v_path / r_m)``, the
+    derivative of ``f(r_m theta + h(q))``.
     """
 
     inputs = {"tendon_force_reference": 1, "tendon_force": 1, "motor_velocity": 1}

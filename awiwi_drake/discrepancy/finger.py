@@ -54,6 +54,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.special import ndtr
 
+from awiwi_drake.analysis import SimulationDivergedError
 from awiwi_drake.components.friction import dahl_path
 from awiwi_drake.components.motor import motor_acceleration, motor_friction_torque, motor_ripple_torque
 from awiwi_drake.hand.diagrams import finger_diagram
@@ -330,7 +331,7 @@ class FingerResiduals:
         from pydrake.trajectories import PiecewisePolynomial
         from scipy.ndimage import gaussian_filter1d
 
-        from awiwi_drake.analysis import SimulationDivergedError, simulate
+        from awiwi_drake.analysis import simulate
         rig = finger_diagram(finger=self.finger, params=params)
         m, n, dt, t = self.m, self.n, self.dt, self.ds.time
         width = self.settings.finger_motor_rest_filter / dt
@@ -368,11 +369,8 @@ class FingerResiduals:
         x0[:n], x0[n:2 * n] = q[:, 0], (q[:, 1] - q[:, 0]) / dt
         x0[2 * n:2 * n + m], x0[2 * n + m:2 * n + 2 * m] = th[:, 0], om[:, 0]
         ctx.SetContinuousState(x0)
-        try:
-            res = simulate(diagram, ctx, t[-1], log=("state",), log_period=dt, mode="fixed_step",
-                           step=min(dt, 1.0 / CONTROL_RATE_HZ))   # the control period (as the finger truth steps)
-        except SimulationDivergedError as exc:
-            raise FloatingPointError(f"{self.ds.name}: the finger replay diverged: {exc}") from None
+        res = simulate(diagram, ctx, t[-1], log=("state",), log_period=dt, mode="fixed_step",
+                       step=min(dt, 1.0 / CONTROL_RATE_HZ))   # the control period (as the finger truth steps)
         S = np.asarray(res["state"], float).T
         if S.shape[1] != len(t):
             raise RuntimeError(f"{self.ds.name}: the finger replay logged {S.shape[1]} samples, expected {len(t)}")
@@ -1131,8 +1129,9 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                                                     fr.params).params
                 try:
                     c = _refit_loop(fr, same, bounds, base_spring, named, settings)
-                except FloatingPointError as exc:
-                    say(f"note: {exc}; the refit waits until every effect is named")
+                except SimulationDivergedError as exc:
+                    say(f"note: the finger replay of {fr.ds.name}: {exc}; the refit waits until every effect is "
+                        f"named")
                 else:
                     refitted.add(len(steps))
                     if c is not win:
@@ -1169,9 +1168,10 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
         without = base_spring + fr.loop_removed(same[0].tendon, same[0].loop)
         try:
             c = _refit_loop(fr, same, bounds, without, others, settings)
-        except FloatingPointError as exc:     # said, and the loop kept
-            warnings.append(f"{exc}: spring_hysteresis on {steps[k].place} is written as the screen fitted it (on "
-                            f"the measured force's elongation, whose noise biases it)")
+        except SimulationDivergedError as exc:     # said, and the loop kept
+            warnings.append(f"the finger replay of {fr.ds.name}: {exc}: spring_hysteresis on {steps[k].place} is "
+                            f"written as the screen fitted it (on the measured force's elongation, whose noise "
+                            f"biases it)")
             say("warning: " + warnings[-1])
             continue
         base_spring = without - fr.loop_removed(c.tendon, c.loop)

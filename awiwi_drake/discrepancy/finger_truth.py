@@ -37,7 +37,7 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem_
 from pydrake.systems.primitives import Adder, ConstantVectorSource
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from awiwi_drake.analysis import Samples, SimulationDivergedError, simulate
+from awiwi_drake.analysis import Samples, SimulationEventError, simulate
 from awiwi_drake.components.friction import stribeck_friction
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
@@ -258,13 +258,10 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     full[:len(X0)] = X0          # the Dahl states (hysteresis of the hidden tendon) start at rest
     u0 = r_m * nominal.pretension   # the PD holds the pretension: u = r f_pre at the reference
     ctx = loop.create_context(state=full, motor_torque=np.full(m, u0))
-    try:
-        res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
-                                                 "tendon_force_reference": np.full(m, nominal.pretension)},
-                       log=("motor_angle", "tendon_force", "joint_angle", "motor_torque_command"), log_period=dt,
-                       mode="fixed_step", step=1.0 / 3000.0 if gen.sample_rate <= 3000 else dt, progress=progress)
-    except SimulationDivergedError as exc:
-        raise FloatingPointError(f"finger truth simulation diverged: {exc}") from None
+    res = simulate(loop, ctx, t[-1], inputs={"motor_angle_reference": Samples(t, ref, hold="zoh"),
+                                             "tendon_force_reference": np.full(m, nominal.pretension)},
+                   log=("motor_angle", "tendon_force", "joint_angle", "motor_torque_command"), log_period=dt,
+                   mode="fixed_step", step=1.0 / 3000.0 if gen.sample_rate <= 3000 else dt, progress=progress)
     U = res["motor_torque_command"]
     if U.shape[0] != N:
         raise RuntimeError(f"finger truth simulation logged {U.shape[0]} samples, expected {N}")
@@ -278,8 +275,10 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     meas = {key: y.copy() if snr_db is None else sensor_reading(key, y, y.std() * 10 ** (-snr_db / 20.0), rng)
             for key, y in clean.items()}
     if np.any(np.abs(U) >= nominal.motor.torque_limit) and nominal.motor.saturation:
-        raise FloatingPointError(f"finger truth: the commanded torque reaches the motor limit "
-                                 f"{nominal.motor.torque_limit} N m; the logged command would not be the applied one")
+        t_sat = float(t[np.nonzero(np.any(np.abs(U) >= nominal.motor.torque_limit, axis=1))[0][0]])
+        raise SimulationEventError(f"finger truth: the commanded torque reaches the motor limit "
+                                   f"{nominal.motor.torque_limit} N m at t = {t_sat:.6g} s; the logged command would "
+                                   f"not be the applied one", kind="actuator_saturation", t=t_sat)
     inputs = {f"motor_torque_{i + 1}": U[:, i].copy() for i in range(m)}
     tag = "-".join(hidden) if hidden else "none"
     where = f"_t{place}" if hidden else ""

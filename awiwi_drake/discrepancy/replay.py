@@ -26,6 +26,7 @@ import numpy as np
 from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from scipy.signal import savgol_coeffs, savgol_filter
 
+from awiwi_drake.analysis import SimulationDivergedError
 from awiwi_drake.components.friction import dahl_path
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
@@ -277,8 +278,10 @@ class ReplayEngine:
         batch = getattr(self._local, "batch", None)
         Ym = batch.simulate(starts, P, X0) if batch is not None else self._simulate_all([(starts, P, X0)])[0]
         if not np.all(np.isfinite(Ym)):
-            bad = np.unique(np.nonzero(~np.isfinite(Ym))[0])
-            raise FloatingPointError(f"replay of {self.ds.name} diverged in {len(bad)} of {len(starts)} copies")
+            c, k = np.nonzero(~np.isfinite(Ym))[:2]
+            t = float(np.min(self.ds.time[starts[c] + 1 + k]))     # sample k of a copy: residual's index
+            raise SimulationDivergedError(f"replay of {self.ds.name} diverged at t = {t:.6g} s in "
+                                          f"{len(np.unique(c))} of {len(starts)} copies", t=t)
         return Ym
 
     def _simulate_all(self, requests: list) -> list:

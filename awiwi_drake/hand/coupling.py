@@ -1,48 +1,23 @@
 """Tendon routing of the fingers and the wrist: lengths ``h(q)``, coupling ``P(q)``, stiffness map.
 
-The wrist's length offsets come from the closed-form kinematics of :mod:`awiwi_drake.hand.wrist`
-((6.1)-(6.9)).
+Sign convention (docs/ARCHITECTURE.md): ``h_i(q)`` is the length of tendon path ``i``; ``P(q) = dh/dq``
+(m x n); spring elongation ``x = r_m theta + h(q) - h(0) + x0``; joint torque ``tau = -P(q)^T f``.
+The lengths are the single truth and ``P`` is derived from them; where the thesis prints other rows
+((5.9), (5.18), (5.21)) docs/REPRODUCTIONS.md reports both readings.
 
-Sign convention (docs/ARCHITECTURE.md): ``h_i(q)`` is the length of tendon
-path ``i``; ``P(q) = dh/dq`` (m x n); spring elongation
-``x = r_m theta + h(q) - h(0) + x0``; joint torque ``tau = -P(q)^T f``.
+* Index / middle, (5.5): the eight lengths as printed.
+* Ring / fifth, (5.16)-(5.18): the plant keeps PIP and DIP as two joints (the coupling is a stiff
+  element, :mod:`.plant`); the six ring tendons are the four base rows of (5.5) and one PIP/DIP pair
+  ``h = +-(r42 q42 + r43 q43)`` (reduced 3-DoF row ``+-(r42 + r43^2/r42) q42``,
+  :func:`reduced_coupling_matrix`).
+* Fifth: no equations in the thesis.  Chosen: the ring routing plus an antagonistic pair on the
+  hematometacarpal (HMC) joint, ``h = +-r_h q_5h`` (rows 1-2): 8 tendons, 4 DoF (section 5.5).
+* Thumb, (5.20)-(5.22): the four base tendons run straight from the palm points A0..D0 (frame 10) to
+  the bone points A..D (frame 12), ``h_i = |T^12_10(q10, q11) p_i - p0_i|``; the PIP/DIP rows are (5.22).
+  ``P`` and the tension Hessian ``sum_i f_i d^2 h_i/dq^2`` are analytic.
 
-Thesis equations and how we read them
--------------------------------------
-* Index / middle, (5.5): the eight lengths are used as printed and ``P`` is
-  *derived* from them.  (5.9) prints rows 1-4 with other signs (row 1 of
-  (5.9) is ``[r20, -r21]``, while d/dq of (5.5) row 1 is ``[r20, r21]``);
-  with ``h`` as the single truth the rows of (5.9) are a permutation/sign
-  flip of ours and the spanned torques are the same.
-* Ring / fifth, (5.16)-(5.18): the plant keeps PIP and DIP as two joints
-  (the coupling is a stiff element, :mod:`.plant`), so the routing acts on
-  both.  The six ring tendons are the four base tendons (rows 1-4 of (5.5))
-  and one PIP/DIP pair that rolls over the PIP pulley ``r42`` and the DIP
-  pulley ``r43``: ``h = +-(r42 q42 + r43 q43)``.  With the coupling (5.16)
-  ``q43 = (r43/r42) q42`` the reduced 3-DoF row is ``+-(r42 + r43^2/r42) q42``;
-  (5.18) prints ``+-(r42 + r43) q42``, which is the same only for
-  ``r42 = r43`` (1:1 coupling).  (5.18) also lists a second pair
-  ``+-r42 q42`` (h44, h45), which the stated count of six tendons
-  (``P4`` in R^{6x3}, Table 6.2) leaves no room for: we read it as the
-  PIP-only part of the same path and do not add motors for it.
-  Alternative reading (reported in docs/REPRODUCTIONS.md): Fig 5.11 labels
-  the two motors theta44/theta45, i.e. the pair ``+-r42 q42`` is motor-driven
-  (reduced moment arm 7 mm instead of our 10.6 mm, 12 mm as printed) and
-  h46/h47 are passive coupling tendons (our coupling element).
-  :func:`reduced_coupling_matrix` gives the 3-DoF matrix.
-* Fifth: no equations in the thesis.  Chosen: the ring routing plus an
-  antagonistic pair on the hematometacarpal (HMC) joint,
-  ``h = +-r_h q_5h`` (rows 1-2), then the four base rows, then the PIP/DIP
-  pair: 8 tendons, 4 DoF (section 5.5 gives the counts).
-* Thumb, (5.20)-(5.22): the four base tendons run straight from the palm
-  points A0..D0 (frame 10) to the bone points A..D (frame 12):
-  ``h_i = |T^12_10(q10, q11) p_i - p0_i|``; the PIP/DIP rows are (5.22) as
-  printed (again (5.21) prints other signs; ``h`` wins).  ``P`` and the
-  tension Hessian ``sum_i f_i d^2 h_i/dq^2`` are analytic.
-
-Stiffness (5.12) under our convention: ``K_q = -d tau/dq =
-P^T K_t P + sum_i f_i d^2 h_i / dq^2`` (the ``dP^T/dq f`` term; zero for
-constant ``P``), see :func:`joint_stiffness`.
+Stiffness (5.12) under our convention: ``K_q = -d tau/dq = P^T K_t P + sum_i f_i d^2 h_i / dq^2``
+(:func:`joint_stiffness`).
 """
 
 from __future__ import annotations
@@ -51,6 +26,7 @@ import abc
 from typing import Sequence
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from .._math import is_float
 from ..components.tendon import joint_stiffness as tendon_joint_stiffness
@@ -60,7 +36,7 @@ from .kinematics import finger_joint_names, rot_y, rot_z
 
 __all__ = ["FingerCoupling", "LinearFingerCoupling", "ThumbCoupling", "HandCoupling",
            "finger_coupling", "hand_coupling", "joint_stiffness", "reduced_coupling_matrix",
-           "coupling_selection", "dof_selection", "index_coupling_matrix"]
+           "dof_selection", "index_coupling_matrix"]
 
 
 def _quiet_fp(method):
@@ -78,12 +54,9 @@ def _quiet_fp(method):
 class FingerCoupling(abc.ABC):
     """Base of the coupling objects: ``h(q)``, ``P(q)``, ``tension_hessian(q, f)``.
 
-    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``,
-    ``joint_names``, ``finger`` (its name); ``is_constant`` when ``P`` does not depend on ``q``.
-    ``parts``, ``joint_slices``, ``tendon_slices`` map each finger the routing spans to its coupling,
-    joints and tendons (one finger: itself; :class:`HandCoupling`: the five).
-    All methods accept float arrays and numpy object arrays of AutoDiffXd or
-    symbolic Expression.
+    Attributes ``num_tendons`` (m), ``num_joints`` (n), ``tendon_names``, ``joint_names``, ``finger``;
+    ``is_constant`` when ``P`` does not depend on ``q``; ``parts``, ``joint_slices``, ``tendon_slices`` map each
+    finger the routing spans to its coupling, joints and tendons.  Methods are generic in the scalar type.
     """
 
     num_tendons: int
@@ -167,35 +140,26 @@ def index_coupling_matrix(r0: float, r1: float, r2: float, r3: float) -> np.ndar
         [0, 0, r2, 0], [0, 0, -r2, 0], [0, 0, r2, -r3], [0, 0, -r2, r3]], dtype=float)
 
 
-def coupling_selection(p: FingerParams) -> np.ndarray:
-    """``S`` with ``q_plant = S q_dof``: DIP = (r_x3/r_x2) PIP (5.16) for coupled fingers."""
-    n = 4 + int(p.has_hmc)
-    if not p.pip_dip_coupled:
-        return np.eye(n)
-    S = np.zeros((n, n - 1))
-    S[: n - 1, : n - 1] = np.eye(n - 1)
-    S[n - 1, n - 2] = p.dip_pip_ratio
-    return S
-
-
 def reduced_coupling_matrix(coupling: LinearFingerCoupling) -> np.ndarray:
     """Coupling matrix on the independent DoF, ``P S`` (ring: the 6 x 3 ``P4`` of section 5.3.3)."""
     return coupling.P() @ coupling.dof_selection
 
 
 def _linear_finger(finger: str, p: FingerParams) -> LinearFingerCoupling:
+    """The routing of a serial finger (module docstring) and its ``S`` (``q_plant = S q_dof``: for coupled fingers
+    DIP = (r_x3/r_x2) PIP, (5.16))."""
     r0, r1, r2, r3 = p.abduction_radius, p.mcp_radius, p.pip_radius, p.dip_radius
-    if not p.pip_dip_coupled:
-        P = index_coupling_matrix(r0, r1, r2, r3)
-    else:
-        base = index_coupling_matrix(r0, r1, r2, r3)[:4]
-        P = np.vstack([base, [[0, 0, r2, r3], [0, 0, -r2, -r3]]])
+    P = index_coupling_matrix(r0, r1, r2, r3)
+    S = np.eye(4 + int(p.has_hmc), 4 + int(p.has_hmc) - int(p.pip_dip_coupled))
+    if p.pip_dip_coupled:
+        P = np.vstack([P[:4], [[0, 0, r2, r3], [0, 0, -r2, -r3]]])
+        S[-1, -1] = p.dip_pip_ratio
     if p.has_hmc:
         rh = p.hmc_radius
         P = np.vstack([np.hstack([[[rh], [-rh]], np.zeros((2, 4))]), np.hstack([np.zeros((len(P), 1)), P])])
     names = [f"{finger}_h{k + 1}" for k in range(P.shape[0])]
     return LinearFingerCoupling(P, joint_names=finger_joint_names(finger), tendon_names=names,
-                                dof_selection=coupling_selection(p), finger=finger)
+                                dof_selection=S, finger=finger)
 
 
 _KZ = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 0]])  # dRz/dq = Rz Kz
@@ -343,12 +307,9 @@ class ThumbCoupling(FingerCoupling):
 class HandCoupling(FingerCoupling):
     """Block-diagonal routing of several fingers, optionally with length-offset inputs.
 
-    Joints: the fingers' plant joints in ``fingers`` order, then
-    ``num_offsets`` extra "joints" that add one-to-one to the tendon lengths
-    (``h += d``; P gets an identity block).  The hand uses them for the 38
-    wrist tendon-length offsets (Table 6.2 order = our global tendon order),
-    so that a wrist motion enters the drive like any joint motion.  Their
-    generalised force ``-f`` is the tendon force itself.
+    Joints: the fingers' plant joints, then ``num_offsets`` extra "joints" that add one-to-one to the
+    tendon lengths (``h += d``; an identity block of P): the hand's 38 wrist offsets, so that a wrist motion
+    enters the drive like any joint motion.
     """
 
     parts = joint_slices = tendon_slices = finger = None   # per instance (not the one-finger properties)
@@ -391,10 +352,9 @@ class HandCoupling(FingerCoupling):
         if q.dtype != object:   # fast path (simulation): one matmul + the nonlinear parts
             h = self._float_constant_part() @ q
             for n in self._nonlinear:
-                h[self.tendon_slices[n]] = self.parts[n].h(q[self.joint_slices[n]])
-            if self.num_offsets:
-                for n in self._nonlinear:
-                    h[self.tendon_slices[n]] += q[self.num_finger_joints:][self.tendon_slices[n]]
+                ts = self.tendon_slices[n]
+                off = q[self.num_finger_joints:][ts] if self.num_offsets else 0.0
+                h[ts] = self.parts[n].h(q[self.joint_slices[n]]) + off
             return h
         h = np.concatenate([c.h(q[self.joint_slices[n]]) for n, c in self.parts.items()])
         if self.num_offsets:
@@ -466,22 +426,15 @@ def hand_coupling(params: HandParams | None = None, *, wrist_offsets: bool = Fal
 def dof_selection(coupling) -> np.ndarray:
     """``S`` (plant joints x independent DoF) with ``q = S q_dof`` over all fingers of a finger or hand
     coupling (block-diagonal of the fingers' ``dof_selection``; ring/fifth: the DIP follows the PIP, (5.16))."""
-    blocks = [c.dof_selection for c in coupling.parts.values()]
-    S = np.zeros((sum(b.shape[0] for b in blocks), sum(b.shape[1] for b in blocks)))
-    i = j = 0
-    for blk in blocks:
-        S[i:i + blk.shape[0], j:j + blk.shape[1]] = blk
-        i, j = i + blk.shape[0], j + blk.shape[1]
-    return S
+    return block_diag(*(np.asarray(c.dof_selection, dtype=float) for c in coupling.parts.values()))
 
 
 def joint_stiffness(coupling: FingerCoupling, q, f, k_t) -> np.ndarray:
     """Joint stiffness (5.12) of ``coupling`` at ``q``: ``K_q = -d tau/dq = P^T diag(k_t) P + sum_i f_i d^2 h_i/dq^2``
     (the law: :func:`awiwi_drake.components.tendon.joint_stiffness`; the Hessian term: ``coupling.tension_hessian``).
 
-    ``f`` are the tendon forces [N] (tension positive), ``k_t`` the tendon
-    (spring) stiffnesses [N/m].  With ``tau = -P^T f`` and ``f = f(x)``,
-    ``x = r_m theta + h(q) - h(0) + x0``, the motors held fixed.
+    ``f``: the tendon forces [N] (tension positive), ``k_t``: the tendon (spring) stiffnesses [N/m]; the motors
+    held fixed.
     """
     f = np.asarray(f)
     k_t = np.asarray(k_t)

@@ -1,37 +1,18 @@
 """Finger and hand diagrams: links (a MultibodyPlant's dynamics) + motors, springs and routing in one system.
 
-``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig`
-(a :class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` /
-``analysis.simulate`` work on them.
+``finger_diagram(finger=...)`` and ``hand_diagram()`` return a :class:`HandRig` (a
+:class:`awiwi_drake.rigs.Rig`), so ``analysis.linearize`` / ``analysis.simulate`` work on them.  The
+plant is one system, ``hand_dynamics`` (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`: its ports and
+state order); ``rig.plant`` is its (standalone) MultibodyPlant.  The diagram exports its inputs
+``motor_torque``, ``external_torque`` and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad]; its
+outputs, and the slices ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` / ``motor_velocity`` /
+``motor_state``, ``wrist_tendon_offset`` (with the wrist) and ``joint_friction_torque`` (with the joints'
+stick-slip friction, ``params.joint_friction``).
 
-Diagram (names as in the exported graph)::
-
-    motor_torque, external_torque ──> hand_dynamics (links + tendon drive in one system,
-    wrist_angle ──> wrist_tendon_offsets ──> ...    :class:`~awiwi_drake.hand.dynamics.HandDynamics_`)
-
-``hand_dynamics`` evaluates the MultibodyPlant's dynamics (mass matrix, bias, damping) and the
-drive's laws in one compiled call (float) or through the plant and the laws (AutoDiffXd,
-Expression); ``rig.plant`` is that (standalone) MultibodyPlant.
-
-Exported inputs: ``motor_torque`` (m) [N m], ``external_torque`` (n) [N m],
-and with ``wrist=True`` ``wrist_angle`` (2) = [q71, q73] [rad].
-Exported outputs: ``state`` (the full continuous state, ``state_names``
-order), ``joint_angle`` / ``joint_velocity`` (n), ``motor_angle`` /
-``motor_velocity`` / ``motor_state``, ``tendon_force`` [N],
-``tendon_stiffness`` [N/m], ``elongation`` [m], ``joint_torque`` (n, tendon
-part ``-P^T f``), ``applied_torque`` (m), and ``wrist_tendon_offset`` with the wrist.
-
-State order: plant ``[q (n), v (n)]``, then the drive ``[theta (m), omega (m)]``,
-then with spring hysteresis (on by default) ``z (m)``, the hysteresis forces, then with
-guide friction (on by default) ``g (m)``, the guide friction forces of the tendon paths
-(both Dahl states; the guide friction adds ``-P^T g`` to the joint torque), then with the joints'
-stick-slip friction (``params.joint_friction``, off by default) ``tau_f (n)``, the friction torque on each
-joint (exported as ``joint_friction_torque``).
-
-The wrist enters the routing like extra joints: the drive's coupling is the
-finger coupling plus ``m`` length-offset "joints" (identity columns of
-``P``) fed by :class:`~awiwi_drake.hand.systems.WristTendonOffsets_`
-(Table 6.2 order = our global tendon order, ``parameters.hand.TENDON_SLICES``).
+The wrist enters the routing like extra joints: the drive's coupling is the finger coupling plus ``m``
+length-offset "joints" (identity columns of ``P``) fed by
+:class:`~awiwi_drake.hand.systems.WristTendonOffsets_` (Table 6.2 order = our global tendon order,
+``parameters.hand.TENDON_SLICES``).
 """
 
 from __future__ import annotations
@@ -93,11 +74,9 @@ class HandRig(Rig):
     def link_estimator(self, period: float | None = None, params=None):
         """The joint-state estimator from tendon lengths ((5.15), Algorithm 1): the hand has no joint sensors.
 
-        Returns a :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's
-        ``motor_angle``, ``elongation`` (and ``wrist_tendon_offset``) outputs; used by
-        :func:`awiwi_drake.control.closed_loop` unless ``sensors="ideal"``.  It samples every
-        ``period`` s but never faster than ``params.rate_hz`` (the sensors' 3 kHz).  ``params``:
-        :class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`.
+        A :class:`~awiwi_drake.hand.estimation.LinkStateEstimator` reading this rig's outputs (what
+        :func:`awiwi_drake.control.closed_loop` uses unless ``sensors="ideal"``), sampling every ``period`` s but
+        never faster than ``params.rate_hz`` (:class:`~awiwi_drake.parameters.hand_control.LinkEstimatorParams`).
         """
         from ..parameters.hand_control import LinkEstimatorParams
         from .estimation import link_state_estimator
@@ -117,24 +96,11 @@ class HandRig(Rig):
         return len(self.tendon_names)
 
 
-
-
 def tendon_spring_laws(p, tendon_names) -> TendonSprings:
-    """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name.
-
-    Equal parameter sets share one law object (one fit, one kernel branch).
-    """
-    names = list(tendon_names)
-    laws = [tendon_spring(p.spring)] * len(names)
-    seen = set()
-    for tendon, sp in p.tendon_springs:
-        if tendon not in names:
-            raise ValueError(f"tendon_springs: unknown tendon {tendon!r}; tendons are {', '.join(names)}")
-        if tendon in seen:
-            raise ValueError(f"tendon_springs: tendon {tendon!r} is given twice")
-        seen.add(tendon)
-        laws[names.index(tendon)] = tendon_spring(sp)
-    return TendonSprings(laws)
+    """One spring law per tendon: ``p.spring`` for all, ``p.tendon_springs`` overriding by tendon name (names
+    checked by the parameter set).  Equal parameter sets share one law object (one fit, one kernel branch)."""
+    own = dict(p.tendon_springs)
+    return TendonSprings([tendon_spring(own.get(t, p.spring)) for t in tendon_names])
 
 
 def tendon_hysteresis(p, tendon_names):
@@ -160,7 +126,7 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     laws = tendon_spring_laws(p, coupling.tendon_names)
     spring = laws[0]
     offsets = laws.inverse_force(np.full(m, p.pretension))
-    rows = _wrist_rows(parts)
+    rows = np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])      # Table 6.2 rows, routing order
     if rows.size != m:
         counts = ", ".join(f"{f}: {c.num_tendons}" for f, c in parts.items())
         raise ValueError(f"{name}: the fingers have {m} tendons ({counts}) but the global tendon order "
@@ -172,14 +138,14 @@ def _build(name, p, plant_factory, parts, wrist, visual):
     # the drive lives inside the one plant system: its handle points at the rig
     drive = TendonDrive(diagram, model)
     joint_names = [plant.get_joint(plant.GetJointIndices()[i]).name() for i in range(n)]
-    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=drive.hysteresis,
-                                  guide_friction=drive.guide_friction, joint_friction=p.joint_friction)
+    state_names = rig_state_names(joints=joint_names, motors=coupling.tendon_names, hysteresis=model.has_hysteresis,
+                                  guide_friction=model.has_guide_friction, joint_friction=p.joint_friction)
 
     def equilibrium(pretension: float | None = None, joint_angles=None, external_torque=None,
                     wrist_angle=None) -> OperatingPoint:
         return _equilibrium(name, p, plant, coupling, laws, offsets, G, rows if wrist else None, pretension,
                             joint_angles, external_torque, wrist_angle,
-                            drive.num_states - 2 * m + (n if p.joint_friction else 0))
+                            model.num_states - 2 * m + (n if p.joint_friction else 0))
 
     return HandRig(name, diagram, p, state_names, equilibrium, plant, spring, drive=drive, coupling=coupling,
                    tension_only=True, torque_limit=p.motor.torque_limit if p.motor.saturation else None,
@@ -207,10 +173,7 @@ def _add_plant(b, name, p, plant, coupling, drive_coupling, laws, offsets, G, ro
     from ..components.fused_drive import DriveModel, GuideFrictionModel
     from .dynamics import HandDynamics_, LinkModel
     n, m = coupling.num_joints, coupling.num_tendons
-    own = dict(p.tendon_guides)
-    for tendon in own:
-        if tendon not in coupling.tendon_names:
-            raise ValueError(f"tendon_guides: unknown tendon {tendon!r}; tendons are {', '.join(coupling.tendon_names)}")
+    own = dict(p.tendon_guides)         # tendon names checked by the parameter set
     angles = tendon_bending_angles(coupling, p) if p.guide_friction else np.zeros(m)   # 0 rad: no friction
     gf = GuideFrictionModel(tuple(angles), p.friction, p.capstan_friction, p.friction_smoothing_velocity,
                             p.guide_presliding_length,
@@ -254,23 +217,15 @@ def _joint_friction(p, plant) -> np.ndarray:
     stick-slip friction: ``p.joint_friction_params``, ``p.joint_frictions`` overriding joints by name."""
     names = [plant.get_joint(j).name() for j in plant.GetJointIndices() if plant.get_joint(j).num_positions()]
     starts = [plant.get_joint(j).position_start() for j in plant.GetJointIndices() if plant.get_joint(j).num_positions()]
-    own = {}
-    for joint, jp in p.joint_frictions:
+    own = dict(p.joint_frictions)
+    for joint in own:
         if joint not in names:
             raise ValueError(f"joint_frictions: unknown joint {joint!r}; joints are {', '.join(names)}")
-        if joint in own:
-            raise ValueError(f"joint_frictions: joint {joint!r} is given twice")
-        own[joint] = jp
     out = np.empty((plant.num_positions(), 4))
     for name, k in zip(names, starts):
         jp = own.get(name, p.joint_friction_params)
         out[k] = (jp.coulomb, jp.static, jp.stribeck_velocity, jp.presliding_angle)
     return out
-
-
-def _wrist_rows(parts) -> np.ndarray:
-    """Rows of Table 6.2 (0-based) served by the tendons of ``parts``, in routing order."""
-    return np.concatenate([np.arange(38)[TENDON_SLICES[f]] for f in parts])
 
 
 def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretension, joint_angles,
@@ -343,21 +298,12 @@ def _equilibrium(name, p, plant, coupling, laws, offsets, G, wrist_rows, pretens
 
 def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = None,
                    wrist: bool = False, visual: bool = False) -> HandRig:
-    """One finger with its motors, springs and routing (see module docstring).
+    """One finger (one of FINGERS) with its motors, springs and routing (see module docstring).
 
-    Parameters
-    ----------
-    finger : {"thumb", "index", "middle", "ring", "fifth"}
-    params : FingerRigParams, optional
-        Default ``FingerRigParams.for_finger(finger)``.
-    wrist : bool
-        Add the ``wrist_angle`` input: the wrist tendon-length offsets of this
-        finger's tendons enter the routing.
-    visual : bool
-        Register cylinder geometry with a SceneGraph (for Meshcat).
-
-    Operating point keys: ``pretension`` [N], ``joint_angles`` (plant joints or
-    independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
+    ``params`` default ``FingerRigParams.for_finger(finger)``; ``wrist`` adds the ``wrist_angle`` input
+    (the wrist's offsets of this finger's tendons enter the routing); ``visual`` registers cylinder
+    geometry with a SceneGraph (for Meshcat).  Operating point keys: ``pretension`` [N], ``joint_angles``
+    (plant joints or independent DoF) [rad], ``external_torque`` [N m], ``wrist_angle`` [rad].
     """
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
@@ -376,15 +322,9 @@ def finger_diagram(*, finger: str = "index", params: FingerRigParams | None = No
 
 
 def hand_diagram(*, params: HandRigParams | None = None, wrist: bool = True, visual: bool = False) -> HandRig:
-    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input.
-
-    The links and the drive are one compiled system, with the thesis's physics on (see
-    :class:`~awiwi_drake.parameters.hand.FingerDriveParams`).
-
-    Tendon order: thumb 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
-    (Table 6.2 numbering, chosen: see ``parameters.hand``).  Same ports and
-    operating-point keys as :func:`finger_diagram`.
-    """
+    """The hand: 5 fingers (21 plant joints, 19 DoF), 38 motors and springs, wrist input, with the thesis's
+    physics (:class:`~awiwi_drake.parameters.hand.FingerDriveParams`); tendons in the global order of
+    ``parameters.hand``.  Same ports and operating-point keys as :func:`finger_diagram`."""
     p = params if params is not None else HandRigParams()
     if not isinstance(p, HandRigParams):
         raise ValueError(f"hand_diagram: params must be HandRigParams, got {type(p).__name__}")

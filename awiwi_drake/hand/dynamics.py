@@ -18,36 +18,22 @@
 For ``AutoDiffXd`` and ``Expression`` (``Linearize``, LQR) the system evaluates the plant's own
 ``CalcMassMatrix`` / ``CalcBiasTerm`` / ``CalcGravityGeneralizedForces`` on a scalar-converted
 copy of the plant and :func:`drive_laws`, and solves ``M qdd = rhs`` with :func:`ldl_solve` per
-block of ``M`` (the fingers are independent: ``M`` is block diagonal).  For ``float`` the same
-function, :func:`hand_dynamics_terms`, is evaluated once on ``pydrake.symbolic`` variables (the
-plant converted to ``Expression``) and compiled (:mod:`awiwi_drake.components.codegen`); the
-compiled ``dynamics`` kernel calls the generated terms and the same :func:`ldl_solve` (its
-source, compiled by numba).  A float system takes the generic path for its first
-:data:`~awiwi_drake.parameters.hand.COMPILE_AFTER_CALLS` evaluations (an operating point or a linearisation
-never pays the trace and the compile; a simulation switches to the kernels), or from the first call once
-:meth:`HandDynamics_.kernels` has been called.  Tests: the float system equals the MultibodyPlant + drive diagram
-(``MultibodyPlant.CalcTimeDerivatives``, articulated-body algorithm) and its own AutoDiffXd
-conversion at random states to 1e-12.
-
-Why one system: the MultibodyPlant's forward dynamics of the 21-DoF hand costs ~24 us per
-evaluation, the separate drive two Python callbacks, and the plumbing between them (state
-split, Mux, Adder, MatrixGain) Drake's cache invalidation; the compiled terms of the whole hand
-cost a few us (see README "How the plants are built, and speed").
+block of ``M`` (the fingers are independent).  For ``float`` the same function,
+:func:`hand_dynamics_terms`, is traced once on ``pydrake.symbolic`` variables and compiled
+(:mod:`awiwi_drake.components.codegen`) with the same :func:`ldl_solve`; a float system takes the
+generic path for its first :data:`~awiwi_drake.parameters.hand.COMPILE_AFTER_CALLS` evaluations (an
+operating point or a linearisation never pays the compile), or from the first call once
+:meth:`HandDynamics_.kernels` has been called.  One system rather than a MultibodyPlant + drive diagram
+for speed (README, "How the plants are built, and speed"); tests check it equals that diagram and its
+own AutoDiffXd conversion at random states to 1e-12.  The generated source is cached on disk
+(:func:`~awiwi_drake.components.codegen.kernel_cache_dir`), keyed by the drive model's content, samples
+of the plant's dynamics and the package's code.
 
 State: ``[q (n), v (n), theta (m), omega (m), z (m, hysteresis), g (m, guide friction), tau_f (n, joint friction)]``
-(the order of the MultibodyPlant + drive diagram: ``rigs.base.state_names``).
-Ports (each computes only its own quantity; prerequisites declared): inputs ``motor_torque``
-(m) [N m], ``external_torque`` (n) [N m] and, with the wrist, ``wrist_tendon_offset`` (m) [m];
-outputs ``state`` (copied in C++: the finger/hand diagram slices ``joint_angle``, ``motor_angle``, ...
-from it with Drake's ``Demultiplexer``), ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
-``elongation`` [m], ``joint_torque`` (n, the tendon part ``-P^T (f + g)``) [N m], ``applied_torque``
-(m) [N m].
-
-The symbolic trace of the whole hand takes ~7 s (the fifth finger's oblique HMC axis makes
-long expressions); the generated source is cached on disk beside the compiled kernels
-(:func:`~awiwi_drake.components.codegen.kernel_cache_dir`), keyed by the drive model's content,
-samples of the plant's dynamics and the package's source, so a changed law or plant is traced
-again.
+(:func:`~awiwi_drake.rigs.base.state_names`).  Inputs ``motor_torque`` (m) [N m], ``external_torque`` (n)
+[N m] and, with the wrist, ``wrist_tendon_offset`` (m) [m]; outputs ``state``, ``tendon_force`` [N],
+``tendon_stiffness`` [N/m], ``elongation`` [m], ``joint_torque`` (n, the tendon part ``-P^T (f + g)``)
+[N m], ``applied_torque`` (m) [N m].
 """
 
 from __future__ import annotations
@@ -67,6 +53,7 @@ from pydrake.systems.framework import InputPortSelection, LeafSystem_, OutputPor
 from pydrake.systems.primitives import Linearize
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from awiwi_drake._math import symbolic_vector
 from awiwi_drake.components.codegen import code_text
 from awiwi_drake.components.fused_drive import DriveModel, drive_laws
 from awiwi_drake.components.motor import saturate_torque
@@ -156,7 +143,6 @@ class LinkModel:
         ctx = plant.CreateDefaultContext()
         plant.SetPositions(ctx, np.random.default_rng(7).uniform(-1.0, 1.0, n))
         M = plant.CalcMassMatrix(ctx)
-        from scipy.sparse.csgraph import connected_components
         count, label = connected_components(np.abs(M) > 0.0, directed=False)
         blocks = tuple(tuple(int(i) for i in np.flatnonzero(label == c)) for c in range(count))
         object.__setattr__(self, "blocks", blocks)
@@ -254,11 +240,6 @@ def _package_digest() -> str:
     return _SOURCE_DIGEST[0]
 
 
-def _vars(prefix, size):
-    v = [sym.Variable(f"{prefix}{i}") for i in range(size)]
-    return v, np.array([sym.Expression(a) for a in v], dtype=object)
-
-
 def _glue_source(n: int, kd: int, blocks) -> str:
     """numba source of ``dynamics(x, u, tau_ext, off, out)``: the generated terms, then ``ldl_solve`` per block."""
     lines = ["@numba.njit(cache=True, error_model='numpy')"] + inspect.getsource(ldl_solve).splitlines()
@@ -322,10 +303,10 @@ def _trace_source(model: DriveModel, links: LinkModel) -> str:
     from awiwi_drake.components.codegen import emit_source
     n, m = links.num_joints, model.num_tendons
     no = model.num_joints - n
-    xs, x = _vars("x", 2 * n + model.num_states + links.num_friction_states)
-    us, u = _vars("u", m)
-    es, e = _vars("e", n)
-    os_, off = _vars("o", no)
+    xs, x = symbolic_vector("x", 2 * n + model.num_states + links.num_friction_states)
+    us, u = symbolic_vector("u", m)
+    es, e = symbolic_vector("e", n)
+    os_, off = symbolic_vector("o", no)
     plant = links.plant.ToSymbolic()
     context = plant.CreateDefaultContext()
     M, rhs, dd = hand_dynamics_terms(model, links, plant, context, x, u, e, off)
@@ -445,13 +426,9 @@ def HandDynamics_(T):
             their values there: the modes a fixed-step integrator meets between two samples of a loop
             (:func:`~awiwi_drake.analysis.simulate` calls this hook on any leaf that has it; the state need not be an
             equilibrium).  The Jacobian is central differences of the compiled float dynamics (steps
-            ``1e-6 max(1, |x_j|)``; equal to Drake's ``Linearize`` of the whole finger to 1e-6,
-            tests/test_simulate_stability.py), one state of every finger perturbed at once (:meth:`_finger_states`):
-            measured 2.4 ms on the hand (194 states; 4.6 ms one state at a time) against 50 ms for the AutoDiffXd
-            evaluation inside ``Linearize``, which it uses when the drive has no compiled kernels (a spring law
-            without a symbolic form).  The eigenvalues are those of the Jacobian's strongly connected blocks
-            (block-triangular after a permutation; the hand's fingers apart: 1.5 ms against 13 ms for the whole
-            194 x 194, and seconds when OpenBLAS threads compete on a loaded machine)."""
+            ``1e-6 max(1, |x_j|)``, one state of every finger at once, :meth:`_finger_states`; equal to Drake's
+            ``Linearize`` to 1e-6, tests/test_simulate_stability.py), or Drake's ``Linearize`` when the drive has no
+            compiled kernels.  The eigenvalues are those of the Jacobian's strongly connected blocks."""
             if not self._float:
                 raise ValueError("HandDynamics.integration_modes: float systems only")
             x0 = context.get_continuous_state_vector().CopyToVector()
@@ -483,10 +460,8 @@ def HandDynamics_(T):
             return np.concatenate([np.linalg.eigvals(A[np.ix_(label == k, label == k)]) for k in range(n)])
 
         def _finger_states(self) -> list:
-            """The state indices of each finger (its joints' q, v and friction torque, its tendons' drive states): the
-            fingers' dynamics are independent (block-diagonal mass matrix, each tendon routed over one finger; the
-            wrist enters as an input), so one evaluation perturbs one state of every finger.  One group for a finger
-            (or a coupling without per-finger slices)."""
+            """The state indices of each finger (its joints' and its tendons' states): the fingers' dynamics are
+            independent, so one evaluation perturbs one state of every finger.  One group for a finger."""
             coupling, n, m = self.model.coupling, self._n, self._m
             slices = getattr(coupling, "joint_slices", None)
             if not slices:

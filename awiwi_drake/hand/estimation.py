@@ -1,36 +1,19 @@
 """Link-position estimation from tendon lengths (thesis (5.14)-(5.15), (5.24), Algorithm 1).
 
-The fingers have no joint sensors; the tendon length change at the finger
-base ``dh = h(q) - h(0)`` is measured (motor angle and spring sensor).
+The fingers have no joint sensors; the tendon length change at the finger base ``dh = h(q) - h(0)`` is
+measured (motor angle and spring sensor).
 
-* Constant coupling: least squares (5.14) is solved by the pseudo-inverse
-  (5.15), ``q = (P S)^+ dh`` on the independent DoF (``S`` maps them to the
-  plant joints; identity except for the ring/fifth PIP/DIP coupling).
-* Thumb base: ``P(q)`` depends on ``q``; Algorithm 1 is a fixed-step
-  gradient search with step halving on the cost ``C(q) = |dh_meas - dh(q)|^2``
-  over the base angles (q10, q11).  The step moves along the *normalised*
-  gradient (a fixed step in radians), is accepted when the cost decreases
-  and halved otherwise.  The PIP/DIP of the thumb use the pseudo-inverse.
+* Constant coupling: least squares (5.14) by the pseudo-inverse (5.15), ``q = (P S)^+ dh`` on the
+  independent DoF (``S`` maps them to the plant joints; identity except for the ring/fifth PIP/DIP).
+* Thumb base: ``P(q)`` depends on ``q``; Algorithm 1 is a fixed-step gradient search with step halving
+  on ``C(q) = |dh_meas - dh(q)|^2`` over (q10, q11) and the four base tendons: a step along the
+  *normalised* gradient (in radians) is accepted when the cost decreases and halved otherwise.  Trial
+  points are projected onto ``[-limit, limit]^2``, and the result reports when that acted
+  (``GradientSearchResult.projected``, ``at_limit``).  The thumb's PIP/DIP use the pseudo-inverse.
 
-Deviations from the printed method (docs/REPRODUCTIONS.md, hand section):
-(5.15) prints ``P+ = P (P P^T)^-1`` with ``P in R^{n x m}``, which is not
-dimensionally consistent; for our tall ``P`` (m x n, full column rank) the
-pseudo-inverse is ``(P^T P)^-1 P^T`` (``numpy.linalg.pinv``).  (5.24) sums
-``i = 1..7`` while the thumb has eight tendons ``h10..h17``; the base search
-uses the four base tendons ``h10..h13`` (the only ones that depend on
-(q10, q11)).  Algorithm 1 parametrises the search over ``ker P``
-(``B <= ker P``, variable ``alpha``) and steps by the raw gradient
-``alpha - grad * step``; we search directly on (q10, q11) (the base block is
-4 x 2 with full column rank, so its kernel is trivial) and step along the
-normalised gradient (a step in radians, independent of the tendon-length
-scale).  Trial points are projected onto ``[-limit, limit]^2``; the result
-reports when that projection acted (``GradientSearchResult.projected``,
-``at_limit``), nothing is clipped silently.
-
-Error bound (used by the tests and docs/REPRODUCTIONS.md): at a converged
-least-squares solution a measurement error ``e`` moves the estimate by
-``dq ~ P^+ e`` to first order, so ``|dq| <= |e| / sigma_min(P)``; with
-``|e_i| <= a`` on each of the four base tendons, ``|e| <= 2 a``.
+Where this departs from the printed (5.15), (5.24) and Algorithm 1 (its search over ``ker P``, the raw
+gradient step) and why: docs/REPRODUCTIONS.md, fingers.  Error bound: a measurement error ``e`` moves a
+converged estimate by ``dq ~ P^+ e``, so ``|dq| <= |e| / sigma_min(P)`` (:func:`noise_error_bound`).
 The Fig 5.16-5.17 study is :func:`awiwi_drake.reproductions.ch05_fingers.thumb_estimation_study`.
 """
 
@@ -66,13 +49,9 @@ def estimate_linear(coupling: LinearFingerCoupling, dh) -> np.ndarray:
 
 @dataclass
 class GradientSearchResult:
-    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps.
-
-    ``projected`` counts the trial points that the projection onto
-    ``[-limit, limit]^2`` moved; ``at_limit`` is True when the returned
-    estimate lies on that bound (the true pose may lie beyond it: the
-    estimate is then the projection, not the least-squares solution).
-    """
+    """Outcome of Algorithm 1: estimate, final cost and step, accepted steps; ``projected`` counts the trial points
+    the projection onto ``[-limit, limit]^2`` moved, ``at_limit`` says the estimate lies on that bound (the pose
+    may lie beyond it)."""
 
     q: np.ndarray
     cost: float
@@ -156,12 +135,8 @@ def _thumb_step(base, dt, qa, qb, iterations, step0, min_step, limit, x, buf, di
 def _thumb_kernels(base):
     """:func:`_search` and :func:`_thumb_step` compiled with the thumb's compiled base kinematics ``base``
     (:meth:`ThumbCoupling._base_kernel`) as a global of one generated module (their ``base`` parameter dropped):
-    ``{"search": fn, "step": fn}``, taking plain numbers and arrays.  A global callee is a static call, so numba
-    caches both on disk with the module (:func:`~awiwi_drake.components.codegen.compile_source`, keyed by the
-    source, which names ``base``'s own cached module): a new process loads the machine code instead of compiling
-    it (measured: ~1.4-3.4 s per process before, paid by every notebook kernel and test worker).  Passed as an
-    argument instead, ``base`` is a first-class function: typed anew at every call from Python (~5 us) and not
-    cacheable (a dynamic global)."""
+    ``{"search": fn, "step": fn}``.  A global callee is a static call, so numba caches both on disk; passed as an
+    argument, ``base`` would be a first-class function, typed anew at every call and not cacheable."""
     import inspect
 
     from ..components.codegen import compile_source
@@ -181,29 +156,13 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
                                limit: float = np.pi / 2) -> GradientSearchResult:
     """Algorithm 1: fixed-step gradient search with step halving on (q10, q11).
 
-    Parameters
-    ----------
-    coupling : ThumbCoupling
-    dh_base : array (4,)
-        Measured base tendon length changes ``h_i(q) - h_i(0)`` [m], i = 0..3.
-    q_start : (q10, q11)
-        Start (``(0, 0)``: cold start as in Fig 5.16-5.17; the previous
-        estimate: warm start, as the real-time code does).
-    iterations : int
-        Number of iterations (15, 30, 50 in Fig 5.17).
-    step0 : float
-        Initial step [rad] along the normalised gradient (chosen: 0.1 rad, so
-        that 15 iterations cannot reach the grid corners from the origin, as
-        the thesis observes).
-    min_step : float
-        The search stops halving below this step [rad].
-    limit : float
-        Trial points are projected onto ``[-limit, limit]^2`` (the
-        "projected gradient" of section 5.6).  Default pi/2: beyond it the
-        metacarpal would cross the plane of the palm points A0..D0, where each
-        configuration has a mirror image with the same four tendon lengths
-        (the palm points are coplanar), so the projection keeps the search on
-        the physical branch.
+    ``dh_base`` (4): the measured base tendon length changes ``h_i(q) - h_i(0)`` [m]; ``q_start``: ``(0, 0)``
+    is the cold start of Fig 5.16-5.17, the previous estimate the real-time warm start; ``iterations``: 15,
+    30, 50 in Fig 5.17; ``step0`` [rad] along the normalised gradient (chosen: 0.1 rad, so that 15
+    iterations cannot reach the grid corners from the origin, as the thesis observes), halved down to
+    ``min_step``.  Trial points are projected onto ``[-limit, limit]^2`` (the "projected gradient" of
+    section 5.6); default pi/2: beyond it the metacarpal crosses the plane of the (coplanar) palm points
+    A0..D0, where each pose has a mirror image with the same four tendon lengths.
     """
     dh_base = np.asarray(dh_base, dtype=float)
     if dh_base.shape != (4,):
@@ -221,26 +180,19 @@ def thumb_base_gradient_search(coupling: ThumbCoupling, dh_base, q_start=(0.0, 0
                                 at_limit=bool(np.any(np.abs(q[:2]) >= limit)), limit=float(limit))
 
 
-def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), *, return_search: bool = False, **kw):
-    """All four thumb joints: Algorithm 1 for the base, pseudo-inverse for PIP/DIP.
-
-    With ``return_search`` returns ``(q, GradientSearchResult)`` (e.g. to see
-    whether the base estimate sits on the projection bound).
-    """
+def estimate_thumb(coupling: ThumbCoupling, dh, q_start=(0.0, 0.0), **kw):
+    """All four thumb joints: Algorithm 1 for the base (``kw``: :func:`thumb_base_gradient_search`'s),
+    pseudo-inverse for PIP/DIP."""
     dh = np.asarray(dh, dtype=float)
     if dh.shape != (8,):
         raise ValueError(f"dh must have shape (8,), got {dh.shape}")
     search = thumb_base_gradient_search(coupling, dh[:4], q_start, **kw)
-    distal = coupling.distal_pseudo_inverse() @ dh[4:]
-    q = np.concatenate([search.q, distal])
-    return (q, search) if return_search else q
+    return np.concatenate([search.q, coupling.distal_pseudo_inverse() @ dh[4:]])
 
 
 def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> float:
-    """First-order bound on the base estimate error [rad] for per-tendon noise ``|e_i| <= amplitude``.
-
-    ``|dq| <= |P^+| |e| <= 2 amplitude / sigma_min(P_base(q))``.
-    """
+    """First-order bound on the base estimate error [rad] for per-tendon noise ``|e_i| <= amplitude``:
+    ``|dq| <= |P^+| |e| <= 2 amplitude / sigma_min(P_base(q))``."""
     P = coupling.P(np.array([q_base[0], q_base[1], 0.0, 0.0]))[:4, :2]
     return 2.0 * amplitude / np.linalg.svd(P, compute_uv=False)[-1]
 
@@ -252,37 +204,18 @@ def noise_error_bound(coupling: ThumbCoupling, q_base, amplitude: float) -> floa
 def LinkPositionEstimator_(T):
     """Joint angles from the measured tendon length changes (no joint sensors, section 5.2.3).
 
-    Inputs ``motor_angle`` (m) [rad] and ``elongation`` (m) [m] (the spring
-    sensors); the length change at the finger base is
-    ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (+ wrist offsets, which
-    ``wrist_offset`` (m) removes when connected; leave it unconnected or 0
-    otherwise).  Output ``joint_angle_estimate`` (n plant joints) is the estimate
-    from the *current* measurements: constant-P fingers by the pseudo-inverse
-    (5.15), the thumb base by Algorithm 1 warm-started from the stored estimate
-    (the thesis's real-time use), then its PIP/DIP by the pseudo-inverse.  Every
-    ``period`` the discrete state stores it (the next warm start).  The estimate
-    comes from the same sensor sample as the forces a controller reads with it
-    (a sampled controller evaluates both at its sample): a state output would
-    be one period older than those forces (simultaneous discrete updates read
-    the pre-update state), and that lag, differentiated into the joint velocity,
-    destabilised the DIP's link mode on its tendons (~600 Hz on the index) in
-    every chain design at 3 kHz (``control/joint_design.py``,
-    :func:`~awiwi_drake.control.joint_design.sampled_loop_poles`).  A computation
-    delay is the loop's (``closed_loop(delay=...)``), for every measurement alike.
+    Inputs ``motor_angle`` (m) [rad] and ``elongation`` (m) [m] (the spring sensors) give the length change
+    at the finger base ``dh = elongation - r_m theta - x0 = h(q) - h(0)`` (the optional input ``wrist_offset``
+    (m) removes the wrist's).  Output ``joint_angle_estimate`` (n plant joints): the estimate from the
+    *current* measurements (module docstring), the thumb base warm-started from the stored estimate, which
+    the discrete state updates every ``period``.  Not a state output: one period older than the forces a
+    controller reads with it, that lag destabilised the DIP's link mode in every chain design at 3 kHz
+    (:func:`~awiwi_drake.control.joint_design.sampled_loop_poles`); a computation delay is the loop's.
 
-    Scalar types: float and AutoDiffXd only.  For AutoDiffXd the search runs
-    on values and one Gauss-Newton step ``q + P(q)^+ (dh - dh(q))`` in the
-    scalar type carries the derivatives (at convergence ``dq/d dh = P^+``,
-    implicit-function theorem).  Not symbolic: Algorithm 1 branches on cost
-    values (accept / halve), which a symbolic Expression cannot evaluate, so
-    ``ToSymbolic()`` of a diagram holding this estimator fails (Drake names
-    the system).
-
-    Projection bound: when the thumb base estimate sits on (or, after the
-    Gauss-Newton refinement, beyond) the search's ``+-pi/2`` bound (the pose may
-    lie beyond it) the update still stores it, counts it in ``limit_hits`` (a
-    diagnostic attribute of the system, summed over all contexts) and warns once
-    per system (RuntimeWarning).
+    Scalar types: float and AutoDiffXd (the search runs on values, then one Gauss-Newton step
+    ``q + P(q)^+ (dh - dh(q))`` in the scalar type carries the derivatives, ``dq/d dh = P^+`` at
+    convergence).  Not symbolic: Algorithm 1 branches on cost values.  A thumb base estimate on (or
+    beyond) the search's ``+-pi/2`` bound is stored, counted in ``limit_hits`` and warned about once.
     """
 
     class Impl(LeafSystem_[T]):
@@ -391,15 +324,11 @@ LinkPositionEstimator = LinkPositionEstimator_[None]
 class LinkStateEstimator:
     """The hand's joint-state "sensor": :class:`LinkPositionEstimator_` + a discrete derivative.
 
-    ``system`` is a Diagram with inputs named after the rig outputs it reads
-    (``motor_angle``, ``elongation`` and, with the wrist, ``wrist_tendon_offset``)
-    and outputs ``joint_angle`` (n) [rad] (the estimate of (5.15) / Algorithm 1
-    from the current sample) and ``joint_velocity`` (n) [rad/s], the "dirty
-    derivative" ``s / (T s + 1)`` of that estimate (the hand has no joint encoders
-    or tachometers), discretised at the period ``h``: ``z+ = z + h/T (q - z)``,
-    ``v = (q - z) / T`` (``T = h``: the backward difference over the last period).
-    Their discrete states (the stored estimate, ``z``) are updated every
-    ``period``.  :meth:`initialize` starts both at a known pose (after homing).
+    ``system`` is a Diagram with inputs named after the rig outputs it reads (``motor_angle``,
+    ``elongation`` and, with the wrist, ``wrist_tendon_offset``) and outputs ``joint_angle`` (n) [rad] and
+    ``joint_velocity`` (n) [rad/s], the "dirty derivative" ``s / (T s + 1)`` of the estimate discretised at
+    the period ``h``: ``z+ = z + h/T (q - z)``, ``v = (q - z) / T`` (``T = h``: the backward difference).
+    :meth:`initialize` starts both discrete states at a known pose (after homing).
     """
 
     system: Diagram

@@ -80,44 +80,24 @@ def finger_joint_names(finger: str, params=None) -> list[str]:
     return names
 
 
-def finger_fixed_transforms(p: FingerParams) -> dict[str, np.ndarray]:
-    """The constant bone transforms of Table 5.1 (plus the chosen HMC offset).
-
-    Keys: ``hmc`` (HMC frame to abduction frame, fifth only), ``abd_to_mcp``
-    (M21 M32), ``mcp_to_pip`` (M54), ``pip_to_dip`` (M76), ``dip_to_tip`` (M98).
-    """
-    return {
-        "hmc": translation(p.hmc_offset),
-        "abd_to_mcp": M21 @ translation(p.base_offset),
-        "mcp_to_pip": translation(p.proximal_length),
-        "pip_to_dip": translation(p.middle_length, 0.0, p.middle_lateral),
-        "dip_to_tip": translation(p.distal_length, 0.0, p.distal_lateral),
-    }
-
-
 def finger_frames(p: FingerParams, q) -> list[np.ndarray]:
     """Frames of a finger in its base frame, (5.2): ``[T_abd, T_mcp, T_pip, T_dip, T_tip]``.
 
-    ``q`` holds the plant joints (``finger_joint_names``); for the fifth
-    finger the HMC angle comes first and the HMC is a rotation about
-    ``p.hmc_axis``, perpendicular to the metacarpal (base x) and oblique
-    between the flexion axis and the palm normal (the four-bar linkage of
-    section 5.5 replaced by one revolute joint: a chosen simplification that
-    keeps its "locking motion towards the palm center").  Each frame is the joint frame
-    *after* its rotation, so its z axis is the joint axis.
+    ``q`` holds the plant joints (``finger_joint_names``); for the fifth finger the HMC angle comes first, a
+    rotation about ``p.hmc_axis`` (the four-bar of section 5.5 replaced by one revolute joint, chosen).  Each
+    frame is the joint frame *after* its rotation, so its z axis is the joint axis.
     """
     q = list(q)
-    fixed = finger_fixed_transforms(p)
     T = np.eye(4)
-    if p.has_hmc:
-        T = rot_axis(p.hmc_axis, q.pop(0)) @ fixed["hmc"]
+    if p.has_hmc:                                             # the chosen HMC offset, fifth only
+        T = rot_axis(p.hmc_axis, q.pop(0)) @ translation(p.hmc_offset)
     if len(q) != 4:
         raise ValueError(f"q: expected {4 + int(p.has_hmc)} joint angles, got {len(q) + int(p.has_hmc)}")
-    T_abd = T @ rot_z(q[0])                                   # M10
-    T_mcp = T_abd @ fixed["abd_to_mcp"] @ rot_z(q[1])         # M21 M32 M43
-    T_pip = T_mcp @ fixed["mcp_to_pip"] @ rot_z(q[2])         # M54 M65
-    T_dip = T_pip @ fixed["pip_to_dip"] @ rot_z(q[3])         # M76 M87
-    T_tip = T_dip @ fixed["dip_to_tip"]                       # M98
+    T_abd = T @ rot_z(q[0])                                                              # M10
+    T_mcp = T_abd @ M21 @ translation(p.base_offset) @ rot_z(q[1])                      # M21 M32 M43
+    T_pip = T_mcp @ translation(p.proximal_length) @ rot_z(q[2])                        # M54 M65
+    T_dip = T_pip @ translation(p.middle_length, 0.0, p.middle_lateral) @ rot_z(q[3])   # M76 M87
+    T_tip = T_dip @ translation(p.distal_length, 0.0, p.distal_lateral)                 # M98
     return [T_abd, T_mcp, T_pip, T_dip, T_tip]
 
 

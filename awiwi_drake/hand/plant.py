@@ -1,17 +1,11 @@
 """Continuous MultibodyPlant models of the fingers and the hand (thesis 5.2.2, 5.3.2, 5.4.2).
 
-Plants are continuous (``time_step=0``) so that a diagram containing them can
-be linearised; tendon forces enter as generalised forces ``tau = -P(q)^T f``
-through the plant's ``applied_generalized_force`` input (no actuators).
-
-The PIP/DIP coupling of the ring and fifth fingers (5.16)-(5.17) is *not* a
-constraint (coupler constraints need a discrete plant): the DIP is a joint of
-its own, held to ``q_DIP = c q_PIP`` (``c = r_x3/r_x2``) by a stiff coupling
-element with energy ``k_c (q_DIP - c q_PIP)^2 / 2`` and damping ``d_c``,
-applied as a linear generalised force ``-G [q; v]`` with a Drake ``MatrixGain``
-(C++, linearisable) beside the tendon forces; see :func:`coupling_force_gain`.
-
-Geometry for drawing is optional: a cylinder per link (no collision).
+Plants are continuous (``time_step=0``) so that a diagram containing them can be linearised; tendon
+forces enter as generalised forces ``tau = -P(q)^T f`` (no actuators).  The PIP/DIP coupling of the
+ring and fifth fingers (5.16)-(5.17) is *not* a constraint (coupler constraints need a discrete plant):
+the DIP is a joint of its own, held to ``q_DIP = c q_PIP`` (``c = r_x3/r_x2``) by a stiff spring/damper,
+the linear generalised force ``-G [q; v]`` of :func:`coupling_force_gain`.  Geometry for drawing is
+optional: a cylinder per link (no collision).
 """
 
 from __future__ import annotations
@@ -19,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.geometry import Cylinder, SceneGraph, Sphere
+from pydrake.geometry import Box, Cylinder, SceneGraph, Sphere
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.primitives import Adder, MatrixGain
@@ -83,27 +77,21 @@ def _add_revolute(plant, name, parent_frame, X_PJ, child, axis, damping):
     return plant.AddJoint(RevoluteJoint(name, F, child.body_frame(), np.asarray(axis, float), damping))
 
 
-def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, parent_frame=None,
-               visual: bool = True, prefix: str = "") -> FingerModel:
-    """Add one finger (bodies + revolute joints, Table 5.1 / (5.19)) to ``plant``.
-
-    ``X_PF`` places the finger base frame in ``parent_frame`` (default: world).
-    Joints are named as in the thesis (``q20``..``q23``, ``q5h``, ``q10``..``q13``)
-    with ``prefix`` prepended.
-    """
+def add_finger(plant: MultibodyPlant, finger: str, params=None, *, X_PF=None, visual: bool = True) -> FingerModel:
+    """Add one finger (bodies + revolute joints, Table 5.1 / (5.19)) to ``plant``, its base frame at ``X_PF`` in
+    the world; joints named as in the thesis (``q20``..``q23``, ``q5h``, ``q10``..``q13``)."""
     if finger not in FINGERS:
         raise ValueError(f"finger must be one of {FINGERS}, got {finger!r}")
     p = params if params is not None else finger_params(finger)
-    parent_frame = parent_frame if parent_frame is not None else plant.world_frame()
+    parent_frame = plant.world_frame()
     X_PF = np.eye(4) if X_PF is None else (X_PF.GetAsMatrix4() if isinstance(X_PF, RigidTransform) else X_PF)
-    instance = plant.AddModelInstance(prefix + finger)
-    names = finger_joint_names(finger)
-    model = FingerModel(finger, p, [prefix + n for n in names])
+    instance = plant.AddModelInstance(finger)
+    model = FingerModel(finger, p, finger_joint_names(finger))
     color = _COLORS[finger]
     R = p.link_radius
 
     def link(name, mass, length):
-        b = _add_link(plant, prefix + f"{finger}_{name}", mass, length, R, color, visual, instance)
+        b = _add_link(plant, f"{finger}_{name}", mass, length, R, color, visual, instance)
         model.bodies.append(b)
         return b
 
@@ -164,13 +152,9 @@ def _new_plant(name: str, builder, visual: bool, scene_graph: SceneGraph | None)
 
 def make_finger_plant(finger: str, params=None, *, scene_graph: SceneGraph | None = None,
                       builder=None, visual: bool = False, gravity: bool = False):
-    """A finalised continuous plant holding one finger (base frame = world).
-
-    With ``builder`` the plant is added to it, otherwise a standalone plant is returned; its visual
-    geometry is registered with ``scene_graph`` when one is given.  Gravity is off by default:
-    section 5.2.2 finds ~0.002 N m, negligible against the tendon torques.
-    Returns ``(plant, FingerModel)``.
-    """
+    """``(plant, FingerModel)``: a finalised continuous plant holding one finger (base frame = world), added to
+    ``builder`` or standalone, its visual geometry registered with ``scene_graph`` when one is given.  Gravity
+    is off by default (section 5.2.2: ~0.002 N m, negligible)."""
     plant = _new_plant(f"{finger}_plant", builder, visual, scene_graph)
     model = add_finger(plant, finger, params, visual=visual)
     if not gravity:
@@ -200,11 +184,9 @@ def make_hand_plant(params: HandParams | None = None, *, visual: bool = False, g
                     scene_graph: SceneGraph | None = None):
     """A finalised continuous plant with all five fingers on a fixed palm.
 
-    Joint (position) order: thumb q10..q13, index q20..q23, middle q30..q33,
-    ring q40..q43, fifth q5h, q50..q53 (21 joints, 19 DoF with the two
-    PIP/DIP couplings).  Returns ``(plant, {finger: FingerModel})``.
-    ``visual`` geometry is registered with ``scene_graph`` when one is given (the plant is then drawn from
-    its positions, e.g. ``MultibodyPositionToGeometryPose``).
+    Joint (position) order: thumb q10..q13, index q20..q23, middle q30..q33, ring q40..q43, fifth q5h,
+    q50..q53 (21 joints, 19 DoF).  Returns ``(plant, {finger: FingerModel})``; ``visual`` geometry is
+    registered with ``scene_graph`` when one is given.
     """
     hp = params or HandParams()
     plant = _new_plant("hand_plant", None, visual, scene_graph)
@@ -212,18 +194,13 @@ def make_hand_plant(params: HandParams | None = None, *, visual: bool = False, g
         palm = plant.world_body()
         plant.RegisterVisualGeometry(
             palm, RigidTransform(palm_centre(hp) - [0.0, 0.0, 0.008]),
-            _Box(hp.palm_length, 4.5 * hp.finger_spacing, 0.016), "palm_visual", np.array([0.7, 0.7, 0.7, 1.0]))
+            Box(hp.palm_length, 4.5 * hp.finger_spacing, 0.016), "palm_visual", np.array([0.7, 0.7, 0.7, 1.0]))
     models = {f: add_finger(plant, f, hp.finger(f), X_PF=finger_base_pose(f, hp), visual=visual)
               for f in FINGERS}
     if not gravity:
         plant.mutable_gravity_field().set_gravity_vector([0.0, 0.0, 0.0])
     plant.Finalize()
     return plant, models
-
-
-def _Box(x, y, z):
-    from pydrake.geometry import Box
-    return Box(x, y, z)
 
 
 def coupling_force_gain(plant: MultibodyPlant, models) -> np.ndarray | None:
@@ -270,16 +247,10 @@ def coupling_compliance(joint_stiffness: np.ndarray, coupling_vector: np.ndarray
                         joint: int | None = None) -> float:
     """Coupling error per unit torque on a joint [rad/(N m)]: ``c^T K_q^-1 e_joint``.
 
-    ``joint_stiffness`` is the full motors-held stiffness ``K_q`` (n x n, the
-    tendons' (5.12) plus the coupling element ``k_c c c^T``, e.g.
-    ``op.joint_stiffness`` of a finger rig), ``coupling_vector`` the
-    ``c`` of :attr:`FingerModel.coupling_vector` placed in the n plant joints
-    (``c . q = q_DIP - (r_x3/r_x2) q_PIP``).  ``joint`` defaults to the DIP
-    (the joint where ``c`` is 1).  A static torque ``tau`` on that joint
-    leaves the coupling error ``c . dq = compliance * tau`` (linearised).
-    For the ring/fifth routing the PIP/DIP tendon pair acts along
-    ``(r_x2, r_x3)``, orthogonal to ``c``, so the result is
-    ``1 / (k_c (1 + (r_x3/r_x2)^2))`` whatever the tendon stiffness.
+    ``joint_stiffness`` is the full motors-held stiffness ``K_q`` (n x n, e.g. ``op.joint_stiffness`` of a finger
+    rig), ``coupling_vector`` the ``c`` of :attr:`FingerModel.coupling_vector` in the n plant joints; ``joint``
+    defaults to the DIP (where ``c`` is 1).  For the ring/fifth routing the PIP/DIP tendon pair acts along
+    ``(r_x2, r_x3)``, orthogonal to ``c``, so the result is ``1 / (k_c (1 + (r_x3/r_x2)^2))``.
     """
     K = np.asarray(joint_stiffness, dtype=float)
     c = np.asarray(coupling_vector, dtype=float).ravel()

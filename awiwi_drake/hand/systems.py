@@ -1,19 +1,6 @@
-"""Small hand-specific systems (TemplateSystems, scalar-convertible).
-
-* :class:`CoriolisCancellation_`: outputs ``C(q, v) v`` of a plant so that adding
-  it to the plant's applied generalised force removes the Coriolis/centrifugal
-  terms (the "simplified model" of Fig 5.7).
-* :class:`MotorAngleReference_`: joint reference -> motor angle reference
-  through the exact routing ``h(q)``.
-* :func:`tendon_bending_angles`: the bending angle of each tendon path, input of the guide
-  friction (4.1) that the compiled tendon drive carries (``components.fused_drive``).
-* :class:`WristTendonOffsets_`: wrist angles -> tendon path offsets ``h_wrist(q) - h_wrist(0)`` (6.9),
-  or (with ``motor_pulley_radius``) the motor angle feed-forward ``-offset / r_m`` that cancels them.
-* :class:`LinkGeometryPoses_`: joint angles -> the poses of a plant's geometry frames (drawing a
-  plant that is not itself in the diagram, e.g. the compiled hand's).
-(The joint-space motor PD that uses it is the ``joint-pd`` controller,
-:mod:`awiwi_drake.control.joint_pd`.)
-"""
+"""Small hand-specific systems (TemplateSystems, scalar-convertible): the Coriolis cancellation of Fig 5.7,
+the motor angle reference through the exact routing, the wrist's tendon offsets (6.9) and the poses of a
+plant's geometry; and :func:`tendon_bending_angles`, the input of the guide friction (4.1)."""
 
 from __future__ import annotations
 
@@ -41,12 +28,9 @@ def _plant_as(plant, T):
 
 @TemplateSystem.define("CoriolisCancellation_", scope=sys.modules[__name__])
 def CoriolisCancellation_(T):
-    """``generalized_force = C(q, v) v`` of ``plant`` for ``state = [q; v]``.
-
-    The plant passed in is a finalised float MultibodyPlant *without* a
-    SceneGraph connection (e.g. from ``make_finger_plant()``); for other
-    scalar types it is converted with ``ToScalarType``.
-    """
+    """``generalized_force = C(q, v) v`` of ``plant`` (a finalised float MultibodyPlant without a SceneGraph
+    connection) for ``state = [q; v]``: added to the plant's applied force it removes the Coriolis terms (the
+    "simplified model" of Fig 5.7)."""
 
     class Impl(LeafSystem_[T]):
         def _construct(self, plant, converter=None):
@@ -73,14 +57,11 @@ CoriolisCancellation = CoriolisCancellation_[None]
 
 @TemplateSystem.define("MotorAngleReference_", scope=sys.modules[__name__])
 def MotorAngleReference_(T):
-    """Joint-space reference to motor angles through the exact routing.
+    """Joint-space reference to motor angles through the exact routing (the ``joint-pd`` controller's).
 
-    Input ``joint_angle_reference`` (n) [rad]; output ``motor_angle_reference``
-    (m) [rad] = ``theta_op - (h(q_ref) - h(q_op)) / r_m``: the motor angles that
-    keep every spring at its operating-point elongation with the joints at
-    ``q_ref`` (x = r_m theta + h(q) - h(0) + x0).  Exact for the nonlinear
-    thumb base too (a linearised ``P(q_op)`` is off by ~3 mm of tendon at
-    0.5 rad there).
+    Input ``joint_angle_reference`` (n) [rad]; output ``motor_angle_reference`` (m) [rad] =
+    ``theta_op - (h(q_ref) - h(q_op)) / r_m``: the motor angles that keep every spring at its
+    operating-point elongation with the joints at ``q_ref``, exact for the nonlinear thumb base too.
     """
 
     class Impl(LeafSystem_[T]):
@@ -124,18 +105,11 @@ MotorAngleReference = MotorAngleReference_[None]
 def WristTendonOffsets_(T):
     """Wrist tendon offsets (6.9) as a system, or the motor feed-forward that cancels them.
 
-    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output ``wrist_tendon_offset``
-    (38) [m] = ``h_wrist(q) - h_wrist(0)``, Table 6.2 order (direct feedthrough).
-    With ``motor_pulley_radius`` r_m [m] (scalar or (38,), > 0) the output is instead
-    ``motor_angle_offset`` (38) [rad] = ``-(h_wrist(q) - h_wrist(0)) / r_m``
-    (:func:`~awiwi_drake.hand.wrist.wrist_compensation`): adding it to the motor angle
-    references keeps every elongation ``r_m theta + h(q) - h(0) + x0`` unchanged when the
-    wrist moves (ARCHITECTURE.md sign convention).  Scalar types: float, AutoDiffXd, Expression.
-
-    Parameters
-    ----------
-    params : WristParams, optional
-    motor_pulley_radius : float or array (38,), optional
+    Input ``wrist_angle`` (2) = [q71, q73] [rad]; output ``wrist_tendon_offset`` (38) [m] =
+    ``h_wrist(q) - h_wrist(0)``, Table 6.2 order.  With ``motor_pulley_radius`` r_m [m] (scalar or (38,))
+    the output is instead ``motor_angle_offset`` (38) [rad] = ``-(h_wrist(q) - h_wrist(0)) / r_m``
+    (:func:`~awiwi_drake.hand.wrist.wrist_compensation`): added to the motor angle references it keeps every
+    elongation unchanged when the wrist moves.
     """
 
     class Impl(LeafSystem_[T]):
@@ -165,9 +139,8 @@ def WristTendonOffsets_(T):
             if T is not float:
                 output.SetFromVector(self._law(q))
                 return
-            # (6.9) costs ~0.1 ms (an iterative solve per tendon), and Drake re-evaluates this port
-            # whenever its source's cache entry is invalidated (a ConstantVectorSource's output
-            # follows time): the last float result is kept while the wrist angle is unchanged
+            # Drake re-evaluates this port whenever its source's cache entry is invalidated: the last float
+            # result is kept while the wrist angle is unchanged
             key = (float(q[0]), float(q[1]))
             if self._last is None or self._last[0] != key:
                 self._last = (key, np.asarray(self._law(q), dtype=float))
@@ -180,12 +153,9 @@ WristTendonOffsets = WristTendonOffsets_[None]
 
 
 def tendon_bending_angles(coupling: FingerCoupling, p) -> np.ndarray:
-    """Total bending angle per tendon [rad] at the straight pose (input of (4.1)).
-
-    ``palm_bending_angle`` plus ``joint_wrap_angle`` for every joint pulley the
-    tendon crosses (non-zero entry of ``P(0)``); the thumb base tendons run
-    straight from the palm (no pulley), so they get the palm bend only.
-    """
+    """Total bending angle per tendon [rad] at the straight pose (input of (4.1)): ``palm_bending_angle`` plus
+    ``joint_wrap_angle`` for every joint pulley the tendon crosses (non-zero entry of ``P(0)``); the thumb base
+    tendons run straight from the palm, so they get the palm bend only."""
     P = np.asarray(coupling.P(np.zeros(coupling.num_joints)), dtype=float)
     crossed = (np.abs(P) > 0).sum(axis=1)
     for name, c in coupling.parts.items():
@@ -200,9 +170,7 @@ def LinkGeometryPoses_(T):
     """``geometry_pose`` (a ``FramePoseVector`` for SceneGraph) of ``plant``'s bodies at ``joint_angle`` (n).
 
     ``plant``: a finalised float MultibodyPlant registered as a SceneGraph source but not in the
-    diagram (the compiled finger/hand evaluates its dynamics itself); connect the output to
-    ``scene_graph.get_source_pose_port(plant.get_source_id())``.  Other scalar types convert the
-    plant with ``ToScalarType``.
+    diagram (the compiled finger/hand's); connect the output to ``scene_graph.get_source_pose_port(...)``.
     """
     from pydrake.common.value import AbstractValue
     from pydrake.geometry import FramePoseVector_

@@ -4,62 +4,42 @@ The wrist's system (:class:`~awiwi_drake.hand.systems.WristTendonOffsets_`: offs
 motor feed-forward) is in :mod:`awiwi_drake.hand.systems`;
 the Fig 6.9-6.10 study in :mod:`awiwi_drake.reproductions.ch06_wrist`.
 
-The wrist is a *double inverted parallelogram* (crossed four-bar linkages).
-The thesis (6.1)-(6.9) gives the method but not the link lengths; this module
-reconstructs them from Table 6.1 (a = length, b = width, c = thickness) with
-the following box construction, in the forearm frame 0 of Table 6.2 (x along
-the forearm towards the hand, y across the width, z across the thickness,
-origin at a corner of the a x b x c wrist box):
+The wrist is a *double inverted parallelogram* (crossed four-bar linkages).  The thesis (6.1)-(6.9)
+gives the method but not the link lengths; this module reconstructs them from Table 6.1 (a = length,
+b = width, c = thickness) by a box construction in the forearm frame 0 of Table 6.2 (x along the forearm
+towards the hand, y across the width, z across the thickness, origin at a corner of the a x b x c box):
 
-* Forearm points: ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the
-  abduction axis, along z) and ``A0 = (0, b, c/2)`` on the other side.
-* Palm points in the neutral wrist: ``B = (a, b, c)``, ``C = (a, b, 0)``,
-  ``A = (a, 0, c/2)``.  So the links B0B and C0C are crossed space diagonals
-  of the box: R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm edge BC equals
-  the forearm edge B0C0: D_BC = c (side view: an inverted parallelogram, the
-  flexion linkage); A is equidistant from B and C (|AB| = |AC|, as (6.5)
-  requires) at R_AA0 = |AM| = b from the midpoint M of BC; the link A0A,
-  |AA0| = sqrt(a^2 + b^2), crosses the projection of B0..M in the top view:
-  ground M0A0 = coupler MA = b (top view: the second inverted parallelogram,
-  the abduction linkage).
-* Thus both crossing points lie on the wrist centre (a/2, b/2, c/2): the
-  two tendon layers of Table 6.2 cross there in the side view (forearm
-  z = 0.008 -> palm z = +0.010 about c/2), and the abduction rotates the palm
-  about the median axis y = b/2, as the thesis describes for Fig 6.10.
+* forearm points ``B0 = (0, 0, 0)``, ``C0 = (0, 0, c)`` (the edge B0C0 is the abduction axis) and
+  ``A0 = (0, b, c/2)``; palm points in the neutral wrist ``B = (a, b, c)``, ``C = (a, b, 0)``,
+  ``A = (a, 0, c/2)``;
+* so the links B0B and C0C are crossed space diagonals, R_BB0 = R_CC0 = sqrt(a^2 + b^2 + c^2); the palm
+  edge BC equals the forearm edge B0C0, D_BC = c (side view: the flexion linkage, an inverted
+  parallelogram); A is equidistant from B and C (|AB| = |AC|, (6.5)) at R_AA0 = |AM| = b from the midpoint
+  M of BC; the link A0A, |AA0| = sqrt(a^2 + b^2), crosses B0..M in the top view (the abduction linkage);
+* both crossing points lie on the wrist centre (a/2, b/2, c/2): the two tendon layers of Table 6.2 cross
+  there in the side view, and the abduction rotates the palm about the median axis y = b/2 (Fig 6.10).
 
-Why this construction: it is the reading of Fig 6.2-6.7 in which (i) all
-four unprinted lengths follow from a, b, c alone, (ii) both views are
-inverted (crossed) parallelograms in the neutral wrist, (iii) A0 and B0C0 are
-apart in the top view (Fig 6.3) and the BC plane turns about B0C0 (Fig 6.4),
-(iv) |AB| = |AC| (6.5), and (v) the Table 6.2 points are consistent with it:
-with the palm frame centred on the palm face, all 38 neutral tendons have
-nearly the same length (46.6 +- 0.1 mm) and both layers pass through the
-flexion crossing point.  Two alternatives were tried and rejected: the BC
-plane along the wrist side (y = 0, A0A parallel to it) makes abduction a pure
-*translation* of the palm (all tendons move alike, contrary to Fig 6.10), and
-B0C0 on the median plane needs A0 on that axis (contrary to Fig 6.3).
-
-Consequence, reported in docs/REPRODUCTIONS.md: the BC plane is diagonal in
-the top view, so the flexion turns the palm about an axis tilted by
-atan(b/a) = 40 deg from y.  Flexion therefore moves the tendons less than
-abduction (peak ratio 0.49 for the thesis motion; 0.13 vs 0.29 mm per degree
-of palm rotation) but not negligibly, whereas the thesis calls the flexion
-coupling minimal; its figure prints no per-tendon numbers to settle this.
+Why this construction: it is the reading of Fig 6.2-6.7 in which all four
+unprinted lengths follow from a, b, c alone, both views are inverted (crossed)
+parallelograms in the neutral wrist, A0 and B0C0 are apart in the top view
+(Fig 6.3), the BC plane turns about B0C0 (Fig 6.4), |AB| = |AC| (6.5), and the
+Table 6.2 points agree (all 38 neutral tendons ~46.6 mm long, both layers
+through the flexion crossing point).  Two alternatives were rejected: the BC
+plane along the wrist side makes abduction a pure translation of the palm
+(contrary to Fig 6.10), and B0C0 on the median plane needs A0 on that axis
+(contrary to Fig 6.3).  A consequence: the BC plane is diagonal in the top view, so flexion turns the
+palm about an axis tilted by atan(b/a) = 40 deg from y and moves the tendons about half as much as
+abduction, not "minimally" (docs/REPRODUCTIONS.md).
 
 Angles
 ------
-``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis
-B0C0 (Fig 6.4).  ``q73`` (flexion) is the crank angle of that linkage.  The
-thesis writes t_B = pi/2 - q73 with q73 the potentiometer reading; with
-B0 at the origin and C0 at (0, D_BC) in the plane, t_B = pi/2 is the flat,
-singular linkage, so the neutral wrist has t_B0 = atan2(c, sqrt(a^2 + b^2))
-(28.9 deg).  We therefore measure ``q73`` from the neutral wrist:
-``t_B = t_B0 - q73`` (thesis q73 = ours + 61.1 deg).  Both angles are crank
-angles: near neutral the palm turns about twice as far (crossed four-bars).
-At q71 = 0 the linkage assembles for q73 in about (-56 deg, +105 deg) (at
-q73 = 30 deg, q71 in about (-78 deg, +178 deg)); the thesis's motion
-(30 deg, 20 deg) is well inside.  Outside the reachable set the functions
-raise ``ValueError`` naming ``wrist_angle``.
+``q71`` (abduction) rotates the plane of the B0C0-BC linkage about the axis B0C0 (Fig 6.4); ``q73``
+(flexion) is the crank angle of that linkage.  The thesis's t_B = pi/2 - q73 puts q73 = 0 at the flat,
+singular linkage, so we measure ``q73`` from the neutral wrist, ``t_B = t_B0 - q73`` with
+t_B0 = atan2(c, sqrt(a^2 + b^2)) = 28.9 deg (thesis q73 = ours + 61.1 deg).  Near neutral the palm turns
+about twice as far as these crank angles.  At q71 = 0 the linkage assembles for q73 in about
+(-56 deg, +105 deg) (at q73 = 30 deg, q71 in about (-78 deg, +178 deg)); outside the reachable set the
+functions raise ``ValueError`` naming ``wrist_angle``.
 
 Method (thesis numbering)
 -------------------------
@@ -127,9 +107,8 @@ def _norm(u):
 
 
 def _symbolic_errstate(*args):
-    """numpy reports spurious 'invalid value' FP flags after object loops over
-    symbolic Expressions (set inside Drake's symbolic constructors); silence
-    them for symbolic input only (float input keeps numpy's warnings)."""
+    """Silence numpy's spurious 'invalid value' flags after object loops over symbolic Expressions (set
+    inside Drake's constructors), for symbolic input only."""
     if any(scalar_value(a) is None for a in args):
         return np.errstate(invalid="ignore")
     return contextlib.nullcontext()
@@ -152,23 +131,9 @@ def _default_params() -> WristParams:
 # ---------------------------------------------------------------------------
 @dataclass
 class WristPose:
-    """Points and palm frame of the wrist at one configuration (frame 0 coordinates).
-
-    Attributes
-    ----------
-    A, B, C : ndarray (3,)
-        Palm points [m].
-    A0, B0, C0 : ndarray (3,)
-        Forearm points [m] (constant).
-    M : ndarray (3,)
-        Midpoint of BC [m].
-    rotation : ndarray (3, 3)
-        Orientation of the palm frame ABC in frame 0 (columns x, y, z).
-    origin : ndarray (3,)
-        Origin of the palm frame ABC in frame 0 [m].
-    t_A, t_B, t_C : scalar
-        Circle parameters of (6.5) and (6.1) [rad].
-    """
+    """Points and palm frame of the wrist at one configuration, in frame 0 [m]: palm points A, B, C, forearm
+    points A0, B0, C0, the midpoint M of BC, the palm frame ABC (``rotation``: columns x, y, z; ``origin``)
+    and the circle parameters t_A, t_B, t_C [rad] of (6.5) and (6.1)."""
 
     A: np.ndarray
     B: np.ndarray
@@ -192,38 +157,22 @@ class WristPose:
         return T
 
 
-def wrist_kinematics(q71, q73, params: WristParams | None = None, *, check: bool = True) -> WristPose:
-    """Solve the double inverted parallelogram, thesis (6.1)-(6.8).
-
-    Parameters
-    ----------
-    q71 : float, AutoDiffXd or Expression
-        Abduction [rad]: rotation of the BC linkage plane about the axis B0C0.
-    q73 : float, AutoDiffXd or Expression
-        Flexion [rad], crank angle measured from the neutral wrist
-        (``t_B = t_B0 - q73``, see the module docstring for the thesis offset).
-    params : WristParams, optional
-        Geometry (default: Table 6.1, 6.2).
-    check : bool
-        For float/AutoDiff input, raise ``ValueError`` naming ``q71``/``q73``
-        when the linkage cannot be assembled (instead of returning NaN).
-
-    Returns
-    -------
-    WristPose
-        Palm points, palm frame ABC and circle parameters, in frame 0.
+def wrist_kinematics(q71, q73, params: WristParams | None = None) -> WristPose:
+    """Solve the double inverted parallelogram, thesis (6.1)-(6.8): the :class:`WristPose` at abduction ``q71``
+    and flexion ``q73`` [rad] (float, AutoDiffXd or Expression; angles as in the module docstring) with the
+    geometry ``params`` (default: Table 6.1, 6.2).  For float/AutoDiff input a linkage that cannot be
+    assembled raises ``ValueError`` naming ``q71``/``q73``.
     """
     p = wrist_params(params)
     with _symbolic_errstate(q71, q73):
-        return _solve(q71, q73, p, check)
+        return _solve(q71, q73, p)
 
 
-def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
-    if check:
-        for name, q in (("q71", q71), ("q73", q73)):
-            v = scalar_value(q)
-            if v is not None and not math.isfinite(v):
-                raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
+def _solve(q71, q73, p: WristParams) -> WristPose:
+    for name, q in (("q71", q71), ("q73", q73)):
+        v = scalar_value(q)
+        if v is not None and not math.isfinite(v):
+            raise ValueError(f"wrist_angle {name} = {v} rad is not finite")
     a, b, c = p.length, p.width, p.thickness
     L, d, R, dA = p.crank_length, p.coupler_length, p.palm_radius, p.link_length
     gamma0 = math.atan2(b, a)               # direction of the BC plane in the top view (neutral)
@@ -240,8 +189,7 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     tB = tB0 - q73
     ctB, stB = np.cos(tB), np.sin(tB)
     den = L * L + d * d - 2.0 * L * d * stB
-    if check:
-        _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
+    _check_positive(den, "linkage B0C0-BC is flat (t_B = +-pi/2)", q71, q73)
     Bu, Bv = L * ctB, L * stB
     Cu = L * (L * L - d * d) * ctB / den
     Cv = (L * L - d * d) * (L * stB - d) / den
@@ -263,8 +211,7 @@ def _solve(q71, q73, p: WristParams, check: bool) -> WristPose:
     k = (a0x * a0x + a0y * a0y + a0z * a0z + R * R - dA * dA) / (2.0 * R)
     rho2 = a0y * a0y + a0z * a0z
     disc = rho2 - k * k
-    if check:
-        _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
+    _check_positive(disc, "palm point A cannot reach |AA0| (6.7)", q71, q73)
     tA = np.arctan2(a0z, a0y) - np.arctan2(np.sqrt(disc), k)
     # (6.5), (6.8): A in frame 0.
     A = M + R * np.cos(tA) * y + R * np.sin(tA) * n
@@ -290,13 +237,9 @@ def _check_positive(value, what: str, q71, q73) -> None:
 
 
 def wrist_constraint_errors(pose: WristPose, params: WristParams | None = None) -> np.ndarray:
-    """Errors of the six distance constraints of Fig 6.9 [m].
-
-    Returns ``[|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|]`` minus their design
-    values (``link_length``, ``crank_length`` twice, ``palm_edge_length``
-    twice, ``coupler_length``); also checks nothing else, so orthonormality of
-    the palm frame is tested separately.
-    """
+    """Errors of the six distance constraints of Fig 6.9 [m]: ``[|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|]`` minus
+    their design values (``link_length``, ``crank_length`` twice, ``palm_edge_length`` twice,
+    ``coupler_length``)."""
     p = wrist_params(params)
     P = pose
     d = [_norm(P.A - P.A0) - p.link_length,
@@ -309,22 +252,8 @@ def wrist_constraint_errors(pose: WristPose, params: WristParams | None = None) 
 
 
 def wrist_tendon_lengths(q71, q73, params: WristParams | None = None) -> np.ndarray:
-    """Length of each tendon through the wrist, thesis (6.9).
-
-    ``h_i = || h0_forearm,i - T^0_ABC h^ABC_palm,i ||`` for the 38 rows of
-    Table 6.2, in table order (tendon 1..38).
-
-    Parameters
-    ----------
-    q71, q73 : float, AutoDiffXd or Expression
-        Abduction and flexion [rad] (see :func:`wrist_kinematics`).
-    params : WristParams, optional
-
-    Returns
-    -------
-    ndarray (num_tendons,)
-        Lengths [m] (object dtype for AutoDiffXd/Expression input).
-    """
+    """Length [m] of each tendon through the wrist, thesis (6.9): ``h_i = || h0_forearm,i - T^0_ABC h^ABC_palm,i ||``
+    for the rows of Table 6.2, in table order, at the wrist angles of :func:`wrist_kinematics`."""
     p = wrist_params(params)
     pose = wrist_kinematics(q71, q73, p)
     with _symbolic_errstate(q71, q73):
@@ -343,9 +272,8 @@ def _neutral_lengths(params: WristParams) -> np.ndarray:
 def wrist_tendon_offsets(q71, q73, params: WristParams | None = None) -> np.ndarray:
     """Wrist-induced tendon path change ``h_wrist(q) - h_wrist(0)`` [m], Table 6.2 order.
 
-    Positive: the path through the wrist gets longer, which (ARCHITECTURE.md)
-    stretches the tendon's spring like winding its motor would.  Generic in the
-    scalar type (float, AutoDiffXd, Expression).
+    Positive: the path through the wrist gets longer, which (ARCHITECTURE.md) stretches the tendon's
+    spring like winding its motor would.  Generic in the scalar type.
 
     Examples
     --------
@@ -359,24 +287,12 @@ def wrist_tendon_offsets(q71, q73, params: WristParams | None = None) -> np.ndar
 
 
 def wrist_lengths_and_jacobian(q71, q73, params: WristParams | None = None):
-    """Tendon lengths (6.9) and their exact Jacobian, generic in the scalar type.
+    """``(h, P)``: the tendon lengths (6.9) [m] and their exact Jacobian ``dh/d[q71, q73]`` [m/rad] (the wrist
+    block of the coupling matrix), generic in the scalar type.
 
-    The palm pose is differentiated in forward mode through the closed-form
-    kinematics; the tendon part uses ``dh_i/dq = -u_i . (dO/dq + dR/dq p_i)``
-    with ``u_i`` the unit vector from the palm point to the forearm point.
-
-    Parameters
-    ----------
-    q71, q73 : float, AutoDiffXd or Expression
-        Abduction and flexion [rad].
-    params : WristParams, optional
-
-    Returns
-    -------
-    h : ndarray (num_tendons,)
-        Lengths [m].
-    P : ndarray (num_tendons, 2)
-        ``dh/d[q71, q73]`` [m/rad] (the wrist block of the coupling matrix).
+    The palm pose is differentiated in forward mode (:class:`~awiwi_drake._math.Tangent`) through the
+    closed-form kinematics; the tendon part uses ``dh_i/dq = -u_i . (dO/dq + dR/dq p_i)`` with ``u_i`` the
+    unit vector from the palm point to the forearm point.
     """
     p = wrist_params(params)
     scalar = is_float(q71) and is_float(q73)
@@ -407,15 +323,8 @@ def wrist_jacobian(q71, q73, params: WristParams | None = None) -> np.ndarray:
 
 
 def wrist_compensation(q71, q73, motor_pulley_radius, params: WristParams | None = None) -> np.ndarray:
-    """Motor angle change that cancels the wrist offset: ``-offset / r_m`` [rad].
-
-    Parameters
-    ----------
-    q71, q73 : scalar
-        Wrist angles [rad].
-    motor_pulley_radius : float or array (num_tendons,)
-        r_m [m], > 0.
-    """
+    """Motor angle change that cancels the wrist offset: ``-offset / r_m`` [rad] (``motor_pulley_radius`` r_m [m],
+    a number or one per tendon)."""
     r = check_motor_pulley_radius(motor_pulley_radius, wrist_params(params).num_tendons)
     return -wrist_tendon_offsets(q71, q73, params) / r
 

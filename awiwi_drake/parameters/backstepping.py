@@ -263,10 +263,8 @@ class FingerOptimalGainsCase(Parameters):
 
     What ch. 16 selects: "the two lower levels of the backstepping controller"; "the two upper gains,
     namely the stiffness and the damping of the impedance controller are directly specified by the
-    user" (ch. 16 introduction). So ``Omega = (K3, K4)`` per DoF; ``Kp,imp``, ``Kd,imp`` are the 15.5
-    finger law's (the chosen impedance, Fig 15.22's single-joint setting, on the modes of M,
-    |h lambda| <= 1/4). Algorithm 3 draws
-    ``rand(1, 4)`` (all four gains): that is what drove the former per-DoF fits to 55-177 Nm/rad.
+    user" (ch. 16 introduction). So ``Omega = (K3, K4)`` per DoF, while Algorithm 3 draws ``rand(1, 4)``;
+    ``Kp,imp``, ``Kd,imp`` are the 15.5 finger law's.
     """
 
     q_weights: tuple = param((100.0, 0.01, 0.01, 0.01), unit="-", low=0.0, vector=True,

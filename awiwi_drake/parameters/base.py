@@ -71,31 +71,13 @@ def param(
 ):
     """Declare a validated dataclass field.
 
-    Parameters
-    ----------
-    default : float, int, bool, tuple
-        Default value.  Sequences are stored as tuples (hashable, immutable).
-    unit : str
-        SI unit, e.g. ``"kg m^2"``; ``"-"`` for dimensionless.
-    source : str
-        Where the default comes from: ``"Table 12.1"``, ``"(3.8), Table 3.3"``
-        or ``"chosen: <reason>"``.
-    low, high : float, optional
-        Allowed range of the value (each element for sequences).
-    low_inclusive, high_inclusive : bool
-        Whether the bounds themselves are allowed.
-    doc : str
-        One-line description.
-    vector : bool
-        The field holds a sequence of numbers.
-    finite : bool
-        Reject NaN and infinity (default).
-    choices : tuple of str, optional
-        For a text field: the allowed values.
-
-    The field's annotation sets its type: a ``bool`` field takes only
-    True/False, an ``int`` field only whole numbers, a ``str`` field text (from
-    ``choices`` if given), any other field a real number (not a bool).
+    ``default`` (sequences are stored as tuples); ``unit``: SI unit, e.g. ``"kg m^2"``, ``"-"`` for
+    dimensionless; ``source``: where the default comes from (``"Table 12.1"``, ``"(3.8), Table 3.3"`` or
+    ``"chosen: <reason>"``); ``low``/``high``: the allowed range (each element of a sequence), bounds
+    allowed unless ``low_inclusive``/``high_inclusive`` is False; ``doc``: one-line description; ``vector``:
+    a sequence of numbers; ``finite``: reject NaN and infinity; ``choices``: the allowed values of a text
+    field.  The field's annotation sets its type: ``bool`` takes only True/False, ``int`` only whole
+    numbers, ``str`` text, any other a real number (not a bool).
     """
     if not source:
         raise ValueError("param(): every parameter needs a source")
@@ -118,11 +100,6 @@ UNIT_CEILINGS: dict[str, float] = {
     "kg": 100.0, "kg m^2": 1.0, "m": 10.0, "N": 1e5, "Nm": 1e4, "Nm s/rad": 1e4, "N m s/rad": 1e4,
     "s": 1e5, "Hz": 1e7, "rad/s": 1e7, "m/s": 1e3, "Pa": 1e13, "N/m": 1e12,
 }
-
-
-def _ceiling(m: Mapping[str, Any]) -> float | None:
-    """The upper bound that applies to a field: its own ``high`` or its unit's ceiling."""
-    return m["high"] if m["high"] is not None else UNIT_CEILINGS.get(m["unit"])
 
 
 def _kind(f) -> str:
@@ -158,8 +135,8 @@ def _check_scalar(cls_name: str, name: str, v: Any, m: Mapping[str, Any], where:
     if hi is not None and (v > hi or (v == hi and not m["high_inclusive"])):
         op = "<=" if m["high_inclusive"] else "<"
         raise ValueError(f"{label} = {v!r} is out of range: must be {op} {hi} [{m['unit']}]")
-    ceiling = _ceiling(m)
-    if hi is None and ceiling is not None and math.isfinite(v) and abs(v) > ceiling:
+    ceiling = UNIT_CEILINGS.get(m["unit"]) if hi is None else None
+    if ceiling is not None and math.isfinite(v) and abs(v) > ceiling:
         raise ValueError(f"{label} = {v!r} is implausible: |value| must be <= {ceiling:g} [{m['unit']}] "
                          f"(physical ceiling of the unit; check the unit)")
 

@@ -1,10 +1,8 @@
 """Settings of the command line: limits on its options, ``compare --short``, and the recording's display.
 
-An option outside :class:`CliLimits` is a unit mistake or would run without end;
-the CLI rejects it with one line naming the option.  None of :class:`AnimationParams`
-enters the physics: they place the camera, draw a forearm stub below the palm and set the
-frame rate of ``awiwi-drake animate``'s recording, chosen for a readable picture of a hand
-about 0.2 m long.
+An option outside :class:`CliLimits` is a unit mistake or would run without end; the CLI rejects it with
+one line naming the option.  :class:`AnimationParams` only places the camera of ``awiwi-drake animate``'s
+recording (no physics).
 """
 
 from __future__ import annotations
@@ -57,11 +55,8 @@ class CompareControllerParams(Parameters):
 class CompareShortMode(Parameters):
     """How ``compare --short`` (and ``AWIWI_SHORT=1``) shortens the standard tests.
 
-    The step window comes from the closed loops themselves: ``step_time_constants``
-    times the slowest tracking time constant of the compared loops
-    (:func:`awiwi_drake.control.compare.dominant_time_constant`), so that a
-    well-tuned loop settles; never shorter than ``min_step_duration`` (longer than the
-    full test when a design's slowest mode needs it).
+    The step window is ``step_time_constants`` times the slowest tracking time constant of the compared
+    loops (:func:`awiwi_drake.control.compare.dominant_time_constant`), at least ``min_step_duration``.
     """
 
     step_time_constants: float = param(5.0, unit="-", low=1.0, high=20.0,
@@ -81,12 +76,9 @@ class CompareShortMode(Parameters):
 class AnimationParams(Parameters):
     """Camera, forearm stub and frame rate of a hand/finger recording.
 
-    The recording is shown in a *display frame*: the palm frame (x towards the
-    fingers, y towards the thumb, z the palmar normal) turned so that the
-    fingers point up (display z) and the palm faces the display x axis.  The
-    camera looks at the centre of the box that holds the moving links, from
-    ``camera_azimuth`` / ``camera_elevation``, far enough that the box fills
-    ``fill_fraction`` of the vertical field of view.
+    The recording shows the palm frame turned so that the fingers point up and the palm faces the display
+    x axis; the camera looks at the centre of the moving links' box from ``camera_azimuth`` /
+    ``camera_elevation``, far enough that the box fills ``fill_fraction`` of the vertical field of view.
     """
 
     frame_rate: float = param(30.0, unit="Hz", low=1.0, high=240.0,

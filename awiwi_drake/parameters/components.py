@@ -34,56 +34,22 @@ _TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
 class MotorParams(Parameters):
     """Geared PMSM + harmonic drive, seen at the output shaft (ch. 3).
 
-    Dynamics (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - r_m f``.
-
-    Attributes
-    ----------
-    inertia : float
-        B [kg m^2], total reflected inertia at the output shaft (3.1); domain (0, inf).
-    friction : bool
-        Include the velocity-dependent friction (3.8).
-    friction_slope : float
-        gamma1 [s/rad] of (3.8), Table 3.3; domain (0, inf).
-    coulomb_torque : float
-        gamma2 [Nm] of (3.8), Table 3.3; domain [0, inf).
-    viscous_friction : float
-        gamma3 [Nm s/rad] of (3.8), Table 3.3; domain [0, inf).
-    damping : float
-        Extra linear damping d_theta [Nm s/rad] (used by the flexible-joint model (12.8));
-        domain [0, inf).
-    ripple : bool
-        Include the position-dependent ripple torques (3.5).
-    ripple_motor_amplitude : float
-        Amplitude [Nm] of the motor-shaft bearing ripple (period 2 pi / gear_ratio at the output).
-    ripple_output_amplitude : float
-        Amplitude [Nm] of the output-bearing ripple (period 2 pi).
-    ripple_motor_phase, ripple_output_phase : float
-        Phases [rad] of the two ripple components.
-    ripple_harmonics : tuple
-        Further ripple orders as flat ``(order, sin amplitude [Nm], cos amplitude [Nm])`` triples
-        (a fitted motor's, e.g. the discrepancy workflow's); empty by default.
-    torque_constant : float
-        Motor current to output torque [Nm/A] (output side); converts the thesis's currents
-        (Fig 3.3b, 3.4b in A) to torques.
-    gear_ratio : float
-        Input/output speed ratio of the harmonic drive (1/alpha_gear); domain [1, inf).
-    saturation : bool
-        Clip the commanded torque to +-torque_limit (reported by the simulation monitors).
-    torque_limit : float
-        Maximum output torque [Nm]; domain (0, inf).
-    pulley_radius : float
-        r_m [m], radius of the motor pulley winding the tendon; domain (0, 0.05].
+    Dynamics (3.5): ``B thdd = sat(u) + tau_fric(thd) + tau_ripple(th) - r_m f``; friction (3.8)
+    ``-(gamma2 atan(gamma1 thd) + gamma3 thd)``; ripple: a motor-shaft bearing component (period
+    ``2 pi / gear_ratio`` at the output) and an output-bearing one (period ``2 pi``), plus optional
+    further orders ``ripple_harmonics``, flat ``(order, sin amplitude, cos amplitude)`` triples.
     """
 
     inertia: float = param(2e-3, unit="kg m^2", low=0.0, low_inclusive=False,
-                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))")
+                           source="Tables 12.1, 13.1, 14.1, 14.2 (output side, (3.1))", doc="B at the output shaft")
     friction: bool = param(True, unit="-", source="chosen: the thesis's motor model includes (3.8)")
     friction_slope: float = param(10.0, unit="s/rad", low=0.0, low_inclusive=False,
                                   source="Table 3.3, gamma1")
     coulomb_torque: float = param(0.5586, unit="Nm", low=0.0, source="Table 3.3, gamma2")
     viscous_friction: float = param(0.0356, unit="Nm s/rad", low=0.0, source="Table 3.3, gamma3")
     damping: float = param(0.0, unit="Nm s/rad", low=0.0,
-                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta")
+                           source="chosen: 0, (3.8) already holds the viscous term; (12.8) sets d_theta",
+                           doc="extra linear damping d_theta")
     ripple: bool = param(False, unit="-",
                          source="chosen: off by default; switch on to study compensation (Fig 3.4-3.6)")
     ripple_motor_amplitude: float = param(
@@ -102,12 +68,14 @@ class MotorParams(Parameters):
         source=("fitted: the thesis measured it at the output shaft (section 3.2) but prints no value; "
                 "(3.8) with Table 3.3 gives 1.408 Nm at 15 rad/s where Fig 3.3b reads ~1.3 A: "
                 "1.083 Nm/A (output side)"))
-    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100")
+    gear_ratio: float = param(100.0, unit="-", low=1.0, source="ch. 3: harmonic drive 1:100",
+                              doc="input/output speed ratio (1/alpha_gear)")
     saturation: bool = param(True, unit="-", source="chosen: real amplifiers saturate")
     torque_limit: float = param(3.0, unit="Nm", low=0.0, low_inclusive=False,
                                 source="chosen: 180 N x r_m (0.9 Nm) + Table 3.3 friction at 15 rad/s (1.41 Nm), with margin")
     pulley_radius: float = param(0.005, unit="m", low=0.0, high=0.05, low_inclusive=False,
-                                 source="chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 torques")
+                                 source=("chosen: not given; 5 mm keeps 180 N at 0.9 Nm, the order of the Table 3.3 "
+                                         "torques"), doc="r_m, the motor pulley winding the tendon")
 
     def _validate(self) -> None:
         h = self.ripple_harmonics
@@ -126,13 +94,6 @@ class PolynomialSpringParams(Parameters):
 
     The thesis's real-time form (ch. 4, "Calibration"). Must be increasing on
     ``[0, max_elongation]`` (checked on a fine grid).
-
-    Attributes
-    ----------
-    coefficients : tuple of float
-        (c1, c2, ...) in SI (N/m, N/m^2, ...); c1 >= 0.
-    max_elongation : float
-        Upper end [m] of the calibrated range; domain (0, 0.1].
     """
 
     coefficients: tuple = param((2.0e4,), unit="N/m^k", vector=True,
@@ -158,13 +119,7 @@ class PolynomialSpringParams(Parameters):
 
 @dataclass(frozen=True)
 class LinearSpringParams(Parameters):
-    """Linear torsional/translational spring (flexible joint (12.8), ch. 15 test rig).
-
-    Attributes
-    ----------
-    stiffness : float
-        k [N/m or Nm/rad]; domain (0, inf).
-    """
+    """Linear torsional/translational spring (flexible joint (12.8), ch. 15 test rig)."""
 
     stiffness: float = param(0.605, unit="Nm/rad", low=0.0, low_inclusive=False, source="Table 12.1, k")
 
@@ -173,18 +128,11 @@ class LinearSpringParams(Parameters):
 class SpringMechanismGeometry(Parameters):
     """Lever + linear spring ("tangent alpha") mechanism of Fig 4.6 / Table 4.1.
 
-    Planar geometry, all points in one frame [m]. The tendon runs from the
-    motor-side pulley M over the lever pulley P to the fixed pulley F; the
-    lever turns about the pivot C; a linear spring joins the lever point Q to
-    the anchor S. Pulleys are modelled by their centres (a documented
-    simplification: Table 4.1 lists radii but the thesis gives no numbers).
-    Tension pushes P towards the line MF; at ``lever_straight_angle`` the
-    tendon is straight and the stiffness is unbounded (the tangent-alpha
-    property: stiffness rises with force).
-
-    The thesis prints no numbers for Table 4.1: these were chosen so that the
-    force-angle curve matches Fig 4.8b (0 N at 0 deg, 175 N at 48 deg, convex,
-    dL of about 6 mm, Fig 4.7).
+    Planar geometry [m]: the tendon runs from the motor-side pulley M over the lever pulley P to the fixed
+    pulley F; the lever turns about the pivot C; a linear spring joins the lever point Q to the anchor S.
+    Pulleys are modelled by their centres.  At ``lever_straight_angle`` the tendon is straight and the
+    stiffness unbounded (the tangent-alpha property).  The thesis prints no numbers for Table 4.1: these
+    were chosen so that the force-angle curve matches Fig 4.8b (175 N at 48 deg, convex, dL ~6 mm, Fig 4.7).
     """
 
     pulley_spacing: float = param(0.060, unit="m", low=0.0, low_inclusive=False,
@@ -267,9 +215,8 @@ class TendonParams(Parameters):
 class GuideFrictionParams(Parameters):
     """Tendon guide friction: bending-angle law (4.1) and a capstan variant.
 
-    (4.1): ``F = C0 (1 - exp(-C1 alpha))`` (independent of tension and speed).
-    Capstan: ``F = f (1 - exp(-mu alpha))`` (proportional to tension; ch. 9 reports
-    routing friction of 10-50 % of the measured force).
+    (4.1): ``F = C0 (1 - exp(-C1 alpha))`` (independent of tension and speed); capstan:
+    ``F = f (1 - exp(-mu alpha))`` (ch. 9 reports routing friction of 10-50 % of the measured force).
     """
 
     c0: float = param(2.2, unit="N", low=0.0,
@@ -287,10 +234,9 @@ class GuideFrictionParams(Parameters):
 class TendonGuideParams(Parameters):
     """The guide friction of one tendon path, given directly (``FingerDriveParams.tendon_guides``).
 
-    The two numbers :func:`~awiwi_drake.components.friction.guide_friction` takes: the tension-independent part C
-    (the (4.1) level at the path's bending angle) and the capstan exponent ``mu alpha``. Both at once: a sliding
-    tendon carries ``C + f (e^{mu alpha} - 1)`` when pulled and ``C + f (1 - e^{-mu alpha})`` when released. Used
-    for one tendon whose guides differ from the rest, e.g. a discrepancy diagnosis's write-back.
+    The two numbers of :func:`~awiwi_drake.components.friction.guide_friction`, the tension-independent part C
+    and the capstan exponent ``mu alpha``, for one tendon whose guides differ from the rest (e.g. a discrepancy
+    diagnosis's write-back).
     """
 
     constant: float = param(0.0, unit="N", low=0.0, high=100.0,

@@ -8,7 +8,8 @@ from awiwi_drake.parameters.base import Parameters, param
 
 __all__ = ["TendonForceGains", "ForceSensorParams", "PolePlacementParams", "LqrParams", "SdreTendonParams",
            "SdreJointParams", "ImpedanceParams", "ImpedanceSweepParams", "RippleCompensationParams", "FrictionIdentificationParams",
-           "CompareTestParams", "LQR_R_VALUES", "CONTROL_RATE_HZ", "FIXED_STEP_STABILITY_MARGIN"]
+           "CompareTestParams", "LQR_R_VALUES", "CONTROL_RATE_HZ", "FIXED_STEP_STABILITY_MARGIN",
+           "FIXED_STEP_CHECK_BUDGET"]
 
 #: The hand's control rate [Hz] (ch. 1: 3 kHz, 333 us round trip; the rate of the thesis's experiments).
 CONTROL_RATE_HZ = 3000.0
@@ -19,6 +20,12 @@ CONTROL_RATE_HZ = 3000.0
 #: 1.25^2 = 56 % along the run before it leaves the region again; a plant whose modes are inside at ``h`` itself keeps
 #: ``k = 1``: at 20 N and 3 kHz the fingers' fastest modes are 3-25 % inside, the hand's 3 %, measured 2026-12-01).
 FIXED_STEP_STABILITY_MARGIN = 1.25
+
+#: Share of a fixed-step run's CPU time that :func:`~awiwi_drake.analysis.simulate` spends re-checking the plants'
+#: modes at its progress-chunk boundaries during the run (chosen: 1 %, so that the check costs the hand at most 1 %
+#: of its run; one check of the hand's modes takes 2.4 ms, measured 2026-12-01, so a cascaded hand run at ~1 s of CPU
+#: time per simulated second is checked about every 0.25 s).
+FIXED_STEP_CHECK_BUDGET = 0.01
 
 #: Table 13.1: the three input costs of Fig 13.2-13.3.
 LQR_R_VALUES = (1e-4, 1e-2, 1.0)

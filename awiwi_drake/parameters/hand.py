@@ -1,34 +1,16 @@
 """Finger and hand parameters (thesis ch. 5), with sources.
 
-Index/middle bone geometry comes from Table 5.1 (read with two corrections:
-M32 last row ``0 0 0 1``, M98 translation 0.0201 m rather than the printed
-0.00201 m, which would make the distal phalanx 2 mm long).  The thesis prints
-no pulley radii, masses or inertias per link; the values below are chosen and
-say why.
+Index/middle bone geometry comes from Table 5.1 (read with two corrections: M32 last row ``0 0 0 1``,
+M98 translation 0.0201 m rather than the printed 0.00201 m, which would make the distal phalanx 2 mm
+long).  The thesis prints no pulley radii, masses or inertias per link; the values below are chosen and
+say why.  The finger's links are uniform cylinders whose masses split the finger mass of section 5.2.2
+(0.02 kg) in proportion to the Table 5.1 link lengths.  The link inertia 7.2e-7 kg m^2 of Tables 14.2 and
+15.1 belongs to the single-joint test rig (Fig 15.14), not to a phalanx: the rigs keep it
+(``parameters.rigs``).
 
-Masses and inertias
--------------------
-The thesis gives a finger mass of about 0.02 kg (section 5.2.2, a gravity
-estimate for the whole finger: 0.02 kg at ~0.01 m) and a link inertia of
-7.2e-7 kg m^2 (Tables 14.2, 15.1).  The latter is the link of the single-joint
-test rig (Fig 15.14), not a phalanx of the finger, so the two are not in
-conflict: the rigs keep 7.2e-7 kg m^2 (``parameters.rigs``).  The finger's
-links are uniform cylinders of radius ``link_radius`` whose masses split the
-finger mass in proportion to the Table 5.1 link lengths (equal cross-section):
-0.019 kg (0.02 kg less the 1 g abduction link) over 40.38 / 29.8 / 20.1 mm gives
-8.50 / 6.27 / 4.23 g.  The distal inertia about the DIP axis is then
-m (L^2/3 + R^2/4) = 6.2e-7 kg m^2, close to the test rig's value by coincidence
-of scale.  The whole finger's centre of mass lies ~4 cm from the MCP (the
-0.01 m of section 5.2.2 only served the thesis's gravity estimate, negligible
-either way: 0.02 kg x 9.81 x 0.04 m = 0.008 N m).
-
-Global tendon order
--------------------
-The thesis (Table 6.2) numbers 38 tendons but does not say which rows belong
-to which finger.  We choose, and use everywhere (hand diagram, wrist offsets):
-thumb tendons 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38
-(1-based, Table 6.2 numbering); within a finger the order of its tendon
-equations ((5.22) thumb, (5.5) index/middle, (5.18) ring, see
+Global tendon order (chosen: Table 6.2 numbers 38 tendons but does not say which rows belong to which
+finger), used everywhere: thumb tendons 1-8, index 9-16, middle 17-24, ring 25-30, fifth 31-38; within a
+finger the order of its tendon equations ((5.22) thumb, (5.5) index/middle, (5.18) ring, see
 :mod:`awiwi_drake.hand.coupling` for the fifth).
 """
 
@@ -245,38 +227,28 @@ class ThumbParams(Parameters):
 
 FINGERS = ("thumb", "index", "middle", "ring", "fifth")
 
-#: Float evaluations of one finger / hand plant system made by the generic path (the plant's own
-#: ``CalcMassMatrix``... and the drive laws, the path ``AutoDiffXd`` takes) before its compiled kernels are built
-#: (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`).  Chosen: an operating point and a linearisation evaluate
-#: the plant in float once (measured on the fifth finger's tests), a simulation thousands of times and its first two
-#: control periods 6-10 times (the benchmarks' warm-up, which must compile); the generic path costs 0.17 / 0.30 ms a
-#: call on the fifth finger / the hand, the kernels a symbolic trace and a numba compile when not cached (the fifth
-#: finger 12 CPU s on an empty cache).
+#: Float evaluations of one finger / hand plant system by the generic path (the plant's own ``CalcMassMatrix``...
+#: and the drive laws) before its compiled kernels are built (:class:`~awiwi_drake.hand.dynamics.HandDynamics_`).
+#: Chosen: an operating point and a linearisation evaluate the plant in float once, a simulation thousands of times
+#: and its first two control periods 6-10 times; the generic path costs 0.17 / 0.30 ms a call on the fifth finger /
+#: the hand, the kernels a trace and a compile when not cached (the fifth finger 12 CPU s).
 COMPILE_AFTER_CALLS = 4
 
 # (pip_dip_coupled, has_hmc) of each serial finger: section 5.2 (index, middle), 5.3 (ring), 5.5 (fifth)
 FINGER_STRUCTURE = {"index": (False, False), "middle": (False, False), "ring": (True, False),
                     "fifth": (True, True)}
-_TENDONS = {"index": 8, "middle": 8, "ring": 6, "fifth": 8}
-
-
-def structure_text(finger: str) -> str:
-    """Human-readable structure of ``finger`` (for error messages)."""
-    if finger not in FINGER_STRUCTURE:
-        return "generic finger"
-    coupled, hmc = FINGER_STRUCTURE[finger]
-    dof = 4 - int(coupled) + int(hmc)
-    return (f"pip_dip_coupled={coupled}, has_hmc={hmc}: {dof} DoF, {_TENDONS[finger]} tendons")
 
 
 def check_finger_structure(finger: str, p) -> None:
     """ValueError naming ``finger`` and the field when ``p``'s structure flags are not the thesis's."""
     if finger not in FINGER_STRUCTURE:
         return
+    coupled, hmc = FINGER_STRUCTURE[finger]
+    dof = 4 - int(coupled) + int(hmc)
     for name, value in zip(("pip_dip_coupled", "has_hmc"), FINGER_STRUCTURE[finger]):
         if getattr(p, name) != value:
-            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} "
-                             f"({structure_text(finger)}; sections 5.2-5.5), got {getattr(p, name)}")
+            raise ValueError(f"{finger} finger: {type(p).__name__}.{name} must be {value} (pip_dip_coupled={coupled}, "
+                             f"has_hmc={hmc}: {dof} DoF, {2 * dof} tendons; sections 5.2-5.5), got {getattr(p, name)}")
 
 # Global tendon numbering (0-based slices of the 38 tendons, Table 6.2 order): chosen, see module doc.
 TENDON_SLICES = {"thumb": slice(0, 8), "index": slice(8, 16), "middle": slice(16, 24),
@@ -304,11 +276,9 @@ class HandParams(Parameters):
 
     def _validate(self) -> None:
         super()._validate()
-        for name, typ in _FINGER_PARAM_TYPES.items():
+        for name, typ in _FINGER_PARAM_TYPES.items():   # each finger class checks its structure (FINGER_STRUCTURE)
             if not isinstance(getattr(self, name), typ):
                 raise ValueError(f"HandParams.{name} must be {typ.__name__}, got {type(getattr(self, name)).__name__}")
-            if name != "thumb":
-                check_finger_structure(name, getattr(self, name))
 
     def finger(self, name: str):
         """The parameter set of finger ``name`` (one of FINGERS)."""
@@ -322,33 +292,19 @@ def finger_params(name: str):
     return HandParams().finger(name)
 
 
-
-
-
-
 @dataclass(frozen=True)
 class FingerDriveParams(Parameters):
     """Motors, springs, pretension and routing friction shared by finger and hand diagrams.
 
-    The thesis's physics, each switchable (``with_physics``; all on by default): motor friction
-    (3.8) and ripple (``motor.friction``, ``motor.ripple``), guide friction on every tendon path
-    (``guide_friction``; (4.1) at each tendon's bending angle, or the capstan form), spring
-    hysteresis (``spring.hysteresis.enabled``, Fig 4.8b), one spring law per tendon (``spring``
-    for all, ``tendon_springs`` overrides tendons one by one) and the tendon's own elasticity
-    ``k_t = E S / l0`` in series with each mechanism (``spring.include_tendon``).
-    ``tendon_springs`` is a tuple of ``(tendon_name, SpringModelParams)`` pairs; ``tendon_motors``
-    likewise overrides ``motor`` tendon by tendon (``(tendon_name, MotorParams)``: friction, ripple,
-    inertia, damping of one motor, e.g. a diagnosis's write-back; pulley radius, torque limit and
-    saturation stay those of ``motor``); ``tendon_guides`` gives one tendon path its own guide friction
-    (``(tendon_name, TendonGuideParams)``: constant and capstan exponent), whether ``guide_friction`` is on or
-    off for the others (``with_physics(guide_friction=False)`` clears it).
-    Stick-slip joint friction (``joint_friction``, off by default; ``joint_friction_params`` for every joint,
-    ``joint_frictions`` overriding joints by name, ``(joint_name, JointFrictionParams)``) is a presliding state per
-    joint with the Stribeck level (:func:`~awiwi_drake.components.friction.stick_slip_rate`).
-    Hysteresis and guide friction are rate-independent Dahl states (one per tendon each,
-    :func:`~awiwi_drake.components.friction.dahl_rate`) with presliding lengths chosen so that
-    fixed-step RK3 at the 3 kHz control period is stable on every finger and the hand at the operating point's
-    20 N (not at every pretension: README, docs/REPRODUCTIONS.md, "Thesis physics at 3 kHz").
+    The thesis's physics, each switchable (``with_physics``): motor friction (3.8) and ripple, guide
+    friction on every tendon path ((4.1) at each tendon's bending angle, or the capstan form), spring
+    hysteresis (Fig 4.8b; hysteresis and guide friction are Dahl states), the tendon's own elasticity in
+    series with each mechanism (``spring.include_tendon``), and the joints' stick-slip friction (off by
+    default).  Per-name overrides, tuples of ``(name, params)`` pairs: ``tendon_springs``
+    (``SpringModelParams``), ``tendon_motors`` (``MotorParams``: friction, ripple, inertia, damping of one
+    motor; pulley radius, torque limit and saturation stay those of ``motor``), ``tendon_guides``
+    (``TendonGuideParams``, whether ``guide_friction`` is on or off for the others) and ``joint_frictions``
+    (``JointFrictionParams`` by joint name).
     """
 
     motor: MotorParams = field(default_factory=lambda: MotorParams(ripple=True))
@@ -433,6 +389,10 @@ class FingerDriveParams(Parameters):
                         or not isinstance(entry[1], cls)):
                     raise ValueError(f"{type(self).__name__}.{name}[{i}] = {entry!r} must be a "
                                      f"({name.split('_')[0].rstrip('s')}_name, {cls.__name__}) pair")
+            keys = [k for k, _ in getattr(self, name)]
+            if len(set(keys)) < len(keys):
+                raise ValueError(f"{type(self).__name__}.{name}: {next(k for k in keys if keys.count(k) > 1)!r} is "
+                                 "given twice")
             if name == "joint_frictions":       # joint names are checked where the plant is built
                 continue
             names = self.tendon_names

@@ -159,7 +159,7 @@ class HandChainParams(Parameters):
     sampled_pole_limit: float = param(
         0.25, unit="-", low=0.0, high=1.0, low_inclusive=False,
         source=("chosen: |h lambda| <= 1/4 for the designed joint modes of the finger backstepping at its control "
-                "period h (the rule that fixed the joint-rig backstepping at 3 kHz, control/backstepping_registry.py); "
+                "period h (the rule that fixed the joint-rig backstepping at 3 kHz, control/catalog.py); "
                 "measured on the index: unclamped the 15.5 joint design has a pole at -6838 1/s (h lambda = -2.3 "
                 "at 3 kHz) and the sampled loop's spectral radius is 1.18"))
     friction_scale: float = param(

@@ -15,13 +15,8 @@ __all__ = ["SpringModelParams", "TendonRigParams", "FlexibleJointParams", "Joint
 
 @dataclass(frozen=True)
 class SpringModelParams(Parameters):
-    """How a rig's tendon spring is modelled.
-
-    The rigs use the thesis's real-time form: a calibration polynomial
-    (degree ``polynomial_degree``) fitted to the lever mechanism in series with
-    the tendon (ch. 4: the calibration is done on the mounted tendon, so the
-    tendon's elasticity is inside the polynomial).
-    """
+    """How a rig's tendon spring is modelled: the thesis's real-time form, a calibration polynomial fitted to
+    the lever mechanism in series with the tendon (ch. 4: calibrated on the mounted tendon)."""
 
     geometry: SpringMechanismGeometry = field(default_factory=SpringMechanismGeometry)
     tendon: TendonParams = field(default_factory=TendonParams)

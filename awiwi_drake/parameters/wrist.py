@@ -1,23 +1,10 @@
 """Wrist of the Awiwi hand (thesis ch. 6): geometry and tendon offsets.
 
-Sources
--------
-* Table 6.1: wrist length ``a`` = 0.050 m, width ``b`` = 0.042 m, thickness
-  ``c`` = 0.036 m.
-* Table 6.2: for each of the 38 tendons, the point it passes in the forearm
-  frame 0 and in the palm frame ABC (two layers of 19 tendons).  Transcribed
-  row by row from the thesis (the PDF text glues the rows; every row was
-  re-parsed and checked: 38 rows, 3 + 3 coordinates each, monotone in y).
-  Rows 1-19 are the layer at forearm z = 0.008 m / palm z = +0.010 m, rows
-  20-38 the layer at forearm z = 0.028 m / palm z = -0.010 m.  The printed
-  values are rounded to 1 mm (the forearm y values of layer 1 are
-  ``0.007 + 0.0016 k`` truncated to mm, k = 0..18), so lengths built from them
-  carry roughly +-0.5 mm of table rounding.
-
-The radii of the linkage (R_BB0, R_CC0, D_BC, R_AA0 and the length of the
-link A0A) are not printed in the thesis; they are derived from a, b, c by the
-box construction documented in :mod:`awiwi_drake.hand.wrist` and exposed as
-read-only properties here.
+Table 6.1 gives the wrist box (a, b, c); Table 6.2, transcribed row by row, the point each of the 38
+tendons passes in the forearm frame 0 and in the palm frame ABC (two layers of 19: rows 1-19 at forearm
+z = 0.008 m / palm z = +0.010 m, rows 20-38 at 0.028 m / -0.010 m; printed to 1 mm, so lengths built from
+them carry ~+-0.5 mm of rounding).  The linkage lengths are not printed; they are derived from a, b, c by
+the box construction of :mod:`awiwi_drake.hand.wrist` (read-only properties here).
 """
 
 from __future__ import annotations
@@ -122,16 +109,10 @@ TABLE_6_2_PALM = (
 class WristParams(Parameters):
     """Geometry of the wrist (double inverted parallelogram) and its 38 tendon points.
 
-    Frames: the forearm frame 0 has x along the forearm towards the hand, y
-    across the width (0 <= y <= b) and z across the thickness (0 <= z <= c),
-    origin at a corner of the wrist box (the centre of the Table 6.2 forearm
-    points is (y, z) = (b/2, c/2)).  The palm frame ABC is built from the palm
-    points A, B, C (see :func:`awiwi_drake.hand.wrist.wrist_kinematics`).
-
-    Derived lengths (not printed in the thesis, see the module docstring of
-    :mod:`awiwi_drake.hand.wrist`): ``crank_length`` R_BB0 = R_CC0 =
-    sqrt(a^2 + b^2 + c^2), ``coupler_length`` D_BC = c, ``palm_radius``
-    R_AA0 = |AM| = b, ``link_length`` |AA0| = sqrt(a^2 + b^2).
+    Frames as in :mod:`awiwi_drake.hand.wrist` (forearm frame 0 at a corner of the wrist box; the palm
+    frame ABC from the palm points).  Derived lengths: ``crank_length`` R_BB0 = R_CC0 =
+    sqrt(a^2 + b^2 + c^2), ``coupler_length`` D_BC = c, ``palm_radius`` R_AA0 = |AM| = b, ``link_length``
+    |AA0| = sqrt(a^2 + b^2).
     """
 
     length: float = param(0.050, unit="m", low=0.0, low_inclusive=False,

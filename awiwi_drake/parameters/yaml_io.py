@@ -1,16 +1,10 @@
 """Parameter sets as YAML, through Drake's ``yaml_load_typed`` / ``yaml_dump_typed``.
 
-Drake's typed YAML reads and writes dataclasses whose field annotations are
-real types.  A :class:`~awiwi_drake.parameters.base.Parameters` class declares
-vectors as tuples and is frozen, so each class gets a mirror *schema*
-dataclass (same name, same fields; vectors as ``list[float]``; nested sets as
-their schemas; ``A | B`` unions as Drake's tagged unions, e.g.
-``finger: !ThumbParams {...}``; named overrides ``tuple[tuple[str, P], ...]``, e.g.
-``tendon_motors``, as a mapping ``{name: P}`` whose entries are whole sets: keys they leave
-out take ``P``'s defaults).  Loading goes YAML -> schema (Drake: unknown
-keys and wrong types are rejected) -> the frozen parameter set (our
-validation: units, ranges, ceilings).  A YAML file may give only some fields;
-the others keep the values of ``defaults``.
+Each :class:`~awiwi_drake.parameters.base.Parameters` class gets a mirror *schema* dataclass for Drake's
+typed YAML (vectors as ``list[float]``, nested sets as their schemas, ``A | B`` unions as tagged unions,
+e.g. ``finger: !ThumbParams {...}``, named overrides such as ``tendon_motors`` as a mapping ``{name: P}``
+of whole sets).  Loading goes YAML -> schema (Drake rejects unknown keys and wrong types) -> the frozen
+parameter set (units, ranges, ceilings); fields the YAML leaves out keep the values of ``defaults``.
 
 >>> from awiwi_drake.parameters import JointRigParams
 >>> text = to_yaml(JointRigParams().replace(pretension=40.0))

@@ -12,7 +12,7 @@ import numpy as np
 
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.analysis import Samples, Step, simulate
-from awiwi_drake.control.sdre import joint_sdre_controller, tendon_sdre_controller
+from awiwi_drake.control.sdre import SDRE_GAIN, joint_sdre_controller, tendon_sdre_controller
 from awiwi_drake.control.tendon_force import ForceMap, force_map
 from awiwi_drake.parameters import FlexibleJointParams
 from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, SdreJointParams, SdreTendonParams
@@ -75,11 +75,12 @@ def tendon_sdre_experiment(fixed: bool, *, schedule: Sequence[tuple[float, float
     ctx = loop.create_context(state=op.state, motor_torque=op.motor_torque, references={"tendon_force_reference": 0.0})
     ref = Samples([0.0, *(t for t, _ in schedule)], [0.0, *(r for _, r in schedule)])   # piecewise constant
     log = simulate(loop, ctx, t_final, inputs={"tendon_force_reference": ref},
-                   log=("tendon_force", "controller_gain", "motor_torque", "tendon_force_reference"), log_period=1 / RATE)
+                   log=("tendon_force", f"controller_{SDRE_GAIN}", "motor_torque", "tendon_force_reference"),
+                   log_period=1 / RATE)
     u = log["motor_torque"][:, 0]
     limit = rig.params.motor.torque_limit  # the rig's amplifier saturates the command (Table 14.1 gains exceed it)
     return SdreRun("fixed gains" if fixed else "SDRE", "tendon_force", "N", log.t, log["tendon_force"][:, 0],
-                   log["tendon_force_reference"][:, 0], log["controller_gain"], u, limit)
+                   log["tendon_force_reference"][:, 0], log[f"controller_{SDRE_GAIN}"], u, limit)
 
 
 def joint_sdre_experiment(fixed: bool, *, target: float = 1.0, external_torque: float = 0.0,

@@ -22,13 +22,9 @@ def state_names(*, joints=0, motors=0, hysteresis: bool = False, guide_friction:
                 joint_friction: bool = False) -> tuple[str, ...]:
     """The one state-naming scheme of every rig, finger and the hand (diagram state order).
 
-    ``joint_angle[j]``, ``joint_velocity[j]`` (the MultibodyPlant's ``[q, v]``), then
-    ``motor_angle[i]``, ``motor_velocity[i]`` (the drive's ``[theta, omega]``, output shaft), then
-    ``hysteresis_force[i]`` when the springs carry a hysteresis state, then
-    ``guide_friction_force[i]`` when the tendon paths carry a guide friction state, then
-    ``joint_friction_torque[j]`` when the joints carry a stick-slip friction state. ``joints`` and ``motors``
-    are counts (labels ``0, 1, ...``) or sequences of labels (joint names such as ``q21``,
-    tendon names).
+    ``joint_angle[j]``, ``joint_velocity[j]``, ``motor_angle[i]``, ``motor_velocity[i]`` (output shaft), then
+    when present ``hysteresis_force[i]``, ``guide_friction_force[i]``, ``joint_friction_torque[j]``.  ``joints``
+    and ``motors`` are counts (labels ``0, 1, ...``) or sequences of labels (joint names, tendon names).
     """
     j, m = _labels(joints), _labels(motors)
     return tuple([f"joint_angle[{a}]" for a in j] + [f"joint_velocity[{a}]" for a in j]
@@ -40,33 +36,13 @@ def state_names(*, joints=0, motors=0, hysteresis: bool = False, guide_friction:
 
 @dataclass(frozen=True)
 class OperatingPoint:
-    """An equilibrium of a rig: full state and the inputs that hold it.
-
-    Attributes
-    ----------
-    state : ndarray
-        Continuous state of the rig diagram, in ``Rig.state_names`` order.
-    motor_torque : ndarray
-        Commanded motor torques [Nm] that hold the equilibrium.
-    external_torque : ndarray or None
-        External joint torques [Nm] (rigs with joints).
-    pretension : float or None
-        Common tendon pretension [N] that defined the point (joint rig, fingers, hand).
-    joint_angle : ndarray or None
-        Joint angles q [rad] at the point (one per joint).
-    wrist_angle : ndarray or None
-        Wrist angles [rad] (fingers and the hand).
-    tendon_force : ndarray or None
-        Tendon (spring-mechanism) forces [N].
-    elongation : ndarray or None
-        Spring elongations [m].
-    tendon_stiffness : ndarray or None
-        Tendon stiffness df/dx [N/m] per tendon.
-    joint_stiffness : float, ndarray or None
-        Joint stiffness [Nm/rad]: a number for one joint (``r_q^2 (k1 + k2)`` of the joint rig,
-        the torsion spring of the flexible joint), the matrix (5.12) for fingers and the hand.
-    spring_torque : float or None
-        Torque in the torsion spring [Nm] (flexible joint).
+    """An equilibrium of a rig: its full state (``Rig.state_names`` order), the motor torques [Nm] and
+    external joint torques [Nm] (rigs with joints) that hold it, and what defined it or follows from it:
+    the common tendon ``pretension`` [N], ``joint_angle`` and ``wrist_angle`` [rad], per tendon the
+    ``tendon_force`` [N], spring ``elongation`` [m] and ``tendon_stiffness`` df/dx [N/m], the
+    ``joint_stiffness`` [Nm/rad] (a number for one joint: ``r_q^2 (k1 + k2)`` of the joint rig, the torsion
+    spring of the flexible joint; the matrix (5.12) for fingers and the hand) and the torsion spring's
+    ``spring_torque`` [Nm] (flexible joint).  None: not defined for the rig.
     """
 
     state: np.ndarray
@@ -114,53 +90,23 @@ class RigPorts:
 class Rig:
     """A plant diagram with named ports, its parameters and its operating points.
 
-    Attributes
-    ----------
-    name : str
-    diagram : Diagram
-        Exported inputs ``motor_torque`` (and ``external_torque`` for link rigs);
-        outputs ``state`` and named physical quantities.
-    params : Parameters
-    state_names : tuple of str
-        Names of the continuous state in diagram order.
-    plant : MultibodyPlant or None
-    equilibrium : callable
-        ``equilibrium(**kwargs) -> OperatingPoint``; see :meth:`operating_point`.
-    spring : object
-        The spring law used (``force``, ``stiffness``).
-    drive : TendonDrive or None
-        The tendon-drive handle inside the diagram.
-    coupling : object or None
-        The routing coupling (``h(q)``, ``P(q)``) of the drive.
-    tension_only : bool
-        Tendon forces cannot push (slack is monitored on ``tendon_force``).
-    torque_limit : float or None
-        Amplifier limit [Nm] on ``motor_torque`` (None: no saturation).
-    max_force : float or None
-        Upper end of the calibrated spring range [N] (over-range monitor).
-    pair_slack : tuple or None
-        ``(x0, r)`` of an antagonistic torsion-spring pair whose hidden tendons can slacken.
-    spring_kind : str or None
-        ``"linear"`` or ``"nonlinear"`` for the flexible joint.
-    tendon_force_of_state : callable or None
-        ``states (T, n_states) -> tendon forces (T, m)``, the law of the ``tendon_force`` port
-        vectorised over samples; the slack/over-range monitors apply it to the logged state
-        instead of evaluating the port at every step.
-    sampled_diagram : callable or None
-        ``sampled_diagram(period, hold_applied_torque=False) -> Diagram``: a new diagram with the same
-        ports and state order whose dynamics are Drake's ``DiscreteTimeApproximation`` at ``period`` [s]
-        (fixed-step RK3, one step per period, input held; ``Linearize`` with the period);
-        :func:`~awiwi_drake.control.closed_loop` puts it in sampled loops, with ``applied_torque`` held
-        over the period (the single-joint rigs; None: the rig has none). Its discrete state is in the
-        integration coordinates of :func:`~awiwi_drake.components.rig_system.rig_integration_system`
-        (``[q, p, x, omega, ...]``: link-and-motor momentum, elongations); its ``state`` output is physical.
-    sampled_state : callable or None
-        ``sampled_state(state) -> discrete state of sampled_diagram``: a physical state (``state_names``
-        order) in those integration coordinates (what :meth:`ClosedLoop.initialize` writes).
-    add_sampled : callable or None
-        ``add_sampled(builder, period, hold_applied_torque=False) -> RigPorts``: the systems of
-        ``sampled_diagram`` added to ``builder`` directly (the same implementation; what
-        :func:`~awiwi_drake.control.closed_loop` does: a sub-diagram costs the simulator ~1 us per period).
+    ``diagram`` exports the input ``motor_torque`` (and ``external_torque`` for link rigs) and the outputs
+    ``state`` and named physical quantities; ``state_names`` names its continuous state in diagram order;
+    ``equilibrium(**kwargs) -> OperatingPoint`` (see :meth:`operating_point`); ``spring`` is the spring law
+    used, ``drive`` the tendon-drive handle and ``coupling`` its routing (``h(q)``, ``P(q)``).  For the
+    monitors: ``tension_only`` (slack is monitored on ``tendon_force``), ``torque_limit`` [Nm] (None: no
+    saturation), ``max_force`` [N] (upper end of the calibrated spring range), ``pair_slack`` ``(x0, r)`` of an
+    antagonistic torsion-spring pair whose hidden tendons can slacken, ``spring_kind`` (``"linear"`` or
+    ``"nonlinear"``, flexible joint) and ``tendon_force_of_state`` (``states (T, n_states) -> forces (T, m)``,
+    the ``tendon_force`` law over logged samples).
+
+    The single-joint rigs also have a sampled form (None elsewhere): ``sampled_diagram(period,
+    hold_applied_torque=False)`` is a new diagram with the same ports whose dynamics are Drake's
+    ``DiscreteTimeApproximation`` at ``period`` [s] (fixed-step RK3, one step per period, input held), in the
+    integration coordinates of :func:`~awiwi_drake.components.rig_system.rig_integration_system` (its
+    ``state`` output is physical); ``sampled_state(state)`` maps a physical state into them;
+    ``add_sampled(builder, period, hold_applied_torque=False) -> RigPorts`` adds the same systems to a
+    caller's builder without a sub-diagram (what :func:`~awiwi_drake.control.closed_loop` does).
     """
 
     name: str

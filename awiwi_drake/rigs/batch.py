@@ -1,12 +1,8 @@
 """N copies of a single-joint rig in one system (Monte-Carlo runs, sweeps over inputs).
 
 :func:`batched_joint_rig` builds ``num_copies`` joint rigs (Fig 5.9) as one
-:class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_`: one compiled
-loop over the copies per derivative evaluation instead of one diagram and one
-Python callback per copy. The copies share the rig's parameters; inputs and
-initial states differ per copy. State: copy ``i`` occupies
-``[6 i, 6 i + 6)`` in the joint rig's order ``[q, qdot, theta1, theta2, omega1,
-omega2]``; inputs are copy-major (``motor_torque[2 i : 2 i + 2]``).
+:class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_` (one compiled loop over the copies).  The
+copies share the rig's parameters; inputs and initial states differ per copy, copy-major.
 """
 
 from __future__ import annotations
@@ -64,13 +60,9 @@ class BatchedRig:
 
 
 def batched_joint_rig(num_copies: int, *, params: JointRigParams | None = None) -> BatchedRig:
-    """``num_copies`` joint rigs with ``params`` in one system (see the module docstring).
-
-    ``BatchedRig.diagram`` is the :class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_`
-    itself (ports ``motor_torque``, ``external_torque``, ``state``, ``joint_angle``,
-    ``tendon_force``), not wrapped in a Diagram: a diagram that adds controllers then holds the
-    copies' state in one contiguous block (no nested sub-vectors for the integrator to walk).
-    """
+    """``num_copies`` joint rigs with ``params`` in one system; ``BatchedRig.diagram`` is the
+    :class:`~awiwi_drake.components.fused_drive.TendonDriveBatch_` itself, not wrapped in a Diagram, so a loop
+    around it holds the copies' state in one contiguous block."""
     single = joint_rig(params=params)
     system = TendonDriveBatch_[float](single.drive.model, num_copies)
     system.set_name(f"joint_rig_x{num_copies}")

@@ -1,25 +1,17 @@
 """The test rigs of the thesis as Drake diagrams.
 
-* :func:`motor_rig` - one free motor, no tendon: the plant of ch. 3 ((3.5)).
-  State ``[theta, omega]``.
-* :func:`tendon_rig` - one motor winding one tendon through a spring mechanism,
-  far end fixed: the plant of ch. 10 (10.1) and 14.2.1. State ``[theta, omega]``.
-* :func:`flexible_joint_rig` - motor, spring, link: the 4th-order plant (12.8)
-  (and ch. 15.2-15.4). State ``[q, qdot, theta, thetadot]`` as in (12.10).
-* :func:`joint_rig` - one link driven antagonistically by two motors through two
-  nonlinear springs with pretension (Fig 5.9, ch. 15.5).
-  State ``[q, qdot, theta1, theta2, omega1, omega2]``.
+* :func:`motor_rig` - one free motor, no tendon: the plant of ch. 3 ((3.5)).  State ``[theta, omega]``.
+* :func:`tendon_rig` - one motor winding one tendon through a spring mechanism, far end fixed: the plant
+  of ch. 10 (10.1) and 14.2.1.  State ``[theta, omega]``.
+* :func:`flexible_joint_rig` - motor, spring, link: the 4th-order plant (12.8) (and ch. 15.2-15.4).
+  State ``[q, qdot, theta, thetadot]`` as in (12.10).
+* :func:`joint_rig` - one link driven antagonistically by two motors through two nonlinear springs with
+  pretension (Fig 5.9, ch. 15.5).  State ``[q, qdot, theta1, theta2, omega1, omega2]``.
 
 A rig's dynamics are *one* C++ ``SymbolicVectorSystem`` generated from the law functions
-(:func:`~awiwi_drake.components.rig_system.rig_dynamics_system`: the drive, with a
-link inside ``I qdd = tau - d qd + tau_ext`` for the one revolute joint, no
-MultibodyPlant; output the state) plus the stateless
-:class:`~awiwi_drake.components.rig_system.LinkRigOutputs_` for the tendon forces,
-stiffnesses, joint torque and applied torque (evaluated only when read); the motor rig's
-is the motor law alone;
-``Rig.plant`` is None. Tests check both against the laws evaluated apart at random states.
-
-Every block is named; ports are named after physical quantities.
+(:mod:`awiwi_drake.components.rig_system`; no MultibodyPlant, ``Rig.plant`` is None) plus the stateless
+:class:`~awiwi_drake.components.rig_system.LinkRigOutputs_` for the tendon forces, stiffnesses, joint
+torque and applied torque.  Every block is named; ports are named after physical quantities.
 """
 
 from __future__ import annotations
@@ -66,11 +58,9 @@ def _check_params(params, cls, rig):
 def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
     """One motor, one spring mechanism, tendon fixed at the far end (ch. 10, 14.2.1).
 
-    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega],
-    ``motor_angle``, ``motor_velocity``, ``tendon_force`` [N], ``tendon_stiffness`` [N/m],
-    ``applied_torque`` [Nm].
-
-    Operating point keys: ``tendon_force`` [N] (default ``params.operating_force``).
+    Ports: in ``motor_torque`` (1) [Nm]; out ``state`` = [theta, omega], ``motor_angle``, ``motor_velocity``,
+    ``tendon_force`` [N], ``tendon_stiffness`` [N/m], ``applied_torque`` [Nm].  Operating point key:
+    ``tendon_force`` [N] (default ``params.operating_force``).
     """
     p = _check_params(params, TendonRigParams, "tendon_rig")
     spring = tendon_spring(p.spring)
@@ -87,7 +77,7 @@ def tendon_rig(*, params: TendonRigParams | None = None) -> Rig:
         theta = x / p.motor.pulley_radius
         u = p.motor.pulley_radius * tendon_force - float(motor_ripple_torque(np.array([theta]), p.motor)[0])
         _check_torque("tendon_rig", np.array([u]), p.motor, f"tendon_force = {tendon_force} N")
-        state = [theta, 0.0] + ([0.0] if drive.hysteresis else [])
+        state = [theta, 0.0] + ([0.0] if drive.model.has_hysteresis else [])
         return OperatingPoint(np.array(state), np.array([u]), None, tendon_force=np.array([tendon_force]),
                               elongation=np.array([x]), tendon_stiffness=spring.stiffness(np.array([x])))
 
@@ -108,16 +98,11 @@ def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, mo
     model = DriveModel(motor, laws, coupling, np.zeros(coupling.num_tendons), r_m, hysteresis, **link)
 
     def add(b, period=None, *, hold_applied_torque=False) -> RigPorts:
-        """The rig's systems added to the DiagramBuilder ``b`` (no sub-diagram), continuous (``period``
-        None) or sampled at ``period`` [s] (the dynamics as Drake's DiscreteTimeApproximation,
-        :func:`~awiwi_drake.components.rig_system.sampled_dynamics`, of
-        :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.
-        The sampled rig's discrete state is in integration coordinates (``Rig.sampled_state`` maps a
-        physical state there); its ``state`` output is the physical state. A sampled rig's
-        ``applied_torque`` is that of its current input, or with ``hold_applied_torque`` that of the input
-        it holds over the current period (a zero-order hold, a second discrete state, also output as
-        ``held_motor_torque``: what a loop logs; the rig alone stays a difference equation with one state
-        group, which Drake's ``Linearize`` needs)."""
+        """The rig's systems added to the DiagramBuilder ``b`` (no sub-diagram), continuous (``period`` None) or
+        sampled at ``period`` [s] (:func:`~awiwi_drake.components.rig_system.sampled_dynamics` of
+        :func:`~awiwi_drake.components.rig_system.rig_integration_system`); the same ports either way.  With
+        ``hold_applied_torque`` a sampled rig's ``applied_torque`` is that of the input it holds over the
+        current period (a zero-order hold, also output as ``held_motor_torque``)."""
         m, n = coupling.num_tendons, coupling.num_joints
         if period is None:
             dyn = b.AddNamedSystem("rig_dynamics", rig_dynamics_system(model))
@@ -167,18 +152,11 @@ def _link_rig(*, name, motor, spring, coupling, inertia, damping, hysteresis, mo
 def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str | None = None) -> Rig:
     """Fourth-order flexible joint (12.8): motor, spring, link.
 
-    ``m qdd = -d_q qd + tau_s + tau_ext``, ``b thdd = -d_th thd - tau_s + u``, with
-    ``tau_s = k (theta - q)`` (``spring="linear"``, Table 12.1) or the antagonistic
-    lever-spring pair ``phi(theta - q)`` (``spring="nonlinear"``, ch. 15.4).
-    The motor has no (3.8) friction here: (12.8) uses the linear damping d_theta.
-
-    Ports: in ``motor_torque`` (1), ``external_torque`` (1) [Nm]; out ``state`` =
-    [q, qdot, theta, thetadot] (the order of (12.10)), ``joint_angle``,
-    ``joint_velocity``, ``motor_angle``, ``motor_velocity``, ``tendon_force`` (=
-    spring torque tau_s [Nm]), ``tendon_stiffness`` [Nm/rad], ``joint_torque``,
-    ``applied_torque``.
-
-    Operating point keys: ``joint_angle`` [rad], ``external_torque`` [Nm].
+    ``m qdd = -d_q qd + tau_s + tau_ext``, ``b thdd = -d_th thd - tau_s + u``, with ``tau_s = k (theta - q)``
+    (``spring="linear"``, Table 12.1) or the antagonistic lever-spring pair ``phi(theta - q)``
+    (``spring="nonlinear"``, ch. 15.4); no (3.8) motor friction ((12.8) uses the damping d_theta).  Ports as
+    :func:`joint_rig`'s with one motor; ``tendon_force`` is the spring torque tau_s [Nm] and
+    ``tendon_stiffness`` [Nm/rad].  Operating point keys: ``joint_angle`` [rad], ``external_torque`` [Nm].
     """
     p = _check_params(params, FlexibleJointParams, "flexible_joint_rig")
     if spring is not None:  # keyword shortcut for params.spring_model
@@ -207,7 +185,7 @@ def flexible_joint_rig(*, params: FlexibleJointParams | None = None, spring: str
     def equilibrium(joint_angle: float = 0.0, external_torque: float = 0.0) -> OperatingPoint:
         tau_s = -float(external_torque)
         delta = float(np.ravel(law.inverse_force(np.array([tau_s])))[0]) if spring == "nonlinear" else tau_s / p.stiffness
-        state = np.array([joint_angle, 0.0, joint_angle + delta, 0.0] + ([0.0] if drive.hysteresis else []))
+        state = np.array([joint_angle, 0.0, joint_angle + delta, 0.0] + ([0.0] if drive.model.has_hysteresis else []))
         if finite_limit and abs(tau_s) > p.torque_limit:
             raise ValueError(f"flexible_joint_rig: external_torque = {external_torque} Nm needs a motor torque "
                              f"beyond torque_limit = {p.torque_limit} Nm")
@@ -227,14 +205,11 @@ def joint_rig(*, params: JointRigParams | None = None) -> Rig:
     ``x1 = r_m th1 - r_q q``, ``x2 = r_m th2 + r_q q``, ``f_i = f(x_i)``,
     ``m qdd = r_q (f1 - f2) - d_q qd + tau_ext``, motors per (3.5).
 
-    Ports: in ``motor_torque`` (2), ``external_torque`` (1) [Nm]; out ``state`` =
-    [q, qdot, theta1, theta2, omega1, omega2], ``joint_angle``, ``joint_velocity``,
-    ``motor_angle`` (2), ``motor_velocity`` (2), ``tendon_force`` (2) [N],
-    ``tendon_stiffness`` (2) [N/m], ``joint_torque`` [Nm], ``applied_torque`` (2).
-
-    Operating point keys: ``pretension`` [N] (default ``params.pretension``),
-    ``joint_angle`` [rad], ``external_torque`` [Nm]. The joint stiffness there is
-    ``r_q^2 (k1 + k2)``.
+    Ports: in ``motor_torque`` (2), ``external_torque`` (1) [Nm]; out ``state``, ``joint_angle``,
+    ``joint_velocity``, ``motor_angle`` (2), ``motor_velocity`` (2), ``tendon_force`` (2) [N],
+    ``tendon_stiffness`` (2) [N/m], ``joint_torque`` [Nm], ``applied_torque`` (2).  Operating point keys:
+    ``pretension`` [N] (default ``params.pretension``), ``joint_angle`` [rad], ``external_torque`` [Nm]; the
+    joint stiffness there is ``r_q^2 (k1 + k2)``.
     """
     p = _check_params(params, JointRigParams, "joint_rig")
     spring = tendon_spring(p.spring)
@@ -258,7 +233,8 @@ def joint_rig(*, params: JointRigParams | None = None) -> Rig:
         theta = np.array([(x[0] + rq * joint_angle) / r, (x[1] - rq * joint_angle) / r])
         u = r * f - motor_ripple_torque(theta, p.motor)
         _check_torque("joint_rig", u, p.motor, f"pretension = {f0} N")
-        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], np.zeros(2) if drive.hysteresis else []])
+        hysteresis = np.zeros(2) if drive.model.has_hysteresis else []
+        state = np.concatenate([[joint_angle, 0.0], theta, [0.0, 0.0], hysteresis])
         k = np.asarray(spring.stiffness(x), dtype=float)
         return OperatingPoint(state, u, np.array([float(external_torque)]), pretension=f0,
                               joint_angle=np.array([joint_angle]), tendon_force=f, elongation=x, tendon_stiffness=k,

@@ -321,11 +321,9 @@ def linear_bandwidth(lin, output=None, *, per_decade: int = 100) -> float:
     g = np.abs(lin.bode(0, output, omega=w).response)
     level = dc / math.sqrt(2.0)
     below = np.nonzero(g < level)[0]
-    if not len(below):
+    if not len(below) or below[0] == 0:
         return math.nan
     k = int(below[0])
-    if k == 0:
-        return math.nan
     wb = brentq(lambda x: abs(H(x)) - level, w[k - 1], w[k], xtol=1e-12, rtol=1e-10)
     return float(wb / (2 * math.pi))
 

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import math
 
-from awiwi_drake.control.compare.metrics import UNITS, MetricsTable
 from awiwi_drake.control.compare.standard_tests import Comparison
 from awiwi_drake.plotting import label_axes
 
-__all__ = ["plot_runs", "plot_joint_runs", "plot_gain_diagram", "plot_metric"]
+__all__ = ["plot_runs", "plot_joint_runs", "plot_gain_diagram"]
 
 
 def plot_runs(comparison: Comparison, test: str = "step", *, ax=None, ylabel: str | None = None):
@@ -99,13 +98,3 @@ def plot_gain_diagram(comparison: Comparison, *, ax=None, unit: str | None = Non
     ax.grid(True, which="both", alpha=0.3)
     return fig, ax
 
-
-def plot_metric(table: MetricsTable, metric: str, test: str, *, ax=None):
-    """Bar chart of one metric over controllers."""
-    import matplotlib.pyplot as plt
-    col = table.column(metric, test)
-    fig, ax = (plt.subplots(figsize=(6, 3.5)) if ax is None else (ax.figure, ax))
-    ax.bar(list(col), [v if math.isfinite(v) else 0.0 for v in col.values()])
-    ax.set_ylabel(f"{metric} [{UNITS[metric]}]")
-    ax.set_title(test)
-    return fig, ax

@@ -1,8 +1,5 @@
-"""Simulation of a closed loop for the standard tests, through :func:`awiwi_drake.analysis.simulate`.
-
-References and disturbances are input schedules (``Step``, ``Sine``, ``Chirp``) wired in as Drake
-sources; outputs are logged every ``dt`` (the control period for sampled loops).
-"""
+"""What the standard tests share: the run record (:class:`TestRun`), the start settled at the initial reference
+(:func:`settle`, through :func:`awiwi_drake.analysis.simulate`) and the motors' applied torque and limit."""
 
 from __future__ import annotations
 
@@ -11,11 +8,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from awiwi_drake.analysis import simulate
-from awiwi_drake.analysis.schedules import Schedule
 from awiwi_drake.control.base import ClosedLoop
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TestRun", "simulate_test", "settle"]
+__all__ = ["TestRun", "applied_port", "torque_limit", "settle"]
 
 
 @dataclass
@@ -44,37 +40,6 @@ def torque_limit(loop: ClosedLoop, size: int):
     if limit is None and isinstance(loop.rig, Rig) and loop.rig.torque_limit is not None:
         limit = np.full(size, float(loop.rig.torque_limit))  # the rig's own amplifier limit
     return limit
-
-
-def simulate_test(loop: ClosedLoop, context, t_final: float, dt: float, reference: Schedule,
-                  disturbance: Schedule | None, max_step: float, controller: str, test: str,
-                  meta: dict | None = None) -> TestRun:
-    """One test through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` (the control period):
-    ``reference`` on every reference input, ``disturbance`` on ``external_torque``."""
-    inputs = {r: reference for r in loop.references}
-    if "external_torque" in loop.disturbances:
-        inputs["external_torque"] = disturbance if disturbance is not None else 0.0
-    y = loop.tracked_outputs[0]
-    log = [y, "motor_torque_command", "state", loop.references[0]]
-    if "external_torque" in inputs:
-        log.append("external_torque")
-    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
-    if slack and y != "tendon_force":
-        log.append("tendon_force")
-    applied = loop.diagram.HasOutputPort("applied_torque")  # the motors' torque after their saturation
-    if applied:
-        log.append("applied_torque")
-    res = simulate(loop, context, context.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
-                   max_step=max_step, accuracy=1e-6)
-    t = res.t - res.t[0]
-    w = res["external_torque"][:, 0] if "external_torque" in res else np.zeros(len(t))
-    meta = dict(meta or {})
-    if slack:
-        meta["tendon_force"] = res["tendon_force"]
-    if applied:
-        meta["applied_torque"] = res["applied_torque"]
-    return TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0],
-                   res["motor_torque_command"], w, res["state"], meta)
 
 
 def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: float = 2e-4, state=None,

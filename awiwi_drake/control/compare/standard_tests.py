@@ -34,11 +34,12 @@ from awiwi_drake.control.base import ClosedLoop, closed_loop
 from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, disturbance_metrics, gain_diagram,
                                                  linear_bandwidth, sine_metrics, step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
-from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, simulate_test, torque_limit
+from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, torque_limit
 from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
+from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TESTS", "compare_test_params", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
+__all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
            "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
            "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load",
            "design_stiffness", "size_loads", "load_stiffness_range"]
@@ -219,20 +220,16 @@ def load_stiffness_range(load: float, bound: float, stiffness: float,
 
 def mark_load(row: Metrics, params: CompareTestParams, bound: float, impedance: float | None = None,
               note: str = "") -> None:
-    """A load row (``row.load_torque`` ``L``) of a chain whose (9.2) observer clips at its friction bound ``bound``
-    [Nm] (the DoF's ``B_j = sum_i |(P S)_ij| W_i``, :class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`,
-    at the end of the run), ``impedance`` the design's static stiffness ``K`` of the DoF [Nm/rad]
-    (:func:`design_stiffness`), ``note`` :func:`size_loads`'s (a load kept linear below its bound: flagged with it).
+    """Flag a load row (``row.load_torque`` ``L``) of a loop whose (9.2) observer clips at its friction bound
+    ``bound`` ``B`` [Nm] (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`, at the end of the run);
+    ``impedance`` the design's static stiffness ``K`` of the DoF [Nm/rad] (:func:`design_stiffness`), ``note``
+    :func:`size_loads`'s.
 
-    ``|L| < B``: the row's ``stiffness`` is NaN (the load over a deflection that went back to ~0, a meaningless
-    number of any size and sign) and its ``not settled`` / ``negative stiffness`` (measured against that ~0) become ``load held by the friction observer (X Nm within its bound Y Nm)``.  Physics, not a
-    failure of the loop: the observer is link-side, driven by the measured tendon forces' torque, so it attributes
-    every torque they do not explain to the link (9.1) and cannot tell a load below what the guides' friction can
-    be from that friction: it cancels it, and the joint does not show its impedance (in the thesis's (9.1)-(9.2)
-    the strain gauges' joint torque contains the load, which is then not estimated: sensors this hand does not
-    have, ch. 9).  ``not settled`` stays when the end drift exceeds the settling band of the impedance's own
-    deflection ``L / K``.  ``|L| >= B`` (the sized load): the measured stiffness must lie in
-    :func:`load_stiffness_range` (from ``B`` and the row's estimation error), else ``stiffness off its design``."""
+    ``|L| < B``: the observer, link-side and driven by the measured tendon forces' torque, cannot tell such a load from
+    the guides' friction and cancels it (9.1): the row's ``stiffness`` is NaN (a load over a deflection of ~0), and its
+    ``negative stiffness`` / ``not settled`` (unless it drifts beyond the band of ``L / K``) become ``load held by the
+    friction observer``.  ``|L| >= B``: the measured stiffness must lie in :func:`load_stiffness_range`, else
+    ``stiffness off its design``."""
     load = row.load_torque if math.isfinite(row.load_torque) else params.disturbance_torque
     row.friction_bound = float(bound)
     if impedance is not None:
@@ -287,6 +284,36 @@ def _sample_dt(loop: ClosedLoop, params: CompareTestParams) -> float:
     return 1.0 / loop.rate_hz if loop.rate_hz else params.sample_period
 
 
+def _schedule(test: str, p: CompareTestParams, r0: float):
+    """``(reference schedule, run length [s])`` of ``test`` from the start reference ``r0``."""
+    if test == "step":
+        return Step(p.step_delay, r0 + p.step_size, before=r0), p.step_duration
+    if test == "sine":
+        return Sine(p.sine_amplitude, p.sine_frequency, offset=r0), p.sine_periods / p.sine_frequency
+    if test == "disturbance":
+        return Constant(r0), p.step_duration
+    return Chirp(p.sweep_amplitude, p.sweep_start, p.sweep_stop, p.sweep_duration, offset=r0), p.sweep_duration
+
+
+def _set_test_metrics(row: Metrics, test: str, p: CompareTestParams, t, r, y, r0: float):
+    """Set ``test``'s metrics on ``row`` from one DoF's reference ``r`` and output ``y`` at the times ``t`` (the load
+    test's ``row.load_torque`` set before); the sweep returns its gain diagram ``(f, g)``."""
+    diagram = None
+    if test == "step":
+        values = step_metrics(t, y, r0, r0 + p.step_size, p.step_delay, band=p.settling_band, fit=True)
+    elif test == "sine":
+        skip = t >= 1.0 / p.sine_frequency  # drop the first period (transient)
+        values = sine_metrics(t[skip], r[skip], y[skip], p.sine_frequency)
+    elif test == "disturbance":
+        values = disturbance_metrics(t, y, r0, p.step_delay, row.load_torque)
+    else:
+        diagram = gain_diagram(t, r, y, p.sweep_start, p.sweep_stop)
+        values = dict(sweep_metrics(*diagram), bandwidth_source="chirp")
+    for k_, v in values.items():
+        setattr(row, k_, v)
+    return diagram
+
+
 def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
              params: CompareTestParams | None = None, settled=None) -> tuple[TestRun, Metrics]:
     """Run one standard test (``step``, ``sine``, ``disturbance``, ``sweep``) on a closed loop."""
@@ -303,55 +330,50 @@ def run_test(loop: ClosedLoop, test: str, *, controller: str = "controller",
     ctx = (settled.Clone() if settled is not None else settle(loop, r0, t_settle=p.settle_time, max_step=p.max_step))
     ctx.SetTime(0.0)
     meta: dict[str, Any] = {}
-    dist = None
-    if test == "step":
-        ref = Step(p.step_delay, r0 + p.step_size, before=r0)
-        t_final = p.step_duration
-    elif test == "sine":
-        ref = Sine(p.sine_amplitude, p.sine_frequency, offset=r0)
-        t_final = p.sine_periods / p.sine_frequency
-    elif test == "disturbance":
-        ref = Constant(r0)
-        dist = Step(p.step_delay, p.disturbance_torque)
-        t_final = p.step_duration
-    else:
-        f0, f1, T = p.sweep_start, p.sweep_stop, p.sweep_duration
-        ref = Chirp(p.sweep_amplitude, f0, f1, T, offset=r0)
-        t_final = T
-        meta.update(f_low=f0, f_high=f1)
+    ref, t_final = _schedule(test, p, r0)
+    if test == "sweep":
+        meta.update(f_low=p.sweep_start, f_high=p.sweep_stop)
         lin_bw = _linearized_bandwidth(loop, ctx)
-    run = simulate_test(loop, ctx, t_final, dt, ref, dist, p.max_step, controller, test, meta)
-    m = Metrics(controller, test, joint="tendon" if loop.tracked_outputs[0] == "tendon_force" else "link")
-    u = np.abs(run.command)
-    m.peak_command = float(np.max(u))
-    m.peak_input = float(np.max(np.abs(run.meta["applied_torque"]))) if "applied_torque" in run.meta else m.peak_command
-    limit = torque_limit(loop, u.shape[1])
-    ratio = _saturation(m, u, limit, dt)
-    if "tendon_force" in run.meta:
-        m.slack_fraction = float(np.mean(np.any(run.meta["tendon_force"] <= 0.0, axis=1)))
-    if test == "step":
-        for k_, v in step_metrics(run.t, run.output, r0, r0 + p.step_size, p.step_delay,
-                                 band=p.settling_band, fit=True).items():
-            setattr(m, k_, v)
-    elif test == "sine":
-        skip = run.t >= 1.0 / p.sine_frequency  # drop the first period (transient)
-        for k_, v in sine_metrics(run.t[skip], run.reference[skip], run.output[skip], p.sine_frequency).items():
-            setattr(m, k_, v)
-    elif test == "disturbance":
+    inputs = {r: ref for r in loop.references}
+    if "external_torque" in loop.disturbances:
+        inputs["external_torque"] = Step(p.step_delay, p.disturbance_torque) if test == "disturbance" else 0.0
+    y = loop.tracked_outputs[0]
+    slack = isinstance(loop.rig, Rig) and loop.rig.tension_only and loop.diagram.HasOutputPort("tendon_force")
+    extra = {"external_torque": "external_torque" in inputs, "tendon_force": slack and y != "tendon_force",
+             "applied_torque": loop.diagram.HasOutputPort("applied_torque")}   # the motors' torque after saturation
+    log = [y, "motor_torque_command", "state", loop.references[0]] + [n for n, on in extra.items() if on]
+    res = simulate(loop, ctx, t_final, inputs=inputs, log=log, log_period=dt, max_step=p.max_step, accuracy=1e-6)
+    if slack:
+        meta["tendon_force"] = res["tendon_force"]
+    if extra["applied_torque"]:
+        meta["applied_torque"] = res["applied_torque"]
+    t = res.t - res.t[0]
+    w = res["external_torque"][:, 0] if "external_torque" in res else np.zeros(len(t))
+    run = TestRun(controller, test, t, res[loop.references[0]][:, 0], res[y][:, 0], res["motor_torque_command"], w,
+                  res["state"], meta)
+    m = Metrics(controller, test, joint="tendon" if y == "tendon_force" else "link")
+    ratio = _command_metrics(m, run.command, run.meta.get("applied_torque", run.command),
+                             torque_limit(loop, run.command.shape[1]), dt, run.meta.get("tendon_force"))
+    if test == "disturbance":
         m.load_torque = p.disturbance_torque
-        for k_, v in disturbance_metrics(run.t, run.output.ravel(), r0, p.step_delay,
-                                         p.disturbance_torque).items():
-            setattr(m, k_, v)
-    else:
-        f, g = gain_diagram(run.t, run.reference, run.output, p.sweep_start, p.sweep_stop)
-        run.meta.update(freq=f, gain=g)
-        for k_, v in sweep_metrics(f, g).items():
-            setattr(m, k_, v)
-        m.bandwidth_source = "chirp"
+    diagram = _set_test_metrics(m, test, p, run.t, run.reference, run.output, r0)
+    if test == "sweep":
+        run.meta.update(freq=diagram[0], gain=diagram[1])
         if lin_bw is not None:
             m.bandwidth_hz, m.bandwidth_source = lin_bw, "linearization"
     flag_run(m, p, ratio)
     return run, m
+
+
+def _command_metrics(row: Metrics, command, applied, limit, dt: float, tendon_force=None) -> float | None:
+    """Set ``row``'s peak command and input (``applied``: after saturation), saturation (:func:`_saturation`, whose
+    peak ratio it returns) and slack (``tendon_force``, None: not tension-only) from its motors' logs."""
+    u = np.abs(command)
+    row.peak_command = float(np.max(u))
+    row.peak_input = float(np.max(np.abs(applied)))
+    if tendon_force is not None:
+        row.slack_fraction = float(np.mean(np.any(tendon_force <= 0.0, axis=1)))
+    return _saturation(row, u, limit, dt)
 
 
 def _saturation(row: Metrics, u, limit, dt: float) -> float | None:
@@ -414,15 +436,8 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
     for group in groups:
         ctx = base.Clone()
         ctx.SetTime(0.0)
-        if test == "step":
-            sched, t_final = Step(p.step_delay, r0 + p.step_size, before=r0), p.step_duration
-        elif test == "sine":
-            sched, t_final = Sine(p.sine_amplitude, p.sine_frequency, offset=r0), p.sine_periods / p.sine_frequency
-        elif test == "disturbance":
-            sched, t_final = Constant(r0), p.step_duration
-        else:
-            sched, t_final = Chirp(p.sweep_amplitude, p.sweep_start, p.sweep_stop, p.sweep_duration, offset=r0), \
-                p.sweep_duration
+        sched, t_final = _schedule(test, p, r0)
+        if test == "sweep":
             meta.update(f_low=p.sweep_start, f_high=p.sweep_stop)
         inputs = {ref_port: joint_inputs(ch, [sched] * k)}
         if n_ext:
@@ -462,36 +477,20 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             runs_y[:, j] = y[:, j]
             row = rows[j]
             sl = ch.tendons[j]
-            u = np.abs(res["motor_torque_command"][:, sl])
-            row.peak_command = float(np.max(u))
-            row.peak_input = float(np.max(np.abs(res[applied][:, sl])))
             limit = torque_limit(loop, res["motor_torque_command"].shape[1])
-            ratio = _saturation(row, u, None if limit is None else limit[sl], dt)
-            if "tendon_force" in res:
-                row.slack_fraction = float(np.mean(np.any(res["tendon_force"][:, sl] <= 0.0, axis=1)))
+            ratio = _command_metrics(row, res["motor_torque_command"][:, sl], res[applied][:, sl],
+                                     None if limit is None else limit[sl], dt,
+                                     res["tendon_force"][:, sl] if "tendon_force" in res else None)
             if ESTIMATION_ERROR in res:
                 joint = int(np.flatnonzero(ch.S[:, j])[0])          # the plant joint the DoF is named after
                 row.estimation_error = float(np.max(np.abs(res[ESTIMATION_ERROR][:, joint])))
-            if test == "step":
-                for k_, v in step_metrics(t, y[:, j], r0, r0 + p.step_size, p.step_delay, band=p.settling_band,
-                                          fit=True).items():
-                    setattr(row, k_, v)
-            elif test == "sine":
-                skip = t >= 1.0 / p.sine_frequency
-                for k_, v in sine_metrics(t[skip], r[skip, j], y[skip, j], p.sine_frequency).items():
-                    setattr(row, k_, v)
-            elif test == "disturbance":
+            if test == "disturbance":
                 row.load_torque = float(loads[j])
-                for k_, v in disturbance_metrics(t, y[:, j], r0, p.step_delay, row.load_torque).items():
-                    setattr(row, k_, v)
                 runs_w[:, j] = np.where(t >= p.step_delay, row.load_torque, 0.0)
-            else:
-                f, g = gain_diagram(t, r[:, j], y[:, j], p.sweep_start, p.sweep_stop)
-                meta.setdefault("freq", f)
-                meta.setdefault("gain_by_joint", {})[ch.names[j]] = g
-                for k_, v in sweep_metrics(f, g).items():
-                    setattr(row, k_, v)
-                row.bandwidth_source = "chirp"
+            diagram = _set_test_metrics(row, test, p, t, r[:, j], y[:, j], r0)
+            if diagram is not None:
+                meta.setdefault("freq", diagram[0])
+                meta.setdefault("gain_by_joint", {})[ch.names[j]] = diagram[1]
             flag_run(row, p, ratio)
             tail = t >= 0.9 * t[-1]                # the run's last 10 %, as the load test's end values
             if OBSERVER_BOUND in res and test == "disturbance":   # at its bound under a sized load: as designed
@@ -556,6 +555,13 @@ def stopped_row(controller: str, test: str, joint: str, exc: Exception, *, settl
                    flags=("while settling at the initial reference: " if settling else "") + str(exc))
 
 
+def default_tests(loop: ClosedLoop) -> list[str]:
+    """The standard tests that apply to ``loop``: ``disturbance`` only with ``external_torque``, ``sweep`` not on
+    fingers/hand (their tests: step, sine, external-torque step)."""
+    return [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
+            and (t != "sweep" or joint_channels(loop) is None)]
+
+
 def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", tests: Sequence[str] | None = None,
                        params: CompareTestParams | None = None,
                        progress: Callable[[str], Any] | None = None) -> tuple[list[TestRun], list[Metrics]]:
@@ -570,9 +576,7 @@ def run_standard_tests(loop: ClosedLoop, *, controller: str = "controller", test
     """
     p = params or compare_test_params(loop.rig)
     channels = joint_channels(loop)
-    if tests is None:
-        tests = [t for t in TESTS if (t != "disturbance" or "external_torque" in loop.disturbances)
-                 and (t != "sweep" or channels is None)]  # fingers/hand: step, sine, external-torque step
+    tests = default_tests(loop) if tests is None else tests
     names = channels.names if channels is not None else ["tendon" if loop.tracked_outputs[0] == "tendon_force"
                                                           else "link"]
     runs, rows = [], []
@@ -660,20 +664,14 @@ def _loops(loops: Any) -> Mapping[str, ClosedLoop]:
 def design_step_duration(make_rig: Callable[[], Any], loops: Mapping[str, ClosedLoop],
                          params: CompareTestParams | None = None) -> float | None:
     """The step window [s] the compared loops' own designs need: ``step_delay + step_time_constants x`` the slowest
-    tracking time constant of the loops ``{name: loop}`` (:func:`build_loops`)
-    (:class:`~awiwi_drake.parameters.cli.CompareShortMode`) that have one; when some loop has none (unstable, or
-    nothing known) at least the chosen ``params.step_duration`` (so adding such a loop to a run never shortens the
-    others' window); None when no loop has one.  ``compare --short`` steps for it (at least ``min_step_duration``), the full tests
-    for at least it (``awiwi-drake compare`` without ``--short``), so that a loop that performs as designed settles:
-    on fingers and the hand the chain's designs count the (9.2) observer on the guides' presliding stiffness
-    (:meth:`~awiwi_drake.control.joint_design.JointDesign.loop`: ~0.6 s on the index DIP, 3.15 s against the chosen
-    0.3 s).
+    tracking time constant of the loops ``{name: loop}`` (:func:`build_loops`,
+    :class:`~awiwi_drake.parameters.cli.CompareShortMode`); at least the chosen ``params.step_duration`` when some
+    loop has none (so adding it never shortens the others' window); None when no loop has one.  ``compare --short``
+    steps for it, the full tests for at least it, so that a loop that performs as designed settles.
 
-    The time constant: fingers and the hand from the compared loops themselves, whose controllers report their
-    design's (:func:`design_time_constant`; the Dahl hysteresis states of their plant would put zero eigenvalues in a
-    linearisation), so no controller is designed twice; single-joint rigs :func:`dominant_time_constant` of the
-    continuous twin of each loop (the registered controller on a fresh ``make_rig()`` without rate
-    and delay, for Drake ``Linearize``; a 1-DoF design costs milliseconds)."""
+    Fingers and the hand: the designs' own :func:`design_time_constant` (their plant's hysteresis states would put zero
+    eigenvalues in a linearisation); single-joint rigs: :func:`dominant_time_constant` of the continuous twin of each
+    loop (the registered controller on a fresh ``make_rig()`` without rate and delay, for Drake ``Linearize``)."""
     from awiwi_drake.parameters.cli import CompareShortMode
 
     loops = _loops(loops)
