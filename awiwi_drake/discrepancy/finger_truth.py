@@ -29,8 +29,8 @@ while the sensor reads ``f`` (waves 4-5 put it on the motor side of the sensor, 
 
 from __future__ import annotations
 
+import dataclasses
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
@@ -148,7 +148,9 @@ def with_loop(params, tendon: str, h: HysteresisParams):
 
 
 def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
-    """The finger diagram with the hidden effects, exporting the ports the PD and the logger read."""
+    """The finger rig with the hidden guides/loop in its parameters, and that rig with the hidden motor torques
+    added in front of its ``motor_torque`` (the same states and handles; its operating points are the finger's
+    without those torques)."""
     p = nominal
     tendon = _diagram(finger, p).tendon_names[truth["place"] - 1] if truth.get("place") else None
     if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
@@ -174,7 +176,7 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
         b.ExportInput(fd.GetInputPort("motor_torque"), "motor_torque")
     for name in ("motor_angle", "motor_velocity", "tendon_force", "joint_angle", "state"):
         b.ExportOutput(fd.GetOutputPort(name), name)
-    return rig, SimpleNamespace(name=f"truth-finger-{finger}", diagram=b.Build(), params=p)
+    return rig, dataclasses.replace(rig, name=f"truth-finger-{finger}", diagram=b.Build())
 
 
 def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None = None, snr_db: float | None = 30.0,

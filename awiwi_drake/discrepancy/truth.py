@@ -40,7 +40,6 @@ deviation); forces are quantised to 12 bit over the sensor range.
 from __future__ import annotations
 
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 from pydrake.systems.framework import DiagramBuilder, LeafSystem_
@@ -56,6 +55,7 @@ from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.discrepancy.catalog import PLACED_EFFECTS
 from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
+from awiwi_drake.rigs.base import OperatingPoint, Rig, state_names
 
 from . import laws
 from .catalog import EFFECTS
@@ -364,8 +364,10 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return a
 
 
-def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float):
-    """The truth rig under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
+def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float, th0: float):
+    """The truth rig (a :class:`~awiwi_drake.rigs.Rig` in the rigs' state order; its operating point is the nominal
+    rest, link at 0 and every motor at the pretension angle ``th0`` [rad] held by ``r_m f_pre``: an equilibrium of
+    the plant without its hidden effects) under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
     ``u_k = r_m f_pre + kp (theta_ref,k - theta_k) - kd omega_k``), closed by :func:`~awiwi_drake.control.closed_loop`
     at the logging rate: the command reaches the plant ``delay`` [s] later, whole periods through the loop's
     ``DiscreteTimeDelay``, the fraction through a hold in front of the plant sampling at ``k dt + frac dt``
@@ -382,7 +384,13 @@ def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, de
     b.ExportInput((split or plant).get_input_port(0), "motor_torque")
     for name in ("measurement", "motor_angle", "motor_velocity", "tendon_force"):
         b.ExportOutput(plant.GetOutputPort(name), name)
-    rig = SimpleNamespace(name=f"truth-{nom.rig}", diagram=b.Build())
+    n, off = nom.num_motors, 2 if nom.has_link else 0
+
+    def rest() -> OperatingPoint:
+        x = np.zeros(nom.num_states)
+        x[off:off + n] = th0
+        return OperatingPoint(x, np.full(n, nom.motor_pulley_radius * gen.pretension), pretension=gen.pretension)
+    rig = Rig(f"truth-{nom.rig}", b.Build(), nom, state_names(joints=off // 2, motors=n, hysteresis=True), rest)
     gains = MotorPositionGains(kp=gen.kp, kd=gen.kd, rate_hz=gen.sample_rate)
     ctrl = motor_position_controller(rig, gains, pulley_radius=nom.motor_pulley_radius)
     return closed_loop(rig, ctrl, rate_hz=gen.sample_rate, delay=nd * dt if nd else None), split
@@ -462,13 +470,10 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
         qref = gen.link_excursion * a
         cc = 0.2 * th0 * np.sin(2 * np.pi * 0.13 * t + rng.uniform(0, 2 * np.pi))
         ref = np.stack([th0 + rq / r * qref + cc, th0 - rq / r * qref + cc], axis=1)
-        X0 = np.zeros(nom.num_states)
-        X0[2:4] = th0       # [q, q', theta_1, theta_2, ...]: link at 0, both motors at the pretension angle
     else:
         ref = (th0 + 0.6 * th0 * a)[:, None]
-        X0 = np.zeros(nom.num_states)
-        X0[0] = th0
-    loop, split = _truth_loop(plant_sys, nom, gen, float(truth.get("delay", 0.0)))
+    loop, split = _truth_loop(plant_sys, nom, gen, float(truth.get("delay", 0.0)), th0)
+    X0 = loop.rig.operating_point().state
     th_0, om_0 = split_state(nom, X0)[:2]
     u0 = r * gen.pretension + gen.kp * (ref[0] - th_0) - gen.kd * om_0   # the bench starts at rest at u_0
     ctx = loop.create_context(state=X0, motor_torque=u0)
