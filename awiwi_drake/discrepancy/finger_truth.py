@@ -152,7 +152,8 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     added in front of its ``motor_torque`` (the same states and handles; its operating points are the finger's
     without those torques)."""
     p = nominal
-    tendon = _diagram(finger, p).tendon_names[truth["place"] - 1] if truth.get("place") else None
+    placed = {"spring_hysteresis", "guide_friction"} & set(truth)
+    tendon = _diagram(finger, p).tendon_names[truth["place"] - 1] if placed else None
     if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
         p = with_loop(p, tendon, HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"]))
     if "guide_friction" in truth:         # the package's guides (between sensor and joints) on that path only

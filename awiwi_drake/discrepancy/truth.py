@@ -505,8 +505,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     init = {nm: float(X0[i]) for i, nm in enumerate(nom.state_names()[:-n])}
     tag = "-".join(list(hidden) + list(unknown)) or "none"
     name = name or f"{rig}_{tag}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
-    meta = {"truth": dict(truth), "generator": {"snr_db": snr_db, "seed": seed,
-                                               "sample_rate": gen.sample_rate, "duration": gen.duration}}
+    meta = {"truth": dict(truth), "generator": {"snr_db": snr_db, "seed": seed, "sample_rate": gen.sample_rate,
+                                                "duration": gen.duration}}
     ds = Dataset(name, rig, t, inputs, meas, params, init, meta)
     if keep_clean:
         ds.meta["clean_outputs"] = clean
