@@ -185,7 +185,7 @@ class FingerResiduals:
         # the inertia-error signature: the acceleration filtered 4x wider, nearly free of the angle noise
         # that the residual's own acceleration carries (no errors-in-variables fit of noise on itself)
         s4, _, _, g2w = _kernel(4 * sigma, dt)
-        self._acc_wide = _filter(TH, g2w)
+        acc_wide = _filter(TH, g2w)
         # decimation: one sample per ``finger_decimation`` kernel deviations; laws evaluated on the filtered
         # full-rate signals are filtered once more (:meth:`consistent`), so both filters' margins are cut
         step = max(1, int(round(settings.finger_decimation * sigma / dt)))
@@ -196,7 +196,7 @@ class FingerResiduals:
         self._force_raw = F
         self.time = ds.time[sl]
         self.theta, self.omega, self.alpha, self.force, self.torque = th[:, sl], om[:, sl], al[:, sl], f[:, sl], u[:, sl]
-        self.tau = tau[:, sl]
+        self.tau, self.acc_wide = tau[:, sl], acc_wide[:, sl]
         # the motor's known acceleration (its linear law with the measured force and the held command) integrated
         # twice: the motion the motor law explains, exact at the sample rate (motor_velocity)
         known = np.stack([motor_acceleration(TH[i], om[i], U[i], r * F[i], lin[i]) for i in range(m)])
@@ -243,9 +243,6 @@ class FingerResiduals:
         """A full-rate signal (a law evaluated on the filtered signals :attr:`full`, or on raw ones) filtered by
         the same kernel and decimated: how it shows in the filtered residuals."""
         return _filter(np.asarray(signal, float), self._g0)[..., self._sl]
-
-    def acceleration_wide(self) -> np.ndarray:
-        return self._acc_wide[:, self._sl]
 
     def _spring_side(self, g0: float) -> None:
         """Joint angles from all tendons (weighted least squares on the elongations the spring laws give for
@@ -596,7 +593,7 @@ def _signature_variants(fr: FingerResiduals, effect: str, i: int, bounds: Catalo
             out.append((f"orders {o1:g}, {o2:g}", np.stack(cols), names,
                         {"ripple_order_1": o1, "ripple_order_2": o2}))
     elif effect == "nominal_motor":   # B error (acceleration), added damping: tau = -dB w' - dd w
-        out.append(("", np.stack([-fr.acceleration_wide()[i], -om]), ["motor_inertia_abs", "motor_damping_add"], {}))
+        out.append(("", np.stack([-fr.acc_wide[i], -om]), ["motor_inertia_abs", "motor_damping_add"], {}))
     elif effect in SPRING_SIDE:
         e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]     # (K, m): a force error on tendon i
         if effect == "spring_hysteresis":
