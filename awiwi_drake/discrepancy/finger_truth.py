@@ -24,7 +24,7 @@ Motor friction and ripple are torques on the motor from a block in front of the 
 (:class:`FingerHiddenTorque_`). Guide friction is where the thesis has it: "the tendon force measurements are
 performed into the forearm", so "the friction introduced by the guidings from the fingers to the spring
 mechanisms" (ch. 4, introduction) acts between the force sensor and the joints: the joints feel ``-P^T (f + g)``
-while the sensor reads ``f`` (waves 4-5 put it on the motor side of the sensor, where the hand has none).
+while the sensor reads ``f``.
 """
 
 from __future__ import annotations

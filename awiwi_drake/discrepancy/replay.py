@@ -27,7 +27,6 @@ from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
 from scipy.signal import savgol_coeffs, savgol_filter
 
 from awiwi_drake.analysis import SimulationDivergedError
-from awiwi_drake.components.friction import dahl_path
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings
 
 from . import laws
@@ -176,13 +175,24 @@ class ReplayEngine:
 
     def _dahl_history(self, length: float, initial: float = 0.0) -> np.ndarray:
         """Normalised Dahl state ``w/h`` (num_motors, N) at every sample, run on the
-        (play-filtered, smoothed) elongation from ``w = initial`` at the dataset start
-        (:func:`~awiwi_drake.components.friction.dahl_path` of level 1)."""
+        (play-filtered, smoothed) elongation from ``w = initial`` at the dataset start."""
         key = (float(length), float(initial))
         hit = self._dahl_cache.get(key)
         if hit is not None:
             return hit
-        w = np.stack([dahl_path(x, 1.0, key[0], initial_state=key[1]) for x in self._played_elongation()])
+        dx = np.diff(self._played_elongation(), axis=1)
+        n, N = self.elong.shape
+        w = np.zeros((n, N))
+        for i in range(n):
+            a = np.exp(-np.abs(dx[i]) / key[0]).tolist()
+            sg = np.sign(dx[i]).tolist()
+            wi = key[1]
+            out = [wi]
+            for ak, sk in zip(a, sg):
+                if sk != 0.0:
+                    wi = sk + (wi - sk) * ak
+                out.append(wi)
+            w[i] = out
         if len(self._dahl_cache) > 64:
             self._dahl_cache.clear()
         self._dahl_cache[key] = w
