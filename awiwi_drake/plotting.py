@@ -54,8 +54,7 @@ def plot_friction_curve(params, omega_max: float = 15.0, ax=None, measured=None)
     """Friction torque (3.8) versus velocity (Fig 3.3b); ``measured`` = (omega, torque) points."""
     from awiwi_drake.components.motor import motor_friction_torque
 
-    plt = _plt()
-    fig, ax = (ax.figure, ax) if ax is not None else plt.subplots(figsize=(5, 3.5))
+    fig, ax = figure_axes(ax, figsize=(5, 3.5))
     w = np.linspace(-omega_max, omega_max, 401)
     ax.plot(w, -motor_friction_torque(w, params), label="(3.8), Table 3.3")
     if measured is not None:
@@ -66,23 +65,15 @@ def plot_friction_curve(params, omega_max: float = 15.0, ax=None, measured=None)
 
 def plot_spring_curve(lever, polynomial=None, max_force: float = 180.0, ax=None):
     """Force versus lever angle (Fig 4.8b) and versus elongation, with the calibration polynomial."""
-    plt = _plt()
-    if ax is None:
-        fig, ax = plt.subplots(1, 2, figsize=(9, 3.5))
-    else:
-        fig = np.ravel(ax)[0].figure
+    fig, ax = figure_axes(ax, ncols=2, figsize=(9, 3.5))
     th, x, f, k = lever.sample_curve(max_force=max_force)
     ax[0].plot(np.degrees(th), f, label="lever model")
-    ax[0].set_xlabel("lever angle [deg]")
-    ax[0].set_ylabel("tendon force [N]")
     ax[1].plot(1e3 * x, f, label="lever model")
     if polynomial is not None:
         xs = np.linspace(0, polynomial.max_elongation, 300)
         ax[1].plot(1e3 * xs, polynomial.force(xs), "--", label="calibration polynomial (with tendon)")
-    ax[1].set_xlabel("elongation [mm]")
-    for a in ax:
-        a.grid(True, alpha=0.3)
-        a.legend()
+    label_axes(ax[0], "tendon force [N]", xlabel="lever angle [deg]")
+    label_axes(ax[1], "", xlabel="elongation [mm]")
     return fig, ax
 
 
@@ -164,7 +155,7 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
             a.axhline(hi, color="0.4", ls="--", lw=0.8, label=f"limit [{lo:g}, {hi:g}]")
             a.axhline(lo, color="0.4", ls="--", lw=0.8)
         shown = set()
-        for desc, val in result.info.get("limits", {}).get(name, []) if not limits else ():
+        for desc, val in result.limits.get(name, []) if not limits else ():
             a.axhline(val, color="k", ls="--", lw=0.8, label=None if desc in shown else desc)
             shown.add(desc)
         a.set_ylabel((labels or {}).get(name, f"{name} [{unit}]"))

@@ -331,7 +331,7 @@ def test_impedance_simulation_is_the_exact_linear_response_and_deflects_by_distu
 def test_antagonistic_step_and_impedance_check():
     run = antagonistic_step(t_final=0.8)
     assert run.q[-1] == pytest.approx(math.radians(30.0), abs=1e-4)
-    assert np.all(run.extra["tendon_force"] > 0)                      # no slack with the pretension
+    assert np.all(run.tendon_force > 0)                      # no slack with the pretension
     assert is_monotone_nonincreasing(run.lyapunov[run.t > 0.051], rtol=1e-4)
     # Fig 15.27: the tendon torque under an imposed deflection is proportional to Kp,imp
     kp = np.array([0.01, 0.02, 0.05, 0.1])

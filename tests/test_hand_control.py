@@ -965,18 +965,21 @@ def test_force_sharing_stage_gives_the_exact_joint_torque_and_converts(finger):
     rig = finger_diagram(finger=finger, params=FingerRigParams.for_finger(finger).with_physics(  # no Dahl states
                              hysteresis=False, guide_friction=False))
     ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing")
-    sharing = ctrl.GetSubsystemByName("force_stage").GetSubsystemByName("force_sharing")
+    stage = ctrl.GetSubsystemByName("force_stage")
+    sharing = stage.GetSubsystemByName("force_sharing")          # Drake's AffineSystem: input u0, output y0
+    tau0 = stage.fused_parts["sharing"][2]
     op = rig.operating_point()
     PS = np.asarray(rig.coupling.P(op.joint_angle), float) @ dof_selection(rig.coupling)
     ctx = sharing.CreateDefaultContext()
     rng = np.random.default_rng(8)
-    port = sharing.GetInputPort("joint_torque_reference")
-    for tau in (sharing.tau0, sharing.tau0 + rng.normal(0.0, 0.05, PS.shape[1])):
+    port = sharing.get_input_port()
+    for tau in (tau0, tau0 + rng.normal(0.0, 0.05, PS.shape[1])):
         port.FixValue(ctx, tau)
-        f = sharing.GetOutputPort("tendon_force_reference").Eval(ctx)
+        f = sharing.get_output_port().Eval(ctx)
         np.testing.assert_allclose(-PS.T @ f, tau, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(sharing.f0, op.tendon_force, rtol=1e-12)
-    check_system_autodiff_matches_fd(sharing, [], dict(joint_torque_reference=rng.normal(0.0, 0.05, PS.shape[1])))
+        if tau is tau0:                                          # the design point maps to its tendon forces
+            np.testing.assert_allclose(f, op.tendon_force, rtol=1e-12)
+    check_system_autodiff_matches_fd(sharing, [], dict(u0=rng.normal(0.0, 0.05, PS.shape[1])))
 
 
 def test_chain_force_loop_cancels_the_motor_friction_and_ripple_at_rest_and_its_sampled_loop_is_stable():

@@ -195,9 +195,10 @@ def test_a_mode_that_leaves_the_region_during_the_run_is_an_event_to_its_end():
 def test_a_mode_that_leaves_the_region_and_comes_back_during_the_run_is_an_event_between_the_checks(monkeypatch,
                                                                                                     tmp_path):
     """``h w = 1.5 + 0.25 sin(swing t)`` over half a swing: inside at the start and at the end, outside (``h w >
-    sqrt(3)``) for ``sin(swing t) > (sqrt(3) - 1.5) / 0.25``.  Checked at every chunk boundary (unlimited budget): one
+    sqrt(3)``) for ``sin(swing t) > (sqrt(3) - 1.5) / 0.25``.  Checked at every chunk boundary (interval 0): one
     event from the first to the last checked instant in that window, ``|R|`` the largest at those instants (closed
-    form on the imaginary axis); within the default budget (1 % of the wall time) the event lies in the window.  The
+    form on the imaginary axis); at the default interval (0.25 s) the checks are at its multiples, deterministic, and
+    the event is the one at t = 1 s, inside the window.  The
     fastest mode is saved to JSON as numbers ``[real, imag]``."""
     import importlib
     import json
@@ -220,7 +221,7 @@ def test_a_mode_that_leaves_the_region_and_comes_back_during_the_run_is_an_event
         return stability_function("runge_kutta3", 1j * (1.5 + a * np.sin(swing * np.asarray(t))))
 
     with monkeypatch.context() as m:
-        m.setattr(sim_module, "FIXED_STEP_CHECK_BUDGET", np.inf)
+        m.setattr(sim_module, "FIXED_STEP_CHECK_INTERVAL", 0.0)
         res = run()
     checked = np.array(res.info["stability_checks"])
     assert checked.size >= 40 and checked[-1] == t_final
@@ -228,9 +229,11 @@ def test_a_mode_that_leaves_the_region_and_comes_back_during_the_run_is_an_event
     (event,) = res.events
     assert (event.t_start, event.t_end) == (out[0], out[-1])
     assert event.extreme == pytest.approx(growth(out).max(), rel=1e-9) and 1.0 < event.extreme <= growth(t_final / 2)
-    res = run()                       # the default budget: fewer checks, the same event inside the window
+    res = run()                       # the default interval: checks at its multiples, one of them in the window
+    np.testing.assert_allclose(res.info["stability_checks"], np.arange(1, 9) * 0.25, rtol=1e-12)
     (event,) = res.events
-    assert window[0] < event.t_start <= event.t_end < window[1] and event.extreme > 1.0
+    assert event.t_start == event.t_end == pytest.approx(1.0, rel=1e-12)
+    assert window[0] < 1.0 < window[1] and event.extreme == pytest.approx(growth(1.0), rel=1e-9)
     res.save(tmp_path / "run.npz")
     mode = json.loads((tmp_path / "run.npz.json").read_text())["info"]["fastest_mode"]["mode"]
     assert mode == [0.0, pytest.approx(1.5 / H)]

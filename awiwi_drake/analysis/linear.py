@@ -119,16 +119,9 @@ def _crossings(w: np.ndarray, g: np.ndarray, level: float) -> list[tuple[int, fl
 
 @dataclass(frozen=True)
 class FrequencyResponse:
-    """``H(j w) = C (j w I - A)^-1 B + D`` of one input channel to one output channel.
-
-    Attributes
-    ----------
-    omega : ndarray
-        Frequencies [rad/s] (log-spaced).
-    response : ndarray (complex)
-        ``H(j omega)`` in output unit per input unit.
-    input_name, output_name : str
-    """
+    """``H(j w) = C (j w I - A)^-1 B + D`` of one input channel (``input_name``) to one output channel
+    (``output_name``): ``response`` ``H(j omega)`` (complex, output unit per input unit) at the log-spaced
+    frequencies ``omega`` [rad/s]."""
 
     omega: np.ndarray
     response: np.ndarray
@@ -233,22 +226,12 @@ class _JsonFile:
 
 @dataclass(frozen=True)
 class LinearizationResult(_JsonFile):
-    """``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du`` around ``(x0, u0)``.
+    """``xdot = f0 + A dx + B du``, ``y = y0 + C dx + D du`` around ``(x0, u0)``, from Drake's ``Linearize``.
 
-    Attributes
-    ----------
-    A, B, C, D : ndarray
-        From Drake's ``Linearize``; ``C, D`` of the first output port (``state`` for rigs).
-    state_names, input_names, output_names : tuple of str
-        Names of the states, the input channels (``motor_torque[i]``) and the
-        output channels of ``C``.
-    x0, u0, f0 : ndarray
-        State, input and ``xdot`` at the linearisation point (``f0 = 0`` at an equilibrium).
-    outputs : dict name -> OutputMap
-        Every linearised output port.
-    operating_point : OperatingPoint or None
-    input_port : str
-    """
+    ``C, D`` are of the first output port (``state`` for rigs), ``outputs`` holds every linearised port (name ->
+    :class:`OutputMap`); ``state_names``, ``input_names`` (``motor_torque[i]``) and ``output_names`` (the channels
+    of ``C``) name the rows and columns; ``f0`` is ``xdot`` at the point (0 at an equilibrium); ``input_port`` the
+    linearised input and ``operating_point`` the rig's :class:`OperatingPoint` (None for a bare system)."""
 
     A: np.ndarray
     B: np.ndarray
@@ -308,20 +291,10 @@ class LinearizationResult(_JsonFile):
         raise ValueError(f"bode: unknown {kind} {which!r}; {kind}s: {', '.join(names)}")
 
     def bode(self, input=0, output=None, *, omega: Sequence[float] | None = None, n: int = 400) -> FrequencyResponse:  # noqa: A002
-        """Frequency response from one input channel to one output channel.
-
-        Parameters
-        ----------
-        input : int or str
-            Input channel (index or name, e.g. ``"motor_torque[0]"``).
-        output : str or int or None
-            An output channel name (of ``output_names`` or of any linearised port,
-            e.g. ``"joint_angle"``), an index into ``output_names``, or None: the
-            first channel of the first output port.
-        omega : sequence, optional
-            Frequencies [rad/s]; default ``n`` log-spaced points from a decade below
-            the slowest non-zero pole to a decade above the fastest.
-        """
+        """Frequency response from one ``input`` channel (index or name, e.g. ``"motor_torque[0]"``) to one
+        ``output`` channel: a name (of ``output_names`` or of any linearised port, e.g. ``"joint_angle"``), an index
+        into ``output_names``, or None (the first channel of the first output port), at ``omega`` [rad/s] (default
+        ``n`` log-spaced points from a decade below the slowest non-zero pole to a decade above the fastest)."""
         iu = self._channel(input, self.input_names, "input")
         if output is None:
             c, d, oname = self.C[0], self.D[0], self.output_names[0] if self.output_names else "y[0]"
@@ -422,25 +395,13 @@ def linearize(plant, op=None, *, context: Context | None = None, input: str = "m
               equilibrium_tolerance: float | None = 1e-6) -> LinearizationResult:
     """Linearise ``plant`` with Drake's ``Linearize``.
 
-    Parameters
-    ----------
-    plant : Rig (finger, hand) or Drake System
-        A rig is linearised at ``op`` (default: its default operating point) in
-        the context :meth:`Rig.context` builds; a bare system at ``context``
-        (default: its default context, inputs must be fixed there).
-    op : OperatingPoint, optional
-    context : Context, optional
-        For a bare system (or to linearise a rig at a context you prepared).
-    input : str
-        The input port (default ``motor_torque``); other inputs stay at their fixed values.
-    outputs : sequence of str, optional
-        Output ports to linearise; the first gives ``C, D``.  Default: ``state``
-        if the system has it, else its first output port.
-    state, motor_torque : sequence, optional
-        Override the state / the input value of the point (a non-equilibrium
-        point: the equilibrium check is skipped and ``f0`` holds ``xdot``).
-    equilibrium_tolerance : float or None
-        Drake checks ``|xdot| <=`` this at the point (None: no check).
+    A rig (finger, hand) is linearised at ``op`` (default: its default operating point) in the context
+    :meth:`Rig.context` builds, or at ``context`` (one you prepared); a bare Drake System at ``context`` (default:
+    its default context, inputs fixed there).  ``input``: the input port (other inputs keep their fixed values);
+    ``outputs``: the output ports linearised, the first gives ``C, D`` (default: ``state`` if the system has it, else
+    its first output port).  ``state`` / ``motor_torque`` override the point's state / input value (a
+    non-equilibrium point: the equilibrium check is skipped and ``f0`` holds ``xdot``); otherwise Drake checks
+    ``|xdot| <= equilibrium_tolerance`` at the point (None: no check).
     """
     if isinstance(plant, System):
         system, names = plant, ()

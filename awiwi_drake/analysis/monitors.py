@@ -1,16 +1,10 @@
 """Health monitors for :func:`~awiwi_drake.analysis.simulate`: slack, saturation, spring over-range.
 
-A monitor names a port (an output port, or an input port whose driving signal
-is then watched) and a condition on its value.  :func:`simulate` logs the port
-with Drake's C++ ``VectorLogSink`` (no Python runs per step) and evaluates the
-condition on the logged samples with numpy, once per progress chunk; a
-condition that holds on consecutive samples is one :class:`Event` interval.
-Nothing is computed per integrator step in Python, so a monitor that finds
-nothing costs one logged port.
-
-Divergence (non-finite or exploding state) is not a monitor: :func:`simulate`
-checks the state at every chunk boundary and raises
-:class:`~awiwi_drake.analysis.simulate.SimulationDivergedError`.
+A monitor names a port (an output port, or an input port whose driving signal is then watched) and a condition on
+its value.  :func:`simulate` logs the port with Drake's C++ ``VectorLogSink`` and evaluates the condition on the
+logged samples with numpy once per progress chunk (nothing in Python per step); a condition that holds on
+consecutive samples is one :class:`Event` interval.  Divergence is not a monitor: :func:`simulate` checks the state
+itself and raises :class:`~awiwi_drake.analysis.simulate.SimulationDivergedError`.
 """
 
 from __future__ import annotations
@@ -49,20 +43,10 @@ class Event:
 
 
 class Monitor(abc.ABC):
-    """A condition on one port, checked on logged samples.
-
-    Parameters
-    ----------
-    system : System or None
-        The system owning ``port_name`` (the simulated diagram or one of its
-        subsystems); None: the simulated diagram.
-    port_name : str
-        Output port, or input port (its driving signal is watched).
-    labels : sequence of str, optional
-        Channel names (default ``port[i]``).
-    raise_on_event : bool
-        Stop the run (``SimulationEventError``) at the first chunk where the condition held.
-    """
+    """A condition on one port, checked on logged samples: ``port_name`` (an output port, or an input port: its
+    driving signal is watched) of ``system`` (the simulated diagram or one of its subsystems; None: the simulated
+    diagram), channel ``labels`` (default ``port[i]``); ``raise_on_event``: stop the run
+    (``SimulationEventError``) at the first chunk where the condition held."""
 
     kind = "condition"
     direction = "max"   # which extreme is reported: "max", "min" or "abs"

@@ -77,28 +77,15 @@ def _jsonable(v: Any):
 
 @dataclass
 class SimulationResult:
-    """Logged signals and detected events of one run.
-
-    Attributes
-    ----------
-    t : ndarray (T,)
-        Log times [s] (every integrator step, or every ``log_period``).
-    signals : dict name -> ndarray (T, k)
-        One array per logged port (or input schedule).
-    units : dict name -> str or list of str
-        Unit of each signal (one per channel where they differ, e.g. ``state``).
-    labels : dict name -> list of str
-        Channel names (``state_names`` for ``state``; ``port[i]`` otherwise).
-    events : list of Event
-        Monitor events (slack, saturation, over-range) in time order.
-    info : dict
-        How the run was made: ``mode`` (``fixed_step``/``error_controlled``),
-        ``integrator``, ``step`` [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``,
-        ``steps`` (integrator steps; discrete updates when the diagram has no continuous state),
-        ``sampled_plants`` (names of the plants integrated inside their discrete update).
-    final_context : Context or None
-        Context of the simulated diagram at the end (not saved by :meth:`save`).
-    """
+    """Logged signals and detected events of one run: ``t`` [s] (every integrator step, or every ``log_period``);
+    ``signals`` (name -> (T, k) array per logged port or input schedule), their ``units`` (one per channel where they
+    differ, e.g. ``state``) and channel ``labels`` (``state_names`` for ``state``, else ``port[i]``); the monitors'
+    ``events`` in time order and ``limits`` (name -> [(description, value)], the thresholds watching each logged
+    signal, in its unit, drawn by :meth:`plot`); ``info``, how the run was made (``mode``, ``integrator``, ``step``
+    [s], ``accuracy``, ``wall_time`` [s], ``realtime_factor``, ``steps``: integrator steps, or discrete updates
+    without continuous state, ``sampled_plants``: the plants integrated inside their discrete update, ...);
+    ``final_context``, the simulated diagram's context at the end, and ``final_sampled_state``, the sampled plants'
+    physical state then (:attr:`final_state`; neither is saved by :meth:`save`)."""
 
     t: np.ndarray
     signals: dict
@@ -107,6 +94,8 @@ class SimulationResult:
     units: dict = field(default_factory=dict)
     labels: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
+    limits: dict = field(default_factory=dict)
+    final_sampled_state: np.ndarray | None = None
 
     # -- access ------------------------------------------------------------
     def __getitem__(self, name: str) -> np.ndarray:
@@ -120,13 +109,13 @@ class SimulationResult:
     @property
     def final_state(self) -> np.ndarray | None:
         """State at the end (None if no context was kept): the continuous state, then the state of each
-        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``; the physical
+        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``, :attr:`final_sampled_state`: the physical
         state it outputs, while its discrete state in ``final_context`` may be in integration coordinates,
         see :func:`~awiwi_drake.components.rig_system.rig_integration_system`)."""
         if self.final_context is None:
             return None
         x = self.final_context.get_continuous_state_vector().CopyToVector()
-        sampled = self.info.get("final_sampled_state")
+        sampled = self.final_sampled_state
         return x if sampled is None or not len(sampled) else np.concatenate([x, sampled])
 
     def events_of(self, kind: str) -> list:
@@ -147,7 +136,7 @@ class SimulationResult:
         out = {k: np.stack([np.interp(t, self.t, v[:, j]) for j in range(v.shape[1])], axis=1)
                for k, v in self.signals.items()}
         return SimulationResult(t, out, list(self.events), self.final_context, dict(self.units),
-                                dict(self.labels), dict(self.info))
+                                dict(self.labels), dict(self.info), dict(self.limits), self.final_sampled_state)
 
     def plot(self, names: Sequence[str] | None = None, **kw):
         """One subplot per signal (per unit for mixed signals such as ``state``): legends, units, monitor
@@ -159,10 +148,12 @@ class SimulationResult:
     def _meta(self) -> dict:
         return dict(format="awiwi_drake.SimulationResult", version=1, signals=list(self.signals),
                     units=_jsonable(self.units), labels=_jsonable(self.labels),
-                    events=[e.to_json() for e in self.events], info=_jsonable(self.info))
+                    events=[e.to_json() for e in self.events], info=_jsonable(self.info),
+                    limits=_jsonable(self.limits))
 
     def save(self, path: str | Path) -> Path:
-        """Write ``path`` (``.npz``: arrays; ``.csv``: one column per channel) and ``path + '.json'`` (units, labels, events, info).
+        """Write ``path`` (``.npz``: arrays; ``.csv``: one column per channel) and ``path + '.json'`` (units, labels,
+        events, info, limits).
 
         Returns the data file's path.  The directory must exist.  A complex number in ``info`` (the fastest mode) is
         written as ``[real, imag]``.
@@ -205,4 +196,6 @@ class SimulationResult:
         else:
             raise ValueError(f"SimulationResult.load: {str(path)!r} must end in .npz or .csv")
         events = [Event(**e) for e in meta.get("events", [])]
-        return cls(t, signals, events, None, meta.get("units", {}), meta.get("labels", {}), meta.get("info", {}))
+        limits = {k: [(str(d), float(v)) for d, v in lims] for k, lims in meta.get("limits", {}).items()}
+        return cls(t, signals, events, None, meta.get("units", {}), meta.get("labels", {}), meta.get("info", {}),
+                   limits)

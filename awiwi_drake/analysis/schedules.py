@@ -1,16 +1,9 @@
 """Input schedules for :func:`~awiwi_drake.analysis.simulate`: steps, ramps, sines, chirps, samples.
 
-A schedule is a pure function of time ``value(t)`` (float or AutoDiffXd), held
-in a small frozen dataclass; schedules add (``Step(...) + Sine(...)``) and
-broadcast to every entry of the port they drive unless given per entry
-(:class:`PerEntry`).  :func:`simulate` turns each schedule into one Drake
-source system, :class:`InputSchedule_` (a scalar-convertible TemplateSystem
-whose output depends on time only), wired to the named input port, so the
-integrator sees the signal at every stage instead of a Python loop re-fixing
-inputs between samples.
-
-Times are relative to the start of the simulation (``t = 0`` at the
-context's start time).
+A schedule is a pure function of time ``value(t)`` (float or AutoDiffXd; ``t`` relative to the start of the
+simulation) in a small frozen dataclass; schedules add (``Step(...) + Sine(...)``) and broadcast to every entry of
+the port they drive unless given per entry (:class:`PerEntry`).  :func:`simulate` wires each one in as a Drake
+source, :class:`InputSchedule_`, so the integrator sees the signal at every stage.
 """
 
 from __future__ import annotations

@@ -1,54 +1,19 @@
 """The one simulation entry point: :func:`simulate` (Drake's ``Simulator`` on any diagram).
 
-:func:`simulate` takes any diagram with named ports (a rig, a finger, the hand,
-a closed loop: anything with a ``diagram`` attribute works too), and
+The simulated diagram is a copy of the one given, flattened (:func:`add_flat`: every leaf cloned by scalar
+conversion, no nested diagrams, each of which costs Drake's simulator ~1 us per step), with the input schedules as
+Drake sources (:mod:`~awiwi_drake.analysis.schedules`) and the logged and monitored ports as Drake's C++
+``VectorLogSink``: no Python runs per step.  Divergence (non-finite or exploding state) and the monitors
+(:mod:`~awiwi_drake.analysis.monitors`: slack, saturation, spring over-range) are checked on the logs at about 40
+chunk boundaries, where ``progress(t, duration)`` is also called.  The user's diagram can be simulated again or
+embedded elsewhere; the given context is advanced to the end time like ``Simulator`` would, and is returned as
+``final_context``.
 
-* drives named input ports with schedules (:mod:`~awiwi_drake.analysis.schedules`:
-  steps, ramps, sines, chirps, recorded samples), each wired in as a Drake
-  source system; inputs not scheduled keep the value fixed in the given context;
-* logs named ports with Drake's C++ ``VectorLogSink`` (every integrator step, or
-  every ``log_period``);
-* watches for divergence (non-finite or exploding state, checked at every
-  progress chunk, raising :class:`SimulationDivergedError`) and evaluates
-  monitors (:mod:`~awiwi_drake.analysis.monitors`: slack, saturation, spring
-  over-range) on the logged samples with numpy; no Python runs per step;
-* integrates error-controlled, or with a fixed step; ``mode="auto"`` (default)
-  uses the fixed step at the control period for sampled loops (a diagram
-  with periodic discrete updates, e.g. a 3 kHz zero-order hold; with several
-  rates their common period, :func:`control_period`) and error control otherwise;
-  a *sampled plant* in the diagram (Drake's ``DiscreteTimeApproximation``, e.g. a
-  single-joint rig in a sampled loop, see :func:`~awiwi_drake.control.closed_loop`)
-  integrates itself with fixed-step RK3 at its period, so such a loop is
-  simulated with one discrete update per period, and error control, another
-  integrator or a shorter step are refused for it (build the loop with
-  ``sampled_rig=False`` for those); its state between two sample instants is
-  the next instant's (Drake's discrete-time semantics), so log it on its grid
-  (every step, or a ``log_period`` that is a multiple of the period); a
-  ``t_final`` within round-off of a sample instant is snapped onto it;
-* checks a fixed-step run's stability before it starts: every leaf with an ``integration_modes(context)`` hook
-  (the finger/hand plant: the eigenvalues of its dynamics' Jacobian with its inputs held, central differences of
-  its compiled laws checked against Drake's ``Linearize``, or ``Linearize`` itself without kernels) has each mode
-  ``lambda`` tested against the integrator's stability function ``R`` (RK3: ``1 + z + z^2/2 + z^3/6``) at
-  ``z = h lambda``; a mode the integrator amplifies beyond the continuous system (``|R| > max(1, |exp(z)|)``)
-  makes the run integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
-  ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
-  unchanged), with a one-line warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``substeps=1`` refuses
-  (a ``ValueError`` naming the mode and ``|R|``), ``substeps=k`` imposes ``k``.  The check is repeated during the
-  run at the progress-chunk boundaries whenever the checks' CPU time (the next predicted by the cheapest so far)
-  stays within ``parameters.control.FIXED_STEP_CHECK_BUDGET`` of the run's so far (about every 0.25 s of a cascaded
-  hand run, most chunks of a small Python plant; the first run of a plant in a process pays the loading of its
-  compiled kernels in its start check and is checked less), and at the end state: a mode outside the region at the
-  step taken is an ``integrator_instability`` event from the first to the last check that found it outside
-  (``extreme`` the largest ``|R|``), with a warning; ``info["stability_checks"]`` lists the checked times (they
-  follow the machine's speed: the trajectory does not depend on them, an excursion between two checks is missed);
-* calls ``progress(t, duration)`` (simulated seconds since the start) after
-  every chunk, for progress bars.
-
-The simulated diagram is a copy (``System.Clone()`` of every leaf, scalar conversion) of the
-one given, flattened into one diagram with the sources and sinks (:func:`add_flat`: no nested
-diagrams, each of which costs Drake's simulator ~1 us per step), so the user's diagram can be
-simulated again or embedded elsewhere; the given context is advanced to the end
-time like ``Simulator`` would, and is returned as ``final_context``.
+A *sampled plant* (Drake's ``DiscreteTimeApproximation``, e.g. a single-joint rig in a sampled loop, see
+:func:`~awiwi_drake.control.closed_loop`) integrates itself with fixed-step RK3 at the control period inside its
+discrete update: such a loop runs one discrete update per period, error control, another integrator or a shorter step
+are refused for it (build the loop with ``sampled_rig=False`` for those), its state between two sample instants is the
+next instant's (log it on its grid), and a ``t_final`` within round-off of a sample instant is snapped onto it.
 """
 
 from __future__ import annotations
@@ -70,7 +35,7 @@ from awiwi_drake.components.rig_system import SAMPLED_INTEGRATOR as _SAMPLED_SCH
 from awiwi_drake.analysis.results import SimulationResult, unit
 from awiwi_drake.analysis.schedules import InputSchedule, as_schedule
 from awiwi_drake.analysis.monitors import Event
-from awiwi_drake.parameters.control import FIXED_STEP_CHECK_BUDGET, FIXED_STEP_STABILITY_MARGIN
+from awiwi_drake.parameters.control import FIXED_STEP_CHECK_INTERVAL, FIXED_STEP_STABILITY_MARGIN
 
 __all__ = ["SimulationError", "SimulationDivergedError", "SimulationEventError", "InfeasibleForceError",
            "PHYSICAL_FAILURES", "simulate", "MODES", "control_period", "sampled_plants", "FlatSystem", "add_flat",
@@ -386,9 +351,22 @@ def simulate(system, context: Context | None, t_final: float, *,
     state_names : sequence of str, optional
         Channel names of the ``state`` output (default: the handle's ``state_names``).
     substeps : int, optional
-        Fixed step only: integrate at ``step / substeps``.  None (default): 1 unless a plant mode lies outside the
-        integrator's stability region at ``step`` (see the module docstring), then the smallest count that puts
-        every mode inside with a margin, reported in ``info`` and by a warning; ``1`` refuses such a run.
+        Fixed step only: integrate at ``step / substeps``.  Before a fixed-step ``explicit_euler``,
+        ``runge_kutta2`` or ``runge_kutta3`` run, every leaf with an ``integration_modes(context)`` hook (the
+        finger/hand plant: the eigenvalues of its dynamics' Jacobian with its inputs held) has each mode ``lambda``
+        tested against the integrator's stability function ``R`` (:func:`stability_function`) at ``z = h lambda``.
+        A mode the integrator amplifies beyond the continuous system (``|R| > max(1, |exp(z)|)``) makes None
+        (default) integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
+        ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
+        unchanged), with a warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``1`` refuses such a run
+        (a ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The modes come from central
+        differences of the plant's compiled laws checked against Drake's ``Linearize`` (``Linearize`` itself without
+        kernels).  The check is repeated during the run, at the first progress-chunk boundary at least
+        ``parameters.control.FIXED_STEP_CHECK_INTERVAL`` simulated seconds after the last one, and at the end
+        state: a mode outside the region at the step taken is an ``integrator_instability`` event from the first to
+        the last check that found it outside (``extreme`` the largest ``|R|``), with a warning;
+        ``info["stability_checks"]`` lists the checked times (the same on every machine; an excursion between two
+        checks is missed).
 
     Returns
     -------
@@ -409,19 +387,16 @@ def simulate(system, context: Context | None, t_final: float, *,
     state_names = tuple(state_names) if state_names is not None else names_from_handle
     if mode not in MODES:
         raise ValueError(f"simulate: mode = {mode!r} must be one of {', '.join(MODES)}")
-    for label, v, lo in (("t_final", t_final, None), ("max_step", max_step, 0.0), ("accuracy", accuracy, 0.0),
-                         ("divergence_bound", divergence_bound, 0.0)):
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
-            raise ValueError(f"simulate: {label} = {v!r} must be a finite number")
-        if lo is not None and v <= lo:
-            raise ValueError(f"simulate: {label} = {v!r} must be > {lo}")
+    for label, v, positive in (("t_final", t_final, False), ("max_step", max_step, True), ("accuracy", accuracy, True),
+                               ("divergence_bound", divergence_bound, True), ("step", step, True),
+                               ("log_period", log_period, True), ("t_start", t_start, False)):
+        if (v is not None or label == "t_final") and (
+                isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v)
+                or (positive and v <= 0)):
+            raise ValueError(f"simulate: {label} = {v!r} must be a finite number" + (" > 0" if positive else ""))
     if substeps is not None and (isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer))
                                  or substeps < 1):
         raise ValueError(f"simulate: substeps = {substeps!r} must be a positive integer")
-    for label, v in (("step", step), ("log_period", log_period), ("t_start", t_start)):
-        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float, np.floating))
-                              or not math.isfinite(v) or (label != "t_start" and v <= 0)):
-            raise ValueError(f"simulate: {label} = {v!r} must be a finite number" + ("" if label == "t_start" else " > 0"))
     user_ctx = context if context is not None else diagram.CreateDefaultContext()
     start = float(user_ctx.get_time() if t_start is None else t_start)
     if not float(t_final) > start:
@@ -473,7 +448,7 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: diagram {diagram.get_name()!r} has no input port {unknown[0]!r}; "
                          f"inputs: {', '.join(in_names) or 'none'}")
     sources: dict[str, OutputPort] = {}
-    fixed_inputs: dict[str, np.ndarray] = {}
+    fixed_inputs: dict[str, Any] = {}   # values of the inputs exported from the wrapper
     # a fixed input is a fixed value in the wrapper's context (no source system to notify at every
     # step) unless a log or a monitor reads it: then a ConstantVectorSource gives it an output port
     read_ports = {p if isinstance(p, str) else p.get_name()
@@ -485,6 +460,8 @@ def simulate(system, context: Context | None, t_final: float, *,
             if name in inputs:
                 raise ValueError(f"simulate: input port {name!r} is abstract-valued and cannot take a schedule")
             _export(b, sub.inputs[i], name)
+            if port.HasValue(user_ctx):
+                fixed_inputs[name] = port.EvalAbstract(user_ctx).Clone()
             continue
         if name in inputs:
             try:
@@ -566,12 +543,8 @@ def simulate(system, context: Context | None, t_final: float, *,
 
     root = wrapper.CreateDefaultContext()
     sub.copy_states_from(user_ctx, root)
-    for i, name in enumerate(in_names):
-        p = diagram.get_input_port(i)
-        if p.get_data_type() != PortDataType.kVectorValued and p.HasValue(user_ctx):
-            wrapper.GetInputPort(name).FixValue(root, p.EvalAbstract(user_ctx).Clone())
-        elif name in fixed_inputs:
-            wrapper.GetInputPort(name).FixValue(root, fixed_inputs[name])
+    for name, value in fixed_inputs.items():
+        wrapper.GetInputPort(name).FixValue(root, value)
     root.SetTime(start)
 
     # -- fixed-step stability of the plants' modes at the initial state --------
@@ -579,9 +552,7 @@ def simulate(system, context: Context | None, t_final: float, *,
         raise ValueError(f"simulate: substeps = {substeps} needs a fixed-step run of a continuous plant (the run is "
                          + (f"{mode})" if mode != "fixed_step" else f"a sampled plant's, {sampled[0].get_name()!r})"))
     n_sub, worst = 1, None
-    check_cost = time.process_time()
     modes = _plant_modes(sub, root) if integrator in _TAYLOR_ORDER and mode == "fixed_step" else []
-    check_cost = time.process_time() - check_cost
     for leaf_name, lam in modes:     # the plant needing the most substeps (0: none suffices), then the largest |R|
         k, mode_k, growth = fixed_step_substeps(lam, h, integrator)
         if worst is None or ((k or math.inf), growth) > ((worst[1] or math.inf), worst[3]):
@@ -691,21 +662,18 @@ def simulate(system, context: Context | None, t_final: float, *,
                 e[2:] = [growth, lam]
         checked.append(t_now)
 
-    # checks during the run while their CPU time (the next predicted by the cheapest so far: a machine's load does not
-    # stretch it as it does wall time) stays within the budget of the run's
-    wall, cpu, spent = time.perf_counter(), time.process_time(), 0.0
+    # checks during the run at the first chunk boundary at least FIXED_STEP_CHECK_INTERVAL simulated seconds after the
+    # last check: the instants depend on the run only, never on the machine's speed
+    wall, last_check = time.perf_counter(), start
     try:
         sim.Initialize()
         for tb in bounds:
             sim.AdvanceTo(tb)
             check_state(tb)
             check_events()
-            if (modes and tb < bounds[-1]
-                    and spent + check_cost <= FIXED_STEP_CHECK_BUDGET * (time.process_time() - cpu)):
-                c0 = time.process_time()
+            if modes and tb < bounds[-1] and tb - last_check >= FIXED_STEP_CHECK_INTERVAL - 1e-9 * h:
                 check_modes(tb)
-                spent += time.process_time() - c0
-                check_cost = min(check_cost, time.process_time() - c0)
+                last_check = tb
             if progress is not None:
                 progress(tb - start, duration)
     except (SimulationDivergedError, SimulationEventError):
@@ -754,7 +722,7 @@ def simulate(system, context: Context | None, t_final: float, *,
     for m, s in watched:
         for label, ls in logged:
             if (ls is s if m.limits_on is None else label == m.limits_on) and m.limits():
-                limits.setdefault(label, []).extend([list(x) for x in m.limits()])
+                limits.setdefault(label, []).extend([(str(d), float(v)) for d, v in m.limits()])
     info = dict(mode=mode, integrator=integrator, step=h if mode == "fixed_step" else None,
                 substeps=n_sub if mode == "fixed_step" else None,
                 fastest_mode=None if worst is None else dict(system=worst[0], mode=worst[2], growth=worst[3],
@@ -765,6 +733,6 @@ def simulate(system, context: Context | None, t_final: float, *,
                 control_period=period, t_start=start, t_final=float(t_final), wall_time=wall,
                 realtime_factor=duration / wall if wall > 0 else math.inf,
                 steps=int(integ.get_num_steps_taken() if diagram.num_continuous_states() else sim.get_num_discrete_updates()),
-                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name(), limits=limits,
-                final_sampled_state=np.concatenate(sampled_state) if sampled_state else None)
-    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info)
+                sampled_plants=[p.get_name() for p in sampled], system=diagram.get_name())
+    return SimulationResult(np.array(t), signals, events, user_ctx, units, labels, info, limits,
+                            np.concatenate(sampled_state) if sampled_state else None)

@@ -1,24 +1,8 @@
-"""One runner for parameter sweeps and Monte-Carlo studies.
-
-Every sweep in awiwi_drake (gain studies of ch. 15, Algorithm 3 of ch. 16, ...)
-goes through :func:`run_sweep`: a function ``fn(**point)`` is evaluated at
-each point of a grid (or of a list of points) on any
-:class:`concurrent.futures.Executor`.
-
-* Default: a :class:`~concurrent.futures.ProcessPoolExecutor` created for the
-  call (``max_workers`` processes, shut down afterwards). ``fn`` and the point
-  values must then be picklable: a module-level function, not a lambda.
-* Threads: ``run_sweep(fn, grid, executor=ThreadPoolExecutor(2))`` (cheap
-  start-up; good when ``fn`` releases the GIL, e.g. Drake's C++ simulation).
-* In-process: ``executor="serial"`` (debugging, tiny sweeps).
-* Dask: ``client = dask.distributed.Client(...)``;
-  ``run_sweep(fn, grid, executor=client.get_executor())``. Any object with the
-  ``Executor.submit`` interface works; executors passed in are *not* shut down.
-
-Points are sent in chunks (``chunksize`` points per task) to amortise the
-per-task overhead (pickling, scheduling: ~1 ms per task for a process pool).
-A point that raises is recorded in :attr:`SweepResult.errors` (with
-``on_error="record"``) or re-raised with the point named (``"raise"``, default).
+"""One runner for parameter sweeps and Monte-Carlo studies: :func:`run_sweep` evaluates ``fn(**point)`` at each
+point of a grid (or of a list of points) on any :class:`concurrent.futures.Executor` (a process pool by default;
+threads, ``"serial"``, or a Dask ``client.get_executor()``: see its parameters).  Every sweep in awiwi_drake (gain
+studies of ch. 15, Algorithm 3 of ch. 16, ...) goes through it.  Points are sent in chunks (``chunksize`` points per
+task) to amortise the per-task overhead (pickling, scheduling: ~1 ms per task for a process pool).
 """
 
 from __future__ import annotations
@@ -42,31 +26,15 @@ class SweepPointError(RuntimeError):
 
 @dataclass
 class SweepResult:
-    """Outcome of :func:`run_sweep`.
-
-    Attributes
-    ----------
-    points : list of dict
-        The evaluated points, in input order.
-    values : list
-        ``fn(**point)`` for each point (``None`` where the point failed).
-    errors : dict
-        ``index -> "ExceptionType: message"`` of the failed points (``on_error="record"``).
-    wall_time : float
-        Wall-clock time of the whole sweep [s].
-    executor : str
-        Name of the executor type used.
-    """
+    """Outcome of :func:`run_sweep`: the evaluated ``points`` (dicts, in input order), ``values`` (``fn(**point)``
+    per point, None where it failed), ``errors`` (index -> ``"ExceptionType: message"`` of the failed points, with
+    ``on_error="record"``), the whole sweep's ``wall_time`` [s] and the ``executor`` type's name."""
 
     points: list
     values: list
     errors: dict = field(default_factory=dict)
     wall_time: float = 0.0
     executor: str = ""
-
-    def ok(self) -> list:
-        """Indices of the points that succeeded."""
-        return [i for i in range(len(self.points)) if i not in self.errors]
 
     def column(self, name: str) -> np.ndarray:
         """Values of one swept parameter as an array (in point order)."""
@@ -90,19 +58,8 @@ def grid_points(grid: Mapping[str, Sequence]) -> list[dict]:
 
 def monte_carlo_points(low: Mapping[str, float], high: Mapping[str, float], n: int, *,
                        seed: int | None = None, log: bool = False) -> list[dict]:
-    """``n`` points drawn uniformly (or log-uniformly) in the box ``[low, high]``.
-
-    Parameters
-    ----------
-    low, high : mapping name -> float
-        Box corners (same names).
-    n : int
-        Number of samples (>= 1).
-    seed : int, optional
-        Seed of :func:`numpy.random.default_rng` (reproducible draws).
-    log : bool
-        Sample ``log(value)`` uniformly (needs ``low > 0``).
-    """
+    """``n`` >= 1 points drawn uniformly in the box ``[low, high]`` (mappings name -> float with the same names), or
+    log-uniformly (``log=True``, needs ``low > 0``); ``seed`` seeds :func:`numpy.random.default_rng`."""
     if set(low) != set(high):
         raise ValueError(f"monte_carlo_points: low and high name different parameters: {sorted(low)} vs {sorted(high)}")
     if int(n) < 1:
@@ -163,9 +120,11 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
         ``{name: values}`` for a Cartesian grid (:func:`grid_points`) or an explicit list
         of point dicts (e.g. :func:`monte_carlo_points`).
     executor : concurrent.futures.Executor, "serial" or None
-        ``None``: a ProcessPoolExecutor for this call (shut down afterwards);
-        ``"serial"``: evaluate in this process; an Executor (thread pool, process pool,
-        ``dask.distributed.Client.get_executor()``) is used as is and left running.
+        ``None``: a ProcessPoolExecutor for this call (shut down afterwards; ``fn`` and the point values must be
+        picklable: a module-level function, not a lambda); ``"serial"``: evaluate in this process (debugging, tiny
+        sweeps); an Executor (``ThreadPoolExecutor``: cheap start-up, good when ``fn`` releases the GIL as Drake's
+        C++ simulation does; a process pool; ``dask.distributed.Client.get_executor()``; anything with
+        ``Executor.submit``) is used as is and left running.
     max_workers : int, optional
         Workers of the default process pool (default: ``min(2, os.cpu_count())``).
     chunksize : int, optional

@@ -43,13 +43,10 @@ def parse_sets(items: list[str] | None, option: str = "--set") -> dict[str, str]
     """Parse repeated ``--set NAME=VALUE`` arguments (of ``option``) into a dict."""
     out: dict[str, str] = {}
     for item in items or []:
-        if "=" not in item:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
             raise CliError(f"{option} expects NAME=VALUE, got {item!r}")
-        name, value = item.split("=", 1)
-        name = name.strip()
-        if not name:
-            raise CliError(f"{option} expects NAME=VALUE, got {item!r}")
-        out[name] = value
+        out[name.strip()] = value
     return out
 
 

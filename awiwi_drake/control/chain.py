@@ -32,12 +32,13 @@ from typing import Any
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem_
+from pydrake.systems.primitives import AffineSystem
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.components.friction import guide_friction_level
 from awiwi_drake.components.spring import TendonSprings
 from awiwi_drake.rigs.base import Rig
-from awiwi_drake.control.base import StaticLaw, StaticLawController, check_gains, check_rate
+from awiwi_drake.control.base import StaticLaw, StaticLawController, check_rate
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
 from awiwi_drake.control.joint_stage import JointStage
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
@@ -46,9 +47,8 @@ from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
-__all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceSharing_", "TendonForceSharing",
-           "TendonForceStage", "TendonChainController", "chain_design_point", "rig_springs",
-           "guide_friction_levels", "joint_friction_levels"]
+__all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceStage", "TendonChainController", "chain_design_point",
+           "rig_springs", "guide_friction_levels", "joint_friction_levels"]
 
 
 def rig_springs(rig: Any) -> TendonSprings:
@@ -127,42 +127,6 @@ TendonPathVelocity = TendonPathVelocity_[None]
 
 
 
-@TemplateSystem.define("TendonForceSharing_", scope=sys.modules[__name__])
-def TendonForceSharing_(T):
-    """The sharing (15.88) of desired DoF torques among the tendons, a static map (continuous loops).
-
-    ``tendon_force_reference = f_op + W (joint_torque_reference - tau_op)`` with ``W = -((P S)^T)^+``
-    at the design point, so that ``-(P S)^T f_ref = tau_ref`` exactly (constant coupling).  No
-    stiffness tracking and no bounds (the sampled distribution of ch. 7 has both): for linear analysis.
-
-    An "invalid value encountered in subtract" RuntimeWarning here under Drake's ``Linearize`` has no NaN behind it
-    (the operands are finite): Drake 1.51.1's symbolic code sets the invalid-operation flag when the garbage collector
-    frees an ``Expression`` inside a numpy object-array operation, and numpy reports it against this line.
-    """
-
-    class Impl(LeafSystem_[T]):
-        def _construct(self, sharing, force_op, torque_op, converter=None):
-            LeafSystem_[T].__init__(self, converter)
-            self.W = check_gains("sharing", sharing, owner="TendonForceSharing")
-            m, k = self.W.shape
-            self.f0 = check_gains("force_op", force_op, shape=(m,), owner="TendonForceSharing")
-            self.tau0 = check_gains("torque_op", torque_op, shape=(k,), owner="TendonForceSharing")
-            self._tau = self.DeclareVectorInputPort("joint_torque_reference", k)
-            self.DeclareVectorOutputPort("tendon_force_reference", m, self._calc,
-                                         prerequisites_of_calc={self._tau.ticket()})
-
-        def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other.W, other.f0, other.tau0, converter=converter)
-
-        def _calc(self, context, out):
-            out.SetFromVector(self.f0 + self.W @ (self._tau.Eval(context) - self.tau0))
-
-    return Impl
-
-
-TendonForceSharing = TendonForceSharing_[None]
-
-
 def chain_design_point(rig: Any, op: Any = None, params: HandChainParams | None = None,
                        mechanical_stiffness=None) -> dict:
     """The chain's design point: ``S``, ``q_op``, ``f_op``, ``tau_op = -(P S)^T f_op`` and the desired
@@ -223,15 +187,19 @@ class TendonForceStage(Diagram):
             raise ValueError(f"TendonForceStage: {len(springs)} spring laws for {m} tendons")
         r_m = drive_params.motor.pulley_radius
         b = DiagramBuilder()
-        if method == "sharing":
+        sharing = None
+        if method == "sharing":     # f_ref = f_op + W (tau_ref - tau_op): -(P S)^T f_ref = tau_ref, no bounds
             W = -np.linalg.pinv(point["coupling_matrix"].T)
-            dist = b.AddNamedSystem("force_sharing", TendonForceSharing(W, point["tendon_force"],
-                                                                       point["torque_offset"]))
+            sharing = (W, point["tendon_force"], point["torque_offset"])
+            dist = b.AddNamedSystem("force_sharing", AffineSystem(D=W, y0=sharing[1] - W @ sharing[2]))
+            dist_in, dist_out = dist.get_input_port(), dist.get_output_port()
         elif method in ("optimal", "algorithm2"):
             dist_kw = dict(fingers=point["fingers"], method=method, period=1.0 / rate_hz, stiffness="full",
                            iterations_per_period=p.distribution_iterations, params=distribution_params,
                            drive=drive_params, springs=springs)
             dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(**dist_kw))
+            dist_in = dist.GetInputPort("joint_torque_reference")
+            dist_out = dist.GetOutputPort("tendon_force_reference")
         else:
             raise ValueError(f"TendonForceStage: distribution = {method!r}; use 'optimal', 'algorithm2' or 'sharing'")
         gains = gains or TendonForceGains(natural_frequency=p.force_bandwidth,
@@ -272,8 +240,8 @@ class TendonForceStage(Diagram):
         if force.HasInputPort("tendon_path_velocity"):
             path = b.AddNamedSystem("tendon_path_velocity", TendonPathVelocity(coupling))
             b.Connect(path.get_output_port(0), force.GetInputPort("tendon_path_velocity"))
-        b.Connect(dist.GetOutputPort("tendon_force_reference"), force.GetInputPort("tendon_force_reference"))
-        b.ExportInput(dist.GetInputPort("joint_torque_reference"), "joint_torque_reference")
+        b.Connect(dist_out, force.GetInputPort("tendon_force_reference"))
+        b.ExportInput(dist_in, "joint_torque_reference")
         if dist.HasInputPort("joint_stiffness_reference"):
             b.ExportInput(dist.GetInputPort("joint_stiffness_reference"), "joint_stiffness_reference")
         if force.HasInputPort("tendon_path_velocity"):
@@ -289,7 +257,7 @@ class TendonForceStage(Diagram):
         b.ExportOutput(force.GetOutputPort("motor_torque"), "motor_torque")
         if force.HasOutputPort("tendon_sdre_gain"):
             b.ExportOutput(force.GetOutputPort("tendon_sdre_gain"), "tendon_sdre_gain")
-        b.ExportOutput(dist.GetOutputPort("tendon_force_reference"), "tendon_force_reference")
+        b.ExportOutput(dist_out, "tendon_force_reference")
         if dist.HasOutputPort("distribution_status"):
             b.ExportOutput(dist.GetOutputPort("distribution_status"), "distribution_status")
         b.BuildInto(self)
@@ -299,7 +267,7 @@ class TendonForceStage(Diagram):
         # what the fused chain (control/fused.py) evaluates: the same law and distribution objects
         self.fused_parts = dict(
             law=law, path_coupling=coupling if force.HasInputPort("tendon_path_velocity") else None,
-            sharing=(dist.W, dist.f0, dist.tau0) if method == "sharing" else None,
+            sharing=sharing,
             distribution=None if method == "sharing" else dist_kw,
             distribution_system=self._dist, initial_forces=None if method == "sharing" else self._f_op)
 

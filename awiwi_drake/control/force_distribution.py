@@ -857,20 +857,17 @@ class _FingerBatch:
         self.parts = parts
         # gather/scatter indices between the loop's stacked vectors and the padded per-finger arrays
         # (tendons, DoF, stiffness entries: ``diagonal`` n_f per finger, else n_f x n_f row-major)
-        t, d, kk = ([], [], []), ([], [], []), ([], [], [], [])
+        t, d, kk = [], [], []          # rows (finger, index[, index], source)
         for k, (_, sd, st, sk, _) in enumerate(parts):
             n = sd.stop - sd.start
-            for i in range(st.stop - st.start):
-                t[0].append(k), t[1].append(i), t[2].append(st.start + i)
-            for i in range(n):
-                d[0].append(k), d[1].append(i), d[2].append(sd.start + i)
-            for a in range(n):
-                for b in ((a,) if diagonal else range(n)):
-                    kk[0].append(k), kk[1].append(a), kk[2].append(b)
-                    kk[3].append(sk.start + (a if diagonal else a * n + b))
-        self._t, self._t_src = (np.array(t[0]), np.array(t[1])), np.array(t[2])
-        self._d, self._d_src = (np.array(d[0]), np.array(d[1])), np.array(d[2])
-        self._k, self._k_src = (np.array(kk[0]), np.array(kk[1]), np.array(kk[2])), np.array(kk[3])
+            t += [(k, i, st.start + i) for i in range(st.stop - st.start)]
+            d += [(k, i, sd.start + i) for i in range(n)]
+            kk += [(k, a, b, sk.start + (a if diagonal else a * n + b))
+                   for a in range(n) for b in ((a,) if diagonal else range(n))]
+        t, d, kk = (np.array(rows, dtype=np.int64).T.copy() for rows in (t, d, kk))
+        self._t, self._t_src = (t[0], t[1]), t[2]
+        self._d, self._d_src = (d[0], d[1]), d[2]
+        self._k, self._k_src = (kk[0], kk[1], kk[2]), kk[3]
         solvers = [pt[0] for pt in parts]
         s0 = solvers[0]
         self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
@@ -890,8 +887,10 @@ class _FingerBatch:
             self.real[k, :m] = True
             if s._offline is None:
                 self.dynamic.append(k)
-            else:
-                self._fill(k, *s._offline[:3])
+            else:                                       # fresh arrays: P, pinv, W zero and pad 1 beyond the finger
+                P, pinv_PT, W = s._offline[:3]
+                self.P[k, :m, :n], self.pinv[k, :m, :n], self.W[k, :m, :W.shape[1]] = P, pinv_PT, W
+                self.pad[k, :W.shape[1]] = 0.0
         self.outer = np.einsum("fij,fik->fijk", self.P, self.P)
         # each tendon's stiffness table row (a finger's shared table repeated; padded tendons: row 0)
         G = solvers[0].stiffness_map.forces.shape[-1]
@@ -911,14 +910,6 @@ class _FingerBatch:
                    and isinstance(s.stiffness_map, TendonStiffnessMap)
                    and s.stiffness_map.forces.shape[-1] == s0.stiffness_map.forces.shape[-1]
                    for s in solvers)
-
-    def _fill(self, k, P, pinv_PT, W):
-        m, n = P.shape
-        r = W.shape[1]
-        self.P[k], self.pinv[k], self.W[k] = 0.0, 0.0, 0.0
-        self.P[k, :m, :n], self.pinv[k, :m, :n], self.W[k, :m, :r] = P, pinv_PT, W
-        self.pad[k] = 1.0
-        self.pad[k, :r] = 0.0
 
     def update(self, tau, Kv, f_prev, q, iterations):
         """New forces (all tendons, stacked as the loop system's) and the fingers left to their own solver

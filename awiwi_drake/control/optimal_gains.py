@@ -100,12 +100,9 @@ def backstepping_feedback(model: JointModel, gains: ImpedanceBacksteppingGains, 
 
 
 def backstepping_feedback_batch(model: JointModel, omegas, state0=None) -> np.ndarray:
-    """``K_bs(Omega_s)`` for many samples at once: ``(S, N, n)`` for ``omegas`` of shape ``(S, 4)``.
-
-    One AutoDiffXd evaluation of the same law (:func:`~awiwi_drake.control.backstepping.impedance_backstepping`)
-    with each gain a column of ``S`` values: numpy broadcasts the law over the samples (the law is
-    element-wise in the gains), so the Python overhead of the law is paid once per batch.
-    """
+    """``K_bs(Omega_s)`` (S, N, n) for ``omegas`` (S, 4): one AutoDiffXd evaluation of the law
+    (:func:`~awiwi_drake.control.backstepping.impedance_backstepping`) with each gain a column of ``S`` values (the law
+    is element-wise in the gains, so numpy broadcasts it over the samples)."""
     om = np.asarray(omegas, dtype=float)
     if om.ndim != 2 or om.shape[1] != len(OMEGA_NAMES) or not np.all(om > 0):
         raise ValueError(f"backstepping_feedback_batch: omegas must be (samples, 4) positive "

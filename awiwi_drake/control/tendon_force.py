@@ -43,11 +43,8 @@ __all__ = ["ForceMap", "force_map", "interp", "TendonForceLaw", "tendon_pd_contr
 
 
 def interp(x, xp: np.ndarray, fp: np.ndarray):
-    """Piecewise-linear interpolation for float and AutoDiffXd (derivative = local slope).
-
-    Outside the table the end segments are extrapolated linearly; callers
-    clamp or validate their argument first (:class:`ForceMap` does).
-    """
+    """Piecewise-linear interpolation for float and AutoDiffXd (derivative = local slope); outside the table the
+    end segments are extrapolated (callers clamp or validate first, as :class:`ForceMap` does)."""
     xp = np.asarray(xp, float)
     fp = np.asarray(fp, float)
     if isinstance(x, np.ndarray) and x.dtype != object and x.size > 1:   # a float bank: the lean path
@@ -70,12 +67,8 @@ def interp(x, xp: np.ndarray, fp: np.ndarray):
 
 @dataclass
 class ForceMap:
-    """Tabulated static tendon force ``f(theta)`` of a rig and its slope ``alpha(theta)``.
-
-    ``theta`` is increasing; only the taut, strictly increasing part is kept
-    (every row has ``force > 0``); ``slack_angle`` is the largest tabulated
-    motor angle at which the tendon is still slack (``f = 0``).
-    """
+    """Tabulated static tendon force ``f(theta)`` of a rig and its slope ``alpha(theta)`` over increasing ``theta``:
+    the taut, strictly increasing part only; ``slack_angle``: the largest tabulated angle with ``f = 0``."""
 
     theta: np.ndarray
     force: np.ndarray
@@ -124,23 +117,15 @@ class ForceMap:
         return interp(f, np.concatenate([[0.0], self.force]), np.concatenate([[self.slack_angle], self.theta]))
 
     def alpha_of_force(self, f, floor: float | None = None):
-        """``d f / d theta`` at force ``f`` [N/rad] (float or AutoDiffXd).
-
-        The force argument is clamped to the taut range ``[max(floor, force[0]),
-        max_force]`` (derivative 0 outside), never extrapolated: below the
-        table's first row (or below ``floor``) the slope at that row is used.
-        """
+        """``d f / d theta`` at force ``f`` [N/rad] (float or AutoDiffXd), ``f`` clamped to ``[max(floor, force[0]),
+        max_force]`` (derivative 0 outside), never extrapolated."""
         lo = float(self.force[0]) if floor is None else max(float(floor), float(self.force[0]))
         return interp(clip(f, lo, self.max_force), self.force, self.alpha)
 
 
 def force_map(rig: Any, *, f_max: float = 200.0, num: int = 600) -> ForceMap:
-    """Tabulate the rig's ``tendon_force`` output over motor angles (motor at rest).
-
-    The rig must have the state ``[theta, omega]`` and output ``tendon_force``;
-    the slope is ``r_m * tendon_stiffness`` when the rig outputs the stiffness,
-    else the centred difference of the tabulated force.
-    """
+    """Tabulate the ``tendon_force`` output of a rig with state ``[theta, omega]`` over motor angles at rest; the
+    slope is ``r_m tendon_stiffness`` when the rig outputs it, else the centred difference of the force."""
     d = rig.diagram
     if not d.HasOutputPort("tendon_force"):
         raise ValueError(f"force_map: rig {getattr(rig, 'name', '?')!r} has no output 'tendon_force'")

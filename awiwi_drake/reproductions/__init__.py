@@ -6,28 +6,23 @@ plants (:mod:`awiwi_drake.rigs`, :mod:`awiwi_drake.hand`), controllers
 and returns data; its ``plot_*`` functions draw that data. docs/REPRODUCTIONS.md
 records each figure: the printed value, ours, the verdict.
 
-=============================================  =========================================
-thesis                                         module
-=============================================  =========================================
-ch. 3 motor: friction (Fig 3.3), ripple        :mod:`.ch03_motor`
-ch. 5 fingers: Coriolis (Fig 5.7), poles       :mod:`.ch05_fingers`
-ch. 5.5 fifth finger HMC four-bar vs revolute  :mod:`.ch05_fifth_hmc`
-ch. 6 wrist: finger drift under wrist motion   :mod:`.ch06_wrist`
-ch. 5/7/8 stiffness by co-contraction, closed  :mod:`.ch07_cocontraction`
-ch. 8 stiffness correction (Fig 8.3)           :mod:`.ch08_stiffness_correction`
-ch. 9 friction observer (Fig 9.3)              :mod:`.ch09_friction_observer`
-ch. 10 tendon force control (Fig 10.1-10.3)    :mod:`.ch10_tendon_force`
-ch. 11 impedance control (Fig 11.2-11.4)       :mod:`.ch11_impedance`
-ch. 12 pole placement (Fig 12.3-12.4, (12.19)) :mod:`.ch12_pole_placement`
-ch. 13 LQR (Fig 13.2-13.3)                     :mod:`.ch13_lqr`
-ch. 14 SDRE (Fig 14.3-14.5)                    :mod:`.ch14_sdre`
-ch. 15 backstepping (Fig 15.2-15.27)           :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`,
-                                               :mod:`.ch15_pip_experiments` (Fig 15.24-15.25 on a PIP)
-ch. 15 PIP of a finger (Fig 15.24-15.25)       :mod:`.ch15_pip_experiments`
-ch. 16 optimal backstepping gains (Tab 16.1)   :mod:`.ch16_optimal_backstepping`
-``awiwi-drake demo`` (joint rig)               :mod:`.demo`
-invented parameters (figure sensitivity)      :mod:`.invented_parameters`
-=============================================  =========================================
+* ch. 3 motor: friction (Fig 3.3), ripple: :mod:`.ch03_motor`
+* ch. 5 fingers: Coriolis (Fig 5.7), poles: :mod:`.ch05_fingers`; fifth finger HMC four-bar vs revolute:
+  :mod:`.ch05_fifth_hmc`
+* ch. 6 wrist: finger drift under wrist motion: :mod:`.ch06_wrist`
+* ch. 5/7/8 stiffness by co-contraction, on the closed loop: :mod:`.ch07_cocontraction`
+* ch. 8 stiffness correction (Fig 8.3): :mod:`.ch08_stiffness_correction`
+* ch. 9 friction observer (Fig 9.3): :mod:`.ch09_friction_observer`
+* ch. 10 tendon force control (Fig 10.1-10.3): :mod:`.ch10_tendon_force`
+* ch. 11 impedance control (Fig 11.2-11.4): :mod:`.ch11_impedance`
+* ch. 12 pole placement (Fig 12.3-12.4, (12.19)): :mod:`.ch12_pole_placement`
+* ch. 13 LQR (Fig 13.2-13.3): :mod:`.ch13_lqr`
+* ch. 14 SDRE (Fig 14.3-14.5): :mod:`.ch14_sdre`
+* ch. 15 backstepping (Fig 15.2-15.27): :mod:`.ch15_backstepping`, :mod:`.ch15_scalar_example`,
+  :mod:`.ch15_pip_experiments` (Fig 15.24-15.25 on a finger's PIP)
+* ch. 16 optimal backstepping gains (Tab 16.1): :mod:`.ch16_optimal_backstepping`
+* ``awiwi-drake demo`` (joint rig): :mod:`.demo`; invented parameters (figure sensitivity):
+  :mod:`.invented_parameters`
 
 Modules are imported on demand (``from awiwi_drake.reproductions import ch15_backstepping``).
 
@@ -47,6 +42,8 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+
+from awiwi_drake.plotting import _plt, figure_axes, label_axes, plot_traces
 
 __all__ = ["FigureEntry", "Reproduction", "FIGURES", "reproduce"]
 
@@ -93,7 +90,6 @@ _PIP_UNITS = dict(peak_torque="Nm", min_tendon_force="N", final_error="rad", ris
 
 
 def _pip(test: str, short: bool) -> Reproduction:
-    from awiwi_drake.plotting import figure_axes, label_axes
     from awiwi_drake.reproductions.ch15_pip_experiments import pip_experiment, pip_metrics
     names = (("backstepping", "cascaded") if short else
              ("backstepping", "backstepping-friction-observer", "cascaded", "cascaded:no-observer"))
@@ -147,11 +143,10 @@ def _fig5_7(short: bool) -> Reproduction:
 
 
 def _fig6_10(short: bool) -> Reproduction:
-    import matplotlib.pyplot as plt
     from awiwi_drake.reproductions.ch06_wrist import (
         plot_wrist_constraint_errors, plot_wrist_displacements, wrist_motion_study)
     w = wrist_motion_study(num_samples=51 if short else 201)
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    fig, axes = figure_axes(None, ncols=2, figsize=(12, 4))
     plot_wrist_constraint_errors(w, ax=axes[0])
     plot_wrist_displacements(w, ax=axes[1])
     series = {"t [s]": w.t, "q71 [rad]": w.wrist_angle[:, 0], "q73 [rad]": w.wrist_angle[:, 1]}
@@ -170,11 +165,10 @@ def _run_series(runs, signal: str = "link angle [rad]") -> dict:
 
 
 def _fig15_7(short: bool) -> Reproduction:
-    import matplotlib.pyplot as plt
     from awiwi_drake.reproductions.ch15_backstepping import plot_joint_angle, position_gain_study
     kw = dict(t_final=5.0, values=(1.0, 5.0)) if short else {}
     runs = {w: position_gain_study(w, **kw) for w in ("k1", "k2")}
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.5))
+    fig, axes = figure_axes(None, ncols=2, figsize=(11, 3.5))
     plot_joint_angle(runs["k1"], ax=axes[0], title="K1 (K2 = 1), Fig 15.7")
     plot_joint_angle(runs["k2"], ax=axes[1], title="K2 (K1 = 5), Fig 15.8")
     every = runs["k1"] + runs["k2"]
@@ -192,10 +186,9 @@ def _fig15_27(short: bool) -> Reproduction:
 
 
 def _fig13_2(short: bool) -> Reproduction:
-    import matplotlib.pyplot as plt
     from awiwi_drake.reproductions.ch13_lqr import lqr_trajectories
     runs = lqr_trajectories(t_final=0.1 if short else 0.2)
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
+    fig, axes = figure_axes(None, ncols=2, figsize=(11, 3.8))
     series = {}
     for r, d in runs.items():
         d.plot(ax=axes)
@@ -219,17 +212,13 @@ def _fig12_3(short: bool) -> Reproduction:
 
 
 def _fig8_3(short: bool) -> Reproduction:
-    import matplotlib.pyplot as plt
     from awiwi_drake.reproductions.ch08_stiffness_correction import plot_stiffness_run, stiffness_correction_run
     kw = dict(loads=(0.0, 0.15), segment=0.2) if short else dict(loads=(0.0, 0.075, 0.15, 0.0), segment=0.3)
     runs = [stiffness_correction_run(corrected=c, **kw) for c in (True, False)]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 3.5))
+    fig, axes = figure_axes(None, ncols=2, figsize=(12, 3.5))
     plot_stiffness_run(runs[0], ax=axes[0])
-    for r in runs:
-        axes[1].plot(r.t, r.q, label="corrected" if r.corrected else "fixed K_imp")
-    axes[1].set_ylabel("link angle [rad]")
-    axes[1].set_xlabel("time [s]")
-    axes[1].legend()
+    plot_traces(runs[0].t, {"corrected" if r.corrected else "fixed K_imp": r.q for r in runs},
+                ylabel="link angle [rad]", ax=axes[1])
     r = runs[0]
     series = {"t [s]": r.t, "external torque [Nm]": r.tau_ext, "K target [Nm/rad]": r.k_target,
               "K_imp [Nm/rad]": r.k_imp, "K_mech [Nm/rad]": r.k_mech, "K_eff (8.1) [Nm/rad]": r.k_eff,
@@ -238,10 +227,9 @@ def _fig8_3(short: bool) -> Reproduction:
 
 
 def _fig10_2(short: bool) -> Reproduction:
-    import matplotlib.pyplot as plt
     from awiwi_drake.reproductions.ch10_tendon_force import plot_tendon_steps, tendon_step_experiment
     runs = [tendon_step_experiment(sched, t_final=0.15 if short else 0.25) for sched in (False, True)]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=True)
+    fig, axes = figure_axes(None, ncols=2, figsize=(12, 4), sharey=True)
     series = {"t [s]": runs[0].t}
     for r, ax in zip(runs, axes):
         plot_tendon_steps(r, ax=ax)
@@ -324,7 +312,6 @@ def reproduce(ids, out, *, short: bool = False, progress: Callable[[str], None] 
     """Run the figure ``ids`` (keys of :data:`FIGURES`; a single id or a list) and write ``ID.png``, ``ID.csv``
     (when the figure has series) and ``ID.json`` into the folder ``out`` (created); returns ``{id: [paths]}``.
     An unknown id raises ``KeyError`` naming it (before anything runs); ``progress(id)`` is called before each."""
-    import matplotlib.pyplot as plt
     ids = [ids] if isinstance(ids, str) else list(ids)
     unknown = [i for i in ids if i not in FIGURES]
     if unknown or not ids:
@@ -340,7 +327,7 @@ def reproduce(ids, out, *, short: bool = False, progress: Callable[[str], None] 
         r = e.run(bool(short))
         paths = [out / f"{i}.png"]
         r.figure.savefig(paths[0], dpi=100)
-        plt.close(r.figure)
+        _plt().close(r.figure)
         if r.series:
             paths.append(out / f"{i}.csv")
             _write_csv(paths[-1], r.series)

@@ -32,32 +32,14 @@ __all__ = ["WristMotionResult", "wrist_motion_study", "plot_wrist_displacements"
 class WristMotionResult:
     """Data of the thesis's wrist check (Fig 6.9, 6.10): flexion, then abduction.
 
-    Attributes
-    ----------
-    t : ndarray (N,)
-        Time [s].
-    wrist_angle : ndarray (N, 2)
-        [q71, q73] [rad] along the motion.
-    offsets : ndarray (N, num_tendons)
-        Tendon displacement ``h_wrist(q) - h_wrist(0)`` [m] (Fig 6.10).
-    constraint_errors : ndarray (N, 6)
-        Distance constraint errors [m] (Fig 6.9), order of
-        :func:`wrist_constraint_errors`.
-    phase : ndarray (N,) of str
-        ``"flexion"`` or ``"abduction"``.
-    median_distance : ndarray (num_tendons,)
-        Signed lateral distance of each tendon's forearm point from the wrist's
-        median axis, ``y - b/2`` [m].
-    flexion_peak, abduction_peak : float
-        Largest |displacement| in each phase [m] (abduction: relative to the
-        start of the abduction phase).
-    abduction_slope : float
-        Least-squares slope of the abduction-induced displacement at the
-        abduction peak vs ``median_distance`` [m/m].
-    abduction_r2 : float
-        Coefficient of determination of that linear fit.
-    abduction_intercept : float
-        Intercept of that fit [m].
+    ``t`` [s]; ``wrist_angle`` (N, 2): [q71, q73] [rad]; ``offsets`` (N, num_tendons): tendon displacement
+    ``h_wrist(q) - h_wrist(0)`` [m] (Fig 6.10); ``constraint_errors`` (N, 6): distance constraint errors [m]
+    (Fig 6.9, in the order of :func:`wrist_constraint_errors`); ``phase``: ``"flexion"`` or ``"abduction"`` per
+    sample; ``median_distance``: signed lateral distance ``y - b/2`` of each tendon's forearm point from the wrist's
+    median axis [m]; ``flexion_peak``, ``abduction_peak``: largest |displacement| in each phase [m] (abduction:
+    relative to the start of its phase); ``abduction_slope`` [m/m], ``abduction_intercept`` [m] and
+    ``abduction_r2``: least-squares line of the abduction-induced displacement at the abduction peak against
+    ``median_distance``, and its coefficient of determination.
     """
 
     t: np.ndarray
@@ -87,34 +69,14 @@ class WristMotionResult:
 def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
                        duration: float = 4.0, num_samples: int = 201, hold_flexion: bool = False,
                        params: WristParams | None = None) -> WristMotionResult:
-    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10).
+    """Flexion, then abduction, as in the thesis's check (Fig 6.9, 6.10); a :class:`WristMotionResult`.
 
-    The first half of ``duration`` moves q73 along ``flexion (1 - cos(2 pi s))/2``
-    (out to ``flexion`` and back), the second half moves q71 likewise (s the
-    phase time / phase duration).  With ``hold_flexion=True`` q73 ramps to
-    ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.
-
-    The abduction statistics use the displacement caused by the abduction
-    alone: offsets at the abduction peak minus offsets at the start of the
-    abduction phase, fitted linearly against the signed distance of each
-    tendon's forearm point from the median axis (y - b/2).
-
-    Parameters
-    ----------
-    flexion, abduction : float
-        Peak q73 and q71 [rad] (thesis: 30 deg and 20 deg).
-    duration : float
-        Total time [s] (Fig 6.10: 4 s; Fig 6.9: 10 s).
-    num_samples : int
-        Time samples (>= 5).
-    hold_flexion : bool
-        Keep the flexion during the abduction phase.
-    params : WristParams, optional
-
-    Returns
-    -------
-    WristMotionResult
-        Displacements, constraint errors and the proportionality statistics.
+    The first half of ``duration`` [s] (Fig 6.10: 4 s; Fig 6.9: 10 s) moves q73 along
+    ``flexion (1 - cos(2 pi s))/2`` (out to ``flexion`` and back), the second half moves q71 likewise to
+    ``abduction`` (s the phase time / phase duration; thesis: 30 deg and 20 deg).  With ``hold_flexion=True`` q73
+    ramps to ``flexion`` (``(1 - cos(pi s))/2``) and stays there during the abduction.  ``num_samples`` >= 5.
+    The abduction statistics use the displacement caused by the abduction alone: offsets at the abduction peak minus
+    offsets at the start of the abduction phase, fitted linearly against ``median_distance``.
     """
     if not (duration > 0.0):
         raise ValueError(f"duration must be > 0 [s], got {duration}")

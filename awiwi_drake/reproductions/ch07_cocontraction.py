@@ -45,6 +45,7 @@ import numpy as np
 from awiwi_drake.analysis import Samples, simulate
 from awiwi_drake.components.friction import guide_friction_rate
 from awiwi_drake.components.spring import hysteresis_rate
+from awiwi_drake.components.tendon import series_stiffness
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_design import joint_stage_controller
 from awiwi_drake.control.joint_pd import joint_pd_controller
@@ -95,8 +96,7 @@ class StiffnessMeasurement:
 
     def table(self) -> str:
         rows = [f"{self.finger} {self.controller} ({self.level}), loads {np.array2string(self.load, precision=3)} Nm, "
-                f"mean tendon force "
-                f"{self.tendon_force.mean():.1f} N",
+                f"mean tendon force {self.tendon_force.mean():.1f} N",
                 f"{'DoF':6s} {'measured':>9s} {'predicted':>9s} {'(5.12)':>9s} {'presliding':>10s} {'commanded':>9s}"]
         cmd = self.commanded if self.commanded is not None else np.full(len(self.dof_names), np.nan)
         for j, n in enumerate(self.dof_names):
@@ -197,10 +197,13 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     res = simulate(loop, ctx, float(ends[-1]), inputs={"external_torque": sched}, **simulate_options,
                    log=("joint_angle", "tendon_force", "elongation", "state")
                    + tuple(p_ for p_ in (ref_port, est_port) if loop.diagram.HasOutputPort(p_)))
-    t, q = res.t, res["joint_angle"] @ np.linalg.pinv(S).T
+    S_pinv = np.linalg.pinv(S)
+    t, q = res.t, res["joint_angle"] @ S_pinv.T
     win = [(t > e - window) & (t <= e + 1e-12) for e in ends]
-    means = np.array([q[w].mean(axis=0) for w in win])
-    D = np.diff(means, axis=0).T                     # column j: the response to the load on DoF j
+
+    def mean(a):                # per window
+        return np.array([a[w].mean(axis=0) for w in win])
+    D = np.diff(mean(q), axis=0).T                     # column j: the response to the load on DoF j
     measured = np.diag(L) @ np.linalg.inv(D)          # D = K^-1 diag(L)
     f = res["tendon_force"][win[0]].mean(axis=0)      # the forces held before the load
     x = np.asarray(rig.drive.model.laws.inverse_force(f), float)
@@ -210,7 +213,6 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     # the ring's and fifth's PIP/DIP coupler (5.16)-(5.17), a stiff spring between the two plant joints of one DoF
     K_c = np.zeros((rig.num_joints, rig.num_joints)) if rig.coupling_gain is None else \
         np.asarray(rig.coupling_gain, float)[:, :rig.num_joints]
-    S_pinv = np.linalg.pinv(S)
 
     def on_dof(K_joints):       # the DoF stiffness the staircase measures: loads S L, deflections S^+ q
         return np.linalg.inv(S_pinv @ np.linalg.solve(K_joints, S))
@@ -221,16 +223,13 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     zs = res["state"][:, k0:k0 + m] if model.has_hysteresis else np.zeros((len(t), m))
     gs = res["state"][:, k0 + m * model.has_hysteresis:][:, :m] if model.guide_friction is not None \
         else np.zeros((len(t), m))
-
-    def mean(a):
-        return np.array([a[w].mean(axis=0) for w in win])
     fw, xw, zw, gw = mean(res["tendon_force"]), mean(res["elongation"]), mean(zs), mean(gs)
     hw = mean(res["joint_angle"] @ P.T)
     c = JointControllerParams()
     r_m = rig.params.motor.pulley_radius
 
     def series(k, fj):          # each tendon's spring (and hysteresis) in series with its motor servo kp / r_m^2
-        return joint_stiffness(rig.coupling, q0, fj, 1.0 / (1.0 / k + r_m ** 2 / c.kp)) + K_c
+        return joint_stiffness(rig.coupling, q0, fj, series_stiffness(k, c.kp / r_m ** 2)) + K_c
     D_pred, D_plain = np.zeros((n, n)), np.zeros((n, n))
     for j in range(n):          # column j from the states before load j and the directions it moves them
         s_x = np.where(xw[j + 1] >= xw[j], 1.0, -1.0)
@@ -250,7 +249,6 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     # how far the Dahl states moved: the elongations' and the tendon paths' largest change over the run
     dx = np.ptp(res["elongation"], axis=0)
     dh = np.ptp(res["joint_angle"] @ P.T, axis=0)
-    model = rig.drive.model
     lin = 0.0
     if model.has_hysteresis:
         delta = np.array([h.presliding_length for h in model.hysteresis]) if isinstance(model.hysteresis, tuple) \
@@ -263,11 +261,11 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     torque_error = np.zeros((len(ends), n))
     if ref_port in res:
         e_tau = -res["tendon_force"] @ (P @ S) - res[ref_port]
-        torque_error = np.array([e_tau[w].mean(axis=0) for w in win])
+        torque_error = mean(e_tau)
     # the tendon-length estimator's (5.15) mean error per window (the chain acts on the estimate, not on q)
     estimation_error = np.zeros((len(ends), n))
     if est_port in res:
-        estimation_error = np.array([np.linalg.pinv(S) @ res[est_port][w].mean(axis=0) for w in win])
+        estimation_error = mean(res[est_port]) @ S_pinv.T
     names = [rig.joint_names[int(np.flatnonzero(S[:, j])[0])] for j in range(n)]
     return StiffnessMeasurement(finger, controller, level, names, L, measured, mechanical, predicted, presliding,
                                 commanded, f, D, lin, ends, window, torque_error, estimation_error, t, q)

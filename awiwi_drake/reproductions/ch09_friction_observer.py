@@ -5,18 +5,16 @@ The observer (9.2) and the link-side friction law are :mod:`awiwi_drake.control.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from awiwi_drake.analysis import PerEntry, Sine, simulate
+from awiwi_drake.analysis import simulate
 from awiwi_drake.control.backstepping import impedance_controller
 from awiwi_drake.control.base import closed_loop
 from awiwi_drake.control.friction_observer import with_link_friction
 from awiwi_drake.parameters.backstepping import AntagonisticBacksteppingGains, ImpedanceBacksteppingGains
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, LinkFrictionParams
 from awiwi_drake.parameters.rigs import JointRigParams
-from awiwi_drake.reproductions.ch15_backstepping import BacksteppingRun, plot_run_traces
+from awiwi_drake.reproductions.ch15_backstepping import BacksteppingRun, plot_run_traces, sine_reference
 from awiwi_drake.rigs import joint_rig
 
 __all__ = ["friction_tracking_run", "chattering", "plot_friction_runs"]
@@ -31,7 +29,7 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     ``external_torque`` input; the antagonistic backstepping impedance controller estimates the
     disturbance with the observer (9.2) and, with ``compensate=True``, cancels it (``u = u_c +
     tau_fric_hat``). Returns a :class:`~awiwi_drake.reproductions.ch15_backstepping.BacksteppingRun`
-    with ``extra["friction"]`` (true) and ``extra["friction_estimate"]``.
+    with the true friction as its ``disturbance`` and the observer's estimate as ``friction_estimate``.
     """
     fp = friction or LinkFrictionParams()
     rig = joint_rig(params=JointRigParams().replace(link_inertia=fp.test_joint_inertia))
@@ -44,16 +42,13 @@ def friction_tracking_run(*, compensate: bool, amplitude: float = 0.3, frequency
     ctx = diagram.CreateDefaultContext()
     op = rig.operating_point(pretension=g.pretension)
     loop.diagram.GetSubsystemByName("rig").GetMyMutableContextFromRoot(ctx).SetContinuousState(op.state)
-    w = 2 * math.pi * frequency
-    # the reference and its four derivatives: A sin(w t), A w cos(w t), -A w^2 sin(w t), ...
-    ref = PerEntry([Sine(amplitude * w ** k, frequency, phase=k * math.pi / 2) for k in range(5)])
-    res = simulate(diagram, ctx, t_final, inputs={"joint_angle_reference": ref},
+    res = simulate(diagram, ctx, t_final, inputs={"joint_angle_reference": sine_reference(amplitude, frequency)},
                    log=("state", "motor_torque", "controller_lyapunov", "controller_external_torque_estimate",
                         "link_friction", "joint_angle_reference"), log_period=dt, max_step=dt, accuracy=1e-6)
     F = res["link_friction"][:, 0]
     return BacksteppingRun("with compensation" if compensate else "without compensation", res.t, res["state"],
                            res["motor_torque"], res["controller_lyapunov"][:, 0], res["joint_angle_reference"][:, 0],
-                           F, dict(friction=F, friction_estimate=res["controller_external_torque_estimate"][:, 0]))
+                           F, friction_estimate=res["controller_external_torque_estimate"][:, 0])
 
 
 def chattering(run, *, after: float = 0.0) -> float:

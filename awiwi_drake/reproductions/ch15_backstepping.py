@@ -48,27 +48,12 @@ __all__ = [
 
 @dataclass
 class BacksteppingRun:
-    """Sampled time series of one closed-loop simulation.
-
-    Attributes
-    ----------
-    label : str
-        What was varied (e.g. ``"K1 = 5"``).
-    t : ndarray (N,)
-        Sample times [s].
-    state : ndarray (N, n)
-        Rig state (``[q, qd, theta..., omega...]``).
-    command : ndarray (N, m)
-        Torque entering the rig [Nm] (after hold, delay, saturation).
-    lyapunov : ndarray (N,)
-        The controller's Lyapunov function.
-    reference : ndarray (N,)
-        Link-angle reference [rad].
-    disturbance : ndarray (N,)
-        External torque [Nm].
-    extra : dict
-        Further logged outputs (``tendon_force``, ``joint_torque``, ``tendon_stiffness``, ...).
-    """
+    """Sampled time series of one closed-loop simulation: ``label`` (what was varied, e.g. ``"K1 = 5"``), ``t`` [s],
+    the rig ``state`` (N, n) (``[q, qd, theta..., omega...]``), the ``command`` (N, m) entering the rig [Nm] (after
+    hold, delay, saturation), the controller's ``lyapunov`` function, the link-angle ``reference`` [rad], the
+    external torque ``disturbance`` [Nm]; where the run logged them (``run_loop``'s ``extra_outputs``) the loop's
+    ``tendon_force`` [N], ``joint_torque`` [Nm] and ``tendon_stiffness`` [N/m], and for Fig 9.3 the (9.2) observer's
+    ``friction_estimate`` [Nm] (the true friction is ``disturbance``)."""
 
     label: str
     t: np.ndarray
@@ -77,7 +62,10 @@ class BacksteppingRun:
     lyapunov: np.ndarray
     reference: np.ndarray
     disturbance: np.ndarray
-    extra: dict = field(default_factory=dict)
+    tendon_force: np.ndarray | None = None
+    joint_torque: np.ndarray | None = None
+    tendon_stiffness: np.ndarray | None = None
+    friction_estimate: np.ndarray | None = None
 
     @property
     def q(self) -> np.ndarray:
@@ -147,12 +135,9 @@ def event_schedules(events: Sequence[tuple[float, Mapping[str, object]]], initia
     return out
 
 
-#: Integrator of the impedance and antagonistic backstepping runs (continuous loops). Their closed loops
-#: have fast poles (K3, K4 and Kd,imp / m with the small link inertias of Table 15.1 and the joint rig), so
-#: error-controlled explicit RK3 is stability-limited: accuracy 1e-4 and 1e-6 took the same 7.4-8.2 s for
-#: the Fig 15.19 pair. The L-stable Radau IIA (3rd order) at the same accuracy took 2.8 s and agreed to
-#: 6e-9 rad; Fig 15.16's run 4.3 s -> 1.0 s (2e-11 rad). Not for the position/saturation studies (linear,
-#: not stiff: RK3 is 4-10x faster there).
+#: Integrator of the impedance and antagonistic backstepping runs (continuous loops): their fast poles (K3, K4 and
+#: Kd,imp / m with Table 15.1's small link inertia) make error-controlled explicit RK3 stability-limited; the L-stable
+#: Radau IIA (3rd order) at the same accuracy is 3-4x faster.  Not for the position/saturation studies (not stiff).
 STIFF_INTEGRATOR = "radau3"
 
 
@@ -162,9 +147,14 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     """One closed-loop run through :func:`awiwi_drake.analysis.simulate`, logged every ``dt`` as a :class:`BacksteppingRun`.
 
     ``inputs`` maps exported inputs (``joint_angle_reference``, ``external_torque``) to schedules
-    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``integrator``: the
-    error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
+    (:func:`event_schedules`, ``Sine``, ``PerEntry``, ...); the others stay 0. ``extra_outputs``: outputs also
+    logged into the run's fields of the same name (``tendon_force``, ``joint_torque``, ``tendon_stiffness``).
+    ``integrator``: the error-controlled Drake integrator of a continuous loop (see :data:`STIFF_INTEGRATOR`).
     """
+    unknown = [k for k in extra_outputs if k not in _EXTRA_OUTPUTS]
+    if unknown:
+        raise ValueError(f"run_loop: extra_outputs {unknown} are not BacksteppingRun fields; "
+                         f"known: {', '.join(_EXTRA_OUTPUTS)}")
     d = loop.diagram
     ctx = loop.create_context(state=state0, motor_torque=motor_torque0)
     log = ["state", "motor_torque", *extra_outputs]
@@ -178,7 +168,10 @@ def run_loop(loop: ClosedLoop, *, t_final: float, state0, motor_torque0=None, in
     return BacksteppingRun(label, res.t, res["state"], res["motor_torque"],
                            res["controller_lyapunov"][:, 0] if has_v else np.full(n, math.nan),
                            res[ref][:, 0] if ref else np.full(n, math.nan),
-                           res[ext][:, 0] if ext else np.zeros(n), {k: res[k] for k in extra_outputs})
+                           res[ext][:, 0] if ext else np.zeros(n), **{k: res[k] for k in extra_outputs})
+
+
+_EXTRA_OUTPUTS = ("tendon_force", "joint_torque", "tendon_stiffness")
 
 
 def is_monotone_nonincreasing(v, *, rtol: float = 1e-6, atol: float = 1e-12) -> bool:
@@ -328,11 +321,8 @@ def nonlinear_impedance_study(study: NonlinearImpedanceStudy | None = None, *, s
     "nonlinear controller" uses the real spring curve and its first two derivatives.
     ``saturation=True`` limits the motor torque (Fig 15.21).
 
-    The load is an ideal step, measured by an ideal sensor: it enters the design's
-    ``qdd``/``qddd`` and the command jumps by :func:`load_step_command_jump` (4.9e3 Nm for
-    the defaults, Table 15.1's tiny link inertia). Unsaturated, that kick throws the link
-    tens of rad away (peak 37.6 rad) before the nonlinear controller returns it to
-    ``step + load / Kp,imp``; the linear controller does not return (docs/REPRODUCTIONS.md).
+    The load is an ideal step, measured by an ideal sensor: it enters the design's ``qdd``/``qddd`` and the
+    command jumps by :func:`load_step_command_jump` (what that does: docs/REPRODUCTIONS.md).
     """
     s = study or NonlinearImpedanceStudy()
     base = functools.partial(table_15_1_rig, spring="nonlinear")

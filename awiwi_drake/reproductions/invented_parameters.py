@@ -6,23 +6,9 @@ the ring, fifth and thumb, the thumb metacarpal, the wrist's linkage lengths, th
 mechanism's geometry or the tendon's modulus and section.  The package chooses them
 (``awiwi_drake/parameters/``, each with its reason).  :func:`invented_parameter_sensitivity`
 varies each of them by -20 % and +20 %, one at a time, and recomputes the headline number of every
-reproduced figure that uses it:
-
-* ``fig4_8b_force_45deg``: lever mechanism force at 45 deg [N] (Fig 4.8b; the spring constant is
-  fitted to 175 N at 48 deg and held, so a geometry change shows as a shape change);
-* ``tendon_stiffness_20N``: stiffness of lever mechanism + tendon in series at 20 N [N/m] (ch. 4
-  calibration; what every tendon-force and joint-stiffness number scales with);
-* ``index_link_mode_20N``: stiffest link mode of the index finger at 20 N pretension [rad/s]
-  (poles vs pretension; sets the time scale of Fig 5.7 and of every finger loop);
-* ``fig5_7_dip_difference``: DIP trajectory difference with/without C(q, v) v after a 0.1 rad MCP
-  release [rad] (Fig 5.7, over 0.05 s instead of 0.2 s to keep the study cheap; ``fig57=False``
-  skips it);
-* ``ring_pip_moment_arm``: reduced PIP moment arm of the ring's motor pair [m] ((5.16)-(5.18));
-* ``fig6_10_abduction_peak``: largest tendon displacement at 20 deg wrist abduction [m] (Fig 6.10);
-* ``thumb_base_stiffness``: smallest eigenvalue of the thumb base stiffness (5.12) at
-  q = (0.5, 0.3), 20 N [N m/rad];
-* ``fig5_17_cold_error``: largest thumb-base estimation error, cold start, 30 iterations, no noise
-  [rad] (Fig 5.17).
+reproduced figure that uses it (:data:`HEADLINES`: name, unit, function).  The lever force of Fig 4.8b
+holds the spring constant fitted to 175 N at 48 deg, so a geometry change shows as a shape change; Fig 5.7's
+difference is taken over 0.05 s instead of 0.2 s to keep the study cheap (``fig57=False`` skips it).
 
 The wrist's linkage lengths are not parameters but are derived from Table 6.1 by the box
 construction (:mod:`awiwi_drake.hand.wrist`); they are varied by overriding the derived property.
