@@ -276,10 +276,10 @@ def test_calibration_parameters_act_on_the_measurements(joint_engine):
     y0, y = model_measurements(nom, X, P0), model_measurements(nom, X, P)
     names = nom.measurement_names()
     np.testing.assert_allclose(y[names.index("motor_angle_1")] - y0[names.index("motor_angle_1")], 0.02)
-    np.testing.assert_allclose(y[names.index("link_angle")], 1.1 * X[0] - 0.03)   # X: [q, q', theta, omega, z]
+    np.testing.assert_allclose(y[names.index("joint_angle")], 1.1 * X[0] - 0.03)   # X: [q, q', theta, omega, z]
     # the measured angles are explained by the calibrated state: the estimate is consistent
-    np.testing.assert_allclose(model_measurements(nom, X, P)[names.index("link_angle")],
-                               model_measurements(nom, X0, P0)[names.index("link_angle")], atol=1e-12)
+    np.testing.assert_allclose(model_measurements(nom, X, P)[names.index("joint_angle")],
+                               model_measurements(nom, X0, P0)[names.index("joint_angle")], atol=1e-12)
     np.testing.assert_allclose(y[names.index("motor_angle_1")], model_measurements(nom, X0, P0)[0], atol=1e-12)
 
 

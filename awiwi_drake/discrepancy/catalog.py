@@ -203,7 +203,7 @@ def effects_for_rig(rig: str, outputs: list[str]) -> list[Effect]:
     """Candidates that can act and be seen on ``rig`` with the measured ``outputs``."""
     has_force = any(o.startswith("tendon_force") for o in outputs)
     return [e for e in EFFECTS.values() if rig in e.rigs and (has_force or e.name != "force_sensor")
-            and ("link_angle" in outputs or e.name != "link_sensor")]
+            and ("joint_angle" in outputs or e.name != "link_sensor")]
 
 
 def default_vector() -> np.ndarray:

@@ -162,7 +162,7 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
         "velocity_sign_asymmetry": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in vprof.items()},
         "position_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in pprof.items()},
         "force_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in fprof.items()},
-        "link_angle_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in lprof.items()},
+        "joint_angle_trend": {n: float(np.nanmean(v[5:]) - np.nanmean(v[:5])) for n, v in lprof.items()},
         "direction_asymmetry": asym,
         "xcorr_peak_lag_s": {n: float(lags[np.argmax(np.abs(c))] * eng.dt) for n, c in xc.items()},
     }

@@ -113,8 +113,8 @@ def _fig15_26(short: bool) -> Reproduction:
     ds = gain_diagram_study()
     fig, _ = plot_gain_diagram_study(ds)
     series = {"frequency [Hz]": ds[0].freq}
-    series.update({f"{d.controller} gain |q/q_des| [-]": d.gain for d in ds})
-    values = {d.controller: dict(bandwidth=_v(d.bandwidth, "Hz"), dc_gain=_v(d.dc_gain, "-"),
+    series.update({f"{d.label} gain |q/q_des| [-]": d.gain for d in ds})
+    values = {d.label: dict(bandwidth=_v(d.bandwidth, "Hz"), dc_gain=_v(d.dc_gain, "-"),
                                  poles_real=_v(d.linearization.poles.real.tolist(), "1/s"),
                                  poles_imag=_v(d.linearization.poles.imag.tolist(), "1/s")) for d in ds}
     return Reproduction(fig, series, values)

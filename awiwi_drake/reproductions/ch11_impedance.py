@@ -5,7 +5,7 @@ The controllers are :mod:`awiwi_drake.control.impedance`; :func:`plot_gain_diagr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from typing import Sequence
 
@@ -48,13 +48,19 @@ class ImpedanceStep:
 
 @dataclass
 class GainDiagram:
-    """Fig 11.4: gain ``|q / q_des|`` [-] over ``freq`` [Hz] (a simulated chirp, or the linearised loop with
-    its ``eigenvalues`` [1/s]), with the resonance [Hz] and the peak gain."""
+    """Fig 11.4 / 15.26: gain ``|q / q_des|`` [-] over ``freq`` [Hz] of a loop (``label``): a simulated chirp, or
+    the continuous loop linearised by Drake's ``Linearize`` (its ``linearization``, a
+    :class:`~awiwi_drake.analysis.LinearizationResult`, and ``eigenvalues`` [1/s]), with its -3 dB ``bandwidth``
+    below the DC gain [Hz] where computed (:func:`~awiwi_drake.control.compare.metrics.linear_bandwidth`) and the
+    ``loop`` itself (to simulate)."""
 
     label: str
     freq: np.ndarray
     gain: np.ndarray
     eigenvalues: np.ndarray | None = None
+    bandwidth: float = float("nan")
+    linearization: object = None
+    loop: object = field(repr=False, default=None)
 
     @property
     def resonance_hz(self) -> float:
@@ -63,6 +69,12 @@ class GainDiagram:
     @property
     def peak_gain(self) -> float:
         return float(np.max(self.gain))
+
+    @property
+    def dc_gain(self) -> float:
+        """|H(0)| = |D - C A^-1 B| of the linearisation [-]."""
+        lin = self.linearization
+        return float(abs((lin.D - lin.C @ np.linalg.solve(lin.A, lin.B))[0, 0]))
 
     def plot(self, ax=None):
         return plot_gain_diagrams({self.label: (self.freq, self.gain)}, ax=ax)
