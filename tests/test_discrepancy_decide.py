@@ -349,8 +349,8 @@ def _dx(ratio_after, steps=(), stop="no candidate passes the acceptance tests", 
     from awiwi_drake.discrepancy.result import Diagnosis, Step
     s = [Step(e, "physical", "confirmed", 1.0, {}, {}, 0.1, {}, [], []) for e in steps]
     unexpl = ratio_after > 1.5 if unexplained is None else unexplained
-    return Diagnosis("d", "joint-rig", "unexplained discrepancy remains" if unexpl else "effects found", list(steps), [],
-                     s, 0.2, 0.1, {}, {}, 30.0, ratio_after, {}, default_vector(), 1.0, 1,
+    return Diagnosis("d", "joint-rig", "unexplained discrepancy remains" if unexpl else "effects found", list(steps),
+                     [], s, 0.2, 0.1, {}, {}, 30.0, ratio_after, {}, default_vector(), 1.0, 1,
                      unexplained_residual=unexpl, unexplained_ratio=1.5,
                      unexplained={"text": "tendon_force_1 (3.1x floor)"} if unexpl else {}, stop_reason=stop)
 
@@ -450,7 +450,8 @@ def test_stateful_probe_ranking_keeps_the_best_probe_for_its_own_profile():
     from awiwi_drake.discrepancy.catalog import param_specs
     from awiwi_drake.discrepancy.screen import STATEFUL_EFFECTS, ResidualState
     from awiwi_drake.parameters.discrepancy import CatalogBounds
-    ds = make_truth_dataset("joint-rig", ["spring_hysteresis"], snr_db=30, seed=32, gen=TruthGeneratorParams(duration=2.0))
+    ds = make_truth_dataset("joint-rig", ["spring_hysteresis"], snr_db=30, seed=32,
+                            gen=TruthGeneratorParams(duration=2.0))
     eng = ReplayEngine(ds)
     st = ResidualState(eng, default_vector())
     high = {s.name: s.high for s in param_specs()}["hysteresis_width"]
