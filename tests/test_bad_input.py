@@ -223,6 +223,8 @@ CLI_CASES = [
      "is a directory"),
     ("animate-duration-inf", lambda t, d: ["animate", "--duration", "inf"], 2, "argument --duration"),
     ("animate-duration-neg", lambda t, d: ["animate", "--duration", "-1"], 2, "argument --duration"),
+    ("animate-finger-short-name", lambda t, d: ["animate", "--target", "index", "--out", str(t / "x.html")], 2,
+     "target = 'index': not a hand rig (one of hand, finger-thumb, finger-index"),
     ("make-dataset-snr-word", lambda t, d: ["make-dataset", "--snr", "loud", "--out", str(t)], 2, "argument --snr"),
     ("make-dataset-snr-nan", lambda t, d: ["make-dataset", "--snr", "nan", "--out", str(t)], 2, "argument --snr"),
     ("make-dataset-seed-neg", lambda t, d: ["make-dataset", "--seed", "-1", "--out", str(t)], 2, "argument --seed"),
