@@ -197,7 +197,8 @@ class DiscrepancySettings(Parameters):
         0.02, unit="N m/rad", low=0.0,
         source="chosen: the finger replayed open loop drifts along the motion that stretches no tendon; this spring "
                "(6 % of a tendon's k r^2 = 0.35 N m/rad, critically damped with the motor inertia) pulling each motor "
-               "to its smoothed measured angle cut the elongation error from 13-43 um to 1-6.5 um (docs/DISCREPANCY.md)",
+               "to its smoothed measured angle cut the elongation error from 13-43 um to 1-6.5 um "
+               "(docs/DISCREPANCY.md)",
         doc="finger diagnosis: stiffness holding the replayed motors to the measured angles (hysteresis write-back)")
     finger_hysteresis_refits: int = param(
         3, unit="-", low=1, high=100,
