@@ -31,11 +31,9 @@ class Schedule(abc.ABC):
     size: int | None = None  # None: broadcast to the port size
 
     def __post_init__(self):
-        """A dataclass schedule's fields must be finite numbers (a field that is itself a schedule checked itself)."""
+        """A dataclass schedule's fields must be finite numbers."""
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, Schedule):
-                continue
             if not (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and math.isfinite(v)):
                 raise ValueError(f"{type(self).__name__}: {f.name.rstrip('_')} = {v!r} must be a finite number")
 
