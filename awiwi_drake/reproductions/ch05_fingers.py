@@ -148,12 +148,14 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
 
 @dataclass
 class CouplingHoldStudy:
-    """PIP step of a coupled finger under joint control: coupling error ``q_DIP - c q_PIP``."""
+    """PIP step of a coupled finger under joint control: coupling error ``q_DIP - c q_PIP``; ``final_state``: the
+    plant's state at the end (its friction states decide where the joints rest)."""
 
     t: np.ndarray
     q_pip: np.ndarray
     q_dip: np.ndarray
     ratio: float
+    final_state: np.ndarray
 
     @property
     def coupling_error(self) -> np.ndarray:
@@ -177,9 +179,9 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     q_ref[n - 2] = pip_step
     q_ref[n - 1] = pip_step * fp.dip_pip_ratio
     ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
-    res = simulate(cl.diagram, ctx, t_final, log=("joint_angle",), max_step=1.0 / cl.rate_hz, accuracy=1e-4)
+    res = simulate(cl.diagram, ctx, t_final, log=("joint_angle", "state"), max_step=1.0 / cl.rate_hz, accuracy=1e-4)
     q = res["joint_angle"]
-    return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
+    return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio, res["state"][-1])
 
 
 @dataclass
