@@ -48,6 +48,7 @@ from awiwi_drake.analysis.linear import LinearizationResult, linearize
 from awiwi_drake.control.base import check_rate, closed_loop
 from awiwi_drake.control.chain import (TendonChainController, TendonForceStage, chain_design_point,
                                       guide_presliding_stiffness, rig_springs)
+from awiwi_drake.control.design import ChainDesign
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
 from awiwi_drake.control.linear import reference_maps
@@ -117,7 +118,7 @@ def design_motor(motor: MotorParams) -> MotorParams:
     return motor.replace(friction=False, ripple=False, damping=motor.damping + viscous)
 
 
-def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: HandChainParams | None = None,
+def joint_subsystem(rig: Any, dof: int, *, point: ChainDesign | None = None, params: HandChainParams | None = None,
                     torque: float | None = None, friction: str = "motion"):
     """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
@@ -130,7 +131,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
         raise ValueError(f"joint_subsystem: friction = {friction!r}; use 'motion' or 'rest'")
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
-    S, PS = point["selection"], point["coupling_matrix"]
+    S, PS = point.selection, point.coupling_matrix
     k = S.shape[1]
     if not 0 <= dof < k:
         raise ValueError(f"joint_subsystem: dof = {dof} is not an independent DoF of {rig.name!r} (0..{k - 1})")
@@ -139,7 +140,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     P_j = col[active][:, None]
     name = _dof_names(rig, S)[dof]
     coupling = LinearFingerCoupling(P_j, joint_names=[name], tendon_names=[rig.tendon_names[i] for i in active])
-    M = float(joint_inertia(rig, point["joint_angle"])[dof])
+    M = float(joint_inertia(rig, point.joint_angle)[dof])
     b = float(joint_damping(rig)[dof, dof])
     design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
     springs = rig_springs(rig).subset(active)          # each of the DoF's tendons with its own law
@@ -148,10 +149,10 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     plant = MultibodyPlant(0.0)                        # the link alone (joint_inertia, joint_damping read it)
     add_revolute_link(plant, name="joint", inertia=M, damping=b)
     plant.Finalize()
-    tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
+    tau0 = -float(P_j[:, 0] @ point.tendon_force[active])
     tau = tau0 if torque is None else float(torque)
     W = -np.linalg.pinv(P_j.T)
-    f = point["tendon_force"][active] + W[:, 0] * (tau - tau0)
+    f = point.tendon_force[active] + W[:, 0] * (tau - tau0)
     if np.any(f <= 0):
         raise ValueError(f"joint_subsystem: joint torque {tau} Nm slackens a tendon of {name} (forces {f} N)")
     r_m = design_params.motor.pulley_radius
@@ -165,20 +166,20 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
                         joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
     sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, lambda: op, plant, springs,
               drive=drive, coupling=coupling, tension_only=True)
-    sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
-                     torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])
+    sub_point = ChainDesign(np.eye(1), P_j, f, np.array([tau]), op=op, joint_angle=np.zeros(1),
+                            mechanical_stiffness=[np.eye(1)])
     return sub, op, sub_point
 
 
-def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, tendon_law: str | None = None):
+def force_loop(sub: Rig, point: ChainDesign, params: HandChainParams | None = None, tendon_law: str | None = None):
     """A subsystem of :func:`joint_subsystem` closed by the chain's force stage (sharing, continuous):
     the :class:`~awiwi_drake.control.base.ClosedLoop` with input ``joint_torque_reference``, and a context
     at its operating point."""
     stage = TendonForceStage(sub.coupling, sub.spring, sub.params, params or HandChainParams(), point=point,
                              distribution="sharing", tendon_law=tendon_law)
     loop = closed_loop(sub, stage, rate_hz=None, estimator=None)
-    op = point["op"]
-    return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
+    op = point.op
+    return loop, loop.create_context(op, references={"joint_torque_reference": point.torque_offset})
 
 
 def _coordinates(lin: LinearizationResult, stiffness: float = 0.0) -> np.ndarray:
@@ -202,7 +203,7 @@ def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndar
     return F, T @ B, res
 
 
-def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
+def reduced_joint_models(rig: Any, *, point: ChainDesign | None = None, params: HandChainParams | None = None,
                          tendon_law: str | None = None, friction: str = "motion",
                          torque_rate: str = "joint") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
@@ -213,14 +214,14 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
         raise ValueError(f"reduced_joint_models: torque_rate = {torque_rate!r}; use 'joint' or 'motor'")
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
-    S = point["selection"]
+    S = point.selection
     names = _dof_names(rig, S)
-    M = joint_inertia(rig, point["joint_angle"])
+    M = joint_inertia(rig, point.joint_angle)
     b = np.diag(joint_damping(rig))
-    kt = np.asarray(point["op"].tendon_stiffness, dtype=float)
+    kt = np.asarray(point.op.tendon_stiffness, dtype=float)
     models = []
     for j in range(S.shape[1]):
-        col = point["coupling_matrix"][:, j]
+        col = point.coupling_matrix[:, j]
         models.append(_reduced_model(rig, j, point, p, tendon_law, friction, torque_rate, None, names[j], float(M[j]),
                                      float(b[j]), float(col ** 2 @ kt), tuple(int(i) for i in np.flatnonzero(col))))
     return models
@@ -235,14 +236,14 @@ def _reduced_model(rig, j, point, chain, tendon_law, friction, torque_rate, torq
     loop, ctx = force_loop(sub, sub_point, chain, tendon_law)
     lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                     outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-    rate = sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0
+    rate = sub_point.op.joint_stiffness if torque_rate == "motor" else 0.0
     F, G, res = _restrict(lin, rate)
     E = None
     if link_torque:     # a link-side torque (the guides' friction, a load): the loop from its external_torque input
         ext = linearize(loop.diagram, context=ctx, input="external_torque", outputs=("joint_angle", "joint_torque"),
                         equilibrium_tolerance=None)
         E = _coordinates(lin, rate) @ ext.B
-    stiffness = float(sub_point["op"].joint_stiffness) if stiffness is None else stiffness
+    stiffness = float(sub_point.op.joint_stiffness) if stiffness is None else stiffness
     return JointReducedModel(name, j, F, G, inertia, damping, stiffness, tendons, res, lin, torque_rate, E)
 
 
@@ -520,7 +521,7 @@ class JointDesign:
         return "\n".join(rows)
 
 
-def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None = None,
+def design_joint_stage(rig: Any, design: str = "cascaded", *, point: ChainDesign | None = None,
                        params: JointDesignParams | None = None, chain: HandChainParams | None = None,
                        models: list | None = None, period: float | None = None) -> JointDesign:
     """Design the joint stage ``design`` for every DoF of a finger/the hand (module docstring); ``period``:
@@ -542,9 +543,9 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
         nx, nu = reference_maps(m.A, m.B, np.array([1.0, 0.0, 0.0, 0.0]))
         Nx.append(nx)
         Nu.append(float(nu[0]))
-    S = point["selection"]
-    kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point["joint_angle"],
-              torque_op=point["torque_offset"], name=design.replace("-", "_"), torque_rate=rate)
+    S = point.selection
+    kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point.joint_angle,
+              torque_op=point.torque_offset, name=design.replace("-", "_"), torque_rate=rate)
     if design == "sdre":
         law = _sdre_law(rig, point, c, p, kw, period)
     else:
@@ -555,14 +556,14 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
 
 def _sdre_law(rig, point, c, p, kw, period):
     """The SDRE (ch. 14) per DoF: LQR on the pointwise-linear model at each tabulated joint torque."""
-    S = point["selection"]
+    S = point.selection
     k = S.shape[1]
     grid = np.linspace(-p.sdre_torque_range, p.sdre_torque_range, p.sdre_points)
     table = np.empty((k, grid.size, 5))
     for j in range(k):
         for i, dt in enumerate(grid):
             model = _reduced_model(rig, j, point, c, c.tendon_law, "motion", kw["torque_rate"],
-                                   point["torque_offset"][j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
+                                   point.torque_offset[j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 
@@ -603,7 +604,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     return ctrl
 
 
-def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, point: dict) -> None:
+def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, point: ChainDesign) -> None:
     """Give ``design`` the (9.2) observer of the chain ``ctrl`` (its per-DoF gain and scale) and the guides' presliding
     stiffness of ``rig`` at ``point`` (:attr:`JointDesign.observer`, :meth:`JointDesign.loop`), and record it and its
     tracking time constant in ``ctrl.design`` (``joint_design``, ``time_constant``)."""
@@ -611,8 +612,8 @@ def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, p
     if obs is not None:
         design.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
                                presliding_stiffness=guide_presliding_stiffness(rig, point))
-    ctrl.design["joint_design"] = design
-    ctrl.design["time_constant"] = design.tracking_time_constant()
+    ctrl.design.joint_design = design
+    ctrl.design.time_constant = design.tracking_time_constant()
 
 
 @dataclass
@@ -788,13 +789,13 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     c = chain or HandChainParams()
     ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing",
                                   friction_observer=None)      # the designs: the stage itself, no ch. 9 observer
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
     op = ctrl.operating_point
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
     lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle", "joint_torque"))
     A = lin.A
-    S = ctrl.design["selection"]
+    S = ctrl.design.selection
     Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
     Ct = S.T @ lin.output("joint_torque").C
     k = S.shape[1]

@@ -179,7 +179,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     else:
         ctrl = joint_stage_controller(rig, "cascaded", op=op, chain=HandChainParams(stiffness_scale=stiffness_scale),
                                       friction_observer=None)
-        commanded = np.asarray(ctrl.design["joint_design"].static_stiffness, float)
+        commanded = np.asarray(ctrl.design.joint_design.static_stiffness, float)
         level = f"pretension {pretension:g} N, stiffness_scale {stiffness_scale:g}"
     if deflection is not None:
         L = deflection * (commanded if commanded is not None else np.diag(S.T @ op.joint_stiffness @ S))
