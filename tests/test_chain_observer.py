@@ -513,7 +513,7 @@ def _dip_on_its_presliding_spring(design, rig, point, dof):
     d = slice(dof, dof + 1)
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, design.gains[d],
                                 state_map=design.law.Nx[d], input_map=design.law.Nu[d], joint_angle_op=[0.0],
-                                torque_op=pt["torque_offset"])
+                                torque_op=pt.torque_offset)
     ctrl = TendonChainController(sprung, law, point=pt, distribution="sharing",
                                  friction_observer=FrictionObserverParams())
     loop = closed_loop(sprung, ctrl, rate_hz=None, sensors="ideal")
