@@ -41,7 +41,7 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
     "antagonistic_sine", "antagonistic_stiffness_check", "sine_reference", "is_monotone_nonincreasing", "count_oscillations",
-    "GainDiagram1526", "gain_diagram_study", "plot_gain_diagram_study", "plot_run_traces", "plot_joint_angle",
+    "GainDiagram1526", "gain_diagram_study", "plot_run_traces", "plot_joint_angle",
     "plot_command", "plot_phase_portrait",
 ]
 
@@ -437,6 +437,15 @@ class GainDiagram1526:
         lin = self.linearization
         return float(abs((lin.D - lin.C @ np.linalg.solve(lin.A, lin.B))[0, 0]))
 
+    def plot(self, ax=None):
+        """Fig 15.26: |q / q_des| against frequency (log axis), the -3 dB bandwidth marked; the study's diagrams drawn
+        on one ``ax`` one after another.  ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        line, = ax.semilogx(self.freq, self.gain, label=f"{self.controller} (-3 dB at {self.bandwidth:.2f} Hz)")
+        ax.axvline(self.bandwidth, color=line.get_color(), ls=":", lw=1)
+        label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]", title="Fig 15.26: joint rig at 20 N, linearised")
+        return fig, ax
+
 
 def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-scale"), *,
                        freqs: Sequence[float] | None = None) -> list[GainDiagram1526]:
@@ -459,16 +468,6 @@ def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-s
         gain = np.abs(lin.bode(0, omega=2 * np.pi * f).response)
         out.append(GainDiagram1526(name, f, gain, linear_bandwidth(lin), lin, loop))
     return out
-
-
-def plot_gain_diagram_study(diagrams: Sequence[GainDiagram1526], *, ax=None):
-    """Fig 15.26: |q / q_des| against frequency (log axis), each loop's -3 dB bandwidth marked."""
-    fig, ax = figure_axes(ax, figsize=(7, 4))
-    for d in diagrams:
-        line, = ax.semilogx(d.freq, d.gain, label=f"{d.controller} (-3 dB at {d.bandwidth:.2f} Hz)")
-        ax.axvline(d.bandwidth, color=line.get_color(), ls=":", lw=1)
-    label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]", title="Fig 15.26: joint rig at 20 N, linearised")
-    return fig, ax
 
 
 def plot_run_traces(runs, signal, ylabel, *, ax=None, title: str = "", reference: bool = False):
