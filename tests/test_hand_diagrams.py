@@ -144,6 +144,10 @@ def test_joint_control_reaches_the_reference_and_keeps_the_coupling():
     bound = fp.dip_radius * 10.0 / (fp.coupling_stiffness * (1 + fp.dip_pip_ratio ** 2))
     assert s.max_coupling_error < bound
     assert s.q_pip[-1] == pytest.approx(0.5, abs=0.02)           # friction-limited PD, 3 kHz
+    fig, ax = s.plot()
+    np.testing.assert_array_equal(ax.get_lines()[2].get_ydata(), s.coupling_error)
+    import matplotlib.pyplot as plt
+    plt.close(fig)
 
 
 def test_tendon_bending_angles_follow_the_routing():
