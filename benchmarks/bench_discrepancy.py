@@ -104,21 +104,21 @@ FINGER = ["motor_friction", "guide_friction", "motor_ripple", "spring_hysteresis
 def cases(per_row: int, quick: bool) -> list:
     """``(row, rig, hidden, snr, seed, strength, transform)``, interleaved over the rows."""
     if quick:
-        return [("single_full", "joint", ["joint_friction"], 30, 1, 1.0, None),
-                ("nothing", "joint", [], 30, 2, 1.0, None),
-                ("out_of_catalog", "joint", [], 30, 3, 1.0, "link_bias"),
-                ("tendon", "tendon", ["delay"], 30, 4, 1.0, None),
-                ("unknown", "joint", [], 30, 9001, 1.0, "force_pickup")]
+        return [("single_full", "joint-rig", ["joint_friction"], 30, 1, 1.0, None),
+                ("nothing", "joint-rig", [], 30, 2, 1.0, None),
+                ("out_of_catalog", "joint-rig", [], 30, 3, 1.0, "link_bias"),
+                ("tendon", "tendon-rig", ["delay"], 30, 4, 1.0, None),
+                ("unknown", "joint-rig", [], 30, 9001, 1.0, "force_pickup")]
     rows = {
-        "single_full": [("joint", [SINGLE[i % len(SINGLE)]], 30, 1.0, None) for i in range(per_row)],
-        "single_half": [("joint", [SINGLE[i % len(SINGLE)]], 30, 0.5, None) for i in range(per_row)],
-        "nothing": [("joint", [], 30, 1.0, None) for _ in range(per_row)],
-        "out_of_catalog": [("joint", [], 30, 1.0, OUT_OF_CATALOG[i % 3]) for i in range(per_row)],
-        "three": [("joint", list(TRIPLES[i % len(TRIPLES)]), 30, 1.0, None) for i in range(per_row)],
-        "tendon": [("tendon", [TENDON[i % len(TENDON)]], 30, 1.0, None) for i in range(per_row)],
+        "single_full": [("joint-rig", [SINGLE[i % len(SINGLE)]], 30, 1.0, None) for i in range(per_row)],
+        "single_half": [("joint-rig", [SINGLE[i % len(SINGLE)]], 30, 0.5, None) for i in range(per_row)],
+        "nothing": [("joint-rig", [], 30, 1.0, None) for _ in range(per_row)],
+        "out_of_catalog": [("joint-rig", [], 30, 1.0, OUT_OF_CATALOG[i % 3]) for i in range(per_row)],
+        "three": [("joint-rig", list(TRIPLES[i % len(TRIPLES)]), 30, 1.0, None) for i in range(per_row)],
+        "tendon": [("tendon-rig", [TENDON[i % len(TENDON)]], 30, 1.0, None) for i in range(per_row)],
         "finger_single": [("finger-index", [FINGER[i % len(FINGER)]], 30, 1.0, None) for i in range(per_row)],
         "finger_nothing": [("finger-index", [], 30, 1.0, None) for _ in range(per_row)],
-        "unknown": [("joint", [], 30, 1.0, UNKNOWN[i % len(UNKNOWN)]) for i in range(per_row)],
+        "unknown": [("joint-rig", [], 30, 1.0, UNKNOWN[i % len(UNKNOWN)]) for i in range(per_row)],
     }
     # the rig rows keep the seeds of earlier runs; the unknown row has its own (added later)
     out, seeds = [], {"rig": 1000, "finger": 5000, "unknown": 9000}
@@ -184,7 +184,7 @@ def calibrated_threshold() -> float:
     benchmark seed)."""
     if "t" not in _threshold_cache:
         from awiwi_drake.discrepancy import make_truth_dataset
-        ds = make_truth_dataset("joint", [], snr_db=30, seed=7, keep_clean=False)
+        ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=7, keep_clean=False)
         ok = [t for t in THRESHOLDS if not any(sindy_baseline(ds, t).values())]
         _threshold_cache["t"] = ok[0] if ok else THRESHOLDS[-1]
     return _threshold_cache["t"]
@@ -213,7 +213,7 @@ def sindy_baseline(ds, threshold: float = 0.1) -> dict:
 
     p, dt = ds.parameters, ds.dt
     win = max(5, int(round(0.031 / dt)) | 1)
-    n = 2 if ds.rig == "joint" else 1
+    n = 2 if ds.rig == "joint-rig" else 1
     sfx = ["_1", "_2"] if n == 2 else [""]
     r = p["motor_pulley_radius"]
     t = ds.time - ds.time[0]
@@ -584,8 +584,8 @@ def summarise(rows: list) -> dict:
     """Scores of the workflow and of the baseline per issue-12 row, and CPU time."""
     summ = {"workflow": _scores(rows, "named", "nuisance_named"),
             "baseline": _scores(rows, "baseline_named", "baseline_calibration")}
-    cpu = [r["cpu_seconds"] for r in rows if r["rig"] == "joint"]
-    wall = [r["seconds"] for r in rows if r["rig"] == "joint"]
+    cpu = [r["cpu_seconds"] for r in rows if r["rig"] == "joint-rig"]
+    wall = [r["seconds"] for r in rows if r["rig"] == "joint-rig"]
     summ["seconds_joint"] = ({"cpu_median": float(np.median(cpu)), "cpu_max": float(np.max(cpu)),
                               "wall_median": float(np.median(wall)), "wall_max": float(np.max(wall))}
                              if cpu else {})
@@ -622,7 +622,7 @@ def markdown(summ: dict, rows: list) -> str:
         sj = summ["seconds_joint"]
         dur = sorted({r.get("duration", 10.0) for r in rows})
         L.append(f"| CPU s per {'/'.join(f'{d:g}' for d in dur)} s joint diagnosis, median / max | {sj['cpu_median']:.0f} / {sj['cpu_max']:.0f} | "
-                 f"{sum(r['rig'] == 'joint' for r in rows)} | | < 15 / < 30 |")
+                 f"{sum(r['rig'] == 'joint-rig' for r in rows)} | | < 15 / < 30 |")
         L.append(f"| wall s (shared machine), median / max | {sj['wall_median']:.0f} / {sj['wall_max']:.0f} | | | |")
     gen = [r["generate_seconds"] for r in rows if "generate_seconds" in r]
     if gen:

@@ -20,11 +20,12 @@ Cases (all at the Awiwi control rate, 3 kHz, zero-order hold):
   control period (Drake's ``DiscreteTimeApproximation``, fixed-step RK3 at 1/3000 s inside one
   discrete update per period, in the momentum/elongation coordinates of
   ``components.rig_system.rig_integration_system``; the default of ``closed_loop`` for sampled loops
-  on single-joint rigs); beside it the continuous rig behind the hold with fixed-step RK3 at the control period in
-  the outer ``Simulator`` (``..._continuous_rig_rtf``; the largest state difference between the two,
-  ``..._sampled_vs_continuous_max_difference``, is round-off); also through ``analysis.simulate``
-  itself (logging and monitors on) and the error against a tight error-controlled run of the
-  continuous rig (RK3, accuracy 1e-9).
+  on single-joint rigs), in a raw ``Simulator`` loop (``joint_rig_3khz_rtf``: the baseline of ``simulate``'s own
+  cost) and through ``analysis.simulate`` with logging and monitors on (``..._simulate_rtf``); beside it, also
+  through ``simulate``, the continuous rig behind the hold with fixed-step RK3 at the control period in the outer
+  ``Simulator`` (``..._continuous_rig_rtf``; the largest state difference between the two,
+  ``..._sampled_vs_continuous_max_difference``, is round-off), and the error against a tight error-controlled run
+  of the continuous rig (RK3, accuracy 1e-9). Every other case runs through ``simulate``, but the breakdown below.
 * ``joint_rig_breakdown``: where one control period of the ``joint_rig_3khz`` loop goes, microseconds
   of CPU per period (``joint_rig_breakdown_*_us``), each figure the difference of two nested diagrams timed
   in the same process (best of ``--repeats``, interleaved): ``loop_us`` the default loop; ``rig_with_hold_us``
@@ -98,7 +99,20 @@ def _best(fn, repeats):
 
 
 # --- cases -----------------------------------------------------------------------------------------
+def _simulated(system, ctx, seconds, **kw):
+    """(cpu rtf, wall rtf, result) of one ``analysis.simulate`` run (fixed-step RK3 at the control period, nothing
+    logged unless ``kw`` says otherwise; a divergence raises its ``SimulationDivergedError``)."""
+    from awiwi_drake.analysis import simulate
+    kw = dict(dict(log=(), mode="fixed_step", step=1.0 / RATE), **kw)
+    t0 = _clock()
+    res = simulate(system, ctx, seconds, **kw)
+    return _rtf(seconds, t0) + (res,)
+
+
 def _fixed_rk3(diagram, ctx, seconds):
+    """The raw ``Simulator`` loop (fixed-step RK3 at the control period): only the baselines that measure what
+    ``simulate`` itself costs (``joint_rig_3khz_rtf`` against ``..._simulate_rtf``) and Drake's own cost per period
+    of each structure (``joint_rig_breakdown``) use it; every other case runs through :func:`_simulated`."""
     from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
     sim = Simulator(diagram, ctx)
     ResetIntegratorFromFlags(sim, "runge_kutta3", 1.0 / RATE)
@@ -123,46 +137,35 @@ def _joint_loop(seconds, sampled_rig=True):
 
 
 def case_joint_rig_3khz(seconds, repeats):
-    from pydrake.systems.analysis import ResetIntegratorFromFlags, Simulator
+    from awiwi_drake.analysis import rig_monitors
 
-    from awiwi_drake.analysis import rig_monitors, simulate
-
-    def run():
+    def run():    # the raw Simulator loop: the baseline that measures simulate's own overhead (..._simulate_rtf)
         _, _, d, ctx = _joint_loop(seconds)
         return _fixed_rk3(d, ctx, seconds)
     cpu, wall, x_fixed = _best(run, repeats)
 
-    def run_continuous():   # the continuous rig behind the hold, fixed-step RK3 in the outer Simulator
-        _, _, d, ctx = _joint_loop(seconds, sampled_rig=False)
-        return _fixed_rk3(d, ctx, seconds)
-    c_cpu, c_wall, x_cont = _best(run_continuous, repeats)
-
-    def run_simulate():
-        rig, _, d, ctx = _joint_loop(seconds)
-        t0 = _clock()
-        res = simulate(d, ctx, seconds, log=("joint_angle",), monitors=rig_monitors(rig))
-        return _rtf(seconds, t0) + (res,)
-    s_cpu, s_wall, res = _best(run_simulate, repeats)
-    # tight reference: error-controlled RK3 at accuracy 1e-9 (the continuous rig), sampled at the same times
+    def run_simulate(sampled_rig=True):     # the loop as a user runs it: logging and monitors on
+        rig, _, d, ctx = _joint_loop(seconds, sampled_rig=sampled_rig)
+        out = _simulated(d, ctx, seconds, log=("joint_angle",), monitors=rig_monitors(rig))
+        return out[:2] + ((out[2], d.GetOutputPort("state").Eval(ctx).copy()),)
+    s_cpu, s_wall, (res, x_simulated) = _best(run_simulate, repeats)
+    # the continuous rig behind the hold, fixed-step RK3 at the control period in the outer Simulator
+    c_cpu, c_wall, (_, x_cont) = _best(lambda: run_simulate(sampled_rig=False), repeats)
+    # tight reference: error-controlled RK3 at accuracy 1e-9 (the continuous rig), logged at the same times
     _, _, d, ctx = _joint_loop(seconds, sampled_rig=False)
-    sim = Simulator(d, ctx)
-    ResetIntegratorFromFlags(sim, "runge_kutta3", 1.0 / RATE)
-    sim.get_mutable_integrator().set_target_accuracy(1e-9)
-    sim.Initialize()
-    q_ref = []
-    port = d.GetOutputPort("joint_angle")
-    for t in res.t:
-        sim.AdvanceTo(float(t))
-        q_ref.append(port.Eval(sim.get_context())[0])
-    err = float(np.max(np.abs(res["joint_angle"][:, 0] - np.asarray(q_ref))))
+    ref = _simulated(d, ctx, seconds, log=("joint_angle",), log_period=1.0 / RATE, mode="error_controlled",
+                     step=None, max_step=1.0 / RATE, accuracy=1e-9)[2]
+    err = float(np.max(np.abs(res["joint_angle"][:, 0] - np.interp(res.t, ref.t, ref["joint_angle"][:, 0]))))
     return dict(joint_rig_3khz_rtf=cpu, joint_rig_3khz_wall_rtf=wall, joint_rig_3khz_simulate_rtf=s_cpu,
                 joint_rig_3khz_simulate_wall_rtf=s_wall, joint_rig_3khz_max_error_rad=err,
                 joint_rig_3khz_final_joint_angle=float(x_fixed[0]), joint_rig_3khz_continuous_rig_rtf=c_cpu,
                 joint_rig_3khz_continuous_rig_wall_rtf=c_wall,
-                joint_rig_3khz_sampled_vs_continuous_max_difference=float(np.max(np.abs(x_fixed - x_cont))))
+                joint_rig_3khz_sampled_vs_continuous_max_difference=float(np.max(np.abs(x_simulated - x_cont))))
 
 
 def _period_us(diagram, ctx, seconds):
+    """CPU microseconds per control period of a raw ``Simulator`` run: Drake's own cost of a structure, without
+    ``simulate`` (the breakdown's differences of nested diagrams)."""
     from pydrake.systems.analysis import Simulator
     sim = Simulator(diagram, ctx)
     sim.Initialize()
@@ -315,7 +318,6 @@ def case_scipy_reference(seconds, repeats):
 
 
 def _hand_like(target, seconds, repeats, params=None):
-    from awiwi_drake.analysis import SimulationDivergedError
     from awiwi_drake.control import closed_loop
     from awiwi_drake.control.joint_pd import joint_pd_controller
     from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
@@ -326,10 +328,7 @@ def _hand_like(target, seconds, repeats, params=None):
         q_ref = np.array(rig.operating_point().joint_angle, dtype=float)
         q_ref[1 if target != "hand" else 5] += 0.2
         ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
-        out = _fixed_rk3(cl.diagram, ctx, seconds)
-        if not np.all(np.isfinite(out[2])) or np.max(np.abs(out[2])) > 1e6:
-            raise SimulationDivergedError(f"{target} under the joint PD diverged by t = {seconds:g} s", t=seconds)
-        return out
+        return _simulated(cl, ctx, seconds)
     return _best(run, repeats)
 
 
@@ -363,7 +362,6 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import Adder, ConstantVectorSource, SparseMatrixGain, ZeroOrderHold
 
-    from awiwi_drake.analysis import SimulationDivergedError
     from awiwi_drake.rigs.batch import batched_joint_rig
     from awiwi_drake.parameters.rigs import MotorPositionGains
 
@@ -414,13 +412,11 @@ def case_batch_rigs(seconds, repeats, num_copies=512):
             plant.GetMyMutableContextFromRoot(ctx).SetContinuousState(x)
             hold.GetMyMutableContextFromRoot(ctx).SetDiscreteState(u)
         d.GetInputPort("external_torque").FixValue(ctx, e)
-        out = _fixed_rk3(d, ctx, seconds)
+        out = _simulated(d, ctx, seconds)
         x_end = (plant.GetMyContextFromRoot(ctx).get_discrete_state_vector() if sampled else
                  plant.GetMyContextFromRoot(ctx).get_continuous_state_vector()).CopyToVector()
         return out[:2] + (x_end,)
     cpu, wall, x = _best(run, max(1, repeats - 1))
-    if not np.all(np.isfinite(x)):
-        raise SimulationDivergedError(f"the batched run diverged by t = {seconds:g} s", t=seconds)
     c_cpu, c_wall, x_c = _best(lambda: run(sampled=False), max(1, repeats - 1))
     return dict(batch_rig_seconds_per_cpu_second=cpu * num_copies,
                 batch_rig_seconds_per_wall_second=wall * num_copies, batch_num_copies=num_copies,

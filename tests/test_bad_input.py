@@ -37,7 +37,7 @@ def _dataset() -> Dataset:
             "link_angle": q}
     init = {"motor_angle_1": 0.3, "motor_velocity_1": 0.0, "motor_angle_2": 0.3, "motor_velocity_2": 0.0,
             "link_angle": 0.0, "link_velocity": 0.0}
-    return Dataset("run", "joint", t, ins, outs, dict(PARAMS), init)
+    return Dataset("run", "joint-rig", t, ins, outs, dict(PARAMS), init)
 
 
 @pytest.fixture
@@ -145,12 +145,14 @@ def test_utf8_bom_and_crlf_are_accepted(good):
 
 
 def test_cli_rig_spelling_in_dataset_json(good):
-    """One spelling per rig: the written JSON and the messages use the CLI name ('joint-rig'); the
-    short internal name is still read."""
+    """One spelling per rig: the dataset, the written JSON and the messages use the package's rig name
+    ('joint-rig'); a short name ('joint') is refused, naming the known ones."""
     assert json.loads(good.with_suffix(".json").read_text())["rig"] == "joint-rig"
-    assert load_dataset(good).rig == "joint"
+    assert load_dataset(good).rig == "joint-rig"
     _edit_json(good, lambda m: m.update(rig="joint"))
-    assert load_dataset(good).rig == "joint"
+    with pytest.raises(ValueError, match="unknown rig 'joint' .known: tendon-rig, joint-rig, finger-index"):
+        load_dataset(good)
+    _edit_json(good, lambda m: m.update(rig="joint-rig"))
     _edit_json(good, lambda m: m["parameters"].update(bogus=1.0))
     with pytest.raises(ValueError, match="unknown parameter 'bogus' for rig 'joint-rig'"):
         load_dataset(good)
@@ -162,7 +164,7 @@ def test_dataset_memory_is_a_few_times_the_file(tmp_path):
 
     ds = _dataset()
     n = 40
-    big = Dataset("big", "joint", np.arange(400 * n) * 1e-3,
+    big = Dataset("big", "joint-rig", np.arange(400 * n) * 1e-3,
                   {k: np.tile(v, n) for k, v in ds.inputs.items()},
                   {k: np.tile(v, n) for k, v in ds.outputs.items()}, ds.parameters, ds.initial_state)
     path = save_dataset(big, tmp_path)

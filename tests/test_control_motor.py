@@ -116,3 +116,7 @@ def test_fig_3_3b_current_axis_uses_the_torque_constant():
     i = friction_curve_in_ampere(v, p)
     np.testing.assert_allclose(i * p.torque_constant, -motor_friction_torque(v, p), rtol=1e-12)
     np.testing.assert_allclose(i, -i[::-1], atol=1e-15)                  # central symmetry of (3.8)
+    # the torque constant: (3.8) with Table 3.3 at Fig 3.3b's full speed over the current read there
+    from awiwi_drake.parameters.components import FIG_3_3B_FULL_SPEED_CURRENT
+    speed, current = FIG_3_3B_FULL_SPEED_CURRENT
+    assert p.torque_constant == round(float(-motor_friction_torque(np.array([speed]), p)[0]) / current, 4) == 1.0829

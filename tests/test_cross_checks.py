@@ -24,7 +24,7 @@ def test_discrepancy_model_equals_the_joint_rig_at_random_states(friction):
     motor = MotorParams(friction=friction, ripple=False, saturation=False, damping=1e-3)
     params = JointRigParams().replace(motor=motor, link_damping=2e-4)
     rig = joint_rig(params=params)
-    nominal = NominalParameters("joint", motor.inertia, motor.damping, motor.pulley_radius,
+    nominal = NominalParameters("joint-rig", motor.inertia, motor.damping, motor.pulley_radius,
                                 tuple(rig.spring.coefficients), params.link_inertia, params.link_damping,
                                 params.link_pulley_radius)
     model = DiscrepancyModel(nominal)

@@ -22,10 +22,10 @@ JOINT = {"motor_inertia": 2e-3, "motor_damping": 1.2e-3, "motor_pulley_radius": 
          "link_pulley_radius": 0.008}
 
 
-def _tiny_dataset(rig="joint") -> Dataset:
+def _tiny_dataset(rig="joint-rig") -> Dataset:
     t = np.arange(50) * 1e-3
     w = np.sin(2 * np.pi * 20 * t)  # some excitation (load_dataset rejects constant recordings)
-    if rig == "joint":
+    if rig == "joint-rig":
         ins = {"motor_torque_1": 0.2 + 0.05 * w, "motor_torque_2": 0.2 - 0.05 * w}
         outs = {"motor_angle_1": 0.3 + 0.01 * w, "motor_angle_2": 0.3 - 0.01 * w, "tendon_force_1": 30 + w,
                 "tendon_force_2": 30 - w, "link_angle": 0.01 * w}
@@ -44,7 +44,7 @@ def test_dataset_roundtrip(tmp_path):
     ds = _tiny_dataset()
     path = save_dataset(ds, tmp_path)
     back = load_dataset(path)
-    assert back.rig == "joint" and back.output_names == ds.output_names
+    assert back.rig == "joint-rig" and back.output_names == ds.output_names
     np.testing.assert_allclose(back.time, ds.time)
     np.testing.assert_allclose(back.inputs["motor_torque_2"], ds.inputs["motor_torque_2"])
     assert back.parameters["spring_poly"] == JOINT["spring_poly"]
@@ -114,7 +114,7 @@ def test_nominal_model_matches_foundation_joint_rig():
     rp = JointRigParams(motor=motor, link_inertia=1e-4, link_damping=1.2e-3)
     rig = joint_rig(params=rp)
     coeffs = tuple(tendon_spring(rp.spring).coefficients)
-    nom = NominalParameters("joint", motor.inertia, motor.damping, motor.pulley_radius, coeffs,
+    nom = NominalParameters("joint-rig", motor.inertia, motor.damping, motor.pulley_radius, coeffs,
                             rp.link_inertia, rp.link_damping, rp.link_pulley_radius)
     rng = np.random.default_rng(0)
     ctx = rig.diagram.CreateDefaultContext()
@@ -133,13 +133,13 @@ def test_nominal_model_matches_foundation_joint_rig():
         np.testing.assert_allclose(y[2:4], f_ref, rtol=1e-12)
 
 
-@pytest.mark.parametrize("rig", ["joint", "tendon"])
+@pytest.mark.parametrize("rig", ["joint-rig", "tendon-rig"])
 def test_replay_kernel_equals_the_laws_for_every_switch(rig):
     """The replay's compiled float path (generated from replay_laws through codegen) equals the law
     functions at random states with random catalog parameters, each effect on or off per copy."""
     from awiwi_drake.discrepancy.catalog import param_specs
     from awiwi_drake.discrepancy.model import replay_kernels
-    params = JOINT if rig == "joint" else {k: JOINT[k] for k in ("motor_inertia", "motor_damping",
+    params = JOINT if rig == "joint-rig" else {k: JOINT[k] for k in ("motor_inertia", "motor_damping",
                                                                  "motor_pulley_radius", "spring_poly")}
     nom = NominalParameters.from_dataset(rig, params)
     rng = np.random.default_rng(21)
@@ -196,7 +196,7 @@ def test_joint_backlash_is_a_dead_zone_between_link_and_pulley():
 def test_place_masks_put_a_per_tendon_effect_on_one_tendon_only():
     """place_1/place_2: guide friction on tendon 2 alone changes only motor 2's acceleration, by exactly the
     both-tendon model's change there; motor 1 is as without the effect."""
-    nom = NominalParameters.from_dataset("joint", JOINT)
+    nom = NominalParameters.from_dataset("joint-rig", JOINT)
     rng = np.random.default_rng(8)
     X = _random_state(nom, rng)
     X[-2:] = 0.0
@@ -228,7 +228,7 @@ def _energy(nom, X):
                                      {"joint_coulomb": 0.02}, {"guide_c0": 1.0, "guide_mu": 0.2}])
 def test_unforced_rig_is_passive(effects):
     """dE/dt = -d sum w^2 - d_q q'^2 exactly without effects; friction effects only dissipate more."""
-    nom = NominalParameters.from_dataset("joint", JOINT)
+    nom = NominalParameters.from_dataset("joint-rig", JOINT)
     p = default_vector()
     for k, v in effects.items():
         p[PARAM_INDEX[k]] = v
@@ -279,7 +279,7 @@ def _autodiff_check(system, ctx_setup, nx):
 
 
 def test_discrepancy_model_converts_to_autodiff_and_matches_finite_differences():
-    nom = NominalParameters.from_dataset("joint", JOINT)
+    nom = NominalParameters.from_dataset("joint-rig", JOINT)
     sys = DiscrepancyModel_[float](nom, 2)
     assert sys.ToAutoDiffXdMaybe() is not None
     rng = np.random.default_rng(2)
@@ -303,8 +303,8 @@ def test_discrepancy_model_converts_to_autodiff_and_matches_finite_differences()
 
 
 def test_truth_plant_converts_to_autodiff_and_matches_finite_differences():
-    nom = NominalParameters.from_dataset("joint", JOINT)
-    truth = draw_truth("joint", ["motor_friction", "spring_hysteresis", "joint_friction", "guide_friction",
+    nom = NominalParameters.from_dataset("joint-rig", JOINT)
+    truth = draw_truth("joint-rig", ["motor_friction", "spring_hysteresis", "joint_friction", "guide_friction",
                                  "motor_ripple"], np.random.default_rng(3))
     sys = HiddenEffectPlant_[float](nom, truth)
     rng = np.random.default_rng(4)
@@ -372,7 +372,7 @@ def test_benchmark_scores_follow_their_definitions():
     spec = importlib.util.spec_from_file_location("bench_discrepancy", path)
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    row = dict(rig="joint", snr_db=30, strength=1.0, transform=None, nuisance_named=[], unexplained=False,
+    row = dict(rig="joint-rig", snr_db=30, strength=1.0, transform=None, nuisance_named=[], unexplained=False,
                seconds=1.0, cpu_seconds=1.0, baseline_named=[], baseline_calibration=[])
     rows = [dict(row, row="single_full", hidden=["delay"], named=["delay", "motor_friction"]),
             dict(row, row="single_full", hidden=["delay"], named=["delay"], baseline_named=["delay"]),
@@ -413,8 +413,8 @@ def test_benchmark_is_resumable_and_claims_each_case_once(tmp_path, monkeypatch)
     calls = []
     monkeypatch.setattr(bench, "run_case",
                         lambda case, cache=None: calls.append(case) or {"row": case[0], "seed": case[4]})
-    a = ("nothing", "joint", [], 30, 5, 1.0, None, 10.0)
-    b = ("single_full", "joint", ["delay"], 30, 6, 1.0, None, 10.0)
+    a = ("nothing", "joint-rig", [], 30, 5, 1.0, None, 10.0)
+    b = ("single_full", "joint-rig", ["delay"], 30, 6, 1.0, None, 10.0)
     assert bench.run_and_store(a, str(tmp_path))["seed"] == 5
     assert bench.run_and_store(a, str(tmp_path)) is None                 # finished: skipped
     (tmp_path / f"{bench.case_id(b)}.claim").write_text("1\n")           # another process runs it
@@ -432,7 +432,7 @@ def test_benchmark_runs_its_cases_through_run_sweep_and_scores_each(tmp_path, mo
     seen = []
     real = sweep.run_sweep
     monkeypatch.setattr(sweep, "run_sweep", lambda fn, points, **kw: seen.append(len(points)) or real(fn, points, **kw))
-    row = dict(rig="joint", snr_db=30, strength=1.0, nuisance_named=[], unexplained=False, named=[], seconds=1.0,
+    row = dict(rig="joint-rig", snr_db=30, strength=1.0, nuisance_named=[], unexplained=False, named=[], seconds=1.0,
                cpu_seconds=1.0, baseline_named=[], baseline_calibration=[], verdict="no effect",
                floor_ratio_after=1.0, generate_seconds=0.0, gap_closed=float("nan"), applied={})
     monkeypatch.setattr(bench, "run_case", lambda case, cache=None: dict(
@@ -489,7 +489,7 @@ def test_screen_estimate_is_the_parameter_change_where_the_residual_is_linear():
     truth = default_vector()
     truth[PARAM_INDEX["link_inertia_rel"]], truth[PARAM_INDEX["link_damping_add"]] = 0.1, 0.01
     eng = _LinearInAEngine(truth, np.random.default_rng(11))
-    out = screen(ResidualState(eng, default_vector()), [EFFECTS["nominal_link"]], CatalogBounds(), "joint")
+    out = screen(ResidualState(eng, default_vector()), [EFFECTS["nominal_link"]], CatalogBounds(), "joint-rig")
     assert out[0]["params"] == pytest.approx({"link_inertia_rel": 0.1, "link_damping_add": 0.01}, rel=1e-9)
 
 
@@ -584,7 +584,7 @@ def test_held_parameter_taken_past_its_bound_is_reported_at_the_bound():
 def test_out_of_catalog_truth_physics_is_its_closed_form():
     """The link spring adds ``-k_j q / m`` to the link acceleration and the torque-constant error ``e u / B``
     to each motor's, nothing else (derivatives of the truth plant at a random state)."""
-    nom = NominalParameters.from_dataset("joint", JOINT)
+    nom = NominalParameters.from_dataset("joint-rig", JOINT)
     X = _random_state(nom, np.random.default_rng(6))
     u = np.array([0.3, -0.2])
 
@@ -613,13 +613,13 @@ def test_out_of_catalog_sensor_effects_are_their_closed_form_on_the_same_physics
     from awiwi_drake.discrepancy import make_truth_dataset
     from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
     gen = TruthGeneratorParams(duration=0.3)
-    base = make_truth_dataset("joint", [], snr_db=None, seed=9004, gen=gen)
-    nl = make_truth_dataset("joint", [], snr_db=None, seed=9004, gen=gen, unknown=["force_nonlinearity"])
+    base = make_truth_dataset("joint-rig", [], snr_db=None, seed=9004, gen=gen)
+    nl = make_truth_dataset("joint-rig", [], snr_db=None, seed=9004, gen=gen, unknown=["force_nonlinearity"])
     c = nl.meta["truth"]["force_nonlinearity"]
     assert 3e-3 <= abs(c) <= 6e-3
     for k, f in base.outputs.items():
         np.testing.assert_array_equal(nl.outputs[k], f * (1 + c * f) if k.startswith("tendon_force") else f)
-    pk = make_truth_dataset("joint", [], snr_db=None, seed=9004, gen=gen, unknown=["force_pickup"])
+    pk = make_truth_dataset("joint-rig", [], snr_db=None, seed=9004, gen=gen, unknown=["force_pickup"])
     p = pk.meta["truth"]["force_pickup"]
     ch = f"tendon_force_{p['channel']}"
     sigma = base.outputs[ch].std() * 10 ** (-30 / 20)   # noise-free: sized on the 30 dB noise
@@ -630,9 +630,9 @@ def test_out_of_catalog_sensor_effects_are_their_closed_form_on_the_same_physics
         else:
             np.testing.assert_array_equal(pk.outputs[k], f)
     with pytest.raises(ValueError, match="link_spring"):
-        make_truth_dataset("tendon", [], seed=1, gen=gen, unknown=["link_spring"])
+        make_truth_dataset("tendon-rig", [], seed=1, gen=gen, unknown=["link_spring"])
     with pytest.raises(ValueError, match="unknown= 'gravity'"):
-        make_truth_dataset("joint", [], seed=1, gen=gen, unknown=["gravity"])
+        make_truth_dataset("joint-rig", [], seed=1, gen=gen, unknown=["gravity"])
 
 
 def _bench():
@@ -656,11 +656,11 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     assert any(f.endswith("discrepancy/defaults.py") for f in files)         # imported inside a function
     assert not any(f.endswith(("discrepancy/workflow.py", "discrepancy/fit.py", "discrepancy/screen.py"))
                    for f in files)                                             # the workflow is not the generator
-    rig_files = [f.as_posix() for f in bench.generator_files((bench.generator_of("joint"),))]
+    rig_files = [f.as_posix() for f in bench.generator_files((bench.generator_of("joint-rig"),))]
     assert any(f.endswith("hand/plant.py") for f in files) and not any(f.endswith("hand/plant.py") for f in rig_files)
     assert bench.generator_of("finger-index") == "awiwi_drake.discrepancy.finger_truth"   # the hand is the finger's
-    case = ("single_full", "joint", ["delay"], 30, 1001, 1.0, None, 0.2)
-    gen = lambda: make_truth_dataset("joint", ["delay"], snr_db=30, seed=1001,  # noqa: E731
+    case = ("single_full", "joint-rig", ["delay"], 30, 1001, 1.0, None, 0.2)
+    gen = lambda: make_truth_dataset("joint-rig", ["delay"], snr_db=30, seed=1001,  # noqa: E731
                                      gen=TruthGeneratorParams(duration=0.2))
     fresh, hit = bench.cached_dataset(case, gen, tmp_path)
     assert not hit and len(list(tmp_path.glob("*.npz"))) == 1
@@ -712,7 +712,7 @@ def test_torque_constant_error_is_exactly_a_recalibration():
     (``bench_discrepancy.UNKNOWN_EXPECTED``): dividing the motor equation by ``1 + e`` makes the truth with
     applied torque ``(1 + e) u`` the catalog model with every mass, damping and the spring force scaled by
     ``1 / (1 + e)`` and a force-sensor gain ``e``, in scaled time-derivatives and measurements alike."""
-    nom = NominalParameters.from_dataset("joint", JOINT)
+    nom = NominalParameters.from_dataset("joint-rig", JOINT)
     e = -0.09
     s = 1.0 / (1.0 + e) - 1.0
     P = default_vector()

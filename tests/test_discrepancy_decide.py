@@ -20,7 +20,7 @@ from awiwi_drake.parameters.discrepancy import DiscrepancySettings, TruthGenerat
 
 @pytest.fixture(scope="module")
 def joint_engine():
-    ds = make_truth_dataset("joint", [], snr_db=30, seed=21, gen=TruthGeneratorParams(duration=2.0))
+    ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=21, gen=TruthGeneratorParams(duration=2.0))
     return ReplayEngine(ds)
 
 
@@ -164,7 +164,7 @@ def test_hysteresis_initial_state_is_the_dahl_history(joint_engine):
 
 
 def test_dataset_name_with_dots_round_trips(tmp_path):
-    ds = make_truth_dataset("tendon", [], snr_db=30, seed=3, gen=TruthGeneratorParams(duration=0.2),
+    ds = make_truth_dataset("tendon-rig", [], snr_db=30, seed=3, gen=TruthGeneratorParams(duration=0.2),
                             keep_clean=False)
     path = save_dataset(ds, tmp_path, name="run_x0.5")
     assert path.name == "run_x0.5.csv" and (tmp_path / "run_x0.5.json").exists()
@@ -177,7 +177,7 @@ def test_dataset_name_with_dots_round_trips(tmp_path):
 def test_interrupted_diagnosis_keeps_a_partial_result(tmp_path):
     """Ctrl-C after the first accepted step: the exception carries the partial diagnosis
     (that step, ``complete`` False, verdict "interrupted"), which serialises and reports."""
-    ds = make_truth_dataset("tendon", ["delay"], snr_db=30, seed=13, gen=TruthGeneratorParams(duration=3.0))
+    ds = make_truth_dataset("tendon-rig", ["delay"], snr_db=30, seed=13, gen=TruthGeneratorParams(duration=3.0))
     seen = []
 
     def interrupt(partial):
@@ -317,14 +317,14 @@ def test_augmented_parameters_build_a_rig_with_the_same_dynamics():
 
     def step(name, kind):
         return Step(name, kind, "confirmed", 1.0, {}, {}, 0.0, {}, [], [])
-    dx = Diagnosis("x", "joint", "effects found", ["motor_friction", "delay"], ["nominal_link"],
+    dx = Diagnosis("x", "joint-rig", "effects found", ["motor_friction", "delay"], ["nominal_link"],
                    [step("motor_friction", "physical"), step("nominal_link", "nuisance"), step("delay", "physical")],
                    0, 0, {}, {}, 1, 1, {}, P, 0, 0)
     aug = augmented_rig_parameters(dx, base)
     assert aug.applied == ["motor_friction", "nominal_link"] and aug.not_representable == ["delay"]
     params = aug.params
     rig = joint_rig(params=params)
-    nominal = NominalParameters("joint", motor.inertia, motor.damping, motor.pulley_radius,
+    nominal = NominalParameters("joint-rig", motor.inertia, motor.damping, motor.pulley_radius,
                                 tuple(rig.spring.coefficients), base.link_inertia, base.link_damping,
                                 base.link_pulley_radius)
     model = DiscrepancyModel(nominal)
@@ -349,7 +349,7 @@ def _dx(ratio_after, steps=(), stop="no candidate passes the acceptance tests", 
     from awiwi_drake.discrepancy.result import Diagnosis, Step
     s = [Step(e, "physical", "confirmed", 1.0, {}, {}, 0.1, {}, [], []) for e in steps]
     unexpl = ratio_after > 1.5 if unexplained is None else unexplained
-    return Diagnosis("d", "joint", "unexplained discrepancy remains" if unexpl else "effects found", list(steps), [],
+    return Diagnosis("d", "joint-rig", "unexplained discrepancy remains" if unexpl else "effects found", list(steps), [],
                      s, 0.2, 0.1, {}, {}, 30.0, ratio_after, {}, default_vector(), 1.0, 1,
                      unexplained_residual=unexpl, unexplained_ratio=1.5,
                      unexplained={"text": "tendon_force_1 (3.1x floor)"} if unexpl else {}, stop_reason=stop)
@@ -450,7 +450,7 @@ def test_stateful_probe_ranking_keeps_the_best_probe_for_its_own_profile():
     from awiwi_drake.discrepancy.catalog import param_specs
     from awiwi_drake.discrepancy.screen import STATEFUL_EFFECTS, ResidualState
     from awiwi_drake.parameters.discrepancy import CatalogBounds
-    ds = make_truth_dataset("joint", ["spring_hysteresis"], snr_db=30, seed=32, gen=TruthGeneratorParams(duration=2.0))
+    ds = make_truth_dataset("joint-rig", ["spring_hysteresis"], snr_db=30, seed=32, gen=TruthGeneratorParams(duration=2.0))
     eng = ReplayEngine(ds)
     st = ResidualState(eng, default_vector())
     high = {s.name: s.high for s in param_specs()}["hysteresis_width"]

@@ -17,7 +17,7 @@ SHORT = TruthGeneratorParams(duration=4.0)
 
 @pytest.fixture(scope="module")
 def joint_friction_case():
-    ds = make_truth_dataset("joint", ["joint_friction"], snr_db=30, seed=11, gen=SHORT)
+    ds = make_truth_dataset("joint-rig", ["joint_friction"], snr_db=30, seed=11, gen=SHORT)
     return ds, diagnose(ds)
 
 
@@ -43,7 +43,7 @@ def test_nothing_hidden_reports_no_effect():
         return {p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"}
 
     seen = []
-    ds = make_truth_dataset("joint", [], snr_db=30, seed=12, gen=SHORT)
+    ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=12, gen=SHORT)
     with threadpool_limits(limits=2, user_api="blas"):
         dx = diagnose(ds, progress=lambda msg: seen.append(blas_threads()))
         assert blas_threads() <= {2}   # restored (a machine with one core caps BLAS at 1)
@@ -54,7 +54,7 @@ def test_nothing_hidden_reports_no_effect():
 
 
 def test_hidden_delay_on_tendon_rig_is_named_with_its_value():
-    ds = make_truth_dataset("tendon", ["delay"], snr_db=30, seed=13, gen=SHORT)
+    ds = make_truth_dataset("tendon-rig", ["delay"], snr_db=30, seed=13, gen=SHORT)
     dx = diagnose(ds)
     assert dx.named_effects[:1] == ["delay"]
     # within 3 standard errors of the fit (Gauss-Newton, s^2 (J^T J)^-1 on the noise-normalised residual: the
@@ -98,7 +98,7 @@ def test_out_of_catalog_link_encoder_bias_is_flagged_not_named(tmp_path):
     discrepancy remains, with where, unless a calibration explains it."""
     from awiwi_drake.discrepancy.report import write_report
 
-    ds = make_truth_dataset("joint", [], snr_db=30, seed=15, gen=SHORT)
+    ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=15, gen=SHORT)
     ds.outputs["link_angle"] = ds.outputs["link_angle"] + 0.05  # rad, ~10x the noise floor
     dx = diagnose(ds)
     assert dx.named_effects == []
@@ -121,10 +121,10 @@ def test_hidden_joint_backlash_is_screened_first_with_its_play():
     from awiwi_drake.discrepancy.replay import ReplayEngine
     from awiwi_drake.discrepancy.screen import ResidualState, screen
     from awiwi_drake.parameters.discrepancy import CatalogBounds
-    ds = make_truth_dataset("joint", ["backlash"], snr_db=30, seed=3, gen=TruthGeneratorParams(duration=1.5))
+    ds = make_truth_dataset("joint-rig", ["backlash"], snr_db=30, seed=3, gen=TruthGeneratorParams(duration=1.5))
     eng = ReplayEngine(ds)
     st = ResidualState(eng, default_vector())
-    out = screen(st, effects_for_rig("joint", eng.out_names), CatalogBounds(), "joint")
+    out = screen(st, effects_for_rig("joint-rig", eng.out_names), CatalogBounds(), "joint-rig")
     assert out[0]["effect"].name == "backlash" and out[0]["rel"] > 0.5
     b = ds.meta["truth"]["backlash"]
     assert b / 1.25 ** 2 <= out[0]["params"]["backlash"] <= b * 1.25 ** 2
@@ -136,7 +136,7 @@ def test_effect_on_one_tendon_is_named_with_its_place(effect, seed):
     that spring) is named with its tendon: guide friction by the screen's place variants (both tendons,
     tendon 1, tendon 2), hysteresis (screened by probes on both tendons) by the place refit after the
     loop; the place is in the JSON and the final parameters."""
-    ds = make_truth_dataset("joint", [effect], snr_db=30, seed=seed, gen=SHORT, place=2)
+    ds = make_truth_dataset("joint-rig", [effect], snr_db=30, seed=seed, gen=SHORT, place=2)
     dx = diagnose(ds)
     assert dx.named_effects == [effect]
     assert dx.places == {effect: "tendon 2"}
@@ -155,7 +155,7 @@ def test_batched_fits_get_exactly_the_numbers_they_get_alone():
     from awiwi_drake.discrepancy.replay import ReplayEngine
     from awiwi_drake.discrepancy.screen import ResidualState
     from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
-    eng = ReplayEngine(make_truth_dataset("joint", ["joint_friction"], snr_db=30, seed=11,
+    eng = ReplayEngine(make_truth_dataset("joint-rig", ["joint_friction"], snr_db=30, seed=11,
                                           gen=TruthGeneratorParams(duration=1.0)))
     st = ResidualState(eng, default_vector())
     bounds, settings = CatalogBounds(), DiscrepancySettings(fit_rounds=1, max_nfev=6)
@@ -195,7 +195,7 @@ def test_a_step_whose_joint_refit_loses_the_gain_is_not_added(monkeypatch):
     from awiwi_drake.discrepancy.fit import FitOutcome
     from awiwi_drake.parameters.discrepancy import CatalogBounds, DiscrepancySettings
 
-    ds = make_truth_dataset("joint", ["joint_friction"], snr_db=30, seed=11, gen=TruthGeneratorParams(duration=1.5))
+    ds = make_truth_dataset("joint-rig", ["joint_friction"], snr_db=30, seed=11, gen=TruthGeneratorParams(duration=1.5))
     run = workflow._Run(ds, DiscrepancySettings(), CatalogBounds(), lambda msg: None)
     link, _ = run.fit_candidate({"effect": EFFECTS["nominal_link"], "params": {}}, None)
     assert run.accept(link, "confirmed", 1.0, [], [], []) == ""
@@ -223,7 +223,7 @@ def test_unexplained_pickup_is_located_at_its_frequency_on_its_signal(tmp_path):
     picked-up signal alone above the threshold, its band around 50 Hz with the peak there, no periodicity in
     motor angle and no operating region (the pickup is periodic in time, zero-mean everywhere)."""
     from awiwi_drake.discrepancy.report import write_report
-    ds = make_truth_dataset("joint", [], snr_db=30, seed=9004, gen=TruthGeneratorParams(duration=3.0),
+    ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=9004, gen=TruthGeneratorParams(duration=3.0),
                             unknown=["force_pickup"])
     p = ds.meta["truth"]["force_pickup"]
     dx = diagnose(ds)
@@ -259,7 +259,7 @@ def test_torque_constant_error_is_not_named_ripple():
     of it (below ``min_z``, where a real ripple adds tens of null std, next test).  The recalibration leads
     their class: a calibration step ``drive_gain``, "not separable" from the ripple, with the experiment that
     would separate them; its fitted force gain and spring scale are the error's."""
-    ds = make_truth_dataset("joint", [], snr_db=30, seed=9002, gen=TruthGeneratorParams(duration=2.0),
+    ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=9002, gen=TruthGeneratorParams(duration=2.0),
                             unknown=["torque_constant"])
     run = _first_step(ds)
     rc = run.history[0]["recalibration"]
@@ -284,7 +284,7 @@ def test_low_order_ripple_that_adds_to_the_recalibration_is_named():
     """A hidden ripple of orders 1 and 3 (0.24 periods over the motor angle covered: as generic a function of
     the angle as the torque-constant case above) is still named: the drive-gain recalibration is fitted and
     compared, and the ripple's correction on top of it removes a significant held-out gain (>= ``min_z``)."""
-    ds = make_truth_dataset("joint", ["motor_ripple"], snr_db=30, seed=1104, strength=0.5,
+    ds = make_truth_dataset("joint-rig", ["motor_ripple"], snr_db=30, seed=1104, strength=0.5,
                             gen=TruthGeneratorParams(duration=2.0))
     assert sorted(o for o, _, _ in ds.meta["truth"]["motor_ripple"]["harmonics"][0]) == [1.0, 3.0]
     run = _first_step(ds)

@@ -18,6 +18,7 @@ from awiwi_drake.components.tendon import joint_stiffness
 from awiwi_drake.hand.coupling import finger_coupling, index_coupling_matrix
 from awiwi_drake.parameters.hand import FingerDriveParams, IndexFingerParams
 from awiwi_drake.parameters.hand_control import ForceDistributionParams
+from _fd import fd_jacobian
 
 
 def _index_P():
@@ -218,14 +219,8 @@ def test_system_autodiff_is_the_derivative_of_the_optimum(tau, K_diag):
     x = np.concatenate([tau, K_diag])
     res = s.solve(x[:4], np.diag(x[4:]))
     J = _ad_update(system, x, res.forces, 4)
-    J_fd = np.zeros_like(J)
-    for j in range(8):
-        h = 1e-5 * max(1.0, abs(x[j]))
-        xp, xm = x.copy(), x.copy()
-        xp[j] += h
-        xm[j] -= h
-        J_fd[:, j] = (s.solve(xp[:4], np.diag(xp[4:]), warm_start=res.forces).forces
-                      - s.solve(xm[:4], np.diag(xm[4:]), warm_start=res.forces).forces) / (2 * h)
+    J_fd = fd_jacobian(lambda y: s.solve(y[:4], np.diag(y[4:]), warm_start=res.forces).forces, x,
+                       h=1e-5 * np.maximum(1.0, np.abs(x)))
     assert np.abs(J_fd).max() > 1.0
     np.testing.assert_allclose(J, J_fd, atol=1e-2 * np.abs(J_fd).max())
 
@@ -408,7 +403,6 @@ def test_fast_solver_equals_the_program_at_random_interior_states(finger):
 
 def test_thumb_tension_hessians_are_the_derivative_of_the_coupling():
     """d^2 h_i/dq^2 of every thumb tendon (vectorised float path) against central differences of P(q)."""
-    from _fd import fd_jacobian
     c = finger_coupling("thumb")
     q = np.array([0.35, -0.25, 0.3, 0.1])
     H = c.tension_hessians(q)

@@ -9,7 +9,7 @@ from awiwi_drake.components.fused_drive import DriveModel, build_kernels, drive_
 from awiwi_drake.components.rig_system import LinkRigOutputs_, rig_dynamics_system
 from awiwi_drake.parameters import HysteresisParams, MotorParams, SpringModelParams
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
-from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd
+from _fd import assert_symbolic_matches_float, check_system_autodiff_matches_fd, fd_jacobian
 
 RNG = np.random.default_rng(11)
 
@@ -257,8 +257,7 @@ def test_sampled_rig_converts_to_autodiff_and_its_update_matches_finite_differen
     out = ad.EvalUniquePeriodicDiscreteUpdate(actx).get_vector(0).CopyToVector()
     np.testing.assert_allclose(ExtractValue(out).ravel(), step(x0), rtol=1e-14, atol=1e-15)
     J = ExtractGradient(out)
-    eps = 1e-6
-    J_fd = np.column_stack([(step(x0 + eps * e) - step(x0 - eps * e)) / (2 * eps) for e in np.eye(6)])
+    J_fd = fd_jacobian(step, x0, h=1e-6)
     np.testing.assert_allclose(J, J_fd, rtol=1e-5, atol=1e-7 * np.max(np.abs(J_fd)))
 
 

@@ -372,6 +372,22 @@ def test_one_simulation_loop_and_one_divergence_error(tmp_path):
         "4: a caught divergence re-raised as FloatingPointError", "4: raise FloatingPointError",
         "8: a caught divergence re-raised as ValueError", "15: raise RuntimeError"))
     assert _divergence_error_misuses([pkg, pkg.parent / "benchmarks"]) == []
+    # the benchmarks run through simulate; a raw Simulator loop only as the baselines of simulate's own cost
+    import ast
+
+    def drives_simulator(fn):
+        stack = list(fn.body)
+        while stack:
+            node = stack.pop()
+            if isinstance(node, (ast.FunctionDef, ast.Lambda)):
+                continue
+            if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", None)) == "Simulator":
+                return True
+            stack.extend(ast.iter_child_nodes(node))
+        return False
+    raw = sorted(f"{b.name}:{fn.name}" for b in (pkg.parent / "benchmarks").glob("*.py")
+                 for fn in ast.walk(ast.parse(b.read_text())) if isinstance(fn, ast.FunctionDef) and drives_simulator(fn))
+    assert raw == ["bench_rigs.py:_fixed_rk3", "bench_rigs.py:_period_us"]
     # one closed-loop builder: ClosedLoop handles come from control.closed_loop only
     handles = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")
                      if "ClosedLoop(" in p.read_text().replace("class ClosedLoop(", ""))

@@ -63,7 +63,7 @@ from awiwi_drake.rigs.rigs import _link_rig
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
            "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
-           "sampled_loop_poles", "observe_design"]
+           "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else params.tendon_law)
@@ -119,16 +119,14 @@ def design_motor(motor: MotorParams) -> MotorParams:
 
 
 def joint_subsystem(rig: Any, dof: int, *, point: ChainDesign | None = None, params: HandChainParams | None = None,
-                    torque: float | None = None, friction: str = "motion"):
+                    torque: float | None = None):
     """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
     Returns ``(sub, op, point)``: the :class:`~awiwi_drake.rigs.base.Rig` (``sub.plant`` its link alone), its
     operating point and its :func:`~awiwi_drake.control.chain.chain_design_point` (close it with :func:`force_loop`).
     ``torque``: the DoF torque (default ``tau_op``; forces ``f_op + W_j (torque - tau_op)``, held by an external
-    torque ``-torque``).  ``friction``: ``"motion"`` (:func:`design_motor`) or ``"rest"`` (the rig's own motor).
+    torque ``-torque``).  The motors are :func:`design_motor`'s.
     """
-    if friction not in ("motion", "rest"):
-        raise ValueError(f"joint_subsystem: friction = {friction!r}; use 'motion' or 'rest'")
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
     S, PS = point.selection, point.coupling_matrix
@@ -142,7 +140,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: ChainDesign | None = None, par
     coupling = LinearFingerCoupling(P_j, joint_names=[name], tendon_names=[rig.tendon_names[i] for i in active])
     M = float(joint_inertia(rig, point.joint_angle)[dof])
     b = float(joint_damping(rig)[dof, dof])
-    design_params = rig.params.replace(motor=design_motor(rig.params.motor)) if friction == "motion" else rig.params
+    design_params = rig.params.replace(motor=design_motor(rig.params.motor))
     springs = rig_springs(rig).subset(active)          # each of the DoF's tendons with its own law
     diagram, drive, names, _ = _link_rig(name=f"{rig.name}-{name}", motor=design_params.motor, spring=springs,
                                          coupling=coupling, inertia=M, damping=b, hysteresis=HysteresisParams())
@@ -204,11 +202,9 @@ def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndar
 
 
 def reduced_joint_models(rig: Any, *, point: ChainDesign | None = None, params: HandChainParams | None = None,
-                         tendon_law: str | None = None, friction: str = "motion",
-                         torque_rate: str = "joint") -> list[JointReducedModel]:
+                         tendon_law: str | None = None, torque_rate: str = "joint") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
     ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`);
-    ``friction``: the motor friction (3.8) linearised in ``"motion"`` (the design model) or at ``"rest"``;
     ``torque_rate``: the fourth coordinate, ``"joint"`` (``tau_dot``) or ``"motor"`` (``sigma``)."""
     if torque_rate not in ("joint", "motor"):
         raise ValueError(f"reduced_joint_models: torque_rate = {torque_rate!r}; use 'joint' or 'motor'")
@@ -222,17 +218,17 @@ def reduced_joint_models(rig: Any, *, point: ChainDesign | None = None, params: 
     models = []
     for j in range(S.shape[1]):
         col = point.coupling_matrix[:, j]
-        models.append(_reduced_model(rig, j, point, p, tendon_law, friction, torque_rate, None, names[j], float(M[j]),
+        models.append(_reduced_model(rig, j, point, p, tendon_law, torque_rate, None, names[j], float(M[j]),
                                      float(b[j]), float(col ** 2 @ kt), tuple(int(i) for i in np.flatnonzero(col))))
     return models
 
 
-def _reduced_model(rig, j, point, chain, tendon_law, friction, torque_rate, torque, name, inertia, damping, stiffness,
+def _reduced_model(rig, j, point, chain, tendon_law, torque_rate, torque, name, inertia, damping, stiffness,
                    tendons, link_torque: bool = True) -> JointReducedModel:
     """DoF ``j``'s :class:`JointReducedModel`: :func:`joint_subsystem` (at the DoF torque ``torque``) closed by
     :func:`force_loop`, linearised by Drake and restricted to ``z`` (:func:`_restrict`); ``link_torque``: also its
     :attr:`~JointReducedModel.link_torque_map` (the loop linearised from its ``external_torque`` input)."""
-    sub, _, sub_point = joint_subsystem(rig, j, point=point, params=chain, torque=torque, friction=friction)
+    sub, _, sub_point = joint_subsystem(rig, j, point=point, params=chain, torque=torque)
     loop, ctx = force_loop(sub, sub_point, chain, tendon_law)
     lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                     outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
@@ -562,7 +558,7 @@ def _sdre_law(rig, point, c, p, kw, period):
     table = np.empty((k, grid.size, 5))
     for j in range(k):
         for i, dt in enumerate(grid):
-            model = _reduced_model(rig, j, point, c, c.tendon_law, "motion", kw["torque_rate"],
+            model = _reduced_model(rig, j, point, c, c.tendon_law, kw["torque_rate"],
                                    point.torque_offset[j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
@@ -580,7 +576,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     K_eff`` (8.2) per DoF, ``K_eff`` the design's :attr:`JointDesign.static_stiffness` ((8.1) is the identity here: no
     spring is in series with the chain's force control).  ``friction_observer``: the (9.2) observer per DoF, on by
     default (the guides' friction otherwise leaves the impedance a dead band); None removes it.  ``kw``:
-    ``mechanical_stiffness``, ``gains``, ``distribution_params`` (:class:`~awiwi_drake.control.chain.TendonChainController`)."""
+    ``mechanical_stiffness``, ``gains``, ``distribution_params`` (:class:`~.chain.TendonChainController`)."""
     c = chain or HandChainParams()
     correction = kw.pop("stiffness_correction", None)
     if correction is not None and not isinstance(correction, StiffnessCorrectionParams):
@@ -600,20 +596,13 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
     ctrl = TendonChainController(rig, d.law, c, point=point, distribution=distribution, rate_hz=rate_hz,
                                  tendon_law=_tendon_law(design, c), name=f"{design.replace('-', '_')}_chain",
                                  friction_observer=friction_observer, **kw)
-    observe_design(d, ctrl, rig, point)
-    return ctrl
-
-
-def observe_design(design: JointDesign, ctrl: TendonChainController, rig: Any, point: ChainDesign) -> None:
-    """Give ``design`` the (9.2) observer of the chain ``ctrl`` (its per-DoF gain and scale) and the guides' presliding
-    stiffness of ``rig`` at ``point`` (:attr:`JointDesign.observer`, :meth:`JointDesign.loop`), and record it and its
-    tracking time constant in ``ctrl.design`` (``joint_design``, ``time_constant``)."""
-    obs = ctrl._observer
+    obs = ctrl._observer                               # the design's loop with the chain's (9.2) observer
     if obs is not None:
-        design.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
-                               presliding_stiffness=guide_presliding_stiffness(rig, point))
-    ctrl.design.joint_design = design
-    ctrl.design.time_constant = design.tracking_time_constant()
+        d.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
+                          presliding_stiffness=guide_presliding_stiffness(rig, point))
+    ctrl.design.joint_design = d
+    ctrl.design.time_constant = d.tracking_time_constant()
+    return ctrl
 
 
 @dataclass

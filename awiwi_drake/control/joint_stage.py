@@ -48,7 +48,7 @@ from awiwi_drake.control.tendon_force import interp
 from awiwi_drake.hand.coupling import dof_selection
 
 __all__ = ["joint_inertia", "joint_damping", "JointStateFeedbackLaw", "JointGainScheduleLaw", "JointStage_",
-           "JointStage", "measured_joint_coordinates", "JointFrictionObserver_", "JointFrictionObserver"]
+           "JointStage", "JointFrictionObserver_", "JointFrictionObserver"]
 
 
 def joint_inertia(rig: Any, q, *, full: bool = False) -> np.ndarray:
@@ -67,18 +67,6 @@ def joint_damping(rig: Any) -> np.ndarray:
     b = np.array([plant.get_joint(j).default_damping_vector()[0] for j in plant.GetJointIndices()])
     S = dof_selection(rig.coupling)
     return S.T @ np.diag(b) @ S
-
-
-def measured_joint_coordinates(coupling, S, Sp, r_m: float, u, torque_rate: str = "joint") -> tuple:
-    """``(q_d, qdot_d, tau, tau_dot)`` (``torque_rate="joint"``) or ``(q_d, qdot_d, tau, sigma)`` (``"motor"``)
-    of the DoF from the measurements ``u`` (module docstring)."""
-    q, v = u["joint_angle"], u["joint_velocity"]
-    P = np.asarray(coupling.P(q))
-    PS = P @ S
-    f, kt, w = u["tendon_force"], u["tendon_stiffness"], u["motor_velocity"]
-    tau = -(PS.T @ f)
-    rate = r_m * w if torque_rate == "motor" else r_m * w + P @ v
-    return Sp @ q, Sp @ v, tau, -(PS.T @ (kt * rate))
 
 
 class JointStateFeedbackLaw(StaticLaw):
@@ -128,12 +116,15 @@ class JointStateFeedbackLaw(StaticLaw):
 
     def coordinates(self, u):
         """``z`` (k x 5: ``[q - q_op, qdot, tau - tau_op, tau_dot, tau_ref(t - h) - tau_op]``) and ``dr`` (k,)."""
-        if self.uses_forces:
-            qd, vd, tau, taud = measured_joint_coordinates(self.coupling, self.S, self.Sp, self.r_m, u,
-                                                           self.torque_rate)
-            cols = [qd - self.q0, vd, tau - self.tau0, taud]
+        q, v = u["joint_angle"], u["joint_velocity"]
+        qd, vd = self.Sp @ q, self.Sp @ v
+        if self.uses_forces:         # tau = -(P S)^T f and its rate tau_dot, or the motors' sigma (module docstring)
+            P = np.asarray(self.coupling.P(q))
+            PS = P @ self.S
+            w = self.r_m * u["motor_velocity"]
+            rate = w if self.torque_rate == "motor" else w + P @ v
+            cols = [qd - self.q0, vd, -(PS.T @ u["tendon_force"]) - self.tau0, -(PS.T @ (u["tendon_stiffness"] * rate))]
         else:
-            qd, vd = self.Sp @ u["joint_angle"], self.Sp @ u["joint_velocity"]
             cols = [qd - self.q0, vd, 0.0 * vd, 0.0 * vd]
         if self.uses_previous:
             PS = np.asarray(self.coupling.P(u["joint_angle"])) @ self.S
@@ -262,7 +253,7 @@ def JointFrictionObserver_(T):
     any external load; the thesis's (9.1)-(9.2) sits on the actuator side, where a load is not cancelled and the joint
     stays an impedance.  The bound keeps that: a load beyond ``B`` is compensated only up to ``B`` (output
     ``friction_compensation_bound`` ``= scale B``).  ``friction_levels`` None: unbounded (the load observer of
-    :class:`~awiwi_drake.control.finger_backstepping.ObservedBacksteppingController`, which estimates the load on purpose).
+    :class:`~.finger_backstepping.ObservedBacksteppingController`, which estimates the load on purpose).
 
     ``period`` None: continuous state (linear analysis); ``h``: a discrete state stepped by
     :func:`~awiwi_drake.control.friction_observer.observer_step` (pole ``1 - L h``).

@@ -77,7 +77,7 @@ def augmented_rig_parameters(dx, base) -> AugmentedParameters:
     dataset, ``TendonRigParams`` for ``tendon``) and return a validated copy."""
     from awiwi_drake.parameters import JointRigParams, TendonRigParams
 
-    want = JointRigParams if dx.rig == "joint" else TendonRigParams
+    want = JointRigParams if dx.rig == "joint-rig" else TendonRigParams
     if not isinstance(base, want):
         raise ValueError(f"augmented_rig_parameters: a {dx.rig!r} diagnosis needs {want.__name__}, "
                          f"got {type(base).__name__}")
@@ -100,7 +100,7 @@ def augmented_rig_parameters(dx, base) -> AugmentedParameters:
         elif eff == "nominal_motor":
             motor = motor.replace(inertia=motor.inertia * (1.0 + g("motor_inertia_rel")),
                                   damping=motor.damping + g("motor_damping_add"))
-        elif eff == "nominal_link" and dx.rig == "joint":
+        elif eff == "nominal_link" and dx.rig == "joint-rig":
             pass  # written below
         else:
             missing.append(eff)

@@ -1,7 +1,7 @@
 """Datasets of the discrepancy workflow: ``NAME.csv`` + ``NAME.json``.
 
 CSV: a header, first column ``time`` [s] (uniform, increasing), then one column
-per signal (SI units).  JSON: ``{"rig": "tendon-rig"|"joint-rig" (also "tendon"|"joint"), "parameters": {...},
+per signal (SI units).  JSON: ``{"rig": "tendon-rig"|"joint-rig"|"finger-<f>"|"hand", "parameters": {...},
 "initial_state": {...}, "inputs": [...], "outputs": [...]}``.  Loading checks
 everything and raises a ``ValueError`` naming the file, column or row.
 """
@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["RigSpec", "RIGS", "Dataset", "load_dataset", "save_dataset", "dataset_paths", "check_plausibility",
-           "CLI_RIG_NAMES", "finger_rig_name", "finger_parameters_to_json", "finger_parameters_from_json",
-           "is_finger_rig", "rig_finger"]
+           "finger_rig_name", "finger_parameters_to_json", "finger_parameters_from_json",
+           "is_finger_rig", "rig_finger", "RIG_NAMES"]
 
 
 @dataclass(frozen=True)
@@ -35,12 +35,12 @@ class RigSpec:
 
 
 RIGS = {
-    "tendon": RigSpec(
-        "tendon", ("motor_torque",), ("motor_angle", "tendon_force"), ("motor_angle",),
+    "tendon-rig": RigSpec(
+        "tendon-rig", ("motor_torque",), ("motor_angle", "tendon_force"), ("motor_angle",),
         ("motor_inertia", "motor_damping", "motor_pulley_radius", "spring_poly"),
         ("motor_angle", "motor_velocity"), 1, False),
-    "joint": RigSpec(
-        "joint", ("motor_torque_1", "motor_torque_2"),
+    "joint-rig": RigSpec(
+        "joint-rig", ("motor_torque_1", "motor_torque_2"),
         ("motor_angle_1", "motor_angle_2", "tendon_force_1", "tendon_force_2", "link_angle"),
         ("motor_angle_1", "motor_angle_2"),
         ("motor_inertia", "motor_damping", "motor_pulley_radius", "spring_poly",
@@ -149,14 +149,8 @@ def finger_parameters_from_json(params: dict, where: str):
     return from_yaml(base, json.dumps(rig), where=f"{where}: parameters.finger_rig")
 
 
-# the command line's spelling of the dataset rigs (awiwi-drake make-dataset --rig joint-rig)
-CLI_RIG_NAMES = {"tendon-rig": "tendon", "joint-rig": "joint",
-                 **{f"finger-{f}": f"finger-{f}" for f in _Rigs.FINGERS}, "hand": "hand"}
-_RIG_CLI_NAME = {v: k for k, v in CLI_RIG_NAMES.items()}      # messages and written files use the CLI spelling
-
-
-def _cli(rig: str) -> str:
-    return _RIG_CLI_NAME.get(rig, rig)
+# every dataset rig, in the package's one spelling of the rigs (Rig.name, the CLI's --rig)
+RIG_NAMES = ("tendon-rig", "joint-rig", *(f"finger-{f}" for f in _Rigs.FINGERS), "hand")
 
 
 @dataclass
@@ -168,7 +162,7 @@ class Dataset:
     name : str
         Stem of the files.
     rig : str
-        ``"tendon"`` or ``"joint"``.
+        One of :data:`RIG_NAMES` (``"tendon-rig"``, ``"joint-rig"``, ``"finger-<f>"``, ``"hand"``).
     time : ndarray (N,)
         Uniform sample times [s].
     inputs : dict[str, ndarray]
@@ -236,11 +230,11 @@ def _check_parameters(rig: str, params, where: str, checks) -> dict:
         raise ValueError(f"{where}: 'parameters' must be an object, got {type(params).__name__}")
     missing = [k for k in spec.parameters if k not in params]
     if missing:
-        raise ValueError(f"{where}: missing parameter {missing[0]!r} for rig {_cli(rig)!r} "
+        raise ValueError(f"{where}: missing parameter {missing[0]!r} for rig {rig!r} "
                          f"(needs {', '.join(spec.parameters)})")
     unknown = sorted(set(params) - set(spec.parameters))
     if unknown:
-        raise ValueError(f"{where}: unknown parameter {unknown[0]!r} for rig {_cli(rig)!r}")
+        raise ValueError(f"{where}: unknown parameter {unknown[0]!r} for rig {rig!r}")
     upper = {"motor_inertia": (checks.max_motor_inertia, "kg m^2"), "link_inertia": (checks.max_link_inertia, "kg m^2"),
              "motor_damping": (checks.max_damping, "Nm s/rad"), "link_damping": (checks.max_damping, "Nm s/rad"),
              "motor_pulley_radius": (checks.max_pulley_radius, "m"), "link_pulley_radius": (checks.max_pulley_radius, "m")}
@@ -373,10 +367,9 @@ def load_dataset(path, *, checks=None) -> Dataset:
             raise ValueError(f"{json_path}: missing key {key!r}")
     rig = meta["rig"]
     if not isinstance(rig, str):
-        raise ValueError(f"{json_path}: 'rig' must be a name ({', '.join(CLI_RIG_NAMES)}), got {rig!r}")
-    rig = CLI_RIG_NAMES.get(rig, rig)
+        raise ValueError(f"{json_path}: 'rig' must be a name ({', '.join(RIG_NAMES)}), got {rig!r}")
     if rig not in RIGS:
-        raise ValueError(f"{json_path}: unknown rig {rig!r} (known: {', '.join(CLI_RIG_NAMES)})")
+        raise ValueError(f"{json_path}: unknown rig {rig!r} (known: {', '.join(RIG_NAMES)})")
     spec = RIGS[rig]
     if is_finger_rig(rig):
         fp = finger_parameters_from_json(meta["parameters"], str(json_path))
@@ -387,10 +380,10 @@ def load_dataset(path, *, checks=None) -> Dataset:
         params = _check_parameters(rig, meta["parameters"], str(json_path), checks)
     inputs, outputs = _name_list(meta, "inputs", json_path), _name_list(meta, "outputs", json_path)
     if sorted(inputs) != sorted(spec.inputs):
-        raise ValueError(f"{json_path}: 'inputs' must be {list(spec.inputs)} for rig {_cli(rig)!r}, got {inputs}")
+        raise ValueError(f"{json_path}: 'inputs' must be {list(spec.inputs)} for rig {rig!r}, got {inputs}")
     bad = [o for o in outputs if o not in spec.outputs]
     if bad:
-        raise ValueError(f"{json_path}: unknown output {bad[0]!r} for rig {_cli(rig)!r} "
+        raise ValueError(f"{json_path}: unknown output {bad[0]!r} for rig {rig!r} "
                          f"(known: {', '.join(spec.outputs)})")
     for req in spec.required_outputs:
         if req not in outputs:
@@ -548,7 +541,7 @@ def save_dataset(ds: Dataset, directory, name: str | None = None) -> pathlib.Pat
                             + [ds.outputs[k] for k in ds.output_names])
     csv_path = d / f"{name}.csv"
     np.savetxt(csv_path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.10g")
-    meta = {"rig": _cli(ds.rig), "parameters": ds.parameters, "initial_state": ds.initial_state,
+    meta = {"rig": ds.rig, "parameters": ds.parameters, "initial_state": ds.initial_state,
             "inputs": list(ds.spec.inputs), "outputs": ds.output_names}
     meta.update({k: v for k, v in ds.meta.items() if not k.startswith("clean_") and k != "truth"})
     (d / f"{name}.json").write_text(json.dumps(meta, indent=1, default=float))

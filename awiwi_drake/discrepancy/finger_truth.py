@@ -219,21 +219,17 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     N = int(round(gen.duration / dt))
     t = np.arange(N) * dt
     # references: each joint its own lab excitation, plus a common co-contraction of every tendon
-    from .truth import _excitation
+    from .truth import _excitation, _reference_filter
     q_op = np.full(n, gen.flexion)
     amp = np.full(n, gen.joint_excursion)
     parts = _finger_joints(finger, nominal, probe.joint_names)
     for _, _, joints in parts:
         q_op[joints[0]] = 0.0  # abduction (or the thumb's first joint) centred
         amp[joints[0]] *= 0.5
-    alpha = dt / (gen.reference_time_constant + dt)   # two first-order reference filters
     Q = np.empty((N, n))
-    for j in range(n):
-        a = _excitation(t + rng.uniform(0, 3.0), rng)
-        for _ in range(2):
-            for k in range(1, N):
-                a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
-        Q[:, j] = q_op[j] + amp[j] * a
+    for j in range(n):      # two first-order reference filters
+        Q[:, j] = q_op[j] + amp[j] * _reference_filter(_excitation(t + rng.uniform(0, 3.0), rng), dt,
+                                                       gen.reference_time_constant, 2)
     for _, fp, joints in parts:
         if getattr(fp, "pip_dip_coupled", False):   # ring, fifth: (5.16) q_DIP = (r_x3 / r_x2) q_PIP, no DIP of its own
             pip, dip = (k for k in joints if probe.joint_names[k][-1] in "23")

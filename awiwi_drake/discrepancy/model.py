@@ -72,7 +72,7 @@ class NominalParameters:
     @classmethod
     def from_dataset(cls, rig: str, p: dict) -> "NominalParameters":
         extra = {}
-        if rig == "joint":
+        if rig == "joint-rig":
             extra = dict(link_inertia=p["link_inertia"], link_damping=p["link_damping"],
                          link_pulley_radius=p["link_pulley_radius"])
         return cls(rig, float(p["motor_inertia"]), float(p["motor_damping"]),
@@ -80,11 +80,11 @@ class NominalParameters:
 
     @property
     def num_motors(self) -> int:
-        return 2 if self.rig == "joint" else 1
+        return 2 if self.rig == "joint-rig" else 1
 
     @property
     def has_link(self) -> bool:
-        return self.rig == "joint"
+        return self.rig == "joint-rig"
 
     @property
     def num_states(self) -> int:
@@ -300,9 +300,8 @@ def replay_kernels(nom: NominalParameters, jit: bool = True) -> dict:
     with np.errstate(invalid="ignore"):
         xdot, _ = replay_laws(nom, E(xv), E(uv), E(pv))
         _, y = replay_laws(nom, E(xv), E(uv) * 0.0, E(pv))
-    rig = "joint" if nom.has_link else "tendon"
     return compile_kernels({"derivatives": ([xv, uv, pv], list(xdot)), "measurements": ([xv, pv], list(y))},
-                           tag=f"replay_{rig}", jit=jit)
+                           tag="replay_joint" if nom.has_link else "replay_tendon", jit=jit)
 
 
 @TemplateSystem.define("DiscrepancyModel_", scope=sys.modules[__name__])

@@ -159,7 +159,7 @@ def candidate_grid(effect: Effect, rig: str, base: np.ndarray, bounds: CatalogBo
     # a per-tendon effect is screened on both tendons and on each alone (its place), unless a
     # per-tendon effect is already in the model (the place masks are shared)
     placed = [n for e in PLACED_EFFECTS for n in EFFECTS[e].amplitude_for(rig)]
-    if (effect.name in PLACED_EFFECTS and rig == "joint" and not np.any(base[[PARAM_INDEX[n] for n in placed]])
+    if (effect.name in PLACED_EFFECTS and rig == "joint-rig" and not np.any(base[[PARAM_INDEX[n] for n in placed]])
             and base[PARAM_INDEX["place_1"]] == 1.0 and base[PARAM_INDEX["place_2"]] == 1.0):
         out += [(f"{label} tendon {i}".strip(), {**shape, "place_1": float(i == 1), "place_2": float(i == 2)},
                  c, o) for i in (1, 2) for label, shape, c, o in list(out)]

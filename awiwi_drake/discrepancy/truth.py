@@ -140,7 +140,7 @@ def HiddenEffectPlant_(T):
             for i in range(nom.num_motors):
                 f0 = laws.spring_force(x[i], nom.spring_poly) * scale
                 if "spring_hysteresis" in tr and _here(tr, i):
-                    f0 = f0 + tr["spring_hysteresis"]["width"] * z[i] * np.tanh(f0)
+                    f0 = f0 + laws.hysteresis_force(tr["spring_hysteresis"]["width"] * z[i], f0)
                 f.append(f0)
             return f, x, xd
 
@@ -225,9 +225,9 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
     for h in unknown:
         if h not in UNKNOWN_EFFECTS:
             raise ValueError(f"unknown= {h!r}: not an out-of-catalog truth effect (known: {', '.join(UNKNOWN_EFFECTS)})")
-        if h == "link_spring" and rig != "joint":
-            raise ValueError(f"unknown= 'link_spring' needs a link: rig {rig!r} has none (use rig 'joint')")
-    if place is not None and (rig != "joint" or place not in (1, 2)):
+        if h == "link_spring" and rig != "joint-rig":
+            raise ValueError(f"unknown= 'link_spring' needs a link: rig {rig!r} has none (use rig 'joint-rig')")
+    if place is not None and (rig != "joint-rig" or place not in (1, 2)):
         raise ValueError(f"place = {place!r}: a per-tendon place is 1 or 2 on the joint rig")
     if place is not None and not set(hidden) & set(PLACED_EFFECTS):
         raise ValueError(f"--place {place}: only a hidden per-tendon effect ({', '.join(PLACED_EFFECTS)}) takes a "
@@ -236,11 +236,11 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         if h not in HIDDEN_EFFECTS:
             raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")
         if rig not in EFFECTS[h].rigs:
-            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r}")
+            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r} (it needs {' or '.join(EFFECTS[h].rigs)})")
     for h in nuisance:
         if h not in NUISANCES:
             raise ValueError(f"unknown nuisance {h!r} (known: {', '.join(NUISANCES)})")
-    n = 2 if rig == "joint" else 1
+    n = 2 if rig == "joint-rig" else 1
     tr: dict = {}
     u = rng.uniform
     if "motor_friction" in hidden:
@@ -313,6 +313,15 @@ def _scale_truth(tr: dict, k: float) -> None:
     tr["strength"] = k
 
 
+def _reference_filter(a: np.ndarray, dt: float, time_constant: float, passes: int = 1) -> np.ndarray:
+    """``a`` (in place) through ``passes`` first-order filters of ``time_constant`` [s] sampled every ``dt`` [s]."""
+    alpha = dt / (time_constant + dt)
+    for _ in range(passes):
+        for k in range(1, a.size):
+            a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
+    return a
+
+
 def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Normalised lab excitation in [-1, 1]: multisine, chirp, steps, slow reversals."""
     T = t[-1] - t[0] + (t[1] - t[0])
@@ -376,7 +385,7 @@ def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, de
     return closed_loop(rig, ctrl, rate_hz=gen.sample_rate, delay=nd * dt if nd else None), split
 
 
-def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
+def make_truth_dataset(rig: str = "joint-rig", hidden=(), *, snr_db: float | None = 30.0, seed: int = 0,
                        nuisance=(), gen: TruthGeneratorParams | None = None, name: str | None = None,
                        keep_clean: bool = True, progress=None, strength: float = 1.0,
                        place: int | None = None, unknown=()) -> Dataset:
@@ -387,7 +396,7 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
 
     Parameters
     ----------
-    rig : "tendon" | "joint"
+    rig : "tendon-rig" | "joint-rig"
     hidden : sequence of catalog names hidden in the truth plant
     snr_db : float or None
         Sensor SNR [dB] per output (None: noise-free, no quantisation).
@@ -411,8 +420,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     ``meta["clean_outputs"]`` (in memory only, when ``keep_clean``) holds the
     noise-free outputs.
     """
-    if rig not in ("tendon", "joint"):
-        raise ValueError(f"unknown rig {rig!r} (known: tendon, joint)")
+    if rig not in ("tendon-rig", "joint-rig"):
+        raise ValueError(f"unknown rig {rig!r} (known: tendon-rig, joint-rig)")
     gen = gen or TruthGeneratorParams()
     rng = np.random.default_rng(seed)
     base = default_nominal(rig)
@@ -439,13 +448,8 @@ def make_truth_dataset(rig: str = "joint", hidden=(), *, snr_db: float | None = 
     xs = np.linspace(0, 0.05, 20001)
     x0 = float(np.interp(gen.pretension, laws.spring_force(xs, nom.spring_poly), xs))
     th0 = x0 / r
-    a = _excitation(t, rng)
-    # first-order reference filter (10 ms): steps stay steps for the plant, without
-    # commanding torque impulses beyond the motor's range
-    alpha = dt / (0.01 + dt)
-    for k in range(1, N):
-        a[k] = a[k - 1] + alpha * (a[k] - a[k - 1])
-    if rig == "joint":
+    a = _reference_filter(_excitation(t, rng), dt, gen.reference_time_constant)
+    if rig == "joint-rig":
         rq = nom.link_pulley_radius
         qref = gen.link_excursion * a
         cc = 0.2 * th0 * np.sin(2 * np.pi * 0.13 * t + rng.uniform(0, 2 * np.pi))

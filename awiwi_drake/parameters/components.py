@@ -24,10 +24,12 @@ __all__ = [
     "JointFrictionParams",
 ]
 
-# Torque constant, roughly: the friction law (3.8) with Table 3.3 gives 1.41 Nm at
-# 15 rad/s where Fig 3.3b reads about 1.3 A, i.e. about 1.1 Nm/A (reading accuracy
-# of the figure: +-10 %). MotorParams.torque_constant; also turns the ripple currents of Fig 3.4b into torques.
-_TORQUE_PER_AMPERE = (0.5586 * math.atan(10 * 15.0) + 0.0356 * 15.0) / 1.3
+#: Fig 3.3b read at full speed: (speed [rad/s], current [A]) (reading accuracy of the figure: +-10 %).
+FIG_3_3B_FULL_SPEED_CURRENT = (15.0, 1.3)
+# Torque constant [Nm/A]: the friction law (3.8) with MotorParams' Table 3.3 values needs 1.408 Nm at that speed,
+# over that current (recomputed with the one (3.8) law by tests/test_control_motor.py). MotorParams.torque_constant;
+# also turns the ripple currents of Fig 3.4b into torques.
+_TORQUE_PER_AMPERE = 1.0829
 
 
 @dataclass(frozen=True)

@@ -436,6 +436,10 @@ class TruthGeneratorParams(Parameters):
     link_excursion: float = param(0.3, unit="rad", low=0.0,
                                   source="chosen: +-17 deg, inside a finger joint's range; keeps both tendons taut at 30 N pretension",
                                   doc="link reference amplitude")
+    reference_time_constant: float = param(
+        0.01, unit="s", low=0.0, source="chosen: 10 ms: the excitation's steps stay steps for the plant without "
+                                        "commanding torque impulses beyond the motor's range",
+        doc="time constant of the first-order reference filter")
     backlash_range: tuple = param(
         (0.01, 0.03), unit="rad", low=0.0,
         source="chosen: +-0.6-1.7 deg of play at the joint, 2-6x the link-encoder noise at 30 dB on the "

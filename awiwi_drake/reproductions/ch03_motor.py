@@ -319,9 +319,8 @@ def inertia_identification(currents=(1.0, 1.5, 2.5), *, window: float = 0.01,
         a = float(np.sum(th * t ** 2 / 2) / np.sum((t ** 2 / 2) ** 2))     # least squares theta = a t^2 / 2
         out.append((tau / a, a))
     out = np.array(out)
-    return InertiaIdentification(np.asarray(currents, float), out[:, 0], p.inertia,
-                                 float(p.coulomb_torque * math.atan(p.friction_slope * 1e3) if p.friction else 0.0),
-                                 out[:, 1])
+    coulomb = -atan_friction(1e3, p.coulomb_torque, p.friction_slope, 0.0) if p.friction else 0.0   # atan saturated
+    return InertiaIdentification(np.asarray(currents, float), out[:, 0], p.inertia, float(coulomb), out[:, 1])
 
 
 def friction_curve_in_ampere(speeds, motor: MotorParams | None = None) -> np.ndarray:

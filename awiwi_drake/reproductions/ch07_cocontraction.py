@@ -45,6 +45,7 @@ import numpy as np
 from awiwi_drake.analysis import Samples, simulate
 from awiwi_drake.components.friction import guide_friction_rate
 from awiwi_drake.components.spring import hysteresis_rate
+from awiwi_drake.components.tendon import series_stiffness
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.joint_design import joint_stage_controller
 from awiwi_drake.control.joint_pd import joint_pd_controller
@@ -249,7 +250,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     r_m = rig.params.motor.pulley_radius
 
     def series(k, fj):          # each tendon's spring (and hysteresis) in series with its motor servo kp / r_m^2
-        return joint_stiffness(rig.coupling, q0, fj, 1.0 / (1.0 / k + r_m ** 2 / c.kp)) + K_c
+        return joint_stiffness(rig.coupling, q0, fj, series_stiffness(k, c.kp / r_m ** 2)) + K_c
     D_pred, D_plain = np.zeros((n, n)), np.zeros((n, n))
     for j in range(n):          # column j from the states before load j and the directions it moves them
         s_x = np.where(xw[j + 1] >= xw[j], 1.0, -1.0)

@@ -426,6 +426,11 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
         for row, b in zip(rows, band):
             row.dead_band = float(b)
     meta: dict[str, Any] = {"joints": list(ch.names), "fingers": list(ch.fingers)}
+    # ESTIMATION_ERROR: no joint sensors, the estimator's error
+    log = ["joint_angle", ref_port, "motor_torque_command", "state", applied]
+    log += [n for n in ("tendon_force", DISTRIBUTION_STATUS, ESTIMATION_ERROR) if loop.diagram.HasOutputPort(n)]
+    log += [OBSERVER_COMPENSATION, OBSERVER_BOUND] if loop.diagram.HasOutputPort(OBSERVER_BOUND) else []
+    Sp = np.linalg.pinv(ch.S)
     runs_t = runs_r = runs_u = runs_a = runs_w = runs_x = None
     failed: list[int] = []
     for group in groups:
@@ -441,17 +446,6 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                 for j in group:
                     ext[int(np.flatnonzero(ch.S[:, j])[0])] = Step(p.step_delay, float(loads[j]))
             inputs["external_torque"] = PerEntry(ext)
-        log = ["joint_angle", ref_port, "motor_torque_command", "state"]
-        if applied != "motor_torque_command":
-            log.append(applied)
-        if loop.diagram.HasOutputPort("tendon_force"):
-            log.append("tendon_force")
-        if loop.diagram.HasOutputPort(DISTRIBUTION_STATUS):
-            log.append(DISTRIBUTION_STATUS)
-        if loop.diagram.HasOutputPort(ESTIMATION_ERROR):   # no joint sensors: the estimator's error
-            log.append(ESTIMATION_ERROR)
-        if loop.diagram.HasOutputPort(OBSERVER_BOUND):
-            log += [OBSERVER_COMPENSATION, OBSERVER_BOUND]
         try:
             res = simulate(loop, ctx, ctx.get_time() + t_final, inputs=inputs, log=log, log_period=dt,
                            max_step=p.max_step, accuracy=1e-6)
@@ -461,7 +455,6 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
             failed += group
             continue
         t = res.t - res.t[0]
-        Sp = np.linalg.pinv(ch.S)
         y = res["joint_angle"] @ Sp.T - ch.q0
         r = res[ref_port] @ Sp.T - ch.q0
         if runs_t is None:
