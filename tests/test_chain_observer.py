@@ -499,7 +499,7 @@ def _dip_on_its_presliding_spring(design, rig, point, dof):
     from awiwi_drake.control.joint_design import joint_subsystem
     from awiwi_drake.control.joint_stage import JointStateFeedbackLaw
     sub, op, pt = joint_subsystem(rig, dof, point=point)
-    Kg = design.observer["presliding_stiffness"][dof]
+    Kg = design.observer.presliding_stiffness[dof]
     b = DiagramBuilder()
     link = b.AddSystem(sub.diagram)
     spring = b.AddSystem(AffineSystem(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros(0), np.zeros((1, 0)), [[-Kg]],
@@ -543,7 +543,7 @@ def test_the_designed_observer_rest_mode_is_drakes_linearisation_of_the_dip_on_i
         assert np.min(np.abs(drake - s)) <= 1e-7 * abs(s), (s, drake)
     slowest = design[np.argmax(design.real)]
     assert slowest.imag == 0.0 and np.max(drake.real) == pytest.approx(slowest.real, rel=1e-7)
-    Kp, Kg, L = d.gains[j, 0], d.observer["presliding_stiffness"][j], d.observer["gain"][j]
+    Kp, Kg, L = d.gains[j, 0], d.observer.presliding_stiffness[j], d.observer.gain[j]
     assert slowest.real > -Kp * L / (Kp + Kg)                      # the chain's lag only slows it
     own = np.linalg.eigvals(d.models[j].A - d.models[j].B @ d.gains[j, None, :4])
     assert slowest.real > 10 * np.max(own.real)

@@ -62,7 +62,7 @@ from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
-           "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
+           "sampled_model", "JointDesign", "JointObserverDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
            "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
@@ -410,6 +410,17 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
 
 
 @dataclass
+class JointObserverDesign:
+    """The chain's (9.2) observer as a design sees it, per DoF (k each): its ``gain`` ``L`` [1/s], ``scale``
+    ``kappa`` [-] (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`) and the guides'
+    ``presliding_stiffness`` ``K_g`` [Nm/rad] (:func:`~awiwi_drake.control.chain.guide_presliding_stiffness`)."""
+
+    gain: np.ndarray
+    scale: np.ndarray
+    presliding_stiffness: np.ndarray
+
+
+@dataclass
 class JointDesign:
     """A designed joint stage: the law for all DoF, its reduced models and the designed closed-loop poles
     (``period`` None: continuous, ``eig(F - G K)``; else the sampled chain's z-plane ``eig(Phi - Gamma K)``)."""
@@ -420,8 +431,7 @@ class JointDesign:
     gains: np.ndarray                 # (k, 5)
     design_poles: list                # per DoF
     period: float | None = None
-    # the chain's (9.2) observer per DoF (k each): gain L, scale kappa, the guides' presliding stiffness K_g [Nm/rad]
-    observer: dict | None = None
+    observer: JointObserverDesign | None = None       # the chain's (9.2) observer, None without
 
     @property
     def static_stiffness(self) -> np.ndarray:
@@ -444,13 +454,13 @@ class JointDesign:
         m, K, nx, nu = self.models[dof], self.gains[dof], self.law.Nx[dof], self.law.Nu[dof]
         obs = self.observer
         if obs is not None:
-            m = dataclasses.replace(m, A=m.A - obs["presliding_stiffness"][dof] * m.link_torque_map @ np.eye(1, 4))
+            m = dataclasses.replace(m, A=m.A - obs.presliding_stiffness[dof] * m.link_torque_map @ np.eye(1, 4))
         A, B = _closed_loop_matrix(m, K, self.period)
         b = B[:, 0] * (nu + K[:4] @ nx + (0.0 if self.period is None else K[4] * nu))
         if obs is None:
             return A, b
-        L, M, damping = obs["gain"][dof], m.inertia, m.damping
-        c = obs["scale"][dof] * L * M                   # the compensation -kappa d_hat = c (w_hat - qdot)
+        L, M, damping = obs.gain[dof], m.inertia, m.damping
+        c = obs.scale[dof] * L * M                   # the compensation -kappa d_hat = c (w_hat - qdot)
         n = A.shape[0]
         Ao = np.zeros((n + 1, n + 1))
         Ao[:n, :n] = A
@@ -598,8 +608,7 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
                                  friction_observer=friction_observer, **kw)
     obs = ctrl._observer                               # the design's loop with the chain's (9.2) observer
     if obs is not None:
-        d.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
-                          presliding_stiffness=guide_presliding_stiffness(rig, point))
+        d.observer = JointObserverDesign(obs.gain.copy(), obs.scale.copy(), guide_presliding_stiffness(rig, point))
     ctrl.design.joint_design = d
     ctrl.design.time_constant = d.tracking_time_constant()
     return ctrl
