@@ -62,8 +62,8 @@ from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
-           "sampled_model", "JointDesign", "JointObserverDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
-           "sampled_loop_poles"]
+           "sampled_model", "JointDesign", "JointObserverDesign", "design_joint_stage", "joint_stage_controller",
+           "DESIGNS", "SampledLoopPoles", "PoleMatch", "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else params.tendon_law)
