@@ -85,35 +85,15 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
     """One subplot per logged signal of a :class:`SimulationResult` (per unit for mixed signals such as
     ``state``), every trace in a legend, every axis with its unit; returns ``(fig, axes)``.
 
-    Parameters
-    ----------
-    result : SimulationResult
-    names : sequence of str, optional
-        Logged signals (default: all), one subplot each (one per unit where the channels differ).
-    labels : dict, optional
-        y-axis label (with unit) per signal, e.g. ``{"motor_torque": "motor torque [Nm]"}``
-        (default ``name [unit]``).
-    reference : dict, optional
-        ``name -> (t, values)`` drawn black dashed as "reference".
-    channels : dict, optional
-        ``name -> channel indices`` drawn (default all), e.g. ``{"state": [0, 2]}``.
-    components : dict, optional
-        ``name -> [legend label per column]`` (default the result's channel labels, e.g. the state names).
-    overlay : dict, optional
-        ``name -> (values (T, k), label)``: a second set of traces on the same time axis,
-        dotted in the same colours (e.g. the commanded torque beside the applied one);
-        ``label`` is a suffix ("commanded") or one legend label per column.
-    limits : dict, optional
-        ``name -> limit`` (drawn at +-limit) or ``(low, high)``: dashed grey lines "limit", instead of
-        the monitor thresholds below.
-    xlim : (float, float), optional
-        Time window shown (e.g. a zoom on a step).
-
-    Monitor thresholds on a logged signal (torque limit, spring range, slack; recorded by
-    ``simulate``) are dashed black lines; events of the result (actuator saturation, tendon
-    slack) are shaded per kind and named in the legend of each panel (``events=False``: not drawn).
+    ``names``: the logged signals drawn (default: all).  Per signal name: ``labels`` the y-axis label with unit
+    (default ``name [unit]``), ``reference`` ``(t, values)`` drawn black dashed, ``channels`` the channel indices
+    drawn (default all), ``components`` one legend label per column (default the result's channel labels),
+    ``overlay`` ``(values (T, k), label)``: a second set of traces dotted in the same colours (e.g. the commanded
+    torque beside the applied one; ``label`` a suffix or one label per column), ``limits`` a limit (drawn at +-limit)
+    or ``(low, high)`` as dashed grey lines instead of the monitor thresholds.  Monitor thresholds on a logged signal
+    (torque limit, spring range, slack; recorded by ``simulate``) are dashed black lines; the result's events are
+    shaded per kind and named in each panel's legend (``events=False``: not drawn).  ``xlim``: the time window shown.
     """
-    plt = _plt()
     names = list(result.signals) if names is None else list(names)
     panels = []   # (name, channels, unit)
     for name in names:
@@ -121,14 +101,10 @@ def plot_signals(result, names=None, ax=None, labels=None, reference=None, *, ch
         for j in (channels or {}).get(name, range(result[name].shape[1])):
             by_unit.setdefault(result.unit(name, j), []).append(j)
         panels += [(name, js, u) for u, js in by_unit.items()]
-    if ax is None:
-        fig, ax = plt.subplots(len(panels), 1, figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
-        ax = ax[:, 0]
-    else:
-        ax = np.ravel(ax)
-        fig = ax[0].figure
-        if len(ax) < len(panels):
-            raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
+    fig, ax = figure_axes(ax, nrows=len(panels), figsize=(7.5, 2.3 * len(panels) + 0.4), sharex=True, squeeze=False)
+    ax = np.ravel(ax)
+    if len(ax) < len(panels):
+        raise ValueError(f"plot_signals: {len(panels)} panels need {len(panels)} axes, got {len(ax)}")
     components, overlay, limits = dict(components or {}), dict(overlay or {}), dict(limits or {})
     for a, (name, js, unit) in zip(ax, panels):
         y = np.asarray(result[name], dtype=float).reshape(len(result.t), -1)

@@ -138,11 +138,11 @@ def apply_transform(ds, transform: str | None, rng: np.random.Generator) -> dict
     sign = float(rng.choice([-1.0, 1.0]))
     if transform == "link_scale":
         k = sign * rng.uniform(0.05, 0.12)
-        ds.outputs["link_angle"] = (1.0 + k) * ds.outputs["link_angle"]
+        ds.outputs["joint_angle"] = (1.0 + k) * ds.outputs["joint_angle"]
         return {"link_scale": k}
     if transform == "link_bias":
         b = sign * rng.uniform(0.02, 0.06)
-        ds.outputs["link_angle"] = ds.outputs["link_angle"] + b
+        ds.outputs["joint_angle"] = ds.outputs["joint_angle"] + b
         return {"link_bias": b}
     if transform == "motor_bias":
         b = sign * rng.uniform(0.02, 0.06)
@@ -248,8 +248,8 @@ def sindy_baseline(ds, threshold: float = 0.1) -> dict:
         add(a, "nominal_motor")
         for nm in _select(cols, owner, err, threshold):
             named.add(nm)
-    if n == 2 and "link_angle" in ds.outputs and len(f_all) == 2:
-        q = ds.outputs["link_angle"]
+    if n == 2 and "joint_angle" in ds.outputs and len(f_all) == 2:
+        q = ds.outputs["joint_angle"]
         qd = savgol_filter(q, win, 3, deriv=1, delta=dt)
         qdd = savgol_filter(q, win, 3, deriv=2, delta=dt)
         err = p["link_pulley_radius"] * (f_all[0] - f_all[1]) - p["link_inertia"] * qdd - p["link_damping"] * qd
@@ -262,8 +262,8 @@ def sindy_baseline(ds, threshold: float = 0.1) -> dict:
             continue
         th = savgol_filter(ds.outputs[f"motor_angle{s}"], win, 3)
         x = r * th
-        if n == 2 and "link_angle" in ds.outputs:
-            x = x + (-1 if i == 0 else 1) * p["link_pulley_radius"] * savgol_filter(ds.outputs["link_angle"], win, 3)
+        if n == 2 and "joint_angle" in ds.outputs:
+            x = x + (-1 if i == 0 else 1) * p["link_pulley_radius"] * savgol_filter(ds.outputs["joint_angle"], win, 3)
         fx = laws.spring_force(x, p["spring_poly"])
         xd = savgol_filter(x, win, 3, deriv=1, delta=dt)
         err = ds.outputs[key] - fx

@@ -170,7 +170,8 @@ INVOCATIONS = [
     Invocation("animate-hand", "cli", ["animate", "--out", "hand.html", "--duration", "0.3"]),
     Invocation("animate-index", "cli", ["animate", "--out", "index.html", "--target", "index", "--duration", "0.3",
                                         "--backend", "python"],
-               ["animate", "--out", "index.html", "--target", "index", "--duration", "0.3"], why=BACKEND),
+               ["animate", "--out", "index.html", "--target", "finger-index", "--duration", "0.3"],
+               why=BACKEND + "; the finger's one spelling (issue 9 item 6): index -> finger-index"),
     Invocation("export-hand-diagrams", "cli", ["export-hand-diagrams", "--out", "hand_diagrams"],
                ["export-diagrams", "--out", "hand_diagrams"],
                why="merged into export-diagrams, which writes the hand/finger graphs too (one way)"),
@@ -223,7 +224,7 @@ NOTEBOOKS = [
                replace=(('from awiwi_drake.config import SimulationProgress\n'
                          'from awiwi_drake.export.animation import record_animation\n\n'
                          'with SimulationProgress("grasp recording") as progress:   # a bar in Jupyter (off in short mode / CI)\n'
-                         '    anim = record_animation(OUT / "hand.html", target="index" if SHORT else "hand", duration=0.3 if SHORT else 1.5,\n'
+                         '    anim = record_animation(OUT / "hand.html", target="finger-index" if SHORT else "hand", duration=0.3 if SHORT else 1.5,\n'
                          '                            progress=progress)',
                          'from awiwi_drake.export.animation import record_animation\n'
                          'anim = record_animation(OUT / "hand.html", target="index" if SHORT else "hand", '

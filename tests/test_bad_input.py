@@ -34,9 +34,9 @@ def _dataset() -> Dataset:
     f1, f2 = _spring(rm * th1 - rq * q + 1e-3), _spring(rm * th2 + rq * q + 1e-3)
     ins = {"motor_torque_1": rm * f1, "motor_torque_2": rm * f2}
     outs = {"motor_angle_1": th1, "motor_angle_2": th2, "tendon_force_1": f1, "tendon_force_2": f2,
-            "link_angle": q}
+            "joint_angle": q}
     init = {"motor_angle_1": 0.3, "motor_velocity_1": 0.0, "motor_angle_2": 0.3, "motor_velocity_2": 0.0,
-            "link_angle": 0.0, "link_velocity": 0.0}
+            "joint_angle": 0.0, "joint_velocity": 0.0}
     return Dataset("run", "joint-rig", t, ins, outs, dict(PARAMS), init)
 
 
@@ -77,20 +77,33 @@ def _zero_all(path: pathlib.Path) -> pathlib.Path:
     return path
 
 
+def _rename(path: pathlib.Path, old: str, new: str, files=(".csv", ".json")) -> pathlib.Path:
+    for f in (path.with_suffix(x) for x in files):
+        f.write_text(f.read_text().replace(old, new))
+    return path
+
+
 # -------------------------------------------------------------------------------------------------------- datasets
 DATASET_CASES = [
+    # a dataset written with the earlier column names: refused naming the column and its one name, never aliased
+    ("old-link-columns", lambda p: _rename(_rename(p, "joint_angle", "link_angle"), "joint_velocity", "link_velocity"),
+     "run.json: 'link_angle' is now named 'joint_angle'"),
+    ("old-link-column-in-csv", lambda p: _rename(p, "joint_angle", "link_angle", (".csv",)),
+     "run.csv: 'link_angle' is now named 'joint_angle'"),
+    ("old-link-velocity-key", lambda p: _rename(p, "joint_velocity", "link_velocity", (".json",)),
+     "run.json: 'link_velocity' is now named 'joint_velocity'"),
     # (id, edit(path) -> path, message fragment)
     ("rig-list", lambda p: _edit_json(p, lambda m: m.update(rig=["joint"])), "'rig' must be a name"),
     ("spring-null", lambda p: _edit_json(p, lambda m: m["parameters"].update(spring_poly=[1.2e4, None])),
      "'spring_poly'[1] = None is not a number"),
     ("spring-string", lambda p: _edit_json(p, lambda m: m["parameters"].update(spring_poly=["1e4"])),
      "'spring_poly'[0] = '1e4' is not a number"),
-    ("initial-list", lambda p: _edit_json(p, lambda m: m["initial_state"].update(link_angle=[0.0])),
-     "initial_state 'link_angle' = [0.0] is not a number"),
-    ("initial-string", lambda p: _edit_json(p, lambda m: m["initial_state"].update(link_angle="0")),
-     "initial_state 'link_angle' = '0' is not a number"),
+    ("initial-list", lambda p: _edit_json(p, lambda m: m["initial_state"].update(joint_angle=[0.0])),
+     "initial_state 'joint_angle' = [0.0] is not a number"),
+    ("initial-string", lambda p: _edit_json(p, lambda m: m["initial_state"].update(joint_angle="0")),
+     "initial_state 'joint_angle' = '0' is not a number"),
     ("inputs-int", lambda p: _edit_json(p, lambda m: m.update(inputs=3)), "'inputs' must be a list of names"),
-    ("outputs-string", lambda p: _edit_json(p, lambda m: m.update(outputs="link_angle")),
+    ("outputs-string", lambda p: _edit_json(p, lambda m: m.update(outputs="joint_angle")),
      "'outputs' must be a list of names"),
     ("bool-parameter", lambda p: _edit_json(p, lambda m: m["parameters"].update(motor_inertia=True)),
      "'motor_inertia' = True is not a number"),
@@ -103,11 +116,11 @@ DATASET_CASES = [
     ("forces-x1000", lambda p: _scale_column(p, "tendon_force_2", 1e3), "forces must be in N"),
     ("force-x1e300", lambda p: _scale_column(p, "tendon_force_1", 1e300), "column 'tendon_force_1'"),
     ("torque-x1e300", lambda p: _scale_column(p, "motor_torque_1", 1e300), "column 'motor_torque_1' reaches"),
-    ("link-degrees", lambda p: _scale_column(p, "link_angle", 180 / math.pi), "degrees are 57x larger"),
+    ("link-degrees", lambda p: _scale_column(p, "joint_angle", 180 / math.pi), "degrees are 57x larger"),
     ("motor-degrees", lambda p: _scale_column(p, "motor_angle_1", 180 / math.pi),
      "column 'motor_angle_1' moves the tendon"),
     ("all-zero", _zero_all, "no excitation"),
-    ("dead-sensor", lambda p: _scale_column(p, "link_angle", 0.0), "column 'link_angle' is constant"),
+    ("dead-sensor", lambda p: _scale_column(p, "joint_angle", 0.0), "column 'joint_angle' is constant"),
     ("csv-not-utf8", lambda p: (p.write_bytes(p.read_bytes().replace(b"time", b"t\xefme", 1)), p)[1],
      "run.csv: not UTF-8"),
     ("json-not-utf8", lambda p: (p.with_suffix(".json").write_bytes(b"\xff\xfe{}"), p)[1], "run.json: not UTF-8"),
@@ -140,7 +153,7 @@ def test_utf8_bom_and_crlf_are_accepted(good):
     jp = good.with_suffix(".json")
     jp.write_bytes(codecs.BOM_UTF8 + jp.read_bytes())
     back = load_dataset(good)
-    np.testing.assert_array_equal(back.outputs["link_angle"], ref.outputs["link_angle"])
+    np.testing.assert_array_equal(back.outputs["joint_angle"], ref.outputs["joint_angle"])
     assert back.parameters == ref.parameters
 
 
@@ -210,6 +223,8 @@ CLI_CASES = [
      "is a directory"),
     ("animate-duration-inf", lambda t, d: ["animate", "--duration", "inf"], 2, "argument --duration"),
     ("animate-duration-neg", lambda t, d: ["animate", "--duration", "-1"], 2, "argument --duration"),
+    ("animate-finger-short-name", lambda t, d: ["animate", "--target", "index", "--out", str(t / "x.html")], 2,
+     "target = 'index': not a hand rig (one of hand, finger-thumb, finger-index"),
     ("make-dataset-snr-word", lambda t, d: ["make-dataset", "--snr", "loud", "--out", str(t)], 2, "argument --snr"),
     ("make-dataset-snr-nan", lambda t, d: ["make-dataset", "--snr", "nan", "--out", str(t)], 2, "argument --snr"),
     ("make-dataset-seed-neg", lambda t, d: ["make-dataset", "--seed", "-1", "--out", str(t)], 2, "argument --seed"),

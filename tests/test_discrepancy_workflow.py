@@ -99,7 +99,7 @@ def test_out_of_catalog_link_encoder_bias_is_flagged_not_named(tmp_path):
     from awiwi_drake.discrepancy.report import write_report
 
     ds = make_truth_dataset("joint-rig", [], snr_db=30, seed=15, gen=SHORT)
-    ds.outputs["link_angle"] = ds.outputs["link_angle"] + 0.05  # rad, ~10x the noise floor
+    ds.outputs["joint_angle"] = ds.outputs["joint_angle"] + 0.05  # rad, ~10x the noise floor
     dx = diagnose(ds)
     assert dx.named_effects == []
     assert dx.unexplained_residual or dx.nuisance_corrections

@@ -70,7 +70,7 @@ def test_fig15_26_bandwidths_are_the_minus_3db_points_of_the_linearised_loops_an
     (non-linear, continuous) loop tracks a 0.01 rad sine at that frequency with that gain and the linearisation's phase (``_sine_check``; the
     backstepping loop only in the full suite: its 2 kHz mode makes the simulation 4x slower)."""
     from awiwi_drake.reproductions.ch15_backstepping import gain_diagram_study
-    diagrams = {d.controller: d for d in gain_diagram_study()}
+    diagrams = {d.label: d for d in gain_diagram_study()}
     assert set(diagrams) == {"backstepping", "two-time-scale"}
     fig = ax = None
     for d in diagrams.values():                              # the figure: both on one axis, bandwidths marked

@@ -37,7 +37,7 @@ def test_linearize_hand_and_unknown_parameter(capsys):
 
 def test_animate_writes_self_contained_html(tmp_path, capsys):
     out = tmp_path / "index.html"
-    assert main(["animate", "--out", str(out), "--target", "index", "--duration", "0.15"]) == 0
+    assert main(["animate", "--out", str(out), "--target", "finger-index", "--duration", "0.15"]) == 0
     text = out.read_text()
     assert "<html" in text.lower() and "meshcat" in text.lower() and len(text) > 10_000
     # self-contained: no script or stylesheet fetched from the network, the meshcat code is inline

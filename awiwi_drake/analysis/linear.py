@@ -80,21 +80,12 @@ class DampRow:
         return self.natural_frequency / (2 * math.pi)
 
 
-@dataclass(frozen=True)
-class DampTable:
-    """The damping table of a linear model (as ``damp`` in MATLAB / python-control)."""
-
-    rows: tuple
-
-    def __iter__(self):
-        return iter(self.rows)
-
-    def __len__(self):
-        return len(self.rows)
+class DampTable(tuple):
+    """The damping table of a linear model (as ``damp`` in MATLAB / python-control): a tuple of :class:`DampRow`."""
 
     def __str__(self) -> str:
         lines = [f"{'pole [1/s]':>28} {'wn [rad/s]':>12} {'wn [Hz]':>10} {'zeta [-]':>9} {'tau [s]':>11}"]
-        for r in self.rows:
+        for r in self:
             zeta = "-" if math.isnan(r.damping_ratio) else f"{r.damping_ratio:.4g}"
             tau = "inf" if math.isinf(r.time_constant) else f"{r.time_constant:.4g}"
             lines.append(f"{_fmt_pole(r.pole):>28} {r.natural_frequency:12.5g} {r.natural_frequency_hz:10.4g} "
@@ -104,7 +95,7 @@ class DampTable:
     def to_json(self) -> list:
         return [dict(pole=[r.pole.real, r.pole.imag], natural_frequency=r.natural_frequency,
                      damping_ratio=None if math.isnan(r.damping_ratio) else r.damping_ratio,
-                     time_constant=None if math.isinf(r.time_constant) else r.time_constant) for r in self.rows]
+                     time_constant=None if math.isinf(r.time_constant) else r.time_constant) for r in self]
 
 
 def _crossings(w: np.ndarray, g: np.ndarray, level: float) -> list[tuple[int, float]]:
@@ -173,11 +164,8 @@ class FrequencyResponse:
 
     def plot(self, *, ax=None, hz: bool = True, label: str | None = None, margins: bool = True):
         """Bode diagram: magnitude [dB] and phase [deg] on a log frequency axis; returns ``(fig, (ax_mag, ax_phase))``."""
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            fig, ax = plt.subplots(2, 1, figsize=(6.5, 5.0), sharex=True)
-        fig = ax[0].figure
+        from awiwi_drake.plotting import figure_axes
+        fig, ax = figure_axes(ax, nrows=2, figsize=(6.5, 5.0), sharex=True)
         x = self.frequency_hz if hz else self.omega
         lab = label or f"{self.output_name} / {self.input_name}"
         ax[0].semilogx(x, self.magnitude_db, label=lab)
@@ -251,10 +239,6 @@ class LinearizationResult(_JsonFile):
     def poles(self) -> np.ndarray:
         """Eigenvalues of A, sorted, round-off zeros set to 0."""
         return clean_poles(np.linalg.eigvals(self.A), np.linalg.norm(self.A, 1) if self.A.size else 1.0)
-
-    @property
-    def num_states(self) -> int:
-        return self.A.shape[0]
 
     def plot(self, ax=None, *, label: str = "poles", **kw):
         """Pole map in the s-plane with rays of constant damping ratio (:func:`awiwi_drake.plotting.plot_poles`;

@@ -9,6 +9,7 @@ source, :class:`InputSchedule_`, so the integrator sees the signal at every stag
 from __future__ import annotations
 
 import abc
+import dataclasses
 import math
 import sys
 from dataclasses import dataclass
@@ -24,16 +25,17 @@ __all__ = ["Schedule", "Constant", "Step", "Ramp", "Sine", "Chirp", "Samples", "
            "InputSchedule_", "InputSchedule"]
 
 
-def _finite(owner: str, **values) -> None:
-    for k, v in values.items():
-        if not (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and math.isfinite(v)):
-            raise ValueError(f"{owner}: {k} = {v!r} must be a finite number")
-
-
 class Schedule(abc.ABC):
     """Base class: ``value(t)`` for time ``t`` [s] after the start; ``+`` builds a sum."""
 
     size: int | None = None  # None: broadcast to the port size
+
+    def __post_init__(self):
+        """A dataclass schedule's fields must be finite numbers."""
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool) and math.isfinite(v)):
+                raise ValueError(f"{type(self).__name__}: {f.name.rstrip('_')} = {v!r} must be a finite number")
 
     @abc.abstractmethod
     def value(self, t):
@@ -57,6 +59,9 @@ class Schedule(abc.ABC):
 class _Sum(Schedule):
     parts: tuple
 
+    def __post_init__(self):      # its fields are schedules, each checked when made
+        pass
+
     def value(self, t):
         out = 0.0
         for p in self.parts:
@@ -76,9 +81,6 @@ class Constant(Schedule):
 
     value_: float
 
-    def __post_init__(self):
-        _finite("Constant", value=self.value_)
-
     def value(self, t):
         return 0.0 * t + self.value_
 
@@ -93,9 +95,6 @@ class Step(Schedule):
     time: float
     after: float
     before: float = 0.0
-
-    def __post_init__(self):
-        _finite("Step", time=self.time, after=self.after, before=self.before)
 
     def value(self, t):  # a time within round-off (1e-12 s) of the step is after it
         return 0.0 * t + (self.after if scalar_value(t) >= self.time - 1e-12 * max(1.0, abs(self.time)) else self.before)
@@ -114,7 +113,7 @@ class Ramp(Schedule):
     end: float
 
     def __post_init__(self):
-        _finite("Ramp", t0=self.t0, t1=self.t1, start=self.start, end=self.end)
+        super().__post_init__()
         if not self.t1 > self.t0:
             raise ValueError(f"Ramp: t1 = {self.t1} must be after t0 = {self.t0} [s]")
 
@@ -141,8 +140,7 @@ class Sine(Schedule):
     start: float = 0.0
 
     def __post_init__(self):
-        _finite("Sine", amplitude=self.amplitude, frequency_hz=self.frequency_hz, phase=self.phase,
-                offset=self.offset, start=self.start)
+        super().__post_init__()
         if self.frequency_hz <= 0:
             raise ValueError(f"Sine: frequency_hz = {self.frequency_hz} must be > 0 [Hz]")
 
@@ -168,8 +166,7 @@ class Chirp(Schedule):
     start: float = 0.0
 
     def __post_init__(self):
-        _finite("Chirp", amplitude=self.amplitude, f0=self.f0, f1=self.f1, duration=self.duration,
-                offset=self.offset, start=self.start)
+        super().__post_init__()
         if self.f0 < 0 or self.f1 <= 0 or self.duration <= 0:
             raise ValueError(f"Chirp: need f0 >= 0, f1 > 0 [Hz] and duration > 0 [s], got "
                              f"f0 = {self.f0}, f1 = {self.f1}, duration = {self.duration}")

@@ -306,82 +306,48 @@ def simulate(system, context: Context | None, t_final: float, *,
              divergence_bound: float = 1e6, t_start: float | None = None, log_period: float | None = None,
              progress: Callable[[float, float], Any] | None = None,
              state_names: Sequence[str] | None = None, substeps: int | None = None) -> SimulationResult:
-    """Simulate ``system`` from ``context`` to the time ``t_final`` [s] with Drake's ``Simulator``.
+    """Simulate ``system`` (a Diagram or System, or an object with a ``diagram``: Rig, ClosedLoop, finger/hand
+    handle) from ``context`` (state set, inputs fixed as needed; None: its default context; advanced to ``t_final``
+    like ``Simulator`` does) to the absolute time ``t_final`` [s] with Drake's ``Simulator``; a
+    :class:`SimulationResult`.
 
-    Parameters
-    ----------
-    system : Diagram, System, or an object with ``diagram`` (Rig, ClosedLoop, finger/hand handle)
-    context : Context or None
-        Initial context of ``system`` (state set, inputs fixed as needed); None:
-        its default context.  It is advanced to ``t_final`` (like ``Simulator``).
-    t_final : float
-        End time [s] (absolute: the run starts at the context's time, or ``t_start``).
-    inputs : mapping port name -> schedule, number or vector, optional
-        Input ports driven by a signal instead of their fixed value
-        (:class:`~awiwi_drake.analysis.schedules.Step`, ``Ramp``, ``Sine``,
-        ``Chirp``, ``Samples``, ``PerEntry``, sums); times relative to the start.
-    log : names or mapping, optional
-        Ports recorded: names of output ports (or input ports: their driving
-        signal) of ``system``, or ``{label: port}`` with ports of subsystems.
-        Default: ``("state",)`` when the diagram has a ``state`` output.
-    monitors : sequence of Monitor
-        Slack / saturation / over-range monitors (:func:`~awiwi_drake.analysis.rig_monitors`).
-    mode : {"auto", "fixed_step", "error_controlled"}
-        ``auto``: fixed step at the control period for sampled loops (the common
-        period of the diagram's periodic discrete updates, :func:`control_period`),
-        error control otherwise.
-    step : float, optional
-        Fixed step [s]; default the control period (or ``max_step`` for a
-        continuous diagram).  For a sampled loop it must divide the control period.
-    integrator : str
-        Drake integrator name (``runge_kutta3`` default: for the hand at its operating point the cheapest
-        stable fixed-step choice at 3 kHz; ``runge_kutta2`` diverges there).  Fixed-step ``explicit_euler``,
-        ``runge_kutta2`` and ``runge_kutta3`` runs are checked against the plant's modes (``substeps``).
-    max_step, accuracy : float
-        Error-controlled mode: maximum step [s] and target accuracy.
-    divergence_bound : float
-        A state entry beyond this magnitude counts as divergence.
-    t_start : float, optional
-        Start time [s] (default: the context's time).
-    log_period : float, optional
-        Log every ``log_period`` [s] instead of every integrator step.
-    progress : callable, optional
-        ``progress(t, duration)`` in simulated seconds since the start, called
-        about 40 times per run (and at the end).
-    state_names : sequence of str, optional
-        Channel names of the ``state`` output (default: the handle's ``state_names``).
-    substeps : int, optional
-        Fixed step only: integrate at ``step / substeps``.  Before a fixed-step ``explicit_euler``,
-        ``runge_kutta2`` or ``runge_kutta3`` run, every leaf with an ``integration_modes(context)`` hook (the
-        finger/hand plant: the eigenvalues of its dynamics' Jacobian with its inputs held) has each mode ``lambda``
-        tested against the integrator's stability function ``R`` (:func:`stability_function`) at ``z = h lambda``.
-        A mode the integrator amplifies beyond the continuous system (``|R| > max(1, |exp(z)|)``) makes None
-        (default) integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
-        ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
-        unchanged), with a warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``1`` refuses such a run
-        (a ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The modes come from central
-        differences of the plant's compiled laws checked against Drake's ``Linearize`` (``Linearize`` itself without
-        kernels).  The check is repeated during the run, at the first progress-chunk boundary at least
-        ``parameters.control.FIXED_STEP_CHECK_INTERVAL`` simulated seconds after the last one, and at the end
-        state: a mode outside the region at the step taken is an ``integrator_instability`` event from the first to
-        the last check that found it outside (``extreme`` the largest ``|R|``), with a warning;
-        ``info["stability_checks"]`` lists the checked times (the same on every machine; an excursion between two
-        checks is missed).
+    ``inputs``: port name -> schedule, number or vector: input ports driven by a signal instead of their fixed value
+    (:class:`~awiwi_drake.analysis.schedules.Step`, ``Ramp``, ``Sine``, ``Chirp``, ``Samples``, ``PerEntry``, sums;
+    times relative to the start).  ``log``: the ports recorded, names of output ports (or input ports: their driving
+    signal) of ``system``, or ``{label: port}`` with ports of subsystems (default ``("state",)`` when the diagram has
+    a ``state`` output), every integrator step or every ``log_period`` [s].  ``monitors``: slack / saturation /
+    over-range monitors (:func:`~awiwi_drake.analysis.rig_monitors`).  ``state_names``: channel names of the
+    ``state`` output (default: the handle's).  ``t_start`` [s]: default the context's time.  ``progress(t,
+    duration)``: simulated seconds since the start, called about 40 times per run (and at the end).  A state entry
+    beyond ``divergence_bound`` in magnitude counts as divergence.
 
-    Returns
-    -------
-    SimulationResult
+    ``mode`` (one of :data:`MODES`): ``auto`` integrates with a fixed step at the control period for sampled loops
+    (the common period of the diagram's periodic discrete updates, :func:`control_period`) and error-controlled
+    otherwise (``max_step`` [s], target ``accuracy``).  ``step`` [s]: the fixed step, default the control period (or
+    ``max_step`` for a continuous diagram); for a sampled loop it must divide the control period.  ``integrator``:
+    Drake's name (``runge_kutta3`` default: for the hand at its operating point the cheapest stable fixed-step choice
+    at 3 kHz; ``runge_kutta2`` diverges there).
 
-    Raises
-    ------
-    ValueError
-        A bad argument (names the argument, port or value).
-    SimulationDivergedError
-        Non-finite or exploding state (names the time and the state entry).
-    SimulationEventError
-        A monitor with ``raise_on_event=True`` saw its condition.
-    SimulationError
-        Drake could not complete the run (its message included).
+    ``substeps`` (fixed step only): integrate at ``step / substeps``.  Before a fixed-step ``explicit_euler``,
+    ``runge_kutta2`` or ``runge_kutta3`` run, every leaf with an ``integration_modes(context)`` hook (the finger/hand
+    plant: the eigenvalues of its dynamics' Jacobian with its inputs held, from central differences of its compiled
+    laws checked against Drake's ``Linearize``, or ``Linearize`` itself without kernels) has each mode ``lambda``
+    tested against the integrator's stability function ``R`` (:func:`stability_function`) at ``z = h lambda``.  A
+    mode the integrator amplifies beyond the continuous system (``|R| > max(1, |exp(z)|)``) makes None (default)
+    integrate at ``h / k``, the smallest ``k`` that puts every mode inside with the margin
+    ``parameters.control.FIXED_STEP_STABILITY_MARGIN`` (substeps of the control period: the loop's sampling is
+    unchanged), with a warning and ``info["substeps"]`` / ``info["fastest_mode"]``; ``1`` refuses such a run (a
+    ``ValueError`` naming the mode and ``|R|``), ``k`` imposes ``k``.  The check is repeated during the run, at the
+    first progress-chunk boundary at least ``parameters.control.FIXED_STEP_CHECK_INTERVAL`` simulated seconds after
+    the last one, and at the end state: a mode outside the region at the step taken is an ``integrator_instability``
+    event from the first to the last check that found it outside (``extreme`` the largest ``|R|``), with a warning;
+    ``info["stability_checks"]`` lists the checked times (the same on every machine; an excursion between two checks
+    is missed).
+
+    Raises ``ValueError`` for a bad argument (naming the argument, port or value), ``SimulationDivergedError`` for a
+    non-finite or exploding state (naming the time and the state entry), ``SimulationEventError`` when a monitor with
+    ``raise_on_event=True`` saw its condition, ``SimulationError`` when Drake could not complete the run (its message
+    included).
     """
     diagram, names_from_handle = _unwrap(system)
     state_names = tuple(state_names) if state_names is not None else names_from_handle

@@ -112,35 +112,20 @@ def run_sweep(fn: Callable[..., Any], points: Mapping[str, Sequence] | Iterable[
               on_error: str = "raise", quiet: bool | None = None, batch: int | None = None) -> SweepResult:
     """Evaluate ``fn(**fixed, **point)`` at every point (or, with ``batch``, ``fn(points, **fixed)`` per chunk).
 
-    Parameters
-    ----------
-    fn : callable
-        Picklable (module-level) function for process pools.
-    points : mapping or iterable of mappings
-        ``{name: values}`` for a Cartesian grid (:func:`grid_points`) or an explicit list
-        of point dicts (e.g. :func:`monte_carlo_points`).
-    executor : concurrent.futures.Executor, "serial" or None
-        ``None``: a ProcessPoolExecutor for this call (shut down afterwards; ``fn`` and the point values must be
-        picklable: a module-level function, not a lambda); ``"serial"``: evaluate in this process (debugging, tiny
-        sweeps); an Executor (``ThreadPoolExecutor``: cheap start-up, good when ``fn`` releases the GIL as Drake's
-        C++ simulation does; a process pool; ``dask.distributed.Client.get_executor()``; anything with
-        ``Executor.submit``) is used as is and left running.
-    max_workers : int, optional
-        Workers of the default process pool (default: ``min(2, os.cpu_count())``).
-    chunksize : int, optional
-        Points per submitted task (default: about 4 tasks per worker).
-    fixed : mapping, optional
-        Keyword arguments passed unchanged to every call.
-    on_error : {"raise", "record"}
-        Re-raise the first failing point (named), or record failures in ``SweepResult.errors``.
-    quiet : bool, optional
-        No progress bar (points done / total); by default it shows on a terminal or in a
-        notebook, see :func:`awiwi_drake.config.progress_enabled`.
-    batch : int, optional
-        Batched evaluation: ``fn`` takes a *list* of up to ``batch`` point dicts (and
-        ``**fixed``) and returns one value per point, e.g. by simulating them as the
-        copies of one :func:`awiwi_drake.rigs.batch.batched_joint_rig`. Each chunk is one
-        task (``chunksize`` is then ``batch``); a failing batch fails all its points.
+    ``points``: ``{name: values}`` for a Cartesian grid (:func:`grid_points`) or an explicit list of point dicts
+    (e.g. :func:`monte_carlo_points`); ``fixed``: keyword arguments passed unchanged to every call.  ``executor``:
+    None, a ProcessPoolExecutor for this call with ``max_workers`` processes (default ``min(2, os.cpu_count())``),
+    shut down afterwards (``fn`` and the point values must be picklable: a module-level function, not a lambda);
+    ``"serial"``: evaluate in this process (debugging, tiny sweeps); an Executor (``ThreadPoolExecutor``: cheap
+    start-up, good when ``fn`` releases the GIL as Drake's C++ simulation does; a process pool;
+    ``dask.distributed.Client.get_executor()``; anything with ``Executor.submit``) is used as is and left running.
+    ``chunksize``: points per submitted task (default: about 4 tasks per worker).  ``on_error``: ``"raise"`` re-raises
+    the first failing point (named), ``"record"`` records failures in ``SweepResult.errors``.  ``quiet``: no progress
+    bar (points done / total; by default it shows on a terminal or in a notebook,
+    :func:`awiwi_drake.config.progress_enabled`).  ``batch``: ``fn`` takes a *list* of up to ``batch`` point dicts (and
+    ``**fixed``) and returns one value per point, e.g. by simulating them as the copies of one
+    :func:`awiwi_drake.rigs.batch.batched_joint_rig`; each chunk is one task (``chunksize`` is then ``batch``) and a
+    failing batch fails all its points.
     """
     from awiwi_drake.config import progress_bar
 

@@ -12,9 +12,6 @@ from awiwi_drake.cli import limited_float
 
 __all__ = ["register"]
 
-_TARGETS = ("hand", "thumb", "index", "middle", "ring", "fifth")
-
-
 def register(sub) -> None:
     fmt = argparse.RawDescriptionHelpFormatter
     p = sub.add_parser(
@@ -23,8 +20,9 @@ def register(sub) -> None:
         epilog="The motion: open -> closed -> open joint references tracked by the 3 kHz joint-space\n"
                "controller through the full tendon model (motors, lever springs, routing). Offline.")
     p.add_argument("--out", default="hand.html", metavar="FILE.html", help="HTML file to write (default hand.html)")
-    p.add_argument("--target", choices=_TARGETS, default="hand",
-                   help="the whole hand (palm, forearm stub, five fingers) or one finger (default hand)")
+    p.add_argument("--target", default="hand", metavar="RIG",
+                   help="hand (palm, forearm stub, five fingers) or one finger's rig: finger-thumb, finger-index, "
+                        "finger-middle, finger-ring, finger-fifth (default hand)")
     p.add_argument("--duration", type=limited_float("max_animation_duration", "s", positive=True), default=1.5, metavar="S",
                    help="simulated seconds of the open -> closed -> open motion (default 1.5)")
     p.add_argument("--quiet", action="store_true", help="no progress bar (it shows only on a terminal anyway)")

@@ -222,7 +222,7 @@ def effects_for_rig(rig: str, outputs: list[str]) -> list[Effect]:
             continue
         if e.name == "force_sensor" and not has_force:
             continue
-        if e.name == "link_sensor" and "link_angle" not in outputs:
+        if e.name == "link_sensor" and "joint_angle" not in outputs:
             continue
         out.append(e)
     return out

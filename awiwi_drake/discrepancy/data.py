@@ -41,12 +41,12 @@ RIGS = {
         ("motor_angle", "motor_velocity"), 1, False),
     "joint-rig": RigSpec(
         "joint-rig", ("motor_torque_1", "motor_torque_2"),
-        ("motor_angle_1", "motor_angle_2", "tendon_force_1", "tendon_force_2", "link_angle"),
+        ("motor_angle_1", "motor_angle_2", "tendon_force_1", "tendon_force_2", "joint_angle"),
         ("motor_angle_1", "motor_angle_2"),
         ("motor_inertia", "motor_damping", "motor_pulley_radius", "spring_poly",
          "link_inertia", "link_damping", "link_pulley_radius"),
         ("motor_angle_1", "motor_velocity_1", "motor_angle_2", "motor_velocity_2",
-         "link_angle", "link_velocity"), 2, True),
+         "joint_angle", "joint_velocity"), 2, True),
 }
 
 
@@ -284,10 +284,22 @@ def _read_text(path: pathlib.Path) -> str:
         raise ValueError(f"{path}: cannot read ({exc.strerror or exc})") from None
 
 
+# columns of earlier datasets, renamed to the package's one name of the quantity (docs/ARCHITECTURE.md,
+# "Joint vs link": a joint's angle and velocity are joint_*); refused with the new name, never read as an alias
+RENAMED_COLUMNS = {"link_angle": "joint_angle", "link_velocity": "joint_velocity"}
+
+
+def _refuse_renamed(names, where) -> None:
+    old = next((n for n in names if n in RENAMED_COLUMNS), None)
+    if old is not None:
+        raise ValueError(f"{where}: {old!r} is now named {RENAMED_COLUMNS[old]!r} (rename it in NAME.csv's header "
+                         f"and in NAME.json's outputs and initial_state)")
+
+
 def _name_list(meta: dict, key: str, where) -> list:
     v = meta[key]
     if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
-        raise ValueError(f"{where}: {key!r} must be a list of names, e.g. [\"link_angle\"], got {v!r}")
+        raise ValueError(f"{where}: {key!r} must be a list of names, e.g. [\"joint_angle\"], got {v!r}")
     return v
 
 
@@ -381,6 +393,7 @@ def load_dataset(path, *, checks=None) -> Dataset:
     inputs, outputs = _name_list(meta, "inputs", json_path), _name_list(meta, "outputs", json_path)
     if sorted(inputs) != sorted(spec.inputs):
         raise ValueError(f"{json_path}: 'inputs' must be {list(spec.inputs)} for rig {rig!r}, got {inputs}")
+    _refuse_renamed(outputs + list(meta["initial_state"] if isinstance(meta["initial_state"], dict) else ()), json_path)
     bad = [o for o in outputs if o not in spec.outputs]
     if bad:
         raise ValueError(f"{json_path}: unknown output {bad[0]!r} for rig {rig!r} "
@@ -410,6 +423,7 @@ def load_dataset(path, *, checks=None) -> Dataset:
     if len(set(header)) != len(header):
         dup = next(h for h in header if header.count(h) > 1)
         raise ValueError(f"{csv_path}: duplicate column {dup!r}")
+    _refuse_renamed(header, csv_path)
     expected = set(inputs) | set(outputs)
     for col in header[1:]:
         if col not in expected:
@@ -477,10 +491,10 @@ def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) ->
         _check_finger_plausibility(ds, c, where)
         return
     p = ds.parameters
-    if "link_angle" in ds.outputs:
-        span = float(np.ptp(ds.outputs["link_angle"]))
+    if "joint_angle" in ds.outputs:
+        span = float(np.ptp(ds.outputs["joint_angle"]))
         if span > c.max_angle_excursion:
-            raise ValueError(f"{where}: column 'link_angle' spans {span:.3g} rad (> {c.max_angle_excursion:g}): "
+            raise ValueError(f"{where}: column 'joint_angle' spans {span:.3g} rad (> {c.max_angle_excursion:g}): "
                              f"angles must be in rad (degrees are 57x larger)")
     rm = p["motor_pulley_radius"]
     elong = 0.0
@@ -492,8 +506,8 @@ def check_plausibility(ds: Dataset, checks=None, *, where: str | None = None) ->
                                  f"(> {c.max_elongation:g} m): motor angles must be in rad, or "
                                  f"motor_pulley_radius is wrong")
             elong = max(elong, travel)
-    if "link_angle" in ds.outputs:
-        elong += p["link_pulley_radius"] * float(np.max(np.abs(ds.outputs["link_angle"])))
+    if "joint_angle" in ds.outputs:
+        elong += p["link_pulley_radius"] * float(np.max(np.abs(ds.outputs["joint_angle"])))
     forces = [k for k in ds.output_names if k.startswith("tendon_force")]
     if forces and elong > 0:
         nominal = sum(ck * elong ** (i + 1) for i, ck in enumerate(p["spring_poly"]))

@@ -59,7 +59,7 @@ class NoiseEquivalent:
         ``r * force`` [Nm]: the motor torque the noise-equivalent force exerts.
     link_torque : float
         ``r_q * force`` [Nm] (joint rig).
-    link_angle : float
+    joint_angle : float
         Link-encoder noise floor [rad]; without a link encoder, the link angle that moves one
         spring by the noise-equivalent force, ``force / (k r_q)`` (joint rig).
     sample : float
@@ -81,12 +81,12 @@ class NoiseEquivalent:
         self.motor_torque = nom.motor_pulley_radius * f
         self.link_torque = nom.link_pulley_radius * f if nom.has_link else float("nan")
         # link angle: the link encoder's noise floor, else the angle the noise force moves one spring by
-        if "link_angle" in sig:
-            self.link_angle = float(sig["link_angle"])
+        if "joint_angle" in sig:
+            self.joint_angle = float(sig["joint_angle"])
         elif nom.has_link:
-            self.link_angle = f / max(k * nom.link_pulley_radius, 1e-12)
+            self.joint_angle = f / max(k * nom.link_pulley_radius, 1e-12)
         else:
-            self.link_angle = float("nan")
+            self.joint_angle = float("nan")
         self.sample = eng.dt
         n = nom.num_motors
         self.omega_rms = float(np.sqrt(np.mean(eng.xhat[n:2 * n] ** 2)))
@@ -139,7 +139,7 @@ def materiality(effect: str, params: dict, ne: NoiseEquivalent) -> dict:
     elif effect == "joint_friction":
         size, floor, unit, what = g("joint_coulomb", 0.0), ne.link_torque, "Nm", "link friction vs noise torque"
     elif effect == "backlash":
-        size, floor, unit, what = g("backlash", 0.0), ne.link_angle, "rad", "play half-width vs link-angle noise"
+        size, floor, unit, what = g("backlash", 0.0), ne.joint_angle, "rad", "play half-width vs link-angle noise"
     elif effect == "guide_friction":
         size = g("guide_c0", 0.0) + g("guide_mu", 0.0) * ne.force_rms
         floor, unit, what = ne.force, "N", "path friction at RMS tension vs noise force"

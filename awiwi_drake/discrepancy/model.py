@@ -98,7 +98,7 @@ class NominalParameters:
         """The rigs' state order ``[(q, q'), theta, omega, z]`` with the dataset's column names."""
         n = self.num_motors
         sfx = [f"_{i + 1}" for i in range(n)] if n > 1 else [""]
-        names = ["link_angle", "link_velocity"] if self.has_link else []
+        names = ["joint_angle", "joint_velocity"] if self.has_link else []
         names += [f"motor_angle{s}" for s in sfx] + [f"motor_velocity{s}" for s in sfx]
         return names + [f"hysteresis_force{s}" for s in sfx]
 
@@ -106,7 +106,7 @@ class NominalParameters:
         n = self.num_motors
         sfx = [f"_{i + 1}" for i in range(n)] if n > 1 else [""]
         names = [f"motor_angle{s}" for s in sfx] + [f"tendon_force{s}" for s in sfx]
-        return names + (["link_angle"] if self.has_link else [])
+        return names + (["joint_angle"] if self.has_link else [])
 
 
 def _p(P, name):

@@ -118,7 +118,7 @@ class ReplayEngine:
         om = savgol_filter(th, win, 3, deriv=1, delta=dt, axis=1)
         cols = [ths, om]
         if nom.has_link:
-            q = self._link_angle_estimate(ths)
+            q = self._joint_angle_estimate(ths)
             self._q_raw = q
             qs = savgol_filter(q, win, 3)
             qd = savgol_filter(q, win, 3, deriv=1, delta=dt)
@@ -132,10 +132,10 @@ class ReplayEngine:
         self._force_max = float(max(forces)) if forces else float(laws.spring_force(np.max(self.elong),
                                                                                      nom.spring_poly))
 
-    def _link_angle_estimate(self, ths):
+    def _joint_angle_estimate(self, ths):
         ds, nom = self.ds, self.nom
-        if "link_angle" in ds.outputs:
-            return np.asarray(ds.outputs["link_angle"], float)
+        if "joint_angle" in ds.outputs:
+            return np.asarray(ds.outputs["joint_angle"], float)
         r, rq = nom.motor_pulley_radius, nom.link_pulley_radius
         est = []
         xs = np.linspace(0.0, 0.05, 4001)
@@ -212,7 +212,7 @@ class ReplayEngine:
         # encoder calibration: the estimate is of the measured angles
         for i in range(n):
             X0[self.xpos[i]] -= P[PARAM_INDEX[f"motor_bias_{i + 1}"]]
-        if self.nom.has_link and "link_angle" in self.ds.outputs:
+        if self.nom.has_link and "joint_angle" in self.ds.outputs:
             scale = 1.0 + P[PARAM_INDEX["link_scale_rel"]]
             X0[0] = (X0[0] - P[PARAM_INDEX["link_bias"]]) / scale
             X0[1] = X0[1] / scale

@@ -236,7 +236,8 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         if h not in HIDDEN_EFFECTS:
             raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")
         if rig not in EFFECTS[h].rigs:
-            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r} (it needs {' or '.join(EFFECTS[h].rigs)})")
+            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r} "
+                             f"(it needs {' or '.join(EFFECTS[h].rigs)})")
     for h in nuisance:
         if h not in NUISANCES:
             raise ValueError(f"unknown nuisance {h!r} (known: {', '.join(NUISANCES)})")
@@ -356,7 +357,8 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float, th0: float):
     """The truth rig (a :class:`~awiwi_drake.rigs.Rig` in the rigs' state order; its operating point is the nominal
     rest, link at 0 and every motor at the pretension angle ``th0`` [rad] held by ``r_m f_pre``: an equilibrium of
-    the plant without its hidden effects) under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
+    the plant without its hidden effects) under the lab's motor PD
+    (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
     ``u_k = r_m f_pre + kp (theta_ref,k - theta_k) - kd omega_k``), closed by :func:`~awiwi_drake.control.closed_loop`
     at the logging rate: the command reaches the plant ``delay`` [s] later, whole periods through the loop's
     ``DiscreteTimeDelay``, the fraction through a hold in front of the plant sampling at ``k dt + frac dt``

@@ -121,21 +121,22 @@ def frame_camera(points: np.ndarray, params: AnimationParams | None = None) -> t
 
 def record_animation(out, *, target: str = "hand", duration: float = 1.5, meshcat: Meshcat | None = None, params: AnimationParams | None = None,
                      progress=None) -> AnimationResult:
-    """Simulate a grasp of ``target`` ("hand" or a finger name) and write ``out`` (HTML).
+    """Simulate a grasp of ``target`` (a rig's name: ``"hand"`` or ``"finger-<f>"``) and write ``out`` (HTML).
 
     The HTML is self-contained (opens offline) and holds the geometry, the
     motion and the camera framed on the moving links.  ``progress(t, duration)`` is passed to :func:`simulate` (e.g.
     :class:`awiwi_drake.config.SimulationProgress`).  Returns an :class:`AnimationResult`.
     """
-    if target != "hand" and target not in FINGERS:
-        raise ValueError(f"target must be 'hand' or one of {', '.join(FINGERS)}, got {target!r}")
+    targets = ("hand", *(f"finger-{f}" for f in FINGERS))
+    if target not in targets:
+        raise ValueError(f"target = {target!r}: not a hand rig (one of {', '.join(targets)})")
     if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
         raise ValueError(f"duration = {duration} must be a finite number > 0 [s]")
     p = params or AnimationParams()
     out = pathlib.Path(out)
     if out.suffix.lower() not in (".html", ".htm"):
         raise ValueError(f"out = {str(out)!r}: the recording is written as HTML (use a .html file name)")
-    rig = hand_diagram(visual=True) if target == "hand" else finger_diagram(finger=target, visual=True)
+    rig = hand_diagram(visual=True) if target == "hand" else finger_diagram(finger=target[len("finger-"):], visual=True)
     from awiwi_drake.control import closed_loop, make_controller
     cl = closed_loop(rig, make_controller("joint-pd", rig))
     op = rig.operating_point()

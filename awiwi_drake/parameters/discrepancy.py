@@ -528,7 +528,7 @@ class DatasetChecks(Parameters):
     max_angle_excursion: float = param(
         3.1416, unit="rad", low=0.0, low_inclusive=False,
         source="chosen: a finger joint moves less than half a turn (joint ranges of Table 5.1 are < 2 rad); "
-               "angles in degrees are 57x larger", doc="largest plausible max - min of link_angle")
+               "angles in degrees are 57x larger", doc="largest plausible max - min of joint_angle")
     max_elongation: float = param(
         0.05, unit="m", low=0.0, low_inclusive=False,
         source="chosen: 10x the ~5 mm travel of the lever spring mechanism (Fig 4.8b); motor angles in degrees "

@@ -113,10 +113,11 @@ def _fig15_26(short: bool) -> Reproduction:
     ds = gain_diagram_study()
     fig = ax = None
     for d in ds:
-        fig, ax = d.plot(ax=ax)
+        fig, ax = d.plot(ax=ax, xscale="log")
+    ax.set_title("Fig 15.26: joint rig at 20 N, linearised")
     series = {"frequency [Hz]": ds[0].freq}
-    series.update({f"{d.controller} gain |q/q_des| [-]": d.gain for d in ds})
-    values = {d.controller: dict(bandwidth=_v(d.bandwidth, "Hz"), dc_gain=_v(d.dc_gain, "-"),
+    series.update({f"{d.label} gain |q/q_des| [-]": d.gain for d in ds})
+    values = {d.label: dict(bandwidth=_v(d.bandwidth, "Hz"), dc_gain=_v(d.dc_gain, "-"),
                                  poles_real=_v(d.linearization.poles.real.tolist(), "1/s"),
                                  poles_imag=_v(d.linearization.poles.imag.tolist(), "1/s")) for d in ds}
     return Reproduction(fig, series, values)
@@ -243,9 +244,9 @@ def _fig10_2(short: bool) -> Reproduction:
 
 
 def _fig11_4(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response, plot_gain_diagrams
+    from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response
     d = impedance_frequency_response("two-time-scale")
-    fig, _ = plot_gain_diagrams({d.label: (d.freq, d.gain)})
+    fig, _ = d.plot()
     return Reproduction(fig, {"frequency [Hz]": d.freq, "gain |q/q_des| [-]": d.gain}, dict(
         resonance=_v(d.resonance_hz, "Hz"), peak_gain=_v(float(np.max(d.gain)), "-"),
         eigenvalues_real=_v(np.real(d.eigenvalues).tolist(), "1/s"),

@@ -1,20 +1,15 @@
 """Thesis ch. 3: motor friction identification (Fig 3.3) and ripple compensation (Fig 3.5-3.6).
 
-* Friction identification (Fig 3.3): the motor follows piecewise-constant
-  velocities (a PD on a position ramp); the mean commanded torque per plateau,
-  averaged over whole periods of the motor-shaft ripple and over forward and
-  backward passes over the same angles, balances the velocity-dependent
-  friction; (3.8) ``tau(w) = gamma2 atan(gamma1 w) + gamma3 w`` is fitted to it.
-* Ripple compensation (Fig 3.5-3.6): at constant speed the position-dependent
-  ripple shows in the controller torque at the motor rotation frequency.  The
-  ripple is identified from that torque (regression on the measured angle at
-  the known period, i.e. known phase), and fed forward with a conservative
-  amplitude (``amplitude_scale`` < 1, ch. 3: over-compensation injects energy).
-  Success metric: attenuation of the first harmonic of the controller's
-  feedback torque.
+* Friction (Fig 3.3): the motor follows piecewise-constant velocities (:func:`friction_identification_data`) and
+  (3.8) ``tau(w) = gamma2 atan(gamma1 w) + gamma3 w`` is fitted to the mean commanded torques (:func:`fit_friction`)
+  that balance the friction.
+* Ripple (Fig 3.5-3.6): at constant speed the position-dependent ripple shows in the controller torque at the motor
+  rotation frequency; it is identified from that torque (:func:`identify_ripple`) and fed forward with a
+  conservative amplitude (``amplitude_scale`` < 1, ch. 3: over-compensation injects energy); the success metric is
+  the attenuation of the first harmonic of the feedback torque (:func:`ripple_compensation_experiment`).
 
-The controller is :class:`awiwi_drake.control.motor_compensation.MotorPdLaw`; the
-plant :func:`awiwi_drake.rigs.motor_rig`.
+The controller is :class:`awiwi_drake.control.motor_compensation.MotorPdLaw`; the plant
+:func:`awiwi_drake.rigs.motor_rig`.
 """
 
 from __future__ import annotations
@@ -116,14 +111,15 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
                                  seed: int = 0) -> FrictionData:
     """Simulated Fig 3.3 protocol: forward and backward plateaus at log-spaced speeds, noisy torque readings.
 
-    Each plateau starts with the motor at rest and zero torque (nothing about the friction is assumed);
-    the start transient is discarded (``settle_fraction``).
+    Each plateau starts with the motor at rest and zero torque (nothing about the friction is assumed); the start
+    transient is discarded (``settle_fraction``); the mean is over whole periods of the motor-shaft ripple, and the
+    backward pass covers the forward pass's angles.
     """
     p = params or FrictionIdentificationParams()
     rng = np.random.default_rng(seed)
     speeds = np.geomspace(p.min_speed, p.max_speed, p.num_speeds)
     period = 2 * math.pi / motor.gear_ratio  # motor-shaft ripple period at the output [rad]
-    out_v, out_m, out_lo, out_hi = [], [], [], []
+    rows = []      # (speed, mean, min, max torque) per plateau
     for v in speeds:
         travel = v * p.plateau_time
         for sign, th0 in ((1.0, 0.0), (-1.0, travel)):  # forward, then back over the same angles
@@ -135,12 +131,9 @@ def friction_identification_data(motor: MotorParams, params: FrictionIdentificat
             n_per = math.floor(v * (p.plateau_time - t_steady) / period)
             if n_per >= 1:  # whole ripple periods only
                 steady &= run.t < t_steady + n_per * period / v
-            out_v.append(sign * v)
-            out_m.append(float(np.mean(tau[steady])))
-            out_lo.append(float(np.min(tau[steady])))
-            out_hi.append(float(np.max(tau[steady])))
-    order = np.argsort(out_v)
-    return FrictionData(*(np.array(a)[order] for a in (out_v, out_m, out_lo, out_hi)))
+            rows.append((sign * v, np.mean(tau[steady]), np.min(tau[steady]), np.max(tau[steady])))
+    rows = np.array(rows, dtype=float)
+    return FrictionData(*rows[np.argsort(rows[:, 0])].T)
 
 
 def fit_friction(speed, torque) -> FrictionFit:

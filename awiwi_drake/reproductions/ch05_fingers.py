@@ -140,9 +140,8 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
         diagram.GetInputPort("external_torque").FixValue(ctx, np.zeros(n))
         x0 = np.zeros(2 * n)
         x0[j] = deflection
-        if p.finger.pip_dip_coupled if hasattr(p.finger, "pip_dip_coupled") else False:
-            if j == n - 2:  # coupled: deflect the DIP consistently (no coupling-element transient)
-                x0[n - 1] = deflection * p.finger.dip_pip_ratio
+        if getattr(p.finger, "pip_dip_coupled", False) and j == n - 2:   # coupled: deflect the DIP consistently
+            x0[n - 1] = deflection * p.finger.dip_pip_ratio                # (no coupling-element transient)
         ctx.SetContinuousState(x0)
         res = simulate(diagram, ctx, t_final, log=("state",), integrator="runge_kutta5", max_step=1e-3,
                        accuracy=accuracy)
@@ -217,11 +216,11 @@ class EstimationStudy:
         """Fig 5.17: one panel per case of ``start`` (rows 50/30/15 iterations, columns 0/0.5/1 mm noise), each the
         true (q10, q11) grid (red circles) and the estimates (blue crosses); ``case`` ``(iterations, noise [m],
         start)``: that case alone on ``ax`` (Fig 5.16).  ``(fig, axes)``."""
-        import matplotlib.pyplot as plt
         if case is None:
             its = sorted({k[0] for k in self.estimates}, reverse=True)
             noises = sorted({k[1] for k in self.estimates})
-            fig, axes = plt.subplots(len(its), len(noises), figsize=(3 * len(noises), 3 * len(its)), squeeze=False)
+            fig, axes = figure_axes(None, nrows=len(its), ncols=len(noises), figsize=(3 * len(noises), 3 * len(its)),
+                                    squeeze=False)
             for i, it in enumerate(its):
                 for j, a in enumerate(noises):
                     self.plot(case=(it, a, start), ax=axes[i, j])

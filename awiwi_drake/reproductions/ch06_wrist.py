@@ -205,19 +205,14 @@ def wrist_compensation_study(target: str = "index", *, amplitude: float = np.rad
         rig = (hand_diagram(wrist=True, params=params) if target == "hand"
                else finger_diagram(finger=target, wrist=True, params=params))
         cl = closed_loop(rig, joint_pd_controller(rig, controller, wrist_compensation=comp))
-        d = cl.diagram
-        ctx = d.CreateDefaultContext()
         op = rig.operating_point()
-        cl.initialize(ctx, state=op.state, motor_torque=op.motor_torque)
-        q_op = op.joint_angle
-        d.GetInputPort("joint_angle_reference").FixValue(ctx, q_op)
-        d.GetInputPort("external_torque").FixValue(ctx, np.zeros(rig.num_joints))
-        res = simulate(d, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},
+        ctx = cl.create_context(op, references={"joint_angle_reference": op.joint_angle})
+        res = simulate(cl.diagram, ctx, t_final, inputs={"wrist_angle": PerEntry([Sine(amplitude, frequency), 0.0])},
                        log=("joint_angle", "tendon_force"), monitors=rig_monitors(rig),
                        max_step=1.0 / cl.rate_hz, accuracy=accuracy)
         events[comp] = list(res.events)
         res = res.resample(t_grid)
-        drift[comp] = res["joint_angle"] - q_op
+        drift[comp] = res["joint_angle"] - op.joint_angle
         fmin[comp] = float(np.min(res["tendon_force"]))
     return WristCompensationStudy(t_grid, amplitude * np.sin(2 * np.pi * frequency * t_grid), drift[False],
                                   drift[True], list(rig.joint_names),

@@ -64,12 +64,12 @@ CONTROLLERS = ("joint-pd", "cascaded:no-observer")
 class StiffnessMeasurement:
     """One finger, one loop, one co-contraction level: the measured static stiffness and its predictions.
 
-    Matrices are over the finger's independent DoF (``dof_names``) [Nm/rad].  ``measured = L D^-1``;
-    ``mechanical``: (5.12) of the springs at the ``tendon_force`` held before the load;
-    ``predicted``: what the loop should show (module docstring), column ``j`` from the Dahl states held before load
-    ``j`` and the directions it moves them; ``presliding`` the part of it from the hysteresis and guide Dahl states; ``commanded``: the chain's static stiffness per DoF (None for
-    ``joint-pd``).  ``linearity``: the largest ``|delta x| / delta`` of a Dahl state over the loads (the
-    presliding slope's secant is within ``linearity / 2`` of the tangent)."""
+    Matrices are over the finger's independent DoF (``dof_names``) [Nm/rad].  ``measured = L D^-1``; ``mechanical``:
+    (5.12) of the springs at the ``tendon_force`` held before the load; ``predicted``: what the loop should show
+    (module docstring), column ``j`` from the Dahl states held before load ``j`` and the directions it moves them;
+    ``presliding`` the part of it from the hysteresis and guide Dahl states; ``commanded``: the chain's static
+    stiffness per DoF (None for ``joint-pd``).  ``linearity``: the largest ``|delta x| / delta`` of a Dahl state over
+    the loads (the presliding slope's secant is within ``linearity / 2`` of the tangent)."""
 
     finger: str
     controller: str
@@ -172,18 +172,18 @@ def _smooth_staircase(n: int, load: np.ndarray, ramp: float, hold: float, settle
 
 def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd", *, pretension: float = 20.0,
                             stiffness_scale: float = 1.0, load: float | None = 0.01, deflection: float | None = None,
-                            ramp: float = 0.1,
-                            hold: float = 0.2, window: float = 0.1, settle: float | None = None,
+                            ramp: float = 0.1, hold: float = 0.2, window: float = 0.1, settle: float | None = None,
                             params=None, **simulate_options) -> StiffnessMeasurement:
     """Measure the static joint stiffness of ``finger`` closed by ``controller`` (``joint-pd`` or
     ``cascaded:no-observer``, see the module docstring) at 3 kHz: the load ``load`` [Nm] (or, with ``deflection``
     [rad], per DoF that deflection times the loop's own stiffness of the design: the chain's commanded, joint-pd's
     (5.12) at the operating point, so that a soft DoF is not bent out of its linear range) ramps onto each DoF in
     turn (raised cosine over ``ramp`` s, then ``hold`` s), the deflection of each step is the change of the joint
-    angles' mean over the last ``window`` s of each hold (the first load after ``settle`` s, default ``hold``).  Co-contraction: ``pretension`` [N] (the operating point,
-    both loops) and, for the chain, ``stiffness_scale`` (the distribution asked for that multiple of the operating
-    point's (5.12)).  ``params``: a :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's,
-    thesis physics on); ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
+    angles' mean over the last ``window`` s of each hold (the first load after ``settle`` s, default ``hold``).
+    Co-contraction: ``pretension`` [N] (the operating point, both loops) and, for the chain, ``stiffness_scale`` (the
+    distribution asked for that multiple of the operating point's (5.12)).  ``params``: a
+    :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's, thesis physics on);
+    ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
     :func:`~awiwi_drake.analysis.simulate` (default: fixed-step RK3 at the control period)."""
     from awiwi_drake.hand import finger_diagram, hand_diagram
 

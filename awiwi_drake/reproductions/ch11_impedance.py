@@ -1,11 +1,11 @@
 """Thesis ch. 11: two-time-scale and cascaded impedance control (Fig 11.2-11.4).
 
-The controllers are :mod:`awiwi_drake.control.impedance`; :func:`plot_gain_diagrams` draws Fig 11.4.
+The controllers are :mod:`awiwi_drake.control.impedance`; :meth:`GainDiagram.plot` draws Fig 11.4 (and 15.26).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from typing import Sequence
 
@@ -20,8 +20,7 @@ from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, ImpedancePar
 from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
-__all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
-           "plot_gain_diagrams"]
+__all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response"]
 
 
 @dataclass
@@ -48,13 +47,19 @@ class ImpedanceStep:
 
 @dataclass
 class GainDiagram:
-    """Fig 11.4: gain ``|q / q_des|`` [-] over ``freq`` [Hz] (a simulated chirp, or the linearised loop with
-    its ``eigenvalues`` [1/s]), with the resonance [Hz] and the peak gain."""
+    """Fig 11.4 / 15.26: gain ``|q / q_des|`` [-] over ``freq`` [Hz] of a loop (``label``): a simulated chirp, or
+    the continuous loop linearised by Drake's ``Linearize`` (its ``linearization``, a
+    :class:`~awiwi_drake.analysis.LinearizationResult`, and ``eigenvalues`` [1/s]), with its -3 dB ``bandwidth``
+    below the DC gain [Hz] where computed (:func:`~awiwi_drake.control.compare.metrics.linear_bandwidth`) and the
+    ``loop`` itself (to simulate)."""
 
     label: str
     freq: np.ndarray
     gain: np.ndarray
     eigenvalues: np.ndarray | None = None
+    bandwidth: float = float("nan")
+    linearization: object = None
+    loop: object = field(repr=False, default=None)
 
     @property
     def resonance_hz(self) -> float:
@@ -64,8 +69,24 @@ class GainDiagram:
     def peak_gain(self) -> float:
         return float(np.max(self.gain))
 
-    def plot(self, ax=None):
-        return plot_gain_diagrams({self.label: (self.freq, self.gain)}, ax=ax)
+    @property
+    def dc_gain(self) -> float:
+        """|H(0)| = |D - C A^-1 B| of the linearisation [-]."""
+        lin = self.linearization
+        return float(abs((lin.D - lin.C @ np.linalg.solve(lin.A, lin.B))[0, 0]))
+
+    def plot(self, ax=None, *, label: str | None = None, xscale: str = "linear"):
+        """|q / q_des| against frequency, labelled ``label`` (default :attr:`label`) and, where computed, its -3 dB
+        bandwidth marked (dotted); several diagrams drawn on one ``ax`` share it.  ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        text = self.label if label is None else label
+        marked = np.isfinite(self.bandwidth)
+        line, = ax.plot(self.freq, self.gain, label=f"{text} (-3 dB at {self.bandwidth:.2f} Hz)" if marked else text)
+        if marked:
+            ax.axvline(self.bandwidth, color=line.get_color(), ls=":", lw=1)
+        ax.set_xscale(xscale)
+        label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]")
+        return fig, ax
 
 
 def _joint(kind: str, *, stiffness=None, pretension=None):
@@ -133,12 +154,3 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
     g = np.abs(lin.bode(omega=2 * np.pi * freqs).response)
     return GainDiagram(f"{mode}, linearised", freqs, g, lin.poles)
-
-
-def plot_gain_diagrams(curves: dict, *, ax=None):
-    """Fig 11.4: ``{label: (freq, gain)}``."""
-    fig, ax = figure_axes(ax, figsize=(7, 4))
-    for label, (f, g) in curves.items():
-        ax.plot(f, g, label=label)
-    label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]")
-    return fig, ax

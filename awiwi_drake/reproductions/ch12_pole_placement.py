@@ -6,7 +6,8 @@ The design and ``stable_stiffness_interval`` are :mod:`awiwi_drake.control.pole_
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -40,13 +41,12 @@ class OpenLoopPoleSweep:
 
     def plot(self, axes=None):
         """Both root loci side by side (:func:`~awiwi_drake.plotting.plot_poles`); returns ``(fig, axes)``."""
-        if axes is None:
-            fig, axes = figure_axes(None, ncols=2, figsize=(12, 5))
+        fig, axes = figure_axes(axes, ncols=2, figsize=(12, 5))
         plot_poles(self.poles_vs_stiffness, axes[0], values=self.stiffness, name="k [Nm/rad]")
         plot_poles(self.poles_vs_damping, axes[1], values=self.link_damping, name="d_q [Nm s/rad]")
         axes[0].set_title("Fig 12.3: open-loop poles vs k")
         axes[1].set_title("Fig 12.3: open-loop poles vs d_q")
-        return axes[0].figure, axes
+        return fig, axes
 
 
 def open_loop_pole_sweep(params: PolePlacementParams | None = None, *, num: int = 25,
@@ -95,14 +95,7 @@ class StiffnessRobustness:
     state: dict
     diverged_at: dict
     printed_gain_poles_vs_stiffness: np.ndarray
-    printed_perturbed_poles: np.ndarray = None
-    printed_gain: np.ndarray = None
-
-    def __post_init__(self):
-        if self.printed_perturbed_poles is None:
-            self.printed_perturbed_poles = PRINTED_12_19.copy()
-        if self.printed_gain is None:
-            self.printed_gain = PRINTED_12_18.copy()
+    printed_perturbed_poles: np.ndarray = field(default_factory=PRINTED_12_19.copy)
 
     def summary(self) -> str:
         """Ours beside the printed values, one line each."""
@@ -127,8 +120,7 @@ class StiffnessRobustness:
         (12.19) ours vs printed, the simulated steps (|q - q_ref|, log scale, with the envelope e^(max Re s t) of
         the perturbed loop) and the tolerated stiffness error per target scale; returns ``(fig, axes)`` (2 x 3,
         the last panel unused)."""
-        if axes is None:
-            fig, axes = figure_axes(None, nrows=2, ncols=3, figsize=(18, 9))
+        fig, axes = figure_axes(axes, nrows=2, ncols=3, figsize=(18, 9))
         axes = np.asarray(axes).reshape(2, 3)
         krange = f"k in [{self.stiffness[0]:g}, {self.stiffness[-1]:g}] Nm/rad"
         plot_poles(self.poles_vs_stiffness, axes[0, 0], values=self.stiffness, name="k [Nm/rad]")
@@ -165,7 +157,6 @@ class StiffnessRobustness:
         label_axes(ax, "tolerated relative stiffness error [-]", xlabel="target omega1 [rad/s] (omega2 = 0.3 omega1)",
                    title="stable stiffness interval vs the target dynamics")
         axes[1, 2].set_axis_off()
-        fig = axes[0, 0].figure
         fig.tight_layout()
         return fig, axes
 
@@ -201,18 +192,14 @@ def stiffness_robustness(params: PolePlacementParams | None = None, *, num: int 
     k0, k1 = float(base.stiffness), float(p.perturbed_stiffness)
     rig0 = flexible_joint_rig(params=base)
     design = design_pole_placement(rig0, p)
-
-    def controller():
-        return state_feedback_controller(design.linearization, design.K, reference="joint_angle",
-                                         name="pole_placement")
+    controller = functools.partial(state_feedback_controller, design.linearization, design.K,
+                                   reference="joint_angle", name="pole_placement")
     loops = {"nominal": _robustness_loop(base, k0, controller), "perturbed": _robustness_loop(base, k1, controller)}
     nominal, perturbed = (_closed_loop_poles(loops[n]) for n in ("nominal", "perturbed"))
     ks = np.linspace(p.stiffness_low, p.stiffness_high, int(num))
     table = np.array([_closed_loop_poles(_robustness_loop(base, k, controller)) for k in ks])
-
-    def printed_controller():
-        return state_feedback_controller(design.linearization, PRINTED_12_18, reference="joint_angle",
-                                         name="pole_placement_12_18")
+    printed_controller = functools.partial(state_feedback_controller, design.linearization, PRINTED_12_18,
+                                           reference="joint_angle", name="pole_placement_12_18")
     printed_table = np.array([_closed_loop_poles(_robustness_loop(base, k, printed_controller)) for k in ks])
 
     def A_of_k(k):

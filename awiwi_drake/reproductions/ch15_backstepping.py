@@ -5,18 +5,14 @@ The controllers and their rig factories are :mod:`awiwi_drake.control.backsteppi
 15.1 is :mod:`.ch15_scalar_example`. The study functions here run the simulations
 behind Fig 15.2-15.4, 15.7-15.13, 15.16-15.21 and 15.23-15.27 and return data
 (:class:`BacksteppingRun`); the ``plot_*`` functions at the end draw them.
-
-All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`):
-inputs that change at given times (reference steps, disturbance steps) are
-piecewise-constant schedules (:func:`event_schedules`), the sine references
-(with their derivatives) ``Sine`` schedules, all wired in as Drake sources.
+All simulations go through :func:`awiwi_drake.analysis.simulate` (:func:`run_loop`, :func:`event_schedules`).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from types import SimpleNamespace
 from typing import Mapping, Sequence
 
@@ -33,6 +29,7 @@ from awiwi_drake.parameters.backstepping import (
     NonlinearImpedanceStudy, PositionBacksteppingGains, PositionStudy, ScalarExampleGains)
 from awiwi_drake.parameters.rigs import FlexibleJointParams, JointRigParams
 from awiwi_drake.plotting import figure_axes, label_axes
+from awiwi_drake.reproductions.ch11_impedance import GainDiagram
 from awiwi_drake.reproductions.ch15_scalar_example import ScalarBackstepping, ScalarExamplePlant, example_dynamics
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
@@ -41,7 +38,7 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
     "antagonistic_sine", "antagonistic_stiffness_check", "sine_reference", "is_monotone_nonincreasing", "count_oscillations",
-    "GainDiagram1526", "gain_diagram_study", "plot_run_traces", "plot_joint_angle",
+    "gain_diagram_study", "plot_run_traces", "plot_joint_angle",
     "plot_command", "plot_phase_portrait",
 ]
 
@@ -416,39 +413,8 @@ def antagonistic_stiffness_check(stiffness_values: Sequence[float], *, deflectio
 
 # ---------------------------------------------------------------------------
 # plots: runs in, ``(fig, ax)`` out
-@dataclass
-class GainDiagram1526:
-    """Fig 15.26 for one registered joint-rig controller: the continuous loop linearised (Drake ``Linearize``) from
-    the link reference to the link angle at its settled rest; ``freq`` [Hz], ``gain`` |q / q_des| [-], ``bandwidth``
-    the -3 dB point below the DC gain [Hz] (:func:`~awiwi_drake.control.compare.metrics.linear_bandwidth`, the
-    number compare's ``bandwidth_source`` ``linearization`` reports), ``linearization`` the
-    :class:`~awiwi_drake.analysis.LinearizationResult` itself, ``loop`` the continuous closed loop (to simulate)."""
-
-    controller: str
-    freq: np.ndarray
-    gain: np.ndarray
-    bandwidth: float
-    linearization: object
-    loop: ClosedLoop = field(repr=False, default=None)
-
-    @property
-    def dc_gain(self) -> float:
-        """|H(0)| = |D - C A^-1 B| of the linearisation [-]."""
-        lin = self.linearization
-        return float(abs((lin.D - lin.C @ np.linalg.solve(lin.A, lin.B))[0, 0]))
-
-    def plot(self, ax=None):
-        """Fig 15.26: |q / q_des| against frequency (log axis), the -3 dB bandwidth marked; the study's diagrams drawn
-        on one ``ax`` one after another.  ``(fig, ax)``."""
-        fig, ax = figure_axes(ax, figsize=(7, 4))
-        line, = ax.semilogx(self.freq, self.gain, label=f"{self.controller} (-3 dB at {self.bandwidth:.2f} Hz)")
-        ax.axvline(self.bandwidth, color=line.get_color(), ls=":", lw=1)
-        label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]", title="Fig 15.26: joint rig at 20 N, linearised")
-        return fig, ax
-
-
 def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-scale"), *,
-                       freqs: Sequence[float] | None = None) -> list[GainDiagram1526]:
+                       freqs: Sequence[float] | None = None) -> list[GainDiagram]:
     """Fig 15.26: gain diagrams of the registered ``controllers`` on the antagonistic joint rig at its default
     operating point (20 N, the figure's pretension), each continuous loop settled as compare settles it
     (:func:`~awiwi_drake.control.compare.runner.settle`, ``compare_test_params``) and linearised there; default
@@ -466,7 +432,7 @@ def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-s
         lin = linearize(loop.diagram, context=ctx, input=loop.references[0], outputs=(loop.tracked_outputs[0],),
                         equilibrium_tolerance=None)
         gain = np.abs(lin.bode(0, omega=2 * np.pi * f).response)
-        out.append(GainDiagram1526(name, f, gain, linear_bandwidth(lin), lin, loop))
+        out.append(GainDiagram(name, f, gain, lin.poles, linear_bandwidth(lin), lin, loop))
     return out
 
 

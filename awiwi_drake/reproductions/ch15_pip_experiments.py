@@ -129,11 +129,10 @@ def stuck_intervals(run: PipRun, speed: float) -> list[tuple[float, float]]:
 def pip_metrics(run: PipRun, study: PipStudy | None = None) -> dict:
     """Step: final error [rad] (mean over the last 0.1 s), rise time 10-90 % [s], overshoot [%]; sine: RMS error after
     the first period [rad]; both: the time the PIP stands (slower than the Stribeck velocity, the friction's static
-    regime) while the reference moves (the sine) or after the step [s] and the longest such interval [s],
-    peak |torque| [Nm],
-    minimum tendon force [N]; the PIP's velocity reversals per second (``reversals_per_s``, counted where it turns
-    faster than that) beside the reference's own (``reference_reversals_per_s``: 0 for the step, 2 f for the sine):
-    reversals beyond the reference's are the stick-slip vibration of Fig 15.25."""
+    regime) while the reference moves (the sine) or after the step [s] and the longest such interval [s], peak
+    |torque| [Nm], minimum tendon force [N]; the PIP's velocity reversals per second (``reversals_per_s``, counted
+    where it turns faster than that) beside the reference's own (``reference_reversals_per_s``: 0 for the step, 2 f
+    for the sine): reversals beyond the reference's are the stick-slip vibration of Fig 15.25."""
     from awiwi_drake.parameters.components import JointFrictionParams
     s = study or PipStudy()
     out = dict(peak_torque=float(np.max(np.abs(run.torque))), min_tendon_force=float(np.min(run.tendon_force)))

@@ -41,44 +41,26 @@ class InventedParameter:
     headlines: tuple        # headline keys that depend on it
 
 
-# group -> how a scaled value is written into the inputs of the headline functions
-INVENTED = (
-    InventedParameter("index.abduction_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.mcp_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.pip_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.dip_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.proximal_mass", "kg", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.middle_mass", "kg", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.distal_mass", "kg", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("index.link_radius", "m", ("index_link_mode_20N", "fig5_7_dip_difference")),
-    InventedParameter("ring.pip_radius", "m", ("ring_pip_moment_arm",)),
-    InventedParameter("ring.dip_radius", "m", ("ring_pip_moment_arm",)),
-    InventedParameter("ring.coupling_stiffness", "N m/rad", ("ring_coupling_compliance",)),
-    InventedParameter("thumb.metacarpal_length", "m", ("thumb_base_stiffness", "fig5_17_cold_error")),
-    InventedParameter("thumb.pip_radius", "m", ()),
-    InventedParameter("thumb.dip_radius", "m", ()),
-    InventedParameter("thumb.proximal_length", "m", ()),
-    InventedParameter("thumb.distal_length", "m", ()),
-    InventedParameter("ring.proximal_length", "m", ()),
-    InventedParameter("fifth.proximal_length", "m", ()),
-    InventedParameter("fifth.middle_length", "m", ()),
-    InventedParameter("fifth.hmc_radius", "m", ()),
-    InventedParameter("fifth.hmc_offset", "m", ()),
-    InventedParameter("fifth.hmc_axis_tilt", "rad", ()),
-    InventedParameter("spring.pulley_spacing", "m", ("fig4_8b_force_45deg", "tendon_stiffness_20N",
-                                                      "index_link_mode_20N")),
-    InventedParameter("spring.lever_length", "m", ("fig4_8b_force_45deg", "tendon_stiffness_20N",
-                                                    "index_link_mode_20N")),
-    InventedParameter("spring.spring_arm", "m", ("fig4_8b_force_45deg", "tendon_stiffness_20N",
-                                                  "index_link_mode_20N")),
-    InventedParameter("tendon.youngs_modulus", "Pa", ("tendon_stiffness_20N", "index_link_mode_20N")),
-    InventedParameter("tendon.diameter", "m", ("tendon_stiffness_20N", "index_link_mode_20N")),
-    InventedParameter("tendon.rest_length", "m", ("tendon_stiffness_20N", "index_link_mode_20N")),
-    InventedParameter("wrist.crank_length", "m", ("fig6_10_abduction_peak",)),
-    InventedParameter("wrist.coupler_length", "m", ("fig6_10_abduction_peak",)),
-    InventedParameter("wrist.palm_radius", "m", ("fig6_10_abduction_peak",)),
-    InventedParameter("wrist.link_length", "m", ("fig6_10_abduction_peak",)),
-)
+_INDEX = ("index_link_mode_20N", "fig5_7_dip_difference")
+_TENDON = ("tendon_stiffness_20N", "index_link_mode_20N")
+
+#: The chosen parameters, in the order of the docs/REPRODUCTIONS.md table: (group, fields, unit, headlines) rows.
+INVENTED = tuple(InventedParameter(f"{group}.{name}", unit, headlines) for group, names, unit, headlines in (
+    ("index", ("abduction_radius", "mcp_radius", "pip_radius", "dip_radius"), "m", _INDEX),
+    ("index", ("proximal_mass", "middle_mass", "distal_mass"), "kg", _INDEX),
+    ("index", ("link_radius",), "m", _INDEX),
+    ("ring", ("pip_radius", "dip_radius"), "m", ("ring_pip_moment_arm",)),
+    ("ring", ("coupling_stiffness",), "N m/rad", ("ring_coupling_compliance",)),
+    ("thumb", ("metacarpal_length",), "m", ("thumb_base_stiffness", "fig5_17_cold_error")),
+    ("thumb", ("pip_radius", "dip_radius", "proximal_length", "distal_length"), "m", ()),
+    ("ring", ("proximal_length",), "m", ()),
+    ("fifth", ("proximal_length", "middle_length", "hmc_radius", "hmc_offset"), "m", ()),
+    ("fifth", ("hmc_axis_tilt",), "rad", ()),
+    ("spring", ("pulley_spacing", "lever_length", "spring_arm"), "m", ("fig4_8b_force_45deg", *_TENDON)),
+    ("tendon", ("youngs_modulus",), "Pa", _TENDON),
+    ("tendon", ("diameter", "rest_length"), "m", _TENDON),
+    ("wrist", ("crank_length", "coupler_length", "palm_radius", "link_length"), "m", ("fig6_10_abduction_peak",)),
+) for name in names)
 
 
 def _scaled_wrist(prop: str, scale: float) -> WristParams:
