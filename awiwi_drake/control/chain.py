@@ -48,8 +48,8 @@ from awiwi_drake.hand.diagrams import HandRig
 from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
-__all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceStage", "TendonChainController", "chain_design_point",
-           "rig_springs", "guide_friction_levels", "joint_friction_levels"]
+__all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceStage", "TendonChainController",
+           "chain_design_point", "rig_springs", "guide_friction_levels", "joint_friction_levels"]
 
 
 def rig_springs(rig: Any) -> TendonSprings:

@@ -164,7 +164,7 @@ class DistributionResult:
     stiffness_error: float            # ||K_des - K_q||_F / ||K_des||_F
     iterations: int
     cost: float                       # the final cost (Algorithm 2: C(alpha); optimal: the relative stiffness cost)
-    program_qps: int = 0              # optimal: QPs the MathematicalProgram solved (a bound active), not the closed form
+    program_qps: int = 0              # optimal: QPs the MathematicalProgram solved (a bound active; not closed form)
 
 
 def _barrier(d):

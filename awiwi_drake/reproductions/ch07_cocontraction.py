@@ -160,8 +160,9 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     turn (raised cosine over ``ramp`` s, then ``hold`` s), the deflection of each step is the change of the joint
     angles' mean over the last ``window`` s of each hold (the first load after ``settle`` s, default ``hold``).
     Co-contraction: ``pretension`` [N] (the operating point, both loops) and, for the chain, ``stiffness_scale`` (the
-    distribution asked for that multiple of the operating point's (5.12)).  ``params``: a :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's,
-    thesis physics on); ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
+    distribution asked for that multiple of the operating point's (5.12)).  ``params``: a
+    :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's, thesis physics on);
+    ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
     :func:`~awiwi_drake.analysis.simulate` (default: fixed-step RK3 at the control period)."""
     from awiwi_drake.hand import finger_diagram, hand_diagram
 

@@ -39,8 +39,9 @@ from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
-           "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
+__all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run",
+           "stopped_row", "run_standard_tests", "compare", "build_loops", "dominant_time_constant",
+           "design_time_constant", "design_step_duration", "short_test_params",
            "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load",
            "design_stiffness", "size_loads", "load_stiffness_range"]
 
