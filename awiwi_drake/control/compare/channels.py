@@ -21,6 +21,9 @@ class _Affine(Schedule):
     gain: float
     offset: float
 
+    def __post_init__(self):      # inner is a schedule (checked when made); gain and offset come from the design
+        pass
+
     def value(self, t):
         return self.offset + self.gain * self.inner.value(t)
 
