@@ -650,7 +650,7 @@ def test_benchmark_dataset_cache_hit_is_fresh_generation_bit_for_bit_and_a_chang
     files = [f.as_posix() for f in bench.generator_files()]
     assert any(f.endswith("discrepancy/truth.py") for f in files)
     assert any(f.endswith("discrepancy/finger_truth.py") for f in files)
-    assert any(f.endswith("discrepancy/defaults.py") for f in files)         # imported inside a function
+    assert any(f.endswith("parameters/yaml_io.py") for f in files)           # imported inside a function
     assert not any(f.endswith(("discrepancy/workflow.py", "discrepancy/fit.py", "discrepancy/screen.py"))
                    for f in files)                                             # the workflow is not the generator
     rig_files = [f.as_posix() for f in bench.generator_files((bench.generator_of("joint-rig"),))]

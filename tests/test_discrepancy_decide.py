@@ -12,7 +12,7 @@ from awiwi_drake.discrepancy import (DiagnosisInterrupted, diagnose, load_datase
                                      save_dataset, write_report)
 from _joint_rig_check import assert_models_match_joint_rig
 from awiwi_drake.discrepancy.catalog import PARAM_INDEX, default_vector
-from awiwi_drake.discrepancy.decide import materiality, noise_equivalent, rejection_reason
+from awiwi_drake.discrepancy.decide import NoiseEquivalent, materiality, rejection_reason
 from awiwi_drake.discrepancy.replay import ReplayEngine, project
 from awiwi_drake.discrepancy.result import CandidateResult
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings, TruthGeneratorParams
@@ -28,7 +28,7 @@ def test_noise_equivalent_quantities_follow_the_sensor_noise(joint_engine):
     """The noise-equivalent force is the force sensors' per-sample noise floor; the
     torques are that force on the motor and link pulleys."""
     eng = joint_engine
-    ne = noise_equivalent(eng)
+    ne = NoiseEquivalent(eng)
     sig = dict(zip(eng.out_names, eng.sigma))
     assert ne.force == pytest.approx(min(sig["tendon_force_1"], sig["tendon_force_2"]))
     assert ne.motor_torque == pytest.approx(eng.nom.motor_pulley_radius * ne.force)
@@ -40,7 +40,7 @@ def test_materiality_floors_reject_effects_below_the_noise(joint_engine):
     """Issue 12's leftovers: a 0.22 ms delay (below one 1 ms sample) and a hysteresis
     half-width far below the noise-equivalent force are not material; the same effects
     above their floors are."""
-    ne = noise_equivalent(joint_engine)
+    ne = NoiseEquivalent(joint_engine)
     assert not materiality("delay", {"delay": 0.22e-3}, ne)["material"]
     assert materiality("delay", {"delay": 3e-3}, ne)["material"]
     assert not materiality("spring_hysteresis", {"hysteresis_width": 0.08 * ne.force}, ne)["material"]
@@ -58,7 +58,7 @@ def test_calibration_corrections_need_a_material_torque(joint_engine):
     torque by m * 0.0006 * rms(q'') -- far below the noise-equivalent link torque: not material; a 50 %
     inertia error at the same motion is.  The size is that torque, computed here by hand."""
     eng = joint_engine
-    ne = noise_equivalent(eng)
+    ne = NoiseEquivalent(eng)
     n = eng.nom.num_motors
     qd = eng.xhat[2 * n + 1]
     qdd_rms = float(np.sqrt(np.mean((np.diff(qd) / eng.dt) ** 2)))

@@ -425,7 +425,11 @@ def test_backstepping_friction_observer_under_a_load_beyond_the_friction_bound_d
     B = law.friction_bound(law.springs.force(res["elongation"][-1]))
     np.testing.assert_allclose(res["controller_friction_compensation_bound"][-1], B, rtol=1e-9)
     rest = law.rest_error(g, z, tau, B)
-    np.testing.assert_allclose(e[1], rest[1], rtol=0.01)                    # measured 0.4 %
+    # not derived: the MCP is off its rest by what the slow rest mode (-1.0 1/s, observer_rest_modes) still creeps
+    # in the PIP/DIP through the coupling, measured -4.6, -5.0, -4.2, -2.7, -1.8 x 1e-4 rad at 0.3, 0.45, 0.6, 0.9,
+    # 1.2 s (0.44 % of the rest at 0.6 s).  A bound needs the quasi-static rest modes with the MCP's compensation
+    # clipped at B, which observer_rest_modes (all DoF inside their bound) does not model
+    np.testing.assert_allclose(e[1], rest[1], rtol=0.01)
     # PIP, DIP: still creeping towards their closed form (the observer's slow mode on the guides' presliding): closer
     # to it at the end than half-way
     half = law.Sp @ (res["joint_angle"][res.t.size // 2] - op.joint_angle)

@@ -46,6 +46,7 @@ from awiwi_drake.control.joint_stage import JointStage
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.parameters.control import TendonForceGains
 from awiwi_drake.hand.coupling import dof_selection
+from awiwi_drake.hand.diagrams import HandRig
 from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
@@ -56,9 +57,8 @@ __all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceStage", "Ten
 def rig_springs(rig: Any) -> TendonSprings:
     """The spring law of each tendon of a rig (:class:`~awiwi_drake.components.spring.TendonSprings`): a
     finger's/the hand's ``spring_laws`` (``params.tendon_springs`` overrides), else ``rig.spring`` for all."""
-    laws = getattr(rig, "spring_laws", None)
-    if laws is not None:
-        return laws if isinstance(laws, TendonSprings) else TendonSprings(laws)
+    if isinstance(rig, HandRig):
+        return rig.spring_laws
     if isinstance(rig.spring, TendonSprings):          # e.g. a per-joint subsystem (joint_design.joint_subsystem)
         return rig.spring
     return TendonSprings([rig.spring] * rig.coupling.num_tendons)
@@ -76,7 +76,7 @@ def guide_friction_levels(rig: Any) -> tuple[np.ndarray, np.ndarray]:
 def joint_friction_levels(rig: Any) -> np.ndarray:
     """The breakaway level ``Fs`` [Nm] per plant joint (n) of the rig's own stick-slip joint friction (the most it can
     hold, :func:`~awiwi_drake.components.friction.stick_slip_rate`; ``HandRig.joint_friction``); zeros when off."""
-    jf = getattr(rig, "joint_friction", None)
+    jf = rig.joint_friction if isinstance(rig, HandRig) else None
     return np.zeros(rig.coupling.num_joints) if jf is None else np.array(jf[:, 1], dtype=float)
 
 

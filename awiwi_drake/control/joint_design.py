@@ -898,7 +898,7 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     :func:`~awiwi_drake.control.base.closed_loop` (the same poles).
     """
 
-    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
     from pydrake.systems.analysis import DiscreteTimeApproximation
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import AffineSystem, Demultiplexer, LinearSystem
@@ -952,12 +952,8 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     ref = diagram.GetInputPort("joint_angle_reference")
     r0 = np.asarray(ref.Eval(ctx), dtype=float)
     xa = InitializeAutoDiff(np.concatenate([x0, r0])).ravel()
-    for i in range(diagram.num_input_ports()):
-        if i == ref.get_index():
-            ad.get_input_port(i).FixValue(actx, xa[x0.size:])
-        elif diagram.get_input_port(i).HasValue(ctx):
-            ad.get_input_port(i).FixValue(actx, np.array([AutoDiffXd(float(v)) for v in
-                                                           diagram.get_input_port(i).Eval(ctx)], dtype=object))
+    ad.FixInputPortsFrom(diagram, ctx, actx)          # the fixed inputs, then the reference with its derivatives
+    ad.get_input_port(ref.get_index()).FixValue(actx, xa[x0.size:])
     start = 0
     for i, n in enumerate(sizes):
         actx.SetDiscreteState(i, xa[start:start + n])

@@ -172,9 +172,9 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
 
 
 def effective_sample_size(x: np.ndarray) -> tuple[float, int]:
-    """``(n_eff, m)``: the number of independent samples the mean of ``x`` is worth, ``n / (1 + 2 sum_k w_k rho_k)``, the sample
-    autocorrelation ``rho_k`` summed with Bartlett weights ``w_k = 1 - k / (m + 1)`` (the Newey-West long-run
-    variance). Bandwidth, chosen: ``m`` = twice the first lag where ``rho_k <= 0`` (the correlation time of the
+    """``(n_eff, m)``: the number of independent samples the mean of ``x`` is worth, ``n / (1 + 2 sum_k w_k rho_k)``,
+    the sample autocorrelation ``rho_k`` summed with Bartlett weights ``w_k = 1 - k / (m + 1)`` (the Newey-West
+    long-run variance). Bandwidth, chosen: ``m`` = twice the first lag where ``rho_k <= 0`` (the correlation time of the
     series itself; a fixed rule such as ``4 (n/100)^(2/9)`` is ~11 samples here and misses a residual correlated
     over hundreds), at most ``n / 2``, returned beside ``n_eff`` (0 for fewer than 3 samples or a constant series).
     White noise gives ~``n``; never more than ``n`` or less than 1."""
