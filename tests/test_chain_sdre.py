@@ -190,8 +190,8 @@ def test_index_finger_chain_with_the_sdre_force_law_steps_a_joint_and_holds_the_
     assert loop.fused is not None and loop.rate_hz == 3000.0
     with pytest.raises(ValueError, match="the two-time-scale chain's tendon level is its own motor-position loop"):
         make_controller("two-time-scale", rig, chain_params=HandChainParams(tendon_law="sdre"))
-    design = ctrl.design["joint_design"]
-    S = ctrl.design["selection"]
+    design = ctrl.design.joint_design
+    S = ctrl.design.selection
     mcp = 1
     window = 0.02 + 5.0 * design.tracking_time_constants()[mcp]
     op = rig.operating_point()

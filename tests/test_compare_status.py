@@ -95,8 +95,8 @@ def test_finger_disturbance_groups_are_independent():
 
     rig = finger_diagram(finger="index")
     point = chain_design_point(rig)
-    W = -np.linalg.pinv(point["coupling_matrix"].T)
-    hold = np.array([np.min(point["tendon_force"][W[:, j] != 0] / np.abs(W[W[:, j] != 0, j])) for j in range(W.shape[1])])
+    W = -np.linalg.pinv(point.coupling_matrix.T)
+    hold = np.array([np.min(point.tendon_force[W[:, j] != 0] / np.abs(W[W[:, j] != 0, j])) for j in range(W.shape[1])])
     order = np.sort(hold)
     load = 0.5 * (order[1] + order[2])
     ctrl = joint_stage_controller(rig, "lqr")
@@ -199,8 +199,8 @@ def test_finger_backstepping_rows_carry_the_dead_band_and_say_when_the_step_stop
     # more than the frictions' bound on some DoF: a not-settled row there keeps "not settled" alone
     from awiwi_drake.control.compare.metrics import Metrics
     from awiwi_drake.control.compare.standard_tests import mark_dead_band
-    np.testing.assert_allclose(law.design["dead_band"], law_band, rtol=1e-12)
-    for j, half in enumerate(law.design["dead_band"]):
+    np.testing.assert_allclose(law.design.dead_band, law_band, rtol=1e-12)
+    for j, half in enumerate(law.design.dead_band):
         for scale, inside in ((0.95, True), (1.05, False)):
             probe = [Metrics("backstepping", "step", joint=r.joint, flags="not settled") for r in rows]
             mark_dead_band(probe, scale * half * np.eye(len(rows))[j], law.friction_hold)

@@ -175,6 +175,10 @@ def test_joint_control_reaches_the_reference_and_keeps_the_coupling():
     rest_free = free[n - 2] - np.linalg.solve(Arr, d.EvalTimeDerivatives(ctx).CopyToVector()[rr])[pip] - 0.5
     assert reach > 0.0 and np.abs(s.final_state[fr]).max() > 0.01          # the friction states do act
     assert abs(s.q_pip[-1] - 0.5) <= abs(rest_free) + reach + abs(to_go)
+    fig, ax = s.plot()
+    np.testing.assert_array_equal(ax.get_lines()[2].get_ydata(), s.coupling_error)
+    import matplotlib.pyplot as plt
+    plt.close(fig)
 
 
 def test_tendon_bending_angles_follow_the_routing():

@@ -76,7 +76,7 @@ def test_one_joint_closed_by_the_chain_has_exactly_the_designed_poles(design):
     m, K = d.models[j], d.gains[j, :4]          # continuous design (no delay gain)
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
-                                torque_op=point["torque_offset"], torque_rate=d.law.torque_rate)
+                                torque_op=point.torque_offset, torque_rate=d.law.torque_rate)
     loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing",
                                                   tendon_law=TENDON_LAW.get(design, "force")), rate_hz=None, estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})
@@ -273,12 +273,12 @@ def _fast_link_frequencies(rig, point):
     from awiwi_drake.components.friction import guide_friction_force
     from awiwi_drake.control.joint_stage import joint_inertia
     from awiwi_drake.hand.systems import tendon_bending_angles
-    p, op = rig.params, point["op"]
+    p, op = rig.params, point.op
     hy = p.spring.hysteresis
     k = (np.asarray(op.tendon_stiffness) + (hy.width_ratio * op.tendon_force + hy.width_offset) / hy.presliding_length
          + guide_friction_force(tendon_bending_angles(rig.coupling, p), p.friction) / p.guide_presliding_length)
-    PS = point["coupling_matrix"]
-    M = joint_inertia(rig, point["joint_angle"], full=True)
+    PS = point.coupling_matrix
+    M = joint_inertia(rig, point.joint_angle, full=True)
     return np.sort(np.sqrt(np.linalg.eigvals(np.linalg.solve(M, PS.T @ np.diag(k) @ PS)).real))
 
 
@@ -343,12 +343,12 @@ def test_full_state_stages_on_the_hand_are_stable_at_rest(physics):
 def _chain_of(rig, point, models, gains, rate):
     """The chain with the joint stage of the given per-DoF ``gains`` on ``models`` (their reference maps)."""
     from awiwi_drake.control.linear import reference_maps
-    S = point["selection"]
+    S = point.selection
     maps = [reference_maps(m.A, m.B, np.array([1.0, 0.0, 0.0, 0.0])) for m in models]
     return TendonChainController(rig, JointStateFeedbackLaw(
         rig.coupling, S, rig.params.motor.pulley_radius, gains, state_map=np.array([nx for nx, _ in maps]),
-        input_map=np.array([nu[0] for _, nu in maps]), joint_angle_op=np.linalg.pinv(S) @ point["joint_angle"],
-        torque_op=point["torque_offset"], torque_rate=rate), point=point)
+        input_map=np.array([nu[0] for _, nu in maps]), joint_angle_op=np.linalg.pinv(S) @ point.joint_angle,
+        torque_op=point.torque_offset, torque_rate=rate), point=point)
 
 
 def test_cause_of_the_default_finger_instabilities_of_pole_placement_and_lqr():
@@ -372,7 +372,7 @@ def test_cause_of_the_default_finger_instabilities_of_pole_placement_and_lqr():
     rig = finger_diagram(finger="index")
     h = 1.0 / 3000.0
     point = chain_design_point(rig)
-    S = point["selection"]
+    S = point.selection
 
     def law_of(models, gains, rate):
         return _chain_of(rig, point, models, gains, rate)
@@ -394,7 +394,7 @@ def test_cause_of_the_default_finger_instabilities_of_pole_placement_and_lqr():
     assert drift.size and np.all(drift.real > 1.0), bad      # a real drift (with the motor friction (3.8) fed forward
     # in full by the force loop the fast link mode below, which the friction at rest used to damp, grows too)
     ctrl = joint_stage_controller(rig, "pole-placement")
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     assert all(torque_loop_gain(K) > 0.0 and motor_held_damping(K, m) >= -1e-9 * K[1] for K, m in zip(d.gains, d.models))
     assert sampled_loop_poles(rig, ctrl).spectral_radius < 1.0
 
@@ -465,13 +465,13 @@ def test_cause_of_the_pole_placement_instability_with_the_motor_friction_off():
     assert [nm.split("[")[0] for nm in rig.state_names[:2 * n + m_t]] == ["joint_angle"] * n + ["joint_velocity"] * n \
         + ["motor_angle"] * m_t
     q, theta = v[start:start + n], v[start + 2 * n:start + 2 * n + m_t]
-    P = np.asarray(rig.coupling.P(point["joint_angle"]))
+    P = np.asarray(rig.coupling.P(point.joint_angle))
     ratio = np.abs(rig.params.motor.pulley_radius * theta) / np.abs(P @ q)
     # the links' term dominates each tendon's elongation rate r_m omega + P qdot (the motors' changes it by at most
     # half, so its sign, the sign of the fed-back damping, is the links'); measured 0.09-0.22
     assert ratio[np.abs(P @ q) > 0.1 * np.abs(P @ q).max()].max() < 0.5, ratio
     ctrl = joint_stage_controller(rig, "pole-placement")
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     assert all(motor_held_damping(K, m) >= -1e-9 * K[1] for K, m in zip(d.gains, d.models))   # at the bound: brentq
     assert sampled_loop_poles(rig, ctrl).spectral_radius < 1.0
 
@@ -494,7 +494,7 @@ def test_sampled_loop_has_the_designed_poles_of_the_decoupled_abduction(design):
     p = FingerRigParams.for_finger("index").with_physics(hysteresis=False, ripple=False, guide_friction=False)
     rig = finger_diagram(finger="index", params=p.replace(motor=design_motor(p.motor)))
     ctrl = joint_stage_controller(rig, design, friction_observer=None)      # the design's own poles
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     loop = sampled_loop_poles(rig, ctrl, estimator=None)
     assert loop.spectral_radius < 1.0
     h = d.period
@@ -619,10 +619,10 @@ def test_full_state_stages_at_3khz_and_the_cause_of_their_saturation():
     assert all(m.torque_rate == "joint" for m in models)
     gains = np.array([design_joint_gains(m, "lqr", period=h) for m in models])
     maps = [reference_maps(m.A, m.B, np.array([1.0, 0.0, 0.0, 0.0])) for m in models]
-    law = JointStateFeedbackLaw(rig.coupling, point["selection"], rig.params.motor.pulley_radius, gains,
+    law = JointStateFeedbackLaw(rig.coupling, point.selection, rig.params.motor.pulley_radius, gains,
                                 state_map=np.array([nx for nx, _ in maps]), input_map=np.array([nu[0] for _, nu in maps]),
-                                joint_angle_op=np.linalg.pinv(point["selection"]) @ point["joint_angle"],
-                                torque_op=point["torque_offset"], torque_rate="joint")
+                                joint_angle_op=np.linalg.pinv(point.selection) @ point.joint_angle,
+                                torque_op=point.torque_offset, torque_rate="joint")
     taud = sampled_loop_poles(rig, TendonChainController(rig, law, point=point))
     bad = taud.s[np.abs(taud.z) > 1.0 + 1e-9]
     assert taud.spectral_radius > 1.0 and np.all((np.abs(bad.imag) > 3000) & (np.abs(bad.imag) < 5000)), bad
@@ -733,7 +733,7 @@ def test_friction_observer_block_leaves_a_load_to_the_impedance_where_the_guides
     for obs in (None, FrictionObserverParams()):
         rig = _design_rig()                          # (3.8) in motion: the joint's slowest mode at -35 1/s
         ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing", friction_observer=obs)
-        kp = ctrl.design["joint_design"].gains[1, 0]
+        kp = ctrl.design.joint_design.gains[1, 0]
         loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
         op = rig.operating_point()
         tau = np.zeros(4)
@@ -763,11 +763,11 @@ def test_static_stiffness_of_a_torque_feedback_stage_and_the_8_2_co_contraction(
     rig = _design_rig()
     ctrl = joint_stage_controller(rig, "lqr", distribution="sharing", stiffness_correction=StiffnessCorrectionParams(),
                                   friction_observer=None)      # the stage's own stiffness (the observer cancels a load)
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     K = d.gains[1]
     k_eff = K[0] / (1 + K[2])
     assert d.static_stiffness[1] == pytest.approx(k_eff, rel=1e-12) and k_eff < 0.5 * K[0]
-    np.testing.assert_allclose(ctrl.design["mechanical_stiffness"][0], np.diag(1.5 * d.static_stiffness), rtol=1e-12)
+    np.testing.assert_allclose(ctrl.design.mechanical_stiffness[0], np.diag(1.5 * d.static_stiffness), rtol=1e-12)
     loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
     op = rig.operating_point()
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle},
@@ -783,7 +783,7 @@ def test_every_dof_of_the_hand_gets_its_own_design():
     from awiwi_drake.hand import hand_diagram
     hand = hand_diagram(wrist=False)
     ctrl = make_controller("lqr", hand)
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     assert d.gains.shape == (19, 5) and [m.name for m in d.models][4:8] == ["q20", "q21", "q22", "q23"]
     rate = get_entry("lqr", hand).loop_options["rate_hz"]
     alone = design_joint_stage(finger_diagram(finger="index"), "lqr", period=1.0 / rate)
