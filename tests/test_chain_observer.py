@@ -162,7 +162,7 @@ def test_cascade_stiffness_is_half_the_11_16_bound_and_that_bound_is_the_routh_l
     np.testing.assert_allclose(K, np.minimum(c.joint_stiffness, c.cascade_margin * Mjj * w ** 2 / 4), rtol=1e-15)
     assert 0.09 < K[2] <= 0.1                                  # the PIP: Fig 15.27's range
     ctrl = make_controller("cascaded", rig)
-    np.testing.assert_allclose(ctrl.design["joint_design"].gains[:, 0], K, rtol=1e-12)
+    np.testing.assert_allclose(ctrl.design.joint_design.gains[:, 0], K, rtol=1e-12)
 
 
 def test_default_cascaded_step_leaves_the_force_loop_only_its_damping_residual():
@@ -177,7 +177,7 @@ def test_default_cascaded_step_leaves_the_force_loop_only_its_damping_residual()
     stiffness...), and the stepped MCP settled inside 2 % of the step."""
     rig = finger_diagram(finger="index")
     ctrl = make_controller("cascaded", rig)
-    Kp = ctrl.design["joint_design"].gains[:, 0]
+    Kp = ctrl.design.joint_design.gains[:, 0]
     loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
     op = rig.operating_point()
     q_ref = op.joint_angle.copy()
@@ -185,7 +185,7 @@ def test_default_cascaded_step_leaves_the_force_loop_only_its_damping_residual()
     ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
     res = simulate(loop, ctx, T_END, log=("joint_angle", "state", "tendon_force",
                                         "controller_tendon_force_reference"))
-    S = ctrl.design["selection"]
+    S = ctrl.design.selection
     e = np.linalg.pinv(S) @ (res["joint_angle"][-1] - q_ref)
     PS = np.asarray(rig.coupling.P(res["joint_angle"][-1])) @ S
     C = guide_friction_force(tendon_bending_angles(rig.coupling, rig.params), rig.params.friction)
@@ -298,7 +298,7 @@ def test_the_observer_estimates_the_joints_stick_slip_within_its_breakaway_bound
     from awiwi_drake.parameters.backstepping import PipStudy
     rig = pip_rig()
     ctrl = make_controller("cascaded", rig)
-    obs, S = ctrl._observer, ctrl.design["selection"]
+    obs, S = ctrl._observer, ctrl.design.selection
     Fs = rig.joint_friction[:, 1]
     loop = closed_loop(rig, ctrl, sensors="ideal", **get_entry("cascaded", rig).loop_options)
     op = rig.operating_point()
@@ -347,13 +347,13 @@ def test_a_load_beyond_the_guides_friction_is_not_cancelled_and_compare_measures
                                                             load_stiffness_range, mark_load, size_loads)
     rig = finger_diagram(finger="index")
     ctrl = make_controller("cascaded", rig)
-    obs, S = ctrl._observer, ctrl.design["selection"]
-    Kp = ctrl.design["joint_design"].gains[:, 0]
+    obs, S = ctrl._observer, ctrl.design.selection
+    Kp = ctrl.design.joint_design.gains[:, 0]
     loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
     op = rig.operating_point()
     B0 = obs.friction_bound(op.joint_angle, op.tendon_force)
     K = design_stiffness(loop)
-    np.testing.assert_array_equal(K, ctrl.design["joint_design"].static_stiffness)
+    np.testing.assert_array_equal(K, ctrl.design.joint_design.static_stiffness)
     p = compare_test_params(rig, step_size=0.5)
     loads, notes = size_loads(p, K, B0)
     assert loads[1] == 3.0 * B0[1] and notes[1] == ""
@@ -414,8 +414,8 @@ def test_a_load_within_the_guides_friction_is_held_and_compare_names_it():
     from awiwi_drake.control.compare.standard_tests import flag_run, mark_load
     rig = finger_diagram(finger="index")
     ctrl = make_controller("cascaded", rig)
-    S = ctrl.design["selection"]
-    Kp = ctrl.design["joint_design"].static_stiffness
+    S = ctrl.design.selection
+    Kp = ctrl.design.joint_design.static_stiffness
     loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
     op = rig.operating_point()
     p = compare_test_params(rig)
@@ -479,11 +479,11 @@ def test_guides_presliding_stiffness_is_the_plants_dahl_law_linearised_by_drake(
     names = list(rig.state_names)
     g = [names.index(nm) for nm in names if nm.startswith("guide_friction_force")]
     v = [names.index(f"joint_velocity[{j}]") for j in rig.joint_names]
-    S, PS = point["selection"], point["coupling_matrix"]
+    S, PS = point.selection, point.coupling_matrix
     K = PS.T @ lin.A[np.ix_(g, v)] @ S                  # d(-(P S)^T g)'/d qdot_dof = -K_g
     Kg = guide_presliding_stiffness(rig, point)
     np.testing.assert_allclose(Kg, np.diag(K), rtol=1e-9)
-    Kp = make_controller("cascaded", rig).design["joint_design"].gains[:, 0]
+    Kp = make_controller("cascaded", rig).design.joint_design.gains[:, 0]
     assert Kg[3] > 30 * Kp[3]
 
 
@@ -499,7 +499,7 @@ def _dip_on_its_presliding_spring(design, rig, point, dof):
     from awiwi_drake.control.joint_design import joint_subsystem
     from awiwi_drake.control.joint_stage import JointStateFeedbackLaw
     sub, op, pt = joint_subsystem(rig, dof, point=point)
-    Kg = design.observer["presliding_stiffness"][dof]
+    Kg = design.observer.presliding_stiffness[dof]
     b = DiagramBuilder()
     link = b.AddSystem(sub.diagram)
     spring = b.AddSystem(AffineSystem(np.zeros((0, 0)), np.zeros((0, 1)), np.zeros(0), np.zeros((1, 0)), [[-Kg]],
@@ -513,7 +513,7 @@ def _dip_on_its_presliding_spring(design, rig, point, dof):
     d = slice(dof, dof + 1)
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, design.gains[d],
                                 state_map=design.law.Nx[d], input_map=design.law.Nu[d], joint_angle_op=[0.0],
-                                torque_op=pt["torque_offset"])
+                                torque_op=pt.torque_offset)
     ctrl = TendonChainController(sprung, law, point=pt, distribution="sharing",
                                  friction_observer=FrictionObserverParams())
     loop = closed_loop(sprung, ctrl, rate_hz=None, sensors="ideal")
@@ -533,7 +533,7 @@ def test_the_designed_observer_rest_mode_is_drakes_linearisation_of_the_dip_on_i
     from awiwi_drake.control.joint_design import joint_stage_controller
     rig = finger_diagram(finger="index")
     ctrl = joint_stage_controller(rig, "cascaded", distribution="sharing")
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     j = 3                                                           # the DIP
     loop, ctx = _dip_on_its_presliding_spring(d, rig, ctrl.design, j)
     lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
@@ -543,7 +543,7 @@ def test_the_designed_observer_rest_mode_is_drakes_linearisation_of_the_dip_on_i
         assert np.min(np.abs(drake - s)) <= 1e-7 * abs(s), (s, drake)
     slowest = design[np.argmax(design.real)]
     assert slowest.imag == 0.0 and np.max(drake.real) == pytest.approx(slowest.real, rel=1e-7)
-    Kp, Kg, L = d.gains[j, 0], d.observer["presliding_stiffness"][j], d.observer["gain"][j]
+    Kp, Kg, L = d.gains[j, 0], d.observer.presliding_stiffness[j], d.observer.gain[j]
     assert slowest.real > -Kp * L / (Kp + Kg)                      # the chain's lag only slows it
     own = np.linalg.eigvals(d.models[j].A - d.models[j].B @ d.gains[j, None, :4])
     assert slowest.real > 10 * np.max(own.real)
@@ -561,13 +561,13 @@ def test_every_index_joint_settles_within_five_time_constants_of_its_observed_de
     from awiwi_drake.parameters.cli import CompareShortMode
     rig = finger_diagram(finger="index")
     ctrl = make_controller("cascaded", rig)
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     n_tau, band = CompareShortMode().step_time_constants, compare_test_params(rig).settling_band
-    tau, own = ctrl.design["time_constant"], dataclasses.replace(d, observer=None).tracking_time_constant()
+    tau, own = ctrl.design.time_constant, dataclasses.replace(d, observer=None).tracking_time_constant()
     assert tau > 10 * own
     loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
     op = rig.operating_point()
-    S = ctrl.design["selection"]
+    S = ctrl.design.selection
     q_ref = op.joint_angle + S @ np.full(S.shape[1], 0.2)
     res = simulate(loop, loop.create_context(op, references={"joint_angle_reference": q_ref}), n_tau * tau,
                    log=("joint_angle",), log_period=1e-3)

@@ -78,7 +78,8 @@ def test_printed_tendon_sdre_is_one_law_equal_to_drakes_lqr_on_14_9_and_the_jaco
     jac = tendon_sdre_controller(rig, p, design_force=30.0, fmap=fmap)
     kt, kw = tendon_sdre_gains(r_m * fmap.alpha_of_force(30.0), B, p.q_diag, p.r, damping=slope)
     np.testing.assert_allclose([kt, kw], jac.law.initial_gain, rtol=1e-9)
-    assert abs(jac.law.initial_gain[1] - printed.law.initial_gain[1]) > 1.0                # the friction slope moves K_omega (6.0 vs 10.2)
+    # the friction slope moves K_omega (6.0 vs 10.2)
+    assert abs(jac.law.initial_gain[1] - printed.law.initial_gain[1]) > 1.0
 
 
 def test_the_gain_follows_the_state_through_the_springs_slope():
@@ -189,8 +190,8 @@ def test_index_finger_chain_with_the_sdre_force_law_steps_a_joint_and_holds_the_
     assert loop.fused is not None and loop.rate_hz == 3000.0
     with pytest.raises(ValueError, match="the two-time-scale chain's tendon level is its own motor-position loop"):
         make_controller("two-time-scale", rig, chain_params=HandChainParams(tendon_law="sdre"))
-    design = ctrl.design["joint_design"]
-    S = ctrl.design["selection"]
+    design = ctrl.design.joint_design
+    S = ctrl.design.selection
     mcp = 1
     window = 0.02 + 5.0 * design.tracking_time_constants()[mcp]
     op = rig.operating_point()

@@ -21,6 +21,12 @@ def test_motor_position_loop_shows_the_springs_stiffness_which_co_contraction_ra
         np.testing.assert_allclose(m.tendon_force, float(m.level.split()[1]), rtol=1e-3)
     lo, hi = runs
     assert np.all(hi.diagonal() - stiffness_bound(hi) > lo.diagonal() + stiffness_bound(lo))
+    fig, ax = lo.plot()                                      # both levels on one axis, side by side
+    hi.plot(ax=ax)
+    np.testing.assert_array_equal([c[0].get_ydata() for c in ax.containers], [lo.diagonal(), hi.diagonal()])
+    np.testing.assert_allclose(ax.containers[1][0].get_xdata() - ax.containers[0][0].get_xdata(), 0.08)
+    import matplotlib.pyplot as plt
+    plt.close(fig)
 
 
 def test_force_chain_shows_its_impedance_not_the_co_contracted_springs():

@@ -40,7 +40,7 @@ def test_short_window_lets_each_designed_joint_loop_settle(name):
     tau (the window is not padded); the compare reads tau for the sampled finger loop (no linearisation)."""
     rig = finger_diagram(finger="index")
     ctrl = make_controller(name, rig)
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     tau = d.tracking_time_constant()
     loop = closed_loop(rig, ctrl, **get_entry(name, rig).loop_options)
     assert design_time_constant(loop) == tau and dominant_time_constant(loop) == tau
@@ -101,7 +101,7 @@ def test_full_compare_window_is_at_least_what_the_compared_designs_need(tmp_path
     # each controller designed once: the window is read from the loop the run gets (it was designed twice)
     assert built == ["cascaded"]
     full = compare_test_params("finger-index")
-    tau = seen["loops"]["cascaded"].controller.design["time_constant"]
+    tau = seen["loops"]["cascaded"].controller.design.time_constant
     make_index = lambda: finger_diagram(finger="index")                                       # noqa: E731
     window = design_step_duration(make_index, seen["loops"], full)
     assert window == pytest.approx(full.step_delay + CompareShortMode().step_time_constants * tau, rel=1e-12)

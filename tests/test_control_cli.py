@@ -124,16 +124,16 @@ def test_compare_controller_set_and_ideal_sensors_reach_the_loop(tmp_path, monke
         loop = seen.pop("cascaded")
         design = loop.controller.design
         if tag == "alg2":
-            assert design["distribution_method"] == "algorithm2"
-            assert design["joint_design"].static_stiffness.max() <= 0.25 + 1e-12   # the set joint_stiffness caps K
-            K_mech = np.concatenate([np.diag(B) for B in design["mechanical_stiffness"]])     # (8.2), eps = 2
-            np.testing.assert_allclose(K_mech, 2.0 * design["joint_design"].static_stiffness, rtol=1e-12)
+            assert design.distribution_method == "algorithm2"
+            assert design.joint_design.static_stiffness.max() <= 0.25 + 1e-12   # the set joint_stiffness caps K
+            K_mech = np.concatenate([np.diag(B) for B in design.mechanical_stiffness])     # (8.2), eps = 2
+            np.testing.assert_allclose(K_mech, 2.0 * design.joint_design.static_stiffness, rtol=1e-12)
             assert loop.estimated == () and loop.fused is None            # the controller reads the true state
             assert loop.diagram.HasOutputPort("joint_angle_estimation_error")  # the estimator runs beside it
             assert "distribution_method=algorithm2" in (tmp_path / tag / "metrics.md").read_text()
             assert loop.controller.HasOutputPort("tendon_sdre_gain")      # the ch. 14 tendon SDRE is the force law
         else:
             assert not loop.controller.HasOutputPort("tendon_sdre_gain")
-            assert design["distribution_method"] == "optimal"
-            assert design["joint_design"].static_stiffness.max() == pytest.approx(0.5)   # HandChainParams' default
+            assert design.distribution_method == "optimal"
+            assert design.joint_design.static_stiffness.max() == pytest.approx(0.5)   # HandChainParams' default
             assert loop.estimator is not None or loop.fused is not None

@@ -12,7 +12,7 @@ from awiwi_drake.discrepancy import (DiagnosisInterrupted, diagnose, load_datase
                                      save_dataset, write_report)
 from _joint_rig_check import assert_models_match_joint_rig
 from awiwi_drake.discrepancy.catalog import PARAM_INDEX, default_vector
-from awiwi_drake.discrepancy.decide import materiality, noise_equivalent, rejection_reason
+from awiwi_drake.discrepancy.decide import NoiseEquivalent, materiality, rejection_reason
 from awiwi_drake.discrepancy.replay import ReplayEngine, project
 from awiwi_drake.discrepancy.result import CandidateResult
 from awiwi_drake.parameters.discrepancy import DiscrepancySettings, TruthGeneratorParams
@@ -28,7 +28,7 @@ def test_noise_equivalent_quantities_follow_the_sensor_noise(joint_engine):
     """The noise-equivalent force is the force sensors' per-sample noise floor; the
     torques are that force on the motor and link pulleys."""
     eng = joint_engine
-    ne = noise_equivalent(eng)
+    ne = NoiseEquivalent(eng)
     sig = dict(zip(eng.out_names, eng.sigma))
     assert ne.force == pytest.approx(min(sig["tendon_force_1"], sig["tendon_force_2"]))
     assert ne.motor_torque == pytest.approx(eng.nom.motor_pulley_radius * ne.force)
@@ -40,7 +40,7 @@ def test_materiality_floors_reject_effects_below_the_noise(joint_engine):
     """Issue 12's leftovers: a 0.22 ms delay (below one 1 ms sample) and a hysteresis
     half-width far below the noise-equivalent force are not material; the same effects
     above their floors are."""
-    ne = noise_equivalent(joint_engine)
+    ne = NoiseEquivalent(joint_engine)
     assert not materiality("delay", {"delay": 0.22e-3}, ne)["material"]
     assert materiality("delay", {"delay": 3e-3}, ne)["material"]
     assert not materiality("spring_hysteresis", {"hysteresis_width": 0.08 * ne.force}, ne)["material"]
@@ -58,7 +58,7 @@ def test_calibration_corrections_need_a_material_torque(joint_engine):
     torque by m * 0.0006 * rms(q'') -- far below the noise-equivalent link torque: not material; a 50 %
     inertia error at the same motion is.  The size is that torque, computed here by hand."""
     eng = joint_engine
-    ne = noise_equivalent(eng)
+    ne = NoiseEquivalent(eng)
     n = eng.nom.num_motors
     qd = eng.xhat[2 * n + 1]
     qdd_rms = float(np.sqrt(np.mean((np.diff(qd) / eng.dt) ** 2)))
@@ -231,7 +231,13 @@ def test_locate_judges_a_region_by_the_residuals_effective_sample_size():
     region that stands out by 3 standard errors of its *effective* sample size in more than the false-alarm
     rate of 10 bins at 3 sigma (2.7 %, so at most 2 of 20 records), where the white-noise standard error
     flags most records; a bump of 8 of those standard errors on one angle bin's range is flagged there on
-    every record. The effective size of white noise is its length, of AR(1) ``n (1 - a) / (1 + a)``."""
+    every record. The effective size of white noise is its length, of AR(1) ``n (1 - a) / (1 + a)``.
+
+    The estimate against its distribution at the bandwidth ``m`` it chose: its correlation time
+    ``tau = 1 + 2 sum_k w_k rho_k`` has the expectation ``1 + 2 sum_k w_k (1 - k/n) a^k - (1 + 2 sum_k w_k) tau_0 / n``
+    (AR(1) ``rho_k = a^k``; the 1/n normalisation and the removed mean, whose variance ``tau_0 / n`` lowers every
+    lag's autocovariance) and the standard deviation ``sqrt(4 m / (3 n)) tau_0`` of the Bartlett long-run variance
+    (Andrews 1991: ``2 (m/n) int k^2``, ``int k^2 = 2/3``), ``tau_0 = (1 + a) / (1 - a)``; within 3 of them."""
     from scipy.signal import lfilter
 
     from awiwi_drake.discrepancy.localise import effective_sample_size, locate
@@ -240,11 +246,17 @@ def test_locate_judges_a_region_by_the_residuals_effective_sample_size():
     rng = np.random.default_rng(12)
     angle = np.sin(2 * np.pi * 0.2 * np.arange(n) * 1e-3)      # two periods of the operating quantity
     n_eff_true = n * (1 - a) / (1 + a)
-    assert effective_sample_size(rng.standard_normal(n)) == pytest.approx(n, rel=0.1)
+    tau_0 = (1 + a) / (1 - a)
+    n_white, m = effective_sample_size(rng.standard_normal(n))
+    assert n_white == pytest.approx(n, abs=3.0 * np.sqrt(4.0 * m / (3.0 * n)) * n)    # tau_0 = 1 there
     white_flags = eff_flags = 0
     for _ in range(20):
         res = lfilter([1.0], [1.0, -a], rng.standard_normal(n)) * np.sqrt(1 - a * a)   # unit variance
-        assert effective_sample_size(res) == pytest.approx(n_eff_true, rel=0.7)
+        n_est, m = effective_sample_size(res)
+        k = np.arange(1, m + 1)
+        w = 1.0 - k / (m + 1.0)
+        expected = 1.0 + 2.0 * np.sum(w * (1.0 - k / n) * a ** k) - (1.0 + 2.0 * np.sum(w)) * tau_0 / n
+        assert abs(n / n_est - expected) <= 3.0 * np.sqrt(4.0 * m / (3.0 * n)) * tau_0, (m, n / n_est, expected)
         maps = _region_maps(res, angle)
         eff_flags += bool(locate(maps, threshold=1.5)["operating_region"])
         white_se = np.sqrt(np.mean(res ** 2)) / np.sqrt(n / 10)            # the white-noise rule
@@ -349,8 +361,8 @@ def _dx(ratio_after, steps=(), stop="no candidate passes the acceptance tests", 
     from awiwi_drake.discrepancy.result import Diagnosis, Step
     s = [Step(e, "physical", "confirmed", 1.0, {}, {}, 0.1, {}, [], []) for e in steps]
     unexpl = ratio_after > 1.5 if unexplained is None else unexplained
-    return Diagnosis("d", "joint-rig", "unexplained discrepancy remains" if unexpl else "effects found", list(steps), [],
-                     s, 0.2, 0.1, {}, {}, 30.0, ratio_after, {}, default_vector(), 1.0, 1,
+    return Diagnosis("d", "joint-rig", "unexplained discrepancy remains" if unexpl else "effects found", list(steps),
+                     [], s, 0.2, 0.1, {}, {}, 30.0, ratio_after, {}, default_vector(), 1.0, 1,
                      unexplained_residual=unexpl, unexplained_ratio=1.5,
                      unexplained={"text": "tendon_force_1 (3.1x floor)"} if unexpl else {}, stop_reason=stop)
 
@@ -450,7 +462,8 @@ def test_stateful_probe_ranking_keeps_the_best_probe_for_its_own_profile():
     from awiwi_drake.discrepancy.catalog import param_specs
     from awiwi_drake.discrepancy.screen import STATEFUL_EFFECTS, ResidualState
     from awiwi_drake.parameters.discrepancy import CatalogBounds
-    ds = make_truth_dataset("joint-rig", ["spring_hysteresis"], snr_db=30, seed=32, gen=TruthGeneratorParams(duration=2.0))
+    ds = make_truth_dataset("joint-rig", ["spring_hysteresis"], snr_db=30, seed=32,
+                            gen=TruthGeneratorParams(duration=2.0))
     eng = ReplayEngine(ds)
     st = ResidualState(eng, default_vector())
     high = {s.name: s.high for s in param_specs()}["hysteresis_width"]

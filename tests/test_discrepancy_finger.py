@@ -471,7 +471,7 @@ def test_truth_shapes_and_hysteresis_play_come_from_the_parameters():
     drawn from the parameter sets (TruthGeneratorParams.stribeck_*, FingerTruthParams.motor_viscous_range); the
     hysteresis candidate's play is DiscrepancySettings.finger_hysteresis_play (a wider play delays every reversal
     by two play widths: the loop of a triangle path moves later)."""
-    from awiwi_drake.discrepancy.finger import _play
+    from awiwi_drake.discrepancy.replay import play_operator
     from awiwi_drake.discrepancy.finger_truth import draw_finger_truth
     from awiwi_drake.parameters.discrepancy import TruthGeneratorParams
     g = TruthGeneratorParams()
@@ -483,7 +483,7 @@ def test_truth_shapes_and_hysteresis_play_come_from_the_parameters():
         assert g.stribeck_velocity_range[0] <= p["vs"] <= g.stribeck_velocity_range[1]
         assert g.stribeck_smoothing_range[0] <= p["eps"] <= g.stribeck_smoothing_range[1]
     x = np.concatenate([np.linspace(0, 1, 11), np.linspace(0.9, 0, 10)])
-    y = _play(x, 0.1)
+    y = play_operator(x, 0.1)
     assert y[10] == pytest.approx(0.9) and np.argmax(y) == 10 and y[11] == pytest.approx(0.9)   # 2 x 0.1 late
 
 

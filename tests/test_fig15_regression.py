@@ -72,6 +72,15 @@ def test_fig15_26_bandwidths_are_the_minus_3db_points_of_the_linearised_loops_an
     from awiwi_drake.reproductions.ch15_backstepping import gain_diagram_study
     diagrams = {d.label: d for d in gain_diagram_study()}
     assert set(diagrams) == {"backstepping", "two-time-scale"}
+    fig = ax = None
+    for d in diagrams.values():                              # the figure: both on one axis, bandwidths marked
+        fig, ax = d.plot(ax=ax)
+    curves = [ln for ln in ax.get_lines() if len(ln.get_xdata()) > 2]
+    np.testing.assert_array_equal([ln.get_ydata() for ln in curves], [d.gain for d in diagrams.values()])
+    assert [ln.get_xdata()[0] for ln in ax.get_lines() if len(ln.get_xdata()) == 2] == \
+        [d.bandwidth for d in diagrams.values()]
+    import matplotlib.pyplot as plt
+    plt.close(fig)
     for d in diagrams.values():
         lin = d.linearization
         assert np.all(np.linalg.eigvals(lin.A).real < 0)

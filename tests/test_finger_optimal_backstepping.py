@@ -150,7 +150,7 @@ def test_thumb_selection_with_its_position_dependent_coupling_is_stable_at_3khz(
     come from its four DoF selections inside the box, and its 3 kHz sampled loop (physics on) is stable."""
     rig = finger_diagram(finger="thumb")
     ctrl = make_controller("optimal-backstepping", rig)
-    sel = ctrl.law.design["force_gains"]
+    sel = ctrl.law.design.force_gains
     assert [f.name for f in sel.fits] == ["q10", "q11", "q12", "q13"]
     assert all(f.box[0] <= f.k3 <= f.box[1] and f.box[0] <= f.k4 <= f.box[1] for f in sel.fits)
     np.testing.assert_array_equal(ctrl.law.K4, sel.k4)

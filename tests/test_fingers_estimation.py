@@ -115,6 +115,13 @@ def test_projection_onto_the_search_bound_is_reported_not_silent():
     np.testing.assert_array_equal(study.at_limit[key], on_bound)
     assert study.summary_rows()[0]["at_limit"] == 3
     assert np.all(study.errors[key][study.at_limit[key]] > 0.1)
+    fig, axes = study.plot("warm")                          # Fig 5.17: one panel per case run, truth and estimate
+    assert axes.shape == (1, 1)
+    np.testing.assert_array_equal(axes[0, 0].get_lines()[1].get_xydata(), study.estimates[key])
+    with pytest.raises(ValueError, match=r"case \(15, 0.0, 'cold'\) was not run"):
+        study.plot(case=(15, 0.0, "cold"))
+    import matplotlib.pyplot as plt
+    plt.close(fig)
     # the 3 kHz estimator warns once and counts
     from awiwi_drake.hand.estimation import LinkPositionEstimator
     est = LinkPositionEstimator(c, 0.005, np.zeros(8), iterations=50)

@@ -122,6 +122,10 @@ def test_fig_5_7_coriolis_effect_vanishes_at_least_quadratically_with_the_deflec
     assert np.max(np.abs(big.q_full[:, 1])) == pytest.approx(0.05, rel=1e-6)   # released from rest
     # the abduction is "not influenced" (thesis): < 0.2 % of the MCP deflection
     assert np.max(np.abs(big.q_full[:, 0])) < 2e-3 * 0.05
+    import matplotlib.pyplot as plt
+    fig, ax = big.plot()                                    # Fig 5.7 draws the difference, one line per joint
+    np.testing.assert_array_equal(np.array([ln.get_ydata() for ln in ax.get_lines()]), big.difference.T)
+    plt.close(fig)
     full = coriolis_study("index", deflection=0.025, t_final=0.2, num_samples=201)
     assert np.all(full.max_abs_difference < 1e-3)      # the thesis's bound, its 0.2 s horizon
 

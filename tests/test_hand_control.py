@@ -155,7 +155,7 @@ def test_force_distribution_in_the_chain_gives_the_exact_joint_torque_within_bou
     p = ForceDistributionParams()
     assert np.all(f >= p.f_min - 1e-9) and np.all(f <= p.f_max + 1e-9)
     assert np.all(ctrl.GetOutputPort("distribution_status").Eval(ctx) == 0)
-    assert np.abs(tau - ctrl.design["torque_offset"]).max() > 1e-3     # a real request, not the op
+    assert np.abs(tau - ctrl.design.torque_offset).max() > 1e-3     # a real request, not the op
 
 
 @pytest.mark.parametrize("finger,per_tendon", [("index", False), ("middle", False), ("index", True)])
@@ -336,7 +336,7 @@ def test_finger_backstepping_step_with_guide_friction_stops_in_its_dead_band():
     # the dead band's half-width per DoF is the largest error of that DoF alone that the frictions can hold: at it
     # the rest needs exactly its bound on one DoF, beyond it more than the bound
     for j in range(len(e)):
-        ej = np.eye(len(e))[j] * law.design["dead_band"][j]
+        ej = np.eye(len(e))[j] * law.design.dead_band[j]
         assert 0.99 < np.max(law.friction_hold(0.999 * ej)) <= 1.0 < np.max(law.friction_hold(1.01 * ej))
 
 
@@ -356,14 +356,14 @@ def test_backstepping_friction_observer_has_no_dead_band_and_tracks_where_the_pl
     rig = _rig()
     ctrl = make_controller("backstepping-friction-observer", rig)
     law = ctrl.law
-    assert law.friction_compensation and np.all(law.design["dead_band"] < 1e-3)
+    assert law.friction_compensation and np.all(law.design.dead_band < 1e-3)
     plain = make_controller("backstepping-friction-observer:no-observer", _rig())      # the chain's convention
     assert isinstance(plain, StaticLawController) and not plain.law.friction_compensation
     (C, _), (beta, _), _ = law.friction_levels
     rng = np.random.default_rng(0)
     for _ in range(3):                     # any friction state within the bounds rests inside the dead band
         g, z = (rng.uniform(-1, 1, C.size) * lv for lv in (C, beta * law.f_op))
-        assert np.all(np.abs(law.rest_error(g, z)) <= law.design["dead_band"] + 1e-12)
+        assert np.all(np.abs(law.rest_error(g, z)) <= law.design.dead_band + 1e-12)
     loop = closed_loop(rig, ctrl, **get_entry("backstepping-friction-observer", rig).loop_options)
     op = rig.operating_point()
     q_ref = op.joint_angle + law.S @ np.full(law.S.shape[1], 0.2)
@@ -425,7 +425,11 @@ def test_backstepping_friction_observer_under_a_load_beyond_the_friction_bound_d
     B = law.friction_bound(law.springs.force(res["elongation"][-1]))
     np.testing.assert_allclose(res["controller_friction_compensation_bound"][-1], B, rtol=1e-9)
     rest = law.rest_error(g, z, tau, B)
-    np.testing.assert_allclose(e[1], rest[1], rtol=0.01)                    # measured 0.4 %
+    # not derived: the MCP is off its rest by what the slow rest mode (-1.0 1/s, observer_rest_modes) still creeps
+    # in the PIP/DIP through the coupling, measured -4.6, -5.0, -4.2, -2.7, -1.8 x 1e-4 rad at 0.3, 0.45, 0.6, 0.9,
+    # 1.2 s (0.44 % of the rest at 0.6 s).  A bound needs the quasi-static rest modes with the MCP's compensation
+    # clipped at B, which observer_rest_modes (all DoF inside their bound) does not model
+    np.testing.assert_allclose(e[1], rest[1], rtol=0.01)
     # PIP, DIP: still creeping towards their closed form (the observer's slow mode on the guides' presliding): closer
     # to it at the end than half-way
     half = law.Sp @ (res["joint_angle"][res.t.size // 2] - op.joint_angle)
@@ -547,7 +551,7 @@ def test_cause_of_the_friction_observers_slow_mode_is_the_guides_presliding():
     make = lambda: finger_diagram(finger="index")       # noqa: E731
     params, loops = compare_test_params(make()), build_loops(make, ["backstepping-friction-observer"])
     window = design_step_duration(make, loops, params)
-    tau = loops["backstepping-friction-observer"].controller.design["time_constant"]
+    tau = loops["backstepping-friction-observer"].controller.design.time_constant
     assert window == pytest.approx(params.step_delay + CompareShortMode().step_time_constants * tau, rel=1e-12)
     assert window >= params.step_delay + np.log(1.0 / params.settling_band) / abs(p[100.0]), (window, p[100.0])
 
@@ -579,7 +583,7 @@ def test_friction_observer_variants_design_counts_the_observers_rest_mode_and_it
     for L in (50.0, 200.0):
         ctrl = finger_backstepping_controller(finger_diagram(finger="index", params=smooth),
                                               friction_observer=FrictionObserverParams(gain=L))
-        design[L] = float(np.max(ctrl.design["observer_rest_modes"].real))
+        design[L] = float(np.max(ctrl.design.observer_rest_modes.real))
         poles = sampled_loop_poles(finger_diagram(finger="index", params=smooth), ctrl)
         z = np.abs(poles.z[~poles.neutral])
         p[L] = float(np.max(np.log(z[z > 0])) / PERIOD)   # z = 0: a one-period delay, no rate
@@ -626,7 +630,7 @@ def test_thumb_base_sharing_gives_the_desired_torque_at_every_pose_and_the_obser
     held = np.abs(plain.rest_error(g, z))[:2]
     assert np.all(e[-1] < held), (e[-1], held)
     three_quarters = e[int(0.75 * (len(e) - 1))]
-    assert np.all((e[-1] <= law.design["dead_band"][:2]) | (e[-1] < three_quarters)), (e[-1], three_quarters)
+    assert np.all((e[-1] <= law.design.dead_band[:2]) | (e[-1] < three_quarters)), (e[-1], three_quarters)
 
 
 def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffness_and_the_observer_shrinks_it():
@@ -651,20 +655,20 @@ def test_impedance_step_with_guide_friction_stops_at_friction_torque_over_stiffn
     for obs in (None, FrictionObserverParams()):
         rig = _rig()
         ctrl = joint_stage_controller(rig, "cascaded", friction_observer=obs)
-        Kp = ctrl.design["joint_design"].gains[:, 0]
+        Kp = ctrl.design.joint_design.gains[:, 0]
         loop = closed_loop(rig, ctrl, **get_entry("cascaded", rig).loop_options)
         op = rig.operating_point()
         q_ref = op.joint_angle.copy()
         q_ref[1] += 0.2
         ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
         res = simulate(loop.diagram, ctx, 0.3, log=("joint_angle", "state", "tendon_force"))
-        S = ctrl.design["selection"]
+        S = ctrl.design.selection
         e = np.linalg.pinv(S) @ (res["joint_angle"] - q_ref).T            # (DoF, samples)
         errors[obs is not None] = e
         if obs is None:
             g = res["state"][-1][[i for i, nm in enumerate(rig.state_names) if nm.startswith("guide_friction_force")]]
             PS = np.asarray(rig.coupling.P(res["joint_angle"][-1])) @ S
-            tau_op = ctrl.design["torque_offset"]
+            tau_op = ctrl.design.torque_offset
             np.testing.assert_allclose(e[:, -1], (tau_op - PS.T @ g) / Kp, rtol=0, atol=1e-3)
             C = guide_friction_force(tendon_bending_angles(rig.coupling, rig.params), rig.params.friction)
             assert np.all(np.abs(g) <= C + 1e-9)
@@ -1051,7 +1055,7 @@ def test_distal_joints_rest_within_the_force_loops_residual_over_their_impedance
     p = FingerRigParams.for_finger("index").with_physics(guide_friction=False, hysteresis=False)
     rig = finger_diagram(finger="index", params=p)
     ctrl = make_controller("cascaded", rig)
-    gains = ctrl.design["joint_design"].gains
+    gains = ctrl.design.joint_design.gains
     Kp, D = gains[:, 0], gains[:, 1]
     law = ctrl._force.fused_parts["law"]
     s, a = law.gains.friction_scale, law.ripple_scale
@@ -1061,7 +1065,7 @@ def test_distal_joints_rest_within_the_force_loops_residual_over_their_impedance
     ctx = loop.create_context(op, references={"joint_angle_reference": q_ref})
     res = simulate(loop, ctx, 0.5, log=("joint_angle", "state", "tendon_force", "controller_tendon_force_reference"))
     n, m, motor = rig.num_joints, rig.num_tendons, rig.params.motor
-    S = ctrl.design["selection"]
+    S = ctrl.design.selection
     x0, x1 = res["state"][-2], res["state"][-1]
     q, v, th, w = x1[:n], x1[n:2 * n], x1[2 * n:2 * n + m], x1[2 * n + m:2 * n + 2 * m]
     h = res.t[-1] - res.t[-2]

@@ -304,7 +304,8 @@ def _divergence_error_misuses(folders) -> list:
     import pathlib
 
     def names(node):
-        return {n.id if isinstance(n, ast.Name) else n.attr for n in ast.walk(node) if isinstance(n, (ast.Name, ast.Attribute))}
+        return {n.id if isinstance(n, ast.Name) else n.attr for n in ast.walk(node)
+                if isinstance(n, (ast.Name, ast.Attribute))}
 
     def raised(node):      # the raised class's name, or None for a bare raise / a raised variable
         exc = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
@@ -363,7 +364,8 @@ def test_one_simulation_loop_and_one_divergence_error(tmp_path):
     # ... and that one error in practice: divergence is never re-wrapped (caught and raised as another type) nor
     # raised as FloatingPointError or a bare RuntimeError, in the package or the benchmarks
     (tmp_path / "planted.py").write_text(
-        "try:\n    simulate(d, c, 1.0)\nexcept SimulationDivergedError as exc:\n    raise FloatingPointError(str(exc))\n"
+        "try:\n    simulate(d, c, 1.0)\nexcept SimulationDivergedError as exc:\n"
+        "    raise FloatingPointError(str(exc))\n"
         "try:\n    sim.AdvanceTo(1.0)\nexcept RuntimeError as exc:\n    raise ValueError(str(exc))\n"
         "try:\n    simulate(d, c, 1.0)\nexcept SimulationDivergedError:\n    raise\nexcept RuntimeError as exc:\n"
         "    raise SimulationError(str(exc))\n"
@@ -386,7 +388,8 @@ def test_one_simulation_loop_and_one_divergence_error(tmp_path):
             stack.extend(ast.iter_child_nodes(node))
         return False
     raw = sorted(f"{b.name}:{fn.name}" for b in (pkg.parent / "benchmarks").glob("*.py")
-                 for fn in ast.walk(ast.parse(b.read_text())) if isinstance(fn, ast.FunctionDef) and drives_simulator(fn))
+                 for fn in ast.walk(ast.parse(b.read_text()))
+                 if isinstance(fn, ast.FunctionDef) and drives_simulator(fn))
     assert raw == ["bench_rigs.py:_fixed_rk3", "bench_rigs.py:_period_us"]
     # one closed-loop builder: ClosedLoop handles come from control.closed_loop only
     handles = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*.py")

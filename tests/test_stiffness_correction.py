@@ -70,6 +70,11 @@ def test_effective_stiffness_held_while_loads_change_the_springs():
         err = {c: abs(r.tau_ext[end] / r.q[end] / target - 1.0) for c, r in runs.items()}
         assert err[True] < 0.02 and err[True] < err[False]
         assert np.all(run.k_imp > 0)
+    fig, ax = run.plot()                                     # Fig 8.3: K_imp, K_mech, K_eff and the target
+    np.testing.assert_array_equal(np.array([ln.get_ydata() for ln in ax.get_lines()]),
+                                  [run.k_imp, run.k_mech, run.k_eff, run.k_target])
+    import matplotlib.pyplot as plt
+    plt.close(fig)
 
 
 def test_stiffness_correction_closes_through_closed_loop():

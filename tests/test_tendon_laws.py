@@ -16,6 +16,7 @@ from _finger_laws import compiled, ideal_drive_derivatives
 from awiwi_drake.components.spring import TendonSprings, tendon_spring
 from awiwi_drake.control import closed_loop
 from awiwi_drake.control.chain import TendonChainController, TendonForceStage, rig_springs
+from awiwi_drake.control.design import ChainDesign
 from awiwi_drake.control.force_distribution import OptimalForceDistribution, TendonStiffnessMap
 from awiwi_drake.control.joint_design import design_joint_stage, design_motor, joint_subsystem, reduced_joint_models
 from awiwi_drake.control.joint_stage import JointStateFeedbackLaw
@@ -107,8 +108,8 @@ def test_chain_force_stage_uses_each_tendons_slope_and_names_a_bad_tendon():
     springs = rig_springs(rig)
     i3 = rig.tendon_names.index("index_h3")
     assert not springs.uniform and springs[i3] is not springs[0]
-    stage = TendonForceStage(rig.coupling, springs, rig.params, HandChainParams(), point=dict(tendon_force=np.full(8, 20.0),
-                             coupling_matrix=np.zeros((8, 4)), torque_offset=np.zeros(4)), distribution="sharing")
+    stage = TendonForceStage(rig.coupling, springs, rig.params, HandChainParams(), point=ChainDesign(
+                             np.eye(4), np.zeros((8, 4)), np.full(8, 20.0), np.zeros(4)), distribution="sharing")
     law = stage.GetSubsystemByName("tendon_force_control").law
     r_m, B = rig.params.motor.pulley_radius, rig.params.motor.inertia
     w, xi = stage.gains.natural_frequency, stage.gains.damping_ratio
@@ -174,7 +175,7 @@ def test_one_joint_with_mixed_laws_closed_by_the_chain_has_exactly_the_designed_
     K = d.gains[j, :4]
     law = JointStateFeedbackLaw(sub.coupling, np.eye(1), rig.params.motor.pulley_radius, K[None, :],
                                 state_map=d.law.Nx[j:j + 1], input_map=d.law.Nu[j:j + 1], joint_angle_op=[0.0],
-                                torque_op=point["torque_offset"], torque_rate=d.law.torque_rate)
+                                torque_op=point.torque_offset, torque_rate=d.law.torque_rate)
     loop = closed_loop(sub, TendonChainController(sub, law, point=point, distribution="sharing"), rate_hz=None,
                        estimator=None)
     ctx = loop.create_context(op, references={"joint_angle_reference": [0.0]})

@@ -284,16 +284,15 @@ def test_plot_uses_the_study(study):
     import matplotlib
 
     matplotlib.use("Agg")
-    from awiwi_drake.reproductions.ch06_wrist import plot_wrist_constraint_errors, plot_wrist_displacements
-
-    fig, ax = plot_wrist_displacements(study)
+    fig, ax = study.plot(panel="displacements")
     lines = ax.get_lines()
     assert len(lines) == 38
     np.testing.assert_array_equal(lines[5].get_ydata(), study.offsets[:, 5])
-    fig2, ax2 = plot_wrist_constraint_errors(study)
+    fig2, (ax2, ax3) = study.plot()
     assert np.max(ax2.get_lines()[0].get_ydata()) == pytest.approx(study.max_constraint_error)
-    with pytest.raises(ValueError, match="WristMotionResult"):
-        plot_wrist_displacements({"t": [0]})
+    assert len(ax3.get_lines()) == 38
+    with pytest.raises(ValueError, match="WristMotionResult.plot: panel 'offsets'"):
+        study.plot(panel="offsets")
     import matplotlib.pyplot as plt
 
     plt.close(fig)

@@ -240,10 +240,6 @@ class LinearizationResult(_JsonFile):
         """Eigenvalues of A, sorted, round-off zeros set to 0."""
         return clean_poles(np.linalg.eigvals(self.A), np.linalg.norm(self.A, 1) if self.A.size else 1.0)
 
-    @property
-    def num_states(self) -> int:
-        return self.A.shape[0]
-
     def plot(self, ax=None, *, label: str = "poles", **kw):
         """Pole map in the s-plane with rays of constant damping ratio (:func:`awiwi_drake.plotting.plot_poles`;
         ``symlog=``, ``damping=``, marker style); the numbers are :meth:`damp`; returns ``(fig, ax)``."""

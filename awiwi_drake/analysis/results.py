@@ -109,9 +109,9 @@ class SimulationResult:
     @property
     def final_state(self) -> np.ndarray | None:
         """State at the end (None if no context was kept): the continuous state, then the state of each
-        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``, :attr:`final_sampled_state`: the physical
-        state it outputs, while its discrete state in ``final_context`` may be in integration coordinates,
-        see :func:`~awiwi_drake.components.rig_system.rig_integration_system`)."""
+        sampled plant (a rig integrated inside its discrete update, ``info["sampled_plants"]``,
+        :attr:`final_sampled_state`: the physical state it outputs, while its discrete state in ``final_context``
+        may be in integration coordinates, see :func:`~awiwi_drake.components.rig_system.rig_integration_system`)."""
         if self.final_context is None:
             return None
         x = self.final_context.get_continuous_state_vector().CopyToVector()

@@ -447,7 +447,7 @@ def closed_loop(rig: Any, controller: System, *, rate_hz: float | None = 3000.0,
             raise ValueError(f"closed_loop: estimator must be a Drake System or have one in .system, got "
                              f"{type(est_sys).__name__}")
         check_reads_rig("estimator input", est_sys, _input_names(est_sys))
-    if not ideal and getattr(rig, "link_estimator", None) is not None and "state" in measurement_ports(controller):
+    if not ideal and not _joint_sensors(rig) and "state" in measurement_ports(controller):
         raise ValueError(f"closed_loop: controller {controller.get_name()!r} reads the rig's full 'state' "
                          f"(true joint angles), but rig {rig_name!r} has no joint sensors: its joint state "
                          f"comes from the tendon-length estimator (joint_angle, joint_velocity); use "
@@ -660,6 +660,13 @@ def _connect(builder, src, dst) -> None:
         builder.Connect(src, port)
 
 
+def _joint_sensors(rig: Any) -> bool:
+    """Whether ``rig`` measures its joint angles (:attr:`Rig.joint_sensors`; a rig-like object that is no
+    :class:`~awiwi_drake.rigs.base.Rig` has its own outputs only)."""
+    from awiwi_drake.rigs.base import Rig          # loaded with any Rig: free here
+    return not isinstance(rig, Rig) or rig.joint_sensors
+
+
 def _resolve_estimator(rig: Any, estimator: Any, ideal: bool, rate_hz: float | None, measured: list[str]):
     """The estimator object for :func:`closed_loop` (None: measurements straight from the rig).
 
@@ -671,10 +678,9 @@ def _resolve_estimator(rig: Any, estimator: Any, ideal: bool, rate_hz: float | N
     if isinstance(estimator, str):
         if estimator != "auto":
             raise ValueError(f"closed_loop: estimator = {estimator!r}; give 'auto', None or an estimator")
-        make = getattr(rig, "link_estimator", None)
-        if make is None or (ideal and rate_hz is None):
+        if _joint_sensors(rig) or (ideal and rate_hz is None):
             return None
-        est = make(None if rate_hz is None else 1.0 / rate_hz)
+        est = rig.link_estimator(None if rate_hz is None else 1.0 / rate_hz)
         used = [m for m in measured if m in _output_names(est.system)]
         if not used:
             return None

@@ -28,6 +28,7 @@ estimator (no joint sensors).
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from awiwi_drake.components.friction import guide_friction_level
 from awiwi_drake.components.spring import TendonSprings
+from awiwi_drake.control.design import ChainDesign, ControllerDesign
 from awiwi_drake.rigs.base import Rig
 from awiwi_drake.control.base import StaticLaw, StaticLawController, check_rate
 from awiwi_drake.control.force_distribution import TendonForceDistributionSystem
@@ -44,19 +46,19 @@ from awiwi_drake.control.joint_stage import JointStage
 from awiwi_drake.control.tendon_force import ForceMap, TendonForceLaw
 from awiwi_drake.parameters.control import TendonForceGains
 from awiwi_drake.hand.coupling import dof_selection
+from awiwi_drake.hand.diagrams import HandRig
 from awiwi_drake.parameters.hand import FINGERS
 from awiwi_drake.parameters.hand_control import ForceDistributionParams, FrictionObserverParams, HandChainParams
 
-__all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceStage", "TendonChainController", "chain_design_point",
-           "rig_springs", "guide_friction_levels", "joint_friction_levels"]
+__all__ = ["TendonPathVelocity_", "TendonPathVelocity", "TendonForceStage", "TendonChainController",
+           "chain_design_point", "rig_springs", "guide_friction_levels", "joint_friction_levels"]
 
 
 def rig_springs(rig: Any) -> TendonSprings:
     """The spring law of each tendon of a rig (:class:`~awiwi_drake.components.spring.TendonSprings`): a
     finger's/the hand's ``spring_laws`` (``params.tendon_springs`` overrides), else ``rig.spring`` for all."""
-    laws = getattr(rig, "spring_laws", None)
-    if laws is not None:
-        return laws if isinstance(laws, TendonSprings) else TendonSprings(laws)
+    if isinstance(rig, HandRig):
+        return rig.spring_laws
     if isinstance(rig.spring, TendonSprings):          # e.g. a per-joint subsystem (joint_design.joint_subsystem)
         return rig.spring
     return TendonSprings([rig.spring] * rig.coupling.num_tendons)
@@ -74,11 +76,11 @@ def guide_friction_levels(rig: Any) -> tuple[np.ndarray, np.ndarray]:
 def joint_friction_levels(rig: Any) -> np.ndarray:
     """The breakaway level ``Fs`` [Nm] per plant joint (n) of the rig's own stick-slip joint friction (the most it can
     hold, :func:`~awiwi_drake.components.friction.stick_slip_rate`; ``HandRig.joint_friction``); zeros when off."""
-    jf = getattr(rig, "joint_friction", None)
+    jf = rig.joint_friction if isinstance(rig, HandRig) else None
     return np.zeros(rig.coupling.num_joints) if jf is None else np.array(jf[:, 1], dtype=float)
 
 
-def guide_presliding_stiffness(rig: Any, point: dict, *, full: bool = False) -> np.ndarray:
+def guide_presliding_stiffness(rig: Any, point: ControllerDesign, *, full: bool = False) -> np.ndarray:
     """``K_g`` per independent DoF [Nm/rad]: the rig's guide friction linearised at rest, ``sum_i (P S)_ij^2 W_i /
     delta`` at the design ``point``'s tendon forces (:func:`chain_design_point`).  Each guide's Dahl rate (4.1)
     (:func:`~awiwi_drake.components.friction.guide_friction_rate`) at zero friction force and zero sliding speed
@@ -86,13 +88,13 @@ def guide_presliding_stiffness(rig: Any, point: dict, *, full: bool = False) -> 
     :func:`~awiwi_drake.components.friction.guide_friction_level` at direction 0, ``delta`` the presliding length):
     a spring on each tendon path, and through ``h = P q`` the spring ``(P S)^T diag(W / delta) (P S)`` on the joints
     (its diagonal; ``full``: the k x k matrix).  Zeros when the rig's guides have no friction."""
-    PS = np.asarray(point["coupling_matrix"], dtype=float)
+    PS = np.asarray(point.coupling_matrix, dtype=float)
     drive = getattr(rig, "drive", None)
     gm = None if drive is None else drive.model.guide_friction
     if gm is None:
         return np.zeros((PS.shape[1],) * (2 if full else 1))
     C, exponent = gm.levels()
-    W = guide_friction_level(np.asarray(point["tendon_force"], dtype=float), C, exponent, 0.0)
+    W = guide_friction_level(np.asarray(point.tendon_force, dtype=float), C, exponent, 0.0)
     return PS.T @ (PS * (W / gm.presliding_length)[:, None]) if full else (PS ** 2).T @ (W / gm.presliding_length)
 
 
@@ -128,7 +130,7 @@ TendonPathVelocity = TendonPathVelocity_[None]
 
 
 def chain_design_point(rig: Any, op: Any = None, params: HandChainParams | None = None,
-                       mechanical_stiffness=None) -> dict:
+                       mechanical_stiffness=None) -> ChainDesign:
     """The chain's design point: ``S``, ``q_op``, ``f_op``, ``tau_op = -(P S)^T f_op`` and the desired
     mechanical stiffness blocks (default ``params.stiffness_scale`` times the op's own (5.12) blocks)."""
     p = params or HandChainParams()
@@ -153,8 +155,8 @@ def chain_design_point(rig: Any, op: Any = None, params: HandChainParams | None 
         if len(blocks) != len(sizes) or any(B_.shape != (s_, s_) for B_, s_ in zip(blocks, sizes)):
             raise ValueError(f"TendonChainController: mechanical_stiffness must be {len(sizes)} blocks of "
                              f"shapes {[(s_, s_) for s_ in sizes]}")
-    return dict(op=op, fingers=fingers, selection=S, joint_angle=q_op, tendon_force=f_op, coupling_matrix=PS,
-                torque_offset=-PS.T @ f_op, mechanical_stiffness=blocks)
+    return ChainDesign(S, PS, f_op, -PS.T @ f_op, op=op, fingers=fingers, joint_angle=q_op,
+                       mechanical_stiffness=blocks)
 
 
 class TendonForceStage(Diagram):
@@ -174,7 +176,7 @@ class TendonForceStage(Diagram):
     """
 
     def __init__(self, coupling, spring, drive_params, params: HandChainParams | None = None, *,
-                 point: dict, distribution: str | None = None, gains: TendonForceGains | None = None,
+                 point: ChainDesign, distribution: str | None = None, gains: TendonForceGains | None = None,
                  distribution_params: ForceDistributionParams | None = None, rate_hz: float = 3000.0,
                  tendon_law: str | None = None):
         super().__init__()
@@ -189,12 +191,12 @@ class TendonForceStage(Diagram):
         b = DiagramBuilder()
         sharing = None
         if method == "sharing":     # f_ref = f_op + W (tau_ref - tau_op): -(P S)^T f_ref = tau_ref, no bounds
-            W = -np.linalg.pinv(point["coupling_matrix"].T)
-            sharing = (W, point["tendon_force"], point["torque_offset"])
+            W = -np.linalg.pinv(point.coupling_matrix.T)
+            sharing = (W, point.tendon_force, point.torque_offset)
             dist = b.AddNamedSystem("force_sharing", AffineSystem(D=W, y0=sharing[1] - W @ sharing[2]))
             dist_in, dist_out = dist.get_input_port(), dist.get_output_port()
         elif method in ("optimal", "algorithm2"):
-            dist_kw = dict(fingers=point["fingers"], method=method, period=1.0 / rate_hz, stiffness="full",
+            dist_kw = dict(fingers=point.fingers, method=method, period=1.0 / rate_hz, stiffness="full",
                            iterations_per_period=p.distribution_iterations, params=distribution_params,
                            drive=drive_params, springs=springs)
             dist = b.AddNamedSystem("force_distribution", TendonForceDistributionSystem(**dist_kw))
@@ -215,7 +217,7 @@ class TendonForceStage(Diagram):
             from awiwi_drake.control.sdre import TendonSdreLaw
             maps = {id(law_): ForceMap.from_spring(law_, r_m) for law_, _ in springs.groups}
             law = TendonSdreLaw([maps[id(law_)] for law_ in springs], drive_params.motor, q_diag=p.tendon_sdre_weights(drive_params.motor.inertia),
-                                r=p.sdre_input_weight, design_forces=point["tendon_force"],
+                                r=p.sdre_input_weight, design_forces=point.tendon_force,
                                 update_period=None if method == "sharing" else 1.0 / p.sdre_update_rate,
                                 friction_scale=p.force_friction_scale,
                                 ripple_scale=p.force_ripple_scale if drive_params.motor.ripple else 0.0,
@@ -263,7 +265,7 @@ class TendonForceStage(Diagram):
         b.BuildInto(self)
         self.set_name("tendon_force_stage")
         self._dist = dist if method != "sharing" else None
-        self._f_op = np.asarray(point["tendon_force"], dtype=float)
+        self._f_op = np.asarray(point.tendon_force, dtype=float)
         # what the fused chain (control/fused.py) evaluates: the same law and distribution objects
         self.fused_parts = dict(
             law=law, path_coupling=coupling if force.HasInputPort("tendon_path_velocity") else None,
@@ -291,7 +293,7 @@ class TendonChainController(Diagram):
     """
 
     def __init__(self, rig: Any, joint_law: StaticLaw, params: HandChainParams | None = None, *,
-                 point: dict | None = None, gains: TendonForceGains | None = None,
+                 point: ChainDesign | None = None, gains: TendonForceGains | None = None,
                  distribution: str | None = None, distribution_params: ForceDistributionParams | None = None,
                  rate_hz: float = 3000.0, tendon_law: str | None = None, friction_observer=None,
                  name: str = "cascaded_chain"):
@@ -300,19 +302,19 @@ class TendonChainController(Diagram):
         tendon_law = tendon_law or p.tendon_law
         rate_hz = check_rate("TendonChainController", rate_hz)
         point = point or chain_design_point(rig, params=p)
-        self.operating_point = point["op"]
-        k = point["selection"].shape[1]
+        self.operating_point = point.op
+        k = point.selection.shape[1]
         if not isinstance(joint_law, StaticLaw) or joint_law.output_size != k:
             raise ValueError(f"TendonChainController: joint_law must be a StaticLaw with {k} outputs (one per DoF), "
                              f"got {joint_law!r}")
-        K_mech = np.concatenate([B_.ravel() for B_ in point["mechanical_stiffness"]])
+        K_mech = np.concatenate([B_.ravel() for B_ in point.mechanical_stiffness])
         b = DiagramBuilder()
         joint = b.AddNamedSystem("joint_stage", JointStage(joint_law, K_mech))
         force = b.AddNamedSystem("force_stage", TendonForceStage(
             rig.coupling, rig_springs(rig), rig.params, p, point=point, distribution=distribution, gains=gains,
             distribution_params=distribution_params, rate_hz=rate_hz, tendon_law=tendon_law))
-        self.design = dict(point, joint_law=joint_law, force_gains=force.gains,
-                           distribution_method=distribution or p.distribution_method)
+        self.design = replace(point, joint_law=joint_law, force_gains=force.gains,
+                              distribution_method=distribution or p.distribution_method)
         tau_ref = joint.GetOutputPort("joint_torque_reference")
         observer = None
         if friction_observer is not None and not isinstance(friction_observer, FrictionObserverParams):
@@ -321,13 +323,13 @@ class TendonChainController(Diagram):
         if friction_observer is not None:            # ch. 9: -d_hat added to the desired torques
             from pydrake.systems.primitives import Adder
             from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_damping, joint_inertia
-            S = point["selection"]
+            S = point.selection
             sampled = (distribution or p.distribution_method) != "sharing"
             # kappa times the stage's torque loop gain: at rest its torque feedback divides what is added to the
             # request by that gain (FrictionObserverParams.compensation_scale)
             g = getattr(joint_law, "torque_loop_gains", np.ones(S.shape[1]))
             observer = b.AddNamedSystem("friction_observer", JointFrictionObserver(
-                rig.coupling, S, joint_inertia(rig, point["joint_angle"]), np.diag(joint_damping(rig)),
+                rig.coupling, S, joint_inertia(rig, point.joint_angle), np.diag(joint_damping(rig)),
                 friction_observer.gain / np.asarray(g, dtype=float), 1.0 / rate_hz if sampled else None,
                 (friction_observer.compensation_scale_motor_position if tendon_law == "motor-position"
                  else friction_observer.compensation_scale) * np.asarray(g, dtype=float),

@@ -98,6 +98,7 @@ from awiwi_drake.components.friction import joint_breakaway_bound, joint_frictio
 from awiwi_drake.control.chain import (guide_friction_levels, guide_presliding_stiffness, joint_friction_levels,
                                        rig_springs)
 from awiwi_drake.control.compiled import float_inputs, motor_law_kernels
+from awiwi_drake.control.design import BacksteppingDesign
 from awiwi_drake.control.joint_stage import JointFrictionObserver, joint_inertia
 from awiwi_drake.hand.coupling import dof_selection
 from awiwi_drake.parameters.hand_control import FrictionObserverParams, HandChainParams
@@ -231,13 +232,12 @@ class FingerBacksteppingLaw(StaticLaw):
         # the motor-side part of the lever's hysteresis at rest: the law's motor model lacks r_m z (rest_error)
         self._motor_gain = np.asarray(op.tendon_stiffness, dtype=float) * self.r_m ** 2 / self.B
         self.output_size = m
-        self.design = dict(selection=self.S, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4,
-                           tendon_force=self.f_op, torque_offset=self.tau_op)
         # the designed joint error dynamics M e'' + Kd e' + Kp e = 0: its slowest mode (compare's short window)
         A_e = np.block([[np.zeros((k, k)), np.eye(k)], [-self._Minv @ self.Kp, -self._Minv @ self.Kd]])
-        self.design["time_constant"] = float(1.0 / np.min(-np.linalg.eigvals(A_e).real))
-        self.design["dead_band"] = self.dead_band()
-        self.design["friction_hold"] = self.friction_hold
+        self.design = BacksteppingDesign(
+            self.S, self.PS_op, self.f_op, self.tau_op, float(1.0 / np.min(-np.linalg.eigvals(A_e).real)),
+            friction_hold=self.friction_hold, inertia=self.M, Kp=self.Kp, Kd=self.Kd, K3=self.K3, K4=self.K4)
+        self.design.dead_band = self.dead_band()
 
     def friction_bound(self, f, P=None):
         """``B_j = sum_i |(P S)_ij| (W_i(f_i + w_i) + w_i) + sum_l |S_lj| Fs_l`` (k) [Nm]: the largest link-side torque
@@ -347,7 +347,7 @@ class FingerBacksteppingLaw(StaticLaw):
         e = np.asarray(e, dtype=float)
         if self.friction_compensation:
             with np.errstate(divide="ignore", invalid="ignore"):
-                return np.where(np.abs(e) > 0, np.abs(e) / self.design["dead_band"], 0.0)
+                return np.where(np.abs(e) > 0, np.abs(e) / self.design.dead_band, 0.0)
         T, _, _ = self._rest_maps()
         tau = np.linalg.solve(T, self.tau_op - self.Kp @ e)
         if dof_load is not None:
@@ -515,10 +515,10 @@ def finger_backstepping_controller(rig: Any, params: HandChainParams | None = No
         return StaticLawController(law)
     # the design's slowest mode counts the observer's rest mode on the guides' presliding (the chain's designs do
     # the same, JointDesign.loop): compare's derived step window
-    Kg = guide_presliding_stiffness(rig, dict(coupling_matrix=law.PS_op, tendon_force=law.f_op), full=True)
+    Kg = guide_presliding_stiffness(rig, law.design, full=True)
     rest = law.observer_rest_modes(observer.gain, Kg)
-    law.design["observer_rest_modes"] = rest
-    law.design["time_constant"] = max(law.design["time_constant"], float(1.0 / np.min(-rest.real)))
+    law.design.observer_rest_modes = rest
+    law.design.time_constant = max(law.design.time_constant, float(1.0 / np.min(-rest.real)))
     return ObservedBacksteppingController(rig, law, observer)
 
 

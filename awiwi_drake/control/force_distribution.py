@@ -164,7 +164,7 @@ class DistributionResult:
     stiffness_error: float            # ||K_des - K_q||_F / ||K_des||_F
     iterations: int
     cost: float                       # the final cost (Algorithm 2: C(alpha); optimal: the relative stiffness cost)
-    program_qps: int = 0              # optimal: QPs the MathematicalProgram solved (a bound active), not the closed form
+    program_qps: int = 0              # optimal: QPs the MathematicalProgram solved (a bound active; not closed form)
 
 
 def _barrier(d):
@@ -663,7 +663,7 @@ def _stiffness_of(P, kt, f, H):
 @numba.njit(cache=True)
 def _interp_rows(f, gf, gv):
     """``np.interp(f[i], gf[i], gv[i])`` per tendon (each tendon's own table row): numpy's rule written out (ends
-    held, a grid point exact, else ``slope (x - x_j) + y_j`` on the bracketing segment found by bisection)."""
+    held, a grid point exact, else ``slope (x - x_j) + y_j`` on the bracketing segment)."""
     out = np.empty(f.shape[0])
     n = gf.shape[1]
     for i in range(f.shape[0]):
@@ -673,13 +673,7 @@ def _interp_rows(f, gf, gv):
         elif x >= xp[n - 1]:
             out[i] = fp[n - 1]
         else:
-            lo, hi = 0, n - 1                  # xp[lo] <= x < xp[hi]
-            while hi - lo > 1:
-                mid = (lo + hi) >> 1
-                if xp[mid] <= x:
-                    lo = mid
-                else:
-                    hi = mid
+            lo = np.searchsorted(xp, x, side="right") - 1      # xp[lo] <= x < xp[lo + 1]
             if xp[lo] == x:
                 out[i] = fp[lo]
             else:
@@ -803,12 +797,12 @@ def _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tau, Kd, fp0, fallba
 
 
 @numba.njit(cache=True)
-def _batch_step(dyn, P_dyn, H_dyn, P, pinv, W, pad, H, outer, real, m_real, tau, Kv, f_prev, d_k, d_i, d_src,
-                k_k, k_a, k_b, k_src, t_k, t_i, t_src, tauP, Kd, fp0, iterations, f_min, f_max, levenberg, tolerance,
-                grid_f, grid_k, grid_dk):
+def _batch_step(dyn, P_dyn, H_dyn, P, pinv, W, pad, H, outer, real, m_real, tau, Kv, f_prev, d, kk, t, tauP, Kd, fp0,
+                iterations, f_min, f_max, levenberg, tolerance, grid_f, grid_k, grid_dk):
     """:meth:`_FingerBatch.update` after the thumb's kinematics, compiled: the varying finger ``dyn`` (-1: none) filled
     from its ``P_dyn``, ``H_dyn`` (null space by :data:`_nullspace_jit`, its outer products), the stacked request
-    gathered into the padded arrays, :func:`_batch_iterate`, the forces scattered back.  Returns (forces, fallback)."""
+    gathered into the padded arrays (``d``, ``kk``, ``t``: :class:`_FingerBatch`'s index rows), :func:`_batch_iterate`,
+    the forces scattered back.  Returns (forces, fallback)."""
     F = P.shape[0]
     fallback = np.zeros(F, dtype=np.bool_)
     if dyn >= 0:
@@ -832,17 +826,17 @@ def _batch_step(dyn, P_dyn, H_dyn, P, pinv, W, pad, H, outer, real, m_real, tau,
                     for a in range(P.shape[2]):
                         for b in range(P.shape[2]):
                             outer[dyn, i, a, b] = P[dyn, i, a] * P[dyn, i, b]
-    for j in range(d_src.shape[0]):
-        tauP[d_k[j], d_i[j]] = tau[d_src[j]]
-    for j in range(k_src.shape[0]):
-        Kd[k_k[j], k_a[j], k_b[j]] = Kv[k_src[j]]
-    for j in range(t_src.shape[0]):
-        fp0[t_k[j], t_i[j]] = f_prev[t_src[j]]
+    for j in range(d.shape[1]):
+        tauP[d[0, j], d[1, j]] = tau[d[2, j]]
+    for j in range(kk.shape[1]):
+        Kd[kk[0, j], kk[1, j], kk[2, j]] = Kv[kk[3, j]]
+    for j in range(t.shape[1]):
+        fp0[t[0, j], t[1, j]] = f_prev[t[2, j]]
     f = _batch_iterate(P, pinv, W, pad, H, outer, real, m_real, tauP, Kd, fp0, fallback, iterations, f_min, f_max,
                        levenberg, tolerance, grid_f, grid_k, grid_dk)
-    f_all = np.empty(t_src.shape[0])
-    for j in range(t_src.shape[0]):
-        f_all[t_src[j]] = f[t_k[j], t_i[j]]
+    f_all = np.empty(t.shape[1])
+    for j in range(t.shape[1]):
+        f_all[t[2, j]] = f[t[0, j], t[1, j]]
     return f_all, fallback
 
 
@@ -864,10 +858,7 @@ class _FingerBatch:
             d += [(k, i, sd.start + i) for i in range(n)]
             kk += [(k, a, b, sk.start + (a if diagonal else a * n + b))
                    for a in range(n) for b in ((a,) if diagonal else range(n))]
-        t, d, kk = (np.array(rows, dtype=np.int64).T.copy() for rows in (t, d, kk))
-        self._t, self._t_src = (t[0], t[1]), t[2]
-        self._d, self._d_src = (d[0], d[1]), d[2]
-        self._k, self._k_src = (kk[0], kk[1], kk[2]), kk[3]
+        self._t, self._d, self._k = (np.array(rows, dtype=np.int64).T.copy() for rows in (t, d, kk))
         solvers = [pt[0] for pt in parts]
         s0 = solvers[0]
         self.params, self.levenberg, self.tolerance = s0.params, s0.levenberg, s0.tolerance
@@ -927,9 +918,9 @@ class _FingerBatch:
             dyn = self.dynamic[0]
             P_dyn, H_dyn = self.couplings[dyn].coupling_and_hessians(q[self.parts[dyn][4]])
         return _batch_step(dyn, P_dyn, H_dyn, self.P, self.pinv, self.W, self.pad, self.H, self.outer, self.real,
-                           self.m, tau, Kv, f_prev, *self._d, self._d_src, *self._k, self._k_src, *self._t,
-                           self._t_src, *self._gather, int(iterations), float(p.f_min), float(p.f_max),
-                           float(self.levenberg), float(self.tolerance), self.grid_f, self.grid_k, self.grid_dk)
+                           self.m, tau, Kv, f_prev, self._d, self._k, self._t, *self._gather, int(iterations),
+                           float(p.f_min), float(p.f_max), float(self.levenberg), float(self.tolerance), self.grid_f,
+                           self.grid_k, self.grid_dk)
 
 
 # ----------------------------------------------------------------------------

@@ -48,6 +48,7 @@ from awiwi_drake.analysis.linear import LinearizationResult, linearize
 from awiwi_drake.control.base import check_rate, closed_loop
 from awiwi_drake.control.chain import (TendonChainController, TendonForceStage, chain_design_point,
                                       guide_presliding_stiffness, rig_springs)
+from awiwi_drake.control.design import ChainDesign
 from awiwi_drake.control.joint_stage import (JointGainScheduleLaw, JointStateFeedbackLaw, joint_damping,
                                              joint_inertia)
 from awiwi_drake.control.linear import reference_maps
@@ -61,8 +62,8 @@ from awiwi_drake.rigs.rigs import _link_rig
 
 __all__ = ["JointReducedModel", "cascade_stiffness", "joint_subsystem", "force_loop", "design_motor", "PoleCheck",
            "check_design_poles", "reduced_joint_models", "design_joint_gains", "torque_loop_gain", "motor_held_damping",
-           "sampled_model", "JointDesign", "design_joint_stage", "joint_stage_controller", "DESIGNS", "SampledLoopPoles", "PoleMatch",
-           "sampled_loop_poles"]
+           "sampled_model", "JointDesign", "JointObserverDesign", "design_joint_stage", "joint_stage_controller",
+           "DESIGNS", "SampledLoopPoles", "PoleMatch", "sampled_loop_poles"]
 
 DESIGNS = ("cascaded", "pd", "two-time-scale", "pole-placement", "lqr", "sdre")
 _TENDON_LAW = {"two-time-scale": "motor-position"}     # the chain's tendon level per design (else params.tendon_law)
@@ -117,7 +118,7 @@ def design_motor(motor: MotorParams) -> MotorParams:
     return motor.replace(friction=False, ripple=False, damping=motor.damping + viscous)
 
 
-def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: HandChainParams | None = None,
+def joint_subsystem(rig: Any, dof: int, *, point: ChainDesign | None = None, params: HandChainParams | None = None,
                     torque: float | None = None):
     """The per-DoF subsystem of the module docstring: a one-link rig with the DoF's tendons.
 
@@ -128,7 +129,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     """
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
-    S, PS = point["selection"], point["coupling_matrix"]
+    S, PS = point.selection, point.coupling_matrix
     k = S.shape[1]
     if not 0 <= dof < k:
         raise ValueError(f"joint_subsystem: dof = {dof} is not an independent DoF of {rig.name!r} (0..{k - 1})")
@@ -137,7 +138,7 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     P_j = col[active][:, None]
     name = _dof_names(rig, S)[dof]
     coupling = LinearFingerCoupling(P_j, joint_names=[name], tendon_names=[rig.tendon_names[i] for i in active])
-    M = float(joint_inertia(rig, point["joint_angle"])[dof])
+    M = float(joint_inertia(rig, point.joint_angle)[dof])
     b = float(joint_damping(rig)[dof, dof])
     design_params = rig.params.replace(motor=design_motor(rig.params.motor))
     springs = rig_springs(rig).subset(active)          # each of the DoF's tendons with its own law
@@ -146,10 +147,10 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
     plant = MultibodyPlant(0.0)                        # the link alone (joint_inertia, joint_damping read it)
     add_revolute_link(plant, name="joint", inertia=M, damping=b)
     plant.Finalize()
-    tau0 = -float(P_j[:, 0] @ point["tendon_force"][active])
+    tau0 = -float(P_j[:, 0] @ point.tendon_force[active])
     tau = tau0 if torque is None else float(torque)
     W = -np.linalg.pinv(P_j.T)
-    f = point["tendon_force"][active] + W[:, 0] * (tau - tau0)
+    f = point.tendon_force[active] + W[:, 0] * (tau - tau0)
     if np.any(f <= 0):
         raise ValueError(f"joint_subsystem: joint torque {tau} Nm slackens a tendon of {name} (forces {f} N)")
     r_m = design_params.motor.pulley_radius
@@ -163,20 +164,20 @@ def joint_subsystem(rig: Any, dof: int, *, point: dict | None = None, params: Ha
                         joint_stiffness=float(P_j[:, 0] ** 2 @ kt))
     sub = Rig(f"{rig.name}-{name}", diagram, design_params, names, lambda: op, plant, springs,
               drive=drive, coupling=coupling, tension_only=True)
-    sub_point = dict(op=op, fingers=None, selection=np.eye(1), tendon_force=f, coupling_matrix=P_j,
-                     torque_offset=np.array([tau]), joint_angle=np.zeros(1), mechanical_stiffness=[np.eye(1)])
+    sub_point = ChainDesign(np.eye(1), P_j, f, np.array([tau]), op=op, joint_angle=np.zeros(1),
+                            mechanical_stiffness=[np.eye(1)])
     return sub, op, sub_point
 
 
-def force_loop(sub: Rig, point: dict, params: HandChainParams | None = None, tendon_law: str | None = None):
+def force_loop(sub: Rig, point: ChainDesign, params: HandChainParams | None = None, tendon_law: str | None = None):
     """A subsystem of :func:`joint_subsystem` closed by the chain's force stage (sharing, continuous):
     the :class:`~awiwi_drake.control.base.ClosedLoop` with input ``joint_torque_reference``, and a context
     at its operating point."""
     stage = TendonForceStage(sub.coupling, sub.spring, sub.params, params or HandChainParams(), point=point,
                              distribution="sharing", tendon_law=tendon_law)
     loop = closed_loop(sub, stage, rate_hz=None, estimator=None)
-    op = point["op"]
-    return loop, loop.create_context(op, references={"joint_torque_reference": point["torque_offset"]})
+    op = point.op
+    return loop, loop.create_context(op, references={"joint_torque_reference": point.torque_offset})
 
 
 def _coordinates(lin: LinearizationResult, stiffness: float = 0.0) -> np.ndarray:
@@ -200,7 +201,7 @@ def _restrict(lin: LinearizationResult, stiffness: float = 0.0) -> tuple[np.ndar
     return F, T @ B, res
 
 
-def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandChainParams | None = None,
+def reduced_joint_models(rig: Any, *, point: ChainDesign | None = None, params: HandChainParams | None = None,
                          tendon_law: str | None = None, torque_rate: str = "joint") -> list[JointReducedModel]:
     """One :class:`JointReducedModel` per independent DoF of a finger or the hand (module docstring);
     ``tendon_law``: the chain's tendon level (:class:`~awiwi_drake.control.chain.TendonForceStage`);
@@ -209,14 +210,14 @@ def reduced_joint_models(rig: Any, *, point: dict | None = None, params: HandCha
         raise ValueError(f"reduced_joint_models: torque_rate = {torque_rate!r}; use 'joint' or 'motor'")
     p = params or HandChainParams()
     point = point or chain_design_point(rig, params=p)
-    S = point["selection"]
+    S = point.selection
     names = _dof_names(rig, S)
-    M = joint_inertia(rig, point["joint_angle"])
+    M = joint_inertia(rig, point.joint_angle)
     b = np.diag(joint_damping(rig))
-    kt = np.asarray(point["op"].tendon_stiffness, dtype=float)
+    kt = np.asarray(point.op.tendon_stiffness, dtype=float)
     models = []
     for j in range(S.shape[1]):
-        col = point["coupling_matrix"][:, j]
+        col = point.coupling_matrix[:, j]
         models.append(_reduced_model(rig, j, point, p, tendon_law, torque_rate, None, names[j], float(M[j]),
                                      float(b[j]), float(col ** 2 @ kt), tuple(int(i) for i in np.flatnonzero(col))))
     return models
@@ -231,14 +232,14 @@ def _reduced_model(rig, j, point, chain, tendon_law, torque_rate, torque, name, 
     loop, ctx = force_loop(sub, sub_point, chain, tendon_law)
     lin = linearize(loop.diagram, context=ctx, input="joint_torque_reference",
                     outputs=("joint_angle", "joint_torque"), equilibrium_tolerance=None)
-    rate = sub_point["op"].joint_stiffness if torque_rate == "motor" else 0.0
+    rate = sub_point.op.joint_stiffness if torque_rate == "motor" else 0.0
     F, G, res = _restrict(lin, rate)
     E = None
     if link_torque:     # a link-side torque (the guides' friction, a load): the loop from its external_torque input
         ext = linearize(loop.diagram, context=ctx, input="external_torque", outputs=("joint_angle", "joint_torque"),
                         equilibrium_tolerance=None)
         E = _coordinates(lin, rate) @ ext.B
-    stiffness = float(sub_point["op"].joint_stiffness) if stiffness is None else stiffness
+    stiffness = float(sub_point.op.joint_stiffness) if stiffness is None else stiffness
     return JointReducedModel(name, j, F, G, inertia, damping, stiffness, tendons, res, lin, torque_rate, E)
 
 
@@ -409,6 +410,17 @@ def design_joint_gains(model: JointReducedModel, design: str, *, params: JointDe
 
 
 @dataclass
+class JointObserverDesign:
+    """The chain's (9.2) observer as a design sees it, per DoF (k each): its ``gain`` ``L`` [1/s], ``scale``
+    ``kappa`` [-] (:class:`~awiwi_drake.control.joint_stage.JointFrictionObserver_`) and the guides'
+    ``presliding_stiffness`` ``K_g`` [Nm/rad] (:func:`~awiwi_drake.control.chain.guide_presliding_stiffness`)."""
+
+    gain: np.ndarray
+    scale: np.ndarray
+    presliding_stiffness: np.ndarray
+
+
+@dataclass
 class JointDesign:
     """A designed joint stage: the law for all DoF, its reduced models and the designed closed-loop poles
     (``period`` None: continuous, ``eig(F - G K)``; else the sampled chain's z-plane ``eig(Phi - Gamma K)``)."""
@@ -419,8 +431,7 @@ class JointDesign:
     gains: np.ndarray                 # (k, 5)
     design_poles: list                # per DoF
     period: float | None = None
-    # the chain's (9.2) observer per DoF (k each): gain L, scale kappa, the guides' presliding stiffness K_g [Nm/rad]
-    observer: dict | None = None
+    observer: JointObserverDesign | None = None       # the chain's (9.2) observer, None without
 
     @property
     def static_stiffness(self) -> np.ndarray:
@@ -443,13 +454,13 @@ class JointDesign:
         m, K, nx, nu = self.models[dof], self.gains[dof], self.law.Nx[dof], self.law.Nu[dof]
         obs = self.observer
         if obs is not None:
-            m = dataclasses.replace(m, A=m.A - obs["presliding_stiffness"][dof] * m.link_torque_map @ np.eye(1, 4))
+            m = dataclasses.replace(m, A=m.A - obs.presliding_stiffness[dof] * m.link_torque_map @ np.eye(1, 4))
         A, B = _closed_loop_matrix(m, K, self.period)
         b = B[:, 0] * (nu + K[:4] @ nx + (0.0 if self.period is None else K[4] * nu))
         if obs is None:
             return A, b
-        L, M, damping = obs["gain"][dof], m.inertia, m.damping
-        c = obs["scale"][dof] * L * M                   # the compensation -kappa d_hat = c (w_hat - qdot)
+        L, M, damping = obs.gain[dof], m.inertia, m.damping
+        c = obs.scale[dof] * L * M                   # the compensation -kappa d_hat = c (w_hat - qdot)
         n = A.shape[0]
         Ao = np.zeros((n + 1, n + 1))
         Ao[:n, :n] = A
@@ -516,7 +527,7 @@ class JointDesign:
         return "\n".join(rows)
 
 
-def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None = None,
+def design_joint_stage(rig: Any, design: str = "cascaded", *, point: ChainDesign | None = None,
                        params: JointDesignParams | None = None, chain: HandChainParams | None = None,
                        models: list | None = None, period: float | None = None) -> JointDesign:
     """Design the joint stage ``design`` for every DoF of a finger/the hand (module docstring); ``period``:
@@ -538,9 +549,9 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
         nx, nu = reference_maps(m.A, m.B, np.array([1.0, 0.0, 0.0, 0.0]))
         Nx.append(nx)
         Nu.append(float(nu[0]))
-    S = point["selection"]
-    kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point["joint_angle"],
-              torque_op=point["torque_offset"], name=design.replace("-", "_"), torque_rate=rate)
+    S = point.selection
+    kw = dict(state_map=np.array(Nx), input_map=np.array(Nu), joint_angle_op=np.linalg.pinv(S) @ point.joint_angle,
+              torque_op=point.torque_offset, name=design.replace("-", "_"), torque_rate=rate)
     if design == "sdre":
         law = _sdre_law(rig, point, c, p, kw, period)
     else:
@@ -551,14 +562,14 @@ def design_joint_stage(rig: Any, design: str = "cascaded", *, point: dict | None
 
 def _sdre_law(rig, point, c, p, kw, period):
     """The SDRE (ch. 14) per DoF: LQR on the pointwise-linear model at each tabulated joint torque."""
-    S = point["selection"]
+    S = point.selection
     k = S.shape[1]
     grid = np.linspace(-p.sdre_torque_range, p.sdre_torque_range, p.sdre_points)
     table = np.empty((k, grid.size, 5))
     for j in range(k):
         for i, dt in enumerate(grid):
             model = _reduced_model(rig, j, point, c, c.tendon_law, kw["torque_rate"],
-                                   point["torque_offset"][j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
+                                   point.torque_offset[j] + dt, "", 0.0, 0.0, None, (), link_torque=False)
             table[j, i] = design_joint_gains(model, "sdre", params=p, chain=c, period=period)
     return JointGainScheduleLaw(rig.coupling, S, rig.params.motor.pulley_radius, grid, table, **kw)
 
@@ -597,10 +608,9 @@ def joint_stage_controller(rig: Any, design: str = "cascaded", *, op: Any = None
                                  friction_observer=friction_observer, **kw)
     obs = ctrl._observer                               # the design's loop with the chain's (9.2) observer
     if obs is not None:
-        d.observer = dict(gain=obs.gain.copy(), scale=obs.scale.copy(),
-                          presliding_stiffness=guide_presliding_stiffness(rig, point))
-    ctrl.design["joint_design"] = d
-    ctrl.design["time_constant"] = d.tracking_time_constant()
+        d.observer = JointObserverDesign(obs.gain.copy(), obs.scale.copy(), guide_presliding_stiffness(rig, point))
+    ctrl.design.joint_design = d
+    ctrl.design.time_constant = d.tracking_time_constant()
     return ctrl
 
 
@@ -777,13 +787,13 @@ def check_design_poles(rig: Any, design: str = "cascaded", *, chain: HandChainPa
     c = chain or HandChainParams()
     ctrl = joint_stage_controller(rig, design, chain=c, params=params, distribution="sharing",
                                   friction_observer=None)      # the designs: the stage itself, no ch. 9 observer
-    d = ctrl.design["joint_design"]
+    d = ctrl.design.joint_design
     loop = closed_loop(rig, ctrl, rate_hz=None, sensors="ideal")
     op = ctrl.operating_point
     ctx = loop.create_context(op, references={"joint_angle_reference": op.joint_angle})
     lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle", "joint_torque"))
     A = lin.A
-    S = ctrl.design["selection"]
+    S = ctrl.design.selection
     Cq = np.linalg.pinv(S) @ lin.output("joint_angle").C
     Ct = S.T @ lin.output("joint_torque").C
     k = S.shape[1]
@@ -888,7 +898,7 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     :func:`~awiwi_drake.control.base.closed_loop` (the same poles).
     """
 
-    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+    from pydrake.autodiffutils import ExtractGradient, ExtractValue, InitializeAutoDiff
     from pydrake.systems.analysis import DiscreteTimeApproximation
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import AffineSystem, Demultiplexer, LinearSystem
@@ -942,12 +952,8 @@ def sampled_loop_poles(rig: Any, controller: Any, *, rate_hz: float = 3000.0, es
     ref = diagram.GetInputPort("joint_angle_reference")
     r0 = np.asarray(ref.Eval(ctx), dtype=float)
     xa = InitializeAutoDiff(np.concatenate([x0, r0])).ravel()
-    for i in range(diagram.num_input_ports()):
-        if i == ref.get_index():
-            ad.get_input_port(i).FixValue(actx, xa[x0.size:])
-        elif diagram.get_input_port(i).HasValue(ctx):
-            ad.get_input_port(i).FixValue(actx, np.array([AutoDiffXd(float(v)) for v in
-                                                           diagram.get_input_port(i).Eval(ctx)], dtype=object))
+    ad.FixInputPortsFrom(diagram, ctx, actx)          # the fixed inputs, then the reference with its derivatives
+    ad.get_input_port(ref.get_index()).FixValue(actx, xa[x0.size:])
     start = 0
     for i, n in enumerate(sizes):
         actx.SetDiscreteState(i, xa[start:start + n])

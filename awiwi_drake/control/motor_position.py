@@ -40,10 +40,11 @@ __all__ = ["motor_position_controller", "motor_references", "demo_references", "
 def _state_indices(rig: Any, m: int):
     """``(angle, velocity)`` indices of the motors in the rig's ``state`` output, or None when the controller
     must read ``motor_angle``/``motor_velocity`` (no full-state measurement, see the module docstring)."""
-    names = getattr(rig, "state_names", None)
-    if names is None or getattr(rig, "link_estimator", None) is not None or not rig.diagram.HasOutputPort("state") \
-            or rig.diagram.GetOutputPort("state").size() != len(names):
+    from awiwi_drake.rigs.base import Rig
+    if not isinstance(rig, Rig) or not rig.joint_sensors or not rig.diagram.HasOutputPort("state") \
+            or rig.diagram.GetOutputPort("state").size() != len(rig.state_names):
         return None
+    names = rig.state_names
     angle = [k for k, nm in enumerate(names) if nm.startswith("motor_angle[")]
     velocity = [k for k, nm in enumerate(names) if nm.startswith("motor_velocity[")]
     return (angle, velocity) if len(angle) == len(velocity) == m else None

@@ -389,7 +389,7 @@ def select_finger_force_gains(rig, case=None, *, params=None, rate_hz: float | N
     op = op or rig.operating_point()
     law = FingerBacksteppingLaw(rig, p, op=op, rate_hz=rate_hz)
     point = chain_design_point(rig, op, params=p)
-    PS = point["coupling_matrix"]
+    PS = point.coupling_matrix
     k = PS.shape[1]
     k_max = 1e4 if rate_hz is None else p.sampled_pole_limit * float(rate_hz)   # the box's upper corner
     if not c.gain_low < k_max:
@@ -468,12 +468,12 @@ def finger_optimal_backstepping_controller(rig, case=None, *, params=None, op=No
     """Registered ``optimal-backstepping`` for fingers and the hand: the 15.5 law
     (:func:`~awiwi_drake.control.finger_backstepping.finger_backstepping_controller`) with its force-level gains
     ``(K3, K4)`` selected per DoF by ch. 16 (:func:`select_finger_force_gains`); the selection is
-    ``controller.law.design["force_gains"]``."""
+    ``controller.law.design.force_gains``."""
     from awiwi_drake.control.base import StaticLawController
     from awiwi_drake.control.finger_backstepping import FingerBacksteppingLaw, check_backstepping_springs
     check_backstepping_springs(rig)
     sel = select_finger_force_gains(rig, case, params=params, rate_hz=rate_hz, op=op)
     law = FingerBacksteppingLaw(rig, params, op=op, rate_hz=rate_hz, force_gains=(sel.k3, sel.k4))
     law.name = "finger_optimal_backstepping"
-    law.design["force_gains"] = sel
+    law.design.force_gains = sel
     return StaticLawController(law)

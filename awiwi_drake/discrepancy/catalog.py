@@ -155,56 +155,42 @@ class Effect:
         return tuple(a for a in self.amplitude if not a.endswith(("_m2", "_2")))
 
 
-EFFECTS = {
-    "motor_friction": Effect(
-        "motor_friction", "physical", ("motor_coulomb", "motor_viscous"),
-        {"motor_slope": (3.0, 10.0, 30.0)}, ("tendon-rig", "joint-rig"),
-        "motor-torque residual odd in motor velocity, saturating (atan); peaks at reversals"),
-    "motor_ripple": Effect(
-        "motor_ripple", "physical",
-        ("ripple_sin1_m1", "ripple_cos1_m1", "ripple_sin2_m1", "ripple_cos2_m1",
-         "ripple_sin1_m2", "ripple_cos1_m2", "ripple_sin2_m2", "ripple_cos2_m2"),
-        {}, ("tendon-rig", "joint-rig"),
-        "residual periodic in motor angle: lines at integer cycles per revolution"),
-    "spring_hysteresis": Effect(
-        "spring_hysteresis", "physical", ("hysteresis_width", "hysteresis_initial"),
-        {"hysteresis_length": (5e-5, 2e-4, 8e-4)}, ("tendon-rig", "joint-rig"),
-        "force residual depends on the direction of elongation (loop in force vs elongation)"),
-    "joint_friction": Effect(
-        "joint_friction", "physical", ("joint_coulomb",),
-        {"joint_velocity": (0.01, 0.05, 0.2)}, ("joint-rig",),
-        "force-difference residual odd in link velocity, stick near link reversals"),
-    "guide_friction": Effect(
-        "guide_friction", "physical", ("guide_c0", "guide_mu"), {}, ("tendon-rig", "joint-rig"),
-        "motor-torque residual odd in tendon velocity and growing with tension"),
-    "spring_drift": Effect(
-        "spring_drift", "physical", ("spring_drift",), {}, ("tendon-rig", "joint-rig"),
-        "force residual proportional to the force and growing over the run (creep of the spring mechanism)"),
-    "backlash": Effect(
-        "backlash", "physical", ("backlash",), {}, ("joint-rig",),
-        "link angle moves without a tendon-force change where the joint torque reverses (dead zone at the joint)"),
-    "delay": Effect(
-        "delay", "physical", ("delay",), {}, ("tendon-rig", "joint-rig"),
-        "residual-input cross-correlation peaks at a positive lag; phase lag growing with frequency"),
-    "force_sensor": Effect(
-        "force_sensor", "nuisance", ("force_gain", "force_offset_1", "force_offset_2"), {},
-        ("tendon-rig", "joint-rig"), "force residual proportional to force or constant"),
-    "link_sensor": Effect(
-        "link_sensor", "nuisance", ("link_bias", "link_scale_rel"), {}, ("joint-rig",),
-        "link-angle residual constant or proportional to the link angle; forces consistent"),
-    "motor_sensor": Effect(
-        "motor_sensor", "nuisance", ("motor_bias_1", "motor_bias_2"), {}, ("tendon-rig", "joint-rig"),
-        "motor-angle residual constant, force residual following the spring stiffness"),
-    "nominal_motor": Effect(
-        "nominal_motor", "nuisance", ("motor_inertia_rel", "motor_damping_add"), {},
-        ("tendon-rig", "joint-rig"), "motor-torque residual in phase with acceleration or velocity"),
-    "nominal_spring": Effect(
-        "nominal_spring", "nuisance", ("spring_scale_rel",), {}, ("tendon-rig", "joint-rig"),
-        "force residual proportional to the modelled force"),
-    "nominal_link": Effect(
-        "nominal_link", "nuisance", ("link_inertia_rel", "link_damping_add"), {}, ("joint-rig",),
-        "link-mode frequency or damping wrong"),
-}
+EFFECTS = {e.name: e for e in (
+    Effect("motor_friction", "physical", ("motor_coulomb", "motor_viscous"),
+           {"motor_slope": (3.0, 10.0, 30.0)}, ("tendon-rig", "joint-rig"),
+           "motor-torque residual odd in motor velocity, saturating (atan); peaks at reversals"),
+    Effect("motor_ripple", "physical",
+           ("ripple_sin1_m1", "ripple_cos1_m1", "ripple_sin2_m1", "ripple_cos2_m1",
+            "ripple_sin1_m2", "ripple_cos1_m2", "ripple_sin2_m2", "ripple_cos2_m2"),
+           {}, ("tendon-rig", "joint-rig"),
+           "residual periodic in motor angle: lines at integer cycles per revolution"),
+    Effect("spring_hysteresis", "physical", ("hysteresis_width", "hysteresis_initial"),
+           {"hysteresis_length": (5e-5, 2e-4, 8e-4)}, ("tendon-rig", "joint-rig"),
+           "force residual depends on the direction of elongation (loop in force vs elongation)"),
+    Effect("joint_friction", "physical", ("joint_coulomb",),
+           {"joint_velocity": (0.01, 0.05, 0.2)}, ("joint-rig",),
+           "force-difference residual odd in link velocity, stick near link reversals"),
+    Effect("guide_friction", "physical", ("guide_c0", "guide_mu"), {}, ("tendon-rig", "joint-rig"),
+           "motor-torque residual odd in tendon velocity and growing with tension"),
+    Effect("spring_drift", "physical", ("spring_drift",), {}, ("tendon-rig", "joint-rig"),
+           "force residual proportional to the force and growing over the run (creep of the spring mechanism)"),
+    Effect("backlash", "physical", ("backlash",), {}, ("joint-rig",),
+           "link angle moves without a tendon-force change where the joint torque reverses (dead zone at the joint)"),
+    Effect("delay", "physical", ("delay",), {}, ("tendon-rig", "joint-rig"),
+           "residual-input cross-correlation peaks at a positive lag; phase lag growing with frequency"),
+    Effect("force_sensor", "nuisance", ("force_gain", "force_offset_1", "force_offset_2"), {},
+           ("tendon-rig", "joint-rig"), "force residual proportional to force or constant"),
+    Effect("link_sensor", "nuisance", ("link_bias", "link_scale_rel"), {}, ("joint-rig",),
+           "link-angle residual constant or proportional to the link angle; forces consistent"),
+    Effect("motor_sensor", "nuisance", ("motor_bias_1", "motor_bias_2"), {}, ("tendon-rig", "joint-rig"),
+           "motor-angle residual constant, force residual following the spring stiffness"),
+    Effect("nominal_motor", "nuisance", ("motor_inertia_rel", "motor_damping_add"), {},
+           ("tendon-rig", "joint-rig"), "motor-torque residual in phase with acceleration or velocity"),
+    Effect("nominal_spring", "nuisance", ("spring_scale_rel",), {}, ("tendon-rig", "joint-rig"),
+           "force residual proportional to the modelled force"),
+    Effect("nominal_link", "nuisance", ("link_inertia_rel", "link_damping_add"), {}, ("joint-rig",),
+           "link-mode frequency or damping wrong"),
+)}
 
 PHYSICAL_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.kind == "physical")
 PLACED_EFFECTS = ("motor_friction", "guide_friction", "spring_hysteresis")
@@ -216,16 +202,8 @@ NUISANCE_EFFECTS = tuple(k for k, e in EFFECTS.items() if e.kind == "nuisance")
 def effects_for_rig(rig: str, outputs: list[str]) -> list[Effect]:
     """Candidates that can act and be seen on ``rig`` with the measured ``outputs``."""
     has_force = any(o.startswith("tendon_force") for o in outputs)
-    out = []
-    for e in EFFECTS.values():
-        if rig not in e.rigs:
-            continue
-        if e.name == "force_sensor" and not has_force:
-            continue
-        if e.name == "link_sensor" and "joint_angle" not in outputs:
-            continue
-        out.append(e)
-    return out
+    return [e for e in EFFECTS.values() if rig in e.rigs and (has_force or e.name != "force_sensor")
+            and ("joint_angle" in outputs or e.name != "link_sensor")]
 
 
 def default_vector() -> np.ndarray:

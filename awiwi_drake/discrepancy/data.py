@@ -272,12 +272,13 @@ def _check_parameters(rig: str, params, where: str, checks) -> dict:
     return out
 
 
-def _read_text(path: pathlib.Path) -> str:
-    """The file as text (UTF-8, a byte-order mark accepted); errors name the file."""
+def _read_text(path: pathlib.Path, read=lambda fh: fh.read()):
+    """``read`` of the open file (UTF-8, a byte-order mark accepted, any line ends); errors name the file."""
     if path.is_dir():
         raise ValueError(f"{path}: is a directory, not a dataset file (a dataset is NAME.csv + NAME.json)")
     try:
-        return path.read_text(encoding="utf-8-sig")
+        with open(path, encoding="utf-8-sig", newline=None) as fh:
+            return read(fh)
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
     except OSError as exc:
@@ -308,22 +309,17 @@ def _read_csv(csv_path: pathlib.Path) -> tuple[list, np.ndarray]:
 
     A bad row is named (a second, line-by-line pass runs only then).
     """
-    if csv_path.is_dir():
-        raise ValueError(f"{csv_path}: is a directory, not a dataset file (a dataset is NAME.csv + NAME.json)")
-    try:
-        with open(csv_path, encoding="utf-8-sig", newline=None) as fh:
-            head_line = fh.readline().strip()
-            if not head_line:
-                raise ValueError(f"{csv_path}: empty file (or empty header line)")
-            header = [h.strip() for h in head_line.split(",")]
-            try:
-                data = np.loadtxt(fh, delimiter=",", dtype=float, ndmin=2)
-            except ValueError:
-                data = None
-    except UnicodeDecodeError as exc:
-        raise ValueError(f"{csv_path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
-    except OSError as exc:
-        raise ValueError(f"{csv_path}: cannot read ({exc.strerror or exc})") from None
+    def read(fh):
+        head_line = fh.readline().strip()
+        if not head_line:
+            raise ValueError(f"{csv_path}: empty file (or empty header line)")
+        header = [h.strip() for h in head_line.split(",")]
+        try:
+            return header, np.loadtxt(fh, delimiter=",", dtype=float, ndmin=2)
+        except ValueError:
+            return header, None
+
+    header, data = _read_text(csv_path, read)
     ncol = len(header)
     if data is not None and (data.size == 0 or data.shape[1] == ncol):
         return header, data.reshape(-1, ncol) if data.size else np.zeros((0, ncol))

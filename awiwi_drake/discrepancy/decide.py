@@ -41,7 +41,7 @@ from .catalog import EFFECTS, Effect
 from .replay import ReplayEngine
 from .screen import gain_z
 
-__all__ = ["NoiseEquivalent", "noise_equivalent", "materiality", "rejection_reason", "separating_experiment",
+__all__ = ["NoiseEquivalent", "materiality", "rejection_reason", "separating_experiment",
            "SEPARATING_EXPERIMENTS", "EQUIVALENT_EFFECTS", "ripple_periods",
            "DRIVE_GAIN_RECALIBRATION", "recalibration_effect", "ripple_adds_to_recalibration"]
 
@@ -102,11 +102,6 @@ class NoiseEquivalent:
         else:
             self.qd_rms = self.qdd_rms = float("nan")
         self.nom = nom
-
-
-def noise_equivalent(eng: ReplayEngine) -> NoiseEquivalent:
-    """:class:`NoiseEquivalent` of the dataset replayed by ``eng``."""
-    return NoiseEquivalent(eng)
 
 
 def _ripple_size(p: dict) -> float:

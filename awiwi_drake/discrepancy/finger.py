@@ -37,20 +37,18 @@ effect is subtracted and the search repeats until the held-out residual is at th
 passes; above ``unexplained_ratio`` times the floor the verdict says an unexplained discrepancy remains,
 naming the tendons where it is.
 
-Why not a replay of the finger diagram (multiple shooting, as on the rigs): measured on the index, one
-multiple-shooting pass of the finger diagram over a 10 s dataset costs about as much as the dataset
-generation (the finger runs at ~0.5-4x real time), and a catalog screen needs tens to hundreds of passes; with
-motor angles and tendon forces measured, the motor and spring laws localise the effect exactly without
-integrating the links (docs/REPRODUCTIONS.md, issue 12). The one replay: a named hysteresis loop's write-back
-(a few passes, once the effects are named): a Dahl state on the noisy measured elongation is relaxed by the
-noise, on the replayed finger's it is not (:meth:`FingerResiduals.replay`, :func:`_hysteresis_law_fit`).
+Why not a multiple-shooting replay as on the rigs: one pass of the finger diagram costs about as much as
+generating the dataset and a screen needs tens to hundreds; with motor angles and tendon forces measured, the
+motor and spring laws localise the effect without integrating the links. The one replay is a named hysteresis
+loop's write-back (:meth:`FingerResiduals.replay`, :func:`_hysteresis_law_fit`): a Dahl state on the noisy
+measured elongation is relaxed by the noise, on the replayed finger's it is not.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from types import SimpleNamespace
 
 import numpy as np
@@ -68,7 +66,8 @@ from . import laws
 from .augment import AugmentedParameters, augmented_finger_parameters
 from .data import Dataset, finger_parameters_from_json, finger_parameters_to_json, is_finger_rig
 from .decide import separating_experiment
-from .replay import noise_floor
+from .finger_truth import with_loop
+from .replay import noise_floor, play_operator
 from .screen import gain_z
 
 __all__ = ["FingerResiduals", "FingerStep", "FingerDiagnosis", "diagnose_finger", "JOINT_LABELS",
@@ -94,9 +93,8 @@ def tendon_place(rig, i: int) -> str:
 
 # ---------------------------------------------------------------------------- consistent filtering
 def _kernel(sigma: float, dt: float):
-    """Gaussian kernel and its first two derivatives sampled on ``+-6 sigma`` (weights times dt). The span
-    matters: cut at 4 sigma, the second derivative's weights sum to 3e-4/sigma^2 instead of 0, which turns a
-    motor angle offset of 1 rad into a 0.03 N m torque residual (B = 2e-3)."""
+    """Gaussian kernel and its first two derivatives sampled on ``+-6 sigma`` (weights times dt): cut at 4 sigma,
+    the second derivative's weights would not sum to 0 (a constant angle offset would show as a torque)."""
     half = int(math.ceil(6 * sigma / dt))
     s = np.arange(-half, half + 1) * dt
     g = np.exp(-0.5 * (s / sigma) ** 2) / (sigma * math.sqrt(2 * math.pi))
@@ -187,7 +185,7 @@ class FingerResiduals:
         # the inertia-error signature: the acceleration filtered 4x wider, nearly free of the angle noise
         # that the residual's own acceleration carries (no errors-in-variables fit of noise on itself)
         s4, _, _, g2w = _kernel(4 * sigma, dt)
-        self._acc_wide = _filter(TH, g2w)
+        acc_wide = _filter(TH, g2w)
         # decimation: one sample per ``finger_decimation`` kernel deviations; laws evaluated on the filtered
         # full-rate signals are filtered once more (:meth:`consistent`), so both filters' margins are cut
         step = max(1, int(round(settings.finger_decimation * sigma / dt)))
@@ -198,7 +196,7 @@ class FingerResiduals:
         self._force_raw = F
         self.time = ds.time[sl]
         self.theta, self.omega, self.alpha, self.force, self.torque = th[:, sl], om[:, sl], al[:, sl], f[:, sl], u[:, sl]
-        self.tau = tau[:, sl]
+        self.tau, self.acc_wide = tau[:, sl], acc_wide[:, sl]
         # the motor's known acceleration (its linear law with the measured force and the held command) integrated
         # twice: the motion the motor law explains, exact at the sample rate (motor_velocity)
         known = np.stack([motor_acceleration(TH[i], om[i], U[i], r * F[i], lin[i]) for i in range(m)])
@@ -229,17 +227,12 @@ class FingerResiduals:
         self._signature_cache: dict = {}     # candidate columns per (effect, tendon): data only (_signatures)
 
     def motor_velocity(self, i: int, width: float) -> np.ndarray:
-        """Motor ``i``'s velocity [rad/s] at the full rate: what a nonlinear velocity law (friction (3.8)) is
-        evaluated on before the consistent filter. The motion the motor's known law explains (its linear law with
+        """Motor ``i``'s velocity [rad/s] at the full rate, what a nonlinear velocity law (friction (3.8)) is
+        evaluated on before the consistent filter: the motion the motor's known law explains (its linear law with
         the measured force and the held command, integrated twice: ``omega_k``, ``theta_k``) plus the derivative of
-        the rest ``theta - theta_k`` smoothed by a Gaussian of ``width`` [s]: only the unknown torques' motion is
-        smoothed, the command's and the tendon's pass at the sample rate. On the consistent filter's own 20 ms the
-        finger's fast motion is gone, and (3.8) of a smoothed velocity is not the filtered friction: a (3.8)
-        friction with the truth's own slope left 14x the floor where the noise-free velocity leaves 0.94x
-        (index_h3, 3 s, 30 dB); the Gaussian-smoothed angle alone 3.6x at its best width (5.6-8 ms), a narrow width
-        passing the angle noise (1 ms: 83x); this form 1.6x at 8 ms (velocity error 0.17 against 0.19 rad/s, and
-        0.18 against 0.44 at 16 ms). The data choose the width from ``finger_motion_filters``, as for the guides'
-        travel (:meth:`guide_path`)."""
+        the rest ``theta - theta_k`` smoothed by a Gaussian of ``width`` [s] (from ``finger_motion_filters``, chosen
+        by the data). Only the unknown torques' motion is smoothed: (3.8) of a velocity smoothed as a whole is not
+        the filtered friction (the finger's fast motion is gone within the filter's 20 ms)."""
         key = (i, width)
         if key not in self._velocities:
             self._velocities[key] = self._omega_known[i] + _filter(self._theta_raw[i] - self._theta_known[i],
@@ -250,9 +243,6 @@ class FingerResiduals:
         """A full-rate signal (a law evaluated on the filtered signals :attr:`full`, or on raw ones) filtered by
         the same kernel and decimated: how it shows in the filtered residuals."""
         return _filter(np.asarray(signal, float), self._g0)[..., self._sl]
-
-    def acceleration_wide(self) -> np.ndarray:
-        return self._acc_wide[:, self._sl]
 
     def _spring_side(self, g0: float) -> None:
         """Joint angles from all tendons (weighted least squares on the elongations the spring laws give for
@@ -328,9 +318,8 @@ class FingerResiduals:
         measured angle smoothed by ``finger_motor_rest_filter``: open loop the motion that stretches no tendon
         drifts (motors and joints together, no motor damping), the tendons' own dynamics are 17x stiffer than the
         pull. Start: the smoothed angles and the joints from the smoothed elongations (least squares), loop forces
-        0. Returns ``elongation`` (m, N) [m] and ``loop`` (m, N) [N] (the hysteresis forces, 0 without a loop):
-        noise-free where the measured force's elongation carries 17 um per sample, against a presliding length of
-        0.4 mm whose Dahl state each noise step relaxes (docs/REPRODUCTIONS.md). Cached per ``params``."""
+        0. Returns ``elongation`` (m, N) [m] and ``loop`` (m, N) [N] (the hysteresis forces, 0 without a loop),
+        free of the sensor noise that relaxes a Dahl state run on the measured elongation. Cached per ``params``."""
         cache = self.__dict__.setdefault("_replays", {})
         if params in cache:
             return cache[params]
@@ -411,8 +400,7 @@ class FingerResiduals:
         P = np.asarray(rig.coupling.P(), float)
         w = np.mean(self.wsq, axis=1)                                      # (m,) mean whitening weight
         A = np.linalg.pinv(w[:, None] * P)
-        # the motor angles as the motor law's motion plus the smoothed rest (motor_velocity): the raw angles' noise
-        # (37-50 um of tendon on the index at 30 dB) dominated the travel's (28 um per sample, now 11 um)
+        # the motor angles as the motor law's motion plus the smoothed rest (motor_velocity), not the raw noisy ones
         w_rest = _kernel(self.settings.finger_motor_rest_filter, self.dt)[1]
         theta = self._theta_known + _filter(TH - self._theta_known, w_rest)
         y = self._x_full - rig.offsets[:, None] - self.r * theta            # (m, N) = P q + noise
@@ -420,10 +408,8 @@ class FingerResiduals:
         self.path = P @ q_full                                             # tendon travel at the guides [m]
         self._paths, self._guide_cols = {}, {}          # smoothed paths, guide columns (guide_columns)
         # the links' terms at the full rate, then filtered: M(q) q'' and C(q, q') q' are not linear in q, and the
-        # ideal finger's link modes (~500 Hz) move q within the kernel's width; evaluated on the filtered angles
-        # they leave 2-4x the noise floor on a nothing-hidden index record (rectified fast-mode terms), at the full
-        # rate 1e-5 N m with the noise-free angles (3 s, 1 kHz). Central differences: the angle noise enters the
-        # filtered acceleration as the consistent filter's H'' does
+        # finger's link modes (~500 Hz) move q within the kernel's width (on the filtered angles the rectified
+        # fast-mode terms would be a residual). Central differences: the angle noise enters as H'' does
         v_full = np.gradient(q_full, self.dt, axis=1)
         a_full = np.gradient(v_full, self.dt, axis=1)
         links = LinkModel(rig.plant, rig.coupling_gain)
@@ -458,14 +444,10 @@ class FingerResiduals:
         (:func:`~awiwi_drake.components.friction.guide_friction_rate`, level
         :func:`~awiwi_drake.components.friction.guide_friction_level`) solved per sample
         (:func:`~awiwi_drake.components.friction.dahl_path`) along the estimated travel at the guides, smoothed by a
-        Gaussian of ``width`` [s] first. The estimated travel carries the motor-angle and force noise (about 28 um
-        per sample on the index at 30 dB, against a presliding length of 0.4 mm): every noise step relaxes the Dahl
-        state by ``|dx| / delta``, which on the raw estimate left 99x the floor where the truth's own law on the
-        true travel leaves 1.2x; a play operator instead delays every true reversal (a 10 um play on the true
-        travel: 12x). The width that balances the two depends on the record (``finger_motion_filters``: a grid,
-        chosen by the data as the candidates' shapes are). The Dahl path is linear in its level
-        ``C + f (rise (1 + s) / 2 + loss (1 - s) / 2)``, so it is ``C U + rise D+ + loss D-``
-        (:meth:`guide_columns`)."""
+        Gaussian of ``width`` [s] first (from ``finger_motion_filters``, chosen by the data): every noise step of
+        the raw travel would relax the Dahl state by ``|dx| / delta``, and a play operator would delay every true
+        reversal. The path is linear in its level ``C + f (rise (1 + s) / 2 + loss (1 - s) / 2)``, so it is
+        ``C U + rise D+ + loss D-`` (:meth:`guide_columns`)."""
         U, Dp, Dm = self.guide_columns(i, width, gm)
         return constant * U + np.expm1(exponent) * Dp - np.expm1(-exponent) * Dm
 
@@ -532,16 +514,6 @@ class Candidate:
     loop: np.ndarray = field(default=None, repr=False)     # spring_hysteresis: the loop force [N] at the full rate
 
 
-def _play(x: np.ndarray, half_width: float) -> np.ndarray:
-    """Play operator of half-width ``half_width``: the output follows ``x`` only once it leaves ``[y - h, y + h]``
-    (noise smaller than the play does not reverse a loop's direction)."""
-    y, out = float(x[0]), np.empty_like(x)
-    for k, v in enumerate(x.tolist()):
-        y = min(max(y, v - half_width), v + half_width)
-        out[k] = y
-    return out
-
-
 def hysteresis_loop(force: np.ndarray, law, h, force_noise: float, play: float, dt: float) -> np.ndarray:
     """The hysteresis force ``z`` [N] of one spring mechanism along a measured force record (full rate): the
     package's loop (:class:`~awiwi_drake.parameters.components.HysteresisParams`, the rate law
@@ -553,8 +525,8 @@ def hysteresis_loop(force: np.ndarray, law, h, force_noise: float, play: float, 
     F = np.maximum(np.asarray(force, float), 1e-3)
     x = np.asarray(law.inverse_force(F), float)
     half = play * force_noise / float(np.median(np.asarray(law.stiffness(x), float)))
-    return dahl_path(_play(x, half), h.width_ratio * F + h.width_offset, h.presliding_length, h.smoothing_velocity,
-                     dt)
+    return dahl_path(play_operator(x, half), h.width_ratio * F + h.width_offset, h.presliding_length,
+                     h.smoothing_velocity, dt)
 
 
 def _ripple_orders(fr: FingerResiduals, i: int, bounds: CatalogBounds) -> list:
@@ -621,14 +593,13 @@ def _signature_variants(fr: FingerResiduals, effect: str, i: int, bounds: Catalo
             out.append((f"orders {o1:g}, {o2:g}", np.stack(cols), names,
                         {"ripple_order_1": o1, "ripple_order_2": o2}))
     elif effect == "nominal_motor":   # B error (acceleration), added damping: tau = -dB w' - dd w
-        out.append(("", np.stack([-fr.acceleration_wide()[i], -om]), ["motor_inertia_abs", "motor_damping_add"], {}))
+        out.append(("", np.stack([-fr.acc_wide[i], -om]), ["motor_inertia_abs", "motor_damping_add"], {}))
     elif effect in SPRING_SIDE:
         e_i = fr.proj[:, :, i] * (fr.wsq[i] / fr.stiff[i])[:, None]     # (K, m): a force error on tendon i
         if effect == "spring_hysteresis":
             # the package's loop (HysteresisParams, Fig 4.8b): the Dahl law with level beta f + z0 on the elongation
-            # (hysteresis_loop), linear in (beta, z0).  Evaluated at the full rate on the elongation the measured force gives, then filtered
-            # (consistent): the finger's link modes move the tendons by up to ~1 mm within a few samples, which
-            # cycles the loop; a Dahl state of the filtered elongation would not see those cycles.
+            # (hysteresis_loop), linear in (beta, z0), at the full rate, then filtered (consistent): the finger's link
+            # modes cycle the loop within a few samples, which a Dahl state of the filtered elongation would not see
             F = fr._force_raw[i]
             for length in fr.settings.finger_hysteresis_lengths:
                 cols = [hysteresis_loop(F, fr.rig.spring_laws[i], HysteresisParams(width_ratio=a, width_offset=b,
@@ -765,28 +736,18 @@ def _guide_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, bas
     c.size = float(np.sqrt(np.mean((C + np.expm1(E) * f_i) ** 2)))
 
 
-def _with_loop(params, tendon: str, h: HysteresisParams):
-    """``params`` (FingerRigParams) with the hysteresis loop ``h`` on ``tendon``'s ``tendon_springs`` entry."""
-    own = dict(params.tendon_springs)
-    own[tendon] = own.get(tendon, params.spring).replace(hysteresis=h)
-    return params.replace(tendon_springs=tuple(own.items()))
-
-
 def _hysteresis_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds, base_spring: np.ndarray,
                         named, rounds: int) -> float:
     """The accepted hysteresis candidate refitted as the package's loop on the finger's own motion, what is
-    written back: the screen's columns run the Dahl law on the elongation the measured force gives, whose noise
-    (17 um per sample at 30 dB against a presliding length of 0.4 mm) relaxes the loop at every step, so its fit
-    is biased (a longer, larger loop; reloaded, 13.5x the floor on index_h6). Here the elongation is the finger
-    replayed on the recorded commands (:meth:`FingerResiduals.replay` of ``named``, the dataset's parameters with
-    the effects named so far written in, and this loop):
-    the loop ``beta f_el(x) + z0`` (``spring.hysteresis_rate``, solved per sample by
+    written back (the screen's columns run the Dahl law on the noisy measured elongation, which biases the fit).
+    The elongation is the finger replayed on the recorded commands (:meth:`FingerResiduals.replay` of ``named``,
+    the dataset's parameters with the effects named so far written in, and this loop): the loop
+    ``beta f_el(x) + z0`` (``spring.hysteresis_rate``, solved per sample by
     :func:`~awiwi_drake.components.friction.dahl_path`) is linear in ``(beta, z0)`` along it, fitted by bounded
     least squares to the spring-side residual for each presliding length (the grid, then a bounded search on
-    ``log delta`` around the best), and the replay repeats with the new loop (the motion moves with it) until the
-    parameters settle (1 %), ``rounds`` replays at most. Kept: the loop that, judged on its own replay's motion,
-    leaves the least (a refit is judged on the motion of the loop before it; on index_h6 the first refit left 0.95x
-    the floor on the screen's motion and 1.5x on its own). ``c`` is updated (parameters, the loop force along its
+    ``log delta`` around the best), and the replay repeats with the new loop until the parameters settle (1 %),
+    ``rounds`` replays at most. Kept: the loop that, judged on its own replay's motion, leaves the least (a refit
+    is judged on the motion of the loop before it). ``c`` is updated (parameters, the loop force along its
     replay's elongation, size, ``at_bound``); returns the energy the last refit leaves on its replay's motion (how
     the tendons of a class compare after one replay)."""
     from scipy.optimize import minimize_scalar
@@ -799,7 +760,7 @@ def _hysteresis_law_fit(fr: FingerResiduals, c: Candidate, bounds: CatalogBounds
                          presliding_length=c.params["hysteresis_length"])
     best = None
     for _ in range(rounds):
-        x = fr.replay(_with_loop(named, fr.rig.tendon_names[i], h))["elongation"][i]
+        x = fr.replay(with_loop(named, fr.rig.tendon_names[i], h))["elongation"][i]
         fel = np.asarray(law.force(x), float)
 
         def columns(length):
@@ -937,9 +898,7 @@ class FingerDiagnosis:
         return {"dataset": self.dataset, "rig": self.rig, "verdict": self.verdict, "complete": self.complete,
                 "named_effects": self.named_effects, "places": self.places,
                 "nuisance_corrections": self.nuisance_corrections,
-                "steps": [dict(effect=s.effect, kind=s.kind, place=s.place, tendon=s.tendon, status=s.status,
-                               parameters=s.parameters, members=s.members, experiment=s.experiment, z=s.z,
-                               delta_bic=s.delta_bic) for s in self.steps],
+                "steps": [asdict(s) for s in self.steps],
                 "floor_ratio_before": self.ratios_before, "floor_ratio_after": self.ratios_after,
                 "unexplained_residual": self.unexplained_residual, "unexplained": self.unexplained,
                 "seconds": self.seconds, "cpu_seconds": self.cpu_seconds, "history": self.history,
@@ -1085,9 +1044,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
         say(f"joint side (links' equation, guide friction), residual/floor: {before['joint']:.2f}")
     steps, history, used = [], [], set()
     floor = settings.floor_ratio
-    # the thumb (routing h(q) nonlinear): its spring side is judged (wave 5 measured 1.2-1.6x the floor on
-    # nothing-hidden thumb data: the truth started with the joints away from the first reference, a transient of
-    # 0-109 N; from a consistent start 0.67-1.16x, seeds 2 and 5, 10 s); its links' equation is not (joint side)
+    # the thumb (routing h(q) nonlinear): its spring side is judged, its links' equation is not (joint side)
     if not fr.joint_checked:
         say(f"joint side not judged on the {fr.finger} (no guide friction): {fr.joint_reason}")
     warnings = []
@@ -1121,13 +1078,7 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
                     (kind == "nuisance" and n_nuis >= settings.max_nuisance):
                 continue
             for i in range(fr.m):
-                if (eff, i) in used:
-                    continue
-                if eff in MOTOR_SIDE and mot[i] < floor:
-                    continue
-                if eff in SPRING_SIDE and spr < floor:
-                    continue
-                if eff in JOINT_SIDE and jnt < floor:
+                if (eff, i) in used or (mot[i] if eff in MOTOR_SIDE else spr if eff in SPRING_SIDE else jnt) < floor:
                     continue
                 c = _fit(fr, eff, i, bounds, settings, base_motor, base_spring, base_joint)
                 c.rejected = _reject(c, settings)
@@ -1166,10 +1117,9 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
         if win.side == "motor":
             base_motor = base_motor - win.fitted
         elif win.effect == "spring_hysteresis":   # removed as a nominal loop is (not linearised): refitted on the
-            # replayed finger now if every motor law holds (the replay drives the motors by them; thumb_h3's friction
-            # unnamed: 480 um of elongation error), else the screen's
+            # replayed finger now if every motor law holds (the replay drives the motors by them), else the screen's
             # loop until every effect is named (below); a loop left as the screen fitted it invites calibrations
-            # that fit its error (index_h2, 10 s: force_sensor and nominal_spring, 2.5x the floor after the refit)
+            # that fit its error
             same = [win] + [c for c in tied if c.effect == win.effect]
             if max(current()[0]) < fr.unexplained_limit():     # the motor sides at noise: the motor laws hold
                 named = augmented_finger_parameters(SimpleNamespace(steps=steps, tendon_names=fr.rig.tendon_names),
@@ -1205,9 +1155,8 @@ def diagnose_finger(dataset: Dataset, *, settings: DiscrepancySettings | None = 
         say(f"added {win.effect} on {places[win.tendon]} ({win.kind}, {status}, z {win.z:.1f}, "
             f"dBIC {win.delta_bic:.1f}): " + ", ".join(f"{k} = {v:.4g}" for k, v in win.params.items()))
     # the write-back's loops: refitted on the finger replayed with every other named effect (_hysteresis_law_fit; a
-    # motor friction left out moves the replay's motor: thumb_h3 with its friction named after the loop, 480 um of
-    # elongation error), on the tendon of the screen's equals where the refit leaves the least (the screen's columns
-    # cannot tell antagonists apart)
+    # motor friction left out moves the replay's motor), on the tendon of the screen's equals where the refit leaves
+    # the least (the screen's columns cannot tell antagonists apart)
     for k, same in loops.items():
         if k in refitted and k == len(steps) - 1:      # refitted with every other effect already named
             continue

@@ -24,7 +24,7 @@ Motor friction and ripple are torques on the motor from a block in front of the 
 (:class:`FingerHiddenTorque_`). Guide friction is where the thesis has it: "the tendon force measurements are
 performed into the forearm", so "the friction introduced by the guidings from the fingers to the spring
 mechanisms" (ch. 4, introduction) acts between the force sensor and the joints: the joints feel ``-P^T (f + g)``
-while the sensor reads ``f`` (waves 4-5 put it on the motor side of the sensor, where the hand has none).
+while the sensor reads ``f``.
 """
 
 from __future__ import annotations
@@ -43,13 +43,13 @@ from awiwi_drake.control import closed_loop
 from awiwi_drake.control.motor_position import motor_position_controller
 from awiwi_drake.hand.diagrams import finger_diagram, hand_diagram
 from awiwi_drake.parameters.components import HysteresisParams, TendonGuideParams
-from awiwi_drake.parameters.discrepancy import FingerTruthParams, TruthGeneratorParams
+from awiwi_drake.parameters.discrepancy import FingerTruthParams
 from awiwi_drake.parameters.hand import FINGERS, FingerRigParams, HandRigParams
 from awiwi_drake.parameters.rigs import MotorPositionGains
 
 from . import laws
 from .data import Dataset, finger_rig_name
-from .truth import stribeck_draw
+from .truth import ripple_draw, sensor_reading, stribeck_draw
 
 __all__ = ["FINGER_HIDDEN_EFFECTS", "FingerHiddenTorque_", "nominal_finger_params", "make_finger_dataset"]
 
@@ -134,15 +134,17 @@ def draw_finger_truth(hidden, place: int, num_tendons: int, rng: np.random.Gener
     if "guide_friction" in hidden:
         tr["guide_friction"] = dict(c0=k * u(*gen.guide_c0_range), mu_angle=k * u(*gen.guide_mu_range))
     if "motor_ripple" in hidden:
-        orders = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False)
-        harm = []
-        for o in orders:
-            amp, ph = k * u(*gen.ripple_amplitude_range), u(0, 2 * np.pi)
-            harm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
-        tr["motor_ripple"] = dict(harmonics=harm)
+        tr["motor_ripple"] = dict(harmonics=ripple_draw(gen.ripple_amplitude_range, 1, rng, k)[0])
     if "spring_hysteresis" in hidden:
         tr["spring_hysteresis"] = dict(width_ratio=k * u(*gen.hysteresis_ratio_range))
     return tr
+
+
+def with_loop(params, tendon: str, h: HysteresisParams):
+    """``params`` (FingerRigParams) with the hysteresis loop ``h`` on ``tendon``'s ``tendon_springs`` entry."""
+    own = dict(params.tendon_springs)
+    own[tendon] = own.get(tendon, params.spring).replace(hysteresis=h)
+    return params.replace(tendon_springs=tuple(own.items()))
 
 
 def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
@@ -150,15 +152,11 @@ def _truth_rig(finger: str, nominal: FingerRigParams, truth: dict):
     added in front of its ``motor_torque`` (the same states and handles; its operating points are the finger's
     without those torques)."""
     p = nominal
+    placed = {"spring_hysteresis", "guide_friction"} & set(truth)
+    tendon = _diagram(finger, p).tendon_names[truth["place"] - 1] if placed else None
     if "spring_hysteresis" in truth:      # the package's hysteresis on the spring mechanism of that tendon
-        tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
-        own = dict(p.tendon_springs)
-        sp = own.get(tendon, p.spring)
-        hyst = HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"])
-        own[tendon] = sp.replace(hysteresis=hyst)
-        p = p.replace(tendon_springs=tuple(own.items()))
+        p = with_loop(p, tendon, HysteresisParams(enabled=True, width_ratio=truth["spring_hysteresis"]["width_ratio"]))
     if "guide_friction" in truth:         # the package's guides (between sensor and joints) on that path only
-        tendon = _diagram(finger, p).tendon_names[truth["place"] - 1]
         g = truth["guide_friction"]
         p = p.replace(tendon_guides=tuple(dict(p.tendon_guides, **{tendon: TendonGuideParams(
             constant=g["c0"], capstan_exponent=g["mu_angle"])}).items()))
@@ -273,16 +271,8 @@ def make_finger_dataset(finger: str = "index", hidden=(), *, place: int | None =
     if joint_angles:
         for j in range(n):
             clean[f"joint_angle_{j + 1}"] = res["joint_angle"][:, j].copy()
-    rg = TruthGeneratorParams()
-    meas = {}
-    for key, y in clean.items():
-        y = y.copy()
-        if snr_db is not None:
-            y = y + rng.normal(0.0, clean[key].std() * 10 ** (-snr_db / 20.0), N)
-            if key.startswith("tendon_force"):
-                lsb = rg.force_range / 2 ** rg.force_bits
-                y = np.round(y / lsb) * lsb
-        meas[key] = y
+    meas = {key: y.copy() if snr_db is None else sensor_reading(key, y, y.std() * 10 ** (-snr_db / 20.0), rng)
+            for key, y in clean.items()}
     if np.any(np.abs(U) >= nominal.motor.torque_limit) and nominal.motor.saturation:
         t_sat = float(t[np.nonzero(np.any(np.abs(U) >= nominal.motor.torque_limit, axis=1))[0][0]])
         raise SimulationEventError(f"finger truth: the commanded torque reaches the motor limit "

@@ -171,27 +171,28 @@ def residual_maps(eng: ReplayEngine, params: np.ndarray) -> ResidualMaps:
                         asym, lags * eng.dt, xc, summary)
 
 
-def effective_sample_size(x: np.ndarray) -> float:
-    """Number of independent samples the mean of ``x`` is worth: ``n / (1 + 2 sum_k w_k rho_k)``, the sample
-    autocorrelation ``rho_k`` summed with Bartlett weights ``w_k = 1 - k / (m + 1)`` (the Newey-West long-run
-    variance). Bandwidth, chosen: ``m`` = twice the first lag where ``rho_k <= 0`` (the correlation time of the
+def effective_sample_size(x: np.ndarray) -> tuple[float, int]:
+    """``(n_eff, m)``: the number of independent samples the mean of ``x`` is worth, ``n / (1 + 2 sum_k w_k rho_k)``,
+    the sample autocorrelation ``rho_k`` summed with Bartlett weights ``w_k = 1 - k / (m + 1)`` (the Newey-West
+    long-run variance). Bandwidth, chosen: ``m`` = twice the first lag where ``rho_k <= 0`` (the correlation time of the
     series itself; a fixed rule such as ``4 (n/100)^(2/9)`` is ~11 samples here and misses a residual correlated
-    over hundreds), at most ``n / 2``. White noise gives ~``n``; never more than ``n`` or less than 1."""
+    over hundreds), at most ``n / 2``, returned beside ``n_eff`` (0 for fewer than 3 samples or a constant series).
+    White noise gives ~``n``; never more than ``n`` or less than 1."""
     x = np.asarray(x, float)
     n = len(x)
     if n < 3:
-        return float(max(n, 1))
+        return float(max(n, 1)), 0
     x = x - x.mean()
     f = np.fft.rfft(x, 2 * n)
     acov = np.fft.irfft(f * np.conj(f))[:n] / n
     if acov[0] <= 0.0:
-        return float(n)
+        return float(n), 0
     rho = acov / acov[0]
     neg = np.nonzero(rho[1:] <= 0.0)[0]
     m = int(min(2 * (neg[0] + 1) if len(neg) else n, n // 2))
     k = np.arange(1, m + 1)
     tau = 1.0 + 2.0 * float(np.sum((1.0 - k / (m + 1.0)) * rho[1:m + 1]))
-    return float(min(n, max(1.0, n / max(tau, 1e-12))))
+    return float(min(n, max(1.0, n / max(tau, 1e-12)))), m
 
 
 def _band(freq: np.ndarray, ratio: np.ndarray, level: float = 2.0) -> list:
@@ -240,7 +241,7 @@ def locate(maps: ResidualMaps, threshold: float) -> dict:
     # residual's effective sample size: a slow residual has few independent samples); a residual periodic in
     # time (e.g. mains pickup) has none
     region = max(regions, key=lambda r: abs(r["mean_residual"])) if regions else {}
-    n_eff = effective_sample_size(maps.residual[worst][np.isfinite(maps.residual[worst])])
+    n_eff, _ = effective_sample_size(maps.residual[worst][np.isfinite(maps.residual[worst])])
     if region and abs(region["mean_residual"]) < 3.0 * rms / np.sqrt(max(n_eff, 10.0) / 10.0):
         region = {}
     # a periodic component stands out of the other orders (a coloured residual fits every low order

@@ -34,7 +34,7 @@ from .catalog import PARAM_INDEX
 from .data import Dataset
 from .model import DiscrepancyModel_, NominalParameters
 
-__all__ = ["ReplayEngine", "Projection", "project", "noise_floor"]
+__all__ = ["ReplayEngine", "Projection", "project", "noise_floor", "play_operator"]
 
 
 def noise_floor(y: np.ndarray) -> float:
@@ -49,6 +49,16 @@ def noise_floor(y: np.ndarray) -> float:
         return 0.0
     mad = np.median(np.abs(d3 - np.median(d3))) * 1.4826
     return float(mad / np.sqrt(20.0))
+
+
+def play_operator(x: np.ndarray, half_width: float) -> np.ndarray:
+    """Play operator (Prandtl-Ishlinskii stop) of half-width ``half_width``: the output follows ``x`` only once it
+    leaves ``[y - h, y + h]`` (noise smaller than the play does not reverse a loop's direction)."""
+    y, out = float(x[0]), np.empty_like(x)
+    for k, v in enumerate(x.tolist()):
+        y = min(max(y, v - half_width), v + half_width)
+        out[k] = y
+    return out
 
 
 class ReplayEngine:
@@ -160,15 +170,7 @@ class ReplayEngine:
             sig = [nom.motor_pulley_radius * self.sigma[self.out_names.index(f"motor_angle{s}")] for s in sfx]
             if nom.has_link:
                 sig = [float(np.hypot(v, nom.link_pulley_radius * noise_floor(self._q_raw))) for v in sig]
-            out = np.empty_like(self.elong)
-            for i in range(n):
-                b = 3.0 * g0 * sig[i]
-                y, row = float(self.elong[i, 0]), []
-                for x in self.elong[i].tolist():
-                    y = min(max(y, x - b), x + b)
-                    row.append(y)
-                out[i] = row
-            self._played = out
+            self._played = np.stack([play_operator(self.elong[i], 3.0 * g0 * sig[i]) for i in range(n)])
         return self._played
 
     def _dahl_history(self, length: float, initial: float = 0.0) -> np.ndarray:
@@ -398,11 +400,7 @@ class ReplayEngine:
         starts_w = self.starts[windows]
         K = 0 if state_perturbations is None else len(state_perturbations)
         starts = np.tile(starts_w, S + K)
-        P = np.empty((Psets.shape[1], (S + K) * W))
-        for s in range(S):
-            P[:, s * W:(s + 1) * W] = Psets[s][:, None]
-        for k in range(K):
-            P[:, (S + k) * W:(S + k + 1) * W] = Psets[0][:, None]
+        P = np.repeat(np.vstack([Psets, np.repeat(Psets[:1], K, axis=0)]).T.astype(float), W, axis=1)
         X0 = self.initial_states(starts, P)
         for k in range(K):
             X0[:, (S + k) * W:(S + k + 1) * W] += state_perturbations[k][:, None]

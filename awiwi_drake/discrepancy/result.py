@@ -66,11 +66,7 @@ class Step:
     place: str = ""  # per-tendon effects: "tendon 1", "tendon 2", "both tendons" or "not localised"
 
     def summary(self) -> dict:
-        return {"effect": self.effect, "kind": self.kind, "status": self.status,
-                "confidence": self.confidence, "parameters": self.parameters,
-                "uncertainties": self.uncertainties, "nrmse_after": self.nrmse_after,
-                "nrmse_after_signals": self.nrmse_after_signals, "alternatives": self.alternatives,
-                "members": self.members, "experiment": self.experiment, "place": self.place,
+        return {**{f.name: getattr(self, f.name) for f in fields(self) if f.name != "candidates"},
                 "candidates": [c.summary() for c in self.candidates]}
 
 

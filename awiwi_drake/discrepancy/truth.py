@@ -59,10 +59,11 @@ from awiwi_drake.rigs.base import OperatingPoint, Rig, state_names
 
 from . import laws
 from .catalog import EFFECTS
-from .data import Dataset
+from .data import RIGS, Dataset
 from .model import NominalParameters, rig_kinematics, split_state
 
-__all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "UNKNOWN_EFFECTS", "draw_truth", "make_truth_dataset", "default_nominal"]
+__all__ = ["HiddenEffectPlant_", "HIDDEN_EFFECTS", "UNKNOWN_EFFECTS", "draw_truth", "make_truth_dataset",
+           "default_nominal", "ripple_draw", "sensor_reading", "stribeck_draw"]
 
 HIDDEN_EFFECTS = ("motor_friction", "motor_ripple", "spring_hysteresis", "joint_friction",
                   "guide_friction", "delay", "spring_drift", "backlash")
@@ -72,10 +73,13 @@ UNKNOWN_EFFECTS = ("link_spring", "torque_constant", "force_nonlinearity", "forc
 
 
 def default_nominal(rig: str) -> dict:
-    """Nominal dataset parameters (centre of the random draw), with their sources in
-    :func:`awiwi_drake.parameters.discrepancy` and the foundation defaults."""
-    from .defaults import nominal_defaults
-    return nominal_defaults(rig)
+    """Nominal dataset ``parameters`` of ``rig`` (centre of the random draw), from :class:`TruthGeneratorParams`."""
+    g = TruthGeneratorParams()
+    p = {"motor_inertia": g.motor_inertia, "motor_damping": g.motor_damping,
+         "motor_pulley_radius": g.motor_pulley_radius, "spring_poly": list(g.spring_poly)}
+    if rig == "joint-rig":
+        p.update(link_inertia=g.link_inertia, link_damping=g.link_damping, link_pulley_radius=g.link_pulley_radius)
+    return p
 
 
 @TemplateSystem.define("HiddenEffectPlant_", scope=sys.modules[__name__])
@@ -215,6 +219,31 @@ def stribeck_draw(coulomb: float, viscous_range, rng: np.random.Generator, visco
                 eps=u(*g.stribeck_smoothing_range), viscous=viscous_scale * u(*viscous_range))
 
 
+def ripple_draw(amplitude_range, motors: int, rng: np.random.Generator, scale: float = 1.0) -> list:
+    """A hidden ripple: two harmonics ``(order, a_sin, a_cos)`` per motor, the two orders drawn once from
+    {1..6, 100} per revolution, each amplitude ``scale`` times a draw from ``amplitude_range`` [N m], random phase."""
+    orders, harm = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False), []
+    for _ in range(motors):
+        hm = []
+        for o in orders:
+            amp, ph = scale * rng.uniform(*amplitude_range), rng.uniform(0, 2 * np.pi)
+            hm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
+        harm.append(hm)
+    return harm
+
+
+def sensor_reading(name: str, y: np.ndarray, sigma: float, rng: np.random.Generator,
+                   gen: TruthGeneratorParams | None = None) -> np.ndarray:
+    """``y`` plus white noise of standard deviation ``sigma``; a tendon force also quantised to
+    ``gen.force_bits`` over ``gen.force_range``."""
+    y = y + rng.normal(0.0, sigma, len(y))
+    if name.startswith("tendon_force"):
+        g = gen or TruthGeneratorParams()
+        lsb = g.force_range / 2 ** g.force_bits
+        y = np.round(y / lsb) * lsb
+    return y
+
+
 def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength: float = 1.0,
                place: int | None = None, unknown=(), unknown_rng: np.random.Generator | None = None) -> dict:
     """Random truth parameters for the hidden effects (and optional miscalibrations);
@@ -236,7 +265,8 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         if h not in HIDDEN_EFFECTS:
             raise ValueError(f"unknown hidden effect {h!r} (known: {', '.join(HIDDEN_EFFECTS)})")
         if rig not in EFFECTS[h].rigs:
-            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r} (it needs {' or '.join(EFFECTS[h].rigs)})")
+            raise ValueError(f"hidden effect {h!r} does not exist on rig {rig!r} "
+                             f"(it needs {' or '.join(EFFECTS[h].rigs)})")
     for h in nuisance:
         if h not in NUISANCES:
             raise ValueError(f"unknown nuisance {h!r} (known: {', '.join(NUISANCES)})")
@@ -247,15 +277,7 @@ def draw_truth(rig: str, hidden, rng: np.random.Generator, nuisance=(), strength
         g = TruthGeneratorParams()
         tr["motor_friction"] = stribeck_draw(u(0.06, 0.2), g.motor_viscous_range, rng)
     if "motor_ripple" in hidden:
-        orders = rng.choice([1, 2, 3, 4, 5, 6, 100], size=2, replace=False)
-        harm = []
-        for _ in range(n):
-            hm = []
-            for o in orders:
-                amp, ph = u(0.04, 0.12), u(0, 2 * np.pi)
-                hm.append((float(o), float(amp * np.cos(ph)), float(amp * np.sin(ph))))
-            harm.append(hm)
-        tr["motor_ripple"] = dict(harmonics=harm)
+        tr["motor_ripple"] = dict(harmonics=ripple_draw((0.04, 0.12), n, rng))
     if "spring_hysteresis" in hidden:
         tr["spring_hysteresis"] = dict(width=u(4.0, 10.0), length=u(1e-4, 4e-4), beta=0.7, gamma=0.3)
     if "joint_friction" in hidden:
@@ -335,10 +357,9 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     a[m] = ms[m] / np.max(np.abs(ms[m]))
     # chirp 0.2 -> 6 Hz
     m2 = (s >= 0.3) & (s < 0.55)
-    tc = t[m2] - t[m2][0] if m2.any() else t[m2]
     if m2.any():
-        dur = tc[-1] + 1e-9
-        a[m2] = np.sin(2 * np.pi * (0.2 * tc + (6.0 - 0.2) * tc ** 2 / (2 * dur)))
+        tc = t[m2] - t[m2][0]
+        a[m2] = np.sin(2 * np.pi * (0.2 * tc + (6.0 - 0.2) * tc ** 2 / (2 * (tc[-1] + 1e-9))))
     # steps every 0.3 s
     m3 = (s >= 0.55) & (s < 0.8)
     if m3.any():
@@ -356,7 +377,8 @@ def _excitation(t: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 def _truth_loop(plant_sys, nom: NominalParameters, gen: TruthGeneratorParams, delay: float, th0: float):
     """The truth rig (a :class:`~awiwi_drake.rigs.Rig` in the rigs' state order; its operating point is the nominal
     rest, link at 0 and every motor at the pretension angle ``th0`` [rad] held by ``r_m f_pre``: an equilibrium of
-    the plant without its hidden effects) under the lab's motor PD (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
+    the plant without its hidden effects) under the lab's motor PD
+    (:func:`~awiwi_drake.control.motor_position.motor_position_controller`,
     ``u_k = r_m f_pre + kp (theta_ref,k - theta_k) - kd omega_k``), closed by :func:`~awiwi_drake.control.closed_loop`
     at the logging rate: the command reaches the plant ``delay`` [s] later, whole periods through the loop's
     ``DiscreteTimeDelay``, the fraction through a hold in front of the plant sampling at ``k dt + frac dt``
@@ -484,23 +506,13 @@ def make_truth_dataset(rig: str = "joint-rig", hidden=(), *, snr_db: float | Non
         if "force_pickup" in truth and nm == names_force[truth["force_pickup"]["channel"] - 1]:
             p = truth["force_pickup"]   # amplitude in noise std (of 30 dB when noise-free)
             y = y + p["amplitude"] * sigma * np.sin(2 * np.pi * p["frequency"] * t + p["phase"])
-        if snr_db is not None:
-            y = y + rng.normal(0.0, sigma, N)
-            if nm.startswith("tendon_force"):
-                lsb = gen.force_range / 2 ** gen.force_bits
-                y = np.round(y / lsb) * lsb
-        meas[nm] = y
-    inputs = {nm: Ucmd[:, i] for i, nm in enumerate(
-        ["motor_torque_1", "motor_torque_2"] if n == 2 else ["motor_torque"])}
-    init = {}
-    sn = nom.state_names()
-    for i, nm in enumerate(sn[:-n]):
-        init[nm] = float(X0[i])
+        meas[nm] = y if snr_db is None else sensor_reading(nm, y, sigma, rng, gen)
+    inputs = {nm: Ucmd[:, i] for i, nm in enumerate(RIGS[rig].inputs)}
+    init = {nm: float(X0[i]) for i, nm in enumerate(nom.state_names()[:-n])}
     tag = "-".join(list(hidden) + list(unknown)) or "none"
     name = name or f"{rig}_{tag}_snr{'inf' if snr_db is None else int(snr_db)}_s{seed}"
-    truth_json = {k: v for k, v in truth.items()}
-    meta = {"truth": truth_json, "generator": {"snr_db": snr_db, "seed": seed,
-                                               "sample_rate": gen.sample_rate, "duration": gen.duration}}
+    meta = {"truth": dict(truth), "generator": {"snr_db": snr_db, "seed": seed, "sample_rate": gen.sample_rate,
+                                                "duration": gen.duration}}
     ds = Dataset(name, rig, t, inputs, meas, params, init, meta)
     if keep_clean:
         ds.meta["clean_outputs"] = clean

@@ -36,7 +36,7 @@ from awiwi_drake.parameters.discrepancy import RIPPLE_MIN_PERIODS, CatalogBounds
 
 from .catalog import EFFECTS, PARAM_INDEX, PLACED_EFFECTS, default_vector, effects_for_rig
 from .data import Dataset, is_finger_rig
-from .decide import (EQUIVALENT_EFFECTS, materiality, noise_equivalent, recalibration_effect,
+from .decide import (EQUIVALENT_EFFECTS, NoiseEquivalent, materiality, recalibration_effect,
                      rejection_reason, ripple_adds_to_recalibration, ripple_periods, separating_experiment)
 from .fit import HeldLinear, fit_parameters
 from .localise import locate, residual_maps
@@ -65,7 +65,7 @@ class _Run:
         self.ds, self.settings, self.bounds, self.say = dataset, settings, bounds, say
         self.eng = ReplayEngine(dataset, settings)
         self.rig = dataset.rig
-        self.ne = noise_equivalent(self.eng)
+        self.ne = NoiseEquivalent(self.eng)
         self.st0 = self.st = ResidualState(self.eng, default_vector())
         self.nrmse_before = nrmse(self.eng, self.st.rp, self.st.W[self.eng.test])
         self.accepted, self.steps, self.history = [], [], []

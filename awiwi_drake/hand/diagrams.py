@@ -60,6 +60,7 @@ class HandRig(Rig):
     coupling_gain: Any = None
     spring_laws: Any = None
     joint_friction: Any = None
+    joint_sensors: bool = False          # the hand measures motor angles and tendon forces only (ch. 5.4)
 
     def set_operating_point(self, context, op, *, fix_inputs: bool = True) -> None:
         super().set_operating_point(context, op, fix_inputs=fix_inputs)

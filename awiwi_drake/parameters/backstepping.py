@@ -125,9 +125,6 @@ class ImpedanceStudy(Parameters):
     damping_values: tuple = param((0.01, 0.05, 0.1), unit="Nm s/rad", low=0.0, vector=True, source="Fig 15.17")
     damping_fixed_stiffness: float = param(1.0, unit="Nm/rad", low=0.0, low_inclusive=False,
                                            source="Fig 15.17 (Kp,imp = 1)")
-    deflection_tolerance: float = param(0.05, unit="-", low=0.0,
-                                        source="chosen: 5 % on disturbance/Kp,imp (the closed form of the "
-                                               "uncompensated loop differs by less, see REPRODUCTIONS.md)")
 
 
 @dataclass(frozen=True)

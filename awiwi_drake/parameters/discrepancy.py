@@ -140,18 +140,15 @@ class DiscrepancySettings(Parameters):
     fit_resolution: float = param(
         1.0, unit="-", low=0.0, high=1e3,
         source="chosen: a candidate's fit stops at the first trial step whose Gauss-Newton predicted reduction of "
-               "the training cost |r|^2 - |r + J dx|^2 is below 1 (squared noise units, one chi-square unit; a BIC "
-               "unit per parameter is ~9) instead of shrinking the trust region to xtol through 10-15 rejected "
-               "replays (seed 1083's last step). Candidates only: applied to the accepted effect's joint refit too "
-               "it lost seed 1047's spring_drift (the refit sets the model every later step builds on)",
+               "the training cost is below one chi-square unit (a BIC unit per parameter is ~9) instead of shrinking "
+               "its trust region through rejected replays; candidates only: the accepted effect's joint refit sets "
+               "the model every later step builds on (docs/DISCREPANCY.md)",
         doc="smallest predicted cost reduction worth a trial step of a candidate's fit [squared noise units]")
     blas_threads: int = param(
         1, unit="-", low=1, high=64,
-        source="chosen: measured, seed 1047 (a three-effect joint dataset of bench_discrepancy), quiet 2-core "
-               "machine, same names: 27.9 CPU s with one BLAS thread against 44.2 with OpenBLAS's default two, in "
-               "the same 39-40 s of wall time (the diagnosis's linear algebra is many small lstsq/QR calls that "
-               "gain nothing from threads; the idle threads spin). Applied for the duration of diagnose only "
-               "(threadpoolctl)",
+        source="chosen: the diagnosis's linear algebra is many small lstsq/QR calls that gain nothing from threads "
+               "(idle threads spin): one thread took 28 CPU s against 44 with two in the same wall time "
+               "(docs/DISCREPANCY.md); applied while diagnose runs (threadpoolctl)",
         doc="BLAS threads while diagnose runs (the caller's setting is restored after)")
     fit_rounds: int = param(
         3, unit="-", low=1, high=20,
@@ -186,10 +183,9 @@ class DiscrepancySettings(Parameters):
         doc="finger diagnosis: materiality floor in noise-equivalent units")
     finger_hysteresis_play: float = param(
         1.0, unit="-", low=0.0, high=100.0,
-        source="chosen: the play trades reversals by noise (none: the loop follows every noise wiggle) "
-               "against a delay of 2 play widths at every true reversal. Correlation of the loop on the noisy force "
-               "with the loop on the noise-free force (index datasets, seeds 2 and 5, delta 0.1 / 0.4 mm): 0.95-0.98 "
-               "without play, 0.96-0.99 at 0.5-1 noise widths, 0.76-0.93 at 3 (the wave-5 value)",
+        source="chosen: the play trades reversals by noise against a delay of 2 play widths at every true reversal; "
+               "the loop on the noisy force correlates best with the noise-free one at 0.5-1 noise widths "
+               "(docs/DISCREPANCY.md)",
         doc="finger diagnosis: play operator before the hysteresis candidate, in force-noise widths")
     finger_hysteresis_lengths: tuple = param(
         (5e-5, 1e-4, 2e-4, 4e-4, 8e-4), unit="m", low=0.0,
@@ -199,39 +195,27 @@ class DiscrepancySettings(Parameters):
         doc="finger diagnosis: presliding lengths of the hysteresis candidate")
     finger_replay_stiffness: float = param(
         0.02, unit="N m/rad", low=0.0,
-        source="chosen: the finger diagram replayed open loop on the recorded commands drifts along the motion that "
-               "stretches no tendon (motors and joints together; no motor damping): from an initial state estimated "
-               "from the first samples the index's elongations were off by 13-43 um (truth's own parameters, "
-               "hysteresis on index_h6, 3 s, 30 dB); a spring of this stiffness pulling each motor towards its "
-               "smoothed measured angle (6 % of a tendon's k r^2 = 0.35 N m/rad, critically damped with the motor "
-               "inertia) leaves 1-6.5 um",
+        source="chosen: the finger replayed open loop drifts along the motion that stretches no tendon; this spring "
+               "(6 % of a tendon's k r^2 = 0.35 N m/rad, critically damped with the motor inertia) pulling each motor "
+               "to its smoothed measured angle cut the elongation error from 13-43 um to 1-6.5 um "
+               "(docs/DISCREPANCY.md)",
         doc="finger diagnosis: stiffness holding the replayed motors to the measured angles (hysteresis write-back)")
     finger_hysteresis_refits: int = param(
         3, unit="-", low=1, high=100,
-        source="chosen: the write-back's loop is refitted on the replayed elongation, which moves with the loop, and "
-               "the loop that leaves the least on its own replay is kept: on index_h6 (3 s) the third replay's "
-               "(1.02x the floor; the fourth 1.03x), on thumb_h3 (10 s) 1.04x after three; each replay 0.3-1.1 CPU s",
+        source="chosen: the replayed elongation moves with the loop; three replays settle it on the index and the "
+               "thumb (1.02-1.04x the floor, docs/DISCREPANCY.md), each 0.3-1.1 CPU s",
         doc="finger diagnosis: replays of the hysteresis write-back at most")
     finger_motion_filters: tuple = param(
         (1e-3, 1.4e-3, 2e-3, 2.8e-3, 4e-3, 5.6e-3, 8e-3), unit="s", low=0.0, low_inclusive=False,
         source="chosen: Gaussian smoothing of the motion a nonlinear law is evaluated on (the estimated tendon travel "
-               "for the guides' Dahl law, the motor velocity for (3.8)), on a factor-sqrt(2) grid; the data choose "
-               "(as the other shape grids). The noise (28 um per sample on the index's estimated travel at 30 dB, "
-               "mostly the motor angles') relaxes a Dahl state and blurs atan(g1 w); smoothing removes the link "
-               "modes' motion. Guides with the truth's own parameters left the links' equation at 3.2 / 24 / 61 / "
-               "44x the floor at 2 ms and 2.4 / 3.2 / 12.8 / 8.5x at 3 ms on four index records (1.1-1.3x on the "
-               "noise-free travel); (3.8) with the truth's slope 14x on the 20 ms filter's velocity, 1.6x on the "
-               "motor law's motion plus the rest smoothed at 8 ms (FingerResiduals.motor_velocity; the smoothed angle "
-               "alone: 3.6x at 5.6-8 ms, 83x at 1 ms; 0.94x on the noise-free velocity); the best width differs per "
-               "record (factor 2: 2.9x left where sqrt(2) leaves 1.5x)",
+               "for the guides' Dahl law, the motor velocity for (3.8)): the noise relaxes a Dahl state and blurs "
+               "atan(g1 w), smoothing removes the link modes' motion; the best width differs per record, so the data "
+               "choose on a factor-sqrt(2) grid (a factor-2 grid left twice the residual; docs/DISCREPANCY.md)",
         doc="finger diagnosis: Gaussian widths (std) tried for the motion under a nonlinear law")
     finger_motor_rest_filter: float = param(
         8e-3, unit="s", low=0.0, low_inclusive=False,
-        source="chosen: the motor angles entering the tendon travel at the guides are the motion the motor's known "
-               "law explains plus the rest smoothed by a Gaussian of this width; an unknown motor torque tau (e.g. a "
-               "hidden friction) curves the rest by tau / B, which the smoothing shifts by sigma^2 tau / (2 B): 5 um "
-               "of tendon for 0.06 N m at 8 ms, under the 11 um of noise left (index, 30 dB: 28 um with the raw "
-               "angles; the truth's own guides then leave 1.35x the floor against 2.1x)",
+        source="chosen: an unknown motor torque tau curves the smoothed rest by sigma^2 tau / (2 B): 5 um of tendon "
+               "for 0.06 N m at 8 ms, under the 11 um of noise left (28 um with the raw angles; docs/DISCREPANCY.md)",
         doc="finger diagnosis: smoothing of the motor angles' unexplained rest in the joints' estimate")
     finger_gauss_newton_iterations: int = param(
         20, unit="-", low=1, high=1000,

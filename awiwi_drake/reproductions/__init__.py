@@ -109,9 +109,12 @@ def _pip(test: str, short: bool) -> Reproduction:
 
 
 def _fig15_26(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch15_backstepping import gain_diagram_study, plot_gain_diagram_study
+    from awiwi_drake.reproductions.ch15_backstepping import gain_diagram_study
     ds = gain_diagram_study()
-    fig, _ = plot_gain_diagram_study(ds)
+    fig = ax = None
+    for d in ds:
+        fig, ax = d.plot(ax=ax, xscale="log")
+    ax.set_title("Fig 15.26: joint rig at 20 N, linearised")
     series = {"frequency [Hz]": ds[0].freq}
     series.update({f"{d.label} gain |q/q_des| [-]": d.gain for d in ds})
     values = {d.label: dict(bandwidth=_v(d.bandwidth, "Hz"), dc_gain=_v(d.dc_gain, "-"),
@@ -121,9 +124,11 @@ def _fig15_26(short: bool) -> Reproduction:
 
 
 def _cocontraction(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch07_cocontraction import cocontraction_study, plot_cocontraction, stiffness_bound
+    from awiwi_drake.reproductions.ch07_cocontraction import cocontraction_study, stiffness_bound
     runs = cocontraction_study("index", **(dict(pretensions=(20.0, 40.0), scales=()) if short else {}))
-    fig, _ = plot_cocontraction(runs)
+    fig = ax = None
+    for m in runs:
+        fig, ax = m.plot(ax=ax)
     values = {f"{m.controller}, {m.level}": dict(
         dof=_v(list(m.dof_names), "-"), measured=_v(m.diagonal().tolist(), "Nm/rad"),
         predicted=_v(m.diagonal("predicted").tolist(), "Nm/rad"), bound=_v(stiffness_bound(m).tolist(), "Nm/rad"),
@@ -133,9 +138,9 @@ def _cocontraction(short: bool) -> Reproduction:
 
 
 def _fig5_7(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch05_fingers import coriolis_study, plot_coriolis_study
+    from awiwi_drake.reproductions.ch05_fingers import coriolis_study
     s = coriolis_study("index", t_final=0.02 if short else 0.2)
-    fig, _ = plot_coriolis_study(s)
+    fig, _ = s.plot()
     series = {"t [s]": s.t}
     series.update({f"{n} full minus no-Coriolis [rad]": d for n, d in zip(s.joint_names, s.difference.T)})
     return Reproduction(fig, series, {"max_abs_difference": _v(dict(zip(s.joint_names, s.max_abs_difference.tolist())),
@@ -143,12 +148,9 @@ def _fig5_7(short: bool) -> Reproduction:
 
 
 def _fig6_10(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch06_wrist import (
-        plot_wrist_constraint_errors, plot_wrist_displacements, wrist_motion_study)
+    from awiwi_drake.reproductions.ch06_wrist import wrist_motion_study
     w = wrist_motion_study(num_samples=51 if short else 201)
-    fig, axes = figure_axes(None, ncols=2, figsize=(12, 4))
-    plot_wrist_constraint_errors(w, ax=axes[0])
-    plot_wrist_displacements(w, ax=axes[1])
+    fig, _ = w.plot()
     series = {"t [s]": w.t, "q71 [rad]": w.wrist_angle[:, 0], "q73 [rad]": w.wrist_angle[:, 1]}
     series.update({f"tendon {i} displacement [m]": w.offsets[:, i] for i in range(w.offsets.shape[1])})
     return Reproduction(fig, series, dict(
@@ -212,11 +214,11 @@ def _fig12_3(short: bool) -> Reproduction:
 
 
 def _fig8_3(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch08_stiffness_correction import plot_stiffness_run, stiffness_correction_run
+    from awiwi_drake.reproductions.ch08_stiffness_correction import stiffness_correction_run
     kw = dict(loads=(0.0, 0.15), segment=0.2) if short else dict(loads=(0.0, 0.075, 0.15, 0.0), segment=0.3)
     runs = [stiffness_correction_run(corrected=c, **kw) for c in (True, False)]
     fig, axes = figure_axes(None, ncols=2, figsize=(12, 3.5))
-    plot_stiffness_run(runs[0], ax=axes[0])
+    runs[0].plot(ax=axes[0])
     plot_traces(runs[0].t, {"corrected" if r.corrected else "fixed K_imp": r.q for r in runs},
                 ylabel="link angle [rad]", ax=axes[1])
     r = runs[0]
@@ -227,12 +229,12 @@ def _fig8_3(short: bool) -> Reproduction:
 
 
 def _fig10_2(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch10_tendon_force import plot_tendon_steps, tendon_step_experiment
+    from awiwi_drake.reproductions.ch10_tendon_force import tendon_step_experiment
     runs = [tendon_step_experiment(sched, t_final=0.15 if short else 0.25) for sched in (False, True)]
     fig, axes = figure_axes(None, ncols=2, figsize=(12, 4), sharey=True)
     series = {"t [s]": runs[0].t}
     for r, ax in zip(runs, axes):
-        plot_tendon_steps(r, ax=ax)
+        r.plot(ax=ax)
         series.update({f"{r.controller}, from {f0:g} N: tendon force [N]": f for f0, f in r.forces.items()})
     units = dict(overshoot="%", settling_time="s", damping_ratio="-", rise_time="s", steady_state_error="N",
                  natural_frequency="rad/s", final="N", dead_time="s")      # step_metrics' keys: a new one fails here
@@ -242,9 +244,9 @@ def _fig10_2(short: bool) -> Reproduction:
 
 
 def _fig11_4(short: bool) -> Reproduction:
-    from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response, plot_gain_diagrams
+    from awiwi_drake.reproductions.ch11_impedance import impedance_frequency_response
     d = impedance_frequency_response("two-time-scale")
-    fig, _ = plot_gain_diagrams({d.label: (d.freq, d.gain)})
+    fig, _ = d.plot()
     return Reproduction(fig, {"frequency [Hz]": d.freq, "gain |q/q_des| [-]": d.gain}, dict(
         resonance=_v(d.resonance_hz, "Hz"), peak_gain=_v(float(np.max(d.gain)), "-"),
         eigenvalues_real=_v(np.real(d.eigenvalues).tolist(), "1/s"),

@@ -34,8 +34,7 @@ from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 
 __all__ = ["CoriolisStudy", "coriolis_study", "mcp_flexion_joint", "fixed_motor_diagram",
            "CouplingHoldStudy", "coupling_hold_study",
-           "EstimationStudy", "thumb_estimation_study", "plot_estimation_grid", "plot_estimation_study",
-           "plot_coriolis_study", "plot_coupling_hold"]
+           "EstimationStudy", "thumb_estimation_study"]
 
 
 def fixed_motor_diagram(finger: str = "index", params: FingerRigParams | None = None, *,
@@ -101,6 +100,11 @@ class CoriolisStudy:
         """Per joint [rad] (thesis: below 1e-3 rad over 0.2 s)."""
         return np.max(np.abs(self.difference), axis=0)
 
+    def plot(self, ax=None):
+        """Fig 5.7: joint position difference full minus simplified (no Coriolis) model; ``(fig, ax)``."""
+        return plot_traces(self.t, dict(zip(self.joint_names, self.difference.T)), ylabel="position error [rad]",
+                           ax=ax, legend=dict(fontsize=8))
+
 
 def mcp_flexion_joint(finger: str) -> int:
     """Plant joint index of the finger's first flexion joint (the "second joint" of Fig 5.7).
@@ -148,12 +152,14 @@ def coriolis_study(finger: str = "index", *, deflection: float = 0.1, joint: int
 
 @dataclass
 class CouplingHoldStudy:
-    """PIP step of a coupled finger under joint control: coupling error ``q_DIP - c q_PIP``."""
+    """PIP step of a coupled finger under joint control: coupling error ``q_DIP - c q_PIP``; ``final_state``: the
+    plant's state at the end (its friction states decide where the joints rest)."""
 
     t: np.ndarray
     q_pip: np.ndarray
     q_dip: np.ndarray
     ratio: float
+    final_state: np.ndarray
 
     @property
     def coupling_error(self) -> np.ndarray:
@@ -162,6 +168,11 @@ class CouplingHoldStudy:
     @property
     def max_coupling_error(self) -> float:
         return float(np.max(np.abs(self.coupling_error)))
+
+    def plot(self, ax=None):
+        """PIP, DIP and the coupling error q_DIP - c q_PIP during the PIP step; ``(fig, ax)``."""
+        return plot_traces(self.t, {"q_PIP": self.q_pip, "q_DIP": self.q_dip, "q_DIP - c q_PIP": self.coupling_error},
+                           ylabel="[rad]", ax=ax, legend=dict(fontsize=8))
 
 
 def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final: float = 0.3,
@@ -177,9 +188,9 @@ def coupling_hold_study(finger: str = "ring", *, pip_step: float = 0.5, t_final:
     q_ref[n - 2] = pip_step
     q_ref[n - 1] = pip_step * fp.dip_pip_ratio
     ctx = cl.create_context(rig.operating_point(), references={"joint_angle_reference": q_ref})
-    res = simulate(cl.diagram, ctx, t_final, log=("joint_angle",), max_step=1.0 / cl.rate_hz, accuracy=1e-4)
+    res = simulate(cl.diagram, ctx, t_final, log=("joint_angle", "state"), max_step=1.0 / cl.rate_hz, accuracy=1e-4)
     q = res["joint_angle"]
-    return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio)
+    return CouplingHoldStudy(res.t, q[:, n - 2], q[:, n - 1], fp.dip_pip_ratio, res["state"][-1])
 
 
 @dataclass
@@ -202,6 +213,34 @@ class EstimationStudy:
                              frac_within_0p1=float(np.mean(e < 0.1)),
                              at_limit=int(np.sum(self.at_limit[key])) if self.at_limit else 0))
         return rows
+
+    def plot(self, start: str = "cold", *, case: tuple | None = None, ax=None):
+        """Fig 5.17: one panel per case of ``start`` (rows 50/30/15 iterations, columns 0/0.5/1 mm noise), each the
+        true (q10, q11) grid (red circles) and the estimates (blue crosses); ``case`` ``(iterations, noise [m],
+        start)``: that case alone on ``ax`` (Fig 5.16).  ``(fig, axes)``."""
+        if case is None:
+            its = sorted({k[0] for k in self.estimates}, reverse=True)
+            noises = sorted({k[1] for k in self.estimates})
+            fig, axes = figure_axes(None, nrows=len(its), ncols=len(noises), figsize=(3 * len(noises), 3 * len(its)),
+                                    squeeze=False)
+            for i, it in enumerate(its):
+                for j, a in enumerate(noises):
+                    self.plot(case=(it, a, start), ax=axes[i, j])
+            fig.tight_layout()
+            return fig, axes
+        if case not in self.estimates:
+            raise ValueError(f"EstimationStudy.plot: case {case!r} was not run; run: {sorted(self.estimates)}")
+        fig, ax = figure_axes(ax, figsize=(4, 4))
+        est = self.estimates[case]
+        ax.plot(self.grid[:, 0], self.grid[:, 1], "o", mfc="none", mec="r", ms=5, label="true")
+        ax.plot(est[:, 0], est[:, 1], "x", color="b", ms=4, label="estimate")
+        it, a, start = case
+        label_axes(ax, "q11 [rad]", xlabel="q10 [rad]", legend=None)
+        ax.set_title(f"{it} it., {1e3 * a:g} mm, {start}", fontsize=9)
+        ax.set_xlim(-1.8, 1.8)
+        ax.set_ylim(-1.8, 1.8)
+        ax.set_aspect("equal")
+        return fig, ax
 
 
 def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int = 13,
@@ -246,43 +285,3 @@ def thumb_estimation_study(coupling: ThumbCoupling | None = None, *, n_grid: int
                 err[(it, a, start)] = np.linalg.norm(out - grid, axis=1)
                 bnd[(it, a, start)] = a * sig_bound + 2.0 * steps
     return EstimationStudy(grid=grid, estimates=est, errors=err, bounds=bnd, at_limit=lim)
-
-
-def plot_estimation_grid(study, key, ax=None):
-    """Fig 5.16: true (q10, q11) grid (red circles) and estimates (blue crosses) for one case."""
-    fig, ax = figure_axes(ax, figsize=(4, 4))
-    est = study.estimates[key]
-    ax.plot(study.grid[:, 0], study.grid[:, 1], "o", mfc="none", mec="r", ms=5, label="true")
-    ax.plot(est[:, 0], est[:, 1], "x", color="b", ms=4, label="estimate")
-    it, a, start = key
-    label_axes(ax, "q11 [rad]", xlabel="q10 [rad]", legend=None)
-    ax.set_title(f"{it} it., {1e3 * a:g} mm, {start}", fontsize=9)
-    ax.set_xlim(-1.8, 1.8)
-    ax.set_ylim(-1.8, 1.8)
-    ax.set_aspect("equal")
-    return fig, ax
-
-
-def plot_estimation_study(study, start="cold"):
-    """Fig 5.17: 3 x 3 panels (rows 50/30/15 iterations, columns 0/0.5/1 mm noise)."""
-    its = sorted({k[0] for k in study.estimates}, reverse=True)
-    noises = sorted({k[1] for k in study.estimates})
-    fig, axes = figure_axes(None, nrows=len(its), ncols=len(noises), figsize=(3 * len(noises), 3 * len(its)),
-                            squeeze=False)
-    for i, it in enumerate(its):
-        for j, a in enumerate(noises):
-            plot_estimation_grid(study, (it, a, start), ax=axes[i, j])
-    fig.tight_layout()
-    return fig, axes
-
-
-def plot_coriolis_study(study, ax=None):
-    """Fig 5.7: joint position difference full minus simplified (no Coriolis) model."""
-    return plot_traces(study.t, dict(zip(study.joint_names, study.difference.T)), ylabel="position error [rad]",
-                       ax=ax, legend=dict(fontsize=8))
-
-
-def plot_coupling_hold(study, ax=None):
-    """PIP, DIP and the coupling error q_DIP - c q_PIP during a PIP step."""
-    return plot_traces(study.t, {"q_PIP": study.q_pip, "q_DIP": study.q_dip, "q_DIP - c q_PIP": study.coupling_error},
-                       ylabel="[rad]", ax=ax, legend=dict(fontsize=8))

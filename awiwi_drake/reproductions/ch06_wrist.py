@@ -1,8 +1,8 @@
 """Thesis ch. 6: the wrist study of Fig 6.9-6.10 and the finger drift under wrist motion (results are data).
 
 * :func:`wrist_motion_study` - Fig 6.9, 6.10: flexion then abduction of the wrist
-  (:mod:`awiwi_drake.hand.wrist` kinematics): tendon displacements and constraint errors;
-  :func:`plot_wrist_displacements`, :func:`plot_wrist_constraint_errors` draw them.
+  (:mod:`awiwi_drake.hand.wrist` kinematics): tendon displacements and constraint errors
+  (:meth:`WristMotionResult.plot` draws them).
 * :func:`wrist_compensation_study` - finger joint drift during a wrist
   abduction sweep, with and without the feedforward compensation ``-h_wrist / r_m`` ((6.9)).
 """
@@ -24,8 +24,8 @@ from awiwi_drake.parameters.hand import JointControllerParams
 from awiwi_drake.parameters.wrist import WristParams
 from awiwi_drake.plotting import figure_axes, label_axes
 
-__all__ = ["WristMotionResult", "wrist_motion_study", "plot_wrist_displacements", "plot_wrist_constraint_errors",
-           "FINGER_COLORS", "WristCompensationStudy", "wrist_compensation_study", "plot_wrist_compensation"]
+__all__ = ["WristMotionResult", "wrist_motion_study", "FINGER_COLORS", "WristCompensationStudy",
+           "wrist_compensation_study"]
 
 
 @dataclass
@@ -64,6 +64,45 @@ class WristMotionResult:
     def flexion_to_abduction_ratio(self) -> float:
         """flexion_peak / abduction_peak (small: flexion barely moves the tendons)."""
         return self.flexion_peak / self.abduction_peak
+
+    def plot(self, ax=None, *, panel: str | None = None):
+        """Fig 6.9 (``panel="constraint_errors"``: the largest distance-constraint error over time) and Fig 6.10
+        (``panel="displacements"``: each tendon's displacement through the wrist, Table 6.2 order, coloured by
+        finger, the flexion phase shaded, the abduction peak's proportionality fit written); both side by side
+        when ``panel`` is None (``ax`` then two axes).  ``(fig, ax)``."""
+        if panel is None:
+            fig, ax = figure_axes(ax, ncols=2, figsize=(12, 4))
+            self.plot(ax[0], panel="constraint_errors")
+            self.plot(ax[1], panel="displacements")
+            return fig, ax
+        if panel not in ("constraint_errors", "displacements"):
+            raise ValueError(f"WristMotionResult.plot: panel {panel!r} must be None, 'constraint_errors' or "
+                             "'displacements'")
+        fig, ax = figure_axes(ax, figsize=(7.0, 4.0))
+        if panel == "constraint_errors":
+            ax.plot(self.t, np.max(np.abs(self.constraint_errors), axis=1), color="k")
+            label_axes(ax, "max constraint error [m]", xlabel="t [s]", legend=None,
+                       title="max(|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|) errors")
+            ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
+            return fig, ax
+        seen = set()
+        for i, finger in enumerate(self.fingers):
+            ax.plot(self.t, self.offsets[:, i], color=FINGER_COLORS.get(finger, "k"), lw=0.9,
+                    label=finger if finger not in seen else None)
+            seen.add(finger)
+        flex = self.phase == "flexion"
+        if np.any(flex):
+            ax.axvspan(self.t[flex][0], self.t[flex][-1], color="0.92", zorder=0)
+        peak_q = np.degrees(np.max(np.abs(self.wrist_angle), axis=0))
+        label_axes(ax, "tendon displacement [m]", xlabel="t [s]", legend=None,
+                   title=f"wrist: flexion {peak_q[1]:.0f} deg (shaded), then abduction {peak_q[0]:.0f} deg")
+        ax.text(0.99, 0.02,
+                f"abduction peak vs distance from median axis: slope {self.abduction_slope:.3f} m/m, "
+                f"R$^2$ = {self.abduction_r2:.4f}\nflexion/abduction peak ratio "
+                f"{self.flexion_to_abduction_ratio:.2f}",
+                transform=ax.transAxes, ha="right", va="bottom", fontsize=8)
+        ax.legend(loc="upper left", fontsize=8)
+        return fig, ax
 
 
 def wrist_motion_study(*, flexion: float = math.radians(30.0), abduction: float = math.radians(20.0),
@@ -118,51 +157,6 @@ FINGER_COLORS = {"thumb": "tab:red", "index": "tab:blue", "middle": "tab:green",
                  "ring": "tab:orange", "fifth": "tab:purple"}
 
 
-def _start(result, ax):
-    """Validate the data and return (fig, ax), creating them when ax is None."""
-    if not isinstance(result, WristMotionResult):
-        raise ValueError(f"result must be a WristMotionResult, got {type(result).__name__}")
-    return figure_axes(ax, figsize=(7.0, 4.0))
-
-
-def plot_wrist_displacements(result: WristMotionResult, ax=None):
-    """Tendon displacement through the wrist vs time (Fig 6.10); ``ax`` optional, returns ``(fig, ax)``.
-
-    One line per tendon (Table 6.2 order), coloured by finger; the flexion
-    and abduction phases are shaded and annotated with the proportionality
-    fit of the abduction peak.
-    """
-    fig, ax = _start(result, ax)
-    seen = set()
-    for i, finger in enumerate(result.fingers):
-        label = finger if finger not in seen else None
-        seen.add(finger)
-        ax.plot(result.t, result.offsets[:, i], color=FINGER_COLORS.get(finger, "k"), lw=0.9, label=label)
-    flex = result.phase == "flexion"
-    if np.any(flex):
-        ax.axvspan(result.t[flex][0], result.t[flex][-1], color="0.92", zorder=0)
-    peak_q = np.degrees(np.max(np.abs(result.wrist_angle), axis=0))
-    label_axes(ax, "tendon displacement [m]", xlabel="t [s]", legend=None,
-               title=f"wrist: flexion {peak_q[1]:.0f} deg (shaded), then abduction {peak_q[0]:.0f} deg")
-    ax.text(0.99, 0.02,
-            f"abduction peak vs distance from median axis: slope {result.abduction_slope:.3f} m/m, "
-            f"R$^2$ = {result.abduction_r2:.4f}\nflexion/abduction peak ratio "
-            f"{result.flexion_to_abduction_ratio:.2f}",
-            transform=ax.transAxes, ha="right", va="bottom", fontsize=8)
-    ax.legend(loc="upper left", fontsize=8)
-    return fig, ax
-
-
-def plot_wrist_constraint_errors(result: WristMotionResult, ax=None):
-    """Largest distance-constraint error vs time (Fig 6.9); ``ax`` optional, returns ``(fig, ax)``."""
-    fig, ax = _start(result, ax)
-    ax.plot(result.t, np.max(np.abs(result.constraint_errors), axis=1), color="k")
-    label_axes(ax, "max constraint error [m]", xlabel="t [s]", legend=None,
-               title="max(|AA0|, |BB0|, |CC0|, |AB|, |AC|, |BC|) errors")
-    ax.ticklabel_format(axis="y", style="sci", scilimits=(0, 0))
-    return fig, ax
-
-
 @dataclass
 class WristCompensationStudy:
     """Finger joint drift during a wrist abduction sweep (rows: time; columns: joints)."""
@@ -179,6 +173,19 @@ class WristCompensationStudy:
         """Largest |q - q_ref| [rad] over time and joints, per case."""
         return {"uncompensated": float(np.max(np.abs(self.drift_uncompensated))),
                 "compensated": float(np.max(np.abs(self.drift_compensated)))}
+
+    def plot(self, ax=None):
+        """The finger joints' drift (those that move) without and with the wrist feedforward, side by side (``ax``:
+        two axes); ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, ncols=2, figsize=(10, 3.5), sharey=True)
+        for a, drift, title in ((ax[0], self.drift_uncompensated, "uncompensated"),
+                                (ax[1], self.drift_compensated, "with wrist feedforward")):
+            for j, name in enumerate(self.joint_names):
+                if np.max(np.abs(drift[:, j])) > 1e-6:
+                    a.plot(self.t, drift[:, j], label=name)
+            label_axes(a, "q - q_ref [rad]" if a is ax[0] else "", legend=None, title=title)
+        ax[0].legend(fontsize=7, ncol=2)
+        return fig, ax
 
 
 def wrist_compensation_study(target: str = "index", *, amplitude: float = np.radians(5.0), frequency: float = 2.0,
@@ -211,19 +218,3 @@ def wrist_compensation_study(target: str = "index", *, amplitude: float = np.rad
                                   drift[True], list(rig.joint_names),
                                   {"uncompensated": fmin[False], "compensated": fmin[True]},
                                   {"uncompensated": events[False], "compensated": events[True]})
-
-
-def plot_wrist_compensation(study, ax=None):
-    """Finger joint drift during a wrist abduction sweep, without and with compensation."""
-    fig, ax = figure_axes(ax, ncols=2, figsize=(10, 3.5), sharey=True)
-    for a, drift, title in ((ax[0], study.drift_uncompensated, "uncompensated"),
-                            (ax[1], study.drift_compensated, "with wrist feedforward")):
-        for j, name in enumerate(study.joint_names):
-            if np.max(np.abs(drift[:, j])) > 1e-6:
-                a.plot(study.t, drift[:, j], label=name)
-        a.set_title(title, fontsize=9)
-        a.set_xlabel("time [s]")
-        a.grid(True, alpha=0.3)
-    ax[0].set_ylabel("q - q_ref [rad]")
-    ax[0].legend(fontsize=7, ncol=2)
-    return fig, ax

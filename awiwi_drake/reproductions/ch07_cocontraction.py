@@ -55,7 +55,7 @@ from awiwi_drake.parameters.hand_control import HandChainParams
 from awiwi_drake.plotting import figure_axes, label_axes
 
 __all__ = ["StiffnessMeasurement", "measure_joint_stiffness", "stiffness_bound", "cocontraction_study",
-           "plot_cocontraction"]
+]
 
 CONTROLLERS = ("joint-pd", "cascaded:no-observer")
 
@@ -93,6 +93,27 @@ class StiffnessMeasurement:
 
     def diagonal(self, which: str = "measured") -> np.ndarray:
         return np.diag(getattr(self, which)).copy()
+
+    def plot(self, ax=None):
+        """The measured stiffness per DoF (markers, :func:`stiffness_bound` as error bars) beside its prediction
+        (line) and, under ``joint-pd``, the springs' (5.12) alone (dotted); log scale.  Measurements drawn on the
+        same ``ax`` one after another sit side by side.  ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, figsize=(8, 4))
+        i = len(ax.containers)                      # the measurements already on ax (one errorbar each)
+        x = np.arange(len(self.dof_names)) + 0.08 * i
+        line = ax.errorbar(x, self.diagonal(), yerr=stiffness_bound(self), fmt="o", ms=4, capsize=2,
+                           label=f"{self.controller}, {self.level}")
+        ax.plot(x, self.diagonal("predicted"), "-", color=line[0].get_color(), lw=1,
+                label="predicted (lines), measured (markers)" if i == 0 else None)
+        if self.controller == "joint-pd":
+            ax.plot(x, self.diagonal("mechanical"), ":", color=line[0].get_color(), lw=1,
+                    label="(5.12) springs alone" if i == 0 else None)
+        ax.set_xticks(range(len(self.dof_names)))
+        ax.set_xticklabels(self.dof_names)
+        ax.set_yscale("log")
+        label_axes(ax, ylabel="static joint stiffness [Nm/rad]", xlabel="DoF", title=f"{self.finger}: stiffness by "
+                   "co-contraction, measured on the closed loop", legend=dict(fontsize="x-small", ncol=2))
+        return fig, ax
 
     def table(self) -> str:
         rows = [f"{self.finger} {self.controller} ({self.level}), loads {np.array2string(self.load, precision=3)} Nm, "
@@ -160,8 +181,9 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     turn (raised cosine over ``ramp`` s, then ``hold`` s), the deflection of each step is the change of the joint
     angles' mean over the last ``window`` s of each hold (the first load after ``settle`` s, default ``hold``).
     Co-contraction: ``pretension`` [N] (the operating point, both loops) and, for the chain, ``stiffness_scale`` (the
-    distribution asked for that multiple of the operating point's (5.12)).  ``params``: a :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's,
-    thesis physics on); ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
+    distribution asked for that multiple of the operating point's (5.12)).  ``params``: a
+    :class:`~awiwi_drake.parameters.hand.FingerRigParams` (default: the finger's, thesis physics on);
+    ``finger="hand"``: the whole hand (wrist held).  ``simulate_options``: to
     :func:`~awiwi_drake.analysis.simulate` (default: fixed-step RK3 at the control period)."""
     from awiwi_drake.hand import finger_diagram, hand_diagram
 
@@ -179,7 +201,7 @@ def measure_joint_stiffness(finger: str = "index", controller: str = "joint-pd",
     else:
         ctrl = joint_stage_controller(rig, "cascaded", op=op, chain=HandChainParams(stiffness_scale=stiffness_scale),
                                       friction_observer=None)
-        commanded = np.asarray(ctrl.design["joint_design"].static_stiffness, float)
+        commanded = np.asarray(ctrl.design.joint_design.static_stiffness, float)
         level = f"pretension {pretension:g} N, stiffness_scale {stiffness_scale:g}"
     if deflection is not None:
         L = deflection * (commanded if commanded is not None else np.diag(S.T @ op.joint_stiffness @ S))
@@ -314,24 +336,3 @@ def cocontraction_study(finger: str = "index", *, pretensions=(20.0, 40.0), scal
     runs += [measure_joint_stiffness(finger, "cascaded:no-observer", stiffness_scale=float(s), params=chain_params,
                                      **chain_kw) for s in scales]
     return runs
-
-
-def plot_cocontraction(runs, *, ax=None):
-    """Measured joint stiffness per DoF (markers, with :func:`stiffness_bound` as error bars) beside each run's
-    prediction (lines) and, for the joint-pd runs, the springs' (5.12) alone (dotted); log scale."""
-    fig, ax = figure_axes(ax, figsize=(8, 4))
-    for i, m in enumerate(runs):
-        x = np.arange(len(m.dof_names)) + 0.08 * (i - (len(runs) - 1) / 2)
-        line = ax.errorbar(x, m.diagonal(), yerr=stiffness_bound(m), fmt="o", ms=4, capsize=2,
-                           label=f"{m.controller}, {m.level}")
-        ax.plot(x, m.diagonal("predicted"), "-", color=line[0].get_color(), lw=1,
-                label="predicted (lines), measured (markers)" if i == 0 else None)
-        if m.controller == "joint-pd":
-            ax.plot(x, m.diagonal("mechanical"), ":", color=line[0].get_color(), lw=1,
-                    label="(5.12) springs alone" if i == 0 else None)
-    ax.set_xticks(range(len(runs[0].dof_names)))
-    ax.set_xticklabels(runs[0].dof_names)
-    ax.set_yscale("log")
-    label_axes(ax, ylabel="static joint stiffness [Nm/rad]", xlabel="DoF", title=f"{runs[0].finger}: stiffness by co-contraction, "
-               "measured on the closed loop", legend=dict(fontsize="x-small", ncol=2))
-    return fig, ax

@@ -17,7 +17,7 @@ from awiwi_drake.parameters.hand_control import StiffnessCorrectionParams
 from awiwi_drake.plotting import plot_traces
 from awiwi_drake.rigs import joint_rig
 
-__all__ = ["StiffnessRun", "stiffness_correction_run", "plot_stiffness_run"]
+__all__ = ["StiffnessRun", "stiffness_correction_run"]
 
 
 @dataclass
@@ -33,6 +33,12 @@ class StiffnessRun:
     k_eff: np.ndarray
     k_target: np.ndarray
     corrected: bool
+
+    def plot(self, ax=None):
+        """Fig 8.3: K_imp, K_mech and K_eff (8.1) over time, with the target; ``(fig, ax)``."""
+        return plot_traces(self.t, {"K_imp (controller)": self.k_imp, "K_mech (springs)": self.k_mech,
+                                    "K_eff (8.1)": self.k_eff}, styles={"K_mech (springs)": ":", "K_eff (8.1)": "-."},
+                           reference=self.k_target, ylabel="stiffness [Nm/rad]", ax=ax, legend=dict(fontsize="small"))
 
 
 def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segment: float = 0.15,
@@ -63,10 +69,3 @@ def stiffness_correction_run(*, targets=None, loads=(0.0, 0.02, 0.04, 0.0), segm
     s = res["controller_stiffness"]
     return StiffnessRun(res.t, res["state"][:, 0], res["external_torque"][:, 0], s[:, 0], s[:, 1], s[:, 2],
                         res["effective_stiffness_reference"][:, 0], corrected)
-
-
-def plot_stiffness_run(run, *, ax=None):
-    """Fig 8.3: K_imp, K_mech and K_eff (8.1) over time, with the target."""
-    return plot_traces(run.t, {"K_imp (controller)": run.k_imp, "K_mech (springs)": run.k_mech, "K_eff (8.1)": run.k_eff},
-                       styles={"K_mech (springs)": ":", "K_eff (8.1)": "-."}, reference=run.k_target,
-                       ylabel="stiffness [Nm/rad]", ax=ax, legend=dict(fontsize="small"))

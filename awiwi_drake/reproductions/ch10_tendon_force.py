@@ -1,6 +1,6 @@
 """Thesis ch. 10: tendon force control experiments (Fig 10.1-10.3) as functions returning data.
 
-The controllers are :mod:`awiwi_drake.control.tendon_force`; :func:`plot_tendon_steps` draws Fig 10.3.
+The controllers are :mod:`awiwi_drake.control.tendon_force`; :meth:`TendonSteps.plot` draws Fig 10.3.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, ForceSensorP
 from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.rigs import tendon_rig
 
-__all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment", "plot_tendon_steps"]
+__all__ = ["FeedforwardRun", "TendonSteps", "tendon_feedforward_experiment", "tendon_step_experiment"]
 
 def _tendon_step(factory, f0, f1, t_step, t_final, log, *, realistic: bool, gains=None, fmap=None):
     """A fresh tendon rig under ``factory``'s controller at 3 kHz (``realistic``: ripple, the force sensor,
@@ -90,6 +90,17 @@ class TendonSteps:
     commands: dict = field(default_factory=dict)   # f0 -> command trace [Nm]
     metrics: dict = field(default_factory=dict)    # f0 -> dict(overshoot, settling_time, damping_ratio, ...)
 
+    def plot(self, ax=None):
+        """Fig 10.3: the force steps from each initial force, labelled with their damping ratio and overshoot, and
+        the references dashed; ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        for f0, f in self.forces.items():
+            m = self.metrics[f0]
+            ax.plot(self.t, f, label=f"{f0:g} N: xi = {m['damping_ratio']:.2f}, OS = {m['overshoot']:.0f} %")
+            ax.plot(self.t, np.where(self.t < self.t_step, f0, f0 + self.step), "k--", lw=0.8)
+        label_axes(ax, "tendon force [N]", title=f"{self.controller} gains", legend=dict(fontsize=8))
+        return fig, ax
+
 
 def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] = (10.0, 20.0, 30.0, 40.0),
                            step: float = 5.0, t_final: float = 0.25, realistic: bool = True,
@@ -114,14 +125,3 @@ def tendon_step_experiment(scheduled: bool, *, initial_forces: Sequence[float] =
         res.commands[f0] = log["motor_torque_command"][:, 0]
         res.metrics[f0] = m
     return res
-
-
-def plot_tendon_steps(steps, *, ax=None):
-    """Fig 10.3 style: force steps of one controller (a :class:`TendonSteps`)."""
-    fig, ax = figure_axes(ax, figsize=(7, 4))
-    for f0, f in steps.forces.items():
-        m = steps.metrics[f0]
-        ax.plot(steps.t, f, label=f"{f0:g} N: xi = {m['damping_ratio']:.2f}, OS = {m['overshoot']:.0f} %")
-        ax.plot(steps.t, np.where(steps.t < steps.t_step, f0, f0 + steps.step), "k--", lw=0.8)
-    label_axes(ax, "tendon force [N]", title=f"{steps.controller} gains", legend=dict(fontsize=8))
-    return fig, ax

@@ -1,6 +1,6 @@
 """Thesis ch. 11: two-time-scale and cascaded impedance control (Fig 11.2-11.4).
 
-The controllers are :mod:`awiwi_drake.control.impedance`; :func:`plot_gain_diagrams` draws Fig 11.4.
+The controllers are :mod:`awiwi_drake.control.impedance`; :meth:`GainDiagram.plot` draws Fig 11.4 (and 15.26).
 """
 
 from __future__ import annotations
@@ -20,8 +20,7 @@ from awiwi_drake.parameters.control import CONTROL_RATE_HZ as RATE, ImpedancePar
 from awiwi_drake.plotting import figure_axes, label_axes, plot_traces
 from awiwi_drake.rigs import flexible_joint_rig, joint_rig
 
-__all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response",
-           "plot_gain_diagrams"]
+__all__ = ["ImpedanceStep", "GainDiagram", "impedance_step", "impedance_sweep", "impedance_frequency_response"]
 
 
 @dataclass
@@ -76,8 +75,18 @@ class GainDiagram:
         lin = self.linearization
         return float(abs((lin.D - lin.C @ np.linalg.solve(lin.A, lin.B))[0, 0]))
 
-    def plot(self, ax=None):
-        return plot_gain_diagrams({self.label: (self.freq, self.gain)}, ax=ax)
+    def plot(self, ax=None, *, label: str | None = None, xscale: str = "linear"):
+        """|q / q_des| against frequency, labelled ``label`` (default :attr:`label`) and, where computed, its -3 dB
+        bandwidth marked (dotted); several diagrams drawn on one ``ax`` share it.  ``(fig, ax)``."""
+        fig, ax = figure_axes(ax, figsize=(7, 4))
+        text = self.label if label is None else label
+        marked = np.isfinite(self.bandwidth)
+        line, = ax.plot(self.freq, self.gain, label=f"{text} (-3 dB at {self.bandwidth:.2f} Hz)" if marked else text)
+        if marked:
+            ax.axvline(self.bandwidth, color=line.get_color(), ls=":", lw=1)
+        ax.set_xscale(xscale)
+        label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]")
+        return fig, ax
 
 
 def _joint(kind: str, *, stiffness=None, pretension=None):
@@ -145,12 +154,3 @@ def impedance_frequency_response(mode: str = "two-time-scale", *, joint_stiffnes
     lin = linearize(loop.diagram, context=ctx, input="joint_angle_reference", outputs=("joint_angle",))
     g = np.abs(lin.bode(omega=2 * np.pi * freqs).response)
     return GainDiagram(f"{mode}, linearised", freqs, g, lin.poles)
-
-
-def plot_gain_diagrams(curves: dict, *, ax=None):
-    """Fig 11.4: ``{label: (freq, gain)}``."""
-    fig, ax = figure_axes(ax, figsize=(7, 4))
-    for label, (f, g) in curves.items():
-        ax.plot(f, g, label=label)
-    label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]")
-    return fig, ax

@@ -96,7 +96,6 @@ class StiffnessRobustness:
     diverged_at: dict
     printed_gain_poles_vs_stiffness: np.ndarray
     printed_perturbed_poles: np.ndarray = field(default_factory=PRINTED_12_19.copy)
-    printed_gain: np.ndarray = field(default_factory=PRINTED_12_18.copy)
 
     def summary(self) -> str:
         """Ours beside the printed values, one line each."""

@@ -38,7 +38,7 @@ __all__ = [
     "example_phase_portrait", "position_gain_study", "saturation_study", "delay_study", "impedance_study",
     "impedance_steady_state", "nonlinear_impedance_study", "load_step_command_jump", "antagonistic_step",
     "antagonistic_sine", "antagonistic_stiffness_check", "sine_reference", "is_monotone_nonincreasing", "count_oscillations",
-    "gain_diagram_study", "plot_gain_diagram_study", "plot_run_traces", "plot_joint_angle",
+    "gain_diagram_study", "plot_run_traces", "plot_joint_angle",
     "plot_command", "plot_phase_portrait",
 ]
 
@@ -434,16 +434,6 @@ def gain_diagram_study(controllers: Sequence[str] = ("backstepping", "two-time-s
         gain = np.abs(lin.bode(0, omega=2 * np.pi * f).response)
         out.append(GainDiagram(name, f, gain, lin.poles, linear_bandwidth(lin), lin, loop))
     return out
-
-
-def plot_gain_diagram_study(diagrams: Sequence[GainDiagram], *, ax=None):
-    """Fig 15.26: |q / q_des| against frequency (log axis), each loop's -3 dB bandwidth marked."""
-    fig, ax = figure_axes(ax, figsize=(7, 4))
-    for d in diagrams:
-        line, = ax.semilogx(d.freq, d.gain, label=f"{d.label} (-3 dB at {d.bandwidth:.2f} Hz)")
-        ax.axvline(d.bandwidth, color=line.get_color(), ls=":", lw=1)
-    label_axes(ax, "gain |q / q_des|", xlabel="frequency [Hz]", title="Fig 15.26: joint rig at 20 N, linearised")
-    return fig, ax
 
 
 def plot_run_traces(runs, signal, ylabel, *, ax=None, title: str = "", reference: bool = False):

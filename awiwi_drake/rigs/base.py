@@ -98,7 +98,8 @@ class Rig:
     saturation), ``max_force`` [N] (upper end of the calibrated spring range), ``pair_slack`` ``(x0, r)`` of an
     antagonistic torsion-spring pair whose hidden tendons can slacken, ``spring_kind`` (``"linear"`` or
     ``"nonlinear"``, flexible joint) and ``tendon_force_of_state`` (``states (T, n_states) -> forces (T, m)``,
-    the ``tendon_force`` law over logged samples).
+    the ``tendon_force`` law over logged samples).  ``joint_sensors``: the joint angles are measured (False for
+    fingers and the hand, :class:`~awiwi_drake.hand.diagrams.HandRig`, whose ``link_estimator()`` estimates them).
 
     The single-joint rigs also have a sampled form (None elsewhere): ``sampled_diagram(period,
     hold_applied_torque=False)`` is a new diagram with the same ports whose dynamics are Drake's
@@ -124,6 +125,7 @@ class Rig:
     pair_slack: tuple | None = None
     spring_kind: str | None = None
     tendon_force_of_state: Callable | None = None
+    joint_sensors: bool = True
     sampled_diagram: Callable[[float], Diagram] | None = None
     sampled_state: Callable | None = None
     add_sampled: Callable | None = None

@@ -21,6 +21,9 @@ class _Affine(Schedule):
     gain: float
     offset: float
 
+    def __post_init__(self):      # inner is a schedule (checked when made); gain and offset come from the design
+        pass
+
     def value(self, t):
         return self.offset + self.gain * self.inner.value(t)
 
@@ -53,12 +56,12 @@ class JointChannels:
 
 def joint_channels(loop: ClosedLoop) -> JointChannels | None:
     """:class:`JointChannels` of a finger/hand loop tracking ``joint_angle`` (None for the 1-DoF rigs)."""
-    rig = loop.rig
-    coupling = getattr(rig, "coupling", None)
-    if (coupling is None or not getattr(rig, "joint_names", None) or not loop.tracked_outputs
-            or loop.tracked_outputs[0] != "joint_angle"):
-        return None
     from awiwi_drake.hand.coupling import dof_selection
+    from awiwi_drake.hand.diagrams import HandRig
+    rig = loop.rig
+    if not isinstance(rig, HandRig) or not loop.tracked_outputs or loop.tracked_outputs[0] != "joint_angle":
+        return None
+    coupling = rig.coupling
     S = dof_selection(coupling)
     parts = coupling.parts
     joint_names = rig.joint_names

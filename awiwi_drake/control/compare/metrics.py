@@ -46,14 +46,14 @@ class Metrics:
     #                                      with ideal sensors the estimator's beside the loop (not fed back); NaN:
     #                                      no estimator (a controller that reads no joint angle, e.g. joint-pd)
     dead_band: float = math.nan          # friction dead band of the DoF, closed form of the controller's rest
-    #                                      equations (design["dead_band"]; the 15.5 finger backstepping) [rad]
+    #                                      equations (design.dead_band; the 15.5 finger backstepping) [rad]
     failed_at: float = math.nan          # s, test time at which the simulation stopped (status a failure cause)
     status: str = "ok"                   # "ok", "flagged" (see flags), or the cause that stopped the simulation
     #                                      (metrics NaN): "diverged", "infeasible_force", a monitor's event kind
     flags: str = ""                      # "; "-separated: saturated, command peak, slack, not settled, negative
     #                                      stiffness, stiffness off its design, load kept linear, load held,
     #                                      force distribution out of bounds (finger/hand chain), stopped within
-    #                                      friction dead band (design["friction_hold"] <= 1); a stopped
+    #                                      friction dead band (design.friction_hold <= 1); a stopped
     #                                      row: the error's message
 
 

@@ -50,7 +50,7 @@ def settle(loop: ClosedLoop, reference: float, *, t_settle: float, max_step: flo
     (``tendon_force=...``, ``joint_angle=...``; else its default one) unless
     ``state`` is given.
     """
-    if state is None and hasattr(loop.rig, "operating_point"):
+    if state is None and isinstance(loop.rig, Rig):
         try:  # start at the rig's equilibrium for the reference when the rig offers one
             op = loop.rig.operating_point(**{loop.tracked_outputs[0]: reference})
         except (TypeError, ValueError):

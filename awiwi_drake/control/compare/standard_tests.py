@@ -35,12 +35,14 @@ from awiwi_drake.control.compare.metrics import (Metrics, MetricsTable, disturba
                                                  linear_bandwidth, sine_metrics, step_metrics, sweep_metrics)
 from awiwi_drake.control.compare.channels import joint_channels, joint_inputs
 from awiwi_drake.control.compare.runner import TestRun, applied_port, settle, torque_limit
+from awiwi_drake.control.design import ControllerDesign
 from awiwi_drake.control.registry import get_entry, make_controller, rig_kind
 from awiwi_drake.parameters.control import CompareTestParams
 from awiwi_drake.rigs.base import Rig
 
-__all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run", "stopped_row",
-           "run_standard_tests", "compare", "build_loops", "dominant_time_constant", "design_time_constant", "design_step_duration", "short_test_params",
+__all__ = ["TESTS", "compare_test_params", "default_tests", "Comparison", "run_test", "run_joint_test", "flag_run",
+           "stopped_row", "run_standard_tests", "compare", "build_loops", "dominant_time_constant",
+           "design_time_constant", "design_step_duration", "short_test_params",
            "compare_controllers", "factory_options", "observer_at_bound", "mark_dead_band", "mark_load",
            "design_stiffness", "size_loads", "load_stiffness_range"]
 
@@ -138,19 +140,19 @@ def dominant_time_constant(loop: ClosedLoop, params: CompareTestParams | None = 
     return float(1.0 / np.min(-lam.real[keep]))
 
 
-def _design(loop: ClosedLoop) -> dict:
-    """The controller's ``design`` dict (its own or its law's; empty when it has none)."""
+def _design(loop: ClosedLoop) -> ControllerDesign | None:
+    """The controller's :class:`~awiwi_drake.control.design.ControllerDesign` (its own or its law's; None without)."""
     ctrl = loop.controller
-    design = getattr(ctrl, "design", None)
-    if not isinstance(design, dict):
-        design = getattr(getattr(ctrl, "law", None), "design", None)
-    return design if isinstance(design, dict) else {}
+    for design in (getattr(ctrl, "design", None), getattr(getattr(ctrl, "law", None), "design", None)):
+        if isinstance(design, ControllerDesign):
+            return design
+    return None
 
 
 def mark_dead_band(rows: Sequence[Metrics], errors, hold, dof_load=None) -> None:
     """Flag each row ``stopped within friction dead band (X % of its bound)`` whose DoF is not settled while the run's
     end errors ``errors`` (k, output - reference per DoF) are a rest of the loop held by friction: ``hold(errors,
-    dof_load)`` (the controller's ``design["friction_hold"]``, the closed form of its rest equations: the fraction
+    dof_load)`` (the controller's ``design.friction_hold``, the closed form of its rest equations: the fraction
     of each DoF's friction bound the rest needs) is <= 1 on every DoF of the finger.  Physics, not a failure of the
     law: the frictions (4.1) and the lever's hysteresis hold the link there (ch. 9, ch. 11)."""
     frac = np.asarray(hold(np.asarray(errors, float), dof_load), float)
@@ -164,17 +166,10 @@ def design_stiffness(loop: ClosedLoop) -> np.ndarray | None:
     """The static stiffness [Nm/rad] per DoF that the loop's design promises to a constant load on that DoF alone:
     ``1 / (K^-1)_jj`` of the design's stiffness matrix ``K`` (the other DoF held at their references by their own
     laws): the chain designs' decoupled :attr:`~awiwi_drake.control.joint_design.JointDesign.static_stiffness`, the
-    15.5 finger backstepping's ``Kp`` (``design["Kp"]``; with the load observed its rest is ``Kp e = S^T tau_ext``,
+    15.5 finger backstepping's ``Kp`` (``design.Kp``; with the load observed its rest is ``Kp e = S^T tau_ext``,
     :class:`~awiwi_drake.control.finger_backstepping.ObservedBacksteppingController`); None when it reports none."""
     design = _design(loop)
-    jd = design.get("joint_design")
-    if jd is not None:
-        return np.asarray(jd.static_stiffness, dtype=float)
-    Kp = design.get("Kp")
-    if Kp is None:
-        return None
-    Kp = np.atleast_2d(np.asarray(Kp, dtype=float))
-    return 1.0 / np.diag(np.linalg.inv(Kp))
+    return None if design is None else design.static_stiffness
 
 
 def size_loads(params: CompareTestParams, stiffness, bound) -> tuple[np.ndarray, list[str]]:
@@ -253,11 +248,12 @@ def mark_load(row: Metrics, params: CompareTestParams, bound: float, impedance: 
 
 
 def design_time_constant(loop: ClosedLoop) -> float | None:
-    """The controller's own slowest designed tracking time constant [s] (``design["time_constant"]`` of the
+    """The controller's own slowest designed tracking time constant [s] (``design.time_constant`` of the
     controller or of its law: the finger/hand per-joint designs,
     :meth:`~awiwi_drake.control.joint_design.JointDesign.tracking_time_constant`, and the finger
     backstepping's joint modes), or None when it reports none."""
-    tau = _design(loop).get("time_constant")
+    design = _design(loop)
+    tau = None if design is None else design.time_constant
     return float(tau) if tau is not None and math.isfinite(tau) and tau > 0 else None
 
 
@@ -420,7 +416,7 @@ def run_joint_test(loop: ClosedLoop, test: str, *, controller: str = "controller
                          f"{getattr(loop.rig, 'name', '?')!r} has none")
     applied = applied_port(loop)
     design = _design(loop)
-    band, hold = design.get("dead_band"), design.get("friction_hold")
+    band, hold = (None, None) if design is None else (design.dead_band, design.friction_hold)
     impedance = design_stiffness(loop)                     # the designed static stiffness per DoF
     rows = [Metrics(controller, test, joint=nm) for nm in ch.names]
     loads, notes = np.full(k, p.disturbance_torque), [""] * k
