@@ -461,6 +461,11 @@ def _code_lines(source: str, tree: ast.Module) -> set[int]:
     return code
 
 
+def _in_package(path: str) -> str:
+    """``awiwi_drake/...`` of a measured file, whichever checkout folder it was measured in (``--reuse``)."""
+    return path[path.rindex("/awiwi_drake/") + 1:] if "/awiwi_drake/" in path else path
+
+
 def count_era(era: str, tree: pathlib.Path, work: pathlib.Path) -> dict:
     import coverage
     era_dir = work / era
@@ -473,7 +478,7 @@ def count_era(era: str, tree: pathlib.Path, work: pathlib.Path) -> dict:
         data.read()
         for path in data.measured_files():
             lines = set(data.lines(path) or ())
-            executed.setdefault(path, set()).update(lines)
+            executed.setdefault(_in_package(path), set()).update(lines)
             per_inv.setdefault(inv_id, {}).setdefault(path, set()).update(lines)
     extra: dict[str, set] = {}
     runs = {}
@@ -483,7 +488,7 @@ def count_era(era: str, tree: pathlib.Path, work: pathlib.Path) -> dict:
         ex = json.loads(f.read_text())
         runs[f.stem] = {"rc": ex["rc"], "failures": ex["failures"], "seconds": round(ex["seconds"], 1)}
         for path, line in ex["numba_hits"] + ex["source_hits"]:
-            extra.setdefault(path, set()).add(line)
+            extra.setdefault(_in_package(path), set()).add(line)
     files = {}
     for path in sorted(pkg.rglob("*.py")):
         source = path.read_text()
@@ -491,8 +496,8 @@ def count_era(era: str, tree: pathlib.Path, work: pathlib.Path) -> dict:
         n = len(source.splitlines())
         code = _code_lines(source, mod)
         units = _units(mod)
-        run = executed.get(str(path), set())
-        hits = extra.get(str(path), set())
+        run = executed.get(_in_package(str(path)), set())
+        hits = extra.get(_in_package(str(path)), set())
         in_unit = set()
         defs = []
         for u in units:
@@ -737,6 +742,7 @@ def main(argv=None) -> int:
     finally:
         if made is not None:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(made)], check=False)
+            shutil.rmtree(made.parent, ignore_errors=True)
     print(report(counts))
     if "main" in counts:
         print()
