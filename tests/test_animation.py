@@ -95,7 +95,7 @@ def test_hand_recording_has_geometry_and_a_framed_camera(tmp_path, capsys):
 
 def test_finger_recording_is_framed_on_the_finger(tmp_path):
     out = tmp_path / "index.html"
-    assert main(["animate", "--out", str(out), "--target", "index", "--duration", "0.15"]) == 0
+    assert main(["animate", "--out", str(out), "--target", "finger-index", "--duration", "0.15"]) == 0
     cmds = _commands(out.read_text())
     objects = [c["path"] for c in cmds if c["type"] == "set_object"]
     assert any("index_proximal_visual" in p for p in objects)
